@@ -1,0 +1,212 @@
+//! Vocabulary of the brick octree, shared by the store, the caches, the index and
+//! the renderer: node keys, the octree layout, node metadata and the
+//! [`BrickSource`] trait (implemented by the file store and the procedural source).
+//!
+//! The volume is embedded in the smallest cube of `2^(levels-1)` bricks per axis
+//! at the finest level. Level 0 is the root (one brick covering the whole cube at
+//! the coarsest resolution); level `levels - 1` holds the original voxels. A node
+//! at level `l` has integer position `(x, y, z)` in `0..2^l` and covers the
+//! *octree cube* `[p / 2^l, (p + 1) / 2^l]` of the unit cube.
+
+use crate::volume::{DType, VolumeDesc};
+use thiserror::Error;
+
+/// Identifies an octree node.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct NodeKey {
+    /// Level, 0 = root.
+    pub level: u8,
+    /// Position along x at this level.
+    pub x: u32,
+    /// Position along y at this level.
+    pub y: u32,
+    /// Position along z at this level.
+    pub z: u32,
+}
+
+impl NodeKey {
+    /// The root.
+    pub const ROOT: NodeKey = NodeKey { level: 0, x: 0, y: 0, z: 0 };
+
+    /// Builds a key.
+    pub fn new(level: u8, x: u32, y: u32, z: u32) -> NodeKey {
+        NodeKey { level, x, y, z }
+    }
+
+    /// Child `i` (bit 0 = +x, bit 1 = +y, bit 2 = +z).
+    pub fn child(self, i: u8) -> NodeKey {
+        NodeKey {
+            level: self.level + 1,
+            x: self.x * 2 + (i & 1) as u32,
+            y: self.y * 2 + ((i >> 1) & 1) as u32,
+            z: self.z * 2 + ((i >> 2) & 1) as u32,
+        }
+    }
+
+    /// The eight children in order 0..8.
+    pub fn children(self) -> [NodeKey; 8] {
+        std::array::from_fn(|i| self.child(i as u8))
+    }
+
+    /// The parent, `None` for the root.
+    pub fn parent(self) -> Option<NodeKey> {
+        (self.level > 0).then(|| NodeKey::new(self.level - 1, self.x / 2, self.y / 2, self.z / 2))
+    }
+
+    /// Index of this node among its parent's children.
+    pub fn child_index(self) -> u8 {
+        ((self.x & 1) | ((self.y & 1) << 1) | ((self.z & 1) << 2)) as u8
+    }
+
+    /// The node's cube in octree unit-cube coordinates: `(min corner, side)`.
+    pub fn unit_box(self) -> ([f64; 3], f64) {
+        let side = 1.0 / (1u64 << self.level) as f64;
+        ([self.x as f64 * side, self.y as f64 * side, self.z as f64 * side], side)
+    }
+}
+
+/// Geometry of a brick octree over a volume.
+#[derive(Debug, Clone, PartialEq)]
+pub struct OctreeLayout {
+    /// The volume.
+    pub volume: VolumeDesc,
+    /// Interior voxels per brick side.
+    pub brick: u32,
+    /// Apron voxels replicated on each side of a brick.
+    pub apron: u32,
+    /// Number of levels (>= 1).
+    pub levels: u8,
+}
+
+impl OctreeLayout {
+    /// The layout for a volume: the fewest levels such that `brick * 2^(levels-1)`
+    /// covers the largest dimension.
+    pub fn new(volume: VolumeDesc, brick: u32, apron: u32) -> OctreeLayout {
+        let brick = brick.max(1);
+        let max_dim = *volume.dims.iter().max().unwrap_or(&1) as u64;
+        let mut levels = 1u8;
+        while (brick as u64) << (levels - 1) < max_dim {
+            levels += 1;
+        }
+        OctreeLayout { volume, brick, apron, levels }
+    }
+
+    /// Stored voxels per brick side, `brick + 2 * apron`.
+    pub fn stored_side(&self) -> u32 {
+        self.brick + 2 * self.apron
+    }
+
+    /// Bytes of one stored brick.
+    pub fn brick_bytes(&self) -> usize {
+        (self.stored_side() as usize).pow(3) * self.volume.dtype.size()
+    }
+
+    /// Sample type.
+    pub fn dtype(&self) -> DType {
+        self.volume.dtype
+    }
+
+    /// Finest-level voxels per side of the octree cube.
+    pub fn cube_voxels(&self) -> u64 {
+        (self.brick as u64) << (self.levels - 1)
+    }
+
+    /// Voxel dimensions of the volume at `level` (each halving rounds up).
+    pub fn level_dims(&self, level: u8) -> [u32; 3] {
+        let shift = (self.levels - 1 - level) as u32;
+        self.volume.dims.map(|d| ((d as u64 + (1u64 << shift) - 1) >> shift) as u32)
+    }
+
+    /// True when `key` is a valid position and its cube overlaps the volume.
+    pub fn in_volume(&self, key: NodeKey) -> bool {
+        if key.level >= self.levels {
+            return false;
+        }
+        let n = 1u64 << key.level;
+        let ld = self.level_dims(key.level);
+        let p = [key.x, key.y, key.z];
+        (0..3).all(|a| (p[a] as u64) < n && (p[a] as u64) * (self.brick as u64) < ld[a] as u64)
+    }
+
+    /// The volume's extent inside the octree cube, per axis (0..1]: texture
+    /// coordinate `u` of the volume maps to octree coordinate `u * scale`.
+    pub fn volume_scale(&self) -> [f64; 3] {
+        let c = self.cube_voxels() as f64;
+        self.volume.dims.map(|d| d as f64 / c)
+    }
+}
+
+/// What a node holds.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum NodeKind {
+    /// Nothing to draw: wholly outside the volume, or below the build threshold.
+    Empty,
+    /// Every stored voxel (apron included) has this raw value; no payload.
+    Uniform(f32),
+    /// A brick payload.
+    Data,
+}
+
+/// Metadata of one node.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NodeInfo {
+    /// What the node holds.
+    pub kind: NodeKind,
+    /// Smallest raw value any sample in the node can interpolate from (apron included).
+    pub min: f32,
+    /// Largest such value.
+    pub max: f32,
+}
+
+/// Errors from a brick source.
+#[derive(Debug, Error)]
+#[non_exhaustive]
+pub enum BrickError {
+    /// The key names no node of this octree.
+    #[error("node {key:?} is outside the octree")]
+    OutOfRange {
+        /// The key.
+        key: NodeKey,
+    },
+    /// The node's stored data is damaged.
+    #[error("node {key:?} is corrupt: {reason}")]
+    Corrupt {
+        /// The key.
+        key: NodeKey,
+        /// What is wrong.
+        reason: String,
+    },
+    /// Reading the node failed.
+    #[error("node {key:?}: I/O error: {source}")]
+    Io {
+        /// The key.
+        key: NodeKey,
+        /// The OS error.
+        #[source]
+        source: std::io::Error,
+    },
+    /// The output buffer has the wrong size.
+    #[error("brick buffer holds {actual} bytes, expected {expected}")]
+    BufferSize {
+        /// Bytes needed.
+        expected: usize,
+        /// Bytes given.
+        actual: usize,
+    },
+}
+
+/// Random access to the nodes of a brick octree. Implementations are thread-safe
+/// so loader threads can read concurrently.
+pub trait BrickSource: Send + Sync {
+    /// The octree geometry.
+    fn layout(&self) -> &OctreeLayout;
+
+    /// Metadata of a node.
+    fn node(&self, key: NodeKey) -> Result<NodeInfo, BrickError>;
+
+    /// Writes the node's stored brick (`stored_side()^3` little-endian samples of
+    /// the volume's dtype, x fastest, apron included) into `out`, whose length must
+    /// be `layout().brick_bytes()`. Uniform and empty nodes are filled with their
+    /// value (empty: the volume's minimum).
+    fn read_brick(&self, key: NodeKey, out: &mut [u8]) -> Result<(), BrickError>;
+}

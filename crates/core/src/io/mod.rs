@@ -1,0 +1,244 @@
+//! Volume input: the [`VolumeReader`] trait and its implementations.
+//!
+//! A reader describes the volume ([`VolumeReader::desc`]) and streams z-slabs of
+//! little-endian samples ([`VolumeReader::read_slices`]), so a builder can consume
+//! an input far larger than memory. [`read_volume`] opens a path by its extension
+//! and loads it whole. Later formats (NIfTI, TIFF, DICOM, OME-Zarr) plug in by
+//! implementing the trait.
+
+mod nrrd;
+mod raw;
+
+pub use nrrd::NrrdReader;
+pub use raw::RawReader;
+
+use crate::volume::{DType, Volume, VolumeData, VolumeDesc, VolumeError};
+use std::path::{Path, PathBuf};
+use thiserror::Error;
+
+/// Errors from reading volume files.
+#[derive(Debug, Error)]
+#[non_exhaustive]
+pub enum IoError {
+    /// The operating system refused a read.
+    #[error("cannot read {path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The OS error.
+        #[source]
+        source: std::io::Error,
+    },
+    /// The header or sidecar is malformed.
+    #[error("{path}: malformed header: {msg}")]
+    BadHeader {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        msg: String,
+    },
+    /// The sample type is not one brickray reads.
+    #[error("{path}: unsupported sample type {name:?} (supported: u8, u16, i16, f32)")]
+    UnknownDType {
+        /// The file.
+        path: PathBuf,
+        /// The type as written.
+        name: String,
+    },
+    /// The file holds fewer sample bytes than its header announces.
+    #[error("{path}: truncated: header announces {expected} bytes of samples, file holds {actual}")]
+    Truncated {
+        /// The file.
+        path: PathBuf,
+        /// Bytes announced.
+        expected: u64,
+        /// Bytes present.
+        actual: u64,
+    },
+    /// The raw file's size does not match the announced dims and sample type.
+    #[error("{path}: raw file holds {actual} bytes but dims and dtype need {expected}")]
+    SizeMismatch {
+        /// The file.
+        path: PathBuf,
+        /// Bytes needed.
+        expected: u64,
+        /// Bytes present.
+        actual: u64,
+    },
+    /// A feature of the format that brickray does not implement.
+    #[error("{path}: unsupported: {what}")]
+    Unsupported {
+        /// The file.
+        path: PathBuf,
+        /// What is unsupported.
+        what: String,
+    },
+    /// The described volume is invalid (dims, spacing, NaN samples, ...).
+    #[error("{path}: {source}")]
+    Volume {
+        /// The file.
+        path: PathBuf,
+        /// The problem.
+        #[source]
+        source: VolumeError,
+    },
+    /// A slab outside the volume was asked for.
+    #[error("slices {z0}..{z1} requested from a volume of depth {depth}")]
+    BadSlab {
+        /// First slice.
+        z0: u32,
+        /// One past the last slice.
+        z1: u32,
+        /// Volume depth.
+        depth: u32,
+    },
+}
+
+impl IoError {
+    pub(crate) fn io(path: &Path, source: std::io::Error) -> IoError {
+        IoError::Io { path: path.to_owned(), source }
+    }
+    pub(crate) fn header(path: &Path, msg: impl Into<String>) -> IoError {
+        IoError::BadHeader { path: path.to_owned(), msg: msg.into() }
+    }
+    pub(crate) fn volume(path: &Path, source: VolumeError) -> IoError {
+        IoError::Volume { path: path.to_owned(), source }
+    }
+}
+
+/// A source of volume samples that can be streamed slab by slab.
+pub trait VolumeReader: Send {
+    /// The volume's description. Its `value_range` is the file's declared range,
+    /// or the data's min..max when the file declares none.
+    fn desc(&self) -> &VolumeDesc;
+
+    /// Reads slices `z0..z1` as little-endian samples into `out`, whose length must
+    /// be `(z1 - z0) * nx * ny * dtype.size()`. Reading slabs in increasing z is
+    /// always efficient; other orders may re-read compressed inputs.
+    fn read_slices(&mut self, z0: u32, z1: u32, out: &mut [u8]) -> Result<(), IoError>;
+
+    /// The path that names this input in errors.
+    fn path(&self) -> &Path;
+
+    /// Reads the whole volume, validating it (NaN/Inf samples are an error).
+    fn read_volume(&mut self) -> Result<Volume, IoError> {
+        let desc = self.desc().clone();
+        let len = usize::try_from(desc.byte_len()).map_err(|_| {
+            IoError::volume(
+                self.path(),
+                VolumeError::BadDims { dims: desc.dims.map(u64::from), max: crate::volume::MAX_DIM },
+            )
+        })?;
+        let mut bytes = vec![0u8; len];
+        self.read_slices(0, desc.dims[2], &mut bytes)?;
+        let data = VolumeData::from_le_bytes(desc.dtype, &bytes);
+        Volume::new(desc, data).map_err(|e| IoError::volume(self.path(), e))
+    }
+}
+
+/// Checks that a slab request fits the volume and the buffer.
+pub(crate) fn check_slab(desc: &VolumeDesc, z0: u32, z1: u32, out: &[u8]) -> Result<u64, IoError> {
+    if z0 > z1 || z1 > desc.dims[2] {
+        return Err(IoError::BadSlab { z0, z1, depth: desc.dims[2] });
+    }
+    let slice = desc.dims[0] as u64 * desc.dims[1] as u64 * desc.dtype.size() as u64;
+    let need = (z1 - z0) as u64 * slice;
+    assert_eq!(out.len() as u64, need, "read_slices: output buffer has the wrong length");
+    Ok(slice)
+}
+
+/// Min and max of little-endian samples, and the index of the first non-finite one.
+pub fn scan_range(dtype: DType, bytes: &[u8]) -> (f32, f32, Option<usize>) {
+    let mut lo = f32::INFINITY;
+    let mut hi = f32::NEG_INFINITY;
+    let mut bad = None;
+    let mut push = |i: usize, x: f32| {
+        if x.is_finite() {
+            lo = lo.min(x);
+            hi = hi.max(x);
+        } else if bad.is_none() {
+            bad = Some(i);
+        }
+    };
+    match dtype {
+        DType::U8 => bytes.iter().enumerate().for_each(|(i, &b)| push(i, b as f32)),
+        DType::U16 => bytes
+            .chunks_exact(2)
+            .enumerate()
+            .for_each(|(i, c)| push(i, u16::from_le_bytes([c[0], c[1]]) as f32)),
+        DType::I16 => bytes
+            .chunks_exact(2)
+            .enumerate()
+            .for_each(|(i, c)| push(i, i16::from_le_bytes([c[0], c[1]]) as f32)),
+        DType::F32 => bytes
+            .chunks_exact(4)
+            .enumerate()
+            .for_each(|(i, c)| push(i, f32::from_le_bytes([c[0], c[1], c[2], c[3]]))),
+    }
+    (lo, hi, bad)
+}
+
+/// Streams the whole input once to find its value range; errors on NaN/Inf.
+pub(crate) fn scan_reader_range(r: &mut dyn VolumeReader) -> Result<[f32; 2], IoError> {
+    let desc = r.desc().clone();
+    let slice = desc.dims[0] as usize * desc.dims[1] as usize * desc.dtype.size();
+    let per = (64 << 20) / slice.max(1);
+    let per = per.clamp(1, desc.dims[2] as usize) as u32;
+    let mut buf = Vec::new();
+    let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+    let mut z = 0;
+    while z < desc.dims[2] {
+        let z1 = (z + per).min(desc.dims[2]);
+        buf.resize((z1 - z) as usize * slice, 0);
+        r.read_slices(z, z1, &mut buf)?;
+        let (a, b, bad) = scan_range(desc.dtype, &buf);
+        if let Some(i) = bad {
+            let plane = desc.dims[0] as usize * desc.dims[1] as usize;
+            let count = bytes_non_finite(desc.dtype, &buf);
+            let first = [
+                (i % desc.dims[0] as usize) as u32,
+                ((i / desc.dims[0] as usize) % desc.dims[1] as usize) as u32,
+                z + (i / plane) as u32,
+            ];
+            return Err(IoError::volume(r.path(), VolumeError::NonFinite { count, first }));
+        }
+        lo = lo.min(a);
+        hi = hi.max(b);
+        z = z1;
+    }
+    if !(hi > lo) {
+        hi = lo + 1.0;
+    }
+    Ok([lo, hi])
+}
+
+fn bytes_non_finite(dtype: DType, bytes: &[u8]) -> u64 {
+    if dtype != DType::F32 {
+        return 0;
+    }
+    bytes
+        .chunks_exact(4)
+        .filter(|c| !f32::from_le_bytes([c[0], c[1], c[2], c[3]]).is_finite())
+        .count() as u64
+}
+
+/// Opens a volume by extension: `.json` (raw + JSON sidecar), `.nrrd` / `.nhdr`,
+/// or a `.raw` file with a `.json` sidecar of the same stem.
+pub fn open(path: impl AsRef<Path>) -> Result<Box<dyn VolumeReader>, IoError> {
+    let path = path.as_ref();
+    let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
+    match ext.as_str() {
+        "json" => Ok(Box::new(RawReader::open_sidecar(path)?)),
+        "nrrd" | "nhdr" => Ok(Box::new(NrrdReader::open(path)?)),
+        "raw" => Ok(Box::new(RawReader::open_sidecar(&path.with_extension("json"))?)),
+        _ => Err(IoError::Unsupported {
+            path: path.to_owned(),
+            what: format!("unknown extension {ext:?} (expected .json, .raw, .nrrd or .nhdr)"),
+        }),
+    }
+}
+
+/// Opens and loads a volume whole (see [`open`]).
+pub fn read_volume(path: impl AsRef<Path>) -> Result<Volume, IoError> {
+    open(path)?.read_volume()
+}

@@ -1,0 +1,294 @@
+//! NRRD (<https://teem.sourceforge.net/nrrd/format.html>): attached or detached
+//! data, `raw` and `gzip` encodings, 3D scalar volumes of u8/u16/i16/f32.
+
+use super::{IoError, VolumeReader, check_slab, scan_reader_range};
+use crate::volume::{DType, VolumeDesc};
+use flate2::read::GzDecoder;
+use std::fs::File;
+use std::io::{BufRead, BufReader, Read, Seek, SeekFrom};
+use std::path::{Path, PathBuf};
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Encoding {
+    Raw,
+    Gzip,
+}
+
+/// Streams a NRRD file.
+#[derive(Debug)]
+pub struct NrrdReader {
+    path: PathBuf,
+    data_path: PathBuf,
+    data_offset: u64,
+    encoding: Encoding,
+    big_endian: bool,
+    desc: VolumeDesc,
+    /// Open gzip stream and the decoded byte position it stands at.
+    gz: Option<(GzDecoder<BufReader<File>>, u64)>,
+}
+
+/// Longest header accepted: a forged file cannot make us read gigabytes of "header".
+const MAX_HEADER: usize = 1 << 20;
+
+impl NrrdReader {
+    /// Parses the header and checks that the data is all there (for raw encoding, by
+    /// size; for gzip, by decoding once, which also finds the value range when the
+    /// header gives none).
+    pub fn open(path: &Path) -> Result<NrrdReader, IoError> {
+        let file = File::open(path).map_err(|e| IoError::io(path, e))?;
+        let mut rd = BufReader::new(file);
+        let mut magic = String::new();
+        rd.read_line(&mut magic).map_err(|e| IoError::io(path, e))?;
+        if !magic.starts_with("NRRD000") {
+            return Err(IoError::header(path, "missing NRRD magic"));
+        }
+        let mut consumed = magic.len();
+        let mut fields: Vec<(String, String)> = Vec::new();
+        loop {
+            let mut line = String::new();
+            let n = match rd.read_line(&mut line) {
+                Ok(n) => n,
+                Err(e) if e.kind() == std::io::ErrorKind::InvalidData => {
+                    return Err(IoError::header(path, "header is not text"));
+                }
+                Err(e) => return Err(IoError::io(path, e)),
+            };
+            consumed += n;
+            if consumed > MAX_HEADER {
+                return Err(IoError::header(path, "header longer than 1 MiB"));
+            }
+            if n == 0 {
+                // EOF: allowed only for detached headers.
+                break;
+            }
+            let l = line.trim_end_matches(['\n', '\r']);
+            if l.is_empty() {
+                break;
+            }
+            if l.starts_with('#') {
+                continue;
+            }
+            if let Some((k, v)) = l.split_once(": ") {
+                fields.push((k.trim().to_ascii_lowercase(), v.trim().to_owned()));
+            } else if l.contains(":=") {
+                continue; // key/value pairs: ignored
+            } else {
+                return Err(IoError::header(path, format!("unparsable line {l:?}")));
+            }
+        }
+        let get = |k: &str| fields.iter().find(|(n, _)| n == k).map(|(_, v)| v.as_str());
+        let ty = get("type").ok_or_else(|| IoError::header(path, "no type field"))?;
+        let dtype = match ty.to_ascii_lowercase().as_str() {
+            "uchar" | "unsigned char" | "uint8" | "uint8_t" => DType::U8,
+            "ushort" | "unsigned short" | "unsigned short int" | "uint16" | "uint16_t" => DType::U16,
+            "short" | "short int" | "signed short" | "signed short int" | "int16" | "int16_t" => DType::I16,
+            "float" => DType::F32,
+            _ => return Err(IoError::UnknownDType { path: path.to_owned(), name: ty.to_owned() }),
+        };
+        let dimension: usize = get("dimension")
+            .ok_or_else(|| IoError::header(path, "no dimension field"))?
+            .parse()
+            .map_err(|_| IoError::header(path, "dimension is not a number"))?;
+        let sizes: Vec<u64> = get("sizes")
+            .ok_or_else(|| IoError::header(path, "no sizes field"))?
+            .split_whitespace()
+            .map(|s| s.parse::<u64>())
+            .collect::<Result<_, _>>()
+            .map_err(|_| IoError::header(path, "sizes are not numbers"))?;
+        if sizes.len() != dimension {
+            return Err(IoError::header(path, "sizes does not match dimension"));
+        }
+        // Accept 3D, or 4D with a leading axis of size 1.
+        let sizes3 = match sizes.as_slice() {
+            [x, y, z] => [*x, *y, *z],
+            [1, x, y, z] => [*x, *y, *z],
+            _ => {
+                return Err(IoError::Unsupported {
+                    path: path.to_owned(),
+                    what: format!("{dimension}D data with sizes {sizes:?} (3D scalar volumes only)"),
+                });
+            }
+        };
+        crate::volume::voxel_count(sizes3).map_err(|e| IoError::volume(path, e))?;
+        let dims = sizes3.map(|d| d as u32);
+        let encoding = match get("encoding").map(|e| e.to_ascii_lowercase()) {
+            Some(e) if e == "raw" => Encoding::Raw,
+            Some(e) if e == "gzip" || e == "gz" => Encoding::Gzip,
+            Some(e) => {
+                return Err(IoError::Unsupported { path: path.to_owned(), what: format!("encoding {e:?}") });
+            }
+            None => return Err(IoError::header(path, "no encoding field")),
+        };
+        let big_endian = matches!(get("endian"), Some(e) if e.eq_ignore_ascii_case("big"));
+        let spacing = parse_spacing(path, get("spacings"), get("space directions"), sizes.len() == 4)?;
+        if get("line skip").is_some_and(|v| v != "0") || get("byte skip").is_some_and(|v| v != "0") {
+            return Err(IoError::Unsupported { path: path.to_owned(), what: "line skip / byte skip".into() });
+        }
+        let declared = match (get("min").or(get("old min")), get("max").or(get("old max"))) {
+            (Some(a), Some(b)) => match (a.parse::<f32>(), b.parse::<f32>()) {
+                (Ok(a), Ok(b)) if a.is_finite() && b.is_finite() && b > a => Some([a, b]),
+                _ => None,
+            },
+            _ => None,
+        };
+        let (data_path, data_offset) = match get("data file").or(get("datafile")) {
+            Some(f) if f.starts_with("LIST") || f.contains('%') => {
+                return Err(IoError::Unsupported { path: path.to_owned(), what: "multi-file data".into() });
+            }
+            Some(f) => (path.parent().unwrap_or(Path::new(".")).join(f), 0),
+            None => (path.to_owned(), consumed as u64),
+        };
+        let desc = VolumeDesc { dims, dtype, spacing, value_range: declared.unwrap_or([0.0, 1.0]) };
+        desc.validate().map_err(|e| IoError::volume(path, e))?;
+        let mut r = NrrdReader {
+            path: path.to_owned(),
+            data_path,
+            data_offset,
+            encoding,
+            big_endian,
+            desc,
+            gz: None,
+        };
+        let file_len = std::fs::metadata(&r.data_path).map_err(|e| IoError::io(&r.data_path, e))?.len();
+        let available = file_len.saturating_sub(r.data_offset);
+        if encoding == Encoding::Raw && available < r.desc.byte_len() {
+            return Err(IoError::Truncated { path: path.to_owned(), expected: r.desc.byte_len(), actual: available });
+        }
+        // For gzip the only way to know the stream is whole is to decode it; the
+        // scan doubles as the value-range pass.
+        if declared.is_none() || encoding == Encoding::Gzip {
+            let range = scan_reader_range(&mut r)?;
+            if declared.is_none() {
+                r.desc.value_range = range;
+            }
+            r.gz = None;
+        }
+        Ok(r)
+    }
+
+    fn truncated(&self, actual: u64) -> IoError {
+        IoError::Truncated { path: self.path.clone(), expected: self.desc.byte_len(), actual }
+    }
+
+    fn read_gzip(&mut self, start: u64, out: &mut [u8]) -> Result<(), IoError> {
+        let restart = match &self.gz {
+            Some((_, pos)) => *pos > start,
+            None => true,
+        };
+        if restart {
+            let mut f = File::open(&self.data_path).map_err(|e| IoError::io(&self.data_path, e))?;
+            f.seek(SeekFrom::Start(self.data_offset)).map_err(|e| IoError::io(&self.data_path, e))?;
+            self.gz = Some((GzDecoder::new(BufReader::new(f)), 0));
+        }
+        let (gz, pos) = self.gz.as_mut().expect("set above");
+        let skip = start - *pos;
+        let copied = std::io::copy(&mut gz.by_ref().take(skip), &mut std::io::sink());
+        let copied = copied.map_err(|e| gz_error(&self.path, e))?;
+        *pos += copied;
+        if copied < skip {
+            let p = *pos;
+            self.gz = None;
+            return Err(self.truncated(p));
+        }
+        let mut filled = 0;
+        while filled < out.len() {
+            match gz.read(&mut out[filled..]) {
+                Ok(0) => {
+                    let p = *pos + filled as u64;
+                    self.gz = None;
+                    return Err(self.truncated(p));
+                }
+                Ok(n) => filled += n,
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                Err(e) => {
+                    let err = gz_error(&self.path, e);
+                    self.gz = None;
+                    return Err(err);
+                }
+            }
+        }
+        *pos += filled as u64;
+        Ok(())
+    }
+}
+
+fn gz_error(path: &Path, e: std::io::Error) -> IoError {
+    match e.kind() {
+        std::io::ErrorKind::UnexpectedEof => {
+            IoError::Truncated { path: path.to_owned(), expected: 0, actual: 0 }
+        }
+        std::io::ErrorKind::InvalidInput | std::io::ErrorKind::InvalidData => {
+            IoError::header(path, format!("corrupt gzip data: {e}"))
+        }
+        _ => IoError::io(path, e),
+    }
+}
+
+fn parse_spacing(
+    path: &Path,
+    spacings: Option<&str>,
+    directions: Option<&str>,
+    four_d: bool,
+) -> Result<[f32; 3], IoError> {
+    if let Some(s) = spacings {
+        let v: Vec<f32> = s
+            .split_whitespace()
+            .filter(|t| !t.eq_ignore_ascii_case("nan"))
+            .map(|t| t.parse::<f32>())
+            .collect::<Result<_, _>>()
+            .map_err(|_| IoError::header(path, "spacings are not numbers"))?;
+        if v.len() == 3 {
+            return Ok([v[0], v[1], v[2]]);
+        }
+        return Err(IoError::header(path, "spacings must give 3 values"));
+    }
+    if let Some(d) = directions {
+        // "(a,b,c) (d,e,f) (g,h,i)", possibly preceded by "none" for a 4D axis.
+        let vecs: Vec<f32> = d
+            .split(')')
+            .map(|t| t.trim().trim_start_matches("none").trim().trim_start_matches('('))
+            .filter(|t| !t.is_empty())
+            .map(|t| {
+                let c: Vec<f32> = t.split(',').filter_map(|x| x.trim().parse().ok()).collect();
+                c.iter().map(|x| x * x).sum::<f32>().sqrt()
+            })
+            .collect();
+        let _ = four_d;
+        if vecs.len() == 3 {
+            return Ok([vecs[0], vecs[1], vecs[2]]);
+        }
+        return Err(IoError::header(path, "space directions must give 3 vectors"));
+    }
+    Ok([1.0; 3])
+}
+
+impl VolumeReader for NrrdReader {
+    fn desc(&self) -> &VolumeDesc {
+        &self.desc
+    }
+
+    fn path(&self) -> &Path {
+        &self.path
+    }
+
+    fn read_slices(&mut self, z0: u32, z1: u32, out: &mut [u8]) -> Result<(), IoError> {
+        let slice = check_slab(&self.desc, z0, z1, out)?;
+        let start = z0 as u64 * slice;
+        match self.encoding {
+            Encoding::Raw => {
+                let mut f = File::open(&self.data_path).map_err(|e| IoError::io(&self.data_path, e))?;
+                f.seek(SeekFrom::Start(self.data_offset + start)).map_err(|e| IoError::io(&self.path, e))?;
+                f.read_exact(out).map_err(|e| match e.kind() {
+                    std::io::ErrorKind::UnexpectedEof => self.truncated(start),
+                    _ => IoError::io(&self.path, e),
+                })?;
+            }
+            Encoding::Gzip => self.read_gzip(start, out)?,
+        }
+        if self.big_endian {
+            let n = self.desc.dtype.size();
+            out.chunks_exact_mut(n).for_each(|c| c.reverse());
+        }
+        Ok(())
+    }
+}

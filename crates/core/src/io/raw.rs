@@ -1,0 +1,120 @@
+//! Raw little-endian samples with a JSON sidecar (the form of `shared/data`).
+
+use super::{IoError, VolumeReader, check_slab, scan_reader_range};
+use crate::volume::{DType, VolumeDesc};
+use std::fs::File;
+use std::io::{Read, Seek, SeekFrom};
+use std::path::{Path, PathBuf};
+
+/// Reads raw samples (x fastest, then y, then z) from a file at an offset.
+#[derive(Debug)]
+pub struct RawReader {
+    path: PathBuf,
+    file: File,
+    offset: u64,
+    desc: VolumeDesc,
+}
+
+#[derive(serde::Deserialize)]
+struct Sidecar {
+    dims: Vec<u64>,
+    dtype: String,
+    #[serde(default)]
+    spacing: Option<Vec<f32>>,
+    #[serde(default)]
+    file: Option<String>,
+    #[serde(default)]
+    byte_order: Option<String>,
+    #[serde(default)]
+    value_range: Option<Vec<f32>>,
+}
+
+impl RawReader {
+    /// Opens a raw file of known description. `desc.value_range` is used as given.
+    /// The file must hold exactly `offset + desc.byte_len()` bytes.
+    pub fn new(path: impl Into<PathBuf>, offset: u64, desc: VolumeDesc) -> Result<RawReader, IoError> {
+        let path = path.into();
+        desc.validate().map_err(|e| IoError::volume(&path, e))?;
+        let file = File::open(&path).map_err(|e| IoError::io(&path, e))?;
+        let actual = file.metadata().map_err(|e| IoError::io(&path, e))?.len();
+        let expected = offset + desc.byte_len();
+        if actual != expected {
+            return Err(IoError::SizeMismatch { path, expected, actual });
+        }
+        Ok(RawReader { path, file, offset, desc })
+    }
+
+    /// Opens `name.json` and the raw file it names (`"file"`, else `name.raw`).
+    /// When the sidecar gives no `value_range`, the data is scanned for one.
+    pub fn open_sidecar(json: &Path) -> Result<RawReader, IoError> {
+        let text = std::fs::read_to_string(json).map_err(|e| IoError::io(json, e))?;
+        let sc: Sidecar =
+            serde_json::from_str(&text).map_err(|e| IoError::header(json, e.to_string()))?;
+        if sc.dims.len() != 3 {
+            return Err(IoError::header(json, format!("dims must have 3 entries, got {}", sc.dims.len())));
+        }
+        let dims64 = [sc.dims[0], sc.dims[1], sc.dims[2]];
+        crate::volume::voxel_count(dims64).map_err(|e| IoError::volume(json, e))?;
+        let dims = dims64.map(|d| d as u32);
+        let dtype = DType::parse(&sc.dtype)
+            .ok_or_else(|| IoError::UnknownDType { path: json.to_owned(), name: sc.dtype.clone() })?;
+        if let Some(order) = &sc.byte_order {
+            if !order.eq_ignore_ascii_case("little") && dtype.size() > 1 {
+                return Err(IoError::Unsupported {
+                    path: json.to_owned(),
+                    what: format!("byte_order {order:?} (only little-endian)"),
+                });
+            }
+        }
+        let spacing = match sc.spacing.as_deref() {
+            None => [1.0; 3],
+            Some([a, b, c]) => [*a, *b, *c],
+            Some(s) => return Err(IoError::header(json, format!("spacing must have 3 entries, got {}", s.len()))),
+        };
+        let raw = match &sc.file {
+            Some(f) => json.parent().unwrap_or(Path::new(".")).join(f),
+            None => json.with_extension("raw"),
+        };
+        let declared = match sc.value_range.as_deref() {
+            Some([lo, hi]) if lo.is_finite() && hi.is_finite() && hi > lo => Some([*lo, *hi]),
+            Some(r) => {
+                return Err(IoError::header(json, format!("value_range must be [lo, hi] with lo < hi, got {r:?}")));
+            }
+            None => None,
+        };
+        let desc = VolumeDesc { dims, dtype, spacing, value_range: declared.unwrap_or([0.0, 1.0]) };
+        let mut reader = RawReader::new(raw, 0, desc)?;
+        if declared.is_none() {
+            reader.desc.value_range = scan_reader_range(&mut reader)?;
+        }
+        Ok(reader)
+    }
+}
+
+impl VolumeReader for RawReader {
+    fn desc(&self) -> &VolumeDesc {
+        &self.desc
+    }
+
+    fn path(&self) -> &Path {
+        &self.path
+    }
+
+    fn read_slices(&mut self, z0: u32, z1: u32, out: &mut [u8]) -> Result<(), IoError> {
+        let slice = check_slab(&self.desc, z0, z1, out)?;
+        self.file
+            .seek(SeekFrom::Start(self.offset + z0 as u64 * slice))
+            .map_err(|e| IoError::io(&self.path, e))?;
+        self.file.read_exact(out).map_err(|e| {
+            if e.kind() == std::io::ErrorKind::UnexpectedEof {
+                IoError::Truncated {
+                    path: self.path.clone(),
+                    expected: self.offset + self.desc.byte_len(),
+                    actual: self.file.metadata().map(|m| m.len()).unwrap_or(0),
+                }
+            } else {
+                IoError::io(&self.path, e)
+            }
+        })
+    }
+}

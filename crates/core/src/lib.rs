@@ -1,0 +1,30 @@
+//! GPU-free core of brickray.
+//!
+//! * [`volume`]: scalar volumes in memory ([`Volume`]), their sample types and
+//!   value ranges;
+//! * [`io`]: the [`VolumeReader`] trait and the raw + JSON sidecar and NRRD readers;
+//! * [`tf`]: 1D RGBA transfer functions and the opacity prefix-sum table that
+//!   answers "is the value range `[min, max]` transparent?" in O(1);
+//! * [`brick`]: the brick-octree vocabulary (node keys, layout, [`BrickSource`]);
+//! * [`camera`]: perspective and orthographic cameras and the ray model shared by
+//!   the GPU ray caster and the CPU reference;
+//! * [`settings`]: render modes and switches;
+//! * [`macrocell`]: the min/max macro-cell grid used for empty-space skipping;
+//! * [`synthetic`]: procedural test volumes (sphere, Marschner-Lobb).
+
+pub mod brick;
+pub mod camera;
+pub mod io;
+pub mod macrocell;
+pub mod settings;
+pub mod synthetic;
+pub mod tf;
+pub mod volume;
+
+pub use brick::{BrickError, BrickSource, NodeInfo, NodeKey, NodeKind, OctreeLayout};
+pub use camera::{Camera, Projection, Ray, VolumeFrame};
+pub use io::{IoError, VolumeReader, read_volume};
+pub use macrocell::MacroCellGrid;
+pub use settings::{Accel, RenderMode, RenderSettings, Shading};
+pub use tf::TransferFunction;
+pub use volume::{DType, Volume, VolumeData, VolumeDesc, VolumeError};

@@ -1,0 +1,1 @@
+//! Visibility scheduler (not yet implemented; planned after the out-of-core path).
