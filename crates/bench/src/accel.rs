@@ -1,0 +1,5 @@
+//! The `accel` suite (not implemented yet).
+
+pub(crate) fn run(_args: &[String]) -> Result<crate::Figures, String> {
+    Err("the accel suite is not implemented yet".into())
+}
