@@ -1,0 +1,345 @@
+//! The brute-force ray marcher.
+
+use brickray_core::tf::corrected_alpha;
+use brickray_core::{Camera, Ray, RenderMode, RenderSettings, Shading, TransferFunction, Volume, VolumeFrame};
+use glam::{DMat3, DMat4, DVec3};
+use rayon::prelude::*;
+
+use crate::Image;
+
+/// The reference's default step: 1/8 of the smallest voxel side (the GPU's
+/// default is 1/2).
+pub const DEFAULT_STEP_FACTOR: f32 = 0.125;
+
+/// Gradients shorter than this (normalized-value units per voxel) leave a sample
+/// unshaded.
+const MIN_GRADIENT: f64 = 1e-6;
+
+/// How the reference samples the image and the rays.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ReferenceOptions<'a> {
+    /// Image width in pixels.
+    pub width: u32,
+    /// Image height in pixels.
+    pub height: u32,
+    /// Sampling step as a fraction of the smallest voxel side (replaces
+    /// `RenderSettings::step_factor`; default [`DEFAULT_STEP_FACTOR`]). Opacity is
+    /// corrected to this step, so images at different steps converge to the same
+    /// integral.
+    pub step_factor: f32,
+    /// `1`: one ray through each pixel centre. `n`: `n x n` stratified rays at the
+    /// centres of an `n x n` grid of sub-pixels, their premultiplied colours
+    /// averaged and the nearest of their depths kept. `0` is treated as `1`.
+    pub supersample: u32,
+    /// Host clip depth per pixel (`width * height`, row 0 at the top): each ray of
+    /// that pixel stops there.
+    pub host_depth: Option<&'a [f32]>,
+}
+
+impl ReferenceOptions<'static> {
+    /// `width x height`, step 1/8, one ray per pixel, no host depth.
+    pub fn new(width: u32, height: u32) -> ReferenceOptions<'static> {
+        ReferenceOptions { width, height, step_factor: DEFAULT_STEP_FACTOR, supersample: 1, host_depth: None }
+    }
+}
+
+impl Default for ReferenceOptions<'static> {
+    /// 256 x 256, step 1/8, one ray per pixel, no host depth.
+    fn default() -> Self {
+        ReferenceOptions::new(256, 256)
+    }
+}
+
+impl<'a> ReferenceOptions<'a> {
+    /// With another step factor.
+    pub fn with_step_factor(self, step_factor: f32) -> Self {
+        ReferenceOptions { step_factor, ..self }
+    }
+
+    /// With `n x n` rays per pixel.
+    pub fn with_supersample(self, n: u32) -> Self {
+        ReferenceOptions { supersample: n, ..self }
+    }
+
+    /// With a host depth buffer.
+    pub fn with_host_depth<'b>(self, depth: &'b [f32]) -> ReferenceOptions<'b> {
+        ReferenceOptions {
+            width: self.width,
+            height: self.height,
+            step_factor: self.step_factor,
+            supersample: self.supersample,
+            host_depth: Some(depth),
+        }
+    }
+}
+
+/// Renders the model of `docs/rendering-model.md` on the CPU, brute force, in f64.
+///
+/// `settings.step_factor` and `settings.accel` are ignored: the step is
+/// `opts.step_factor` (with the opacity corrected to it) and every sample is taken
+/// (no empty-space skipping, no early ray termination). Rows are rendered in
+/// parallel (rayon).
+///
+/// # Panics
+/// If `opts.step_factor` is not finite and positive, if `frame.voxel_world` is not
+/// finite and positive, or if `opts.host_depth` is not `width * height` long.
+pub fn render_reference(
+    vol: &Volume,
+    frame: &VolumeFrame,
+    tf: &TransferFunction,
+    camera: &Camera,
+    settings: &RenderSettings,
+    opts: &ReferenceOptions<'_>,
+) -> Image {
+    let (width, height) = (opts.width, opts.height);
+    let mut img = Image::new(width, height);
+    if width == 0 || height == 0 {
+        return img;
+    }
+    let step_factor = opts.step_factor as f64;
+    assert!(step_factor.is_finite() && step_factor > 0.0, "step_factor must be finite and > 0, got {step_factor}");
+    let voxel_world = frame.voxel_world as f64;
+    assert!(voxel_world.is_finite() && voxel_world > 0.0, "frame.voxel_world must be finite and > 0, got {voxel_world}");
+    if let Some(d) = opts.host_depth {
+        assert_eq!(d.len(), width as usize * height as usize, "host_depth must hold width * height values");
+    }
+
+    let view_proj = camera.view_proj(width as f32 / height as f32).as_dmat4();
+    let model = frame.model.as_dmat4();
+    let marcher = Marcher {
+        vol,
+        tf,
+        settings,
+        dims: DVec3::from_array(vol.dims().map(f64::from)),
+        view_proj,
+        inv_view_proj: view_proj.inverse(),
+        inv_model: model.inverse(),
+        normal_matrix: DMat3::from_mat4(model).inverse().transpose(),
+        step_factor,
+        dt: step_factor * voxel_world,
+        width,
+        height,
+    };
+    let n = opts.supersample.max(1);
+    let w = width as usize;
+    img.color.par_chunks_mut(w).zip(img.depth.par_chunks_mut(w)).enumerate().for_each(|(py, (colors, depths))| {
+        for (px, (color, depth)) in colors.iter_mut().zip(depths.iter_mut()).enumerate() {
+            let host = opts.host_depth.map(|d| d[py * w + px]);
+            let (c, z) = marcher.pixel(px as f64, py as f64, n, host);
+            *color = c.map(|x| x as f32);
+            *depth = z.map_or(1.0, |z| z as f32);
+        }
+    });
+    img
+}
+
+/// The per-frame constants of a render.
+struct Marcher<'a> {
+    vol: &'a Volume,
+    tf: &'a TransferFunction,
+    settings: &'a RenderSettings,
+    dims: DVec3,
+    view_proj: DMat4,
+    inv_view_proj: DMat4,
+    inv_model: DMat4,
+    /// Inverse transpose of the model's 3x3 (texture-space gradients to world).
+    normal_matrix: DMat3,
+    step_factor: f64,
+    dt: f64,
+    width: u32,
+    height: u32,
+}
+
+/// The result of one ray: premultiplied RGBA and clip depth.
+type RayResult = ([f64; 4], Option<f64>);
+
+impl Marcher<'_> {
+    /// One pixel: `n x n` stratified rays, colours averaged, nearest depth kept.
+    fn pixel(&self, px: f64, py: f64, n: u32, host_depth: Option<f32>) -> RayResult {
+        if n == 1 {
+            return self.trace(px, py, host_depth);
+        }
+        let mut sum = [0.0f64; 4];
+        let mut depth: Option<f64> = None;
+        let inv = 1.0 / n as f64;
+        for j in 0..n {
+            for i in 0..n {
+                // `through_pixel` adds 0.5: sub-pixel centre (i + 0.5) / n.
+                let (c, z) = self.trace(px + (i as f64 + 0.5) * inv - 0.5, py + (j as f64 + 0.5) * inv - 0.5, host_depth);
+                for k in 0..4 {
+                    sum[k] += c[k];
+                }
+                if let Some(z) = z {
+                    depth = Some(depth.map_or(z, |d| d.min(z)));
+                }
+            }
+        }
+        let count = (n * n) as f64;
+        (sum.map(|s| s / count), depth)
+    }
+
+    /// One ray through image position `(px + 0.5, py + 0.5)`.
+    fn trace(&self, px: f64, py: f64, host_depth: Option<f32>) -> RayResult {
+        let ray = Ray::through_pixel(&self.inv_view_proj, &self.inv_model, px, py, self.width, self.height);
+        let Some((t0, mut t1)) = ray.clip_unit_box() else {
+            return ([0.0; 4], None);
+        };
+        if let Some(d) = host_depth.filter(|d| !d.is_nan()) {
+            let ndc = (2.0 * (px + 0.5) / self.width as f64 - 1.0, 1.0 - 2.0 * (py + 0.5) / self.height as f64);
+            t1 = t1.min(ray.t_at_depth(&self.inv_view_proj, ndc, d as f64));
+        }
+        let span = Span { t0, t1, dt: self.dt };
+        match self.settings.mode {
+            RenderMode::Iso { value, color } => self.iso(&ray, span, value as f64, color.map(f64::from)),
+            RenderMode::Mip => self.mip(&ray, span),
+            // Dvr and any future mode without a reference definition.
+            _ => self.dvr(&ray, span),
+        }
+    }
+
+    /// Front-to-back emission-absorption.
+    fn dvr(&self, ray: &Ray, span: Span) -> RayResult {
+        let shading = &self.settings.shading;
+        let depth_opacity = self.settings.depth_opacity as f64;
+        let mut c_acc = [0.0f64; 3];
+        let mut a_acc = 0.0f64;
+        let mut depth = None;
+        for t in span.samples() {
+            let v = self.value(ray, t);
+            let [r, g, b, a] = self.tf.lookup(v);
+            let a = corrected_alpha(a, self.step_factor);
+            if a <= 0.0 {
+                // Contributes nothing (and cannot change A or the depth).
+                continue;
+            }
+            let c = if shading.enabled { self.shade(ray, t, [r, g, b], shading) } else { [r, g, b] };
+            let w = (1.0 - a_acc) * a;
+            for k in 0..3 {
+                c_acc[k] += w * c[k];
+            }
+            a_acc += w;
+            if depth.is_none() && a_acc >= depth_opacity {
+                depth = Some(self.clip_depth(ray, t));
+            }
+        }
+        ([c_acc[0], c_acc[1], c_acc[2], a_acc], depth)
+    }
+
+    /// First crossing of `iso`, bisection-refined, shaded, opaque.
+    fn iso(&self, ray: &Ray, span: Span, iso: f64, color: [f64; 3]) -> RayResult {
+        let inside = |t: f64| self.value(ray, t) >= iso;
+        let mut prev = None;
+        let mut hit = None;
+        for t in span.samples() {
+            if inside(t) {
+                hit = Some(match prev {
+                    // The first sample is inside: a capped cut at t0.
+                    None => t,
+                    Some(t_prev) => {
+                        let (mut a, mut b) = (t_prev, t); // a outside, b inside
+                        for _ in 0..self.settings.iso_refine_steps {
+                            let m = 0.5 * (a + b);
+                            if inside(m) {
+                                b = m;
+                            } else {
+                                a = m;
+                            }
+                        }
+                        0.5 * (a + b)
+                    }
+                });
+                break;
+            }
+            prev = Some(t);
+        }
+        match hit {
+            None => ([0.0; 4], None),
+            Some(t) => {
+                let [r, g, b] = self.shade(ray, t, color, &self.settings.shading);
+                ([r, g, b, 1.0], Some(self.clip_depth(ray, t)))
+            }
+        }
+    }
+
+    /// Maximum intensity projection.
+    fn mip(&self, ray: &Ray, span: Span) -> RayResult {
+        let mut best: Option<(f64, f64)> = None; // (value, t)
+        for t in span.samples() {
+            let v = self.value(ray, t);
+            if best.is_none_or(|(m, _)| v > m) {
+                best = Some((v, t));
+            }
+        }
+        match best {
+            None => ([0.0; 4], None),
+            Some((m, t)) => {
+                let [r, g, b, a] = self.tf.lookup(m);
+                ([r * a, g * a, b * a, a], Some(self.clip_depth(ray, t)))
+            }
+        }
+    }
+
+    /// Continuous voxel coordinates of the ray at `t`.
+    #[inline]
+    fn voxel_pos(&self, ray: &Ray, t: f64) -> DVec3 {
+        (ray.tex_origin + ray.tex_dir * t) * self.dims - DVec3::splat(0.5)
+    }
+
+    /// The normalized trilinear value at `t`.
+    #[inline]
+    fn value(&self, ray: &Ray, t: f64) -> f64 {
+        self.vol.sample_trilinear(self.voxel_pos(ray, t).to_array())
+    }
+
+    /// Clip depth of the ray's point at `t`.
+    fn clip_depth(&self, ray: &Ray, t: f64) -> f64 {
+        self.view_proj.project_point3(ray.origin + ray.dir * t).z
+    }
+
+    /// The unit world normal at `t`, or `None` where the gradient vanishes.
+    fn normal(&self, ray: &Ray, t: f64) -> Option<DVec3> {
+        let p = self.voxel_pos(ray, t);
+        let g = DVec3::from_array(std::array::from_fn(|i| {
+            let mut e = DVec3::ZERO;
+            e[i] = 1.0;
+            let hi = self.vol.sample_trilinear((p + e).to_array());
+            let lo = self.vol.sample_trilinear((p - e).to_array());
+            (hi - lo) * 0.5
+        }));
+        if g.length() < MIN_GRADIENT {
+            return None;
+        }
+        // Per voxel -> per texture unit (x dims), then to world by the inverse
+        // transpose of the texture-to-world 3x3 (see the crate docs).
+        let n = self.normal_matrix * (g * self.dims);
+        let n = n.normalize_or_zero();
+        (n != DVec3::ZERO).then_some(n)
+    }
+
+    /// Blinn-Phong with a headlight, two-sided, clamped to 0..1.
+    fn shade(&self, ray: &Ray, t: f64, c: [f64; 3], s: &Shading) -> [f64; 3] {
+        let Some(n) = self.normal(ray, t) else {
+            return c.map(|x| x.clamp(0.0, 1.0));
+        };
+        let l = -ray.dir; // L = H
+        let ndl = n.dot(l).abs();
+        let diffuse = s.ambient as f64 + s.diffuse as f64 * ndl;
+        let specular = s.specular as f64 * ndl.powf(s.shininess as f64);
+        c.map(|x| (x * diffuse + specular).clamp(0.0, 1.0))
+    }
+}
+
+/// The sample positions of a clipped ray.
+#[derive(Debug, Clone, Copy)]
+struct Span {
+    t0: f64,
+    t1: f64,
+    dt: f64,
+}
+
+impl Span {
+    /// `t_k = t0 + k * dt` for `k = 0, 1, ...` while `t_k < t1`.
+    fn samples(self) -> impl Iterator<Item = f64> {
+        (0u64..).map(move |k| self.t0 + k as f64 * self.dt).take_while(move |&t| t < self.t1)
+    }
+}
