@@ -1,1 +1,263 @@
-//! placeholder
+//! Support for brickray's tests, examples and benchmarks. Not part of the library
+//! API: the library never creates an adapter or a device; this crate does, for
+//! programs that have no host application.
+//!
+//! * [`GpuContext::new`] picks an adapter: a real GPU when there is one, else a
+//!   software one (Mesa's lavapipe). It honours `WGPU_BACKEND` (e.g. `vulkan`, `gl`)
+//!   and `WGPU_ADAPTER_NAME` (a case-insensitive substring of the adapter's name).
+//!   With no adapter at all it fails with [`GpuError::NoAdapter`], whose message
+//!   names the package to install.
+//! * [`Offscreen`] is a colour + depth target pair with read-back helpers.
+//! * [`shared_data_dir`] finds `../shared/data` and decides whether a test that
+//!   needs it may skip.
+
+use std::path::PathBuf;
+use thiserror::Error;
+
+/// Errors creating a GPU context.
+#[derive(Debug, Error)]
+#[non_exhaustive]
+pub enum GpuError {
+    /// No adapter was found.
+    #[error(
+        "no GPU adapter found{filter}. On Debian/Ubuntu without a GPU install the software Vulkan driver: \
+         `sudo apt-get install -y mesa-vulkan-drivers` (or run ./scripts/setup.sh)"
+    )]
+    NoAdapter {
+        /// A note on the filters in effect.
+        filter: String,
+    },
+    /// The adapter refused the device.
+    #[error("the adapter {adapter} refused a device: {source}")]
+    Device {
+        /// Adapter name.
+        adapter: String,
+        /// wgpu's error.
+        #[source]
+        source: wgpu::RequestDeviceError,
+    },
+}
+
+/// An instance, adapter, device and queue for headless work.
+#[derive(Debug)]
+pub struct GpuContext {
+    /// The instance.
+    pub instance: wgpu::Instance,
+    /// The adapter.
+    pub adapter: wgpu::Adapter,
+    /// The device, with the optional features brickray benefits from enabled when
+    /// the adapter has them.
+    pub device: wgpu::Device,
+    /// The queue.
+    pub queue: wgpu::Queue,
+}
+
+/// Optional features brickray uses when present.
+pub const WANTED_FEATURES: wgpu::Features = wgpu::Features::TEXTURE_FORMAT_16BIT_NORM
+    .union(wgpu::Features::FLOAT32_FILTERABLE)
+    .union(wgpu::Features::TIMESTAMP_QUERY);
+
+impl GpuContext {
+    /// Picks an adapter (see the crate docs) and creates a device.
+    pub fn new() -> Result<GpuContext, GpuError> {
+        let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+        let backends = wgpu::Backends::from_env().unwrap_or(wgpu::Backends::all());
+        let mut adapters = pollster::block_on(instance.enumerate_adapters(backends));
+        let name = std::env::var("WGPU_ADAPTER_NAME").ok().map(|s| s.to_lowercase());
+        if let Some(n) = &name {
+            adapters.retain(|a| a.get_info().name.to_lowercase().contains(n.as_str()));
+        }
+        let rank = |a: &wgpu::Adapter| {
+            let info = a.get_info();
+            let ty = match info.device_type {
+                wgpu::DeviceType::DiscreteGpu => 0,
+                wgpu::DeviceType::IntegratedGpu => 1,
+                wgpu::DeviceType::VirtualGpu => 2,
+                wgpu::DeviceType::Cpu => 3,
+                wgpu::DeviceType::Other => 4,
+            };
+            // Prefer Vulkan, then the others (GL's software path is much slower).
+            let backend = if info.backend == wgpu::Backend::Vulkan { 0 } else { 1 };
+            (ty, backend)
+        };
+        adapters.sort_by_key(rank);
+        let Some(adapter) = adapters.into_iter().next() else {
+            let mut filter = String::new();
+            if let Ok(b) = std::env::var("WGPU_BACKEND") {
+                filter += &format!(" (WGPU_BACKEND={b})");
+            }
+            if let Some(n) = name {
+                filter += &format!(" (WGPU_ADAPTER_NAME={n})");
+            }
+            return Err(GpuError::NoAdapter { filter });
+        };
+        let features = adapter.features() & WANTED_FEATURES;
+        let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+            label: Some("brickray-harness"),
+            required_features: features,
+            required_limits: adapter.limits(),
+            ..Default::default()
+        }))
+        .map_err(|source| GpuError::Device { adapter: adapter.get_info().name, source })?;
+        Ok(GpuContext { instance, adapter, device, queue })
+    }
+
+    /// One line describing the adapter.
+    pub fn describe(&self) -> String {
+        let i = self.adapter.get_info();
+        format!("{} ({:?}, {:?}, driver {} {})", i.name, i.backend, i.device_type, i.driver, i.driver_info)
+    }
+
+    /// Submits and waits (tests and benchmarks only: never in a frame path).
+    pub fn submit_wait(&self, encoder: wgpu::CommandEncoder) {
+        self.queue.submit([encoder.finish()]);
+        let _ = self.device.poll(wgpu::PollType::wait_indefinitely());
+    }
+}
+
+/// A colour (`Rgba8Unorm`) and depth (`Depth32Float`) target pair, as a host
+/// application would have, with read-back.
+#[derive(Debug)]
+pub struct Offscreen {
+    /// Width.
+    pub width: u32,
+    /// Height.
+    pub height: u32,
+    /// Colour texture.
+    pub color: wgpu::Texture,
+    /// Colour view.
+    pub color_view: wgpu::TextureView,
+    /// Depth texture (sampleable, so it can be handed to `prepare`).
+    pub depth: wgpu::Texture,
+    /// Depth view.
+    pub depth_view: wgpu::TextureView,
+}
+
+/// Colour format of [`Offscreen`].
+pub const COLOR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
+/// Depth format of [`Offscreen`].
+pub const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
+
+impl Offscreen {
+    /// Creates the targets.
+    pub fn new(device: &wgpu::Device, width: u32, height: u32) -> Offscreen {
+        let make = |label, format| {
+            device.create_texture(&wgpu::TextureDescriptor {
+                label: Some(label),
+                size: wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format,
+                usage: wgpu::TextureUsages::RENDER_ATTACHMENT
+                    | wgpu::TextureUsages::TEXTURE_BINDING
+                    | wgpu::TextureUsages::COPY_SRC,
+                view_formats: &[],
+            })
+        };
+        let color = make("brickray-harness colour", COLOR_FORMAT);
+        let depth = make("brickray-harness depth", DEPTH_FORMAT);
+        let color_view = color.create_view(&Default::default());
+        let depth_view = depth.create_view(&Default::default());
+        Offscreen { width, height, color, color_view, depth, depth_view }
+    }
+
+    /// Begins a render pass on both targets; `clear` clears colour to black and
+    /// depth to 1, else both are loaded.
+    pub fn pass<'e>(&self, encoder: &'e mut wgpu::CommandEncoder, clear: bool) -> wgpu::RenderPass<'e> {
+        encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+            label: Some("brickray-harness pass"),
+            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                view: &self.color_view,
+                depth_slice: None,
+                resolve_target: None,
+                ops: wgpu::Operations {
+                    load: if clear { wgpu::LoadOp::Clear(wgpu::Color::BLACK) } else { wgpu::LoadOp::Load },
+                    store: wgpu::StoreOp::Store,
+                },
+            })],
+            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                view: &self.depth_view,
+                depth_ops: Some(wgpu::Operations {
+                    load: if clear { wgpu::LoadOp::Clear(1.0) } else { wgpu::LoadOp::Load },
+                    store: wgpu::StoreOp::Store,
+                }),
+                stencil_ops: None,
+            }),
+            timestamp_writes: None,
+            occlusion_query_set: None,
+            multiview_mask: None,
+        })
+    }
+
+    /// Reads the colour target back as tightly packed RGBA8.
+    pub fn read_color(&self, gpu: &GpuContext) -> Vec<u8> {
+        read_texture(gpu, &self.color, 4, wgpu::TextureAspect::All)
+    }
+
+    /// Reads the depth target back.
+    pub fn read_depth(&self, gpu: &GpuContext) -> Vec<f32> {
+        let bytes = read_texture(gpu, &self.depth, 4, wgpu::TextureAspect::DepthOnly);
+        bytes.chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect()
+    }
+}
+
+/// Copies a 2D texture to a buffer and maps it (blocking: tests and benches only).
+pub fn read_texture(gpu: &GpuContext, tex: &wgpu::Texture, bpp: u32, aspect: wgpu::TextureAspect) -> Vec<u8> {
+    let (w, h) = (tex.width(), tex.height());
+    let row = (w * bpp).div_ceil(256) * 256;
+    let buf = gpu.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("brickray-harness readback"),
+        size: row as u64 * h as u64,
+        usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+        mapped_at_creation: false,
+    });
+    let mut enc = gpu.device.create_command_encoder(&Default::default());
+    enc.copy_texture_to_buffer(
+        wgpu::TexelCopyTextureInfo { texture: tex, mip_level: 0, origin: wgpu::Origin3d::ZERO, aspect },
+        wgpu::TexelCopyBufferInfo {
+            buffer: &buf,
+            layout: wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(row), rows_per_image: Some(h) },
+        },
+        wgpu::Extent3d { width: w, height: h, depth_or_array_layers: 1 },
+    );
+    gpu.submit_wait(enc);
+    let slice = buf.slice(..);
+    slice.map_async(wgpu::MapMode::Read, |_| {});
+    let _ = gpu.device.poll(wgpu::PollType::wait_indefinitely());
+    let data = slice.get_mapped_range().expect("buffer mapped after wait");
+    let mut out = Vec::with_capacity((w * h * bpp) as usize);
+    for y in 0..h as usize {
+        out.extend_from_slice(&data[y * row as usize..y * row as usize + (w * bpp) as usize]);
+    }
+    drop(data);
+    buf.unmap();
+    out
+}
+
+/// Where the shared real volumes live (`<workspace>/../shared/data`), or `None`
+/// when absent. Panics when absent and `CI=true`: CI always has them, so a test
+/// must never silently skip there.
+pub fn shared_data_dir() -> Option<PathBuf> {
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data");
+    if dir.is_dir() {
+        return Some(dir);
+    }
+    if std::env::var("CI").is_ok_and(|v| v == "true") {
+        panic!("CI=true but the shared data directory {} is missing", dir.display());
+    }
+    eprintln!("skipping: shared data not found at {} (a user's clone has no ../shared)", dir.display());
+    None
+}
+
+/// The sidecar path of a shared dataset, e.g. `shared_volume("invesalius_cranium_ct")`.
+pub fn shared_volume(name: &str) -> Option<PathBuf> {
+    shared_data_dir().map(|d| d.join(name).join(format!("{name}.json")))
+}
+
+/// Where tests write their images: `<workspace>/target/test-images`.
+pub fn test_output_dir() -> PathBuf {
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../target/test-images");
+    let _ = std::fs::create_dir_all(&dir);
+    dir
+}

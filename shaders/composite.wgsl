@@ -1,0 +1,33 @@
+// Composites the ray caster's premultiplied colour into the host's pass and writes
+// its depth (the host depth where the volume put none), so host geometry and the
+// volume occlude each other correctly both ways.
+
+@group(0) @binding(0) var color_tex: texture_2d<f32>;
+@group(0) @binding(1) var depth_tex: texture_2d<f32>;
+
+@vertex
+fn vs_main(@builtin(vertex_index) i: u32) -> @builtin(position) vec4<f32> {
+    let x = f32((i << 1u) & 2u) * 2.0 - 1.0;
+    let y = f32(i & 2u) * 2.0 - 1.0;
+    return vec4<f32>(x, y, 0.0, 1.0);
+}
+
+struct FragOut {
+    @location(0) color: vec4<f32>,
+    @builtin(frag_depth) depth: f32,
+}
+
+@fragment
+fn fs_main(@builtin(position) pos: vec4<f32>) -> FragOut {
+    let p = vec2<i32>(pos.xy);
+    var o: FragOut;
+    o.color = textureLoad(color_tex, p, 0);
+    o.depth = textureLoad(depth_tex, p, 0).r;
+    return o;
+}
+
+// Variant for hosts whose pass has no depth attachment.
+@fragment
+fn fs_color(@builtin(position) pos: vec4<f32>) -> @location(0) vec4<f32> {
+    return textureLoad(color_tex, vec2<i32>(pos.xy), 0);
+}
