@@ -104,22 +104,7 @@ pub fn render_reference(
         assert_eq!(d.len(), width as usize * height as usize, "host_depth must hold width * height values");
     }
 
-    let view_proj = camera.view_proj(width as f32 / height as f32).as_dmat4();
-    let model = frame.model.as_dmat4();
-    let marcher = Marcher {
-        vol,
-        tf,
-        settings,
-        dims: DVec3::from_array(vol.dims().map(f64::from)),
-        view_proj,
-        inv_view_proj: view_proj.inverse(),
-        inv_model: model.inverse(),
-        normal_matrix: DMat3::from_mat4(model).inverse().transpose(),
-        step_factor,
-        dt: step_factor * voxel_world,
-        width,
-        height,
-    };
+    let marcher = Marcher::new(vol, frame, tf, camera, settings, step_factor, width, height);
     let n = opts.supersample.max(1);
     let w = width as usize;
     img.color.par_chunks_mut(w).zip(img.depth.par_chunks_mut(w)).enumerate().for_each(|(py, (colors, depths))| {
@@ -152,6 +137,38 @@ struct Marcher<'a> {
 
 /// The result of one ray: premultiplied RGBA and clip depth.
 type RayResult = ([f64; 4], Option<f64>);
+
+impl<'a> Marcher<'a> {
+    /// The constants of a `width x height` render at `step_factor`.
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        vol: &'a Volume,
+        frame: &VolumeFrame,
+        tf: &'a TransferFunction,
+        camera: &Camera,
+        settings: &'a RenderSettings,
+        step_factor: f64,
+        width: u32,
+        height: u32,
+    ) -> Marcher<'a> {
+        let view_proj = camera.view_proj(width as f32 / height as f32).as_dmat4();
+        let model = frame.model.as_dmat4();
+        Marcher {
+            vol,
+            tf,
+            settings,
+            dims: DVec3::from_array(vol.dims().map(f64::from)),
+            view_proj,
+            inv_view_proj: view_proj.inverse(),
+            inv_model: model.inverse(),
+            normal_matrix: DMat3::from_mat4(model).inverse().transpose(),
+            step_factor,
+            dt: step_factor * frame.voxel_world as f64,
+            width,
+            height,
+        }
+    }
+}
 
 impl Marcher<'_> {
     /// One pixel: `n x n` stratified rays, colours averaged, nearest depth kept.
@@ -343,3 +360,6 @@ impl Span {
         (0u64..).map(move |k| self.t0 + k as f64 * self.dt).take_while(move |&t| t < self.t1)
     }
 }
+
+#[cfg(test)]
+mod tests;
