@@ -1,0 +1,252 @@
+//! Level-2 cache: decompressed bricks in system memory, LRU within a byte budget.
+
+use brickray_core::NodeKey;
+use std::collections::{BTreeMap, HashMap};
+use std::sync::Arc;
+
+/// Bytes of one decompressed brick, shared between the cache, the loader and the
+/// upload list of a frame.
+pub type BrickBytes = Arc<[u8]>;
+
+#[derive(Debug)]
+struct Entry {
+    data: BrickBytes,
+    tick: u64,
+}
+
+/// Decompressed bricks keyed by [`NodeKey`], evicted least-recently-used first
+/// once their total size exceeds the byte budget.
+///
+/// The most recently inserted brick is always kept, even when it alone exceeds the
+/// budget, so a cache smaller than one brick still makes progress.
+#[derive(Debug)]
+pub struct CpuCache {
+    budget: usize,
+    bytes: usize,
+    tick: u64,
+    map: HashMap<NodeKey, Entry>,
+    /// `tick -> key`, oldest first.
+    order: BTreeMap<u64, NodeKey>,
+    hits: u64,
+    misses: u64,
+    evictions: u64,
+}
+
+impl CpuCache {
+    /// An empty cache holding at most `budget_bytes` of brick data.
+    pub fn new(budget_bytes: usize) -> CpuCache {
+        CpuCache {
+            budget: budget_bytes,
+            bytes: 0,
+            tick: 0,
+            map: HashMap::new(),
+            order: BTreeMap::new(),
+            hits: 0,
+            misses: 0,
+            evictions: 0,
+        }
+    }
+
+    fn next_tick(&mut self) -> u64 {
+        self.tick += 1;
+        self.tick
+    }
+
+    /// Looks a brick up, counting a hit or a miss and marking it most recently used.
+    pub fn get(&mut self, key: NodeKey) -> Option<BrickBytes> {
+        let found = self.touch(key);
+        if found {
+            self.hits += 1;
+        } else {
+            self.misses += 1;
+        }
+        self.map.get(&key).map(|e| e.data.clone())
+    }
+
+    /// Marks a brick most recently used without counting a hit or miss; returns
+    /// whether it is cached.
+    pub fn touch(&mut self, key: NodeKey) -> bool {
+        let t = self.next_tick();
+        match self.map.get_mut(&key) {
+            Some(e) => {
+                self.order.remove(&e.tick);
+                e.tick = t;
+                self.order.insert(t, key);
+                true
+            }
+            None => false,
+        }
+    }
+
+    /// The brick, if cached, without touching it or counting.
+    pub fn peek(&self, key: NodeKey) -> Option<&BrickBytes> {
+        self.map.get(&key).map(|e| &e.data)
+    }
+
+    /// True when the brick is cached (no LRU update, no counting).
+    pub fn contains(&self, key: NodeKey) -> bool {
+        self.map.contains_key(&key)
+    }
+
+    /// Inserts (or replaces) a brick as most recently used, then evicts the least
+    /// recently used others until the total fits the budget. Returns the evicted keys.
+    pub fn insert(&mut self, key: NodeKey, data: BrickBytes) -> Vec<NodeKey> {
+        self.remove(key);
+        let t = self.next_tick();
+        self.bytes += data.len();
+        self.map.insert(key, Entry { data, tick: t });
+        self.order.insert(t, key);
+        let mut evicted = Vec::new();
+        while self.bytes > self.budget && self.map.len() > 1 {
+            let Some((_, victim)) = self.order.pop_first() else { break };
+            if let Some(e) = self.map.remove(&victim) {
+                self.bytes -= e.data.len();
+            }
+            self.evictions += 1;
+            evicted.push(victim);
+        }
+        evicted
+    }
+
+    /// Removes a brick; returns it if it was cached.
+    pub fn remove(&mut self, key: NodeKey) -> Option<BrickBytes> {
+        let e = self.map.remove(&key)?;
+        self.order.remove(&e.tick);
+        self.bytes -= e.data.len();
+        Some(e.data)
+    }
+
+    /// Keys from least to most recently used.
+    pub fn lru_order(&self) -> Vec<NodeKey> {
+        self.order.values().copied().collect()
+    }
+
+    /// Number of cached bricks.
+    pub fn len(&self) -> usize {
+        self.map.len()
+    }
+
+    /// True when nothing is cached.
+    pub fn is_empty(&self) -> bool {
+        self.map.is_empty()
+    }
+
+    /// Bytes of cached brick data.
+    pub fn bytes(&self) -> usize {
+        self.bytes
+    }
+
+    /// The byte budget.
+    pub fn budget(&self) -> usize {
+        self.budget
+    }
+
+    /// Counted lookups that found their brick.
+    pub fn hits(&self) -> u64 {
+        self.hits
+    }
+
+    /// Counted lookups that did not.
+    pub fn misses(&self) -> u64 {
+        self.misses
+    }
+
+    /// Bricks evicted for space so far.
+    pub fn evictions(&self) -> u64 {
+        self.evictions
+    }
+
+    /// `hits / (hits + misses)`, 1 when nothing was looked up.
+    pub fn hit_rate(&self) -> f64 {
+        let n = self.hits + self.misses;
+        if n == 0 { 1.0 } else { self.hits as f64 / n as f64 }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn k(i: u32) -> NodeKey {
+        NodeKey::new(3, i, 0, 0)
+    }
+
+    fn b(n: usize) -> BrickBytes {
+        vec![0u8; n].into()
+    }
+
+    #[test]
+    fn lru_order_and_budget() {
+        let mut c = CpuCache::new(300);
+        assert!(c.insert(k(0), b(100)).is_empty());
+        assert!(c.insert(k(1), b(100)).is_empty());
+        assert!(c.insert(k(2), b(100)).is_empty());
+        assert_eq!(c.lru_order(), vec![k(0), k(1), k(2)]);
+        // Using 0 makes 1 the oldest.
+        assert!(c.get(k(0)).is_some());
+        assert_eq!(c.lru_order(), vec![k(1), k(2), k(0)]);
+        assert_eq!(c.insert(k(3), b(100)), vec![k(1)]);
+        assert_eq!(c.bytes(), 300);
+        assert!(!c.contains(k(1)));
+        // A large brick evicts several.
+        assert_eq!(c.insert(k(4), b(250)), vec![k(2), k(0), k(3)]);
+        assert_eq!(c.len(), 1);
+        assert_eq!(c.hits(), 1);
+        assert!(c.get(k(1)).is_none());
+        assert_eq!(c.misses(), 1);
+        assert!((c.hit_rate() - 0.5).abs() < 1e-12);
+    }
+
+    #[test]
+    fn oversized_brick_is_kept_alone() {
+        let mut c = CpuCache::new(10);
+        c.insert(k(0), b(5));
+        assert_eq!(c.insert(k(1), b(50)), vec![k(0)]);
+        assert!(c.contains(k(1)));
+        assert_eq!(c.bytes(), 50);
+    }
+
+    #[test]
+    fn replace_and_remove_keep_byte_count() {
+        let mut c = CpuCache::new(1000);
+        c.insert(k(0), b(10));
+        c.insert(k(0), b(20));
+        assert_eq!(c.bytes(), 20);
+        assert_eq!(c.len(), 1);
+        assert_eq!(c.remove(k(0)).map(|d| d.len()), Some(20));
+        assert_eq!(c.bytes(), 0);
+        assert!(c.is_empty());
+    }
+
+    proptest! {
+        /// Against a model: the byte total never exceeds the budget (unless a single
+        /// brick does), the evicted brick is always the least recently used.
+        #[test]
+        fn matches_lru_model(ops in prop::collection::vec((0u32..12, 1usize..60, any::<bool>()), 1..200)) {
+            let budget = 150;
+            let mut c = CpuCache::new(budget);
+            let mut model: Vec<(NodeKey, usize)> = Vec::new(); // oldest first
+            for (i, size, is_get) in ops {
+                let key = k(i);
+                if is_get {
+                    let hit = c.get(key).is_some();
+                    let pos = model.iter().position(|e| e.0 == key);
+                    prop_assert_eq!(hit, pos.is_some());
+                    if let Some(p) = pos { let e = model.remove(p); model.push(e); }
+                } else {
+                    let evicted = c.insert(key, b(size));
+                    model.retain(|e| e.0 != key);
+                    model.push((key, size));
+                    let mut expect = Vec::new();
+                    while model.iter().map(|e| e.1).sum::<usize>() > budget && model.len() > 1 {
+                        expect.push(model.remove(0).0);
+                    }
+                    prop_assert_eq!(evicted, expect);
+                }
+                prop_assert_eq!(c.lru_order(), model.iter().map(|e| e.0).collect::<Vec<_>>());
+                prop_assert_eq!(c.bytes(), model.iter().map(|e| e.1).sum::<usize>());
+            }
+        }
+    }
+}

@@ -1,0 +1,434 @@
+//! The per-frame façade: [`BrickManager::update`] polls the loader, refines the
+//! cut, assigns pool slots, schedules uploads within the budget and re-submits the
+//! wanted loads. The renderer uploads the listed bricks into its atlas and encodes
+//! the cut.
+
+use crate::cpu_cache::{BrickBytes, CpuCache};
+use crate::loader::{LoadError, Loader, LoaderConfig};
+use crate::pool::{BrickPool, PoolError, PoolLimits, SlotId};
+use crate::refine::{DataState, EmptyReason, NodeClass, RefineEnv, RefineParams, SplitBlocks, refine};
+use crate::upload::UploadBudget;
+use brickray_core::{BrickSource, Camera, NodeInfo, NodeKey, OctreeLayout, RenderMode, TransferFunction, VolumeFrame};
+use std::collections::HashMap;
+use std::sync::Arc;
+use thiserror::Error;
+
+/// Errors creating a [`BrickManager`].
+#[derive(Debug, Error)]
+#[non_exhaustive]
+pub enum CacheError {
+    /// The GPU pool cannot be sized.
+    #[error(transparent)]
+    Pool(#[from] PoolError),
+    /// A loader thread could not be started.
+    #[error("cannot start a loader thread: {0}")]
+    Spawn(#[source] std::io::Error),
+}
+
+/// Budgets and knobs of a [`BrickManager`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ManagerConfig {
+    /// System memory for decompressed bricks (level-2 cache).
+    pub cpu_budget_bytes: usize,
+    /// GPU memory for the brick pool.
+    pub gpu_budget_bytes: u64,
+    /// Device limit on a 3D texture dimension.
+    pub max_texture_dim_3d: u32,
+    /// Bytes uploaded per frame (at least one split or one brick always goes).
+    pub upload_budget_bytes: u64,
+    /// Screen-space error tolerance in pixels per voxel (default 1).
+    pub tolerance_px: f32,
+    /// Loader threads.
+    pub loader: LoaderConfig,
+}
+
+impl Default for ManagerConfig {
+    fn default() -> Self {
+        ManagerConfig {
+            cpu_budget_bytes: 512 << 20,
+            gpu_budget_bytes: 256 << 20,
+            max_texture_dim_3d: 2048,
+            upload_budget_bytes: 16 << 20,
+            tolerance_px: 1.0,
+            loader: LoaderConfig::default(),
+        }
+    }
+}
+
+/// Where a node's brick is, the most GPU-ward state first.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Residency {
+    /// Queued for loading.
+    Requested,
+    /// Being read (or read and awaiting the next update).
+    Loading,
+    /// In the CPU cache, not on the GPU.
+    InCpu,
+    /// In a GPU pool slot.
+    OnGpu,
+    /// Its load failed; the error is kept ([`BrickManager::failure`]).
+    Failed,
+}
+
+/// Number of nodes per residency state.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct ResidencyCounts {
+    /// Queued.
+    pub requested: u32,
+    /// Being read.
+    pub loading: u32,
+    /// In CPU memory only.
+    pub in_cpu: u32,
+    /// On the GPU.
+    pub on_gpu: u32,
+    /// Failed.
+    pub failed: u32,
+}
+
+/// What a leaf of the cut holds for the renderer.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum LeafKind {
+    /// Nothing to sample here.
+    Empty(EmptyReason),
+    /// Sample the brick in this pool slot (resident or uploaded this frame).
+    Data {
+        /// The slot.
+        slot: SlotId,
+    },
+}
+
+/// One leaf of the frame's cut.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CutLeaf {
+    /// The node.
+    pub key: NodeKey,
+    /// What it holds.
+    pub kind: LeafKind,
+    /// Projected voxel size in pixels (0 for empty leaves).
+    pub priority: f32,
+}
+
+/// A brick to copy into the atlas this frame, before drawing.
+#[derive(Debug, Clone)]
+pub struct Upload {
+    /// The node.
+    pub key: NodeKey,
+    /// Its slot.
+    pub slot: SlotId,
+    /// Voxel offset of the slot in the atlas.
+    pub atlas_offset: [u32; 3],
+    /// The brick (`stored_side^3` samples, x fastest).
+    pub data: BrickBytes,
+}
+
+/// Statistics of one frame.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct FrameStats {
+    /// The frame.
+    pub frame: u64,
+    /// Leaves of the cut.
+    pub leaves: u32,
+    /// Leaves holding a brick (the GPU working set).
+    pub working_set_bricks: u32,
+    /// Pool slots.
+    pub pool_slots: u32,
+    /// Occupied pool slots.
+    pub pool_occupied: u32,
+    /// Bricks scheduled for upload.
+    pub upload_bricks: u32,
+    /// Bytes scheduled for upload.
+    pub upload_bytes: u64,
+    /// Working-set bricks already on the GPU / working-set bricks (this frame; 1 if none).
+    pub gpu_hit_rate: f64,
+    /// Lookups of bricks not on the GPU found in CPU memory (cumulative; 1 if none).
+    pub cpu_hit_rate: f64,
+    /// Requests queued or being read.
+    pub requests_in_flight: u32,
+    /// Nodes requested this frame.
+    pub requested_this_frame: u32,
+    /// Nodes per residency state.
+    pub residency: ResidencyCounts,
+    /// Why nodes were not split.
+    pub blocked: SplitBlocks,
+}
+
+/// What the renderer does this frame.
+#[derive(Debug, Clone, Default)]
+pub struct FramePlan {
+    /// Leaves covering the octree cube (each point in exactly one).
+    pub cut: Vec<CutLeaf>,
+    /// Bricks to upload before drawing.
+    pub uploads: Vec<Upload>,
+    /// Statistics.
+    pub stats: FrameStats,
+}
+
+/// Drives the caches, the loader and refinement for a renderer.
+pub struct BrickManager {
+    source: Arc<dyn BrickSource>,
+    layout: OctreeLayout,
+    volume_frame: VolumeFrame,
+    config: ManagerConfig,
+    meta: HashMap<NodeKey, Option<NodeInfo>>,
+    cpu: CpuCache,
+    pool: BrickPool,
+    loader: Loader,
+    budget: UploadBudget,
+}
+
+impl std::fmt::Debug for BrickManager {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("BrickManager")
+            .field("layout", &self.layout)
+            .field("config", &self.config)
+            .field("cpu", &self.cpu)
+            .field("pool", &self.pool)
+            .field("loader", &self.loader)
+            .finish_non_exhaustive()
+    }
+}
+
+struct Env<'a> {
+    source: &'a dyn BrickSource,
+    meta: &'a mut HashMap<NodeKey, Option<NodeInfo>>,
+    cpu: &'a mut CpuCache,
+    pool: &'a BrickPool,
+    loader: &'a mut Loader,
+}
+
+impl RefineEnv for Env<'_> {
+    fn node(&mut self, key: NodeKey) -> Option<NodeInfo> {
+        if let Some(m) = self.meta.get(&key) {
+            return *m;
+        }
+        let m = match self.source.node(key) {
+            Ok(info) => Some(info),
+            Err(e) => {
+                self.loader.mark_failed(key, LoadError::Source(e));
+                None
+            }
+        };
+        self.meta.insert(key, m);
+        m
+    }
+
+    fn data(&mut self, key: NodeKey) -> DataState {
+        if self.pool.contains(key) {
+            self.cpu.touch(key);
+            DataState::OnGpu
+        } else if self.cpu.get(key).is_some() {
+            DataState::InCpu
+        } else if self.loader.failure(key).is_some() {
+            DataState::Failed
+        } else {
+            DataState::Missing
+        }
+    }
+}
+
+impl BrickManager {
+    /// A manager over `source`, placed in the world by `volume_frame`.
+    pub fn new(
+        source: Arc<dyn BrickSource>,
+        volume_frame: VolumeFrame,
+        config: ManagerConfig,
+    ) -> Result<BrickManager, CacheError> {
+        let layout = source.layout().clone();
+        let pool = BrickPool::new(PoolLimits {
+            budget_bytes: config.gpu_budget_bytes,
+            brick_bytes: layout.brick_bytes() as u64,
+            stored_side: layout.stored_side(),
+            max_dim: config.max_texture_dim_3d,
+        })?;
+        let loader = Loader::new(source.clone(), config.loader).map_err(CacheError::Spawn)?;
+        Ok(BrickManager {
+            source,
+            layout,
+            volume_frame,
+            meta: HashMap::new(),
+            cpu: CpuCache::new(config.cpu_budget_bytes),
+            pool,
+            loader,
+            budget: UploadBudget::new(config.upload_budget_bytes),
+            config,
+        })
+    }
+
+    /// Plans one frame. `frame` must not decrease from call to call; bricks used by
+    /// the returned cut are pinned in the pool for that frame. Never blocks on I/O.
+    pub fn update(
+        &mut self,
+        camera: &Camera,
+        aspect: f32,
+        viewport_height_px: u32,
+        frame: u64,
+        mode: RenderMode,
+        tf: &TransferFunction,
+    ) -> FramePlan {
+        self.loader.poll(&mut self.cpu);
+        self.budget.begin_frame();
+        let params = RefineParams {
+            camera,
+            aspect,
+            viewport_height_px,
+            volume_frame: &self.volume_frame,
+            mode,
+            tf,
+            tolerance_px: self.config.tolerance_px,
+            max_data_leaves: self.pool.slot_count(),
+        };
+        let refined = {
+            let mut env = Env {
+                source: self.source.as_ref(),
+                meta: &mut self.meta,
+                cpu: &mut self.cpu,
+                pool: &self.pool,
+                loader: &mut self.loader,
+            };
+            refine(&self.layout, &params, &mut env, &mut self.budget)
+        };
+
+        // Pin what is resident first, so that allocations below can only evict
+        // bricks this frame does not use.
+        let mut cut = Vec::with_capacity(refined.leaves.len());
+        let mut pending = Vec::new();
+        let mut resident = 0u32;
+        for l in &refined.leaves {
+            let kind = match l.class {
+                NodeClass::Empty(r) => LeafKind::Empty(r),
+                NodeClass::Data => match self.pool.touch(l.key, frame) {
+                    Some(slot) => {
+                        resident += 1;
+                        LeafKind::Data { slot }
+                    }
+                    None => {
+                        pending.push(cut.len());
+                        LeafKind::Empty(EmptyReason::NotLoaded)
+                    }
+                },
+            };
+            cut.push(CutLeaf { key: l.key, kind, priority: l.priority });
+        }
+        let mut uploads = Vec::with_capacity(pending.len());
+        for i in pending {
+            let key = cut[i].key;
+            let Some(data) = self.cpu.peek(key).cloned() else { continue };
+            match self.pool.allocate(key, frame) {
+                Ok(a) => {
+                    cut[i].kind = LeafKind::Data { slot: a.slot };
+                    uploads.push(Upload { key, slot: a.slot, atlas_offset: self.pool.slot_offset(a.slot), data });
+                }
+                // Refinement keeps data leaves within the slot count, so this is
+                // not expected; the leaf then stays empty for this frame.
+                Err(_) => debug_assert!(false, "pool full despite refinement's slot budget"),
+            }
+        }
+
+        // Loads wanted this frame; queued ones no longer wanted are dropped.
+        self.loader.submit(&refined.requests);
+
+        let working = cut.iter().filter(|l| matches!(l.kind, LeafKind::Data { .. })).count() as u32;
+        let residency = self.residency_counts();
+        let stats = FrameStats {
+            frame,
+            leaves: cut.len() as u32,
+            working_set_bricks: working,
+            pool_slots: self.pool.slot_count(),
+            pool_occupied: self.pool.occupied(),
+            upload_bricks: uploads.len() as u32,
+            upload_bytes: uploads.iter().map(|u| u.data.len() as u64).sum(),
+            gpu_hit_rate: if working == 0 { 1.0 } else { resident as f64 / working as f64 },
+            cpu_hit_rate: self.cpu.hit_rate(),
+            requests_in_flight: residency.requested + residency.loading,
+            requested_this_frame: refined.requests.len() as u32,
+            residency,
+            blocked: refined.blocked,
+        };
+        FramePlan { cut, uploads, stats }
+    }
+
+    /// The residency of a node's brick, `None` when it is nowhere.
+    pub fn residency(&self, key: NodeKey) -> Option<Residency> {
+        if self.pool.contains(key) {
+            Some(Residency::OnGpu)
+        } else if self.cpu.contains(key) {
+            Some(Residency::InCpu)
+        } else if self.loader.failure(key).is_some() {
+            Some(Residency::Failed)
+        } else if self.loader.is_loading(key) {
+            Some(Residency::Loading)
+        } else if self.loader.is_queued(key) {
+            Some(Residency::Requested)
+        } else {
+            None
+        }
+    }
+
+    /// Nodes per residency state (each node counted once, in its most GPU-ward state).
+    pub fn residency_counts(&self) -> ResidencyCounts {
+        let on_gpu = self.pool.occupied();
+        let in_cpu = self.pool.resident().filter(|(k, _)| self.cpu.contains(*k)).count() as u32;
+        ResidencyCounts {
+            requested: self.loader.queued() as u32,
+            loading: self.loader.loading() as u32,
+            in_cpu: self.cpu.len() as u32 - in_cpu,
+            on_gpu,
+            failed: self.loader.failed_count() as u32,
+        }
+    }
+
+    /// The error that made a node fail.
+    pub fn failure(&self, key: NodeKey) -> Option<Arc<LoadError>> {
+        self.loader.failure(key).cloned()
+    }
+
+    /// Forgets every failure so the nodes are requested again when wanted.
+    pub fn retry_failed(&mut self) {
+        let keys: Vec<NodeKey> = self.loader.failures().map(|(k, _)| k).collect();
+        for k in keys {
+            self.loader.retry(k);
+            self.meta.remove(&k);
+        }
+    }
+
+    /// Forgets every GPU slot (e.g. after the atlas was recreated); the next update
+    /// uploads the working set again.
+    pub fn clear_gpu(&mut self) {
+        self.pool.clear();
+    }
+
+    /// Moves the volume in the world.
+    pub fn set_volume_frame(&mut self, frame: VolumeFrame) {
+        self.volume_frame = frame;
+    }
+
+    /// Sets the screen-space error tolerance (pixels per voxel).
+    pub fn set_tolerance_px(&mut self, tolerance_px: f32) {
+        self.config.tolerance_px = tolerance_px;
+    }
+
+    /// The octree layout.
+    pub fn layout(&self) -> &OctreeLayout {
+        &self.layout
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &ManagerConfig {
+        &self.config
+    }
+
+    /// The pool bookkeeping (slot grid, atlas size, slot offsets).
+    pub fn pool(&self) -> &BrickPool {
+        &self.pool
+    }
+
+    /// The CPU cache.
+    pub fn cpu_cache(&self) -> &CpuCache {
+        &self.cpu
+    }
+
+    /// The loader.
+    pub fn loader(&self) -> &Loader {
+        &self.loader
+    }
+}

@@ -1,0 +1,389 @@
+//! Bookkeeping of the GPU brick pool: a 3D texture atlas cut into a grid of
+//! equally sized slots, one brick each, with frame-stamped LRU eviction.
+//!
+//! No GPU object lives here; the renderer owns the texture and uploads the bricks
+//! this bookkeeping assigns to slots.
+
+use brickray_core::NodeKey;
+use std::collections::{BTreeMap, HashMap};
+use thiserror::Error;
+
+/// Index of a slot in the pool, `0..slot_count()`.
+pub type SlotId = u32;
+
+/// Errors from the brick pool.
+#[derive(Debug, Error, Clone, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum PoolError {
+    /// The budget and device limits leave room for no slot at all.
+    #[error(
+        "brick pool has no slot: budget {budget_bytes} B for bricks of {brick_bytes} B \
+         ({stored_side}^3 voxels) within a max 3D texture dimension of {max_dim}"
+    )]
+    NoSlots {
+        /// The pool budget in bytes.
+        budget_bytes: u64,
+        /// Bytes of one brick.
+        brick_bytes: u64,
+        /// Stored voxels per brick side.
+        stored_side: u32,
+        /// Largest 3D texture dimension.
+        max_dim: u32,
+    },
+    /// Every slot holds a brick used in the current frame.
+    #[error("all {slots} brick-pool slots are in use by frame {frame}")]
+    Full {
+        /// Number of slots.
+        slots: u32,
+        /// The current frame.
+        frame: u64,
+    },
+}
+
+/// Plain-integer inputs that size the pool.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct PoolLimits {
+    /// Bytes of GPU memory the pool may use.
+    pub budget_bytes: u64,
+    /// Bytes of one stored brick (`OctreeLayout::brick_bytes()`).
+    pub brick_bytes: u64,
+    /// Stored voxels per brick side, apron included (`OctreeLayout::stored_side()`).
+    pub stored_side: u32,
+    /// Device limit on a 3D texture dimension (`max_texture_dimension_3d`).
+    pub max_dim: u32,
+}
+
+impl PoolLimits {
+    /// The slot grid `[sx, sy, sz]`: each axis `<= max_dim / stored_side`, the
+    /// product `<= budget / brick_bytes` and as large as possible; among equally
+    /// large grids the most cube-like. `None` when not one slot fits.
+    pub fn grid(&self) -> Option<[u32; 3]> {
+        if self.brick_bytes == 0 || self.stored_side == 0 {
+            return None;
+        }
+        let n = self.budget_bytes / self.brick_bytes;
+        let m = (self.max_dim / self.stored_side) as u64;
+        if n == 0 || m == 0 {
+            return None;
+        }
+        let m3 = m.saturating_mul(m).saturating_mul(m);
+        if n >= m3 {
+            return Some([m as u32; 3]);
+        }
+        // Search sz <= sy <= sx; score = (product, -max extent).
+        let mut best = [1u64, 1, 1];
+        let mut best_score = (1u64, u64::MAX);
+        let mut sz = 1u64;
+        while sz <= m && sz * sz * sz <= n {
+            let mut sy = sz;
+            while sy <= m && sz * sy * sy <= n {
+                let sx = (n / (sz * sy)).min(m);
+                if sx >= sy {
+                    let p = sx * sy * sz;
+                    let score = (p, sx);
+                    if p > best_score.0 || (p == best_score.0 && sx < best_score.1) {
+                        best = [sx, sy, sz];
+                        best_score = score;
+                    }
+                }
+                sy += 1;
+            }
+            sz += 1;
+        }
+        Some(best.map(|v| v as u32))
+    }
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Slot {
+    key: Option<NodeKey>,
+    frame: u64,
+    tick: u64,
+}
+
+/// The result of [`BrickPool::allocate`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Allocation {
+    /// The slot now holding the node.
+    pub slot: SlotId,
+    /// True when the node was already resident (nothing to upload).
+    pub resident: bool,
+    /// The node whose brick was evicted to make room, if any.
+    pub evicted: Option<NodeKey>,
+}
+
+/// Slot allocation over a fixed grid with LRU eviction that never evicts a slot
+/// stamped with the current frame.
+#[derive(Debug)]
+pub struct BrickPool {
+    grid: [u32; 3],
+    stored_side: u32,
+    slots: Vec<Slot>,
+    map: HashMap<NodeKey, SlotId>,
+    /// Occupied slots by `tick` (oldest first); free slots are not listed.
+    lru: BTreeMap<u64, SlotId>,
+    free: Vec<SlotId>,
+    tick: u64,
+    evictions: u64,
+}
+
+impl BrickPool {
+    /// A pool sized by `limits`.
+    pub fn new(limits: PoolLimits) -> Result<BrickPool, PoolError> {
+        let grid = limits.grid().ok_or(PoolError::NoSlots {
+            budget_bytes: limits.budget_bytes,
+            brick_bytes: limits.brick_bytes,
+            stored_side: limits.stored_side,
+            max_dim: limits.max_dim,
+        })?;
+        Ok(BrickPool::with_grid(grid, limits.stored_side))
+    }
+
+    /// A pool with an explicit slot grid (each axis >= 1).
+    pub fn with_grid(grid: [u32; 3], stored_side: u32) -> BrickPool {
+        let grid = grid.map(|g| g.max(1));
+        let n = grid.iter().product::<u32>();
+        BrickPool {
+            grid,
+            stored_side,
+            slots: vec![Slot { key: None, frame: 0, tick: 0 }; n as usize],
+            map: HashMap::new(),
+            lru: BTreeMap::new(),
+            free: (0..n).rev().collect(),
+            tick: 0,
+            evictions: 0,
+        }
+    }
+
+    /// The slot grid `[sx, sy, sz]`.
+    pub fn grid(&self) -> [u32; 3] {
+        self.grid
+    }
+
+    /// Number of slots.
+    pub fn slot_count(&self) -> u32 {
+        self.slots.len() as u32
+    }
+
+    /// Occupied slots.
+    pub fn occupied(&self) -> u32 {
+        self.map.len() as u32
+    }
+
+    /// Stored voxels per brick side.
+    pub fn stored_side(&self) -> u32 {
+        self.stored_side
+    }
+
+    /// Voxel size of the atlas texture, `grid * stored_side`.
+    pub fn atlas_dims(&self) -> [u32; 3] {
+        self.grid.map(|g| g * self.stored_side)
+    }
+
+    /// Voxel offset of a slot's brick inside the atlas.
+    pub fn slot_offset(&self, slot: SlotId) -> [u32; 3] {
+        let [sx, sy, _] = self.grid;
+        [slot % sx, (slot / sx) % sy, slot / (sx * sy)].map(|c| c * self.stored_side)
+    }
+
+    /// The slot holding `key`, if resident.
+    pub fn slot_of(&self, key: NodeKey) -> Option<SlotId> {
+        self.map.get(&key).copied()
+    }
+
+    /// The node held by a slot.
+    pub fn key_of(&self, slot: SlotId) -> Option<NodeKey> {
+        self.slots.get(slot as usize).and_then(|s| s.key)
+    }
+
+    /// True when the node is resident.
+    pub fn contains(&self, key: NodeKey) -> bool {
+        self.map.contains_key(&key)
+    }
+
+    /// True when the slot was used in `frame`.
+    pub fn is_pinned(&self, slot: SlotId, frame: u64) -> bool {
+        self.slots.get(slot as usize).is_some_and(|s| s.key.is_some() && s.frame == frame)
+    }
+
+    /// Bricks evicted so far.
+    pub fn evictions(&self) -> u64 {
+        self.evictions
+    }
+
+    fn stamp(&mut self, slot: SlotId, frame: u64) {
+        self.tick += 1;
+        let s = &mut self.slots[slot as usize];
+        if s.key.is_some() {
+            self.lru.remove(&s.tick);
+        }
+        s.tick = self.tick;
+        s.frame = s.frame.max(frame);
+        self.lru.insert(self.tick, slot);
+    }
+
+    /// Marks a resident node used in `frame` (pinning it for that frame) and
+    /// returns its slot.
+    pub fn touch(&mut self, key: NodeKey, frame: u64) -> Option<SlotId> {
+        let slot = self.slot_of(key)?;
+        self.stamp(slot, frame);
+        Some(slot)
+    }
+
+    /// A slot for `key`, used in `frame`: its current slot when resident, else a
+    /// free slot, else the least recently used slot not used in `frame` (whose node
+    /// is evicted). `Err(Full)` when every slot is pinned by `frame`.
+    pub fn allocate(&mut self, key: NodeKey, frame: u64) -> Result<Allocation, PoolError> {
+        if let Some(slot) = self.touch(key, frame) {
+            return Ok(Allocation { slot, resident: true, evicted: None });
+        }
+        let (slot, evicted) = if let Some(slot) = self.free.pop() {
+            (slot, None)
+        } else {
+            // Ticks and frames grow together, so the oldest tick has the oldest frame.
+            let (&tick, &slot) = self
+                .lru
+                .first_key_value()
+                .ok_or(PoolError::Full { slots: self.slot_count(), frame })?;
+            if self.slots[slot as usize].frame >= frame {
+                return Err(PoolError::Full { slots: self.slot_count(), frame });
+            }
+            self.lru.remove(&tick);
+            let old = self.slots[slot as usize].key.take();
+            if let Some(old) = old {
+                self.map.remove(&old);
+                self.evictions += 1;
+            }
+            (slot, old)
+        };
+        let s = &mut self.slots[slot as usize];
+        s.key = Some(key);
+        s.frame = frame;
+        self.tick += 1;
+        s.tick = self.tick;
+        self.lru.insert(self.tick, slot);
+        self.map.insert(key, slot);
+        Ok(Allocation { slot, resident: false, evicted })
+    }
+
+    /// Frees the slot of `key`; returns it.
+    pub fn evict(&mut self, key: NodeKey) -> Option<SlotId> {
+        let slot = self.map.remove(&key)?;
+        let s = &mut self.slots[slot as usize];
+        self.lru.remove(&s.tick);
+        s.key = None;
+        self.free.push(slot);
+        Some(slot)
+    }
+
+    /// Frees every slot.
+    pub fn clear(&mut self) {
+        let keys: Vec<NodeKey> = self.map.keys().copied().collect();
+        for k in keys {
+            self.evict(k);
+        }
+    }
+
+    /// Resident nodes and their slots (unordered).
+    pub fn resident(&self) -> impl Iterator<Item = (NodeKey, SlotId)> + '_ {
+        self.map.iter().map(|(k, s)| (*k, *s))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+    use std::collections::HashSet;
+
+    fn k(i: u32) -> NodeKey {
+        NodeKey::new(5, i, 0, 0)
+    }
+
+    #[test]
+    fn grid_respects_budget_and_max_dim() {
+        let l = PoolLimits { budget_bytes: 100 * 1000, brick_bytes: 1000, stored_side: 10, max_dim: 2048 };
+        let g = l.grid().unwrap();
+        assert_eq!(g.iter().product::<u32>(), 100);
+        assert!(g.iter().all(|&a| a * 10 <= 2048));
+        // Axis limit 4 => at most 64 slots even with a huge budget.
+        let l = PoolLimits { budget_bytes: 1 << 40, brick_bytes: 1000, stored_side: 10, max_dim: 40 };
+        assert_eq!(l.grid(), Some([4, 4, 4]));
+        // 7 slots, axis limit 2 => best product 6 (or fewer), never above 8.
+        let l = PoolLimits { budget_bytes: 7000, brick_bytes: 1000, stored_side: 10, max_dim: 20 };
+        let g = l.grid().unwrap();
+        assert_eq!(g.iter().product::<u32>(), 4);
+        assert!(g.iter().all(|&a| a <= 2));
+        let l = PoolLimits { budget_bytes: 999, brick_bytes: 1000, stored_side: 10, max_dim: 2048 };
+        assert!(matches!(BrickPool::new(l), Err(PoolError::NoSlots { .. })));
+    }
+
+    #[test]
+    fn slot_offsets_tile_the_atlas() {
+        let p = BrickPool::with_grid([3, 2, 2], 10);
+        assert_eq!(p.atlas_dims(), [30, 20, 20]);
+        let offs: HashSet<[u32; 3]> = (0..p.slot_count()).map(|s| p.slot_offset(s)).collect();
+        assert_eq!(offs.len(), 12);
+        assert!(offs.iter().all(|o| (0..3).all(|a| o[a] + 10 <= p.atlas_dims()[a])));
+        assert_eq!(p.slot_offset(4), [10, 10, 0]);
+    }
+
+    #[test]
+    fn lru_eviction_skips_current_frame_and_full_is_err() {
+        let mut p = BrickPool::with_grid([2, 1, 1], 4);
+        let a = p.allocate(k(0), 1).unwrap();
+        let b = p.allocate(k(1), 1).unwrap();
+        assert_ne!(a.slot, b.slot);
+        assert!(!a.resident && a.evicted.is_none());
+        // Both pinned by frame 1.
+        assert_eq!(p.allocate(k(2), 1), Err(PoolError::Full { slots: 2, frame: 1 }));
+        // Frame 2: touch k1, so k0 is the LRU victim.
+        p.touch(k(1), 2);
+        let c = p.allocate(k(2), 2).unwrap();
+        assert_eq!(c.evicted, Some(k(0)));
+        assert_eq!(c.slot, a.slot);
+        assert!(p.allocate(k(1), 2).unwrap().resident);
+        assert!(p.allocate(k(3), 2).is_err());
+        assert_eq!(p.occupied(), 2);
+        assert_eq!(p.evict(k(1)), Some(b.slot));
+        assert_eq!(p.allocate(k(3), 2).unwrap().slot, b.slot);
+    }
+
+    proptest! {
+        /// Random frames of random accesses: a slot touched or allocated in the
+        /// current frame is never taken away within that frame; the mapping stays a
+        /// bijection; Full only when all slots are pinned.
+        #[test]
+        fn never_evicts_current_frame(
+            frames in prop::collection::vec(prop::collection::vec(0u32..20, 0..12), 1..30),
+            n_slots in 1u32..8,
+        ) {
+            let mut p = BrickPool::with_grid([n_slots, 1, 1], 2);
+            for (f, accesses) in frames.iter().enumerate() {
+                let frame = f as u64 + 1;
+                let mut used: HashMap<NodeKey, SlotId> = HashMap::new();
+                for &i in accesses {
+                    let key = k(i);
+                    match p.allocate(key, frame) {
+                        Ok(a) => {
+                            if let Some(e) = a.evicted { prop_assert!(!used.contains_key(&e)); }
+                            if let Some(&s) = used.get(&key) { prop_assert_eq!(s, a.slot); prop_assert!(a.resident); }
+                            used.insert(key, a.slot);
+                        }
+                        Err(PoolError::Full { .. }) => {
+                            prop_assert!(used.len() as u32 == n_slots);
+                        }
+                        Err(e) => prop_assert!(false, "{e}"),
+                    }
+                    // Everything used this frame is still resident where it was.
+                    for (&key, &s) in &used {
+                        prop_assert_eq!(p.slot_of(key), Some(s));
+                        prop_assert!(p.is_pinned(s, frame));
+                    }
+                    let slots: HashSet<SlotId> = p.resident().map(|r| r.1).collect();
+                    prop_assert_eq!(slots.len() as u32, p.occupied());
+                }
+            }
+        }
+    }
+}
