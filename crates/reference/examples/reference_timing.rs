@@ -29,13 +29,20 @@ fn main() {
     eprintln!("volume built in {:.2?}", t.elapsed());
     let frame = VolumeFrame::centered(dims, spacing);
     let tf = TransferFunction::from_points(
-        &[(0.2, [0.9, 0.5, 0.3, 0.0]), (0.45, [0.9, 0.8, 0.6, 0.05]), (1.0, [1.0, 1.0, 1.0, 0.6])],
+        &[
+            (0.2, [0.9, 0.5, 0.3, 0.0]),
+            (0.45, [0.9, 0.8, 0.6, 0.05]),
+            (1.0, [1.0, 1.0, 1.0, 0.6]),
+        ],
         256,
     );
     let camera = Camera::orbit(frame.center(), 2.2, 0.6, 0.4);
     let opts = ReferenceOptions::new(256, 256);
     for shaded in [false, true] {
-        let mut settings = RenderSettings { mode: RenderMode::Dvr, ..Default::default() };
+        let mut settings = RenderSettings {
+            mode: RenderMode::Dvr,
+            ..Default::default()
+        };
         settings.shading.enabled = shaded;
         let t = Instant::now();
         let img = render_reference(&vol, &frame, &tf, &camera, &settings, &opts);
@@ -47,7 +54,11 @@ fn main() {
             rayon::current_num_threads()
         );
         if let Some(path) = std::env::args().nth(1) {
-            let path = if shaded { path.replace(".png", "-shaded.png") } else { path };
+            let path = if shaded {
+                path.replace(".png", "-shaded.png")
+            } else {
+                path
+            };
             img.save_png(&path, [0.0; 3]).expect("write png");
         }
     }

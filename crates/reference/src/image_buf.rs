@@ -47,13 +47,23 @@ impl Image {
     /// A transparent image with depth 1.0 everywhere.
     pub fn new(width: u32, height: u32) -> Image {
         let n = width as usize * height as usize;
-        Image { width, height, color: vec![[0.0; 4]; n], depth: vec![1.0; n] }
+        Image {
+            width,
+            height,
+            color: vec![[0.0; 4]; n],
+            depth: vec![1.0; n],
+        }
     }
 
     /// Index of pixel `(x, y)`.
     #[inline]
     fn index(&self, x: u32, y: u32) -> usize {
-        assert!(x < self.width && y < self.height, "pixel ({x}, {y}) outside {}x{}", self.width, self.height);
+        assert!(
+            x < self.width && y < self.height,
+            "pixel ({x}, {y}) outside {}x{}",
+            self.width,
+            self.height
+        );
         y as usize * self.width as usize + x as usize
     }
 
@@ -95,7 +105,12 @@ impl Image {
             .chunks_exact(4)
             .map(|p| std::array::from_fn(|k| p[k] as f32 / 255.0))
             .collect();
-        Image { width, height, color, depth: vec![1.0; n] }
+        Image {
+            width,
+            height,
+            color,
+            depth: vec![1.0; n],
+        }
     }
 
     /// Writes [`to_rgba8`](Image::to_rgba8)`(background)` as an RGBA PNG.
@@ -116,14 +131,29 @@ pub fn save_rgba8_png(path: impl AsRef<Path>, rgba: &[u8], width: u32, height: u
     let path = path.as_ref();
     let expected = width as usize * height as usize * 4;
     if rgba.len() != expected {
-        return Err(ImageIoError::SizeMismatch { width, height, expected, actual: rgba.len() });
+        return Err(ImageIoError::SizeMismatch {
+            width,
+            height,
+            expected,
+            actual: rgba.len(),
+        });
     }
-    let err = |message: String| ImageIoError::Write { path: path.display().to_string(), message };
+    let err = |message: String| ImageIoError::Write {
+        path: path.display().to_string(),
+        message,
+    };
     if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).map_err(|e| err(e.to_string()))?;
     }
-    image::save_buffer_with_format(path, rgba, width, height, image::ExtendedColorType::Rgba8, image::ImageFormat::Png)
-        .map_err(|e| err(e.to_string()))
+    image::save_buffer_with_format(
+        path,
+        rgba,
+        width,
+        height,
+        image::ExtendedColorType::Rgba8,
+        image::ImageFormat::Png,
+    )
+    .map_err(|e| err(e.to_string()))
 }
 
 #[cfg(test)]
@@ -152,7 +182,10 @@ mod tests {
         assert_eq!(img.pixel(1, 1), std::array::from_fn(|k| bytes[16 + k] as f32 / 255.0));
         assert_eq!(img.depth_at(2, 1), 1.0);
         // Opaque pixels survive compositing unchanged.
-        let opaque: Vec<u8> = bytes.chunks(4).flat_map(|p| [p[0].min(200), p[1].min(200), p[2].min(200), 255]).collect();
+        let opaque: Vec<u8> = bytes
+            .chunks(4)
+            .flat_map(|p| [p[0].min(200), p[1].min(200), p[2].min(200), 255])
+            .collect();
         assert_eq!(Image::from_rgba8(3, 2, &opaque).to_rgba8([0.3; 3]), opaque);
 
         let dir = tempfile::tempdir().unwrap();
@@ -161,6 +194,9 @@ mod tests {
         let back = image::open(&path).unwrap().into_rgba8();
         assert_eq!(back.dimensions(), (3, 2));
         assert_eq!(back.into_raw(), opaque);
-        assert!(matches!(save_rgba8_png(&path, &opaque[..4], 3, 2), Err(ImageIoError::SizeMismatch { .. })));
+        assert!(matches!(
+            save_rgba8_png(&path, &opaque[..4], 3, 2),
+            Err(ImageIoError::SizeMismatch { .. })
+        ));
     }
 }

@@ -41,15 +41,13 @@
 //!
 //! # Shading normals
 //!
-//! The model's gradient is a central difference with a one-voxel offset along each
-//! voxel axis, `g_i = (v(p + e_i) - v(p - e_i)) / 2` (normalized-value units per
-//! voxel); samples with `|g| < 1e-6` are left unshaded. It is carried to world
-//! space as the gradient of the field: `g_i / spacing_i` is the physical gradient,
-//! and the physical-to-world map of a [`VolumeFrame`](brickray_core::VolumeFrame) is
-//! `model * diag(1 / extent)`, so the world gradient is
-//! `model3^-T * (dims * g)` (texture-space gradient under the inverse transpose of
-//! the texture-to-world 3x3). For the default (centred, proportion-keeping) frame
-//! this is the physical gradient up to a uniform scale.
+//! As the model states: the central difference `g_i = (v(p + e_i) - v(p - e_i)) / 2`
+//! (one voxel along each voxel axis, normalized-value units per voxel; samples with
+//! `|g| < 1e-6` are left unshaded) becomes the texture-space gradient `g * dims`
+//! (since `p = u * dims - 0.5`), which the inverse transpose of the model's 3x3 maps
+//! to world. This is the exact world gradient of a linear field in any affine frame
+//! (a test checks it on a rotated, sheared, anisotropic frame); for the default
+//! centred frame it is the direction of the physical gradient `g_i / spacing_i`.
 //!
 //! # Metrics
 //!
@@ -64,7 +62,6 @@ mod render;
 
 pub use image_buf::{Image, ImageIoError, save_rgba8_png};
 pub use metrics::{
-    ImageComparison, assert_close, compare, compare_and_report, max_abs_diff, mean_flip, psnr,
-    test_output_dir,
+    ImageComparison, assert_close, compare, compare_and_report, max_abs_diff, mean_flip, psnr, test_output_dir,
 };
 pub use render::{DEFAULT_STEP_FACTOR, ReferenceOptions, render_reference};

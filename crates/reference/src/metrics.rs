@@ -53,7 +53,10 @@ fn rgb8(buf: &[u8], width: u32, height: u32, what: &str) -> Vec<u8> {
     } else if buf.len() == n * 3 {
         buf.to_vec()
     } else {
-        panic!("{what}: {} bytes is neither a {width}x{height} RGBA8 nor RGB8 image", buf.len());
+        panic!(
+            "{what}: {} bytes is neither a {width}x{height} RGBA8 nor RGB8 image",
+            buf.len()
+        );
     }
 }
 
@@ -95,7 +98,11 @@ pub struct ImageComparison {
 
 impl std::fmt::Display for ImageComparison {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "PSNR {:.2} dB, mean FLIP {:.4}, max |diff| {}", self.psnr_db, self.mean_flip, self.max_abs_diff)
+        write!(
+            f,
+            "PSNR {:.2} dB, mean FLIP {:.4}, max |diff| {}",
+            self.psnr_db, self.mean_flip, self.max_abs_diff
+        )
     }
 }
 
@@ -121,7 +128,16 @@ pub fn compare(actual: &[u8], expected: &[u8], width: u32, height: u32) -> Image
 
 /// Keeps `[A-Za-z0-9._-]`, replaces anything else by `_`.
 fn file_stem(name: &str) -> String {
-    let s: String = name.chars().map(|c| if c.is_ascii_alphanumeric() || "._-".contains(c) { c } else { '_' }).collect();
+    let s: String = name
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || "._-".contains(c) {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect();
     if s.is_empty() { "image".to_owned() } else { s }
 }
 
@@ -156,7 +172,12 @@ fn write_report(
     save(path("expected"), expected)?;
     save(path("diff"), &diff)?;
     if width > 0 && height > 0 {
-        let map = flip_map(&rgb8(actual, width, height, "flip"), &rgb8(expected, width, height, "flip"), width, height);
+        let map = flip_map(
+            &rgb8(actual, width, height, "flip"),
+            &rgb8(expected, width, height, "flip"),
+            width,
+            height,
+        );
         let rgb = map.apply_color_lut(&nv_flip::magma_lut()).to_vec();
         let rgba: Vec<u8> = rgb.chunks_exact(3).flat_map(|p| [p[0], p[1], p[2], 255]).collect();
         save(path("flip"), &rgba)?;
@@ -224,11 +245,20 @@ pub fn assert_close(
     let dir = test_output_dir();
     let files = match write_report(name, actual, expected, width, height, &dir) {
         Ok(files) => {
-            format!("wrote {}", files.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(", "))
+            format!(
+                "wrote {}",
+                files
+                    .iter()
+                    .map(|p| p.display().to_string())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )
         }
         Err(e) => format!("could not write the images: {e}"),
     };
-    Err(format!("{name}: {cmp}, below the required PSNR {min_psnr_db:.2} dB; {files}"))
+    Err(format!(
+        "{name}: {cmp}, below the required PSNR {min_psnr_db:.2} dB; {files}"
+    ))
 }
 
 #[cfg(test)]
@@ -264,7 +294,13 @@ mod tests {
     #[test]
     fn flip_identical_is_zero_and_differences_are_not() {
         let (w, h) = (24u32, 16u32);
-        let a = img(w, h, |i| if i % 4 == 3 { 255 } else { ((i / 4) % 7 * 30 + i % 4 * 10) as u8 });
+        let a = img(w, h, |i| {
+            if i % 4 == 3 {
+                255
+            } else {
+                ((i / 4) % 7 * 30 + i % 4 * 10) as u8
+            }
+        });
         assert_eq!(mean_flip(&a, &a, w, h), 0.0);
         // Through the library as well (not the equality shortcut).
         let rgb = rgb8(&a, w, h, "t");
@@ -276,7 +312,11 @@ mod tests {
             p[0] = 255 - p[0];
         }
         let small = mean_flip(&b, &a, w, h);
-        let inverted: Vec<u8> = a.iter().enumerate().map(|(i, &x)| if i % 4 == 3 { x } else { 255 - x }).collect();
+        let inverted: Vec<u8> = a
+            .iter()
+            .enumerate()
+            .map(|(i, &x)| if i % 4 == 3 { x } else { 255 - x })
+            .collect();
         let large = mean_flip(&inverted, &a, w, h);
         assert!(small > 0.0 && small < large && large <= 1.0, "{small} {large}");
     }
@@ -298,10 +338,17 @@ mod tests {
         let diff = image::open(dir.path().join("case_one-diff.png")).unwrap().into_rgba8();
         assert_eq!(diff.get_pixel(0, 0).0, [255, 0, 0, 255]);
 
-        assert_eq!(assert_close("same", &a, &a, w, h, 100.0).unwrap().psnr_db, f64::INFINITY);
+        assert_eq!(
+            assert_close("same", &a, &a, w, h, 100.0).unwrap().psnr_db,
+            f64::INFINITY
+        );
         assert!(assert_close("near", &b, &a, w, h, 20.0).is_ok());
         let err = assert_close("brickray-reference-selftest", &b, &a, w, h, 60.0).unwrap_err();
         assert!(err.contains("brickray-reference-selftest-diff.png"), "{err}");
-        assert!(assert_close("size", &a[4..], &a, w, h, 20.0).unwrap_err().contains("RGBA8"));
+        assert!(
+            assert_close("size", &a[4..], &a, w, h, 20.0)
+                .unwrap_err()
+                .contains("RGBA8")
+        );
     }
 }

@@ -39,7 +39,13 @@ pub struct ReferenceOptions<'a> {
 impl ReferenceOptions<'static> {
     /// `width x height`, step 1/8, one ray per pixel, no host depth.
     pub fn new(width: u32, height: u32) -> ReferenceOptions<'static> {
-        ReferenceOptions { width, height, step_factor: DEFAULT_STEP_FACTOR, supersample: 1, host_depth: None }
+        ReferenceOptions {
+            width,
+            height,
+            step_factor: DEFAULT_STEP_FACTOR,
+            supersample: 1,
+            host_depth: None,
+        }
     }
 }
 
@@ -82,7 +88,10 @@ impl<'a> ReferenceOptions<'a> {
 ///
 /// # Panics
 /// If `opts.step_factor` is not finite and positive, if `frame.voxel_world` is not
-/// finite and positive, or if `opts.host_depth` is not `width * height` long.
+/// finite and positive, if `opts.host_depth` is not `width * height` long, or if
+/// `settings.mode` is a mode this reference does not define (a variant added to
+/// the non-exhaustive [`RenderMode`] after DVR, Iso and MIP): the oracle refuses
+/// rather than guessing.
 pub fn render_reference(
     vol: &Volume,
     frame: &VolumeFrame,
@@ -91,30 +100,52 @@ pub fn render_reference(
     settings: &RenderSettings,
     opts: &ReferenceOptions<'_>,
 ) -> Image {
+    assert!(
+        matches!(
+            settings.mode,
+            RenderMode::Dvr | RenderMode::Iso { .. } | RenderMode::Mip
+        ),
+        "the reference renderer does not implement {:?}",
+        settings.mode
+    );
     let (width, height) = (opts.width, opts.height);
     let mut img = Image::new(width, height);
     if width == 0 || height == 0 {
         return img;
     }
     let step_factor = opts.step_factor as f64;
-    assert!(step_factor.is_finite() && step_factor > 0.0, "step_factor must be finite and > 0, got {step_factor}");
+    assert!(
+        step_factor.is_finite() && step_factor > 0.0,
+        "step_factor must be finite and > 0, got {step_factor}"
+    );
     let voxel_world = frame.voxel_world as f64;
-    assert!(voxel_world.is_finite() && voxel_world > 0.0, "frame.voxel_world must be finite and > 0, got {voxel_world}");
+    assert!(
+        voxel_world.is_finite() && voxel_world > 0.0,
+        "frame.voxel_world must be finite and > 0, got {voxel_world}"
+    );
     if let Some(d) = opts.host_depth {
-        assert_eq!(d.len(), width as usize * height as usize, "host_depth must hold width * height values");
+        assert_eq!(
+            d.len(),
+            width as usize * height as usize,
+            "host_depth must hold width * height values"
+        );
     }
 
     let marcher = Marcher::new(vol, frame, tf, camera, settings, step_factor, width, height);
     let n = opts.supersample.max(1);
     let w = width as usize;
-    img.color.par_chunks_mut(w).zip(img.depth.par_chunks_mut(w)).enumerate().for_each(|(py, (colors, depths))| {
-        for (px, (color, depth)) in colors.iter_mut().zip(depths.iter_mut()).enumerate() {
-            let host = opts.host_depth.map(|d| d[py * w + px]);
-            let (c, z) = marcher.pixel(px as f64, py as f64, n, host);
-            *color = c.map(|x| x as f32);
-            *depth = z.map_or(1.0, |z| z as f32);
-        }
-    });
+    img.color
+        .par_chunks_mut(w)
+        .zip(img.depth.par_chunks_mut(w))
+        .enumerate()
+        .for_each(|(py, (colors, depths))| {
+            for (px, (color, depth)) in colors.iter_mut().zip(depths.iter_mut()).enumerate() {
+                let host = opts.host_depth.map(|d| d[py * w + px]);
+                let (c, z) = marcher.pixel(px as f64, py as f64, n, host);
+                *color = c.map(|x| x as f32);
+                *depth = z.map_or(1.0, |z| z as f32);
+            }
+        });
     img
 }
 
@@ -182,7 +213,11 @@ impl Marcher<'_> {
         for j in 0..n {
             for i in 0..n {
                 // `through_pixel` adds 0.5: sub-pixel centre (i + 0.5) / n.
-                let (c, z) = self.trace(px + (i as f64 + 0.5) * inv - 0.5, py + (j as f64 + 0.5) * inv - 0.5, host_depth);
+                let (c, z) = self.trace(
+                    px + (i as f64 + 0.5) * inv - 0.5,
+                    py + (j as f64 + 0.5) * inv - 0.5,
+                    host_depth,
+                );
                 for k in 0..4 {
                     sum[k] += c[k];
                 }
@@ -202,15 +237,18 @@ impl Marcher<'_> {
             return ([0.0; 4], None);
         };
         if let Some(d) = host_depth.filter(|d| !d.is_nan()) {
-            let ndc = (2.0 * (px + 0.5) / self.width as f64 - 1.0, 1.0 - 2.0 * (py + 0.5) / self.height as f64);
+            let ndc = (
+                2.0 * (px + 0.5) / self.width as f64 - 1.0,
+                1.0 - 2.0 * (py + 0.5) / self.height as f64,
+            );
             t1 = t1.min(ray.t_at_depth(&self.inv_view_proj, ndc, d as f64));
         }
         let span = Span { t0, t1, dt: self.dt };
         match self.settings.mode {
             RenderMode::Iso { value, color } => self.iso(&ray, span, value as f64, color.map(f64::from)),
             RenderMode::Mip => self.mip(&ray, span),
-            // Dvr and any future mode without a reference definition.
-            _ => self.dvr(&ray, span),
+            RenderMode::Dvr => self.dvr(&ray, span),
+            other => unreachable!("mode {other:?} was rejected by render_reference"),
         }
     }
 
@@ -229,7 +267,11 @@ impl Marcher<'_> {
                 // Contributes nothing (and cannot change A or the depth).
                 continue;
             }
-            let c = if shading.enabled { self.shade(ray, t, [r, g, b], shading) } else { [r, g, b] };
+            let c = if shading.enabled {
+                self.shade(ray, t, [r, g, b], shading)
+            } else {
+                [r, g, b]
+            };
             let w = (1.0 - a_acc) * a;
             for k in 0..3 {
                 c_acc[k] += w * c[k];
@@ -357,7 +399,9 @@ struct Span {
 impl Span {
     /// `t_k = t0 + k * dt` for `k = 0, 1, ...` while `t_k < t1`.
     fn samples(self) -> impl Iterator<Item = f64> {
-        (0u64..).map(move |k| self.t0 + k as f64 * self.dt).take_while(move |&t| t < self.t1)
+        (0u64..)
+            .map(move |k| self.t0 + k as f64 * self.dt)
+            .take_while(move |&t| t < self.t1)
     }
 }
 

@@ -21,7 +21,16 @@ fn f32_volume(dims: [u32; 3], spacing: [f32; 3], range: [f32; 2], f: impl Fn(u32
             }
         }
     }
-    Volume::new(VolumeDesc { dims, dtype: DType::F32, spacing, value_range: range }, VolumeData::F32(data)).unwrap()
+    Volume::new(
+        VolumeDesc {
+            dims,
+            dtype: DType::F32,
+            spacing,
+            value_range: range,
+        },
+        VolumeData::F32(data),
+    )
+    .unwrap()
 }
 
 /// A frame placing texture space as the box `size` centred at the origin.
@@ -50,7 +59,10 @@ fn constant_tf(c: [f32; 3], a: f32) -> TransferFunction {
 }
 
 fn dvr() -> RenderSettings {
-    RenderSettings { mode: RenderMode::Dvr, ..Default::default() }
+    RenderSettings {
+        mode: RenderMode::Dvr,
+        ..Default::default()
+    }
 }
 
 /// Number of samples `t0 + k dt < t0 + len`, i.e. `ceil(len / dt)`.
@@ -65,7 +77,10 @@ const SLAB_Z: f32 = 0.999;
 
 fn slab() -> (Volume, VolumeFrame) {
     let dims = [16, 16, 8];
-    (f32_volume(dims, [1.0; 3], [0.0, 1.0], |_, _, _| 0.5), box_frame(Vec3::new(1.0, 1.0, SLAB_Z), dims))
+    (
+        f32_volume(dims, [1.0; 3], [0.0, 1.0], |_, _, _| 0.5),
+        box_frame(Vec3::new(1.0, 1.0, SLAB_Z), dims),
+    )
 }
 
 /// (a) A constant slab viewed along its axis accumulates `1 - (1 - a)^(L/voxel_world)`,
@@ -89,15 +104,25 @@ fn constant_slab_opacity_is_step_independent() {
             let n = sample_count(len, sf as f64 * vw);
             let exact = 1.0 - (1.0 - a as f64).powf(n as f64 * sf as f64);
             // Depth: the first sample at which A >= 0.5.
-            let k_half = (0u32..).find(|&k| 1.0 - (1.0 - a as f64).powf((k + 1) as f64 * sf as f64) >= 0.5).unwrap();
+            let k_half = (0u32..)
+                .find(|&k| 1.0 - (1.0 - a as f64).powf((k + 1) as f64 * sf as f64) >= 0.5)
+                .unwrap();
             let z = SLAB_Z as f64 * 0.5 - k_half as f64 * sf as f64 * vw;
             let depth = ortho_depth(3.0 - z);
             for (i, c) in img.color.iter().enumerate() {
-                assert!((c[3] as f64 - exact).abs() < 1e-6, "a={a} sf={sf} px={i}: {} vs {exact}", c[3]);
+                assert!(
+                    (c[3] as f64 - exact).abs() < 1e-6,
+                    "a={a} sf={sf} px={i}: {} vs {exact}",
+                    c[3]
+                );
                 for k in 0..3 {
                     assert!((c[k] as f64 - exact * rgb[k] as f64).abs() < 1e-6);
                 }
-                assert!((img.depth[i] as f64 - depth).abs() < 1e-6, "{} vs {depth}", img.depth[i]);
+                assert!(
+                    (img.depth[i] as f64 - depth).abs() < 1e-6,
+                    "{} vs {depth}",
+                    img.depth[i]
+                );
             }
             assert!((img.color[0][3] as f64 - continuous).abs() < 1e-3, "a={a} sf={sf}");
             seen.push(img.color[5][3]);
@@ -112,7 +137,10 @@ fn constant_slab_opacity_is_step_independent() {
 /// in an 8 x 8 x 32 grid (a 0.25 x 0.25 x 1 box).
 fn ramp() -> (Volume, VolumeFrame) {
     let dims = [8, 8, 32];
-    (f32_volume(dims, [1.0; 3], [0.0, 31.0], |_, _, z| z as f32), VolumeFrame::centered(dims, [1.0; 3]))
+    (
+        f32_volume(dims, [1.0; 3], [0.0, 31.0], |_, _, z| z as f32),
+        VolumeFrame::centered(dims, [1.0; 3]),
+    )
 }
 
 /// World z of the plane where the ramp equals `iso`: `p_z = 31 iso`,
@@ -124,7 +152,13 @@ fn ramp_plane(iso: f64) -> f64 {
 const ISO_COLOR: [f32; 3] = [0.5, 0.25, 0.1];
 
 fn iso(value: f32) -> RenderSettings {
-    RenderSettings { mode: RenderMode::Iso { value, color: ISO_COLOR }, ..Default::default() }
+    RenderSettings {
+        mode: RenderMode::Iso {
+            value,
+            color: ISO_COLOR,
+        },
+        ..Default::default()
+    }
 }
 
 /// `shade(ISO_COLOR, n)` with `|n . L| = 1` and the default weights.
@@ -145,7 +179,14 @@ fn iso_on_ramp_hits_the_analytic_plane() {
 
     // Orthographic from -z: every pixel hits the plane.
     let cam = ortho(Vec3::new(0.0, 0.0, -3.0), 0.2);
-    let img = render_reference(&vol, &frame, &tf, &cam, &iso(iso_v as f32), &ReferenceOptions::new(5, 5));
+    let img = render_reference(
+        &vol,
+        &frame,
+        &tf,
+        &cam,
+        &iso(iso_v as f32),
+        &ReferenceOptions::new(5, 5),
+    );
     let depth = ortho_depth(3.0 + z_hit);
     // Bisection leaves at most dt / 2^(steps + 1) of error in t.
     let tol = (0.125 * frame.voxel_world as f64) / 512.0 / (FAR - NEAR) as f64 + 1e-7;
@@ -153,12 +194,18 @@ fn iso_on_ramp_hits_the_analytic_plane() {
         assert!((*d as f64 - depth).abs() < tol, "{d} vs {depth}");
         assert_eq!(c[3], 1.0);
         for k in 0..3 {
-            assert!((c[k] as f64 - expected_color[k]).abs() < 1e-6, "{c:?} vs {expected_color:?}");
+            assert!(
+                (c[k] as f64 - expected_color[k]).abs() < 1e-6,
+                "{c:?} vs {expected_color:?}"
+            );
         }
     }
 
     // Without refinement the hit is the middle of the sample interval: within dt / 2.
-    let coarse = RenderSettings { iso_refine_steps: 0, ..iso(iso_v as f32) };
+    let coarse = RenderSettings {
+        iso_refine_steps: 0,
+        ..iso(iso_v as f32)
+    };
     let img0 = render_reference(&vol, &frame, &tf, &cam, &coarse, &ReferenceOptions::new(5, 5));
     let half_dt = 0.5 * 0.125 * frame.voxel_world as f64 / (FAR - NEAR) as f64;
     assert!((img0.depth[12] as f64 - depth).abs() <= half_dt + 1e-7);
@@ -168,18 +215,31 @@ fn iso_on_ramp_hits_the_analytic_plane() {
         eye: Vec3::new(0.0, 0.0, -3.0),
         target: Vec3::new(0.01, 0.02, 0.0),
         up: Vec3::Y,
-        projection: Projection::Perspective { fov_y: 3f32.to_radians() },
+        projection: Projection::Perspective {
+            fov_y: 3f32.to_radians(),
+        },
         near: 1.0,
         far: 5.0,
     };
     let (w, h) = (9u32, 7u32);
-    let img = render_reference(&vol, &frame, &tf, &cam, &iso(iso_v as f32), &ReferenceOptions::new(w, h));
+    let img = render_reference(
+        &vol,
+        &frame,
+        &tf,
+        &cam,
+        &iso(iso_v as f32),
+        &ReferenceOptions::new(w, h),
+    );
     let ivp = cam.view_proj(w as f32 / h as f32).as_dmat4().inverse();
     for py in 0..h {
         for px in 0..w {
             let d = img.depth_at(px, py) as f64;
             assert!(d < 1.0, "pixel ({px}, {py}) missed");
-            let ndc = DVec3::new(2.0 * (px as f64 + 0.5) / w as f64 - 1.0, 1.0 - 2.0 * (py as f64 + 0.5) / h as f64, d);
+            let ndc = DVec3::new(
+                2.0 * (px as f64 + 0.5) / w as f64 - 1.0,
+                1.0 - 2.0 * (py as f64 + 0.5) / h as f64,
+                d,
+            );
             let p = ivp.project_point3(ndc);
             assert!((p.z - z_hit).abs() < 2e-5, "({px}, {py}): z {} vs {z_hit}", p.z);
             assert!(p.x.abs() < 0.125 && p.y.abs() < 0.125);
@@ -188,7 +248,14 @@ fn iso_on_ramp_hits_the_analytic_plane() {
 
     // From +z the first sample (v = 1 at the z = 0.5 face) is inside: capped at t0.
     let cam = ortho(Vec3::new(0.0, 0.0, 3.0), 0.2);
-    let img = render_reference(&vol, &frame, &tf, &cam, &iso(iso_v as f32), &ReferenceOptions::new(3, 3));
+    let img = render_reference(
+        &vol,
+        &frame,
+        &tf,
+        &cam,
+        &iso(iso_v as f32),
+        &ReferenceOptions::new(3, 3),
+    );
     assert!((img.depth[4] as f64 - ortho_depth(2.5)).abs() < 1e-6);
     assert_eq!(img.color[4][3], 1.0);
 }
@@ -210,7 +277,11 @@ fn dvr_shading_head_on() {
     assert_eq!(shaded.color[4][3], a);
     for k in 0..3 {
         let expected = a as f64 * (rgb[k] as f64 * 1.0 + 0.2).min(1.0);
-        assert!((shaded.color[4][k] as f64 - expected).abs() < 1e-6, "{:?}", shaded.color[4]);
+        assert!(
+            (shaded.color[4][k] as f64 - expected).abs() < 1e-6,
+            "{:?}",
+            shaded.color[4]
+        );
         assert!((plain.color[4][k] - a * rgb[k]).abs() < 1e-6);
     }
     // A constant volume has no gradient: shading leaves it unchanged.
@@ -266,14 +337,21 @@ fn normals_are_world_gradients() {
 #[test]
 fn mip_sees_the_bright_voxel() {
     let dims = [16u32; 3];
-    let vol = f32_volume(dims, [1.0; 3], [0.0, 255.0], |x, y, z| if (x, y, z) == (5, 10, 7) { 255.0 } else { 0.0 });
+    let vol = f32_volume(dims, [1.0; 3], [0.0, 255.0], |x, y, z| {
+        if (x, y, z) == (5, 10, 7) { 255.0 } else { 0.0 }
+    });
     let frame = VolumeFrame::centered(dims, [1.0; 3]);
     let tf = TransferFunction::from_points(&[(0.0, [0.0; 4]), (1.0, [1.0, 0.5, 0.25, 0.8])], 256);
     let cam = ortho(Vec3::new(0.0, 0.0, 3.0), 1.0);
-    let settings = RenderSettings { mode: RenderMode::Mip, ..Default::default() };
+    let settings = RenderSettings {
+        mode: RenderMode::Mip,
+        ..Default::default()
+    };
     let img = render_reference(&vol, &frame, &tf, &cam, &settings, &ReferenceOptions::new(16, 16));
     // Voxel x = 5 is column 5; voxel y = 10 is world y = 0.15625, row 5 (rows go down).
-    let best = (0..256).max_by(|&a, &b| img.color[a][3].total_cmp(&img.color[b][3])).unwrap();
+    let best = (0..256)
+        .max_by(|&a, &b| img.color[a][3].total_cmp(&img.color[b][3]))
+        .unwrap();
     assert_eq!((best % 16, best / 16), (5, 5));
     let c = img.pixel(5, 5);
     let expected = [0.8, 0.4, 0.2, 0.8];
@@ -305,10 +383,21 @@ fn ortho_and_perspective_agree_at_the_centre() {
     let (vol, frame) = sphere_scene();
     let tf = TransferFunction::ramp(0.05, 1.0, 0.4);
     let persp = Camera::orbit(Vec3::ZERO, 3.0, 0.3, 0.2);
-    let orth = Camera { projection: Projection::Orthographic { height: 1.2 }, ..persp };
+    let orth = Camera {
+        projection: Projection::Orthographic { height: 1.2 },
+        ..persp
+    };
     let mut shaded = dvr();
     shaded.shading.enabled = true;
-    let modes = [dvr(), shaded, iso(0.4), RenderSettings { mode: RenderMode::Mip, ..Default::default() }];
+    let modes = [
+        dvr(),
+        shaded,
+        iso(0.4),
+        RenderSettings {
+            mode: RenderMode::Mip,
+            ..Default::default()
+        },
+    ];
     for s in modes {
         let opts = ReferenceOptions::new(33, 33);
         let a = render_reference(&vol, &frame, &tf, &persp, &s, &opts);
@@ -354,7 +443,10 @@ fn host_depth_stops_rays() {
     let cam = ortho(Vec3::new(0.0, 0.0, -3.0), 0.2);
     let vp = cam.view_proj(1.0).as_dmat4();
     let z_hit = ramp_plane(0.3);
-    let host = [vp.project_point3(DVec3::new(0.0, 0.0, z_hit - 0.01)).z as f32, vp.project_point3(DVec3::new(0.0, 0.0, z_hit + 0.01)).z as f32];
+    let host = [
+        vp.project_point3(DVec3::new(0.0, 0.0, z_hit - 0.01)).z as f32,
+        vp.project_point3(DVec3::new(0.0, 0.0, z_hit + 0.01)).z as f32,
+    ];
     let opts = ReferenceOptions::new(2, 1).with_host_depth(&host);
     let img = render_reference(&vol, &frame, &tf, &cam, &iso(0.3), &opts);
     assert_eq!(img.color[0], [0.0; 4]);
@@ -371,7 +463,9 @@ fn camera_inside_the_volume() {
         eye: Vec3::ZERO,
         target: Vec3::new(0.0, 0.0, -1.0),
         up: Vec3::Y,
-        projection: Projection::Perspective { fov_y: 1f32.to_radians() },
+        projection: Projection::Perspective {
+            fov_y: 1f32.to_radians(),
+        },
         near: 0.01,
         far: 5.0,
     };
@@ -379,7 +473,11 @@ fn camera_inside_the_volume() {
     // From the near plane z = -0.01 to the face z = -0.4995.
     let n = sample_count(SLAB_Z as f64 * 0.5 - 0.01, 0.125 / 16.0);
     let expected = 1.0 - (1.0 - a).powf(n as f64 * 0.125);
-    assert!((img.color[0][3] as f64 - expected).abs() < 1e-6, "{:?} vs {expected}", img.color[0]);
+    assert!(
+        (img.color[0][3] as f64 - expected).abs() < 1e-6,
+        "{:?} vs {expected}",
+        img.color[0]
+    );
 }
 
 /// Supersampling averages stratified sub-pixel rays: where every ray sees the
@@ -395,10 +493,21 @@ fn supersampling_averages_subpixel_rays() {
     let one = render_reference(&vol, &frame, &tf, &cam, &dvr(), &ReferenceOptions::new(6, 6));
     let full = one.pixel(2, 2);
     for n in [2u32, 4] {
-        let img = render_reference(&vol, &frame, &tf, &cam, &dvr(), &ReferenceOptions::new(6, 6).with_supersample(n));
+        let img = render_reference(
+            &vol,
+            &frame,
+            &tf,
+            &cam,
+            &dvr(),
+            &ReferenceOptions::new(6, 6).with_supersample(n),
+        );
         for k in 0..4 {
             assert!((img.pixel(2, 2)[k] - full[k]).abs() < 1e-6);
-            assert!((img.pixel(4, 2)[k] - 0.5 * full[k]).abs() < 1e-6, "n={n}: {:?}", img.pixel(4, 2));
+            assert!(
+                (img.pixel(4, 2)[k] - 0.5 * full[k]).abs() < 1e-6,
+                "n={n}: {:?}",
+                img.pixel(4, 2)
+            );
             // corner pixel (4, 1) spans y in [1/3, 2/3]: a quarter.
             assert!((img.pixel(4, 1)[k] - 0.25 * full[k]).abs() < 1e-6);
         }
@@ -415,13 +524,23 @@ fn sphere_converges_with_the_step() {
     let tf = TransferFunction::ramp(0.05, 1.0, 0.3);
     let cam = Camera::orbit(Vec3::ZERO, 2.5, 0.5, 0.3);
     let r = |sf: f32| {
-        render_reference(&vol, &frame, &tf, &cam, &dvr(), &ReferenceOptions::new(24, 24).with_step_factor(sf))
-            .to_rgba8([0.0; 3])
+        render_reference(
+            &vol,
+            &frame,
+            &tf,
+            &cam,
+            &dvr(),
+            &ReferenceOptions::new(24, 24).with_step_factor(sf),
+        )
+        .to_rgba8([0.0; 3])
     };
     let (coarse, fine, finer) = (r(0.5), r(0.125), r(1.0 / 16.0));
     let p_fine = crate::psnr(&fine, &finer);
     let p_coarse = crate::psnr(&coarse, &finer);
-    assert!(p_fine > 40.0 && p_coarse > 30.0 && p_fine >= p_coarse, "{p_fine} {p_coarse}");
+    assert!(
+        p_fine > 40.0 && p_coarse > 30.0 && p_fine >= p_coarse,
+        "{p_fine} {p_coarse}"
+    );
 }
 
 /// The synthetic sphere in each mode: non-empty, transparent corners, mirror
@@ -433,12 +552,25 @@ fn sphere_in_every_mode_is_plausible() {
     let cam = Camera::orbit(Vec3::ZERO, 2.5, 0.0, 0.0);
     let mut shaded = dvr();
     shaded.shading.enabled = true;
-    let modes = [dvr(), shaded, iso(0.5), RenderSettings { mode: RenderMode::Mip, ..Default::default() }];
+    let modes = [
+        dvr(),
+        shaded,
+        iso(0.5),
+        RenderSettings {
+            mode: RenderMode::Mip,
+            ..Default::default()
+        },
+    ];
     let n = 32u32;
     for s in modes {
         let img = render_reference(&vol, &frame, &tf, &cam, &s, &ReferenceOptions::new(n, n));
         let covered = img.color.iter().filter(|c| c[3] > 0.01).count();
-        assert!(img.pixel(n / 2, n / 2)[3] > 0.2, "{:?}: {:?}", s.mode, img.pixel(n / 2, n / 2));
+        assert!(
+            img.pixel(n / 2, n / 2)[3] > 0.2,
+            "{:?}: {:?}",
+            s.mode,
+            img.pixel(n / 2, n / 2)
+        );
         assert!(img.depth_at(n / 2, n / 2) < 1.0);
         assert!(covered > 20 && covered < 600, "{:?}: {covered}", s.mode);
         for (x, y) in [(0, 0), (n - 1, 0), (0, n - 1), (n - 1, n - 1)] {
@@ -465,11 +597,21 @@ fn degenerate_inputs() {
     let img = render_reference(&vol, &frame, &tf, &cam, &dvr(), &ReferenceOptions::new(0, 5));
     assert!(img.color.is_empty() && img.depth.is_empty());
     // supersample 0 behaves as 1
-    let a = render_reference(&vol, &frame, &tf, &cam, &dvr(), &ReferenceOptions::new(4, 4).with_supersample(0));
+    let a = render_reference(
+        &vol,
+        &frame,
+        &tf,
+        &cam,
+        &dvr(),
+        &ReferenceOptions::new(4, 4).with_supersample(0),
+    );
     let b = render_reference(&vol, &frame, &tf, &cam, &dvr(), &ReferenceOptions::new(4, 4));
     assert_eq!(a, b);
     // Looking away: nothing.
-    let away = Camera { target: Vec3::new(0.0, 0.0, 5.0), ..cam };
+    let away = Camera {
+        target: Vec3::new(0.0, 0.0, 5.0),
+        ..cam
+    };
     let img = render_reference(&vol, &frame, &tf, &away, &dvr(), &ReferenceOptions::new(4, 4));
     assert!(img.color.iter().all(|c| *c == [0.0; 4]) && img.depth.iter().all(|&d| d == 1.0));
 }
