@@ -1,0 +1,314 @@
+//! Cut validation and encoding: a set of leaves tiling the unit cube becomes the
+//! octree with neighbour pointers (ropes) of Gobbetti et al. 2008, section 5.1,
+//! encoded as `u32` words (see [`crate::format`]).
+
+use crate::format::{
+    LEAF_RECORD_WORDS, MAX_LEVEL, MAX_NODES, MAX_WORDS, NULL, TAG_DATA, TAG_EMPTY, TAG_INNER, node_word,
+    rope_word,
+};
+use brickray_core::brick::NodeKey;
+use thiserror::Error;
+
+/// What a leaf of the cut holds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum LeafKind {
+    /// Nothing to draw; the ray skips it.
+    Empty,
+    /// A brick resident in the GPU brick pool.
+    Data {
+        /// The brick's position in the brick pool (any `u32`).
+        slot: u32,
+    },
+}
+
+/// Why a cut cannot be encoded.
+#[derive(Debug, Clone, PartialEq, Eq, Error)]
+#[non_exhaustive]
+pub enum CutError {
+    /// A leaf is deeper than [`MAX_LEVEL`].
+    #[error("leaf {key:?} is deeper than the maximum level {max}")]
+    LevelTooDeep {
+        /// The leaf.
+        key: NodeKey,
+        /// The deepest level accepted.
+        max: u8,
+    },
+    /// A leaf's position is outside `0..2^level`.
+    #[error("leaf {key:?} lies outside the unit cube")]
+    PositionOutOfRange {
+        /// The leaf.
+        key: NodeKey,
+    },
+    /// Two leaves overlap: `outer` contains or equals `inner`.
+    #[error("leaves {outer:?} and {inner:?} overlap")]
+    Overlap {
+        /// The coarser (or equal) leaf.
+        outer: NodeKey,
+        /// The finer (or equal) leaf.
+        inner: NodeKey,
+    },
+    /// The region of `missing` is not covered by any leaf (the first such node in
+    /// breadth-first order; the root for an empty cut).
+    #[error("the cut leaves a gap: node {missing:?} is not covered")]
+    Gap {
+        /// A node whose region no leaf covers.
+        missing: NodeKey,
+    },
+    /// The encoding would exceed the format's pointer fields.
+    #[error("the index would need {nodes} nodes / {words} words, more than the format addresses")]
+    TooLarge {
+        /// Nodes needed.
+        nodes: usize,
+        /// Words needed.
+        words: usize,
+    },
+}
+
+/// Size figures of an encoded index.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct IndexStats {
+    /// Octree nodes (inner and leaves).
+    pub nodes: u32,
+    /// Inner nodes.
+    pub inner_nodes: u32,
+    /// Leaves (`empty_leaves + data_leaves`).
+    pub leaves: u32,
+    /// Empty leaves.
+    pub empty_leaves: u32,
+    /// Data leaves.
+    pub data_leaves: u32,
+    /// Deepest leaf level.
+    pub max_level: u8,
+    /// Encoded words (`nodes + 7 * leaves`).
+    pub words: u32,
+}
+
+impl IndexStats {
+    /// Encoded size in bytes.
+    pub fn bytes(&self) -> usize {
+        self.words as usize * 4
+    }
+}
+
+/// An encoded octree with ropes, ready to upload as a storage buffer.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EncodedIndex {
+    words: Vec<u32>,
+    keys: Vec<NodeKey>,
+    stats: IndexStats,
+}
+
+impl EncodedIndex {
+    /// The encoded words (upload these; `bytemuck::cast_slice` gives the bytes).
+    pub fn words(&self) -> &[u32] {
+        &self.words
+    }
+
+    /// Takes the encoded words.
+    pub fn into_words(self) -> Vec<u32> {
+        self.words
+    }
+
+    /// Size figures.
+    pub fn stats(&self) -> IndexStats {
+        self.stats
+    }
+
+    /// The key of node `index` (node indices are the ones in node and rope words).
+    pub fn node_key(&self, index: u32) -> Option<NodeKey> {
+        self.keys.get(index as usize).copied()
+    }
+
+    /// The node index of `key`, if the node exists in the tree (leaf or inner).
+    pub fn node_index(&self, key: NodeKey) -> Option<u32> {
+        if key.level > MAX_LEVEL {
+            return None;
+        }
+        let mut node = 0u32;
+        for d in 0..key.level {
+            let word = *self.words.get(node as usize)?;
+            if crate::format::node_tag(word) != TAG_INNER {
+                return None;
+            }
+            let shift = (key.level - 1 - d) as u32;
+            let ci = ((key.x >> shift) & 1) | (((key.y >> shift) & 1) << 1) | (((key.z >> shift) & 1) << 2);
+            node = crate::format::node_ptr(word) + ci;
+        }
+        (self.keys.get(node as usize) == Some(&key)).then_some(node)
+    }
+}
+
+const NONE: u32 = u32::MAX;
+const UNSET: u8 = 0;
+const LEAF: u8 = 1;
+const INNER: u8 = 2;
+
+#[derive(Clone, Copy)]
+struct ArenaNode {
+    first_child: u32,
+    state: u8,
+    kind: LeafKind,
+}
+
+const UNSET_NODE: ArenaNode = ArenaNode { first_child: NONE, state: UNSET, kind: LeafKind::Empty };
+
+fn ancestor(key: NodeKey, level: u8) -> NodeKey {
+    let s = (key.level - level) as u32;
+    NodeKey::new(level, key.x >> s, key.y >> s, key.z >> s)
+}
+
+/// Validates a cut and encodes it.
+///
+/// `leaves` must tile the unit cube exactly: every point in exactly one leaf. The
+/// result does not depend on the order of `leaves` (nodes are numbered breadth
+/// first, children in child-index order). Runs in `O(sum of leaf levels)`.
+pub fn encode_cut<I>(leaves: I) -> Result<EncodedIndex, CutError>
+where
+    I: IntoIterator<Item = (NodeKey, LeafKind)>,
+{
+    // 1. Insert every leaf into an arena octree; children are allocated in blocks
+    //    of 8 when a node is first subdivided.
+    let leaves = leaves.into_iter();
+    let mut arena: Vec<ArenaNode> = Vec::with_capacity(leaves.size_hint().0 * 8 / 7 + 8);
+    arena.push(UNSET_NODE);
+    for (key, kind) in leaves {
+        if key.level > MAX_LEVEL {
+            return Err(CutError::LevelTooDeep { key, max: MAX_LEVEL });
+        }
+        let n = 1u32 << key.level;
+        if key.x >= n || key.y >= n || key.z >= n {
+            return Err(CutError::PositionOutOfRange { key });
+        }
+        let mut cur = 0usize;
+        for d in 0..key.level {
+            match arena[cur].state {
+                LEAF => return Err(CutError::Overlap { outer: ancestor(key, d), inner: key }),
+                UNSET => {
+                    arena[cur].state = INNER;
+                    arena[cur].first_child = arena.len() as u32;
+                    arena.extend_from_slice(&[UNSET_NODE; 8]);
+                }
+                _ => {}
+            }
+            let shift = (key.level - 1 - d) as u32;
+            let ci = ((key.x >> shift) & 1) | (((key.y >> shift) & 1) << 1) | (((key.z >> shift) & 1) << 2);
+            cur = (arena[cur].first_child + ci) as usize;
+        }
+        match arena[cur].state {
+            LEAF => return Err(CutError::Overlap { outer: key, inner: key }),
+            INNER => {
+                // Some earlier leaf lies below: find one (the first in child order).
+                let mut below = key;
+                let mut a = cur;
+                while arena[a].state == INNER {
+                    let fc = arena[a].first_child as usize;
+                    let ci = (0..8).find(|&i| arena[fc + i].state != UNSET).unwrap_or(0);
+                    a = fc + ci;
+                    below = below.child(ci as u8);
+                }
+                return Err(CutError::Overlap { outer: key, inner: below });
+            }
+            _ => {
+                arena[cur].state = LEAF;
+                arena[cur].kind = kind;
+            }
+        }
+        if arena.len() > MAX_NODES {
+            return Err(CutError::TooLarge { nodes: arena.len(), words: 0 });
+        }
+    }
+
+    // 2. Breadth-first numbering: `order[q]` is the arena node numbered `q`. The
+    //    8 children of a node are consecutive in both numberings.
+    let nodes = arena.len();
+    let mut order: Vec<u32> = Vec::with_capacity(nodes);
+    let mut keys: Vec<NodeKey> = Vec::with_capacity(nodes);
+    let mut first_child: Vec<u32> = vec![NONE; nodes];
+    order.push(0);
+    keys.push(NodeKey::ROOT);
+    let mut stats = IndexStats::default();
+    let mut q = 0usize;
+    while q < order.len() {
+        let a = &arena[order[q] as usize];
+        match a.state {
+            UNSET => return Err(CutError::Gap { missing: keys[q] }),
+            INNER => {
+                first_child[q] = order.len() as u32;
+                let key = keys[q];
+                for i in 0..8u8 {
+                    order.push(a.first_child + i as u32);
+                    keys.push(key.child(i));
+                }
+                stats.inner_nodes += 1;
+            }
+            _ => {
+                stats.leaves += 1;
+                match a.kind {
+                    LeafKind::Empty => stats.empty_leaves += 1,
+                    LeafKind::Data { .. } => stats.data_leaves += 1,
+                }
+                stats.max_level = stats.max_level.max(keys[q].level);
+            }
+        }
+        q += 1;
+    }
+    debug_assert_eq!(order.len(), nodes);
+    let words_len = nodes + LEAF_RECORD_WORDS as usize * stats.leaves as usize;
+    if words_len > MAX_WORDS {
+        return Err(CutError::TooLarge { nodes, words: words_len });
+    }
+    stats.nodes = nodes as u32;
+    stats.words = words_len as u32;
+
+    // 3. Neighbours of every node (same-level node if it exists, else the coarser
+    //    leaf containing it), top-down in O(1) per face: a child's neighbour across
+    //    an inner face is its sibling; across an outer face it is the parent's
+    //    neighbour if that is a leaf, else that neighbour's mirrored child.
+    let mut neigh: Vec<[u32; 6]> = vec![[NULL; 6]; nodes];
+    let mut words: Vec<u32> = vec![0; words_len];
+    let mut record = nodes as u32;
+    for q in 0..nodes {
+        let fc = first_child[q];
+        if fc != NONE {
+            words[q] = node_word(TAG_INNER, fc);
+            let pn = neigh[q];
+            for ci in 0..8u32 {
+                let mut cn = [NULL; 6];
+                for (face, slot) in cn.iter_mut().enumerate() {
+                    let axis = face as u32 / 2;
+                    let positive = face & 1 == 1;
+                    let bit = (ci >> axis) & 1;
+                    let mirrored = ci ^ (1 << axis);
+                    *slot = if positive == (bit == 0) {
+                        fc + mirrored
+                    } else {
+                        let m = pn[face];
+                        if m == NULL {
+                            NULL
+                        } else if first_child[m as usize] != NONE {
+                            first_child[m as usize] + mirrored
+                        } else {
+                            m
+                        }
+                    };
+                }
+                neigh[(fc + ci) as usize] = cn;
+            }
+        } else {
+            let a = &arena[order[q] as usize];
+            let (tag, data) = match a.kind {
+                LeafKind::Empty => (TAG_EMPTY, NULL),
+                LeafKind::Data { slot } => (TAG_DATA, slot),
+            };
+            words[q] = node_word(tag, record);
+            let r = record as usize;
+            words[r] = data;
+            for face in 0..6 {
+                let m = neigh[q][face];
+                words[r + 1 + face] = if m == NULL { NULL } else { rope_word(m, keys[m as usize].level) };
+            }
+            record += LEAF_RECORD_WORDS;
+        }
+    }
+    Ok(EncodedIndex { words, keys, stats })
+}

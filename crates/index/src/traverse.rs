@@ -1,0 +1,332 @@
+//! The CPU twin of the GPU traversal (Gobbetti et al. 2008, Fig. 5): a stackless,
+//! rope-following walk over the *encoded words*, enumerating the leaves pierced
+//! by a ray front to back.
+//!
+//! Every function here has a line-by-line counterpart in
+//! `shaders/octree_traversal.wgsl` (`oct_` prefix there): plain loops with
+//! constant bounds, `f32` math, no recursion, no allocation. Keep them in sync.
+//!
+//! # Tie rules (see `docs/index-format.md`)
+//! * **Zero direction components**: a component with `|d| < 1e-30` is flushed to
+//!   exactly 0 ([`ray_setup`]). Along such an axis boxes are half-open
+//!   `[min, max)`: a ray lying exactly in the plane between two nodes belongs to
+//!   the upper one, and a ray in the plane `1.0` misses the cube.
+//! * **Locating a point on a child boundary** ([`locate_leaf`]): per axis the
+//!   upper child is taken when `p > mid`, or `p == mid` and `d >= 0`; i.e. ties go
+//!   to the side the ray moves into (upper for a zero component). Exact, no epsilon.
+//! * **Exit through an edge or corner** ([`exit_face`]): the smallest exit `t`
+//!   wins, ties to the lowest axis (x, then y, then z). The rope of that face leads
+//!   to a node that touches the exit point; locating the exit point there lands
+//!   in a leaf whose exit is (up to rounding) the same `t`, which is left through
+//!   the next axis. Such zero-length visits, and any visit with `t_exit <= t_enter`
+//!   caused by rounding, count as steps but are not reported: only leaves with
+//!   `t_exit > t_enter` are yielded, and consecutive yields share the boundary
+//!   `t` exactly (`t_enter` of one is `t_exit` of the previous).
+
+use crate::cut::LeafKind;
+use crate::format::{
+    MAX_LEVEL, NULL, ROPE_LEVEL_SHIFT, ROPE_NODE_MASK, TAG_DATA, TAG_EMPTY, TAG_INNER, exp2_neg,
+    exp2_pos, node_ptr, node_tag,
+};
+use brickray_core::brick::NodeKey;
+use glam::{BVec3, Vec3};
+
+/// Direction components with a smaller magnitude are treated as exactly zero.
+pub const DIR_EPSILON: f32 = 1e-30;
+/// "No exit along this axis" (`t` of a zero direction component).
+pub const T_BIG: f32 = 3.0e38;
+
+/// A ray in octree unit-cube coordinates; the points `origin + dir * t` for `t` in
+/// `[t_min, t_max]` (`t_max` may be infinite; `dir` need not be normalised).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Ray {
+    /// Origin.
+    pub origin: Vec3,
+    /// Direction.
+    pub dir: Vec3,
+    /// Start parameter.
+    pub t_min: f32,
+    /// End parameter.
+    pub t_max: f32,
+}
+
+impl Ray {
+    /// A ray over `t` in `[0, inf)`.
+    pub fn new(origin: Vec3, dir: Vec3) -> Ray {
+        Ray { origin, dir, t_min: 0.0, t_max: f32::INFINITY }
+    }
+
+    /// The same ray over `t` in `[t_min, t_max]`.
+    pub fn with_range(self, t_min: f32, t_max: f32) -> Ray {
+        Ray { t_min, t_max, ..self }
+    }
+}
+
+/// A node and its box: the cursor of the traversal.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NodeBox {
+    /// Node index (position of its node word).
+    pub node: u32,
+    /// Octree level of the node.
+    pub level: u32,
+    /// Minimum corner of the node's cube.
+    pub box_min: Vec3,
+    /// Side of the node's cube, `2^-level`.
+    pub box_size: f32,
+}
+
+impl NodeBox {
+    /// The root: node 0, the unit cube.
+    pub const ROOT: NodeBox = NodeBox { node: 0, level: 0, box_min: Vec3::ZERO, box_size: 1.0 };
+
+    /// The node's key, from its box (exact: corners are multiples of `2^-level`).
+    pub fn key(&self) -> NodeKey {
+        let k = self.box_min * exp2_pos(self.level);
+        NodeKey::new(self.level as u8, k.x as u32, k.y as u32, k.z as u32)
+    }
+}
+
+/// The encoded words are malformed (out-of-range pointer, bad tag, too deep).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct CorruptIndex;
+
+#[inline]
+fn read(words: &[u32], i: u32) -> Result<u32, CorruptIndex> {
+    words.get(i as usize).copied().ok_or(CorruptIndex)
+}
+
+/// Ray setup: flushes tiny direction components to zero and returns
+/// `(dir, inv_dir)` with `inv_dir = 0` on zero components.
+pub fn ray_setup(dir: Vec3) -> (Vec3, Vec3) {
+    let d = Vec3::select(dir.abs().cmplt(Vec3::splat(DIR_EPSILON)), Vec3::ZERO, dir);
+    let nonzero = d.cmpne(Vec3::ZERO);
+    let inv = Vec3::select(nonzero, Vec3::ONE / Vec3::select(nonzero, d, Vec3::ONE), Vec3::ZERO);
+    (d, inv)
+}
+
+/// Clips `[t_min, t_max]` to the unit cube (half-open along zero components).
+/// Returns `(t0, t1)`; the ray misses when `!(t0 < t1)`.
+pub fn clip_unit_cube(origin: Vec3, dir: Vec3, inv_dir: Vec3, t_min: f32, t_max: f32) -> (f32, f32) {
+    let mut t0 = t_min;
+    let mut t1 = t_max;
+    if dir == Vec3::ZERO {
+        return (1.0, 0.0);
+    }
+    for a in 0..3 {
+        let o = origin[a];
+        if dir[a] == 0.0 {
+            if !(0.0..1.0).contains(&o) {
+                return (1.0, 0.0);
+            }
+        } else {
+            let ta = (0.0 - o) * inv_dir[a];
+            let tb = (1.0 - o) * inv_dir[a];
+            t0 = t0.max(ta.min(tb));
+            t1 = t1.min(ta.max(tb));
+        }
+    }
+    (t0, t1)
+}
+
+/// Descends from `start` to the leaf containing `p` (box subdivision, Fig. 5);
+/// ties on a child boundary go to the side `dir` moves into (upper when the
+/// component is zero). Returns the leaf and its node word.
+pub fn locate_leaf(words: &[u32], start: NodeBox, p: Vec3, dir: Vec3) -> Result<(NodeBox, u32), CorruptIndex> {
+    let mut c = start;
+    let mut word = read(words, c.node)?;
+    // At most MAX_LEVEL descents: the loop bound is the level check.
+    while node_tag(word) == TAG_INNER {
+        if c.level >= MAX_LEVEL as u32 {
+            return Err(CorruptIndex);
+        }
+        c.box_size *= 0.5;
+        let mid = c.box_min + Vec3::splat(c.box_size);
+        let s: BVec3 = p.cmpgt(mid) | (p.cmpeq(mid) & dir.cmpge(Vec3::ZERO));
+        c.box_min += Vec3::select(s, Vec3::splat(c.box_size), Vec3::ZERO);
+        let ci = s.x as u32 + 2 * s.y as u32 + 4 * s.z as u32;
+        c.node = node_ptr(word) + ci;
+        c.level += 1;
+        word = read(words, c.node)?;
+    }
+    if node_tag(word) != TAG_EMPTY && node_tag(word) != TAG_DATA {
+        return Err(CorruptIndex);
+    }
+    Ok((c, word))
+}
+
+/// Exit of the ray from box `c`: `(t_exit, face)`, face `2 * axis + (dir > 0)`.
+/// The smallest `t` wins; ties go to the lowest axis. `t_exit` is [`T_BIG`] when
+/// the direction is zero.
+pub fn exit_face(c: &NodeBox, origin: Vec3, dir: Vec3, inv_dir: Vec3) -> (f32, u32) {
+    let pos = dir.cmpgt(Vec3::ZERO);
+    let far = c.box_min + Vec3::select(pos, Vec3::splat(c.box_size), Vec3::ZERO);
+    let tf = Vec3::select(dir.cmpne(Vec3::ZERO), (far - origin) * inv_dir, Vec3::splat(T_BIG));
+    let mut t = tf.x;
+    let mut face = pos.x as u32;
+    if tf.y < t {
+        t = tf.y;
+        face = 2 + pos.y as u32;
+    }
+    if tf.z < t {
+        t = tf.z;
+        face = 4 + pos.z as u32;
+    }
+    (t, face)
+}
+
+/// Follows `rope` (the word at `leaf record + 1 + face`) out of box `c`: the
+/// neighbour's node and box, computed from `c` and the neighbour's level (shift
+/// by one box along the face, then snap to the coarser grid). `Ok(None)` for NULL.
+pub fn follow_rope(rope: u32, c: &NodeBox, face: u32) -> Result<Option<NodeBox>, CorruptIndex> {
+    if rope == NULL {
+        return Ok(None);
+    }
+    let level = rope >> ROPE_LEVEL_SHIFT;
+    if level > c.level || face > 5 {
+        return Err(CorruptIndex);
+    }
+    let mut n = *c;
+    let axis = (face / 2) as usize;
+    n.box_min[axis] += if face & 1 == 1 { n.box_size } else { -n.box_size };
+    if level < c.level {
+        n.box_size = exp2_neg(level);
+        n.box_min = (n.box_min * exp2_pos(level)).floor() * n.box_size;
+    }
+    n.level = level;
+    n.node = rope & ROPE_NODE_MASK;
+    Ok(Some(n))
+}
+
+/// One leaf pierced by the ray.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LeafHit {
+    /// The leaf's node, level and box.
+    pub leaf: NodeBox,
+    /// What the leaf holds.
+    pub kind: LeafKind,
+    /// Ray parameter where the ray enters the leaf (the previous leaf's `t_exit`).
+    pub t_enter: f32,
+    /// Ray parameter where it leaves (`> t_enter`).
+    pub t_exit: f32,
+}
+
+impl LeafHit {
+    /// The leaf's key.
+    pub fn key(&self) -> NodeKey {
+        self.leaf.key()
+    }
+}
+
+/// How a traversal stands.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum TraversalStatus {
+    /// More leaves may follow.
+    Running,
+    /// The ray left the cube or reached `t_max`: every leaf was reported.
+    Finished,
+    /// The step bound was reached before the end.
+    StepLimit,
+    /// The words are malformed; traversal stopped.
+    Corrupt,
+}
+
+/// Iterator over the leaves pierced by a ray, front to back (see [`traverse`]).
+#[derive(Debug, Clone)]
+pub struct Traversal<'a> {
+    words: &'a [u32],
+    origin: Vec3,
+    dir: Vec3,
+    inv_dir: Vec3,
+    t: f32,
+    t_end: f32,
+    /// Where to locate next; `node == NULL` when done.
+    cur: NodeBox,
+    steps: u32,
+    max_steps: u32,
+    status: TraversalStatus,
+}
+
+/// Walks the encoded index `words` along `ray`, front to back. Each visited leaf
+/// (reported or not, see the tie rules) costs one step; after `max_steps` steps
+/// the iterator ends with [`TraversalStatus::StepLimit`].
+pub fn traverse(words: &[u32], ray: Ray, max_steps: u32) -> Traversal<'_> {
+    let (dir, inv_dir) = ray_setup(ray.dir);
+    let (t0, t1) = clip_unit_cube(ray.origin, dir, inv_dir, ray.t_min, ray.t_max);
+    let mut cur = NodeBox::ROOT;
+    // `!(t0 < t1)` also catches NaN.
+    let hit = t0 < t1;
+    if !hit {
+        cur.node = NULL;
+    }
+    Traversal { words, origin: ray.origin, dir, inv_dir, t: t0, t_end: t1, cur, steps: 0, max_steps, status: TraversalStatus::Running }
+}
+
+impl Traversal<'_> {
+    /// Current status (`Running` until the iterator has returned `None`).
+    pub fn status(&self) -> TraversalStatus {
+        self.status
+    }
+
+    /// Steps (leaf visits) taken so far.
+    pub fn steps(&self) -> u32 {
+        self.steps
+    }
+
+    fn step(&mut self) -> Result<Option<LeafHit>, CorruptIndex> {
+        let p = self.origin + self.dir * self.t;
+        let (leaf, word) = locate_leaf(self.words, self.cur, p, self.dir)?;
+        let (mut t_exit, face) = exit_face(&leaf, self.origin, self.dir, self.inv_dir);
+        let record = node_ptr(word);
+        let mut rope = NULL;
+        if t_exit < self.t_end {
+            rope = read(self.words, record + 1 + face)?;
+        } else {
+            t_exit = self.t_end;
+        }
+        let t_enter = self.t;
+        t_exit = t_exit.max(t_enter);
+        let kind = if node_tag(word) == TAG_DATA {
+            LeafKind::Data { slot: read(self.words, record)? }
+        } else {
+            LeafKind::Empty
+        };
+        match follow_rope(rope, &leaf, face)? {
+            Some(n) => self.cur = n,
+            None => self.cur.node = NULL,
+        }
+        self.t = t_exit;
+        Ok((t_exit > t_enter).then_some(LeafHit { leaf, kind, t_enter, t_exit }))
+    }
+}
+
+impl Iterator for Traversal<'_> {
+    type Item = LeafHit;
+
+    fn next(&mut self) -> Option<LeafHit> {
+        // Bounded by max_steps: every iteration takes a step or returns.
+        loop {
+            if self.status != TraversalStatus::Running {
+                return None;
+            }
+            if self.cur.node == NULL {
+                self.status = TraversalStatus::Finished;
+                return None;
+            }
+            if self.steps >= self.max_steps {
+                self.status = TraversalStatus::StepLimit;
+                return None;
+            }
+            self.steps += 1;
+            match self.step() {
+                Ok(Some(hit)) => return Some(hit),
+                Ok(None) => {}
+                Err(CorruptIndex) => {
+                    self.status = TraversalStatus::Corrupt;
+                    return None;
+                }
+            }
+        }
+    }
+}
+
+impl std::iter::FusedIterator for Traversal<'_> {}

@@ -1,0 +1,1 @@
+// Octree traversal library (work in progress).
