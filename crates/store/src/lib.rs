@@ -1,1 +1,55 @@
-//! See the crate description.
+//! The brick octree store of brickray (issue #3).
+//!
+//! * [`build`] / [`build_file`]: a streaming, parallel, memory-bounded builder that
+//!   reads any [`brickray_core::VolumeReader`] and writes one store file
+//!   (temporary name, renamed when complete);
+//! * [`open`] / [`Store`]: validated open, lock-free positional brick reads with
+//!   checksum verification, metadata queries; implements [`BrickSource`];
+//! * [`ProceduralSource`]: a virtual volume of up to `65536^3` voxels (and more)
+//!   whose bricks are computed on demand, with exactly filtered inner nodes;
+//!   implements [`BrickSource`].
+//!
+//! The file format, the apron and the filter are specified in
+//! `docs/store-format.md`. Brick semantics follow [`brickray_core::brick`].
+//!
+//! [`BrickSource`]: brickray_core::BrickSource
+
+mod build;
+mod error;
+pub mod format;
+mod procedural;
+mod reader;
+mod sample;
+
+pub use build::{BuildOptions, BuildReport, build, build_file};
+pub use error::StoreError;
+pub use procedural::ProceduralSource;
+pub use reader::{NodeRecord, Store, StoreStats, decode_payload, open};
+
+/// The 2x downsampling filter that computes a level-`l-1` voxel from the 2x2x2
+/// level-`l` voxels `(2i + {0,1}, 2j + {0,1}, 2k + {0,1})`, indices clamped to the
+/// level's edge (odd sizes repeat the last voxel).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub enum Filter {
+    /// The mean; integer types round half up (`floor(sum / 8 + 1/2)`), f32 sums
+    /// in f64 in the order x fastest, then y, then z. For intensities.
+    #[default]
+    Average,
+    /// The largest of the eight. For label volumes (a label present anywhere in
+    /// the block survives) and for maximum-intensity projection.
+    Max,
+}
+
+impl Filter {
+    /// Parses `average`/`avg`/`mean` and `max`.
+    pub fn parse(s: &str) -> Option<Filter> {
+        match s.to_ascii_lowercase().as_str() {
+            "average" | "avg" | "mean" => Some(Filter::Average),
+            "max" => Some(Filter::Max),
+            _ => None,
+        }
+    }
+}
+
+/// Marks an entry the builder has not written yet (never a valid level).
+pub(crate) const NO_ENTRY_LEVEL: u8 = u8::MAX;

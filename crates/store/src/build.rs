@@ -1,0 +1,545 @@
+//! The streaming, parallel builder.
+//!
+//! The input is read one z-slice at a time. Every level of the pyramid keeps a
+//! rolling window of whole xy-slices of its level volume: as soon as a level holds
+//! the slices a row of bricks needs (`brick + 2 * apron`, clamped at the volume's
+//! edges), that brick slab is cut, classified and compressed in parallel and its
+//! payloads appended to the file; as soon as it holds the two slices a coarser
+//! slice filters from, that slice is computed (in parallel over rows) and pushed
+//! to the next coarser level. Slices no longer needed are dropped, so memory is
+//! about `(brick + 2 * apron + 2) * 4/3` finest slices whatever the depth.
+//!
+//! Children are always cut before their parent, so an inner node's min/max is the
+//! union of its own stored voxels and its children's ranges (the range of the
+//! whole subtree), and the empty threshold applies to that subtree range.
+
+use crate::error::StoreError;
+use crate::format::{
+    ENTRY_LEN, Entry, FLAG_THRESHOLD, HEADER_LEN, Header, KIND_DATA, KIND_EMPTY, KIND_UNIFORM,
+    MAX_APRON, MAX_BRICK, MAX_BRICK_BYTES, TableGeometry, VERSION, dtype_code, filter_code,
+};
+use crate::sample::{Sample, range_dyn, with_sample};
+use crate::{Filter, NO_ENTRY_LEVEL};
+use brickray_core::{NodeKey, OctreeLayout, VolumeReader};
+use rayon::prelude::*;
+use std::collections::VecDeque;
+use std::io::{BufWriter, Seek, SeekFrom, Write};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// Options of a build.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BuildOptions {
+    /// Interior voxels per brick side (default 32).
+    pub brick: u32,
+    /// Apron voxels on each side of a brick (default 2, see `docs/store-format.md`).
+    pub apron: u32,
+    /// The 2x downsampling filter of inner nodes (default [`Filter::Average`]).
+    pub filter: Filter,
+    /// Nodes whose whole subtree lies strictly below this raw value are stored as
+    /// empty, without payload (default: none).
+    pub empty_below: Option<f32>,
+    /// Upper bound in bytes on the builder's buffers (default 1 GiB).
+    pub memory_bound: u64,
+    /// Show a progress bar on stderr (default false).
+    pub progress: bool,
+}
+
+impl Default for BuildOptions {
+    fn default() -> Self {
+        BuildOptions {
+            brick: 32,
+            apron: 2,
+            filter: Filter::Average,
+            empty_below: None,
+            memory_bound: 1 << 30,
+            progress: false,
+        }
+    }
+}
+
+/// What a build did.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BuildReport {
+    /// The octree geometry.
+    pub layout: OctreeLayout,
+    /// Nodes in the table (every node that overlaps the volume).
+    pub nodes: u64,
+    /// Nodes with a payload.
+    pub data_nodes: u64,
+    /// Uniform nodes.
+    pub uniform_nodes: u64,
+    /// Empty nodes.
+    pub empty_nodes: u64,
+    /// Input voxels.
+    pub input_voxels: u64,
+    /// Input bytes.
+    pub input_bytes: u64,
+    /// Bytes of payload written.
+    pub payload_bytes: u64,
+    /// Uncompressed bytes of the bricks stored with a payload.
+    pub raw_payload_bytes: u64,
+    /// Size of the store file.
+    pub file_bytes: u64,
+    /// The builder's estimate of its peak buffer bytes.
+    pub buffer_estimate: u64,
+    /// Wall-clock seconds.
+    pub seconds: f64,
+}
+
+/// Builds a store at `out` from the volume file at `input` (any format
+/// `brickray_core::io::open` reads).
+pub fn build_file(input: &Path, out: &Path, opts: &BuildOptions) -> Result<BuildReport, StoreError> {
+    let mut reader = brickray_core::io::open(input)?;
+    build(reader.as_mut(), out, opts)
+}
+
+/// Builds a store at `out` from `reader`. The file is written under a temporary
+/// name in the same directory and renamed only when complete.
+pub fn build(reader: &mut dyn VolumeReader, out: &Path, opts: &BuildOptions) -> Result<BuildReport, StoreError> {
+    let t0 = Instant::now();
+    let desc = reader.desc().clone();
+    desc.validate().map_err(|e| StoreError::BadOption { option: "input", reason: e.to_string() })?;
+    if opts.brick == 0 || opts.brick > MAX_BRICK {
+        return Err(StoreError::BadOption { option: "brick", reason: format!("must be in 1..={MAX_BRICK}") });
+    }
+    if opts.apron > MAX_APRON {
+        return Err(StoreError::BadOption { option: "apron", reason: format!("must be in 0..={MAX_APRON}") });
+    }
+    if let Some(t) = opts.empty_below {
+        if !t.is_finite() {
+            return Err(StoreError::BadOption { option: "empty_below", reason: "must be finite".into() });
+        }
+    }
+    let layout = OctreeLayout::new(desc.clone(), opts.brick, opts.apron);
+    if layout.brick_bytes() > MAX_BRICK_BYTES {
+        return Err(StoreError::BadOption {
+            option: "brick",
+            reason: format!("a stored brick would take {} bytes (max {MAX_BRICK_BYTES})", layout.brick_bytes()),
+        });
+    }
+    let geo = TableGeometry::new(&layout).ok_or_else(|| StoreError::BadOption {
+        option: "input",
+        reason: "too many nodes".into(),
+    })?;
+    let size = desc.dtype.size() as u64;
+    let slice_bytes = desc.dims[0] as u64 * desc.dims[1] as u64 * size;
+    let side = layout.stored_side() as u64;
+    let slab = side * slice_bytes;
+    // Rolling windows: brick + 2 apron + 2 slices per level, levels shrink 4x.
+    let windows = (side + 2) * slice_bytes * 4 / 3;
+    // Compressed output of one group of bricks, plus per-thread scratch.
+    let group_cap: u64 = (32u64 << 20).min(opts.memory_bound / 8).max(layout.brick_bytes() as u64 * 2);
+    let threads = rayon::current_num_threads() as u64;
+    let scratch = threads * 3 * layout.brick_bytes() as u64;
+    let table = geo.count * (ENTRY_LEN as u64 + 48);
+    let needed = windows + group_cap + scratch + table + (8 << 20);
+    if needed > opts.memory_bound {
+        return Err(StoreError::MemoryBound { needed, bound: opts.memory_bound, slab });
+    }
+
+    let dir = out.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let tmp = tempfile::Builder::new()
+        .prefix(".brickray-store-")
+        .suffix(".partial")
+        .tempfile_in(dir)
+        .map_err(|e| StoreError::io(dir, e))?;
+    let tmp_path: PathBuf = tmp.path().to_owned();
+    let mut w = BufWriter::with_capacity(4 << 20, tmp.as_file());
+    // Placeholder header: all zeros never opens as a store.
+    w.write_all(&[0u8; HEADER_LEN]).map_err(|e| StoreError::io(&tmp_path, e))?;
+
+    let fill_entry = Entry {
+        level: NO_ENTRY_LEVEL,
+        kind: KIND_EMPTY,
+        pos: [0; 3],
+        min: 0.0,
+        max: 0.0,
+        value: 0.0,
+        len: 0,
+        offset: 0,
+        crc: 0,
+    };
+    let mut ctx = Ctx {
+        layout: layout.clone(),
+        geo,
+        filter: opts.filter,
+        empty_below: opts.empty_below,
+        entries: Vec::new(),
+        offset: HEADER_LEN as u64,
+        group_cap,
+        path: tmp_path.clone(),
+        data_range: [f32::INFINITY, f32::NEG_INFINITY],
+        raw_payload: 0,
+    };
+    ctx.entries = vec![fill_entry; ctx.geo.count as usize];
+
+    let pb = if opts.progress {
+        let pb = indicatif::ProgressBar::new(desc.voxel_count());
+        pb.set_style(
+            indicatif::ProgressStyle::with_template(
+                "{spinner} [{elapsed_precise}] {wide_bar} {percent}% {human_pos}/{human_len} voxels, \
+                 {per_sec}, {eta} left",
+            )
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+        );
+        pb
+    } else {
+        indicatif::ProgressBar::hidden()
+    };
+
+    let mut levels: Vec<LevelBuf> = (0..layout.levels).map(|l| LevelBuf::new(&layout, l)).collect();
+    let finest = layout.levels as usize - 1;
+    let nz = desc.dims[2];
+    // Read in chunks of a few slices (at most ~8 MiB, at most a brick).
+    let per = ((8u64 << 20) / slice_bytes.max(1)).clamp(1, opts.brick as u64) as u32;
+    let mut z = 0;
+    let mut chunk = Vec::new();
+    while z < nz {
+        let z1 = (z + per).min(nz);
+        chunk.resize(((z1 - z) as u64 * slice_bytes) as usize, 0);
+        reader.read_slices(z, z1, &mut chunk)?;
+        for s in chunk.chunks_exact(slice_bytes as usize) {
+            levels[finest].slices.push_back(s.to_vec());
+        }
+        z = z1;
+        for l in (0..=finest).rev() {
+            let (coarse, fine) = levels.split_at_mut(l);
+            fine[0].process(&mut ctx, coarse.last_mut(), &mut w)?;
+        }
+        pb.set_position(z as u64 * desc.dims[0] as u64 * desc.dims[1] as u64);
+    }
+    for l in 0..=finest {
+        if levels[l].next_slab < levels[l].grid[2] {
+            return Err(StoreError::BadOption {
+                option: "input",
+                reason: format!("internal: level {l} not complete"),
+            });
+        }
+    }
+    pb.finish_and_clear();
+
+    // Node table, then the header.
+    let table_offset = ctx.offset;
+    let mut table = vec![0u8; ctx.entries.len() * ENTRY_LEN];
+    let (mut data_nodes, mut uniform_nodes, mut empty_nodes) = (0, 0, 0);
+    for (e, b) in ctx.entries.iter().zip(table.chunks_exact_mut(ENTRY_LEN)) {
+        match e.kind {
+            KIND_DATA => data_nodes += 1,
+            KIND_UNIFORM => uniform_nodes += 1,
+            _ => empty_nodes += 1,
+        }
+        e.encode(b);
+    }
+    w.write_all(&table).map_err(|e| StoreError::io(&tmp_path, e))?;
+    let data_range = if ctx.data_range[0] <= ctx.data_range[1] { ctx.data_range } else { [0.0, 0.0] };
+    let header = Header {
+        version: VERSION,
+        header_len: HEADER_LEN as u32,
+        dims: desc.dims,
+        dtype: dtype_code(desc.dtype),
+        filter: filter_code(opts.filter),
+        flags: if opts.empty_below.is_some() { FLAG_THRESHOLD } else { 0 },
+        levels: layout.levels,
+        brick: layout.brick,
+        apron: layout.apron,
+        spacing: desc.spacing,
+        value_range: desc.value_range,
+        data_range,
+        empty_below: opts.empty_below.unwrap_or(0.0),
+        node_count: ctx.entries.len() as u64,
+        table_offset,
+        table_len: table.len() as u64,
+        payload_bytes: table_offset - HEADER_LEN as u64,
+        table_crc: crc32fast::hash(&table),
+    };
+    w.seek(SeekFrom::Start(0)).map_err(|e| StoreError::io(&tmp_path, e))?;
+    w.write_all(&header.encode()).map_err(|e| StoreError::io(&tmp_path, e))?;
+    w.flush().map_err(|e| StoreError::io(&tmp_path, e))?;
+    drop(w);
+    tmp.as_file().sync_all().map_err(|e| StoreError::io(&tmp_path, e))?;
+    tmp.persist(out).map_err(|e| StoreError::io(out, e.error))?;
+    let file_bytes = table_offset + table.len() as u64;
+    Ok(BuildReport {
+        layout,
+        nodes: ctx.entries.len() as u64,
+        data_nodes,
+        uniform_nodes,
+        empty_nodes,
+        input_voxels: desc.voxel_count(),
+        input_bytes: desc.byte_len(),
+        payload_bytes: table_offset - HEADER_LEN as u64,
+        raw_payload_bytes: ctx.raw_payload,
+        file_bytes,
+        buffer_estimate: needed,
+        seconds: t0.elapsed().as_secs_f64(),
+    })
+}
+
+/// Shared state of a build.
+struct Ctx {
+    layout: OctreeLayout,
+    geo: TableGeometry,
+    filter: Filter,
+    empty_below: Option<f32>,
+    entries: Vec<Entry>,
+    offset: u64,
+    group_cap: u64,
+    path: PathBuf,
+    data_range: [f32; 2],
+    raw_payload: u64,
+}
+
+/// The rolling window of one level's slices.
+struct LevelBuf {
+    level: u8,
+    dims: [u32; 3],
+    grid: [u32; 3],
+    /// `slices[i]` is level slice `base + i`.
+    slices: VecDeque<Vec<u8>>,
+    base: u32,
+    next_slab: u32,
+    next_down: u32,
+}
+
+impl LevelBuf {
+    fn new(layout: &OctreeLayout, level: u8) -> LevelBuf {
+        let dims = layout.level_dims(level);
+        LevelBuf {
+            level,
+            dims,
+            grid: dims.map(|d| d.div_ceil(layout.brick)),
+            slices: VecDeque::new(),
+            base: 0,
+            next_slab: 0,
+            next_down: 0,
+        }
+    }
+
+    fn received(&self) -> u32 {
+        self.base + self.slices.len() as u32
+    }
+
+    fn slice(&self, z: u32) -> &[u8] {
+        &self.slices[(z - self.base) as usize]
+    }
+
+    /// Cuts every ready brick slab, filters every ready coarser slice into
+    /// `parent`, and drops slices no longer needed.
+    fn process<W: Write>(
+        &mut self,
+        ctx: &mut Ctx,
+        mut parent: Option<&mut LevelBuf>,
+        w: &mut W,
+    ) -> Result<(), StoreError> {
+        let b = ctx.layout.brick;
+        let a = ctx.layout.apron;
+        let nz = self.dims[2];
+        while self.next_slab < self.grid[2] {
+            let need = ((self.next_slab as u64 + 1) * b as u64 + a as u64).min(nz as u64) as u32;
+            if self.received() < need {
+                break;
+            }
+            self.emit_slab(ctx, w)?;
+            self.next_slab += 1;
+        }
+        if let Some(p) = parent.as_deref_mut() {
+            let pnz = p.dims[2];
+            while self.next_down < pnz {
+                let need = (2 * self.next_down + 2).min(nz);
+                if self.received() < need {
+                    break;
+                }
+                let s = self.downsample(ctx, self.next_down, p.dims);
+                p.slices.push_back(s);
+                self.next_down += 1;
+            }
+        }
+        // Keep what the next slab and the next coarser slice need.
+        let keep_slab = (self.next_slab as u64 * b as u64).saturating_sub(a as u64);
+        let keep_slab = if self.next_slab >= self.grid[2] { u64::MAX } else { keep_slab };
+        let keep_down = if parent.is_some() && self.next_down < self.dims[2].div_ceil(2) {
+            2 * self.next_down as u64
+        } else {
+            u64::MAX
+        };
+        let keep = keep_slab.min(keep_down);
+        while !self.slices.is_empty() && (self.base as u64) < keep {
+            self.slices.pop_front();
+            self.base += 1;
+        }
+        Ok(())
+    }
+
+    /// Level slice `k` of the coarser level, filtered from slices `2k`, `2k+1`.
+    fn downsample(&self, ctx: &Ctx, k: u32, pdims: [u32; 3]) -> Vec<u8> {
+        let nz = self.dims[2];
+        let s0 = self.slice(2 * k);
+        let s1 = self.slice((2 * k + 1).min(nz - 1));
+        let dtype = ctx.layout.dtype();
+        let filter = ctx.filter;
+        let [nx, ny, _] = self.dims.map(|d| d as usize);
+        let [px, py, _] = pdims.map(|d| d as usize);
+        let mut out = vec![0u8; px * py * dtype.size()];
+        with_sample!(dtype, T => downsample_slice::<T>(s0, s1, nx, ny, px, py, filter, &mut out));
+        out
+    }
+
+    /// Cuts, classifies, compresses and writes the bricks of slab `next_slab`.
+    fn emit_slab<W: Write>(&self, ctx: &mut Ctx, w: &mut W) -> Result<(), StoreError> {
+        let bz = self.next_slab;
+        let [gx, gy, _] = self.grid;
+        let bb = ctx.layout.brick_bytes() as u64;
+        let rows_per_group = (ctx.group_cap / (bb * gx as u64).max(1)).max(1) as u32;
+        let mut by0 = 0;
+        while by0 < gy {
+            let by1 = (by0 + rows_per_group).min(gy);
+            let keys: Vec<NodeKey> = (by0..by1)
+                .flat_map(|by| (0..gx).map(move |bx| (bx, by)))
+                .map(|(bx, by)| NodeKey::new(self.level, bx, by, bz))
+                .collect();
+            let shared: &Ctx = ctx;
+            let results: Vec<(Entry, Option<Vec<u8>>)> = keys
+                .par_iter()
+                .map_init(
+                    || vec![0u8; bb as usize],
+                    |buf, &key| self.cut_brick(shared, key, buf),
+                )
+                .collect();
+            for (mut e, payload) in results {
+                if let Some(p) = payload {
+                    e.offset = ctx.offset;
+                    e.len = p.len() as u32;
+                    e.crc = crc32fast::hash(&p);
+                    w.write_all(&p).map_err(|err| StoreError::io(&ctx.path, err))?;
+                    ctx.offset += p.len() as u64;
+                    ctx.raw_payload += bb;
+                }
+                if self.level + 1 == ctx.layout.levels {
+                    ctx.data_range[0] = ctx.data_range[0].min(e.min);
+                    ctx.data_range[1] = ctx.data_range[1].max(e.max);
+                }
+                let i = ctx.geo.index(e.key()).unwrap_or(usize::MAX);
+                if let Some(slot) = ctx.entries.get_mut(i) {
+                    *slot = e;
+                }
+            }
+            by0 = by1;
+        }
+        Ok(())
+    }
+
+    /// Cuts one brick into `buf` and returns its entry and compressed payload.
+    fn cut_brick(&self, ctx: &Ctx, key: NodeKey, buf: &mut [u8]) -> (Entry, Option<Vec<u8>>) {
+        let lay = &ctx.layout;
+        let size = lay.dtype().size();
+        let side = lay.stored_side() as i64;
+        let a = lay.apron as i64;
+        let b = lay.brick as i64;
+        let [nx, ny, nz] = self.dims.map(|d| d as i64);
+        let x0 = key.x as i64 * b - a;
+        let y0 = key.y as i64 * b - a;
+        let z0 = key.z as i64 * b - a;
+        // x range of the row that lies inside the level volume.
+        let in_lo = x0.max(0);
+        let in_hi = (x0 + side).min(nx);
+        let row = side as usize * size;
+        for k in 0..side {
+            let z = (z0 + k).clamp(0, nz - 1) as u32;
+            let sl = self.slice(z);
+            for j in 0..side {
+                let y = (y0 + j).clamp(0, ny - 1) as usize;
+                let src_row = &sl[y * nx as usize * size..(y + 1) * nx as usize * size];
+                let dst = &mut buf[((k * side + j) as usize) * row..][..row];
+                // Left clamp.
+                let left = (in_lo - x0) as usize;
+                for i in 0..left {
+                    dst[i * size..(i + 1) * size].copy_from_slice(&src_row[..size]);
+                }
+                let mid = (in_hi - in_lo).max(0) as usize;
+                dst[left * size..(left + mid) * size]
+                    .copy_from_slice(&src_row[in_lo as usize * size..(in_lo as usize + mid) * size]);
+                let last = &src_row[(nx as usize - 1) * size..nx as usize * size];
+                for i in left + mid..side as usize {
+                    dst[i * size..(i + 1) * size].copy_from_slice(last);
+                }
+            }
+        }
+        let (lo, hi) = range_dyn(lay.dtype(), buf);
+        let uniform = lo == hi;
+        // Subtree range: own voxels and the children's ranges.
+        let (mut smin, mut smax) = (lo, hi);
+        if key.level + 1 < lay.levels {
+            for c in key.children() {
+                if let Some(e) = ctx.geo.index(c).and_then(|i| ctx.entries.get(i)) {
+                    if e.level != NO_ENTRY_LEVEL {
+                        smin = smin.min(e.min);
+                        smax = smax.max(e.max);
+                    }
+                }
+            }
+        }
+        let mut e = Entry {
+            level: key.level,
+            kind: KIND_DATA,
+            pos: [key.x, key.y, key.z],
+            min: smin,
+            max: smax,
+            value: lo,
+            len: 0,
+            offset: 0,
+            crc: 0,
+        };
+        if ctx.empty_below.is_some_and(|t| smax < t) {
+            e.kind = KIND_EMPTY;
+            return (e, None);
+        }
+        if uniform {
+            e.kind = KIND_UNIFORM;
+            return (e, None);
+        }
+        let payload = lz4_flex::block::compress(buf);
+        (e, Some(payload))
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
+fn downsample_slice<T: Sample>(
+    s0: &[u8],
+    s1: &[u8],
+    nx: usize,
+    ny: usize,
+    px: usize,
+    py: usize,
+    filter: Filter,
+    out: &mut [u8],
+) {
+    let sz = T::SIZE;
+    let rows = out.par_chunks_mut(px * sz).with_min_len(8);
+    rows.enumerate().take(py).for_each(|(j, orow)| {
+        let y0 = (2 * j).min(ny - 1);
+        let y1 = (2 * j + 1).min(ny - 1);
+        let r = [
+            &s0[y0 * nx * sz..(y0 + 1) * nx * sz],
+            &s0[y1 * nx * sz..(y1 + 1) * nx * sz],
+            &s1[y0 * nx * sz..(y0 + 1) * nx * sz],
+            &s1[y1 * nx * sz..(y1 + 1) * nx * sz],
+        ];
+        for i in 0..px {
+            let x0 = (2 * i).min(nx - 1) * sz;
+            let x1 = (2 * i + 1).min(nx - 1) * sz;
+            // Order: x fastest, then y, then z.
+            let v = [
+                T::read(&r[0][x0..]),
+                T::read(&r[0][x1..]),
+                T::read(&r[1][x0..]),
+                T::read(&r[1][x1..]),
+                T::read(&r[2][x0..]),
+                T::read(&r[2][x1..]),
+                T::read(&r[3][x0..]),
+                T::read(&r[3][x1..]),
+            ];
+            T::filter(v, filter).write(&mut orow[i * sz..]);
+        }
+    });
+}

@@ -1,0 +1,259 @@
+//! On-disk layout: the header and node-table entries (see `docs/store-format.md`).
+
+use crate::Filter;
+use brickray_core::{DType, NodeKey, OctreeLayout};
+
+/// The file's first eight bytes.
+pub const MAGIC: [u8; 8] = *b"BRKSTORE";
+/// The format version this crate writes and reads.
+pub const VERSION: u32 = 1;
+/// Bytes of the header.
+pub const HEADER_LEN: usize = 128;
+/// Bytes of one node-table entry.
+pub const ENTRY_LEN: usize = 48;
+/// Largest accepted brick side (interior voxels).
+pub const MAX_BRICK: u32 = 512;
+/// Largest accepted apron width.
+pub const MAX_APRON: u32 = 16;
+/// Largest accepted stored brick, in bytes.
+pub const MAX_BRICK_BYTES: usize = 256 << 20;
+
+pub(crate) const KIND_EMPTY: u8 = 0;
+pub(crate) const KIND_UNIFORM: u8 = 1;
+pub(crate) const KIND_DATA: u8 = 2;
+
+pub(crate) fn dtype_code(d: DType) -> u8 {
+    match d {
+        DType::U8 => 0,
+        DType::U16 => 1,
+        DType::I16 => 2,
+        _ => 3,
+    }
+}
+
+pub(crate) fn dtype_from_code(c: u8) -> Option<DType> {
+    Some(match c {
+        0 => DType::U8,
+        1 => DType::U16,
+        2 => DType::I16,
+        3 => DType::F32,
+        _ => return None,
+    })
+}
+
+pub(crate) fn filter_code(f: Filter) -> u8 {
+    match f {
+        Filter::Average => 0,
+        Filter::Max => 1,
+    }
+}
+
+pub(crate) fn filter_from_code(c: u8) -> Option<Filter> {
+    Some(match c {
+        0 => Filter::Average,
+        1 => Filter::Max,
+        _ => return None,
+    })
+}
+
+/// Decoded header fields (unvalidated).
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct Header {
+    pub(crate) version: u32,
+    pub(crate) header_len: u32,
+    pub(crate) dims: [u32; 3],
+    pub(crate) dtype: u8,
+    pub(crate) filter: u8,
+    pub(crate) flags: u8,
+    pub(crate) levels: u8,
+    pub(crate) brick: u32,
+    pub(crate) apron: u32,
+    pub(crate) spacing: [f32; 3],
+    pub(crate) value_range: [f32; 2],
+    pub(crate) data_range: [f32; 2],
+    pub(crate) empty_below: f32,
+    pub(crate) node_count: u64,
+    pub(crate) table_offset: u64,
+    pub(crate) table_len: u64,
+    pub(crate) payload_bytes: u64,
+    pub(crate) table_crc: u32,
+}
+
+/// Header flag: the empty threshold is set.
+pub(crate) const FLAG_THRESHOLD: u8 = 1;
+
+fn u32_at(b: &[u8], o: usize) -> u32 {
+    u32::from_le_bytes([b[o], b[o + 1], b[o + 2], b[o + 3]])
+}
+fn f32_at(b: &[u8], o: usize) -> f32 {
+    f32::from_bits(u32_at(b, o))
+}
+fn u64_at(b: &[u8], o: usize) -> u64 {
+    let mut a = [0u8; 8];
+    a.copy_from_slice(&b[o..o + 8]);
+    u64::from_le_bytes(a)
+}
+
+impl Header {
+    /// Encodes the header, checksum included.
+    pub(crate) fn encode(&self) -> [u8; HEADER_LEN] {
+        let mut b = [0u8; HEADER_LEN];
+        b[0..8].copy_from_slice(&MAGIC);
+        b[8..12].copy_from_slice(&self.version.to_le_bytes());
+        b[12..16].copy_from_slice(&self.header_len.to_le_bytes());
+        for a in 0..3 {
+            b[16 + 4 * a..20 + 4 * a].copy_from_slice(&self.dims[a].to_le_bytes());
+        }
+        b[28] = self.dtype;
+        b[29] = self.filter;
+        b[30] = self.flags;
+        b[31] = self.levels;
+        b[32..36].copy_from_slice(&self.brick.to_le_bytes());
+        b[36..40].copy_from_slice(&self.apron.to_le_bytes());
+        for a in 0..3 {
+            b[40 + 4 * a..44 + 4 * a].copy_from_slice(&self.spacing[a].to_le_bytes());
+        }
+        b[52..56].copy_from_slice(&self.value_range[0].to_le_bytes());
+        b[56..60].copy_from_slice(&self.value_range[1].to_le_bytes());
+        b[60..64].copy_from_slice(&self.data_range[0].to_le_bytes());
+        b[64..68].copy_from_slice(&self.data_range[1].to_le_bytes());
+        b[68..72].copy_from_slice(&self.empty_below.to_le_bytes());
+        b[72..80].copy_from_slice(&self.node_count.to_le_bytes());
+        b[80..88].copy_from_slice(&self.table_offset.to_le_bytes());
+        b[88..96].copy_from_slice(&self.table_len.to_le_bytes());
+        b[96..104].copy_from_slice(&self.payload_bytes.to_le_bytes());
+        b[104..108].copy_from_slice(&self.table_crc.to_le_bytes());
+        let crc = crc32fast::hash(&b[..124]);
+        b[124..128].copy_from_slice(&crc.to_le_bytes());
+        b
+    }
+
+    /// Decodes the fields of `b` (at least `HEADER_LEN` bytes); magic and checksum
+    /// are checked by the caller.
+    pub(crate) fn decode(b: &[u8]) -> Header {
+        Header {
+            version: u32_at(b, 8),
+            header_len: u32_at(b, 12),
+            dims: [u32_at(b, 16), u32_at(b, 20), u32_at(b, 24)],
+            dtype: b[28],
+            filter: b[29],
+            flags: b[30],
+            levels: b[31],
+            brick: u32_at(b, 32),
+            apron: u32_at(b, 36),
+            spacing: [f32_at(b, 40), f32_at(b, 44), f32_at(b, 48)],
+            value_range: [f32_at(b, 52), f32_at(b, 56)],
+            data_range: [f32_at(b, 60), f32_at(b, 64)],
+            empty_below: f32_at(b, 68),
+            node_count: u64_at(b, 72),
+            table_offset: u64_at(b, 80),
+            table_len: u64_at(b, 88),
+            payload_bytes: u64_at(b, 96),
+            table_crc: u32_at(b, 104),
+        }
+    }
+
+    /// The stored header checksum and the checksum of bytes `0..124`.
+    pub(crate) fn checksums(b: &[u8]) -> (u32, u32) {
+        (u32_at(b, 124), crc32fast::hash(&b[..124]))
+    }
+}
+
+/// One node-table entry.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct Entry {
+    pub(crate) level: u8,
+    pub(crate) kind: u8,
+    pub(crate) pos: [u32; 3],
+    pub(crate) min: f32,
+    pub(crate) max: f32,
+    /// The uniform value (uniform nodes), else the fill value.
+    pub(crate) value: f32,
+    pub(crate) len: u32,
+    pub(crate) offset: u64,
+    pub(crate) crc: u32,
+}
+
+impl Entry {
+    pub(crate) fn key(&self) -> NodeKey {
+        NodeKey::new(self.level, self.pos[0], self.pos[1], self.pos[2])
+    }
+
+    pub(crate) fn encode(&self, b: &mut [u8]) {
+        b[..ENTRY_LEN].fill(0);
+        b[0] = self.level;
+        b[1] = self.kind;
+        for a in 0..3 {
+            b[4 + 4 * a..8 + 4 * a].copy_from_slice(&self.pos[a].to_le_bytes());
+        }
+        b[16..20].copy_from_slice(&self.min.to_le_bytes());
+        b[20..24].copy_from_slice(&self.max.to_le_bytes());
+        b[24..28].copy_from_slice(&self.value.to_le_bytes());
+        b[28..32].copy_from_slice(&self.len.to_le_bytes());
+        b[32..40].copy_from_slice(&self.offset.to_le_bytes());
+        b[40..44].copy_from_slice(&self.crc.to_le_bytes());
+    }
+
+    pub(crate) fn decode(b: &[u8]) -> (Entry, [u8; 6]) {
+        let e = Entry {
+            level: b[0],
+            kind: b[1],
+            pos: [u32_at(b, 4), u32_at(b, 8), u32_at(b, 12)],
+            min: f32_at(b, 16),
+            max: f32_at(b, 20),
+            value: f32_at(b, 24),
+            len: u32_at(b, 28),
+            offset: u64_at(b, 32),
+            crc: u32_at(b, 40),
+        };
+        (e, [b[2], b[3], b[44], b[45], b[46], b[47]])
+    }
+}
+
+/// Bricks per axis at each level, and the index of each level's first entry in
+/// the node table (entries are ordered by level, then z, y, x).
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct TableGeometry {
+    pub(crate) grid: Vec<[u32; 3]>,
+    pub(crate) first: Vec<u64>,
+    pub(crate) count: u64,
+}
+
+impl TableGeometry {
+    /// `None` when the count overflows u64.
+    pub(crate) fn new(layout: &OctreeLayout) -> Option<TableGeometry> {
+        let mut grid = Vec::with_capacity(layout.levels as usize);
+        let mut first = Vec::with_capacity(layout.levels as usize);
+        let mut count = 0u64;
+        for l in 0..layout.levels {
+            let d = layout.level_dims(l);
+            let g = d.map(|n| n.div_ceil(layout.brick));
+            first.push(count);
+            let n = (g[0] as u64).checked_mul(g[1] as u64)?.checked_mul(g[2] as u64)?;
+            count = count.checked_add(n)?;
+            grid.push(g);
+        }
+        Some(TableGeometry { grid, first, count })
+    }
+
+    /// The table index of `key`, `None` when the node is outside the volume.
+    pub(crate) fn index(&self, key: NodeKey) -> Option<usize> {
+        let g = self.grid.get(key.level as usize)?;
+        if key.x >= g[0] || key.y >= g[1] || key.z >= g[2] {
+            return None;
+        }
+        let i = key.x as u64 + g[0] as u64 * (key.y as u64 + g[1] as u64 * key.z as u64);
+        Some((self.first[key.level as usize] + i) as usize)
+    }
+
+    /// The key of table index `i` (must be < count).
+    pub(crate) fn key(&self, i: u64) -> NodeKey {
+        let l = self.first.partition_point(|&f| f <= i) - 1;
+        let g = self.grid[l];
+        let r = i - self.first[l];
+        let x = r % g[0] as u64;
+        let y = (r / g[0] as u64) % g[1] as u64;
+        let z = r / (g[0] as u64 * g[1] as u64);
+        NodeKey::new(l as u8, x as u32, y as u32, z as u32)
+    }
+}

@@ -1,0 +1,244 @@
+//! A virtual volume whose bricks are computed on demand.
+//!
+//! The field is defined top-down, as an inverse Haar-like cascade, so that every
+//! level is *exactly* the [`Filter::Average`](crate::Filter::Average) of the next
+//! finer one, at any size, without evaluating the finest level:
+//!
+//! * level 0 (at most `brick^3` voxels) is smooth value noise
+//!   ([`brickray_core::synthetic::fractal_noise`]) mapped to 16..=240;
+//! * a level-`j` voxel `c` with parent `p = c / 2` (level `j-1`, value `v`) has the
+//!   value `v + sx*Ax + sy*Ay + sz*Az`, where `s = +1` for an even index and `-1`
+//!   for an odd one along that axis, and `A` are integer displacements hashed from
+//!   `(seed, j, p, axis)`, of amplitude `amp_j = 48 * 0.75^j`, limited to
+//!   `min(v, 255 - v) / 3` so values stay in `0..=255`. An axis along which the
+//!   parent has only one child (odd level size, clamped) gets `A = 0`.
+//!
+//! The eight (edge-clamped) children of a parent then sum to exactly `8 v`, so the
+//! rounded average is `v`: inner nodes equal the filter of their children. A
+//! voxel's value is reached from its level-0 ancestor in `level` steps, and a
+//! brick costs about `8/7` of its stored voxels in evaluations.
+//!
+//! `min`/`max` of a node come without evaluating it: the brick's footprint on a
+//! level a few steps coarser (about 3^3 voxels) is evaluated and widened by the
+//! largest displacement the remaining levels can add (`sum 3 * ceil(amp_j)`), then
+//! clamped to 0..=255. That bound covers the node's stored voxels and its whole
+//! subtree, like the store's subtree ranges.
+
+use crate::error::StoreError;
+use brickray_core::synthetic::fractal_noise;
+use brickray_core::{BrickError, BrickSource, DType, NodeInfo, NodeKey, NodeKind, OctreeLayout, VolumeDesc};
+
+/// A procedural u8 volume (see the module docs) implementing [`BrickSource`].
+#[derive(Debug, Clone)]
+pub struct ProceduralSource {
+    layout: OctreeLayout,
+    seed: u64,
+    /// Per level: displacement amplitude (integer bound) applied to reach it.
+    amp: Vec<i32>,
+    /// Per level: largest total displacement from a voxel of this level to any
+    /// finer descendant.
+    reach: Vec<i32>,
+}
+
+fn mix(mut h: u64) -> u64 {
+    h ^= h >> 30;
+    h = h.wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    h ^= h >> 27;
+    h = h.wrapping_mul(0x94D0_49BB_1331_11EB);
+    h ^ (h >> 31)
+}
+
+impl ProceduralSource {
+    /// Fractal noise over `dims` voxels (each in `1..=2^24`, at most `2^48` voxels,
+    /// e.g. `[65536; 3]`), in bricks of `brick` voxels with `apron`.
+    pub fn fractal_noise(dims: [u64; 3], brick: u32, apron: u32) -> Result<ProceduralSource, StoreError> {
+        ProceduralSource::with_seed(dims, brick, apron, 0x5EED_B41C)
+    }
+
+    /// [`fractal_noise`](Self::fractal_noise) with a chosen seed.
+    pub fn with_seed(dims: [u64; 3], brick: u32, apron: u32, seed: u64) -> Result<ProceduralSource, StoreError> {
+        brickray_core::volume::voxel_count(dims)
+            .map_err(|e| StoreError::BadOption { option: "dims", reason: e.to_string() })?;
+        if brick == 0 || brick > crate::format::MAX_BRICK {
+            return Err(StoreError::BadOption { option: "brick", reason: "must be in 1..=512".into() });
+        }
+        if apron > crate::format::MAX_APRON {
+            return Err(StoreError::BadOption { option: "apron", reason: "must be in 0..=16".into() });
+        }
+        let desc = VolumeDesc {
+            dims: dims.map(|d| d as u32),
+            dtype: DType::U8,
+            spacing: [1.0; 3],
+            value_range: [0.0, 255.0],
+        };
+        let layout = OctreeLayout::new(desc, brick, apron);
+        let n = layout.levels as usize;
+        let amp: Vec<i32> = (0..n).map(|j| if j == 0 { 0 } else { (48.0 * 0.75f64.powi(j as i32)).ceil() as i32 }).collect();
+        let mut reach = vec![0i32; n];
+        for j in (0..n.saturating_sub(1)).rev() {
+            reach[j] = reach[j + 1] + 3 * amp[j + 1];
+        }
+        Ok(ProceduralSource { layout, seed, amp, reach })
+    }
+
+    fn root_value(&self, p: [u64; 3]) -> i32 {
+        let period = (self.layout.brick as f64 / 2.0).max(2.0);
+        let q = p.map(|c| c as f64 + (self.seed % 977) as f64);
+        let n = fractal_noise(q, period, 3);
+        (16.0 + 224.0 * n).round().clamp(16.0, 240.0) as i32
+    }
+
+    fn displacement(&self, level: u8, parent: [u64; 3], axis: usize, v: i32) -> i32 {
+        let amp = self.amp[level as usize];
+        if amp == 0 {
+            return 0;
+        }
+        let h = mix(
+            self.seed
+                ^ mix(parent[0].wrapping_add((level as u64) << 56))
+                ^ mix(parent[1].wrapping_mul(0x9E37_79B9_7F4A_7C15).wrapping_add(axis as u64))
+                ^ mix(parent[2].wrapping_mul(0xC2B2_AE3D_27D4_EB4F).wrapping_add(17)),
+        );
+        let lim = v.min(255 - v) / 3;
+        let a = (h % (2 * amp as u64 + 1)) as i32 - amp;
+        a.clamp(-lim, lim)
+    }
+
+    /// Values of level `level` voxels in the box `lo..=hi` (inside the level
+    /// volume), x fastest.
+    pub fn region(&self, level: u8, lo: [u64; 3], hi: [u64; 3]) -> Vec<u8> {
+        self.region_i32(level, lo, hi).into_iter().map(|v| v as u8).collect()
+    }
+
+    fn region_i32(&self, level: u8, lo: [u64; 3], hi: [u64; 3]) -> Vec<i32> {
+        let n = [0, 1, 2].map(|a| (hi[a] - lo[a] + 1) as usize);
+        let mut out = Vec::with_capacity(n[0] * n[1] * n[2]);
+        if level == 0 {
+            for z in lo[2]..=hi[2] {
+                for y in lo[1]..=hi[1] {
+                    for x in lo[0]..=hi[0] {
+                        out.push(self.root_value([x, y, z]));
+                    }
+                }
+            }
+            return out;
+        }
+        let plo = lo.map(|c| c / 2);
+        let phi = hi.map(|c| c / 2);
+        let pn = [0, 1, 2].map(|a| (phi[a] - plo[a] + 1) as usize);
+        let parent = self.region_i32(level - 1, plo, phi);
+        let dims = self.layout.level_dims(level).map(u64::from);
+        // Per parent voxel: the three displacements.
+        let mut disp = Vec::with_capacity(parent.len());
+        let mut i = 0;
+        for pz in plo[2]..=phi[2] {
+            for py in plo[1]..=phi[1] {
+                for px in plo[0]..=phi[0] {
+                    let v = parent[i];
+                    let pp = [px, py, pz];
+                    let d: [i32; 3] = std::array::from_fn(|a| {
+                        if 2 * pp[a] + 1 < dims[a] { self.displacement(level, pp, a, v) } else { 0 }
+                    });
+                    disp.push(d);
+                    i += 1;
+                }
+            }
+        }
+        for z in lo[2]..=hi[2] {
+            for y in lo[1]..=hi[1] {
+                let prow = ((z / 2 - plo[2]) as usize * pn[1] + (y / 2 - plo[1]) as usize) * pn[0];
+                let sy = if y & 1 == 0 { 1 } else { -1 };
+                let sz = if z & 1 == 0 { 1 } else { -1 };
+                for x in lo[0]..=hi[0] {
+                    let pi = prow + (x / 2 - plo[0]) as usize;
+                    let sx = if x & 1 == 0 { 1 } else { -1 };
+                    let d = disp[pi];
+                    out.push(parent[pi] + sx * d[0] + sy * d[1] + sz * d[2]);
+                }
+            }
+        }
+        out
+    }
+
+    /// The value of one level voxel (coordinates inside the level volume).
+    pub fn voxel(&self, level: u8, p: [u64; 3]) -> u8 {
+        self.region(level, p, p)[0]
+    }
+
+    fn check(&self, key: NodeKey) -> Result<bool, BrickError> {
+        let n = 1u64 << key.level.min(63);
+        if key.level >= self.layout.levels || [key.x, key.y, key.z].iter().any(|&p| p as u64 >= n) {
+            return Err(BrickError::OutOfRange { key });
+        }
+        Ok(self.layout.in_volume(key))
+    }
+
+    /// The level-`level` voxel box `lo..=hi` a node's stored brick reads (clamped).
+    fn footprint(&self, key: NodeKey) -> ([u64; 3], [u64; 3]) {
+        let d = self.layout.level_dims(key.level).map(|d| d as i64);
+        let b = self.layout.brick as i64;
+        let a = self.layout.apron as i64;
+        let p = [key.x, key.y, key.z].map(|c| c as i64);
+        let lo = [0, 1, 2].map(|i| (p[i] * b - a).clamp(0, d[i] - 1) as u64);
+        let hi = [0, 1, 2].map(|i| (p[i] * b + b + a - 1).clamp(0, d[i] - 1) as u64);
+        (lo, hi)
+    }
+}
+
+impl BrickSource for ProceduralSource {
+    fn layout(&self) -> &OctreeLayout {
+        &self.layout
+    }
+
+    fn node(&self, key: NodeKey) -> Result<NodeInfo, BrickError> {
+        if !self.check(key)? {
+            return Ok(NodeInfo { kind: NodeKind::Empty, min: 0.0, max: 0.0 });
+        }
+        let (lo, hi) = self.footprint(key);
+        // Step up until the footprint is about 3 voxels a side.
+        let mut m = key.level;
+        let (mut lo, mut hi) = (lo, hi);
+        while m > 0 && (0..3).any(|a| hi[a] - lo[a] > 2) {
+            m -= 1;
+            lo = lo.map(|c| c / 2);
+            hi = hi.map(|c| c / 2);
+        }
+        let vals = self.region_i32(m, lo, hi);
+        let (mn, mx) = vals.iter().fold((i32::MAX, i32::MIN), |(a, b), &v| (a.min(v), b.max(v)));
+        let r = self.reach[m as usize];
+        Ok(NodeInfo { kind: NodeKind::Data, min: (mn - r).max(0) as f32, max: (mx + r).min(255) as f32 })
+    }
+
+    fn read_brick(&self, key: NodeKey, out: &mut [u8]) -> Result<(), BrickError> {
+        let expected = self.layout.brick_bytes();
+        if out.len() != expected {
+            return Err(BrickError::BufferSize { expected, actual: out.len() });
+        }
+        if !self.check(key)? {
+            out.fill(0);
+            return Ok(());
+        }
+        let (lo, hi) = self.footprint(key);
+        let vals = self.region(key.level, lo, hi);
+        let n = [0, 1, 2].map(|a| (hi[a] - lo[a] + 1) as i64);
+        let d = self.layout.level_dims(key.level).map(|d| d as i64);
+        let b = self.layout.brick as i64;
+        let a = self.layout.apron as i64;
+        let side = self.layout.stored_side() as i64;
+        let origin = [key.x, key.y, key.z].map(|c| c as i64 * b - a);
+        let idx = |axis: usize, i: i64| (origin[axis] + i).clamp(0, d[axis] - 1) - lo[axis] as i64;
+        let mut o = 0;
+        for k in 0..side {
+            let zk = idx(2, k);
+            for j in 0..side {
+                let yj = idx(1, j);
+                let row = (zk * n[1] + yj) * n[0];
+                for i in 0..side {
+                    out[o] = vals[(row + idx(0, i)) as usize];
+                    o += 1;
+                }
+            }
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,419 @@
+//! The store reader: validated open, thread-safe positional brick reads.
+
+use crate::error::StoreError;
+use crate::format::{
+    ENTRY_LEN, Entry, FLAG_THRESHOLD, HEADER_LEN, Header, KIND_DATA, KIND_EMPTY, KIND_UNIFORM, MAGIC,
+    MAX_APRON, MAX_BRICK, MAX_BRICK_BYTES, TableGeometry, VERSION, dtype_from_code, filter_from_code,
+};
+use crate::sample::{fill, representable};
+use crate::Filter;
+use brickray_core::{BrickError, BrickSource, NodeInfo, NodeKey, NodeKind, OctreeLayout, VolumeDesc};
+use std::fs::File;
+use std::os::unix::fs::FileExt;
+use std::path::{Path, PathBuf};
+
+/// Opens a store file, validating its header and node table.
+pub fn open(path: impl AsRef<Path>) -> Result<Store, StoreError> {
+    Store::open(path)
+}
+
+/// An open brick store. Reads are positional (`pread`), so any number of threads
+/// may read bricks concurrently without a lock.
+#[derive(Debug)]
+pub struct Store {
+    path: PathBuf,
+    file: File,
+    layout: OctreeLayout,
+    geo: TableGeometry,
+    entries: Vec<Entry>,
+    filter: Filter,
+    empty_below: Option<f32>,
+    data_range: [f32; 2],
+    file_len: u64,
+    payload_bytes: u64,
+}
+
+/// One node's table record.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NodeRecord {
+    /// The node.
+    pub key: NodeKey,
+    /// Its metadata.
+    pub info: NodeInfo,
+    /// Compressed payload bytes (0 for empty and uniform nodes).
+    pub payload_len: u32,
+}
+
+/// Counts over a store's node table.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct StoreStats {
+    /// Per level: (nodes in the table, data, uniform, empty).
+    pub per_level: Vec<[u64; 4]>,
+    /// Nodes with a payload.
+    pub data: u64,
+    /// Uniform nodes.
+    pub uniform: u64,
+    /// Empty nodes (in the table).
+    pub empty: u64,
+    /// Bytes of payload referenced by the table.
+    pub payload_bytes: u64,
+    /// Uncompressed bytes of the bricks with a payload.
+    pub raw_payload_bytes: u64,
+}
+
+fn bad(path: &Path, field: &'static str, reason: impl Into<String>) -> StoreError {
+    StoreError::BadHeader { path: path.to_owned(), field, reason: reason.into() }
+}
+
+/// Largest lz4 block a brick of `n` bytes can compress to.
+fn max_compressed(n: usize) -> u64 {
+    lz4_flex::block::get_maximum_output_size(n) as u64
+}
+
+impl Store {
+    /// Opens a store file (see [`open`]).
+    pub fn open(path: impl AsRef<Path>) -> Result<Store, StoreError> {
+        let path = path.as_ref();
+        let file = File::open(path).map_err(|e| StoreError::io(path, e))?;
+        Store::from_file(file, path)
+    }
+
+    /// Opens a store from an open file; `path` names it in errors.
+    pub fn from_file(file: File, path: &Path) -> Result<Store, StoreError> {
+        let file_len = file.metadata().map_err(|e| StoreError::io(path, e))?.len();
+        let mut hb = [0u8; HEADER_LEN];
+        if file_len < HEADER_LEN as u64 {
+            return Err(StoreError::Truncated {
+                path: path.to_owned(),
+                section: "header",
+                needed: HEADER_LEN as u64,
+                actual: file_len,
+            });
+        }
+        file.read_exact_at(&mut hb, 0).map_err(|e| StoreError::io(path, e))?;
+        if hb[..8] != MAGIC {
+            return Err(StoreError::NotAStore { path: path.to_owned() });
+        }
+        let (stored, computed) = Header::checksums(&hb);
+        let h = Header::decode(&hb);
+        if h.version != VERSION {
+            return Err(StoreError::UnsupportedVersion { path: path.to_owned(), version: h.version });
+        }
+        if stored != computed {
+            return Err(StoreError::HeaderChecksum { path: path.to_owned(), stored, computed });
+        }
+        if h.header_len != HEADER_LEN as u32 {
+            return Err(bad(path, "header_len", format!("{} (expected {HEADER_LEN})", h.header_len)));
+        }
+        let dtype = dtype_from_code(h.dtype).ok_or_else(|| bad(path, "dtype", format!("unknown code {}", h.dtype)))?;
+        let filter =
+            filter_from_code(h.filter).ok_or_else(|| bad(path, "filter", format!("unknown code {}", h.filter)))?;
+        if h.flags & !FLAG_THRESHOLD != 0 {
+            return Err(bad(path, "flags", format!("unknown bits {:#x}", h.flags)));
+        }
+        let desc = VolumeDesc { dims: h.dims, dtype, spacing: h.spacing, value_range: h.value_range };
+        if let Err(e) = brickray_core::volume::voxel_count(h.dims.map(u64::from)) {
+            return Err(bad(path, "dims", e.to_string()));
+        }
+        if h.spacing.iter().any(|s| !s.is_finite() || *s <= 0.0) {
+            return Err(bad(path, "spacing", format!("{:?}", h.spacing)));
+        }
+        if h.value_range.iter().any(|v| !v.is_finite()) {
+            return Err(bad(path, "value_range", format!("{:?}", h.value_range)));
+        }
+        if h.data_range.iter().any(|v| !v.is_finite()) || h.data_range[0] > h.data_range[1] {
+            return Err(bad(path, "data_range", format!("{:?}", h.data_range)));
+        }
+        if !h.empty_below.is_finite() {
+            return Err(bad(path, "empty_below", format!("{}", h.empty_below)));
+        }
+        if h.brick == 0 || h.brick > MAX_BRICK {
+            return Err(bad(path, "brick", format!("{} (must be in 1..={MAX_BRICK})", h.brick)));
+        }
+        if h.apron > MAX_APRON {
+            return Err(bad(path, "apron", format!("{} (must be in 0..={MAX_APRON})", h.apron)));
+        }
+        let layout = OctreeLayout::new(desc, h.brick, h.apron);
+        if layout.levels != h.levels {
+            return Err(bad(path, "levels", format!("{} (dims and brick imply {})", h.levels, layout.levels)));
+        }
+        if layout.brick_bytes() > MAX_BRICK_BYTES {
+            return Err(bad(path, "brick", format!("stored brick of {} bytes", layout.brick_bytes())));
+        }
+        let geo = TableGeometry::new(&layout).ok_or_else(|| bad(path, "dims", "node count overflows"))?;
+        if h.node_count != geo.count {
+            return Err(bad(path, "node_count", format!("{} (geometry implies {})", h.node_count, geo.count)));
+        }
+        let table_len = geo.count.checked_mul(ENTRY_LEN as u64).ok_or_else(|| bad(path, "node_count", "overflow"))?;
+        if h.table_len != table_len {
+            return Err(bad(path, "table_len", format!("{} (expected {table_len})", h.table_len)));
+        }
+        if h.table_offset < HEADER_LEN as u64 {
+            return Err(bad(path, "table_offset", format!("{} overlaps the header", h.table_offset)));
+        }
+        if h.payload_bytes != h.table_offset - HEADER_LEN as u64 {
+            return Err(bad(path, "payload_bytes", format!("{} (table offset implies {})", h.payload_bytes, h.table_offset - HEADER_LEN as u64)));
+        }
+        let end = h.table_offset.checked_add(table_len).ok_or_else(|| bad(path, "table_offset", "overflow"))?;
+        if end > file_len {
+            return Err(StoreError::Truncated { path: path.to_owned(), section: "node table", needed: end, actual: file_len });
+        }
+        if end < file_len {
+            return Err(bad(path, "table_offset", format!("table ends at {end} but the file holds {file_len} bytes")));
+        }
+        // Bounded by the file size checked above.
+        let mut table = vec![0u8; table_len as usize];
+        file.read_exact_at(&mut table, h.table_offset).map_err(|e| StoreError::io(path, e))?;
+        let crc = crc32fast::hash(&table);
+        if crc != h.table_crc {
+            return Err(StoreError::TableChecksum { path: path.to_owned(), stored: h.table_crc, computed: crc });
+        }
+        let max_len = max_compressed(layout.brick_bytes());
+        let mut entries = Vec::with_capacity(geo.count as usize);
+        for (i, b) in table.chunks_exact(ENTRY_LEN).enumerate() {
+            let key = geo.key(i as u64);
+            let (e, reserved) = Entry::decode(b);
+            let node = |field: &'static str, reason: String| StoreError::BadNode {
+                path: path.to_owned(),
+                key,
+                field,
+                reason,
+            };
+            if e.key() != key {
+                return Err(node("position", format!("entry names {:?}", e.key())));
+            }
+            if reserved != [0; 6] {
+                return Err(node("reserved", "non-zero".into()));
+            }
+            if !(e.min.is_finite() && e.max.is_finite() && e.min <= e.max) {
+                return Err(node("min/max", format!("[{}, {}]", e.min, e.max)));
+            }
+            if !representable(dtype, e.value) {
+                return Err(node("value", format!("{} is not a {} sample", e.value, dtype.name())));
+            }
+            match e.kind {
+                KIND_EMPTY | KIND_UNIFORM => {
+                    if e.len != 0 || e.offset != 0 || e.crc != 0 {
+                        return Err(node("payload", "payload fields set on a node without payload".into()));
+                    }
+                    if e.kind == KIND_UNIFORM && !(e.min <= e.value && e.value <= e.max) {
+                        return Err(node("value", format!("{} outside [{}, {}]", e.value, e.min, e.max)));
+                    }
+                }
+                KIND_DATA => {
+                    if e.len == 0 || e.len as u64 > max_len {
+                        return Err(node("len", format!("{} (must be in 1..={max_len})", e.len)));
+                    }
+                    let pend = e.offset.checked_add(e.len as u64);
+                    if e.offset < HEADER_LEN as u64 || pend.is_none_or(|p| p > h.table_offset) {
+                        return Err(node("offset", format!("{}+{} outside the payload section", e.offset, e.len)));
+                    }
+                }
+                k => return Err(node("kind", format!("unknown kind {k}"))),
+            }
+            entries.push(e);
+        }
+        Ok(Store {
+            path: path.to_owned(),
+            file,
+            layout,
+            geo,
+            entries,
+            filter,
+            empty_below: (h.flags & FLAG_THRESHOLD != 0).then_some(h.empty_below),
+            data_range: h.data_range,
+            file_len,
+            payload_bytes: h.payload_bytes,
+        })
+    }
+
+    /// The file's path.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// The octree geometry.
+    pub fn layout(&self) -> &OctreeLayout {
+        &self.layout
+    }
+
+    /// The volume's description.
+    pub fn desc(&self) -> &VolumeDesc {
+        &self.layout.volume
+    }
+
+    /// Number of levels.
+    pub fn levels(&self) -> u8 {
+        self.layout.levels
+    }
+
+    /// The filter the inner nodes were built with.
+    pub fn filter(&self) -> Filter {
+        self.filter
+    }
+
+    /// The empty threshold the store was built with.
+    pub fn empty_below(&self) -> Option<f32> {
+        self.empty_below
+    }
+
+    /// Smallest and largest voxel of the volume.
+    pub fn data_range(&self) -> [f32; 2] {
+        self.data_range
+    }
+
+    /// Size of the file in bytes.
+    pub fn file_len(&self) -> u64 {
+        self.file_len
+    }
+
+    /// Bytes of the payload section.
+    pub fn payload_bytes(&self) -> u64 {
+        self.payload_bytes
+    }
+
+    /// Bricks per axis at `level` (nodes outside this grid are wholly outside the volume).
+    pub fn grid(&self, level: u8) -> Option<[u32; 3]> {
+        self.geo.grid.get(level as usize).copied()
+    }
+
+    fn check_key(&self, key: NodeKey) -> Result<Option<&Entry>, StoreError> {
+        let n = 1u64 << key.level.min(63);
+        if key.level >= self.layout.levels || [key.x, key.y, key.z].iter().any(|&p| p as u64 >= n) {
+            return Err(StoreError::OutOfRange { key });
+        }
+        Ok(self.geo.index(key).and_then(|i| self.entries.get(i)))
+    }
+
+    fn info_of(&self, e: Option<&Entry>) -> NodeInfo {
+        match e {
+            None => NodeInfo { kind: NodeKind::Empty, min: self.data_range[0], max: self.data_range[0] },
+            Some(e) => NodeInfo {
+                kind: match e.kind {
+                    KIND_DATA => NodeKind::Data,
+                    KIND_UNIFORM => NodeKind::Uniform(e.value),
+                    _ => NodeKind::Empty,
+                },
+                min: e.min,
+                max: e.max,
+            },
+        }
+    }
+
+    /// Metadata of a node: `Empty` for nodes wholly outside the volume.
+    pub fn info(&self, key: NodeKey) -> Result<NodeInfo, StoreError> {
+        Ok(self.info_of(self.check_key(key)?))
+    }
+
+    /// The node's table record.
+    pub fn record(&self, key: NodeKey) -> Result<NodeRecord, StoreError> {
+        let e = self.check_key(key)?;
+        Ok(NodeRecord { key, info: self.info_of(e), payload_len: e.map_or(0, |e| e.len) })
+    }
+
+    /// The children of `key` that overlap the volume, with their metadata
+    /// (empty for leaves).
+    pub fn children(&self, key: NodeKey) -> Result<Vec<NodeRecord>, StoreError> {
+        self.check_key(key)?;
+        if key.level + 1 >= self.layout.levels {
+            return Ok(Vec::new());
+        }
+        key.children()
+            .into_iter()
+            .filter(|c| self.geo.index(*c).is_some())
+            .map(|c| self.record(c))
+            .collect()
+    }
+
+    /// Every node in the table (all nodes that overlap the volume), coarse to fine.
+    pub fn nodes(&self) -> impl Iterator<Item = NodeRecord> + '_ {
+        self.entries.iter().map(|e| NodeRecord { key: e.key(), info: self.info_of(Some(e)), payload_len: e.len })
+    }
+
+    /// Counts over the node table.
+    pub fn stats(&self) -> StoreStats {
+        let mut s = StoreStats { per_level: vec![[0; 4]; self.layout.levels as usize], ..Default::default() };
+        let bb = self.layout.brick_bytes() as u64;
+        for e in &self.entries {
+            let pl = &mut s.per_level[e.level as usize];
+            pl[0] += 1;
+            match e.kind {
+                KIND_DATA => {
+                    pl[1] += 1;
+                    s.data += 1;
+                    s.payload_bytes += e.len as u64;
+                    s.raw_payload_bytes += bb;
+                }
+                KIND_UNIFORM => {
+                    pl[2] += 1;
+                    s.uniform += 1;
+                }
+                _ => {
+                    pl[3] += 1;
+                    s.empty += 1;
+                }
+            }
+        }
+        s
+    }
+
+    /// The node's compressed payload (checksum verified), `None` for nodes without one.
+    pub fn read_compressed(&self, key: NodeKey) -> Result<Option<Vec<u8>>, StoreError> {
+        let Some(e) = self.check_key(key)? else { return Ok(None) };
+        if e.kind != KIND_DATA {
+            return Ok(None);
+        }
+        // `len` was bounded by the brick size and the file at open.
+        let mut buf = vec![0u8; e.len as usize];
+        self.file.read_exact_at(&mut buf, e.offset).map_err(|source| StoreError::NodeIo { key, source })?;
+        let crc = crc32fast::hash(&buf);
+        if crc != e.crc {
+            return Err(StoreError::PayloadChecksum { key, stored: e.crc, computed: crc });
+        }
+        Ok(Some(buf))
+    }
+
+    /// Reads the node's stored brick into `out` (`layout().brick_bytes()` bytes),
+    /// verifying its checksum.
+    pub fn read(&self, key: NodeKey, out: &mut [u8]) -> Result<(), StoreError> {
+        let expected = self.layout.brick_bytes();
+        if out.len() != expected {
+            return Err(StoreError::BufferSize { expected, actual: out.len() });
+        }
+        let e = self.check_key(key)?;
+        let dtype = self.layout.dtype();
+        match e {
+            None => fill(dtype, self.data_range[0], out),
+            Some(e) if e.kind == KIND_UNIFORM => fill(dtype, e.value, out),
+            Some(e) if e.kind == KIND_EMPTY => fill(dtype, self.data_range[0], out),
+            Some(_) => {
+                let payload = self.read_compressed(key)?.unwrap_or_default();
+                decode_payload(key, &payload, out)?;
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Decompresses one lz4 brick payload into `out`, which it must fill exactly.
+pub fn decode_payload(key: NodeKey, payload: &[u8], out: &mut [u8]) -> Result<(), StoreError> {
+    match lz4_flex::block::decompress_into(payload, out) {
+        Ok(n) if n == out.len() => Ok(()),
+        Ok(n) => Err(StoreError::Decode { key, reason: format!("decoded {n} bytes, expected {}", out.len()) }),
+        Err(e) => Err(StoreError::Decode { key, reason: e.to_string() }),
+    }
+}
+
+impl BrickSource for Store {
+    fn layout(&self) -> &OctreeLayout {
+        &self.layout
+    }
+
+    fn node(&self, key: NodeKey) -> Result<NodeInfo, BrickError> {
+        self.info(key).map_err(|e| e.into_brick_error(key))
+    }
+
+    fn read_brick(&self, key: NodeKey, out: &mut [u8]) -> Result<(), BrickError> {
+        self.read(key, out).map_err(|e| e.into_brick_error(key))
+    }
+}
