@@ -246,6 +246,20 @@ fn iso_on_ramp_hits_the_analytic_plane() {
         }
     }
 
+    // Oblique view: Blinn-Phong with |n . L| = cos(angle to the plane's normal).
+    let eye = Vec3::new(0.0, 0.6, -2.0);
+    let cam = ortho(eye, 0.05);
+    let img = render_reference(&vol, &frame, &tf, &cam, &iso(iso_v as f32), &ReferenceOptions::new(3, 3));
+    let cos = 2.0 / (eye.length() as f64);
+    let s = Shading::default();
+    for c in &img.color {
+        for k in 0..3 {
+            let e = ISO_COLOR[k] as f64 * (s.ambient as f64 + s.diffuse as f64 * cos)
+                + s.specular as f64 * cos.powf(s.shininess as f64);
+            assert!((c[k] as f64 - e).abs() < 1e-6, "{c:?}: channel {k} expected {e}");
+        }
+    }
+
     // From +z the first sample (v = 1 at the z = 0.5 face) is inside: capped at t0.
     let cam = ortho(Vec3::new(0.0, 0.0, 3.0), 0.2);
     let img = render_reference(
