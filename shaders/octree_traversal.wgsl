@@ -1,1 +1,296 @@
-// Octree traversal library (work in progress).
+// Octree-with-ropes traversal (Gobbetti et al. 2008, section 5.2 and Fig. 5)
+// over the index encoded by brickray-index (docs/index-format.md).
+//
+// Library file: it has no entry point and declares NO binding. The including
+// shader must declare the index buffer under this exact name, at a binding of
+// its choice, e.g.
+//
+//     @group(0) @binding(9) var<storage, read> index_words: array<u32>;
+//
+// All names are prefixed `oct_` / `Oct` / `OCT_`. The code mirrors
+// crates/index/src/traverse.rs (the CPU twin, which the tests check against a
+// brute-force oracle) function by function; change both together.
+//
+// Usage (coordinates are octree unit-cube coordinates, t_max finite):
+//
+//     var st = oct_begin(origin, dir, t_min, t_max, 4096u);
+//     while (oct_next_leaf(&st)) {
+//         // st.hit.leaf.{node, level, box_min, box_size}, st.hit.tag,
+//         // st.hit.data (brick-pool slot when tag == OCT_TAG_DATA),
+//         // st.hit.t_enter < st.hit.t_exit
+//         if (done) { break; }
+//     }
+//     // st.status: OCT_STATUS_FINISHED, _STEP_LIMIT or _CORRUPT (or _RUNNING
+//     // when the caller broke out early)
+
+const OCT_NULL: u32 = 0xffffffffu;
+const OCT_TAG_SHIFT: u32 = 30u;
+const OCT_PTR_MASK: u32 = 0x3fffffffu;
+const OCT_TAG_INNER: u32 = 0u;
+const OCT_TAG_EMPTY: u32 = 1u;
+const OCT_TAG_DATA: u32 = 2u;
+const OCT_LEAF_RECORD_WORDS: u32 = 7u;
+const OCT_ROPE_LEVEL_SHIFT: u32 = 27u;
+const OCT_ROPE_NODE_MASK: u32 = 0x07ffffffu;
+const OCT_MAX_LEVEL: u32 = 20u;
+const OCT_DIR_EPSILON: f32 = 1e-30;
+const OCT_T_BIG: f32 = 3.0e38;
+
+const OCT_STATUS_RUNNING: u32 = 0u;
+const OCT_STATUS_FINISHED: u32 = 1u;
+const OCT_STATUS_STEP_LIMIT: u32 = 2u;
+const OCT_STATUS_CORRUPT: u32 = 3u;
+
+// A node and its cube (Rust: NodeBox).
+struct OctBox {
+    node: u32,
+    level: u32,
+    box_min: vec3<f32>,
+    box_size: f32,
+}
+
+// One reported leaf (Rust: LeafHit). tag is OCT_TAG_EMPTY or OCT_TAG_DATA;
+// data is the brick-pool slot of a data leaf, OCT_NULL for an empty one.
+struct OctLeaf {
+    leaf: OctBox,
+    tag: u32,
+    data: u32,
+    t_enter: f32,
+    t_exit: f32,
+}
+
+// Traversal state (Rust: Traversal). cur.node == OCT_NULL when done.
+struct OctState {
+    origin: vec3<f32>,
+    dir: vec3<f32>,
+    inv_dir: vec3<f32>,
+    t: f32,
+    t_end: f32,
+    cur: OctBox,
+    steps: u32,
+    max_steps: u32,
+    status: u32,
+    hit: OctLeaf,
+}
+
+struct OctLocated {
+    leaf: OctBox,
+    word: u32,
+    ok: bool,
+}
+
+struct OctExit {
+    t: f32,
+    face: u32,
+}
+
+struct OctRope {
+    next: OctBox,
+    ok: bool,
+}
+
+// 2^-level and 2^level, exact (built from the float bits).
+fn oct_exp2_neg(level: u32) -> f32 {
+    return bitcast<f32>((127u - level) << 23u);
+}
+
+fn oct_exp2_pos(level: u32) -> f32 {
+    return bitcast<f32>((127u + level) << 23u);
+}
+
+fn oct_in_bounds(i: u32) -> bool {
+    return i < arrayLength(&index_words);
+}
+
+// Rust: clip_unit_cube. Returns (t0, t1); the ray misses when !(t0 < t1).
+fn oct_clip_unit_cube(origin: vec3<f32>, dir: vec3<f32>, inv_dir: vec3<f32>, t_min: f32, t_max: f32) -> vec2<f32> {
+    var t0 = t_min;
+    var t1 = t_max;
+    if (all(dir == vec3<f32>(0.0))) {
+        return vec2<f32>(1.0, 0.0);
+    }
+    for (var a = 0u; a < 3u; a = a + 1u) {
+        let o = origin[a];
+        if (dir[a] == 0.0) {
+            if (o < 0.0 || o >= 1.0) {
+                return vec2<f32>(1.0, 0.0);
+            }
+        } else {
+            let ta = (0.0 - o) * inv_dir[a];
+            let tb = (1.0 - o) * inv_dir[a];
+            t0 = max(t0, min(ta, tb));
+            t1 = min(t1, max(ta, tb));
+        }
+    }
+    return vec2<f32>(t0, t1);
+}
+
+// Rust: ray_setup + traverse. Flushes |d| < 1e-30 to 0, clips to the cube.
+fn oct_begin(origin: vec3<f32>, dir_in: vec3<f32>, t_min: f32, t_max: f32, max_steps: u32) -> OctState {
+    var st: OctState;
+    let d = select(dir_in, vec3<f32>(0.0), abs(dir_in) < vec3<f32>(OCT_DIR_EPSILON));
+    let nz = d != vec3<f32>(0.0);
+    st.origin = origin;
+    st.dir = d;
+    st.inv_dir = select(vec3<f32>(0.0), vec3<f32>(1.0) / select(vec3<f32>(1.0), d, nz), nz);
+    let tc = oct_clip_unit_cube(origin, d, st.inv_dir, t_min, t_max);
+    st.t = tc.x;
+    st.t_end = tc.y;
+    st.cur = OctBox(0u, 0u, vec3<f32>(0.0), 1.0);
+    if (!(tc.x < tc.y)) {
+        st.cur.node = OCT_NULL;
+    }
+    st.steps = 0u;
+    st.max_steps = max_steps;
+    st.status = OCT_STATUS_RUNNING;
+    return st;
+}
+
+// Rust: locate_leaf. Down traversal from `start` to the leaf containing p by box
+// subdivision; a tie (p == mid) goes to the side dir moves into (upper if 0).
+fn oct_locate_leaf(start: OctBox, p: vec3<f32>, dir: vec3<f32>) -> OctLocated {
+    var r: OctLocated;
+    var c = start;
+    r.ok = false;
+    r.word = OCT_NULL;
+    if (!oct_in_bounds(c.node)) {
+        r.leaf = c;
+        return r;
+    }
+    var word = index_words[c.node];
+    for (var i = 0u; i <= OCT_MAX_LEVEL; i = i + 1u) {
+        if ((word >> OCT_TAG_SHIFT) != OCT_TAG_INNER) {
+            let tag = word >> OCT_TAG_SHIFT;
+            r.leaf = c;
+            r.word = word;
+            r.ok = tag == OCT_TAG_EMPTY || tag == OCT_TAG_DATA;
+            return r;
+        }
+        if (c.level >= OCT_MAX_LEVEL) {
+            break;
+        }
+        c.box_size = c.box_size * 0.5;
+        let mid = c.box_min + vec3<f32>(c.box_size);
+        let s = (p > mid) | ((p == mid) & (dir >= vec3<f32>(0.0)));
+        c.box_min = c.box_min + select(vec3<f32>(0.0), vec3<f32>(c.box_size), s);
+        let si = select(vec3<u32>(0u), vec3<u32>(1u), s);
+        c.node = (word & OCT_PTR_MASK) + si.x + 2u * si.y + 4u * si.z;
+        c.level = c.level + 1u;
+        if (!oct_in_bounds(c.node)) {
+            break;
+        }
+        word = index_words[c.node];
+    }
+    r.leaf = c;
+    return r;
+}
+
+// Rust: exit_face. Smallest exit t over the far planes; ties to the lowest axis.
+// face = 2 * axis + (dir[axis] > 0): 0 -x, 1 +x, 2 -y, 3 +y, 4 -z, 5 +z.
+fn oct_exit_face(c: OctBox, origin: vec3<f32>, dir: vec3<f32>, inv_dir: vec3<f32>) -> OctExit {
+    let pos = dir > vec3<f32>(0.0);
+    let far = c.box_min + select(vec3<f32>(0.0), vec3<f32>(c.box_size), pos);
+    let tf = select(vec3<f32>(OCT_T_BIG), (far - origin) * inv_dir, dir != vec3<f32>(0.0));
+    var e: OctExit;
+    e.t = tf.x;
+    e.face = select(0u, 1u, pos.x);
+    if (tf.y < e.t) {
+        e.t = tf.y;
+        e.face = select(2u, 3u, pos.y);
+    }
+    if (tf.z < e.t) {
+        e.t = tf.z;
+        e.face = select(4u, 5u, pos.z);
+    }
+    return e;
+}
+
+// Rust: follow_rope. The neighbour's box from the current box and the rope's
+// level: shift by one box along the face, then snap to the coarser grid.
+// next.node == OCT_NULL for a NULL rope (the cube boundary).
+fn oct_follow_rope(rope: u32, c: OctBox, face: u32) -> OctRope {
+    var r: OctRope;
+    r.next = c;
+    r.ok = true;
+    if (rope == OCT_NULL) {
+        r.next.node = OCT_NULL;
+        return r;
+    }
+    let level = rope >> OCT_ROPE_LEVEL_SHIFT;
+    if (level > c.level || face > 5u) {
+        r.ok = false;
+        return r;
+    }
+    let axis = face / 2u;
+    var m = c.box_min;
+    m[axis] = m[axis] + select(-c.box_size, c.box_size, (face & 1u) == 1u);
+    var size = c.box_size;
+    if (level < c.level) {
+        size = oct_exp2_neg(level);
+        m = floor(m * oct_exp2_pos(level)) * size;
+    }
+    r.next = OctBox(rope & OCT_ROPE_NODE_MASK, level, m, size);
+    return r;
+}
+
+// Rust: Traversal::next. Advances to the next leaf with t_exit > t_enter and
+// stores it in st.hit; false when the traversal ended (see st.status).
+// Zero-length visits (edges, corners, rounding) count as steps, are not reported.
+fn oct_next_leaf(st: ptr<function, OctState>) -> bool {
+    loop {
+        if ((*st).status != OCT_STATUS_RUNNING) {
+            return false;
+        }
+        if ((*st).cur.node == OCT_NULL) {
+            (*st).status = OCT_STATUS_FINISHED;
+            return false;
+        }
+        if ((*st).steps >= (*st).max_steps) {
+            (*st).status = OCT_STATUS_STEP_LIMIT;
+            return false;
+        }
+        (*st).steps = (*st).steps + 1u;
+        let p = (*st).origin + (*st).dir * (*st).t;
+        let loc = oct_locate_leaf((*st).cur, p, (*st).dir);
+        if (!loc.ok) {
+            (*st).status = OCT_STATUS_CORRUPT;
+            return false;
+        }
+        let ex = oct_exit_face(loc.leaf, (*st).origin, (*st).dir, (*st).inv_dir);
+        var t_exit = ex.t;
+        let record = loc.word & OCT_PTR_MASK;
+        var rope = OCT_NULL;
+        if (t_exit < (*st).t_end) {
+            if (!oct_in_bounds(record + 1u + ex.face)) {
+                (*st).status = OCT_STATUS_CORRUPT;
+                return false;
+            }
+            rope = index_words[record + 1u + ex.face];
+        } else {
+            t_exit = (*st).t_end;
+        }
+        let t_enter = (*st).t;
+        t_exit = max(t_exit, t_enter);
+        let tag = loc.word >> OCT_TAG_SHIFT;
+        var data = OCT_NULL;
+        if (tag == OCT_TAG_DATA) {
+            if (!oct_in_bounds(record)) {
+                (*st).status = OCT_STATUS_CORRUPT;
+                return false;
+            }
+            data = index_words[record];
+        }
+        let fr = oct_follow_rope(rope, loc.leaf, ex.face);
+        if (!fr.ok) {
+            (*st).status = OCT_STATUS_CORRUPT;
+            return false;
+        }
+        (*st).cur = fr.next;
+        (*st).t = t_exit;
+        if (t_exit > t_enter) {
+            (*st).hit = OctLeaf(loc.leaf, tag, data, t_enter, t_exit);
+            return true;
+        }
+    }
+    return false;
+}

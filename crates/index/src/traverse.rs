@@ -134,10 +134,13 @@ pub fn clip_unit_cube(origin: Vec3, dir: Vec3, inv_dir: Vec3, t_min: f32, t_max:
 pub fn locate_leaf(words: &[u32], start: NodeBox, p: Vec3, dir: Vec3) -> Result<(NodeBox, u32), CorruptIndex> {
     let mut c = start;
     let mut word = read(words, c.node)?;
-    // At most MAX_LEVEL descents: the loop bound is the level check.
-    while node_tag(word) == TAG_INNER {
+    for _ in 0..=MAX_LEVEL {
+        if node_tag(word) != TAG_INNER {
+            let tag = node_tag(word);
+            return if tag == TAG_EMPTY || tag == TAG_DATA { Ok((c, word)) } else { Err(CorruptIndex) };
+        }
         if c.level >= MAX_LEVEL as u32 {
-            return Err(CorruptIndex);
+            break;
         }
         c.box_size *= 0.5;
         let mid = c.box_min + Vec3::splat(c.box_size);
@@ -148,10 +151,7 @@ pub fn locate_leaf(words: &[u32], start: NodeBox, p: Vec3, dir: Vec3) -> Result<
         c.level += 1;
         word = read(words, c.node)?;
     }
-    if node_tag(word) != TAG_EMPTY && node_tag(word) != TAG_DATA {
-        return Err(CorruptIndex);
-    }
-    Ok((c, word))
+    Err(CorruptIndex)
 }
 
 /// Exit of the ray from box `c`: `(t_exit, face)`, face `2 * axis + (dir > 0)`.
