@@ -21,6 +21,9 @@ mod pool;
 pub mod refine;
 mod upload;
 
+#[cfg(test)]
+mod test_source;
+
 pub use cpu_cache::{BrickBytes, CpuCache};
 pub use loader::{LoadError, Loader, LoaderConfig, PollReport, RequestOutcome};
 pub use manager::{

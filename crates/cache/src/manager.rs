@@ -432,3 +432,219 @@ impl BrickManager {
         &self.loader
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::refine::tests::assert_exact_cover;
+    use crate::test_source::{TestSource, fill_byte};
+    use brickray_core::BrickError;
+    use glam::Vec3;
+    use std::collections::HashSet;
+    use std::sync::atomic::Ordering;
+    use std::time::{Duration, Instant};
+
+    fn manager(src: &Arc<TestSource>, config: ManagerConfig) -> BrickManager {
+        let dims = src.layout.volume.dims;
+        BrickManager::new(src.clone(), VolumeFrame::centered(dims, [1.0; 3]), config).unwrap()
+    }
+
+    fn config() -> ManagerConfig {
+        ManagerConfig { cpu_budget_bytes: 4 << 20, gpu_budget_bytes: 1 << 20, ..ManagerConfig::default() }
+    }
+
+    /// Checks a plan's invariants against the manager's pool.
+    fn check_plan(m: &BrickManager, plan: &FramePlan) {
+        let keys: Vec<NodeKey> = plan.cut.iter().map(|l| l.key).collect();
+        assert_exact_cover(&keys, m.layout().levels);
+        let mut slots = HashSet::new();
+        for l in &plan.cut {
+            if let LeafKind::Data { slot } = l.kind {
+                assert!(slots.insert(slot), "slot {slot} used twice");
+                assert_eq!(m.pool().key_of(slot), Some(l.key));
+                assert!(m.pool().is_pinned(slot, plan.stats.frame));
+            }
+        }
+        assert_eq!(slots.len() as u32, plan.stats.working_set_bricks);
+        for u in &plan.uploads {
+            assert!(slots.contains(&u.slot));
+            assert_eq!(m.pool().key_of(u.slot), Some(u.key));
+            assert_eq!(u.atlas_offset, m.pool().slot_offset(u.slot));
+            assert!(u.data.iter().all(|&b| b == fill_byte(u.key)));
+        }
+    }
+
+    /// Updates until a frame neither requests nor uploads anything and no load is
+    /// in flight; returns the last plan and the frame count.
+    fn converge(
+        m: &mut BrickManager,
+        frame: &mut u64,
+        cam: &Camera,
+        mode: RenderMode,
+        tf: &TransferFunction,
+        mut each: impl FnMut(&BrickManager, &FramePlan),
+    ) -> FramePlan {
+        let t = Instant::now();
+        loop {
+            *frame += 1;
+            let plan = m.update(cam, 1.0, 128, *frame, mode, tf);
+            check_plan(m, &plan);
+            each(m, &plan);
+            if plan.uploads.is_empty() && plan.stats.requested_this_frame == 0 && plan.stats.requests_in_flight == 0
+            {
+                return plan;
+            }
+            assert!(t.elapsed() < Duration::from_secs(10), "no convergence: {:?}", plan.stats);
+            std::thread::sleep(Duration::from_millis(1));
+        }
+    }
+
+    #[test]
+    fn converges_to_a_complete_resident_cut() {
+        let src = Arc::new(TestSource::new(64));
+        let mut m = manager(&src, config());
+        let cam = Camera::orbit(Vec3::ZERO, 1.6, 0.4, 0.3);
+        let tf = TransferFunction::ramp(0.1, 1.0, 0.5);
+        let mut frame = 0;
+        let first = m.update(&cam, 1.0, 128, 1, RenderMode::Dvr, &tf);
+        frame += 1;
+        // Nothing loaded yet: the root is wanted and the cut is still complete.
+        assert_eq!(first.cut.len(), 1);
+        assert_eq!(first.cut[0].kind, LeafKind::Empty(EmptyReason::NotLoaded));
+        assert!(first.uploads.is_empty());
+        let plan = converge(&mut m, &mut frame, &cam, RenderMode::Dvr, &tf, |_, _| {});
+        assert!(plan.stats.working_set_bricks > 8);
+        assert!(plan.cut.iter().any(|l| l.key.level >= 2));
+        assert_eq!(plan.stats.gpu_hit_rate, 1.0);
+        let r = plan.stats.residency;
+        assert_eq!(r.on_gpu, m.pool().occupied());
+        assert_eq!(r.requested + r.loading + r.failed, 0);
+        for l in &plan.cut {
+            if matches!(l.kind, LeafKind::Data { .. }) {
+                assert_eq!(m.residency(l.key), Some(Residency::OnGpu));
+            }
+        }
+        // Root and children loaded together: the root was split before it was ever
+        // needed on the GPU.
+        assert_eq!(m.residency(NodeKey::ROOT), Some(Residency::InCpu));
+        // A static view keeps the same cut and uploads nothing.
+        frame += 1;
+        let again = m.update(&cam, 1.0, 128, frame, RenderMode::Dvr, &tf);
+        assert_eq!(again.cut, plan.cut);
+        assert!(again.uploads.is_empty());
+    }
+
+    #[test]
+    fn tf_and_isovalue_changes_reclassify_without_reads() {
+        let src = Arc::new(TestSource::new(64));
+        let mut m = manager(&src, config());
+        let cam = Camera::orbit(Vec3::ZERO, 1.6, 0.4, 0.3);
+        let mut frame = 0;
+        let wide = TransferFunction::ramp(0.0, 0.3, 0.5);
+        let a = converge(&mut m, &mut frame, &cam, RenderMode::Dvr, &wide, |_, _| {});
+        let reads = src.reads().len();
+        let metas = src.meta_reads.load(Ordering::Relaxed);
+        // A TF that hides the outer shell only coarsens or hides nodes already known.
+        let narrow = TransferFunction::ramp(0.8, 1.0, 0.5);
+        frame += 1;
+        let b = m.update(&cam, 1.0, 128, frame, RenderMode::Dvr, &narrow);
+        check_plan(&m, &b);
+        let invisible = |p: &FramePlan| p.cut.iter().filter(|l| l.kind == LeafKind::Empty(EmptyReason::Invisible)).count();
+        assert!(invisible(&b) > invisible(&a));
+        assert!(b.stats.working_set_bricks < a.stats.working_set_bricks);
+        assert!(b.uploads.is_empty());
+        assert_eq!(b.stats.requested_this_frame, 0);
+        assert_eq!(src.reads().len(), reads);
+        assert_eq!(src.meta_reads.load(Ordering::Relaxed), metas, "metadata is cached");
+        // Isovalue changes likewise.
+        frame += 1;
+        let iso = m.update(&cam, 1.0, 128, frame, RenderMode::Iso { value: 0.95, color: [1.0; 3] }, &wide);
+        check_plan(&m, &iso);
+        assert!(invisible(&iso) > 0);
+        assert_eq!(src.reads().len(), reads);
+        // Back to the first TF: the same cut, all still resident.
+        frame += 1;
+        let back = m.update(&cam, 1.0, 128, frame, RenderMode::Dvr, &wide);
+        assert_eq!(back.cut, a.cut);
+        assert!(back.uploads.is_empty());
+    }
+
+    #[test]
+    fn failed_loads_are_reported_and_the_cut_stays_complete() {
+        let mut src = TestSource::new(64);
+        let bad = NodeKey::new(1, 1, 1, 1);
+        src.failing.insert(bad);
+        let src = Arc::new(src);
+        let mut m = manager(&src, config());
+        let cam = Camera::orbit(Vec3::ZERO, 1.6, 0.4, 0.3);
+        let tf = TransferFunction::ramp(0.1, 1.0, 0.5);
+        let mut frame = 0;
+        let plan = converge(&mut m, &mut frame, &cam, RenderMode::Mip, &tf, |_, _| {});
+        assert_eq!(m.residency(bad), Some(Residency::Failed));
+        assert!(matches!(m.failure(bad).as_deref(), Some(LoadError::Source(BrickError::Io { .. }))));
+        assert_eq!(plan.stats.residency.failed, 1);
+        assert!(plan.stats.blocked.failed > 0);
+        // The root cannot split without its child: it stays the only leaf.
+        assert_eq!(plan.cut.len(), 1);
+        assert!(matches!(plan.cut[0].kind, LeafKind::Data { .. }));
+    }
+
+    #[test]
+    fn tiny_pool_gives_a_coarser_complete_cut() {
+        let src = Arc::new(TestSource::new(64));
+        let brick = src.layout.brick_bytes() as u64;
+        let mut m = manager(&src, ManagerConfig { gpu_budget_bytes: 9 * brick, ..config() });
+        assert_eq!(m.pool().slot_count(), 9);
+        let cam = Camera::orbit(Vec3::ZERO, 1.6, 0.4, 0.3);
+        let tf = TransferFunction::ramp(0.1, 1.0, 0.5);
+        let mut frame = 0;
+        let plan = converge(&mut m, &mut frame, &cam, RenderMode::Mip, &tf, |_, p| {
+            assert!(p.stats.working_set_bricks <= 9);
+        });
+        assert!(plan.stats.working_set_bricks >= 1);
+        assert!(plan.stats.blocked.pool_full > 0);
+        assert!(plan.stats.pool_occupied <= 9);
+    }
+
+    #[test]
+    fn upload_budget_makes_progress_every_frame() {
+        let src = Arc::new(TestSource::new(64));
+        let brick = src.layout.brick_bytes() as u64;
+        let mut m = manager(&src, ManagerConfig { upload_budget_bytes: brick, ..config() });
+        let cam = Camera::orbit(Vec3::ZERO, 1.6, 0.4, 0.3);
+        let tf = TransferFunction::ramp(0.1, 1.0, 0.5);
+        let mut frame = 0;
+        let mut uploaded = 0;
+        let plan = converge(&mut m, &mut frame, &cam, RenderMode::Mip, &tf, |_, p| {
+            // One brick fits the budget; a split (up to 8 bricks) may exceed it once.
+            assert!(p.uploads.len() <= 8);
+            assert!(p.stats.upload_bytes <= 8 * brick);
+            uploaded += p.uploads.len();
+        });
+        assert!(uploaded as u32 >= plan.stats.working_set_bricks);
+        assert!(plan.stats.working_set_bricks > 8);
+    }
+
+    #[test]
+    fn moving_camera_with_small_pool_never_reuses_a_slot_within_a_frame() {
+        let mut src = TestSource::new(64);
+        src.delay = Duration::from_millis(1);
+        let src = Arc::new(src);
+        let brick = src.layout.brick_bytes() as u64;
+        let mut m = manager(
+            &src,
+            ManagerConfig { gpu_budget_bytes: 40 * brick, cpu_budget_bytes: 60 * brick as usize, ..config() },
+        );
+        let tf = TransferFunction::ramp(0.1, 1.0, 0.5);
+        for frame in 1..=150u64 {
+            let yaw = frame as f32 * 0.07;
+            let cam = Camera::orbit(Vec3::new(0.2 * yaw.sin(), 0.0, 0.0), 0.9 + 0.5 * (yaw * 0.5).cos(), yaw, 0.3);
+            let plan = m.update(&cam, 1.3, 128, frame, RenderMode::Dvr, &tf);
+            check_plan(&m, &plan);
+            assert!(plan.stats.pool_occupied <= 40);
+            assert!(m.cpu_cache().bytes() <= 60 * brick as usize);
+            std::thread::sleep(Duration::from_millis(1));
+        }
+        assert!(m.pool().evictions() > 0);
+    }
+}

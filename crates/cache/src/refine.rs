@@ -309,12 +309,10 @@ pub fn refine(
         out.blocked.pool_full += 1;
         return out;
     }
-    // The root itself needs its brick before anything else.
-    let mut root_reserved = false;
-    match env.data(NodeKey::ROOT) {
-        DataState::InCpu => root_reserved = budget.try_reserve(brick_bytes),
-        DataState::Missing => out.requests.push((NodeKey::ROOT, f32::MAX)),
-        DataState::OnGpu | DataState::Failed => {}
+    // The root's brick is wanted first (it is charged to the upload budget only if
+    // it ends up a leaf).
+    if env.data(NodeKey::ROOT) == DataState::Missing {
+        out.requests.push((NodeKey::ROOT, f32::MAX));
     }
 
     // Leaves still needing data decisions: (key, priority, on_gpu_or_reserved).
@@ -388,8 +386,9 @@ pub fn refine(
         let state = env.data(key);
         let available = match state {
             DataState::OnGpu => true,
-            // Split children were charged when split; the root up front.
-            DataState::InCpu => key != NodeKey::ROOT || root_reserved,
+            // Split children were charged when split; the root, if a leaf, is the
+            // only leaf, so nothing else was charged and the reservation succeeds.
+            DataState::InCpu => key != NodeKey::ROOT || budget.try_reserve(brick_bytes),
             DataState::Missing | DataState::Failed => false,
         };
         if available {
@@ -607,9 +606,15 @@ pub(crate) mod tests {
         let cam = Camera::orbit(Vec3::ZERO, 1.5, 0.3, 0.2);
         let r = run(&s, &cam, RenderMode::Mip, &s.tf, 10_000, 0);
         assert_exact_cover(&keys(&r), s.layout.levels);
-        // Only the root's upload fits: nothing split.
-        assert_eq!(r.leaves.len(), 1);
+        // Only the first split is let through (progress), whatever its size.
+        assert_eq!(r.leaves.len(), 8);
+        assert!(r.leaves.iter().all(|l| l.key.level == 1 && l.needs_upload));
         assert!(r.blocked.upload_budget > 0);
+        // With room for two splits' worth, exactly one more split happens.
+        let brick = s.layout.brick_bytes() as u64;
+        let r = run(&s, &cam, RenderMode::Mip, &s.tf, 10_000, 16 * brick);
+        assert_exact_cover(&keys(&r), s.layout.levels);
+        assert_eq!(r.leaves.len(), 15);
     }
 
     #[test]
