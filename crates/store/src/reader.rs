@@ -102,6 +102,9 @@ impl Store {
         if stored != computed {
             return Err(StoreError::HeaderChecksum { path: path.to_owned(), stored, computed });
         }
+        if hb[108..124].iter().any(|&b| b != 0) {
+            return Err(bad(path, "reserved", "non-zero"));
+        }
         if h.header_len != HEADER_LEN as u32 {
             return Err(bad(path, "header_len", format!("{} (expected {HEADER_LEN})", h.header_len)));
         }

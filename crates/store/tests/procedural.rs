@@ -1,0 +1,119 @@
+//! The procedural source: exact filtering, conservative bounds, huge volumes.
+#![allow(missing_docs)]
+
+mod common;
+
+use brickray_core::{BrickSource, DType, NodeKey, NodeKind, VolumeReader};
+use brickray_store::{BuildOptions, Filter, ProceduralSource, build, open};
+use common::*;
+
+/// The finest level of a small procedural volume as f32 values.
+fn finest(src: &ProceduralSource) -> Vec<f32> {
+    let lay = src.layout();
+    let d = lay.level_dims(lay.levels - 1).map(|d| d as u64 - 1);
+    src.region(lay.levels - 1, [0; 3], d).into_iter().map(f32::from).collect()
+}
+
+#[test]
+fn inner_nodes_equal_the_filter_of_their_children() {
+    for (dims, brick, apron) in [([45u64, 30, 19], 4u32, 2u32), ([64, 64, 64], 8, 2), ([33, 1, 7], 2, 1), ([1, 1, 1], 32, 2)] {
+        let src = ProceduralSource::fractal_noise(dims, brick, apron).unwrap();
+        let lay = src.layout().clone();
+        let levels = reference_levels(&lay, finest(&src), Filter::Average);
+        // Every level computed top-down equals the filtered finest level.
+        for l in 0..lay.levels {
+            let d = lay.level_dims(l).map(|d| d as u64 - 1);
+            let got: Vec<f32> = src.region(l, [0; 3], d).into_iter().map(f32::from).collect();
+            assert_eq!(got, levels[l as usize], "{dims:?} level {l}");
+        }
+        // Bricks, aprons and conservative min/max.
+        check_source(&src, &levels, None);
+    }
+}
+
+#[test]
+fn store_built_from_the_finest_level_matches() {
+    let src = ProceduralSource::fractal_noise([50, 37, 29], 8, 2).unwrap();
+    let lay = src.layout().clone();
+    let bytes: Vec<u8> = finest(&src).into_iter().map(|v| v as u8).collect();
+    let dims = lay.volume.dims;
+    let mut r = MemReader::new(dims, DType::U8, bytes);
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("p.brick");
+    build(&mut r, &out, &BuildOptions { brick: 8, apron: 2, ..BuildOptions::default() }).unwrap();
+    let store = open(&out).unwrap();
+    assert_eq!(store.layout().levels, lay.levels);
+    let (mut a, mut b) = (vec![0u8; lay.brick_bytes()], vec![0u8; lay.brick_bytes()]);
+    for rec in store.nodes() {
+        store.read_brick(rec.key, &mut a).unwrap();
+        src.read_brick(rec.key, &mut b).unwrap();
+        assert_eq!(a, b, "{:?}", rec.key);
+        let p = src.node(rec.key).unwrap();
+        assert!(p.min <= rec.info.min && p.max >= rec.info.max, "{:?}", rec.key);
+    }
+    let _ = r.desc();
+}
+
+#[test]
+fn huge_virtual_volume_65536_cubed() {
+    let src = ProceduralSource::fractal_noise([65536; 3], 32, 2).unwrap();
+    let lay = src.layout().clone();
+    assert_eq!(lay.levels, 12);
+    let mut buf = vec![0u8; lay.brick_bytes()];
+    let mut h = 0x2545_F491_4F6C_DD1Du64;
+    let mut rnd = |n: u64| {
+        h ^= h << 13;
+        h ^= h >> 7;
+        h ^= h << 17;
+        h % n
+    };
+    let t = std::time::Instant::now();
+    for l in 0..lay.levels {
+        for _ in 0..4 {
+            let n = 1u64 << l;
+            let key = NodeKey::new(l, rnd(n) as u32, rnd(n) as u32, rnd(n) as u32);
+            let info = src.node(key).unwrap();
+            assert_eq!(info.kind, NodeKind::Data);
+            src.read_brick(key, &mut buf).unwrap();
+            assert!(buf.iter().all(|&v| (v as f32) >= info.min && (v as f32) <= info.max), "{key:?}");
+        }
+        // Exact filtering at random voxels of this level.
+        if l + 1 < lay.levels {
+            let d = lay.level_dims(l).map(u64::from);
+            let fd = lay.level_dims(l + 1).map(u64::from);
+            for _ in 0..20 {
+                let p = [rnd(d[0]), rnd(d[1]), rnd(d[2])];
+                let lo = p.map(|c| 2 * c);
+                let hi = [0, 1, 2].map(|a| (2 * p[a] + 1).min(fd[a] - 1));
+                let kids = src.region(l + 1, lo, hi);
+                let mut v = [0f32; 8];
+                let mut c = 0;
+                for dz in 0..2 {
+                    for dy in 0..2 {
+                        for dx in 0..2 {
+                            let q = [dx, dy, dz].map(|o: u64| o);
+                            let i = [0, 1, 2].map(|a| (lo[a] + q[a]).min(hi[a]) - lo[a]);
+                            let n = [0, 1, 2].map(|a| hi[a] - lo[a] + 1);
+                            v[c] = kids[(i[0] + n[0] * (i[1] + n[1] * i[2])) as usize] as f32;
+                            c += 1;
+                        }
+                    }
+                }
+                assert_eq!(src.voxel(l, p) as f32, filter_ref(DType::U8, Filter::Average, v), "level {l} voxel {p:?}");
+            }
+        }
+    }
+    assert!(t.elapsed().as_secs_f64() < 20.0);
+    // Outside the octree.
+    assert!(src.node(NodeKey::new(12, 0, 0, 0)).is_err());
+}
+
+#[test]
+fn non_cubic_virtual_volume_has_empty_outside_nodes() {
+    let src = ProceduralSource::fractal_noise([4096, 1000, 3], 16, 2).unwrap();
+    let lay = src.layout();
+    assert_eq!(src.node(NodeKey::new(1, 0, 1, 0)).unwrap().kind, NodeKind::Empty);
+    assert_eq!(src.node(NodeKey::new(1, 1, 0, 0)).unwrap().kind, NodeKind::Data);
+    assert!(ProceduralSource::fractal_noise([0, 1, 1], 16, 2).is_err());
+    let _ = lay;
+}
