@@ -481,17 +481,22 @@ mod tests {
     #[test]
     fn drop_with_loads_in_flight_ends_cleanly() {
         let mut src = TestSource::new(128);
-        src.delay = Duration::from_millis(5);
+        src.delay = Duration::from_millis(10);
         let src = Arc::new(src);
         let loader = Loader::new(src.clone(), LoaderConfig { workers: 3 }).unwrap();
-        let wanted: Vec<(NodeKey, f32)> = (0..64).map(|x| (NodeKey::new(4, x % 16, x / 16, 0), x as f32)).collect();
+        let wanted: Vec<(NodeKey, f32)> =
+            (0..256).map(|x| (NodeKey::new(4, x % 16, x / 16, 0), x as f32)).collect();
         loader.submit(&wanted);
-        std::thread::sleep(Duration::from_millis(8));
+        let t = Instant::now();
+        while loader.loading() == 0 {
+            assert!(t.elapsed() < Duration::from_secs(5));
+            std::thread::yield_now();
+        }
         let t = Instant::now();
         drop(loader);
-        // Only reads already started finish: a few delays, not 64.
+        // Only reads already started finish: a few delays, not 256 / 3 of them.
         assert!(t.elapsed() < Duration::from_secs(2));
-        assert!(src.reads().len() < 64);
+        assert!(src.reads().len() < 256);
         // The source is no longer shared with any thread.
         assert_eq!(Arc::strong_count(&src), 1);
     }
