@@ -261,3 +261,97 @@ pub fn test_output_dir() -> PathBuf {
     let _ = std::fs::create_dir_all(&dir);
     dir
 }
+
+/// Draws opaque screen rectangles at a constant depth: a stand-in for a host
+/// application's geometry in tests and demos (`shaders/host_quad.wgsl`).
+#[derive(Debug)]
+pub struct HostQuad {
+    pipeline: wgpu::RenderPipeline,
+    layout: wgpu::BindGroupLayout,
+}
+
+impl HostQuad {
+    /// Creates the pipeline for [`Offscreen`]'s formats.
+    pub fn new(device: &wgpu::Device) -> HostQuad {
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("brickray-harness host_quad.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(include_str!("../../../shaders/host_quad.wgsl").into()),
+        });
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("brickray-harness quad"),
+            entries: &[wgpu::BindGroupLayoutEntry {
+                binding: 0,
+                visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
+                ty: wgpu::BindingType::Buffer {
+                    ty: wgpu::BufferBindingType::Uniform,
+                    has_dynamic_offset: false,
+                    min_binding_size: None,
+                },
+                count: None,
+            }],
+        });
+        let pl = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("brickray-harness quad"),
+            bind_group_layouts: &[Some(&layout)],
+            immediate_size: 0,
+        });
+        let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some("brickray-harness quad"),
+            layout: Some(&pl),
+            vertex: wgpu::VertexState {
+                module: &module,
+                entry_point: Some("vs_main"),
+                compilation_options: Default::default(),
+                buffers: &[],
+            },
+            primitive: wgpu::PrimitiveState { topology: wgpu::PrimitiveTopology::TriangleStrip, ..Default::default() },
+            depth_stencil: Some(wgpu::DepthStencilState {
+                format: DEPTH_FORMAT,
+                depth_write_enabled: Some(true),
+                depth_compare: Some(wgpu::CompareFunction::Less),
+                stencil: Default::default(),
+                bias: Default::default(),
+            }),
+            multisample: Default::default(),
+            fragment: Some(wgpu::FragmentState {
+                module: &module,
+                entry_point: Some("fs_main"),
+                compilation_options: Default::default(),
+                targets: &[Some(wgpu::ColorTargetState {
+                    format: COLOR_FORMAT,
+                    blend: None,
+                    write_mask: wgpu::ColorWrites::ALL,
+                })],
+            }),
+            multiview_mask: None,
+            cache: None,
+        });
+        HostQuad { pipeline, layout }
+    }
+
+    /// Draws a rectangle `rect = [x0, y0, x1, y1]` (NDC) at clip `depth` with an
+    /// opaque `color` into `pass`.
+    pub fn draw(&self, device: &wgpu::Device, pass: &mut wgpu::RenderPass<'_>, rect: [f32; 4], depth: f32, color: [f32; 4]) {
+        let mut data = [0f32; 12];
+        data[..4].copy_from_slice(&rect);
+        data[4..8].copy_from_slice(&color);
+        data[8] = depth;
+        let bytes: Vec<u8> = data.iter().flat_map(|f| f.to_le_bytes()).collect();
+        let buffer = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("brickray-harness quad"),
+            size: bytes.len() as u64,
+            usage: wgpu::BufferUsages::UNIFORM,
+            mapped_at_creation: true,
+        });
+        buffer.slice(..).get_mapped_range_mut().expect("mapped at creation").copy_from_slice(&bytes);
+        buffer.unmap();
+        let bg = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("brickray-harness quad"),
+            layout: &self.layout,
+            entries: &[wgpu::BindGroupEntry { binding: 0, resource: buffer.as_entire_binding() }],
+        });
+        pass.set_pipeline(&self.pipeline);
+        pass.set_bind_group(0, &bg, &[]);
+        pass.draw(0..4, 0..1);
+    }
+}

@@ -36,12 +36,17 @@ mod tests {
         validate("composite", COMPOSITE);
     }
 
+    #[test]
+    fn host_quad_validates() {
+        validate("host_quad", include_str!("../../../shaders/host_quad.wgsl"));
+    }
+
     /// Every `.wgsl` file in shaders/ is either validated above or a library that
     /// is validated as part of a composed shader; a new file must be added here.
     #[test]
     fn every_shader_file_is_covered() {
         let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shaders");
-        let known = ["common.wgsl", "raycast_incore.wgsl", "composite.wgsl", "octree_traversal.wgsl"];
+        let known = ["common.wgsl", "raycast_incore.wgsl", "composite.wgsl", "octree_traversal.wgsl", "host_quad.wgsl"];
         for entry in std::fs::read_dir(dir).unwrap() {
             let name = entry.unwrap().file_name().into_string().unwrap();
             if name.ends_with(".wgsl") {
