@@ -464,6 +464,7 @@ mod tests {
     use crate::test_source::{TestSource, fill_byte};
     use brickray_core::BrickError;
     use glam::Vec3;
+    use proptest::prelude::*;
     use std::collections::HashSet;
     use std::sync::atomic::Ordering;
     use std::time::{Duration, Instant};
@@ -692,5 +693,35 @@ mod tests {
             std::thread::sleep(Duration::from_millis(1));
         }
         assert!(m.pool().evictions() > 0);
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(12))]
+        /// Random camera paths, pool sizes and modes: every plan tiles the cube,
+        /// uses each slot once, pins its slots and stays within the pool.
+        #[test]
+        fn plans_stay_valid_along_random_paths(
+            path in prop::collection::vec((0.0f32..6.3, -1.4f32..1.4, 0.4f32..4.0), 2..6),
+            slots in 1u64..60,
+            iso in prop::option::of(0.0f32..1.0),
+        ) {
+            let src = Arc::new(TestSource::new(64));
+            let brick = src.layout.brick_bytes() as u64;
+            let mut m = manager(&src, ManagerConfig { gpu_budget_bytes: slots * brick, upload_budget_bytes: 4 * brick, ..config() });
+            let tf = TransferFunction::ramp(0.2, 1.0, 0.5);
+            let mode = iso.map_or(RenderMode::Dvr, |value| RenderMode::Iso { value, color: [1.0; 3] });
+            let mut frame = 0u64;
+            for (yaw, pitch, dist) in path {
+                let cam = Camera::orbit(Vec3::ZERO, dist, yaw, pitch);
+                for _ in 0..6 {
+                    frame += 1;
+                    let plan = m.update(&cam, 1.5, 96, frame, mode, &tf);
+                    check_plan(&m, &plan);
+                    prop_assert!(plan.stats.working_set_bricks as u64 <= slots);
+                    prop_assert_eq!(plan.stats.allocation_failures, 0);
+                    std::thread::sleep(Duration::from_micros(300));
+                }
+            }
+        }
     }
 }
