@@ -233,6 +233,8 @@ struct HeapItem {
     priority: f64,
     key: NodeKey,
     uniform: bool,
+    /// Its upload was charged to the budget when its parent was split.
+    charged: bool,
 }
 impl Eq for HeapItem {}
 impl PartialOrd for HeapItem {
@@ -294,7 +296,7 @@ pub fn refine(
             return out;
         }
         Ok((NodeClass::Data, uniform)) => {
-            heap.push(HeapItem { priority: geo.voxel_pixels(NodeKey::ROOT), key: NodeKey::ROOT, uniform });
+            heap.push(HeapItem { priority: geo.voxel_pixels(NodeKey::ROOT), key: NodeKey::ROOT, uniform, charged: false });
         }
         Err(()) => {
             out.leaves.push(empty_leaf(NodeKey::ROOT, EmptyReason::NotLoaded));
@@ -317,7 +319,7 @@ pub fn refine(
 
     // Leaves still needing data decisions: (key, priority, on_gpu_or_reserved).
     let mut finals: Vec<(NodeKey, f64)> = Vec::new();
-    while let Some(HeapItem { priority, key, uniform }) = heap.pop() {
+    while let Some(HeapItem { priority, key, uniform, charged }) = heap.pop() {
         if uniform || key.level >= finest || priority <= tol {
             finals.push((key, priority));
             continue;
@@ -363,13 +365,19 @@ pub fn refine(
             finals.push((key, priority));
             continue;
         }
+        // A split node charged at its parent's split is not uploaded after all.
         let uploads = states.iter().filter(|s| **s == DataState::InCpu).count() as u64;
-        if uploads > 0 && !budget.try_reserve(uploads * brick_bytes) {
+        let release = if charged { brick_bytes } else { 0 };
+        if uploads > 0 && !budget.try_exchange(release, uploads * brick_bytes) {
             out.blocked.upload_budget += 1;
             finals.push((key, priority));
             continue;
         }
         out.data_leaves = out.data_leaves - 1 + data.len() as u32;
+        if uploads == 0 && charged {
+            budget.release(brick_bytes);
+        }
+        let mut state = states.iter();
         for i in 0..8 {
             match classes[i] {
                 NodeClass::Empty(r) => out.leaves.push(empty_leaf(children[i], r)),
@@ -377,6 +385,7 @@ pub fn refine(
                     priority: geo.voxel_pixels(children[i]),
                     key: children[i],
                     uniform: uniforms[i],
+                    charged: state.next() == Some(&DataState::InCpu),
                 }),
             }
         }
@@ -610,11 +619,20 @@ pub(crate) mod tests {
         assert_eq!(r.leaves.len(), 8);
         assert!(r.leaves.iter().all(|l| l.key.level == 1 && l.needs_upload));
         assert!(r.blocked.upload_budget > 0);
-        // With room for two splits' worth, exactly one more split happens.
+        // Larger budgets: more splits, and the bricks uploaded (leaves not on the
+        // GPU; split nodes charged at their parent's split are given back) stay
+        // within the budget once past the first split.
         let brick = s.layout.brick_bytes() as u64;
-        let r = run(&s, &cam, RenderMode::Mip, &s.tf, 10_000, 16 * brick);
-        assert_exact_cover(&keys(&r), s.layout.levels);
-        assert_eq!(r.leaves.len(), 15);
+        let mut last = r.leaves.len();
+        for n in [16u64, 22, 40, 100] {
+            let r = run(&s, &cam, RenderMode::Mip, &s.tf, 10_000, n * brick);
+            assert_exact_cover(&keys(&r), s.layout.levels);
+            let uploads = r.leaves.iter().filter(|l| l.needs_upload).count() as u64;
+            assert!(uploads <= n, "{uploads} > {n}");
+            assert!(uploads + 8 > n, "budget {n} underused: {uploads}");
+            assert!(r.leaves.len() >= last);
+            last = r.leaves.len();
+        }
     }
 
     #[test]

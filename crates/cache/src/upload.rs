@@ -28,13 +28,25 @@ impl UploadBudget {
     /// Reserves `bytes` for one item if they fit in what is left this frame, or if
     /// nothing was reserved yet this frame (progress). Returns whether it did.
     pub fn try_reserve(&mut self, bytes: u64) -> bool {
-        if self.items == 0 || self.used.saturating_add(bytes) <= self.per_frame {
-            self.used = self.used.saturating_add(bytes);
+        self.try_exchange(0, bytes)
+    }
+
+    /// Like [`try_reserve`](Self::try_reserve), but also gives back `release` bytes
+    /// reserved earlier this frame for an item no longer needed, if it succeeds.
+    pub fn try_exchange(&mut self, release: u64, bytes: u64) -> bool {
+        let used = self.used.saturating_sub(release);
+        if self.items == 0 || used.saturating_add(bytes) <= self.per_frame {
+            self.used = used.saturating_add(bytes);
             self.items += 1;
             true
         } else {
             false
         }
+    }
+
+    /// Gives back `bytes` reserved earlier this frame.
+    pub fn release(&mut self, bytes: u64) {
+        self.used = self.used.saturating_sub(bytes);
     }
 
     /// Bytes reserved this frame.
@@ -101,6 +113,18 @@ mod tests {
         let (take, defer) = b.select(defer);
         assert_eq!(take.len(), 1);
         assert!(defer.is_empty());
+    }
+
+    #[test]
+    fn exchange_releases_on_success_only() {
+        let mut b = UploadBudget::new(100);
+        assert!(b.try_reserve(80));
+        assert!(!b.try_exchange(10, 40));
+        assert_eq!(b.used(), 80);
+        assert!(b.try_exchange(30, 40));
+        assert_eq!(b.used(), 90);
+        b.release(50);
+        assert_eq!(b.used(), 40);
     }
 
     #[test]
