@@ -317,7 +317,7 @@ pub fn refine(
         out.requests.push((NodeKey::ROOT, f32::MAX));
     }
 
-    // Leaves still needing data decisions: (key, priority, on_gpu_or_reserved).
+    // Nodes that stay leaves and need their brick: (key, priority).
     let mut finals: Vec<(NodeKey, f64)> = Vec::new();
     while let Some(HeapItem { priority, key, uniform, charged }) = heap.pop() {
         if uniform || key.level >= finest || priority <= tol {
