@@ -42,7 +42,8 @@ pub fn random_cut(rng: &mut Rng, max_depth: u8, p_refine: f64, p_data: f64, budg
     let mut count = 1usize;
     let mut slot = 0u32;
     while let Some(k) = queue.pop_front() {
-        if k.level < max_depth && count + 7 <= budget && rng.chance(p_refine) {
+        // The root is always refined (when allowed), so that cuts are not trivial.
+        if k.level < max_depth && count + 7 <= budget && (k.level == 0 || rng.chance(p_refine)) {
             count += 7;
             queue.extend(k.children());
         } else {
