@@ -105,7 +105,7 @@ fn check_ray(cut: &[(NodeKey, LeafKind)], words: &[u32], ray: &Ray, kind: usize,
         if !seen.insert(h.key()) {
             return Err(format!("leaf {:?} reported twice", h.key()));
         }
-        if !(h.t_exit > h.t_enter) {
+        if h.t_exit.partial_cmp(&h.t_enter) != Some(std::cmp::Ordering::Greater) {
             return Err(format!("empty segment {h:?}"));
         }
         if i > 0 && (h.t_enter - got[i - 1].t_exit).abs() > GAP_TOL {
@@ -357,6 +357,19 @@ fn awkward_rays_on_fixed_cut() {
     ];
     for ray in rays {
         check_ray(&cut, index.words(), &ray, 0, &mut totals).unwrap_or_else(|e| panic!("{e}\n{ray:?}"));
+    }
+    // Non-finite inputs neither panic nor loop.
+    for ray in [
+        Ray::new(Vec3::new(f32::NAN, 0.5, 0.5), Vec3::X),
+        Ray::new(Vec3::new(-1.0, 0.5, 0.5), Vec3::new(f32::NAN, 1.0, 0.0)),
+        Ray::new(Vec3::new(-1.0, 0.5, 0.5), Vec3::new(f32::INFINITY, 1.0, 0.0)),
+        Ray::new(Vec3::new(-1.0, 0.5, 0.5), Vec3::X).with_range(f32::NEG_INFINITY, f32::INFINITY),
+        Ray::new(Vec3::new(-1.0, 0.5, 0.5), Vec3::X).with_range(f32::NAN, 3.0),
+    ] {
+        let mut it = traverse(index.words(), ray, 1000);
+        let n = it.by_ref().count();
+        assert!(n <= 1000);
+        assert_ne!(it.status(), TraversalStatus::Running);
     }
     // Upper-edge ray misses (half-open rule); lower-edge ray crosses the cube.
     assert_eq!(traverse(index.words(), rays[5], 100).count(), 0);
