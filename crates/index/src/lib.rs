@@ -4,7 +4,7 @@
 //! * [`encode_cut`] validates a *cut* (leaves tiling the unit cube, each
 //!   [`LeafKind::Empty`] or [`LeafKind::Data`] with a brick-pool slot) and encodes
 //!   the octree with neighbour pointers as `u32` words for a GPU storage buffer
-//!   ([`format`], `docs/index-format.md`).
+//!   ([`format`](mod@format), `docs/index-format.md`).
 //! * [`traverse`] is the CPU twin of the GPU traversal: it reads the same words
 //!   as `shaders/octree_traversal.wgsl` ([`OCTREE_TRAVERSAL_WGSL`]) and enumerates
 //!   the leaves pierced by a ray front to back, following ropes without a stack.

@@ -407,3 +407,28 @@ fn step_limit_and_corrupt_words_are_reported() {
         assert!(n <= 1000 && it.status() != TraversalStatus::Running);
     }
 }
+
+/// Throughput of the twin alone on a ~100k-leaf cut (informative; no bound).
+#[test]
+fn twin_throughput() {
+    let mut cut = Vec::new();
+    for (i, (k, kind)) in common::uniform_cut(5).into_iter().enumerate() {
+        if i % 3 == 0 {
+            cut.extend(k.children().map(|c| (c, kind)));
+        } else {
+            cut.push((k, kind));
+        }
+    }
+    let index = encode_cut(cut).unwrap();
+    let mut rng = Rng(5);
+    let rays: Vec<Ray> = (0..20_000).map(|_| random_ray(&mut rng, 0)).collect();
+    let t = std::time::Instant::now();
+    let mut leaves = 0usize;
+    for r in &rays {
+        let mut it = traverse(index.words(), *r, 100_000);
+        leaves += it.by_ref().count();
+        assert_eq!(it.status(), TraversalStatus::Finished);
+    }
+    let s = t.elapsed().as_secs_f64();
+    eprintln!("twin: {} rays, {leaves} leaves in {:.1} ms ({:.0} ns/leaf)", rays.len(), s * 1e3, s * 1e9 / leaves.max(1) as f64);
+}
