@@ -13,6 +13,7 @@ pub use nrrd::NrrdReader;
 pub use raw::RawReader;
 
 use crate::volume::{DType, Volume, VolumeData, VolumeDesc, VolumeError};
+use std::io::Read;
 use std::path::{Path, PathBuf};
 use thiserror::Error;
 
@@ -178,35 +179,67 @@ pub fn scan_range(dtype: DType, bytes: &[u8]) -> (f32, f32, Option<usize>) {
     (lo, hi, bad)
 }
 
-/// Streams the whole input once to find its value range; errors on NaN/Inf.
-pub(crate) fn scan_reader_range(r: &mut dyn VolumeReader) -> Result<[f32; 2], IoError> {
-    let desc = r.desc().clone();
-    let slice = desc.dims[0] as usize * desc.dims[1] as usize * desc.dtype.size();
-    let per = (64 << 20) / slice.max(1);
-    let per = per.clamp(1, desc.dims[2] as usize) as u32;
-    let mut buf = Vec::new();
+/// Bytes decoded per step by [`scan_stream`]: memory stays bounded whatever the
+/// dims claim (a multiple of every sample size).
+const SCAN_CHUNK: usize = 1 << 20;
+
+/// Streams the `desc.byte_len()` sample bytes of `src` (in file byte order) once,
+/// returning the data's min..max (widened to `lo..lo+1` when flat). Errors on
+/// NaN/Inf with the total count and the first voxel, and with
+/// [`IoError::Truncated`] when the stream ends early. `io_err` maps a read error
+/// at a decoded byte position. Memory use is bounded by [`SCAN_CHUNK`], so a
+/// forged header cannot make the scan allocate what the data does not hold.
+pub(crate) fn scan_stream(
+    path: &Path,
+    desc: &VolumeDesc,
+    big_endian: bool,
+    src: &mut dyn Read,
+    io_err: &dyn Fn(std::io::Error, u64) -> IoError,
+) -> Result<[f32; 2], IoError> {
+    let size = desc.dtype.size();
+    let total = desc.byte_len();
+    let mut buf = vec![0u8; (SCAN_CHUNK as u64).min(total) as usize];
     let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
-    let mut z = 0;
-    while z < desc.dims[2] {
-        let z1 = (z + per).min(desc.dims[2]);
-        buf.resize((z1 - z) as usize * slice, 0);
-        r.read_slices(z, z1, &mut buf)?;
-        let (a, b, bad) = scan_range(desc.dtype, &buf);
+    let mut count = 0u64;
+    let mut first: Option<u64> = None;
+    let mut pos = 0u64;
+    while pos < total {
+        let want = (total - pos).min(buf.len() as u64) as usize;
+        let chunk = &mut buf[..want];
+        let mut filled = 0;
+        while filled < want {
+            match src.read(&mut chunk[filled..]) {
+                Ok(0) => {
+                    return Err(IoError::Truncated {
+                        path: path.to_owned(),
+                        expected: total,
+                        actual: pos + filled as u64,
+                    });
+                }
+                Ok(n) => filled += n,
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                Err(e) => return Err(io_err(e, pos + filled as u64)),
+            }
+        }
+        if big_endian && size > 1 {
+            chunk.chunks_exact_mut(size).for_each(|c| c.reverse());
+        }
+        let (a, b, bad) = scan_range(desc.dtype, chunk);
         if let Some(i) = bad {
-            let plane = desc.dims[0] as usize * desc.dims[1] as usize;
-            let count = bytes_non_finite(desc.dtype, &buf);
-            let first = [
-                (i % desc.dims[0] as usize) as u32,
-                ((i / desc.dims[0] as usize) % desc.dims[1] as usize) as u32,
-                z + (i / plane) as u32,
-            ];
-            return Err(IoError::volume(r.path(), VolumeError::NonFinite { count, first }));
+            count += bytes_non_finite(desc.dtype, chunk);
+            first.get_or_insert(pos / size as u64 + i as u64);
         }
         lo = lo.min(a);
         hi = hi.max(b);
-        z = z1;
+        pos += want as u64;
     }
-    if !(hi > lo) {
+    if let Some(i) = first {
+        let [nx, ny, _] = desc.dims.map(u64::from);
+        let first = [(i % nx) as u32, ((i / nx) % ny) as u32, (i / (nx * ny)) as u32];
+        return Err(IoError::volume(path, VolumeError::NonFinite { count, first }));
+    }
+    // Both finite here (NaN/Inf returned above, and there is at least one voxel).
+    if hi <= lo {
         hi = lo + 1.0;
     }
     Ok([lo, hi])
@@ -216,10 +249,7 @@ fn bytes_non_finite(dtype: DType, bytes: &[u8]) -> u64 {
     if dtype != DType::F32 {
         return 0;
     }
-    bytes
-        .chunks_exact(4)
-        .filter(|c| !f32::from_le_bytes([c[0], c[1], c[2], c[3]]).is_finite())
-        .count() as u64
+    bytes.chunks_exact(4).filter(|c| !f32::from_le_bytes([c[0], c[1], c[2], c[3]]).is_finite()).count() as u64
 }
 
 /// Opens a volume by extension: `.json` (raw + JSON sidecar), `.nrrd` / `.nhdr`,

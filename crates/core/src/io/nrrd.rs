@@ -1,7 +1,7 @@
 //! NRRD (<https://teem.sourceforge.net/nrrd/format.html>): attached or detached
 //! data, `raw` and `gzip` encodings, 3D scalar volumes of u8/u16/i16/f32.
 
-use super::{IoError, VolumeReader, check_slab, scan_reader_range};
+use super::{IoError, VolumeReader, check_slab, scan_stream};
 use crate::volume::{DType, VolumeDesc};
 use flate2::read::GzDecoder;
 use std::fs::File;
@@ -37,30 +37,36 @@ impl NrrdReader {
     pub fn open(path: &Path) -> Result<NrrdReader, IoError> {
         let file = File::open(path).map_err(|e| IoError::io(path, e))?;
         let mut rd = BufReader::new(file);
-        let mut magic = String::new();
-        rd.read_line(&mut magic).map_err(|e| IoError::io(path, e))?;
-        if !magic.starts_with("NRRD000") {
-            return Err(IoError::header(path, "missing NRRD magic"));
-        }
-        let mut consumed = magic.len();
-        let mut fields: Vec<(String, String)> = Vec::new();
-        loop {
-            let mut line = String::new();
-            let n = match rd.read_line(&mut line) {
-                Ok(n) => n,
-                Err(e) if e.kind() == std::io::ErrorKind::InvalidData => {
-                    return Err(IoError::header(path, "header is not text"));
-                }
-                Err(e) => return Err(IoError::io(path, e)),
-            };
+        // Every line is read through a limit, so a forged file without newlines
+        // cannot make us buffer gigabytes of "header".
+        let mut consumed = 0usize;
+        let mut next_line = |rd: &mut BufReader<File>| -> Result<Option<String>, IoError> {
+            let mut raw = Vec::new();
+            let limit = (MAX_HEADER - consumed.min(MAX_HEADER)) as u64 + 1;
+            let n = rd.by_ref().take(limit).read_until(b'\n', &mut raw).map_err(|e| IoError::io(path, e))?;
             consumed += n;
             if consumed > MAX_HEADER {
                 return Err(IoError::header(path, "header longer than 1 MiB"));
             }
             if n == 0 {
-                // EOF: allowed only for detached headers.
-                break;
+                return Ok(None);
             }
+            String::from_utf8(raw).map(Some).map_err(|_| IoError::header(path, "header is not text"))
+        };
+        let magic = match next_line(&mut rd) {
+            Ok(Some(m)) => m,
+            Ok(None) | Err(IoError::BadHeader { .. }) => {
+                return Err(IoError::header(path, "missing NRRD magic"));
+            }
+            Err(e) => return Err(e),
+        };
+        if !magic.starts_with("NRRD000") {
+            return Err(IoError::header(path, "missing NRRD magic"));
+        }
+        let mut fields: Vec<(String, String)> = Vec::new();
+        // `None` at EOF: allowed only for detached headers (an attached one then
+        // holds no data, which the size check below reports).
+        while let Some(line) = next_line(&mut rd)? {
             let l = line.trim_end_matches(['\n', '\r']);
             if l.is_empty() {
                 break;
@@ -69,13 +75,22 @@ impl NrrdReader {
                 continue;
             }
             if let Some((k, v)) = l.split_once(": ") {
-                fields.push((k.trim().to_ascii_lowercase(), v.trim().to_owned()));
+                let (k, v) = (k.trim().to_ascii_lowercase(), v.trim().to_owned());
+                if (k == "data file" || k == "datafile") && v.starts_with("LIST") {
+                    // the file names follow as lines of their own
+                    return Err(IoError::Unsupported {
+                        path: path.to_owned(),
+                        what: "multi-file data".into(),
+                    });
+                }
+                fields.push((k, v));
             } else if l.contains(":=") {
                 continue; // key/value pairs: ignored
             } else {
                 return Err(IoError::header(path, format!("unparsable line {l:?}")));
             }
         }
+        let consumed = consumed;
         let get = |k: &str| fields.iter().find(|(n, _)| n == k).map(|(_, v)| v.as_str());
         let ty = get("type").ok_or_else(|| IoError::header(path, "no type field"))?;
         let dtype = match ty.to_ascii_lowercase().as_str() {
@@ -83,7 +98,9 @@ impl NrrdReader {
             "ushort" | "unsigned short" | "unsigned short int" | "uint16" | "uint16_t" => DType::U16,
             "short" | "short int" | "signed short" | "signed short int" | "int16" | "int16_t" => DType::I16,
             "float" => DType::F32,
-            _ => return Err(IoError::UnknownDType { path: path.to_owned(), name: ty.to_owned() }),
+            _ => {
+                return Err(IoError::UnknownDType { path: path.to_owned(), name: ty.to_owned() });
+            }
         };
         let dimension: usize = get("dimension")
             .ok_or_else(|| IoError::header(path, "no dimension field"))?
@@ -152,18 +169,60 @@ impl NrrdReader {
         let file_len = std::fs::metadata(&r.data_path).map_err(|e| IoError::io(&r.data_path, e))?.len();
         let available = file_len.saturating_sub(r.data_offset);
         if encoding == Encoding::Raw && available < r.desc.byte_len() {
-            return Err(IoError::Truncated { path: path.to_owned(), expected: r.desc.byte_len(), actual: available });
+            return Err(IoError::Truncated {
+                path: path.to_owned(),
+                expected: r.desc.byte_len(),
+                actual: available,
+            });
         }
         // For gzip the only way to know the stream is whole is to decode it; the
         // scan doubles as the value-range pass.
         if declared.is_none() || encoding == Encoding::Gzip {
-            let range = scan_reader_range(&mut r)?;
+            let range = r.scan()?;
             if declared.is_none() {
                 r.desc.value_range = range;
             }
-            r.gz = None;
         }
         Ok(r)
+    }
+
+    /// One pass over the data in bounded memory: the value range, NaN/Inf, and
+    /// (for gzip) that the stream is whole, checksum included.
+    fn scan(&mut self) -> Result<[f32; 2], IoError> {
+        let mut f = File::open(&self.data_path).map_err(|e| IoError::io(&self.data_path, e))?;
+        f.seek(SeekFrom::Start(self.data_offset)).map_err(|e| IoError::io(&self.data_path, e))?;
+        let f = BufReader::new(f);
+        let expected = self.desc.byte_len();
+        let path = self.path.clone();
+        let io_err = |e: std::io::Error, pos: u64| gz_error(&path, e, expected, pos);
+        match self.encoding {
+            Encoding::Raw => {
+                scan_stream(&self.path, &self.desc, self.big_endian, &mut f.take(expected), &io_err)
+            }
+            Encoding::Gzip => {
+                let mut gz = GzDecoder::new(f);
+                let range = scan_stream(&self.path, &self.desc, self.big_endian, &mut gz, &io_err);
+                if matches!(
+                    range,
+                    Err(IoError::Truncated { .. } | IoError::BadHeader { .. } | IoError::Io { .. })
+                ) {
+                    return range;
+                }
+                // Read on to the end of the member so that the CRC and length in
+                // the gzip trailer are checked (extra decoded bytes are ignored):
+                // corrupt data is reported as such, not as the NaNs it decoded to.
+                let mut rest = [0u8; 4096];
+                loop {
+                    match gz.read(&mut rest) {
+                        Ok(0) => break,
+                        Ok(_) => {}
+                        Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                        Err(e) => return Err(io_err(e, expected)),
+                    }
+                }
+                range
+            }
+        }
     }
 
     fn truncated(&self, actual: u64) -> IoError {
@@ -183,7 +242,7 @@ impl NrrdReader {
         let (gz, pos) = self.gz.as_mut().expect("set above");
         let skip = start - *pos;
         let copied = std::io::copy(&mut gz.by_ref().take(skip), &mut std::io::sink());
-        let copied = copied.map_err(|e| gz_error(&self.path, e))?;
+        let copied = copied.map_err(|e| gz_error(&self.path, e, self.desc.byte_len(), start))?;
         *pos += copied;
         if copied < skip {
             let p = *pos;
@@ -201,7 +260,7 @@ impl NrrdReader {
                 Ok(n) => filled += n,
                 Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
                 Err(e) => {
-                    let err = gz_error(&self.path, e);
+                    let err = gz_error(&self.path, e, self.desc.byte_len(), *pos + filled as u64);
                     self.gz = None;
                     return Err(err);
                 }
@@ -212,10 +271,11 @@ impl NrrdReader {
     }
 }
 
-fn gz_error(path: &Path, e: std::io::Error) -> IoError {
+/// Maps a read error at decoded byte `pos` of a stream announced as `expected` bytes.
+fn gz_error(path: &Path, e: std::io::Error, expected: u64, pos: u64) -> IoError {
     match e.kind() {
         std::io::ErrorKind::UnexpectedEof => {
-            IoError::Truncated { path: path.to_owned(), expected: 0, actual: 0 }
+            IoError::Truncated { path: path.to_owned(), expected, actual: pos }
         }
         std::io::ErrorKind::InvalidInput | std::io::ErrorKind::InvalidData => {
             IoError::header(path, format!("corrupt gzip data: {e}"))
@@ -231,12 +291,16 @@ fn parse_spacing(
     four_d: bool,
 ) -> Result<[f32; 3], IoError> {
     if let Some(s) = spacings {
-        let v: Vec<f32> = s
+        // "nan" parses (as NaN) and is then rejected by validation, except on
+        // the leading non-spatial axis of a 4D file, which is dropped.
+        let mut v: Vec<f32> = s
             .split_whitespace()
-            .filter(|t| !t.eq_ignore_ascii_case("nan"))
             .map(|t| t.parse::<f32>())
             .collect::<Result<_, _>>()
             .map_err(|_| IoError::header(path, "spacings are not numbers"))?;
+        if four_d && v.len() == 4 {
+            v.remove(0);
+        }
         if v.len() == 3 {
             return Ok([v[0], v[1], v[2]]);
         }
@@ -249,11 +313,16 @@ fn parse_spacing(
             .map(|t| t.trim().trim_start_matches("none").trim().trim_start_matches('('))
             .filter(|t| !t.is_empty())
             .map(|t| {
-                let c: Vec<f32> = t.split(',').filter_map(|x| x.trim().parse().ok()).collect();
-                c.iter().map(|x| x * x).sum::<f32>().sqrt()
+                let c: Vec<f32> =
+                    t.split(',').map(|x| x.trim().parse::<f32>()).collect::<Result<_, _>>().map_err(
+                        |_| IoError::header(path, format!("space direction ({t}) is not numeric")),
+                    )?;
+                if c.len() != 3 {
+                    return Err(IoError::header(path, format!("space direction ({t}) needs 3 components")));
+                }
+                Ok(c.iter().map(|x| x * x).sum::<f32>().sqrt())
             })
-            .collect();
-        let _ = four_d;
+            .collect::<Result<_, _>>()?;
         if vecs.len() == 3 {
             return Ok([vecs[0], vecs[1], vecs[2]]);
         }

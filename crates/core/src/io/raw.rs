@@ -1,6 +1,6 @@
 //! Raw little-endian samples with a JSON sidecar (the form of `shared/data`).
 
-use super::{IoError, VolumeReader, check_slab, scan_reader_range};
+use super::{IoError, VolumeReader, check_slab, scan_stream};
 use crate::volume::{DType, VolumeDesc};
 use std::fs::File;
 use std::io::{Read, Seek, SeekFrom};
@@ -48,8 +48,7 @@ impl RawReader {
     /// When the sidecar gives no `value_range`, the data is scanned for one.
     pub fn open_sidecar(json: &Path) -> Result<RawReader, IoError> {
         let text = std::fs::read_to_string(json).map_err(|e| IoError::io(json, e))?;
-        let sc: Sidecar =
-            serde_json::from_str(&text).map_err(|e| IoError::header(json, e.to_string()))?;
+        let sc: Sidecar = serde_json::from_str(&text).map_err(|e| IoError::header(json, e.to_string()))?;
         if sc.dims.len() != 3 {
             return Err(IoError::header(json, format!("dims must have 3 entries, got {}", sc.dims.len())));
         }
@@ -58,18 +57,21 @@ impl RawReader {
         let dims = dims64.map(|d| d as u32);
         let dtype = DType::parse(&sc.dtype)
             .ok_or_else(|| IoError::UnknownDType { path: json.to_owned(), name: sc.dtype.clone() })?;
-        if let Some(order) = &sc.byte_order {
-            if !order.eq_ignore_ascii_case("little") && dtype.size() > 1 {
-                return Err(IoError::Unsupported {
-                    path: json.to_owned(),
-                    what: format!("byte_order {order:?} (only little-endian)"),
-                });
-            }
+        if let Some(order) = &sc.byte_order
+            && !order.eq_ignore_ascii_case("little")
+            && dtype.size() > 1
+        {
+            return Err(IoError::Unsupported {
+                path: json.to_owned(),
+                what: format!("byte_order {order:?} (only little-endian)"),
+            });
         }
         let spacing = match sc.spacing.as_deref() {
             None => [1.0; 3],
             Some([a, b, c]) => [*a, *b, *c],
-            Some(s) => return Err(IoError::header(json, format!("spacing must have 3 entries, got {}", s.len()))),
+            Some(s) => {
+                return Err(IoError::header(json, format!("spacing must have 3 entries, got {}", s.len())));
+            }
         };
         let raw = match &sc.file {
             Some(f) => json.parent().unwrap_or(Path::new(".")).join(f),
@@ -78,16 +80,29 @@ impl RawReader {
         let declared = match sc.value_range.as_deref() {
             Some([lo, hi]) if lo.is_finite() && hi.is_finite() && hi > lo => Some([*lo, *hi]),
             Some(r) => {
-                return Err(IoError::header(json, format!("value_range must be [lo, hi] with lo < hi, got {r:?}")));
+                return Err(IoError::header(
+                    json,
+                    format!("value_range must be [lo, hi] with lo < hi, got {r:?}"),
+                ));
             }
             None => None,
         };
         let desc = VolumeDesc { dims, dtype, spacing, value_range: declared.unwrap_or([0.0, 1.0]) };
         let mut reader = RawReader::new(raw, 0, desc)?;
         if declared.is_none() {
-            reader.desc.value_range = scan_reader_range(&mut reader)?;
+            reader.desc.value_range = reader.scan()?;
         }
         Ok(reader)
+    }
+}
+
+impl RawReader {
+    /// One bounded-memory pass over the samples for their value range.
+    fn scan(&mut self) -> Result<[f32; 2], IoError> {
+        self.file.seek(SeekFrom::Start(self.offset)).map_err(|e| IoError::io(&self.path, e))?;
+        let path = self.path.clone();
+        let io_err = |e: std::io::Error, _pos: u64| IoError::io(&path, e);
+        scan_stream(&self.path, &self.desc, false, &mut self.file, &io_err)
     }
 }
 
