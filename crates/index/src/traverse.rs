@@ -330,3 +330,80 @@ impl Iterator for Traversal<'_> {
 }
 
 impl std::iter::FusedIterator for Traversal<'_> {}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::format::{FACE_NEG_X, FACE_POS_X, FACE_POS_Y, FACE_POS_Z, rope_word};
+
+    fn nb(level: u32, min: [f32; 3]) -> NodeBox {
+        NodeBox { node: 0, level, box_min: Vec3::from(min), box_size: exp2_neg(level) }
+    }
+
+    #[test]
+    fn exit_face_prefers_smallest_t_then_lowest_axis() {
+        let c = nb(1, [0.0, 0.0, 0.0]);
+        let (dir, inv) = ray_setup(Vec3::new(1.0, 2.0, 0.0));
+        assert_eq!(exit_face(&c, Vec3::new(0.1, 0.1, 0.1), dir, inv), (0.2, FACE_POS_Y));
+        // Through the corner: x, y and z tie at t = 0.5, x wins.
+        let (dir, inv) = ray_setup(Vec3::ONE);
+        assert_eq!(exit_face(&c, Vec3::ZERO, dir, inv), (0.5, FACE_POS_X));
+        let (dir, inv) = ray_setup(Vec3::new(0.0, 1.0, 1.0));
+        assert_eq!(exit_face(&c, Vec3::ZERO, dir, inv), (0.5, FACE_POS_Y));
+        let (dir, inv) = ray_setup(Vec3::new(-1.0, 0.0, 1e-31));
+        assert_eq!(dir, Vec3::new(-1.0, 0.0, 0.0));
+        assert_eq!(exit_face(&c, Vec3::new(0.25, 0.1, 0.1), dir, inv), (0.25, FACE_NEG_X));
+        let (dir, inv) = ray_setup(Vec3::new(0.0, 0.0, 0.5));
+        assert_eq!(exit_face(&c, Vec3::new(0.25, 0.1, 0.0), dir, inv), (1.0, FACE_POS_Z));
+    }
+
+    #[test]
+    fn locate_ties_follow_the_direction() {
+        // Root split once: nodes 1..9 are leaves.
+        let mut words = vec![crate::format::node_word(TAG_INNER, 1)];
+        for i in 0..8 {
+            words.push(crate::format::node_word(TAG_EMPTY, 9 + 7 * i));
+        }
+        words.resize(9 + 56, NULL);
+        let p = Vec3::splat(0.5);
+        let at = |d: Vec3| locate_leaf(&words, NodeBox::ROOT, p, d).unwrap().0;
+        assert_eq!(at(Vec3::new(1.0, 1.0, 1.0)).node, 1 + 7);
+        assert_eq!(at(Vec3::new(-1.0, -1.0, -1.0)).node, 1);
+        assert_eq!(at(Vec3::new(0.0, -1.0, 0.0)).node, 1 + 1 + 4);
+        let leaf = at(Vec3::new(-1.0, 1.0, 0.0));
+        assert_eq!((leaf.node, leaf.level, leaf.box_min, leaf.box_size), (1 + 2 + 4, 1, Vec3::new(0.0, 0.5, 0.5), 0.5));
+        assert_eq!(leaf.key(), NodeKey::new(1, 0, 1, 1));
+        // A bad tag is corrupt, as is a pointer past the end.
+        let mut bad = words.clone();
+        bad[8] = 3 << 30;
+        assert_eq!(locate_leaf(&bad, NodeBox::ROOT, Vec3::splat(0.9), Vec3::X), Err(CorruptIndex));
+        bad[0] = crate::format::node_word(TAG_INNER, 1000);
+        assert_eq!(locate_leaf(&bad, NodeBox::ROOT, Vec3::splat(0.9), Vec3::X), Err(CorruptIndex));
+    }
+
+    #[test]
+    fn follow_rope_shifts_and_snaps_to_the_coarser_grid() {
+        // Level-3 box at (5, 2, 7)/8 leaving +x into a level-1 neighbour.
+        let c = NodeBox { node: 3, ..nb(3, [5.0 / 8.0, 2.0 / 8.0, 7.0 / 8.0]) };
+        let n = follow_rope(rope_word(11, 1), &c, FACE_POS_X).unwrap().unwrap();
+        assert_eq!((n.node, n.level, n.box_min, n.box_size), (11, 1, Vec3::new(0.5, 0.0, 0.5), 0.5));
+        // Same level: a pure shift.
+        let n = follow_rope(rope_word(12, 3), &c, FACE_NEG_X).unwrap().unwrap();
+        assert_eq!((n.level, n.box_min, n.box_size), (3, Vec3::new(4.0 / 8.0, 2.0 / 8.0, 7.0 / 8.0), 0.125));
+        // NULL, and a rope to a finer level is corrupt.
+        assert_eq!(follow_rope(NULL, &c, FACE_POS_X), Ok(None));
+        assert_eq!(follow_rope(rope_word(1, 4), &c, FACE_POS_X), Err(CorruptIndex));
+    }
+
+    #[test]
+    fn clip_is_half_open_along_zero_components() {
+        let (d, inv) = ray_setup(Vec3::X);
+        assert_eq!(clip_unit_cube(Vec3::new(-1.0, 0.0, 0.5), d, inv, 0.0, f32::INFINITY), (1.0, 2.0));
+        let (t0, t1) = clip_unit_cube(Vec3::new(-1.0, 1.0, 0.5), d, inv, 0.0, f32::INFINITY);
+        assert!(t0 >= t1);
+        let (d, inv) = ray_setup(Vec3::ZERO);
+        let (t0, t1) = clip_unit_cube(Vec3::splat(0.5), d, inv, 0.0, 1.0);
+        assert!(t0 >= t1);
+        assert_eq!(exp2_pos(3) * exp2_neg(3), 1.0);
+    }
+}
