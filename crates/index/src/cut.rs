@@ -7,6 +7,7 @@ use crate::format::{
     rope_word,
 };
 use brickray_core::brick::NodeKey;
+use std::borrow::Borrow;
 use thiserror::Error;
 
 /// What a leaf of the cut holds.
@@ -157,21 +158,24 @@ fn ancestor(key: NodeKey, level: u8) -> NodeKey {
     NodeKey::new(level, key.x >> s, key.y >> s, key.z >> s)
 }
 
-/// Validates a cut and encodes it.
+/// Validates a cut and encodes it. `leaves` yields `(NodeKey, LeafKind)` pairs or
+/// references to them (`encode_cut(&cut)` with `cut: Vec<(NodeKey, LeafKind)>`).
 ///
 /// `leaves` must tile the unit cube exactly: every point in exactly one leaf. The
 /// result does not depend on the order of `leaves` (nodes are numbered breadth
 /// first, children in child-index order). Runs in `O(sum of leaf levels)`.
 pub fn encode_cut<I>(leaves: I) -> Result<EncodedIndex, CutError>
 where
-    I: IntoIterator<Item = (NodeKey, LeafKind)>,
+    I: IntoIterator,
+    I::Item: Borrow<(NodeKey, LeafKind)>,
 {
     // 1. Insert every leaf into an arena octree; children are allocated in blocks
     //    of 8 when a node is first subdivided.
     let leaves = leaves.into_iter();
     let mut arena: Vec<ArenaNode> = Vec::with_capacity(leaves.size_hint().0 * 8 / 7 + 8);
     arena.push(UNSET_NODE);
-    for (key, kind) in leaves {
+    for leaf in leaves {
+        let (key, kind) = *leaf.borrow();
         if key.level > MAX_LEVEL {
             return Err(CutError::LevelTooDeep { key, max: MAX_LEVEL });
         }

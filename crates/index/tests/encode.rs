@@ -173,7 +173,7 @@ fn encoding_is_independent_of_input_order() {
 fn invalid_cuts_are_typed_errors() {
     let r = NodeKey::ROOT;
     let e = LeafKind::Empty;
-    assert_eq!(encode_cut(Vec::new()), Err(CutError::Gap { missing: r }));
+    assert_eq!(encode_cut(Vec::<(NodeKey, LeafKind)>::new()), Err(CutError::Gap { missing: r }));
     // One child missing.
     let cut: Vec<_> = r.children().into_iter().filter(|k| k.child_index() != 5).map(|k| (k, e)).collect();
     assert_eq!(encode_cut(cut), Err(CutError::Gap { missing: r.child(5) }));
@@ -203,7 +203,7 @@ fn invalid_cuts_are_typed_errors() {
     let outside = NodeKey::new(0, 0, 0, 1);
     assert_eq!(encode_cut([(outside, e)]), Err(CutError::PositionOutOfRange { key: outside }));
     // Messages render.
-    let msg = encode_cut(Vec::new()).unwrap_err().to_string();
+    let msg = encode_cut(Vec::<(NodeKey, LeafKind)>::new()).unwrap_err().to_string();
     assert!(msg.contains("gap"), "{msg}");
 }
 
