@@ -101,27 +101,7 @@ fn head_ct() -> Option<Volume> {
     Some(brickray::io::read_volume(path).expect("head CT reads"))
 }
 
-/// Hounsfield units to the head CT's normalized value.
-fn hu(v: f32) -> f32 {
-    (v + 1024.0) / 4010.0
-}
-
-fn bone_tf() -> TransferFunction {
-    TransferFunction::from_points(&[(hu(250.0), [0.9, 0.85, 0.75, 0.0]), (hu(600.0), [1.0, 0.95, 0.85, 1.0])], 512)
-}
-
-fn soft_tissue_tf() -> TransferFunction {
-    TransferFunction::from_points(
-        &[
-            (hu(-500.0), [0.6, 0.3, 0.2, 0.0]),
-            (hu(-100.0), [0.8, 0.5, 0.4, 0.02]),
-            (hu(150.0), [0.9, 0.6, 0.5, 0.03]),
-            (hu(300.0), [1.0, 1.0, 0.9, 0.0]),
-            (hu(500.0), [1.0, 1.0, 0.95, 0.3]),
-        ],
-        512,
-    )
-}
+use brickray_harness::ct::{bone as bone_tf, hu, soft_tissue as soft_tissue_tf};
 
 fn gray_ramp() -> TransferFunction {
     TransferFunction::ramp(0.0, 1.0, 1.0)

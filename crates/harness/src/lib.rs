@@ -355,3 +355,33 @@ impl HostQuad {
         pass.draw(0..4, 0..1);
     }
 }
+
+/// Transfer-function presets for the head CT (`invesalius_cranium_ct`, Hounsfield
+/// units over the value range -1024..2986), shared by tests, benches and demos.
+pub mod ct {
+    use brickray_core::TransferFunction;
+
+    /// Hounsfield units to the head CT's normalized value.
+    pub fn hu(v: f32) -> f32 {
+        (v + 1024.0) / 4010.0
+    }
+
+    /// Opaque bone: transparent below 250 HU, opaque from 600 HU.
+    pub fn bone() -> TransferFunction {
+        TransferFunction::from_points(&[(hu(250.0), [0.9, 0.85, 0.75, 0.0]), (hu(600.0), [1.0, 0.95, 0.85, 1.0])], 512)
+    }
+
+    /// Semi-transparent soft tissue with faint bone.
+    pub fn soft_tissue() -> TransferFunction {
+        TransferFunction::from_points(
+            &[
+                (hu(-500.0), [0.6, 0.3, 0.2, 0.0]),
+                (hu(-100.0), [0.8, 0.5, 0.4, 0.02]),
+                (hu(150.0), [0.9, 0.6, 0.5, 0.03]),
+                (hu(300.0), [1.0, 1.0, 0.9, 0.0]),
+                (hu(500.0), [1.0, 1.0, 0.95, 0.3]),
+            ],
+            512,
+        )
+    }
+}

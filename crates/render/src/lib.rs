@@ -125,6 +125,8 @@ struct FrameTargets {
     height: u32,
     color: wgpu::TextureView,
     depth: wgpu::TextureView,
+    samples: wgpu::Texture,
+    samples_view: wgpu::TextureView,
     composite_bg: wgpu::BindGroup,
 }
 
@@ -238,6 +240,16 @@ impl VolumeRenderer {
                     ty: wgpu::BindingType::StorageTexture {
                         access: wgpu::StorageTextureAccess::WriteOnly,
                         format: wgpu::TextureFormat::R32Float,
+                        view_dimension: wgpu::TextureViewDimension::D2,
+                    },
+                    count: None,
+                },
+                wgpu::BindGroupLayoutEntry {
+                    binding: 9,
+                    visibility: c,
+                    ty: wgpu::BindingType::StorageTexture {
+                        access: wgpu::StorageTextureAccess::WriteOnly,
+                        format: wgpu::TextureFormat::R32Uint,
                         view_dimension: wgpu::TextureViewDimension::D2,
                     },
                     count: None,
@@ -405,22 +417,23 @@ impl VolumeRenderer {
         if self.frame_targets.as_ref().is_some_and(|t| t.width == width && t.height == height) {
             return;
         }
-        let make = |label, format| {
-            device
-                .create_texture(&wgpu::TextureDescriptor {
-                    label: Some(label),
-                    size: wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
-                    mip_level_count: 1,
-                    sample_count: 1,
-                    dimension: wgpu::TextureDimension::D2,
-                    format,
-                    usage: wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::TEXTURE_BINDING,
-                    view_formats: &[],
-                })
-                .create_view(&Default::default())
+        let make = |label, format, extra| {
+            device.create_texture(&wgpu::TextureDescriptor {
+                label: Some(label),
+                size: wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format,
+                usage: wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::TEXTURE_BINDING | extra,
+                view_formats: &[],
+            })
         };
-        let color = make("brickray-render ray colour", wgpu::TextureFormat::Rgba16Float);
-        let depth = make("brickray-render ray depth", wgpu::TextureFormat::R32Float);
+        let none = wgpu::TextureUsages::empty();
+        let color = make("brickray-render ray colour", wgpu::TextureFormat::Rgba16Float, none).create_view(&Default::default());
+        let depth = make("brickray-render ray depth", wgpu::TextureFormat::R32Float, none).create_view(&Default::default());
+        let samples = make("brickray-render ray samples", wgpu::TextureFormat::R32Uint, wgpu::TextureUsages::COPY_SRC);
+        let samples_view = samples.create_view(&Default::default());
         let composite_bg = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("brickray-render composite"),
             layout: &self.composite_bgl,
@@ -429,7 +442,7 @@ impl VolumeRenderer {
                 wgpu::BindGroupEntry { binding: 1, resource: wgpu::BindingResource::TextureView(&depth) },
             ],
         });
-        self.frame_targets = Some(FrameTargets { width, height, color, depth, composite_bg });
+        self.frame_targets = Some(FrameTargets { width, height, color, depth, samples, samples_view, composite_bg });
         self.raycast_bg = None;
     }
 
@@ -481,6 +494,7 @@ impl VolumeRenderer {
                     wgpu::BindGroupEntry { binding: 6, resource: wgpu::BindingResource::TextureView(depth_view) },
                     wgpu::BindGroupEntry { binding: 7, resource: wgpu::BindingResource::TextureView(&t.color) },
                     wgpu::BindGroupEntry { binding: 8, resource: wgpu::BindingResource::TextureView(&t.depth) },
+                    wgpu::BindGroupEntry { binding: 9, resource: wgpu::BindingResource::TextureView(&t.samples_view) },
                 ],
             });
             self.raycast_bg = Some((bg, host));
@@ -539,6 +553,13 @@ impl VolumeRenderer {
             cells: [vol.cells[0], vol.cells[1], vol.cells[2], gpu_volume::CELL],
             limits: [MAX_STEPS, 0, 0, 0],
         }
+    }
+
+    /// Diagnostics for benchmarks and tests: an `R32Uint` texture (the viewport's
+    /// size, `COPY_SRC`) holding the volume samples each ray took in the last
+    /// prepared frame (march and iso refinement; gradient taps excluded).
+    pub fn sample_count_texture(&self) -> Option<&wgpu::Texture> {
+        self.frame_targets.as_ref().map(|t| &t.samples)
     }
 
     /// Records the composite draw into the host's pass: premultiplied blending over
