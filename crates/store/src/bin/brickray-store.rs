@@ -1,1 +1,216 @@
-fn main() {}
+//! `brickray-store`: build a brick octree store from a volume, or describe one.
+//!
+//! ```text
+//! brickray-store build <input.json|.raw|.nrrd|.nhdr> <out.brick> [--brick N] [--apron N]
+//!                      [--filter average|max] [--empty-below V] [--memory-mib N] [--quiet]
+//! brickray-store info <store.brick> [--bins N]
+//! ```
+
+use brickray_core::{BrickSource, NodeKind};
+use brickray_store::{BuildOptions, Filter, Store};
+use rayon::prelude::*;
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+const USAGE: &str = "usage:
+  brickray-store build <input.json|.raw|.nrrd|.nhdr> <out.brick> [--brick N] [--apron N]
+                       [--filter average|max] [--empty-below V] [--memory-mib N] [--quiet]
+  brickray-store info <store.brick> [--bins N]";
+
+fn main() -> ExitCode {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let r = match args.first().map(String::as_str) {
+        Some("build") => cmd_build(&args[1..]),
+        Some("info") => cmd_info(&args[1..]),
+        Some("-h" | "--help" | "help") => {
+            println!("{USAGE}");
+            return ExitCode::SUCCESS;
+        }
+        _ => Err(USAGE.to_string()),
+    };
+    match r {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("brickray-store: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+/// Splits arguments into positionals and `--flag value` pairs.
+fn parse(args: &[String], flags: &[&str], switches: &[&str]) -> Result<(Vec<String>, Vec<(String, String)>), String> {
+    let mut pos = Vec::new();
+    let mut opts = Vec::new();
+    let mut it = args.iter();
+    while let Some(a) = it.next() {
+        if let Some(name) = a.strip_prefix("--") {
+            let (name, inline) = match name.split_once('=') {
+                Some((n, v)) => (n, Some(v.to_string())),
+                None => (name, None),
+            };
+            if switches.contains(&name) {
+                opts.push((name.to_string(), String::new()));
+            } else if flags.contains(&name) {
+                let v = match inline {
+                    Some(v) => v,
+                    None => it.next().cloned().ok_or_else(|| format!("--{name} needs a value"))?,
+                };
+                opts.push((name.to_string(), v));
+            } else {
+                return Err(format!("unknown option --{name}\n{USAGE}"));
+            }
+        } else {
+            pos.push(a.clone());
+        }
+    }
+    Ok((pos, opts))
+}
+
+fn num<T: std::str::FromStr>(name: &str, v: &str) -> Result<T, String> {
+    v.parse().map_err(|_| format!("--{name}: cannot parse {v:?}"))
+}
+
+fn cmd_build(args: &[String]) -> Result<(), String> {
+    let (pos, opts) = parse(args, &["brick", "apron", "filter", "empty-below", "memory-mib"], &["quiet"])?;
+    let [input, output] = pos.as_slice() else {
+        return Err(format!("build needs <input> <output>\n{USAGE}"));
+    };
+    let mut o = BuildOptions { progress: true, ..BuildOptions::default() };
+    for (k, v) in &opts {
+        match k.as_str() {
+            "brick" => o.brick = num(k, v)?,
+            "apron" => o.apron = num(k, v)?,
+            "filter" => o.filter = Filter::parse(v).ok_or_else(|| format!("--filter: expected average or max, got {v:?}"))?,
+            "empty-below" => o.empty_below = Some(num(k, v)?),
+            "memory-mib" => o.memory_bound = num::<u64>(k, v)? << 20,
+            "quiet" => o.progress = false,
+            _ => {}
+        }
+    }
+    let r = brickray_store::build_file(&PathBuf::from(input), &PathBuf::from(output), &o).map_err(|e| e.to_string())?;
+    println!(
+        "built {output}: {} levels, {} nodes ({} data, {} uniform, {} empty), {:.1} MiB from {:.1} MiB in {:.2} s ({:.1} Mvoxel/s)",
+        r.layout.levels,
+        r.nodes,
+        r.data_nodes,
+        r.uniform_nodes,
+        r.empty_nodes,
+        r.file_bytes as f64 / (1 << 20) as f64,
+        r.input_bytes as f64 / (1 << 20) as f64,
+        r.seconds,
+        r.input_voxels as f64 / r.seconds / 1e6
+    );
+    Ok(())
+}
+
+fn cmd_info(args: &[String]) -> Result<(), String> {
+    let (pos, opts) = parse(args, &["bins"], &[])?;
+    let [path] = pos.as_slice() else {
+        return Err(format!("info needs <store>\n{USAGE}"));
+    };
+    let mut bins = 16usize;
+    for (k, v) in &opts {
+        if k == "bins" {
+            bins = num::<usize>(k, v)?.clamp(1, 4096);
+        }
+    }
+    let store = Store::open(path).map_err(|e| e.to_string())?;
+    let lay = store.layout().clone();
+    let d = store.desc();
+    println!("store       {path}");
+    println!("volume      {}x{}x{} {}, spacing {:?}, value range {:?}", d.dims[0], d.dims[1], d.dims[2], d.dtype.name(), d.spacing, d.value_range);
+    println!("data range  {:?}", store.data_range());
+    println!(
+        "bricks      {} interior + 2x{} apron = {} stored voxels a side ({} bytes), filter {:?}, empty below {:?}",
+        lay.brick,
+        lay.apron,
+        lay.stored_side(),
+        lay.brick_bytes(),
+        store.filter(),
+        store.empty_below()
+    );
+    let s = store.stats();
+    let total: u64 = s.per_level.iter().map(|l| l[0]).sum();
+    println!("levels      {}", lay.levels);
+    println!("  level   grid            nodes      data   uniform     empty");
+    for (l, c) in s.per_level.iter().enumerate() {
+        let g = store.grid(l as u8).unwrap_or([0; 3]);
+        println!("  {l:>5}   {:<14} {:>6} {:>9} {:>9} {:>9}", format!("{}x{}x{}", g[0], g[1], g[2]), c[0], c[1], c[2], c[3]);
+    }
+    let frac = |n: u64| 100.0 * n as f64 / total.max(1) as f64;
+    println!("nodes       {total}: {:.1}% data, {:.1}% uniform, {:.1}% empty", frac(s.data), frac(s.uniform), frac(s.empty));
+    println!(
+        "size        {:.2} MiB file, {:.2} MiB payload; volume {:.2} MiB",
+        store.file_len() as f64 / (1 << 20) as f64,
+        s.payload_bytes as f64 / (1 << 20) as f64,
+        d.byte_len() as f64 / (1 << 20) as f64
+    );
+    println!(
+        "compression {:.2}x lz4 on data bricks; {:.2}x volume bytes / file bytes",
+        s.raw_payload_bytes as f64 / s.payload_bytes.max(1) as f64,
+        d.byte_len() as f64 / store.file_len().max(1) as f64
+    );
+    // Histogram of the finest level's voxels (leaf interiors inside the volume).
+    let leaf = lay.levels - 1;
+    let [lo, hi] = store.data_range();
+    let span = (hi - lo).max(f32::MIN_POSITIVE);
+    let keys: Vec<_> = store.nodes().filter(|n| n.key.level == leaf).collect();
+    let hist = keys
+        .par_iter()
+        .map(|rec| -> Result<Vec<u64>, String> {
+            let mut h = vec![0u64; bins];
+            let bin = |v: f32| (((v - lo) / span * bins as f32) as usize).min(bins - 1);
+            let b = lay.brick as u64;
+            let ext = [rec.key.x, rec.key.y, rec.key.z]
+                .map(|p| p as u64 * b)
+                .iter()
+                .zip(d.dims)
+                .map(|(&o, n)| (n as u64 - o).min(b))
+                .collect::<Vec<_>>();
+            let count = ext.iter().product::<u64>();
+            match rec.info.kind {
+                NodeKind::Uniform(v) => h[bin(v)] += count,
+                NodeKind::Empty => h[bin(lo)] += count,
+                NodeKind::Data => {
+                    let mut buf = vec![0u8; lay.brick_bytes()];
+                    store.read_brick(rec.key, &mut buf).map_err(|e| e.to_string())?;
+                    let vals = decode(d.dtype, &buf);
+                    let s = lay.stored_side() as usize;
+                    let a = lay.apron as usize;
+                    for k in 0..ext[2] as usize {
+                        for j in 0..ext[1] as usize {
+                            let row = ((k + a) * s + j + a) * s + a;
+                            for v in &vals[row..row + ext[0] as usize] {
+                                h[bin(*v)] += 1;
+                            }
+                        }
+                    }
+                }
+            }
+            Ok(h)
+        })
+        .try_reduce(|| vec![0u64; bins], |mut a, b| {
+            a.iter_mut().zip(b).for_each(|(x, y)| *x += y);
+            Ok(a)
+        })?;
+    let n: u64 = hist.iter().sum();
+    let peak = *hist.iter().max().unwrap_or(&1);
+    println!("histogram   {n} voxels, {bins} bins over the data range");
+    for (i, c) in hist.iter().enumerate() {
+        let a = lo + span * i as f32 / bins as f32;
+        let b = lo + span * (i + 1) as f32 / bins as f32;
+        let bar = "#".repeat(((*c as f64 / peak.max(1) as f64) * 40.0).round() as usize);
+        println!("  [{a:>11.4}, {b:>11.4})  {c:>12}  {:>5.1}%  {bar}", 100.0 * *c as f64 / n.max(1) as f64);
+    }
+    Ok(())
+}
+
+fn decode(dtype: brickray_core::DType, b: &[u8]) -> Vec<f32> {
+    use brickray_core::DType;
+    match dtype {
+        DType::U8 => b.iter().map(|&x| x as f32).collect(),
+        DType::U16 => b.chunks_exact(2).map(|c| u16::from_le_bytes([c[0], c[1]]) as f32).collect(),
+        DType::I16 => b.chunks_exact(2).map(|c| i16::from_le_bytes([c[0], c[1]]) as f32).collect(),
+        _ => b.chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect(),
+    }
+}
