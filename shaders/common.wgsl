@@ -1,7 +1,6 @@
 // Functions shared by brickray's ray casters. Concatenated in front of a ray-cast
-// shader that declares `params` (type Params), `tf` (array<vec4<f32>>) and the
-// sampling function `sample_value(u: vec3<f32>) -> f32` (normalized value at
-// texture coordinate u). See docs/rendering-model.md.
+// shader that declares `params` (type Params) and `tf` (array<vec4<f32>>).
+// See docs/rendering-model.md.
 
 struct Params {
     inv_view_proj: mat4x4<f32>,
@@ -23,8 +22,14 @@ struct Params {
     size: vec4<u32>,
     // xyz: macro cells per axis, w: cell size in voxels.
     cells: vec4<u32>,
-    // x: max steps per ray, yzw: unused.
+    // x: max steps per ray, y: max leaves per ray (out of core), zw: unused.
     limits: vec4<u32>,
+    // Out of core: xyz octree scale (octree coord = texture coord * scale), w: unused.
+    octree: vec4<f32>,
+    // Out of core: x interior voxels per brick, y apron, z finest level, w stored side.
+    bricks: vec4<u32>,
+    // Out of core: xyz atlas size in texels, w unused.
+    atlas: vec4<f32>,
 }
 
 const MODE_MASK: u32 = 3u;
@@ -110,20 +115,10 @@ fn tf_lookup(v: f32) -> vec4<f32> {
     return mix(tf[i], tf[j], f);
 }
 
-// World-space gradient direction (unnormalized) and the voxel-space magnitude.
-fn gradient(u: vec3<f32>) -> vec4<f32> {
-    let e = 1.0 / params.dims.xyz;
-    let gx = (sample_value(u + vec3<f32>(e.x, 0.0, 0.0)) - sample_value(u - vec3<f32>(e.x, 0.0, 0.0))) * 0.5;
-    let gy = (sample_value(u + vec3<f32>(0.0, e.y, 0.0)) - sample_value(u - vec3<f32>(0.0, e.y, 0.0))) * 0.5;
-    let gz = (sample_value(u + vec3<f32>(0.0, 0.0, e.z)) - sample_value(u - vec3<f32>(0.0, 0.0, e.z))) * 0.5;
-    let g = vec3<f32>(gx, gy, gz);
-    let gw = (params.normal_mat * vec4<f32>(g * params.dims.xyz, 0.0)).xyz;
-    return vec4<f32>(gw, length(g));
-}
-
-// Blinn-Phong with a headlight (two-sided), clamped to 0..1.
-fn shade(c: vec3<f32>, u: vec3<f32>, dir: vec3<f32>) -> vec3<f32> {
-    let g = gradient(u);
+// Blinn-Phong with a headlight (two-sided), clamped to 0..1. `g.xyz` is the
+// world-space gradient direction, `g.w` its magnitude in normalized value per
+// finest voxel (below 1e-6 the sample is left unshaded).
+fn shade(c: vec3<f32>, g: vec4<f32>, dir: vec3<f32>) -> vec3<f32> {
     if (g.w < 1e-6) {
         return c;
     }

@@ -20,6 +20,17 @@ fn sample_value(u: vec3<f32>) -> f32 {
     return textureSampleLevel(volume_tex, volume_sampler, u, 0.0).r * params.value_map.x + params.value_map.y;
 }
 
+// World-space gradient direction (unnormalized) and the voxel-space magnitude.
+fn gradient(u: vec3<f32>) -> vec4<f32> {
+    let e = 1.0 / params.dims.xyz;
+    let gx = (sample_value(u + vec3<f32>(e.x, 0.0, 0.0)) - sample_value(u - vec3<f32>(e.x, 0.0, 0.0))) * 0.5;
+    let gy = (sample_value(u + vec3<f32>(0.0, e.y, 0.0)) - sample_value(u - vec3<f32>(0.0, e.y, 0.0))) * 0.5;
+    let gz = (sample_value(u + vec3<f32>(0.0, 0.0, e.z)) - sample_value(u - vec3<f32>(0.0, 0.0, e.z))) * 0.5;
+    let g = vec3<f32>(gx, gy, gz);
+    let gw = (params.normal_mat * vec4<f32>(g * params.dims.xyz, 0.0)).xyz;
+    return vec4<f32>(gw, length(g));
+}
+
 fn cell_of(u: vec3<f32>) -> vec3<u32> {
     let c = floor(u * params.dims.xyz / f32(params.cells.w));
     return vec3<u32>(clamp(c, vec3<f32>(0.0), vec3<f32>(params.cells.xyz) - 1.0));
@@ -105,7 +116,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                     let a = 1.0 - pow(1.0 - s.a, step_factor);
                     var c = s.rgb;
                     if (shading) {
-                        c = shade(c, u, r.dir);
+                        c = shade(c, gradient(u), r.dir);
                     }
                     color = vec4<f32>(color.rgb + (1.0 - color.a) * a * c, color.a + (1.0 - color.a) * a);
                     if (!depth_set && color.a >= params.misc.y) {
@@ -118,7 +129,6 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             }
         } else if (mode == MODE_ISO) {
             let iso = params.iso.x;
-            var prev_inside = false;
             var hit = false;
             var t_lo = t0;
             var t_hi = t0;
@@ -140,7 +150,6 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                     }
                     break;
                 }
-                prev_inside = inside;
                 if (ess) {
                     let c = cell_of(u);
                     let cr = cell_range(c);
@@ -167,7 +176,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                     }
                 }
                 let th = 0.5 * (a + b);
-                let c = shade(params.iso.yzw, tex_at(r, th), r.dir);
+                let c = shade(params.iso.yzw, gradient(tex_at(r, th)), r.dir);
                 color = vec4<f32>(c, 1.0);
                 depth = depth_at(r, th);
             }

@@ -6,8 +6,8 @@
 //! ERT+ESS vs brute force on the GPU >= 50 dB.
 
 use brickray::{
-    Accel, Camera, FrameDesc, Projection, RenderError, RenderMode, RenderSettings, Shading, TargetDesc,
-    TransferFunction, Volume, VolumeFrame, VolumeRenderer,
+    Accel, Camera, FrameDesc, Projection, RenderError, RenderMode, RenderSettings, Shading,
+    TargetDesc, TransferFunction, Volume, VolumeFrame, VolumeRenderer,
 };
 use brickray_harness::{GpuContext, HostQuad, Offscreen};
 use brickray_reference::{ReferenceOptions, assert_close, render_reference};
@@ -24,7 +24,10 @@ fn gpu() -> &'static GpuContext {
 }
 
 fn targets() -> TargetDesc {
-    TargetDesc { color_format: brickray_harness::COLOR_FORMAT, depth_format: Some(brickray_harness::DEPTH_FORMAT) }
+    TargetDesc {
+        color_format: brickray_harness::COLOR_FORMAT,
+        depth_format: Some(brickray_harness::DEPTH_FORMAT),
+    }
 }
 
 struct Scene<'a> {
@@ -37,7 +40,12 @@ struct Scene<'a> {
 }
 
 impl Scene<'_> {
-    fn new<'a>(vol: &'a Volume, tf: &'a TransferFunction, mode: RenderMode, size: u32) -> Scene<'a> {
+    fn new<'a>(
+        vol: &'a Volume,
+        tf: &'a TransferFunction,
+        mode: RenderMode,
+        size: u32,
+    ) -> Scene<'a> {
         let d = vol.desc();
         let frame = VolumeFrame::centered(d.dims, d.spacing);
         Scene {
@@ -45,7 +53,10 @@ impl Scene<'_> {
             tf,
             frame,
             camera: Camera::orbit(frame.center(), 2.0, 0.5, 0.3),
-            settings: RenderSettings { mode, ..Default::default() },
+            settings: RenderSettings {
+                mode,
+                ..Default::default()
+            },
             size,
         }
     }
@@ -90,8 +101,13 @@ impl Scene<'_> {
     fn check_reference(&self, name: &str, min_db: f64) {
         let (gpu, _) = self.gpu();
         let cpu = self.reference();
-        assert!(gpu.chunks_exact(4).any(|p| p[0] > 10 || p[1] > 10 || p[2] > 10), "{name}: GPU image is black");
-        let cmp = assert_close(name, &gpu, &cpu, self.size, self.size, min_db).unwrap_or_else(|e| panic!("{e}"));
+        assert!(
+            gpu.chunks_exact(4)
+                .any(|p| p[0] > 10 || p[1] > 10 || p[2] > 10),
+            "{name}: GPU image is black"
+        );
+        let cmp = assert_close(name, &gpu, &cpu, self.size, self.size, min_db)
+            .unwrap_or_else(|e| panic!("{e}"));
         eprintln!("{name}: {cmp}");
     }
 }
@@ -107,7 +123,13 @@ fn gray_ramp() -> TransferFunction {
     TransferFunction::ramp(0.0, 1.0, 1.0)
 }
 
-const SHADED: Shading = Shading { enabled: true, ambient: 0.3, diffuse: 0.7, specular: 0.2, shininess: 24.0 };
+const SHADED: Shading = Shading {
+    enabled: true,
+    ambient: 0.3,
+    diffuse: 0.7,
+    specular: 0.2,
+    shininess: 24.0,
+};
 
 #[test]
 fn head_ct_dvr_matches_reference() {
@@ -122,7 +144,15 @@ fn head_ct_dvr_matches_reference() {
 fn head_ct_iso_matches_reference() {
     let Some(vol) = head_ct() else { return };
     let tf = bone_tf();
-    let s = Scene::new(&vol, &tf, RenderMode::Iso { value: hu(400.0), color: [0.9, 0.85, 0.75] }, 256);
+    let s = Scene::new(
+        &vol,
+        &tf,
+        RenderMode::Iso {
+            value: hu(400.0),
+            color: [0.9, 0.85, 0.75],
+        },
+        256,
+    );
     s.check_reference("head_ct_iso", 40.0);
 }
 
@@ -142,9 +172,14 @@ fn other_shared_volumes_match_reference() {
         ("cells3d_nuclei_fluo", RenderMode::Dvr, 0.15, 0.6),
         ("cryoet_tomo", RenderMode::Mip, 0.4, 0.9),
     ] {
-        let Some(path) = brickray_harness::shared_volume(name) else { return };
+        let Some(path) = brickray_harness::shared_volume(name) else {
+            return;
+        };
         let vol = brickray::io::read_volume(path).unwrap();
-        let tf = TransferFunction::from_points(&[(lo, [0.2, 0.5, 1.0, 0.0]), (hi, [1.0, 0.9, 0.7, 0.4])], 256);
+        let tf = TransferFunction::from_points(
+            &[(lo, [0.2, 0.5, 1.0, 0.0]), (hi, [1.0, 0.9, 0.7, 0.4])],
+            256,
+        );
         let mut s = Scene::new(&vol, &tf, mode, 128);
         s.settings.shading = SHADED;
         s.check_reference(name, 40.0);
@@ -155,9 +190,20 @@ fn other_shared_volumes_match_reference() {
 fn synthetic_volumes_match_reference() {
     let sphere = brickray_core::synthetic::sphere(48);
     let ml = brickray_core::synthetic::marschner_lobb(64);
-    let tf = TransferFunction::from_points(&[(0.2, [0.3, 0.6, 1.0, 0.0]), (0.9, [1.0, 0.8, 0.5, 0.5])], 256);
+    let tf = TransferFunction::from_points(
+        &[(0.2, [0.3, 0.6, 1.0, 0.0]), (0.9, [1.0, 0.8, 0.5, 0.5])],
+        256,
+    );
     // Orthographic iso of the sphere.
-    let mut s = Scene::new(&sphere, &tf, RenderMode::Iso { value: 0.5, color: [0.8, 0.8, 0.8] }, 96);
+    let mut s = Scene::new(
+        &sphere,
+        &tf,
+        RenderMode::Iso {
+            value: 0.5,
+            color: [0.8, 0.8, 0.8],
+        },
+        96,
+    );
     s.camera.projection = Projection::Orthographic { height: 1.5 };
     s.check_reference("sphere_iso_ortho", 40.0);
     // DVR of Marschner-Lobb, shaded.
@@ -167,7 +213,15 @@ fn synthetic_volumes_match_reference() {
     // The camera inside the volume. Marschner-Lobb's shells are thinner than the
     // default half-voxel step at grazing angles (at 0.5 a few silhouette pixels
     // miss a crossing the reference finds: 38.8 dB), so this case samples at 0.25.
-    let mut s = Scene::new(&ml, &tf, RenderMode::Iso { value: 0.5, color: [0.9, 0.7, 0.5] }, 96);
+    let mut s = Scene::new(
+        &ml,
+        &tf,
+        RenderMode::Iso {
+            value: 0.5,
+            color: [0.9, 0.7, 0.5],
+        },
+        96,
+    );
     s.camera = Camera::orbit(s.frame.center(), 0.3, 0.4, 0.2);
     s.settings.step_factor = 0.25;
     s.check_reference("ml_iso_inside", 40.0);
@@ -188,13 +242,27 @@ fn accelerations_preserve_the_image() {
         }
     };
     let is_ct = vol.desc().dtype == brickray::DType::I16;
-    let (bone, soft) = if is_ct { (bone_tf(), soft_tissue_tf()) } else { (TransferFunction::ramp(0.5, 0.6, 1.0), TransferFunction::ramp(0.3, 1.0, 0.1)) };
+    let (bone, soft) = if is_ct {
+        (bone_tf(), soft_tissue_tf())
+    } else {
+        (
+            TransferFunction::ramp(0.5, 0.6, 1.0),
+            TransferFunction::ramp(0.3, 1.0, 0.1),
+        )
+    };
     let iso = if is_ct { hu(400.0) } else { 0.5 };
     let ramp = gray_ramp();
     let cases: [(&str, RenderMode, &TransferFunction); 4] = [
         ("opaque", RenderMode::Dvr, &bone),
         ("translucent", RenderMode::Dvr, &soft),
-        ("iso", RenderMode::Iso { value: iso, color: [0.9, 0.9, 0.9] }, &bone),
+        (
+            "iso",
+            RenderMode::Iso {
+                value: iso,
+                color: [0.9, 0.9, 0.9],
+            },
+            &bone,
+        ),
         ("mip", RenderMode::Mip, &ramp),
     ];
     for (name, mode, tf) in cases {
@@ -203,14 +271,33 @@ fn accelerations_preserve_the_image() {
         s.settings.accel = Accel::BRUTE_FORCE;
         let (brute, _) = s.gpu();
         for (label, accel) in [
-            ("ert", Accel { early_termination: Some(0.99), empty_space_skipping: false }),
-            ("ess", Accel { early_termination: None, empty_space_skipping: true }),
+            (
+                "ert",
+                Accel {
+                    early_termination: Some(0.99),
+                    empty_space_skipping: false,
+                },
+            ),
+            (
+                "ess",
+                Accel {
+                    early_termination: None,
+                    empty_space_skipping: true,
+                },
+            ),
             ("both", Accel::default()),
         ] {
             s.settings.accel = accel;
             let (fast, _) = s.gpu();
-            let cmp = assert_close(&format!("accel_{name}_{label}"), &fast, &brute, 128, 128, 50.0)
-                .unwrap_or_else(|e| panic!("{e}"));
+            let cmp = assert_close(
+                &format!("accel_{name}_{label}"),
+                &fast,
+                &brute,
+                128,
+                128,
+                50.0,
+            )
+            .unwrap_or_else(|e| panic!("{e}"));
             eprintln!("accel {name} {label}: {cmp}");
         }
     }
@@ -226,7 +313,15 @@ fn host_depth_composites_both_ways() {
     let vol = brickray_core::synthetic::sphere(48);
     let tf = TransferFunction::ramp(0.1, 0.5, 0.5);
     let size = 96u32;
-    let mut s = Scene::new(&vol, &tf, RenderMode::Iso { value: 0.5, color: [0.8, 0.8, 0.8] }, size);
+    let mut s = Scene::new(
+        &vol,
+        &tf,
+        RenderMode::Iso {
+            value: 0.5,
+            color: [0.8, 0.8, 0.8],
+        },
+        size,
+    );
     s.camera = Camera::orbit(s.frame.center(), 2.0, 0.0, 0.0);
     let vp = s.camera.view_proj(1.0);
     // Clip depths of points in front of and behind the volume centre.
@@ -244,8 +339,20 @@ fn host_depth_composites_both_ways() {
     let mut enc = g.device.create_command_encoder(&Default::default());
     {
         let mut pass = target.pass(&mut enc, true);
-        quads.draw(&g.device, &mut pass, [-1.0, -1.0, -0.2, 1.0], d_front, [1.0, 0.0, 0.0, 1.0]);
-        quads.draw(&g.device, &mut pass, [0.2, -1.0, 1.0, 1.0], d_back, [0.0, 0.0, 1.0, 1.0]);
+        quads.draw(
+            &g.device,
+            &mut pass,
+            [-1.0, -1.0, -0.2, 1.0],
+            d_front,
+            [1.0, 0.0, 0.0, 1.0],
+        );
+        quads.draw(
+            &g.device,
+            &mut pass,
+            [0.2, -1.0, 1.0, 1.0],
+            d_back,
+            [0.0, 0.0, 1.0, 1.0],
+        );
     }
     g.submit_wait(enc);
     let host_rgba = target.read_color(g);
@@ -281,37 +388,75 @@ fn host_depth_composites_both_ways() {
     for (i, p) in img.color.iter().enumerate() {
         for k in 0..3 {
             let host = host_rgba[4 * i + k] as f32 / 255.0;
-            expected[4 * i + k] = ((p[k] + (1.0 - p[3]) * host).clamp(0.0, 1.0) * 255.0).round() as u8;
+            expected[4 * i + k] =
+                ((p[k] + (1.0 - p[3]) * host).clamp(0.0, 1.0) * 255.0).round() as u8;
         }
     }
-    let cmp = assert_close("host_depth", &gpu_rgba, &expected, size, size, 40.0).unwrap_or_else(|e| panic!("{e}"));
+    let cmp = assert_close("host_depth", &gpu_rgba, &expected, size, size, 40.0)
+        .unwrap_or_else(|e| panic!("{e}"));
     eprintln!("host depth: {cmp}");
     // Both ways, explicitly: the centre row shows red (front quad) on the left,
     // the volume in the middle, and the volume over the back quad on the right edge
     // of the sphere, blue beyond it.
-    let px = |x: u32, y: u32| &gpu_rgba[(4 * (y * size + x)) as usize..(4 * (y * size + x) + 3) as usize];
+    let px = |x: u32, y: u32| {
+        &gpu_rgba[(4 * (y * size + x)) as usize..(4 * (y * size + x) + 3) as usize]
+    };
     let mid = size / 2;
-    assert_eq!(px(5, mid), [255, 0, 0], "front quad must occlude the volume");
-    assert!(px(mid, mid)[0] > 100 && px(mid, mid)[2] > 100, "volume visible in the middle");
-    assert_eq!(px(size - 3, mid), [0, 0, 255], "back quad visible beside the volume");
-    let sphere_right = (mid..size).rev().find(|&x| px(x, mid) != [0, 0, 255]).unwrap();
-    assert!(sphere_right > (size as f32 * 0.6) as u32, "the volume must cover the back quad");
+    assert_eq!(
+        px(5, mid),
+        [255, 0, 0],
+        "front quad must occlude the volume"
+    );
+    assert!(
+        px(mid, mid)[0] > 100 && px(mid, mid)[2] > 100,
+        "volume visible in the middle"
+    );
+    assert_eq!(
+        px(size - 3, mid),
+        [0, 0, 255],
+        "back quad visible beside the volume"
+    );
+    let sphere_right = (mid..size)
+        .rev()
+        .find(|&x| px(x, mid) != [0, 0, 255])
+        .unwrap();
+    assert!(
+        sphere_right > (size as f32 * 0.6) as u32,
+        "the volume must cover the back quad"
+    );
     // Depth written: min(host, volume) everywhere.
     for i in 0..(size * size) as usize {
-        assert!(gpu_depth[i] <= host_depth[i] + 1e-6, "depth must never move back");
-        assert!((gpu_depth[i] - img.depth[i].min(host_depth[i])).abs() < 2e-3 || img.color[i][3] < 0.5,
-            "pixel {i}: depth {} vs reference {}", gpu_depth[i], img.depth[i]);
+        assert!(
+            gpu_depth[i] <= host_depth[i] + 1e-6,
+            "depth must never move back"
+        );
+        assert!(
+            (gpu_depth[i] - img.depth[i].min(host_depth[i])).abs() < 2e-3 || img.color[i][3] < 0.5,
+            "pixel {i}: depth {} vs reference {}",
+            gpu_depth[i],
+            img.depth[i]
+        );
     }
     // Geometry drawn after the volume is hidden where the volume is in front of it.
     let mut enc = g.device.create_command_encoder(&Default::default());
     {
         let mut pass = target.pass(&mut enc, false);
-        quads.draw(&g.device, &mut pass, [-0.2, -0.1, 0.2, 0.1], depth_of(0.0), [0.0, 1.0, 0.0, 1.0]);
+        quads.draw(
+            &g.device,
+            &mut pass,
+            [-0.2, -0.1, 0.2, 0.1],
+            depth_of(0.0),
+            [0.0, 1.0, 0.0, 1.0],
+        );
     }
     g.submit_wait(enc);
     let after = target.read_color(g);
     let c = &after[(4 * (mid * size + mid)) as usize..][..3];
-    assert_ne!(c, [0, 255, 0], "a quad at the sphere's centre drawn later must be hidden by the surface");
+    assert_ne!(
+        c,
+        [0, 255, 0],
+        "a quad at the sphere's centre drawn later must be hidden by the surface"
+    );
 }
 
 /// Anisotropic spacing keeps physical proportions: a 32x32x8 slab of spacing
@@ -320,11 +465,24 @@ fn host_depth_composites_both_ways() {
 fn anisotropic_spacing_keeps_proportions() {
     let dims = [32u32, 32, 8];
     let data = vec![200u8; (dims[0] * dims[1] * dims[2]) as usize];
-    let desc = brickray::VolumeDesc { dims, dtype: brickray::DType::U8, spacing: [1.0, 1.0, 4.0], value_range: [0.0, 255.0] };
+    let desc = brickray::VolumeDesc {
+        dims,
+        dtype: brickray::DType::U8,
+        spacing: [1.0, 1.0, 4.0],
+        value_range: [0.0, 255.0],
+    };
     let vol = Volume::new(desc, brickray::core::VolumeData::U8(data)).unwrap();
     let tf = TransferFunction::ramp(0.0, 0.5, 1.0);
     let size = 64;
-    let mut s = Scene::new(&vol, &tf, RenderMode::Iso { value: 0.5, color: [1.0; 3] }, size);
+    let mut s = Scene::new(
+        &vol,
+        &tf,
+        RenderMode::Iso {
+            value: 0.5,
+            color: [1.0; 3],
+        },
+        size,
+    );
     // Look along -y: x is horizontal, z vertical.
     s.camera = Camera {
         eye: s.frame.center() + Vec3::new(0.0, 3.0, 0.0),
@@ -339,10 +497,18 @@ fn anisotropic_spacing_keeps_proportions() {
         .filter(|i| rgba[(4 * i) as usize] > 0)
         .map(|i| (i % size, i / size))
         .collect();
-    let w = covered.iter().map(|p| p.0).max().unwrap() - covered.iter().map(|p| p.0).min().unwrap() + 1;
-    let h = covered.iter().map(|p| p.1).max().unwrap() - covered.iter().map(|p| p.1).min().unwrap() + 1;
-    assert!((w as i32 - h as i32).abs() <= 1, "silhouette {w}x{h} should be square");
-    assert!((38..=42).contains(&w), "silhouette width {w} should be 40 px (1.0 of a 1.6-high view)");
+    let w =
+        covered.iter().map(|p| p.0).max().unwrap() - covered.iter().map(|p| p.0).min().unwrap() + 1;
+    let h =
+        covered.iter().map(|p| p.1).max().unwrap() - covered.iter().map(|p| p.1).min().unwrap() + 1;
+    assert!(
+        (w as i32 - h as i32).abs() <= 1,
+        "silhouette {w}x{h} should be square"
+    );
+    assert!(
+        (38..=42).contains(&w),
+        "silhouette width {w} should be 40 px (1.0 of a 1.6-high view)"
+    );
 }
 
 #[test]
@@ -361,7 +527,10 @@ fn typed_errors_not_panics() {
         host_depth: None,
     };
     let mut enc = g.device.create_command_encoder(&Default::default());
-    assert!(matches!(r.prepare(&g.device, &g.queue, &mut enc, &desc), Err(brickray::PrepareError::NoVolume)));
+    assert!(matches!(
+        r.prepare(&g.device, &g.queue, &mut enc, &desc),
+        Err(brickray::PrepareError::NoVolume)
+    ));
     // A volume beyond the 3D texture limit.
     let limit = g.device.limits().max_texture_dimension_3d;
     let desc_big = brickray::VolumeDesc {
@@ -370,21 +539,43 @@ fn typed_errors_not_panics() {
         spacing: [1.0; 3],
         value_range: [0.0, 255.0],
     };
-    let big = Volume::new(desc_big, brickray::core::VolumeData::U8(vec![0; limit as usize + 1])).unwrap();
+    let big = Volume::new(
+        desc_big,
+        brickray::core::VolumeData::U8(vec![0; limit as usize + 1]),
+    )
+    .unwrap();
     assert!(matches!(
         r.set_volume(&g.device, &g.queue, &big),
         Err(RenderError::VolumeTooLarge { limit: l, .. }) if l == limit
     ));
     // No TF yet, then a zero viewport, then a bad step.
     r.set_volume(&g.device, &g.queue, &vol).unwrap();
-    assert!(matches!(r.prepare(&g.device, &g.queue, &mut enc, &desc), Err(brickray::PrepareError::BadSetting(_))));
+    assert!(matches!(
+        r.prepare(&g.device, &g.queue, &mut enc, &desc),
+        Err(brickray::PrepareError::BadSetting(_))
+    ));
     r.set_transfer_function(&g.device, &g.queue, &gray_ramp());
-    let zero = FrameDesc { width: 0, ..desc.clone() };
-    assert!(matches!(r.prepare(&g.device, &g.queue, &mut enc, &zero), Err(brickray::PrepareError::BadViewport { .. })));
+    let zero = FrameDesc {
+        width: 0,
+        ..desc.clone()
+    };
+    assert!(matches!(
+        r.prepare(&g.device, &g.queue, &mut enc, &zero),
+        Err(brickray::PrepareError::BadViewport { .. })
+    ));
     let mut bad = desc.clone();
     bad.settings.step_factor = f32::NAN;
-    assert!(matches!(r.prepare(&g.device, &g.queue, &mut enc, &bad), Err(brickray::PrepareError::BadSetting(_))));
+    assert!(matches!(
+        r.prepare(&g.device, &g.queue, &mut enc, &bad),
+        Err(brickray::PrepareError::BadSetting(_))
+    ));
     // A non-blendable target format.
-    let t = TargetDesc { color_format: wgpu::TextureFormat::R32Uint, depth_format: None };
-    assert!(matches!(VolumeRenderer::new(&g.device, t), Err(RenderError::BadTargetFormat(_))));
+    let t = TargetDesc {
+        color_format: wgpu::TextureFormat::R32Uint,
+        depth_format: None,
+    };
+    assert!(matches!(
+        VolumeRenderer::new(&g.device, t),
+        Err(RenderError::BadTargetFormat(_))
+    ));
 }

@@ -3,16 +3,28 @@
 //!
 //! This facade re-exports the public API of the workspace's crates:
 //! * [`core`]: volumes and their readers, transfer functions, cameras, settings;
+//! * [`store`]: the brick-octree file format, its builder and reader, and the
+//!   procedural source of virtual volumes;
+//! * [`cache`]: CPU and GPU brick caches, the asynchronous loader, refinement;
+//! * [`index`]: the octree-with-ropes index over a cut, and the CPU twin of the
+//!   GPU traversal;
 //! * [`render`]: the [`VolumeRenderer`] middleware (takes `&Device`, `&Queue` and
 //!   target formats; `prepare` records GPU work, `render` draws into the host's
 //!   pass and writes depth).
 
+pub use brickray_cache as cache;
 pub use brickray_core as core;
+pub use brickray_index as index;
 pub use brickray_render as render;
+pub use brickray_store as store;
 
 pub use brickray_core::{
-    Accel, Camera, DType, Projection, RenderMode, RenderSettings, Shading, TransferFunction, Volume, VolumeDesc,
-    VolumeFrame, io,
+    Accel, Camera, DType, Projection, RenderMode, RenderSettings, Shading, TransferFunction,
+    Volume, VolumeDesc, VolumeFrame, io,
 };
-pub use brickray_render::{FrameDesc, FrameStats, PrepareError, RenderError, TargetDesc, VolumeRenderer};
+pub use brickray_core::{BrickSource, NodeKey, OctreeLayout};
+pub use brickray_render::{
+    FrameDesc, FrameStats, OutOfCoreConfig, OutOfCoreStats, PrepareError, RenderError, TargetDesc,
+    VolumeRenderer,
+};
 pub use wgpu;

@@ -98,7 +98,9 @@ impl CpuCache {
         self.order.insert(t, key);
         let mut evicted = Vec::new();
         while self.bytes > self.budget && self.map.len() > 1 {
-            let Some((_, victim)) = self.order.pop_first() else { break };
+            let Some((_, victim)) = self.order.pop_first() else {
+                break;
+            };
             if let Some(e) = self.map.remove(&victim) {
                 self.bytes -= e.data.len();
             }
@@ -159,7 +161,11 @@ impl CpuCache {
     /// `hits / (hits + misses)`, 1 when nothing was looked up.
     pub fn hit_rate(&self) -> f64 {
         let n = self.hits + self.misses;
-        if n == 0 { 1.0 } else { self.hits as f64 / n as f64 }
+        if n == 0 {
+            1.0
+        } else {
+            self.hits as f64 / n as f64
+        }
     }
 }
 

@@ -27,8 +27,8 @@ mod test_source;
 pub use cpu_cache::{BrickBytes, CpuCache};
 pub use loader::{LoadError, Loader, LoaderConfig, PollReport, RequestOutcome};
 pub use manager::{
-    BrickManager, CacheError, CutLeaf, FramePlan, FrameStats, LeafKind, ManagerConfig, Residency, ResidencyCounts,
-    Upload,
+    BrickManager, CacheError, CutLeaf, FramePlan, FrameStats, LeafKind, ManagerConfig, Residency,
+    ResidencyCounts, Upload,
 };
 pub use pool::{Allocation, BrickPool, PoolError, PoolLimits, SlotId};
 pub use refine::{EmptyReason, NodeClass};

@@ -58,8 +58,15 @@ struct QueueKey {
 fn queue_key(priority: f32, seq: u64) -> QueueKey {
     // Map f32 to u32 preserving total order, then invert.
     let b = priority.to_bits();
-    let ordered = if b & 0x8000_0000 != 0 { !b } else { b | 0x8000_0000 };
-    QueueKey { neg_priority: !ordered, seq }
+    let ordered = if b & 0x8000_0000 != 0 {
+        !b
+    } else {
+        b | 0x8000_0000
+    };
+    QueueKey {
+        neg_priority: !ordered,
+        seq,
+    }
 }
 
 #[derive(Debug, Default)]
@@ -159,11 +166,20 @@ impl Loader {
     /// Starts `config.workers` threads (at least one) reading from `source`.
     /// Fails only when the OS refuses a thread.
     pub fn new(source: Arc<dyn BrickSource>, config: LoaderConfig) -> std::io::Result<Loader> {
-        let shared = Arc::new(Shared { queue: Mutex::new(Queue::default()), wake: Condvar::new() });
+        let shared = Arc::new(Shared {
+            queue: Mutex::new(Queue::default()),
+            wake: Condvar::new(),
+        });
         let (tx, rx) = crossbeam_channel::unbounded();
         let brick_bytes = source.layout().brick_bytes();
-        let mut loader =
-            Loader { shared, workers: Vec::new(), done: rx, failed: HashMap::new(), brick_bytes, loaded_total: 0 };
+        let mut loader = Loader {
+            shared,
+            workers: Vec::new(),
+            done: rx,
+            failed: HashMap::new(),
+            brick_bytes,
+            loaded_total: 0,
+        };
         for i in 0..config.workers.max(1) {
             let shared = loader.shared.clone();
             let source = source.clone();
@@ -192,17 +208,29 @@ impl Loader {
         q.push(key, priority);
         drop(q);
         self.shared.wake.notify_one();
-        if was { RequestOutcome::Reprioritized } else { RequestOutcome::Queued }
+        if was {
+            RequestOutcome::Reprioritized
+        } else {
+            RequestOutcome::Queued
+        }
     }
 
     /// Replaces the wanted set: queues or re-prioritises every listed node and
     /// cancels every queued node not listed. Returns how many were cancelled.
     pub fn submit(&self, wanted: &[(NodeKey, f32)]) -> usize {
-        let wanted: Vec<(NodeKey, f32)> =
-            wanted.iter().copied().filter(|(k, _)| !self.failed.contains_key(k)).collect();
+        let wanted: Vec<(NodeKey, f32)> = wanted
+            .iter()
+            .copied()
+            .filter(|(k, _)| !self.failed.contains_key(k))
+            .collect();
         let keep: HashSet<NodeKey> = wanted.iter().map(|w| w.0).collect();
         let mut q = self.shared.queue.lock();
-        let stale: Vec<NodeKey> = q.queued.keys().filter(|k| !keep.contains(k)).copied().collect();
+        let stale: Vec<NodeKey> = q
+            .queued
+            .keys()
+            .filter(|k| !keep.contains(k))
+            .copied()
+            .collect();
         for k in &stale {
             q.cancel(*k);
         }
@@ -349,7 +377,9 @@ fn worker(shared: &Shared, source: &dyn BrickSource, tx: &Sender<Completion>, br
         };
         let res = std::panic::catch_unwind(AssertUnwindSafe(|| {
             let mut buf = vec![0u8; brick_bytes];
-            source.read_brick(key, &mut buf).map(|()| BrickBytes::from(buf))
+            source
+                .read_brick(key, &mut buf)
+                .map(|()| BrickBytes::from(buf))
         }));
         let res = match res {
             Ok(r) => r.map_err(LoadError::from),
@@ -378,11 +408,18 @@ mod tests {
     }
 
     /// Polls until `done` holds, failing after 5 s.
-    fn poll_until(loader: &mut Loader, cache: &mut CpuCache, mut done: impl FnMut(&Loader, &CpuCache) -> bool) {
+    fn poll_until(
+        loader: &mut Loader,
+        cache: &mut CpuCache,
+        mut done: impl FnMut(&Loader, &CpuCache) -> bool,
+    ) {
         let t = Instant::now();
         while !done(loader, cache) {
             loader.poll(cache);
-            assert!(t.elapsed() < Duration::from_secs(5), "timed out: {loader:?}");
+            assert!(
+                t.elapsed() < Duration::from_secs(5),
+                "timed out: {loader:?}"
+            );
             std::thread::sleep(Duration::from_millis(1));
         }
     }
@@ -396,7 +433,9 @@ mod tests {
         for (i, key) in keys.iter().enumerate() {
             assert_eq!(loader.request(*key, i as f32), RequestOutcome::Queued);
         }
-        poll_until(&mut loader, &mut cache, |l, c| keys.iter().all(|k| c.contains(*k)) && l.loading() == 0);
+        poll_until(&mut loader, &mut cache, |l, c| {
+            keys.iter().all(|k| c.contains(*k)) && l.loading() == 0
+        });
         for key in &keys {
             let b = cache.peek(*key).unwrap();
             assert_eq!(b.len(), src.layout.brick_bytes());
@@ -424,7 +463,9 @@ mod tests {
         assert_eq!(loader.request(gate, 1.0), RequestOutcome::Loading);
         assert_eq!(loader.queued(), 6);
         src.open_gate();
-        poll_until(&mut loader, &mut cache, |l, _| l.queued() == 0 && l.loading() == 0);
+        poll_until(&mut loader, &mut cache, |l, _| {
+            l.queued() == 0 && l.loading() == 0
+        });
         let xs: Vec<u32> = src.reads().iter().skip(1).map(|k| k.x).collect();
         assert_eq!(xs, vec![0, 5, 4, 3, 2, 1]);
     }
@@ -446,7 +487,9 @@ mod tests {
         assert!(loader.cancel(k(3, 4)));
         assert!(!loader.cancel(k(3, 4)));
         src.open_gate();
-        poll_until(&mut loader, &mut cache, |l, _| l.queued() == 0 && l.loading() == 0);
+        poll_until(&mut loader, &mut cache, |l, _| {
+            l.queued() == 0 && l.loading() == 0
+        });
         assert_eq!(src.reads(), vec![gate, k(3, 1)]);
         assert!(cache.contains(k(3, 1)) && !cache.contains(k(3, 4)));
     }
@@ -462,13 +505,18 @@ mod tests {
         for x in 0..3 {
             loader.request(k(2, x), 1.0);
         }
-        poll_until(&mut loader, &mut cache, |l, _| l.failed_count() == 2 && l.loading() == 0 && l.queued() == 0);
+        poll_until(&mut loader, &mut cache, |l, _| {
+            l.failed_count() == 2 && l.loading() == 0 && l.queued() == 0
+        });
         assert!(cache.contains(k(2, 0)));
         assert!(matches!(
             loader.failure(k(2, 1)).map(|e| &**e),
             Some(LoadError::Source(BrickError::Io { .. }))
         ));
-        assert!(matches!(loader.failure(k(2, 2)).map(|e| &**e), Some(LoadError::Panicked { .. })));
+        assert!(matches!(
+            loader.failure(k(2, 2)).map(|e| &**e),
+            Some(LoadError::Panicked { .. })
+        ));
         // Failed nodes are not re-queued until retried.
         assert_eq!(loader.request(k(2, 1), 1.0), RequestOutcome::Failed);
         assert!(loader.retry(k(2, 1)).is_some());
@@ -484,8 +532,9 @@ mod tests {
         src.delay = Duration::from_millis(10);
         let src = Arc::new(src);
         let loader = Loader::new(src.clone(), LoaderConfig { workers: 3 }).unwrap();
-        let wanted: Vec<(NodeKey, f32)> =
-            (0..256).map(|x| (NodeKey::new(4, x % 16, x / 16, 0), x as f32)).collect();
+        let wanted: Vec<(NodeKey, f32)> = (0..256)
+            .map(|x| (NodeKey::new(4, x % 16, x / 16, 0), x as f32))
+            .collect();
         loader.submit(&wanted);
         let t = Instant::now();
         while loader.loading() == 0 {

@@ -6,9 +6,13 @@
 use crate::cpu_cache::{BrickBytes, CpuCache};
 use crate::loader::{LoadError, Loader, LoaderConfig};
 use crate::pool::{BrickPool, PoolError, PoolLimits, SlotId};
-use crate::refine::{DataState, EmptyReason, NodeClass, RefineEnv, RefineParams, SplitBlocks, refine};
+use crate::refine::{
+    DataState, EmptyReason, NodeClass, RefineEnv, RefineParams, SplitBlocks, refine,
+};
 use crate::upload::UploadBudget;
-use brickray_core::{BrickSource, Camera, NodeInfo, NodeKey, OctreeLayout, RenderMode, TransferFunction, VolumeFrame};
+use brickray_core::{
+    BrickSource, Camera, NodeInfo, NodeKey, OctreeLayout, RenderMode, TransferFunction, VolumeFrame,
+};
 use std::collections::HashMap;
 use std::sync::Arc;
 use thiserror::Error;
@@ -328,17 +332,28 @@ impl BrickManager {
                     }
                 },
             };
-            cut.push(CutLeaf { key: l.key, kind, priority: l.priority });
+            cut.push(CutLeaf {
+                key: l.key,
+                kind,
+                priority: l.priority,
+            });
         }
         let mut uploads = Vec::with_capacity(pending.len());
         let mut allocation_failures = 0u32;
         for i in pending {
             let key = cut[i].key;
-            let Some(data) = self.cpu.peek(key).cloned() else { continue };
+            let Some(data) = self.cpu.peek(key).cloned() else {
+                continue;
+            };
             match self.pool.allocate(key, frame) {
                 Ok(a) => {
                     cut[i].kind = LeafKind::Data { slot: a.slot };
-                    uploads.push(Upload { key, slot: a.slot, atlas_offset: self.pool.slot_offset(a.slot), data });
+                    uploads.push(Upload {
+                        key,
+                        slot: a.slot,
+                        atlas_offset: self.pool.slot_offset(a.slot),
+                        data,
+                    });
                 }
                 // Refinement keeps data leaves within the slot count, so this only
                 // happens when `frame` repeats and an earlier plan of the same frame
@@ -350,7 +365,10 @@ impl BrickManager {
         // Loads wanted this frame; queued ones no longer wanted are dropped.
         self.loader.submit(&refined.requests);
 
-        let working = cut.iter().filter(|l| matches!(l.kind, LeafKind::Data { .. })).count() as u32;
+        let working = cut
+            .iter()
+            .filter(|l| matches!(l.kind, LeafKind::Data { .. }))
+            .count() as u32;
         let residency = self.residency_counts();
         let stats = FrameStats {
             frame,
@@ -360,7 +378,11 @@ impl BrickManager {
             pool_occupied: self.pool.occupied(),
             upload_bricks: uploads.len() as u32,
             upload_bytes: uploads.iter().map(|u| u.data.len() as u64).sum(),
-            gpu_hit_rate: if working == 0 { 1.0 } else { resident as f64 / working as f64 },
+            gpu_hit_rate: if working == 0 {
+                1.0
+            } else {
+                resident as f64 / working as f64
+            },
             cpu_hit_rate: self.cpu.hit_rate(),
             requests_in_flight: residency.requested + residency.loading,
             requested_this_frame: refined.requests.len() as u32,
@@ -368,7 +390,11 @@ impl BrickManager {
             blocked: refined.blocked,
             allocation_failures,
         };
-        FramePlan { cut, uploads, stats }
+        FramePlan {
+            cut,
+            uploads,
+            stats,
+        }
     }
 
     /// The residency of a node's brick, `None` when it is nowhere.
@@ -391,7 +417,11 @@ impl BrickManager {
     /// Nodes per residency state (each node counted once, in its most GPU-ward state).
     pub fn residency_counts(&self) -> ResidencyCounts {
         let on_gpu = self.pool.occupied();
-        let in_cpu = self.pool.resident().filter(|(k, _)| self.cpu.contains(*k)).count() as u32;
+        let in_cpu = self
+            .pool
+            .resident()
+            .filter(|(k, _)| self.cpu.contains(*k))
+            .count() as u32;
         ResidencyCounts {
             requested: self.loader.queued() as u32,
             loading: self.loader.loading() as u32,
@@ -475,7 +505,11 @@ mod tests {
     }
 
     fn config() -> ManagerConfig {
-        ManagerConfig { cpu_budget_bytes: 4 << 20, gpu_budget_bytes: 1 << 20, ..ManagerConfig::default() }
+        ManagerConfig {
+            cpu_budget_bytes: 4 << 20,
+            gpu_budget_bytes: 1 << 20,
+            ..ManagerConfig::default()
+        }
     }
 
     /// Checks a plan's invariants against the manager's pool.
@@ -515,11 +549,17 @@ mod tests {
             let plan = m.update(cam, 1.0, 128, *frame, mode, tf);
             check_plan(m, &plan);
             each(m, &plan);
-            if plan.uploads.is_empty() && plan.stats.requested_this_frame == 0 && plan.stats.requests_in_flight == 0
+            if plan.uploads.is_empty()
+                && plan.stats.requested_this_frame == 0
+                && plan.stats.requests_in_flight == 0
             {
                 return plan;
             }
-            assert!(t.elapsed() < Duration::from_secs(10), "no convergence: {:?}", plan.stats);
+            assert!(
+                t.elapsed() < Duration::from_secs(10),
+                "no convergence: {:?}",
+                plan.stats
+            );
             std::thread::sleep(Duration::from_millis(1));
         }
     }
@@ -574,16 +614,35 @@ mod tests {
         frame += 1;
         let b = m.update(&cam, 1.0, 128, frame, RenderMode::Dvr, &narrow);
         check_plan(&m, &b);
-        let invisible = |p: &FramePlan| p.cut.iter().filter(|l| l.kind == LeafKind::Empty(EmptyReason::Invisible)).count();
+        let invisible = |p: &FramePlan| {
+            p.cut
+                .iter()
+                .filter(|l| l.kind == LeafKind::Empty(EmptyReason::Invisible))
+                .count()
+        };
         assert!(invisible(&b) > invisible(&a));
         assert!(b.stats.working_set_bricks < a.stats.working_set_bricks);
         assert!(b.uploads.is_empty());
         assert_eq!(b.stats.requested_this_frame, 0);
         assert_eq!(src.reads().len(), reads);
-        assert_eq!(src.meta_reads.load(Ordering::Relaxed), metas, "metadata is cached");
+        assert_eq!(
+            src.meta_reads.load(Ordering::Relaxed),
+            metas,
+            "metadata is cached"
+        );
         // Isovalue changes likewise.
         frame += 1;
-        let iso = m.update(&cam, 1.0, 128, frame, RenderMode::Iso { value: 0.95, color: [1.0; 3] }, &wide);
+        let iso = m.update(
+            &cam,
+            1.0,
+            128,
+            frame,
+            RenderMode::Iso {
+                value: 0.95,
+                color: [1.0; 3],
+            },
+            &wide,
+        );
         check_plan(&m, &iso);
         assert!(invisible(&iso) > 0);
         assert_eq!(src.reads().len(), reads);
@@ -598,7 +657,13 @@ mod tests {
     fn planning_the_same_frame_twice_does_not_panic() {
         let src = Arc::new(TestSource::new(64));
         let brick = src.layout.brick_bytes() as u64;
-        let mut m = manager(&src, ManagerConfig { gpu_budget_bytes: 12 * brick, ..config() });
+        let mut m = manager(
+            &src,
+            ManagerConfig {
+                gpu_budget_bytes: 12 * brick,
+                ..config()
+            },
+        );
         let tf = TransferFunction::ramp(0.1, 1.0, 0.5);
         let a = Camera::orbit(Vec3::ZERO, 1.6, 0.4, 0.3);
         let mut frame = 0;
@@ -625,7 +690,10 @@ mod tests {
         let mut frame = 0;
         let plan = converge(&mut m, &mut frame, &cam, RenderMode::Mip, &tf, |_, _| {});
         assert_eq!(m.residency(bad), Some(Residency::Failed));
-        assert!(matches!(m.failure(bad).as_deref(), Some(LoadError::Source(BrickError::Io { .. }))));
+        assert!(matches!(
+            m.failure(bad).as_deref(),
+            Some(LoadError::Source(BrickError::Io { .. }))
+        ));
         assert_eq!(plan.stats.residency.failed, 1);
         assert!(plan.stats.blocked.failed > 0);
         // The root cannot split without its child: it stays the only leaf.
@@ -637,7 +705,13 @@ mod tests {
     fn tiny_pool_gives_a_coarser_complete_cut() {
         let src = Arc::new(TestSource::new(64));
         let brick = src.layout.brick_bytes() as u64;
-        let mut m = manager(&src, ManagerConfig { gpu_budget_bytes: 9 * brick, ..config() });
+        let mut m = manager(
+            &src,
+            ManagerConfig {
+                gpu_budget_bytes: 9 * brick,
+                ..config()
+            },
+        );
         assert_eq!(m.pool().slot_count(), 9);
         let cam = Camera::orbit(Vec3::ZERO, 1.6, 0.4, 0.3);
         let tf = TransferFunction::ramp(0.1, 1.0, 0.5);
@@ -654,7 +728,13 @@ mod tests {
     fn upload_budget_makes_progress_every_frame() {
         let src = Arc::new(TestSource::new(64));
         let brick = src.layout.brick_bytes() as u64;
-        let mut m = manager(&src, ManagerConfig { upload_budget_bytes: brick, ..config() });
+        let mut m = manager(
+            &src,
+            ManagerConfig {
+                upload_budget_bytes: brick,
+                ..config()
+            },
+        );
         let cam = Camera::orbit(Vec3::ZERO, 1.6, 0.4, 0.3);
         let tf = TransferFunction::ramp(0.1, 1.0, 0.5);
         let mut frame = 0;
@@ -677,7 +757,11 @@ mod tests {
         let brick = src.layout.brick_bytes() as u64;
         let mut m = manager(
             &src,
-            ManagerConfig { gpu_budget_bytes: 40 * brick, cpu_budget_bytes: 60 * brick as usize, ..config() },
+            ManagerConfig {
+                gpu_budget_bytes: 40 * brick,
+                cpu_budget_bytes: 60 * brick as usize,
+                ..config()
+            },
         );
         let tf = TransferFunction::ramp(0.1, 1.0, 0.5);
         let t = Instant::now();
@@ -685,7 +769,12 @@ mod tests {
         while frame < 150 || (m.pool().evictions() == 0 && t.elapsed() < Duration::from_secs(10)) {
             frame += 1;
             let yaw = frame as f32 * 0.07;
-            let cam = Camera::orbit(Vec3::new(0.2 * yaw.sin(), 0.0, 0.0), 0.9 + 0.5 * (yaw * 0.5).cos(), yaw, 0.3);
+            let cam = Camera::orbit(
+                Vec3::new(0.2 * yaw.sin(), 0.0, 0.0),
+                0.9 + 0.5 * (yaw * 0.5).cos(),
+                yaw,
+                0.3,
+            );
             let plan = m.update(&cam, 1.3, 128, frame, RenderMode::Dvr, &tf);
             check_plan(&m, &plan);
             assert!(plan.stats.pool_occupied <= 40);

@@ -146,7 +146,14 @@ impl BrickPool {
         BrickPool {
             grid,
             stored_side,
-            slots: vec![Slot { key: None, frame: 0, tick: 0 }; n as usize],
+            slots: vec![
+                Slot {
+                    key: None,
+                    frame: 0,
+                    tick: 0
+                };
+                n as usize
+            ],
             map: HashMap::new(),
             lru: BTreeMap::new(),
             free: (0..n).rev().collect(),
@@ -203,7 +210,9 @@ impl BrickPool {
 
     /// True when the slot was used in `frame`.
     pub fn is_pinned(&self, slot: SlotId, frame: u64) -> bool {
-        self.slots.get(slot as usize).is_some_and(|s| s.key.is_some() && s.frame == frame)
+        self.slots
+            .get(slot as usize)
+            .is_some_and(|s| s.key.is_some() && s.frame == frame)
     }
 
     /// Bricks evicted so far.
@@ -235,18 +244,25 @@ impl BrickPool {
     /// is evicted). `Err(Full)` when every slot is pinned by `frame`.
     pub fn allocate(&mut self, key: NodeKey, frame: u64) -> Result<Allocation, PoolError> {
         if let Some(slot) = self.touch(key, frame) {
-            return Ok(Allocation { slot, resident: true, evicted: None });
+            return Ok(Allocation {
+                slot,
+                resident: true,
+                evicted: None,
+            });
         }
         let (slot, evicted) = if let Some(slot) = self.free.pop() {
             (slot, None)
         } else {
             // Ticks and frames grow together, so the oldest tick has the oldest frame.
-            let (&tick, &slot) = self
-                .lru
-                .first_key_value()
-                .ok_or(PoolError::Full { slots: self.slot_count(), frame })?;
+            let (&tick, &slot) = self.lru.first_key_value().ok_or(PoolError::Full {
+                slots: self.slot_count(),
+                frame,
+            })?;
             if self.slots[slot as usize].frame >= frame {
-                return Err(PoolError::Full { slots: self.slot_count(), frame });
+                return Err(PoolError::Full {
+                    slots: self.slot_count(),
+                    frame,
+                });
             }
             self.lru.remove(&tick);
             let old = self.slots[slot as usize].key.take();
@@ -263,7 +279,11 @@ impl BrickPool {
         s.tick = self.tick;
         self.lru.insert(self.tick, slot);
         self.map.insert(key, slot);
-        Ok(Allocation { slot, resident: false, evicted })
+        Ok(Allocation {
+            slot,
+            resident: false,
+            evicted,
+        })
     }
 
     /// Frees the slot of `key`; returns it.
@@ -302,19 +322,39 @@ mod tests {
 
     #[test]
     fn grid_respects_budget_and_max_dim() {
-        let l = PoolLimits { budget_bytes: 100 * 1000, brick_bytes: 1000, stored_side: 10, max_dim: 2048 };
+        let l = PoolLimits {
+            budget_bytes: 100 * 1000,
+            brick_bytes: 1000,
+            stored_side: 10,
+            max_dim: 2048,
+        };
         let g = l.grid().unwrap();
         assert_eq!(g.iter().product::<u32>(), 100);
         assert!(g.iter().all(|&a| a * 10 <= 2048));
         // Axis limit 4 => at most 64 slots even with a huge budget.
-        let l = PoolLimits { budget_bytes: 1 << 40, brick_bytes: 1000, stored_side: 10, max_dim: 40 };
+        let l = PoolLimits {
+            budget_bytes: 1 << 40,
+            brick_bytes: 1000,
+            stored_side: 10,
+            max_dim: 40,
+        };
         assert_eq!(l.grid(), Some([4, 4, 4]));
         // 7 slots, axis limit 2 => best product 6 (or fewer), never above 8.
-        let l = PoolLimits { budget_bytes: 7000, brick_bytes: 1000, stored_side: 10, max_dim: 20 };
+        let l = PoolLimits {
+            budget_bytes: 7000,
+            brick_bytes: 1000,
+            stored_side: 10,
+            max_dim: 20,
+        };
         let g = l.grid().unwrap();
         assert_eq!(g.iter().product::<u32>(), 4);
         assert!(g.iter().all(|&a| a <= 2));
-        let l = PoolLimits { budget_bytes: 999, brick_bytes: 1000, stored_side: 10, max_dim: 2048 };
+        let l = PoolLimits {
+            budget_bytes: 999,
+            brick_bytes: 1000,
+            stored_side: 10,
+            max_dim: 2048,
+        };
         assert!(matches!(BrickPool::new(l), Err(PoolError::NoSlots { .. })));
     }
 
@@ -324,7 +364,10 @@ mod tests {
         assert_eq!(p.atlas_dims(), [30, 20, 20]);
         let offs: HashSet<[u32; 3]> = (0..p.slot_count()).map(|s| p.slot_offset(s)).collect();
         assert_eq!(offs.len(), 12);
-        assert!(offs.iter().all(|o| (0..3).all(|a| o[a] + 10 <= p.atlas_dims()[a])));
+        assert!(
+            offs.iter()
+                .all(|o| (0..3).all(|a| o[a] + 10 <= p.atlas_dims()[a]))
+        );
         assert_eq!(p.slot_offset(4), [10, 10, 0]);
     }
 
@@ -336,7 +379,10 @@ mod tests {
         assert_ne!(a.slot, b.slot);
         assert!(!a.resident && a.evicted.is_none());
         // Both pinned by frame 1.
-        assert_eq!(p.allocate(k(2), 1), Err(PoolError::Full { slots: 2, frame: 1 }));
+        assert_eq!(
+            p.allocate(k(2), 1),
+            Err(PoolError::Full { slots: 2, frame: 1 })
+        );
         // Frame 2: touch k1, so k0 is the LRU victim.
         p.touch(k(1), 2);
         let c = p.allocate(k(2), 2).unwrap();

@@ -12,7 +12,10 @@
 //! Classification uses node metadata only ([`RefineEnv::node`]); no brick is read.
 
 use crate::upload::UploadBudget;
-use brickray_core::{Camera, NodeInfo, NodeKey, NodeKind, OctreeLayout, Projection, RenderMode, TransferFunction, VolumeFrame};
+use brickray_core::{
+    Camera, NodeInfo, NodeKey, NodeKind, OctreeLayout, Projection, RenderMode, TransferFunction,
+    VolumeFrame,
+};
 use glam::{DMat4, DVec3, DVec4};
 use std::collections::BinaryHeap;
 
@@ -142,14 +145,28 @@ pub struct ViewGeometry {
 
 impl ViewGeometry {
     /// Geometry of `camera` over `layout` placed by `frame`.
-    pub fn new(layout: &OctreeLayout, camera: &Camera, aspect: f32, viewport_height_px: u32, frame: &VolumeFrame) -> Self {
+    pub fn new(
+        layout: &OctreeLayout,
+        camera: &Camera,
+        aspect: f32,
+        viewport_height_px: u32,
+        frame: &VolumeFrame,
+    ) -> Self {
         let vp = camera.view_proj(aspect).as_dmat4();
         let r = [vp.row(0), vp.row(1), vp.row(2), vp.row(3)];
         // wgpu clip space: -w <= x, y <= w, 0 <= z <= w.
-        let planes = [r[3] + r[0], r[3] - r[0], r[3] + r[1], r[3] - r[1], r[2], r[3] - r[2]];
+        let planes = [
+            r[3] + r[0],
+            r[3] - r[0],
+            r[3] + r[1],
+            r[3] - r[1],
+            r[2],
+            r[3] - r[2],
+        ];
         let model = frame.model.as_dmat4();
         let dims = layout.volume.dims;
-        let voxel_world: [f64; 3] = std::array::from_fn(|a| model.col(a).truncate().length() / dims[a].max(1) as f64);
+        let voxel_world: [f64; 3] =
+            std::array::from_fn(|a| model.col(a).truncate().length() / dims[a].max(1) as f64);
         let h = viewport_height_px.max(1) as f64;
         let (px_per_unit, perspective) = match camera.projection {
             Projection::Perspective { fov_y } => (h / (2.0 * (fov_y as f64 * 0.5).tan()), true),
@@ -193,7 +210,9 @@ impl ViewGeometry {
     /// a node reported visible may still be off-screen).
     pub fn culled(&self, key: NodeKey) -> bool {
         let c = self.world_corners(key);
-        self.planes.iter().any(|p| c.iter().all(|q| p.truncate().dot(*q) + p.w < 0.0))
+        self.planes
+            .iter()
+            .any(|p| c.iter().all(|q| p.truncate().dot(*q) + p.w < 0.0))
     }
 
     /// Projected size in pixels of one voxel of `key` at the node's nearest point
@@ -206,14 +225,21 @@ impl ViewGeometry {
         }
         let c = self.world_corners(key);
         let lo = c.iter().fold(DVec3::splat(f64::INFINITY), |m, p| m.min(*p));
-        let hi = c.iter().fold(DVec3::splat(f64::NEG_INFINITY), |m, p| m.max(*p));
+        let hi = c
+            .iter()
+            .fold(DVec3::splat(f64::NEG_INFINITY), |m, p| m.max(*p));
         let d = (self.eye.clamp(lo, hi) - self.eye).length().max(self.near);
         voxel * self.px_per_unit / d
     }
 }
 
 /// True when a node with this metadata can contribute to the image in `mode`.
-pub fn is_visible(info: &NodeInfo, mode: RenderMode, tf: &TransferFunction, layout: &OctreeLayout) -> bool {
+pub fn is_visible(
+    info: &NodeInfo,
+    mode: RenderMode,
+    tf: &TransferFunction,
+    layout: &OctreeLayout,
+) -> bool {
     let (min, max) = match info.kind {
         NodeKind::Empty => return false,
         NodeKind::Uniform(v) => (v, v),
@@ -223,7 +249,10 @@ pub fn is_visible(info: &NodeInfo, mode: RenderMode, tf: &TransferFunction, layo
     let (lo, hi) = if a <= b { (a, b) } else { (b, a) };
     match mode {
         RenderMode::Dvr => !tf.is_transparent(lo, hi),
-        RenderMode::Iso { value, .. } => lo <= value && value <= hi,
+        // A node wholly inside the surface (min > iso) stays visible: a ray that
+        // enters the volume there hits the surface at once (a capped cut), and an
+        // empty leaf could not carry that inside state.
+        RenderMode::Iso { value, .. } => value <= hi,
         _ => true,
     }
 }
@@ -244,7 +273,9 @@ impl PartialOrd for HeapItem {
 }
 impl Ord for HeapItem {
     fn cmp(&self, other: &Self) -> std::cmp::Ordering {
-        self.priority.total_cmp(&other.priority).then_with(|| other.key.cmp(&self.key))
+        self.priority
+            .total_cmp(&other.priority)
+            .then_with(|| other.key.cmp(&self.key))
     }
 }
 
@@ -281,14 +312,25 @@ pub fn refine(
     env: &mut dyn RefineEnv,
     budget: &mut UploadBudget,
 ) -> Refinement {
-    let geo = ViewGeometry::new(layout, params.camera, params.aspect, params.viewport_height_px, params.volume_frame);
+    let geo = ViewGeometry::new(
+        layout,
+        params.camera,
+        params.aspect,
+        params.viewport_height_px,
+        params.volume_frame,
+    );
     let brick_bytes = layout.brick_bytes() as u64;
     let finest = layout.levels - 1;
     let tol = params.tolerance_px.max(0.0) as f64;
     let mut out = Refinement::default();
     let mut heap = BinaryHeap::new();
 
-    let empty_leaf = |key, reason| RefinedLeaf { key, class: NodeClass::Empty(reason), priority: 0.0, needs_upload: false };
+    let empty_leaf = |key, reason| RefinedLeaf {
+        key,
+        class: NodeClass::Empty(reason),
+        priority: 0.0,
+        needs_upload: false,
+    };
 
     match classify(NodeKey::ROOT, layout, params, &geo, env) {
         Ok((NodeClass::Empty(r), _)) => {
@@ -296,17 +338,24 @@ pub fn refine(
             return out;
         }
         Ok((NodeClass::Data, uniform)) => {
-            heap.push(HeapItem { priority: geo.voxel_pixels(NodeKey::ROOT), key: NodeKey::ROOT, uniform, charged: false });
+            heap.push(HeapItem {
+                priority: geo.voxel_pixels(NodeKey::ROOT),
+                key: NodeKey::ROOT,
+                uniform,
+                charged: false,
+            });
         }
         Err(()) => {
-            out.leaves.push(empty_leaf(NodeKey::ROOT, EmptyReason::NotLoaded));
+            out.leaves
+                .push(empty_leaf(NodeKey::ROOT, EmptyReason::NotLoaded));
             out.blocked.failed += 1;
             return out;
         }
     }
     out.data_leaves = 1;
     if params.max_data_leaves == 0 {
-        out.leaves.push(empty_leaf(NodeKey::ROOT, EmptyReason::NotLoaded));
+        out.leaves
+            .push(empty_leaf(NodeKey::ROOT, EmptyReason::NotLoaded));
         out.data_leaves = 0;
         out.blocked.pool_full += 1;
         return out;
@@ -319,7 +368,13 @@ pub fn refine(
 
     // Nodes that stay leaves and need their brick: (key, priority).
     let mut finals: Vec<(NodeKey, f64)> = Vec::new();
-    while let Some(HeapItem { priority, key, uniform, charged }) = heap.pop() {
+    while let Some(HeapItem {
+        priority,
+        key,
+        uniform,
+        charged,
+    }) = heap.pop()
+    {
         if uniform || key.level >= finest || priority <= tol {
             finals.push((key, priority));
             continue;
@@ -350,8 +405,12 @@ pub fn refine(
             finals.push((key, priority));
             continue;
         }
-        let missing: Vec<usize> =
-            data.iter().zip(&states).filter(|(_, s)| **s == DataState::Missing).map(|(i, _)| *i).collect();
+        let missing: Vec<usize> = data
+            .iter()
+            .zip(&states)
+            .filter(|(_, s)| **s == DataState::Missing)
+            .map(|(i, _)| *i)
+            .collect();
         if !missing.is_empty() {
             for i in missing {
                 out.requests.push((children[i], priority as f32));
@@ -440,12 +499,21 @@ pub(crate) mod tests {
         }
         let max = (1.0 - 2.0 * near2.sqrt()).max(0.0) as f32;
         let min = (1.0 - 2.0 * far2.sqrt()).max(0.0) as f32;
-        let kind = if max <= 0.0 { NodeKind::Empty } else { NodeKind::Data };
+        let kind = if max <= 0.0 {
+            NodeKind::Empty
+        } else {
+            NodeKind::Data
+        };
         NodeInfo { kind, min, max }
     }
 
     pub(crate) fn ball_layout(dim: u32) -> OctreeLayout {
-        let desc = VolumeDesc { dims: [dim; 3], dtype: DType::U8, spacing: [1.0; 3], value_range: [0.0, 1.0] };
+        let desc = VolumeDesc {
+            dims: [dim; 3],
+            dtype: DType::U8,
+            spacing: [1.0; 3],
+            value_range: [0.0, 1.0],
+        };
         OctreeLayout::new(desc, 8, 1)
     }
 
@@ -462,7 +530,11 @@ pub(crate) mod tests {
             Some(ball_info(&self.layout, key))
         }
         fn data(&mut self, key: NodeKey) -> DataState {
-            if self.on_gpu.contains(&key) { DataState::OnGpu } else { DataState::InCpu }
+            if self.on_gpu.contains(&key) {
+                DataState::OnGpu
+            } else {
+                DataState::InCpu
+            }
         }
     }
 
@@ -472,14 +544,24 @@ pub(crate) mod tests {
         for l in leaves {
             let mut p = l.parent();
             while let Some(k) = p {
-                assert!(!set.contains(&k), "{k:?} and its descendant {l:?} are both leaves");
+                assert!(
+                    !set.contains(&k),
+                    "{k:?} and its descendant {l:?} are both leaves"
+                );
                 p = k.parent();
             }
             assert!(l.level < levels);
         }
         let deepest = levels as u32 - 1;
-        let total: u128 = leaves.iter().map(|l| 1u128 << (3 * (deepest - l.level as u32))).sum();
-        assert_eq!(total, 1u128 << (3 * deepest), "leaves do not cover the cube");
+        let total: u128 = leaves
+            .iter()
+            .map(|l| 1u128 << (3 * (deepest - l.level as u32)))
+            .sum();
+        assert_eq!(
+            total,
+            1u128 << (3 * deepest),
+            "leaves do not cover the cube"
+        );
     }
 
     struct Setup {
@@ -491,11 +573,26 @@ pub(crate) mod tests {
     fn setup() -> Setup {
         let layout = ball_layout(64);
         let frame = VolumeFrame::centered([64; 3], [1.0; 3]);
-        Setup { layout, frame, tf: TransferFunction::ramp(0.0, 1.0, 1.0) }
+        Setup {
+            layout,
+            frame,
+            tf: TransferFunction::ramp(0.0, 1.0, 1.0),
+        }
     }
 
-    fn run(s: &Setup, cam: &Camera, mode: RenderMode, tf: &TransferFunction, slots: u32, budget: u64) -> Refinement {
-        let mut env = AllInCpu { layout: s.layout.clone(), on_gpu: HashSet::new(), meta_reads: 0 };
+    fn run(
+        s: &Setup,
+        cam: &Camera,
+        mode: RenderMode,
+        tf: &TransferFunction,
+        slots: u32,
+        budget: u64,
+    ) -> Refinement {
+        let mut env = AllInCpu {
+            layout: s.layout.clone(),
+            on_gpu: HashSet::new(),
+            meta_reads: 0,
+        };
         let params = RefineParams {
             camera: cam,
             aspect: 1.0,
@@ -524,7 +621,11 @@ pub(crate) mod tests {
         let near = Camera::orbit(Vec3::ZERO, 1.5, 0.3, 0.2);
         let r = run(&s, &near, RenderMode::Dvr, &s.tf, 10_000, u64::MAX);
         assert_exact_cover(&keys(&r), s.layout.levels);
-        assert!(r.leaves.iter().any(|l| l.key.level == s.layout.levels - 1 && l.class == NodeClass::Data));
+        assert!(
+            r.leaves
+                .iter()
+                .any(|l| l.key.level == s.layout.levels - 1 && l.class == NodeClass::Data)
+        );
         assert_eq!(r.data_leaves as usize, count(&r, NodeClass::Data));
         let far = Camera::orbit(Vec3::ZERO, 400.0, 0.3, 0.2);
         let r = run(&s, &far, RenderMode::Dvr, &s.tf, 10_000, u64::MAX);
@@ -542,11 +643,21 @@ pub(crate) mod tests {
         assert_eq!(r.leaves.len(), 1);
         assert_eq!(r.leaves[0].class, NodeClass::Empty(EmptyReason::Culled));
         // Close up on one corner: many culled leaves, and no culled leaf projects on screen.
-        let cam = Camera { target: Vec3::splat(0.4), ..Camera::orbit(Vec3::ZERO, 0.0, 0.0, 0.0) };
-        let cam = Camera { eye: Vec3::new(0.4, 0.4, 1.0), ..cam };
+        let cam = Camera {
+            target: Vec3::splat(0.4),
+            ..Camera::orbit(Vec3::ZERO, 0.0, 0.0, 0.0)
+        };
+        let cam = Camera {
+            eye: Vec3::new(0.4, 0.4, 1.0),
+            ..cam
+        };
         let r = run(&s, &cam, RenderMode::Mip, &s.tf, 10_000, u64::MAX);
         assert_exact_cover(&keys(&r), s.layout.levels);
-        let culled: Vec<_> = r.leaves.iter().filter(|l| l.class == NodeClass::Empty(EmptyReason::Culled)).collect();
+        let culled: Vec<_> = r
+            .leaves
+            .iter()
+            .filter(|l| l.class == NodeClass::Empty(EmptyReason::Culled))
+            .collect();
         assert!(!culled.is_empty());
         let geo = ViewGeometry::new(&s.layout, &cam, 1.0, 512, &s.frame);
         let vp = cam.view_proj(1.0).as_dmat4();
@@ -554,7 +665,11 @@ pub(crate) mod tests {
             // Sample the box densely: no point projects inside the clip volume.
             let c = geo.world_corners(l.key);
             for t in 0..125 {
-                let f = [(t % 5) as f64 / 4.0, ((t / 5) % 5) as f64 / 4.0, (t / 25) as f64 / 4.0];
+                let f = [
+                    (t % 5) as f64 / 4.0,
+                    ((t / 5) % 5) as f64 / 4.0,
+                    (t / 25) as f64 / 4.0,
+                ];
                 let p = c[0] + (c[1] - c[0]) * f[0] + (c[2] - c[0]) * f[1] + (c[4] - c[0]) * f[2];
                 let q = vp * p.extend(1.0);
                 let inside = q.x.abs() <= q.w && q.y.abs() <= q.w && q.z >= 0.0 && q.z <= q.w;
@@ -579,14 +694,19 @@ pub(crate) mod tests {
         assert!(count(&r, NodeClass::Empty(EmptyReason::Empty)) > 0);
         assert_eq!(count(&r, NodeClass::Empty(EmptyReason::Invisible)), 0);
         // Iso at 0.9: only nodes whose range contains 0.9 (near the centre) hold data.
-        let iso = RenderMode::Iso { value: 0.9, color: [1.0; 3] };
+        let iso = RenderMode::Iso {
+            value: 0.9,
+            color: [1.0; 3],
+        };
         let r = run(&s, &cam, iso, &s.tf, 10_000, u64::MAX);
         assert_exact_cover(&keys(&r), s.layout.levels);
         for l in &r.leaves {
             let info = ball_info(&s.layout, l.key);
             match l.class {
                 NodeClass::Data => assert!(info.min <= 0.9 && 0.9 <= info.max, "{l:?}"),
-                NodeClass::Empty(EmptyReason::Invisible) => assert!(!(info.min <= 0.9 && 0.9 <= info.max)),
+                NodeClass::Empty(EmptyReason::Invisible) => {
+                    assert!(!(info.min <= 0.9 && 0.9 <= info.max))
+                }
                 _ => {}
             }
         }
@@ -639,15 +759,39 @@ pub(crate) mod tests {
     fn tf_change_reclassifies_from_metadata_only() {
         let s = setup();
         let cam = Camera::orbit(Vec3::ZERO, 1.5, 0.3, 0.2);
-        let a = run(&s, &cam, RenderMode::Dvr, &TransferFunction::ramp(0.0, 0.2, 1.0), 10_000, u64::MAX);
-        let b = run(&s, &cam, RenderMode::Dvr, &TransferFunction::ramp(0.7, 1.0, 1.0), 10_000, u64::MAX);
+        let a = run(
+            &s,
+            &cam,
+            RenderMode::Dvr,
+            &TransferFunction::ramp(0.0, 0.2, 1.0),
+            10_000,
+            u64::MAX,
+        );
+        let b = run(
+            &s,
+            &cam,
+            RenderMode::Dvr,
+            &TransferFunction::ramp(0.7, 1.0, 1.0),
+            10_000,
+            u64::MAX,
+        );
         assert_exact_cover(&keys(&b), s.layout.levels);
         assert!(b.data_leaves < a.data_leaves);
-        assert!(count(&b, NodeClass::Empty(EmptyReason::Invisible)) > count(&a, NodeClass::Empty(EmptyReason::Invisible)));
+        assert!(
+            count(&b, NodeClass::Empty(EmptyReason::Invisible))
+                > count(&a, NodeClass::Empty(EmptyReason::Invisible))
+        );
     }
 
     fn arb_camera() -> impl Strategy<Value = Camera> {
-        (0.0f32..6.3, -1.5f32..1.5, 0.3f32..20.0, any::<bool>(), 0.1f32..3.0, -0.6f32..0.6)
+        (
+            0.0f32..6.3,
+            -1.5f32..1.5,
+            0.3f32..20.0,
+            any::<bool>(),
+            0.1f32..3.0,
+            -0.6f32..0.6,
+        )
             .prop_map(|(yaw, pitch, dist, ortho, h, off)| {
                 let mut c = Camera::orbit(Vec3::splat(off), dist, yaw, pitch);
                 if ortho {

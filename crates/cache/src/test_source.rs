@@ -78,10 +78,16 @@ impl BrickSource for TestSource {
             panic!("test source panics on {key:?}");
         }
         if self.failing.contains(&key) {
-            return Err(BrickError::Io { key, source: std::io::Error::other("injected failure") });
+            return Err(BrickError::Io {
+                key,
+                source: std::io::Error::other("injected failure"),
+            });
         }
         if out.len() != self.layout.brick_bytes() {
-            return Err(BrickError::BufferSize { expected: self.layout.brick_bytes(), actual: out.len() });
+            return Err(BrickError::BufferSize {
+                expected: self.layout.brick_bytes(),
+                actual: out.len(),
+            });
         }
         out.fill(fill_byte(key));
         Ok(())

@@ -16,7 +16,11 @@ pub struct UploadBudget {
 impl UploadBudget {
     /// A budget of `bytes_per_frame` (0 = one item per frame).
     pub fn new(bytes_per_frame: u64) -> UploadBudget {
-        UploadBudget { per_frame: bytes_per_frame, used: 0, items: 0 }
+        UploadBudget {
+            per_frame: bytes_per_frame,
+            used: 0,
+            items: 0,
+        }
     }
 
     /// Starts a new frame: nothing used yet.
@@ -67,7 +71,10 @@ impl UploadBudget {
     /// Splits candidates into those uploaded this frame and those deferred: highest
     /// priority first (ties by key for determinism), each taken if it fits; the
     /// first is always taken. Starts a new frame first.
-    pub fn select(&mut self, mut candidates: Vec<UploadCandidate>) -> (Vec<UploadCandidate>, Vec<UploadCandidate>) {
+    pub fn select(
+        &mut self,
+        mut candidates: Vec<UploadCandidate>,
+    ) -> (Vec<UploadCandidate>, Vec<UploadCandidate>) {
         self.begin_frame();
         candidates.sort_by(|a, b| b.priority.total_cmp(&a.priority).then(a.key.cmp(&b.key)));
         let mut take = Vec::new();
@@ -99,14 +106,26 @@ mod tests {
     use super::*;
 
     fn c(i: u32, priority: f32, bytes: u64) -> UploadCandidate {
-        UploadCandidate { key: NodeKey::new(4, i, 0, 0), priority, bytes }
+        UploadCandidate {
+            key: NodeKey::new(4, i, 0, 0),
+            priority,
+            bytes,
+        }
     }
 
     #[test]
     fn picks_highest_priority_within_budget() {
         let mut b = UploadBudget::new(250);
-        let (take, defer) = b.select(vec![c(0, 1.0, 100), c(1, 3.0, 100), c(2, 2.0, 100), c(3, 0.5, 40)]);
-        assert_eq!(take.iter().map(|x| x.key.x).collect::<Vec<_>>(), vec![1, 2, 3]);
+        let (take, defer) = b.select(vec![
+            c(0, 1.0, 100),
+            c(1, 3.0, 100),
+            c(2, 2.0, 100),
+            c(3, 0.5, 40),
+        ]);
+        assert_eq!(
+            take.iter().map(|x| x.key.x).collect::<Vec<_>>(),
+            vec![1, 2, 3]
+        );
         assert_eq!(defer.iter().map(|x| x.key.x).collect::<Vec<_>>(), vec![0]);
         assert_eq!(b.used(), 240);
         // Next frame the deferred one goes.

@@ -26,7 +26,12 @@ pub struct NodeKey {
 
 impl NodeKey {
     /// The root.
-    pub const ROOT: NodeKey = NodeKey { level: 0, x: 0, y: 0, z: 0 };
+    pub const ROOT: NodeKey = NodeKey {
+        level: 0,
+        x: 0,
+        y: 0,
+        z: 0,
+    };
 
     /// Builds a key.
     pub fn new(level: u8, x: u32, y: u32, z: u32) -> NodeKey {
@@ -61,7 +66,14 @@ impl NodeKey {
     /// The node's cube in octree unit-cube coordinates: `(min corner, side)`.
     pub fn unit_box(self) -> ([f64; 3], f64) {
         let side = 1.0 / (1u64 << self.level) as f64;
-        ([self.x as f64 * side, self.y as f64 * side, self.z as f64 * side], side)
+        (
+            [
+                self.x as f64 * side,
+                self.y as f64 * side,
+                self.z as f64 * side,
+            ],
+            side,
+        )
     }
 }
 
@@ -88,7 +100,12 @@ impl OctreeLayout {
         while (brick as u64) << (levels - 1) < max_dim {
             levels += 1;
         }
-        OctreeLayout { volume, brick, apron, levels }
+        OctreeLayout {
+            volume,
+            brick,
+            apron,
+            levels,
+        }
     }
 
     /// Stored voxels per brick side, `brick + 2 * apron`.
@@ -114,7 +131,9 @@ impl OctreeLayout {
     /// Voxel dimensions of the volume at `level` (each halving rounds up).
     pub fn level_dims(&self, level: u8) -> [u32; 3] {
         let shift = (self.levels - 1 - level) as u32;
-        self.volume.dims.map(|d| ((d as u64 + (1u64 << shift) - 1) >> shift) as u32)
+        self.volume
+            .dims
+            .map(|d| ((d as u64 + (1u64 << shift) - 1) >> shift) as u32)
     }
 
     /// True when `key` is a valid position and its cube overlaps the volume.

@@ -47,12 +47,18 @@ impl Camera {
     /// A perspective camera orbiting `target` at `distance`, `yaw` about +y and
     /// `pitch` above the horizon (radians), with a 40 degree field of view.
     pub fn orbit(target: Vec3, distance: f32, yaw: f32, pitch: f32) -> Camera {
-        let dir = Vec3::new(yaw.sin() * pitch.cos(), pitch.sin(), yaw.cos() * pitch.cos());
+        let dir = Vec3::new(
+            yaw.sin() * pitch.cos(),
+            pitch.sin(),
+            yaw.cos() * pitch.cos(),
+        );
         Camera {
             eye: target + dir * distance,
             target,
             up: Vec3::Y,
-            projection: Projection::Perspective { fov_y: 40f32.to_radians() },
+            projection: Projection::Perspective {
+                fov_y: 40f32.to_radians(),
+            },
             near: 0.01,
             far: distance + 10.0,
         }
@@ -66,7 +72,9 @@ impl Camera {
     /// The projection matrix for a viewport aspect ratio (width / height).
     pub fn proj(&self, aspect: f32) -> Mat4 {
         match self.projection {
-            Projection::Perspective { fov_y } => Mat4::perspective_rh(fov_y, aspect, self.near, self.far),
+            Projection::Perspective { fov_y } => {
+                Mat4::perspective_rh(fov_y, aspect, self.near, self.far)
+            }
             Projection::Orthographic { height } => {
                 let h = height * 0.5;
                 let w = h * aspect;
@@ -107,7 +115,11 @@ impl VolumeFrame {
         let voxel_world = (0..3)
             .map(|i| model.col(i).truncate().length() / dims[i] as f32)
             .fold(f32::INFINITY, f32::min);
-        VolumeFrame { model, dims, voxel_world }
+        VolumeFrame {
+            model,
+            dims,
+            voxel_world,
+        }
     }
 
     /// World-space size of the volume's box (for placing cameras).
@@ -155,7 +167,12 @@ impl Ray {
         let dir = (far - near).normalize();
         let tex_origin = inv_model.transform_point3(near);
         let tex_dir = inv_model.transform_vector3(dir);
-        Ray { origin: near, dir, tex_origin, tex_dir }
+        Ray {
+            origin: near,
+            dir,
+            tex_origin,
+            tex_dir,
+        }
     }
 
     /// World distance along the ray to the point whose clip depth at this pixel is

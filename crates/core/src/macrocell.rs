@@ -88,7 +88,7 @@ impl MacroCellGrid {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::volume::{VolumeData, VolumeDesc, DType};
+    use crate::volume::{DType, VolumeData, VolumeDesc};
     use proptest::prelude::*;
 
     proptest! {

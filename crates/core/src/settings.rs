@@ -36,7 +36,13 @@ pub struct Shading {
 
 impl Default for Shading {
     fn default() -> Self {
-        Shading { enabled: false, ambient: 0.3, diffuse: 0.7, specular: 0.2, shininess: 24.0 }
+        Shading {
+            enabled: false,
+            ambient: 0.3,
+            diffuse: 0.7,
+            specular: 0.2,
+            shininess: 24.0,
+        }
     }
 }
 
@@ -53,13 +59,19 @@ pub struct Accel {
 
 impl Default for Accel {
     fn default() -> Self {
-        Accel { early_termination: Some(0.99), empty_space_skipping: true }
+        Accel {
+            early_termination: Some(0.99),
+            empty_space_skipping: true,
+        }
     }
 }
 
 impl Accel {
     /// Both accelerations off.
-    pub const BRUTE_FORCE: Accel = Accel { early_termination: None, empty_space_skipping: false };
+    pub const BRUTE_FORCE: Accel = Accel {
+        early_termination: None,
+        empty_space_skipping: false,
+    };
 }
 
 /// Everything that decides what a ray computes, besides camera, volume and TF.

@@ -11,13 +11,19 @@ pub fn sphere(n: u32) -> Volume {
     for z in 0..n {
         for y in 0..n {
             for x in 0..n {
-                let d = ((x as f32 - c).powi(2) + (y as f32 - c).powi(2) + (z as f32 - c).powi(2)).sqrt();
+                let d = ((x as f32 - c).powi(2) + (y as f32 - c).powi(2) + (z as f32 - c).powi(2))
+                    .sqrt();
                 let v = (1.0 - d / r).clamp(0.0, 1.0);
                 data.push((v * 255.0).round() as u8);
             }
         }
     }
-    let desc = VolumeDesc { dims: [n; 3], dtype: DType::U8, spacing: [1.0; 3], value_range: [0.0, 255.0] };
+    let desc = VolumeDesc {
+        dims: [n; 3],
+        dtype: DType::U8,
+        spacing: [1.0; 3],
+        value_range: [0.0, 255.0],
+    };
     Volume::new(desc, VolumeData::U8(data)).expect("valid by construction")
 }
 
@@ -33,12 +39,18 @@ pub fn marschner_lobb(n: u32) -> Volume {
                 let p = [x, y, z].map(|i| -1.0 + 2.0 * (i as f64 + 0.5) / n as f64);
                 let r = (p[0] * p[0] + p[1] * p[1]).sqrt();
                 let rho = (2.0 * pi * fm * (pi * r / 2.0).cos()).cos();
-                let v = (1.0 - (pi * p[2] / 2.0).sin() + alpha * (1.0 + rho)) / (2.0 * (1.0 + alpha));
+                let v =
+                    (1.0 - (pi * p[2] / 2.0).sin() + alpha * (1.0 + rho)) / (2.0 * (1.0 + alpha));
                 data.push(v as f32);
             }
         }
     }
-    let desc = VolumeDesc { dims: [n; 3], dtype: DType::F32, spacing: [1.0; 3], value_range: [0.0, 1.0] };
+    let desc = VolumeDesc {
+        dims: [n; 3],
+        dtype: DType::F32,
+        spacing: [1.0; 3],
+        value_range: [0.0, 1.0],
+    };
     Volume::new(desc, VolumeData::F32(data)).expect("valid by construction")
 }
 

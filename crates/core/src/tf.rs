@@ -40,7 +40,11 @@ impl TransferFunction {
         }
         for e in &mut entries {
             for c in e.iter_mut() {
-                *c = if c.is_finite() { c.clamp(0.0, 1.0) } else { 0.0 };
+                *c = if c.is_finite() {
+                    c.clamp(0.0, 1.0)
+                } else {
+                    0.0
+                };
             }
         }
         let mut prefix = Vec::with_capacity(entries.len() + 1);
@@ -82,7 +86,10 @@ impl TransferFunction {
 
     /// A grey ramp: transparent up to `lo`, linearly rising to `(1,1,1,alpha)` at `hi`.
     pub fn ramp(lo: f32, hi: f32, alpha: f32) -> TransferFunction {
-        TransferFunction::from_points(&[(lo, [1.0, 1.0, 1.0, 0.0]), (hi, [1.0, 1.0, 1.0, alpha])], 256)
+        TransferFunction::from_points(
+            &[(lo, [1.0, 1.0, 1.0, 0.0]), (hi, [1.0, 1.0, 1.0, alpha])],
+            256,
+        )
     }
 
     /// The entries.
@@ -119,8 +126,16 @@ impl TransferFunction {
     /// The entry range `[i0, i1]` a lookup of any value in `[min, max]` reads.
     fn entry_range(&self, min: f32, max: f32) -> (usize, usize) {
         let n1 = (self.entries.len() - 1) as f32;
-        let lo = if min.is_nan() { 0.0 } else { min.clamp(0.0, 1.0) };
-        let hi = if max.is_nan() { 1.0 } else { max.clamp(0.0, 1.0) };
+        let lo = if min.is_nan() {
+            0.0
+        } else {
+            min.clamp(0.0, 1.0)
+        };
+        let hi = if max.is_nan() {
+            1.0
+        } else {
+            max.clamp(0.0, 1.0)
+        };
         let i0 = (lo * n1).floor() as usize;
         let i1 = ((hi * n1).ceil() as usize).min(self.entries.len() - 1);
         (i0.min(i1), i1)

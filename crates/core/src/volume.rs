@@ -57,7 +57,9 @@ impl DType {
 #[non_exhaustive]
 pub enum VolumeError {
     /// A dimension is zero or larger than [`MAX_DIM`], or the voxel count overflows.
-    #[error("invalid volume dimensions {dims:?}: each must be in 1..={max} and the voxel count must fit in memory")]
+    #[error(
+        "invalid volume dimensions {dims:?}: each must be in 1..={max} and the voxel count must fit in memory"
+    )]
     BadDims {
         /// The offending dimensions.
         dims: [u64; 3],
@@ -215,10 +217,16 @@ impl VolumeData {
         match dtype {
             DType::U8 => VolumeData::U8(bytes.to_vec()),
             DType::U16 => VolumeData::U16(
-                bytes.chunks_exact(2).map(|c| u16::from_le_bytes([c[0], c[1]])).collect(),
+                bytes
+                    .chunks_exact(2)
+                    .map(|c| u16::from_le_bytes([c[0], c[1]]))
+                    .collect(),
             ),
             DType::I16 => VolumeData::I16(
-                bytes.chunks_exact(2).map(|c| i16::from_le_bytes([c[0], c[1]])).collect(),
+                bytes
+                    .chunks_exact(2)
+                    .map(|c| i16::from_le_bytes([c[0], c[1]]))
+                    .collect(),
             ),
             DType::F32 => VolumeData::F32(
                 bytes
@@ -277,7 +285,11 @@ impl Volume {
             }
             if let Some(i) = first {
                 let [nx, ny, _] = desc.dims.map(|d| d as usize);
-                let first = [(i % nx) as u32, ((i / nx) % ny) as u32, (i / (nx * ny)) as u32];
+                let first = [
+                    (i % nx) as u32,
+                    ((i / nx) % ny) as u32,
+                    (i / (nx * ny)) as u32,
+                ];
                 return Err(VolumeError::NonFinite { count, first });
             }
         }
@@ -293,7 +305,15 @@ impl Volume {
         let dtype = data.dtype();
         let (lo, hi) = data.min_max().unwrap_or((0.0, 1.0));
         let hi = if hi > lo { hi } else { lo + 1.0 };
-        Volume::new(VolumeDesc { dims, dtype, spacing, value_range: [lo, hi] }, data)
+        Volume::new(
+            VolumeDesc {
+                dims,
+                dtype,
+                spacing,
+                value_range: [lo, hi],
+            },
+            data,
+        )
     }
 
     /// The description.
@@ -365,8 +385,14 @@ mod tests {
 
     #[test]
     fn rejects_bad_dims_and_sizes() {
-        assert!(matches!(voxel_count([0, 1, 1]), Err(VolumeError::BadDims { .. })));
-        assert!(matches!(voxel_count([1 << 25, 1, 1]), Err(VolumeError::BadDims { .. })));
+        assert!(matches!(
+            voxel_count([0, 1, 1]),
+            Err(VolumeError::BadDims { .. })
+        ));
+        assert!(matches!(
+            voxel_count([1 << 25, 1, 1]),
+            Err(VolumeError::BadDims { .. })
+        ));
         assert!(matches!(
             voxel_count([1 << 24, 1 << 24, 1 << 24]),
             Err(VolumeError::BadDims { .. })
@@ -379,7 +405,11 @@ mod tests {
         };
         assert!(matches!(
             Volume::new(desc.clone(), VolumeData::U8(vec![0; 7])),
-            Err(VolumeError::SizeMismatch { expected: 8, actual: 7, .. })
+            Err(VolumeError::SizeMismatch {
+                expected: 8,
+                actual: 7,
+                ..
+            })
         ));
         let mut bad = desc.clone();
         bad.spacing = [1.0, f32::NAN, 1.0];
@@ -397,9 +427,18 @@ mod tests {
             spacing: [1.0; 3],
             value_range: [0.0, 1.0],
         };
-        let err = Volume::new(desc, VolumeData::F32(vec![0.0, 1.0, f32::INFINITY, f32::NAN]))
-            .unwrap_err();
-        assert_eq!(err, VolumeError::NonFinite { count: 2, first: [0, 1, 0] });
+        let err = Volume::new(
+            desc,
+            VolumeData::F32(vec![0.0, 1.0, f32::INFINITY, f32::NAN]),
+        )
+        .unwrap_err();
+        assert_eq!(
+            err,
+            VolumeError::NonFinite {
+                count: 2,
+                first: [0, 1, 0]
+            }
+        );
     }
 
     #[test]

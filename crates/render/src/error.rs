@@ -7,7 +7,9 @@ use thiserror::Error;
 #[non_exhaustive]
 pub enum RenderError {
     /// The volume does not fit the device's 3D texture limit.
-    #[error("volume dims {dims:?} exceed the device's max 3D texture dimension {limit}; use the out-of-core path")]
+    #[error(
+        "volume dims {dims:?} exceed the device's max 3D texture dimension {limit}; use the out-of-core path"
+    )]
     VolumeTooLarge {
         /// The volume's dimensions.
         dims: [u32; 3],
@@ -30,6 +32,9 @@ pub enum RenderError {
     /// The depth format has no depth aspect.
     #[error("depth format {0:?} has no depth aspect")]
     BadDepthFormat(wgpu::TextureFormat),
+    /// The out-of-core machinery failed (pool sizing, loader threads, index).
+    #[error("out-of-core path: {0}")]
+    OutOfCore(String),
     /// `render` was called before a successful `prepare`.
     #[error("render called before prepare")]
     NotPrepared,
@@ -55,4 +60,7 @@ pub enum PrepareError {
     /// A setting is out of range.
     #[error("invalid setting: {0}")]
     BadSetting(String),
+    /// The out-of-core path failed this frame.
+    #[error(transparent)]
+    Render(#[from] RenderError),
 }

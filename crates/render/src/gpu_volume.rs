@@ -1,7 +1,8 @@
 //! The in-core volume on the GPU: one 3D texture plus the macro-cell ranges.
 
 use crate::error::RenderError;
-use brickray_core::{DType, MacroCellGrid, Volume, VolumeData};
+use brickray_core::{DType, MacroCellGrid, Volume};
+use std::borrow::Cow;
 
 /// Macro-cell size in voxels for empty-space skipping.
 pub(crate) const CELL: u32 = 8;
@@ -20,38 +21,86 @@ pub(crate) struct GpuVolume {
     pub(crate) bytes: u64,
 }
 
-/// Chooses the texture format and converts samples for it. Prefers exact formats
-/// (R8Unorm, R16Unorm, filterable R32Float) and falls back to R16Float of the
-/// normalized value when the device lacks the optional features.
-fn encode(vol: &Volume, features: wgpu::Features) -> (wgpu::TextureFormat, Vec<u8>, f32, f32) {
-    let desc = vol.desc();
-    let [lo, hi] = desc.value_range;
-    let span = if hi > lo { hi - lo } else { 1.0 };
-    let norm16 = features.contains(wgpu::Features::TEXTURE_FORMAT_16BIT_NORM);
-    let f32filt = features.contains(wgpu::Features::FLOAT32_FILTERABLE);
-    // Normalized-f16 fallback.
-    let to_f16 = |vol: &Volume| -> Vec<u8> {
-        let d = vol.data();
-        (0..d.len())
-            .flat_map(|i| f16_bits(desc.normalize(d.get(i))).to_le_bytes())
-            .collect()
-    };
-    match (vol.data(), desc.dtype) {
-        (VolumeData::U8(v), DType::U8) => (wgpu::TextureFormat::R8Unorm, v.clone(), 255.0 / span, -lo / span),
-        (VolumeData::U16(v), DType::U16) if norm16 => (
-            wgpu::TextureFormat::R16Unorm,
-            bytemuck::cast_slice(v).to_vec(),
-            65535.0 / span,
-            -lo / span,
-        ),
-        (VolumeData::I16(v), DType::I16) if norm16 => {
-            let u: Vec<u16> = v.iter().map(|&x| (x as i32 + 32768) as u16).collect();
-            (wgpu::TextureFormat::R16Unorm, bytemuck::cast_slice(&u).to_vec(), 65535.0 / span, (-32768.0 - lo) / span)
+/// How samples of a dtype are stored in a GPU texture: the format and the map
+/// from texel value to normalized value (`texel * scale + offset`). Exact formats
+/// are preferred (R8Unorm, R16Unorm, filterable R32Float); without the optional
+/// features the fallback is R16Float of the normalized value.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct SampleEncoding {
+    pub(crate) format: wgpu::TextureFormat,
+    pub(crate) scale: f32,
+    pub(crate) offset: f32,
+    dtype: DType,
+    value_range: [f32; 2],
+}
+
+impl SampleEncoding {
+    pub(crate) fn choose(
+        dtype: DType,
+        value_range: [f32; 2],
+        features: wgpu::Features,
+    ) -> SampleEncoding {
+        let [lo, hi] = value_range;
+        let span = if hi > lo { hi - lo } else { 1.0 };
+        let norm16 = features.contains(wgpu::Features::TEXTURE_FORMAT_16BIT_NORM);
+        let f32filt = features.contains(wgpu::Features::FLOAT32_FILTERABLE);
+        let (format, scale, offset) = match dtype {
+            DType::U8 => (wgpu::TextureFormat::R8Unorm, 255.0 / span, -lo / span),
+            DType::U16 if norm16 => (wgpu::TextureFormat::R16Unorm, 65535.0 / span, -lo / span),
+            DType::I16 if norm16 => (
+                wgpu::TextureFormat::R16Unorm,
+                65535.0 / span,
+                (-32768.0 - lo) / span,
+            ),
+            DType::F32 if f32filt => (wgpu::TextureFormat::R32Float, 1.0 / span, -lo / span),
+            _ => (wgpu::TextureFormat::R16Float, 1.0, 0.0),
+        };
+        SampleEncoding {
+            format,
+            scale,
+            offset,
+            dtype,
+            value_range,
         }
-        (VolumeData::F32(v), DType::F32) if f32filt => {
-            (wgpu::TextureFormat::R32Float, bytemuck::cast_slice(v).to_vec(), 1.0 / span, -lo / span)
+    }
+
+    /// Bytes per texel.
+    pub(crate) fn texel_bytes(&self) -> u32 {
+        self.format.block_copy_size(None).unwrap_or(1)
+    }
+
+    /// Converts little-endian samples of the dtype into texels of the format.
+    pub(crate) fn encode<'a>(&self, bytes: &'a [u8]) -> Cow<'a, [u8]> {
+        let [lo, hi] = self.value_range;
+        let span = if hi > lo { hi - lo } else { 1.0 };
+        let n = self.dtype.size();
+        match (self.dtype, self.format) {
+            (DType::U8, _)
+            | (DType::U16, wgpu::TextureFormat::R16Unorm)
+            | (DType::F32, wgpu::TextureFormat::R32Float) => Cow::Borrowed(bytes),
+            (DType::I16, wgpu::TextureFormat::R16Unorm) => Cow::Owned(
+                bytes
+                    .chunks_exact(2)
+                    .flat_map(|c| {
+                        ((i16::from_le_bytes([c[0], c[1]]) as i32 + 32768) as u16).to_le_bytes()
+                    })
+                    .collect(),
+            ),
+            _ => Cow::Owned(
+                bytes
+                    .chunks_exact(n)
+                    .flat_map(|c| {
+                        let raw = match self.dtype {
+                            DType::U16 => u16::from_le_bytes([c[0], c[1]]) as f32,
+                            DType::I16 => i16::from_le_bytes([c[0], c[1]]) as f32,
+                            DType::F32 => f32::from_le_bytes([c[0], c[1], c[2], c[3]]),
+                            _ => c[0] as f32,
+                        };
+                        f16_bits((raw - lo) / span).to_le_bytes()
+                    })
+                    .collect(),
+            ),
         }
-        _ => (wgpu::TextureFormat::R16Float, to_f16(vol), 1.0, 0.0),
     }
 }
 
@@ -79,7 +128,11 @@ fn f16_bits(x: f32) -> u16 {
         return sign | rounded as u16;
     }
     let rounded = man + 0xfff + ((man >> 13) & 1);
-    let (e, m) = if rounded & 0x80_0000 != 0 { (e + 1, 0) } else { (e, rounded >> 13) };
+    let (e, m) = if rounded & 0x80_0000 != 0 {
+        (e + 1, 0)
+    } else {
+        (e, rounded >> 13)
+    };
     if e >= 31 {
         return sign | 0x7c00;
     }
@@ -97,10 +150,17 @@ impl GpuVolume {
         if dims.iter().any(|&d| d > limit) {
             return Err(RenderError::VolumeTooLarge { dims, limit });
         }
-        let (format, bytes, scale, offset) = encode(vol, device.features());
+        let enc =
+            SampleEncoding::choose(vol.desc().dtype, vol.desc().value_range, device.features());
+        let (format, scale, offset) = (enc.format, enc.scale, enc.offset);
+        let bytes = enc.encode(vol.data().as_bytes());
         let texture = device.create_texture(&wgpu::TextureDescriptor {
             label: Some("brickray-render volume"),
-            size: wgpu::Extent3d { width: dims[0], height: dims[1], depth_or_array_layers: dims[2] },
+            size: wgpu::Extent3d {
+                width: dims[0],
+                height: dims[1],
+                depth_or_array_layers: dims[2],
+            },
             mip_level_count: 1,
             sample_count: 1,
             dimension: wgpu::TextureDimension::D3,
@@ -108,7 +168,7 @@ impl GpuVolume {
             usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
             view_formats: &[],
         });
-        let bpp = format.block_copy_size(None).unwrap_or(1);
+        let bpp = enc.texel_bytes();
         let row = dims[0] * bpp;
         let slice = row as usize * dims[1] as usize;
         // Upload in slabs of at most 64 MiB so staging memory stays bounded.
@@ -124,8 +184,16 @@ impl GpuVolume {
                     aspect: wgpu::TextureAspect::All,
                 },
                 &bytes[z as usize * slice..z1 as usize * slice],
-                wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(row), rows_per_image: Some(dims[1]) },
-                wgpu::Extent3d { width: dims[0], height: dims[1], depth_or_array_layers: z1 - z },
+                wgpu::TexelCopyBufferLayout {
+                    offset: 0,
+                    bytes_per_row: Some(row),
+                    rows_per_image: Some(dims[1]),
+                },
+                wgpu::Extent3d {
+                    width: dims[0],
+                    height: dims[1],
+                    depth_or_array_layers: z1 - z,
+                },
             );
             z = z1;
         }

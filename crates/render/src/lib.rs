@@ -18,13 +18,19 @@
 
 mod error;
 mod gpu_volume;
+mod ooc;
 pub mod shaders;
 
 pub use error::{PrepareError, RenderError};
+pub use ooc::{OutOfCoreConfig, OutOfCoreStats};
 
-use brickray_core::{Camera, RenderMode, RenderSettings, TransferFunction, Volume, VolumeFrame};
+use brickray_core::{
+    BrickSource, Camera, RenderMode, RenderSettings, TransferFunction, Volume, VolumeFrame,
+};
 use glam::{Mat3, Mat4};
 use gpu_volume::GpuVolume;
+use ooc::OocVolume;
+use std::sync::Arc;
 
 /// The host's render targets that [`VolumeRenderer::render`] draws into.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -64,6 +70,8 @@ pub struct FrameStats {
 
 /// Upper bound of samples along one ray (a guard, not a quality setting).
 const MAX_STEPS: u32 = 1 << 20;
+/// Upper bound of index leaves visited by one ray out of core (a guard).
+const MAX_LEAVES: u32 = 1 << 16;
 
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
@@ -80,29 +88,41 @@ struct Params {
     size: [u32; 4],
     cells: [u32; 4],
     limits: [u32; 4],
+    octree: [f32; 4],
+    bricks: [u32; 4],
+    atlas: [f32; 4],
 }
 
 /// A storage buffer that grows geometrically and is rewritten only on change.
 #[derive(Debug)]
-struct GrowBuffer {
+pub(crate) struct GrowBuffer {
     label: &'static str,
     buffer: wgpu::Buffer,
     contents: Vec<u8>,
 }
 
 impl GrowBuffer {
-    fn new(device: &wgpu::Device, label: &'static str, size: u64) -> GrowBuffer {
+    pub(crate) fn new(device: &wgpu::Device, label: &'static str, size: u64) -> GrowBuffer {
         let buffer = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some(label),
             size: size.max(16),
             usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        GrowBuffer { label, buffer, contents: Vec::new() }
+        GrowBuffer {
+            label,
+            buffer,
+            contents: Vec::new(),
+        }
     }
 
     /// Writes `data`; returns (bytes written, whether the buffer was reallocated).
-    fn write(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, data: &[u8]) -> (u64, bool) {
+    pub(crate) fn write(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        data: &[u8],
+    ) -> (u64, bool) {
         if data == self.contents.as_slice() {
             return (0, false);
         }
@@ -144,7 +164,11 @@ pub struct VolumeRenderer {
     tf: GrowBuffer,
     tf_prefix: GrowBuffer,
     tf_len: u32,
+    tf_cpu: Option<TransferFunction>,
     volume: Option<GpuVolume>,
+    ooc: Option<OocVolume>,
+    /// The out-of-core pipeline and its layout, created on first use.
+    ooc_pipeline: Option<(wgpu::ComputePipeline, wgpu::BindGroupLayout)>,
     dummy_depth: wgpu::TextureView,
     frame_targets: Option<FrameTargets>,
     /// The ray-cast bind group and the host depth view it was built with.
@@ -165,6 +189,111 @@ fn storage_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
     }
 }
 
+/// Bindings shared by the in-core and out-of-core ray casters (binding 5 holds the
+/// macro-cell ranges in core and the brick slot table out of core).
+fn raycast_layout_entries() -> Vec<wgpu::BindGroupLayoutEntry> {
+    let c = wgpu::ShaderStages::COMPUTE;
+    vec![
+        wgpu::BindGroupLayoutEntry {
+            binding: 0,
+            visibility: c,
+            ty: wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Uniform,
+                has_dynamic_offset: false,
+                min_binding_size: wgpu::BufferSize::new(std::mem::size_of::<Params>() as u64),
+            },
+            count: None,
+        },
+        wgpu::BindGroupLayoutEntry {
+            binding: 1,
+            visibility: c,
+            ty: wgpu::BindingType::Texture {
+                sample_type: wgpu::TextureSampleType::Float { filterable: true },
+                view_dimension: wgpu::TextureViewDimension::D3,
+                multisampled: false,
+            },
+            count: None,
+        },
+        wgpu::BindGroupLayoutEntry {
+            binding: 2,
+            visibility: c,
+            ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
+            count: None,
+        },
+        storage_entry(3),
+        storage_entry(4),
+        storage_entry(5),
+        wgpu::BindGroupLayoutEntry {
+            binding: 6,
+            visibility: c,
+            ty: wgpu::BindingType::Texture {
+                sample_type: wgpu::TextureSampleType::Depth,
+                view_dimension: wgpu::TextureViewDimension::D2,
+                multisampled: false,
+            },
+            count: None,
+        },
+        wgpu::BindGroupLayoutEntry {
+            binding: 7,
+            visibility: c,
+            ty: wgpu::BindingType::StorageTexture {
+                access: wgpu::StorageTextureAccess::WriteOnly,
+                format: wgpu::TextureFormat::Rgba16Float,
+                view_dimension: wgpu::TextureViewDimension::D2,
+            },
+            count: None,
+        },
+        wgpu::BindGroupLayoutEntry {
+            binding: 8,
+            visibility: c,
+            ty: wgpu::BindingType::StorageTexture {
+                access: wgpu::StorageTextureAccess::WriteOnly,
+                format: wgpu::TextureFormat::R32Float,
+                view_dimension: wgpu::TextureViewDimension::D2,
+            },
+            count: None,
+        },
+        wgpu::BindGroupLayoutEntry {
+            binding: 9,
+            visibility: c,
+            ty: wgpu::BindingType::StorageTexture {
+                access: wgpu::StorageTextureAccess::WriteOnly,
+                format: wgpu::TextureFormat::R32Uint,
+                view_dimension: wgpu::TextureViewDimension::D2,
+            },
+            count: None,
+        },
+    ]
+}
+
+/// The out-of-core ray-cast pipeline: the shared bindings plus the index (10).
+fn ooc_pipeline(device: &wgpu::Device) -> (wgpu::ComputePipeline, wgpu::BindGroupLayout) {
+    let mut entries = raycast_layout_entries();
+    entries.push(storage_entry(10));
+    let bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some("brickray-render raycast ooc"),
+        entries: &entries,
+    });
+    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some("brickray-render raycast_ooc.wgsl"),
+        source: wgpu::ShaderSource::Wgsl(shaders::raycast_ooc().into()),
+    });
+    let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+        label: Some("brickray-render raycast ooc"),
+        bind_group_layouts: &[Some(&bgl)],
+        immediate_size: 0,
+    });
+    let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+        label: Some("brickray-render raycast ooc"),
+        layout: Some(&layout),
+        module: &module,
+        entry_point: Some("main"),
+        compilation_options: Default::default(),
+        cache: None,
+    });
+    (pipeline, bgl)
+}
+
 impl VolumeRenderer {
     /// Creates the pipelines for the host's targets.
     pub fn new(device: &wgpu::Device, targets: TargetDesc) -> Result<VolumeRenderer, RenderError> {
@@ -181,80 +310,9 @@ impl VolumeRenderer {
                 return Err(RenderError::BadDepthFormat(d));
             }
         }
-        let c = wgpu::ShaderStages::COMPUTE;
         let raycast_bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("brickray-render raycast"),
-            entries: &[
-                wgpu::BindGroupLayoutEntry {
-                    binding: 0,
-                    visibility: c,
-                    ty: wgpu::BindingType::Buffer {
-                        ty: wgpu::BufferBindingType::Uniform,
-                        has_dynamic_offset: false,
-                        min_binding_size: wgpu::BufferSize::new(std::mem::size_of::<Params>() as u64),
-                    },
-                    count: None,
-                },
-                wgpu::BindGroupLayoutEntry {
-                    binding: 1,
-                    visibility: c,
-                    ty: wgpu::BindingType::Texture {
-                        sample_type: wgpu::TextureSampleType::Float { filterable: true },
-                        view_dimension: wgpu::TextureViewDimension::D3,
-                        multisampled: false,
-                    },
-                    count: None,
-                },
-                wgpu::BindGroupLayoutEntry {
-                    binding: 2,
-                    visibility: c,
-                    ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
-                    count: None,
-                },
-                storage_entry(3),
-                storage_entry(4),
-                storage_entry(5),
-                wgpu::BindGroupLayoutEntry {
-                    binding: 6,
-                    visibility: c,
-                    ty: wgpu::BindingType::Texture {
-                        sample_type: wgpu::TextureSampleType::Depth,
-                        view_dimension: wgpu::TextureViewDimension::D2,
-                        multisampled: false,
-                    },
-                    count: None,
-                },
-                wgpu::BindGroupLayoutEntry {
-                    binding: 7,
-                    visibility: c,
-                    ty: wgpu::BindingType::StorageTexture {
-                        access: wgpu::StorageTextureAccess::WriteOnly,
-                        format: wgpu::TextureFormat::Rgba16Float,
-                        view_dimension: wgpu::TextureViewDimension::D2,
-                    },
-                    count: None,
-                },
-                wgpu::BindGroupLayoutEntry {
-                    binding: 8,
-                    visibility: c,
-                    ty: wgpu::BindingType::StorageTexture {
-                        access: wgpu::StorageTextureAccess::WriteOnly,
-                        format: wgpu::TextureFormat::R32Float,
-                        view_dimension: wgpu::TextureViewDimension::D2,
-                    },
-                    count: None,
-                },
-                wgpu::BindGroupLayoutEntry {
-                    binding: 9,
-                    visibility: c,
-                    ty: wgpu::BindingType::StorageTexture {
-                        access: wgpu::StorageTextureAccess::WriteOnly,
-                        format: wgpu::TextureFormat::R32Uint,
-                        view_dimension: wgpu::TextureViewDimension::D2,
-                    },
-                    count: None,
-                },
-            ],
+            entries: &raycast_layout_entries(),
         });
         let raycast_src = shaders::raycast_incore();
         let raycast_module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
@@ -318,7 +376,11 @@ impl VolumeRenderer {
             multisample: wgpu::MultisampleState::default(),
             fragment: Some(wgpu::FragmentState {
                 module: &composite_module,
-                entry_point: Some(if targets.depth_format.is_some() { "fs_main" } else { "fs_color" }),
+                entry_point: Some(if targets.depth_format.is_some() {
+                    "fs_main"
+                } else {
+                    "fs_color"
+                }),
                 compilation_options: Default::default(),
                 targets: &[Some(wgpu::ColorTargetState {
                     format: targets.color_format,
@@ -347,7 +409,11 @@ impl VolumeRenderer {
         let dummy_depth = device
             .create_texture(&wgpu::TextureDescriptor {
                 label: Some("brickray-render no host depth"),
-                size: wgpu::Extent3d { width: 1, height: 1, depth_or_array_layers: 1 },
+                size: wgpu::Extent3d {
+                    width: 1,
+                    height: 1,
+                    depth_or_array_layers: 1,
+                },
                 mip_level_count: 1,
                 sample_count: 1,
                 dimension: wgpu::TextureDimension::D2,
@@ -368,7 +434,10 @@ impl VolumeRenderer {
             tf: GrowBuffer::new(device, "brickray-render tf", 256 * 16),
             tf_prefix: GrowBuffer::new(device, "brickray-render tf prefix", 257 * 4),
             tf_len: 0,
+            tf_cpu: None,
             volume: None,
+            ooc: None,
+            ooc_pipeline: None,
             dummy_depth,
             frame_targets: None,
             raycast_bg: None,
@@ -384,10 +453,41 @@ impl VolumeRenderer {
     /// Uploads a volume into one 3D texture (the in-core path) and builds its
     /// macro-cell grid. Fails with [`RenderError::VolumeTooLarge`] when a dimension
     /// exceeds the device's 3D texture limit.
-    pub fn set_volume(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, volume: &Volume) -> Result<(), RenderError> {
+    pub fn set_volume(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        volume: &Volume,
+    ) -> Result<(), RenderError> {
         self.volume = Some(GpuVolume::upload(device, queue, volume)?);
+        self.ooc = None;
         self.raycast_bg = None;
         Ok(())
+    }
+
+    /// Switches to the out-of-core path over a brick source (a brick-octree file
+    /// store or a procedural source): bricks stream in asynchronously, a coarse
+    /// image appears at once and sharpens over frames. `frame` places the volume
+    /// in the world (as later passed in [`FrameDesc::frame`]).
+    pub fn set_volume_source(
+        &mut self,
+        device: &wgpu::Device,
+        source: Arc<dyn BrickSource>,
+        frame: VolumeFrame,
+        config: OutOfCoreConfig,
+    ) -> Result<(), RenderError> {
+        if self.ooc_pipeline.is_none() {
+            self.ooc_pipeline = Some(ooc_pipeline(device));
+        }
+        self.ooc = Some(OocVolume::new(device, source, frame, config)?);
+        self.volume = None;
+        self.raycast_bg = None;
+        Ok(())
+    }
+
+    /// Statistics of the out-of-core path's last frame (`None` in core).
+    pub fn out_of_core_stats(&self) -> Option<OutOfCoreStats> {
+        self.ooc.as_ref().map(|o| o.stats)
     }
 
     /// The GPU texture format chosen for the volume, if one is set.
@@ -402,52 +502,100 @@ impl VolumeRenderer {
 
     /// Sets the transfer function (and its opacity prefix-sum table). Written to the
     /// GPU only when it changed.
-    pub fn set_transfer_function(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, tf: &TransferFunction) -> u64 {
+    pub fn set_transfer_function(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        tf: &TransferFunction,
+    ) -> u64 {
         let entries: &[u8] = bytemuck::cast_slice(tf.entries());
         let (a, grew_a) = self.tf.write(device, queue, entries);
-        let (b, grew_b) = self.tf_prefix.write(device, queue, bytemuck::cast_slice(tf.prefix()));
+        let (b, grew_b) = self
+            .tf_prefix
+            .write(device, queue, bytemuck::cast_slice(tf.prefix()));
         if grew_a || grew_b {
             self.raycast_bg = None;
         }
         self.tf_len = tf.len() as u32;
+        self.tf_cpu = Some(tf.clone());
         a + b
     }
 
     fn ensure_targets(&mut self, device: &wgpu::Device, width: u32, height: u32) {
-        if self.frame_targets.as_ref().is_some_and(|t| t.width == width && t.height == height) {
+        if self
+            .frame_targets
+            .as_ref()
+            .is_some_and(|t| t.width == width && t.height == height)
+        {
             return;
         }
         let make = |label, format, extra| {
             device.create_texture(&wgpu::TextureDescriptor {
                 label: Some(label),
-                size: wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
+                size: wgpu::Extent3d {
+                    width,
+                    height,
+                    depth_or_array_layers: 1,
+                },
                 mip_level_count: 1,
                 sample_count: 1,
                 dimension: wgpu::TextureDimension::D2,
                 format,
-                usage: wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::TEXTURE_BINDING | extra,
+                usage: wgpu::TextureUsages::STORAGE_BINDING
+                    | wgpu::TextureUsages::TEXTURE_BINDING
+                    | extra,
                 view_formats: &[],
             })
         };
         let none = wgpu::TextureUsages::empty();
-        let color = make("brickray-render ray colour", wgpu::TextureFormat::Rgba16Float, none).create_view(&Default::default());
-        let depth = make("brickray-render ray depth", wgpu::TextureFormat::R32Float, none).create_view(&Default::default());
-        let samples = make("brickray-render ray samples", wgpu::TextureFormat::R32Uint, wgpu::TextureUsages::COPY_SRC);
+        let color = make(
+            "brickray-render ray colour",
+            wgpu::TextureFormat::Rgba16Float,
+            none,
+        )
+        .create_view(&Default::default());
+        let depth = make(
+            "brickray-render ray depth",
+            wgpu::TextureFormat::R32Float,
+            none,
+        )
+        .create_view(&Default::default());
+        let samples = make(
+            "brickray-render ray samples",
+            wgpu::TextureFormat::R32Uint,
+            wgpu::TextureUsages::COPY_SRC,
+        );
         let samples_view = samples.create_view(&Default::default());
         let composite_bg = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("brickray-render composite"),
             layout: &self.composite_bgl,
             entries: &[
-                wgpu::BindGroupEntry { binding: 0, resource: wgpu::BindingResource::TextureView(&color) },
-                wgpu::BindGroupEntry { binding: 1, resource: wgpu::BindingResource::TextureView(&depth) },
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: wgpu::BindingResource::TextureView(&color),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: wgpu::BindingResource::TextureView(&depth),
+                },
             ],
         });
-        self.frame_targets = Some(FrameTargets { width, height, color, depth, samples, samples_view, composite_bg });
+        self.frame_targets = Some(FrameTargets {
+            width,
+            height,
+            color,
+            depth,
+            samples,
+            samples_view,
+            composite_bg,
+        });
         self.raycast_bg = None;
     }
 
     /// Writes this frame's uniforms and records the ray-cast compute pass into
-    /// `encoder`. The host submits the encoder, then records [`Self::render`] into
+    /// `encoder`. Out of core it first plans the frame (refinement, requests to the
+    /// loader, uploads within the budget, index encoding); it never waits for I/O
+    /// or the GPU. The host submits the encoder, then records [`Self::render`] into
     /// its pass (in the same or a later submission).
     pub fn prepare(
         &mut self,
@@ -456,21 +604,46 @@ impl VolumeRenderer {
         encoder: &mut wgpu::CommandEncoder,
         frame: &FrameDesc<'_>,
     ) -> Result<FrameStats, PrepareError> {
-        let vol = self.volume.as_ref().ok_or(PrepareError::NoVolume)?;
+        if self.volume.is_none() && self.ooc.is_none() {
+            return Err(PrepareError::NoVolume);
+        }
         let limit = device.limits().max_texture_dimension_2d;
         if frame.width == 0 || frame.height == 0 || frame.width > limit || frame.height > limit {
-            return Err(PrepareError::BadViewport { width: frame.width, height: frame.height, limit });
+            return Err(PrepareError::BadViewport {
+                width: frame.width,
+                height: frame.height,
+                limit,
+            });
         }
         let s = &frame.settings;
         if !(s.step_factor.is_finite() && s.step_factor > 0.0) {
-            return Err(PrepareError::BadSetting(format!("step_factor {} must be > 0", s.step_factor)));
+            return Err(PrepareError::BadSetting(format!(
+                "step_factor {} must be > 0",
+                s.step_factor
+            )));
         }
-        if self.tf_len < 2 {
+        if self.tf_cpu.is_none() || self.tf_len < 2 {
             return Err(PrepareError::BadSetting("no transfer function set".into()));
         }
-        let params = self.params(vol, frame);
         self.ensure_targets(device, frame.width, frame.height);
         let mut uploaded = 0;
+        if let (Some(ooc), Some(tf)) = (self.ooc.as_mut(), self.tf_cpu.as_ref()) {
+            let (bytes, grew) = ooc.update(
+                device,
+                queue,
+                &frame.camera,
+                frame.frame,
+                frame.width,
+                frame.height,
+                s.mode,
+                tf,
+            )?;
+            uploaded += bytes;
+            if grew {
+                self.raycast_bg = None;
+            }
+        }
+        let params = self.params(frame);
         if self.last_params != Some(params) {
             queue.write_buffer(&self.uniform, 0, bytemuck::bytes_of(&params));
             self.last_params = Some(params);
@@ -478,42 +651,93 @@ impl VolumeRenderer {
         }
         let host = frame.host_depth.cloned();
         if self.raycast_bg.as_ref().is_none_or(|(_, h)| *h != host) {
-            let vol = self.volume.as_ref().expect("checked above");
             let t = self.frame_targets.as_ref().expect("ensured above");
             let depth_view = host.as_ref().unwrap_or(&self.dummy_depth);
+            let (layout, volume_view, table, index) =
+                match (&self.volume, &self.ooc, &self.ooc_pipeline) {
+                    (_, Some(o), Some((_, bgl))) => {
+                        (bgl, &o.atlas_view, &o.slots, Some(&o.index.buffer))
+                    }
+                    (Some(v), _, _) => (&self.raycast_bgl, &v.view, &v.cell_ranges, None),
+                    _ => return Err(PrepareError::NoVolume),
+                };
+            let mut entries = vec![
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: self.uniform.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: wgpu::BindingResource::TextureView(volume_view),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: wgpu::BindingResource::Sampler(&self.sampler),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 3,
+                    resource: self.tf.buffer.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 4,
+                    resource: self.tf_prefix.buffer.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 5,
+                    resource: table.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 6,
+                    resource: wgpu::BindingResource::TextureView(depth_view),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 7,
+                    resource: wgpu::BindingResource::TextureView(&t.color),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 8,
+                    resource: wgpu::BindingResource::TextureView(&t.depth),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 9,
+                    resource: wgpu::BindingResource::TextureView(&t.samples_view),
+                },
+            ];
+            if let Some(index) = index {
+                entries.push(wgpu::BindGroupEntry {
+                    binding: 10,
+                    resource: index.as_entire_binding(),
+                });
+            }
             let bg = device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("brickray-render raycast"),
-                layout: &self.raycast_bgl,
-                entries: &[
-                    wgpu::BindGroupEntry { binding: 0, resource: self.uniform.as_entire_binding() },
-                    wgpu::BindGroupEntry { binding: 1, resource: wgpu::BindingResource::TextureView(&vol.view) },
-                    wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::Sampler(&self.sampler) },
-                    wgpu::BindGroupEntry { binding: 3, resource: self.tf.buffer.as_entire_binding() },
-                    wgpu::BindGroupEntry { binding: 4, resource: self.tf_prefix.buffer.as_entire_binding() },
-                    wgpu::BindGroupEntry { binding: 5, resource: vol.cell_ranges.as_entire_binding() },
-                    wgpu::BindGroupEntry { binding: 6, resource: wgpu::BindingResource::TextureView(depth_view) },
-                    wgpu::BindGroupEntry { binding: 7, resource: wgpu::BindingResource::TextureView(&t.color) },
-                    wgpu::BindGroupEntry { binding: 8, resource: wgpu::BindingResource::TextureView(&t.depth) },
-                    wgpu::BindGroupEntry { binding: 9, resource: wgpu::BindingResource::TextureView(&t.samples_view) },
-                ],
+                layout,
+                entries: &entries,
             });
             self.raycast_bg = Some((bg, host));
         }
         let (bg, _) = self.raycast_bg.as_ref().expect("set above");
+        let pipeline = match (&self.ooc, &self.ooc_pipeline) {
+            (Some(_), Some((p, _))) => p,
+            _ => &self.raycast,
+        };
         {
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some("brickray-render raycast"),
                 timestamp_writes: None,
             });
-            pass.set_pipeline(&self.raycast);
+            pass.set_pipeline(pipeline);
             pass.set_bind_group(0, bg, &[]);
             pass.dispatch_workgroups(frame.width.div_ceil(8), frame.height.div_ceil(8), 1);
         }
         self.prepared = true;
-        Ok(FrameStats { rays: frame.width as u64 * frame.height as u64, uploaded_bytes: uploaded })
+        Ok(FrameStats {
+            rays: frame.width as u64 * frame.height as u64,
+            uploaded_bytes: uploaded,
+        })
     }
 
-    fn params(&self, vol: &GpuVolume, frame: &FrameDesc<'_>) -> Params {
+    fn params(&self, frame: &FrameDesc<'_>) -> Params {
         let s = &frame.settings;
         let aspect = frame.width as f32 / frame.height as f32;
         let vp = frame.camera.view_proj(aspect);
@@ -539,19 +763,63 @@ impl VolumeRenderer {
             flags |= 32;
         }
         let voxel_world = frame.frame.voxel_world;
+        let (dims, scale, offset, cells, octree, bricks, atlas) = match (&self.ooc, &self.volume) {
+            (Some(o), _) => {
+                let l = &o.layout;
+                let sc = l.volume_scale();
+                let a = o.atlas_dims;
+                (
+                    l.volume.dims,
+                    o.encoding.scale,
+                    o.encoding.offset,
+                    [0; 4],
+                    [sc[0] as f32, sc[1] as f32, sc[2] as f32, 0.0],
+                    [l.brick, l.apron, (l.levels - 1) as u32, l.stored_side()],
+                    [a[0] as f32, a[1] as f32, a[2] as f32, 0.0],
+                )
+            }
+            (None, Some(v)) => (
+                v.dims,
+                v.scale,
+                v.offset,
+                [v.cells[0], v.cells[1], v.cells[2], gpu_volume::CELL],
+                [0.0; 4],
+                [0; 4],
+                [0.0; 4],
+            ),
+            (None, None) => ([1; 3], 1.0, 0.0, [0; 4], [0.0; 4], [0; 4], [0.0; 4]),
+        };
         Params {
             inv_view_proj: vp.inverse().to_cols_array_2d(),
             view_proj: vp.to_cols_array_2d(),
             inv_model: model.inverse().to_cols_array_2d(),
             normal_mat: Mat4::from_mat3(normal).to_cols_array_2d(),
-            dims: [vol.dims[0] as f32, vol.dims[1] as f32, vol.dims[2] as f32, voxel_world],
-            value_map: [vol.scale, vol.offset, self.tf_len as f32, s.step_factor * voxel_world],
+            dims: [dims[0] as f32, dims[1] as f32, dims[2] as f32, voxel_world],
+            value_map: [
+                scale,
+                offset,
+                self.tf_len as f32,
+                s.step_factor * voxel_world,
+            ],
             iso,
-            shade: [s.shading.ambient, s.shading.diffuse, s.shading.specular, s.shading.shininess],
-            misc: [s.accel.early_termination.unwrap_or(2.0), s.depth_opacity, s.step_factor, 0.0],
+            shade: [
+                s.shading.ambient,
+                s.shading.diffuse,
+                s.shading.specular,
+                s.shading.shininess,
+            ],
+            misc: [
+                s.accel.early_termination.unwrap_or(2.0),
+                s.depth_opacity,
+                s.step_factor,
+                0.0,
+            ],
             size: [frame.width, frame.height, flags, s.iso_refine_steps],
-            cells: [vol.cells[0], vol.cells[1], vol.cells[2], gpu_volume::CELL],
-            limits: [MAX_STEPS, 0, 0, 0],
+            cells,
+            limits: [MAX_STEPS, MAX_LEAVES, 0, 0],
+            octree,
+            bricks,
+            atlas,
         }
     }
 
@@ -566,7 +834,11 @@ impl VolumeRenderer {
     /// the host's colour and, when the pass has a depth attachment, the volume's
     /// depth (the host's depth where the volume put none).
     pub fn render(&self, pass: &mut wgpu::RenderPass<'_>) -> Result<(), RenderError> {
-        let t = self.frame_targets.as_ref().filter(|_| self.prepared).ok_or(RenderError::NotPrepared)?;
+        let t = self
+            .frame_targets
+            .as_ref()
+            .filter(|_| self.prepared)
+            .ok_or(RenderError::NotPrepared)?;
         pass.set_pipeline(&self.composite);
         pass.set_bind_group(0, &t.composite_bg, &[]);
         pass.draw(0..3, 0..1);

@@ -97,13 +97,22 @@ pub enum IoError {
 
 impl IoError {
     pub(crate) fn io(path: &Path, source: std::io::Error) -> IoError {
-        IoError::Io { path: path.to_owned(), source }
+        IoError::Io {
+            path: path.to_owned(),
+            source,
+        }
     }
     pub(crate) fn header(path: &Path, msg: impl Into<String>) -> IoError {
-        IoError::BadHeader { path: path.to_owned(), msg: msg.into() }
+        IoError::BadHeader {
+            path: path.to_owned(),
+            msg: msg.into(),
+        }
     }
     pub(crate) fn volume(path: &Path, source: VolumeError) -> IoError {
-        IoError::Volume { path: path.to_owned(), source }
+        IoError::Volume {
+            path: path.to_owned(),
+            source,
+        }
     }
 }
 
@@ -127,7 +136,10 @@ pub trait VolumeReader: Send {
         let len = usize::try_from(desc.byte_len()).map_err(|_| {
             IoError::volume(
                 self.path(),
-                VolumeError::BadDims { dims: desc.dims.map(u64::from), max: crate::volume::MAX_DIM },
+                VolumeError::BadDims {
+                    dims: desc.dims.map(u64::from),
+                    max: crate::volume::MAX_DIM,
+                },
             )
         })?;
         let mut bytes = vec![0u8; len];
@@ -140,11 +152,19 @@ pub trait VolumeReader: Send {
 /// Checks that a slab request fits the volume and the buffer.
 pub(crate) fn check_slab(desc: &VolumeDesc, z0: u32, z1: u32, out: &[u8]) -> Result<u64, IoError> {
     if z0 > z1 || z1 > desc.dims[2] {
-        return Err(IoError::BadSlab { z0, z1, depth: desc.dims[2] });
+        return Err(IoError::BadSlab {
+            z0,
+            z1,
+            depth: desc.dims[2],
+        });
     }
     let slice = desc.dims[0] as u64 * desc.dims[1] as u64 * desc.dtype.size() as u64;
     let need = (z1 - z0) as u64 * slice;
-    assert_eq!(out.len() as u64, need, "read_slices: output buffer has the wrong length");
+    assert_eq!(
+        out.len() as u64,
+        need,
+        "read_slices: output buffer has the wrong length"
+    );
     Ok(slice)
 }
 
@@ -162,7 +182,10 @@ pub fn scan_range(dtype: DType, bytes: &[u8]) -> (f32, f32, Option<usize>) {
         }
     };
     match dtype {
-        DType::U8 => bytes.iter().enumerate().for_each(|(i, &b)| push(i, b as f32)),
+        DType::U8 => bytes
+            .iter()
+            .enumerate()
+            .for_each(|(i, &b)| push(i, b as f32)),
         DType::U16 => bytes
             .chunks_exact(2)
             .enumerate()
@@ -235,8 +258,15 @@ pub(crate) fn scan_stream(
     }
     if let Some(i) = first {
         let [nx, ny, _] = desc.dims.map(u64::from);
-        let first = [(i % nx) as u32, ((i / nx) % ny) as u32, (i / (nx * ny)) as u32];
-        return Err(IoError::volume(path, VolumeError::NonFinite { count, first }));
+        let first = [
+            (i % nx) as u32,
+            ((i / nx) % ny) as u32,
+            (i / (nx * ny)) as u32,
+        ];
+        return Err(IoError::volume(
+            path,
+            VolumeError::NonFinite { count, first },
+        ));
     }
     // Both finite here (NaN/Inf returned above, and there is at least one voxel).
     if hi <= lo {
@@ -249,18 +279,27 @@ fn bytes_non_finite(dtype: DType, bytes: &[u8]) -> u64 {
     if dtype != DType::F32 {
         return 0;
     }
-    bytes.chunks_exact(4).filter(|c| !f32::from_le_bytes([c[0], c[1], c[2], c[3]]).is_finite()).count() as u64
+    bytes
+        .chunks_exact(4)
+        .filter(|c| !f32::from_le_bytes([c[0], c[1], c[2], c[3]]).is_finite())
+        .count() as u64
 }
 
 /// Opens a volume by extension: `.json` (raw + JSON sidecar), `.nrrd` / `.nhdr`,
 /// or a `.raw` file with a `.json` sidecar of the same stem.
 pub fn open(path: impl AsRef<Path>) -> Result<Box<dyn VolumeReader>, IoError> {
     let path = path.as_ref();
-    let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .unwrap_or("")
+        .to_ascii_lowercase();
     match ext.as_str() {
         "json" => Ok(Box::new(RawReader::open_sidecar(path)?)),
         "nrrd" | "nhdr" => Ok(Box::new(NrrdReader::open(path)?)),
-        "raw" => Ok(Box::new(RawReader::open_sidecar(&path.with_extension("json"))?)),
+        "raw" => Ok(Box::new(RawReader::open_sidecar(
+            &path.with_extension("json"),
+        )?)),
         _ => Err(IoError::Unsupported {
             path: path.to_owned(),
             what: format!("unknown extension {ext:?} (expected .json, .raw, .nrrd or .nhdr)"),
@@ -271,4 +310,43 @@ pub fn open(path: impl AsRef<Path>) -> Result<Box<dyn VolumeReader>, IoError> {
 /// Opens and loads a volume whole (see [`open`]).
 pub fn read_volume(path: impl AsRef<Path>) -> Result<Volume, IoError> {
     open(path)?.read_volume()
+}
+
+/// A [`VolumeReader`] over a volume already in memory (for building a brick store
+/// from generated data, and for tests).
+#[derive(Debug)]
+pub struct MemoryReader {
+    volume: Volume,
+    path: PathBuf,
+}
+
+impl MemoryReader {
+    /// Wraps a volume; `name` stands for its path in errors.
+    pub fn new(volume: Volume, name: impl Into<PathBuf>) -> MemoryReader {
+        MemoryReader {
+            volume,
+            path: name.into(),
+        }
+    }
+}
+
+impl VolumeReader for MemoryReader {
+    fn desc(&self) -> &VolumeDesc {
+        self.volume.desc()
+    }
+
+    fn path(&self) -> &Path {
+        &self.path
+    }
+
+    fn read_slices(&mut self, z0: u32, z1: u32, out: &mut [u8]) -> Result<(), IoError> {
+        let slice = check_slab(self.volume.desc(), z0, z1, out)? as usize;
+        let bytes = self.volume.data().as_bytes();
+        out.copy_from_slice(&bytes[z0 as usize * slice..z1 as usize * slice]);
+        Ok(())
+    }
+
+    fn read_volume(&mut self) -> Result<Volume, IoError> {
+        Ok(self.volume.clone())
+    }
 }

@@ -43,7 +43,11 @@ impl NrrdReader {
         let mut next_line = |rd: &mut BufReader<File>| -> Result<Option<String>, IoError> {
             let mut raw = Vec::new();
             let limit = (MAX_HEADER - consumed.min(MAX_HEADER)) as u64 + 1;
-            let n = rd.by_ref().take(limit).read_until(b'\n', &mut raw).map_err(|e| IoError::io(path, e))?;
+            let n = rd
+                .by_ref()
+                .take(limit)
+                .read_until(b'\n', &mut raw)
+                .map_err(|e| IoError::io(path, e))?;
             consumed += n;
             if consumed > MAX_HEADER {
                 return Err(IoError::header(path, "header longer than 1 MiB"));
@@ -51,7 +55,9 @@ impl NrrdReader {
             if n == 0 {
                 return Ok(None);
             }
-            String::from_utf8(raw).map(Some).map_err(|_| IoError::header(path, "header is not text"))
+            String::from_utf8(raw)
+                .map(Some)
+                .map_err(|_| IoError::header(path, "header is not text"))
         };
         let magic = match next_line(&mut rd) {
             Ok(Some(m)) => m,
@@ -95,11 +101,18 @@ impl NrrdReader {
         let ty = get("type").ok_or_else(|| IoError::header(path, "no type field"))?;
         let dtype = match ty.to_ascii_lowercase().as_str() {
             "uchar" | "unsigned char" | "uint8" | "uint8_t" => DType::U8,
-            "ushort" | "unsigned short" | "unsigned short int" | "uint16" | "uint16_t" => DType::U16,
-            "short" | "short int" | "signed short" | "signed short int" | "int16" | "int16_t" => DType::I16,
+            "ushort" | "unsigned short" | "unsigned short int" | "uint16" | "uint16_t" => {
+                DType::U16
+            }
+            "short" | "short int" | "signed short" | "signed short int" | "int16" | "int16_t" => {
+                DType::I16
+            }
             "float" => DType::F32,
             _ => {
-                return Err(IoError::UnknownDType { path: path.to_owned(), name: ty.to_owned() });
+                return Err(IoError::UnknownDType {
+                    path: path.to_owned(),
+                    name: ty.to_owned(),
+                });
             }
         };
         let dimension: usize = get("dimension")
@@ -122,7 +135,9 @@ impl NrrdReader {
             _ => {
                 return Err(IoError::Unsupported {
                     path: path.to_owned(),
-                    what: format!("{dimension}D data with sizes {sizes:?} (3D scalar volumes only)"),
+                    what: format!(
+                        "{dimension}D data with sizes {sizes:?} (3D scalar volumes only)"
+                    ),
                 });
             }
         };
@@ -132,14 +147,26 @@ impl NrrdReader {
             Some(e) if e == "raw" => Encoding::Raw,
             Some(e) if e == "gzip" || e == "gz" => Encoding::Gzip,
             Some(e) => {
-                return Err(IoError::Unsupported { path: path.to_owned(), what: format!("encoding {e:?}") });
+                return Err(IoError::Unsupported {
+                    path: path.to_owned(),
+                    what: format!("encoding {e:?}"),
+                });
             }
             None => return Err(IoError::header(path, "no encoding field")),
         };
         let big_endian = matches!(get("endian"), Some(e) if e.eq_ignore_ascii_case("big"));
-        let spacing = parse_spacing(path, get("spacings"), get("space directions"), sizes.len() == 4)?;
-        if get("line skip").is_some_and(|v| v != "0") || get("byte skip").is_some_and(|v| v != "0") {
-            return Err(IoError::Unsupported { path: path.to_owned(), what: "line skip / byte skip".into() });
+        let spacing = parse_spacing(
+            path,
+            get("spacings"),
+            get("space directions"),
+            sizes.len() == 4,
+        )?;
+        if get("line skip").is_some_and(|v| v != "0") || get("byte skip").is_some_and(|v| v != "0")
+        {
+            return Err(IoError::Unsupported {
+                path: path.to_owned(),
+                what: "line skip / byte skip".into(),
+            });
         }
         let declared = match (get("min").or(get("old min")), get("max").or(get("old max"))) {
             (Some(a), Some(b)) => match (a.parse::<f32>(), b.parse::<f32>()) {
@@ -150,12 +177,20 @@ impl NrrdReader {
         };
         let (data_path, data_offset) = match get("data file").or(get("datafile")) {
             Some(f) if f.starts_with("LIST") || f.contains('%') => {
-                return Err(IoError::Unsupported { path: path.to_owned(), what: "multi-file data".into() });
+                return Err(IoError::Unsupported {
+                    path: path.to_owned(),
+                    what: "multi-file data".into(),
+                });
             }
             Some(f) => (path.parent().unwrap_or(Path::new(".")).join(f), 0),
             None => (path.to_owned(), consumed as u64),
         };
-        let desc = VolumeDesc { dims, dtype, spacing, value_range: declared.unwrap_or([0.0, 1.0]) };
+        let desc = VolumeDesc {
+            dims,
+            dtype,
+            spacing,
+            value_range: declared.unwrap_or([0.0, 1.0]),
+        };
         desc.validate().map_err(|e| IoError::volume(path, e))?;
         let mut r = NrrdReader {
             path: path.to_owned(),
@@ -166,7 +201,9 @@ impl NrrdReader {
             desc,
             gz: None,
         };
-        let file_len = std::fs::metadata(&r.data_path).map_err(|e| IoError::io(&r.data_path, e))?.len();
+        let file_len = std::fs::metadata(&r.data_path)
+            .map_err(|e| IoError::io(&r.data_path, e))?
+            .len();
         let available = file_len.saturating_sub(r.data_offset);
         if encoding == Encoding::Raw && available < r.desc.byte_len() {
             return Err(IoError::Truncated {
@@ -190,15 +227,20 @@ impl NrrdReader {
     /// (for gzip) that the stream is whole, checksum included.
     fn scan(&mut self) -> Result<[f32; 2], IoError> {
         let mut f = File::open(&self.data_path).map_err(|e| IoError::io(&self.data_path, e))?;
-        f.seek(SeekFrom::Start(self.data_offset)).map_err(|e| IoError::io(&self.data_path, e))?;
+        f.seek(SeekFrom::Start(self.data_offset))
+            .map_err(|e| IoError::io(&self.data_path, e))?;
         let f = BufReader::new(f);
         let expected = self.desc.byte_len();
         let path = self.path.clone();
         let io_err = |e: std::io::Error, pos: u64| gz_error(&path, e, expected, pos);
         match self.encoding {
-            Encoding::Raw => {
-                scan_stream(&self.path, &self.desc, self.big_endian, &mut f.take(expected), &io_err)
-            }
+            Encoding::Raw => scan_stream(
+                &self.path,
+                &self.desc,
+                self.big_endian,
+                &mut f.take(expected),
+                &io_err,
+            ),
             Encoding::Gzip => {
                 let mut gz = GzDecoder::new(f);
                 let range = scan_stream(&self.path, &self.desc, self.big_endian, &mut gz, &io_err);
@@ -226,7 +268,11 @@ impl NrrdReader {
     }
 
     fn truncated(&self, actual: u64) -> IoError {
-        IoError::Truncated { path: self.path.clone(), expected: self.desc.byte_len(), actual }
+        IoError::Truncated {
+            path: self.path.clone(),
+            expected: self.desc.byte_len(),
+            actual,
+        }
     }
 
     fn read_gzip(&mut self, start: u64, out: &mut [u8]) -> Result<(), IoError> {
@@ -236,7 +282,8 @@ impl NrrdReader {
         };
         if restart {
             let mut f = File::open(&self.data_path).map_err(|e| IoError::io(&self.data_path, e))?;
-            f.seek(SeekFrom::Start(self.data_offset)).map_err(|e| IoError::io(&self.data_path, e))?;
+            f.seek(SeekFrom::Start(self.data_offset))
+                .map_err(|e| IoError::io(&self.data_path, e))?;
             self.gz = Some((GzDecoder::new(BufReader::new(f)), 0));
         }
         let (gz, pos) = self.gz.as_mut().expect("set above");
@@ -274,9 +321,11 @@ impl NrrdReader {
 /// Maps a read error at decoded byte `pos` of a stream announced as `expected` bytes.
 fn gz_error(path: &Path, e: std::io::Error, expected: u64, pos: u64) -> IoError {
     match e.kind() {
-        std::io::ErrorKind::UnexpectedEof => {
-            IoError::Truncated { path: path.to_owned(), expected, actual: pos }
-        }
+        std::io::ErrorKind::UnexpectedEof => IoError::Truncated {
+            path: path.to_owned(),
+            expected,
+            actual: pos,
+        },
         std::io::ErrorKind::InvalidInput | std::io::ErrorKind::InvalidData => {
             IoError::header(path, format!("corrupt gzip data: {e}"))
         }
@@ -310,15 +359,26 @@ fn parse_spacing(
         // "(a,b,c) (d,e,f) (g,h,i)", possibly preceded by "none" for a 4D axis.
         let vecs: Vec<f32> = d
             .split(')')
-            .map(|t| t.trim().trim_start_matches("none").trim().trim_start_matches('('))
+            .map(|t| {
+                t.trim()
+                    .trim_start_matches("none")
+                    .trim()
+                    .trim_start_matches('(')
+            })
             .filter(|t| !t.is_empty())
             .map(|t| {
-                let c: Vec<f32> =
-                    t.split(',').map(|x| x.trim().parse::<f32>()).collect::<Result<_, _>>().map_err(
-                        |_| IoError::header(path, format!("space direction ({t}) is not numeric")),
-                    )?;
+                let c: Vec<f32> = t
+                    .split(',')
+                    .map(|x| x.trim().parse::<f32>())
+                    .collect::<Result<_, _>>()
+                    .map_err(|_| {
+                        IoError::header(path, format!("space direction ({t}) is not numeric"))
+                    })?;
                 if c.len() != 3 {
-                    return Err(IoError::header(path, format!("space direction ({t}) needs 3 components")));
+                    return Err(IoError::header(
+                        path,
+                        format!("space direction ({t}) needs 3 components"),
+                    ));
                 }
                 Ok(c.iter().map(|x| x * x).sum::<f32>().sqrt())
             })
@@ -326,7 +386,10 @@ fn parse_spacing(
         if vecs.len() == 3 {
             return Ok([vecs[0], vecs[1], vecs[2]]);
         }
-        return Err(IoError::header(path, "space directions must give 3 vectors"));
+        return Err(IoError::header(
+            path,
+            "space directions must give 3 vectors",
+        ));
     }
     Ok([1.0; 3])
 }
@@ -345,8 +408,10 @@ impl VolumeReader for NrrdReader {
         let start = z0 as u64 * slice;
         match self.encoding {
             Encoding::Raw => {
-                let mut f = File::open(&self.data_path).map_err(|e| IoError::io(&self.data_path, e))?;
-                f.seek(SeekFrom::Start(self.data_offset + start)).map_err(|e| IoError::io(&self.path, e))?;
+                let mut f =
+                    File::open(&self.data_path).map_err(|e| IoError::io(&self.data_path, e))?;
+                f.seek(SeekFrom::Start(self.data_offset + start))
+                    .map_err(|e| IoError::io(&self.path, e))?;
                 f.read_exact(out).map_err(|e| match e.kind() {
                     std::io::ErrorKind::UnexpectedEof => self.truncated(start),
                     _ => IoError::io(&self.path, e),

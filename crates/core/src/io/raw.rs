@@ -32,31 +32,50 @@ struct Sidecar {
 impl RawReader {
     /// Opens a raw file of known description. `desc.value_range` is used as given.
     /// The file must hold exactly `offset + desc.byte_len()` bytes.
-    pub fn new(path: impl Into<PathBuf>, offset: u64, desc: VolumeDesc) -> Result<RawReader, IoError> {
+    pub fn new(
+        path: impl Into<PathBuf>,
+        offset: u64,
+        desc: VolumeDesc,
+    ) -> Result<RawReader, IoError> {
         let path = path.into();
         desc.validate().map_err(|e| IoError::volume(&path, e))?;
         let file = File::open(&path).map_err(|e| IoError::io(&path, e))?;
         let actual = file.metadata().map_err(|e| IoError::io(&path, e))?.len();
         let expected = offset + desc.byte_len();
         if actual != expected {
-            return Err(IoError::SizeMismatch { path, expected, actual });
+            return Err(IoError::SizeMismatch {
+                path,
+                expected,
+                actual,
+            });
         }
-        Ok(RawReader { path, file, offset, desc })
+        Ok(RawReader {
+            path,
+            file,
+            offset,
+            desc,
+        })
     }
 
     /// Opens `name.json` and the raw file it names (`"file"`, else `name.raw`).
     /// When the sidecar gives no `value_range`, the data is scanned for one.
     pub fn open_sidecar(json: &Path) -> Result<RawReader, IoError> {
         let text = std::fs::read_to_string(json).map_err(|e| IoError::io(json, e))?;
-        let sc: Sidecar = serde_json::from_str(&text).map_err(|e| IoError::header(json, e.to_string()))?;
+        let sc: Sidecar =
+            serde_json::from_str(&text).map_err(|e| IoError::header(json, e.to_string()))?;
         if sc.dims.len() != 3 {
-            return Err(IoError::header(json, format!("dims must have 3 entries, got {}", sc.dims.len())));
+            return Err(IoError::header(
+                json,
+                format!("dims must have 3 entries, got {}", sc.dims.len()),
+            ));
         }
         let dims64 = [sc.dims[0], sc.dims[1], sc.dims[2]];
         crate::volume::voxel_count(dims64).map_err(|e| IoError::volume(json, e))?;
         let dims = dims64.map(|d| d as u32);
-        let dtype = DType::parse(&sc.dtype)
-            .ok_or_else(|| IoError::UnknownDType { path: json.to_owned(), name: sc.dtype.clone() })?;
+        let dtype = DType::parse(&sc.dtype).ok_or_else(|| IoError::UnknownDType {
+            path: json.to_owned(),
+            name: sc.dtype.clone(),
+        })?;
         if let Some(order) = &sc.byte_order
             && !order.eq_ignore_ascii_case("little")
             && dtype.size() > 1
@@ -70,7 +89,10 @@ impl RawReader {
             None => [1.0; 3],
             Some([a, b, c]) => [*a, *b, *c],
             Some(s) => {
-                return Err(IoError::header(json, format!("spacing must have 3 entries, got {}", s.len())));
+                return Err(IoError::header(
+                    json,
+                    format!("spacing must have 3 entries, got {}", s.len()),
+                ));
             }
         };
         let raw = match &sc.file {
@@ -87,7 +109,12 @@ impl RawReader {
             }
             None => None,
         };
-        let desc = VolumeDesc { dims, dtype, spacing, value_range: declared.unwrap_or([0.0, 1.0]) };
+        let desc = VolumeDesc {
+            dims,
+            dtype,
+            spacing,
+            value_range: declared.unwrap_or([0.0, 1.0]),
+        };
         let mut reader = RawReader::new(raw, 0, desc)?;
         if declared.is_none() {
             reader.desc.value_range = reader.scan()?;
@@ -99,7 +126,9 @@ impl RawReader {
 impl RawReader {
     /// One bounded-memory pass over the samples for their value range.
     fn scan(&mut self) -> Result<[f32; 2], IoError> {
-        self.file.seek(SeekFrom::Start(self.offset)).map_err(|e| IoError::io(&self.path, e))?;
+        self.file
+            .seek(SeekFrom::Start(self.offset))
+            .map_err(|e| IoError::io(&self.path, e))?;
         let path = self.path.clone();
         let io_err = |e: std::io::Error, _pos: u64| IoError::io(&path, e);
         scan_stream(&self.path, &self.desc, false, &mut self.file, &io_err)

@@ -1,0 +1,8 @@
+#!/usr/bin/env bash
+# The test suite: sets up what is missing, then runs every test of the workspace
+# (GPU tests render on a real adapter or on Mesa's lavapipe).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+. scripts/ensure-env.sh
+export BRICKRAY_TEST_OUTPUT="${BRICKRAY_TEST_OUTPUT:-$PWD/target/test-images}"
+cargo test --workspace --no-fail-fast "$@"

@@ -1,0 +1,196 @@
+// Out-of-core single-pass ray caster (Gobbetti et al. 2008, sect. 5.2), compute.
+// Prefixed at load time by common.wgsl and octree_traversal.wgsl. Each ray walks
+// the octree-with-ropes index over the current cut front to back (stackless),
+// skips empty leaves, and samples data leaves from the brick atlas with a step
+// matched to the leaf's level (opacity corrected to that step). Every loop is
+// bounded. See docs/rendering-model.md and docs/index-format.md.
+
+struct SlotInfo {
+    // xyz: atlas texel offset of the slot, w: unused.
+    offset: vec4<f32>,
+    // x: normalized min, y: normalized max of the brick.
+    range: vec4<f32>,
+}
+
+@group(0) @binding(0) var<uniform> params: Params;
+@group(0) @binding(1) var atlas_tex: texture_3d<f32>;
+@group(0) @binding(2) var atlas_sampler: sampler;
+@group(0) @binding(3) var<storage, read> tf: array<vec4<f32>>;
+@group(0) @binding(4) var<storage, read> tf_prefix: array<u32>;
+@group(0) @binding(5) var<storage, read> slots: array<SlotInfo>;
+@group(0) @binding(6) var host_depth: texture_depth_2d;
+@group(0) @binding(7) var out_color: texture_storage_2d<rgba16float, write>;
+@group(0) @binding(8) var out_depth: texture_storage_2d<r32float, write>;
+@group(0) @binding(9) var out_samples: texture_storage_2d<r32uint, write>;
+@group(0) @binding(10) var<storage, read> index_words: array<u32>;
+
+// A data leaf's brick: atlas texel coordinate = base + o * k for octree point o.
+struct Brick {
+    base: vec3<f32>,
+    k: f32,
+    // Finest voxels per voxel of this level (2^(finest - level)).
+    f: f32,
+}
+
+fn brick_of(leaf: OctBox, slot: u32) -> Brick {
+    var b: Brick;
+    let bs = f32(params.bricks.x);
+    b.k = bs / leaf.box_size;
+    b.base = slots[slot].offset.xyz + f32(params.bricks.y) - leaf.box_min * b.k;
+    b.f = oct_exp2_pos(params.bricks.z - leaf.level);
+    return b;
+}
+
+fn atlas_value(tc: vec3<f32>) -> f32 {
+    return textureSampleLevel(atlas_tex, atlas_sampler, tc / params.atlas.xyz, 0.0).r * params.value_map.x
+        + params.value_map.y;
+}
+
+fn brick_value(b: Brick, o: vec3<f32>) -> f32 {
+    return atlas_value(b.base + o * b.k);
+}
+
+// World gradient direction and magnitude (normalized value per finest voxel), by
+// central differences of one voxel of the brick's level.
+fn brick_gradient(b: Brick, o: vec3<f32>) -> vec4<f32> {
+    let tc = b.base + o * b.k;
+    let gx = (atlas_value(tc + vec3<f32>(1.0, 0.0, 0.0)) - atlas_value(tc - vec3<f32>(1.0, 0.0, 0.0))) * 0.5;
+    let gy = (atlas_value(tc + vec3<f32>(0.0, 1.0, 0.0)) - atlas_value(tc - vec3<f32>(0.0, 1.0, 0.0))) * 0.5;
+    let gz = (atlas_value(tc + vec3<f32>(0.0, 0.0, 1.0)) - atlas_value(tc - vec3<f32>(0.0, 0.0, 1.0))) * 0.5;
+    let g = vec3<f32>(gx, gy, gz) / b.f;
+    let gw = (params.normal_mat * vec4<f32>(g * params.dims.xyz, 0.0)).xyz;
+    return vec4<f32>(gw, length(g));
+}
+
+@compute @workgroup_size(8, 8, 1)
+fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    if (gid.x >= params.size.x || gid.y >= params.size.y) {
+        return;
+    }
+    let px = gid.xy;
+    let flags = params.size.z;
+    let mode = flags & MODE_MASK;
+    let r = ray_through_pixel(px);
+
+    var host = 1.0;
+    if ((flags & FLAG_HOST_DEPTH) != 0u) {
+        host = textureLoad(host_depth, vec2<i32>(px), 0);
+    }
+    var color = vec4<f32>(0.0);
+    var depth = host;
+    var samples = 0u;
+
+    let tb = clip_box(r, vec3<f32>(0.0), vec3<f32>(1.0));
+    let t0 = max(tb.x, 0.0);
+    var t1 = tb.y;
+    if ((flags & FLAG_HOST_DEPTH) != 0u) {
+        t1 = min(t1, t_at_depth(r, host));
+    }
+    if (t1 > t0) {
+        let oo = r.tex_origin * params.octree.xyz;
+        let od = r.tex_dir * params.octree.xyz;
+        let dt = params.value_map.w;
+        let ess = (flags & FLAG_ESS) != 0u;
+        let ert = (flags & FLAG_ERT) != 0u;
+        let shading = (flags & FLAG_SHADE) != 0u;
+        let ert_thr = params.misc.x;
+        let step_factor = params.misc.z;
+        let iso = params.iso.x;
+        var budget = params.limits.x;
+        // Sampling state carried across leaves: the grid (level, spacing, index).
+        var grid_f = 0.0;
+        var k = 0u;
+        var t_last = t0;
+        var depth_set = false;
+        var done = false;
+        var m = -3.0e38;
+        var tm = t0;
+        var st = oct_begin(oo, od, t0, t1, params.limits.y);
+        while (!done && oct_next_leaf(&st)) {
+            let hit = st.hit;
+            if (hit.tag != OCT_TAG_DATA) {
+                continue;
+            }
+            let slot = hit.data;
+            if (mode == MODE_MIP && ess && slots[slot].range.y <= m) {
+                continue;
+            }
+            let b = brick_of(hit.leaf, slot);
+            let dtl = dt * b.f;
+            // Snap to this level's sample grid at or after max(t_enter, last sample).
+            if (b.f != grid_f) {
+                grid_f = b.f;
+                k = u32(max(ceil((max(hit.t_enter, t_last) - t0) / dtl), 0.0));
+            }
+            let k_enter = u32(max(ceil((hit.t_enter - t0) / dtl), 0.0));
+            k = max(k, k_enter);
+            loop {
+                let t = t0 + f32(k) * dtl;
+                if (t >= hit.t_exit || t >= t1) { break; }
+                if (budget == 0u) { done = true; break; }
+                budget = budget - 1u;
+                let o = oo + od * t;
+                let v = brick_value(b, o);
+                samples = samples + 1u;
+                if (mode == MODE_DVR) {
+                    let s = tf_lookup(v);
+                    if (s.a > 0.0) {
+                        let a = 1.0 - pow(1.0 - s.a, step_factor * b.f);
+                        var c = s.rgb;
+                        if (shading) {
+                            c = shade(c, brick_gradient(b, o), r.dir);
+                        }
+                        color = vec4<f32>(color.rgb + (1.0 - color.a) * a * c, color.a + (1.0 - color.a) * a);
+                        if (!depth_set && color.a >= params.misc.y) {
+                            depth = depth_at(r, t);
+                            depth_set = true;
+                        }
+                        if (ert && color.a >= ert_thr) { done = true; break; }
+                    }
+                } else if (mode == MODE_ISO) {
+                    if (v >= iso) {
+                        // Bracket [previous sample, t], clipped to one voxel of this
+                        // level before the leaf (the brick's apron covers it).
+                        var a = t;
+                        var bb = t;
+                        if (t > t0) {
+                            a = max(t_last, max(hit.t_enter - dtl, t - dtl));
+                            if (t_last >= t) { a = t; }
+                        }
+                        for (var i = 0u; i < params.size.w; i = i + 1u) {
+                            if (bb <= a) { break; }
+                            let mid = 0.5 * (a + bb);
+                            samples = samples + 1u;
+                            if (brick_value(b, oo + od * mid) >= iso) {
+                                bb = mid;
+                            } else {
+                                a = mid;
+                            }
+                        }
+                        let th = 0.5 * (a + bb);
+                        color = vec4<f32>(shade(params.iso.yzw, brick_gradient(b, oo + od * th), r.dir), 1.0);
+                        depth = depth_at(r, th);
+                        done = true;
+                        break;
+                    }
+                } else {
+                    if (v > m) {
+                        m = v;
+                        tm = t;
+                    }
+                    if (ert && m >= 1.0) { done = true; break; }
+                }
+                t_last = t;
+                k = k + 1u;
+            }
+        }
+        if (mode == MODE_MIP && m > -1.0e38) {
+            let s = tf_lookup(m);
+            color = vec4<f32>(s.rgb * s.a, s.a);
+            depth = depth_at(r, tm);
+        }
+    }
+    textureStore(out_color, vec2<i32>(px), color);
+    textureStore(out_depth, vec2<i32>(px), vec4<f32>(min(depth, host), 0.0, 0.0, 0.0));
+    textureStore(out_samples, vec2<i32>(px), vec4<u32>(samples, 0u, 0u, 0u));
+}

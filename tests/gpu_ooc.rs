@@ -1,0 +1,251 @@
+//! GPU tests of the out-of-core path: the brick store or the procedural source,
+//! the cache, the index and the stackless traversal shader, end to end.
+//!
+//! Thresholds: out of core at the finest level vs in core with the same switches
+//! and step >= 45 dB PSNR (8-bit RGB over black).
+
+use brickray::{
+    Camera, FrameDesc, OutOfCoreConfig, OutOfCoreStats, RenderMode, RenderSettings, Shading,
+    TargetDesc, TransferFunction, Volume, VolumeFrame, VolumeRenderer,
+};
+use brickray_harness::{GpuContext, Offscreen, ct};
+use brickray_reference::assert_close;
+use std::sync::{Arc, OnceLock};
+
+fn gpu() -> &'static GpuContext {
+    static GPU: OnceLock<GpuContext> = OnceLock::new();
+    GPU.get_or_init(|| GpuContext::new().expect("a wgpu adapter (install mesa-vulkan-drivers)"))
+}
+
+fn targets() -> TargetDesc {
+    TargetDesc {
+        color_format: brickray_harness::COLOR_FORMAT,
+        depth_format: Some(brickray_harness::DEPTH_FORMAT),
+    }
+}
+
+/// Builds a brick store of `vol` in a temporary directory and opens it.
+fn store_of(vol: &Volume, dir: &tempfile::TempDir) -> Arc<dyn brickray::BrickSource> {
+    let path = dir.path().join("vol.brs");
+    let mut reader = brickray::io::MemoryReader::new(vol.clone(), "memory");
+    brickray::store::build(
+        &mut reader,
+        &path,
+        &brickray::store::BuildOptions::default(),
+    )
+    .expect("build");
+    Arc::new(brickray::store::open(&path).expect("open"))
+}
+
+struct View {
+    camera: Camera,
+    frame: VolumeFrame,
+    settings: RenderSettings,
+    size: u32,
+}
+
+/// Renders one frame with `r` into a fresh target; returns RGBA8.
+fn frame(r: &mut VolumeRenderer, v: &View) -> Vec<u8> {
+    let g = gpu();
+    let target = Offscreen::new(&g.device, v.size, v.size);
+    let mut enc = g.device.create_command_encoder(&Default::default());
+    let desc = FrameDesc {
+        camera: v.camera,
+        frame: v.frame,
+        width: v.size,
+        height: v.size,
+        settings: v.settings,
+        host_depth: None,
+    };
+    r.prepare(&g.device, &g.queue, &mut enc, &desc)
+        .expect("prepare");
+    {
+        let mut pass = target.pass(&mut enc, true);
+        r.render(&mut pass).unwrap();
+    }
+    g.submit_wait(enc);
+    target.read_color(g)
+}
+
+/// Renders frames until the out-of-core path reports convergence (bounded).
+fn converge(
+    r: &mut VolumeRenderer,
+    v: &View,
+    max_frames: usize,
+) -> (Vec<u8>, OutOfCoreStats, usize) {
+    for i in 1..=max_frames {
+        let img = frame(r, v);
+        let s = r.out_of_core_stats().unwrap();
+        if s.converged {
+            return (img, s, i);
+        }
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    panic!(
+        "not converged after {max_frames} frames: {:?}",
+        r.out_of_core_stats()
+    );
+}
+
+fn finest() -> OutOfCoreConfig {
+    OutOfCoreConfig {
+        tolerance_px: 0.0,
+        upload_budget_bytes: 1 << 30,
+        ..Default::default()
+    }
+}
+
+#[test]
+fn finest_level_matches_in_core_on_head_ct() {
+    let Some(path) = brickray_harness::shared_volume("invesalius_cranium_ct") else {
+        return;
+    };
+    let vol = brickray::io::read_volume(path).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let source = store_of(&vol, &dir);
+    let g = gpu();
+    let d = vol.desc();
+    let wf = VolumeFrame::centered(d.dims, d.spacing);
+    let shading = Shading {
+        enabled: true,
+        ..Default::default()
+    };
+    let cases: [(&str, RenderMode, TransferFunction); 4] = [
+        ("dvr_translucent", RenderMode::Dvr, ct::soft_tissue()),
+        ("dvr_opaque", RenderMode::Dvr, ct::bone()),
+        (
+            "iso",
+            RenderMode::Iso {
+                value: ct::hu(400.0),
+                color: [0.9, 0.85, 0.75],
+            },
+            ct::bone(),
+        ),
+        (
+            "mip",
+            RenderMode::Mip,
+            TransferFunction::ramp(ct::hu(-200.0), ct::hu(1500.0), 1.0),
+        ),
+    ];
+    let mut incore = VolumeRenderer::new(&g.device, targets()).unwrap();
+    incore.set_volume(&g.device, &g.queue, &vol).unwrap();
+    let mut ooc = VolumeRenderer::new(&g.device, targets()).unwrap();
+    ooc.set_volume_source(&g.device, source, wf, finest())
+        .unwrap();
+    for (name, mode, tf) in cases {
+        let v = View {
+            camera: Camera::orbit(wf.center(), 2.0, 0.5, 0.3),
+            frame: wf,
+            settings: RenderSettings {
+                mode,
+                shading,
+                ..Default::default()
+            },
+            size: 192,
+        };
+        incore.set_transfer_function(&g.device, &g.queue, &tf);
+        ooc.set_transfer_function(&g.device, &g.queue, &tf);
+        let reference = frame(&mut incore, &v);
+        let (img, stats, frames) = converge(&mut ooc, &v, 60);
+        let cmp = assert_close(
+            &format!("ooc_{name}"),
+            &img,
+            &reference,
+            v.size,
+            v.size,
+            45.0,
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        eprintln!(
+            "ooc {name}: {cmp}; {frames} frames, {} bricks, {} leaves, {} index words",
+            stats.cache.working_set_bricks, stats.cache.leaves, stats.index_words
+        );
+    }
+}
+
+/// A volume whose bricks far exceed an 8 MiB pool renders a coarser but complete
+/// image, without error.
+#[test]
+fn small_pool_renders_coarser_but_complete() {
+    let g = gpu();
+    let source =
+        Arc::new(brickray::store::ProceduralSource::fractal_noise([4096; 3], 32, 2).unwrap());
+    let wf = VolumeFrame::centered([4096; 3], [1.0; 3]);
+    let tf = TransferFunction::from_points(
+        &[(0.45, [0.2, 0.5, 1.0, 0.0]), (0.7, [1.0, 0.8, 0.5, 0.3])],
+        256,
+    );
+    let mut r = VolumeRenderer::new(&g.device, targets()).unwrap();
+    let config = OutOfCoreConfig {
+        gpu_budget_bytes: 8 << 20,
+        tolerance_px: 0.5,
+        ..Default::default()
+    };
+    r.set_volume_source(&g.device, source, wf, config).unwrap();
+    r.set_transfer_function(&g.device, &g.queue, &tf);
+    let v = View {
+        camera: Camera::orbit(wf.center(), 1.8, 0.7, 0.4),
+        frame: wf,
+        settings: RenderSettings::default(),
+        size: 96,
+    };
+    let mut last = None;
+    for _ in 0..40 {
+        let img = frame(&mut r, &v);
+        let s = r.out_of_core_stats().unwrap();
+        last = Some((img, s));
+        if s.converged {
+            break;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    let (img, s) = last.unwrap();
+    eprintln!("small pool: {:?}", s.cache);
+    assert!(s.cache.pool_slots > 0 && s.cache.working_set_bricks <= s.cache.pool_slots);
+    assert!(
+        s.cache.blocked.pool_full > 0 || s.cache.pool_occupied == s.cache.pool_slots || s.converged,
+        "the pool should limit refinement: {:?}",
+        s.cache
+    );
+    let lit = img
+        .chunks_exact(4)
+        .filter(|p| p[0] > 8 || p[1] > 8 || p[2] > 8)
+        .count();
+    assert!(
+        lit > (96 * 96) / 4,
+        "the image must be complete, {lit} lit pixels"
+    );
+}
+
+/// Dropping the renderer while loads are in flight ends cleanly.
+#[test]
+fn drop_with_loads_in_flight() {
+    let g = gpu();
+    let source =
+        Arc::new(brickray::store::ProceduralSource::fractal_noise([65536; 3], 32, 2).unwrap());
+    let wf = VolumeFrame::centered([65536; 3], [1.0; 3]);
+    let mut r = VolumeRenderer::new(&g.device, targets()).unwrap();
+    r.set_volume_source(
+        &g.device,
+        source,
+        wf,
+        OutOfCoreConfig {
+            tolerance_px: 0.0,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    r.set_transfer_function(&g.device, &g.queue, &TransferFunction::ramp(0.3, 0.9, 0.2));
+    let v = View {
+        camera: Camera::orbit(wf.center(), 1.5, 0.2, 0.1),
+        frame: wf,
+        settings: RenderSettings::default(),
+        size: 64,
+    };
+    for _ in 0..3 {
+        frame(&mut r, &v);
+    }
+    let s = r.out_of_core_stats().unwrap();
+    eprintln!("in flight at drop: {}", s.cache.requests_in_flight);
+    drop(r);
+}
