@@ -4,8 +4,8 @@
 //! With no volume it renders a generated one (Marschner-Lobb), so it needs no data.
 
 use brickray::{
-    Accel, Camera, FrameDesc, RenderMode, RenderSettings, Shading, TargetDesc, TransferFunction, VolumeFrame,
-    VolumeRenderer,
+    Accel, Camera, FrameDesc, RenderMode, RenderSettings, Shading, TargetDesc, TransferFunction,
+    VolumeFrame, VolumeRenderer,
 };
 use brickray_harness::{GpuContext, Offscreen};
 use std::path::PathBuf;
@@ -30,10 +30,19 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         None => brickray_core::synthetic::marschner_lobb(128),
     };
     let d = volume.desc();
-    println!("volume: {:?} {} spacing {:?} range {:?}", d.dims, d.dtype.name(), d.spacing, d.value_range);
+    println!(
+        "volume: {:?} {} spacing {:?} range {:?}",
+        d.dims,
+        d.dtype.name(),
+        d.spacing,
+        d.value_range
+    );
     let mut renderer = VolumeRenderer::new(
         &gpu.device,
-        TargetDesc { color_format: brickray_harness::COLOR_FORMAT, depth_format: Some(brickray_harness::DEPTH_FORMAT) },
+        TargetDesc {
+            color_format: brickray_harness::COLOR_FORMAT,
+            depth_format: Some(brickray_harness::DEPTH_FORMAT),
+        },
     )?;
     renderer.set_volume(&gpu.device, &gpu.queue, &volume)?;
     let frame = VolumeFrame::centered(d.dims, d.spacing);
@@ -48,18 +57,39 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         256,
     );
     renderer.set_transfer_function(&gpu.device, &gpu.queue, &tf);
-    let shading = Shading { enabled: true, ..Default::default() };
+    let shading = Shading {
+        enabled: true,
+        ..Default::default()
+    };
     let modes = [
         ("dvr", RenderMode::Dvr),
-        ("iso", RenderMode::Iso { value: 0.5, color: [0.9, 0.85, 0.75] }),
+        (
+            "iso",
+            RenderMode::Iso {
+                value: 0.5,
+                color: [0.9, 0.85, 0.75],
+            },
+        ),
         ("mip", RenderMode::Mip),
     ];
     for (name, mode) in modes {
         let camera = Camera::orbit(frame.center(), 2.2, 0.6, 0.35);
-        let settings = RenderSettings { mode, shading, accel: Accel::default(), ..Default::default() };
+        let settings = RenderSettings {
+            mode,
+            shading,
+            accel: Accel::default(),
+            ..Default::default()
+        };
         let mut enc = gpu.device.create_command_encoder(&Default::default());
         let t0 = std::time::Instant::now();
-        let desc = FrameDesc { camera, frame, width: size, height: size, settings, host_depth: None };
+        let desc = FrameDesc {
+            camera,
+            frame,
+            width: size,
+            height: size,
+            settings,
+            host_depth: None,
+        };
         renderer.prepare(&gpu.device, &gpu.queue, &mut enc, &desc)?;
         {
             let mut pass = target.pass(&mut enc, true);

@@ -9,7 +9,9 @@
 //! against the brute-force image.
 
 use crate::Figures;
-use brickray_core::{Accel, Camera, RenderMode, RenderSettings, Shading, TransferFunction, Volume, VolumeFrame};
+use brickray_core::{
+    Accel, Camera, RenderMode, RenderSettings, Shading, TransferFunction, Volume, VolumeFrame,
+};
 use brickray_harness::{GpuContext, Offscreen, ct};
 use brickray_render::{FrameDesc, TargetDesc, VolumeRenderer};
 use serde_json::json;
@@ -17,9 +19,27 @@ use std::time::Instant;
 
 const VARIANTS: [(&str, Accel); 4] = [
     ("brute", Accel::BRUTE_FORCE),
-    ("ert", Accel { early_termination: Some(0.99), empty_space_skipping: false }),
-    ("ess", Accel { early_termination: None, empty_space_skipping: true }),
-    ("ert_ess", Accel { early_termination: Some(0.99), empty_space_skipping: true }),
+    (
+        "ert",
+        Accel {
+            early_termination: Some(0.99),
+            empty_space_skipping: false,
+        },
+    ),
+    (
+        "ess",
+        Accel {
+            early_termination: None,
+            empty_space_skipping: true,
+        },
+    ),
+    (
+        "ert_ess",
+        Accel {
+            early_termination: Some(0.99),
+            empty_space_skipping: true,
+        },
+    ),
 ];
 
 struct Bench<'a> {
@@ -33,7 +53,11 @@ struct Bench<'a> {
 
 impl Bench<'_> {
     /// One frame: returns (ms, RGBA8, mean samples per entering ray).
-    fn frame(&mut self, settings: RenderSettings, read: bool) -> Result<(f64, Vec<u8>, f64), String> {
+    fn frame(
+        &mut self,
+        settings: RenderSettings,
+        read: bool,
+    ) -> Result<(f64, Vec<u8>, f64), String> {
         let g = self.gpu;
         let t0 = Instant::now();
         let mut enc = g.device.create_command_encoder(&Default::default());
@@ -45,7 +69,9 @@ impl Bench<'_> {
             settings,
             host_depth: None,
         };
-        self.renderer.prepare(&g.device, &g.queue, &mut enc, &desc).map_err(|e| e.to_string())?;
+        self.renderer
+            .prepare(&g.device, &g.queue, &mut enc, &desc)
+            .map_err(|e| e.to_string())?;
         {
             let mut pass = self.target.pass(&mut enc, true);
             self.renderer.render(&mut pass).map_err(|e| e.to_string())?;
@@ -56,9 +82,15 @@ impl Bench<'_> {
             return Ok((ms, Vec::new(), 0.0));
         }
         let rgba = self.target.read_color(g);
-        let tex = self.renderer.sample_count_texture().ok_or("no sample counts")?;
+        let tex = self
+            .renderer
+            .sample_count_texture()
+            .ok_or("no sample counts")?;
         let counts = brickray_harness::read_texture(g, tex, 4, wgpu::TextureAspect::All);
-        let counts: Vec<u32> = counts.chunks_exact(4).map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect();
+        let counts: Vec<u32> = counts
+            .chunks_exact(4)
+            .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+            .collect();
         let entering: Vec<u32> = counts.iter().copied().filter(|&c| c > 0).collect();
         let mean = entering.iter().map(|&c| c as f64).sum::<f64>() / entering.len().max(1) as f64;
         Ok((ms, rgba, mean))
@@ -91,13 +123,23 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
     let gpu = GpuContext::new().map_err(|e| e.to_string())?;
     println!("adapter: {}", gpu.describe());
     let d = vol.desc();
-    println!("volume: head CT {:?} {} spacing {:?}; image {size}x{size}; {rounds} interleaved rounds", d.dims, d.dtype.name(), d.spacing);
+    println!(
+        "volume: head CT {:?} {} spacing {:?}; image {size}x{size}; {rounds} interleaved rounds",
+        d.dims,
+        d.dtype.name(),
+        d.spacing
+    );
     let mut renderer = VolumeRenderer::new(
         &gpu.device,
-        TargetDesc { color_format: brickray_harness::COLOR_FORMAT, depth_format: Some(brickray_harness::DEPTH_FORMAT) },
+        TargetDesc {
+            color_format: brickray_harness::COLOR_FORMAT,
+            depth_format: Some(brickray_harness::DEPTH_FORMAT),
+        },
     )
     .map_err(|e| e.to_string())?;
-    renderer.set_volume(&gpu.device, &gpu.queue, &vol).map_err(|e| e.to_string())?;
+    renderer
+        .set_volume(&gpu.device, &gpu.queue, &vol)
+        .map_err(|e| e.to_string())?;
     let frame = VolumeFrame::centered(d.dims, d.spacing);
     let mut bench = Bench {
         gpu: &gpu,
@@ -107,17 +149,34 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         camera: Camera::orbit(frame.center(), 2.0, 0.5, 0.3),
         size,
     };
-    let shading = Shading { enabled: true, ..Default::default() };
+    let shading = Shading {
+        enabled: true,
+        ..Default::default()
+    };
     let scenes: [(&str, TransferFunction, RenderMode); 3] = [
         ("opaque", ct::bone(), RenderMode::Dvr),
         ("translucent", ct::soft_tissue(), RenderMode::Dvr),
-        ("iso", ct::bone(), RenderMode::Iso { value: ct::hu(400.0), color: [0.9, 0.85, 0.75] }),
+        (
+            "iso",
+            ct::bone(),
+            RenderMode::Iso {
+                value: ct::hu(400.0),
+                color: [0.9, 0.85, 0.75],
+            },
+        ),
     ];
     let mut fig = Figures::new();
     let mut psnr_min = f64::INFINITY;
     for (scene, tf, mode) in &scenes {
-        bench.renderer.set_transfer_function(&gpu.device, &gpu.queue, tf);
-        let settings = |accel| RenderSettings { mode: *mode, shading, accel, ..Default::default() };
+        bench
+            .renderer
+            .set_transfer_function(&gpu.device, &gpu.queue, tf);
+        let settings = |accel| RenderSettings {
+            mode: *mode,
+            shading,
+            accel,
+            ..Default::default()
+        };
         // Warm-up and quality pass: one frame per variant, read back.
         let mut images = Vec::new();
         let mut samples = Vec::new();
@@ -137,23 +196,46 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         }
         let ms: Vec<f64> = times.iter_mut().map(|t| median(t)).collect();
         println!("\n{scene} ({mode:?}):");
-        println!("  {:<8} {:>12} {:>10} {:>9} {:>10}", "variant", "samples/ray", "ms/frame", "speedup", "PSNR dB");
+        println!(
+            "  {:<8} {:>12} {:>10} {:>9} {:>10}",
+            "variant", "samples/ray", "ms/frame", "speedup", "PSNR dB"
+        );
         for (i, (name, _)) in VARIANTS.iter().enumerate() {
             let psnr = brickray_reference::psnr(&images[i], &images[0]);
             if i > 0 {
                 psnr_min = psnr_min.min(psnr);
             }
             let speedup = ms[0] / ms[i];
-            println!("  {name:<8} {:>12.1} {:>10.1} {:>8.2}x {:>10.2}", samples[i], ms[i], speedup, psnr);
+            println!(
+                "  {name:<8} {:>12.1} {:>10.1} {:>8.2}x {:>10.2}",
+                samples[i], ms[i], speedup, psnr
+            );
             fig.insert(format!("ms_{name}_{scene}"), json!(round2(ms[i])));
-            fig.insert(format!("samples_per_ray_{name}_{scene}"), json!(round2(samples[i])));
+            fig.insert(
+                format!("samples_per_ray_{name}_{scene}"),
+                json!(round2(samples[i])),
+            );
             if i > 0 {
                 fig.insert(format!("speedup_{name}_{scene}"), json!(round2(speedup)));
-                fig.insert(format!("psnr_{name}_{scene}_db"), json!(if psnr.is_finite() { round2(psnr) } else { 999.0 }));
+                fig.insert(
+                    format!("psnr_{name}_{scene}_db"),
+                    json!(if psnr.is_finite() {
+                        round2(psnr)
+                    } else {
+                        999.0
+                    }),
+                );
             }
         }
     }
-    fig.insert("psnr_min_db".into(), json!(if psnr_min.is_finite() { round2(psnr_min) } else { 999.0 }));
+    fig.insert(
+        "psnr_min_db".into(),
+        json!(if psnr_min.is_finite() {
+            round2(psnr_min)
+        } else {
+            999.0
+        }),
+    );
     fig.insert("image_size".into(), json!(size));
     fig.insert("rounds".into(), json!(rounds));
     fig.insert("adapter".into(), json!(gpu.adapter.get_info().name));

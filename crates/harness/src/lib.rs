@@ -60,10 +60,13 @@ pub const WANTED_FEATURES: wgpu::Features = wgpu::Features::TEXTURE_FORMAT_16BIT
 impl GpuContext {
     /// Picks an adapter (see the crate docs) and creates a device.
     pub fn new() -> Result<GpuContext, GpuError> {
-        let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+        let instance =
+            wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
         let backends = wgpu::Backends::from_env().unwrap_or(wgpu::Backends::all());
         let mut adapters = pollster::block_on(instance.enumerate_adapters(backends));
-        let name = std::env::var("WGPU_ADAPTER_NAME").ok().map(|s| s.to_lowercase());
+        let name = std::env::var("WGPU_ADAPTER_NAME")
+            .ok()
+            .map(|s| s.to_lowercase());
         if let Some(n) = &name {
             adapters.retain(|a| a.get_info().name.to_lowercase().contains(n.as_str()));
         }
@@ -77,7 +80,11 @@ impl GpuContext {
                 wgpu::DeviceType::Other => 4,
             };
             // Prefer Vulkan, then the others (GL's software path is much slower).
-            let backend = if info.backend == wgpu::Backend::Vulkan { 0 } else { 1 };
+            let backend = if info.backend == wgpu::Backend::Vulkan {
+                0
+            } else {
+                1
+            };
             (ty, backend)
         };
         adapters.sort_by_key(rank);
@@ -98,14 +105,25 @@ impl GpuContext {
             required_limits: adapter.limits(),
             ..Default::default()
         }))
-        .map_err(|source| GpuError::Device { adapter: adapter.get_info().name, source })?;
-        Ok(GpuContext { instance, adapter, device, queue })
+        .map_err(|source| GpuError::Device {
+            adapter: adapter.get_info().name,
+            source,
+        })?;
+        Ok(GpuContext {
+            instance,
+            adapter,
+            device,
+            queue,
+        })
     }
 
     /// One line describing the adapter.
     pub fn describe(&self) -> String {
         let i = self.adapter.get_info();
-        format!("{} ({:?}, {:?}, driver {} {})", i.name, i.backend, i.device_type, i.driver, i.driver_info)
+        format!(
+            "{} ({:?}, {:?}, driver {} {})",
+            i.name, i.backend, i.device_type, i.driver, i.driver_info
+        )
     }
 
     /// Submits and waits (tests and benchmarks only: never in a frame path).
@@ -144,7 +162,11 @@ impl Offscreen {
         let make = |label, format| {
             device.create_texture(&wgpu::TextureDescriptor {
                 label: Some(label),
-                size: wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
+                size: wgpu::Extent3d {
+                    width,
+                    height,
+                    depth_or_array_layers: 1,
+                },
                 mip_level_count: 1,
                 sample_count: 1,
                 dimension: wgpu::TextureDimension::D2,
@@ -159,12 +181,23 @@ impl Offscreen {
         let depth = make("brickray-harness depth", DEPTH_FORMAT);
         let color_view = color.create_view(&Default::default());
         let depth_view = depth.create_view(&Default::default());
-        Offscreen { width, height, color, color_view, depth, depth_view }
+        Offscreen {
+            width,
+            height,
+            color,
+            color_view,
+            depth,
+            depth_view,
+        }
     }
 
     /// Begins a render pass on both targets; `clear` clears colour to black and
     /// depth to 1, else both are loaded.
-    pub fn pass<'e>(&self, encoder: &'e mut wgpu::CommandEncoder, clear: bool) -> wgpu::RenderPass<'e> {
+    pub fn pass<'e>(
+        &self,
+        encoder: &'e mut wgpu::CommandEncoder,
+        clear: bool,
+    ) -> wgpu::RenderPass<'e> {
         encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
             label: Some("brickray-harness pass"),
             color_attachments: &[Some(wgpu::RenderPassColorAttachment {
@@ -172,14 +205,22 @@ impl Offscreen {
                 depth_slice: None,
                 resolve_target: None,
                 ops: wgpu::Operations {
-                    load: if clear { wgpu::LoadOp::Clear(wgpu::Color::BLACK) } else { wgpu::LoadOp::Load },
+                    load: if clear {
+                        wgpu::LoadOp::Clear(wgpu::Color::BLACK)
+                    } else {
+                        wgpu::LoadOp::Load
+                    },
                     store: wgpu::StoreOp::Store,
                 },
             })],
             depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
                 view: &self.depth_view,
                 depth_ops: Some(wgpu::Operations {
-                    load: if clear { wgpu::LoadOp::Clear(1.0) } else { wgpu::LoadOp::Load },
+                    load: if clear {
+                        wgpu::LoadOp::Clear(1.0)
+                    } else {
+                        wgpu::LoadOp::Load
+                    },
                     store: wgpu::StoreOp::Store,
                 }),
                 stencil_ops: None,
@@ -198,12 +239,20 @@ impl Offscreen {
     /// Reads the depth target back.
     pub fn read_depth(&self, gpu: &GpuContext) -> Vec<f32> {
         let bytes = read_texture(gpu, &self.depth, 4, wgpu::TextureAspect::DepthOnly);
-        bytes.chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect()
+        bytes
+            .chunks_exact(4)
+            .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+            .collect()
     }
 }
 
 /// Copies a 2D texture to a buffer and maps it (blocking: tests and benches only).
-pub fn read_texture(gpu: &GpuContext, tex: &wgpu::Texture, bpp: u32, aspect: wgpu::TextureAspect) -> Vec<u8> {
+pub fn read_texture(
+    gpu: &GpuContext,
+    tex: &wgpu::Texture,
+    bpp: u32,
+    aspect: wgpu::TextureAspect,
+) -> Vec<u8> {
     let (w, h) = (tex.width(), tex.height());
     let row = (w * bpp).div_ceil(256) * 256;
     let buf = gpu.device.create_buffer(&wgpu::BufferDescriptor {
@@ -214,12 +263,25 @@ pub fn read_texture(gpu: &GpuContext, tex: &wgpu::Texture, bpp: u32, aspect: wgp
     });
     let mut enc = gpu.device.create_command_encoder(&Default::default());
     enc.copy_texture_to_buffer(
-        wgpu::TexelCopyTextureInfo { texture: tex, mip_level: 0, origin: wgpu::Origin3d::ZERO, aspect },
+        wgpu::TexelCopyTextureInfo {
+            texture: tex,
+            mip_level: 0,
+            origin: wgpu::Origin3d::ZERO,
+            aspect,
+        },
         wgpu::TexelCopyBufferInfo {
             buffer: &buf,
-            layout: wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(row), rows_per_image: Some(h) },
+            layout: wgpu::TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some(row),
+                rows_per_image: Some(h),
+            },
         },
-        wgpu::Extent3d { width: w, height: h, depth_or_array_layers: 1 },
+        wgpu::Extent3d {
+            width: w,
+            height: h,
+            depth_or_array_layers: 1,
+        },
     );
     gpu.submit_wait(enc);
     let slice = buf.slice(..);
@@ -244,9 +306,15 @@ pub fn shared_data_dir() -> Option<PathBuf> {
         return Some(dir);
     }
     if std::env::var("CI").is_ok_and(|v| v == "true") {
-        panic!("CI=true but the shared data directory {} is missing", dir.display());
+        panic!(
+            "CI=true but the shared data directory {} is missing",
+            dir.display()
+        );
     }
-    eprintln!("skipping: shared data not found at {} (a user's clone has no ../shared)", dir.display());
+    eprintln!(
+        "skipping: shared data not found at {} (a user's clone has no ../shared)",
+        dir.display()
+    );
     None
 }
 
@@ -275,7 +343,9 @@ impl HostQuad {
     pub fn new(device: &wgpu::Device) -> HostQuad {
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("brickray-harness host_quad.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(include_str!("../../../shaders/host_quad.wgsl").into()),
+            source: wgpu::ShaderSource::Wgsl(
+                include_str!("../../../shaders/host_quad.wgsl").into(),
+            ),
         });
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("brickray-harness quad"),
@@ -304,7 +374,10 @@ impl HostQuad {
                 compilation_options: Default::default(),
                 buffers: &[],
             },
-            primitive: wgpu::PrimitiveState { topology: wgpu::PrimitiveTopology::TriangleStrip, ..Default::default() },
+            primitive: wgpu::PrimitiveState {
+                topology: wgpu::PrimitiveTopology::TriangleStrip,
+                ..Default::default()
+            },
             depth_stencil: Some(wgpu::DepthStencilState {
                 format: DEPTH_FORMAT,
                 depth_write_enabled: Some(true),
@@ -331,7 +404,14 @@ impl HostQuad {
 
     /// Draws a rectangle `rect = [x0, y0, x1, y1]` (NDC) at clip `depth` with an
     /// opaque `color` into `pass`.
-    pub fn draw(&self, device: &wgpu::Device, pass: &mut wgpu::RenderPass<'_>, rect: [f32; 4], depth: f32, color: [f32; 4]) {
+    pub fn draw(
+        &self,
+        device: &wgpu::Device,
+        pass: &mut wgpu::RenderPass<'_>,
+        rect: [f32; 4],
+        depth: f32,
+        color: [f32; 4],
+    ) {
         let mut data = [0f32; 12];
         data[..4].copy_from_slice(&rect);
         data[4..8].copy_from_slice(&color);
@@ -343,12 +423,19 @@ impl HostQuad {
             usage: wgpu::BufferUsages::UNIFORM,
             mapped_at_creation: true,
         });
-        buffer.slice(..).get_mapped_range_mut().expect("mapped at creation").copy_from_slice(&bytes);
+        buffer
+            .slice(..)
+            .get_mapped_range_mut()
+            .expect("mapped at creation")
+            .copy_from_slice(&bytes);
         buffer.unmap();
         let bg = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("brickray-harness quad"),
             layout: &self.layout,
-            entries: &[wgpu::BindGroupEntry { binding: 0, resource: buffer.as_entire_binding() }],
+            entries: &[wgpu::BindGroupEntry {
+                binding: 0,
+                resource: buffer.as_entire_binding(),
+            }],
         });
         pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(0, &bg, &[]);
@@ -368,7 +455,13 @@ pub mod ct {
 
     /// Opaque bone: transparent below 250 HU, opaque from 600 HU.
     pub fn bone() -> TransferFunction {
-        TransferFunction::from_points(&[(hu(250.0), [0.9, 0.85, 0.75, 0.0]), (hu(600.0), [1.0, 0.95, 0.85, 1.0])], 512)
+        TransferFunction::from_points(
+            &[
+                (hu(250.0), [0.9, 0.85, 0.75, 0.0]),
+                (hu(600.0), [1.0, 0.95, 0.85, 1.0]),
+            ],
+            512,
+        )
     }
 
     /// Semi-transparent soft tissue with faint bone.

@@ -3,8 +3,8 @@
 //! encoded as `u32` words (see [`crate::format`]).
 
 use crate::format::{
-    LEAF_RECORD_WORDS, MAX_LEVEL, MAX_NODES, MAX_WORDS, NULL, TAG_DATA, TAG_EMPTY, TAG_INNER, node_word,
-    rope_word,
+    LEAF_RECORD_WORDS, MAX_LEVEL, MAX_NODES, MAX_WORDS, NULL, TAG_DATA, TAG_EMPTY, TAG_INNER,
+    node_word, rope_word,
 };
 use brickray_core::brick::NodeKey;
 use std::borrow::Borrow;
@@ -132,7 +132,9 @@ impl EncodedIndex {
                 return None;
             }
             let shift = (key.level - 1 - d) as u32;
-            let ci = ((key.x >> shift) & 1) | (((key.y >> shift) & 1) << 1) | (((key.z >> shift) & 1) << 2);
+            let ci = ((key.x >> shift) & 1)
+                | (((key.y >> shift) & 1) << 1)
+                | (((key.z >> shift) & 1) << 2);
             node = crate::format::node_ptr(word) + ci;
         }
         (self.keys.get(node as usize) == Some(&key)).then_some(node)
@@ -151,7 +153,11 @@ struct ArenaNode {
     kind: LeafKind,
 }
 
-const UNSET_NODE: ArenaNode = ArenaNode { first_child: NONE, state: UNSET, kind: LeafKind::Empty };
+const UNSET_NODE: ArenaNode = ArenaNode {
+    first_child: NONE,
+    state: UNSET,
+    kind: LeafKind::Empty,
+};
 
 fn ancestor(key: NodeKey, level: u8) -> NodeKey {
     let s = (key.level - level) as u32;
@@ -177,7 +183,10 @@ where
     for leaf in leaves {
         let (key, kind) = *leaf.borrow();
         if key.level > MAX_LEVEL {
-            return Err(CutError::LevelTooDeep { key, max: MAX_LEVEL });
+            return Err(CutError::LevelTooDeep {
+                key,
+                max: MAX_LEVEL,
+            });
         }
         let n = 1u32 << key.level;
         if key.x >= n || key.y >= n || key.z >= n {
@@ -186,7 +195,12 @@ where
         let mut cur = 0usize;
         for d in 0..key.level {
             match arena[cur].state {
-                LEAF => return Err(CutError::Overlap { outer: ancestor(key, d), inner: key }),
+                LEAF => {
+                    return Err(CutError::Overlap {
+                        outer: ancestor(key, d),
+                        inner: key,
+                    });
+                }
                 UNSET => {
                     arena[cur].state = INNER;
                     arena[cur].first_child = arena.len() as u32;
@@ -195,11 +209,18 @@ where
                 _ => {}
             }
             let shift = (key.level - 1 - d) as u32;
-            let ci = ((key.x >> shift) & 1) | (((key.y >> shift) & 1) << 1) | (((key.z >> shift) & 1) << 2);
+            let ci = ((key.x >> shift) & 1)
+                | (((key.y >> shift) & 1) << 1)
+                | (((key.z >> shift) & 1) << 2);
             cur = (arena[cur].first_child + ci) as usize;
         }
         match arena[cur].state {
-            LEAF => return Err(CutError::Overlap { outer: key, inner: key }),
+            LEAF => {
+                return Err(CutError::Overlap {
+                    outer: key,
+                    inner: key,
+                });
+            }
             INNER => {
                 // Some earlier leaf lies below: find one (the first in child order).
                 let mut below = key;
@@ -210,7 +231,10 @@ where
                     a = fc + ci;
                     below = below.child(ci as u8);
                 }
-                return Err(CutError::Overlap { outer: key, inner: below });
+                return Err(CutError::Overlap {
+                    outer: key,
+                    inner: below,
+                });
             }
             _ => {
                 arena[cur].state = LEAF;
@@ -218,7 +242,10 @@ where
             }
         }
         if arena.len() > MAX_NODES {
-            return Err(CutError::TooLarge { nodes: arena.len(), words: 0 });
+            return Err(CutError::TooLarge {
+                nodes: arena.len(),
+                words: 0,
+            });
         }
     }
 
@@ -259,7 +286,10 @@ where
     debug_assert_eq!(order.len(), nodes);
     let words_len = nodes + LEAF_RECORD_WORDS as usize * stats.leaves as usize;
     if words_len > MAX_WORDS {
-        return Err(CutError::TooLarge { nodes, words: words_len });
+        return Err(CutError::TooLarge {
+            nodes,
+            words: words_len,
+        });
     }
     stats.nodes = nodes as u32;
     stats.words = words_len as u32;
@@ -309,7 +339,11 @@ where
             words[r] = data;
             for face in 0..6 {
                 let m = neigh[q][face];
-                words[r + 1 + face] = if m == NULL { NULL } else { rope_word(m, keys[m as usize].level) };
+                words[r + 1 + face] = if m == NULL {
+                    NULL
+                } else {
+                    rope_word(m, keys[m as usize].level)
+                };
             }
             record += LEAF_RECORD_WORDS;
         }

@@ -86,7 +86,11 @@ pub const fn rope_word(node: u32, level: u8) -> u32 {
 /// Decoded rope: `None` for [`NULL`], else `(neighbour node index, neighbour level)`.
 #[inline]
 pub const fn decode_rope(word: u32) -> Option<(u32, u8)> {
-    if word == NULL { None } else { Some((word & ROPE_NODE_MASK, (word >> ROPE_LEVEL_SHIFT) as u8)) }
+    if word == NULL {
+        None
+    } else {
+        Some((word & ROPE_NODE_MASK, (word >> ROPE_LEVEL_SHIFT) as u8))
+    }
 }
 
 /// `2^-level` as an exact `f32` (built from its bits, as the shader does).

@@ -34,8 +34,8 @@ mod traverse;
 
 pub use cut::{CutError, EncodedIndex, IndexStats, LeafKind, encode_cut};
 pub use traverse::{
-    CorruptIndex, DIR_EPSILON, LeafHit, NodeBox, Ray, T_BIG, Traversal, TraversalStatus, clip_unit_cube, exit_face,
-    follow_rope, locate_leaf, ray_setup, traverse,
+    CorruptIndex, DIR_EPSILON, LeafHit, NodeBox, Ray, T_BIG, Traversal, TraversalStatus,
+    clip_unit_cube, exit_face, follow_rope, locate_leaf, ray_setup, traverse,
 };
 
 /// The WGSL traversal library (`shaders/octree_traversal.wgsl`). It declares no

@@ -53,12 +53,21 @@ pub struct Ray {
 impl Ray {
     /// A ray over `t` in `[0, inf)`.
     pub fn new(origin: Vec3, dir: Vec3) -> Ray {
-        Ray { origin, dir, t_min: 0.0, t_max: f32::INFINITY }
+        Ray {
+            origin,
+            dir,
+            t_min: 0.0,
+            t_max: f32::INFINITY,
+        }
     }
 
     /// The same ray over `t` in `[t_min, t_max]`.
     pub fn with_range(self, t_min: f32, t_max: f32) -> Ray {
-        Ray { t_min, t_max, ..self }
+        Ray {
+            t_min,
+            t_max,
+            ..self
+        }
     }
 }
 
@@ -77,7 +86,12 @@ pub struct NodeBox {
 
 impl NodeBox {
     /// The root: node 0, the unit cube.
-    pub const ROOT: NodeBox = NodeBox { node: 0, level: 0, box_min: Vec3::ZERO, box_size: 1.0 };
+    pub const ROOT: NodeBox = NodeBox {
+        node: 0,
+        level: 0,
+        box_min: Vec3::ZERO,
+        box_size: 1.0,
+    };
 
     /// The node's key, from its box (exact: corners are multiples of `2^-level`).
     pub fn key(&self) -> NodeKey {
@@ -100,13 +114,23 @@ fn read(words: &[u32], i: u32) -> Result<u32, CorruptIndex> {
 pub fn ray_setup(dir: Vec3) -> (Vec3, Vec3) {
     let d = Vec3::select(dir.abs().cmplt(Vec3::splat(DIR_EPSILON)), Vec3::ZERO, dir);
     let nonzero = d.cmpne(Vec3::ZERO);
-    let inv = Vec3::select(nonzero, Vec3::ONE / Vec3::select(nonzero, d, Vec3::ONE), Vec3::ZERO);
+    let inv = Vec3::select(
+        nonzero,
+        Vec3::ONE / Vec3::select(nonzero, d, Vec3::ONE),
+        Vec3::ZERO,
+    );
     (d, inv)
 }
 
 /// Clips `[t_min, t_max]` to the unit cube (half-open along zero components).
 /// Returns `(t0, t1)`; the ray misses when `!(t0 < t1)`.
-pub fn clip_unit_cube(origin: Vec3, dir: Vec3, inv_dir: Vec3, t_min: f32, t_max: f32) -> (f32, f32) {
+pub fn clip_unit_cube(
+    origin: Vec3,
+    dir: Vec3,
+    inv_dir: Vec3,
+    t_min: f32,
+    t_max: f32,
+) -> (f32, f32) {
     let mut t0 = t_min;
     let mut t1 = t_max;
     if dir == Vec3::ZERO {
@@ -131,13 +155,22 @@ pub fn clip_unit_cube(origin: Vec3, dir: Vec3, inv_dir: Vec3, t_min: f32, t_max:
 /// Descends from `start` to the leaf containing `p` (box subdivision, Fig. 5);
 /// ties on a child boundary go to the side `dir` moves into (upper when the
 /// component is zero). Returns the leaf and its node word.
-pub fn locate_leaf(words: &[u32], start: NodeBox, p: Vec3, dir: Vec3) -> Result<(NodeBox, u32), CorruptIndex> {
+pub fn locate_leaf(
+    words: &[u32],
+    start: NodeBox,
+    p: Vec3,
+    dir: Vec3,
+) -> Result<(NodeBox, u32), CorruptIndex> {
     let mut c = start;
     let mut word = read(words, c.node)?;
     for _ in 0..=MAX_LEVEL {
         if node_tag(word) != TAG_INNER {
             let tag = node_tag(word);
-            return if tag == TAG_EMPTY || tag == TAG_DATA { Ok((c, word)) } else { Err(CorruptIndex) };
+            return if tag == TAG_EMPTY || tag == TAG_DATA {
+                Ok((c, word))
+            } else {
+                Err(CorruptIndex)
+            };
         }
         if c.level >= MAX_LEVEL as u32 {
             break;
@@ -160,7 +193,11 @@ pub fn locate_leaf(words: &[u32], start: NodeBox, p: Vec3, dir: Vec3) -> Result<
 pub fn exit_face(c: &NodeBox, origin: Vec3, dir: Vec3, inv_dir: Vec3) -> (f32, u32) {
     let pos = dir.cmpgt(Vec3::ZERO);
     let far = c.box_min + Vec3::select(pos, Vec3::splat(c.box_size), Vec3::ZERO);
-    let tf = Vec3::select(dir.cmpne(Vec3::ZERO), (far - origin) * inv_dir, Vec3::splat(T_BIG));
+    let tf = Vec3::select(
+        dir.cmpne(Vec3::ZERO),
+        (far - origin) * inv_dir,
+        Vec3::splat(T_BIG),
+    );
     let mut t = tf.x;
     let mut face = pos.x as u32;
     if tf.y < t {
@@ -187,7 +224,11 @@ pub fn follow_rope(rope: u32, c: &NodeBox, face: u32) -> Result<Option<NodeBox>,
     }
     let mut n = *c;
     let axis = (face / 2) as usize;
-    n.box_min[axis] += if face & 1 == 1 { n.box_size } else { -n.box_size };
+    n.box_min[axis] += if face & 1 == 1 {
+        n.box_size
+    } else {
+        -n.box_size
+    };
     if level < c.level {
         n.box_size = exp2_neg(level);
         n.box_min = (n.box_min * exp2_pos(level)).floor() * n.box_size;
@@ -258,7 +299,18 @@ pub fn traverse(words: &[u32], ray: Ray, max_steps: u32) -> Traversal<'_> {
     if !hit {
         cur.node = NULL;
     }
-    Traversal { words, origin: ray.origin, dir, inv_dir, t: t0, t_end: t1, cur, steps: 0, max_steps, status: TraversalStatus::Running }
+    Traversal {
+        words,
+        origin: ray.origin,
+        dir,
+        inv_dir,
+        t: t0,
+        t_end: t1,
+        cur,
+        steps: 0,
+        max_steps,
+        status: TraversalStatus::Running,
+    }
 }
 
 impl Traversal<'_> {
@@ -286,7 +338,9 @@ impl Traversal<'_> {
         let t_enter = self.t;
         t_exit = t_exit.max(t_enter);
         let kind = if node_tag(word) == TAG_DATA {
-            LeafKind::Data { slot: read(self.words, record)? }
+            LeafKind::Data {
+                slot: read(self.words, record)?,
+            }
         } else {
             LeafKind::Empty
         };
@@ -295,7 +349,12 @@ impl Traversal<'_> {
             None => self.cur.node = NULL,
         }
         self.t = t_exit;
-        Ok((t_exit > t_enter).then_some(LeafHit { leaf, kind, t_enter, t_exit }))
+        Ok((t_exit > t_enter).then_some(LeafHit {
+            leaf,
+            kind,
+            t_enter,
+            t_exit,
+        }))
     }
 }
 
@@ -337,14 +396,22 @@ mod tests {
     use crate::format::{FACE_NEG_X, FACE_POS_X, FACE_POS_Y, FACE_POS_Z, rope_word};
 
     fn nb(level: u32, min: [f32; 3]) -> NodeBox {
-        NodeBox { node: 0, level, box_min: Vec3::from(min), box_size: exp2_neg(level) }
+        NodeBox {
+            node: 0,
+            level,
+            box_min: Vec3::from(min),
+            box_size: exp2_neg(level),
+        }
     }
 
     #[test]
     fn exit_face_prefers_smallest_t_then_lowest_axis() {
         let c = nb(1, [0.0, 0.0, 0.0]);
         let (dir, inv) = ray_setup(Vec3::new(1.0, 2.0, 0.0));
-        assert_eq!(exit_face(&c, Vec3::new(0.1, 0.1, 0.1), dir, inv), (0.2, FACE_POS_Y));
+        assert_eq!(
+            exit_face(&c, Vec3::new(0.1, 0.1, 0.1), dir, inv),
+            (0.2, FACE_POS_Y)
+        );
         // Through the corner: x, y and z tie at t = 0.5, x wins.
         let (dir, inv) = ray_setup(Vec3::ONE);
         assert_eq!(exit_face(&c, Vec3::ZERO, dir, inv), (0.5, FACE_POS_X));
@@ -352,9 +419,15 @@ mod tests {
         assert_eq!(exit_face(&c, Vec3::ZERO, dir, inv), (0.5, FACE_POS_Y));
         let (dir, inv) = ray_setup(Vec3::new(-1.0, 0.0, 1e-31));
         assert_eq!(dir, Vec3::new(-1.0, 0.0, 0.0));
-        assert_eq!(exit_face(&c, Vec3::new(0.25, 0.1, 0.1), dir, inv), (0.25, FACE_NEG_X));
+        assert_eq!(
+            exit_face(&c, Vec3::new(0.25, 0.1, 0.1), dir, inv),
+            (0.25, FACE_NEG_X)
+        );
         let (dir, inv) = ray_setup(Vec3::new(0.0, 0.0, 0.5));
-        assert_eq!(exit_face(&c, Vec3::new(0.25, 0.1, 0.0), dir, inv), (1.0, FACE_POS_Z));
+        assert_eq!(
+            exit_face(&c, Vec3::new(0.25, 0.1, 0.0), dir, inv),
+            (1.0, FACE_POS_Z)
+        );
     }
 
     #[test]
@@ -371,34 +444,62 @@ mod tests {
         assert_eq!(at(Vec3::new(-1.0, -1.0, -1.0)).node, 1);
         assert_eq!(at(Vec3::new(0.0, -1.0, 0.0)).node, 1 + 1 + 4);
         let leaf = at(Vec3::new(-1.0, 1.0, 0.0));
-        assert_eq!((leaf.node, leaf.level, leaf.box_min, leaf.box_size), (1 + 2 + 4, 1, Vec3::new(0.0, 0.5, 0.5), 0.5));
+        assert_eq!(
+            (leaf.node, leaf.level, leaf.box_min, leaf.box_size),
+            (1 + 2 + 4, 1, Vec3::new(0.0, 0.5, 0.5), 0.5)
+        );
         assert_eq!(leaf.key(), NodeKey::new(1, 0, 1, 1));
         // A bad tag is corrupt, as is a pointer past the end.
         let mut bad = words.clone();
         bad[8] = 3 << 30;
-        assert_eq!(locate_leaf(&bad, NodeBox::ROOT, Vec3::splat(0.9), Vec3::X), Err(CorruptIndex));
+        assert_eq!(
+            locate_leaf(&bad, NodeBox::ROOT, Vec3::splat(0.9), Vec3::X),
+            Err(CorruptIndex)
+        );
         bad[0] = crate::format::node_word(TAG_INNER, 1000);
-        assert_eq!(locate_leaf(&bad, NodeBox::ROOT, Vec3::splat(0.9), Vec3::X), Err(CorruptIndex));
+        assert_eq!(
+            locate_leaf(&bad, NodeBox::ROOT, Vec3::splat(0.9), Vec3::X),
+            Err(CorruptIndex)
+        );
     }
 
     #[test]
     fn follow_rope_shifts_and_snaps_to_the_coarser_grid() {
         // Level-3 box at (5, 2, 7)/8 leaving +x into a level-1 neighbour.
-        let c = NodeBox { node: 3, ..nb(3, [5.0 / 8.0, 2.0 / 8.0, 7.0 / 8.0]) };
-        let n = follow_rope(rope_word(11, 1), &c, FACE_POS_X).unwrap().unwrap();
-        assert_eq!((n.node, n.level, n.box_min, n.box_size), (11, 1, Vec3::new(0.5, 0.0, 0.5), 0.5));
+        let c = NodeBox {
+            node: 3,
+            ..nb(3, [5.0 / 8.0, 2.0 / 8.0, 7.0 / 8.0])
+        };
+        let n = follow_rope(rope_word(11, 1), &c, FACE_POS_X)
+            .unwrap()
+            .unwrap();
+        assert_eq!(
+            (n.node, n.level, n.box_min, n.box_size),
+            (11, 1, Vec3::new(0.5, 0.0, 0.5), 0.5)
+        );
         // Same level: a pure shift.
-        let n = follow_rope(rope_word(12, 3), &c, FACE_NEG_X).unwrap().unwrap();
-        assert_eq!((n.level, n.box_min, n.box_size), (3, Vec3::new(4.0 / 8.0, 2.0 / 8.0, 7.0 / 8.0), 0.125));
+        let n = follow_rope(rope_word(12, 3), &c, FACE_NEG_X)
+            .unwrap()
+            .unwrap();
+        assert_eq!(
+            (n.level, n.box_min, n.box_size),
+            (3, Vec3::new(4.0 / 8.0, 2.0 / 8.0, 7.0 / 8.0), 0.125)
+        );
         // NULL, and a rope to a finer level is corrupt.
         assert_eq!(follow_rope(NULL, &c, FACE_POS_X), Ok(None));
-        assert_eq!(follow_rope(rope_word(1, 4), &c, FACE_POS_X), Err(CorruptIndex));
+        assert_eq!(
+            follow_rope(rope_word(1, 4), &c, FACE_POS_X),
+            Err(CorruptIndex)
+        );
     }
 
     #[test]
     fn clip_is_half_open_along_zero_components() {
         let (d, inv) = ray_setup(Vec3::X);
-        assert_eq!(clip_unit_cube(Vec3::new(-1.0, 0.0, 0.5), d, inv, 0.0, f32::INFINITY), (1.0, 2.0));
+        assert_eq!(
+            clip_unit_cube(Vec3::new(-1.0, 0.0, 0.5), d, inv, 0.0, f32::INFINITY),
+            (1.0, 2.0)
+        );
         let (t0, t1) = clip_unit_cube(Vec3::new(-1.0, 1.0, 0.5), d, inv, 0.0, f32::INFINITY);
         assert!(t0 >= t1);
         let (d, inv) = ray_setup(Vec3::ZERO);

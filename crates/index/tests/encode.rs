@@ -4,7 +4,8 @@ mod common;
 
 use brickray_core::brick::NodeKey;
 use brickray_index::format::{
-    LEAF_RECORD_WORDS, MAX_LEVEL, NULL, TAG_DATA, TAG_EMPTY, TAG_INNER, decode_rope, node_ptr, node_tag,
+    LEAF_RECORD_WORDS, MAX_LEVEL, NULL, TAG_DATA, TAG_EMPTY, TAG_INNER, decode_rope, node_ptr,
+    node_tag,
 };
 use brickray_index::{CutError, EncodedIndex, LeafKind, encode_cut};
 use common::{Rng, random_cut, shuffle, uniform_cut};
@@ -29,7 +30,12 @@ fn rope_target(index: &EncodedIndex, leaf: NodeKey, face: usize) -> Option<NodeK
 /// The rope target by definition (section 5.1): the same-level node across the
 /// face if it exists in the tree (leaf or inner), else the coarser leaf that
 /// contains it; NULL on the cube boundary.
-fn expected_target(leaves: &HashMap<NodeKey, LeafKind>, index: &EncodedIndex, leaf: NodeKey, face: usize) -> Option<NodeKey> {
+fn expected_target(
+    leaves: &HashMap<NodeKey, LeafKind>,
+    index: &EncodedIndex,
+    leaf: NodeKey,
+    face: usize,
+) -> Option<NodeKey> {
     let (axis, step) = FACES[face];
     let mut p = [leaf.x as i64, leaf.y as i64, leaf.z as i64];
     p[axis] += step;
@@ -82,15 +88,39 @@ fn check_all_ropes(cut: &[(NodeKey, LeafKind)]) {
 #[test]
 fn root_only_cut() {
     let index = encode_cut([(NodeKey::ROOT, LeafKind::Data { slot: 42 })]).unwrap();
-    assert_eq!(index.words(), &[(TAG_DATA << 30) | 1, 42, NULL, NULL, NULL, NULL, NULL, NULL]);
+    assert_eq!(
+        index.words(),
+        &[(TAG_DATA << 30) | 1, 42, NULL, NULL, NULL, NULL, NULL, NULL]
+    );
     let s = index.stats();
-    assert_eq!((s.nodes, s.inner_nodes, s.leaves, s.data_leaves, s.empty_leaves, s.words), (1, 0, 1, 1, 0, 8));
+    assert_eq!(
+        (
+            s.nodes,
+            s.inner_nodes,
+            s.leaves,
+            s.data_leaves,
+            s.empty_leaves,
+            s.words
+        ),
+        (1, 0, 1, 1, 0, 8)
+    );
     assert_eq!(s.bytes(), 32);
 }
 
 #[test]
 fn one_split_layout_and_ropes() {
-    let cut: Vec<_> = NodeKey::ROOT.children().into_iter().map(|k| (k, LeafKind::Data { slot: 10 + k.child_index() as u32 })).collect();
+    let cut: Vec<_> = NodeKey::ROOT
+        .children()
+        .into_iter()
+        .map(|k| {
+            (
+                k,
+                LeafKind::Data {
+                    slot: 10 + k.child_index() as u32,
+                },
+            )
+        })
+        .collect();
     let index = encode_cut(cut.clone()).unwrap();
     let w = index.words();
     assert_eq!(w.len(), 9 + 8 * LEAF_RECORD_WORDS as usize);
@@ -127,7 +157,14 @@ fn mixed_levels_ropes_point_to_same_level_inner_or_coarser_leaf() {
             cut.push((k, LeafKind::Empty));
         }
     }
-    cut.extend(c0.children().map(|k| (k, LeafKind::Data { slot: k.child_index() as u32 })));
+    cut.extend(c0.children().map(|k| {
+        (
+            k,
+            LeafKind::Data {
+                slot: k.child_index() as u32,
+            },
+        )
+    }));
     for k in c1.children() {
         if k != c10 {
             cut.push((k, LeafKind::Empty));
@@ -153,7 +190,10 @@ fn mixed_levels_ropes_point_to_same_level_inner_or_coarser_leaf() {
     assert_eq!(rope_target(&index, g(1, 1, 1, 1), 1), None);
     check_all_ropes(&cut);
     let s = index.stats();
-    assert_eq!((s.inner_nodes, s.leaves, s.max_level), (4, 6 + 8 + 7 + 8, 3));
+    assert_eq!(
+        (s.inner_nodes, s.leaves, s.max_level),
+        (4, 6 + 8 + 7 + 8, 3)
+    );
     assert_eq!(s.nodes, 1 + 4 * 8);
     assert_eq!(s.words, s.nodes + 7 * s.leaves);
 }
@@ -173,37 +213,90 @@ fn encoding_is_independent_of_input_order() {
 fn invalid_cuts_are_typed_errors() {
     let r = NodeKey::ROOT;
     let e = LeafKind::Empty;
-    assert_eq!(encode_cut(Vec::<(NodeKey, LeafKind)>::new()), Err(CutError::Gap { missing: r }));
+    assert_eq!(
+        encode_cut(Vec::<(NodeKey, LeafKind)>::new()),
+        Err(CutError::Gap { missing: r })
+    );
     // One child missing.
-    let cut: Vec<_> = r.children().into_iter().filter(|k| k.child_index() != 5).map(|k| (k, e)).collect();
-    assert_eq!(encode_cut(cut), Err(CutError::Gap { missing: r.child(5) }));
+    let cut: Vec<_> = r
+        .children()
+        .into_iter()
+        .filter(|k| k.child_index() != 5)
+        .map(|k| (k, e))
+        .collect();
+    assert_eq!(
+        encode_cut(cut),
+        Err(CutError::Gap {
+            missing: r.child(5)
+        })
+    );
     // A deeper gap.
     let mut cut: Vec<_> = r.children().into_iter().skip(1).map(|k| (k, e)).collect();
     cut.extend(r.child(0).children().into_iter().take(7).map(|k| (k, e)));
-    assert_eq!(encode_cut(cut), Err(CutError::Gap { missing: r.child(0).child(7) }));
+    assert_eq!(
+        encode_cut(cut),
+        Err(CutError::Gap {
+            missing: r.child(0).child(7)
+        })
+    );
     // Duplicate leaf.
     let mut cut: Vec<_> = r.children().into_iter().map(|k| (k, e)).collect();
     cut.push((r.child(3), LeafKind::Data { slot: 1 }));
-    assert_eq!(encode_cut(cut), Err(CutError::Overlap { outer: r.child(3), inner: r.child(3) }));
+    assert_eq!(
+        encode_cut(cut),
+        Err(CutError::Overlap {
+            outer: r.child(3),
+            inner: r.child(3)
+        })
+    );
     // Leaf inside an earlier coarser leaf.
     let mut cut: Vec<_> = r.children().into_iter().map(|k| (k, e)).collect();
     cut.push((r.child(2).child(6).child(1), e));
-    assert_eq!(encode_cut(cut), Err(CutError::Overlap { outer: r.child(2), inner: r.child(2).child(6).child(1) }));
+    assert_eq!(
+        encode_cut(cut),
+        Err(CutError::Overlap {
+            outer: r.child(2),
+            inner: r.child(2).child(6).child(1)
+        })
+    );
     // Coarser leaf after a finer one.
     let mut cut: Vec<_> = r.child(4).children().into_iter().map(|k| (k, e)).collect();
     cut.push((r.child(4), e));
-    assert_eq!(encode_cut(cut), Err(CutError::Overlap { outer: r.child(4), inner: r.child(4).child(0) }));
+    assert_eq!(
+        encode_cut(cut),
+        Err(CutError::Overlap {
+            outer: r.child(4),
+            inner: r.child(4).child(0)
+        })
+    );
     // Root plus anything.
-    assert!(matches!(encode_cut([(r, e), (r.child(1), e)]), Err(CutError::Overlap { .. })));
+    assert!(matches!(
+        encode_cut([(r, e), (r.child(1), e)]),
+        Err(CutError::Overlap { .. })
+    ));
     // Bad levels and positions.
     let deep = NodeKey::new(MAX_LEVEL + 1, 0, 0, 0);
-    assert_eq!(encode_cut([(deep, e)]), Err(CutError::LevelTooDeep { key: deep, max: MAX_LEVEL }));
+    assert_eq!(
+        encode_cut([(deep, e)]),
+        Err(CutError::LevelTooDeep {
+            key: deep,
+            max: MAX_LEVEL
+        })
+    );
     let outside = NodeKey::new(2, 4, 0, 0);
-    assert_eq!(encode_cut([(outside, e)]), Err(CutError::PositionOutOfRange { key: outside }));
+    assert_eq!(
+        encode_cut([(outside, e)]),
+        Err(CutError::PositionOutOfRange { key: outside })
+    );
     let outside = NodeKey::new(0, 0, 0, 1);
-    assert_eq!(encode_cut([(outside, e)]), Err(CutError::PositionOutOfRange { key: outside }));
+    assert_eq!(
+        encode_cut([(outside, e)]),
+        Err(CutError::PositionOutOfRange { key: outside })
+    );
     // Messages render.
-    let msg = encode_cut(Vec::<(NodeKey, LeafKind)>::new()).unwrap_err().to_string();
+    let msg = encode_cut(Vec::<(NodeKey, LeafKind)>::new())
+        .unwrap_err()
+        .to_string();
     assert!(msg.contains("gap"), "{msg}");
 }
 
@@ -244,7 +337,14 @@ fn encodes_100k_leaves_fast() {
         best = best.min(t.elapsed().as_secs_f64());
     }
     let s = index.unwrap().stats();
-    eprintln!("encode: {} leaves, {} nodes, {} words ({} KiB) in {:.2} ms", s.leaves, s.nodes, s.words, s.bytes() / 1024, best * 1e3);
+    eprintln!(
+        "encode: {} leaves, {} nodes, {} words ({} KiB) in {:.2} ms",
+        s.leaves,
+        s.nodes,
+        s.words,
+        s.bytes() / 1024,
+        best * 1e3
+    );
     assert_eq!(s.leaves as usize, cut.len());
     // Generous bound (shared CI machine); release builds take a few ms.
     assert!(best < 0.25, "encoding took {best} s");

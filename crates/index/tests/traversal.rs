@@ -24,7 +24,13 @@ struct Seg {
 /// `[t_min, t_max]`, drop zero-length touches, sort by entry.
 fn oracle(cut: &[(NodeKey, LeafKind)], ray: &Ray) -> Vec<Seg> {
     let o = ray.origin.to_array().map(f64::from);
-    let d = ray.dir.to_array().map(|c| if c.abs() < DIR_EPSILON { 0.0 } else { f64::from(c) });
+    let d = ray.dir.to_array().map(|c| {
+        if c.abs() < DIR_EPSILON {
+            0.0
+        } else {
+            f64::from(c)
+        }
+    });
     let mut out = Vec::new();
     if d == [0.0; 3] {
         return out;
@@ -78,21 +84,37 @@ struct Totals {
     tiny_missing: u64,
 }
 
-fn check_ray(cut: &[(NodeKey, LeafKind)], words: &[u32], ray: &Ray, kind: usize, totals: &mut Totals) -> Result<(), String> {
+fn check_ray(
+    cut: &[(NodeKey, LeafKind)],
+    words: &[u32],
+    ray: &Ray,
+    kind: usize,
+    totals: &mut Totals,
+) -> Result<(), String> {
     let want = oracle(cut, ray);
     let max_steps = 10_000;
     let mut it = traverse(words, *ray, max_steps);
     let got: Vec<LeafHit> = it.by_ref().collect();
     if it.status() != TraversalStatus::Finished {
-        return Err(format!("status {:?} after {} steps", it.status(), it.steps()));
+        return Err(format!(
+            "status {:?} after {} steps",
+            it.status(),
+            it.steps()
+        ));
     }
     // Bounded steps: every step visits a distinct leaf; zero-length visits happen
     // only at edges and corners (at most 2 per crossing).
     let bound = 3 * want.len() as u32 + 3;
     if it.steps() > bound {
-        return Err(format!("{} steps for {} oracle leaves", it.steps(), want.len()));
+        return Err(format!(
+            "{} steps for {} oracle leaves",
+            it.steps(),
+            want.len()
+        ));
     }
-    totals.max_step_excess = totals.max_step_excess.max(it.steps() as i64 - want.len() as i64);
+    totals.max_step_excess = totals
+        .max_step_excess
+        .max(it.steps() as i64 - want.len() as i64);
     totals.steps += it.steps() as u64;
     totals.hits += got.len() as u64;
     totals.hits_by_kind[kind] += got.len() as u64;
@@ -158,14 +180,19 @@ fn check_ray(cut: &[(NodeKey, LeafKind)], words: &[u32], ray: &Ray, kind: usize,
     // Same overall extent.
     match (want.first(), want.last(), got.first(), got.last()) {
         (Some(a), Some(b), Some(c), Some(d)) => {
-            if (f64::from(c.t_enter) - a.t0).abs() > tol(a.t0) + TINY || (f64::from(d.t_exit) - b.t1).abs() > tol(b.t1) + TINY {
+            if (f64::from(c.t_enter) - a.t0).abs() > tol(a.t0) + TINY
+                || (f64::from(d.t_exit) - b.t1).abs() > tol(b.t1) + TINY
+            {
                 return Err("extent differs".into());
             }
         }
         (None, None, None, None) => {}
         _ => {
             let total: f64 = want.iter().map(|s| s.t1 - s.t0).sum::<f64>()
-                + got.iter().map(|h| f64::from(h.t_exit - h.t_enter)).sum::<f64>();
+                + got
+                    .iter()
+                    .map(|h| f64::from(h.t_exit - h.t_enter))
+                    .sum::<f64>();
             if total > 2.0 * TINY {
                 return Err("one side is empty".into());
             }
@@ -184,7 +211,11 @@ fn dyadic(rng: &mut Rng, max_level: u32, lo: i64, hi: i64) -> f32 {
 
 fn random_dir(rng: &mut Rng) -> Vec3 {
     loop {
-        let d = Vec3::new(rng.range(-1.0, 1.0) as f32, rng.range(-1.0, 1.0) as f32, rng.range(-1.0, 1.0) as f32);
+        let d = Vec3::new(
+            rng.range(-1.0, 1.0) as f32,
+            rng.range(-1.0, 1.0) as f32,
+            rng.range(-1.0, 1.0) as f32,
+        );
         let l = d.length();
         if l > 0.2 && l <= 1.0 {
             return d / l * rng.range(0.5, 2.0) as f32;
@@ -212,7 +243,11 @@ fn random_ray(rng: &mut Rng, kind: usize) -> Ray {
         // Starting inside, sometimes ending inside.
         1 => {
             let r = Ray::new(Vec3::new(unit(rng), unit(rng), unit(rng)), random_dir(rng));
-            if rng.chance(0.5) { r.with_range(rng.range(0.0, 0.5) as f32, rng.range(0.0, 1.5) as f32) } else { r }
+            if rng.chance(0.5) {
+                r.with_range(rng.range(0.0, 0.5) as f32, rng.range(0.0, 1.5) as f32)
+            } else {
+                r
+            }
         }
         // Axis-aligned, origin on the dyadic grid (along faces and edges), from
         // outside or inside.
@@ -220,7 +255,11 @@ fn random_ray(rng: &mut Rng, kind: usize) -> Ray {
             let a = rng.below(3) as usize;
             let mut d = Vec3::ZERO;
             d[a] = if rng.chance(0.5) { 1.0 } else { -0.5 };
-            let mut o = Vec3::new(dyadic(rng, 7, 0, 1), dyadic(rng, 7, 0, 1), dyadic(rng, 7, 0, 1));
+            let mut o = Vec3::new(
+                dyadic(rng, 7, 0, 1),
+                dyadic(rng, 7, 0, 1),
+                dyadic(rng, 7, 0, 1),
+            );
             if rng.chance(0.5) {
                 o[a] = if d[a] > 0.0 { -0.5 } else { 1.5 };
             }
@@ -234,7 +273,11 @@ fn random_ray(rng: &mut Rng, kind: usize) -> Ray {
             o[a] = dyadic(rng, 7, 0, 1);
             let mut target = Vec3::new(unit(rng), unit(rng), unit(rng));
             target[a] = o[a];
-            let mut d = if target != o { (target - o).normalize() } else { random_dir(rng) };
+            let mut d = if target != o {
+                (target - o).normalize()
+            } else {
+                random_dir(rng)
+            };
             d[a] = match rng.below(4) {
                 0 => 1e-6,
                 1 => -1e-6,
@@ -246,10 +289,18 @@ fn random_ray(rng: &mut Rng, kind: usize) -> Ray {
         // Through a dyadic edge or corner point, exactly: origin = c - d * s with
         // dyadic d and s, so the f32 ray passes through c.
         4 | 5 => {
-            let c = Vec3::new(dyadic(rng, 6, 0, 1), dyadic(rng, 6, 0, 1), dyadic(rng, 6, 0, 1));
+            let c = Vec3::new(
+                dyadic(rng, 6, 0, 1),
+                dyadic(rng, 6, 0, 1),
+                dyadic(rng, 6, 0, 1),
+            );
             let mut d = Vec3::ZERO;
             while d == Vec3::ZERO {
-                d = Vec3::new(rng.below(9) as f32 - 4.0, rng.below(9) as f32 - 4.0, rng.below(9) as f32 - 4.0) / 4.0;
+                d = Vec3::new(
+                    rng.below(9) as f32 - 4.0,
+                    rng.below(9) as f32 - 4.0,
+                    rng.below(9) as f32 - 4.0,
+                ) / 4.0;
             }
             if kind == 5 {
                 // Start exactly at the corner.
@@ -265,7 +316,11 @@ fn random_ray(rng: &mut Rng, kind: usize) -> Ray {
                 if rng.chance(0.5) { 1.0 } else { -1.0 },
                 if rng.chance(0.5) { 1.0 } else { -1.0 },
             );
-            let c = Vec3::new(dyadic(rng, 5, 0, 1), dyadic(rng, 5, 0, 1), dyadic(rng, 5, 0, 1));
+            let c = Vec3::new(
+                dyadic(rng, 5, 0, 1),
+                dyadic(rng, 5, 0, 1),
+                dyadic(rng, 5, 0, 1),
+            );
             Ray::new(c - d * 2.0, d)
         }
         // Generic with a random sub-range, sometimes negative t_min; half of them
@@ -274,13 +329,25 @@ fn random_ray(rng: &mut Rng, kind: usize) -> Ray {
             let o = if rng.chance(0.5) {
                 Vec3::new(outside(rng), outside(rng), outside(rng))
             } else {
-                Vec3::new(rng.range(-8.0, 9.0) as f32, rng.range(-8.0, 9.0) as f32, rng.range(-8.0, 9.0) as f32)
+                Vec3::new(
+                    rng.range(-8.0, 9.0) as f32,
+                    rng.range(-8.0, 9.0) as f32,
+                    rng.range(-8.0, 9.0) as f32,
+                )
             };
             let target = Vec3::new(unit(rng), unit(rng), unit(rng));
-            let d = if rng.chance(0.5) && o != target { (target - o).normalize() } else { random_dir(rng) };
+            let d = if rng.chance(0.5) && o != target {
+                (target - o).normalize()
+            } else {
+                random_dir(rng)
+            };
             let r = Ray::new(o, d);
             if o.length() > 3.0 {
-                return if rng.chance(0.5) { r } else { r.with_range(rng.range(0.0, 10.0) as f32, rng.range(5.0, 20.0) as f32) };
+                return if rng.chance(0.5) {
+                    r
+                } else {
+                    r.with_range(rng.range(0.0, 10.0) as f32, rng.range(5.0, 20.0) as f32)
+                };
             }
             let a = rng.range(-2.0, 3.0) as f32;
             r.with_range(a, a + rng.range(0.0, 3.0) as f32)
@@ -295,14 +362,22 @@ const RAYS_PER_CASE: usize = 480;
 fn twin_matches_brute_force_oracle() {
     let start = std::time::Instant::now();
     // BRICKRAY_INDEX_CASES=N runs a longer soak.
-    let cases = std::env::var("BRICKRAY_INDEX_CASES").ok().and_then(|v| v.parse().ok()).unwrap_or(CASES);
-    let mut runner = TestRunner::new(Config { cases, failure_persistence: None, ..Config::default() });
+    let cases = std::env::var("BRICKRAY_INDEX_CASES")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(CASES);
+    let mut runner = TestRunner::new(Config {
+        cases,
+        failure_persistence: None,
+        ..Config::default()
+    });
     let totals = std::cell::RefCell::new(Totals::default());
     let strategy = (proptest::num::u64::ANY, 0u8..=6, 0.3f64..0.9, 0.0f64..1.0);
     let result = runner.run(&strategy, |(seed, depth, p_refine, p_data)| {
         let mut rng = Rng(seed);
         let cut = random_cut(&mut rng, depth, p_refine, p_data, 3000);
-        let index = encode_cut(cut.iter().copied()).map_err(|e| TestCaseError::fail(e.to_string()))?;
+        let index =
+            encode_cut(cut.iter().copied()).map_err(|e| TestCaseError::fail(e.to_string()))?;
         let mut totals = totals.borrow_mut();
         totals.leaves_in_cuts += cut.len() as u64;
         for i in 0..RAYS_PER_CASE {
@@ -310,15 +385,23 @@ fn twin_matches_brute_force_oracle() {
             let ray = random_ray(&mut rng, kind);
             totals.rays += 1;
             totals.rays_by_kind[kind] += 1;
-            check_ray(&cut, index.words(), &ray, kind, &mut totals)
-                .map_err(|e| TestCaseError::fail(format!("{e}\nray {ray:?}\ncut of {} leaves (depth {depth})", cut.len())))?;
+            check_ray(&cut, index.words(), &ray, kind, &mut totals).map_err(|e| {
+                TestCaseError::fail(format!(
+                    "{e}\nray {ray:?}\ncut of {} leaves (depth {depth})",
+                    cut.len()
+                ))
+            })?;
         }
         Ok(())
     });
     let totals = totals.into_inner();
     eprintln!("{totals:#?}\nin {:.2} s", start.elapsed().as_secs_f64());
     result.unwrap();
-    assert!(totals.rays >= u64::from(cases) * RAYS_PER_CASE as u64, "only {} rays", totals.rays);
+    assert!(
+        totals.rays >= u64::from(cases) * RAYS_PER_CASE as u64,
+        "only {} rays",
+        totals.rays
+    );
     assert!(cases < CASES || totals.rays >= 100_000);
 }
 
@@ -356,13 +439,17 @@ fn awkward_rays_on_fixed_cut() {
         Ray::new(Vec3::new(0.2, 0.3, 0.3), Vec3::X).with_range(0.1, 0.1),
     ];
     for ray in rays {
-        check_ray(&cut, index.words(), &ray, 0, &mut totals).unwrap_or_else(|e| panic!("{e}\n{ray:?}"));
+        check_ray(&cut, index.words(), &ray, 0, &mut totals)
+            .unwrap_or_else(|e| panic!("{e}\n{ray:?}"));
     }
     // Non-finite inputs neither panic nor loop.
     for ray in [
         Ray::new(Vec3::new(f32::NAN, 0.5, 0.5), Vec3::X),
         Ray::new(Vec3::new(-1.0, 0.5, 0.5), Vec3::new(f32::NAN, 1.0, 0.0)),
-        Ray::new(Vec3::new(-1.0, 0.5, 0.5), Vec3::new(f32::INFINITY, 1.0, 0.0)),
+        Ray::new(
+            Vec3::new(-1.0, 0.5, 0.5),
+            Vec3::new(f32::INFINITY, 1.0, 0.0),
+        ),
         Ray::new(Vec3::new(-1.0, 0.5, 0.5), Vec3::X).with_range(f32::NEG_INFINITY, f32::INFINITY),
         Ray::new(Vec3::new(-1.0, 0.5, 0.5), Vec3::X).with_range(f32::NAN, 3.0),
     ] {
@@ -401,7 +488,14 @@ fn step_limit_and_corrupt_words_are_reported() {
             let i = rng.below(words.len() as u64) as usize;
             words[i] = rng.u64() as u32;
         }
-        let r = Ray::new(Vec3::new(rng.range(-1.0, 2.0) as f32, rng.range(-1.0, 2.0) as f32, -1.0), random_dir(&mut rng));
+        let r = Ray::new(
+            Vec3::new(
+                rng.range(-1.0, 2.0) as f32,
+                rng.range(-1.0, 2.0) as f32,
+                -1.0,
+            ),
+            random_dir(&mut rng),
+        );
         let mut it = traverse(&words, r, 1000);
         let n = it.by_ref().count();
         assert!(n <= 1000 && it.status() != TraversalStatus::Running);
@@ -430,5 +524,10 @@ fn twin_throughput() {
         assert_eq!(it.status(), TraversalStatus::Finished);
     }
     let s = t.elapsed().as_secs_f64();
-    eprintln!("twin: {} rays, {leaves} leaves in {:.1} ms ({:.0} ns/leaf)", rays.len(), s * 1e3, s * 1e9 / leaves.max(1) as f64);
+    eprintln!(
+        "twin: {} rays, {leaves} leaves in {:.1} ms ({:.0} ns/leaf)",
+        rays.len(),
+        s * 1e3,
+        s * 1e9 / leaves.max(1) as f64
+    );
 }

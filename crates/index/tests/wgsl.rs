@@ -30,9 +30,12 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
 fn validate(src: &str) -> naga::valid::ModuleInfo {
     let module = naga::front::wgsl::parse_str(src)
         .unwrap_or_else(|e| panic!("parse error:\n{}", e.emit_to_string(src)));
-    naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::default())
-        .validate(&module)
-        .unwrap_or_else(|e| panic!("validation error:\n{}", e.emit_to_string(src)))
+    naga::valid::Validator::new(
+        naga::valid::ValidationFlags::all(),
+        naga::valid::Capabilities::default(),
+    )
+    .validate(&module)
+    .unwrap_or_else(|e| panic!("validation error:\n{}", e.emit_to_string(src)))
 }
 
 #[test]

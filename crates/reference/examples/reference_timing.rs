@@ -5,7 +5,9 @@
 
 use std::time::Instant;
 
-use brickray_core::{Camera, RenderMode, RenderSettings, TransferFunction, Volume, VolumeData, VolumeFrame};
+use brickray_core::{
+    Camera, RenderMode, RenderSettings, TransferFunction, Volume, VolumeData, VolumeFrame,
+};
 use brickray_reference::{ReferenceOptions, render_reference};
 
 fn main() {
@@ -16,10 +18,18 @@ fn main() {
     for z in 0..dims[2] {
         for y in 0..dims[1] {
             for x in 0..dims[0] {
-                let p = [x as f32 / 256.0 - 0.5, y as f32 / 256.0 - 0.5, z as f32 / 108.0 - 0.5];
+                let p = [
+                    x as f32 / 256.0 - 0.5,
+                    y as f32 / 256.0 - 0.5,
+                    z as f32 / 108.0 - 0.5,
+                ];
                 let r = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
                 let shell = (-((r - 0.35) * 30.0).powi(2)).exp();
-                let waves = 0.5 + 0.5 * (x as f32 * 0.11).sin() * (y as f32 * 0.07).sin() * (z as f32 * 0.19).sin();
+                let waves = 0.5
+                    + 0.5
+                        * (x as f32 * 0.11).sin()
+                        * (y as f32 * 0.07).sin()
+                        * (z as f32 * 0.19).sin();
                 let v = (0.6 * shell + 0.4 * waves * (r < 0.3) as u8 as f32).clamp(0.0, 1.0);
                 data.push((v * 4095.0) as u16);
             }

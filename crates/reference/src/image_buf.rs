@@ -9,7 +9,9 @@ use thiserror::Error;
 #[non_exhaustive]
 pub enum ImageIoError {
     /// The pixel buffer does not match the dimensions.
-    #[error("buffer of {actual} bytes does not hold a {width}x{height} RGBA8 image ({expected} bytes)")]
+    #[error(
+        "buffer of {actual} bytes does not hold a {width}x{height} RGBA8 image ({expected} bytes)"
+    )]
     SizeMismatch {
         /// Width.
         width: u32,
@@ -100,7 +102,11 @@ impl Image {
     /// If `rgba.len() != width * height * 4`.
     pub fn from_rgba8(width: u32, height: u32, rgba: &[u8]) -> Image {
         let n = width as usize * height as usize;
-        assert_eq!(rgba.len(), n * 4, "RGBA8 buffer does not hold a {width}x{height} image");
+        assert_eq!(
+            rgba.len(),
+            n * 4,
+            "RGBA8 buffer does not hold a {width}x{height} image"
+        );
         let color = rgba
             .chunks_exact(4)
             .map(|p| std::array::from_fn(|k| p[k] as f32 / 255.0))
@@ -114,7 +120,11 @@ impl Image {
     }
 
     /// Writes [`to_rgba8`](Image::to_rgba8)`(background)` as an RGBA PNG.
-    pub fn save_png(&self, path: impl AsRef<Path>, background: [f32; 3]) -> Result<(), ImageIoError> {
+    pub fn save_png(
+        &self,
+        path: impl AsRef<Path>,
+        background: [f32; 3],
+    ) -> Result<(), ImageIoError> {
         save_rgba8_png(path, &self.to_rgba8(background), self.width, self.height)
     }
 }
@@ -127,7 +137,12 @@ fn unorm8(c: f32) -> u8 {
 }
 
 /// Writes a tightly packed RGBA8 buffer as a PNG, creating the parent directory.
-pub fn save_rgba8_png(path: impl AsRef<Path>, rgba: &[u8], width: u32, height: u32) -> Result<(), ImageIoError> {
+pub fn save_rgba8_png(
+    path: impl AsRef<Path>,
+    rgba: &[u8],
+    width: u32,
+    height: u32,
+) -> Result<(), ImageIoError> {
     let path = path.as_ref();
     let expected = width as usize * height as usize * 4;
     if rgba.len() != expected {
@@ -179,7 +194,10 @@ mod tests {
     fn rgba8_roundtrip_and_png() {
         let bytes: Vec<u8> = (0..3 * 2 * 4).map(|i| (i * 17 % 256) as u8).collect();
         let img = Image::from_rgba8(3, 2, &bytes);
-        assert_eq!(img.pixel(1, 1), std::array::from_fn(|k| bytes[16 + k] as f32 / 255.0));
+        assert_eq!(
+            img.pixel(1, 1),
+            std::array::from_fn(|k| bytes[16 + k] as f32 / 255.0)
+        );
         assert_eq!(img.depth_at(2, 1), 1.0);
         // Opaque pixels survive compositing unchanged.
         let opaque: Vec<u8> = bytes
@@ -190,7 +208,9 @@ mod tests {
 
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("sub/x.png");
-        Image::from_rgba8(3, 2, &opaque).save_png(&path, [0.0; 3]).unwrap();
+        Image::from_rgba8(3, 2, &opaque)
+            .save_png(&path, [0.0; 3])
+            .unwrap();
         let back = image::open(&path).unwrap().into_rgba8();
         assert_eq!(back.dimensions(), (3, 2));
         assert_eq!(back.into_raw(), opaque);

@@ -62,6 +62,7 @@ mod render;
 
 pub use image_buf::{Image, ImageIoError, save_rgba8_png};
 pub use metrics::{
-    ImageComparison, assert_close, compare, compare_and_report, max_abs_diff, mean_flip, psnr, test_output_dir,
+    ImageComparison, assert_close, compare, compare_and_report, max_abs_diff, mean_flip, psnr,
+    test_output_dir,
 };
 pub use render::{DEFAULT_STEP_FACTOR, ReferenceOptions, render_reference};

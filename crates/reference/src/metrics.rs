@@ -49,7 +49,9 @@ pub fn max_abs_diff(a: &[u8], b: &[u8]) -> u8 {
 fn rgb8(buf: &[u8], width: u32, height: u32, what: &str) -> Vec<u8> {
     let n = width as usize * height as usize;
     if buf.len() == n * 4 {
-        buf.chunks_exact(4).flat_map(|p| [p[0], p[1], p[2]]).collect()
+        buf.chunks_exact(4)
+            .flat_map(|p| [p[0], p[1], p[2]])
+            .collect()
     } else if buf.len() == n * 3 {
         buf.to_vec()
     } else {
@@ -75,7 +77,10 @@ fn flip_map(test: &[u8], reference: &[u8], width: u32, height: u32) -> nv_flip::
 /// # Panics
 /// If a buffer is neither `width * height * 4` nor `width * height * 3` bytes.
 pub fn mean_flip(a: &[u8], b: &[u8], width: u32, height: u32) -> f32 {
-    let (ta, tb) = (rgb8(a, width, height, "mean_flip"), rgb8(b, width, height, "mean_flip"));
+    let (ta, tb) = (
+        rgb8(a, width, height, "mean_flip"),
+        rgb8(b, width, height, "mean_flip"),
+    );
     if width == 0 || height == 0 {
         return 0.0;
     }
@@ -179,7 +184,10 @@ fn write_report(
             height,
         );
         let rgb = map.apply_color_lut(&nv_flip::magma_lut()).to_vec();
-        let rgba: Vec<u8> = rgb.chunks_exact(3).flat_map(|p| [p[0], p[1], p[2], 255]).collect();
+        let rgba: Vec<u8> = rgb
+            .chunks_exact(3)
+            .flat_map(|p| [p[0], p[1], p[2], 255])
+            .collect();
         save(path("flip"), &rgba)?;
     }
     Ok(written)
@@ -202,7 +210,14 @@ pub fn compare_and_report(
     out_dir: impl AsRef<Path>,
 ) -> ImageComparison {
     let cmp = compare(actual_rgba8, expected_rgba8, width, height);
-    if let Err(e) = write_report(name, actual_rgba8, expected_rgba8, width, height, out_dir.as_ref()) {
+    if let Err(e) = write_report(
+        name,
+        actual_rgba8,
+        expected_rgba8,
+        width,
+        height,
+        out_dir.as_ref(),
+    ) {
         eprintln!("compare_and_report({name}): {e}");
     }
     cmp
@@ -304,7 +319,10 @@ mod tests {
         assert_eq!(mean_flip(&a, &a, w, h), 0.0);
         // Through the library as well (not the equality shortcut).
         let rgb = rgb8(&a, w, h, "t");
-        assert_eq!(nv_flip::FlipPool::from_image(&flip_map(&rgb, &rgb, w, h)).mean(), 0.0);
+        assert_eq!(
+            nv_flip::FlipPool::from_image(&flip_map(&rgb, &rgb, w, h)).mean(),
+            0.0
+        );
         // RGB8 input is accepted.
         assert_eq!(mean_flip(&rgb, &a, w, h), 0.0);
         let mut b = a.clone();
@@ -318,7 +336,10 @@ mod tests {
             .map(|(i, &x)| if i % 4 == 3 { x } else { 255 - x })
             .collect();
         let large = mean_flip(&inverted, &a, w, h);
-        assert!(small > 0.0 && small < large && large <= 1.0, "{small} {large}");
+        assert!(
+            small > 0.0 && small < large && large <= 1.0,
+            "{small} {large}"
+        );
     }
 
     #[test]
@@ -335,7 +356,9 @@ mod tests {
             let p = dir.path().join(format!("case_one-{s}.png"));
             assert!(p.exists(), "{}", p.display());
         }
-        let diff = image::open(dir.path().join("case_one-diff.png")).unwrap().into_rgba8();
+        let diff = image::open(dir.path().join("case_one-diff.png"))
+            .unwrap()
+            .into_rgba8();
         assert_eq!(diff.get_pixel(0, 0).0, [255, 0, 0, 255]);
 
         assert_eq!(
@@ -344,7 +367,10 @@ mod tests {
         );
         assert!(assert_close("near", &b, &a, w, h, 20.0).is_ok());
         let err = assert_close("brickray-reference-selftest", &b, &a, w, h, 60.0).unwrap_err();
-        assert!(err.contains("brickray-reference-selftest-diff.png"), "{err}");
+        assert!(
+            err.contains("brickray-reference-selftest-diff.png"),
+            "{err}"
+        );
         assert!(
             assert_close("size", &a[4..], &a, w, h, 20.0)
                 .unwrap_err()

@@ -1,7 +1,9 @@
 //! The brute-force ray marcher.
 
 use brickray_core::tf::corrected_alpha;
-use brickray_core::{Camera, Ray, RenderMode, RenderSettings, Shading, TransferFunction, Volume, VolumeFrame};
+use brickray_core::{
+    Camera, Ray, RenderMode, RenderSettings, Shading, TransferFunction, Volume, VolumeFrame,
+};
 use glam::{DMat3, DMat4, DVec3};
 use rayon::prelude::*;
 
@@ -59,12 +61,18 @@ impl Default for ReferenceOptions<'static> {
 impl<'a> ReferenceOptions<'a> {
     /// With another step factor.
     pub fn with_step_factor(self, step_factor: f32) -> Self {
-        ReferenceOptions { step_factor, ..self }
+        ReferenceOptions {
+            step_factor,
+            ..self
+        }
     }
 
     /// With `n x n` rays per pixel.
     pub fn with_supersample(self, n: u32) -> Self {
-        ReferenceOptions { supersample: n, ..self }
+        ReferenceOptions {
+            supersample: n,
+            ..self
+        }
     }
 
     /// With a host depth buffer.
@@ -232,7 +240,14 @@ impl Marcher<'_> {
 
     /// One ray through image position `(px + 0.5, py + 0.5)`.
     fn trace(&self, px: f64, py: f64, host_depth: Option<f32>) -> RayResult {
-        let ray = Ray::through_pixel(&self.inv_view_proj, &self.inv_model, px, py, self.width, self.height);
+        let ray = Ray::through_pixel(
+            &self.inv_view_proj,
+            &self.inv_model,
+            px,
+            py,
+            self.width,
+            self.height,
+        );
         let Some((t0, mut t1)) = ray.clip_unit_box() else {
             return ([0.0; 4], None);
         };
@@ -243,9 +258,15 @@ impl Marcher<'_> {
             );
             t1 = t1.min(ray.t_at_depth(&self.inv_view_proj, ndc, d as f64));
         }
-        let span = Span { t0, t1, dt: self.dt };
+        let span = Span {
+            t0,
+            t1,
+            dt: self.dt,
+        };
         match self.settings.mode {
-            RenderMode::Iso { value, color } => self.iso(&ray, span, value as f64, color.map(f64::from)),
+            RenderMode::Iso { value, color } => {
+                self.iso(&ray, span, value as f64, color.map(f64::from))
+            }
             RenderMode::Mip => self.mip(&ray, span),
             RenderMode::Dvr => self.dvr(&ray, span),
             other => unreachable!("mode {other:?} was rejected by render_reference"),

@@ -36,7 +36,13 @@ impl Rng {
 
 /// A random cut: the root refined breadth first, each node at `level < max_depth`
 /// with probability `p_refine`, while the leaf count stays within `budget`.
-pub fn random_cut(rng: &mut Rng, max_depth: u8, p_refine: f64, p_data: f64, budget: usize) -> Vec<(NodeKey, LeafKind)> {
+pub fn random_cut(
+    rng: &mut Rng,
+    max_depth: u8,
+    p_refine: f64,
+    p_data: f64,
+    budget: usize,
+) -> Vec<(NodeKey, LeafKind)> {
     let mut queue = VecDeque::from([NodeKey::ROOT]);
     let mut leaves = Vec::new();
     let mut count = 1usize;
@@ -66,7 +72,12 @@ pub fn uniform_cut(level: u8) -> Vec<(NodeKey, LeafKind)> {
     for z in 0..n {
         for y in 0..n {
             for x in 0..n {
-                v.push((NodeKey::new(level, x, y, z), LeafKind::Data { slot: v.len() as u32 }));
+                v.push((
+                    NodeKey::new(level, x, y, z),
+                    LeafKind::Data {
+                        slot: v.len() as u32,
+                    },
+                ));
             }
         }
     }

@@ -12,7 +12,12 @@ use super::*;
 const NEAR: f32 = 0.5;
 const FAR: f32 = 10.0;
 
-fn f32_volume(dims: [u32; 3], spacing: [f32; 3], range: [f32; 2], f: impl Fn(u32, u32, u32) -> f32) -> Volume {
+fn f32_volume(
+    dims: [u32; 3],
+    spacing: [f32; 3],
+    range: [f32; 2],
+    f: impl Fn(u32, u32, u32) -> f32,
+) -> Volume {
     let mut data = Vec::new();
     for z in 0..dims[2] {
         for y in 0..dims[1] {
@@ -35,7 +40,10 @@ fn f32_volume(dims: [u32; 3], spacing: [f32; 3], range: [f32; 2], f: impl Fn(u32
 
 /// A frame placing texture space as the box `size` centred at the origin.
 fn box_frame(size: Vec3, dims: [u32; 3]) -> VolumeFrame {
-    VolumeFrame::new(Mat4::from_translation(-size * 0.5) * Mat4::from_scale(size), dims)
+    VolumeFrame::new(
+        Mat4::from_translation(-size * 0.5) * Mat4::from_scale(size),
+        dims,
+    )
 }
 
 fn ortho(eye: Vec3, height: f32) -> Camera {
@@ -124,7 +132,10 @@ fn constant_slab_opacity_is_step_independent() {
                     img.depth[i]
                 );
             }
-            assert!((img.color[0][3] as f64 - continuous).abs() < 1e-3, "a={a} sf={sf}");
+            assert!(
+                (img.color[0][3] as f64 - continuous).abs() < 1e-3,
+                "a={a} sf={sf}"
+            );
             seen.push(img.color[5][3]);
         }
         for s in &seen {
@@ -164,7 +175,8 @@ fn iso(value: f32) -> RenderSettings {
 /// `shade(ISO_COLOR, n)` with `|n . L| = 1` and the default weights.
 fn head_on_iso_color() -> [f64; 3] {
     let s = Shading::default();
-    ISO_COLOR.map(|c| (c as f64 * (s.ambient + s.diffuse) as f64 + s.specular as f64).clamp(0.0, 1.0))
+    ISO_COLOR
+        .map(|c| (c as f64 * (s.ambient + s.diffuse) as f64 + s.specular as f64).clamp(0.0, 1.0))
 }
 
 /// (b) Iso on a linear ramp: the hit is the analytic plane, head-on shading is
@@ -206,7 +218,14 @@ fn iso_on_ramp_hits_the_analytic_plane() {
         iso_refine_steps: 0,
         ..iso(iso_v as f32)
     };
-    let img0 = render_reference(&vol, &frame, &tf, &cam, &coarse, &ReferenceOptions::new(5, 5));
+    let img0 = render_reference(
+        &vol,
+        &frame,
+        &tf,
+        &cam,
+        &coarse,
+        &ReferenceOptions::new(5, 5),
+    );
     let half_dt = 0.5 * 0.125 * frame.voxel_world as f64 / (FAR - NEAR) as f64;
     assert!((img0.depth[12] as f64 - depth).abs() <= half_dt + 1e-7);
 
@@ -241,7 +260,11 @@ fn iso_on_ramp_hits_the_analytic_plane() {
                 d,
             );
             let p = ivp.project_point3(ndc);
-            assert!((p.z - z_hit).abs() < 2e-5, "({px}, {py}): z {} vs {z_hit}", p.z);
+            assert!(
+                (p.z - z_hit).abs() < 2e-5,
+                "({px}, {py}): z {} vs {z_hit}",
+                p.z
+            );
             assert!(p.x.abs() < 0.125 && p.y.abs() < 0.125);
         }
     }
@@ -249,14 +272,24 @@ fn iso_on_ramp_hits_the_analytic_plane() {
     // Oblique view: Blinn-Phong with |n . L| = cos(angle to the plane's normal).
     let eye = Vec3::new(0.0, 0.6, -2.0);
     let cam = ortho(eye, 0.05);
-    let img = render_reference(&vol, &frame, &tf, &cam, &iso(iso_v as f32), &ReferenceOptions::new(3, 3));
+    let img = render_reference(
+        &vol,
+        &frame,
+        &tf,
+        &cam,
+        &iso(iso_v as f32),
+        &ReferenceOptions::new(3, 3),
+    );
     let cos = 2.0 / (eye.length() as f64);
     let s = Shading::default();
     for c in &img.color {
         for k in 0..3 {
             let e = ISO_COLOR[k] as f64 * (s.ambient as f64 + s.diffuse as f64 * cos)
                 + s.specular as f64 * cos.powf(s.shininess as f64);
-            assert!((c[k] as f64 - e).abs() < 1e-6, "{c:?}: channel {k} expected {e}");
+            assert!(
+                (c[k] as f64 - e).abs() < 1e-6,
+                "{c:?}: channel {k} expected {e}"
+            );
         }
     }
 
@@ -282,7 +315,14 @@ fn dvr_shading_head_on() {
     let rgb = [0.2f32, 0.5, 0.9];
     let tf = constant_tf(rgb, 0.05);
     let cam = ortho(Vec3::new(0.0, 0.0, 3.0), 0.2);
-    let plain = render_reference(&vol, &frame, &tf, &cam, &dvr(), &ReferenceOptions::new(3, 3));
+    let plain = render_reference(
+        &vol,
+        &frame,
+        &tf,
+        &cam,
+        &dvr(),
+        &ReferenceOptions::new(3, 3),
+    );
     let mut s = dvr();
     s.shading.enabled = true;
     let shaded = render_reference(&vol, &frame, &tf, &cam, &s, &ReferenceOptions::new(3, 3));
@@ -300,7 +340,14 @@ fn dvr_shading_head_on() {
     }
     // A constant volume has no gradient: shading leaves it unchanged.
     let (vol, frame) = slab();
-    let p = render_reference(&vol, &frame, &tf, &cam, &dvr(), &ReferenceOptions::new(2, 2));
+    let p = render_reference(
+        &vol,
+        &frame,
+        &tf,
+        &cam,
+        &dvr(),
+        &ReferenceOptions::new(2, 2),
+    );
     let q = render_reference(&vol, &frame, &tf, &cam, &s, &ReferenceOptions::new(2, 2));
     assert_eq!(p, q);
 }
@@ -340,7 +387,11 @@ fn normals_are_world_gradients() {
             continue;
         }
         let n = marcher.normal(&ray, t).expect("non-zero gradient");
-        assert!((n - k.normalize()).length() < 1e-4, "{n} vs {}", k.normalize());
+        assert!(
+            (n - k.normalize()).length() < 1e-4,
+            "{n} vs {}",
+            k.normalize()
+        );
         checked += 1;
     }
     assert!(checked >= 5, "{checked}");
@@ -361,7 +412,14 @@ fn mip_sees_the_bright_voxel() {
         mode: RenderMode::Mip,
         ..Default::default()
     };
-    let img = render_reference(&vol, &frame, &tf, &cam, &settings, &ReferenceOptions::new(16, 16));
+    let img = render_reference(
+        &vol,
+        &frame,
+        &tf,
+        &cam,
+        &settings,
+        &ReferenceOptions::new(16, 16),
+    );
     // Voxel x = 5 is column 5; voxel y = 10 is world y = 0.15625, row 5 (rows go down).
     let best = (0..256)
         .max_by(|&a, &b| img.color[a][3].total_cmp(&img.color[b][3]))
@@ -419,7 +477,11 @@ fn ortho_and_perspective_agree_at_the_centre() {
         let (ca, cb) = (a.pixel(16, 16), b.pixel(16, 16));
         assert!(ca[3] > 0.2, "{:?}: {ca:?}", s.mode);
         for k in 0..4 {
-            assert!((ca[k] - cb[k]).abs() < 1e-5, "{:?}: {ca:?} vs {cb:?}", s.mode);
+            assert!(
+                (ca[k] - cb[k]).abs() < 1e-5,
+                "{:?}: {ca:?} vs {cb:?}",
+                s.mode
+            );
         }
     }
 }
@@ -446,7 +508,10 @@ fn host_depth_stops_rays() {
         let expected = 1.0 - (1.0 - a).powf(n as f64 * 0.125);
         for px in 0..4 {
             let got = img.pixel(px, row as u32)[3] as f64;
-            assert!((got - expected).abs() < 1e-6, "row {row}: {got} vs {expected}");
+            assert!(
+                (got - expected).abs() < 1e-6,
+                "row {row}: {got} vs {expected}"
+            );
         }
     }
     assert_eq!(img.pixel(0, 2), [0.0; 4]);
@@ -483,7 +548,14 @@ fn camera_inside_the_volume() {
         near: 0.01,
         far: 5.0,
     };
-    let img = render_reference(&vol, &frame, &tf, &cam, &dvr(), &ReferenceOptions::new(1, 1));
+    let img = render_reference(
+        &vol,
+        &frame,
+        &tf,
+        &cam,
+        &dvr(),
+        &ReferenceOptions::new(1, 1),
+    );
     // From the near plane z = -0.01 to the face z = -0.4995.
     let n = sample_count(SLAB_Z as f64 * 0.5 - 0.01, 0.125 / 16.0);
     let expected = 1.0 - (1.0 - a).powf(n as f64 * 0.125);
@@ -504,7 +576,14 @@ fn supersampling_averages_subpixel_rays() {
     // A 2 x 2 view over 6 x 6 pixels: the box edge x = 0.5 runs through the centres
     // of column 4 (which spans x in [1/3, 2/3]).
     let cam = ortho(Vec3::new(0.0, 0.0, 3.0), 2.0);
-    let one = render_reference(&vol, &frame, &tf, &cam, &dvr(), &ReferenceOptions::new(6, 6));
+    let one = render_reference(
+        &vol,
+        &frame,
+        &tf,
+        &cam,
+        &dvr(),
+        &ReferenceOptions::new(6, 6),
+    );
     let full = one.pixel(2, 2);
     for n in [2u32, 4] {
         let img = render_reference(
@@ -595,7 +674,11 @@ fn sphere_in_every_mode_is_plausible() {
                 let c = img.pixel(x, y);
                 for m in [img.pixel(n - 1 - x, y), img.pixel(x, n - 1 - y)] {
                     for k in 0..4 {
-                        assert!((c[k] - m[k]).abs() < 1e-3, "{:?} ({x}, {y}): {c:?} vs {m:?}", s.mode);
+                        assert!(
+                            (c[k] - m[k]).abs() < 1e-3,
+                            "{:?} ({x}, {y}): {c:?} vs {m:?}",
+                            s.mode
+                        );
                     }
                 }
             }
@@ -608,7 +691,14 @@ fn degenerate_inputs() {
     let (vol, frame) = sphere_scene();
     let tf = TransferFunction::ramp(0.05, 1.0, 0.3);
     let cam = Camera::orbit(Vec3::ZERO, 2.5, 0.0, 0.0);
-    let img = render_reference(&vol, &frame, &tf, &cam, &dvr(), &ReferenceOptions::new(0, 5));
+    let img = render_reference(
+        &vol,
+        &frame,
+        &tf,
+        &cam,
+        &dvr(),
+        &ReferenceOptions::new(0, 5),
+    );
     assert!(img.color.is_empty() && img.depth.is_empty());
     // supersample 0 behaves as 1
     let a = render_reference(
@@ -619,13 +709,27 @@ fn degenerate_inputs() {
         &dvr(),
         &ReferenceOptions::new(4, 4).with_supersample(0),
     );
-    let b = render_reference(&vol, &frame, &tf, &cam, &dvr(), &ReferenceOptions::new(4, 4));
+    let b = render_reference(
+        &vol,
+        &frame,
+        &tf,
+        &cam,
+        &dvr(),
+        &ReferenceOptions::new(4, 4),
+    );
     assert_eq!(a, b);
     // Looking away: nothing.
     let away = Camera {
         target: Vec3::new(0.0, 0.0, 5.0),
         ..cam
     };
-    let img = render_reference(&vol, &frame, &tf, &away, &dvr(), &ReferenceOptions::new(4, 4));
+    let img = render_reference(
+        &vol,
+        &frame,
+        &tf,
+        &away,
+        &dvr(),
+        &ReferenceOptions::new(4, 4),
+    );
     assert!(img.color.iter().all(|c| *c == [0.0; 4]) && img.depth.iter().all(|&d| d == 1.0));
 }
