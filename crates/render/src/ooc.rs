@@ -55,6 +55,9 @@ pub struct OutOfCoreStats {
     /// True when nothing is in flight or pending: the image will not change for
     /// this view.
     pub converged: bool,
+    /// Data leaves of the cut per octree level (level 0 = root; levels past 15
+    /// are counted in 15).
+    pub data_leaves_per_level: [u32; 16],
 }
 
 #[repr(C)]
@@ -279,6 +282,12 @@ impl OocVolume {
         bytes += written;
         let encode_ms = t.elapsed().as_secs_f64() * 1e3;
 
+        let mut per_level = [0u32; 16];
+        for l in &plan.cut {
+            if matches!(l.kind, LeafKind::Data { .. }) {
+                per_level[(l.key.level as usize).min(15)] += 1;
+            }
+        }
         let s = plan.stats;
         let converged =
             s.requests_in_flight == 0 && s.upload_bricks == 0 && s.requested_this_frame == 0;
@@ -289,6 +298,7 @@ impl OocVolume {
             upload_ms,
             encode_ms,
             converged,
+            data_leaves_per_level: per_level,
         };
         Ok((bytes, grew))
     }
