@@ -41,24 +41,30 @@ fn mix(mut h: u64) -> u64 {
     h
 }
 
-/// A phantom: air (0) outside a ball, concentric shells of different values
-/// inside with a smooth gradient and a little noise (like a scanned object).
+/// A phantom: air (0) outside an ellipsoid that fills 94% of the box, nested
+/// shells of different values inside with a smooth gradient and a little noise
+/// (like a scanned object in air: about half the bricks are uniform air).
 fn phantom(dims: [u32; 3], x: u32, y: u32, z: u32, max: f64) -> f64 {
-    let c = dims.map(|d| d as f64 * 0.5);
-    let r0 = dims.iter().copied().min().unwrap_or(1) as f64 * 0.47;
-    let d = [x as f64 - c[0], y as f64 - c[1], (z as f64 - c[2]) * dims[0] as f64 / dims[2] as f64];
-    let r = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-    if r > r0 {
+    let p = [x, y, z];
+    let d: [f64; 3] = std::array::from_fn(|a| (p[a] as f64 + 0.5) / dims[a] as f64 * 2.0 - 1.0);
+    let r = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt() / 0.94;
+    if r > 1.0 {
         return 0.0;
     }
-    let shell = ((r / r0 * 6.0) as u32 % 3) as f64;
+    let shell = ((r * 6.0) as u32 % 3) as f64;
     let grad = 0.15 * (x as f64 / dims[0] as f64);
     let noise = (mix((x as u64) | (y as u64) << 21 | (z as u64) << 42) & 15) as f64 / 15.0 * 0.04;
     max * (0.2 + 0.25 * shell + grad + noise)
 }
 
 /// Writes a generated raw volume and its JSON sidecar; returns the sidecar path.
-fn generate(dir: &Path, name: &str, dims: [u32; 3], u16: bool, noise: bool) -> Result<PathBuf, String> {
+fn generate(
+    dir: &Path,
+    name: &str,
+    dims: [u32; 3],
+    u16: bool,
+    noise: bool,
+) -> Result<PathBuf, String> {
     let raw = dir.join(format!("{name}.raw"));
     let json = dir.join(format!("{name}.json"));
     let t = Instant::now();
@@ -71,20 +77,23 @@ fn generate(dir: &Path, name: &str, dims: [u32; 3], u16: bool, noise: bool) -> R
     while z < dims[2] {
         let z1 = (z + per).min(dims[2]);
         let mut buf = vec![0u8; (z1 - z) as usize * slice];
-        buf.par_chunks_mut(dims[0] as usize * size).enumerate().for_each(|(row, out)| {
-            let y = (row % dims[1] as usize) as u32;
-            let zz = z + (row / dims[1] as usize) as u32;
-            for x in 0..dims[0] {
-                if u16 {
-                    let v = phantom(dims, x, y, zz, 60000.0) as u16;
-                    out[2 * x as usize..2 * x as usize + 2].copy_from_slice(&v.to_le_bytes());
-                } else if noise {
-                    out[x as usize] = mix((x as u64) | (y as u64) << 21 | (zz as u64) << 42) as u8;
-                } else {
-                    out[x as usize] = phantom(dims, x, y, zz, 250.0) as u8;
+        buf.par_chunks_mut(dims[0] as usize * size)
+            .enumerate()
+            .for_each(|(row, out)| {
+                let y = (row % dims[1] as usize) as u32;
+                let zz = z + (row / dims[1] as usize) as u32;
+                for x in 0..dims[0] {
+                    if u16 {
+                        let v = phantom(dims, x, y, zz, 60000.0) as u16;
+                        out[2 * x as usize..2 * x as usize + 2].copy_from_slice(&v.to_le_bytes());
+                    } else if noise {
+                        out[x as usize] =
+                            mix((x as u64) | (y as u64) << 21 | (zz as u64) << 42) as u8;
+                    } else {
+                        out[x as usize] = phantom(dims, x, y, zz, 250.0) as u8;
+                    }
                 }
-            }
-        });
+            });
         w.write_all(&buf).map_err(|e| e.to_string())?;
         z = z1;
     }
@@ -95,7 +104,10 @@ fn generate(dir: &Path, name: &str, dims: [u32; 3], u16: bool, noise: bool) -> R
         "file": format!("{name}.raw"), "byte_order": "little", "value_range": [0.0, max],
     });
     std::fs::write(&json, sidecar.to_string()).map_err(|e| e.to_string())?;
-    eprintln!("  generated {name} {dims:?} in {:.1} s", t.elapsed().as_secs_f64());
+    eprintln!(
+        "  generated {name} {dims:?} in {:.1} s",
+        t.elapsed().as_secs_f64()
+    );
     Ok(json)
 }
 
@@ -127,7 +139,12 @@ fn build_one(input: &Path, out: &Path, opts: &BuildOptions, label: &str) -> Resu
         ratio,
         r.raw_payload_bytes as f64 / r.payload_bytes.max(1) as f64,
     );
-    Ok(Built { mvox_s, rss_mb: rss, ratio, store: out.to_owned() })
+    Ok(Built {
+        mvox_s,
+        rss_mb: rss,
+        ratio,
+        store: out.to_owned(),
+    })
 }
 
 /// Decode speed of every data brick of `stores`, single thread, GB/s of output.
@@ -158,8 +175,11 @@ fn decode_speed(stores: &[PathBuf]) -> Result<f64, String> {
 fn read_latency(store: &Path, n: usize) -> Result<(f64, f64, f64), String> {
     let s = Store::open(store).map_err(|e| e.to_string())?;
     let leaf = s.levels() - 1;
-    let keys: Vec<NodeKey> =
-        s.nodes().filter(|r| r.key.level == leaf && r.info.kind == NodeKind::Data).map(|r| r.key).collect();
+    let keys: Vec<NodeKey> = s
+        .nodes()
+        .filter(|r| r.key.level == leaf && r.info.kind == NodeKind::Data)
+        .map(|r| r.key)
+        .collect();
     if keys.is_empty() {
         return Err("no data leaves".into());
     }
@@ -182,40 +202,85 @@ pub(crate) fn run(args: &[String]) -> Result<crate::Figures, String> {
     let quick = args.iter().any(|a| a == "--quick");
     let keep = args.iter().any(|a| a == "--keep");
     let mut fig = crate::Figures::new();
-    let tmp = tempfile::Builder::new().prefix("brickray-bench-build-").tempdir().map_err(|e| e.to_string())?;
+    let tmp = tempfile::Builder::new()
+        .prefix("brickray-bench-build-")
+        .tempdir()
+        .map_err(|e| e.to_string())?;
     let dir = tmp.path().to_owned();
-    println!("build suite: {} rayon threads, temp dir {}", rayon::current_num_threads(), dir.display());
+    println!(
+        "build suite: {} rayon threads, temp dir {}",
+        rayon::current_num_threads(),
+        dir.display()
+    );
     let opts = BuildOptions::default();
 
     // 1024^3 u8.
     let input = generate(&dir, "gen_u8_1024", [1024; 3], false, false)?;
-    let u8_1024 = build_one(&input, &dir.join("u8_1024.brick"), &opts, "generated 1024^3 u8")?;
+    let u8_1024 = build_one(
+        &input,
+        &dir.join("u8_1024.brick"),
+        &opts,
+        "generated 1024^3 u8",
+    )?;
     let _ = std::fs::remove_file(input.with_extension("raw"));
-    fig.insert("build_mvoxel_per_s_u8_1024".into(), json!(round(u8_1024.mvox_s, 1)));
+    fig.insert(
+        "build_mvoxel_per_s_u8_1024".into(),
+        json!(round(u8_1024.mvox_s, 1)),
+    );
     fig.insert("peak_rss_mb".into(), json!(round(u8_1024.rss_mb, 1)));
     fig.insert("ratio_u8_1024".into(), json!(round(u8_1024.ratio, 2)));
 
     // 1024^3 u8 white noise: the worst case (no uniform bricks, incompressible).
     let input = generate(&dir, "gen_u8_1024_noise", [1024; 3], false, true)?;
-    let noise = build_one(&input, &dir.join("noise.brick"), &opts, "generated 1024^3 u8 noise")?;
+    let noise = build_one(
+        &input,
+        &dir.join("noise.brick"),
+        &opts,
+        "generated 1024^3 u8 noise",
+    )?;
     let _ = std::fs::remove_file(input.with_extension("raw"));
     let _ = std::fs::remove_file(&noise.store);
-    fig.insert("build_mvoxel_per_s_u8_1024_noise".into(), json!(round(noise.mvox_s, 1)));
+    fig.insert(
+        "build_mvoxel_per_s_u8_1024_noise".into(),
+        json!(round(noise.mvox_s, 1)),
+    );
     fig.insert("peak_rss_mb_noise".into(), json!(round(noise.rss_mb, 1)));
 
     // 1024x1024x540 u16.
-    let input = generate(&dir, "gen_u16_1024x1024x540", [1024, 1024, 540], true, false)?;
-    let u16b = build_one(&input, &dir.join("u16.brick"), &opts, "generated 1024x1024x540 u16")?;
+    let input = generate(
+        &dir,
+        "gen_u16_1024x1024x540",
+        [1024, 1024, 540],
+        true,
+        false,
+    )?;
+    let u16b = build_one(
+        &input,
+        &dir.join("u16.brick"),
+        &opts,
+        "generated 1024x1024x540 u16",
+    )?;
     let _ = std::fs::remove_file(input.with_extension("raw"));
     let _ = std::fs::remove_file(&u16b.store);
-    fig.insert("build_mvoxel_per_s_u16_1024x1024x540".into(), json!(round(u16b.mvox_s, 1)));
+    fig.insert(
+        "build_mvoxel_per_s_u16_1024x1024x540".into(),
+        json!(round(u16b.mvox_s, 1)),
+    );
     fig.insert("peak_rss_mb_u16".into(), json!(round(u16b.rss_mb, 1)));
-    fig.insert("ratio_u16_1024x1024x540".into(), json!(round(u16b.ratio, 2)));
+    fig.insert(
+        "ratio_u16_1024x1024x540".into(),
+        json!(round(u16b.ratio, 2)),
+    );
 
     // Shared data: compression ratio per dataset, head CT throughput.
     let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data");
     let mut real = Vec::new();
-    for name in ["invesalius_cranium_ct", "pycortex_s1_t1_mri", "cells3d_nuclei_fluo", "cryoet_tomo"] {
+    for name in [
+        "invesalius_cranium_ct",
+        "pycortex_s1_t1_mri",
+        "cells3d_nuclei_fluo",
+        "cryoet_tomo",
+    ] {
         let json = data.join(name).join(format!("{name}.json"));
         if !json.exists() {
             println!("  {name}: not found at {}, skipped", json.display());
@@ -223,7 +288,11 @@ pub(crate) fn run(args: &[String]) -> Result<crate::Figures, String> {
         }
         let out = dir.join(format!("{name}.brick"));
         let mut best: Option<Built> = None;
-        for _ in 0..if name == "invesalius_cranium_ct" { 3 } else { 1 } {
+        for _ in 0..if name == "invesalius_cranium_ct" {
+            3
+        } else {
+            1
+        } {
             let b = build_one(&json, &out, &opts, name)?;
             if best.as_ref().is_none_or(|x| b.mvox_s > x.mvox_s) {
                 best = Some(b);
@@ -232,7 +301,10 @@ pub(crate) fn run(args: &[String]) -> Result<crate::Figures, String> {
         if let Some(b) = best {
             fig.insert(format!("ratio_{name}"), json!(round(b.ratio, 2)));
             if name == "invesalius_cranium_ct" {
-                fig.insert("build_mvoxel_per_s_head_ct".into(), json!(round(b.mvox_s, 1)));
+                fig.insert(
+                    "build_mvoxel_per_s_head_ct".into(),
+                    json!(round(b.mvox_s, 1)),
+                );
                 fig.insert("peak_rss_mb_head_ct".into(), json!(round(b.rss_mb, 1)));
             }
             real.push(b.store);
@@ -240,7 +312,11 @@ pub(crate) fn run(args: &[String]) -> Result<crate::Figures, String> {
     }
     if !real.is_empty() {
         let gbs = decode_speed(&real)?;
-        println!("lz4 decode {:.2} GB/s (single thread, decoded bytes, data bricks of {} real stores)", gbs, real.len());
+        println!(
+            "lz4 decode {:.2} GB/s (single thread, decoded bytes, data bricks of {} real stores)",
+            gbs,
+            real.len()
+        );
         fig.insert("decode_gb_per_s".into(), json!(round(gbs, 2)));
     } else {
         let gbs = decode_speed(std::slice::from_ref(&u8_1024.store))?;
@@ -248,18 +324,34 @@ pub(crate) fn run(args: &[String]) -> Result<crate::Figures, String> {
         fig.insert("decode_gb_per_s".into(), json!(round(gbs, 2)));
     }
     let (mean, p50, p99) = read_latency(&u8_1024.store, 4000)?;
-    println!("random leaf read (1024^3 u8 store, warm page cache): mean {mean:.1} µs, p50 {p50:.1} µs, p99 {p99:.1} µs");
+    println!(
+        "random leaf read (1024^3 u8 store, warm page cache): mean {mean:.1} µs, p50 {p50:.1} µs, p99 {p99:.1} µs"
+    );
     fig.insert("read_latency_us_mean".into(), json!(round(mean, 1)));
     fig.insert("read_latency_us_p99".into(), json!(round(p99, 1)));
     let _ = std::fs::remove_file(&u8_1024.store);
 
     // 4 GiB input under the default 1 GiB bound.
     if !quick {
-        let input = generate(&dir, "gen_u8_2048x2048x1024", [2048, 2048, 1024], false, false)?;
-        let big = build_one(&input, &dir.join("big.brick"), &opts, "generated 2048^2x1024 u8 (4 GiB)")?;
+        let input = generate(
+            &dir,
+            "gen_u8_2048x2048x1024",
+            [2048, 2048, 1024],
+            false,
+            false,
+        )?;
+        let big = build_one(
+            &input,
+            &dir.join("big.brick"),
+            &opts,
+            "generated 2048^2x1024 u8 (4 GiB)",
+        )?;
         let _ = std::fs::remove_file(input.with_extension("raw"));
         let _ = std::fs::remove_file(&big.store);
-        fig.insert("build_mvoxel_per_s_u8_4gib".into(), json!(round(big.mvox_s, 1)));
+        fig.insert(
+            "build_mvoxel_per_s_u8_4gib".into(),
+            json!(round(big.mvox_s, 1)),
+        );
         fig.insert("peak_rss_mb_4gib".into(), json!(round(big.rss_mb, 1)));
         fig.insert("memory_bound_mb".into(), json!(opts.memory_bound >> 20));
     }

@@ -89,33 +89,54 @@ pub struct BuildReport {
 
 /// Builds a store at `out` from the volume file at `input` (any format
 /// `brickray_core::io::open` reads).
-pub fn build_file(input: &Path, out: &Path, opts: &BuildOptions) -> Result<BuildReport, StoreError> {
+pub fn build_file(
+    input: &Path,
+    out: &Path,
+    opts: &BuildOptions,
+) -> Result<BuildReport, StoreError> {
     let mut reader = brickray_core::io::open(input)?;
     build(reader.as_mut(), out, opts)
 }
 
 /// Builds a store at `out` from `reader`. The file is written under a temporary
 /// name in the same directory and renamed only when complete.
-pub fn build(reader: &mut dyn VolumeReader, out: &Path, opts: &BuildOptions) -> Result<BuildReport, StoreError> {
+pub fn build(
+    reader: &mut dyn VolumeReader,
+    out: &Path,
+    opts: &BuildOptions,
+) -> Result<BuildReport, StoreError> {
     let t0 = Instant::now();
     let desc = reader.desc().clone();
-    desc.validate().map_err(|e| StoreError::BadOption { option: "input", reason: e.to_string() })?;
+    desc.validate().map_err(|e| StoreError::BadOption {
+        option: "input",
+        reason: e.to_string(),
+    })?;
     if opts.brick == 0 || opts.brick > MAX_BRICK {
-        return Err(StoreError::BadOption { option: "brick", reason: format!("must be in 1..={MAX_BRICK}") });
+        return Err(StoreError::BadOption {
+            option: "brick",
+            reason: format!("must be in 1..={MAX_BRICK}"),
+        });
     }
     if opts.apron > MAX_APRON {
-        return Err(StoreError::BadOption { option: "apron", reason: format!("must be in 0..={MAX_APRON}") });
+        return Err(StoreError::BadOption {
+            option: "apron",
+            reason: format!("must be in 0..={MAX_APRON}"),
+        });
     }
-    if let Some(t) = opts.empty_below {
-        if !t.is_finite() {
-            return Err(StoreError::BadOption { option: "empty_below", reason: "must be finite".into() });
-        }
+    if opts.empty_below.is_some_and(|t| !t.is_finite()) {
+        return Err(StoreError::BadOption {
+            option: "empty_below",
+            reason: "must be finite".into(),
+        });
     }
     let layout = OctreeLayout::new(desc.clone(), opts.brick, opts.apron);
     if layout.brick_bytes() > MAX_BRICK_BYTES {
         return Err(StoreError::BadOption {
             option: "brick",
-            reason: format!("a stored brick would take {} bytes (max {MAX_BRICK_BYTES})", layout.brick_bytes()),
+            reason: format!(
+                "a stored brick would take {} bytes (max {MAX_BRICK_BYTES})",
+                layout.brick_bytes()
+            ),
         });
     }
     let geo = TableGeometry::new(&layout).ok_or_else(|| StoreError::BadOption {
@@ -126,19 +147,31 @@ pub fn build(reader: &mut dyn VolumeReader, out: &Path, opts: &BuildOptions) -> 
     let slice_bytes = desc.dims[0] as u64 * desc.dims[1] as u64 * size;
     let side = layout.stored_side() as u64;
     let slab = side * slice_bytes;
-    // Rolling windows: brick + 2 apron + 2 slices per level, levels shrink 4x.
-    let windows = (side + 2) * slice_bytes * 4 / 3;
+    // Slices read between two processing steps (at most ~8 MiB, at most a brick).
+    let per = ((8u64 << 20) / slice_bytes.max(1)).clamp(1, opts.brick as u64) as u32;
+    // Rolling windows: brick + 2 apron + 2 slices per level plus the slices read
+    // in one step and as many recycled buffers; levels shrink 4x.
+    let windows = (side + 2 + 2 * per as u64) * slice_bytes * 4 / 3;
     // Compressed output of one group of bricks, plus per-thread scratch.
-    let group_cap: u64 = (32u64 << 20).min(opts.memory_bound / 8).max(layout.brick_bytes() as u64 * 2);
+    let group_cap: u64 = (32u64 << 20)
+        .min(opts.memory_bound / 8)
+        .max(layout.brick_bytes() as u64 * 2);
     let threads = rayon::current_num_threads() as u64;
     let scratch = threads * 3 * layout.brick_bytes() as u64;
     let table = geo.count * (ENTRY_LEN as u64 + 48);
     let needed = windows + group_cap + scratch + table + (8 << 20);
     if needed > opts.memory_bound {
-        return Err(StoreError::MemoryBound { needed, bound: opts.memory_bound, slab });
+        return Err(StoreError::MemoryBound {
+            needed,
+            bound: opts.memory_bound,
+            slab,
+        });
     }
 
-    let dir = out.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let dir = out
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
     let tmp = tempfile::Builder::new()
         .prefix(".brickray-store-")
         .suffix(".partial")
@@ -147,7 +180,8 @@ pub fn build(reader: &mut dyn VolumeReader, out: &Path, opts: &BuildOptions) -> 
     let tmp_path: PathBuf = tmp.path().to_owned();
     let mut w = BufWriter::with_capacity(4 << 20, tmp.as_file());
     // Placeholder header: all zeros never opens as a store.
-    w.write_all(&[0u8; HEADER_LEN]).map_err(|e| StoreError::io(&tmp_path, e))?;
+    w.write_all(&[0u8; HEADER_LEN])
+        .map_err(|e| StoreError::io(&tmp_path, e))?;
 
     let fill_entry = Entry {
         level: NO_ENTRY_LEVEL,
@@ -188,19 +222,20 @@ pub fn build(reader: &mut dyn VolumeReader, out: &Path, opts: &BuildOptions) -> 
         indicatif::ProgressBar::hidden()
     };
 
-    let mut levels: Vec<LevelBuf> = (0..layout.levels).map(|l| LevelBuf::new(&layout, l)).collect();
+    let mut levels: Vec<LevelBuf> = (0..layout.levels)
+        .map(|l| LevelBuf::new(&layout, l, per))
+        .collect();
     let finest = layout.levels as usize - 1;
     let nz = desc.dims[2];
-    // Read in chunks of a few slices (at most ~8 MiB, at most a brick).
-    let per = ((8u64 << 20) / slice_bytes.max(1)).clamp(1, opts.brick as u64) as u32;
+    // Read slice by slice straight into recycled slice buffers; process after
+    // every `per` slices.
     let mut z = 0;
-    let mut chunk = Vec::new();
     while z < nz {
         let z1 = (z + per).min(nz);
-        chunk.resize(((z1 - z) as u64 * slice_bytes) as usize, 0);
-        reader.read_slices(z, z1, &mut chunk)?;
-        for s in chunk.chunks_exact(slice_bytes as usize) {
-            levels[finest].slices.push_back(s.to_vec());
+        for zi in z..z1 {
+            let mut s = levels[finest].take_buffer(slice_bytes as usize);
+            reader.read_slices(zi, zi + 1, &mut s)?;
+            levels[finest].slices.push_back(s);
         }
         z = z1;
         for l in (0..=finest).rev() {
@@ -209,8 +244,8 @@ pub fn build(reader: &mut dyn VolumeReader, out: &Path, opts: &BuildOptions) -> 
         }
         pb.set_position(z as u64 * desc.dims[0] as u64 * desc.dims[1] as u64);
     }
-    for l in 0..=finest {
-        if levels[l].next_slab < levels[l].grid[2] {
+    for (l, lb) in levels.iter().enumerate() {
+        if lb.next_slab < lb.grid[2] {
             return Err(StoreError::BadOption {
                 option: "input",
                 reason: format!("internal: level {l} not complete"),
@@ -231,15 +266,24 @@ pub fn build(reader: &mut dyn VolumeReader, out: &Path, opts: &BuildOptions) -> 
         }
         e.encode(b);
     }
-    w.write_all(&table).map_err(|e| StoreError::io(&tmp_path, e))?;
-    let data_range = if ctx.data_range[0] <= ctx.data_range[1] { ctx.data_range } else { [0.0, 0.0] };
+    w.write_all(&table)
+        .map_err(|e| StoreError::io(&tmp_path, e))?;
+    let data_range = if ctx.data_range[0] <= ctx.data_range[1] {
+        ctx.data_range
+    } else {
+        [0.0, 0.0]
+    };
     let header = Header {
         version: VERSION,
         header_len: HEADER_LEN as u32,
         dims: desc.dims,
         dtype: dtype_code(desc.dtype),
         filter: filter_code(opts.filter),
-        flags: if opts.empty_below.is_some() { FLAG_THRESHOLD } else { 0 },
+        flags: if opts.empty_below.is_some() {
+            FLAG_THRESHOLD
+        } else {
+            0
+        },
         levels: layout.levels,
         brick: layout.brick,
         apron: layout.apron,
@@ -253,11 +297,15 @@ pub fn build(reader: &mut dyn VolumeReader, out: &Path, opts: &BuildOptions) -> 
         payload_bytes: table_offset - HEADER_LEN as u64,
         table_crc: crc32fast::hash(&table),
     };
-    w.seek(SeekFrom::Start(0)).map_err(|e| StoreError::io(&tmp_path, e))?;
-    w.write_all(&header.encode()).map_err(|e| StoreError::io(&tmp_path, e))?;
+    w.seek(SeekFrom::Start(0))
+        .map_err(|e| StoreError::io(&tmp_path, e))?;
+    w.write_all(&header.encode())
+        .map_err(|e| StoreError::io(&tmp_path, e))?;
     w.flush().map_err(|e| StoreError::io(&tmp_path, e))?;
     drop(w);
-    tmp.as_file().sync_all().map_err(|e| StoreError::io(&tmp_path, e))?;
+    tmp.as_file()
+        .sync_all()
+        .map_err(|e| StoreError::io(&tmp_path, e))?;
     tmp.persist(out).map_err(|e| StoreError::io(out, e.error))?;
     let file_bytes = table_offset + table.len() as u64;
     Ok(BuildReport {
@@ -297,23 +345,35 @@ struct LevelBuf {
     grid: [u32; 3],
     /// `slices[i]` is level slice `base + i`.
     slices: VecDeque<Vec<u8>>,
+    /// Dropped slice buffers, reused (avoids page faults on fresh allocations).
+    pool: Vec<Vec<u8>>,
+    pool_cap: usize,
     base: u32,
     next_slab: u32,
     next_down: u32,
 }
 
 impl LevelBuf {
-    fn new(layout: &OctreeLayout, level: u8) -> LevelBuf {
+    fn new(layout: &OctreeLayout, level: u8, per: u32) -> LevelBuf {
         let dims = layout.level_dims(level);
         LevelBuf {
             level,
             dims,
             grid: dims.map(|d| d.div_ceil(layout.brick)),
             slices: VecDeque::new(),
+            pool: Vec::new(),
+            pool_cap: per as usize,
             base: 0,
             next_slab: 0,
             next_down: 0,
         }
+    }
+
+    /// A slice buffer of `len` bytes (contents unspecified).
+    fn take_buffer(&mut self, len: usize) -> Vec<u8> {
+        let mut b = self.pool.pop().unwrap_or_default();
+        b.resize(len, 0);
+        b
     }
 
     fn received(&self) -> u32 {
@@ -350,14 +410,21 @@ impl LevelBuf {
                 if self.received() < need {
                     break;
                 }
-                let s = self.downsample(ctx, self.next_down, p.dims);
+                let mut s = p.take_buffer(
+                    p.dims[0] as usize * p.dims[1] as usize * ctx.layout.dtype().size(),
+                );
+                self.downsample(ctx, self.next_down, p.dims, &mut s);
                 p.slices.push_back(s);
                 self.next_down += 1;
             }
         }
         // Keep what the next slab and the next coarser slice need.
         let keep_slab = (self.next_slab as u64 * b as u64).saturating_sub(a as u64);
-        let keep_slab = if self.next_slab >= self.grid[2] { u64::MAX } else { keep_slab };
+        let keep_slab = if self.next_slab >= self.grid[2] {
+            u64::MAX
+        } else {
+            keep_slab
+        };
         let keep_down = if parent.is_some() && self.next_down < self.dims[2].div_ceil(2) {
             2 * self.next_down as u64
         } else {
@@ -365,14 +432,18 @@ impl LevelBuf {
         };
         let keep = keep_slab.min(keep_down);
         while !self.slices.is_empty() && (self.base as u64) < keep {
-            self.slices.pop_front();
+            if let Some(b) = self.slices.pop_front()
+                && self.pool.len() < self.pool_cap
+            {
+                self.pool.push(b);
+            }
             self.base += 1;
         }
         Ok(())
     }
 
     /// Level slice `k` of the coarser level, filtered from slices `2k`, `2k+1`.
-    fn downsample(&self, ctx: &Ctx, k: u32, pdims: [u32; 3]) -> Vec<u8> {
+    fn downsample(&self, ctx: &Ctx, k: u32, pdims: [u32; 3], out: &mut [u8]) {
         let nz = self.dims[2];
         let s0 = self.slice(2 * k);
         let s1 = self.slice((2 * k + 1).min(nz - 1));
@@ -380,9 +451,8 @@ impl LevelBuf {
         let filter = ctx.filter;
         let [nx, ny, _] = self.dims.map(|d| d as usize);
         let [px, py, _] = pdims.map(|d| d as usize);
-        let mut out = vec![0u8; px * py * dtype.size()];
-        with_sample!(dtype, T => downsample_slice::<T>(s0, s1, nx, ny, px, py, filter, &mut out));
-        out
+        debug_assert_eq!(out.len(), px * py * dtype.size());
+        with_sample!(dtype, T => downsample_slice::<T>(s0, s1, nx, ny, px, py, filter, out));
     }
 
     /// Cuts, classifies, compresses and writes the bricks of slab `next_slab`.
@@ -411,7 +481,8 @@ impl LevelBuf {
                     e.offset = ctx.offset;
                     e.len = p.len() as u32;
                     e.crc = crc32fast::hash(&p);
-                    w.write_all(&p).map_err(|err| StoreError::io(&ctx.path, err))?;
+                    w.write_all(&p)
+                        .map_err(|err| StoreError::io(&ctx.path, err))?;
                     ctx.offset += p.len() as u64;
                     ctx.raw_payload += bb;
                 }
@@ -457,8 +528,9 @@ impl LevelBuf {
                     dst[i * size..(i + 1) * size].copy_from_slice(&src_row[..size]);
                 }
                 let mid = (in_hi - in_lo).max(0) as usize;
-                dst[left * size..(left + mid) * size]
-                    .copy_from_slice(&src_row[in_lo as usize * size..(in_lo as usize + mid) * size]);
+                dst[left * size..(left + mid) * size].copy_from_slice(
+                    &src_row[in_lo as usize * size..(in_lo as usize + mid) * size],
+                );
                 let last = &src_row[(nx as usize - 1) * size..nx as usize * size];
                 for i in left + mid..side as usize {
                     dst[i * size..(i + 1) * size].copy_from_slice(last);
@@ -471,11 +543,11 @@ impl LevelBuf {
         let (mut smin, mut smax) = (lo, hi);
         if key.level + 1 < lay.levels {
             for c in key.children() {
-                if let Some(e) = ctx.geo.index(c).and_then(|i| ctx.entries.get(i)) {
-                    if e.level != NO_ENTRY_LEVEL {
-                        smin = smin.min(e.min);
-                        smax = smax.max(e.max);
-                    }
+                if let Some(e) = ctx.geo.index(c).and_then(|i| ctx.entries.get(i))
+                    && e.level != NO_ENTRY_LEVEL
+                {
+                    smin = smin.min(e.min);
+                    smax = smax.max(e.max);
                 }
             }
         }

@@ -67,7 +67,9 @@ pub enum StoreError {
         computed: u32,
     },
     /// The node table checksum does not match.
-    #[error("{path}: node table checksum mismatch (stored {stored:#010x}, computed {computed:#010x})")]
+    #[error(
+        "{path}: node table checksum mismatch (stored {stored:#010x}, computed {computed:#010x})"
+    )]
     TableChecksum {
         /// The file.
         path: PathBuf,
@@ -89,7 +91,9 @@ pub enum StoreError {
         reason: String,
     },
     /// A node's payload does not match its checksum.
-    #[error("node {key:?}: payload checksum mismatch (stored {stored:#010x}, computed {computed:#010x})")]
+    #[error(
+        "node {key:?}: payload checksum mismatch (stored {stored:#010x}, computed {computed:#010x})"
+    )]
     PayloadChecksum {
         /// The node.
         key: NodeKey,
@@ -154,17 +158,25 @@ pub enum StoreError {
 
 impl StoreError {
     pub(crate) fn io(path: &std::path::Path, source: std::io::Error) -> StoreError {
-        StoreError::Io { path: path.to_owned(), source }
+        StoreError::Io {
+            path: path.to_owned(),
+            source,
+        }
     }
 
     /// Converts into the brick-source error for `key`.
     pub fn into_brick_error(self, key: NodeKey) -> BrickError {
         match self {
             StoreError::OutOfRange { key } => BrickError::OutOfRange { key },
-            StoreError::BufferSize { expected, actual } => BrickError::BufferSize { expected, actual },
+            StoreError::BufferSize { expected, actual } => {
+                BrickError::BufferSize { expected, actual }
+            }
             StoreError::NodeIo { key, source } => BrickError::Io { key, source },
             StoreError::Io { source, .. } => BrickError::Io { key, source },
-            other => BrickError::Corrupt { key, reason: other.to_string() },
+            other => BrickError::Corrupt {
+                key,
+                reason: other.to_string(),
+            },
         }
     }
 }

@@ -229,7 +229,9 @@ impl TableGeometry {
             let d = layout.level_dims(l);
             let g = d.map(|n| n.div_ceil(layout.brick));
             first.push(count);
-            let n = (g[0] as u64).checked_mul(g[1] as u64)?.checked_mul(g[2] as u64)?;
+            let n = (g[0] as u64)
+                .checked_mul(g[1] as u64)?
+                .checked_mul(g[2] as u64)?;
             count = count.checked_add(n)?;
             grid.push(g);
         }

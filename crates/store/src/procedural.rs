@@ -26,7 +26,9 @@
 
 use crate::error::StoreError;
 use brickray_core::synthetic::fractal_noise;
-use brickray_core::{BrickError, BrickSource, DType, NodeInfo, NodeKey, NodeKind, OctreeLayout, VolumeDesc};
+use brickray_core::{
+    BrickError, BrickSource, DType, NodeInfo, NodeKey, NodeKind, OctreeLayout, VolumeDesc,
+};
 
 /// A procedural u8 volume (see the module docs) implementing [`BrickSource`].
 #[derive(Debug, Clone)]
@@ -51,19 +53,36 @@ fn mix(mut h: u64) -> u64 {
 impl ProceduralSource {
     /// Fractal noise over `dims` voxels (each in `1..=2^24`, at most `2^48` voxels,
     /// e.g. `[65536; 3]`), in bricks of `brick` voxels with `apron`.
-    pub fn fractal_noise(dims: [u64; 3], brick: u32, apron: u32) -> Result<ProceduralSource, StoreError> {
+    pub fn fractal_noise(
+        dims: [u64; 3],
+        brick: u32,
+        apron: u32,
+    ) -> Result<ProceduralSource, StoreError> {
         ProceduralSource::with_seed(dims, brick, apron, 0x5EED_B41C)
     }
 
     /// [`fractal_noise`](Self::fractal_noise) with a chosen seed.
-    pub fn with_seed(dims: [u64; 3], brick: u32, apron: u32, seed: u64) -> Result<ProceduralSource, StoreError> {
-        brickray_core::volume::voxel_count(dims)
-            .map_err(|e| StoreError::BadOption { option: "dims", reason: e.to_string() })?;
+    pub fn with_seed(
+        dims: [u64; 3],
+        brick: u32,
+        apron: u32,
+        seed: u64,
+    ) -> Result<ProceduralSource, StoreError> {
+        brickray_core::volume::voxel_count(dims).map_err(|e| StoreError::BadOption {
+            option: "dims",
+            reason: e.to_string(),
+        })?;
         if brick == 0 || brick > crate::format::MAX_BRICK {
-            return Err(StoreError::BadOption { option: "brick", reason: "must be in 1..=512".into() });
+            return Err(StoreError::BadOption {
+                option: "brick",
+                reason: "must be in 1..=512".into(),
+            });
         }
         if apron > crate::format::MAX_APRON {
-            return Err(StoreError::BadOption { option: "apron", reason: "must be in 0..=16".into() });
+            return Err(StoreError::BadOption {
+                option: "apron",
+                reason: "must be in 0..=16".into(),
+            });
         }
         let desc = VolumeDesc {
             dims: dims.map(|d| d as u32),
@@ -73,12 +92,25 @@ impl ProceduralSource {
         };
         let layout = OctreeLayout::new(desc, brick, apron);
         let n = layout.levels as usize;
-        let amp: Vec<i32> = (0..n).map(|j| if j == 0 { 0 } else { (48.0 * 0.75f64.powi(j as i32)).ceil() as i32 }).collect();
+        let amp: Vec<i32> = (0..n)
+            .map(|j| {
+                if j == 0 {
+                    0
+                } else {
+                    (48.0 * 0.75f64.powi(j as i32)).ceil() as i32
+                }
+            })
+            .collect();
         let mut reach = vec![0i32; n];
         for j in (0..n.saturating_sub(1)).rev() {
             reach[j] = reach[j + 1] + 3 * amp[j + 1];
         }
-        Ok(ProceduralSource { layout, seed, amp, reach })
+        Ok(ProceduralSource {
+            layout,
+            seed,
+            amp,
+            reach,
+        })
     }
 
     fn root_value(&self, p: [u64; 3]) -> i32 {
@@ -93,12 +125,14 @@ impl ProceduralSource {
         if amp == 0 {
             return 0;
         }
-        let h = mix(
-            self.seed
-                ^ mix(parent[0].wrapping_add((level as u64) << 56))
-                ^ mix(parent[1].wrapping_mul(0x9E37_79B9_7F4A_7C15).wrapping_add(axis as u64))
-                ^ mix(parent[2].wrapping_mul(0xC2B2_AE3D_27D4_EB4F).wrapping_add(17)),
-        );
+        let h = mix(self.seed
+            ^ mix(parent[0].wrapping_add((level as u64) << 56))
+            ^ mix(parent[1]
+                .wrapping_mul(0x9E37_79B9_7F4A_7C15)
+                .wrapping_add(axis as u64))
+            ^ mix(parent[2]
+                .wrapping_mul(0xC2B2_AE3D_27D4_EB4F)
+                .wrapping_add(17)));
         let lim = v.min(255 - v) / 3;
         let a = (h % (2 * amp as u64 + 1)) as i32 - amp;
         a.clamp(-lim, lim)
@@ -107,7 +141,10 @@ impl ProceduralSource {
     /// Values of level `level` voxels in the box `lo..=hi` (inside the level
     /// volume), x fastest.
     pub fn region(&self, level: u8, lo: [u64; 3], hi: [u64; 3]) -> Vec<u8> {
-        self.region_i32(level, lo, hi).into_iter().map(|v| v as u8).collect()
+        self.region_i32(level, lo, hi)
+            .into_iter()
+            .map(|v| v as u8)
+            .collect()
     }
 
     fn region_i32(&self, level: u8, lo: [u64; 3], hi: [u64; 3]) -> Vec<i32> {
@@ -137,7 +174,11 @@ impl ProceduralSource {
                     let v = parent[i];
                     let pp = [px, py, pz];
                     let d: [i32; 3] = std::array::from_fn(|a| {
-                        if 2 * pp[a] + 1 < dims[a] { self.displacement(level, pp, a, v) } else { 0 }
+                        if 2 * pp[a] + 1 < dims[a] {
+                            self.displacement(level, pp, a, v)
+                        } else {
+                            0
+                        }
                     });
                     disp.push(d);
                     i += 1;
@@ -192,7 +233,11 @@ impl BrickSource for ProceduralSource {
 
     fn node(&self, key: NodeKey) -> Result<NodeInfo, BrickError> {
         if !self.check(key)? {
-            return Ok(NodeInfo { kind: NodeKind::Empty, min: 0.0, max: 0.0 });
+            return Ok(NodeInfo {
+                kind: NodeKind::Empty,
+                min: 0.0,
+                max: 0.0,
+            });
         }
         let (lo, hi) = self.footprint(key);
         // Step up until the footprint is about 3 voxels a side.
@@ -204,15 +249,24 @@ impl BrickSource for ProceduralSource {
             hi = hi.map(|c| c / 2);
         }
         let vals = self.region_i32(m, lo, hi);
-        let (mn, mx) = vals.iter().fold((i32::MAX, i32::MIN), |(a, b), &v| (a.min(v), b.max(v)));
+        let (mn, mx) = vals
+            .iter()
+            .fold((i32::MAX, i32::MIN), |(a, b), &v| (a.min(v), b.max(v)));
         let r = self.reach[m as usize];
-        Ok(NodeInfo { kind: NodeKind::Data, min: (mn - r).max(0) as f32, max: (mx + r).min(255) as f32 })
+        Ok(NodeInfo {
+            kind: NodeKind::Data,
+            min: (mn - r).max(0) as f32,
+            max: (mx + r).min(255) as f32,
+        })
     }
 
     fn read_brick(&self, key: NodeKey, out: &mut [u8]) -> Result<(), BrickError> {
         let expected = self.layout.brick_bytes();
         if out.len() != expected {
-            return Err(BrickError::BufferSize { expected, actual: out.len() });
+            return Err(BrickError::BufferSize {
+                expected,
+                actual: out.len(),
+            });
         }
         if !self.check(key)? {
             out.fill(0);

@@ -1,13 +1,16 @@
 //! The store reader: validated open, thread-safe positional brick reads.
 
+use crate::Filter;
 use crate::error::StoreError;
 use crate::format::{
-    ENTRY_LEN, Entry, FLAG_THRESHOLD, HEADER_LEN, Header, KIND_DATA, KIND_EMPTY, KIND_UNIFORM, MAGIC,
-    MAX_APRON, MAX_BRICK, MAX_BRICK_BYTES, TableGeometry, VERSION, dtype_from_code, filter_from_code,
+    ENTRY_LEN, Entry, FLAG_THRESHOLD, HEADER_LEN, Header, KIND_DATA, KIND_EMPTY, KIND_UNIFORM,
+    MAGIC, MAX_APRON, MAX_BRICK, MAX_BRICK_BYTES, TableGeometry, VERSION, dtype_from_code,
+    filter_from_code,
 };
 use crate::sample::{fill, representable};
-use crate::Filter;
-use brickray_core::{BrickError, BrickSource, NodeInfo, NodeKey, NodeKind, OctreeLayout, VolumeDesc};
+use brickray_core::{
+    BrickError, BrickSource, NodeInfo, NodeKey, NodeKind, OctreeLayout, VolumeDesc,
+};
 use std::fs::File;
 use std::os::unix::fs::FileExt;
 use std::path::{Path, PathBuf};
@@ -62,7 +65,11 @@ pub struct StoreStats {
 }
 
 fn bad(path: &Path, field: &'static str, reason: impl Into<String>) -> StoreError {
-    StoreError::BadHeader { path: path.to_owned(), field, reason: reason.into() }
+    StoreError::BadHeader {
+        path: path.to_owned(),
+        field,
+        reason: reason.into(),
+    }
 }
 
 /// Largest lz4 block a brick of `n` bytes can compress to.
@@ -90,31 +97,51 @@ impl Store {
                 actual: file_len,
             });
         }
-        file.read_exact_at(&mut hb, 0).map_err(|e| StoreError::io(path, e))?;
+        file.read_exact_at(&mut hb, 0)
+            .map_err(|e| StoreError::io(path, e))?;
         if hb[..8] != MAGIC {
-            return Err(StoreError::NotAStore { path: path.to_owned() });
+            return Err(StoreError::NotAStore {
+                path: path.to_owned(),
+            });
         }
         let (stored, computed) = Header::checksums(&hb);
         let h = Header::decode(&hb);
         if h.version != VERSION {
-            return Err(StoreError::UnsupportedVersion { path: path.to_owned(), version: h.version });
+            return Err(StoreError::UnsupportedVersion {
+                path: path.to_owned(),
+                version: h.version,
+            });
         }
         if stored != computed {
-            return Err(StoreError::HeaderChecksum { path: path.to_owned(), stored, computed });
+            return Err(StoreError::HeaderChecksum {
+                path: path.to_owned(),
+                stored,
+                computed,
+            });
         }
         if hb[108..124].iter().any(|&b| b != 0) {
             return Err(bad(path, "reserved", "non-zero"));
         }
         if h.header_len != HEADER_LEN as u32 {
-            return Err(bad(path, "header_len", format!("{} (expected {HEADER_LEN})", h.header_len)));
+            return Err(bad(
+                path,
+                "header_len",
+                format!("{} (expected {HEADER_LEN})", h.header_len),
+            ));
         }
-        let dtype = dtype_from_code(h.dtype).ok_or_else(|| bad(path, "dtype", format!("unknown code {}", h.dtype)))?;
-        let filter =
-            filter_from_code(h.filter).ok_or_else(|| bad(path, "filter", format!("unknown code {}", h.filter)))?;
+        let dtype = dtype_from_code(h.dtype)
+            .ok_or_else(|| bad(path, "dtype", format!("unknown code {}", h.dtype)))?;
+        let filter = filter_from_code(h.filter)
+            .ok_or_else(|| bad(path, "filter", format!("unknown code {}", h.filter)))?;
         if h.flags & !FLAG_THRESHOLD != 0 {
             return Err(bad(path, "flags", format!("unknown bits {:#x}", h.flags)));
         }
-        let desc = VolumeDesc { dims: h.dims, dtype, spacing: h.spacing, value_range: h.value_range };
+        let desc = VolumeDesc {
+            dims: h.dims,
+            dtype,
+            spacing: h.spacing,
+            value_range: h.value_range,
+        };
         if let Err(e) = brickray_core::volume::voxel_count(h.dims.map(u64::from)) {
             return Err(bad(path, "dims", e.to_string()));
         }
@@ -131,45 +158,102 @@ impl Store {
             return Err(bad(path, "empty_below", format!("{}", h.empty_below)));
         }
         if h.brick == 0 || h.brick > MAX_BRICK {
-            return Err(bad(path, "brick", format!("{} (must be in 1..={MAX_BRICK})", h.brick)));
+            return Err(bad(
+                path,
+                "brick",
+                format!("{} (must be in 1..={MAX_BRICK})", h.brick),
+            ));
         }
         if h.apron > MAX_APRON {
-            return Err(bad(path, "apron", format!("{} (must be in 0..={MAX_APRON})", h.apron)));
+            return Err(bad(
+                path,
+                "apron",
+                format!("{} (must be in 0..={MAX_APRON})", h.apron),
+            ));
         }
         let layout = OctreeLayout::new(desc, h.brick, h.apron);
         if layout.levels != h.levels {
-            return Err(bad(path, "levels", format!("{} (dims and brick imply {})", h.levels, layout.levels)));
+            return Err(bad(
+                path,
+                "levels",
+                format!("{} (dims and brick imply {})", h.levels, layout.levels),
+            ));
         }
         if layout.brick_bytes() > MAX_BRICK_BYTES {
-            return Err(bad(path, "brick", format!("stored brick of {} bytes", layout.brick_bytes())));
+            return Err(bad(
+                path,
+                "brick",
+                format!("stored brick of {} bytes", layout.brick_bytes()),
+            ));
         }
-        let geo = TableGeometry::new(&layout).ok_or_else(|| bad(path, "dims", "node count overflows"))?;
+        let geo =
+            TableGeometry::new(&layout).ok_or_else(|| bad(path, "dims", "node count overflows"))?;
         if h.node_count != geo.count {
-            return Err(bad(path, "node_count", format!("{} (geometry implies {})", h.node_count, geo.count)));
+            return Err(bad(
+                path,
+                "node_count",
+                format!("{} (geometry implies {})", h.node_count, geo.count),
+            ));
         }
-        let table_len = geo.count.checked_mul(ENTRY_LEN as u64).ok_or_else(|| bad(path, "node_count", "overflow"))?;
+        let table_len = geo
+            .count
+            .checked_mul(ENTRY_LEN as u64)
+            .ok_or_else(|| bad(path, "node_count", "overflow"))?;
         if h.table_len != table_len {
-            return Err(bad(path, "table_len", format!("{} (expected {table_len})", h.table_len)));
+            return Err(bad(
+                path,
+                "table_len",
+                format!("{} (expected {table_len})", h.table_len),
+            ));
         }
         if h.table_offset < HEADER_LEN as u64 {
-            return Err(bad(path, "table_offset", format!("{} overlaps the header", h.table_offset)));
+            return Err(bad(
+                path,
+                "table_offset",
+                format!("{} overlaps the header", h.table_offset),
+            ));
         }
         if h.payload_bytes != h.table_offset - HEADER_LEN as u64 {
-            return Err(bad(path, "payload_bytes", format!("{} (table offset implies {})", h.payload_bytes, h.table_offset - HEADER_LEN as u64)));
+            return Err(bad(
+                path,
+                "payload_bytes",
+                format!(
+                    "{} (table offset implies {})",
+                    h.payload_bytes,
+                    h.table_offset - HEADER_LEN as u64
+                ),
+            ));
         }
-        let end = h.table_offset.checked_add(table_len).ok_or_else(|| bad(path, "table_offset", "overflow"))?;
+        let end = h
+            .table_offset
+            .checked_add(table_len)
+            .ok_or_else(|| bad(path, "table_offset", "overflow"))?;
         if end > file_len {
-            return Err(StoreError::Truncated { path: path.to_owned(), section: "node table", needed: end, actual: file_len });
+            return Err(StoreError::Truncated {
+                path: path.to_owned(),
+                section: "node table",
+                needed: end,
+                actual: file_len,
+            });
         }
         if end < file_len {
-            return Err(bad(path, "table_offset", format!("table ends at {end} but the file holds {file_len} bytes")));
+            return Err(bad(
+                path,
+                "table_offset",
+                format!("table ends at {end} but the file holds {file_len} bytes"),
+            ));
         }
         // Bounded by the file size checked above.
         let mut table = vec![0u8; table_len as usize];
-        file.read_exact_at(&mut table, h.table_offset).map_err(|e| StoreError::io(path, e))?;
+        file.read_exact_at(&mut table, h.table_offset)
+            .map_err(|e| StoreError::io(path, e))?;
         let crc = crc32fast::hash(&table);
         if crc != h.table_crc {
-            return Err(StoreError::TableChecksum { path: path.to_owned(), stored: h.table_crc, computed: crc });
+            return Err(StoreError::TableChecksum {
+                path: path.to_owned(),
+                stored: h.table_crc,
+                computed: crc,
+            });
         }
         let max_len = max_compressed(layout.brick_bytes());
         let mut entries = Vec::with_capacity(geo.count as usize);
@@ -192,15 +276,24 @@ impl Store {
                 return Err(node("min/max", format!("[{}, {}]", e.min, e.max)));
             }
             if !representable(dtype, e.value) {
-                return Err(node("value", format!("{} is not a {} sample", e.value, dtype.name())));
+                return Err(node(
+                    "value",
+                    format!("{} is not a {} sample", e.value, dtype.name()),
+                ));
             }
             match e.kind {
                 KIND_EMPTY | KIND_UNIFORM => {
                     if e.len != 0 || e.offset != 0 || e.crc != 0 {
-                        return Err(node("payload", "payload fields set on a node without payload".into()));
+                        return Err(node(
+                            "payload",
+                            "payload fields set on a node without payload".into(),
+                        ));
                     }
                     if e.kind == KIND_UNIFORM && !(e.min <= e.value && e.value <= e.max) {
-                        return Err(node("value", format!("{} outside [{}, {}]", e.value, e.min, e.max)));
+                        return Err(node(
+                            "value",
+                            format!("{} outside [{}, {}]", e.value, e.min, e.max),
+                        ));
                     }
                 }
                 KIND_DATA => {
@@ -209,7 +302,10 @@ impl Store {
                     }
                     let pend = e.offset.checked_add(e.len as u64);
                     if e.offset < HEADER_LEN as u64 || pend.is_none_or(|p| p > h.table_offset) {
-                        return Err(node("offset", format!("{}+{} outside the payload section", e.offset, e.len)));
+                        return Err(node(
+                            "offset",
+                            format!("{}+{} outside the payload section", e.offset, e.len),
+                        ));
                     }
                 }
                 k => return Err(node("kind", format!("unknown kind {k}"))),
@@ -290,7 +386,11 @@ impl Store {
 
     fn info_of(&self, e: Option<&Entry>) -> NodeInfo {
         match e {
-            None => NodeInfo { kind: NodeKind::Empty, min: self.data_range[0], max: self.data_range[0] },
+            None => NodeInfo {
+                kind: NodeKind::Empty,
+                min: self.data_range[0],
+                max: self.data_range[0],
+            },
             Some(e) => NodeInfo {
                 kind: match e.kind {
                     KIND_DATA => NodeKind::Data,
@@ -311,7 +411,11 @@ impl Store {
     /// The node's table record.
     pub fn record(&self, key: NodeKey) -> Result<NodeRecord, StoreError> {
         let e = self.check_key(key)?;
-        Ok(NodeRecord { key, info: self.info_of(e), payload_len: e.map_or(0, |e| e.len) })
+        Ok(NodeRecord {
+            key,
+            info: self.info_of(e),
+            payload_len: e.map_or(0, |e| e.len),
+        })
     }
 
     /// The children of `key` that overlap the volume, with their metadata
@@ -330,12 +434,19 @@ impl Store {
 
     /// Every node in the table (all nodes that overlap the volume), coarse to fine.
     pub fn nodes(&self) -> impl Iterator<Item = NodeRecord> + '_ {
-        self.entries.iter().map(|e| NodeRecord { key: e.key(), info: self.info_of(Some(e)), payload_len: e.len })
+        self.entries.iter().map(|e| NodeRecord {
+            key: e.key(),
+            info: self.info_of(Some(e)),
+            payload_len: e.len,
+        })
     }
 
     /// Counts over the node table.
     pub fn stats(&self) -> StoreStats {
-        let mut s = StoreStats { per_level: vec![[0; 4]; self.layout.levels as usize], ..Default::default() };
+        let mut s = StoreStats {
+            per_level: vec![[0; 4]; self.layout.levels as usize],
+            ..Default::default()
+        };
         let bb = self.layout.brick_bytes() as u64;
         for e in &self.entries {
             let pl = &mut s.per_level[e.level as usize];
@@ -362,16 +473,24 @@ impl Store {
 
     /// The node's compressed payload (checksum verified), `None` for nodes without one.
     pub fn read_compressed(&self, key: NodeKey) -> Result<Option<Vec<u8>>, StoreError> {
-        let Some(e) = self.check_key(key)? else { return Ok(None) };
+        let Some(e) = self.check_key(key)? else {
+            return Ok(None);
+        };
         if e.kind != KIND_DATA {
             return Ok(None);
         }
         // `len` was bounded by the brick size and the file at open.
         let mut buf = vec![0u8; e.len as usize];
-        self.file.read_exact_at(&mut buf, e.offset).map_err(|source| StoreError::NodeIo { key, source })?;
+        self.file
+            .read_exact_at(&mut buf, e.offset)
+            .map_err(|source| StoreError::NodeIo { key, source })?;
         let crc = crc32fast::hash(&buf);
         if crc != e.crc {
-            return Err(StoreError::PayloadChecksum { key, stored: e.crc, computed: crc });
+            return Err(StoreError::PayloadChecksum {
+                key,
+                stored: e.crc,
+                computed: crc,
+            });
         }
         Ok(Some(buf))
     }
@@ -381,7 +500,10 @@ impl Store {
     pub fn read(&self, key: NodeKey, out: &mut [u8]) -> Result<(), StoreError> {
         let expected = self.layout.brick_bytes();
         if out.len() != expected {
-            return Err(StoreError::BufferSize { expected, actual: out.len() });
+            return Err(StoreError::BufferSize {
+                expected,
+                actual: out.len(),
+            });
         }
         let e = self.check_key(key)?;
         let dtype = self.layout.dtype();
@@ -402,8 +524,14 @@ impl Store {
 pub fn decode_payload(key: NodeKey, payload: &[u8], out: &mut [u8]) -> Result<(), StoreError> {
     match lz4_flex::block::decompress_into(payload, out) {
         Ok(n) if n == out.len() => Ok(()),
-        Ok(n) => Err(StoreError::Decode { key, reason: format!("decoded {n} bytes, expected {}", out.len()) }),
-        Err(e) => Err(StoreError::Decode { key, reason: e.to_string() }),
+        Ok(n) => Err(StoreError::Decode {
+            key,
+            reason: format!("decoded {n} bytes, expected {}", out.len()),
+        }),
+        Err(e) => Err(StoreError::Decode {
+            key,
+            reason: e.to_string(),
+        }),
     }
 }
 

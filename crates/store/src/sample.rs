@@ -132,7 +132,9 @@ pub(crate) fn range_of<T: Sample>(bytes: &[u8]) -> (f32, f32) {
 pub(crate) fn range_u8(bytes: &[u8]) -> (f32, f32) {
     let (mut lo, mut hi) = (u8::MAX, u8::MIN);
     for c in bytes.chunks(4096) {
-        let (a, b) = c.iter().fold((u8::MAX, u8::MIN), |(a, b), &x| (a.min(x), b.max(x)));
+        let (a, b) = c
+            .iter()
+            .fold((u8::MAX, u8::MIN), |(a, b), &x| (a.min(x), b.max(x)));
         lo = lo.min(a);
         hi = hi.max(b);
     }

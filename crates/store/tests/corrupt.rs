@@ -16,7 +16,11 @@ fn tiny_store(dir: &Path) -> Vec<u8> {
     let dims = [12, 10, 7];
     let mut r = MemReader::new(dims, DType::U8, test_volume(dims, DType::U8, 11));
     let out = dir.join("tiny.brick");
-    let o = BuildOptions { brick: 4, apron: 1, ..BuildOptions::default() };
+    let o = BuildOptions {
+        brick: 4,
+        apron: 1,
+        ..BuildOptions::default()
+    };
     build(&mut r, &out, &o).unwrap();
     std::fs::read(&out).unwrap()
 }
@@ -41,11 +45,21 @@ fn reseal_header(b: &mut [u8]) {
     }
 }
 
-/// Opens `bytes` and reads every node; returns whether it opened and how many
-/// reads failed. Panics only if the store panics.
+/// Opens `bytes` and reads every node; returns how many reads failed. Panics
+/// only if the store panics. The bytes are written in place into one file (no
+/// truncation to zero, which makes ext4 flush on close and the test slow).
 fn exercise(path: &Path, bytes: &[u8]) -> Result<usize, StoreError> {
-    std::fs::write(path, bytes).unwrap();
-    let store = open(path)?;
+    use std::os::unix::fs::FileExt;
+    let f = std::fs::OpenOptions::new()
+        .read(true)
+        .write(true)
+        .create(true)
+        .truncate(false)
+        .open(path)
+        .unwrap();
+    f.write_all_at(bytes, 0).unwrap();
+    f.set_len(bytes.len() as u64).unwrap();
+    let store = Store::from_file(f, path)?;
     let mut errors = 0;
     let mut buf = vec![0u8; store.layout().brick_bytes()];
     let keys: Vec<NodeKey> = store.nodes().map(|n| n.key).collect();
@@ -170,7 +184,9 @@ fn truncation_at_every_length_is_a_typed_error() {
     for l in 0..good.len() {
         let err = exercise(&path, &good[..l]).unwrap_err();
         match err {
-            StoreError::Truncated { .. } | StoreError::NotAStore { .. } | StoreError::BadHeader { .. } => {}
+            StoreError::Truncated { .. }
+            | StoreError::NotAStore { .. }
+            | StoreError::BadHeader { .. } => {}
             other => panic!("truncated at {l}: unexpected {other}"),
         }
     }
@@ -214,7 +230,17 @@ fn every_header_field_forged() {
         ("reserved", 108, 8),
         ("reserved", 116, 8),
     ];
-    let values: [u64; 9] = [0, 1, 2, 3, 0xFF, 0x7FC0_0000, 0xFFFF_FFFF, u64::MAX, 1 << 40];
+    let values: [u64; 9] = [
+        0,
+        1,
+        2,
+        3,
+        0xFF,
+        0x7FC0_0000,
+        0xFFFF_FFFF,
+        u64::MAX,
+        1 << 40,
+    ];
     let mut refused = 0;
     for &(name, off, width) in fields {
         for &v in &values {
@@ -225,7 +251,10 @@ fn every_header_field_forged() {
                 continue;
             }
             // Unsealed: the checksum catches it.
-            assert!(exercise(&path, &b).is_err(), "{name}={v:#x} unsealed opened");
+            assert!(
+                exercise(&path, &b).is_err(),
+                "{name}={v:#x} unsealed opened"
+            );
             reseal_header(&mut b);
             match exercise(&path, &b) {
                 Err(_) => refused += 1,
@@ -234,7 +263,20 @@ fn every_header_field_forged() {
                     // (the sample type) must fail on reading the payloads.
                     assert!(
                         read_errors > 0
-                            || matches!(name, "spacing.x" | "spacing.y" | "spacing.z" | "value_range.lo" | "value_range.hi" | "data_min" | "data_max" | "empty_below" | "filter" | "flags" | "reserved"),
+                            || matches!(
+                                name,
+                                "spacing.x"
+                                    | "spacing.y"
+                                    | "spacing.z"
+                                    | "value_range.lo"
+                                    | "value_range.hi"
+                                    | "data_min"
+                                    | "data_max"
+                                    | "empty_below"
+                                    | "filter"
+                                    | "flags"
+                                    | "reserved"
+                            ),
                         "{name}={v:#x} opened and read without error"
                     );
                 }
@@ -245,7 +287,10 @@ fn every_header_field_forged() {
     // Magic.
     let mut b = good.clone();
     b[0] ^= 1;
-    assert!(matches!(exercise(&path, &b), Err(StoreError::NotAStore { .. })));
+    assert!(matches!(
+        exercise(&path, &b),
+        Err(StoreError::NotAStore { .. })
+    ));
 }
 
 #[test]
@@ -257,9 +302,20 @@ fn forged_node_lengths_are_bounded() {
     let entries = (good.len() - table_off) / ENTRY_LEN;
     for e in 0..entries {
         let eo = table_off + e * ENTRY_LEN;
-        for (field, off, val) in [("len", 28usize, u32::MAX as u64), ("offset", 32, u64::MAX - 3), ("kind", 1, 9), ("level", 0, 200)] {
+        for (field, off, val) in [
+            ("len", 28usize, u32::MAX as u64),
+            ("offset", 32, u64::MAX - 3),
+            ("kind", 1, 9),
+            ("level", 0, 200),
+        ] {
             let mut b = good.clone();
-            let w = if field == "kind" || field == "level" { 1 } else if field == "len" { 4 } else { 8 };
+            let w = if field == "kind" || field == "level" {
+                1
+            } else if field == "len" {
+                4
+            } else {
+                8
+            };
             b[eo + off..eo + off + w].copy_from_slice(&val.to_le_bytes()[..w]);
             reseal_table(&mut b);
             reseal_header(&mut b);

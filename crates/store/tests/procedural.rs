@@ -11,19 +11,31 @@ use common::*;
 fn finest(src: &ProceduralSource) -> Vec<f32> {
     let lay = src.layout();
     let d = lay.level_dims(lay.levels - 1).map(|d| d as u64 - 1);
-    src.region(lay.levels - 1, [0; 3], d).into_iter().map(f32::from).collect()
+    src.region(lay.levels - 1, [0; 3], d)
+        .into_iter()
+        .map(f32::from)
+        .collect()
 }
 
 #[test]
 fn inner_nodes_equal_the_filter_of_their_children() {
-    for (dims, brick, apron) in [([45u64, 30, 19], 4u32, 2u32), ([64, 64, 64], 8, 2), ([33, 1, 7], 2, 1), ([1, 1, 1], 32, 2)] {
+    for (dims, brick, apron) in [
+        ([45u64, 30, 19], 4u32, 2u32),
+        ([64, 64, 64], 8, 2),
+        ([33, 1, 7], 2, 1),
+        ([1, 1, 1], 32, 2),
+    ] {
         let src = ProceduralSource::fractal_noise(dims, brick, apron).unwrap();
         let lay = src.layout().clone();
         let levels = reference_levels(&lay, finest(&src), Filter::Average);
         // Every level computed top-down equals the filtered finest level.
         for l in 0..lay.levels {
             let d = lay.level_dims(l).map(|d| d as u64 - 1);
-            let got: Vec<f32> = src.region(l, [0; 3], d).into_iter().map(f32::from).collect();
+            let got: Vec<f32> = src
+                .region(l, [0; 3], d)
+                .into_iter()
+                .map(f32::from)
+                .collect();
             assert_eq!(got, levels[l as usize], "{dims:?} level {l}");
         }
         // Bricks, aprons and conservative min/max.
@@ -40,7 +52,16 @@ fn store_built_from_the_finest_level_matches() {
     let mut r = MemReader::new(dims, DType::U8, bytes);
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("p.brick");
-    build(&mut r, &out, &BuildOptions { brick: 8, apron: 2, ..BuildOptions::default() }).unwrap();
+    build(
+        &mut r,
+        &out,
+        &BuildOptions {
+            brick: 8,
+            apron: 2,
+            ..BuildOptions::default()
+        },
+    )
+    .unwrap();
     let store = open(&out).unwrap();
     assert_eq!(store.layout().levels, lay.levels);
     let (mut a, mut b) = (vec![0u8; lay.brick_bytes()], vec![0u8; lay.brick_bytes()]);
@@ -49,7 +70,11 @@ fn store_built_from_the_finest_level_matches() {
         src.read_brick(rec.key, &mut b).unwrap();
         assert_eq!(a, b, "{:?}", rec.key);
         let p = src.node(rec.key).unwrap();
-        assert!(p.min <= rec.info.min && p.max >= rec.info.max, "{:?}", rec.key);
+        assert!(
+            p.min <= rec.info.min && p.max >= rec.info.max,
+            "{:?}",
+            rec.key
+        );
     }
     let _ = r.desc();
 }
@@ -75,7 +100,11 @@ fn huge_virtual_volume_65536_cubed() {
             let info = src.node(key).unwrap();
             assert_eq!(info.kind, NodeKind::Data);
             src.read_brick(key, &mut buf).unwrap();
-            assert!(buf.iter().all(|&v| (v as f32) >= info.min && (v as f32) <= info.max), "{key:?}");
+            assert!(
+                buf.iter()
+                    .all(|&v| (v as f32) >= info.min && (v as f32) <= info.max),
+                "{key:?}"
+            );
         }
         // Exact filtering at random voxels of this level.
         if l + 1 < lay.levels {
@@ -99,7 +128,11 @@ fn huge_virtual_volume_65536_cubed() {
                         }
                     }
                 }
-                assert_eq!(src.voxel(l, p) as f32, filter_ref(DType::U8, Filter::Average, v), "level {l} voxel {p:?}");
+                assert_eq!(
+                    src.voxel(l, p) as f32,
+                    filter_ref(DType::U8, Filter::Average, v),
+                    "level {l} voxel {p:?}"
+                );
             }
         }
     }
@@ -112,8 +145,14 @@ fn huge_virtual_volume_65536_cubed() {
 fn non_cubic_virtual_volume_has_empty_outside_nodes() {
     let src = ProceduralSource::fractal_noise([4096, 1000, 3], 16, 2).unwrap();
     let lay = src.layout();
-    assert_eq!(src.node(NodeKey::new(1, 0, 1, 0)).unwrap().kind, NodeKind::Empty);
-    assert_eq!(src.node(NodeKey::new(1, 1, 0, 0)).unwrap().kind, NodeKind::Data);
+    assert_eq!(
+        src.node(NodeKey::new(1, 0, 1, 0)).unwrap().kind,
+        NodeKind::Empty
+    );
+    assert_eq!(
+        src.node(NodeKey::new(1, 1, 0, 0)).unwrap().kind,
+        NodeKind::Data
+    );
     assert!(ProceduralSource::fractal_noise([0, 1, 1], 16, 2).is_err());
     let _ = lay;
 }

@@ -9,7 +9,12 @@ use common::*;
 use proptest::prelude::*;
 
 fn opts(brick: u32, apron: u32, filter: Filter) -> BuildOptions {
-    BuildOptions { brick, apron, filter, ..BuildOptions::default() }
+    BuildOptions {
+        brick,
+        apron,
+        filter,
+        ..BuildOptions::default()
+    }
 }
 
 fn roundtrip(dims: [u32; 3], dtype: DType, o: &BuildOptions, seed: u64) {
@@ -47,7 +52,10 @@ fn odd_257x129x67_u8() {
 
 #[test]
 fn odd_sizes_all_dtypes_and_filters() {
-    for (i, dtype) in [DType::U8, DType::U16, DType::I16, DType::F32].into_iter().enumerate() {
+    for (i, dtype) in [DType::U8, DType::U16, DType::I16, DType::F32]
+        .into_iter()
+        .enumerate()
+    {
         roundtrip([37, 21, 13], dtype, &opts(8, 2, Filter::Average), i as u64);
         roundtrip([19, 40, 9], dtype, &opts(4, 1, Filter::Max), i as u64);
     }
@@ -77,7 +85,10 @@ fn uniform_bricks_have_no_payload_and_threshold_empties() {
         }
     }
     // Threshold above the constant block value (5): those nodes become empty.
-    let o = BuildOptions { empty_below: Some(6.0), ..opts(8, 2, Filter::Average) };
+    let o = BuildOptions {
+        empty_below: Some(6.0),
+        ..opts(8, 2, Filter::Average)
+    };
     roundtrip_bytes(dims, DType::U8, bytes, &o);
     let mut r = MemReader::new(dims, DType::U8, test_volume(dims, DType::U8, 9));
     build(&mut r, &out, &o).unwrap();
@@ -107,7 +118,10 @@ fn aprons_equal_neighbour_voxels() {
     };
     let at = |v: &[f32], i: usize, j: usize, k: usize| v[i + s * (j + s * k)];
     // +x neighbour: apron voxels a+b..a+b+a of brick x are voxels a..2a of brick x+1.
-    let (p, q) = (read(NodeKey::new(leaf, 1, 1, 1)), read(NodeKey::new(leaf, 2, 1, 1)));
+    let (p, q) = (
+        read(NodeKey::new(leaf, 1, 1, 1)),
+        read(NodeKey::new(leaf, 2, 1, 1)),
+    );
     for k in 0..s {
         for j in 0..s {
             for t in 0..a {
@@ -137,14 +151,21 @@ fn interrupted_build_leaves_no_store() {
     let err = build(&mut r, &out, &opts(8, 2, Filter::Average)).unwrap_err();
     assert!(matches!(err, StoreError::Input(_)), "{err}");
     assert!(!out.exists());
-    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0, "temporary file left behind");
+    assert_eq!(
+        std::fs::read_dir(dir.path()).unwrap().count(),
+        0,
+        "temporary file left behind"
+    );
 }
 
 #[test]
 fn memory_bound_is_enforced() {
     let dims = [512, 512, 4];
     let mut r = MemReader::new(dims, DType::U8, vec![0; 512 * 512 * 4]);
-    let o = BuildOptions { memory_bound: 4 << 20, ..BuildOptions::default() };
+    let o = BuildOptions {
+        memory_bound: 4 << 20,
+        ..BuildOptions::default()
+    };
     let dir = tempfile::tempdir().unwrap();
     let err = build(&mut r, &dir.path().join("v.brick"), &o).unwrap_err();
     assert!(matches!(err, StoreError::MemoryBound { .. }), "{err}");
@@ -195,11 +216,23 @@ fn metadata_queries() {
     // Only children that overlap the volume: x halves both, y and z low half only.
     assert_eq!(root.len(), 2);
     assert!(store.children(NodeKey::new(3, 0, 0, 0)).unwrap().is_empty());
-    assert!(matches!(store.info(NodeKey::new(4, 0, 0, 0)), Err(StoreError::OutOfRange { .. })));
-    assert!(matches!(store.info(NodeKey::new(1, 2, 0, 0)), Err(StoreError::OutOfRange { .. })));
-    assert_eq!(store.info(NodeKey::new(1, 0, 1, 0)).unwrap().kind, NodeKind::Empty);
+    assert!(matches!(
+        store.info(NodeKey::new(4, 0, 0, 0)),
+        Err(StoreError::OutOfRange { .. })
+    ));
+    assert!(matches!(
+        store.info(NodeKey::new(1, 2, 0, 0)),
+        Err(StoreError::OutOfRange { .. })
+    ));
+    assert_eq!(
+        store.info(NodeKey::new(1, 0, 1, 0)).unwrap().kind,
+        NodeKind::Empty
+    );
     let mut small = vec![0u8; 3];
-    assert!(matches!(store.read(NodeKey::ROOT, &mut small), Err(StoreError::BufferSize { .. })));
+    assert!(matches!(
+        store.read(NodeKey::ROOT, &mut small),
+        Err(StoreError::BufferSize { .. })
+    ));
     let s = store.stats();
     assert_eq!(s.per_level.len(), 4);
     assert_eq!(s.per_level[3][0], 7 * 2 * 2);
@@ -209,14 +242,23 @@ fn metadata_queries() {
 fn shared_data_volumes_round_trip() {
     let Some(dir) = shared_data() else { return };
     let tmp = tempfile::tempdir().unwrap();
-    for name in ["invesalius_cranium_ct", "pycortex_s1_t1_mri", "cells3d_nuclei_fluo", "cryoet_tomo"] {
+    for name in [
+        "invesalius_cranium_ct",
+        "pycortex_s1_t1_mri",
+        "cells3d_nuclei_fluo",
+        "cryoet_tomo",
+    ] {
         let json = dir.join(name).join(format!("{name}.json"));
         let out = tmp.path().join(format!("{name}.brick"));
         let report = brickray_store::build_file(&json, &out, &BuildOptions::default()).unwrap();
         let vol = brickray_core::read_volume(&json).unwrap();
         let store = open(&out).unwrap();
         assert_eq!(store.desc(), vol.desc());
-        let levels = reference_levels(store.layout(), decode(vol.desc().dtype, vol.data().as_bytes()), Filter::Average);
+        let levels = reference_levels(
+            store.layout(),
+            decode(vol.desc().dtype, vol.data().as_bytes()),
+            Filter::Average,
+        );
         check_source(&store, &levels, None);
         eprintln!(
             "{name}: {} nodes, {} data, {} uniform, compression {:.2}x",

@@ -37,8 +37,11 @@ fn main() -> ExitCode {
     }
 }
 
+/// Positional arguments and `(flag, value)` pairs.
+type Parsed = (Vec<String>, Vec<(String, String)>);
+
 /// Splits arguments into positionals and `--flag value` pairs.
-fn parse(args: &[String], flags: &[&str], switches: &[&str]) -> Result<(Vec<String>, Vec<(String, String)>), String> {
+fn parse(args: &[String], flags: &[&str], switches: &[&str]) -> Result<Parsed, String> {
     let mut pos = Vec::new();
     let mut opts = Vec::new();
     let mut it = args.iter();
@@ -53,7 +56,10 @@ fn parse(args: &[String], flags: &[&str], switches: &[&str]) -> Result<(Vec<Stri
             } else if flags.contains(&name) {
                 let v = match inline {
                     Some(v) => v,
-                    None => it.next().cloned().ok_or_else(|| format!("--{name} needs a value"))?,
+                    None => it
+                        .next()
+                        .cloned()
+                        .ok_or_else(|| format!("--{name} needs a value"))?,
                 };
                 opts.push((name.to_string(), v));
             } else {
@@ -67,27 +73,39 @@ fn parse(args: &[String], flags: &[&str], switches: &[&str]) -> Result<(Vec<Stri
 }
 
 fn num<T: std::str::FromStr>(name: &str, v: &str) -> Result<T, String> {
-    v.parse().map_err(|_| format!("--{name}: cannot parse {v:?}"))
+    v.parse()
+        .map_err(|_| format!("--{name}: cannot parse {v:?}"))
 }
 
 fn cmd_build(args: &[String]) -> Result<(), String> {
-    let (pos, opts) = parse(args, &["brick", "apron", "filter", "empty-below", "memory-mib"], &["quiet"])?;
+    let (pos, opts) = parse(
+        args,
+        &["brick", "apron", "filter", "empty-below", "memory-mib"],
+        &["quiet"],
+    )?;
     let [input, output] = pos.as_slice() else {
         return Err(format!("build needs <input> <output>\n{USAGE}"));
     };
-    let mut o = BuildOptions { progress: true, ..BuildOptions::default() };
+    let mut o = BuildOptions {
+        progress: true,
+        ..BuildOptions::default()
+    };
     for (k, v) in &opts {
         match k.as_str() {
             "brick" => o.brick = num(k, v)?,
             "apron" => o.apron = num(k, v)?,
-            "filter" => o.filter = Filter::parse(v).ok_or_else(|| format!("--filter: expected average or max, got {v:?}"))?,
+            "filter" => {
+                o.filter = Filter::parse(v)
+                    .ok_or_else(|| format!("--filter: expected average or max, got {v:?}"))?
+            }
             "empty-below" => o.empty_below = Some(num(k, v)?),
             "memory-mib" => o.memory_bound = num::<u64>(k, v)? << 20,
             "quiet" => o.progress = false,
             _ => {}
         }
     }
-    let r = brickray_store::build_file(&PathBuf::from(input), &PathBuf::from(output), &o).map_err(|e| e.to_string())?;
+    let r = brickray_store::build_file(&PathBuf::from(input), &PathBuf::from(output), &o)
+        .map_err(|e| e.to_string())?;
     println!(
         "built {output}: {} levels, {} nodes ({} data, {} uniform, {} empty), {:.1} MiB from {:.1} MiB in {:.2} s ({:.1} Mvoxel/s)",
         r.layout.levels,
@@ -118,7 +136,15 @@ fn cmd_info(args: &[String]) -> Result<(), String> {
     let lay = store.layout().clone();
     let d = store.desc();
     println!("store       {path}");
-    println!("volume      {}x{}x{} {}, spacing {:?}, value range {:?}", d.dims[0], d.dims[1], d.dims[2], d.dtype.name(), d.spacing, d.value_range);
+    println!(
+        "volume      {}x{}x{} {}, spacing {:?}, value range {:?}",
+        d.dims[0],
+        d.dims[1],
+        d.dims[2],
+        d.dtype.name(),
+        d.spacing,
+        d.value_range
+    );
     println!("data range  {:?}", store.data_range());
     println!(
         "bricks      {} interior + 2x{} apron = {} stored voxels a side ({} bytes), filter {:?}, empty below {:?}",
@@ -135,10 +161,22 @@ fn cmd_info(args: &[String]) -> Result<(), String> {
     println!("  level   grid            nodes      data   uniform     empty");
     for (l, c) in s.per_level.iter().enumerate() {
         let g = store.grid(l as u8).unwrap_or([0; 3]);
-        println!("  {l:>5}   {:<14} {:>6} {:>9} {:>9} {:>9}", format!("{}x{}x{}", g[0], g[1], g[2]), c[0], c[1], c[2], c[3]);
+        println!(
+            "  {l:>5}   {:<14} {:>6} {:>9} {:>9} {:>9}",
+            format!("{}x{}x{}", g[0], g[1], g[2]),
+            c[0],
+            c[1],
+            c[2],
+            c[3]
+        );
     }
     let frac = |n: u64| 100.0 * n as f64 / total.max(1) as f64;
-    println!("nodes       {total}: {:.1}% data, {:.1}% uniform, {:.1}% empty", frac(s.data), frac(s.uniform), frac(s.empty));
+    println!(
+        "nodes       {total}: {:.1}% data, {:.1}% uniform, {:.1}% empty",
+        frac(s.data),
+        frac(s.uniform),
+        frac(s.empty)
+    );
     println!(
         "size        {:.2} MiB file, {:.2} MiB payload; volume {:.2} MiB",
         store.file_len() as f64 / (1 << 20) as f64,
@@ -173,7 +211,9 @@ fn cmd_info(args: &[String]) -> Result<(), String> {
                 NodeKind::Empty => h[bin(lo)] += count,
                 NodeKind::Data => {
                     let mut buf = vec![0u8; lay.brick_bytes()];
-                    store.read_brick(rec.key, &mut buf).map_err(|e| e.to_string())?;
+                    store
+                        .read_brick(rec.key, &mut buf)
+                        .map_err(|e| e.to_string())?;
                     let vals = decode(d.dtype, &buf);
                     let s = lay.stored_side() as usize;
                     let a = lay.apron as usize;
@@ -189,10 +229,13 @@ fn cmd_info(args: &[String]) -> Result<(), String> {
             }
             Ok(h)
         })
-        .try_reduce(|| vec![0u64; bins], |mut a, b| {
-            a.iter_mut().zip(b).for_each(|(x, y)| *x += y);
-            Ok(a)
-        })?;
+        .try_reduce(
+            || vec![0u64; bins],
+            |mut a, b| {
+                a.iter_mut().zip(b).for_each(|(x, y)| *x += y);
+                Ok(a)
+            },
+        )?;
     let n: u64 = hist.iter().sum();
     let peak = *hist.iter().max().unwrap_or(&1);
     println!("histogram   {n} voxels, {bins} bins over the data range");
@@ -200,7 +243,10 @@ fn cmd_info(args: &[String]) -> Result<(), String> {
         let a = lo + span * i as f32 / bins as f32;
         let b = lo + span * (i + 1) as f32 / bins as f32;
         let bar = "#".repeat(((*c as f64 / peak.max(1) as f64) * 40.0).round() as usize);
-        println!("  [{a:>11.4}, {b:>11.4})  {c:>12}  {:>5.1}%  {bar}", 100.0 * *c as f64 / n.max(1) as f64);
+        println!(
+            "  [{a:>11.4}, {b:>11.4})  {c:>12}  {:>5.1}%  {bar}",
+            100.0 * *c as f64 / n.max(1) as f64
+        );
     }
     Ok(())
 }
@@ -209,8 +255,17 @@ fn decode(dtype: brickray_core::DType, b: &[u8]) -> Vec<f32> {
     use brickray_core::DType;
     match dtype {
         DType::U8 => b.iter().map(|&x| x as f32).collect(),
-        DType::U16 => b.chunks_exact(2).map(|c| u16::from_le_bytes([c[0], c[1]]) as f32).collect(),
-        DType::I16 => b.chunks_exact(2).map(|c| i16::from_le_bytes([c[0], c[1]]) as f32).collect(),
-        _ => b.chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect(),
+        DType::U16 => b
+            .chunks_exact(2)
+            .map(|c| u16::from_le_bytes([c[0], c[1]]) as f32)
+            .collect(),
+        DType::I16 => b
+            .chunks_exact(2)
+            .map(|c| i16::from_le_bytes([c[0], c[1]]) as f32)
+            .collect(),
+        _ => b
+            .chunks_exact(4)
+            .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+            .collect(),
     }
 }

@@ -1,9 +1,7 @@
 //! Test helpers: an in-memory reader, a naive reference pyramid and a checker.
 #![allow(dead_code, unreachable_pub, missing_docs)]
 
-use brickray_core::{
-    BrickSource, DType, IoError, NodeKey, NodeKind, VolumeDesc, VolumeReader,
-};
+use brickray_core::{BrickSource, DType, IoError, NodeKey, NodeKind, VolumeDesc, VolumeReader};
 use brickray_store::Filter;
 use std::path::{Path, PathBuf};
 
@@ -19,16 +17,36 @@ pub struct MemReader {
 
 impl MemReader {
     pub fn new(dims: [u32; 3], dtype: DType, bytes: Vec<u8>) -> MemReader {
-        assert_eq!(bytes.len(), dims.iter().map(|&d| d as usize).product::<usize>() * dtype.size());
-        let (lo, hi) = if bytes.is_empty() { (0.0, 1.0) } else { range(dtype, &bytes) };
-        let desc = VolumeDesc { dims, dtype, spacing: [1.0, 0.5, 2.0], value_range: [lo, hi.max(lo + 1.0)] };
-        MemReader { desc, bytes, path: PathBuf::from("<memory>"), fail_at: None }
+        assert_eq!(
+            bytes.len(),
+            dims.iter().map(|&d| d as usize).product::<usize>() * dtype.size()
+        );
+        let (lo, hi) = if bytes.is_empty() {
+            (0.0, 1.0)
+        } else {
+            range(dtype, &bytes)
+        };
+        let desc = VolumeDesc {
+            dims,
+            dtype,
+            spacing: [1.0, 0.5, 2.0],
+            value_range: [lo, hi.max(lo + 1.0)],
+        };
+        MemReader {
+            desc,
+            bytes,
+            path: PathBuf::from("<memory>"),
+            fail_at: None,
+        }
     }
 }
 
 pub fn range(dtype: DType, bytes: &[u8]) -> (f32, f32) {
     let v = decode(dtype, bytes);
-    v.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &x| (a.min(x), b.max(x)))
+    v.iter()
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &x| {
+            (a.min(x), b.max(x))
+        })
 }
 
 impl VolumeReader for MemReader {
@@ -51,9 +69,18 @@ impl VolumeReader for MemReader {
 pub fn decode(dtype: DType, b: &[u8]) -> Vec<f32> {
     match dtype {
         DType::U8 => b.iter().map(|&x| x as f32).collect(),
-        DType::U16 => b.chunks_exact(2).map(|c| u16::from_le_bytes([c[0], c[1]]) as f32).collect(),
-        DType::I16 => b.chunks_exact(2).map(|c| i16::from_le_bytes([c[0], c[1]]) as f32).collect(),
-        _ => b.chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect(),
+        DType::U16 => b
+            .chunks_exact(2)
+            .map(|c| u16::from_le_bytes([c[0], c[1]]) as f32)
+            .collect(),
+        DType::I16 => b
+            .chunks_exact(2)
+            .map(|c| i16::from_le_bytes([c[0], c[1]]) as f32)
+            .collect(),
+        _ => b
+            .chunks_exact(4)
+            .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+            .collect(),
     }
 }
 
@@ -85,7 +112,9 @@ pub fn test_volume(dims: [u32; 3], dtype: DType, seed: u64) -> Vec<u8> {
                 let val = if x * 3 < dims[0] {
                     5.0
                 } else {
-                    ((x as f32 * 0.37).sin() + (y as f32 * 0.21).cos() + z as f32 * 0.05) * 40.0 + 100.0 + noise
+                    ((x as f32 * 0.37).sin() + (y as f32 * 0.21).cos() + z as f32 * 0.05) * 40.0
+                        + 100.0
+                        + noise
                 };
                 v.push(match dtype {
                     DType::U8 => val.clamp(0.0, 255.0).round(),
@@ -152,7 +181,11 @@ pub fn filter_ref(dtype: DType, filter: Filter, v: [f32; 8]) -> f32 {
 }
 
 /// The expected stored brick of `key` from the reference level volume.
-pub fn expected_brick(layout: &brickray_core::OctreeLayout, level: &[f32], key: NodeKey) -> Vec<f32> {
+pub fn expected_brick(
+    layout: &brickray_core::OctreeLayout,
+    level: &[f32],
+    key: NodeKey,
+) -> Vec<f32> {
     let d = layout.level_dims(key.level).map(|d| d as i64);
     let b = layout.brick as i64;
     let a = layout.apron as i64;
@@ -193,13 +226,25 @@ pub fn check_source(src: &dyn BrickSource, levels: &[Vec<f32>], threshold: Optio
                         continue;
                     }
                     let want = expected_brick(&layout, &levels[l as usize], key);
-                    let (lo, hi) = want.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
-                    assert!(info.min <= lo && info.max >= hi, "{key:?}: [{}, {}] does not cover [{lo}, {hi}]", info.min, info.max);
+                    let (lo, hi) = want
+                        .iter()
+                        .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &v| {
+                            (a.min(v), b.max(v))
+                        });
+                    assert!(
+                        info.min <= lo && info.max >= hi,
+                        "{key:?}: [{}, {}] does not cover [{lo}, {hi}]",
+                        info.min,
+                        info.max
+                    );
                     if l + 1 < layout.levels {
                         for c in key.children() {
                             if layout.in_volume(c) {
                                 let ci = src.node(c).unwrap();
-                                assert!(info.min <= ci.min && info.max >= ci.max, "{key:?} range does not cover child {c:?}");
+                                assert!(
+                                    info.min <= ci.min && info.max >= ci.max,
+                                    "{key:?} range does not cover child {c:?}"
+                                );
                             }
                         }
                     }
@@ -209,14 +254,20 @@ pub fn check_source(src: &dyn BrickSource, levels: &[Vec<f32>], threshold: Optio
                             assert!(info.max < t, "{key:?} empty but max {} >= {t}", info.max);
                         }
                         NodeKind::Uniform(v) => {
-                            assert!(want.iter().all(|&w| w == v), "{key:?} uniform {v} but voxels differ");
+                            assert!(
+                                want.iter().all(|&w| w == v),
+                                "{key:?} uniform {v} but voxels differ"
+                            );
                             assert_eq!(decode(dtype, &buf), want, "{key:?}");
                         }
                         NodeKind::Data => {
                             let got = decode(dtype, &buf);
                             if got != want {
                                 let i = got.iter().zip(&want).position(|(a, b)| a != b).unwrap();
-                                panic!("{key:?}: stored voxel {i} is {} expected {}", got[i], want[i]);
+                                panic!(
+                                    "{key:?}: stored voxel {i} is {} expected {}",
+                                    got[i], want[i]
+                                );
                             }
                         }
                     }
@@ -233,7 +284,10 @@ pub fn shared_data() -> Option<PathBuf> {
         return Some(p);
     }
     if std::env::var("CI").is_ok_and(|v| v == "true") {
-        panic!("shared data not found at {} (required when CI=true)", p.display());
+        panic!(
+            "shared data not found at {} (required when CI=true)",
+            p.display()
+        );
     }
     eprintln!("skipping: shared data not found at {}", p.display());
     None
