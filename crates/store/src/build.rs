@@ -24,6 +24,7 @@ use brickray_core::{NodeKey, OctreeLayout, VolumeReader};
 use rayon::prelude::*;
 use std::collections::VecDeque;
 use std::io::{BufWriter, Seek, SeekFrom, Write};
+use std::os::unix::fs::FileExt;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -83,6 +84,9 @@ pub struct BuildReport {
     pub file_bytes: u64,
     /// The builder's estimate of its peak buffer bytes.
     pub buffer_estimate: u64,
+    /// Levels built in y-bands (several passes over their input) because one
+    /// streaming pass would not fit the memory bound; 0 for a single pass.
+    pub banded_levels: u8,
     /// Wall-clock seconds.
     pub seconds: f64,
 }
@@ -143,31 +147,17 @@ pub fn build(
         option: "input",
         reason: "too many nodes".into(),
     })?;
-    let size = desc.dtype.size() as u64;
-    let slice_bytes = desc.dims[0] as u64 * desc.dims[1] as u64 * size;
-    let side = layout.stored_side() as u64;
-    let slab = side * slice_bytes;
-    // Slices read between two processing steps (at most ~8 MiB, at most a brick).
-    let per = ((8u64 << 20) / slice_bytes.max(1)).clamp(1, opts.brick as u64) as u32;
-    // Rolling windows: brick + 2 apron + 2 slices per level plus the slices read
-    // in one step and as many recycled buffers; levels shrink 4x.
-    let windows = (side + 2 + 2 * per as u64) * slice_bytes * 4 / 3;
-    // Compressed output of one group of bricks, plus per-thread scratch.
+    // Compressed output of one group of bricks, per-thread scratch, the table.
     let group_cap: u64 = (32u64 << 20)
         .min(opts.memory_bound / 8)
         .max(layout.brick_bytes() as u64 * 2);
     let threads = rayon::current_num_threads() as u64;
     let scratch = threads * 3 * layout.brick_bytes() as u64;
     let table = geo.count * (ENTRY_LEN as u64 + 48);
-    let needed = windows + group_cap + scratch + table + (8 << 20);
-    if needed > opts.memory_bound {
-        return Err(StoreError::MemoryBound {
-            needed,
-            bound: opts.memory_bound,
-            slab,
-        });
-    }
-
+    let fixed = group_cap + scratch + table + (8u64 << 20).min(opts.memory_bound / 16);
+    let top = layout.levels - 1;
+    let first_plan = plan(&layout, top, opts.memory_bound, fixed)?;
+    let needed = first_plan.need();
     let dir = out
         .parent()
         .filter(|p| !p.as_os_str().is_empty())
@@ -222,35 +212,64 @@ pub fn build(
         indicatif::ProgressBar::hidden()
     };
 
-    let mut levels: Vec<LevelBuf> = (0..layout.levels)
-        .map(|l| LevelBuf::new(&layout, l, per))
-        .collect();
-    let finest = layout.levels as usize - 1;
-    let nz = desc.dims[2];
-    // Read slice by slice straight into recycled slice buffers; process after
-    // every `per` slices.
-    let mut z = 0;
-    while z < nz {
-        let z1 = (z + per).min(nz);
-        for zi in z..z1 {
-            let mut s = levels[finest].take_buffer(slice_bytes as usize);
-            reader.read_slices(zi, zi + 1, &mut s)?;
-            levels[finest].slices.push_back(s);
+    // Levels `0..=top` remain to be built from `input` (the level-`top` volume):
+    // in one streaming pass when that fits the bound, else level `top` alone in
+    // y-bands (several passes over the input), writing the level `top - 1`
+    // volume to a temporary file that becomes the next input.
+    let mut top = top;
+    let mut owned: Option<brickray_core::io::RawReader> = None;
+    let mut _level_file: Option<tempfile::NamedTempFile> = None;
+    let mut cur_plan = first_plan;
+    let mut banded = 0u8;
+    loop {
+        let input: &mut dyn VolumeReader = match owned.as_mut() {
+            Some(r) => r,
+            None => &mut *reader,
+        };
+        match cur_plan {
+            Plan::Stream { per, .. } => {
+                run_stream(&mut ctx, input, top, per, &mut w, &pb)?;
+                break;
+            }
+            Plan::Bands { band_bricks, .. } => {
+                let pdims = layout.level_dims(top - 1);
+                let f = tempfile::Builder::new()
+                    .prefix(".brickray-store-level-")
+                    .suffix(".partial")
+                    .tempfile_in(dir)
+                    .map_err(|e| StoreError::io(dir, e))?;
+                let plen =
+                    pdims.iter().map(|&d| d as u64).product::<u64>() * layout.dtype().size() as u64;
+                f.as_file()
+                    .set_len(plen)
+                    .map_err(|e| StoreError::io(f.path(), e))?;
+                run_bands(
+                    &mut ctx,
+                    input,
+                    top,
+                    band_bricks,
+                    f.as_file(),
+                    f.path(),
+                    &mut w,
+                    &pb,
+                )?;
+                let pdesc = brickray_core::VolumeDesc {
+                    dims: pdims,
+                    ..layout.volume.clone()
+                };
+                owned = Some(brickray_core::io::RawReader::new(f.path(), 0, pdesc)?);
+                _level_file = Some(f);
+                top -= 1;
+                banded += 1;
+                cur_plan = plan(&layout, top, opts.memory_bound, fixed)?;
+            }
         }
-        z = z1;
-        for l in (0..=finest).rev() {
-            let (coarse, fine) = levels.split_at_mut(l);
-            fine[0].process(&mut ctx, coarse.last_mut(), &mut w)?;
-        }
-        pb.set_position(z as u64 * desc.dims[0] as u64 * desc.dims[1] as u64);
     }
-    for (l, lb) in levels.iter().enumerate() {
-        if lb.next_slab < lb.grid[2] {
-            return Err(StoreError::BadOption {
-                option: "input",
-                reason: format!("internal: level {l} not complete"),
-            });
-        }
+    if ctx.entries.iter().any(|e| e.level == NO_ENTRY_LEVEL) {
+        return Err(StoreError::BadOption {
+            option: "input",
+            reason: "internal: octree not complete".into(),
+        });
     }
     pb.finish_and_clear();
 
@@ -320,6 +339,7 @@ pub fn build(
         raw_payload_bytes: ctx.raw_payload,
         file_bytes,
         buffer_estimate: needed,
+        banded_levels: banded,
         seconds: t0.elapsed().as_secs_f64(),
     })
 }
@@ -351,6 +371,11 @@ struct LevelBuf {
     base: u32,
     next_slab: u32,
     next_down: u32,
+    /// The slices hold level rows `row0..row0 + nrows` (all rows when streaming).
+    row0: u32,
+    nrows: u32,
+    /// Brick rows (y) this pass cuts.
+    by: (u32, u32),
 }
 
 impl LevelBuf {
@@ -366,6 +391,9 @@ impl LevelBuf {
             base: 0,
             next_slab: 0,
             next_down: 0,
+            row0: 0,
+            nrows: dims[1],
+            by: (0, dims[1].div_ceil(layout.brick)),
         }
     }
 
@@ -385,11 +413,11 @@ impl LevelBuf {
     }
 
     /// Cuts every ready brick slab, filters every ready coarser slice into
-    /// `parent`, and drops slices no longer needed.
+    /// `sink`, and drops slices no longer needed.
     fn process<W: Write>(
         &mut self,
         ctx: &mut Ctx,
-        mut parent: Option<&mut LevelBuf>,
+        mut sink: Sink<'_>,
         w: &mut W,
     ) -> Result<(), StoreError> {
         let b = ctx.layout.brick;
@@ -403,18 +431,38 @@ impl LevelBuf {
             self.emit_slab(ctx, w)?;
             self.next_slab += 1;
         }
-        if let Some(p) = parent.as_deref_mut() {
-            let pnz = p.dims[2];
-            while self.next_down < pnz {
+        let has_parent = !matches!(sink, Sink::None);
+        if has_parent {
+            let pdims = ctx.layout.level_dims(self.level - 1);
+            let size = ctx.layout.dtype().size();
+            while self.next_down < pdims[2] {
                 let need = (2 * self.next_down + 2).min(nz);
                 if self.received() < need {
                     break;
                 }
-                let mut s = p.take_buffer(
-                    p.dims[0] as usize * p.dims[1] as usize * ctx.layout.dtype().size(),
-                );
-                self.downsample(ctx, self.next_down, p.dims, &mut s);
-                p.slices.push_back(s);
+                match &mut sink {
+                    Sink::Level(p) => {
+                        let mut s = p.take_buffer(pdims[0] as usize * pdims[1] as usize * size);
+                        self.downsample(ctx, self.next_down, pdims, (0, pdims[1]), &mut s);
+                        p.slices.push_back(s);
+                    }
+                    Sink::File {
+                        file,
+                        path,
+                        rows,
+                        buf,
+                    } => {
+                        let (j0, j1) = *rows;
+                        buf.resize((j1 - j0) as usize * pdims[0] as usize * size, 0);
+                        self.downsample(ctx, self.next_down, pdims, (j0, j1), buf);
+                        let off = ((self.next_down as u64 * pdims[1] as u64 + j0 as u64)
+                            * pdims[0] as u64)
+                            * size as u64;
+                        file.write_all_at(buf, off)
+                            .map_err(|e| StoreError::io(path, e))?;
+                    }
+                    Sink::None => {}
+                }
                 self.next_down += 1;
             }
         }
@@ -425,7 +473,7 @@ impl LevelBuf {
         } else {
             keep_slab
         };
-        let keep_down = if parent.is_some() && self.next_down < self.dims[2].div_ceil(2) {
+        let keep_down = if has_parent && self.next_down < self.dims[2].div_ceil(2) {
             2 * self.next_down as u64
         } else {
             u64::MAX
@@ -442,26 +490,32 @@ impl LevelBuf {
         Ok(())
     }
 
-    /// Level slice `k` of the coarser level, filtered from slices `2k`, `2k+1`.
-    fn downsample(&self, ctx: &Ctx, k: u32, pdims: [u32; 3], out: &mut [u8]) {
+    /// Rows `rows` of level slice `k` of the coarser level, filtered from
+    /// slices `2k`, `2k+1`.
+    fn downsample(&self, ctx: &Ctx, k: u32, pdims: [u32; 3], rows: (u32, u32), out: &mut [u8]) {
         let nz = self.dims[2];
         let s0 = self.slice(2 * k);
         let s1 = self.slice((2 * k + 1).min(nz - 1));
         let dtype = ctx.layout.dtype();
-        let filter = ctx.filter;
-        let [nx, ny, _] = self.dims.map(|d| d as usize);
-        let [px, py, _] = pdims.map(|d| d as usize);
-        debug_assert_eq!(out.len(), px * py * dtype.size());
-        with_sample!(dtype, T => downsample_slice::<T>(s0, s1, nx, ny, px, py, filter, out));
+        let g = Geom {
+            nx: self.dims[0] as usize,
+            ny: self.dims[1] as usize,
+            row0: self.row0 as usize,
+            px: pdims[0] as usize,
+            rows: (rows.0 as usize, rows.1 as usize),
+        };
+        debug_assert_eq!(out.len(), g.px * (g.rows.1 - g.rows.0) * dtype.size());
+        with_sample!(dtype, T => downsample_slice::<T>(s0, s1, &g, ctx.filter, out));
     }
 
     /// Cuts, classifies, compresses and writes the bricks of slab `next_slab`.
     fn emit_slab<W: Write>(&self, ctx: &mut Ctx, w: &mut W) -> Result<(), StoreError> {
         let bz = self.next_slab;
-        let [gx, gy, _] = self.grid;
+        let [gx, _, _] = self.grid;
+        let (by_start, gy) = self.by;
         let bb = ctx.layout.brick_bytes() as u64;
         let rows_per_group = (ctx.group_cap / (bb * gx as u64).max(1)).max(1) as u32;
-        let mut by0 = 0;
+        let mut by0 = by_start;
         while by0 < gy {
             let by1 = (by0 + rows_per_group).min(gy);
             let keys: Vec<NodeKey> = (by0..by1)
@@ -519,7 +573,7 @@ impl LevelBuf {
             let z = (z0 + k).clamp(0, nz - 1) as u32;
             let sl = self.slice(z);
             for j in 0..side {
-                let y = (y0 + j).clamp(0, ny - 1) as usize;
+                let y = (y0 + j).clamp(0, ny - 1) as usize - self.row0 as usize;
                 let src_row = &sl[y * nx as usize * size..(y + 1) * nx as usize * size];
                 let dst = &mut buf[((k * side + j) as usize) * row..][..row];
                 // Left clamp.
@@ -575,27 +629,36 @@ impl LevelBuf {
     }
 }
 
-#[allow(clippy::too_many_arguments)]
-fn downsample_slice<T: Sample>(
-    s0: &[u8],
-    s1: &[u8],
+/// Geometry of one downsampling step.
+struct Geom {
+    /// Fine level width and height.
     nx: usize,
     ny: usize,
+    /// First fine row held in the slices.
+    row0: usize,
+    /// Coarse width.
     px: usize,
-    py: usize,
-    filter: Filter,
-    out: &mut [u8],
-) {
+    /// Coarse rows to compute.
+    rows: (usize, usize),
+}
+
+fn downsample_slice<T: Sample>(s0: &[u8], s1: &[u8], g: &Geom, filter: Filter, out: &mut [u8]) {
     let sz = T::SIZE;
+    let (nx, ny, px) = (g.nx, g.ny, g.px);
+    let row = |s: &'_ [u8], y: usize| -> std::ops::Range<usize> {
+        let _ = s;
+        (y - g.row0) * nx * sz..(y - g.row0 + 1) * nx * sz
+    };
     let rows = out.par_chunks_mut(px * sz).with_min_len(8);
-    rows.enumerate().take(py).for_each(|(j, orow)| {
+    rows.enumerate().for_each(|(jj, orow)| {
+        let j = g.rows.0 + jj;
         let y0 = (2 * j).min(ny - 1);
         let y1 = (2 * j + 1).min(ny - 1);
         let r = [
-            &s0[y0 * nx * sz..(y0 + 1) * nx * sz],
-            &s0[y1 * nx * sz..(y1 + 1) * nx * sz],
-            &s1[y0 * nx * sz..(y0 + 1) * nx * sz],
-            &s1[y1 * nx * sz..(y1 + 1) * nx * sz],
+            &s0[row(s0, y0)],
+            &s0[row(s0, y1)],
+            &s1[row(s1, y0)],
+            &s1[row(s1, y1)],
         ];
         for i in 0..px {
             let x0 = (2 * i).min(nx - 1) * sz;
@@ -614,4 +677,213 @@ fn downsample_slice<T: Sample>(
             T::filter(v, filter).write(&mut orow[i * sz..]);
         }
     });
+}
+
+/// Where a level's filtered slices go.
+enum Sink<'a> {
+    /// Nowhere (the root level).
+    None,
+    /// The next coarser level's window.
+    Level(&'a mut LevelBuf),
+    /// Rows `rows` of each coarser slice, into a raw file of the coarser level.
+    File {
+        file: &'a std::fs::File,
+        path: &'a Path,
+        rows: (u32, u32),
+        buf: &'a mut Vec<u8>,
+    },
+}
+
+/// How the remaining levels are built.
+#[derive(Debug, Clone, Copy)]
+enum Plan {
+    /// All levels `0..=top` in one streaming pass, reading `per` slices a step.
+    Stream { per: u32, need: u64 },
+    /// Level `top` alone, `band_bricks` brick rows per pass.
+    Bands { band_bricks: u32, need: u64 },
+}
+
+impl Plan {
+    fn need(&self) -> u64 {
+        match *self {
+            Plan::Stream { need, .. } | Plan::Bands { need, .. } => need,
+        }
+    }
+}
+
+/// Slices read per step for slices of `bytes` (at most ~8 MiB, at most a brick).
+fn per_step(bytes: u64, brick: u32) -> u32 {
+    ((8u64 << 20) / bytes.max(1)).clamp(1, brick as u64) as u32
+}
+
+/// Rows a band of `band_bricks` brick rows starting at brick row `by0` holds.
+fn band_rows(layout: &OctreeLayout, ny: u32, by0: u32, by1: u32) -> (u32, u32) {
+    let b = layout.brick as u64;
+    let a = layout.apron as u64;
+    let lo = (by0 as u64 * b).saturating_sub(a);
+    let hi = (by1 as u64 * b + a.max(1)).min(ny as u64);
+    (lo as u32, hi as u32)
+}
+
+/// Chooses how to build levels `0..=top` within `bound` bytes.
+fn plan(layout: &OctreeLayout, top: u8, bound: u64, fixed: u64) -> Result<Plan, StoreError> {
+    let d = layout.level_dims(top);
+    let size = layout.dtype().size() as u64;
+    let slice = d[0] as u64 * d[1] as u64 * size;
+    let side = layout.stored_side() as u64;
+    let per = per_step(slice, layout.brick);
+    // Rolling windows: brick + 2 apron + 2 slices per level plus the slices read
+    // in one step and as many recycled buffers; levels shrink 4x.
+    let need = (side + 2 + 2 * per as u64) * slice * 4 / 3 + fixed;
+    if need <= bound || top == 0 {
+        return if need <= bound {
+            Ok(Plan::Stream { per, need })
+        } else {
+            Err(StoreError::MemoryBound {
+                needed: need,
+                bound,
+                slab: side * slice,
+            })
+        };
+    }
+    // Bands: one full input slice to read into, the band window, one band of
+    // coarser rows.
+    let gy = d[1].div_ceil(layout.brick);
+    let band_need = |bb: u32| {
+        let (lo, hi) = band_rows(layout, d[1], 0, bb.min(gy));
+        let band = (hi - lo) as u64 * d[0] as u64 * size;
+        let per = per_step(band, layout.brick) as u64;
+        slice + (side + 2 + 2 * per) * band + band / 2 + fixed
+    };
+    let mut lo = 1u32;
+    if band_need(lo) > bound {
+        return Err(StoreError::MemoryBound {
+            needed: band_need(lo),
+            bound,
+            slab: side * slice,
+        });
+    }
+    let mut hi = gy;
+    while lo < hi {
+        let mid = (lo + hi).div_ceil(2);
+        if band_need(mid) <= bound {
+            lo = mid
+        } else {
+            hi = mid - 1
+        }
+    }
+    Ok(Plan::Bands {
+        band_bricks: lo,
+        need: band_need(lo),
+    })
+}
+
+/// Builds levels `0..=top` from the level-`top` volume in one streaming pass.
+fn run_stream<W: Write>(
+    ctx: &mut Ctx,
+    input: &mut dyn VolumeReader,
+    top: u8,
+    per: u32,
+    w: &mut W,
+    pb: &indicatif::ProgressBar,
+) -> Result<(), StoreError> {
+    let layout = ctx.layout.clone();
+    let mut levels: Vec<LevelBuf> = (0..=top).map(|l| LevelBuf::new(&layout, l, per)).collect();
+    let finest = top as usize;
+    let d = layout.level_dims(top);
+    let slice_bytes = d[0] as usize * d[1] as usize * layout.dtype().size();
+    let full = top + 1 == layout.levels;
+    let mut z = 0;
+    while z < d[2] {
+        let z1 = (z + per).min(d[2]);
+        for zi in z..z1 {
+            let mut s = levels[finest].take_buffer(slice_bytes);
+            input.read_slices(zi, zi + 1, &mut s)?;
+            levels[finest].slices.push_back(s);
+        }
+        z = z1;
+        for l in (0..=finest).rev() {
+            let (coarse, fine) = levels.split_at_mut(l);
+            let sink = match coarse.last_mut() {
+                Some(p) => Sink::Level(p),
+                None => Sink::None,
+            };
+            fine[0].process(ctx, sink, w)?;
+        }
+        if full {
+            pb.set_position(z as u64 * d[0] as u64 * d[1] as u64);
+        }
+    }
+    Ok(())
+}
+
+/// Builds level `top` in bands of `band_bricks` brick rows (one pass over the
+/// input each), writing the level `top - 1` volume to `file`.
+#[allow(clippy::too_many_arguments)]
+fn run_bands<W: Write>(
+    ctx: &mut Ctx,
+    input: &mut dyn VolumeReader,
+    top: u8,
+    band_bricks: u32,
+    file: &std::fs::File,
+    path: &Path,
+    w: &mut W,
+    pb: &indicatif::ProgressBar,
+) -> Result<(), StoreError> {
+    let layout = ctx.layout.clone();
+    let d = layout.level_dims(top);
+    let pd = layout.level_dims(top - 1);
+    let size = layout.dtype().size();
+    let gy = d[1].div_ceil(layout.brick);
+    let bands = gy.div_ceil(band_bricks);
+    let full = top + 1 == layout.levels;
+    let mut slice = vec![0u8; d[0] as usize * d[1] as usize * size];
+    let mut out_rows = Vec::new();
+    for band in 0..bands {
+        let by0 = band * band_bricks;
+        let by1 = (by0 + band_bricks).min(gy);
+        let (r0, r1) = band_rows(&layout, d[1], by0, by1);
+        // Coarser rows this band filters: every row whose source rows start here.
+        let b = layout.brick as u64;
+        let j0 = ((by0 as u64 * b).div_ceil(2)).min(pd[1] as u64) as u32;
+        let j1 = if by1 == gy {
+            pd[1]
+        } else {
+            ((by1 as u64 * b).div_ceil(2)).min(pd[1] as u64) as u32
+        };
+        let row_bytes = d[0] as usize * size;
+        let band_bytes = (r1 - r0) as usize * row_bytes;
+        let per = per_step(band_bytes as u64, layout.brick);
+        let mut lb = LevelBuf::new(&layout, top, per);
+        lb.row0 = r0;
+        lb.nrows = r1 - r0;
+        lb.by = (by0, by1);
+        let mut z = 0;
+        while z < d[2] {
+            let z1 = (z + per).min(d[2]);
+            for zi in z..z1 {
+                input.read_slices(zi, zi + 1, &mut slice)?;
+                let mut s = lb.take_buffer(band_bytes);
+                s.copy_from_slice(&slice[r0 as usize * row_bytes..r1 as usize * row_bytes]);
+                lb.slices.push_back(s);
+            }
+            z = z1;
+            let sink = if j1 > j0 {
+                Sink::File {
+                    file,
+                    path,
+                    rows: (j0, j1),
+                    buf: &mut out_rows,
+                }
+            } else {
+                Sink::None
+            };
+            lb.process(ctx, sink, w)?;
+            if full {
+                let done = (band as u64 * d[2] as u64 + z as u64) * layout.volume.voxel_count();
+                pb.set_position(done / (bands as u64 * d[2] as u64));
+            }
+        }
+    }
+    Ok(())
 }

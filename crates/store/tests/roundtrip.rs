@@ -163,12 +163,44 @@ fn memory_bound_is_enforced() {
     let dims = [512, 512, 4];
     let mut r = MemReader::new(dims, DType::U8, vec![0; 512 * 512 * 4]);
     let o = BuildOptions {
-        memory_bound: 4 << 20,
+        memory_bound: 300 << 10,
         ..BuildOptions::default()
     };
     let dir = tempfile::tempdir().unwrap();
     let err = build(&mut r, &dir.path().join("v.brick"), &o).unwrap_err();
     assert!(matches!(err, StoreError::MemoryBound { .. }), "{err}");
+}
+
+#[test]
+fn banded_build_under_a_tight_memory_bound() {
+    // Slices too large for one streaming pass under the bound: the finest
+    // levels are built in y-bands through temporary level files.
+    for (dims, dtype, brick, apron, bound) in [
+        ([200u32, 300, 50], DType::U8, 8u32, 2u32, 1_500_000u64),
+        ([130, 257, 33], DType::I16, 8, 1, 1_500_000),
+        ([64, 190, 21], DType::F32, 4, 0, 900_000),
+        ([97, 250, 19], DType::U16, 6, 3, 1_200_000),
+    ] {
+        let bytes = test_volume(dims, dtype, 3);
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("v.brick");
+        let mut r = MemReader::new(dims, dtype, bytes.clone());
+        let o = BuildOptions {
+            memory_bound: bound,
+            ..opts(brick, apron, Filter::Average)
+        };
+        let report = build(&mut r, &out, &o).unwrap();
+        assert!(report.banded_levels >= 1, "{dims:?}: {report:?}");
+        assert!(report.buffer_estimate <= bound);
+        let store = open(&out).unwrap();
+        let levels = reference_levels(store.layout(), decode(dtype, &bytes), Filter::Average);
+        check_source(&store, &levels, None);
+        assert_eq!(
+            std::fs::read_dir(dir.path()).unwrap().count(),
+            1,
+            "temporary files left"
+        );
+    }
 }
 
 #[test]
@@ -281,5 +313,31 @@ proptest! {
         let dtype = [DType::U8, DType::U16, DType::I16, DType::F32][dt];
         let filter = if max { Filter::Max } else { Filter::Average };
         roundtrip([nx, ny, nz], dtype, &opts(brick, apron, filter), seed);
+    }
+
+    #[test]
+    fn random_dims_banded(
+        nx in 8u32..90, ny in 30u32..120, nz in 1u32..20,
+        brick in 2u32..9, apron in 0u32..4,
+        dt in 0usize..4, bound_kib in 40u64..400, seed in any::<u64>(),
+    ) {
+        let dtype = [DType::U8, DType::U16, DType::I16, DType::F32][dt];
+        let dims = [nx, ny, nz];
+        let bytes = test_volume(dims, dtype, seed);
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("v.brick");
+        let mut r = MemReader::new(dims, dtype, bytes.clone());
+        let o = BuildOptions { memory_bound: bound_kib << 10, ..opts(brick, apron, Filter::Average) };
+        match build(&mut r, &out, &o) {
+            Err(StoreError::MemoryBound { .. }) => {}
+            Err(e) => panic!("{e}"),
+            Ok(report) => {
+                prop_assert!(report.buffer_estimate <= o.memory_bound);
+                let store = open(&out).unwrap();
+                let levels = reference_levels(store.layout(), decode(dtype, &bytes), Filter::Average);
+                check_source(&store, &levels, None);
+            }
+        }
+        prop_assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), usize::from(out.exists()));
     }
 }
