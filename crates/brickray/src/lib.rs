@@ -24,7 +24,7 @@ pub use brickray_core::{
 };
 pub use brickray_core::{BrickSource, NodeKey, OctreeLayout};
 pub use brickray_render::{
-    FrameDesc, FrameStats, OutOfCoreConfig, OutOfCoreStats, PrepareError, RenderError, TargetDesc,
-    VolumeRenderer,
+    FrameDesc, FrameStats, OutOfCoreConfig, OutOfCoreStats, PrepareError, RenderError,
+    RendererStats, TargetDesc, VolumeRenderer,
 };
 pub use wgpu;

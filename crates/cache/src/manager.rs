@@ -451,6 +451,22 @@ impl BrickManager {
         self.pool.clear();
     }
 
+    /// Reads the root brick synchronously into the CPU cache, so the very first
+    /// frame already shows a coarse image. Meant for set-up time, not the frame
+    /// path (it blocks on one brick read).
+    pub fn preload_root(&mut self) -> Result<(), brickray_core::BrickError> {
+        let key = NodeKey::ROOT;
+        let info = self.source.node(key)?;
+        self.meta.insert(key, Some(info));
+        if matches!(info.kind, brickray_core::NodeKind::Empty) {
+            return Ok(());
+        }
+        let mut buf = vec![0u8; self.layout.brick_bytes()];
+        self.source.read_brick(key, &mut buf)?;
+        self.cpu.insert(key, buf.into());
+        Ok(())
+    }
+
     /// Moves the volume in the world.
     pub fn set_volume_frame(&mut self, frame: VolumeFrame) {
         self.volume_frame = frame;

@@ -68,6 +68,17 @@ pub struct FrameStats {
     pub uploaded_bytes: u64,
 }
 
+/// Everything the renderer knows about its last frame.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct RendererStats {
+    /// What the last `prepare` did.
+    pub frame: FrameStats,
+    /// The out-of-core path's figures (working set, pool occupancy, bytes
+    /// uploaded, CPU and GPU cache hit rates, requests in flight, frame phases);
+    /// `None` in core.
+    pub out_of_core: Option<OutOfCoreStats>,
+}
+
 /// Upper bound of samples along one ray (a guard, not a quality setting).
 const MAX_STEPS: u32 = 1 << 20;
 /// Upper bound of index leaves visited by one ray out of core (a guard).
@@ -174,6 +185,7 @@ pub struct VolumeRenderer {
     /// The ray-cast bind group and the host depth view it was built with.
     raycast_bg: Option<(wgpu::BindGroup, Option<wgpu::TextureView>)>,
     prepared: bool,
+    last_frame: FrameStats,
 }
 
 fn storage_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
@@ -442,6 +454,7 @@ impl VolumeRenderer {
             frame_targets: None,
             raycast_bg: None,
             prepared: false,
+            last_frame: FrameStats::default(),
         })
     }
 
@@ -483,6 +496,14 @@ impl VolumeRenderer {
         self.volume = None;
         self.raycast_bg = None;
         Ok(())
+    }
+
+    /// Statistics of the last frame.
+    pub fn stats(&self) -> RendererStats {
+        RendererStats {
+            frame: self.last_frame,
+            out_of_core: self.out_of_core_stats(),
+        }
     }
 
     /// Statistics of the out-of-core path's last frame (`None` in core).

@@ -125,6 +125,12 @@ impl OocVolume {
             },
         )
         .map_err(|e| RenderError::OutOfCore(e.to_string()))?;
+        let mut manager = manager;
+        // The root is read now (set-up time, not the frame path), so the first
+        // frame already shows a coarse image.
+        manager
+            .preload_root()
+            .map_err(|e| RenderError::OutOfCore(e.to_string()))?;
         let atlas_dims = manager.pool().atlas_dims();
         let atlas = device.create_texture(&wgpu::TextureDescriptor {
             label: Some("brickray-render brick atlas"),
