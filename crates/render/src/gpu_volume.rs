@@ -200,11 +200,11 @@ impl GpuVolume {
         let grid = MacroCellGrid::build(vol, CELL);
         let ranges: &[u8] = bytemuck::cast_slice(&grid.ranges);
         let max_storage = device.limits().max_storage_buffer_binding_size;
-        if ranges.len() as u64 > max_storage as u64 {
+        if ranges.len() as u64 > max_storage {
             return Err(RenderError::LowDeviceLimit {
                 what: "macro-cell ranges",
                 required: ranges.len() as u64,
-                limit: max_storage as u64,
+                limit: max_storage,
             });
         }
         let cell_ranges = device.create_buffer(&wgpu::BufferDescriptor {

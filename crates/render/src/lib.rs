@@ -317,10 +317,8 @@ impl VolumeRenderer {
         if !blendable {
             return Err(RenderError::BadTargetFormat(targets.color_format));
         }
-        if let Some(d) = targets.depth_format {
-            if !d.has_depth_aspect() {
-                return Err(RenderError::BadDepthFormat(d));
-            }
+        if let Some(d) = targets.depth_format.filter(|d| !d.has_depth_aspect()) {
+            return Err(RenderError::BadDepthFormat(d));
         }
         let raycast_bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("brickray-render raycast"),
@@ -649,16 +647,7 @@ impl VolumeRenderer {
         self.ensure_targets(device, frame.width, frame.height);
         let mut uploaded = 0;
         if let (Some(ooc), Some(tf)) = (self.ooc.as_mut(), self.tf_cpu.as_ref()) {
-            let (bytes, grew) = ooc.update(
-                device,
-                queue,
-                &frame.camera,
-                frame.frame,
-                frame.width,
-                frame.height,
-                s.mode,
-                tf,
-            )?;
+            let (bytes, grew) = ooc.update(device, queue, frame, tf)?;
             uploaded += bytes;
             if grew {
                 self.raycast_bg = None;

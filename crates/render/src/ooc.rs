@@ -6,7 +6,7 @@
 use crate::error::RenderError;
 use crate::gpu_volume::SampleEncoding;
 use brickray_cache::{BrickManager, FrameStats as CacheStats, LeafKind, ManagerConfig};
-use brickray_core::{BrickSource, Camera, OctreeLayout, RenderMode, TransferFunction, VolumeFrame};
+use brickray_core::{BrickSource, OctreeLayout, TransferFunction, VolumeFrame};
 use std::sync::Arc;
 use std::time::Instant;
 
@@ -148,11 +148,11 @@ impl OocVolume {
         });
         let slot_count = manager.pool().slot_count() as usize;
         let slots_size = (slot_count.max(1) * std::mem::size_of::<SlotInfo>()) as u64;
-        if slots_size > limits.max_storage_buffer_binding_size as u64 {
+        if slots_size > limits.max_storage_buffer_binding_size {
             return Err(RenderError::LowDeviceLimit {
                 what: "brick slot table",
                 required: slots_size,
-                limit: limits.max_storage_buffer_binding_size as u64,
+                limit: limits.max_storage_buffer_binding_size,
             });
         }
         let slots = device.create_buffer(&wgpu::BufferDescriptor {
@@ -191,13 +191,11 @@ impl OocVolume {
         &mut self,
         device: &wgpu::Device,
         queue: &wgpu::Queue,
-        camera: &Camera,
-        world: VolumeFrame,
-        width: u32,
-        height: u32,
-        mode: RenderMode,
+        desc: &crate::FrameDesc<'_>,
         tf: &TransferFunction,
     ) -> Result<(u64, bool), RenderError> {
+        let (world, camera) = (desc.frame, &desc.camera);
+        let (width, height, mode) = (desc.width, desc.height, desc.settings.mode);
         if world != self.frame_of_world {
             self.manager.set_volume_frame(world);
             self.frame_of_world = world;
