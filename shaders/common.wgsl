@@ -1,5 +1,6 @@
 // Functions shared by brickray's ray casters. Concatenated in front of a ray-cast
-// shader that declares `params` (type Params) and `tf` (array<vec4<f32>>).
+// shader that declares `params` (type Params), `tf` (array<vec4<f32>>) and
+// `host_depth` (texture_depth_2d).
 // See docs/rendering-model.md.
 
 struct Params {
@@ -89,6 +90,32 @@ fn clip_box(r: RaySetup, lo: vec3<f32>, hi: vec3<f32>) -> vec2<f32> {
         }
     }
     return vec2<f32>(t0, t1);
+}
+
+// A pixel's ray, the host's depth there (1 without one) and the ray's extent in
+// the volume box, clipped to the host's depth.
+struct RayStart {
+    r: RaySetup,
+    host: f32,
+    t0: f32,
+    t1: f32,
+}
+
+fn start_ray(px: vec2<u32>) -> RayStart {
+    var s: RayStart;
+    s.r = ray_through_pixel(px);
+    s.host = 1.0;
+    let with_host = (params.size.z & FLAG_HOST_DEPTH) != 0u;
+    if (with_host) {
+        s.host = textureLoad(host_depth, vec2<i32>(px), 0);
+    }
+    let tb = clip_box(s.r, vec3<f32>(0.0), vec3<f32>(1.0));
+    s.t0 = max(tb.x, 0.0);
+    s.t1 = tb.y;
+    if (with_host) {
+        s.t1 = min(s.t1, t_at_depth(s.r, s.host));
+    }
+    return s;
 }
 
 fn t_at_depth(r: RaySetup, depth: f32) -> f32 {

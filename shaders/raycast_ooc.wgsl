@@ -70,22 +70,14 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let px = gid.xy;
     let flags = params.size.z;
     let mode = flags & MODE_MASK;
-    let r = ray_through_pixel(px);
-
-    var host = 1.0;
-    if ((flags & FLAG_HOST_DEPTH) != 0u) {
-        host = textureLoad(host_depth, vec2<i32>(px), 0);
-    }
+    let start = start_ray(px);
+    let r = start.r;
+    let host = start.host;
+    let t0 = start.t0;
+    let t1 = start.t1;
     var color = vec4<f32>(0.0);
     var depth = host;
     var samples = 0u;
-
-    let tb = clip_box(r, vec3<f32>(0.0), vec3<f32>(1.0));
-    let t0 = max(tb.x, 0.0);
-    var t1 = tb.y;
-    if ((flags & FLAG_HOST_DEPTH) != 0u) {
-        t1 = min(t1, t_at_depth(r, host));
-    }
     if (t1 > t0) {
         let oo = r.tex_origin * params.octree.xyz;
         let od = r.tex_dir * params.octree.xyz;
