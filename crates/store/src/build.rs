@@ -9,6 +9,11 @@
 //! to the next coarser level. Slices no longer needed are dropped, so memory is
 //! about `(brick + 2 * apron + 2) * 4/3` finest slices whatever the depth.
 //!
+//! When the slices are too large for that pass to fit the memory bound, the
+//! finest level is built alone in y-bands (one pass over the input per band of
+//! brick rows), writing the next coarser level volume to a temporary raw file
+//! that is the input of the remaining levels (see `docs/store-format.md`).
+//!
 //! Children are always cut before their parent, so an inner node's min/max is the
 //! union of its own stored voxels and its children's ranges (the range of the
 //! whole subtree), and the empty threshold applies to that subtree range.
