@@ -535,6 +535,12 @@ impl LevelBuf {
                     |buf, &key| self.cut_brick(shared, key, buf),
                 )
                 .collect();
+            if let Some((e, _)) = results
+                .iter()
+                .find(|(e, _)| !(e.min.is_finite() && e.max.is_finite()))
+            {
+                return Err(StoreError::NonFinite { key: e.key() });
+            }
             for (mut e, payload) in results {
                 if let Some(p) = payload {
                     e.offset = ctx.offset;
@@ -596,7 +602,14 @@ impl LevelBuf {
                 }
             }
         }
-        let (lo, hi) = range_dyn(lay.dtype(), buf);
+        let (mut lo, mut hi) = range_dyn(lay.dtype(), buf);
+        if lay.dtype() == brickray_core::DType::F32
+            && buf
+                .chunks_exact(4)
+                .any(|c| !f32::from_le_bytes([c[0], c[1], c[2], c[3]]).is_finite())
+        {
+            (lo, hi) = (f32::NAN, f32::NAN);
+        }
         let uniform = lo == hi;
         // Subtree range: own voxels and the children's ranges.
         let (mut smin, mut smax) = (lo, hi);

@@ -133,6 +133,12 @@ pub enum StoreError {
         /// Bytes given.
         actual: usize,
     },
+    /// The input holds NaN or infinite samples (f32), first met in this node.
+    #[error("input holds NaN or infinite samples (in the voxels of node {key:?})")]
+    NonFinite {
+        /// The node whose voxels hold the first non-finite sample found.
+        key: NodeKey,
+    },
     /// Build options are invalid.
     #[error("invalid build option `{option}`: {reason}")]
     BadOption {

@@ -159,6 +159,19 @@ fn interrupted_build_leaves_no_store() {
 }
 
 #[test]
+fn non_finite_input_is_refused() {
+    let dims = [20, 10, 9];
+    let mut v = decode(DType::F32, &test_volume(dims, DType::F32, 1));
+    v[20 * 10 * 7 + 13] = f32::NAN;
+    let mut r = MemReader::new(dims, DType::F32, encode(DType::F32, &v));
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("v.brick");
+    let err = build(&mut r, &out, &opts(4, 2, Filter::Average)).unwrap_err();
+    assert!(matches!(err, StoreError::NonFinite { .. }), "{err}");
+    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
+}
+
+#[test]
 fn memory_bound_is_enforced() {
     let dims = [512, 512, 4];
     let mut r = MemReader::new(dims, DType::U8, vec![0; 512 * 512 * 4]);
