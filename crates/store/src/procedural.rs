@@ -5,7 +5,9 @@
 //! finer one, at any size, without evaluating the finest level:
 //!
 //! * level 0 (at most `brick^3` voxels) is smooth value noise
-//!   ([`brickray_core::synthetic::fractal_noise`]) mapped to 16..=240;
+//!   ([`brickray_core::synthetic::fractal_noise`]) mapped to 16..=240
+//!   ([`ProceduralSource::fractal_noise`]), or concentric shells in a ball in
+//!   air of exactly 0 ([`ProceduralSource::sphere_shells`]);
 //! * a level-`j` voxel `c` with parent `p = c / 2` (level `j-1`, value `v`) has the
 //!   value `v + sx*Ax + sy*Ay + sz*Az`, where `s = +1` for an even index and `-1`
 //!   for an odd one along that axis, and `A` are integer displacements hashed from
@@ -22,7 +24,9 @@
 //! level a few steps coarser (about 3^3 voxels) is evaluated and widened by the
 //! largest displacement the remaining levels can add (`sum 3 * ceil(amp_j)`), then
 //! clamped to 0..=255. That bound covers the node's stored voxels and its whole
-//! subtree, like the store's subtree ranges.
+//! subtree, like the store's subtree ranges. A value of 0 or 255 leaves no room
+//! for displacements, so a footprint that is all 0 (or all 255) is exact: the
+//! node is `Uniform(0)` (or `Uniform(255)`).
 
 use crate::error::StoreError;
 use brickray_core::synthetic::fractal_noise;
@@ -35,11 +39,21 @@ use brickray_core::{
 pub struct ProceduralSource {
     layout: OctreeLayout,
     seed: u64,
+    field: Field,
     /// Per level: displacement amplitude (integer bound) applied to reach it.
     amp: Vec<i32>,
     /// Per level: largest total displacement from a voxel of this level to any
     /// finer descendant.
     reach: Vec<i32>,
+}
+
+/// The coarse (level-0) field the cascade starts from.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Field {
+    /// Value noise in 16..=240.
+    Noise,
+    /// Concentric shells in a ball, exact 0 (air) outside it.
+    Shells,
 }
 
 fn mix(mut h: u64) -> u64 {
@@ -59,6 +73,21 @@ impl ProceduralSource {
         apron: u32,
     ) -> Result<ProceduralSource, StoreError> {
         ProceduralSource::with_seed(dims, brick, apron, 0x5EED_B41C)
+    }
+
+    /// Concentric shells (values 60, 120, 200) in a ball of 0.45 times the
+    /// octree cube's side, centred in the volume, in air of exactly 0, with the
+    /// same cascade of fine detail inside. Nodes wholly in the air are
+    /// `Uniform(0)`, found by [`BrickSource::node`] without evaluating them,
+    /// so empty-space skipping can be tested at any scale.
+    pub fn sphere_shells(
+        dims: [u64; 3],
+        brick: u32,
+        apron: u32,
+    ) -> Result<ProceduralSource, StoreError> {
+        let mut s = ProceduralSource::with_seed(dims, brick, apron, 0x5E11_5EED)?;
+        s.field = Field::Shells;
+        Ok(s)
     }
 
     /// [`fractal_noise`](Self::fractal_noise) with a chosen seed.
@@ -110,10 +139,28 @@ impl ProceduralSource {
             seed,
             amp,
             reach,
+            field: Field::Noise,
         })
     }
 
     fn root_value(&self, p: [u64; 3]) -> i32 {
+        if self.field == Field::Shells {
+            let d = self.layout.level_dims(0);
+            let r2: f64 = (0..3)
+                .map(|a| {
+                    // Unit coordinates of the octree cube, so the ball is round
+                    // in voxels whatever the volume's shape.
+                    let c = d[a] as f64 * 0.5;
+                    let u = (p[a] as f64 + 0.5 - c) / self.layout.brick as f64;
+                    u * u
+                })
+                .sum();
+            let r = r2.sqrt() * 2.0;
+            if r > 0.9 {
+                return 0;
+            }
+            return [60, 120, 200][(r * 10.0) as usize % 3];
+        }
         let period = (self.layout.brick as f64 / 2.0).max(2.0);
         let q = p.map(|c| c as f64 + (self.seed % 977) as f64);
         let n = fractal_noise(q, period, 3);
@@ -252,6 +299,14 @@ impl BrickSource for ProceduralSource {
         let (mn, mx) = vals
             .iter()
             .fold((i32::MAX, i32::MIN), |(a, b), &v| (a.min(v), b.max(v)));
+        // 0 and 255 have no room for displacements: such a region is exact.
+        if mn == mx && (mn == 0 || mn == 255) {
+            return Ok(NodeInfo {
+                kind: NodeKind::Uniform(mn as f32),
+                min: mn as f32,
+                max: mn as f32,
+            });
+        }
         let r = self.reach[m as usize];
         Ok(NodeInfo {
             kind: NodeKind::Data,

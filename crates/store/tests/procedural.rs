@@ -44,6 +44,46 @@ fn inner_nodes_equal_the_filter_of_their_children() {
 }
 
 #[test]
+fn sphere_shells_exact_and_uniform_air() {
+    for (dims, brick, apron) in [
+        ([64u64, 64, 64], 4u32, 2u32),
+        ([45, 30, 19], 4, 1),
+        ([70, 70, 40], 8, 2),
+    ] {
+        let src = ProceduralSource::sphere_shells(dims, brick, apron).unwrap();
+        let lay = src.layout().clone();
+        let levels = reference_levels(&lay, finest(&src), Filter::Average);
+        check_source(&src, &levels, None);
+        let leaf = lay.levels - 1;
+        let uniform = (0..1u32 << leaf)
+            .flat_map(|z| (0..1u32 << leaf).map(move |y| (y, z)))
+            .flat_map(|(y, z)| (0..1u32 << leaf).map(move |x| NodeKey::new(leaf, x, y, z)))
+            .filter(|k| lay.in_volume(*k))
+            .filter(|k| matches!(src.node(*k).unwrap().kind, NodeKind::Uniform(_)))
+            .count();
+        // The ball is sized by the octree cube: cubic volumes have air corners.
+        if dims[0] == dims[1] && dims[1] == dims[2] {
+            assert!(uniform > 0, "{dims:?}: no uniform air bricks");
+        }
+    }
+    // At 65536^3 the corners are air, found without evaluating bricks.
+    let src = ProceduralSource::sphere_shells([65536; 3], 32, 2).unwrap();
+    let mut buf = vec![0u8; src.layout().brick_bytes()];
+    for key in [
+        NodeKey::new(3, 0, 0, 0),
+        NodeKey::new(11, 0, 0, 0),
+        NodeKey::new(11, 2047, 5, 2047),
+    ] {
+        let info = src.node(key).unwrap();
+        assert_eq!(info.kind, NodeKind::Uniform(0.0), "{key:?}");
+        src.read_brick(key, &mut buf).unwrap();
+        assert!(buf.iter().all(|&v| v == 0));
+    }
+    let centre = NodeKey::new(11, 1024, 1024, 1024);
+    assert_eq!(src.node(centre).unwrap().kind, NodeKind::Data);
+}
+
+#[test]
 fn store_built_from_the_finest_level_matches() {
     let src = ProceduralSource::fractal_noise([50, 37, 29], 8, 2).unwrap();
     let lay = src.layout().clone();
