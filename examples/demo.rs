@@ -11,8 +11,8 @@
 //! streams that (or, with `--in-core`, uploads the file whole).
 
 use brickray::{
-    Camera, FrameDesc, OutOfCoreConfig, RenderMode, RenderSettings, Shading, TargetDesc, TransferFunction,
-    VolumeFrame, VolumeRenderer,
+    Camera, FrameDesc, OutOfCoreConfig, RenderMode, RenderSettings, Shading, TargetDesc,
+    TransferFunction, VolumeFrame, VolumeRenderer,
 };
 use brickray_harness::{GpuContext, Offscreen};
 use std::path::PathBuf;
@@ -29,7 +29,14 @@ struct Args {
 }
 
 fn parse() -> Result<Args, Box<dyn std::error::Error>> {
-    let mut a = Args { volume: None, in_core: false, frames: 12, size: 256, pool_mib: 64, out: "out/demo".into() };
+    let mut a = Args {
+        volume: None,
+        in_core: false,
+        frames: 12,
+        size: 256,
+        pool_mib: 64,
+        out: "out/demo".into(),
+    };
     let mut it = std::env::args().skip(1);
     while let Some(arg) = it.next() {
         let mut val = || it.next().ok_or_else(|| format!("{arg} needs a value"));
@@ -57,13 +64,21 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     println!("adapter: {}", gpu.describe());
     let mut renderer = VolumeRenderer::new(
         &gpu.device,
-        TargetDesc { color_format: brickray_harness::COLOR_FORMAT, depth_format: Some(brickray_harness::DEPTH_FORMAT) },
+        TargetDesc {
+            color_format: brickray_harness::COLOR_FORMAT,
+            depth_format: Some(brickray_harness::DEPTH_FORMAT),
+        },
     )?;
-    let config = OutOfCoreConfig { gpu_budget_bytes: args.pool_mib << 20, ..Default::default() };
+    let config = OutOfCoreConfig {
+        gpu_budget_bytes: args.pool_mib << 20,
+        ..Default::default()
+    };
     let (frame, tf, mode) = match &args.volume {
         None => {
             let dims = [4096u64; 3];
-            let source = Arc::new(brickray::store::ProceduralSource::fractal_noise(dims, 32, 2)?);
+            let source = Arc::new(brickray::store::ProceduralSource::fractal_noise(
+                dims, 32, 2,
+            )?);
             let l = brickray::BrickSource::layout(&*source).clone();
             println!(
                 "volume: procedural fractal noise {dims:?} u8 ({:.0} GiB virtual), {} levels of {}^3 bricks; GPU pool {} MiB",
@@ -75,7 +90,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             let frame = VolumeFrame::centered([4096; 3], [1.0; 3]);
             renderer.set_volume_source(&gpu.device, source, frame, config)?;
             let tf = TransferFunction::from_points(
-                &[(0.45, [0.1, 0.3, 0.8, 0.0]), (0.6, [0.3, 0.7, 1.0, 0.05]), (0.75, [1.0, 0.9, 0.6, 0.6])],
+                &[
+                    (0.45, [0.1, 0.3, 0.8, 0.0]),
+                    (0.6, [0.3, 0.7, 1.0, 0.05]),
+                    (0.75, [1.0, 0.9, 0.6, 0.6]),
+                ],
                 256,
             );
             (frame, tf, RenderMode::Dvr)
@@ -83,7 +102,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         Some(path) => {
             let mut reader = brickray::io::open(path)?;
             let d = reader.desc().clone();
-            println!("volume: {} {:?} {} spacing {:?} range {:?}", path.display(), d.dims, d.dtype.name(), d.spacing, d.value_range);
+            println!(
+                "volume: {} {:?} {} spacing {:?} range {:?}",
+                path.display(),
+                d.dims,
+                d.dtype.name(),
+                d.spacing,
+                d.value_range
+            );
             let frame = VolumeFrame::centered(d.dims, d.spacing);
             if args.in_core {
                 renderer.set_volume(&gpu.device, &gpu.queue, &reader.read_volume()?)?;
@@ -91,11 +117,24 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 let store = args.out.join("volume.brs");
                 let t = Instant::now();
                 let report = brickray::store::build(&mut *reader, &store, &Default::default())?;
-                println!("built {} in {:.1} s: {report:?}", store.display(), t.elapsed().as_secs_f64());
-                renderer.set_volume_source(&gpu.device, Arc::new(brickray::store::open(&store)?), frame, config)?;
+                println!(
+                    "built {} in {:.1} s: {report:?}",
+                    store.display(),
+                    t.elapsed().as_secs_f64()
+                );
+                renderer.set_volume_source(
+                    &gpu.device,
+                    Arc::new(brickray::store::open(&store)?),
+                    frame,
+                    config,
+                )?;
             }
             let tf = TransferFunction::from_points(
-                &[(0.2, [0.8, 0.5, 0.4, 0.0]), (0.35, [0.9, 0.7, 0.6, 0.03]), (0.6, [1.0, 1.0, 0.9, 0.5])],
+                &[
+                    (0.2, [0.8, 0.5, 0.4, 0.0]),
+                    (0.35, [0.9, 0.7, 0.6, 0.03]),
+                    (0.6, [1.0, 1.0, 0.9, 0.5]),
+                ],
                 256,
             );
             (frame, tf, RenderMode::Dvr)
@@ -103,13 +142,27 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     };
     renderer.set_transfer_function(&gpu.device, &gpu.queue, &tf);
     let target = Offscreen::new(&gpu.device, args.size, args.size);
-    let settings = RenderSettings { mode, shading: Shading { enabled: true, ..Default::default() }, ..Default::default() };
+    let settings = RenderSettings {
+        mode,
+        shading: Shading {
+            enabled: true,
+            ..Default::default()
+        },
+        ..Default::default()
+    };
     for i in 0..args.frames {
         let yaw = 0.6 + i as f32 * std::f32::consts::TAU / args.frames.max(1) as f32 * 0.25;
         let camera = Camera::orbit(frame.center(), 1.9, yaw, 0.35);
         let t = Instant::now();
         let mut enc = gpu.device.create_command_encoder(&Default::default());
-        let desc = FrameDesc { camera, frame, width: args.size, height: args.size, settings, host_depth: None };
+        let desc = FrameDesc {
+            camera,
+            frame,
+            width: args.size,
+            height: args.size,
+            settings,
+            host_depth: None,
+        };
         renderer.prepare(&gpu.device, &gpu.queue, &mut enc, &desc)?;
         {
             let mut pass = target.pass(&mut enc, true);
@@ -118,7 +171,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         gpu.submit_wait(enc);
         let ms = t.elapsed().as_secs_f64() * 1e3;
         let path = args.out.join(format!("frame_{i:02}.png"));
-        image::save_buffer(&path, &target.read_color(&gpu), args.size, args.size, image::ExtendedColorType::Rgba8)?;
+        image::save_buffer(
+            &path,
+            &target.read_color(&gpu),
+            args.size,
+            args.size,
+            image::ExtendedColorType::Rgba8,
+        )?;
         match renderer.out_of_core_stats() {
             Some(s) => println!(
                 "frame {i:2}: {ms:7.1} ms | working set {:4} bricks, pool {:4}/{:4} slots | uploaded {:6.2} MiB | in flight {:4} | cpu hit {:.2} | refine {:.1} ms, index {} words{}",
@@ -132,9 +191,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 s.index_words,
                 if s.converged { " | converged" } else { "" }
             ),
-            None => println!("frame {i:2}: {ms:7.1} ms (in core, {} MiB on the GPU)", renderer.volume_bytes() >> 20),
+            None => println!(
+                "frame {i:2}: {ms:7.1} ms (in core, {} MiB on the GPU)",
+                renderer.volume_bytes() >> 20
+            ),
         }
     }
-    println!("wrote {} PNG files to {}", args.frames, std::fs::canonicalize(&args.out)?.display());
+    println!(
+        "wrote {} PNG files to {}",
+        args.frames,
+        std::fs::canonicalize(&args.out)?.display()
+    );
     Ok(())
 }

@@ -261,14 +261,33 @@ fn mixed_levels_show_no_seams() {
     let dir = tempfile::tempdir().unwrap();
     let source = store_of(&vol, &dir);
     let wf = VolumeFrame::centered([128; 3], [1.0; 3]);
-    let tf = TransferFunction::from_points(&[(0.1, [0.2, 0.5, 1.0, 0.0]), (0.8, [1.0, 0.8, 0.5, 0.2])], 256);
-    let shading = Shading { enabled: true, ..Default::default() };
-    for (name, mode) in [("dvr", RenderMode::Dvr), ("iso", RenderMode::Iso { value: 0.5, color: [0.9, 0.9, 0.9] })] {
+    let tf = TransferFunction::from_points(
+        &[(0.1, [0.2, 0.5, 1.0, 0.0]), (0.8, [1.0, 0.8, 0.5, 0.2])],
+        256,
+    );
+    let shading = Shading {
+        enabled: true,
+        ..Default::default()
+    };
+    for (name, mode) in [
+        ("dvr", RenderMode::Dvr),
+        (
+            "iso",
+            RenderMode::Iso {
+                value: 0.5,
+                color: [0.9, 0.9, 0.9],
+            },
+        ),
+    ] {
         // Close and oblique, so near bricks refine and far ones stay coarse.
         let v = View {
             camera: Camera::orbit(wf.center(), 1.3, 0.7, 0.5),
             frame: wf,
-            settings: RenderSettings { mode, shading, ..Default::default() },
+            settings: RenderSettings {
+                mode,
+                shading,
+                ..Default::default()
+            },
             size: 128,
         };
         let mut incore = VolumeRenderer::new(&g.device, targets()).unwrap();
@@ -276,16 +295,36 @@ fn mixed_levels_show_no_seams() {
         incore.set_transfer_function(&g.device, &g.queue, &tf);
         let reference = frame(&mut incore, &v);
         let mut ooc = VolumeRenderer::new(&g.device, targets()).unwrap();
-        let config = OutOfCoreConfig { tolerance_px: 3.0, upload_budget_bytes: 1 << 30, ..Default::default() };
-        ooc.set_volume_source(&g.device, source.clone(), wf, config).unwrap();
+        let config = OutOfCoreConfig {
+            tolerance_px: 3.0,
+            upload_budget_bytes: 1 << 30,
+            ..Default::default()
+        };
+        ooc.set_volume_source(&g.device, source.clone(), wf, config)
+            .unwrap();
         ooc.set_transfer_function(&g.device, &g.queue, &tf);
         let (img, stats, _) = converge(&mut ooc, &v, 60);
-        let levels: Vec<(usize, u32)> =
-            stats.data_leaves_per_level.iter().copied().enumerate().filter(|(_, n)| *n > 0).collect();
+        let levels: Vec<(usize, u32)> = stats
+            .data_leaves_per_level
+            .iter()
+            .copied()
+            .enumerate()
+            .filter(|(_, n)| *n > 0)
+            .collect();
         eprintln!("seams {name}: data leaves per level {levels:?}");
-        assert!(levels.len() >= 2, "the cut must mix levels to test seams: {levels:?}");
-        let cmp = assert_close(&format!("seams_{name}"), &img, &reference, v.size, v.size, 35.0)
-            .unwrap_or_else(|e| panic!("{e}"));
+        assert!(
+            levels.len() >= 2,
+            "the cut must mix levels to test seams: {levels:?}"
+        );
+        let cmp = assert_close(
+            &format!("seams_{name}"),
+            &img,
+            &reference,
+            v.size,
+            v.size,
+            35.0,
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
         eprintln!("seams {name}: {cmp}");
         // Inside the silhouette (a 5x5 neighbourhood lit in the in-core image) no
         // pixel may show the background (a crack) or differ by more than 40 levels
@@ -309,7 +348,13 @@ fn mixed_levels_show_no_seams() {
                 }
             }
         }
-        assert_eq!(cracks, 0, "seams {name}: {cracks} background pixels inside the silhouette");
-        assert!(worst <= 40, "seams {name}: an interior difference of {worst} levels suggests a step");
+        assert_eq!(
+            cracks, 0,
+            "seams {name}: {cracks} background pixels inside the silhouette"
+        );
+        assert!(
+            worst <= 40,
+            "seams {name}: an interior difference of {worst} levels suggests a step"
+        );
     }
 }
