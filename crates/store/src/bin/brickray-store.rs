@@ -8,25 +8,84 @@
 
 use brickray_core::{BrickSource, NodeKind};
 use brickray_store::{BuildOptions, Filter, Store};
+use clap::{Parser, Subcommand};
 use rayon::prelude::*;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-const USAGE: &str = "usage:
-  brickray-store build <input.json|.raw|.nrrd|.nhdr> <out.brick> [--brick N] [--apron N]
-                       [--filter average|max] [--empty-below V] [--memory-mib N] [--quiet]
-  brickray-store info <store.brick> [--bins N]";
+/// Build a brick octree store from a volume, or describe one.
+#[derive(Debug, Parser)]
+#[command(name = "brickray-store", version)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Build a store from raw + JSON sidecar or NRRD.
+    Build {
+        /// The input volume (.json, .raw with a .json sidecar, .nrrd, .nhdr).
+        input: PathBuf,
+        /// The store to write.
+        output: PathBuf,
+        /// Interior voxels per brick side.
+        #[arg(long, default_value_t = 32)]
+        brick: u32,
+        /// Apron voxels on each side of a brick.
+        #[arg(long, default_value_t = 2)]
+        apron: u32,
+        /// Filter of inner nodes: `average` (intensities) or `max` (labels).
+        #[arg(long, default_value = "average", value_parser = parse_filter)]
+        filter: Filter,
+        /// Store nodes whose values all lie below this raw value as empty.
+        #[arg(long)]
+        empty_below: Option<f32>,
+        /// Upper bound on the builder's memory, in MiB.
+        #[arg(long, default_value_t = 1024)]
+        memory_mib: u64,
+        /// No progress bar.
+        #[arg(long)]
+        quiet: bool,
+    },
+    /// Describe a store: levels, bricks, empty and uniform fractions, compression,
+    /// value histogram.
+    Info {
+        /// The store.
+        store: PathBuf,
+        /// Histogram bins.
+        #[arg(long, default_value_t = 16)]
+        bins: usize,
+    },
+}
+
+fn parse_filter(v: &str) -> Result<Filter, String> {
+    Filter::parse(v).ok_or_else(|| format!("expected average or max, got {v:?}"))
+}
 
 fn main() -> ExitCode {
-    let args: Vec<String> = std::env::args().skip(1).collect();
-    let r = match args.first().map(String::as_str) {
-        Some("build") => cmd_build(&args[1..]),
-        Some("info") => cmd_info(&args[1..]),
-        Some("-h" | "--help" | "help") => {
-            println!("{USAGE}");
-            return ExitCode::SUCCESS;
+    let r = match Cli::parse().command {
+        Command::Build {
+            input,
+            output,
+            brick,
+            apron,
+            filter,
+            empty_below,
+            memory_mib,
+            quiet,
+        } => {
+            let o = BuildOptions {
+                brick,
+                apron,
+                filter,
+                empty_below,
+                memory_bound: memory_mib << 20,
+                progress: !quiet,
+            };
+            cmd_build(&input, &output, &o)
         }
-        _ => Err(USAGE.to_string()),
+        Command::Info { store, bins } => cmd_info(&store, bins.clamp(1, 4096)),
     };
     match r {
         Ok(()) => ExitCode::SUCCESS,
@@ -37,75 +96,13 @@ fn main() -> ExitCode {
     }
 }
 
-/// Positional arguments and `(flag, value)` pairs.
-type Parsed = (Vec<String>, Vec<(String, String)>);
-
-/// Splits arguments into positionals and `--flag value` pairs.
-fn parse(args: &[String], flags: &[&str], switches: &[&str]) -> Result<Parsed, String> {
-    let mut pos = Vec::new();
-    let mut opts = Vec::new();
-    let mut it = args.iter();
-    while let Some(a) = it.next() {
-        if let Some(name) = a.strip_prefix("--") {
-            let (name, inline) = match name.split_once('=') {
-                Some((n, v)) => (n, Some(v.to_string())),
-                None => (name, None),
-            };
-            if switches.contains(&name) {
-                opts.push((name.to_string(), String::new()));
-            } else if flags.contains(&name) {
-                let v = match inline {
-                    Some(v) => v,
-                    None => it
-                        .next()
-                        .cloned()
-                        .ok_or_else(|| format!("--{name} needs a value"))?,
-                };
-                opts.push((name.to_string(), v));
-            } else {
-                return Err(format!("unknown option --{name}\n{USAGE}"));
-            }
-        } else {
-            pos.push(a.clone());
-        }
-    }
-    Ok((pos, opts))
-}
-
-fn num<T: std::str::FromStr>(name: &str, v: &str) -> Result<T, String> {
-    v.parse()
-        .map_err(|_| format!("--{name}: cannot parse {v:?}"))
-}
-
-fn cmd_build(args: &[String]) -> Result<(), String> {
-    let (pos, opts) = parse(
-        args,
-        &["brick", "apron", "filter", "empty-below", "memory-mib"],
-        &["quiet"],
-    )?;
-    let [input, output] = pos.as_slice() else {
-        return Err(format!("build needs <input> <output>\n{USAGE}"));
-    };
-    let mut o = BuildOptions {
-        progress: true,
-        ..BuildOptions::default()
-    };
-    for (k, v) in &opts {
-        match k.as_str() {
-            "brick" => o.brick = num(k, v)?,
-            "apron" => o.apron = num(k, v)?,
-            "filter" => {
-                o.filter = Filter::parse(v)
-                    .ok_or_else(|| format!("--filter: expected average or max, got {v:?}"))?
-            }
-            "empty-below" => o.empty_below = Some(num(k, v)?),
-            "memory-mib" => o.memory_bound = num::<u64>(k, v)? << 20,
-            "quiet" => o.progress = false,
-            _ => {}
-        }
-    }
-    let r = brickray_store::build_file(&PathBuf::from(input), &PathBuf::from(output), &o)
-        .map_err(|e| e.to_string())?;
+fn cmd_build(
+    input: &std::path::Path,
+    out: &std::path::Path,
+    o: &BuildOptions,
+) -> Result<(), String> {
+    let output = out.display();
+    let r = brickray_store::build_file(input, out, o).map_err(|e| e.to_string())?;
     println!(
         "built {output}: {} levels, {} nodes ({} data, {} uniform, {} empty), {:.1} MiB from {:.1} MiB in {:.2} s ({:.1} Mvoxel/s)",
         r.layout.levels,
@@ -121,18 +118,9 @@ fn cmd_build(args: &[String]) -> Result<(), String> {
     Ok(())
 }
 
-fn cmd_info(args: &[String]) -> Result<(), String> {
-    let (pos, opts) = parse(args, &["bins"], &[])?;
-    let [path] = pos.as_slice() else {
-        return Err(format!("info needs <store>\n{USAGE}"));
-    };
-    let mut bins = 16usize;
-    for (k, v) in &opts {
-        if k == "bins" {
-            bins = num::<usize>(k, v)?.clamp(1, 4096);
-        }
-    }
-    let store = Store::open(path).map_err(|e| e.to_string())?;
+fn cmd_info(store_path: &std::path::Path, bins: usize) -> Result<(), String> {
+    let path = store_path.display();
+    let store = Store::open(store_path).map_err(|e| e.to_string())?;
     let lay = store.layout().clone();
     let d = store.desc();
     println!("store       {path}");
