@@ -1,6 +1,6 @@
 // Functions shared by brickray's ray casters. Concatenated in front of a ray-cast
-// shader that declares `params` (type Params), `tf` (array<vec4<f32>>) and
-// `host_depth` (texture_depth_2d).
+// shader that declares `params` (type Params), `tf` (array<vec4<f32>>),
+// `tf_prefix` (array<u32>) and `host_depth` (texture_depth_2d).
 // See docs/rendering-model.md.
 
 struct Params {
@@ -23,11 +23,13 @@ struct Params {
     size: vec4<u32>,
     // xyz: macro cells per axis, w: cell size in voxels.
     cells: vec4<u32>,
-    // x: max steps per ray, y: max leaves per ray (out of core), zw: unused.
+    // x: max steps per ray, y: max leaves per ray (out of core), z: finest level
+    // (out of core), w: unused.
     limits: vec4<u32>,
     // Out of core: xyz octree scale (octree coord = texture coord * scale), w: unused.
     octree: vec4<f32>,
-    // Out of core: x interior voxels per brick, y apron, z finest level, w stored side.
+    // Out of core: x interior voxels per brick, y apron, z stored side, w sub-cells
+    // per brick axis.
     bricks: vec4<u32>,
     // Out of core: xyz atlas size in texels, w unused.
     atlas: vec4<f32>,
@@ -140,6 +142,14 @@ fn tf_lookup(v: f32) -> vec4<f32> {
     let j = min(i + 1u, u32(n) - 1u);
     let f = x - f32(i);
     return mix(tf[i], tf[j], f);
+}
+
+// O(1): can any value in [lo, hi] be visible through the TF?
+fn tf_transparent(range: vec2<f32>) -> bool {
+    let n1 = params.value_map.z - 1.0;
+    let i0 = u32(floor(clamp(range.x, 0.0, 1.0) * n1));
+    let i1 = min(u32(ceil(clamp(range.y, 0.0, 1.0) * n1)), u32(n1));
+    return tf_prefix[i1 + 1u] == tf_prefix[min(i0, i1)];
 }
 
 // Blinn-Phong with a headlight (two-sided), clamped to 0..1. `g.xyz` is the

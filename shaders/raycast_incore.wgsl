@@ -40,14 +40,6 @@ fn cell_range(c: vec3<u32>) -> vec2<f32> {
     return cell_ranges[(c.z * params.cells.y + c.y) * params.cells.x + c.x];
 }
 
-// O(1): can any value in [lo, hi] be visible through the TF?
-fn tf_transparent(range: vec2<f32>) -> bool {
-    let n1 = params.value_map.z - 1.0;
-    let i0 = u32(floor(clamp(range.x, 0.0, 1.0) * n1));
-    let i1 = min(u32(ceil(clamp(range.y, 0.0, 1.0) * n1)), u32(n1));
-    return tf_prefix[i1 + 1u] == tf_prefix[min(i0, i1)];
-}
-
 // t at which the ray leaves macro cell c.
 fn cell_exit(r: RaySetup, c: vec3<u32>) -> f32 {
     let s = f32(params.cells.w) / params.dims.xyz;

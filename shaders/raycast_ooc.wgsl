@@ -23,43 +23,85 @@ struct SlotInfo {
 @group(0) @binding(8) var out_depth: texture_storage_2d<r32float, write>;
 @group(0) @binding(9) var out_samples: texture_storage_2d<r32uint, write>;
 @group(0) @binding(10) var<storage, read> index_words: array<u32>;
+// Normalized min/max of each brick's sub-cells (`params.bricks.w`^3 per slot, x
+// fastest), for empty-space skipping inside a brick.
+@group(0) @binding(11) var<storage, read> sub_cells: array<vec2<f32>>;
 
-// A data leaf's brick: atlas texel coordinate = base + o * k for octree point o.
+// A data leaf's brick: atlas texture coordinate = uv0 + o * kuv for octree
+// point o (texel centres at +0.5 are folded in).
 struct Brick {
-    base: vec3<f32>,
-    k: f32,
+    uv0: vec3<f32>,
+    kuv: vec3<f32>,
     // Finest voxels per voxel of this level (2^(finest - level)).
     f: f32,
+    slot: u32,
+    box_min: vec3<f32>,
+    box_size: f32,
 }
 
 fn brick_of(leaf: OctBox, slot: u32) -> Brick {
     var b: Brick;
-    let bs = f32(params.bricks.x);
-    b.k = bs / leaf.box_size;
-    b.base = slots[slot].offset.xyz + f32(params.bricks.y) - leaf.box_min * b.k;
-    b.f = oct_exp2_pos(params.bricks.z - leaf.level);
+    let k = f32(params.bricks.x) / leaf.box_size;
+    let inv_atlas = 1.0 / params.atlas.xyz;
+    b.kuv = k * inv_atlas;
+    b.uv0 = (slots[slot].offset.xyz + f32(params.bricks.y) - leaf.box_min * k) * inv_atlas;
+    b.f = oct_exp2_pos(params.limits.z - leaf.level);
+    b.slot = slot;
+    b.box_min = leaf.box_min;
+    b.box_size = leaf.box_size;
     return b;
 }
 
-fn atlas_value(tc: vec3<f32>) -> f32 {
-    return textureSampleLevel(atlas_tex, atlas_sampler, tc / params.atlas.xyz, 0.0).r * params.value_map.x
-        + params.value_map.y;
+fn atlas_value(uv: vec3<f32>) -> f32 {
+    return textureSampleLevel(atlas_tex, atlas_sampler, uv, 0.0).r * params.value_map.x + params.value_map.y;
 }
 
 fn brick_value(b: Brick, o: vec3<f32>) -> f32 {
-    return atlas_value(b.base + o * b.k);
+    return atlas_value(b.uv0 + o * b.kuv);
 }
 
 // World gradient direction and magnitude (normalized value per finest voxel), by
 // central differences of one voxel of the brick's level.
 fn brick_gradient(b: Brick, o: vec3<f32>) -> vec4<f32> {
-    let tc = b.base + o * b.k;
-    let gx = (atlas_value(tc + vec3<f32>(1.0, 0.0, 0.0)) - atlas_value(tc - vec3<f32>(1.0, 0.0, 0.0))) * 0.5;
-    let gy = (atlas_value(tc + vec3<f32>(0.0, 1.0, 0.0)) - atlas_value(tc - vec3<f32>(0.0, 1.0, 0.0))) * 0.5;
-    let gz = (atlas_value(tc + vec3<f32>(0.0, 0.0, 1.0)) - atlas_value(tc - vec3<f32>(0.0, 0.0, 1.0))) * 0.5;
+    let uv = b.uv0 + o * b.kuv;
+    let e = 1.0 / params.atlas.xyz;
+    let gx = (atlas_value(uv + vec3<f32>(e.x, 0.0, 0.0)) - atlas_value(uv - vec3<f32>(e.x, 0.0, 0.0))) * 0.5;
+    let gy = (atlas_value(uv + vec3<f32>(0.0, e.y, 0.0)) - atlas_value(uv - vec3<f32>(0.0, e.y, 0.0))) * 0.5;
+    let gz = (atlas_value(uv + vec3<f32>(0.0, 0.0, e.z)) - atlas_value(uv - vec3<f32>(0.0, 0.0, e.z))) * 0.5;
     let g = vec3<f32>(gx, gy, gz) / b.f;
     let gw = (params.normal_mat * vec4<f32>(g * params.dims.xyz, 0.0)).xyz;
     return vec4<f32>(gw, length(g));
+}
+
+// The sub-cell of the brick holding octree point o: its range and its box.
+struct SubCell {
+    range: vec2<f32>,
+    lo: vec3<f32>,
+    hi: vec3<f32>,
+}
+
+fn sub_cell(b: Brick, o: vec3<f32>) -> SubCell {
+    let n = params.bricks.w;
+    let side = b.box_size / f32(n);
+    let j = vec3<u32>(clamp(floor((o - b.box_min) / side), vec3<f32>(0.0), vec3<f32>(f32(n - 1u))));
+    var c: SubCell;
+    c.range = sub_cells[((b.slot * n + j.z) * n + j.y) * n + j.x];
+    c.lo = b.box_min + vec3<f32>(j) * side;
+    c.hi = c.lo + side;
+    return c;
+}
+
+// t at which the ray o(t) = oo + od t leaves the box [lo, hi].
+fn box_exit(oo: vec3<f32>, od: vec3<f32>, lo: vec3<f32>, hi: vec3<f32>) -> f32 {
+    var t = 3.0e38;
+    for (var a = 0; a < 3; a = a + 1) {
+        if (od[a] > 0.0) {
+            t = min(t, (hi[a] - oo[a]) / od[a]);
+        } else if (od[a] < 0.0) {
+            t = min(t, (lo[a] - oo[a]) / od[a]);
+        }
+    }
+    return t;
 }
 
 @compute @workgroup_size(8, 8, 1)
@@ -122,6 +164,18 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 if (budget == 0u) { done = true; break; }
                 budget = budget - 1u;
                 let o = oo + od * t;
+                if (ess) {
+                    // Skip the rest of a sub-cell that cannot contribute: transparent
+                    // (DVR), or below the running maximum (MIP). The sample grid is
+                    // unchanged, so skipping never changes the image.
+                    let c = sub_cell(b, o);
+                    let skip = (mode == MODE_DVR && tf_transparent(c.range)) || (mode == MODE_MIP && c.range.y <= m);
+                    if (skip) {
+                        let te = min(box_exit(oo, od, c.lo, c.hi), hit.t_exit);
+                        k = max(k + 1u, u32(max(ceil((te - t0) / dtl), 0.0)));
+                        continue;
+                    }
+                }
                 let v = brick_value(b, o);
                 samples = samples + 1u;
                 if (mode == MODE_DVR) {
@@ -164,6 +218,16 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                         depth = depth_at(r, th);
                         done = true;
                         break;
+                    }
+                    if (ess) {
+                        // The whole sub-cell lies below the isovalue, like this sample.
+                        let c = sub_cell(b, o);
+                        if (c.range.y < iso) {
+                            let te = min(box_exit(oo, od, c.lo, c.hi), hit.t_exit);
+                            t_last = t0 + f32(max(u32(max(ceil((te - t0) / dtl), 0.0)), k + 1u) - 1u) * dtl;
+                            k = max(k + 1u, u32(max(ceil((te - t0) / dtl), 0.0)));
+                            continue;
+                        }
                     }
                 } else {
                     if (v > m) {

@@ -282,6 +282,7 @@ fn raycast_layout_entries() -> Vec<wgpu::BindGroupLayoutEntry> {
 fn ooc_pipeline(device: &wgpu::Device) -> (wgpu::ComputePipeline, wgpu::BindGroupLayout) {
     let mut entries = raycast_layout_entries();
     entries.push(storage_entry(10));
+    entries.push(storage_entry(11));
     let bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
         label: Some("brickray-render raycast ooc"),
         entries: &entries,
@@ -665,9 +666,12 @@ impl VolumeRenderer {
             let depth_view = host.as_ref().unwrap_or(&self.dummy_depth);
             let (layout, volume_view, table, index) =
                 match (&self.volume, &self.ooc, &self.ooc_pipeline) {
-                    (_, Some(o), Some((_, bgl))) => {
-                        (bgl, &o.atlas_view, &o.slots, Some(&o.index.buffer))
-                    }
+                    (_, Some(o), Some((_, bgl))) => (
+                        bgl,
+                        &o.atlas_view,
+                        &o.slots,
+                        Some((&o.index.buffer, &o.sub_cells)),
+                    ),
                     (Some(v), _, _) => (&self.raycast_bgl, &v.view, &v.cell_ranges, None),
                     _ => return Err(PrepareError::NoVolume),
                 };
@@ -713,10 +717,14 @@ impl VolumeRenderer {
                     resource: wgpu::BindingResource::TextureView(&t.samples_view),
                 },
             ];
-            if let Some(index) = index {
+            if let Some((index, sub_cells)) = index {
                 entries.push(wgpu::BindGroupEntry {
                     binding: 10,
                     resource: index.as_entire_binding(),
+                });
+                entries.push(wgpu::BindGroupEntry {
+                    binding: 11,
+                    resource: sub_cells.as_entire_binding(),
                 });
             }
             let bg = device.create_bind_group(&wgpu::BindGroupDescriptor {
@@ -773,6 +781,10 @@ impl VolumeRenderer {
             flags |= 32;
         }
         let voxel_world = frame.frame.voxel_world;
+        let finest = self
+            .ooc
+            .as_ref()
+            .map_or(0, |o| (o.layout.levels - 1) as u32);
         let (dims, scale, offset, cells, octree, bricks, atlas) = match (&self.ooc, &self.volume) {
             (Some(o), _) => {
                 let l = &o.layout;
@@ -784,7 +796,7 @@ impl VolumeRenderer {
                     o.encoding.offset,
                     [0; 4],
                     [sc[0] as f32, sc[1] as f32, sc[2] as f32, 0.0],
-                    [l.brick, l.apron, (l.levels - 1) as u32, l.stored_side()],
+                    [l.brick, l.apron, l.stored_side(), o.sub_n],
                     [a[0] as f32, a[1] as f32, a[2] as f32, 0.0],
                 )
             }
@@ -826,7 +838,7 @@ impl VolumeRenderer {
             ],
             size: [frame.width, frame.height, flags, s.iso_refine_steps],
             cells,
-            limits: [MAX_STEPS, MAX_LEAVES, 0, 0],
+            limits: [MAX_STEPS, MAX_LEAVES, finest, 0],
             octree,
             bricks,
             atlas,

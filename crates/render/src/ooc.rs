@@ -60,6 +60,66 @@ pub struct OutOfCoreStats {
     pub data_leaves_per_level: [u32; 16],
 }
 
+/// Sub-cells per brick axis for empty-space skipping inside bricks: cells of
+/// about 8 voxels, as the in-core macro cells.
+pub(crate) fn sub_cells_per_axis(brick: u32) -> u32 {
+    brick.div_ceil(8).max(1)
+}
+
+/// Normalized min/max of each of a brick's `n^3` sub-cells (x fastest). Cell `j`
+/// covers the brick-local edge coordinates `[j B/n, (j+1) B/n]` (B interior
+/// voxels); a trilinear sample there reads voxel centres `floor(e - 0.5)` and the
+/// next, so the range covers those, offset by the apron and clamped to the brick.
+pub(crate) fn sub_cell_ranges(layout: &OctreeLayout, bytes: &[u8], n: u32) -> Vec<[f32; 2]> {
+    let side = layout.stored_side() as usize;
+    let (b, a) = (layout.brick as f64, layout.apron as i64);
+    let d = &layout.volume;
+    let size = d.dtype.size();
+    let vals: Vec<f32> = bytes
+        .chunks_exact(size)
+        .map(|c| {
+            let raw = match d.dtype {
+                brickray_core::DType::U8 => c[0] as f32,
+                brickray_core::DType::U16 => u16::from_le_bytes([c[0], c[1]]) as f32,
+                brickray_core::DType::I16 => i16::from_le_bytes([c[0], c[1]]) as f32,
+                _ => f32::from_le_bytes([c[0], c[1], c[2], c[3]]),
+            };
+            d.normalize(raw)
+        })
+        .collect();
+    if vals.len() < side * side * side {
+        // A malformed brick: never skip it.
+        return vec![[f32::NEG_INFINITY, f32::INFINITY]; (n * n * n) as usize];
+    }
+    let span = |j: u32| -> (usize, usize) {
+        let lo = ((j as f64 * b / n as f64 - 0.5).floor() as i64 + a).clamp(0, side as i64 - 1);
+        let hi = (((j + 1) as f64 * b / n as f64 - 0.5).floor() as i64 + 1 + a)
+            .clamp(0, side as i64 - 1);
+        (lo as usize, hi as usize)
+    };
+    let mut out = Vec::with_capacity((n * n * n) as usize);
+    for jz in 0..n {
+        let (z0, z1) = span(jz);
+        for jy in 0..n {
+            let (y0, y1) = span(jy);
+            for jx in 0..n {
+                let (x0, x1) = span(jx);
+                let mut m = [f32::INFINITY, f32::NEG_INFINITY];
+                for z in z0..=z1 {
+                    for y in y0..=y1 {
+                        let row = (z * side + y) * side;
+                        for &v in &vals[row + x0..=row + x1] {
+                            m = [m[0].min(v), m[1].max(v)];
+                        }
+                    }
+                }
+                out.push(m);
+            }
+        }
+    }
+    out
+}
+
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 struct SlotInfo {
@@ -78,6 +138,9 @@ pub(crate) struct OocVolume {
     pub(crate) encoding: SampleEncoding,
     pub(crate) slots: wgpu::Buffer,
     slots_cpu: Vec<SlotInfo>,
+    /// Sub-cell ranges of every slot (`sub_n^3` per slot).
+    pub(crate) sub_cells: wgpu::Buffer,
+    pub(crate) sub_n: u32,
     slots_dirty: bool,
     pub(crate) index: crate::GrowBuffer,
     frame: u64,
@@ -161,6 +224,21 @@ impl OocVolume {
             usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
+        let sub_n = sub_cells_per_axis(layout.brick);
+        let sub_size = (slot_count.max(1) as u64) * (sub_n as u64).pow(3) * 8;
+        if sub_size > limits.max_storage_buffer_binding_size {
+            return Err(RenderError::LowDeviceLimit {
+                what: "brick sub-cell table",
+                required: sub_size,
+                limit: limits.max_storage_buffer_binding_size,
+            });
+        }
+        let sub_cells = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("brickray-render brick sub-cells"),
+            size: sub_size,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
         Ok(OocVolume {
             manager,
             layout,
@@ -178,6 +256,8 @@ impl OocVolume {
                 slot_count.max(1)
             ],
             slots_dirty: true,
+            sub_cells,
+            sub_n,
             index: crate::GrowBuffer::new(device, "brickray-render octree index", 1 << 12),
             frame: 0,
             stats: OutOfCoreStats::default(),
@@ -251,6 +331,14 @@ impl OocVolume {
                 // Unknown: never skip it.
                 Err(_) => [f32::NEG_INFINITY, f32::INFINITY],
             };
+            let cells = sub_cell_ranges(&self.layout, &up.data, self.sub_n);
+            let cell_bytes: &[u8] = bytemuck::cast_slice(&cells);
+            queue.write_buffer(
+                &self.sub_cells,
+                up.slot as u64 * cell_bytes.len() as u64,
+                cell_bytes,
+            );
+            bytes += cell_bytes.len() as u64;
             if let Some(s) = self.slots_cpu.get_mut(up.slot as usize) {
                 let o = up.atlas_offset;
                 *s = SlotInfo {
@@ -305,5 +393,67 @@ impl OocVolume {
             data_leaves_per_level: per_level,
         };
         Ok((bytes, grew))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use brickray_core::{DType, VolumeDesc};
+
+    /// Every trilinear sample inside a sub-cell lies within its range.
+    #[test]
+    fn sub_cell_ranges_are_conservative() {
+        let desc = VolumeDesc {
+            dims: [64; 3],
+            dtype: DType::U8,
+            spacing: [1.0; 3],
+            value_range: [0.0, 255.0],
+        };
+        let layout = OctreeLayout::new(desc, 16, 2);
+        let side = layout.stored_side() as usize;
+        let mut seed = 0x2545_f491_u32;
+        let bytes: Vec<u8> = (0..side * side * side)
+            .map(|_| {
+                seed ^= seed << 13;
+                seed ^= seed >> 17;
+                seed ^= seed << 5;
+                seed as u8
+            })
+            .collect();
+        let n = sub_cells_per_axis(layout.brick);
+        assert_eq!(n, 2);
+        let r = sub_cell_ranges(&layout, &bytes, n);
+        let val = |x: usize, y: usize, z: usize| bytes[(z * side + y) * side + x] as f64 / 255.0;
+        let (b, a) = (layout.brick as f64, layout.apron as f64);
+        for i in 0..4000 {
+            // A point in brick-local edge coordinates [0, B]^3.
+            let e: Vec<f64> = (0..3)
+                .map(|k| ((i * 7919 + k * 104_729) % 10_007) as f64 / 10_007.0 * b)
+                .collect();
+            let p: Vec<f64> = e.iter().map(|c| c - 0.5 + a).collect();
+            let f: Vec<usize> = p.iter().map(|c| c.floor() as usize).collect();
+            let t: Vec<f64> = p.iter().zip(&f).map(|(c, f)| c - *f as f64).collect();
+            let mut v = 0.0;
+            for dz in 0..2 {
+                for dy in 0..2 {
+                    for dx in 0..2 {
+                        let w = (if dx == 0 { 1.0 - t[0] } else { t[0] })
+                            * (if dy == 0 { 1.0 - t[1] } else { t[1] })
+                            * (if dz == 0 { 1.0 - t[2] } else { t[2] });
+                        v += w * val(f[0] + dx, f[1] + dy, f[2] + dz);
+                    }
+                }
+            }
+            let j: Vec<u32> = e
+                .iter()
+                .map(|c| ((c / (b / n as f64)).floor() as u32).min(n - 1))
+                .collect();
+            let c = r[((j[2] * n + j[1]) * n + j[0]) as usize];
+            assert!(
+                v as f32 >= c[0] - 1e-6 && v as f32 <= c[1] + 1e-6,
+                "sample {v} outside {c:?}"
+            );
+        }
     }
 }
