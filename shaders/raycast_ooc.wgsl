@@ -136,109 +136,115 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         var k = 0u;
         var t_last = t0;
         var depth_set = false;
-        var done = false;
         var m = -3.0e38;
         var tm = t0;
         var st = oct_begin(oo, od, t0, t1, params.limits.y);
-        while (!done && oct_next_leaf(&st)) {
-            let hit = st.hit;
-            if (hit.tag != OCT_TAG_DATA) {
+        // One flat loop: each iteration either moves to the next leaf or takes
+        // (or skips) one sample. Rays of a SIMD group/warp then diverge only per
+        // iteration, not per nested leaf loop.
+        var have_leaf = false;
+        var hit: OctLeaf;
+        var b: Brick;
+        var dtl = dt;
+        loop {
+            if (!have_leaf) {
+                if (!oct_next_leaf(&st)) { break; }
+                hit = st.hit;
+                if (hit.tag != OCT_TAG_DATA) { continue; }
+                let slot = hit.data;
+                if (mode == MODE_MIP && ess && slots[slot].range.y <= m) { continue; }
+                b = brick_of(hit.leaf, slot);
+                dtl = dt * b.f;
+                // Snap to this level's sample grid at or after max(t_enter, last sample).
+                if (b.f != grid_f) {
+                    grid_f = b.f;
+                    k = u32(max(ceil((max(hit.t_enter, t_last) - t0) / dtl), 0.0));
+                }
+                k = max(k, u32(max(ceil((hit.t_enter - t0) / dtl), 0.0)));
+                have_leaf = true;
+            }
+            let t = t0 + f32(k) * dtl;
+            if (t >= hit.t_exit || t >= t1) {
+                have_leaf = false;
                 continue;
             }
-            let slot = hit.data;
-            if (mode == MODE_MIP && ess && slots[slot].range.y <= m) {
-                continue;
+            if (budget == 0u) { break; }
+            budget = budget - 1u;
+            let o = oo + od * t;
+            if (ess) {
+                // Skip the rest of a sub-cell that cannot contribute: transparent
+                // (DVR), or below the running maximum (MIP). The sample grid is
+                // unchanged, so skipping never changes the image.
+                let c = sub_cell(b, o);
+                let skip = (mode == MODE_DVR && tf_transparent(c.range)) || (mode == MODE_MIP && c.range.y <= m);
+                if (skip) {
+                    let te = min(box_exit(oo, od, c.lo, c.hi), hit.t_exit);
+                    k = max(k + 1u, u32(max(ceil((te - t0) / dtl), 0.0)));
+                    continue;
+                }
             }
-            let b = brick_of(hit.leaf, slot);
-            let dtl = dt * b.f;
-            // Snap to this level's sample grid at or after max(t_enter, last sample).
-            if (b.f != grid_f) {
-                grid_f = b.f;
-                k = u32(max(ceil((max(hit.t_enter, t_last) - t0) / dtl), 0.0));
-            }
-            let k_enter = u32(max(ceil((hit.t_enter - t0) / dtl), 0.0));
-            k = max(k, k_enter);
-            loop {
-                let t = t0 + f32(k) * dtl;
-                if (t >= hit.t_exit || t >= t1) { break; }
-                if (budget == 0u) { done = true; break; }
-                budget = budget - 1u;
-                let o = oo + od * t;
+            let v = brick_value(b, o);
+            samples = samples + 1u;
+            if (mode == MODE_DVR) {
+                let s = tf_lookup(v);
+                if (s.a > 0.0) {
+                    let a = 1.0 - pow(1.0 - s.a, step_factor * b.f);
+                    var c = s.rgb;
+                    if (shading) {
+                        c = shade(c, brick_gradient(b, o), r.dir);
+                    }
+                    color = vec4<f32>(color.rgb + (1.0 - color.a) * a * c, color.a + (1.0 - color.a) * a);
+                    if (!depth_set && color.a >= params.misc.y) {
+                        depth = depth_at(r, t);
+                        depth_set = true;
+                    }
+                    if (ert && color.a >= ert_thr) { break; }
+                }
+            } else if (mode == MODE_ISO) {
+                if (v >= iso) {
+                    // Bracket [previous sample, t], clipped to one voxel of this
+                    // level before the leaf (the brick's apron covers it).
+                    var a = t;
+                    var bb = t;
+                    if (t > t0) {
+                        a = max(t_last, max(hit.t_enter - dtl, t - dtl));
+                        if (t_last >= t) { a = t; }
+                    }
+                    for (var i = 0u; i < params.size.w; i = i + 1u) {
+                        if (bb <= a) { break; }
+                        let mid = 0.5 * (a + bb);
+                        samples = samples + 1u;
+                        if (brick_value(b, oo + od * mid) >= iso) {
+                            bb = mid;
+                        } else {
+                            a = mid;
+                        }
+                    }
+                    let th = 0.5 * (a + bb);
+                    color = vec4<f32>(shade(params.iso.yzw, brick_gradient(b, oo + od * th), r.dir), 1.0);
+                    depth = depth_at(r, th);
+                    // The hit ends the ray.
+                    break;
+                }
                 if (ess) {
-                    // Skip the rest of a sub-cell that cannot contribute: transparent
-                    // (DVR), or below the running maximum (MIP). The sample grid is
-                    // unchanged, so skipping never changes the image.
+                    // The whole sub-cell lies below the isovalue, like this sample.
                     let c = sub_cell(b, o);
-                    let skip = (mode == MODE_DVR && tf_transparent(c.range)) || (mode == MODE_MIP && c.range.y <= m);
-                    if (skip) {
+                    if (c.range.y < iso) {
                         let te = min(box_exit(oo, od, c.lo, c.hi), hit.t_exit);
+                        t_last = t0 + f32(max(u32(max(ceil((te - t0) / dtl), 0.0)), k + 1u) - 1u) * dtl;
                         k = max(k + 1u, u32(max(ceil((te - t0) / dtl), 0.0)));
                         continue;
                     }
                 }
-                let v = brick_value(b, o);
-                samples = samples + 1u;
-                if (mode == MODE_DVR) {
-                    let s = tf_lookup(v);
-                    if (s.a > 0.0) {
-                        let a = 1.0 - pow(1.0 - s.a, step_factor * b.f);
-                        var c = s.rgb;
-                        if (shading) {
-                            c = shade(c, brick_gradient(b, o), r.dir);
-                        }
-                        color = vec4<f32>(color.rgb + (1.0 - color.a) * a * c, color.a + (1.0 - color.a) * a);
-                        if (!depth_set && color.a >= params.misc.y) {
-                            depth = depth_at(r, t);
-                            depth_set = true;
-                        }
-                        if (ert && color.a >= ert_thr) { done = true; break; }
-                    }
-                } else if (mode == MODE_ISO) {
-                    if (v >= iso) {
-                        // Bracket [previous sample, t], clipped to one voxel of this
-                        // level before the leaf (the brick's apron covers it).
-                        var a = t;
-                        var bb = t;
-                        if (t > t0) {
-                            a = max(t_last, max(hit.t_enter - dtl, t - dtl));
-                            if (t_last >= t) { a = t; }
-                        }
-                        for (var i = 0u; i < params.size.w; i = i + 1u) {
-                            if (bb <= a) { break; }
-                            let mid = 0.5 * (a + bb);
-                            samples = samples + 1u;
-                            if (brick_value(b, oo + od * mid) >= iso) {
-                                bb = mid;
-                            } else {
-                                a = mid;
-                            }
-                        }
-                        let th = 0.5 * (a + bb);
-                        color = vec4<f32>(shade(params.iso.yzw, brick_gradient(b, oo + od * th), r.dir), 1.0);
-                        depth = depth_at(r, th);
-                        done = true;
-                        break;
-                    }
-                    if (ess) {
-                        // The whole sub-cell lies below the isovalue, like this sample.
-                        let c = sub_cell(b, o);
-                        if (c.range.y < iso) {
-                            let te = min(box_exit(oo, od, c.lo, c.hi), hit.t_exit);
-                            t_last = t0 + f32(max(u32(max(ceil((te - t0) / dtl), 0.0)), k + 1u) - 1u) * dtl;
-                            k = max(k + 1u, u32(max(ceil((te - t0) / dtl), 0.0)));
-                            continue;
-                        }
-                    }
-                } else {
-                    if (v > m) {
-                        m = v;
-                        tm = t;
-                    }
-                    if (ert && m >= 1.0) { done = true; break; }
+            } else {
+                if (v > m) {
+                    m = v;
+                    tm = t;
                 }
-                t_last = t;
-                k = k + 1u;
+                if (ert && m >= 1.0) { break; }
             }
+            t_last = t;
+            k = k + 1u;
         }
         if (mode == MODE_MIP && m > -1.0e38) {
             let s = tf_lookup(m);
