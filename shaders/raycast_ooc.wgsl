@@ -73,35 +73,29 @@ fn brick_gradient(b: Brick, o: vec3<f32>) -> vec4<f32> {
     return vec4<f32>(gw, length(g));
 }
 
-// The sub-cell of the brick holding octree point o: its range and its box.
-struct SubCell {
-    range: vec2<f32>,
-    lo: vec3<f32>,
-    hi: vec3<f32>,
+// The sub-cell of the brick holding octree point o (integer coordinates).
+fn sub_cell_of(b: Brick, o: vec3<f32>) -> vec3<u32> {
+    let n = f32(params.bricks.w);
+    return vec3<u32>(clamp(floor((o - b.box_min) * (n / b.box_size)), vec3<f32>(0.0), vec3<f32>(n - 1.0)));
 }
 
-fn sub_cell(b: Brick, o: vec3<f32>) -> SubCell {
+fn sub_cell_range(b: Brick, j: vec3<u32>) -> vec2<f32> {
     let n = params.bricks.w;
-    let side = b.box_size / f32(n);
-    let j = vec3<u32>(clamp(floor((o - b.box_min) / side), vec3<f32>(0.0), vec3<f32>(f32(n - 1u))));
-    var c: SubCell;
-    c.range = sub_cells[((b.slot * n + j.z) * n + j.y) * n + j.x];
-    c.lo = b.box_min + vec3<f32>(j) * side;
-    c.hi = c.lo + side;
-    return c;
+    return sub_cells[((b.slot * n + j.z) * n + j.y) * n + j.x];
+}
+
+// t at which the ray leaves sub-cell j of brick b.
+fn sub_cell_exit(b: Brick, j: vec3<u32>, oo: vec3<f32>, od: vec3<f32>) -> f32 {
+    let side = b.box_size / f32(params.bricks.w);
+    let lo = b.box_min + vec3<f32>(j) * side;
+    return box_exit(oo, od, lo, lo + side);
 }
 
 // t at which the ray o(t) = oo + od t leaves the box [lo, hi].
 fn box_exit(oo: vec3<f32>, od: vec3<f32>, lo: vec3<f32>, hi: vec3<f32>) -> f32 {
-    var t = 3.0e38;
-    for (var a = 0; a < 3; a = a + 1) {
-        if (od[a] > 0.0) {
-            t = min(t, (hi[a] - oo[a]) / od[a]);
-        } else if (od[a] < 0.0) {
-            t = min(t, (lo[a] - oo[a]) / od[a]);
-        }
-    }
-    return t;
+    let far = select(lo, hi, od > vec3<f32>(0.0));
+    let tf = select(vec3<f32>(3.0e38), (far - oo) / od, od != vec3<f32>(0.0));
+    return min(tf.x, min(tf.y, tf.z));
 }
 
 @compute @workgroup_size(8, 8, 1)
@@ -143,28 +137,34 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         // (or skips) one sample. Rays of a SIMD group/warp then diverge only per
         // iteration, not per nested leaf loop.
         var have_leaf = false;
-        var hit: OctLeaf;
         var b: Brick;
         var dtl = dt;
         loop {
             if (!have_leaf) {
-                if (!oct_next_leaf(&st)) { break; }
-                hit = st.hit;
-                if (hit.tag != OCT_TAG_DATA) { continue; }
-                let slot = hit.data;
-                if (mode == MODE_MIP && ess && slots[slot].range.y <= m) { continue; }
-                b = brick_of(hit.leaf, slot);
+                // Walk to the next data leaf (skipping empty ones, and for MIP
+                // bricks below the running maximum) in one go.
+                var found = false;
+                loop {
+                    if (!oct_next_leaf(&st)) { break; }
+                    if (st.hit.tag == OCT_TAG_DATA && !(mode == MODE_MIP && ess && slots[st.hit.data].range.y <= m)) {
+                        found = true;
+                        break;
+                    }
+                }
+                if (!found) { break; }
+                let slot = st.hit.data;
+                b = brick_of(st.hit.leaf, slot);
                 dtl = dt * b.f;
                 // Snap to this level's sample grid at or after max(t_enter, last sample).
                 if (b.f != grid_f) {
                     grid_f = b.f;
-                    k = u32(max(ceil((max(hit.t_enter, t_last) - t0) / dtl), 0.0));
+                    k = u32(max(ceil((max(st.hit.t_enter, t_last) - t0) / dtl), 0.0));
                 }
-                k = max(k, u32(max(ceil((hit.t_enter - t0) / dtl), 0.0)));
+                k = max(k, u32(max(ceil((st.hit.t_enter - t0) / dtl), 0.0)));
                 have_leaf = true;
             }
             let t = t0 + f32(k) * dtl;
-            if (t >= hit.t_exit || t >= t1) {
+            if (t >= st.hit.t_exit || t >= t1) {
                 have_leaf = false;
                 continue;
             }
@@ -175,10 +175,11 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 // Skip the rest of a sub-cell that cannot contribute: transparent
                 // (DVR), or below the running maximum (MIP). The sample grid is
                 // unchanged, so skipping never changes the image.
-                let c = sub_cell(b, o);
-                let skip = (mode == MODE_DVR && tf_transparent(c.range)) || (mode == MODE_MIP && c.range.y <= m);
+                let j = sub_cell_of(b, o);
+                let range = sub_cell_range(b, j);
+                let skip = (mode == MODE_DVR && tf_transparent(range)) || (mode == MODE_MIP && range.y <= m);
                 if (skip) {
-                    let te = min(box_exit(oo, od, c.lo, c.hi), hit.t_exit);
+                    let te = min(sub_cell_exit(b, j, oo, od), st.hit.t_exit);
                     k = max(k + 1u, u32(max(ceil((te - t0) / dtl), 0.0)));
                     continue;
                 }
@@ -207,7 +208,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                     var a = t;
                     var bb = t;
                     if (t > t0) {
-                        a = max(t_last, max(hit.t_enter - dtl, t - dtl));
+                        a = max(t_last, max(st.hit.t_enter - dtl, t - dtl));
                         if (t_last >= t) { a = t; }
                     }
                     for (var i = 0u; i < params.size.w; i = i + 1u) {
@@ -228,9 +229,9 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 }
                 if (ess) {
                     // The whole sub-cell lies below the isovalue, like this sample.
-                    let c = sub_cell(b, o);
-                    if (c.range.y < iso) {
-                        let te = min(box_exit(oo, od, c.lo, c.hi), hit.t_exit);
+                    let j = sub_cell_of(b, o);
+                    if (sub_cell_range(b, j).y < iso) {
+                        let te = min(sub_cell_exit(b, j, oo, od), st.hit.t_exit);
                         t_last = t0 + f32(max(u32(max(ceil((te - t0) / dtl), 0.0)), k + 1u) - 1u) * dtl;
                         k = max(k + 1u, u32(max(ceil((te - t0) / dtl), 0.0)));
                         continue;
