@@ -271,20 +271,8 @@ fn accelerations_preserve_the_image() {
         s.settings.accel = Accel::BRUTE_FORCE;
         let (brute, _) = s.gpu();
         for (label, accel) in [
-            (
-                "ert",
-                Accel {
-                    early_termination: Some(0.99),
-                    empty_space_skipping: false,
-                },
-            ),
-            (
-                "ess",
-                Accel {
-                    early_termination: None,
-                    empty_space_skipping: true,
-                },
-            ),
+            ("ert", Accel::ERT_ONLY),
+            ("ess", Accel::ESS_ONLY),
             ("both", Accel::default()),
         ] {
             s.settings.accel = accel;

@@ -163,12 +163,22 @@ fn finest_level_matches_in_core_on_head_ct() {
         // The accelerations (ERT, and ESS over empty leaves and brick sub-cells)
         // keep the out-of-core image too.
         let brute = View {
-            settings: RenderSettings { accel: brickray::Accel::BRUTE_FORCE, ..v.settings },
+            settings: RenderSettings {
+                accel: brickray::Accel::BRUTE_FORCE,
+                ..v.settings
+            },
             ..v
         };
         let slow = frame(&mut ooc, &brute);
-        let acc = assert_close(&format!("ooc_accel_{name}"), &img, &slow, v.size, v.size, 50.0)
-            .unwrap_or_else(|e| panic!("{e}"));
+        let acc = assert_close(
+            &format!("ooc_accel_{name}"),
+            &img,
+            &slow,
+            v.size,
+            v.size,
+            50.0,
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
         eprintln!("ooc {name} accelerated vs brute force: {acc}");
     }
 }

@@ -19,20 +19,8 @@ use std::time::Instant;
 
 const VARIANTS: [(&str, Accel); 4] = [
     ("brute", Accel::BRUTE_FORCE),
-    (
-        "ert",
-        Accel {
-            early_termination: Some(0.99),
-            empty_space_skipping: false,
-        },
-    ),
-    (
-        "ess",
-        Accel {
-            early_termination: None,
-            empty_space_skipping: true,
-        },
-    ),
+    ("ert", Accel::ERT_ONLY),
+    ("ess", Accel::ESS_ONLY),
     (
         "ert_ess",
         Accel {

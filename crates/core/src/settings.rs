@@ -72,6 +72,16 @@ impl Accel {
         early_termination: None,
         empty_space_skipping: false,
     };
+    /// Early ray termination at 0.99 only.
+    pub const ERT_ONLY: Accel = Accel {
+        early_termination: Some(0.99),
+        empty_space_skipping: false,
+    };
+    /// Empty-space skipping only.
+    pub const ESS_ONLY: Accel = Accel {
+        early_termination: None,
+        empty_space_skipping: true,
+    };
 }
 
 /// Everything that decides what a ray computes, besides camera, volume and TF.
