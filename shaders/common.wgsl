@@ -19,7 +19,7 @@ struct Params {
     shade: vec4<f32>,
     // x: ERT threshold (>1 = off), y: depth opacity, z: step_factor, w: unused.
     misc: vec4<f32>,
-    // x: width, y: height, z: flags, w: iso bisection steps.
+    // x: width, y: height, z: flags (FLAG_HOST_DEPTH), w: iso bisection steps.
     size: vec4<u32>,
     // xyz: macro cells per axis, w: cell size in voxels.
     cells: vec4<u32>,
@@ -35,13 +35,17 @@ struct Params {
     atlas: vec4<f32>,
 }
 
-const MODE_MASK: u32 = 3u;
+// Pipeline-overridable switches: every combination is compiled into its own
+// pipeline (VolumeRenderer keys them by mode, ERT, ESS and shading), so a ray
+// caster carries only the code of its mode.
+override MODE: u32 = 0u;
+override ERT: bool = true;
+override ESS: bool = true;
+override SHADE: bool = false;
+
 const MODE_DVR: u32 = 0u;
 const MODE_ISO: u32 = 1u;
 const MODE_MIP: u32 = 2u;
-const FLAG_ERT: u32 = 4u;
-const FLAG_ESS: u32 = 8u;
-const FLAG_SHADE: u32 = 16u;
 const FLAG_HOST_DEPTH: u32 = 32u;
 
 struct RaySetup {

@@ -60,8 +60,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         return;
     }
     let px = gid.xy;
-    let flags = params.size.z;
-    let mode = flags & MODE_MASK;
+    let mode = MODE;
     let start = start_ray(px);
     let r = start.r;
     let host = start.host;
@@ -73,9 +72,9 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     if (t1 > t0) {
         let dt = params.value_map.w;
         let n = min(u32(ceil((t1 - t0) / dt)), params.limits.x);
-        let ess = (flags & FLAG_ESS) != 0u;
-        let ert = (flags & FLAG_ERT) != 0u;
-        let shading = (flags & FLAG_SHADE) != 0u;
+        let ess = ESS;
+        let ert = ERT;
+        let shading = SHADE;
         let ert_thr = params.misc.x;
         let step_factor = params.misc.z;
         var k = 0u;

@@ -104,8 +104,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         return;
     }
     let px = gid.xy;
-    let flags = params.size.z;
-    let mode = flags & MODE_MASK;
+    let mode = MODE;
     let start = start_ray(px);
     let r = start.r;
     let host = start.host;
@@ -118,9 +117,9 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         let oo = r.tex_origin * params.octree.xyz;
         let od = r.tex_dir * params.octree.xyz;
         let dt = params.value_map.w;
-        let ess = (flags & FLAG_ESS) != 0u;
-        let ert = (flags & FLAG_ERT) != 0u;
-        let shading = (flags & FLAG_SHADE) != 0u;
+        let ess = ESS;
+        let ert = ERT;
+        let shading = SHADE;
         let ert_thr = params.misc.x;
         let step_factor = params.misc.z;
         let iso = params.iso.x;
