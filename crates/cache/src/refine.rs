@@ -693,7 +693,7 @@ pub(crate) mod tests {
         let r = run(&s, &cam, RenderMode::Mip, &s.tf, 10_000, u64::MAX);
         assert!(count(&r, NodeClass::Empty(EmptyReason::Empty)) > 0);
         assert_eq!(count(&r, NodeClass::Empty(EmptyReason::Invisible)), 0);
-        // Iso at 0.9: only nodes whose range contains 0.9 (near the centre) hold data.
+        // Iso at 0.9: only nodes reaching 0.9 (near the centre) hold data.
         let iso = RenderMode::Iso {
             value: 0.9,
             color: [1.0; 3],
