@@ -41,6 +41,26 @@ impl DType {
         }
     }
 
+    /// Decodes little-endian samples of this type to f32 (a trailing partial
+    /// sample is ignored).
+    pub fn decode_le(self, bytes: &[u8]) -> Vec<f32> {
+        match self {
+            DType::U8 => bytes.iter().map(|&x| x as f32).collect(),
+            DType::U16 => bytes
+                .chunks_exact(2)
+                .map(|c| u16::from_le_bytes([c[0], c[1]]) as f32)
+                .collect(),
+            DType::I16 => bytes
+                .chunks_exact(2)
+                .map(|c| i16::from_le_bytes([c[0], c[1]]) as f32)
+                .collect(),
+            DType::F32 => bytes
+                .chunks_exact(4)
+                .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+                .collect(),
+        }
+    }
+
     /// The short name (`u8`, `u16`, `i16`, `f32`).
     pub fn name(self) -> &'static str {
         match self {

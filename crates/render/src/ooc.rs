@@ -74,18 +74,11 @@ pub(crate) fn sub_cell_ranges(layout: &OctreeLayout, bytes: &[u8], n: u32) -> Ve
     let side = layout.stored_side() as usize;
     let (b, a) = (layout.brick as f64, layout.apron as i64);
     let d = &layout.volume;
-    let size = d.dtype.size();
-    let vals: Vec<f32> = bytes
-        .chunks_exact(size)
-        .map(|c| {
-            let raw = match d.dtype {
-                brickray_core::DType::U8 => c[0] as f32,
-                brickray_core::DType::U16 => u16::from_le_bytes([c[0], c[1]]) as f32,
-                brickray_core::DType::I16 => i16::from_le_bytes([c[0], c[1]]) as f32,
-                _ => f32::from_le_bytes([c[0], c[1], c[2], c[3]]),
-            };
-            d.normalize(raw)
-        })
+    let vals: Vec<f32> = d
+        .dtype
+        .decode_le(bytes)
+        .into_iter()
+        .map(|raw| d.normalize(raw))
         .collect();
     if vals.len() < side * side * side {
         // A malformed brick: never skip it.

@@ -202,7 +202,7 @@ fn cmd_info(store_path: &std::path::Path, bins: usize) -> Result<(), String> {
                     store
                         .read_brick(rec.key, &mut buf)
                         .map_err(|e| e.to_string())?;
-                    let vals = decode(d.dtype, &buf);
+                    let vals = d.dtype.decode_le(&buf);
                     let s = lay.stored_side() as usize;
                     let a = lay.apron as usize;
                     for k in 0..ext[2] as usize {
@@ -237,23 +237,4 @@ fn cmd_info(store_path: &std::path::Path, bins: usize) -> Result<(), String> {
         );
     }
     Ok(())
-}
-
-fn decode(dtype: brickray_core::DType, b: &[u8]) -> Vec<f32> {
-    use brickray_core::DType;
-    match dtype {
-        DType::U8 => b.iter().map(|&x| x as f32).collect(),
-        DType::U16 => b
-            .chunks_exact(2)
-            .map(|c| u16::from_le_bytes([c[0], c[1]]) as f32)
-            .collect(),
-        DType::I16 => b
-            .chunks_exact(2)
-            .map(|c| i16::from_le_bytes([c[0], c[1]]) as f32)
-            .collect(),
-        _ => b
-            .chunks_exact(4)
-            .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
-            .collect(),
-    }
 }

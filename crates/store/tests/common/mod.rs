@@ -67,21 +67,7 @@ impl VolumeReader for MemReader {
 }
 
 pub fn decode(dtype: DType, b: &[u8]) -> Vec<f32> {
-    match dtype {
-        DType::U8 => b.iter().map(|&x| x as f32).collect(),
-        DType::U16 => b
-            .chunks_exact(2)
-            .map(|c| u16::from_le_bytes([c[0], c[1]]) as f32)
-            .collect(),
-        DType::I16 => b
-            .chunks_exact(2)
-            .map(|c| i16::from_le_bytes([c[0], c[1]]) as f32)
-            .collect(),
-        _ => b
-            .chunks_exact(4)
-            .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
-            .collect(),
-    }
+    dtype.decode_le(b)
 }
 
 pub fn encode(dtype: DType, v: &[f32]) -> Vec<u8> {
