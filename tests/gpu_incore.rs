@@ -567,3 +567,82 @@ fn typed_errors_not_panics() {
         Err(RenderError::BadTargetFormat(_))
     ));
 }
+
+/// Without the optional features (16-bit normalized and filterable 32-bit float
+/// textures) the renderer falls back to normalized R16Float textures and still
+/// matches the reference, for every dtype that needs them.
+#[test]
+fn missing_texture_features_fall_back() {
+    let g = GpuContext::with_features(wgpu::Features::empty()).expect("a wgpu adapter");
+    assert!(
+        !g.device
+            .features()
+            .contains(wgpu::Features::TEXTURE_FORMAT_16BIT_NORM)
+    );
+    let mut vols = vec![("ml_f32", brickray_core::synthetic::marschner_lobb(48))];
+    for name in ["invesalius_cranium_ct", "cells3d_nuclei_fluo"] {
+        if let Some(p) = brickray_harness::shared_volume(name) {
+            vols.push((name, brickray::io::read_volume(p).unwrap()));
+        }
+    }
+    let tf = TransferFunction::from_points(
+        &[(0.3, [0.3, 0.6, 1.0, 0.0]), (0.8, [1.0, 0.8, 0.5, 0.5])],
+        256,
+    );
+    for (name, vol) in &vols {
+        let d = vol.desc();
+        let frame = VolumeFrame::centered(d.dims, d.spacing);
+        let mut r = VolumeRenderer::new(&g.device, targets()).unwrap();
+        r.set_volume(&g.device, &g.queue, vol).unwrap();
+        if d.dtype != brickray::DType::U8 {
+            assert_eq!(
+                r.volume_format(),
+                Some(wgpu::TextureFormat::R16Float),
+                "{name}"
+            );
+        }
+        r.set_transfer_function(&g.device, &g.queue, &tf);
+        let size = 96;
+        let target = Offscreen::new(&g.device, size, size);
+        let camera = Camera::orbit(frame.center(), 2.0, 0.5, 0.3);
+        let settings = RenderSettings {
+            mode: RenderMode::Mip,
+            ..Default::default()
+        };
+        let mut enc = g.device.create_command_encoder(&Default::default());
+        let desc = FrameDesc {
+            camera,
+            frame,
+            width: size,
+            height: size,
+            settings,
+            host_depth: None,
+        };
+        r.prepare(&g.device, &g.queue, &mut enc, &desc).unwrap();
+        {
+            let mut pass = target.pass(&mut enc, true);
+            r.render(&mut pass).unwrap();
+        }
+        g.submit_wait(enc);
+        let gpu_img = target.read_color(&g);
+        let cpu = render_reference(
+            vol,
+            &frame,
+            &tf,
+            &camera,
+            &settings,
+            &ReferenceOptions::new(size, size),
+        )
+        .to_rgba8([0.0; 3]);
+        let cmp = assert_close(
+            &format!("fallback_{name}"),
+            &gpu_img,
+            &cpu,
+            size,
+            size,
+            40.0,
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        eprintln!("fallback {name}: {cmp}");
+    }
+}

@@ -60,6 +60,13 @@ pub const WANTED_FEATURES: wgpu::Features = wgpu::Features::TEXTURE_FORMAT_16BIT
 impl GpuContext {
     /// Picks an adapter (see the crate docs) and creates a device.
     pub fn new() -> Result<GpuContext, GpuError> {
+        GpuContext::with_features(WANTED_FEATURES)
+    }
+
+    /// Like [`GpuContext::new`], enabling only `features` of [`WANTED_FEATURES`]
+    /// (the others are left off even when the adapter has them: tests use this to
+    /// exercise the fallbacks for missing features).
+    pub fn with_features(wanted: wgpu::Features) -> Result<GpuContext, GpuError> {
         let instance =
             wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
         let backends = wgpu::Backends::from_env().unwrap_or(wgpu::Backends::all());
@@ -98,7 +105,7 @@ impl GpuContext {
             }
             return Err(GpuError::NoAdapter { filter });
         };
-        let features = adapter.features() & WANTED_FEATURES;
+        let features = adapter.features() & WANTED_FEATURES & wanted;
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("brickray-harness"),
             required_features: features,
