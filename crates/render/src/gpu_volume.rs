@@ -199,20 +199,7 @@ impl GpuVolume {
         }
         let grid = MacroCellGrid::build(vol, CELL);
         let ranges: &[u8] = bytemuck::cast_slice(&grid.ranges);
-        let max_storage = device.limits().max_storage_buffer_binding_size;
-        if ranges.len() as u64 > max_storage {
-            return Err(RenderError::LowDeviceLimit {
-                what: "macro-cell ranges",
-                required: ranges.len() as u64,
-                limit: max_storage,
-            });
-        }
-        let cell_ranges = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("brickray-render macro cells"),
-            size: ranges.len() as u64,
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
+        let cell_ranges = crate::storage_buffer(device, "macro-cell ranges", ranges.len() as u64)?;
         queue.write_buffer(&cell_ranges, 0, ranges);
         Ok(GpuVolume {
             view: texture.create_view(&wgpu::TextureViewDescriptor::default()),

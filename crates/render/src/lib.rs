@@ -187,6 +187,30 @@ pub struct VolumeRenderer {
     last_frame: FrameStats,
 }
 
+/// A `STORAGE | COPY_DST` buffer of `size` bytes, or a typed error when it would
+/// exceed the device's storage-binding limit. `what` names it in the error and
+/// in its `brickray-render` label.
+pub(crate) fn storage_buffer(
+    device: &wgpu::Device,
+    what: &'static str,
+    size: u64,
+) -> Result<wgpu::Buffer, RenderError> {
+    let limit = device.limits().max_storage_buffer_binding_size;
+    if size > limit {
+        return Err(RenderError::LowDeviceLimit {
+            what,
+            required: size,
+            limit,
+        });
+    }
+    Ok(device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some(&format!("brickray-render {what}")),
+        size: size.max(16),
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    }))
+}
+
 fn storage_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
     wgpu::BindGroupLayoutEntry {
         binding,

@@ -204,34 +204,10 @@ impl OocVolume {
         });
         let slot_count = manager.pool().slot_count() as usize;
         let slots_size = (slot_count.max(1) * std::mem::size_of::<SlotInfo>()) as u64;
-        if slots_size > limits.max_storage_buffer_binding_size {
-            return Err(RenderError::LowDeviceLimit {
-                what: "brick slot table",
-                required: slots_size,
-                limit: limits.max_storage_buffer_binding_size,
-            });
-        }
-        let slots = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("brickray-render brick slots"),
-            size: slots_size,
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
+        let slots = crate::storage_buffer(device, "brick slot table", slots_size)?;
         let sub_n = sub_cells_per_axis(layout.brick);
         let sub_size = (slot_count.max(1) as u64) * (sub_n as u64).pow(3) * 8;
-        if sub_size > limits.max_storage_buffer_binding_size {
-            return Err(RenderError::LowDeviceLimit {
-                what: "brick sub-cell table",
-                required: sub_size,
-                limit: limits.max_storage_buffer_binding_size,
-            });
-        }
-        let sub_cells = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("brickray-render brick sub-cells"),
-            size: sub_size,
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
+        let sub_cells = crate::storage_buffer(device, "brick sub-cell table", sub_size)?;
         Ok(OocVolume {
             manager,
             layout,
