@@ -11,8 +11,8 @@
 //! streams that (or, with `--in-core`, uploads the file whole).
 
 use brickray::{
-    Camera, FrameDesc, OutOfCoreConfig, RenderMode, RenderSettings, Shading, TargetDesc,
-    TransferFunction, VolumeFrame, VolumeRenderer,
+    Camera, FrameDesc, OutOfCoreConfig, RenderMode, RenderSettings, Shading, TransferFunction,
+    VolumeFrame, VolumeRenderer,
 };
 use brickray_harness::{GpuContext, Offscreen};
 use std::path::PathBuf;
@@ -62,13 +62,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     std::fs::create_dir_all(&args.out)?;
     let gpu = GpuContext::new()?;
     println!("adapter: {}", gpu.describe());
-    let mut renderer = VolumeRenderer::new(
-        &gpu.device,
-        TargetDesc {
-            color_format: brickray_harness::COLOR_FORMAT,
-            depth_format: Some(brickray_harness::DEPTH_FORMAT),
-        },
-    )?;
+    let mut renderer = VolumeRenderer::new(&gpu.device, brickray_harness::target_desc())?;
     let config = OutOfCoreConfig {
         gpu_budget_bytes: args.pool_mib << 20,
         ..Default::default()
@@ -88,7 +82,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 args.pool_mib
             );
             let frame = VolumeFrame::centered([4096; 3], [1.0; 3]);
-            renderer.set_volume_source(&gpu.device, source, frame, config)?;
+            renderer.set_volume_source(&gpu.device, &gpu.queue, source, frame, config)?;
             let tf = TransferFunction::from_points(
                 &[
                     (0.45, [0.1, 0.3, 0.8, 0.0]),
@@ -124,6 +118,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 );
                 renderer.set_volume_source(
                     &gpu.device,
+                    &gpu.queue,
                     Arc::new(brickray::store::open(&store)?),
                     frame,
                     config,
@@ -140,7 +135,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             (frame, tf, RenderMode::Dvr)
         }
     };
-    renderer.set_transfer_function(&gpu.device, &gpu.queue, &tf);
+    renderer.set_transfer_function(&gpu.device, &gpu.queue, &tf)?;
     let target = Offscreen::new(&gpu.device, args.size, args.size);
     let settings = RenderSettings {
         mode,
@@ -158,8 +153,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let desc = FrameDesc {
             camera,
             frame,
-            width: args.size,
-            height: args.size,
+            viewport: brickray::Viewport::full(args.size, args.size),
             settings,
             host_depth: None,
         };

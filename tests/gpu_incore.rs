@@ -9,7 +9,7 @@ use brickray::{
     Accel, Camera, FrameDesc, Projection, RenderError, RenderMode, RenderSettings, Shading,
     TargetDesc, TransferFunction, Volume, VolumeFrame, VolumeRenderer,
 };
-use brickray_harness::{GpuContext, HostQuad, Offscreen};
+use brickray_harness::{GpuContext, Offscreen};
 use brickray_reference::{ReferenceOptions, assert_close, render_reference};
 use glam::Vec3;
 use std::sync::OnceLock;
@@ -24,10 +24,7 @@ fn gpu() -> &'static GpuContext {
 }
 
 fn targets() -> TargetDesc {
-    TargetDesc {
-        color_format: brickray_harness::COLOR_FORMAT,
-        depth_format: Some(brickray_harness::DEPTH_FORMAT),
-    }
+    brickray_harness::target_desc()
 }
 
 struct Scene<'a> {
@@ -66,14 +63,14 @@ impl Scene<'_> {
         let g = gpu();
         let mut r = VolumeRenderer::new(&g.device, targets()).unwrap();
         r.set_volume(&g.device, &g.queue, self.vol).unwrap();
-        r.set_transfer_function(&g.device, &g.queue, self.tf);
+        r.set_transfer_function(&g.device, &g.queue, self.tf)
+            .unwrap();
         let target = Offscreen::new(&g.device, self.size, self.size);
         let mut enc = g.device.create_command_encoder(&Default::default());
         let desc = FrameDesc {
             camera: self.camera,
             frame: self.frame,
-            width: self.size,
-            height: self.size,
+            viewport: brickray::Viewport::full(self.size, self.size),
             settings: self.settings,
             host_depth: None,
         };
@@ -291,162 +288,6 @@ fn accelerations_preserve_the_image() {
     }
 }
 
-/// A host quad in front occludes the volume; the volume occludes a host quad
-/// behind it; a quad drawn after the volume is depth-tested against it. The GPU
-/// image must equal the CPU reference given the host's depth, composited over
-/// the host's colour.
-#[test]
-fn host_depth_composites_both_ways() {
-    let g = gpu();
-    let vol = brickray_core::synthetic::sphere(48);
-    let tf = TransferFunction::ramp(0.1, 0.5, 0.5);
-    let size = 96u32;
-    let mut s = Scene::new(
-        &vol,
-        &tf,
-        RenderMode::Iso {
-            value: 0.5,
-            color: [0.8, 0.8, 0.8],
-        },
-        size,
-    );
-    s.camera = Camera::orbit(s.frame.center(), 2.0, 0.0, 0.0);
-    let vp = s.camera.view_proj(1.0);
-    // Clip depths of points in front of and behind the volume centre.
-    let depth_of = |z: f32| {
-        let c = vp * Vec3::new(0.0, 0.0, z).extend(1.0);
-        c.z / c.w
-    };
-    let (d_front, d_back) = (depth_of(0.45), depth_of(-0.1));
-    let quads = HostQuad::new(&g.device);
-    let target = Offscreen::new(&g.device, size, size);
-    let mut r = VolumeRenderer::new(&g.device, targets()).unwrap();
-    r.set_volume(&g.device, &g.queue, &vol).unwrap();
-    r.set_transfer_function(&g.device, &g.queue, &tf);
-    // Pass 1: the host's opaque geometry.
-    let mut enc = g.device.create_command_encoder(&Default::default());
-    {
-        let mut pass = target.pass(&mut enc, true);
-        quads.draw(
-            &g.device,
-            &mut pass,
-            [-1.0, -1.0, -0.2, 1.0],
-            d_front,
-            [1.0, 0.0, 0.0, 1.0],
-        );
-        quads.draw(
-            &g.device,
-            &mut pass,
-            [0.2, -1.0, 1.0, 1.0],
-            d_back,
-            [0.0, 0.0, 1.0, 1.0],
-        );
-    }
-    g.submit_wait(enc);
-    let host_rgba = target.read_color(g);
-    let host_depth = target.read_depth(g);
-    // Pass 2: the volume, with the host's depth.
-    let mut enc = g.device.create_command_encoder(&Default::default());
-    let desc = FrameDesc {
-        camera: s.camera,
-        frame: s.frame,
-        width: size,
-        height: size,
-        settings: s.settings,
-        host_depth: Some(&target.depth_view),
-    };
-    r.prepare(&g.device, &g.queue, &mut enc, &desc).unwrap();
-    {
-        let mut pass = target.pass(&mut enc, false);
-        r.render(&mut pass).unwrap();
-    }
-    g.submit_wait(enc);
-    let gpu_rgba = target.read_color(g);
-    let gpu_depth = target.read_depth(g);
-    // The reference: the volume with the host's depth, over the host's colour.
-    let img = render_reference(
-        &vol,
-        &s.frame,
-        &tf,
-        &s.camera,
-        &s.settings,
-        &ReferenceOptions::new(size, size).with_host_depth(&host_depth),
-    );
-    let mut expected = host_rgba.clone();
-    for (i, p) in img.color.iter().enumerate() {
-        for k in 0..3 {
-            let host = host_rgba[4 * i + k] as f32 / 255.0;
-            expected[4 * i + k] =
-                ((p[k] + (1.0 - p[3]) * host).clamp(0.0, 1.0) * 255.0).round() as u8;
-        }
-    }
-    let cmp = assert_close("host_depth", &gpu_rgba, &expected, size, size, 40.0)
-        .unwrap_or_else(|e| panic!("{e}"));
-    eprintln!("host depth: {cmp}");
-    // Both ways, explicitly: the centre row shows red (front quad) on the left,
-    // the volume in the middle, and the volume over the back quad on the right edge
-    // of the sphere, blue beyond it.
-    let px = |x: u32, y: u32| {
-        &gpu_rgba[(4 * (y * size + x)) as usize..(4 * (y * size + x) + 3) as usize]
-    };
-    let mid = size / 2;
-    assert_eq!(
-        px(5, mid),
-        [255, 0, 0],
-        "front quad must occlude the volume"
-    );
-    assert!(
-        px(mid, mid)[0] > 100 && px(mid, mid)[2] > 100,
-        "volume visible in the middle"
-    );
-    assert_eq!(
-        px(size - 3, mid),
-        [0, 0, 255],
-        "back quad visible beside the volume"
-    );
-    let sphere_right = (mid..size)
-        .rev()
-        .find(|&x| px(x, mid) != [0, 0, 255])
-        .unwrap();
-    assert!(
-        sphere_right > (size as f32 * 0.6) as u32,
-        "the volume must cover the back quad"
-    );
-    // Depth written: min(host, volume) everywhere.
-    for i in 0..(size * size) as usize {
-        assert!(
-            gpu_depth[i] <= host_depth[i] + 1e-6,
-            "depth must never move back"
-        );
-        assert!(
-            (gpu_depth[i] - img.depth[i].min(host_depth[i])).abs() < 2e-3 || img.color[i][3] < 0.5,
-            "pixel {i}: depth {} vs reference {}",
-            gpu_depth[i],
-            img.depth[i]
-        );
-    }
-    // Geometry drawn after the volume is hidden where the volume is in front of it.
-    let mut enc = g.device.create_command_encoder(&Default::default());
-    {
-        let mut pass = target.pass(&mut enc, false);
-        quads.draw(
-            &g.device,
-            &mut pass,
-            [-0.2, -0.1, 0.2, 0.1],
-            depth_of(0.0),
-            [0.0, 1.0, 0.0, 1.0],
-        );
-    }
-    g.submit_wait(enc);
-    let after = target.read_color(g);
-    let c = &after[(4 * (mid * size + mid)) as usize..][..3];
-    assert_ne!(
-        c,
-        [0, 255, 0],
-        "a quad at the sphere's centre drawn later must be hidden by the surface"
-    );
-}
-
 /// Anisotropic spacing keeps physical proportions: a 32x32x8 slab of spacing
 /// (1, 1, 4) seen orthographically from the side is as tall as it is wide.
 #[test]
@@ -479,6 +320,7 @@ fn anisotropic_spacing_keeps_proportions() {
         projection: Projection::Orthographic { height: 1.6 },
         near: 0.1,
         far: 10.0,
+        depth: brickray::DepthConvention::Standard,
     };
     let (rgba, _) = s.gpu();
     let covered: Vec<(u32, u32)> = (0..size * size)
@@ -509,8 +351,7 @@ fn typed_errors_not_panics() {
     let desc = FrameDesc {
         camera: Camera::orbit(frame.center(), 2.0, 0.0, 0.0),
         frame,
-        width: 16,
-        height: 16,
+        viewport: brickray::Viewport::full(16, 16),
         settings: RenderSettings::default(),
         host_depth: None,
     };
@@ -540,11 +381,12 @@ fn typed_errors_not_panics() {
     r.set_volume(&g.device, &g.queue, &vol).unwrap();
     assert!(matches!(
         r.prepare(&g.device, &g.queue, &mut enc, &desc),
-        Err(brickray::PrepareError::BadSetting(_))
+        Err(brickray::PrepareError::NoTransferFunction)
     ));
-    r.set_transfer_function(&g.device, &g.queue, &gray_ramp());
+    r.set_transfer_function(&g.device, &g.queue, &gray_ramp())
+        .unwrap();
     let zero = FrameDesc {
-        width: 0,
+        viewport: brickray::Viewport::full(0, 16),
         ..desc.clone()
     };
     assert!(matches!(
@@ -555,13 +397,10 @@ fn typed_errors_not_panics() {
     bad.settings.step_factor = f32::NAN;
     assert!(matches!(
         r.prepare(&g.device, &g.queue, &mut enc, &bad),
-        Err(brickray::PrepareError::BadSetting(_))
+        Err(brickray::PrepareError::Settings(_))
     ));
     // A non-blendable target format.
-    let t = TargetDesc {
-        color_format: wgpu::TextureFormat::R32Uint,
-        depth_format: None,
-    };
+    let t = TargetDesc::new(wgpu::TextureFormat::R32Uint);
     assert!(matches!(
         VolumeRenderer::new(&g.device, t),
         Err(RenderError::BadTargetFormat(_))
@@ -601,7 +440,7 @@ fn missing_texture_features_fall_back() {
                 "{name}"
             );
         }
-        r.set_transfer_function(&g.device, &g.queue, &tf);
+        r.set_transfer_function(&g.device, &g.queue, &tf).unwrap();
         let size = 96;
         let target = Offscreen::new(&g.device, size, size);
         let camera = Camera::orbit(frame.center(), 2.0, 0.5, 0.3);
@@ -613,8 +452,7 @@ fn missing_texture_features_fall_back() {
         let desc = FrameDesc {
             camera,
             frame,
-            width: size,
-            height: size,
+            viewport: brickray::Viewport::full(size, size),
             settings,
             host_depth: None,
         };

@@ -18,10 +18,7 @@ fn gpu() -> &'static GpuContext {
 }
 
 fn targets() -> TargetDesc {
-    TargetDesc {
-        color_format: brickray_harness::COLOR_FORMAT,
-        depth_format: Some(brickray_harness::DEPTH_FORMAT),
-    }
+    brickray_harness::target_desc()
 }
 
 /// Builds a brick store of `vol` in a temporary directory and opens it.
@@ -52,8 +49,7 @@ fn frame(r: &mut VolumeRenderer, v: &View) -> Vec<u8> {
     let desc = FrameDesc {
         camera: v.camera,
         frame: v.frame,
-        width: v.size,
-        height: v.size,
+        viewport: brickray::Viewport::full(v.size, v.size),
         settings: v.settings,
         host_depth: None,
     };
@@ -130,7 +126,7 @@ fn finest_level_matches_in_core_on_head_ct() {
     let mut incore = VolumeRenderer::new(&g.device, targets()).unwrap();
     incore.set_volume(&g.device, &g.queue, &vol).unwrap();
     let mut ooc = VolumeRenderer::new(&g.device, targets()).unwrap();
-    ooc.set_volume_source(&g.device, source, wf, finest())
+    ooc.set_volume_source(&g.device, &g.queue, source, wf, finest())
         .unwrap();
     for (name, mode, tf) in cases {
         let v = View {
@@ -143,8 +139,10 @@ fn finest_level_matches_in_core_on_head_ct() {
             },
             size: 192,
         };
-        incore.set_transfer_function(&g.device, &g.queue, &tf);
-        ooc.set_transfer_function(&g.device, &g.queue, &tf);
+        incore
+            .set_transfer_function(&g.device, &g.queue, &tf)
+            .unwrap();
+        ooc.set_transfer_function(&g.device, &g.queue, &tf).unwrap();
         let reference = frame(&mut incore, &v);
         let (img, stats, frames) = converge(&mut ooc, &v, 60);
         let cmp = assert_close(
@@ -201,8 +199,9 @@ fn small_pool_renders_coarser_but_complete() {
         tolerance_px: 0.5,
         ..Default::default()
     };
-    r.set_volume_source(&g.device, source, wf, config).unwrap();
-    r.set_transfer_function(&g.device, &g.queue, &tf);
+    r.set_volume_source(&g.device, &g.queue, source, wf, config)
+        .unwrap();
+    r.set_transfer_function(&g.device, &g.queue, &tf).unwrap();
     let v = View {
         camera: Camera::orbit(wf.center(), 1.8, 0.7, 0.4),
         frame: wf,
@@ -247,6 +246,7 @@ fn drop_with_loads_in_flight() {
     let mut r = VolumeRenderer::new(&g.device, targets()).unwrap();
     r.set_volume_source(
         &g.device,
+        &g.queue,
         source,
         wf,
         OutOfCoreConfig {
@@ -255,7 +255,8 @@ fn drop_with_loads_in_flight() {
         },
     )
     .unwrap();
-    r.set_transfer_function(&g.device, &g.queue, &TransferFunction::ramp(0.3, 0.9, 0.2));
+    r.set_transfer_function(&g.device, &g.queue, &TransferFunction::ramp(0.3, 0.9, 0.2))
+        .unwrap();
     let v = View {
         camera: Camera::orbit(wf.center(), 1.5, 0.2, 0.1),
         frame: wf,
@@ -312,7 +313,9 @@ fn mixed_levels_show_no_seams() {
         };
         let mut incore = VolumeRenderer::new(&g.device, targets()).unwrap();
         incore.set_volume(&g.device, &g.queue, &vol).unwrap();
-        incore.set_transfer_function(&g.device, &g.queue, &tf);
+        incore
+            .set_transfer_function(&g.device, &g.queue, &tf)
+            .unwrap();
         let reference = frame(&mut incore, &v);
         let mut ooc = VolumeRenderer::new(&g.device, targets()).unwrap();
         let config = OutOfCoreConfig {
@@ -320,9 +323,9 @@ fn mixed_levels_show_no_seams() {
             upload_budget_bytes: 1 << 30,
             ..Default::default()
         };
-        ooc.set_volume_source(&g.device, source.clone(), wf, config)
+        ooc.set_volume_source(&g.device, &g.queue, source.clone(), wf, config)
             .unwrap();
-        ooc.set_transfer_function(&g.device, &g.queue, &tf);
+        ooc.set_transfer_function(&g.device, &g.queue, &tf).unwrap();
         let (img, stats, _) = converge(&mut ooc, &v, 60);
         let levels: Vec<(usize, u32)> = stats
             .data_leaves_per_level

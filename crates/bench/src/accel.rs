@@ -13,7 +13,7 @@ use brickray_core::{
     Accel, Camera, RenderMode, RenderSettings, Shading, TransferFunction, Volume, VolumeFrame,
 };
 use brickray_harness::{GpuContext, Offscreen, ct};
-use brickray_render::{FrameDesc, TargetDesc, VolumeRenderer};
+use brickray_render::{FrameDesc, VolumeRenderer};
 use serde_json::json;
 use std::time::Instant;
 
@@ -52,8 +52,7 @@ impl Bench<'_> {
         let desc = FrameDesc {
             camera: self.camera,
             frame: self.frame,
-            width: self.size,
-            height: self.size,
+            viewport: brickray_render::Viewport::full(self.size, self.size),
             settings,
             host_depth: None,
         };
@@ -117,14 +116,8 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         d.dtype.name(),
         d.spacing
     );
-    let mut renderer = VolumeRenderer::new(
-        &gpu.device,
-        TargetDesc {
-            color_format: brickray_harness::COLOR_FORMAT,
-            depth_format: Some(brickray_harness::DEPTH_FORMAT),
-        },
-    )
-    .map_err(|e| e.to_string())?;
+    let mut renderer = VolumeRenderer::new(&gpu.device, brickray_harness::target_desc())
+        .map_err(|e| e.to_string())?;
     renderer
         .set_volume(&gpu.device, &gpu.queue, &vol)
         .map_err(|e| e.to_string())?;
@@ -158,7 +151,8 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
     for (scene, tf, mode) in &scenes {
         bench
             .renderer
-            .set_transfer_function(&gpu.device, &gpu.queue, tf);
+            .set_transfer_function(&gpu.device, &gpu.queue, tf)
+            .expect("transfer function");
         let settings = |accel| RenderSettings {
             mode: *mode,
             shading,

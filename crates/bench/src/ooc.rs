@@ -85,8 +85,7 @@ impl<'a> Runner<'a> {
         let desc = FrameDesc {
             camera,
             frame,
-            width: self.size,
-            height: self.size,
+            viewport: brickray_render::Viewport::full(self.size, self.size),
             settings,
             host_depth: None,
         };
@@ -139,8 +138,7 @@ impl<'a> Runner<'a> {
         let desc = FrameDesc {
             camera,
             frame,
-            width: self.size,
-            height: self.size,
+            viewport: brickray_render::Viewport::full(self.size, self.size),
             settings,
             host_depth: None,
         };
@@ -208,10 +206,7 @@ fn arg<T: std::str::FromStr>(args: &[String], name: &str, default: T) -> Result<
 }
 
 fn targets() -> TargetDesc {
-    TargetDesc {
-        color_format: brickray_harness::COLOR_FORMAT,
-        depth_format: Some(brickray_harness::DEPTH_FORMAT),
-    }
+    brickray_harness::target_desc()
 }
 
 pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
@@ -291,6 +286,7 @@ fn part_a(gpu: &GpuContext, size: u32, rounds: usize, fig: &mut Figures) -> Resu
     let mut ooc = VolumeRenderer::new(&gpu.device, targets()).map_err(|e| e.to_string())?;
     ooc.set_volume_source(
         &gpu.device,
+        &gpu.queue,
         source,
         frame,
         OutOfCoreConfig {
@@ -340,8 +336,11 @@ fn part_a(gpu: &GpuContext, size: u32, rounds: usize, fig: &mut Figures) -> Resu
     );
     let (mut worst_ratio, mut worst_psnr) = (0.0f64, f64::INFINITY);
     for (scene, tf) in &scenes {
-        incore.set_transfer_function(&gpu.device, &gpu.queue, tf);
-        ooc.set_transfer_function(&gpu.device, &gpu.queue, tf);
+        incore
+            .set_transfer_function(&gpu.device, &gpu.queue, tf)
+            .expect("transfer function");
+        ooc.set_transfer_function(&gpu.device, &gpu.queue, tf)
+            .expect("transfer function");
         let (frames, stats) =
             run.converge(&mut ooc, camera, frame, settings(variants[0].1), 400)?;
         let frames = frames.ok_or_else(|| format!("(a) {scene}: not converged: {stats:?}"))?;
@@ -573,13 +572,15 @@ fn part_b(
         let mut renderer =
             VolumeRenderer::new(&gpu.device, targets()).map_err(|e| e.to_string())?;
         renderer
-            .set_volume_source(&gpu.device, source.clone(), frame, config)
+            .set_volume_source(&gpu.device, &gpu.queue, source.clone(), frame, config)
             .map_err(|e| e.to_string())?;
-        renderer.set_transfer_function(
-            &gpu.device,
-            &gpu.queue,
-            &noise_tf_world(dims, TF_REFERENCE_DIMS),
-        );
+        renderer
+            .set_transfer_function(
+                &gpu.device,
+                &gpu.queue,
+                &noise_tf_world(dims, TF_REFERENCE_DIMS),
+            )
+            .expect("transfer function");
         let t = Instant::now();
         let (frames, stats) = run.converge(&mut renderer, cam, frame, settings, 600)?;
         let frames = frames.ok_or_else(|| format!("(b) {dims}^3: not converged: {stats:?}"))?;
@@ -703,13 +704,21 @@ fn part_c(gpu: &GpuContext, size: u32, dims: u64, fig: &mut Figures) -> Result<(
     let frame = VolumeFrame::centered([dims as u32; 3], [1.0; 3]);
     let mut renderer = VolumeRenderer::new(&gpu.device, targets()).map_err(|e| e.to_string())?;
     renderer
-        .set_volume_source(&gpu.device, source, frame, OutOfCoreConfig::default())
+        .set_volume_source(
+            &gpu.device,
+            &gpu.queue,
+            source,
+            frame,
+            OutOfCoreConfig::default(),
+        )
         .map_err(|e| e.to_string())?;
-    renderer.set_transfer_function(
-        &gpu.device,
-        &gpu.queue,
-        &noise_tf_world(dims, PATH_TF_REFERENCE_DIMS),
-    );
+    renderer
+        .set_transfer_function(
+            &gpu.device,
+            &gpu.queue,
+            &noise_tf_world(dims, PATH_TF_REFERENCE_DIMS),
+        )
+        .expect("transfer function");
     let settings = RenderSettings::default();
     let run = Runner::new(gpu, size);
     let c = frame.center();

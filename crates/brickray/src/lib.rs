@@ -19,12 +19,14 @@ pub use brickray_render as render;
 pub use brickray_store as store;
 
 pub use brickray_core::{
-    Accel, Camera, DType, Projection, RenderMode, RenderSettings, Shading, TransferFunction,
-    Volume, VolumeDesc, VolumeFrame, io,
+    Accel, Camera, CameraError, DType, DepthConvention, FrameError, Projection, RenderMode,
+    RenderSettings, SettingsError, Shading, TfError, TransferFunction, Volume, VolumeDesc,
+    VolumeFrame, io,
 };
 pub use brickray_core::{BrickSource, NodeKey, OctreeLayout};
 pub use brickray_render::{
-    FrameDesc, FrameStats, OutOfCoreConfig, OutOfCoreStats, PrepareError, RenderError,
-    RendererStats, TargetDesc, VolumeRenderer,
+    FrameDesc, FrameStats, GpuErrorKind, HostDepthError, OutOfCoreConfig, OutOfCoreStats,
+    PrepareError, RenderError, RendererOptions, RendererStats, TargetDesc, U8Filtering, Viewport,
+    VolumeRenderer, required_limits,
 };
 pub use wgpu;

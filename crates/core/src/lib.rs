@@ -22,9 +22,12 @@ pub mod tf;
 pub mod volume;
 
 pub use brick::{BrickError, BrickSource, NodeInfo, NodeKey, NodeKind, OctreeLayout};
-pub use camera::{Camera, Projection, Ray, VolumeFrame};
+pub use camera::{
+    Camera, CameraError, DepthConvention, DepthMap, FrameError, Projection, Ray, RayGen,
+    VolumeFrame,
+};
 pub use io::{IoError, VolumeReader, read_volume};
 pub use macrocell::MacroCellGrid;
-pub use settings::{Accel, RenderMode, RenderSettings, Shading};
-pub use tf::TransferFunction;
+pub use settings::{Accel, RenderMode, RenderSettings, SettingsError, Shading};
+pub use tf::{TfError, TransferFunction};
 pub use volume::{DType, Volume, VolumeData, VolumeDesc, VolumeError};

@@ -113,3 +113,176 @@ impl Default for RenderSettings {
         }
     }
 }
+
+/// A setting outside the range the renderers accept.
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum SettingsError {
+    /// A value is NaN, infinite or outside its documented range.
+    #[error("{field} = {value} is outside {min}..={max}")]
+    OutOfRange {
+        /// The setting.
+        field: &'static str,
+        /// Its value.
+        value: f64,
+        /// Smallest accepted value.
+        min: f64,
+        /// Largest accepted value.
+        max: f64,
+    },
+    /// A render mode this version does not implement.
+    #[error("render mode {0:?} is not supported")]
+    UnsupportedMode(RenderMode),
+}
+
+impl RenderSettings {
+    /// Smallest accepted `step_factor`: finer steps cost more than they gain (the
+    /// reference itself samples at 1/8), and every ray's work is bounded by the
+    /// volume's diagonal over the step.
+    pub const MIN_STEP_FACTOR: f32 = 1.0 / 64.0;
+    /// Largest accepted `step_factor`.
+    pub const MAX_STEP_FACTOR: f32 = 16.0;
+    /// Largest accepted `iso_refine_steps` (bisection halves the bracket each step;
+    /// 32 exhausts f32).
+    pub const MAX_ISO_REFINE_STEPS: u32 = 32;
+
+    /// Checks every field: finite and within its range, a supported mode.
+    pub fn validate(&self) -> Result<(), SettingsError> {
+        fn check(field: &'static str, value: f32, min: f32, max: f32) -> Result<(), SettingsError> {
+            if value >= min && value <= max {
+                Ok(())
+            } else {
+                Err(SettingsError::OutOfRange {
+                    field,
+                    value: value as f64,
+                    min: min as f64,
+                    max: max as f64,
+                })
+            }
+        }
+        check(
+            "step_factor",
+            self.step_factor,
+            Self::MIN_STEP_FACTOR,
+            Self::MAX_STEP_FACTOR,
+        )?;
+        check("depth_opacity", self.depth_opacity, 0.0, 1.0)?;
+        if self.iso_refine_steps > Self::MAX_ISO_REFINE_STEPS {
+            return Err(SettingsError::OutOfRange {
+                field: "iso_refine_steps",
+                value: self.iso_refine_steps as f64,
+                min: 0.0,
+                max: Self::MAX_ISO_REFINE_STEPS as f64,
+            });
+        }
+        if let Some(t) = self.accel.early_termination {
+            check("accel.early_termination", t, f32::MIN_POSITIVE, 1.0)?;
+        }
+        let s = &self.shading;
+        check("shading.ambient", s.ambient, 0.0, f32::MAX)?;
+        check("shading.diffuse", s.diffuse, 0.0, f32::MAX)?;
+        check("shading.specular", s.specular, 0.0, f32::MAX)?;
+        check("shading.shininess", s.shininess, 0.0, 1.0e4)?;
+        match self.mode {
+            RenderMode::Dvr | RenderMode::Mip => Ok(()),
+            RenderMode::Iso { value, color } => {
+                check("iso.value", value, f32::MIN, f32::MAX)?;
+                for c in color {
+                    check("iso.color", c, 0.0, 1.0)?;
+                }
+                Ok(())
+            }
+            #[allow(unreachable_patterns)]
+            other => Err(SettingsError::UnsupportedMode(other)),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn defaults_validate() {
+        assert_eq!(RenderSettings::default().validate(), Ok(()));
+    }
+
+    #[test]
+    fn non_finite_and_out_of_range_settings_are_refused() {
+        let ok = RenderSettings::default();
+        let bad = [
+            RenderSettings {
+                step_factor: f32::NAN,
+                ..ok
+            },
+            RenderSettings {
+                step_factor: 1e-6,
+                ..ok
+            },
+            RenderSettings {
+                step_factor: -1.0,
+                ..ok
+            },
+            RenderSettings {
+                step_factor: f32::INFINITY,
+                ..ok
+            },
+            RenderSettings {
+                depth_opacity: f32::NAN,
+                ..ok
+            },
+            RenderSettings {
+                iso_refine_steps: 1000,
+                ..ok
+            },
+            RenderSettings {
+                accel: Accel {
+                    early_termination: Some(f32::NAN),
+                    ..ok.accel
+                },
+                ..ok
+            },
+            RenderSettings {
+                accel: Accel {
+                    early_termination: Some(0.0),
+                    ..ok.accel
+                },
+                ..ok
+            },
+            RenderSettings {
+                shading: Shading {
+                    ambient: f32::NAN,
+                    ..ok.shading
+                },
+                ..ok
+            },
+            RenderSettings {
+                shading: Shading {
+                    shininess: f32::INFINITY,
+                    ..ok.shading
+                },
+                ..ok
+            },
+            RenderSettings {
+                mode: RenderMode::Iso {
+                    value: f32::NAN,
+                    color: [1.0; 3],
+                },
+                ..ok
+            },
+            RenderSettings {
+                mode: RenderMode::Iso {
+                    value: 0.5,
+                    color: [f32::NAN, 0.0, 0.0],
+                },
+                ..ok
+            },
+        ];
+        for s in bad {
+            assert!(
+                matches!(s.validate(), Err(SettingsError::OutOfRange { .. })),
+                "{s:?} must be refused"
+            );
+        }
+    }
+}

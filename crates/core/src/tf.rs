@@ -28,8 +28,100 @@ pub fn corrected_alpha(alpha: f64, step_over_reference: f64) -> f64 {
     1.0 - (1.0 - alpha.clamp(0.0, 1.0)).powf(step_over_reference)
 }
 
+/// A transfer function that cannot be built as given.
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum TfError {
+    /// Fewer than two entries (or control points: at least one is needed).
+    #[error("a transfer function needs at least {min} entries, got {len}")]
+    TooFew {
+        /// Entries given.
+        len: usize,
+        /// Entries needed.
+        min: usize,
+    },
+    /// More entries than [`TransferFunction::MAX_ENTRIES`].
+    #[error("a transfer function holds at most {max} entries, got {len}")]
+    TooMany {
+        /// Entries given.
+        len: usize,
+        /// The maximum.
+        max: usize,
+    },
+    /// An entry (or a control point's position) is NaN or infinite.
+    #[error("transfer-function entry {index} component {component} is not finite")]
+    NotFinite {
+        /// The entry or control point.
+        index: usize,
+        /// 0..4 = r, g, b, a; 4 = a control point's position.
+        component: usize,
+    },
+}
+
 impl TransferFunction {
-    /// Builds a table from entries (at least 2). Components are clamped to 0..1.
+    /// Most entries a table may have (256 KiB of RGBA f32 on the GPU, well
+    /// inside WebGPU's default storage-binding limit).
+    pub const MAX_ENTRIES: usize = 1 << 14;
+
+    /// Builds a table from entries, refusing what [`Self::from_entries`] would
+    /// repair: fewer than 2 or more than [`Self::MAX_ENTRIES`] entries, or a NaN
+    /// or infinite component. Finite components are clamped to 0..1.
+    pub fn try_from_entries(entries: Vec<[f32; 4]>) -> Result<TransferFunction, TfError> {
+        if entries.len() < 2 {
+            return Err(TfError::TooFew {
+                len: entries.len(),
+                min: 2,
+            });
+        }
+        if entries.len() > Self::MAX_ENTRIES {
+            return Err(TfError::TooMany {
+                len: entries.len(),
+                max: Self::MAX_ENTRIES,
+            });
+        }
+        for (index, e) in entries.iter().enumerate() {
+            if let Some(component) = e.iter().position(|c| !c.is_finite()) {
+                return Err(TfError::NotFinite { index, component });
+            }
+        }
+        Ok(TransferFunction::from_entries(entries))
+    }
+
+    /// Like [`Self::from_points`], refusing non-finite positions or colours, no
+    /// point at all, and `n` outside `2..=MAX_ENTRIES`.
+    pub fn try_from_points(
+        points: &[(f32, [f32; 4])],
+        n: usize,
+    ) -> Result<TransferFunction, TfError> {
+        if points.is_empty() {
+            return Err(TfError::TooFew { len: 0, min: 1 });
+        }
+        if n < 2 {
+            return Err(TfError::TooFew { len: n, min: 2 });
+        }
+        if n > Self::MAX_ENTRIES {
+            return Err(TfError::TooMany {
+                len: n,
+                max: Self::MAX_ENTRIES,
+            });
+        }
+        for (index, (x, c)) in points.iter().enumerate() {
+            if !x.is_finite() {
+                return Err(TfError::NotFinite {
+                    index,
+                    component: 4,
+                });
+            }
+            if let Some(component) = c.iter().position(|v| !v.is_finite()) {
+                return Err(TfError::NotFinite { index, component });
+            }
+        }
+        Ok(TransferFunction::from_points(points, n))
+    }
+
+    /// Builds a table from entries, repairing what it must: fewer than 2 entries
+    /// are padded, non-finite components become 0 and all are clamped to 0..1.
+    /// Use [`Self::try_from_entries`] to refuse such input instead.
     pub fn from_entries(entries: Vec<[f32; 4]>) -> TransferFunction {
         let mut entries = entries;
         if entries.is_empty() {
@@ -153,6 +245,40 @@ impl TransferFunction {
 mod tests {
     use super::*;
     use proptest::prelude::*;
+
+    #[test]
+    fn strict_constructors_refuse_bad_input() {
+        assert_eq!(
+            TransferFunction::try_from_entries(vec![[0.0; 4]]),
+            Err(TfError::TooFew { len: 1, min: 2 })
+        );
+        assert_eq!(
+            TransferFunction::try_from_entries(vec![[0.0; 4], [0.0, f32::NAN, 0.0, 0.0]]),
+            Err(TfError::NotFinite {
+                index: 1,
+                component: 1
+            })
+        );
+        assert!(matches!(
+            TransferFunction::try_from_entries(vec![[0.0; 4]; TransferFunction::MAX_ENTRIES + 1]),
+            Err(TfError::TooMany { .. })
+        ));
+        assert_eq!(
+            TransferFunction::try_from_points(&[(f32::NAN, [1.0; 4])], 16),
+            Err(TfError::NotFinite {
+                index: 0,
+                component: 4
+            })
+        );
+        assert!(TransferFunction::try_from_points(&[(0.5, [1.0; 4])], 1).is_err());
+        let ok =
+            TransferFunction::try_from_points(&[(0.2, [1.0, 0.0, 0.0, 0.0]), (0.8, [2.0; 4])], 64)
+                .unwrap();
+        assert_eq!(
+            ok,
+            TransferFunction::from_points(&[(0.2, [1.0, 0.0, 0.0, 0.0]), (0.8, [2.0; 4])], 64)
+        );
+    }
 
     #[test]
     fn ramp_lookup_and_transparency() {

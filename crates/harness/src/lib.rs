@@ -140,22 +140,59 @@ impl GpuContext {
     }
 }
 
+/// One device shared by every test of a test binary (created on first use;
+/// panics with the install hint when there is no adapter).
+pub fn shared_gpu() -> &'static GpuContext {
+    static GPU: std::sync::OnceLock<GpuContext> = std::sync::OnceLock::new();
+    GPU.get_or_init(|| {
+        let g = GpuContext::new().expect("a wgpu adapter (install mesa-vulkan-drivers)");
+        eprintln!("adapter: {}", g.describe());
+        g
+    })
+}
+
+/// Prepares one frame and composites it into `target` in a pass that clears to
+/// `clear` first (or loads, with `None`), then submits and waits: a host's frame,
+/// for tests and benches.
+pub fn draw_frame(
+    gpu: &GpuContext,
+    renderer: &mut brickray_render::VolumeRenderer,
+    target: &Offscreen,
+    desc: &brickray_render::FrameDesc<'_>,
+    clear: Option<wgpu::Color>,
+) -> Result<brickray_render::FrameStats, brickray_render::PrepareError> {
+    let mut enc = gpu.device.create_command_encoder(&Default::default());
+    let stats = renderer.prepare(&gpu.device, &gpu.queue, &mut enc, desc)?;
+    {
+        let mut pass = target.pass_clear(&mut enc, clear);
+        renderer.render(&mut pass)?;
+    }
+    gpu.submit_wait(enc);
+    Ok(stats)
+}
+
 /// A colour (`Rgba8Unorm`) and depth (`Depth32Float`) target pair, as a host
-/// application would have, with read-back.
+/// application would have, with read-back. With `samples > 1` the attachments
+/// are multisampled and the colour resolves into [`Offscreen::color`].
 #[derive(Debug)]
 pub struct Offscreen {
     /// Width.
     pub width: u32,
     /// Height.
     pub height: u32,
-    /// Colour texture.
+    /// Colour texture (single-sampled: the resolve target of an MSAA pass).
     pub color: wgpu::Texture,
     /// Colour view.
     pub color_view: wgpu::TextureView,
-    /// Depth texture (sampleable, so it can be handed to `prepare`).
+    /// Depth texture (sampleable when single-sampled, so it can be handed to
+    /// `prepare`).
     pub depth: wgpu::Texture,
     /// Depth view.
     pub depth_view: wgpu::TextureView,
+    /// The multisampled colour attachment, when `samples > 1`.
+    pub msaa_view: Option<wgpu::TextureView>,
+    /// The depth value a clearing pass writes (1 standard, 0 reversed-Z).
+    pub clear_depth: f32,
 }
 
 /// Colour format of [`Offscreen`].
@@ -163,10 +200,34 @@ pub const COLOR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
 /// Depth format of [`Offscreen`].
 pub const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
 
+/// The renderer's view of [`Offscreen`]'s targets (single-sampled colour and
+/// depth).
+pub fn target_desc() -> brickray_render::TargetDesc {
+    brickray_render::TargetDesc::new(COLOR_FORMAT).with_depth(DEPTH_FORMAT)
+}
+
 impl Offscreen {
-    /// Creates the targets.
+    /// Creates single-sampled targets cleared to depth 1 (standard depth).
     pub fn new(device: &wgpu::Device, width: u32, height: u32) -> Offscreen {
-        let make = |label, format| {
+        Offscreen::with(
+            device,
+            width,
+            height,
+            1,
+            brickray_core::DepthConvention::Standard,
+        )
+    }
+
+    /// Creates targets with `samples` per pixel for a host using `depth`'s
+    /// convention (cleared to its far value).
+    pub fn with(
+        device: &wgpu::Device,
+        width: u32,
+        height: u32,
+        samples: u32,
+        depth: brickray_core::DepthConvention,
+    ) -> Offscreen {
+        let make = |label, format, samples, usage| {
             device.create_texture(&wgpu::TextureDescriptor {
                 label: Some(label),
                 size: wgpu::Extent3d {
@@ -175,47 +236,77 @@ impl Offscreen {
                     depth_or_array_layers: 1,
                 },
                 mip_level_count: 1,
-                sample_count: 1,
+                sample_count: samples,
                 dimension: wgpu::TextureDimension::D2,
                 format,
-                usage: wgpu::TextureUsages::RENDER_ATTACHMENT
-                    | wgpu::TextureUsages::TEXTURE_BINDING
-                    | wgpu::TextureUsages::COPY_SRC,
+                usage,
                 view_formats: &[],
             })
         };
-        let color = make("brickray-harness colour", COLOR_FORMAT);
-        let depth = make("brickray-harness depth", DEPTH_FORMAT);
+        let usage = wgpu::TextureUsages::RENDER_ATTACHMENT
+            | wgpu::TextureUsages::TEXTURE_BINDING
+            | wgpu::TextureUsages::COPY_SRC;
+        let color = make("brickray-harness colour", COLOR_FORMAT, 1, usage);
+        let depth_usage = if samples > 1 {
+            wgpu::TextureUsages::RENDER_ATTACHMENT
+        } else {
+            usage
+        };
+        let depth_tex = make("brickray-harness depth", DEPTH_FORMAT, samples, depth_usage);
+        let msaa_view = (samples > 1).then(|| {
+            make(
+                "brickray-harness msaa colour",
+                COLOR_FORMAT,
+                samples,
+                wgpu::TextureUsages::RENDER_ATTACHMENT,
+            )
+            .create_view(&Default::default())
+        });
         let color_view = color.create_view(&Default::default());
-        let depth_view = depth.create_view(&Default::default());
+        let depth_view = depth_tex.create_view(&Default::default());
         Offscreen {
             width,
             height,
             color,
             color_view,
-            depth,
+            depth: depth_tex,
             depth_view,
+            msaa_view,
+            clear_depth: depth.far_value(),
         }
     }
 
     /// Begins a render pass on both targets; `clear` clears colour to black and
-    /// depth to 1, else both are loaded.
+    /// depth to its far value, else both are loaded.
     pub fn pass<'e>(
         &self,
         encoder: &'e mut wgpu::CommandEncoder,
         clear: bool,
     ) -> wgpu::RenderPass<'e> {
+        self.pass_clear(encoder, clear.then_some(wgpu::Color::BLACK))
+    }
+
+    /// Begins a render pass; `clear` clears colour to it and depth to its far
+    /// value, `None` loads both. An MSAA pass resolves into [`Offscreen::color`].
+    pub fn pass_clear<'e>(
+        &self,
+        encoder: &'e mut wgpu::CommandEncoder,
+        clear: Option<wgpu::Color>,
+    ) -> wgpu::RenderPass<'e> {
+        let (view, resolve_target) = match &self.msaa_view {
+            Some(m) => (m, Some(&self.color_view)),
+            None => (&self.color_view, None),
+        };
         encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
             label: Some("brickray-harness pass"),
             color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                view: &self.color_view,
+                view,
                 depth_slice: None,
-                resolve_target: None,
+                resolve_target,
                 ops: wgpu::Operations {
-                    load: if clear {
-                        wgpu::LoadOp::Clear(wgpu::Color::BLACK)
-                    } else {
-                        wgpu::LoadOp::Load
+                    load: match clear {
+                        Some(c) => wgpu::LoadOp::Clear(c),
+                        None => wgpu::LoadOp::Load,
                     },
                     store: wgpu::StoreOp::Store,
                 },
@@ -223,10 +314,9 @@ impl Offscreen {
             depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
                 view: &self.depth_view,
                 depth_ops: Some(wgpu::Operations {
-                    load: if clear {
-                        wgpu::LoadOp::Clear(1.0)
-                    } else {
-                        wgpu::LoadOp::Load
+                    load: match clear {
+                        Some(_) => wgpu::LoadOp::Clear(self.clear_depth),
+                        None => wgpu::LoadOp::Load,
                     },
                     store: wgpu::StoreOp::Store,
                 }),
@@ -338,7 +428,7 @@ pub fn test_output_dir() -> PathBuf {
 }
 
 /// Draws opaque screen rectangles at a constant depth: a stand-in for a host
-/// application's geometry in tests and demos (`shaders/host_quad.wgsl`).
+/// application's geometry in tests and demos (`crates/harness/shaders/host_quad.wgsl`).
 #[derive(Debug)]
 pub struct HostQuad {
     pipeline: wgpu::RenderPipeline,
@@ -346,13 +436,22 @@ pub struct HostQuad {
 }
 
 impl HostQuad {
-    /// Creates the pipeline for [`Offscreen`]'s formats.
+    /// Creates the pipeline for [`Offscreen`]'s single-sampled formats and
+    /// standard depth.
     pub fn new(device: &wgpu::Device) -> HostQuad {
+        HostQuad::with(device, 1, brickray_core::DepthConvention::Standard)
+    }
+
+    /// Creates the pipeline for [`Offscreen`]'s formats with `samples` per pixel,
+    /// depth-tested in `depth`'s convention (`Less` or `Greater`).
+    pub fn with(
+        device: &wgpu::Device,
+        samples: u32,
+        depth: brickray_core::DepthConvention,
+    ) -> HostQuad {
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("brickray-harness host_quad.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(
-                include_str!("../../../shaders/host_quad.wgsl").into(),
-            ),
+            source: wgpu::ShaderSource::Wgsl(include_str!("../shaders/host_quad.wgsl").into()),
         });
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("brickray-harness quad"),
@@ -388,11 +487,17 @@ impl HostQuad {
             depth_stencil: Some(wgpu::DepthStencilState {
                 format: DEPTH_FORMAT,
                 depth_write_enabled: Some(true),
-                depth_compare: Some(wgpu::CompareFunction::Less),
+                depth_compare: Some(match depth {
+                    brickray_core::DepthConvention::ReversedZ => wgpu::CompareFunction::Greater,
+                    _ => wgpu::CompareFunction::Less,
+                }),
                 stencil: Default::default(),
                 bias: Default::default(),
             }),
-            multisample: Default::default(),
+            multisample: wgpu::MultisampleState {
+                count: samples,
+                ..Default::default()
+            },
             fragment: Some(wgpu::FragmentState {
                 module: &module,
                 entry_point: Some("fs_main"),

@@ -38,7 +38,7 @@ pub use traverse::{
     clip_unit_cube, exit_face, follow_rope, locate_leaf, ray_setup, traverse,
 };
 
-/// The WGSL traversal library (`shaders/octree_traversal.wgsl`). It declares no
+/// The WGSL traversal library (`crates/index/shaders/octree_traversal.wgsl`). It declares no
 /// bindings: the including shader must declare
 /// `var<storage, read> index_words: array<u32>;` at a binding of its choice.
-pub const OCTREE_TRAVERSAL_WGSL: &str = include_str!("../../../shaders/octree_traversal.wgsl");
+pub const OCTREE_TRAVERSAL_WGSL: &str = include_str!("../shaders/octree_traversal.wgsl");

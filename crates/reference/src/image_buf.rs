@@ -41,7 +41,8 @@ pub struct Image {
     pub height: u32,
     /// Premultiplied linear RGBA per pixel, row-major.
     pub color: Vec<[f32; 4]>,
-    /// Clip depth per pixel (0 near .. 1 far); 1.0 where the ray wrote none.
+    /// Clip depth per pixel in the camera's convention (standard: 0 near .. 1
+    /// far); the far value (1.0 standard, 0.0 reversed-Z) where the ray wrote none.
     pub depth: Vec<f32>,
 }
 

@@ -2,7 +2,7 @@
 
 use brickray_core::tf::corrected_alpha;
 use brickray_core::{
-    Camera, Ray, RenderMode, RenderSettings, Shading, TransferFunction, Volume, VolumeFrame,
+    Camera, Ray, RayGen, RenderMode, RenderSettings, Shading, TransferFunction, Volume, VolumeFrame,
 };
 use glam::{DMat3, DMat4, DVec3};
 use rayon::prelude::*;
@@ -141,6 +141,8 @@ pub fn render_reference(
 
     let marcher = Marcher::new(vol, frame, tf, camera, settings, step_factor, width, height);
     let n = opts.supersample.max(1);
+    let far = camera.depth.far_value();
+    img.depth.fill(far);
     let w = width as usize;
     img.color
         .par_chunks_mut(w)
@@ -151,7 +153,7 @@ pub fn render_reference(
                 let host = opts.host_depth.map(|d| d[py * w + px]);
                 let (c, z) = marcher.pixel(px as f64, py as f64, n, host);
                 *color = c.map(|x| x as f32);
-                *depth = z.map_or(1.0, |z| z as f32);
+                *depth = z.map_or(far, |z| z as f32);
             }
         });
     img
@@ -163,8 +165,7 @@ struct Marcher<'a> {
     tf: &'a TransferFunction,
     settings: &'a RenderSettings,
     dims: DVec3,
-    view_proj: DMat4,
-    inv_view_proj: DMat4,
+    rays: RayGen,
     inv_model: DMat4,
     /// Inverse transpose of the model's 3x3 (texture-space gradients to world).
     normal_matrix: DMat3,
@@ -190,15 +191,13 @@ impl<'a> Marcher<'a> {
         width: u32,
         height: u32,
     ) -> Marcher<'a> {
-        let view_proj = camera.view_proj(width as f32 / height as f32).as_dmat4();
         let model = frame.model.as_dmat4();
         Marcher {
             vol,
             tf,
             settings,
             dims: DVec3::from_array(vol.dims().map(f64::from)),
-            view_proj,
-            inv_view_proj: view_proj.inverse(),
+            rays: camera.rays(width as f64 / height as f64),
             inv_model: model.inverse(),
             normal_matrix: DMat3::from_mat4(model).inverse().transpose(),
             step_factor,
@@ -210,6 +209,14 @@ impl<'a> Marcher<'a> {
 }
 
 impl Marcher<'_> {
+    /// The nearer of two clip depths in the camera's convention.
+    fn nearer(&self, a: f64, b: f64) -> f64 {
+        match self.rays.depth.convention {
+            brickray_core::DepthConvention::ReversedZ => a.max(b),
+            _ => a.min(b),
+        }
+    }
+
     /// One pixel: `n x n` stratified rays, colours averaged, nearest depth kept.
     fn pixel(&self, px: f64, py: f64, n: u32, host_depth: Option<f32>) -> RayResult {
         if n == 1 {
@@ -230,7 +237,7 @@ impl Marcher<'_> {
                     sum[k] += c[k];
                 }
                 if let Some(z) = z {
-                    depth = Some(depth.map_or(z, |d| d.min(z)));
+                    depth = Some(depth.map_or(z, |d| self.nearer(d, z)));
                 }
             }
         }
@@ -240,23 +247,14 @@ impl Marcher<'_> {
 
     /// One ray through image position `(px + 0.5, py + 0.5)`.
     fn trace(&self, px: f64, py: f64, host_depth: Option<f32>) -> RayResult {
-        let ray = Ray::through_pixel(
-            &self.inv_view_proj,
-            &self.inv_model,
-            px,
-            py,
-            self.width,
-            self.height,
-        );
+        let ray = self
+            .rays
+            .pixel_ray(&self.inv_model, px, py, self.width, self.height);
         let Some((t0, mut t1)) = ray.clip_unit_box() else {
             return ([0.0; 4], None);
         };
         if let Some(d) = host_depth.filter(|d| !d.is_nan()) {
-            let ndc = (
-                2.0 * (px + 0.5) / self.width as f64 - 1.0,
-                1.0 - 2.0 * (py + 0.5) / self.height as f64,
-            );
-            t1 = t1.min(ray.t_at_depth(&self.inv_view_proj, ndc, d as f64));
+            t1 = t1.min(self.rays.t_at_depth(&ray, d as f64));
         }
         let span = Span {
             t0,
@@ -373,7 +371,7 @@ impl Marcher<'_> {
 
     /// Clip depth of the ray's point at `t`.
     fn clip_depth(&self, ray: &Ray, t: f64) -> f64 {
-        self.view_proj.project_point3(ray.origin + ray.dir * t).z
+        self.rays.depth_at(ray, t)
     }
 
     /// The unit world normal at `t`, or `None` where the gradient vanishes.

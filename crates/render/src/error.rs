@@ -1,8 +1,23 @@
-//! Errors of the render crate, one enum per phase.
+//! Errors of the render crate, one enum per phase. No variant carries only a
+//! string: each names what failed with structured fields.
 
+use brickray_core::{BrickError, CameraError, FrameError, SettingsError};
 use thiserror::Error;
 
-/// Errors creating a renderer or setting its volume.
+/// What kind of error wgpu reported inside one of the library's error scopes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum GpuErrorKind {
+    /// A validation error (a limit or rule the library's checks missed: a bug).
+    Validation,
+    /// The device ran out of memory.
+    OutOfMemory,
+    /// An internal error of the implementation.
+    Internal,
+}
+
+/// Errors creating a renderer, setting its volume or transfer function, or
+/// drawing.
 #[derive(Debug, Error)]
 #[non_exhaustive]
 pub enum RenderError {
@@ -16,15 +31,15 @@ pub enum RenderError {
         /// `max_texture_dimension_3d`.
         limit: u32,
     },
-    /// A buffer would exceed a device limit.
-    #[error("{what} needs {required} bytes but the device allows {limit}")]
+    /// A setting or resource needs more than a device limit allows.
+    #[error("needs {limit} >= {required}, but the device allows {available}")]
     LowDeviceLimit {
-        /// What needed it.
-        what: &'static str,
-        /// Bytes needed.
+        /// The `wgpu::Limits` field.
+        limit: &'static str,
+        /// What was asked.
         required: u64,
-        /// The device's limit.
-        limit: u64,
+        /// The device's value.
+        available: u64,
     },
     /// The target format cannot be rendered to with blending.
     #[error("target format {0:?} is not a blendable colour format")]
@@ -32,12 +47,67 @@ pub enum RenderError {
     /// The depth format has no depth aspect.
     #[error("depth format {0:?} has no depth aspect")]
     BadDepthFormat(wgpu::TextureFormat),
-    /// The out-of-core machinery failed (pool sizing, loader threads, index).
-    #[error("out-of-core path: {0}")]
-    OutOfCore(String),
+    /// The sample count is not supported for the target formats.
+    #[error("sample count {count} is not supported for {format:?}")]
+    BadSampleCount {
+        /// The format that refuses it.
+        format: wgpu::TextureFormat,
+        /// The sample count asked for.
+        count: u32,
+    },
+    /// The out-of-core cache refused its configuration or could not start.
+    #[error(transparent)]
+    Cache(#[from] brickray_cache::CacheError),
+    /// The brick source failed at set-up (reading the root).
+    #[error("brick source: {0}")]
+    Source(#[from] BrickError),
+    /// The frame's cut could not be encoded as an index.
+    #[error(transparent)]
+    Index(#[from] brickray_index::CutError),
+    /// The transfer function is not usable.
+    #[error(transparent)]
+    TransferFunction(#[from] brickray_core::TfError),
+    /// wgpu reported an error creating one of the library's objects (caught by an
+    /// error scope, never a panic in the host).
+    #[error("wgpu {kind:?} error creating {what}: {message}")]
+    Gpu {
+        /// The object.
+        what: &'static str,
+        /// The kind of error.
+        kind: GpuErrorKind,
+        /// wgpu's description.
+        message: String,
+    },
+    /// The operation needs an out-of-core volume.
+    #[error("no out-of-core volume is set")]
+    NotOutOfCore,
     /// `render` was called before a successful `prepare`.
     #[error("render called before prepare")]
     NotPrepared,
+}
+
+/// What is wrong with the host depth view handed to `prepare`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Error)]
+#[non_exhaustive]
+pub enum HostDepthError {
+    /// Its texture lacks `TEXTURE_BINDING` usage.
+    #[error("the host depth texture needs TEXTURE_BINDING usage (has {0:?})")]
+    NotBindable(wgpu::TextureUsages),
+    /// Its format has no depth aspect (a colour view).
+    #[error("the host depth view's format {0:?} is not a depth format")]
+    NotDepth(wgpu::TextureFormat),
+    /// It is multisampled (resolve or copy the depth into a single-sampled
+    /// texture first).
+    #[error("the host depth texture has {0} samples; a single-sampled one is needed")]
+    Multisampled(u32),
+    /// It is smaller than the viewport's extent.
+    #[error("the host depth texture is {size:?}, smaller than the viewport's extent {needed:?}")]
+    TooSmall {
+        /// Its size.
+        size: [u32; 2],
+        /// The viewport's right and bottom edges.
+        needed: [u32; 2],
+    },
 }
 
 /// Errors from [`crate::VolumeRenderer::prepare`].
@@ -45,8 +115,11 @@ pub enum RenderError {
 #[non_exhaustive]
 pub enum PrepareError {
     /// No volume has been set.
-    #[error("no volume set: call set_volume first")]
+    #[error("no volume set: call set_volume or set_volume_source first")]
     NoVolume,
+    /// No transfer function has been set.
+    #[error("no transfer function set: call set_transfer_function first")]
+    NoTransferFunction,
     /// The viewport is empty or larger than the device's 2D texture limit.
     #[error("viewport {width}x{height} is empty or exceeds the device limit {limit}")]
     BadViewport {
@@ -57,10 +130,19 @@ pub enum PrepareError {
         /// `max_texture_dimension_2d`.
         limit: u32,
     },
-    /// A setting is out of range.
-    #[error("invalid setting: {0}")]
-    BadSetting(String),
-    /// The out-of-core path failed this frame.
+    /// The camera cannot form an image.
+    #[error(transparent)]
+    Camera(#[from] CameraError),
+    /// The volume frame cannot place the volume.
+    #[error(transparent)]
+    Frame(#[from] FrameError),
+    /// A render setting is out of range.
+    #[error(transparent)]
+    Settings(#[from] SettingsError),
+    /// The host depth view cannot be used.
+    #[error(transparent)]
+    HostDepth(#[from] HostDepthError),
+    /// Creating or updating GPU resources failed.
     #[error(transparent)]
     Render(#[from] RenderError),
 }

@@ -1,85 +1,43 @@
-//! WGSL sources. They live in the workspace's `shaders/` folder; ray-cast shaders
-//! are prefixed with `common.wgsl` at load time. Every composed source is validated
-//! by naga in this module's tests, so a WGSL error fails `cargo test` without a GPU.
+//! The WGSL library of the ray casters, packaged with this crate
+//! (`crates/render/shaders/`):
+//!
+//! * `common.wgsl`: groups 0 (frame: uniforms, host depth, outputs) and 1
+//!   (transfer function), ray generation, depth conventions, TF lookups, stores;
+//! * `modes.wgsl`: the override switches and what a ray computes (DVR
+//!   accumulation, iso bisection and shading, MIP), once for both kernels;
+//! * `incore.wgsl`, `ooc.wgsl`: each backend's group 2, its sampling `Cursor`
+//!   and its march; the out-of-core kernel also includes brickray-index's
+//!   traversal library;
+//! * `composite.wgsl`: the draw into the host's pass.
+//!
+//! Every composed kernel is validated by naga in this module's tests, which also
+//! reflect it and check the Rust side against it (uniform offsets, overrides,
+//! entry points, workgroup size, mode ids, flag bits), so a WGSL error or drift
+//! fails `cargo test` without a GPU.
 
-/// Functions shared by the ray casters.
-pub const COMMON: &str = include_str!("../../../shaders/common.wgsl");
-/// The in-core ray-cast compute shader body.
-pub const RAYCAST_INCORE: &str = include_str!("../../../shaders/raycast_incore.wgsl");
-/// The out-of-core ray-cast compute shader body.
-pub const RAYCAST_OOC: &str = include_str!("../../../shaders/raycast_ooc.wgsl");
-/// The octree-with-ropes traversal library (`brickray-index`'s GPU twin).
-pub const OCTREE_TRAVERSAL: &str = include_str!("../../../shaders/octree_traversal.wgsl");
+/// Groups 0 and 1 and the functions every kernel shares.
+pub const COMMON: &str = include_str!("../shaders/common.wgsl");
+/// The switches and the per-mode ray logic.
+pub const MODES: &str = include_str!("../shaders/modes.wgsl");
+/// The in-core kernel's own part.
+pub const INCORE: &str = include_str!("../shaders/incore.wgsl");
+/// The out-of-core kernel's own part.
+pub const OOC: &str = include_str!("../shaders/ooc.wgsl");
 /// The composite (fullscreen) shader.
-pub const COMPOSITE: &str = include_str!("../../../shaders/composite.wgsl");
+pub const COMPOSITE: &str = include_str!("../shaders/composite.wgsl");
 
-/// The in-core ray caster as compiled: `common.wgsl` followed by its body.
-pub fn raycast_incore() -> String {
-    format!("{COMMON}\n{RAYCAST_INCORE}")
+/// The in-core ray caster as compiled.
+pub fn incore() -> String {
+    format!("{COMMON}\n{MODES}\n{INCORE}")
 }
 
-/// The out-of-core ray caster as compiled: `common.wgsl`, the traversal library,
-/// then its body.
-pub fn raycast_ooc() -> String {
-    format!("{COMMON}\n{OCTREE_TRAVERSAL}\n{RAYCAST_OOC}")
+/// The out-of-core ray caster as compiled (with the octree traversal library).
+pub fn ooc() -> String {
+    format!(
+        "{COMMON}\n{MODES}\n{}\n{OOC}",
+        brickray_index::OCTREE_TRAVERSAL_WGSL
+    )
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn validate(name: &str, src: &str) {
-        let module = naga::front::wgsl::parse_str(src)
-            .unwrap_or_else(|e| panic!("{name}: parse error:\n{}", e.emit_to_string(src)));
-        naga::valid::Validator::new(
-            naga::valid::ValidationFlags::all(),
-            naga::valid::Capabilities::all(),
-        )
-        .validate(&module)
-        .unwrap_or_else(|e| panic!("{name}: validation error:\n{}", e.emit_to_string(src)));
-    }
-
-    #[test]
-    fn raycast_incore_validates() {
-        validate("raycast_incore", &raycast_incore());
-    }
-
-    #[test]
-    fn raycast_ooc_validates() {
-        validate("raycast_ooc", &raycast_ooc());
-    }
-
-    #[test]
-    fn composite_validates() {
-        validate("composite", COMPOSITE);
-    }
-
-    #[test]
-    fn host_quad_validates() {
-        validate("host_quad", include_str!("../../../shaders/host_quad.wgsl"));
-    }
-
-    /// Every `.wgsl` file in shaders/ is either validated above or a library that
-    /// is validated as part of a composed shader; a new file must be added here.
-    #[test]
-    fn every_shader_file_is_covered() {
-        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shaders");
-        let known = [
-            "common.wgsl",
-            "raycast_incore.wgsl",
-            "composite.wgsl",
-            "octree_traversal.wgsl",
-            "host_quad.wgsl",
-            "raycast_ooc.wgsl",
-        ];
-        for entry in std::fs::read_dir(dir).unwrap() {
-            let name = entry.unwrap().file_name().into_string().unwrap();
-            if name.ends_with(".wgsl") {
-                assert!(
-                    known.contains(&name.as_str()),
-                    "{name} is not validated by any test"
-                );
-            }
-        }
-    }
-}
+mod tests;

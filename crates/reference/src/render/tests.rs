@@ -54,6 +54,7 @@ fn ortho(eye: Vec3, height: f32) -> Camera {
         projection: Projection::Orthographic { height },
         near: NEAR,
         far: FAR,
+        depth: brickray_core::DepthConvention::Standard,
     }
 }
 
@@ -239,6 +240,7 @@ fn iso_on_ramp_hits_the_analytic_plane() {
         },
         near: 1.0,
         far: 5.0,
+        depth: brickray_core::DepthConvention::Standard,
     };
     let (w, h) = (9u32, 7u32);
     let img = render_reference(
@@ -376,7 +378,7 @@ fn normals_are_world_gradients() {
     let cam = Camera::orbit(frame.center(), 3.0, 0.4, 0.3);
     let settings = dvr();
     let marcher = Marcher::new(&vol, &frame, &tf, &cam, &settings, 0.125, 16, 16);
-    let ray = Ray::through_pixel(&marcher.inv_view_proj, &marcher.inv_model, 7.5, 8.0, 16, 16);
+    let ray = marcher.rays.pixel_ray(&marcher.inv_model, 7.5, 8.0, 16, 16);
     let (t0, t1) = ray.clip_unit_box().expect("hits");
     // Interior points (central differences need one voxel of margin).
     let mut checked = 0;
@@ -547,6 +549,7 @@ fn camera_inside_the_volume() {
         },
         near: 0.01,
         far: 5.0,
+        depth: brickray_core::DepthConvention::Standard,
     };
     let img = render_reference(
         &vol,

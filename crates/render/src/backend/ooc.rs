@@ -1,14 +1,21 @@
-//! The out-of-core path (Gobbetti et al. 2008): a [`BrickManager`] plans each
-//! frame's cut and uploads; this module owns their GPU side — the brick atlas (one
-//! preallocated 3D texture of slots), the per-slot table, and the index buffer
-//! (the octree with ropes over the cut) — and the ray-cast pipeline that walks it.
+//! The out-of-core backend (Gobbetti et al. 2008): a [`BrickManager`] plans each
+//! frame's cut and uploads; this owns their GPU side (the brick atlas, one
+//! preallocated 3D texture of slots; the per-slot table; the sub-cell table; the
+//! index buffer, the octree with ropes over the cut) and group 2 over them.
 
-use crate::error::RenderError;
-use crate::gpu_volume::SampleEncoding;
+use super::{VolumeBackend, check_stage_limits, volume_layout_entries, volume_sampler};
+use crate::desc::FrameDesc;
+use crate::encoding::{self, SampleEncoding, U8Filtering};
+use crate::error::{PrepareError, RenderError};
+use crate::gpu::{self, GrowBuffer, Uniform};
+use crate::kernels::KernelKind;
 use brickray_cache::{BrickManager, FrameStats as CacheStats, LeafKind, ManagerConfig};
 use brickray_core::{BrickSource, OctreeLayout, TransferFunction, VolumeFrame};
 use std::sync::Arc;
 use std::time::Instant;
+
+/// Storage buffers of group 2: slots, sub-cells, index.
+const STORAGE_BUFFERS: u32 = 3;
 
 /// Budgets and tolerances of the out-of-core path.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -48,7 +55,7 @@ pub struct OutOfCoreStats {
     pub index_words: u32,
     /// Milliseconds spent refining (the manager's update).
     pub refine_ms: f64,
-    /// Milliseconds spent converting and writing bricks.
+    /// Milliseconds spent writing prepared bricks and tables.
     pub upload_ms: f64,
     /// Milliseconds spent encoding and writing the index.
     pub encode_ms: f64,
@@ -66,10 +73,7 @@ pub(crate) fn sub_cells_per_axis(brick: u32) -> u32 {
     brick.div_ceil(8).max(1)
 }
 
-/// Normalized min/max of each of a brick's `n^3` sub-cells (x fastest). Cell `j`
-/// covers the brick-local edge coordinates `[j B/n, (j+1) B/n]` (B interior
-/// voxels); a trilinear sample there reads voxel centres `floor(e - 0.5)` and the
-/// next, so the range covers those, offset by the apron and clamped to the brick.
+/// Normalized min/max of each of a brick's `n^3` sub-cells (x fastest).
 pub(crate) fn sub_cell_ranges(layout: &OctreeLayout, bytes: &[u8], n: u32) -> Vec<[f32; 2]> {
     let side = layout.stored_side() as usize;
     let (b, a) = (layout.brick as f64, layout.apron as i64);
@@ -81,7 +85,6 @@ pub(crate) fn sub_cell_ranges(layout: &OctreeLayout, bytes: &[u8], n: u32) -> Ve
         .map(|raw| d.normalize(raw))
         .collect();
     if vals.len() < side * side * side {
-        // A malformed brick: never skip it.
         return vec![[f32::NEG_INFINITY, f32::INFINITY]; (n * n * n) as usize];
     }
     let span = |j: u32| -> (usize, usize) {
@@ -113,60 +116,86 @@ pub(crate) fn sub_cell_ranges(layout: &OctreeLayout, bytes: &[u8], n: u32) -> Ve
     out
 }
 
+/// `struct SlotInfo` of ooc.wgsl: one row of the slot table.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
-struct SlotInfo {
-    offset: [f32; 4],
-    range: [f32; 4],
+pub(crate) struct SlotInfo {
+    pub(crate) offset: [f32; 4],
+    pub(crate) range: [f32; 4],
+}
+
+/// `struct OocParams` of ooc.wgsl.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub(crate) struct OocParams {
+    pub(crate) dims: [f32; 3],
+    pub(crate) value_scale: f32,
+    pub(crate) octree_scale: [f32; 3],
+    pub(crate) value_offset: f32,
+    pub(crate) atlas_size: [f32; 3],
+    pub(crate) finest_level: u32,
+    pub(crate) brick: u32,
+    pub(crate) apron: u32,
+    pub(crate) stored_side: u32,
+    pub(crate) sub_cells: u32,
 }
 
 /// The GPU side of an out-of-core volume.
-pub(crate) struct OocVolume {
-    pub(crate) manager: BrickManager,
-    pub(crate) layout: OctreeLayout,
+pub(crate) struct OutOfCore {
+    manager: BrickManager,
+    layout: OctreeLayout,
     source: Arc<dyn BrickSource>,
+    encoding: SampleEncoding,
+    format: wgpu::TextureFormat,
     atlas: wgpu::Texture,
-    pub(crate) atlas_view: wgpu::TextureView,
-    pub(crate) atlas_dims: [u32; 3],
-    pub(crate) encoding: SampleEncoding,
-    pub(crate) slots: wgpu::Buffer,
+    atlas_view: wgpu::TextureView,
+    atlas_bytes: u64,
+    sampler: wgpu::Sampler,
+    params: Uniform<OocParams>,
+    slots: wgpu::Buffer,
     slots_cpu: Vec<SlotInfo>,
-    /// Sub-cell ranges of every slot (`sub_n^3` per slot).
-    pub(crate) sub_cells: wgpu::Buffer,
-    pub(crate) sub_n: u32,
     slots_dirty: bool,
-    pub(crate) index: crate::GrowBuffer,
+    sub_cells: wgpu::Buffer,
+    sub_n: u32,
+    index: GrowBuffer,
+    group_layout: wgpu::BindGroupLayout,
+    bind_group: wgpu::BindGroup,
     frame: u64,
-    pub(crate) stats: OutOfCoreStats,
+    stats: OutOfCoreStats,
     frame_of_world: VolumeFrame,
 }
 
-impl std::fmt::Debug for OocVolume {
+impl std::fmt::Debug for OutOfCore {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("OocVolume")
+        f.debug_struct("OutOfCore")
             .field("dims", &self.layout.volume.dims)
             .field("levels", &self.layout.levels)
-            .field("atlas_dims", &self.atlas_dims)
+            .field("format", &self.format)
             .field("stats", &self.stats)
             .finish_non_exhaustive()
     }
 }
 
-impl OocVolume {
+impl OutOfCore {
     pub(crate) fn new(
         device: &wgpu::Device,
+        queue: &wgpu::Queue,
         source: Arc<dyn BrickSource>,
         frame: VolumeFrame,
         config: OutOfCoreConfig,
-    ) -> Result<OocVolume, RenderError> {
+        u8: U8Filtering,
+    ) -> Result<OutOfCore, RenderError> {
+        check_stage_limits(device, STORAGE_BUFFERS)?;
         let layout = source.layout().clone();
         let limits = device.limits();
         let encoding = SampleEncoding::choose(
             layout.volume.dtype,
             layout.volume.value_range,
-            device.features(),
+            encoding::caps(device),
+            u8,
         );
-        let manager = BrickManager::new(
+        let format = encoding::wgpu_format(encoding.format);
+        let mut manager = BrickManager::new(
             source.clone(),
             frame,
             ManagerConfig {
@@ -179,93 +208,126 @@ impl OocVolume {
                     workers: config.loader_threads.max(1),
                 },
             },
-        )
-        .map_err(|e| RenderError::OutOfCore(e.to_string()))?;
-        let mut manager = manager;
+        )?;
         // The root is read now (set-up time, not the frame path), so the first
         // frame already shows a coarse image.
-        manager
-            .preload_root()
-            .map_err(|e| RenderError::OutOfCore(e.to_string()))?;
+        manager.preload_root()?;
         let atlas_dims = manager.pool().atlas_dims();
-        let atlas = device.create_texture(&wgpu::TextureDescriptor {
-            label: Some("brickray-render brick atlas"),
-            size: wgpu::Extent3d {
-                width: atlas_dims[0],
-                height: atlas_dims[1],
-                depth_or_array_layers: atlas_dims[2],
+        let atlas = gpu::texture(
+            device,
+            &wgpu::TextureDescriptor {
+                label: Some("brickray-render brick atlas"),
+                size: wgpu::Extent3d {
+                    width: atlas_dims[0],
+                    height: atlas_dims[1],
+                    depth_or_array_layers: atlas_dims[2],
+                },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D3,
+                format,
+                usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+                view_formats: &[],
             },
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D3,
-            format: encoding.format,
-            usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-            view_formats: &[],
-        });
-        let slot_count = manager.pool().slot_count() as usize;
-        let slots_size = (slot_count.max(1) * std::mem::size_of::<SlotInfo>()) as u64;
-        let slots = crate::storage_buffer(device, "brick slot table", slots_size)?;
+        )?;
+        let atlas_bytes =
+            atlas_dims.iter().map(|&d| d as u64).product::<u64>() * encoding.texel_bytes() as u64;
+        let slot_count = manager.pool().slot_count().max(1) as usize;
+        let slots = gpu::storage_buffer(
+            device,
+            "brickray-render brick slot table",
+            (slot_count * std::mem::size_of::<SlotInfo>()) as u64,
+        )?;
         let sub_n = sub_cells_per_axis(layout.brick);
-        let sub_size = (slot_count.max(1) as u64) * (sub_n as u64).pow(3) * 8;
-        let sub_cells = crate::storage_buffer(device, "brick sub-cell table", sub_size)?;
-        Ok(OocVolume {
+        let sub_cells = gpu::storage_buffer(
+            device,
+            "brickray-render brick sub-cell table",
+            slot_count as u64 * (sub_n as u64).pow(3) * 8,
+        )?;
+        let index = GrowBuffer::new(device, "brickray-render octree index", 1 << 12)?;
+        let mut params = Uniform::new(device, "brickray-render out-of-core params")?;
+        let sc = layout.volume_scale();
+        params.write(
+            queue,
+            OocParams {
+                dims: layout.volume.dims.map(|d| d as f32),
+                value_scale: encoding.scale,
+                octree_scale: sc.map(|s| s as f32),
+                value_offset: encoding.offset,
+                atlas_size: atlas_dims.map(|d| d as f32),
+                finest_level: (layout.levels - 1) as u32,
+                brick: layout.brick,
+                apron: layout.apron,
+                stored_side: layout.stored_side(),
+                sub_cells: sub_n,
+            },
+        );
+        let group_layout = gpu::scoped(device, "brickray-render out-of-core layout", || {
+            device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some("brickray-render out of core"),
+                entries: &volume_layout_entries(STORAGE_BUFFERS),
+            })
+        })?;
+        let sampler = volume_sampler(device)?;
+        let atlas_view = atlas.create_view(&Default::default());
+        let parts = GroupParts {
+            layout: &group_layout,
+            params: &params.buffer,
+            atlas: &atlas_view,
+            sampler: &sampler,
+            slots: &slots,
+            sub_cells: &sub_cells,
+            index: &index.buffer,
+        };
+        let bind_group = parts.bind_group(device)?;
+        Ok(OutOfCore {
             manager,
             layout,
             source,
-            atlas_view: atlas.create_view(&Default::default()),
-            atlas,
-            atlas_dims,
             encoding,
+            format,
+            atlas,
+            atlas_view,
+            atlas_bytes,
+            sampler,
+            params,
             slots,
             slots_cpu: vec![
                 SlotInfo {
                     offset: [0.0; 4],
                     range: [0.0; 4]
                 };
-                slot_count.max(1)
+                slot_count
             ],
             slots_dirty: true,
             sub_cells,
             sub_n,
-            index: crate::GrowBuffer::new(device, "brickray-render octree index", 1 << 12),
+            index,
+            group_layout,
+            bind_group,
             frame: 0,
             stats: OutOfCoreStats::default(),
             frame_of_world: frame,
         })
     }
 
-    /// Plans the frame, uploads what the plan says, encodes the index. Returns the
-    /// bytes written and whether the index buffer was reallocated.
-    pub(crate) fn update(
-        &mut self,
-        device: &wgpu::Device,
-        queue: &wgpu::Queue,
-        desc: &crate::FrameDesc<'_>,
-        tf: &TransferFunction,
-    ) -> Result<(u64, bool), RenderError> {
-        let (world, camera) = (desc.frame, &desc.camera);
-        let (width, height, mode) = (desc.width, desc.height, desc.settings.mode);
-        if world != self.frame_of_world {
-            self.manager.set_volume_frame(world);
-            self.frame_of_world = world;
-        }
-        self.frame += 1;
-        let t = Instant::now();
-        let plan = self.manager.update(
-            camera,
-            width as f32 / height as f32,
-            height,
-            self.frame,
-            mode,
-            tf,
-        );
-        let refine_ms = t.elapsed().as_secs_f64() * 1e3;
+    /// Statistics of the last frame.
+    pub(crate) fn stats(&self) -> OutOfCoreStats {
+        self.stats
+    }
 
-        let t = Instant::now();
+    /// The brick manager (budgets, tolerance, failures).
+    pub(crate) fn manager_mut(&mut self) -> &mut BrickManager {
+        &mut self.manager
+    }
+
+    /// Writes this frame's uploads: texels into the atlas, sub-cell ranges and
+    /// slot rows into their tables. Returns the bytes written.
+    fn write_uploads(&mut self, queue: &wgpu::Queue, uploads: &[brickray_cache::Upload]) -> u64 {
         let side = self.layout.stored_side();
         let bpp = self.encoding.texel_bytes();
         let mut bytes = 0u64;
-        for up in &plan.uploads {
+        for up in uploads {
             let texels = self.encoding.encode(&up.data);
             queue.write_texture(
                 wgpu::TexelCopyTextureInfo {
@@ -319,9 +381,101 @@ impl OocVolume {
         }
         if self.slots_dirty {
             queue.write_buffer(&self.slots, 0, bytemuck::cast_slice(&self.slots_cpu));
-            bytes += (self.slots_cpu.len() * std::mem::size_of::<SlotInfo>()) as u64;
+            bytes += std::mem::size_of_val(self.slots_cpu.as_slice()) as u64;
             self.slots_dirty = false;
         }
+        bytes
+    }
+}
+
+/// Everything group 2 binds.
+struct GroupParts<'a> {
+    layout: &'a wgpu::BindGroupLayout,
+    params: &'a wgpu::Buffer,
+    atlas: &'a wgpu::TextureView,
+    sampler: &'a wgpu::Sampler,
+    slots: &'a wgpu::Buffer,
+    sub_cells: &'a wgpu::Buffer,
+    index: &'a wgpu::Buffer,
+}
+
+impl GroupParts<'_> {
+    fn bind_group(&self, device: &wgpu::Device) -> Result<wgpu::BindGroup, RenderError> {
+        gpu::scoped(device, "brickray-render out-of-core bind group", || {
+            device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("brickray-render out of core"),
+                layout: self.layout,
+                entries: &[
+                    wgpu::BindGroupEntry {
+                        binding: 0,
+                        resource: self.params.as_entire_binding(),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 1,
+                        resource: wgpu::BindingResource::TextureView(self.atlas),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 2,
+                        resource: wgpu::BindingResource::Sampler(self.sampler),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 3,
+                        resource: self.slots.as_entire_binding(),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 4,
+                        resource: self.sub_cells.as_entire_binding(),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 5,
+                        resource: self.index.as_entire_binding(),
+                    },
+                ],
+            })
+        })
+    }
+}
+
+impl VolumeBackend for OutOfCore {
+    fn kind(&self) -> KernelKind {
+        KernelKind::OutOfCore
+    }
+
+    fn layout(&self) -> &wgpu::BindGroupLayout {
+        &self.group_layout
+    }
+
+    fn bind_group(&self) -> &wgpu::BindGroup {
+        &self.bind_group
+    }
+
+    /// Plans the frame, uploads what the plan says, encodes the index.
+    fn update(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        desc: &FrameDesc<'_>,
+        tf: &TransferFunction,
+    ) -> Result<u64, PrepareError> {
+        if desc.frame != self.frame_of_world {
+            self.manager.set_volume_frame(desc.frame);
+            self.frame_of_world = desc.frame;
+        }
+        self.frame += 1;
+        let vp = desc.viewport;
+        let t = Instant::now();
+        let plan = self.manager.update(
+            &desc.camera,
+            vp.aspect() as f32,
+            vp.height,
+            self.frame,
+            desc.settings.mode,
+            tf,
+        );
+        let refine_ms = t.elapsed().as_secs_f64() * 1e3;
+
+        let t = Instant::now();
+        let mut bytes = self.write_uploads(queue, &plan.uploads);
         let upload_ms = t.elapsed().as_secs_f64() * 1e3;
 
         let t = Instant::now();
@@ -336,11 +490,24 @@ impl OocVolume {
                 (l.key, kind)
             })
             .collect();
-        let index = brickray_index::encode_cut(&leaves)
-            .map_err(|e| RenderError::OutOfCore(e.to_string()))?;
+        let index = brickray_index::encode_cut(&leaves).map_err(RenderError::from)?;
         let words = index.words();
-        let (written, grew) = self.index.write(device, queue, bytemuck::cast_slice(words));
+        let (written, grew) = self
+            .index
+            .write(device, queue, bytemuck::cast_slice(words))?;
         bytes += written;
+        if grew {
+            self.bind_group = GroupParts {
+                layout: &self.group_layout,
+                params: &self.params.buffer,
+                atlas: &self.atlas_view,
+                sampler: &self.sampler,
+                slots: &self.slots,
+                sub_cells: &self.sub_cells,
+                index: &self.index.buffer,
+            }
+            .bind_group(device)?;
+        }
         let encode_ms = t.elapsed().as_secs_f64() * 1e3;
 
         let mut per_level = [0u32; 16];
@@ -361,7 +528,26 @@ impl OocVolume {
             converged,
             data_leaves_per_level: per_level,
         };
-        Ok((bytes, grew))
+        Ok(bytes)
+    }
+
+    fn max_leaves(&self) -> u32 {
+        // A ray crosses at most about 3 * 2^finest leaves of the finest level,
+        // plus zero-length visits at edges: a guard, not a quality setting.
+        let finest = (self.layout.levels - 1).min(20) as u32;
+        (3u64 << finest).saturating_add(1024).min(1 << 20) as u32
+    }
+
+    fn wants_redraw(&self) -> bool {
+        !self.stats.converged
+    }
+
+    fn texel_format(&self) -> wgpu::TextureFormat {
+        self.format
+    }
+
+    fn resident_bytes(&self) -> u64 {
+        self.atlas_bytes
     }
 }
 
@@ -396,7 +582,6 @@ mod tests {
         let val = |x: usize, y: usize, z: usize| bytes[(z * side + y) * side + x] as f64 / 255.0;
         let (b, a) = (layout.brick as f64, layout.apron as f64);
         for i in 0..4000 {
-            // A point in brick-local edge coordinates [0, B]^3.
             let e: Vec<f64> = (0..3)
                 .map(|k| ((i * 7919 + k * 104_729) % 10_007) as f64 / 10_007.0 * b)
                 .collect();

@@ -1,9 +1,18 @@
 // Composites the ray caster's premultiplied colour into the host's pass and writes
 // its depth (the host depth where the volume put none), so host geometry and the
-// volume occlude each other correctly both ways.
+// volume occlude each other correctly both ways. Drawn as one triangle covering
+// the viewport; the outputs are viewport-sized, so a fragment reads the texel at
+// its framebuffer position minus the viewport origin.
+
+struct Composite {
+    // The viewport's origin in the host's target (pixels).
+    origin: vec2<u32>,
+    pad: vec2<u32>,
+}
 
 @group(0) @binding(0) var color_tex: texture_2d<f32>;
 @group(0) @binding(1) var depth_tex: texture_2d<f32>;
+@group(0) @binding(2) var<uniform> composite: Composite;
 
 @vertex
 fn vs_main(@builtin(vertex_index) i: u32) -> @builtin(position) vec4<f32> {
@@ -17,9 +26,13 @@ struct FragOut {
     @builtin(frag_depth) depth: f32,
 }
 
+fn texel(pos: vec4<f32>) -> vec2<i32> {
+    return vec2<i32>(pos.xy) - vec2<i32>(composite.origin);
+}
+
 @fragment
 fn fs_main(@builtin(position) pos: vec4<f32>) -> FragOut {
-    let p = vec2<i32>(pos.xy);
+    let p = texel(pos);
     var o: FragOut;
     o.color = textureLoad(color_tex, p, 0);
     o.depth = textureLoad(depth_tex, p, 0).r;
@@ -29,5 +42,5 @@ fn fs_main(@builtin(position) pos: vec4<f32>) -> FragOut {
 // Variant for hosts whose pass has no depth attachment.
 @fragment
 fn fs_color(@builtin(position) pos: vec4<f32>) -> @location(0) vec4<f32> {
-    return textureLoad(color_tex, vec2<i32>(pos.xy), 0);
+    return textureLoad(color_tex, texel(pos), 0);
 }

@@ -1,0 +1,234 @@
+// Shared by brickray's ray-cast kernels. This file declares the two groups every
+// kernel binds:
+//   group 0, the frame: its uniforms, the host's depth, and the outputs
+//            (owned by `frame.rs` in the render crate);
+//   group 1, the transfer function (owned by `tf.rs`).
+// Group 2 belongs to the volume backend and is declared by the kernel's own file
+// (incore.wgsl, ooc.wgsl). See docs/rendering-model.md.
+
+// Per-frame uniforms (`FrameUniforms` in frame.rs; a test checks the offsets).
+// Rays are generated from the camera's basis, in texture space and in world
+// space, computed in f64 on the CPU: accuracy does not depend on the near or far
+// plane (an inverse view-projection in f32 lost 27 dB at near = 1e-3).
+struct Frame {
+    // The eye in texture space.
+    eye_tex: vec3<f32>,
+    // Near plane distance (world).
+    near: f32,
+    // The unit world view axis, mapped to texture space.
+    fwd_tex: vec3<f32>,
+    // Clip depth = depth_a + depth_b / distance (perspective) or
+    // depth_a + depth_b * distance (orthographic).
+    depth_a: f32,
+    // NDC x = 1 half-extent (perspective: at distance 1) in texture space.
+    right_tex: vec3<f32>,
+    depth_b: f32,
+    // NDC y = 1 half-extent in texture space.
+    up_tex: vec3<f32>,
+    // World sampling step.
+    dt: f32,
+    // The same three vectors in world space (for the headlight and distances).
+    fwd_world: vec3<f32>,
+    // Step as a fraction of the smallest voxel (opacity correction exponent).
+    step_factor: f32,
+    right_world: vec3<f32>,
+    // Early ray termination opacity (> 1 when off).
+    ert_threshold: f32,
+    up_world: vec3<f32>,
+    // Accumulated opacity at which DVR writes depth.
+    depth_opacity: f32,
+    iso_color: vec3<f32>,
+    // Normalized isovalue.
+    isovalue: f32,
+    // Inverse transpose of the model's 3x3 part: texture gradients to world.
+    normal_mat: mat3x3<f32>,
+    // The viewport in the host's target (pixels); outputs are viewport-sized.
+    viewport_origin: vec2<u32>,
+    viewport_size: vec2<u32>,
+    // FLAG_* bits.
+    flags: u32,
+    iso_refine_steps: u32,
+    // Guards: samples (or skips) per ray, index leaves per ray (out of core).
+    max_samples: u32,
+    max_leaves: u32,
+    // Blinn-Phong weights.
+    ambient: f32,
+    diffuse: f32,
+    specular: f32,
+    shininess: f32,
+}
+
+const FLAG_HOST_DEPTH: u32 = 1u;
+const FLAG_PERSPECTIVE: u32 = 2u;
+const FLAG_REVERSED_Z: u32 = 4u;
+
+@group(0) @binding(0) var<uniform> frame: Frame;
+// The host's opaque depth (a 1x1 far-valued texture when the host gives none).
+@group(0) @binding(1) var host_depth: texture_depth_2d;
+@group(0) @binding(2) var out_color: texture_storage_2d<rgba16float, write>;
+@group(0) @binding(3) var out_depth: texture_storage_2d<r32float, write>;
+// Diagnostics: volume samples taken along each ray (march and iso refinement;
+// gradient taps excluded), for benchmarks.
+@group(0) @binding(4) var out_samples: texture_storage_2d<r32uint, write>;
+
+// Transfer-function uniforms (`TfInfo` in tf.rs).
+struct TfInfo {
+    // Number of entries, as a float.
+    count: f32,
+    pad0: f32,
+    pad1: f32,
+    pad2: f32,
+}
+
+@group(1) @binding(0) var<storage, read> tf: array<vec4<f32>>;
+// Opacity prefix sums: tf_prefix[i] = entries j < i with alpha > 0.
+@group(1) @binding(1) var<storage, read> tf_prefix: array<u32>;
+@group(1) @binding(2) var<uniform> tf_info: TfInfo;
+
+// A ray through one pixel, parametrised by world distance t from its origin on
+// the near plane.
+struct Ray {
+    tex_origin: vec3<f32>,
+    // Texture-space displacement per unit t.
+    tex_dir: vec3<f32>,
+    // Unit world direction.
+    dir: vec3<f32>,
+    // View distance gained per unit t.
+    dist_per_t: f32,
+}
+
+fn has_flag(f: u32) -> bool {
+    return (frame.flags & f) != 0u;
+}
+
+fn pixel_ray(px: vec2<u32>) -> Ray {
+    let size = vec2<f32>(frame.viewport_size);
+    let ndc = vec2<f32>(2.0 * (f32(px.x) + 0.5) / size.x - 1.0, 1.0 - 2.0 * (f32(px.y) + 0.5) / size.y);
+    var r: Ray;
+    if (has_flag(FLAG_PERSPECTIVE)) {
+        let dw = frame.fwd_world + ndc.x * frame.right_world + ndc.y * frame.up_world;
+        let dtx = frame.fwd_tex + ndc.x * frame.right_tex + ndc.y * frame.up_tex;
+        let len = length(dw);
+        r.dir = dw / len;
+        r.tex_dir = dtx / len;
+        r.tex_origin = frame.eye_tex + dtx * frame.near;
+        r.dist_per_t = 1.0 / len;
+    } else {
+        r.dir = frame.fwd_world;
+        r.tex_dir = frame.fwd_tex;
+        r.tex_origin = frame.eye_tex + ndc.x * frame.right_tex + ndc.y * frame.up_tex + frame.fwd_tex * frame.near;
+        r.dist_per_t = 1.0;
+    }
+    return r;
+}
+
+fn tex_at(r: Ray, t: f32) -> vec3<f32> {
+    return r.tex_origin + r.tex_dir * t;
+}
+
+// The far end of clip depth ("nothing here") and the nearer of two depths, in
+// the host's convention.
+fn far_depth() -> f32 {
+    return select(1.0, 0.0, has_flag(FLAG_REVERSED_Z));
+}
+
+fn nearer_depth(a: f32, b: f32) -> f32 {
+    return select(min(a, b), max(a, b), has_flag(FLAG_REVERSED_Z));
+}
+
+fn depth_at(r: Ray, t: f32) -> f32 {
+    let d = frame.near + t * r.dist_per_t;
+    var z = frame.depth_a + frame.depth_b * d;
+    if (has_flag(FLAG_PERSPECTIVE)) {
+        z = frame.depth_a + frame.depth_b / d;
+    }
+    return clamp(z, 0.0, 1.0);
+}
+
+// The ray's t at clip depth `depth` (3e38 at the far end of an infinite
+// projection).
+fn t_at_depth(r: Ray, depth: f32) -> f32 {
+    let q = depth - frame.depth_a;
+    var d = q / frame.depth_b;
+    if (has_flag(FLAG_PERSPECTIVE)) {
+        d = 3.0e38;
+        if (q != 0.0 && frame.depth_b / q > 0.0) {
+            d = frame.depth_b / q;
+        }
+    }
+    return (d - frame.near) / r.dist_per_t;
+}
+
+// Slab test of the ray against the texture-space box [lo, hi]: (t_enter, t_exit).
+fn clip_box(r: Ray, lo: vec3<f32>, hi: vec3<f32>) -> vec2<f32> {
+    var t0 = -3.0e38;
+    var t1 = 3.0e38;
+    for (var a = 0; a < 3; a = a + 1) {
+        let o = r.tex_origin[a];
+        let d = r.tex_dir[a];
+        if (abs(d) < 1e-30) {
+            if (o < lo[a] || o > hi[a]) {
+                return vec2<f32>(1.0, 0.0);
+            }
+        } else {
+            let ta = (lo[a] - o) / d;
+            let tb = (hi[a] - o) / d;
+            t0 = max(t0, min(ta, tb));
+            t1 = min(t1, max(ta, tb));
+        }
+    }
+    return vec2<f32>(t0, t1);
+}
+
+// A pixel's ray, the host's depth there (the far value without one) and the
+// ray's extent in the volume box, clipped to the host's depth.
+struct RayStart {
+    r: Ray,
+    host: f32,
+    t0: f32,
+    t1: f32,
+}
+
+fn start_ray(px: vec2<u32>) -> RayStart {
+    var s: RayStart;
+    s.r = pixel_ray(px);
+    s.host = far_depth();
+    let with_host = has_flag(FLAG_HOST_DEPTH);
+    if (with_host) {
+        s.host = textureLoad(host_depth, vec2<i32>(px + frame.viewport_origin), 0);
+    }
+    let tb = clip_box(s.r, vec3<f32>(0.0), vec3<f32>(1.0));
+    s.t0 = max(tb.x, 0.0);
+    s.t1 = tb.y;
+    if (with_host) {
+        s.t1 = min(s.t1, t_at_depth(s.r, s.host));
+    }
+    return s;
+}
+
+// Linear interpolation between the two nearest TF entries (clamped to 0..1).
+fn tf_lookup(v: f32) -> vec4<f32> {
+    let n = tf_info.count;
+    let x = clamp(v, 0.0, 1.0) * (n - 1.0);
+    let i = min(u32(floor(x)), u32(n) - 1u);
+    let j = min(i + 1u, u32(n) - 1u);
+    let f = x - f32(i);
+    return mix(tf[i], tf[j], f);
+}
+
+// O(1): can any value in [lo, hi] be visible through the TF?
+fn tf_transparent(range: vec2<f32>) -> bool {
+    let n1 = tf_info.count - 1.0;
+    let i0 = u32(floor(clamp(range.x, 0.0, 1.0) * n1));
+    let i1 = min(u32(ceil(clamp(range.y, 0.0, 1.0) * n1)), u32(n1));
+    return tf_prefix[i1 + 1u] == tf_prefix[min(i0, i1)];
+}
+
+// Writes one pixel of the outputs: premultiplied colour, the nearer of the
+// volume's and the host's depth, and the sample count.
+fn store_pixel(px: vec2<u32>, color: vec4<f32>, depth: f32, host: f32, samples: u32) {
+    let p = vec2<i32>(px);
+    textureStore(out_color, p, color);
+    textureStore(out_depth, p, vec4<f32>(nearer_depth(depth, host), 0.0, 0.0, 0.0));
+    textureStore(out_samples, p, vec4<u32>(samples, 0u, 0u, 0u));
+}

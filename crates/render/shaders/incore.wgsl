@@ -1,0 +1,136 @@
+// In-core single-pass ray caster (compute), after common.wgsl and modes.wgsl.
+// Krueger-Westermann 2003 accelerations: early ray termination and empty-space
+// skipping over a min/max macro-cell grid, classified per transfer function by
+// the opacity prefix-sum table. See docs/rendering-model.md.
+
+// Group 2: the in-core volume (`InCore` in backend/incore.rs; a test checks the
+// offsets).
+struct VolumeParams {
+    // Voxel dimensions.
+    dims: vec3<f32>,
+    // normalized = texel * value_scale + value_offset.
+    value_scale: f32,
+    // Macro cells per axis.
+    cells: vec3<u32>,
+    // Macro-cell side in voxels.
+    cell_size: u32,
+    value_offset: f32,
+    pad0: f32,
+    pad1: f32,
+    pad2: f32,
+}
+
+@group(2) @binding(0) var<uniform> vol: VolumeParams;
+@group(2) @binding(1) var volume_tex: texture_3d<f32>;
+@group(2) @binding(2) var volume_sampler: sampler;
+// Normalized min/max of every macro cell (x fastest).
+@group(2) @binding(3) var<storage, read> cell_ranges: array<vec2<f32>>;
+
+fn sample_value(u: vec3<f32>) -> f32 {
+    return textureSampleLevel(volume_tex, volume_sampler, u, 0.0).r * vol.value_scale + vol.value_offset;
+}
+
+// World-space gradient direction (unnormalized) and the voxel-space magnitude.
+fn gradient(u: vec3<f32>) -> vec4<f32> {
+    let e = 1.0 / vol.dims;
+    let gx = (sample_value(u + vec3<f32>(e.x, 0.0, 0.0)) - sample_value(u - vec3<f32>(e.x, 0.0, 0.0))) * 0.5;
+    let gy = (sample_value(u + vec3<f32>(0.0, e.y, 0.0)) - sample_value(u - vec3<f32>(0.0, e.y, 0.0))) * 0.5;
+    let gz = (sample_value(u + vec3<f32>(0.0, 0.0, e.z)) - sample_value(u - vec3<f32>(0.0, 0.0, e.z))) * 0.5;
+    let g = vec3<f32>(gx, gy, gz);
+    return vec4<f32>(frame.normal_mat * (g * vol.dims), length(g));
+}
+
+// In core a sample depends on the ray alone.
+struct Cursor {
+    r: Ray,
+}
+
+fn cursor_value(c: Cursor, t: f32) -> f32 {
+    return sample_value(tex_at(c.r, t));
+}
+
+fn cursor_gradient(c: Cursor, t: f32) -> vec4<f32> {
+    return gradient(tex_at(c.r, t));
+}
+
+fn cell_of(u: vec3<f32>) -> vec3<u32> {
+    let c = floor(u * vol.dims / f32(vol.cell_size));
+    return vec3<u32>(clamp(c, vec3<f32>(0.0), vec3<f32>(vol.cells) - 1.0));
+}
+
+fn cell_range(c: vec3<u32>) -> vec2<f32> {
+    return cell_ranges[(c.z * vol.cells.y + c.y) * vol.cells.x + c.x];
+}
+
+// t at which the ray leaves macro cell c.
+fn cell_exit(r: Ray, c: vec3<u32>) -> f32 {
+    let s = f32(vol.cell_size) / vol.dims;
+    let lo = vec3<f32>(c) * s;
+    return clip_box(r, lo, lo + s).y;
+}
+
+// First sample index at or after t.
+fn first_k_after(t: f32, t0: f32, dt: f32) -> u32 {
+    return u32(max(ceil((t - t0) / dt), 0.0));
+}
+
+@compute @workgroup_size(8, 8, 1)
+fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    if (gid.x >= frame.viewport_size.x || gid.y >= frame.viewport_size.y) {
+        return;
+    }
+    let px = gid.xy;
+    let start = start_ray(px);
+    let r = start.r;
+    let t0 = start.t0;
+    let t1 = start.t1;
+    var acc = accum_new();
+    let cur = Cursor(r);
+    if (t1 > t0) {
+        let dt = frame.dt;
+        let n = min(u32(ceil((t1 - t0) / dt)), frame.max_samples);
+        var k = 0u;
+        loop {
+            if (k >= n) { break; }
+            let t = t0 + f32(k) * dt;
+            if (t >= t1) { break; }
+            let u = tex_at(r, t);
+            if (ESS && MODE != MODE_ISO) {
+                // Skip a cell that cannot contribute: transparent (DVR) or below the
+                // running maximum (MIP). The sample grid is unchanged.
+                let c = cell_of(u);
+                let range = cell_range(c);
+                let skip = (MODE == MODE_DVR && tf_transparent(range)) || (MODE == MODE_MIP && range.y <= acc.max_v);
+                if (skip) {
+                    k = max(k + 1u, first_k_after(cell_exit(r, c), t0, dt));
+                    continue;
+                }
+            }
+            let v = sample_value(u);
+            acc.samples = acc.samples + 1u;
+            if (MODE == MODE_DVR) {
+                if (dvr_sample(&acc, cur, r, t, v, frame.step_factor)) { break; }
+            } else if (MODE == MODE_ISO) {
+                if (v >= frame.isovalue) {
+                    // The first sample inside is a capped cut, else the crossing
+                    // lies since the previous sample.
+                    iso_hit(&acc, cur, r, select(t - dt, t, k == 0u), t);
+                    break;
+                }
+                if (ESS) {
+                    // The whole cell lies on this sample's side of the isovalue.
+                    let c = cell_of(u);
+                    let cr = cell_range(c);
+                    if (frame.isovalue < cr.x || frame.isovalue > cr.y) {
+                        k = max(k + 1u, first_k_after(cell_exit(r, c), t0, dt));
+                        continue;
+                    }
+                }
+            } else {
+                if (mip_sample(&acc, t, v)) { break; }
+            }
+            k = k + 1u;
+        }
+    }
+    finish_ray(px, &acc, r, start.host);
+}

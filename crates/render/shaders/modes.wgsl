@@ -1,0 +1,132 @@
+// What a ray computes, once for every kernel: DVR accumulation, isosurface
+// bisection and shading, MIP finalisation (docs/rendering-model.md, "Modes").
+//
+// The volume backend's kernel (incore.wgsl, ooc.wgsl) provides where samples come
+// from, as
+//     struct Cursor { ... }                                  // e.g. the brick
+//     fn cursor_value(c: Cursor, t: f32) -> f32              // normalized value
+//     fn cursor_gradient(c: Cursor, t: f32) -> vec4<f32>     // world dir, |g|
+// and marches the ray; these functions do the rest.
+
+// Pipeline-overridable switches: every combination is compiled into its own
+// pipeline (`Variant` in kernels.rs), so a kernel carries only its mode's code.
+override MODE: u32 = 0u;
+override ERT: bool = true;
+override ESS: bool = true;
+override SHADE: bool = false;
+
+const MODE_DVR: u32 = 0u;
+const MODE_ISO: u32 = 1u;
+const MODE_MIP: u32 = 2u;
+
+// What a ray has accumulated so far.
+struct Accum {
+    // Premultiplied colour.
+    color: vec4<f32>,
+    // Clip depth of the result (the far value until set).
+    depth: f32,
+    depth_set: bool,
+    // MIP: running maximum and where it was first attained.
+    max_v: f32,
+    max_t: f32,
+    // Volume samples taken (march and bisection).
+    samples: u32,
+}
+
+fn accum_new() -> Accum {
+    var a: Accum;
+    a.color = vec4<f32>(0.0);
+    a.depth = far_depth();
+    a.depth_set = false;
+    a.max_v = -3.0e38;
+    a.max_t = 0.0;
+    a.samples = 0u;
+    return a;
+}
+
+// Blinn-Phong with a headlight (two-sided), clamped to 0..1. `g.xyz` is the
+// world-space gradient direction, `g.w` its magnitude in normalized value per
+// finest voxel (below 1e-6 the sample is left unshaded).
+fn shade(c: vec3<f32>, g: vec4<f32>, dir: vec3<f32>) -> vec3<f32> {
+    if (g.w < 1e-6) {
+        return c;
+    }
+    let n = normalize(g.xyz);
+    let ndl = abs(dot(n, -dir));
+    let spec = frame.specular * pow(ndl, frame.shininess);
+    return clamp(c * (frame.ambient + frame.diffuse * ndl) + vec3<f32>(spec), vec3<f32>(0.0), vec3<f32>(1.0));
+}
+
+// DVR: composites the sample of value `v` at `t` front to back, its opacity
+// corrected to `alpha_exponent` reference lengths. True when early ray
+// termination ends the ray.
+fn dvr_sample(acc: ptr<function, Accum>, c: Cursor, r: Ray, t: f32, v: f32, alpha_exponent: f32) -> bool {
+    let s = tf_lookup(v);
+    if (s.a <= 0.0) {
+        return false;
+    }
+    let a = 1.0 - pow(1.0 - s.a, alpha_exponent);
+    var rgb = s.rgb;
+    if (SHADE) {
+        rgb = shade(rgb, cursor_gradient(c, t), r.dir);
+    }
+    let acc_a = (*acc).color.a;
+    (*acc).color = vec4<f32>((*acc).color.rgb + (1.0 - acc_a) * a * rgb, acc_a + (1.0 - acc_a) * a);
+    if (!(*acc).depth_set && (*acc).color.a >= frame.depth_opacity) {
+        (*acc).depth = depth_at(r, t);
+        (*acc).depth_set = true;
+    }
+    return ERT && (*acc).color.a >= frame.ert_threshold;
+}
+
+// Iso: the surface lies in [a, b] (below the isovalue at a, at or above at b;
+// a == b for a capped cut). Bisects `iso_refine_steps` times, shades at the
+// midpoint of the final interval and sets the opaque result.
+fn iso_hit(acc: ptr<function, Accum>, c: Cursor, r: Ray, a_in: f32, b_in: f32) {
+    var a = a_in;
+    var b = b_in;
+    for (var i = 0u; i < frame.iso_refine_steps; i = i + 1u) {
+        if (b <= a) {
+            break;
+        }
+        let m = 0.5 * (a + b);
+        (*acc).samples = (*acc).samples + 1u;
+        if (cursor_value(c, m) >= frame.isovalue) {
+            b = m;
+        } else {
+            a = m;
+        }
+    }
+    let th = 0.5 * (a + b);
+    (*acc).color = vec4<f32>(shade(frame.iso_color, cursor_gradient(c, th), r.dir), 1.0);
+    (*acc).depth = depth_at(r, th);
+    (*acc).depth_set = true;
+}
+
+// MIP: takes the sample of value `v` at `t`. True when early ray termination
+// ends the ray (the maximum reached 1).
+fn mip_sample(acc: ptr<function, Accum>, t: f32, v: f32) -> bool {
+    if (v > (*acc).max_v) {
+        (*acc).max_v = v;
+        (*acc).max_t = t;
+    }
+    return ERT && (*acc).max_v >= 1.0;
+}
+
+// MIP: maps the maximum through the TF (premultiplied, no step correction).
+fn mip_finish(acc: ptr<function, Accum>, r: Ray) {
+    if ((*acc).max_v > -1.0e38) {
+        let s = tf_lookup((*acc).max_v);
+        (*acc).color = vec4<f32>(s.rgb * s.a, s.a);
+        (*acc).depth = depth_at(r, (*acc).max_t);
+        (*acc).depth_set = true;
+    }
+}
+
+// Ends a ray: MIP is finalised, the pixel stored.
+fn finish_ray(px: vec2<u32>, acc: ptr<function, Accum>, r: Ray, host: f32) {
+    if (MODE == MODE_MIP) {
+        mip_finish(acc, r);
+    }
+    store_pixel(px, (*acc).color, (*acc).depth, host, (*acc).samples);
+}

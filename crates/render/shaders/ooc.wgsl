@@ -1,0 +1,238 @@
+// Out-of-core single-pass ray caster (Gobbetti et al. 2008, sect. 5.2), compute,
+// after common.wgsl, modes.wgsl and brickray-index's octree_traversal.wgsl. Each
+// ray walks the octree-with-ropes index over the current cut front to back
+// (stackless), skips empty leaves, and samples data leaves from the brick atlas
+// with a step matched to the leaf's level (opacity corrected to that step). Every
+// loop is bounded. See docs/rendering-model.md and docs/index-format.md.
+
+// Group 2: the out-of-core volume (`OutOfCore` in backend/ooc.rs; a test checks
+// the offsets).
+struct OocParams {
+    // Voxel dimensions of the finest level.
+    dims: vec3<f32>,
+    // normalized = texel * value_scale + value_offset.
+    value_scale: f32,
+    // Octree coordinate = texture coordinate * octree_scale.
+    octree_scale: vec3<f32>,
+    value_offset: f32,
+    // Atlas size in texels.
+    atlas_size: vec3<f32>,
+    // The finest octree level.
+    finest_level: u32,
+    // Interior voxels per brick side.
+    brick: u32,
+    // Apron voxels on each side.
+    apron: u32,
+    // Stored voxels per brick side (brick + 2 apron).
+    stored_side: u32,
+    // Sub-cells per brick axis (empty-space skipping inside bricks).
+    sub_cells: u32,
+}
+
+struct SlotInfo {
+    // xyz: atlas texel offset of the slot, w: unused.
+    offset: vec4<f32>,
+    // x: normalized min, y: normalized max of the brick.
+    range: vec4<f32>,
+}
+
+@group(2) @binding(0) var<uniform> ooc: OocParams;
+@group(2) @binding(1) var atlas_tex: texture_3d<f32>;
+@group(2) @binding(2) var atlas_sampler: sampler;
+@group(2) @binding(3) var<storage, read> slots: array<SlotInfo>;
+// Normalized min/max of each brick's sub-cells (`sub_cells`^3 per slot, x
+// fastest), for empty-space skipping inside a brick.
+@group(2) @binding(4) var<storage, read> sub_cells: array<vec2<f32>>;
+// The octree with ropes (docs/index-format.md), walked by octree_traversal.wgsl.
+@group(2) @binding(5) var<storage, read> index_words: array<u32>;
+
+// A data leaf's brick: atlas texture coordinate = uv0 + o * kuv for octree
+// point o (texel centres at +0.5 are folded in).
+struct Brick {
+    uv0: vec3<f32>,
+    kuv: vec3<f32>,
+    // Finest voxels per voxel of this level (2^(finest - level)).
+    f: f32,
+    slot: u32,
+    box_min: vec3<f32>,
+    box_size: f32,
+}
+
+fn brick_of(leaf: OctBox, slot: u32) -> Brick {
+    var b: Brick;
+    let k = f32(ooc.brick) / leaf.box_size;
+    let inv_atlas = 1.0 / ooc.atlas_size;
+    b.kuv = k * inv_atlas;
+    b.uv0 = (slots[slot].offset.xyz + f32(ooc.apron) - leaf.box_min * k) * inv_atlas;
+    b.f = oct_exp2_pos(ooc.finest_level - leaf.level);
+    b.slot = slot;
+    b.box_min = leaf.box_min;
+    b.box_size = leaf.box_size;
+    return b;
+}
+
+fn atlas_value(uv: vec3<f32>) -> f32 {
+    return textureSampleLevel(atlas_tex, atlas_sampler, uv, 0.0).r * ooc.value_scale + ooc.value_offset;
+}
+
+// Out of core a sample depends on the brick and the ray in octree coordinates
+// (o(t) = oo + od t).
+struct Cursor {
+    b: Brick,
+    oo: vec3<f32>,
+    od: vec3<f32>,
+}
+
+fn cursor_value(c: Cursor, t: f32) -> f32 {
+    return atlas_value(c.b.uv0 + (c.oo + c.od * t) * c.b.kuv);
+}
+
+// World gradient direction and magnitude (normalized value per finest voxel), by
+// central differences of one voxel of the brick's level.
+fn cursor_gradient(c: Cursor, t: f32) -> vec4<f32> {
+    let uv = c.b.uv0 + (c.oo + c.od * t) * c.b.kuv;
+    let e = 1.0 / ooc.atlas_size;
+    let gx = (atlas_value(uv + vec3<f32>(e.x, 0.0, 0.0)) - atlas_value(uv - vec3<f32>(e.x, 0.0, 0.0))) * 0.5;
+    let gy = (atlas_value(uv + vec3<f32>(0.0, e.y, 0.0)) - atlas_value(uv - vec3<f32>(0.0, e.y, 0.0))) * 0.5;
+    let gz = (atlas_value(uv + vec3<f32>(0.0, 0.0, e.z)) - atlas_value(uv - vec3<f32>(0.0, 0.0, e.z))) * 0.5;
+    let g = vec3<f32>(gx, gy, gz) / c.b.f;
+    return vec4<f32>(frame.normal_mat * (g * ooc.dims), length(g));
+}
+
+// The sub-cell of the brick holding octree point o (integer coordinates).
+fn sub_cell_of(b: Brick, o: vec3<f32>) -> vec3<u32> {
+    let n = f32(ooc.sub_cells);
+    return vec3<u32>(clamp(floor((o - b.box_min) * (n / b.box_size)), vec3<f32>(0.0), vec3<f32>(n - 1.0)));
+}
+
+fn sub_cell_range(b: Brick, j: vec3<u32>) -> vec2<f32> {
+    let n = ooc.sub_cells;
+    return sub_cells[((b.slot * n + j.z) * n + j.y) * n + j.x];
+}
+
+// t at which the ray o(t) = oo + od t leaves the box [lo, hi].
+fn box_exit(oo: vec3<f32>, od: vec3<f32>, lo: vec3<f32>, hi: vec3<f32>) -> f32 {
+    let far = select(lo, hi, od > vec3<f32>(0.0));
+    let tf = select(vec3<f32>(3.0e38), (far - oo) / od, od != vec3<f32>(0.0));
+    return min(tf.x, min(tf.y, tf.z));
+}
+
+// t at which the ray leaves sub-cell j of brick b.
+fn sub_cell_exit(b: Brick, j: vec3<u32>, oo: vec3<f32>, od: vec3<f32>) -> f32 {
+    let side = b.box_size / f32(ooc.sub_cells);
+    let lo = b.box_min + vec3<f32>(j) * side;
+    return box_exit(oo, od, lo, lo + side);
+}
+
+// First index k of the grid t0 + k dtl at or after t.
+fn grid_k(t: f32, t0: f32, dtl: f32) -> u32 {
+    return u32(max(ceil((t - t0) / dtl), 0.0));
+}
+
+@compute @workgroup_size(8, 8, 1)
+fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    if (gid.x >= frame.viewport_size.x || gid.y >= frame.viewport_size.y) {
+        return;
+    }
+    let px = gid.xy;
+    let start = start_ray(px);
+    let r = start.r;
+    let t0 = start.t0;
+    let t1 = start.t1;
+    var acc = accum_new();
+    if (t1 > t0) {
+        let oo = r.tex_origin * ooc.octree_scale;
+        let od = r.tex_dir * ooc.octree_scale;
+        let dt = frame.dt;
+        var budget = frame.max_samples;
+        // Sampling state carried across leaves: the grid (level, spacing, index).
+        var grid_f = 0.0;
+        var k = 0u;
+        var t_last = t0;
+        var st = oct_begin(oo, od, t0, t1, frame.max_leaves);
+        // One flat loop: each iteration either moves to the next leaf or takes
+        // (or skips) one sample. Rays of a SIMD group/warp then diverge only per
+        // iteration, not per nested leaf loop.
+        var have_leaf = false;
+        var cur: Cursor;
+        cur.oo = oo;
+        cur.od = od;
+        var dtl = dt;
+        loop {
+            if (!have_leaf) {
+                // Walk to the next data leaf (skipping empty ones, and for MIP
+                // bricks below the running maximum) in one go.
+                var found = false;
+                loop {
+                    if (!oct_next_leaf(&st)) { break; }
+                    if (st.hit.tag == OCT_TAG_DATA && !(MODE == MODE_MIP && ESS && slots[st.hit.data].range.y <= acc.max_v)) {
+                        found = true;
+                        break;
+                    }
+                }
+                if (!found) { break; }
+                cur.b = brick_of(st.hit.leaf, st.hit.data);
+                dtl = dt * cur.b.f;
+                // Snap to this level's sample grid at or after max(t_enter, last sample).
+                if (cur.b.f != grid_f) {
+                    grid_f = cur.b.f;
+                    k = grid_k(max(st.hit.t_enter, t_last), t0, dtl);
+                }
+                k = max(k, grid_k(st.hit.t_enter, t0, dtl));
+                have_leaf = true;
+            }
+            let t = t0 + f32(k) * dtl;
+            if (t >= st.hit.t_exit || t >= t1) {
+                have_leaf = false;
+                continue;
+            }
+            if (budget == 0u) { break; }
+            budget = budget - 1u;
+            let o = oo + od * t;
+            if (ESS && MODE != MODE_ISO) {
+                // Skip the rest of a sub-cell that cannot contribute: transparent
+                // (DVR), or below the running maximum (MIP). The sample grid is
+                // unchanged, so skipping never changes the image.
+                let j = sub_cell_of(cur.b, o);
+                let range = sub_cell_range(cur.b, j);
+                let skip = (MODE == MODE_DVR && tf_transparent(range)) || (MODE == MODE_MIP && range.y <= acc.max_v);
+                if (skip) {
+                    let te = min(sub_cell_exit(cur.b, j, oo, od), st.hit.t_exit);
+                    k = max(k + 1u, grid_k(te, t0, dtl));
+                    continue;
+                }
+            }
+            let v = cursor_value(cur, t);
+            acc.samples = acc.samples + 1u;
+            if (MODE == MODE_DVR) {
+                if (dvr_sample(&acc, cur, r, t, v, frame.step_factor * cur.b.f)) { break; }
+            } else if (MODE == MODE_ISO) {
+                if (v >= frame.isovalue) {
+                    // Bracket [previous sample, t], clipped to one voxel of this
+                    // level before the leaf (the brick's apron covers it).
+                    var a = t;
+                    if (t > t0 && t_last < t) {
+                        a = max(t_last, max(st.hit.t_enter - dtl, t - dtl));
+                    }
+                    iso_hit(&acc, cur, r, a, t);
+                    break;
+                }
+                if (ESS) {
+                    // The whole sub-cell lies below the isovalue, like this sample.
+                    let j = sub_cell_of(cur.b, o);
+                    if (sub_cell_range(cur.b, j).y < frame.isovalue) {
+                        let kn = max(grid_k(min(sub_cell_exit(cur.b, j, oo, od), st.hit.t_exit), t0, dtl), k + 1u);
+                        t_last = t0 + f32(kn - 1u) * dtl;
+                        k = kn;
+                        continue;
+                    }
+                }
+            } else {
+                if (mip_sample(&acc, t, v)) { break; }
+            }
+            t_last = t;
+            k = k + 1u;
+        }
+    }
+    finish_ray(px, &acc, r, start.host);
+}

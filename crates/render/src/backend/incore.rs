@@ -1,0 +1,214 @@
+//! The in-core backend: the whole volume in one 3D texture plus its min/max
+//! macro-cell grid (Krueger and Westermann 2003), and its group 2.
+
+use super::{VolumeBackend, check_stage_limits, volume_layout_entries, volume_sampler};
+use crate::desc::FrameDesc;
+use crate::encoding::{self, SampleEncoding, U8Filtering};
+use crate::error::{PrepareError, RenderError};
+use crate::gpu::{self, Uniform};
+use crate::kernels::KernelKind;
+use brickray_core::{MacroCellGrid, TransferFunction, Volume};
+
+/// Macro-cell size in voxels for empty-space skipping.
+pub(crate) const CELL: u32 = 8;
+
+/// Storage buffers of group 2: the macro-cell ranges.
+const STORAGE_BUFFERS: u32 = 1;
+
+/// `struct VolumeParams` of incore.wgsl.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub(crate) struct VolumeParams {
+    pub(crate) dims: [f32; 3],
+    pub(crate) value_scale: f32,
+    pub(crate) cells: [u32; 3],
+    pub(crate) cell_size: u32,
+    pub(crate) value_offset: f32,
+    pub(crate) pad0: f32,
+    pub(crate) pad1: f32,
+    pub(crate) pad2: f32,
+}
+
+/// A volume resident on the GPU.
+#[derive(Debug)]
+pub(crate) struct InCore {
+    layout: wgpu::BindGroupLayout,
+    bind_group: wgpu::BindGroup,
+    format: wgpu::TextureFormat,
+    bytes: u64,
+}
+
+impl InCore {
+    /// Uploads `vol` (in slabs of at most 64 MiB) and its macro-cell grid.
+    pub(crate) fn new(
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        vol: &Volume,
+        u8: U8Filtering,
+    ) -> Result<InCore, RenderError> {
+        check_stage_limits(device, STORAGE_BUFFERS)?;
+        let dims = vol.dims();
+        let limit = device.limits().max_texture_dimension_3d;
+        if dims.iter().any(|&d| d > limit) {
+            return Err(RenderError::VolumeTooLarge { dims, limit });
+        }
+        let desc = vol.desc();
+        let enc = SampleEncoding::choose(desc.dtype, desc.value_range, encoding::caps(device), u8);
+        let format = encoding::wgpu_format(enc.format);
+        let bpp = enc.texel_bytes();
+        let row = dims[0] * bpp;
+        let slice = row as usize * dims[1] as usize;
+        let bytes = slice as u64 * dims[2] as u64;
+        let texture = gpu::texture(
+            device,
+            &wgpu::TextureDescriptor {
+                label: Some("brickray-render volume"),
+                size: wgpu::Extent3d {
+                    width: dims[0],
+                    height: dims[1],
+                    depth_or_array_layers: dims[2],
+                },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D3,
+                format,
+                usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+                view_formats: &[],
+            },
+        )?;
+        // Upload in slabs of at most 64 MiB so staging memory stays bounded; each
+        // slab is converted on its own (no full-volume copy in the texel format).
+        let src = vol.data().as_bytes();
+        let src_slice = dims[0] as usize * dims[1] as usize * desc.dtype.size();
+        let per = ((64usize << 20) / slice.max(1)).clamp(1, dims[2] as usize) as u32;
+        let mut z = 0;
+        while z < dims[2] {
+            let z1 = (z + per).min(dims[2]);
+            let texels = enc.encode(&src[z as usize * src_slice..z1 as usize * src_slice]);
+            gpu::scoped(device, "brickray-render volume upload", || {
+                queue.write_texture(
+                    wgpu::TexelCopyTextureInfo {
+                        texture: &texture,
+                        mip_level: 0,
+                        origin: wgpu::Origin3d { x: 0, y: 0, z },
+                        aspect: wgpu::TextureAspect::All,
+                    },
+                    &texels,
+                    wgpu::TexelCopyBufferLayout {
+                        offset: 0,
+                        bytes_per_row: Some(row),
+                        rows_per_image: Some(dims[1]),
+                    },
+                    wgpu::Extent3d {
+                        width: dims[0],
+                        height: dims[1],
+                        depth_or_array_layers: z1 - z,
+                    },
+                )
+            })?;
+            z = z1;
+        }
+        let grid = MacroCellGrid::build(vol, CELL);
+        let ranges: &[u8] = bytemuck::cast_slice(&grid.ranges);
+        let cell_ranges = gpu::storage_buffer(
+            device,
+            "brickray-render macro-cell ranges",
+            ranges.len() as u64,
+        )?;
+        queue.write_buffer(&cell_ranges, 0, ranges);
+        let mut params = Uniform::<VolumeParams>::new(device, "brickray-render volume params")?;
+        params.write(
+            queue,
+            VolumeParams {
+                dims: dims.map(|d| d as f32),
+                value_scale: enc.scale,
+                cells: grid.dims,
+                cell_size: CELL,
+                value_offset: enc.offset,
+                pad0: 0.0,
+                pad1: 0.0,
+                pad2: 0.0,
+            },
+        );
+        let sampler = volume_sampler(device)?;
+        let layout = gpu::scoped(device, "brickray-render in-core layout", || {
+            device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some("brickray-render in core"),
+                entries: &volume_layout_entries(STORAGE_BUFFERS),
+            })
+        })?;
+        let view = texture.create_view(&Default::default());
+        let bind_group = gpu::scoped(device, "brickray-render in-core bind group", || {
+            device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("brickray-render in core"),
+                layout: &layout,
+                entries: &[
+                    wgpu::BindGroupEntry {
+                        binding: 0,
+                        resource: params.buffer.as_entire_binding(),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 1,
+                        resource: wgpu::BindingResource::TextureView(&view),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 2,
+                        resource: wgpu::BindingResource::Sampler(&sampler),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 3,
+                        resource: cell_ranges.as_entire_binding(),
+                    },
+                ],
+            })
+        })?;
+        Ok(InCore {
+            layout,
+            bind_group,
+            format,
+            bytes,
+        })
+    }
+}
+
+impl VolumeBackend for InCore {
+    fn kind(&self) -> KernelKind {
+        KernelKind::InCore
+    }
+
+    fn layout(&self) -> &wgpu::BindGroupLayout {
+        &self.layout
+    }
+
+    fn bind_group(&self) -> &wgpu::BindGroup {
+        &self.bind_group
+    }
+
+    fn update(
+        &mut self,
+        _device: &wgpu::Device,
+        _queue: &wgpu::Queue,
+        _frame: &FrameDesc<'_>,
+        _tf: &TransferFunction,
+    ) -> Result<u64, PrepareError> {
+        // Everything was uploaded at set-up; the TF classifies macro cells in the
+        // shader.
+        Ok(0)
+    }
+
+    fn max_leaves(&self) -> u32 {
+        0
+    }
+
+    fn wants_redraw(&self) -> bool {
+        false
+    }
+
+    fn texel_format(&self) -> wgpu::TextureFormat {
+        self.format
+    }
+
+    fn resident_bytes(&self) -> u64 {
+        self.bytes
+    }
+}

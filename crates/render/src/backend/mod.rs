@@ -1,0 +1,171 @@
+//! The volume backends behind one seam: each owns group 2 of its kernel (the
+//! volume's textures, tables and uniforms, and their bind group) and updates it
+//! per frame. In core the volume is one 3D texture; out of core a brick atlas fed
+//! by the cache and walked through the octree-with-ropes index.
+
+pub(crate) mod incore;
+pub(crate) mod ooc;
+
+pub(crate) use incore::InCore;
+pub(crate) use ooc::OutOfCore;
+pub use ooc::OutOfCoreStats;
+
+use crate::desc::FrameDesc;
+use crate::error::{PrepareError, RenderError};
+use crate::kernels::KernelKind;
+use brickray_core::TransferFunction;
+
+/// What every backend does for the coordinator.
+pub(crate) trait VolumeBackend: std::fmt::Debug {
+    /// The kernel that samples this backend.
+    fn kind(&self) -> KernelKind;
+    /// The layout of group 2 (the kernel's pipeline layout is built from it).
+    fn layout(&self) -> &wgpu::BindGroupLayout;
+    /// Group 2.
+    fn bind_group(&self) -> &wgpu::BindGroup;
+    /// Updates what the frame needs (out of core: plans the cut, writes prepared
+    /// bricks and the index); returns the bytes written.
+    fn update(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        frame: &FrameDesc<'_>,
+        tf: &TransferFunction,
+    ) -> Result<u64, PrepareError>;
+    /// Most index leaves one ray may visit (0 in core).
+    fn max_leaves(&self) -> u32;
+    /// True when another frame of the same view would change the image.
+    fn wants_redraw(&self) -> bool;
+    /// The texture format the samples are stored in.
+    fn texel_format(&self) -> wgpu::TextureFormat;
+    /// Bytes of volume data resident on the GPU.
+    fn resident_bytes(&self) -> u64;
+}
+
+/// The backend in use.
+#[derive(Debug)]
+pub(crate) enum Backend {
+    InCore(InCore),
+    OutOfCore(Box<OutOfCore>),
+}
+
+impl Backend {
+    pub(crate) fn get(&self) -> &dyn VolumeBackend {
+        match self {
+            Backend::InCore(b) => b,
+            Backend::OutOfCore(b) => b.as_ref(),
+        }
+    }
+
+    pub(crate) fn get_mut(&mut self) -> &mut dyn VolumeBackend {
+        match self {
+            Backend::InCore(b) => b,
+            Backend::OutOfCore(b) => b.as_mut(),
+        }
+    }
+
+    pub(crate) fn out_of_core(&self) -> Option<&OutOfCore> {
+        match self {
+            Backend::OutOfCore(b) => Some(b),
+            Backend::InCore(_) => None,
+        }
+    }
+
+    pub(crate) fn out_of_core_mut(&mut self) -> Result<&mut OutOfCore, RenderError> {
+        match self {
+            Backend::OutOfCore(b) => Ok(b),
+            Backend::InCore(_) => Err(RenderError::NotOutOfCore),
+        }
+    }
+}
+
+/// The linear, clamp-to-edge sampler of a volume texture.
+pub(crate) fn volume_sampler(device: &wgpu::Device) -> Result<wgpu::Sampler, RenderError> {
+    crate::gpu::scoped(device, "brickray-render volume sampler", || {
+        device.create_sampler(&wgpu::SamplerDescriptor {
+            label: Some("brickray-render volume"),
+            address_mode_u: wgpu::AddressMode::ClampToEdge,
+            address_mode_v: wgpu::AddressMode::ClampToEdge,
+            address_mode_w: wgpu::AddressMode::ClampToEdge,
+            mag_filter: wgpu::FilterMode::Linear,
+            min_filter: wgpu::FilterMode::Linear,
+            ..Default::default()
+        })
+    })
+}
+
+/// Layout entries shared by both backends' group 2: the uniform (0), the volume
+/// texture (1), its sampler (2), then `storage` read-only storage buffers
+/// (3, 4, ...).
+pub(crate) fn volume_layout_entries(storage: u32) -> Vec<wgpu::BindGroupLayoutEntry> {
+    let c = wgpu::ShaderStages::COMPUTE;
+    let mut e = vec![
+        wgpu::BindGroupLayoutEntry {
+            binding: 0,
+            visibility: c,
+            ty: wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Uniform,
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+            count: None,
+        },
+        wgpu::BindGroupLayoutEntry {
+            binding: 1,
+            visibility: c,
+            ty: wgpu::BindingType::Texture {
+                sample_type: wgpu::TextureSampleType::Float { filterable: true },
+                view_dimension: wgpu::TextureViewDimension::D3,
+                multisampled: false,
+            },
+            count: None,
+        },
+        wgpu::BindGroupLayoutEntry {
+            binding: 2,
+            visibility: c,
+            ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
+            count: None,
+        },
+    ];
+    for i in 0..storage {
+        e.push(wgpu::BindGroupLayoutEntry {
+            binding: 3 + i,
+            visibility: c,
+            ty: wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Storage { read_only: true },
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+            count: None,
+        });
+    }
+    e
+}
+
+/// Checks the per-stage binding counts of a kernel whose group 2 has `storage`
+/// storage buffers (the transfer function adds 2 storage buffers and a uniform,
+/// the frame a uniform, a sampled depth texture and 3 storage textures).
+pub(crate) fn check_stage_limits(device: &wgpu::Device, storage: u32) -> Result<(), RenderError> {
+    let l = device.limits();
+    crate::gpu::need(
+        "max_storage_buffers_per_shader_stage",
+        (storage + 2) as u64,
+        l.max_storage_buffers_per_shader_stage as u64,
+    )?;
+    crate::gpu::need(
+        "max_uniform_buffers_per_shader_stage",
+        3,
+        l.max_uniform_buffers_per_shader_stage as u64,
+    )?;
+    crate::gpu::need(
+        "max_sampled_textures_per_shader_stage",
+        2,
+        l.max_sampled_textures_per_shader_stage as u64,
+    )?;
+    crate::gpu::need(
+        "max_samplers_per_shader_stage",
+        1,
+        l.max_samplers_per_shader_stage as u64,
+    )?;
+    Ok(())
+}

@@ -1,0 +1,228 @@
+//! Small GPU helpers shared by the owners: limit-checked buffer creation, a
+//! grow-only buffer, and error scopes that turn a wgpu error into a typed one.
+
+use crate::error::{GpuErrorKind, RenderError};
+use std::future::Future;
+use std::pin::pin;
+use std::task::{Context, Poll, Waker};
+
+/// Runs `create` inside validation, out-of-memory and internal error scopes and
+/// returns its value, or the first error wgpu reported as a typed
+/// [`RenderError::Gpu`] naming `what`. The library checks every limit it knows
+/// before creating an object, so this only catches what those checks miss; an
+/// error here is a bug to report.
+///
+/// On native backends the scopes resolve at once. Where they would resolve later
+/// (WebGPU), the error is left to the device's uncaptured-error handler.
+pub(crate) fn scoped<T>(
+    device: &wgpu::Device,
+    what: &'static str,
+    create: impl FnOnce() -> T,
+) -> Result<T, RenderError> {
+    let internal = device.push_error_scope(wgpu::ErrorFilter::Internal);
+    let oom = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
+    let validation = device.push_error_scope(wgpu::ErrorFilter::Validation);
+    let out = create();
+    // Scopes pop in the reverse order of their pushes.
+    let errors = [
+        ready(validation.pop()),
+        ready(oom.pop()),
+        ready(internal.pop()),
+    ];
+    match errors.into_iter().flatten().next() {
+        None => Ok(out),
+        Some(e) => Err(gpu_error(what, e)),
+    }
+}
+
+fn gpu_error(what: &'static str, e: wgpu::Error) -> RenderError {
+    let kind = match &e {
+        wgpu::Error::OutOfMemory { .. } => GpuErrorKind::OutOfMemory,
+        wgpu::Error::Validation { .. } => GpuErrorKind::Validation,
+        _ => GpuErrorKind::Internal,
+    };
+    RenderError::Gpu {
+        what,
+        kind,
+        message: e.to_string(),
+    }
+}
+
+/// The value of a future that is already complete, `None` if it is not.
+fn ready<T>(f: impl Future<Output = Option<T>>) -> Option<T> {
+    let mut f = pin!(f);
+    match f.as_mut().poll(&mut Context::from_waker(Waker::noop())) {
+        Poll::Ready(v) => v,
+        Poll::Pending => None,
+    }
+}
+
+/// Fails with [`RenderError::LowDeviceLimit`] when `required > available`.
+pub(crate) fn need(limit: &'static str, required: u64, available: u64) -> Result<(), RenderError> {
+    if required > available {
+        Err(RenderError::LowDeviceLimit {
+            limit,
+            required,
+            available,
+        })
+    } else {
+        Ok(())
+    }
+}
+
+/// A `STORAGE | COPY_DST` buffer of `size` bytes, checked against the device's
+/// storage-binding and buffer-size limits first. `what` labels it.
+pub(crate) fn storage_buffer(
+    device: &wgpu::Device,
+    what: &'static str,
+    size: u64,
+) -> Result<wgpu::Buffer, RenderError> {
+    let limits = device.limits();
+    let size = size.max(16).next_multiple_of(4);
+    need(
+        "max_storage_buffer_binding_size",
+        size,
+        limits.max_storage_buffer_binding_size,
+    )?;
+    need("max_buffer_size", size, limits.max_buffer_size)?;
+    scoped(device, what, || {
+        device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(what),
+            size,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        })
+    })
+}
+
+/// A `UNIFORM | COPY_DST` buffer for one `T`, checked against the uniform-binding
+/// limit first.
+pub(crate) fn uniform_buffer<T>(
+    device: &wgpu::Device,
+    what: &'static str,
+) -> Result<wgpu::Buffer, RenderError> {
+    let size = std::mem::size_of::<T>() as u64;
+    need(
+        "max_uniform_buffer_binding_size",
+        size,
+        device.limits().max_uniform_buffer_binding_size,
+    )?;
+    scoped(device, what, || {
+        device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(what),
+            size,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        })
+    })
+}
+
+/// A uniform buffer and the last value written to it: written only on change.
+#[derive(Debug)]
+pub(crate) struct Uniform<T> {
+    pub(crate) buffer: wgpu::Buffer,
+    last: Option<T>,
+}
+
+impl<T: bytemuck::Pod + PartialEq> Uniform<T> {
+    pub(crate) fn new(device: &wgpu::Device, what: &'static str) -> Result<Self, RenderError> {
+        Ok(Uniform {
+            buffer: uniform_buffer::<T>(device, what)?,
+            last: None,
+        })
+    }
+
+    /// Writes `value` if it differs from the last one; returns the bytes written.
+    pub(crate) fn write(&mut self, queue: &wgpu::Queue, value: T) -> u64 {
+        if self.last == Some(value) {
+            return 0;
+        }
+        queue.write_buffer(&self.buffer, 0, bytemuck::bytes_of(&value));
+        self.last = Some(value);
+        std::mem::size_of::<T>() as u64
+    }
+}
+
+/// A storage buffer that grows geometrically and is rewritten only on change.
+#[derive(Debug)]
+pub(crate) struct GrowBuffer {
+    label: &'static str,
+    pub(crate) buffer: wgpu::Buffer,
+    contents: Vec<u8>,
+}
+
+impl GrowBuffer {
+    pub(crate) fn new(
+        device: &wgpu::Device,
+        label: &'static str,
+        size: u64,
+    ) -> Result<GrowBuffer, RenderError> {
+        Ok(GrowBuffer {
+            label,
+            buffer: storage_buffer(device, label, size)?,
+            contents: Vec::new(),
+        })
+    }
+
+    /// Writes `data`; returns (bytes written, whether the buffer was reallocated,
+    /// so bind groups holding it must be rebuilt).
+    pub(crate) fn write(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        data: &[u8],
+    ) -> Result<(u64, bool), RenderError> {
+        if data == self.contents.as_slice() {
+            return Ok((0, false));
+        }
+        let mut grown = false;
+        if data.len() as u64 > self.buffer.size() {
+            let size = (data.len() as u64).next_power_of_two();
+            let limit = device.limits().max_storage_buffer_binding_size;
+            // Grow geometrically, but never past the binding limit.
+            let size = if size > limit {
+                data.len() as u64
+            } else {
+                size
+            };
+            self.buffer = storage_buffer(device, self.label, size)?;
+            grown = true;
+        }
+        queue.write_buffer(&self.buffer, 0, data);
+        self.contents.clear();
+        self.contents.extend_from_slice(data);
+        Ok((data.len() as u64, grown))
+    }
+}
+
+/// A limit-checked texture: its size against the dimension limit of its kind.
+pub(crate) fn texture(
+    device: &wgpu::Device,
+    desc: &wgpu::TextureDescriptor<'static>,
+) -> Result<wgpu::Texture, RenderError> {
+    let limits = device.limits();
+    let s = desc.size;
+    match desc.dimension {
+        wgpu::TextureDimension::D3 => {
+            let m = s.width.max(s.height).max(s.depth_or_array_layers) as u64;
+            need(
+                "max_texture_dimension_3d",
+                m,
+                limits.max_texture_dimension_3d as u64,
+            )?;
+        }
+        _ => {
+            let m = s.width.max(s.height) as u64;
+            need(
+                "max_texture_dimension_2d",
+                m,
+                limits.max_texture_dimension_2d as u64,
+            )?;
+        }
+    }
+    scoped(
+        device,
+        desc.label.unwrap_or("brickray-render texture"),
+        || device.create_texture(desc),
+    )
+}

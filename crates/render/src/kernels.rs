@@ -1,0 +1,191 @@
+//! The ray-cast kernels: one shader module per volume backend and one compute
+//! pipeline per [`Variant`] (mode, ERT, ESS, shading as WGSL override
+//! constants), compiled on first use. On lavapipe a specialised out-of-core
+//! pipeline runs about 1.5x faster than one that branches on the mode.
+
+use crate::error::RenderError;
+use crate::gpu;
+use crate::shaders;
+use brickray_core::{RenderMode, RenderSettings};
+use std::collections::HashMap;
+
+/// The workgroup size of the kernels (`@workgroup_size(8, 8, 1)`).
+pub(crate) const WORKGROUP: [u32; 2] = [8, 8];
+
+/// Bind groups of a kernel: frame, transfer function, volume.
+pub(crate) const BIND_GROUPS: u32 = 3;
+
+/// The kernel's mode (`MODE_*` in modes.wgsl).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[repr(u32)]
+pub(crate) enum KernelMode {
+    Dvr = 0,
+    Iso = 1,
+    Mip = 2,
+}
+
+impl KernelMode {
+    /// Every mode with its WGSL name, for the reflection test.
+    #[cfg(test)]
+    pub(crate) const ALL: [(&'static str, KernelMode); 3] = [
+        ("MODE_DVR", KernelMode::Dvr),
+        ("MODE_ISO", KernelMode::Iso),
+        ("MODE_MIP", KernelMode::Mip),
+    ];
+}
+
+/// Which volume backend a kernel serves.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub(crate) enum KernelKind {
+    InCore,
+    OutOfCore,
+}
+
+/// The switches compiled into a pipeline.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub(crate) struct Variant {
+    pub(crate) mode: KernelMode,
+    pub(crate) ert: bool,
+    pub(crate) ess: bool,
+    pub(crate) shade: bool,
+}
+
+/// The override constants of a pipeline, by WGSL name (modes.wgsl).
+pub(crate) const OVERRIDES: [&str; 4] = ["MODE", "ERT", "ESS", "SHADE"];
+
+impl Variant {
+    /// The variant of validated settings.
+    pub(crate) fn of(s: &RenderSettings) -> Variant {
+        let mode = match s.mode {
+            RenderMode::Iso { .. } => KernelMode::Iso,
+            RenderMode::Mip => KernelMode::Mip,
+            _ => KernelMode::Dvr,
+        };
+        Variant {
+            mode,
+            ert: s.accel.early_termination.is_some(),
+            ess: s.accel.empty_space_skipping,
+            shade: s.shading.enabled,
+        }
+    }
+
+    fn constants(&self) -> [(&'static str, f64); 4] {
+        let b = |x: bool| if x { 1.0 } else { 0.0 };
+        let v = [
+            self.mode as u32 as f64,
+            b(self.ert),
+            b(self.ess),
+            b(self.shade),
+        ];
+        [0, 1, 2, 3].map(|i| (OVERRIDES[i], v[i]))
+    }
+}
+
+/// One backend's shader module, pipeline layout and pipelines.
+#[derive(Debug)]
+struct Kernel {
+    label: &'static str,
+    module: wgpu::ShaderModule,
+    layout: wgpu::PipelineLayout,
+    pipelines: HashMap<Variant, wgpu::ComputePipeline>,
+}
+
+/// Owner of the ray-cast shader modules and pipelines.
+#[derive(Debug, Default)]
+pub(crate) struct Kernels {
+    kernels: HashMap<KernelKind, Kernel>,
+}
+
+/// Checks the device limits every kernel needs.
+pub(crate) fn check_limits(device: &wgpu::Device) -> Result<(), RenderError> {
+    let l = device.limits();
+    gpu::need(
+        "max_bind_groups",
+        BIND_GROUPS as u64,
+        l.max_bind_groups as u64,
+    )?;
+    gpu::need(
+        "max_compute_invocations_per_workgroup",
+        (WORKGROUP[0] * WORKGROUP[1]) as u64,
+        l.max_compute_invocations_per_workgroup as u64,
+    )?;
+    gpu::need(
+        "max_compute_workgroup_size_x",
+        WORKGROUP[0] as u64,
+        l.max_compute_workgroup_size_x as u64,
+    )?;
+    gpu::need(
+        "max_compute_workgroup_size_y",
+        WORKGROUP[1] as u64,
+        l.max_compute_workgroup_size_y as u64,
+    )?;
+    Ok(())
+}
+
+impl Kernels {
+    /// The pipeline of `variant` for the `kind` backend, whose bind group layouts
+    /// are `groups` (frame, transfer function, volume); compiled on first use.
+    pub(crate) fn pipeline(
+        &mut self,
+        device: &wgpu::Device,
+        kind: KernelKind,
+        groups: [&wgpu::BindGroupLayout; 3],
+        variant: Variant,
+    ) -> Result<&wgpu::ComputePipeline, RenderError> {
+        if !self.kernels.contains_key(&kind) {
+            let k = Kernel::new(device, kind, groups)?;
+            self.kernels.insert(kind, k);
+        }
+        let k = self.kernels.get_mut(&kind).expect("inserted above");
+        if !k.pipelines.contains_key(&variant) {
+            let constants = variant.constants();
+            let p = gpu::scoped(device, k.label, || {
+                device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                    label: Some(k.label),
+                    layout: Some(&k.layout),
+                    module: &k.module,
+                    entry_point: Some("main"),
+                    compilation_options: wgpu::PipelineCompilationOptions {
+                        constants: &constants,
+                        ..Default::default()
+                    },
+                    cache: None,
+                })
+            })?;
+            k.pipelines.insert(variant, p);
+        }
+        Ok(&k.pipelines[&variant])
+    }
+}
+
+impl Kernel {
+    fn new(
+        device: &wgpu::Device,
+        kind: KernelKind,
+        groups: [&wgpu::BindGroupLayout; 3],
+    ) -> Result<Kernel, RenderError> {
+        let (label, source) = match kind {
+            KernelKind::InCore => ("brickray-render raycast in core", shaders::incore()),
+            KernelKind::OutOfCore => ("brickray-render raycast out of core", shaders::ooc()),
+        };
+        let module = gpu::scoped(device, label, || {
+            device.create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some(label),
+                source: wgpu::ShaderSource::Wgsl(source.into()),
+            })
+        })?;
+        let layout = gpu::scoped(device, label, || {
+            device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                label: Some(label),
+                bind_group_layouts: &groups.map(Some),
+                immediate_size: 0,
+            })
+        })?;
+        Ok(Kernel {
+            label,
+            module,
+            layout,
+            pipelines: HashMap::new(),
+        })
+    }
+}

@@ -1,0 +1,328 @@
+//! naga validation and reflection of every composed shader against the Rust side.
+
+use super::*;
+use crate::backend::{incore::VolumeParams, ooc::OocParams, ooc::SlotInfo, volume_layout_entries};
+use crate::composite::CompositeUniforms;
+use crate::frame::{FrameFlags, FrameUniforms};
+use crate::kernels::{KernelMode, OVERRIDES, WORKGROUP};
+use crate::tf::TfInfo;
+use naga::valid::{Capabilities, ValidationFlags, Validator};
+use std::collections::BTreeSet;
+
+fn module(name: &str, src: &str) -> naga::Module {
+    let module = naga::front::wgsl::parse_str(src)
+        .unwrap_or_else(|e| panic!("{name}: parse error:\n{}", e.emit_to_string(src)));
+    Validator::new(ValidationFlags::all(), Capabilities::all())
+        .validate(&module)
+        .unwrap_or_else(|e| panic!("{name}: validation error:\n{}", e.emit_to_string(src)));
+    module
+}
+
+/// `(member name, byte offset)` of a WGSL struct, and its size.
+fn wgsl_struct(m: &naga::Module, name: &str) -> (Vec<(String, u32)>, u32) {
+    let (_, ty) = m
+        .types
+        .iter()
+        .find(|(_, t)| t.name.as_deref() == Some(name))
+        .unwrap_or_else(|| panic!("no struct {name}"));
+    match &ty.inner {
+        naga::TypeInner::Struct { members, span } => (
+            members
+                .iter()
+                .map(|mb| (mb.name.clone().unwrap_or_default(), mb.offset))
+                .collect(),
+            *span,
+        ),
+        other => panic!("{name} is not a struct: {other:?}"),
+    }
+}
+
+/// `(field name, byte offset)` of a Rust struct's fields, in the order given.
+macro_rules! rust_fields {
+    ($rust:ty, [$($field:ident),* $(,)?]) => {
+        vec![$((stringify!($field).to_string(), std::mem::offset_of!($rust, $field) as u32)),*]
+    };
+}
+
+/// Checks a WGSL struct's members, name by name and offset by offset, and its
+/// size against a Rust struct.
+fn check_struct(m: &naga::Module, wgsl: &str, rust: Vec<(String, u32)>, size: usize) {
+    let (members, span) = wgsl_struct(m, wgsl);
+    assert_eq!(
+        members, rust,
+        "WGSL struct {wgsl} drifted from the Rust side"
+    );
+    assert_eq!(span as usize, size, "WGSL struct {wgsl} size");
+}
+
+fn frame_fields() -> Vec<(String, u32)> {
+    rust_fields!(
+        FrameUniforms,
+        [
+            eye_tex,
+            near,
+            fwd_tex,
+            depth_a,
+            right_tex,
+            depth_b,
+            up_tex,
+            dt,
+            fwd_world,
+            step_factor,
+            right_world,
+            ert_threshold,
+            up_world,
+            depth_opacity,
+            iso_color,
+            isovalue,
+            normal_mat,
+            viewport_origin,
+            viewport_size,
+            flags,
+            iso_refine_steps,
+            max_samples,
+            max_leaves,
+            ambient,
+            diffuse,
+            specular,
+            shininess,
+        ]
+    )
+}
+
+fn kernel_bindings(volume_storage: u32) -> BTreeSet<(u32, u32, &'static str)> {
+    rust_bindings(&[
+        &crate::frame::layout_entries(),
+        &crate::tf::layout_entries(),
+        &volume_layout_entries(volume_storage),
+    ])
+}
+
+/// The value of a `const NAME: u32` of the module.
+fn const_u32(m: &naga::Module, name: &str) -> u32 {
+    let (_, c) = m
+        .constants
+        .iter()
+        .find(|(_, c)| c.name.as_deref() == Some(name))
+        .unwrap_or_else(|| panic!("no const {name}"));
+    match m.global_expressions[c.init] {
+        naga::Expression::Literal(naga::Literal::U32(v)) => v,
+        ref e => panic!("{name} is not a u32 literal: {e:?}"),
+    }
+}
+
+/// `(group, binding, kind)` of every resource the module declares.
+fn wgsl_bindings(m: &naga::Module) -> BTreeSet<(u32, u32, &'static str)> {
+    m.global_variables
+        .iter()
+        .filter_map(|(_, v)| {
+            let b = v.binding.as_ref()?;
+            let kind = match v.space {
+                naga::AddressSpace::Uniform => "uniform",
+                naga::AddressSpace::Storage { .. } => "storage",
+                _ => match &m.types[v.ty].inner {
+                    naga::TypeInner::Sampler { .. } => "sampler",
+                    naga::TypeInner::Image {
+                        class: naga::ImageClass::Storage { .. },
+                        ..
+                    } => "storage_texture",
+                    naga::TypeInner::Image { .. } => "texture",
+                    other => panic!("unexpected resource {other:?}"),
+                },
+            };
+            Some((b.group, b.binding, kind))
+        })
+        .collect()
+}
+
+/// The same from the Rust layouts, group by group.
+fn rust_bindings(groups: &[&[wgpu::BindGroupLayoutEntry]]) -> BTreeSet<(u32, u32, &'static str)> {
+    let mut out = BTreeSet::new();
+    for (g, entries) in groups.iter().enumerate() {
+        for e in entries.iter() {
+            let kind = match e.ty {
+                wgpu::BindingType::Buffer {
+                    ty: wgpu::BufferBindingType::Uniform,
+                    ..
+                } => "uniform",
+                wgpu::BindingType::Buffer { .. } => "storage",
+                wgpu::BindingType::Sampler(_) => "sampler",
+                wgpu::BindingType::StorageTexture { .. } => "storage_texture",
+                wgpu::BindingType::Texture { .. } => "texture",
+                ref other => panic!("unexpected layout entry {other:?}"),
+            };
+            out.insert((g as u32, e.binding, kind));
+        }
+    }
+    out
+}
+
+fn check_kernel(name: &str, m: &naga::Module, volume_storage: u32) {
+    // Entry point and workgroup size.
+    assert_eq!(m.entry_points.len(), 1, "{name}");
+    let ep = &m.entry_points[0];
+    assert_eq!(ep.name, "main", "{name}");
+    assert_eq!(ep.stage, naga::ShaderStage::Compute, "{name}");
+    assert_eq!(ep.workgroup_size, [WORKGROUP[0], WORKGROUP[1], 1], "{name}");
+    // Overrides, by name.
+    let overrides: BTreeSet<String> = m
+        .overrides
+        .iter()
+        .filter_map(|(_, o)| o.name.clone())
+        .collect();
+    let want: BTreeSet<String> = OVERRIDES.iter().map(|s| s.to_string()).collect();
+    assert_eq!(overrides, want, "{name}: override constants");
+    // Mode ids and flag bits.
+    for (wgsl, mode) in KernelMode::ALL {
+        assert_eq!(const_u32(m, wgsl), mode as u32, "{name}: {wgsl}");
+    }
+    for (wgsl, flag) in FrameFlags::ALL {
+        assert_eq!(const_u32(m, wgsl), flag.0, "{name}: {wgsl}");
+    }
+    // Uniform layouts of groups 0 and 1.
+    check_struct(
+        m,
+        "Frame",
+        frame_fields(),
+        std::mem::size_of::<FrameUniforms>(),
+    );
+    check_struct(
+        m,
+        "TfInfo",
+        rust_fields!(TfInfo, [count, pad0, pad1, pad2]),
+        std::mem::size_of::<TfInfo>(),
+    );
+    // Every binding of every group against the Rust layouts.
+    assert_eq!(
+        wgsl_bindings(m),
+        kernel_bindings(volume_storage),
+        "{name}: bindings"
+    );
+}
+
+#[test]
+fn incore_kernel_matches_the_rust_side() {
+    let m = module("incore", &incore());
+    check_kernel("incore", &m, 1);
+    check_struct(
+        &m,
+        "VolumeParams",
+        rust_fields!(
+            VolumeParams,
+            [
+                dims,
+                value_scale,
+                cells,
+                cell_size,
+                value_offset,
+                pad0,
+                pad1,
+                pad2
+            ]
+        ),
+        std::mem::size_of::<VolumeParams>(),
+    );
+}
+
+#[test]
+fn ooc_kernel_matches_the_rust_side() {
+    let m = module("ooc", &ooc());
+    check_kernel("ooc", &m, 3);
+    check_struct(
+        &m,
+        "OocParams",
+        rust_fields!(
+            OocParams,
+            [
+                dims,
+                value_scale,
+                octree_scale,
+                value_offset,
+                atlas_size,
+                finest_level,
+                brick,
+                apron,
+                stored_side,
+                sub_cells,
+            ]
+        ),
+        std::mem::size_of::<OocParams>(),
+    );
+    check_struct(
+        &m,
+        "SlotInfo",
+        rust_fields!(SlotInfo, [offset, range]),
+        std::mem::size_of::<SlotInfo>(),
+    );
+}
+
+#[test]
+fn composite_matches_the_rust_side() {
+    let m = module("composite", COMPOSITE);
+    let names: BTreeSet<&str> = m.entry_points.iter().map(|e| e.name.as_str()).collect();
+    assert_eq!(names, BTreeSet::from(["vs_main", "fs_main", "fs_color"]));
+    check_struct(
+        &m,
+        "Composite",
+        rust_fields!(CompositeUniforms, [origin, pad]),
+        std::mem::size_of::<CompositeUniforms>(),
+    );
+}
+
+/// The reflection has teeth: a drifted member offset, a renamed override or a
+/// moved binding is caught.
+#[test]
+fn reflection_catches_drift() {
+    // An extra member shifts every later offset.
+    let drifted = incore().replace("    near: f32,\n", "    near: f32,\n    extra: f32,\n");
+    let (members, _) = wgsl_struct(&module("drifted", &drifted), "Frame");
+    assert_ne!(members, frame_fields());
+    // Two members swapped keep the size but not the names.
+    let swapped = incore().replace(
+        "    ambient: f32,\n    diffuse: f32,",
+        "    diffuse: f32,\n    ambient: f32,",
+    );
+    let (members, _) = wgsl_struct(&module("swapped", &swapped), "Frame");
+    assert_ne!(members, frame_fields());
+    // A renamed override.
+    let renamed = incore()
+        .replace("override SHADE", "override SHADING")
+        .replace("(SHADE)", "(SHADING)");
+    let m = module("renamed", &renamed);
+    assert!(
+        !m.overrides
+            .iter()
+            .any(|(_, o)| o.name.as_deref() == Some("SHADE"))
+    );
+    // A moved binding.
+    let moved = incore().replace("@group(2) @binding(3)", "@group(2) @binding(7)");
+    assert_ne!(wgsl_bindings(&module("moved", &moved)), kernel_bindings(1));
+    // A changed flag bit.
+    let flag = incore().replace("FLAG_REVERSED_Z: u32 = 4u", "FLAG_REVERSED_Z: u32 = 8u");
+    assert_ne!(
+        const_u32(&module("flag", &flag), "FLAG_REVERSED_Z"),
+        FrameFlags::REVERSED_Z.0
+    );
+}
+
+/// Every `.wgsl` file of the crate is part of a validated shader.
+#[test]
+fn every_shader_file_is_covered() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("shaders");
+    let known = [
+        "common.wgsl",
+        "modes.wgsl",
+        "incore.wgsl",
+        "ooc.wgsl",
+        "composite.wgsl",
+    ];
+    for entry in std::fs::read_dir(dir).unwrap() {
+        let name = entry.unwrap().file_name().into_string().unwrap();
+        if name.ends_with(".wgsl") {
+            assert!(
+                known.contains(&name.as_str()),
+                "{name} is not validated by any test"
+            );
+        }
+    }
+}
