@@ -171,6 +171,37 @@ pub fn draw_frame(
     Ok(stats)
 }
 
+/// Draws frames of one view until the renderer no longer wants a redraw (out of
+/// core: every brick the view needs arrived), at most `max_frames`. Returns the
+/// frames drawn, or `None` when it did not settle.
+pub fn draw_until_settled(
+    gpu: &GpuContext,
+    renderer: &mut brickray_render::VolumeRenderer,
+    target: &Offscreen,
+    desc: &brickray_render::FrameDesc<'_>,
+    max_frames: usize,
+) -> Result<Option<usize>, brickray_render::PrepareError> {
+    for i in 1..=max_frames {
+        draw_frame(gpu, renderer, target, desc, Some(wgpu::Color::BLACK))?;
+        if !renderer.wants_redraw() {
+            return Ok(Some(i));
+        }
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    Ok(None)
+}
+
+/// Builds a brick store of `vol` (default options) at `path` and opens it.
+pub fn store_of(
+    vol: &brickray_core::Volume,
+    path: &std::path::Path,
+) -> std::sync::Arc<dyn brickray_core::BrickSource> {
+    let mut reader = brickray_core::io::MemoryReader::new(vol.clone(), "memory");
+    brickray_store::build(&mut reader, path, &brickray_store::BuildOptions::default())
+        .expect("build the brick store");
+    std::sync::Arc::new(brickray_store::open(path).expect("open the brick store"))
+}
+
 /// A colour (`Rgba8Unorm`) and depth (`Depth32Float`) target pair, as a host
 /// application would have, with read-back. With `samples > 1` the attachments
 /// are multisampled and the colour resolves into [`Offscreen::color`].
