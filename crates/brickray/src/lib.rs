@@ -30,3 +30,8 @@ pub use brickray_render::{
     VolumeRenderer, required_limits,
 };
 pub use wgpu;
+
+/// The README's code, compiled as doc tests (the embedding program is complete).
+#[cfg(doctest)]
+#[doc = include_str!("../../../README.md")]
+pub struct ReadmeDoctests;

@@ -67,6 +67,16 @@ impl GpuContext {
     /// (the others are left off even when the adapter has them: tests use this to
     /// exercise the fallbacks for missing features).
     pub fn with_features(wanted: wgpu::Features) -> Result<GpuContext, GpuError> {
+        GpuContext::with_limits(wanted, |adapter| adapter)
+    }
+
+    /// Like [`GpuContext::with_features`], with the device's limits chosen by
+    /// `limits` from the adapter's (tests use this to create devices below what
+    /// a setting needs).
+    pub fn with_limits(
+        wanted: wgpu::Features,
+        limits: impl FnOnce(wgpu::Limits) -> wgpu::Limits,
+    ) -> Result<GpuContext, GpuError> {
         let instance =
             wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
         let backends = wgpu::Backends::from_env().unwrap_or(wgpu::Backends::all());
@@ -109,7 +119,7 @@ impl GpuContext {
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("brickray-harness"),
             required_features: features,
-            required_limits: adapter.limits(),
+            required_limits: limits(adapter.limits()),
             ..Default::default()
         }))
         .map_err(|source| GpuError::Device {

@@ -72,6 +72,12 @@ pub(crate) fn check_targets(device: &wgpu::Device, t: &TargetDesc) -> Result<(),
 impl Compositor {
     pub(crate) fn new(device: &wgpu::Device, t: &TargetDesc) -> Result<Compositor, RenderError> {
         check_targets(device, t)?;
+        let limits = device.limits();
+        gpu::need(
+            "max_sampled_textures_per_shader_stage",
+            2,
+            limits.max_sampled_textures_per_shader_stage as u64,
+        )?;
         let label = Some("brickray-render composite");
         let layout = gpu::scoped(device, "brickray-render composite layout", || {
             device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {

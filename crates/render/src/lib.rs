@@ -73,7 +73,7 @@ pub fn required_limits() -> wgpu::Limits {
         max_compute_workgroup_size_y: kernels::WORKGROUP[1],
         max_compute_workgroup_size_z: 1,
         max_uniform_buffer_binding_size: std::mem::size_of::<FrameUniforms>() as u64,
-        ..wgpu::Limits::downlevel_webgl2_defaults()
+        ..wgpu::Limits::downlevel_defaults()
     }
 }
 

@@ -59,8 +59,8 @@ impl TfTables {
         })?;
         Ok(TfTables {
             layout,
-            entries: GrowBuffer::new(device, "brickray-render tf", 256 * 16)?,
-            prefix: GrowBuffer::new(device, "brickray-render tf prefix", 257 * 4)?,
+            entries: GrowBuffer::new(device, "brickray-render tf", 16)?,
+            prefix: GrowBuffer::new(device, "brickray-render tf prefix", 16)?,
             info: Uniform::new(device, "brickray-render tf info")?,
             bind_group: None,
             current: None,
