@@ -20,10 +20,10 @@
 //!   p99 / median.
 
 use crate::Figures;
-use brickray_cache::refine::{DataState, NodeClass, RefineEnv, RefineParams};
+use brickray_cache::refine::{DataState, MetaState, NodeClass, RefineEnv, RefineParams};
 use brickray_core::{
-    Accel, BrickSource, Camera, NodeInfo, NodeKey, RenderMode, RenderSettings, Shading,
-    TransferFunction, Volume, VolumeFrame,
+    Accel, BrickSource, Camera, NodeKey, RenderMode, RenderSettings, Shading, TransferFunction,
+    Volume, VolumeFrame,
 };
 use brickray_harness::{GpuContext, Offscreen, ct};
 use brickray_render::{FrameDesc, OutOfCoreConfig, OutOfCoreStats, TargetDesc, VolumeRenderer};
@@ -478,8 +478,8 @@ fn noise_source(dims: u64) -> Result<Arc<dyn BrickSource>, String> {
 struct AllResident<'a>(&'a dyn BrickSource);
 
 impl RefineEnv for AllResident<'_> {
-    fn node(&mut self, key: NodeKey) -> Option<NodeInfo> {
-        self.0.node(key).ok()
+    fn node(&mut self, key: NodeKey) -> MetaState {
+        self.0.node(key).map_or(MetaState::Failed, MetaState::Known)
     }
     fn data(&mut self, _key: NodeKey) -> DataState {
         DataState::OnGpu
@@ -506,6 +506,7 @@ fn cut_levels(
         tf,
         tolerance_px,
         max_data_leaves,
+        brick_upload_bytes: layout.brick_bytes() as u64,
     };
     let mut budget = brickray_cache::UploadBudget::new(u64::MAX / 4);
     budget.begin_frame();

@@ -1,28 +1,24 @@
-//! Level-2 cache: decompressed bricks in system memory, LRU within a byte budget.
+//! Level-2 cache: prepared bricks in system memory, LRU within a byte budget.
 
+use crate::prepared::PreparedBrick;
 use brickray_core::NodeKey;
 use std::collections::{BTreeMap, HashMap};
-use std::sync::Arc;
-
-/// Bytes of one decompressed brick, shared between the cache, the loader and the
-/// upload list of a frame.
-pub type BrickBytes = Arc<[u8]>;
 
 #[derive(Debug)]
 struct Entry {
-    data: BrickBytes,
+    data: PreparedBrick,
     tick: u64,
 }
 
-/// Decompressed bricks keyed by [`NodeKey`], evicted least-recently-used first
-/// once their total size exceeds the byte budget.
+/// Prepared bricks keyed by [`NodeKey`], evicted least-recently-used first once
+/// their total size ([`PreparedBrick::bytes`]) exceeds the byte budget.
 ///
 /// The most recently inserted brick is always kept, even when it alone exceeds the
 /// budget, so a cache smaller than one brick still makes progress.
 #[derive(Debug)]
 pub struct CpuCache {
-    budget: usize,
-    bytes: usize,
+    budget: u64,
+    bytes: u64,
     tick: u64,
     map: HashMap<NodeKey, Entry>,
     /// `tick -> key`, oldest first.
@@ -34,7 +30,7 @@ pub struct CpuCache {
 
 impl CpuCache {
     /// An empty cache holding at most `budget_bytes` of brick data.
-    pub fn new(budget_bytes: usize) -> CpuCache {
+    pub fn new(budget_bytes: u64) -> CpuCache {
         CpuCache {
             budget: budget_bytes,
             bytes: 0,
@@ -53,7 +49,7 @@ impl CpuCache {
     }
 
     /// Looks a brick up, counting a hit or a miss and marking it most recently used.
-    pub fn get(&mut self, key: NodeKey) -> Option<BrickBytes> {
+    pub fn get(&mut self, key: NodeKey) -> Option<PreparedBrick> {
         let found = self.touch(key);
         if found {
             self.hits += 1;
@@ -79,7 +75,7 @@ impl CpuCache {
     }
 
     /// The brick, if cached, without touching it or counting.
-    pub fn peek(&self, key: NodeKey) -> Option<&BrickBytes> {
+    pub fn peek(&self, key: NodeKey) -> Option<&PreparedBrick> {
         self.map.get(&key).map(|e| &e.data)
     }
 
@@ -90,19 +86,30 @@ impl CpuCache {
 
     /// Inserts (or replaces) a brick as most recently used, then evicts the least
     /// recently used others until the total fits the budget. Returns the evicted keys.
-    pub fn insert(&mut self, key: NodeKey, data: BrickBytes) -> Vec<NodeKey> {
+    pub fn insert(&mut self, key: NodeKey, data: PreparedBrick) -> Vec<NodeKey> {
         self.remove(key);
         let t = self.next_tick();
-        self.bytes += data.len();
+        self.bytes += data.bytes();
         self.map.insert(key, Entry { data, tick: t });
         self.order.insert(t, key);
+        self.evict_to_budget()
+    }
+
+    /// Changes the budget; shrinking evicts least recently used bricks (all but
+    /// the newest) until the total fits. Returns the evicted keys.
+    pub fn set_budget(&mut self, budget_bytes: u64) -> Vec<NodeKey> {
+        self.budget = budget_bytes;
+        self.evict_to_budget()
+    }
+
+    fn evict_to_budget(&mut self) -> Vec<NodeKey> {
         let mut evicted = Vec::new();
         while self.bytes > self.budget && self.map.len() > 1 {
             let Some((_, victim)) = self.order.pop_first() else {
                 break;
             };
             if let Some(e) = self.map.remove(&victim) {
-                self.bytes -= e.data.len();
+                self.bytes -= e.data.bytes();
             }
             self.evictions += 1;
             evicted.push(victim);
@@ -111,10 +118,10 @@ impl CpuCache {
     }
 
     /// Removes a brick; returns it if it was cached.
-    pub fn remove(&mut self, key: NodeKey) -> Option<BrickBytes> {
+    pub fn remove(&mut self, key: NodeKey) -> Option<PreparedBrick> {
         let e = self.map.remove(&key)?;
         self.order.remove(&e.tick);
-        self.bytes -= e.data.len();
+        self.bytes -= e.data.bytes();
         Some(e.data)
     }
 
@@ -134,12 +141,12 @@ impl CpuCache {
     }
 
     /// Bytes of cached brick data.
-    pub fn bytes(&self) -> usize {
+    pub fn bytes(&self) -> u64 {
         self.bytes
     }
 
     /// The byte budget.
-    pub fn budget(&self) -> usize {
+    pub fn budget(&self) -> u64 {
         self.budget
     }
 
@@ -178,8 +185,12 @@ mod tests {
         NodeKey::new(3, i, 0, 0)
     }
 
-    fn b(n: usize) -> BrickBytes {
-        vec![0u8; n].into()
+    fn b(n: usize) -> PreparedBrick {
+        PreparedBrick {
+            texels: vec![0u8; n].into(),
+            sub_cells: Vec::new().into(),
+            range: [0.0, 1.0],
+        }
     }
 
     #[test]
@@ -205,6 +216,31 @@ mod tests {
     }
 
     #[test]
+    fn bytes_count_texels_and_sub_cells() {
+        let mut c = CpuCache::new(1000);
+        let brick = PreparedBrick {
+            sub_cells: vec![[0.0, 1.0]; 8].into(),
+            ..b(100)
+        };
+        c.insert(k(0), brick);
+        assert_eq!(c.bytes(), 164);
+    }
+
+    #[test]
+    fn shrinking_the_budget_evicts_lru_first() {
+        let mut c = CpuCache::new(1000);
+        for i in 0..5 {
+            c.insert(k(i), b(100));
+        }
+        c.get(k(0));
+        assert_eq!(c.set_budget(250), vec![k(1), k(2), k(3)]);
+        assert_eq!(c.lru_order(), vec![k(4), k(0)]);
+        assert_eq!((c.bytes(), c.budget()), (200, 250));
+        // Growing evicts nothing.
+        assert!(c.set_budget(10_000).is_empty());
+    }
+
+    #[test]
     fn oversized_brick_is_kept_alone() {
         let mut c = CpuCache::new(10);
         c.insert(k(0), b(5));
@@ -220,7 +256,7 @@ mod tests {
         c.insert(k(0), b(20));
         assert_eq!(c.bytes(), 20);
         assert_eq!(c.len(), 1);
-        assert_eq!(c.remove(k(0)).map(|d| d.len()), Some(20));
+        assert_eq!(c.remove(k(0)).map(|d| d.bytes()), Some(20));
         assert_eq!(c.bytes(), 0);
         assert!(c.is_empty());
     }
@@ -230,8 +266,8 @@ mod tests {
         /// brick does), the evicted brick is always the least recently used.
         #[test]
         fn matches_lru_model(ops in prop::collection::vec((0u32..12, 1usize..60, any::<bool>()), 1..200)) {
-            let budget = 150;
-            let mut c = CpuCache::new(budget);
+            let budget = 150usize;
+            let mut c = CpuCache::new(budget as u64);
             let mut model: Vec<(NodeKey, usize)> = Vec::new(); // oldest first
             for (i, size, is_get) in ops {
                 let key = k(i);
@@ -251,7 +287,7 @@ mod tests {
                     prop_assert_eq!(evicted, expect);
                 }
                 prop_assert_eq!(c.lru_order(), model.iter().map(|e| e.0).collect::<Vec<_>>());
-                prop_assert_eq!(c.bytes(), model.iter().map(|e| e.1).sum::<usize>());
+                prop_assert_eq!(c.bytes(), model.iter().map(|e| e.1 as u64).sum::<u64>());
             }
         }
     }

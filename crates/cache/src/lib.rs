@@ -1,35 +1,54 @@
 //! Out-of-core brick management for brickray, after Gobbetti et al. 2008 (sect. 3
 //! and 4), free of any GPU API:
 //!
-//! * [`CpuCache`]: the level-2 cache of decompressed bricks, LRU within a byte budget;
-//! * [`Loader`]: worker threads reading bricks from a
-//!   [`BrickSource`](brickray_core::BrickSource) in priority order, with
-//!   cancellation and kept failures;
+//! * [`CacheConfig`]: budgets and knobs, validated ([`ConfigError`]); with
+//!   [`GpuFormat`], what the renderer's device stores per pool slot;
+//! * [`CpuCache`]: the level-2 cache of [`PreparedBrick`]s (texels and sub-cell
+//!   ranges, made off the frame path), LRU within a byte budget;
+//! * [`Loader`]: worker threads reading node metadata and bricks from a
+//!   [`BrickSource`](brickray_core::BrickSource) (metadata first, then bricks in
+//!   priority order) and preparing them, with cancellation, panics caught and a
+//!   drop that never waits on a hung read;
 //! * [`BrickPool`]: bookkeeping of the GPU brick atlas (slot grid within device
 //!   limits, frame-stamped LRU that never evicts what the current frame uses);
 //! * [`UploadBudget`]: bytes uploaded per frame, always making progress;
-//! * [`refine`](refine::refine): the view- and transfer-function-dependent cut;
+//! * [`refine`](refine::refine): the view- and transfer-function-dependent cut,
+//!   bounded work per frame whatever the camera;
 //! * [`BrickManager`]: the per-frame façade tying them together; its
-//!   [`update`](BrickManager::update) returns a [`FramePlan`] (cut, uploads, stats).
+//!   [`update`](BrickManager::update) returns a [`FramePlan`] (cut, uploads, stats)
+//!   and never calls the source; failures are counted, surfaced once
+//!   ([`BrickManager::take_error`]) and retried after a back-off ([`RetryPolicy`]).
 //!
-//! See `docs/cache.md` for the design.
+//! The cut vocabulary ([`CutLeaf`], [`LeafKind`], [`EmptyReason`]) is
+//! `brickray_core`'s, re-exported here. See `docs/cache.md` for the design.
 
+mod config;
 mod cpu_cache;
+mod failures;
 mod loader;
 mod manager;
 mod pool;
+mod prepared;
 pub mod refine;
 mod upload;
 
 #[cfg(test)]
 mod test_source;
 
-pub use cpu_cache::{BrickBytes, CpuCache};
-pub use loader::{LoadError, Loader, LoaderConfig, PollReport, RequestOutcome};
+pub use brickray_core::{CutLeaf, EmptyReason, LeafKind};
+pub use config::{
+    CacheConfig, ConfigError, GpuFormat, MAX_LOADER_THREADS, MIN_RESIDENT_BRICKS, RetryPolicy,
+    SizeQuantity,
+};
+pub use cpu_cache::CpuCache;
+pub use failures::{Clock, FailureCounts, FetchKind, StreamError, SystemClock};
+pub use loader::{
+    BrickRequest, LoadError, Loader, LoaderConfig, PollReport, RequestOutcome, SHUTDOWN_WAIT,
+};
 pub use manager::{
-    BrickManager, CacheError, CutLeaf, FramePlan, FrameStats, LeafKind, ManagerConfig, Residency,
-    ResidencyCounts, Upload,
+    BrickManager, CacheError, FramePlan, FrameStats, Residency, ResidencyCounts, Upload,
 };
 pub use pool::{Allocation, BrickPool, PoolError, PoolLimits, SlotId};
-pub use refine::{EmptyReason, NodeClass};
+pub use prepared::{PreparedBrick, Preparer};
+pub use refine::{NodeClass, SplitBlocks};
 pub use upload::{UploadBudget, UploadCandidate};

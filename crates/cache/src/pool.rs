@@ -17,14 +17,14 @@ pub type SlotId = u32;
 pub enum PoolError {
     /// The budget and device limits leave room for no slot at all.
     #[error(
-        "brick pool has no slot: budget {budget_bytes} B for bricks of {brick_bytes} B \
+        "brick pool has no slot: budget {budget_bytes} B for slots of {slot_bytes} B \
          ({stored_side}^3 voxels) within a max 3D texture dimension of {max_dim}"
     )]
     NoSlots {
         /// The pool budget in bytes.
         budget_bytes: u64,
-        /// Bytes of one brick.
-        brick_bytes: u64,
+        /// Bytes of one slot.
+        slot_bytes: u64,
         /// Stored voxels per brick side.
         stored_side: u32,
         /// Largest 3D texture dimension.
@@ -45,8 +45,9 @@ pub enum PoolError {
 pub struct PoolLimits {
     /// Bytes of GPU memory the pool may use.
     pub budget_bytes: u64,
-    /// Bytes of one stored brick (`OctreeLayout::brick_bytes()`).
-    pub brick_bytes: u64,
+    /// Bytes one slot costs: its texels in the texture format used plus the
+    /// renderer's per-slot side tables ([`GpuFormat::slot_bytes`](crate::GpuFormat::slot_bytes)).
+    pub slot_bytes: u64,
     /// Stored voxels per brick side, apron included (`OctreeLayout::stored_side()`).
     pub stored_side: u32,
     /// Device limit on a 3D texture dimension (`max_texture_dimension_3d`).
@@ -55,13 +56,13 @@ pub struct PoolLimits {
 
 impl PoolLimits {
     /// The slot grid `[sx, sy, sz]`: each axis `<= max_dim / stored_side`, the
-    /// product `<= budget / brick_bytes` and as large as possible; among equally
+    /// product `<= budget / slot_bytes` and as large as possible; among equally
     /// large grids the most cube-like. `None` when not one slot fits.
     pub fn grid(&self) -> Option<[u32; 3]> {
-        if self.brick_bytes == 0 || self.stored_side == 0 {
+        if self.slot_bytes == 0 || self.stored_side == 0 {
             return None;
         }
-        let n = self.budget_bytes / self.brick_bytes;
+        let n = self.budget_bytes / self.slot_bytes;
         let m = (self.max_dim / self.stored_side) as u64;
         if n == 0 || m == 0 {
             return None;
@@ -132,7 +133,7 @@ impl BrickPool {
     pub fn new(limits: PoolLimits) -> Result<BrickPool, PoolError> {
         let grid = limits.grid().ok_or(PoolError::NoSlots {
             budget_bytes: limits.budget_bytes,
-            brick_bytes: limits.brick_bytes,
+            slot_bytes: limits.slot_bytes,
             stored_side: limits.stored_side,
             max_dim: limits.max_dim,
         })?;
@@ -324,7 +325,7 @@ mod tests {
     fn grid_respects_budget_and_max_dim() {
         let l = PoolLimits {
             budget_bytes: 100 * 1000,
-            brick_bytes: 1000,
+            slot_bytes: 1000,
             stored_side: 10,
             max_dim: 2048,
         };
@@ -334,7 +335,7 @@ mod tests {
         // Axis limit 4 => at most 64 slots even with a huge budget.
         let l = PoolLimits {
             budget_bytes: 1 << 40,
-            brick_bytes: 1000,
+            slot_bytes: 1000,
             stored_side: 10,
             max_dim: 40,
         };
@@ -342,7 +343,7 @@ mod tests {
         // 7 slots, axis limit 2 => best product 6 (or fewer), never above 8.
         let l = PoolLimits {
             budget_bytes: 7000,
-            brick_bytes: 1000,
+            slot_bytes: 1000,
             stored_side: 10,
             max_dim: 20,
         };
@@ -351,7 +352,7 @@ mod tests {
         assert!(g.iter().all(|&a| a <= 2));
         let l = PoolLimits {
             budget_bytes: 999,
-            brick_bytes: 1000,
+            slot_bytes: 1000,
             stored_side: 10,
             max_dim: 2048,
         };

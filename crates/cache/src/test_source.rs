@@ -1,23 +1,41 @@
 //! A `BrickSource` for tests: the ball of `refine::tests::ball_info`, bricks filled
-//! with a byte derived from the key, optional per-read delay, failing and panicking
-//! keys, a gate that holds one key's read until opened, and a log of reads.
+//! with a byte derived from the key; injected delays (per read, per metadata
+//! call), failing and panicking keys for reads and for metadata (changeable at
+//! run time: a key can be "restored"), gates that hold one key's read or metadata
+//! call until opened, and a log of calls with the threads that made them.
 
+use crate::config::GpuFormat;
+use crate::failures::FetchKind;
 use crate::refine::tests::{ball_info, ball_layout};
-use brickray_core::{BrickError, BrickSource, NodeInfo, NodeKey, OctreeLayout};
+use brickray_core::{
+    BrickError, BrickSource, NodeInfo, NodeKey, OctreeLayout, TexelCaps, U8Filtering,
+};
 use parking_lot::{Condvar, Mutex};
 use std::collections::HashSet;
 use std::sync::atomic::{AtomicUsize, Ordering};
+use std::thread::ThreadId;
 use std::time::Duration;
+
+#[derive(Debug, Default)]
+struct Faults {
+    failing: HashSet<(FetchKind, NodeKey)>,
+    panicking: HashSet<(FetchKind, NodeKey)>,
+}
 
 pub(crate) struct TestSource {
     pub(crate) layout: OctreeLayout,
+    /// Sleep per brick read.
     pub(crate) delay: Duration,
-    pub(crate) failing: HashSet<NodeKey>,
-    pub(crate) panicking: HashSet<NodeKey>,
+    /// Sleep per metadata call.
+    pub(crate) meta_delay: Duration,
+    /// A brick read of this key waits for `open_gate`.
     pub(crate) gate_key: Option<NodeKey>,
+    /// A metadata call for this key waits for `open_gate`.
+    pub(crate) meta_gate_key: Option<NodeKey>,
+    faults: Mutex<Faults>,
     gate: Mutex<bool>,
     gate_cv: Condvar,
-    pub(crate) reads: Mutex<Vec<NodeKey>>,
+    calls: Mutex<Vec<(FetchKind, NodeKey, ThreadId)>>,
     pub(crate) meta_reads: AtomicUsize,
 }
 
@@ -25,19 +43,47 @@ pub(crate) fn fill_byte(key: NodeKey) -> u8 {
     (key.level as u32 * 31 + key.x * 7 + key.y * 3 + key.z) as u8
 }
 
+/// The GPU format of the tests: u8 as R16Unorm (`raw * 257`: both bytes of a
+/// texel equal the raw byte), one sub-cell per brick, 32-byte slot rows.
+pub(crate) fn test_gpu(layout: &OctreeLayout) -> GpuFormat {
+    let caps = TexelCaps {
+        norm16: true,
+        float32_filterable: false,
+    };
+    GpuFormat::for_layout(layout, caps, U8Filtering::Exact, 32, 2048)
+}
+
 impl TestSource {
     pub(crate) fn new(dim: u32) -> TestSource {
         TestSource {
             layout: ball_layout(dim),
             delay: Duration::ZERO,
-            failing: HashSet::new(),
-            panicking: HashSet::new(),
+            meta_delay: Duration::ZERO,
             gate_key: None,
+            meta_gate_key: None,
+            faults: Mutex::new(Faults::default()),
             gate: Mutex::new(false),
             gate_cv: Condvar::new(),
-            reads: Mutex::new(Vec::new()),
+            calls: Mutex::new(Vec::new()),
             meta_reads: AtomicUsize::new(0),
         }
+    }
+
+    /// Makes reads of `kind` for `key` return an I/O error.
+    pub(crate) fn fail(&self, kind: FetchKind, key: NodeKey) {
+        self.faults.lock().failing.insert((kind, key));
+    }
+
+    /// Makes reads of `kind` for `key` panic.
+    pub(crate) fn panic_on(&self, kind: FetchKind, key: NodeKey) {
+        self.faults.lock().panicking.insert((kind, key));
+    }
+
+    /// Ends every injected fault of `key` (the file is "restored").
+    pub(crate) fn restore(&self, key: NodeKey) {
+        let mut f = self.faults.lock();
+        f.failing.retain(|k| k.1 != key);
+        f.panicking.retain(|k| k.1 != key);
     }
 
     pub(crate) fn open_gate(&self) {
@@ -45,8 +91,52 @@ impl TestSource {
         self.gate_cv.notify_all();
     }
 
+    fn wait_gate(&self) {
+        let mut open = self.gate.lock();
+        while !*open {
+            self.gate_cv.wait(&mut open);
+        }
+    }
+
+    /// Brick reads, in order.
     pub(crate) fn reads(&self) -> Vec<NodeKey> {
-        self.reads.lock().clone()
+        self.calls_of(FetchKind::Brick)
+    }
+
+    /// Calls of a kind, in order.
+    pub(crate) fn calls_of(&self, kind: FetchKind) -> Vec<NodeKey> {
+        let calls = self.calls.lock();
+        calls.iter().filter(|c| c.0 == kind).map(|c| c.1).collect()
+    }
+
+    /// All calls, in order.
+    pub(crate) fn calls(&self) -> Vec<(FetchKind, NodeKey)> {
+        self.calls.lock().iter().map(|c| (c.0, c.1)).collect()
+    }
+
+    /// Calls made by `thread`.
+    pub(crate) fn calls_on(&self, thread: ThreadId) -> usize {
+        self.calls.lock().iter().filter(|c| c.2 == thread).count()
+    }
+
+    fn fault(&self, kind: FetchKind, key: NodeKey) -> Result<(), BrickError> {
+        let (fail, panic) = {
+            let f = self.faults.lock();
+            (
+                f.failing.contains(&(kind, key)),
+                f.panicking.contains(&(kind, key)),
+            )
+        };
+        if panic {
+            panic!("test source panics on the {kind} of {key:?}");
+        }
+        if fail {
+            return Err(BrickError::Io {
+                key,
+                source: std::io::Error::other("injected failure"),
+            });
+        }
+        Ok(())
     }
 }
 
@@ -57,6 +147,16 @@ impl BrickSource for TestSource {
 
     fn node(&self, key: NodeKey) -> Result<NodeInfo, BrickError> {
         self.meta_reads.fetch_add(1, Ordering::Relaxed);
+        if Some(key) == self.meta_gate_key {
+            self.wait_gate();
+        }
+        if !self.meta_delay.is_zero() {
+            std::thread::sleep(self.meta_delay);
+        }
+        self.calls
+            .lock()
+            .push((FetchKind::Metadata, key, std::thread::current().id()));
+        self.fault(FetchKind::Metadata, key)?;
         if !self.layout.in_volume(key) && key.level >= self.layout.levels {
             return Err(BrickError::OutOfRange { key });
         }
@@ -65,24 +165,15 @@ impl BrickSource for TestSource {
 
     fn read_brick(&self, key: NodeKey, out: &mut [u8]) -> Result<(), BrickError> {
         if Some(key) == self.gate_key {
-            let mut open = self.gate.lock();
-            while !*open {
-                self.gate_cv.wait(&mut open);
-            }
+            self.wait_gate();
         }
         if !self.delay.is_zero() {
             std::thread::sleep(self.delay);
         }
-        self.reads.lock().push(key);
-        if self.panicking.contains(&key) {
-            panic!("test source panics on {key:?}");
-        }
-        if self.failing.contains(&key) {
-            return Err(BrickError::Io {
-                key,
-                source: std::io::Error::other("injected failure"),
-            });
-        }
+        self.calls
+            .lock()
+            .push((FetchKind::Brick, key, std::thread::current().id()));
+        self.fault(FetchKind::Brick, key)?;
         if out.len() != self.layout.brick_bytes() {
             return Err(BrickError::BufferSize {
                 expected: self.layout.brick_bytes(),

@@ -177,6 +177,90 @@ pub struct NodeInfo {
     pub max: f32,
 }
 
+/// Why a leaf of a cut needs no brick.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[non_exhaustive]
+pub enum EmptyReason {
+    /// Outside the volume or empty by construction ([`NodeKind::Empty`]).
+    Empty,
+    /// Invisible under the current mode: transparent range for DVR, isovalue
+    /// outside `[min, max]` for iso-surfaces.
+    Invisible,
+    /// Outside the view frustum.
+    Culled,
+    /// Its data is wanted but not available yet (only the root, before its
+    /// metadata or brick arrives).
+    NotLoaded,
+    /// Its data is wanted but its metadata or brick could not be read (only the
+    /// root: other nodes whose children failed are simply not split).
+    Failed,
+}
+
+/// What a leaf of a cut holds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum LeafKind {
+    /// Nothing to sample here; the ray skips it.
+    Empty(EmptyReason),
+    /// Sample the brick in this GPU pool slot.
+    Data {
+        /// The slot (any `u32` to the index encoder).
+        slot: u32,
+    },
+}
+
+impl LeafKind {
+    /// The slot of a data leaf.
+    pub fn slot(self) -> Option<u32> {
+        match self {
+            LeafKind::Data { slot } => Some(slot),
+            LeafKind::Empty(_) => None,
+        }
+    }
+
+    /// True for a data leaf.
+    pub fn is_data(self) -> bool {
+        matches!(self, LeafKind::Data { .. })
+    }
+}
+
+/// One leaf of a cut of the octree: the cache produces them
+/// (`FramePlan::cut`), the index encoder consumes them.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CutLeaf {
+    /// The node.
+    pub key: NodeKey,
+    /// What it holds.
+    pub kind: LeafKind,
+    /// Projected voxel size in pixels (0 for empty leaves; ignored by the encoder).
+    pub priority: f32,
+}
+
+impl CutLeaf {
+    /// A leaf with priority 0.
+    pub fn new(key: NodeKey, kind: LeafKind) -> CutLeaf {
+        CutLeaf {
+            key,
+            kind,
+            priority: 0.0,
+        }
+    }
+
+    /// A data leaf in `slot`, priority 0.
+    pub fn data(key: NodeKey, slot: u32) -> CutLeaf {
+        CutLeaf::new(key, LeafKind::Data { slot })
+    }
+
+    /// An empty leaf, priority 0.
+    pub fn empty(key: NodeKey, reason: EmptyReason) -> CutLeaf {
+        CutLeaf::new(key, LeafKind::Empty(reason))
+    }
+
+    /// The pool slot of a data leaf.
+    pub fn slot(&self) -> Option<u32> {
+        self.kind.slot()
+    }
+}
+
 /// Errors from a brick source.
 #[derive(Debug, Error)]
 #[non_exhaustive]

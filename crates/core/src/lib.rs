@@ -9,7 +9,9 @@
 //! * [`camera`]: perspective and orthographic cameras and the ray model shared by
 //!   the GPU ray caster and the CPU reference;
 //! * [`settings`]: render modes and switches;
-//! * [`macrocell`]: the min/max macro-cell grid used for empty-space skipping;
+//! * [`macrocell`]: the min/max macro-cell grid used for empty-space skipping,
+//!   and its brick analogue (sub-cell ranges);
+//! * [`texel`]: how samples are stored in GPU textures ([`SampleEncoding`]);
 //! * [`synthetic`]: procedural test volumes (sphere, Marschner-Lobb).
 
 pub mod brick;
@@ -18,16 +20,21 @@ pub mod io;
 pub mod macrocell;
 pub mod settings;
 pub mod synthetic;
+pub mod texel;
 pub mod tf;
 pub mod volume;
 
-pub use brick::{BrickError, BrickSource, NodeInfo, NodeKey, NodeKind, OctreeLayout};
+pub use brick::{
+    BrickError, BrickSource, CutLeaf, EmptyReason, LeafKind, NodeInfo, NodeKey, NodeKind,
+    OctreeLayout,
+};
 pub use camera::{
     Camera, CameraError, DepthConvention, DepthMap, FrameError, Projection, Ray, RayGen,
     VolumeFrame,
 };
 pub use io::{IoError, VolumeReader, read_volume};
-pub use macrocell::MacroCellGrid;
+pub use macrocell::{MacroCellGrid, sub_cell_ranges, sub_cells_per_axis};
 pub use settings::{Accel, RenderMode, RenderSettings, SettingsError, Shading};
+pub use texel::{SampleEncoding, TexelCaps, TexelFormat, U8Filtering};
 pub use tf::{TfError, TransferFunction};
 pub use volume::{DType, Volume, VolumeData, VolumeDesc, VolumeError};

@@ -5,7 +5,12 @@
 //! there reads voxels `c*C - 1 ..= c*C + C` (clamped to the grid), and the cell's
 //! range covers exactly those, so "the TF is transparent over `[min, max]`" proves
 //! every sample inside the cell is transparent.
+//!
+//! [`sub_cell_ranges`] is the brick analogue for the out-of-core path: the
+//! min/max of each of a brick's `n^3` sub-cells, computed from the brick's stored
+//! samples (apron included).
 
+use crate::brick::OctreeLayout;
 use crate::volume::Volume;
 
 /// Normalized min/max per macro cell.
@@ -85,11 +90,147 @@ impl MacroCellGrid {
     }
 }
 
+/// Sub-cells per brick axis for empty-space skipping inside bricks: cells of
+/// about 8 voxels, as the in-core macro cells.
+pub fn sub_cells_per_axis(brick: u32) -> u32 {
+    brick.div_ceil(8).max(1)
+}
+
+/// Normalized min/max of each of a brick's `n^3` sub-cells (x fastest). `bytes`
+/// is the brick as stored (`stored_side^3` little-endian samples of the layout's
+/// dtype, apron included). Cell `j` covers the brick-local edge coordinates
+/// `[j B/n, (j+1) B/n]` (B interior voxels); a trilinear sample there reads voxel
+/// centres `floor(e - 0.5)` and the next, so the range covers those, offset by the
+/// apron and clamped to the brick. A malformed brick (too short) or `n == 0`
+/// gives ranges that never skip (`[-inf, inf]`, at least one cell).
+pub fn sub_cell_ranges(layout: &OctreeLayout, bytes: &[u8], n: u32) -> Vec<[f32; 2]> {
+    let side = layout.stored_side() as usize;
+    let d = &layout.volume;
+    let cells = (n.max(1) as usize).pow(3);
+    if n == 0 || side == 0 || bytes.len() / d.dtype.size() < side * side * side {
+        return vec![[f32::NEG_INFINITY, f32::INFINITY]; cells];
+    }
+    let (b, a) = (layout.brick as f64, layout.apron as i64);
+    let vals: Vec<f32> = d
+        .dtype
+        .decode_le(bytes)
+        .into_iter()
+        .map(|raw| d.normalize(raw))
+        .collect();
+    let span = |j: u32| -> (usize, usize) {
+        let lo = ((j as f64 * b / n as f64 - 0.5).floor() as i64 + a).clamp(0, side as i64 - 1);
+        let hi = (((j + 1) as f64 * b / n as f64 - 0.5).floor() as i64 + 1 + a)
+            .clamp(0, side as i64 - 1);
+        (lo as usize, hi as usize)
+    };
+    let mut out = Vec::with_capacity(cells);
+    for jz in 0..n {
+        let (z0, z1) = span(jz);
+        for jy in 0..n {
+            let (y0, y1) = span(jy);
+            for jx in 0..n {
+                let (x0, x1) = span(jx);
+                let mut m = [f32::INFINITY, f32::NEG_INFINITY];
+                for z in z0..=z1 {
+                    for y in y0..=y1 {
+                        let row = (z * side + y) * side;
+                        for &v in &vals[row + x0..=row + x1] {
+                            m = [m[0].min(v), m[1].max(v)];
+                        }
+                    }
+                }
+                // NaN samples (f32 volumes) make `min`/`max` skip them; a cell of
+                // only NaN stays inverted: never skip it.
+                if m[0] > m[1] {
+                    m = [f32::NEG_INFINITY, f32::INFINITY];
+                }
+                out.push(m);
+            }
+        }
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::volume::{DType, VolumeData, VolumeDesc};
     use proptest::prelude::*;
+
+    /// Every trilinear sample inside a brick's sub-cell lies within its range.
+    #[test]
+    fn sub_cell_ranges_are_conservative() {
+        let desc = VolumeDesc {
+            dims: [64; 3],
+            dtype: DType::U8,
+            spacing: [1.0; 3],
+            value_range: [0.0, 255.0],
+        };
+        let layout = OctreeLayout::new(desc, 16, 2);
+        let side = layout.stored_side() as usize;
+        let mut seed = 0x2545_f491_u32;
+        let bytes: Vec<u8> = (0..side * side * side)
+            .map(|_| {
+                seed ^= seed << 13;
+                seed ^= seed >> 17;
+                seed ^= seed << 5;
+                seed as u8
+            })
+            .collect();
+        let n = sub_cells_per_axis(layout.brick);
+        assert_eq!(n, 2);
+        let r = sub_cell_ranges(&layout, &bytes, n);
+        assert_eq!(r.len(), 8);
+        let val = |x: usize, y: usize, z: usize| bytes[(z * side + y) * side + x] as f64 / 255.0;
+        let (b, a) = (layout.brick as f64, layout.apron as f64);
+        for i in 0..4000 {
+            // A point in brick-local edge coordinates [0, B]^3.
+            let e: Vec<f64> = (0..3)
+                .map(|k| ((i * 7919 + k * 104_729) % 10_007) as f64 / 10_007.0 * b)
+                .collect();
+            let p: Vec<f64> = e.iter().map(|c| c - 0.5 + a).collect();
+            let f: Vec<usize> = p.iter().map(|c| c.floor() as usize).collect();
+            let t: Vec<f64> = p.iter().zip(&f).map(|(c, f)| c - *f as f64).collect();
+            let mut v = 0.0;
+            for dz in 0..2 {
+                for dy in 0..2 {
+                    for dx in 0..2 {
+                        let w = (if dx == 0 { 1.0 - t[0] } else { t[0] })
+                            * (if dy == 0 { 1.0 - t[1] } else { t[1] })
+                            * (if dz == 0 { 1.0 - t[2] } else { t[2] });
+                        v += w * val(f[0] + dx, f[1] + dy, f[2] + dz);
+                    }
+                }
+            }
+            let j: Vec<u32> = e
+                .iter()
+                .map(|c| ((c / (b / n as f64)).floor() as u32).min(n - 1))
+                .collect();
+            let c = r[((j[2] * n + j[1]) * n + j[0]) as usize];
+            assert!(
+                v as f32 >= c[0] - 1e-6 && v as f32 <= c[1] + 1e-6,
+                "sample {v} outside {c:?}"
+            );
+        }
+        // The ranges are normalized.
+        assert!(r.iter().all(|c| c[0] >= 0.0 && c[1] <= 1.0));
+    }
+
+    #[test]
+    fn malformed_bricks_are_never_skipped() {
+        let desc = VolumeDesc {
+            dims: [16; 3],
+            dtype: DType::U16,
+            spacing: [1.0; 3],
+            value_range: [0.0, 1.0],
+        };
+        let layout = OctreeLayout::new(desc, 8, 1);
+        let all = [f32::NEG_INFINITY, f32::INFINITY];
+        assert_eq!(sub_cell_ranges(&layout, &[0; 10], 2), vec![all; 8]);
+        assert_eq!(sub_cell_ranges(&layout, &[0; 2000], 0), vec![all]);
+        assert_eq!(sub_cells_per_axis(0), 1);
+        assert_eq!(sub_cells_per_axis(32), 4);
+    }
 
     proptest! {
         /// Every trilinear sample inside a cell lies within the cell's range.

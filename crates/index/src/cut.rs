@@ -6,21 +6,9 @@ use crate::format::{
     LEAF_RECORD_WORDS, MAX_LEVEL, MAX_NODES, MAX_WORDS, NULL, TAG_DATA, TAG_EMPTY, TAG_INNER,
     node_word, rope_word,
 };
-use brickray_core::brick::NodeKey;
+use brickray_core::brick::{CutLeaf, NodeKey};
 use std::borrow::Borrow;
 use thiserror::Error;
-
-/// What a leaf of the cut holds.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum LeafKind {
-    /// Nothing to draw; the ray skips it.
-    Empty,
-    /// A brick resident in the GPU brick pool.
-    Data {
-        /// The brick's position in the brick pool (any `u32`).
-        slot: u32,
-    },
-}
 
 /// Why a cut cannot be encoded.
 #[derive(Debug, Clone, PartialEq, Eq, Error)]
@@ -150,13 +138,14 @@ const INNER: u8 = 2;
 struct ArenaNode {
     first_child: u32,
     state: u8,
-    kind: LeafKind,
+    /// The brick slot of a data leaf.
+    slot: Option<u32>,
 }
 
 const UNSET_NODE: ArenaNode = ArenaNode {
     first_child: NONE,
     state: UNSET,
-    kind: LeafKind::Empty,
+    slot: None,
 };
 
 fn ancestor(key: NodeKey, level: u8) -> NodeKey {
@@ -164,8 +153,10 @@ fn ancestor(key: NodeKey, level: u8) -> NodeKey {
     NodeKey::new(level, key.x >> s, key.y >> s, key.z >> s)
 }
 
-/// Validates a cut and encodes it. `leaves` yields `(NodeKey, LeafKind)` pairs or
-/// references to them (`encode_cut(&cut)` with `cut: Vec<(NodeKey, LeafKind)>`).
+/// Validates a cut and encodes it. `leaves` yields [`CutLeaf`]s or references to
+/// them (`encode_cut(&plan.cut)` with `cut: Vec<CutLeaf>`). Only each leaf's key
+/// and slot matter: the [`EmptyReason`](brickray_core::brick::EmptyReason) of an
+/// empty leaf and the priority are ignored.
 ///
 /// `leaves` must tile the unit cube exactly: every point in exactly one leaf. The
 /// result does not depend on the order of `leaves` (nodes are numbered breadth
@@ -173,7 +164,7 @@ fn ancestor(key: NodeKey, level: u8) -> NodeKey {
 pub fn encode_cut<I>(leaves: I) -> Result<EncodedIndex, CutError>
 where
     I: IntoIterator,
-    I::Item: Borrow<(NodeKey, LeafKind)>,
+    I::Item: Borrow<CutLeaf>,
 {
     // 1. Insert every leaf into an arena octree; children are allocated in blocks
     //    of 8 when a node is first subdivided.
@@ -181,7 +172,7 @@ where
     let mut arena: Vec<ArenaNode> = Vec::with_capacity(leaves.size_hint().0 * 8 / 7 + 8);
     arena.push(UNSET_NODE);
     for leaf in leaves {
-        let (key, kind) = *leaf.borrow();
+        let CutLeaf { key, kind, .. } = *leaf.borrow();
         if key.level > MAX_LEVEL {
             return Err(CutError::LevelTooDeep {
                 key,
@@ -238,7 +229,7 @@ where
             }
             _ => {
                 arena[cur].state = LEAF;
-                arena[cur].kind = kind;
+                arena[cur].slot = kind.slot();
             }
         }
         if arena.len() > MAX_NODES {
@@ -274,9 +265,9 @@ where
             }
             _ => {
                 stats.leaves += 1;
-                match a.kind {
-                    LeafKind::Empty => stats.empty_leaves += 1,
-                    LeafKind::Data { .. } => stats.data_leaves += 1,
+                match a.slot {
+                    None => stats.empty_leaves += 1,
+                    Some(_) => stats.data_leaves += 1,
                 }
                 stats.max_level = stats.max_level.max(keys[q].level);
             }
@@ -330,9 +321,9 @@ where
             }
         } else {
             let a = &arena[order[q] as usize];
-            let (tag, data) = match a.kind {
-                LeafKind::Empty => (TAG_EMPTY, NULL),
-                LeafKind::Data { slot } => (TAG_DATA, slot),
+            let (tag, data) = match a.slot {
+                None => (TAG_EMPTY, NULL),
+                Some(slot) => (TAG_DATA, slot),
             };
             words[q] = node_word(tag, record);
             let r = record as usize;

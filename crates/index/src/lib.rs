@@ -1,29 +1,35 @@
 //! The octree-with-ropes spatial index of the out-of-core ray caster (Gobbetti et
 //! al. 2008, section 5), GPU-free.
 //!
-//! * [`encode_cut`] validates a *cut* (leaves tiling the unit cube, each
-//!   [`LeafKind::Empty`] or [`LeafKind::Data`] with a brick-pool slot) and encodes
-//!   the octree with neighbour pointers as `u32` words for a GPU storage buffer
-//!   ([`format`](mod@format), `docs/index-format.md`).
+//! * [`encode_cut`] validates a *cut* ([`CutLeaf`]s tiling the unit cube, each
+//!   [`LeafKind::Empty`] or [`LeafKind::Data`] with a brick-pool slot; the cut
+//!   vocabulary lives in [`brickray_core::brick`] and is re-exported here) and
+//!   encodes the octree with neighbour pointers as `u32` words for a GPU storage
+//!   buffer ([`format`](mod@format), `docs/index-format.md`).
 //! * [`traverse`] is the CPU twin of the GPU traversal: it reads the same words
 //!   as `shaders/octree_traversal.wgsl` ([`OCTREE_TRAVERSAL_WGSL`]) and enumerates
 //!   the leaves pierced by a ray front to back, following ropes without a stack.
 //!
 //! ```
 //! use brickray_core::brick::NodeKey;
-//! use brickray_index::{LeafKind, Ray, encode_cut, traverse};
+//! use brickray_index::{CutLeaf, EmptyReason, Ray, encode_cut, traverse};
 //! use glam::Vec3;
 //!
 //! // The root split once; child 0 holds brick 7, the rest is empty.
 //! let cut = NodeKey::ROOT.children().map(|k| {
-//!     (k, if k.child_index() == 0 { LeafKind::Data { slot: 7 } } else { LeafKind::Empty })
+//!     if k.child_index() == 0 {
+//!         CutLeaf::data(k, 7)
+//!     } else {
+//!         CutLeaf::empty(k, EmptyReason::Empty)
+//!     }
 //! });
 //! let index = encode_cut(cut).unwrap();
 //! assert_eq!(index.stats().nodes, 9);
 //! let ray = Ray::new(Vec3::new(-1.0, 0.25, 0.25), Vec3::X);
 //! let hits: Vec<_> = traverse(index.words(), ray, 64).collect();
 //! assert_eq!(hits.len(), 2);
-//! assert_eq!(hits[0].kind, LeafKind::Data { slot: 7 });
+//! assert_eq!(hits[0].slot, Some(7));
+//! assert_eq!(hits[1].slot, None);
 //! assert_eq!((hits[0].t_enter, hits[0].t_exit, hits[1].t_exit), (1.0, 1.5, 2.0));
 //! ```
 
@@ -32,7 +38,8 @@ pub mod format;
 mod cut;
 mod traverse;
 
-pub use cut::{CutError, EncodedIndex, IndexStats, LeafKind, encode_cut};
+pub use brickray_core::brick::{CutLeaf, EmptyReason, LeafKind};
+pub use cut::{CutError, EncodedIndex, IndexStats, encode_cut};
 pub use traverse::{
     CorruptIndex, DIR_EPSILON, LeafHit, NodeBox, Ray, T_BIG, Traversal, TraversalStatus,
     clip_unit_cube, exit_face, follow_rope, locate_leaf, ray_setup, traverse,

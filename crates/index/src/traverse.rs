@@ -23,7 +23,6 @@
 //!   `t_exit > t_enter` are yielded, and consecutive yields share the boundary
 //!   `t` exactly (`t_enter` of one is `t_exit` of the previous).
 
-use crate::cut::LeafKind;
 use crate::format::{
     MAX_LEVEL, NULL, ROPE_LEVEL_SHIFT, ROPE_NODE_MASK, TAG_DATA, TAG_EMPTY, TAG_INNER, exp2_neg,
     exp2_pos, node_ptr, node_tag,
@@ -243,8 +242,9 @@ pub fn follow_rope(rope: u32, c: &NodeBox, face: u32) -> Result<Option<NodeBox>,
 pub struct LeafHit {
     /// The leaf's node, level and box.
     pub leaf: NodeBox,
-    /// What the leaf holds.
-    pub kind: LeafKind,
+    /// The brick-pool slot of a data leaf, `None` for an empty leaf (the index
+    /// does not keep why a leaf is empty).
+    pub slot: Option<u32>,
     /// Ray parameter where the ray enters the leaf (the previous leaf's `t_exit`).
     pub t_enter: f32,
     /// Ray parameter where it leaves (`> t_enter`).
@@ -337,12 +337,10 @@ impl Traversal<'_> {
         }
         let t_enter = self.t;
         t_exit = t_exit.max(t_enter);
-        let kind = if node_tag(word) == TAG_DATA {
-            LeafKind::Data {
-                slot: read(self.words, record)?,
-            }
+        let slot = if node_tag(word) == TAG_DATA {
+            Some(read(self.words, record)?)
         } else {
-            LeafKind::Empty
+            None
         };
         match follow_rope(rope, &leaf, face)? {
             Some(n) => self.cur = n,
@@ -351,7 +349,7 @@ impl Traversal<'_> {
         self.t = t_exit;
         Ok((t_exit > t_enter).then_some(LeafHit {
             leaf,
-            kind,
+            slot,
             t_enter,
             t_exit,
         }))

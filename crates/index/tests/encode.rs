@@ -7,7 +7,7 @@ use brickray_index::format::{
     LEAF_RECORD_WORDS, MAX_LEVEL, NULL, TAG_DATA, TAG_EMPTY, TAG_INNER, decode_rope, node_ptr,
     node_tag,
 };
-use brickray_index::{CutError, EncodedIndex, LeafKind, encode_cut};
+use brickray_index::{CutError, CutLeaf, EmptyReason, EncodedIndex, LeafKind, encode_cut};
 use common::{Rng, random_cut, shuffle, uniform_cut};
 use proptest::prelude::*;
 use std::collections::HashMap;
@@ -57,15 +57,18 @@ fn expected_target(
     panic!("no leaf contains {same:?}");
 }
 
-fn check_all_ropes(cut: &[(NodeKey, LeafKind)]) {
+fn check_all_ropes(cut: &[CutLeaf]) {
     let index = encode_cut(cut.iter().copied()).unwrap();
-    let map: HashMap<_, _> = cut.iter().copied().collect();
-    for &(leaf, kind) in cut {
+    let map: HashMap<_, _> = cut.iter().map(|l| (l.key, l.kind)).collect();
+    for &CutLeaf {
+        key: leaf, kind, ..
+    } in cut
+    {
         let node = index.node_index(leaf).unwrap();
         let word = index.words()[node as usize];
         let record = node_ptr(word) as usize;
         match kind {
-            LeafKind::Empty => {
+            LeafKind::Empty(_) => {
                 assert_eq!(node_tag(word), TAG_EMPTY);
                 assert_eq!(index.words()[record], NULL);
             }
@@ -87,7 +90,7 @@ fn check_all_ropes(cut: &[(NodeKey, LeafKind)]) {
 
 #[test]
 fn root_only_cut() {
-    let index = encode_cut([(NodeKey::ROOT, LeafKind::Data { slot: 42 })]).unwrap();
+    let index = encode_cut([CutLeaf::data(NodeKey::ROOT, 42)]).unwrap();
     assert_eq!(
         index.words(),
         &[(TAG_DATA << 30) | 1, 42, NULL, NULL, NULL, NULL, NULL, NULL]
@@ -112,14 +115,7 @@ fn one_split_layout_and_ropes() {
     let cut: Vec<_> = NodeKey::ROOT
         .children()
         .into_iter()
-        .map(|k| {
-            (
-                k,
-                LeafKind::Data {
-                    slot: 10 + k.child_index() as u32,
-                },
-            )
-        })
+        .map(|k| CutLeaf::data(k, 10 + k.child_index() as u32))
         .collect();
     let index = encode_cut(cut.clone()).unwrap();
     let w = index.words();
@@ -154,23 +150,19 @@ fn mixed_levels_ropes_point_to_same_level_inner_or_coarser_leaf() {
     let mut cut = Vec::new();
     for k in NodeKey::ROOT.children() {
         if k != c0 && k != c1 {
-            cut.push((k, LeafKind::Empty));
+            cut.push(CutLeaf::empty(k, EmptyReason::Empty));
         }
     }
-    cut.extend(c0.children().map(|k| {
-        (
-            k,
-            LeafKind::Data {
-                slot: k.child_index() as u32,
-            },
-        )
-    }));
+    cut.extend(
+        c0.children()
+            .map(|k| CutLeaf::data(k, k.child_index() as u32)),
+    );
     for k in c1.children() {
         if k != c10 {
-            cut.push((k, LeafKind::Empty));
+            cut.push(CutLeaf::empty(k, EmptyReason::Culled));
         }
     }
-    cut.extend(c10.children().map(|k| (k, LeafKind::Data { slot: 100 })));
+    cut.extend(c10.children().map(|k| CutLeaf::data(k, 100)));
     let index = encode_cut(cut.clone()).unwrap();
     let g = |l, x, y, z| NodeKey::new(l, x, y, z);
     // Fine leaf (2,1,0,0) in child 0, +x: the same-level node (2,2,0,0) = c10 exists (inner).
@@ -198,6 +190,36 @@ fn mixed_levels_ropes_point_to_same_level_inner_or_coarser_leaf() {
     assert_eq!(s.words, s.nodes + 7 * s.leaves);
 }
 
+/// The encoder reads only each leaf's key and slot: why a leaf is empty and its
+/// priority change nothing, and it takes the cache's cut as it is (`&[CutLeaf]`).
+#[test]
+fn empty_reason_and_priority_are_ignored() {
+    let mut rng = Rng(11);
+    let cut = random_cut(&mut rng, 4, 0.5, 0.5, 2000);
+    let reasons = [
+        EmptyReason::Empty,
+        EmptyReason::Invisible,
+        EmptyReason::Culled,
+        EmptyReason::NotLoaded,
+        EmptyReason::Failed,
+    ];
+    let varied: Vec<CutLeaf> = cut
+        .iter()
+        .enumerate()
+        .map(|(i, l)| CutLeaf {
+            kind: match l.kind {
+                LeafKind::Empty(_) => LeafKind::Empty(reasons[i % reasons.len()]),
+                data => data,
+            },
+            priority: i as f32 * 0.5,
+            ..*l
+        })
+        .collect();
+    assert_ne!(cut, varied);
+    assert!(cut.iter().any(|l| !l.kind.is_data()));
+    assert_eq!(encode_cut(&cut).unwrap(), encode_cut(&varied).unwrap());
+}
+
 #[test]
 fn encoding_is_independent_of_input_order() {
     let mut rng = Rng(7);
@@ -212,9 +234,9 @@ fn encoding_is_independent_of_input_order() {
 #[test]
 fn invalid_cuts_are_typed_errors() {
     let r = NodeKey::ROOT;
-    let e = LeafKind::Empty;
+    let e = |k: NodeKey| CutLeaf::empty(k, EmptyReason::Empty);
     assert_eq!(
-        encode_cut(Vec::<(NodeKey, LeafKind)>::new()),
+        encode_cut(Vec::<CutLeaf>::new()),
         Err(CutError::Gap { missing: r })
     );
     // One child missing.
@@ -222,7 +244,7 @@ fn invalid_cuts_are_typed_errors() {
         .children()
         .into_iter()
         .filter(|k| k.child_index() != 5)
-        .map(|k| (k, e))
+        .map(e)
         .collect();
     assert_eq!(
         encode_cut(cut),
@@ -231,8 +253,8 @@ fn invalid_cuts_are_typed_errors() {
         })
     );
     // A deeper gap.
-    let mut cut: Vec<_> = r.children().into_iter().skip(1).map(|k| (k, e)).collect();
-    cut.extend(r.child(0).children().into_iter().take(7).map(|k| (k, e)));
+    let mut cut: Vec<_> = r.children().into_iter().skip(1).map(e).collect();
+    cut.extend(r.child(0).children().into_iter().take(7).map(e));
     assert_eq!(
         encode_cut(cut),
         Err(CutError::Gap {
@@ -240,8 +262,8 @@ fn invalid_cuts_are_typed_errors() {
         })
     );
     // Duplicate leaf.
-    let mut cut: Vec<_> = r.children().into_iter().map(|k| (k, e)).collect();
-    cut.push((r.child(3), LeafKind::Data { slot: 1 }));
+    let mut cut: Vec<_> = r.children().into_iter().map(e).collect();
+    cut.push(CutLeaf::data(r.child(3), 1));
     assert_eq!(
         encode_cut(cut),
         Err(CutError::Overlap {
@@ -250,8 +272,8 @@ fn invalid_cuts_are_typed_errors() {
         })
     );
     // Leaf inside an earlier coarser leaf.
-    let mut cut: Vec<_> = r.children().into_iter().map(|k| (k, e)).collect();
-    cut.push((r.child(2).child(6).child(1), e));
+    let mut cut: Vec<_> = r.children().into_iter().map(e).collect();
+    cut.push(e(r.child(2).child(6).child(1)));
     assert_eq!(
         encode_cut(cut),
         Err(CutError::Overlap {
@@ -260,8 +282,8 @@ fn invalid_cuts_are_typed_errors() {
         })
     );
     // Coarser leaf after a finer one.
-    let mut cut: Vec<_> = r.child(4).children().into_iter().map(|k| (k, e)).collect();
-    cut.push((r.child(4), e));
+    let mut cut: Vec<_> = r.child(4).children().into_iter().map(e).collect();
+    cut.push(e(r.child(4)));
     assert_eq!(
         encode_cut(cut),
         Err(CutError::Overlap {
@@ -271,13 +293,13 @@ fn invalid_cuts_are_typed_errors() {
     );
     // Root plus anything.
     assert!(matches!(
-        encode_cut([(r, e), (r.child(1), e)]),
+        encode_cut([e(r), e(r.child(1))]),
         Err(CutError::Overlap { .. })
     ));
     // Bad levels and positions.
     let deep = NodeKey::new(MAX_LEVEL + 1, 0, 0, 0);
     assert_eq!(
-        encode_cut([(deep, e)]),
+        encode_cut([e(deep)]),
         Err(CutError::LevelTooDeep {
             key: deep,
             max: MAX_LEVEL
@@ -285,18 +307,16 @@ fn invalid_cuts_are_typed_errors() {
     );
     let outside = NodeKey::new(2, 4, 0, 0);
     assert_eq!(
-        encode_cut([(outside, e)]),
+        encode_cut([e(outside)]),
         Err(CutError::PositionOutOfRange { key: outside })
     );
     let outside = NodeKey::new(0, 0, 0, 1);
     assert_eq!(
-        encode_cut([(outside, e)]),
+        encode_cut([e(outside)]),
         Err(CutError::PositionOutOfRange { key: outside })
     );
     // Messages render.
-    let msg = encode_cut(Vec::<(NodeKey, LeafKind)>::new())
-        .unwrap_err()
-        .to_string();
+    let msg = encode_cut(Vec::<CutLeaf>::new()).unwrap_err().to_string();
     assert!(msg.contains("gap"), "{msg}");
 }
 
@@ -307,11 +327,11 @@ fn max_level_leaf_is_accepted() {
     let mut k = NodeKey::ROOT;
     while k.level < MAX_LEVEL {
         for c in k.children().into_iter().skip(1) {
-            cut.push((c, LeafKind::Empty));
+            cut.push(CutLeaf::empty(c, EmptyReason::Invisible));
         }
         k = k.child(0);
     }
-    cut.push((k, LeafKind::Data { slot: 9 }));
+    cut.push(CutLeaf::data(k, 9));
     let index = encode_cut(cut.clone()).unwrap();
     assert_eq!(index.stats().max_level, MAX_LEVEL);
     check_all_ropes(&cut);
@@ -321,11 +341,11 @@ fn max_level_leaf_is_accepted() {
 fn encodes_100k_leaves_fast() {
     // Level 5 uniform (32768 leaves), every third leaf refined: ~98k leaves.
     let mut cut = Vec::new();
-    for (i, (k, kind)) in uniform_cut(5).into_iter().enumerate() {
+    for (i, l) in uniform_cut(5).into_iter().enumerate() {
         if i % 3 == 0 {
-            cut.extend(k.children().map(|c| (c, kind)));
+            cut.extend(l.key.children().map(|c| CutLeaf::new(c, l.kind)));
         } else {
-            cut.push((k, kind));
+            cut.push(l);
         }
     }
     assert!(cut.len() > 95_000);
@@ -379,8 +399,8 @@ proptest! {
             prop_assert!(overlap);
             // A child of a leaf (or the parent of a leaf) added.
             let mut extra = cut.clone();
-            let (k, kind) = cut[i];
-            extra.push(if k.level < MAX_LEVEL { (k.child(0), kind) } else { (k.parent().unwrap(), kind) });
+            let CutLeaf { key: k, kind, .. } = cut[i];
+            extra.push(CutLeaf::new(if k.level < MAX_LEVEL { k.child(0) } else { k.parent().unwrap() }, kind));
             shuffle(&mut rng, &mut extra);
             let overlap = matches!(encode_cut(extra), Err(CutError::Overlap { .. }));
             prop_assert!(overlap);

@@ -4,7 +4,9 @@
 mod common;
 
 use brickray_core::brick::NodeKey;
-use brickray_index::{DIR_EPSILON, LeafHit, LeafKind, Ray, TraversalStatus, encode_cut, traverse};
+use brickray_index::{
+    CutLeaf, DIR_EPSILON, LeafHit, LeafKind, Ray, TraversalStatus, encode_cut, traverse,
+};
 use common::{Rng, random_cut};
 use glam::Vec3;
 use proptest::test_runner::{Config, TestCaseError, TestRunner};
@@ -22,7 +24,7 @@ struct Seg {
 /// Brute force: intersect the ray with every leaf box (closed slabs; half-open
 /// `[min, max)` along zero direction components, the twin's tie rule), clip to
 /// `[t_min, t_max]`, drop zero-length touches, sort by entry.
-fn oracle(cut: &[(NodeKey, LeafKind)], ray: &Ray) -> Vec<Seg> {
+fn oracle(cut: &[CutLeaf], ray: &Ray) -> Vec<Seg> {
     let o = ray.origin.to_array().map(f64::from);
     let d = ray.dir.to_array().map(|c| {
         if c.abs() < DIR_EPSILON {
@@ -35,7 +37,7 @@ fn oracle(cut: &[(NodeKey, LeafKind)], ray: &Ray) -> Vec<Seg> {
     if d == [0.0; 3] {
         return out;
     }
-    'leaves: for &(key, kind) in cut {
+    'leaves: for &CutLeaf { key, kind, .. } in cut {
         let (lo, size) = key.unit_box();
         let mut t0 = f64::from(ray.t_min);
         let mut t1 = f64::from(ray.t_max);
@@ -85,7 +87,7 @@ struct Totals {
 }
 
 fn check_ray(
-    cut: &[(NodeKey, LeafKind)],
+    cut: &[CutLeaf],
     words: &[u32],
     ray: &Ray,
     kind: usize,
@@ -148,7 +150,7 @@ fn check_ray(
         let (t0, t1) = (f64::from(h.t_enter), f64::from(h.t_exit));
         match by_key.get(&h.key()) {
             Some(s) => {
-                if s.kind != h.kind {
+                if s.kind.slot() != h.slot {
                     return Err(format!("kind of {h:?} != {s:?}"));
                 }
                 let err = (t0 - s.t0).abs().max((t1 - s.t1).abs());
@@ -506,11 +508,11 @@ fn step_limit_and_corrupt_words_are_reported() {
 #[test]
 fn twin_throughput() {
     let mut cut = Vec::new();
-    for (i, (k, kind)) in common::uniform_cut(5).into_iter().enumerate() {
+    for (i, l) in common::uniform_cut(5).into_iter().enumerate() {
         if i % 3 == 0 {
-            cut.extend(k.children().map(|c| (c, kind)));
+            cut.extend(l.key.children().map(|c| CutLeaf::new(c, l.kind)));
         } else {
-            cut.push((k, kind));
+            cut.push(l);
         }
     }
     let index = encode_cut(cut).unwrap();

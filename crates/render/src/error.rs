@@ -1,7 +1,7 @@
 //! Errors of the render crate, one enum per phase. No variant carries only a
 //! string: each names what failed with structured fields.
 
-use brickray_core::{BrickError, CameraError, FrameError, SettingsError};
+use brickray_core::{CameraError, FrameError, SettingsError};
 use thiserror::Error;
 
 /// What kind of error wgpu reported inside one of the library's error scopes.
@@ -58,9 +58,13 @@ pub enum RenderError {
     /// The out-of-core cache refused its configuration or could not start.
     #[error(transparent)]
     Cache(#[from] brickray_cache::CacheError),
+    /// The out-of-core configuration is not usable (a budget too small for the
+    /// texel format, a NaN tolerance, too many loader threads, ...).
+    #[error(transparent)]
+    CacheConfig(#[from] brickray_cache::ConfigError),
     /// The brick source failed at set-up (reading the root).
-    #[error("brick source: {0}")]
-    Source(#[from] BrickError),
+    #[error(transparent)]
+    Stream(#[from] brickray_cache::StreamError),
     /// The frame's cut could not be encoded as an index.
     #[error(transparent)]
     Index(#[from] brickray_index::CutError),

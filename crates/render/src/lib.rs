@@ -34,7 +34,10 @@ pub mod shaders;
 mod tf;
 
 pub use backend::OutOfCoreStats;
-pub use backend::ooc::OutOfCoreConfig;
+/// Budgets, tolerance, loader threads and retry policy of the out-of-core path:
+/// the cache's own configuration.
+pub use brickray_cache::CacheConfig as OutOfCoreConfig;
+pub use brickray_cache::{ConfigError, RetryPolicy, StreamError};
 pub use desc::{FrameDesc, FrameStats, RendererStats, TargetDesc, Viewport};
 pub use encoding::U8Filtering;
 pub use error::{GpuErrorKind, HostDepthError, PrepareError, RenderError};
@@ -210,22 +213,61 @@ impl VolumeRenderer {
             .is_some_and(|b| b.get().wants_redraw())
     }
 
-    /// Sets the out-of-core screen-space error tolerance (pixels per voxel; 0 =
-    /// always the finest level).
-    pub fn set_lod_tolerance(&mut self, tolerance_px: f32) -> Result<(), RenderError> {
+    fn out_of_core(&mut self) -> Result<&mut OutOfCore, RenderError> {
         let b = self.backend.as_mut().ok_or(RenderError::NotOutOfCore)?;
-        b.out_of_core_mut()?
-            .manager_mut()
-            .set_tolerance_px(tolerance_px);
+        b.out_of_core_mut()
+    }
+
+    /// Out of core: sets the screen-space error tolerance (pixels per voxel; 0
+    /// = always the finest level).
+    pub fn set_lod_tolerance(&mut self, tolerance_px: f32) -> Result<(), RenderError> {
+        let m = self.out_of_core()?.manager_mut();
+        Ok(m.set_tolerance_px(tolerance_px)?)
+    }
+
+    /// Out of core: sets the bytes of bricks uploaded per frame.
+    pub fn set_upload_budget(&mut self, bytes: u64) -> Result<(), RenderError> {
+        Ok(self.out_of_core()?.manager_mut().set_upload_budget(bytes)?)
+    }
+
+    /// Out of core: sets the system memory for prepared bricks (shrinking evicts
+    /// the least recently used).
+    pub fn set_cpu_budget(&mut self, bytes: u64) -> Result<(), RenderError> {
+        Ok(self.out_of_core()?.manager_mut().set_cpu_budget(bytes)?)
+    }
+
+    /// Out of core: sets the GPU memory of the brick pool. The atlas is
+    /// recreated at the new size and the working set uploaded again over the
+    /// next frames.
+    pub fn set_gpu_budget(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        bytes: u64,
+    ) -> Result<(), RenderError> {
+        self.prepared = None;
+        self.out_of_core()?.set_gpu_budget(device, queue, bytes)
+    }
+
+    /// Out of core: how failed bricks are retried on their own (`None`: only
+    /// through [`Self::retry_failed_bricks`]).
+    pub fn set_retry_policy(&mut self, policy: Option<RetryPolicy>) -> Result<(), RenderError> {
+        self.out_of_core()?.set_retry_policy(policy)
+    }
+
+    /// Out of core: forgets every failed brick so it is requested again when the
+    /// view needs it (after the source was repaired).
+    pub fn retry_failed_bricks(&mut self) -> Result<(), RenderError> {
+        self.out_of_core()?.manager_mut().retry_failed();
         Ok(())
     }
 
-    /// Forgets every failed brick so it is requested again when the view needs
-    /// it (after the source was repaired).
-    pub fn retry_failed_bricks(&mut self) -> Result<(), RenderError> {
-        let b = self.backend.as_mut().ok_or(RenderError::NotOutOfCore)?;
-        b.out_of_core_mut()?.manager_mut().retry_failed();
-        Ok(())
+    /// Out of core: the first streaming failure (a brick or its metadata could
+    /// not be read) since the last call, with the count of further ones, so a
+    /// viewer shows one message, not thousands. Failures never fail `prepare`:
+    /// the image stays at a coarser level there and `wants_redraw` stays true.
+    pub fn take_streaming_error(&mut self) -> Option<StreamError> {
+        self.out_of_core().ok()?.take_error()
     }
 
     /// The GPU texture format chosen for the volume, if one is set.

@@ -2,7 +2,7 @@
 #![allow(dead_code, unreachable_pub)]
 
 use brickray_core::brick::NodeKey;
-use brickray_index::LeafKind;
+use brickray_index::{CutLeaf, EmptyReason};
 use std::collections::VecDeque;
 
 /// SplitMix64.
@@ -42,7 +42,7 @@ pub fn random_cut(
     p_refine: f64,
     p_data: f64,
     budget: usize,
-) -> Vec<(NodeKey, LeafKind)> {
+) -> Vec<CutLeaf> {
     let mut queue = VecDeque::from([NodeKey::ROOT]);
     let mut leaves = Vec::new();
     let mut count = 1usize;
@@ -53,31 +53,25 @@ pub fn random_cut(
             count += 7;
             queue.extend(k.children());
         } else {
-            let kind = if rng.chance(p_data) {
+            leaves.push(if rng.chance(p_data) {
                 slot += 1;
-                LeafKind::Data { slot: slot * 3 + 1 }
+                CutLeaf::data(k, slot * 3 + 1)
             } else {
-                LeafKind::Empty
-            };
-            leaves.push((k, kind));
+                CutLeaf::empty(k, EmptyReason::Empty)
+            });
         }
     }
     leaves
 }
 
 /// A uniform cut at `level`.
-pub fn uniform_cut(level: u8) -> Vec<(NodeKey, LeafKind)> {
+pub fn uniform_cut(level: u8) -> Vec<CutLeaf> {
     let n = 1u32 << level;
     let mut v = Vec::new();
     for z in 0..n {
         for y in 0..n {
             for x in 0..n {
-                v.push((
-                    NodeKey::new(level, x, y, z),
-                    LeafKind::Data {
-                        slot: v.len() as u32,
-                    },
-                ));
+                v.push(CutLeaf::data(NodeKey::new(level, x, y, z), v.len() as u32));
             }
         }
     }

@@ -1,15 +1,20 @@
 //! The out-of-core backend (Gobbetti et al. 2008): a [`BrickManager`] plans each
-//! frame's cut and uploads; this owns their GPU side (the brick atlas, one
-//! preallocated 3D texture of slots; the per-slot table; the sub-cell table; the
+//! frame's cut and its uploads of bricks its loader threads already prepared
+//! (texels, sub-cell ranges, range); this owns their GPU side (the brick atlas,
+//! one preallocated 3D texture of slots; the slot table; the sub-cell table; the
 //! index buffer, the octree with ropes over the cut) and group 2 over them.
+//! `update` only writes prepared rows.
 
 use super::{VolumeBackend, check_stage_limits, volume_layout_entries, volume_sampler};
 use crate::desc::FrameDesc;
-use crate::encoding::{self, SampleEncoding, U8Filtering};
+use crate::encoding::{self, U8Filtering};
 use crate::error::{PrepareError, RenderError};
 use crate::gpu::{self, GrowBuffer, Uniform};
 use crate::kernels::KernelKind;
-use brickray_cache::{BrickManager, FrameStats as CacheStats, LeafKind, ManagerConfig};
+use brickray_cache::{
+    BrickManager, CacheConfig, FrameStats as CacheStats, GpuFormat, RetryPolicy, StreamError,
+    Upload,
+};
 use brickray_core::{BrickSource, OctreeLayout, TransferFunction, VolumeFrame};
 use std::sync::Arc;
 use std::time::Instant;
@@ -17,39 +22,11 @@ use std::time::Instant;
 /// Storage buffers of group 2: slots, sub-cells, index.
 const STORAGE_BUFFERS: u32 = 3;
 
-/// Budgets and tolerances of the out-of-core path.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct OutOfCoreConfig {
-    /// System memory for decompressed bricks (the level-2 cache).
-    pub cpu_budget_bytes: usize,
-    /// GPU memory for the brick atlas.
-    pub gpu_budget_bytes: u64,
-    /// Bytes uploaded per frame (at least one refinement always goes).
-    pub upload_budget_bytes: u64,
-    /// Screen-space error tolerance: a brick is refined while one of its voxels
-    /// covers more than this many pixels (0 = always the finest level).
-    pub tolerance_px: f32,
-    /// Loader threads.
-    pub loader_threads: usize,
-}
-
-impl Default for OutOfCoreConfig {
-    fn default() -> Self {
-        OutOfCoreConfig {
-            cpu_budget_bytes: 512 << 20,
-            gpu_budget_bytes: 256 << 20,
-            upload_budget_bytes: 16 << 20,
-            tolerance_px: 1.0,
-            loader_threads: 2,
-        }
-    }
-}
-
 /// What the out-of-core path did in the last frame.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct OutOfCoreStats {
     /// The cache's view: working set, pool occupancy, uploads, hit rates,
-    /// requests in flight, residency counts.
+    /// requests in flight, residency counts, failures.
     pub cache: CacheStats,
     /// Words of the encoded index.
     pub index_words: u32,
@@ -59,61 +36,13 @@ pub struct OutOfCoreStats {
     pub upload_ms: f64,
     /// Milliseconds spent encoding and writing the index.
     pub encode_ms: f64,
-    /// True when nothing is in flight or pending: the image will not change for
-    /// this view.
+    /// True when another frame of this view would not change the image: nothing
+    /// in flight or pending, and no brick the view needs has failed
+    /// (`cache.converged()`).
     pub converged: bool,
     /// Data leaves of the cut per octree level (level 0 = root; levels past 15
     /// are counted in 15).
     pub data_leaves_per_level: [u32; 16],
-}
-
-/// Sub-cells per brick axis for empty-space skipping inside bricks: cells of
-/// about 8 voxels, as the in-core macro cells.
-pub(crate) fn sub_cells_per_axis(brick: u32) -> u32 {
-    brick.div_ceil(8).max(1)
-}
-
-/// Normalized min/max of each of a brick's `n^3` sub-cells (x fastest).
-pub(crate) fn sub_cell_ranges(layout: &OctreeLayout, bytes: &[u8], n: u32) -> Vec<[f32; 2]> {
-    let side = layout.stored_side() as usize;
-    let (b, a) = (layout.brick as f64, layout.apron as i64);
-    let d = &layout.volume;
-    let vals: Vec<f32> = d
-        .dtype
-        .decode_le(bytes)
-        .into_iter()
-        .map(|raw| d.normalize(raw))
-        .collect();
-    if vals.len() < side * side * side {
-        return vec![[f32::NEG_INFINITY, f32::INFINITY]; (n * n * n) as usize];
-    }
-    let span = |j: u32| -> (usize, usize) {
-        let lo = ((j as f64 * b / n as f64 - 0.5).floor() as i64 + a).clamp(0, side as i64 - 1);
-        let hi = (((j + 1) as f64 * b / n as f64 - 0.5).floor() as i64 + 1 + a)
-            .clamp(0, side as i64 - 1);
-        (lo as usize, hi as usize)
-    };
-    let mut out = Vec::with_capacity((n * n * n) as usize);
-    for jz in 0..n {
-        let (z0, z1) = span(jz);
-        for jy in 0..n {
-            let (y0, y1) = span(jy);
-            for jx in 0..n {
-                let (x0, x1) = span(jx);
-                let mut m = [f32::INFINITY, f32::NEG_INFINITY];
-                for z in z0..=z1 {
-                    for y in y0..=y1 {
-                        let row = (z * side + y) * side;
-                        for &v in &vals[row + x0..=row + x1] {
-                            m = [m[0].min(v), m[1].max(v)];
-                        }
-                    }
-                }
-                out.push(m);
-            }
-        }
-    }
-    out
 }
 
 /// `struct SlotInfo` of ooc.wgsl: one row of the slot table.
@@ -140,23 +69,76 @@ pub(crate) struct OocParams {
     pub(crate) sub_cells: u32,
 }
 
-/// The GPU side of an out-of-core volume.
-pub(crate) struct OutOfCore {
-    manager: BrickManager,
-    layout: OctreeLayout,
-    source: Arc<dyn BrickSource>,
-    encoding: SampleEncoding,
-    format: wgpu::TextureFormat,
+/// The pool's GPU side, sized by the pool's slot grid: the atlas and the
+/// per-slot tables (recreated when the GPU budget changes).
+struct Pool {
     atlas: wgpu::Texture,
     atlas_view: wgpu::TextureView,
     atlas_bytes: u64,
-    sampler: wgpu::Sampler,
-    params: Uniform<OocParams>,
     slots: wgpu::Buffer,
     slots_cpu: Vec<SlotInfo>,
     slots_dirty: bool,
     sub_cells: wgpu::Buffer,
-    sub_n: u32,
+}
+
+impl Pool {
+    fn new(
+        device: &wgpu::Device,
+        manager: &BrickManager,
+        format: wgpu::TextureFormat,
+    ) -> Result<Pool, RenderError> {
+        let gpu = manager.gpu_format();
+        let dims = manager.pool().atlas_dims();
+        let atlas = gpu::texture(
+            device,
+            &wgpu::TextureDescriptor {
+                label: Some("brickray-render brick atlas"),
+                size: wgpu::Extent3d {
+                    width: dims[0],
+                    height: dims[1],
+                    depth_or_array_layers: dims[2],
+                },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D3,
+                format,
+                usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+                view_formats: &[],
+            },
+        )?;
+        let atlas_bytes = dims.iter().map(|&d| d as u64).product::<u64>()
+            * gpu.encoding.texel_bytes() as u64;
+        let slot_count = manager.pool().slot_count().max(1) as usize;
+        let slots = gpu::storage_buffer(
+            device,
+            "brickray-render brick slot table",
+            (slot_count * std::mem::size_of::<SlotInfo>()) as u64,
+        )?;
+        let sub_cells = gpu::storage_buffer(
+            device,
+            "brickray-render brick sub-cell table",
+            slot_count as u64 * (gpu.sub_cells_per_axis as u64).pow(3) * 8,
+        )?;
+        Ok(Pool {
+            atlas_view: atlas.create_view(&Default::default()),
+            atlas,
+            atlas_bytes,
+            slots,
+            slots_cpu: vec![bytemuck::Zeroable::zeroed(); slot_count],
+            slots_dirty: true,
+            sub_cells,
+        })
+    }
+}
+
+/// The GPU side of an out-of-core volume.
+pub(crate) struct OutOfCore {
+    manager: BrickManager,
+    layout: OctreeLayout,
+    format: wgpu::TextureFormat,
+    pool: Pool,
+    sampler: wgpu::Sampler,
+    params: Uniform<OocParams>,
     index: GrowBuffer,
     group_layout: wgpu::BindGroupLayout,
     bind_group: wgpu::BindGroup,
@@ -182,86 +164,28 @@ impl OutOfCore {
         queue: &wgpu::Queue,
         source: Arc<dyn BrickSource>,
         frame: VolumeFrame,
-        config: OutOfCoreConfig,
+        config: CacheConfig,
         u8: U8Filtering,
     ) -> Result<OutOfCore, RenderError> {
         check_stage_limits(device, STORAGE_BUFFERS)?;
         let layout = source.layout().clone();
-        let limits = device.limits();
-        let encoding = SampleEncoding::choose(
-            layout.volume.dtype,
-            layout.volume.value_range,
+        let gpu_format = GpuFormat::for_layout(
+            &layout,
             encoding::caps(device),
             u8,
+            std::mem::size_of::<SlotInfo>() as u32,
+            device.limits().max_texture_dimension_3d,
         );
-        let format = encoding::wgpu_format(encoding.format);
-        let mut manager = BrickManager::new(
-            source.clone(),
-            frame,
-            ManagerConfig {
-                cpu_budget_bytes: config.cpu_budget_bytes,
-                gpu_budget_bytes: config.gpu_budget_bytes,
-                max_texture_dim_3d: limits.max_texture_dimension_3d,
-                upload_budget_bytes: config.upload_budget_bytes,
-                tolerance_px: config.tolerance_px,
-                loader: brickray_cache::LoaderConfig {
-                    workers: config.loader_threads.max(1),
-                },
-            },
-        )?;
+        let format = encoding::wgpu_format(gpu_format.encoding.format);
+        // Validates the configuration against the layout and the texel format,
+        // and sizes the pool within the 3D texture limit, before any GPU object.
+        let mut manager = BrickManager::new(source, frame, config, gpu_format)?;
         // The root is read now (set-up time, not the frame path), so the first
         // frame already shows a coarse image.
         manager.preload_root()?;
-        let atlas_dims = manager.pool().atlas_dims();
-        let atlas = gpu::texture(
-            device,
-            &wgpu::TextureDescriptor {
-                label: Some("brickray-render brick atlas"),
-                size: wgpu::Extent3d {
-                    width: atlas_dims[0],
-                    height: atlas_dims[1],
-                    depth_or_array_layers: atlas_dims[2],
-                },
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D3,
-                format,
-                usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-                view_formats: &[],
-            },
-        )?;
-        let atlas_bytes =
-            atlas_dims.iter().map(|&d| d as u64).product::<u64>() * encoding.texel_bytes() as u64;
-        let slot_count = manager.pool().slot_count().max(1) as usize;
-        let slots = gpu::storage_buffer(
-            device,
-            "brickray-render brick slot table",
-            (slot_count * std::mem::size_of::<SlotInfo>()) as u64,
-        )?;
-        let sub_n = sub_cells_per_axis(layout.brick);
-        let sub_cells = gpu::storage_buffer(
-            device,
-            "brickray-render brick sub-cell table",
-            slot_count as u64 * (sub_n as u64).pow(3) * 8,
-        )?;
+        let pool = Pool::new(device, &manager, format)?;
         let index = GrowBuffer::new(device, "brickray-render octree index", 1 << 12)?;
-        let mut params = Uniform::new(device, "brickray-render out-of-core params")?;
-        let sc = layout.volume_scale();
-        params.write(
-            queue,
-            OocParams {
-                dims: layout.volume.dims.map(|d| d as f32),
-                value_scale: encoding.scale,
-                octree_scale: sc.map(|s| s as f32),
-                value_offset: encoding.offset,
-                atlas_size: atlas_dims.map(|d| d as f32),
-                finest_level: (layout.levels - 1) as u32,
-                brick: layout.brick,
-                apron: layout.apron,
-                stored_side: layout.stored_side(),
-                sub_cells: sub_n,
-            },
-        );
+        let params = Uniform::new(device, "brickray-render out-of-core params")?;
         let group_layout = gpu::scoped(device, "brickray-render out-of-core layout", || {
             device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
                 label: Some("brickray-render out of core"),
@@ -269,46 +193,64 @@ impl OutOfCore {
             })
         })?;
         let sampler = volume_sampler(device)?;
-        let atlas_view = atlas.create_view(&Default::default());
-        let parts = GroupParts {
+        let bind_group = GroupParts {
             layout: &group_layout,
             params: &params.buffer,
-            atlas: &atlas_view,
+            atlas: &pool.atlas_view,
             sampler: &sampler,
-            slots: &slots,
-            sub_cells: &sub_cells,
+            slots: &pool.slots,
+            sub_cells: &pool.sub_cells,
             index: &index.buffer,
-        };
-        let bind_group = parts.bind_group(device)?;
-        Ok(OutOfCore {
+        }
+        .bind_group(device)?;
+        let mut ooc = OutOfCore {
             manager,
             layout,
-            source,
-            encoding,
             format,
-            atlas,
-            atlas_view,
-            atlas_bytes,
+            pool,
             sampler,
             params,
-            slots,
-            slots_cpu: vec![
-                SlotInfo {
-                    offset: [0.0; 4],
-                    range: [0.0; 4]
-                };
-                slot_count
-            ],
-            slots_dirty: true,
-            sub_cells,
-            sub_n,
             index,
             group_layout,
             bind_group,
             frame: 0,
             stats: OutOfCoreStats::default(),
             frame_of_world: frame,
-        })
+        };
+        ooc.write_params(queue);
+        Ok(ooc)
+    }
+
+    fn write_params(&mut self, queue: &wgpu::Queue) {
+        let l = &self.layout;
+        let enc = self.manager.gpu_format().encoding;
+        let params = OocParams {
+            dims: l.volume.dims.map(|d| d as f32),
+            value_scale: enc.scale,
+            octree_scale: l.volume_scale().map(|s| s as f32),
+            value_offset: enc.offset,
+            atlas_size: self.manager.pool().atlas_dims().map(|d| d as f32),
+            finest_level: (l.levels - 1) as u32,
+            brick: l.brick,
+            apron: l.apron,
+            stored_side: l.stored_side(),
+            sub_cells: self.manager.gpu_format().sub_cells_per_axis,
+        };
+        self.params.write(queue, params);
+    }
+
+    fn rebuild_bind_group(&mut self, device: &wgpu::Device) -> Result<(), RenderError> {
+        self.bind_group = GroupParts {
+            layout: &self.group_layout,
+            params: &self.params.buffer,
+            atlas: &self.pool.atlas_view,
+            sampler: &self.sampler,
+            slots: &self.pool.slots,
+            sub_cells: &self.pool.sub_cells,
+            index: &self.index.buffer,
+        }
+        .bind_group(device)?;
+        Ok(())
     }
 
     /// Statistics of the last frame.
@@ -316,22 +258,50 @@ impl OutOfCore {
         self.stats
     }
 
-    /// The brick manager (budgets, tolerance, failures).
+    /// The brick manager (tolerance, budgets, failures).
     pub(crate) fn manager_mut(&mut self) -> &mut BrickManager {
         &mut self.manager
     }
 
-    /// Writes this frame's uploads: texels into the atlas, sub-cell ranges and
-    /// slot rows into their tables. Returns the bytes written.
-    fn write_uploads(&mut self, queue: &wgpu::Queue, uploads: &[brickray_cache::Upload]) -> u64 {
+    /// Changes the GPU budget: the pool is re-planned (every slot forgotten)
+    /// and the atlas and slot tables recreated at the new size; the next frames
+    /// upload the working set again.
+    pub(crate) fn set_gpu_budget(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        bytes: u64,
+    ) -> Result<(), RenderError> {
+        self.manager.set_gpu_budget(bytes)?;
+        self.pool = Pool::new(device, &self.manager, self.format)?;
+        self.write_params(queue);
+        self.rebuild_bind_group(device)
+    }
+
+    /// The first failure (metadata or brick read) since the last call, with the
+    /// count of further ones.
+    pub(crate) fn take_error(&mut self) -> Option<StreamError> {
+        self.manager.take_error()
+    }
+
+    /// Sets the retry policy of failed bricks (`None`: only on request).
+    pub(crate) fn set_retry_policy(&mut self, p: Option<RetryPolicy>) -> Result<(), RenderError> {
+        Ok(self.manager.set_retry_policy(p)?)
+    }
+
+    /// Writes this frame's uploads, prepared by the loader threads: texels into
+    /// the atlas, sub-cell ranges and slot rows into their tables. Returns the
+    /// bytes written.
+    fn write_uploads(&mut self, queue: &wgpu::Queue, uploads: &[Upload]) -> u64 {
         let side = self.layout.stored_side();
-        let bpp = self.encoding.texel_bytes();
+        let bpp = self.manager.gpu_format().encoding.texel_bytes();
+        let pool = &mut self.pool;
         let mut bytes = 0u64;
         for up in uploads {
-            let texels = self.encoding.encode(&up.data);
+            let b = &up.brick;
             queue.write_texture(
                 wgpu::TexelCopyTextureInfo {
-                    texture: &self.atlas,
+                    texture: &pool.atlas,
                     mip_level: 0,
                     origin: wgpu::Origin3d {
                         x: up.atlas_offset[0],
@@ -340,7 +310,7 @@ impl OutOfCore {
                     },
                     aspect: wgpu::TextureAspect::All,
                 },
-                &texels,
+                &b.texels,
                 wgpu::TexelCopyBufferLayout {
                     offset: 0,
                     bytes_per_row: Some(side * bpp),
@@ -352,37 +322,26 @@ impl OutOfCore {
                     depth_or_array_layers: side,
                 },
             );
-            bytes += texels.len() as u64;
-            let range = match self.source.node(up.key) {
-                Ok(info) => {
-                    let d = &self.layout.volume;
-                    let (a, b) = (d.normalize(info.min), d.normalize(info.max));
-                    [a.min(b), a.max(b)]
-                }
-                // Unknown: never skip it.
-                Err(_) => [f32::NEG_INFINITY, f32::INFINITY],
-            };
-            let cells = sub_cell_ranges(&self.layout, &up.data, self.sub_n);
-            let cell_bytes: &[u8] = bytemuck::cast_slice(&cells);
+            let cells: &[u8] = bytemuck::cast_slice(&b.sub_cells);
             queue.write_buffer(
-                &self.sub_cells,
-                up.slot as u64 * cell_bytes.len() as u64,
-                cell_bytes,
+                &pool.sub_cells,
+                up.slot as u64 * cells.len() as u64,
+                cells,
             );
-            bytes += cell_bytes.len() as u64;
-            if let Some(s) = self.slots_cpu.get_mut(up.slot as usize) {
+            bytes += (b.texels.len() + cells.len()) as u64;
+            if let Some(s) = pool.slots_cpu.get_mut(up.slot as usize) {
                 let o = up.atlas_offset;
                 *s = SlotInfo {
                     offset: [o[0] as f32, o[1] as f32, o[2] as f32, 0.0],
-                    range: [range[0], range[1], 0.0, 0.0],
+                    range: [b.range[0], b.range[1], 0.0, 0.0],
                 };
-                self.slots_dirty = true;
+                pool.slots_dirty = true;
             }
         }
-        if self.slots_dirty {
-            queue.write_buffer(&self.slots, 0, bytemuck::cast_slice(&self.slots_cpu));
-            bytes += std::mem::size_of_val(self.slots_cpu.as_slice()) as u64;
-            self.slots_dirty = false;
+        if pool.slots_dirty {
+            queue.write_buffer(&pool.slots, 0, bytemuck::cast_slice(&pool.slots_cpu));
+            bytes += std::mem::size_of_val(pool.slots_cpu.as_slice()) as u64;
+            pool.slots_dirty = false;
         }
         bytes
     }
@@ -479,53 +438,28 @@ impl VolumeBackend for OutOfCore {
         let upload_ms = t.elapsed().as_secs_f64() * 1e3;
 
         let t = Instant::now();
-        let leaves: Vec<(brickray_core::NodeKey, brickray_index::LeafKind)> = plan
-            .cut
-            .iter()
-            .map(|l| {
-                let kind = match l.kind {
-                    LeafKind::Data { slot } => brickray_index::LeafKind::Data { slot },
-                    _ => brickray_index::LeafKind::Empty,
-                };
-                (l.key, kind)
-            })
-            .collect();
-        let index = brickray_index::encode_cut(&leaves).map_err(RenderError::from)?;
+        let index = brickray_index::encode_cut(&plan.cut).map_err(RenderError::from)?;
         let words = index.words();
         let (written, grew) = self
             .index
             .write(device, queue, bytemuck::cast_slice(words))?;
         bytes += written;
         if grew {
-            self.bind_group = GroupParts {
-                layout: &self.group_layout,
-                params: &self.params.buffer,
-                atlas: &self.atlas_view,
-                sampler: &self.sampler,
-                slots: &self.slots,
-                sub_cells: &self.sub_cells,
-                index: &self.index.buffer,
-            }
-            .bind_group(device)?;
+            self.rebuild_bind_group(device)?;
         }
         let encode_ms = t.elapsed().as_secs_f64() * 1e3;
 
         let mut per_level = [0u32; 16];
-        for l in &plan.cut {
-            if matches!(l.kind, LeafKind::Data { .. }) {
-                per_level[(l.key.level as usize).min(15)] += 1;
-            }
+        for l in plan.cut.iter().filter(|l| l.kind.is_data()) {
+            per_level[(l.key.level as usize).min(15)] += 1;
         }
-        let s = plan.stats;
-        let converged =
-            s.requests_in_flight == 0 && s.upload_bricks == 0 && s.requested_this_frame == 0;
         self.stats = OutOfCoreStats {
-            cache: s,
+            cache: plan.stats,
             index_words: words.len() as u32,
             refine_ms,
             upload_ms,
             encode_ms,
-            converged,
+            converged: plan.stats.converged(),
             data_leaves_per_level: per_level,
         };
         Ok(bytes)
@@ -547,67 +481,7 @@ impl VolumeBackend for OutOfCore {
     }
 
     fn resident_bytes(&self) -> u64 {
-        self.atlas_bytes
+        self.pool.atlas_bytes
     }
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use brickray_core::{DType, VolumeDesc};
-
-    /// Every trilinear sample inside a sub-cell lies within its range.
-    #[test]
-    fn sub_cell_ranges_are_conservative() {
-        let desc = VolumeDesc {
-            dims: [64; 3],
-            dtype: DType::U8,
-            spacing: [1.0; 3],
-            value_range: [0.0, 255.0],
-        };
-        let layout = OctreeLayout::new(desc, 16, 2);
-        let side = layout.stored_side() as usize;
-        let mut seed = 0x2545_f491_u32;
-        let bytes: Vec<u8> = (0..side * side * side)
-            .map(|_| {
-                seed ^= seed << 13;
-                seed ^= seed >> 17;
-                seed ^= seed << 5;
-                seed as u8
-            })
-            .collect();
-        let n = sub_cells_per_axis(layout.brick);
-        assert_eq!(n, 2);
-        let r = sub_cell_ranges(&layout, &bytes, n);
-        let val = |x: usize, y: usize, z: usize| bytes[(z * side + y) * side + x] as f64 / 255.0;
-        let (b, a) = (layout.brick as f64, layout.apron as f64);
-        for i in 0..4000 {
-            let e: Vec<f64> = (0..3)
-                .map(|k| ((i * 7919 + k * 104_729) % 10_007) as f64 / 10_007.0 * b)
-                .collect();
-            let p: Vec<f64> = e.iter().map(|c| c - 0.5 + a).collect();
-            let f: Vec<usize> = p.iter().map(|c| c.floor() as usize).collect();
-            let t: Vec<f64> = p.iter().zip(&f).map(|(c, f)| c - *f as f64).collect();
-            let mut v = 0.0;
-            for dz in 0..2 {
-                for dy in 0..2 {
-                    for dx in 0..2 {
-                        let w = (if dx == 0 { 1.0 - t[0] } else { t[0] })
-                            * (if dy == 0 { 1.0 - t[1] } else { t[1] })
-                            * (if dz == 0 { 1.0 - t[2] } else { t[2] });
-                        v += w * val(f[0] + dx, f[1] + dy, f[2] + dz);
-                    }
-                }
-            }
-            let j: Vec<u32> = e
-                .iter()
-                .map(|c| ((c / (b / n as f64)).floor() as u32).min(n - 1))
-                .collect();
-            let c = r[((j[2] * n + j[1]) * n + j[0]) as usize];
-            assert!(
-                v as f32 >= c[0] - 1e-6 && v as f32 <= c[1] + 1e-6,
-                "sample {v} outside {c:?}"
-            );
-        }
-    }
-}

@@ -1,0 +1,409 @@
+//! The cache's configuration ([`CacheConfig`]), what the renderer's device stores
+//! per pool slot ([`GpuFormat`]), the retry back-off ([`RetryPolicy`]) and their
+//! validation ([`ConfigError`]).
+
+use crate::pool::PoolLimits;
+use brickray_core::{
+    DType, OctreeLayout, SampleEncoding, TexelCaps, U8Filtering, sub_cells_per_axis,
+};
+use std::time::Duration;
+use thiserror::Error;
+
+/// Most loader threads a [`CacheConfig`] accepts.
+pub const MAX_LOADER_THREADS: usize = 64;
+
+/// Fewest bricks the CPU cache and the GPU pool must hold: the root and its
+/// eight children, so that the root can be split at all.
+pub const MIN_RESIDENT_BRICKS: u32 = 9;
+
+/// Exponential back-off of automatic retries of failed reads, per node:
+/// the `n`-th consecutive failure is retried after `min(initial * factor^(n-1), max)`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RetryPolicy {
+    /// Delay after the first failure (> 0).
+    pub initial: Duration,
+    /// Longest delay (`>= initial`).
+    pub max: Duration,
+    /// Growth per consecutive failure (finite, `>= 1`).
+    pub factor: f32,
+}
+
+impl Default for RetryPolicy {
+    /// 1 s, doubling up to 60 s.
+    fn default() -> Self {
+        RetryPolicy {
+            initial: Duration::from_secs(1),
+            max: Duration::from_secs(60),
+            factor: 2.0,
+        }
+    }
+}
+
+impl RetryPolicy {
+    /// The delay before retrying after the `failures`-th consecutive failure
+    /// (`failures >= 1`; 0 is treated as 1).
+    pub fn delay(&self, failures: u32) -> Duration {
+        let exp = failures.saturating_sub(1).min(1024) as i32;
+        let secs = self.initial.as_secs_f64() * (self.factor as f64).powi(exp);
+        let capped = secs.min(self.max.as_secs_f64());
+        Duration::try_from_secs_f64(capped).unwrap_or(self.max)
+    }
+
+    /// Checks the fields (see each field's doc).
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        if !self.factor.is_finite() || self.factor < 1.0 {
+            return Err(ConfigError::RetryFactor {
+                factor: self.factor,
+            });
+        }
+        if self.initial.is_zero() || self.max < self.initial {
+            return Err(ConfigError::RetryDelays {
+                initial: self.initial,
+                max: self.max,
+            });
+        }
+        Ok(())
+    }
+}
+
+/// Budgets and knobs of a [`BrickManager`](crate::BrickManager). Nothing here
+/// depends on the device: what the device stores per slot is a [`GpuFormat`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CacheConfig {
+    /// System memory for prepared bricks (texels + sub-cell ranges), the level-2
+    /// cache; at least [`MIN_RESIDENT_BRICKS`] prepared bricks.
+    pub cpu_budget_bytes: u64,
+    /// GPU memory for the brick pool (atlas texels, sub-cell table and slot table
+    /// per slot); at least [`MIN_RESIDENT_BRICKS`] slots.
+    pub gpu_budget_bytes: u64,
+    /// Bytes uploaded per frame (at least one split or one brick always goes).
+    pub upload_budget_bytes: u64,
+    /// Screen-space error tolerance: a brick is refined while one of its voxels
+    /// covers more than this many pixels (finite, `>= 0`; 0 = always the finest
+    /// level the budgets allow).
+    pub tolerance_px: f32,
+    /// Loader threads, `1..=`[`MAX_LOADER_THREADS`].
+    pub loader_threads: usize,
+    /// Automatic retry of failed reads; `None`: only on request
+    /// ([`BrickManager::retry_failed`](crate::BrickManager::retry_failed)).
+    pub retry: Option<RetryPolicy>,
+}
+
+impl Default for CacheConfig {
+    /// 512 MiB CPU, 256 MiB GPU, 16 MiB uploaded per frame, 1 px, 2 threads,
+    /// retries after 1 s doubling to 60 s.
+    fn default() -> Self {
+        CacheConfig {
+            cpu_budget_bytes: 512 << 20,
+            gpu_budget_bytes: 256 << 20,
+            upload_budget_bytes: 16 << 20,
+            tolerance_px: 1.0,
+            loader_threads: 2,
+            retry: Some(RetryPolicy::default()),
+        }
+    }
+}
+
+/// What the renderer's device stores per pool slot: the texel encoding of the
+/// atlas, the sub-cell table and the per-slot table row.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GpuFormat {
+    /// How samples become texels (must match the layout's dtype and value range).
+    pub encoding: SampleEncoding,
+    /// Sub-cells per brick axis of the empty-space-skipping table
+    /// (`1..=brick`, usually [`sub_cells_per_axis`]).
+    pub sub_cells_per_axis: u32,
+    /// Bytes of one row of the renderer's per-slot table.
+    pub slot_row_bytes: u32,
+    /// Device limit on a 3D texture dimension (`max_texture_dimension_3d`).
+    pub max_texture_dim_3d: u32,
+}
+
+/// Which size overflowed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum SizeQuantity {
+    /// Stored voxels per brick side (`brick + 2 * apron`).
+    StoredSide,
+    /// Bytes of one brick as the source stores it.
+    RawBrick,
+    /// Bytes of one prepared brick (texels and sub-cell ranges).
+    PreparedBrick,
+    /// Bytes of one GPU pool slot.
+    Slot,
+}
+
+/// A configuration the cache cannot work with.
+#[derive(Debug, Clone, PartialEq, Error)]
+#[non_exhaustive]
+pub enum ConfigError {
+    /// The tolerance is NaN, negative or infinite.
+    #[error("tolerance_px must be finite and >= 0, got {value}")]
+    Tolerance {
+        /// The value given.
+        value: f32,
+    },
+    /// Zero loader threads, or more than [`MAX_LOADER_THREADS`].
+    #[error("loader_threads must be in 1..={max}, got {threads}")]
+    LoaderThreads {
+        /// The value given.
+        threads: usize,
+        /// The most accepted.
+        max: usize,
+    },
+    /// The CPU budget holds fewer than [`MIN_RESIDENT_BRICKS`] prepared bricks.
+    #[error(
+        "cpu_budget_bytes {budget_bytes} holds {bricks} prepared bricks of {brick_bytes} B; \
+         at least {needed} are needed (the root and its children)"
+    )]
+    CpuBudgetTooSmall {
+        /// The budget given.
+        budget_bytes: u64,
+        /// Bytes of one prepared brick.
+        brick_bytes: u64,
+        /// Bricks the budget holds.
+        bricks: u64,
+        /// Bricks needed.
+        needed: u32,
+    },
+    /// The GPU budget (within the device's texture limit) gives fewer than
+    /// [`MIN_RESIDENT_BRICKS`] slots.
+    #[error(
+        "gpu_budget_bytes {budget_bytes} gives {slots} pool slots of {slot_bytes} B \
+         ({stored_side}^3 voxels, max 3D texture dimension {max_texture_dim_3d}); \
+         at least {needed} are needed"
+    )]
+    GpuBudgetTooSmall {
+        /// The budget given.
+        budget_bytes: u64,
+        /// Bytes of one slot.
+        slot_bytes: u64,
+        /// Stored voxels per brick side.
+        stored_side: u32,
+        /// The device limit.
+        max_texture_dim_3d: u32,
+        /// Slots the budget gives.
+        slots: u32,
+        /// Slots needed.
+        needed: u32,
+    },
+    /// A size computed from the layout and format overflows.
+    #[error("the size of {quantity:?} overflows")]
+    SizeOverflow {
+        /// Which one.
+        quantity: SizeQuantity,
+    },
+    /// The encoding converts another dtype or value range than the layout's.
+    #[error(
+        "the GPU encoding is for {encoding_dtype:?} over {encoding_range:?}, \
+         the volume is {layout_dtype:?} over {layout_range:?}"
+    )]
+    EncodingMismatch {
+        /// The volume's dtype.
+        layout_dtype: DType,
+        /// The encoding's dtype.
+        encoding_dtype: DType,
+        /// The volume's value range.
+        layout_range: [f32; 2],
+        /// The encoding's value range.
+        encoding_range: [f32; 2],
+    },
+    /// Sub-cells per axis outside `1..=max`.
+    #[error("sub_cells_per_axis must be in 1..={max}, got {per_axis}")]
+    SubCells {
+        /// The value given.
+        per_axis: u32,
+        /// The most accepted (the brick's interior side).
+        max: u32,
+    },
+    /// The retry factor is not finite or below 1.
+    #[error("retry factor must be finite and >= 1, got {factor}")]
+    RetryFactor {
+        /// The value given.
+        factor: f32,
+    },
+    /// The retry delays are zero or `max < initial`.
+    #[error("retry delays must satisfy 0 < initial <= max, got {initial:?} and {max:?}")]
+    RetryDelays {
+        /// The initial delay given.
+        initial: Duration,
+        /// The longest delay given.
+        max: Duration,
+    },
+}
+
+impl GpuFormat {
+    /// The format a device with `caps` stores for `layout`: the encoding chosen for
+    /// the volume's dtype and value range, [`sub_cells_per_axis`] of the brick.
+    pub fn for_layout(
+        layout: &OctreeLayout,
+        caps: TexelCaps,
+        u8_filtering: U8Filtering,
+        slot_row_bytes: u32,
+        max_texture_dim_3d: u32,
+    ) -> GpuFormat {
+        GpuFormat {
+            encoding: SampleEncoding::choose(
+                layout.volume.dtype,
+                layout.volume.value_range,
+                caps,
+                u8_filtering,
+            ),
+            sub_cells_per_axis: sub_cells_per_axis(layout.brick),
+            slot_row_bytes,
+            max_texture_dim_3d,
+        }
+    }
+
+    /// Checks the format against the layout: encoding of the same dtype and value
+    /// range, sub-cells in range, sizes that do not overflow.
+    pub fn validate(&self, layout: &OctreeLayout) -> Result<(), ConfigError> {
+        let (ld, lr) = (layout.volume.dtype, layout.volume.value_range);
+        let (ed, er) = (self.encoding.dtype(), self.encoding.value_range());
+        if ld != ed || lr.map(f32::to_bits) != er.map(f32::to_bits) {
+            return Err(ConfigError::EncodingMismatch {
+                layout_dtype: ld,
+                encoding_dtype: ed,
+                layout_range: lr,
+                encoding_range: er,
+            });
+        }
+        let max = layout.brick.max(1);
+        if self.sub_cells_per_axis == 0 || self.sub_cells_per_axis > max {
+            return Err(ConfigError::SubCells {
+                per_axis: self.sub_cells_per_axis,
+                max,
+            });
+        }
+        self.slot_bytes(layout).map(|_| ())
+    }
+
+    /// Bytes of one prepared brick: `stored_side^3` texels and `sub_cells^3`
+    /// ranges of 8 bytes (what the CPU cache counts and a frame uploads).
+    pub fn prepared_brick_bytes(&self, layout: &OctreeLayout) -> Result<u64, ConfigError> {
+        let side = stored_side(layout)? as u64;
+        let n = self.sub_cells_per_axis as u64;
+        let overflow = ConfigError::SizeOverflow {
+            quantity: SizeQuantity::PreparedBrick,
+        };
+        let texels = side
+            .checked_pow(3)
+            .and_then(|v| v.checked_mul(self.encoding.texel_bytes() as u64));
+        let cells = n.checked_pow(3).and_then(|v| v.checked_mul(8));
+        texels
+            .zip(cells)
+            .and_then(|(t, c)| t.checked_add(c))
+            .ok_or(overflow)
+    }
+
+    /// Bytes one pool slot costs on the GPU: the prepared brick plus one row of the
+    /// slot table.
+    pub fn slot_bytes(&self, layout: &OctreeLayout) -> Result<u64, ConfigError> {
+        self.prepared_brick_bytes(layout)?
+            .checked_add(self.slot_row_bytes as u64)
+            .ok_or(ConfigError::SizeOverflow {
+                quantity: SizeQuantity::Slot,
+            })
+    }
+
+    /// The pool's sizing inputs for a GPU budget, checked to give at least
+    /// [`MIN_RESIDENT_BRICKS`] slots.
+    pub fn pool_limits(
+        &self,
+        layout: &OctreeLayout,
+        gpu_budget_bytes: u64,
+    ) -> Result<PoolLimits, ConfigError> {
+        let limits = PoolLimits {
+            budget_bytes: gpu_budget_bytes,
+            slot_bytes: self.slot_bytes(layout)?,
+            stored_side: stored_side(layout)?,
+            max_dim: self.max_texture_dim_3d,
+        };
+        let slots = limits
+            .grid()
+            .map_or(0, |g| g.iter().map(|&a| a as u64).product::<u64>());
+        if slots < MIN_RESIDENT_BRICKS as u64 {
+            return Err(ConfigError::GpuBudgetTooSmall {
+                budget_bytes: gpu_budget_bytes,
+                slot_bytes: limits.slot_bytes,
+                stored_side: limits.stored_side,
+                max_texture_dim_3d: self.max_texture_dim_3d,
+                slots: slots as u32,
+                needed: MIN_RESIDENT_BRICKS,
+            });
+        }
+        Ok(limits)
+    }
+}
+
+/// `brick + 2 * apron`, checked.
+pub(crate) fn stored_side(layout: &OctreeLayout) -> Result<u32, ConfigError> {
+    layout
+        .apron
+        .checked_mul(2)
+        .and_then(|a| a.checked_add(layout.brick))
+        .ok_or(ConfigError::SizeOverflow {
+            quantity: SizeQuantity::StoredSide,
+        })
+}
+
+/// Bytes of one brick as the source stores it, checked (`layout.brick_bytes()`).
+pub(crate) fn raw_brick_bytes(layout: &OctreeLayout) -> Result<usize, ConfigError> {
+    (stored_side(layout)? as usize)
+        .checked_pow(3)
+        .and_then(|v| v.checked_mul(layout.volume.dtype.size()))
+        .ok_or(ConfigError::SizeOverflow {
+            quantity: SizeQuantity::RawBrick,
+        })
+}
+
+impl CacheConfig {
+    /// Checks every field against the layout and the GPU format (see each
+    /// field's doc); the first violation found is returned.
+    pub fn validate(&self, layout: &OctreeLayout, gpu: &GpuFormat) -> Result<(), ConfigError> {
+        validate_tolerance(self.tolerance_px)?;
+        if self.loader_threads == 0 || self.loader_threads > MAX_LOADER_THREADS {
+            return Err(ConfigError::LoaderThreads {
+                threads: self.loader_threads,
+                max: MAX_LOADER_THREADS,
+            });
+        }
+        if let Some(r) = &self.retry {
+            r.validate()?;
+        }
+        gpu.validate(layout)?;
+        raw_brick_bytes(layout)?;
+        validate_cpu_budget(self.cpu_budget_bytes, layout, gpu)?;
+        gpu.pool_limits(layout, self.gpu_budget_bytes)?;
+        Ok(())
+    }
+}
+
+pub(crate) fn validate_tolerance(value: f32) -> Result<(), ConfigError> {
+    if value.is_finite() && value >= 0.0 {
+        Ok(())
+    } else {
+        Err(ConfigError::Tolerance { value })
+    }
+}
+
+pub(crate) fn validate_cpu_budget(
+    budget_bytes: u64,
+    layout: &OctreeLayout,
+    gpu: &GpuFormat,
+) -> Result<(), ConfigError> {
+    let brick_bytes = gpu.prepared_brick_bytes(layout)?;
+    let bricks = budget_bytes.checked_div(brick_bytes).unwrap_or(u64::MAX);
+    if bricks < MIN_RESIDENT_BRICKS as u64 {
+        return Err(ConfigError::CpuBudgetTooSmall {
+            budget_bytes,
+            brick_bytes,
+            bricks,
+            needed: MIN_RESIDENT_BRICKS,
+        });
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests;

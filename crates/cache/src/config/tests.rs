@@ -1,0 +1,192 @@
+//! Validation of the configuration and the GPU format.
+
+use super::*;
+use crate::refine::tests::ball_layout;
+
+fn gpu(layout: &OctreeLayout) -> GpuFormat {
+    GpuFormat::for_layout(
+        layout,
+        TexelCaps {
+            norm16: true,
+            float32_filterable: false,
+        },
+        U8Filtering::Exact,
+        32,
+        2048,
+    )
+}
+
+#[test]
+fn defaults_are_valid_and_sizes_count_the_format() {
+    let layout = ball_layout(64);
+    let g = gpu(&layout);
+    assert_eq!(CacheConfig::default().validate(&layout, &g), Ok(()));
+    // 10^3 voxels as R16Unorm, one sub-cell, one 32-byte slot row.
+    assert_eq!(g.prepared_brick_bytes(&layout), Ok(2000 + 8));
+    assert_eq!(g.slot_bytes(&layout), Ok(2000 + 8 + 32));
+    let fast = GpuFormat::for_layout(&layout, TexelCaps::default(), U8Filtering::Fast, 0, 64);
+    assert_eq!(fast.slot_bytes(&layout), Ok(1000 + 8));
+}
+
+#[test]
+fn every_violation_is_a_typed_error() {
+    let layout = ball_layout(64);
+    let g = gpu(&layout);
+    let ok = CacheConfig::default();
+    let check = |c: CacheConfig| c.validate(&layout, &g);
+    for value in [f32::NAN, -0.5, f32::INFINITY] {
+        let e = check(CacheConfig {
+            tolerance_px: value,
+            ..ok
+        });
+        assert!(matches!(e, Err(ConfigError::Tolerance { .. })), "{value}");
+    }
+    for threads in [0, MAX_LOADER_THREADS + 1, 2000] {
+        assert_eq!(
+            check(CacheConfig {
+                loader_threads: threads,
+                ..ok
+            }),
+            Err(ConfigError::LoaderThreads {
+                threads,
+                max: MAX_LOADER_THREADS
+            })
+        );
+    }
+    assert_eq!(
+        check(CacheConfig {
+            cpu_budget_bytes: 8 * 2008,
+            ..ok
+        }),
+        Err(ConfigError::CpuBudgetTooSmall {
+            budget_bytes: 8 * 2008,
+            brick_bytes: 2008,
+            bricks: 8,
+            needed: 9
+        })
+    );
+    assert_eq!(
+        check(CacheConfig {
+            cpu_budget_bytes: 9 * 2008,
+            gpu_budget_bytes: 9 * 2040,
+            ..ok
+        }),
+        Ok(())
+    );
+    let e = check(CacheConfig {
+        gpu_budget_bytes: 8 * 2040 + 2039,
+        ..ok
+    });
+    assert!(
+        matches!(
+            e,
+            Err(ConfigError::GpuBudgetTooSmall {
+                slots: 8,
+                slot_bytes: 2040,
+                needed: 9,
+                ..
+            })
+        ),
+        "{e:?}"
+    );
+    // The device limit caps the grid: 2 slots per axis at most.
+    let small_dim = GpuFormat {
+        max_texture_dim_3d: 29,
+        ..g
+    };
+    let e = ok.validate(&layout, &small_dim);
+    assert!(
+        matches!(e, Err(ConfigError::GpuBudgetTooSmall { slots: 8, .. })),
+        "{e:?}"
+    );
+    assert!(e.unwrap_err().to_string().contains("8 pool slots"));
+    for (initial, max, factor) in [
+        (Duration::ZERO, Duration::from_secs(1), 2.0),
+        (Duration::from_secs(2), Duration::from_secs(1), 2.0),
+    ] {
+        let e = check(CacheConfig {
+            retry: Some(RetryPolicy {
+                initial,
+                max,
+                factor,
+            }),
+            ..ok
+        });
+        assert_eq!(e, Err(ConfigError::RetryDelays { initial, max }));
+    }
+    for factor in [f32::NAN, 0.5, f32::INFINITY] {
+        let retry = Some(RetryPolicy {
+            factor,
+            ..RetryPolicy::default()
+        });
+        let e = check(CacheConfig { retry, ..ok });
+        assert!(matches!(e, Err(ConfigError::RetryFactor { .. })));
+    }
+    assert_eq!(check(CacheConfig { retry: None, ..ok }), Ok(()));
+}
+
+#[test]
+fn format_mismatches_and_overflows_are_typed_errors() {
+    let layout = ball_layout(64);
+    let g = gpu(&layout);
+    let ok = CacheConfig::default();
+    let mut other = layout.clone();
+    other.volume.dtype = DType::U16;
+    assert!(matches!(
+        ok.validate(&other, &g),
+        Err(ConfigError::EncodingMismatch { .. })
+    ));
+    let mut range = layout.clone();
+    range.volume.value_range = [0.0, 2.0];
+    assert!(matches!(
+        ok.validate(&range, &g),
+        Err(ConfigError::EncodingMismatch { .. })
+    ));
+    for per_axis in [0, layout.brick + 1] {
+        let e = ok.validate(
+            &layout,
+            &GpuFormat {
+                sub_cells_per_axis: per_axis,
+                ..g
+            },
+        );
+        assert_eq!(
+            e,
+            Err(ConfigError::SubCells {
+                per_axis,
+                max: layout.brick
+            })
+        );
+    }
+    let mut huge = layout.clone();
+    huge.brick = u32::MAX - 1;
+    assert_eq!(
+        ok.validate(&huge, &g),
+        Err(ConfigError::SizeOverflow {
+            quantity: SizeQuantity::StoredSide
+        })
+    );
+    huge.brick = 1 << 22;
+    huge.apron = 0;
+    assert!(matches!(
+        ok.validate(
+            &huge,
+            &GpuFormat {
+                sub_cells_per_axis: 1,
+                ..g
+            }
+        ),
+        Err(ConfigError::SizeOverflow { .. })
+    ));
+}
+
+#[test]
+fn retry_delays_grow_and_saturate() {
+    let p = RetryPolicy::default();
+    let secs: Vec<u64> = (1..=9).map(|n| p.delay(n).as_secs()).collect();
+    assert_eq!(secs, vec![1, 2, 4, 8, 16, 32, 60, 60, 60]);
+    assert_eq!(p.delay(0), p.delay(1));
+    assert_eq!(p.delay(u32::MAX), Duration::from_secs(60));
+    let flat = RetryPolicy { factor: 1.0, ..p };
+    assert_eq!(flat.delay(50), Duration::from_secs(1));
+}

@@ -1,0 +1,154 @@
+//! The loader's job queue: metadata jobs first, then bricks, each by priority
+//! (descending) then FIFO, with an index for re-prioritising and cancelling.
+
+use crate::failures::FetchKind;
+use brickray_core::{NodeInfo, NodeKey};
+use std::collections::{BTreeMap, HashMap, HashSet};
+
+/// A job's identity: one of each kind per node.
+pub(crate) type JobKey = (FetchKind, NodeKey);
+
+/// What a worker does.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) enum Job {
+    /// Read a node's metadata.
+    Meta(NodeKey),
+    /// Read and prepare a node's brick; with `children_meta`, also read the
+    /// metadata of its children inside the volume.
+    Brick {
+        key: NodeKey,
+        info: NodeInfo,
+        children_meta: bool,
+    },
+}
+
+impl Job {
+    pub(crate) fn key(&self) -> JobKey {
+        match *self {
+            Job::Meta(key) => (FetchKind::Metadata, key),
+            Job::Brick { key, .. } => (FetchKind::Brick, key),
+        }
+    }
+}
+
+/// A job's place in the queue: metadata before bricks, priority descending,
+/// then FIFO.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+struct QueueKey {
+    /// 0 for metadata, 1 for bricks.
+    class: u8,
+    /// `!total-order bits` of the priority so that higher priorities sort first.
+    neg_priority: u32,
+    seq: u64,
+}
+
+fn queue_key(kind: FetchKind, priority: f32, seq: u64) -> QueueKey {
+    // Map f32 to u32 preserving total order, then invert.
+    let b = priority.to_bits();
+    let ordered = if b & 0x8000_0000 != 0 {
+        !b
+    } else {
+        b | 0x8000_0000
+    };
+    QueueKey {
+        class: match kind {
+            FetchKind::Metadata => 0,
+            FetchKind::Brick => 1,
+        },
+        neg_priority: !ordered,
+        seq,
+    }
+}
+
+#[derive(Debug, Default)]
+pub(crate) struct Queue {
+    order: BTreeMap<QueueKey, Job>,
+    queued: HashMap<JobKey, QueueKey>,
+    /// Taken by a worker, result not yet polled.
+    loading: HashSet<JobKey>,
+    seq: u64,
+    pub(crate) shutdown: bool,
+}
+
+impl Queue {
+    /// Queues (or re-prioritises) a job; returns whether it was queued before.
+    pub(crate) fn push(&mut self, job: Job, priority: f32) -> bool {
+        let jk = job.key();
+        let was = self.cancel(jk);
+        self.seq += 1;
+        let qk = queue_key(jk.0, priority, self.seq);
+        self.order.insert(qk, job);
+        self.queued.insert(jk, qk);
+        was
+    }
+
+    pub(crate) fn cancel(&mut self, jk: JobKey) -> bool {
+        match self.queued.remove(&jk) {
+            Some(qk) => {
+                self.order.remove(&qk);
+                true
+            }
+            None => false,
+        }
+    }
+
+    /// Drops every queued job.
+    pub(crate) fn clear(&mut self) {
+        self.order.clear();
+        self.queued.clear();
+    }
+
+    /// Takes the first job, marking it loading.
+    pub(crate) fn pop(&mut self) -> Option<Job> {
+        let (_, job) = self.order.pop_first()?;
+        let jk = job.key();
+        self.queued.remove(&jk);
+        self.loading.insert(jk);
+        Some(job)
+    }
+
+    /// Marks the metadata of `keys` loading for a brick job that reads it (a
+    /// queued metadata job of one of them is taken over); returns those claimed,
+    /// i.e. all but those already being read.
+    pub(crate) fn claim_metadata(&mut self, keys: &[NodeKey]) -> Vec<NodeKey> {
+        let mut claimed = Vec::with_capacity(keys.len());
+        for &k in keys {
+            let jk = (FetchKind::Metadata, k);
+            if !self.loading.contains(&jk) {
+                self.cancel(jk);
+                self.loading.insert(jk);
+                claimed.push(k);
+            }
+        }
+        claimed
+    }
+
+    pub(crate) fn done(&mut self, jk: JobKey) {
+        self.loading.remove(&jk);
+    }
+
+    pub(crate) fn is_queued(&self, jk: JobKey) -> bool {
+        self.queued.contains_key(&jk)
+    }
+
+    pub(crate) fn is_loading(&self, jk: JobKey) -> bool {
+        self.loading.contains(&jk)
+    }
+
+    /// Queued job keys not in `keep`.
+    pub(crate) fn stale(&self, keep: &HashSet<JobKey>) -> Vec<JobKey> {
+        self.queued
+            .keys()
+            .filter(|k| !keep.contains(k))
+            .copied()
+            .collect()
+    }
+
+    pub(crate) fn queued_count(&self, kind: FetchKind) -> usize {
+        self.queued.keys().filter(|k| k.0 == kind).count()
+    }
+
+    pub(crate) fn loading_count(&self, kind: FetchKind) -> usize {
+        self.loading.iter().filter(|k| k.0 == kind).count()
+    }
+}

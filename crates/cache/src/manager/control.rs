@@ -1,0 +1,232 @@
+//! The manager's queries, failure handling, set-up read and runtime setters.
+
+use super::{BrickManager, Residency, ResidencyCounts};
+use crate::config::{
+    CacheConfig, ConfigError, GpuFormat, MIN_RESIDENT_BRICKS, RetryPolicy, validate_cpu_budget,
+    validate_tolerance,
+};
+use crate::cpu_cache::CpuCache;
+use crate::failures::{FetchKind, StreamError};
+use crate::loader::worker::{children_in_volume, fetch_brick, fetch_meta};
+use crate::loader::{LoadError, Loader};
+use crate::pool::BrickPool;
+use crate::upload::UploadBudget;
+use brickray_core::{NodeInfo, NodeKey, NodeKind, OctreeLayout, VolumeFrame};
+use std::sync::Arc;
+
+impl BrickManager {
+    /// The residency of a node's brick, `None` when it is nowhere.
+    pub fn residency(&self, key: NodeKey) -> Option<Residency> {
+        if self.pool.contains(key) {
+            Some(Residency::OnGpu)
+        } else if self.cpu.contains(key) {
+            Some(Residency::InCpu)
+        } else if self.failures.is_failed(FetchKind::Brick, key) {
+            Some(Residency::Failed)
+        } else if self.loader.is_loading(FetchKind::Brick, key) {
+            Some(Residency::Loading)
+        } else if self.loader.is_queued(FetchKind::Brick, key) {
+            Some(Residency::Requested)
+        } else {
+            None
+        }
+    }
+
+    /// Nodes per residency state (each node counted once, in its most GPU-ward state).
+    pub fn residency_counts(&self) -> ResidencyCounts {
+        let on_gpu = self.pool.occupied();
+        let in_cpu = self
+            .pool
+            .resident()
+            .filter(|(k, _)| self.cpu.contains(*k))
+            .count() as u32;
+        ResidencyCounts {
+            requested: self.loader.queued(FetchKind::Brick) as u32,
+            loading: self.loader.loading(FetchKind::Brick) as u32,
+            in_cpu: self.cpu.len() as u32 - in_cpu,
+            on_gpu,
+            failed: self.failures.counts().bricks_failed,
+        }
+    }
+
+    /// The node's metadata, if known.
+    pub fn metadata(&self, key: NodeKey) -> Option<NodeInfo> {
+        self.meta.get(&key).copied()
+    }
+
+    /// The error that made a node fail (its brick, else its metadata), while it
+    /// is failed (not yet due for a retry).
+    pub fn failure(&self, key: NodeKey) -> Option<Arc<LoadError>> {
+        self.failures
+            .error(FetchKind::Brick, key)
+            .or_else(|| self.failures.error(FetchKind::Metadata, key))
+            .cloned()
+    }
+
+    /// The first failure since the last call (naming the node and what failed),
+    /// with the number of failures after it: one message to show, not thousands.
+    pub fn take_error(&mut self) -> Option<StreamError> {
+        self.failures.take_error()
+    }
+
+    /// Makes every failed node wanted again at once (restarting its back-off).
+    pub fn retry_failed(&mut self) {
+        self.failures.retry_all();
+    }
+
+    /// Makes one node's failures (metadata and brick) wanted again at once;
+    /// returns whether it had any.
+    pub fn retry(&mut self, key: NodeKey) -> bool {
+        self.failures.retry(key)
+    }
+
+    /// Forgets every GPU slot (e.g. after the atlas was recreated); the next update
+    /// uploads the working set again.
+    pub fn clear_gpu(&mut self) {
+        self.pool.clear();
+    }
+
+    /// Reads the root's metadata and brick (and its children's metadata)
+    /// synchronously, so the very first frame already shows a coarse image and
+    /// can request the next level. Meant for set-up time, not the frame path: it
+    /// blocks on the source. A failure (or panic) of the root is returned and
+    /// kept like any failure (retried after the back-off); a child's failure is
+    /// kept and surfaced by [`take_error`](Self::take_error).
+    pub fn preload_root(&mut self) -> Result<(), StreamError> {
+        let key = NodeKey::ROOT;
+        let now = self.clock.now();
+        let info = match self.meta.get(&key) {
+            Some(info) => *info,
+            None => match fetch_meta(self.source.as_ref(), key) {
+                Ok(info) => {
+                    self.meta.insert(key, info);
+                    self.failures.succeeded(FetchKind::Metadata, key);
+                    info
+                }
+                Err(e) => {
+                    return Err(self
+                        .failures
+                        .record(FetchKind::Metadata, key, e, now, false));
+                }
+            },
+        };
+        if matches!(info.kind, NodeKind::Empty) {
+            return Ok(());
+        }
+        if !self.cpu.contains(key) && !self.pool.contains(key) {
+            match fetch_brick(self.source.as_ref(), &self.preparer, key, &info) {
+                Ok(brick) => {
+                    self.cpu.insert(key, brick);
+                    self.failures.succeeded(FetchKind::Brick, key);
+                }
+                Err(e) => {
+                    return Err(self.failures.record(FetchKind::Brick, key, e, now, false));
+                }
+            }
+        }
+        if self.children_meta_missing(key, &info) {
+            for c in children_in_volume(&self.layout, key) {
+                match fetch_meta(self.source.as_ref(), c) {
+                    Ok(info) => {
+                        self.meta.insert(c, info);
+                        self.failures.succeeded(FetchKind::Metadata, c);
+                    }
+                    Err(e) => {
+                        self.failures.record(FetchKind::Metadata, c, e, now, true);
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Moves the volume in the world.
+    pub fn set_volume_frame(&mut self, frame: VolumeFrame) {
+        self.volume_frame = frame;
+    }
+
+    /// Sets the screen-space error tolerance (pixels per voxel; finite, `>= 0`).
+    pub fn set_tolerance_px(&mut self, tolerance_px: f32) -> Result<(), ConfigError> {
+        validate_tolerance(tolerance_px)?;
+        self.config.tolerance_px = tolerance_px;
+        Ok(())
+    }
+
+    /// Sets the bytes uploaded per frame (any value: 0 means one split or one brick
+    /// per frame).
+    pub fn set_upload_budget(&mut self, bytes_per_frame: u64) -> Result<(), ConfigError> {
+        self.config.upload_budget_bytes = bytes_per_frame;
+        self.budget = UploadBudget::new(bytes_per_frame);
+        Ok(())
+    }
+
+    /// Sets the CPU cache budget (at least nine prepared bricks); shrinking evicts
+    /// the least recently used bricks.
+    pub fn set_cpu_budget(&mut self, bytes: u64) -> Result<(), ConfigError> {
+        validate_cpu_budget(bytes, &self.layout, &self.gpu)?;
+        self.config.cpu_budget_bytes = bytes;
+        self.cpu.set_budget(bytes);
+        Ok(())
+    }
+
+    /// Sets the GPU pool budget (at least nine slots) and rebuilds the pool
+    /// bookkeeping: every slot is forgotten. Returns the new atlas size in voxels
+    /// ([`BrickPool::atlas_dims`]): the renderer recreates its atlas and slot
+    /// tables (sized by [`pool`](Self::pool)) before the next update, which
+    /// uploads the working set again.
+    pub fn set_gpu_budget(&mut self, bytes: u64) -> Result<[u32; 3], ConfigError> {
+        let limits = self.gpu.pool_limits(&self.layout, bytes)?;
+        let pool = BrickPool::new(limits).map_err(|_| ConfigError::GpuBudgetTooSmall {
+            budget_bytes: bytes,
+            slot_bytes: limits.slot_bytes,
+            stored_side: limits.stored_side,
+            max_texture_dim_3d: limits.max_dim,
+            slots: 0,
+            needed: MIN_RESIDENT_BRICKS,
+        })?;
+        self.pool = pool;
+        self.config.gpu_budget_bytes = bytes;
+        Ok(self.pool.atlas_dims())
+    }
+
+    /// Sets (or, with `None`, turns off) the automatic retry of failures. Failures
+    /// already kept keep the time of their next retry.
+    pub fn set_retry_policy(&mut self, policy: Option<RetryPolicy>) -> Result<(), ConfigError> {
+        if let Some(p) = &policy {
+            p.validate()?;
+        }
+        self.failures.set_policy(policy);
+        self.config.retry = policy;
+        Ok(())
+    }
+
+    /// The octree layout.
+    pub fn layout(&self) -> &OctreeLayout {
+        &self.layout
+    }
+
+    /// The configuration (as changed by the setters).
+    pub fn config(&self) -> &CacheConfig {
+        &self.config
+    }
+
+    /// What the device stores per slot.
+    pub fn gpu_format(&self) -> &GpuFormat {
+        &self.gpu
+    }
+
+    /// The pool bookkeeping (slot grid, atlas size, slot offsets).
+    pub fn pool(&self) -> &BrickPool {
+        &self.pool
+    }
+
+    /// The CPU cache.
+    pub fn cpu_cache(&self) -> &CpuCache {
+        &self.cpu
+    }
+
+    /// The loader.
+    pub fn loader(&self) -> &Loader {
+        &self.loader
+    }
+}

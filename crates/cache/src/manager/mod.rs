@@ -1,0 +1,313 @@
+//! The per-frame façade: [`BrickManager::update`] polls the loader, refines the
+//! cut, assigns pool slots, schedules uploads within the budget and re-submits the
+//! wanted loads. The renderer uploads the listed prepared bricks into its atlas
+//! and encodes the cut. Nothing here calls the source except
+//! [`BrickManager::preload_root`] (set-up time).
+
+mod control;
+mod stats;
+#[cfg(test)]
+mod tests;
+#[cfg(test)]
+mod tests_config;
+#[cfg(test)]
+mod tests_faults;
+
+pub use stats::{FramePlan, FrameStats, Residency, ResidencyCounts, Upload};
+
+use crate::config::{CacheConfig, ConfigError, GpuFormat};
+use crate::cpu_cache::CpuCache;
+use crate::failures::{Clock, Failures, FetchKind, SystemClock};
+use crate::loader::{BrickRequest, Loader, LoaderConfig};
+use crate::pool::{BrickPool, PoolError};
+use crate::prepared::Preparer;
+use crate::refine::{DataState, MetaState, NodeClass, RefineEnv, RefineParams, refine};
+use crate::upload::UploadBudget;
+use brickray_core::{
+    BrickSource, Camera, CutLeaf, EmptyReason, LeafKind, NodeInfo, NodeKey, NodeKind, OctreeLayout,
+    RenderMode, TransferFunction, VolumeFrame,
+};
+use std::collections::HashMap;
+use std::sync::Arc;
+use thiserror::Error;
+
+/// Errors creating a [`BrickManager`].
+#[derive(Debug, Error)]
+#[non_exhaustive]
+pub enum CacheError {
+    /// The configuration or GPU format is not usable.
+    #[error(transparent)]
+    Config(#[from] ConfigError),
+    /// The GPU pool cannot be sized.
+    #[error(transparent)]
+    Pool(#[from] PoolError),
+    /// A loader thread could not be started.
+    #[error("cannot start a loader thread: {0}")]
+    Spawn(#[source] std::io::Error),
+}
+
+/// Drives the caches, the loader and refinement for a renderer.
+pub struct BrickManager {
+    source: Arc<dyn BrickSource>,
+    layout: OctreeLayout,
+    volume_frame: VolumeFrame,
+    config: CacheConfig,
+    gpu: GpuFormat,
+    preparer: Arc<Preparer>,
+    brick_bytes: u64,
+    meta: HashMap<NodeKey, NodeInfo>,
+    cpu: CpuCache,
+    pool: BrickPool,
+    loader: Loader,
+    budget: UploadBudget,
+    failures: Failures,
+    clock: Arc<dyn Clock>,
+}
+
+impl std::fmt::Debug for BrickManager {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("BrickManager")
+            .field("layout", &self.layout)
+            .field("config", &self.config)
+            .field("gpu", &self.gpu)
+            .field("cpu", &self.cpu)
+            .field("pool", &self.pool)
+            .field("loader", &self.loader)
+            .finish_non_exhaustive()
+    }
+}
+
+/// Refinement's view of the manager: caches only, never the source.
+struct Env<'a> {
+    meta: &'a HashMap<NodeKey, NodeInfo>,
+    failures: &'a Failures,
+    cpu: &'a mut CpuCache,
+    pool: &'a BrickPool,
+}
+
+impl RefineEnv for Env<'_> {
+    fn node(&mut self, key: NodeKey) -> MetaState {
+        match self.meta.get(&key) {
+            Some(info) => MetaState::Known(*info),
+            None if self.failures.is_failed(FetchKind::Metadata, key) => MetaState::Failed,
+            None => MetaState::Pending,
+        }
+    }
+
+    fn data(&mut self, key: NodeKey) -> DataState {
+        if self.pool.contains(key) {
+            self.cpu.touch(key);
+            DataState::OnGpu
+        } else if self.cpu.get(key).is_some() {
+            DataState::InCpu
+        } else if self.failures.is_failed(FetchKind::Brick, key) {
+            DataState::Failed
+        } else {
+            DataState::Missing
+        }
+    }
+}
+
+impl BrickManager {
+    /// A manager over `source`, placed in the world by `volume_frame`, preparing
+    /// bricks for a device storing `gpu`. Validates `config` against the layout and
+    /// `gpu` ([`CacheConfig::validate`]). Reads nothing: the root's metadata and
+    /// brick arrive through the loader, or at once with
+    /// [`preload_root`](Self::preload_root).
+    pub fn new(
+        source: Arc<dyn BrickSource>,
+        volume_frame: VolumeFrame,
+        config: CacheConfig,
+        gpu: GpuFormat,
+    ) -> Result<BrickManager, CacheError> {
+        let layout = source.layout().clone();
+        config.validate(&layout, &gpu)?;
+        let pool = BrickPool::new(gpu.pool_limits(&layout, config.gpu_budget_bytes)?)?;
+        let preparer = Arc::new(Preparer::new(&layout, &gpu)?);
+        let brick_bytes = gpu.prepared_brick_bytes(&layout)?;
+        let loader = Loader::new(
+            source.clone(),
+            preparer.clone(),
+            LoaderConfig {
+                workers: config.loader_threads,
+            },
+        )
+        .map_err(CacheError::Spawn)?;
+        Ok(BrickManager {
+            source,
+            layout,
+            volume_frame,
+            meta: HashMap::new(),
+            cpu: CpuCache::new(config.cpu_budget_bytes),
+            pool,
+            loader,
+            budget: UploadBudget::new(config.upload_budget_bytes),
+            failures: Failures::new(config.retry),
+            config,
+            gpu,
+            preparer,
+            brick_bytes,
+            clock: Arc::new(SystemClock),
+        })
+    }
+
+    /// Replaces the clock that times retry back-offs (tests use a manual one).
+    pub fn set_clock(&mut self, clock: Arc<dyn Clock>) {
+        self.clock = clock;
+    }
+
+    /// Plans one frame. `frame` must not decrease from call to call; bricks used by
+    /// the returned cut are pinned in the pool for that frame. Never blocks on I/O
+    /// and never calls the source.
+    pub fn update(
+        &mut self,
+        camera: &Camera,
+        aspect: f32,
+        viewport_height_px: u32,
+        frame: u64,
+        mode: RenderMode,
+        tf: &TransferFunction,
+    ) -> FramePlan {
+        let now = self.clock.now();
+        let report = self.loader.poll(&mut self.cpu);
+        for (key, info) in report.metadata {
+            self.meta.insert(key, info);
+            self.failures.succeeded(FetchKind::Metadata, key);
+        }
+        for key in report.loaded {
+            self.failures.succeeded(FetchKind::Brick, key);
+        }
+        for (kind, key, error) in report.failed {
+            self.failures.record(kind, key, error, now, true);
+        }
+        self.failures.wake(now);
+        self.budget.begin_frame();
+        let params = RefineParams {
+            camera,
+            aspect,
+            viewport_height_px,
+            volume_frame: &self.volume_frame,
+            mode,
+            tf,
+            tolerance_px: self.config.tolerance_px,
+            max_data_leaves: self.pool.slot_count(),
+            brick_upload_bytes: self.brick_bytes,
+        };
+        let refined = {
+            let mut env = Env {
+                meta: &self.meta,
+                failures: &self.failures,
+                cpu: &mut self.cpu,
+                pool: &self.pool,
+            };
+            refine(&self.layout, &params, &mut env, &mut self.budget)
+        };
+
+        // Pin what is resident first, so that allocations below can only evict
+        // bricks this frame does not use.
+        let mut cut = Vec::with_capacity(refined.leaves.len());
+        let mut pending = Vec::new();
+        let mut resident = 0u32;
+        for l in &refined.leaves {
+            let kind = match l.class {
+                NodeClass::Empty(r) => LeafKind::Empty(r),
+                NodeClass::Data => match self.pool.touch(l.key, frame) {
+                    Some(slot) => {
+                        resident += 1;
+                        LeafKind::Data { slot }
+                    }
+                    None => {
+                        pending.push(cut.len());
+                        LeafKind::Empty(EmptyReason::NotLoaded)
+                    }
+                },
+            };
+            cut.push(CutLeaf {
+                key: l.key,
+                kind,
+                priority: l.priority,
+            });
+        }
+        let mut uploads = Vec::with_capacity(pending.len());
+        let mut allocation_failures = 0u32;
+        for i in pending {
+            let key = cut[i].key;
+            let Some(brick) = self.cpu.peek(key).cloned() else {
+                continue;
+            };
+            match self.pool.allocate(key, frame) {
+                Ok(a) => {
+                    cut[i].kind = LeafKind::Data { slot: a.slot };
+                    uploads.push(Upload {
+                        key,
+                        slot: a.slot,
+                        atlas_offset: self.pool.slot_offset(a.slot),
+                        brick,
+                    });
+                }
+                // Refinement keeps data leaves within the slot count, so this only
+                // happens when `frame` repeats and an earlier plan of the same frame
+                // pinned other slots; the leaf then stays empty for this frame.
+                Err(PoolError::Full { .. } | PoolError::NoSlots { .. }) => allocation_failures += 1,
+            }
+        }
+
+        // Loads wanted this frame; queued ones no longer wanted are dropped. A
+        // brick job also reads its children's metadata unless all of it is known.
+        let bricks: Vec<BrickRequest> = refined
+            .requests
+            .iter()
+            .map(|r| BrickRequest {
+                key: r.key,
+                priority: r.priority,
+                info: r.info,
+                children_meta: self.children_meta_missing(r.key, &r.info),
+            })
+            .collect();
+        self.loader.submit(&refined.meta_requests, &bricks);
+
+        let working = cut.iter().filter(|l| l.kind.is_data()).count() as u32;
+        let residency = self.residency_counts();
+        let stats = FrameStats {
+            frame,
+            leaves: cut.len() as u32,
+            working_set_bricks: working,
+            pool_slots: self.pool.slot_count(),
+            pool_occupied: self.pool.occupied(),
+            upload_bricks: uploads.len() as u32,
+            upload_bytes: uploads.iter().map(|u| u.brick.bytes()).sum(),
+            gpu_hit_rate: if working == 0 {
+                1.0
+            } else {
+                resident as f64 / working as f64
+            },
+            cpu_hit_rate: self.cpu.hit_rate(),
+            requests_in_flight: residency.requested + residency.loading,
+            requested_this_frame: bricks.len() as u32,
+            metadata_in_flight: (self.loader.queued(FetchKind::Metadata)
+                + self.loader.loading(FetchKind::Metadata)) as u32,
+            metadata_requested_this_frame: refined.meta_requests.len() as u32,
+            residency,
+            blocked: refined.blocked,
+            allocation_failures,
+            failed_needed: refined.failed_needed,
+            failures: self.failures.counts(),
+        };
+        FramePlan {
+            cut,
+            uploads,
+            stats,
+        }
+    }
+
+    /// True when some child of `key` inside the volume has no known metadata (and
+    /// the node can be split at all).
+    pub(crate) fn children_meta_missing(&self, key: NodeKey, info: &NodeInfo) -> bool {
+        !matches!(info.kind, NodeKind::Uniform(_))
+            && key.level.saturating_add(1) < self.layout.levels
+            && key
+                .children()
+                .iter()
+                .any(|c| self.layout.in_volume(*c) && !self.meta.contains_key(c))
+    }
+}

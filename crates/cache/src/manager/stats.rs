@@ -1,0 +1,145 @@
+//! What [`BrickManager::update`](super::BrickManager::update) returns: the
+//! frame's plan (cut and uploads) and its statistics.
+
+use crate::failures::FailureCounts;
+use crate::pool::SlotId;
+use crate::prepared::PreparedBrick;
+use crate::refine::SplitBlocks;
+use brickray_core::{CutLeaf, NodeKey};
+
+/// Where a node's brick is, the most GPU-ward state first.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Residency {
+    /// Queued for loading.
+    Requested,
+    /// Being read (or read and awaiting the next update).
+    Loading,
+    /// In the CPU cache, not on the GPU.
+    InCpu,
+    /// In a GPU pool slot.
+    OnGpu,
+    /// Its load failed and is not yet due for a retry; the error is kept
+    /// ([`BrickManager::failure`](super::BrickManager::failure)).
+    Failed,
+}
+
+/// Number of nodes per residency state.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct ResidencyCounts {
+    /// Queued.
+    pub requested: u32,
+    /// Being read.
+    pub loading: u32,
+    /// In CPU memory only.
+    pub in_cpu: u32,
+    /// On the GPU.
+    pub on_gpu: u32,
+    /// Failed.
+    pub failed: u32,
+}
+
+/// A brick to copy into the atlas this frame, before drawing.
+#[derive(Debug, Clone)]
+pub struct Upload {
+    /// The node.
+    pub key: NodeKey,
+    /// Its slot.
+    pub slot: SlotId,
+    /// Voxel offset of the slot in the atlas.
+    pub atlas_offset: [u32; 3],
+    /// The prepared brick: texels for the atlas, sub-cell ranges for the slot's
+    /// rows of the sub-cell table, the node's range for its slot-table row.
+    pub brick: PreparedBrick,
+}
+
+/// Statistics of one frame.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct FrameStats {
+    /// The frame.
+    pub frame: u64,
+    /// Leaves of the cut.
+    pub leaves: u32,
+    /// Leaves holding a brick (the GPU working set).
+    pub working_set_bricks: u32,
+    /// Pool slots.
+    pub pool_slots: u32,
+    /// Occupied pool slots.
+    pub pool_occupied: u32,
+    /// Bricks scheduled for upload.
+    pub upload_bricks: u32,
+    /// Bytes scheduled for upload ([`PreparedBrick::bytes`] summed).
+    pub upload_bytes: u64,
+    /// Working-set bricks already on the GPU / working-set bricks (this frame; 1 if none).
+    pub gpu_hit_rate: f64,
+    /// Lookups of bricks not on the GPU found in CPU memory (cumulative; 1 if none).
+    pub cpu_hit_rate: f64,
+    /// Brick requests queued or being read.
+    pub requests_in_flight: u32,
+    /// Bricks requested this frame.
+    pub requested_this_frame: u32,
+    /// Metadata requests queued or being read.
+    pub metadata_in_flight: u32,
+    /// Metadata reads requested this frame.
+    pub metadata_requested_this_frame: u32,
+    /// Nodes per residency state.
+    pub residency: ResidencyCounts,
+    /// Why nodes were not split.
+    pub blocked: SplitBlocks,
+    /// Data leaves left empty because the pool had no unpinned slot (only when the
+    /// same frame number is planned twice).
+    pub allocation_failures: u32,
+    /// Nodes this frame's cut needs whose metadata or brick failed (children of a
+    /// split refused for it, or the root): the image is degraded there.
+    pub failed_needed: u32,
+    /// Failed reads, current and cumulative, per kind.
+    pub failures: FailureCounts,
+}
+
+impl FrameStats {
+    /// True when another frame of the same view would not change the image:
+    /// nothing requested or in flight (bricks or metadata), nothing uploaded or
+    /// waiting for upload budget, no split waiting for data or metadata, and no
+    /// node the cut needs has failed ([`degraded`](Self::degraded) is false). A
+    /// degraded image is not converged: a retry (automatic after the back-off, or
+    /// [`BrickManager::retry_failed`](super::BrickManager::retry_failed)) may
+    /// still change it.
+    pub fn converged(&self) -> bool {
+        self.settled() && !self.degraded()
+    }
+
+    /// True when the cut needs nodes whose metadata or brick failed.
+    pub fn degraded(&self) -> bool {
+        self.failed_needed > 0
+    }
+
+    /// True when nothing is loading or pending (failures aside).
+    pub fn settled(&self) -> bool {
+        self.requested_this_frame == 0
+            && self.requests_in_flight == 0
+            && self.metadata_requested_this_frame == 0
+            && self.metadata_in_flight == 0
+            && self.upload_bricks == 0
+            && self.blocked.missing_data == 0
+            && self.blocked.missing_meta == 0
+            && self.blocked.upload_budget == 0
+    }
+}
+
+/// What the renderer does this frame.
+#[derive(Debug, Clone, Default)]
+pub struct FramePlan {
+    /// Leaves covering the octree cube (each point in exactly one); give it to
+    /// `brickray_index::encode_cut` as it is.
+    pub cut: Vec<CutLeaf>,
+    /// Bricks to upload before drawing.
+    pub uploads: Vec<Upload>,
+    /// Statistics.
+    pub stats: FrameStats,
+}
+
+impl FramePlan {
+    /// The cut as `(node, slot)` pairs, `None` for empty leaves.
+    pub fn leaves(&self) -> impl Iterator<Item = (NodeKey, Option<SlotId>)> + '_ {
+        self.cut.iter().map(|l| (l.key, l.slot()))
+    }
+}

@@ -1,0 +1,127 @@
+//! Bricks prepared for the GPU off the frame path: the loader's workers turn each
+//! brick they read into its texels and sub-cell ranges, so the render thread only
+//! copies bytes.
+
+use crate::config::{ConfigError, GpuFormat, raw_brick_bytes};
+use brickray_core::{NodeInfo, OctreeLayout, SampleEncoding, sub_cell_ranges};
+use std::sync::Arc;
+
+/// A brick ready to upload: what the renderer writes into its atlas slot, its
+/// sub-cell table and its slot-table row.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PreparedBrick {
+    /// `stored_side^3` texels of [`GpuFormat::encoding`], x fastest.
+    pub texels: Arc<[u8]>,
+    /// Normalized `[min, max]` of each of the `n^3` sub-cells (x fastest,
+    /// `n` = [`GpuFormat::sub_cells_per_axis`]); see
+    /// [`sub_cell_ranges`](brickray_core::sub_cell_ranges).
+    pub sub_cells: Arc<[[f32; 2]]>,
+    /// The node's normalized `[min, max]` from its metadata (`[-inf, inf]` when
+    /// the metadata is not finite: never skipped).
+    pub range: [f32; 2],
+}
+
+impl PreparedBrick {
+    /// Bytes it occupies (and uploads): `texels.len() + 8 * sub_cells.len()`.
+    pub fn bytes(&self) -> u64 {
+        self.texels.len() as u64 + 8 * self.sub_cells.len() as u64
+    }
+}
+
+/// Turns bricks as the source stores them into [`PreparedBrick`]s.
+#[derive(Debug, Clone)]
+pub struct Preparer {
+    layout: OctreeLayout,
+    encoding: SampleEncoding,
+    sub_cells_per_axis: u32,
+    raw_bytes: usize,
+}
+
+impl Preparer {
+    /// A preparer for `layout` and what the device stores (`gpu`), checked.
+    pub fn new(layout: &OctreeLayout, gpu: &GpuFormat) -> Result<Preparer, ConfigError> {
+        gpu.validate(layout)?;
+        Ok(Preparer {
+            layout: layout.clone(),
+            encoding: gpu.encoding,
+            sub_cells_per_axis: gpu.sub_cells_per_axis,
+            raw_bytes: raw_brick_bytes(layout)?,
+        })
+    }
+
+    /// The octree layout.
+    pub fn layout(&self) -> &OctreeLayout {
+        &self.layout
+    }
+
+    /// Bytes of a brick as the source stores it (the read buffer).
+    pub fn raw_bytes(&self) -> usize {
+        self.raw_bytes
+    }
+
+    /// The normalized `[min, max]` of a node's metadata, ordered; `[-inf, inf]`
+    /// when not finite.
+    pub fn range(&self, info: &NodeInfo) -> [f32; 2] {
+        let d = &self.layout.volume;
+        let (a, b) = (d.normalize(info.min), d.normalize(info.max));
+        if a.is_finite() && b.is_finite() {
+            [a.min(b), a.max(b)]
+        } else {
+            [f32::NEG_INFINITY, f32::INFINITY]
+        }
+    }
+
+    /// Prepares a brick read from the source (`raw`: `raw_bytes()` little-endian
+    /// samples) whose metadata is `info`.
+    pub fn prepare(&self, raw: &[u8], info: &NodeInfo) -> PreparedBrick {
+        let texels: Arc<[u8]> = Arc::from(self.encoding.encode(raw).as_ref());
+        let sub_cells: Arc<[[f32; 2]]> =
+            sub_cell_ranges(&self.layout, raw, self.sub_cells_per_axis).into();
+        PreparedBrick {
+            texels,
+            sub_cells,
+            range: self.range(info),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::refine::tests::ball_layout;
+    use brickray_core::{NodeKind, TexelCaps, U8Filtering};
+
+    #[test]
+    fn prepares_texels_cells_and_range() {
+        let layout = ball_layout(64);
+        let caps = TexelCaps {
+            norm16: true,
+            float32_filterable: false,
+        };
+        let gpu = GpuFormat::for_layout(&layout, caps, U8Filtering::Exact, 32, 2048);
+        let p = Preparer::new(&layout, &gpu).unwrap();
+        assert_eq!(p.raw_bytes(), 1000);
+        let mut raw = vec![3u8; 1000];
+        raw[0] = 0;
+        raw[999] = 9;
+        let info = NodeInfo {
+            kind: NodeKind::Data,
+            min: 0.9,
+            max: 0.1,
+        };
+        let b = p.prepare(&raw, &info);
+        assert_eq!(b.texels.len(), 2000);
+        assert_eq!(&b.texels[..4], &[0, 0, 3, 3]);
+        assert_eq!(&b.texels[1998..], &[9, 9]);
+        // One sub-cell (8^3 interior voxels) spanning the whole brick.
+        assert_eq!(&*b.sub_cells, &[[0.0, 9.0]]);
+        assert_eq!(b.range, [0.1, 0.9]);
+        assert_eq!(b.bytes(), 2008);
+        assert_eq!(Some(b.bytes()), gpu.prepared_brick_bytes(&layout).ok());
+        let nan = NodeInfo {
+            min: f32::NAN,
+            ..info
+        };
+        assert_eq!(p.range(&nan), [f32::NEG_INFINITY, f32::INFINITY]);
+    }
+}

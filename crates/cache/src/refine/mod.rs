@@ -1,0 +1,459 @@
+//! View- and transfer-function-dependent refinement (Gobbetti et al. 2008, sect. 4).
+//!
+//! Each frame the cut is rebuilt from the root: a max-heap of the cut's refinable
+//! nodes, keyed by the projected screen-space size of their voxels, is refined
+//! greedily. Terminal nodes are those outside the view frustum, empty or invisible
+//! under the current mode and transfer function, uniform, at the finest level,
+//! already within the screen-error tolerance, or whose projected size is not
+//! finite (a non-finite camera or frame). A node is split only when the metadata
+//! of its children is known (missing metadata is requested), the bricks of all its
+//! visible children are on the GPU or in CPU memory (missing ones are requested
+//! with the parent's priority), none of them failed, the pool has slots for them
+//! and the frame's upload budget can take those not yet on the GPU.
+//!
+//! Classification uses node metadata only ([`RefineEnv::node`]); no brick is read
+//! and refinement never calls the source: it only says what to request. At most
+//! `min(max_data_leaves, `[`MAX_REQUESTS_PER_FRAME`]`)` bricks and
+//! [`MAX_META_REQUESTS_PER_FRAME`] metadata reads are requested per frame,
+//! highest priority first.
+
+#[cfg(test)]
+mod fault_tests;
+mod geometry;
+#[cfg(test)]
+pub(crate) mod tests;
+
+pub use geometry::{ViewGeometry, is_visible};
+
+use crate::upload::UploadBudget;
+use brickray_core::{
+    Camera, EmptyReason, NodeInfo, NodeKey, NodeKind, OctreeLayout, RenderMode, TransferFunction,
+    VolumeFrame,
+};
+use std::collections::BinaryHeap;
+
+/// Most bricks requested in one frame (also never more than the pool's slots).
+pub const MAX_REQUESTS_PER_FRAME: u32 = 256;
+/// Most metadata reads requested in one frame.
+pub const MAX_META_REQUESTS_PER_FRAME: u32 = 1024;
+
+/// The classification of one node under a view.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum NodeClass {
+    /// Needs no brick.
+    Empty(EmptyReason),
+    /// Needs its brick.
+    Data,
+}
+
+/// Where a node's brick is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum DataState {
+    /// In a GPU pool slot.
+    OnGpu,
+    /// In the CPU cache (not on the GPU).
+    InCpu,
+    /// Neither; may be queued or loading.
+    Missing,
+    /// Its load failed (and is not yet due for a retry).
+    Failed,
+}
+
+/// What is known of a node's metadata.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum MetaState {
+    /// Known.
+    Known(NodeInfo),
+    /// Not known yet (refinement requests it).
+    Pending,
+    /// Its read failed (and is not yet due for a retry).
+    Failed,
+}
+
+/// What refinement needs to know about the world outside it. Neither method may
+/// block: the answers come from caches.
+pub trait RefineEnv {
+    /// Node metadata, as far as it is known.
+    fn node(&mut self, key: NodeKey) -> MetaState;
+    /// Where the node's brick is.
+    fn data(&mut self, key: NodeKey) -> DataState;
+}
+
+/// The view and the knobs of one refinement.
+#[derive(Debug, Clone, Copy)]
+pub struct RefineParams<'a> {
+    /// The camera.
+    pub camera: &'a Camera,
+    /// Viewport width / height.
+    pub aspect: f32,
+    /// Viewport height in pixels.
+    pub viewport_height_px: u32,
+    /// The volume's placement in the world.
+    pub volume_frame: &'a VolumeFrame,
+    /// Render mode (decides emptiness).
+    pub mode: RenderMode,
+    /// Transfer function (decides DVR transparency).
+    pub tf: &'a TransferFunction,
+    /// Screen-space error tolerance: a node whose voxels project to at most this
+    /// many pixels is not refined (default 1).
+    pub tolerance_px: f32,
+    /// Most leaves needing a brick (the pool's slot count).
+    pub max_data_leaves: u32,
+    /// Bytes one brick upload costs against the frame's upload budget.
+    pub brick_upload_bytes: u64,
+}
+
+/// One leaf of a refined cut (the manager turns it into a
+/// [`CutLeaf`](brickray_core::CutLeaf) once slots are assigned).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RefinedLeaf {
+    /// The node.
+    pub key: NodeKey,
+    /// Whether it needs its brick.
+    pub class: NodeClass,
+    /// Projected voxel size in pixels (0 for culled and empty leaves and when
+    /// not finite).
+    pub priority: f32,
+    /// True when the brick is needed and not on the GPU (an upload this frame).
+    pub needs_upload: bool,
+}
+
+/// Counts of refusals to split, by reason.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct SplitBlocks {
+    /// Children's metadata not known yet (requested).
+    pub missing_meta: u32,
+    /// Children's data not in memory yet.
+    pub missing_data: u32,
+    /// A child's data or metadata failed to load.
+    pub failed: u32,
+    /// Not enough pool slots.
+    pub pool_full: u32,
+    /// Upload budget of the frame spent.
+    pub upload_budget: u32,
+}
+
+/// A brick refinement wants loaded.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LoadRequest {
+    /// The node.
+    pub key: NodeKey,
+    /// Higher first.
+    pub priority: f32,
+    /// Its metadata.
+    pub info: NodeInfo,
+}
+
+/// The result of [`refine`].
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Refinement {
+    /// Leaves covering the octree cube, each point in exactly one.
+    pub leaves: Vec<RefinedLeaf>,
+    /// Bricks to load, highest priority first.
+    pub requests: Vec<LoadRequest>,
+    /// Metadata to read, with priorities, highest first.
+    pub meta_requests: Vec<(NodeKey, f32)>,
+    /// Why nodes were not split.
+    pub blocked: SplitBlocks,
+    /// Leaves needing a brick.
+    pub data_leaves: u32,
+    /// Nodes the cut needs (children of a wanted split, or the root) whose
+    /// metadata or brick failed: the image is degraded there.
+    pub failed_needed: u32,
+}
+
+#[derive(Debug, PartialEq)]
+struct HeapItem {
+    priority: f64,
+    key: NodeKey,
+    uniform: bool,
+    /// Its upload was charged to the budget when its parent was split.
+    charged: bool,
+}
+impl Eq for HeapItem {}
+impl PartialOrd for HeapItem {
+    fn partial_cmp(&self, other: &Self) -> Option<std::cmp::Ordering> {
+        Some(self.cmp(other))
+    }
+}
+impl Ord for HeapItem {
+    fn cmp(&self, other: &Self) -> std::cmp::Ordering {
+        self.priority
+            .total_cmp(&other.priority)
+            .then_with(|| other.key.cmp(&self.key))
+    }
+}
+
+/// A classified node.
+#[derive(Debug, Clone, Copy)]
+struct Classified {
+    class: NodeClass,
+    uniform: bool,
+    /// Its metadata (for nodes inside the volume).
+    info: Option<NodeInfo>,
+}
+
+/// Why a node could not be classified.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Unknown {
+    Pending,
+    Failed,
+}
+
+fn classify(
+    key: NodeKey,
+    layout: &OctreeLayout,
+    params: &RefineParams<'_>,
+    geo: &ViewGeometry,
+    env: &mut dyn RefineEnv,
+) -> Result<Classified, Unknown> {
+    let empty = |reason, info| Classified {
+        class: NodeClass::Empty(reason),
+        uniform: false,
+        info,
+    };
+    if !layout.in_volume(key) {
+        return Ok(empty(EmptyReason::Empty, None));
+    }
+    let info = match env.node(key) {
+        MetaState::Known(info) => info,
+        MetaState::Pending => return Err(Unknown::Pending),
+        MetaState::Failed => return Err(Unknown::Failed),
+    };
+    if info.kind == NodeKind::Empty {
+        return Ok(empty(EmptyReason::Empty, Some(info)));
+    }
+    if !is_visible(&info, params.mode, params.tf, layout) {
+        return Ok(empty(EmptyReason::Invisible, Some(info)));
+    }
+    if geo.culled(key) {
+        return Ok(empty(EmptyReason::Culled, Some(info)));
+    }
+    Ok(Classified {
+        class: NodeClass::Data,
+        uniform: matches!(info.kind, NodeKind::Uniform(_)),
+        info: Some(info),
+    })
+}
+
+/// Refines the octree of `layout` for one frame. `budget` is the frame's upload
+/// budget (already started); bricks of split children not on the GPU are charged
+/// to it, as is the root when it is the only leaf and not on the GPU.
+pub fn refine(
+    layout: &OctreeLayout,
+    params: &RefineParams<'_>,
+    env: &mut dyn RefineEnv,
+    budget: &mut UploadBudget,
+) -> Refinement {
+    let geo = ViewGeometry::new(
+        layout,
+        params.camera,
+        params.aspect,
+        params.viewport_height_px,
+        params.volume_frame,
+    );
+    let brick_bytes = params.brick_upload_bytes;
+    let finest = layout.levels.saturating_sub(1);
+    let tol = params.tolerance_px.max(0.0) as f64;
+    let max_requests = params.max_data_leaves.min(MAX_REQUESTS_PER_FRAME) as usize;
+    let max_meta = MAX_META_REQUESTS_PER_FRAME as usize;
+    let mut out = Refinement::default();
+    let mut heap = BinaryHeap::new();
+
+    let empty_leaf = |key, reason| RefinedLeaf {
+        key,
+        class: NodeClass::Empty(reason),
+        priority: 0.0,
+        needs_upload: false,
+    };
+
+    let root = NodeKey::ROOT;
+    let root_info = match classify(root, layout, params, &geo, env) {
+        Ok(Classified {
+            class: NodeClass::Empty(r),
+            ..
+        }) => {
+            out.leaves.push(empty_leaf(root, r));
+            return out;
+        }
+        Ok(c) => {
+            heap.push(HeapItem {
+                priority: geo.voxel_pixels(root),
+                key: root,
+                uniform: c.uniform,
+                charged: false,
+            });
+            c.info
+        }
+        Err(Unknown::Pending) => {
+            out.leaves.push(empty_leaf(root, EmptyReason::NotLoaded));
+            out.meta_requests.push((root, f32::MAX));
+            out.blocked.missing_meta += 1;
+            return out;
+        }
+        Err(Unknown::Failed) => {
+            out.leaves.push(empty_leaf(root, EmptyReason::Failed));
+            out.blocked.failed += 1;
+            out.failed_needed += 1;
+            return out;
+        }
+    };
+    out.data_leaves = 1;
+    if params.max_data_leaves == 0 {
+        out.leaves.push(empty_leaf(root, EmptyReason::NotLoaded));
+        out.data_leaves = 0;
+        out.blocked.pool_full += 1;
+        return out;
+    }
+    // The root's brick is wanted first (it is charged to the upload budget only if
+    // it ends up a leaf).
+    if let (DataState::Missing, Some(info)) = (env.data(root), root_info) {
+        out.requests.push(LoadRequest {
+            key: root,
+            priority: f32::MAX,
+            info,
+        });
+    }
+
+    // Nodes that stay leaves and need their brick: (key, priority).
+    let mut finals: Vec<(NodeKey, f64)> = Vec::new();
+    while let Some(HeapItem {
+        priority,
+        key,
+        uniform,
+        charged,
+    }) = heap.pop()
+    {
+        // A non-finite size (a non-finite camera or frame) is never refined.
+        if uniform || key.level >= finest || !priority.is_finite() || priority <= tol {
+            finals.push((key, priority));
+            continue;
+        }
+        let children = key.children();
+        // Classify the children.
+        let mut classes = [Classified {
+            class: NodeClass::Empty(EmptyReason::Empty),
+            uniform: false,
+            info: None,
+        }; 8];
+        let (mut pending, mut failed) = (Vec::new(), 0u32);
+        for (i, c) in children.into_iter().enumerate() {
+            match classify(c, layout, params, &geo, env) {
+                Ok(cl) => classes[i] = cl,
+                Err(Unknown::Pending) => pending.push(c),
+                Err(Unknown::Failed) => failed += 1,
+            }
+        }
+        if failed > 0 {
+            out.blocked.failed += 1;
+            out.failed_needed += failed;
+            finals.push((key, priority));
+            continue;
+        }
+        if !pending.is_empty() {
+            for c in pending {
+                if out.meta_requests.len() < max_meta {
+                    out.meta_requests.push((c, priority as f32));
+                }
+            }
+            out.blocked.missing_meta += 1;
+            finals.push((key, priority));
+            continue;
+        }
+        let data: Vec<usize> = (0..8)
+            .filter(|&i| classes[i].class == NodeClass::Data)
+            .collect();
+        let states: Vec<DataState> = data.iter().map(|&i| env.data(children[i])).collect();
+        let failed = states.iter().filter(|s| **s == DataState::Failed).count() as u32;
+        if failed > 0 {
+            out.blocked.failed += 1;
+            out.failed_needed += failed;
+            finals.push((key, priority));
+            continue;
+        }
+        let missing: Vec<usize> = data
+            .iter()
+            .zip(&states)
+            .filter(|(_, s)| **s == DataState::Missing)
+            .map(|(i, _)| *i)
+            .collect();
+        if !missing.is_empty() {
+            for i in missing {
+                if let (true, Some(info)) = (out.requests.len() < max_requests, classes[i].info) {
+                    out.requests.push(LoadRequest {
+                        key: children[i],
+                        priority: priority as f32,
+                        info,
+                    });
+                }
+            }
+            out.blocked.missing_data += 1;
+            finals.push((key, priority));
+            continue;
+        }
+        if out.data_leaves - 1 + data.len() as u32 > params.max_data_leaves {
+            out.blocked.pool_full += 1;
+            finals.push((key, priority));
+            continue;
+        }
+        // A split node charged at its parent's split is not uploaded after all.
+        let uploads = states.iter().filter(|s| **s == DataState::InCpu).count() as u64;
+        let release = if charged { brick_bytes } else { 0 };
+        if uploads > 0 && !budget.try_exchange(release, uploads * brick_bytes) {
+            out.blocked.upload_budget += 1;
+            finals.push((key, priority));
+            continue;
+        }
+        out.data_leaves = out.data_leaves - 1 + data.len() as u32;
+        if uploads == 0 && charged {
+            budget.release(brick_bytes);
+        }
+        let mut state = states.iter();
+        for i in 0..8 {
+            match classes[i].class {
+                NodeClass::Empty(r) => out.leaves.push(empty_leaf(children[i], r)),
+                NodeClass::Data => heap.push(HeapItem {
+                    priority: geo.voxel_pixels(children[i]),
+                    key: children[i],
+                    uniform: classes[i].uniform,
+                    charged: state.next() == Some(&DataState::InCpu),
+                }),
+            }
+        }
+    }
+
+    for (key, priority) in finals {
+        let state = env.data(key);
+        let available = match state {
+            DataState::OnGpu => true,
+            // Split children were charged when split; the root, if a leaf, is the
+            // only leaf, so nothing else was charged and the reservation succeeds.
+            DataState::InCpu => key != root || budget.try_reserve(brick_bytes),
+            DataState::Missing | DataState::Failed => false,
+        };
+        if available {
+            out.leaves.push(RefinedLeaf {
+                key,
+                class: NodeClass::Data,
+                priority: if priority.is_finite() {
+                    priority as f32
+                } else {
+                    0.0
+                },
+                needs_upload: state == DataState::InCpu,
+            });
+        } else {
+            out.data_leaves -= 1;
+            let reason = if state == DataState::Failed {
+                // Only the root can get here: other nodes are split only when
+                // their brick is available.
+                out.failed_needed += 1;
+                EmptyReason::Failed
+            } else {
+                EmptyReason::NotLoaded
+            };
+            out.leaves.push(empty_leaf(key, reason));
+        }
+    }
+    out
+}

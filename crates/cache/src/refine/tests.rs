@@ -1,0 +1,356 @@
+use super::*;
+use brickray_core::{DType, Projection, VolumeDesc};
+use glam::Vec3;
+use proptest::prelude::*;
+use std::collections::HashSet;
+
+/// A ball: raw value `clamp(1 - 2 |p - c|, 0, 1)` over texture space; nodes
+/// wholly outside the ball are `Empty`.
+pub(crate) fn ball_info(layout: &OctreeLayout, key: NodeKey) -> NodeInfo {
+    let scale = layout.volume_scale();
+    let (o, side) = key.unit_box();
+    let mut near2 = 0.0;
+    let mut far2 = 0.0;
+    for a in 0..3 {
+        let lo = (o[a] / scale[a]).min(1.0);
+        let hi = ((o[a] + side) / scale[a]).min(1.0);
+        let n = (0.5f64.clamp(lo, hi) - 0.5).abs();
+        let f = (lo - 0.5).abs().max((hi - 0.5).abs());
+        near2 += n * n;
+        far2 += f * f;
+    }
+    let max = (1.0 - 2.0 * near2.sqrt()).max(0.0) as f32;
+    let min = (1.0 - 2.0 * far2.sqrt()).max(0.0) as f32;
+    let kind = if max <= 0.0 {
+        NodeKind::Empty
+    } else {
+        NodeKind::Data
+    };
+    NodeInfo { kind, min, max }
+}
+
+pub(crate) fn ball_layout(dim: u32) -> OctreeLayout {
+    let desc = VolumeDesc {
+        dims: [dim; 3],
+        dtype: DType::U8,
+        spacing: [1.0; 3],
+        value_range: [0.0, 1.0],
+    };
+    OctreeLayout::new(desc, 8, 1)
+}
+
+/// Every brick available in CPU memory; metadata from the ball.
+struct AllInCpu {
+    layout: OctreeLayout,
+    on_gpu: HashSet<NodeKey>,
+    meta_reads: usize,
+}
+
+impl RefineEnv for AllInCpu {
+    fn node(&mut self, key: NodeKey) -> MetaState {
+        self.meta_reads += 1;
+        MetaState::Known(ball_info(&self.layout, key))
+    }
+    fn data(&mut self, key: NodeKey) -> DataState {
+        if self.on_gpu.contains(&key) {
+            DataState::OnGpu
+        } else {
+            DataState::InCpu
+        }
+    }
+}
+
+pub(crate) fn assert_exact_cover(leaves: &[NodeKey], levels: u8) {
+    let set: HashSet<NodeKey> = leaves.iter().copied().collect();
+    assert_eq!(set.len(), leaves.len(), "duplicate leaves");
+    for l in leaves {
+        let mut p = l.parent();
+        while let Some(k) = p {
+            assert!(
+                !set.contains(&k),
+                "{k:?} and its descendant {l:?} are both leaves"
+            );
+            p = k.parent();
+        }
+        assert!(l.level < levels);
+    }
+    let deepest = levels as u32 - 1;
+    let total: u128 = leaves
+        .iter()
+        .map(|l| 1u128 << (3 * (deepest - l.level as u32)))
+        .sum();
+    assert_eq!(
+        total,
+        1u128 << (3 * deepest),
+        "leaves do not cover the cube"
+    );
+}
+
+pub(super) struct Setup {
+    pub(super) layout: OctreeLayout,
+    pub(super) frame: VolumeFrame,
+    pub(super) tf: TransferFunction,
+}
+
+pub(super) fn setup() -> Setup {
+    let layout = ball_layout(64);
+    let frame = VolumeFrame::centered([64; 3], [1.0; 3]);
+    Setup {
+        layout,
+        frame,
+        tf: TransferFunction::ramp(0.0, 1.0, 1.0),
+    }
+}
+
+fn run(
+    s: &Setup,
+    cam: &Camera,
+    mode: RenderMode,
+    tf: &TransferFunction,
+    slots: u32,
+    budget: u64,
+) -> Refinement {
+    let mut env = AllInCpu {
+        layout: s.layout.clone(),
+        on_gpu: HashSet::new(),
+        meta_reads: 0,
+    };
+    let params = RefineParams {
+        camera: cam,
+        aspect: 1.0,
+        viewport_height_px: 512,
+        volume_frame: &s.frame,
+        mode,
+        tf,
+        tolerance_px: 1.0,
+        max_data_leaves: slots,
+        brick_upload_bytes: s.layout.brick_bytes() as u64,
+    };
+    let mut b = UploadBudget::new(budget);
+    refine(&s.layout, &params, &mut env, &mut b)
+}
+
+pub(super) fn keys(r: &Refinement) -> Vec<NodeKey> {
+    r.leaves.iter().map(|l| l.key).collect()
+}
+
+fn count(r: &Refinement, class: NodeClass) -> usize {
+    r.leaves.iter().filter(|l| l.class == class).count()
+}
+
+#[test]
+fn close_view_refines_to_finest_far_view_stays_coarse() {
+    let s = setup();
+    let near = Camera::orbit(Vec3::ZERO, 1.5, 0.3, 0.2);
+    let r = run(&s, &near, RenderMode::Dvr, &s.tf, 10_000, u64::MAX);
+    assert_exact_cover(&keys(&r), s.layout.levels);
+    assert!(
+        r.leaves
+            .iter()
+            .any(|l| l.key.level == s.layout.levels - 1 && l.class == NodeClass::Data)
+    );
+    assert_eq!(r.data_leaves as usize, count(&r, NodeClass::Data));
+    let far = Camera::orbit(Vec3::ZERO, 400.0, 0.3, 0.2);
+    let r = run(&s, &far, RenderMode::Dvr, &s.tf, 10_000, u64::MAX);
+    assert_eq!(keys(&r), vec![NodeKey::ROOT]);
+    assert!(r.leaves[0].needs_upload);
+}
+
+#[test]
+fn frustum_culling_drops_offscreen_nodes() {
+    let s = setup();
+    // Looking away from the volume: everything culled at the root.
+    let mut away = Camera::orbit(Vec3::ZERO, 2.0, 0.0, 0.0);
+    away.target = away.eye * 2.0;
+    let r = run(&s, &away, RenderMode::Dvr, &s.tf, 10_000, u64::MAX);
+    assert_eq!(r.leaves.len(), 1);
+    assert_eq!(r.leaves[0].class, NodeClass::Empty(EmptyReason::Culled));
+    // Close up on one corner: many culled leaves, and no culled leaf projects on screen.
+    let cam = Camera {
+        target: Vec3::splat(0.4),
+        ..Camera::orbit(Vec3::ZERO, 0.0, 0.0, 0.0)
+    };
+    let cam = Camera {
+        eye: Vec3::new(0.4, 0.4, 1.0),
+        ..cam
+    };
+    let r = run(&s, &cam, RenderMode::Mip, &s.tf, 10_000, u64::MAX);
+    assert_exact_cover(&keys(&r), s.layout.levels);
+    let culled: Vec<_> = r
+        .leaves
+        .iter()
+        .filter(|l| l.class == NodeClass::Empty(EmptyReason::Culled))
+        .collect();
+    assert!(!culled.is_empty());
+    let geo = ViewGeometry::new(&s.layout, &cam, 1.0, 512, &s.frame);
+    let vp = cam.view_proj(1.0).as_dmat4();
+    for l in culled {
+        // Sample the box densely: no point projects inside the clip volume.
+        let c = geo.world_corners(l.key);
+        for t in 0..125 {
+            let f = [
+                (t % 5) as f64 / 4.0,
+                ((t / 5) % 5) as f64 / 4.0,
+                (t / 25) as f64 / 4.0,
+            ];
+            let p = c[0] + (c[1] - c[0]) * f[0] + (c[2] - c[0]) * f[1] + (c[4] - c[0]) * f[2];
+            let q = vp * p.extend(1.0);
+            let inside = q.x.abs() <= q.w && q.y.abs() <= q.w && q.z >= 0.0 && q.z <= q.w;
+            assert!(!inside, "culled {:?} is visible at {p:?}", l.key);
+        }
+    }
+    assert!(count(&r, NodeClass::Data) > 0);
+}
+
+#[test]
+fn empty_and_invisible_nodes_are_terminal() {
+    let s = setup();
+    let cam = Camera::orbit(Vec3::ZERO, 1.5, 0.3, 0.2);
+    // Fully transparent TF: the root is invisible and nothing is requested.
+    let clear = TransferFunction::ramp(1.0, 1.0, 0.0);
+    let r = run(&s, &cam, RenderMode::Dvr, &clear, 10_000, u64::MAX);
+    assert_eq!(r.leaves.len(), 1);
+    assert_eq!(r.leaves[0].class, NodeClass::Empty(EmptyReason::Invisible));
+    assert!(r.requests.is_empty());
+    // MIP: only the Empty corners of the ball are terminal-empty, none invisible.
+    let r = run(&s, &cam, RenderMode::Mip, &s.tf, 10_000, u64::MAX);
+    assert!(count(&r, NodeClass::Empty(EmptyReason::Empty)) > 0);
+    assert_eq!(count(&r, NodeClass::Empty(EmptyReason::Invisible)), 0);
+    // Iso at 0.9: only nodes reaching 0.9 (near the centre) hold data.
+    let iso = RenderMode::Iso {
+        value: 0.9,
+        color: [1.0; 3],
+    };
+    let r = run(&s, &cam, iso, &s.tf, 10_000, u64::MAX);
+    assert_exact_cover(&keys(&r), s.layout.levels);
+    for l in &r.leaves {
+        let info = ball_info(&s.layout, l.key);
+        match l.class {
+            NodeClass::Data => assert!(info.min <= 0.9 && 0.9 <= info.max, "{l:?}"),
+            NodeClass::Empty(EmptyReason::Invisible) => {
+                assert!(!(info.min <= 0.9 && 0.9 <= info.max))
+            }
+            _ => {}
+        }
+    }
+    assert!(count(&r, NodeClass::Empty(EmptyReason::Invisible)) > 0);
+}
+
+#[test]
+fn tiny_pool_gives_coarser_complete_cut() {
+    let s = setup();
+    let cam = Camera::orbit(Vec3::ZERO, 1.5, 0.3, 0.2);
+    let big = run(&s, &cam, RenderMode::Mip, &s.tf, 10_000, u64::MAX);
+    for slots in [1u32, 3, 8, 20] {
+        let r = run(&s, &cam, RenderMode::Mip, &s.tf, slots, u64::MAX);
+        assert_exact_cover(&keys(&r), s.layout.levels);
+        assert!(r.data_leaves <= slots);
+        assert!(r.data_leaves < big.data_leaves);
+        assert!(r.blocked.pool_full > 0);
+    }
+    let r = run(&s, &cam, RenderMode::Mip, &s.tf, 0, u64::MAX);
+    assert_eq!(r.leaves[0].class, NodeClass::Empty(EmptyReason::NotLoaded));
+}
+
+#[test]
+fn upload_budget_limits_splits_but_progresses() {
+    let s = setup();
+    let cam = Camera::orbit(Vec3::ZERO, 1.5, 0.3, 0.2);
+    let r = run(&s, &cam, RenderMode::Mip, &s.tf, 10_000, 0);
+    assert_exact_cover(&keys(&r), s.layout.levels);
+    // Only the first split is let through (progress), whatever its size.
+    assert_eq!(r.leaves.len(), 8);
+    assert!(r.leaves.iter().all(|l| l.key.level == 1 && l.needs_upload));
+    assert!(r.blocked.upload_budget > 0);
+    // Larger budgets: more splits, and the bricks uploaded (leaves not on the
+    // GPU; split nodes charged at their parent's split are given back) stay
+    // within the budget once past the first split.
+    let brick = s.layout.brick_bytes() as u64;
+    let mut last = r.leaves.len();
+    for n in [16u64, 22, 40, 100] {
+        let r = run(&s, &cam, RenderMode::Mip, &s.tf, 10_000, n * brick);
+        assert_exact_cover(&keys(&r), s.layout.levels);
+        let uploads = r.leaves.iter().filter(|l| l.needs_upload).count() as u64;
+        assert!(uploads <= n, "{uploads} > {n}");
+        assert!(uploads + 8 > n, "budget {n} underused: {uploads}");
+        assert!(r.leaves.len() >= last);
+        last = r.leaves.len();
+    }
+}
+
+#[test]
+fn tf_change_reclassifies_from_metadata_only() {
+    let s = setup();
+    let cam = Camera::orbit(Vec3::ZERO, 1.5, 0.3, 0.2);
+    let a = run(
+        &s,
+        &cam,
+        RenderMode::Dvr,
+        &TransferFunction::ramp(0.0, 0.2, 1.0),
+        10_000,
+        u64::MAX,
+    );
+    let b = run(
+        &s,
+        &cam,
+        RenderMode::Dvr,
+        &TransferFunction::ramp(0.7, 1.0, 1.0),
+        10_000,
+        u64::MAX,
+    );
+    assert_exact_cover(&keys(&b), s.layout.levels);
+    assert!(b.data_leaves < a.data_leaves);
+    assert!(
+        count(&b, NodeClass::Empty(EmptyReason::Invisible))
+            > count(&a, NodeClass::Empty(EmptyReason::Invisible))
+    );
+}
+
+fn arb_camera() -> impl Strategy<Value = Camera> {
+    (
+        0.0f32..6.3,
+        -1.5f32..1.5,
+        0.3f32..20.0,
+        any::<bool>(),
+        0.1f32..3.0,
+        -0.6f32..0.6,
+    )
+        .prop_map(|(yaw, pitch, dist, ortho, h, off)| {
+            let mut c = Camera::orbit(Vec3::splat(off), dist, yaw, pitch);
+            if ortho {
+                c.projection = Projection::Orthographic { height: h };
+            }
+            c
+        })
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(64))]
+    /// Every point of the octree cube is in exactly one leaf, for any camera,
+    /// mode, tolerance and pool size; data leaves never exceed the pool.
+    #[test]
+    fn cut_covers_cube_exactly(
+        cam in arb_camera(),
+        slots in 1u32..300,
+        tol in 0.5f32..4.0,
+        mode in prop_oneof![Just(RenderMode::Dvr), Just(RenderMode::Mip), (0.0f32..1.0).prop_map(|v| RenderMode::Iso { value: v, color: [1.0; 3] })],
+        dim in prop_oneof![Just(40u32), Just(64), Just(100)],
+    ) {
+        let layout = ball_layout(dim);
+        let frame = VolumeFrame::centered([dim; 3], [1.0; 3]);
+        let tf = TransferFunction::ramp(0.3, 1.0, 0.5);
+        let mut env = AllInCpu { layout: layout.clone(), on_gpu: HashSet::new(), meta_reads: 0 };
+        let params = RefineParams { camera: &cam, aspect: 1.3, viewport_height_px: 400, volume_frame: &frame, mode, tf: &tf, tolerance_px: tol, max_data_leaves: slots, brick_upload_bytes: 1000 };
+        let mut b = UploadBudget::new(u64::MAX);
+        let r = refine(&layout, &params, &mut env, &mut b);
+        assert_exact_cover(&keys(&r), layout.levels);
+        prop_assert!(r.data_leaves <= slots);
+        prop_assert!(r.requests.len() as u32 <= slots.min(MAX_REQUESTS_PER_FRAME));
+        prop_assert_eq!(r.data_leaves as usize, count(&r, NodeClass::Data));
+        for l in &r.leaves {
+            if l.class == NodeClass::Data {
+                prop_assert!(layout.in_volume(l.key));
+            }
+        }
+    }
+}
