@@ -25,9 +25,9 @@ pub use brickray_core::{
 };
 pub use brickray_core::{BrickSource, NodeKey, OctreeLayout};
 pub use brickray_render::{
-    FrameDesc, FrameStats, GpuErrorKind, HostDepthError, OutOfCoreConfig, OutOfCoreStats,
-    PrepareError, RenderError, RendererOptions, RendererStats, TargetDesc, U8Filtering, Viewport,
-    VolumeRenderer, required_limits,
+    ConfigError, FrameDesc, FrameStats, GpuErrorKind, HostDepthError, OutOfCoreConfig,
+    OutOfCoreStats, PrepareError, RenderError, RendererOptions, RendererStats, RetryPolicy,
+    StreamError, TargetDesc, U8Filtering, Viewport, VolumeRenderer, required_limits,
 };
 pub use wgpu;
 
