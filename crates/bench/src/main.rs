@@ -8,6 +8,7 @@
 mod accel;
 mod build;
 mod ooc;
+mod soak;
 
 use std::process::ExitCode;
 
@@ -22,8 +23,9 @@ fn main() -> ExitCode {
         "accel" => accel::run(rest),
         "build" => build::run(rest),
         "ooc" => ooc::run(rest),
+        "soak" => soak::run(rest),
         _ => {
-            eprintln!("usage: brickray-bench <accel|build|ooc> [options]");
+            eprintln!("usage: brickray-bench <accel|build|ooc|soak> [options]");
             return ExitCode::from(2);
         }
     };

@@ -11,6 +11,8 @@
 //! * [`shared_data_dir`] finds `../shared/data` and decides whether a test that
 //!   needs it may skip.
 
+pub mod soak;
+
 use std::path::PathBuf;
 use thiserror::Error;
 

@@ -101,24 +101,30 @@ fn has_flag(f: u32) -> bool {
     return (frame.flags & f) != 0u;
 }
 
+// Mesa's lavapipe (22.x, what CI and users without a GPU run) recompiles a
+// shader, per command buffer and without ever freeing it, for every `if` or loop
+// bound that depends on uniform values alone ("inlinable uniforms"): process
+// memory grew by 0.35-0.8 MB a frame. So no branch or loop bound here depends on
+// `frame` alone: projection and host-depth variants are blended with `select`,
+// and loop trip counts involve per-ray values. See docs/rendering-model.md.
+
 fn pixel_ray(px: vec2<u32>) -> Ray {
     let size = vec2<f32>(frame.viewport_size);
     let ndc = vec2<f32>(2.0 * (f32(px.x) + 0.5) / size.x - 1.0, 1.0 - 2.0 * (f32(px.y) + 0.5) / size.y);
+    // Perspective: rays from the eye through the image plane at distance 1,
+    // origin on the near plane. Orthographic: parallel rays from the near
+    // plane's rectangle.
+    let persp = has_flag(FLAG_PERSPECTIVE);
+    let k = select(0.0, 1.0, persp);
+    let lateral_world = ndc.x * frame.right_world + ndc.y * frame.up_world;
+    let lateral_tex = ndc.x * frame.right_tex + ndc.y * frame.up_tex;
+    let dw = frame.fwd_world + k * lateral_world;
+    let len = length(dw);
     var r: Ray;
-    if (has_flag(FLAG_PERSPECTIVE)) {
-        let dw = frame.fwd_world + ndc.x * frame.right_world + ndc.y * frame.up_world;
-        let dtx = frame.fwd_tex + ndc.x * frame.right_tex + ndc.y * frame.up_tex;
-        let len = length(dw);
-        r.dir = dw / len;
-        r.tex_dir = dtx / len;
-        r.tex_origin = frame.eye_tex + dtx * frame.near;
-        r.dist_per_t = 1.0 / len;
-    } else {
-        r.dir = frame.fwd_world;
-        r.tex_dir = frame.fwd_tex;
-        r.tex_origin = frame.eye_tex + ndc.x * frame.right_tex + ndc.y * frame.up_tex + frame.fwd_tex * frame.near;
-        r.dist_per_t = 1.0;
-    }
+    r.dir = dw / len;
+    r.tex_dir = (frame.fwd_tex + k * lateral_tex) / len;
+    r.tex_origin = frame.eye_tex + frame.fwd_tex * frame.near + lateral_tex * select(1.0, frame.near, persp);
+    r.dist_per_t = 1.0 / len;
     return r;
 }
 
@@ -138,10 +144,8 @@ fn nearer_depth(a: f32, b: f32) -> f32 {
 
 fn depth_at(r: Ray, t: f32) -> f32 {
     let d = frame.near + t * r.dist_per_t;
-    var z = frame.depth_a + frame.depth_b * d;
-    if (has_flag(FLAG_PERSPECTIVE)) {
-        z = frame.depth_a + frame.depth_b / d;
-    }
+    // A + B / d (perspective) or A + B * d (orthographic).
+    let z = frame.depth_a + frame.depth_b * select(d, 1.0 / d, has_flag(FLAG_PERSPECTIVE));
     return clamp(z, 0.0, 1.0);
 }
 
@@ -149,13 +153,9 @@ fn depth_at(r: Ray, t: f32) -> f32 {
 // projection).
 fn t_at_depth(r: Ray, depth: f32) -> f32 {
     let q = depth - frame.depth_a;
-    var d = q / frame.depth_b;
-    if (has_flag(FLAG_PERSPECTIVE)) {
-        d = 3.0e38;
-        if (q != 0.0 && frame.depth_b / q > 0.0) {
-            d = frame.depth_b / q;
-        }
-    }
+    let inv = frame.depth_b / q;
+    let persp_d = select(3.0e38, inv, q != 0.0 && inv > 0.0);
+    let d = select(q / frame.depth_b, persp_d, has_flag(FLAG_PERSPECTIVE));
     return (d - frame.near) / r.dist_per_t;
 }
 
@@ -192,17 +192,14 @@ struct RayStart {
 fn start_ray(px: vec2<u32>) -> RayStart {
     var s: RayStart;
     s.r = pixel_ray(px);
-    s.host = far_depth();
+    // Loaded whatever the flag (from the 1x1 stand-in without host depth,
+    // clamped into it) and selected: no branch on a uniform alone.
     let with_host = has_flag(FLAG_HOST_DEPTH);
-    if (with_host) {
-        s.host = textureLoad(host_depth, vec2<i32>(px + frame.viewport_origin), 0);
-    }
+    let at = min(px + frame.viewport_origin, textureDimensions(host_depth) - vec2<u32>(1u));
+    s.host = select(far_depth(), textureLoad(host_depth, vec2<i32>(at), 0), with_host);
     let tb = clip_box(s.r, vec3<f32>(0.0), vec3<f32>(1.0));
     s.t0 = max(tb.x, 0.0);
-    s.t1 = tb.y;
-    if (with_host) {
-        s.t1 = min(s.t1, t_at_depth(s.r, s.host));
-    }
+    s.t1 = select(tb.y, min(tb.y, t_at_depth(s.r, s.host)), with_host);
     return s;
 }
 

@@ -85,7 +85,10 @@ fn dvr_sample(acc: ptr<function, Accum>, c: Cursor, r: Ray, t: f32, v: f32, alph
 fn iso_hit(acc: ptr<function, Accum>, c: Cursor, r: Ray, a_in: f32, b_in: f32) {
     var a = a_in;
     var b = b_in;
-    for (var i = 0u; i < frame.iso_refine_steps; i = i + 1u) {
+    // The trip count involves the ray's bracket, never the uniform alone (see
+    // pixel_ray in common.wgsl).
+    let steps = select(0u, frame.iso_refine_steps, b_in > a_in);
+    for (var i = 0u; i < steps; i = i + 1u) {
         if (b <= a) {
             break;
         }

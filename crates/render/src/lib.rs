@@ -282,6 +282,25 @@ impl VolumeRenderer {
             .map_or(0, |b| b.get().resident_bytes())
     }
 
+    /// Compiles the ray-cast pipelines of `settings` for the current volume now
+    /// (set-up time) instead of on first use in `prepare`, so switching mode,
+    /// accelerations or shading later does not stall a frame.
+    pub fn warm_up(
+        &mut self,
+        device: &wgpu::Device,
+        settings: &[brickray_core::RenderSettings],
+    ) -> Result<(), RenderError> {
+        let Some(backend) = self.backend.as_ref().map(Backend::get) else {
+            return Ok(());
+        };
+        let layouts = [self.frame.layout(), self.tf.layout(), backend.layout()];
+        for s in settings {
+            self.kernels
+                .pipeline(device, backend.kind(), layouts, Variant::of(s))?;
+        }
+        Ok(())
+    }
+
     /// Checks everything `prepare` is given before any GPU work.
     fn check_frame(&self, device: &wgpu::Device, f: &FrameDesc<'_>) -> Result<(), PrepareError> {
         let limits = device.limits();

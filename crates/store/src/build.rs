@@ -23,8 +23,10 @@ use crate::format::{
     ENTRY_LEN, Entry, FLAG_THRESHOLD, HEADER_LEN, Header, KIND_DATA, KIND_EMPTY, KIND_UNIFORM,
     MAX_APRON, MAX_BRICK, MAX_BRICK_BYTES, TableGeometry, VERSION, dtype_code, filter_code,
 };
+use crate::partial::{PartialFile, parent_dir, remove_stale};
 use crate::sample::{Sample, range_dyn, with_sample};
 use crate::{Filter, NO_ENTRY_LEVEL};
+use brickray_core::io::FileKind;
 use brickray_core::{NodeKey, OctreeLayout, VolumeReader};
 use rayon::prelude::*;
 use std::collections::VecDeque;
@@ -97,7 +99,7 @@ pub struct BuildReport {
 }
 
 /// Builds a store at `out` from the volume file at `input` (any format
-/// `brickray_core::io::open` reads).
+/// `brickray_core::io::open` reads, with its default, strict options).
 pub fn build_file(
     input: &Path,
     out: &Path,
@@ -108,13 +110,22 @@ pub fn build_file(
 }
 
 /// Builds a store at `out` from `reader`. The file is written under a temporary
-/// name in the same directory and renamed only when complete.
+/// name in the same directory (`.<name>.brickray-partial.<pid>-<seq>`) and
+/// renamed only when complete; temporaries are removed on error, and stale
+/// ones of earlier builds (their process gone) are removed first.
+///
+/// `out` must not be one of the reader's input files
+/// ([`VolumeReader::input_files`], compared by file identity, so links and
+/// other spellings are caught: [`StoreError::OutputIsInput`]), and if it exists
+/// it must be a regular file ([`StoreError::OutputNotRegularFile`]).
 pub fn build(
     reader: &mut dyn VolumeReader,
     out: &Path,
     opts: &BuildOptions,
 ) -> Result<BuildReport, StoreError> {
     let t0 = Instant::now();
+    let inputs = reader.input_files();
+    check_output(out, &inputs)?;
     let desc = reader.desc().clone();
     desc.validate().map_err(|e| StoreError::BadOption {
         option: "input",
@@ -130,6 +141,12 @@ pub fn build(
         return Err(StoreError::BadOption {
             option: "apron",
             reason: format!("must be in 0..={MAX_APRON}"),
+        });
+    }
+    if opts.memory_bound == 0 {
+        return Err(StoreError::BadOption {
+            option: "memory_bound",
+            reason: "must be > 0 bytes".into(),
         });
     }
     if opts.empty_below.is_some_and(|t| !t.is_finite()) {
@@ -158,22 +175,18 @@ pub fn build(
         .max(layout.brick_bytes() as u64 * 2);
     let threads = rayon::current_num_threads() as u64;
     let scratch = threads * 3 * layout.brick_bytes() as u64;
-    let table = geo.count * (ENTRY_LEN as u64 + 48);
-    let fixed = group_cap + scratch + table + (8u64 << 20).min(opts.memory_bound / 16);
+    let table = geo.count.saturating_mul(ENTRY_LEN as u64 + 48);
+    let fixed = group_cap
+        .saturating_add(scratch)
+        .saturating_add(table)
+        .saturating_add((8u64 << 20).min(opts.memory_bound / 16));
     let top = layout.levels - 1;
     let first_plan = plan(&layout, top, opts.memory_bound, fixed)?;
     let needed = first_plan.need();
-    let dir = out
-        .parent()
-        .filter(|p| !p.as_os_str().is_empty())
-        .unwrap_or(Path::new("."));
-    let tmp = tempfile::Builder::new()
-        .prefix(".brickray-store-")
-        .suffix(".partial")
-        .tempfile_in(dir)
-        .map_err(|e| StoreError::io(dir, e))?;
+    remove_stale(parent_dir(out));
+    let tmp = PartialFile::create(out)?;
     let tmp_path: PathBuf = tmp.path().to_owned();
-    let mut w = BufWriter::with_capacity(4 << 20, tmp.as_file());
+    let mut w = BufWriter::with_capacity(4 << 20, tmp.file());
     // Placeholder header: all zeros never opens as a store.
     w.write_all(&[0u8; HEADER_LEN])
         .map_err(|e| StoreError::io(&tmp_path, e))?;
@@ -223,7 +236,7 @@ pub fn build(
     // volume to a temporary file that becomes the next input.
     let mut top = top;
     let mut owned: Option<brickray_core::io::RawReader> = None;
-    let mut _level_file: Option<tempfile::NamedTempFile> = None;
+    let mut _level_file: Option<PartialFile> = None;
     let mut cur_plan = first_plan;
     let mut banded = 0u8;
     loop {
@@ -238,14 +251,10 @@ pub fn build(
             }
             Plan::Bands { band_bricks, .. } => {
                 let pdims = layout.level_dims(top - 1);
-                let f = tempfile::Builder::new()
-                    .prefix(".brickray-store-level-")
-                    .suffix(".partial")
-                    .tempfile_in(dir)
-                    .map_err(|e| StoreError::io(dir, e))?;
+                let f = PartialFile::create(out)?;
                 let plen =
                     pdims.iter().map(|&d| d as u64).product::<u64>() * layout.dtype().size() as u64;
-                f.as_file()
+                f.file()
                     .set_len(plen)
                     .map_err(|e| StoreError::io(f.path(), e))?;
                 run_bands(
@@ -253,7 +262,7 @@ pub fn build(
                     input,
                     top,
                     band_bricks,
-                    f.as_file(),
+                    f.file(),
                     f.path(),
                     &mut w,
                     &pb,
@@ -327,10 +336,12 @@ pub fn build(
         .map_err(|e| StoreError::io(&tmp_path, e))?;
     w.flush().map_err(|e| StoreError::io(&tmp_path, e))?;
     drop(w);
-    tmp.as_file()
+    tmp.file()
         .sync_all()
         .map_err(|e| StoreError::io(&tmp_path, e))?;
-    tmp.persist(out).map_err(|e| StoreError::io(out, e.error))?;
+    // Again: the output may have been replaced while the build ran.
+    check_output(out, &inputs)?;
+    tmp.persist(out)?;
     let file_bytes = table_offset + table.len() as u64;
     Ok(BuildReport {
         layout,
@@ -347,6 +358,49 @@ pub fn build(
         banded_levels: banded,
         seconds: t0.elapsed().as_secs_f64(),
     })
+}
+
+/// Refuses an output that exists and is not a regular file, or that is one of
+/// the build's input files (by file identity).
+fn check_output(out: &Path, inputs: &[PathBuf]) -> Result<(), StoreError> {
+    let md = match std::fs::metadata(out) {
+        Ok(md) => md,
+        // Nothing there yet (or a dangling link, which the rename replaces).
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(()),
+        Err(e) => return Err(StoreError::io(out, e)),
+    };
+    if let Some(kind) = FileKind::of(md.file_type()) {
+        return Err(StoreError::OutputNotRegularFile {
+            path: out.to_owned(),
+            kind,
+        });
+    }
+    for input in inputs {
+        if let Ok(im) = std::fs::metadata(input)
+            && same_file(out, &md, input, &im)
+        {
+            return Err(StoreError::OutputIsInput {
+                output: out.to_owned(),
+                input: input.clone(),
+            });
+        }
+    }
+    Ok(())
+}
+
+/// Whether two paths name the same file: device and inode on unix, else the
+/// canonical paths.
+#[cfg(unix)]
+fn same_file(_a: &Path, a: &std::fs::Metadata, _b: &Path, b: &std::fs::Metadata) -> bool {
+    use std::os::unix::fs::MetadataExt;
+    a.dev() == b.dev() && a.ino() == b.ino()
+}
+
+/// Whether two paths name the same file: device and inode on unix, else the
+/// canonical paths.
+#[cfg(not(unix))]
+fn same_file(a: &Path, _: &std::fs::Metadata, b: &Path, _: &std::fs::Metadata) -> bool {
+    matches!((a.canonicalize(), b.canonicalize()), (Ok(x), Ok(y)) if x == y)
 }
 
 /// Shared state of a build.

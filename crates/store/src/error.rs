@@ -1,5 +1,6 @@
 //! The store's error type.
 
+use brickray_core::io::FileKind;
 use brickray_core::{BrickError, IoError, NodeKey};
 use std::path::PathBuf;
 use thiserror::Error;
@@ -160,6 +161,167 @@ pub enum StoreError {
         /// Bytes of one finest-level brick slab (brick + 2 apron slices).
         slab: u64,
     },
+    /// The build's output is one of its input files (the same file, by device
+    /// and inode, whatever the spelling: links, `./`, `..`). Nothing was written.
+    #[error("output {output} is an input of the build ({input}); refusing to overwrite it")]
+    OutputIsInput {
+        /// The output as given.
+        output: PathBuf,
+        /// The input file it is.
+        input: PathBuf,
+    },
+    /// The build's output exists and is not a regular file (a directory, a
+    /// FIFO, a device such as `/dev/null`); it is not replaced.
+    #[error("output {path} is a {kind}, not a regular file; refusing to replace it")]
+    OutputNotRegularFile {
+        /// The output.
+        path: PathBuf,
+        /// What it is.
+        kind: FileKind,
+    },
+    /// The store path names something other than a regular file (found from its
+    /// metadata, without opening it: opening a FIFO would block).
+    #[error("{path} is a {kind}, not a regular file")]
+    NotRegularFile {
+        /// The path.
+        path: PathBuf,
+        /// What it is.
+        kind: FileKind,
+    },
+    /// A procedural region is empty (`lo > hi` on an axis), names a level the
+    /// octree does not have, or reaches outside the level volume.
+    #[error(
+        "region {lo:?}..={hi:?} at level {level} is empty or outside the level volume \
+         (level dims {level_dims:?})"
+    )]
+    RegionOutOfRange {
+        /// The level asked for.
+        level: u8,
+        /// The first voxel asked for.
+        lo: [u64; 3],
+        /// The last voxel asked for.
+        hi: [u64; 3],
+        /// The level's dims, `None` when the level does not exist.
+        level_dims: Option<[u32; 3]>,
+    },
+    /// A procedural region holds more voxels than one call evaluates.
+    #[error("region of {voxels} voxels is larger than the {max} one call evaluates")]
+    RegionTooLarge {
+        /// Voxels asked for (saturated at `u64::MAX`).
+        voxels: u64,
+        /// The limit.
+        max: u64,
+    },
+    /// The build was interrupted: this process is shutting down and has
+    /// removed its temporary files ([`crate::remove_partial_files`]).
+    #[error("build interrupted: the process is exiting and removed its temporary files")]
+    Interrupted,
+    /// Bytes of the payload section belong to no data node. The builder writes
+    /// the payloads back to back, so a gap means a node's payload reference was
+    /// removed or moved (for example a data node forged into a uniform one).
+    #[error("{path}: payload bytes {start}..{end} belong to no data node")]
+    PayloadGap {
+        /// The file.
+        path: PathBuf,
+        /// First byte of the gap.
+        start: u64,
+        /// One past its last byte.
+        end: u64,
+    },
+    /// Two data nodes' payloads overlap (one node pointed at another's bytes).
+    #[error("{path}: node {key:?}'s payload overlaps node {other:?}'s")]
+    PayloadOverlap {
+        /// The file.
+        path: PathBuf,
+        /// The node whose payload starts inside another's.
+        key: NodeKey,
+        /// The node whose payload it overlaps.
+        other: NodeKey,
+    },
+    /// A brick decoded without error (its checksum matches) but contradicts its
+    /// node's table entry: a payload that belongs to another node, or a forged
+    /// one.
+    #[error("node {key:?}: decoded brick contradicts the node table: {mismatch}")]
+    BrickMismatch {
+        /// The node.
+        key: NodeKey,
+        /// What disagrees.
+        mismatch: Mismatch,
+    },
+}
+
+/// How a decoded brick contradicts its node's table entry (see
+/// [`StoreError::BrickMismatch`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[non_exhaustive]
+pub enum Mismatch {
+    /// A sample is NaN.
+    NotANumber {
+        /// Index of the first NaN sample in the brick.
+        index: usize,
+    },
+    /// Samples lie outside the node's recorded range.
+    OutOfRange {
+        /// The recorded minimum.
+        min: f32,
+        /// The recorded maximum.
+        max: f32,
+        /// The smallest decoded sample.
+        found_min: f32,
+        /// The largest decoded sample.
+        found_max: f32,
+    },
+    /// The smallest sample is not the node's recorded `value` (the smallest of
+    /// its own stored voxels).
+    Smallest {
+        /// The recorded value.
+        recorded: f32,
+        /// The smallest decoded sample.
+        found: f32,
+    },
+    /// A leaf's largest sample is not its recorded maximum (a leaf's range is
+    /// exactly the range of its own stored voxels).
+    LeafMax {
+        /// The recorded maximum.
+        recorded: f32,
+        /// The largest decoded sample.
+        found: f32,
+    },
+    /// Every sample has the same value: such a node is stored as uniform, never
+    /// with a payload.
+    Uniform {
+        /// The value.
+        value: f32,
+    },
+}
+
+impl std::fmt::Display for Mismatch {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match *self {
+            Mismatch::NotANumber { index } => write!(f, "sample {index} is NaN"),
+            Mismatch::OutOfRange {
+                min,
+                max,
+                found_min,
+                found_max,
+            } => write!(
+                f,
+                "samples span [{found_min}, {found_max}], outside the recorded range [{min}, {max}]"
+            ),
+            Mismatch::Smallest { recorded, found } => write!(
+                f,
+                "smallest sample is {found}, the table records {recorded}"
+            ),
+            Mismatch::LeafMax { recorded, found } => write!(
+                f,
+                "largest sample of the leaf is {found}, the table records {recorded}"
+            ),
+            Mismatch::Uniform { value } => write!(
+                f,
+                "every sample is {value}, but the node is stored with a payload"
+            ),
+        }
+    }
 }
 
 impl StoreError {

@@ -2,9 +2,12 @@
 //!
 //! * [`build`] / [`build_file`]: a streaming, parallel, memory-bounded builder that
 //!   reads any [`brickray_core::VolumeReader`] and writes one store file
-//!   (temporary name, renamed when complete);
+//!   (temporary name, renamed when complete; never over one of its inputs or
+//!   a non-regular file); [`remove_partial_files`] removes the temporaries of
+//!   builds in progress (for signal handlers);
 //! * [`open`] / [`Store`]: validated open, lock-free positional brick reads with
-//!   checksum verification, metadata queries; implements [`BrickSource`];
+//!   checksum verification and a check of every decoded brick against its
+//!   node's table entry, metadata queries; implements [`BrickSource`];
 //! * [`ProceduralSource`]: a virtual volume of up to `65536^3` voxels (and more)
 //!   whose bricks are computed on demand, with exactly filtered inner nodes;
 //!   implements [`BrickSource`].
@@ -17,12 +20,14 @@
 mod build;
 mod error;
 pub mod format;
+mod partial;
 mod procedural;
 mod reader;
 mod sample;
 
 pub use build::{BuildOptions, BuildReport, build, build_file};
-pub use error::StoreError;
+pub use error::{Mismatch, StoreError};
+pub use partial::remove_partial_files;
 pub use procedural::ProceduralSource;
 pub use reader::{NodeRecord, Store, StoreStats, decode_payload, open};
 

@@ -185,9 +185,44 @@ impl ProceduralSource {
         a.clamp(-lim, lim)
     }
 
-    /// Values of level `level` voxels in the box `lo..=hi` (inside the level
-    /// volume), x fastest.
-    pub fn region(&self, level: u8, lo: [u64; 3], hi: [u64; 3]) -> Vec<u8> {
+    /// Largest box [`region`](Self::region) evaluates, in voxels.
+    pub const MAX_REGION_VOXELS: u64 = 1 << 27;
+
+    /// Values of level `level` voxels in the box `lo..=hi`, x fastest. The box
+    /// must be non-empty (`lo <= hi` on each axis), inside the level volume
+    /// ([`StoreError::RegionOutOfRange`]) and hold at most
+    /// [`MAX_REGION_VOXELS`](Self::MAX_REGION_VOXELS)
+    /// ([`StoreError::RegionTooLarge`]).
+    pub fn region(&self, level: u8, lo: [u64; 3], hi: [u64; 3]) -> Result<Vec<u8>, StoreError> {
+        self.check_region(level, lo, hi)?;
+        Ok(self.region_u8(level, lo, hi))
+    }
+
+    fn check_region(&self, level: u8, lo: [u64; 3], hi: [u64; 3]) -> Result<(), StoreError> {
+        let dims = (level < self.layout.levels).then(|| self.layout.level_dims(level));
+        let inside = dims.is_some_and(|d| (0..3).all(|a| lo[a] <= hi[a] && hi[a] < d[a] as u64));
+        if !inside {
+            return Err(StoreError::RegionOutOfRange {
+                level,
+                lo,
+                hi,
+                level_dims: dims,
+            });
+        }
+        // Each extent is at most 2^24 here: the product fits in u128.
+        let voxels: u128 = (0..3).map(|a| (hi[a] - lo[a] + 1) as u128).product();
+        if voxels > Self::MAX_REGION_VOXELS as u128 {
+            return Err(StoreError::RegionTooLarge {
+                voxels: u64::try_from(voxels).unwrap_or(u64::MAX),
+                max: Self::MAX_REGION_VOXELS,
+            });
+        }
+        Ok(())
+    }
+
+    /// [`region`](Self::region) without the checks (callers pass boxes inside
+    /// the level volume).
+    fn region_u8(&self, level: u8, lo: [u64; 3], hi: [u64; 3]) -> Vec<u8> {
         self.region_i32(level, lo, hi)
             .into_iter()
             .map(|v| v as u8)
@@ -248,9 +283,10 @@ impl ProceduralSource {
         out
     }
 
-    /// The value of one level voxel (coordinates inside the level volume).
-    pub fn voxel(&self, level: u8, p: [u64; 3]) -> u8 {
-        self.region(level, p, p)[0]
+    /// The value of one level voxel (coordinates inside the level volume, else
+    /// [`StoreError::RegionOutOfRange`]).
+    pub fn voxel(&self, level: u8, p: [u64; 3]) -> Result<u8, StoreError> {
+        Ok(self.region(level, p, p)?[0])
     }
 
     fn check(&self, key: NodeKey) -> Result<bool, BrickError> {
@@ -328,7 +364,7 @@ impl BrickSource for ProceduralSource {
             return Ok(());
         }
         let (lo, hi) = self.footprint(key);
-        let vals = self.region(key.level, lo, hi);
+        let vals = self.region_u8(key.level, lo, hi);
         let n = [0, 1, 2].map(|a| (hi[a] - lo[a] + 1) as i64);
         let d = self.layout.level_dims(key.level).map(|d| d as i64);
         let b = self.layout.brick as i64;

@@ -1,13 +1,14 @@
 //! The store reader: validated open, thread-safe positional brick reads.
 
 use crate::Filter;
-use crate::error::StoreError;
+use crate::error::{Mismatch, StoreError};
 use crate::format::{
     ENTRY_LEN, Entry, FLAG_THRESHOLD, HEADER_LEN, Header, KIND_DATA, KIND_EMPTY, KIND_UNIFORM,
     MAGIC, MAX_APRON, MAX_BRICK, MAX_BRICK_BYTES, TableGeometry, VERSION, dtype_from_code,
     filter_from_code,
 };
-use crate::sample::{fill, representable};
+use crate::sample::{fill, first_nan, representable, stats_dyn};
+use brickray_core::io::FileKind;
 use brickray_core::{
     BrickError, BrickSource, NodeInfo, NodeKey, NodeKind, OctreeLayout, VolumeDesc,
 };
@@ -78,16 +79,33 @@ fn max_compressed(n: usize) -> u64 {
 }
 
 impl Store {
-    /// Opens a store file (see [`open`]).
+    /// Opens a store file (see [`open`]). A path that is not a regular file (a
+    /// FIFO, a device, a directory) is refused from its metadata, before it is
+    /// opened: opening a FIFO would block.
     pub fn open(path: impl AsRef<Path>) -> Result<Store, StoreError> {
         let path = path.as_ref();
+        let md = std::fs::metadata(path).map_err(|e| StoreError::io(path, e))?;
+        if let Some(kind) = FileKind::of(md.file_type()) {
+            return Err(StoreError::NotRegularFile {
+                path: path.to_owned(),
+                kind,
+            });
+        }
         let file = File::open(path).map_err(|e| StoreError::io(path, e))?;
         Store::from_file(file, path)
     }
 
-    /// Opens a store from an open file; `path` names it in errors.
+    /// Opens a store from an open file; `path` names it in errors. The file must
+    /// be a regular file.
     pub fn from_file(file: File, path: &Path) -> Result<Store, StoreError> {
-        let file_len = file.metadata().map_err(|e| StoreError::io(path, e))?.len();
+        let md = file.metadata().map_err(|e| StoreError::io(path, e))?;
+        if let Some(kind) = FileKind::of(md.file_type()) {
+            return Err(StoreError::NotRegularFile {
+                path: path.to_owned(),
+                kind,
+            });
+        }
+        let file_len = md.len();
         let mut hb = [0u8; HEADER_LEN];
         if file_len < HEADER_LEN as u64 {
             return Err(StoreError::Truncated {
@@ -312,6 +330,7 @@ impl Store {
             }
             entries.push(e);
         }
+        check_tiling(path, &entries, h.table_offset)?;
         Ok(Store {
             path: path.to_owned(),
             file,
@@ -513,14 +532,107 @@ impl Store {
             Some(e) if e.kind == KIND_EMPTY => fill(dtype, self.data_range[0], out),
             Some(_) => {
                 let payload = self.read_compressed(key)?.unwrap_or_default();
-                decode_payload(key, &payload, out)?;
+                self.decode(key, &payload, out)?;
             }
+        }
+        Ok(())
+    }
+
+    /// Decompresses the payload of data node `key` (from
+    /// [`read_compressed`](Self::read_compressed)) into `out` and checks the
+    /// brick against the node's table entry, like [`read`](Self::read): every
+    /// sample within the node's `[min, max]` (NaN never is), the smallest equal
+    /// to the recorded `value`, a leaf's largest equal to its `max`, and not all
+    /// equal (such a node is stored as uniform). A payload that belongs to
+    /// another node, or a forged one, fails with [`StoreError::BrickMismatch`]
+    /// even when its checksum was recomputed. One pass over the samples, no
+    /// allocation.
+    pub fn decode(&self, key: NodeKey, payload: &[u8], out: &mut [u8]) -> Result<(), StoreError> {
+        decode_payload(key, payload, out)?;
+        let e = match self.check_key(key)? {
+            Some(e) if e.kind == KIND_DATA => e,
+            _ => return Ok(()),
+        };
+        let dtype = self.layout.dtype();
+        let mismatch = |mismatch| Err(StoreError::BrickMismatch { key, mismatch });
+        let (lo, hi, nan) = stats_dyn(dtype, out);
+        if nan {
+            return mismatch(Mismatch::NotANumber {
+                index: first_nan(dtype, out).unwrap_or(0),
+            });
+        }
+        if lo < e.min || hi > e.max {
+            return mismatch(Mismatch::OutOfRange {
+                min: e.min,
+                max: e.max,
+                found_min: lo,
+                found_max: hi,
+            });
+        }
+        if lo != e.value {
+            return mismatch(Mismatch::Smallest {
+                recorded: e.value,
+                found: lo,
+            });
+        }
+        if key.level + 1 == self.layout.levels && hi != e.max {
+            return mismatch(Mismatch::LeafMax {
+                recorded: e.max,
+                found: hi,
+            });
+        }
+        if lo == hi {
+            return mismatch(Mismatch::Uniform { value: lo });
         }
         Ok(())
     }
 }
 
+/// Checks that the data nodes' payloads tile the payload section
+/// `HEADER_LEN..table_offset` exactly, as the builder writes them: a gap is a
+/// payload whose reference was removed or moved, an overlap two nodes sharing
+/// bytes.
+fn check_tiling(path: &Path, entries: &[Entry], table_offset: u64) -> Result<(), StoreError> {
+    let mut spans: Vec<(u64, u64, usize)> = entries
+        .iter()
+        .enumerate()
+        .filter(|(_, e)| e.kind == KIND_DATA)
+        .map(|(i, e)| (e.offset, e.len as u64, i))
+        .collect();
+    spans.sort_unstable();
+    let mut end = HEADER_LEN as u64;
+    let mut prev: Option<usize> = None;
+    for (off, len, i) in spans {
+        if off > end {
+            return Err(StoreError::PayloadGap {
+                path: path.to_owned(),
+                start: end,
+                end: off,
+            });
+        }
+        if off < end {
+            return Err(StoreError::PayloadOverlap {
+                path: path.to_owned(),
+                key: entries[i].key(),
+                other: prev.map_or(entries[i].key(), |p| entries[p].key()),
+            });
+        }
+        end = off + len;
+        prev = Some(i);
+    }
+    if end < table_offset {
+        return Err(StoreError::PayloadGap {
+            path: path.to_owned(),
+            start: end,
+            end: table_offset,
+        });
+    }
+    Ok(())
+}
+
 /// Decompresses one lz4 brick payload into `out`, which it must fill exactly.
+/// This checks the size only; [`Store::decode`] (and [`Store::read`]) also
+/// check the brick against its node's table entry.
 pub fn decode_payload(key: NodeKey, payload: &[u8], out: &mut [u8]) -> Result<(), StoreError> {
     match lz4_flex::block::decompress_into(payload, out) {
         Ok(n) if n == out.len() => Ok(()),

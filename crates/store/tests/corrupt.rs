@@ -355,3 +355,266 @@ fn corrupt_payload_names_the_node() {
     assert!(err.to_string().contains(&format!("{:?}", bad[0])), "{err}");
     let _ = table_off;
 }
+
+// ---------------------------------------------------------------------------
+// Forgeries with recomputed checksums: every checksum is right, so only the
+// semantic checks (payloads tile the payload section; a decoded brick agrees
+// with its node's min/max/value) can tell.
+
+/// A store of a gradient (every brick has its own range), and its bricks.
+fn gradient_store(dir: &Path, dtype: DType) -> (Vec<u8>, Vec<(NodeKey, Vec<u8>)>) {
+    let dims = [40u32, 36, 12];
+    let mut v = Vec::new();
+    for z in 0..dims[2] {
+        for y in 0..dims[1] {
+            for x in 0..dims[0] {
+                v.push((x + 64 * y + 4096 * z) as f32);
+            }
+        }
+    }
+    let bytes = match dtype {
+        DType::F32 => v
+            .iter()
+            .flat_map(|x| (x * 1e-3 - 3.0).to_le_bytes())
+            .collect(),
+        _ => v.iter().flat_map(|&x| (x as u16).to_le_bytes()).collect(),
+    };
+    let mut r = MemReader::new(dims, dtype, bytes);
+    let out = dir.join(format!("g{}.brick", dtype.name()));
+    let o = BuildOptions {
+        brick: 8,
+        apron: 1,
+        ..BuildOptions::default()
+    };
+    build(&mut r, &out, &o).unwrap();
+    let store = open(&out).unwrap();
+    let bricks = store
+        .nodes()
+        .map(|n| {
+            let mut buf = vec![0u8; store.layout().brick_bytes()];
+            store.read(n.key, &mut buf).unwrap();
+            (n.key, buf)
+        })
+        .collect();
+    (std::fs::read(&out).unwrap(), bricks)
+}
+
+/// Byte offsets (in the file) of the data entries.
+fn data_entries(b: &[u8]) -> Vec<usize> {
+    let table_off = u64_at(b, 80) as usize;
+    (table_off..b.len())
+        .step_by(ENTRY_LEN)
+        .filter(|&eo| b[eo + 1] == 2)
+        .collect()
+}
+
+fn payload_of(b: &[u8], eo: usize) -> Vec<u8> {
+    let len = u32::from_le_bytes(b[eo + 28..eo + 32].try_into().unwrap()) as usize;
+    let off = u64_at(b, eo + 32) as usize;
+    b[off..off + len].to_vec()
+}
+
+/// Rebuilds the payload section with `with` as the payload of the entry at
+/// `eo`, in the original order, so the payloads still tile the section; all
+/// offsets, lengths and checksums are recomputed.
+fn rewrite_payload(good: &[u8], eo: usize, with: &[u8]) -> Vec<u8> {
+    let table_off = u64_at(good, 80) as usize;
+    let mut entries = data_entries(good);
+    entries.sort_by_key(|&e| u64_at(good, e + 32));
+    let mut table = good[table_off..].to_vec();
+    let mut payload = Vec::new();
+    for e in entries {
+        let p = if e == eo {
+            with.to_vec()
+        } else {
+            payload_of(good, e)
+        };
+        let t = e - table_off;
+        let off = (HEADER_LEN + payload.len()) as u64;
+        table[t + 28..t + 32].copy_from_slice(&(p.len() as u32).to_le_bytes());
+        table[t + 32..t + 40].copy_from_slice(&off.to_le_bytes());
+        table[t + 40..t + 44].copy_from_slice(&crc32fast::hash(&p).to_le_bytes());
+        payload.extend_from_slice(&p);
+    }
+    let mut out = good[..HEADER_LEN].to_vec();
+    out.extend_from_slice(&payload);
+    let new_off = out.len() as u64;
+    out.extend_from_slice(&table);
+    out[80..88].copy_from_slice(&new_off.to_le_bytes());
+    out[96..104].copy_from_slice(&(new_off - HEADER_LEN as u64).to_le_bytes());
+    reseal_table(&mut out);
+    reseal_header(&mut out);
+    out
+}
+
+#[derive(Debug, Default)]
+struct Outcome {
+    /// Refused at open or on reading some node.
+    detected: usize,
+    /// Opened, every read succeeded, some brick differs from the original.
+    silently_wrong: usize,
+    /// Opened and every brick is the original (the forgery changed nothing).
+    harmless: usize,
+}
+
+/// Opens `bytes` and reads every node, comparing with the original bricks.
+fn judge(path: &Path, bytes: &[u8], bricks: &[(NodeKey, Vec<u8>)], out: &mut Outcome) {
+    std::fs::write(path, bytes).unwrap();
+    let store = match open(path) {
+        Ok(s) => s,
+        Err(e) => {
+            assert!(
+                matches!(
+                    e,
+                    StoreError::PayloadGap { .. } | StoreError::PayloadOverlap { .. }
+                ),
+                "refused at open with an unexpected error: {e}"
+            );
+            out.detected += 1;
+            return;
+        }
+    };
+    let mut buf = vec![0u8; store.layout().brick_bytes()];
+    let mut differs = false;
+    for (key, want) in bricks {
+        match store.read(*key, &mut buf) {
+            Err(e) => {
+                assert!(
+                    matches!(e, StoreError::BrickMismatch { key: k, .. } if k == *key),
+                    "{key:?}: unexpected error {e}"
+                );
+                assert!(e.to_string().contains(&format!("{key:?}")), "{e}");
+                out.detected += 1;
+                return;
+            }
+            Ok(()) => differs |= buf != *want,
+        }
+    }
+    if differs {
+        out.silently_wrong += 1;
+    } else {
+        out.harmless += 1;
+    }
+}
+
+#[test]
+fn forgeries_with_recomputed_checksums_never_decode_silently_wrong() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("f.brick");
+    let mut rng = Rng(0x0F0F_1234_5678_9ABC);
+    let n = 40;
+    for dtype in [DType::U16, DType::F32] {
+        let (good, bricks) = gradient_store(dir.path(), dtype);
+        let data = data_entries(&good);
+        assert!(data.len() > 20, "{} data nodes", data.len());
+        let pair = |rng: &mut Rng| {
+            let i = rng.below(data.len());
+            let j = (i + 1 + rng.below(data.len() - 1)) % data.len();
+            (data[i], data[j])
+        };
+        let classes = [
+            "swapped payload references",
+            "data node marked uniform",
+            "another node's payload referenced",
+            "another node's lz4 written in place",
+            "one sample out of range (or NaN)",
+        ];
+        for (c, class) in classes.iter().enumerate() {
+            let mut out = Outcome::default();
+            for _ in 0..n {
+                let (a, b) = pair(&mut rng);
+                let mut m = good.clone();
+                match c {
+                    0 => {
+                        let fa = m[a + 28..a + 44].to_vec();
+                        let fb = m[b + 28..b + 44].to_vec();
+                        m[a + 28..a + 44].copy_from_slice(&fb);
+                        m[b + 28..b + 44].copy_from_slice(&fa);
+                    }
+                    1 => {
+                        m[a + 1] = 1;
+                        m[a + 28..a + 44].fill(0);
+                    }
+                    2 => {
+                        let fb = m[b + 28..b + 44].to_vec();
+                        m[a + 28..a + 44].copy_from_slice(&fb);
+                    }
+                    3 => m = rewrite_payload(&good, a, &payload_of(&good, b)),
+                    _ => {
+                        let mut brick = vec![0u8; bricks[0].1.len()];
+                        lz4_flex::block::decompress_into(&payload_of(&good, a), &mut brick)
+                            .unwrap();
+                        let s = dtype.size();
+                        let i = rng.below(brick.len() / s) * s;
+                        let max = f32::from_le_bytes(m[a + 20..a + 24].try_into().unwrap());
+                        match dtype {
+                            DType::F32 => brick[i..i + 4].copy_from_slice(&f32::NAN.to_le_bytes()),
+                            _ => brick[i..i + 2].copy_from_slice(&(max as u16 + 1).to_le_bytes()),
+                        }
+                        m = rewrite_payload(&good, a, &lz4_flex::block::compress(&brick));
+                    }
+                }
+                if c < 3 {
+                    reseal_table(&mut m);
+                    reseal_header(&mut m);
+                }
+                judge(&path, &m, &bricks, &mut out);
+            }
+            eprintln!("{} {class}: {out:?}", dtype.name());
+            assert_eq!(out.silently_wrong, 0, "{} {class}: {out:?}", dtype.name());
+            assert_eq!(out.detected, n, "{} {class}: {out:?}", dtype.name());
+        }
+    }
+}
+
+#[test]
+fn uniform_value_outside_its_range_is_refused() {
+    // (Checked at open since the format's first version; kept under test.)
+    let dir = tempfile::tempdir().unwrap();
+    // Constant where x < 8 (uniform bricks), a ramp elsewhere.
+    let dims = [16u32, 12, 8];
+    let mut v = Vec::new();
+    for _z in 0..dims[2] {
+        for y in 0..dims[1] {
+            for x in 0..dims[0] {
+                v.push(if x < 8 { 5u8 } else { (x * 10 + y) as u8 });
+            }
+        }
+    }
+    let mut r = MemReader::new(dims, DType::U8, v);
+    let out = dir.path().join("good.brick");
+    let o = BuildOptions {
+        brick: 4,
+        apron: 1,
+        ..BuildOptions::default()
+    };
+    build(&mut r, &out, &o).unwrap();
+    let good = std::fs::read(&out).unwrap();
+    let path = dir.path().join("u.brick");
+    let table_off = u64_at(&good, 80) as usize;
+    let uniform: Vec<usize> = (table_off..good.len())
+        .step_by(ENTRY_LEN)
+        .filter(|&eo| good[eo + 1] == 1)
+        .collect();
+    assert!(!uniform.is_empty());
+    for eo in uniform {
+        let max = f32::from_le_bytes(good[eo + 20..eo + 24].try_into().unwrap());
+        let min = f32::from_le_bytes(good[eo + 16..eo + 20].try_into().unwrap());
+        for v in [max + 1.0, min - 1.0] {
+            if !(0.0..=255.0).contains(&v) {
+                continue;
+            }
+            let mut b = good.clone();
+            b[eo + 24..eo + 28].copy_from_slice(&v.to_le_bytes());
+            reseal_table(&mut b);
+            reseal_header(&mut b);
+            assert!(
+                matches!(
+                    exercise(&path, &b),
+                    Err(StoreError::BadNode { field: "value", .. })
+                ),
+                "uniform value {v} outside [{min}, {max}] opened"
+            );
+        }
+    }
+}

@@ -4,7 +4,7 @@
 mod common;
 
 use brickray_core::{BrickSource, DType, NodeKey, NodeKind, VolumeReader};
-use brickray_store::{BuildOptions, Filter, ProceduralSource, build, open};
+use brickray_store::{BuildOptions, Filter, ProceduralSource, StoreError, build, open};
 use common::*;
 
 /// The finest level of a small procedural volume as f32 values.
@@ -12,6 +12,7 @@ fn finest(src: &ProceduralSource) -> Vec<f32> {
     let lay = src.layout();
     let d = lay.level_dims(lay.levels - 1).map(|d| d as u64 - 1);
     src.region(lay.levels - 1, [0; 3], d)
+        .unwrap()
         .into_iter()
         .map(f32::from)
         .collect()
@@ -33,6 +34,7 @@ fn inner_nodes_equal_the_filter_of_their_children() {
             let d = lay.level_dims(l).map(|d| d as u64 - 1);
             let got: Vec<f32> = src
                 .region(l, [0; 3], d)
+                .unwrap()
                 .into_iter()
                 .map(f32::from)
                 .collect();
@@ -154,7 +156,7 @@ fn huge_virtual_volume_65536_cubed() {
                 let p = [rnd(d[0]), rnd(d[1]), rnd(d[2])];
                 let lo = p.map(|c| 2 * c);
                 let hi = [0, 1, 2].map(|a| (2 * p[a] + 1).min(fd[a] - 1));
-                let kids = src.region(l + 1, lo, hi);
+                let kids = src.region(l + 1, lo, hi).unwrap();
                 let mut v = [0f32; 8];
                 let mut c = 0;
                 for dz in 0..2 {
@@ -169,7 +171,7 @@ fn huge_virtual_volume_65536_cubed() {
                     }
                 }
                 assert_eq!(
-                    src.voxel(l, p) as f32,
+                    src.voxel(l, p).unwrap() as f32,
                     filter_ref(DType::U8, Filter::Average, v),
                     "level {l} voxel {p:?}"
                 );
@@ -195,4 +197,86 @@ fn non_cubic_virtual_volume_has_empty_outside_nodes() {
     );
     assert!(ProceduralSource::fractal_noise([0, 1, 1], 16, 2).is_err());
     let _ = lay;
+}
+
+#[test]
+fn degenerate_regions_and_options_are_typed_errors() {
+    let src = ProceduralSource::fractal_noise([64, 40, 20], 8, 2).unwrap();
+    let levels = src.layout().levels;
+    assert_eq!(levels, 4);
+    let d = src.layout().level_dims(3).map(u64::from);
+    let out_of_range =
+        |r: Result<Vec<u8>, StoreError>| matches!(r, Err(StoreError::RegionOutOfRange { .. }));
+    // hi < lo on each axis (used to overflow and panic), past the level
+    // volume, a level the octree does not have, u64::MAX corners.
+    for a in 0..3 {
+        let mut lo = [5u64; 3];
+        let hi = [5u64; 3];
+        lo[a] = 6;
+        assert!(out_of_range(src.region(3, lo, hi)), "axis {a}");
+        let mut hi = [0u64; 3];
+        hi[a] = d[a];
+        assert!(out_of_range(src.region(3, [0; 3], hi)), "axis {a}");
+        let mut hi = [0u64; 3];
+        hi[a] = u64::MAX;
+        assert!(out_of_range(src.region(3, [0; 3], hi)), "axis {a}");
+    }
+    assert!(out_of_range(src.region(levels, [0; 3], [0; 3])));
+    assert!(out_of_range(src.region(u8::MAX, [0; 3], [0; 3])));
+    assert!(matches!(
+        src.voxel(3, d),
+        Err(StoreError::RegionOutOfRange {
+            level: 3,
+            level_dims: Some([64, 40, 20]),
+            ..
+        })
+    ));
+    assert!(matches!(
+        src.voxel(9, [0; 3]),
+        Err(StoreError::RegionOutOfRange {
+            level_dims: None,
+            ..
+        })
+    ));
+    // The largest corner voxel and the whole finest level are fine.
+    assert!(src.voxel(3, d.map(|x| x - 1)).is_ok());
+    assert_eq!(
+        src.region(3, [0; 3], d.map(|x| x - 1)).unwrap().len(),
+        64 * 40 * 20
+    );
+    // Too large a box: a typed error, not an allocation failure.
+    let huge = ProceduralSource::fractal_noise([65536; 3], 32, 2).unwrap();
+    let l = huge.layout().levels - 1;
+    assert!(matches!(
+        huge.region(l, [0; 3], [65535; 3]),
+        Err(StoreError::RegionTooLarge { voxels, max }) if voxels == 1 << 48 && max == ProceduralSource::MAX_REGION_VOXELS
+    ));
+    // Degenerate constructor options.
+    for (dims, brick, apron) in [
+        ([0u64, 1, 1], 16u32, 2u32),
+        ([1, 1, 1 << 25], 16, 2),
+        ([1 << 24; 3], 16, 2),
+        ([u64::MAX, 2, 2], 16, 2),
+        ([8, 8, 8], 0, 2),
+        ([8, 8, 8], 513, 2),
+        ([8, 8, 8], 8, 17),
+        ([8, 8, 8], u32::MAX, u32::MAX),
+    ] {
+        for r in [
+            ProceduralSource::fractal_noise(dims, brick, apron),
+            ProceduralSource::sphere_shells(dims, brick, apron),
+            ProceduralSource::with_seed(dims, brick, apron, 7),
+        ] {
+            assert!(
+                matches!(r, Err(StoreError::BadOption { .. })),
+                "{dims:?} {brick} {apron}: {r:?}"
+            );
+        }
+    }
+    // An apron wider than the brick is valid (the apron clamps at the edges
+    // like any sample): brick 1, apron 16.
+    let wide = ProceduralSource::fractal_noise([5, 3, 2], 1, 16).unwrap();
+    let lay = wide.layout().clone();
+    let levels = reference_levels(&lay, finest(&wide), Filter::Average);
+    check_source(&wide, &levels, None);
 }

@@ -83,6 +83,43 @@ pub enum IoError {
         #[source]
         source: VolumeError,
     },
+    /// The path names something other than a regular file (a FIFO, a device,
+    /// a directory, ...). Reported from its metadata, before opening it: opening
+    /// a FIFO for reading would block.
+    #[error("{path} is a {kind}, not a regular file")]
+    NotRegularFile {
+        /// The path.
+        path: PathBuf,
+        /// What it is.
+        kind: FileKind,
+    },
+    /// A header or sidecar names a data file that does not resolve inside the
+    /// header's folder (an absolute path, `..`, or a symbolic link leading out),
+    /// and the reader was not allowed to read outside it
+    /// ([`ReadOptions::allow_outside_dir`]).
+    #[error(
+        "{path}: data file {data} resolves outside the header's folder {dir} \
+         (allowed only on request: ReadOptions::allow_outside_dir, \
+         brickray-store build --allow-outside-dir)"
+    )]
+    OutsideDir {
+        /// The header or sidecar.
+        path: PathBuf,
+        /// The data file as named, joined to the header's folder.
+        data: PathBuf,
+        /// The header's folder.
+        dir: PathBuf,
+    },
+    /// A numeric header field is NaN or infinite.
+    #[error("{path}: header field `{field}` is {value}, not a finite number")]
+    NonFiniteValue {
+        /// The file.
+        path: PathBuf,
+        /// The field (`min`, `max`, `old min`, `old max`, `value_range`).
+        field: &'static str,
+        /// The value read.
+        value: f32,
+    },
     /// A slab outside the volume was asked for.
     #[error("slices {z0}..{z1} requested from a volume of depth {depth}")]
     BadSlab {
@@ -116,6 +153,86 @@ impl IoError {
     }
 }
 
+/// What a path names when it is not a regular file.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[non_exhaustive]
+pub enum FileKind {
+    /// A directory.
+    Directory,
+    /// A named pipe (FIFO).
+    Fifo,
+    /// A socket.
+    Socket,
+    /// A character device (`/dev/null`, a terminal, ...).
+    CharDevice,
+    /// A block device.
+    BlockDevice,
+    /// Anything else that is not a regular file.
+    Other,
+}
+
+impl FileKind {
+    /// The kind of a file type, `None` for a regular file.
+    pub fn of(ft: std::fs::FileType) -> Option<FileKind> {
+        if ft.is_file() {
+            return None;
+        }
+        if ft.is_dir() {
+            return Some(FileKind::Directory);
+        }
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::FileTypeExt;
+            if ft.is_fifo() {
+                return Some(FileKind::Fifo);
+            }
+            if ft.is_socket() {
+                return Some(FileKind::Socket);
+            }
+            if ft.is_char_device() {
+                return Some(FileKind::CharDevice);
+            }
+            if ft.is_block_device() {
+                return Some(FileKind::BlockDevice);
+            }
+        }
+        Some(FileKind::Other)
+    }
+}
+
+impl std::fmt::Display for FileKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            FileKind::Directory => "directory",
+            FileKind::Fifo => "FIFO (named pipe)",
+            FileKind::Socket => "socket",
+            FileKind::CharDevice => "character device",
+            FileKind::BlockDevice => "block device",
+            FileKind::Other => "special file",
+        })
+    }
+}
+
+/// Options of the file readers ([`open_with`], [`RawReader::open_sidecar_with`],
+/// [`NrrdReader::open_with`]). The default is strict.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+#[non_exhaustive]
+pub struct ReadOptions {
+    /// Let a sidecar's `file` or a NRRD header's `data file` name a file outside
+    /// the header's folder (absolute paths, `..`, symbolic links leading out).
+    /// Off by default: a header from elsewhere cannot make the reader read any
+    /// file the process can read.
+    pub allow_outside_dir: bool,
+}
+
+impl ReadOptions {
+    /// Sets [`ReadOptions::allow_outside_dir`].
+    pub fn allow_outside_dir(mut self, allow: bool) -> ReadOptions {
+        self.allow_outside_dir = allow;
+        self
+    }
+}
+
 /// A source of volume samples that can be streamed slab by slab.
 pub trait VolumeReader: Send {
     /// The volume's description. Its `value_range` is the file's declared range,
@@ -129,6 +246,13 @@ pub trait VolumeReader: Send {
 
     /// The path that names this input in errors.
     fn path(&self) -> &Path;
+
+    /// Every file this reader reads (header or sidecar, and data file), so that
+    /// a caller writing a file can refuse to overwrite one of its inputs. The
+    /// default is [`path`](Self::path).
+    fn input_files(&self) -> Vec<PathBuf> {
+        vec![self.path().to_owned()]
+    }
 
     /// Reads the whole volume, validating it (NaN/Inf samples are an error).
     fn read_volume(&mut self) -> Result<Volume, IoError> {
@@ -146,6 +270,94 @@ pub trait VolumeReader: Send {
         self.read_slices(0, desc.dims[2], &mut bytes)?;
         let data = VolumeData::from_le_bytes(desc.dtype, &bytes);
         Volume::new(desc, data).map_err(|e| IoError::volume(self.path(), e))
+    }
+}
+
+/// The metadata of `path` (following symbolic links) if it names a regular
+/// file, else [`IoError::NotRegularFile`]. It never opens the path, so a FIFO
+/// is refused at once instead of blocking the caller.
+pub fn regular_file_metadata(path: &Path) -> Result<std::fs::Metadata, IoError> {
+    let md = std::fs::metadata(path).map_err(|e| IoError::io(path, e))?;
+    match FileKind::of(md.file_type()) {
+        None => Ok(md),
+        Some(kind) => Err(IoError::NotRegularFile {
+            path: path.to_owned(),
+            kind,
+        }),
+    }
+}
+
+/// Opens a regular file for reading: its metadata is checked first (opening a
+/// FIFO would block), and the opened file again (the path may have changed in
+/// between).
+pub(crate) fn open_regular(path: &Path) -> Result<std::fs::File, IoError> {
+    regular_file_metadata(path)?;
+    let f = std::fs::File::open(path).map_err(|e| IoError::io(path, e))?;
+    let md = f.metadata().map_err(|e| IoError::io(path, e))?;
+    match FileKind::of(md.file_type()) {
+        None => Ok(f),
+        Some(kind) => Err(IoError::NotRegularFile {
+            path: path.to_owned(),
+            kind,
+        }),
+    }
+}
+
+/// Longest JSON sidecar or NRRD header read (a forged file cannot make a
+/// reader buffer gigabytes of "header").
+pub(crate) const MAX_HEADER: usize = 1 << 20;
+
+/// The data file `name` (as written in the header or sidecar `header`),
+/// relative to the header's folder. Unless `opts` allows otherwise it must
+/// resolve inside that folder: no absolute path or `..` leading out, and, when
+/// it exists, its canonical path (symbolic links followed) must lie in the
+/// folder's.
+pub(crate) fn resolve_data_file(
+    header: &Path,
+    name: &Path,
+    opts: &ReadOptions,
+) -> Result<PathBuf, IoError> {
+    let dir = header
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    let data = dir.join(name);
+    if opts.allow_outside_dir {
+        return Ok(data);
+    }
+    let outside = || IoError::OutsideDir {
+        path: header.to_owned(),
+        data: data.clone(),
+        dir: dir.to_owned(),
+    };
+    match (dir.canonicalize(), data.canonicalize()) {
+        (Ok(cdir), Ok(cdata)) => {
+            if cdata.starts_with(&cdir) {
+                Ok(data)
+            } else {
+                Err(outside())
+            }
+        }
+        // The folder exists (it holds the header) but the data file does not
+        // resolve: judge the name alone, so that the error does not tell
+        // whether a file outside the folder exists.
+        _ => {
+            let mut depth = 0i64;
+            for c in name.components() {
+                match c {
+                    std::path::Component::Normal(_) => depth += 1,
+                    std::path::Component::CurDir => {}
+                    std::path::Component::ParentDir => depth -= 1,
+                    std::path::Component::RootDir | std::path::Component::Prefix(_) => {
+                        return Err(outside());
+                    }
+                }
+                if depth < 0 {
+                    return Err(outside());
+                }
+            }
+            Ok(data)
+        }
     }
 }
 
@@ -286,8 +498,17 @@ fn bytes_non_finite(dtype: DType, bytes: &[u8]) -> u64 {
 }
 
 /// Opens a volume by extension: `.json` (raw + JSON sidecar), `.nrrd` / `.nhdr`,
-/// or a `.raw` file with a `.json` sidecar of the same stem.
+/// or a `.raw` file with a `.json` sidecar of the same stem. Strict: the data
+/// file must resolve inside the header's folder (see [`open_with`]).
 pub fn open(path: impl AsRef<Path>) -> Result<Box<dyn VolumeReader>, IoError> {
+    open_with(path, &ReadOptions::default())
+}
+
+/// [`open`] with options.
+pub fn open_with(
+    path: impl AsRef<Path>,
+    opts: &ReadOptions,
+) -> Result<Box<dyn VolumeReader>, IoError> {
     let path = path.as_ref();
     let ext = path
         .extension()
@@ -295,10 +516,11 @@ pub fn open(path: impl AsRef<Path>) -> Result<Box<dyn VolumeReader>, IoError> {
         .unwrap_or("")
         .to_ascii_lowercase();
     match ext.as_str() {
-        "json" => Ok(Box::new(RawReader::open_sidecar(path)?)),
-        "nrrd" | "nhdr" => Ok(Box::new(NrrdReader::open(path)?)),
-        "raw" => Ok(Box::new(RawReader::open_sidecar(
+        "json" => Ok(Box::new(RawReader::open_sidecar_with(path, opts)?)),
+        "nrrd" | "nhdr" => Ok(Box::new(NrrdReader::open_with(path, opts)?)),
+        "raw" => Ok(Box::new(RawReader::open_sidecar_with(
             &path.with_extension("json"),
+            opts,
         )?)),
         _ => Err(IoError::Unsupported {
             path: path.to_owned(),
@@ -337,6 +559,11 @@ impl VolumeReader for MemoryReader {
 
     fn path(&self) -> &Path {
         &self.path
+    }
+
+    /// None: the volume is in memory (its name is not a file).
+    fn input_files(&self) -> Vec<PathBuf> {
+        Vec::new()
     }
 
     fn read_slices(&mut self, z0: u32, z1: u32, out: &mut [u8]) -> Result<(), IoError> {

@@ -1,7 +1,10 @@
 //! NRRD (<https://teem.sourceforge.net/nrrd/format.html>): attached or detached
 //! data, `raw` and `gzip` encodings, 3D scalar volumes of u8/u16/i16/f32.
 
-use super::{IoError, VolumeReader, check_slab, scan_stream};
+use super::{
+    IoError, MAX_HEADER, ReadOptions, VolumeReader, check_slab, open_regular,
+    regular_file_metadata, resolve_data_file, scan_stream,
+};
 use crate::volume::{DType, VolumeDesc};
 use flate2::read::GzDecoder;
 use std::fs::File;
@@ -27,15 +30,20 @@ pub struct NrrdReader {
     gz: Option<(GzDecoder<BufReader<File>>, u64)>,
 }
 
-/// Longest header accepted: a forged file cannot make us read gigabytes of "header".
-const MAX_HEADER: usize = 1 << 20;
-
 impl NrrdReader {
     /// Parses the header and checks that the data is all there (for raw encoding, by
     /// size; for gzip, by decoding once, which also finds the value range when the
-    /// header gives none).
+    /// header gives none). A detached data file must resolve inside the header's
+    /// folder (see [`open_with`](Self::open_with)); header and data must be
+    /// regular files.
     pub fn open(path: &Path) -> Result<NrrdReader, IoError> {
-        let file = File::open(path).map_err(|e| IoError::io(path, e))?;
+        NrrdReader::open_with(path, &ReadOptions::default())
+    }
+
+    /// [`open`](Self::open) with options: [`ReadOptions::allow_outside_dir`]
+    /// lets `data file` name a file outside the header's folder.
+    pub fn open_with(path: &Path, opts: &ReadOptions) -> Result<NrrdReader, IoError> {
+        let file = open_regular(path)?;
         let mut rd = BufReader::new(file);
         // Every line is read through a limit, so a forged file without newlines
         // cannot make us buffer gigabytes of "header".
@@ -168,11 +176,27 @@ impl NrrdReader {
                 what: "line skip / byte skip".into(),
             });
         }
-        let declared = match (get("min").or(get("old min")), get("max").or(get("old max"))) {
-            (Some(a), Some(b)) => match (a.parse::<f32>(), b.parse::<f32>()) {
-                (Ok(a), Ok(b)) if a.is_finite() && b.is_finite() && b > a => Some([a, b]),
-                _ => None,
-            },
+        // Every range field present must be a finite number; the range is used
+        // when both ends are given and increasing (a flat one, as a constant
+        // volume has, falls back to the data's).
+        let number = |key: &'static str| -> Result<Option<f32>, IoError> {
+            let Some(v) = get(key) else { return Ok(None) };
+            let x = v
+                .parse::<f32>()
+                .map_err(|_| IoError::header(path, format!("{key} is not a number: {v:?}")))?;
+            if !x.is_finite() {
+                return Err(IoError::NonFiniteValue {
+                    path: path.to_owned(),
+                    field: key,
+                    value: x,
+                });
+            }
+            Ok(Some(x))
+        };
+        let (min, max) = (number("min")?, number("max")?);
+        let (old_min, old_max) = (number("old min")?, number("old max")?);
+        let declared = match (min.or(old_min), max.or(old_max)) {
+            (Some(a), Some(b)) if b > a => Some([a, b]),
             _ => None,
         };
         let (data_path, data_offset) = match get("data file").or(get("datafile")) {
@@ -182,7 +206,7 @@ impl NrrdReader {
                     what: "multi-file data".into(),
                 });
             }
-            Some(f) => (path.parent().unwrap_or(Path::new(".")).join(f), 0),
+            Some(f) => (resolve_data_file(path, Path::new(f), opts)?, 0),
             None => (path.to_owned(), consumed as u64),
         };
         let desc = VolumeDesc {
@@ -201,9 +225,7 @@ impl NrrdReader {
             desc,
             gz: None,
         };
-        let file_len = std::fs::metadata(&r.data_path)
-            .map_err(|e| IoError::io(&r.data_path, e))?
-            .len();
+        let file_len = regular_file_metadata(&r.data_path)?.len();
         let available = file_len.saturating_sub(r.data_offset);
         if encoding == Encoding::Raw && available < r.desc.byte_len() {
             return Err(IoError::Truncated {
@@ -226,7 +248,7 @@ impl NrrdReader {
     /// One pass over the data in bounded memory: the value range, NaN/Inf, and
     /// (for gzip) that the stream is whole, checksum included.
     fn scan(&mut self) -> Result<[f32; 2], IoError> {
-        let mut f = File::open(&self.data_path).map_err(|e| IoError::io(&self.data_path, e))?;
+        let mut f = open_regular(&self.data_path)?;
         f.seek(SeekFrom::Start(self.data_offset))
             .map_err(|e| IoError::io(&self.data_path, e))?;
         let f = BufReader::new(f);
@@ -281,7 +303,7 @@ impl NrrdReader {
             None => true,
         };
         if restart {
-            let mut f = File::open(&self.data_path).map_err(|e| IoError::io(&self.data_path, e))?;
+            let mut f = open_regular(&self.data_path)?;
             f.seek(SeekFrom::Start(self.data_offset))
                 .map_err(|e| IoError::io(&self.data_path, e))?;
             self.gz = Some((GzDecoder::new(BufReader::new(f)), 0));
@@ -403,13 +425,20 @@ impl VolumeReader for NrrdReader {
         &self.path
     }
 
+    fn input_files(&self) -> Vec<PathBuf> {
+        let mut v = vec![self.path.clone()];
+        if self.data_path != self.path {
+            v.push(self.data_path.clone());
+        }
+        v
+    }
+
     fn read_slices(&mut self, z0: u32, z1: u32, out: &mut [u8]) -> Result<(), IoError> {
         let slice = check_slab(&self.desc, z0, z1, out)?;
         let start = z0 as u64 * slice;
         match self.encoding {
             Encoding::Raw => {
-                let mut f =
-                    File::open(&self.data_path).map_err(|e| IoError::io(&self.data_path, e))?;
+                let mut f = open_regular(&self.data_path)?;
                 f.seek(SeekFrom::Start(self.data_offset + start))
                     .map_err(|e| IoError::io(&self.path, e))?;
                 f.read_exact(out).map_err(|e| match e.kind() {

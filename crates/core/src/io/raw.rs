@@ -1,6 +1,9 @@
 //! Raw little-endian samples with a JSON sidecar (the form of `shared/data`).
 
-use super::{IoError, VolumeReader, check_slab, scan_stream};
+use super::{
+    IoError, MAX_HEADER, ReadOptions, VolumeReader, check_slab, open_regular, resolve_data_file,
+    scan_stream,
+};
 use crate::volume::{DType, VolumeDesc};
 use std::fs::File;
 use std::io::{Read, Seek, SeekFrom};
@@ -10,6 +13,8 @@ use std::path::{Path, PathBuf};
 #[derive(Debug)]
 pub struct RawReader {
     path: PathBuf,
+    /// The sidecar it was opened from, if any.
+    sidecar: Option<PathBuf>,
     file: File,
     offset: u64,
     desc: VolumeDesc,
@@ -31,7 +36,8 @@ struct Sidecar {
 
 impl RawReader {
     /// Opens a raw file of known description. `desc.value_range` is used as given.
-    /// The file must hold exactly `offset + desc.byte_len()` bytes.
+    /// The file must be a regular file (a FIFO or a device is refused before it
+    /// is opened) holding exactly `offset + desc.byte_len()` bytes.
     pub fn new(
         path: impl Into<PathBuf>,
         offset: u64,
@@ -39,9 +45,9 @@ impl RawReader {
     ) -> Result<RawReader, IoError> {
         let path = path.into();
         desc.validate().map_err(|e| IoError::volume(&path, e))?;
-        let file = File::open(&path).map_err(|e| IoError::io(&path, e))?;
+        let file = open_regular(&path)?;
         let actual = file.metadata().map_err(|e| IoError::io(&path, e))?.len();
-        let expected = offset + desc.byte_len();
+        let expected = offset.saturating_add(desc.byte_len());
         if actual != expected {
             return Err(IoError::SizeMismatch {
                 path,
@@ -51,6 +57,7 @@ impl RawReader {
         }
         Ok(RawReader {
             path,
+            sidecar: None,
             file,
             offset,
             desc,
@@ -59,8 +66,27 @@ impl RawReader {
 
     /// Opens `name.json` and the raw file it names (`"file"`, else `name.raw`).
     /// When the sidecar gives no `value_range`, the data is scanned for one.
+    /// The raw file must resolve inside the sidecar's folder (see
+    /// [`open_sidecar_with`](Self::open_sidecar_with)); both must be regular
+    /// files.
     pub fn open_sidecar(json: &Path) -> Result<RawReader, IoError> {
-        let text = std::fs::read_to_string(json).map_err(|e| IoError::io(json, e))?;
+        RawReader::open_sidecar_with(json, &ReadOptions::default())
+    }
+
+    /// [`open_sidecar`](Self::open_sidecar) with options:
+    /// [`ReadOptions::allow_outside_dir`] lets `"file"` name a file outside the
+    /// sidecar's folder.
+    pub fn open_sidecar_with(json: &Path, opts: &ReadOptions) -> Result<RawReader, IoError> {
+        let mut bytes = Vec::new();
+        open_regular(json)?
+            .take(MAX_HEADER as u64 + 1)
+            .read_to_end(&mut bytes)
+            .map_err(|e| IoError::io(json, e))?;
+        if bytes.len() > MAX_HEADER {
+            return Err(IoError::header(json, "sidecar longer than 1 MiB"));
+        }
+        let text =
+            String::from_utf8(bytes).map_err(|_| IoError::header(json, "sidecar is not UTF-8"))?;
         let sc: Sidecar =
             serde_json::from_str(&text).map_err(|e| IoError::header(json, e.to_string()))?;
         if sc.dims.len() != 3 {
@@ -96,9 +122,23 @@ impl RawReader {
             }
         };
         let raw = match &sc.file {
-            Some(f) => json.parent().unwrap_or(Path::new(".")).join(f),
-            None => json.with_extension("raw"),
+            Some(f) => resolve_data_file(json, Path::new(f), opts)?,
+            None => {
+                let name = json.with_extension("raw");
+                resolve_data_file(json, Path::new(name.file_name().unwrap_or_default()), opts)?
+            }
         };
+        if let Some(&v) = sc
+            .value_range
+            .as_deref()
+            .and_then(|r| r.iter().find(|v| !v.is_finite()))
+        {
+            return Err(IoError::NonFiniteValue {
+                path: json.to_owned(),
+                field: "value_range",
+                value: v,
+            });
+        }
         let declared = match sc.value_range.as_deref() {
             Some([lo, hi]) if lo.is_finite() && hi.is_finite() && hi > lo => Some([*lo, *hi]),
             Some(r) => {
@@ -116,6 +156,7 @@ impl RawReader {
             value_range: declared.unwrap_or([0.0, 1.0]),
         };
         let mut reader = RawReader::new(raw, 0, desc)?;
+        reader.sidecar = Some(json.to_owned());
         if declared.is_none() {
             reader.desc.value_range = reader.scan()?;
         }
@@ -142,6 +183,14 @@ impl VolumeReader for RawReader {
 
     fn path(&self) -> &Path {
         &self.path
+    }
+
+    fn input_files(&self) -> Vec<PathBuf> {
+        self.sidecar
+            .iter()
+            .chain(std::iter::once(&self.path))
+            .cloned()
+            .collect()
     }
 
     fn read_slices(&mut self, z0: u32, z1: u32, out: &mut [u8]) -> Result<(), IoError> {

@@ -2,16 +2,22 @@
 //!
 //! ```text
 //! brickray-store build <input.json|.raw|.nrrd|.nhdr> <out.brick> [--brick N] [--apron N]
-//!                      [--filter average|max] [--empty-below V] [--memory-mib N] [--quiet]
+//!                      [--filter average|max] [--empty-below V] [--memory-mib N]
+//!                      [--allow-outside-dir] [--quiet]
 //! brickray-store info <store.brick> [--bins N]
 //! ```
+//!
+//! On SIGINT, SIGTERM or SIGHUP a build removes its temporary files, then dies
+//! of the signal.
 
+use brickray_core::io::ReadOptions;
 use brickray_core::{BrickSource, NodeKind};
-use brickray_store::{BuildOptions, Filter, Store};
+use brickray_store::{BuildOptions, Filter, Store, StoreError};
 use clap::{Parser, Subcommand};
 use rayon::prelude::*;
 use std::path::PathBuf;
 use std::process::ExitCode;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 /// Build a brick octree store from a volume, or describe one.
 #[derive(Debug, Parser)]
@@ -42,8 +48,13 @@ enum Command {
         #[arg(long)]
         empty_below: Option<f32>,
         /// Upper bound on the builder's memory, in MiB.
-        #[arg(long, default_value_t = 1024)]
+        #[arg(long, default_value_t = 1024,
+              value_parser = clap::value_parser!(u64).range(1..=MAX_MEMORY_MIB))]
         memory_mib: u64,
+        /// Let the sidecar's `file` or the NRRD `data file` name a file outside
+        /// the header's folder (absolute paths, `..`, links leading out).
+        #[arg(long)]
+        allow_outside_dir: bool,
         /// No progress bar.
         #[arg(long)]
         quiet: bool,
@@ -59,6 +70,12 @@ enum Command {
     },
 }
 
+/// Set by the signal thread before it removes the build's temporaries.
+static INTERRUPTED: AtomicBool = AtomicBool::new(false);
+
+/// The largest `--memory-mib` whose byte count fits in a u64.
+const MAX_MEMORY_MIB: u64 = u64::MAX >> 20;
+
 fn parse_filter(v: &str) -> Result<Filter, String> {
     Filter::parse(v).ok_or_else(|| format!("expected average or max, got {v:?}"))
 }
@@ -73,22 +90,36 @@ fn main() -> ExitCode {
             filter,
             empty_below,
             memory_mib,
+            allow_outside_dir,
             quiet,
-        } => {
+        } => remove_temporaries_on_signals().and_then(|()| {
+            let memory_bound = memory_mib.checked_mul(1 << 20).ok_or_else(|| {
+                StoreError::BadOption {
+                    option: "memory-mib",
+                    reason: format!("{memory_mib} MiB does not fit in 64 bits of bytes"),
+                }
+                .to_string()
+            })?;
             let o = BuildOptions {
                 brick,
                 apron,
                 filter,
                 empty_below,
-                memory_bound: memory_mib << 20,
+                memory_bound,
                 progress: !quiet,
             };
-            cmd_build(&input, &output, &o)
-        }
+            let read = ReadOptions::default().allow_outside_dir(allow_outside_dir);
+            cmd_build(&input, &output, &o, &read)
+        }),
         Command::Info { store, bins } => cmd_info(&store, bins.clamp(1, 4096)),
     };
     match r {
         Ok(()) => ExitCode::SUCCESS,
+        // The build failed because a signal removed its files: the signal
+        // thread ends the process (with the signal's status); wait for it.
+        Err(_) if INTERRUPTED.load(Ordering::SeqCst) => loop {
+            std::thread::park();
+        },
         Err(e) => {
             eprintln!("brickray-store: {e}");
             ExitCode::FAILURE
@@ -96,13 +127,54 @@ fn main() -> ExitCode {
     }
 }
 
+/// On SIGINT, SIGTERM and SIGHUP: remove the temporary files of the build in
+/// progress, then die of the signal (as without a handler). A signal that the
+/// process was started with ignored (`nohup`, a background job of a
+/// non-interactive shell) stays ignored.
+fn remove_temporaries_on_signals() -> Result<(), String> {
+    use signal_hook::consts::{SIGHUP, SIGINT, SIGTERM};
+    let ignored = ignored_signals();
+    let wanted: Vec<i32> = [SIGINT, SIGTERM, SIGHUP]
+        .into_iter()
+        .filter(|&s| ignored & (1u64 << (s - 1)) == 0)
+        .collect();
+    let mut signals = signal_hook::iterator::Signals::new(wanted)
+        .map_err(|e| format!("cannot install signal handlers: {e}"))?;
+    std::thread::spawn(move || {
+        if let Some(sig) = signals.forever().next() {
+            INTERRUPTED.store(true, Ordering::SeqCst);
+            let n = brickray_store::remove_partial_files();
+            eprintln!("brickray-store: interrupted (signal {sig}); removed {n} temporary file(s)");
+            let _ = signal_hook::low_level::emulate_default_handler(sig);
+            std::process::exit(128 + sig);
+        }
+    });
+    Ok(())
+}
+
+/// The signals this process ignores (bit `n - 1` for signal `n`), from
+/// `/proc/self/status`; none where that cannot be read.
+fn ignored_signals() -> u64 {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find_map(|l| l.strip_prefix("SigIgn:"))
+                .and_then(|m| u64::from_str_radix(m.trim(), 16).ok())
+        })
+        .unwrap_or(0)
+}
+
 fn cmd_build(
     input: &std::path::Path,
     out: &std::path::Path,
     o: &BuildOptions,
+    read: &ReadOptions,
 ) -> Result<(), String> {
     let output = out.display();
-    let r = brickray_store::build_file(input, out, o).map_err(|e| e.to_string())?;
+    let mut reader =
+        brickray_core::io::open_with(input, read).map_err(|e| StoreError::Input(e).to_string())?;
+    let r = brickray_store::build(reader.as_mut(), out, o).map_err(|e| e.to_string())?;
     println!(
         "built {output}: {} levels, {} nodes ({} data, {} uniform, {} empty), {:.1} MiB from {:.1} MiB in {:.2} s ({:.1} Mvoxel/s)",
         r.layout.levels,
