@@ -13,10 +13,13 @@ use brickray::{
 };
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let out = std::env::args().nth(1).unwrap_or_else(|| "out/embed.png".into());
+    let out = std::env::args()
+        .nth(1)
+        .unwrap_or_else(|| "out/embed.png".into());
     // The host's device: brickray never creates one. It needs at most
     // `brickray::required_limits()` (within WebGPU's defaults).
-    let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+    let instance =
+        wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
     let adapter = pollster::block_on(instance.request_adapter(&Default::default()))?;
     let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
         required_limits: brickray::required_limits().using_resolution(adapter.limits()),
@@ -30,7 +33,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let target = |format, usage| {
         device.create_texture(&wgpu::TextureDescriptor {
             label: Some("host target"),
-            size: wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
+            size: wgpu::Extent3d {
+                width,
+                height,
+                depth_or_array_layers: 1,
+            },
             mip_level_count: 1,
             sample_count: 1,
             dimension: wgpu::TextureDimension::D2,
@@ -61,7 +68,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     };
     let mut encoder = device.create_command_encoder(&Default::default());
     // 1. The host's opaque pass (here it only clears; geometry would go here).
-    let clear = wgpu::Color { r: 0.1, g: 0.1, b: 0.15, a: 1.0 };
+    let clear = wgpu::Color {
+        r: 0.1,
+        g: 0.1,
+        b: 0.15,
+        a: 1.0,
+    };
     drop(host_pass(
         &mut encoder,
         &color_view,
@@ -80,7 +92,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     //    geometry drawn after it is depth-tested against the volume.
     {
         let (load_color, load_depth) = (wgpu::LoadOp::Load, wgpu::LoadOp::Load);
-        let mut pass = host_pass(&mut encoder, &color_view, &depth_view, load_color, load_depth);
+        let mut pass = host_pass(
+            &mut encoder,
+            &color_view,
+            &depth_view,
+            load_color,
+            load_depth,
+        );
         renderer.render(&mut pass)?;
     }
     queue.submit([encoder.finish()]);
@@ -105,11 +123,17 @@ fn host_pass<'e>(
             view: color,
             depth_slice: None,
             resolve_target: None,
-            ops: wgpu::Operations { load: load_color, store: wgpu::StoreOp::Store },
+            ops: wgpu::Operations {
+                load: load_color,
+                store: wgpu::StoreOp::Store,
+            },
         })],
         depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
             view: depth,
-            depth_ops: Some(wgpu::Operations { load: load_depth, store: wgpu::StoreOp::Store }),
+            depth_ops: Some(wgpu::Operations {
+                load: load_depth,
+                store: wgpu::StoreOp::Store,
+            }),
             stencil_ops: None,
         }),
         timestamp_writes: None,

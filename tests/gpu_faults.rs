@@ -5,11 +5,11 @@
 //! repaired; dropping the renderer returns promptly whatever the loader does;
 //! budgets change at run time.
 
+use brickray::core::{BrickError, NodeInfo, OctreeLayout};
 use brickray::{
     BrickSource, Camera, FrameDesc, NodeKey, OutOfCoreConfig, RetryPolicy, TransferFunction,
     VolumeFrame, VolumeRenderer,
 };
-use brickray::core::{BrickError, NodeInfo, OctreeLayout};
 use brickray_harness::{Offscreen, draw_frame, shared_gpu as gpu};
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::sync::{Arc, Condvar, Mutex};
@@ -91,7 +91,10 @@ impl BrickSource for FaultySource {
     }
 }
 
-fn setup(source: Arc<FaultySource>, retry: Option<RetryPolicy>) -> (VolumeRenderer, FrameDesc<'static>) {
+fn setup(
+    source: Arc<FaultySource>,
+    retry: Option<RetryPolicy>,
+) -> (VolumeRenderer, FrameDesc<'static>) {
     let g = gpu();
     let frame = VolumeFrame::centered([256; 3], [1.0; 3]);
     let mut r = VolumeRenderer::new(&g.device, brickray_harness::target_desc()).unwrap();
@@ -141,9 +144,15 @@ fn failing_and_panicking_sources_are_surfaced_then_retried() {
         let (mut r, desc) = setup(source.clone(), None);
         // The image needs the failed nodes: it never settles, but every frame
         // renders (at the root's level) and one error is surfaced.
-        assert!(!settle(&mut r, &desc, 40), "{what}: degraded image reported converged");
+        assert!(
+            !settle(&mut r, &desc, 40),
+            "{what}: degraded image reported converged"
+        );
         let stats = r.out_of_core_stats().unwrap();
-        assert!(!stats.converged && stats.cache.degraded(), "{what}: {stats:?}");
+        assert!(
+            !stats.converged && stats.cache.degraded(),
+            "{what}: {stats:?}"
+        );
         let e = r.take_streaming_error().expect("one error surfaced");
         eprintln!("{what}: {e}");
         assert!(r.take_streaming_error().is_none(), "{what}: surfaced twice");

@@ -55,22 +55,7 @@ fn every_projection_and_near_plane_matches_the_reference() {
     let frame = VolumeFrame::centered(d.dims, d.spacing);
     let size_world = frame.world_size().max_element();
     let size = 96;
-    let cases = [
-        ("dvr", RenderMode::Dvr, ct::soft_tissue()),
-        (
-            "iso",
-            RenderMode::Iso {
-                value: ct::hu(400.0),
-                color: [0.9, 0.85, 0.75],
-            },
-            ct::bone(),
-        ),
-        (
-            "mip",
-            RenderMode::Mip,
-            TransferFunction::ramp(ct::hu(-200.0), ct::hu(1500.0), 1.0),
-        ),
-    ];
+    let cases = ct::scenes();
     let mut r = VolumeRenderer::new(&g.device, brickray_harness::target_desc()).unwrap();
     r.set_volume(&g.device, &g.queue, &vol).unwrap();
     let mut worst = f64::INFINITY;

@@ -49,7 +49,8 @@ fn procedural(brick: u32) -> Arc<dyn brickray::BrickSource> {
 
 #[test]
 fn limits_below_the_kernels_needs_are_typed_errors_at_creation() {
-    let cases: [(&str, fn(&mut wgpu::Limits)); 7] = [
+    type Lower = fn(&mut wgpu::Limits);
+    let cases: [(&str, Lower); 7] = [
         // The composite samples the ray caster's colour and depth.
         ("max_sampled_textures_per_shader_stage", |l| {
             l.max_sampled_textures_per_shader_stage = 1
@@ -61,11 +62,15 @@ fn limits_below_the_kernels_needs_are_typed_errors_at_creation() {
         ("max_compute_invocations_per_workgroup", |l| {
             l.max_compute_invocations_per_workgroup = 32
         }),
-        ("max_compute_workgroup_size_x", |l| l.max_compute_workgroup_size_x = 4),
+        ("max_compute_workgroup_size_x", |l| {
+            l.max_compute_workgroup_size_x = 4
+        }),
         ("max_uniform_buffer_binding_size", |l| {
             l.max_uniform_buffer_binding_size = 128
         }),
-        ("max_texture_dimension_2d", |l| l.max_texture_dimension_2d = 0),
+        ("max_texture_dimension_2d", |l| {
+            l.max_texture_dimension_2d = 0
+        }),
     ];
     for (limit, f) in cases {
         let g = device_with(f);
@@ -88,7 +93,13 @@ fn limits_below_a_backends_needs_are_typed_errors() {
     r.set_volume(&g.device, &g.queue, &sphere()).unwrap();
     let frame = VolumeFrame::centered([1024; 3], [1.0; 3]);
     expect_limit(
-        r.set_volume_source(&g.device, &g.queue, procedural(32), frame, OutOfCoreConfig::default()),
+        r.set_volume_source(
+            &g.device,
+            &g.queue,
+            procedural(32),
+            frame,
+            OutOfCoreConfig::default(),
+        ),
         "max_storage_buffers_per_shader_stage",
     );
     // A volume beyond the 3D texture limit.
@@ -110,7 +121,8 @@ fn tables_beyond_the_storage_binding_limit_are_typed_errors() {
         "max_storage_buffer_binding_size",
     );
     let small = TransferFunction::from_points(&[(0.1, [1.0; 4])], 64);
-    r.set_transfer_function(&g.device, &g.queue, &small).unwrap();
+    r.set_transfer_function(&g.device, &g.queue, &small)
+        .unwrap();
     // Small bricks and a large pool: the slot table exceeds the binding.
     let frame = VolumeFrame::centered([1024; 3], [1.0; 3]);
     let config = OutOfCoreConfig {
@@ -162,12 +174,17 @@ fn an_index_beyond_the_storage_binding_limit_is_a_typed_error() {
     // The slot table (32 B a slot) and the sub-cell table (8 B a slot with 8^3
     // bricks) are the other storage buffers.
     let fixed = s.cache.pool_slots as u64 * 32;
-    assert!(index_bytes > fixed + 1024, "index {index_bytes} B, tables {fixed} B");
+    assert!(
+        index_bytes > fixed + 1024,
+        "index {index_bytes} B, tables {fixed} B"
+    );
     let limit = (fixed + index_bytes) / 2;
     let g = device_with(|l| l.max_storage_buffer_binding_size = limit);
     let (_, err) = run(&g).unwrap();
     match err {
-        Some(PrepareError::Render(e)) => expect_limit::<()>(Err(e), "max_storage_buffer_binding_size"),
+        Some(PrepareError::Render(e)) => {
+            expect_limit::<()>(Err(e), "max_storage_buffer_binding_size")
+        }
         other => panic!("expected the index to outgrow {limit} B, got {other:?}"),
     }
 }
@@ -183,10 +200,20 @@ fn viewports_beyond_the_device_are_refused() {
     let camera = Camera::orbit(frame.center(), 2.0, 0.0, 0.0);
     let mut enc = g.device.create_command_encoder(&Default::default());
     // 32 px = 4 workgroups fits, 40 px = 5 does not.
-    r.prepare(&g.device, &g.queue, &mut enc, &FrameDesc::new(camera, frame, 32, 32))
-        .unwrap();
+    r.prepare(
+        &g.device,
+        &g.queue,
+        &mut enc,
+        &FrameDesc::new(camera, frame, 32, 32),
+    )
+    .unwrap();
     assert!(matches!(
-        r.prepare(&g.device, &g.queue, &mut enc, &FrameDesc::new(camera, frame, 40, 32)),
+        r.prepare(
+            &g.device,
+            &g.queue,
+            &mut enc,
+            &FrameDesc::new(camera, frame, 40, 32)
+        ),
         Err(PrepareError::BadViewport { .. })
     ));
 }
@@ -248,25 +275,53 @@ fn non_finite_or_degenerate_frames_are_refused_before_gpu_work() {
     let (g, mut r, frame) = ready_renderer();
     let ok = Camera::orbit(frame.center(), 2.0, 0.3, 0.2);
     let cameras = [
-        Camera { eye: Vec3::NAN, ..ok },
-        Camera { target: ok.eye, ..ok },
-        Camera { up: ok.target - ok.eye, ..ok },
-        Camera { projection: Projection::Perspective { fov_y: 0.0 }, ..ok },
-        Camera { projection: Projection::Perspective { fov_y: f32::NAN }, ..ok },
+        Camera {
+            eye: Vec3::NAN,
+            ..ok
+        },
+        Camera {
+            target: ok.eye,
+            ..ok
+        },
+        Camera {
+            up: ok.target - ok.eye,
+            ..ok
+        },
+        Camera {
+            projection: Projection::Perspective { fov_y: 0.0 },
+            ..ok
+        },
+        Camera {
+            projection: Projection::Perspective { fov_y: f32::NAN },
+            ..ok
+        },
         Camera { near: 0.0, ..ok },
         Camera { far: ok.near, ..ok },
-        Camera { projection: Projection::Orthographic { height: 0.0 }, ..ok },
-        Camera { projection: Projection::Orthographic { height: 1.0 }, far: f32::INFINITY, ..ok },
+        Camera {
+            projection: Projection::Orthographic { height: 0.0 },
+            ..ok
+        },
+        Camera {
+            projection: Projection::Orthographic { height: 1.0 },
+            far: f32::INFINITY,
+            ..ok
+        },
     ];
     let mut enc = g.device.create_command_encoder(&Default::default());
     for camera in cameras {
         let desc = FrameDesc::new(camera, frame, 16, 16);
         assert!(
-            matches!(r.prepare(&g.device, &g.queue, &mut enc, &desc), Err(PrepareError::Camera(_))),
+            matches!(
+                r.prepare(&g.device, &g.queue, &mut enc, &desc),
+                Err(PrepareError::Camera(_))
+            ),
             "{camera:?} must be refused"
         );
     }
-    let singular = VolumeFrame { model: Mat4::ZERO, ..frame };
+    let singular = VolumeFrame {
+        model: Mat4::ZERO,
+        ..frame
+    };
     let desc = FrameDesc::new(ok, singular, 16, 16);
     assert!(matches!(
         r.prepare(&g.device, &g.queue, &mut enc, &desc),
@@ -295,8 +350,25 @@ fn non_finite_or_degenerate_frames_are_refused_before_gpu_work() {
     let mut pass = target.pass(&mut e2, true);
     assert!(matches!(r.render(&mut pass), Err(RenderError::NotPrepared)));
     drop(pass);
+    // A finite but absurd eye (1e30 away): accepted, and every ray's work is
+    // bounded (by the box's diagonal over the step), so the frame ends.
+    let far_eye = Camera {
+        eye: Vec3::new(1e30, 0.0, 0.0),
+        ..ok
+    };
+    draw_frame(
+        g,
+        &mut r,
+        &target,
+        &FrameDesc::new(far_eye, frame, 16, 16),
+        None,
+    )
+    .unwrap();
     // Out-of-core knobs on an in-core renderer are typed errors.
-    assert!(matches!(r.set_lod_tolerance(1.0), Err(RenderError::NotOutOfCore)));
+    assert!(matches!(
+        r.set_lod_tolerance(1.0),
+        Err(RenderError::NotOutOfCore)
+    ));
     // A viewport of zero pixels.
     let desc = FrameDesc {
         viewport: Viewport::full(0, 16),

@@ -106,23 +106,7 @@ fn finest_level_matches_in_core_on_head_ct() {
         enabled: true,
         ..Default::default()
     };
-    let cases: [(&str, RenderMode, TransferFunction); 4] = [
-        ("dvr_translucent", RenderMode::Dvr, ct::soft_tissue()),
-        ("dvr_opaque", RenderMode::Dvr, ct::bone()),
-        (
-            "iso",
-            RenderMode::Iso {
-                value: ct::hu(400.0),
-                color: [0.9, 0.85, 0.75],
-            },
-            ct::bone(),
-        ),
-        (
-            "mip",
-            RenderMode::Mip,
-            TransferFunction::ramp(ct::hu(-200.0), ct::hu(1500.0), 1.0),
-        ),
-    ];
+    let cases = ct::scenes();
     let mut incore = VolumeRenderer::new(&g.device, targets()).unwrap();
     incore.set_volume(&g.device, &g.queue, &vol).unwrap();
     let mut ooc = VolumeRenderer::new(&g.device, targets()).unwrap();

@@ -150,7 +150,10 @@ fn check(name: &str, vol: &Volume, iso: f32, size: u32) {
     assert_ne!(incore.volume_format(), Some(wgpu::TextureFormat::R8Unorm));
     let mut incore_fast = VolumeRenderer::with_options(&g.device, targets, fast).unwrap();
     incore_fast.set_volume(&g.device, &g.queue, vol).unwrap();
-    assert_eq!(incore_fast.volume_format(), Some(wgpu::TextureFormat::R8Unorm));
+    assert_eq!(
+        incore_fast.volume_format(),
+        Some(wgpu::TextureFormat::R8Unorm)
+    );
     let mut ooc = VolumeRenderer::with_options(&g.device, targets, exact).unwrap();
     let config = OutOfCoreConfig {
         tolerance_px: 0.0,
@@ -178,7 +181,14 @@ fn check(name: &str, vol: &Volume, iso: f32, size: u32) {
         for r in [&mut incore, &mut incore_fast, &mut ooc] {
             r.set_transfer_function(&g.device, &g.queue, &c.tf).unwrap();
         }
-        draw_frame(g, &mut incore_fast, &target, &desc, Some(wgpu::Color::BLACK)).unwrap();
+        draw_frame(
+            g,
+            &mut incore_fast,
+            &target,
+            &desc,
+            Some(wgpu::Color::BLACK),
+        )
+        .unwrap();
         let fast_cmp = compare(&target.read_color(g), &reference, size, size);
         draw_frame(g, &mut incore, &target, &desc, Some(wgpu::Color::BLACK)).unwrap();
         let label = format!("u8_{name}_{}_incore", c.name);

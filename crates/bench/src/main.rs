@@ -9,11 +9,23 @@ mod accel;
 mod build;
 mod ooc;
 mod soak;
+mod u8;
 
 use std::process::ExitCode;
 
 /// What a suite returns: its figures, printed as the last line.
 type Figures = serde_json::Map<String, serde_json::Value>;
+
+/// The value after `name` in `args`, parsed, or `default` when absent.
+fn arg<T: std::str::FromStr>(args: &[String], name: &str, default: T) -> Result<T, String> {
+    match args.iter().position(|a| a == name) {
+        None => Ok(default),
+        Some(i) => args
+            .get(i + 1)
+            .and_then(|s| s.parse().ok())
+            .ok_or_else(|| format!("bad {name}")),
+    }
+}
 
 fn main() -> ExitCode {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -24,8 +36,9 @@ fn main() -> ExitCode {
         "build" => build::run(rest),
         "ooc" => ooc::run(rest),
         "soak" => soak::run(rest),
+        "u8" => u8::run(rest),
         _ => {
-            eprintln!("usage: brickray-bench <accel|build|ooc|soak> [options]");
+            eprintln!("usage: brickray-bench <accel|build|ooc|soak|u8> [options]");
             return ExitCode::from(2);
         }
     };

@@ -17,16 +17,21 @@
 //!   (GPU 256 MiB, upload 16 MiB per frame): a slow orbit, a jump to a close-up of
 //!   another region held still while it streams in, then slow motion again. Reports
 //!   per-frame wall time, frames to converge after the jump, median, p99 and
-//!   p99 / median.
+//!   p99 / median; run with exact (default) and 8-bit u8 texels, whose pool holds
+//!   twice the bricks. `--path-hold N` (25) and `--path-gpu-mib M` (256) change
+//!   the hold and the pool.
 
-use crate::Figures;
+use crate::{Figures, arg};
 use brickray_cache::refine::{DataState, MetaState, NodeClass, RefineEnv, RefineParams};
 use brickray_core::{
     Accel, BrickSource, Camera, NodeKey, RenderMode, RenderSettings, Shading, TransferFunction,
     Volume, VolumeFrame,
 };
 use brickray_harness::{GpuContext, Offscreen, ct};
-use brickray_render::{FrameDesc, OutOfCoreConfig, OutOfCoreStats, TargetDesc, VolumeRenderer};
+use brickray_render::{
+    FrameDesc, OutOfCoreConfig, OutOfCoreStats, RendererOptions, TargetDesc, U8Filtering,
+    VolumeRenderer,
+};
 use glam::Vec3;
 use serde_json::json;
 use std::sync::Arc;
@@ -195,16 +200,6 @@ fn finite_db(x: f64) -> f64 {
     if x.is_finite() { round2(x) } else { 999.0 }
 }
 
-fn arg<T: std::str::FromStr>(args: &[String], name: &str, default: T) -> Result<T, String> {
-    match args.iter().position(|a| a == name) {
-        None => Ok(default),
-        Some(i) => args
-            .get(i + 1)
-            .and_then(|s| s.parse().ok())
-            .ok_or_else(|| format!("bad {name}")),
-    }
-}
-
 fn targets() -> TargetDesc {
     brickray_harness::target_desc()
 }
@@ -235,7 +230,16 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         part_b(&gpu, size, rounds, &mut fig, 2.0, "_close")?;
     }
     if parts.contains('c') {
-        part_c(&gpu, path_size, path_dims, &mut fig)?;
+        let path = PathOptions {
+            size: path_size,
+            dims: path_dims,
+            hold: arg(args, "--path-hold", 25)?,
+            gpu_mib: arg(args, "--path-gpu-mib", 256)?,
+        };
+        part_c(&gpu, path, U8Filtering::Exact, "", &mut fig)?;
+        // The same path with 8-bit texels: the pool then holds twice the bricks
+        // and uploads carry half the bytes (the memory cost of exact u8).
+        part_c(&gpu, path, U8Filtering::Fast, "_u8_fast", &mut fig)?;
     }
     println!("\nsuite wall time: {:.0} s", t.elapsed().as_secs_f64());
     fig.insert("image_size".into(), json!(size));
@@ -506,6 +510,7 @@ fn cut_levels(
         tf,
         tolerance_px,
         max_data_leaves,
+        max_requests: u32::MAX,
         brick_upload_bytes: layout.brick_bytes() as u64,
     };
     let mut budget = brickray_cache::UploadBudget::new(u64::MAX / 4);
@@ -691,26 +696,52 @@ fn part_b(
 }
 
 /// (c) A scripted camera path with streaming.
-fn part_c(gpu: &GpuContext, size: u32, dims: u64, fig: &mut Figures) -> Result<(), String> {
+/// Knobs of part (c).
+#[derive(Debug, Clone, Copy)]
+struct PathOptions {
+    size: u32,
+    dims: u64,
+    /// Frames the close-up is held after the jump.
+    hold: usize,
+    /// GPU pool budget.
+    gpu_mib: u64,
+}
+
+fn part_c(
+    gpu: &GpuContext,
+    path: PathOptions,
+    u8_filtering: U8Filtering,
+    suffix: &str,
+    fig: &mut Figures,
+) -> Result<(), String> {
+    let PathOptions {
+        size, dims, hold, ..
+    } = path;
     const ORBIT: usize = 15;
-    const HOLD: usize = 25;
     const MOVE: usize = 15;
     println!(
-        "\n(c) camera path over {dims}^3 fractal noise at {size}x{size}: GPU 256 MiB, upload 16 MiB/frame, tolerance 1 px,\n  TF opacity per world length of the {PATH_TF_REFERENCE_DIMS}^3 voxel"
+        "\n(c) camera path over {dims}^3 fractal noise at {size}x{size}: GPU {} MiB, upload 16 MiB/frame, tolerance 1 px,\n  TF opacity per world length of the {PATH_TF_REFERENCE_DIMS}^3 voxel",
+        path.gpu_mib
     );
     println!(
-        "  {ORBIT} frames slow orbit, jump to a close-up held {HOLD} frames, {MOVE} frames slow motion"
+        "  {ORBIT} frames slow orbit, jump to a close-up held {hold} frames, {MOVE} frames slow motion"
     );
     let source = noise_source(dims)?;
     let frame = VolumeFrame::centered([dims as u32; 3], [1.0; 3]);
-    let mut renderer = VolumeRenderer::new(&gpu.device, targets()).map_err(|e| e.to_string())?;
+    let options = RendererOptions { u8_filtering };
+    println!("  u8 texels: {u8_filtering:?}");
+    let mut renderer =
+        VolumeRenderer::with_options(&gpu.device, targets(), options).map_err(|e| e.to_string())?;
     renderer
         .set_volume_source(
             &gpu.device,
             &gpu.queue,
             source,
             frame,
-            OutOfCoreConfig::default(),
+            OutOfCoreConfig {
+                gpu_budget_bytes: path.gpu_mib << 20,
+                ..Default::default()
+            },
         )
         .map_err(|e| e.to_string())?;
     renderer
@@ -736,7 +767,7 @@ fn part_c(gpu: &GpuContext, size: u32, dims: u64, fig: &mut Figures) -> Result<(
     for i in 0..ORBIT {
         cams.push(Camera::orbit(c, 2.0, 0.5 + 0.01 * i as f32, 0.3));
     }
-    for _ in 0..HOLD {
+    for _ in 0..hold {
         cams.push(Camera::orbit(close_target, 0.4, 3.3, -0.2));
     }
     for i in 0..MOVE {
@@ -762,7 +793,7 @@ fn part_c(gpu: &GpuContext, size: u32, dims: u64, fig: &mut Figures) -> Result<(
             worst = (shot.ms, i);
         }
         let first_converged =
-            after_jump.is_none() && (ORBIT..ORBIT + HOLD).contains(&i) && s.converged;
+            after_jump.is_none() && (ORBIT..ORBIT + hold).contains(&i) && s.converged;
         if first_converged {
             after_jump = Some(i - ORBIT + 1);
         }
@@ -790,13 +821,13 @@ fn part_c(gpu: &GpuContext, size: u32, dims: u64, fig: &mut Figures) -> Result<(
     );
     match after_jump {
         Some(f) => println!("  converged {f} frames after the jump"),
-        None => println!("  NOT converged within the {HOLD} frames held after the jump"),
+        None => println!("  NOT converged within the {hold} frames held after the jump"),
     }
-    fig.insert("path_median_ms".into(), json!(round2(med)));
-    fig.insert("path_p99_ms".into(), json!(round2(p99)));
-    fig.insert("p99_over_median".into(), json!(round2(p99 / med)));
+    fig.insert(format!("path_median_ms{suffix}"), json!(round2(med)));
+    fig.insert(format!("path_p99_ms{suffix}"), json!(round2(p99)));
+    fig.insert(format!("p99_over_median{suffix}"), json!(round2(p99 / med)));
     fig.insert(
-        "frames_to_converge_after_jump".into(),
+        format!("frames_to_converge_after_jump{suffix}"),
         after_jump.map_or(json!(null), |f| json!(f)),
     );
     Ok(())

@@ -1,5 +1,5 @@
 //! The `soak` suite: 10,000 frames at 64x64 of a 65536^3 procedural volume with a
-//! 64 MiB pool and a 96 MiB CPU cache, a random camera each frame (jumps, inside
+//! 64 MiB pool and a 32 MiB CPU cache, a random camera each frame (jumps, inside
 //! the volume, extreme zoom, every depth convention and mode), process memory
 //! sampled every 250 frames. Reports RSS at frame 250 and at the end, the
 //! maximum, frame time median and p99 per 1,000 frames, stalls and panics.
@@ -11,22 +11,18 @@
 //!
 //! `cargo run --release -p brickray-bench -- soak [--frames N] [--size PX]`
 
-use crate::Figures;
+use crate::{Figures, arg};
 use brickray_harness::GpuContext;
 use brickray_harness::soak::{self, SoakConfig};
 use serde_json::json;
 
 pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
-    let mut config = SoakConfig::default();
-    let mut it = args.iter();
-    while let Some(a) = it.next() {
-        let mut val = || it.next().ok_or_else(|| format!("{a} needs a value"));
-        match a.as_str() {
-            "--frames" => config.frames = val()?.parse().map_err(|e| format!("{e}"))?,
-            "--size" => config.size = val()?.parse().map_err(|e| format!("{e}"))?,
-            other => return Err(format!("unknown argument {other}")),
-        }
-    }
+    let d = SoakConfig::default();
+    let config = SoakConfig {
+        frames: arg(args, "--frames", d.frames)?,
+        size: arg(args, "--size", d.size)?,
+        ..d
+    };
     let gpu = GpuContext::new().map_err(|e| e.to_string())?;
     println!("adapter: {}", gpu.describe());
     println!(
@@ -61,7 +57,8 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
     let max = r.rss.iter().map(|s| s.1).max().unwrap_or(0);
     let growth = r.rss_growth_pct(start);
     let drift = r.drift(1000);
-    let stalls = r.stalls(10.0);
+    let stall_list = r.stalls(10.0);
+    let stalls = stall_list.len();
     let slow = r.slow_frames(10.0);
     println!(
         "RSS {:.1} MiB at frame {start}, {:.1} MiB at the end ({growth:+.1}%), max {:.1} MiB; drift {drift:.3}; {stalls} stalls ({slow} frames over 10x the median, by the view's work); {} errors; {} panics",
@@ -71,13 +68,19 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         r.errors,
         r.panics
     );
+    for (i, ms, samples) in &stall_list {
+        println!("  stall: frame {i}, {ms:.1} ms, {samples} samples");
+    }
     if let Some(f) = &r.first_failure {
         println!("first failure: {f}");
     }
     let mut fig = Figures::new();
     fig.insert("frames".into(), json!(config.frames));
     fig.insert("rss_start_mib".into(), json!(mib(r.rss_at(start))));
-    fig.insert("rss_end_mib".into(), json!(mib(r.rss.last().map_or(0, |s| s.1))));
+    fig.insert(
+        "rss_end_mib".into(),
+        json!(mib(r.rss.last().map_or(0, |s| s.1))),
+    );
     fig.insert("rss_max_mib".into(), json!(mib(max)));
     fig.insert("rss_growth_pct".into(), json!(growth));
     fig.insert("frame_time_drift".into(), json!(drift));

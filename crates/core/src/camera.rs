@@ -175,13 +175,13 @@ impl Camera {
         finite3(self.up, "up")?;
         let view = self.target.as_dvec3() - self.eye.as_dvec3();
         let len = view.length();
-        if !(len > 0.0) || !len.is_finite() || len < 1e-12 * self.eye.as_dvec3().length() {
+        if !len.is_finite() || len <= 0.0 || len < 1e-12 * self.eye.as_dvec3().length() {
             return Err(CameraError::EyeAtTarget {
                 eye: self.eye.to_array(),
             });
         }
         let up = self.up.as_dvec3();
-        if !(up.length() > 0.0) || view.normalize().cross(up.normalize()).length() < 1e-6 {
+        if up.length() <= 0.0 || view.normalize().cross(up.normalize()).length() < 1e-6 {
             return Err(CameraError::UpParallelToView {
                 up: self.up.to_array(),
             });
@@ -202,7 +202,7 @@ impl Camera {
             return Err(CameraError::BadNear { near: self.near });
         }
         let ortho = matches!(self.projection, Projection::Orthographic { .. });
-        if !(self.far > self.near) || (ortho && self.far.is_infinite()) {
+        if self.far.is_nan() || self.far <= self.near || (ortho && self.far.is_infinite()) {
             return Err(CameraError::BadFar {
                 near: self.near,
                 far: self.far,
@@ -487,7 +487,8 @@ impl VolumeFrame {
         let scale = (0..3)
             .map(|i| m.col(i).truncate().length())
             .product::<f64>();
-        if self.model.row(3) != Vec4::W || !(det.abs() > 1e-9 * scale) || scale == 0.0 {
+        if self.model.row(3) != Vec4::W || det.is_nan() || det.abs() <= 1e-9 * scale || scale == 0.0
+        {
             return Err(FrameError::Singular {
                 determinant: det as f32,
             });
@@ -663,7 +664,8 @@ mod tests {
     #[test]
     fn degenerate_cameras_are_typed_errors() {
         let ok = Camera::orbit(Vec3::ZERO, 2.0, 0.3, 0.2);
-        let cases: Vec<(Camera, fn(&CameraError) -> bool)> = vec![
+        type Check = fn(&CameraError) -> bool;
+        let cases: Vec<(Camera, Check)> = vec![
             (
                 Camera {
                     eye: Vec3::NAN,
@@ -781,14 +783,13 @@ mod tests {
             .validate(),
             Err(FrameError::Singular { determinant: 0.0 })
         );
-        assert_eq!(
+        assert!(
             VolumeFrame {
                 model: Mat4::from_scale(Vec3::new(1.0, 1.0, 0.0)),
                 ..f
             }
             .validate()
-            .is_err(),
-            true
+            .is_err()
         );
         assert_eq!(
             VolumeFrame {

@@ -619,6 +619,29 @@ pub mod ct {
         )
     }
 
+    /// The head CT's standard scenes: translucent and opaque DVR, the bone
+    /// isosurface (400 HU) and MIP, as `(name, mode, TF)`.
+    pub fn scenes() -> [(&'static str, brickray_core::RenderMode, TransferFunction); 4] {
+        use brickray_core::RenderMode;
+        [
+            ("dvr_translucent", RenderMode::Dvr, soft_tissue()),
+            ("dvr_opaque", RenderMode::Dvr, bone()),
+            (
+                "iso",
+                RenderMode::Iso {
+                    value: hu(400.0),
+                    color: [0.9, 0.85, 0.75],
+                },
+                bone(),
+            ),
+            (
+                "mip",
+                RenderMode::Mip,
+                TransferFunction::ramp(hu(-200.0), hu(1500.0), 1.0),
+            ),
+        ]
+    }
+
     /// Semi-transparent soft tissue with faint bone.
     pub fn soft_tissue() -> TransferFunction {
         TransferFunction::from_points(

@@ -34,14 +34,14 @@ pub struct SoakConfig {
 
 impl Default for SoakConfig {
     /// The soak: 10,000 frames at 64x64 of a 65536^3 volume through a
-    /// 64 MiB pool and a 96 MiB CPU cache, memory every 250 frames.
+    /// 64 MiB pool and a 32 MiB CPU cache, memory every 250 frames.
     fn default() -> Self {
         SoakConfig {
             frames: 10_000,
             size: 64,
             volume: 65536,
             gpu_budget_bytes: 64 << 20,
-            cpu_budget_bytes: 96 << 20,
+            cpu_budget_bytes: 32 << 20,
             sample_every: 250,
             seed: 0x5eed_b71c,
         }
@@ -113,11 +113,11 @@ impl SoakReport {
         self.frame_ms.iter().filter(|&&t| t > factor * m).count()
     }
 
-    /// Stalls: frames over `factor` times both the median frame time and what
-    /// their own work predicts (their samples times the median time per
+    /// Stalls, as `(frame, ms, samples)`: frames over `factor` times both the
+    /// median frame time and what their own work predicts (their samples times the median time per
     /// sample). These are the frames where the system, not the view, was slow:
     /// compilation, blocking I/O, memory pressure, a leak.
-    pub fn stalls(&self, factor: f64) -> usize {
+    pub fn stalls(&self, factor: f64) -> Vec<(usize, f64, u64)> {
         let m = median(&self.frame_ms);
         let per_sample: Vec<f64> = self
             .frame_ms
@@ -130,8 +130,10 @@ impl SoakReport {
         self.frame_ms
             .iter()
             .zip(&self.samples)
-            .filter(|(t, s)| **t > factor * m.max(k * **s as f64))
-            .count()
+            .enumerate()
+            .filter(|(_, (t, s))| **t > factor * m.max(k * **s as f64))
+            .map(|(i, (t, s))| (i, *t, *s))
+            .collect()
     }
 
     /// `(median, p99)` frame time of each block of `block` frames.
@@ -168,13 +170,19 @@ impl Rng {
     }
 
     fn unit(&mut self) -> Vec3 {
-        Vec3::new(self.range(-1.0, 1.0), self.range(-1.0, 1.0), self.range(-1.0, 1.0))
-            .normalize_or(Vec3::X)
+        Vec3::new(
+            self.range(-1.0, 1.0),
+            self.range(-1.0, 1.0),
+            self.range(-1.0, 1.0),
+        )
+        .normalize_or(Vec3::X)
     }
 }
 
 /// A random camera: an orbit at any distance (60%), inside the volume (20%), or
 /// an extreme zoom (20%); any depth convention, sometimes an infinite far plane.
+/// (Yaws span 0..6.283, about a turn: the literal is part of the recorded path.)
+#[allow(clippy::approx_constant)]
 fn random_camera(rng: &mut Rng, centre: Vec3) -> Camera {
     let pick = rng.next();
     let mut c = if pick < 0.6 {
@@ -192,7 +200,12 @@ fn random_camera(rng: &mut Rng, centre: Vec3) -> Camera {
             ..Camera::orbit(centre, 1.0, 0.0, 0.0)
         }
     } else {
-        let mut c = Camera::orbit(centre + rng.unit() * 0.3, rng.range(1.0, 6.0), rng.range(0.0, 6.283), rng.range(-1.2, 1.2));
+        let mut c = Camera::orbit(
+            centre + rng.unit() * 0.3,
+            rng.range(1.0, 6.0),
+            rng.range(0.0, 6.283),
+            rng.range(-1.2, 1.2),
+        );
         c.projection = Projection::Perspective {
             fov_y: rng.range(0.2, 3.0).to_radians(),
         };
@@ -237,7 +250,8 @@ pub fn run(
         brickray_store::ProceduralSource::fractal_noise(dims, 32, 2).map_err(|e| e.to_string())?,
     );
     let frame = VolumeFrame::centered(dims.map(|d| d as u32), [1.0; 3]);
-    let mut renderer = VolumeRenderer::new(&gpu.device, crate::target_desc()).map_err(|e| e.to_string())?;
+    let mut renderer =
+        VolumeRenderer::new(&gpu.device, crate::target_desc()).map_err(|e| e.to_string())?;
     let ooc = OutOfCoreConfig {
         gpu_budget_bytes: config.gpu_budget_bytes,
         cpu_budget_bytes: config.cpu_budget_bytes,
@@ -290,7 +304,9 @@ pub fn run(
             Ok(Ok(_)) => {}
             Ok(Err(e)) => {
                 report.errors += 1;
-                report.first_failure.get_or_insert_with(|| format!("frame {i}: {e}"));
+                report
+                    .first_failure
+                    .get_or_insert_with(|| format!("frame {i}: {e}"));
             }
             Err(p) => {
                 report.panics += 1;
@@ -299,7 +315,9 @@ pub fn run(
                     .map(|s| s.to_string())
                     .or_else(|| p.downcast_ref::<String>().cloned())
                     .unwrap_or_default();
-                report.first_failure.get_or_insert_with(|| format!("frame {i}: panic {msg}"));
+                report
+                    .first_failure
+                    .get_or_insert_with(|| format!("frame {i}: panic {msg}"));
             }
         }
         report.frame_ms.push(ms);

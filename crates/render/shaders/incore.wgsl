@@ -69,11 +69,6 @@ fn cell_exit(r: Ray, c: vec3<u32>) -> f32 {
     return clip_box(r, lo, lo + s).y;
 }
 
-// First sample index at or after t.
-fn first_k_after(t: f32, t0: f32, dt: f32) -> u32 {
-    return u32(max(ceil((t - t0) / dt), 0.0));
-}
-
 @compute @workgroup_size(8, 8, 1)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     if (gid.x >= frame.viewport_size.x || gid.y >= frame.viewport_size.y) {
@@ -114,7 +109,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 if (v >= frame.isovalue) {
                     // The first sample inside is a capped cut, else the crossing
                     // lies since the previous sample.
-                    iso_hit(&acc, cur, r, select(t - dt, t, k == 0u), t);
+                    iso_bracket(&acc, select(t - dt, t, k == 0u), t);
                     break;
                 }
                 if (ESS) {
@@ -132,5 +127,5 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             k = k + 1u;
         }
     }
-    finish_ray(px, &acc, r, start.host);
+    finish_ray(px, &acc, cur, r, start.host);
 }

@@ -19,6 +19,12 @@ const MODE_DVR: u32 = 0u;
 const MODE_ISO: u32 = 1u;
 const MODE_MIP: u32 = 2u;
 
+// The first index k of the sample grid t0 + k dt at or after t (skips land on
+// the same grid, so empty-space skipping never changes which samples are taken).
+fn first_k_after(t: f32, t0: f32, dt: f32) -> u32 {
+    return u32(max(ceil((t - t0) / dt), 0.0));
+}
+
 // What a ray has accumulated so far.
 struct Accum {
     // Premultiplied colour.
@@ -29,6 +35,10 @@ struct Accum {
     // MIP: running maximum and where it was first attained.
     max_v: f32,
     max_t: f32,
+    // Iso: the bracket [hit_a, hit_b] of the first crossing, when hit.
+    hit: bool,
+    hit_a: f32,
+    hit_b: f32,
     // Volume samples taken (march and bisection).
     samples: u32,
 }
@@ -40,6 +50,9 @@ fn accum_new() -> Accum {
     a.depth_set = false;
     a.max_v = -3.0e38;
     a.max_t = 0.0;
+    a.hit = false;
+    a.hit_a = 0.0;
+    a.hit_b = 0.0;
     a.samples = 0u;
     return a;
 }
@@ -79,9 +92,18 @@ fn dvr_sample(acc: ptr<function, Accum>, c: Cursor, r: Ray, t: f32, v: f32, alph
     return ERT && (*acc).color.a >= frame.ert_threshold;
 }
 
-// Iso: the surface lies in [a, b] (below the isovalue at a, at or above at b;
-// a == b for a capped cut). Bisects `iso_refine_steps` times, shades at the
-// midpoint of the final interval and sets the opaque result.
+// Iso: records that the surface lies in [a, b] (below the isovalue at a, at or
+// above at b; a == b for a capped cut). The march ends; the bracket is refined
+// after the loop (`finish_ray`), where every lane of a SIMD group refines at
+// once instead of each lane stalling the others inside the march.
+fn iso_bracket(acc: ptr<function, Accum>, a: f32, b: f32) {
+    (*acc).hit = true;
+    (*acc).hit_a = a;
+    (*acc).hit_b = b;
+}
+
+// Iso: bisects [a, b] `iso_refine_steps` times, shades at the midpoint of the
+// final interval and sets the opaque result.
 fn iso_hit(acc: ptr<function, Accum>, c: Cursor, r: Ray, a_in: f32, b_in: f32) {
     var a = a_in;
     var b = b_in;
@@ -126,8 +148,12 @@ fn mip_finish(acc: ptr<function, Accum>, r: Ray) {
     }
 }
 
-// Ends a ray: MIP is finalised, the pixel stored.
-fn finish_ray(px: vec2<u32>, acc: ptr<function, Accum>, r: Ray, host: f32) {
+// Ends a ray: an isosurface hit is refined and shaded at `c` (the cursor it was
+// bracketed in), MIP finalised, the pixel stored.
+fn finish_ray(px: vec2<u32>, acc: ptr<function, Accum>, c: Cursor, r: Ray, host: f32) {
+    if (MODE == MODE_ISO && (*acc).hit) {
+        iso_hit(acc, c, r, (*acc).hit_a, (*acc).hit_b);
+    }
     if (MODE == MODE_MIP) {
         mip_finish(acc, r);
     }

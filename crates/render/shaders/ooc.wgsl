@@ -124,11 +124,6 @@ fn sub_cell_exit(b: Brick, j: vec3<u32>, oo: vec3<f32>, od: vec3<f32>) -> f32 {
     return box_exit(oo, od, lo, lo + side);
 }
 
-// First index k of the grid t0 + k dtl at or after t.
-fn grid_k(t: f32, t0: f32, dtl: f32) -> u32 {
-    return u32(max(ceil((t - t0) / dtl), 0.0));
-}
-
 @compute @workgroup_size(8, 8, 1)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     if (gid.x >= frame.viewport_size.x || gid.y >= frame.viewport_size.y) {
@@ -140,9 +135,13 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let t0 = start.t0;
     let t1 = start.t1;
     var acc = accum_new();
+    // The brick being sampled (set at each data leaf).
+    var cur: Cursor;
     if (t1 > t0) {
         let oo = r.tex_origin * ooc.octree_scale;
         let od = r.tex_dir * ooc.octree_scale;
+        cur.oo = oo;
+        cur.od = od;
         let dt = frame.dt;
         var budget = frame.max_samples;
         // Sampling state carried across leaves: the grid (level, spacing, index).
@@ -154,9 +153,6 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         // (or skips) one sample. Rays of a SIMD group/warp then diverge only per
         // iteration, not per nested leaf loop.
         var have_leaf = false;
-        var cur: Cursor;
-        cur.oo = oo;
-        cur.od = od;
         var dtl = dt;
         loop {
             if (!have_leaf) {
@@ -176,9 +172,9 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 // Snap to this level's sample grid at or after max(t_enter, last sample).
                 if (cur.b.f != grid_f) {
                     grid_f = cur.b.f;
-                    k = grid_k(max(st.hit.t_enter, t_last), t0, dtl);
+                    k = first_k_after(max(st.hit.t_enter, t_last), t0, dtl);
                 }
-                k = max(k, grid_k(st.hit.t_enter, t0, dtl));
+                k = max(k, first_k_after(st.hit.t_enter, t0, dtl));
                 have_leaf = true;
             }
             let t = t0 + f32(k) * dtl;
@@ -198,7 +194,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 let skip = (MODE == MODE_DVR && tf_transparent(range)) || (MODE == MODE_MIP && range.y <= acc.max_v);
                 if (skip) {
                     let te = min(sub_cell_exit(cur.b, j, oo, od), st.hit.t_exit);
-                    k = max(k + 1u, grid_k(te, t0, dtl));
+                    k = max(k + 1u, first_k_after(te, t0, dtl));
                     continue;
                 }
             }
@@ -214,14 +210,14 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                     if (t > t0 && t_last < t) {
                         a = max(t_last, max(st.hit.t_enter - dtl, t - dtl));
                     }
-                    iso_hit(&acc, cur, r, a, t);
+                    iso_bracket(&acc, a, t);
                     break;
                 }
                 if (ESS) {
                     // The whole sub-cell lies below the isovalue, like this sample.
                     let j = sub_cell_of(cur.b, o);
                     if (sub_cell_range(cur.b, j).y < frame.isovalue) {
-                        let kn = max(grid_k(min(sub_cell_exit(cur.b, j, oo, od), st.hit.t_exit), t0, dtl), k + 1u);
+                        let kn = max(first_k_after(min(sub_cell_exit(cur.b, j, oo, od), st.hit.t_exit), t0, dtl), k + 1u);
                         t_last = t0 + f32(kn - 1u) * dtl;
                         k = kn;
                         continue;
@@ -234,5 +230,5 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             k = k + 1u;
         }
     }
-    finish_ray(px, &acc, r, start.host);
+    finish_ray(px, &acc, cur, r, start.host);
 }

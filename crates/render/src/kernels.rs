@@ -132,11 +132,12 @@ impl Kernels {
         groups: [&wgpu::BindGroupLayout; 3],
         variant: Variant,
     ) -> Result<&wgpu::ComputePipeline, RenderError> {
-        if !self.kernels.contains_key(&kind) {
-            let k = Kernel::new(device, kind, groups)?;
-            self.kernels.insert(kind, k);
-        }
-        let k = self.kernels.get_mut(&kind).expect("inserted above");
+        let k = match self.kernels.entry(kind) {
+            std::collections::hash_map::Entry::Occupied(e) => e.into_mut(),
+            std::collections::hash_map::Entry::Vacant(e) => {
+                e.insert(Kernel::new(device, kind, groups)?)
+            }
+        };
         if !k.pipelines.contains_key(&variant) {
             let constants = variant.constants();
             let p = gpu::scoped(device, k.label, || {

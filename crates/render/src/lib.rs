@@ -401,3 +401,19 @@ impl VolumeRenderer {
         self.compositor.draw(pass, p.viewport, p.convention)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    /// What the library needs fits WebGPU's default limits, so any conformant
+    /// adapter can run it.
+    #[test]
+    fn required_limits_fit_webgpu_defaults() {
+        let need = super::required_limits();
+        assert!(need.check_limits(&wgpu::Limits::default()));
+        assert!(need.max_storage_buffers_per_shader_stage >= 5);
+        assert!(
+            need.max_uniform_buffer_binding_size
+                >= std::mem::size_of::<super::FrameUniforms>() as u64
+        );
+    }
+}

@@ -51,7 +51,7 @@ impl BrickManager {
 
     /// The node's metadata, if known.
     pub fn metadata(&self, key: NodeKey) -> Option<NodeInfo> {
-        self.meta.get(&key).copied()
+        self.meta.get(key)
     }
 
     /// The error that made a node fail (its brick, else its metadata), while it
@@ -95,8 +95,8 @@ impl BrickManager {
     pub fn preload_root(&mut self) -> Result<(), StreamError> {
         let key = NodeKey::ROOT;
         let now = self.clock.now();
-        let info = match self.meta.get(&key) {
-            Some(info) => *info,
+        let info = match self.meta.get(key) {
+            Some(info) => info,
             None => match fetch_meta(self.source.as_ref(), key) {
                 Ok(info) => {
                     self.meta.insert(key, info);
@@ -166,6 +166,8 @@ impl BrickManager {
         validate_cpu_budget(bytes, &self.layout, &self.gpu)?;
         self.config.cpu_budget_bytes = bytes;
         self.cpu.set_budget(bytes);
+        self.meta
+            .set_capacity(super::meta_capacity(bytes, self.brick_bytes));
         Ok(())
     }
 

@@ -5,6 +5,9 @@
 //! [`BrickManager::preload_root`] (set-up time).
 
 mod control;
+mod meta;
+
+use meta::MetaCache;
 mod stats;
 #[cfg(test)]
 mod tests;
@@ -27,7 +30,6 @@ use brickray_core::{
     BrickSource, Camera, CutLeaf, EmptyReason, LeafKind, NodeInfo, NodeKey, NodeKind, OctreeLayout,
     RenderMode, TransferFunction, VolumeFrame,
 };
-use std::collections::HashMap;
 use std::sync::Arc;
 use thiserror::Error;
 
@@ -55,7 +57,7 @@ pub struct BrickManager {
     gpu: GpuFormat,
     preparer: Arc<Preparer>,
     brick_bytes: u64,
-    meta: HashMap<NodeKey, NodeInfo>,
+    meta: MetaCache,
     cpu: CpuCache,
     pool: BrickPool,
     loader: Loader,
@@ -77,9 +79,18 @@ impl std::fmt::Debug for BrickManager {
     }
 }
 
+/// Metadata entries kept per prepared brick the CPU budget holds (at least
+/// 16,384): the nodes a view meets while refining down to its bricks, with room
+/// for the views before it. About 48 bytes an entry, under 4% of the budget.
+const META_PER_BRICK: u64 = 64;
+
+fn meta_capacity(cpu_budget_bytes: u64, brick_bytes: u64) -> usize {
+    (META_PER_BRICK * (cpu_budget_bytes / brick_bytes.max(1))).clamp(16_384, 1 << 24) as usize
+}
+
 /// Refinement's view of the manager: caches only, never the source.
 struct Env<'a> {
-    meta: &'a HashMap<NodeKey, NodeInfo>,
+    meta: &'a MetaCache,
     failures: &'a Failures,
     cpu: &'a mut CpuCache,
     pool: &'a BrickPool,
@@ -87,8 +98,8 @@ struct Env<'a> {
 
 impl RefineEnv for Env<'_> {
     fn node(&mut self, key: NodeKey) -> MetaState {
-        match self.meta.get(&key) {
-            Some(info) => MetaState::Known(*info),
+        match self.meta.get(key) {
+            Some(info) => MetaState::Known(info),
             None if self.failures.is_failed(FetchKind::Metadata, key) => MetaState::Failed,
             None => MetaState::Pending,
         }
@@ -137,7 +148,7 @@ impl BrickManager {
             source,
             layout,
             volume_frame,
-            meta: HashMap::new(),
+            meta: MetaCache::new(meta_capacity(config.cpu_budget_bytes, brick_bytes)),
             cpu: CpuCache::new(config.cpu_budget_bytes),
             pool,
             loader,
@@ -169,6 +180,7 @@ impl BrickManager {
         tf: &TransferFunction,
     ) -> FramePlan {
         let now = self.clock.now();
+        self.meta.begin_frame(frame);
         let report = self.loader.poll(&mut self.cpu);
         for (key, info) in report.metadata {
             self.meta.insert(key, info);
@@ -191,6 +203,11 @@ impl BrickManager {
             tf,
             tolerance_px: self.config.tolerance_px,
             max_data_leaves: self.pool.slot_count(),
+            max_requests: crate::refine::requests_per_frame(
+                self.pool.slot_count(),
+                self.config.upload_budget_bytes,
+                self.brick_bytes,
+            ),
             brick_upload_bytes: self.brick_bytes,
         };
         let refined = {
@@ -268,6 +285,7 @@ impl BrickManager {
 
         let working = cut.iter().filter(|l| l.kind.is_data()).count() as u32;
         let residency = self.residency_counts();
+        self.meta.trim();
         let stats = FrameStats {
             frame,
             leaves: cut.len() as u32,
@@ -287,6 +305,8 @@ impl BrickManager {
             metadata_in_flight: (self.loader.queued(FetchKind::Metadata)
                 + self.loader.loading(FetchKind::Metadata)) as u32,
             metadata_requested_this_frame: refined.meta_requests.len() as u32,
+            metadata_known: self.meta.len() as u32,
+            metadata_evicted: self.meta.evicted(),
             residency,
             blocked: refined.blocked,
             allocation_failures,
@@ -308,6 +328,6 @@ impl BrickManager {
             && key
                 .children()
                 .iter()
-                .any(|c| self.layout.in_volume(*c) && !self.meta.contains_key(c))
+                .any(|c| self.layout.in_volume(*c) && !self.meta.contains(*c))
     }
 }

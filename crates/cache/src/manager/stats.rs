@@ -81,6 +81,11 @@ pub struct FrameStats {
     pub metadata_in_flight: u32,
     /// Metadata reads requested this frame.
     pub metadata_requested_this_frame: u32,
+    /// Nodes whose metadata is held (bounded: the least recently used are
+    /// forgotten beyond a capacity that scales with the CPU budget).
+    pub metadata_known: u32,
+    /// Metadata entries forgotten so far.
+    pub metadata_evicted: u64,
     /// Nodes per residency state.
     pub residency: ResidencyCounts,
     /// Why nodes were not split.
@@ -121,7 +126,10 @@ impl FrameStats {
             && self.upload_bricks == 0
             && self.blocked.missing_data == 0
             && self.blocked.missing_meta == 0
-            && self.blocked.upload_budget == 0
+        // Splits the upload budget refused in a frame that uploaded nothing were
+        // refused on speculative charges (a split charges its children's uploads
+        // before knowing they split further into resident bricks); the same frame
+        // repeats identically, so the image will not change: settled.
     }
 }
 

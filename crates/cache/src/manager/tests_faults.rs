@@ -4,7 +4,7 @@
 use super::tests::{ManualClock, config, converge, manager, manager_with_clock};
 use super::*;
 use crate::loader::LoadError;
-use crate::refine::MAX_REQUESTS_PER_FRAME;
+use crate::refine::MIN_REQUESTS_PER_FRAME;
 use crate::test_source::TestSource;
 use brickray_core::BrickError;
 use glam::Vec3;
@@ -341,25 +341,28 @@ fn non_finite_cameras_and_huge_pools_request_boundedly() {
         CacheConfig {
             gpu_budget_bytes: 64 << 20,
             cpu_budget_bytes: 64 << 20,
+            // Uploads of about 30 prepared bricks a frame: four frames of them
+            // are fewer than the floor, so the cap is the floor.
+            upload_budget_bytes: 60 * src.layout.brick_bytes() as u64,
             ..config()
         },
     );
     let slots = m.pool().slot_count();
-    assert!(slots > MAX_REQUESTS_PER_FRAME);
+    assert!(slots > MIN_REQUESTS_PER_FRAME);
     let close = Camera::orbit(Vec3::ZERO, 0.6, 0.4, 0.3);
-    let (mut most, mut frame) = (0, 0);
-    let t = Instant::now();
-    // Until the cap is reached (unbounded, level 2 alone would ask for 512).
-    while most < MAX_REQUESTS_PER_FRAME {
-        frame += 1;
+    let (mut most, mut total) = (0, 0u64);
+    // The close-up wants far more bricks than the cap (the refine-level test
+    // shows the cap binding); here every frame of a streaming run stays within it.
+    for frame in 1..=60u64 {
         let plan = m.update(&close, 1.0, 1024, frame, RenderMode::Mip, &tf());
         let n = plan.stats.requested_this_frame;
-        assert!(n <= MAX_REQUESTS_PER_FRAME, "{n} requests in frame {frame}");
+        assert!(n <= MIN_REQUESTS_PER_FRAME, "{n} requests in frame {frame}");
         most = most.max(n);
-        assert!(
-            t.elapsed() < Duration::from_secs(10),
-            "cap never reached: {most}"
-        );
+        total += n as u64;
         std::thread::sleep(Duration::from_millis(1));
     }
+    assert!(
+        most > 100 && total > MIN_REQUESTS_PER_FRAME as u64,
+        "{most} {total}"
+    );
 }

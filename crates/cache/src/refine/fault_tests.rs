@@ -76,6 +76,7 @@ fn refine_in(
         tf: &s.tf,
         tolerance_px: 1.0,
         max_data_leaves: slots,
+        max_requests: MIN_REQUESTS_PER_FRAME,
         brick_upload_bytes: 1000,
     };
     let mut b = UploadBudget::new(u64::MAX);
@@ -228,7 +229,7 @@ fn requests_per_frame_are_capped_by_slots_and_the_constant() {
     let s = setup();
     // Bricks of levels 0..3 in memory, level 3 missing: 64 level-2 splits each
     // want up to 8 bricks.
-    for (slots, cap) in [(10_000, MAX_REQUESTS_PER_FRAME), (100, 100), (20, 20)] {
+    for (slots, cap) in [(10_000, MIN_REQUESTS_PER_FRAME), (100, 100), (20, 20)] {
         let mut env = Scripted::new(&s.layout);
         env.missing_from = 3;
         let r = refine_with(&mut env, &close(), slots);
@@ -243,4 +244,17 @@ fn requests_per_frame_are_capped_by_slots_and_the_constant() {
         );
         assert!(r.blocked.missing_data as usize * 8 >= r.requests.len());
     }
+}
+
+#[test]
+fn the_request_cap_follows_the_pool_and_the_upload_budget() {
+    // The pool bounds it; else four frames of uploads, at least the floor.
+    assert_eq!(requests_per_frame(100, 1 << 30, 1000), 100);
+    assert_eq!(
+        requests_per_frame(100_000, 1 << 10, 1000),
+        MIN_REQUESTS_PER_FRAME
+    );
+    assert_eq!(requests_per_frame(100_000, 16 << 20, 46_656), 1438);
+    assert_eq!(requests_per_frame(100_000, u64::MAX, 0), 100_000);
+    assert_eq!(requests_per_frame(0, 1 << 20, 1000), 0);
 }

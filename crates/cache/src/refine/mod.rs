@@ -13,7 +13,7 @@
 //!
 //! Classification uses node metadata only ([`RefineEnv::node`]); no brick is read
 //! and refinement never calls the source: it only says what to request. At most
-//! `min(max_data_leaves, `[`MAX_REQUESTS_PER_FRAME`]`)` bricks and
+//! `min(max_data_leaves, max_requests)` bricks ([`requests_per_frame`]) and
 //! [`MAX_META_REQUESTS_PER_FRAME`] metadata reads are requested per frame,
 //! highest priority first.
 
@@ -32,8 +32,24 @@ use brickray_core::{
 };
 use std::collections::BinaryHeap;
 
-/// Most bricks requested in one frame (also never more than the pool's slots).
-pub const MAX_REQUESTS_PER_FRAME: u32 = 256;
+/// Bricks a frame may request at least (when the pool has the slots), whatever
+/// the upload budget.
+pub const MIN_REQUESTS_PER_FRAME: u32 = 256;
+/// Frames of the upload budget a frame's requests may cover.
+pub const REQUESTED_UPLOAD_FRAMES: u64 = 4;
+
+/// The most bricks one frame requests: what the pool can hold (`slots`), and
+/// no more than [`REQUESTED_UPLOAD_FRAMES`] frames of uploads (at least
+/// [`MIN_REQUESTS_PER_FRAME`]), so a view that wants thousands of bricks keeps
+/// the loader busy without queueing work it cannot upload soon (a fixed cap of
+/// 256 kept uploads at 11 of 16 MiB a frame and slowed a jump's convergence from
+/// 17 to 23 frames), and a degenerate view requests a bounded amount.
+pub fn requests_per_frame(slots: u32, upload_bytes_per_frame: u64, brick_bytes: u64) -> u32 {
+    let by_uploads =
+        REQUESTED_UPLOAD_FRAMES.saturating_mul(upload_bytes_per_frame) / brick_bytes.max(1);
+    slots.min(by_uploads.clamp(MIN_REQUESTS_PER_FRAME as u64, u32::MAX as u64) as u32)
+}
+
 /// Most metadata reads requested in one frame.
 pub const MAX_META_REQUESTS_PER_FRAME: u32 = 1024;
 
@@ -99,6 +115,8 @@ pub struct RefineParams<'a> {
     pub tolerance_px: f32,
     /// Most leaves needing a brick (the pool's slot count).
     pub max_data_leaves: u32,
+    /// Most bricks to request this frame ([`requests_per_frame`]).
+    pub max_requests: u32,
     /// Bytes one brick upload costs against the frame's upload budget.
     pub brick_upload_bytes: u64,
 }
@@ -255,7 +273,7 @@ pub fn refine(
     let brick_bytes = params.brick_upload_bytes;
     let finest = layout.levels.saturating_sub(1);
     let tol = params.tolerance_px.max(0.0) as f64;
-    let max_requests = params.max_data_leaves.min(MAX_REQUESTS_PER_FRAME) as usize;
+    let max_requests = params.max_data_leaves.min(params.max_requests) as usize;
     let max_meta = MAX_META_REQUESTS_PER_FRAME as usize;
     let mut out = Refinement::default();
     let mut heap = BinaryHeap::new();

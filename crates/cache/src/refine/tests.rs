@@ -124,6 +124,7 @@ fn run(
         tf,
         tolerance_px: 1.0,
         max_data_leaves: slots,
+        max_requests: u32::MAX,
         brick_upload_bytes: s.layout.brick_bytes() as u64,
     };
     let mut b = UploadBudget::new(budget);
@@ -340,12 +341,12 @@ proptest! {
         let frame = VolumeFrame::centered([dim; 3], [1.0; 3]);
         let tf = TransferFunction::ramp(0.3, 1.0, 0.5);
         let mut env = AllInCpu { layout: layout.clone(), on_gpu: HashSet::new(), meta_reads: 0 };
-        let params = RefineParams { camera: &cam, aspect: 1.3, viewport_height_px: 400, volume_frame: &frame, mode, tf: &tf, tolerance_px: tol, max_data_leaves: slots, brick_upload_bytes: 1000 };
+        let params = RefineParams { camera: &cam, aspect: 1.3, viewport_height_px: 400, volume_frame: &frame, mode, tf: &tf, tolerance_px: tol, max_data_leaves: slots, max_requests: MIN_REQUESTS_PER_FRAME, brick_upload_bytes: 1000 };
         let mut b = UploadBudget::new(u64::MAX);
         let r = refine(&layout, &params, &mut env, &mut b);
         assert_exact_cover(&keys(&r), layout.levels);
         prop_assert!(r.data_leaves <= slots);
-        prop_assert!(r.requests.len() as u32 <= slots.min(MAX_REQUESTS_PER_FRAME));
+        prop_assert!(r.requests.len() as u32 <= slots.min(MIN_REQUESTS_PER_FRAME));
         prop_assert_eq!(r.data_leaves as usize, count(&r, NodeClass::Data));
         for l in &r.leaves {
             if l.class == NodeClass::Data {

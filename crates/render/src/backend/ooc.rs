@@ -106,8 +106,8 @@ impl Pool {
                 view_formats: &[],
             },
         )?;
-        let atlas_bytes = dims.iter().map(|&d| d as u64).product::<u64>()
-            * gpu.encoding.texel_bytes() as u64;
+        let atlas_bytes =
+            dims.iter().map(|&d| d as u64).product::<u64>() * gpu.encoding.texel_bytes() as u64;
         let slot_count = manager.pool().slot_count().max(1) as usize;
         let slots = gpu::storage_buffer(
             device,
@@ -323,11 +323,7 @@ impl OutOfCore {
                 },
             );
             let cells: &[u8] = bytemuck::cast_slice(&b.sub_cells);
-            queue.write_buffer(
-                &pool.sub_cells,
-                up.slot as u64 * cells.len() as u64,
-                cells,
-            );
+            queue.write_buffer(&pool.sub_cells, up.slot as u64 * cells.len() as u64, cells);
             bytes += (b.texels.len() + cells.len()) as u64;
             if let Some(s) = pool.slots_cpu.get_mut(up.slot as usize) {
                 let o = up.atlas_offset;
@@ -484,4 +480,3 @@ impl VolumeBackend for OutOfCore {
         self.pool.atlas_bytes
     }
 }
-
