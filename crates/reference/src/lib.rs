@@ -6,12 +6,14 @@
 //! (the function of volume, transfer function, camera and settings that every
 //! brickray renderer computes) as directly as the text states it:
 //!
-//! * one ray per pixel centre ([`Ray::through_pixel`](brickray_core::Ray::through_pixel)),
+//! * one ray per pixel centre from the camera's f64 basis
+//!   ([`RayGen::pixel_ray`](brickray_core::RayGen::pixel_ray)),
 //!   or `n x n` stratified sub-pixel rays averaged ([`ReferenceOptions::supersample`]);
 //! * the ray clipped to the volume's texture-space unit cube
 //!   ([`Ray::clip_unit_box`](brickray_core::Ray::clip_unit_box)) and, when the host
 //!   passes a depth buffer, to the host's depth
-//!   ([`Ray::t_at_depth`](brickray_core::Ray::t_at_depth));
+//!   ([`RayGen::t_at_depth`](brickray_core::RayGen::t_at_depth), in the camera's
+//!   depth convention);
 //! * samples at `t_k = t0 + k * dt` (computed from `k`, never accumulated) while
 //!   `t_k < t1`, with `dt = step_factor * voxel_world`;
 //! * the exact trilinear value of the normalized field

@@ -14,10 +14,10 @@
 //!    composites correctly too.
 //!
 //! The renderer is a thin coordinator of owners, one per GPU object family:
-//! [`frame`] (group 0: frame uniforms, host depth, per-viewport outputs), [`tf`]
+//! `frame.rs` (group 0: frame uniforms, host depth, per-viewport outputs), `tf.rs`
 //! (group 1: the transfer function), a volume backend (group 2: in core, one 3D
-//! texture; out of core, a brick atlas, its tables and the index), [`kernels`]
-//! (shader modules and specialised pipelines) and [`composite`] (the draw into the
+//! texture; out of core, a brick atlas, its tables and the index), `kernels.rs`
+//! (shader modules and specialised pipelines) and `composite.rs` (the draw into the
 //! host's pass). The ray-casting model is specified in `docs/rendering-model.md`;
 //! the CPU reference in `brickray-reference` implements it and is the accuracy
 //! oracle. The device limits the library needs are [`required_limits`].
@@ -30,6 +30,7 @@ mod error;
 mod frame;
 mod gpu;
 mod kernels;
+mod limits;
 pub mod shaders;
 mod tf;
 
@@ -41,6 +42,7 @@ pub use brickray_cache::{ConfigError, RetryPolicy, StreamError};
 pub use desc::{FrameDesc, FrameStats, RendererStats, TargetDesc, Viewport};
 pub use encoding::U8Filtering;
 pub use error::{GpuErrorKind, HostDepthError, PrepareError, RenderError};
+pub use limits::required_limits;
 
 use backend::{Backend, InCore, OutOfCore};
 use brickray_core::{BrickSource, DepthConvention, TransferFunction, Volume, VolumeFrame};
@@ -56,28 +58,6 @@ pub struct RendererOptions {
     /// How u8 volumes are stored and filtered (default: exactly, as the rendering
     /// model says; see `docs/rendering-model.md` for the measured cost).
     pub u8_filtering: U8Filtering,
-}
-
-/// The device limits brickray needs, all within WebGPU's defaults
-/// (`wgpu::Limits::default()`): request at least these when creating the
-/// device. Larger volumes, viewports, pools and transfer functions need more of
-/// the size limits; a setting beyond the device's limits is a typed
-/// [`RenderError::LowDeviceLimit`] naming the limit.
-pub fn required_limits() -> wgpu::Limits {
-    wgpu::Limits {
-        max_bind_groups: kernels::BIND_GROUPS,
-        max_storage_buffers_per_shader_stage: 5,
-        max_storage_textures_per_shader_stage: frame::OUTPUT_FORMATS.len() as u32,
-        max_sampled_textures_per_shader_stage: 2,
-        max_samplers_per_shader_stage: 1,
-        max_uniform_buffers_per_shader_stage: 3,
-        max_compute_invocations_per_workgroup: kernels::WORKGROUP[0] * kernels::WORKGROUP[1],
-        max_compute_workgroup_size_x: kernels::WORKGROUP[0],
-        max_compute_workgroup_size_y: kernels::WORKGROUP[1],
-        max_compute_workgroup_size_z: 1,
-        max_uniform_buffer_binding_size: std::mem::size_of::<FrameUniforms>() as u64,
-        ..wgpu::Limits::downlevel_defaults()
-    }
 }
 
 /// What `render` needs from the last `prepare`.
@@ -399,21 +379,5 @@ impl VolumeRenderer {
     pub fn render(&self, pass: &mut wgpu::RenderPass<'_>) -> Result<(), RenderError> {
         let p = self.prepared.ok_or(RenderError::NotPrepared)?;
         self.compositor.draw(pass, p.viewport, p.convention)
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    /// What the library needs fits WebGPU's default limits, so any conformant
-    /// adapter can run it.
-    #[test]
-    fn required_limits_fit_webgpu_defaults() {
-        let need = super::required_limits();
-        assert!(need.check_limits(&wgpu::Limits::default()));
-        assert!(need.max_storage_buffers_per_shader_stage >= 5);
-        assert!(
-            need.max_uniform_buffer_binding_size
-                >= std::mem::size_of::<super::FrameUniforms>() as u64
-        );
     }
 }

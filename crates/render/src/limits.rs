@@ -1,0 +1,43 @@
+//! The device limits the library needs.
+
+use crate::frame::{self, FrameUniforms};
+use crate::kernels;
+
+/// The device limits brickray needs, all within WebGPU's defaults
+/// (`wgpu::Limits::default()`): request at least these when creating the
+/// device. Larger volumes, viewports, pools and transfer functions need more of
+/// the size limits; a setting beyond the device's limits is a typed
+/// [`RenderError::LowDeviceLimit`](crate::RenderError::LowDeviceLimit) naming
+/// the limit.
+pub fn required_limits() -> wgpu::Limits {
+    wgpu::Limits {
+        max_bind_groups: kernels::BIND_GROUPS,
+        max_storage_buffers_per_shader_stage: 5,
+        max_storage_textures_per_shader_stage: frame::OUTPUT_FORMATS.len() as u32,
+        max_sampled_textures_per_shader_stage: 2,
+        max_samplers_per_shader_stage: 1,
+        max_uniform_buffers_per_shader_stage: 3,
+        max_compute_invocations_per_workgroup: kernels::WORKGROUP[0] * kernels::WORKGROUP[1],
+        max_compute_workgroup_size_x: kernels::WORKGROUP[0],
+        max_compute_workgroup_size_y: kernels::WORKGROUP[1],
+        max_compute_workgroup_size_z: 1,
+        max_uniform_buffer_binding_size: std::mem::size_of::<FrameUniforms>() as u64,
+        ..wgpu::Limits::downlevel_defaults()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    /// What the library needs fits WebGPU's default limits, so any conformant
+    /// adapter can run it.
+    #[test]
+    fn required_limits_fit_webgpu_defaults() {
+        let need = super::required_limits();
+        assert!(need.check_limits(&wgpu::Limits::default()));
+        assert!(need.max_storage_buffers_per_shader_stage >= 5);
+        assert!(
+            need.max_uniform_buffer_binding_size
+                >= std::mem::size_of::<super::FrameUniforms>() as u64
+        );
+    }
+}
