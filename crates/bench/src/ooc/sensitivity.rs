@@ -1,0 +1,221 @@
+//! Part (b) of the `ooc` suite: output sensitivity over the procedural source.
+
+use super::*;
+
+/// Treats every brick as resident: refinement then yields the cut the view
+/// converges to (with unlimited uploads), whose levels we count.
+struct AllResident<'a>(&'a dyn BrickSource);
+
+impl RefineEnv for AllResident<'_> {
+    fn node(&mut self, key: NodeKey) -> MetaState {
+        self.0.node(key).map_or(MetaState::Failed, MetaState::Known)
+    }
+    fn data(&mut self, _key: NodeKey) -> DataState {
+        DataState::OnGpu
+    }
+}
+
+/// Data leaves per level of the converged cut of a view.
+fn cut_levels(
+    source: &dyn BrickSource,
+    camera: &Camera,
+    frame: &VolumeFrame,
+    size: u32,
+    tf: &TransferFunction,
+    tolerance_px: f32,
+    max_data_leaves: u32,
+) -> Vec<u32> {
+    let layout = source.layout().clone();
+    let params = RefineParams {
+        camera,
+        aspect: 1.0,
+        viewport_height_px: size,
+        volume_frame: frame,
+        mode: RenderMode::Dvr,
+        tf,
+        tolerance_px,
+        max_data_leaves,
+        max_requests: u32::MAX,
+        brick_upload_bytes: layout.brick_bytes() as u64,
+    };
+    let mut budget = brickray_cache::UploadBudget::new(u64::MAX / 4);
+    budget.begin_frame();
+    let cut =
+        brickray_cache::refine::refine(&layout, &params, &mut AllResident(source), &mut budget);
+    let mut per_level = vec![0u32; layout.levels as usize];
+    for l in &cut.leaves {
+        if l.class == NodeClass::Data {
+            per_level[l.key.level as usize] += 1;
+        }
+    }
+    per_level
+}
+
+fn levels_text(per_level: &[u32]) -> String {
+    per_level
+        .iter()
+        .enumerate()
+        .filter(|(_, n)| **n > 0)
+        .map(|(l, n)| format!("L{l}:{n}"))
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
+/// (b) Output sensitivity over the procedural source, from an orbit camera at
+/// `distance` (world units; the box's longest side is 1). Figures get `suffix`.
+pub(super) fn part_b(
+    gpu: &GpuContext,
+    size: u32,
+    rounds: usize,
+    fig: &mut Figures,
+    distance: f32,
+    suffix: &str,
+) -> Result<(), String> {
+    println!(
+        "\n(b{suffix}) output sensitivity: procedural fractal noise (bricks {BRICK}+2x{APRON}), same view (orbit at distance {distance}), tolerance 1 px,"
+    );
+    println!(
+        "  TF opacity per world length of the {TF_REFERENCE_DIMS}^3 voxel (the same image at every size)"
+    );
+    let settings = RenderSettings::default();
+    let run = Runner::new(gpu, size);
+    let config = OutOfCoreConfig {
+        gpu_budget_bytes: 1 << 30,
+        upload_budget_bytes: 1 << 30,
+        ..Default::default()
+    };
+    struct Entry {
+        dims: u64,
+        frame: VolumeFrame,
+        renderer: VolumeRenderer,
+        source: Arc<dyn BrickSource>,
+        frames: usize,
+        stats: OutOfCoreStats,
+        samples: f64,
+        times: Vec<f64>,
+    }
+    let mut entries = Vec::new();
+    let mut camera = None;
+    for dims in SIZES {
+        let source = noise_source(dims)?;
+        let frame = VolumeFrame::centered([dims as u32; 3], [1.0; 3]);
+        let cam = *camera.get_or_insert_with(|| Camera::orbit(frame.center(), distance, 0.5, 0.3));
+        let mut renderer =
+            VolumeRenderer::new(&gpu.device, targets()).map_err(|e| e.to_string())?;
+        renderer
+            .set_volume_source(&gpu.device, &gpu.queue, source.clone(), frame, config)
+            .map_err(|e| e.to_string())?;
+        renderer
+            .set_transfer_function(
+                &gpu.device,
+                &gpu.queue,
+                &noise_tf_world(dims, TF_REFERENCE_DIMS),
+            )
+            .expect("transfer function");
+        let t = Instant::now();
+        let (frames, stats) = run.converge(&mut renderer, cam, frame, settings, 600)?;
+        let frames = frames.ok_or_else(|| format!("(b) {dims}^3: not converged: {stats:?}"))?;
+        println!(
+            "  {dims}^3: converged in {frames} frames, {:.1} s",
+            t.elapsed().as_secs_f64()
+        );
+        let shot = run.frame(&mut renderer, cam, frame, settings, true)?;
+        let stats = renderer.out_of_core_stats().ok_or("not out of core")?;
+        entries.push(Entry {
+            dims,
+            frame,
+            renderer,
+            source,
+            frames,
+            stats,
+            samples: shot.samples,
+            times: Vec::new(),
+        });
+    }
+    let camera = camera.ok_or("no camera")?;
+    for r in 0..rounds {
+        for k in 0..entries.len() {
+            let n = entries.len();
+            let e = &mut entries[(k + r) % n];
+            let ms = run
+                .frame(&mut e.renderer, camera, e.frame, settings, false)?
+                .ms;
+            e.times.push(ms);
+        }
+    }
+    println!(
+        "  {:>8} {:>7} {:>8} {:>8} {:>9} {:>8} {:>7}  cut levels (data leaves per level)",
+        "dims", "levels", "bricks", "leaves", "ms/frame", "smp/ray", "frames"
+    );
+    let mut ms = Vec::new();
+    let mut bricks = Vec::new();
+    for e in &entries {
+        let m = median(&e.times);
+        let per_level = cut_levels(
+            e.source.as_ref(),
+            &camera,
+            &e.frame,
+            size,
+            &noise_tf_world(e.dims, TF_REFERENCE_DIMS),
+            config.tolerance_px,
+            e.stats.cache.pool_slots,
+        );
+        println!(
+            "  {:>8} {:>7} {:>8} {:>8} {:>9.1} {:>8.1} {:>7}  {}",
+            format!("{}^3", e.dims),
+            e.source.layout().levels,
+            e.stats.cache.working_set_bricks,
+            e.stats.cache.leaves,
+            m,
+            e.samples,
+            e.frames,
+            levels_text(&per_level)
+        );
+        fig.insert(format!("ms_noise_{}{suffix}", e.dims), json!(round2(m)));
+        fig.insert(
+            format!("bricks_noise_{}{suffix}", e.dims),
+            json!(e.stats.cache.working_set_bricks),
+        );
+        fig.insert(
+            format!("samples_per_ray_noise_{}{suffix}", e.dims),
+            json!(round2(e.samples)),
+        );
+        ms.push(m);
+        bricks.push(e.stats.cache.working_set_bricks as f64);
+    }
+    let n = entries.len() - 1;
+    let time_ratio = ms[n] / ms[0];
+    let bricks_ratio = bricks[n] / bricks[0].max(1.0);
+    println!(
+        "  {}^3 / {}^3: time {time_ratio:.2}x ({}), bricks {bricks_ratio:.2}x ({}) [bound 2x, goal 1.5x]",
+        entries[n].dims,
+        entries[0].dims,
+        verdict(time_ratio, 2.0, 1.5),
+        verdict(bricks_ratio, 2.0, 1.5)
+    );
+    fig.insert(
+        format!("size_sensitivity_time_ratio{suffix}"),
+        json!(round2(time_ratio)),
+    );
+    fig.insert(
+        format!("size_sensitivity_bricks_ratio{suffix}"),
+        json!(round2(bricks_ratio)),
+    );
+    for i in 1..n {
+        let (t, b) = (ms[n] / ms[i], bricks[n] / bricks[i].max(1.0));
+        println!(
+            "  {}^3 / {}^3: time {t:.2}x, bricks {b:.2}x",
+            entries[n].dims, entries[i].dims
+        );
+        let d = entries[i].dims;
+        fig.insert(
+            format!("size_sensitivity_time_ratio_vs_{d}{suffix}"),
+            json!(round2(t)),
+        );
+        fig.insert(
+            format!("size_sensitivity_bricks_ratio_vs_{d}{suffix}"),
+            json!(round2(b)),
+        );
+    }
+    Ok(())
+}
