@@ -12,20 +12,8 @@ use brickray::{
 use brickray_harness::{GpuContext, Offscreen};
 use brickray_reference::{ReferenceOptions, assert_close, render_reference};
 use glam::Vec3;
-use std::sync::OnceLock;
 
-fn gpu() -> &'static GpuContext {
-    static GPU: OnceLock<GpuContext> = OnceLock::new();
-    GPU.get_or_init(|| {
-        let g = GpuContext::new().expect("a wgpu adapter (install mesa-vulkan-drivers)");
-        eprintln!("adapter: {}", g.describe());
-        g
-    })
-}
-
-fn targets() -> TargetDesc {
-    brickray_harness::target_desc()
-}
+use brickray_harness::{shared_gpu as gpu, target_desc as targets};
 
 struct Scene<'a> {
     vol: &'a Volume,

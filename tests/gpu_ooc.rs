@@ -6,32 +6,17 @@
 
 use brickray::{
     Camera, FrameDesc, OutOfCoreConfig, OutOfCoreStats, RenderMode, RenderSettings, Shading,
-    TargetDesc, TransferFunction, Volume, VolumeFrame, VolumeRenderer,
+    TransferFunction, Volume, VolumeFrame, VolumeRenderer,
 };
-use brickray_harness::{GpuContext, Offscreen, ct};
+use brickray_harness::{Offscreen, ct};
 use brickray_reference::assert_close;
-use std::sync::{Arc, OnceLock};
+use std::sync::Arc;
 
-fn gpu() -> &'static GpuContext {
-    static GPU: OnceLock<GpuContext> = OnceLock::new();
-    GPU.get_or_init(|| GpuContext::new().expect("a wgpu adapter (install mesa-vulkan-drivers)"))
-}
-
-fn targets() -> TargetDesc {
-    brickray_harness::target_desc()
-}
+use brickray_harness::{shared_gpu as gpu, target_desc as targets};
 
 /// Builds a brick store of `vol` in a temporary directory and opens it.
 fn store_of(vol: &Volume, dir: &tempfile::TempDir) -> Arc<dyn brickray::BrickSource> {
-    let path = dir.path().join("vol.brs");
-    let mut reader = brickray::io::MemoryReader::new(vol.clone(), "memory");
-    brickray::store::build(
-        &mut reader,
-        &path,
-        &brickray::store::BuildOptions::default(),
-    )
-    .expect("build");
-    Arc::new(brickray::store::open(&path).expect("open"))
+    brickray_harness::store_of(vol, &dir.path().join("vol.brs"))
 }
 
 struct View {

@@ -30,7 +30,7 @@ use brickray_core::{
     Accel, BrickSource, Camera, NodeKey, RenderMode, RenderSettings, Shading, TransferFunction,
     Volume, VolumeFrame,
 };
-use brickray_harness::{GpuContext, Offscreen, ct};
+use brickray_harness::{GpuContext, Offscreen, ct, target_desc as targets};
 use brickray_render::{
     FrameDesc, OutOfCoreConfig, OutOfCoreStats, RendererOptions, TargetDesc, U8Filtering,
     VolumeRenderer,
@@ -201,10 +201,6 @@ fn round2(x: f64) -> f64 {
 
 fn finite_db(x: f64) -> f64 {
     if x.is_finite() { round2(x) } else { 999.0 }
-}
-
-fn targets() -> TargetDesc {
-    brickray_harness::target_desc()
 }
 
 pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
