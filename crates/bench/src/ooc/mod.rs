@@ -32,8 +32,7 @@ use brickray_core::{
 };
 use brickray_harness::{GpuContext, Offscreen, ct, target_desc as targets};
 use brickray_render::{
-    FrameDesc, OutOfCoreConfig, OutOfCoreStats, RendererOptions, TargetDesc, U8Filtering,
-    VolumeRenderer,
+    FrameDesc, OutOfCoreConfig, OutOfCoreStats, RendererOptions, U8Filtering, VolumeRenderer,
 };
 use glam::Vec3;
 use serde_json::json;
