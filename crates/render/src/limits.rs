@@ -1,5 +1,6 @@
 //! The device limits the library needs.
 
+use crate::backend;
 use crate::frame::{self, FrameUniforms};
 use crate::kernels;
 
@@ -12,11 +13,12 @@ use crate::kernels;
 pub fn required_limits() -> wgpu::Limits {
     wgpu::Limits {
         max_bind_groups: kernels::BIND_GROUPS,
-        max_storage_buffers_per_shader_stage: 5,
+        max_storage_buffers_per_shader_stage: backend::MAX_VOLUME_STORAGE
+            + backend::STORAGE_OUTSIDE_VOLUME,
         max_storage_textures_per_shader_stage: frame::OUTPUT_FORMATS.len() as u32,
-        max_sampled_textures_per_shader_stage: 2,
-        max_samplers_per_shader_stage: 1,
-        max_uniform_buffers_per_shader_stage: 3,
+        max_sampled_textures_per_shader_stage: backend::SAMPLED_TEXTURES,
+        max_samplers_per_shader_stage: backend::SAMPLERS,
+        max_uniform_buffers_per_shader_stage: backend::UNIFORM_BUFFERS,
         max_compute_invocations_per_workgroup: kernels::WORKGROUP[0] * kernels::WORKGROUP[1],
         max_compute_workgroup_size_x: kernels::WORKGROUP[0],
         max_compute_workgroup_size_y: kernels::WORKGROUP[1],

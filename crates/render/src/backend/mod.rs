@@ -142,30 +142,44 @@ pub(crate) fn volume_layout_entries(storage: u32) -> Vec<wgpu::BindGroupLayoutEn
     e
 }
 
+/// Per-stage bindings of a kernel besides group 2's storage buffers: the
+/// transfer function's 2 storage buffers; uniforms of frame, TF and volume; the
+/// sampled volume and host depth; the volume sampler.
+pub(crate) const STORAGE_OUTSIDE_VOLUME: u32 = 2;
+pub(crate) const UNIFORM_BUFFERS: u32 = 3;
+pub(crate) const SAMPLED_TEXTURES: u32 = 2;
+pub(crate) const SAMPLERS: u32 = 1;
+/// The most storage buffers group 2 holds (out of core: slots, sub-cells, index).
+pub(crate) const MAX_VOLUME_STORAGE: u32 = ooc::STORAGE_BUFFERS;
+
 /// Checks the per-stage binding counts of a kernel whose group 2 has `storage`
-/// storage buffers (the transfer function adds 2 storage buffers and a uniform,
-/// the frame a uniform, a sampled depth texture and 3 storage textures).
+/// storage buffers.
 pub(crate) fn check_stage_limits(device: &wgpu::Device, storage: u32) -> Result<(), RenderError> {
     let l = device.limits();
-    crate::gpu::need(
-        "max_storage_buffers_per_shader_stage",
-        (storage + 2) as u64,
-        l.max_storage_buffers_per_shader_stage as u64,
-    )?;
-    crate::gpu::need(
-        "max_uniform_buffers_per_shader_stage",
-        3,
-        l.max_uniform_buffers_per_shader_stage as u64,
-    )?;
-    crate::gpu::need(
-        "max_sampled_textures_per_shader_stage",
-        2,
-        l.max_sampled_textures_per_shader_stage as u64,
-    )?;
-    crate::gpu::need(
-        "max_samplers_per_shader_stage",
-        1,
-        l.max_samplers_per_shader_stage as u64,
-    )?;
+    let checks = [
+        (
+            "max_storage_buffers_per_shader_stage",
+            storage + STORAGE_OUTSIDE_VOLUME,
+            l.max_storage_buffers_per_shader_stage,
+        ),
+        (
+            "max_uniform_buffers_per_shader_stage",
+            UNIFORM_BUFFERS,
+            l.max_uniform_buffers_per_shader_stage,
+        ),
+        (
+            "max_sampled_textures_per_shader_stage",
+            SAMPLED_TEXTURES,
+            l.max_sampled_textures_per_shader_stage,
+        ),
+        (
+            "max_samplers_per_shader_stage",
+            SAMPLERS,
+            l.max_samplers_per_shader_stage,
+        ),
+    ];
+    for (limit, required, available) in checks {
+        crate::gpu::need(limit, required as u64, available as u64)?;
+    }
     Ok(())
 }
