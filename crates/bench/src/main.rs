@@ -8,6 +8,8 @@
 mod accel;
 mod build;
 mod ooc;
+mod raw;
+mod runner;
 mod soak;
 mod u8;
 
@@ -35,10 +37,11 @@ fn main() -> ExitCode {
         "accel" => accel::run(rest),
         "build" => build::run(rest),
         "ooc" => ooc::run(rest),
+        "raw" => raw::run(rest),
         "soak" => soak::run(rest),
         "u8" => u8::run(rest),
         _ => {
-            eprintln!("usage: brickray-bench <accel|build|ooc|soak|u8> [options]");
+            eprintln!("usage: brickray-bench <accel|build|ooc|raw|soak|u8> [options]");
             return ExitCode::from(2);
         }
     };

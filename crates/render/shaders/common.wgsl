@@ -75,15 +75,21 @@ const FLAG_REVERSED_Z: u32 = 4u;
 struct TfInfo {
     // Number of entries, as a float.
     count: f32,
+    // Columns and rows of the corrected table, as floats.
+    width: f32,
+    rows: f32,
     pad0: f32,
-    pad1: f32,
-    pad2: f32,
 }
 
 @group(1) @binding(0) var<storage, read> tf: array<vec4<f32>>;
 // Opacity prefix sums: tf_prefix[i] = entries j < i with alpha > 0.
 @group(1) @binding(1) var<storage, read> tf_prefix: array<u32>;
 @group(1) @binding(2) var<uniform> tf_info: TfInfo;
+// The corrected table (brickray_core::tf::CorrectedTable): row r holds the TF
+// with its opacity corrected to step_factor * 2^r reference lengths, read with
+// hardware linear filtering: no interpolation by hand and no pow per sample.
+@group(1) @binding(3) var tf_table: texture_2d<f32>;
+@group(1) @binding(4) var tf_sampler: sampler;
 
 // A ray through one pixel, parametrised by world distance t from its origin on
 // the near plane.
@@ -203,7 +209,22 @@ fn start_ray(px: vec2<u32>) -> RayStart {
     return s;
 }
 
-// Linear interpolation between the two nearest TF entries (clamped to 0..1).
+// The texture coordinate of the corrected table's row for a step of
+// step_factor * 2^r reference lengths (hoisted out of the sample loop).
+fn tf_row(r: f32) -> f32 {
+    return (r + 0.5) / tf_info.rows;
+}
+
+// The TF at v (clamped to 0..1) with its opacity corrected to the step of row
+// coordinate `row`: one filtered texture read.
+fn tf_sample(v: f32, row: f32) -> vec4<f32> {
+    let w = tf_info.width;
+    let x = (clamp(v, 0.0, 1.0) * (w - 1.0) + 0.5) / w;
+    return textureSampleLevel(tf_table, tf_sampler, vec2<f32>(x, row), 0.0);
+}
+
+// Linear interpolation between the two nearest TF entries (clamped to 0..1),
+// exact and uncorrected: once per ray (MIP's maximum).
 fn tf_lookup(v: f32) -> vec4<f32> {
     let n = tf_info.count;
     let x = clamp(v, 0.0, 1.0) * (n - 1.0);

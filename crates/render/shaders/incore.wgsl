@@ -83,43 +83,45 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let cur = Cursor(r);
     if (t1 > t0) {
         let dt = frame.dt;
+        let tf_v = tf_row(0.0);
         let n = min(u32(ceil((t1 - t0) / dt)), frame.max_samples);
+        // Empty-space skipping tests a macro cell once, when the ray enters it
+        // (k reaches k_cell), not at every sample: the samples of a cell known to
+        // contribute run without tests. A cell is skipped when it cannot
+        // contribute: transparent (DVR), below the isovalue (iso: a crossing needs
+        // a value at or above it; the bracket's lower end may lie in the skipped
+        // cell, whose values are all below), or below the running maximum (MIP).
+        // Skips land on the same sample grid, so skipping never changes the image.
         var k = 0u;
+        var k_cell = 0u;
         loop {
             if (k >= n) { break; }
             let t = t0 + f32(k) * dt;
             if (t >= t1) { break; }
             let u = tex_at(r, t);
-            if (ESS && MODE != MODE_ISO) {
-                // Skip a cell that cannot contribute: transparent (DVR) or below the
-                // running maximum (MIP). The sample grid is unchanged.
+            if (ESS && k >= k_cell) {
                 let c = cell_of(u);
                 let range = cell_range(c);
-                let skip = (MODE == MODE_DVR && tf_transparent(range)) || (MODE == MODE_MIP && range.y <= acc.max_v);
+                let k_exit = max(k + 1u, first_k_after(cell_exit(r, c), t0, dt));
+                let skip = (MODE == MODE_DVR && tf_transparent(range))
+                    || (MODE == MODE_ISO && range.y < frame.isovalue)
+                    || (MODE == MODE_MIP && range.y <= acc.max_v);
                 if (skip) {
-                    k = max(k + 1u, first_k_after(cell_exit(r, c), t0, dt));
+                    k = k_exit;
                     continue;
                 }
+                k_cell = k_exit;
             }
             let v = sample_value(u);
             acc.samples = acc.samples + 1u;
             if (MODE == MODE_DVR) {
-                if (dvr_sample(&acc, cur, r, t, v, frame.step_factor)) { break; }
+                if (dvr_sample(&acc, cur, r, t, v, tf_v)) { break; }
             } else if (MODE == MODE_ISO) {
                 if (v >= frame.isovalue) {
                     // The first sample inside is a capped cut, else the crossing
                     // lies since the previous sample.
                     iso_bracket(&acc, select(t - dt, t, k == 0u), t);
                     break;
-                }
-                if (ESS) {
-                    // The whole cell lies on this sample's side of the isovalue.
-                    let c = cell_of(u);
-                    let cr = cell_range(c);
-                    if (frame.isovalue < cr.x || frame.isovalue > cr.y) {
-                        k = max(k + 1u, first_k_after(cell_exit(r, c), t0, dt));
-                        continue;
-                    }
                 }
             } else {
                 if (mip_sample(&acc, t, v)) { break; }

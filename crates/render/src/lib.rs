@@ -323,6 +323,12 @@ impl VolumeRenderer {
         let tf = self.tf.current().ok_or(PrepareError::NoTransferFunction)?;
         let mut uploaded = backend.get_mut().update(device, queue, desc, tf)?;
         let backend = backend.get();
+        uploaded += self.tf.prepare(
+            device,
+            queue,
+            desc.settings.step_factor,
+            backend.step_lengths(),
+        )?;
         let uniforms = FrameUniforms::new(desc, backend.max_leaves());
         uploaded += self.frame.update(device, queue, desc, uniforms)?;
         let outputs = self.frame.outputs().expect("sized by update");

@@ -200,6 +200,10 @@ impl VolumeBackend for InCore {
         0
     }
 
+    fn step_lengths(&self) -> u32 {
+        1
+    }
+
     fn wants_redraw(&self) -> bool {
         false
     }

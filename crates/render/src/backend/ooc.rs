@@ -468,6 +468,10 @@ impl VolumeBackend for OutOfCore {
         (3u64 << finest).saturating_add(1024).min(1 << 20) as u32
     }
 
+    fn step_lengths(&self) -> u32 {
+        self.layout.levels as u32
+    }
+
     fn wants_redraw(&self) -> bool {
         !self.stats.converged
     }

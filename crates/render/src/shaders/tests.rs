@@ -189,7 +189,7 @@ fn check_kernel(name: &str, m: &naga::Module, volume_storage: u32) {
     check_struct(
         m,
         "TfInfo",
-        rust_fields!(TfInfo, [count, pad0, pad1, pad2]),
+        rust_fields!(TfInfo, [count, width, rows, pad0]),
         std::mem::size_of::<TfInfo>(),
     );
     // Every binding of every group against the Rust layouts.

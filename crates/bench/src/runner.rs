@@ -1,0 +1,163 @@
+//! What the suites share: timed frames into an offscreen target, convergence of
+//! the out-of-core path, and order statistics.
+
+use brickray_core::{Camera, RenderSettings, VolumeFrame};
+use brickray_harness::{GpuContext, Offscreen};
+use brickray_render::{FrameDesc, OutOfCoreStats, VolumeRenderer};
+use std::time::{Duration, Instant};
+
+/// One rendered frame.
+pub(crate) struct Shot {
+    /// `prepare + submit + wait` wall time.
+    pub(crate) ms: f64,
+    /// The image (RGBA8; empty when not read).
+    pub(crate) rgba: Vec<u8>,
+    /// Mean samples per ray over the rays that enter the volume (0 when not read).
+    pub(crate) samples: f64,
+    /// Samples of all rays (0 when not read).
+    pub(crate) total_samples: u64,
+}
+
+/// Draws frames of one size into an offscreen target and times them.
+pub(crate) struct Runner<'a> {
+    pub(crate) gpu: &'a GpuContext,
+    pub(crate) target: Offscreen,
+    pub(crate) size: u32,
+}
+
+impl<'a> Runner<'a> {
+    pub(crate) fn new(gpu: &'a GpuContext, size: u32) -> Self {
+        Runner {
+            gpu,
+            target: Offscreen::new(&gpu.device, size, size),
+            size,
+        }
+    }
+
+    /// One frame: `prepare + submit + wait` wall time, and optionally the image
+    /// and the samples per ray read back (not timed).
+    pub(crate) fn frame(
+        &self,
+        r: &mut VolumeRenderer,
+        camera: Camera,
+        frame: VolumeFrame,
+        settings: RenderSettings,
+        read: bool,
+    ) -> Result<Shot, String> {
+        let g = self.gpu;
+        let t0 = Instant::now();
+        let mut enc = g.device.create_command_encoder(&Default::default());
+        let desc = FrameDesc {
+            camera,
+            frame,
+            viewport: brickray_render::Viewport::full(self.size, self.size),
+            settings,
+            host_depth: None,
+        };
+        r.prepare(&g.device, &g.queue, &mut enc, &desc)
+            .map_err(|e| e.to_string())?;
+        {
+            let mut pass = self.target.pass(&mut enc, true);
+            r.render(&mut pass).map_err(|e| e.to_string())?;
+        }
+        g.submit_wait(enc);
+        let ms = t0.elapsed().as_secs_f64() * 1e3;
+        if !read {
+            return Ok(Shot {
+                ms,
+                rgba: Vec::new(),
+                samples: 0.0,
+                total_samples: 0,
+            });
+        }
+        let rgba = self.target.read_color(g);
+        let tex = r.sample_count_texture().ok_or("no sample counts")?;
+        let counts = brickray_harness::read_texture(g, tex, 4, wgpu::TextureAspect::All);
+        let (mut sum, mut n) = (0u64, 0u64);
+        for c in counts.chunks_exact(4) {
+            let c = u32::from_le_bytes([c[0], c[1], c[2], c[3]]);
+            if c > 0 {
+                sum += c as u64;
+                n += 1;
+            }
+        }
+        Ok(Shot {
+            ms,
+            rgba,
+            samples: sum as f64 / n.max(1) as f64,
+            total_samples: sum,
+        })
+    }
+
+    /// Plans one frame without ray casting it: `prepare` (refinement, uploads,
+    /// index) then a submission that only flushes the queued writes. The cut and
+    /// the streaming are those of a rendered frame; only the GPU ray cast is
+    /// skipped (lavapipe takes seconds per 512x512 frame).
+    pub(crate) fn plan(
+        &self,
+        r: &mut VolumeRenderer,
+        camera: Camera,
+        frame: VolumeFrame,
+        settings: RenderSettings,
+    ) -> Result<(), String> {
+        let g = self.gpu;
+        let mut enc = g.device.create_command_encoder(&Default::default());
+        let desc = FrameDesc {
+            camera,
+            frame,
+            viewport: brickray_render::Viewport::full(self.size, self.size),
+            settings,
+            host_depth: None,
+        };
+        r.prepare(&g.device, &g.queue, &mut enc, &desc)
+            .map_err(|e| e.to_string())?;
+        drop(enc);
+        g.submit_wait(g.device.create_command_encoder(&Default::default()));
+        Ok(())
+    }
+
+    /// Plans frames of one view until the out-of-core path converges (at most
+    /// `max_frames`); returns the frames it took (`None`: not converged) and the
+    /// last stats.
+    pub(crate) fn converge(
+        &self,
+        r: &mut VolumeRenderer,
+        camera: Camera,
+        frame: VolumeFrame,
+        settings: RenderSettings,
+        max_frames: usize,
+    ) -> Result<(Option<usize>, OutOfCoreStats), String> {
+        for i in 1..=max_frames {
+            self.plan(r, camera, frame, settings)?;
+            let s = r.out_of_core_stats().ok_or("not out of core")?;
+            if s.converged {
+                return Ok((Some(i), s));
+            }
+            // Give the loader threads the CPU (2 cores, shared with lavapipe).
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        Ok((None, r.out_of_core_stats().ok_or("not out of core")?))
+    }
+}
+
+pub(crate) fn median(v: &[f64]) -> f64 {
+    let mut v = v.to_vec();
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+/// The `p`-quantile (nearest rank).
+pub(crate) fn quantile(v: &[f64], p: f64) -> f64 {
+    let mut v = v.to_vec();
+    v.sort_by(f64::total_cmp);
+    let rank = ((p * v.len() as f64).ceil() as usize).clamp(1, v.len());
+    v[rank - 1]
+}
+
+pub(crate) fn round2(x: f64) -> f64 {
+    (x * 100.0).round() / 100.0
+}
+
+pub(crate) fn finite_db(x: f64) -> f64 {
+    if x.is_finite() { round2(x) } else { 999.0 }
+}
