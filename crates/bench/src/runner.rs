@@ -16,6 +16,23 @@ pub(crate) struct Shot {
     pub(crate) samples: f64,
     /// Samples of all rays (0 when not read).
     pub(crate) total_samples: u64,
+    /// Samples as SIMD hardware executes them: each run of
+    /// [`SIMD_LANES`] neighbouring rays of a row costs its longest ray's
+    /// samples times the lanes (0 when not read).
+    pub(crate) lane_samples: u64,
+}
+
+/// Lanes of one SIMD group of rays: 8 x 32-bit on lavapipe's 256-bit vectors
+/// (consecutive invocations of an 8x8 workgroup are consecutive pixels of a row).
+pub(crate) const SIMD_LANES: usize = 8;
+
+/// [`Shot::lane_samples`] of per-ray sample counts of a `width`-wide image.
+pub(crate) fn lane_samples(counts: &[u32], width: usize) -> u64 {
+    counts
+        .chunks(width)
+        .flat_map(|row| row.chunks(SIMD_LANES))
+        .map(|g| g.iter().copied().max().unwrap_or(0) as u64 * g.len() as u64)
+        .sum()
 }
 
 /// Draws frames of one size into an offscreen target and times them.
@@ -68,24 +85,24 @@ impl<'a> Runner<'a> {
                 rgba: Vec::new(),
                 samples: 0.0,
                 total_samples: 0,
+                lane_samples: 0,
             });
         }
         let rgba = self.target.read_color(g);
         let tex = r.sample_count_texture().ok_or("no sample counts")?;
         let counts = brickray_harness::read_texture(g, tex, 4, wgpu::TextureAspect::All);
-        let (mut sum, mut n) = (0u64, 0u64);
-        for c in counts.chunks_exact(4) {
-            let c = u32::from_le_bytes([c[0], c[1], c[2], c[3]]);
-            if c > 0 {
-                sum += c as u64;
-                n += 1;
-            }
-        }
+        let counts: Vec<u32> = counts
+            .chunks_exact(4)
+            .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+            .collect();
+        let sum: u64 = counts.iter().map(|&c| c as u64).sum();
+        let n = counts.iter().filter(|&&c| c > 0).count() as u64;
         Ok(Shot {
             ms,
             rgba,
             samples: sum as f64 / n.max(1) as f64,
             total_samples: sum,
+            lane_samples: lane_samples(&counts, self.size as usize),
         })
     }
 

@@ -186,6 +186,20 @@ fn clip_box(r: Ray, lo: vec3<f32>, hi: vec3<f32>) -> vec2<f32> {
     return vec2<f32>(t0, t1);
 }
 
+// 1 / d per component (0 where d is 0), once per ray: box exits then need no
+// division per test.
+fn safe_inverse(d: vec3<f32>) -> vec3<f32> {
+    return select(vec3<f32>(0.0), 1.0 / d, d != vec3<f32>(0.0));
+}
+
+// t at which the ray o + d t leaves the box [lo, hi] it is inside; `inv_d` is
+// safe_inverse(d).
+fn box_exit(o: vec3<f32>, d: vec3<f32>, inv_d: vec3<f32>, lo: vec3<f32>, hi: vec3<f32>) -> f32 {
+    let far = select(lo, hi, d > vec3<f32>(0.0));
+    let t = select(vec3<f32>(3.0e38), (far - o) * inv_d, d != vec3<f32>(0.0));
+    return min(t.x, min(t.y, t.z));
+}
+
 // A pixel's ray, the host's depth there (the far value without one) and the
 // ray's extent in the volume box, clipped to the host's depth.
 struct RayStart {

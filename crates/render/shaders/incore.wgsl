@@ -62,11 +62,11 @@ fn cell_range(c: vec3<u32>) -> vec2<f32> {
     return cell_ranges[(c.z * vol.cells.y + c.y) * vol.cells.x + c.x];
 }
 
-// t at which the ray leaves macro cell c.
-fn cell_exit(r: Ray, c: vec3<u32>) -> f32 {
+// t at which the ray leaves macro cell c (`inv_dir`: safe_inverse(r.tex_dir)).
+fn cell_exit(r: Ray, inv_dir: vec3<f32>, c: vec3<u32>) -> f32 {
     let s = f32(vol.cell_size) / vol.dims;
     let lo = vec3<f32>(c) * s;
-    return clip_box(r, lo, lo + s).y;
+    return box_exit(r.tex_origin, r.tex_dir, inv_dir, lo, lo + s);
 }
 
 @compute @workgroup_size(8, 8, 1)
@@ -84,6 +84,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     if (t1 > t0) {
         let dt = frame.dt;
         let tf_v = tf_row(0.0);
+        let inv_dir = safe_inverse(r.tex_dir);
         let n = min(u32(ceil((t1 - t0) / dt)), frame.max_samples);
         // Empty-space skipping tests a macro cell once, when the ray enters it
         // (k reaches k_cell), not at every sample: the samples of a cell known to
@@ -102,7 +103,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             if (ESS && k >= k_cell) {
                 let c = cell_of(u);
                 let range = cell_range(c);
-                let k_exit = max(k + 1u, first_k_after(cell_exit(r, c), t0, dt));
+                let k_exit = max(k + 1u, first_k_after(cell_exit(r, inv_dir, c), t0, dt));
                 let skip = (MODE == MODE_DVR && tf_transparent(range))
                     || (MODE == MODE_ISO && range.y < frame.isovalue)
                     || (MODE == MODE_MIP && range.y <= acc.max_v);

@@ -122,18 +122,12 @@ fn sub_cell_range(b: Brick, j: vec3<u32>) -> vec2<f32> {
     return sub_cells[((b.slot * n + j.z) * n + j.y) * n + j.x];
 }
 
-// t at which the ray o(t) = oo + od t leaves the box [lo, hi].
-fn box_exit(oo: vec3<f32>, od: vec3<f32>, lo: vec3<f32>, hi: vec3<f32>) -> f32 {
-    let far = select(lo, hi, od > vec3<f32>(0.0));
-    let tf = select(vec3<f32>(3.0e38), (far - oo) / od, od != vec3<f32>(0.0));
-    return min(tf.x, min(tf.y, tf.z));
-}
-
-// t at which the ray leaves sub-cell j of brick b.
-fn sub_cell_exit(b: Brick, j: vec3<u32>, oo: vec3<f32>, od: vec3<f32>) -> f32 {
+// t at which the ray o(t) = oo + od t leaves sub-cell j of brick b (`inv_od`:
+// safe_inverse(od)).
+fn sub_cell_exit(b: Brick, j: vec3<u32>, oo: vec3<f32>, od: vec3<f32>, inv_od: vec3<f32>) -> f32 {
     let side = b.box_size / f32(ooc.sub_cells);
     let lo = b.box_min + vec3<f32>(j) * side;
-    return box_exit(oo, od, lo, lo + side);
+    return box_exit(oo, od, inv_od, lo, lo + side);
 }
 
 @compute @workgroup_size(8, 8, 1)
@@ -152,6 +146,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     if (t1 > t0) {
         let oo = r.tex_origin * ooc.octree_scale;
         let od = r.tex_dir * ooc.octree_scale;
+        let inv_od = safe_inverse(od);
         cur.oo = oo;
         cur.od = od;
         let dt = frame.dt;
@@ -192,7 +187,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 if (ESS && k >= k_cell) {
                     let j = sub_cell_of(cur.b, oo + od * t);
                     let range = sub_cell_range(cur.b, j);
-                    let te = min(sub_cell_exit(cur.b, j, oo, od), st.hit.t_exit);
+                    let te = min(sub_cell_exit(cur.b, j, oo, od, inv_od), st.hit.t_exit);
                     let k_exit = max(k + 1u, first_k_after(te, t0, dtl));
                     let skip = (MODE == MODE_DVR && tf_transparent(range))
                         || (MODE == MODE_ISO && range.y < frame.isovalue)

@@ -1,7 +1,7 @@
 //! The yardstick kernel of the `raw` suite (raw.wgsl): its pipelines, its
 //! resources and one timed dispatch.
 
-use brickray_core::{Camera, TransferFunction, Volume, VolumeFrame};
+use brickray_core::{Camera, Volume, VolumeFrame};
 use brickray_harness::GpuContext;
 use glam::DVec3;
 use std::time::Instant;
@@ -50,15 +50,6 @@ pub(crate) struct RawKernel {
     dims: [u32; 3],
     bind_group: Option<wgpu::BindGroup>,
     tf_count: f32,
-}
-
-/// Opacity corrected to `exponent` reference lengths (what brickray's kernels
-/// compute per sample, here once per entry).
-pub(crate) fn corrected(tf: &TransferFunction, exponent: f32) -> Vec<[f32; 4]> {
-    tf.entries()
-        .iter()
-        .map(|&[r, g, b, a]| [r, g, b, 1.0 - (1.0 - a).powf(exponent)])
-        .collect()
 }
 
 impl RawKernel {
@@ -223,8 +214,9 @@ impl RawKernel {
         })
     }
 
-    /// Sets the transfer function: `entries` (opacity already corrected to the
-    /// step) as a filtered `Rgba16Float` row and as a storage buffer.
+    /// Sets the transfer function: `entries` (brickray's corrected table, one
+    /// row: opacity already corrected to the step) as a filtered `Rgba16Float`
+    /// row and as a storage buffer.
     pub(crate) fn set_tf(&mut self, gpu: &GpuContext, entries: &[[f32; 4]]) {
         let dev = &gpu.device;
         let n = entries.len() as u32;
@@ -349,14 +341,15 @@ impl RawKernel {
     }
 
     /// One dispatch, submitted and waited for: wall ms, and with `count` the
-    /// samples of all rays (read back, not timed).
+    /// samples of all rays and their SIMD lane-bound count (read back, not
+    /// timed).
     pub(crate) fn run(
         &self,
         gpu: &GpuContext,
         mode: usize,
         texture_tf: bool,
         count: bool,
-    ) -> (f64, u64) {
+    ) -> (f64, u64, u64) {
         let bind_group = self.bind_group.as_ref().expect("set_tf first");
         let t = Instant::now();
         let mut enc = gpu.device.create_command_encoder(&Default::default());
@@ -370,7 +363,7 @@ impl RawKernel {
         gpu.submit_wait(enc);
         let ms = t.elapsed().as_secs_f64() * 1e3;
         if !count {
-            return (ms, 0);
+            return (ms, 0, 0);
         }
         let mut enc = gpu.device.create_command_encoder(&Default::default());
         enc.copy_buffer_to_buffer(&self.counts, 0, &self.readback, 0, None);
@@ -378,14 +371,19 @@ impl RawKernel {
         let slice = self.readback.slice(..);
         slice.map_async(wgpu::MapMode::Read, |_| {});
         let _ = gpu.device.poll(wgpu::PollType::wait_indefinitely());
-        let total = {
+        let counts: Vec<u32> = {
             let data = slice.get_mapped_range().expect("mapped counts");
             data.chunks_exact(4)
-                .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]) as u64)
-                .sum()
+                .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+                .collect()
         };
         self.readback.unmap();
-        (ms, total)
+        let total = counts.iter().map(|&c| c as u64).sum();
+        (
+            ms,
+            total,
+            crate::runner::lane_samples(&counts, self.size as usize),
+        )
     }
 }
 

@@ -16,6 +16,11 @@
 //! `--step` (0.5) voxel, variants interleaved round by round (`--rounds`, 3), each
 //! time the median of `prepare + submit + wait` (the yardstick: dispatch + wait).
 //!
+//! Samples are counted per ray and, as SIMD hardware runs them, per group of 8
+//! neighbouring rays of a row costing its longest ray's samples 8 times
+//! ("lane-bound"): early termination and skipping save samples of single rays,
+//! but a group runs as long as its longest ray.
+//!
 //! Reports per mode: samples per ray and ms of every variant; the useful rate
 //! ratio (brickray brute-force samples per second / the yardstick's, in core and
 //! out of core); the rate per sample taken with the default switches relative to
@@ -34,7 +39,7 @@ use brickray_core::{
 };
 use brickray_harness::{GpuContext, target_desc};
 use brickray_render::{OutOfCoreConfig, RendererOptions, U8Filtering, VolumeRenderer};
-use kernel::{MODES, RawKernel, corrected};
+use kernel::{MODES, RawKernel};
 use serde_json::json;
 
 /// The variants, in the order of the table.
@@ -144,7 +149,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
     let mip_tf = TransferFunction::ramp(0.2, 0.9, 1.0);
     let mut fig = Figures::new();
     println!(
-        "\n| mode | variant | samples/ray | ms | Msamples/s | rate / yardstick |\n|---|---|---:|---:|---:|---:|"
+        "\n| mode | variant | samples/ray | lane-bound samples/ray | ms | Msamples/s | rate / yardstick | lane-bound rate / yardstick |\n|---|---|---:|---:|---:|---:|---:|---:|"
     );
     for (m, &(mode, _)) in MODES.iter().enumerate() {
         if !only.split(',').any(|o| o == mode) {
@@ -156,7 +161,8 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
                 .map_err(|e| e.to_string())?;
         }
         // MIP maps the maximum through the TF uncorrected.
-        raw.set_tf(&gpu, &corrected(tf, if m == 3 { 1.0 } else { step }));
+        let table = tf.corrected_table(if m == 3 { 1.0 } else { step }, 1, 8192);
+        raw.set_tf(&gpu, &table.texels);
         raw.set_view(&gpu, &camera, &frame, step, ISOVALUE, REFINE_STEPS)?;
         let (frames, stats) = run.converge(
             &mut ooc,
@@ -168,7 +174,8 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         frames.ok_or_else(|| format!("{mode}: out of core did not converge: {stats:?}"))?;
         // One counted frame per variant (also the warm-up), then timed rounds.
         let mut samples = [0u64; VARIANTS.len()];
-        let mut one = |i: usize, count: bool| -> Result<(f64, u64), String> {
+        let mut lanes = [0u64; VARIANTS.len()];
+        let mut one = |i: usize, count: bool| -> Result<(f64, u64, u64), String> {
             let v = VARIANTS[i];
             match v {
                 "raw_tex" | "raw_buf" => Ok(raw.run(&gpu, m, v == "raw_tex", count)),
@@ -180,12 +187,12 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
                     };
                     let shot =
                         run.frame(r, camera, frame, settings(m, step, accel_of(v)), count)?;
-                    Ok((shot.ms, shot.total_samples))
+                    Ok((shot.ms, shot.total_samples, shot.lane_samples))
                 }
             }
         };
-        for (i, s) in samples.iter_mut().enumerate() {
-            *s = one(i, true)?.1;
+        for i in 0..VARIANTS.len() {
+            (_, samples[i], lanes[i]) = one(i, true)?;
         }
         let mut times = vec![Vec::new(); VARIANTS.len()];
         for round in 0..rounds {
@@ -197,13 +204,16 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         let ms: Vec<f64> = times.iter().map(|t| median(t)).collect();
         let rays = size as f64 * size as f64;
         let rate = |i: usize| samples[i] as f64 / ms[i];
+        let lane_rate = |i: usize| lanes[i] as f64 / ms[i];
         for (i, v) in VARIANTS.iter().enumerate() {
             println!(
-                "| {mode} | {v} | {:.1} | {:.1} | {:.1} | {:.3} |",
+                "| {mode} | {v} | {:.1} | {:.1} | {:.1} | {:.1} | {:.3} | {:.3} |",
                 samples[i] as f64 / rays,
+                lanes[i] as f64 / rays,
                 ms[i],
                 rate(i) / 1e3,
-                rate(i) / rate(0)
+                rate(i) / rate(0),
+                lane_rate(i) / lane_rate(0)
             );
             fig.insert(format!("ms_{v}_{mode}"), json!(round2(ms[i])));
             fig.insert(
@@ -223,6 +233,14 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
             (
                 "accel_rate_per_sample_ooc",
                 rate(ix("ooc_default")) / rate(ix("ooc_brute")),
+            ),
+            (
+                "accel_lane_rate",
+                lane_rate(ix("in_default")) / lane_rate(ix("in_brute")),
+            ),
+            (
+                "accel_lane_rate_ooc",
+                lane_rate(ix("ooc_default")) / lane_rate(ix("ooc_brute")),
             ),
             (
                 "ooc_vs_incore",
