@@ -10,6 +10,8 @@ use std::time::{Duration, Instant};
 pub(crate) struct Shot {
     /// `prepare + submit + wait` wall time.
     pub(crate) ms: f64,
+    /// The process's CPU time over the same span ([`process_cpu_ms`]).
+    pub(crate) cpu_ms: f64,
     /// The image (RGBA8; empty when not read).
     pub(crate) rgba: Vec<u8>,
     /// Mean samples per ray over the rays that enter the volume (0 when not read).
@@ -20,6 +22,24 @@ pub(crate) struct Shot {
     /// [`SIMD_LANES`] neighbouring rays of a row costs its longest ray's
     /// samples times the lanes (0 when not read).
     pub(crate) lane_samples: u64,
+}
+
+/// CPU time of this process so far (all its threads: lavapipe's rasteriser
+/// threads run in it), in ms, from `/proc/self/stat` at its 10 ms tick; NaN
+/// where that is not available. On a machine shared with other work, CPU time
+/// moves far less than wall time, so suites report both.
+pub(crate) fn process_cpu_ms() -> f64 {
+    let ticks = || -> Option<f64> {
+        let s = std::fs::read_to_string("/proc/self/stat").ok()?;
+        // Fields after the command name in parentheses, from field 3 (state).
+        let rest = s.get(s.rfind(')')? + 2..)?;
+        let f: Vec<&str> = rest.split_whitespace().collect();
+        let utime: f64 = f.get(11)?.parse().ok()?;
+        let stime: f64 = f.get(12)?.parse().ok()?;
+        Some(utime + stime)
+    };
+    // USER_HZ is 100 on every Linux ABI.
+    ticks().map_or(f64::NAN, |t| t * 10.0)
 }
 
 /// Lanes of one SIMD group of rays: 8 x 32-bit on lavapipe's 256-bit vectors
@@ -62,6 +82,7 @@ impl<'a> Runner<'a> {
         read: bool,
     ) -> Result<Shot, String> {
         let g = self.gpu;
+        let cpu0 = process_cpu_ms();
         let t0 = Instant::now();
         let mut enc = g.device.create_command_encoder(&Default::default());
         let desc = FrameDesc {
@@ -79,9 +100,11 @@ impl<'a> Runner<'a> {
         }
         g.submit_wait(enc);
         let ms = t0.elapsed().as_secs_f64() * 1e3;
+        let cpu_ms = process_cpu_ms() - cpu0;
         if !read {
             return Ok(Shot {
                 ms,
+                cpu_ms,
                 rgba: Vec::new(),
                 samples: 0.0,
                 total_samples: 0,
@@ -99,6 +122,7 @@ impl<'a> Runner<'a> {
         let n = counts.iter().filter(|&&c| c > 0).count() as u64;
         Ok(Shot {
             ms,
+            cpu_ms,
             rgba,
             samples: sum as f64 / n.max(1) as f64,
             total_samples: sum,

@@ -340,17 +340,18 @@ impl RawKernel {
         Ok(())
     }
 
-    /// One dispatch, submitted and waited for: wall ms, and with `count` the
-    /// samples of all rays and their SIMD lane-bound count (read back, not
-    /// timed).
+    /// One dispatch, submitted and waited for: wall ms, the process's CPU ms,
+    /// and with `count` the samples of all rays and their SIMD lane-bound count
+    /// (read back, not timed).
     pub(crate) fn run(
         &self,
         gpu: &GpuContext,
         mode: usize,
         texture_tf: bool,
         count: bool,
-    ) -> (f64, u64, u64) {
+    ) -> (f64, f64, u64, u64) {
         let bind_group = self.bind_group.as_ref().expect("set_tf first");
+        let cpu0 = crate::runner::process_cpu_ms();
         let t = Instant::now();
         let mut enc = gpu.device.create_command_encoder(&Default::default());
         {
@@ -362,8 +363,9 @@ impl RawKernel {
         }
         gpu.submit_wait(enc);
         let ms = t.elapsed().as_secs_f64() * 1e3;
+        let cpu_ms = crate::runner::process_cpu_ms() - cpu0;
         if !count {
-            return (ms, 0, 0);
+            return (ms, cpu_ms, 0, 0);
         }
         let mut enc = gpu.device.create_command_encoder(&Default::default());
         enc.copy_buffer_to_buffer(&self.counts, 0, &self.readback, 0, None);
@@ -381,6 +383,7 @@ impl RawKernel {
         let total = counts.iter().map(|&c| c as u64).sum();
         (
             ms,
+            cpu_ms,
             total,
             crate::runner::lane_samples(&counts, self.size as usize),
         )

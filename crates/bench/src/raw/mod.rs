@@ -21,6 +21,11 @@
 //! ("lane-bound"): early termination and skipping save samples of single rays,
 //! but a group runs as long as its longest ray.
 //!
+//! Times are the median over rounds of both wall time and the process's CPU
+//! time (lavapipe rasterises on threads of this process); rates and ratios use
+//! CPU time, which moves far less than wall time when other work shares the
+//! machine (`*_wall` figures give the wall-time versions of the main ratios).
+//!
 //! Reports per mode: samples per ray and ms of every variant; the useful rate
 //! ratio (brickray brute-force samples per second / the yardstick's, in core and
 //! out of core); the rate per sample taken with the default switches relative to
@@ -149,7 +154,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
     let mip_tf = TransferFunction::ramp(0.2, 0.9, 1.0);
     let mut fig = Figures::new();
     println!(
-        "\n| mode | variant | samples/ray | lane-bound samples/ray | ms | Msamples/s | rate / yardstick | lane-bound rate / yardstick |\n|---|---|---:|---:|---:|---:|---:|---:|"
+        "\n| mode | variant | samples/ray | lane-bound samples/ray | wall ms | CPU ms | Msamples/CPU s | rate / yardstick | lane-bound rate / yardstick |\n|---|---|---:|---:|---:|---:|---:|---:|---:|"
     );
     for (m, &(mode, _)) in MODES.iter().enumerate() {
         if !only.split(',').any(|o| o == mode) {
@@ -175,7 +180,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         // One counted frame per variant (also the warm-up), then timed rounds.
         let mut samples = [0u64; VARIANTS.len()];
         let mut lanes = [0u64; VARIANTS.len()];
-        let mut one = |i: usize, count: bool| -> Result<(f64, u64, u64), String> {
+        let mut one = |i: usize, count: bool| -> Result<(f64, f64, u64, u64), String> {
             let v = VARIANTS[i];
             match v {
                 "raw_tex" | "raw_buf" => Ok(raw.run(&gpu, m, v == "raw_tex", count)),
@@ -187,35 +192,43 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
                     };
                     let shot =
                         run.frame(r, camera, frame, settings(m, step, accel_of(v)), count)?;
-                    Ok((shot.ms, shot.total_samples, shot.lane_samples))
+                    Ok((shot.ms, shot.cpu_ms, shot.total_samples, shot.lane_samples))
                 }
             }
         };
         for i in 0..VARIANTS.len() {
-            (_, samples[i], lanes[i]) = one(i, true)?;
+            (_, _, samples[i], lanes[i]) = one(i, true)?;
         }
-        let mut times = vec![Vec::new(); VARIANTS.len()];
+        let mut wall = vec![Vec::new(); VARIANTS.len()];
+        let mut cpu = vec![Vec::new(); VARIANTS.len()];
         for round in 0..rounds {
             for k in 0..VARIANTS.len() {
                 let i = (k + round) % VARIANTS.len();
-                times[i].push(one(i, false)?.0);
+                let (w, c, _, _) = one(i, false)?;
+                wall[i].push(w);
+                cpu[i].push(c);
             }
         }
-        let ms: Vec<f64> = times.iter().map(|t| median(t)).collect();
+        let wall: Vec<f64> = wall.iter().map(|t| median(t)).collect();
+        // Rates and ratios from the process's CPU time: on this shared 2-core
+        // machine wall time moved by up to 2x between variants of one round.
+        let ms: Vec<f64> = cpu.iter().map(|t| median(t)).collect();
         let rays = size as f64 * size as f64;
         let rate = |i: usize| samples[i] as f64 / ms[i];
         let lane_rate = |i: usize| lanes[i] as f64 / ms[i];
         for (i, v) in VARIANTS.iter().enumerate() {
             println!(
-                "| {mode} | {v} | {:.1} | {:.1} | {:.1} | {:.1} | {:.3} | {:.3} |",
+                "| {mode} | {v} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {:.3} | {:.3} |",
                 samples[i] as f64 / rays,
                 lanes[i] as f64 / rays,
+                wall[i],
                 ms[i],
                 rate(i) / 1e3,
                 rate(i) / rate(0),
                 lane_rate(i) / lane_rate(0)
             );
-            fig.insert(format!("ms_{v}_{mode}"), json!(round2(ms[i])));
+            fig.insert(format!("ms_{v}_{mode}"), json!(round2(wall[i])));
+            fig.insert(format!("cpu_ms_{v}_{mode}"), json!(round2(ms[i])));
             fig.insert(
                 format!("samples_per_pixel_{v}_{mode}"),
                 json!(round2(samples[i] as f64 / rays)),
@@ -257,6 +270,16 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
             (
                 "default_vs_noskip_ooc",
                 ms[ix("ooc_default")] / ms[ix("ooc_noskip")],
+            ),
+            (
+                "useful_rate_ratio_wall",
+                samples[ix("in_brute")] as f64
+                    / wall[ix("in_brute")]
+                    / (samples[0] as f64 / wall[0]),
+            ),
+            (
+                "ooc_vs_incore_wall",
+                wall[ix("ooc_default")] / wall[ix("in_default")],
             ),
         ];
         print!("  {mode}:");
