@@ -20,7 +20,7 @@ use std::sync::Arc;
 use std::time::Instant;
 
 /// Storage buffers of group 2: slots, sub-cells, index.
-pub(super) const STORAGE_BUFFERS: u32 = 3;
+pub(crate) const STORAGE_BUFFERS: u32 = 3;
 
 /// What the out-of-core path did in the last frame.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
