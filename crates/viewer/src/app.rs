@@ -102,12 +102,14 @@ impl ViewerApp {
     pub(crate) fn new(cc: &eframe::CreationContext<'_>, startup: Startup) -> ViewerApp {
         let mut gpu_error = None;
         match cc.wgpu_render_state.as_ref() {
-            Some(rs) => match ViewResources::new(&rs.device, rs.target_format, Default::default()) {
-                Ok(r) => {
-                    rs.renderer.write().callback_resources.insert(r);
+            Some(rs) => {
+                match ViewResources::new(&rs.device, rs.target_format, Default::default()) {
+                    Ok(r) => {
+                        rs.renderer.write().callback_resources.insert(r);
+                    }
+                    Err(e) => gpu_error = Some(format!("brickray cannot render here: {e}")),
                 }
-                Err(e) => gpu_error = Some(format!("brickray cannot render here: {e}")),
-            },
+            }
             None => gpu_error = Some("eframe runs without wgpu".into()),
         }
         let mut app = ViewerApp {
@@ -171,7 +173,7 @@ impl ViewerApp {
     fn install(&mut self, frame: &eframe::Frame, loaded: Loaded) -> Result<(), String> {
         let desc = loaded.desc.clone();
         let vframe = VolumeFrame::centered(desc.dims, desc.spacing);
-        let ooc = self.ooc.clone();
+        let ooc = self.ooc;
         let streamed = matches!(loaded.volume, Opened::Streamed(_));
         self.with_gpu(frame, |device, queue, r| match loaded.volume {
             Opened::InCore(v) => r.renderer.set_volume(device, queue, &v),
@@ -182,7 +184,11 @@ impl ViewerApp {
         // A first TF suited to the data: CT presets for Hounsfield ranges.
         let first = self.shown.is_none();
         if first || self.tf_dirty {
-            let preset = if desc.value_range[0] <= -900.0 { Preset::CtBone } else { Preset::Grey };
+            let preset = if desc.value_range[0] <= -900.0 {
+                Preset::CtBone
+            } else {
+                Preset::Grey
+            };
             self.tf = TfModel::preset(preset, desc.value_range);
         }
         self.tf_dirty = true;
@@ -221,7 +227,9 @@ impl ViewerApp {
             self.tf_dirty = false;
             match self.tf.to_table(TABLE_ENTRIES) {
                 Ok(table) => {
-                    if let Some(Err(e)) = self.with_gpu(frame, |d, q, r| r.renderer.set_transfer_function(d, q, &table)) {
+                    if let Some(Err(e)) = self.with_gpu(frame, |d, q, r| {
+                        r.renderer.set_transfer_function(d, q, &table)
+                    }) {
                         self.fail(format!("transfer function: {e}"));
                     }
                 }
@@ -230,7 +238,7 @@ impl ViewerApp {
         }
         if self.ooc_dirty && self.shown.as_ref().is_some_and(|s| s.streamed) {
             self.ooc_dirty = false;
-            let c = self.ooc.clone();
+            let c = self.ooc;
             let res = self.with_gpu(frame, |d, q, r| -> Result<(), brickray::RenderError> {
                 r.renderer.set_lod_tolerance(c.tolerance_px)?;
                 r.renderer.set_upload_budget(c.upload_budget_bytes)?;
@@ -265,7 +273,12 @@ impl ViewerApp {
     }
 
     /// Starts a screenshot of the volume view.
-    fn request_shot(&mut self, ctx: &egui::Context, path: PathBuf, callback: Option<&VolumeCallback>) {
+    fn request_shot(
+        &mut self,
+        ctx: &egui::Context,
+        path: PathBuf,
+        callback: Option<&VolumeCallback>,
+    ) {
         let Some(cb) = callback else {
             return self.fail("screenshot: no volume view".into());
         };
@@ -292,7 +305,9 @@ impl ViewerApp {
 
     /// Saves a finished screenshot (the view's pixels) and its JSON sidecar.
     fn finish_shot(&mut self) {
-        let Some(shot) = self.shot.as_ref() else { return };
+        let Some(shot) = self.shot.as_ref() else {
+            return;
+        };
         let Some(image) = shot.image.lock().ok().and_then(|mut g| g.take()) else {
             return;
         };
@@ -304,9 +319,16 @@ impl ViewerApp {
     }
 
     /// Runs script actions until one has to wait.
-    fn step_script(&mut self, ctx: &egui::Context, converged: bool, callback: Option<&VolumeCallback>) {
+    fn step_script(
+        &mut self,
+        ctx: &egui::Context,
+        converged: bool,
+        callback: Option<&VolumeCallback>,
+    ) {
         loop {
-            let Some(s) = self.script.as_mut() else { return };
+            let Some(s) = self.script.as_mut() else {
+                return;
+            };
             if self.opening.is_some() || self.shot.is_some() {
                 return;
             }
@@ -335,7 +357,10 @@ impl ViewerApp {
                     Err(e) => return self.fail(e.to_string()),
                 },
                 Action::TfPreset(p) => {
-                    let range = self.shown.as_ref().map_or([0.0, 1.0], |s| s.desc.value_range);
+                    let range = self
+                        .shown
+                        .as_ref()
+                        .map_or([0.0, 1.0], |s| s.desc.value_range);
                     self.tf = TfModel::preset(p, range);
                     self.tf_dirty = true;
                 }
@@ -355,7 +380,10 @@ impl ViewerApp {
                 Action::Iso(v) => self.iso = v,
                 Action::Step(v) => self.settings.step_factor = v,
                 Action::Orbit(yaw, pitch, d) => {
-                    let home = self.shown.as_ref().map(|s| CameraController::new(&s.frame).distance);
+                    let home = self
+                        .shown
+                        .as_ref()
+                        .map(|s| CameraController::new(&s.frame).distance);
                     if let (Some(c), Some(home)) = (self.camera.as_mut(), home) {
                         c.set_orbit(yaw.to_radians(), pitch.to_radians(), d * home);
                     }
@@ -424,7 +452,11 @@ impl ViewerApp {
             if ui.button("Procedural 4096³").clicked() {
                 self.start_open(Input::Procedural(4096));
             }
-            if ui.button("Screenshot").on_hover_text("saves the view to brickray-viewer-N.png").clicked() {
+            if ui
+                .button("Screenshot")
+                .on_hover_text("saves the view to brickray-viewer-N.png")
+                .clicked()
+            {
                 self.shot_requested = true;
             }
             ui.separator();
@@ -435,7 +467,11 @@ impl ViewerApp {
         if let Some(o) = &self.opening {
             ui.horizontal(|ui| {
                 ui.label(format!("{}: {}", o.input.name(), o.progress.stage()));
-                ui.add(egui::ProgressBar::new(o.progress.fraction()).show_percentage().desired_width(240.0));
+                ui.add(
+                    egui::ProgressBar::new(o.progress.fraction())
+                        .show_percentage()
+                        .desired_width(240.0),
+                );
             });
         }
         if let Some(m) = self.messages.last() {
@@ -466,7 +502,10 @@ impl ViewerApp {
             }
         });
         let mut fov = c.fov_y.to_degrees();
-        if ui.add(egui::Slider::new(&mut fov, 10.0..=100.0).text("field of view °")).changed() {
+        if ui
+            .add(egui::Slider::new(&mut fov, 10.0..=100.0).text("field of view °"))
+            .changed()
+        {
             c.fov_y = fov.to_radians();
         }
         ui.label(
@@ -486,12 +525,21 @@ impl ViewerApp {
                     ui.selectable_value(&mut self.mode, m, m.label());
                 }
             });
-        if self.mode == ModeName::Iso {
-            if let Some(s) = &self.shown {
-                let raw = s.desc.value_range[0] + self.iso * (s.desc.value_range[1] - s.desc.value_range[0]);
-                ui.add(egui::Slider::new(&mut self.iso, 0.0..=1.0).text(format!("isovalue (raw {raw:.1})")));
-                histogram_strip(ui, &s.histogram, self.tf_editor.log_histogram, Some(self.iso));
-            }
+        if self.mode == ModeName::Iso
+            && let Some(s) = &self.shown
+        {
+            let raw =
+                s.desc.value_range[0] + self.iso * (s.desc.value_range[1] - s.desc.value_range[0]);
+            ui.add(
+                egui::Slider::new(&mut self.iso, 0.0..=1.0)
+                    .text(format!("isovalue (raw {raw:.1})")),
+            );
+            histogram_strip(
+                ui,
+                &s.histogram,
+                self.tf_editor.log_histogram,
+                Some(self.iso),
+            );
         }
         let s = &mut self.settings;
         ui.add(
@@ -508,7 +556,13 @@ impl ViewerApp {
         });
         ui.checkbox(&mut s.accel.empty_space_skipping, "empty-space skipping");
         ui.add(egui::Slider::new(&mut s.depth_opacity, 0.01..=1.0).text("depth at opacity"));
-        ui.add(egui::Slider::new(&mut s.iso_refine_steps, 0..=RenderSettings::MAX_ISO_REFINE_STEPS).text("iso refinement"));
+        ui.add(
+            egui::Slider::new(
+                &mut s.iso_refine_steps,
+                0..=RenderSettings::MAX_ISO_REFINE_STEPS,
+            )
+            .text("iso refinement"),
+        );
         egui::CollapsingHeader::new("shading").show(ui, |ui| {
             ui.add(egui::Slider::new(&mut s.shading.ambient, 0.0..=1.0).text("ambient"));
             ui.add(egui::Slider::new(&mut s.shading.diffuse, 0.0..=1.0).text("diffuse"));
@@ -516,24 +570,41 @@ impl ViewerApp {
             ui.add(egui::Slider::new(&mut s.shading.shininess, 1.0..=128.0).text("shininess"));
         });
         if self.shown.as_ref().is_some_and(|s| s.streamed) {
-            egui::CollapsingHeader::new("out of core").default_open(true).show(ui, |ui| {
-                let c = &mut self.ooc;
-                let mut changed = ui
-                    .add(egui::Slider::new(&mut c.tolerance_px, 0.0..=8.0).text("LOD tolerance (px per voxel)"))
-                    .changed();
-                let mut mib = |ui: &mut egui::Ui, v: &mut u64, range: std::ops::RangeInclusive<u64>, text: &str| {
-                    let mut m = *v >> 20;
-                    let r = ui.add(egui::Slider::new(&mut m, range).logarithmic(true).text(text));
-                    if r.drag_stopped() || (r.changed() && !r.dragged()) {
-                        *v = m << 20;
-                        changed = true;
-                    }
-                };
-                mib(ui, &mut c.upload_budget_bytes, 1..=256, "upload MiB per frame");
-                mib(ui, &mut c.cpu_budget_bytes, 64..=16384, "CPU cache MiB");
-                mib(ui, &mut c.gpu_budget_bytes, 16..=4096, "GPU pool MiB");
-                self.ooc_dirty |= changed;
-            });
+            egui::CollapsingHeader::new("out of core")
+                .default_open(true)
+                .show(ui, |ui| {
+                    let c = &mut self.ooc;
+                    let mut changed = ui
+                        .add(
+                            egui::Slider::new(&mut c.tolerance_px, 0.0..=8.0)
+                                .text("LOD tolerance (px per voxel)"),
+                        )
+                        .changed();
+                    let mut mib = |ui: &mut egui::Ui,
+                                   v: &mut u64,
+                                   range: std::ops::RangeInclusive<u64>,
+                                   text: &str| {
+                        let mut m = *v >> 20;
+                        let r = ui.add(
+                            egui::Slider::new(&mut m, range)
+                                .logarithmic(true)
+                                .text(text),
+                        );
+                        if r.drag_stopped() || (r.changed() && !r.dragged()) {
+                            *v = m << 20;
+                            changed = true;
+                        }
+                    };
+                    mib(
+                        ui,
+                        &mut c.upload_budget_bytes,
+                        1..=256,
+                        "upload MiB per frame",
+                    );
+                    mib(ui, &mut c.cpu_budget_bytes, 64..=16384, "CPU cache MiB");
+                    mib(ui, &mut c.gpu_budget_bytes, 16..=4096, "GPU pool MiB");
+                    self.ooc_dirty |= changed;
+                });
         }
         ui.horizontal(|ui| {
             ui.checkbox(&mut self.overlays, "bounding box and axes");
@@ -543,7 +614,10 @@ impl ViewerApp {
     }
 
     fn tf_ui(&mut self, ui: &mut egui::Ui) {
-        let range = self.shown.as_ref().map_or([0.0, 1.0], |s| s.desc.value_range);
+        let range = self
+            .shown
+            .as_ref()
+            .map_or([0.0, 1.0], |s| s.desc.value_range);
         ui.horizontal(|ui| {
             egui::ComboBox::from_id_salt("brickray-viewer preset")
                 .selected_text("preset")
@@ -566,7 +640,8 @@ impl ViewerApp {
             ui.add(egui::TextEdit::singleline(&mut self.tf_path).desired_width(160.0));
             if ui.button("Save").clicked() {
                 let r = self.tf.save(Path::new(&self.tf_path));
-                self.messages.push(r.map_or_else(|e| e.to_string(), |_| format!("saved {}", self.tf_path)));
+                self.messages
+                    .push(r.map_or_else(|e| e.to_string(), |_| format!("saved {}", self.tf_path)));
             }
             if ui.button("Load").clicked() {
                 match TfModel::load(Path::new(&self.tf_path)) {
@@ -582,12 +657,16 @@ impl ViewerApp {
 
     /// Camera input over the view; returns true while a fly key is held.
     fn camera_input(&mut self, ui: &egui::Ui, response: &egui::Response) -> bool {
-        let Some(c) = self.camera.as_mut() else { return false };
+        let Some(c) = self.camera.as_mut() else {
+            return false;
+        };
         let d = response.drag_delta();
         if response.dragged_by(egui::PointerButton::Primary) {
             c.rotate(d.x, d.y);
         }
-        if response.dragged_by(egui::PointerButton::Secondary) || response.dragged_by(egui::PointerButton::Middle) {
+        if response.dragged_by(egui::PointerButton::Secondary)
+            || response.dragged_by(egui::PointerButton::Middle)
+        {
             c.pan(d.x, d.y, response.rect.height());
         }
         if response.hovered() {
@@ -621,7 +700,8 @@ impl ViewerApp {
 
 /// The histogram as a strip with a marker (the isovalue slider's background).
 fn histogram_strip(ui: &mut egui::Ui, h: &Histogram, log: bool, marker: Option<f32>) {
-    let (rect, _) = ui.allocate_exact_size(egui::vec2(ui.available_width(), 40.0), egui::Sense::hover());
+    let (rect, _) =
+        ui.allocate_exact_size(egui::vec2(ui.available_width(), 40.0), egui::Sense::hover());
     let p = ui.painter_at(rect);
     p.rect_filled(rect, 2.0, Color32::from_gray(24));
     let heights = h.heights(log);
@@ -629,12 +709,18 @@ fn histogram_strip(ui: &mut egui::Ui, h: &Histogram, log: bool, marker: Option<f
     for (i, v) in heights.iter().enumerate() {
         let x0 = rect.left() + i as f32 / n * rect.width();
         let x1 = rect.left() + (i + 1) as f32 / n * rect.width();
-        let bar = egui::Rect::from_min_max(egui::pos2(x0, rect.bottom() - v * rect.height()), egui::pos2(x1, rect.bottom()));
+        let bar = egui::Rect::from_min_max(
+            egui::pos2(x0, rect.bottom() - v * rect.height()),
+            egui::pos2(x1, rect.bottom()),
+        );
         p.rect_filled(bar, 0.0, Color32::from_gray(90));
     }
     if let Some(m) = marker {
         let x = rect.left() + m * rect.width();
-        p.line_segment([egui::pos2(x, rect.top()), egui::pos2(x, rect.bottom())], egui::Stroke::new(2.0, Color32::YELLOW));
+        p.line_segment(
+            [egui::pos2(x, rect.top()), egui::pos2(x, rect.bottom())],
+            egui::Stroke::new(2.0, Color32::YELLOW),
+        );
     }
 }
 
@@ -643,7 +729,9 @@ fn save_shot(shot: &PendingShot, image: &egui::ColorImage) -> Result<(), String>
     let vp = shot.viewport;
     let [w, h] = image.size;
     if (vp.x + vp.width) as usize > w || (vp.y + vp.height) as usize > h {
-        return Err(format!("the view {vp:?} is outside the captured {w}x{h} image"));
+        return Err(format!(
+            "the view {vp:?} is outside the captured {w}x{h} image"
+        ));
     }
     let mut rgba = Vec::with_capacity((vp.width * vp.height * 4) as usize);
     for y in vp.y..vp.y + vp.height {
@@ -654,11 +742,22 @@ fn save_shot(shot: &PendingShot, image: &egui::ColorImage) -> Result<(), String>
     if let Some(dir) = shot.path.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).map_err(|e| e.to_string())?;
     }
-    image::save_buffer(&shot.path, &rgba, vp.width, vp.height, image::ExtendedColorType::Rgba8).map_err(|e| e.to_string())?;
+    image::save_buffer(
+        &shot.path,
+        &rgba,
+        vp.width,
+        vp.height,
+        image::ExtendedColorType::Rgba8,
+    )
+    .map_err(|e| e.to_string())?;
     let c = shot.camera;
     let projection = match c.projection {
-        brickray::Projection::Perspective { fov_y } => serde_json::json!({"perspective": {"fov_y": fov_y}}),
-        brickray::Projection::Orthographic { height } => serde_json::json!({"orthographic": {"height": height}}),
+        brickray::Projection::Perspective { fov_y } => {
+            serde_json::json!({"perspective": {"fov_y": fov_y}})
+        }
+        brickray::Projection::Orthographic { height } => {
+            serde_json::json!({"orthographic": {"height": height}})
+        }
     };
     let sidecar = serde_json::json!({
         "viewport": [vp.width, vp.height],
@@ -681,7 +780,10 @@ impl eframe::App for ViewerApp {
         // A finished open.
         if let Some(result) = self.opening.as_ref().and_then(Opening::poll) {
             self.opening = None;
-            match result.map_err(|e| e.to_string()).and_then(|l| self.install(frame, l)) {
+            match result
+                .map_err(|e| e.to_string())
+                .and_then(|l| self.install(frame, l))
+            {
                 Ok(()) => {}
                 Err(e) => self.fail(e),
             }
@@ -699,7 +801,14 @@ impl eframe::App for ViewerApp {
 
         // Statistics of the frame drawn last time, and GPU errors.
         let (stats, frames, wants_redraw, err) = self
-            .with_gpu(frame, |_, _, r| (r.renderer.stats(), r.frames, r.renderer.wants_redraw(), r.take_error()))
+            .with_gpu(frame, |_, _, r| {
+                (
+                    r.renderer.stats(),
+                    r.frames,
+                    r.renderer.wants_redraw(),
+                    r.take_error(),
+                )
+            })
             .unwrap_or_default();
         if let Some(e) = err {
             self.fail(e);
@@ -707,9 +816,12 @@ impl eframe::App for ViewerApp {
         if frames > self.frames_seen {
             self.frames_seen = frames;
             let now = Instant::now();
-            let dt = self.last_frame.map_or(0.0, |t| (now - t).as_secs_f64() * 1e3);
+            let dt = self
+                .last_frame
+                .map_or(0.0, |t| (now - t).as_secs_f64() * 1e3);
             self.last_frame = Some(now);
-            self.stats.push(self.started.elapsed().as_secs_f64(), dt, &stats);
+            self.stats
+                .push(self.started.elapsed().as_secs_f64(), dt, &stats);
         }
         let converged = stats.out_of_core.is_none_or(|o| o.converged) && !wants_redraw;
 
@@ -719,10 +831,18 @@ impl eframe::App for ViewerApp {
             .resizable(true)
             .show(ui, |ui| {
                 egui::ScrollArea::vertical().show(ui, |ui| {
-                    egui::CollapsingHeader::new("Camera").default_open(true).show(ui, |ui| self.camera_ui(ui));
-                    egui::CollapsingHeader::new("Rendering").default_open(true).show(ui, |ui| self.render_ui(ui));
-                    egui::CollapsingHeader::new("Transfer function").default_open(true).show(ui, |ui| self.tf_ui(ui));
-                    egui::CollapsingHeader::new("Statistics").default_open(true).show(ui, |ui| self.stats.show(ui));
+                    egui::CollapsingHeader::new("Camera")
+                        .default_open(true)
+                        .show(ui, |ui| self.camera_ui(ui));
+                    egui::CollapsingHeader::new("Rendering")
+                        .default_open(true)
+                        .show(ui, |ui| self.render_ui(ui));
+                    egui::CollapsingHeader::new("Transfer function")
+                        .default_open(true)
+                        .show(ui, |ui| self.tf_ui(ui));
+                    egui::CollapsingHeader::new("Statistics")
+                        .default_open(true)
+                        .show(ui, |ui| self.stats.show(ui));
                 });
             });
         let mut callback = None;
@@ -730,9 +850,11 @@ impl eframe::App for ViewerApp {
         egui::CentralPanel::default_margins()
             .frame(egui::Frame::NONE)
             .show(ui, |ui| {
-                let (rect, response) = ui.allocate_exact_size(ui.available_size(), egui::Sense::click_and_drag());
+                let (rect, response) =
+                    ui.allocate_exact_size(ui.available_size(), egui::Sense::click_and_drag());
                 let [r, g, b] = self.background;
-                ui.painter().rect_filled(rect, 0.0, Color32::from_rgb(r, g, b));
+                ui.painter()
+                    .rect_filled(rect, 0.0, Color32::from_rgb(r, g, b));
                 flying = self.camera_input(ui, &response);
                 if let (Some(s), Some(c)) = (&self.shown, &self.camera) {
                     let cb = VolumeCallback {
@@ -742,7 +864,8 @@ impl eframe::App for ViewerApp {
                         settings: self.frame_settings(),
                         overlays: self.overlays,
                     };
-                    ui.painter().add(egui_wgpu::Callback::new_paint_callback(rect, cb.clone()));
+                    ui.painter()
+                        .add(egui_wgpu::Callback::new_paint_callback(rect, cb.clone()));
                     callback = Some(cb);
                 } else if self.opening.is_some() {
                     ui.centered_and_justified(|ui| ui.spinner());
@@ -770,7 +893,9 @@ pub(crate) fn device_descriptor(adapter: &wgpu::Adapter) -> wgpu::DeviceDescript
     let wanted = wgpu::Features::TEXTURE_FORMAT_16BIT_NORM | wgpu::Features::FLOAT32_FILTERABLE;
     let mut limits = brickray::required_limits().using_resolution(adapter.limits());
     // egui's depth buffer spans the window.
-    limits.max_texture_dimension_2d = limits.max_texture_dimension_2d.max(adapter.limits().max_texture_dimension_2d.min(8192));
+    limits.max_texture_dimension_2d = limits
+        .max_texture_dimension_2d
+        .max(adapter.limits().max_texture_dimension_2d.min(8192));
     wgpu::DeviceDescriptor {
         label: Some("brickray-viewer"),
         required_features: adapter.features() & wanted,
@@ -778,4 +903,3 @@ pub(crate) fn device_descriptor(adapter: &wgpu::Adapter) -> wgpu::DeviceDescript
         ..Default::default()
     }
 }
-

@@ -22,7 +22,11 @@ use std::sync::{Arc, Mutex};
 
 /// Command line.
 #[derive(Debug, Parser)]
-#[command(name = "brickray-viewer", version, about = "Interactive out-of-core volume viewer (brickray)")]
+#[command(
+    name = "brickray-viewer",
+    version,
+    about = "Interactive out-of-core volume viewer (brickray)"
+)]
 struct Cli {
     /// A volume (.json sidecar, .raw, .nrrd, .nhdr), a brick store (.brs), or
     /// `procedural:N` (fractal noise, N^3 voxels). Default: procedural:4096.
@@ -50,7 +54,9 @@ struct Cli {
 }
 
 fn parse_size(s: &str) -> Result<(u32, u32), String> {
-    let (w, h) = s.split_once('x').ok_or("expected WIDTHxHEIGHT, e.g. 1280x800")?;
+    let (w, h) = s
+        .split_once('x')
+        .ok_or("expected WIDTHxHEIGHT, e.g. 1280x800")?;
     let p = |v: &str| v.parse::<u32>().ok().filter(|&n| (64..=16384).contains(&n));
     match (p(w), p(h)) {
         (Some(w), Some(h)) => Ok((w, h)),

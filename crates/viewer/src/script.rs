@@ -74,7 +74,12 @@ pub(crate) enum ModeName {
 
 impl ModeName {
     /// All, in menu order.
-    pub(crate) const ALL: [ModeName; 4] = [ModeName::Dvr, ModeName::Shaded, ModeName::Iso, ModeName::Mip];
+    pub(crate) const ALL: [ModeName; 4] = [
+        ModeName::Dvr,
+        ModeName::Shaded,
+        ModeName::Iso,
+        ModeName::Mip,
+    ];
 
     /// Its label.
     pub(crate) fn label(self) -> &'static str {
@@ -135,7 +140,9 @@ pub(crate) fn parse(text: &str) -> Result<Vec<Action>, ScriptError> {
         };
         let rest = || line.split_once(char::is_whitespace).map(|r| r.1.trim());
         let action = match words.as_slice() {
-            ["open", ..] => Action::Open(rest().ok_or_else(|| err("open needs a path"))?.to_string()),
+            ["open", ..] => {
+                Action::Open(rest().ok_or_else(|| err("open needs a path"))?.to_string())
+            }
             ["tf", "load", ..] => Action::TfLoad(
                 rest()
                     .and_then(|r| r.strip_prefix("load"))
@@ -144,7 +151,9 @@ pub(crate) fn parse(text: &str) -> Result<Vec<Action>, ScriptError> {
                     .ok_or_else(|| err("tf load needs a file"))?
                     .into(),
             ),
-            ["tf", name] => Action::TfPreset(Preset::parse(name).ok_or_else(|| err("unknown preset"))?),
+            ["tf", name] => {
+                Action::TfPreset(Preset::parse(name).ok_or_else(|| err("unknown preset"))?)
+            }
             ["mode", "dvr"] => Action::Mode(ModeName::Dvr, None),
             ["mode", "shaded"] => Action::Mode(ModeName::Shaded, None),
             ["mode", "iso"] => Action::Mode(ModeName::Iso, None),
@@ -153,7 +162,10 @@ pub(crate) fn parse(text: &str) -> Result<Vec<Action>, ScriptError> {
             ["iso", v] => Action::Iso(unit(v)?),
             ["step", v] => {
                 let v = num(v)?;
-                let (lo, hi) = (brickray::RenderSettings::MIN_STEP_FACTOR, brickray::RenderSettings::MAX_STEP_FACTOR);
+                let (lo, hi) = (
+                    brickray::RenderSettings::MIN_STEP_FACTOR,
+                    brickray::RenderSettings::MAX_STEP_FACTOR,
+                );
                 if !(lo..=hi).contains(&v) {
                     return Err(err(&format!("the step must be in {lo}..={hi}")));
                 }
@@ -166,7 +178,9 @@ pub(crate) fn parse(text: &str) -> Result<Vec<Action>, ScriptError> {
                 }
                 Action::Orbit(num(y)?, num(p)?, d)
             }
-            ["camera", "axis", a] => Action::Axis(Axis::parse(a).ok_or_else(|| err("expected +x, -x, +y, -y, +z or -z"))?),
+            ["camera", "axis", a] => Action::Axis(
+                Axis::parse(a).ok_or_else(|| err("expected +x, -x, +y, -y, +z or -z"))?,
+            ),
             ["camera", "reset"] => Action::Reset,
             ["projection", "perspective"] => Action::Orthographic(false),
             ["projection", "orthographic"] => Action::Orthographic(true),
@@ -176,9 +190,13 @@ pub(crate) fn parse(text: &str) -> Result<Vec<Action>, ScriptError> {
                 Action::Background([c(r)?, c(g)?, c(b)?])
             }
             ["wait", "converged"] => Action::WaitConverged(600),
-            ["wait", "converged", n] => Action::WaitConverged(n.parse().map_err(|_| err("expected a frame count"))?),
+            ["wait", "converged", n] => {
+                Action::WaitConverged(n.parse().map_err(|_| err("expected a frame count"))?)
+            }
             ["wait", n] => Action::Wait(n.parse().map_err(|_| err("expected a frame count"))?),
-            ["screenshot", ..] => Action::Screenshot(rest().ok_or_else(|| err("screenshot needs a file"))?.into()),
+            ["screenshot", ..] => {
+                Action::Screenshot(rest().ok_or_else(|| err("screenshot needs a file"))?.into())
+            }
             ["quit"] => Action::Quit,
             _ => return Err(err("unknown action")),
         };

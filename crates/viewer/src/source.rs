@@ -35,7 +35,9 @@ impl Input {
                 .and_then(|n| n.parse().ok())
                 .filter(|&n| (1..=1 << 24).contains(&n))
                 .map(Input::Procedural)
-                .ok_or_else(|| OpenError::BadInput(format!("{s}: expected procedural:N, N in 1..=16777216"))),
+                .ok_or_else(|| {
+                    OpenError::BadInput(format!("{s}: expected procedural:N, N in 1..=16777216"))
+                }),
             None => Ok(Input::Path(s.into())),
         }
     }
@@ -194,11 +196,17 @@ impl Opening {
 }
 
 /// Opens `input` (blocking; run on a thread).
-pub(crate) fn open(input: &Input, opts: &OpenOptions, progress: &Progress) -> Result<Loaded, OpenError> {
+pub(crate) fn open(
+    input: &Input,
+    opts: &OpenOptions,
+    progress: &Progress,
+) -> Result<Loaded, OpenError> {
     match input {
         Input::Procedural(n) => {
             progress.set_stage("generating the histogram");
-            let source = Arc::new(brickray::store::ProceduralSource::fractal_noise([*n; 3], 32, 2)?);
+            let source = Arc::new(brickray::store::ProceduralSource::fractal_noise(
+                [*n; 3], 32, 2,
+            )?);
             let desc = source.layout().volume.clone();
             let histogram = source_histogram(&*source)?;
             let note = format!(
@@ -227,8 +235,8 @@ pub(crate) fn open(input: &Input, opts: &OpenOptions, progress: &Progress) -> Re
             let desc = reader.desc().clone();
             let bytes = desc.byte_len();
             progress.total.store(bytes, Ordering::Relaxed);
-            let small = bytes <= opts.in_core_max_bytes
-                && desc.dims.iter().all(|&d| d <= opts.max_3d_side);
+            let small =
+                bytes <= opts.in_core_max_bytes && desc.dims.iter().all(|&d| d <= opts.max_3d_side);
             if small {
                 progress.set_stage("reading the volume");
                 let volume = read_with_progress(reader.as_mut(), progress)?;
@@ -237,7 +245,12 @@ pub(crate) fn open(input: &Input, opts: &OpenOptions, progress: &Progress) -> Re
                 for i in 0..volume.data().len() {
                     histogram.add(d.normalize(volume.data().get(i)));
                 }
-                let note = format!("{:?} {} loaded whole ({:.1} MiB)", d.dims, d.dtype.name(), bytes as f64 / (1 << 20) as f64);
+                let note = format!(
+                    "{:?} {} loaded whole ({:.1} MiB)",
+                    d.dims,
+                    d.dtype.name(),
+                    bytes as f64 / (1 << 20) as f64
+                );
                 return Ok(Loaded {
                     input: input.clone(),
                     desc: d,
@@ -247,7 +260,10 @@ pub(crate) fn open(input: &Input, opts: &OpenOptions, progress: &Progress) -> Re
                 });
             }
             // Large: build a brick store once (reused while newer than the input).
-            let stem = path.file_stem().and_then(|s| s.to_str()).unwrap_or("volume");
+            let stem = path
+                .file_stem()
+                .and_then(|s| s.to_str())
+                .unwrap_or("volume");
             let store = opts.store_dir.join(format!("{stem}.{STORE_EXTENSION}"));
             let fresh = newer(&store, &reader.input_files());
             if !fresh {
@@ -262,7 +278,11 @@ pub(crate) fn open(input: &Input, opts: &OpenOptions, progress: &Progress) -> Re
                 brickray::store::build(&mut counting, &store, &Default::default())?;
             }
             let how = if fresh { "reused" } else { "built" };
-            open_store(input, &store, format!("{how} brick store {}", store.display()))
+            open_store(
+                input,
+                &store,
+                format!("{how} brick store {}", store.display()),
+            )
         }
     }
 }
@@ -278,7 +298,11 @@ fn open_store(input: &Input, path: &Path, how: String) -> Result<Loaded, OpenErr
     let store = Arc::new(brickray::store::open(path)?);
     let desc = store.desc().clone();
     let histogram = source_histogram(&*store)?;
-    let note = format!("{:?} {} streamed from a {how}", desc.dims, desc.dtype.name());
+    let note = format!(
+        "{:?} {} streamed from a {how}",
+        desc.dims,
+        desc.dtype.name()
+    );
     Ok(Loaded {
         input: input.clone(),
         desc,
@@ -289,7 +313,10 @@ fn open_store(input: &Input, path: &Path, how: String) -> Result<Loaded, OpenErr
 }
 
 /// Reads a volume whole, counting bytes.
-fn read_with_progress(reader: &mut dyn VolumeReader, progress: &Progress) -> Result<Volume, OpenError> {
+fn read_with_progress(
+    reader: &mut dyn VolumeReader,
+    progress: &Progress,
+) -> Result<Volume, OpenError> {
     let mut counting = Counting {
         inner: reader,
         progress,
@@ -316,7 +343,9 @@ impl VolumeReader for Counting<'_> {
             let n = (chunk.len() / slice) as u32;
             self.inner.read_slices(z, z + n, chunk)?;
             z += n;
-            self.progress.done.fetch_add(chunk.len() as u64, Ordering::Relaxed);
+            self.progress
+                .done
+                .fetch_add(chunk.len() as u64, Ordering::Relaxed);
         }
         Ok(())
     }
@@ -336,7 +365,10 @@ fn source_histogram(source: &dyn BrickSource) -> Result<Histogram, OpenError> {
     let level = (0..layout.levels)
         .take_while(|&l| {
             let d = layout.level_dims(l);
-            d.iter().map(|&n| n.div_ceil(layout.brick) as u64).product::<u64>() <= 64
+            d.iter()
+                .map(|&n| n.div_ceil(layout.brick) as u64)
+                .product::<u64>()
+                <= 64
         })
         .last()
         .unwrap_or(0);
@@ -376,10 +408,16 @@ mod tests {
     #[test]
     fn inputs_parse() {
         assert_eq!(Input::parse("procedural").unwrap(), Input::Procedural(4096));
-        assert_eq!(Input::parse("procedural:256").unwrap(), Input::Procedural(256));
+        assert_eq!(
+            Input::parse("procedural:256").unwrap(),
+            Input::Procedural(256)
+        );
         assert!(Input::parse("procedural:0").is_err());
         assert!(Input::parse("procedural:x").is_err());
-        assert_eq!(Input::parse("a/b.json").unwrap(), Input::Path("a/b.json".into()));
+        assert_eq!(
+            Input::parse("a/b.json").unwrap(),
+            Input::Path("a/b.json".into())
+        );
     }
 
     fn write_sphere(dir: &Path) -> PathBuf {
@@ -436,7 +474,10 @@ mod tests {
         let missing = Input::Path("/nonexistent/v.json".into());
         assert!(matches!(open(&missing, &opts, &p), Err(OpenError::Io(_))));
         let bad_store = Input::Path("/nonexistent/v.brs".into());
-        assert!(matches!(open(&bad_store, &opts, &p), Err(OpenError::Store(_))));
+        assert!(matches!(
+            open(&bad_store, &opts, &p),
+            Err(OpenError::Store(_))
+        ));
         let unknown = Input::Path("v.xyz".into());
         assert!(open(&unknown, &opts, &p).is_err());
     }

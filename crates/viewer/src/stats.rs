@@ -58,7 +58,11 @@ impl Stats {
             sample.pool = c.pool_occupied as f64 / c.pool_slots.max(1) as f64;
             sample.in_flight = c.requests_in_flight as f64;
             self.levels = o.data_leaves_per_level;
-            self.since_converged = if o.converged { 0 } else { self.since_converged + 1 };
+            self.since_converged = if o.converged {
+                0
+            } else {
+                self.since_converged + 1
+            };
         }
         sample.since_converged = self.since_converged as f64;
         self.samples.push_back(sample);
@@ -113,7 +117,10 @@ impl Stats {
             plot("brickray-viewer bricks").show(ui, |p| {
                 p.line(Line::new("working set", self.series(|s| s.working_set)));
                 p.line(Line::new("in flight", self.series(|s| s.in_flight)));
-                p.line(Line::new("frames since converged", self.series(|s| s.since_converged)));
+                p.line(Line::new(
+                    "frames since converged",
+                    self.series(|s| s.since_converged),
+                ));
             });
             plot("brickray-viewer pool").include_y(1.0).show(ui, |p| {
                 p.line(Line::new("pool occupancy", self.series(|s| s.pool)));

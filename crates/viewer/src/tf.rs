@@ -243,9 +243,18 @@ impl TfModel {
 
     /// The opacity point nearest to `(x, a)` within `radius` pixels, where one
     /// unit of `x` is `sx` pixels and one unit of opacity `sy` pixels.
-    pub(crate) fn hit_opacity(&self, x: f32, a: f32, sx: f32, sy: f32, radius: f32) -> Option<usize> {
+    pub(crate) fn hit_opacity(
+        &self,
+        x: f32,
+        a: f32,
+        sx: f32,
+        sy: f32,
+        radius: f32,
+    ) -> Option<usize> {
         nearest(
-            self.opacity.iter().map(|p| ((p.x - x) * sx, (p.a - a) * sy)),
+            self.opacity
+                .iter()
+                .map(|p| ((p.x - x) * sx, (p.a - a) * sy)),
             radius,
         )
     }
@@ -279,7 +288,9 @@ impl TfModel {
     /// Moves opacity point `i` towards `(x, a)`, clamped between its
     /// neighbours (points never pass each other) and to 0..1.
     pub(crate) fn move_opacity(&mut self, i: usize, x: f32, a: f32) {
-        let Some(&p) = self.opacity.get(i) else { return };
+        let Some(&p) = self.opacity.get(i) else {
+            return;
+        };
         let lo = i.checked_sub(1).map_or(0.0, |j| self.opacity[j].x);
         let hi = self.opacity.get(i + 1).map_or(1.0, |q| q.x);
         self.opacity[i] = OpacityPoint {
@@ -362,7 +373,11 @@ fn clamp01(v: f32) -> f32 {
 
 /// `v` clamped to `lo..=hi`, or `fallback` when `v` is not finite.
 fn clamp_finite(v: f32, lo: f32, hi: f32, fallback: f32) -> f32 {
-    if v.is_finite() { v.clamp(lo, hi) } else { fallback }
+    if v.is_finite() {
+        v.clamp(lo, hi)
+    } else {
+        fallback
+    }
 }
 
 /// The index of the offset nearest the origin within `radius`.
@@ -424,10 +439,19 @@ mod tests {
     fn interpolation_is_linear_between_points_and_held_outside() {
         let m = TfModel {
             colors: vec![
-                ColorPoint { x: 0.2, rgb: [1.0, 0.0, 0.0] },
-                ColorPoint { x: 0.6, rgb: [0.0, 0.0, 1.0] },
+                ColorPoint {
+                    x: 0.2,
+                    rgb: [1.0, 0.0, 0.0],
+                },
+                ColorPoint {
+                    x: 0.6,
+                    rgb: [0.0, 0.0, 1.0],
+                },
             ],
-            opacity: vec![OpacityPoint { x: 0.5, a: 0.0 }, OpacityPoint { x: 0.7, a: 0.8 }],
+            opacity: vec![
+                OpacityPoint { x: 0.5, a: 0.0 },
+                OpacityPoint { x: 0.7, a: 0.8 },
+            ],
         };
         assert_eq!(m.color_at(0.0), [1.0, 0.0, 0.0]);
         assert_eq!(m.color_at(1.0), [0.0, 0.0, 1.0]);
@@ -445,10 +469,16 @@ mod tests {
         let m = TfModel::preset(Preset::CtBone, CT);
         let hu = |v: f32| (v + 1024.0) / 4010.0;
         // Shared positions: drop the first colour point.
-        let m = TfModel { colors: m.colors[1..].to_vec(), ..m };
+        let m = TfModel {
+            colors: m.colors[1..].to_vec(),
+            ..m
+        };
         let ours = m.to_table(512).unwrap();
         let lib = TransferFunction::from_points(
-            &[(hu(250.0), [0.9, 0.85, 0.75, 0.0]), (hu(600.0), [1.0, 0.95, 0.85, 1.0])],
+            &[
+                (hu(250.0), [0.9, 0.85, 0.75, 0.0]),
+                (hu(600.0), [1.0, 0.95, 0.85, 1.0]),
+            ],
             512,
         );
         for (a, b) in ours.entries().iter().zip(lib.entries()) {
@@ -492,14 +522,30 @@ mod tests {
         m.save(&path).unwrap();
         assert_eq!(TfModel::load(&path).unwrap(), m);
         let p = std::path::Path::new("x.json");
-        assert!(matches!(TfModel::from_json("{", p), Err(TfFileError::Json { .. })));
+        assert!(matches!(
+            TfModel::from_json("{", p),
+            Err(TfFileError::Json { .. })
+        ));
         let empty = r#"{"colors": [], "opacity": [{"x": 0.5, "a": 1.0}]}"#;
-        assert!(matches!(TfModel::from_json(empty, p), Err(TfFileError::Invalid(_))));
-        let outside = r#"{"colors": [{"x": 0.5, "rgb": [2, 0, 0]}], "opacity": [{"x": 0.5, "a": 1.0}]}"#;
-        assert!(matches!(TfModel::from_json(outside, p), Err(TfFileError::Invalid(_))));
+        assert!(matches!(
+            TfModel::from_json(empty, p),
+            Err(TfFileError::Invalid(_))
+        ));
+        let outside =
+            r#"{"colors": [{"x": 0.5, "rgb": [2, 0, 0]}], "opacity": [{"x": 0.5, "a": 1.0}]}"#;
+        assert!(matches!(
+            TfModel::from_json(outside, p),
+            Err(TfFileError::Invalid(_))
+        ));
         let unsorted = r#"{"colors": [{"x": 0.5, "rgb": [1, 0, 0]}], "opacity": [{"x": 0.5, "a": 1.0}, {"x": 0.1, "a": 0}]}"#;
-        assert!(matches!(TfModel::from_json(unsorted, p), Err(TfFileError::Invalid(_))));
-        assert!(matches!(TfModel::load(&dir.path().join("none.json")), Err(TfFileError::Io { .. })));
+        assert!(matches!(
+            TfModel::from_json(unsorted, p),
+            Err(TfFileError::Invalid(_))
+        ));
+        assert!(matches!(
+            TfModel::load(&dir.path().join("none.json")),
+            Err(TfFileError::Io { .. })
+        ));
     }
 
     #[test]

@@ -36,9 +36,15 @@ fn color32(rgb: [f32; 3]) -> Color32 {
 
 impl TfEditor {
     /// Shows the editor; returns true when the model changed.
-    pub(crate) fn show(&mut self, ui: &mut egui::Ui, model: &mut TfModel, histogram: &Histogram) -> bool {
+    pub(crate) fn show(
+        &mut self,
+        ui: &mut egui::Ui,
+        model: &mut TfModel,
+        histogram: &Histogram,
+    ) -> bool {
         let width = ui.available_width().max(120.0);
-        let (rect, response) = ui.allocate_exact_size(Vec2::new(width, 150.0), Sense::click_and_drag());
+        let (rect, response) =
+            ui.allocate_exact_size(Vec2::new(width, 150.0), Sense::click_and_drag());
         let strip_h = 18.0;
         let curve = Rect::from_min_max(rect.min, Pos2::new(rect.max.x, rect.max.y - strip_h - 4.0));
         let strip = Rect::from_min_max(Pos2::new(rect.min.x, rect.max.y - strip_h), rect.max);
@@ -88,9 +94,13 @@ impl TfEditor {
             }
             if response.secondary_clicked() {
                 let removed = if in_strip {
-                    model.hit_color(x, sx, PICK).is_some_and(|i| model.remove_color(i))
+                    model
+                        .hit_color(x, sx, PICK)
+                        .is_some_and(|i| model.remove_color(i))
                 } else {
-                    model.hit_opacity(x, a, sx, sy, PICK).is_some_and(|i| model.remove_opacity(i))
+                    model
+                        .hit_opacity(x, a, sx, sy, PICK)
+                        .is_some_and(|i| model.remove_opacity(i))
                 };
                 if removed {
                     self.selected_color = None;
@@ -111,7 +121,10 @@ impl TfEditor {
             if *h > 0.0 {
                 let x0 = curve.left() + i as f32 / n * sx;
                 let x1 = curve.left() + (i + 1) as f32 / n * sx;
-                let bar = Rect::from_min_max(Pos2::new(x0, curve.bottom() - h * sy), Pos2::new(x1, curve.bottom()));
+                let bar = Rect::from_min_max(
+                    Pos2::new(x0, curve.bottom() - h * sy),
+                    Pos2::new(x1, curve.bottom()),
+                );
                 painter.rect_filled(bar, 0.0, Color32::from_gray(70));
             }
         }
@@ -122,11 +135,19 @@ impl TfEditor {
                 to_screen(x, model.opacity_at(x))
             })
             .collect();
-        painter.add(egui::Shape::line(pts, Stroke::new(1.5, Color32::from_rgb(240, 240, 240))));
+        painter.add(egui::Shape::line(
+            pts,
+            Stroke::new(1.5, Color32::from_rgb(240, 240, 240)),
+        ));
         for (i, p) in model.opacity.iter().enumerate() {
             let active = self.drag == Some(Drag::Opacity(i));
             let fill = color32(model.color_at(p.x));
-            painter.circle(to_screen(p.x, p.a), if active { 6.0 } else { 4.5 }, fill, Stroke::new(1.0, Color32::WHITE));
+            painter.circle(
+                to_screen(p.x, p.a),
+                if active { 6.0 } else { 4.5 },
+                fill,
+                Stroke::new(1.0, Color32::WHITE),
+            );
         }
         // The colour strip and its points.
         for i in 0..samples {
@@ -143,7 +164,11 @@ impl TfEditor {
             let selected = self.selected_color == Some(i);
             let stroke = Stroke::new(if selected { 2.5 } else { 1.0 }, Color32::WHITE);
             painter.add(egui::Shape::convex_polygon(
-                vec![Pos2::new(x, strip.top()), Pos2::new(x - 5.0, strip.bottom()), Pos2::new(x + 5.0, strip.bottom())],
+                vec![
+                    Pos2::new(x, strip.top()),
+                    Pos2::new(x - 5.0, strip.bottom()),
+                    Pos2::new(x + 5.0, strip.bottom()),
+                ],
                 color32(p.rgb),
                 stroke,
             ));

@@ -10,7 +10,9 @@
 //! 2. `paint` (egui's pass): the lines are drawn with colour and depth, then
 //!    `VolumeRenderer::render` blends the volume over them and writes depth.
 
-use brickray::{Camera, FrameDesc, RenderSettings, TargetDesc, Viewport, VolumeFrame, VolumeRenderer};
+use brickray::{
+    Camera, FrameDesc, RenderSettings, TargetDesc, Viewport, VolumeFrame, VolumeRenderer,
+};
 use eframe::{egui, egui_wgpu};
 use glam::{Mat4, Vec3};
 use std::sync::Mutex;
@@ -37,8 +39,14 @@ fn overlay_lines(frame: &VolumeFrame) -> Vec<LineVertex> {
     let grey = [0.55, 0.55, 0.6, 1.0];
     let mut v = Vec::with_capacity(30);
     let mut line = |a: Vec3, b: Vec3, color: [f32; 4]| {
-        v.push(LineVertex { position: a.extend(1.0).to_array(), color });
-        v.push(LineVertex { position: b.extend(1.0).to_array(), color });
+        v.push(LineVertex {
+            position: a.extend(1.0).to_array(),
+            color,
+        });
+        v.push(LineVertex {
+            position: b.extend(1.0).to_array(),
+            color,
+        });
     };
     for i in 0..8u32 {
         for bit in [1u32, 2, 4] {
@@ -165,8 +173,18 @@ impl Overlay {
     }
 
     /// Writes the view-projection and (when the volume moved) the lines.
-    fn update(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, frame: &VolumeFrame, view_proj: Mat4) {
-        queue.write_buffer(&self.uniforms, 0, bytemuck::cast_slice(&view_proj.to_cols_array()));
+    fn update(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        frame: &VolumeFrame,
+        view_proj: Mat4,
+    ) {
+        queue.write_buffer(
+            &self.uniforms,
+            0,
+            bytemuck::cast_slice(&view_proj.to_cols_array()),
+        );
         if self.vertices.as_ref().is_some_and(|v| v.2 == *frame) {
             return;
         }
@@ -182,8 +200,14 @@ impl Overlay {
     }
 
     fn draw(&self, pass: &mut wgpu::RenderPass<'_>, color: bool) {
-        let Some((buffer, count, _)) = &self.vertices else { return };
-        pass.set_pipeline(if color { &self.colored } else { &self.depth_only });
+        let Some((buffer, count, _)) = &self.vertices else {
+            return;
+        };
+        pass.set_pipeline(if color {
+            &self.colored
+        } else {
+            &self.depth_only
+        });
         pass.set_bind_group(0, &self.bind_group, &[]);
         pass.set_vertex_buffer(0, buffer.slice(..));
         pass.draw(0..*count, 0..1);
@@ -236,10 +260,17 @@ impl ViewResources {
     }
 
     /// The host-depth texture view, (re)created at the screen's size.
-    fn host_depth(&mut self, device: &wgpu::Device, size: [u32; 2]) -> Result<&wgpu::TextureView, String> {
+    fn host_depth(
+        &mut self,
+        device: &wgpu::Device,
+        size: [u32; 2],
+    ) -> Result<&wgpu::TextureView, String> {
         let limit = device.limits().max_texture_dimension_2d;
         if size[0] > limit || size[1] > limit || size[0] == 0 || size[1] == 0 {
-            return Err(format!("the window ({}x{}) exceeds the device's 2D texture limit {limit}", size[0], size[1]));
+            return Err(format!(
+                "the window ({}x{}) exceeds the device's 2D texture limit {limit}",
+                size[0], size[1]
+            ));
         }
         let fits = self
             .host_depth
@@ -257,7 +288,8 @@ impl ViewResources {
                 sample_count: 1,
                 dimension: wgpu::TextureDimension::D2,
                 format: DEPTH_FORMAT,
-                usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
+                usage: wgpu::TextureUsages::RENDER_ATTACHMENT
+                    | wgpu::TextureUsages::TEXTURE_BINDING,
                 view_formats: &[],
             });
             let view = texture.create_view(&Default::default());
@@ -284,9 +316,13 @@ pub(crate) struct VolumeCallback {
 
 /// The viewport in the target's pixels for a rectangle in points (egui's own
 /// rounding, so it equals the pass's viewport in `paint`).
-pub(crate) fn viewport_px(rect: &egui::Rect, pixels_per_point: f32, screen: [u32; 2]) -> Option<Viewport> {
+pub(crate) fn viewport_px(
+    rect: &egui::Rect,
+    pixels_per_point: f32,
+    screen: [u32; 2],
+) -> Option<Viewport> {
     let v = egui::epaint::ViewportInPixels::from_points(rect, pixels_per_point, screen);
-    (v.width_px > 0 && v.height_px > 0 && v.left_px >= 0 && v.top_px >= 0).then(|| Viewport {
+    (v.width_px > 0 && v.height_px > 0 && v.left_px >= 0 && v.top_px >= 0).then_some(Viewport {
         x: v.left_px as u32,
         y: v.top_px as u32,
         width: v.width_px as u32,
@@ -307,7 +343,8 @@ impl egui_wgpu::CallbackTrait for VolumeCallback {
             return Vec::new();
         };
         r.prepared = false;
-        let Some(vp) = viewport_px(&self.rect, screen.pixels_per_point, screen.size_in_pixels) else {
+        let Some(vp) = viewport_px(&self.rect, screen.pixels_per_point, screen.size_in_pixels)
+        else {
             return Vec::new();
         };
         let view_proj = self.camera.view_proj(vp.aspect() as f32);
@@ -363,7 +400,9 @@ impl egui_wgpu::CallbackTrait for VolumeCallback {
         pass: &mut wgpu::RenderPass<'static>,
         resources: &egui_wgpu::CallbackResources,
     ) {
-        let Some(r) = resources.get::<ViewResources>() else { return };
+        let Some(r) = resources.get::<ViewResources>() else {
+            return;
+        };
         if self.overlays {
             r.overlay.draw(pass, true);
         }
@@ -388,7 +427,11 @@ mod tests {
         naga::valid::Validator::new(Default::default(), naga::valid::Capabilities::empty())
             .validate(&module)
             .expect("validate");
-        let vs = module.entry_points.iter().find(|e| e.name == "vs_main").expect("vs_main");
+        let vs = module
+            .entry_points
+            .iter()
+            .find(|e| e.name == "vs_main")
+            .expect("vs_main");
         assert_eq!(vs.function.arguments.len(), 2);
         assert_eq!(std::mem::size_of::<LineVertex>(), 32);
     }
@@ -402,10 +445,16 @@ mod tests {
         // Box edges have the box's side lengths: four of each.
         let mut lengths: Vec<f32> = v[..24]
             .chunks(2)
-            .map(|e| (Vec3::from_slice(&e[0].position[..3]) - Vec3::from_slice(&e[1].position[..3])).length())
+            .map(|e| {
+                (Vec3::from_slice(&e[0].position[..3]) - Vec3::from_slice(&e[1].position[..3]))
+                    .length()
+            })
             .collect();
         lengths.sort_by(f32::total_cmp);
-        let mut want: Vec<f32> = [size.x, size.y, size.z].iter().flat_map(|&s| [s; 4]).collect();
+        let mut want: Vec<f32> = [size.x, size.y, size.z]
+            .iter()
+            .flat_map(|&s| [s; 4])
+            .collect();
         want.sort_by(f32::total_cmp);
         for (a, b) in lengths.iter().zip(&want) {
             assert!((a - b).abs() < 1e-5, "{lengths:?} vs {want:?}");
