@@ -80,6 +80,8 @@ pub(crate) struct ViewerApp {
     stats: Stats,
     started: Instant,
     last_frame: Option<Instant>,
+    /// The last frame asked for the next one at once.
+    continuous: bool,
     frames_seen: u64,
     open_path: String,
     messages: Vec<String>,
@@ -131,6 +133,7 @@ impl ViewerApp {
             stats: Stats::default(),
             started: Instant::now(),
             last_frame: None,
+            continuous: false,
             frames_seen: 0,
             open_path: String::new(),
             messages: Vec::new(),
@@ -181,9 +184,9 @@ impl ViewerApp {
         })
         .ok_or("no GPU")?
         .map_err(|e| format!("{}: {e}", loaded.input.name()))?;
-        // A first TF suited to the data: CT presets for Hounsfield ranges.
-        let first = self.shown.is_none();
-        if first || self.tf_dirty {
+        // A TF suited to the new data (CT presets for Hounsfield ranges);
+        // scripts and users change it after opening.
+        {
             let preset = if desc.value_range[0] <= -900.0 {
                 Preset::CtBone
             } else {
@@ -273,18 +276,21 @@ impl ViewerApp {
     }
 
     /// Starts a screenshot of the volume view.
+    /// With `window`, of the whole window.
     fn request_shot(
         &mut self,
         ctx: &egui::Context,
         path: PathBuf,
         callback: Option<&VolumeCallback>,
+        window: bool,
     ) {
         let Some(cb) = callback else {
             return self.fail("screenshot: no volume view".into());
         };
         let screen = ctx.content_rect().size() * ctx.pixels_per_point();
         let screen = [screen.x.round() as u32, screen.y.round() as u32];
-        let Some(viewport) = viewport_px(&cb.rect, ctx.pixels_per_point(), screen) else {
+        let rect = if window { ctx.content_rect() } else { cb.rect };
+        let Some(viewport) = viewport_px(&rect, ctx.pixels_per_point(), screen) else {
             return self.fail("screenshot: the view is empty".into());
         };
         let slot = Arc::new(Mutex::new(None));
@@ -422,7 +428,11 @@ impl ViewerApp {
                 }
                 Action::Screenshot(p) => {
                     // The capture is of the next frame: the state is unchanged.
-                    self.request_shot(ctx, p, callback);
+                    self.request_shot(ctx, p, callback, false);
+                    return;
+                }
+                Action::WindowScreenshot(p) => {
+                    self.request_shot(ctx, p, callback, true);
                     return;
                 }
                 Action::Quit => {
@@ -816,9 +826,11 @@ impl eframe::App for ViewerApp {
         if frames > self.frames_seen {
             self.frames_seen = frames;
             let now = Instant::now();
-            let dt = self
-                .last_frame
-                .map_or(0.0, |t| (now - t).as_secs_f64() * 1e3);
+            // The interval is a frame time only while redrawing continuously.
+            let dt = match self.last_frame {
+                Some(t) if self.continuous => (now - t).as_secs_f64() * 1e3,
+                _ => f64::NAN,
+            };
             self.last_frame = Some(now);
             self.stats
                 .push(self.started.elapsed().as_secs_f64(), dt, &stats);
@@ -874,12 +886,13 @@ impl eframe::App for ViewerApp {
         if std::mem::take(&mut self.shot_requested) && self.shot.is_none() {
             self.shots_taken += 1;
             let path = PathBuf::from(format!("brickray-viewer-{}.png", self.shots_taken));
-            self.request_shot(&ctx, path, callback.as_ref());
+            self.request_shot(&ctx, path, callback.as_ref(), false);
         }
         self.step_script(&ctx, converged, callback.as_ref());
 
         // Redraw only while the image can change.
-        if self.script.is_some() || self.shot.is_some() || wants_redraw || flying {
+        self.continuous = self.script.is_some() || self.shot.is_some() || wants_redraw || flying;
+        if self.continuous {
             ctx.request_repaint();
         } else if self.opening.is_some() {
             ctx.request_repaint_after(std::time::Duration::from_millis(50));

@@ -15,6 +15,7 @@
 //! wait N                         draw N frames
 //! wait converged [MAX]           draw until no brick is pending (at most MAX frames, default 600)
 //! screenshot FILE.png            the volume view, plus FILE.json (camera, viewport)
+//! screenshot-window FILE.png     the whole window
 //! quit
 //! ```
 
@@ -55,6 +56,8 @@ pub(crate) enum Action {
     WaitConverged(u32),
     /// Save the view.
     Screenshot(PathBuf),
+    /// Save the whole window.
+    WindowScreenshot(PathBuf),
     /// Close the viewer.
     Quit,
 }
@@ -194,6 +197,11 @@ pub(crate) fn parse(text: &str) -> Result<Vec<Action>, ScriptError> {
                 Action::WaitConverged(n.parse().map_err(|_| err("expected a frame count"))?)
             }
             ["wait", n] => Action::Wait(n.parse().map_err(|_| err("expected a frame count"))?),
+            ["screenshot-window", ..] => Action::WindowScreenshot(
+                rest()
+                    .ok_or_else(|| err("screenshot-window needs a file"))?
+                    .into(),
+            ),
             ["screenshot", ..] => {
                 Action::Screenshot(rest().ok_or_else(|| err("screenshot needs a file"))?.into())
             }
@@ -231,10 +239,12 @@ mod tests {
             wait converged
             wait converged 50
             screenshot out/a.png
+            screenshot-window out/w.png
             quit
         ";
         let a = parse(text).unwrap();
-        assert_eq!(a.len(), 19);
+        assert_eq!(a.len(), 20);
+        assert_eq!(a[18], Action::WindowScreenshot("out/w.png".into()));
         assert_eq!(a[0], Action::Open("/data/head ct.json".into()));
         assert_eq!(a[3], Action::TfLoad("my tf.json".into()));
         assert_eq!(a[5], Action::Mode(ModeName::Iso, Some(0.35)));
@@ -243,7 +253,7 @@ mod tests {
         assert_eq!(a[13], Action::Background([0, 0, 0]));
         assert_eq!(a[15], Action::WaitConverged(600));
         assert_eq!(a[16], Action::WaitConverged(50));
-        assert_eq!(a[18], Action::Quit);
+        assert_eq!(a[19], Action::Quit);
     }
 
     #[test]

@@ -76,16 +76,25 @@ impl Stats {
         self.samples.back()
     }
 
+    /// Points of one figure (frames without it, NaN, are left out).
     fn series(&self, f: impl Fn(&Sample) -> f64) -> Vec<[f64; 2]> {
-        self.samples.iter().map(|s| [s.t, f(s)]).collect()
+        self.samples
+            .iter()
+            .map(|s| [s.t, f(s)])
+            .filter(|p| p[1].is_finite())
+            .collect()
     }
 
     /// The plots.
     pub(crate) fn show(&self, ui: &mut egui::Ui) {
         if let Some(s) = self.last() {
+            let frame = if s.frame_ms.is_finite() {
+                format!("frame {:.1} ms", s.frame_ms)
+            } else {
+                "idle".to_string()
+            };
             ui.label(format!(
-                "frame {:.1} ms, upload {:.2} MiB{}",
-                s.frame_ms,
+                "{frame}, upload {:.2} MiB{}",
                 s.upload_mib,
                 if self.streamed {
                     format!(

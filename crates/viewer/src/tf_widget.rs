@@ -20,13 +20,24 @@ enum Drag {
 }
 
 /// The widget's state between frames.
-#[derive(Debug, Default)]
+#[derive(Debug)]
 pub(crate) struct TfEditor {
     drag: Option<Drag>,
     /// The colour point the picker edits.
     pub(crate) selected_color: Option<usize>,
     /// Show the histogram as `ln(1 + count)`.
     pub(crate) log_histogram: bool,
+}
+
+impl Default for TfEditor {
+    fn default() -> Self {
+        // Log by default: air or background dominates most volumes.
+        TfEditor {
+            drag: None,
+            selected_color: None,
+            log_histogram: true,
+        }
+    }
 }
 
 fn color32(rgb: [f32; 3]) -> Color32 {
