@@ -108,7 +108,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             if args.in_core {
                 renderer.set_volume(&gpu.device, &gpu.queue, &reader.read_volume()?)?;
             } else {
-                let store = args.out.join("volume.brs");
+                let store = args
+                    .out
+                    .join(format!("volume.{}", brickray::store::EXTENSION));
                 let t = Instant::now();
                 let report = brickray::store::build(&mut *reader, &store, &Default::default())?;
                 println!(

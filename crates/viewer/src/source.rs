@@ -11,8 +11,7 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Mutex, mpsc};
 
-/// The file extension of brick stores.
-pub(crate) const STORE_EXTENSION: &str = "brs";
+use brickray::store::EXTENSION as STORE_EXTENSION;
 /// Bins of the histograms.
 const HISTOGRAM_BINS: usize = 256;
 
