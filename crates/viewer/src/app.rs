@@ -411,6 +411,7 @@ impl ViewerApp {
                 }
                 Action::Overlays(on) => self.overlays = on,
                 Action::Background(c) => self.background = c,
+                Action::Clip(min, max) => self.settings.clip = brickray::ClipBox { min, max },
                 // Changes above take effect in this frame's drawing; waits
                 // count frames drawn after it.
                 Action::Wait(n) => {
@@ -616,6 +617,23 @@ impl ViewerApp {
                     self.ooc_dirty |= changed;
                 });
         }
+        egui::CollapsingHeader::new("clip box").show(ui, |ui| {
+            let c = &mut self.settings.clip;
+            for (a, name) in ["x", "y", "z"].iter().enumerate() {
+                ui.horizontal(|ui| {
+                    ui.label(*name);
+                    ui.add(egui::Slider::new(&mut c.min[a], 0.0..=1.0).show_value(false));
+                    ui.add(egui::Slider::new(&mut c.max[a], 0.0..=1.0).show_value(false));
+                    // Dragging a bound past the other pushes it along.
+                    if c.min[a] > c.max[a] {
+                        c.max[a] = c.min[a];
+                    }
+                });
+            }
+            if ui.button("whole volume").clicked() {
+                *c = brickray::ClipBox::FULL;
+            }
+        });
         ui.horizontal(|ui| {
             ui.checkbox(&mut self.overlays, "bounding box and axes");
             ui.label("background");

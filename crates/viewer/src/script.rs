@@ -12,6 +12,7 @@
 //! projection perspective | orthographic
 //! overlays on | off              the bounding box and axes
 //! background R G B               0..255, behind the volume
+//! clip X0 Y0 Z0 X1 Y1 Z1 | clip off   the clip box, texture space 0..1
 //! wait N                         draw N frames
 //! wait converged [MAX]           draw until no brick is pending (at most MAX frames, default 600)
 //! screenshot FILE.png            the volume view, plus FILE.json (camera, viewport)
@@ -50,6 +51,8 @@ pub(crate) enum Action {
     Overlays(bool),
     /// The background colour.
     Background([u8; 3]),
+    /// The clip box (texture space).
+    Clip([f32; 3], [f32; 3]),
     /// Draw frames.
     Wait(u32),
     /// Draw until converged, at most this many frames.
@@ -188,6 +191,15 @@ pub(crate) fn parse(text: &str) -> Result<Vec<Action>, ScriptError> {
             ["projection", "perspective"] => Action::Orthographic(false),
             ["projection", "orthographic"] => Action::Orthographic(true),
             ["overlays", v] => Action::Overlays(on_off(v)?),
+            ["clip", "off"] => Action::Clip([0.0; 3], [1.0; 3]),
+            ["clip", x0, y0, z0, x1, y1, z1] => {
+                let lo = [unit(x0)?, unit(y0)?, unit(z0)?];
+                let hi = [unit(x1)?, unit(y1)?, unit(z1)?];
+                if (0..3).any(|a| lo[a] > hi[a]) {
+                    return Err(err("the clip box's minimum exceeds its maximum"));
+                }
+                Action::Clip(lo, hi)
+            }
             ["background", r, g, b] => {
                 let c = |s: &str| s.parse::<u8>().map_err(|_| err("expected 0..255"));
                 Action::Background([c(r)?, c(g)?, c(b)?])
@@ -235,6 +247,7 @@ mod tests {
             projection orthographic
             overlays off
             background 0 0 0
+            clip 0 0 0.5 1 1 1
             wait 3
             wait converged
             wait converged 50
@@ -243,17 +256,18 @@ mod tests {
             quit
         ";
         let a = parse(text).unwrap();
-        assert_eq!(a.len(), 20);
-        assert_eq!(a[18], Action::WindowScreenshot("out/w.png".into()));
+        assert_eq!(a.len(), 21);
+        assert_eq!(a[19], Action::WindowScreenshot("out/w.png".into()));
         assert_eq!(a[0], Action::Open("/data/head ct.json".into()));
         assert_eq!(a[3], Action::TfLoad("my tf.json".into()));
         assert_eq!(a[5], Action::Mode(ModeName::Iso, Some(0.35)));
         assert_eq!(a[8], Action::Orbit(30.0, 20.0, 1.5));
         assert_eq!(a[9], Action::Axis(Axis::NegY));
         assert_eq!(a[13], Action::Background([0, 0, 0]));
-        assert_eq!(a[15], Action::WaitConverged(600));
-        assert_eq!(a[16], Action::WaitConverged(50));
-        assert_eq!(a[19], Action::Quit);
+        assert_eq!(a[16], Action::WaitConverged(600));
+        assert_eq!(a[17], Action::WaitConverged(50));
+        assert_eq!(a[14], Action::Clip([0.0, 0.0, 0.5], [1.0; 3]));
+        assert_eq!(a[20], Action::Quit);
     }
 
     #[test]
@@ -271,6 +285,8 @@ mod tests {
             ("background 0 0 300", 1),
             ("wait x", 1),
             ("overlays maybe", 1),
+            ("clip 0.5 0 0 0.4 1 1", 1),
+            ("clip 0 0 0 1 1", 1),
             ("\n\n\nfly away", 4),
         ] {
             let e = parse(text).unwrap_err();

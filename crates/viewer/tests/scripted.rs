@@ -11,13 +11,15 @@
 //! scene scores far below (checked: the DVR screenshot against the library's
 //! isosurface image).
 //!
+//! The third screenshot cuts the head with a clip box (drawn by the library).
+//!
 //! A second run opens a brick store and a procedural 4096^3 volume out of
 //! core, and compares the store's converged screenshot with the library's
 //! out-of-core rendering of the same store with the viewer's budgets.
 
 use brickray::{
-    Camera, DepthConvention, FrameDesc, Projection, RenderMode, RenderSettings, TransferFunction,
-    VolumeFrame, VolumeRenderer,
+    Camera, ClipBox, DepthConvention, FrameDesc, Projection, RenderMode, RenderSettings,
+    TransferFunction, VolumeFrame, VolumeRenderer,
 };
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -116,6 +118,7 @@ fn library_image(
     w: u32,
     h: u32,
     mode: RenderMode,
+    clip: ClipBox,
 ) -> Vec<u8> {
     let gpu = brickray_harness::shared_gpu();
     let mut renderer =
@@ -133,6 +136,7 @@ fn library_image(
     let desc = FrameDesc {
         settings: RenderSettings {
             mode,
+            clip,
             ..RenderSettings::default()
         },
         ..FrameDesc::new(camera, VolumeFrame::centered(d.dims, d.spacing), w, h)
@@ -185,7 +189,10 @@ fn read_png(path: &Path) -> (Vec<u8>, u32, u32) {
 }
 
 #[test]
-#[cfg_attr(no_shared_data, ignore = "needs ../shared/data (the shared volumes), absent when the tests were built")]
+#[cfg_attr(
+    no_shared_data,
+    ignore = "needs ../shared/data (the shared volumes), absent when the tests were built"
+)]
 fn scripted_screenshots_match_the_library() {
     if !display_available() {
         return;
@@ -199,11 +206,13 @@ fn scripted_screenshots_match_the_library() {
     let iso = hu(400.0);
     let script = format!(
         "open {ct}\nbackground 0 0 0\noverlays off\ntf load {tf}\ncamera orbit 30 15 1.0\n\
-         wait converged\nscreenshot {dvr}\nmode iso {iso}\nwait 2\nscreenshot {isopng}\nquit\n",
+         wait converged\nscreenshot {dvr}\nmode iso {iso}\nwait 2\nscreenshot {isopng}\n\
+         clip 0 0 0 1 0.55 1\nwait 2\nscreenshot {clippng}\nquit\n",
         ct = ct.display(),
         tf = out("bone.json").display(),
         dvr = out("dvr.png").display(),
         isopng = out("iso.png").display(),
+        clippng = out("clip.png").display(),
     );
     std::fs::write(out("script.txt"), script).expect("write the script");
     let t = Instant::now();
@@ -224,8 +233,16 @@ fn scripted_screenshots_match_the_library() {
         value: iso,
         color: [0.9, 0.85, 0.75],
     };
-    let mut dvr_lib = None;
-    for (name, mode) in [("dvr", RenderMode::Dvr), ("iso", iso_mode)] {
+    let (mut dvr_lib, mut iso_shot) = (None, None);
+    let cut = ClipBox {
+        min: [0.0; 3],
+        max: [1.0, 0.55, 1.0],
+    };
+    for (name, mode, clip) in [
+        ("dvr", RenderMode::Dvr, ClipBox::FULL),
+        ("iso", iso_mode, ClipBox::FULL),
+        ("clip", iso_mode, cut),
+    ] {
         let png = out(&format!("{name}.png"));
         let (shot, w, h) = read_png(&png);
         let (camera, vw, vh) = sidecar(&png);
@@ -235,7 +252,7 @@ fn scripted_screenshots_match_the_library() {
             "{name}: the screenshot is the view's size"
         );
         assert!(w >= 64 && h >= 64, "{name}: a {w}x{h} view");
-        let lib = library_image(&volume, camera, w, h, mode);
+        let lib = library_image(&volume, camera, w, h, mode, clip);
         // The head covers a good part of the view (not a blank image).
         let lit = shot
             .chunks(4)
@@ -254,7 +271,7 @@ fn scripted_screenshots_match_the_library() {
         eprintln!("viewer {name} vs library: {cmp}");
         if name == "dvr" {
             dvr_lib = Some(shot);
-        } else {
+        } else if name == "iso" {
             // The metric tells these scenes apart: the DVR screenshot is far
             // from the library's isosurface.
             let other = brickray_reference::psnr(dvr_lib.as_deref().expect("dvr first"), &lib);
@@ -262,6 +279,11 @@ fn scripted_screenshots_match_the_library() {
                 other < MIN_PSNR_DB - 10.0,
                 "DVR vs iso scored {other:.1} dB"
             );
+            iso_shot = Some(shot);
+        } else {
+            // The clip box cut something away.
+            let db = brickray_reference::psnr(iso_shot.as_deref().expect("iso first"), &shot);
+            assert!(db < 30.0, "the clip changed too little ({db:.1} dB)");
         }
     }
 }
