@@ -90,6 +90,10 @@ pub(crate) struct ViewerApp {
     shot: Option<PendingShot>,
     shots_taken: u32,
     shot_requested: bool,
+    /// u8 volumes interpolated exactly (a renderer option: changing it
+    /// recreates the renderer and reopens the volume).
+    u8_exact: bool,
+    renderer_dirty: bool,
     gpu_error: Option<String>,
 }
 
@@ -114,8 +118,13 @@ impl ViewerApp {
             }
             None => gpu_error = Some("eframe runs without wgpu".into()),
         }
+        let mut open_opts = startup.open;
+        if let Some(rs) = cc.wgpu_render_state.as_ref() {
+            // Larger volumes stream instead of failing to upload.
+            open_opts.max_3d_side = rs.device.limits().max_texture_dimension_3d;
+        }
         let mut app = ViewerApp {
-            open_opts: startup.open,
+            open_opts,
             ooc: startup.ooc,
             ooc_dirty: false,
             opening: None,
@@ -147,6 +156,8 @@ impl ViewerApp {
             shot: None,
             shots_taken: 0,
             shot_requested: false,
+            u8_exact: true,
+            renderer_dirty: false,
             gpu_error,
         };
         if let Some(input) = startup.input {
@@ -184,9 +195,11 @@ impl ViewerApp {
         })
         .ok_or("no GPU")?
         .map_err(|e| format!("{}: {e}", loaded.input.name()))?;
-        // A TF suited to the new data (CT presets for Hounsfield ranges);
-        // scripts and users change it after opening.
-        {
+        // Reopening what is shown (a renderer option changed) keeps the view.
+        let reopened = self.shown.as_ref().is_some_and(|s| s.input == loaded.input);
+        // A TF suited to new data (CT presets for Hounsfield ranges); scripts
+        // and users change it after opening.
+        if !reopened {
             let preset = if desc.value_range[0] <= -900.0 {
                 Preset::CtBone
             } else {
@@ -196,7 +209,9 @@ impl ViewerApp {
         }
         self.tf_dirty = true;
         self.messages.push(loaded.note.clone());
-        self.camera = Some(CameraController::new(&vframe));
+        if !reopened || self.camera.is_none() {
+            self.camera = Some(CameraController::new(&vframe));
+        }
         self.stats.clear();
         self.shown = Some(Shown {
             input: loaded.input,
@@ -207,6 +222,31 @@ impl ViewerApp {
             streamed,
         });
         Ok(())
+    }
+
+    /// Recreates the renderer with the current options and reopens the volume.
+    fn recreate_renderer(&mut self, frame: &eframe::Frame) {
+        let Some(rs) = frame.wgpu_render_state() else {
+            return;
+        };
+        let options = brickray::RendererOptions {
+            u8_filtering: if self.u8_exact {
+                brickray::U8Filtering::Exact
+            } else {
+                brickray::U8Filtering::Fast
+            },
+        };
+        match ViewResources::new(&rs.device, rs.target_format, options) {
+            Ok(r) => {
+                rs.renderer.write().callback_resources.insert(r);
+                // The budgets travel with the reopen (`install`).
+                self.tf_dirty = true;
+                if let Some(input) = self.shown.as_ref().map(|s| s.input.clone()) {
+                    self.start_open(input);
+                }
+            }
+            Err(e) => self.fail(format!("renderer: {e}")),
+        }
     }
 
     /// The settings of the current mode.
@@ -411,6 +451,17 @@ impl ViewerApp {
                 }
                 Action::Overlays(on) => self.overlays = on,
                 Action::Background(c) => self.background = c,
+                Action::U8Exact(exact) => {
+                    if exact != self.u8_exact {
+                        self.u8_exact = exact;
+                        self.renderer_dirty = true;
+                    }
+                    // The reopen starts at the next frame; wait for it.
+                    if let Some(s) = self.script.as_mut() {
+                        s.wait = 1;
+                    }
+                    return;
+                }
                 Action::Clip(min, max) => self.settings.clip = brickray::ClipBox { min, max },
                 // Changes above take effect in this frame's drawing; waits
                 // count frames drawn after it.
@@ -566,6 +617,13 @@ impl ViewerApp {
             s.accel.early_termination = ert.then_some(t);
         });
         ui.checkbox(&mut s.accel.empty_space_skipping, "empty-space skipping");
+        if ui
+            .checkbox(&mut self.u8_exact, "exact u8 interpolation")
+            .on_hover_text("u8 volumes in 16-bit texels (exact) or 8-bit (half the memory); reopens the volume")
+            .changed()
+        {
+            self.renderer_dirty = true;
+        }
         ui.add(egui::Slider::new(&mut s.depth_opacity, 0.01..=1.0).text("depth at opacity"));
         ui.add(
             egui::Slider::new(
@@ -825,6 +883,9 @@ impl eframe::App for ViewerApp {
             return;
         }
         self.finish_shot();
+        if std::mem::take(&mut self.renderer_dirty) {
+            self.recreate_renderer(frame);
+        }
         self.apply(frame);
 
         // Statistics of the frame drawn last time, and GPU errors.

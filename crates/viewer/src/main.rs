@@ -103,8 +103,7 @@ fn main() -> ExitCode {
         outcome: outcome.clone(),
         open: source::OpenOptions {
             in_core_max_bytes: cli.in_core_max << 20,
-            // Checked against the device when the volume is set; this only
-            // routes volumes too large for any device's 3D texture.
+            // Replaced by the device's 3D texture limit once it exists.
             max_3d_side: 2048,
             store_dir,
         },

@@ -13,6 +13,7 @@
 //! overlays on | off              the bounding box and axes
 //! background R G B               0..255, behind the volume
 //! clip X0 Y0 Z0 X1 Y1 Z1 | clip off   the clip box, texture space 0..1
+//! u8 exact | fast                u8 interpolation (reopens the volume)
 //! wait N                         draw N frames
 //! wait converged [MAX]           draw until no brick is pending (at most MAX frames, default 600)
 //! screenshot FILE.png            the volume view, plus FILE.json (camera, viewport)
@@ -53,6 +54,8 @@ pub(crate) enum Action {
     Background([u8; 3]),
     /// The clip box (texture space).
     Clip([f32; 3], [f32; 3]),
+    /// u8 volumes interpolated exactly (true) or from 8-bit texels.
+    U8Exact(bool),
     /// Draw frames.
     Wait(u32),
     /// Draw until converged, at most this many frames.
@@ -191,6 +194,8 @@ pub(crate) fn parse(text: &str) -> Result<Vec<Action>, ScriptError> {
             ["projection", "perspective"] => Action::Orthographic(false),
             ["projection", "orthographic"] => Action::Orthographic(true),
             ["overlays", v] => Action::Overlays(on_off(v)?),
+            ["u8", "exact"] => Action::U8Exact(true),
+            ["u8", "fast"] => Action::U8Exact(false),
             ["clip", "off"] => Action::Clip([0.0; 3], [1.0; 3]),
             ["clip", x0, y0, z0, x1, y1, z1] => {
                 let lo = [unit(x0)?, unit(y0)?, unit(z0)?];
@@ -285,6 +290,7 @@ mod tests {
             ("background 0 0 300", 1),
             ("wait x", 1),
             ("overlays maybe", 1),
+            ("u8 slow", 1),
             ("clip 0.5 0 0 0.4 1 1", 1),
             ("clip 0 0 0 1 1", 1),
             ("\n\n\nfly away", 4),
