@@ -27,6 +27,8 @@ pub(crate) struct TfEditor {
     pub(crate) selected_color: Option<usize>,
     /// Show the histogram as `ln(1 + count)`.
     pub(crate) log_histogram: bool,
+    /// The opacity area of the last frame, in points.
+    curve: Option<Rect>,
 }
 
 impl Default for TfEditor {
@@ -36,6 +38,7 @@ impl Default for TfEditor {
             drag: None,
             selected_color: None,
             log_histogram: true,
+            curve: None,
         }
     }
 }
@@ -59,6 +62,7 @@ impl TfEditor {
         let strip_h = 18.0;
         let curve = Rect::from_min_max(rect.min, Pos2::new(rect.max.x, rect.max.y - strip_h - 4.0));
         let strip = Rect::from_min_max(Pos2::new(rect.min.x, rect.max.y - strip_h), rect.max);
+        self.curve = Some(curve);
         let (sx, sy) = (curve.width(), curve.height());
         let to_screen = |x: f32, a: f32| Pos2::new(curve.left() + x * sx, curve.bottom() - a * sy);
         let from_screen = |p: Pos2| ((p.x - curve.left()) / sx, (curve.bottom() - p.y) / sy);
@@ -69,6 +73,10 @@ impl TfEditor {
             let (x, a) = from_screen(pos);
             let in_strip = pos.y >= strip.top() - 2.0;
             if response.drag_started_by(egui::PointerButton::Primary) || response.clicked() {
+                // Pick where the button went down, not where the drag began.
+                let origin = ui.input(|i| i.pointer.press_origin()).unwrap_or(pos);
+                let (x, a) = from_screen(origin);
+                let in_strip = origin.y >= strip.top() - 2.0;
                 self.drag = if in_strip {
                     match model.hit_color(x, sx, PICK) {
                         Some(i) => Some(Drag::Color(i)),
@@ -197,5 +205,143 @@ impl TfEditor {
             });
         }
         changed
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::tf::Preset;
+
+    /// The widget in a headless egui context, driven by pointer events.
+    struct Ui {
+        ctx: egui::Context,
+        time: f64,
+        editor: TfEditor,
+        model: TfModel,
+    }
+
+    impl Ui {
+        fn new() -> Ui {
+            let mut ui = Ui {
+                ctx: egui::Context::default(),
+                time: 0.0,
+                editor: TfEditor::default(),
+                model: TfModel::preset(Preset::Grey, [0.0, 1.0]),
+            };
+            ui.frame(Vec::new());
+            ui
+        }
+
+        /// One frame with `events`; returns whether the model changed.
+        fn frame(&mut self, events: Vec<egui::Event>) -> bool {
+            self.time += 0.1;
+            let input = egui::RawInput {
+                screen_rect: Some(Rect::from_min_size(Pos2::ZERO, Vec2::new(400.0, 300.0))),
+                time: Some(self.time),
+                events,
+                ..Default::default()
+            };
+            let mut changed = false;
+            let hist = Histogram::new(8);
+            let (editor, model) = (&mut self.editor, &mut self.model);
+            let mut out = self.ctx.run_ui(input, |ui| {
+                changed |= editor.show(ui, model, &hist);
+            });
+            // Nothing renders here: the font atlas updates are dropped.
+            out.textures_delta.clear();
+            changed
+        }
+
+        /// Where `(x, a)` of the opacity area is on screen.
+        fn at(&self, x: f32, a: f32) -> Pos2 {
+            let c = self.editor.curve.expect("drawn");
+            Pos2::new(c.left() + x * c.width(), c.bottom() - a * c.height())
+        }
+
+        fn button(pos: Pos2, button: egui::PointerButton, pressed: bool) -> egui::Event {
+            egui::Event::PointerButton {
+                pos,
+                button,
+                pressed,
+                modifiers: Default::default(),
+            }
+        }
+
+        fn click(&mut self, pos: Pos2, button: egui::PointerButton) -> bool {
+            let a = self.frame(vec![
+                egui::Event::PointerMoved(pos),
+                Ui::button(pos, button, true),
+            ]);
+            let b = self.frame(vec![Ui::button(pos, button, false)]);
+            a | b
+        }
+
+        fn drag(&mut self, from: Pos2, to: Pos2) -> bool {
+            let mut changed = self.frame(vec![
+                egui::Event::PointerMoved(from),
+                Ui::button(from, egui::PointerButton::Primary, true),
+            ]);
+            for k in 1..=5 {
+                let p = from + (to - from) * (k as f32 / 5.0);
+                changed |= self.frame(vec![egui::Event::PointerMoved(p)]);
+            }
+            changed |= self.frame(vec![Ui::button(to, egui::PointerButton::Primary, false)]);
+            changed
+        }
+    }
+
+    fn near(p: &crate::tf::OpacityPoint, x: f32, a: f32) -> bool {
+        (p.x - x).abs() < 0.01 && (p.a - a).abs() < 0.02
+    }
+
+    #[test]
+    fn clicking_empty_space_adds_an_opacity_point() {
+        let mut ui = Ui::new();
+        assert_eq!(ui.model.opacity.len(), 2);
+        assert!(ui.click(ui.at(0.5, 0.1), egui::PointerButton::Primary));
+        assert_eq!(ui.model.opacity.len(), 3, "{:?}", ui.model.opacity);
+        assert!(
+            near(&ui.model.opacity[1], 0.5, 0.1),
+            "{:?}",
+            ui.model.opacity
+        );
+    }
+
+    #[test]
+    fn dragging_a_point_moves_it_and_right_click_removes_it() {
+        let mut ui = Ui::new();
+        // The grey preset's last opacity point sits at (1, 0.5).
+        assert!(ui.drag(ui.at(1.0, 0.5), ui.at(0.8, 0.9)));
+        assert_eq!(
+            ui.model.opacity.len(),
+            2,
+            "moved, not added: {:?}",
+            ui.model.opacity
+        );
+        assert!(
+            near(&ui.model.opacity[1], 0.8, 0.9),
+            "{:?}",
+            ui.model.opacity
+        );
+        assert!(ui.click(ui.at(0.8, 0.9), egui::PointerButton::Secondary));
+        assert_eq!(ui.model.opacity.len(), 1, "{:?}", ui.model.opacity);
+        // The last point stays.
+        assert!(!ui.click(ui.at(0.0, 0.0), egui::PointerButton::Secondary));
+        assert_eq!(ui.model.opacity.len(), 1);
+    }
+
+    #[test]
+    fn clicking_the_strip_adds_and_selects_a_colour_point() {
+        let mut ui = Ui::new();
+        let c = ui.editor.curve.expect("drawn");
+        // The strip lies below the opacity area.
+        let pos = Pos2::new(c.left() + 0.3 * c.width(), c.bottom() + 4.0 + 9.0);
+        assert!(ui.click(pos, egui::PointerButton::Primary));
+        assert_eq!(ui.model.colors.len(), 3, "{:?}", ui.model.colors);
+        assert!((ui.model.colors[1].x - 0.3).abs() < 0.01);
+        assert_eq!(ui.editor.selected_color, Some(1));
+        // The new point shows the colour that was there.
+        assert!((ui.model.colors[1].rgb[0] - 0.3).abs() < 0.01);
     }
 }
