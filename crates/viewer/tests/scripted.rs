@@ -193,6 +193,10 @@ fn read_png(path: &Path) -> (Vec<u8>, u32, u32) {
     no_shared_data,
     ignore = "needs ../shared/data (the shared volumes), absent when the tests were built"
 )]
+#[cfg_attr(
+    no_display,
+    ignore = "needs an X server (DISPLAY unset when the tests were built; scripts/test.sh starts Xvfb)"
+)]
 fn scripted_screenshots_match_the_library() {
     if !display_available() {
         return;
@@ -289,6 +293,10 @@ fn scripted_screenshots_match_the_library() {
 }
 
 #[test]
+#[cfg_attr(
+    no_display,
+    ignore = "needs an X server (DISPLAY unset when the tests were built; scripts/test.sh starts Xvfb)"
+)]
 fn opens_a_store_and_a_procedural_volume_out_of_core() {
     if !display_available() {
         return;
