@@ -76,6 +76,7 @@ struct Overlay {
     uniforms: wgpu::Buffer,
     bind_group: wgpu::BindGroup,
     vertices: Option<(wgpu::Buffer, u32, VolumeFrame)>,
+    view_proj: Option<Mat4>,
 }
 
 impl Overlay {
@@ -169,6 +170,7 @@ impl Overlay {
             uniforms,
             bind_group,
             vertices: None,
+            view_proj: None,
         }
     }
 
@@ -180,11 +182,15 @@ impl Overlay {
         frame: &VolumeFrame,
         view_proj: Mat4,
     ) {
-        queue.write_buffer(
-            &self.uniforms,
-            0,
-            bytemuck::cast_slice(&view_proj.to_cols_array()),
-        );
+        // Uniforms are written only when they change.
+        if self.view_proj != Some(view_proj) {
+            self.view_proj = Some(view_proj);
+            queue.write_buffer(
+                &self.uniforms,
+                0,
+                bytemuck::cast_slice(&view_proj.to_cols_array()),
+            );
+        }
         if self.vertices.as_ref().is_some_and(|v| v.2 == *frame) {
             return;
         }
