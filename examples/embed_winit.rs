@@ -81,9 +81,15 @@ impl Gpu {
                 ..Default::default()
             }))?;
         let size = window.inner_size();
-        let config = surface
+        let mut config = surface
             .get_default_config(&adapter, size.width.max(1), size.height.max(1))
             .ok_or("the surface does not work with this adapter")?;
+        // A non-sRGB format when there is one: the same colours as the
+        // headless example and egui (brickray writes its colours as they are).
+        let formats = surface.get_capabilities(&adapter).formats;
+        if let Some(&f) = formats.iter().find(|f| !f.is_srgb()) {
+            config.format = f;
+        }
         surface.configure(&device, &config);
         let depth = depth_view(&device, &config);
         let targets = TargetDesc::new(config.format).with_depth(DEPTH_FORMAT);
