@@ -56,6 +56,11 @@ struct Frame {
     diffuse: f32,
     specular: f32,
     shininess: f32,
+    // The clip box (RenderSettings::clip) in texture space; rays sample inside it.
+    clip_min: vec3<f32>,
+    clip_pad_a: f32,
+    clip_max: vec3<f32>,
+    clip_pad_b: f32,
 }
 
 const FLAG_HOST_DEPTH: u32 = 1u;
@@ -201,7 +206,8 @@ fn box_exit(o: vec3<f32>, d: vec3<f32>, inv_d: vec3<f32>, lo: vec3<f32>, hi: vec
 }
 
 // A pixel's ray, the host's depth there (the far value without one) and the
-// ray's extent in the volume box, clipped to the host's depth.
+// ray's extent in the clip box (the volume box by default), clipped to the
+// host's depth.
 struct RayStart {
     r: Ray,
     host: f32,
@@ -217,7 +223,7 @@ fn start_ray(px: vec2<u32>) -> RayStart {
     let with_host = has_flag(FLAG_HOST_DEPTH);
     let at = min(px + frame.viewport_origin, textureDimensions(host_depth) - vec2<u32>(1u));
     s.host = select(far_depth(), textureLoad(host_depth, vec2<i32>(at), 0), with_host);
-    let tb = clip_box(s.r, vec3<f32>(0.0), vec3<f32>(1.0));
+    let tb = clip_box(s.r, frame.clip_min, frame.clip_max);
     s.t0 = max(tb.x, 0.0);
     s.t1 = select(tb.y, min(tb.y, t_at_depth(s.r, s.host)), with_host);
     return s;

@@ -86,6 +86,10 @@ fn frame_fields() -> Vec<(String, u32)> {
             diffuse,
             specular,
             shininess,
+            clip_min,
+            clip_pad_a,
+            clip_max,
+            clip_pad_b,
         ]
     )
 }
