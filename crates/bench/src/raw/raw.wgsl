@@ -23,10 +23,15 @@ struct Raw {
     isovalue: f32,
     size: vec2<u32>,
     refine_steps: u32,
-    pad0: u32,
+    // normalized = texel * value_scale + value_offset (as brickray maps values).
+    value_scale: f32,
     // Voxel dimensions (central differences of one voxel).
     dims: vec3<f32>,
     tf_count: f32,
+    value_offset: f32,
+    pad0: f32,
+    pad1: f32,
+    pad2: f32,
 }
 
 @group(0) @binding(0) var<uniform> p: Raw;
@@ -38,7 +43,7 @@ struct Raw {
 @group(0) @binding(6) var<storage, read_write> counts: array<u32>;
 
 fn value(u: vec3<f32>) -> f32 {
-    return textureSampleLevel(vol, lin, u, 0.0).r;
+    return textureSampleLevel(vol, lin, u, 0.0).r * p.value_scale + p.value_offset;
 }
 
 fn tf(v: f32) -> vec4<f32> {
