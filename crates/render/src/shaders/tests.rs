@@ -5,6 +5,7 @@ use crate::backend::{incore::VolumeParams, ooc::OocParams, ooc::SlotInfo, volume
 use crate::composite::CompositeUniforms;
 use crate::frame::{FrameFlags, FrameUniforms};
 use crate::kernels::{KernelMode, OVERRIDES, WORKGROUP};
+use crate::predict::{PredictUniforms, TraversalClass};
 use crate::tf::TfInfo;
 use naga::valid::{Capabilities, ValidationFlags, Validator};
 use std::collections::BTreeSet;
@@ -192,6 +193,29 @@ fn check_kernel(name: &str, m: &naga::Module, volume_storage: u32) {
         rust_fields!(TfInfo, [count, width, rows, pad0]),
         std::mem::size_of::<TfInfo>(),
     );
+    // The prediction buffer's uniforms and traversal classes (both kernels
+    // declare them: group 0 is shared).
+    check_struct(
+        m,
+        "Predict",
+        rust_fields!(
+            PredictUniforms,
+            [
+                read_off,
+                write_off,
+                class_off,
+                refresh,
+                local_steps,
+                sparse_refine,
+                sparse_dt,
+                pad0
+            ]
+        ),
+        std::mem::size_of::<PredictUniforms>(),
+    );
+    for (wgsl, class) in TraversalClass::ALL {
+        assert_eq!(const_u32(m, wgsl), class as u32, "{name}: {wgsl}");
+    }
     // Every binding of every group against the Rust layouts.
     assert_eq!(
         wgsl_bindings(m),
@@ -297,6 +321,19 @@ fn reflection_catches_drift() {
     // A moved binding.
     let moved = incore().replace("@group(2) @binding(3)", "@group(2) @binding(7)");
     assert_ne!(wgsl_bindings(&module("moved", &moved)), kernel_bindings(1));
+    // A renamed prediction override, a moved prediction binding.
+    let renamed = incore().replace("override GUARD", "override FIRST_HIT_GUARD");
+    let m = module(
+        "renamed guard",
+        &renamed.replace("(GUARD)", "(FIRST_HIT_GUARD)"),
+    );
+    assert!(
+        !m.overrides
+            .iter()
+            .any(|(_, o)| o.name.as_deref() == Some("GUARD"))
+    );
+    let moved = incore().replace("@group(0) @binding(6)", "@group(0) @binding(7)");
+    assert_ne!(wgsl_bindings(&module("moved", &moved)), kernel_bindings(1));
     // A changed flag bit.
     let flag = incore().replace("FLAG_REVERSED_Z: u32 = 4u", "FLAG_REVERSED_Z: u32 = 8u");
     assert_ne!(
@@ -315,6 +352,8 @@ fn every_shader_file_is_covered() {
         "incore.wgsl",
         "ooc.wgsl",
         "composite.wgsl",
+        "predict.wgsl",
+        "incore_predict.wgsl",
     ];
     for entry in std::fs::read_dir(dir).unwrap() {
         let name = entry.unwrap().file_name().into_string().unwrap();
