@@ -8,6 +8,8 @@
 mod accel;
 mod build;
 mod ooc;
+mod prediction;
+mod prediction_chart;
 mod raw;
 mod runner;
 mod soak;
@@ -37,11 +39,12 @@ fn main() -> ExitCode {
         "accel" => accel::run(rest),
         "build" => build::run(rest),
         "ooc" => ooc::run(rest),
+        "prediction" => prediction::run(rest),
         "raw" => raw::run(rest),
         "soak" => soak::run(rest),
         "u8" => u8::run(rest),
         _ => {
-            eprintln!("usage: brickray-bench <accel|build|ooc|raw|soak|u8> [options]");
+            eprintln!("usage: brickray-bench <accel|build|ooc|prediction|raw|soak|u8> [options]");
             return ExitCode::from(2);
         }
     };

@@ -171,6 +171,9 @@ fn predict_ray(px: vec2<u32>, start: RayStart) {
     let t0 = start.t0;
     let t1 = start.t1;
     let p = pred_pixel(px);
+    // Entries are distances from the eye (t is from the near plane, which moves
+    // with the near distance).
+    let eye_offset = frame.near / r.dist_per_t;
     let last = pred_buf[pred.read_off + p];
     var acc = accum_new();
     let cur = Cursor(r);
@@ -186,7 +189,8 @@ fn predict_ray(px: vec2<u32>, start: RayStart) {
             iso_march(&acc, r, t0, t1, frame.dt, ESS);
         } else if (local) {
             kind = TRAVERSAL_LOCAL;
-            var ok = local_traversal(&acc, r, t0, t1, pred_decode_hit(last));
+            let tp = pred_decode_hit(last) - eye_offset;
+            var ok = local_traversal(&acc, r, t0, t1, tp);
             if (!ok) {
                 kind = TRAVERSAL_LOCAL_MISSED;
                 acc = accum_new();
@@ -210,7 +214,7 @@ fn predict_ray(px: vec2<u32>, start: RayStart) {
     }
     var entry = select(PRED_MISS_SURFACE, PRED_MISS_BOX, t1 <= t0);
     if (acc.hit) {
-        entry = pred_encode_hit(acc.hit_b);
+        entry = pred_encode_hit(acc.hit_b + eye_offset);
     }
     pred_buf[pred.write_off + p] = entry;
     pred_buf[pred.class_off + p] = kind;

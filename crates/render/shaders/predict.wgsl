@@ -3,8 +3,8 @@
 // both kernels: its bindings in group 0 (owned by `frame.rs`), its switches and
 // its per-pixel encoding. The in-core traversals are in incore_predict.wgsl.
 //
-// Per pixel the buffer holds last frame's result: the hit's t (the upper sample
-// of the crossing's bracket) or a flag. The next frame picks a traversal: local
+// Per pixel the buffer holds last frame's result: the hit's distance from the
+// eye along the ray (at the upper sample of the crossing's bracket) or a flag. The next frame picks a traversal: local
 // (search outward from the predicted t), sparse (march with a coarse step and
 // bisect) or full (the ordinary march); a pixel whose ray misses the box is not
 // traversed. Pipelines without PREDICT compile none of this.
@@ -37,8 +37,8 @@ struct Predict {
 @group(0) @binding(5) var<storage, read_write> pred_buf: array<u32>;
 @group(0) @binding(6) var<uniform> pred: Predict;
 
-// History entries: 0 = no information (a cleared buffer), a hit as the bits of
-// t + 1 (ordered like t, as u32), or a flag.
+// History entries: 0 = no information (a cleared buffer), a hit at eye
+// distance e as the bits of e + 1 (ordered like e, as u32), or a flag.
 const PRED_NO_INFO: u32 = 0u;
 const PRED_MISS_SURFACE: u32 = 0xfffffffeu;
 const PRED_MISS_BOX: u32 = 0xfffffffdu;
