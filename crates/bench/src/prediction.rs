@@ -28,9 +28,13 @@ use brickray_render::{FrameDesc, Prediction, TraversalClass, VolumeRenderer};
 use glam::Vec3;
 use serde_json::json;
 
-/// `(name, prediction)` of every variant; `full` first.
-fn variants() -> Vec<(&'static str, Option<Prediction>)> {
-    let p = Prediction::PAPER;
+/// `(name, prediction)` of every variant; `full` first. `kappa`: the sparse
+/// step's (the paper's 0.5 unless `--kappa` says otherwise).
+fn variants(kappa: f32) -> Vec<(&'static str, Option<Prediction>)> {
+    let p = Prediction {
+        kappa,
+        ..Prediction::PAPER
+    };
     vec![
         ("full", None),
         ("paper", Some(p)),
@@ -87,6 +91,8 @@ struct Track {
     wrong: Vec<f64>,
     psnr: Vec<f64>,
     samples: Vec<f64>,
+    /// Wrong pixels by the traversal class that drew them (summed over frames).
+    wrong_by_class: [u64; 6],
 }
 
 impl Track {
@@ -107,6 +113,11 @@ impl Track {
             "wrong_max_pct": (self.wrong.iter().copied().fold(0.0, f64::max) * 1e4).round() / 1e2,
             "psnr_min_db": finite_db(finite.iter().copied().fold(f64::INFINITY, f64::min)),
             "frames_exact": self.wrong.iter().filter(|&&w| w == 0.0).count(),
+            "wrong_px_by_class": TraversalClass::ALL
+                .iter()
+                .filter(|(_, c)| self.wrong_by_class[*c as usize] > 0)
+                .map(|(n, c)| (n.trim_start_matches("TRAVERSAL_").to_lowercase(), json!(self.wrong_by_class[*c as usize])))
+                .collect::<serde_json::Map<_, _>>(),
         })
     }
 }
@@ -120,10 +131,11 @@ fn run_path(
     size: u32,
     cameras: &[Camera],
     accel: Accel,
+    kappa: f32,
 ) -> Result<(Vec<Track>, Option<FrameResult>), String> {
     let d = scene.vol.desc();
     let frame = VolumeFrame::centered(d.dims, d.spacing);
-    let vs = variants();
+    let vs = variants(kappa);
     let mut rs = Vec::new();
     for (_, p) in &vs {
         let mut r = VolumeRenderer::new(&gpu.device, brickray_harness::target_desc())
@@ -163,6 +175,18 @@ fn run_path(
                 .push(predict::wrong_share(&s.color, &shots[0].color));
             t.psnr.push(psnr(&s.color, &shots[0].color));
             t.samples.push(predict::samples_per_ray(&s.samples));
+            if let Some(c) = &s.classes {
+                let wrong = s.color.chunks_exact(4).zip(shots[0].color.chunks_exact(4));
+                for (class, (p, q)) in c.iter().zip(wrong) {
+                    let off = p
+                        .iter()
+                        .zip(q)
+                        .any(|(x, y)| x.abs_diff(*y) > predict::WRONG_LEVELS);
+                    if off && (*class as usize) < 6 {
+                        t.wrong_by_class[*class as usize] += 1;
+                    }
+                }
+            }
         }
         if i % 10 != 0 {
             last_paper = Some(shots[1].clone());
@@ -212,9 +236,13 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
     let frames: usize = arg(args, "--frames", 120)?;
     let chart: String = arg(args, "--chart", String::new())?;
     let classes_png: String = arg(args, "--classes-png", String::new())?;
+    let kappa: f32 = arg(args, "--kappa", Prediction::PAPER.kappa)?;
+    let brute: bool = arg(args, "--brute", 1u32)? == 1;
     let gpu = GpuContext::new().map_err(|e| e.to_string())?;
     println!("adapter: {}", gpu.describe());
-    println!("image {size}x{size}; orbit of {frames} frames; variants interleaved frame by frame");
+    println!(
+        "image {size}x{size}; orbit of {frames} frames; kappa {kappa}; variants interleaved frame by frame"
+    );
     let mut scenes = Vec::new();
     if let Some(p) = brickray_harness::shared_volume("invesalius_cranium_ct") {
         let vol = brickray_core::io::read_volume(&p).map_err(|e| e.to_string())?;
@@ -241,7 +269,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         vol: predict::nested_shells(128),
         isovalue: 0.5,
     });
-    let names: Vec<&str> = variants().iter().map(|v| v.0).collect();
+    let names: Vec<&str> = variants(kappa).iter().map(|v| v.0).collect();
     let mut fig = Figures::new();
     let mut orbit_fig = serde_json::Map::new();
     let mut speedup_paper = 0.0;
@@ -249,7 +277,12 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
     let mut wrong_mean_paper = 0.0;
     let mut exact_orbit = vec![true; names.len()];
     let mut speed_ct = vec![0.0; names.len()];
-    for accel_name in ["default", "brute"] {
+    let accels: &[&str] = if brute {
+        &["default", "brute"]
+    } else {
+        &["default"]
+    };
+    for &accel_name in accels {
         for scene in &scenes {
             let d = scene.vol.desc();
             let frame = VolumeFrame::centered(d.dims, d.spacing);
@@ -260,6 +293,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
                 size,
                 &orbit(frame.center(), 2.0, frames),
                 accel,
+                kappa,
             )?;
             let default = accel_name == "default";
             println!(
@@ -319,7 +353,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
             Camera::orbit(frame.center(), 2.2, yaw, 0.1)
         })
         .collect();
-    let (tracks, _) = run_path(&gpu, &occ, size, &cams, Accel::default())?;
+    let (tracks, _) = run_path(&gpu, &occ, size, &cams, Accel::default(), kappa)?;
     println!("\nfailure path (occluder; camera moves {moving} frames, then stops {still}):");
     let mut fail = serde_json::Map::new();
     for (k, t) in tracks.iter().enumerate() {
@@ -378,7 +412,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
             cam
         })
         .collect();
-    let (tracks, _) = run_path(&gpu, scene, size, &cams, Accel::default())?;
+    let (tracks, _) = run_path(&gpu, scene, size, &cams, Accel::default(), kappa)?;
     println!("\ntranslation + zoom, {} ({n} frames):", scene.name);
     let mut tz = serde_json::Map::new();
     for (k, t) in tracks.iter().enumerate() {
@@ -398,6 +432,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         names[best_exact], speed_ct[best_exact]
     );
     fig.insert("size".into(), json!(size));
+    fig.insert("kappa".into(), json!(kappa));
     fig.insert("frames".into(), json!(frames));
     fig.insert("speedup_paper".into(), json!(speedup_paper));
     fig.insert("speedup_paper_vs_brute".into(), json!(speedup_paper_brute));

@@ -71,7 +71,8 @@ fn sparse_traversal(acc: ptr<function, Accum>, r: Ray, t0: f32, t1: f32) {
 }
 
 // The local traversal: from the full-step sample nearest the prediction `tp`,
-// alternately one step back and one step forward, until two neighbouring
+// alternately one step back and one step forward (back only when that sample
+// is inside the surface), until two neighbouring
 // samples bracket an entering crossing (below, then at or above the isovalue)
 // or `pred.local_steps` steps each way are spent. True when found (the bracket
 // is in `acc`).
@@ -107,9 +108,11 @@ fn local_traversal(acc: ptr<function, Accum>, r: Ray, t0: f32, t1: f32, tp: f32)
             iso_bracket(acc, t0, t0);
             return true;
         }
-        // One step forward.
+        // One step forward, only from a predicted sample below the isovalue:
+        // from one at or above it, an entering crossing ahead lies behind an
+        // exit from the surface, so it is never the ray's first.
         let t = t0 + f32(kf + 1u) * dt;
-        if (kf + 1u < n && t < t1) {
+        if (!inside_p && kf + 1u < n && t < t1) {
             let inside = sample_value(tex_at(r, t)) >= frame.isovalue;
             (*acc).samples = (*acc).samples + 1u;
             if (inside && !in_f) {

@@ -365,3 +365,43 @@ fn every_shader_file_is_covered() {
         }
     }
 }
+
+/// Every permutation of the override constants that a pipeline can have
+/// validates with the switches as constants: naga then checks each specialised
+/// kernel as a pipeline compiles it. Every mode with every combination of ERT,
+/// ESS and shading; the iso mode with prediction on and every combination of
+/// its guard, its sparse skipping, ERT and ESS.
+#[test]
+fn every_override_permutation_validates() {
+    let switches = ["ERT", "ESS", "SHADE", "PREDICT", "GUARD", "SPARSE_ESS"];
+    let mut combos = Vec::new();
+    for (_, mode) in KernelMode::ALL {
+        for bits in 0..8u32 {
+            combos.push((mode, bits));
+        }
+    }
+    for bits in 0..16u32 {
+        // ERT, ESS from bits 0-1; GUARD, SPARSE_ESS from bits 2-3.
+        let b = (bits & 3) | 1 << 3 | (bits >> 2) << 4;
+        combos.push((KernelMode::Iso, b));
+    }
+    for (name, src) in [("incore", incore()), ("ooc", ooc())] {
+        for &(mode, bits) in &combos {
+            let mut s = src.replace(
+                "override MODE: u32 = 0u;",
+                &format!("const MODE: u32 = {}u;", mode as u32),
+            );
+            for (i, sw) in switches.iter().enumerate() {
+                let on = bits >> i & 1 == 1;
+                let from = [true, false]
+                    .map(|d| format!("override {sw}: bool = {d};"))
+                    .into_iter()
+                    .find(|f| s.contains(f.as_str()))
+                    .unwrap_or_else(|| panic!("{name}: no override {sw}"));
+                s = s.replace(&from, &format!("const {sw}: bool = {on};"));
+            }
+            assert!(!s.contains("override "), "{name}: an override left");
+            module(&format!("{name} {mode:?} {bits:06b}"), &s);
+        }
+    }
+}
