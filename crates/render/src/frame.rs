@@ -357,7 +357,7 @@ impl FrameState {
             h.frames += 1;
         }
         let p = key.settings;
-        let refresh = h.frames % p.alpha as u64 == 0;
+        let refresh = h.frames.is_multiple_of(p.alpha as u64);
         // The sparse step over the full one, as bisection steps.
         let ratio = 1.0 / (p.kappa as f64 * desc.settings.step_factor as f64);
         let sparse_refine = ratio.log2().ceil().clamp(0.0, 16.0) as u32;
