@@ -191,15 +191,17 @@ pub(crate) struct PredictUniforms {
 }
 
 /// What invalidates the history: a change of any of these clears it (the next
-/// frame takes the full traversal everywhere).
+/// frame takes the full traversal everywhere). The camera's pose is not part of
+/// it: that is the coherence the prediction exploits.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(crate) struct HistoryKey {
     pub(crate) size: [u32; 2],
-    pub(crate) isovalue: f32,
+    /// Every render setting (the isovalue, the step, and any later one such as
+    /// a clip box): a change of any of them clears the history.
+    pub(crate) render: brickray_core::RenderSettings,
     pub(crate) volume: u64,
     pub(crate) frame: VolumeFrame,
     pub(crate) projection: brickray_core::Projection,
-    pub(crate) step_factor: f32,
     pub(crate) host_depth: bool,
     pub(crate) settings: Prediction,
 }
@@ -210,17 +212,16 @@ impl HistoryKey {
         volume: u64,
         settings: Prediction,
     ) -> Option<HistoryKey> {
-        let RenderMode::Iso { value, .. } = desc.settings.mode else {
+        let RenderMode::Iso { .. } = desc.settings.mode else {
             return None;
         };
         let c: &Camera = &desc.camera;
         Some(HistoryKey {
             size: [desc.viewport.width, desc.viewport.height],
-            isovalue: value,
+            render: desc.settings,
             volume,
             frame: desc.frame,
             projection: c.projection,
-            step_factor: desc.settings.step_factor,
             host_depth: desc.host_depth.is_some(),
             settings,
         })
