@@ -269,3 +269,67 @@ fn prediction_settings_are_validated() {
     r.set_prediction(Some(Prediction::PAPER)).unwrap();
     assert_eq!(r.prediction(), Some(Prediction::PAPER));
 }
+
+/// Along a translation + zoom path, reprojection keeps more pixels on the local
+/// traversal than the per-pixel prediction, and with the guard it stays exact.
+#[test]
+fn reprojection_keeps_coherence_on_translation_and_zoom() {
+    let g = gpu();
+    let vol = predict::nested_shells(64);
+    let d = vol.desc();
+    let frame = VolumeFrame::centered(d.dims, d.spacing);
+    let c = frame.center();
+    let paper = Prediction::PAPER;
+    let reproj = Prediction {
+        reproject: true,
+        ..paper
+    };
+    let guarded = Prediction {
+        reproject: true,
+        guard: true,
+        ..paper
+    };
+    let mut full = renderer(&vol, None);
+    let mut rs: Vec<VolumeRenderer> = [paper, reproj, guarded]
+        .iter()
+        .map(|p| renderer(&vol, Some(*p)))
+        .collect();
+    let ta = Offscreen::new(&g.device, SIZE, SIZE);
+    let tb = Offscreen::new(&g.device, SIZE, SIZE);
+    let mut local = [0usize; 3];
+    // A fast dolly (0.17 a frame: 11 voxels, beyond the local search's 8) with
+    // a sideways shift.
+    let frames = 7;
+    for i in 0..frames {
+        let f = i as f32 / frames as f32;
+        let mut cam = Camera::orbit(c, 2.4 - 1.2 * f, 0.6, 0.3);
+        let shift = glam::Vec3::new(0.4 * f - 0.2, 0.1 * f, 0.0);
+        cam.eye += shift;
+        cam.target += shift;
+        let fd = desc(frame, cam, SIZE, iso(0.5));
+        let a = predict::draw(g, &mut full, &ta, &fd).unwrap();
+        for (k, r) in rs.iter_mut().enumerate() {
+            let b = predict::draw(g, r, &tb, &fd).unwrap();
+            let stats = r.stats().frame.prediction.unwrap();
+            assert_eq!(stats.reprojected, k > 0 && i > 0, "variant {k} frame {i}");
+            local[k] += count(&b, TraversalClass::Local);
+            if k == 2 {
+                assert_eq!(
+                    predict::wrong_share(&b.color, &a.color),
+                    0.0,
+                    "reprojected + guarded frame {i} is not exact"
+                );
+            }
+        }
+    }
+    eprintln!(
+        "local pixels over {frames} frames: paper {}, reprojected {}, reprojected + guard {}",
+        local[0], local[1], local[2]
+    );
+    assert!(
+        local[1] as f64 > 1.2 * local[0] as f64,
+        "reprojection kept {} local pixels, the per-pixel prediction {}",
+        local[1],
+        local[0]
+    );
+}

@@ -177,7 +177,7 @@ fn predict_ray(px: vec2<u32>, start: RayStart) {
     // Entries are distances from the eye (t is from the near plane, which moves
     // with the near distance).
     let eye_offset = frame.near / r.dist_per_t;
-    let last = pred_buf[pred.read_off + p];
+    let last = pred_last(p);
     var acc = accum_new();
     let cur = Cursor(r);
     var kind = TRAVERSAL_NONE;
@@ -185,7 +185,9 @@ fn predict_ray(px: vec2<u32>, start: RayStart) {
         // The refresh flag is mixed with the pixel's entry (never a branch on a
         // uniform alone; see common.wgsl).
         let refresh = pred.refresh != 0u;
-        let full = refresh || last == PRED_NO_INFO;
+        // No information means a cleared history (full traversal), or with
+        // reprojection a hole of the warp (sparse traversal).
+        let full = refresh || (last == PRED_NO_INFO && pred.reprojected == 0u);
         let local = !full && pred_is_hit(last);
         if (full) {
             kind = TRAVERSAL_FULL;
@@ -210,7 +212,8 @@ fn predict_ray(px: vec2<u32>, start: RayStart) {
                 }
             }
         } else {
-            // Missed the surface (or the box, and the ray now enters it).
+            // Missed the surface (or the box, and the ray now enters it; or a
+            // hole of the reprojection).
             kind = TRAVERSAL_SPARSE;
             sparse_traversal(&acc, r, t0, t1);
         }

@@ -31,7 +31,9 @@ struct Predict {
     sparse_refine: u32,
     // Sparse step (world): the smallest voxel / kappa.
     sparse_dt: f32,
-    pad0: u32,
+    // 1 when `read_off` holds last frame's hits warped into this view
+    // (reproject.wgsl: complemented; 0 a hole, which takes the sparse traversal).
+    reprojected: u32,
 }
 
 @group(0) @binding(5) var<storage, read_write> pred_buf: array<u32>;
@@ -61,6 +63,14 @@ fn pred_decode_hit(v: u32) -> f32 {
 
 fn pred_is_hit(v: u32) -> bool {
     return v != PRED_NO_INFO && v < PRED_MISS_BOX;
+}
+
+// This pixel's entry from last frame (warped when reprojected). Selected, not
+// branched, on the uniform flag.
+fn pred_last(p: u32) -> u32 {
+    let raw = pred_buf[pred.read_off + p];
+    let warped = select(0u, ~raw, raw != 0u);
+    return select(raw, warped, pred.reprojected != 0u);
 }
 
 fn pred_pixel(px: vec2<u32>) -> u32 {

@@ -5,7 +5,9 @@
 use crate::desc::{FrameDesc, Viewport};
 use crate::error::{HostDepthError, PrepareError, RenderError};
 use crate::gpu::{self, Uniform};
-use crate::predict::{History, HistoryKey, PredictUniforms, Prediction};
+use crate::predict::{
+    Basis, History, HistoryKey, PredictUniforms, Prediction, ReprojectUniforms, Reprojector,
+};
 use brickray_core::{DepthConvention, RenderMode, RenderSettings};
 use glam::{DMat3, DVec3};
 
@@ -170,6 +172,8 @@ pub(crate) struct FrameState {
     /// Bound at binding 5 without a history.
     no_history: wgpu::Buffer,
     history_generation: u64,
+    /// The reprojection pass, made on first use.
+    reprojector: Option<Reprojector>,
 }
 
 /// What the prediction did in a frame.
@@ -181,6 +185,8 @@ pub struct PredictionFrame {
     pub invalidated: bool,
     /// A full-refresh frame (every alpha frames).
     pub refresh: bool,
+    /// Last frame's hits were warped into this view (reprojection).
+    pub reprojected: bool,
     /// Frames since the history was cleared.
     pub frames: u64,
 }
@@ -301,6 +307,7 @@ impl FrameState {
             history: None,
             no_history,
             history_generation: 0,
+            reprojector: None,
         })
     }
 
@@ -358,21 +365,52 @@ impl FrameState {
         }
         let p = key.settings;
         let refresh = h.frames.is_multiple_of(p.alpha as u64);
+        let n = h.pixels;
+        let basis = Basis::of(desc);
+        let prev_basis = h.basis.replace(basis);
+        let mut written = 0;
+        // Reprojection: warp last frame's entries (the half this frame would
+        // read) into the fourth region, which this frame reads instead.
+        let reproject = match prev_basis {
+            Some(prev) if p.reproject && !invalidated && !refresh => Some(prev),
+            _ => None,
+        };
+        if let Some(prev) = reproject {
+            if self.reprojector.is_none() {
+                self.reprojector = Some(Reprojector::new(device)?);
+            }
+            let h = self.history.as_ref().expect("made above");
+            let u = ReprojectUniforms::new(
+                prev,
+                basis,
+                [desc.viewport.width, desc.viewport.height],
+                h.parity * n,
+                3 * n,
+            );
+            written += self.reprojector.as_mut().expect("made above").record(
+                device,
+                queue,
+                encoder,
+                h,
+                self.history_generation,
+                u,
+            )?;
+        }
+        let h = self.history.as_ref().expect("made above");
         // The sparse step over the full one, as bisection steps.
         let ratio = 1.0 / (p.kappa as f64 * desc.settings.step_factor as f64);
         let sparse_refine = ratio.log2().ceil().clamp(0.0, 16.0) as u32;
-        let n = h.pixels;
-        let written = self.predict_uniform.write(
+        written += self.predict_uniform.write(
             queue,
             PredictUniforms {
-                read_off: h.parity * n,
+                read_off: if reproject.is_some() { 3 * n } else { h.parity * n },
                 write_off: (1 - h.parity) * n,
                 class_off: 2 * n,
                 refresh: refresh as u32,
                 local_steps: p.local_steps,
                 sparse_refine,
                 sparse_dt: (desc.frame.voxel_world as f64 / p.kappa as f64) as f32,
-                pad0: 0,
+                reprojected: reproject.is_some() as u32,
             },
         );
         Ok((
@@ -380,6 +418,7 @@ impl FrameState {
             Some(PredictionFrame {
                 invalidated,
                 refresh,
+                reprojected: reproject.is_some(),
                 frames: h.frames,
             }),
         ))

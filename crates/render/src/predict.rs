@@ -26,6 +26,10 @@ pub struct Prediction {
     pub guard: bool,
     /// Empty-space skipping in the sparse traversal.
     pub sparse_ess: bool,
+    /// Reprojection: last frame's hits are warped into this frame's view (a
+    /// scatter pass before the ray cast; holes take the sparse traversal), so
+    /// translation and zoom keep their coherence.
+    pub reproject: bool,
 }
 
 impl Prediction {
@@ -37,6 +41,7 @@ impl Prediction {
         local_steps: 16,
         guard: false,
         sparse_ess: false,
+        reproject: false,
     };
     /// Accepted range of `alpha`.
     pub const ALPHA: (u32, u32) = (1, 100_000);
@@ -187,7 +192,213 @@ pub(crate) struct PredictUniforms {
     pub(crate) local_steps: u32,
     pub(crate) sparse_refine: u32,
     pub(crate) sparse_dt: f32,
-    pub(crate) pad0: u32,
+    pub(crate) reprojected: u32,
+}
+
+/// A camera's basis in world space (as `RayGen`), for reprojection.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct Basis {
+    eye: [f32; 3],
+    fwd: [f32; 3],
+    right: [f32; 3],
+    up: [f32; 3],
+    near: f32,
+    perspective: bool,
+}
+
+impl Basis {
+    pub(crate) fn of(desc: &crate::FrameDesc<'_>) -> Basis {
+        let r = desc.camera.rays(desc.viewport.aspect());
+        let v = |x: glam::DVec3| x.as_vec3().to_array();
+        Basis {
+            eye: v(r.eye),
+            fwd: v(r.fwd),
+            right: v(r.right),
+            up: v(r.up),
+            near: r.near as f32,
+            perspective: r.perspective,
+        }
+    }
+}
+
+/// `struct Reproject` of reproject.wgsl.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, bytemuck::Pod, bytemuck::Zeroable)]
+pub(crate) struct ReprojectUniforms {
+    pub(crate) prev_eye: [f32; 3],
+    pub(crate) prev_perspective: u32,
+    pub(crate) prev_fwd: [f32; 3],
+    pub(crate) prev_near: f32,
+    pub(crate) prev_right: [f32; 3],
+    pub(crate) pad0: f32,
+    pub(crate) prev_up: [f32; 3],
+    pub(crate) pad1: f32,
+    pub(crate) eye: [f32; 3],
+    pub(crate) perspective: u32,
+    pub(crate) fwd: [f32; 3],
+    pub(crate) near: f32,
+    pub(crate) right: [f32; 3],
+    pub(crate) pad2: f32,
+    pub(crate) up: [f32; 3],
+    pub(crate) pad3: f32,
+    pub(crate) size: [u32; 2],
+    pub(crate) read_off: u32,
+    pub(crate) write_off: u32,
+}
+
+impl ReprojectUniforms {
+    pub(crate) fn new(prev: Basis, cur: Basis, size: [u32; 2], read_off: u32, write_off: u32) -> Self {
+        ReprojectUniforms {
+            prev_eye: prev.eye,
+            prev_perspective: prev.perspective as u32,
+            prev_fwd: prev.fwd,
+            prev_near: prev.near,
+            prev_right: prev.right,
+            pad0: 0.0,
+            prev_up: prev.up,
+            pad1: 0.0,
+            eye: cur.eye,
+            perspective: cur.perspective as u32,
+            fwd: cur.fwd,
+            near: cur.near,
+            right: cur.right,
+            pad2: 0.0,
+            up: cur.up,
+            pad3: 0.0,
+            size,
+            read_off,
+            write_off,
+        }
+    }
+}
+
+/// Layout of the reprojection pass: the history (0) and its uniforms (1).
+pub(crate) fn reproject_layout_entries() -> Vec<wgpu::BindGroupLayoutEntry> {
+    let c = wgpu::ShaderStages::COMPUTE;
+    vec![
+        wgpu::BindGroupLayoutEntry {
+            binding: 0,
+            visibility: c,
+            ty: wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Storage { read_only: false },
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+            count: None,
+        },
+        wgpu::BindGroupLayoutEntry {
+            binding: 1,
+            visibility: c,
+            ty: wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Uniform,
+                has_dynamic_offset: false,
+                min_binding_size: wgpu::BufferSize::new(
+                    std::mem::size_of::<ReprojectUniforms>() as u64,
+                ),
+            },
+            count: None,
+        },
+    ]
+}
+
+/// The reprojection pass: its pipeline, uniforms and bind group (over one
+/// history buffer), made when reprojection is first used.
+#[derive(Debug)]
+pub(crate) struct Reprojector {
+    layout: wgpu::BindGroupLayout,
+    pipeline: wgpu::ComputePipeline,
+    uniform: gpu::Uniform<ReprojectUniforms>,
+    /// The bind group and the history generation it binds.
+    bind_group: Option<(wgpu::BindGroup, u64)>,
+}
+
+impl Reprojector {
+    pub(crate) fn new(device: &wgpu::Device) -> Result<Reprojector, RenderError> {
+        let label = "brickray-render prediction reprojection";
+        let layout = gpu::scoped(device, label, || {
+            device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some(label),
+                entries: &reproject_layout_entries(),
+            })
+        })?;
+        let module = gpu::scoped(device, label, || {
+            device.create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some(label),
+                source: wgpu::ShaderSource::Wgsl(crate::shaders::REPROJECT.into()),
+            })
+        })?;
+        let pl = gpu::scoped(device, label, || {
+            device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                label: Some(label),
+                bind_group_layouts: &[Some(&layout)],
+                immediate_size: 0,
+            })
+        })?;
+        let pipeline = gpu::scoped(device, label, || {
+            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(label),
+                layout: Some(&pl),
+                module: &module,
+                entry_point: Some("main"),
+                compilation_options: Default::default(),
+                cache: None,
+            })
+        })?;
+        Ok(Reprojector {
+            layout,
+            pipeline,
+            uniform: gpu::Uniform::new(device, "brickray-render reprojection uniforms")?,
+            bind_group: None,
+        })
+    }
+
+    /// Records the warp of `history`'s last entries (at `u.read_off`) into its
+    /// reprojection region (at `u.write_off`, cleared first). Returns the bytes
+    /// written.
+    pub(crate) fn record(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        encoder: &mut wgpu::CommandEncoder,
+        history: &History,
+        generation: u64,
+        u: ReprojectUniforms,
+    ) -> Result<u64, RenderError> {
+        let written = self.uniform.write(queue, u);
+        if self.bind_group.as_ref().is_none_or(|(_, g)| *g != generation) {
+            let bg = gpu::scoped(device, "brickray-render reprojection bind group", || {
+                device.create_bind_group(&wgpu::BindGroupDescriptor {
+                    label: Some("brickray-render reprojection"),
+                    layout: &self.layout,
+                    entries: &[
+                        wgpu::BindGroupEntry {
+                            binding: 0,
+                            resource: history.buffer.as_entire_binding(),
+                        },
+                        wgpu::BindGroupEntry {
+                            binding: 1,
+                            resource: self.uniform.buffer.as_entire_binding(),
+                        },
+                    ],
+                })
+            })?;
+            self.bind_group = Some((bg, generation));
+        }
+        let n = history.pixels as u64 * 4;
+        encoder.clear_buffer(&history.buffer, u.write_off as u64 * 4, Some(n));
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some("brickray-render prediction reprojection"),
+            timestamp_writes: None,
+        });
+        pass.set_pipeline(&self.pipeline);
+        pass.set_bind_group(0, self.bind_group.as_ref().map(|(b, _)| b), &[]);
+        pass.dispatch_workgroups(
+            u.size[0].div_ceil(crate::kernels::WORKGROUP[0]),
+            u.size[1].div_ceil(crate::kernels::WORKGROUP[1]),
+            1,
+        );
+        Ok(written)
+    }
 }
 
 /// What invalidates the history: a change of any of these clears it (the next
@@ -239,12 +450,15 @@ pub(crate) struct History {
     /// Frames since the history was cleared.
     pub(crate) frames: u64,
     pub(crate) key: Option<HistoryKey>,
+    /// The camera of the frame that wrote the last entries (reprojection).
+    pub(crate) basis: Option<Basis>,
 }
 
 impl History {
-    /// A cleared history for `pixels` pixels (3 u32 per pixel).
+    /// A cleared history for `pixels` pixels (4 u32 per pixel: two halves of
+    /// entries, the classes, the reprojected entries).
     pub(crate) fn new(device: &wgpu::Device, pixels: u32) -> Result<History, RenderError> {
-        let size = (pixels as u64 * 3 * 4).max(16);
+        let size = (pixels as u64 * 4 * 4).max(16);
         let l = device.limits();
         gpu::need(
             "max_storage_buffer_binding_size",
@@ -268,6 +482,7 @@ impl History {
             parity: 0,
             frames: 0,
             key: None,
+            basis: None,
         })
     }
 

@@ -29,6 +29,8 @@ pub const OOC: &str = include_str!("../shaders/ooc.wgsl");
 pub const PREDICT: &str = include_str!("../shaders/predict.wgsl");
 /// The in-core traversals of the prediction buffer.
 pub const INCORE_PREDICT: &str = include_str!("../shaders/incore_predict.wgsl");
+/// The prediction buffer's reprojection pass (a module of its own).
+pub const REPROJECT: &str = include_str!("../shaders/reproject.wgsl");
 /// The composite (fullscreen) shader.
 pub const COMPOSITE: &str = include_str!("../shaders/composite.wgsl");
 

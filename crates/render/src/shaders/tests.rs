@@ -5,7 +5,7 @@ use crate::backend::{incore::VolumeParams, ooc::OocParams, ooc::SlotInfo, volume
 use crate::composite::CompositeUniforms;
 use crate::frame::{FrameFlags, FrameUniforms};
 use crate::kernels::{KernelMode, OVERRIDES, WORKGROUP};
-use crate::predict::{PredictUniforms, TraversalClass};
+use crate::predict::{PredictUniforms, ReprojectUniforms, TraversalClass};
 use crate::tf::TfInfo;
 use naga::valid::{Capabilities, ValidationFlags, Validator};
 use std::collections::BTreeSet;
@@ -208,7 +208,7 @@ fn check_kernel(name: &str, m: &naga::Module, volume_storage: u32) {
                 local_steps,
                 sparse_refine,
                 sparse_dt,
-                pad0
+                reprojected
             ]
         ),
         std::mem::size_of::<PredictUniforms>(),
@@ -277,6 +277,53 @@ fn ooc_kernel_matches_the_rust_side() {
         "SlotInfo",
         rust_fields!(SlotInfo, [offset, range]),
         std::mem::size_of::<SlotInfo>(),
+    );
+}
+
+#[test]
+fn reproject_matches_the_rust_side() {
+    let m = module("reproject", REPROJECT);
+    assert_eq!(m.entry_points.len(), 1);
+    let ep = &m.entry_points[0];
+    assert_eq!((ep.name.as_str(), ep.stage), ("main", naga::ShaderStage::Compute));
+    assert_eq!(ep.workgroup_size, [WORKGROUP[0], WORKGROUP[1], 1]);
+    check_struct(
+        &m,
+        "Reproject",
+        rust_fields!(
+            ReprojectUniforms,
+            [
+                prev_eye,
+                prev_perspective,
+                prev_fwd,
+                prev_near,
+                prev_right,
+                pad0,
+                prev_up,
+                pad1,
+                eye,
+                perspective,
+                fwd,
+                near,
+                right,
+                pad2,
+                up,
+                pad3,
+                size,
+                read_off,
+                write_off
+            ]
+        ),
+        std::mem::size_of::<ReprojectUniforms>(),
+    );
+    assert_eq!(
+        wgsl_bindings(&m),
+        rust_bindings(&[&crate::predict::reproject_layout_entries()])
+    );
+    // The hit bound matches predict.wgsl's flags.
+    assert_eq!(
+        const_u32(&m, "HIT_MAX"),
+        const_u32(&module("incore", &incore()), "PRED_MISS_BOX")
     );
 }
 
@@ -354,6 +401,7 @@ fn every_shader_file_is_covered() {
         "composite.wgsl",
         "predict.wgsl",
         "incore_predict.wgsl",
+        "reproject.wgsl",
     ];
     for entry in std::fs::read_dir(dir).unwrap() {
         let name = entry.unwrap().file_name().into_string().unwrap();
