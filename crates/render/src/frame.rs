@@ -403,7 +403,11 @@ impl FrameState {
         written += self.predict_uniform.write(
             queue,
             PredictUniforms {
-                read_off: if reproject.is_some() { 3 * n } else { h.parity * n },
+                read_off: if reproject.is_some() {
+                    3 * n
+                } else {
+                    h.parity * n
+                },
                 write_off: (1 - h.parity) * n,
                 class_off: 2 * n,
                 refresh: refresh as u32,

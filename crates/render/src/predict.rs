@@ -247,7 +247,13 @@ pub(crate) struct ReprojectUniforms {
 }
 
 impl ReprojectUniforms {
-    pub(crate) fn new(prev: Basis, cur: Basis, size: [u32; 2], read_off: u32, write_off: u32) -> Self {
+    pub(crate) fn new(
+        prev: Basis,
+        cur: Basis,
+        size: [u32; 2],
+        read_off: u32,
+        write_off: u32,
+    ) -> Self {
         ReprojectUniforms {
             prev_eye: prev.eye,
             prev_perspective: prev.perspective as u32,
@@ -293,7 +299,7 @@ pub(crate) fn reproject_layout_entries() -> Vec<wgpu::BindGroupLayoutEntry> {
                 ty: wgpu::BufferBindingType::Uniform,
                 has_dynamic_offset: false,
                 min_binding_size: wgpu::BufferSize::new(
-                    std::mem::size_of::<ReprojectUniforms>() as u64,
+                    std::mem::size_of::<ReprojectUniforms>() as u64
                 ),
             },
             count: None,
@@ -365,7 +371,11 @@ impl Reprojector {
         u: ReprojectUniforms,
     ) -> Result<u64, RenderError> {
         let written = self.uniform.write(queue, u);
-        if self.bind_group.as_ref().is_none_or(|(_, g)| *g != generation) {
+        if self
+            .bind_group
+            .as_ref()
+            .is_none_or(|(_, g)| *g != generation)
+        {
             let bg = gpu::scoped(device, "brickray-render reprojection bind group", || {
                 device.create_bind_group(&wgpu::BindGroupDescriptor {
                     label: Some("brickray-render reprojection"),

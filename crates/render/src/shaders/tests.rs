@@ -285,7 +285,10 @@ fn reproject_matches_the_rust_side() {
     let m = module("reproject", REPROJECT);
     assert_eq!(m.entry_points.len(), 1);
     let ep = &m.entry_points[0];
-    assert_eq!((ep.name.as_str(), ep.stage), ("main", naga::ShaderStage::Compute));
+    assert_eq!(
+        (ep.name.as_str(), ep.stage),
+        ("main", naga::ShaderStage::Compute)
+    );
     assert_eq!(ep.workgroup_size, [WORKGROUP[0], WORKGROUP[1], 1]);
     check_struct(
         &m,
