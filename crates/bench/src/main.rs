@@ -8,6 +8,8 @@
 mod accel;
 mod build;
 mod ooc;
+mod prediction;
+mod prediction_chart;
 mod raw;
 mod runner;
 mod soak;
@@ -84,6 +86,28 @@ enum Suite {
         #[arg(long)]
         path_gpu_mib: Option<u64>,
     },
+    /// The isosurface prediction buffer (Braley et al.): orbits, a failure path,
+    /// translation and zoom; variants interleaved frame by frame.
+    Prediction {
+        /// Image side in pixels (default 256).
+        #[arg(long)]
+        size: Option<u32>,
+        /// Frames of each orbit (default 120).
+        #[arg(long)]
+        frames: Option<usize>,
+        /// Write the failure path's chart (SVG) here.
+        #[arg(long)]
+        chart: Option<String>,
+        /// Write the traversal-class image (PNG) here.
+        #[arg(long)]
+        classes_png: Option<String>,
+        /// Sparse traversal's kappa (default the paper's 0.5).
+        #[arg(long)]
+        kappa: Option<f32>,
+        /// 1: also time full traversal without empty-space skipping (default 1).
+        #[arg(long)]
+        brute: Option<u32>,
+    },
     /// Per-sample cost: brickray against a minimal kernel (the device's rate), in
     /// core and out of core, DVR, shaded DVR, iso and MIP.
     Raw {
@@ -129,6 +153,7 @@ fn main() -> ExitCode {
         Suite::Accel { .. } => accel::run(rest),
         Suite::Build { .. } => build::run(rest),
         Suite::Ooc { .. } => ooc::run(rest),
+        Suite::Prediction { .. } => prediction::run(rest),
         Suite::Raw { .. } => raw::run(rest),
         Suite::Soak { .. } => soak::run(rest),
         Suite::U8 { .. } => u8::run(rest),

@@ -11,6 +11,7 @@
 //! * [`shared_data_dir`] finds `../shared/data` and decides whether a test that
 //!   needs it may skip.
 
+pub mod predict;
 pub mod soak;
 
 use std::path::PathBuf;

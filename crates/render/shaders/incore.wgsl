@@ -86,6 +86,12 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     let px = gid.xy;
     let start = start_ray(px);
+    // Iso with the prediction buffer: incore_predict.wgsl (an override: pipelines
+    // without prediction compile none of it).
+    if (MODE == MODE_ISO && PREDICT) {
+        predict_ray(px, start);
+        return;
+    }
     let r = start.r;
     let t0 = start.t0;
     let t1 = start.t1;

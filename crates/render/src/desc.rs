@@ -117,6 +117,9 @@ pub struct FrameStats {
     pub rays: u64,
     /// Bytes written to the GPU this frame (uniforms, bricks, tables, index).
     pub uploaded_bytes: u64,
+    /// What the isosurface prediction buffer did (`None`: the frame did not
+    /// predict).
+    pub prediction: Option<crate::PredictionFrame>,
 }
 
 /// Everything the renderer knows about its last frame.

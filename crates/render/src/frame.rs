@@ -1,9 +1,13 @@
 //! Group 0 of every ray-cast kernel: the frame's uniforms, the host's depth and
-//! the per-viewport outputs (colour, depth, sample counts), with their bind group.
+//! the per-viewport outputs (colour, depth, sample counts) and the isosurface
+//! prediction history (`predict.rs`), with their bind group.
 
 use crate::desc::{FrameDesc, Viewport};
 use crate::error::{HostDepthError, PrepareError, RenderError};
 use crate::gpu::{self, Uniform};
+use crate::predict::{
+    Basis, History, HistoryKey, PredictUniforms, Prediction, ReprojectUniforms, Reprojector,
+};
 use brickray_core::{DepthConvention, RenderMode, RenderSettings};
 use glam::{DMat3, DVec3};
 
@@ -166,8 +170,33 @@ pub(crate) struct FrameState {
     no_host_depth: wgpu::TextureView,
     outputs: Option<Outputs>,
     generation: u64,
-    /// The bind group, the outputs generation and host depth view it holds.
-    bind_group: Option<(wgpu::BindGroup, u64, Option<wgpu::TextureView>)>,
+    /// The bind group, the outputs and history generations and the host depth
+    /// view it holds.
+    bind_group: Option<(wgpu::BindGroup, [u64; 2], Option<wgpu::TextureView>)>,
+    /// The prediction's uniforms (binding 6).
+    predict_uniform: Uniform<PredictUniforms>,
+    /// The prediction history (binding 5), while iso frames predict.
+    history: Option<History>,
+    /// Bound at binding 5 without a history.
+    no_history: wgpu::Buffer,
+    history_generation: u64,
+    /// The reprojection pass, made on first use.
+    reprojector: Option<Reprojector>,
+}
+
+/// What the prediction did in a frame.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct PredictionFrame {
+    /// The history was cleared this frame (first frame, or a change of size,
+    /// isovalue, volume, volume frame, projection, step, host depth or the
+    /// prediction's settings): every pixel takes the full traversal.
+    pub invalidated: bool,
+    /// A full-refresh frame (every alpha frames).
+    pub refresh: bool,
+    /// Last frame's hits were warped into this view (reprojection).
+    pub reprojected: bool,
+    /// Frames since the history was cleared.
+    pub frames: u64,
 }
 
 fn storage_texture_entry(binding: u32, format: wgpu::TextureFormat) -> wgpu::BindGroupLayoutEntry {
@@ -183,7 +212,8 @@ fn storage_texture_entry(binding: u32, format: wgpu::TextureFormat) -> wgpu::Bin
     }
 }
 
-/// Group 0's layout: uniforms (0), host depth (1), outputs (2, 3, 4).
+/// Group 0's layout: uniforms (0), host depth (1), outputs (2, 3, 4), the
+/// prediction history (5) and its uniforms (6).
 pub(crate) fn layout_entries() -> Vec<wgpu::BindGroupLayoutEntry> {
     vec![
         wgpu::BindGroupLayoutEntry {
@@ -209,6 +239,28 @@ pub(crate) fn layout_entries() -> Vec<wgpu::BindGroupLayoutEntry> {
         storage_texture_entry(2, OUTPUT_FORMATS[0]),
         storage_texture_entry(3, OUTPUT_FORMATS[1]),
         storage_texture_entry(4, OUTPUT_FORMATS[2]),
+        wgpu::BindGroupLayoutEntry {
+            binding: 5,
+            visibility: wgpu::ShaderStages::COMPUTE,
+            ty: wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Storage { read_only: false },
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+            count: None,
+        },
+        wgpu::BindGroupLayoutEntry {
+            binding: 6,
+            visibility: wgpu::ShaderStages::COMPUTE,
+            ty: wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Uniform,
+                has_dynamic_offset: false,
+                min_binding_size: wgpu::BufferSize::new(
+                    std::mem::size_of::<PredictUniforms>() as u64
+                ),
+            },
+            count: None,
+        },
     ]
 }
 
@@ -251,6 +303,7 @@ impl FrameState {
             },
         )?
         .create_view(&Default::default());
+        let no_history = gpu::storage_buffer(device, "brickray-render no prediction history", 16)?;
         Ok(FrameState {
             layout,
             uniform: Uniform::new(device, "brickray-render frame uniforms")?,
@@ -258,6 +311,11 @@ impl FrameState {
             outputs: None,
             generation: 0,
             bind_group: None,
+            predict_uniform: Uniform::new(device, "brickray-render prediction uniforms")?,
+            history: None,
+            no_history,
+            history_generation: 0,
+            reprojector: None,
         })
     }
 
@@ -270,25 +328,146 @@ impl FrameState {
         self.outputs.as_ref()
     }
 
-    /// Sizes the outputs to the viewport, writes the uniforms (when changed) and
-    /// rebuilds the bind group when the outputs or the host depth view changed.
-    /// Returns the bytes written.
+    /// The prediction history, while iso frames predict.
+    pub(crate) fn history(&self) -> Option<&History> {
+        self.history.as_ref()
+    }
+
+    /// Drops the prediction history (a new volume: the next frame clears it).
+    pub(crate) fn drop_history(&mut self) {
+        self.history = None;
+    }
+
+    /// Advances the prediction history for this frame: `predict` is the
+    /// settings and the volume's identity when this frame predicts. Clears the
+    /// history (recording the clear into `encoder`) when what it was computed
+    /// for changed, else swaps its halves. Returns the bytes written.
+    fn update_prediction(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        encoder: &mut wgpu::CommandEncoder,
+        desc: &FrameDesc<'_>,
+        predict: Option<(Prediction, u64)>,
+    ) -> Result<(u64, Option<PredictionFrame>), RenderError> {
+        let key = predict.and_then(|(p, volume)| HistoryKey::new(desc, volume, p));
+        let Some(key) = key else {
+            self.history = None;
+            return Ok((0, None));
+        };
+        let pixels = desc.viewport.width * desc.viewport.height;
+        if self.history.as_ref().is_none_or(|h| h.pixels != pixels) {
+            self.history = None;
+            self.history = Some(History::new(device, pixels)?);
+            self.history_generation += 1;
+        }
+        let h = self.history.as_mut().expect("made above");
+        let invalidated = h.key != Some(key);
+        if invalidated {
+            encoder.clear_buffer(&h.buffer, 0, None);
+            h.frames = 0;
+            h.key = Some(key);
+        } else {
+            h.parity ^= 1;
+            h.frames += 1;
+        }
+        let p = key.settings;
+        let refresh = h.frames.is_multiple_of(p.alpha as u64);
+        let n = h.pixels;
+        let basis = Basis::of(desc);
+        let prev_basis = h.basis.replace(basis);
+        let mut written = 0;
+        // Reprojection: warp last frame's entries (the half this frame would
+        // read) into the fourth region, which this frame reads instead.
+        let reproject = match prev_basis {
+            Some(prev) if p.reproject && !invalidated && !refresh => Some(prev),
+            _ => None,
+        };
+        if let Some(prev) = reproject {
+            if self.reprojector.is_none() {
+                self.reprojector = Some(Reprojector::new(device)?);
+            }
+            let h = self.history.as_ref().expect("made above");
+            let u = ReprojectUniforms::new(
+                prev,
+                basis,
+                [desc.viewport.width, desc.viewport.height],
+                h.parity * n,
+                3 * n,
+            );
+            written += self.reprojector.as_mut().expect("made above").record(
+                device,
+                queue,
+                encoder,
+                h,
+                self.history_generation,
+                u,
+            )?;
+        }
+        let h = self.history.as_ref().expect("made above");
+        // The sparse step over the full one, as bisection steps.
+        let ratio = 1.0 / (p.kappa as f64 * desc.settings.step_factor as f64);
+        let sparse_refine = ratio.log2().ceil().clamp(0.0, 16.0) as u32;
+        written += self.predict_uniform.write(
+            queue,
+            PredictUniforms {
+                read_off: if reproject.is_some() {
+                    3 * n
+                } else {
+                    h.parity * n
+                },
+                write_off: (1 - h.parity) * n,
+                class_off: 2 * n,
+                refresh: refresh as u32,
+                local_steps: p.local_steps,
+                sparse_refine,
+                sparse_dt: (desc.frame.voxel_world as f64 / p.kappa as f64) as f32,
+                reprojected: reproject.is_some() as u32,
+            },
+        );
+        Ok((
+            written,
+            Some(PredictionFrame {
+                invalidated,
+                refresh,
+                reprojected: reproject.is_some(),
+                frames: h.frames,
+            }),
+        ))
+    }
+
+    /// Sizes the outputs to the viewport, writes the uniforms (when changed),
+    /// advances the prediction history (see `update_prediction`) and rebuilds
+    /// the bind group when the outputs, the history or the host depth view
+    /// changed. Returns the bytes written.
     pub(crate) fn update(
         &mut self,
         device: &wgpu::Device,
         queue: &wgpu::Queue,
+        encoder: &mut wgpu::CommandEncoder,
         desc: &FrameDesc<'_>,
         uniforms: FrameUniforms,
-    ) -> Result<u64, PrepareError> {
+        predict: Option<(Prediction, u64)>,
+    ) -> Result<(u64, Option<PredictionFrame>), PrepareError> {
         self.ensure_outputs(device, desc.viewport)?;
-        let written = self.uniform.write(queue, uniforms);
+        let mut written = self.uniform.write(queue, uniforms);
+        let (w, predicted) = self.update_prediction(device, queue, encoder, desc, predict)?;
+        written += w;
         let host = desc.host_depth.cloned();
         let outputs = self.outputs.as_ref().expect("ensured above");
+        let generations = [
+            outputs.generation,
+            self.history.as_ref().map_or(0, |_| self.history_generation),
+        ];
         let stale = self
             .bind_group
             .as_ref()
-            .is_none_or(|(_, g, h)| *g != outputs.generation || *h != host);
+            .is_none_or(|(_, g, h)| *g != generations || *h != host);
         if stale {
+            let history = self
+                .history
+                .as_ref()
+                .map_or(&self.no_history, |h| &h.buffer);
             let depth = host.as_ref().unwrap_or(&self.no_host_depth);
             let view = |v| wgpu::BindingResource::TextureView(v);
             let bg = gpu::scoped(device, "brickray-render frame bind group", || {
@@ -316,12 +495,20 @@ impl FrameState {
                             binding: 4,
                             resource: view(&outputs.samples_view),
                         },
+                        wgpu::BindGroupEntry {
+                            binding: 5,
+                            resource: history.as_entire_binding(),
+                        },
+                        wgpu::BindGroupEntry {
+                            binding: 6,
+                            resource: self.predict_uniform.buffer.as_entire_binding(),
+                        },
                     ],
                 })
             })?;
-            self.bind_group = Some((bg, outputs.generation, host));
+            self.bind_group = Some((bg, generations, host));
         }
-        Ok(written)
+        Ok((written, predicted))
     }
 
     pub(crate) fn bind_group(&self) -> Option<&wgpu::BindGroup> {

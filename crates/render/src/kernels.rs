@@ -1,10 +1,11 @@
 //! The ray-cast kernels: one shader module per volume backend and one compute
-//! pipeline per [`Variant`] (mode, ERT, ESS, shading as WGSL override
-//! constants), compiled on first use. On lavapipe a specialised out-of-core
+//! pipeline per [`Variant`] (mode, ERT, ESS, shading and the isosurface
+//! prediction's switches as WGSL override constants), compiled on first use. On lavapipe a specialised out-of-core
 //! pipeline runs about 1.5x faster than one that branches on the mode.
 
 use crate::error::RenderError;
 use crate::gpu;
+use crate::predict::Prediction;
 use crate::shaders;
 use brickray_core::{RenderMode, RenderSettings};
 use std::collections::HashMap;
@@ -48,36 +49,75 @@ pub(crate) struct Variant {
     pub(crate) ert: bool,
     pub(crate) ess: bool,
     pub(crate) shade: bool,
+    /// The prediction buffer (in-core iso only; predict.wgsl) and its guard and
+    /// sparse skipping switches.
+    pub(crate) predict: bool,
+    pub(crate) guard: bool,
+    pub(crate) sparse_ess: bool,
 }
 
-/// The override constants of a pipeline, by WGSL name (modes.wgsl).
-pub(crate) const OVERRIDES: [&str; 4] = ["MODE", "ERT", "ESS", "SHADE"];
+/// The override constants of a pipeline, by WGSL name (modes.wgsl,
+/// predict.wgsl).
+pub(crate) const OVERRIDES: [&str; 7] = [
+    "MODE",
+    "ERT",
+    "ESS",
+    "SHADE",
+    "PREDICT",
+    "GUARD",
+    "SPARSE_ESS",
+];
 
 impl Variant {
-    /// The variant of validated settings.
-    pub(crate) fn of(s: &RenderSettings) -> Variant {
+    /// The variant of validated settings for a `kind` kernel, with `prediction`
+    /// when the host enabled it (it applies to the in-core iso mode only).
+    pub(crate) fn of(
+        s: &RenderSettings,
+        kind: KernelKind,
+        prediction: Option<Prediction>,
+    ) -> Variant {
         let mode = match s.mode {
             RenderMode::Iso { .. } => KernelMode::Iso,
             RenderMode::Mip => KernelMode::Mip,
             _ => KernelMode::Dvr,
         };
-        Variant {
+        let v = Variant {
             mode,
             ert: s.accel.early_termination.is_some(),
             ess: s.accel.empty_space_skipping,
             shade: s.shading.enabled,
+            predict: false,
+            guard: false,
+            sparse_ess: false,
+        };
+        match prediction {
+            Some(p) if mode == KernelMode::Iso && kind == KernelKind::InCore => Variant {
+                predict: true,
+                guard: p.guard,
+                sparse_ess: p.sparse_ess,
+                ..v
+            },
+            _ => v,
         }
     }
 
-    fn constants(&self) -> [(&'static str, f64); 4] {
+    /// True when the variant predicts (its frames use the history).
+    pub(crate) fn predicts(&self) -> bool {
+        self.predict
+    }
+
+    fn constants(&self) -> [(&'static str, f64); 7] {
         let b = |x: bool| if x { 1.0 } else { 0.0 };
         let v = [
             self.mode as u32 as f64,
             b(self.ert),
             b(self.ess),
             b(self.shade),
+            b(self.predict),
+            b(self.guard),
+            b(self.sparse_ess),
         ];
-        [0, 1, 2, 3].map(|i| (OVERRIDES[i], v[i]))
+        std::array::from_fn(|i| (OVERRIDES[i], v[i]))
     }
 }
 

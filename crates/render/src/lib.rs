@@ -31,6 +31,7 @@ mod frame;
 mod gpu;
 mod kernels;
 mod limits;
+mod predict;
 pub mod shaders;
 mod tf;
 
@@ -42,7 +43,9 @@ pub use brickray_cache::{ConfigError, RetryPolicy, StreamError};
 pub use desc::{FrameDesc, FrameStats, RendererStats, TargetDesc, Viewport};
 pub use encoding::U8Filtering;
 pub use error::{GpuErrorKind, HostDepthError, PrepareError, RenderError};
+pub use frame::PredictionFrame;
 pub use limits::required_limits;
+pub use predict::{Prediction, PredictionCounts, PredictionError, TraversalClass};
 
 use backend::{Backend, InCore, OutOfCore};
 use brickray_core::{BrickSource, DepthConvention, TransferFunction, Volume, VolumeFrame};
@@ -79,6 +82,10 @@ pub struct VolumeRenderer {
     backend: Option<Backend>,
     prepared: Option<Prepared>,
     last_frame: FrameStats,
+    /// The isosurface prediction buffer's settings, when on.
+    prediction: Option<Prediction>,
+    /// Counts the volumes set (the prediction history is the volume's).
+    volume_epoch: u64,
 }
 
 impl VolumeRenderer {
@@ -106,6 +113,8 @@ impl VolumeRenderer {
             backend: None,
             prepared: None,
             last_frame: FrameStats::default(),
+            prediction: None,
+            volume_epoch: 0,
         })
     }
 
@@ -126,6 +135,8 @@ impl VolumeRenderer {
         // Free the old volume first: two large volumes need not fit at once.
         self.backend = None;
         self.prepared = None;
+        self.volume_epoch += 1;
+        self.frame.drop_history();
         let b = InCore::new(device, queue, volume, self.options.u8_filtering)?;
         self.backend = Some(Backend::InCore(b));
         Ok(())
@@ -145,6 +156,8 @@ impl VolumeRenderer {
     ) -> Result<(), RenderError> {
         self.backend = None;
         self.prepared = None;
+        self.volume_epoch += 1;
+        self.frame.drop_history();
         let b = OutOfCore::new(
             device,
             queue,
@@ -166,6 +179,35 @@ impl VolumeRenderer {
         tf: &TransferFunction,
     ) -> Result<u64, RenderError> {
         self.tf.set(device, queue, tf)
+    }
+
+    /// Turns the isosurface prediction buffer (Braley et al.; see
+    /// `docs/prediction.md`) on with `settings`, or off with `None`. It applies
+    /// to iso frames of the in-core path; the history is per viewport and is
+    /// cleared whenever the viewport's size, the isovalue, the volume, its frame,
+    /// the camera's projection, the step, the host depth's presence or these
+    /// settings change.
+    pub fn set_prediction(&mut self, settings: Option<Prediction>) -> Result<(), PredictionError> {
+        if let Some(p) = &settings {
+            p.validate()?;
+        }
+        self.prediction = settings;
+        Ok(())
+    }
+
+    /// The prediction settings in use.
+    pub fn prediction(&self) -> Option<Prediction> {
+        self.prediction
+    }
+
+    /// Diagnostics for benchmarks, tests and the prediction-buffer image: the
+    /// buffer holding the last predicted frame's per-pixel [`TraversalClass`]
+    /// codes (u32, row-major over the viewport; `COPY_SRC`), with the byte
+    /// offset and size of that range. `None` when the last frame did not predict.
+    pub fn prediction_classes(&self) -> Option<(&wgpu::Buffer, u64, u64)> {
+        let h = self.frame.history()?;
+        let (offset, size) = h.classes();
+        Some((&h.buffer, offset, size))
     }
 
     /// Statistics of the last frame.
@@ -275,8 +317,8 @@ impl VolumeRenderer {
         };
         let layouts = [self.frame.layout(), self.tf.layout(), backend.layout()];
         for s in settings {
-            self.kernels
-                .pipeline(device, backend.kind(), layouts, Variant::of(s))?;
+            let v = Variant::of(s, backend.kind(), self.prediction);
+            self.kernels.pipeline(device, backend.kind(), layouts, v)?;
         }
         Ok(())
     }
@@ -330,15 +372,23 @@ impl VolumeRenderer {
             backend.step_lengths(),
         )?;
         let uniforms = FrameUniforms::new(desc, backend.max_leaves());
-        uploaded += self.frame.update(device, queue, desc, uniforms)?;
+        let variant = Variant::of(&desc.settings, backend.kind(), self.prediction);
+        let predict = self
+            .prediction
+            .filter(|_| variant.predicts())
+            .map(|p| (p, self.volume_epoch));
+        let (written, prediction) = self
+            .frame
+            .update(device, queue, encoder, desc, uniforms, predict)?;
+        uploaded += written;
         let outputs = self.frame.outputs().expect("sized by update");
         uploaded += self
             .compositor
             .update(device, queue, outputs, desc.viewport)?;
         let layouts = [self.frame.layout(), self.tf.layout(), backend.layout()];
-        let pipeline =
-            self.kernels
-                .pipeline(device, backend.kind(), layouts, Variant::of(&desc.settings))?;
+        let pipeline = self
+            .kernels
+            .pipeline(device, backend.kind(), layouts, variant)?;
         let groups = [
             self.frame.bind_group(),
             self.tf.bind_group(),
@@ -367,6 +417,7 @@ impl VolumeRenderer {
         self.last_frame = FrameStats {
             rays: desc.viewport.width as u64 * desc.viewport.height as u64,
             uploaded_bytes: uploaded,
+            prediction,
         };
         Ok(self.last_frame)
     }

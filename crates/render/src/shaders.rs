@@ -8,6 +8,8 @@
 //! * `incore.wgsl`, `ooc.wgsl`: each backend's group 2, its sampling `Cursor`
 //!   and its march; the out-of-core kernel also includes brickray-index's
 //!   traversal library;
+//! * `predict.wgsl`: the isosurface prediction buffer's bindings (group 0) and
+//!   switches, in both kernels; `incore_predict.wgsl`: its in-core traversals;
 //! * `composite.wgsl`: the draw into the host's pass.
 //!
 //! Every composed kernel is validated by naga in this module's tests, which also
@@ -23,18 +25,24 @@ pub const MODES: &str = include_str!("../shaders/modes.wgsl");
 pub const INCORE: &str = include_str!("../shaders/incore.wgsl");
 /// The out-of-core kernel's own part.
 pub const OOC: &str = include_str!("../shaders/ooc.wgsl");
+/// The prediction buffer's bindings, switches and encoding (both kernels).
+pub const PREDICT: &str = include_str!("../shaders/predict.wgsl");
+/// The in-core traversals of the prediction buffer.
+pub const INCORE_PREDICT: &str = include_str!("../shaders/incore_predict.wgsl");
+/// The prediction buffer's reprojection pass (a module of its own).
+pub const REPROJECT: &str = include_str!("../shaders/reproject.wgsl");
 /// The composite (fullscreen) shader.
 pub const COMPOSITE: &str = include_str!("../shaders/composite.wgsl");
 
 /// The in-core ray caster as compiled.
 pub fn incore() -> String {
-    format!("{COMMON}\n{MODES}\n{INCORE}")
+    format!("{COMMON}\n{MODES}\n{PREDICT}\n{INCORE}\n{INCORE_PREDICT}")
 }
 
 /// The out-of-core ray caster as compiled (with the octree traversal library).
 pub fn ooc() -> String {
     format!(
-        "{COMMON}\n{MODES}\n{}\n{OOC}",
+        "{COMMON}\n{MODES}\n{PREDICT}\n{}\n{OOC}",
         brickray_index::OCTREE_TRAVERSAL_WGSL
     )
 }

@@ -223,10 +223,8 @@ impl VolumeBackend for InCore {
         tf: &TransferFunction,
     ) -> Result<u64, PrepareError> {
         // The volume was uploaded at set-up; only the skip distances follow the
-        // TF (DVR) or the isovalue, and only with skipping on.
-        if !frame.settings.accel.empty_space_skipping {
-            return Ok(0);
-        }
+        // TF (DVR) or the isovalue (kept current whatever the switches, since
+        // the prediction buffer's sparse traversal skips with them too).
         let key = match frame.settings.mode {
             RenderMode::Iso { value, .. } => SkipKey::Iso(value),
             RenderMode::Mip => return Ok(0),

@@ -5,6 +5,7 @@ use crate::backend::{incore::VolumeParams, ooc::OocParams, ooc::SlotInfo, volume
 use crate::composite::CompositeUniforms;
 use crate::frame::{FrameFlags, FrameUniforms};
 use crate::kernels::{KernelMode, OVERRIDES, WORKGROUP};
+use crate::predict::{PredictUniforms, ReprojectUniforms, TraversalClass};
 use crate::tf::TfInfo;
 use naga::valid::{Capabilities, ValidationFlags, Validator};
 use std::collections::BTreeSet;
@@ -196,6 +197,29 @@ fn check_kernel(name: &str, m: &naga::Module, volume_storage: u32) {
         rust_fields!(TfInfo, [count, width, rows, pad0]),
         std::mem::size_of::<TfInfo>(),
     );
+    // The prediction buffer's uniforms and traversal classes (both kernels
+    // declare them: group 0 is shared).
+    check_struct(
+        m,
+        "Predict",
+        rust_fields!(
+            PredictUniforms,
+            [
+                read_off,
+                write_off,
+                class_off,
+                refresh,
+                local_steps,
+                sparse_refine,
+                sparse_dt,
+                reprojected
+            ]
+        ),
+        std::mem::size_of::<PredictUniforms>(),
+    );
+    for (wgsl, class) in TraversalClass::ALL {
+        assert_eq!(const_u32(m, wgsl), class as u32, "{name}: {wgsl}");
+    }
     // Every binding of every group against the Rust layouts.
     assert_eq!(
         wgsl_bindings(m),
@@ -261,6 +285,56 @@ fn ooc_kernel_matches_the_rust_side() {
 }
 
 #[test]
+fn reproject_matches_the_rust_side() {
+    let m = module("reproject", REPROJECT);
+    assert_eq!(m.entry_points.len(), 1);
+    let ep = &m.entry_points[0];
+    assert_eq!(
+        (ep.name.as_str(), ep.stage),
+        ("main", naga::ShaderStage::Compute)
+    );
+    assert_eq!(ep.workgroup_size, [WORKGROUP[0], WORKGROUP[1], 1]);
+    check_struct(
+        &m,
+        "Reproject",
+        rust_fields!(
+            ReprojectUniforms,
+            [
+                prev_eye,
+                prev_perspective,
+                prev_fwd,
+                prev_near,
+                prev_right,
+                pad0,
+                prev_up,
+                pad1,
+                eye,
+                perspective,
+                fwd,
+                near,
+                right,
+                pad2,
+                up,
+                pad3,
+                size,
+                read_off,
+                write_off
+            ]
+        ),
+        std::mem::size_of::<ReprojectUniforms>(),
+    );
+    assert_eq!(
+        wgsl_bindings(&m),
+        rust_bindings(&[&crate::predict::reproject_layout_entries()])
+    );
+    // The hit bound matches predict.wgsl's flags.
+    assert_eq!(
+        const_u32(&m, "HIT_MAX"),
+        const_u32(&module("incore", &incore()), "PRED_MISS_BOX")
+    );
+}
+
+#[test]
 fn composite_matches_the_rust_side() {
     let m = module("composite", COMPOSITE);
     let names: BTreeSet<&str> = m.entry_points.iter().map(|e| e.name.as_str()).collect();
@@ -301,6 +375,19 @@ fn reflection_catches_drift() {
     // A moved binding.
     let moved = incore().replace("@group(2) @binding(3)", "@group(2) @binding(7)");
     assert_ne!(wgsl_bindings(&module("moved", &moved)), kernel_bindings(1));
+    // A renamed prediction override, a moved prediction binding.
+    let renamed = incore().replace("override GUARD", "override FIRST_HIT_GUARD");
+    let m = module(
+        "renamed guard",
+        &renamed.replace("(GUARD)", "(FIRST_HIT_GUARD)"),
+    );
+    assert!(
+        !m.overrides
+            .iter()
+            .any(|(_, o)| o.name.as_deref() == Some("GUARD"))
+    );
+    let moved = incore().replace("@group(0) @binding(6)", "@group(0) @binding(7)");
+    assert_ne!(wgsl_bindings(&module("moved", &moved)), kernel_bindings(1));
     // A changed flag bit.
     let flag = incore().replace("FLAG_REVERSED_Z: u32 = 4u", "FLAG_REVERSED_Z: u32 = 8u");
     assert_ne!(
@@ -319,6 +406,9 @@ fn every_shader_file_is_covered() {
         "incore.wgsl",
         "ooc.wgsl",
         "composite.wgsl",
+        "predict.wgsl",
+        "incore_predict.wgsl",
+        "reproject.wgsl",
     ];
     for entry in std::fs::read_dir(dir).unwrap() {
         let name = entry.unwrap().file_name().into_string().unwrap();
@@ -327,6 +417,46 @@ fn every_shader_file_is_covered() {
                 known.contains(&name.as_str()),
                 "{name} is not validated by any test"
             );
+        }
+    }
+}
+
+/// Every permutation of the override constants that a pipeline can have
+/// validates with the switches as constants: naga then checks each specialised
+/// kernel as a pipeline compiles it. Every mode with every combination of ERT,
+/// ESS and shading; the iso mode with prediction on and every combination of
+/// its guard, its sparse skipping, ERT and ESS.
+#[test]
+fn every_override_permutation_validates() {
+    let switches = ["ERT", "ESS", "SHADE", "PREDICT", "GUARD", "SPARSE_ESS"];
+    let mut combos = Vec::new();
+    for (_, mode) in KernelMode::ALL {
+        for bits in 0..8u32 {
+            combos.push((mode, bits));
+        }
+    }
+    for bits in 0..16u32 {
+        // ERT, ESS from bits 0-1; GUARD, SPARSE_ESS from bits 2-3.
+        let b = (bits & 3) | 1 << 3 | (bits >> 2) << 4;
+        combos.push((KernelMode::Iso, b));
+    }
+    for (name, src) in [("incore", incore()), ("ooc", ooc())] {
+        for &(mode, bits) in &combos {
+            let mut s = src.replace(
+                "override MODE: u32 = 0u;",
+                &format!("const MODE: u32 = {}u;", mode as u32),
+            );
+            for (i, sw) in switches.iter().enumerate() {
+                let on = bits >> i & 1 == 1;
+                let from = [true, false]
+                    .map(|d| format!("override {sw}: bool = {d};"))
+                    .into_iter()
+                    .find(|f| s.contains(f.as_str()))
+                    .unwrap_or_else(|| panic!("{name}: no override {sw}"));
+                s = s.replace(&from, &format!("const {sw}: bool = {on};"));
+            }
+            assert!(!s.contains("override "), "{name}: an override left");
+            module(&format!("{name} {mode:?} {bits:06b}"), &s);
         }
     }
 }

@@ -1,0 +1,461 @@
+//! The `prediction` suite: the isosurface prediction buffer (Braley et al.;
+//! docs/prediction.md) against the full traversal, in core.
+//!
+//! Variants, interleaved frame by frame (the order rotates each frame): `full`
+//! (no prediction: the reference), `paper` (alpha 10, kappa 0.5), `ess`
+//! (+ empty-space skipping in the sparse traversal), `reproj` (+ reprojection),
+//! `guard` (+ the first-hit guard) and `all` (all three). Every variant's image is compared with the full
+//! traversal's image of the same frame: wrong pixels (a channel off by more
+//! than 2 levels; mean and max share over frames) and PSNR. Time is
+//! `prepare + submit + wait` wall time; speedups are ratios of the summed
+//! times of the same frames.
+//!
+//! Paths: the paper's 360-degree orbit on the head CT, the shared MRI and a
+//! procedural volume of nested surfaces; the failure path (a small ball slides
+//! in front of the large one in view, then the camera stops) with per-frame
+//! wrong pixels and the frames until they are gone; a translation + zoom path.
+
+use crate::Figures;
+use crate::arg;
+use crate::runner::{finite_db, round2};
+use brickray_core::{
+    Accel, Camera, RenderMode, RenderSettings, TransferFunction, Volume, VolumeFrame,
+};
+use brickray_harness::predict::{self, FrameResult};
+use brickray_harness::{GpuContext, Offscreen, ct};
+use brickray_reference::psnr;
+use brickray_render::{FrameDesc, Prediction, TraversalClass, VolumeRenderer};
+use glam::Vec3;
+use serde_json::json;
+
+/// `(name, prediction)` of every variant; `full` first. `kappa`: the sparse
+/// step's (the paper's 0.5 unless `--kappa` says otherwise).
+fn variants(kappa: f32) -> Vec<(&'static str, Option<Prediction>)> {
+    let p = Prediction {
+        kappa,
+        ..Prediction::PAPER
+    };
+    vec![
+        ("full", None),
+        ("paper", Some(p)),
+        (
+            "ess",
+            Some(Prediction {
+                sparse_ess: true,
+                ..p
+            }),
+        ),
+        (
+            "reproj",
+            Some(Prediction {
+                reproject: true,
+                ..p
+            }),
+        ),
+        ("guard", Some(Prediction { guard: true, ..p })),
+        (
+            "all",
+            Some(Prediction {
+                guard: true,
+                sparse_ess: true,
+                reproject: true,
+                ..p
+            }),
+        ),
+    ]
+}
+
+struct Scene {
+    name: &'static str,
+    vol: Volume,
+    isovalue: f32,
+}
+
+fn iso(value: f32, accel: Accel) -> RenderSettings {
+    RenderSettings {
+        mode: RenderMode::Iso {
+            value,
+            color: [0.9, 0.85, 0.75],
+        },
+        accel,
+        ..Default::default()
+    }
+}
+
+/// The accelerations of a run: the renderer's default (ERT and ESS: the full
+/// traversal skips empty macro cells) or none (the paper's full traversal).
+fn accel_of(name: &str) -> Accel {
+    if name == "brute" {
+        Accel::BRUTE_FORCE
+    } else {
+        Accel::default()
+    }
+}
+
+/// Per-frame figures of one variant along a path.
+#[derive(Default, Clone)]
+struct Track {
+    ms: Vec<f64>,
+    wrong: Vec<f64>,
+    psnr: Vec<f64>,
+    samples: Vec<f64>,
+    /// Wrong pixels by the traversal class that drew them (summed over frames).
+    wrong_by_class: [u64; 6],
+}
+
+impl Track {
+    fn summary(&self, full: &Track) -> serde_json::Value {
+        let n = self.ms.len().max(1) as f64;
+        let sum = |v: &[f64]| v.iter().sum::<f64>();
+        let finite: Vec<f64> = self
+            .psnr
+            .iter()
+            .copied()
+            .filter(|x| x.is_finite())
+            .collect();
+        json!({
+            "ms": round2(sum(&self.ms) / n),
+            "speedup": round2(sum(&full.ms) / sum(&self.ms)),
+            "samples_per_ray": round2(sum(&self.samples) / n),
+            "wrong_mean_pct": (sum(&self.wrong) / n * 1e4).round() / 1e2,
+            "wrong_max_pct": (self.wrong.iter().copied().fold(0.0, f64::max) * 1e4).round() / 1e2,
+            "psnr_min_db": finite_db(finite.iter().copied().fold(f64::INFINITY, f64::min)),
+            "frames_exact": self.wrong.iter().filter(|&&w| w == 0.0).count(),
+            "wrong_px_by_class": TraversalClass::ALL
+                .iter()
+                .filter(|(_, c)| self.wrong_by_class[*c as usize] > 0)
+                .map(|(n, c)| (n.trim_start_matches("TRAVERSAL_").to_lowercase(), json!(self.wrong_by_class[*c as usize])))
+                .collect::<serde_json::Map<_, _>>(),
+        })
+    }
+}
+
+/// Draws `cameras` with every variant, interleaved; returns one track per
+/// variant (in `variants()` order) and the classes of the last predicted frame
+/// of the `paper` variant.
+fn run_path(
+    gpu: &GpuContext,
+    scene: &Scene,
+    size: u32,
+    cameras: &[Camera],
+    accel: Accel,
+    kappa: f32,
+) -> Result<(Vec<Track>, Option<FrameResult>), String> {
+    let d = scene.vol.desc();
+    let frame = VolumeFrame::centered(d.dims, d.spacing);
+    let vs = variants(kappa);
+    let mut rs = Vec::new();
+    for (_, p) in &vs {
+        let mut r = VolumeRenderer::new(&gpu.device, brickray_harness::target_desc())
+            .map_err(|e| e.to_string())?;
+        r.set_volume(&gpu.device, &gpu.queue, &scene.vol)
+            .map_err(|e| e.to_string())?;
+        r.set_transfer_function(
+            &gpu.device,
+            &gpu.queue,
+            &TransferFunction::ramp(0.0, 1.0, 1.0),
+        )
+        .map_err(|e| e.to_string())?;
+        r.set_prediction(*p).map_err(|e| e.to_string())?;
+        // Compile the pipeline before the timed frames.
+        r.warm_up(&gpu.device, &[iso(scene.isovalue, accel)])
+            .map_err(|e| e.to_string())?;
+        rs.push((r, Offscreen::new(&gpu.device, size, size)));
+    }
+    let mut tracks = vec![Track::default(); vs.len()];
+    let mut last_paper = None;
+    for (i, cam) in cameras.iter().enumerate() {
+        let desc = FrameDesc {
+            settings: iso(scene.isovalue, accel),
+            ..FrameDesc::new(*cam, frame, size, size)
+        };
+        let mut shots: Vec<Option<FrameResult>> = vec![None; vs.len()];
+        for j in 0..vs.len() {
+            let k = (i + j) % vs.len();
+            let (r, t) = &mut rs[k];
+            shots[k] = Some(predict::draw(gpu, r, t, &desc).map_err(|e| e.to_string())?);
+        }
+        let shots: Vec<FrameResult> = shots.into_iter().map(Option::unwrap).collect();
+        for (k, s) in shots.iter().enumerate() {
+            let t = &mut tracks[k];
+            t.ms.push(s.ms);
+            t.wrong
+                .push(predict::wrong_share(&s.color, &shots[0].color));
+            t.psnr.push(psnr(&s.color, &shots[0].color));
+            t.samples.push(predict::samples_per_ray(&s.samples));
+            if let Some(c) = &s.classes {
+                let wrong = s.color.chunks_exact(4).zip(shots[0].color.chunks_exact(4));
+                for (class, (p, q)) in c.iter().zip(wrong) {
+                    let off = p
+                        .iter()
+                        .zip(q)
+                        .any(|(x, y)| x.abs_diff(*y) > predict::WRONG_LEVELS);
+                    if off && (*class as usize) < 6 {
+                        t.wrong_by_class[*class as usize] += 1;
+                    }
+                }
+            }
+        }
+        if i % 10 != 0 {
+            last_paper = Some(shots[1].clone());
+        }
+    }
+    Ok((tracks, last_paper))
+}
+
+fn orbit(center: Vec3, distance: f32, frames: usize) -> Vec<Camera> {
+    (0..frames)
+        .map(|i| {
+            let yaw = std::f32::consts::TAU * i as f32 / frames as f32;
+            Camera::orbit(center, distance, yaw, 0.3)
+        })
+        .collect()
+}
+
+fn class_share(r: &FrameResult) -> serde_json::Value {
+    let Some(c) = &r.classes else {
+        return json!(null);
+    };
+    let mut m = serde_json::Map::new();
+    for (name, class) in TraversalClass::ALL {
+        let n = c.iter().filter(|&&x| x == class as u32).count();
+        m.insert(
+            name.trim_start_matches("TRAVERSAL_").to_lowercase(),
+            json!(round2(100.0 * n as f64 / c.len() as f64)),
+        );
+    }
+    json!(m)
+}
+
+fn save_classes(r: &FrameResult, size: u32, path: &str) -> Result<(), String> {
+    let c = r.classes.as_ref().ok_or("no classes")?;
+    let rgba: Vec<u8> = c
+        .iter()
+        .flat_map(|&k| {
+            let [r, g, b] = TraversalClass::from_code(k).map_or([255, 0, 255], |c| c.debug_color());
+            [r, g, b, 255]
+        })
+        .collect();
+    brickray_reference::save_rgba8_png(path, &rgba, size, size).map_err(|e| e.to_string())
+}
+
+pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
+    let size: u32 = arg(args, "--size", 256)?;
+    let frames: usize = arg(args, "--frames", 120)?;
+    let chart: String = arg(args, "--chart", String::new())?;
+    let classes_png: String = arg(args, "--classes-png", String::new())?;
+    let kappa: f32 = arg(args, "--kappa", Prediction::PAPER.kappa)?;
+    let brute: bool = arg(args, "--brute", 1u32)? == 1;
+    let gpu = GpuContext::new().map_err(|e| e.to_string())?;
+    println!("adapter: {}", gpu.describe());
+    println!(
+        "image {size}x{size}; orbit of {frames} frames; kappa {kappa}; variants interleaved frame by frame"
+    );
+    let mut scenes = Vec::new();
+    if let Some(p) = brickray_harness::shared_volume("invesalius_cranium_ct") {
+        let vol = brickray_core::io::read_volume(&p).map_err(|e| e.to_string())?;
+        scenes.push(Scene {
+            name: "head_ct",
+            vol,
+            isovalue: ct::hu(400.0),
+        });
+    } else {
+        println!("head CT absent: skipped");
+    }
+    if let Some(p) = brickray_harness::shared_volume("pycortex_s1_t1_mri") {
+        let vol = brickray_core::io::read_volume(&p).map_err(|e| e.to_string())?;
+        scenes.push(Scene {
+            name: "mri",
+            vol,
+            isovalue: 0.3,
+        });
+    } else {
+        println!("MRI absent: skipped");
+    }
+    scenes.push(Scene {
+        name: "nested_shells",
+        vol: predict::nested_shells(128),
+        isovalue: 0.5,
+    });
+    let names: Vec<&str> = variants(kappa).iter().map(|v| v.0).collect();
+    let mut fig = Figures::new();
+    let mut orbit_fig = serde_json::Map::new();
+    let mut speedup_paper = 0.0;
+    let mut speedup_paper_brute = 0.0;
+    let mut wrong_mean_paper = 0.0;
+    let mut exact_orbit = vec![true; names.len()];
+    let mut speed_ct = vec![0.0; names.len()];
+    let accels: &[&str] = if brute {
+        &["default", "brute"]
+    } else {
+        &["default"]
+    };
+    for &accel_name in accels {
+        for scene in &scenes {
+            let d = scene.vol.desc();
+            let frame = VolumeFrame::centered(d.dims, d.spacing);
+            let accel = accel_of(accel_name);
+            let (tracks, last) = run_path(
+                &gpu,
+                scene,
+                size,
+                &orbit(frame.center(), 2.0, frames),
+                accel,
+                kappa,
+            )?;
+            let default = accel_name == "default";
+            println!(
+                "\norbit, {} {:?} isovalue {:.4}, accelerations {accel_name}:",
+                scene.name, d.dims, scene.isovalue
+            );
+            let mut m = serde_json::Map::new();
+            for (k, t) in tracks.iter().enumerate() {
+                let s = t.summary(&tracks[0]);
+                println!("  {:6} {s}", names[k]);
+                if default && t.wrong.iter().any(|&w| w > 0.0) {
+                    exact_orbit[k] = false;
+                }
+                if default && scene.name == scenes[0].name {
+                    speed_ct[k] = s["speedup"].as_f64().unwrap_or(0.0);
+                }
+                if scene.name == scenes[0].name && k == 1 {
+                    if default {
+                        speedup_paper = s["speedup"].as_f64().unwrap_or(0.0);
+                        wrong_mean_paper = s["wrong_mean_pct"].as_f64().unwrap_or(0.0);
+                    } else {
+                        speedup_paper_brute = s["speedup"].as_f64().unwrap_or(0.0);
+                    }
+                }
+                m.insert(names[k].to_string(), s);
+            }
+            if let Some(l) = &last {
+                let c = class_share(l);
+                println!(
+                    "  paper, traversal classes of its last predicted frame (% of pixels): {c}"
+                );
+                m.insert("paper_classes_pct".into(), c);
+                if !classes_png.is_empty() && default && scene.name == scenes[0].name {
+                    save_classes(l, size, &classes_png)?;
+                    println!("  wrote {classes_png}");
+                }
+            }
+            orbit_fig.insert(format!("{}_{accel_name}", scene.name), json!(m));
+        }
+    }
+    fig.insert("orbit".into(), json!(orbit_fig));
+
+    // The failure path: the small ball slides in front of the large one for
+    // `moving` frames, then the camera stops.
+    let moving = 24;
+    let still = 15;
+    let occ = Scene {
+        name: "occluder",
+        vol: predict::occluder_scene(128),
+        isovalue: 0.5,
+    };
+    let d = occ.vol.desc();
+    let frame = VolumeFrame::centered(d.dims, d.spacing);
+    let cams: Vec<Camera> = (0..moving + still)
+        .map(|i| {
+            let yaw = -0.9 + 0.06 * i.min(moving - 1) as f32;
+            Camera::orbit(frame.center(), 2.2, yaw, 0.1)
+        })
+        .collect();
+    let (tracks, _) = run_path(&gpu, &occ, size, &cams, Accel::default(), kappa)?;
+    println!("\nfailure path (occluder; camera moves {moving} frames, then stops {still}):");
+    let mut fail = serde_json::Map::new();
+    for (k, t) in tracks.iter().enumerate() {
+        println!("  {:6} {}", names[k], t.summary(&tracks[0]));
+        let pct: Vec<String> = t
+            .wrong
+            .iter()
+            .map(|w| format!("{:.2}", 100.0 * w))
+            .collect();
+        println!("         wrong % per frame: {}", pct.join(" "));
+        fail.insert(names[k].to_string(), t.summary(&tracks[0]));
+    }
+    // Frames after the camera stopped until the paper's wrong pixels are gone.
+    let recovery = |t: &Track| {
+        t.wrong[moving..]
+            .iter()
+            .position(|&w| w == 0.0)
+            .map_or(json!(null), |p| json!(p))
+    };
+    let recovery_paper = recovery(&tracks[1]);
+    fail.insert("recovery_frames_paper".into(), recovery_paper.clone());
+    fig.insert("failure".into(), json!(fail));
+    let exact_fail: Vec<bool> = tracks
+        .iter()
+        .map(|t| t.wrong.iter().all(|&w| w == 0.0))
+        .collect();
+    if !chart.is_empty() {
+        crate::prediction_chart::draw(
+            &chart,
+            &names,
+            &tracks
+                .iter()
+                .map(|t| (t.ms.clone(), t.wrong.clone()))
+                .collect::<Vec<_>>(),
+            moving,
+        )?;
+        println!("wrote {chart}");
+    }
+    let wrong_max =
+        |k: usize| (tracks[k].wrong.iter().copied().fold(0.0, f64::max) * 1e4).round() / 1e2;
+
+    // Translation + zoom on the first scene: what reprojection keeps of the
+    // coherence that the paper's per-pixel prediction loses.
+    let scene = &scenes[0];
+    let d = scene.vol.desc();
+    let frame = VolumeFrame::centered(d.dims, d.spacing);
+    let c = frame.center();
+    let n = frames.min(60);
+    let cams: Vec<Camera> = (0..n)
+        .map(|i| {
+            let f = i as f32 / n as f32;
+            let mut cam = Camera::orbit(c, 2.4 - 0.8 * f, 0.5, 0.25);
+            let shift = Vec3::new(0.25 * f - 0.1, 0.1 * f, 0.0);
+            cam.eye += shift;
+            cam.target += shift;
+            cam
+        })
+        .collect();
+    let (tracks, _) = run_path(&gpu, scene, size, &cams, Accel::default(), kappa)?;
+    println!("\ntranslation + zoom, {} ({n} frames):", scene.name);
+    let mut tz = serde_json::Map::new();
+    for (k, t) in tracks.iter().enumerate() {
+        println!("  {:6} {}", names[k], t.summary(&tracks[0]));
+        tz.insert(names[k].to_string(), t.summary(&tracks[0]));
+    }
+    fig.insert("translate_zoom".into(), json!(tz));
+
+    // The fastest variant (on the first scene's orbit) whose wrong pixels stay
+    // at 0 on the orbits and the failure path; `full` itself is exact.
+    let best_exact = (0..names.len())
+        .filter(|&k| exact_orbit[k] && exact_fail[k])
+        .max_by(|&a, &b| speed_ct[a].total_cmp(&speed_ct[b]))
+        .unwrap_or(0);
+    println!(
+        "\nbest exact variant: {} ({}x)",
+        names[best_exact], speed_ct[best_exact]
+    );
+    fig.insert("size".into(), json!(size));
+    fig.insert("kappa".into(), json!(kappa));
+    fig.insert("frames".into(), json!(frames));
+    fig.insert("speedup_paper".into(), json!(speedup_paper));
+    fig.insert("speedup_paper_vs_brute".into(), json!(speedup_paper_brute));
+    fig.insert(
+        "wrong_pixels_mean_paper_orbit".into(),
+        json!(wrong_mean_paper),
+    );
+    fig.insert("speedup_best_exact".into(), json!(speed_ct[best_exact]));
+    fig.insert("best_exact".into(), json!(names[best_exact]));
+    fig.insert("wrong_pixels_max_paper".into(), json!(wrong_max(1)));
+    let guard = names
+        .iter()
+        .position(|n| *n == "guard")
+        .expect("a guard variant");
+    fig.insert("wrong_pixels_max_guarded".into(), json!(wrong_max(guard)));
+    fig.insert("recovery_frames_paper".into(), recovery_paper);
+    Ok(fig)
+}

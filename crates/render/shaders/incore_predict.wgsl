@@ -1,0 +1,231 @@
+// In-core traversals of the isosurface prediction buffer (predict.wgsl), after
+// incore.wgsl. Local hits lie on the full traversal's sample grid t0 + k dt, so
+// a local hit that is the first crossing has exactly the full traversal's
+// bracket and pixel. See docs/prediction.md.
+
+// The iso march from the ray start at step `dt` (the full traversal at
+// frame.dt, the sparse one at pred.sparse_dt), skipping macro cells below the
+// isovalue when `ess`: the in-core kernel's iso loop, with the step a parameter.
+fn iso_march(acc: ptr<function, Accum>, r: Ray, t0: f32, t1: f32, dt: f32, ess: bool) {
+    let inv_dir = safe_inverse(r.tex_dir);
+    let n = min(u32(ceil((t1 - t0) / dt)), frame.max_samples);
+    var k = 0u;
+    var k_cell = 0u;
+    loop {
+        if (k >= n) { break; }
+        let t = t0 + f32(k) * dt;
+        if (t >= t1) { break; }
+        let u = tex_at(r, t);
+        if (ess && k >= k_cell) {
+            // As the in-core kernel: a cell at skip distance d > 0 lies in an
+            // empty cube of side 2d - 1, skipped with one test.
+            let c = cell_of(u);
+            let d = cell_skip[cell_index(c)];
+            let k_exit = max(k + 1u, first_k_after(cell_exit(r, inv_dir, c, max(d, 1u)), t0, dt));
+            if (d > 0u) {
+                k = k_exit;
+                continue;
+            }
+            k_cell = k_exit;
+        }
+        let v = sample_value(u);
+        (*acc).samples = (*acc).samples + 1u;
+        if (v >= frame.isovalue) {
+            iso_bracket(acc, select(t - dt, t, k == 0u), t);
+            break;
+        }
+        k = k + 1u;
+    }
+}
+
+// Bisects a sparse bracket `pred.sparse_refine` times, so that the remaining
+// bracket is as long as a full traversal's before `finish_ray` refines it.
+fn sparse_refine(acc: ptr<function, Accum>, r: Ray) {
+    var a = (*acc).hit_a;
+    var b = (*acc).hit_b;
+    let steps = select(0u, pred.sparse_refine, b > a);
+    for (var i = 0u; i < steps; i = i + 1u) {
+        let m = 0.5 * (a + b);
+        (*acc).samples = (*acc).samples + 1u;
+        if (sample_value(tex_at(r, m)) >= frame.isovalue) {
+            b = m;
+        } else {
+            a = m;
+        }
+    }
+    (*acc).hit_a = a;
+    (*acc).hit_b = b;
+}
+
+// The sparse traversal: a march at the coarse step from the ray start, its
+// bracket bisected down to the full step's length. With the guard it marches
+// at the full step instead (with skipping, which never changes the result): a
+// coarse step can pass over a thin or grazing crossing the full traversal
+// finds, so only the full step keeps the guarded variant exact.
+fn sparse_traversal(acc: ptr<function, Accum>, r: Ray, t0: f32, t1: f32) {
+    if (GUARD) {
+        iso_march(acc, r, t0, t1, frame.dt, ESS || SPARSE_ESS);
+        return;
+    }
+    iso_march(acc, r, t0, t1, pred.sparse_dt, SPARSE_ESS);
+    if ((*acc).hit) {
+        sparse_refine(acc, r);
+    }
+}
+
+// The local traversal: from the full-step sample nearest the prediction `tp`,
+// alternately one step back and one step forward (back only when that sample
+// is inside the surface), until two neighbouring
+// samples bracket an entering crossing (below, then at or above the isovalue)
+// or `pred.local_steps` steps each way are spent. True when found (the bracket
+// is in `acc`).
+fn local_traversal(acc: ptr<function, Accum>, r: Ray, t0: f32, t1: f32, tp: f32) -> bool {
+    let dt = frame.dt;
+    let n = min(u32(ceil((t1 - t0) / dt)), frame.max_samples);
+    if (n == 0u) {
+        return false;
+    }
+    let kp = u32(clamp(round((tp - t0) / dt), 0.0, f32(n - 1u)));
+    let inside_p = sample_value(tex_at(r, t0 + f32(kp) * dt)) >= frame.isovalue;
+    (*acc).samples = (*acc).samples + 1u;
+    var kb = kp;
+    var in_b = inside_p;
+    var kf = kp;
+    var in_f = inside_p;
+    let steps = min(pred.local_steps, n);
+    for (var i = 0u; i < steps; i = i + 1u) {
+        // One step back.
+        if (kb > 0u) {
+            let k = kb - 1u;
+            let t = t0 + f32(k) * dt;
+            let inside = sample_value(tex_at(r, t)) >= frame.isovalue;
+            (*acc).samples = (*acc).samples + 1u;
+            if (in_b && !inside) {
+                iso_bracket(acc, t, t + dt);
+                return true;
+            }
+            kb = k;
+            in_b = inside;
+        } else if (in_b) {
+            // The first sample is inside: a capped cut, as the full traversal.
+            iso_bracket(acc, t0, t0);
+            return true;
+        }
+        // One step forward, only from a predicted sample below the isovalue:
+        // from one at or above it, an entering crossing ahead lies behind an
+        // exit from the surface, so it is never the ray's first.
+        let t = t0 + f32(kf + 1u) * dt;
+        if (!inside_p && kf + 1u < n && t < t1) {
+            let inside = sample_value(tex_at(r, t)) >= frame.isovalue;
+            (*acc).samples = (*acc).samples + 1u;
+            if (inside && !in_f) {
+                iso_bracket(acc, t - dt, t);
+                return true;
+            }
+            kf = kf + 1u;
+            in_f = inside;
+        }
+    }
+    return false;
+}
+
+// The first-hit guard: can a sample of the full traversal in front of the
+// local hit (upper sample k_hit) reach the isovalue? Walks the macro cells from
+// the ray start; every cell before the hit's own must lie below the isovalue
+// (else 0: the guard rejects the hit); the hit's own cell is sampled at the
+// full step up to the hit, and an earlier crossing found there replaces the
+// bracket (exactly the full traversal's). 1: the hit is the first crossing.
+// The cell walk's range reads are counted as samples.
+fn guard_first_hit(acc: ptr<function, Accum>, r: Ray, t0: f32) -> bool {
+    let dt = frame.dt;
+    let inv_dir = safe_inverse(r.tex_dir);
+    let t_hit = (*acc).hit_b;
+    let k_hit = u32(max(round((t_hit - t0) / dt), 0.0));
+    let c_hit = cell_of(tex_at(r, t_hit));
+    var k = 0u;
+    loop {
+        if (k >= k_hit) { break; }
+        let t = t0 + f32(k) * dt;
+        let c = cell_of(tex_at(r, t));
+        let k_exit = max(k + 1u, first_k_after(cell_exit(r, inv_dir, c, 1u), t0, dt));
+        if (all(c == c_hit)) {
+            let k_end = min(k_exit, k_hit);
+            for (var j = k; j < k_end; j = j + 1u) {
+                let tj = t0 + f32(j) * dt;
+                (*acc).samples = (*acc).samples + 1u;
+                if (sample_value(tex_at(r, tj)) >= frame.isovalue) {
+                    iso_bracket(acc, select(tj - dt, tj, j == 0u), tj);
+                    return true;
+                }
+            }
+            k = k_end;
+            continue;
+        }
+        (*acc).samples = (*acc).samples + 1u;
+        if (cell_range(c).y >= frame.isovalue) {
+            return false;
+        }
+        k = k_exit;
+    }
+    return true;
+}
+
+// One pixel of the iso mode with prediction: picks the traversal from last
+// frame's entry, traverses, writes this frame's entry and the pixel's class.
+fn predict_ray(px: vec2<u32>, start: RayStart) {
+    let r = start.r;
+    let t0 = start.t0;
+    let t1 = start.t1;
+    let p = pred_pixel(px);
+    // Entries are distances from the eye (t is from the near plane, which moves
+    // with the near distance).
+    let eye_offset = frame.near / r.dist_per_t;
+    let last = pred_last(p);
+    var acc = accum_new();
+    let cur = Cursor(r);
+    var kind = TRAVERSAL_NONE;
+    if (t1 > t0) {
+        // The refresh flag is mixed with the pixel's entry (never a branch on a
+        // uniform alone; see common.wgsl).
+        let refresh = pred.refresh != 0u;
+        // No information means a cleared history (full traversal), or with
+        // reprojection a hole of the warp (sparse traversal).
+        let full = refresh || (last == PRED_NO_INFO && pred.reprojected == 0u);
+        let local = !full && pred_is_hit(last);
+        if (full) {
+            kind = TRAVERSAL_FULL;
+            iso_march(&acc, r, t0, t1, frame.dt, ESS);
+        } else if (local) {
+            kind = TRAVERSAL_LOCAL;
+            let tp = pred_decode_hit(last) - eye_offset;
+            var ok = local_traversal(&acc, r, t0, t1, tp);
+            if (!ok) {
+                kind = TRAVERSAL_LOCAL_MISSED;
+                acc = accum_new();
+                sparse_traversal(&acc, r, t0, t1);
+            } else if (GUARD) {
+                if (!guard_first_hit(&acc, r, t0)) {
+                    // Something in front may hold the isovalue: the full march,
+                    // so the guarded result is the full traversal's.
+                    kind = TRAVERSAL_GUARD_REJECTED;
+                    let spent = acc.samples;
+                    acc = accum_new();
+                    acc.samples = spent;
+                    iso_march(&acc, r, t0, t1, frame.dt, ESS);
+                }
+            }
+        } else {
+            // Missed the surface (or the box, and the ray now enters it; or a
+            // hole of the reprojection).
+            kind = TRAVERSAL_SPARSE;
+            sparse_traversal(&acc, r, t0, t1);
+        }
+    }
+    var entry = select(PRED_MISS_SURFACE, PRED_MISS_BOX, t1 <= t0);
+    if (acc.hit) {
+        entry = pred_encode_hit(acc.hit_b + eye_offset);
+    }
+    pred_buf[pred.write_off + p] = entry;
+    pred_buf[pred.class_off + p] = kind;
+    finish_ray(px, &acc, cur, r, start.host);
+}
