@@ -1,7 +1,7 @@
 //! The brick octree store of brickray (issue #3).
 //!
 //! * [`build`] / [`build_file`]: a streaming, parallel, memory-bounded builder that
-//!   reads any [`brickray_core::VolumeReader`] and writes one store file
+//!   reads any [`brickray_io::VolumeReader`] and writes one store file
 //!   (temporary name, renamed when complete; never over one of its inputs or
 //!   a non-regular file); [`remove_partial_files`] removes the temporaries of
 //!   builds in progress (for signal handlers);

@@ -10,8 +10,8 @@
 //! On SIGINT, SIGTERM or SIGHUP a build removes its temporary files, then dies
 //! of the signal.
 
-use brickray_core::io::ReadOptions;
 use brickray_core::{BrickSource, NodeKind};
+use brickray_io::ReadOptions;
 use brickray_store::{BuildOptions, Filter, Store, StoreError};
 use clap::{Parser, Subcommand};
 use rayon::prelude::*;
@@ -173,7 +173,7 @@ fn cmd_build(
 ) -> Result<(), String> {
     let output = out.display();
     let mut reader =
-        brickray_core::io::open_with(input, read).map_err(|e| StoreError::Input(e).to_string())?;
+        brickray_io::open_with(input, read).map_err(|e| StoreError::Input(e).to_string())?;
     let r = brickray_store::build(reader.as_mut(), out, o).map_err(|e| e.to_string())?;
     println!(
         "built {output}: {} levels, {} nodes ({} data, {} uniform, {} empty), {:.1} MiB from {:.1} MiB in {:.2} s ({:.1} Mvoxel/s)",

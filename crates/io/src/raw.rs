@@ -4,7 +4,7 @@ use super::{
     IoError, MAX_HEADER, ReadOptions, VolumeReader, check_slab, open_regular, resolve_data_file,
     scan_stream,
 };
-use crate::volume::{DType, VolumeDesc};
+use brickray_core::volume::{DType, VolumeDesc};
 use std::fs::File;
 use std::io::{Read, Seek, SeekFrom};
 use std::path::{Path, PathBuf};
@@ -96,7 +96,7 @@ impl RawReader {
             ));
         }
         let dims64 = [sc.dims[0], sc.dims[1], sc.dims[2]];
-        crate::volume::voxel_count(dims64).map_err(|e| IoError::volume(json, e))?;
+        brickray_core::volume::voxel_count(dims64).map_err(|e| IoError::volume(json, e))?;
         let dims = dims64.map(|d| d as u32);
         let dtype = DType::parse(&sc.dtype).ok_or_else(|| IoError::UnknownDType {
             path: json.to_owned(),
@@ -181,6 +181,10 @@ impl VolumeReader for RawReader {
         &self.desc
     }
 
+    fn format(&self) -> &'static str {
+        "raw"
+    }
+
     fn path(&self) -> &Path {
         &self.path
     }
@@ -210,4 +214,38 @@ impl VolumeReader for RawReader {
             }
         })
     }
+}
+
+/// The raw + JSON sidecar format: `.json`, or a `.raw` beside its sidecar.
+#[derive(Debug)]
+struct RawFormat;
+
+impl crate::Format for RawFormat {
+    fn name(&self) -> &'static str {
+        "raw"
+    }
+    fn expects(&self) -> &'static str {
+        ".json sidecar, or .raw beside one"
+    }
+    fn claims(&self, probe: &crate::Probe) -> crate::Claim {
+        match probe.ext.as_str() {
+            "json" | "raw" => crate::Claim::ByName,
+            _ => crate::Claim::No,
+        }
+    }
+    fn open(&self, path: &Path, opts: &ReadOptions) -> Result<Box<dyn VolumeReader>, IoError> {
+        let json = if path
+            .extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("raw"))
+        {
+            path.with_extension("json")
+        } else {
+            path.to_owned()
+        };
+        Ok(Box::new(RawReader::open_sidecar_with(&json, opts)?))
+    }
+}
+
+pub(crate) fn register(r: &mut crate::Registry) {
+    r.register(std::sync::Arc::new(RawFormat));
 }
