@@ -313,7 +313,7 @@ impl std::fmt::Display for FileKind {
 /// multi-part input to read. The default is strict and reads the default part
 /// (the largest DICOM series, the finest OME-Zarr level, the first channel and
 /// time point).
-#[derive(Debug, Clone, Default, PartialEq, Eq)]
+#[derive(Debug, Clone, Default, PartialEq)]
 #[non_exhaustive]
 pub struct ReadOptions {
     /// Let a sidecar's `file`, a NRRD header's `data file` or a NIfTI header's
@@ -330,6 +330,9 @@ pub struct ReadOptions {
     pub channel: Option<u64>,
     /// The time point of a time series; `None`: the first.
     pub time: Option<u64>,
+    /// The voxel spacing to use where the file states none (a plain TIFF);
+    /// `None`: 1, 1, 1 there. Formats that state a spacing keep theirs.
+    pub spacing: Option<[f32; 3]>,
 }
 
 impl ReadOptions {
@@ -351,6 +354,11 @@ impl ReadOptions {
     /// Sets [`ReadOptions::channel`].
     pub fn channel(mut self, channel: Option<u64>) -> ReadOptions {
         self.channel = channel;
+        self
+    }
+    /// Sets [`ReadOptions::spacing`].
+    pub fn spacing(mut self, spacing: Option<[f32; 3]>) -> ReadOptions {
+        self.spacing = spacing;
         self
     }
     /// Sets [`ReadOptions::time`].

@@ -350,10 +350,11 @@ impl ByteStream {
             let len = f.metadata().map(|m| m.len()).unwrap_or(0);
             return r.map_err(|e| self.map_err(e, len.saturating_sub(self.offset)));
         }
+        // gzip: decoded positions count from the stream's start (header
+        // included, for a .nii.gz), so the offset is skipped by decoding
+        let start = self.offset + start;
         if self.gz.as_ref().is_none_or(|(_, pos)| *pos > start) {
-            let mut f = crate::open_regular(&self.path)?;
-            f.seek(SeekFrom::Start(self.offset))
-                .map_err(|e| crate::IoError::io(&self.path, e))?;
+            let f = crate::open_regular(&self.path)?;
             self.gz = Some((
                 flate2::read::GzDecoder::new(std::io::BufReader::new(f)),
                 0,
@@ -362,18 +363,18 @@ impl ByteStream {
         let (mut gz, mut pos) = self.gz.take().expect("set above");
         let skip = start - pos;
         let copied = std::io::copy(&mut gz.by_ref().take(skip), &mut std::io::sink())
-            .map_err(|e| self.map_err(e, pos))?;
+            .map_err(|e| self.map_err(e, pos.saturating_sub(self.offset)))?;
         pos += copied;
         if copied < skip {
-            return Err(self.truncated(pos));
+            return Err(self.truncated(pos.saturating_sub(self.offset)));
         }
         let mut filled = 0;
         while filled < out.len() {
             match gz.read(&mut out[filled..]) {
-                Ok(0) => return Err(self.truncated(pos + filled as u64)),
+                Ok(0) => return Err(self.truncated(pos + filled as u64 - self.offset)),
                 Ok(n) => filled += n,
                 Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
-                Err(e) => return Err(self.map_err(e, pos + filled as u64)),
+                Err(e) => return Err(self.map_err(e, pos + filled as u64 - self.offset)),
             }
         }
         self.gz = Some((gz, pos + filled as u64));
