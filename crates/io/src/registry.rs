@@ -15,6 +15,9 @@ use std::sync::{Arc, LazyLock};
 pub enum Claim {
     /// Not this format.
     No,
+    /// Possibly this format, when no other claims it (a folder that may hold
+    /// DICOM files).
+    Fallback,
     /// The content looks like this format (magic bytes, a folder's files).
     ByContent,
     /// The name says so (its extension).
