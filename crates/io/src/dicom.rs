@@ -104,8 +104,7 @@ fn read_header(file: &Path) -> Result<Option<SliceHeader>, IoError> {
             return Err(dec_err(file, e));
         }
     };
-    let (Some(rows), Some(cols)) = (get_u32(&obj, tags::ROWS), get_u32(&obj, tags::COLUMNS))
-    else {
+    let (Some(rows), Some(cols)) = (get_u32(&obj, tags::ROWS), get_u32(&obj, tags::COLUMNS)) else {
         return Ok(None);
     };
     let bad = |msg: &str| IoError::header(file, msg.to_owned());
@@ -151,7 +150,11 @@ fn read_header(file: &Path) -> Result<Option<SliceHeader>, IoError> {
             .and_then(|v| v.first().copied())
             .filter(|s| s.is_finite())
             .unwrap_or(0.0),
-        ts: obj.meta().transfer_syntax().trim_end_matches('\0').to_owned(),
+        ts: obj
+            .meta()
+            .transfer_syntax()
+            .trim_end_matches('\0')
+            .to_owned(),
     }))
 }
 
@@ -346,8 +349,13 @@ impl DicomReader {
                     file: h.file.clone(),
                     msg: format!(
                         "{}x{} {}-bit slice in a series of {}x{} {}-bit slices ({})",
-                        h.cols, h.rows, h.bits_allocated, first.cols, first.rows,
-                        first.bits_allocated, first.file.display()
+                        h.cols,
+                        h.rows,
+                        h.bits_allocated,
+                        first.cols,
+                        first.rows,
+                        first.bits_allocated,
+                        first.file.display()
                     ),
                 });
             }
@@ -423,7 +431,10 @@ impl DicomReader {
             }
             let total = dot(sub(slices[n - 1].position, slices[0].position), normal);
             slice_step = total / (n - 1) as f64;
-            let spread = gaps.iter().map(|g| (g - slice_step).abs()).fold(0.0, f64::max);
+            let spread = gaps
+                .iter()
+                .map(|g| (g - slice_step).abs())
+                .fold(0.0, f64::max);
             if spread > 0.01 * slice_step {
                 notes.push(format!(
                     "non-uniform slice spacing: gaps from {:.4} to {:.4} mm; the mean {slice_step:.4} mm is used",
@@ -510,7 +521,8 @@ impl DicomReader {
         let dst = if same_rescale {
             SampleConverter::choose(src, false, first.slope, first.inter, Some([lo, hi])).dst
         } else {
-            r.notes.push("RescaleSlope/Intercept vary per slice: stored as f32".into());
+            r.notes
+                .push("RescaleSlope/Intercept vary per slice: stored as f32".into());
             brickray_core::DType::F32
         };
         for c in &mut r.convs {

@@ -215,7 +215,11 @@ pub enum IoError {
 }
 
 impl IoError {
-    pub(crate) fn decode(path: &Path, format: &'static str, msg: impl std::fmt::Display) -> IoError {
+    pub(crate) fn decode(
+        path: &Path,
+        format: &'static str,
+        msg: impl std::fmt::Display,
+    ) -> IoError {
         IoError::Decode {
             path: path.to_owned(),
             format,

@@ -127,7 +127,12 @@ impl NiftiHeader {
             let single_file = match magic {
                 b"n+1\0" => true,
                 b"ni1\0" => false,
-                _ => return Err(IoError::header(path, format!("bad NIfTI-1 magic {magic:?}"))),
+                _ => {
+                    return Err(IoError::header(
+                        path,
+                        format!("bad NIfTI-1 magic {magic:?}"),
+                    ));
+                }
             };
             let mut dim = [0i64; 8];
             let mut pixdim = [0f64; 8];
@@ -170,7 +175,12 @@ impl NiftiHeader {
             let single_file = match &magic[..4] {
                 b"n+2\0" => true,
                 b"ni2\0" => false,
-                _ => return Err(IoError::header(path, format!("bad NIfTI-2 magic {magic:?}"))),
+                _ => {
+                    return Err(IoError::header(
+                        path,
+                        format!("bad NIfTI-2 magic {magic:?}"),
+                    ));
+                }
             };
             let mut dim = [0i64; 8];
             let mut pixdim = [0f64; 8];
@@ -242,7 +252,10 @@ impl NiftiHeader {
         if self.bitpix != bits {
             return Err(IoError::header(
                 path,
-                format!("bitpix {} does not match datatype {}", self.bitpix, self.datatype),
+                format!(
+                    "bitpix {} does not match datatype {}",
+                    self.bitpix, self.datatype
+                ),
             ));
         }
         Ok(t)
@@ -371,7 +384,10 @@ impl NiftiReader {
         if d[4..].iter().any(|&v| v > 1) {
             return Err(IoError::unsupported(
                 &header_path,
-                format!("a 5D+ NIfTI (dim {:?}): vectors or tensors per voxel", &d[..ndim as usize]),
+                format!(
+                    "a 5D+ NIfTI (dim {:?}): vectors or tensors per voxel",
+                    &d[..ndim as usize]
+                ),
             ));
         }
         let dims64 = [d[0] as u64, d[1] as u64, d[2] as u64];
@@ -389,9 +405,17 @@ impl NiftiReader {
         }
         let mut spacing = [0f32; 3];
         for i in 0..3 {
-            let p = if i < ndim as usize { h.pixdim[i + 1].abs() } else { 1.0 };
+            let p = if i < ndim as usize {
+                h.pixdim[i + 1].abs()
+            } else {
+                1.0
+            };
             if !(p.is_finite() && p > 0.0) {
-                return Err(bad(format!("pixdim[{}] is {}, not a voxel size", i + 1, h.pixdim[i + 1])));
+                return Err(bad(format!(
+                    "pixdim[{}] is {}, not a voxel size",
+                    i + 1,
+                    h.pixdim[i + 1]
+                )));
             }
             spacing[i] = p as f32;
         }
@@ -404,7 +428,10 @@ impl NiftiReader {
             return Err(bad(format!("scl_inter is {inter}")));
         }
         let (data_path, offset) = if h.single_file {
-            if header_path.extension().is_some_and(|e| e.eq_ignore_ascii_case("hdr")) {
+            if header_path
+                .extension()
+                .is_some_and(|e| e.eq_ignore_ascii_case("hdr"))
+            {
                 return Err(bad("a .hdr with the single-file magic n+1/n+2".into()));
             }
             let off = h.vox_offset;
@@ -443,7 +470,8 @@ impl NiftiReader {
             spacing,
             value_range: desc_range(range),
         };
-        desc.validate().map_err(|e| IoError::volume(&header_path, e))?;
+        desc.validate()
+            .map_err(|e| IoError::volume(&header_path, e))?;
         Ok(NiftiReader {
             path: header_path,
             data_path,
@@ -468,7 +496,11 @@ impl VolumeReader for NiftiReader {
     }
 
     fn format(&self) -> &'static str {
-        if self.header.version == 1 { "NIfTI-1" } else { "NIfTI-2" }
+        if self.header.version == 1 {
+            "NIfTI-1"
+        } else {
+            "NIfTI-2"
+        }
     }
 
     fn path(&self) -> &Path {

@@ -255,25 +255,47 @@ mod tests {
 
     #[test]
     fn ct_rescale_gives_exact_i16() {
-        let c = SampleConverter::choose(SourceType::U16, false, 1.0, -1024.0, Some([-1024.0, 3000.0]));
+        let c = SampleConverter::choose(
+            SourceType::U16,
+            false,
+            1.0,
+            -1024.0,
+            Some([-1024.0, 3000.0]),
+        );
         assert_eq!(c.dst, DType::I16);
-        let src: Vec<u8> = [0u16, 1024, 4024].iter().flat_map(|v| v.to_le_bytes()).collect();
+        let src: Vec<u8> = [0u16, 1024, 4024]
+            .iter()
+            .flat_map(|v| v.to_le_bytes())
+            .collect();
         let mut out = vec![0u8; 6];
         c.convert(&src, &mut out);
-        let got: Vec<i16> = out.chunks(2).map(|c| i16::from_le_bytes([c[0], c[1]])).collect();
+        let got: Vec<i16> = out
+            .chunks(2)
+            .map(|c| i16::from_le_bytes([c[0], c[1]]))
+            .collect();
         assert_eq!(got, [-1024, 0, 3000]);
     }
 
     #[test]
     fn targets_follow_the_rules() {
-        let t = |src, slope, inter, range| SampleConverter::choose(src, true, slope, inter, range).dst;
+        let t =
+            |src, slope, inter, range| SampleConverter::choose(src, true, slope, inter, range).dst;
         assert_eq!(t(SourceType::U8, 1.0, 0.0, None), DType::U8);
         assert_eq!(t(SourceType::I8, 1.0, 0.0, None), DType::I16);
         assert_eq!(t(SourceType::F64, 1.0, 0.0, None), DType::F32);
-        assert_eq!(t(SourceType::I32, 1.0, 0.0, Some([-5.0, 70000.0])), DType::F32);
-        assert_eq!(t(SourceType::U32, 1.0, 0.0, Some([0.0, 60000.0])), DType::U16);
+        assert_eq!(
+            t(SourceType::I32, 1.0, 0.0, Some([-5.0, 70000.0])),
+            DType::F32
+        );
+        assert_eq!(
+            t(SourceType::U32, 1.0, 0.0, Some([0.0, 60000.0])),
+            DType::U16
+        );
         assert_eq!(t(SourceType::U16, 0.5, 0.0, Some([0.0, 1.0])), DType::F32);
-        assert_eq!(t(SourceType::U16, 2.0, 0.0, Some([0.0, 100000.0])), DType::F32);
+        assert_eq!(
+            t(SourceType::U16, 2.0, 0.0, Some([0.0, 100000.0])),
+            DType::F32
+        );
     }
 
     #[test]
@@ -297,17 +319,15 @@ pub(crate) struct ByteStream {
     total: u64,
     gzip: bool,
     plain: Option<std::fs::File>,
-    gz: Option<(flate2::read::GzDecoder<std::io::BufReader<std::fs::File>>, u64)>,
+    gz: Option<(
+        flate2::read::GzDecoder<std::io::BufReader<std::fs::File>>,
+        u64,
+    )>,
 }
 
 impl ByteStream {
     /// The stream of `total` bytes at `offset` in `path` (decoded bytes for gzip).
-    pub(crate) fn new(
-        path: &std::path::Path,
-        offset: u64,
-        total: u64,
-        gzip: bool,
-    ) -> ByteStream {
+    pub(crate) fn new(path: &std::path::Path, offset: u64, total: u64, gzip: bool) -> ByteStream {
         ByteStream {
             path: path.to_owned(),
             offset,
@@ -355,10 +375,7 @@ impl ByteStream {
         let start = self.offset + start;
         if self.gz.as_ref().is_none_or(|(_, pos)| *pos > start) {
             let f = crate::open_regular(&self.path)?;
-            self.gz = Some((
-                flate2::read::GzDecoder::new(std::io::BufReader::new(f)),
-                0,
-            ));
+            self.gz = Some((flate2::read::GzDecoder::new(std::io::BufReader::new(f)), 0));
         }
         let (mut gz, mut pos) = self.gz.take().expect("set above");
         let skip = start - pos;

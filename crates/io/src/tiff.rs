@@ -200,7 +200,10 @@ fn parse_description(desc: &str, xres: Option<f64>, yres: Option<f64>) -> Option
 }
 
 fn rational(d: &mut Dec, tag: Tag) -> Option<f64> {
-    d.find_tag(tag).ok().flatten().and_then(|v| v.into_f64().ok())
+    d.find_tag(tag)
+        .ok()
+        .flatten()
+        .and_then(|v| v.into_f64().ok())
 }
 
 /// Where slice `z` lives: a file and its page.
@@ -398,7 +401,11 @@ impl TiffReader {
         }
         decode_page(file, d, &mut self.buf)?;
         if self.buf.len() != wh.0 as usize * wh.1 as usize * src.size() {
-            return Err(IoError::decode(file, "TIFF", "page decoded to the wrong size"));
+            return Err(IoError::decode(
+                file,
+                "TIFF",
+                "page decoded to the wrong size",
+            ));
         }
         Ok(s.file)
     }
@@ -426,7 +433,15 @@ fn list_tiffs(dir: &Path) -> Result<Vec<PathBuf>, IoError> {
                 .is_some_and(|e| e.eq_ignore_ascii_case("tif") || e.eq_ignore_ascii_case("tiff"))
                 && p.is_file()
         })
-        .map(|p| (p.file_name().unwrap_or_default().to_string_lossy().into_owned(), p))
+        .map(|p| {
+            (
+                p.file_name()
+                    .unwrap_or_default()
+                    .to_string_lossy()
+                    .into_owned(),
+                p,
+            )
+        })
         .collect();
     if names.is_empty() {
         return Err(IoError::UnknownFormat {
@@ -494,7 +509,11 @@ impl Format for TiffFormat {
                         })
                     })
                 });
-                if has_tiff { Claim::ByContent } else { Claim::No }
+                if has_tiff {
+                    Claim::ByContent
+                } else {
+                    Claim::No
+                }
             }
             _ if probe.head.starts_with(b"II*\0")
                 || probe.head.starts_with(b"MM\0*")
@@ -524,9 +543,16 @@ mod tests {
 
     #[test]
     fn natural_order() {
-        let mut v = vec!["s10.tif", "s2.tif", "s1.tif", "s02.tif", "a.tif", "s100.tif"];
+        let mut v = vec![
+            "s10.tif", "s2.tif", "s1.tif", "s02.tif", "a.tif", "s100.tif",
+        ];
         v.sort_by(|a, b| natural_cmp(a, b));
-        assert_eq!(v, ["a.tif", "s1.tif", "s02.tif", "s2.tif", "s10.tif", "s100.tif"]);
+        assert_eq!(
+            v,
+            [
+                "a.tif", "s1.tif", "s02.tif", "s2.tif", "s10.tif", "s100.tif"
+            ]
+        );
     }
 
     #[test]
