@@ -82,10 +82,130 @@ fn get_u32(obj: &DefaultDicomObject, tag: Tag) -> Option<u32> {
         .and_then(|e| e.to_int::<u32>().ok())
 }
 
+/// Checks that no element length in a DICOM file (up to and including the
+/// pixel data's) runs past the end of the file, walking the element headers
+/// (meta group explicit VR little endian; the data set implicit or explicit
+/// VR little endian; sequences and items are descended into). A forged
+/// length would otherwise make the parser allocate and zero up to 4 GiB.
+/// Files with the DICM magic only; other files are left to the parser.
+fn check_lengths(file: &Path, b: &[u8]) -> Result<Option<u32>, IoError> {
+    if b.len() < 132 || &b[128..132] != b"DICM" {
+        return Ok(None);
+    }
+    let implicit_ds = meta_transfer_syntax(b).as_deref() == Some("1.2.840.10008.1.2");
+    if meta_transfer_syntax(b).is_some_and(|u| u.starts_with("1.2.840.10008.1.2.1.99")) {
+        return Ok(None); // deflated: the data set is not walkable here
+    }
+    let bad = |at: usize, len: u64| IoError::Truncated {
+        path: file.to_owned(),
+        expected: at as u64 + len,
+        actual: b.len() as u64,
+    };
+    let mut i = 132;
+    while i + 8 <= b.len() {
+        let group = u16::from_le_bytes([b[i], b[i + 1]]);
+        let elem = u16::from_le_bytes([b[i + 2], b[i + 3]]);
+        let explicit = group == 0x0002 || !implicit_ds;
+        let (len, head) = if group == 0xFFFE {
+            // item and delimiters: always a 4-byte length
+            (
+                u32::from_le_bytes([b[i + 4], b[i + 5], b[i + 6], b[i + 7]]),
+                8,
+            )
+        } else if explicit {
+            let vr = [b[i + 4], b[i + 5]];
+            const VRS: [&[u8; 2]; 34] = [
+                b"AE", b"AS", b"AT", b"CS", b"DA", b"DS", b"DT", b"FL", b"FD", b"IS", b"LO", b"LT",
+                b"OB", b"OD", b"OF", b"OL", b"OV", b"OW", b"PN", b"SH", b"SL", b"SQ", b"SS", b"ST",
+                b"SV", b"TM", b"UC", b"UI", b"UL", b"UN", b"UR", b"US", b"UT", b"UV",
+            ];
+            if !VRS.contains(&&vr) {
+                return Err(IoError::header(
+                    file,
+                    format!(
+                        "unknown value representation {:?} at byte {i}",
+                        String::from_utf8_lossy(&vr)
+                    ),
+                ));
+            }
+            let long = matches!(
+                &vr,
+                b"OB"
+                    | b"OW"
+                    | b"OF"
+                    | b"SQ"
+                    | b"UT"
+                    | b"UN"
+                    | b"OD"
+                    | b"OL"
+                    | b"OV"
+                    | b"SV"
+                    | b"UV"
+                    | b"UC"
+                    | b"UR"
+            );
+            if long {
+                if i + 12 > b.len() {
+                    return Err(bad(i, 12));
+                }
+                (
+                    u32::from_le_bytes([b[i + 8], b[i + 9], b[i + 10], b[i + 11]]),
+                    12,
+                )
+            } else {
+                (u16::from_le_bytes([b[i + 6], b[i + 7]]) as u32, 8)
+            }
+        } else {
+            (
+                u32::from_le_bytes([b[i + 4], b[i + 5], b[i + 6], b[i + 7]]),
+                8,
+            )
+        };
+        let body = i + head;
+        let is_sq = explicit && group != 0xFFFE && &b[i + 4..i + 6] == b"SQ";
+        if len == u32::MAX || is_sq || (group == 0xFFFE && elem == 0xE000) {
+            // undefined length, a sequence or an item: walk into it (its
+            // content is elements or items whose lengths are checked in turn)
+            if len != u32::MAX && body as u64 + len as u64 > b.len() as u64 {
+                return Err(bad(body, len as u64));
+            }
+            i = body;
+            continue;
+        }
+        if body as u64 + len as u64 > b.len() as u64 {
+            return Err(bad(body, len as u64));
+        }
+        if group == 0x7FE0 && elem == 0x0010 {
+            return Ok(Some(len));
+        }
+        i = body + len as usize;
+    }
+    Ok(None)
+}
+
 /// Reads one file's header (up to the pixel data). `Ok(None)`: not a DICOM
 /// image (no pixel geometry): skipped.
 fn read_header(file: &Path) -> Result<Option<SliceHeader>, IoError> {
-    crate::regular_file_metadata(file)?;
+    let md = crate::regular_file_metadata(file)?;
+    if md.len() < 132 {
+        return Ok(None);
+    }
+    // Only DICOM Part 10 files (preamble, "DICM", meta group) are read: their
+    // transfer syntax is checked, then every element length, before the
+    // parser sees them.
+    let bytes = std::fs::read(file).map_err(|e| IoError::io(file, e))?;
+    if &bytes[128..132] != b"DICM" {
+        return Ok(None);
+    }
+    let Some(ts) = meta_transfer_syntax(&bytes) else {
+        return Err(IoError::header(
+            file,
+            "no TransferSyntaxUID in the file meta group",
+        ));
+    };
+    check_syntax(file, &ts)?;
+    check_lengths(file, &bytes)?;
+    drop(bytes);
     let obj = match OpenFileOptions::new()
         .read_until(tags::PIXEL_DATA)
         .open_file(file)
@@ -549,12 +669,33 @@ impl DicomReader {
     /// bits above BitsStored masked or sign-extended).
     fn decode(&mut self, z: usize) -> Result<(), IoError> {
         let h = &self.slices[z];
+        let bytes = std::fs::read(&h.file).map_err(|e| IoError::io(&h.file, e))?;
+        let pixel_len = check_lengths(&h.file, &bytes)?;
+        drop(bytes);
+        let want = h.rows as u64 * h.cols as u64 * (h.bits_allocated as u64).div_ceil(8);
+        // native (unencapsulated) pixel data must hold the whole image before
+        // a decoder allocates for it; no slice is larger than 2^28 pixels
+        if h.rows as u64 * h.cols as u64 > 1 << 28 {
+            return Err(IoError::header(
+                &h.file,
+                format!("{}x{} pixels per slice", h.cols, h.rows),
+            ));
+        }
+        if let Some(len) = pixel_len.filter(|&l| l != u32::MAX)
+            && (len as u64) < want
+        {
+            return Err(IoError::Truncated {
+                path: h.file.clone(),
+                expected: want,
+                actual: len as u64,
+            });
+        }
         let obj = dicom_object::open_file(&h.file).map_err(|e| dec_err(&h.file, e))?;
         let ts = obj.meta().transfer_syntax().trim_end_matches('\0');
         check_syntax(&h.file, ts)?;
         let px = obj.decode_pixel_data().map_err(|e| dec_err(&h.file, e))?;
         let data = px.frame_data(0).map_err(|e| dec_err(&h.file, e))?;
-        let want = h.rows as usize * h.cols as usize * (h.bits_allocated as usize / 8);
+        let want = want as usize;
         if data.len() != want {
             return Err(IoError::Truncated {
                 path: h.file.clone(),
