@@ -7,6 +7,7 @@
 
 mod accel;
 mod build;
+mod formats;
 mod ooc;
 mod soak;
 mod u8;
@@ -34,11 +35,12 @@ fn main() -> ExitCode {
     let result: Result<Figures, String> = match suite {
         "accel" => accel::run(rest),
         "build" => build::run(rest),
+        "formats" => formats::run(rest),
         "ooc" => ooc::run(rest),
         "soak" => soak::run(rest),
         "u8" => u8::run(rest),
         _ => {
-            eprintln!("usage: brickray-bench <accel|build|ooc|soak|u8> [options]");
+            eprintln!("usage: brickray-bench <accel|build|formats|ooc|soak|u8> [options]");
             return ExitCode::from(2);
         }
     };

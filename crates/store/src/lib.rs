@@ -18,6 +18,7 @@
 //! [`BrickSource`]: brickray_core::BrickSource
 
 mod build;
+mod convert;
 mod error;
 pub mod format;
 mod partial;
@@ -25,7 +26,8 @@ mod procedural;
 mod reader;
 mod sample;
 
-pub use build::{BuildOptions, BuildReport, build, build_file};
+pub use build::{BuildOptions, BuildReport, build, build_file, check_output};
+pub use convert::{ConvertReport, convert};
 pub use error::{Mismatch, StoreError};
 pub use partial::remove_partial_files;
 pub use procedural::ProceduralSource;

@@ -363,7 +363,7 @@ pub fn build(
 
 /// Refuses an output that exists and is not a regular file, or that is one of
 /// the build's input files (by file identity).
-fn check_output(out: &Path, inputs: &[PathBuf]) -> Result<(), StoreError> {
+pub fn check_output(out: &Path, inputs: &[PathBuf]) -> Result<(), StoreError> {
     let md = match std::fs::metadata(out) {
         Ok(md) => md,
         // Nothing there yet (or a dangling link, which the rename replaces).
