@@ -353,6 +353,8 @@ fn read_head(path: &Path, n: u64) -> Result<Vec<u8>, IoError> {
 }
 
 impl NiftiReader {
+    // dims, pixdim and spacing are indexed together by axis
+    #[allow(clippy::needless_range_loop)]
     /// Opens a `.nii`, `.nii.gz`, `.hdr` (with its `.img`) or `.img` (with its
     /// `.hdr`). Scans the data once (bounded memory) for its value range and
     /// for NaN/Inf, which also proves that it is all there.

@@ -399,6 +399,9 @@ impl ByteStream {
     }
 }
 
+/// Reads source bytes at a decoded position into a buffer.
+pub(crate) type SlabRead<'a> = dyn FnMut(u64, &mut [u8]) -> Result<(), crate::IoError> + 'a;
+
 /// One bounded-memory pass over `n` samples of `conv.src` read through
 /// `read(start, buf)`: the rescaled min..max, or the volume error for the first
 /// non-finite sample (voxel coordinates in `dims`).
@@ -406,7 +409,7 @@ pub(crate) fn scan_converted(
     path: &std::path::Path,
     conv: &SampleConverter,
     dims: [u32; 3],
-    read: &mut dyn FnMut(u64, &mut [u8]) -> Result<(), crate::IoError>,
+    read: &mut SlabRead<'_>,
 ) -> Result<[f64; 2], crate::IoError> {
     const CHUNK: u64 = 1 << 20;
     let size = conv.src.size() as u64;

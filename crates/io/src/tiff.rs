@@ -229,6 +229,7 @@ pub struct TiffReader {
 }
 
 impl TiffReader {
+    #[allow(clippy::needless_range_loop)]
     /// Opens a multi-page TIFF or a folder of single-page TIFFs (`.tif`,
     /// `.tiff`, natural name order). Decodes every slice once (one at a time)
     /// for the value range and to prove the data whole.

@@ -12,6 +12,7 @@ use std::path::Path;
 use tempfile::TempDir;
 
 #[test]
+#[allow(clippy::needless_range_loop)]
 fn nifti_fixture_decodes_with_its_affine() {
     let Some(dir) = formats_dir() else { return };
     let t = truth("pycortex_s1_t1_mri");
@@ -49,6 +50,7 @@ fn nifti_fixture_decodes_with_its_affine() {
 // ---------------------------------------------------------------------------
 // Synthesized NIfTI files.
 
+#[allow(clippy::too_many_arguments)]
 /// A NIfTI header (version 1 or 2) for `dims` of `datatype`, either byte order.
 fn nifti_header(
     version: u8,
