@@ -25,7 +25,7 @@ fuzz_target!(|data: &[u8]| {
     for name in ["f.nrrd", "f.nhdr"] {
         let p = dir.join(name);
         std::fs::write(&p, data).expect("write the input");
-        if let Ok(v) = brickray_core::io::read_volume(&p) {
+        if let Ok(v) = brickray_io::read_volume(&p) {
             common::check_volume(&v);
         }
     }

@@ -24,7 +24,7 @@ fuzz_target!(|data: &[u8]| {
     }
     let json = dir.join("s.json");
     std::fs::write(&json, data).expect("write the input");
-    if let Ok(v) = brickray_core::io::read_volume(&json) {
+    if let Ok(v) = brickray_io::read_volume(&json) {
         common::check_volume(&v);
     }
 });

@@ -47,7 +47,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         .unwrap_or(512);
     let path = brickray_harness::shared_volume("invesalius_cranium_ct")
         .ok_or("the accel suite needs ../shared/data/invesalius_cranium_ct")?;
-    let vol: Volume = brickray_core::io::read_volume(&path).map_err(|e| e.to_string())?;
+    let vol: Volume = brickray_io::read_volume(&path).map_err(|e| e.to_string())?;
     let gpu = GpuContext::new().map_err(|e| e.to_string())?;
     println!("adapter: {}", gpu.describe());
     let d = vol.desc();

@@ -7,6 +7,7 @@
 
 mod accel;
 mod build;
+mod formats;
 mod ooc;
 mod prediction;
 mod prediction_chart;
@@ -61,6 +62,16 @@ enum Suite {
         /// Keep the stores built.
         #[arg(long)]
         keep: bool,
+    },
+    /// Store build throughput and memory from each input format (the shared
+    /// format fixtures).
+    Formats {
+        /// The builder's memory bound, MiB (default 8).
+        #[arg(long)]
+        memory_mib: Option<u64>,
+        /// Best of this many builds (default 3).
+        #[arg(long)]
+        rounds: Option<u64>,
     },
     /// Out of core vs in core, output sensitivity, a camera path.
     Ooc {
@@ -152,6 +163,7 @@ fn main() -> ExitCode {
     let result: Result<Figures, String> = match cli.suite {
         Suite::Accel { .. } => accel::run(rest),
         Suite::Build { .. } => build::run(rest),
+        Suite::Formats { .. } => formats::run(rest),
         Suite::Ooc { .. } => ooc::run(rest),
         Suite::Prediction { .. } => prediction::run(rest),
         Suite::Raw { .. } => raw::run(rest),

@@ -253,7 +253,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
     );
     let mut scenes = Vec::new();
     if let Some(p) = brickray_harness::shared_volume("invesalius_cranium_ct") {
-        let vol = brickray_core::io::read_volume(&p).map_err(|e| e.to_string())?;
+        let vol = brickray_io::read_volume(&p).map_err(|e| e.to_string())?;
         scenes.push(Scene {
             name: "head_ct",
             vol,
@@ -263,7 +263,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         println!("head CT absent: skipped");
     }
     if let Some(p) = brickray_harness::shared_volume("pycortex_s1_t1_mri") {
-        let vol = brickray_core::io::read_volume(&p).map_err(|e| e.to_string())?;
+        let vol = brickray_io::read_volume(&p).map_err(|e| e.to_string())?;
         scenes.push(Scene {
             name: "mri",
             vol,

@@ -26,7 +26,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
     let rounds: usize = arg(args, "--rounds", 5)?;
     let path = brickray_harness::shared_volume("pycortex_s1_t1_mri")
         .ok_or("the u8 suite needs ../shared/data/pycortex_s1_t1_mri")?;
-    let vol = brickray_core::io::read_volume(&path).map_err(|e| e.to_string())?;
+    let vol = brickray_io::read_volume(&path).map_err(|e| e.to_string())?;
     let gpu = GpuContext::new().map_err(|e| e.to_string())?;
     println!("adapter: {}", gpu.describe());
     println!(

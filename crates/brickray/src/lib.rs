@@ -2,7 +2,9 @@
 //! GPU ray casting.
 //!
 //! This facade re-exports the public API of the workspace's crates:
-//! * [`core`]: volumes and their readers, transfer functions, cameras, settings;
+//! * [`core`]: volumes, transfer functions, cameras, settings;
+//! * [`io`]: volume input: the `VolumeReader` seam, the format registry and the
+//!   readers (raw + JSON, NRRD, NIfTI, TIFF, DICOM, OME-Zarr);
 //! * [`store`]: the brick-octree file format, its builder and reader, and the
 //!   procedural source of virtual volumes;
 //! * [`cache`]: CPU and GPU brick caches, the asynchronous loader, refinement;
@@ -15,13 +17,14 @@
 pub use brickray_cache as cache;
 pub use brickray_core as core;
 pub use brickray_index as index;
+pub use brickray_io as io;
 pub use brickray_render as render;
 pub use brickray_store as store;
 
 pub use brickray_core::{
     Accel, Camera, CameraError, ClipBox, DType, DepthConvention, FrameError, Projection,
     RenderMode, RenderSettings, SettingsError, Shading, TfError, TransferFunction, Volume,
-    VolumeDesc, VolumeFrame, io,
+    VolumeDesc, VolumeFrame,
 };
 pub use brickray_core::{BrickSource, NodeKey, OctreeLayout};
 pub use brickray_render::{

@@ -2,7 +2,6 @@
 //!
 //! * [`volume`]: scalar volumes in memory ([`Volume`]), their sample types and
 //!   value ranges;
-//! * [`io`]: the [`VolumeReader`] trait and the raw + JSON sidecar and NRRD readers;
 //! * [`tf`]: 1D RGBA transfer functions and the opacity prefix-sum table that
 //!   answers "is the value range `[min, max]` transparent?" in O(1);
 //! * [`brick`]: the brick-octree vocabulary (node keys, layout, [`BrickSource`]);
@@ -16,7 +15,6 @@
 
 pub mod brick;
 pub mod camera;
-pub mod io;
 pub mod macrocell;
 pub mod settings;
 pub mod synthetic;
@@ -32,7 +30,6 @@ pub use camera::{
     Camera, CameraError, DepthConvention, DepthMap, FrameError, Projection, Ray, RayGen,
     VolumeFrame,
 };
-pub use io::{IoError, VolumeReader, read_volume};
 pub use macrocell::{MacroCellGrid, sub_cell_ranges, sub_cells_per_axis};
 pub use settings::{Accel, ClipBox, RenderMode, RenderSettings, SettingsError, Shading};
 pub use texel::{SampleEncoding, TexelCaps, TexelFormat, U8Filtering};

@@ -210,7 +210,7 @@ pub fn store_of(
     vol: &brickray_core::Volume,
     path: &std::path::Path,
 ) -> std::sync::Arc<dyn brickray_core::BrickSource> {
-    let mut reader = brickray_core::io::MemoryReader::new(vol.clone(), "memory");
+    let mut reader = brickray_io::MemoryReader::new(vol.clone(), "memory");
     brickray_store::build(&mut reader, path, &brickray_store::BuildOptions::default())
         .expect("build the brick store");
     std::sync::Arc::new(brickray_store::open(path).expect("open the brick store"))

@@ -1,7 +1,8 @@
 //! The store's error type.
 
-use brickray_core::io::FileKind;
-use brickray_core::{BrickError, IoError, NodeKey};
+use brickray_core::{BrickError, NodeKey};
+use brickray_io::FileKind;
+use brickray_io::IoError;
 use std::path::PathBuf;
 use thiserror::Error;
 

@@ -1,7 +1,7 @@
 //! The brick octree store of brickray (issue #3).
 //!
 //! * [`build`] / [`build_file`]: a streaming, parallel, memory-bounded builder that
-//!   reads any [`brickray_core::VolumeReader`] and writes one store file
+//!   reads any [`brickray_io::VolumeReader`] and writes one store file
 //!   (temporary name, renamed when complete; never over one of its inputs or
 //!   a non-regular file); [`remove_partial_files`] removes the temporaries of
 //!   builds in progress (for signal handlers);
@@ -18,6 +18,7 @@
 //! [`BrickSource`]: brickray_core::BrickSource
 
 mod build;
+mod convert;
 mod error;
 pub mod format;
 mod partial;
@@ -25,7 +26,8 @@ mod procedural;
 mod reader;
 mod sample;
 
-pub use build::{BuildOptions, BuildReport, build, build_file};
+pub use build::{BuildOptions, BuildReport, build, build_file, check_output};
+pub use convert::{ConvertReport, convert};
 pub use error::{Mismatch, StoreError};
 pub use partial::remove_partial_files;
 pub use procedural::ProceduralSource;

@@ -8,10 +8,10 @@ use crate::format::{
     filter_from_code,
 };
 use crate::sample::{fill, first_nan, representable, stats_dyn};
-use brickray_core::io::FileKind;
 use brickray_core::{
     BrickError, BrickSource, NodeInfo, NodeKey, NodeKind, OctreeLayout, VolumeDesc,
 };
+use brickray_io::FileKind;
 use std::fs::File;
 use std::os::unix::fs::FileExt;
 use std::path::{Path, PathBuf};

@@ -90,10 +90,19 @@ fn build_then_info() {
         brickray_store::open(&neg).unwrap().empty_below(),
         Some(-500.0)
     );
-    // Errors: a message and a failure status, never a panic.
-    let bad = Command::new(exe)
+    // An input volume (here the raw file) is described as an input.
+    let input = Command::new(exe)
         .args(["info"])
         .arg(dir.path().join("v.raw"))
+        .output()
+        .unwrap();
+    assert!(input.status.success());
+    assert!(String::from_utf8_lossy(&input.stdout).contains("input "));
+    // Errors: a message and a failure status, never a panic.
+    std::fs::write(dir.path().join("junk.bin"), [b'x'; 200]).unwrap();
+    let bad = Command::new(exe)
+        .args(["info"])
+        .arg(dir.path().join("junk.bin"))
         .output()
         .unwrap();
     assert!(!bad.status.success());
@@ -103,4 +112,68 @@ fn build_then_info() {
         .output()
         .unwrap();
     assert!(!bad.status.success());
+}
+
+/// `convert` writes raw + JSON for inputs in other formats (the shared
+/// fixtures), voxel for voxel, and `info` lists an input's parts.
+#[test]
+fn convert_and_info_read_every_format() {
+    let Some(root) = shared_formats_dir() else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let bin = env!("CARGO_BIN_EXE_brickray-store");
+    for (input, raw, name) in [
+        ("nifti/pycortex_s1_t1.nii.gz", "pycortex_s1_t1_mri", "nifti"),
+        ("dicom/cranium_ct", "invesalius_cranium_ct", "dicom"),
+        ("ome-zarr/cryoet_tomo_v04.ome.zarr", "cryoet_tomo", "zarr"),
+        ("tiff_slices/cryoet_tomo", "cryoet_tomo", "tiff"),
+    ] {
+        let out = dir.path().join(format!("{name}.json"));
+        let st = std::process::Command::new(bin)
+            .args(["convert"])
+            .arg(root.join(input))
+            .arg(&out)
+            .output()
+            .unwrap();
+        assert!(
+            st.status.success(),
+            "{name}: {}",
+            String::from_utf8_lossy(&st.stderr)
+        );
+        let want = std::fs::read(root.join("..").join(raw).join(format!("{raw}.raw"))).unwrap();
+        let got = std::fs::read(out.with_extension("raw")).unwrap();
+        assert!(
+            got == want,
+            "{name}: converted samples differ from {raw}.raw"
+        );
+        let sc: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+        assert!(sc["original_format"].is_string(), "{name}: {sc}");
+    }
+    let info = std::process::Command::new(bin)
+        .arg("info")
+        .arg(root.join("ome-zarr/pycortex_s1_t1_v05.ome.zarr"))
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&info.stdout);
+    assert!(info.status.success() && text.contains("OME-Zarr"), "{text}");
+    assert!(
+        text.lines().filter(|l| l.starts_with("level")).count() >= 3,
+        "{text}"
+    );
+}
+
+fn shared_formats_dir() -> Option<std::path::PathBuf> {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/formats");
+    if dir.is_dir() {
+        return Some(dir);
+    }
+    assert!(
+        std::env::var("CI").as_deref() != Ok("true"),
+        "CI=true but the shared data directory {} is missing",
+        dir.display()
+    );
+    eprintln!("skipping: shared data not found at {}", dir.display());
+    None
 }

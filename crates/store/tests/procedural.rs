@@ -3,7 +3,8 @@
 
 mod common;
 
-use brickray_core::{BrickSource, DType, NodeKey, NodeKind, VolumeReader};
+use brickray_core::{BrickSource, DType, NodeKey, NodeKind};
+use brickray_io::VolumeReader;
 use brickray_store::{BuildOptions, Filter, ProceduralSource, StoreError, build, open};
 use common::*;
 

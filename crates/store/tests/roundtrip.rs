@@ -296,7 +296,7 @@ fn shared_data_volumes_round_trip() {
         let json = dir.join(name).join(format!("{name}.json"));
         let out = tmp.path().join(format!("{name}.brick"));
         let report = brickray_store::build_file(&json, &out, &BuildOptions::default()).unwrap();
-        let vol = brickray_core::read_volume(&json).unwrap();
+        let vol = brickray_io::read_volume(&json).unwrap();
         let store = open(&out).unwrap();
         assert_eq!(store.desc(), vol.desc());
         let levels = reference_levels(

@@ -546,7 +546,7 @@ fn cli_reads_outside_the_sidecars_folder_only_when_asked() {
     assert!(matches!(
         build_file(&json, &top.path().join("w.brs"), &small_opts()),
         Err(brickray_store::StoreError::Input(
-            brickray_core::IoError::OutsideDir { .. }
+            brickray_io::IoError::OutsideDir { .. }
         ))
     ));
 }

@@ -104,7 +104,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
 fn part_a(gpu: &GpuContext, size: u32, rounds: usize, fig: &mut Figures) -> Result<(), String> {
     let path = brickray_harness::shared_volume("invesalius_cranium_ct")
         .ok_or("the ooc suite needs ../shared/data/invesalius_cranium_ct")?;
-    let vol: Volume = brickray_core::io::read_volume(&path).map_err(|e| e.to_string())?;
+    let vol: Volume = brickray_io::read_volume(&path).map_err(|e| e.to_string())?;
     let d = vol.desc().clone();
     println!(
         "\n(a) finest level out of core vs in core: head CT {:?} {} spacing {:?}",
@@ -115,7 +115,7 @@ fn part_a(gpu: &GpuContext, size: u32, rounds: usize, fig: &mut Figures) -> Resu
     let dir = tempfile::tempdir().map_err(|e| e.to_string())?;
     let store_path = dir.path().join("head.brs");
     let t = Instant::now();
-    let mut reader = brickray_core::io::MemoryReader::new(vol.clone(), "memory");
+    let mut reader = brickray_io::MemoryReader::new(vol.clone(), "memory");
     brickray_store::build(
         &mut reader,
         &store_path,

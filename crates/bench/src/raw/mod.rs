@@ -105,7 +105,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
     let only: String = arg(args, "--modes", "dvr,dvr_shaded,iso,mip".to_string())?;
     let path = brickray_harness::shared_volume("pycortex_s1_t1_mri")
         .ok_or("the raw suite needs ../shared/data/pycortex_s1_t1_mri")?;
-    let vol = brickray_core::io::read_volume(&path).map_err(|e| e.to_string())?;
+    let vol = brickray_io::read_volume(&path).map_err(|e| e.to_string())?;
     let gpu = GpuContext::new().map_err(|e| e.to_string())?;
     println!("adapter: {}", gpu.describe());
     let d = vol.desc().clone();

@@ -1,17 +1,23 @@
 //! `brickray-store`: build a brick octree store from a volume, or describe one.
 //!
 //! ```text
-//! brickray-store build <input.json|.raw|.nrrd|.nhdr> <out.brs> [--brick N] [--apron N]
+//! brickray-store build <input> <out.brs> [--brick N] [--apron N]
 //!                      [--filter average|max] [--empty-below V] [--memory-mib N]
-//!                      [--allow-outside-dir] [--quiet]
-//! brickray-store info <store.brs> [--bins N]
+//!                      [--series UID|N] [--level N] [--channel N] [--time N]
+//!                      [--spacing X,Y,Z] [--allow-outside-dir] [--quiet]
+//! brickray-store info <store.brs | input> [--bins N]
+//! brickray-store convert <input> <out.json> [--memory-mib N] [selection as for build]
 //! ```
+//!
+//! An input is any format `brickray_io::open` reads: raw + JSON, NRRD, NIfTI,
+//! TIFF (a stack or a folder of slices), DICOM (a folder) or OME-Zarr. `info`
+//! on an input lists its series, levels, channels and time points.
 //!
 //! On SIGINT, SIGTERM or SIGHUP a build removes its temporary files, then dies
 //! of the signal.
 
-use brickray_core::io::ReadOptions;
 use brickray_core::{BrickSource, NodeKind};
+use brickray_io::ReadOptions;
 use brickray_store::{BuildOptions, Filter, Store, StoreError};
 use clap::{Parser, Subcommand};
 use rayon::prelude::*;
@@ -29,9 +35,11 @@ struct Cli {
 
 #[derive(Debug, Subcommand)]
 enum Command {
-    /// Build a store from raw + JSON sidecar or NRRD.
+    /// Build a store from a volume in any format brickray reads.
     Build {
-        /// The input volume (.json, .raw with a .json sidecar, .nrrd, .nhdr).
+        /// The input volume: .json / .raw + sidecar, .nrrd / .nhdr, .nii /
+        /// .nii.gz / .hdr, .tif (or a folder of slices), a DICOM folder, an
+        /// OME-Zarr folder.
         input: PathBuf,
         /// The store to write (by convention `.brs`).
         output: PathBuf,
@@ -52,23 +60,88 @@ enum Command {
         #[arg(long, default_value_t = 1024,
               value_parser = clap::value_parser!(u64).range(1..=MAX_MEMORY_MIB))]
         memory_mib: u64,
-        /// Let the sidecar's `file` or the NRRD `data file` name a file outside
-        /// the header's folder (absolute paths, `..`, links leading out).
-        #[arg(long)]
-        allow_outside_dir: bool,
+        #[command(flatten)]
+        select: Select,
         /// No progress bar.
         #[arg(long)]
         quiet: bool,
     },
-    /// Describe a store: levels, bricks, empty and uniform fractions, compression,
-    /// value histogram.
+    /// Write any input as raw samples + a JSON sidecar (`<out>.json` and
+    /// `<out>.raw`), streamed within the memory bound.
+    Convert {
+        /// The input volume (as for `build`).
+        input: PathBuf,
+        /// The sidecar to write; the raw file goes beside it.
+        output: PathBuf,
+        /// Upper bound on the slab buffer, in MiB.
+        #[arg(long, default_value_t = 256,
+              value_parser = clap::value_parser!(u64).range(1..=MAX_MEMORY_MIB))]
+        memory_mib: u64,
+        #[command(flatten)]
+        select: Select,
+    },
+    /// Describe a store (levels, bricks, empty and uniform fractions,
+    /// compression, value histogram) or an input volume (format, size,
+    /// placement, and its series, levels, channels and time points).
     Info {
-        /// The store.
+        /// The store, or an input volume.
         store: PathBuf,
+        #[command(flatten)]
+        select: Select,
         /// Histogram bins.
         #[arg(long, default_value_t = 16)]
         bins: usize,
     },
+}
+
+/// What to read from an input, and how.
+#[derive(Debug, clap::Args)]
+struct Select {
+    /// DICOM: the series to read (its SeriesInstanceUID, or its number in
+    /// `info`'s list); default: the one with the most slices.
+    #[arg(long)]
+    series: Option<String>,
+    /// OME-Zarr: the multiscale level (0 = finest).
+    #[arg(long)]
+    level: Option<usize>,
+    /// The channel (OME-Zarr, multi-channel TIFF); default 0.
+    #[arg(long)]
+    channel: Option<u64>,
+    /// The time point (OME-Zarr, TIFF, 4D NIfTI); default 0.
+    #[arg(long)]
+    time: Option<u64>,
+    /// Voxel spacing `x,y,z` for inputs that state none (a plain TIFF).
+    #[arg(long, value_parser = parse_spacing)]
+    spacing: Option<[f32; 3]>,
+    /// Let the sidecar's `file`, the NRRD `data file` or a NIfTI `.img` name a
+    /// file outside the header's folder (absolute paths, `..`, links leading
+    /// out).
+    #[arg(long)]
+    allow_outside_dir: bool,
+}
+
+impl Select {
+    fn options(&self) -> ReadOptions {
+        ReadOptions::default()
+            .allow_outside_dir(self.allow_outside_dir)
+            .series(self.series.clone())
+            .level(self.level)
+            .channel(self.channel)
+            .time(self.time)
+            .spacing(self.spacing)
+    }
+}
+
+fn parse_spacing(v: &str) -> Result<[f32; 3], String> {
+    let p: Vec<f32> = v
+        .split(',')
+        .map(|t| t.trim().parse::<f32>())
+        .collect::<Result<_, _>>()
+        .map_err(|e| format!("{v:?}: {e}"))?;
+    match p.as_slice() {
+        [x, y, z] if p.iter().all(|s| s.is_finite() && *s > 0.0) => Ok([*x, *y, *z]),
+        _ => Err(format!("expected three positive numbers x,y,z, got {v:?}")),
+    }
 }
 
 /// Set by the signal thread before it removes the build's temporaries.
@@ -91,7 +164,7 @@ fn main() -> ExitCode {
             filter,
             empty_below,
             memory_mib,
-            allow_outside_dir,
+            select,
             quiet,
         } => remove_temporaries_on_signals().and_then(|()| {
             let memory_bound = memory_mib.checked_mul(1 << 20).ok_or_else(|| {
@@ -109,10 +182,26 @@ fn main() -> ExitCode {
                 memory_bound,
                 progress: !quiet,
             };
-            let read = ReadOptions::default().allow_outside_dir(allow_outside_dir);
-            cmd_build(&input, &output, &o, &read)
+            cmd_build(&input, &output, &o, &select.options())
         }),
-        Command::Info { store, bins } => cmd_info(&store, bins.clamp(1, 4096)),
+        Command::Convert {
+            input,
+            output,
+            memory_mib,
+            select,
+        } => cmd_convert(&input, &output, memory_mib << 20, &select.options()),
+        Command::Info {
+            store,
+            bins,
+            select,
+        } => {
+            // A path a volume format claims is an input; anything else a store.
+            if brickray_io::Registry::global().find(&store).is_ok() {
+                cmd_info_input(&store, &select.options())
+            } else {
+                cmd_info(&store, bins.clamp(1, 4096))
+            }
+        }
     };
     match r {
         Ok(()) => ExitCode::SUCCESS,
@@ -174,7 +263,12 @@ fn cmd_build(
 ) -> Result<(), String> {
     let output = out.display();
     let mut reader =
-        brickray_core::io::open_with(input, read).map_err(|e| StoreError::Input(e).to_string())?;
+        brickray_io::open_with(input, read).map_err(|e| StoreError::Input(e).to_string())?;
+    if o.progress {
+        for n in reader.notes() {
+            eprintln!("{}: {n}", reader.format());
+        }
+    }
     let r = brickray_store::build(reader.as_mut(), out, o).map_err(|e| e.to_string())?;
     println!(
         "built {output}: {} levels, {} nodes ({} data, {} uniform, {} empty), {:.1} MiB from {:.1} MiB in {:.2} s ({:.1} Mvoxel/s)",
@@ -188,6 +282,64 @@ fn cmd_build(
         r.seconds,
         r.input_voxels as f64 / r.seconds / 1e6
     );
+    Ok(())
+}
+
+fn cmd_convert(
+    input: &std::path::Path,
+    out: &std::path::Path,
+    memory_bound: u64,
+    read: &ReadOptions,
+) -> Result<(), String> {
+    let mut reader =
+        brickray_io::open_with(input, read).map_err(|e| StoreError::Input(e).to_string())?;
+    let r =
+        brickray_store::convert(reader.as_mut(), out, memory_bound).map_err(|e| e.to_string())?;
+    println!(
+        "converted {} ({}) to {} + {}: {:.1} MiB in {:.2} s, slabs of {} slices",
+        input.display(),
+        reader.format(),
+        r.json.display(),
+        r.raw.display(),
+        r.bytes as f64 / (1 << 20) as f64,
+        r.seconds,
+        r.slab
+    );
+    Ok(())
+}
+
+fn cmd_info_input(input: &std::path::Path, read: &ReadOptions) -> Result<(), String> {
+    let reader =
+        brickray_io::open_with(input, read).map_err(|e| StoreError::Input(e).to_string())?;
+    let d = reader.desc();
+    println!("input       {} ({})", input.display(), reader.format());
+    println!(
+        "volume      {}x{}x{} {}, spacing {:?}, value range {:?}",
+        d.dims[0],
+        d.dims[1],
+        d.dims[2],
+        d.dtype.name(),
+        d.spacing,
+        d.value_range
+    );
+    if let Some(p) = reader.placement() {
+        println!("placement   voxel to world ({}):", p.space);
+        for row in &p.affine[..3] {
+            println!(
+                "              [{:>10.4} {:>10.4} {:>10.4} {:>10.4}]",
+                row[0], row[1], row[2], row[3]
+            );
+        }
+    }
+    println!("files       {}", reader.input_files().len());
+    for n in reader.notes() {
+        println!("note        {n}");
+    }
+    let entries = brickray_io::list(input, read).map_err(|e| StoreError::Input(e).to_string())?;
+    for e in entries {
+        let mark = if e.default { "*" } else { " " };
+        println!("{:<11} {mark} {}  {}", e.kind.to_string(), e.id, e.summary);
+    }
     Ok(())
 }
 

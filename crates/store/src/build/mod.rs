@@ -25,8 +25,9 @@ use crate::format::{
 };
 use crate::partial::{PartialFile, parent_dir, remove_stale};
 use crate::{Filter, NO_ENTRY_LEVEL};
-use brickray_core::io::FileKind;
-use brickray_core::{OctreeLayout, VolumeReader};
+use brickray_core::OctreeLayout;
+use brickray_io::FileKind;
+use brickray_io::VolumeReader;
 use std::io::{BufWriter, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -99,13 +100,13 @@ pub struct BuildReport {
 }
 
 /// Builds a store at `out` from the volume file at `input` (any format
-/// `brickray_core::io::open` reads, with its default, strict options).
+/// `brickray_io::open` reads, with its default, strict options).
 pub fn build_file(
     input: &Path,
     out: &Path,
     opts: &BuildOptions,
 ) -> Result<BuildReport, StoreError> {
-    let mut reader = brickray_core::io::open(input)?;
+    let mut reader = brickray_io::open(input)?;
     build(reader.as_mut(), out, opts)
 }
 
@@ -235,7 +236,7 @@ pub fn build(
     // y-bands (several passes over the input), writing the level `top - 1`
     // volume to a temporary file that becomes the next input.
     let mut top = top;
-    let mut owned: Option<brickray_core::io::RawReader> = None;
+    let mut owned: Option<brickray_io::RawReader> = None;
     let mut _level_file: Option<PartialFile> = None;
     let mut cur_plan = first_plan;
     let mut banded = 0u8;
@@ -271,7 +272,7 @@ pub fn build(
                     dims: pdims,
                     ..layout.volume.clone()
                 };
-                owned = Some(brickray_core::io::RawReader::new(f.path(), 0, pdesc)?);
+                owned = Some(brickray_io::RawReader::new(f.path(), 0, pdesc)?);
                 _level_file = Some(f);
                 top -= 1;
                 banded += 1;
@@ -362,7 +363,7 @@ pub fn build(
 
 /// Refuses an output that exists and is not a regular file, or that is one of
 /// the build's input files (by file identity).
-fn check_output(out: &Path, inputs: &[PathBuf]) -> Result<(), StoreError> {
+pub fn check_output(out: &Path, inputs: &[PathBuf]) -> Result<(), StoreError> {
     let md = match std::fs::metadata(out) {
         Ok(md) => md,
         // Nothing there yet (or a dangling link, which the rename replaces).

@@ -1,7 +1,8 @@
 //! Test helpers: an in-memory reader, a naive reference pyramid and a checker.
 #![allow(dead_code, unreachable_pub, missing_docs)]
 
-use brickray_core::{BrickSource, DType, IoError, NodeKey, NodeKind, VolumeDesc, VolumeReader};
+use brickray_core::{BrickSource, DType, NodeKey, NodeKind, VolumeDesc};
+use brickray_io::{IoError, VolumeReader};
 use brickray_store::Filter;
 use std::path::{Path, PathBuf};
 

@@ -2,8 +2,8 @@
 //! both formats, and checks of what a reader returns.
 #![allow(dead_code)]
 
-use brickray_core::io::{self, IoError};
 use brickray_core::{DType, Volume};
+use brickray_io::{self as io, IoError};
 use flate2::Compression;
 use flate2::write::GzEncoder;
 use std::io::Write;

@@ -4,7 +4,7 @@ use super::{
     IoError, MAX_HEADER, ReadOptions, VolumeReader, check_slab, open_regular, resolve_data_file,
     scan_stream,
 };
-use crate::volume::{DType, VolumeDesc};
+use brickray_core::volume::{DType, VolumeDesc};
 use std::fs::File;
 use std::io::{Read, Seek, SeekFrom};
 use std::path::{Path, PathBuf};
@@ -24,14 +24,16 @@ pub struct RawReader {
 struct Sidecar {
     dims: Vec<u64>,
     dtype: String,
+    // f64, narrowed below: 1e39 becomes infinity (a typed spacing error)
+    // whatever serde_json's features (some make f32 out of range a parse error)
     #[serde(default)]
-    spacing: Option<Vec<f32>>,
+    spacing: Option<Vec<f64>>,
     #[serde(default)]
     file: Option<String>,
     #[serde(default)]
     byte_order: Option<String>,
     #[serde(default)]
-    value_range: Option<Vec<f32>>,
+    value_range: Option<Vec<f64>>,
 }
 
 impl RawReader {
@@ -89,6 +91,14 @@ impl RawReader {
             String::from_utf8(bytes).map_err(|_| IoError::header(json, "sidecar is not UTF-8"))?;
         let sc: Sidecar =
             serde_json::from_str(&text).map_err(|e| IoError::header(json, e.to_string()))?;
+        let spacing_f32 = sc
+            .spacing
+            .as_ref()
+            .map(|v| v.iter().map(|&x| x as f32).collect::<Vec<f32>>());
+        let range_f32 = sc
+            .value_range
+            .as_ref()
+            .map(|v| v.iter().map(|&x| x as f32).collect::<Vec<f32>>());
         if sc.dims.len() != 3 {
             return Err(IoError::header(
                 json,
@@ -96,7 +106,7 @@ impl RawReader {
             ));
         }
         let dims64 = [sc.dims[0], sc.dims[1], sc.dims[2]];
-        crate::volume::voxel_count(dims64).map_err(|e| IoError::volume(json, e))?;
+        brickray_core::volume::voxel_count(dims64).map_err(|e| IoError::volume(json, e))?;
         let dims = dims64.map(|d| d as u32);
         let dtype = DType::parse(&sc.dtype).ok_or_else(|| IoError::UnknownDType {
             path: json.to_owned(),
@@ -111,7 +121,7 @@ impl RawReader {
                 what: format!("byte_order {order:?} (only little-endian)"),
             });
         }
-        let spacing = match sc.spacing.as_deref() {
+        let spacing = match spacing_f32.as_deref() {
             None => [1.0; 3],
             Some([a, b, c]) => [*a, *b, *c],
             Some(s) => {
@@ -128,8 +138,7 @@ impl RawReader {
                 resolve_data_file(json, Path::new(name.file_name().unwrap_or_default()), opts)?
             }
         };
-        if let Some(&v) = sc
-            .value_range
+        if let Some(&v) = range_f32
             .as_deref()
             .and_then(|r| r.iter().find(|v| !v.is_finite()))
         {
@@ -139,7 +148,7 @@ impl RawReader {
                 value: v,
             });
         }
-        let declared = match sc.value_range.as_deref() {
+        let declared = match range_f32.as_deref() {
             Some([lo, hi]) if lo.is_finite() && hi.is_finite() && hi > lo => Some([*lo, *hi]),
             Some(r) => {
                 return Err(IoError::header(
@@ -181,6 +190,10 @@ impl VolumeReader for RawReader {
         &self.desc
     }
 
+    fn format(&self) -> &'static str {
+        "raw"
+    }
+
     fn path(&self) -> &Path {
         &self.path
     }
@@ -210,4 +223,38 @@ impl VolumeReader for RawReader {
             }
         })
     }
+}
+
+/// The raw + JSON sidecar format: `.json`, or a `.raw` beside its sidecar.
+#[derive(Debug)]
+struct RawFormat;
+
+impl crate::Format for RawFormat {
+    fn name(&self) -> &'static str {
+        "raw"
+    }
+    fn expects(&self) -> &'static str {
+        ".json sidecar, or .raw beside one"
+    }
+    fn claims(&self, probe: &crate::Probe) -> crate::Claim {
+        match probe.ext.as_str() {
+            "json" | "raw" => crate::Claim::ByName,
+            _ => crate::Claim::No,
+        }
+    }
+    fn open(&self, path: &Path, opts: &ReadOptions) -> Result<Box<dyn VolumeReader>, IoError> {
+        let json = if path
+            .extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("raw"))
+        {
+            path.with_extension("json")
+        } else {
+            path.to_owned()
+        };
+        Ok(Box::new(RawReader::open_sidecar_with(&json, opts)?))
+    }
+}
+
+pub(crate) fn register(r: &mut crate::Registry) {
+    r.register(std::sync::Arc::new(RawFormat));
 }

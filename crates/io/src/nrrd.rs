@@ -5,7 +5,7 @@ use super::{
     IoError, MAX_HEADER, ReadOptions, VolumeReader, check_slab, open_regular,
     regular_file_metadata, resolve_data_file, scan_stream,
 };
-use crate::volume::{DType, VolumeDesc};
+use brickray_core::volume::{DType, VolumeDesc};
 use flate2::read::GzDecoder;
 use std::fs::File;
 use std::io::{BufRead, BufReader, Read, Seek, SeekFrom};
@@ -149,7 +149,7 @@ impl NrrdReader {
                 });
             }
         };
-        crate::volume::voxel_count(sizes3).map_err(|e| IoError::volume(path, e))?;
+        brickray_core::volume::voxel_count(sizes3).map_err(|e| IoError::volume(path, e))?;
         let dims = sizes3.map(|d| d as u32);
         let encoding = match get("encoding").map(|e| e.to_ascii_lowercase()) {
             Some(e) if e == "raw" => Encoding::Raw,
@@ -421,6 +421,10 @@ impl VolumeReader for NrrdReader {
         &self.desc
     }
 
+    fn format(&self) -> &'static str {
+        "NRRD"
+    }
+
     fn path(&self) -> &Path {
         &self.path
     }
@@ -454,4 +458,31 @@ impl VolumeReader for NrrdReader {
         }
         Ok(())
     }
+}
+
+/// The NRRD format: `.nrrd`, `.nhdr`, or a file starting with `NRRD000`.
+#[derive(Debug)]
+struct NrrdFormat;
+
+impl crate::Format for NrrdFormat {
+    fn name(&self) -> &'static str {
+        "NRRD"
+    }
+    fn expects(&self) -> &'static str {
+        ".nrrd, .nhdr"
+    }
+    fn claims(&self, probe: &crate::Probe) -> crate::Claim {
+        match probe.ext.as_str() {
+            "nrrd" | "nhdr" => crate::Claim::ByName,
+            _ if probe.head.starts_with(b"NRRD000") => crate::Claim::ByContent,
+            _ => crate::Claim::No,
+        }
+    }
+    fn open(&self, path: &Path, opts: &ReadOptions) -> Result<Box<dyn VolumeReader>, IoError> {
+        Ok(Box::new(NrrdReader::open_with(path, opts)?))
+    }
+}
+
+pub(crate) fn register(r: &mut crate::Registry) {
+    r.register(std::sync::Arc::new(NrrdFormat));
 }

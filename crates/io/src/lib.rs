@@ -1,18 +1,47 @@
-//! Volume input: the [`VolumeReader`] trait and its implementations.
+//! Volume input of brickray: the [`VolumeReader`] seam, a [`Registry`] of
+//! formats, and the readers.
 //!
-//! A reader describes the volume ([`VolumeReader::desc`]) and streams z-slabs of
-//! little-endian samples ([`VolumeReader::read_slices`]), so a builder can consume
-//! an input far larger than memory. [`read_volume`] opens a path by its extension
-//! and loads it whole. Later formats (NIfTI, TIFF, DICOM, OME-Zarr) plug in by
-//! implementing the trait.
+//! A reader describes the volume ([`VolumeReader::desc`]), where it lies in the
+//! world when the file says so ([`VolumeReader::placement`]), and streams z-slabs
+//! of little-endian samples ([`VolumeReader::read_slices`]), so a builder can
+//! consume an input far larger than memory. An input is a path: one file (raw +
+//! JSON, NRRD, NIfTI, a TIFF stack) or a folder (a DICOM series, a folder of TIFF
+//! slices, an OME-Zarr store). [`open`] finds the format through the default
+//! [`Registry`], to which every compiled-in format adds itself; an application
+//! can register its own ([`Registry::register`]).
+//!
+//! Formats (cargo features; the default enables all):
+//!
+//! | format | feature | reader |
+//! |---|---|---|
+//! | raw + JSON sidecar | always | [`RawReader`] |
+//! | NRRD | always | [`NrrdReader`] |
+//! | NIfTI-1 / NIfTI-2 | `nifti` | `NiftiReader` |
+//! | TIFF stack / slice folder | `tiff` | `TiffReader` |
+//! | DICOM series | `dicom` | `DicomReader` |
+//! | OME-Zarr 0.4 / 0.5 | `zarr` | `ZarrReader`, and `ZarrBrickSource` (streamed) |
 
 mod nrrd;
 mod raw;
+mod registry;
+mod slab;
+
+#[cfg(feature = "dicom")]
+pub mod dicom;
+#[cfg(feature = "nifti")]
+pub mod nifti;
+#[cfg(feature = "tiff")]
+pub mod tiff;
+#[cfg(feature = "zarr")]
+pub mod zarr;
 
 pub use nrrd::NrrdReader;
 pub use raw::RawReader;
+pub use registry::{Claim, Entry, EntryKind, Format, Probe, Registry};
+pub use slab::{SampleConverter, SourceType};
 
-use crate::volume::{DType, Volume, VolumeData, VolumeDesc, VolumeError};
+use brickray_core::VolumeFrame;
+use brickray_core::volume::{DType, Volume, VolumeData, VolumeDesc, VolumeError};
 use std::io::Read;
 use std::path::{Path, PathBuf};
 use thiserror::Error;
@@ -120,6 +149,59 @@ pub enum IoError {
         /// The value read.
         value: f32,
     },
+    /// A codec or library failed to decode the file's data (a corrupt chunk,
+    /// a damaged compressed stream, ...).
+    #[error("{path}: cannot decode {format} data: {msg}")]
+    Decode {
+        /// The file (or chunk) that failed.
+        path: PathBuf,
+        /// The format (`"TIFF"`, `"DICOM"`, `"OME-Zarr"`, ...).
+        format: &'static str,
+        /// What the decoder said.
+        msg: String,
+    },
+    /// A DICOM file's transfer syntax is one brickray cannot decode (a
+    /// compression whose decoder needs a system library, or an unknown one).
+    #[error("{path}: DICOM transfer syntax {uid} ({name}) is not supported")]
+    UnsupportedTransferSyntax {
+        /// The file.
+        path: PathBuf,
+        /// The transfer syntax UID.
+        uid: String,
+        /// Its name, when known.
+        name: String,
+    },
+    /// The files of a multi-file volume (a DICOM series, a folder of TIFF
+    /// slices) do not make one volume: mixed sizes or types, a missing slice.
+    #[error("{path}: {file}: {msg}")]
+    Inconsistent {
+        /// The folder.
+        path: PathBuf,
+        /// The file that does not fit.
+        file: PathBuf,
+        /// What is wrong.
+        msg: String,
+    },
+    /// A selection (series, level, channel, time point) names nothing in the input.
+    #[error("{path}: no {what} {wanted:?} (available: {available})")]
+    NoSuchChoice {
+        /// The input.
+        path: PathBuf,
+        /// `"series"`, `"level"`, `"channel"` or `"time point"`.
+        what: &'static str,
+        /// What was asked for.
+        wanted: String,
+        /// What there is.
+        available: String,
+    },
+    /// No registered format reads this path.
+    #[error("{path}: no reader for this input ({tried})")]
+    UnknownFormat {
+        /// The input.
+        path: PathBuf,
+        /// The formats tried, and what each expects.
+        tried: String,
+    },
     /// A slab outside the volume was asked for.
     #[error("slices {z0}..{z1} requested from a volume of depth {depth}")]
     BadSlab {
@@ -133,6 +215,23 @@ pub enum IoError {
 }
 
 impl IoError {
+    pub(crate) fn decode(
+        path: &Path,
+        format: &'static str,
+        msg: impl std::fmt::Display,
+    ) -> IoError {
+        IoError::Decode {
+            path: path.to_owned(),
+            format,
+            msg: msg.to_string(),
+        }
+    }
+    pub(crate) fn unsupported(path: &Path, what: impl Into<String>) -> IoError {
+        IoError::Unsupported {
+            path: path.to_owned(),
+            what: what.into(),
+        }
+    }
     pub(crate) fn io(path: &Path, source: std::io::Error) -> IoError {
         IoError::Io {
             path: path.to_owned(),
@@ -213,16 +312,31 @@ impl std::fmt::Display for FileKind {
     }
 }
 
-/// Options of the file readers ([`open_with`], [`RawReader::open_sidecar_with`],
-/// [`NrrdReader::open_with`]). The default is strict.
-#[derive(Debug, Clone, Default, PartialEq, Eq)]
+/// Options of the readers ([`open_with`], [`RawReader::open_sidecar_with`],
+/// [`NrrdReader::open_with`], ...): safety switches and which part of a
+/// multi-part input to read. The default is strict and reads the default part
+/// (the largest DICOM series, the finest OME-Zarr level, the first channel and
+/// time point).
+#[derive(Debug, Clone, Default, PartialEq)]
 #[non_exhaustive]
 pub struct ReadOptions {
-    /// Let a sidecar's `file` or a NRRD header's `data file` name a file outside
-    /// the header's folder (absolute paths, `..`, symbolic links leading out).
-    /// Off by default: a header from elsewhere cannot make the reader read any
-    /// file the process can read.
+    /// Let a sidecar's `file`, a NRRD header's `data file` or a NIfTI header's
+    /// `.img` name a file outside the header's folder (absolute paths, `..`,
+    /// symbolic links leading out). Off by default: a header from elsewhere
+    /// cannot make the reader read any file the process can read.
     pub allow_outside_dir: bool,
+    /// The DICOM series to read (its SeriesInstanceUID, or its index in
+    /// [`Registry::list`]'s order); `None`: the series with the most slices.
+    pub series: Option<String>,
+    /// The OME-Zarr multiscale level (0 = finest); `None`: 0.
+    pub level: Option<usize>,
+    /// The channel of a multi-channel input; `None`: the first.
+    pub channel: Option<u64>,
+    /// The time point of a time series; `None`: the first.
+    pub time: Option<u64>,
+    /// The voxel spacing to use where the file states none (a plain TIFF);
+    /// `None`: 1, 1, 1 there. Formats that state a spacing keep theirs.
+    pub spacing: Option<[f32; 3]>,
 }
 
 impl ReadOptions {
@@ -230,6 +344,80 @@ impl ReadOptions {
     pub fn allow_outside_dir(mut self, allow: bool) -> ReadOptions {
         self.allow_outside_dir = allow;
         self
+    }
+    /// Sets [`ReadOptions::series`].
+    pub fn series(mut self, series: Option<String>) -> ReadOptions {
+        self.series = series;
+        self
+    }
+    /// Sets [`ReadOptions::level`].
+    pub fn level(mut self, level: Option<usize>) -> ReadOptions {
+        self.level = level;
+        self
+    }
+    /// Sets [`ReadOptions::channel`].
+    pub fn channel(mut self, channel: Option<u64>) -> ReadOptions {
+        self.channel = channel;
+        self
+    }
+    /// Sets [`ReadOptions::spacing`].
+    pub fn spacing(mut self, spacing: Option<[f32; 3]>) -> ReadOptions {
+        self.spacing = spacing;
+        self
+    }
+    /// Sets [`ReadOptions::time`].
+    pub fn time(mut self, time: Option<u64>) -> ReadOptions {
+        self.time = time;
+        self
+    }
+}
+
+/// Where a volume lies in the world, as its file states it: the affine map
+/// from voxel indices (`i, j, k`, voxel centres at integers; `i` along x of
+/// [`VolumeDesc::dims`]) to world coordinates (for medical formats, patient
+/// millimetres in RAS+ or LPS+ as [`Placement::space`] says).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Placement {
+    /// Row-major 4x4 voxel-to-world affine (last row `0 0 0 1`).
+    pub affine: [[f64; 4]; 4],
+    /// The world's axes: `"RAS"` (NIfTI), `"LPS"` (DICOM) or `"image"` (a
+    /// microscope's stage axes: OME-Zarr, TIFF).
+    pub space: &'static str,
+}
+
+impl Placement {
+    /// A scale-and-translate placement (no rotation): voxel `i` along axis `a`
+    /// lies at `origin[a] + i * spacing[a]`.
+    pub fn axis_aligned(spacing: [f64; 3], origin: [f64; 3], space: &'static str) -> Placement {
+        let mut affine = [[0.0; 4]; 4];
+        for a in 0..3 {
+            affine[a][a] = spacing[a];
+            affine[a][3] = origin[a];
+        }
+        affine[3][3] = 1.0;
+        Placement { affine, space }
+    }
+
+    /// The voxel-to-world matrix as a column-major [`glam::DMat4`].
+    pub fn matrix(&self) -> glam::DMat4 {
+        glam::DMat4::from_cols_array_2d(&self.affine).transpose()
+    }
+
+    /// The world position of voxel `(i, j, k)`.
+    pub fn voxel_to_world(&self, ijk: [f64; 3]) -> [f64; 3] {
+        self.matrix()
+            .transform_point3(glam::DVec3::from_array(ijk))
+            .to_array()
+    }
+
+    /// The [`VolumeFrame`] that puts the volume's texture space `[0,1]^3` where
+    /// this placement says (voxel `i` is at texture coordinate `(i + 0.5) / n`),
+    /// so that a mirrored or rotated acquisition is shown as acquired.
+    pub fn frame(&self, dims: [u32; 3]) -> VolumeFrame {
+        let d = glam::DVec3::from_array(dims.map(f64::from));
+        let tex_to_voxel =
+            glam::DMat4::from_translation(glam::DVec3::splat(-0.5)) * glam::DMat4::from_scale(d);
+        VolumeFrame::new((self.matrix() * tex_to_voxel).as_mat4(), dims)
     }
 }
 
@@ -244,12 +432,32 @@ pub trait VolumeReader: Send {
     /// always efficient; other orders may re-read compressed inputs.
     fn read_slices(&mut self, z0: u32, z1: u32, out: &mut [u8]) -> Result<(), IoError>;
 
-    /// The path that names this input in errors.
+    /// The path that names this input in errors: a file, or a folder for the
+    /// formats that are folders (a DICOM series, TIFF slices, OME-Zarr).
     fn path(&self) -> &Path;
 
-    /// Every file this reader reads (header or sidecar, and data file), so that
-    /// a caller writing a file can refuse to overwrite one of its inputs. The
-    /// default is [`path`](Self::path).
+    /// The format's name (`"raw"`, `"NRRD"`, `"NIfTI-1"`, `"DICOM"`, ...).
+    fn format(&self) -> &'static str {
+        "raw"
+    }
+
+    /// Where the file places the volume in the world, if it says (NIfTI's
+    /// qform/sform, DICOM's patient position and orientation, OME-Zarr's
+    /// coordinate transformations). `None`: only [`VolumeDesc::spacing`] is
+    /// known.
+    fn placement(&self) -> Option<Placement> {
+        None
+    }
+
+    /// What the reader noticed and the user should know (a conversion of the
+    /// sample type, a gantry tilt, non-uniform slice spacing, ...), one line each.
+    fn notes(&self) -> Vec<String> {
+        Vec::new()
+    }
+
+    /// Every file this reader reads (header or sidecar, and data file; each
+    /// slice of a folder), so that a caller writing a file can refuse to
+    /// overwrite one of its inputs. The default is [`path`](Self::path).
     fn input_files(&self) -> Vec<PathBuf> {
         vec![self.path().to_owned()]
     }
@@ -262,7 +470,7 @@ pub trait VolumeReader: Send {
                 self.path(),
                 VolumeError::BadDims {
                     dims: desc.dims.map(u64::from),
-                    max: crate::volume::MAX_DIM,
+                    max: brickray_core::volume::MAX_DIM,
                 },
             )
         })?;
@@ -410,6 +618,8 @@ pub fn scan_range(dtype: DType, bytes: &[u8]) -> (f32, f32, Option<usize>) {
             .chunks_exact(4)
             .enumerate()
             .for_each(|(i, c)| push(i, f32::from_le_bytes([c[0], c[1], c[2], c[3]]))),
+        // A sample type added to brickray-core after this reader: no range.
+        _ => {}
     }
     (lo, hi, bad)
 }
@@ -497,36 +707,29 @@ fn bytes_non_finite(dtype: DType, bytes: &[u8]) -> u64 {
         .count() as u64
 }
 
-/// Opens a volume by extension: `.json` (raw + JSON sidecar), `.nrrd` / `.nhdr`,
-/// or a `.raw` file with a `.json` sidecar of the same stem. Strict: the data
-/// file must resolve inside the header's folder (see [`open_with`]).
+/// Opens a volume through the default [`Registry`]: raw + JSON (`.json`, or a
+/// `.raw` beside its sidecar), NRRD (`.nrrd`, `.nhdr`), and with their
+/// features NIfTI (`.nii`, `.nii.gz`, `.hdr`/`.img`), TIFF (`.tif`, `.tiff`,
+/// or a folder of slices), DICOM (a folder, searched recursively, or one file)
+/// and OME-Zarr (a `.zarr` folder). Strict: a data file named by a header must
+/// resolve inside the header's folder (see [`open_with`]).
 pub fn open(path: impl AsRef<Path>) -> Result<Box<dyn VolumeReader>, IoError> {
     open_with(path, &ReadOptions::default())
 }
 
-/// [`open`] with options.
+/// [`open`] with options (safety switches; series, level, channel, time point).
 pub fn open_with(
     path: impl AsRef<Path>,
     opts: &ReadOptions,
 ) -> Result<Box<dyn VolumeReader>, IoError> {
-    let path = path.as_ref();
-    let ext = path
-        .extension()
-        .and_then(|e| e.to_str())
-        .unwrap_or("")
-        .to_ascii_lowercase();
-    match ext.as_str() {
-        "json" => Ok(Box::new(RawReader::open_sidecar_with(path, opts)?)),
-        "nrrd" | "nhdr" => Ok(Box::new(NrrdReader::open_with(path, opts)?)),
-        "raw" => Ok(Box::new(RawReader::open_sidecar_with(
-            &path.with_extension("json"),
-            opts,
-        )?)),
-        _ => Err(IoError::Unsupported {
-            path: path.to_owned(),
-            what: format!("unknown extension {ext:?} (expected .json, .raw, .nrrd or .nhdr)"),
-        }),
-    }
+    Registry::global().open(path.as_ref(), opts)
+}
+
+/// What an input holds beyond the volume [`open`] reads: its DICOM series,
+/// OME-Zarr levels, channels and time points (through the default
+/// [`Registry`]).
+pub fn list(path: impl AsRef<Path>, opts: &ReadOptions) -> Result<Vec<Entry>, IoError> {
+    Registry::global().list(path.as_ref(), opts)
 }
 
 /// Opens and loads a volume whole (see [`open`]).
@@ -564,6 +767,10 @@ impl VolumeReader for MemoryReader {
     /// None: the volume is in memory (its name is not a file).
     fn input_files(&self) -> Vec<PathBuf> {
         Vec::new()
+    }
+
+    fn format(&self) -> &'static str {
+        "memory"
     }
 
     fn read_slices(&mut self, z0: u32, z1: u32, out: &mut [u8]) -> Result<(), IoError> {

@@ -4,8 +4,8 @@
 
 mod common;
 
-use brickray_core::io::{self, IoError, NrrdReader, RawReader, VolumeReader};
 use brickray_core::{DType, Volume, VolumeError};
+use brickray_io::{self as io, IoError, NrrdReader, RawReader, VolumeReader};
 use common::*;
 use std::path::Path;
 use tempfile::TempDir;

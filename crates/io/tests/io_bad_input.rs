@@ -4,8 +4,8 @@
 
 mod common;
 
-use brickray_core::io::{self, IoError};
 use brickray_core::{DType, VolumeError};
+use brickray_io::{self as io, IoError};
 use common::*;
 use std::path::Path;
 use tempfile::TempDir;

@@ -1,0 +1,848 @@
+//! OME-Zarr 0.4 (zarr v2) and 0.5 (zarr v3) images, read with `zarrs` (codecs:
+//! blosc, zstd, gzip, crc32c, transpose, sharding).
+//!
+//! * the first multiscale image of the group; its axes (`t`, `c`, `z`, `y`,
+//!   `x` in the standard's order; `z` may be absent) and each level's `scale`
+//!   and `translation` transforms (times the multiscale's own, if any) give
+//!   the spacing and the [`Placement`] (the image's own axes and units);
+//! * the level ([`ReadOptions::level`], 0 = finest), channel and time point
+//!   ([`ReadOptions::channel`], [`ReadOptions::time`]) are selectable, the
+//!   first of each by default, and listed by [`crate::list`];
+//! * a missing chunk reads as the array's fill value (the zarr
+//!   specification's rule); a corrupt one is an [`IoError::Decode`] naming the
+//!   level;
+//! * two ways in: [`ZarrReader`] streams z-slabs to the store builder, and
+//!   [`ZarrBrickSource`] serves octree bricks straight from the chunks (see
+//!   its documentation), so a store need not be built at all.
+
+use crate::slab::desc_range;
+use crate::{
+    Claim, Entry, EntryKind, Format, IoError, Placement, Probe, ReadOptions, Registry,
+    SampleConverter, SourceType, VolumeReader, check_slab,
+};
+use brickray_core::{
+    BrickError, BrickSource, DType, NodeInfo, NodeKey, NodeKind, OctreeLayout, VolumeDesc,
+};
+use parking_lot::Mutex;
+use serde_json::Value;
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use zarrs::array::{Array, ArraySubset};
+use zarrs::filesystem::FilesystemStore;
+
+type ZArray = Array<FilesystemStore>;
+
+/// One level of the multiscale image.
+#[derive(Debug)]
+struct Level {
+    path: String,
+    shape: Vec<u64>,
+    scale: Vec<f64>,
+    translation: Vec<f64>,
+    array: ZArray,
+}
+
+/// An opened OME-Zarr multiscale image.
+#[derive(Debug)]
+pub struct OmeZarr {
+    root: PathBuf,
+    version: String,
+    levels: Vec<Level>,
+    /// Array axis of x, y, z (z may be absent), c, t.
+    ax: [Option<usize>; 5],
+    src: SourceType,
+}
+
+fn read_json(path: &Path) -> Result<Option<Value>, IoError> {
+    match std::fs::read(path) {
+        Ok(b) => {
+            if b.len() > crate::MAX_HEADER {
+                return Err(IoError::header(path, "metadata longer than 1 MiB"));
+            }
+            serde_json::from_slice(&b)
+                .map(Some)
+                .map_err(|e| IoError::header(path, e.to_string()))
+        }
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
+        Err(e) => Err(IoError::io(path, e)),
+    }
+}
+
+fn zerr(path: &Path, e: impl std::fmt::Display) -> IoError {
+    IoError::decode(path, "OME-Zarr", e)
+}
+
+fn transforms(v: &Value, n: usize) -> (Vec<f64>, Vec<f64>) {
+    let mut scale = vec![1.0; n];
+    let mut trans = vec![0.0; n];
+    if let Some(list) = v.get("coordinateTransformations").and_then(Value::as_array) {
+        for t in list {
+            let nums = |k: &str| -> Option<Vec<f64>> {
+                t.get(k)?.as_array()?.iter().map(Value::as_f64).collect()
+            };
+            match t.get("type").and_then(Value::as_str) {
+                Some("scale") => {
+                    if let Some(s) = nums("scale").filter(|s| s.len() == n) {
+                        scale = s;
+                    }
+                }
+                Some("translation") => {
+                    if let Some(s) = nums("translation").filter(|s| s.len() == n) {
+                        trans = s;
+                    }
+                }
+                _ => {}
+            }
+        }
+    }
+    (scale, trans)
+}
+
+impl OmeZarr {
+    /// Opens the group at `root` (a `.zarr` folder).
+    pub fn open(root: &Path) -> Result<OmeZarr, IoError> {
+        let (attrs, meta_path) = if let Some(v) = read_json(&root.join("zarr.json"))? {
+            let a = v
+                .get("attributes")
+                .and_then(|a| a.get("ome"))
+                .cloned()
+                .unwrap_or(Value::Null);
+            (a, root.join("zarr.json"))
+        } else if let Some(v) = read_json(&root.join(".zattrs"))? {
+            (v, root.join(".zattrs"))
+        } else {
+            return Err(IoError::UnknownFormat {
+                path: root.to_owned(),
+                tried: "OME-Zarr: no zarr.json or .zattrs".into(),
+            });
+        };
+        let bad = |msg: &str| IoError::header(&meta_path, msg.to_owned());
+        let ms = attrs
+            .get("multiscales")
+            .and_then(Value::as_array)
+            .and_then(|m| m.first())
+            .ok_or_else(|| bad("no multiscales (not an OME-Zarr image)"))?;
+        let version = ms
+            .get("version")
+            .or(attrs.get("version"))
+            .and_then(Value::as_str)
+            .unwrap_or("0.4")
+            .to_owned();
+        if !matches!(version.as_str(), "0.4" | "0.5") {
+            return Err(IoError::unsupported(
+                &meta_path,
+                format!("OME-Zarr version {version} (0.4 and 0.5 are read)"),
+            ));
+        }
+        let axes = ms
+            .get("axes")
+            .and_then(Value::as_array)
+            .ok_or_else(|| bad("multiscales has no axes"))?;
+        let n = axes.len();
+        let mut ax = [None; 5];
+        let mut order = Vec::new();
+        for (i, a) in axes.iter().enumerate() {
+            let name = a.get("name").and_then(Value::as_str).unwrap_or("");
+            let kind = a.get("type").and_then(Value::as_str).unwrap_or("");
+            let slot = match (name, kind) {
+                ("x", _) => 0,
+                ("y", _) => 1,
+                ("z", _) => 2,
+                (_, "channel") | ("c", _) => 3,
+                (_, "time") | ("t", _) => 4,
+                _ => {
+                    return Err(IoError::unsupported(
+                        &meta_path,
+                        format!("axis {name:?} of type {kind:?}"),
+                    ));
+                }
+            };
+            if ax[slot].replace(i).is_some() {
+                return Err(bad("an axis appears twice"));
+            }
+            order.push(slot);
+        }
+        if ax[0].is_none() || ax[1].is_none() {
+            return Err(bad("no x or y axis"));
+        }
+        // OME-NGFF orders axes t, c, z, y, x: x is the fastest in memory.
+        if order.windows(2).any(|w| w[0] < w[1]) {
+            return Err(IoError::unsupported(
+                &meta_path,
+                "axes not in the standard t, c, z, y, x order",
+            ));
+        }
+        let (gscale, gtrans) = transforms(ms, n);
+        let store = Arc::new(
+            FilesystemStore::new(root).map_err(|e| IoError::io(root, std::io::Error::other(e)))?,
+        );
+        let datasets = ms
+            .get("datasets")
+            .and_then(Value::as_array)
+            .filter(|d| !d.is_empty())
+            .ok_or_else(|| bad("multiscales has no datasets"))?;
+        let mut levels = Vec::new();
+        let mut src = None;
+        for d in datasets {
+            let path = d
+                .get("path")
+                .and_then(Value::as_str)
+                .ok_or_else(|| bad("a dataset has no path"))?
+                .to_owned();
+            let lp = root.join(&path);
+            if path.split('/').any(|c| c == ".." || c.is_empty()) {
+                return Err(bad("a dataset path leaves the group"));
+            }
+            let array =
+                ZArray::open(store.clone(), &format!("/{path}")).map_err(|e| zerr(&lp, e))?;
+            let shape = array.shape().to_vec();
+            if shape.len() != n {
+                return Err(IoError::header(
+                    &lp,
+                    format!("{} dims, the axes say {n}", shape.len()),
+                ));
+            }
+            let dtype = array_dtype(&lp)?;
+            if src.is_some_and(|s| s != dtype) {
+                return Err(IoError::Inconsistent {
+                    path: root.to_owned(),
+                    file: lp,
+                    msg: "levels of different sample types".into(),
+                });
+            }
+            src = Some(dtype);
+            let (mut scale, mut trans) = transforms(d, n);
+            for i in 0..n {
+                trans[i] = trans[i] * gscale[i] + gtrans[i];
+                scale[i] *= gscale[i];
+                if !(scale[i].is_finite() && scale[i] > 0.0 && trans[i].is_finite()) {
+                    return Err(IoError::header(
+                        &lp,
+                        "scale or translation not a positive finite number",
+                    ));
+                }
+            }
+            levels.push(Level {
+                path,
+                shape,
+                scale,
+                translation: trans,
+                array,
+            });
+        }
+        Ok(OmeZarr {
+            root: root.to_owned(),
+            version,
+            levels,
+            ax,
+            src: src.expect("datasets is not empty"),
+        })
+    }
+
+    /// The OME-Zarr version (`"0.4"`, `"0.5"`).
+    pub fn version(&self) -> &str {
+        &self.version
+    }
+
+    /// Number of levels.
+    pub fn level_count(&self) -> usize {
+        self.levels.len()
+    }
+
+    /// Voxel dims (x, y, z) of a level.
+    pub fn dims(&self, level: usize) -> [u64; 3] {
+        let s = &self.levels[level].shape;
+        [0, 1, 2].map(|a| self.ax[a].map_or(1, |i| s[i]))
+    }
+
+    fn extent(&self, slot: usize) -> u64 {
+        self.ax[slot].map_or(1, |i| self.levels[0].shape[i])
+    }
+
+    /// Spacing and translation (x, y, z) of a level.
+    fn xyz(&self, level: usize) -> ([f64; 3], [f64; 3]) {
+        let l = &self.levels[level];
+        (
+            [0, 1, 2].map(|a| self.ax[a].map_or(1.0, |i| l.scale[i])),
+            [0, 1, 2].map(|a| self.ax[a].map_or(0.0, |i| l.translation[i])),
+        )
+    }
+
+    /// Samples (little-endian, the file's type) of the box `lo..hi` (x, y, z;
+    /// exclusive) of `level`, at channel `c` and time `t`: x fastest.
+    fn region(
+        &self,
+        level: usize,
+        c: u64,
+        t: u64,
+        lo: [u64; 3],
+        hi: [u64; 3],
+    ) -> Result<Vec<u8>, IoError> {
+        let l = &self.levels[level];
+        let mut ranges = vec![0..1; l.shape.len()];
+        for a in 0..3 {
+            if let Some(i) = self.ax[a] {
+                ranges[i] = lo[a]..hi[a];
+            }
+        }
+        if let Some(i) = self.ax[3] {
+            ranges[i] = c..c + 1;
+        }
+        if let Some(i) = self.ax[4] {
+            ranges[i] = t..t + 1;
+        }
+        let subset = ArraySubset::new_with_ranges(&ranges);
+        let lp = self.root.join(&l.path);
+        macro_rules! get {
+            ($t:ty) => {{
+                let v: Vec<$t> = l
+                    .array
+                    .retrieve_array_subset(&subset)
+                    .map_err(|e| zerr(&lp, e))?;
+                v.iter().flat_map(|x| x.to_le_bytes()).collect()
+            }};
+        }
+        Ok(match self.src {
+            SourceType::U8 => get!(u8),
+            SourceType::I8 => get!(i8),
+            SourceType::U16 => get!(u16),
+            SourceType::I16 => get!(i16),
+            SourceType::U32 => get!(u32),
+            SourceType::I32 => get!(i32),
+            SourceType::F32 => get!(f32),
+            SourceType::F64 => get!(f64),
+        })
+    }
+
+    fn check_choice(&self, opts: &ReadOptions) -> Result<(usize, u64, u64), IoError> {
+        let level = opts.level.unwrap_or(0);
+        let c = opts.channel.unwrap_or(0);
+        let t = opts.time.unwrap_or(0);
+        let fail = |what, wanted: String, n: u64| IoError::NoSuchChoice {
+            path: self.root.clone(),
+            what,
+            wanted,
+            available: format!("0..{n}"),
+        };
+        if level >= self.levels.len() {
+            return Err(fail("level", level.to_string(), self.levels.len() as u64));
+        }
+        if c >= self.extent(3) {
+            return Err(fail("channel", c.to_string(), self.extent(3)));
+        }
+        if t >= self.extent(4) {
+            return Err(fail("time point", t.to_string(), self.extent(4)));
+        }
+        Ok((level, c, t))
+    }
+
+    /// The selectable levels, channels and time points.
+    pub fn entries(&self, opts: &ReadOptions) -> Vec<Entry> {
+        let mut v: Vec<Entry> = (0..self.levels.len())
+            .map(|i| {
+                let (s, _) = self.xyz(i);
+                Entry {
+                    kind: EntryKind::Level,
+                    id: i.to_string(),
+                    summary: format!(
+                        "{}: {:?} voxels (x, y, z), spacing {:?}",
+                        self.levels[i].path,
+                        self.dims(i),
+                        s
+                    ),
+                    default: i == opts.level.unwrap_or(0),
+                }
+            })
+            .collect();
+        for (slot, kind, what) in [
+            (3, EntryKind::Channel, "channel"),
+            (4, EntryKind::Time, "time point"),
+        ] {
+            let n = self.extent(slot);
+            let pick = if slot == 3 { opts.channel } else { opts.time }.unwrap_or(0);
+            if n > 1 {
+                v.extend((0..n).map(|i| Entry {
+                    kind,
+                    id: i.to_string(),
+                    summary: format!("{what} {i} of {n}"),
+                    default: i == pick,
+                }));
+            }
+        }
+        v
+    }
+}
+
+/// The sample type from the array's own metadata.
+fn array_dtype(level: &Path) -> Result<SourceType, IoError> {
+    let (name, file) = if let Some(v) = read_json(&level.join("zarr.json"))? {
+        (
+            v.get("data_type")
+                .and_then(Value::as_str)
+                .unwrap_or("")
+                .to_owned(),
+            level.join("zarr.json"),
+        )
+    } else if let Some(v) = read_json(&level.join(".zarray"))? {
+        let d = v.get("dtype").and_then(Value::as_str).unwrap_or("");
+        let n = match d.trim_start_matches(['<', '>', '|', '=']) {
+            "u1" => "uint8",
+            "i1" => "int8",
+            "u2" => "uint16",
+            "i2" => "int16",
+            "u4" => "uint32",
+            "i4" => "int32",
+            "f4" => "float32",
+            "f8" => "float64",
+            other => other,
+        };
+        (n.to_owned(), level.join(".zarray"))
+    } else {
+        return Err(IoError::header(level, "no zarr.json or .zarray"));
+    };
+    Ok(match name.as_str() {
+        "uint8" => SourceType::U8,
+        "int8" => SourceType::I8,
+        "uint16" => SourceType::U16,
+        "int16" => SourceType::I16,
+        "uint32" => SourceType::U32,
+        "int32" => SourceType::I32,
+        "float32" => SourceType::F32,
+        "float64" => SourceType::F64,
+        _ => {
+            return Err(IoError::UnknownDType { path: file, name });
+        }
+    })
+}
+
+/// One pass over a level in z-slabs: the value range (NaN/Inf refused).
+fn scan(z: &OmeZarr, level: usize, c: u64, t: u64) -> Result<[f64; 2], IoError> {
+    let [nx, ny, nz] = z.dims(level);
+    let conv = SampleConverter::choose(z.src, false, 1.0, 0.0, None);
+    let step = (((1u64 << 24) / (nx * ny).max(1)).max(1)).min(nz);
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    let mut k = 0;
+    while k < nz {
+        let k1 = (k + step).min(nz);
+        let b = z.region(level, c, t, [0, 0, k], [nx, ny, k1])?;
+        for (i, s) in b.chunks_exact(z.src.size()).enumerate() {
+            let v = conv.value(s);
+            if !v.is_finite() {
+                let i = i as u64;
+                return Err(IoError::volume(
+                    &z.root,
+                    brickray_core::VolumeError::NonFinite {
+                        count: 1,
+                        first: [
+                            (i % nx) as u32,
+                            ((i / nx) % ny) as u32,
+                            (k + i / (nx * ny)) as u32,
+                        ],
+                    },
+                ));
+            }
+            lo = lo.min(v);
+            hi = hi.max(v);
+        }
+        k = k1;
+    }
+    Ok([lo, hi])
+}
+
+/// Streams one level, channel and time point of an OME-Zarr image in z-slabs.
+#[derive(Debug)]
+pub struct ZarrReader {
+    zarr: OmeZarr,
+    level: usize,
+    c: u64,
+    t: u64,
+    conv: SampleConverter,
+    desc: VolumeDesc,
+    notes: Vec<String>,
+}
+
+impl ZarrReader {
+    /// Opens `root` with the level, channel and time point of `opts`. Scans the
+    /// level once (in slabs) for its value range.
+    pub fn open(root: &Path, opts: &ReadOptions) -> Result<ZarrReader, IoError> {
+        let zarr = OmeZarr::open(root)?;
+        let (level, c, t) = zarr.check_choice(opts)?;
+        let dims64 = zarr.dims(level);
+        brickray_core::volume::voxel_count(dims64).map_err(|e| IoError::volume(root, e))?;
+        let range = scan(&zarr, level, c, t)?;
+        let conv = SampleConverter::choose(zarr.src, false, 1.0, 0.0, Some(range));
+        let (s, _) = zarr.xyz(level);
+        let desc = VolumeDesc {
+            dims: dims64.map(|d| d as u32),
+            dtype: conv.dst,
+            spacing: s.map(|v| v as f32),
+            value_range: desc_range(range),
+        };
+        desc.validate().map_err(|e| IoError::volume(root, e))?;
+        let notes = vec![
+            format!(
+                "OME-Zarr {}: level {level} of {} ({}), channel {c}, time point {t}",
+                zarr.version,
+                zarr.levels.len(),
+                zarr.levels[level].path
+            ),
+            format!("samples: {}", conv.describe()),
+        ];
+        Ok(ZarrReader {
+            zarr,
+            level,
+            c,
+            t,
+            conv,
+            desc,
+            notes,
+        })
+    }
+}
+
+impl VolumeReader for ZarrReader {
+    fn desc(&self) -> &VolumeDesc {
+        &self.desc
+    }
+
+    fn format(&self) -> &'static str {
+        "OME-Zarr"
+    }
+
+    fn path(&self) -> &Path {
+        &self.zarr.root
+    }
+
+    fn input_files(&self) -> Vec<PathBuf> {
+        vec![self.zarr.root.clone()]
+    }
+
+    fn placement(&self) -> Option<Placement> {
+        let (s, t) = self.zarr.xyz(self.level);
+        Some(Placement::axis_aligned(s, t, "image"))
+    }
+
+    fn notes(&self) -> Vec<String> {
+        self.notes.clone()
+    }
+
+    fn read_slices(&mut self, z0: u32, z1: u32, out: &mut [u8]) -> Result<(), IoError> {
+        check_slab(&self.desc, z0, z1, out)?;
+        let [nx, ny, _] = self.desc.dims.map(u64::from);
+        let b = self.zarr.region(
+            self.level,
+            self.c,
+            self.t,
+            [0, 0, z0 as u64],
+            [nx, ny, z1 as u64],
+        )?;
+        self.conv.convert(&b, out);
+        Ok(())
+    }
+}
+
+/// An OME-Zarr image served as a brick octree, without building a store.
+///
+/// The octree is the one a store built from the finest level would have
+/// ([`OctreeLayout::new`] with the given brick size and apron). A brick of
+/// octree level `l` (`2^s` finest voxels per voxel, `s = levels - 1 - l`) is
+/// read from the coarsest pyramid level whose voxels are no larger than that
+/// on any axis (its own scale transform says how much larger than the finest
+/// they are, rounded to a power of two), and box-filtered by the remaining
+/// factor per axis: a file whose pyramid halves only x and y (as
+/// ome-zarr-py's does) is filtered along z only. Aprons come from the
+/// neighbouring chunks, clamped at the volume's faces, as in a built store.
+/// Node min/max are those of the brick's footprint, computed on first ask
+/// and kept.
+pub struct ZarrBrickSource {
+    zarr: OmeZarr,
+    c: u64,
+    t: u64,
+    layout: OctreeLayout,
+    conv: SampleConverter,
+    /// Per octree level: the pyramid level read and the remaining factor per axis.
+    plan: Vec<(usize, [u64; 3])>,
+    nodes: Mutex<HashMap<NodeKey, NodeInfo>>,
+}
+
+impl std::fmt::Debug for ZarrBrickSource {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ZarrBrickSource")
+            .field("root", &self.zarr.root)
+            .field("layout", &self.layout)
+            .field("plan", &self.plan)
+            .finish()
+    }
+}
+
+impl ZarrBrickSource {
+    /// Opens `root` (channel and time point from `opts`; its level is ignored:
+    /// every level is used) as an octree of `brick`-voxel bricks with `apron`
+    /// voxels of apron. `value_range`: the finest level's range if known (a
+    /// store built from the same data declares it), else one scan of the
+    /// finest level finds it.
+    pub fn open(
+        root: &Path,
+        opts: &ReadOptions,
+        brick: u32,
+        apron: u32,
+        value_range: Option<[f32; 2]>,
+    ) -> Result<ZarrBrickSource, IoError> {
+        let zarr = OmeZarr::open(root)?;
+        let (_, c, t) = zarr.check_choice(&ReadOptions {
+            level: None,
+            ..opts.clone()
+        })?;
+        let dims64 = zarr.dims(0);
+        brickray_core::volume::voxel_count(dims64).map_err(|e| IoError::volume(root, e))?;
+        let range = match value_range {
+            Some([a, b]) => [a as f64, b as f64],
+            None => scan(&zarr, 0, c, t)?,
+        };
+        let conv = SampleConverter::choose(zarr.src, false, 1.0, 0.0, Some(range));
+        let (s, _) = zarr.xyz(0);
+        let desc = VolumeDesc {
+            dims: dims64.map(|d| d as u32),
+            dtype: conv.dst,
+            spacing: s.map(|v| v as f32),
+            value_range: desc_range(range),
+        };
+        desc.validate().map_err(|e| IoError::volume(root, e))?;
+        let layout = OctreeLayout::new(desc, brick, apron);
+        // Each pyramid level's factor per axis, as a power of two.
+        let (s0, _) = zarr.xyz(0);
+        let factors: Vec<[u64; 3]> = (0..zarr.levels.len())
+            .map(|m| {
+                let (sm, _) = zarr.xyz(m);
+                [0, 1, 2].map(|a| {
+                    let r = (sm[a] / s0[a]).max(1.0);
+                    1u64 << (r.log2().round().clamp(0.0, 40.0) as u32)
+                })
+            })
+            .collect();
+        let plan = (0..layout.levels)
+            .map(|l| {
+                let f = 1u64 << (layout.levels - 1 - l);
+                let best = (0..factors.len())
+                    .filter(|&m| factors[m].iter().all(|&x| x <= f))
+                    .max_by_key(|&m| factors[m].iter().product::<u64>())
+                    .unwrap_or(0);
+                (best, factors[best].map(|x| f / x))
+            })
+            .collect();
+        Ok(ZarrBrickSource {
+            zarr,
+            c,
+            t,
+            layout,
+            conv,
+            plan,
+            nodes: Mutex::new(HashMap::new()),
+        })
+    }
+
+    /// Where the volume lies (the finest level's transforms).
+    pub fn placement(&self) -> Placement {
+        let (s, t) = self.zarr.xyz(0);
+        Placement::axis_aligned(s, t, "image")
+    }
+
+    /// The level-`l` voxel box `lo..=hi` a node's brick reads (clamped).
+    fn footprint(&self, key: NodeKey) -> ([u64; 3], [u64; 3]) {
+        let d = self.layout.level_dims(key.level).map(|d| d as i64);
+        let b = self.layout.brick as i64;
+        let a = self.layout.apron as i64;
+        let p = [key.x, key.y, key.z].map(|c| c as i64);
+        let lo = [0, 1, 2].map(|i| (p[i] * b - a).clamp(0, d[i] - 1) as u64);
+        let hi = [0, 1, 2].map(|i| (p[i] * b + b + a - 1).clamp(0, d[i] - 1) as u64);
+        (lo, hi)
+    }
+
+    /// Values (rescaled, f64) of the octree-level box `lo..=hi`, x fastest.
+    fn values(&self, level: u8, lo: [u64; 3], hi: [u64; 3]) -> Result<Vec<f64>, IoError> {
+        let (m, r) = self.plan[level as usize];
+        let md = self.zarr.dims(m);
+        let zlo = [0, 1, 2].map(|a| (lo[a] * r[a]).min(md[a] - 1));
+        let zhi = [0, 1, 2].map(|a| ((hi[a] + 1) * r[a]).min(md[a]).max(zlo[a] + 1));
+        let bytes = self.zarr.region(m, self.c, self.t, zlo, zhi)?;
+        let n = self.zarr.src.size();
+        let src: Vec<f64> = bytes.chunks_exact(n).map(|s| self.conv.value(s)).collect();
+        if r == [1, 1, 1] {
+            return Ok(src);
+        }
+        let zn = [0, 1, 2].map(|a| zhi[a] - zlo[a]);
+        let out_n = [0, 1, 2].map(|a| hi[a] - lo[a] + 1);
+        let mut out = Vec::with_capacity((out_n[0] * out_n[1] * out_n[2]) as usize);
+        for k in 0..out_n[2] {
+            for j in 0..out_n[1] {
+                for i in 0..out_n[0] {
+                    let (mut sum, mut cnt) = (0.0, 0.0);
+                    let o = [i, j, k];
+                    let start = [0, 1, 2].map(|a| ((lo[a] + o[a]) * r[a]).min(md[a] - 1) - zlo[a]);
+                    for dz in 0..r[2] {
+                        let z = (start[2] + dz).min(zn[2] - 1);
+                        for dy in 0..r[1] {
+                            let y = (start[1] + dy).min(zn[1] - 1);
+                            for dx in 0..r[0] {
+                                let x = (start[0] + dx).min(zn[0] - 1);
+                                sum += src[((z * zn[1] + y) * zn[0] + x) as usize];
+                                cnt += 1.0;
+                            }
+                        }
+                    }
+                    out.push(sum / cnt);
+                }
+            }
+        }
+        Ok(out)
+    }
+
+    fn check(&self, key: NodeKey) -> Result<bool, BrickError> {
+        let n = 1u64 << key.level.min(63);
+        if key.level >= self.layout.levels || [key.x, key.y, key.z].iter().any(|&p| p as u64 >= n) {
+            return Err(BrickError::OutOfRange { key });
+        }
+        Ok(self.layout.in_volume(key))
+    }
+
+    fn brick_err(key: NodeKey, e: IoError) -> BrickError {
+        BrickError::Corrupt {
+            key,
+            reason: e.to_string(),
+        }
+    }
+}
+
+fn store_value(dst: DType, v: f64, out: &mut [u8]) {
+    match dst {
+        DType::U8 => out[0] = v.round() as u8,
+        DType::U16 => out.copy_from_slice(&(v.round() as u16).to_le_bytes()),
+        DType::I16 => out.copy_from_slice(&(v.round() as i16).to_le_bytes()),
+        _ => out.copy_from_slice(&(v as f32).to_le_bytes()),
+    }
+}
+
+impl BrickSource for ZarrBrickSource {
+    fn layout(&self) -> &OctreeLayout {
+        &self.layout
+    }
+
+    fn node(&self, key: NodeKey) -> Result<NodeInfo, BrickError> {
+        if !self.check(key)? {
+            return Ok(NodeInfo {
+                kind: NodeKind::Empty,
+                min: 0.0,
+                max: 0.0,
+            });
+        }
+        if let Some(n) = self.nodes.lock().get(&key) {
+            return Ok(*n);
+        }
+        let (lo, hi) = self.footprint(key);
+        let v = self
+            .values(key.level, lo, hi)
+            .map_err(|e| Self::brick_err(key, e))?;
+        let (mn, mx) = v
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
+                (a.min(x), b.max(x))
+            });
+        // as stored: integer types round
+        let q = |x: f64| {
+            let mut b = [0u8; 4];
+            let n = self.layout.dtype().size();
+            store_value(self.layout.dtype(), x, &mut b[..n]);
+            brickray_core::VolumeData::from_le_bytes(self.layout.dtype(), &b[..n]).get(0)
+        };
+        let (mn, mx) = (q(mn), q(mx));
+        let info = NodeInfo {
+            kind: if mn == mx {
+                NodeKind::Uniform(mn)
+            } else {
+                NodeKind::Data
+            },
+            min: mn,
+            max: mx,
+        };
+        self.nodes.lock().insert(key, info);
+        Ok(info)
+    }
+
+    fn read_brick(&self, key: NodeKey, out: &mut [u8]) -> Result<(), BrickError> {
+        let expected = self.layout.brick_bytes();
+        if out.len() != expected {
+            return Err(BrickError::BufferSize {
+                expected,
+                actual: out.len(),
+            });
+        }
+        let dst = self.layout.dtype();
+        let sz = dst.size();
+        if !self.check(key)? {
+            let lo = self.layout.volume.value_range[0] as f64;
+            for o in out.chunks_exact_mut(sz) {
+                store_value(dst, lo, o);
+            }
+            return Ok(());
+        }
+        let (lo, hi) = self.footprint(key);
+        let vals = self
+            .values(key.level, lo, hi)
+            .map_err(|e| Self::brick_err(key, e))?;
+        let n = [0, 1, 2].map(|a| (hi[a] - lo[a] + 1) as i64);
+        let d = self.layout.level_dims(key.level).map(|d| d as i64);
+        let b = self.layout.brick as i64;
+        let a = self.layout.apron as i64;
+        let side = self.layout.stored_side() as i64;
+        let origin = [key.x, key.y, key.z].map(|c| c as i64 * b - a);
+        let idx = |axis: usize, i: i64| (origin[axis] + i).clamp(0, d[axis] - 1) - lo[axis] as i64;
+        let mut o = 0;
+        for k in 0..side {
+            let zk = idx(2, k);
+            for j in 0..side {
+                let yj = idx(1, j);
+                let row = (zk * n[1] + yj) * n[0];
+                for i in 0..side {
+                    store_value(dst, vals[(row + idx(0, i)) as usize], &mut out[o..o + sz]);
+                    o += sz;
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+#[derive(Debug)]
+struct ZarrFormat;
+
+impl Format for ZarrFormat {
+    fn name(&self) -> &'static str {
+        "OME-Zarr"
+    }
+    fn expects(&self) -> &'static str {
+        "a .zarr folder (OME-Zarr 0.4 or 0.5)"
+    }
+    fn claims(&self, probe: &Probe) -> Claim {
+        if !probe.is_dir() {
+            return Claim::No;
+        }
+        if probe.ext == "zarr" {
+            return Claim::ByName;
+        }
+        if probe.path.join("zarr.json").is_file() || probe.path.join(".zattrs").is_file() {
+            return Claim::ByContent;
+        }
+        Claim::No
+    }
+    fn open(&self, path: &Path, opts: &ReadOptions) -> Result<Box<dyn VolumeReader>, IoError> {
+        Ok(Box::new(ZarrReader::open(path, opts)?))
+    }
+    fn list(&self, path: &Path, opts: &ReadOptions) -> Result<Vec<Entry>, IoError> {
+        Ok(OmeZarr::open(path)?.entries(opts))
+    }
+}
+
+pub(crate) fn register(r: &mut Registry) {
+    r.register(Arc::new(ZarrFormat));
+}

@@ -1,0 +1,199 @@
+//! DICOM: the shared CT series decodes voxel for voxel to its raw volume (HU,
+//! i16, spacing from positions); a folder with two series and shuffled names;
+//! a missing slice, mixed sizes and an unknown transfer syntax are typed
+//! errors naming the file.
+#![cfg(feature = "dicom")]
+
+mod formats_common;
+
+use brickray_core::DType;
+use brickray_io::{self as io, EntryKind, IoError, ReadOptions};
+use dicom_core::{DataElement, PrimitiveValue, VR};
+use dicom_dictionary_std::tags;
+use formats_common::*;
+use std::path::{Path, PathBuf};
+use tempfile::TempDir;
+
+fn fixture() -> Option<PathBuf> {
+    formats_dir().map(|d| d.join("dicom/cranium_ct"))
+}
+
+fn files(dir: &Path) -> Vec<PathBuf> {
+    let mut v: Vec<PathBuf> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    v.sort();
+    v
+}
+
+/// The fixture's files in position order (z of ImagePositionPatient: the
+/// series is axial).
+fn by_position(dir: &Path) -> Vec<PathBuf> {
+    let mut v: Vec<(f64, PathBuf)> = files(dir)
+        .into_iter()
+        .map(|f| {
+            let o = dicom_object::open_file(&f).unwrap();
+            let p = o.element(tags::IMAGE_POSITION_PATIENT).unwrap();
+            (p.to_multi_float64().unwrap()[2], f)
+        })
+        .collect();
+    v.sort_by(|a, b| a.0.total_cmp(&b.0));
+    v.into_iter().map(|(_, f)| f).collect()
+}
+
+/// Copies `src` to `dst`, setting `tag` to `value` (a string element).
+fn copy_with(src: &Path, dst: &Path, edits: &[(dicom_core::Tag, VR, PrimitiveValue)]) {
+    let mut obj = dicom_object::open_file(src).unwrap();
+    for (tag, vr, v) in edits {
+        obj.put(DataElement::new(*tag, *vr, v.clone()));
+    }
+    obj.write_to_file(dst).unwrap();
+}
+
+#[test]
+fn ct_series_fixture_decodes_in_hounsfield_units() {
+    let Some(dir) = fixture() else { return };
+    let t = truth("invesalius_cranium_ct");
+    let mut r = io::open(&dir).unwrap();
+    assert_eq!(r.format(), "DICOM");
+    assert_eq!(r.desc().dims, t.desc.dims);
+    assert_eq!(r.desc().dtype, DType::I16);
+    assert_spacing(r.desc().spacing, t.desc.spacing, "dicom");
+    assert_eq!(r.input_files().len(), 108);
+    assert_same_voxels(&read_by_slabs(r.as_mut(), 10), &t, "dicom");
+    assert_eq!(r.desc().value_range, t.desc.value_range);
+    let pl = r.placement().unwrap();
+    assert_eq!(pl.space, "LPS");
+    // slice k lies k * 1.5 mm along the normal from slice 0
+    let p0 = pl.voxel_to_world([0.0, 0.0, 0.0]);
+    let p9 = pl.voxel_to_world([0.0, 0.0, 9.0]);
+    let d = ((p9[0] - p0[0]).powi(2) + (p9[1] - p0[1]).powi(2) + (p9[2] - p0[2]).powi(2)).sqrt();
+    assert!((d - 13.5).abs() < 1e-3, "9 slices span {d} mm");
+}
+
+#[test]
+fn two_series_with_shuffled_names() {
+    let Some(dir) = fixture() else { return };
+    let t = truth("invesalius_cranium_ct");
+    let d = TempDir::new().unwrap();
+    let src = by_position(&dir);
+    // the 30 lowest slices become a second series in a subfolder, the other
+    // 78 stay; every name scrambled, so neither names nor directory order
+    // tell the slice order
+    let sub = d.path().join("nested/deeper");
+    std::fs::create_dir_all(&sub).unwrap();
+    for (k, f) in src.iter().enumerate() {
+        let name = format!("x{:03}", (k * 71) % 108);
+        if k < 30 {
+            copy_with(
+                f,
+                &sub.join(&name),
+                &[(
+                    tags::SERIES_INSTANCE_UID,
+                    VR::UI,
+                    PrimitiveValue::from("1.2.3.4.5.999"),
+                )],
+            );
+        } else {
+            std::fs::copy(f, d.path().join(name)).unwrap();
+        }
+    }
+    let list = io::list(d.path(), &ReadOptions::default()).unwrap();
+    assert_eq!(list.len(), 2, "{list:?}");
+    assert!(list.iter().all(|e| e.kind == EntryKind::Series));
+    assert!(list[0].default && !list[1].default, "{list:?}");
+    assert_eq!(list[1].id, "1.2.3.4.5.999");
+    let slice = 256 * 256 * 2;
+    // default: the largest, raw slices 30..108
+    let mut r = io::open(d.path()).unwrap();
+    assert_eq!(r.desc().dims[2], 78);
+    assert!(
+        read_by_slabs(r.as_mut(), 20) == t.bytes[30 * slice..],
+        "series A differs"
+    );
+    // the small one, selected by UID and by index: raw slices 0..30
+    for sel in ["1.2.3.4.5.999", "1"] {
+        let mut r =
+            io::open_with(d.path(), &ReadOptions::default().series(Some(sel.into()))).unwrap();
+        assert_eq!(r.desc().dims[2], 30, "{sel}");
+        assert!(
+            read_by_slabs(r.as_mut(), 30) == t.bytes[..30 * slice],
+            "{sel}: series B differs"
+        );
+    }
+    let e = io::open_with(d.path(), &ReadOptions::default().series(Some("7".into())))
+        .err()
+        .unwrap();
+    assert!(
+        matches!(e, IoError::NoSuchChoice { what: "series", .. }),
+        "{e}"
+    );
+}
+
+#[test]
+fn missing_slice_mixed_sizes_and_unknown_syntax_are_refused() {
+    let Some(dir) = fixture() else { return };
+    let src = by_position(&dir);
+    // a missing slice: the file at position 50 removed
+    let d = TempDir::new().unwrap();
+    for (k, f) in src.iter().enumerate() {
+        if k != 50 {
+            std::fs::copy(f, d.path().join(f.file_name().unwrap())).unwrap();
+        }
+    }
+    let e = io::open(d.path()).err().expect("missing slice refused");
+    let next = d.path().join(src[51].file_name().unwrap());
+    assert!(
+        matches!(&e, IoError::Inconsistent { file, msg, .. } if file == &next && msg.contains("missing")),
+        "{e}"
+    );
+
+    // mixed sizes: one file claims 128 columns
+    let d = TempDir::new().unwrap();
+    for f in &src[..10] {
+        std::fs::copy(f, d.path().join(f.file_name().unwrap())).unwrap();
+    }
+    let odd = d.path().join("odd.dcm");
+    copy_with(
+        &src[10],
+        &odd,
+        &[(tags::COLUMNS, VR::US, PrimitiveValue::from(128u16))],
+    );
+    let e = io::open(d.path()).err().expect("mixed sizes refused");
+    assert!(
+        matches!(&e, IoError::Inconsistent { file, .. } if file == &odd),
+        "{e}"
+    );
+
+    // an unknown transfer syntax (same length as the real one, patched in place)
+    let d = TempDir::new().unwrap();
+    for f in &src[..5] {
+        std::fs::copy(f, d.path().join(f.file_name().unwrap())).unwrap();
+    }
+    let mut bytes = std::fs::read(&src[5]).unwrap();
+    let uid = b"1.2.840.10008.1.2.1\0";
+    let at = bytes
+        .windows(uid.len())
+        .position(|w| w == uid)
+        .expect("explicit VR LE file");
+    bytes[at..at + uid.len()].copy_from_slice(b"1.2.840.10008.1.9.9\0");
+    let bad = d.path().join("bad_syntax.dcm");
+    std::fs::write(&bad, &bytes).unwrap();
+    let e = io::open(d.path()).err().expect("unknown syntax refused");
+    assert!(
+        matches!(&e, IoError::UnsupportedTransferSyntax { path, uid, .. } if path == &bad && uid == "1.2.840.10008.1.9.9"),
+        "{e}"
+    );
+
+    // a truncated file: an error naming it, never a panic
+    let d = TempDir::new().unwrap();
+    for f in &src[..5] {
+        std::fs::copy(f, d.path().join(f.file_name().unwrap())).unwrap();
+    }
+    let bytes = std::fs::read(&src[5]).unwrap();
+    let cut = d.path().join("cut.dcm");
+    std::fs::write(&cut, &bytes[..bytes.len() - 5000]).unwrap();
+    let e = io::open(d.path()).err().expect("truncated file refused");
+    assert!(e.to_string().contains("cut.dcm"), "{e}");
+}

@@ -1,0 +1,94 @@
+//! Conversion of any readable volume into raw samples + a JSON sidecar (the
+//! form of `shared/data`), streamed in z-slabs within a memory bound.
+
+use crate::{StoreError, check_output};
+use brickray_io::VolumeReader;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// What [`convert`] wrote.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ConvertReport {
+    /// The sidecar.
+    pub json: PathBuf,
+    /// The raw file.
+    pub raw: PathBuf,
+    /// Bytes of samples written.
+    pub bytes: u64,
+    /// Slices per slab read.
+    pub slab: u32,
+    /// Wall-clock seconds.
+    pub seconds: f64,
+}
+
+/// Writes `reader`'s volume as `<stem>.raw` (little-endian, x fastest) beside
+/// the sidecar `json` (dims, dtype, spacing, value range, the format read,
+/// its placement and notes). Slabs hold at most `memory_bound` bytes (at
+/// least one slice). The raw file is written under a temporary name and
+/// renamed when complete; neither output may be one of the reader's inputs.
+pub fn convert(
+    reader: &mut dyn VolumeReader,
+    json: &Path,
+    memory_bound: u64,
+) -> Result<ConvertReport, StoreError> {
+    let t0 = Instant::now();
+    let raw = json.with_extension("raw");
+    let inputs = reader.input_files();
+    check_output(json, &inputs)?;
+    check_output(&raw, &inputs)?;
+    let d = reader.desc().clone();
+    let slice = d.dims[0] as u64 * d.dims[1] as u64 * d.dtype.size() as u64;
+    let slab = (memory_bound / slice.max(1)).clamp(1, d.dims[2] as u64) as u32;
+    let tmp = raw.with_extension(format!("raw.partial.{}", std::process::id()));
+    let io = |p: &Path, e: std::io::Error| StoreError::Io {
+        path: p.to_owned(),
+        source: e,
+    };
+    let result = (|| -> Result<(), StoreError> {
+        let f = std::fs::File::create(&tmp).map_err(|e| io(&tmp, e))?;
+        let mut w = std::io::BufWriter::new(f);
+        let mut buf = Vec::new();
+        let mut z = 0;
+        while z < d.dims[2] {
+            let z1 = (z + slab).min(d.dims[2]);
+            buf.resize(((z1 - z) as u64 * slice) as usize, 0);
+            reader.read_slices(z, z1, &mut buf)?;
+            w.write_all(&buf).map_err(|e| io(&tmp, e))?;
+            z = z1;
+        }
+        w.flush().map_err(|e| io(&tmp, e))?;
+        Ok(())
+    })();
+    if let Err(e) = result {
+        let _ = std::fs::remove_file(&tmp);
+        return Err(e);
+    }
+    std::fs::rename(&tmp, &raw).map_err(|e| io(&raw, e))?;
+    let mut sc = serde_json::json!({
+        "dims": d.dims,
+        "dtype": d.dtype.name(),
+        "spacing": d.spacing,
+        "value_range": d.value_range,
+        "file": raw.file_name().map(|n| n.to_string_lossy().into_owned()),
+        "byte_order": "little",
+        "layout": "x fastest, then y, then z (a C array [z][y][x])",
+        "bytes": d.byte_len(),
+        "original_format": reader.format(),
+        "source": reader.path().display().to_string(),
+        "notes": reader.notes(),
+    });
+    if let Some(p) = reader.placement() {
+        sc["affine"] = serde_json::json!(p.affine);
+        sc["affine_space"] = serde_json::json!(p.space);
+    }
+    let text = serde_json::to_string_pretty(&sc).map_err(|e| io(json, std::io::Error::other(e)))?;
+    std::fs::write(json, text).map_err(|e| io(json, e))?;
+    Ok(ConvertReport {
+        json: json.to_owned(),
+        raw,
+        bytes: d.byte_len(),
+        slab,
+        seconds: t0.elapsed().as_secs_f64(),
+    })
+}
