@@ -161,6 +161,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 var found = false;
                 loop {
                     if (!oct_next_leaf(&st)) { break; }
+                    if (st.hit.tag == OCT_TAG_DATA) { feedback_reached(st.hit.data); }
                     if (st.hit.tag == OCT_TAG_DATA && !(MODE == MODE_MIP && ESS && slots[st.hit.data].range.y <= acc.max_v)) {
                         found = true;
                         break;

@@ -7,7 +7,7 @@
 //!   accumulation, iso bisection and shading, MIP), once for both kernels;
 //! * `incore.wgsl`, `ooc.wgsl`: each backend's group 2, its sampling `Cursor`
 //!   and its march; the out-of-core kernel also includes brickray-index's
-//!   traversal library;
+//!   traversal library and `feedback.wgsl` (ray-guided usage counters);
 //! * `composite.wgsl`: the draw into the host's pass.
 //!
 //! Every composed kernel is validated by naga in this module's tests, which also
@@ -23,6 +23,8 @@ pub const MODES: &str = include_str!("../shaders/modes.wgsl");
 pub const INCORE: &str = include_str!("../shaders/incore.wgsl");
 /// The out-of-core kernel's own part.
 pub const OOC: &str = include_str!("../shaders/ooc.wgsl");
+/// The out-of-core kernel's usage feedback (group 2, binding 6).
+pub const FEEDBACK: &str = include_str!("../shaders/feedback.wgsl");
 /// The composite (fullscreen) shader.
 pub const COMPOSITE: &str = include_str!("../shaders/composite.wgsl");
 
@@ -34,7 +36,7 @@ pub fn incore() -> String {
 /// The out-of-core ray caster as compiled (with the octree traversal library).
 pub fn ooc() -> String {
     format!(
-        "{COMMON}\n{MODES}\n{}\n{OOC}",
+        "{COMMON}\n{MODES}\n{}\n{OOC}\n{FEEDBACK}",
         brickray_index::OCTREE_TRAVERSAL_WGSL
     )
 }

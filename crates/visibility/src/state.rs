@@ -33,8 +33,10 @@ struct LeafVis {
     entered: u64,
     /// The latest frame it was observed in (visible or not).
     observed: Option<u64>,
-    /// The latest frame it was observed visible in.
+    /// The latest frame it was observed visible in (at least the threshold).
     visible: Option<u64>,
+    /// The latest frame it showed any pixel in (propagation uses it).
+    reached: Option<u64>,
 }
 
 /// Counts of the current cut's data leaves by visibility.
@@ -61,9 +63,17 @@ pub struct VisibilityCounts {
 /// * a leaf of the cut: visible until an observation says otherwise, then
 ///   visible iff it was seen visible within `hold_frames` of its latest
 ///   observation;
-/// * an inner node of the cut: visible iff a data leaf below it is (leaf
-///   visibility propagated to the root), or it has no data leaf below it
-///   (nothing was observed there);
+/// * an inner node of the cut: visible iff a data leaf below it is visible or
+///   showed at least one pixel (leaf visibility propagated to the root), or it
+///   has no data leaf below it (nothing was observed there). Propagating "any
+///   pixel" rather than the threshold keeps a node whose children each show
+///   fewer pixels than the threshold, but together more, from collapsing and
+///   splitting again every few frames;
+/// * a leaf that was an inner node of the previous cut (collapsed, because it
+///   was invisible) inherits its invisibility: it counts as observed
+///   invisible in the frame it became a leaf, so it does not split again until
+///   an observation shows it (without this, a collapsed node would be
+///   unobserved, hence visible, split, be found invisible, collapse, ...);
 /// * any other node (not yet met): visible.
 ///
 /// Refinement splits only visible nodes, so an invisible node stays a leaf at
@@ -109,12 +119,18 @@ impl VisibilityState {
     /// The data leaves of the cut planned for `frame`. Leaves already in the
     /// previous cut keep their observations; new ones start unobserved.
     pub fn set_cut(&mut self, frame: u64, data_leaves: impl IntoIterator<Item = NodeKey>) {
+        self.propagate();
         let mut next = HashMap::with_capacity(self.leaves.len());
         for key in data_leaves {
-            let v = self.leaves.get(&key).copied().unwrap_or(LeafVis {
-                entered: frame,
-                observed: None,
-                visible: None,
+            let v = self.leaves.get(&key).copied().unwrap_or_else(|| {
+                // A collapsed inner node found invisible stays invisible.
+                let collapsed_hidden = self.inner.get(&key) == Some(&false);
+                LeafVis {
+                    entered: frame,
+                    observed: collapsed_hidden.then_some(frame),
+                    visible: None,
+                    reached: None,
+                }
             });
             next.insert(key, v);
         }
@@ -134,20 +150,30 @@ impl VisibilityState {
         if frame < l.entered {
             return false;
         }
-        l.observed = Some(l.observed.map_or(frame, |o| o.max(frame)));
+        let latest = |x: Option<u64>| Some(x.map_or(frame, |o| o.max(frame)));
+        l.observed = latest(l.observed);
         if pixels >= threshold {
-            l.visible = Some(l.visible.map_or(frame, |v| v.max(frame)));
+            l.visible = latest(l.visible);
+        }
+        if pixels > 0 {
+            l.reached = latest(l.reached);
         }
         self.dirty = true;
         true
     }
 
-    fn leaf_visible(&self, l: &LeafVis) -> bool {
-        match (l.observed, l.visible) {
+    /// Seen at `seen` within the hold of the latest observation (or never
+    /// observed).
+    fn recent(&self, l: &LeafVis, seen: Option<u64>) -> bool {
+        match (l.observed, seen) {
             (None, _) => true,
             (Some(_), None) => false,
             (Some(o), Some(v)) => v.saturating_add(self.config.hold_frames as u64) >= o,
         }
+    }
+
+    fn leaf_visible(&self, l: &LeafVis) -> bool {
+        self.recent(l, l.visible)
     }
 
     fn propagate(&mut self) {
@@ -158,7 +184,7 @@ impl VisibilityState {
         let leaves: Vec<(NodeKey, bool)> = self
             .leaves
             .iter()
-            .map(|(k, l)| (*k, self.leaf_visible(l)))
+            .map(|(k, l)| (*k, self.recent(l, l.reached) || self.leaf_visible(l)))
             .collect();
         for (key, vis) in leaves {
             let mut p = key.parent();
@@ -246,12 +272,39 @@ mod tests {
         assert!(s.visible(b));
         s.observe(8, b, 0);
         assert!(!s.visible(b));
+        // a, reached by 3 rays at 5 (below the threshold), still keeps the root.
+        assert!(s.visible(NodeKey::ROOT));
+        s.observe(8, a, 0);
         assert!(!s.visible(NodeKey::ROOT));
         // Late, out-of-order observations never move the latest back.
         s.observe(5, b, 100);
         assert!(!s.visible(b));
         // A node not in the cut is not observed.
         assert!(!s.observe(8, NodeKey::ROOT, 100));
+    }
+
+    #[test]
+    fn a_collapsed_hidden_node_stays_invisible_until_observed() {
+        let mut s = VisibilityState::new(cfg());
+        let a = NodeKey::ROOT.child(0);
+        s.set_cut(1, a.children());
+        for c in a.children() {
+            s.observe(1, c, 0);
+        }
+        assert!(!s.visible(a));
+        // Refinement collapses it: a new leaf, but observed invisible.
+        s.set_cut(2, [a]);
+        assert!(!s.visible(a));
+        assert_eq!(s.counts().invisible, 1);
+        s.observe(3, a, 9);
+        assert!(s.visible(a));
+        // Children each below the threshold but reached keep the parent visible.
+        s.set_cut(4, a.children());
+        for c in a.children() {
+            s.observe(4, c, 1);
+        }
+        assert!(!s.visible(a.child(0)));
+        assert!(s.visible(a));
     }
 
     #[test]
@@ -325,7 +378,8 @@ mod tests {
                 let below: Vec<usize> = (0..data_leaves.len())
                     .filter(|&i| ancestors(data_leaves[i]).any(|a| a == *n))
                     .collect();
-                let any = below.iter().any(|&i| pixels[i % pixels.len()] >= 4);
+                // Propagation: any pixel (the threshold applies to leaves).
+                let any = below.iter().any(|&i| pixels[i % pixels.len()] > 0);
                 prop_assert_eq!(*vis, any || below.is_empty(), "node {:?}", n);
             }
             if !data_leaves.is_empty() {

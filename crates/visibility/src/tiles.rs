@@ -147,7 +147,9 @@ fn build(
         // goes at the near edge of the median rectangle, so that a set of
         // abutting rectangles splits without straddlers.
         items.sort_by_key(|&i| rects[i].lo(axis) as u64 + rects[i].hi(axis) as u64);
-        let at = rects[items[items.len() / 2]].lo(axis).clamp(lo + min, hi - min);
+        let at = rects[items[items.len() / 2]]
+            .lo(axis)
+            .clamp(lo + min, hi - min);
         let (a, b) = tile.split(axis, at);
         let (mut left, mut right, mut own) = (Vec::new(), Vec::new(), Vec::new());
         for &i in &items {
@@ -224,7 +226,10 @@ pub fn schedule_tiles(
         let mut node = &root;
         let mut siblings = Vec::new();
         for &step in &job.path {
-            let c = node.children.as_ref().expect("a job's path follows the tree");
+            let c = node
+                .children
+                .as_ref()
+                .expect("a job's path follows the tree");
             siblings.push(c[1 - step as usize].tile);
             node = &c[step as usize];
         }

@@ -425,7 +425,11 @@ fn invisible_nodes_stay_at_their_level_and_request_nothing() {
                 .all(|q| !under(q.key, hidden) || q.key == hidden),
             "{loaded}"
         );
-        assert!(r.leaves.iter().all(|l| !under(l.key, hidden) || l.key == hidden));
+        assert!(
+            r.leaves
+                .iter()
+                .all(|l| !under(l.key, hidden) || l.key == hidden)
+        );
         // Never a hole: the hidden node, once reached, is a data leaf.
         if loaded >= hidden.level {
             let h = r.leaves.iter().find(|l| l.key == hidden).expect("a leaf");

@@ -90,11 +90,11 @@ fn frame_fields() -> Vec<(String, u32)> {
     )
 }
 
-fn kernel_bindings(volume_storage: u32) -> BTreeSet<(u32, u32, &'static str)> {
+fn kernel_bindings(volume: &[wgpu::BindGroupLayoutEntry]) -> BTreeSet<(u32, u32, &'static str)> {
     rust_bindings(&[
         &crate::frame::layout_entries(),
         &crate::tf::layout_entries(),
-        &volume_layout_entries(volume_storage),
+        volume,
     ])
 }
 
@@ -119,6 +119,11 @@ fn wgsl_bindings(m: &naga::Module) -> BTreeSet<(u32, u32, &'static str)> {
             let b = v.binding.as_ref()?;
             let kind = match v.space {
                 naga::AddressSpace::Uniform => "uniform",
+                naga::AddressSpace::Storage { access }
+                    if access.contains(naga::StorageAccess::STORE) =>
+                {
+                    "storage_rw"
+                }
                 naga::AddressSpace::Storage { .. } => "storage",
                 _ => match &m.types[v.ty].inner {
                     naga::TypeInner::Sampler { .. } => "sampler",
@@ -145,6 +150,10 @@ fn rust_bindings(groups: &[&[wgpu::BindGroupLayoutEntry]]) -> BTreeSet<(u32, u32
                     ty: wgpu::BufferBindingType::Uniform,
                     ..
                 } => "uniform",
+                wgpu::BindingType::Buffer {
+                    ty: wgpu::BufferBindingType::Storage { read_only: false },
+                    ..
+                } => "storage_rw",
                 wgpu::BindingType::Buffer { .. } => "storage",
                 wgpu::BindingType::Sampler(_) => "sampler",
                 wgpu::BindingType::StorageTexture { .. } => "storage_texture",
@@ -157,7 +166,7 @@ fn rust_bindings(groups: &[&[wgpu::BindGroupLayoutEntry]]) -> BTreeSet<(u32, u32
     out
 }
 
-fn check_kernel(name: &str, m: &naga::Module, volume_storage: u32) {
+fn check_kernel(name: &str, m: &naga::Module, volume: &[wgpu::BindGroupLayoutEntry]) {
     // Entry point and workgroup size.
     assert_eq!(m.entry_points.len(), 1, "{name}");
     let ep = &m.entry_points[0];
@@ -195,7 +204,7 @@ fn check_kernel(name: &str, m: &naga::Module, volume_storage: u32) {
     // Every binding of every group against the Rust layouts.
     assert_eq!(
         wgsl_bindings(m),
-        kernel_bindings(volume_storage),
+        kernel_bindings(volume),
         "{name}: bindings"
     );
 }
@@ -203,7 +212,7 @@ fn check_kernel(name: &str, m: &naga::Module, volume_storage: u32) {
 #[test]
 fn incore_kernel_matches_the_rust_side() {
     let m = module("incore", &incore());
-    check_kernel("incore", &m, 1);
+    check_kernel("incore", &m, &volume_layout_entries(1));
     check_struct(
         &m,
         "VolumeParams",
@@ -227,7 +236,7 @@ fn incore_kernel_matches_the_rust_side() {
 #[test]
 fn ooc_kernel_matches_the_rust_side() {
     let m = module("ooc", &ooc());
-    check_kernel("ooc", &m, 3);
+    check_kernel("ooc", &m, &crate::backend::ooc::layout_entries());
     check_struct(
         &m,
         "OocParams",
@@ -296,7 +305,20 @@ fn reflection_catches_drift() {
     );
     // A moved binding.
     let moved = incore().replace("@group(2) @binding(3)", "@group(2) @binding(7)");
-    assert_ne!(wgsl_bindings(&module("moved", &moved)), kernel_bindings(1));
+    assert_ne!(
+        wgsl_bindings(&module("moved", &moved)),
+        kernel_bindings(&volume_layout_entries(1))
+    );
+    // The usage counters made read-only.
+    let ro = ooc().replace(
+        "var<storage, read_write> usage: array<atomic<u32>>",
+        "var<storage, read> usage: array<u32>",
+    );
+    let ro = ro.replace("atomicAdd(&usage[slot], 1u);", "let _u = usage[slot];");
+    assert_ne!(
+        wgsl_bindings(&module("read-only usage", &ro)),
+        kernel_bindings(&crate::backend::ooc::layout_entries())
+    );
     // A changed flag bit.
     let flag = incore().replace("FLAG_REVERSED_Z: u32 = 4u", "FLAG_REVERSED_Z: u32 = 8u");
     assert_ne!(
@@ -314,6 +336,7 @@ fn every_shader_file_is_covered() {
         "modes.wgsl",
         "incore.wgsl",
         "ooc.wgsl",
+        "feedback.wgsl",
         "composite.wgsl",
     ];
     for entry in std::fs::read_dir(dir).unwrap() {
