@@ -10,6 +10,7 @@ mod build;
 mod ooc;
 mod soak;
 mod u8;
+mod visibility;
 
 use std::process::ExitCode;
 
@@ -37,8 +38,9 @@ fn main() -> ExitCode {
         "ooc" => ooc::run(rest),
         "soak" => soak::run(rest),
         "u8" => u8::run(rest),
+        "visibility" => visibility::run(rest),
         _ => {
-            eprintln!("usage: brickray-bench <accel|build|ooc|soak|u8> [options]");
+            eprintln!("usage: brickray-bench <accel|build|ooc|soak|u8|visibility> [options]");
             return ExitCode::from(2);
         }
     };

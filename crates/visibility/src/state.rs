@@ -37,6 +37,8 @@ struct LeafVis {
     visible: Option<u64>,
     /// The latest frame it showed any pixel in (propagation uses it).
     reached: Option<u64>,
+    /// It became a leaf by collapsing, invisible.
+    collapsed: bool,
 }
 
 /// Counts of the current cut's data leaves by visibility.
@@ -74,6 +76,11 @@ pub struct VisibilityCounts {
 ///   invisible in the frame it became a leaf, so it does not split again until
 ///   an observation shows it (without this, a collapsed node would be
 ///   unobserved, hence visible, split, be found invisible, collapse, ...);
+/// * a collapsed node that then shows as a leaf (rays crossing only its empty
+///   children reach its coarser brick, whose data is smeared over them) is
+///   marked *bounced* and stays split while it remains in the cut, even when
+///   none of its children shows: otherwise it would collapse and split again
+///   every few frames;
 /// * any other node (not yet met): visible.
 ///
 /// Refinement splits only visible nodes, so an invisible node stays a leaf at
@@ -86,6 +93,9 @@ pub struct VisibilityState {
     leaves: HashMap<NodeKey, LeafVis>,
     /// Propagated visibility of the inner nodes of the cut.
     inner: HashMap<NodeKey, bool>,
+    /// Nodes that collapsed as invisible and then showed as leaves: they stay
+    /// split while they are in the cut (see the type's documentation).
+    bounced: std::collections::HashSet<NodeKey>,
     dirty: bool,
 }
 
@@ -113,6 +123,7 @@ impl VisibilityState {
     pub fn clear(&mut self) {
         self.leaves.clear();
         self.inner.clear();
+        self.bounced.clear();
         self.dirty = false;
     }
 
@@ -130,6 +141,7 @@ impl VisibilityState {
                     observed: collapsed_hidden.then_some(frame),
                     visible: None,
                     reached: None,
+                    collapsed: collapsed_hidden,
                 }
             });
             next.insert(key, v);
@@ -154,6 +166,9 @@ impl VisibilityState {
         l.observed = latest(l.observed);
         if pixels >= threshold {
             l.visible = latest(l.visible);
+            if l.collapsed {
+                self.bounced.insert(key);
+            }
         }
         if pixels > 0 {
             l.reached = latest(l.reached);
@@ -198,6 +213,9 @@ impl VisibilityState {
                 p = a.parent();
             }
         }
+        let (inner, leaves) = (&self.inner, &self.leaves);
+        self.bounced
+            .retain(|k| inner.contains_key(k) || leaves.contains_key(k));
         self.dirty = false;
     }
 
@@ -207,7 +225,7 @@ impl VisibilityState {
             return self.leaf_visible(l);
         }
         self.propagate();
-        self.inner.get(&key).copied().unwrap_or(true)
+        self.inner.get(&key).copied().unwrap_or(true) || self.bounced.contains(&key)
     }
 
     /// Counts of the cut's data leaves by visibility.
@@ -305,6 +323,34 @@ mod tests {
         }
         assert!(!s.visible(a.child(0)));
         assert!(s.visible(a));
+    }
+
+    #[test]
+    fn a_node_that_bounces_stays_split() {
+        let mut s = VisibilityState::new(cfg());
+        let a = NodeKey::ROOT.child(0);
+        s.set_cut(1, a.children());
+        for c in a.children() {
+            s.observe(1, c, 0);
+        }
+        assert!(!s.visible(a));
+        s.set_cut(2, [a]);
+        // The coarser brick shows (rays through its empty children).
+        s.observe(2, a, 10);
+        assert!(s.visible(a));
+        s.set_cut(3, a.children());
+        for c in a.children() {
+            s.observe(3, c, 0);
+        }
+        // Children hidden again, but it stays split.
+        assert!(s.visible(a));
+        // Out of the cut, the mark goes.
+        s.set_cut(4, [NodeKey::ROOT]);
+        s.set_cut(5, a.children());
+        for c in a.children() {
+            s.observe(5, c, 0);
+        }
+        assert!(!s.visible(a));
     }
 
     #[test]
