@@ -20,7 +20,7 @@
 
 use brickray::{
     Camera, FrameDesc, OutOfCoreConfig, OutOfCoreStats, RenderSettings, TransferFunction,
-    VisibilityPolicy, VolumeFrame, VolumeRenderer,
+    VisibilityConfig, VisibilityPolicy, VolumeFrame, VolumeRenderer,
 };
 use brickray_harness::{Offscreen, shared_gpu as gpu, target_desc as targets};
 use brickray_reference::psnr;
@@ -165,7 +165,38 @@ fn hidden_bricks_leave_the_working_set_and_the_image_stays() {
         "the scene must hide bricks"
     );
 
-    let mut culled = renderer(VisibilityPolicy::RayGuided);
+    for policy in [
+        VisibilityPolicy::RayGuided,
+        VisibilityPolicy::OcclusionQueries,
+    ] {
+        culls_hidden(policy, None, &img0, &s0, &hidden);
+    }
+    // Occlusion queries rotating over screen tiles: 64 a frame for about 270
+    // leaves.
+    let small = VisibilityConfig {
+        queries_per_frame: 64,
+        ..Default::default()
+    };
+    culls_hidden(
+        VisibilityPolicy::OcclusionQueries,
+        Some(small),
+        &img0,
+        &s0,
+        &hidden,
+    );
+}
+
+fn culls_hidden(
+    policy: VisibilityPolicy,
+    config: Option<VisibilityConfig>,
+    img0: &[u8],
+    s0: &OutOfCoreStats,
+    hidden: &HashSet<brickray::NodeKey>,
+) {
+    let mut culled = renderer(policy);
+    if let Some(c) = config {
+        culled.set_visibility_config(c).unwrap();
+    }
     let (img1, s1, frames) = converge(&mut culled, camera(0.0), 200);
     let cut: HashSet<_> = culled
         .last_usage()
@@ -175,11 +206,23 @@ fn hidden_bricks_leave_the_working_set_and_the_image_stays() {
         .map(|(k, _)| *k)
         .collect();
     let kept = hidden.iter().filter(|k| cut.contains(k)).count();
-    let p = psnr(&img1, &img0);
+    let p = psnr(&img1, img0);
     eprintln!(
-        "ray-guided: {} bricks after {frames} frames ({:?}), {kept} hidden finest bricks kept, {p:.1} dB",
-        s1.cache.working_set_bricks, s1.visibility
+        "{} ({:?}): {} bricks after {frames} frames ({:?}, {:?}), {kept} hidden finest bricks kept, {p:.1} dB",
+        policy.name(),
+        config.map(|c| c.queries_per_frame),
+        s1.cache.working_set_bricks,
+        s1.visibility,
+        s1.occlusion
     );
+    if config.is_some() {
+        assert!(
+            s1.occlusion.period > 1,
+            "the queries must rotate: {:?}",
+            s1.occlusion
+        );
+        assert!(s1.occlusion.queries <= 64);
+    }
     assert!(
         kept * 50 <= hidden.len(),
         "{kept} of {} hidden bricks stayed in the working set",
@@ -192,12 +235,21 @@ fn hidden_bricks_leave_the_working_set_and_the_image_stays() {
         s0.cache.working_set_bricks
     );
     assert!(p >= 50.0, "culled vs unculled {p:.1} dB");
-    assert!(lit(&img1) * 100 >= lit(&img0) * 99);
+    assert!(lit(&img1) * 100 >= lit(img0) * 99);
 }
 
 #[test]
 fn a_half_turn_reveals_and_refines_without_holes() {
-    let mut culled = renderer(VisibilityPolicy::RayGuided);
+    for policy in [
+        VisibilityPolicy::RayGuided,
+        VisibilityPolicy::OcclusionQueries,
+    ] {
+        half_turn(policy);
+    }
+}
+
+fn half_turn(policy: VisibilityPolicy) {
+    let mut culled = renderer(policy);
     converge(&mut culled, camera(0.0), 200);
     // The unculled reference of each view of the turn.
     let steps = 8;
@@ -229,8 +281,10 @@ fn a_half_turn_reveals_and_refines_without_holes() {
     let s_ref = none.out_of_core_stats().unwrap();
     let p = psnr(&img_b, &ref_b);
     eprintln!(
-        "after the turn: converged in {frames} frames, {} bricks (unculled {}), {p:.1} dB",
-        s_b.cache.working_set_bricks, s_ref.cache.working_set_bricks
+        "{}: after the turn: converged in {frames} frames, {} bricks (unculled {}), {p:.1} dB",
+        policy.name(),
+        s_b.cache.working_set_bricks,
+        s_ref.cache.working_set_bricks
     );
     assert!(
         s_b.converged,
@@ -243,8 +297,17 @@ fn a_half_turn_reveals_and_refines_without_holes() {
 /// the read-backs complete during its later submits, and culling follows.
 #[test]
 fn a_host_that_never_waits_still_gets_culling() {
+    for policy in [
+        VisibilityPolicy::RayGuided,
+        VisibilityPolicy::OcclusionQueries,
+    ] {
+        never_waits(policy);
+    }
+}
+
+fn never_waits(policy: VisibilityPolicy) {
     let g = gpu();
-    let mut r = renderer(VisibilityPolicy::RayGuided);
+    let mut r = renderer(policy);
     let target = Offscreen::new(&g.device, SIZE, SIZE);
     let mut culled_at = None;
     for i in 1..=150 {
@@ -265,10 +328,19 @@ fn a_host_that_never_waits_still_gets_culling() {
     }
     let (i, s) = culled_at.expect("no culling within 150 frames of a host that never waits");
     eprintln!(
-        "culling after {i} frames: {:?} {:?}",
-        s.visibility, s.feedback
+        "{}: culling after {i} frames: {:?} {:?} {:?}",
+        policy.name(),
+        s.visibility,
+        s.feedback,
+        s.occlusion
     );
-    assert!(s.feedback.frames_applied > 0);
+    // The read-backs of the policy's own path arrived.
+    let applied = if policy.occlusion_queries() {
+        s.occlusion.frames_applied
+    } else {
+        s.feedback.frames_applied
+    };
+    assert!(applied > 0);
     // Let the device finish before the next test uses it.
     let _ = g.device.poll(wgpu::PollType::wait_indefinitely());
 }

@@ -17,3 +17,21 @@
 fn feedback_reached(slot: u32) {
     atomicAdd(&usage[slot], 1u);
 }
+
+// Occlusion-query feedback: the clip depth of the last sample each ray visited
+// (where early ray termination or an isosurface hit stopped it; the end of its
+// extent in the volume, clipped to the host's depth, otherwise), per viewport
+// pixel; occlusion.wgsl rasterises leaf boxes against it.
+@group(2) @binding(7) var stop_depth: texture_storage_2d<r32float, write>;
+
+fn feedback_stop(px: vec2<u32>, depth: f32) {
+    textureStore(stop_depth, vec2<i32>(px), vec4<f32>(depth, 0.0, 0.0, 0.0));
+}
+
+// True when the ray stopped before the end of its extent: DVR early ray
+// termination or an isosurface hit. MIP and rays that ran out of samples count
+// as not stopped (nothing behind them is hidden).
+fn feedback_terminated(acc: Accum) -> bool {
+    let ert = ERT && MODE == MODE_DVR && acc.color.a >= frame.ert_threshold;
+    return ert || (MODE == MODE_ISO && acc.hit);
+}

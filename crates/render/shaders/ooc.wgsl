@@ -137,6 +137,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     var acc = accum_new();
     // The brick being sampled (set at each data leaf).
     var cur: Cursor;
+    feedback_stop(px, far_depth());
     if (t1 > t0) {
         let oo = r.tex_origin * ooc.octree_scale;
         let od = r.tex_dir * ooc.octree_scale;
@@ -230,6 +231,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             t_last = t;
             k = k + 1u;
         }
+        feedback_stop(px, depth_at(r, select(t1, t0 + f32(k) * dtl, feedback_terminated(acc))));
     }
     finish_ray(px, &acc, cur, r, start.host);
 }

@@ -34,7 +34,7 @@ mod limits;
 pub mod shaders;
 mod tf;
 
-pub use backend::{FeedbackStats, OutOfCoreStats, UsageFrame};
+pub use backend::{FeedbackStats, OcclusionStats, OutOfCoreStats, UsageFrame};
 /// Budgets, tolerance, loader threads and retry policy of the out-of-core path:
 /// the cache's own configuration.
 pub use brickray_cache::CacheConfig as OutOfCoreConfig;
@@ -213,11 +213,6 @@ impl VolumeRenderer {
     /// material): they stay at the level they have and request nothing.
     /// Switching forgets what was observed.
     pub fn set_visibility_policy(&mut self, policy: VisibilityPolicy) -> Result<(), RenderError> {
-        if policy.occlusion_queries() {
-            return Err(RenderError::Unsupported {
-                what: "occlusion-query visibility feedback",
-            });
-        }
         self.out_of_core()?.set_visibility_policy(policy);
         Ok(())
     }

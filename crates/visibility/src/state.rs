@@ -14,6 +14,9 @@ pub struct VisibilityConfig {
     /// over `N` frames this must be at least `N`, so a leaf not queried this
     /// frame keeps its state).
     pub hold_frames: u32,
+    /// Occlusion queries per frame (the screen-tile scheduler's budget; the
+    /// renderer caps it at its query set's size, 1024).
+    pub queries_per_frame: u32,
 }
 
 impl Default for VisibilityConfig {
@@ -21,6 +24,7 @@ impl Default for VisibilityConfig {
         VisibilityConfig {
             threshold_px: 4,
             hold_frames: 4,
+            queries_per_frame: 1024,
         }
     }
 }
@@ -256,6 +260,7 @@ mod tests {
         VisibilityConfig {
             threshold_px: 4,
             hold_frames: 2,
+            queries_per_frame: 64,
         }
     }
 

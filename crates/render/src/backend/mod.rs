@@ -5,10 +5,12 @@
 
 pub(crate) mod feedback;
 pub(crate) mod incore;
+pub(crate) mod occlusion;
 pub(crate) mod ooc;
 
 pub use feedback::{FeedbackStats, UsageFrame};
 pub(crate) use incore::InCore;
+pub use occlusion::OcclusionStats;
 pub(crate) use ooc::OutOfCore;
 pub use ooc::OutOfCoreStats;
 

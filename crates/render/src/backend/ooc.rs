@@ -6,6 +6,7 @@
 //! `update` only writes prepared rows.
 
 use super::feedback::{FeedbackStats, UsageFeedback, UsageFrame};
+use super::occlusion::{OcclusionFeedback, OcclusionStats};
 use super::{VolumeBackend, check_stage_limits, volume_layout_entries, volume_sampler};
 use crate::desc::FrameDesc;
 use crate::encoding::{self, U8Filtering};
@@ -28,6 +29,14 @@ pub(super) const READ_ONLY_STORAGE: u32 = 3;
 pub(super) const STORAGE_BUFFERS: u32 = READ_ONLY_STORAGE + 1;
 /// The binding of the usage counters (`shaders/feedback.wgsl`).
 pub(crate) const USAGE_BINDING: u32 = 6;
+/// The binding of the stop-depth texture (`shaders/feedback.wgsl`).
+pub(crate) const STOP_DEPTH_BINDING: u32 = 7;
+/// Storage textures of group 2: the stop depth.
+pub(crate) const STORAGE_TEXTURES: u32 = 1;
+/// Most occlusion queries per frame (the query set's size).
+pub(crate) const QUERIES_PER_FRAME: u32 = 1024;
+/// The smallest tile side the scheduler splits to.
+const MIN_TILE_PX: u32 = 16;
 
 /// The layout of group 2 out of core: the shared volume entries and the
 /// read-write usage counters.
@@ -40,6 +49,16 @@ pub(crate) fn layout_entries() -> Vec<wgpu::BindGroupLayoutEntry> {
             ty: wgpu::BufferBindingType::Storage { read_only: false },
             has_dynamic_offset: false,
             min_binding_size: None,
+        },
+        count: None,
+    });
+    e.push(wgpu::BindGroupLayoutEntry {
+        binding: STOP_DEPTH_BINDING,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::StorageTexture {
+            access: wgpu::StorageTextureAccess::WriteOnly,
+            format: wgpu::TextureFormat::R32Float,
+            view_dimension: wgpu::TextureViewDimension::D2,
         },
         count: None,
     });
@@ -73,6 +92,8 @@ pub struct OutOfCoreStats {
     pub visibility: VisibilityCounts,
     /// The usage feedback's read-back counters.
     pub feedback: FeedbackStats,
+    /// The occlusion queries' schedule and read-back counters.
+    pub occlusion: OcclusionStats,
 }
 
 /// `struct SlotInfo` of ooc.wgsl: one row of the slot table.
@@ -185,6 +206,7 @@ pub(crate) struct OutOfCore {
     leaves: Vec<(u32, NodeKey)>,
     /// True when the last frame's cut differed from the one before.
     cut_changed: bool,
+    occlusion: OcclusionFeedback,
 }
 
 /// Refinement's view of the visibility state.
@@ -217,6 +239,11 @@ impl OutOfCore {
         u8: U8Filtering,
     ) -> Result<OutOfCore, RenderError> {
         check_stage_limits(device, STORAGE_BUFFERS)?;
+        gpu::need(
+            "max_storage_textures_per_shader_stage",
+            (crate::frame::OUTPUT_FORMATS.len() as u32 + STORAGE_TEXTURES) as u64,
+            device.limits().max_storage_textures_per_shader_stage as u64,
+        )?;
         let layout = source.layout().clone();
         let gpu_format = GpuFormat::for_layout(
             &layout,
@@ -242,6 +269,7 @@ impl OutOfCore {
             })
         })?;
         let sampler = volume_sampler(device)?;
+        let occlusion = OcclusionFeedback::new(device, QUERIES_PER_FRAME)?;
         let bind_group = GroupParts {
             layout: &group_layout,
             params: &params.buffer,
@@ -251,6 +279,7 @@ impl OutOfCore {
             sub_cells: &pool.sub_cells,
             index: &index.buffer,
             usage: &pool.feedback.usage,
+            stop: occlusion.stop_view(),
         }
         .bind_group(device)?;
         let mut ooc = OutOfCore {
@@ -270,6 +299,7 @@ impl OutOfCore {
             visibility: VisibilityState::new(VisibilityConfig::default()),
             leaves: Vec::new(),
             cut_changed: false,
+            occlusion,
         };
         ooc.write_params(queue);
         Ok(ooc)
@@ -303,6 +333,7 @@ impl OutOfCore {
             sub_cells: &self.pool.sub_cells,
             index: &self.index.buffer,
             usage: &self.pool.feedback.usage,
+            stop: self.occlusion.stop_view(),
         }
         .bind_group(device)?;
         Ok(())
@@ -429,6 +460,7 @@ struct GroupParts<'a> {
     sub_cells: &'a wgpu::Buffer,
     index: &'a wgpu::Buffer,
     usage: &'a wgpu::Buffer,
+    stop: &'a wgpu::TextureView,
 }
 
 impl GroupParts<'_> {
@@ -465,6 +497,10 @@ impl GroupParts<'_> {
                     wgpu::BindGroupEntry {
                         binding: USAGE_BINDING,
                         resource: self.usage.as_entire_binding(),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: STOP_DEPTH_BINDING,
+                        resource: wgpu::BindingResource::TextureView(self.stop),
                     },
                 ],
             })
@@ -508,6 +544,14 @@ impl VolumeBackend for OutOfCore {
                 }
             }
         }
+        if self.occlusion.resize(device, [vp.width, vp.height])? {
+            self.rebuild_bind_group(device)?;
+        }
+        for (frame, key, samples) in self.occlusion.poll(self.frame) {
+            if self.policy.occlusion_queries() {
+                self.visibility.observe(frame, key, samples);
+            }
+        }
         let mut filter = Filter(&mut self.visibility);
         let filter: Option<&mut dyn brickray_cache::SplitFilter> = if self.policy.culls() {
             Some(&mut filter)
@@ -533,6 +577,37 @@ impl VolumeBackend for OutOfCore {
         if self.policy.culls() {
             self.visibility
                 .set_cut(self.frame, self.leaves.iter().map(|l| l.1));
+        }
+        if self.policy.occlusion_queries() {
+            let geo = brickray_cache::refine::ViewGeometry::new(
+                &self.layout,
+                &desc.camera,
+                vp.aspect() as f32,
+                vp.height,
+                &self.frame_of_world,
+            );
+            let keys: Vec<NodeKey> = self.leaves.iter().map(|l| l.1).collect();
+            let near = self.occlusion.schedule(
+                queue,
+                &geo,
+                &desc.camera,
+                vp.aspect() as f32,
+                [vp.width, vp.height],
+                self.frame,
+                &keys,
+                self.visibility.config().queries_per_frame,
+                MIN_TILE_PX,
+            );
+            // A box reaching behind the eye cannot be rasterised whole: visible.
+            for k in near {
+                self.visibility.observe(self.frame, k, u32::MAX);
+            }
+            // A leaf keeps its state until the rotation queries it again.
+            let mut c = self.visibility.config();
+            if c.hold_frames < self.occlusion.stats.period {
+                c.hold_frames = self.occlusion.stats.period;
+                self.visibility.set_config(c);
+            }
         }
         let refine_ms = t.elapsed().as_secs_f64() * 1e3;
 
@@ -571,6 +646,7 @@ impl VolumeBackend for OutOfCore {
             policy: self.policy,
             visibility,
             feedback: self.pool.feedback.stats,
+            occlusion: self.occlusion.stats,
         };
         Ok(bytes)
     }
@@ -583,6 +659,9 @@ impl VolumeBackend for OutOfCore {
         self.pool
             .feedback
             .after_pass(queue, encoder, self.frame, &self.leaves);
+        if self.policy.occlusion_queries() {
+            self.occlusion.record(queue, encoder, self.frame);
+        }
     }
 
     fn max_leaves(&self) -> u32 {

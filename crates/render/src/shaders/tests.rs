@@ -266,6 +266,33 @@ fn ooc_kernel_matches_the_rust_side() {
 }
 
 #[test]
+fn occlusion_matches_the_rust_side() {
+    use crate::backend::occlusion::{OcclusionUniforms, WGSL, layout_entries};
+    let m = module("occlusion", WGSL);
+    let eps: BTreeSet<(String, naga::ShaderStage)> = m
+        .entry_points
+        .iter()
+        .map(|e| (e.name.clone(), e.stage))
+        .collect();
+    let want: BTreeSet<(String, naga::ShaderStage)> = [
+        ("fill_vs", naga::ShaderStage::Vertex),
+        ("fill_fs", naga::ShaderStage::Fragment),
+        ("box_vs", naga::ShaderStage::Vertex),
+    ]
+    .into_iter()
+    .map(|(n, s)| (n.to_string(), s))
+    .collect();
+    assert_eq!(eps, want);
+    check_struct(
+        &m,
+        "OcclusionUniforms",
+        rust_fields!(OcclusionUniforms, [view_proj]),
+        std::mem::size_of::<OcclusionUniforms>(),
+    );
+    assert_eq!(wgsl_bindings(&m), rust_bindings(&[&layout_entries()]));
+}
+
+#[test]
 fn composite_matches_the_rust_side() {
     let m = module("composite", COMPOSITE);
     let names: BTreeSet<&str> = m.entry_points.iter().map(|e| e.name.as_str()).collect();
@@ -337,6 +364,7 @@ fn every_shader_file_is_covered() {
         "incore.wgsl",
         "ooc.wgsl",
         "feedback.wgsl",
+        "occlusion.wgsl",
         "composite.wgsl",
     ];
     for entry in std::fs::read_dir(dir).unwrap() {
