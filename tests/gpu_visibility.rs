@@ -344,3 +344,61 @@ fn never_waits(policy: VisibilityPolicy) {
     // Let the device finish before the next test uses it.
     let _ = g.device.poll(wgpu::PollType::wait_indefinitely());
 }
+
+/// MIP: nothing is occluded, so neither policy culls: the converged working set
+/// and image equal those without culling.
+#[test]
+fn mip_culls_nothing() {
+    let g = gpu();
+    let mip = |policy| {
+        let mut r = renderer(policy);
+        r.set_transfer_function(&g.device, &g.queue, &TransferFunction::ramp(0.1, 0.9, 1.0))
+            .unwrap();
+        r
+    };
+    let settings = RenderSettings {
+        mode: brickray::RenderMode::Mip,
+        ..Default::default()
+    };
+    let run = |r: &mut VolumeRenderer| {
+        for i in 1..=200 {
+            let target = Offscreen::new(&g.device, SIZE, SIZE);
+            let mut enc = g.device.create_command_encoder(&Default::default());
+            let d = FrameDesc {
+                settings,
+                ..desc(camera(0.0))
+            };
+            r.prepare(&g.device, &g.queue, &mut enc, &d).unwrap();
+            {
+                let mut pass = target.pass(&mut enc, true);
+                r.render(&mut pass).unwrap();
+            }
+            g.submit_wait(enc);
+            let s = r.out_of_core_stats().unwrap();
+            if s.converged {
+                return (target.read_color(g), s, i);
+            }
+        }
+        panic!("MIP did not converge");
+    };
+    let (img0, s0, _) = run(&mut mip(VisibilityPolicy::None));
+    for policy in [
+        VisibilityPolicy::RayGuided,
+        VisibilityPolicy::OcclusionQueries,
+    ] {
+        let (img, s, frames) = run(&mut mip(policy));
+        let p = psnr(&img, &img0);
+        eprintln!(
+            "MIP {}: {} bricks (unculled {}) after {frames} frames, {p:.1} dB, {:?}",
+            policy.name(),
+            s.cache.working_set_bricks,
+            s0.cache.working_set_bricks,
+            s.visibility
+        );
+        assert_eq!(s.cache.working_set_bricks, s0.cache.working_set_bricks);
+        // Only bricks showing fewer than 4 pixels (at the frustum's edge) may
+        // be invisible (measured: 1 of 508).
+        assert!(s.visibility.invisible * 100 <= s.visibility.visible);
+        assert!(p >= 50.0);
+    }
+}
