@@ -15,7 +15,8 @@
 //!    frames);
 //! 2. turn half way round the volume in `--turn` frames, revealing the side
 //!    hidden so far;
-//! 3. hold the view from behind until every policy converged.
+//! 3. hold the view from behind until every policy converged;
+//! 4. jump back to the start view and hold until every policy converged.
 //!
 //! Per policy: working-set bricks along the path (median, peak), bytes
 //! uploaded, frames to converge at the start view, ms per frame (`prepare +
@@ -23,7 +24,9 @@
 //! working set / oracle, PSNR of the converged images (start and back views)
 //! against those of no culling, and the disocclusion latency: frames from
 //! reaching the back view until its image is within 50 dB of the unculled
-//! converged one. The oracle (start view): the unculled converged cut's data
+//! converged one (`disocc`), and the same after a final jump back to the start
+//! view in one frame, which reveals the side hidden from behind at once
+//! (`jump`; frames until within 50 dB of the unculled start image). The oracle (start view): the unculled converged cut's data
 //! leaves that at least one ray reaches (the renderer's own usage counts: the
 //! bricks whose samples the image uses at the needed level), and the smallest
 //! hole-free cut holding them (every ancestor split, its other non-empty
@@ -68,6 +71,7 @@ struct Track {
     start: Option<(Vec<u8>, OutOfCoreStats)>,
     back: Option<(Vec<u8>, OutOfCoreStats)>,
     back_frames: Vec<Vec<u8>>,
+    jump_frames: Vec<Vec<u8>>,
     oracle_usage: Option<Vec<(NodeKey, u32)>>,
 }
 
@@ -438,6 +442,23 @@ fn run_scene(
         let (s, img) = step(r, t, back, true)?;
         t.back = Some((img.unwrap_or_default(), s));
     }
+    // 4. A jump back to the start view in one frame: the side hidden from
+    // behind is revealed at once; frames kept for its latency.
+    let mut done = vec![false; policies.len()];
+    for _ in 1..=hold {
+        for (i, (r, t)) in rs.iter_mut().zip(tracks.iter_mut()).enumerate() {
+            if done[i] {
+                continue;
+            }
+            let (s, img) = step(r, t, start, true)?;
+            t.jump_frames.push(img.unwrap_or_default());
+            done[i] = s.converged;
+        }
+        if done.iter().all(|d| *d) {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    }
     Ok(tracks)
 }
 
@@ -467,7 +488,7 @@ fn report(
         oracle_cut
     );
     println!(
-        "  {:<10} {:>8} {:>6} {:>9} {:>7} {:>8} {:>8} {:>8} {:>7} {:>7} {:>8} {:>8} {:>7}",
+        "  {:<10} {:>8} {:>6} {:>9} {:>7} {:>8} {:>8} {:>8} {:>7} {:>7} {:>8} {:>8} {:>7} {:>5}",
         "policy",
         "ws_conv",
         "cut",
@@ -480,12 +501,19 @@ fn report(
         "/orc",
         "/orccut",
         "psnr_s",
-        "disocc"
+        "disocc",
+        "jump"
     );
     let disocc = |t: &Track| {
         t.back_frames
             .iter()
             .position(|img| brickray_reference::psnr(img, base_back) >= SAME_DB)
+            .map(|i| i + 1)
+    };
+    let jump = |t: &Track| {
+        t.jump_frames
+            .iter()
+            .position(|img| brickray_reference::psnr(img, base_start) >= SAME_DB)
             .map(|i| i + 1)
     };
     for (p, t) in policies.iter().zip(tracks) {
@@ -501,7 +529,7 @@ fn report(
         let d = disocc(t);
         let peak = t.working.iter().cloned().fold(0.0, f64::max);
         println!(
-            "  {:<10} {:>8} {:>5.0}% {:>9.0} {:>7.0} {:>8.1} {:>8} {:>8.1} {:>7.2} {:>7.2} {:>8.2} {:>8.1} {:>7}",
+            "  {:<10} {:>8} {:>5.0}% {:>9.0} {:>7.0} {:>8.1} {:>8} {:>8.1} {:>7.2} {:>7.2} {:>8.2} {:>8.1} {:>7} {:>5}",
             p.name(),
             ws,
             cut_frac * 100.0,
@@ -515,6 +543,7 @@ fn report(
             ws / oracle_cut as f64,
             psnr_s.min(999.0),
             d.map_or("-".into(), |f| f.to_string()),
+            jump(t).map_or("-".into(), |f| f.to_string()),
         );
         let key = |m: &str| format!("{}_{}_{}", m, scene.name, p.name());
         let mut put = |m: &str, v: serde_json::Value| {
@@ -535,6 +564,7 @@ fn report(
         put("psnr_start_db", json!(r2(psnr_s.min(999.0))));
         put("psnr_back_db", json!(r2(psnr_b.min(999.0))));
         put("disocclusion_frames", json!(d));
+        put("disocclusion_jump_frames", json!(jump(t)));
         put("kind", json!(scene.kind));
     }
     fig.insert(format!("oracle_{}", scene.name), json!(reached.len()));
@@ -590,8 +620,10 @@ fn headline(fig: &mut Figures) {
                     psnr_min = Some(psnr_min.map_or(p, |m: f64| m.min(p)));
                 }
             }
-            if let Some(d) = get(&format!("disocclusion_frames_{s}_{pol}")) {
-                disocc_max = Some(disocc_max.map_or(d, |m: f64| m.max(d)));
+            for k in ["disocclusion_frames", "disocclusion_jump_frames"] {
+                if let Some(d) = get(&format!("{k}_{s}_{pol}")) {
+                    disocc_max = Some(disocc_max.map_or(d, |m: f64| m.max(d)));
+                }
             }
         }
         if opaque {
