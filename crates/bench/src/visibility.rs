@@ -60,6 +60,11 @@ struct Scene {
     distance: f32,
 }
 
+/// Working set along the path per policy, for one scene's chart.
+type Chart = (String, Vec<(String, Vec<f64>)>);
+/// One host frame: wall ms, `prepare` ms, bytes uploaded, image if read.
+type FrameOut = (f64, f64, u64, Option<Vec<u8>>);
+
 /// What one policy did on one scene.
 #[derive(Default)]
 struct Track {
@@ -89,7 +94,7 @@ impl Runner<'_> {
         scene: &Scene,
         camera: Camera,
         read: bool,
-    ) -> Result<(f64, f64, u64, Option<Vec<u8>>), String> {
+    ) -> Result<FrameOut, String> {
         let g = self.gpu;
         let t0 = Instant::now();
         let mut enc = g.device.create_command_encoder(&Default::default());
@@ -196,7 +201,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         scenes.push(shells_scene(shell_dims));
     }
     let mut fig = Figures::new();
-    let mut chart: Vec<(String, Vec<(String, Vec<f64>)>)> = Vec::new();
+    let mut chart: Vec<Chart> = Vec::new();
     let t = Instant::now();
     for scene in &scenes {
         let px = if scene.name == "shells" {
@@ -649,7 +654,7 @@ fn headline(fig: &mut Figures) {
 }
 
 /// Working set along the path, per scene and policy, as an SVG (plotters).
-fn write_chart(path: &str, chart: &[(String, Vec<(String, Vec<f64>)>)]) -> Result<(), String> {
+fn write_chart(path: &str, chart: &[Chart]) -> Result<(), String> {
     use plotters::prelude::*;
     let n = chart.len().max(1) as u32;
     let root = SVGBackend::new(path, (720, 260 * n)).into_drawing_area();

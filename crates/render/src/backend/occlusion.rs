@@ -449,7 +449,7 @@ impl OcclusionFeedback {
             let mut behind = false;
             for p in &c {
                 let q = vp * p.extend(1.0);
-                if !(q.w > 1e-9) || !q.z.is_finite() {
+                if q.w.is_nan() || q.w <= 1e-9 || !q.z.is_finite() {
                     behind = true;
                     break;
                 }
