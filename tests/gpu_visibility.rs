@@ -106,6 +106,19 @@ fn converge(
     panic!("not converged in {max} frames: {:?}", r.out_of_core_stats());
 }
 
+/// Draws frames of the start view until the usage counts read back are those
+/// of frame `f` or later (a converged cut stays as it is; the read-back lags
+/// 2 frames, more on a loaded machine).
+fn read_back_since(r: &mut VolumeRenderer, f: u64) {
+    for _ in 0..100 {
+        if r.last_usage().is_some_and(|u| u.frame >= f) {
+            return;
+        }
+        frame(r, camera(0.0));
+    }
+    panic!("no usage read back for frame {f} in 100 frames");
+}
+
 fn lit(img: &[u8]) -> usize {
     img.chunks_exact(4)
         .filter(|p| p[0] > 4 || p[1] > 4 || p[2] > 4)
@@ -150,10 +163,7 @@ fn has_hole(img: &[u8], reference: &[u8]) -> bool {
 fn hidden_bricks_leave_the_working_set_and_the_image_stays() {
     let mut none = renderer(VisibilityPolicy::None);
     let (img0, s0, _) = converge(&mut none, camera(0.0), 200);
-    // A few more frames so that the usage of the converged cut is read back.
-    for _ in 0..4 {
-        frame(&mut none, camera(0.0));
-    }
+    read_back_since(&mut none, s0.cache.frame);
     let hidden = unreached(&none);
     eprintln!(
         "unculled: {} bricks, {} never reached by a ray",
@@ -198,6 +208,7 @@ fn culls_hidden(
         culled.set_visibility_config(c).unwrap();
     }
     let (img1, s1, frames) = converge(&mut culled, camera(0.0), 200);
+    read_back_since(&mut culled, s1.cache.frame);
     let cut: HashSet<_> = culled
         .last_usage()
         .unwrap()
