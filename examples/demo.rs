@@ -19,6 +19,14 @@ use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Instant;
 
+const USAGE: &str = "Usage: demo [--volume FILE.json|FILE.nrrd] [--in-core] [--frames N] [--size PX] [--pool-mib M] [--out DIR]
+  --volume FILE  a volume to build into a brick store and stream (default: procedural 4096^3)
+  --in-core      upload --volume whole instead
+  --frames N     frames of the orbit (default 12)
+  --size PX      image side (default 256)
+  --pool-mib M   GPU brick pool in MiB (default 64)
+  --out DIR      where the PNGs go (default out/demo)";
+
 struct Args {
     volume: Option<PathBuf>,
     in_core: bool,
@@ -48,7 +56,7 @@ fn parse() -> Result<Args, Box<dyn std::error::Error>> {
             "--pool-mib" => a.pool_mib = val()?.parse()?,
             "--out" => a.out = val()?.into(),
             "-h" | "--help" => {
-                println!("see the doc comment of examples/demo.rs");
+                println!("{USAGE}");
                 std::process::exit(0);
             }
             _ => return Err(format!("unknown argument {arg}").into()),
@@ -108,7 +116,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             if args.in_core {
                 renderer.set_volume(&gpu.device, &gpu.queue, &reader.read_volume()?)?;
             } else {
-                let store = args.out.join("volume.brs");
+                let store = args
+                    .out
+                    .join(format!("volume.{}", brickray::store::EXTENSION));
                 let t = Instant::now();
                 let report = brickray::store::build(&mut *reader, &store, &Default::default())?;
                 println!(

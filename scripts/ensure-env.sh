@@ -75,3 +75,54 @@ if [ -z "${XDG_RUNTIME_DIR:-}" ]; then
   export XDG_RUNTIME_DIR="${TMPDIR:-/tmp}/brickray-xdg-$(id -u)"
   mkdir -p "$XDG_RUNTIME_DIR" && chmod 700 "$XDG_RUNTIME_DIR"
 fi
+
+# An X server for the windowed tests (the viewer and the winit example):
+# `ensure_display` (called by test.sh, not by the demo) keeps a DISPLAY that
+# is already set; otherwise it installs Xvfb when missing (as above: as root,
+# with password-less sudo, or it stops with the exact command), starts one on
+# a free display number and exports DISPLAY. The caller stops it with
+# `stop_display` (test.sh does so on exit).
+BRICKRAY_XVFB_PID=""
+ensure_display() {
+  if [ -n "${DISPLAY:-}" ]; then
+    return 0
+  fi
+  if ! command -v Xvfb >/dev/null 2>&1; then
+    if ! apt_install xvfb; then
+      echo "brickray: no X server for the windowed tests. Install Xvfb with:" >&2
+      echo "  sudo apt-get install -y xvfb" >&2
+      exit 1
+    fi
+  fi
+  local fdfile
+  fdfile="$(mktemp "${TMPDIR:-/tmp}/brickray-xvfb.XXXXXX")"
+  # -displayfd: Xvfb picks a free display number and writes it when ready.
+  Xvfb -displayfd 3 -screen 0 1280x1024x24 -nolisten tcp 3>"$fdfile" >/dev/null 2>&1 &
+  BRICKRAY_XVFB_PID=$!
+  local i
+  for i in $(seq 1 100); do
+    if [ -s "$fdfile" ]; then
+      break
+    fi
+    if ! kill -0 "$BRICKRAY_XVFB_PID" 2>/dev/null; then
+      break
+    fi
+    sleep 0.1
+  done
+  if [ ! -s "$fdfile" ]; then
+    rm -f "$fdfile"
+    echo "brickray: Xvfb did not start" >&2
+    exit 1
+  fi
+  export DISPLAY=":$(head -n1 "$fdfile")"
+  rm -f "$fdfile"
+  echo "brickray: started Xvfb on $DISPLAY for the windowed tests" >&2
+}
+
+stop_display() {
+  if [ -n "$BRICKRAY_XVFB_PID" ]; then
+    kill "$BRICKRAY_XVFB_PID" 2>/dev/null || true
+    wait "$BRICKRAY_XVFB_PID" 2>/dev/null || true
+    BRICKRAY_XVFB_PID=""
+  fi
+}

@@ -48,6 +48,10 @@ fn render(r: &mut VolumeRenderer, desc: &FrameDesc<'_>) -> Vec<u8> {
 /// The same view through every projection, with near planes from 1e-1 down to
 /// 1e-6 of the volume's size: the image does not depend on them.
 #[test]
+#[cfg_attr(
+    no_shared_data,
+    ignore = "needs ../shared/data (the shared volumes), absent when the tests were built"
+)]
 fn every_projection_and_near_plane_matches_the_reference() {
     let Some(vol) = head_ct() else { return };
     let g = gpu();

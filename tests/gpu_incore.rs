@@ -117,6 +117,10 @@ const SHADED: Shading = Shading {
 };
 
 #[test]
+#[cfg_attr(
+    no_shared_data,
+    ignore = "needs ../shared/data (the shared volumes), absent when the tests were built"
+)]
 fn head_ct_dvr_matches_reference() {
     let Some(vol) = head_ct() else { return };
     let tf = soft_tissue_tf();
@@ -126,6 +130,10 @@ fn head_ct_dvr_matches_reference() {
 }
 
 #[test]
+#[cfg_attr(
+    no_shared_data,
+    ignore = "needs ../shared/data (the shared volumes), absent when the tests were built"
+)]
 fn head_ct_iso_matches_reference() {
     let Some(vol) = head_ct() else { return };
     let tf = bone_tf();
@@ -142,6 +150,10 @@ fn head_ct_iso_matches_reference() {
 }
 
 #[test]
+#[cfg_attr(
+    no_shared_data,
+    ignore = "needs ../shared/data (the shared volumes), absent when the tests were built"
+)]
 fn head_ct_mip_matches_reference() {
     let Some(vol) = head_ct() else { return };
     let tf = TransferFunction::ramp(hu(-200.0), hu(1500.0), 1.0);
@@ -151,6 +163,10 @@ fn head_ct_mip_matches_reference() {
 
 /// u8, u16 and f32 real volumes (the i16 one is the head CT above).
 #[test]
+#[cfg_attr(
+    no_shared_data,
+    ignore = "needs ../shared/data (the shared volumes), absent when the tests were built"
+)]
 fn other_shared_volumes_match_reference() {
     for (name, mode, lo, hi) in [
         ("pycortex_s1_t1_mri", RenderMode::Dvr, 0.25, 0.8),

@@ -77,6 +77,10 @@ fn finest() -> OutOfCoreConfig {
 }
 
 #[test]
+#[cfg_attr(
+    no_shared_data,
+    ignore = "needs ../shared/data (the shared volumes), absent when the tests were built"
+)]
 fn finest_level_matches_in_core_on_head_ct() {
     let Some(path) = brickray_harness::shared_volume("invesalius_cranium_ct") else {
         return;

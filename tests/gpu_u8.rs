@@ -211,6 +211,10 @@ fn u8_label_phantom_matches_reference() {
 }
 
 #[test]
+#[cfg_attr(
+    no_shared_data,
+    ignore = "needs ../shared/data (the shared volumes), absent when the tests were built"
+)]
 fn u8_mri_matches_reference() {
     let Some(path) = brickray_harness::shared_volume("pycortex_s1_t1_mri") else {
         return;

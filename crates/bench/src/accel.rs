@@ -9,13 +9,13 @@
 //! against the brute-force image.
 
 use crate::Figures;
+use crate::runner::{Runner, finite_db, median, round2};
 use brickray_core::{
     Accel, Camera, RenderMode, RenderSettings, Shading, TransferFunction, Volume, VolumeFrame,
 };
-use brickray_harness::{GpuContext, Offscreen, ct};
-use brickray_render::{FrameDesc, VolumeRenderer};
+use brickray_harness::{GpuContext, ct};
+use brickray_render::VolumeRenderer;
 use serde_json::json;
-use std::time::Instant;
 
 const VARIANTS: [(&str, Accel); 4] = [
     ("brute", Accel::BRUTE_FORCE),
@@ -29,65 +29,6 @@ const VARIANTS: [(&str, Accel); 4] = [
         },
     ),
 ];
-
-struct Bench<'a> {
-    gpu: &'a GpuContext,
-    renderer: VolumeRenderer,
-    target: Offscreen,
-    frame: VolumeFrame,
-    camera: Camera,
-    size: u32,
-}
-
-impl Bench<'_> {
-    /// One frame: returns (ms, RGBA8, mean samples per entering ray).
-    fn frame(
-        &mut self,
-        settings: RenderSettings,
-        read: bool,
-    ) -> Result<(f64, Vec<u8>, f64), String> {
-        let g = self.gpu;
-        let t0 = Instant::now();
-        let mut enc = g.device.create_command_encoder(&Default::default());
-        let desc = FrameDesc {
-            camera: self.camera,
-            frame: self.frame,
-            viewport: brickray_render::Viewport::full(self.size, self.size),
-            settings,
-            host_depth: None,
-        };
-        self.renderer
-            .prepare(&g.device, &g.queue, &mut enc, &desc)
-            .map_err(|e| e.to_string())?;
-        {
-            let mut pass = self.target.pass(&mut enc, true);
-            self.renderer.render(&mut pass).map_err(|e| e.to_string())?;
-        }
-        g.submit_wait(enc);
-        let ms = t0.elapsed().as_secs_f64() * 1e3;
-        if !read {
-            return Ok((ms, Vec::new(), 0.0));
-        }
-        let rgba = self.target.read_color(g);
-        let tex = self
-            .renderer
-            .sample_count_texture()
-            .ok_or("no sample counts")?;
-        let counts = brickray_harness::read_texture(g, tex, 4, wgpu::TextureAspect::All);
-        let counts: Vec<u32> = counts
-            .chunks_exact(4)
-            .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]))
-            .collect();
-        let entering: Vec<u32> = counts.iter().copied().filter(|&c| c > 0).collect();
-        let mean = entering.iter().map(|&c| c as f64).sum::<f64>() / entering.len().max(1) as f64;
-        Ok((ms, rgba, mean))
-    }
-}
-
-fn median(v: &mut [f64]) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
-}
 
 pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
     let rounds: usize = args
@@ -122,14 +63,8 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         .set_volume(&gpu.device, &gpu.queue, &vol)
         .map_err(|e| e.to_string())?;
     let frame = VolumeFrame::centered(d.dims, d.spacing);
-    let mut bench = Bench {
-        gpu: &gpu,
-        renderer,
-        target: Offscreen::new(&gpu.device, size, size),
-        frame,
-        camera: Camera::orbit(frame.center(), 2.0, 0.5, 0.3),
-        size,
-    };
+    let camera = Camera::orbit(frame.center(), 2.0, 0.5, 0.3);
+    let run = Runner::new(&gpu, size);
     let shading = Shading {
         enabled: true,
         ..Default::default()
@@ -149,8 +84,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
     let mut fig = Figures::new();
     let mut psnr_min = f64::INFINITY;
     for (scene, tf, mode) in &scenes {
-        bench
-            .renderer
+        renderer
             .set_transfer_function(&gpu.device, &gpu.queue, tf)
             .expect("transfer function");
         let settings = |accel| RenderSettings {
@@ -163,20 +97,21 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         let mut images = Vec::new();
         let mut samples = Vec::new();
         for (_, accel) in VARIANTS {
-            let (_, rgba, s) = bench.frame(settings(accel), true)?;
-            images.push(rgba);
-            samples.push(s);
+            let shot = run.frame(&mut renderer, camera, frame, settings(accel), true)?;
+            images.push(shot.rgba);
+            samples.push(shot.samples);
         }
         // Timing: rounds of all variants, the order rotated each round.
         let mut times = vec![Vec::new(); VARIANTS.len()];
         for r in 0..rounds {
             for k in 0..VARIANTS.len() {
                 let i = (k + r) % VARIANTS.len();
-                let (ms, _, _) = bench.frame(settings(VARIANTS[i].1), false)?;
-                times[i].push(ms);
+                let shot =
+                    run.frame(&mut renderer, camera, frame, settings(VARIANTS[i].1), false)?;
+                times[i].push(shot.ms);
             }
         }
-        let ms: Vec<f64> = times.iter_mut().map(|t| median(t)).collect();
+        let ms: Vec<f64> = times.iter().map(|t| median(t)).collect();
         println!("\n{scene} ({mode:?}):");
         println!(
             "  {:<8} {:>12} {:>10} {:>9} {:>10}",
@@ -199,31 +134,13 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
             );
             if i > 0 {
                 fig.insert(format!("speedup_{name}_{scene}"), json!(round2(speedup)));
-                fig.insert(
-                    format!("psnr_{name}_{scene}_db"),
-                    json!(if psnr.is_finite() {
-                        round2(psnr)
-                    } else {
-                        999.0
-                    }),
-                );
+                fig.insert(format!("psnr_{name}_{scene}_db"), json!(finite_db(psnr)));
             }
         }
     }
-    fig.insert(
-        "psnr_min_db".into(),
-        json!(if psnr_min.is_finite() {
-            round2(psnr_min)
-        } else {
-            999.0
-        }),
-    );
+    fig.insert("psnr_min_db".into(), json!(finite_db(psnr_min)));
     fig.insert("image_size".into(), json!(size));
     fig.insert("rounds".into(), json!(rounds));
     fig.insert("adapter".into(), json!(gpu.adapter.get_info().name));
     Ok(fig)
-}
-
-fn round2(x: f64) -> f64 {
-    (x * 100.0).round() / 100.0
 }

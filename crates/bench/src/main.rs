@@ -8,6 +8,8 @@
 mod accel;
 mod build;
 mod ooc;
+mod raw;
+mod runner;
 mod soak;
 mod u8;
 mod visibility;
@@ -28,21 +30,138 @@ fn arg<T: std::str::FromStr>(args: &[String], name: &str, default: T) -> Result<
     }
 }
 
+/// brickray's benchmarks: each suite prints what it measured and ends with one
+/// line holding a JSON object of the figures.
+#[derive(Debug, clap::Parser)]
+#[command(name = "brickray-bench", version)]
+struct Cli {
+    #[command(subcommand)]
+    suite: Suite,
+}
+
+/// The suites and their options (each suite reads its options itself; clap
+/// checks them and prints `--help`).
+#[derive(Debug, clap::Subcommand)]
+enum Suite {
+    /// Early ray termination and empty-space skipping vs brute force on the head CT.
+    Accel {
+        /// Interleaved rounds (default 5).
+        #[arg(long)]
+        rounds: Option<usize>,
+        /// Image side in pixels (default 512).
+        #[arg(long)]
+        size: Option<u32>,
+    },
+    /// The brick-store builder: throughput, memory bound, banded levels.
+    Build {
+        /// Smaller inputs, for a quick look.
+        #[arg(long)]
+        quick: bool,
+        /// Keep the stores built.
+        #[arg(long)]
+        keep: bool,
+    },
+    /// Out of core vs in core, output sensitivity, a camera path.
+    Ooc {
+        /// Image side in pixels (default 512).
+        #[arg(long)]
+        size: Option<u32>,
+        /// Interleaved rounds (default 3).
+        #[arg(long)]
+        rounds: Option<usize>,
+        /// Parts to run: any of a (vs in core), b (output sensitivity), c (camera path) (default abc).
+        #[arg(long)]
+        parts: Option<String>,
+        /// Image side of the camera path (default 256).
+        #[arg(long)]
+        path_size: Option<u32>,
+        /// Voxels per side of the path's procedural volume (default 65536).
+        #[arg(long)]
+        path_dims: Option<u64>,
+        /// Frames each path view is held (default 25).
+        #[arg(long)]
+        path_hold: Option<usize>,
+        /// GPU pool of the path, MiB (default 256).
+        #[arg(long)]
+        path_gpu_mib: Option<u64>,
+    },
+    /// Per-sample cost: brickray against a minimal kernel (the device's rate), in
+    /// core and out of core, DVR, shaded DVR, iso and MIP.
+    Raw {
+        /// Image side in pixels (default 512).
+        #[arg(long)]
+        size: Option<u32>,
+        /// Interleaved rounds (default 3).
+        #[arg(long)]
+        rounds: Option<usize>,
+        /// Step in voxels (default 0.5).
+        #[arg(long)]
+        step: Option<f32>,
+        /// Modes, comma-separated, of dvr, dvr_shaded, iso, mip (default all).
+        #[arg(long)]
+        modes: Option<String>,
+    },
+    /// Memory and frame time over a long random-camera run.
+    Soak {
+        /// Frames (default 10000).
+        #[arg(long)]
+        frames: Option<usize>,
+        /// Image side in pixels (default 64).
+        #[arg(long)]
+        size: Option<u32>,
+    },
+    /// Visibility feedback: working set, image and latency per policy along a
+    /// camera path with a half turn (head CT and procedural shells).
+    Visibility {
+        /// Scenes, comma-separated, of head, shells (default both).
+        #[arg(long)]
+        scenes: Option<String>,
+        /// Image side of the head CT scenes (default 256).
+        #[arg(long)]
+        size: Option<u32>,
+        /// Brick side of the head CT's store (default 32).
+        #[arg(long)]
+        head_brick: Option<u32>,
+        /// Image side of the shells scene (default 512).
+        #[arg(long)]
+        shell_size: Option<u32>,
+        /// Voxels per side of the shells volume (default 4096).
+        #[arg(long)]
+        shell_dims: Option<u64>,
+        /// Most frames each view is held (default 120).
+        #[arg(long)]
+        hold: Option<usize>,
+        /// Frames of the half turn (default 12).
+        #[arg(long)]
+        turn: Option<usize>,
+        /// Write the working-set chart (SVG) here.
+        #[arg(long)]
+        svg: Option<String>,
+    },
+    /// u8 volumes: exact interpolation vs 8-bit texels.
+    U8 {
+        /// Image side in pixels (default 512).
+        #[arg(long)]
+        size: Option<u32>,
+        /// Interleaved rounds (default 5).
+        #[arg(long)]
+        rounds: Option<usize>,
+    },
+}
+
 fn main() -> ExitCode {
+    let cli = <Cli as clap::Parser>::parse();
     let args: Vec<String> = std::env::args().skip(1).collect();
     let suite = args.first().map(String::as_str).unwrap_or("");
     let rest = &args[args.len().min(1)..];
-    let result: Result<Figures, String> = match suite {
-        "accel" => accel::run(rest),
-        "build" => build::run(rest),
-        "ooc" => ooc::run(rest),
-        "soak" => soak::run(rest),
-        "u8" => u8::run(rest),
-        "visibility" => visibility::run(rest),
-        _ => {
-            eprintln!("usage: brickray-bench <accel|build|ooc|soak|u8|visibility> [options]");
-            return ExitCode::from(2);
-        }
+    let result: Result<Figures, String> = match cli.suite {
+        Suite::Accel { .. } => accel::run(rest),
+        Suite::Build { .. } => build::run(rest),
+        Suite::Ooc { .. } => ooc::run(rest),
+        Suite::Raw { .. } => raw::run(rest),
+        Suite::Soak { .. } => soak::run(rest),
+        Suite::U8 { .. } => u8::run(rest),
+        Suite::Visibility { .. } => visibility::run(rest),
     };
     match result {
         Ok(fig) => {

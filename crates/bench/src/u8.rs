@@ -12,6 +12,7 @@
 //!
 //! `cargo run --release -p brickray-bench -- u8 [--size PX] [--rounds N]`
 
+use crate::runner::median;
 use crate::{Figures, arg};
 use brickray_core::{Camera, RenderMode, RenderSettings, Shading, TransferFunction, VolumeFrame};
 use brickray_harness::{GpuContext, Offscreen, draw_frame};
@@ -19,11 +20,6 @@ use brickray_reference::{DEFAULT_STEP_FACTOR, ReferenceOptions, compare, render_
 use brickray_render::{FrameDesc, RendererOptions, U8Filtering, VolumeRenderer};
 use serde_json::json;
 use std::time::Instant;
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
-}
 
 pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
     let size: u32 = arg(args, "--size", 512)?;
@@ -133,7 +129,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
                 }
             }
         }
-        let ms: Vec<f64> = times.into_iter().map(median).collect();
+        let ms: Vec<f64> = times.iter().map(|t| median(t)).collect();
         // Accuracy against the reference, at the default step and at its own.
         let mut psnr = Vec::new();
         for step in [settings.step_factor, DEFAULT_STEP_FACTOR] {

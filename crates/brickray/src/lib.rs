@@ -19,9 +19,9 @@ pub use brickray_render as render;
 pub use brickray_store as store;
 
 pub use brickray_core::{
-    Accel, Camera, CameraError, DType, DepthConvention, FrameError, Projection, RenderMode,
-    RenderSettings, SettingsError, Shading, TfError, TransferFunction, Volume, VolumeDesc,
-    VolumeFrame, io,
+    Accel, Camera, CameraError, ClipBox, DType, DepthConvention, FrameError, Projection,
+    RenderMode, RenderSettings, SettingsError, Shading, TfError, TransferFunction, Volume,
+    VolumeDesc, VolumeFrame, io,
 };
 pub use brickray_core::{BrickSource, NodeKey, OctreeLayout};
 pub use brickray_render::{

@@ -34,7 +34,7 @@ pub use camera::{
 };
 pub use io::{IoError, VolumeReader, read_volume};
 pub use macrocell::{MacroCellGrid, sub_cell_ranges, sub_cells_per_axis};
-pub use settings::{Accel, RenderMode, RenderSettings, SettingsError, Shading};
+pub use settings::{Accel, ClipBox, RenderMode, RenderSettings, SettingsError, Shading};
 pub use texel::{SampleEncoding, TexelCaps, TexelFormat, U8Filtering};
 pub use tf::{TfError, TransferFunction};
 pub use volume::{DType, Volume, VolumeData, VolumeDesc, VolumeError};

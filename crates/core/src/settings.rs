@@ -84,6 +84,31 @@ impl Accel {
     };
 }
 
+/// An axis-aligned box in the volume's texture space (`0..1` per axis over the
+/// volume's box) that cuts the volume: rays sample only inside it. The default
+/// is the whole volume.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ClipBox {
+    /// The lower corner.
+    pub min: [f32; 3],
+    /// The upper corner (`>= min` per axis; equal: nothing is drawn).
+    pub max: [f32; 3],
+}
+
+impl ClipBox {
+    /// The whole volume.
+    pub const FULL: ClipBox = ClipBox {
+        min: [0.0; 3],
+        max: [1.0; 3],
+    };
+}
+
+impl Default for ClipBox {
+    fn default() -> Self {
+        ClipBox::FULL
+    }
+}
+
 /// Everything that decides what a ray computes, besides camera, volume and TF.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RenderSettings {
@@ -99,6 +124,8 @@ pub struct RenderSettings {
     pub iso_refine_steps: u32,
     /// Accumulated opacity at which DVR writes depth.
     pub depth_opacity: f32,
+    /// The part of the volume that is drawn (default: all of it).
+    pub clip: ClipBox,
 }
 
 impl Default for RenderSettings {
@@ -110,6 +137,7 @@ impl Default for RenderSettings {
             step_factor: 0.5,
             iso_refine_steps: 8,
             depth_opacity: 0.5,
+            clip: ClipBox::FULL,
         }
     }
 }
@@ -178,6 +206,10 @@ impl RenderSettings {
         if let Some(t) = self.accel.early_termination {
             check("accel.early_termination", t, f32::MIN_POSITIVE, 1.0)?;
         }
+        for a in 0..3 {
+            check("clip.min", self.clip.min[a], 0.0, 1.0)?;
+            check("clip.max", self.clip.max[a], self.clip.min[a], 1.0)?;
+        }
         let s = &self.shading;
         check("shading.ambient", s.ambient, 0.0, f32::MAX)?;
         check("shading.diffuse", s.diffuse, 0.0, f32::MAX)?;
@@ -211,6 +243,27 @@ mod tests {
     fn non_finite_and_out_of_range_settings_are_refused() {
         let ok = RenderSettings::default();
         let bad = [
+            RenderSettings {
+                clip: ClipBox {
+                    min: [0.0, f32::NAN, 0.0],
+                    max: [1.0; 3],
+                },
+                ..ok
+            },
+            RenderSettings {
+                clip: ClipBox {
+                    min: [0.6, 0.0, 0.0],
+                    max: [0.5, 1.0, 1.0],
+                },
+                ..ok
+            },
+            RenderSettings {
+                clip: ClipBox {
+                    min: [0.0; 3],
+                    max: [1.0, 1.5, 1.0],
+                },
+                ..ok
+            },
             RenderSettings {
                 step_factor: f32::NAN,
                 ..ok

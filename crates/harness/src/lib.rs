@@ -23,7 +23,8 @@ pub enum GpuError {
     /// No adapter was found.
     #[error(
         "no GPU adapter found{filter}. On Debian/Ubuntu without a GPU install the software Vulkan driver: \
-         `sudo apt-get install -y mesa-vulkan-drivers` (or run ./scripts/setup.sh)"
+         `sudo apt-get install -y mesa-vulkan-drivers libvulkan1` (scripts/test.sh and scripts/demo.sh \
+         install it when run as root or with password-less sudo)"
     )]
     NoAdapter {
         /// A note on the filters in effect.
@@ -157,7 +158,7 @@ impl GpuContext {
 pub fn shared_gpu() -> &'static GpuContext {
     static GPU: std::sync::OnceLock<GpuContext> = std::sync::OnceLock::new();
     GPU.get_or_init(|| {
-        let g = GpuContext::new().expect("a wgpu adapter (install mesa-vulkan-drivers)");
+        let g = GpuContext::new().unwrap_or_else(|e| panic!("{e}"));
         eprintln!("adapter: {}", g.describe());
         g
     })
@@ -654,5 +655,31 @@ pub mod ct {
             ],
             512,
         )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    /// The no-adapter message names commands and scripts that exist.
+    #[test]
+    fn no_adapter_message_names_existing_scripts() {
+        let msg = super::GpuError::NoAdapter {
+            filter: String::new(),
+        }
+        .to_string();
+        assert!(
+            msg.contains("apt-get install -y mesa-vulkan-drivers"),
+            "{msg}"
+        );
+        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+        let scripts: Vec<&str> = msg
+            .split(|c: char| c.is_whitespace() || c == '`' || c == '(' || c == ')')
+            .filter(|w| w.contains("scripts/"))
+            .collect();
+        assert!(!scripts.is_empty(), "{msg}");
+        for s in scripts {
+            let path = root.join(s.trim_start_matches("./"));
+            assert!(path.is_file(), "{msg} names {s}, which does not exist");
+        }
     }
 }

@@ -250,7 +250,9 @@ impl Marcher<'_> {
         let ray = self
             .rays
             .pixel_ray(&self.inv_model, px, py, self.width, self.height);
-        let Some((t0, mut t1)) = ray.clip_unit_box() else {
+        let clip = self.settings.clip;
+        let Some((t0, mut t1)) = ray.clip_box(clip.min.map(f64::from), clip.max.map(f64::from))
+        else {
             return ([0.0; 4], None);
         };
         if let Some(d) = host_depth.filter(|d| !d.is_nan()) {

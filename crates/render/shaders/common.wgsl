@@ -56,6 +56,11 @@ struct Frame {
     diffuse: f32,
     specular: f32,
     shininess: f32,
+    // The clip box (RenderSettings::clip) in texture space; rays sample inside it.
+    clip_min: vec3<f32>,
+    clip_pad_a: f32,
+    clip_max: vec3<f32>,
+    clip_pad_b: f32,
 }
 
 const FLAG_HOST_DEPTH: u32 = 1u;
@@ -75,15 +80,21 @@ const FLAG_REVERSED_Z: u32 = 4u;
 struct TfInfo {
     // Number of entries, as a float.
     count: f32,
+    // Columns and rows of the corrected table, as floats.
+    width: f32,
+    rows: f32,
     pad0: f32,
-    pad1: f32,
-    pad2: f32,
 }
 
 @group(1) @binding(0) var<storage, read> tf: array<vec4<f32>>;
 // Opacity prefix sums: tf_prefix[i] = entries j < i with alpha > 0.
 @group(1) @binding(1) var<storage, read> tf_prefix: array<u32>;
 @group(1) @binding(2) var<uniform> tf_info: TfInfo;
+// The corrected table (brickray_core::tf::CorrectedTable): row r holds the TF
+// with its opacity corrected to step_factor * 2^r reference lengths, read with
+// hardware linear filtering: no interpolation by hand and no pow per sample.
+@group(1) @binding(3) var tf_table: texture_2d<f32>;
+@group(1) @binding(4) var tf_sampler: sampler;
 
 // A ray through one pixel, parametrised by world distance t from its origin on
 // the near plane.
@@ -180,8 +191,23 @@ fn clip_box(r: Ray, lo: vec3<f32>, hi: vec3<f32>) -> vec2<f32> {
     return vec2<f32>(t0, t1);
 }
 
+// 1 / d per component (0 where d is 0), once per ray: box exits then need no
+// division per test.
+fn safe_inverse(d: vec3<f32>) -> vec3<f32> {
+    return select(vec3<f32>(0.0), 1.0 / d, d != vec3<f32>(0.0));
+}
+
+// t at which the ray o + d t leaves the box [lo, hi] it is inside; `inv_d` is
+// safe_inverse(d).
+fn box_exit(o: vec3<f32>, d: vec3<f32>, inv_d: vec3<f32>, lo: vec3<f32>, hi: vec3<f32>) -> f32 {
+    let far = select(lo, hi, d > vec3<f32>(0.0));
+    let t = select(vec3<f32>(3.0e38), (far - o) * inv_d, d != vec3<f32>(0.0));
+    return min(t.x, min(t.y, t.z));
+}
+
 // A pixel's ray, the host's depth there (the far value without one) and the
-// ray's extent in the volume box, clipped to the host's depth.
+// ray's extent in the clip box (the volume box by default), clipped to the
+// host's depth.
 struct RayStart {
     r: Ray,
     host: f32,
@@ -197,13 +223,28 @@ fn start_ray(px: vec2<u32>) -> RayStart {
     let with_host = has_flag(FLAG_HOST_DEPTH);
     let at = min(px + frame.viewport_origin, textureDimensions(host_depth) - vec2<u32>(1u));
     s.host = select(far_depth(), textureLoad(host_depth, vec2<i32>(at), 0), with_host);
-    let tb = clip_box(s.r, vec3<f32>(0.0), vec3<f32>(1.0));
+    let tb = clip_box(s.r, frame.clip_min, frame.clip_max);
     s.t0 = max(tb.x, 0.0);
     s.t1 = select(tb.y, min(tb.y, t_at_depth(s.r, s.host)), with_host);
     return s;
 }
 
-// Linear interpolation between the two nearest TF entries (clamped to 0..1).
+// The texture coordinate of the corrected table's row for a step of
+// step_factor * 2^r reference lengths (hoisted out of the sample loop).
+fn tf_row(r: f32) -> f32 {
+    return (r + 0.5) / tf_info.rows;
+}
+
+// The TF at v (clamped to 0..1) with its opacity corrected to the step of row
+// coordinate `row`: one filtered texture read.
+fn tf_sample(v: f32, row: f32) -> vec4<f32> {
+    let w = tf_info.width;
+    let x = (clamp(v, 0.0, 1.0) * (w - 1.0) + 0.5) / w;
+    return textureSampleLevel(tf_table, tf_sampler, vec2<f32>(x, row), 0.0);
+}
+
+// Linear interpolation between the two nearest TF entries (clamped to 0..1),
+// exact and uncorrected: once per ray (MIP's maximum).
 fn tf_lookup(v: f32) -> vec4<f32> {
     let n = tf_info.count;
     let x = clamp(v, 0.0, 1.0) * (n - 1.0);

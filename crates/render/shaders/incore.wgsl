@@ -25,6 +25,10 @@ struct VolumeParams {
 @group(2) @binding(2) var volume_sampler: sampler;
 // Normalized min/max of every macro cell (x fastest).
 @group(2) @binding(3) var<storage, read> cell_ranges: array<vec2<f32>>;
+// Per macro cell, for the current TF (DVR) or isovalue (iso): the Chebyshev
+// distance in cells to the nearest cell that can contribute, 0 for those
+// (MacroCellGrid::empty_distance); MIP reads the ranges instead.
+@group(2) @binding(4) var<storage, read> cell_skip: array<u32>;
 
 fn sample_value(u: vec3<f32>) -> f32 {
     return textureSampleLevel(volume_tex, volume_sampler, u, 0.0).r * vol.value_scale + vol.value_offset;
@@ -58,15 +62,21 @@ fn cell_of(u: vec3<f32>) -> vec3<u32> {
     return vec3<u32>(clamp(c, vec3<f32>(0.0), vec3<f32>(vol.cells) - 1.0));
 }
 
-fn cell_range(c: vec3<u32>) -> vec2<f32> {
-    return cell_ranges[(c.z * vol.cells.y + c.y) * vol.cells.x + c.x];
+fn cell_index(c: vec3<u32>) -> u32 {
+    return (c.z * vol.cells.y + c.y) * vol.cells.x + c.x;
 }
 
-// t at which the ray leaves macro cell c.
-fn cell_exit(r: Ray, c: vec3<u32>) -> f32 {
+fn cell_range(c: vec3<u32>) -> vec2<f32> {
+    return cell_ranges[cell_index(c)];
+}
+
+// t at which the ray leaves the cube of macro cells within `reach - 1` of cell c
+// (reach 1: the cell itself; `inv_dir`: safe_inverse(r.tex_dir)).
+fn cell_exit(r: Ray, inv_dir: vec3<f32>, c: vec3<u32>, reach: u32) -> f32 {
     let s = f32(vol.cell_size) / vol.dims;
-    let lo = vec3<f32>(c) * s;
-    return clip_box(r, lo, lo + s).y;
+    let lo = (vec3<f32>(c) - f32(reach - 1u)) * s;
+    let hi = (vec3<f32>(c) + f32(reach)) * s;
+    return box_exit(r.tex_origin, r.tex_dir, inv_dir, lo, hi);
 }
 
 @compute @workgroup_size(8, 8, 1)
@@ -83,43 +93,54 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let cur = Cursor(r);
     if (t1 > t0) {
         let dt = frame.dt;
+        let tf_v = tf_row(0.0);
+        let inv_dir = safe_inverse(r.tex_dir);
         let n = min(u32(ceil((t1 - t0) / dt)), frame.max_samples);
+        // Empty-space skipping tests a macro cell once, when the ray enters it
+        // (k reaches k_cell), not at every sample: the samples of a cell known to
+        // contribute run without tests. A cell is skipped when it cannot
+        // contribute: transparent (DVR), below the isovalue (iso: a crossing needs
+        // a value at or above it; the bracket's lower end may lie in the skipped
+        // cell, whose values are all below), or below the running maximum (MIP).
+        // Skips land on the same sample grid, so skipping never changes the image.
         var k = 0u;
+        var k_cell = 0u;
         loop {
             if (k >= n) { break; }
             let t = t0 + f32(k) * dt;
             if (t >= t1) { break; }
             let u = tex_at(r, t);
-            if (ESS && MODE != MODE_ISO) {
-                // Skip a cell that cannot contribute: transparent (DVR) or below the
-                // running maximum (MIP). The sample grid is unchanged.
+            if (ESS && k >= k_cell) {
                 let c = cell_of(u);
-                let range = cell_range(c);
-                let skip = (MODE == MODE_DVR && tf_transparent(range)) || (MODE == MODE_MIP && range.y <= acc.max_v);
+                // DVR and iso: a cell at distance d > 0 from any cell that can
+                // contribute lies in an empty cube of side 2d - 1: one test skips
+                // it whole. MIP: the cell alone, by its range.
+                var reach = 1u;
+                var skip = false;
+                if (MODE == MODE_MIP) {
+                    skip = cell_range(c).y <= acc.max_v;
+                } else {
+                    let d = cell_skip[cell_index(c)];
+                    skip = d > 0u;
+                    reach = max(d, 1u);
+                }
+                let k_exit = max(k + 1u, first_k_after(cell_exit(r, inv_dir, c, reach), t0, dt));
                 if (skip) {
-                    k = max(k + 1u, first_k_after(cell_exit(r, c), t0, dt));
+                    k = k_exit;
                     continue;
                 }
+                k_cell = k_exit;
             }
             let v = sample_value(u);
             acc.samples = acc.samples + 1u;
             if (MODE == MODE_DVR) {
-                if (dvr_sample(&acc, cur, r, t, v, frame.step_factor)) { break; }
+                if (dvr_sample(&acc, cur, r, t, v, tf_v)) { break; }
             } else if (MODE == MODE_ISO) {
                 if (v >= frame.isovalue) {
                     // The first sample inside is a capped cut, else the crossing
                     // lies since the previous sample.
                     iso_bracket(&acc, select(t - dt, t, k == 0u), t);
                     break;
-                }
-                if (ESS) {
-                    // The whole cell lies on this sample's side of the isovalue.
-                    let c = cell_of(u);
-                    let cr = cell_range(c);
-                    if (frame.isovalue < cr.x || frame.isovalue > cr.y) {
-                        k = max(k + 1u, first_k_after(cell_exit(r, c), t0, dt));
-                        continue;
-                    }
                 }
             } else {
                 if (mip_sample(&acc, t, v)) { break; }

@@ -71,14 +71,14 @@ fn shade(c: vec3<f32>, g: vec4<f32>, dir: vec3<f32>) -> vec3<f32> {
 }
 
 // DVR: composites the sample of value `v` at `t` front to back, its opacity
-// corrected to `alpha_exponent` reference lengths. True when early ray
-// termination ends the ray.
-fn dvr_sample(acc: ptr<function, Accum>, c: Cursor, r: Ray, t: f32, v: f32, alpha_exponent: f32) -> bool {
-    let s = tf_lookup(v);
+// corrected to the step by the corrected table's row `tf_v` (see tf_row). True
+// when early ray termination ends the ray.
+fn dvr_sample(acc: ptr<function, Accum>, c: Cursor, r: Ray, t: f32, v: f32, tf_v: f32) -> bool {
+    let s = tf_sample(v, tf_v);
     if (s.a <= 0.0) {
         return false;
     }
-    let a = 1.0 - pow(1.0 - s.a, alpha_exponent);
+    let a = s.a;
     var rgb = s.rgb;
     if (SHADE) {
         rgb = shade(rgb, cursor_gradient(c, t), r.dir);

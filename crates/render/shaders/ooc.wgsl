@@ -53,6 +53,8 @@ struct Brick {
     kuv: vec3<f32>,
     // Finest voxels per voxel of this level (2^(finest - level)).
     f: f32,
+    // The corrected TF table's row for this level's step.
+    tf_v: f32,
     slot: u32,
     box_min: vec3<f32>,
     box_size: f32,
@@ -65,6 +67,7 @@ fn brick_of(leaf: OctBox, slot: u32) -> Brick {
     b.kuv = k * inv_atlas;
     b.uv0 = (slots[slot].offset.xyz + f32(ooc.apron) - leaf.box_min * k) * inv_atlas;
     b.f = oct_exp2_pos(ooc.finest_level - leaf.level);
+    b.tf_v = tf_row(f32(ooc.finest_level - leaf.level));
     b.slot = slot;
     b.box_min = leaf.box_min;
     b.box_size = leaf.box_size;
@@ -76,21 +79,30 @@ fn atlas_value(uv: vec3<f32>) -> f32 {
 }
 
 // Out of core a sample depends on the brick and the ray in octree coordinates
-// (o(t) = oo + od t).
+// (o(t) = oo + od t); the ray's line in the brick's atlas coordinates,
+// uv(t) = ua + ud t, is set once per leaf (`cursor_enter`).
 struct Cursor {
     b: Brick,
     oo: vec3<f32>,
     od: vec3<f32>,
+    ua: vec3<f32>,
+    ud: vec3<f32>,
+}
+
+fn cursor_enter(c: ptr<function, Cursor>, b: Brick) {
+    (*c).b = b;
+    (*c).ua = b.uv0 + (*c).oo * b.kuv;
+    (*c).ud = (*c).od * b.kuv;
 }
 
 fn cursor_value(c: Cursor, t: f32) -> f32 {
-    return atlas_value(c.b.uv0 + (c.oo + c.od * t) * c.b.kuv);
+    return atlas_value(c.ua + c.ud * t);
 }
 
 // World gradient direction and magnitude (normalized value per finest voxel), by
 // central differences of one voxel of the brick's level.
 fn cursor_gradient(c: Cursor, t: f32) -> vec4<f32> {
-    let uv = c.b.uv0 + (c.oo + c.od * t) * c.b.kuv;
+    let uv = c.ua + c.ud * t;
     let e = 1.0 / ooc.atlas_size;
     let gx = (atlas_value(uv + vec3<f32>(e.x, 0.0, 0.0)) - atlas_value(uv - vec3<f32>(e.x, 0.0, 0.0))) * 0.5;
     let gy = (atlas_value(uv + vec3<f32>(0.0, e.y, 0.0)) - atlas_value(uv - vec3<f32>(0.0, e.y, 0.0))) * 0.5;
@@ -110,18 +122,12 @@ fn sub_cell_range(b: Brick, j: vec3<u32>) -> vec2<f32> {
     return sub_cells[((b.slot * n + j.z) * n + j.y) * n + j.x];
 }
 
-// t at which the ray o(t) = oo + od t leaves the box [lo, hi].
-fn box_exit(oo: vec3<f32>, od: vec3<f32>, lo: vec3<f32>, hi: vec3<f32>) -> f32 {
-    let far = select(lo, hi, od > vec3<f32>(0.0));
-    let tf = select(vec3<f32>(3.0e38), (far - oo) / od, od != vec3<f32>(0.0));
-    return min(tf.x, min(tf.y, tf.z));
-}
-
-// t at which the ray leaves sub-cell j of brick b.
-fn sub_cell_exit(b: Brick, j: vec3<u32>, oo: vec3<f32>, od: vec3<f32>) -> f32 {
+// t at which the ray o(t) = oo + od t leaves sub-cell j of brick b (`inv_od`:
+// safe_inverse(od)).
+fn sub_cell_exit(b: Brick, j: vec3<u32>, oo: vec3<f32>, od: vec3<f32>, inv_od: vec3<f32>) -> f32 {
     let side = b.box_size / f32(ooc.sub_cells);
     let lo = b.box_min + vec3<f32>(j) * side;
-    return box_exit(oo, od, lo, lo + side);
+    return box_exit(oo, od, inv_od, lo, lo + side);
 }
 
 @compute @workgroup_size(8, 8, 1)
@@ -141,6 +147,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     if (t1 > t0) {
         let oo = r.tex_origin * ooc.octree_scale;
         let od = r.tex_dir * ooc.octree_scale;
+        let inv_od = safe_inverse(od);
         cur.oo = oo;
         cur.od = od;
         let dt = frame.dt;
@@ -150,86 +157,71 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         var k = 0u;
         var t_last = t0;
         var st = oct_begin(oo, od, t0, t1, frame.max_leaves);
-        // One flat loop: each iteration either moves to the next leaf or takes
-        // (or skips) one sample. Rays of a SIMD group/warp then diverge only per
-        // iteration, not per nested leaf loop.
-        var have_leaf = false;
         var dtl = dt;
+        var done = false;
         loop {
-            if (!have_leaf) {
-                // Walk to the next data leaf (skipping empty ones, and for MIP
-                // bricks below the running maximum) in one go.
-                var found = false;
-                loop {
-                    if (!oct_next_leaf(&st)) { break; }
-                    if (st.hit.tag == OCT_TAG_DATA) { feedback_reached(st.hit.data); }
-                    if (st.hit.tag == OCT_TAG_DATA && !(MODE == MODE_MIP && ESS && slots[st.hit.data].range.y <= acc.max_v)) {
-                        found = true;
-                        break;
-                    }
-                }
-                if (!found) { break; }
-                cur.b = brick_of(st.hit.leaf, st.hit.data);
-                dtl = dt * cur.b.f;
-                // Snap to this level's sample grid at or after max(t_enter, last sample).
-                if (cur.b.f != grid_f) {
-                    grid_f = cur.b.f;
-                    k = first_k_after(max(st.hit.t_enter, t_last), t0, dtl);
-                }
-                k = max(k, first_k_after(st.hit.t_enter, t0, dtl));
-                have_leaf = true;
-            }
-            let t = t0 + f32(k) * dtl;
-            if (t >= st.hit.t_exit || t >= t1) {
-                have_leaf = false;
-                continue;
-            }
-            if (budget == 0u) { break; }
-            budget = budget - 1u;
-            let o = oo + od * t;
-            if (ESS && MODE != MODE_ISO) {
-                // Skip the rest of a sub-cell that cannot contribute: transparent
-                // (DVR), or below the running maximum (MIP). The sample grid is
-                // unchanged, so skipping never changes the image.
-                let j = sub_cell_of(cur.b, o);
-                let range = sub_cell_range(cur.b, j);
-                let skip = (MODE == MODE_DVR && tf_transparent(range)) || (MODE == MODE_MIP && range.y <= acc.max_v);
-                if (skip) {
-                    let te = min(sub_cell_exit(cur.b, j, oo, od), st.hit.t_exit);
-                    k = max(k + 1u, first_k_after(te, t0, dtl));
-                    continue;
-                }
-            }
-            let v = cursor_value(cur, t);
-            acc.samples = acc.samples + 1u;
-            if (MODE == MODE_DVR) {
-                if (dvr_sample(&acc, cur, r, t, v, frame.step_factor * cur.b.f)) { break; }
-            } else if (MODE == MODE_ISO) {
-                if (v >= frame.isovalue) {
-                    // Bracket [previous sample, t], clipped to one voxel of this
-                    // level before the leaf (the brick's apron covers it).
-                    var a = t;
-                    if (t > t0 && t_last < t) {
-                        a = max(t_last, max(st.hit.t_enter - dtl, t - dtl));
-                    }
-                    iso_bracket(&acc, a, t);
+            // Walk to the next data leaf (skipping empty ones, and for MIP
+            // bricks below the running maximum) in one go.
+            var found = false;
+            loop {
+                if (!oct_next_leaf(&st)) { break; }
+                if (st.hit.tag == OCT_TAG_DATA) { feedback_reached(st.hit.data); }
+                if (st.hit.tag == OCT_TAG_DATA && !(MODE == MODE_MIP && ESS && slots[st.hit.data].range.y <= acc.max_v)) {
+                    found = true;
                     break;
                 }
-                if (ESS) {
-                    // The whole sub-cell lies below the isovalue, like this sample.
-                    let j = sub_cell_of(cur.b, o);
-                    if (sub_cell_range(cur.b, j).y < frame.isovalue) {
-                        let kn = max(first_k_after(min(sub_cell_exit(cur.b, j, oo, od), st.hit.t_exit), t0, dtl), k + 1u);
-                        t_last = t0 + f32(kn - 1u) * dtl;
-                        k = kn;
+            }
+            if (!found) { break; }
+            cursor_enter(&cur, brick_of(st.hit.leaf, st.hit.data));
+            dtl = dt * cur.b.f;
+            if (cur.b.f != grid_f) {
+                grid_f = cur.b.f;
+                k = first_k_after(max(st.hit.t_enter, t_last), t0, dtl);
+            }
+            k = max(k, first_k_after(st.hit.t_enter, t0, dtl));
+            let t_end = min(st.hit.t_exit, t1);
+            var k_cell = 0u;
+            loop {
+                let t = t0 + f32(k) * dtl;
+                if (t >= t_end) { break; }
+                if (budget == 0u) { done = true; break; }
+                budget = budget - 1u;
+                if (ESS && k >= k_cell) {
+                    let j = sub_cell_of(cur.b, oo + od * t);
+                    let range = sub_cell_range(cur.b, j);
+                    let te = min(sub_cell_exit(cur.b, j, oo, od, inv_od), st.hit.t_exit);
+                    let k_exit = max(k + 1u, first_k_after(te, t0, dtl));
+                    let skip = (MODE == MODE_DVR && tf_transparent(range))
+                        || (MODE == MODE_ISO && range.y < frame.isovalue)
+                        || (MODE == MODE_MIP && range.y <= acc.max_v);
+                    if (skip) {
+                        t_last = select(t_last, t0 + f32(k_exit - 1u) * dtl, MODE == MODE_ISO);
+                        k = k_exit;
                         continue;
                     }
+                    k_cell = k_exit;
                 }
-            } else {
-                if (mip_sample(&acc, t, v)) { break; }
+                let v = cursor_value(cur, t);
+                acc.samples = acc.samples + 1u;
+                if (MODE == MODE_DVR) {
+                    if (dvr_sample(&acc, cur, r, t, v, cur.b.tf_v)) { done = true; break; }
+                } else if (MODE == MODE_ISO) {
+                    if (v >= frame.isovalue) {
+                        var a = t;
+                        if (t > t0 && t_last < t) {
+                            a = max(t_last, max(st.hit.t_enter - dtl, t - dtl));
+                        }
+                        iso_bracket(&acc, a, t);
+                        done = true;
+                        break;
+                    }
+                } else {
+                    if (mip_sample(&acc, t, v)) { done = true; break; }
+                }
+                t_last = t;
+                k = k + 1u;
             }
-            t_last = t;
-            k = k + 1u;
+            if (done) { break; }
         }
         feedback_stop(px, depth_at(r, select(t1, t0 + f32(k) * dtl, feedback_terminated(acc))));
     }

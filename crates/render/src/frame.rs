@@ -66,6 +66,10 @@ pub(crate) struct FrameUniforms {
     pub(crate) diffuse: f32,
     pub(crate) specular: f32,
     pub(crate) shininess: f32,
+    pub(crate) clip_min: [f32; 3],
+    pub(crate) clip_pad_a: f32,
+    pub(crate) clip_max: [f32; 3],
+    pub(crate) clip_pad_b: f32,
 }
 
 /// Upper bound of samples (and skips) along one ray as a multiple of the samples
@@ -133,6 +137,10 @@ impl FrameUniforms {
             diffuse: s.shading.diffuse,
             specular: s.shading.specular,
             shininess: s.shading.shininess,
+            clip_min: s.clip.min,
+            clip_pad_a: 0.0,
+            clip_max: s.clip.max,
+            clip_pad_b: 0.0,
         }
     }
 }

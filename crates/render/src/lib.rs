@@ -351,6 +351,12 @@ impl VolumeRenderer {
         let mut uploaded = backend.get_mut().update(device, queue, desc, tf)?;
         backend.get_mut().before_pass(encoder);
         let backend = backend.get();
+        uploaded += self.tf.prepare(
+            device,
+            queue,
+            desc.settings.step_factor,
+            backend.step_lengths(),
+        )?;
         let uniforms = FrameUniforms::new(desc, backend.max_leaves());
         uploaded += self.frame.update(device, queue, desc, uniforms)?;
         let outputs = self.frame.outputs().expect("sized by update");

@@ -1,5 +1,7 @@
 //! Group 1 of every ray-cast kernel: the transfer function's entries, its
-//! opacity prefix sums and their count, with their bind group.
+//! opacity prefix sums, and the corrected table (a filtered `Rgba16Float` 2D
+//! texture, one row per step length in use: `brickray_core::tf::CorrectedTable`)
+//! with its sampler, their sizes, and the bind group.
 
 use crate::error::RenderError;
 use crate::gpu::{self, GrowBuffer, Uniform};
@@ -9,10 +11,23 @@ use brickray_core::TransferFunction;
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 pub(crate) struct TfInfo {
+    /// Entries of the TF, as a float.
     pub(crate) count: f32,
+    /// Columns of the corrected table, as a float.
+    pub(crate) width: f32,
+    /// Rows of the corrected table, as a float.
+    pub(crate) rows: f32,
     pub(crate) pad0: f32,
-    pub(crate) pad1: f32,
-    pub(crate) pad2: f32,
+}
+
+/// Texel format of the corrected table (filterable on every WebGPU device).
+const TABLE_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
+
+/// What a corrected table was built for.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct TableKey {
+    step_factor: f32,
+    rows: u32,
 }
 
 /// Owner of group 1.
@@ -22,30 +37,50 @@ pub(crate) struct TfTables {
     entries: GrowBuffer,
     prefix: GrowBuffer,
     info: Uniform<TfInfo>,
+    sampler: wgpu::Sampler,
+    table: Option<(wgpu::Texture, wgpu::TextureView)>,
+    table_key: Option<TableKey>,
     bind_group: Option<wgpu::BindGroup>,
     current: Option<TransferFunction>,
 }
 
-fn entry(binding: u32, ty: wgpu::BufferBindingType) -> wgpu::BindGroupLayoutEntry {
+fn entry(binding: u32, ty: wgpu::BindingType) -> wgpu::BindGroupLayoutEntry {
     wgpu::BindGroupLayoutEntry {
         binding,
         visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::Buffer {
-            ty,
-            has_dynamic_offset: false,
-            min_binding_size: None,
-        },
+        ty,
         count: None,
     }
 }
 
-/// Group 1's layout: entries (0), prefix sums (1), info (2).
-pub(crate) fn layout_entries() -> [wgpu::BindGroupLayoutEntry; 3] {
+fn buffer(ty: wgpu::BufferBindingType) -> wgpu::BindingType {
+    wgpu::BindingType::Buffer {
+        ty,
+        has_dynamic_offset: false,
+        min_binding_size: None,
+    }
+}
+
+/// Group 1's layout: entries (0), prefix sums (1), info (2), corrected table (3)
+/// and its sampler (4).
+pub(crate) fn layout_entries() -> [wgpu::BindGroupLayoutEntry; 5] {
     let storage = wgpu::BufferBindingType::Storage { read_only: true };
     [
-        entry(0, storage),
-        entry(1, storage),
-        entry(2, wgpu::BufferBindingType::Uniform),
+        entry(0, buffer(storage)),
+        entry(1, buffer(storage)),
+        entry(2, buffer(wgpu::BufferBindingType::Uniform)),
+        entry(
+            3,
+            wgpu::BindingType::Texture {
+                sample_type: wgpu::TextureSampleType::Float { filterable: true },
+                view_dimension: wgpu::TextureViewDimension::D2,
+                multisampled: false,
+            },
+        ),
+        entry(
+            4,
+            wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
+        ),
     ]
 }
 
@@ -57,11 +92,22 @@ impl TfTables {
                 entries: &layout_entries(),
             })
         })?;
+        let sampler = gpu::scoped(device, "brickray-render tf sampler", || {
+            device.create_sampler(&wgpu::SamplerDescriptor {
+                label: Some("brickray-render tf table"),
+                mag_filter: wgpu::FilterMode::Linear,
+                min_filter: wgpu::FilterMode::Linear,
+                ..Default::default()
+            })
+        })?;
         Ok(TfTables {
             layout,
             entries: GrowBuffer::new(device, "brickray-render tf", 16)?,
             prefix: GrowBuffer::new(device, "brickray-render tf prefix", 16)?,
             info: Uniform::new(device, "brickray-render tf info")?,
+            sampler,
+            table: None,
+            table_key: None,
             bind_group: None,
             current: None,
         })
@@ -76,11 +122,13 @@ impl TfTables {
         self.current.as_ref()
     }
 
+    /// The bind group, once [`Self::prepare`] built the table.
     pub(crate) fn bind_group(&self) -> Option<&wgpu::BindGroup> {
         self.bind_group.as_ref()
     }
 
-    /// Uploads `tf` (only what changed); returns the bytes written.
+    /// Uploads `tf`'s entries and prefix sums (only what changed) and marks the
+    /// corrected table stale; returns the bytes written.
     pub(crate) fn set(
         &mut self,
         device: &wgpu::Device,
@@ -103,16 +151,90 @@ impl TfTables {
         let (b, grew_b) = self
             .prefix
             .write(device, queue, bytemuck::cast_slice(tf.prefix()))?;
-        let c = self.info.write(
-            queue,
-            TfInfo {
-                count: tf.len() as f32,
-                pad0: 0.0,
-                pad1: 0.0,
-                pad2: 0.0,
-            },
-        );
-        if grew_a || grew_b || self.bind_group.is_none() {
+        if grew_a || grew_b {
+            self.bind_group = None;
+        }
+        self.current = Some(tf.clone());
+        self.table_key = None;
+        Ok(a + b)
+    }
+
+    /// Builds the corrected table of the current TF for `step_factor` and `rows`
+    /// step lengths when it is stale, and the bind group when a resource
+    /// changed; returns the bytes written.
+    pub(crate) fn prepare(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        step_factor: f32,
+        rows: u32,
+    ) -> Result<u64, RenderError> {
+        let Some(tf) = self.current.as_ref() else {
+            return Ok(0);
+        };
+        let key = TableKey { step_factor, rows };
+        let mut written = 0;
+        if self.table_key != Some(key) {
+            let max_width = device.limits().max_texture_dimension_2d;
+            let t = tf.corrected_table(step_factor, rows, max_width);
+            let size = wgpu::Extent3d {
+                width: t.width,
+                height: t.rows,
+                depth_or_array_layers: 1,
+            };
+            if self
+                .table
+                .as_ref()
+                .is_none_or(|(tex, _)| tex.size() != size)
+            {
+                let tex = gpu::texture(
+                    device,
+                    &wgpu::TextureDescriptor {
+                        label: Some("brickray-render tf table"),
+                        size,
+                        mip_level_count: 1,
+                        sample_count: 1,
+                        dimension: wgpu::TextureDimension::D2,
+                        format: TABLE_FORMAT,
+                        usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+                        view_formats: &[],
+                    },
+                )?;
+                let view = tex.create_view(&Default::default());
+                self.table = Some((tex, view));
+                self.bind_group = None;
+            }
+            let halfs: Vec<u16> = t
+                .texels
+                .iter()
+                .flatten()
+                .map(|&x| half::f16::from_f32(x).to_bits())
+                .collect();
+            let (tex, _) = self.table.as_ref().expect("created above");
+            queue.write_texture(
+                tex.as_image_copy(),
+                bytemuck::cast_slice(&halfs),
+                wgpu::TexelCopyBufferLayout {
+                    offset: 0,
+                    bytes_per_row: Some(t.width * 8),
+                    rows_per_image: None,
+                },
+                size,
+            );
+            written += halfs.len() as u64 * 2;
+            written += self.info.write(
+                queue,
+                TfInfo {
+                    count: tf.len() as f32,
+                    width: t.width as f32,
+                    rows: t.rows as f32,
+                    pad0: 0.0,
+                },
+            );
+            self.table_key = Some(key);
+        }
+        if self.bind_group.is_none() {
+            let (_, view) = self.table.as_ref().expect("built above");
             self.bind_group = Some(gpu::scoped(
                 device,
                 "brickray-render tf bind group",
@@ -133,12 +255,19 @@ impl TfTables {
                                 binding: 2,
                                 resource: self.info.buffer.as_entire_binding(),
                             },
+                            wgpu::BindGroupEntry {
+                                binding: 3,
+                                resource: wgpu::BindingResource::TextureView(view),
+                            },
+                            wgpu::BindGroupEntry {
+                                binding: 4,
+                                resource: wgpu::BindingResource::Sampler(&self.sampler),
+                            },
                         ],
                     })
                 },
             )?);
         }
-        self.current = Some(tf.clone());
-        Ok(a + b + c)
+        Ok(written)
     }
 }

@@ -56,5 +56,9 @@ impl Filter {
     }
 }
 
+/// The file extension of brick stores (`volume.brs`), used by the demo, the
+/// viewer and the documentation.
+pub const EXTENSION: &str = "brs";
+
 /// Marks an entry the builder has not written yet (never a valid level).
 pub(crate) const NO_ENTRY_LEVEL: u8 = u8::MAX;

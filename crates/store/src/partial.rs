@@ -260,17 +260,17 @@ mod tests {
     #[test]
     fn temporary_names_parse() {
         let ok = |s: &str| temporary_pid(OsStr::new(s));
-        assert_eq!(ok(".v.brick.brickray-partial.123-0"), Some(123));
+        assert_eq!(ok(".v.brs.brickray-partial.123-0"), Some(123));
         assert_eq!(ok("..brickray-partial.7-99"), Some(7));
         assert_eq!(ok(".a.brickray-partial.b.brickray-partial.5-1"), Some(5));
         for bad in [
-            "v.brick.brickray-partial.123-0",
-            ".v.brick.brickray-partial.123",
-            ".v.brick.brickray-partial.-0",
-            ".v.brick.brickray-partial.12a-0",
-            ".v.brick.brickray-partial.12-",
-            ".v.brick.brickray-partial.99999999999-0",
-            ".v.brick",
+            "v.brs.brickray-partial.123-0",
+            ".v.brs.brickray-partial.123",
+            ".v.brs.brickray-partial.-0",
+            ".v.brs.brickray-partial.12a-0",
+            ".v.brs.brickray-partial.12-",
+            ".v.brs.brickray-partial.99999999999-0",
+            ".v.brs",
         ] {
             assert_eq!(ok(bad), None, "{bad}");
         }
@@ -282,6 +282,6 @@ mod tests {
         let t = truncated_name(OsStr::new(&long));
         assert!(t.len() <= NAME_BYTES);
         assert!(t.to_str().is_some());
-        assert_eq!(truncated_name(OsStr::new("v.brick")), "v.brick");
+        assert_eq!(truncated_name(OsStr::new("v.brs")), "v.brs");
     }
 }

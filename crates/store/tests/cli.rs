@@ -18,7 +18,7 @@ fn build_then_info() {
     )
     .unwrap();
     let exe = env!("CARGO_BIN_EXE_brickray-store");
-    let out = dir.path().join("v.brick");
+    let out = dir.path().join("v.brs");
     let st = Command::new(exe)
         .args([
             "build",
@@ -42,6 +42,16 @@ fn build_then_info() {
     );
     let store = brickray_store::open(&out).unwrap();
     assert_eq!(store.layout().brick, 8);
+    // The store gets the mode of any file this process writes (0666 less the
+    // umask), not a temporary file's 0600.
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        let plain = dir.path().join("plain");
+        std::fs::write(&plain, b"x").unwrap();
+        let mode = |p: &std::path::Path| std::fs::metadata(p).unwrap().permissions().mode() & 0o777;
+        assert_eq!(mode(&out), mode(&plain), "store mode {:o}", mode(&out));
+    }
     assert_eq!(store.filter(), brickray_store::Filter::Max);
     assert_eq!(store.empty_below(), Some(3.0));
     let info = Command::new(exe)
@@ -63,6 +73,23 @@ fn build_then_info() {
     ] {
         assert!(text.contains(want), "info lacks {want:?}:\n{text}");
     }
+    // A negative threshold is a value, not an option (`--empty-below -500`).
+    let neg = dir.path().join("neg.brs");
+    let st = Command::new(exe)
+        .args(["build", "--quiet", "--empty-below", "-500"])
+        .arg(dir.path().join("v.json"))
+        .arg(&neg)
+        .output()
+        .unwrap();
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
+    assert_eq!(
+        brickray_store::open(&neg).unwrap().empty_below(),
+        Some(-500.0)
+    );
     // Errors: a message and a failure status, never a panic.
     let bad = Command::new(exe)
         .args(["info"])

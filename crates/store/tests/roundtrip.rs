@@ -24,7 +24,7 @@ fn roundtrip(dims: [u32; 3], dtype: DType, o: &BuildOptions, seed: u64) {
 
 fn roundtrip_bytes(dims: [u32; 3], dtype: DType, bytes: Vec<u8>, o: &BuildOptions) {
     let dir = tempfile::tempdir().unwrap();
-    let out = dir.path().join("v.brick");
+    let out = dir.path().join("v.brs");
     let mut r = MemReader::new(dims, dtype, bytes.clone());
     let report = build(&mut r, &out, o).unwrap();
     let store = open(&out).unwrap();
@@ -73,7 +73,7 @@ fn uniform_bricks_have_no_payload_and_threshold_empties() {
     let dims = [48, 40, 24];
     let bytes = test_volume(dims, DType::U8, 9);
     let dir = tempfile::tempdir().unwrap();
-    let out = dir.path().join("v.brick");
+    let out = dir.path().join("v.brs");
     let mut r = MemReader::new(dims, DType::U8, bytes.clone());
     build(&mut r, &out, &opts(8, 2, Filter::Average)).unwrap();
     let store = open(&out).unwrap();
@@ -103,7 +103,7 @@ fn aprons_equal_neighbour_voxels() {
     let dims = [70, 50, 40];
     let o = opts(16, 2, Filter::Average);
     let dir = tempfile::tempdir().unwrap();
-    let out = dir.path().join("v.brick");
+    let out = dir.path().join("v.brs");
     let mut r = MemReader::new(dims, DType::U16, test_volume(dims, DType::U16, 2));
     build(&mut r, &out, &o).unwrap();
     let store = open(&out).unwrap();
@@ -145,7 +145,7 @@ fn aprons_equal_neighbour_voxels() {
 fn interrupted_build_leaves_no_store() {
     let dims = [40, 40, 40];
     let dir = tempfile::tempdir().unwrap();
-    let out = dir.path().join("v.brick");
+    let out = dir.path().join("v.brs");
     let mut r = MemReader::new(dims, DType::U8, test_volume(dims, DType::U8, 1));
     r.fail_at = Some(25);
     let err = build(&mut r, &out, &opts(8, 2, Filter::Average)).unwrap_err();
@@ -165,7 +165,7 @@ fn non_finite_input_is_refused() {
     v[20 * 10 * 7 + 13] = f32::NAN;
     let mut r = MemReader::new(dims, DType::F32, encode(DType::F32, &v));
     let dir = tempfile::tempdir().unwrap();
-    let out = dir.path().join("v.brick");
+    let out = dir.path().join("v.brs");
     let err = build(&mut r, &out, &opts(4, 2, Filter::Average)).unwrap_err();
     assert!(matches!(err, StoreError::NonFinite { .. }), "{err}");
     assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
@@ -180,7 +180,7 @@ fn memory_bound_is_enforced() {
         ..BuildOptions::default()
     };
     let dir = tempfile::tempdir().unwrap();
-    let err = build(&mut r, &dir.path().join("v.brick"), &o).unwrap_err();
+    let err = build(&mut r, &dir.path().join("v.brs"), &o).unwrap_err();
     assert!(matches!(err, StoreError::MemoryBound { .. }), "{err}");
 }
 
@@ -196,7 +196,7 @@ fn banded_build_under_a_tight_memory_bound() {
     ] {
         let bytes = test_volume(dims, dtype, 3);
         let dir = tempfile::tempdir().unwrap();
-        let out = dir.path().join("v.brick");
+        let out = dir.path().join("v.brs");
         let mut r = MemReader::new(dims, dtype, bytes.clone());
         let o = BuildOptions {
             memory_bound: bound,
@@ -220,7 +220,7 @@ fn banded_build_under_a_tight_memory_bound() {
 fn concurrent_reads_agree() {
     let dims = [90, 70, 50];
     let dir = tempfile::tempdir().unwrap();
-    let out = dir.path().join("v.brick");
+    let out = dir.path().join("v.brs");
     let mut r = MemReader::new(dims, DType::I16, test_volume(dims, DType::I16, 5));
     build(&mut r, &out, &opts(8, 2, Filter::Average)).unwrap();
     let store = open(&out).unwrap();
@@ -252,7 +252,7 @@ fn concurrent_reads_agree() {
 fn metadata_queries() {
     let dims = [100, 30, 20];
     let dir = tempfile::tempdir().unwrap();
-    let out = dir.path().join("v.brick");
+    let out = dir.path().join("v.brs");
     let mut r = MemReader::new(dims, DType::U8, test_volume(dims, DType::U8, 5));
     build(&mut r, &out, &opts(16, 2, Filter::Average)).unwrap();
     let store = open(&out).unwrap();
@@ -338,7 +338,7 @@ proptest! {
         let dims = [nx, ny, nz];
         let bytes = test_volume(dims, dtype, seed);
         let dir = tempfile::tempdir().unwrap();
-        let out = dir.path().join("v.brick");
+        let out = dir.path().join("v.brs");
         let mut r = MemReader::new(dims, dtype, bytes.clone());
         let o = BuildOptions { memory_bound: bound_kib << 10, ..opts(brick, apron, Filter::Average) };
         match build(&mut r, &out, &o) {

@@ -222,7 +222,7 @@ fn non_regular_outputs_are_refused() {
 #[test]
 fn opening_a_fifo_as_a_store_is_refused_fast() {
     let dir = tempfile::tempdir().unwrap();
-    let fifo = dir.path().join("s.brick");
+    let fifo = dir.path().join("s.brs");
     mkfifo(&fifo);
     let f = fifo.clone();
     let t = Instant::now();
@@ -292,7 +292,7 @@ fn signals_during_a_build_leave_no_temporaries() {
     let json = big_sparse_input(d, 1024);
     let exe = env!("CARGO_BIN_EXE_brickray-store");
     for sig in ["INT", "TERM", "HUP"] {
-        let out = d.join("big.brick");
+        let out = d.join("big.brs");
         let mut child = Command::new(exe)
             .args(["build", "--quiet"])
             .arg(&json)
@@ -357,20 +357,16 @@ fn stale_temporaries_are_removed_by_the_next_build() {
     let (json, _) = raw_input(d);
     // pid 999999999 cannot exist (pid_max is at most 2^22); pid 1 always does.
     let dead = [
-        ".v.brick.brickray-partial.999999999-0",
-        ".v.brick.brickray-partial.999999999-7",
-        ".w.brick.brickray-partial.999999998-1",
+        ".v.brs.brickray-partial.999999999-0",
+        ".v.brs.brickray-partial.999999999-7",
+        ".w.brs.brickray-partial.999999998-1",
     ];
-    let alive = ".v.brick.brickray-partial.1-0";
-    let unrelated = [
-        "v.brick.brickray-partial.notapid",
-        ".x.partial",
-        "notes.txt",
-    ];
+    let alive = ".v.brs.brickray-partial.1-0";
+    let unrelated = ["v.brs.brickray-partial.notapid", ".x.partial", "notes.txt"];
     for n in dead.iter().chain([&alive]).chain(unrelated.iter()) {
         std::fs::write(d.join(n), b"junk").unwrap();
     }
-    build_file(&json, &d.join("v.brick"), &small_opts()).unwrap();
+    build_file(&json, &d.join("v.brs"), &small_opts()).unwrap();
     let n = names(d);
     for x in dead {
         assert!(!n.contains(&x.to_string()), "{x} was not removed: {n:?}");
@@ -379,7 +375,7 @@ fn stale_temporaries_are_removed_by_the_next_build() {
     for x in unrelated {
         assert!(n.contains(&x.to_string()), "{x} was removed");
     }
-    assert!(n.contains(&"v.brick".to_string()));
+    assert!(n.contains(&"v.brs".to_string()));
 }
 
 #[test]
@@ -393,13 +389,13 @@ fn absurd_memory_bound_is_refused_by_the_cli() {
         let st = Command::new(exe)
             .args(["build", "--quiet", "--memory-mib", mib])
             .arg(&json)
-            .arg(d.join("o.brick"))
+            .arg(d.join("o.brs"))
             .output()
             .unwrap();
         assert!(!st.status.success(), "{mib}");
         let err = String::from_utf8_lossy(&st.stderr);
         assert!(err.contains("memory-mib"), "{mib}: {err}");
-        assert!(!d.join("o.brick").exists());
+        assert!(!d.join("o.brs").exists());
     }
 }
 
@@ -407,7 +403,7 @@ fn absurd_memory_bound_is_refused_by_the_cli() {
 fn degenerate_build_options_are_typed_errors() {
     use brickray_store::{StoreError, build};
     let dir = tempfile::tempdir().unwrap();
-    let out = dir.path().join("o.brick");
+    let out = dir.path().join("o.brs");
     let dims = [9u32, 7, 5];
     let mut r = MemReader::new(dims, DType::U8, test_volume(dims, DType::U8, 1));
     let bad = |o: BuildOptions, r: &mut MemReader| match build(r, &out, &o) {
@@ -502,7 +498,7 @@ fn degenerate_build_options_are_typed_errors() {
         ),
         Err(StoreError::MemoryBound { bound: 1, .. })
     ));
-    assert_eq!(names(dir.path()), ["o.brick"]);
+    assert_eq!(names(dir.path()), ["o.brs"]);
 }
 
 #[test]
@@ -522,7 +518,7 @@ fn cli_reads_outside_the_sidecars_folder_only_when_asked() {
     )
     .unwrap();
     let exe = env!("CARGO_BIN_EXE_brickray-store");
-    let out = top.path().join("v.brick");
+    let out = top.path().join("v.brs");
     let st = Command::new(exe)
         .args(["build", "--quiet"])
         .arg(&json)
@@ -548,7 +544,7 @@ fn cli_reads_outside_the_sidecars_folder_only_when_asked() {
     assert_eq!(brickray_store::open(&out).unwrap().desc().dims, [12, 10, 7]);
     // The library's build_file is strict.
     assert!(matches!(
-        build_file(&json, &top.path().join("w.brick"), &small_opts()),
+        build_file(&json, &top.path().join("w.brs"), &small_opts()),
         Err(brickray_store::StoreError::Input(
             brickray_core::IoError::OutsideDir { .. }
         ))
@@ -563,7 +559,7 @@ fn a_build_started_under_nohup_survives_sighup() {
     let d = dir.path();
     let json = big_sparse_input(d, 384);
     let exe = env!("CARGO_BIN_EXE_brickray-store");
-    let out = d.join("big.brick");
+    let out = d.join("big.brs");
     let mut child = Command::new("nohup")
         .arg(exe)
         .args(["build", "--quiet", "--brick", "64"])
@@ -594,5 +590,5 @@ fn a_build_started_under_nohup_survives_sighup() {
     });
     assert!(status.success(), "{status:?}");
     assert!(brickray_store::open(&out).is_ok());
-    assert_eq!(names(d), ["big.brick", "big.json", "big.raw"]);
+    assert_eq!(names(d), ["big.brs", "big.json", "big.raw"]);
 }

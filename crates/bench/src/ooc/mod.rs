@@ -24,20 +24,21 @@
 mod path;
 mod sensitivity;
 
+use crate::runner::{Runner, finite_db, median, quantile, round2};
 use crate::{Figures, arg};
 use brickray_cache::refine::{DataState, MetaState, NodeClass, RefineEnv, RefineParams};
 use brickray_core::{
     Accel, BrickSource, Camera, NodeKey, RenderMode, RenderSettings, Shading, TransferFunction,
     Volume, VolumeFrame,
 };
-use brickray_harness::{GpuContext, Offscreen, ct, target_desc as targets};
+use brickray_harness::{GpuContext, ct, target_desc as targets};
 use brickray_render::{
-    FrameDesc, OutOfCoreConfig, OutOfCoreStats, RendererOptions, U8Filtering, VolumeRenderer,
+    OutOfCoreConfig, OutOfCoreStats, RendererOptions, U8Filtering, VolumeRenderer,
 };
 use glam::Vec3;
 use serde_json::json;
 use std::sync::Arc;
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 /// Brick side and apron of the procedural sources (those of the store's default).
 const BRICK: u32 = 32;
@@ -52,155 +53,6 @@ const TF_REFERENCE_DIMS: u64 = 256;
 /// close-up ray crosses the whole box at the fine step of the near bricks, and
 /// one 256x256 frame takes about 17 s on lavapipe).
 const PATH_TF_REFERENCE_DIMS: u64 = 4096;
-
-/// One rendered frame.
-struct Shot {
-    ms: f64,
-    rgba: Vec<u8>,
-    /// Mean samples per ray over the rays that enter the volume (0 when not read).
-    samples: f64,
-}
-
-struct Runner<'a> {
-    gpu: &'a GpuContext,
-    target: Offscreen,
-    size: u32,
-}
-
-impl<'a> Runner<'a> {
-    fn new(gpu: &'a GpuContext, size: u32) -> Self {
-        Runner {
-            gpu,
-            target: Offscreen::new(&gpu.device, size, size),
-            size,
-        }
-    }
-
-    /// One frame: `prepare + submit + wait` wall time, and optionally the image
-    /// and the samples per ray read back (not timed).
-    fn frame(
-        &self,
-        r: &mut VolumeRenderer,
-        camera: Camera,
-        frame: VolumeFrame,
-        settings: RenderSettings,
-        read: bool,
-    ) -> Result<Shot, String> {
-        let g = self.gpu;
-        let t0 = Instant::now();
-        let mut enc = g.device.create_command_encoder(&Default::default());
-        let desc = FrameDesc {
-            camera,
-            frame,
-            viewport: brickray_render::Viewport::full(self.size, self.size),
-            settings,
-            host_depth: None,
-        };
-        r.prepare(&g.device, &g.queue, &mut enc, &desc)
-            .map_err(|e| e.to_string())?;
-        {
-            let mut pass = self.target.pass(&mut enc, true);
-            r.render(&mut pass).map_err(|e| e.to_string())?;
-        }
-        g.submit_wait(enc);
-        let ms = t0.elapsed().as_secs_f64() * 1e3;
-        if !read {
-            return Ok(Shot {
-                ms,
-                rgba: Vec::new(),
-                samples: 0.0,
-            });
-        }
-        let rgba = self.target.read_color(g);
-        let tex = r.sample_count_texture().ok_or("no sample counts")?;
-        let counts = brickray_harness::read_texture(g, tex, 4, wgpu::TextureAspect::All);
-        let (mut sum, mut n) = (0u64, 0u64);
-        for c in counts.chunks_exact(4) {
-            let c = u32::from_le_bytes([c[0], c[1], c[2], c[3]]);
-            if c > 0 {
-                sum += c as u64;
-                n += 1;
-            }
-        }
-        Ok(Shot {
-            ms,
-            rgba,
-            samples: sum as f64 / n.max(1) as f64,
-        })
-    }
-
-    /// Plans one frame without ray casting it: `prepare` (refinement, uploads,
-    /// index) then a submission that only flushes the queued writes. The cut and
-    /// the streaming are those of a rendered frame; only the GPU ray cast is
-    /// skipped (lavapipe takes seconds per 512x512 frame).
-    fn plan(
-        &self,
-        r: &mut VolumeRenderer,
-        camera: Camera,
-        frame: VolumeFrame,
-        settings: RenderSettings,
-    ) -> Result<(), String> {
-        let g = self.gpu;
-        let mut enc = g.device.create_command_encoder(&Default::default());
-        let desc = FrameDesc {
-            camera,
-            frame,
-            viewport: brickray_render::Viewport::full(self.size, self.size),
-            settings,
-            host_depth: None,
-        };
-        r.prepare(&g.device, &g.queue, &mut enc, &desc)
-            .map_err(|e| e.to_string())?;
-        drop(enc);
-        g.submit_wait(g.device.create_command_encoder(&Default::default()));
-        Ok(())
-    }
-
-    /// Plans frames of one view until the out-of-core path converges (at most
-    /// `max_frames`); returns the frames it took (`None`: not converged) and the
-    /// last stats.
-    fn converge(
-        &self,
-        r: &mut VolumeRenderer,
-        camera: Camera,
-        frame: VolumeFrame,
-        settings: RenderSettings,
-        max_frames: usize,
-    ) -> Result<(Option<usize>, OutOfCoreStats), String> {
-        for i in 1..=max_frames {
-            self.plan(r, camera, frame, settings)?;
-            let s = r.out_of_core_stats().ok_or("not out of core")?;
-            if s.converged {
-                return Ok((Some(i), s));
-            }
-            // Give the loader threads the CPU (2 cores, shared with lavapipe).
-            std::thread::sleep(Duration::from_millis(10));
-        }
-        Ok((None, r.out_of_core_stats().ok_or("not out of core")?))
-    }
-}
-
-fn median(v: &[f64]) -> f64 {
-    let mut v = v.to_vec();
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
-}
-
-/// The `p`-quantile (nearest rank).
-fn quantile(v: &[f64], p: f64) -> f64 {
-    let mut v = v.to_vec();
-    v.sort_by(f64::total_cmp);
-    let rank = ((p * v.len() as f64).ceil() as usize).clamp(1, v.len());
-    v[rank - 1]
-}
-
-fn round2(x: f64) -> f64 {
-    (x * 100.0).round() / 100.0
-}
-
-fn finite_db(x: f64) -> f64 {
-    if x.is_finite() { round2(x) } else { 999.0 }
-}
 
 pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
     let size: u32 = arg(args, "--size", 512)?;

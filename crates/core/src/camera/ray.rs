@@ -98,18 +98,24 @@ impl Ray {
     /// Intersects the texture-space unit cube; returns `(t_enter, t_exit)` clipped
     /// to `t >= 0`, or `None` if missed.
     pub fn clip_unit_box(&self) -> Option<(f64, f64)> {
+        self.clip_box([0.0; 3], [1.0; 3])
+    }
+
+    /// Intersects the texture-space box `lo..hi`; returns `(t_enter, t_exit)`
+    /// clipped to `t >= 0`, or `None` if missed.
+    pub fn clip_box(&self, lo: [f64; 3], hi: [f64; 3]) -> Option<(f64, f64)> {
         let mut t0 = 0.0f64;
         let mut t1 = f64::INFINITY;
         for a in 0..3 {
             let o = self.tex_origin[a];
             let d = self.tex_dir[a];
             if d.abs() < 1e-300 {
-                if !(0.0..=1.0).contains(&o) {
+                if !(lo[a]..=hi[a]).contains(&o) {
                     return None;
                 }
             } else {
-                let ta = (0.0 - o) / d;
-                let tb = (1.0 - o) / d;
+                let ta = (lo[a] - o) / d;
+                let tb = (hi[a] - o) / d;
                 t0 = t0.max(ta.min(tb));
                 t1 = t1.min(ta.max(tb));
             }

@@ -7,13 +7,26 @@ use crate::encoding::{self, SampleEncoding, U8Filtering};
 use crate::error::{PrepareError, RenderError};
 use crate::gpu::{self, Uniform};
 use crate::kernels::KernelKind;
-use brickray_core::{MacroCellGrid, TransferFunction, Volume};
+use brickray_core::{MacroCellGrid, RenderMode, TransferFunction, Volume};
 
 /// Macro-cell size in voxels for empty-space skipping.
 pub(crate) const CELL: u32 = 8;
 
-/// Storage buffers of group 2: the macro-cell ranges.
-const STORAGE_BUFFERS: u32 = 1;
+/// Storage buffers of group 2: the macro-cell ranges and skip distances.
+pub(crate) const STORAGE_BUFFERS: u32 = 2;
+
+/// The largest jump of the skip distances, in cells: bounds the host's work
+/// when the transfer function or isovalue changes (O(cells * SKIP_CAP)).
+const SKIP_CAP: u32 = 8;
+
+/// What the skip distances were computed for.
+#[derive(Debug, Clone, PartialEq)]
+enum SkipKey {
+    /// DVR: cells transparent through this TF.
+    Dvr(TransferFunction),
+    /// Iso: cells whose values all lie below this isovalue.
+    Iso(f32),
+}
 
 /// `struct VolumeParams` of incore.wgsl.
 #[repr(C)]
@@ -36,6 +49,12 @@ pub(crate) struct InCore {
     bind_group: wgpu::BindGroup,
     format: wgpu::TextureFormat,
     bytes: u64,
+    /// The min/max grid, kept to derive skip distances for each TF / isovalue.
+    grid: MacroCellGrid,
+    /// Per cell: Chebyshev distance (in cells) to the nearest cell that can
+    /// contribute, for the current TF (DVR) or isovalue; MIP uses the ranges.
+    skip: wgpu::Buffer,
+    skip_key: Option<SkipKey>,
 }
 
 impl InCore {
@@ -116,6 +135,11 @@ impl InCore {
             ranges.len() as u64,
         )?;
         queue.write_buffer(&cell_ranges, 0, ranges);
+        let skip = gpu::storage_buffer(
+            device,
+            "brickray-render macro-cell skip distances",
+            grid.ranges.len() as u64 * 4,
+        )?;
         let mut params = Uniform::<VolumeParams>::new(device, "brickray-render volume params")?;
         params.write(
             queue,
@@ -159,6 +183,10 @@ impl InCore {
                         binding: 3,
                         resource: cell_ranges.as_entire_binding(),
                     },
+                    wgpu::BindGroupEntry {
+                        binding: 4,
+                        resource: skip.as_entire_binding(),
+                    },
                 ],
             })
         })?;
@@ -167,6 +195,9 @@ impl InCore {
             bind_group,
             format,
             bytes,
+            grid,
+            skip,
+            skip_key: None,
         })
     }
 }
@@ -187,17 +218,41 @@ impl VolumeBackend for InCore {
     fn update(
         &mut self,
         _device: &wgpu::Device,
-        _queue: &wgpu::Queue,
-        _frame: &FrameDesc<'_>,
-        _tf: &TransferFunction,
+        queue: &wgpu::Queue,
+        frame: &FrameDesc<'_>,
+        tf: &TransferFunction,
     ) -> Result<u64, PrepareError> {
-        // Everything was uploaded at set-up; the TF classifies macro cells in the
-        // shader.
-        Ok(0)
+        // The volume was uploaded at set-up; only the skip distances follow the
+        // TF (DVR) or the isovalue, and only with skipping on.
+        if !frame.settings.accel.empty_space_skipping {
+            return Ok(0);
+        }
+        let key = match frame.settings.mode {
+            RenderMode::Iso { value, .. } => SkipKey::Iso(value),
+            RenderMode::Mip => return Ok(0),
+            _ => SkipKey::Dvr(tf.clone()),
+        };
+        if self.skip_key.as_ref() == Some(&key) {
+            return Ok(0);
+        }
+        let d = match &key {
+            SkipKey::Dvr(tf) => self
+                .grid
+                .empty_distance(|r| tf.is_transparent(r[0], r[1]), SKIP_CAP),
+            SkipKey::Iso(iso) => self.grid.empty_distance(|r| r[1] < *iso, SKIP_CAP),
+        };
+        let bytes: &[u8] = bytemuck::cast_slice(&d);
+        queue.write_buffer(&self.skip, 0, bytes);
+        self.skip_key = Some(key);
+        Ok(bytes.len() as u64)
     }
 
     fn max_leaves(&self) -> u32 {
         0
+    }
+
+    fn step_lengths(&self) -> u32 {
+        1
     }
 
     fn wants_redraw(&self) -> bool {

@@ -48,6 +48,9 @@ pub(crate) trait VolumeBackend: std::fmt::Debug {
     }
     /// Most index leaves one ray may visit (0 in core).
     fn max_leaves(&self) -> u32;
+    /// Step lengths the kernel samples with (rows of the corrected TF table):
+    /// one in core, one per octree level out of core (the step doubles a level).
+    fn step_lengths(&self) -> u32;
     /// True when another frame of the same view would change the image.
     fn wants_redraw(&self) -> bool;
     /// The texture format the samples are stored in.
@@ -158,11 +161,12 @@ pub(crate) fn volume_layout_entries(storage: u32) -> Vec<wgpu::BindGroupLayoutEn
 
 /// Per-stage bindings of a kernel besides group 2's storage buffers: the
 /// transfer function's 2 storage buffers; uniforms of frame, TF and volume; the
-/// sampled volume and host depth; the volume sampler.
+/// sampled volume, host depth and corrected TF table; the volume and TF
+/// samplers.
 pub(crate) const STORAGE_OUTSIDE_VOLUME: u32 = 2;
 pub(crate) const UNIFORM_BUFFERS: u32 = 3;
-pub(crate) const SAMPLED_TEXTURES: u32 = 2;
-pub(crate) const SAMPLERS: u32 = 1;
+pub(crate) const SAMPLED_TEXTURES: u32 = 3;
+pub(crate) const SAMPLERS: u32 = 2;
 /// The most storage buffers group 2 holds (out of core: slots, sub-cells,
 /// index, usage counters).
 pub(crate) const MAX_VOLUME_STORAGE: u32 = ooc::STORAGE_BUFFERS;

@@ -23,10 +23,10 @@ use std::sync::Arc;
 use std::time::Instant;
 
 /// Read-only storage buffers of group 2: slots, sub-cells, index.
-pub(super) const READ_ONLY_STORAGE: u32 = 3;
+pub(crate) const READ_ONLY_STORAGE: u32 = 3;
 /// Storage buffers of group 2: the read-only ones and the usage counters
 /// (read-write, binding 6).
-pub(super) const STORAGE_BUFFERS: u32 = READ_ONLY_STORAGE + 1;
+pub(crate) const STORAGE_BUFFERS: u32 = READ_ONLY_STORAGE + 1;
 /// The binding of the usage counters (`shaders/feedback.wgsl`).
 pub(crate) const USAGE_BINDING: u32 = 6;
 /// The binding of the stop-depth texture (`shaders/feedback.wgsl`).
@@ -669,6 +669,10 @@ impl VolumeBackend for OutOfCore {
         // plus zero-length visits at edges: a guard, not a quality setting.
         let finest = (self.layout.levels - 1).min(20) as u32;
         (3u64 << finest).saturating_add(1024).min(1 << 20) as u32
+    }
+
+    fn step_lengths(&self) -> u32 {
+        self.layout.levels as u32
     }
 
     fn wants_redraw(&self) -> bool {

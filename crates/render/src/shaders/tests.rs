@@ -86,6 +86,10 @@ fn frame_fields() -> Vec<(String, u32)> {
             diffuse,
             specular,
             shininess,
+            clip_min,
+            clip_pad_a,
+            clip_max,
+            clip_pad_b,
         ]
     )
 }
@@ -198,7 +202,7 @@ fn check_kernel(name: &str, m: &naga::Module, volume: &[wgpu::BindGroupLayoutEnt
     check_struct(
         m,
         "TfInfo",
-        rust_fields!(TfInfo, [count, pad0, pad1, pad2]),
+        rust_fields!(TfInfo, [count, width, rows, pad0]),
         std::mem::size_of::<TfInfo>(),
     );
     // Every binding of every group against the Rust layouts.
@@ -212,7 +216,11 @@ fn check_kernel(name: &str, m: &naga::Module, volume: &[wgpu::BindGroupLayoutEnt
 #[test]
 fn incore_kernel_matches_the_rust_side() {
     let m = module("incore", &incore());
-    check_kernel("incore", &m, &volume_layout_entries(1));
+    check_kernel(
+        "incore",
+        &m,
+        &volume_layout_entries(crate::backend::incore::STORAGE_BUFFERS),
+    );
     check_struct(
         &m,
         "VolumeParams",

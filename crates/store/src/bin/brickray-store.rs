@@ -1,10 +1,10 @@
 //! `brickray-store`: build a brick octree store from a volume, or describe one.
 //!
 //! ```text
-//! brickray-store build <input.json|.raw|.nrrd|.nhdr> <out.brick> [--brick N] [--apron N]
+//! brickray-store build <input.json|.raw|.nrrd|.nhdr> <out.brs> [--brick N] [--apron N]
 //!                      [--filter average|max] [--empty-below V] [--memory-mib N]
 //!                      [--allow-outside-dir] [--quiet]
-//! brickray-store info <store.brick> [--bins N]
+//! brickray-store info <store.brs> [--bins N]
 //! ```
 //!
 //! On SIGINT, SIGTERM or SIGHUP a build removes its temporary files, then dies
@@ -33,7 +33,7 @@ enum Command {
     Build {
         /// The input volume (.json, .raw with a .json sidecar, .nrrd, .nhdr).
         input: PathBuf,
-        /// The store to write.
+        /// The store to write (by convention `.brs`).
         output: PathBuf,
         /// Interior voxels per brick side.
         #[arg(long, default_value_t = 32)]
@@ -44,8 +44,9 @@ enum Command {
         /// Filter of inner nodes: `average` (intensities) or `max` (labels).
         #[arg(long, default_value = "average", value_parser = parse_filter)]
         filter: Filter,
-        /// Store nodes whose values all lie below this raw value as empty.
-        #[arg(long)]
+        /// Store nodes whose values all lie below this raw value as empty
+        /// (negative values are accepted: `--empty-below -500`).
+        #[arg(long, allow_negative_numbers = true)]
         empty_below: Option<f32>,
         /// Upper bound on the builder's memory, in MiB.
         #[arg(long, default_value_t = 1024,

@@ -1,0 +1,204 @@
+//! What the suites share: timed frames into an offscreen target, convergence of
+//! the out-of-core path, and order statistics.
+
+use brickray_core::{Camera, RenderSettings, VolumeFrame};
+use brickray_harness::{GpuContext, Offscreen};
+use brickray_render::{FrameDesc, OutOfCoreStats, VolumeRenderer};
+use std::time::{Duration, Instant};
+
+/// One rendered frame.
+pub(crate) struct Shot {
+    /// `prepare + submit + wait` wall time.
+    pub(crate) ms: f64,
+    /// The process's CPU time over the same span ([`process_cpu_ms`]).
+    pub(crate) cpu_ms: f64,
+    /// The image (RGBA8; empty when not read).
+    pub(crate) rgba: Vec<u8>,
+    /// Mean samples per ray over the rays that enter the volume (0 when not read).
+    pub(crate) samples: f64,
+    /// Samples of all rays (0 when not read).
+    pub(crate) total_samples: u64,
+    /// Samples as SIMD hardware executes them: each run of
+    /// [`SIMD_LANES`] neighbouring rays of a row costs its longest ray's
+    /// samples times the lanes (0 when not read).
+    pub(crate) lane_samples: u64,
+}
+
+/// CPU time of this process so far (all its threads: lavapipe's rasteriser
+/// threads run in it), in ms, from `/proc/self/stat` at its 10 ms tick; NaN
+/// where that is not available. On a machine shared with other work, CPU time
+/// moves far less than wall time, so suites report both.
+pub(crate) fn process_cpu_ms() -> f64 {
+    let ticks = || -> Option<f64> {
+        let s = std::fs::read_to_string("/proc/self/stat").ok()?;
+        // Fields after the command name in parentheses, from field 3 (state).
+        let rest = s.get(s.rfind(')')? + 2..)?;
+        let f: Vec<&str> = rest.split_whitespace().collect();
+        let utime: f64 = f.get(11)?.parse().ok()?;
+        let stime: f64 = f.get(12)?.parse().ok()?;
+        Some(utime + stime)
+    };
+    // USER_HZ is 100 on every Linux ABI.
+    ticks().map_or(f64::NAN, |t| t * 10.0)
+}
+
+/// Lanes of one SIMD group of rays: 8 x 32-bit on lavapipe's 256-bit vectors
+/// (consecutive invocations of an 8x8 workgroup are consecutive pixels of a row).
+pub(crate) const SIMD_LANES: usize = 8;
+
+/// [`Shot::lane_samples`] of per-ray sample counts of a `width`-wide image.
+pub(crate) fn lane_samples(counts: &[u32], width: usize) -> u64 {
+    counts
+        .chunks(width)
+        .flat_map(|row| row.chunks(SIMD_LANES))
+        .map(|g| g.iter().copied().max().unwrap_or(0) as u64 * g.len() as u64)
+        .sum()
+}
+
+/// Draws frames of one size into an offscreen target and times them.
+pub(crate) struct Runner<'a> {
+    pub(crate) gpu: &'a GpuContext,
+    pub(crate) target: Offscreen,
+    pub(crate) size: u32,
+}
+
+impl<'a> Runner<'a> {
+    pub(crate) fn new(gpu: &'a GpuContext, size: u32) -> Self {
+        Runner {
+            gpu,
+            target: Offscreen::new(&gpu.device, size, size),
+            size,
+        }
+    }
+
+    /// One frame: `prepare + submit + wait` wall time, and optionally the image
+    /// and the samples per ray read back (not timed).
+    pub(crate) fn frame(
+        &self,
+        r: &mut VolumeRenderer,
+        camera: Camera,
+        frame: VolumeFrame,
+        settings: RenderSettings,
+        read: bool,
+    ) -> Result<Shot, String> {
+        let g = self.gpu;
+        let cpu0 = process_cpu_ms();
+        let t0 = Instant::now();
+        let mut enc = g.device.create_command_encoder(&Default::default());
+        let desc = FrameDesc {
+            camera,
+            frame,
+            viewport: brickray_render::Viewport::full(self.size, self.size),
+            settings,
+            host_depth: None,
+        };
+        r.prepare(&g.device, &g.queue, &mut enc, &desc)
+            .map_err(|e| e.to_string())?;
+        {
+            let mut pass = self.target.pass(&mut enc, true);
+            r.render(&mut pass).map_err(|e| e.to_string())?;
+        }
+        g.submit_wait(enc);
+        let ms = t0.elapsed().as_secs_f64() * 1e3;
+        let cpu_ms = process_cpu_ms() - cpu0;
+        if !read {
+            return Ok(Shot {
+                ms,
+                cpu_ms,
+                rgba: Vec::new(),
+                samples: 0.0,
+                total_samples: 0,
+                lane_samples: 0,
+            });
+        }
+        let rgba = self.target.read_color(g);
+        let tex = r.sample_count_texture().ok_or("no sample counts")?;
+        let counts = brickray_harness::read_texture(g, tex, 4, wgpu::TextureAspect::All);
+        let counts: Vec<u32> = counts
+            .chunks_exact(4)
+            .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+            .collect();
+        let sum: u64 = counts.iter().map(|&c| c as u64).sum();
+        let n = counts.iter().filter(|&&c| c > 0).count() as u64;
+        Ok(Shot {
+            ms,
+            cpu_ms,
+            rgba,
+            samples: sum as f64 / n.max(1) as f64,
+            total_samples: sum,
+            lane_samples: lane_samples(&counts, self.size as usize),
+        })
+    }
+
+    /// Plans one frame without ray casting it: `prepare` (refinement, uploads,
+    /// index) then a submission that only flushes the queued writes. The cut and
+    /// the streaming are those of a rendered frame; only the GPU ray cast is
+    /// skipped (lavapipe takes seconds per 512x512 frame).
+    pub(crate) fn plan(
+        &self,
+        r: &mut VolumeRenderer,
+        camera: Camera,
+        frame: VolumeFrame,
+        settings: RenderSettings,
+    ) -> Result<(), String> {
+        let g = self.gpu;
+        let mut enc = g.device.create_command_encoder(&Default::default());
+        let desc = FrameDesc {
+            camera,
+            frame,
+            viewport: brickray_render::Viewport::full(self.size, self.size),
+            settings,
+            host_depth: None,
+        };
+        r.prepare(&g.device, &g.queue, &mut enc, &desc)
+            .map_err(|e| e.to_string())?;
+        drop(enc);
+        g.submit_wait(g.device.create_command_encoder(&Default::default()));
+        Ok(())
+    }
+
+    /// Plans frames of one view until the out-of-core path converges (at most
+    /// `max_frames`); returns the frames it took (`None`: not converged) and the
+    /// last stats.
+    pub(crate) fn converge(
+        &self,
+        r: &mut VolumeRenderer,
+        camera: Camera,
+        frame: VolumeFrame,
+        settings: RenderSettings,
+        max_frames: usize,
+    ) -> Result<(Option<usize>, OutOfCoreStats), String> {
+        for i in 1..=max_frames {
+            self.plan(r, camera, frame, settings)?;
+            let s = r.out_of_core_stats().ok_or("not out of core")?;
+            if s.converged {
+                return Ok((Some(i), s));
+            }
+            // Give the loader threads the CPU (2 cores, shared with lavapipe).
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        Ok((None, r.out_of_core_stats().ok_or("not out of core")?))
+    }
+}
+
+pub(crate) fn median(v: &[f64]) -> f64 {
+    let mut v = v.to_vec();
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+/// The `p`-quantile (nearest rank).
+pub(crate) fn quantile(v: &[f64], p: f64) -> f64 {
+    let mut v = v.to_vec();
+    v.sort_by(f64::total_cmp);
+    let rank = ((p * v.len() as f64).ceil() as usize).clamp(1, v.len());
+    v[rank - 1]
+}
+
+pub(crate) fn round2(x: f64) -> f64 {
+    (x * 100.0).round() / 100.0
+}
+
+pub(crate) fn finite_db(x: f64) -> f64 {
+    if x.is_finite() { round2(x) } else { 999.0 }
+}

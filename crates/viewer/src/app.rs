@@ -1,0 +1,997 @@
+//! The viewer application: panels, the volume view, the script runner.
+
+use crate::camera::{Axis, CameraController, Navigation};
+use crate::script::{Action, ModeName};
+use crate::source::{Input, Loaded, OpenOptions, Opened, Opening};
+use crate::stats::Stats;
+use crate::tf::{Histogram, Preset, TABLE_ENTRIES, TfModel};
+use crate::tf_widget::TfEditor;
+use crate::view::{ViewResources, VolumeCallback, viewport_px};
+use brickray::{OutOfCoreConfig, RenderMode, RenderSettings, Viewport, VolumeDesc, VolumeFrame};
+use eframe::egui::{self, Color32};
+use eframe::egui_wgpu;
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex};
+use std::time::Instant;
+
+/// What the command line asked for.
+#[derive(Debug, Clone)]
+pub(crate) struct Startup {
+    /// Open this first.
+    pub(crate) input: Option<Input>,
+    /// Run this script.
+    pub(crate) script: Option<Vec<Action>>,
+    /// Where the script's outcome goes (read by `main` after the window closes).
+    pub(crate) outcome: Arc<Mutex<Option<Result<(), String>>>>,
+    /// Open options.
+    pub(crate) open: OpenOptions,
+    /// Out-of-core budgets.
+    pub(crate) ooc: OutOfCoreConfig,
+}
+
+/// The volume on display.
+#[derive(Debug)]
+struct Shown {
+    input: Input,
+    desc: VolumeDesc,
+    frame: VolumeFrame,
+    histogram: Histogram,
+    note: String,
+    streamed: bool,
+}
+
+/// A screenshot waiting for egui's capture.
+#[derive(Debug)]
+struct PendingShot {
+    path: PathBuf,
+    viewport: Viewport,
+    camera: brickray::Camera,
+    image: Arc<Mutex<Option<Arc<egui::ColorImage>>>>,
+}
+
+/// The script's progress.
+#[derive(Debug)]
+struct ScriptRunner {
+    actions: Vec<Action>,
+    next: usize,
+    /// Frames left to draw before the next action.
+    wait: u32,
+    /// Waiting for convergence, with the frames left.
+    converge: Option<u32>,
+}
+
+/// The viewer.
+pub(crate) struct ViewerApp {
+    open_opts: OpenOptions,
+    ooc: OutOfCoreConfig,
+    ooc_dirty: bool,
+    opening: Option<Opening>,
+    shown: Option<Shown>,
+    camera: Option<CameraController>,
+    mode: ModeName,
+    iso: f32,
+    settings: RenderSettings,
+    tf: TfModel,
+    tf_dirty: bool,
+    tf_editor: TfEditor,
+    tf_path: String,
+    overlays: bool,
+    background: [u8; 3],
+    stats: Stats,
+    started: Instant,
+    last_frame: Option<Instant>,
+    /// The last frame asked for the next one at once.
+    continuous: bool,
+    frames_seen: u64,
+    open_path: String,
+    messages: Vec<String>,
+    script: Option<ScriptRunner>,
+    outcome: Arc<Mutex<Option<Result<(), String>>>>,
+    shot: Option<PendingShot>,
+    shots_taken: u32,
+    shot_requested: bool,
+    /// u8 volumes interpolated exactly (a renderer option: changing it
+    /// recreates the renderer and reopens the volume).
+    u8_exact: bool,
+    renderer_dirty: bool,
+    gpu_error: Option<String>,
+}
+
+impl std::fmt::Debug for ViewerApp {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ViewerApp").finish_non_exhaustive()
+    }
+}
+
+impl ViewerApp {
+    /// Creates the app and its GPU resources in egui-wgpu's callback resources.
+    pub(crate) fn new(cc: &eframe::CreationContext<'_>, startup: Startup) -> ViewerApp {
+        let mut gpu_error = None;
+        match cc.wgpu_render_state.as_ref() {
+            Some(rs) => {
+                match ViewResources::new(&rs.device, rs.target_format, Default::default()) {
+                    Ok(r) => {
+                        rs.renderer.write().callback_resources.insert(r);
+                    }
+                    Err(e) => gpu_error = Some(format!("brickray cannot render here: {e}")),
+                }
+            }
+            None => gpu_error = Some("eframe runs without wgpu".into()),
+        }
+        let mut open_opts = startup.open;
+        if let Some(rs) = cc.wgpu_render_state.as_ref() {
+            // Larger volumes stream instead of failing to upload.
+            open_opts.max_3d_side = rs.device.limits().max_texture_dimension_3d;
+        }
+        let mut app = ViewerApp {
+            open_opts,
+            ooc: startup.ooc,
+            ooc_dirty: false,
+            opening: None,
+            shown: None,
+            camera: None,
+            mode: ModeName::Dvr,
+            iso: 0.5,
+            settings: RenderSettings::default(),
+            tf: TfModel::preset(Preset::Grey, [0.0, 1.0]),
+            tf_dirty: true,
+            tf_editor: TfEditor::default(),
+            tf_path: "tf.json".into(),
+            overlays: true,
+            background: [18, 18, 24],
+            stats: Stats::default(),
+            started: Instant::now(),
+            last_frame: None,
+            continuous: false,
+            frames_seen: 0,
+            open_path: String::new(),
+            messages: Vec::new(),
+            script: startup.script.map(|actions| ScriptRunner {
+                actions,
+                next: 0,
+                wait: 0,
+                converge: None,
+            }),
+            outcome: startup.outcome,
+            shot: None,
+            shots_taken: 0,
+            shot_requested: false,
+            u8_exact: true,
+            renderer_dirty: false,
+            gpu_error,
+        };
+        if let Some(input) = startup.input {
+            app.start_open(input);
+        }
+        app
+    }
+
+    fn start_open(&mut self, input: Input) {
+        self.messages.push(format!("opening {}", input.name()));
+        self.opening = Some(Opening::start(input, self.open_opts.clone()));
+    }
+
+    /// Runs `f` on the GPU resources (with the device and queue).
+    fn with_gpu<R>(
+        &self,
+        frame: &eframe::Frame,
+        f: impl FnOnce(&wgpu::Device, &wgpu::Queue, &mut ViewResources) -> R,
+    ) -> Option<R> {
+        let rs = frame.wgpu_render_state()?;
+        let mut renderer = rs.renderer.write();
+        let r = renderer.callback_resources.get_mut::<ViewResources>()?;
+        Some(f(&rs.device, &rs.queue, r))
+    }
+
+    /// Installs a loaded volume in the renderer.
+    fn install(&mut self, frame: &eframe::Frame, loaded: Loaded) -> Result<(), String> {
+        let desc = loaded.desc.clone();
+        let vframe = VolumeFrame::centered(desc.dims, desc.spacing);
+        let ooc = self.ooc;
+        let streamed = matches!(loaded.volume, Opened::Streamed(_));
+        self.with_gpu(frame, |device, queue, r| match loaded.volume {
+            Opened::InCore(v) => r.renderer.set_volume(device, queue, &v),
+            Opened::Streamed(s) => r.renderer.set_volume_source(device, queue, s, vframe, ooc),
+        })
+        .ok_or("no GPU")?
+        .map_err(|e| format!("{}: {e}", loaded.input.name()))?;
+        // Reopening what is shown (a renderer option changed) keeps the view.
+        let reopened = self.shown.as_ref().is_some_and(|s| s.input == loaded.input);
+        // A TF suited to new data (CT presets for Hounsfield ranges); scripts
+        // and users change it after opening.
+        if !reopened {
+            let preset = if desc.value_range[0] <= -900.0 {
+                Preset::CtBone
+            } else {
+                Preset::Grey
+            };
+            self.tf = TfModel::preset(preset, desc.value_range);
+        }
+        self.tf_dirty = true;
+        self.messages.push(loaded.note.clone());
+        if !reopened || self.camera.is_none() {
+            self.camera = Some(CameraController::new(&vframe));
+        }
+        self.stats.clear();
+        self.shown = Some(Shown {
+            input: loaded.input,
+            desc,
+            frame: vframe,
+            histogram: loaded.histogram,
+            note: loaded.note,
+            streamed,
+        });
+        Ok(())
+    }
+
+    /// Recreates the renderer with the current options and reopens the volume.
+    fn recreate_renderer(&mut self, frame: &eframe::Frame) {
+        let Some(rs) = frame.wgpu_render_state() else {
+            return;
+        };
+        let options = brickray::RendererOptions {
+            u8_filtering: if self.u8_exact {
+                brickray::U8Filtering::Exact
+            } else {
+                brickray::U8Filtering::Fast
+            },
+        };
+        match ViewResources::new(&rs.device, rs.target_format, options) {
+            Ok(r) => {
+                rs.renderer.write().callback_resources.insert(r);
+                // The budgets travel with the reopen (`install`).
+                self.tf_dirty = true;
+                if let Some(input) = self.shown.as_ref().map(|s| s.input.clone()) {
+                    self.start_open(input);
+                }
+            }
+            Err(e) => self.fail(format!("renderer: {e}")),
+        }
+    }
+
+    /// The settings of the current mode.
+    fn frame_settings(&self) -> RenderSettings {
+        let mut s = self.settings;
+        s.shading.enabled = self.mode == ModeName::Shaded;
+        s.mode = match self.mode {
+            ModeName::Dvr | ModeName::Shaded => RenderMode::Dvr,
+            ModeName::Iso => RenderMode::Iso {
+                value: self.iso,
+                color: [0.9, 0.85, 0.75],
+            },
+            ModeName::Mip => RenderMode::Mip,
+        };
+        s
+    }
+
+    /// Applies pending TF and budget changes.
+    fn apply(&mut self, frame: &eframe::Frame) {
+        if self.tf_dirty && self.shown.is_some() {
+            self.tf_dirty = false;
+            match self.tf.to_table(TABLE_ENTRIES) {
+                Ok(table) => {
+                    if let Some(Err(e)) = self.with_gpu(frame, |d, q, r| {
+                        r.renderer.set_transfer_function(d, q, &table)
+                    }) {
+                        self.fail(format!("transfer function: {e}"));
+                    }
+                }
+                Err(e) => self.fail(e.to_string()),
+            }
+        }
+        if self.ooc_dirty && self.shown.as_ref().is_some_and(|s| s.streamed) {
+            self.ooc_dirty = false;
+            let c = self.ooc;
+            let res = self.with_gpu(frame, |d, q, r| -> Result<(), brickray::RenderError> {
+                r.renderer.set_lod_tolerance(c.tolerance_px)?;
+                r.renderer.set_upload_budget(c.upload_budget_bytes)?;
+                r.renderer.set_cpu_budget(c.cpu_budget_bytes)?;
+                if r.renderer.stats().out_of_core.is_some() {
+                    r.renderer.set_gpu_budget(d, q, c.gpu_budget_bytes)?;
+                }
+                Ok(())
+            });
+            if let Some(Err(e)) = res {
+                self.fail(format!("budgets: {e}"));
+            }
+        }
+    }
+
+    /// Records an error: shown in the window, and failing the script if one runs.
+    fn fail(&mut self, e: String) {
+        eprintln!("brickray-viewer: {e}");
+        if self.script.is_some() {
+            self.finish_script(Err(e.clone()));
+        }
+        self.messages.push(e);
+    }
+
+    fn finish_script(&mut self, r: Result<(), String>) {
+        if let Ok(mut o) = self.outcome.lock()
+            && o.is_none()
+        {
+            *o = Some(r);
+        }
+        self.script = None;
+    }
+
+    /// Starts a screenshot of the volume view.
+    /// With `window`, of the whole window.
+    fn request_shot(
+        &mut self,
+        ctx: &egui::Context,
+        path: PathBuf,
+        callback: Option<&VolumeCallback>,
+        window: bool,
+    ) {
+        let Some(cb) = callback else {
+            return self.fail("screenshot: no volume view".into());
+        };
+        let screen = ctx.content_rect().size() * ctx.pixels_per_point();
+        let screen = [screen.x.round() as u32, screen.y.round() as u32];
+        let rect = if window { ctx.content_rect() } else { cb.rect };
+        let Some(viewport) = viewport_px(&rect, ctx.pixels_per_point(), screen) else {
+            return self.fail("screenshot: the view is empty".into());
+        };
+        let slot = Arc::new(Mutex::new(None));
+        let (s, c) = (slot.clone(), ctx.clone());
+        ctx.request_screenshot(move |image| {
+            if let Ok(mut g) = s.lock() {
+                *g = Some(image);
+            }
+            c.request_repaint();
+        });
+        self.shot = Some(PendingShot {
+            path,
+            viewport,
+            camera: cb.camera,
+            image: slot,
+        });
+    }
+
+    /// Saves a finished screenshot (the view's pixels) and its JSON sidecar.
+    fn finish_shot(&mut self) {
+        let Some(shot) = self.shot.as_ref() else {
+            return;
+        };
+        let Some(image) = shot.image.lock().ok().and_then(|mut g| g.take()) else {
+            return;
+        };
+        let shot = self.shot.take().expect("checked above");
+        match save_shot(&shot, &image) {
+            Ok(()) => self.messages.push(format!("saved {}", shot.path.display())),
+            Err(e) => self.fail(format!("screenshot {}: {e}", shot.path.display())),
+        }
+    }
+
+    /// Runs script actions until one has to wait.
+    fn step_script(
+        &mut self,
+        ctx: &egui::Context,
+        converged: bool,
+        callback: Option<&VolumeCallback>,
+    ) {
+        loop {
+            let Some(s) = self.script.as_mut() else {
+                return;
+            };
+            if self.opening.is_some() || self.shot.is_some() {
+                return;
+            }
+            if s.wait > 0 {
+                s.wait -= 1;
+                return;
+            }
+            if let Some(left) = s.converge {
+                if converged {
+                    s.converge = None;
+                } else if left == 0 {
+                    s.converge = None;
+                    return self.fail("wait converged: the image did not converge".into());
+                } else {
+                    s.converge = Some(left - 1);
+                    return;
+                }
+            }
+            let Some(action) = s.actions.get(s.next).cloned() else {
+                return self.finish_script(Ok(()));
+            };
+            s.next += 1;
+            match action {
+                Action::Open(a) => match Input::parse(&a) {
+                    Ok(i) => self.start_open(i),
+                    Err(e) => return self.fail(e.to_string()),
+                },
+                Action::TfPreset(p) => {
+                    let range = self
+                        .shown
+                        .as_ref()
+                        .map_or([0.0, 1.0], |s| s.desc.value_range);
+                    self.tf = TfModel::preset(p, range);
+                    self.tf_dirty = true;
+                }
+                Action::TfLoad(path) => match TfModel::load(&path) {
+                    Ok(m) => {
+                        self.tf = m;
+                        self.tf_dirty = true;
+                    }
+                    Err(e) => return self.fail(e.to_string()),
+                },
+                Action::Mode(m, iso) => {
+                    self.mode = m;
+                    if let Some(v) = iso {
+                        self.iso = v;
+                    }
+                }
+                Action::Iso(v) => self.iso = v,
+                Action::Step(v) => self.settings.step_factor = v,
+                Action::Orbit(yaw, pitch, d) => {
+                    let home = self
+                        .shown
+                        .as_ref()
+                        .map(|s| CameraController::new(&s.frame).distance);
+                    if let (Some(c), Some(home)) = (self.camera.as_mut(), home) {
+                        c.set_orbit(yaw.to_radians(), pitch.to_radians(), d * home);
+                    }
+                }
+                Action::Axis(a) => {
+                    if let Some(c) = self.camera.as_mut() {
+                        c.axis_view(a);
+                    }
+                }
+                Action::Reset => {
+                    if let Some(c) = self.camera.as_mut() {
+                        c.reset();
+                    }
+                }
+                Action::Orthographic(o) => {
+                    if let Some(c) = self.camera.as_mut() {
+                        c.orthographic = o;
+                    }
+                }
+                Action::Overlays(on) => self.overlays = on,
+                Action::Background(c) => self.background = c,
+                Action::U8Exact(exact) => {
+                    if exact != self.u8_exact {
+                        self.u8_exact = exact;
+                        self.renderer_dirty = true;
+                    }
+                    // The reopen starts at the next frame; wait for it.
+                    if let Some(s) = self.script.as_mut() {
+                        s.wait = 1;
+                    }
+                    return;
+                }
+                Action::Clip(min, max) => self.settings.clip = brickray::ClipBox { min, max },
+                // Changes above take effect in this frame's drawing; waits
+                // count frames drawn after it.
+                Action::Wait(n) => {
+                    if let Some(s) = self.script.as_mut() {
+                        s.wait = n;
+                    }
+                    return;
+                }
+                Action::WaitConverged(n) => {
+                    if let Some(s) = self.script.as_mut() {
+                        s.converge = Some(n);
+                        s.wait = 1;
+                    }
+                    return;
+                }
+                Action::Screenshot(p) => {
+                    // The capture is of the next frame: the state is unchanged.
+                    self.request_shot(ctx, p, callback, false);
+                    return;
+                }
+                Action::WindowScreenshot(p) => {
+                    self.request_shot(ctx, p, callback, true);
+                    return;
+                }
+                Action::Quit => {
+                    self.finish_script(Ok(()));
+                    ctx.send_viewport_cmd(egui::ViewportCommand::Close);
+                    return;
+                }
+            }
+        }
+    }
+
+    fn top_bar(&mut self, ui: &mut egui::Ui) {
+        ui.horizontal(|ui| {
+            ui.label("Open:");
+            let edit = ui.add(
+                egui::TextEdit::singleline(&mut self.open_path)
+                    .hint_text("volume.json | volume.nrrd | store.brs | procedural:N")
+                    .desired_width(320.0),
+            );
+            let enter = edit.lost_focus() && ui.input(|i| i.key_pressed(egui::Key::Enter));
+            if (ui.button("Open").clicked() || enter) && !self.open_path.trim().is_empty() {
+                match Input::parse(self.open_path.trim()) {
+                    Ok(i) => self.start_open(i),
+                    Err(e) => self.messages.push(e.to_string()),
+                }
+            }
+            if ui.button("Procedural 4096³").clicked() {
+                self.start_open(Input::Procedural(4096));
+            }
+            if ui
+                .button("Screenshot")
+                .on_hover_text("saves the view to brickray-viewer-N.png")
+                .clicked()
+            {
+                self.shot_requested = true;
+            }
+            ui.separator();
+            if let Some(s) = &self.shown {
+                ui.label(format!("{}: {}", s.input.name(), s.note));
+            }
+        });
+        if let Some(o) = &self.opening {
+            ui.horizontal(|ui| {
+                ui.label(format!("{}: {}", o.input.name(), o.progress.stage()));
+                ui.add(
+                    egui::ProgressBar::new(o.progress.fraction())
+                        .show_percentage()
+                        .desired_width(240.0),
+                );
+            });
+        }
+        if let Some(m) = self.messages.last() {
+            ui.label(egui::RichText::new(m).weak());
+        }
+    }
+
+    fn camera_ui(&mut self, ui: &mut egui::Ui) {
+        let Some(c) = self.camera.as_mut() else {
+            ui.label("no volume");
+            return;
+        };
+        ui.horizontal(|ui| {
+            ui.selectable_value(&mut c.navigation, Navigation::Orbit, "Orbit");
+            ui.selectable_value(&mut c.navigation, Navigation::Fly, "Fly");
+            ui.separator();
+            ui.selectable_value(&mut c.orthographic, false, "Perspective");
+            ui.selectable_value(&mut c.orthographic, true, "Orthographic");
+        });
+        ui.horizontal(|ui| {
+            if ui.button("Reset").clicked() {
+                c.reset();
+            }
+            for a in Axis::ALL {
+                if ui.button(a.label()).clicked() {
+                    c.axis_view(a);
+                }
+            }
+        });
+        let mut fov = c.fov_y.to_degrees();
+        if ui
+            .add(egui::Slider::new(&mut fov, 10.0..=100.0).text("field of view °"))
+            .changed()
+        {
+            c.fov_y = fov.to_radians();
+        }
+        ui.label(
+            egui::RichText::new(
+                "drag: orbit (fly: look) · right/middle drag: pan · wheel: zoom · WASD/QE: fly · R: reset",
+            )
+            .small()
+            .weak(),
+        );
+    }
+
+    fn render_ui(&mut self, ui: &mut egui::Ui) {
+        egui::ComboBox::from_label("mode")
+            .selected_text(self.mode.label())
+            .show_ui(ui, |ui| {
+                for m in ModeName::ALL {
+                    ui.selectable_value(&mut self.mode, m, m.label());
+                }
+            });
+        if self.mode == ModeName::Iso
+            && let Some(s) = &self.shown
+        {
+            let raw =
+                s.desc.value_range[0] + self.iso * (s.desc.value_range[1] - s.desc.value_range[0]);
+            ui.add(
+                egui::Slider::new(&mut self.iso, 0.0..=1.0)
+                    .text(format!("isovalue (raw {raw:.1})")),
+            );
+            histogram_strip(
+                ui,
+                &s.histogram,
+                self.tf_editor.log_histogram,
+                Some(self.iso),
+            );
+        }
+        let s = &mut self.settings;
+        ui.add(
+            egui::Slider::new(&mut s.step_factor, RenderSettings::MIN_STEP_FACTOR..=2.0)
+                .logarithmic(true)
+                .text("step (voxels)"),
+        );
+        let mut ert = s.accel.early_termination.is_some();
+        ui.horizontal(|ui| {
+            ui.checkbox(&mut ert, "early ray termination");
+            let mut t = s.accel.early_termination.unwrap_or(0.99);
+            ui.add_enabled(ert, egui::Slider::new(&mut t, 0.5..=1.0));
+            s.accel.early_termination = ert.then_some(t);
+        });
+        ui.checkbox(&mut s.accel.empty_space_skipping, "empty-space skipping");
+        if ui
+            .checkbox(&mut self.u8_exact, "exact u8 interpolation")
+            .on_hover_text("u8 volumes in 16-bit texels (exact) or 8-bit (half the memory); reopens the volume")
+            .changed()
+        {
+            self.renderer_dirty = true;
+        }
+        ui.add(egui::Slider::new(&mut s.depth_opacity, 0.01..=1.0).text("depth at opacity"));
+        ui.add(
+            egui::Slider::new(
+                &mut s.iso_refine_steps,
+                0..=RenderSettings::MAX_ISO_REFINE_STEPS,
+            )
+            .text("iso refinement"),
+        );
+        egui::CollapsingHeader::new("shading").show(ui, |ui| {
+            ui.add(egui::Slider::new(&mut s.shading.ambient, 0.0..=1.0).text("ambient"));
+            ui.add(egui::Slider::new(&mut s.shading.diffuse, 0.0..=1.0).text("diffuse"));
+            ui.add(egui::Slider::new(&mut s.shading.specular, 0.0..=1.0).text("specular"));
+            ui.add(egui::Slider::new(&mut s.shading.shininess, 1.0..=128.0).text("shininess"));
+        });
+        if self.shown.as_ref().is_some_and(|s| s.streamed) {
+            egui::CollapsingHeader::new("out of core")
+                .default_open(true)
+                .show(ui, |ui| {
+                    let c = &mut self.ooc;
+                    let mut changed = ui
+                        .add(
+                            egui::Slider::new(&mut c.tolerance_px, 0.0..=8.0)
+                                .text("LOD tolerance (px per voxel)"),
+                        )
+                        .changed();
+                    let mut mib = |ui: &mut egui::Ui,
+                                   v: &mut u64,
+                                   range: std::ops::RangeInclusive<u64>,
+                                   text: &str| {
+                        let mut m = *v >> 20;
+                        let r = ui.add(
+                            egui::Slider::new(&mut m, range)
+                                .logarithmic(true)
+                                .text(text),
+                        );
+                        if r.drag_stopped() || (r.changed() && !r.dragged()) {
+                            *v = m << 20;
+                            changed = true;
+                        }
+                    };
+                    mib(
+                        ui,
+                        &mut c.upload_budget_bytes,
+                        1..=256,
+                        "upload MiB per frame",
+                    );
+                    mib(ui, &mut c.cpu_budget_bytes, 64..=16384, "CPU cache MiB");
+                    mib(ui, &mut c.gpu_budget_bytes, 16..=4096, "GPU pool MiB");
+                    self.ooc_dirty |= changed;
+                });
+        }
+        egui::CollapsingHeader::new("clip box").show(ui, |ui| {
+            let c = &mut self.settings.clip;
+            for (a, name) in ["x", "y", "z"].iter().enumerate() {
+                ui.horizontal(|ui| {
+                    ui.label(*name);
+                    ui.add(egui::Slider::new(&mut c.min[a], 0.0..=1.0).show_value(false));
+                    ui.add(egui::Slider::new(&mut c.max[a], 0.0..=1.0).show_value(false));
+                    // Dragging a bound past the other pushes it along.
+                    if c.min[a] > c.max[a] {
+                        c.max[a] = c.min[a];
+                    }
+                });
+            }
+            if ui.button("whole volume").clicked() {
+                *c = brickray::ClipBox::FULL;
+            }
+        });
+        ui.horizontal(|ui| {
+            ui.checkbox(&mut self.overlays, "bounding box and axes");
+            ui.label("background");
+            ui.color_edit_button_srgb(&mut self.background);
+        });
+    }
+
+    fn tf_ui(&mut self, ui: &mut egui::Ui) {
+        let range = self
+            .shown
+            .as_ref()
+            .map_or([0.0, 1.0], |s| s.desc.value_range);
+        ui.horizontal(|ui| {
+            egui::ComboBox::from_id_salt("brickray-viewer preset")
+                .selected_text("preset")
+                .show_ui(ui, |ui| {
+                    for p in Preset::ALL {
+                        if ui.button(p.name()).clicked() {
+                            self.tf = TfModel::preset(p, range);
+                            self.tf_dirty = true;
+                        }
+                    }
+                });
+            ui.checkbox(&mut self.tf_editor.log_histogram, "log histogram");
+        });
+        let empty = Histogram::new(1);
+        let h = self.shown.as_ref().map_or(&empty, |s| &s.histogram);
+        if self.tf_editor.show(ui, &mut self.tf, h) {
+            self.tf_dirty = true;
+        }
+        ui.horizontal(|ui| {
+            ui.add(egui::TextEdit::singleline(&mut self.tf_path).desired_width(160.0));
+            if ui.button("Save").clicked() {
+                let r = self.tf.save(Path::new(&self.tf_path));
+                self.messages
+                    .push(r.map_or_else(|e| e.to_string(), |_| format!("saved {}", self.tf_path)));
+            }
+            if ui.button("Load").clicked() {
+                match TfModel::load(Path::new(&self.tf_path)) {
+                    Ok(m) => {
+                        self.tf = m;
+                        self.tf_dirty = true;
+                    }
+                    Err(e) => self.messages.push(e.to_string()),
+                }
+            }
+        });
+    }
+
+    /// Camera input over the view; returns true while a fly key is held.
+    fn camera_input(&mut self, ui: &egui::Ui, response: &egui::Response) -> bool {
+        let Some(c) = self.camera.as_mut() else {
+            return false;
+        };
+        let d = response.drag_delta();
+        if response.dragged_by(egui::PointerButton::Primary) {
+            c.rotate(d.x, d.y);
+        }
+        if response.dragged_by(egui::PointerButton::Secondary)
+            || response.dragged_by(egui::PointerButton::Middle)
+        {
+            c.pan(d.x, d.y, response.rect.height());
+        }
+        if response.hovered() {
+            let scroll = ui.input(|i| i.smooth_scroll_delta.y);
+            if scroll != 0.0 {
+                c.zoom(scroll / 50.0);
+            }
+        }
+        if ui.ctx().egui_wants_keyboard_input() {
+            return false;
+        }
+        let (keys, dt) = ui.input(|i| {
+            let k = |key| if i.key_down(key) { 1.0 } else { 0.0 };
+            let v = glam::Vec3::new(
+                k(egui::Key::D) - k(egui::Key::A),
+                k(egui::Key::E) - k(egui::Key::Q),
+                k(egui::Key::W) - k(egui::Key::S),
+            );
+            if i.key_pressed(egui::Key::R) {
+                c.reset();
+            }
+            (v, i.stable_dt.min(0.1))
+        });
+        if keys != glam::Vec3::ZERO {
+            c.fly(keys * 0.5, dt);
+            return true;
+        }
+        false
+    }
+}
+
+/// The histogram as a strip with a marker (the isovalue slider's background).
+fn histogram_strip(ui: &mut egui::Ui, h: &Histogram, log: bool, marker: Option<f32>) {
+    let (rect, _) =
+        ui.allocate_exact_size(egui::vec2(ui.available_width(), 40.0), egui::Sense::hover());
+    let p = ui.painter_at(rect);
+    p.rect_filled(rect, 2.0, Color32::from_gray(24));
+    let heights = h.heights(log);
+    let n = heights.len().max(1) as f32;
+    for (i, v) in heights.iter().enumerate() {
+        let x0 = rect.left() + i as f32 / n * rect.width();
+        let x1 = rect.left() + (i + 1) as f32 / n * rect.width();
+        let bar = egui::Rect::from_min_max(
+            egui::pos2(x0, rect.bottom() - v * rect.height()),
+            egui::pos2(x1, rect.bottom()),
+        );
+        p.rect_filled(bar, 0.0, Color32::from_gray(90));
+    }
+    if let Some(m) = marker {
+        let x = rect.left() + m * rect.width();
+        p.line_segment(
+            [egui::pos2(x, rect.top()), egui::pos2(x, rect.bottom())],
+            egui::Stroke::new(2.0, Color32::YELLOW),
+        );
+    }
+}
+
+/// Writes the view's pixels as PNG and the camera and viewport as JSON.
+fn save_shot(shot: &PendingShot, image: &egui::ColorImage) -> Result<(), String> {
+    let vp = shot.viewport;
+    let [w, h] = image.size;
+    if (vp.x + vp.width) as usize > w || (vp.y + vp.height) as usize > h {
+        return Err(format!(
+            "the view {vp:?} is outside the captured {w}x{h} image"
+        ));
+    }
+    let mut rgba = Vec::with_capacity((vp.width * vp.height * 4) as usize);
+    for y in vp.y..vp.y + vp.height {
+        for x in vp.x..vp.x + vp.width {
+            rgba.extend_from_slice(&image.pixels[y as usize * w + x as usize].to_array());
+        }
+    }
+    if let Some(dir) = shot.path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).map_err(|e| e.to_string())?;
+    }
+    image::save_buffer(
+        &shot.path,
+        &rgba,
+        vp.width,
+        vp.height,
+        image::ExtendedColorType::Rgba8,
+    )
+    .map_err(|e| e.to_string())?;
+    let c = shot.camera;
+    let projection = match c.projection {
+        brickray::Projection::Perspective { fov_y } => {
+            serde_json::json!({"perspective": {"fov_y": fov_y}})
+        }
+        brickray::Projection::Orthographic { height } => {
+            serde_json::json!({"orthographic": {"height": height}})
+        }
+    };
+    let sidecar = serde_json::json!({
+        "viewport": [vp.width, vp.height],
+        "camera": {
+            "eye": c.eye.to_array(),
+            "target": c.target.to_array(),
+            "up": c.up.to_array(),
+            "projection": projection,
+            "near": c.near,
+            "far": c.far,
+        },
+    });
+    let text = serde_json::to_string_pretty(&sidecar).map_err(|e| e.to_string())?;
+    std::fs::write(shot.path.with_extension("json"), text).map_err(|e| e.to_string())
+}
+
+impl eframe::App for ViewerApp {
+    fn ui(&mut self, ui: &mut egui::Ui, frame: &mut eframe::Frame) {
+        let ctx = ui.ctx().clone();
+        // A finished open.
+        if let Some(result) = self.opening.as_ref().and_then(Opening::poll) {
+            self.opening = None;
+            match result
+                .map_err(|e| e.to_string())
+                .and_then(|l| self.install(frame, l))
+            {
+                Ok(()) => {}
+                Err(e) => self.fail(e),
+            }
+        }
+        if let Some(e) = &self.gpu_error {
+            let e = e.clone();
+            if self.script.is_some() {
+                self.fail(e.clone());
+            }
+            egui::CentralPanel::default_margins().show(ui, |ui| ui.label(e));
+            return;
+        }
+        self.finish_shot();
+        if std::mem::take(&mut self.renderer_dirty) {
+            self.recreate_renderer(frame);
+        }
+        self.apply(frame);
+
+        // Statistics of the frame drawn last time, and GPU errors.
+        let (stats, frames, wants_redraw, err) = self
+            .with_gpu(frame, |_, _, r| {
+                (
+                    r.renderer.stats(),
+                    r.frames,
+                    r.renderer.wants_redraw(),
+                    r.take_error(),
+                )
+            })
+            .unwrap_or_default();
+        if let Some(e) = err {
+            self.fail(e);
+        }
+        if frames > self.frames_seen {
+            self.frames_seen = frames;
+            let now = Instant::now();
+            // The interval is a frame time only while redrawing continuously.
+            let dt = match self.last_frame {
+                Some(t) if self.continuous => (now - t).as_secs_f64() * 1e3,
+                _ => f64::NAN,
+            };
+            self.last_frame = Some(now);
+            self.stats
+                .push(self.started.elapsed().as_secs_f64(), dt, &stats);
+        }
+        let converged = stats.out_of_core.is_none_or(|o| o.converged) && !wants_redraw;
+
+        egui::Panel::top("brickray-viewer top").show(ui, |ui| self.top_bar(ui));
+        egui::Panel::left("brickray-viewer side")
+            .default_size(340.0)
+            .resizable(true)
+            .show(ui, |ui| {
+                egui::ScrollArea::vertical().show(ui, |ui| {
+                    egui::CollapsingHeader::new("Camera")
+                        .default_open(true)
+                        .show(ui, |ui| self.camera_ui(ui));
+                    egui::CollapsingHeader::new("Rendering")
+                        .default_open(true)
+                        .show(ui, |ui| self.render_ui(ui));
+                    egui::CollapsingHeader::new("Transfer function")
+                        .default_open(true)
+                        .show(ui, |ui| self.tf_ui(ui));
+                    egui::CollapsingHeader::new("Statistics")
+                        .default_open(true)
+                        .show(ui, |ui| self.stats.show(ui));
+                });
+            });
+        let mut callback = None;
+        let mut flying = false;
+        egui::CentralPanel::default_margins()
+            .frame(egui::Frame::NONE)
+            .show(ui, |ui| {
+                let (rect, response) =
+                    ui.allocate_exact_size(ui.available_size(), egui::Sense::click_and_drag());
+                let [r, g, b] = self.background;
+                ui.painter()
+                    .rect_filled(rect, 0.0, Color32::from_rgb(r, g, b));
+                flying = self.camera_input(ui, &response);
+                if let (Some(s), Some(c)) = (&self.shown, &self.camera) {
+                    let cb = VolumeCallback {
+                        rect,
+                        camera: c.camera(),
+                        frame: s.frame,
+                        settings: self.frame_settings(),
+                        overlays: self.overlays,
+                    };
+                    ui.painter()
+                        .add(egui_wgpu::Callback::new_paint_callback(rect, cb.clone()));
+                    callback = Some(cb);
+                } else if self.opening.is_some() {
+                    ui.centered_and_justified(|ui| ui.spinner());
+                }
+            });
+        if std::mem::take(&mut self.shot_requested) && self.shot.is_none() {
+            self.shots_taken += 1;
+            let path = PathBuf::from(format!("brickray-viewer-{}.png", self.shots_taken));
+            self.request_shot(&ctx, path, callback.as_ref(), false);
+        }
+        self.step_script(&ctx, converged, callback.as_ref());
+
+        // Redraw only while the image can change.
+        self.continuous = self.script.is_some() || self.shot.is_some() || wants_redraw || flying;
+        if self.continuous {
+            ctx.request_repaint();
+        } else if self.opening.is_some() {
+            ctx.request_repaint_after(std::time::Duration::from_millis(50));
+        }
+    }
+}
+
+/// The device needs: brickray's limits within the adapter's, and the
+/// optional features it benefits from.
+pub(crate) fn device_descriptor(adapter: &wgpu::Adapter) -> wgpu::DeviceDescriptor<'static> {
+    let wanted = wgpu::Features::TEXTURE_FORMAT_16BIT_NORM | wgpu::Features::FLOAT32_FILTERABLE;
+    let mut limits = brickray::required_limits().using_resolution(adapter.limits());
+    // egui's depth buffer spans the window.
+    limits.max_texture_dimension_2d = limits
+        .max_texture_dimension_2d
+        .max(adapter.limits().max_texture_dimension_2d.min(8192));
+    wgpu::DeviceDescriptor {
+        label: Some("brickray-viewer"),
+        required_features: adapter.features() & wanted,
+        required_limits: limits,
+        ..Default::default()
+    }
+}

@@ -1,0 +1,156 @@
+//! brickray's interactive viewer: `brickray-viewer [PATH] [--script FILE]`.
+//!
+//! Opens a raw+JSON or NRRD volume (loaded whole when small, built into a
+//! brick store in the background when large), a brick store (`.brs`), or with
+//! no argument a procedural 4096^3 volume streamed out of core. The volume is
+//! drawn through egui-wgpu's paint callback: the viewer is a brickray host like
+//! any other. See `docs/viewer.md`.
+
+mod app;
+mod camera;
+mod script;
+mod source;
+mod stats;
+mod tf;
+mod tf_widget;
+mod view;
+
+use clap::Parser;
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::sync::{Arc, Mutex};
+
+/// Command line.
+#[derive(Debug, Parser)]
+#[command(
+    name = "brickray-viewer",
+    version,
+    about = "Interactive out-of-core volume viewer (brickray)"
+)]
+struct Cli {
+    /// A volume (.json sidecar, .raw, .nrrd, .nhdr), a brick store (.brs), or
+    /// `procedural:N` (fractal noise, N^3 voxels). Default: procedural:4096.
+    path: Option<String>,
+    /// Run the actions of FILE (see docs/viewer.md); the exit status says
+    /// whether they all succeeded.
+    #[arg(long, value_name = "FILE")]
+    script: Option<PathBuf>,
+    /// Window size in pixels, WIDTHxHEIGHT.
+    #[arg(long, default_value = "1280x800", value_parser = parse_size)]
+    window: (u32, u32),
+    /// Volume files up to this many MiB are loaded whole (in core); larger
+    /// ones are built into a brick store and streamed.
+    #[arg(long, default_value_t = 1024, value_name = "MiB")]
+    in_core_max: u64,
+    /// Where brick stores built from large files go.
+    #[arg(long, value_name = "DIR")]
+    store_dir: Option<PathBuf>,
+    /// GPU brick pool of the out-of-core path, MiB.
+    #[arg(long, default_value_t = 256, value_name = "MiB")]
+    gpu_pool: u64,
+    /// CPU brick cache of the out-of-core path, MiB.
+    #[arg(long, default_value_t = 1024, value_name = "MiB")]
+    cpu_cache: u64,
+}
+
+fn parse_size(s: &str) -> Result<(u32, u32), String> {
+    let (w, h) = s
+        .split_once('x')
+        .ok_or("expected WIDTHxHEIGHT, e.g. 1280x800")?;
+    let p = |v: &str| v.parse::<u32>().ok().filter(|&n| (64..=16384).contains(&n));
+    match (p(w), p(h)) {
+        (Some(w), Some(h)) => Ok((w, h)),
+        _ => Err("width and height must be in 64..=16384".into()),
+    }
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let script = match &cli.script {
+        None => None,
+        Some(path) => match std::fs::read_to_string(path)
+            .map_err(|e| format!("{}: {e}", path.display()))
+            .and_then(|t| script::parse(&t).map_err(|e| format!("{}: {e}", path.display())))
+        {
+            Ok(actions) => Some(actions),
+            Err(e) => {
+                eprintln!("brickray-viewer: {e}");
+                return ExitCode::from(2);
+            }
+        },
+    };
+    // With a script that opens its own volume, open nothing first.
+    let input = match (&cli.path, &script) {
+        (Some(p), _) => Some(p.as_str()),
+        (None, Some(a)) if a.iter().any(|a| matches!(a, script::Action::Open(_))) => None,
+        (None, _) => Some("procedural"),
+    };
+    let input = match input.map(source::Input::parse).transpose() {
+        Ok(i) => i,
+        Err(e) => {
+            eprintln!("brickray-viewer: {e}");
+            return ExitCode::from(2);
+        }
+    };
+    let store_dir = cli
+        .store_dir
+        .clone()
+        .unwrap_or_else(|| std::env::temp_dir().join("brickray-viewer-stores"));
+    let outcome = Arc::new(Mutex::new(None));
+    let startup = app::Startup {
+        input,
+        script,
+        outcome: outcome.clone(),
+        open: source::OpenOptions {
+            in_core_max_bytes: cli.in_core_max << 20,
+            // Replaced by the device's 3D texture limit once it exists.
+            max_3d_side: 2048,
+            store_dir,
+        },
+        ooc: brickray::OutOfCoreConfig {
+            gpu_budget_bytes: cli.gpu_pool << 20,
+            cpu_budget_bytes: cli.cpu_cache << 20,
+            ..Default::default()
+        },
+    };
+    let has_script = startup.script.is_some();
+    let mut wgpu_options = eframe::egui_wgpu::WgpuConfiguration::default();
+    if let eframe::egui_wgpu::WgpuSetup::CreateNew(create) = &mut wgpu_options.wgpu_setup {
+        create.device_descriptor = Arc::new(app::device_descriptor);
+    }
+    let options = eframe::NativeOptions {
+        viewport: eframe::egui::ViewportBuilder::default()
+            .with_title("brickray viewer")
+            .with_inner_size([cli.window.0 as f32, cli.window.1 as f32]),
+        // egui's pass gets a depth buffer: the volume and the viewer's own
+        // geometry composite by depth in it.
+        depth_buffer: 32,
+        // Exact colours (screenshots are compared with the library's images).
+        dithering: false,
+        wgpu_options,
+        ..Default::default()
+    };
+    let run = eframe::run_native(
+        "brickray-viewer",
+        options,
+        Box::new(move |cc| Ok(Box::new(app::ViewerApp::new(cc, startup)))),
+    );
+    if let Err(e) = run {
+        eprintln!("brickray-viewer: {e}");
+        return ExitCode::FAILURE;
+    }
+    if has_script {
+        match outcome.lock().ok().and_then(|mut o| o.take()) {
+            Some(Ok(())) => {}
+            Some(Err(e)) => {
+                eprintln!("brickray-viewer: script failed: {e}");
+                return ExitCode::FAILURE;
+            }
+            None => {
+                eprintln!("brickray-viewer: the window closed before the script finished");
+                return ExitCode::FAILURE;
+            }
+        }
+    }
+    ExitCode::SUCCESS
+}

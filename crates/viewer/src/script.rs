@@ -1,0 +1,302 @@
+//! `--script FILE`: a list of actions run one per frame or more, for tests and
+//! reproducible figures. One action per line; `#` starts a comment.
+//!
+//! ```text
+//! open PATH | procedural[:N]     open a volume (waits until it is loaded)
+//! tf PRESET | tf load FILE.json  transfer function (presets: ct-bone, ct-soft, mri, microscopy, grey)
+//! mode dvr | shaded | iso [VALUE] | mip
+//! iso VALUE                      isovalue, normalized 0..1
+//! step FACTOR                    sampling step in voxels
+//! camera orbit YAW PITCH DIST    degrees, degrees, multiple of the home distance
+//! camera axis +x|-x|+y|-y|+z|-z  camera reset
+//! projection perspective | orthographic
+//! overlays on | off              the bounding box and axes
+//! background R G B               0..255, behind the volume
+//! clip X0 Y0 Z0 X1 Y1 Z1 | clip off   the clip box, texture space 0..1
+//! u8 exact | fast                u8 interpolation (reopens the volume)
+//! wait N                         draw N frames
+//! wait converged [MAX]           draw until no brick is pending (at most MAX frames, default 600)
+//! screenshot FILE.png            the volume view, plus FILE.json (camera, viewport)
+//! screenshot-window FILE.png     the whole window
+//! quit
+//! ```
+
+use crate::camera::Axis;
+use crate::tf::Preset;
+use std::path::PathBuf;
+
+/// One action.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) enum Action {
+    /// Open a volume.
+    Open(String),
+    /// A preset TF.
+    TfPreset(Preset),
+    /// A TF file.
+    TfLoad(PathBuf),
+    /// The render mode (with the isovalue for `iso VALUE`).
+    Mode(ModeName, Option<f32>),
+    /// The isovalue.
+    Iso(f32),
+    /// The step factor.
+    Step(f32),
+    /// Orbit: yaw and pitch in degrees, distance as a multiple of the home distance.
+    Orbit(f32, f32, f32),
+    /// An axis view.
+    Axis(Axis),
+    /// The home view.
+    Reset,
+    /// Orthographic (true) or perspective.
+    Orthographic(bool),
+    /// Show the bounding box and axes.
+    Overlays(bool),
+    /// The background colour.
+    Background([u8; 3]),
+    /// The clip box (texture space).
+    Clip([f32; 3], [f32; 3]),
+    /// u8 volumes interpolated exactly (true) or from 8-bit texels.
+    U8Exact(bool),
+    /// Draw frames.
+    Wait(u32),
+    /// Draw until converged, at most this many frames.
+    WaitConverged(u32),
+    /// Save the view.
+    Screenshot(PathBuf),
+    /// Save the whole window.
+    WindowScreenshot(PathBuf),
+    /// Close the viewer.
+    Quit,
+}
+
+/// Render modes by name.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum ModeName {
+    /// DVR.
+    Dvr,
+    /// DVR with shading.
+    Shaded,
+    /// Isosurface.
+    Iso,
+    /// MIP.
+    Mip,
+}
+
+impl ModeName {
+    /// All, in menu order.
+    pub(crate) const ALL: [ModeName; 4] = [
+        ModeName::Dvr,
+        ModeName::Shaded,
+        ModeName::Iso,
+        ModeName::Mip,
+    ];
+
+    /// Its label.
+    pub(crate) fn label(self) -> &'static str {
+        match self {
+            ModeName::Dvr => "DVR",
+            ModeName::Shaded => "shaded DVR",
+            ModeName::Iso => "isosurface",
+            ModeName::Mip => "MIP",
+        }
+    }
+}
+
+/// A script line that cannot be run.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("script line {line}: {reason}: {text:?}")]
+pub(crate) struct ScriptError {
+    /// 1-based line number.
+    pub(crate) line: usize,
+    /// The line.
+    pub(crate) text: String,
+    /// What is wrong.
+    pub(crate) reason: String,
+}
+
+/// Parses a script.
+pub(crate) fn parse(text: &str) -> Result<Vec<Action>, ScriptError> {
+    let mut actions = Vec::new();
+    for (i, raw) in text.lines().enumerate() {
+        let line = raw.split('#').next().unwrap_or("").trim();
+        if line.is_empty() {
+            continue;
+        }
+        let err = |reason: &str| ScriptError {
+            line: i + 1,
+            text: raw.to_string(),
+            reason: reason.to_string(),
+        };
+        let words: Vec<&str> = line.split_whitespace().collect();
+        let num = |s: &str| -> Result<f32, ScriptError> {
+            s.parse::<f32>()
+                .ok()
+                .filter(|v| v.is_finite())
+                .ok_or_else(|| err("expected a finite number"))
+        };
+        let unit = |s: &str| -> Result<f32, ScriptError> {
+            num(s).and_then(|v| {
+                if (0.0..=1.0).contains(&v) {
+                    Ok(v)
+                } else {
+                    Err(err("expected a value in 0..1"))
+                }
+            })
+        };
+        let on_off = |s: &str| match s {
+            "on" => Ok(true),
+            "off" => Ok(false),
+            _ => Err(err("expected on or off")),
+        };
+        let rest = || line.split_once(char::is_whitespace).map(|r| r.1.trim());
+        let action = match words.as_slice() {
+            ["open", ..] => {
+                Action::Open(rest().ok_or_else(|| err("open needs a path"))?.to_string())
+            }
+            ["tf", "load", ..] => Action::TfLoad(
+                rest()
+                    .and_then(|r| r.strip_prefix("load"))
+                    .map(str::trim)
+                    .filter(|p| !p.is_empty())
+                    .ok_or_else(|| err("tf load needs a file"))?
+                    .into(),
+            ),
+            ["tf", name] => {
+                Action::TfPreset(Preset::parse(name).ok_or_else(|| err("unknown preset"))?)
+            }
+            ["mode", "dvr"] => Action::Mode(ModeName::Dvr, None),
+            ["mode", "shaded"] => Action::Mode(ModeName::Shaded, None),
+            ["mode", "iso"] => Action::Mode(ModeName::Iso, None),
+            ["mode", "iso", v] => Action::Mode(ModeName::Iso, Some(unit(v)?)),
+            ["mode", "mip"] => Action::Mode(ModeName::Mip, None),
+            ["iso", v] => Action::Iso(unit(v)?),
+            ["step", v] => {
+                let v = num(v)?;
+                let (lo, hi) = (
+                    brickray::RenderSettings::MIN_STEP_FACTOR,
+                    brickray::RenderSettings::MAX_STEP_FACTOR,
+                );
+                if !(lo..=hi).contains(&v) {
+                    return Err(err(&format!("the step must be in {lo}..={hi}")));
+                }
+                Action::Step(v)
+            }
+            ["camera", "orbit", y, p, d] => {
+                let d = num(d)?;
+                if d <= 0.0 {
+                    return Err(err("the distance must be > 0"));
+                }
+                Action::Orbit(num(y)?, num(p)?, d)
+            }
+            ["camera", "axis", a] => Action::Axis(
+                Axis::parse(a).ok_or_else(|| err("expected +x, -x, +y, -y, +z or -z"))?,
+            ),
+            ["camera", "reset"] => Action::Reset,
+            ["projection", "perspective"] => Action::Orthographic(false),
+            ["projection", "orthographic"] => Action::Orthographic(true),
+            ["overlays", v] => Action::Overlays(on_off(v)?),
+            ["u8", "exact"] => Action::U8Exact(true),
+            ["u8", "fast"] => Action::U8Exact(false),
+            ["clip", "off"] => Action::Clip([0.0; 3], [1.0; 3]),
+            ["clip", x0, y0, z0, x1, y1, z1] => {
+                let lo = [unit(x0)?, unit(y0)?, unit(z0)?];
+                let hi = [unit(x1)?, unit(y1)?, unit(z1)?];
+                if (0..3).any(|a| lo[a] > hi[a]) {
+                    return Err(err("the clip box's minimum exceeds its maximum"));
+                }
+                Action::Clip(lo, hi)
+            }
+            ["background", r, g, b] => {
+                let c = |s: &str| s.parse::<u8>().map_err(|_| err("expected 0..255"));
+                Action::Background([c(r)?, c(g)?, c(b)?])
+            }
+            ["wait", "converged"] => Action::WaitConverged(600),
+            ["wait", "converged", n] => {
+                Action::WaitConverged(n.parse().map_err(|_| err("expected a frame count"))?)
+            }
+            ["wait", n] => Action::Wait(n.parse().map_err(|_| err("expected a frame count"))?),
+            ["screenshot-window", ..] => Action::WindowScreenshot(
+                rest()
+                    .ok_or_else(|| err("screenshot-window needs a file"))?
+                    .into(),
+            ),
+            ["screenshot", ..] => {
+                Action::Screenshot(rest().ok_or_else(|| err("screenshot needs a file"))?.into())
+            }
+            ["quit"] => Action::Quit,
+            _ => return Err(err("unknown action")),
+        };
+        actions.push(action);
+    }
+    Ok(actions)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_action_parses() {
+        let text = "
+            # a comment
+            open /data/head ct.json
+            open procedural:256
+            tf ct-bone
+            tf load my tf.json   # trailing comment
+            mode dvr
+            mode iso 0.35
+            iso 0.4
+            step 0.25
+            camera orbit 30 20 1.5
+            camera axis -y
+            camera reset
+            projection orthographic
+            overlays off
+            background 0 0 0
+            clip 0 0 0.5 1 1 1
+            wait 3
+            wait converged
+            wait converged 50
+            screenshot out/a.png
+            screenshot-window out/w.png
+            quit
+        ";
+        let a = parse(text).unwrap();
+        assert_eq!(a.len(), 21);
+        assert_eq!(a[19], Action::WindowScreenshot("out/w.png".into()));
+        assert_eq!(a[0], Action::Open("/data/head ct.json".into()));
+        assert_eq!(a[3], Action::TfLoad("my tf.json".into()));
+        assert_eq!(a[5], Action::Mode(ModeName::Iso, Some(0.35)));
+        assert_eq!(a[8], Action::Orbit(30.0, 20.0, 1.5));
+        assert_eq!(a[9], Action::Axis(Axis::NegY));
+        assert_eq!(a[13], Action::Background([0, 0, 0]));
+        assert_eq!(a[16], Action::WaitConverged(600));
+        assert_eq!(a[17], Action::WaitConverged(50));
+        assert_eq!(a[14], Action::Clip([0.0, 0.0, 0.5], [1.0; 3]));
+        assert_eq!(a[20], Action::Quit);
+    }
+
+    #[test]
+    fn bad_lines_name_their_line() {
+        for (text, line) in [
+            ("open", 1),
+            ("\nmode volume", 2),
+            ("iso 1.5", 1),
+            ("iso nan", 1),
+            ("step 100", 1),
+            ("camera orbit 1 2 0", 1),
+            ("camera axis w", 1),
+            ("tf nope", 1),
+            ("tf load", 1),
+            ("background 0 0 300", 1),
+            ("wait x", 1),
+            ("overlays maybe", 1),
+            ("u8 slow", 1),
+            ("clip 0.5 0 0 0.4 1 1", 1),
+            ("clip 0 0 0 1 1", 1),
+            ("\n\n\nfly away", 4),
+        ] {
+            let e = parse(text).unwrap_err();
+            assert_eq!(e.line, line, "{text:?}: {e}");
+        }
+    }
+}

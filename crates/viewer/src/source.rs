@@ -1,0 +1,496 @@
+//! Opening volumes in the background: raw+JSON and NRRD files (loaded whole
+//! when small, built into a brick store with progress when large), brick
+//! stores, and procedural volumes. GPU-free: the result is handed to the
+//! renderer by the app.
+
+use crate::tf::Histogram;
+use brickray::io::{IoError, VolumeReader};
+use brickray::{BrickSource, NodeKey, Volume, VolumeDesc};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Mutex, mpsc};
+
+use brickray::store::EXTENSION as STORE_EXTENSION;
+/// Bins of the histograms.
+const HISTOGRAM_BINS: usize = 256;
+
+/// What to open.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) enum Input {
+    /// A volume file or a brick store.
+    Path(PathBuf),
+    /// A procedural fractal-noise volume of `n^3` voxels (never stored).
+    Procedural(u64),
+}
+
+impl Input {
+    /// Parses a command-line or script argument: `procedural[:N]` or a path.
+    pub(crate) fn parse(s: &str) -> Result<Input, OpenError> {
+        match s.strip_prefix("procedural") {
+            Some("") => Ok(Input::Procedural(4096)),
+            Some(rest) => rest
+                .strip_prefix(':')
+                .and_then(|n| n.parse().ok())
+                .filter(|&n| (1..=1 << 24).contains(&n))
+                .map(Input::Procedural)
+                .ok_or_else(|| {
+                    OpenError::BadInput(format!("{s}: expected procedural:N, N in 1..=16777216"))
+                }),
+            None => Ok(Input::Path(s.into())),
+        }
+    }
+
+    /// A short name for titles and messages.
+    pub(crate) fn name(&self) -> String {
+        match self {
+            Input::Path(p) => p.display().to_string(),
+            Input::Procedural(n) => format!("procedural {n}^3"),
+        }
+    }
+}
+
+/// Why a volume could not be opened.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub(crate) enum OpenError {
+    /// The argument names nothing openable.
+    #[error("{0}")]
+    BadInput(String),
+    /// Reading the volume file failed.
+    #[error(transparent)]
+    Io(#[from] IoError),
+    /// Building or opening the brick store failed.
+    #[error(transparent)]
+    Store(#[from] brickray::store::StoreError),
+    /// Reading a brick for the histogram failed.
+    #[error(transparent)]
+    Brick(#[from] brickray::core::BrickError),
+    /// The loader thread stopped without an answer.
+    #[error("the loader thread stopped: {0}")]
+    Thread(String),
+}
+
+/// An opened volume, ready for the renderer.
+pub(crate) enum Opened {
+    /// Small enough to upload whole (the in-core path).
+    InCore(Volume),
+    /// Streamed out of core from a brick source.
+    Streamed(Arc<dyn BrickSource>),
+}
+
+impl std::fmt::Debug for Opened {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Opened::InCore(v) => f.debug_tuple("InCore").field(&v.desc()).finish(),
+            Opened::Streamed(s) => f.debug_tuple("Streamed").field(s.layout()).finish(),
+        }
+    }
+}
+
+/// What the loader hands back.
+#[derive(Debug)]
+pub(crate) struct Loaded {
+    /// What was opened.
+    pub(crate) input: Input,
+    /// The volume's description (dims, dtype, spacing, value range).
+    pub(crate) desc: VolumeDesc,
+    /// The data.
+    pub(crate) volume: Opened,
+    /// Histogram of normalized values (whole volume in core; a coarse level
+    /// when streamed).
+    pub(crate) histogram: Histogram,
+    /// One line on how it was opened.
+    pub(crate) note: String,
+}
+
+/// Progress of a background open, shared with the UI thread.
+#[derive(Debug, Default)]
+pub(crate) struct Progress {
+    /// Work done (bytes of input read).
+    done: AtomicU64,
+    /// Total work (bytes), 0 while unknown.
+    total: AtomicU64,
+    /// What is being done now.
+    stage: Mutex<String>,
+}
+
+impl Progress {
+    /// Sets what is being done now.
+    fn set_stage(&self, s: impl Into<String>) {
+        if let Ok(mut g) = self.stage.lock() {
+            *g = s.into();
+        }
+    }
+
+    /// What is being done now.
+    pub(crate) fn stage(&self) -> String {
+        self.stage.lock().map(|g| g.clone()).unwrap_or_default()
+    }
+
+    /// Done as a fraction (0 while the total is unknown).
+    pub(crate) fn fraction(&self) -> f32 {
+        let total = self.total.load(Ordering::Relaxed);
+        if total == 0 {
+            0.0
+        } else {
+            (self.done.load(Ordering::Relaxed) as f64 / total as f64).min(1.0) as f32
+        }
+    }
+}
+
+/// Where and how to open.
+#[derive(Debug, Clone)]
+pub(crate) struct OpenOptions {
+    /// Volume files up to this many bytes are loaded whole; larger ones are
+    /// built into a brick store.
+    pub(crate) in_core_max_bytes: u64,
+    /// Largest side the device's 3D textures accept (larger volumes stream).
+    pub(crate) max_3d_side: u32,
+    /// Where built stores go.
+    pub(crate) store_dir: PathBuf,
+}
+
+/// A background open in progress.
+#[derive(Debug)]
+pub(crate) struct Opening {
+    /// Its progress.
+    pub(crate) progress: Arc<Progress>,
+    /// What is being opened.
+    pub(crate) input: Input,
+    rx: mpsc::Receiver<Result<Loaded, OpenError>>,
+}
+
+impl Opening {
+    /// Starts opening `input` on a thread.
+    pub(crate) fn start(input: Input, opts: OpenOptions) -> Opening {
+        let progress = Arc::new(Progress::default());
+        let (tx, rx) = mpsc::channel();
+        let (p, i, tx2) = (progress.clone(), input.clone(), tx.clone());
+        let spawned = std::thread::Builder::new()
+            .name("brickray-viewer open".into())
+            .spawn(move || {
+                let _ = tx.send(open(&i, &opts, &p));
+            });
+        if let Err(e) = spawned {
+            let _ = tx2.send(Err(OpenError::Thread(e.to_string())));
+        }
+        Opening {
+            progress,
+            input,
+            rx,
+        }
+    }
+
+    /// The result once the thread is done.
+    pub(crate) fn poll(&self) -> Option<Result<Loaded, OpenError>> {
+        match self.rx.try_recv() {
+            Ok(r) => Some(r),
+            Err(mpsc::TryRecvError::Empty) => None,
+            Err(mpsc::TryRecvError::Disconnected) => {
+                Some(Err(OpenError::Thread("no result".into())))
+            }
+        }
+    }
+}
+
+/// Opens `input` (blocking; run on a thread).
+pub(crate) fn open(
+    input: &Input,
+    opts: &OpenOptions,
+    progress: &Progress,
+) -> Result<Loaded, OpenError> {
+    match input {
+        Input::Procedural(n) => {
+            progress.set_stage("generating the histogram");
+            let source = Arc::new(brickray::store::ProceduralSource::fractal_noise(
+                [*n; 3], 32, 2,
+            )?);
+            let desc = source.layout().volume.clone();
+            let histogram = source_histogram(&*source)?;
+            let note = format!(
+                "procedural fractal noise {n}^3 u8 ({:.1} GiB virtual), computed on demand",
+                (*n as f64).powi(3) / (1u64 << 30) as f64
+            );
+            Ok(Loaded {
+                input: input.clone(),
+                desc,
+                volume: Opened::Streamed(source),
+                histogram,
+                note,
+            })
+        }
+        Input::Path(path) => {
+            let ext = path
+                .extension()
+                .and_then(|e| e.to_str())
+                .unwrap_or("")
+                .to_ascii_lowercase();
+            if ext == STORE_EXTENSION {
+                progress.set_stage("opening the brick store");
+                return open_store(input, path, "brick store".into());
+            }
+            let mut reader = brickray::io::open(path)?;
+            let desc = reader.desc().clone();
+            let bytes = desc.byte_len();
+            progress.total.store(bytes, Ordering::Relaxed);
+            let small =
+                bytes <= opts.in_core_max_bytes && desc.dims.iter().all(|&d| d <= opts.max_3d_side);
+            if small {
+                progress.set_stage("reading the volume");
+                let volume = read_with_progress(reader.as_mut(), progress)?;
+                let mut histogram = Histogram::new(HISTOGRAM_BINS);
+                let d = volume.desc().clone();
+                for i in 0..volume.data().len() {
+                    histogram.add(d.normalize(volume.data().get(i)));
+                }
+                let note = format!(
+                    "{:?} {} loaded whole ({:.1} MiB)",
+                    d.dims,
+                    d.dtype.name(),
+                    bytes as f64 / (1 << 20) as f64
+                );
+                return Ok(Loaded {
+                    input: input.clone(),
+                    desc: d,
+                    volume: Opened::InCore(volume),
+                    histogram,
+                    note,
+                });
+            }
+            // Large: build a brick store once (reused while newer than the input).
+            let stem = path
+                .file_stem()
+                .and_then(|s| s.to_str())
+                .unwrap_or("volume");
+            let store = opts.store_dir.join(format!("{stem}.{STORE_EXTENSION}"));
+            let fresh = newer(&store, &reader.input_files());
+            if !fresh {
+                progress.set_stage(format!("building the brick store {}", store.display()));
+                std::fs::create_dir_all(&opts.store_dir).map_err(|e| {
+                    OpenError::BadInput(format!("{}: {e}", opts.store_dir.display()))
+                })?;
+                let mut counting = Counting {
+                    inner: reader.as_mut(),
+                    progress,
+                };
+                brickray::store::build(&mut counting, &store, &Default::default())?;
+            }
+            let how = if fresh { "reused" } else { "built" };
+            open_store(
+                input,
+                &store,
+                format!("{how} brick store {}", store.display()),
+            )
+        }
+    }
+}
+
+/// True when `out` exists and is newer than every input.
+fn newer(out: &Path, inputs: &[PathBuf]) -> bool {
+    let modified = |p: &Path| std::fs::metadata(p).and_then(|m| m.modified()).ok();
+    let Some(t) = modified(out) else { return false };
+    inputs.iter().all(|i| modified(i).is_some_and(|ti| ti <= t))
+}
+
+fn open_store(input: &Input, path: &Path, how: String) -> Result<Loaded, OpenError> {
+    let store = Arc::new(brickray::store::open(path)?);
+    let desc = store.desc().clone();
+    let histogram = source_histogram(&*store)?;
+    let note = format!(
+        "{:?} {} streamed from a {how}",
+        desc.dims,
+        desc.dtype.name()
+    );
+    Ok(Loaded {
+        input: input.clone(),
+        desc,
+        volume: Opened::Streamed(store),
+        histogram,
+        note,
+    })
+}
+
+/// Reads a volume whole, counting bytes.
+fn read_with_progress(
+    reader: &mut dyn VolumeReader,
+    progress: &Progress,
+) -> Result<Volume, OpenError> {
+    let mut counting = Counting {
+        inner: reader,
+        progress,
+    };
+    Ok(counting.read_volume()?)
+}
+
+/// A reader that reports the bytes read.
+struct Counting<'a> {
+    inner: &'a mut dyn VolumeReader,
+    progress: &'a Progress,
+}
+
+impl VolumeReader for Counting<'_> {
+    fn desc(&self) -> &VolumeDesc {
+        self.inner.desc()
+    }
+
+    fn read_slices(&mut self, z0: u32, z1: u32, out: &mut [u8]) -> Result<(), IoError> {
+        // Whole volumes are read in one call: split it so progress moves.
+        let slice = (out.len() / (z1 - z0).max(1) as usize).max(1);
+        let mut z = z0;
+        for chunk in out.chunks_mut(slice * 8) {
+            let n = (chunk.len() / slice) as u32;
+            self.inner.read_slices(z, z + n, chunk)?;
+            z += n;
+            self.progress
+                .done
+                .fetch_add(chunk.len() as u64, Ordering::Relaxed);
+        }
+        Ok(())
+    }
+
+    fn path(&self) -> &Path {
+        self.inner.path()
+    }
+
+    fn input_files(&self) -> Vec<PathBuf> {
+        self.inner.input_files()
+    }
+}
+
+/// A histogram of the finest level with at most 64 bricks (interiors only).
+fn source_histogram(source: &dyn BrickSource) -> Result<Histogram, OpenError> {
+    let layout = source.layout().clone();
+    let level = (0..layout.levels)
+        .take_while(|&l| {
+            let d = layout.level_dims(l);
+            d.iter()
+                .map(|&n| n.div_ceil(layout.brick) as u64)
+                .product::<u64>()
+                <= 64
+        })
+        .last()
+        .unwrap_or(0);
+    let grid = layout.level_dims(level).map(|n| n.div_ceil(layout.brick));
+    let side = layout.stored_side() as usize;
+    let (a, b) = (layout.apron as usize, layout.brick as usize);
+    let dtype = layout.dtype();
+    let mut buf = vec![0u8; layout.brick_bytes()];
+    let mut h = Histogram::new(HISTOGRAM_BINS);
+    for z in 0..grid[2] {
+        for y in 0..grid[1] {
+            for x in 0..grid[0] {
+                let key = NodeKey::new(level, x, y, z);
+                if !layout.in_volume(key) {
+                    continue;
+                }
+                source.read_brick(key, &mut buf)?;
+                let values = dtype.decode_le(&buf);
+                for k in a..a + b {
+                    for j in a..a + b {
+                        let row = (k * side + j) * side;
+                        for v in &values[row + a..row + a + b] {
+                            h.add(layout.volume.normalize(*v));
+                        }
+                    }
+                }
+            }
+        }
+    }
+    Ok(h)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn inputs_parse() {
+        assert_eq!(Input::parse("procedural").unwrap(), Input::Procedural(4096));
+        assert_eq!(
+            Input::parse("procedural:256").unwrap(),
+            Input::Procedural(256)
+        );
+        assert!(Input::parse("procedural:0").is_err());
+        assert!(Input::parse("procedural:x").is_err());
+        assert_eq!(
+            Input::parse("a/b.json").unwrap(),
+            Input::Path("a/b.json".into())
+        );
+    }
+
+    fn write_sphere(dir: &Path) -> PathBuf {
+        let v = brickray::core::synthetic::sphere(24);
+        let raw = dir.join("s.raw");
+        std::fs::write(&raw, v.data().as_bytes()).unwrap();
+        let json = dir.join("s.json");
+        std::fs::write(
+            &json,
+            r#"{"dims": [24, 24, 24], "dtype": "u8", "spacing": [1, 1, 1], "file": "s.raw", "value_range": [0, 255]}"#,
+        )
+        .unwrap();
+        json
+    }
+
+    /// Small files load whole, with a histogram of every voxel; with a lower
+    /// in-core limit the same file is built into a store (progress reaches the
+    /// total) and streamed, and a second open reuses the store.
+    #[test]
+    fn small_files_load_whole_and_large_ones_stream() {
+        let dir = tempfile::tempdir().unwrap();
+        let json = write_sphere(dir.path());
+        let mut opts = OpenOptions {
+            in_core_max_bytes: 1 << 20,
+            max_3d_side: 2048,
+            store_dir: dir.path().join("stores"),
+        };
+        let input = Input::Path(json);
+        let p = Progress::default();
+        let l = open(&input, &opts, &p).unwrap();
+        assert!(matches!(l.volume, Opened::InCore(_)));
+        assert_eq!(l.histogram.bins.iter().sum::<u64>(), 24 * 24 * 24);
+        assert_eq!(p.fraction(), 1.0);
+
+        opts.in_core_max_bytes = 100;
+        let p = Progress::default();
+        let l = open(&input, &opts, &p).unwrap();
+        assert!(matches!(l.volume, Opened::Streamed(_)), "{}", l.note);
+        assert!(l.note.contains("built"), "{}", l.note);
+        assert_eq!(p.fraction(), 1.0);
+        assert!(l.histogram.bins.iter().sum::<u64>() > 0);
+        let l = open(&input, &opts, &Progress::default()).unwrap();
+        assert!(l.note.contains("reused"), "{}", l.note);
+    }
+
+    #[test]
+    fn bad_inputs_are_errors() {
+        let opts = OpenOptions {
+            in_core_max_bytes: 1 << 20,
+            max_3d_side: 2048,
+            store_dir: std::env::temp_dir(),
+        };
+        let p = Progress::default();
+        let missing = Input::Path("/nonexistent/v.json".into());
+        assert!(matches!(open(&missing, &opts, &p), Err(OpenError::Io(_))));
+        let bad_store = Input::Path("/nonexistent/v.brs".into());
+        assert!(matches!(
+            open(&bad_store, &opts, &p),
+            Err(OpenError::Store(_))
+        ));
+        let unknown = Input::Path("v.xyz".into());
+        assert!(open(&unknown, &opts, &p).is_err());
+    }
+
+    #[test]
+    fn procedural_volumes_open_with_a_histogram() {
+        let opts = OpenOptions {
+            in_core_max_bytes: 0,
+            max_3d_side: 2048,
+            store_dir: std::env::temp_dir(),
+        };
+        let l = open(&Input::Procedural(128), &opts, &Progress::default()).unwrap();
+        assert!(matches!(l.volume, Opened::Streamed(_)));
+        assert_eq!(l.desc.dims, [128; 3]);
+        assert!(l.histogram.bins.iter().filter(|&&c| c > 0).count() > 10);
+    }
+}
