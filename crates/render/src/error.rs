@@ -55,12 +55,6 @@ pub enum RenderError {
         /// The sample count asked for.
         count: u32,
     },
-    /// The feature is not implemented by this version.
-    #[error("{what} is not supported yet")]
-    Unsupported {
-        /// What was asked for.
-        what: &'static str,
-    },
     /// The out-of-core cache refused its configuration or could not start.
     #[error(transparent)]
     Cache(#[from] brickray_cache::CacheError),
