@@ -15,6 +15,7 @@ mod raw;
 mod runner;
 mod soak;
 mod u8;
+mod visibility;
 
 use std::process::ExitCode;
 
@@ -144,6 +145,34 @@ enum Suite {
         #[arg(long)]
         size: Option<u32>,
     },
+    /// Visibility feedback: working set, image and latency per policy along a
+    /// camera path with a half turn (head CT and procedural shells).
+    Visibility {
+        /// Scenes, comma-separated, of head, shells (default both).
+        #[arg(long)]
+        scenes: Option<String>,
+        /// Image side of the head CT scenes (default 256).
+        #[arg(long)]
+        size: Option<u32>,
+        /// Brick side of the head CT's store (default 32).
+        #[arg(long)]
+        head_brick: Option<u32>,
+        /// Image side of the shells scene (default 512).
+        #[arg(long)]
+        shell_size: Option<u32>,
+        /// Voxels per side of the shells volume (default 4096).
+        #[arg(long)]
+        shell_dims: Option<u64>,
+        /// Most frames each view is held (default 120).
+        #[arg(long)]
+        hold: Option<usize>,
+        /// Frames of the half turn (default 12).
+        #[arg(long)]
+        turn: Option<usize>,
+        /// Write the working-set chart (SVG) here.
+        #[arg(long)]
+        svg: Option<String>,
+    },
     /// u8 volumes: exact interpolation vs 8-bit texels.
     U8 {
         /// Image side in pixels (default 512).
@@ -169,6 +198,7 @@ fn main() -> ExitCode {
         Suite::Raw { .. } => raw::run(rest),
         Suite::Soak { .. } => soak::run(rest),
         Suite::U8 { .. } => u8::run(rest),
+        Suite::Visibility { .. } => visibility::run(rest),
     };
     match result {
         Ok(fig) => {

@@ -32,6 +32,9 @@ pub use brickray_render::{
     OutOfCoreStats, PrepareError, RenderError, RendererOptions, RendererStats, RetryPolicy,
     StreamError, TargetDesc, U8Filtering, Viewport, VolumeRenderer, required_limits,
 };
+pub use brickray_render::{
+    FeedbackStats, UsageFrame, VisibilityConfig, VisibilityCounts, VisibilityPolicy,
+};
 pub use wgpu;
 
 /// The README's code, compiled as doc tests (the embedding program is complete).

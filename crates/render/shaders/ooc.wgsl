@@ -143,6 +143,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     var acc = accum_new();
     // The brick being sampled (set at each data leaf).
     var cur: Cursor;
+    feedback_stop(px, far_depth());
     if (t1 > t0) {
         let oo = r.tex_origin * ooc.octree_scale;
         let od = r.tex_dir * ooc.octree_scale;
@@ -164,6 +165,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             var found = false;
             loop {
                 if (!oct_next_leaf(&st)) { break; }
+                if (st.hit.tag == OCT_TAG_DATA) { feedback_reached(st.hit.data); }
                 if (st.hit.tag == OCT_TAG_DATA && !(MODE == MODE_MIP && ESS && slots[st.hit.data].range.y <= acc.max_v)) {
                     found = true;
                     break;
@@ -221,6 +223,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             }
             if (done) { break; }
         }
+        feedback_stop(px, depth_at(r, select(t1, t0 + f32(k) * dtl, feedback_terminated(acc))));
     }
     finish_ray(px, &acc, cur, r, start.host);
 }

@@ -95,6 +95,34 @@ pub(crate) fn storage_buffer(
     })
 }
 
+/// A buffer of `size` bytes with `usage`, checked against the device's
+/// buffer-size limit (and the storage-binding limit when it is `STORAGE`).
+pub(crate) fn buffer(
+    device: &wgpu::Device,
+    what: &'static str,
+    size: u64,
+    usage: wgpu::BufferUsages,
+) -> Result<wgpu::Buffer, RenderError> {
+    let limits = device.limits();
+    let size = size.max(16).next_multiple_of(4);
+    if usage.contains(wgpu::BufferUsages::STORAGE) {
+        need(
+            "max_storage_buffer_binding_size",
+            size,
+            limits.max_storage_buffer_binding_size,
+        )?;
+    }
+    need("max_buffer_size", size, limits.max_buffer_size)?;
+    scoped(device, what, || {
+        device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(what),
+            size,
+            usage,
+            mapped_at_creation: false,
+        })
+    })
+}
+
 /// A `UNIFORM | COPY_DST` buffer for one `T`, checked against the uniform-binding
 /// limit first.
 pub(crate) fn uniform_buffer<T>(

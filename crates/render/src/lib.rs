@@ -35,11 +35,12 @@ mod predict;
 pub mod shaders;
 mod tf;
 
-pub use backend::OutOfCoreStats;
+pub use backend::{FeedbackStats, OcclusionStats, OutOfCoreStats, UsageFrame};
 /// Budgets, tolerance, loader threads and retry policy of the out-of-core path:
 /// the cache's own configuration.
 pub use brickray_cache::CacheConfig as OutOfCoreConfig;
 pub use brickray_cache::{ConfigError, RetryPolicy, StreamError};
+pub use brickray_visibility::{VisibilityConfig, VisibilityCounts, VisibilityPolicy};
 pub use desc::{FrameDesc, FrameStats, RendererStats, TargetDesc, Viewport};
 pub use encoding::U8Filtering;
 pub use error::{GpuErrorKind, HostDepthError, PrepareError, RenderError};
@@ -247,6 +248,32 @@ impl VolumeRenderer {
         Ok(m.set_tolerance_px(tolerance_px)?)
     }
 
+    /// Out of core: sets where refinement's visibility comes from
+    /// (`docs/visibility.md`). With [`VisibilityPolicy::RayGuided`] the ray
+    /// caster's per-brick usage counts, read back a few frames later without
+    /// waiting, stop refinement of bricks no ray reaches (hidden behind opaque
+    /// material): they stay at the level they have and request nothing.
+    /// Switching forgets what was observed.
+    pub fn set_visibility_policy(&mut self, policy: VisibilityPolicy) -> Result<(), RenderError> {
+        self.out_of_core()?.set_visibility_policy(policy);
+        Ok(())
+    }
+
+    /// Out of core: the visibility threshold (pixels) and hold (frames).
+    pub fn set_visibility_config(&mut self, config: VisibilityConfig) -> Result<(), RenderError> {
+        self.out_of_core()?.set_visibility_config(config);
+        Ok(())
+    }
+
+    /// Out of core, diagnostics: the latest usage counts read back (rays that
+    /// reached each data leaf of that frame's cut), whatever the policy.
+    pub fn last_usage(&self) -> Option<&UsageFrame> {
+        self.backend
+            .as_ref()
+            .and_then(Backend::out_of_core)
+            .and_then(OutOfCore::last_usage)
+    }
+
     /// Out of core: sets the bytes of bricks uploaded per frame.
     pub fn set_upload_budget(&mut self, bytes: u64) -> Result<(), RenderError> {
         Ok(self.out_of_core()?.manager_mut().set_upload_budget(bytes)?)
@@ -364,6 +391,7 @@ impl VolumeRenderer {
         let backend = self.backend.as_mut().ok_or(PrepareError::NoVolume)?;
         let tf = self.tf.current().ok_or(PrepareError::NoTransferFunction)?;
         let mut uploaded = backend.get_mut().update(device, queue, desc, tf)?;
+        backend.get_mut().before_pass(encoder);
         let backend = backend.get();
         uploaded += self.tf.prepare(
             device,
@@ -409,6 +437,9 @@ impl VolumeRenderer {
                 vp.height.div_ceil(kernels::WORKGROUP[1]),
                 1,
             );
+        }
+        if let Some(b) = self.backend.as_mut() {
+            b.get_mut().after_pass(queue, encoder);
         }
         self.prepared = Some(Prepared {
             viewport: desc.viewport,

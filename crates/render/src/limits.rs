@@ -15,7 +15,8 @@ pub fn required_limits() -> wgpu::Limits {
         max_bind_groups: kernels::BIND_GROUPS,
         max_storage_buffers_per_shader_stage: backend::MAX_VOLUME_STORAGE
             + backend::STORAGE_OUTSIDE_VOLUME,
-        max_storage_textures_per_shader_stage: frame::OUTPUT_FORMATS.len() as u32,
+        max_storage_textures_per_shader_stage: frame::OUTPUT_FORMATS.len() as u32
+            + backend::ooc::STORAGE_TEXTURES,
         max_sampled_textures_per_shader_stage: backend::SAMPLED_TEXTURES,
         max_samplers_per_shader_stage: backend::SAMPLERS,
         max_uniform_buffers_per_shader_stage: backend::UNIFORM_BUFFERS,

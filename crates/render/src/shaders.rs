@@ -7,7 +7,7 @@
 //!   accumulation, iso bisection and shading, MIP), once for both kernels;
 //! * `incore.wgsl`, `ooc.wgsl`: each backend's group 2, its sampling `Cursor`
 //!   and its march; the out-of-core kernel also includes brickray-index's
-//!   traversal library;
+//!   traversal library and `feedback.wgsl` (ray-guided usage counters);
 //! * `predict.wgsl`: the isosurface prediction buffer's bindings (group 0) and
 //!   switches, in both kernels; `incore_predict.wgsl`: its in-core traversals;
 //! * `composite.wgsl`: the draw into the host's pass.
@@ -31,6 +31,8 @@ pub const PREDICT: &str = include_str!("../shaders/predict.wgsl");
 pub const INCORE_PREDICT: &str = include_str!("../shaders/incore_predict.wgsl");
 /// The prediction buffer's reprojection pass (a module of its own).
 pub const REPROJECT: &str = include_str!("../shaders/reproject.wgsl");
+/// The out-of-core kernel's usage feedback (group 2, binding 6).
+pub const FEEDBACK: &str = include_str!("../shaders/feedback.wgsl");
 /// The composite (fullscreen) shader.
 pub const COMPOSITE: &str = include_str!("../shaders/composite.wgsl");
 
@@ -42,7 +44,7 @@ pub fn incore() -> String {
 /// The out-of-core ray caster as compiled (with the octree traversal library).
 pub fn ooc() -> String {
     format!(
-        "{COMMON}\n{MODES}\n{PREDICT}\n{}\n{OOC}",
+        "{COMMON}\n{MODES}\n{PREDICT}\n{}\n{OOC}\n{FEEDBACK}",
         brickray_index::OCTREE_TRAVERSAL_WGSL
     )
 }

@@ -24,7 +24,9 @@ use crate::failures::{Clock, Failures, FetchKind, SystemClock};
 use crate::loader::{BrickRequest, Loader, LoaderConfig};
 use crate::pool::{BrickPool, PoolError};
 use crate::prepared::Preparer;
-use crate::refine::{DataState, MetaState, NodeClass, RefineEnv, RefineParams, refine};
+use crate::refine::{
+    DataState, MetaState, NodeClass, RefineEnv, RefineParams, SplitFilter, refine,
+};
 use crate::upload::UploadBudget;
 use brickray_core::{
     BrickSource, Camera, CutLeaf, EmptyReason, LeafKind, NodeInfo, NodeKey, NodeKind, OctreeLayout,
@@ -89,14 +91,15 @@ fn meta_capacity(cpu_budget_bytes: u64, brick_bytes: u64) -> usize {
 }
 
 /// Refinement's view of the manager: caches only, never the source.
-struct Env<'a> {
+struct Env<'a, 'f> {
     meta: &'a MetaCache,
     failures: &'a Failures,
     cpu: &'a mut CpuCache,
     pool: &'a BrickPool,
+    filter: Option<&'f mut dyn SplitFilter>,
 }
 
-impl RefineEnv for Env<'_> {
+impl RefineEnv for Env<'_, '_> {
     fn node(&mut self, key: NodeKey) -> MetaState {
         match self.meta.get(key) {
             Some(info) => MetaState::Known(info),
@@ -116,6 +119,10 @@ impl RefineEnv for Env<'_> {
         } else {
             DataState::Missing
         }
+    }
+
+    fn may_split(&mut self, key: NodeKey) -> bool {
+        self.filter.as_mut().is_none_or(|f| f.may_split(key))
     }
 }
 
@@ -179,6 +186,23 @@ impl BrickManager {
         mode: RenderMode,
         tf: &TransferFunction,
     ) -> FramePlan {
+        self.update_filtered(camera, aspect, viewport_height_px, frame, mode, tf, None)
+    }
+
+    /// [`update`](Self::update) with visibility: refinement splits only nodes
+    /// `filter` allows (nodes hidden in the previous frames stay leaves at
+    /// their level and request nothing).
+    #[allow(clippy::too_many_arguments)]
+    pub fn update_filtered(
+        &mut self,
+        camera: &Camera,
+        aspect: f32,
+        viewport_height_px: u32,
+        frame: u64,
+        mode: RenderMode,
+        tf: &TransferFunction,
+        filter: Option<&mut dyn SplitFilter>,
+    ) -> FramePlan {
         let now = self.clock.now();
         self.meta.begin_frame(frame);
         let report = self.loader.poll(&mut self.cpu);
@@ -216,6 +240,7 @@ impl BrickManager {
                 failures: &self.failures,
                 cpu: &mut self.cpu,
                 pool: &self.pool,
+                filter,
             };
             refine(&self.layout, &params, &mut env, &mut self.budget)
         };

@@ -93,6 +93,22 @@ pub trait RefineEnv {
     fn node(&mut self, key: NodeKey) -> MetaState;
     /// Where the node's brick is.
     fn data(&mut self, key: NodeKey) -> DataState;
+    /// Whether `key`, which refinement would split, may be split: false for a
+    /// node the visibility feedback marked invisible in the previous frames
+    /// (`brickray-visibility`). Such a node stays a leaf at its level (its brick
+    /// is available: its parent's split required it) and requests nothing.
+    /// Every node by default.
+    fn may_split(&mut self, key: NodeKey) -> bool {
+        let _ = key;
+        true
+    }
+}
+
+/// Visibility as refinement sees it: whether a node may be split (see
+/// [`RefineEnv::may_split`]). The renderer implements it over its feedback.
+pub trait SplitFilter {
+    /// False for a node that must not be split this frame.
+    fn may_split(&mut self, key: NodeKey) -> bool;
 }
 
 /// The view and the knobs of one refinement.
@@ -149,6 +165,8 @@ pub struct SplitBlocks {
     pub pool_full: u32,
     /// Upload budget of the frame spent.
     pub upload_budget: u32,
+    /// Invisible under the visibility feedback ([`RefineEnv::may_split`]).
+    pub invisible: u32,
 }
 
 /// A brick refinement wants loaded.
@@ -344,6 +362,12 @@ pub fn refine(
     {
         // A non-finite size (a non-finite camera or frame) is never refined.
         if uniform || key.level >= finest || !priority.is_finite() || priority <= tol {
+            finals.push((key, priority));
+            continue;
+        }
+        // Hidden in the previous frames: stays at its level, requests nothing.
+        if !env.may_split(key) {
+            out.blocked.invisible += 1;
             finals.push((key, priority));
             continue;
         }

@@ -355,3 +355,92 @@ proptest! {
         }
     }
 }
+
+/// The ball with the bricks of levels <= `loaded` in CPU memory (the rest
+/// missing), and every node under `hidden` invisible.
+struct Hidden {
+    inner: AllInCpu,
+    loaded: u8,
+    hidden: NodeKey,
+    asked: Vec<NodeKey>,
+}
+
+fn under(k: NodeKey, a: NodeKey) -> bool {
+    std::iter::successors(Some(k), |p| p.parent()).any(|p| p == a)
+}
+
+impl RefineEnv for Hidden {
+    fn node(&mut self, key: NodeKey) -> MetaState {
+        self.inner.node(key)
+    }
+    fn data(&mut self, key: NodeKey) -> DataState {
+        if key.level <= self.loaded {
+            DataState::InCpu
+        } else {
+            DataState::Missing
+        }
+    }
+    fn may_split(&mut self, key: NodeKey) -> bool {
+        self.asked.push(key);
+        !under(key, self.hidden)
+    }
+}
+
+#[test]
+fn invisible_nodes_stay_at_their_level_and_request_nothing() {
+    let s = setup();
+    let cam = Camera::orbit(Vec3::ZERO, 1.5, 0.3, 0.2);
+    let hidden = NodeKey::ROOT.child(0).child(7);
+    for loaded in [1u8, 2, 3, 8] {
+        let mut env = Hidden {
+            inner: AllInCpu {
+                layout: s.layout.clone(),
+                on_gpu: HashSet::new(),
+                meta_reads: 0,
+            },
+            loaded,
+            hidden,
+            asked: Vec::new(),
+        };
+        let params = RefineParams {
+            camera: &cam,
+            aspect: 1.0,
+            viewport_height_px: 512,
+            volume_frame: &s.frame,
+            mode: RenderMode::Dvr,
+            tf: &s.tf,
+            tolerance_px: 0.0,
+            max_data_leaves: u32::MAX,
+            max_requests: u32::MAX,
+            brick_upload_bytes: 1,
+        };
+        let mut b = UploadBudget::new(u64::MAX);
+        let r = refine(&s.layout, &params, &mut env, &mut b);
+        assert_exact_cover(&keys(&r), s.layout.levels);
+        // No request below the hidden node (its own brick is its visible
+        // parent's request); nothing under it split.
+        assert!(
+            r.requests
+                .iter()
+                .all(|q| !under(q.key, hidden) || q.key == hidden),
+            "{loaded}"
+        );
+        assert!(
+            r.leaves
+                .iter()
+                .all(|l| !under(l.key, hidden) || l.key == hidden)
+        );
+        // Never a hole: the hidden node, once reached, is a data leaf.
+        if loaded >= hidden.level {
+            let h = r.leaves.iter().find(|l| l.key == hidden).expect("a leaf");
+            assert_eq!(h.class, NodeClass::Data);
+            assert!(r.blocked.invisible >= 1);
+        }
+        // Elsewhere refinement proceeds: with everything loaded, leaves deeper
+        // than the hidden node exist.
+        if loaded == 8 {
+            assert!(r.leaves.iter().any(|l| l.key.level > hidden.level));
+            assert!(env.asked.contains(&hidden));
+        }
+    }
+}

@@ -3,10 +3,14 @@
 //! per frame. In core the volume is one 3D texture; out of core a brick atlas fed
 //! by the cache and walked through the octree-with-ropes index.
 
+pub(crate) mod feedback;
 pub(crate) mod incore;
+pub(crate) mod occlusion;
 pub(crate) mod ooc;
 
+pub use feedback::{FeedbackStats, UsageFrame};
 pub(crate) use incore::InCore;
+pub use occlusion::OcclusionStats;
 pub(crate) use ooc::OutOfCore;
 pub use ooc::OutOfCoreStats;
 
@@ -32,6 +36,16 @@ pub(crate) trait VolumeBackend: std::fmt::Debug {
         frame: &FrameDesc<'_>,
         tf: &TransferFunction,
     ) -> Result<u64, PrepareError>;
+    /// Records what must precede the ray-cast pass (out of core: clearing the
+    /// usage counters).
+    fn before_pass(&mut self, encoder: &mut wgpu::CommandEncoder) {
+        let _ = encoder;
+    }
+    /// Records what follows the ray-cast pass (out of core: copying the usage
+    /// counters into the read-back ring).
+    fn after_pass(&mut self, queue: &wgpu::Queue, encoder: &mut wgpu::CommandEncoder) {
+        let _ = (queue, encoder);
+    }
     /// Most index leaves one ray may visit (0 in core).
     fn max_leaves(&self) -> u32;
     /// Step lengths the kernel samples with (rows of the corrected TF table):
@@ -154,7 +168,8 @@ pub(crate) const STORAGE_OUTSIDE_VOLUME: u32 = 3;
 pub(crate) const UNIFORM_BUFFERS: u32 = 4;
 pub(crate) const SAMPLED_TEXTURES: u32 = 3;
 pub(crate) const SAMPLERS: u32 = 2;
-/// The most storage buffers group 2 holds (out of core: slots, sub-cells, index).
+/// The most storage buffers group 2 holds (out of core: slots, sub-cells,
+/// index, usage counters).
 pub(crate) const MAX_VOLUME_STORAGE: u32 = ooc::STORAGE_BUFFERS;
 
 /// Checks the per-stage binding counts of a kernel whose group 2 has `storage`

@@ -5,6 +5,8 @@
 //! index buffer, the octree with ropes over the cut) and group 2 over them.
 //! `update` only writes prepared rows.
 
+use super::feedback::{FeedbackStats, UsageFeedback, UsageFrame};
+use super::occlusion::{OcclusionFeedback, OcclusionStats};
 use super::{VolumeBackend, check_stage_limits, volume_layout_entries, volume_sampler};
 use crate::desc::FrameDesc;
 use crate::encoding::{self, U8Filtering};
@@ -15,12 +17,53 @@ use brickray_cache::{
     BrickManager, CacheConfig, FrameStats as CacheStats, GpuFormat, RetryPolicy, StreamError,
     Upload,
 };
-use brickray_core::{BrickSource, OctreeLayout, TransferFunction, VolumeFrame};
+use brickray_core::{BrickSource, NodeKey, OctreeLayout, TransferFunction, VolumeFrame};
+use brickray_visibility::{VisibilityConfig, VisibilityCounts, VisibilityPolicy, VisibilityState};
 use std::sync::Arc;
 use std::time::Instant;
 
-/// Storage buffers of group 2: slots, sub-cells, index.
-pub(crate) const STORAGE_BUFFERS: u32 = 3;
+/// Read-only storage buffers of group 2: slots, sub-cells, index.
+pub(crate) const READ_ONLY_STORAGE: u32 = 3;
+/// Storage buffers of group 2: the read-only ones and the usage counters
+/// (read-write, binding 6).
+pub(crate) const STORAGE_BUFFERS: u32 = READ_ONLY_STORAGE + 1;
+/// The binding of the usage counters (`shaders/feedback.wgsl`).
+pub(crate) const USAGE_BINDING: u32 = 6;
+/// The binding of the stop-depth texture (`shaders/feedback.wgsl`).
+pub(crate) const STOP_DEPTH_BINDING: u32 = 7;
+/// Storage textures of group 2: the stop depth.
+pub(crate) const STORAGE_TEXTURES: u32 = 1;
+/// Most occlusion queries per frame (the query set's size).
+pub(crate) const QUERIES_PER_FRAME: u32 = 1024;
+/// The smallest tile side the scheduler splits to.
+const MIN_TILE_PX: u32 = 16;
+
+/// The layout of group 2 out of core: the shared volume entries and the
+/// read-write usage counters.
+pub(crate) fn layout_entries() -> Vec<wgpu::BindGroupLayoutEntry> {
+    let mut e = volume_layout_entries(READ_ONLY_STORAGE);
+    e.push(wgpu::BindGroupLayoutEntry {
+        binding: USAGE_BINDING,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Storage { read_only: false },
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
+        count: None,
+    });
+    e.push(wgpu::BindGroupLayoutEntry {
+        binding: STOP_DEPTH_BINDING,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::StorageTexture {
+            access: wgpu::StorageTextureAccess::WriteOnly,
+            format: wgpu::TextureFormat::R32Float,
+            view_dimension: wgpu::TextureViewDimension::D2,
+        },
+        count: None,
+    });
+    e
+}
 
 /// What the out-of-core path did in the last frame.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -43,6 +86,14 @@ pub struct OutOfCoreStats {
     /// Data leaves of the cut per octree level (level 0 = root; levels past 15
     /// are counted in 15).
     pub data_leaves_per_level: [u32; 16],
+    /// The visibility policy in force.
+    pub policy: VisibilityPolicy,
+    /// The cut's data leaves by visibility (all unobserved without culling).
+    pub visibility: VisibilityCounts,
+    /// The usage feedback's read-back counters.
+    pub feedback: FeedbackStats,
+    /// The occlusion queries' schedule and read-back counters.
+    pub occlusion: OcclusionStats,
 }
 
 /// `struct SlotInfo` of ooc.wgsl: one row of the slot table.
@@ -79,6 +130,8 @@ struct Pool {
     slots_cpu: Vec<SlotInfo>,
     slots_dirty: bool,
     sub_cells: wgpu::Buffer,
+    /// Usage counters per slot and their read-back ring.
+    feedback: UsageFeedback,
 }
 
 impl Pool {
@@ -119,7 +172,9 @@ impl Pool {
             "brickray-render brick sub-cell table",
             slot_count as u64 * (gpu.sub_cells_per_axis as u64).pow(3) * 8,
         )?;
+        let feedback = UsageFeedback::new(device, slot_count as u32)?;
         Ok(Pool {
+            feedback,
             atlas_view: atlas.create_view(&Default::default()),
             atlas,
             atlas_bytes,
@@ -145,6 +200,22 @@ pub(crate) struct OutOfCore {
     frame: u64,
     stats: OutOfCoreStats,
     frame_of_world: VolumeFrame,
+    policy: VisibilityPolicy,
+    visibility: VisibilityState,
+    /// `(slot, node)` of the current cut's data leaves.
+    leaves: Vec<(u32, NodeKey)>,
+    /// True when the last frame's cut differed from the one before.
+    cut_changed: bool,
+    occlusion: OcclusionFeedback,
+}
+
+/// Refinement's view of the visibility state.
+struct Filter<'a>(&'a mut VisibilityState);
+
+impl brickray_cache::SplitFilter for Filter<'_> {
+    fn may_split(&mut self, key: NodeKey) -> bool {
+        self.0.visible(key)
+    }
 }
 
 impl std::fmt::Debug for OutOfCore {
@@ -168,6 +239,11 @@ impl OutOfCore {
         u8: U8Filtering,
     ) -> Result<OutOfCore, RenderError> {
         check_stage_limits(device, STORAGE_BUFFERS)?;
+        gpu::need(
+            "max_storage_textures_per_shader_stage",
+            (crate::frame::OUTPUT_FORMATS.len() as u32 + STORAGE_TEXTURES) as u64,
+            device.limits().max_storage_textures_per_shader_stage as u64,
+        )?;
         let layout = source.layout().clone();
         let gpu_format = GpuFormat::for_layout(
             &layout,
@@ -189,10 +265,11 @@ impl OutOfCore {
         let group_layout = gpu::scoped(device, "brickray-render out-of-core layout", || {
             device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
                 label: Some("brickray-render out of core"),
-                entries: &volume_layout_entries(STORAGE_BUFFERS),
+                entries: &layout_entries(),
             })
         })?;
         let sampler = volume_sampler(device)?;
+        let occlusion = OcclusionFeedback::new(device, QUERIES_PER_FRAME)?;
         let bind_group = GroupParts {
             layout: &group_layout,
             params: &params.buffer,
@@ -201,6 +278,8 @@ impl OutOfCore {
             slots: &pool.slots,
             sub_cells: &pool.sub_cells,
             index: &index.buffer,
+            usage: &pool.feedback.usage,
+            stop: occlusion.stop_view(),
         }
         .bind_group(device)?;
         let mut ooc = OutOfCore {
@@ -216,6 +295,11 @@ impl OutOfCore {
             frame: 0,
             stats: OutOfCoreStats::default(),
             frame_of_world: frame,
+            policy: VisibilityPolicy::None,
+            visibility: VisibilityState::new(VisibilityConfig::default()),
+            leaves: Vec::new(),
+            cut_changed: false,
+            occlusion,
         };
         ooc.write_params(queue);
         Ok(ooc)
@@ -248,6 +332,8 @@ impl OutOfCore {
             slots: &self.pool.slots,
             sub_cells: &self.pool.sub_cells,
             index: &self.index.buffer,
+            usage: &self.pool.feedback.usage,
+            stop: self.occlusion.stop_view(),
         }
         .bind_group(device)?;
         Ok(())
@@ -263,6 +349,25 @@ impl OutOfCore {
         &mut self.manager
     }
 
+    /// Sets where refinement's visibility comes from. Switching forgets what
+    /// was observed (every node visible again).
+    pub(crate) fn set_visibility_policy(&mut self, policy: VisibilityPolicy) {
+        if policy != self.policy {
+            self.visibility.clear();
+            self.policy = policy;
+        }
+    }
+
+    /// Sets the threshold and hold of the visibility state.
+    pub(crate) fn set_visibility_config(&mut self, config: VisibilityConfig) {
+        self.visibility.set_config(config);
+    }
+
+    /// The latest usage counts read back (whatever the policy).
+    pub(crate) fn last_usage(&self) -> Option<&UsageFrame> {
+        self.pool.feedback.last.as_ref()
+    }
+
     /// Changes the GPU budget: the pool is re-planned (every slot forgotten)
     /// and the atlas and slot tables recreated at the new size; the next frames
     /// upload the working set again.
@@ -274,6 +379,8 @@ impl OutOfCore {
     ) -> Result<(), RenderError> {
         self.manager.set_gpu_budget(bytes)?;
         self.pool = Pool::new(device, &self.manager, self.format)?;
+        // Slots are forgotten: so are the observations made through them.
+        self.visibility.clear();
         self.write_params(queue);
         self.rebuild_bind_group(device)
     }
@@ -352,6 +459,8 @@ struct GroupParts<'a> {
     slots: &'a wgpu::Buffer,
     sub_cells: &'a wgpu::Buffer,
     index: &'a wgpu::Buffer,
+    usage: &'a wgpu::Buffer,
+    stop: &'a wgpu::TextureView,
 }
 
 impl GroupParts<'_> {
@@ -384,6 +493,14 @@ impl GroupParts<'_> {
                     wgpu::BindGroupEntry {
                         binding: 5,
                         resource: self.index.as_entire_binding(),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: USAGE_BINDING,
+                        resource: self.usage.as_entire_binding(),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: STOP_DEPTH_BINDING,
+                        resource: wgpu::BindingResource::TextureView(self.stop),
                     },
                 ],
             })
@@ -419,14 +536,79 @@ impl VolumeBackend for OutOfCore {
         self.frame += 1;
         let vp = desc.viewport;
         let t = Instant::now();
-        let plan = self.manager.update(
+        // Usage counts read back since the last frame (never waits).
+        for u in self.pool.feedback.poll(self.frame) {
+            if self.policy.ray_guided() {
+                for &(key, count) in &u.counts {
+                    self.visibility.observe(u.frame, key, count);
+                }
+            }
+        }
+        if self.occlusion.resize(device, [vp.width, vp.height])? {
+            self.rebuild_bind_group(device)?;
+        }
+        for (frame, key, samples) in self.occlusion.poll(self.frame) {
+            if self.policy.occlusion_queries() {
+                self.visibility.observe(frame, key, samples);
+            }
+        }
+        let mut filter = Filter(&mut self.visibility);
+        let filter: Option<&mut dyn brickray_cache::SplitFilter> = if self.policy.culls() {
+            Some(&mut filter)
+        } else {
+            None
+        };
+        let plan = self.manager.update_filtered(
             &desc.camera,
             vp.aspect() as f32,
             vp.height,
             self.frame,
             desc.settings.mode,
             tf,
+            filter,
         );
+        let leaves: Vec<(u32, NodeKey)> = plan
+            .cut
+            .iter()
+            .filter_map(|l| l.slot().map(|s| (s, l.key)))
+            .collect();
+        self.cut_changed = leaves != self.leaves;
+        self.leaves = leaves;
+        if self.policy.culls() {
+            self.visibility
+                .set_cut(self.frame, self.leaves.iter().map(|l| l.1));
+        }
+        if self.policy.occlusion_queries() {
+            let geo = brickray_cache::refine::ViewGeometry::new(
+                &self.layout,
+                &desc.camera,
+                vp.aspect() as f32,
+                vp.height,
+                &self.frame_of_world,
+            );
+            let keys: Vec<NodeKey> = self.leaves.iter().map(|l| l.1).collect();
+            let near = self.occlusion.schedule(
+                queue,
+                &geo,
+                &desc.camera,
+                vp.aspect() as f32,
+                [vp.width, vp.height],
+                self.frame,
+                &keys,
+                self.visibility.config().queries_per_frame,
+                MIN_TILE_PX,
+            );
+            // A box reaching behind the eye cannot be rasterised whole: visible.
+            for k in near {
+                self.visibility.observe(self.frame, k, u32::MAX);
+            }
+            // A leaf keeps its state until the rotation queries it again.
+            let mut c = self.visibility.config();
+            if c.hold_frames < self.occlusion.stats.period {
+                c.hold_frames = self.occlusion.stats.period;
+                self.visibility.set_config(c);
+            }
+        }
         let refine_ms = t.elapsed().as_secs_f64() * 1e3;
 
         let t = Instant::now();
@@ -449,16 +631,37 @@ impl VolumeBackend for OutOfCore {
         for l in plan.cut.iter().filter(|l| l.kind.is_data()) {
             per_level[(l.key.level as usize).min(15)] += 1;
         }
+        let visibility = self.visibility.counts();
+        // With culling, the view has converged only once every leaf was
+        // observed and the feedback no longer changes the cut.
+        let vis_settled = !self.policy.culls() || (visibility.unobserved == 0 && !self.cut_changed);
         self.stats = OutOfCoreStats {
             cache: plan.stats,
             index_words: words.len() as u32,
             refine_ms,
             upload_ms,
             encode_ms,
-            converged: plan.stats.converged(),
+            converged: plan.stats.converged() && vis_settled,
             data_leaves_per_level: per_level,
+            policy: self.policy,
+            visibility,
+            feedback: self.pool.feedback.stats,
+            occlusion: self.occlusion.stats,
         };
         Ok(bytes)
+    }
+
+    fn before_pass(&mut self, encoder: &mut wgpu::CommandEncoder) {
+        self.pool.feedback.before_pass(encoder);
+    }
+
+    fn after_pass(&mut self, queue: &wgpu::Queue, encoder: &mut wgpu::CommandEncoder) {
+        self.pool
+            .feedback
+            .after_pass(queue, encoder, self.frame, &self.leaves);
+        if self.policy.occlusion_queries() {
+            self.occlusion.record(queue, encoder, self.frame);
+        }
     }
 
     fn max_leaves(&self) -> u32 {

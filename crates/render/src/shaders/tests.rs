@@ -95,11 +95,11 @@ fn frame_fields() -> Vec<(String, u32)> {
     )
 }
 
-fn kernel_bindings(volume_storage: u32) -> BTreeSet<(u32, u32, &'static str)> {
+fn kernel_bindings(volume: &[wgpu::BindGroupLayoutEntry]) -> BTreeSet<(u32, u32, &'static str)> {
     rust_bindings(&[
         &crate::frame::layout_entries(),
         &crate::tf::layout_entries(),
-        &volume_layout_entries(volume_storage),
+        volume,
     ])
 }
 
@@ -124,6 +124,11 @@ fn wgsl_bindings(m: &naga::Module) -> BTreeSet<(u32, u32, &'static str)> {
             let b = v.binding.as_ref()?;
             let kind = match v.space {
                 naga::AddressSpace::Uniform => "uniform",
+                naga::AddressSpace::Storage { access }
+                    if access.contains(naga::StorageAccess::STORE) =>
+                {
+                    "storage_rw"
+                }
                 naga::AddressSpace::Storage { .. } => "storage",
                 _ => match &m.types[v.ty].inner {
                     naga::TypeInner::Sampler { .. } => "sampler",
@@ -150,6 +155,10 @@ fn rust_bindings(groups: &[&[wgpu::BindGroupLayoutEntry]]) -> BTreeSet<(u32, u32
                     ty: wgpu::BufferBindingType::Uniform,
                     ..
                 } => "uniform",
+                wgpu::BindingType::Buffer {
+                    ty: wgpu::BufferBindingType::Storage { read_only: false },
+                    ..
+                } => "storage_rw",
                 wgpu::BindingType::Buffer { .. } => "storage",
                 wgpu::BindingType::Sampler(_) => "sampler",
                 wgpu::BindingType::StorageTexture { .. } => "storage_texture",
@@ -162,7 +171,7 @@ fn rust_bindings(groups: &[&[wgpu::BindGroupLayoutEntry]]) -> BTreeSet<(u32, u32
     out
 }
 
-fn check_kernel(name: &str, m: &naga::Module, volume_storage: u32) {
+fn check_kernel(name: &str, m: &naga::Module, volume: &[wgpu::BindGroupLayoutEntry]) {
     // Entry point and workgroup size.
     assert_eq!(m.entry_points.len(), 1, "{name}");
     let ep = &m.entry_points[0];
@@ -223,7 +232,7 @@ fn check_kernel(name: &str, m: &naga::Module, volume_storage: u32) {
     // Every binding of every group against the Rust layouts.
     assert_eq!(
         wgsl_bindings(m),
-        kernel_bindings(volume_storage),
+        kernel_bindings(volume),
         "{name}: bindings"
     );
 }
@@ -231,7 +240,11 @@ fn check_kernel(name: &str, m: &naga::Module, volume_storage: u32) {
 #[test]
 fn incore_kernel_matches_the_rust_side() {
     let m = module("incore", &incore());
-    check_kernel("incore", &m, crate::backend::incore::STORAGE_BUFFERS);
+    check_kernel(
+        "incore",
+        &m,
+        &volume_layout_entries(crate::backend::incore::STORAGE_BUFFERS),
+    );
     check_struct(
         &m,
         "VolumeParams",
@@ -255,7 +268,7 @@ fn incore_kernel_matches_the_rust_side() {
 #[test]
 fn ooc_kernel_matches_the_rust_side() {
     let m = module("ooc", &ooc());
-    check_kernel("ooc", &m, crate::backend::ooc::STORAGE_BUFFERS);
+    check_kernel("ooc", &m, &crate::backend::ooc::layout_entries());
     check_struct(
         &m,
         "OocParams",
@@ -335,6 +348,33 @@ fn reproject_matches_the_rust_side() {
 }
 
 #[test]
+fn occlusion_matches_the_rust_side() {
+    use crate::backend::occlusion::{OcclusionUniforms, WGSL, layout_entries};
+    let m = module("occlusion", WGSL);
+    let eps: BTreeSet<(String, naga::ShaderStage)> = m
+        .entry_points
+        .iter()
+        .map(|e| (e.name.clone(), e.stage))
+        .collect();
+    let want: BTreeSet<(String, naga::ShaderStage)> = [
+        ("fill_vs", naga::ShaderStage::Vertex),
+        ("fill_fs", naga::ShaderStage::Fragment),
+        ("box_vs", naga::ShaderStage::Vertex),
+    ]
+    .into_iter()
+    .map(|(n, s)| (n.to_string(), s))
+    .collect();
+    assert_eq!(eps, want);
+    check_struct(
+        &m,
+        "OcclusionUniforms",
+        rust_fields!(OcclusionUniforms, [view_proj]),
+        std::mem::size_of::<OcclusionUniforms>(),
+    );
+    assert_eq!(wgsl_bindings(&m), rust_bindings(&[&layout_entries()]));
+}
+
+#[test]
 fn composite_matches_the_rust_side() {
     let m = module("composite", COMPOSITE);
     let names: BTreeSet<&str> = m.entry_points.iter().map(|e| e.name.as_str()).collect();
@@ -374,7 +414,20 @@ fn reflection_catches_drift() {
     );
     // A moved binding.
     let moved = incore().replace("@group(2) @binding(3)", "@group(2) @binding(7)");
-    assert_ne!(wgsl_bindings(&module("moved", &moved)), kernel_bindings(1));
+    assert_ne!(
+        wgsl_bindings(&module("moved", &moved)),
+        kernel_bindings(&volume_layout_entries(1))
+    );
+    // The usage counters made read-only.
+    let ro = ooc().replace(
+        "var<storage, read_write> usage: array<atomic<u32>>",
+        "var<storage, read> usage: array<u32>",
+    );
+    let ro = ro.replace("atomicAdd(&usage[slot], 1u);", "let _u = usage[slot];");
+    assert_ne!(
+        wgsl_bindings(&module("read-only usage", &ro)),
+        kernel_bindings(&crate::backend::ooc::layout_entries())
+    );
     // A renamed prediction override, a moved prediction binding.
     let renamed = incore().replace("override GUARD", "override FIRST_HIT_GUARD");
     let m = module(
@@ -387,7 +440,7 @@ fn reflection_catches_drift() {
             .any(|(_, o)| o.name.as_deref() == Some("GUARD"))
     );
     let moved = incore().replace("@group(0) @binding(6)", "@group(0) @binding(7)");
-    assert_ne!(wgsl_bindings(&module("moved", &moved)), kernel_bindings(1));
+    assert_ne!(wgsl_bindings(&module("moved", &moved)), kernel_bindings(&volume_layout_entries(1)));
     // A changed flag bit.
     let flag = incore().replace("FLAG_REVERSED_Z: u32 = 4u", "FLAG_REVERSED_Z: u32 = 8u");
     assert_ne!(
@@ -405,6 +458,8 @@ fn every_shader_file_is_covered() {
         "modes.wgsl",
         "incore.wgsl",
         "ooc.wgsl",
+        "feedback.wgsl",
+        "occlusion.wgsl",
         "composite.wgsl",
         "predict.wgsl",
         "incore_predict.wgsl",

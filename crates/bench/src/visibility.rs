@@ -1,0 +1,697 @@
+//! The `visibility` suite: what visibility feedback (docs/visibility.md) takes
+//! out of the working set, at what cost in image and latency.
+//!
+//! Scenes: the head CT (256 x 256 x 108 i16, bricks of `--head-brick`, 32 by
+//! default) with the opaque bone
+//! TF, the translucent soft-tissue TF and the bone isosurface (400 HU), all
+//! shaded; a procedural volume of concentric shells in a ball
+//! (`ProceduralSource::sphere_shells`, `--shell-dims`, default 4096^3) under an
+//! opaque TF, so its outer shell hides the rest. Policies: none and ray-guided
+//! (occlusion queries are reported when the renderer supports them). Each
+//! policy has its own renderer and source; their frames are interleaved, policy
+//! by policy, along one scripted camera path:
+//!
+//! 1. hold the start view until every policy converged (at most `--hold`
+//!    frames);
+//! 2. turn half way round the volume in `--turn` frames, revealing the side
+//!    hidden so far;
+//! 3. hold the view from behind until every policy converged;
+//! 4. jump back to the start view and hold until every policy converged.
+//!
+//! Per policy: working-set bricks along the path (median, peak), bytes
+//! uploaded, frames to converge at the start view, ms per frame (`prepare +
+//! submit + wait`, median) and host ms per frame (`prepare` alone, median),
+//! working set / oracle, PSNR of the converged images (start and back views)
+//! against those of no culling, and the disocclusion latency: frames from
+//! reaching the back view until its image is within 50 dB of the unculled
+//! converged one (`disocc`), and the same after a final jump back to the start
+//! view in one frame, which reveals the side hidden from behind at once
+//! (`jump`; frames until within 50 dB of the unculled start image). The oracle (start view): the unculled converged cut's data
+//! leaves that at least one ray reaches (the renderer's own usage counts: the
+//! bricks whose samples the image uses at the needed level), and the smallest
+//! hole-free cut holding them (every ancestor split, its other non-empty
+//! children kept as leaves). Timings are wall times on a shared machine:
+//! compare the ratios within one run, not across runs.
+
+use crate::{Figures, arg};
+use brickray_core::{
+    BrickSource, Camera, NodeKey, RenderSettings, Shading, TransferFunction, Volume, VolumeFrame,
+};
+use brickray_harness::{GpuContext, Offscreen, ct, target_desc as targets};
+use brickray_render::{
+    FrameDesc, OutOfCoreConfig, OutOfCoreStats, VisibilityPolicy, VolumeRenderer,
+};
+use serde_json::json;
+use std::collections::{HashMap, HashSet};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+/// PSNR above which a frame counts as the converged image.
+const SAME_DB: f64 = 50.0;
+
+struct Scene {
+    name: &'static str,
+    /// "opaque" or "translucent" for the headline figures.
+    kind: &'static str,
+    source: Arc<dyn Fn() -> Result<Arc<dyn BrickSource>, String>>,
+    frame: VolumeFrame,
+    tf: TransferFunction,
+    settings: RenderSettings,
+    distance: f32,
+}
+
+/// Working set along the path per policy, for one scene's chart.
+type Chart = (String, Vec<(String, Vec<f64>)>);
+/// One host frame: wall ms, `prepare` ms, bytes uploaded, image if read.
+type FrameOut = (f64, f64, u64, Option<Vec<u8>>);
+
+/// What one policy did on one scene.
+#[derive(Default)]
+struct Track {
+    working: Vec<f64>,
+    uploaded: u64,
+    ms: Vec<f64>,
+    host_ms: Vec<f64>,
+    converge_start: Option<usize>,
+    start: Option<(Vec<u8>, OutOfCoreStats)>,
+    back: Option<(Vec<u8>, OutOfCoreStats)>,
+    back_frames: Vec<Vec<u8>>,
+    jump_frames: Vec<Vec<u8>>,
+    oracle_usage: Option<Vec<(NodeKey, u32)>>,
+}
+
+struct Runner<'a> {
+    gpu: &'a GpuContext,
+    target: Offscreen,
+    size: u32,
+}
+
+impl Runner<'_> {
+    /// One host frame; returns (wall ms, prepare ms, image when `read`).
+    fn frame(
+        &self,
+        r: &mut VolumeRenderer,
+        scene: &Scene,
+        camera: Camera,
+        read: bool,
+    ) -> Result<FrameOut, String> {
+        let g = self.gpu;
+        let t0 = Instant::now();
+        let mut enc = g.device.create_command_encoder(&Default::default());
+        let desc = FrameDesc {
+            camera,
+            frame: scene.frame,
+            viewport: brickray_render::Viewport::full(self.size, self.size),
+            settings: scene.settings,
+            host_depth: None,
+        };
+        let fs = r
+            .prepare(&g.device, &g.queue, &mut enc, &desc)
+            .map_err(|e| e.to_string())?;
+        let host = t0.elapsed().as_secs_f64() * 1e3;
+        {
+            let mut pass = self.target.pass(&mut enc, true);
+            r.render(&mut pass).map_err(|e| e.to_string())?;
+        }
+        g.submit_wait(enc);
+        let ms = t0.elapsed().as_secs_f64() * 1e3;
+        let img = read.then(|| self.target.read_color(g));
+        Ok((ms, host, fs.uploaded_bytes, img))
+    }
+}
+
+fn median(v: &[f64]) -> f64 {
+    if v.is_empty() {
+        return 0.0;
+    }
+    let mut v = v.to_vec();
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+fn r2(x: f64) -> f64 {
+    (x * 100.0).round() / 100.0
+}
+
+/// The smallest hole-free cut holding `reached` (leaves of the unculled cut
+/// `cut`): every strict ancestor of a reached leaf is split; each child of a
+/// split node that is not split itself is a leaf, a data leaf when some data
+/// leaf of `cut` lies in it. Returns its data leaves.
+fn oracle_cut(cut: &[NodeKey], reached: &[NodeKey]) -> usize {
+    let mut split: HashSet<NodeKey> = HashSet::new();
+    for k in reached {
+        let mut p = k.parent();
+        while let Some(a) = p {
+            if !split.insert(a) {
+                break;
+            }
+            p = a.parent();
+        }
+    }
+    // Nodes holding some data leaf of the cut (the leaves and their ancestors).
+    let mut has_data: HashSet<NodeKey> = HashSet::new();
+    for k in cut {
+        let mut p = Some(*k);
+        while let Some(a) = p {
+            if !has_data.insert(a) {
+                break;
+            }
+            p = a.parent();
+        }
+    }
+    if split.is_empty() {
+        return reached.len();
+    }
+    split
+        .iter()
+        .flat_map(|s| s.children())
+        .filter(|c| !split.contains(c) && has_data.contains(c))
+        .count()
+}
+
+pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
+    let size: u32 = arg(args, "--size", 256)?;
+    let hold: usize = arg(args, "--hold", 120)?;
+    let turn: usize = arg(args, "--turn", 12)?;
+    let shell_dims: u64 = arg(args, "--shell-dims", 4096)?;
+    let shell_size: u32 = arg(args, "--shell-size", 512)?;
+    let scenes_arg: String = arg(args, "--scenes", "head,shells".to_string())?;
+    let svg: Option<String> = args
+        .iter()
+        .position(|a| a == "--svg")
+        .and_then(|i| args.get(i + 1).cloned());
+    let gpu = GpuContext::new().map_err(|e| e.to_string())?;
+    println!("adapter: {}", gpu.describe());
+    let mut policies = vec![VisibilityPolicy::None, VisibilityPolicy::RayGuided];
+    for p in [VisibilityPolicy::OcclusionQueries, VisibilityPolicy::Both] {
+        if supported(&gpu, p) {
+            policies.push(p);
+        } else {
+            println!(
+                "policy {} not supported by this renderer: not run",
+                p.name()
+            );
+        }
+    }
+    let mut scenes = Vec::new();
+    if scenes_arg.contains("head") {
+        scenes.extend(head_scenes(arg(args, "--head-brick", 32)?)?);
+    }
+    if scenes_arg.contains("shells") {
+        scenes.push(shells_scene(shell_dims));
+    }
+    let mut fig = Figures::new();
+    let mut chart: Vec<Chart> = Vec::new();
+    let t = Instant::now();
+    for scene in &scenes {
+        let px = if scene.name == "shells" {
+            shell_size
+        } else {
+            size
+        };
+        let runner = Runner {
+            gpu: &gpu,
+            target: Offscreen::new(&gpu.device, px, px),
+            size: px,
+        };
+        println!(
+            "\n{} ({px}x{px}): hold <= {hold}, turn {turn} frames, hold <= {hold}",
+            scene.name
+        );
+        let tracks = run_scene(&runner, scene, &policies, hold, turn)?;
+        report(scene, &policies, &tracks, &mut fig)?;
+        chart.push((
+            format!("{} ({px}x{px})", scene.name),
+            policies
+                .iter()
+                .zip(&tracks)
+                .map(|(p, t)| (p.name().to_string(), t.working.clone()))
+                .collect(),
+        ));
+    }
+    headline(&mut fig);
+    if let Some(path) = svg {
+        write_chart(&path, &chart)?;
+        println!("chart: {path}");
+    }
+    println!("\nsuite wall time: {:.0} s", t.elapsed().as_secs_f64());
+    fig.insert("image_size".into(), json!(size));
+    fig.insert("shell_image_size".into(), json!(shell_size));
+    fig.insert("shell_dims".into(), json!(shell_dims));
+    fig.insert("adapter".into(), json!(gpu.adapter.get_info().name));
+    Ok(fig)
+}
+
+fn supported(gpu: &GpuContext, p: VisibilityPolicy) -> bool {
+    let Ok(mut r) = VolumeRenderer::new(&gpu.device, targets()) else {
+        return false;
+    };
+    let src = match brickray_store::ProceduralSource::sphere_shells([64; 3], 32, 2) {
+        Ok(s) => Arc::new(s),
+        Err(_) => return false,
+    };
+    let frame = VolumeFrame::centered([64; 3], [1.0; 3]);
+    r.set_volume_source(
+        &gpu.device,
+        &gpu.queue,
+        src,
+        frame,
+        OutOfCoreConfig::default(),
+    )
+    .is_ok()
+        && r.set_visibility_policy(p).is_ok()
+}
+
+fn head_scenes(brick: u32) -> Result<Vec<Scene>, String> {
+    let path = brickray_harness::shared_volume("invesalius_cranium_ct")
+        .ok_or("the visibility suite needs ../shared/data/invesalius_cranium_ct")?;
+    let vol: Volume = brickray_io::read_volume(&path).map_err(|e| e.to_string())?;
+    let d = vol.desc().clone();
+    let dir = tempfile::tempdir().map_err(|e| e.to_string())?;
+    let store_path = dir.path().join("head.brs");
+    let mut reader = brickray_io::MemoryReader::new(vol, "memory");
+    brickray_store::build(
+        &mut reader,
+        &store_path,
+        &brickray_store::BuildOptions {
+            brick,
+            ..Default::default()
+        },
+    )
+    .map_err(|e| e.to_string())?;
+    // The store is opened once per renderer; the directory lives as long as
+    // the closure.
+    let dir = Arc::new(dir);
+    let open: Arc<dyn Fn() -> Result<Arc<dyn BrickSource>, String>> = Arc::new(move || {
+        let _keep = &dir;
+        Ok(
+            Arc::new(brickray_store::open(&store_path).map_err(|e| e.to_string())?)
+                as Arc<dyn BrickSource>,
+        )
+    });
+    let frame = VolumeFrame::centered(d.dims, d.spacing);
+    let shaded = RenderSettings {
+        shading: Shading {
+            enabled: true,
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    let [(_, _, translucent), (_, _, bone), (_, iso_mode, iso_tf), _] = ct::scenes();
+    Ok(vec![
+        Scene {
+            name: "head_opaque",
+            kind: "opaque",
+            source: open.clone(),
+            frame,
+            tf: bone,
+            settings: shaded,
+            distance: 2.0,
+        },
+        Scene {
+            name: "head_translucent",
+            kind: "translucent",
+            source: open.clone(),
+            frame,
+            tf: translucent,
+            settings: shaded,
+            distance: 2.0,
+        },
+        Scene {
+            name: "head_iso",
+            kind: "opaque",
+            source: open,
+            frame,
+            tf: iso_tf,
+            settings: RenderSettings {
+                mode: iso_mode,
+                ..shaded
+            },
+            distance: 2.0,
+        },
+    ])
+}
+
+fn shells_scene(dims: u64) -> Scene {
+    Scene {
+        name: "shells",
+        kind: "opaque",
+        source: Arc::new(move || {
+            Ok(Arc::new(
+                brickray_store::ProceduralSource::sphere_shells([dims; 3], 32, 2)
+                    .map_err(|e| e.to_string())?,
+            ) as Arc<dyn BrickSource>)
+        }),
+        frame: VolumeFrame::centered([dims as u32; 3], [1.0; 3]),
+        tf: TransferFunction::from_points(
+            &[(0.15, [0.9, 0.8, 0.7, 0.0]), (0.22, [0.9, 0.8, 0.7, 1.0])],
+            256,
+        ),
+        settings: RenderSettings::default(),
+        distance: 1.8,
+    }
+}
+
+fn camera(scene: &Scene, turn: f32) -> Camera {
+    Camera::orbit(scene.frame.center(), scene.distance, 0.5 + turn, 0.3)
+}
+
+fn run_scene(
+    runner: &Runner<'_>,
+    scene: &Scene,
+    policies: &[VisibilityPolicy],
+    hold: usize,
+    turn: usize,
+) -> Result<Vec<Track>, String> {
+    let g = runner.gpu;
+    let mut rs = Vec::new();
+    for &p in policies {
+        let mut r = VolumeRenderer::new(&g.device, targets()).map_err(|e| e.to_string())?;
+        r.set_volume_source(
+            &g.device,
+            &g.queue,
+            (scene.source)()?,
+            scene.frame,
+            OutOfCoreConfig::default(),
+        )
+        .map_err(|e| e.to_string())?;
+        r.set_transfer_function(&g.device, &g.queue, &scene.tf)
+            .map_err(|e| e.to_string())?;
+        r.set_visibility_policy(p).map_err(|e| e.to_string())?;
+        rs.push(r);
+    }
+    let mut tracks: Vec<Track> = policies.iter().map(|_| Track::default()).collect();
+    let step = |r: &mut VolumeRenderer, t: &mut Track, cam: Camera, read: bool| {
+        let (ms, host, bytes, img) = runner.frame(r, scene, cam, read)?;
+        let s = r.out_of_core_stats().ok_or("not out of core")?;
+        t.working.push(s.cache.working_set_bricks as f64);
+        t.uploaded += bytes;
+        t.ms.push(ms);
+        t.host_ms.push(host);
+        Ok::<_, String>((s, img))
+    };
+    // 1. The start view, until every policy converged.
+    let start = camera(scene, 0.0);
+    let mut done = vec![false; policies.len()];
+    for f in 1..=hold {
+        for (i, (r, t)) in rs.iter_mut().zip(tracks.iter_mut()).enumerate() {
+            let (s, _) = step(r, t, start, false)?;
+            if s.converged && !done[i] {
+                done[i] = true;
+                t.converge_start = Some(f);
+            }
+        }
+        if done.iter().all(|d| *d) {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    // A few more frames: converged images and the usage of the converged cut.
+    for (r, t) in rs.iter_mut().zip(tracks.iter_mut()) {
+        for _ in 0..4 {
+            step(r, t, start, false)?;
+        }
+        let (s, img) = step(r, t, start, true)?;
+        t.start = Some((img.unwrap_or_default(), s));
+        t.oracle_usage = r.last_usage().map(|u| u.counts.clone());
+    }
+    // 2. The half turn.
+    for k in 1..=turn {
+        let cam = camera(scene, std::f32::consts::PI * k as f32 / turn as f32);
+        for (r, t) in rs.iter_mut().zip(tracks.iter_mut()) {
+            step(r, t, cam, false)?;
+        }
+    }
+    // 3. The back view, until every policy converged; images kept for the
+    // disocclusion latency.
+    let back = camera(scene, std::f32::consts::PI);
+    let mut done = vec![false; policies.len()];
+    for _ in 1..=hold {
+        for (i, (r, t)) in rs.iter_mut().zip(tracks.iter_mut()).enumerate() {
+            if done[i] {
+                step(r, t, back, false)?;
+                continue;
+            }
+            let (s, img) = step(r, t, back, true)?;
+            t.back_frames.push(img.unwrap_or_default());
+            if s.converged {
+                done[i] = true;
+            }
+        }
+        if done.iter().all(|d| *d) {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    for (r, t) in rs.iter_mut().zip(tracks.iter_mut()) {
+        let (s, img) = step(r, t, back, true)?;
+        t.back = Some((img.unwrap_or_default(), s));
+    }
+    // 4. A jump back to the start view in one frame: the side hidden from
+    // behind is revealed at once; frames kept for its latency.
+    let mut done = vec![false; policies.len()];
+    for _ in 1..=hold {
+        for (i, (r, t)) in rs.iter_mut().zip(tracks.iter_mut()).enumerate() {
+            if done[i] {
+                continue;
+            }
+            let (s, img) = step(r, t, start, true)?;
+            t.jump_frames.push(img.unwrap_or_default());
+            done[i] = s.converged;
+        }
+        if done.iter().all(|d| *d) {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    Ok(tracks)
+}
+
+fn report(
+    scene: &Scene,
+    policies: &[VisibilityPolicy],
+    tracks: &[Track],
+    fig: &mut Figures,
+) -> Result<(), String> {
+    let base = &tracks[0];
+    let (base_start, base_s) = base.start.as_ref().ok_or("no start image")?;
+    let (base_back, base_back_s) = base.back.as_ref().ok_or("no back image")?;
+    // The oracle from the unculled converged cut's usage.
+    let usage = base.oracle_usage.clone().unwrap_or_default();
+    let cut: Vec<NodeKey> = usage.iter().map(|(k, _)| *k).collect();
+    let reached: Vec<NodeKey> = usage
+        .iter()
+        .filter(|(_, c)| *c > 0)
+        .map(|(k, _)| *k)
+        .collect();
+    let oracle = reached.len().max(1);
+    let oracle_cut = oracle_cut(&cut, &reached).max(1);
+    println!(
+        "  oracle (start view): {} bricks reached by a ray of {} in the unculled cut; smallest hole-free cut {}",
+        reached.len(),
+        cut.len(),
+        oracle_cut
+    );
+    println!(
+        "  {:<10} {:>8} {:>6} {:>9} {:>7} {:>8} {:>8} {:>8} {:>7} {:>7} {:>8} {:>8} {:>7} {:>5}",
+        "policy",
+        "ws_conv",
+        "cut",
+        "ws_med",
+        "ws_pk",
+        "MB_up",
+        "conv_f",
+        "ms/f",
+        "host",
+        "/orc",
+        "/orccut",
+        "psnr_s",
+        "disocc",
+        "jump"
+    );
+    let disocc = |t: &Track| {
+        t.back_frames
+            .iter()
+            .position(|img| brickray_reference::psnr(img, base_back) >= SAME_DB)
+            .map(|i| i + 1)
+    };
+    let jump = |t: &Track| {
+        t.jump_frames
+            .iter()
+            .position(|img| brickray_reference::psnr(img, base_start) >= SAME_DB)
+            .map(|i| i + 1)
+    };
+    for (p, t) in policies.iter().zip(tracks) {
+        let (img, s) = t.start.as_ref().ok_or("no start image")?;
+        let (bimg, bs) = t.back.as_ref().ok_or("no back image")?;
+        let ws = s.cache.working_set_bricks as f64;
+        let cut_frac = 1.0 - ws / (base_s.cache.working_set_bricks.max(1) as f64);
+        let cut_back = 1.0
+            - bs.cache.working_set_bricks as f64
+                / base_back_s.cache.working_set_bricks.max(1) as f64;
+        let psnr_s = brickray_reference::psnr(img, base_start);
+        let psnr_b = brickray_reference::psnr(bimg, base_back);
+        let d = disocc(t);
+        let peak = t.working.iter().cloned().fold(0.0, f64::max);
+        println!(
+            "  {:<10} {:>8} {:>5.0}% {:>9.0} {:>7.0} {:>8.1} {:>8} {:>8.1} {:>7.2} {:>7.2} {:>8.2} {:>8.1} {:>7} {:>5}",
+            p.name(),
+            ws,
+            cut_frac * 100.0,
+            median(&t.working),
+            peak,
+            t.uploaded as f64 / 1e6,
+            t.converge_start.map_or("-".into(), |f| f.to_string()),
+            median(&t.ms),
+            median(&t.host_ms),
+            ws / oracle as f64,
+            ws / oracle_cut as f64,
+            psnr_s.min(999.0),
+            d.map_or("-".into(), |f| f.to_string()),
+            jump(t).map_or("-".into(), |f| f.to_string()),
+        );
+        let key = |m: &str| format!("{}_{}_{}", m, scene.name, p.name());
+        let mut put = |m: &str, v: serde_json::Value| {
+            fig.insert(key(m), v);
+        };
+        put("working_set_converged", json!(ws));
+        put("working_set_back", json!(bs.cache.working_set_bricks));
+        put("cut", json!(r2(cut_frac)));
+        put("cut_back", json!(r2(cut_back)));
+        put("working_set_median", json!(median(&t.working)));
+        put("working_set_peak", json!(peak));
+        put("uploaded_mb", json!(r2(t.uploaded as f64 / 1e6)));
+        put("frames_to_converge", json!(t.converge_start));
+        put("ms_per_frame", json!(r2(median(&t.ms))));
+        put("host_ms_per_frame", json!(r2(median(&t.host_ms))));
+        put("oracle_ratio", json!(r2(ws / oracle as f64)));
+        put("oracle_cut_ratio", json!(r2(ws / oracle_cut as f64)));
+        put("psnr_start_db", json!(r2(psnr_s.min(999.0))));
+        put("psnr_back_db", json!(r2(psnr_b.min(999.0))));
+        put("disocclusion_frames", json!(d));
+        put("disocclusion_jump_frames", json!(jump(t)));
+        put("kind", json!(scene.kind));
+    }
+    fig.insert(format!("oracle_{}", scene.name), json!(reached.len()));
+    fig.insert(format!("oracle_cut_{}", scene.name), json!(oracle_cut));
+    Ok(())
+}
+
+/// The headline figures over the scenes: worst cut per kind and policy, the
+/// best oracle ratio on opaque scenes, the lowest PSNR of a culled policy, the
+/// longest disocclusion latency.
+fn headline(fig: &mut Figures) {
+    let get = |k: &str| fig.get(k).and_then(|v| v.as_f64());
+    let mut out: HashMap<String, serde_json::Value> = HashMap::new();
+    let scenes: Vec<String> = fig
+        .keys()
+        .filter_map(|k| k.strip_prefix("kind_"))
+        .filter_map(|k| k.strip_suffix("_none"))
+        .map(str::to_string)
+        .collect();
+    for (kind, pol, name) in [
+        ("opaque", "occlusion", "cut_opaque_occlusion"),
+        ("opaque", "rayguided", "cut_opaque_rayguided"),
+        ("translucent", "occlusion", "cut_translucent_occlusion"),
+        ("translucent", "rayguided", "cut_translucent_rayguided"),
+    ] {
+        let cuts: Vec<f64> = scenes
+            .iter()
+            .filter(|s| fig.get(&format!("kind_{s}_none")).and_then(|v| v.as_str()) == Some(kind))
+            .filter_map(|s| get(&format!("cut_{s}_{pol}")))
+            .collect();
+        // The smallest cut over the scenes of the kind (null when not run).
+        let v = cuts.iter().cloned().reduce(f64::min);
+        out.insert(name.into(), json!(v));
+    }
+    let mut best_oracle: Option<f64> = None;
+    let mut best_oracle_cut: Option<f64> = None;
+    let mut psnr_min: Option<f64> = None;
+    let mut disocc_max: Option<f64> = None;
+    for s in &scenes {
+        let opaque = fig.get(&format!("kind_{s}_none")).and_then(|v| v.as_str()) == Some("opaque");
+        // The better policy of the scene, then the worst scene.
+        let mut scene_best: Option<f64> = None;
+        let mut scene_best_cut: Option<f64> = None;
+        for pol in ["occlusion", "rayguided", "both"] {
+            if let Some(r) = get(&format!("oracle_ratio_{s}_{pol}")) {
+                scene_best = Some(scene_best.map_or(r, |b: f64| b.min(r)));
+            }
+            if let Some(r) = get(&format!("oracle_cut_ratio_{s}_{pol}")) {
+                scene_best_cut = Some(scene_best_cut.map_or(r, |b: f64| b.min(r)));
+            }
+            for k in ["psnr_start_db", "psnr_back_db"] {
+                if let Some(p) = get(&format!("{k}_{s}_{pol}")) {
+                    psnr_min = Some(psnr_min.map_or(p, |m: f64| m.min(p)));
+                }
+            }
+            for k in ["disocclusion_frames", "disocclusion_jump_frames"] {
+                if let Some(d) = get(&format!("{k}_{s}_{pol}")) {
+                    disocc_max = Some(disocc_max.map_or(d, |m: f64| m.max(d)));
+                }
+            }
+        }
+        if opaque {
+            if let Some(b) = scene_best {
+                best_oracle = Some(best_oracle.map_or(b, |m: f64| m.max(b)));
+            }
+            if let Some(b) = scene_best_cut {
+                best_oracle_cut = Some(best_oracle_cut.map_or(b, |m: f64| m.max(b)));
+            }
+        }
+    }
+    out.insert("oracle_ratio_best".into(), json!(best_oracle));
+    out.insert("oracle_cut_ratio_best".into(), json!(best_oracle_cut));
+    out.insert("psnr_min_culled_db".into(), json!(psnr_min));
+    out.insert("disocclusion_frames_max".into(), json!(disocc_max));
+    println!("\nheadline:");
+    let mut keys: Vec<_> = out.keys().cloned().collect();
+    keys.sort();
+    for k in keys {
+        println!("  {k}: {}", out[&k]);
+        fig.insert(k.clone(), out[&k].clone());
+    }
+}
+
+/// Working set along the path, per scene and policy, as an SVG (plotters).
+fn write_chart(path: &str, chart: &[Chart]) -> Result<(), String> {
+    use plotters::prelude::*;
+    let n = chart.len().max(1) as u32;
+    let root = SVGBackend::new(path, (720, 260 * n)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| e.to_string())?;
+    let areas = root.split_evenly((n as usize, 1));
+    let colors = [BLACK, RED, BLUE, GREEN];
+    for ((title, series), area) in chart.iter().zip(areas) {
+        let frames = series.iter().map(|s| s.1.len()).max().unwrap_or(1);
+        let peak = series
+            .iter()
+            .flat_map(|s| s.1.iter().cloned())
+            .fold(1.0, f64::max);
+        let mut c = ChartBuilder::on(&area)
+            .caption(title, ("sans-serif", 16))
+            .margin(8)
+            .x_label_area_size(28)
+            .y_label_area_size(48)
+            .build_cartesian_2d(0..frames, 0.0..peak * 1.05)
+            .map_err(|e| e.to_string())?;
+        c.configure_mesh()
+            .x_desc("frame along the path (all policies interleaved)")
+            .y_desc("working-set bricks")
+            .draw()
+            .map_err(|e| e.to_string())?;
+        for (i, (name, ws)) in series.iter().enumerate() {
+            let color = colors[i % colors.len()];
+            c.draw_series(LineSeries::new(ws.iter().cloned().enumerate(), color))
+                .map_err(|e| e.to_string())?
+                .label(name.as_str())
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], color));
+        }
+        c.configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .draw()
+            .map_err(|e| e.to_string())?;
+    }
+    root.present().map_err(|e| e.to_string())?;
+    Ok(())
+}

@@ -1,0 +1,214 @@
+//! Ray-guided usage feedback (docs/visibility.md): the out-of-core kernel counts,
+//! per pool slot, the rays that reached the slot's brick before terminating
+//! (`shaders/feedback.wgsl`). This owns the counters and a ring of read-back
+//! buffers, and never blocks: before the ray-cast pass the counters are
+//! cleared; after it they are copied, with a frame stamp, into a free ring
+//! entry; at the next `poll` (the host has submitted the frame by then) the
+//! entry is mapped with `map_async`, and once wgpu reports it mapped (during
+//! any later `submit` or `poll` of the host) its counts are handed to the
+//! visibility state. Nothing here calls `poll` or waits. A frame that finds no
+//! free entry (the host's GPU is more than [`RING`] frames behind) records no
+//! copy and loses only that frame's feedback.
+
+use crate::error::RenderError;
+use crate::gpu;
+use brickray_core::NodeKey;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU8, Ordering};
+
+/// Read-back buffers in flight at most.
+pub(crate) const RING: usize = 4;
+/// Bytes before the counters in a ring entry: the frame stamp.
+const STAMP_BYTES: u64 = 16;
+
+const FREE: u8 = 0;
+const COPIED: u8 = 1;
+const MAPPING: u8 = 2;
+const READY: u8 = 3;
+const FAILED: u8 = 4;
+
+struct Entry {
+    buffer: wgpu::Buffer,
+    state: Arc<AtomicU8>,
+    /// The frame whose counts it holds.
+    frame: u64,
+    /// `(slot, node)` of that frame's data leaves.
+    leaves: Vec<(u32, NodeKey)>,
+}
+
+/// One frame's counts, as read back.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct UsageFrame {
+    /// The frame (the out-of-core backend's frame counter) they were rendered in.
+    pub frame: u64,
+    /// Rays that reached each data leaf of that frame's cut.
+    pub counts: Vec<(NodeKey, u32)>,
+}
+
+/// Counters of the feedback path.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct FeedbackStats {
+    /// Frames whose counts were read back and applied.
+    pub frames_applied: u64,
+    /// Read-backs discarded: the stamp said the frame's commands never ran
+    /// (the host dropped or reordered the encoder) or mapping failed.
+    pub frames_discarded: u64,
+    /// Frames that found no free ring entry (no copy recorded).
+    pub frames_skipped: u64,
+    /// Frames between rendering and applying, of the last applied read-back.
+    pub last_latency_frames: u64,
+}
+
+pub(crate) struct UsageFeedback {
+    /// One `u32` counter per pool slot (group 2, binding 6).
+    pub(crate) usage: wgpu::Buffer,
+    stamp: wgpu::Buffer,
+    slots: u32,
+    ring: Vec<Entry>,
+    pub(crate) stats: FeedbackStats,
+    /// The latest counts read back.
+    pub(crate) last: Option<UsageFrame>,
+}
+
+impl UsageFeedback {
+    pub(crate) fn new(device: &wgpu::Device, slots: u32) -> Result<UsageFeedback, RenderError> {
+        let slots = slots.max(1);
+        let bytes = slots as u64 * 4;
+        let usage = gpu::buffer(
+            device,
+            "brickray-render usage counters",
+            bytes,
+            wgpu::BufferUsages::STORAGE
+                | wgpu::BufferUsages::COPY_SRC
+                | wgpu::BufferUsages::COPY_DST,
+        )?;
+        let stamp = gpu::buffer(
+            device,
+            "brickray-render usage stamp",
+            STAMP_BYTES,
+            wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
+        )?;
+        let mut ring = Vec::with_capacity(RING);
+        for _ in 0..RING {
+            ring.push(Entry {
+                buffer: gpu::buffer(
+                    device,
+                    "brickray-render usage read-back",
+                    STAMP_BYTES + bytes,
+                    wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                )?,
+                state: Arc::new(AtomicU8::new(FREE)),
+                frame: 0,
+                leaves: Vec::new(),
+            });
+        }
+        Ok(UsageFeedback {
+            usage,
+            stamp,
+            slots,
+            ring,
+            stats: FeedbackStats::default(),
+            last: None,
+        })
+    }
+
+    /// Starts mapping the entries copied in frames before `frame` (submitted
+    /// by now) and returns the counts of every entry whose mapping completed,
+    /// oldest first. Never waits.
+    pub(crate) fn poll(&mut self, frame: u64) -> Vec<UsageFrame> {
+        let mut out = Vec::new();
+        for e in &mut self.ring {
+            match e.state.load(Ordering::Acquire) {
+                COPIED if e.frame < frame => {
+                    e.state.store(MAPPING, Ordering::Release);
+                    let state = e.state.clone();
+                    e.buffer.slice(..).map_async(wgpu::MapMode::Read, move |r| {
+                        state.store(if r.is_ok() { READY } else { FAILED }, Ordering::Release);
+                    });
+                }
+                READY => {
+                    let counts = match e.buffer.slice(..).get_mapped_range() {
+                        Err(_) => None,
+                        Ok(view) => {
+                            let words: &[u32] = bytemuck::cast_slice(&view);
+                            let stamp = words[0] as u64 | (words[1] as u64) << 32;
+                            (stamp == e.frame).then(|| {
+                                let counts = &words[(STAMP_BYTES / 4) as usize..];
+                                e.leaves
+                                    .iter()
+                                    .map(|&(slot, key)| {
+                                        (key, counts.get(slot as usize).copied().unwrap_or(0))
+                                    })
+                                    .collect::<Vec<_>>()
+                            })
+                        }
+                    };
+                    e.buffer.unmap();
+                    e.state.store(FREE, Ordering::Release);
+                    match counts {
+                        Some(counts) => {
+                            self.stats.frames_applied += 1;
+                            self.stats.last_latency_frames = frame - e.frame;
+                            out.push(UsageFrame {
+                                frame: e.frame,
+                                counts,
+                            });
+                        }
+                        None => self.stats.frames_discarded += 1,
+                    }
+                }
+                FAILED => {
+                    e.state.store(FREE, Ordering::Release);
+                    self.stats.frames_discarded += 1;
+                }
+                _ => {}
+            }
+        }
+        out.sort_by_key(|u| u.frame);
+        if let Some(l) = out.last() {
+            self.last = Some(l.clone());
+        }
+        out
+    }
+
+    /// Before the ray-cast pass: zeroes the counters.
+    pub(crate) fn before_pass(&self, encoder: &mut wgpu::CommandEncoder) {
+        encoder.clear_buffer(&self.usage, 0, None);
+    }
+
+    /// After the ray-cast pass of `frame`: copies the stamp and the counters
+    /// into a free ring entry, remembering the frame's `(slot, node)` leaves.
+    pub(crate) fn after_pass(
+        &mut self,
+        queue: &wgpu::Queue,
+        encoder: &mut wgpu::CommandEncoder,
+        frame: u64,
+        leaves: &[(u32, NodeKey)],
+    ) {
+        let Some(e) = self
+            .ring
+            .iter_mut()
+            .find(|e| e.state.load(Ordering::Acquire) == FREE)
+        else {
+            self.stats.frames_skipped += 1;
+            return;
+        };
+        // The stamp lands in the buffer when the host submits; if this frame's
+        // encoder never runs, or runs after the next frame's stamp, the copy
+        // carries another stamp and is discarded.
+        let stamp = [frame as u32, (frame >> 32) as u32, 0, 0];
+        queue.write_buffer(&self.stamp, 0, bytemuck::cast_slice(&stamp));
+        encoder.copy_buffer_to_buffer(&self.stamp, 0, &e.buffer, 0, STAMP_BYTES);
+        encoder.copy_buffer_to_buffer(
+            &self.usage,
+            0,
+            &e.buffer,
+            STAMP_BYTES,
+            self.slots as u64 * 4,
+        );
+        e.frame = frame;
+        e.leaves.clear();
+        e.leaves.extend_from_slice(leaves);
+        e.state.store(COPIED, Ordering::Release);
+    }
+}

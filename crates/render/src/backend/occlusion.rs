@@ -1,0 +1,563 @@
+//! Occlusion-query feedback (Gobbetti et al. 2008, section 6; docs/visibility.md).
+//!
+//! The out-of-core kernel writes, per pixel, the clip depth of the last sample
+//! its ray visited into an R32Float texture (`feedback.wgsl`). After the ray
+//! cast this records one depth-only render pass (`occlusion.wgsl`): a
+//! fullscreen triangle copies that depth into a depth attachment, then the
+//! boxes of the leaves the screen-tile scheduler
+//! ([`brickray_visibility::schedule_tiles`]) picked for this frame are drawn
+//! against it, depth test on and writes off, each in its own occlusion query.
+//! The query results are resolved and copied, with a frame stamp, into a ring
+//! of read-back buffers mapped asynchronously, exactly as the usage counters
+//! are (`feedback.rs`): nothing here polls or waits.
+//!
+//! wgpu records the ray cast as one compute dispatch and the queries as a
+//! later render pass of the same submission; it gives no control over their
+//! overlap on the GPU. The tile list is computed (and reported) but the ray
+//! cast is not split into tiles: the paper's ordering hides query latency
+//! inside a frame, whereas here the results come back through the read-back
+//! ring one or two frames later whatever the order, so splitting the dispatch
+//! would only add passes.
+
+use crate::error::RenderError;
+use crate::gpu;
+use brickray_cache::refine::ViewGeometry;
+use brickray_core::{Camera, DepthConvention, NodeKey};
+use brickray_visibility::{PxRect, TileSchedulerConfig, schedule_tiles};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU8, Ordering};
+
+/// Read-back buffers in flight at most.
+const RING: usize = 4;
+const STAMP_BYTES: u64 = 16;
+const FREE: u8 = 0;
+const COPIED: u8 = 1;
+const MAPPING: u8 = 2;
+const READY: u8 = 3;
+const FAILED: u8 = 4;
+/// Bytes of one box instance: corner and three edges, `vec4<f32>` each.
+const BOX_BYTES: u64 = 64;
+
+/// The shader (validated with the others in `shaders/tests.rs`).
+pub(crate) const WGSL: &str = include_str!("../../shaders/occlusion.wgsl");
+
+/// `struct OcclusionUniforms` of occlusion.wgsl.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub(crate) struct OcclusionUniforms {
+    pub(crate) view_proj: [[f32; 4]; 4],
+}
+
+/// The layout of occlusion.wgsl's group 0: the stop depth (sampled, not
+/// filterable) and the uniforms.
+pub(crate) fn layout_entries() -> Vec<wgpu::BindGroupLayoutEntry> {
+    vec![
+        wgpu::BindGroupLayoutEntry {
+            binding: 0,
+            visibility: wgpu::ShaderStages::FRAGMENT,
+            ty: wgpu::BindingType::Texture {
+                sample_type: wgpu::TextureSampleType::Float { filterable: false },
+                view_dimension: wgpu::TextureViewDimension::D2,
+                multisampled: false,
+            },
+            count: None,
+        },
+        wgpu::BindGroupLayoutEntry {
+            binding: 1,
+            visibility: wgpu::ShaderStages::VERTEX,
+            ty: wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Uniform,
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+            count: None,
+        },
+    ]
+}
+
+struct Entry {
+    buffer: wgpu::Buffer,
+    state: Arc<AtomicU8>,
+    frame: u64,
+    keys: Vec<NodeKey>,
+}
+
+/// Counters of the occlusion-query path.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct OcclusionStats {
+    /// Queries issued in the last frame.
+    pub queries: u32,
+    /// Frames the scheduler's rotation takes to query every on-screen leaf.
+    pub period: u32,
+    /// Tiles of the last frame's screen subdivision.
+    pub tiles: u32,
+    /// Leaves whose box reaches behind the near plane (visible, not queried).
+    pub near_visible: u32,
+    /// Frames whose results were read back and applied.
+    pub frames_applied: u64,
+    /// Read-backs discarded (stamp mismatch or failed mapping).
+    pub frames_discarded: u64,
+    /// Frames that found no free ring entry (no queries recorded).
+    pub frames_skipped: u64,
+}
+
+/// The viewport-sized textures.
+struct Targets {
+    size: [u32; 2],
+    stop: wgpu::Texture,
+    stop_view: wgpu::TextureView,
+    depth_view: wgpu::TextureView,
+    bind_group: wgpu::BindGroup,
+}
+
+pub(crate) struct OcclusionFeedback {
+    budget: u32,
+    targets: Targets,
+    uniforms: wgpu::Buffer,
+    group_layout: wgpu::BindGroupLayout,
+    fill: wgpu::RenderPipeline,
+    boxes_less: wgpu::RenderPipeline,
+    boxes_greater: wgpu::RenderPipeline,
+    box_buffer: wgpu::Buffer,
+    queries: wgpu::QuerySet,
+    resolve: wgpu::Buffer,
+    stamp: wgpu::Buffer,
+    ring: Vec<Entry>,
+    /// This frame's queried leaves (recorded after the pass).
+    pending: Vec<NodeKey>,
+    reversed: bool,
+    pub(crate) stats: OcclusionStats,
+}
+
+const STOP_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::R32Float;
+const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
+
+impl OcclusionFeedback {
+    pub(crate) fn new(
+        device: &wgpu::Device,
+        budget: u32,
+    ) -> Result<OcclusionFeedback, RenderError> {
+        let l = device.limits();
+        let budget = budget.clamp(1, wgpu::QUERY_SET_MAX_QUERIES);
+        gpu::need("max_vertex_buffers", 1, l.max_vertex_buffers as u64)?;
+        gpu::need("max_vertex_attributes", 4, l.max_vertex_attributes as u64)?;
+        let group_layout = gpu::scoped(device, "brickray-render occlusion layout", || {
+            device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some("brickray-render occlusion"),
+                entries: &layout_entries(),
+            })
+        })?;
+        let uniforms = gpu::buffer(
+            device,
+            "brickray-render occlusion uniforms",
+            std::mem::size_of::<OcclusionUniforms>() as u64,
+            wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+        )?;
+        let module = gpu::scoped(device, "brickray-render occlusion shader", || {
+            device.create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some("brickray-render occlusion"),
+                source: wgpu::ShaderSource::Wgsl(WGSL.into()),
+            })
+        })?;
+        let pl = gpu::scoped(device, "brickray-render occlusion pipeline layout", || {
+            device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                label: Some("brickray-render occlusion"),
+                bind_group_layouts: &[Some(&group_layout)],
+                immediate_size: 0,
+            })
+        })?;
+        let attrs = wgpu::vertex_attr_array![0 => Float32x4, 1 => Float32x4, 2 => Float32x4, 3 => Float32x4];
+        let pipeline = |label: &'static str,
+                        vs: &str,
+                        fs: Option<&str>,
+                        compare: wgpu::CompareFunction,
+                        write: bool,
+                        boxes: bool| {
+            let buffers = [Some(wgpu::VertexBufferLayout {
+                array_stride: BOX_BYTES,
+                step_mode: wgpu::VertexStepMode::Instance,
+                attributes: &attrs,
+            })];
+            gpu::scoped(device, label, || {
+                device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                    label: Some(label),
+                    layout: Some(&pl),
+                    vertex: wgpu::VertexState {
+                        module: &module,
+                        entry_point: Some(vs),
+                        compilation_options: Default::default(),
+                        buffers: if boxes { &buffers } else { &[] },
+                    },
+                    primitive: wgpu::PrimitiveState::default(),
+                    depth_stencil: Some(wgpu::DepthStencilState {
+                        format: DEPTH_FORMAT,
+                        depth_write_enabled: Some(write),
+                        depth_compare: Some(compare),
+                        stencil: Default::default(),
+                        bias: Default::default(),
+                    }),
+                    multisample: Default::default(),
+                    fragment: fs.map(|fs| wgpu::FragmentState {
+                        module: &module,
+                        entry_point: Some(fs),
+                        compilation_options: Default::default(),
+                        targets: &[],
+                    }),
+                    multiview_mask: None,
+                    cache: None,
+                })
+            })
+        };
+        let fill = pipeline(
+            "brickray-render occlusion fill",
+            "fill_vs",
+            Some("fill_fs"),
+            wgpu::CompareFunction::Always,
+            true,
+            false,
+        )?;
+        let boxes_less = pipeline(
+            "brickray-render occlusion boxes",
+            "box_vs",
+            None,
+            wgpu::CompareFunction::LessEqual,
+            false,
+            true,
+        )?;
+        let boxes_greater = pipeline(
+            "brickray-render occlusion boxes (reversed-Z)",
+            "box_vs",
+            None,
+            wgpu::CompareFunction::GreaterEqual,
+            false,
+            true,
+        )?;
+        let box_buffer = gpu::buffer(
+            device,
+            "brickray-render occlusion boxes",
+            budget as u64 * BOX_BYTES,
+            wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::COPY_DST,
+        )?;
+        let queries = gpu::scoped(device, "brickray-render occlusion queries", || {
+            device.create_query_set(&wgpu::QuerySetDescriptor {
+                label: Some("brickray-render occlusion"),
+                ty: wgpu::QueryType::Occlusion,
+                count: budget,
+            })
+        })?;
+        let resolve = gpu::buffer(
+            device,
+            "brickray-render occlusion resolve",
+            budget as u64 * 8,
+            wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
+        )?;
+        let stamp = gpu::buffer(
+            device,
+            "brickray-render occlusion stamp",
+            STAMP_BYTES,
+            wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
+        )?;
+        let mut ring = Vec::with_capacity(RING);
+        for _ in 0..RING {
+            ring.push(Entry {
+                buffer: gpu::buffer(
+                    device,
+                    "brickray-render occlusion read-back",
+                    STAMP_BYTES + budget as u64 * 8,
+                    wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                )?,
+                state: Arc::new(AtomicU8::new(FREE)),
+                frame: 0,
+                keys: Vec::new(),
+            });
+        }
+        let targets = Self::targets(device, &group_layout, &uniforms, [1, 1])?;
+        Ok(OcclusionFeedback {
+            budget,
+            targets,
+            uniforms,
+            group_layout,
+            fill,
+            boxes_less,
+            boxes_greater,
+            box_buffer,
+            queries,
+            resolve,
+            stamp,
+            ring,
+            pending: Vec::new(),
+            reversed: false,
+            stats: OcclusionStats::default(),
+        })
+    }
+
+    fn targets(
+        device: &wgpu::Device,
+        layout: &wgpu::BindGroupLayout,
+        uniforms: &wgpu::Buffer,
+        size: [u32; 2],
+    ) -> Result<Targets, RenderError> {
+        let extent = wgpu::Extent3d {
+            width: size[0],
+            height: size[1],
+            depth_or_array_layers: 1,
+        };
+        let tex = |label: &'static str, format, usage| {
+            gpu::texture(
+                device,
+                &wgpu::TextureDescriptor {
+                    label: Some(label),
+                    size: extent,
+                    mip_level_count: 1,
+                    sample_count: 1,
+                    dimension: wgpu::TextureDimension::D2,
+                    format,
+                    usage,
+                    view_formats: &[],
+                },
+            )
+        };
+        let stop = tex(
+            "brickray-render stop depth",
+            STOP_FORMAT,
+            wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::TEXTURE_BINDING,
+        )?;
+        let depth = tex(
+            "brickray-render occlusion depth",
+            DEPTH_FORMAT,
+            wgpu::TextureUsages::RENDER_ATTACHMENT,
+        )?;
+        let stop_view = stop.create_view(&Default::default());
+        let depth_view = depth.create_view(&Default::default());
+        let bind_group = gpu::scoped(device, "brickray-render occlusion bind group", || {
+            device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("brickray-render occlusion"),
+                layout,
+                entries: &[
+                    wgpu::BindGroupEntry {
+                        binding: 0,
+                        resource: wgpu::BindingResource::TextureView(&stop_view),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 1,
+                        resource: uniforms.as_entire_binding(),
+                    },
+                ],
+            })
+        })?;
+        Ok(Targets {
+            size,
+            stop,
+            stop_view,
+            depth_view,
+            bind_group,
+        })
+    }
+
+    /// The stop-depth texture the kernel writes (group 2, binding 7).
+    pub(crate) fn stop_view(&self) -> &wgpu::TextureView {
+        &self.targets.stop_view
+    }
+
+    /// Resizes the viewport-sized textures; true when they were recreated (the
+    /// kernel's group 2 must be rebuilt).
+    pub(crate) fn resize(
+        &mut self,
+        device: &wgpu::Device,
+        size: [u32; 2],
+    ) -> Result<bool, RenderError> {
+        if self.targets.size == size {
+            return Ok(false);
+        }
+        self.targets = Self::targets(device, &self.group_layout, &self.uniforms, size)?;
+        let _ = &self.targets.stop;
+        Ok(true)
+    }
+
+    /// Observations read back since the last call: `(frame, node, samples)`.
+    pub(crate) fn poll(&mut self, frame: u64) -> Vec<(u64, NodeKey, u32)> {
+        let mut out = Vec::new();
+        for e in &mut self.ring {
+            match e.state.load(Ordering::Acquire) {
+                COPIED if e.frame < frame => {
+                    e.state.store(MAPPING, Ordering::Release);
+                    let state = e.state.clone();
+                    e.buffer.slice(..).map_async(wgpu::MapMode::Read, move |r| {
+                        state.store(if r.is_ok() { READY } else { FAILED }, Ordering::Release);
+                    });
+                }
+                READY => {
+                    let ok = match e.buffer.slice(..).get_mapped_range() {
+                        Err(_) => false,
+                        Ok(view) => {
+                            let w: &[u32] = bytemuck::cast_slice(&view);
+                            let stamp = w[0] as u64 | (w[1] as u64) << 32;
+                            if stamp == e.frame {
+                                let r: &[u64] = bytemuck::cast_slice(&view[STAMP_BYTES as usize..]);
+                                for (i, k) in e.keys.iter().enumerate() {
+                                    let n = r.get(i).copied().unwrap_or(0);
+                                    out.push((e.frame, *k, n.min(u32::MAX as u64) as u32));
+                                }
+                            }
+                            stamp == e.frame
+                        }
+                    };
+                    e.buffer.unmap();
+                    e.state.store(FREE, Ordering::Release);
+                    if ok {
+                        self.stats.frames_applied += 1;
+                    } else {
+                        self.stats.frames_discarded += 1;
+                    }
+                }
+                FAILED => {
+                    e.state.store(FREE, Ordering::Release);
+                    self.stats.frames_discarded += 1;
+                }
+                _ => {}
+            }
+        }
+        out
+    }
+
+    /// Schedules this frame's queries over the cut's data leaves and writes
+    /// their boxes. Leaves whose box reaches behind the eye's near side are
+    /// returned (visible without a query).
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn schedule(
+        &mut self,
+        queue: &wgpu::Queue,
+        geo: &ViewGeometry,
+        camera: &Camera,
+        aspect: f32,
+        size: [u32; 2],
+        frame: u64,
+        leaves: &[NodeKey],
+        queries_per_frame: u32,
+        min_tile_px: u32,
+    ) -> Vec<NodeKey> {
+        let vp = camera.view_proj(aspect).as_dmat4();
+        self.reversed = camera.depth == DepthConvention::ReversedZ;
+        let (w, h) = (size[0] as f64, size[1] as f64);
+        let mut near = Vec::new();
+        let mut rects = Vec::with_capacity(leaves.len());
+        let mut boxes = Vec::with_capacity(leaves.len());
+        let mut keys = Vec::with_capacity(leaves.len());
+        for &k in leaves {
+            let c = geo.world_corners(k);
+            let (mut lo, mut hi) = ([f64::MAX; 2], [f64::MIN; 2]);
+            let mut behind = false;
+            for p in &c {
+                let q = vp * p.extend(1.0);
+                if q.w.is_nan() || q.w <= 1e-9 || !q.z.is_finite() {
+                    behind = true;
+                    break;
+                }
+                let (x, y) = (q.x / q.w, q.y / q.w);
+                lo = [lo[0].min(x), lo[1].min(y)];
+                hi = [hi[0].max(x), hi[1].max(y)];
+            }
+            if behind {
+                near.push(k);
+                continue;
+            }
+            // NDC to pixels (y down), widened to whole pixels.
+            let px = |v: f64, n: f64| ((v * 0.5 + 0.5) * n).clamp(0.0, n);
+            let rect = PxRect::new(
+                px(lo[0], w).floor() as u32,
+                (h - px(hi[1], h)).floor() as u32,
+                px(hi[0], w).ceil() as u32,
+                (h - px(lo[1], h)).ceil() as u32,
+            );
+            rects.push(rect);
+            keys.push(k);
+            let f = |v: glam::DVec3| [v.x as f32, v.y as f32, v.z as f32, 0.0];
+            boxes.push([f(c[0]), f(c[1] - c[0]), f(c[2] - c[0]), f(c[4] - c[0])]);
+        }
+        let cfg = TileSchedulerConfig {
+            queries_per_frame: queries_per_frame.clamp(1, self.budget) as usize,
+            min_tile_px,
+        };
+        let s = schedule_tiles(PxRect::new(0, 0, size[0], size[1]), &rects, &cfg, frame);
+        let data: Vec<[[f32; 4]; 4]> = s.queried.iter().map(|&i| boxes[i]).collect();
+        self.pending = s.queried.iter().map(|&i| keys[i]).collect();
+        if !data.is_empty() {
+            queue.write_buffer(&self.box_buffer, 0, bytemuck::cast_slice(&data));
+        }
+        queue.write_buffer(
+            &self.uniforms,
+            0,
+            bytemuck::bytes_of(&OcclusionUniforms {
+                view_proj: camera.view_proj(aspect).to_cols_array_2d(),
+            }),
+        );
+        self.stats.queries = self.pending.len() as u32;
+        self.stats.period = s.period as u32;
+        self.stats.tiles = s.tiles.len() as u32;
+        self.stats.near_visible = near.len() as u32;
+        near
+    }
+
+    /// Records the depth fill and this frame's queries after the ray cast,
+    /// then the copy of their results into a free ring entry.
+    pub(crate) fn record(
+        &mut self,
+        queue: &wgpu::Queue,
+        encoder: &mut wgpu::CommandEncoder,
+        frame: u64,
+    ) {
+        if self.pending.is_empty() {
+            return;
+        }
+        let Some(e) = self
+            .ring
+            .iter_mut()
+            .find(|e| e.state.load(Ordering::Acquire) == FREE)
+        else {
+            self.stats.frames_skipped += 1;
+            self.pending.clear();
+            return;
+        };
+        let n = self.pending.len() as u32;
+        let far = if self.reversed { 0.0 } else { 1.0 };
+        {
+            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some("brickray-render occlusion queries"),
+                color_attachments: &[],
+                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                    view: &self.targets.depth_view,
+                    depth_ops: Some(wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(far),
+                        store: wgpu::StoreOp::Discard,
+                    }),
+                    stencil_ops: None,
+                }),
+                timestamp_writes: None,
+                occlusion_query_set: Some(&self.queries),
+                multiview_mask: None,
+            });
+            pass.set_bind_group(0, &self.targets.bind_group, &[]);
+            pass.set_pipeline(&self.fill);
+            pass.draw(0..3, 0..1);
+            pass.set_pipeline(if self.reversed {
+                &self.boxes_greater
+            } else {
+                &self.boxes_less
+            });
+            pass.set_vertex_buffer(0, self.box_buffer.slice(..));
+            for i in 0..n {
+                pass.begin_occlusion_query(i);
+                pass.draw(0..36, i..i + 1);
+                pass.end_occlusion_query();
+            }
+        }
+        encoder.resolve_query_set(&self.queries, 0..n, &self.resolve, 0);
+        let stamp = [frame as u32, (frame >> 32) as u32, 0, 0];
+        queue.write_buffer(&self.stamp, 0, bytemuck::cast_slice(&stamp));
+        encoder.copy_buffer_to_buffer(&self.stamp, 0, &e.buffer, 0, STAMP_BYTES);
+        encoder.copy_buffer_to_buffer(&self.resolve, 0, &e.buffer, STAMP_BYTES, n as u64 * 8);
+        e.frame = frame;
+        e.keys = std::mem::take(&mut self.pending);
+        e.state.store(COPIED, Ordering::Release);
+    }
+}
