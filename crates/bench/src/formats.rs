@@ -11,20 +11,12 @@
 //! `--rounds` (default 3). Peak RSS is the process's `VmHWM`, reset before
 //! each build.
 
+use crate::build::peak_rss_mb;
 use brickray_io::ReadOptions;
 use brickray_store::BuildOptions;
 use serde_json::json;
 use std::path::PathBuf;
 use std::time::Instant;
-
-fn peak_rss_mb() -> f64 {
-    let s = std::fs::read_to_string("/proc/self/status").unwrap_or_default();
-    s.lines()
-        .find(|l| l.starts_with("VmHWM:"))
-        .and_then(|l| l.split_whitespace().nth(1))
-        .and_then(|v| v.parse::<f64>().ok())
-        .map_or(f64::NAN, |kb| kb / 1024.0)
-}
 
 pub(crate) fn run(args: &[String]) -> Result<crate::Figures, String> {
     let memory_mib: u64 = crate::arg(args, "--memory-mib", 8)?;

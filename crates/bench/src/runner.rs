@@ -42,6 +42,32 @@ pub(crate) fn process_cpu_ms() -> f64 {
     ticks().map_or(f64::NAN, |t| t * 10.0)
 }
 
+/// An out-of-core renderer over `source` kept at the finest level
+/// (`tolerance_px = 0`, a 1 GiB upload budget so it converges in a few frames).
+pub(crate) fn finest_ooc_renderer(
+    gpu: &GpuContext,
+    source: std::sync::Arc<dyn brickray_core::BrickSource>,
+    frame: VolumeFrame,
+    options: brickray_render::RendererOptions,
+) -> Result<VolumeRenderer, String> {
+    let mut ooc =
+        VolumeRenderer::with_options(&gpu.device, brickray_harness::target_desc(), options)
+            .map_err(|e| e.to_string())?;
+    ooc.set_volume_source(
+        &gpu.device,
+        &gpu.queue,
+        source,
+        frame,
+        brickray_render::OutOfCoreConfig {
+            tolerance_px: 0.0,
+            upload_budget_bytes: 1 << 30,
+            ..Default::default()
+        },
+    )
+    .map_err(|e| e.to_string())?;
+    Ok(ooc)
+}
+
 /// Lanes of one SIMD group of rays: 8 x 32-bit on lavapipe's 256-bit vectors
 /// (consecutive invocations of an 8x8 workgroup are consecutive pixels of a row).
 pub(crate) const SIMD_LANES: usize = 8;
@@ -63,6 +89,22 @@ pub(crate) struct Runner<'a> {
 }
 
 impl<'a> Runner<'a> {
+    /// A full-target frame of the runner's size, without host depth.
+    fn desc(
+        &self,
+        camera: Camera,
+        frame: VolumeFrame,
+        settings: RenderSettings,
+    ) -> FrameDesc<'static> {
+        FrameDesc {
+            camera,
+            frame,
+            viewport: brickray_render::Viewport::full(self.size, self.size),
+            settings,
+            host_depth: None,
+        }
+    }
+
     pub(crate) fn new(gpu: &'a GpuContext, size: u32) -> Self {
         Runner {
             gpu,
@@ -85,13 +127,7 @@ impl<'a> Runner<'a> {
         let cpu0 = process_cpu_ms();
         let t0 = Instant::now();
         let mut enc = g.device.create_command_encoder(&Default::default());
-        let desc = FrameDesc {
-            camera,
-            frame,
-            viewport: brickray_render::Viewport::full(self.size, self.size),
-            settings,
-            host_depth: None,
-        };
+        let desc = self.desc(camera, frame, settings);
         r.prepare(&g.device, &g.queue, &mut enc, &desc)
             .map_err(|e| e.to_string())?;
         {
@@ -143,13 +179,7 @@ impl<'a> Runner<'a> {
     ) -> Result<(), String> {
         let g = self.gpu;
         let mut enc = g.device.create_command_encoder(&Default::default());
-        let desc = FrameDesc {
-            camera,
-            frame,
-            viewport: brickray_render::Viewport::full(self.size, self.size),
-            settings,
-            host_depth: None,
-        };
+        let desc = self.desc(camera, frame, settings);
         r.prepare(&g.device, &g.queue, &mut enc, &desc)
             .map_err(|e| e.to_string())?;
         drop(enc);

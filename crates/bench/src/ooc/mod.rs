@@ -24,7 +24,7 @@
 mod path;
 mod sensitivity;
 
-use crate::runner::{Runner, finite_db, median, quantile, round2};
+use crate::runner::{Runner, finest_ooc_renderer, finite_db, median, quantile, round2};
 use crate::{Figures, arg};
 use brickray_cache::refine::{DataState, MetaState, NodeClass, RefineEnv, RefineParams};
 use brickray_core::{
@@ -137,19 +137,7 @@ fn part_a(gpu: &GpuContext, size: u32, rounds: usize, fig: &mut Figures) -> Resu
     incore
         .set_volume(&gpu.device, &gpu.queue, &vol)
         .map_err(|e| e.to_string())?;
-    let mut ooc = VolumeRenderer::new(&gpu.device, targets()).map_err(|e| e.to_string())?;
-    ooc.set_volume_source(
-        &gpu.device,
-        &gpu.queue,
-        source,
-        frame,
-        OutOfCoreConfig {
-            tolerance_px: 0.0,
-            upload_budget_bytes: 1 << 30,
-            ..Default::default()
-        },
-    )
-    .map_err(|e| e.to_string())?;
+    let mut ooc = finest_ooc_renderer(gpu, source, frame, RendererOptions::default())?;
     let run = Runner::new(gpu, size);
     let settings = |accel| RenderSettings {
         mode: RenderMode::Dvr,

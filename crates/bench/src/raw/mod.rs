@@ -37,13 +37,13 @@
 
 mod kernel;
 
-use crate::runner::{Runner, median, round2};
+use crate::runner::{Runner, finest_ooc_renderer, median, round2};
 use crate::{Figures, arg};
 use brickray_core::{
     Accel, Camera, RenderMode, RenderSettings, Shading, TransferFunction, VolumeFrame,
 };
 use brickray_harness::{GpuContext, target_desc};
-use brickray_render::{OutOfCoreConfig, RendererOptions, U8Filtering, VolumeRenderer};
+use brickray_render::{RendererOptions, U8Filtering, VolumeRenderer};
 use kernel::{MODES, RawKernel};
 use serde_json::json;
 
@@ -126,20 +126,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         .map_err(|e| e.to_string())?;
     let dir = tempfile::tempdir().map_err(|e| e.to_string())?;
     let source = brickray_harness::store_of(&vol, &dir.path().join("mri.brs"));
-    let mut ooc = VolumeRenderer::with_options(&gpu.device, target_desc(), options)
-        .map_err(|e| e.to_string())?;
-    ooc.set_volume_source(
-        &gpu.device,
-        &gpu.queue,
-        source,
-        frame,
-        OutOfCoreConfig {
-            tolerance_px: 0.0,
-            upload_budget_bytes: 1 << 30,
-            ..Default::default()
-        },
-    )
-    .map_err(|e| e.to_string())?;
+    let mut ooc = finest_ooc_renderer(&gpu, source, frame, options)?;
     let mut raw = RawKernel::new(&gpu, &vol, size)?;
     let run = Runner::new(&gpu, size);
     let dvr_tf = TransferFunction::from_points(

@@ -440,7 +440,10 @@ fn reflection_catches_drift() {
             .any(|(_, o)| o.name.as_deref() == Some("GUARD"))
     );
     let moved = incore().replace("@group(0) @binding(6)", "@group(0) @binding(7)");
-    assert_ne!(wgsl_bindings(&module("moved", &moved)), kernel_bindings(&volume_layout_entries(1)));
+    assert_ne!(
+        wgsl_bindings(&module("moved", &moved)),
+        kernel_bindings(&volume_layout_entries(1))
+    );
     // A changed flag bit.
     let flag = incore().replace("FLAG_REVERSED_Z: u32 = 4u", "FLAG_REVERSED_Z: u32 = 8u");
     assert_ne!(
