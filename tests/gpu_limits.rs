@@ -80,15 +80,17 @@ fn limits_below_the_kernels_needs_are_typed_errors_at_creation() {
 
 #[test]
 fn limits_below_a_backends_needs_are_typed_errors() {
-    // In core: 3 storage buffers per stage (TF, prefix sums, macro cells).
-    let g = device_with(|l| l.max_storage_buffers_per_shader_stage = 2);
+    // In core: 5 storage buffers per stage (TF, prefix sums, prediction
+    // history, macro-cell ranges, skip distances).
+    let g = device_with(|l| l.max_storage_buffers_per_shader_stage = 4);
     let mut r = new_renderer(&g).unwrap();
     expect_limit(
         r.set_volume(&g.device, &g.queue, &sphere()),
         "max_storage_buffers_per_shader_stage",
     );
-    // Out of core: 5 (TF, prefix sums, slots, sub-cells, index).
-    let g = device_with(|l| l.max_storage_buffers_per_shader_stage = 4);
+    // Out of core: 7 (TF, prefix sums, prediction history, slots, sub-cells,
+    // index, usage counters).
+    let g = device_with(|l| l.max_storage_buffers_per_shader_stage = 6);
     let mut r = new_renderer(&g).unwrap();
     r.set_volume(&g.device, &g.queue, &sphere()).unwrap();
     let frame = VolumeFrame::centered([1024; 3], [1.0; 3]);
