@@ -52,6 +52,7 @@ fn copy_with(src: &Path, dst: &Path, edits: &[(dicom_core::Tag, VR, PrimitiveVal
 }
 
 #[test]
+#[cfg_attr(no_shared_data, ignore = "needs ../shared/data/formats (absent)")]
 fn ct_series_fixture_decodes_in_hounsfield_units() {
     let Some(dir) = fixture() else { return };
     let t = truth("invesalius_cranium_ct");
@@ -73,6 +74,7 @@ fn ct_series_fixture_decodes_in_hounsfield_units() {
 }
 
 #[test]
+#[cfg_attr(no_shared_data, ignore = "needs ../shared/data/formats (absent)")]
 fn two_series_with_shuffled_names() {
     let Some(dir) = fixture() else { return };
     let t = truth("invesalius_cranium_ct");
@@ -132,6 +134,7 @@ fn two_series_with_shuffled_names() {
 }
 
 #[test]
+#[cfg_attr(no_shared_data, ignore = "needs ../shared/data/formats (absent)")]
 fn missing_slice_mixed_sizes_and_unknown_syntax_are_refused() {
     let Some(dir) = fixture() else { return };
     let src = by_position(&dir);

@@ -379,6 +379,7 @@ fn nifti_lying_headers_are_typed_errors() {
 // TIFF.
 
 #[test]
+#[cfg_attr(no_shared_data, ignore = "needs ../shared/data/formats (absent)")]
 fn tiff_stack_fixture_decodes() {
     let Some(dir) = formats_dir() else { return };
     let t = truth("cells3d_nuclei_fluo");
@@ -395,6 +396,7 @@ fn tiff_stack_fixture_decodes() {
 }
 
 #[test]
+#[cfg_attr(no_shared_data, ignore = "needs ../shared/data/formats (absent)")]
 fn tiff_slice_folder_fixture_decodes() {
     let Some(dir) = formats_dir() else { return };
     let t = truth("cryoet_tomo");
@@ -409,6 +411,7 @@ fn tiff_slice_folder_fixture_decodes() {
 }
 
 #[test]
+#[cfg_attr(no_shared_data, ignore = "needs ../shared/data/formats (absent)")]
 fn tiff_slice_folder_with_unpadded_numbers() {
     let Some(dir) = formats_dir() else { return };
     let t = truth("cryoet_tomo");
@@ -438,6 +441,7 @@ fn tiff_slice_folder_with_unpadded_numbers() {
 }
 
 #[test]
+#[cfg_attr(no_shared_data, ignore = "needs ../shared/data/formats (absent)")]
 fn tiff_bad_files_are_typed_errors() {
     let Some(dir) = formats_dir() else { return };
     let d = TempDir::new().unwrap();

@@ -24,6 +24,7 @@ const CASES: [(&str, &str); 2] = [
 ];
 
 #[test]
+#[cfg_attr(no_shared_data, ignore = "needs ../shared/data/formats (absent)")]
 fn fixtures_decode_at_the_finest_level() {
     for (store, raw) in CASES {
         let Some(p) = fixture(store) else { return };
@@ -45,6 +46,7 @@ fn fixtures_decode_at_the_finest_level() {
 }
 
 #[test]
+#[cfg_attr(no_shared_data, ignore = "needs ../shared/data/formats (absent)")]
 fn levels_are_listed_and_selectable() {
     let Some(p) = fixture("pycortex_s1_t1_v05.ome.zarr") else {
         return;
@@ -99,6 +101,7 @@ fn copy_dir(src: &Path, dst: &Path) {
 }
 
 #[test]
+#[cfg_attr(no_shared_data, ignore = "needs ../shared/data/formats (absent)")]
 fn missing_chunk_is_fill_corrupt_chunk_is_an_error() {
     let Some(p) = fixture("pycortex_s1_t1_v05.ome.zarr") else {
         return;
@@ -144,6 +147,7 @@ fn missing_chunk_is_fill_corrupt_chunk_is_an_error() {
 }
 
 #[test]
+#[cfg_attr(no_shared_data, ignore = "needs ../shared/data/formats (absent)")]
 fn streamed_bricks_equal_the_built_store_at_the_finest_level() {
     let Some(p) = fixture("cryoet_tomo_v04.ome.zarr") else {
         return;

@@ -117,6 +117,7 @@ fn build_then_info() {
 /// `convert` writes raw + JSON for inputs in other formats (the shared
 /// fixtures), voxel for voxel, and `info` lists an input's parts.
 #[test]
+#[cfg_attr(no_shared_data, ignore = "needs ../shared/data/formats (absent)")]
 fn convert_and_info_read_every_format() {
     let Some(root) = shared_formats_dir() else {
         return;
