@@ -343,3 +343,65 @@ fn opens_a_store_and_a_procedural_volume_out_of_core() {
         "procedural: only {lit} lit pixels of {w}x{h}"
     );
 }
+
+/// Every format of the shared fixtures opens in the viewer (through
+/// `brickray::io::open`) and shows an image (MIP, grey TF): NIfTI, a TIFF
+/// stack, a folder of TIFF slices, a DICOM series and OME-Zarr 0.4 and 0.5.
+#[test]
+#[cfg_attr(
+    no_shared_data,
+    ignore = "needs ../shared/data (the format fixtures), absent when the tests were built"
+)]
+#[cfg_attr(
+    no_display,
+    ignore = "needs an X server (DISPLAY unset when the tests were built; scripts/test.sh starts Xvfb)"
+)]
+fn opens_every_shared_format() {
+    if !display_available() {
+        return;
+    }
+    let formats = brickray_harness::shared_data_dir()
+        .expect("shared data")
+        .join("formats");
+    let inputs = [
+        ("nifti", "nifti/pycortex_s1_t1.nii.gz"),
+        ("tiff_stack", "tiff/cells3d_nuclei.tif"),
+        ("tiff_slices", "tiff_slices/cryoet_tomo"),
+        ("dicom", "dicom/cranium_ct"),
+        ("zarr_v04", "ome-zarr/cryoet_tomo_v04.ome.zarr"),
+        ("zarr_v05", "ome-zarr/pycortex_s1_t1_v05.ome.zarr"),
+    ];
+    let dir = tempfile::tempdir().expect("temp dir");
+    let mut script = String::from("background 0 0 0\noverlays off\n");
+    for (name, rel) in inputs {
+        script += &format!(
+            "open {}\ntf grey\nmode mip\nwait 2\nscreenshot {}\n",
+            formats.join(rel).display(),
+            dir.path().join(format!("{name}.png")).display()
+        );
+    }
+    script += "quit\n";
+    let path = dir.path().join("script.txt");
+    std::fs::write(&path, script).expect("write the script");
+    let run = run_viewer(&path, Duration::from_secs(240));
+    assert!(
+        run.status.success(),
+        "the viewer failed ({:?}): {}",
+        run.status,
+        String::from_utf8_lossy(&run.stderr)
+    );
+    for (name, _) in inputs {
+        let (shot, w, h) = read_png(&dir.path().join(format!("{name}.png")));
+        let lit = shot
+            .chunks(4)
+            .filter(|p| p[..3].iter().any(|&c| c > 20))
+            .count();
+        eprintln!("{name}: {lit} lit pixels of {w}x{h}");
+        // The nuclei stack is thin (60 slices of 256x256): about 2.5% of the
+        // view; a failed open or an empty volume draws none.
+        assert!(
+            lit * 100 > (w * h) as usize,
+            "{name}: only {lit} lit pixels"
+        );
+    }
+}
