@@ -92,7 +92,7 @@ fn streamed_ome_zarr_renders_as_the_built_store() {
         };
         let g = gpu();
         let mut a = VolumeRenderer::new(&g.device, targets()).unwrap();
-        a.set_volume_source(&g.device, &g.queue, store, wf, cfg.clone())
+        a.set_volume_source(&g.device, &g.queue, store, wf, cfg)
             .unwrap();
         let mut b = VolumeRenderer::new(&g.device, targets()).unwrap();
         b.set_volume_source(&g.device, &g.queue, streamed, wf, cfg)
