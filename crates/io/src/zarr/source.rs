@@ -1,0 +1,275 @@
+//! The OME-Zarr image served as a `BrickSource`: octree bricks assembled from
+//! the chunks on demand, without a store (see [`ZarrBrickSource`]).
+
+use super::*;
+
+/// An OME-Zarr image served as a brick octree, without building a store.
+///
+/// The octree is the one a store built from the finest level would have
+/// ([`OctreeLayout::new`] with the given brick size and apron). A brick of
+/// octree level `l` (`2^s` finest voxels per voxel, `s = levels - 1 - l`) is
+/// read from the coarsest pyramid level whose voxels are no larger than that
+/// on any axis (its own scale transform says how much larger than the finest
+/// they are, rounded to a power of two), and box-filtered by the remaining
+/// factor per axis: a file whose pyramid halves only x and y (as
+/// ome-zarr-py's does) is filtered along z only. Aprons come from the
+/// neighbouring chunks, clamped at the volume's faces, as in a built store.
+/// Node min/max are those of the brick's footprint, computed on first ask
+/// and kept.
+pub struct ZarrBrickSource {
+    zarr: OmeZarr,
+    c: u64,
+    t: u64,
+    layout: OctreeLayout,
+    conv: SampleConverter,
+    /// Per octree level: the pyramid level read and the remaining factor per axis.
+    plan: Vec<(usize, [u64; 3])>,
+    nodes: Mutex<HashMap<NodeKey, NodeInfo>>,
+}
+
+impl std::fmt::Debug for ZarrBrickSource {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ZarrBrickSource")
+            .field("root", &self.zarr.root)
+            .field("layout", &self.layout)
+            .field("plan", &self.plan)
+            .finish()
+    }
+}
+
+impl ZarrBrickSource {
+    /// Opens `root` (channel and time point from `opts`; its level is ignored:
+    /// every level is used) as an octree of `brick`-voxel bricks with `apron`
+    /// voxels of apron. `value_range`: the finest level's range if known (a
+    /// store built from the same data declares it), else one scan of the
+    /// finest level finds it.
+    pub fn open(
+        root: &Path,
+        opts: &ReadOptions,
+        brick: u32,
+        apron: u32,
+        value_range: Option<[f32; 2]>,
+    ) -> Result<ZarrBrickSource, IoError> {
+        let zarr = OmeZarr::open(root)?;
+        let (_, c, t) = zarr.check_choice(&ReadOptions {
+            level: None,
+            ..opts.clone()
+        })?;
+        let dims64 = zarr.dims(0);
+        brickray_core::volume::voxel_count(dims64).map_err(|e| IoError::volume(root, e))?;
+        let range = match value_range {
+            Some([a, b]) => [a as f64, b as f64],
+            None => scan(&zarr, 0, c, t)?,
+        };
+        let conv = SampleConverter::choose(zarr.src, false, 1.0, 0.0, Some(range));
+        let (s, _) = zarr.xyz(0);
+        let desc = VolumeDesc {
+            dims: dims64.map(|d| d as u32),
+            dtype: conv.dst,
+            spacing: s.map(|v| v as f32),
+            value_range: desc_range(range),
+        };
+        desc.validate().map_err(|e| IoError::volume(root, e))?;
+        let layout = OctreeLayout::new(desc, brick, apron);
+        // Each pyramid level's factor per axis, as a power of two.
+        let (s0, _) = zarr.xyz(0);
+        let factors: Vec<[u64; 3]> = (0..zarr.levels.len())
+            .map(|m| {
+                let (sm, _) = zarr.xyz(m);
+                [0, 1, 2].map(|a| {
+                    let r = (sm[a] / s0[a]).max(1.0);
+                    1u64 << (r.log2().round().clamp(0.0, 40.0) as u32)
+                })
+            })
+            .collect();
+        let plan = (0..layout.levels)
+            .map(|l| {
+                let f = 1u64 << (layout.levels - 1 - l);
+                let best = (0..factors.len())
+                    .filter(|&m| factors[m].iter().all(|&x| x <= f))
+                    .max_by_key(|&m| factors[m].iter().product::<u64>())
+                    .unwrap_or(0);
+                (best, factors[best].map(|x| f / x))
+            })
+            .collect();
+        Ok(ZarrBrickSource {
+            zarr,
+            c,
+            t,
+            layout,
+            conv,
+            plan,
+            nodes: Mutex::new(HashMap::new()),
+        })
+    }
+
+    /// Where the volume lies (the finest level's transforms).
+    pub fn placement(&self) -> Placement {
+        let (s, t) = self.zarr.xyz(0);
+        Placement::axis_aligned(s, t, "image")
+    }
+
+    /// The level-`l` voxel box `lo..=hi` a node's brick reads (clamped).
+    fn footprint(&self, key: NodeKey) -> ([u64; 3], [u64; 3]) {
+        let d = self.layout.level_dims(key.level).map(|d| d as i64);
+        let b = self.layout.brick as i64;
+        let a = self.layout.apron as i64;
+        let p = [key.x, key.y, key.z].map(|c| c as i64);
+        let lo = [0, 1, 2].map(|i| (p[i] * b - a).clamp(0, d[i] - 1) as u64);
+        let hi = [0, 1, 2].map(|i| (p[i] * b + b + a - 1).clamp(0, d[i] - 1) as u64);
+        (lo, hi)
+    }
+
+    /// Values (rescaled, f64) of the octree-level box `lo..=hi`, x fastest.
+    fn values(&self, level: u8, lo: [u64; 3], hi: [u64; 3]) -> Result<Vec<f64>, IoError> {
+        let (m, r) = self.plan[level as usize];
+        let md = self.zarr.dims(m);
+        let zlo = [0, 1, 2].map(|a| (lo[a] * r[a]).min(md[a] - 1));
+        let zhi = [0, 1, 2].map(|a| ((hi[a] + 1) * r[a]).min(md[a]).max(zlo[a] + 1));
+        let bytes = self.zarr.region(m, self.c, self.t, zlo, zhi)?;
+        let n = self.zarr.src.size();
+        let src: Vec<f64> = bytes.chunks_exact(n).map(|s| self.conv.value(s)).collect();
+        if r == [1, 1, 1] {
+            return Ok(src);
+        }
+        let zn = [0, 1, 2].map(|a| zhi[a] - zlo[a]);
+        let out_n = [0, 1, 2].map(|a| hi[a] - lo[a] + 1);
+        let mut out = Vec::with_capacity((out_n[0] * out_n[1] * out_n[2]) as usize);
+        for k in 0..out_n[2] {
+            for j in 0..out_n[1] {
+                for i in 0..out_n[0] {
+                    let (mut sum, mut cnt) = (0.0, 0.0);
+                    let o = [i, j, k];
+                    let start = [0, 1, 2].map(|a| ((lo[a] + o[a]) * r[a]).min(md[a] - 1) - zlo[a]);
+                    for dz in 0..r[2] {
+                        let z = (start[2] + dz).min(zn[2] - 1);
+                        for dy in 0..r[1] {
+                            let y = (start[1] + dy).min(zn[1] - 1);
+                            for dx in 0..r[0] {
+                                let x = (start[0] + dx).min(zn[0] - 1);
+                                sum += src[((z * zn[1] + y) * zn[0] + x) as usize];
+                                cnt += 1.0;
+                            }
+                        }
+                    }
+                    out.push(sum / cnt);
+                }
+            }
+        }
+        Ok(out)
+    }
+
+    fn check(&self, key: NodeKey) -> Result<bool, BrickError> {
+        let n = 1u64 << key.level.min(63);
+        if key.level >= self.layout.levels || [key.x, key.y, key.z].iter().any(|&p| p as u64 >= n) {
+            return Err(BrickError::OutOfRange { key });
+        }
+        Ok(self.layout.in_volume(key))
+    }
+
+    fn brick_err(key: NodeKey, e: IoError) -> BrickError {
+        BrickError::Corrupt {
+            key,
+            reason: e.to_string(),
+        }
+    }
+}
+
+fn store_value(dst: DType, v: f64, out: &mut [u8]) {
+    match dst {
+        DType::U8 => out[0] = v.round() as u8,
+        DType::U16 => out.copy_from_slice(&(v.round() as u16).to_le_bytes()),
+        DType::I16 => out.copy_from_slice(&(v.round() as i16).to_le_bytes()),
+        _ => out.copy_from_slice(&(v as f32).to_le_bytes()),
+    }
+}
+
+impl BrickSource for ZarrBrickSource {
+    fn layout(&self) -> &OctreeLayout {
+        &self.layout
+    }
+
+    fn node(&self, key: NodeKey) -> Result<NodeInfo, BrickError> {
+        if !self.check(key)? {
+            return Ok(NodeInfo {
+                kind: NodeKind::Empty,
+                min: 0.0,
+                max: 0.0,
+            });
+        }
+        if let Some(n) = self.nodes.lock().get(&key) {
+            return Ok(*n);
+        }
+        let (lo, hi) = self.footprint(key);
+        let v = self
+            .values(key.level, lo, hi)
+            .map_err(|e| Self::brick_err(key, e))?;
+        let (mn, mx) = v
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
+                (a.min(x), b.max(x))
+            });
+        // as stored: integer types round
+        let q = |x: f64| {
+            let mut b = [0u8; 4];
+            let n = self.layout.dtype().size();
+            store_value(self.layout.dtype(), x, &mut b[..n]);
+            brickray_core::VolumeData::from_le_bytes(self.layout.dtype(), &b[..n]).get(0)
+        };
+        let (mn, mx) = (q(mn), q(mx));
+        let info = NodeInfo {
+            kind: if mn == mx {
+                NodeKind::Uniform(mn)
+            } else {
+                NodeKind::Data
+            },
+            min: mn,
+            max: mx,
+        };
+        self.nodes.lock().insert(key, info);
+        Ok(info)
+    }
+
+    fn read_brick(&self, key: NodeKey, out: &mut [u8]) -> Result<(), BrickError> {
+        let expected = self.layout.brick_bytes();
+        if out.len() != expected {
+            return Err(BrickError::BufferSize {
+                expected,
+                actual: out.len(),
+            });
+        }
+        let dst = self.layout.dtype();
+        let sz = dst.size();
+        if !self.check(key)? {
+            let lo = self.layout.volume.value_range[0] as f64;
+            for o in out.chunks_exact_mut(sz) {
+                store_value(dst, lo, o);
+            }
+            return Ok(());
+        }
+        let (lo, hi) = self.footprint(key);
+        let vals = self
+            .values(key.level, lo, hi)
+            .map_err(|e| Self::brick_err(key, e))?;
+        let n = [0, 1, 2].map(|a| (hi[a] - lo[a] + 1) as i64);
+        let d = self.layout.level_dims(key.level).map(|d| d as i64);
+        let b = self.layout.brick as i64;
+        let a = self.layout.apron as i64;
+        let side = self.layout.stored_side() as i64;
+        let origin = [key.x, key.y, key.z].map(|c| c as i64 * b - a);
+        let idx = |axis: usize, i: i64| (origin[axis] + i).clamp(0, d[axis] - 1) - lo[axis] as i64;
+        let mut o = 0;
+        for k in 0..side {
+            let zk = idx(2, k);
+            for j in 0..side {
+                let yj = idx(1, j);
+                let row = (zk * n[1] + yj) * n[0];
+                for i in 0..side {
+                    store_value(dst, vals[(row + idx(0, i)) as usize], &mut out[o..o + sz]);
+                    o += sz;
+                }
+            }
+        }
+        Ok(())
+    }
+}
