@@ -14,6 +14,7 @@ mod prediction_chart;
 mod raw;
 mod runner;
 mod soak;
+mod stability;
 mod u8;
 mod visibility;
 
@@ -173,6 +174,21 @@ enum Suite {
         #[arg(long)]
         svg: Option<String>,
     },
+    /// Stability: scripted scenes that drive each method to where it breaks
+    /// (streaming, memory pressure, high-frequency TF, thin structures,
+    /// grazing rays, precision at 65536^3, ERT, prediction and disocclusion),
+    /// against the f64 reference.
+    Stability {
+        /// Image side in pixels (default 128; also the volumes' side).
+        #[arg(long)]
+        size: Option<u32>,
+        /// Cases, comma-separated numbers 1-8 (default all).
+        #[arg(long)]
+        cases: Option<String>,
+        /// Folder of the SVG charts (default docs/charts; empty: none).
+        #[arg(long)]
+        charts: Option<String>,
+    },
     /// u8 volumes: exact interpolation vs 8-bit texels.
     U8 {
         /// Image side in pixels (default 512).
@@ -197,6 +213,7 @@ fn main() -> ExitCode {
         Suite::Prediction { .. } => prediction::run(rest),
         Suite::Raw { .. } => raw::run(rest),
         Suite::Soak { .. } => soak::run(rest),
+        Suite::Stability { .. } => stability::run(rest),
         Suite::U8 { .. } => u8::run(rest),
         Suite::Visibility { .. } => visibility::run(rest),
     };

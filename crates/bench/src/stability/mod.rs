@@ -1,0 +1,163 @@
+//! The `stability` suite: scripted scenes that drive one method each to where it
+//! breaks, measured against the f64 CPU reference (`brickray-reference`: PSNR
+//! and mean FLIP of 8-bit RGB over black), reporting the setting brickray
+//! ships and the bound it keeps.
+//!
+//! Cases (`--cases`, comma-separated numbers, default all):
+//!
+//! 1. streaming under a tiny pool and a slow source (delay per brick read);
+//! 2. memory pressure: a pool smaller than the view needs, the camera circling;
+//! 3. a high-frequency TF (narrow opacity spike) at steps 1/8 to 4 voxels;
+//! 4. thin structures (one-voxel sheets, lines, bright voxels) at coarse
+//!    levels, DVR, iso and MIP, average vs max downsampling;
+//! 5. grazing rays: an orthographic view exactly axis-aligned with every ray on
+//!    a voxel face (brick faces included), and a perspective view whose centre
+//!    column lies in a brick face;
+//! 6. precision at 65536^3: single voxels at the far corner, sample positions
+//!    emulated in f32 and the image against the reference;
+//! 7. early ray termination thresholds 0.9 to 0.999 on a translucent TF;
+//! 8. the prediction buffer's failure path and the visibility feedback's
+//!    disocclusion, error over frames.
+//!
+//! Each case prints a table and returns a [`Case`]: what was varied, where it
+//! fails, by how much, the shipped setting and the bound it keeps. The last
+//! line holds `holes_max`, `cases_with_bound`, `cases_total` and the per-case
+//! figures.
+//!
+//! `cargo run --release -p brickray-bench -- stability [--size 128] [--cases 1,2,...] [--charts docs/charts]`
+
+mod detail;
+mod geometry;
+mod sampling;
+mod streaming;
+mod temporal;
+mod util;
+
+pub(crate) use util::*;
+
+use crate::{Figures, arg};
+use brickray_harness::GpuContext;
+use serde_json::json;
+use std::time::Instant;
+
+/// What one case established.
+pub(crate) struct Case {
+    /// Short name (`streaming`, ...).
+    pub(crate) name: &'static str,
+    /// What was varied.
+    pub(crate) varied: String,
+    /// Where the method fails (or "does not fail in the range").
+    pub(crate) fails: String,
+    /// By how much.
+    pub(crate) by: String,
+    /// The shipped setting.
+    pub(crate) shipped: String,
+    /// The bound the shipped setting keeps, with its metric.
+    pub(crate) bound: String,
+    /// Whether the shipped setting kept the bound in this run.
+    pub(crate) holds: bool,
+    /// Most hole pixels seen in any frame of the case.
+    pub(crate) holes_max: u64,
+    /// The case's figures.
+    pub(crate) fig: serde_json::Value,
+}
+
+/// What the cases share.
+pub(crate) struct Ctx<'a> {
+    pub(crate) gpu: &'a GpuContext,
+    /// Image side.
+    pub(crate) size: u32,
+    /// Where charts go (`docs/charts` by default; empty: none).
+    pub(crate) charts: String,
+}
+
+pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
+    let size: u32 = arg(args, "--size", 128)?;
+    let cases: String = arg(args, "--cases", "1,2,3,4,5,6,7,8".to_string())?;
+    let charts: String = arg(args, "--charts", "docs/charts".to_string())?;
+    let wanted: Vec<u32> = cases
+        .split(',')
+        .map(|s| s.trim().parse().map_err(|_| format!("bad case {s}")))
+        .collect::<Result<_, _>>()?;
+    if !(32..=1024).contains(&size) {
+        return Err("--size must be in 32..=1024".into());
+    }
+    let gpu = GpuContext::new().map_err(|e| e.to_string())?;
+    println!("adapter: {}", gpu.describe());
+    println!("image {size}x{size}; cases {cases}; charts into {charts:?}");
+    if !charts.is_empty() {
+        std::fs::create_dir_all(&charts).map_err(|e| e.to_string())?;
+    }
+    let ctx = Ctx {
+        gpu: &gpu,
+        size,
+        charts,
+    };
+    let t = Instant::now();
+    let mut done: Vec<Case> = Vec::new();
+    for c in wanted {
+        let t0 = Instant::now();
+        let case = match c {
+            1 => streaming::streaming(&ctx)?,
+            2 => streaming::pressure(&ctx)?,
+            3 => sampling::high_frequency_tf(&ctx)?,
+            4 => detail::thin_structures(&ctx)?,
+            5 => geometry::grazing(&ctx)?,
+            6 => geometry::precision(&ctx)?,
+            7 => sampling::ert(&ctx)?,
+            8 => temporal::prediction_and_disocclusion(&ctx)?,
+            _ => return Err(format!("no case {c} (1-8)")),
+        };
+        println!(
+            "  => {}: fails {}; by {}; shipped {}; bound {} ({}) [{:.0} s]",
+            case.name,
+            case.fails,
+            case.by,
+            case.shipped,
+            case.bound,
+            if case.holds { "kept" } else { "NOT KEPT" },
+            t0.elapsed().as_secs_f64()
+        );
+        done.push(case);
+    }
+    // MERGE POINT (LOD fly-through and zoom with fades): the lead calls
+    // `paths::cases(&ctx)?` here and appends its `Case`s to `done`, so its
+    // holes and bounds enter the summary below and the last JSON line.
+
+    println!("\nsummary (case | where it fails | by how much | shipped | bound | kept):");
+    for c in &done {
+        println!(
+            "  {} | {} | {} | {} | {} | {}",
+            c.name,
+            c.fails,
+            c.by,
+            c.shipped,
+            c.bound,
+            if c.holds { "yes" } else { "NO" }
+        );
+    }
+    println!("suite wall time: {:.0} s", t.elapsed().as_secs_f64());
+    let mut fig = Figures::new();
+    fig.insert(
+        "holes_max".into(),
+        json!(done.iter().map(|c| c.holes_max).max().unwrap_or(0)),
+    );
+    fig.insert(
+        "cases_with_bound".into(),
+        json!(done.iter().filter(|c| c.holds).count()),
+    );
+    fig.insert("cases_total".into(), json!(done.len()));
+    fig.insert("image_size".into(), json!(size));
+    for c in done {
+        fig.insert(
+            c.name.into(),
+            json!({
+                "varied": c.varied, "fails": c.fails, "by": c.by,
+                "shipped": c.shipped, "bound": c.bound, "kept": c.holds,
+                "holes_max": c.holes_max, "figures": c.fig,
+            }),
+        );
+    }
+    fig.insert("adapter".into(), json!(gpu.adapter.get_info().name));
+    Ok(fig)
+}

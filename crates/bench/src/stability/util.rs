@@ -1,0 +1,318 @@
+//! What the stability cases share: volumes with a CPU twin for the reference,
+//! a slow source, renderers, image measures and charts.
+
+use brickray_core::{
+    BrickError, BrickSource, Camera, DType, NodeInfo, NodeKey, OctreeLayout, RenderSettings,
+    TransferFunction, Volume, VolumeData, VolumeDesc, VolumeFrame,
+};
+use brickray_harness::{GpuContext, target_desc};
+use brickray_render::{OutOfCoreConfig, VolumeRenderer};
+use brickray_store::ProceduralSource;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::Duration;
+
+/// `e.to_string()`, for `map_err`.
+pub(crate) fn s<E: std::fmt::Display>(e: E) -> String {
+    e.to_string()
+}
+
+/// A u8 volume of `dims` voxels from `data` (x fastest), value range 0..255.
+pub(crate) fn u8_volume(dims: [u32; 3], data: Vec<u8>) -> Result<Volume, String> {
+    Volume::new(
+        VolumeDesc {
+            dims,
+            dtype: DType::U8,
+            spacing: [1.0; 3],
+            value_range: [0.0, 255.0],
+        },
+        VolumeData::U8(data),
+    )
+    .map_err(s)
+}
+
+/// The finest-level box `lo .. lo + n` of a procedural source as a volume (the
+/// CPU reference's twin of the bricks the renderer streams).
+pub(crate) fn region_volume(
+    src: &ProceduralSource,
+    lo: [u64; 3],
+    n: [u64; 3],
+) -> Result<Volume, String> {
+    let finest = src.layout().levels - 1;
+    let hi = [0, 1, 2].map(|a| lo[a] + n[a] - 1);
+    let data = src.region(finest, lo, hi).map_err(s)?;
+    u8_volume(n.map(|v| v as u32), data)
+}
+
+/// Fractal noise of `dims^3` in bricks of `brick` (apron 2): the source and the
+/// whole finest level as a volume.
+pub(crate) fn noise(dims: u64, brick: u32) -> Result<(Volume, Arc<ProceduralSource>), String> {
+    let src = ProceduralSource::fractal_noise([dims; 3], brick, 2).map_err(s)?;
+    let vol = region_volume(&src, [0; 3], [dims; 3])?;
+    Ok((vol, Arc::new(src)))
+}
+
+/// The reference image (8-bit RGBA over black) at `step` voxels.
+pub(crate) fn reference(
+    vol: &Volume,
+    frame: &VolumeFrame,
+    tf: &TransferFunction,
+    camera: &Camera,
+    settings: &RenderSettings,
+    size: u32,
+    step: f32,
+) -> Vec<u8> {
+    let opts = brickray_reference::ReferenceOptions::new(size, size).with_step_factor(step);
+    brickray_reference::render_reference(vol, frame, tf, camera, settings, &opts).to_rgba8([0.0; 3])
+}
+
+/// Brightest RGB channel of pixel `i`.
+fn peak(img: &[u8], i: usize) -> u8 {
+    img[4 * i].max(img[4 * i + 1]).max(img[4 * i + 2])
+}
+
+/// Reference pixels at least this bright (of 255) count as "something here".
+pub(crate) const HOLE_REF_MIN: u8 = 24;
+/// Image pixels at most this bright count as "nothing drawn".
+pub(crate) const HOLE_IMG_MAX: u8 = 2;
+
+/// Hole pixels: drawn from no level (at most [`HOLE_IMG_MAX`]) where the
+/// reference shows something (at least [`HOLE_REF_MIN`]).
+pub(crate) fn holes(img: &[u8], reference: &[u8]) -> u64 {
+    (0..img.len() / 4)
+        .filter(|&i| peak(reference, i) >= HOLE_REF_MIN && peak(img, i) <= HOLE_IMG_MAX)
+        .count() as u64
+}
+
+/// Mean absolute difference of the RGB channels, in 8-bit levels.
+pub(crate) fn mean_abs_diff(a: &[u8], b: &[u8]) -> f64 {
+    let mut sum = 0u64;
+    let mut n = 0u64;
+    for (pa, pb) in a.chunks_exact(4).zip(b.chunks_exact(4)) {
+        for c in 0..3 {
+            sum += (pa[c] as i32 - pb[c] as i32).unsigned_abs() as u64;
+            n += 1;
+        }
+    }
+    sum as f64 / n.max(1) as f64
+}
+
+/// PSNR (dB, 999 when equal) and mean FLIP of `img` against `reference`.
+pub(crate) fn quality(img: &[u8], reference: &[u8], size: u32) -> (f64, f64) {
+    let p = crate::runner::finite_db(brickray_reference::psnr(img, reference));
+    let f = brickray_reference::mean_flip(img, reference, size, size) as f64;
+    (p, (f * 1e4).round() / 1e4)
+}
+
+/// An in-core renderer of `vol` with `tf`.
+pub(crate) fn incore(
+    gpu: &GpuContext,
+    vol: &Volume,
+    tf: &TransferFunction,
+) -> Result<VolumeRenderer, String> {
+    let mut r = VolumeRenderer::new(&gpu.device, target_desc()).map_err(s)?;
+    r.set_volume(&gpu.device, &gpu.queue, vol).map_err(s)?;
+    r.set_transfer_function(&gpu.device, &gpu.queue, tf)
+        .map_err(s)?;
+    Ok(r)
+}
+
+/// An out-of-core renderer of `source` with `config` and `tf`.
+pub(crate) fn ooc(
+    gpu: &GpuContext,
+    source: Arc<dyn BrickSource>,
+    frame: VolumeFrame,
+    config: OutOfCoreConfig,
+    tf: &TransferFunction,
+) -> Result<VolumeRenderer, String> {
+    let mut r = VolumeRenderer::new(&gpu.device, target_desc()).map_err(s)?;
+    r.set_volume_source(&gpu.device, &gpu.queue, source, frame, config)
+        .map_err(s)?;
+    r.set_transfer_function(&gpu.device, &gpu.queue, tf)
+        .map_err(s)?;
+    Ok(r)
+}
+
+/// A source that sleeps `delay` before every brick read (a slow disk or
+/// network) and counts the reads.
+pub(crate) struct SlowSource {
+    pub(crate) inner: Arc<dyn BrickSource>,
+    pub(crate) delay: Duration,
+    pub(crate) reads: AtomicU64,
+}
+
+impl SlowSource {
+    pub(crate) fn new(inner: Arc<dyn BrickSource>, delay: Duration) -> SlowSource {
+        SlowSource {
+            inner,
+            delay,
+            reads: AtomicU64::new(0),
+        }
+    }
+}
+
+impl BrickSource for SlowSource {
+    fn layout(&self) -> &OctreeLayout {
+        self.inner.layout()
+    }
+
+    fn node(&self, key: NodeKey) -> Result<NodeInfo, BrickError> {
+        self.inner.node(key)
+    }
+
+    fn read_brick(&self, key: NodeKey, out: &mut [u8]) -> Result<(), BrickError> {
+        std::thread::sleep(self.delay);
+        self.reads.fetch_add(1, Ordering::Relaxed);
+        self.inner.read_brick(key, out)
+    }
+}
+
+/// One line of a chart.
+pub(crate) struct Series {
+    pub(crate) name: String,
+    pub(crate) points: Vec<(f64, f64)>,
+}
+
+/// A line chart (SVG) at `dir/file`; `log2_x` puts x on a log2 axis. Does
+/// nothing when `dir` is empty.
+pub(crate) fn line_chart(
+    dir: &str,
+    file: &str,
+    title: &str,
+    x_desc: &str,
+    y_desc: &str,
+    series: &[Series],
+    log2_x: bool,
+) -> Result<(), String> {
+    use plotters::prelude::*;
+    if dir.is_empty() || series.iter().all(|s| s.points.is_empty()) {
+        return Ok(());
+    }
+    let path = std::path::Path::new(dir).join(file);
+    let fx = |x: f64| if log2_x { x.log2() } else { x };
+    let pts = || series.iter().flat_map(|s| s.points.iter());
+    let (x0, x1) = pts().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| {
+        (a.min(fx(p.0)), b.max(fx(p.0)))
+    });
+    let (y0, y1) = pts().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| {
+        (a.min(p.1), b.max(p.1))
+    });
+    let pad = ((y1 - y0) * 0.05).max(1e-3);
+    let xr = if x1 > x0 { x0..x1 } else { x0 - 1.0..x0 + 1.0 };
+    let root = SVGBackend::new(&path, (800, 480)).into_drawing_area();
+    root.fill(&WHITE).map_err(s)?;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(title, ("sans-serif", 18))
+        .margin(12)
+        .x_label_area_size(36)
+        .y_label_area_size(56)
+        .build_cartesian_2d(xr, y0 - pad..y1 + pad)
+        .map_err(s)?;
+    chart
+        .configure_mesh()
+        .x_desc(if log2_x {
+            format!("log2 {x_desc}")
+        } else {
+            x_desc.to_string()
+        })
+        .y_desc(y_desc)
+        .draw()
+        .map_err(s)?;
+    let colors = [BLACK, BLUE, RED, GREEN, MAGENTA, CYAN];
+    for (k, se) in series.iter().enumerate() {
+        let c = colors[k % colors.len()];
+        chart
+            .draw_series(LineSeries::new(
+                se.points.iter().map(|&(x, y)| (fx(x), y)),
+                c,
+            ))
+            .map_err(s)?
+            .label(se.name.clone())
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c));
+    }
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()
+        .map_err(s)?;
+    root.present().map_err(s)?;
+    println!("  wrote {}", path.display());
+    Ok(())
+}
+
+/// A GPU-free twin of the renderer's planning (a `BrickManager` over the same
+/// source, configuration and cameras, root preloaded as the renderer does)
+/// that checks every planned cut for holes: leaves that want data and hold
+/// none (`Empty(NotLoaded)`, `Empty(Failed)`, data leaves without a slot,
+/// allocation failures), and leaves that do not tile the octree cube.
+pub(crate) struct CutCheck {
+    manager: brickray_cache::BrickManager,
+    frame: u64,
+    levels: u8,
+}
+
+impl CutCheck {
+    pub(crate) fn new(
+        source: Arc<dyn BrickSource>,
+        frame: VolumeFrame,
+        config: OutOfCoreConfig,
+    ) -> Result<CutCheck, String> {
+        let layout = source.layout().clone();
+        let caps = brickray_core::TexelCaps {
+            norm16: true,
+            float32_filterable: false,
+        };
+        let gpu = brickray_cache::GpuFormat::for_layout(
+            &layout,
+            caps,
+            brickray_core::U8Filtering::Exact,
+            32,
+            2048,
+        );
+        let mut manager =
+            brickray_cache::BrickManager::new(source, frame, config, gpu).map_err(s)?;
+        manager.preload_root().map_err(s)?;
+        Ok(CutCheck {
+            manager,
+            frame: 0,
+            levels: layout.levels,
+        })
+    }
+
+    /// Plans one frame; returns its hole leaves.
+    pub(crate) fn plan(
+        &mut self,
+        camera: &Camera,
+        size: u32,
+        mode: brickray_core::RenderMode,
+        tf: &TransferFunction,
+    ) -> u64 {
+        use brickray_core::{EmptyReason, LeafKind};
+        self.frame += 1;
+        let plan = self.manager.update(camera, 1.0, size, self.frame, mode, tf);
+        let mut holes = plan.stats.allocation_failures as u64;
+        // Each leaf covers 8^(levels - 1 - level) finest-level cells.
+        let mut covered: u128 = 0;
+        for leaf in &plan.cut {
+            covered += 1u128 << (3 * (self.levels - 1 - leaf.key.level) as u32);
+            if matches!(
+                leaf.kind,
+                LeafKind::Empty(EmptyReason::NotLoaded) | LeafKind::Empty(EmptyReason::Failed)
+            ) {
+                holes += 1;
+            }
+        }
+        if covered != 1u128 << (3 * (self.levels - 1) as u32) {
+            holes += 1;
+        }
+        holes
+    }
+}
+
+/// Pixels dark in `img` (at most [`HOLE_IMG_MAX`]) but lit in `reference`
+/// (at least [`HOLE_REF_MIN`]): holes when the cut is at the finest level;
+/// with coarser levels also detail the coarse data lacks (a diagnostic).
+pub(crate) fn dark(img: &[u8], reference: &[u8]) -> u64 {
+    holes(img, reference)
+}
