@@ -552,9 +552,10 @@ fn rays_exactly_on_brick_faces_show_no_seams() {
 /// Case 6. A 65536^3 procedural volume, a 60^3 box of finest voxels 8 voxels
 /// from the far corner clipped out and seen from 40 voxels; the reference
 /// renders the box alone in f64; the control is the same scene at unit scale
-/// (the box as a 64^3 volume, the camera scaled by 1024) in core. Threshold:
-/// the 65536^3 image is at most 3 dB below the control's PSNR. Guard: the
-/// reference of a camera moved by one voxel is more than 3 dB further off.
+/// (the box as a 64^3 volume, the camera scaled by 1024) in core. DVR with an
+/// opacity ramp over the box's own values. Threshold: the 65536^3 image is at
+/// most 1 dB below the control's PSNR (measured: 0.01 dB). Guard: the
+/// reference of a camera moved by one voxel is more than 1 dB further off.
 #[test]
 fn finest_voxels_of_a_65536_cubed_volume_match_the_reference() {
     const D: u64 = 65536;
@@ -625,7 +626,7 @@ fn finest_voxels_of_a_65536_cubed_volume_match_the_reference() {
     let (p, pu) = (psnr(&img, &reference), psnr(&uimg, &ref_unit));
     eprintln!("65536^3 far corner: {p:.2} dB; unit-scale control {pu:.2} dB");
     assert!(
-        pu - p <= 3.0,
+        pu - p <= 1.0,
         "65536^3: {p:.2} dB, {:.2} dB below the control",
         pu - p
     );
@@ -637,7 +638,7 @@ fn finest_voxels_of_a_65536_cubed_volume_match_the_reference() {
     let wrong = reference_unit(&sub, &sub_frame, &tf, &moved, &st_sub);
     let pw = psnr(&img, &wrong);
     assert!(
-        pu - pw > 3.0,
+        pu - pw > 1.0,
         "guard: a camera one voxel off scores {pw:.2} dB"
     );
 }
