@@ -246,7 +246,8 @@ pub(crate) fn pressure(ctx: &Ctx<'_>) -> Result<Case, String> {
     let mut psnr_series = Vec::new();
     let mut upload_series = Vec::new();
     for frac in POOL_FRACTIONS {
-        let budget = ((frac * need * per_slot) as u64).max(256 << 10);
+        // The cache needs at least 9 slots.
+        let budget = ((frac * need).max(9.0) * per_slot + per_slot / 2.0) as u64;
         let mut r = super::ooc(ctx.gpu, src.clone(), frame, config(budget), &tf)?;
         run.converge(&mut r, cam(0), frame, settings, 200)?;
         let mut twin = CutCheck::new(src.clone(), frame, config(budget))?;
