@@ -9,6 +9,7 @@ mod accel;
 mod build;
 mod formats;
 mod ooc;
+mod pareto;
 mod prediction;
 mod prediction_chart;
 mod raw;
@@ -98,6 +99,32 @@ enum Suite {
         /// GPU pool of the path, MiB (default 256).
         #[arg(long)]
         path_gpu_mib: Option<u64>,
+    },
+    /// Speed against accuracy: one knob at a time around the defaults on five
+    /// volumes, time against error against the f64 reference, Pareto fronts
+    /// charted (SVG).
+    Pareto {
+        /// Image side in pixels (default 512).
+        #[arg(long)]
+        size: Option<u32>,
+        /// Interleaved rounds (default 3).
+        #[arg(long)]
+        rounds: Option<usize>,
+        /// Volumes, comma-separated, of ct, mri, nuclei, ml, noise (default all).
+        #[arg(long)]
+        scenes: Option<String>,
+        /// Voxels per side of the procedural volumes (default 128).
+        #[arg(long)]
+        ml_side: Option<u32>,
+        /// Where the CSV and the cached reference images go (default target/pareto).
+        #[arg(long)]
+        out: Option<String>,
+        /// Where the SVG charts go (default docs/charts/pareto).
+        #[arg(long)]
+        charts: Option<String>,
+        /// Rays per pixel side of the reference (default 2).
+        #[arg(long)]
+        supersample: Option<u32>,
     },
     /// The isosurface prediction buffer (Braley et al.): orbits, a failure path,
     /// translation and zoom; variants interleaved frame by frame.
@@ -210,6 +237,7 @@ fn main() -> ExitCode {
         Suite::Build { .. } => build::run(rest),
         Suite::Formats { .. } => formats::run(rest),
         Suite::Ooc { .. } => ooc::run(rest),
+        Suite::Pareto { .. } => pareto::run(rest),
         Suite::Prediction { .. } => prediction::run(rest),
         Suite::Raw { .. } => raw::run(rest),
         Suite::Soak { .. } => soak::run(rest),

@@ -53,7 +53,7 @@
 //!
 //! # Metrics
 //!
-//! [`psnr`], [`mean_flip`] (NVIDIA's FLIP, through the `nv-flip` crate),
+//! [`psnr`], [`mean_flip`] (NVIDIA's FLIP, through the `nv-flip` crate), [`ssim`],
 //! [`compare`], [`compare_and_report`] (writes actual, expected and difference
 //! PNGs) and [`assert_close`] compare 8-bit RGBA images such as
 //! [`Image::to_rgba8`] produces (composited over a background) or GPU read-backs.
@@ -61,6 +61,7 @@
 mod image_buf;
 mod metrics;
 mod render;
+mod ssim;
 
 pub use image_buf::{Image, ImageIoError, save_rgba8_png};
 pub use metrics::{
@@ -68,3 +69,4 @@ pub use metrics::{
     test_output_dir,
 };
 pub use render::{DEFAULT_STEP_FACTOR, ReferenceOptions, render_reference};
+pub use ssim::ssim;

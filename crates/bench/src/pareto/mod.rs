@@ -1,0 +1,526 @@
+//! The `pareto` suite: speed against accuracy, one chart per volume and mode.
+//!
+//! For each scene (a volume, its transfer function and a mode) it renders one
+//! view with a set of configurations: the defaults, and one knob at a time swept
+//! around them (step, level-of-detail budget, early-termination threshold, the u8
+//! interpolation, the visibility policy, in core instead of out of core). Each
+//! configuration gets its own renderer state (a renderer per cache setting,
+//! converged before timing); frames are interleaved round by round over all the
+//! configurations (the machine's speed drifts) and each time is the median of
+//! `prepare + submit + wait`. Each configuration's converged image is compared
+//! with the f64 CPU reference at a step of 1/8 voxel with 2 x 2 supersampling:
+//! PSNR, mean FLIP and SSIM. Working set: the cut's data bricks on the GPU and
+//! their bytes.
+//!
+//! Output: a CSV of every point, one SVG chart per scene (time against PSNR, the
+//! front, the default marked) and, as the last line, the figures as JSON.
+
+mod chart;
+mod front;
+mod scenes;
+
+use crate::Figures;
+use crate::runner::{Runner, finite_db, median, round2};
+use brickray_core::{Accel, RenderMode, RenderSettings, Shading, TransferFunction, U8Filtering};
+use brickray_harness::GpuContext;
+use brickray_reference::{ReferenceOptions, mean_flip, psnr, render_reference, ssim};
+use brickray_render::{
+    OutOfCoreConfig, RendererOptions, VisibilityPolicy, VolumeRenderer,
+};
+use scenes::Scene;
+use serde_json::json;
+use std::fmt::Write as _;
+use std::path::PathBuf;
+use std::sync::Arc;
+
+/// A configuration's renderer state: what needs its own renderer.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct RendererKey {
+    in_core: bool,
+    tolerance_px: f32,
+    u8_filtering: U8Filtering,
+    policy: VisibilityPolicy,
+}
+
+/// The defaults: out of core with the cache's default LOD tolerance.
+const DEFAULT_KEY: RendererKey = RendererKey {
+    in_core: false,
+    tolerance_px: 1.0,
+    u8_filtering: U8Filtering::Exact,
+    policy: VisibilityPolicy::None,
+};
+
+/// One configuration of a scene.
+#[derive(Debug, Clone)]
+struct Config {
+    /// The knob swept (`default` for the defaults).
+    knob: &'static str,
+    /// The knob's value, as printed.
+    value: String,
+    key: RendererKey,
+    settings: RenderSettings,
+}
+
+/// What a configuration measured.
+#[derive(Debug, Clone, Default)]
+struct Measured {
+    ms: f64,
+    cpu_ms: f64,
+    samples_per_ray: f64,
+    bricks: u32,
+    bytes: u64,
+    psnr_db: f64,
+    mse: f64,
+    flip: f64,
+    ssim: f64,
+}
+
+/// The configurations of one mode: the defaults first, then each knob's sweep.
+fn configs(mode: RenderMode, u8_volume: bool) -> Vec<Config> {
+    let base = RenderSettings {
+        mode,
+        shading: Shading {
+            enabled: matches!(mode, RenderMode::Dvr),
+            ..Shading::default()
+        },
+        ..RenderSettings::default()
+    };
+    let cfg = |knob, value: String, key, settings| Config {
+        knob,
+        value,
+        key,
+        settings,
+    };
+    let mut out = vec![cfg("default", "defaults".into(), DEFAULT_KEY, base)];
+    for step in [0.125f32, 0.25, 1.0, 2.0, 4.0] {
+        let s = RenderSettings {
+            step_factor: step,
+            ..base
+        };
+        out.push(cfg("step", format!("{step}"), DEFAULT_KEY, s));
+    }
+    for tol in [0.0f32, 0.5, 2.0, 4.0, 8.0] {
+        let key = RendererKey {
+            tolerance_px: tol,
+            ..DEFAULT_KEY
+        };
+        out.push(cfg("lod_geometric", format!("{tol} px"), key, base));
+    }
+    for ert in [None, Some(0.9f32), Some(0.95), Some(0.999)] {
+        let s = RenderSettings {
+            accel: Accel {
+                early_termination: ert,
+                ..base.accel
+            },
+            ..base
+        };
+        let v = ert.map_or("off".to_string(), |t| format!("{t}"));
+        out.push(cfg("ert", v, DEFAULT_KEY, s));
+    }
+    if u8_volume {
+        let key = RendererKey {
+            u8_filtering: U8Filtering::Fast,
+            ..DEFAULT_KEY
+        };
+        out.push(cfg("u8_filtering", "fast".into(), key, base));
+    }
+    if !matches!(mode, RenderMode::Mip) {
+        for (name, policy) in [
+            ("ray-guided", VisibilityPolicy::RayGuided),
+            ("occlusion", VisibilityPolicy::OcclusionQueries),
+        ] {
+            let key = RendererKey {
+                policy,
+                ..DEFAULT_KEY
+            };
+            out.push(cfg("visibility", name.into(), key, base));
+        }
+    }
+    let key = RendererKey {
+        in_core: true,
+        ..DEFAULT_KEY
+    };
+    out.push(cfg("in_core", "in core".into(), key, base));
+    out
+}
+
+/// Options of the suite.
+struct Options {
+    size: u32,
+    rounds: usize,
+    scenes: Vec<String>,
+    ml_side: u32,
+    out: PathBuf,
+    charts: PathBuf,
+    supersample: u32,
+}
+
+fn options(args: &[String]) -> Result<Options, String> {
+    let list = |name: &str| -> Vec<String> {
+        args.iter()
+            .position(|a| a == name)
+            .and_then(|i| args.get(i + 1))
+            .map(|s| s.split(',').map(str::to_string).collect())
+            .unwrap_or_default()
+    };
+    let path = |name: &str, default: &str| -> PathBuf {
+        args.iter()
+            .position(|a| a == name)
+            .and_then(|i| args.get(i + 1))
+            .map_or_else(|| PathBuf::from(default), PathBuf::from)
+    };
+    Ok(Options {
+        size: crate::arg(args, "--size", 512)?,
+        rounds: crate::arg(args, "--rounds", 3)?,
+        scenes: list("--scenes"),
+        ml_side: crate::arg(args, "--ml-side", 128)?,
+        out: path("--out", "target/pareto"),
+        charts: path("--charts", "docs/charts/pareto"),
+        supersample: crate::arg(args, "--supersample", 2)?,
+    })
+}
+
+pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
+    let o = options(args)?;
+    if o.size == 0 || o.rounds == 0 {
+        return Err("--size and --rounds must be > 0".into());
+    }
+    let scenes = scenes::scenes(&o.scenes, o.ml_side)?;
+    let gpu = GpuContext::new().map_err(|e| e.to_string())?;
+    println!("adapter: {}", gpu.describe());
+    println!(
+        "image {0}x{0}; {1} interleaved rounds; reference: step 1/8 voxel, {2}x{2} rays per pixel",
+        o.size, o.rounds, o.supersample
+    );
+    std::fs::create_dir_all(&o.out).map_err(|e| format!("{}: {e}", o.out.display()))?;
+    std::fs::create_dir_all(&o.charts).map_err(|e| format!("{}: {e}", o.charts.display()))?;
+    let run = Runner::new(&gpu, o.size);
+    let mut csv = String::from(
+        "volume,mode,knob,value,ms,cpu_ms,samples_per_ray,bricks,bytes,psnr_db,mean_flip,ssim,on_front,default_within_5pct\n",
+    );
+    let mut all_on_front = true;
+    let mut per_scene = serde_json::Map::new();
+    let (mut lod_gains, mut preint_gains) = (Vec::new(), Vec::new());
+    for scene in &scenes {
+        let dir = tempfile::tempdir().map_err(|e| e.to_string())?;
+        let store = brickray_harness::store_of(&scene.volume, &dir.path().join("v.brs"));
+        for (mode_name, mode, tf) in &scene.modes {
+            let name = format!("{}_{}", scene.name, mode_name);
+            let cfgs = configs(*mode, scene.volume.desc().dtype == brickray_core::DType::U8);
+            let reference = reference(scene, *mode, tf, &o)?;
+            let m = measure(&run, scene, store.clone(), tf, &cfgs, &reference, o.rounds)?;
+            let pts: Vec<(f64, f64)> = m.iter().map(|x| (x.ms, x.mse)).collect();
+            let on = front::front(&pts);
+            let default_ok = front::within(&pts, 0, 0.05);
+            all_on_front &= default_ok;
+            println!("\n{name}: {} configurations", cfgs.len());
+            println!(
+                "  {:<14} {:>9} {:>9} {:>8} {:>7} {:>8} {:>7} {:>7} {:>6} front",
+                "knob", "value", "ms", "samples", "bricks", "PSNR", "FLIP", "SSIM", ""
+            );
+            for (i, (c, x)) in cfgs.iter().zip(&m).enumerate() {
+                let f = on.contains(&i);
+                println!(
+                    "  {:<14} {:>9} {:>9.1} {:>8.1} {:>7} {:>8.2} {:>7.4} {:>7.4} {:>6}",
+                    c.knob,
+                    c.value,
+                    x.ms,
+                    x.samples_per_ray,
+                    x.bricks,
+                    x.psnr_db,
+                    x.flip,
+                    x.ssim,
+                    if f { "*" } else { "" }
+                );
+                let _ = writeln!(
+                    csv,
+                    "{},{},{},{},{:.3},{:.3},{:.2},{},{},{:.3},{:.5},{:.5},{},{}",
+                    scene.name,
+                    mode_name,
+                    c.knob,
+                    c.value,
+                    x.ms,
+                    x.cpu_ms,
+                    x.samples_per_ray,
+                    x.bricks,
+                    x.bytes,
+                    x.psnr_db,
+                    x.flip,
+                    x.ssim,
+                    f,
+                    i == 0 && default_ok
+                );
+            }
+            println!("  default within 5% of the front: {default_ok}");
+            let chart_pts: Vec<chart::ChartPoint<'_>> = cfgs
+                .iter()
+                .zip(&m)
+                .map(|(c, x)| chart::ChartPoint {
+                    knob: c.knob,
+                    ms: x.ms,
+                    psnr_db: x.psnr_db,
+                })
+                .collect();
+            let svg = o.charts.join(format!("{name}.svg"));
+            chart::draw(
+                &svg,
+                &format!("{} {}: time against error ({}x{} px)", scene.name, mode_name, o.size, o.size),
+                &chart_pts,
+                &on,
+                0,
+            )?;
+            println!("  chart: {}", svg.display());
+            if let Some(g) = lod_gain(&cfgs, &m) {
+                println!("  error-aware LOD over geometric at equal bricks: {g:+.2} dB");
+                lod_gains.push(g);
+            }
+            if let Some(g) = preint_gain(&cfgs, &m) {
+                println!("  pre-integration at step 2: {g:+.2} dB");
+                preint_gains.push(g);
+            }
+            let d = &m[0];
+            per_scene.insert(
+                name,
+                json!({
+                    "default_ms": round2(d.ms),
+                    "default_psnr_db": finite_db(d.psnr_db),
+                    "default_bricks": d.bricks,
+                    "default_on_front": default_ok,
+                    "front": on.iter().map(|&i| format!("{}={}", cfgs[i].knob, cfgs[i].value)).collect::<Vec<_>>(),
+                }),
+            );
+        }
+    }
+    let csv_path = o.out.join("pareto.csv");
+    std::fs::write(&csv_path, csv).map_err(|e| format!("{}: {e}", csv_path.display()))?;
+    println!("\ndata: {}", csv_path.display());
+    let mut f = Figures::new();
+    f.insert("suite".into(), json!("pareto"));
+    f.insert("size".into(), json!(o.size));
+    f.insert("rounds".into(), json!(o.rounds));
+    f.insert("default_on_front_all".into(), json!(all_on_front));
+    let med = |v: &[f64]| (!v.is_empty()).then(|| round2(median(v)));
+    f.insert(
+        "error_aware_gain_db_at_equal_bricks".into(),
+        json!(med(&lod_gains)),
+    );
+    f.insert(
+        "preintegration_gain_db_at_step_2".into(),
+        json!(med(&preint_gains)),
+    );
+    f.insert("scenes".into(), serde_json::Value::Object(per_scene));
+    Ok(f)
+}
+
+/// The scene's f64 reference image (RGBA8 over black), cached under `o.out`
+/// by scene, mode, size and supersampling.
+fn reference(
+    scene: &Scene,
+    mode: RenderMode,
+    tf: &TransferFunction,
+    o: &Options,
+) -> Result<Vec<u8>, String> {
+    let settings = RenderSettings {
+        mode,
+        shading: Shading {
+            enabled: matches!(mode, RenderMode::Dvr),
+            ..Shading::default()
+        },
+        ..RenderSettings::default()
+    };
+    let tag = match mode {
+        RenderMode::Dvr => "dvr".to_string(),
+        RenderMode::Iso { value, .. } => format!("iso{value}"),
+        RenderMode::Mip => "mip".to_string(),
+        _ => "other".to_string(),
+    };
+    let path = o.out.join(format!(
+        "ref_{}_{}_{}_ss{}_{}.rgba",
+        scene.name,
+        tag,
+        o.size,
+        o.supersample,
+        cache_tag(scene, tf)
+    ));
+    if let Ok(b) = std::fs::read(&path) {
+        if b.len() == (o.size * o.size * 4) as usize {
+            return Ok(b);
+        }
+    }
+    let t = std::time::Instant::now();
+    let img = render_reference(
+        &scene.volume,
+        &scene.frame,
+        tf,
+        &scene.camera,
+        &settings,
+        &ReferenceOptions::new(o.size, o.size).with_supersample(o.supersample),
+    );
+    let rgba = img.to_rgba8([0.0; 3]);
+    println!(
+        "reference {} {tag}: {:.1} s",
+        scene.name,
+        t.elapsed().as_secs_f64()
+    );
+    std::fs::write(&path, &rgba).map_err(|e| format!("{}: {e}", path.display()))?;
+    Ok(rgba)
+}
+
+/// A short hash of what the reference depends on besides name and mode (the
+/// volume's description and the TF's table), so a changed scene is re-rendered.
+fn cache_tag(scene: &Scene, tf: &TransferFunction) -> String {
+    use std::hash::{Hash, Hasher};
+    let mut h = std::collections::hash_map::DefaultHasher::new();
+    format!("{:?}{:?}", scene.volume.desc(), scene.camera).hash(&mut h);
+    for c in tf.entries() {
+        for x in c {
+            x.to_bits().hash(&mut h);
+        }
+    }
+    format!("{:016x}", h.finish())
+}
+
+/// Builds one renderer per distinct key, converges each on the view, then times
+/// every configuration over interleaved rounds and reads its image.
+fn measure(
+    run: &Runner<'_>,
+    scene: &Scene,
+    store: Arc<dyn brickray_core::BrickSource>,
+    tf: &TransferFunction,
+    cfgs: &[Config],
+    reference: &[u8],
+    rounds: usize,
+) -> Result<Vec<Measured>, String> {
+    let gpu = run.gpu;
+    let mut keys: Vec<RendererKey> = Vec::new();
+    for c in cfgs {
+        if !keys.contains(&c.key) {
+            keys.push(c.key);
+        }
+    }
+    let brick_bytes = store.layout().brick_bytes() as u64;
+    let mut renderers = Vec::new();
+    for k in &keys {
+        let mut r = VolumeRenderer::with_options(
+            &gpu.device,
+            brickray_harness::target_desc(),
+            RendererOptions {
+                u8_filtering: k.u8_filtering,
+            },
+        )
+        .map_err(|e| e.to_string())?;
+        if k.in_core {
+            r.set_volume(&gpu.device, &gpu.queue, &scene.volume)
+                .map_err(|e| e.to_string())?;
+        } else {
+            r.set_volume_source(
+                &gpu.device,
+                &gpu.queue,
+                store.clone(),
+                scene.frame,
+                OutOfCoreConfig {
+                    tolerance_px: k.tolerance_px,
+                    upload_budget_bytes: 1 << 30,
+                    ..Default::default()
+                },
+            )
+            .map_err(|e| e.to_string())?;
+            r.set_visibility_policy(k.policy).map_err(|e| e.to_string())?;
+        }
+        r.set_transfer_function(&gpu.device, &gpu.queue, tf)
+            .map_err(|e| e.to_string())?;
+        renderers.push(r);
+    }
+    let slot = |c: &Config| keys.iter().position(|k| *k == c.key).expect("key listed");
+    // Converge: render (visibility feedback needs ray-cast frames) until the
+    // cut is settled, at least a few frames so read-backs arrive.
+    for c in cfgs {
+        let r = &mut renderers[slot(c)];
+        if c.key.in_core {
+            continue;
+        }
+        let mut settled = false;
+        for i in 0..400 {
+            run.frame(r, scene.camera, scene.frame, c.settings, false)?;
+            let s = r.out_of_core_stats().ok_or("not out of core")?;
+            if s.converged && i >= 8 {
+                settled = true;
+                break;
+            }
+            std::thread::sleep(std::time::Duration::from_millis(5));
+        }
+        if !settled {
+            println!("  warning: {}={} did not converge in 400 frames", c.knob, c.value);
+        }
+    }
+    let mut times = vec![Vec::new(); cfgs.len()];
+    let mut cpu = vec![Vec::new(); cfgs.len()];
+    for _ in 0..rounds {
+        for (i, c) in cfgs.iter().enumerate() {
+            let r = &mut renderers[slot(c)];
+            // One untimed frame absorbs a settings change (tables, pipelines).
+            run.frame(r, scene.camera, scene.frame, c.settings, false)?;
+            let s = run.frame(r, scene.camera, scene.frame, c.settings, false)?;
+            times[i].push(s.ms);
+            cpu[i].push(s.cpu_ms);
+        }
+    }
+    let (w, h) = (run.size, run.size);
+    let mut out = Vec::new();
+    for (i, c) in cfgs.iter().enumerate() {
+        let r = &mut renderers[slot(c)];
+        let shot = run.frame(r, scene.camera, scene.frame, c.settings, true)?;
+        let bricks = r
+            .out_of_core_stats()
+            .map_or(0, |s| s.cache.working_set_bricks);
+        let bytes = if c.key.in_core {
+            scene.volume.desc().byte_len()
+        } else {
+            bricks as u64 * brick_bytes
+        };
+        let p = psnr(&shot.rgba, reference);
+        out.push(Measured {
+            ms: median(&times[i]),
+            cpu_ms: median(&cpu[i]),
+            samples_per_ray: shot.samples,
+            bricks,
+            bytes,
+            psnr_db: p,
+            mse: 255.0f64.powi(2) / 10f64.powf(p / 10.0),
+            flip: mean_flip(&shot.rgba, reference, w, h) as f64,
+            ssim: ssim(&shot.rgba, reference, w, h),
+        });
+    }
+    Ok(out)
+}
+
+/// The median PSNR gain of the error-aware LOD sweep over the geometric one at
+/// equal working-set size: each error-aware point's PSNR minus the geometric
+/// sweep's PSNR interpolated (in log bricks) at its brick count; points outside
+/// the geometric sweep's range are left out. `None` without both sweeps.
+fn lod_gain(cfgs: &[Config], m: &[Measured]) -> Option<f64> {
+    let series = |knob: &str| -> Vec<(f64, f64)> {
+        cfgs.iter()
+            .zip(m)
+            .filter(|(c, _)| c.knob == knob || (knob == "lod_geometric" && c.knob == "default"))
+            .map(|(_, x)| (x.bricks as f64, x.psnr_db.min(99.0)))
+            .collect()
+    };
+    let (geo, err) = (series("lod_geometric"), series("lod_error"));
+    let gains: Vec<f64> = err
+        .iter()
+        .filter_map(|&(b, p)| front::at_equal(&geo, b).map(|g| p - g))
+        .collect();
+    (!gains.is_empty()).then(|| median(&gains))
+}
+
+/// PSNR of pre-integration at step 2 voxels minus the plain step-2 PSNR.
+fn preint_gain(cfgs: &[Config], m: &[Measured]) -> Option<f64> {
+    let at = |knob: &str| {
+        cfgs.iter()
+            .zip(m)
+            .find(|(c, _)| c.knob == knob && c.settings.step_factor == 2.0)
+            .map(|(_, x)| x.psnr_db)
+    };
+    Some(at("preint")? - at("step")?)
+}

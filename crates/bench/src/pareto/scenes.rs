@@ -1,0 +1,138 @@
+//! The Pareto suite's scenes: five volumes (three shared, two procedural), each
+//! with its transfer function and the modes charted.
+
+use brickray_core::{Camera, RenderMode, TransferFunction, Volume, VolumeFrame, synthetic};
+use brickray_harness::ct;
+
+/// One volume and the modes charted on it.
+pub(crate) struct Scene {
+    /// Short name (file names, JSON keys).
+    pub(crate) name: &'static str,
+    pub(crate) volume: Volume,
+    pub(crate) frame: VolumeFrame,
+    pub(crate) camera: Camera,
+    /// `(mode name, mode, TF)`.
+    pub(crate) modes: Vec<(&'static str, RenderMode, TransferFunction)>,
+}
+
+/// The volumes, by name, of `wanted` (all when empty): `ct`, `mri`, `nuclei`,
+/// `ml` (Marschner-Lobb, high frequency), `noise` (procedural fractal noise).
+pub(crate) fn scenes(wanted: &[String], ml_side: u32) -> Result<Vec<Scene>, String> {
+    let want = |n: &str| wanted.is_empty() || wanted.iter().any(|w| w == n);
+    let mut out = Vec::new();
+    let shared = |name: &str| -> Result<Volume, String> {
+        let path = brickray_harness::shared_volume(name)
+            .ok_or_else(|| format!("the pareto suite needs ../shared/data/{name}"))?;
+        brickray_io::read_volume(&path).map_err(|e| e.to_string())
+    };
+    if want("ct") {
+        let [translucent, _, iso, mip] = ct::scenes();
+        out.push(scene("ct", shared("invesalius_cranium_ct")?, vec![
+            ("dvr", translucent.1, translucent.2),
+            (iso.0, iso.1, iso.2),
+            (mip.0, mip.1, mip.2),
+        ]));
+    }
+    if want("mri") {
+        let tf = TransferFunction::from_points(
+            &[
+                (0.12, [0.3, 0.12, 0.06, 0.0]),
+                (0.35, [0.9, 0.5, 0.3, 0.08]),
+                (0.7, [1.0, 0.9, 0.8, 0.4]),
+            ],
+            512,
+        );
+        out.push(scene("mri", shared("pycortex_s1_t1_mri")?, vec![
+            ("dvr", RenderMode::Dvr, tf),
+            ("mip", RenderMode::Mip, TransferFunction::ramp(0.0, 1.0, 1.0)),
+        ]));
+    }
+    if want("nuclei") {
+        let tf = TransferFunction::from_points(
+            &[
+                (0.15, [0.0, 0.35, 0.1, 0.0]),
+                (0.5, [0.3, 0.8, 0.3, 0.2]),
+                (1.0, [0.6, 1.0, 0.5, 0.8]),
+            ],
+            512,
+        );
+        out.push(scene("nuclei", shared("cells3d_nuclei_fluo")?, vec![
+            ("dvr", RenderMode::Dvr, tf),
+            ("mip", RenderMode::Mip, TransferFunction::ramp(0.0, 1.0, 1.0)),
+        ]));
+    }
+    if want("ml") {
+        let tf = TransferFunction::from_points(
+            &[
+                (0.45, [0.2, 0.4, 0.9, 0.0]),
+                (0.5, [0.9, 0.9, 0.9, 0.6]),
+                (0.55, [0.9, 0.5, 0.2, 0.0]),
+            ],
+            512,
+        );
+        out.push(scene("ml", synthetic::marschner_lobb(ml_side), vec![
+            ("dvr", RenderMode::Dvr, tf),
+            (
+                "iso",
+                RenderMode::Iso {
+                    value: 0.5,
+                    color: [0.9, 0.85, 0.75],
+                },
+                TransferFunction::ramp(0.0, 1.0, 1.0),
+            ),
+        ]));
+    }
+    if want("noise") {
+        let tf = TransferFunction::from_points(
+            &[
+                (0.55, [0.8, 0.4, 0.1, 0.0]),
+                (0.65, [1.0, 0.8, 0.4, 0.3]),
+                (0.8, [1.0, 1.0, 1.0, 0.9]),
+            ],
+            512,
+        );
+        out.push(scene("noise", noise(ml_side), vec![("dvr", RenderMode::Dvr, tf)]));
+    }
+    if out.is_empty() {
+        return Err(format!("no scene among {wanted:?} (ct, mri, nuclei, ml, noise)"));
+    }
+    Ok(out)
+}
+
+fn scene(
+    name: &'static str,
+    volume: Volume,
+    modes: Vec<(&'static str, RenderMode, TransferFunction)>,
+) -> Scene {
+    let d = volume.desc();
+    let frame = VolumeFrame::centered(d.dims, d.spacing);
+    let camera = Camera::orbit(frame.center(), 2.0, 0.5, 0.3);
+    Scene {
+        name,
+        volume,
+        frame,
+        camera,
+        modes,
+    }
+}
+
+/// Four octaves of value noise on an `n^3` u8 grid (base period 32 voxels).
+fn noise(n: u32) -> Volume {
+    use brickray_core::{DType, VolumeData, VolumeDesc};
+    let mut data = Vec::with_capacity((n as usize).pow(3));
+    for z in 0..n {
+        for y in 0..n {
+            for x in 0..n {
+                let v = synthetic::fractal_noise([x as f64, y as f64, z as f64], 32.0, 4);
+                data.push((v.clamp(0.0, 1.0) * 255.0).round() as u8);
+            }
+        }
+    }
+    let desc = VolumeDesc {
+        dims: [n; 3],
+        dtype: DType::U8,
+        spacing: [1.0; 3],
+        value_range: [0.0, 255.0],
+    };
+    Volume::new(desc, VolumeData::U8(data)).expect("valid by construction")
+}
