@@ -181,6 +181,7 @@ fn main() -> ExitCode {
                 empty_below,
                 memory_bound,
                 progress: !quiet,
+                ..BuildOptions::default()
             };
             cmd_build(&input, &output, &o, &select.options())
         }),
