@@ -138,6 +138,15 @@ impl Splits {
         Splits::from_masks(&layout.split_masks()).unwrap_or(Splits::ALL)
     }
 
+    /// The two words the WGSL traversal takes (`oct_begin`'s `splits`): the
+    /// masks of levels 0..10 and 10..20, 3 bits a level.
+    pub const fn gpu_words(self) -> [u32; 2] {
+        [
+            (self.0 & 0x3fff_ffff) as u32,
+            ((self.0 >> 30) & 0x3fff_ffff) as u32,
+        ]
+    }
+
     /// The mask of `level` (7 from [`MAX_LEVEL`] on).
     #[inline]
     pub const fn mask(self, level: u32) -> u32 {
