@@ -302,6 +302,8 @@ impl OutOfCore {
             cut_changed: false,
             occlusion,
         };
+        let layout = ooc.layout.clone();
+        ooc.visibility.set_layout(&layout);
         ooc.write_params(queue);
         Ok(ooc)
     }
