@@ -91,11 +91,13 @@ fn cut_volume(
                     }
                 }
                 let key = key.ok_or_else(|| format!("voxel {v:?} in no leaf"))?;
-                if !bricks.contains_key(&key) {
-                    store.read_brick(key, &mut buf).map_err(|e| e.to_string())?;
-                    bricks.insert(key, DType::I16.decode_le(&buf));
-                }
-                let br = &bricks[&key];
+                let br = match bricks.entry(key) {
+                    std::collections::hash_map::Entry::Occupied(e) => e.into_mut(),
+                    std::collections::hash_map::Entry::Vacant(e) => {
+                        store.read_brick(key, &mut buf).map_err(|e| e.to_string())?;
+                        e.insert(DType::I16.decode_le(&buf))
+                    }
+                };
                 let f = factors[key.level as usize];
                 let kp = [key.x, key.y, key.z];
                 // Brick-local coordinate of this voxel's centre.

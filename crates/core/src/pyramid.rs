@@ -89,8 +89,8 @@ pub fn anisotropic_split_masks(dims: [u32; 3], spacing: [f32; 3], brick: u32) ->
         // Past MAX_LEVELS / 2 levels (absurd spacing ratios) halve all axes so
         // the level count stays bounded.
         if masks.len() < (MAX_LEVELS / 2) as usize {
-            for a in 0..3 {
-                if side[a] * HALVE_BELOW < largest {
+            for (a, s) in side.iter().enumerate() {
+                if s * HALVE_BELOW < largest {
                     mask |= 1 << a;
                 }
             }

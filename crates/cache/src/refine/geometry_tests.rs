@@ -99,7 +99,7 @@ proptest! {
             let m = lod_voxel_world(&l, vw, level);
             let f = l.voxel_factor(level);
             let sides: [f64; 3] = std::array::from_fn(|a| vw[a] * f[a]);
-            prop_assert!(sides.iter().any(|s| *s == m));
+            prop_assert!(sides.contains(&m));
             prop_assert!(m <= sides.iter().fold(0.0f64, |x, s| x.max(*s)));
             for a in 0..3 {
                 if f[a] > 1.0 {
