@@ -6,6 +6,7 @@
 //! machine's speed drifts.
 
 mod accel;
+mod aniso;
 mod build;
 mod formats;
 mod ooc;
@@ -56,6 +57,19 @@ enum Suite {
         /// Image side in pixels (default 512).
         #[arg(long)]
         size: Option<u32>,
+    },
+    /// LOD sweep on the head CT at 4.5 mm slices: bricks and PSNR per
+    /// tolerance, all-axes octree vs anisotropic pyramid (CPU only).
+    Aniso {
+        /// Image side in pixels (default 160).
+        #[arg(long)]
+        size: Option<u32>,
+        /// Reference step factor (default 0.5).
+        #[arg(long)]
+        step: Option<f32>,
+        /// Head CT scene: dvr_translucent (default), dvr_opaque, iso, mip.
+        #[arg(long)]
+        scene: Option<String>,
     },
     /// The brick-store builder: throughput, memory bound, banded levels.
     Build {
@@ -234,6 +248,7 @@ fn main() -> ExitCode {
     let rest = &args[args.len().min(1)..];
     let result: Result<Figures, String> = match cli.suite {
         Suite::Accel { .. } => accel::run(rest),
+        Suite::Aniso { .. } => aniso::run(rest),
         Suite::Build { .. } => build::run(rest),
         Suite::Formats { .. } => formats::run(rest),
         Suite::Ooc { .. } => ooc::run(rest),

@@ -50,5 +50,5 @@ pub use manager::{
 };
 pub use pool::{Allocation, BrickPool, PoolError, PoolLimits, SlotId};
 pub use prepared::{PreparedBrick, Preparer};
-pub use refine::{NodeClass, SplitBlocks, SplitFilter};
+pub use refine::{NodeClass, SplitBlocks, SplitFilter, lod_voxel_world};
 pub use upload::{UploadBudget, UploadCandidate};

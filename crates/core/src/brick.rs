@@ -88,6 +88,9 @@ pub struct OctreeLayout {
     pub apron: u32,
     /// Number of levels (>= 1).
     pub levels: u8,
+    /// Per-level split masks (see [`OctreeLayout::split_mask`]); empty for the
+    /// isotropic octree, where every level halves all three axes.
+    pub(crate) splits: Vec<u8>,
 }
 
 impl OctreeLayout {
@@ -105,6 +108,7 @@ impl OctreeLayout {
             brick,
             apron,
             levels,
+            splits: Vec::new(),
         }
     }
 
@@ -123,35 +127,38 @@ impl OctreeLayout {
         self.volume.dtype
     }
 
-    /// Finest-level voxels per side of the octree cube.
+    /// Finest-level voxels per side of the octree cube (the isotropic octree;
+    /// see [`OctreeLayout::cube_voxels_axes`] for the per-axis extents).
     pub fn cube_voxels(&self) -> u64 {
         (self.brick as u64) << (self.levels - 1)
     }
 
     /// Voxel dimensions of the volume at `level` (each halving rounds up).
     pub fn level_dims(&self, level: u8) -> [u32; 3] {
-        let shift = (self.levels - 1 - level) as u32;
-        self.volume
-            .dims
-            .map(|d| ((d as u64 + (1u64 << shift) - 1) >> shift) as u32)
+        let finest = self.halvings(self.levels - 1);
+        let here = self.halvings(level);
+        std::array::from_fn(|a| {
+            let shift = finest[a] - here[a];
+            ((self.volume.dims[a] as u64 + (1u64 << shift) - 1) >> shift) as u32
+        })
     }
 
-    /// True when `key` is a valid position and its cube overlaps the volume.
+    /// True when `key` is a valid position and its box overlaps the volume.
     pub fn in_volume(&self, key: NodeKey) -> bool {
         if key.level >= self.levels {
             return false;
         }
-        let n = 1u64 << key.level;
+        let n = self.nodes_per_axis(key.level);
         let ld = self.level_dims(key.level);
         let p = [key.x, key.y, key.z];
-        (0..3).all(|a| (p[a] as u64) < n && (p[a] as u64) * (self.brick as u64) < ld[a] as u64)
+        (0..3).all(|a| (p[a] as u64) < n[a] && (p[a] as u64) * (self.brick as u64) < ld[a] as u64)
     }
 
-    /// The volume's extent inside the octree cube, per axis (0..1]: texture
+    /// The volume's extent inside the octree box, per axis (0..1]: texture
     /// coordinate `u` of the volume maps to octree coordinate `u * scale`.
     pub fn volume_scale(&self) -> [f64; 3] {
-        let c = self.cube_voxels() as f64;
-        self.volume.dims.map(|d| d as f64 / c)
+        let c = self.cube_voxels_axes();
+        std::array::from_fn(|a| self.volume.dims[a] as f64 / c[a] as f64)
     }
 }
 

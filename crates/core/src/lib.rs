@@ -16,6 +16,7 @@
 pub mod brick;
 pub mod camera;
 pub mod macrocell;
+mod pyramid;
 pub mod settings;
 pub mod synthetic;
 pub mod texel;
@@ -31,6 +32,7 @@ pub use camera::{
     VolumeFrame,
 };
 pub use macrocell::{MacroCellGrid, sub_cell_ranges, sub_cells_per_axis};
+pub use pyramid::{ALL_AXES, Children, LayoutError, MAX_LEVELS, anisotropic_split_masks};
 pub use settings::{Accel, ClipBox, RenderMode, RenderSettings, SettingsError, Shading};
 pub use texel::{SampleEncoding, TexelCaps, TexelFormat, U8Filtering};
 pub use tf::{TfError, TransferFunction};

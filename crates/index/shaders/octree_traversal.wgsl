@@ -11,9 +11,11 @@
 // crates/index/src/traverse.rs (the CPU twin, which the tests check against a
 // brute-force oracle) function by function; change both together.
 //
-// Usage (coordinates are octree unit-cube coordinates, t_max finite):
+// Usage (coordinates are octree unit-cube coordinates, t_max finite; `splits`
+// the packed split masks, Rust `Splits::gpu_words`, OCT_SPLITS_ALL for the
+// octree):
 //
-//     var st = oct_begin(origin, dir, t_min, t_max, 4096u);
+//     var st = oct_begin(origin, dir, t_min, t_max, 4096u, splits);
 //     while (oct_next_leaf(&st)) {
 //         // st.hit.leaf.{node, level, box_min, box_size}, st.hit.tag,
 //         // st.hit.data (brick-pool slot when tag == OCT_TAG_DATA),
@@ -35,18 +37,23 @@ const OCT_ROPE_NODE_MASK: u32 = 0x07ffffffu;
 const OCT_MAX_LEVEL: u32 = 20u;
 const OCT_DIR_EPSILON: f32 = 1e-30;
 const OCT_T_BIG: f32 = 3.0e38;
+// Split masks of levels 0..9 (x) and 10..19 (y), 3 bits a level (Rust: Splits);
+// every level splits all axes.
+const OCT_SPLITS_ALL: vec2<u32> = vec2<u32>(0x3fffffffu, 0x3fffffffu);
+// Bit 0 of each level's 3-bit mask, levels 0..9.
+const OCT_SPLIT_AXIS_BITS: u32 = 0x09249249u;
 
 const OCT_STATUS_RUNNING: u32 = 0u;
 const OCT_STATUS_FINISHED: u32 = 1u;
 const OCT_STATUS_STEP_LIMIT: u32 = 2u;
 const OCT_STATUS_CORRUPT: u32 = 3u;
 
-// A node and its cube (Rust: NodeBox).
+// A node and its box (Rust: NodeBox); box_size per axis.
 struct OctBox {
     node: u32,
     level: u32,
     box_min: vec3<f32>,
-    box_size: f32,
+    box_size: vec3<f32>,
 }
 
 // One reported leaf (Rust: LeafHit). tag is OCT_TAG_EMPTY or OCT_TAG_DATA;
@@ -71,6 +78,7 @@ struct OctState {
     max_steps: u32,
     status: u32,
     hit: OctLeaf,
+    splits: vec2<u32>,
 }
 
 struct OctLocated {
@@ -96,6 +104,26 @@ fn oct_exp2_neg(level: u32) -> f32 {
 
 fn oct_exp2_pos(level: u32) -> f32 {
     return bitcast<f32>((127u + level) << 23u);
+}
+
+// Rust: Splits::mask. The axes a node of `level` is split along (7 from level 20).
+fn oct_mask(splits: vec2<u32>, level: u32) -> u32 {
+    let w = select(splits.y, splits.x, level < 10u);
+    return select(7u, (w >> (3u * (level % 10u))) & 7u, level < 20u);
+}
+
+// Rust: Splits::halvings. Per axis, the levels above `level` that split it.
+fn oct_halvings(splits: vec2<u32>, level: u32) -> vec3<u32> {
+    let lo = splits.x & ((1u << (3u * min(level, 10u))) - 1u);
+    let hi = splits.y & ((1u << (3u * (clamp(level, 10u, 20u) - 10u))) - 1u);
+    let b = OCT_SPLIT_AXIS_BITS;
+    let h = vec3<u32>(
+        countOneBits(lo & b) + countOneBits(hi & b),
+        countOneBits((lo >> 1u) & b) + countOneBits((hi >> 1u) & b),
+        countOneBits((lo >> 2u) & b) + countOneBits((hi >> 2u) & b),
+    );
+    // Levels past 20 split all axes.
+    return h + vec3<u32>(max(level, 20u) - 20u);
 }
 
 fn oct_in_bounds(i: u32) -> bool {
@@ -126,7 +154,7 @@ fn oct_clip_unit_cube(origin: vec3<f32>, dir: vec3<f32>, inv_dir: vec3<f32>, t_m
 }
 
 // Rust: ray_setup + traverse. Flushes |d| < 1e-30 to 0, clips to the cube.
-fn oct_begin(origin: vec3<f32>, dir_in: vec3<f32>, t_min: f32, t_max: f32, max_steps: u32) -> OctState {
+fn oct_begin(origin: vec3<f32>, dir_in: vec3<f32>, t_min: f32, t_max: f32, max_steps: u32, splits: vec2<u32>) -> OctState {
     var st: OctState;
     let d = select(dir_in, vec3<f32>(0.0), abs(dir_in) < vec3<f32>(OCT_DIR_EPSILON));
     let nz = d != vec3<f32>(0.0);
@@ -136,7 +164,8 @@ fn oct_begin(origin: vec3<f32>, dir_in: vec3<f32>, t_min: f32, t_max: f32, max_s
     let tc = oct_clip_unit_cube(origin, d, st.inv_dir, t_min, t_max);
     st.t = tc.x;
     st.t_end = tc.y;
-    st.cur = OctBox(0u, 0u, vec3<f32>(0.0), 1.0);
+    st.cur = OctBox(0u, 0u, vec3<f32>(0.0), vec3<f32>(1.0));
+    st.splits = splits;
     if (!(tc.x < tc.y)) {
         st.cur.node = OCT_NULL;
     }
@@ -146,9 +175,10 @@ fn oct_begin(origin: vec3<f32>, dir_in: vec3<f32>, t_min: f32, t_max: f32, max_s
     return st;
 }
 
-// Rust: locate_leaf. Down traversal from `start` to the leaf containing p by box
-// subdivision; a tie (p == mid) goes to the side dir moves into (upper if 0).
-fn oct_locate_leaf(start: OctBox, p: vec3<f32>, dir: vec3<f32>) -> OctLocated {
+// Rust: locate_leaf_with. Down traversal from `start` to the leaf containing p by
+// box subdivision of the level's split axes; a tie (p == mid) goes to the side dir
+// moves into (upper if 0). The child index takes the split axes' bits in order.
+fn oct_locate_leaf(start: OctBox, p: vec3<f32>, dir: vec3<f32>, splits: vec2<u32>) -> OctLocated {
     var r: OctLocated;
     var c = start;
     r.ok = false;
@@ -169,12 +199,14 @@ fn oct_locate_leaf(start: OctBox, p: vec3<f32>, dir: vec3<f32>) -> OctLocated {
         if (c.level >= OCT_MAX_LEVEL) {
             break;
         }
-        c.box_size = c.box_size * 0.5;
-        let mid = c.box_min + vec3<f32>(c.box_size);
-        let s = (p > mid) | ((p == mid) & (dir >= vec3<f32>(0.0)));
-        c.box_min = c.box_min + select(vec3<f32>(0.0), vec3<f32>(c.box_size), s);
+        let m = oct_mask(splits, c.level);
+        let split = (vec3<u32>(m) & vec3<u32>(1u, 2u, 4u)) != vec3<u32>(0u);
+        c.box_size = select(c.box_size, c.box_size * 0.5, split);
+        let mid = c.box_min + c.box_size;
+        let s = split & ((p > mid) | ((p == mid) & (dir >= vec3<f32>(0.0))));
+        c.box_min = c.box_min + select(vec3<f32>(0.0), c.box_size, s);
         let si = select(vec3<u32>(0u), vec3<u32>(1u), s);
-        c.node = (word & OCT_PTR_MASK) + si.x + 2u * si.y + 4u * si.z;
+        c.node = (word & OCT_PTR_MASK) + si.x + (si.y << (m & 1u)) + (si.z << countOneBits(m & 3u));
         c.level = c.level + 1u;
         if (!oct_in_bounds(c.node)) {
             break;
@@ -189,7 +221,7 @@ fn oct_locate_leaf(start: OctBox, p: vec3<f32>, dir: vec3<f32>) -> OctLocated {
 // face = 2 * axis + (dir[axis] > 0): 0 -x, 1 +x, 2 -y, 3 +y, 4 -z, 5 +z.
 fn oct_exit_face(c: OctBox, origin: vec3<f32>, dir: vec3<f32>, inv_dir: vec3<f32>) -> OctExit {
     let pos = dir > vec3<f32>(0.0);
-    let far = c.box_min + select(vec3<f32>(0.0), vec3<f32>(c.box_size), pos);
+    let far = c.box_min + select(vec3<f32>(0.0), c.box_size, pos);
     let tf = select(vec3<f32>(OCT_T_BIG), (far - origin) * inv_dir, dir != vec3<f32>(0.0));
     var e: OctExit;
     e.t = tf.x;
@@ -205,10 +237,10 @@ fn oct_exit_face(c: OctBox, origin: vec3<f32>, dir: vec3<f32>, inv_dir: vec3<f32
     return e;
 }
 
-// Rust: follow_rope. The neighbour's box from the current box and the rope's
-// level: shift by one box along the face, then snap to the coarser grid.
-// next.node == OCT_NULL for a NULL rope (the cube boundary).
-fn oct_follow_rope(rope: u32, c: OctBox, face: u32) -> OctRope {
+// Rust: follow_rope_with. The neighbour's box from the current box and the rope's
+// level: shift by one box along the face, then snap to the coarser grid (per
+// axis, 2^-halvings). next.node == OCT_NULL for a NULL rope (the cube boundary).
+fn oct_follow_rope(rope: u32, c: OctBox, face: u32, splits: vec2<u32>) -> OctRope {
     var r: OctRope;
     r.next = c;
     r.ok = true;
@@ -223,11 +255,12 @@ fn oct_follow_rope(rope: u32, c: OctBox, face: u32) -> OctRope {
     }
     let axis = face / 2u;
     var m = c.box_min;
-    m[axis] = m[axis] + select(-c.box_size, c.box_size, (face & 1u) == 1u);
+    m[axis] = m[axis] + select(-c.box_size[axis], c.box_size[axis], (face & 1u) == 1u);
     var size = c.box_size;
     if (level < c.level) {
-        size = oct_exp2_neg(level);
-        m = floor(m * oct_exp2_pos(level)) * size;
+        let h = oct_halvings(splits, level);
+        size = vec3<f32>(oct_exp2_neg(h.x), oct_exp2_neg(h.y), oct_exp2_neg(h.z));
+        m = floor(m * vec3<f32>(oct_exp2_pos(h.x), oct_exp2_pos(h.y), oct_exp2_pos(h.z))) * size;
     }
     r.next = OctBox(rope & OCT_ROPE_NODE_MASK, level, m, size);
     return r;
@@ -251,7 +284,7 @@ fn oct_next_leaf(st: ptr<function, OctState>) -> bool {
         }
         (*st).steps = (*st).steps + 1u;
         let p = (*st).origin + (*st).dir * (*st).t;
-        let loc = oct_locate_leaf((*st).cur, p, (*st).dir);
+        let loc = oct_locate_leaf((*st).cur, p, (*st).dir, (*st).splits);
         if (!loc.ok) {
             (*st).status = OCT_STATUS_CORRUPT;
             return false;
@@ -280,7 +313,7 @@ fn oct_next_leaf(st: ptr<function, OctState>) -> bool {
             }
             data = index_words[record];
         }
-        let fr = oct_follow_rope(rope, loc.leaf, ex.face);
+        let fr = oct_follow_rope(rope, loc.leaf, ex.face, (*st).splits);
         if (!fr.ok) {
             (*st).status = OCT_STATUS_CORRUPT;
             return false;

@@ -3,8 +3,8 @@
 //! encoded as `u32` words (see [`crate::format`]).
 
 use crate::format::{
-    LEAF_RECORD_WORDS, MAX_LEVEL, MAX_NODES, MAX_WORDS, NULL, TAG_DATA, TAG_EMPTY, TAG_INNER,
-    node_word, rope_word,
+    LEAF_RECORD_WORDS, MAX_LEVEL, MAX_NODES, MAX_WORDS, NULL, Splits, TAG_DATA, TAG_EMPTY,
+    TAG_INNER, node_word, rope_word,
 };
 use brickray_core::brick::{CutLeaf, NodeKey};
 use std::borrow::Borrow;
@@ -22,7 +22,8 @@ pub enum CutError {
         /// The deepest level accepted.
         max: u8,
     },
-    /// A leaf's position is outside `0..2^level`.
+    /// A leaf's position is outside `0..2^level` (per axis `0..2^halvings` with
+    /// split masks).
     #[error("leaf {key:?} lies outside the unit cube")]
     PositionOutOfRange {
         /// The leaf.
@@ -85,6 +86,7 @@ pub struct EncodedIndex {
     words: Vec<u32>,
     keys: Vec<NodeKey>,
     stats: IndexStats,
+    splits: Splits,
 }
 
 impl EncodedIndex {
@@ -108,24 +110,81 @@ impl EncodedIndex {
         self.keys.get(index as usize).copied()
     }
 
+    /// The split masks the index was encoded with.
+    pub fn splits(&self) -> Splits {
+        self.splits
+    }
+
     /// The node index of `key`, if the node exists in the tree (leaf or inner).
     pub fn node_index(&self, key: NodeKey) -> Option<u32> {
         if key.level > MAX_LEVEL {
             return None;
         }
+        let h = Halvings::new(self.splits);
         let mut node = 0u32;
         for d in 0..key.level {
             let word = *self.words.get(node as usize)?;
             if crate::format::node_tag(word) != TAG_INNER {
                 return None;
             }
-            let shift = (key.level - 1 - d) as u32;
-            let ci = ((key.x >> shift) & 1)
-                | (((key.y >> shift) & 1) << 1)
-                | (((key.z >> shift) & 1) << 2);
-            node = crate::format::node_ptr(word) + ci;
+            node = crate::format::node_ptr(word) + h.child_index(key, d);
         }
         (self.keys.get(node as usize) == Some(&key)).then_some(node)
+    }
+}
+
+/// Per-level halvings of a [`Splits`], for O(1) key arithmetic.
+struct Halvings {
+    splits: Splits,
+    h: [[u32; 3]; MAX_LEVEL as usize + 2],
+}
+
+impl Halvings {
+    fn new(splits: Splits) -> Halvings {
+        let mut h = [[0u32; 3]; MAX_LEVEL as usize + 2];
+        for l in 1..h.len() {
+            let m = splits.mask(l as u32 - 1);
+            h[l] = std::array::from_fn(|a| h[l - 1][a] + ((m >> a) & 1));
+        }
+        Halvings { splits, h }
+    }
+
+    /// Index, among the children of its level-`d` ancestor, of the level-`d+1`
+    /// ancestor of `key`.
+    fn child_index(&self, key: NodeKey, d: u8) -> u32 {
+        let m = self.splits.mask(d as u32);
+        let hk = self.h[key.level as usize];
+        let hd = self.h[d as usize + 1];
+        let p = [key.x, key.y, key.z];
+        let (mut ci, mut bit) = (0u32, 0u32);
+        for a in 0..3 {
+            if m & (1 << a) != 0 {
+                ci |= ((p[a] >> (hk[a] - hd[a])) & 1) << bit;
+                bit += 1;
+            }
+        }
+        ci
+    }
+
+    /// The level-`level` ancestor of `key`.
+    fn ancestor(&self, key: NodeKey, level: u8) -> NodeKey {
+        let hk = self.h[key.level as usize];
+        let hl = self.h[level as usize];
+        NodeKey::new(
+            level,
+            key.x >> (hk[0] - hl[0]),
+            key.y >> (hk[1] - hl[1]),
+            key.z >> (hk[2] - hl[2]),
+        )
+    }
+
+    /// Whether `key`'s position lies in `0..2^halvings` per axis.
+    fn in_range(&self, key: NodeKey) -> bool {
+        let h = self.h[key.level as usize];
+        [key.x, key.y, key.z]
+            .iter()
+            .zip(h)
+            .all(|(&p, h)| (p as u64) < (1u64 << h))
     }
 }
 
@@ -148,11 +207,6 @@ const UNSET_NODE: ArenaNode = ArenaNode {
     slot: None,
 };
 
-fn ancestor(key: NodeKey, level: u8) -> NodeKey {
-    let s = (key.level - level) as u32;
-    NodeKey::new(level, key.x >> s, key.y >> s, key.z >> s)
-}
-
 /// Validates a cut and encodes it. `leaves` yields [`CutLeaf`]s or references to
 /// them (`encode_cut(&plan.cut)` with `cut: Vec<CutLeaf>`). Only each leaf's key
 /// and slot matter: the [`EmptyReason`](brickray_core::brick::EmptyReason) of an
@@ -166,6 +220,18 @@ where
     I: IntoIterator,
     I::Item: Borrow<CutLeaf>,
 {
+    encode_cut_with(leaves, Splits::ALL)
+}
+
+/// [`encode_cut`] for an anisotropic octree: a node of level `l` has
+/// `2^popcount(splits.mask(l))` children, consecutive, in child-index order
+/// (`docs/index-format.md`). With [`Splits::ALL`] this is `encode_cut`.
+pub fn encode_cut_with<I>(leaves: I, splits: Splits) -> Result<EncodedIndex, CutError>
+where
+    I: IntoIterator,
+    I::Item: Borrow<CutLeaf>,
+{
+    let hv = Halvings::new(splits);
     // 1. Insert every leaf into an arena octree; children are allocated in blocks
     //    of 8 when a node is first subdivided.
     let leaves = leaves.into_iter();
@@ -179,8 +245,7 @@ where
                 max: MAX_LEVEL,
             });
         }
-        let n = 1u32 << key.level;
-        if key.x >= n || key.y >= n || key.z >= n {
+        if !hv.in_range(key) {
             return Err(CutError::PositionOutOfRange { key });
         }
         let mut cur = 0usize;
@@ -188,21 +253,19 @@ where
             match arena[cur].state {
                 LEAF => {
                     return Err(CutError::Overlap {
-                        outer: ancestor(key, d),
+                        outer: hv.ancestor(key, d),
                         inner: key,
                     });
                 }
                 UNSET => {
                     arena[cur].state = INNER;
                     arena[cur].first_child = arena.len() as u32;
-                    arena.extend_from_slice(&[UNSET_NODE; 8]);
+                    let n = splits.child_count(d as u32) as usize;
+                    arena.resize(arena.len() + n, UNSET_NODE);
                 }
                 _ => {}
             }
-            let shift = (key.level - 1 - d) as u32;
-            let ci = ((key.x >> shift) & 1)
-                | (((key.y >> shift) & 1) << 1)
-                | (((key.z >> shift) & 1) << 2);
+            let ci = hv.child_index(key, d);
             cur = (arena[cur].first_child + ci) as usize;
         }
         match arena[cur].state {
@@ -218,9 +281,10 @@ where
                 let mut a = cur;
                 while arena[a].state == INNER {
                     let fc = arena[a].first_child as usize;
-                    let ci = (0..8).find(|&i| arena[fc + i].state != UNSET).unwrap_or(0);
+                    let n = splits.child_count(below.level as u32) as usize;
+                    let ci = (0..n).find(|&i| arena[fc + i].state != UNSET).unwrap_or(0);
                     a = fc + ci;
-                    below = below.child(ci as u8);
+                    below = splits.child(below, ci as u32);
                 }
                 return Err(CutError::Overlap {
                     outer: key,
@@ -241,7 +305,7 @@ where
     }
 
     // 2. Breadth-first numbering: `order[q]` is the arena node numbered `q`. The
-    //    8 children of a node are consecutive in both numberings.
+    //    children of a node are consecutive in both numberings.
     let nodes = arena.len();
     let mut order: Vec<u32> = Vec::with_capacity(nodes);
     let mut keys: Vec<NodeKey> = Vec::with_capacity(nodes);
@@ -257,9 +321,9 @@ where
             INNER => {
                 first_child[q] = order.len() as u32;
                 let key = keys[q];
-                for i in 0..8u8 {
-                    order.push(a.first_child + i as u32);
-                    keys.push(key.child(i));
+                for i in 0..splits.child_count(key.level as u32) {
+                    order.push(a.first_child + i);
+                    keys.push(splits.child(key, i));
                 }
                 stats.inner_nodes += 1;
             }
@@ -288,7 +352,9 @@ where
     // 3. Neighbours of every node (same-level node if it exists, else the coarser
     //    leaf containing it), top-down in O(1) per face: a child's neighbour across
     //    an inner face is its sibling; across an outer face it is the parent's
-    //    neighbour if that is a leaf, else that neighbour's mirrored child.
+    //    neighbour if that is a leaf, else that neighbour's mirrored child. Along
+    //    an axis the node is not split along, both of a child's faces are outer
+    //    faces and the neighbour's child has the same index.
     let mut neigh: Vec<[u32; 6]> = vec![[NULL; 6]; nodes];
     let mut words: Vec<u32> = vec![0; words_len];
     let mut record = nodes as u32;
@@ -297,14 +363,18 @@ where
         if fc != NONE {
             words[q] = node_word(TAG_INNER, fc);
             let pn = neigh[q];
-            for ci in 0..8u32 {
+            let m = splits.mask(keys[q].level as u32);
+            for ci in 0..splits.child_count(keys[q].level as u32) {
                 let mut cn = [NULL; 6];
                 for (face, slot) in cn.iter_mut().enumerate() {
                     let axis = face as u32 / 2;
                     let positive = face & 1 == 1;
-                    let bit = (ci >> axis) & 1;
-                    let mirrored = ci ^ (1 << axis);
-                    *slot = if positive == (bit == 0) {
+                    let split = m & (1 << axis) != 0;
+                    // This axis's bit in the child index (its rank among the split axes).
+                    let rank = (m & ((1 << axis) - 1)).count_ones();
+                    let bit = (ci >> rank) & 1;
+                    let mirrored = if split { ci ^ (1 << rank) } else { ci };
+                    *slot = if split && positive == (bit == 0) {
                         fc + mirrored
                     } else {
                         let m = pn[face];
@@ -339,5 +409,10 @@ where
             record += LEAF_RECORD_WORDS;
         }
     }
-    Ok(EncodedIndex { words, keys, stats })
+    Ok(EncodedIndex {
+        words,
+        keys,
+        stats,
+        splits,
+    })
 }

@@ -104,3 +104,97 @@ pub const fn exp2_neg(level: u32) -> f32 {
 pub const fn exp2_pos(level: u32) -> f32 {
     f32::from_bits((127 + level) << 23)
 }
+
+/// Per-level split masks of an anisotropic octree (see
+/// `brickray_core::OctreeLayout::split_mask`), packed 3 bits per level, level 0
+/// in the lowest bits: bit 0 = x, 1 = y, 2 = z, the axes along which a node of
+/// that level is split. A node of level `l` has `2^popcount(mask(l))` children,
+/// consecutive in the index; child `i`'s bits enumerate the split axes in the
+/// order x, y, z. [`Splits::ALL`] is the octree (every level splits all axes).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct Splits(pub u64);
+
+impl Splits {
+    /// Every level splits all three axes: the octree.
+    pub const ALL: Splits = Splits((1u64 << (3 * MAX_LEVEL as u64)) - 1);
+
+    /// The masks of `levels` (root first); levels past the end split all axes.
+    /// `None` when a mask is not in `1..=7` or there are more than [`MAX_LEVEL`].
+    pub fn from_masks(masks: &[u8]) -> Option<Splits> {
+        if masks.len() > MAX_LEVEL as usize || masks.iter().any(|m| *m == 0 || *m > 7) {
+            return None;
+        }
+        let mut p = Splits::ALL.0;
+        for (l, m) in masks.iter().enumerate() {
+            p &= !(7u64 << (3 * l));
+            p |= (*m as u64) << (3 * l);
+        }
+        Some(Splits(p))
+    }
+
+    /// The split masks of a layout (`ALL` for the isotropic octree and for
+    /// layouts deeper than [`MAX_LEVEL`], whose cuts the encoder refuses anyway).
+    pub fn from_layout(layout: &brickray_core::OctreeLayout) -> Splits {
+        Splits::from_masks(&layout.split_masks()).unwrap_or(Splits::ALL)
+    }
+
+    /// The two words the WGSL traversal takes (`oct_begin`'s `splits`): the
+    /// masks of levels 0..10 and 10..20, 3 bits a level.
+    pub const fn gpu_words(self) -> [u32; 2] {
+        [
+            (self.0 & 0x3fff_ffff) as u32,
+            ((self.0 >> 30) & 0x3fff_ffff) as u32,
+        ]
+    }
+
+    /// The mask of `level` (7 from [`MAX_LEVEL`] on).
+    #[inline]
+    pub const fn mask(self, level: u32) -> u32 {
+        if level >= MAX_LEVEL as u32 {
+            7
+        } else {
+            ((self.0 >> (3 * level)) & 7) as u32
+        }
+    }
+
+    /// Children of a node of `level`.
+    #[inline]
+    pub const fn child_count(self, level: u32) -> u32 {
+        1 << self.mask(level).count_ones()
+    }
+
+    /// Per axis, the levels above `level` that split it (node positions along
+    /// axis `a` at `level` run over `0..2^halvings[a]`).
+    pub fn halvings(self, level: u32) -> [u32; 3] {
+        let mut h = [0u32; 3];
+        for l in 0..level {
+            let m = self.mask(l);
+            for (a, ha) in h.iter_mut().enumerate() {
+                *ha += (m >> a) & 1;
+            }
+        }
+        h
+    }
+
+    /// Child `i` of `key` under these splits.
+    pub fn child(self, key: brickray_core::NodeKey, i: u32) -> brickray_core::NodeKey {
+        let m = self.mask(key.level as u32);
+        let mut p = [key.x, key.y, key.z];
+        let mut bit = 0;
+        for (a, pa) in p.iter_mut().enumerate() {
+            if m & (1 << a) != 0 {
+                *pa = *pa * 2 + ((i >> bit) & 1);
+                bit += 1;
+            }
+        }
+        brickray_core::NodeKey::new(key.level + 1, p[0], p[1], p[2])
+    }
+
+    /// The node's box in unit-cube coordinates: `(min corner, size)` per axis.
+    pub fn unit_box(self, key: brickray_core::NodeKey) -> ([f64; 3], [f64; 3]) {
+        let h = self.halvings(key.level as u32);
+        let p = [key.x, key.y, key.z];
+        let size: [f64; 3] = std::array::from_fn(|a| 1.0 / (1u64 << h[a]) as f64);
+        (std::array::from_fn(|a| p[a] as f64 * size[a]), size)
+    }
+}

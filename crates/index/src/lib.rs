@@ -39,10 +39,12 @@ mod cut;
 mod traverse;
 
 pub use brickray_core::brick::{CutLeaf, EmptyReason, LeafKind};
-pub use cut::{CutError, EncodedIndex, IndexStats, encode_cut};
+pub use cut::{CutError, EncodedIndex, IndexStats, encode_cut, encode_cut_with};
+pub use format::Splits;
 pub use traverse::{
     CorruptIndex, DIR_EPSILON, LeafHit, NodeBox, Ray, T_BIG, Traversal, TraversalStatus,
-    clip_unit_cube, exit_face, follow_rope, locate_leaf, ray_setup, traverse,
+    clip_unit_cube, exit_face, follow_rope, follow_rope_with, locate_leaf, locate_leaf_with,
+    ray_setup, traverse, traverse_with,
 };
 
 /// The WGSL traversal library (`crates/index/shaders/octree_traversal.wgsl`). It declares no

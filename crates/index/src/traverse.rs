@@ -24,8 +24,8 @@
 //!   `t` exactly (`t_enter` of one is `t_exit` of the previous).
 
 use crate::format::{
-    MAX_LEVEL, NULL, ROPE_LEVEL_SHIFT, ROPE_NODE_MASK, TAG_DATA, TAG_EMPTY, TAG_INNER, exp2_neg,
-    exp2_pos, node_ptr, node_tag,
+    MAX_LEVEL, NULL, ROPE_LEVEL_SHIFT, ROPE_NODE_MASK, Splits, TAG_DATA, TAG_EMPTY, TAG_INNER,
+    exp2_neg, exp2_pos, node_ptr, node_tag,
 };
 use brickray_core::brick::NodeKey;
 use glam::{BVec3, Vec3};
@@ -77,10 +77,11 @@ pub struct NodeBox {
     pub node: u32,
     /// Octree level of the node.
     pub level: u32,
-    /// Minimum corner of the node's cube.
+    /// Minimum corner of the node's box.
     pub box_min: Vec3,
-    /// Side of the node's cube, `2^-level`.
-    pub box_size: f32,
+    /// Sides of the node's box: `2^-level` on every axis in the octree,
+    /// `2^-halvings[a]` per axis with split masks ([`Splits::halvings`]).
+    pub box_size: Vec3,
 }
 
 impl NodeBox {
@@ -89,13 +90,21 @@ impl NodeBox {
         node: 0,
         level: 0,
         box_min: Vec3::ZERO,
-        box_size: 1.0,
+        box_size: Vec3::ONE,
     };
 
     /// The node's key, from its box (exact: corners are multiples of `2^-level`).
     pub fn key(&self) -> NodeKey {
         let k = self.box_min * exp2_pos(self.level);
         NodeKey::new(self.level as u8, k.x as u32, k.y as u32, k.z as u32)
+    }
+
+    /// The node's key in an octree with split masks (exact: corners are
+    /// multiples of the box sizes).
+    pub fn key_with(&self, splits: Splits) -> NodeKey {
+        let h = splits.halvings(self.level);
+        let k: [u32; 3] = std::array::from_fn(|a| (self.box_min[a] * exp2_pos(h[a])) as u32);
+        NodeKey::new(self.level as u8, k[0], k[1], k[2])
     }
 }
 
@@ -160,6 +169,18 @@ pub fn locate_leaf(
     p: Vec3,
     dir: Vec3,
 ) -> Result<(NodeBox, u32), CorruptIndex> {
+    locate_leaf_with(words, Splits::ALL, start, p, dir)
+}
+
+/// [`locate_leaf`] with split masks: a level's descent halves only its split
+/// axes, and the child index takes their bits in the order x, y, z.
+pub fn locate_leaf_with(
+    words: &[u32],
+    splits: Splits,
+    start: NodeBox,
+    p: Vec3,
+    dir: Vec3,
+) -> Result<(NodeBox, u32), CorruptIndex> {
     let mut c = start;
     let mut word = read(words, c.node)?;
     for _ in 0..=MAX_LEVEL {
@@ -174,11 +195,14 @@ pub fn locate_leaf(
         if c.level >= MAX_LEVEL as u32 {
             break;
         }
-        c.box_size *= 0.5;
-        let mid = c.box_min + Vec3::splat(c.box_size);
-        let s: BVec3 = p.cmpgt(mid) | (p.cmpeq(mid) & dir.cmpge(Vec3::ZERO));
-        c.box_min += Vec3::select(s, Vec3::splat(c.box_size), Vec3::ZERO);
-        let ci = s.x as u32 + 2 * s.y as u32 + 4 * s.z as u32;
+        let m = splits.mask(c.level);
+        let split = BVec3::new(m & 1 != 0, m & 2 != 0, m & 4 != 0);
+        c.box_size = Vec3::select(split, c.box_size * 0.5, c.box_size);
+        let mid = c.box_min + c.box_size;
+        let s: BVec3 = split & (p.cmpgt(mid) | (p.cmpeq(mid) & dir.cmpge(Vec3::ZERO)));
+        c.box_min += Vec3::select(s, c.box_size, Vec3::ZERO);
+        // Bit of each split axis: its rank among the split axes.
+        let ci = s.x as u32 + ((s.y as u32) << (m & 1)) + ((s.z as u32) << (m & 3).count_ones());
         c.node = node_ptr(word) + ci;
         c.level += 1;
         word = read(words, c.node)?;
@@ -191,7 +215,7 @@ pub fn locate_leaf(
 /// the direction is zero.
 pub fn exit_face(c: &NodeBox, origin: Vec3, dir: Vec3, inv_dir: Vec3) -> (f32, u32) {
     let pos = dir.cmpgt(Vec3::ZERO);
-    let far = c.box_min + Vec3::select(pos, Vec3::splat(c.box_size), Vec3::ZERO);
+    let far = c.box_min + Vec3::select(pos, c.box_size, Vec3::ZERO);
     let tf = Vec3::select(
         dir.cmpne(Vec3::ZERO),
         (far - origin) * inv_dir,
@@ -214,6 +238,17 @@ pub fn exit_face(c: &NodeBox, origin: Vec3, dir: Vec3, inv_dir: Vec3) -> (f32, u
 /// neighbour's node and box, computed from `c` and the neighbour's level (shift
 /// by one box along the face, then snap to the coarser grid). `Ok(None)` for NULL.
 pub fn follow_rope(rope: u32, c: &NodeBox, face: u32) -> Result<Option<NodeBox>, CorruptIndex> {
+    follow_rope_with(rope, c, face, Splits::ALL)
+}
+
+/// [`follow_rope`] with split masks: the coarser box is snapped per axis to the
+/// neighbour level's grid, `2^-halvings[a]`.
+pub fn follow_rope_with(
+    rope: u32,
+    c: &NodeBox,
+    face: u32,
+    splits: Splits,
+) -> Result<Option<NodeBox>, CorruptIndex> {
     if rope == NULL {
         return Ok(None);
     }
@@ -224,13 +259,15 @@ pub fn follow_rope(rope: u32, c: &NodeBox, face: u32) -> Result<Option<NodeBox>,
     let mut n = *c;
     let axis = (face / 2) as usize;
     n.box_min[axis] += if face & 1 == 1 {
-        n.box_size
+        n.box_size[axis]
     } else {
-        -n.box_size
+        -n.box_size[axis]
     };
     if level < c.level {
-        n.box_size = exp2_neg(level);
-        n.box_min = (n.box_min * exp2_pos(level)).floor() * n.box_size;
+        let h = splits.halvings(level);
+        let up = Vec3::new(exp2_pos(h[0]), exp2_pos(h[1]), exp2_pos(h[2]));
+        n.box_size = Vec3::new(exp2_neg(h[0]), exp2_neg(h[1]), exp2_neg(h[2]));
+        n.box_min = (n.box_min * up).floor() * n.box_size;
     }
     n.level = level;
     n.node = rope & ROPE_NODE_MASK;
@@ -285,12 +322,20 @@ pub struct Traversal<'a> {
     steps: u32,
     max_steps: u32,
     status: TraversalStatus,
+    splits: Splits,
 }
 
 /// Walks the encoded index `words` along `ray`, front to back. Each visited leaf
 /// (reported or not, see the tie rules) costs one step; after `max_steps` steps
 /// the iterator ends with [`TraversalStatus::StepLimit`].
 pub fn traverse(words: &[u32], ray: Ray, max_steps: u32) -> Traversal<'_> {
+    traverse_with(words, Splits::ALL, ray, max_steps)
+}
+
+/// [`traverse`] over an index encoded with split masks
+/// ([`encode_cut_with`](crate::encode_cut_with)); the same `splits` must be given.
+/// With [`Splits::ALL`] this is `traverse`.
+pub fn traverse_with(words: &[u32], splits: Splits, ray: Ray, max_steps: u32) -> Traversal<'_> {
     let (dir, inv_dir) = ray_setup(ray.dir);
     let (t0, t1) = clip_unit_cube(ray.origin, dir, inv_dir, ray.t_min, ray.t_max);
     let mut cur = NodeBox::ROOT;
@@ -310,6 +355,7 @@ pub fn traverse(words: &[u32], ray: Ray, max_steps: u32) -> Traversal<'_> {
         steps: 0,
         max_steps,
         status: TraversalStatus::Running,
+        splits,
     }
 }
 
@@ -326,7 +372,7 @@ impl Traversal<'_> {
 
     fn step(&mut self) -> Result<Option<LeafHit>, CorruptIndex> {
         let p = self.origin + self.dir * self.t;
-        let (leaf, word) = locate_leaf(self.words, self.cur, p, self.dir)?;
+        let (leaf, word) = locate_leaf_with(self.words, self.splits, self.cur, p, self.dir)?;
         let (mut t_exit, face) = exit_face(&leaf, self.origin, self.dir, self.inv_dir);
         let record = node_ptr(word);
         let mut rope = NULL;
@@ -342,7 +388,7 @@ impl Traversal<'_> {
         } else {
             None
         };
-        match follow_rope(rope, &leaf, face)? {
+        match follow_rope_with(rope, &leaf, face, self.splits)? {
             Some(n) => self.cur = n,
             None => self.cur.node = NULL,
         }
@@ -398,7 +444,7 @@ mod tests {
             node: 0,
             level,
             box_min: Vec3::from(min),
-            box_size: exp2_neg(level),
+            box_size: Vec3::splat(exp2_neg(level)),
         }
     }
 
@@ -444,7 +490,7 @@ mod tests {
         let leaf = at(Vec3::new(-1.0, 1.0, 0.0));
         assert_eq!(
             (leaf.node, leaf.level, leaf.box_min, leaf.box_size),
-            (1 + 2 + 4, 1, Vec3::new(0.0, 0.5, 0.5), 0.5)
+            (1 + 2 + 4, 1, Vec3::new(0.0, 0.5, 0.5), Vec3::splat(0.5))
         );
         assert_eq!(leaf.key(), NodeKey::new(1, 0, 1, 1));
         // A bad tag is corrupt, as is a pointer past the end.
@@ -473,7 +519,7 @@ mod tests {
             .unwrap();
         assert_eq!(
             (n.node, n.level, n.box_min, n.box_size),
-            (11, 1, Vec3::new(0.5, 0.0, 0.5), 0.5)
+            (11, 1, Vec3::new(0.5, 0.0, 0.5), Vec3::splat(0.5))
         );
         // Same level: a pure shift.
         let n = follow_rope(rope_word(12, 3), &c, FACE_NEG_X)
@@ -481,7 +527,11 @@ mod tests {
             .unwrap();
         assert_eq!(
             (n.level, n.box_min, n.box_size),
-            (3, Vec3::new(4.0 / 8.0, 2.0 / 8.0, 7.0 / 8.0), 0.125)
+            (
+                3,
+                Vec3::new(4.0 / 8.0, 2.0 / 8.0, 7.0 / 8.0),
+                Vec3::splat(0.125)
+            )
         );
         // NULL, and a rope to a finer level is corrupt.
         assert_eq!(follow_rope(NULL, &c, FACE_POS_X), Ok(None));

@@ -136,7 +136,9 @@ fn check_ray(
             return Err(format!("gap between {:?} and {h:?}", got[i - 1]));
         }
         let (lo, size) = h.key().unit_box();
-        if h.leaf.box_size as f64 != size || h.leaf.box_min.to_array().map(f64::from) != lo {
+        if h.leaf.box_size.to_array().map(f64::from) != [size; 3]
+            || h.leaf.box_min.to_array().map(f64::from) != lo
+        {
             return Err(format!("box of {h:?} disagrees with its key"));
         }
     }

@@ -12,18 +12,19 @@ const HARNESS: &str = r#"
 fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let o = vec3<f32>(-0.5, 0.25, f32(gid.x) * 0.01);
     let d = vec3<f32>(1.0, 0.1, 0.0);
-    var st = oct_begin(o, d, 0.0, 1.0e30, 4096u);
+    var st = oct_begin(o, d, 0.0, 1.0e30, 4096u, vec2<u32>(gid.y, OCT_SPLITS_ALL.y));
     var acc = 0u;
     while (oct_next_leaf(&st)) {
         acc = acc + st.hit.data + st.hit.leaf.level + st.hit.tag + bitcast<u32>(st.hit.t_exit - st.hit.t_enter);
     }
     // The building blocks on their own.
-    let loc = oct_locate_leaf(OctBox(0u, 0u, vec3<f32>(0.0), 1.0), vec3<f32>(0.3), d);
+    let loc = oct_locate_leaf(OctBox(0u, 0u, vec3<f32>(0.0), vec3<f32>(1.0)), vec3<f32>(0.3), d, OCT_SPLITS_ALL);
     let ex = oct_exit_face(loc.leaf, o, d, vec3<f32>(1.0, 10.0, 0.0));
-    let rope = oct_follow_rope(index_words[(loc.word & OCT_PTR_MASK) + 1u + ex.face], loc.leaf, ex.face);
+    let rope = oct_follow_rope(index_words[(loc.word & OCT_PTR_MASK) + 1u + ex.face], loc.leaf, ex.face, OCT_SPLITS_ALL);
+    let h = oct_halvings(vec2<u32>(gid.z, gid.x), gid.y);
     let tc = oct_clip_unit_cube(o, d, vec3<f32>(1.0, 10.0, 0.0), 0.0, 1.0);
     out_words[gid.x] = acc + st.status + st.steps + rope.next.node + select(0u, 1u, rope.ok && loc.ok)
-        + bitcast<u32>(tc.x + ex.t);
+        + bitcast<u32>(tc.x + ex.t) + h.x + h.y + h.z + oct_mask(OCT_SPLITS_ALL, gid.z);
 }
 "#;
 
@@ -68,6 +69,10 @@ fn wgsl_constants_match_format() {
         ("OCT_ROPE_NODE_MASK", format!("0x{ROPE_NODE_MASK:08x}u")),
         ("OCT_MAX_LEVEL", format!("{MAX_LEVEL}u")),
     ];
+    let [lo, hi] = Splits::ALL.gpu_words();
+    assert!(OCTREE_TRAVERSAL_WGSL.contains(&format!(
+        "const OCT_SPLITS_ALL: vec2<u32> = vec2<u32>(0x{lo:08x}u, 0x{hi:08x}u);"
+    )));
     for (name, value) in expect {
         let line = format!("const {name}: u32 = {value};");
         assert!(OCTREE_TRAVERSAL_WGSL.contains(&line), "missing `{line}`");

@@ -27,6 +27,9 @@ struct OocParams {
     stored_side: u32,
     // Sub-cells per brick axis (empty-space skipping inside bricks).
     sub_cells: u32,
+    // xy: the octree's split masks for octree_traversal.wgsl (OCT_SPLITS_ALL for
+    // an octree; docs/index-format.md); zw: unused.
+    splits: vec4<u32>,
 }
 
 struct SlotInfo {
@@ -51,13 +54,16 @@ struct SlotInfo {
 struct Brick {
     uv0: vec3<f32>,
     kuv: vec3<f32>,
-    // Finest voxels per voxel of this level (2^(finest - level)).
+    // The step multiple of this level: finest voxels per voxel along the axis
+    // the level keeps finest (2^(finest - level) in an octree).
     f: f32,
+    // Finest voxels per voxel of this level, per axis.
+    f3: vec3<f32>,
     // The corrected TF table's row for this level's step.
     tf_v: f32,
     slot: u32,
     box_min: vec3<f32>,
-    box_size: f32,
+    box_size: vec3<f32>,
 }
 
 fn brick_of(leaf: OctBox, slot: u32) -> Brick {
@@ -66,8 +72,12 @@ fn brick_of(leaf: OctBox, slot: u32) -> Brick {
     let inv_atlas = 1.0 / ooc.atlas_size;
     b.kuv = k * inv_atlas;
     b.uv0 = (slots[slot].offset.xyz + f32(ooc.apron) - leaf.box_min * k) * inv_atlas;
-    b.f = oct_exp2_pos(ooc.finest_level - leaf.level);
-    b.tf_v = tf_row(f32(ooc.finest_level - leaf.level));
+    // Per-axis halvings between this level and the finest.
+    let hd = oct_halvings(ooc.splits.xy, ooc.finest_level) - oct_halvings(ooc.splits.xy, leaf.level);
+    b.f3 = vec3<f32>(oct_exp2_pos(hd.x), oct_exp2_pos(hd.y), oct_exp2_pos(hd.z));
+    let e = min(hd.x, min(hd.y, hd.z));
+    b.f = oct_exp2_pos(e);
+    b.tf_v = tf_row(f32(e));
     b.slot = slot;
     b.box_min = leaf.box_min;
     b.box_size = leaf.box_size;
@@ -107,7 +117,7 @@ fn cursor_gradient(c: Cursor, t: f32) -> vec4<f32> {
     let gx = (atlas_value(uv + vec3<f32>(e.x, 0.0, 0.0)) - atlas_value(uv - vec3<f32>(e.x, 0.0, 0.0))) * 0.5;
     let gy = (atlas_value(uv + vec3<f32>(0.0, e.y, 0.0)) - atlas_value(uv - vec3<f32>(0.0, e.y, 0.0))) * 0.5;
     let gz = (atlas_value(uv + vec3<f32>(0.0, 0.0, e.z)) - atlas_value(uv - vec3<f32>(0.0, 0.0, e.z))) * 0.5;
-    let g = vec3<f32>(gx, gy, gz) / c.b.f;
+    let g = vec3<f32>(gx, gy, gz) / c.b.f3;
     return vec4<f32>(frame.normal_mat * (g * ooc.dims), length(g));
 }
 
@@ -156,7 +166,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         var grid_f = 0.0;
         var k = 0u;
         var t_last = t0;
-        var st = oct_begin(oo, od, t0, t1, frame.max_leaves);
+        var st = oct_begin(oo, od, t0, t1, frame.max_leaves, ooc.splits.xy);
         var dtl = dt;
         var done = false;
         loop {

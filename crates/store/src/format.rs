@@ -77,10 +77,37 @@ pub(crate) struct Header {
     pub(crate) table_len: u64,
     pub(crate) payload_bytes: u64,
     pub(crate) table_crc: u32,
+    /// Split masks of an anisotropic pyramid, root level first (one per level
+    /// but the finest; empty without [`FLAG_SPLIT_MASKS`]).
+    pub(crate) split_masks: Vec<u8>,
 }
 
 /// Header flag: the empty threshold is set.
 pub(crate) const FLAG_THRESHOLD: u8 = 1;
+/// Header flag: the octree is an anisotropic pyramid whose split masks are
+/// packed at [`SPLIT_MASKS_AT`] (3 bits per level, root level in the lowest
+/// bits). Without it every level halves all axes.
+pub(crate) const FLAG_SPLIT_MASKS: u8 = 2;
+/// Offset and length of the packed split masks in the header (reserved bytes).
+pub(crate) const SPLIT_MASKS_AT: std::ops::Range<usize> = 108..120;
+/// Most split masks the header holds (`12 * 8 / 3`).
+pub(crate) const MAX_SPLIT_MASKS: usize = 32;
+
+/// Packs split masks into `SPLIT_MASKS_AT` (the caller checks the count).
+fn pack_masks(masks: &[u8]) -> u128 {
+    masks
+        .iter()
+        .take(MAX_SPLIT_MASKS)
+        .enumerate()
+        .fold(0u128, |p, (l, m)| p | (((*m & 7) as u128) << (3 * l)))
+}
+
+/// The packed bits of `SPLIT_MASKS_AT`.
+pub(crate) fn packed_masks(b: &[u8]) -> u128 {
+    let mut a = [0u8; 16];
+    a[..12].copy_from_slice(&b[SPLIT_MASKS_AT]);
+    u128::from_le_bytes(a)
+}
 
 fn u32_at(b: &[u8], o: usize) -> u32 {
     u32::from_le_bytes([b[o], b[o + 1], b[o + 2], b[o + 3]])
@@ -123,6 +150,9 @@ impl Header {
         b[88..96].copy_from_slice(&self.table_len.to_le_bytes());
         b[96..104].copy_from_slice(&self.payload_bytes.to_le_bytes());
         b[104..108].copy_from_slice(&self.table_crc.to_le_bytes());
+        if self.flags & FLAG_SPLIT_MASKS != 0 {
+            b[SPLIT_MASKS_AT].copy_from_slice(&pack_masks(&self.split_masks).to_le_bytes()[..12]);
+        }
         let crc = crc32fast::hash(&b[..124]);
         b[124..128].copy_from_slice(&crc.to_le_bytes());
         b
@@ -150,6 +180,14 @@ impl Header {
             table_len: u64_at(b, 88),
             payload_bytes: u64_at(b, 96),
             table_crc: u32_at(b, 104),
+            split_masks: if b[30] & FLAG_SPLIT_MASKS != 0 {
+                let p = packed_masks(b);
+                (0..(b[31].saturating_sub(1) as usize).min(MAX_SPLIT_MASKS))
+                    .map(|l| ((p >> (3 * l)) & 7) as u8)
+                    .collect()
+            } else {
+                Vec::new()
+            },
         }
     }
 

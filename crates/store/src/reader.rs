@@ -3,9 +3,9 @@
 use crate::Filter;
 use crate::error::{Mismatch, StoreError};
 use crate::format::{
-    ENTRY_LEN, Entry, FLAG_THRESHOLD, HEADER_LEN, Header, KIND_DATA, KIND_EMPTY, KIND_UNIFORM,
-    MAGIC, MAX_APRON, MAX_BRICK, MAX_BRICK_BYTES, TableGeometry, VERSION, dtype_from_code,
-    filter_from_code,
+    ENTRY_LEN, Entry, FLAG_SPLIT_MASKS, FLAG_THRESHOLD, HEADER_LEN, Header, KIND_DATA, KIND_EMPTY,
+    KIND_UNIFORM, MAGIC, MAX_APRON, MAX_BRICK, MAX_BRICK_BYTES, MAX_SPLIT_MASKS, TableGeometry,
+    VERSION, dtype_from_code, filter_from_code, packed_masks,
 };
 use crate::sample::{fill, first_nan, representable, stats_dyn};
 use brickray_core::{
@@ -137,7 +137,17 @@ impl Store {
                 computed,
             });
         }
-        if hb[108..124].iter().any(|&b| b != 0) {
+        // Reserved bytes are zero, but for the split masks of an anisotropic
+        // pyramid (3 bits per level but the finest).
+        let masks_used = if h.flags & FLAG_SPLIT_MASKS != 0 {
+            (3 * h.levels.saturating_sub(1) as u32).min(96)
+        } else {
+            0
+        };
+        if hb[120..124].iter().any(|&b| b != 0)
+            || packed_masks(&hb).checked_shr(masks_used).unwrap_or(0) != 0
+            || (h.flags & FLAG_SPLIT_MASKS != 0 && h.levels as usize > MAX_SPLIT_MASKS + 1)
+        {
             return Err(bad(path, "reserved", "non-zero"));
         }
         if h.header_len != HEADER_LEN as u32 {
@@ -151,7 +161,7 @@ impl Store {
             .ok_or_else(|| bad(path, "dtype", format!("unknown code {}", h.dtype)))?;
         let filter = filter_from_code(h.filter)
             .ok_or_else(|| bad(path, "filter", format!("unknown code {}", h.filter)))?;
-        if h.flags & !FLAG_THRESHOLD != 0 {
+        if h.flags & !(FLAG_THRESHOLD | FLAG_SPLIT_MASKS) != 0 {
             return Err(bad(path, "flags", format!("unknown bits {:#x}", h.flags)));
         }
         let desc = VolumeDesc {
@@ -189,7 +199,12 @@ impl Store {
                 format!("{} (must be in 0..={MAX_APRON})", h.apron),
             ));
         }
-        let layout = OctreeLayout::new(desc, h.brick, h.apron);
+        let layout = if h.flags & FLAG_SPLIT_MASKS != 0 {
+            OctreeLayout::with_split_masks(desc, h.brick, h.apron, &h.split_masks)
+                .map_err(|e| bad(path, "split_masks", e.to_string()))?
+        } else {
+            OctreeLayout::new(desc, h.brick, h.apron)
+        };
         if layout.levels != h.levels {
             return Err(bad(
                 path,
@@ -396,8 +411,15 @@ impl Store {
     }
 
     fn check_key(&self, key: NodeKey) -> Result<Option<&Entry>, StoreError> {
-        let n = 1u64 << key.level.min(63);
-        if key.level >= self.layout.levels || [key.x, key.y, key.z].iter().any(|&p| p as u64 >= n) {
+        if key.level >= self.layout.levels {
+            return Err(StoreError::OutOfRange { key });
+        }
+        let n = self.layout.nodes_per_axis(key.level);
+        if [key.x, key.y, key.z]
+            .iter()
+            .zip(n)
+            .any(|(&p, n)| p as u64 >= n)
+        {
             return Err(StoreError::OutOfRange { key });
         }
         Ok(self.geo.index(key).and_then(|i| self.entries.get(i)))
@@ -444,8 +466,10 @@ impl Store {
         if key.level + 1 >= self.layout.levels {
             return Ok(Vec::new());
         }
-        key.children()
-            .into_iter()
+        self.layout
+            .children(key)
+            .iter()
+            .copied()
             .filter(|c| self.geo.index(*c).is_some())
             .map(|c| self.record(c))
             .collect()

@@ -101,6 +101,9 @@ pub struct VisibilityState {
     /// split while they are in the cut (see the type's documentation).
     bounced: std::collections::HashSet<NodeKey>,
     dirty: bool,
+    /// The octree of an anisotropic pyramid, whose parents halve only some
+    /// axes (`None`: every level halves all axes).
+    pyramid: Option<brickray_core::OctreeLayout>,
 }
 
 impl VisibilityState {
@@ -109,6 +112,21 @@ impl VisibilityState {
         VisibilityState {
             config,
             ..Default::default()
+        }
+    }
+
+    /// Sets the octree the cut's keys belong to: an anisotropic pyramid's
+    /// parents come from its split masks (`OctreeLayout::parent`). An octree
+    /// (every level halving all axes) needs no call.
+    pub fn set_layout(&mut self, layout: &brickray_core::OctreeLayout) {
+        self.pyramid = (!layout.is_isotropic()).then(|| layout.clone());
+        self.dirty = true;
+    }
+
+    fn parent(&self, key: NodeKey) -> Option<NodeKey> {
+        match &self.pyramid {
+            Some(l) => l.parent(key),
+            None => key.parent(),
         }
     }
 
@@ -206,7 +224,7 @@ impl VisibilityState {
             .map(|(k, l)| (*k, self.recent(l, l.reached) || self.leaf_visible(l)))
             .collect();
         for (key, vis) in leaves {
-            let mut p = key.parent();
+            let mut p = self.parent(key);
             while let Some(a) = p {
                 let e = self.inner.entry(a).or_insert(false);
                 if *e && !vis {
@@ -214,7 +232,10 @@ impl VisibilityState {
                     break;
                 }
                 *e |= vis;
-                p = a.parent();
+                p = match &self.pyramid {
+                    Some(l) => l.parent(a),
+                    None => a.parent(),
+                };
             }
         }
         let (inner, leaves) = (&self.inner, &self.leaves);
@@ -304,6 +325,39 @@ mod tests {
         assert!(!s.visible(b));
         // A node not in the cut is not observed.
         assert!(!s.observe(8, NodeKey::ROOT, 100));
+    }
+
+    #[test]
+    fn anisotropic_pyramid_parents_follow_the_split_masks() {
+        use brickray_core::{DType, OctreeLayout, VolumeDesc};
+        // Masks (root first) xyz, xy, xy: level-2 nodes share z with their parent.
+        let layout = OctreeLayout::anisotropic(
+            VolumeDesc {
+                dims: [128, 128, 40],
+                dtype: DType::U8,
+                spacing: [1.0, 1.0, 4.0],
+                value_range: [0.0, 1.0],
+            },
+            32,
+            1,
+        );
+        assert_eq!(layout.split_masks(), vec![7, 3, 3]);
+        let mut s = VisibilityState::new(cfg());
+        s.set_layout(&layout);
+        let a = NodeKey::new(1, 1, 1, 1);
+        let kids = layout.children(a);
+        assert_eq!(kids.len(), 4);
+        // Its children hidden: `a` is hidden, while its z = 0 sibling (the
+        // octree parent of these keys) is not touched.
+        s.set_cut(1, kids.iter().copied());
+        for c in kids.iter() {
+            s.observe(1, *c, 0);
+        }
+        assert!(!s.visible(a));
+        assert!(s.visible(NodeKey::new(1, 1, 1, 0)));
+        s.observe(2, kids[3], 100);
+        assert!(s.visible(a));
+        assert!(s.visible(NodeKey::ROOT));
     }
 
     #[test]

@@ -94,8 +94,10 @@ pub(crate) fn children_in_volume(layout: &OctreeLayout, key: NodeKey) -> Vec<Nod
     if key.level.saturating_add(1) >= layout.levels {
         return Vec::new();
     }
-    key.children()
-        .into_iter()
+    layout
+        .children(key)
+        .iter()
+        .copied()
         .filter(|c| layout.in_volume(*c))
         .collect()
 }

@@ -350,8 +350,9 @@ impl BrickManager {
     pub(crate) fn children_meta_missing(&self, key: NodeKey, info: &NodeInfo) -> bool {
         !matches!(info.kind, NodeKind::Uniform(_))
             && key.level.saturating_add(1) < self.layout.levels
-            && key
-                .children()
+            && self
+                .layout
+                .children(key)
                 .iter()
                 .any(|c| self.layout.in_volume(*c) && !self.meta.contains(*c))
     }

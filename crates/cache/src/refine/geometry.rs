@@ -13,9 +13,11 @@ pub struct ViewGeometry {
     planes: [DVec4; 6],
     model: DMat4,
     scale: [f64; 3],
-    /// Finest-level voxel world size per axis.
-    voxel_world: [f64; 3],
-    levels: u8,
+    /// Per level, the node size in octree unit-box coordinates per axis.
+    unit_size: Vec<[f64; 3]>,
+    /// Per level, the world size of the voxel the LOD metric projects
+    /// ([`lod_voxel_world`]).
+    lod_voxel: Vec<f64>,
     eye: DVec3,
     near: f64,
     /// Pixels per world unit at distance 1 (perspective) or anywhere (ortho).
@@ -47,6 +49,12 @@ impl ViewGeometry {
         let dims = layout.volume.dims;
         let voxel_world: [f64; 3] =
             std::array::from_fn(|a| model.col(a).truncate().length() / dims[a].max(1) as f64);
+        let lod_voxel = (0..layout.levels)
+            .map(|l| lod_voxel_world(layout, voxel_world, l))
+            .collect();
+        let unit_size = (0..layout.levels)
+            .map(|l| layout.nodes_per_axis(l).map(|n| 1.0 / n as f64))
+            .collect();
         let h = viewport_height_px.max(1) as f64;
         let (mut px_per_unit, perspective) = match camera.projection {
             Projection::Perspective { fov_y } => (h / (2.0 * (fov_y as f64 * 0.5).tan()), true),
@@ -62,8 +70,8 @@ impl ViewGeometry {
             planes,
             model,
             scale: layout.volume_scale(),
-            voxel_world,
-            levels: layout.levels,
+            unit_size,
+            lod_voxel,
             eye: camera.eye.as_dvec3(),
             near: (camera.near as f64).max(1e-9),
             px_per_unit,
@@ -73,9 +81,12 @@ impl ViewGeometry {
 
     /// The node's box in texture space, clipped to the volume `[0,1]^3`.
     pub fn tex_box(&self, key: NodeKey) -> (DVec3, DVec3) {
-        let (o, side) = key.unit_box();
+        let last = self.unit_size.len().saturating_sub(1);
+        let size = self.unit_size[(key.level as usize).min(last)];
+        let p = [key.x, key.y, key.z];
+        let o: [f64; 3] = std::array::from_fn(|a| p[a] as f64 * size[a]);
         let lo: [f64; 3] = std::array::from_fn(|a| (o[a] / self.scale[a]).min(1.0));
-        let hi: [f64; 3] = std::array::from_fn(|a| ((o[a] + side) / self.scale[a]).min(1.0));
+        let hi: [f64; 3] = std::array::from_fn(|a| ((o[a] + size[a]) / self.scale[a]).min(1.0));
         (DVec3::from_array(lo), DVec3::from_array(hi))
     }
 
@@ -101,14 +112,13 @@ impl ViewGeometry {
             .any(|p| c.iter().all(|q| p.truncate().dot(*q) + p.w < 0.0))
     }
 
-    /// Projected size in pixels of one voxel of `key` at the node's nearest point
-    /// to the eye (perspective) or anywhere (orthographic). Not finite (NaN or
-    /// infinite) when the camera or the frame is not: refinement then does not
-    /// refine the node.
+    /// Projected size in pixels of one voxel of `key` ([`lod_voxel_world`]) at
+    /// the node's nearest point to the eye (perspective) or anywhere
+    /// (orthographic). Not finite (NaN or infinite) when the camera or the frame
+    /// is not: refinement then does not refine the node.
     pub fn voxel_pixels(&self, key: NodeKey) -> f64 {
-        let finest = self.levels.saturating_sub(1);
-        let shift = (finest - key.level.min(finest)) as i32;
-        let voxel = self.voxel_world.iter().fold(0.0f64, |m, v| m.max(*v)) * 2f64.powi(shift);
+        let last = self.lod_voxel.len().saturating_sub(1);
+        let voxel = self.lod_voxel[(key.level as usize).min(last)];
         if !self.perspective {
             return voxel * self.px_per_unit;
         }
@@ -120,6 +130,33 @@ impl ViewGeometry {
         let d = (self.eye.clamp(lo, hi) - self.eye).length().max(self.near);
         voxel * self.px_per_unit / d
     }
+}
+
+/// The world size of a voxel of `level` that the LOD metric projects: the largest
+/// of its sides along the axes where the level is coarser than the finest data
+/// (at the finest level: the axes its parent level splits; with one level: all
+/// axes). Each side is the finest voxel's world side along that axis times the
+/// level's per-axis voxel factor ([`OctreeLayout::voxel_factor`]).
+///
+/// Axes at full resolution are left out: no refinement can make them finer, so
+/// they would hold a node above the tolerance however far it is refined (a CT
+/// with 5 mm slices would never leave the finest level). In the isotropic
+/// octree every axis is coarsened at every level but the finest, and this is the
+/// largest voxel side times `2^(finest - level)`, exactly as before.
+pub fn lod_voxel_world(layout: &OctreeLayout, voxel_world: [f64; 3], level: u8) -> f64 {
+    let finest = layout.levels.saturating_sub(1);
+    let level = level.min(finest);
+    let mut axes = (level..finest).fold(0u8, |m, l| m | layout.split_mask(l));
+    if axes == 0 && finest > 0 {
+        axes = layout.split_mask(finest - 1);
+    }
+    if axes == 0 {
+        axes = brickray_core::ALL_AXES;
+    }
+    let f = layout.voxel_factor(level);
+    (0..3)
+        .filter(|a| axes & (1 << a) != 0)
+        .fold(0.0f64, |m, a| m.max(voxel_world[a] * f[a]))
 }
 
 /// True when a node with this metadata can contribute to the image in `mode`.
@@ -145,3 +182,7 @@ pub fn is_visible(
         _ => true,
     }
 }
+
+#[cfg(test)]
+#[path = "geometry_tests.rs"]
+mod tests;

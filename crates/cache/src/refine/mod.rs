@@ -23,7 +23,7 @@ mod geometry;
 #[cfg(test)]
 pub(crate) mod tests;
 
-pub use geometry::{ViewGeometry, is_visible};
+pub use geometry::{ViewGeometry, is_visible, lod_voxel_world};
 
 use crate::upload::UploadBudget;
 use brickray_core::{
@@ -371,7 +371,8 @@ pub fn refine(
             finals.push((key, priority));
             continue;
         }
-        let children = key.children();
+        let children = layout.children(key);
+        let n = children.len();
         // Classify the children.
         let mut classes = [Classified {
             class: NodeClass::Empty(EmptyReason::Empty),
@@ -379,7 +380,7 @@ pub fn refine(
             info: None,
         }; 8];
         let (mut pending, mut failed) = (Vec::new(), 0u32);
-        for (i, c) in children.into_iter().enumerate() {
+        for (i, &c) in children.iter().enumerate() {
             match classify(c, layout, params, &geo, env) {
                 Ok(cl) => classes[i] = cl,
                 Err(Unknown::Pending) => pending.push(c),
@@ -402,7 +403,7 @@ pub fn refine(
             finals.push((key, priority));
             continue;
         }
-        let data: Vec<usize> = (0..8)
+        let data: Vec<usize> = (0..n)
             .filter(|&i| classes[i].class == NodeClass::Data)
             .collect();
         let states: Vec<DataState> = data.iter().map(|&i| env.data(children[i])).collect();
@@ -451,7 +452,7 @@ pub fn refine(
             budget.release(brick_bytes);
         }
         let mut state = states.iter();
-        for i in 0..8 {
+        for i in 0..n {
             match classes[i].class {
                 NodeClass::Empty(r) => out.leaves.push(empty_leaf(children[i], r)),
                 NodeClass::Data => heap.push(HeapItem {

@@ -118,6 +118,7 @@ pub(crate) struct OocParams {
     pub(crate) apron: u32,
     pub(crate) stored_side: u32,
     pub(crate) sub_cells: u32,
+    pub(crate) splits: [u32; 4],
 }
 
 /// The pool's GPU side, sized by the pool's slot grid: the atlas and the
@@ -301,6 +302,8 @@ impl OutOfCore {
             cut_changed: false,
             occlusion,
         };
+        let layout = ooc.layout.clone();
+        ooc.visibility.set_layout(&layout);
         ooc.write_params(queue);
         Ok(ooc)
     }
@@ -319,6 +322,10 @@ impl OutOfCore {
             apron: l.apron,
             stored_side: l.stored_side(),
             sub_cells: self.manager.gpu_format().sub_cells_per_axis,
+            splits: {
+                let [lo, hi] = brickray_index::Splits::from_layout(l).gpu_words();
+                [lo, hi, 0, 0]
+            },
         };
         self.params.write(queue, params);
     }
@@ -616,7 +623,11 @@ impl VolumeBackend for OutOfCore {
         let upload_ms = t.elapsed().as_secs_f64() * 1e3;
 
         let t = Instant::now();
-        let index = brickray_index::encode_cut(&plan.cut).map_err(RenderError::from)?;
+        let index = brickray_index::encode_cut_with(
+            &plan.cut,
+            brickray_index::Splits::from_layout(&self.layout),
+        )
+        .map_err(RenderError::from)?;
         let words = index.words();
         let (written, grew) = self
             .index

@@ -285,6 +285,7 @@ fn ooc_kernel_matches_the_rust_side() {
                 apron,
                 stored_side,
                 sub_cells,
+                splits,
             ]
         ),
         std::mem::size_of::<OocParams>(),

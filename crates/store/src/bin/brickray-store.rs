@@ -65,6 +65,10 @@ enum Command {
         /// No progress bar.
         #[arg(long)]
         quiet: bool,
+        /// Build an anisotropic pyramid: coarser levels first halve only the
+        /// axes with the finer voxel sides (docs/store-format.md).
+        #[arg(long)]
+        anisotropic: bool,
     },
     /// Write any input as raw samples + a JSON sidecar (`<out>.json` and
     /// `<out>.raw`), streamed within the memory bound.
@@ -166,6 +170,7 @@ fn main() -> ExitCode {
             memory_mib,
             select,
             quiet,
+            anisotropic,
         } => remove_temporaries_on_signals().and_then(|()| {
             let memory_bound = memory_mib.checked_mul(1 << 20).ok_or_else(|| {
                 StoreError::BadOption {
@@ -181,6 +186,7 @@ fn main() -> ExitCode {
                 empty_below,
                 memory_bound,
                 progress: !quiet,
+                anisotropic,
             };
             cmd_build(&input, &output, &o, &select.options())
         }),
@@ -371,6 +377,14 @@ fn cmd_info(store_path: &std::path::Path, bins: usize) -> Result<(), String> {
     let s = store.stats();
     let total: u64 = s.per_level.iter().map(|l| l[0]).sum();
     println!("levels      {}", lay.levels);
+    if !lay.is_isotropic() {
+        // Octal digits: 1 x, 2 y, 4 z (7: all axes).
+        let m: Vec<String> = lay.split_masks().iter().map(|m| format!("{m:o}")).collect();
+        println!(
+            "split masks {} (anisotropic pyramid, root first)",
+            m.join(",")
+        );
+    }
     println!("  level   grid            nodes      data   uniform     empty");
     for (l, c) in s.per_level.iter().enumerate() {
         let g = store.grid(l as u8).unwrap_or([0; 3]);

@@ -31,12 +31,21 @@ pub(super) struct LevelBuf {
     pub(super) nrows: u32,
     /// Brick rows (y) this pass cuts.
     pub(super) by: (u32, u32),
+    /// The axes the filter to the next coarser level halves (the layout's split
+    /// mask of that level); an axis not halved is copied through.
+    pub(super) halve: [bool; 3],
 }
 
 impl LevelBuf {
     pub(super) fn new(layout: &OctreeLayout, level: u8, per: u32) -> LevelBuf {
         let dims = layout.level_dims(level);
+        let mask = if level > 0 {
+            layout.split_mask(level - 1)
+        } else {
+            brickray_core::ALL_AXES
+        };
         LevelBuf {
+            halve: std::array::from_fn(|a| mask & (1 << a) != 0),
             level,
             dims,
             grid: dims.map(|d| d.div_ceil(layout.brick)),
@@ -91,7 +100,11 @@ impl LevelBuf {
             let pdims = ctx.layout.level_dims(self.level - 1);
             let size = ctx.layout.dtype().size();
             while self.next_down < pdims[2] {
-                let need = (2 * self.next_down + 2).min(nz);
+                let need = if self.halve[2] {
+                    (2 * self.next_down + 2).min(nz)
+                } else {
+                    self.next_down + 1
+                };
                 if self.received() < need {
                     break;
                 }
@@ -128,8 +141,13 @@ impl LevelBuf {
         } else {
             keep_slab
         };
-        let keep_down = if has_parent && self.next_down < self.dims[2].div_ceil(2) {
-            2 * self.next_down as u64
+        let coarse_nz = if self.halve[2] {
+            self.dims[2].div_ceil(2)
+        } else {
+            self.dims[2]
+        };
+        let keep_down = if has_parent && self.next_down < coarse_nz {
+            self.next_down as u64 * if self.halve[2] { 2 } else { 1 }
         } else {
             u64::MAX
         };
@@ -146,7 +164,7 @@ impl LevelBuf {
     }
 
     /// Rows `rows` of level slice `k` of the coarser level, filtered from
-    /// slices `2k`, `2k+1`.
+    /// slices `2k`, `2k+1` (slice `k` alone when z is not halved).
     pub(super) fn downsample(
         &self,
         ctx: &Ctx,
@@ -156,8 +174,11 @@ impl LevelBuf {
         out: &mut [u8],
     ) {
         let nz = self.dims[2];
-        let s0 = self.slice(2 * k);
-        let s1 = self.slice((2 * k + 1).min(nz - 1));
+        let (s0, s1) = if self.halve[2] {
+            (self.slice(2 * k), self.slice((2 * k + 1).min(nz - 1)))
+        } else {
+            (self.slice(k), self.slice(k))
+        };
         let dtype = ctx.layout.dtype();
         let g = Geom {
             nx: self.dims[0] as usize,
@@ -165,6 +186,8 @@ impl LevelBuf {
             row0: self.row0 as usize,
             px: pdims[0] as usize,
             rows: (rows.0 as usize, rows.1 as usize),
+            halve_x: self.halve[0],
+            halve_y: self.halve[1],
         };
         debug_assert_eq!(out.len(), g.px * (g.rows.1 - g.rows.0) * dtype.size());
         with_sample!(dtype, T => downsample_slice::<T>(s0, s1, &g, ctx.filter, out));
@@ -276,7 +299,7 @@ impl LevelBuf {
         // Subtree range: own voxels and the children's ranges.
         let (mut smin, mut smax) = (lo, hi);
         if key.level + 1 < lay.levels {
-            for c in key.children() {
+            for &c in lay.children(key).iter() {
                 if let Some(e) = ctx.geo.index(c).and_then(|i| ctx.entries.get(i))
                     && e.level != NO_ENTRY_LEVEL
                 {
@@ -320,6 +343,10 @@ pub(super) struct Geom {
     px: usize,
     /// Coarse rows to compute.
     rows: (usize, usize),
+    /// Whether x and y are halved (else each coarse voxel takes one fine column
+    /// or row, read twice).
+    halve_x: bool,
+    halve_y: bool,
 }
 
 pub(super) fn downsample_slice<T: Sample>(
@@ -338,8 +365,11 @@ pub(super) fn downsample_slice<T: Sample>(
     let rows = out.par_chunks_mut(px * sz).with_min_len(8);
     rows.enumerate().for_each(|(jj, orow)| {
         let j = g.rows.0 + jj;
-        let y0 = (2 * j).min(ny - 1);
-        let y1 = (2 * j + 1).min(ny - 1);
+        let (y0, y1) = if g.halve_y {
+            ((2 * j).min(ny - 1), (2 * j + 1).min(ny - 1))
+        } else {
+            (j, j)
+        };
         let r = [
             &s0[row(s0, y0)],
             &s0[row(s0, y1)],
@@ -347,8 +377,11 @@ pub(super) fn downsample_slice<T: Sample>(
             &s1[row(s1, y1)],
         ];
         for i in 0..px {
-            let x0 = (2 * i).min(nx - 1) * sz;
-            let x1 = (2 * i + 1).min(nx - 1) * sz;
+            let (x0, x1) = if g.halve_x {
+                ((2 * i).min(nx - 1) * sz, (2 * i + 1).min(nx - 1) * sz)
+            } else {
+                (i * sz, i * sz)
+            };
             // Order: x fastest, then y, then z.
             let v = [
                 T::read(&r[0][x0..]),

@@ -20,8 +20,9 @@
 
 use crate::error::StoreError;
 use crate::format::{
-    ENTRY_LEN, Entry, FLAG_THRESHOLD, HEADER_LEN, Header, KIND_DATA, KIND_EMPTY, KIND_UNIFORM,
-    MAX_APRON, MAX_BRICK, MAX_BRICK_BYTES, TableGeometry, VERSION, dtype_code, filter_code,
+    ENTRY_LEN, Entry, FLAG_SPLIT_MASKS, FLAG_THRESHOLD, HEADER_LEN, Header, KIND_DATA, KIND_EMPTY,
+    KIND_UNIFORM, MAX_APRON, MAX_BRICK, MAX_BRICK_BYTES, TableGeometry, VERSION, dtype_code,
+    filter_code,
 };
 use crate::partial::{PartialFile, parent_dir, remove_stale};
 use crate::{Filter, NO_ENTRY_LEVEL};
@@ -52,6 +53,11 @@ pub struct BuildOptions {
     pub memory_bound: u64,
     /// Show a progress bar on stderr (default false).
     pub progress: bool,
+    /// Build an anisotropic pyramid ([`OctreeLayout::anisotropic`]): coarser
+    /// levels first halve only the axes with the finer voxel sides (default
+    /// false: every level halves all axes). Volumes with near-isotropic voxels
+    /// get the same store either way.
+    pub anisotropic: bool,
 }
 
 impl Default for BuildOptions {
@@ -63,6 +69,7 @@ impl Default for BuildOptions {
             empty_below: None,
             memory_bound: 1 << 30,
             progress: false,
+            anisotropic: false,
         }
     }
 }
@@ -156,7 +163,11 @@ pub fn build(
             reason: "must be finite".into(),
         });
     }
-    let layout = OctreeLayout::new(desc.clone(), opts.brick, opts.apron);
+    let layout = if opts.anisotropic {
+        OctreeLayout::anisotropic(desc.clone(), opts.brick, opts.apron)
+    } else {
+        OctreeLayout::new(desc.clone(), opts.brick, opts.apron)
+    };
     if layout.brick_bytes() > MAX_BRICK_BYTES {
         return Err(StoreError::BadOption {
             option: "brick",
@@ -317,7 +328,12 @@ pub fn build(
             FLAG_THRESHOLD
         } else {
             0
+        } | if layout.is_isotropic() {
+            0
+        } else {
+            FLAG_SPLIT_MASKS
         },
+        split_masks: layout.split_masks(),
         levels: layout.levels,
         brick: layout.brick,
         apron: layout.apron,
@@ -458,7 +474,18 @@ fn plan(layout: &OctreeLayout, top: u8, bound: u64, fixed: u64) -> Result<Plan, 
     let per = per_step(slice, layout.brick);
     // Rolling windows: brick + 2 apron + 2 slices per level plus the slices read
     // in one step and as many recycled buffers; levels shrink 4x.
-    let need = (side + 2 + 2 * per as u64) * slice * 4 / 3 + fixed;
+    let need = if layout.is_isotropic() {
+        (side + 2 + 2 * per as u64) * slice * 4 / 3 + fixed
+    } else {
+        // An anisotropic pyramid's levels need not shrink 4x: sum them.
+        let all: u64 = (0..=top)
+            .map(|l| {
+                let d = layout.level_dims(l);
+                d[0] as u64 * d[1] as u64 * size
+            })
+            .sum();
+        (side + 2 + 2 * per as u64) * all + fixed
+    };
     if need <= bound || top == 0 {
         return if need <= bound {
             Ok(Plan::Stream { per, need })
@@ -569,11 +596,16 @@ fn run_bands<W: Write>(
         let (r0, r1) = band_rows(&layout, d[1], by0, by1);
         // Coarser rows this band filters: every row whose source rows start here.
         let b = layout.brick as u64;
-        let j0 = ((by0 as u64 * b).div_ceil(2)).min(pd[1] as u64) as u32;
+        let hy = if layout.split_mask(top - 1) & 2 != 0 {
+            2
+        } else {
+            1
+        };
+        let j0 = ((by0 as u64 * b).div_ceil(hy)).min(pd[1] as u64) as u32;
         let j1 = if by1 == gy {
             pd[1]
         } else {
-            ((by1 as u64 * b).div_ceil(2)).min(pd[1] as u64) as u32
+            ((by1 as u64 * b).div_ceil(hy)).min(pd[1] as u64) as u32
         };
         let row_bytes = d[0] as usize * size;
         let band_bytes = (r1 - r0) as usize * row_bytes;

@@ -128,6 +128,9 @@ pub fn reference_levels(
         let fd = layout.level_dims(l as u8 + 1).map(|d| d as usize);
         let cd = layout.level_dims(l as u8).map(|d| d as usize);
         let fine = &levels[l + 1];
+        // Axes this step halves; a kept axis reads the same fine voxel twice.
+        let m = layout.split_mask(l as u8);
+        let f = [0, 1, 2].map(|a| if m & (1 << a) != 0 { 2 } else { 1 });
         let mut out = Vec::with_capacity(cd[0] * cd[1] * cd[2]);
         for k in 0..cd[2] {
             for j in 0..cd[1] {
@@ -137,9 +140,9 @@ pub fn reference_levels(
                     for dz in 0..2 {
                         for dy in 0..2 {
                             for dx in 0..2 {
-                                let x = (2 * i + dx).min(fd[0] - 1);
-                                let y = (2 * j + dy).min(fd[1] - 1);
-                                let z = (2 * k + dz).min(fd[2] - 1);
+                                let x = (f[0] * i + dx * (f[0] - 1)).min(fd[0] - 1);
+                                let y = (f[1] * j + dy * (f[1] - 1)).min(fd[1] - 1);
+                                let z = (f[2] * k + dz * (f[2] - 1)).min(fd[2] - 1);
                                 v[c] = fine[x + fd[0] * (y + fd[1] * z)];
                                 c += 1;
                             }
@@ -199,12 +202,12 @@ pub fn check_source(src: &dyn BrickSource, levels: &[Vec<f32>], threshold: Optio
     let dtype = layout.dtype();
     let mut buf = vec![0u8; layout.brick_bytes()];
     for l in (0..layout.levels).rev() {
-        let n = 1u32 << l;
+        let n = layout.nodes_per_axis(l).map(|n| n as u32);
         let ld = layout.level_dims(l);
         let g = ld.map(|d| d.div_ceil(layout.brick));
-        for z in 0..n.min(g[2] + 1) {
-            for y in 0..n.min(g[1] + 1) {
-                for x in 0..n.min(g[0] + 1) {
+        for z in 0..n[2].min(g[2] + 1) {
+            for y in 0..n[1].min(g[1] + 1) {
+                for x in 0..n[0].min(g[0] + 1) {
                     let key = NodeKey::new(l, x, y, z);
                     let info = src.node(key).unwrap();
                     src.read_brick(key, &mut buf).unwrap();
@@ -225,7 +228,7 @@ pub fn check_source(src: &dyn BrickSource, levels: &[Vec<f32>], threshold: Optio
                         info.max
                     );
                     if l + 1 < layout.levels {
-                        for c in key.children() {
+                        for &c in layout.children(key).iter() {
                             if layout.in_volume(c) {
                                 let ci = src.node(c).unwrap();
                                 assert!(

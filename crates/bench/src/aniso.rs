@@ -1,0 +1,212 @@
+//! LOD sweep on an anisotropic CT: the head CT resampled to 4.5 mm slices (every
+//! third slice of 0.957 x 0.957 x 1.5 mm), stored as today's all-axes octree
+//! ("before") and as an anisotropic pyramid ("after", `BuildOptions::anisotropic`
+//! with the per-axis LOD metric). For each screen-space tolerance the cut is
+//! refined with every brick available (one refinement from the root, no pool,
+//! upload or request limits), the cut's bricks are resampled onto the finest
+//! grid exactly as the out-of-core kernel samples them (trilinear inside each
+//! leaf's stored brick, apron included), and the f64 CPU reference renders that
+//! volume; PSNR is against the reference render of the finest data. GPU-free.
+
+use crate::Figures;
+use brickray_cache::refine::{DataState, MetaState, RefineEnv, RefineParams, refine};
+use brickray_cache::{NodeClass, UploadBudget};
+use brickray_core::{
+    BrickSource, Camera, DType, NodeKey, OctreeLayout, RenderMode, RenderSettings, Volume,
+    VolumeData, VolumeDesc, VolumeFrame,
+};
+use brickray_harness::ct;
+use brickray_reference::{ReferenceOptions, psnr, render_reference};
+use brickray_store::{BuildOptions, Store};
+use std::collections::HashMap;
+
+/// Every brick available; metadata from the store.
+struct AllAvailable<'a>(&'a Store);
+
+impl RefineEnv for AllAvailable<'_> {
+    fn node(&mut self, key: NodeKey) -> MetaState {
+        match self.0.info(key) {
+            Ok(i) => MetaState::Known(i),
+            Err(_) => MetaState::Failed,
+        }
+    }
+    fn data(&mut self, _key: NodeKey) -> DataState {
+        DataState::OnGpu
+    }
+}
+
+/// The finest-grid volume the cut's leaves sample to, and its data-leaf count.
+fn cut_volume(
+    store: &Store,
+    tf: &brickray_core::TransferFunction,
+    mode: RenderMode,
+    camera: &Camera,
+    frame: &VolumeFrame,
+    size: u32,
+    tolerance_px: f32,
+) -> Result<(Volume, u32, Vec<u32>), String> {
+    let layout = store.layout().clone();
+    let params = RefineParams {
+        camera,
+        aspect: 1.0,
+        viewport_height_px: size,
+        volume_frame: frame,
+        mode,
+        tf,
+        tolerance_px,
+        max_data_leaves: u32::MAX / 2,
+        max_requests: u32::MAX / 2,
+        brick_upload_bytes: layout.brick_bytes() as u64,
+    };
+    let mut budget = UploadBudget::new(u64::MAX / 4);
+    let r = refine(&layout, &params, &mut AllAvailable(store), &mut budget);
+    let mut per_level = vec![0u32; layout.levels as usize];
+    let leaves: HashMap<NodeKey, ()> = r.leaves.iter().map(|l| (l.key, ())).collect();
+    for l in &r.leaves {
+        if l.class == NodeClass::Data {
+            per_level[l.key.level as usize] += 1;
+        }
+    }
+    let d = layout.volume.dims;
+    let side = layout.stored_side() as i64;
+    let (b, a) = (layout.brick as f64, layout.apron as f64);
+    let mut bricks: HashMap<NodeKey, Vec<f32>> = HashMap::new();
+    let mut buf = vec![0u8; layout.brick_bytes()];
+    let mut out = vec![0i16; d.iter().map(|&n| n as usize).product()];
+    let factors: Vec<[f64; 3]> = (0..layout.levels).map(|l| layout.voxel_factor(l)).collect();
+    for z in 0..d[2] {
+        for y in 0..d[1] {
+            for x in 0..d[0] {
+                let v = [x, y, z];
+                // The leaf holding this voxel.
+                let mut key = None;
+                for l in 0..layout.levels {
+                    let f = factors[l as usize];
+                    let p: [u32; 3] =
+                        std::array::from_fn(|i| (v[i] as f64 / (f[i] * b)).floor() as u32);
+                    let k = NodeKey::new(l, p[0], p[1], p[2]);
+                    if leaves.contains_key(&k) {
+                        key = Some(k);
+                        break;
+                    }
+                }
+                let key = key.ok_or_else(|| format!("voxel {v:?} in no leaf"))?;
+                let br = match bricks.entry(key) {
+                    std::collections::hash_map::Entry::Occupied(e) => e.into_mut(),
+                    std::collections::hash_map::Entry::Vacant(e) => {
+                        store.read_brick(key, &mut buf).map_err(|e| e.to_string())?;
+                        e.insert(DType::I16.decode_le(&buf))
+                    }
+                };
+                let f = factors[key.level as usize];
+                let kp = [key.x, key.y, key.z];
+                // Brick-local coordinate of this voxel's centre.
+                let c: [f64; 3] = std::array::from_fn(|i| {
+                    ((v[i] as f64 + 0.5) / f[i] - 0.5 - kp[i] as f64 * b + a)
+                        .clamp(0.0, (side - 1) as f64)
+                });
+                let i0 = c.map(|t| (t.floor() as i64).min(side - 2).max(0));
+                let w: [f64; 3] = std::array::from_fn(|i| c[i] - i0[i] as f64);
+                let at = |i: i64, j: i64, k: i64| br[(i + side * (j + side * k)) as usize] as f64;
+                let mut s = 0.0;
+                for dz in 0..2 {
+                    for dy in 0..2 {
+                        for dx in 0..2 {
+                            let wt = (if dx == 1 { w[0] } else { 1.0 - w[0] })
+                                * (if dy == 1 { w[1] } else { 1.0 - w[1] })
+                                * (if dz == 1 { w[2] } else { 1.0 - w[2] });
+                            s += wt * at(i0[0] + dx, i0[1] + dy, i0[2] + dz);
+                        }
+                    }
+                }
+                out[(x + d[0] * (y + d[1] * z)) as usize] = s.round() as i16;
+            }
+        }
+    }
+    let vol =
+        Volume::new(layout.volume.clone(), VolumeData::I16(out)).map_err(|e| e.to_string())?;
+    Ok((vol, r.data_leaves, per_level))
+}
+
+pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
+    let size: u32 = crate::arg(args, "--size", 160)?;
+    let step: f32 = crate::arg(args, "--step", 0.5)?;
+    let scene: String = crate::arg(args, "--scene", "dvr_translucent".to_string())?;
+    let (_, mode, tf) = ct::scenes()
+        .into_iter()
+        .find(|(n, _, _)| *n == scene)
+        .ok_or("--scene: one of dvr_translucent, dvr_opaque, iso, mip")?;
+    let path = brickray_harness::shared_volume("invesalius_cranium_ct")
+        .ok_or("the aniso suite needs ../shared/data/invesalius_cranium_ct")?;
+    let full = brickray_io::read_volume(&path).map_err(|e| e.to_string())?;
+    let d = full.desc().clone();
+    let slice = d.dims[0] as usize * d.dims[1] as usize;
+    let VolumeData::I16(all) = full.data() else {
+        return Err("the head CT is not i16".into());
+    };
+    let nz = d.dims[2].div_ceil(3);
+    let thick: Vec<i16> = (0..nz as usize)
+        .flat_map(|z| all[3 * z * slice..(3 * z + 1) * slice].iter().copied())
+        .collect();
+    let desc = VolumeDesc {
+        dims: [d.dims[0], d.dims[1], nz],
+        spacing: [d.spacing[0], d.spacing[1], d.spacing[2] * 3.0],
+        ..d.clone()
+    };
+    let vol = Volume::new(desc.clone(), VolumeData::I16(thick)).map_err(|e| e.to_string())?;
+    let frame = VolumeFrame::centered(desc.dims, desc.spacing);
+    let camera = Camera::orbit(frame.center(), 1.6, 0.6, 0.35);
+    let settings = RenderSettings {
+        mode,
+        ..Default::default()
+    };
+    let opts = ReferenceOptions::new(size, size).with_step_factor(step);
+    println!(
+        "volume: head CT every third slice, {:?} i16 spacing {:?} mm; image {size}x{size}, \
+         {scene}, reference step factor {step}",
+        desc.dims, desc.spacing
+    );
+    let reference =
+        render_reference(&vol, &frame, &tf, &camera, &settings, &opts).to_rgba8([0.0, 0.0, 0.0]);
+    let tmp = tempfile::tempdir().map_err(|e| e.to_string())?;
+    let mut fig = Figures::new();
+    println!(
+        "\n{:<7} {:>6} {:>8} {:>9} {:>10}  data leaves per level (root first)",
+        "octree", "tol px", "bricks", "PSNR dB", "masks"
+    );
+    for (name, anisotropic) in [("before", false), ("after", true)] {
+        let out = tmp.path().join(format!("{name}.brs"));
+        let o = BuildOptions {
+            anisotropic,
+            ..BuildOptions::default()
+        };
+        let mut reader = brickray_io::MemoryReader::new(vol.clone(), "head_ct_4.5mm");
+        brickray_store::build(&mut reader, &out, &o).map_err(|e| e.to_string())?;
+        let store = brickray_store::open(&out).map_err(|e| e.to_string())?;
+        let layout: &OctreeLayout = store.layout();
+        let masks: String = layout
+            .split_masks()
+            .iter()
+            .map(|m| format!("{m:o}"))
+            .collect::<Vec<_>>()
+            .join(",");
+        for tol in [0.5f32, 1.0, 2.0, 4.0, 8.0] {
+            let (cv, bricks, per_level) =
+                cut_volume(&store, &tf, mode, &camera, &frame, size, tol)?;
+            let img = render_reference(&cv, &frame, &tf, &camera, &settings, &opts)
+                .to_rgba8([0.0, 0.0, 0.0]);
+            let p = psnr(&img, &reference);
+            println!("{name:<7} {tol:>6} {bricks:>8} {p:>9.2} {masks:>10}  {per_level:?}");
+            let t = format!("{tol}").replace('.', "_");
+            fig.insert(format!("{name}_bricks_at_{t}px"), bricks.into());
+            fig.insert(
+                format!("{name}_psnr_at_{t}px"),
+                ((p * 100.0).round() / 100.0).into(),
+            );
+            if anisotropic && tol == 1.0 {
+                fig.insert("anisotropic_ct_bricks_at_1px".into(), bricks.into());
+            }
+        }
+    }
+    Ok(fig)
+}
