@@ -25,6 +25,7 @@
 mod config;
 mod cpu_cache;
 mod failures;
+pub mod fade;
 mod loader;
 mod manager;
 mod pool;
@@ -41,6 +42,7 @@ pub use config::{
     SizeQuantity,
 };
 pub use cpu_cache::CpuCache;
+pub use fade::{Displayed, Fade, FadeDuration, Fader, MAX_FADE_FRAMES};
 pub use failures::{Clock, FailureCounts, FetchKind, StreamError, SystemClock};
 pub use loader::{
     BrickRequest, LoadError, Loader, LoaderConfig, PollReport, RequestOutcome, SHUTDOWN_WAIT,
