@@ -59,7 +59,11 @@ impl FadeDuration {
                     return 1.0;
                 }
                 let s = (dt_s.max(0.0) * 1e3 / ms as f64) as f32;
-                if s.is_finite() { s.clamp(min, 1.0) } else { 1.0 }
+                if s.is_finite() {
+                    s.clamp(min, 1.0)
+                } else {
+                    1.0
+                }
             }
         }
     }
@@ -177,8 +181,11 @@ impl Fader {
             .filter(|l| is_data(l))
             .map(|l| l.key)
             .collect();
-        let refined_keys: HashMap<NodeKey, usize> =
-            refined.iter().enumerate().map(|(i, l)| (l.key, i)).collect();
+        let refined_keys: HashMap<NodeKey, usize> = refined
+            .iter()
+            .enumerate()
+            .map(|(i, l)| (l.key, i))
+            .collect();
         // The last displayed leaves strictly inside each refined leaf.
         let mut under: HashMap<usize, Vec<usize>> = HashMap::new();
         for (j, d) in self.prev.iter().enumerate() {
@@ -249,7 +256,14 @@ impl Fader {
                         };
                         group.push((d, s));
                     } else {
-                        group.push((d, State { ancestor: n.key, weight: 1.0, target: 1.0 }));
+                        group.push((
+                            d,
+                            State {
+                                ancestor: n.key,
+                                weight: 1.0,
+                                target: 1.0,
+                            },
+                        ));
                     }
                 }
                 let done = group

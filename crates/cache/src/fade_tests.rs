@@ -100,7 +100,10 @@ fn run(cuts: &[Vec<RefinedLeaf>], hold: usize, step: f32) -> Fader {
                 now.insert(fade.leaf, (fade.ancestor, fade.weight));
             }
             last = now;
-            resident = drawn.union(&d.fallbacks().into_iter().collect()).copied().collect();
+            resident = drawn
+                .union(&d.fallbacks().into_iter().collect())
+                .copied()
+                .collect();
         }
     }
     f
@@ -198,7 +201,11 @@ fn a_merge_keeps_the_children_until_faded() {
     f.advance(&kids, Some(0.5));
     let d = f.advance(&root, Some(0.5));
     assert_eq!(keys(&d.leaves), keys(&kids));
-    assert!(d.fades.iter().all(|f| f.weight == 0.5 && f.ancestor == NodeKey::ROOT));
+    assert!(
+        d.fades
+            .iter()
+            .all(|f| f.weight == 0.5 && f.ancestor == NodeKey::ROOT)
+    );
     let d = f.advance(&root, Some(0.5));
     assert_eq!(keys(&d.leaves), vec![NodeKey::ROOT]);
     assert!(d.fades.is_empty());
@@ -215,8 +222,15 @@ fn a_reversed_split_fades_back_from_where_it_was() {
     // Back out: the children stay, fading toward the root from 0.5.
     let d = f.advance(&root, Some(0.25));
     assert_eq!(keys(&d.leaves), keys(&kids));
-    assert!(d.fades.iter().all(|f| f.weight == 0.75 && f.ancestor == NodeKey::ROOT));
-    assert_eq!(keys(&f.advance(&root, Some(0.25)).leaves), vec![NodeKey::ROOT]);
+    assert!(
+        d.fades
+            .iter()
+            .all(|f| f.weight == 0.75 && f.ancestor == NodeKey::ROOT)
+    );
+    assert_eq!(
+        keys(&f.advance(&root, Some(0.25)).leaves),
+        vec![NodeKey::ROOT]
+    );
 }
 
 #[test]

@@ -24,8 +24,8 @@
 
 mod config;
 mod cpu_cache;
-mod failures;
 pub mod fade;
+mod failures;
 mod loader;
 mod manager;
 mod pool;
@@ -38,8 +38,8 @@ mod test_source;
 
 pub use brickray_core::{CutLeaf, EmptyReason, LeafKind};
 pub use config::{
-    CacheConfig, ConfigError, GpuFormat, MAX_LOADER_THREADS, MIN_RESIDENT_BRICKS, RetryPolicy,
-    SizeQuantity,
+    CacheConfig, ConfigError, DEFAULT_FLOOR_SLOTS, GpuFormat, MAX_LOADER_THREADS,
+    MIN_RESIDENT_BRICKS, RetryPolicy, SizeQuantity,
 };
 pub use cpu_cache::CpuCache;
 pub use fade::{Displayed, Fade, FadeDuration, Fader, MAX_FADE_FRAMES};
@@ -48,7 +48,7 @@ pub use loader::{
     BrickRequest, LoadError, Loader, LoaderConfig, PollReport, RequestOutcome, SHUTDOWN_WAIT,
 };
 pub use manager::{
-    BrickManager, CacheError, FramePlan, FrameStats, Residency, ResidencyCounts, Upload,
+    BrickManager, CacheError, FadeSlot, FramePlan, FrameStats, Residency, ResidencyCounts, Upload,
 };
 pub use pool::{Allocation, BrickPool, PoolError, PoolLimits, SlotId};
 pub use prepared::{PreparedBrick, Preparer};

@@ -84,6 +84,7 @@ impl BrickManager {
     /// uploads the working set again.
     pub fn clear_gpu(&mut self) {
         self.pool.clear();
+        self.fader.clear();
     }
 
     /// Reads the root's metadata and brick (and its children's metadata)
@@ -188,6 +189,7 @@ impl BrickManager {
         })?;
         self.pool = pool;
         self.config.gpu_budget_bytes = bytes;
+        self.reset_floor();
         Ok(self.pool.atlas_dims())
     }
 
