@@ -61,6 +61,7 @@
 mod image_buf;
 mod metrics;
 mod render;
+mod temporal;
 
 pub use image_buf::{Image, ImageIoError, save_rgba8_png};
 pub use metrics::{
@@ -68,3 +69,6 @@ pub use metrics::{
     test_output_dir,
 };
 pub use render::{DEFAULT_STEP_FACTOR, ReferenceOptions, render_reference};
+pub use temporal::{
+    CHANGE_EPS, TemporalError, TemporalOptions, TemporalReport, temporal_stability,
+};
