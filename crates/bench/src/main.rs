@@ -14,6 +14,10 @@ mod prediction_chart;
 mod raw;
 mod runner;
 mod soak;
+// The LOD-path cases of the stability suite (its module is wired in with the
+// rest of the suite); `stability-paths` runs them meanwhile.
+#[path = "stability/paths.rs"]
+mod stability_paths;
 mod u8;
 mod visibility;
 
@@ -199,6 +203,7 @@ fn main() -> ExitCode {
         Suite::Soak { .. } => soak::run(rest),
         Suite::U8 { .. } => u8::run(rest),
         Suite::Visibility { .. } => visibility::run(rest),
+        Suite::StabilityPaths { .. } => stability_paths::run(rest),
     };
     match result {
         Ok(fig) => {
