@@ -226,14 +226,23 @@ impl Fader {
                 p = k.parent();
             }
             if let Some(a) = from {
-                states.insert(
-                    n.key,
-                    State {
+                // `a` was drawn as mix(a, a0, w). Start from whichever of
+                // mix(n, a, 1) = a and mix(n, a0, w) is nearer to it: the jump
+                // is at most half a level's difference, w (a0 - a) or
+                // (1 - w) (n - a).
+                let state = match self.states.get(&a) {
+                    Some(s) if s.target == 0.0 && s.weight > 0.5 => State {
+                        ancestor: s.ancestor,
+                        weight: s.weight,
+                        target: 0.0,
+                    },
+                    _ => State {
                         ancestor: a,
                         weight: 1.0,
                         target: 0.0,
                     },
-                );
+                };
+                states.insert(n.key, state);
                 out.leaves.push(*n);
                 continue;
             }
