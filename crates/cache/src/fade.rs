@@ -55,7 +55,7 @@ impl FadeDuration {
         match *self {
             FadeDuration::Frames(n) => 1.0 / n.max(1) as f32,
             FadeDuration::Millis(ms) => {
-                if !(ms > 0.0) || !ms.is_finite() {
+                if ms.is_nan() || ms <= 0.0 || !ms.is_finite() {
                     return 1.0;
                 }
                 let s = (dt_s.max(0.0) * 1e3 / ms as f64) as f32;

@@ -85,16 +85,14 @@ fn run(cuts: &[Vec<RefinedLeaf>], hold: usize, step: f32) -> Fader {
                 assert!(is_ancestor(fade.ancestor, fade.leaf));
                 assert!((0.0..=1.0).contains(&fade.weight));
                 // Same input, same pair: monotone toward the target.
-                if frame > 0 {
-                    if let Some(&(a, w)) = last.get(&fade.leaf) {
-                        if a == fade.ancestor {
-                            let merge = !data(cut).contains(&fade.leaf);
-                            if merge {
-                                assert!(fade.weight >= w, "merge weight fell");
-                            } else {
-                                assert!(fade.weight <= w, "split weight rose");
-                            }
-                        }
+                if let (true, Some(&(a, w))) = (frame > 0, last.get(&fade.leaf))
+                    && a == fade.ancestor
+                {
+                    let merge = !data(cut).contains(&fade.leaf);
+                    if merge {
+                        assert!(fade.weight >= w, "merge weight fell");
+                    } else {
+                        assert!(fade.weight <= w, "split weight rose");
                     }
                 }
                 now.insert(fade.leaf, (fade.ancestor, fade.weight));

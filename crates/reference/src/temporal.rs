@@ -238,8 +238,8 @@ mod tests {
         for y in region.1..region.1 + 16 {
             for x in region.0..region.0 + 16 {
                 let p = ((y * W + x) * 4) as usize;
-                for k in p..p + 3 {
-                    v[k] = (v[k] as i16 + d).clamp(0, 255) as u8;
+                for c in &mut v[p..p + 3] {
+                    *c = (*c as i16 + d).clamp(0, 255) as u8;
                 }
             }
         }
@@ -294,7 +294,7 @@ mod tests {
         let r: Vec<Vec<u8>> = f
             .iter()
             .enumerate()
-            .map(|(t, i)| offset(i, (16, 0), (5 * (t as i16 - 4).clamp(0, 8)) as i16))
+            .map(|(t, i)| offset(i, (16, 0), 5 * (t as i16 - 4).clamp(0, 8)))
             .collect();
         let rep = temporal_stability(&r, &f, W, H, TemporalOptions::default()).unwrap();
         assert_eq!(rep.pops, 0, "{rep:?}");

@@ -45,7 +45,7 @@ impl Default for PathOptions {
             size: 128,
             dims: 128,
             brick: 16,
-            frames: 32,
+            frames: 48,
             fade_frames: 6,
             pop_threshold: 8.0,
             pause_ms: 10,
@@ -108,7 +108,7 @@ pub fn paths(frames: usize) -> Vec<(&'static str, Vec<Camera>)> {
     let s = |i: usize| i as f32 / (n - 1) as f32;
     let fly = (0..n)
         .map(|i| {
-            let eye = Vec3::new(0.12, 0.07, 1.4 - 1.6 * s(i));
+            let eye = Vec3::new(0.12, 0.07, 1.2 - 1.4 * s(i));
             Camera {
                 eye,
                 target: eye + Vec3::new(0.05, 0.0, -1.0),
@@ -120,7 +120,7 @@ pub fn paths(frames: usize) -> Vec<(&'static str, Vec<Camera>)> {
     let zoom = (0..n)
         .map(|i| {
             // Geometric: the same relative step every frame.
-            let d = 5.0 * (0.3f32 / 5.0).powf(s(i));
+            let d = 2.5 * (0.35f32 / 2.5).powf(s(i));
             Camera {
                 near: 0.01,
                 ..Camera::orbit(Vec3::ZERO, d, 0.6, 0.35)

@@ -269,10 +269,7 @@ impl BrickManager {
         // The displayed cut: the refined one, with level changes fading
         // (crate::fade). If its bricks, their fallbacks and the floor do not fit
         // in the pool, the fades are dropped (the refined cut always fits).
-        let step = match self.config.fade {
-            Some(d) => Some(d.step(self.fade_dt(now))),
-            None => None,
-        };
+        let step = self.config.fade.map(|d| d.step(self.fade_dt(now)));
         let mut shown = self.fader.advance(&refined.leaves, step);
         if !shown.fades.is_empty() {
             let mut need: std::collections::HashSet<NodeKey> = shown
