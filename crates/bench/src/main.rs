@@ -186,6 +186,23 @@ enum Suite {
         #[arg(long)]
         rounds: Option<usize>,
     },
+    /// Temporary: the LOD-path cases of the stability suite
+    /// (crates/bench/src/stability/paths.rs), until the suite is wired in.
+    #[command(hide = true)]
+    StabilityPaths {
+        /// Image side in pixels (default 128).
+        #[arg(long)]
+        size: Option<u32>,
+        /// Frames per path (default 48).
+        #[arg(long)]
+        frames: Option<usize>,
+        /// Fade length in frames with fades on (default 6).
+        #[arg(long)]
+        fade_frames: Option<u32>,
+        /// Pop threshold, 8-bit units over a 16x16 tile (default 8).
+        #[arg(long)]
+        pop_threshold: Option<f64>,
+    },
 }
 
 fn main() -> ExitCode {

@@ -22,21 +22,21 @@ use std::sync::Arc;
 
 /// Knobs of the path cases.
 #[derive(Debug, Clone, Copy)]
-pub struct PathOptions {
+pub(crate) struct PathOptions {
     /// Image side in pixels.
-    pub size: u32,
+    pub(crate) size: u32,
     /// Volume side in voxels.
-    pub dims: u32,
+    pub(crate) dims: u32,
     /// Brick side of the store.
-    pub brick: u32,
+    pub(crate) brick: u32,
     /// Frames per path.
-    pub frames: usize,
+    pub(crate) frames: usize,
     /// Fade length with fades on (frames: deterministic).
-    pub fade_frames: u32,
+    pub(crate) fade_frames: u32,
     /// Pop threshold (mean absolute error change of a 16x16 tile, 8-bit units).
-    pub pop_threshold: f64,
+    pub(crate) pop_threshold: f64,
     /// Pause after each frame, letting the loader threads work (ms).
-    pub pause_ms: u64,
+    pub(crate) pause_ms: u64,
 }
 
 impl Default for PathOptions {
@@ -55,29 +55,29 @@ impl Default for PathOptions {
 
 /// One path rendered one way.
 #[derive(Debug, Clone)]
-pub struct Run {
+pub(crate) struct Run {
     /// The temporal stability against the reference.
-    pub temporal: TemporalReport,
+    pub(crate) temporal: TemporalReport,
     /// Most holes (leaves without a brick) in a frame of the path.
-    pub holes_max: u32,
+    pub(crate) holes_max: u32,
     /// Frames with a fade in progress.
-    pub fading_frames: usize,
+    pub(crate) fading_frames: usize,
 }
 
 /// One case: fades on and off.
 #[derive(Debug, Clone)]
-pub struct CaseResult {
+pub(crate) struct CaseResult {
     /// Its name.
-    pub name: String,
+    pub(crate) name: String,
     /// With fades.
-    pub fades: Run,
+    pub(crate) fades: Run,
     /// Without.
-    pub no_fades: Run,
+    pub(crate) no_fades: Run,
 }
 
 /// A 8-bit fractal-noise volume (detail at every level, so level changes
 /// show).
-pub fn noise_volume(n: u32) -> Volume {
+pub(crate) fn noise_volume(n: u32) -> Volume {
     let mut data = Vec::with_capacity((n as usize).pow(3));
     for z in 0..n {
         for y in 0..n {
@@ -97,13 +97,13 @@ pub fn noise_volume(n: u32) -> Volume {
 }
 
 /// The transfer function of the cases.
-pub fn noise_tf() -> TransferFunction {
+pub(crate) fn noise_tf() -> TransferFunction {
     TransferFunction::ramp(0.5, 0.8, 0.5)
 }
 
 /// The cameras of the named paths (`fly`: straight into the volume and
 /// through it; `zoom`: from far away to inside), `frames` each.
-pub fn paths(frames: usize) -> Vec<(&'static str, Vec<Camera>)> {
+pub(crate) fn paths(frames: usize) -> Vec<(&'static str, Vec<Camera>)> {
     let n = frames.max(2);
     let s = |i: usize| i as f32 / (n - 1) as f32;
     let fly = (0..n)
@@ -176,7 +176,7 @@ fn render_path(
 
 /// Runs the path cases (DVR), fades on (`FadeDuration::Frames(fade_frames)`)
 /// and off, against the CPU reference of every frame.
-pub fn cases(gpu: &GpuContext, opt: &PathOptions) -> Result<Vec<CaseResult>, String> {
+pub(crate) fn cases(gpu: &GpuContext, opt: &PathOptions) -> Result<Vec<CaseResult>, String> {
     let vol = noise_volume(opt.dims);
     let dir = tempfile::tempdir().map_err(|e| e.to_string())?;
     let path = dir.path().join("noise.brs");
@@ -214,7 +214,7 @@ pub fn cases(gpu: &GpuContext, opt: &PathOptions) -> Result<Vec<CaseResult>, Str
                 .to_rgba8([0.0; 3])
             })
             .collect();
-        let mut run = |fade| -> Result<Run, String> {
+        let run = |fade| -> Result<Run, String> {
             let (images, holes_max, fading_frames) =
                 render_path(gpu, source.clone(), frame, &tf, settings, &cams, fade, opt)?;
             let temporal = temporal_stability(&images, &reference, opt.size, opt.size, topt)
@@ -239,7 +239,7 @@ pub fn cases(gpu: &GpuContext, opt: &PathOptions) -> Result<Vec<CaseResult>, Str
 /// Prints the cases and returns the suite's figures: `temporal_excess_db_fades`
 /// (the largest change excess in dB with fades), `..._no_fades`, `pops_fades`,
 /// `pops_no_fades` (summed), `holes_max`, and per case.
-pub fn figures(results: &[CaseResult]) -> serde_json::Map<String, serde_json::Value> {
+pub(crate) fn figures(results: &[CaseResult]) -> serde_json::Map<String, serde_json::Value> {
     let mut fig = serde_json::Map::new();
     println!(
         "{:<12} {:>6} {:>10} {:>9} {:>9} {:>5} {:>6} {:>6}",
@@ -252,11 +252,21 @@ pub fn figures(results: &[CaseResult]) -> serde_json::Map<String, serde_json::Va
             let t = &r.temporal;
             println!(
                 "{:<12} {:>6} {:>10.3} {:>9.3} {:>9.3} {:>5} {:>6} {:>6}",
-                c.name, on, t.change_excess_db, t.flicker_mean, t.flicker_p99, t.pops, r.holes_max,
+                c.name,
+                on,
+                t.change_excess_db,
+                t.flicker_mean,
+                t.flicker_p99,
+                t.pops,
+                r.holes_max,
                 r.fading_frames
             );
             fig.insert(
-                format!("{}_{}", c.name.replace('-', "_"), if on == "on" { "fades" } else { "no_fades" }),
+                format!(
+                    "{}_{}",
+                    c.name.replace('-', "_"),
+                    if on == "on" { "fades" } else { "no_fades" }
+                ),
                 json!({
                     "excess_db": t.change_excess_db,
                     "flicker_mean": t.flicker_mean,
@@ -287,13 +297,19 @@ pub fn figures(results: &[CaseResult]) -> serde_json::Map<String, serde_json::Va
 
 /// The temporary `stability-paths` subcommand: `--size`, `--frames`,
 /// `--fade-frames`, `--pop-threshold`.
-pub fn run(args: &[String]) -> Result<serde_json::Map<String, serde_json::Value>, String> {
+pub(crate) fn run(args: &[String]) -> Result<serde_json::Map<String, serde_json::Value>, String> {
     let d = PathOptions::default();
-    let get = |name: &str| args.iter().position(|a| a == name).and_then(|i| args.get(i + 1));
+    let get = |name: &str| {
+        args.iter()
+            .position(|a| a == name)
+            .and_then(|i| args.get(i + 1))
+    };
     let parse = |name: &str| get(name).map(|s| s.parse::<f64>().map_err(|_| format!("bad {name}")));
     let opt = PathOptions {
         size: parse("--size").transpose()?.map_or(d.size, |v| v as u32),
-        frames: parse("--frames").transpose()?.map_or(d.frames, |v| v as usize),
+        frames: parse("--frames")
+            .transpose()?
+            .map_or(d.frames, |v| v as usize),
         fade_frames: parse("--fade-frames")
             .transpose()?
             .map_or(d.fade_frames, |v| v as u32),
