@@ -202,6 +202,9 @@ enum Suite {
         /// Pop threshold, 8-bit units over a 16x16 tile (default 8).
         #[arg(long)]
         pop_threshold: Option<f64>,
+        /// Refinement tolerance in pixels (default 4).
+        #[arg(long)]
+        tolerance: Option<f32>,
     },
 }
 

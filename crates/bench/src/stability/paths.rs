@@ -37,6 +37,9 @@ pub(crate) struct PathOptions {
     pub(crate) pop_threshold: f64,
     /// Pause after each frame, letting the loader threads work (ms).
     pub(crate) pause_ms: u64,
+    /// Screen-space tolerance of refinement (pixels per voxel; larger: coarser
+    /// levels, larger level switches).
+    pub(crate) tolerance_px: f32,
 }
 
 impl Default for PathOptions {
@@ -49,6 +52,7 @@ impl Default for PathOptions {
             fade_frames: 6,
             pop_threshold: 8.0,
             pause_ms: 10,
+            tolerance_px: 4.0,
         }
     }
 }
@@ -108,7 +112,7 @@ pub(crate) fn paths(frames: usize) -> Vec<(&'static str, Vec<Camera>)> {
     let s = |i: usize| i as f32 / (n - 1) as f32;
     let fly = (0..n)
         .map(|i| {
-            let eye = Vec3::new(0.12, 0.07, 1.2 - 1.4 * s(i));
+            let eye = Vec3::new(0.12, 0.07, 3.0 - 3.2 * s(i));
             Camera {
                 eye,
                 target: eye + Vec3::new(0.05, 0.0, -1.0),
@@ -120,7 +124,7 @@ pub(crate) fn paths(frames: usize) -> Vec<(&'static str, Vec<Camera>)> {
     let zoom = (0..n)
         .map(|i| {
             // Geometric: the same relative step every frame.
-            let d = 2.5 * (0.35f32 / 2.5).powf(s(i));
+            let d = 8.0 * (0.35f32 / 8.0).powf(s(i));
             Camera {
                 near: 0.01,
                 ..Camera::orbit(Vec3::ZERO, d, 0.6, 0.35)
@@ -147,6 +151,7 @@ fn render_path(
     let mut r = VolumeRenderer::new(&gpu.device, target_desc()).map_err(e)?;
     let config = OutOfCoreConfig {
         fade,
+        tolerance_px: opt.tolerance_px,
         ..Default::default()
     };
     r.set_volume_source(&gpu.device, &gpu.queue, source, frame, config)
@@ -296,7 +301,7 @@ pub(crate) fn figures(results: &[CaseResult]) -> serde_json::Map<String, serde_j
 }
 
 /// The temporary `stability-paths` subcommand: `--size`, `--frames`,
-/// `--fade-frames`, `--pop-threshold`.
+/// `--fade-frames`, `--pop-threshold`, `--tolerance`.
 pub(crate) fn run(args: &[String]) -> Result<serde_json::Map<String, serde_json::Value>, String> {
     let d = PathOptions::default();
     let get = |name: &str| {
@@ -316,14 +321,24 @@ pub(crate) fn run(args: &[String]) -> Result<serde_json::Map<String, serde_json:
         pop_threshold: parse("--pop-threshold")
             .transpose()?
             .unwrap_or(d.pop_threshold),
+        tolerance_px: parse("--tolerance")
+            .transpose()?
+            .map_or(d.tolerance_px, |v| v as f32),
         ..d
     };
     let gpu = GpuContext::new().map_err(|e| e.to_string())?;
     println!("adapter: {}", gpu.describe());
     println!(
-        "LOD paths over {}^3 fractal noise (bricks {}), {}x{} px, {} frames, fades of {} frames vs off;\n  \
+        "LOD paths over {}^3 fractal noise (bricks {}), {}x{} px, {} frames, tolerance {} px, fades of {} frames vs off;\n  \
          temporal metric vs the CPU f64 reference of every frame (docs/stability.md), pops: 16x16 tile error change > {} (8-bit)",
-        opt.dims, opt.brick, opt.size, opt.size, opt.frames, opt.fade_frames, opt.pop_threshold
+        opt.dims,
+        opt.brick,
+        opt.size,
+        opt.size,
+        opt.frames,
+        opt.tolerance_px,
+        opt.fade_frames,
+        opt.pop_threshold
     );
     let results = cases(&gpu, &opt)?;
     Ok(figures(&results))
