@@ -72,7 +72,7 @@ pub(crate) struct Run {
 #[derive(Debug, Clone)]
 pub(crate) struct CaseResult {
     /// Its name.
-    pub(crate) name: String,
+    pub(crate) name: &'static str,
     /// With fades.
     pub(crate) fades: Run,
     /// Without.
@@ -233,12 +233,68 @@ pub(crate) fn cases(gpu: &GpuContext, opt: &PathOptions) -> Result<Vec<CaseResul
         let fades = run(Some(FadeDuration::Frames(opt.fade_frames)))?;
         let no_fades = run(None)?;
         out.push(CaseResult {
-            name: name.to_string(),
+            name,
             fades,
             no_fades,
         });
     }
     Ok(out)
+}
+
+/// Bound of the cases with fades: the change excess in dB.
+pub(crate) const EXCESS_DB_BOUND: f64 = 0.5;
+
+/// One case as the stability suite summarises it (the fields of its `Case`,
+/// so that wiring it in is a field-by-field copy).
+#[derive(Debug, Clone)]
+pub(crate) struct CaseSummary {
+    pub(crate) name: &'static str,
+    pub(crate) varied: String,
+    pub(crate) fails: String,
+    pub(crate) by: String,
+    pub(crate) shipped: String,
+    pub(crate) bound: String,
+    pub(crate) holds: bool,
+    pub(crate) holes_max: u64,
+    pub(crate) fig: serde_json::Value,
+}
+
+/// The suite's summary of each case: it holds when, with fades, no frame pops,
+/// the change excess is within [`EXCESS_DB_BOUND`] and no frame has a hole.
+pub(crate) fn summaries(results: &[CaseResult], opt: &PathOptions) -> Vec<CaseSummary> {
+    results
+        .iter()
+        .map(|c| {
+            let (on, off) = (&c.fades.temporal, &c.no_fades.temporal);
+            let holes = c.fades.holes_max.max(c.no_fades.holes_max);
+            CaseSummary {
+                name: c.name,
+                varied: format!(
+                    "LOD fades of {} frames vs off along the path (tolerance {} px)",
+                    opt.fade_frames, opt.tolerance_px
+                ),
+                fails: format!(
+                    "without fades: {} pops (largest 16x16 tile error jump {:.1})",
+                    off.pops, off.max_tile_jump
+                ),
+                by: format!(
+                    "with fades: {} pops (jump {:.1}), change excess {:+.3} dB",
+                    on.pops, on.max_tile_jump, on.change_excess_db
+                ),
+                shipped: "fades on by default (120 ms)".into(),
+                bound: format!("pops with fades 0, change excess <= {EXCESS_DB_BOUND} dB, holes 0"),
+                holds: on.pops == 0 && on.change_excess_db <= EXCESS_DB_BOUND && holes == 0,
+                holes_max: holes as u64,
+                fig: json!({
+                    "excess_db_fades": on.change_excess_db,
+                    "excess_db_no_fades": off.change_excess_db,
+                    "pops_fades": on.pops,
+                    "pops_no_fades": off.pops,
+                    "holes_max": holes,
+                }),
+            }
+        })
+        .collect()
 }
 
 /// Prints the cases and returns the suite's figures: `temporal_excess_db_fades`
@@ -341,5 +397,19 @@ pub(crate) fn run(args: &[String]) -> Result<serde_json::Map<String, serde_json:
         opt.pop_threshold
     );
     let results = cases(&gpu, &opt)?;
+    for c in summaries(&results, &opt) {
+        println!(
+            "  => {}: varied {}; fails {}; by {}; shipped {}; bound {} ({}); holes {}; {}",
+            c.name,
+            c.varied,
+            c.fails,
+            c.by,
+            c.shipped,
+            c.bound,
+            if c.holds { "kept" } else { "NOT KEPT" },
+            c.holes_max,
+            c.fig
+        );
+    }
     Ok(figures(&results))
 }
