@@ -24,6 +24,7 @@
 
 mod config;
 mod cpu_cache;
+pub mod fade;
 mod failures;
 mod loader;
 mod manager;
@@ -37,16 +38,17 @@ mod test_source;
 
 pub use brickray_core::{CutLeaf, EmptyReason, LeafKind};
 pub use config::{
-    CacheConfig, ConfigError, GpuFormat, MAX_LOADER_THREADS, MIN_RESIDENT_BRICKS, RetryPolicy,
-    SizeQuantity,
+    CacheConfig, ConfigError, DEFAULT_FLOOR_SLOTS, GpuFormat, MAX_LOADER_THREADS,
+    MIN_RESIDENT_BRICKS, RetryPolicy, SizeQuantity,
 };
 pub use cpu_cache::CpuCache;
+pub use fade::{Displayed, Fade, FadeDuration, Fader, MAX_FADE_FRAMES};
 pub use failures::{Clock, FailureCounts, FetchKind, StreamError, SystemClock};
 pub use loader::{
     BrickRequest, LoadError, Loader, LoaderConfig, PollReport, RequestOutcome, SHUTDOWN_WAIT,
 };
 pub use manager::{
-    BrickManager, CacheError, FramePlan, FrameStats, Residency, ResidencyCounts, Upload,
+    BrickManager, CacheError, FadeSlot, FramePlan, FrameStats, Residency, ResidencyCounts, Upload,
 };
 pub use pool::{Allocation, BrickPool, PoolError, PoolLimits, SlotId};
 pub use prepared::{PreparedBrick, Preparer};

@@ -100,6 +100,8 @@ struct Slot {
     key: Option<NodeKey>,
     frame: u64,
     tick: u64,
+    /// Pinned for good (the coarse floor): never an eviction candidate.
+    pinned: bool,
 }
 
 /// The result of [`BrickPool::allocate`].
@@ -126,6 +128,7 @@ pub struct BrickPool {
     free: Vec<SlotId>,
     tick: u64,
     evictions: u64,
+    pinned: u32,
 }
 
 impl BrickPool {
@@ -151,7 +154,8 @@ impl BrickPool {
                 Slot {
                     key: None,
                     frame: 0,
-                    tick: 0
+                    tick: 0,
+                    pinned: false,
                 };
                 n as usize
             ],
@@ -160,6 +164,7 @@ impl BrickPool {
             free: (0..n).rev().collect(),
             tick: 0,
             evictions: 0,
+            pinned: 0,
         }
     }
 
@@ -229,7 +234,46 @@ impl BrickPool {
         }
         s.tick = self.tick;
         s.frame = s.frame.max(frame);
-        self.lru.insert(self.tick, slot);
+        if !s.pinned {
+            self.lru.insert(self.tick, slot);
+        }
+    }
+
+    /// Pins a resident node for good: its slot is never evicted (until
+    /// [`unpin`](Self::unpin), [`evict`](Self::evict) or [`clear`](Self::clear)).
+    /// Returns its slot, `None` when not resident.
+    pub fn pin(&mut self, key: NodeKey) -> Option<SlotId> {
+        let slot = self.slot_of(key)?;
+        let s = &mut self.slots[slot as usize];
+        if !s.pinned {
+            s.pinned = true;
+            self.lru.remove(&s.tick);
+            self.pinned += 1;
+        }
+        Some(slot)
+    }
+
+    /// Makes a pinned node evictable again (least recently used first).
+    pub fn unpin(&mut self, key: NodeKey) {
+        if let Some(slot) = self.slot_of(key) {
+            let s = &mut self.slots[slot as usize];
+            if s.pinned {
+                s.pinned = false;
+                self.pinned -= 1;
+                self.lru.insert(s.tick, slot);
+            }
+        }
+    }
+
+    /// True when `key` is resident and pinned for good.
+    pub fn is_pinned_for_good(&self, key: NodeKey) -> bool {
+        self.slot_of(key)
+            .is_some_and(|s| self.slots[s as usize].pinned)
+    }
+
+    /// Slots pinned for good.
+    pub fn pinned_count(&self) -> u32 {
+        self.pinned
     }
 
     /// Marks a resident node used in `frame` (pinning it for that frame) and
@@ -291,6 +335,10 @@ impl BrickPool {
     pub fn evict(&mut self, key: NodeKey) -> Option<SlotId> {
         let slot = self.map.remove(&key)?;
         let s = &mut self.slots[slot as usize];
+        if s.pinned {
+            s.pinned = false;
+            self.pinned -= 1;
+        }
         self.lru.remove(&s.tick);
         s.key = None;
         self.free.push(slot);
@@ -432,5 +480,28 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn pinned_slots_are_never_evicted() {
+        let mut p = BrickPool::with_grid([3, 1, 1], 1);
+        p.allocate(k(0), 1).unwrap();
+        assert_eq!(p.pin(k(0)), Some(0).map(|_| p.slot_of(k(0)).unwrap()));
+        assert_eq!(p.pinned_count(), 1);
+        for f in 2..20u64 {
+            let a = p.allocate(k(f as u32), f).unwrap();
+            assert_ne!(a.evicted, Some(k(0)));
+            assert!(p.contains(k(0)));
+        }
+        // Every other slot pinned by the frame: full, the floor stays.
+        p.allocate(k(100), 30).unwrap();
+        p.allocate(k(101), 30).unwrap();
+        assert!(matches!(
+            p.allocate(k(102), 30),
+            Err(PoolError::Full { .. })
+        ));
+        p.unpin(k(0));
+        assert_eq!(p.pinned_count(), 0);
+        assert_eq!(p.allocate(k(102), 31).unwrap().evicted, Some(k(0)));
     }
 }

@@ -62,6 +62,7 @@ mod image_buf;
 mod metrics;
 mod render;
 mod ssim;
+mod temporal;
 
 pub use image_buf::{Image, ImageIoError, save_rgba8_png};
 pub use metrics::{
@@ -70,3 +71,6 @@ pub use metrics::{
 };
 pub use render::{DEFAULT_STEP_FACTOR, ReferenceOptions, render_reference};
 pub use ssim::ssim;
+pub use temporal::{
+    CHANGE_EPS, TemporalError, TemporalOptions, TemporalReport, temporal_stability,
+};

@@ -33,9 +33,11 @@ struct OocParams {
 }
 
 struct SlotInfo {
-    // xyz: atlas texel offset of the slot, w: unused.
+    // xyz: atlas texel offset of the slot, w: levels up to the brick's fade
+    // fallback (0: not fading; docs/stability.md).
     offset: vec4<f32>,
-    // x: normalized min, y: normalized max of the brick.
+    // x: normalized min, y: normalized max of the brick; z: the fallback's
+    // slot, w: the fallback's weight (value = mix(own, fallback, w)).
     range: vec4<f32>,
 }
 
@@ -64,6 +66,12 @@ struct Brick {
     slot: u32,
     box_min: vec3<f32>,
     box_size: vec3<f32>,
+    // A level-of-detail fade: the ancestor brick's mapping (as uv0, kuv), its
+    // finest voxels per voxel per axis, and its weight (0: not fading).
+    fb_uv0: vec3<f32>,
+    fb_kuv: vec3<f32>,
+    fb_f3: vec3<f32>,
+    fb_w: f32,
 }
 
 fn brick_of(leaf: OctBox, slot: u32) -> Brick {
@@ -81,6 +89,26 @@ fn brick_of(leaf: OctBox, slot: u32) -> Brick {
     b.slot = slot;
     b.box_min = leaf.box_min;
     b.box_size = leaf.box_size;
+    // Fading: the ancestor `up` levels coarser, sampled at the same points.
+    let up = u32(slots[slot].offset.w);
+    b.fb_w = 0.0;
+    b.fb_f3 = b.f3;
+    b.fb_uv0 = b.uv0;
+    b.fb_kuv = b.kuv;
+    if (up > 0u && up <= leaf.level) {
+        // The ancestor's box: each axis doubled once per level that split it.
+        let anc = leaf.level - up;
+        let hu = oct_halvings(ooc.splits.xy, leaf.level) - oct_halvings(ooc.splits.xy, anc);
+        let size = leaf.box_size * vec3<f32>(oct_exp2_pos(hu.x), oct_exp2_pos(hu.y), oct_exp2_pos(hu.z));
+        let fmin = floor(leaf.box_min / size) * size;
+        let fk = f32(ooc.brick) / size;
+        let fs = u32(slots[slot].range.z);
+        b.fb_kuv = fk * inv_atlas;
+        b.fb_uv0 = (slots[fs].offset.xyz + f32(ooc.apron) - fmin * fk) * inv_atlas;
+        let hf = hd + hu;
+        b.fb_f3 = vec3<f32>(oct_exp2_pos(hf.x), oct_exp2_pos(hf.y), oct_exp2_pos(hf.z));
+        b.fb_w = clamp(slots[slot].range.w, 0.0, 1.0);
+    }
     return b;
 }
 
@@ -97,27 +125,48 @@ struct Cursor {
     od: vec3<f32>,
     ua: vec3<f32>,
     ud: vec3<f32>,
+    // The same line in the fade fallback's atlas coordinates.
+    fa: vec3<f32>,
+    fd: vec3<f32>,
 }
 
 fn cursor_enter(c: ptr<function, Cursor>, b: Brick) {
     (*c).b = b;
     (*c).ua = b.uv0 + (*c).oo * b.kuv;
     (*c).ud = (*c).od * b.kuv;
+    (*c).fa = b.fb_uv0 + (*c).oo * b.fb_kuv;
+    (*c).fd = (*c).od * b.fb_kuv;
 }
 
+// A fading leaf mixes its value with its ancestor's at the same point, before
+// classification (one transfer-function lookup; iso-surfaces and maxima move
+// continuously from the old level to the new).
 fn cursor_value(c: Cursor, t: f32) -> f32 {
-    return atlas_value(c.ua + c.ud * t);
+    let v = atlas_value(c.ua + c.ud * t);
+    if (c.b.fb_w > 0.0) {
+        return mix(v, atlas_value(c.fa + c.fd * t), c.b.fb_w);
+    }
+    return v;
 }
 
-// World gradient direction and magnitude (normalized value per finest voxel), by
-// central differences of one voxel of the brick's level.
-fn cursor_gradient(c: Cursor, t: f32) -> vec4<f32> {
-    let uv = c.ua + c.ud * t;
+// Central differences of one atlas texel at uv, per finest voxel (f3: finest
+// voxels per texel, per axis).
+fn atlas_gradient(uv: vec3<f32>, f3: vec3<f32>) -> vec3<f32> {
     let e = 1.0 / ooc.atlas_size;
     let gx = (atlas_value(uv + vec3<f32>(e.x, 0.0, 0.0)) - atlas_value(uv - vec3<f32>(e.x, 0.0, 0.0))) * 0.5;
     let gy = (atlas_value(uv + vec3<f32>(0.0, e.y, 0.0)) - atlas_value(uv - vec3<f32>(0.0, e.y, 0.0))) * 0.5;
     let gz = (atlas_value(uv + vec3<f32>(0.0, 0.0, e.z)) - atlas_value(uv - vec3<f32>(0.0, 0.0, e.z))) * 0.5;
-    let g = vec3<f32>(gx, gy, gz) / c.b.f3;
+    return vec3<f32>(gx, gy, gz) / f3;
+}
+
+// World gradient direction and magnitude (normalized value per finest voxel), by
+// central differences of one voxel of the brick's level (mixed like the value
+// while fading).
+fn cursor_gradient(c: Cursor, t: f32) -> vec4<f32> {
+    var g = atlas_gradient(c.ua + c.ud * t, c.b.f3);
+    if (c.b.fb_w > 0.0) {
+        g = mix(g, atlas_gradient(c.fa + c.fd * t, c.b.fb_f3), c.b.fb_w);
+    }
     return vec4<f32>(frame.normal_mat * (g * ooc.dims), length(g));
 }
 
@@ -176,7 +225,8 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             loop {
                 if (!oct_next_leaf(&st)) { break; }
                 if (st.hit.tag == OCT_TAG_DATA) { feedback_reached(st.hit.data); }
-                if (st.hit.tag == OCT_TAG_DATA && !(MODE == MODE_MIP && ESS && slots[st.hit.data].range.y <= acc.max_v)) {
+                // (A fading brick's range does not bound its ancestor's.)
+                if (st.hit.tag == OCT_TAG_DATA && !(MODE == MODE_MIP && ESS && slots[st.hit.data].range.y <= acc.max_v && slots[st.hit.data].offset.w == 0.0)) {
                     found = true;
                     break;
                 }
@@ -196,7 +246,9 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 if (t >= t_end) { break; }
                 if (budget == 0u) { done = true; break; }
                 budget = budget - 1u;
-                if (ESS && k >= k_cell) {
+                // A fading brick's sub-cells do not bound its ancestor's values:
+                // no skipping inside it while it fades.
+                if (ESS && k >= k_cell && cur.b.fb_w == 0.0) {
                     let j = sub_cell_of(cur.b, oo + od * t);
                     let range = sub_cell_range(cur.b, j);
                     let te = min(sub_cell_exit(cur.b, j, oo, od, inv_od), st.hit.t_exit);

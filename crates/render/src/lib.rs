@@ -39,7 +39,7 @@ pub use backend::{FeedbackStats, OcclusionStats, OutOfCoreStats, UsageFrame};
 /// Budgets, tolerance, loader threads and retry policy of the out-of-core path:
 /// the cache's own configuration.
 pub use brickray_cache::CacheConfig as OutOfCoreConfig;
-pub use brickray_cache::{ConfigError, RetryPolicy, StreamError};
+pub use brickray_cache::{ConfigError, FadeDuration, RetryPolicy, StreamError};
 pub use brickray_visibility::{VisibilityConfig, VisibilityCounts, VisibilityPolicy};
 pub use desc::{FrameDesc, FrameStats, RendererStats, TargetDesc, Viewport};
 pub use encoding::U8Filtering;
@@ -272,6 +272,22 @@ impl VolumeRenderer {
             .as_ref()
             .and_then(Backend::out_of_core)
             .and_then(OutOfCore::last_usage)
+    }
+
+    /// Out of core: level-of-detail transitions. When the cut changes, a
+    /// region blends from its old level to its new one over `fade` (frames or
+    /// milliseconds of frame time) instead of switching in one frame; `None`
+    /// switches at once. Default 120 ms (`docs/stability.md`).
+    pub fn set_lod_fade(&mut self, fade: Option<FadeDuration>) -> Result<(), RenderError> {
+        Ok(self.out_of_core()?.manager_mut().set_fade(fade)?)
+    }
+
+    /// Out of core: the time of the next `prepare` in seconds (any origin,
+    /// non-decreasing), which times fades given in milliseconds. Without it the
+    /// wall clock between `prepare` calls is used.
+    pub fn set_frame_time(&mut self, seconds: f64) -> Result<(), RenderError> {
+        self.out_of_core()?.manager_mut().set_frame_time(seconds);
+        Ok(())
     }
 
     /// Out of core: sets the bytes of bricks uploaded per frame.

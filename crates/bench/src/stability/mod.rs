@@ -17,7 +17,10 @@
 //!    emulated in f32 and the image against the reference;
 //! 7. early ray termination thresholds 0.9 to 0.999 on a translucent TF;
 //! 8. the prediction buffer's failure path and the visibility feedback's
-//!    disocclusion, error over frames.
+//!    disocclusion, error over frames;
+//! 9. level-of-detail transitions along a fly-through and a zoom from far away
+//!    to inside a procedural volume, fades on and off: the temporal metric
+//!    against the reference's own change, pops and holes (`paths.rs`).
 //!
 //! Each case prints a table and returns a [`Case`]: what was varied, where it
 //! fails, by how much, the shipped setting and the bound it keeps. The last
@@ -28,6 +31,7 @@
 
 mod detail;
 mod geometry;
+mod paths;
 mod sampling;
 mod streaming;
 mod temporal;
@@ -73,7 +77,7 @@ pub(crate) struct Ctx<'a> {
 
 pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
     let size: u32 = arg(args, "--size", 128)?;
-    let cases: String = arg(args, "--cases", "1,2,3,4,5,6,7,8".to_string())?;
+    let cases: String = arg(args, "--cases", "1,2,3,4,5,6,7,8,9".to_string())?;
     let charts: String = arg(args, "--charts", "docs/charts".to_string())?;
     let wanted: Vec<u32> = cases
         .split(',')
@@ -95,8 +99,41 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
     };
     let t = Instant::now();
     let mut done: Vec<Case> = Vec::new();
+    let mut path_figures = Figures::new();
     for c in wanted {
         let t0 = Instant::now();
+        if c == 9 {
+            let opt = paths::PathOptions {
+                size: ctx.size,
+                ..Default::default()
+            };
+            let results = paths::cases(ctx.gpu, &opt)?;
+            path_figures = paths::figures(&results);
+            for s in paths::summaries(&results, &opt) {
+                println!(
+                    "  => {}: fails {}; by {}; shipped {}; bound {} ({}) [{:.0} s]",
+                    s.name,
+                    s.fails,
+                    s.by,
+                    s.shipped,
+                    s.bound,
+                    if s.holds { "kept" } else { "NOT KEPT" },
+                    t0.elapsed().as_secs_f64()
+                );
+                done.push(Case {
+                    name: s.name,
+                    varied: s.varied,
+                    fails: s.fails,
+                    by: s.by,
+                    shipped: s.shipped,
+                    bound: s.bound,
+                    holds: s.holds,
+                    holes_max: s.holes_max,
+                    fig: s.fig,
+                });
+            }
+            continue;
+        }
         let case = match c {
             1 => streaming::streaming(&ctx)?,
             2 => streaming::pressure(&ctx)?,
@@ -106,7 +143,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
             6 => geometry::precision(&ctx)?,
             7 => sampling::ert(&ctx)?,
             8 => temporal::prediction_and_disocclusion(&ctx)?,
-            _ => return Err(format!("no case {c} (1-8)")),
+            _ => return Err(format!("no case {c} (1-9)")),
         };
         println!(
             "  => {}: fails {}; by {}; shipped {}; bound {} ({}) [{:.0} s]",
@@ -120,9 +157,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         );
         done.push(case);
     }
-    // MERGE POINT (LOD fly-through and zoom with fades): the lead calls
-    // `paths::cases(&ctx)?` here and appends its `Case`s to `done`, so its
-    // holes and bounds enter the summary below and the last JSON line.
+
 
     println!("\nsummary (case | where it fails | by how much | shipped | bound | kept):");
     for c in &done {
@@ -147,6 +182,13 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         json!(done.iter().filter(|c| c.holds).count()),
     );
     fig.insert("cases_total".into(), json!(done.len()));
+    // The LOD paths' headline figures (`temporal_excess_db_fades`,
+    // `pops_fades`, `pops_no_fades`); their holes enter `holes_max` above.
+    for (k, v) in path_figures {
+        if k != "holes_max" {
+            fig.insert(k, v);
+        }
+    }
     fig.insert("image_size".into(), json!(size));
     for c in done {
         fig.insert(

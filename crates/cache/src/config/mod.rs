@@ -2,6 +2,7 @@
 //! per pool slot ([`GpuFormat`]), the retry back-off ([`RetryPolicy`]) and their
 //! validation ([`ConfigError`]).
 
+use crate::fade::FadeDuration;
 use crate::pool::PoolLimits;
 use brickray_core::{
     DType, OctreeLayout, SampleEncoding, TexelCaps, U8Filtering, sub_cells_per_axis,
@@ -87,11 +88,25 @@ pub struct CacheConfig {
     /// Automatic retry of failed reads; `None`: only on request
     /// ([`BrickManager::retry_failed`](crate::BrickManager::retry_failed)).
     pub retry: Option<RetryPolicy>,
+    /// Level-of-detail transitions: a region whose level changes blends from
+    /// its old brick to its new one over this long instead of switching in one
+    /// frame ([`crate::fade`]); `None`: switch at once.
+    pub fade: Option<FadeDuration>,
+    /// Most pool slots pinned for the coarse floor: the top levels of the
+    /// octree (as many whole levels as fit, within a quarter of the pool and
+    /// leaving [`MIN_RESIDENT_BRICKS`] slots) stay resident, never evicted, so
+    /// that a region evicted under memory pressure falls back to an ancestor,
+    /// never to nothing. 0: no floor.
+    pub floor_slots: u32,
 }
+
+/// Default [`CacheConfig::floor_slots`]: levels 0 to 2 of a cubic volume.
+pub const DEFAULT_FLOOR_SLOTS: u32 = 73;
 
 impl Default for CacheConfig {
     /// 512 MiB CPU, 256 MiB GPU, 16 MiB uploaded per frame, 1 px, 2 threads,
-    /// retries after 1 s doubling to 60 s.
+    /// retries after 1 s doubling to 60 s, fades of 120 ms, a floor of up to
+    /// 73 slots.
     fn default() -> Self {
         CacheConfig {
             cpu_budget_bytes: 512 << 20,
@@ -100,6 +115,8 @@ impl Default for CacheConfig {
             tolerance_px: 1.0,
             loader_threads: 2,
             retry: Some(RetryPolicy::default()),
+            fade: Some(FadeDuration::default()),
+            floor_slots: DEFAULT_FLOOR_SLOTS,
         }
     }
 }
@@ -186,6 +203,12 @@ pub enum ConfigError {
         slots: u32,
         /// Slots needed.
         needed: u32,
+    },
+    /// A fade duration of 0 frames, or milliseconds negative or not finite.
+    #[error("fade duration must be >= 1 frame or finite >= 0 ms, got {value:?}")]
+    Fade {
+        /// The value given.
+        value: FadeDuration,
     },
     /// A size computed from the layout and format overflows.
     #[error("the size of {quantity:?} overflows")]
@@ -370,6 +393,9 @@ impl CacheConfig {
         }
         if let Some(r) = &self.retry {
             r.validate()?;
+        }
+        if let Some(f) = self.fade.filter(|f| !f.is_valid()) {
+            return Err(ConfigError::Fade { value: f });
         }
         gpu.validate(layout)?;
         raw_brick_bytes(layout)?;

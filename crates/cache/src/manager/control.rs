@@ -6,6 +6,7 @@ use crate::config::{
     validate_tolerance,
 };
 use crate::cpu_cache::CpuCache;
+use crate::fade::FadeDuration;
 use crate::failures::{FetchKind, StreamError};
 use crate::loader::worker::{children_in_volume, fetch_brick, fetch_meta};
 use crate::loader::{LoadError, Loader};
@@ -84,6 +85,7 @@ impl BrickManager {
     /// uploads the working set again.
     pub fn clear_gpu(&mut self) {
         self.pool.clear();
+        self.fader.clear();
     }
 
     /// Reads the root's metadata and brick (and its children's metadata)
@@ -188,7 +190,18 @@ impl BrickManager {
         })?;
         self.pool = pool;
         self.config.gpu_budget_bytes = bytes;
+        self.reset_floor();
         Ok(self.pool.atlas_dims())
+    }
+
+    /// Sets (or, with `None`, turns off) level-of-detail fades
+    /// ([`CacheConfig::fade`]); fades in progress end at once when turned off.
+    pub fn set_fade(&mut self, fade: Option<FadeDuration>) -> Result<(), ConfigError> {
+        if let Some(f) = fade.filter(|f| !f.is_valid()) {
+            return Err(ConfigError::Fade { value: f });
+        }
+        self.config.fade = fade;
+        Ok(())
     }
 
     /// Sets (or, with `None`, turns off) the automatic retry of failures. Failures

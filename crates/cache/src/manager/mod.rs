@@ -5,6 +5,7 @@
 //! [`BrickManager::preload_root`] (set-up time).
 
 mod control;
+mod lod;
 mod meta;
 
 use meta::MetaCache;
@@ -15,11 +16,15 @@ mod tests;
 mod tests_config;
 #[cfg(test)]
 mod tests_faults;
+#[cfg(test)]
+mod tests_lod;
 
+pub use lod::FadeSlot;
 pub use stats::{FramePlan, FrameStats, Residency, ResidencyCounts, Upload};
 
 use crate::config::{CacheConfig, ConfigError, GpuFormat};
 use crate::cpu_cache::CpuCache;
+use crate::fade::Fader;
 use crate::failures::{Clock, Failures, FetchKind, SystemClock};
 use crate::loader::{BrickRequest, Loader, LoaderConfig};
 use crate::pool::{BrickPool, PoolError};
@@ -66,6 +71,16 @@ pub struct BrickManager {
     budget: UploadBudget,
     failures: Failures,
     clock: Arc<dyn Clock>,
+    /// Level-of-detail fades between the refined and the displayed cut.
+    fader: Fader,
+    /// The coarse floor's nodes (pinned for good once resident).
+    floor: Vec<NodeKey>,
+    /// Host time of the next update, if given.
+    frame_time: Option<f64>,
+    /// Time of the last update (fades).
+    last_fade_time: Option<f64>,
+    /// Origin of clock-based fade time.
+    epoch: std::time::Instant,
 }
 
 impl std::fmt::Debug for BrickManager {
@@ -151,7 +166,13 @@ impl BrickManager {
             },
         )
         .map_err(CacheError::Spawn)?;
+        let floor = lod::floor_nodes(&layout, pool.slot_count(), config.floor_slots);
         Ok(BrickManager {
+            fader: Fader::new(),
+            floor,
+            frame_time: None,
+            last_fade_time: None,
+            epoch: std::time::Instant::now(),
             source,
             layout,
             volume_frame,
@@ -226,7 +247,7 @@ impl BrickManager {
             mode,
             tf,
             tolerance_px: self.config.tolerance_px,
-            max_data_leaves: self.pool.slot_count(),
+            max_data_leaves: self.cut_slots(),
             max_requests: crate::refine::requests_per_frame(
                 self.pool.slot_count(),
                 self.config.upload_budget_bytes,
@@ -245,12 +266,31 @@ impl BrickManager {
             refine(&self.layout, &params, &mut env, &mut self.budget)
         };
 
+        // The displayed cut: the refined one, with level changes fading
+        // (crate::fade). If its bricks, their fallbacks and the floor do not fit
+        // in the pool, the fades are dropped (the refined cut always fits).
+        let step = self.config.fade.map(|d| d.step(self.fade_dt(now)));
+        let mut shown = self.fader.advance(&refined.leaves, step);
+        if !shown.fades.is_empty() {
+            let mut need: std::collections::HashSet<NodeKey> = shown
+                .leaves
+                .iter()
+                .filter(|l| l.class == NodeClass::Data)
+                .map(|l| l.key)
+                .collect();
+            need.extend(shown.fallbacks());
+            need.extend(self.floor.iter().copied());
+            if need.len() > self.pool.slot_count() as usize {
+                shown = self.fader.advance(&refined.leaves, None);
+            }
+        }
+
         // Pin what is resident first, so that allocations below can only evict
         // bricks this frame does not use.
-        let mut cut = Vec::with_capacity(refined.leaves.len());
+        let mut cut = Vec::with_capacity(shown.leaves.len());
         let mut pending = Vec::new();
         let mut resident = 0u32;
-        for l in &refined.leaves {
+        for l in &shown.leaves {
             let kind = match l.class {
                 NodeClass::Empty(r) => LeafKind::Empty(r),
                 NodeClass::Data => match self.pool.touch(l.key, frame) {
@@ -270,33 +310,77 @@ impl BrickManager {
                 priority: l.priority,
             });
         }
+        let fallbacks = shown.fallbacks();
+        let mut pending_fallbacks = Vec::new();
+        for &a in &fallbacks {
+            if self.pool.touch(a, frame).is_none() {
+                pending_fallbacks.push(a);
+            }
+        }
         let mut uploads = Vec::with_capacity(pending.len());
         let mut allocation_failures = 0u32;
-        for i in pending {
-            let key = cut[i].key;
-            let Some(brick) = self.cpu.peek(key).cloned() else {
-                continue;
-            };
-            match self.pool.allocate(key, frame) {
+        let mut assign = |pool: &mut BrickPool, cpu: &CpuCache, key: NodeKey| {
+            let brick = cpu.peek(key).cloned()?;
+            match pool.allocate(key, frame) {
                 Ok(a) => {
-                    cut[i].kind = LeafKind::Data { slot: a.slot };
                     uploads.push(Upload {
                         key,
                         slot: a.slot,
-                        atlas_offset: self.pool.slot_offset(a.slot),
+                        atlas_offset: pool.slot_offset(a.slot),
                         brick,
                     });
+                    Some(a.slot)
                 }
                 // Refinement keeps data leaves within the slot count, so this only
                 // happens when `frame` repeats and an earlier plan of the same frame
                 // pinned other slots; the leaf then stays empty for this frame.
-                Err(PoolError::Full { .. } | PoolError::NoSlots { .. }) => allocation_failures += 1,
+                Err(PoolError::Full { .. } | PoolError::NoSlots { .. }) => {
+                    allocation_failures += 1;
+                    None
+                }
+            }
+        };
+        for i in pending {
+            if let Some(slot) = assign(&mut self.pool, &self.cpu, cut[i].key) {
+                cut[i].kind = LeafKind::Data { slot };
             }
         }
+        for a in pending_fallbacks {
+            // A merge's target is a refined leaf, so it is available; a split's
+            // ancestor was drawn last frame, so it is resident.
+            assign(&mut self.pool, &self.cpu, a);
+        }
+        let floor = self.floor_step(frame);
+        uploads.extend(floor.uploads);
+        let slot_of: std::collections::HashMap<NodeKey, u32> = cut
+            .iter()
+            .filter_map(|l| l.slot().map(|s| (l.key, s)))
+            .collect();
+        let mut fades = Vec::with_capacity(shown.fades.len());
+        for f in &shown.fades {
+            match (slot_of.get(&f.leaf), self.pool.slot_of(f.ancestor)) {
+                (Some(&slot), Some(fallback)) => fades.push(FadeSlot {
+                    slot,
+                    fallback,
+                    levels_up: (f.leaf.level - f.ancestor.level) as u32,
+                    weight: f.weight,
+                }),
+                _ => self.fader.cancel(f.leaf),
+            }
+        }
+        let holes = cut
+            .iter()
+            .filter(|l| {
+                matches!(
+                    l.kind,
+                    LeafKind::Empty(EmptyReason::NotLoaded | EmptyReason::Failed)
+                )
+            })
+            .count() as u32;
 
         // Loads wanted this frame; queued ones no longer wanted are dropped. A
         // brick job also reads its children's metadata unless all of it is known.
-        let bricks: Vec<BrickRequest> = refined
+        let mut bricks: Vec<BrickRequest> = refined
             .requests
             .iter()
             .map(|r| BrickRequest {
@@ -306,7 +390,25 @@ impl BrickManager {
                 children_meta: self.children_meta_missing(r.key, &r.info),
             })
             .collect();
-        self.loader.submit(&refined.meta_requests, &bricks);
+        let mut meta_requests = refined.meta_requests.clone();
+        if !floor.requests.is_empty() || !floor.meta_requests.is_empty() {
+            let known: std::collections::HashSet<NodeKey> = bricks.iter().map(|b| b.key).collect();
+            bricks.extend(
+                floor
+                    .requests
+                    .into_iter()
+                    .filter(|r| !known.contains(&r.key)),
+            );
+            let known: std::collections::HashSet<NodeKey> =
+                meta_requests.iter().map(|m| m.0).collect();
+            meta_requests.extend(
+                floor
+                    .meta_requests
+                    .into_iter()
+                    .filter(|m| !known.contains(&m.0)),
+            );
+        }
+        self.loader.submit(&meta_requests, &bricks);
 
         let working = cut.iter().filter(|l| l.kind.is_data()).count() as u32;
         let residency = self.residency_counts();
@@ -329,7 +431,7 @@ impl BrickManager {
             requested_this_frame: bricks.len() as u32,
             metadata_in_flight: (self.loader.queued(FetchKind::Metadata)
                 + self.loader.loading(FetchKind::Metadata)) as u32,
-            metadata_requested_this_frame: refined.meta_requests.len() as u32,
+            metadata_requested_this_frame: meta_requests.len() as u32,
             metadata_known: self.meta.len() as u32,
             metadata_evicted: self.meta.evicted(),
             residency,
@@ -337,12 +439,25 @@ impl BrickManager {
             allocation_failures,
             failed_needed: refined.failed_needed,
             failures: self.failures.counts(),
+            fading: fades.len() as u32,
+            holes,
+            floor_pinned: self.floor_pinned(),
         };
         FramePlan {
             cut,
             uploads,
+            fades,
             stats,
         }
+    }
+
+    /// Most data leaves refinement may use: the pool less the floor and, with
+    /// fades on, an eighth of it for the bricks fades keep (fallbacks, merged
+    /// leaves still fading).
+    fn cut_slots(&self) -> u32 {
+        let n = self.pool.slot_count();
+        let fades = if self.config.fade.is_some() { n / 8 } else { 0 };
+        n.saturating_sub(self.floor.len() as u32 + fades).max(1)
     }
 
     /// True when some child of `key` inside the volume has no known metadata (and

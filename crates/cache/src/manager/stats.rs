@@ -98,6 +98,14 @@ pub struct FrameStats {
     pub failed_needed: u32,
     /// Failed reads, current and cumulative, per kind.
     pub failures: FailureCounts,
+    /// Leaves of the drawn cut fading between levels ([`FramePlan::fades`]).
+    pub fading: u32,
+    /// Leaves of the drawn cut with no brick where the data is not known to be
+    /// empty (`Empty(NotLoaded | Failed)`): pixels there show nothing at any
+    /// level. With the coarse floor resident this stays 0.
+    pub holes: u32,
+    /// Floor bricks resident and pinned for good.
+    pub floor_pinned: u32,
 }
 
 impl FrameStats {
@@ -126,6 +134,7 @@ impl FrameStats {
             && self.upload_bricks == 0
             && self.blocked.missing_data == 0
             && self.blocked.missing_meta == 0
+            && self.fading == 0
         // Splits the upload budget refused in a frame that uploaded nothing were
         // refused on speculative charges (a split charges its children's uploads
         // before knowing they split further into resident bricks); the same frame
@@ -139,8 +148,11 @@ pub struct FramePlan {
     /// Leaves covering the octree cube (each point in exactly one); give it to
     /// `brickray_index::encode_cut` as it is.
     pub cut: Vec<CutLeaf>,
-    /// Bricks to upload before drawing.
+    /// Bricks to upload before drawing (the cut's, fallbacks' and floor's).
     pub uploads: Vec<Upload>,
+    /// Leaves of `cut` fading from or toward an ancestor's brick: the
+    /// renderer writes them to its per-slot fade table.
+    pub fades: Vec<super::FadeSlot>,
     /// Statistics.
     pub stats: FrameStats,
 }

@@ -82,8 +82,32 @@ pub(super) fn check_plan(m: &BrickManager, plan: &FramePlan) {
         }
     }
     assert_eq!(slots.len() as u32, plan.stats.working_set_bricks);
+    // Fades: a drawn leaf and a resident ancestor, both pinned for the frame.
+    let mut fallbacks = HashSet::new();
+    for f in &plan.fades {
+        assert!(slots.contains(&f.slot));
+        let leaf = m.pool().key_of(f.slot).unwrap();
+        let anc = m.pool().key_of(f.fallback).unwrap();
+        assert_eq!(leaf.level - anc.level, f.levels_up as u8);
+        assert!(m.pool().is_pinned(f.fallback, plan.stats.frame));
+        assert!((0.0..=1.0).contains(&f.weight));
+        fallbacks.insert(f.fallback);
+    }
+    // A hole only before the root's brick or metadata is there (or if they failed).
+    if plan.stats.holes > 0 {
+        assert_eq!(
+            keys,
+            vec![NodeKey::ROOT],
+            "a leaf without a brick below the root"
+        );
+    }
     for u in &plan.uploads {
-        assert!(slots.contains(&u.slot));
+        // The cut's bricks, the fallbacks' and the coarse floor's.
+        assert!(
+            slots.contains(&u.slot)
+                || fallbacks.contains(&u.slot)
+                || (m.floor().contains(&u.key) && m.pool().is_pinned_for_good(u.key))
+        );
         assert_eq!(m.pool().key_of(u.slot), Some(u.key));
         assert_eq!(u.atlas_offset, m.pool().slot_offset(u.slot));
         // Prepared off the frame path: texels (R16Unorm of u8: both bytes equal

@@ -330,8 +330,10 @@ fn non_finite_cameras_and_huge_pools_request_boundedly() {
     for frame in 1..40 {
         let plan = m.update(&nan, f32::NAN, 128, frame, RenderMode::Dvr, &tf());
         assert_eq!(plan.cut.len(), 1);
-        assert!(plan.stats.requested_this_frame <= 1);
-        assert!(plan.stats.metadata_requested_this_frame <= 1);
+        // The root, and the coarse floor's nodes (loaded whatever the view).
+        let floor = m.floor().len() as u32;
+        assert!(plan.stats.requested_this_frame <= 1 + floor);
+        assert!(plan.stats.metadata_requested_this_frame <= 1 + floor);
         std::thread::sleep(Duration::from_millis(1));
     }
     // A finite close-up with a large pool: at most the cap per frame.

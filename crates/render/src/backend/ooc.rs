@@ -14,8 +14,8 @@ use crate::error::{PrepareError, RenderError};
 use crate::gpu::{self, GrowBuffer, Uniform};
 use crate::kernels::KernelKind;
 use brickray_cache::{
-    BrickManager, CacheConfig, FrameStats as CacheStats, GpuFormat, RetryPolicy, StreamError,
-    Upload,
+    BrickManager, CacheConfig, FadeSlot, FrameStats as CacheStats, GpuFormat, RetryPolicy,
+    StreamError, Upload,
 };
 use brickray_core::{BrickSource, NodeKey, OctreeLayout, TransferFunction, VolumeFrame};
 use brickray_visibility::{VisibilityConfig, VisibilityCounts, VisibilityPolicy, VisibilityState};
@@ -96,7 +96,9 @@ pub struct OutOfCoreStats {
     pub occlusion: OcclusionStats,
 }
 
-/// `struct SlotInfo` of ooc.wgsl: one row of the slot table.
+/// `struct SlotInfo` of ooc.wgsl: one row of the slot table. `offset[3]`
+/// (levels up to the fade fallback, 0: none), `range[2]` (the fallback's slot)
+/// and `range[3]` (its weight) carry a level-of-detail fade ([`FadeSlot`]).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 pub(crate) struct SlotInfo {
@@ -131,6 +133,8 @@ struct Pool {
     slots_cpu: Vec<SlotInfo>,
     slots_dirty: bool,
     sub_cells: wgpu::Buffer,
+    /// Slots whose rows carry a fade (cleared before the next frame's fades).
+    faded: Vec<u32>,
     /// Usage counters per slot and their read-back ring.
     feedback: UsageFeedback,
 }
@@ -183,6 +187,7 @@ impl Pool {
             slots_cpu: vec![bytemuck::Zeroable::zeroed(); slot_count],
             slots_dirty: true,
             sub_cells,
+            faded: Vec::new(),
         })
     }
 }
@@ -406,7 +411,12 @@ impl OutOfCore {
     /// Writes this frame's uploads, prepared by the loader threads: texels into
     /// the atlas, sub-cell ranges and slot rows into their tables. Returns the
     /// bytes written.
-    fn write_uploads(&mut self, queue: &wgpu::Queue, uploads: &[Upload]) -> u64 {
+    fn write_uploads(
+        &mut self,
+        queue: &wgpu::Queue,
+        uploads: &[Upload],
+        fades: &[FadeSlot],
+    ) -> u64 {
         let side = self.layout.stored_side();
         let bpp = self.manager.gpu_format().encoding.texel_bytes();
         let pool = &mut self.pool;
@@ -445,6 +455,25 @@ impl OutOfCore {
                     offset: [o[0] as f32, o[1] as f32, o[2] as f32, 0.0],
                     range: [b.range[0], b.range[1], 0.0, 0.0],
                 };
+                pool.slots_dirty = true;
+            }
+        }
+        // Fades: last frame's cleared, this frame's set (after the uploads,
+        // which reset their slots' rows).
+        for slot in std::mem::take(&mut pool.faded) {
+            if let Some(s) = pool.slots_cpu.get_mut(slot as usize) {
+                s.offset[3] = 0.0;
+                s.range[2] = 0.0;
+                s.range[3] = 0.0;
+                pool.slots_dirty = true;
+            }
+        }
+        for f in fades {
+            if let Some(s) = pool.slots_cpu.get_mut(f.slot as usize) {
+                s.offset[3] = f.levels_up as f32;
+                s.range[2] = f.fallback as f32;
+                s.range[3] = f.weight;
+                pool.faded.push(f.slot);
                 pool.slots_dirty = true;
             }
         }
@@ -619,7 +648,7 @@ impl VolumeBackend for OutOfCore {
         let refine_ms = t.elapsed().as_secs_f64() * 1e3;
 
         let t = Instant::now();
-        let mut bytes = self.write_uploads(queue, &plan.uploads);
+        let mut bytes = self.write_uploads(queue, &plan.uploads, &plan.fades);
         let upload_ms = t.elapsed().as_secs_f64() * 1e3;
 
         let t = Instant::now();

@@ -1,0 +1,281 @@
+//! GPU tests of level-of-detail fades and the coarse floor, out of core
+//! (docs/stability.md):
+//!
+//! * a split fades over the configured frames: with every brick resident, a
+//!   tolerance change refines the whole cut in one frame; with fades of 4
+//!   frames the 3 frames in between lie between the old and the new image
+//!   (mean absolute distance to the old one grows, to the new one shrinks) and
+//!   the 4th is the new image; with fades off the 1st is;
+//! * the floor: with a pool of 40 slots and a CPU cache of 9 bricks, a camera
+//!   circling and diving never draws a leaf without a brick (`holes` 0);
+//! * a zoom path (40 frames, 2.6% closer a frame, tolerance 4 px) with fades
+//!   of 6 frames has no pop (16x16 tile error change above 8 units against
+//!   the in-core rendering at the finest level); without fades it has some.
+
+use brickray::{
+    Camera, FadeDuration, FrameDesc, OutOfCoreConfig, RenderMode, RenderSettings, TransferFunction,
+    Volume, VolumeFrame, VolumeRenderer,
+};
+use brickray_core::{DType, VolumeData, VolumeDesc, synthetic::fractal_noise};
+use brickray_harness::{Offscreen, draw_frame, draw_until_settled};
+use brickray_harness::{shared_gpu as gpu, target_desc as targets};
+use brickray_reference::{TemporalOptions, temporal_stability};
+use glam::Vec3;
+use std::sync::Arc;
+
+const SIZE: u32 = 64;
+
+fn noise(n: u32) -> Volume {
+    let mut data = Vec::with_capacity((n as usize).pow(3));
+    for z in 0..n {
+        for y in 0..n {
+            for x in 0..n {
+                let p = [x, y, z].map(|i| i as f64 + 0.5);
+                data.push((fractal_noise(p, n as f64 / 4.0, 4) * 255.0).round() as u8);
+            }
+        }
+    }
+    let desc = VolumeDesc {
+        dims: [n; 3],
+        dtype: DType::U8,
+        spacing: [1.0; 3],
+        value_range: [0.0, 255.0],
+    };
+    Volume::new(desc, VolumeData::U8(data)).unwrap()
+}
+
+/// A store of `vol` with 8-voxel bricks (4 levels at 64^3).
+fn store(vol: &Volume, dir: &tempfile::TempDir) -> Arc<dyn brickray::BrickSource> {
+    let path = dir.path().join("noise.brs");
+    let mut reader = brickray::io::MemoryReader::new(vol.clone(), "memory");
+    let opt = brickray::store::BuildOptions {
+        brick: 8,
+        ..Default::default()
+    };
+    brickray::store::build(&mut reader, &path, &opt).unwrap();
+    Arc::new(brickray::store::open(&path).unwrap())
+}
+
+fn tf() -> TransferFunction {
+    TransferFunction::ramp(0.5, 0.8, 0.5)
+}
+
+fn renderer(source: Arc<dyn brickray::BrickSource>, config: OutOfCoreConfig) -> VolumeRenderer {
+    let g = gpu();
+    let wf = VolumeFrame::centered([64; 3], [1.0; 3]);
+    let mut r = VolumeRenderer::new(&g.device, targets()).unwrap();
+    r.set_volume_source(&g.device, &g.queue, source, wf, config)
+        .unwrap();
+    r.set_transfer_function(&g.device, &g.queue, &tf()).unwrap();
+    r
+}
+
+fn desc(camera: Camera, mode: RenderMode) -> FrameDesc<'static> {
+    FrameDesc {
+        settings: RenderSettings {
+            mode,
+            ..Default::default()
+        },
+        ..FrameDesc::new(camera, VolumeFrame::centered([64; 3], [1.0; 3]), SIZE, SIZE)
+    }
+}
+
+fn draw(r: &mut VolumeRenderer, t: &Offscreen, d: &FrameDesc<'_>) -> Vec<u8> {
+    draw_frame(gpu(), r, t, d, Some(brickray::wgpu::Color::BLACK)).unwrap();
+    t.read_color(gpu())
+}
+
+fn settle(r: &mut VolumeRenderer, t: &Offscreen, d: &FrameDesc<'_>) -> Vec<u8> {
+    draw_until_settled(gpu(), r, t, d, 400)
+        .unwrap()
+        .expect("settles");
+    draw(r, t, d)
+}
+
+fn mad(a: &[u8], b: &[u8]) -> f64 {
+    let s: u64 = a
+        .chunks_exact(4)
+        .zip(b.chunks_exact(4))
+        .map(|(p, q)| (0..3).map(|k| p[k].abs_diff(q[k]) as u64).sum::<u64>())
+        .sum();
+    s as f64 / (a.len() / 4 * 3) as f64
+}
+
+/// Settles coarse (root only) and fine (all resident), then switches from
+/// coarse to fine; returns (old, new, the frames after the switch).
+fn switch(
+    mode: RenderMode,
+    fade: Option<FadeDuration>,
+    frames: usize,
+) -> (Vec<u8>, Vec<u8>, Vec<Vec<u8>>) {
+    let vol = noise(64);
+    let dir = tempfile::tempdir().unwrap();
+    let mut r = renderer(
+        store(&vol, &dir),
+        OutOfCoreConfig {
+            fade,
+            tolerance_px: 0.0,
+            upload_budget_bytes: 1 << 30,
+            ..Default::default()
+        },
+    );
+    let t = Offscreen::new(&gpu().device, SIZE, SIZE);
+    let d = desc(Camera::orbit(Vec3::ZERO, 1.8, 0.5, 0.3), mode);
+    let new = settle(&mut r, &t, &d);
+    r.set_lod_tolerance(1e6).unwrap();
+    let old = settle(&mut r, &t, &d);
+    assert_eq!(
+        r.out_of_core_stats().unwrap().data_leaves_per_level[0],
+        1,
+        "coarse: the root"
+    );
+    r.set_lod_tolerance(0.0).unwrap();
+    let after = (0..frames).map(|_| draw(&mut r, &t, &d)).collect();
+    (old, new, after)
+}
+
+#[test]
+fn a_split_fades_over_the_configured_frames() {
+    for mode in [
+        RenderMode::Dvr,
+        RenderMode::Mip,
+        RenderMode::Iso {
+            value: 0.6,
+            color: [1.0, 0.8, 0.6],
+        },
+    ] {
+        let (old, new, after) = switch(mode, Some(FadeDuration::Frames(4)), 5);
+        let span = mad(&old, &new);
+        assert!(span > 1.0, "{mode:?}: the levels differ ({span})");
+        let to_old: Vec<f64> = after.iter().map(|f| mad(f, &old)).collect();
+        let to_new: Vec<f64> = after.iter().map(|f| mad(f, &new)).collect();
+        eprintln!("{mode:?}: old-new {span:.2}, to old {to_old:.2?}, to new {to_new:.2?}");
+        for j in 0..3 {
+            // Strictly between, and moving from the old image to the new one.
+            assert!(
+                to_old[j] > 0.0 && to_new[j] > 0.0,
+                "{mode:?} frame {j} is an end"
+            );
+            assert!(
+                to_old[j] < span && to_new[j] < span,
+                "{mode:?} frame {j} beyond"
+            );
+            assert!(
+                to_new[j + 1] < to_new[j],
+                "{mode:?}: not toward the new image"
+            );
+            assert!(
+                to_old[j + 1] > to_old[j],
+                "{mode:?}: not away from the old image"
+            );
+        }
+        assert_eq!(to_new[3], 0.0, "{mode:?}: the 4th frame is the new image");
+        assert_eq!(to_new[4], 0.0);
+    }
+}
+
+#[test]
+fn fades_off_switch_in_one_frame() {
+    let (old, new, after) = switch(RenderMode::Dvr, None, 2);
+    assert!(mad(&old, &new) > 1.0);
+    assert_eq!(mad(&after[0], &new), 0.0);
+}
+
+#[test]
+fn the_floor_prevents_holes_under_a_tiny_pool_while_circling() {
+    let vol = noise(64);
+    let dir = tempfile::tempdir().unwrap();
+    let source = store(&vol, &dir);
+    let layout = source.layout().clone();
+    let gpu_format = brickray::cache::GpuFormat::for_layout(
+        &layout,
+        brickray_core::TexelCaps {
+            norm16: true,
+            float32_filterable: false,
+        },
+        brickray::U8Filtering::default(),
+        32,
+        2048,
+    );
+    let slot = gpu_format.slot_bytes(&layout).unwrap();
+    let brick = gpu_format.prepared_brick_bytes(&layout).unwrap();
+    let mut r = renderer(
+        source,
+        OutOfCoreConfig {
+            gpu_budget_bytes: 40 * slot,
+            cpu_budget_bytes: 9 * brick,
+            fade: Some(FadeDuration::Frames(3)),
+            ..Default::default()
+        },
+    );
+    let t = Offscreen::new(&gpu().device, SIZE, SIZE);
+    let (mut holes, mut floor) = (0, 0);
+    for i in 0..90 {
+        let a = i as f32 * 0.12;
+        let dist = 1.0 + 0.7 * (i as f32 * 0.21).sin();
+        let d = desc(
+            Camera::orbit(Vec3::ZERO, dist, a, 0.3 * a.cos()),
+            RenderMode::Dvr,
+        );
+        draw(&mut r, &t, &d);
+        let s = r.out_of_core_stats().unwrap();
+        holes = holes.max(s.cache.holes);
+        floor = floor.max(s.cache.floor_pinned);
+        std::thread::sleep(std::time::Duration::from_millis(2));
+    }
+    assert!(floor > 0, "the floor was never resident");
+    assert_eq!(holes, 0, "a frame drew a leaf without a brick");
+}
+
+const TOL: f32 = 4.0;
+
+#[test]
+fn a_zoom_path_with_fades_has_no_pop() {
+    let vol = noise(64);
+    let dir = tempfile::tempdir().unwrap();
+    let g = gpu();
+    let t = Offscreen::new(&g.device, SIZE, SIZE);
+    // A zoom from 2.5 to 0.9, 2.6% closer a frame.
+    let cams: Vec<Camera> = (0..40)
+        .map(|i| {
+            let d = 2.5 * (0.9f32 / 2.5).powf(i as f32 / 39.0);
+            Camera::orbit(Vec3::ZERO, d, 0.6, 0.35)
+        })
+        .collect();
+    // The reference: in core, the finest level.
+    let mut incore = VolumeRenderer::new(&g.device, targets()).unwrap();
+    incore.set_volume(&g.device, &g.queue, &vol).unwrap();
+    incore
+        .set_transfer_function(&g.device, &g.queue, &tf())
+        .unwrap();
+    let reference: Vec<Vec<u8>> = cams
+        .iter()
+        .map(|c| draw(&mut incore, &t, &desc(*c, RenderMode::Dvr)))
+        .collect();
+    let run = |fade| {
+        let mut r = renderer(
+            store(&vol, &dir),
+            OutOfCoreConfig {
+                fade,
+                tolerance_px: TOL,
+                ..Default::default()
+            },
+        );
+        settle(&mut r, &t, &desc(cams[0], RenderMode::Dvr));
+        let imgs: Vec<Vec<u8>> = cams
+            .iter()
+            .map(|c| {
+                let img = draw(&mut r, &t, &desc(*c, RenderMode::Dvr));
+                std::thread::sleep(std::time::Duration::from_millis(10));
+                img
+            })
+            .collect();
+        temporal_stability(&imgs, &reference, SIZE, SIZE, TemporalOptions::default()).unwrap()
+    };
+    let on = run(Some(FadeDuration::Frames(6)));
+    let off = run(None);
+    eprintln!("fades on: {on:?}\nfades off: {off:?}");
+    assert_eq!(on.pops, 0, "pops with fades: {:?}", on.pop_frames);
+    // The path does pop without fades (else it would test nothing).
+    assert!(off.pops > 0, "no pop without fades");
+}
