@@ -5,8 +5,11 @@ use brickray_core::{DType, NodeKey, OctreeLayout};
 
 /// The file's first eight bytes.
 pub const MAGIC: [u8; 8] = *b"BRKSTORE";
-/// The format version this crate writes and reads.
-pub const VERSION: u32 = 1;
+/// The format version this crate writes (it also reads [`MIN_VERSION`]..=this).
+/// Version 2 adds the optional per-node error section (`docs/store-format.md`).
+pub const VERSION: u32 = 2;
+/// The oldest format version this crate reads (version 1: no error section).
+pub const MIN_VERSION: u32 = 1;
 /// Bytes of the header.
 pub const HEADER_LEN: usize = 128;
 /// Bytes of one node-table entry.
@@ -77,10 +80,16 @@ pub(crate) struct Header {
     pub(crate) table_len: u64,
     pub(crate) payload_bytes: u64,
     pub(crate) table_crc: u32,
+    /// Bytes of the error section (version 2, flag [`FLAG_ERRORS`]; else 0).
+    pub(crate) errors_len: u64,
+    /// CRC-32 of the error section (else 0).
+    pub(crate) errors_crc: u32,
 }
 
 /// Header flag: the empty threshold is set.
 pub(crate) const FLAG_THRESHOLD: u8 = 1;
+/// Header flag (version 2): the error section follows the node table.
+pub(crate) const FLAG_ERRORS: u8 = 2;
 
 fn u32_at(b: &[u8], o: usize) -> u32 {
     u32::from_le_bytes([b[o], b[o + 1], b[o + 2], b[o + 3]])
@@ -123,6 +132,8 @@ impl Header {
         b[88..96].copy_from_slice(&self.table_len.to_le_bytes());
         b[96..104].copy_from_slice(&self.payload_bytes.to_le_bytes());
         b[104..108].copy_from_slice(&self.table_crc.to_le_bytes());
+        b[108..116].copy_from_slice(&self.errors_len.to_le_bytes());
+        b[116..120].copy_from_slice(&self.errors_crc.to_le_bytes());
         let crc = crc32fast::hash(&b[..124]);
         b[124..128].copy_from_slice(&crc.to_le_bytes());
         b
@@ -150,6 +161,8 @@ impl Header {
             table_len: u64_at(b, 88),
             payload_bytes: u64_at(b, 96),
             table_crc: u32_at(b, 104),
+            errors_len: u64_at(b, 108),
+            errors_crc: u32_at(b, 116),
         }
     }
 
