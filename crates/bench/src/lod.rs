@@ -10,6 +10,8 @@
 //! the finest data). The comparison is at equal working sets: each error-aware
 //! point's PSNR minus the geometric curve's PSNR interpolated (linearly in
 //! log bricks) at the same brick count, where the geometric sweep covers it.
+//! A third sweep ranks by the strict bound (`LodMetric::ErrorBound`), reported
+//! apart.
 //!
 //! `cargo run --release -p brickray-bench -- lod [--size PX] [--scenes a,b] [--brick N]`
 //!
@@ -204,10 +206,12 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
     let size: u32 = arg(args, "--size", 256)?;
     let brick: u32 = arg(args, "--brick", 32)?;
     let scenes: String = arg(args, "--scenes", "mri,ct,ml".to_string())?;
-    let tolerances: [f32; 10] = [0.0, 0.5, 0.75, 1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0];
-    let budgets: [f32; 10] = [
-        4.0, 8.0, 16.0, 32.0, 64.0, 128.0, 256.0, 512.0, 1024.0, 2048.0,
-    ];
+    // Both sweeps in steps of sqrt(2): tolerances 0 and 0.5..16 px, budgets
+    // 2..8192 (8-bit levels x px).
+    let tolerances: Vec<f32> = std::iter::once(0.0)
+        .chain((0..11).map(|k| 0.5 * 2f32.powf(k as f32 / 2.0)))
+        .collect();
+    let budgets: Vec<f32> = (0..25).map(|k| 2.0 * 2f32.powf(k as f32 / 2.0)).collect();
     let gpu = GpuContext::new().map_err(|e| e.to_string())?;
     println!("adapter: {}", gpu.describe());
     println!(
@@ -291,6 +295,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         );
         let mut geo = Vec::new();
         let mut err = Vec::new();
+        let mut bound = Vec::new();
         let mut points = Vec::new();
         let sweeps = tolerances
             .iter()
@@ -299,6 +304,12 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
                 budgets
                     .iter()
                     .map(|&b| ("error", LodMetric::ErrorAware { budget: b }, 1.0, b)),
+            )
+            .chain(
+                budgets
+                    .iter()
+                    .step_by(2)
+                    .map(|&b| ("bound", LodMetric::ErrorBound { budget: b }, 1.0, b)),
             );
         for (label, metric, tol, knob) in sweeps {
             let p = lod_point(
@@ -313,15 +324,15 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
             )?;
             let psnr = compare(&p.rgba, &reference, size, size).psnr_db.min(99.0);
             println!(
-                "  {label:>10} {knob:>9} {:>7} {:>9.1} {psnr:>9.2} {:>7}",
+                "  {label:>10} {knob:>9.2} {:>7} {:>9.1} {psnr:>9.2} {:>7}",
                 p.bricks,
                 p.bytes as f64 / (1 << 20) as f64,
                 p.frames
             );
-            if label == "geometric" {
-                geo.push((p.bricks as f64, psnr));
-            } else {
-                err.push((p.bricks as f64, psnr));
+            match label {
+                "geometric" => geo.push((p.bricks as f64, psnr)),
+                "error" => err.push((p.bricks as f64, psnr)),
+                _ => bound.push((p.bricks as f64, psnr)),
             }
             points.push(
                 json!({"metric": label, "knob": knob, "bricks": p.bricks, "psnr_db": round2(psnr)}),
@@ -339,6 +350,17 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
             scene.name,
             gains.iter().map(|g| round2(*g)).collect::<Vec<_>>()
         );
+        let mut bgains: Vec<f64> = bound
+            .iter()
+            .filter_map(|&(b, p)| interpolate(&geo, b).map(|g| p - g))
+            .collect();
+        let bmed = median(&mut bgains);
+        println!(
+            "  {}: strict-bound rule minus geometric: median {bmed:.2} dB over {} matched points",
+            scene.name,
+            bgains.len()
+        );
+        fig.insert(format!("{}_bound_median_gain_db", scene.name), json!(round2(bmed)));
         fig.insert(format!("{}_median_gain_db", scene.name), json!(round2(med)));
         fig.insert(format!("{}_matched_points", scene.name), json!(matched));
         fig.insert(format!("{}_points", scene.name), json!(points));

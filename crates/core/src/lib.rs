@@ -33,7 +33,10 @@ pub use camera::{
     Camera, CameraError, DepthConvention, DepthMap, FrameError, Projection, Ray, RayGen,
     VolumeFrame,
 };
-pub use lod::{ERROR_BINS, LodMetric, NodeError, TfErrorTable, node_tf_error};
+pub use lod::{
+    BinStats, ERROR_BINS, LodMetric, NodeError, TfErrorTable, node_pixel_error, node_tf_error,
+    node_tf_error_expected,
+};
 pub use macrocell::{MacroCellGrid, sub_cell_ranges, sub_cells_per_axis};
 pub use settings::{Accel, ClipBox, RenderMode, RenderSettings, SettingsError, Shading};
 pub use texel::{SampleEncoding, TexelCaps, TexelFormat, U8Filtering};

@@ -35,9 +35,10 @@ pub enum LodMetric {
     /// tolerance in pixels, whatever the data and transfer function do there.
     Geometric,
     /// A node is refined while its projected voxel size (pixels) times its
-    /// error under the current mode and transfer function ([`node_tf_error`],
-    /// in 8-bit levels: 255 x the bound on the change of the opacity-weighted
-    /// classified sample) exceeds `budget`. The unit of `budget` is therefore
+    /// expected pixel error under the current mode and transfer function
+    /// ([`node_pixel_error`], in 8-bit levels: 255 x the share-weighted change
+    /// of the opacity-weighted classified sample, accumulated over the node's
+    /// depth in DVR) exceeds `budget`. The unit of `budget` is therefore
     /// "8-bit levels x pixels": 16 lets a voxel covering one pixel err by
     /// 16/255, or one covering 4 pixels by 4/255; 255 refines a node of
     /// full-scale error to 1 px, like the geometric rule at 1 px. A flat
@@ -45,6 +46,16 @@ pub enum LodMetric {
     /// freely; a sharp edge refines first. Sources without error bounds (a
     /// version-1 store) fall back to [`LodMetric::Geometric`].
     ErrorAware {
+        /// The error budget (finite, `>= 0`).
+        budget: f32,
+    },
+    /// Like [`LodMetric::ErrorAware`] with the strict bound
+    /// ([`node_tf_error`]) instead of the expected error: every leaf's
+    /// projected size times 255 x its worst-case change stays within the budget
+    /// (when nothing else blocks a split), but the worst case over a node's
+    /// neighbourhood is rarely much below its value range, so this ranks
+    /// nodes almost like the geometric rule (docs/benchmarks.md).
+    ErrorBound {
         /// The error budget (finite, `>= 0`).
         budget: f32,
     },
@@ -62,14 +73,33 @@ pub const ERROR_BINS: usize = 16;
 /// Largest quantised deviation ([`NodeError::dev`]): `max - min`.
 pub const DEV_SCALE: u16 = u16::MAX;
 
-/// A node's recorded error bound (see the module documentation).
+/// A node's recorded error bound and expected error (see the module
+/// documentation).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
 pub struct NodeError {
     /// Bit `b` set: some coarse voxel of the node falls in bin `b`.
     pub occupied: u16,
-    /// Bin `b`'s largest deviation from the finest level, in units of
-    /// `(max - min) / 65535`, rounded up (so decoding never underestimates).
+    /// Bin `b`'s largest deviation from the finest level (the bound), in units
+    /// of `(max - min) / 65535`, rounded up (so decoding never underestimates).
     pub dev: [u16; ERROR_BINS],
+    /// Bin `b`'s typical deviation: the root mean square over its coarse
+    /// voxels `C` of the RMS of `F - C` over the finest voxels `F` of `C`'s own
+    /// footprint; same unit, rounded up.
+    pub rms: [u16; ERROR_BINS],
+    /// Bin `b`'s share of the node's coarse voxels, in units of 1/65535, rounded.
+    pub weight: [u16; ERROR_BINS],
+}
+
+/// What the builder measured in one bin of a node.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct BinStats {
+    /// Coarse voxels in the bin.
+    pub count: u64,
+    /// Their largest deviation from the finest voxels of their 3x3x3
+    /// neighbourhood of footprints (raw units).
+    pub dev: f64,
+    /// Sum over them of the mean square of `F - C` over their own footprint.
+    pub sum_sq: f64,
 }
 
 /// The bin of raw value `v` in a node of range `[min, max]` (values outside
@@ -88,24 +118,32 @@ pub fn bin_of(v: f64, min: f64, max: f64) -> usize {
 }
 
 impl NodeError {
-    /// Encodes raw deviations `dev[b]` (`None`: bin not occupied) of a node of
-    /// range `[min, max]`, rounding up. Deviations are clamped to
+    /// Encodes what the builder measured per bin of a node of range
+    /// `[min, max]`, rounding deviations up. Deviations are clamped to
     /// `0..=max - min` (no fine and coarse value of a subtree lie further apart).
-    pub fn encode(devs: &[Option<f64>; ERROR_BINS], min: f64, max: f64) -> NodeError {
+    pub fn encode(bins: &[BinStats; ERROR_BINS], min: f64, max: f64) -> NodeError {
         let span = max - min;
-        let mut e = NodeError::default();
-        for (b, d) in devs.iter().enumerate() {
-            if let Some(d) = d {
-                e.occupied |= 1 << b;
-                e.dev[b] = if span > 0.0 && d.is_finite() {
-                    let q = (d.max(0.0) / span * DEV_SCALE as f64).ceil();
-                    q.clamp(0.0, DEV_SCALE as f64) as u16
-                } else if span > 0.0 {
-                    DEV_SCALE
-                } else {
-                    0
-                };
+        let total: u64 = bins.iter().map(|b| b.count).sum();
+        let q = |d: f64| -> u16 {
+            if span > 0.0 && d.is_finite() {
+                (d.max(0.0) / span * DEV_SCALE as f64)
+                    .ceil()
+                    .clamp(0.0, DEV_SCALE as f64) as u16
+            } else if span > 0.0 {
+                DEV_SCALE
+            } else {
+                0
             }
+        };
+        let mut e = NodeError::default();
+        for (b, st) in bins.iter().enumerate() {
+            if st.count == 0 {
+                continue;
+            }
+            e.occupied |= 1 << b;
+            e.dev[b] = q(st.dev);
+            e.rms[b] = q((st.sum_sq / st.count as f64).sqrt()).min(e.dev[b]);
+            e.weight[b] = ((st.count as f64 / total as f64) * DEV_SCALE as f64).round() as u16;
         }
         e
     }
@@ -123,10 +161,29 @@ impl NodeError {
             .map_or(0.0, |&q| q as f64 / DEV_SCALE as f64 * span)
     }
 
+    /// Bin `b`'s typical (RMS) deviation in raw units.
+    pub fn typical_deviation(&self, b: usize, min: f64, max: f64) -> f64 {
+        let span = (max - min).max(0.0);
+        self.rms
+            .get(b)
+            .map_or(0.0, |&q| q as f64 / DEV_SCALE as f64 * span)
+    }
+
+    /// Bin `b`'s share of the node's coarse voxels (0..=1).
+    pub fn share(&self, b: usize) -> f64 {
+        self.weight
+            .get(b)
+            .map_or(0.0, |&w| w as f64 / DEV_SCALE as f64)
+    }
+
     /// The widened bin `W_b = [bin_lo - dev_b, bin_hi + dev_b]` (raw units).
     pub fn widened(&self, b: usize, min: f64, max: f64) -> (f64, f64) {
+        self.widened_by(b, min, max, self.deviation(b, min, max))
+    }
+
+    /// Bin `b` widened by `d` on each side (raw units).
+    pub fn widened_by(&self, b: usize, min: f64, max: f64, d: f64) -> (f64, f64) {
         let w = (max - min).max(0.0) / ERROR_BINS as f64;
-        let d = self.deviation(b, min, max);
         let (lo, hi) = (min + b as f64 * w, min + (b + 1) as f64 * w);
         (lo - d, hi + d)
     }
@@ -282,6 +339,90 @@ pub fn node_tf_error(
     Some(if e.is_nan() { 1.0 } else { e.clamp(0.0, 1.0) })
 }
 
+/// The *expected* error of drawing a node instead of the finest data, in
+/// 0..=1, from its metadata only (`None` without error data): like
+/// [`node_tf_error`], but each occupied bin is widened by its typical (RMS)
+/// deviation instead of its largest. Not a bound: a guide to where
+/// refinement pays most, which error-aware refinement
+/// ([`LodMetric::ErrorAware`], through [`node_pixel_error`]) ranks nodes by.
+///
+/// * DVR: `max_b change(bin_b +- rms_b)` of the opacity-weighted classified
+///   sample (the worst bin, not weighted by its share: a few visible voxels in
+///   a node of transparent ones are what the image shows);
+/// * iso-surface: the share of bins whose RMS-widened range holds the
+///   isovalue (and whose deviation is not zero);
+/// * MIP: the share-weighted RMS deviation as a fraction of the value range.
+pub fn node_tf_error_expected(
+    info: &NodeInfo,
+    mode: RenderMode,
+    table: &TfErrorTable,
+    layout: &OctreeLayout,
+) -> Option<f64> {
+    let err = info.error?;
+    if info.kind != NodeKind::Data {
+        return Some(0.0);
+    }
+    let (min, max) = (info.min as f64, info.max as f64);
+    let [vlo, vhi] = layout.volume.value_range;
+    let vspan = vhi as f64 - vlo as f64;
+    let norm = |v: f64| -> f64 {
+        if vspan > 0.0 {
+            (v - vlo as f64) / vspan
+        } else {
+            0.0
+        }
+    };
+    let bins = (0..ERROR_BINS).filter(|&b| err.is_occupied(b));
+    let e: f64 = match mode {
+        RenderMode::Dvr => bins
+            .map(|b| {
+                let (lo, hi) = err.widened_by(b, min, max, err.typical_deviation(b, min, max));
+                table.classified_change(norm(lo), norm(hi))
+            })
+            .fold(0.0, f64::max),
+        RenderMode::Iso { value, .. } => bins
+            .filter(|&b| {
+                let (lo, hi) = err.widened_by(b, min, max, err.typical_deviation(b, min, max));
+                let (a, c) = (norm(lo), norm(hi));
+                let (a, c) = if a <= c { (a, c) } else { (c, a) };
+                err.dev[b] > 0 && a <= value as f64 && value as f64 <= c
+            })
+            .map(|b| err.share(b))
+            .sum(),
+        RenderMode::Mip => {
+            bins.map(|b| err.share(b) * err.typical_deviation(b, min, max))
+                .sum::<f64>()
+                / vspan.abs().max(f64::MIN_POSITIVE)
+        }
+    };
+    Some(if e.is_nan() { 1.0 } else { e.clamp(0.0, 1.0) })
+}
+
+/// The expected error a node adds to a pixel, in 0..=1: for DVR the
+/// per-sample [`node_tf_error_expected`] accumulated over the node's depth
+/// along a ray, `brick * 2^(levels - 1 - level)` finest voxels (opacity is per
+/// voxel length, so a change of the classified sample of `e` over `n` voxels
+/// changes the composited pixel by up to about `n * e` while that is small),
+/// capped at 1; for iso-surfaces and MIP, where one sample decides the pixel,
+/// the per-sample error itself. What [`LodMetric::ErrorAware`] ranks by.
+pub fn node_pixel_error(
+    info: &NodeInfo,
+    level: u8,
+    mode: RenderMode,
+    table: &TfErrorTable,
+    layout: &OctreeLayout,
+) -> Option<f64> {
+    let e = node_tf_error_expected(info, mode, table, layout)?;
+    Some(match mode {
+        RenderMode::Dvr => {
+            let finest = layout.levels.saturating_sub(1);
+            let depth = layout.brick as f64 * 2f64.powi((finest - level.min(finest)) as i32);
+            (e * depth).min(1.0)
+        }
+        _ => e,
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -314,9 +455,11 @@ mod tests {
         /// Encoding rounds up and stays within the node's range.
         #[test]
         fn encoding_never_underestimates(d in 0.0f64..300.0, min in -100.0f64..100.0, span in 0.001f64..500.0) {
-            let mut devs = [None; ERROR_BINS];
-            devs[3] = Some(d);
-            let e = NodeError::encode(&devs, min, min + span);
+            let mut bins = [BinStats::default(); ERROR_BINS];
+            bins[3] = BinStats { count: 5, dev: d, sum_sq: 5.0 * d * d * 0.25 };
+            let e = NodeError::encode(&bins, min, min + span);
+            prop_assert!(e.typical_deviation(3, min, min + span) >= (d * 0.5).min(span) * (1.0 - 1e-12));
+            prop_assert_eq!(e.weight[3], DEV_SCALE);
             prop_assert!(e.is_occupied(3) && !e.is_occupied(2));
             prop_assert!(e.deviation(3, min, min + span) >= d.min(span) * (1.0 - 1e-12));
         }

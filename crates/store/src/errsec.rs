@@ -9,14 +9,17 @@ use std::os::unix::fs::FileExt;
 use std::path::Path;
 
 /// Bytes of one error entry: `occupied` (u16), reserved (u16, zero), then
-/// `ERROR_BINS` u16 deviations.
-pub const ERROR_ENTRY_LEN: usize = 4 + 2 * ERROR_BINS;
+/// `ERROR_BINS` u16 each of `dev`, `rms` and `weight`.
+pub const ERROR_ENTRY_LEN: usize = 4 + 3 * 2 * ERROR_BINS;
 
 pub(crate) fn encode(e: &NodeError, b: &mut [u8]) {
     b[..ERROR_ENTRY_LEN].fill(0);
     b[0..2].copy_from_slice(&e.occupied.to_le_bytes());
-    for (i, d) in e.dev.iter().enumerate() {
-        b[4 + 2 * i..6 + 2 * i].copy_from_slice(&d.to_le_bytes());
+    for (k, arr) in [&e.dev, &e.rms, &e.weight].into_iter().enumerate() {
+        for (i, d) in arr.iter().enumerate() {
+            let o = 4 + 2 * (k * ERROR_BINS + i);
+            b[o..o + 2].copy_from_slice(&d.to_le_bytes());
+        }
     }
 }
 
@@ -26,6 +29,8 @@ pub(crate) fn decode(b: &[u8]) -> (NodeError, u16) {
     let e = NodeError {
         occupied: u16_at(0),
         dev: std::array::from_fn(|i| u16_at(4 + 2 * i)),
+        rms: std::array::from_fn(|i| u16_at(4 + 2 * (ERROR_BINS + i))),
+        weight: std::array::from_fn(|i| u16_at(4 + 2 * (2 * ERROR_BINS + i))),
     };
     (e, u16_at(2))
 }

@@ -237,6 +237,17 @@ fn version_2_round_trip() {
             assert_ne!(e.occupied, 0, "{:?}", rec.key);
         }
         some_error |= e.dev.iter().any(|&d| d > 0);
+        // The typical deviation never exceeds the bound; shares sum to 1.
+        for b in 0..brickray_core::ERROR_BINS {
+            assert!(e.rms[b] <= e.dev[b], "{:?} bin {b}", rec.key);
+            if !e.is_occupied(b) {
+                assert_eq!((e.dev[b], e.rms[b], e.weight[b]), (0, 0, 0));
+            }
+        }
+        if e.occupied != 0 {
+            let total: f64 = (0..brickray_core::ERROR_BINS).map(|b| e.share(b)).sum();
+            assert!((total - 1.0).abs() < 1e-3, "{:?}: shares sum to {total}", rec.key);
+        }
         // Through the BrickSource too.
         assert_eq!(s.node(rec.key).unwrap().error, Some(e));
     }

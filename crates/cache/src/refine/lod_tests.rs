@@ -3,7 +3,9 @@
 
 use super::tests::{assert_exact_cover, ball_layout};
 use super::*;
-use brickray_core::{ERROR_BINS, NodeError, TfErrorTable, node_tf_error};
+use brickray_core::{
+    BinStats, ERROR_BINS, NodeError, TfErrorTable, node_pixel_error, node_tf_error,
+};
 use proptest::prelude::*;
 use std::collections::HashMap;
 
@@ -31,14 +33,20 @@ impl RampSource {
             .wrapping_mul(0x9E37_79B9_7F4A_7C15)
             | 1;
         let finest = self.layout.levels - 1;
-        let mut devs = [None; ERROR_BINS];
+        let mut bins = [BinStats::default(); ERROR_BINS];
         if key.level < finest {
-            for d in devs.iter_mut() {
+            for st in bins.iter_mut() {
                 h ^= h << 13;
                 h ^= h >> 7;
                 h ^= h << 17;
                 let r = (h % 1000) as f64 / 1000.0;
-                *d = Some(self.rough * r * 0.5f64.powi(key.level as i32));
+                let count = 1 + h % 50;
+                let dev = self.rough * r * 0.5f64.powi(key.level as i32);
+                *st = BinStats {
+                    count,
+                    dev,
+                    sum_sq: count as f64 * (0.3 * dev) * (0.3 * dev),
+                };
             }
         }
         NodeInfo {
@@ -46,7 +54,7 @@ impl RampSource {
             min,
             max: max.max(min + 1e-3),
             error: Some(NodeError::encode(
-                &devs,
+                &bins,
                 min as f64,
                 max.max(min + 1e-3) as f64,
             )),
@@ -130,12 +138,13 @@ proptest! {
 
     /// With everything resident, no leaf that could be split stays coarser
     /// than the budget: its projected voxel size times 255 x its error under
-    /// the TF is within the budget.
+    /// the TF (expected, or the bound) is within the budget.
     #[test]
     fn never_coarsens_a_node_over_the_budget(
         seed in any::<u64>(),
         rough in 0.0f64..0.5,
         budget in 0.0f32..400.0,
+        strict in any::<bool>(),
         dist in 1.2f32..6.0,
         yaw in 0.0f32..6.28,
         entries in proptest::collection::vec(proptest::array::uniform4(0.0f32..1.0), 2..10),
@@ -146,7 +155,12 @@ proptest! {
         let tf = TransferFunction::from_entries(entries);
         let frame = VolumeFrame::centered(layout.volume.dims, [1.0; 3]);
         let cam = Camera::orbit(frame.center(), dist, yaw, 0.3);
-        let r = refine_with(&layout, &mut env, &cam, &tf, LodMetric::ErrorAware { budget });
+        let metric = if strict {
+            LodMetric::ErrorBound { budget }
+        } else {
+            LodMetric::ErrorAware { budget }
+        };
+        let r = refine_with(&layout, &mut env, &cam, &tf, metric);
         let keys: Vec<NodeKey> = r.leaves.iter().map(|l| l.key).collect();
         assert_exact_cover(&keys, layout.levels);
         let geo = ViewGeometry::new(&layout, &cam, 1.0, 256, &frame);
@@ -157,7 +171,12 @@ proptest! {
                 continue;
             }
             let info = env.meta[&l.key];
-            let e = node_tf_error(&info, RenderMode::Dvr, &table, &layout).unwrap();
+            let e = if strict {
+                node_tf_error(&info, RenderMode::Dvr, &table, &layout)
+            } else {
+                node_pixel_error(&info, l.key.level, RenderMode::Dvr, &table, &layout)
+            }
+            .unwrap();
             let px = geo.voxel_pixels(l.key);
             prop_assert!(
                 px * 255.0 * e <= budget as f64 * (1.0 + 1e-6) + 1e-9,

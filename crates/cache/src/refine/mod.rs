@@ -35,7 +35,7 @@ pub use geometry::{ViewGeometry, is_visible};
 use crate::upload::UploadBudget;
 use brickray_core::{
     Camera, EmptyReason, LodMetric, NodeInfo, NodeKey, NodeKind, OctreeLayout, RenderMode,
-    TfErrorTable, TransferFunction, VolumeFrame, node_tf_error,
+    TfErrorTable, TransferFunction, VolumeFrame, node_pixel_error, node_tf_error,
 };
 use std::collections::BinaryHeap;
 
@@ -289,38 +289,49 @@ fn classify(
 struct ScreenError {
     /// `Some` for error-aware refinement over a source with error bounds.
     table: Option<TfErrorTable>,
+    /// The strict bound ([`LodMetric::ErrorBound`]) instead of the expected error.
+    strict: bool,
     threshold: f64,
 }
 
 impl ScreenError {
     fn new(params: &RefineParams<'_>, root: Option<&NodeInfo>) -> ScreenError {
+        let has_errors = root.is_some_and(|i| i.error.is_some());
         match params.metric {
-            LodMetric::ErrorAware { budget } if root.is_some_and(|i| i.error.is_some()) => {
+            LodMetric::ErrorAware { budget } | LodMetric::ErrorBound { budget } if has_errors => {
                 ScreenError {
                     table: Some(TfErrorTable::new(params.tf)),
+                    strict: matches!(params.metric, LodMetric::ErrorBound { .. }),
                     threshold: budget.max(0.0) as f64,
                 }
             }
             _ => ScreenError {
                 table: None,
+                strict: false,
                 threshold: params.tolerance_px.max(0.0) as f64,
             },
         }
     }
 
-    /// The node's priority: its projected voxel size, times 255 x its error
-    /// under the mode and transfer function when error-aware (a node without
-    /// an error bound counts as full-scale error).
+    /// The node's priority: its projected voxel size, times 255 x its
+    /// expected error (or its bound) under the mode and transfer function when
+    /// error-aware (a node without error data counts as full-scale error).
     fn priority(
         &self,
         px: f64,
+        key: NodeKey,
         info: Option<&NodeInfo>,
         params: &RefineParams<'_>,
         layout: &OctreeLayout,
     ) -> f64 {
         match (&self.table, info) {
             (Some(t), Some(i)) => {
-                let e = node_tf_error(i, params.mode, t, layout).unwrap_or(1.0);
+                let e = if self.strict {
+                    node_tf_error(i, params.mode, t, layout)
+                } else {
+                    node_pixel_error(i, key.level, params.mode, t, layout)
+                }
+                .unwrap_or(1.0);
                 // 0 x inf (a degenerate camera on a flat node) stays NaN: never refined.
                 px * 255.0 * e
             }
@@ -372,7 +383,13 @@ pub fn refine(
         Ok(c) => {
             let se = ScreenError::new(params, c.info.as_ref());
             heap.push(HeapItem {
-                priority: se.priority(geo.voxel_pixels(root), c.info.as_ref(), params, layout),
+                priority: se.priority(
+                    geo.voxel_pixels(root),
+                    root,
+                    c.info.as_ref(),
+                    params,
+                    layout,
+                ),
                 key: root,
                 uniform: c.uniform,
                 charged: false,
@@ -517,6 +534,7 @@ pub fn refine(
                 NodeClass::Data => heap.push(HeapItem {
                     priority: screen.priority(
                         geo.voxel_pixels(children[i]),
+                        children[i],
                         classes[i].info.as_ref(),
                         params,
                         layout,
