@@ -46,6 +46,7 @@ pub(crate) struct LodPoint {
 /// Draws `renderer` (out of core over its source) under `metric` with the
 /// geometric `tolerance_px`, converged, and reads the image back. The
 /// renderer is reused across calls: only the refinement rule changes.
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn lod_point(
     run: &Runner<'_>,
     renderer: &mut VolumeRenderer,
@@ -360,7 +361,10 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
             scene.name,
             bgains.len()
         );
-        fig.insert(format!("{}_bound_median_gain_db", scene.name), json!(round2(bmed)));
+        fig.insert(
+            format!("{}_bound_median_gain_db", scene.name),
+            json!(round2(bmed)),
+        );
         fig.insert(format!("{}_median_gain_db", scene.name), json!(round2(med)));
         fig.insert(format!("{}_matched_points", scene.name), json!(matched));
         fig.insert(format!("{}_points", scene.name), json!(points));

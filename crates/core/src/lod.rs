@@ -29,10 +29,11 @@
 use crate::{NodeInfo, NodeKind, OctreeLayout, RenderMode, TransferFunction};
 
 /// How refinement decides that a node is fine enough (`docs/cache.md`).
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub enum LodMetric {
     /// A node is refined while one of its voxels projects to more than the
     /// tolerance in pixels, whatever the data and transfer function do there.
+    #[default]
     Geometric,
     /// A node is refined while its projected voxel size (pixels) times its
     /// expected pixel error under the current mode and transfer function
@@ -59,12 +60,6 @@ pub enum LodMetric {
         /// The error budget (finite, `>= 0`).
         budget: f32,
     },
-}
-
-impl Default for LodMetric {
-    fn default() -> Self {
-        LodMetric::Geometric
-    }
 }
 
 /// Bins of a node's value range in [`NodeError`].

@@ -146,7 +146,7 @@ proptest! {
         budget in 0.0f32..400.0,
         strict in any::<bool>(),
         dist in 1.2f32..6.0,
-        yaw in 0.0f32..6.28,
+        yaw in 0.0f32..std::f32::consts::TAU,
         entries in proptest::collection::vec(proptest::array::uniform4(0.0f32..1.0), 2..10),
     ) {
         let layout = ball_layout(64);
