@@ -9,7 +9,8 @@
 //! and the PSNR of the image against the CPU reference (f64, exact trilinear,
 //! the finest data). The comparison is at equal working sets: each error-aware
 //! point's PSNR minus the geometric curve's PSNR interpolated (linearly in
-//! log bricks) at the same brick count, where the geometric sweep covers it.
+//! log bricks) at the same brick count, where the geometric sweep covers it,
+//! one point per distinct working set.
 //! A third sweep ranks by the strict bound (`LodMetric::ErrorBound`), reported
 //! apart.
 //!
@@ -339,6 +340,15 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
                 json!({"metric": label, "knob": knob, "bricks": p.bricks, "psnr_db": round2(psnr)}),
             );
         }
+        // One point per distinct working set (a budget sweep repeats the
+        // coarsest and finest cuts many times).
+        let distinct = |v: &[(f64, f64)]| {
+            let mut v = v.to_vec();
+            v.sort_by(|a, b| a.0.total_cmp(&b.0));
+            v.dedup_by(|b, a| a.0 == b.0);
+            v
+        };
+        let (err, bound) = (distinct(&err), distinct(&bound));
         let mut gains: Vec<f64> = err
             .iter()
             .filter_map(|&(b, p)| interpolate(&geo, b).map(|g| p - g))
@@ -347,7 +357,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         all_gains.extend(gains.iter().copied());
         let med = median(&mut gains);
         println!(
-            "  {}: error-aware minus geometric PSNR at equal bricks: median {med:.2} dB over {matched} matched points (gains {:?})",
+            "  {}: error-aware minus geometric PSNR at equal bricks: median {med:.2} dB over {matched} matched distinct working sets (gains {:?})",
             scene.name,
             gains.iter().map(|g| round2(*g)).collect::<Vec<_>>()
         );
