@@ -25,6 +25,15 @@
 //! the occupied bins. The bound is against the finest level, so it holds for
 //! a node drawn instead of any refinement of it. It does not bound gradients
 //! (shading).
+//!
+//! # The expected error
+//!
+//! The worst case over 27 footprints is rarely much below a node's value
+//! range, so each bin also records its typical deviation (`rms`: the RMS of
+//! `F - C` over each coarse voxel's own footprint) and its share of the
+//! node's voxels (`weight`). [`node_tf_error_expected`] and
+//! [`node_pixel_error`] (what [`LodMetric::ErrorAware`] ranks by) use them;
+//! [`node_tf_error`] (what [`LodMetric::ErrorBound`] ranks by) is the bound.
 
 use crate::{NodeInfo, NodeKind, OctreeLayout, RenderMode, TransferFunction};
 
