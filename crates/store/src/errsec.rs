@@ -52,9 +52,10 @@ pub(crate) fn read(
     h: &Header,
     geo: &TableGeometry,
     offset: u64,
+    len: u64,
 ) -> Result<Vec<NodeError>, StoreError> {
     // Bounded by the file size checked by the caller.
-    let mut b = vec![0u8; h.errors_len as usize];
+    let mut b = vec![0u8; len as usize];
     file.read_exact_at(&mut b, offset)
         .map_err(|e| StoreError::io(path, e))?;
     let crc = crc32fast::hash(&b);

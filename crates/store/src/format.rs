@@ -80,16 +80,17 @@ pub(crate) struct Header {
     pub(crate) table_len: u64,
     pub(crate) payload_bytes: u64,
     pub(crate) table_crc: u32,
-    /// Bytes of the error section (version 2, flag [`FLAG_ERRORS`]; else 0).
-    pub(crate) errors_len: u64,
-    /// CRC-32 of the error section (else 0).
+    /// CRC-32 of the error section (version 2, flag [`FLAG_ERRORS`]; else 0).
+    /// The section's length is implied: `node_count * ERROR_ENTRY_LEN`.
     pub(crate) errors_crc: u32,
 }
 
 /// Header flag: the empty threshold is set.
 pub(crate) const FLAG_THRESHOLD: u8 = 1;
-/// Header flag (version 2): the error section follows the node table.
-pub(crate) const FLAG_ERRORS: u8 = 2;
+/// Header flag (version 2, bit 2): the error section follows the node table.
+pub(crate) const FLAG_ERRORS: u8 = 4;
+/// Where the error section's CRC is in the header (version 2).
+pub(crate) const ERRORS_CRC_AT: std::ops::Range<usize> = 120..124;
 
 fn u32_at(b: &[u8], o: usize) -> u32 {
     u32::from_le_bytes([b[o], b[o + 1], b[o + 2], b[o + 3]])
@@ -132,8 +133,7 @@ impl Header {
         b[88..96].copy_from_slice(&self.table_len.to_le_bytes());
         b[96..104].copy_from_slice(&self.payload_bytes.to_le_bytes());
         b[104..108].copy_from_slice(&self.table_crc.to_le_bytes());
-        b[108..116].copy_from_slice(&self.errors_len.to_le_bytes());
-        b[116..120].copy_from_slice(&self.errors_crc.to_le_bytes());
+        b[ERRORS_CRC_AT].copy_from_slice(&self.errors_crc.to_le_bytes());
         let crc = crc32fast::hash(&b[..124]);
         b[124..128].copy_from_slice(&crc.to_le_bytes());
         b
@@ -161,8 +161,7 @@ impl Header {
             table_len: u64_at(b, 88),
             payload_bytes: u64_at(b, 96),
             table_crc: u32_at(b, 104),
-            errors_len: u64_at(b, 108),
-            errors_crc: u32_at(b, 116),
+            errors_crc: u32_at(b, ERRORS_CRC_AT.start),
         }
     }
 

@@ -141,10 +141,10 @@ impl Store {
                 computed,
             });
         }
-        // Version 1 reserves bytes 108..124; version 2 uses 108..120 for the
-        // error section (zero without it).
-        let reserved_from = if h.version >= 2 { 120 } else { 108 };
-        if hb[reserved_from..124].iter().any(|&b| b != 0) {
+        // Version 1 reserves bytes 108..124; version 2 keeps the error
+        // section's CRC at 120..124 (zero without the section).
+        let reserved_to = if h.version >= 2 { 120 } else { 124 };
+        if hb[108..reserved_to].iter().any(|&b| b != 0) {
             return Err(bad(path, "reserved", "non-zero"));
         }
         if h.header_len != HEADER_LEN as u32 {
@@ -258,15 +258,15 @@ impl Store {
         let errors_len = if has_errors {
             geo.count
                 .checked_mul(ERROR_ENTRY_LEN as u64)
-                .ok_or_else(|| bad(path, "errors_len", "overflow"))?
+                .ok_or_else(|| bad(path, "node_count", "overflow"))?
         } else {
             0
         };
-        if h.errors_len != errors_len || (!has_errors && h.errors_crc != 0) {
+        if !has_errors && h.errors_crc != 0 {
             return Err(bad(
                 path,
-                "errors_len",
-                format!("{} (expected {errors_len})", h.errors_len),
+                "errors_crc",
+                "set without the error section's flag",
             ));
         }
         let table_end = h
@@ -275,7 +275,7 @@ impl Store {
             .ok_or_else(|| bad(path, "table_offset", "overflow"))?;
         let end = table_end
             .checked_add(errors_len)
-            .ok_or_else(|| bad(path, "errors_len", "overflow"))?;
+            .ok_or_else(|| bad(path, "node_count", "overflow"))?;
         if end > file_len {
             return Err(StoreError::Truncated {
                 path: path.to_owned(),
@@ -366,7 +366,7 @@ impl Store {
         }
         check_tiling(path, &entries, h.table_offset)?;
         let errors = if has_errors {
-            Some(errsec::read(&file, path, &h, &geo, table_end)?)
+            Some(errsec::read(&file, path, &h, &geo, table_end, errors_len)?)
         } else {
             None
         };

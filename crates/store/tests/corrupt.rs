@@ -42,9 +42,9 @@ fn reseal_table(b: &mut [u8]) {
 /// table, to the end of the file).
 fn reseal_errors(b: &mut [u8]) {
     let end = (u64_at(b, 80) as usize).saturating_add(u64_at(b, 88) as usize);
-    if b.len() >= 120 && end <= b.len() {
+    if b.len() >= 124 && end <= b.len() {
         let crc = crc32fast::hash(&b[end..]);
-        b[116..120].copy_from_slice(&crc.to_le_bytes());
+        b[120..124].copy_from_slice(&crc.to_le_bytes());
     }
 }
 

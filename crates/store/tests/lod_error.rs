@@ -194,7 +194,7 @@ fn error_section(b: &[u8]) -> std::ops::Range<usize> {
 fn reseal_errors(b: &mut [u8]) {
     let r = error_section(b);
     let crc = crc32fast::hash(&b[r]);
-    b[116..120].copy_from_slice(&crc.to_le_bytes());
+    b[120..124].copy_from_slice(&crc.to_le_bytes());
     reseal_header(b);
 }
 
@@ -203,7 +203,7 @@ fn reseal_errors(b: &mut [u8]) {
 fn as_version1(b: &[u8]) -> Vec<u8> {
     let mut v = b[..error_section(b).start].to_vec();
     v[8..12].copy_from_slice(&1u32.to_le_bytes());
-    v[30] &= !2;
+    v[30] &= !4;
     v[108..124].fill(0);
     reseal_header(&mut v);
     v
@@ -220,13 +220,17 @@ fn version_2_round_trip() {
     let dir = tempfile::tempdir().unwrap();
     let (path, b) = small_store(dir.path());
     assert_eq!(u32::from_le_bytes(b[8..12].try_into().unwrap()), 2);
-    assert_eq!(b[30] & 2, 2, "error flag");
+    assert_eq!(b[30] & 4, 4, "error flag");
     let s = open(&path).unwrap();
     assert_eq!(s.version(), 2);
     assert!(s.has_errors());
     let n = s.nodes().count();
     assert_eq!(error_section(&b).len(), n * ERROR_ENTRY_LEN);
-    assert_eq!(u64_at(&b, 108) as usize, n * ERROR_ENTRY_LEN);
+    assert_eq!(b[108..120], [0u8; 12], "reserved");
+    assert_eq!(
+        u32::from_le_bytes(b[120..124].try_into().unwrap()),
+        crc32fast::hash(&b[error_section(&b)])
+    );
     let finest = s.levels() - 1;
     let mut some_error = false;
     for rec in s.nodes() {
@@ -246,7 +250,11 @@ fn version_2_round_trip() {
         }
         if e.occupied != 0 {
             let total: f64 = (0..brickray_core::ERROR_BINS).map(|b| e.share(b)).sum();
-            assert!((total - 1.0).abs() < 1e-3, "{:?}: shares sum to {total}", rec.key);
+            assert!(
+                (total - 1.0).abs() < 1e-3,
+                "{:?}: shares sum to {total}",
+                rec.key
+            );
         }
         // Through the BrickSource too.
         assert_eq!(s.node(rec.key).unwrap().error, Some(e));
@@ -281,14 +289,14 @@ fn version_1_stores_still_open() {
     }
     // A version-1 header may not carry the error flag or fields.
     let mut bad = as_version1(&b);
-    bad[30] |= 2;
+    bad[30] |= 4;
     reseal_header(&mut bad);
     assert!(matches!(
         open_bytes(dir.path(), "bad.brs", &bad),
         Err(StoreError::BadHeader { field: "flags", .. })
     ));
     let mut bad = as_version1(&b);
-    bad[108] = 1;
+    bad[121] = 1;
     reseal_header(&mut bad);
     assert!(matches!(
         open_bytes(dir.path(), "bad.brs", &bad),
@@ -348,32 +356,41 @@ fn corrupt_error_sections_are_typed_errors() {
     let mut bad = b.clone();
     bad.push(0);
     assert!(open_bytes(dir.path(), "c.brs", &bad).is_err());
-    // A wrong length, or the section's flag cleared with it present.
+    // The section's flag cleared with the section present: the file is
+    // longer than the store; its CRC without the flag: refused.
     let mut bad = b.clone();
-    bad[108..116].copy_from_slice(&(sec.len() as u64 + 1).to_le_bytes());
+    bad[30] &= !4;
+    reseal_header(&mut bad);
+    assert!(matches!(
+        open_bytes(dir.path(), "c.brs", &bad),
+        Err(StoreError::BadHeader { .. })
+    ));
+    let mut bad = b[..sec.start].to_vec();
+    bad[30] &= !4;
     reseal_header(&mut bad);
     assert!(matches!(
         open_bytes(dir.path(), "c.brs", &bad),
         Err(StoreError::BadHeader {
-            field: "errors_len",
+            field: "errors_crc",
             ..
         })
     ));
+    // Reserved header bytes 108..120 of version 2.
     let mut bad = b.clone();
-    bad[30] &= !2;
+    bad[110] = 1;
     reseal_header(&mut bad);
     assert!(matches!(
         open_bytes(dir.path(), "c.brs", &bad),
         Err(StoreError::BadHeader {
-            field: "errors_len",
+            field: "reserved",
             ..
         })
     ));
     // Without the section (flag and fields cleared, bytes removed): a valid
     // version-2 store without error bounds.
     let mut ok = b[..sec.start].to_vec();
-    ok[30] &= !2;
-    ok[108..120].fill(0);
+    ok[30] &= !4;
+    ok[120..124].fill(0);
     reseal_header(&mut ok);
     let s = open_bytes(dir.path(), "ok.brs", &ok).unwrap();
     assert_eq!(s.version(), 2);

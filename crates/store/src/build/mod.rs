@@ -354,7 +354,6 @@ pub fn build(
         table_len: table.len() as u64,
         payload_bytes: table_offset - HEADER_LEN as u64,
         table_crc: crc32fast::hash(&table),
-        errors_len: error_bytes.as_ref().map_or(0, |b| b.len() as u64),
         errors_crc: error_bytes.as_deref().map_or(0, crc32fast::hash),
     };
     w.seek(SeekFrom::Start(0))
