@@ -54,6 +54,7 @@ fn cut_volume(
         mode,
         tf,
         tolerance_px,
+        metric: brickray_core::LodMetric::Geometric,
         max_data_leaves: u32::MAX / 2,
         max_requests: u32::MAX / 2,
         brick_upload_bytes: layout.brick_bytes() as u64,

@@ -9,6 +9,7 @@ mod accel;
 mod aniso;
 mod build;
 mod formats;
+mod lod;
 mod ooc;
 mod pareto;
 mod prediction;
@@ -187,6 +188,19 @@ enum Suite {
         #[arg(long)]
         size: Option<u32>,
     },
+    /// Error-aware vs geometric level of detail at equal working sets (PSNR
+    /// against the CPU reference; shared MRI and head CT, Marschner-Lobb).
+    Lod {
+        /// Image side in pixels (default 256).
+        #[arg(long)]
+        size: Option<u32>,
+        /// Scenes, comma-separated, of mri, ct, ct_iso, ml (default mri,ct,ml).
+        #[arg(long)]
+        scenes: Option<String>,
+        /// Brick side of the stores (default 32).
+        #[arg(long)]
+        brick: Option<u32>,
+    },
     /// Visibility feedback: working set, image and latency per policy along a
     /// camera path with a half turn (head CT and procedural shells).
     Visibility {
@@ -258,6 +272,7 @@ fn main() -> ExitCode {
         Suite::Soak { .. } => soak::run(rest),
         Suite::Stability { .. } => stability::run(rest),
         Suite::U8 { .. } => u8::run(rest),
+        Suite::Lod { .. } => lod::run(rest),
         Suite::Visibility { .. } => visibility::run(rest),
     };
     match result {

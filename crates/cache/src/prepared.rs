@@ -108,6 +108,7 @@ mod tests {
             kind: NodeKind::Data,
             min: 0.9,
             max: 0.1,
+            error: None,
         };
         let b = p.prepare(&raw, &info);
         assert_eq!(b.texels.len(), 2000);

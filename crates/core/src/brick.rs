@@ -182,6 +182,10 @@ pub struct NodeInfo {
     pub min: f32,
     /// Largest such value.
     pub max: f32,
+    /// The recorded bound on the error of drawing this node instead of the
+    /// finest data ([`crate::lod`]); `None` when the source records none (a
+    /// version-1 store): error-aware refinement then uses the geometric rule.
+    pub error: Option<crate::lod::NodeError>,
 }
 
 /// Why a leaf of a cut needs no brick.

@@ -11,10 +11,13 @@
 //! * [`macrocell`]: the min/max macro-cell grid used for empty-space skipping,
 //!   and its brick analogue (sub-cell ranges);
 //! * [`texel`]: how samples are stored in GPU textures ([`SampleEncoding`]);
+//! * [`lod`]: per-node error bounds of level of detail and their cost under a
+//!   transfer function (error-aware refinement);
 //! * [`synthetic`]: procedural test volumes (sphere, Marschner-Lobb).
 
 pub mod brick;
 pub mod camera;
+pub mod lod;
 pub mod macrocell;
 mod pyramid;
 pub mod settings;
@@ -30,6 +33,10 @@ pub use brick::{
 pub use camera::{
     Camera, CameraError, DepthConvention, DepthMap, FrameError, Projection, Ray, RayGen,
     VolumeFrame,
+};
+pub use lod::{
+    BinStats, ERROR_BINS, LodMetric, NodeError, TfErrorTable, node_pixel_error, node_tf_error,
+    node_tf_error_expected,
 };
 pub use macrocell::{MacroCellGrid, sub_cell_ranges, sub_cells_per_axis};
 pub use pyramid::{ALL_AXES, Children, LayoutError, MAX_LEVELS, anisotropic_split_masks};

@@ -241,6 +241,13 @@ impl VolumeRenderer {
         b.out_of_core_mut()
     }
 
+    /// Out of core: sets the refinement rule, geometric or error-aware with an
+    /// error budget (`brickray_core::LodMetric`, `docs/cache.md`).
+    pub fn set_lod_metric(&mut self, metric: brickray_core::LodMetric) -> Result<(), RenderError> {
+        let m = self.out_of_core()?.manager_mut();
+        Ok(m.set_lod_metric(metric)?)
+    }
+
     /// Out of core: sets the screen-space error tolerance (pixels per voxel; 0
     /// = always the finest level).
     pub fn set_lod_tolerance(&mut self, tolerance_px: f32) -> Result<(), RenderError> {

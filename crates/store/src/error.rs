@@ -80,6 +80,18 @@ pub enum StoreError {
         /// The checksum of the bytes read.
         computed: u32,
     },
+    /// The error section's checksum does not match (format version 2).
+    #[error(
+        "{path}: error section checksum mismatch (stored {stored:#010x}, computed {computed:#010x})"
+    )]
+    ErrorsChecksum {
+        /// The file.
+        path: PathBuf,
+        /// The stored checksum.
+        stored: u32,
+        /// The checksum of the bytes read.
+        computed: u32,
+    },
     /// A node table entry is invalid.
     #[error("{path}: node {key:?}: table field `{field}` is invalid: {reason}")]
     BadNode {

@@ -5,8 +5,11 @@ use brickray_core::{DType, NodeKey, OctreeLayout};
 
 /// The file's first eight bytes.
 pub const MAGIC: [u8; 8] = *b"BRKSTORE";
-/// The format version this crate writes and reads.
-pub const VERSION: u32 = 1;
+/// The format version this crate writes (it also reads [`MIN_VERSION`]..=this).
+/// Version 2 adds the optional per-node error section (`docs/store-format.md`).
+pub const VERSION: u32 = 2;
+/// The oldest format version this crate reads (version 1: no error section).
+pub const MIN_VERSION: u32 = 1;
 /// Bytes of the header.
 pub const HEADER_LEN: usize = 128;
 /// Bytes of one node-table entry.
@@ -80,6 +83,9 @@ pub(crate) struct Header {
     /// Split masks of an anisotropic pyramid, root level first (one per level
     /// but the finest; empty without [`FLAG_SPLIT_MASKS`]).
     pub(crate) split_masks: Vec<u8>,
+    /// CRC-32 of the error section (version 2, flag [`FLAG_ERRORS`]; else 0).
+    /// The section's length is implied: `node_count * ERROR_ENTRY_LEN`.
+    pub(crate) errors_crc: u32,
 }
 
 /// Header flag: the empty threshold is set.
@@ -108,6 +114,10 @@ pub(crate) fn packed_masks(b: &[u8]) -> u128 {
     a[..12].copy_from_slice(&b[SPLIT_MASKS_AT]);
     u128::from_le_bytes(a)
 }
+/// Header flag (version 2, bit 2): the error section follows the node table.
+pub(crate) const FLAG_ERRORS: u8 = 4;
+/// Where the error section's CRC is in the header (version 2).
+pub(crate) const ERRORS_CRC_AT: std::ops::Range<usize> = 120..124;
 
 fn u32_at(b: &[u8], o: usize) -> u32 {
     u32::from_le_bytes([b[o], b[o + 1], b[o + 2], b[o + 3]])
@@ -153,6 +163,7 @@ impl Header {
         if self.flags & FLAG_SPLIT_MASKS != 0 {
             b[SPLIT_MASKS_AT].copy_from_slice(&pack_masks(&self.split_masks).to_le_bytes()[..12]);
         }
+        b[ERRORS_CRC_AT].copy_from_slice(&self.errors_crc.to_le_bytes());
         let crc = crc32fast::hash(&b[..124]);
         b[124..128].copy_from_slice(&crc.to_le_bytes());
         b
@@ -188,6 +199,7 @@ impl Header {
             } else {
                 Vec::new()
             },
+            errors_crc: u32_at(b, ERRORS_CRC_AT.start),
         }
     }
 

@@ -20,6 +20,7 @@
 mod build;
 mod convert;
 mod error;
+mod errsec;
 pub mod format;
 mod partial;
 mod procedural;
@@ -29,6 +30,7 @@ mod sample;
 pub use build::{BuildOptions, BuildReport, build, build_file, check_output};
 pub use convert::{ConvertReport, convert};
 pub use error::{Mismatch, StoreError};
+pub use errsec::ERROR_ENTRY_LEN;
 pub use partial::remove_partial_files;
 pub use procedural::ProceduralSource;
 pub use reader::{NodeRecord, Store, StoreStats, decode_payload, open};

@@ -320,6 +320,7 @@ impl BrickSource for ProceduralSource {
                 kind: NodeKind::Empty,
                 min: 0.0,
                 max: 0.0,
+                error: None,
             });
         }
         let (lo, hi) = self.footprint(key);
@@ -341,6 +342,7 @@ impl BrickSource for ProceduralSource {
                 kind: NodeKind::Uniform(mn as f32),
                 min: mn as f32,
                 max: mn as f32,
+                error: None,
             });
         }
         let r = self.reach[m as usize];
@@ -348,6 +350,7 @@ impl BrickSource for ProceduralSource {
             kind: NodeKind::Data,
             min: (mn - r).max(0) as f32,
             max: (mx + r).min(255) as f32,
+            error: None,
         })
     }
 

@@ -2,14 +2,15 @@
 
 use crate::Filter;
 use crate::error::{Mismatch, StoreError};
+use crate::errsec::{self, ERROR_ENTRY_LEN};
 use crate::format::{
-    ENTRY_LEN, Entry, FLAG_SPLIT_MASKS, FLAG_THRESHOLD, HEADER_LEN, Header, KIND_DATA, KIND_EMPTY,
-    KIND_UNIFORM, MAGIC, MAX_APRON, MAX_BRICK, MAX_BRICK_BYTES, MAX_SPLIT_MASKS, TableGeometry,
-    VERSION, dtype_from_code, filter_from_code, packed_masks,
+    ENTRY_LEN, Entry, FLAG_ERRORS, FLAG_SPLIT_MASKS, FLAG_THRESHOLD, HEADER_LEN, Header, KIND_DATA,
+    KIND_EMPTY, KIND_UNIFORM, MAGIC, MAX_APRON, MAX_BRICK, MAX_BRICK_BYTES, MAX_SPLIT_MASKS,
+    MIN_VERSION, TableGeometry, VERSION, dtype_from_code, filter_from_code, packed_masks,
 };
 use crate::sample::{fill, first_nan, representable, stats_dyn};
 use brickray_core::{
-    BrickError, BrickSource, NodeInfo, NodeKey, NodeKind, OctreeLayout, VolumeDesc,
+    BrickError, BrickSource, NodeError, NodeInfo, NodeKey, NodeKind, OctreeLayout, VolumeDesc,
 };
 use brickray_io::FileKind;
 use std::fs::File;
@@ -35,6 +36,9 @@ pub struct Store {
     data_range: [f32; 2],
     file_len: u64,
     payload_bytes: u64,
+    /// Per table entry (format version 2 with the error section).
+    errors: Option<Vec<NodeError>>,
+    version: u32,
 }
 
 /// One node's table record.
@@ -124,7 +128,7 @@ impl Store {
         }
         let (stored, computed) = Header::checksums(&hb);
         let h = Header::decode(&hb);
-        if h.version != VERSION {
+        if !(MIN_VERSION..=VERSION).contains(&h.version) {
             return Err(StoreError::UnsupportedVersion {
                 path: path.to_owned(),
                 version: h.version,
@@ -138,13 +142,14 @@ impl Store {
             });
         }
         // Reserved bytes are zero, but for the split masks of an anisotropic
-        // pyramid (3 bits per level but the finest).
+        // pyramid (3 bits per level but the finest, in 108..120) and, from
+        // version 2, the error section's CRC (120..124, zero without it).
         let masks_used = if h.flags & FLAG_SPLIT_MASKS != 0 {
             (3 * h.levels.saturating_sub(1) as u32).min(96)
         } else {
             0
         };
-        if hb[120..124].iter().any(|&b| b != 0)
+        if (h.version < 2 && hb[120..124].iter().any(|&b| b != 0))
             || packed_masks(&hb).checked_shr(masks_used).unwrap_or(0) != 0
             || (h.flags & FLAG_SPLIT_MASKS != 0 && h.levels as usize > MAX_SPLIT_MASKS + 1)
         {
@@ -161,7 +166,12 @@ impl Store {
             .ok_or_else(|| bad(path, "dtype", format!("unknown code {}", h.dtype)))?;
         let filter = filter_from_code(h.filter)
             .ok_or_else(|| bad(path, "filter", format!("unknown code {}", h.filter)))?;
-        if h.flags & !(FLAG_THRESHOLD | FLAG_SPLIT_MASKS) != 0 {
+        let known_flags = if h.version >= 2 {
+            FLAG_THRESHOLD | FLAG_SPLIT_MASKS | FLAG_ERRORS
+        } else {
+            FLAG_THRESHOLD | FLAG_SPLIT_MASKS
+        };
+        if h.flags & !known_flags != 0 {
             return Err(bad(path, "flags", format!("unknown bits {:#x}", h.flags)));
         }
         let desc = VolumeDesc {
@@ -257,14 +267,36 @@ impl Store {
                 ),
             ));
         }
-        let end = h
+        let has_errors = h.flags & FLAG_ERRORS != 0;
+        let errors_len = if has_errors {
+            geo.count
+                .checked_mul(ERROR_ENTRY_LEN as u64)
+                .ok_or_else(|| bad(path, "node_count", "overflow"))?
+        } else {
+            0
+        };
+        if !has_errors && h.errors_crc != 0 {
+            return Err(bad(
+                path,
+                "errors_crc",
+                "set without the error section's flag",
+            ));
+        }
+        let table_end = h
             .table_offset
             .checked_add(table_len)
             .ok_or_else(|| bad(path, "table_offset", "overflow"))?;
+        let end = table_end
+            .checked_add(errors_len)
+            .ok_or_else(|| bad(path, "node_count", "overflow"))?;
         if end > file_len {
             return Err(StoreError::Truncated {
                 path: path.to_owned(),
-                section: "node table",
+                section: if table_end > file_len {
+                    "node table"
+                } else {
+                    "error section"
+                },
                 needed: end,
                 actual: file_len,
             });
@@ -273,7 +305,7 @@ impl Store {
             return Err(bad(
                 path,
                 "table_offset",
-                format!("table ends at {end} but the file holds {file_len} bytes"),
+                format!("the store ends at {end} but the file holds {file_len} bytes"),
             ));
         }
         // Bounded by the file size checked above.
@@ -346,7 +378,14 @@ impl Store {
             entries.push(e);
         }
         check_tiling(path, &entries, h.table_offset)?;
+        let errors = if has_errors {
+            Some(errsec::read(&file, path, &h, &geo, table_end, errors_len)?)
+        } else {
+            None
+        };
         Ok(Store {
+            errors,
+            version: h.version,
             path: path.to_owned(),
             file,
             layout,
@@ -358,6 +397,16 @@ impl Store {
             file_len,
             payload_bytes: h.payload_bytes,
         })
+    }
+
+    /// The file's format version (1 or 2).
+    pub fn version(&self) -> u32 {
+        self.version
+    }
+
+    /// Whether the store records per-node error bounds (`NodeInfo::error`).
+    pub fn has_errors(&self) -> bool {
+        self.errors.is_some()
     }
 
     /// The file's path.
@@ -426,11 +475,16 @@ impl Store {
     }
 
     fn info_of(&self, e: Option<&Entry>) -> NodeInfo {
+        let error = e.and_then(|e| {
+            let i = self.geo.index(e.key())?;
+            self.errors.as_ref()?.get(i).copied()
+        });
         match e {
             None => NodeInfo {
                 kind: NodeKind::Empty,
                 min: self.data_range[0],
                 max: self.data_range[0],
+                error: None,
             },
             Some(e) => NodeInfo {
                 kind: match e.kind {
@@ -440,6 +494,7 @@ impl Store {
                 },
                 min: e.min,
                 max: e.max,
+                error,
             },
         }
     }

@@ -38,6 +38,21 @@ fn reseal_table(b: &mut [u8]) {
     }
 }
 
+/// Reseals the error section's checksum (format version 2: it follows the
+/// table, to the end of the file).
+fn reseal_errors(b: &mut [u8]) {
+    let end = (u64_at(b, 80) as usize).saturating_add(u64_at(b, 88) as usize);
+    if b.len() >= 124 && end <= b.len() {
+        let crc = crc32fast::hash(&b[end..]);
+        b[120..124].copy_from_slice(&crc.to_le_bytes());
+    }
+}
+
+/// Entries in the node table (the error section follows it).
+fn table_entries(b: &[u8]) -> usize {
+    u64_at(b, 88) as usize / ENTRY_LEN
+}
+
 fn reseal_header(b: &mut [u8]) {
     if b.len() >= HEADER_LEN {
         let crc = crc32fast::hash(&b[..124]);
@@ -120,7 +135,8 @@ fn ten_thousand_mutations_never_panic() {
                 b[p] ^= 1 << rng.below(8);
                 reseal_header(&mut b);
             }
-            // Bit flips or random words in the table, checksums resealed.
+            // Bit flips or random words in the table or the error section,
+            // checksums resealed.
             3 => {
                 let p = table_off + rng.below(b.len() - table_off);
                 if rng.below(2) == 0 {
@@ -131,6 +147,7 @@ fn ten_thousand_mutations_never_panic() {
                     b[p..end].copy_from_slice(&w[..end - p]);
                 }
                 reseal_table(&mut b);
+                reseal_errors(&mut b);
                 reseal_header(&mut b);
             }
             // Truncation anywhere.
@@ -141,7 +158,7 @@ fn ten_thousand_mutations_never_panic() {
             // Payload bytes rewritten and their checksum resealed in the table
             // (exercises the lz4 decoder on garbage).
             _ => {
-                let e = rng.below((b.len() - table_off) / ENTRY_LEN);
+                let e = rng.below(table_entries(&b));
                 let eo = table_off + e * ENTRY_LEN;
                 let len = u32::from_le_bytes(b[eo + 28..eo + 32].try_into().unwrap()) as usize;
                 let off = u64_at(&b, eo + 32) as usize;
@@ -299,7 +316,7 @@ fn forged_node_lengths_are_bounded() {
     let good = tiny_store(dir.path());
     let path = dir.path().join("n.brick");
     let table_off = u64_at(&good, 80) as usize;
-    let entries = (good.len() - table_off) / ENTRY_LEN;
+    let entries = table_entries(&good);
     for e in 0..entries {
         let eo = table_off + e * ENTRY_LEN;
         for (field, off, val) in [
@@ -402,7 +419,7 @@ fn gradient_store(dir: &Path, dtype: DType) -> (Vec<u8>, Vec<(NodeKey, Vec<u8>)>
 /// Byte offsets (in the file) of the data entries.
 fn data_entries(b: &[u8]) -> Vec<usize> {
     let table_off = u64_at(b, 80) as usize;
-    (table_off..b.len())
+    (table_off..table_off + table_entries(b) * ENTRY_LEN)
         .step_by(ENTRY_LEN)
         .filter(|&eo| b[eo + 1] == 2)
         .collect()
@@ -592,7 +609,7 @@ fn uniform_value_outside_its_range_is_refused() {
     let good = std::fs::read(&out).unwrap();
     let path = dir.path().join("u.brick");
     let table_off = u64_at(&good, 80) as usize;
-    let uniform: Vec<usize> = (table_off..good.len())
+    let uniform: Vec<usize> = (table_off..table_off + table_entries(&good) * ENTRY_LEN)
         .step_by(ENTRY_LEN)
         .filter(|&eo| good[eo + 1] == 1)
         .collect();

@@ -34,6 +34,7 @@ fn cut_levels(
         mode: RenderMode::Dvr,
         tf,
         tolerance_px,
+        metric: brickray_core::LodMetric::Geometric,
         max_data_leaves,
         max_requests: u32::MAX,
         brick_upload_bytes: layout.brick_bytes() as u64,

@@ -5,7 +5,7 @@
 use crate::fade::FadeDuration;
 use crate::pool::PoolLimits;
 use brickray_core::{
-    DType, OctreeLayout, SampleEncoding, TexelCaps, U8Filtering, sub_cells_per_axis,
+    DType, LodMetric, OctreeLayout, SampleEncoding, TexelCaps, U8Filtering, sub_cells_per_axis,
 };
 use std::time::Duration;
 use thiserror::Error;
@@ -83,6 +83,9 @@ pub struct CacheConfig {
     /// covers more than this many pixels (finite, `>= 0`; 0 = always the finest
     /// level the budgets allow).
     pub tolerance_px: f32,
+    /// The refinement rule: geometric (`tolerance_px`) or error-aware with an
+    /// error budget in 8-bit levels x pixels ([`LodMetric`], `docs/cache.md`).
+    pub lod_metric: LodMetric,
     /// Loader threads, `1..=`[`MAX_LOADER_THREADS`].
     pub loader_threads: usize,
     /// Automatic retry of failed reads; `None`: only on request
@@ -113,6 +116,7 @@ impl Default for CacheConfig {
             gpu_budget_bytes: 256 << 20,
             upload_budget_bytes: 16 << 20,
             tolerance_px: 1.0,
+            lod_metric: LodMetric::Geometric,
             loader_threads: 2,
             retry: Some(RetryPolicy::default()),
             fade: Some(FadeDuration::default()),
@@ -157,6 +161,12 @@ pub enum ConfigError {
     /// The tolerance is NaN, negative or infinite.
     #[error("tolerance_px must be finite and >= 0, got {value}")]
     Tolerance {
+        /// The value given.
+        value: f32,
+    },
+    /// The error budget of [`LodMetric::ErrorAware`] is NaN, negative or infinite.
+    #[error("the error budget must be finite and >= 0, got {value}")]
+    ErrorBudget {
         /// The value given.
         value: f32,
     },
@@ -385,6 +395,7 @@ impl CacheConfig {
     /// field's doc); the first violation found is returned.
     pub fn validate(&self, layout: &OctreeLayout, gpu: &GpuFormat) -> Result<(), ConfigError> {
         validate_tolerance(self.tolerance_px)?;
+        validate_metric(self.lod_metric)?;
         if self.loader_threads == 0 || self.loader_threads > MAX_LOADER_THREADS {
             return Err(ConfigError::LoaderThreads {
                 threads: self.loader_threads,
@@ -410,6 +421,17 @@ pub(crate) fn validate_tolerance(value: f32) -> Result<(), ConfigError> {
         Ok(())
     } else {
         Err(ConfigError::Tolerance { value })
+    }
+}
+
+pub(crate) fn validate_metric(metric: LodMetric) -> Result<(), ConfigError> {
+    match metric {
+        LodMetric::ErrorAware { budget } | LodMetric::ErrorBound { budget }
+            if !(budget.is_finite() && budget >= 0.0) =>
+        {
+            Err(ConfigError::ErrorBudget { value: budget })
+        }
+        _ => Ok(()),
     }
 }
 

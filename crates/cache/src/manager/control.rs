@@ -3,7 +3,7 @@
 use super::{BrickManager, Residency, ResidencyCounts};
 use crate::config::{
     CacheConfig, ConfigError, GpuFormat, MIN_RESIDENT_BRICKS, RetryPolicy, validate_cpu_budget,
-    validate_tolerance,
+    validate_metric, validate_tolerance,
 };
 use crate::cpu_cache::CpuCache;
 use crate::fade::FadeDuration;
@@ -145,6 +145,14 @@ impl BrickManager {
     /// Moves the volume in the world.
     pub fn set_volume_frame(&mut self, frame: VolumeFrame) {
         self.volume_frame = frame;
+    }
+
+    /// Sets the refinement rule ([`brickray_core::LodMetric`]; an error budget
+    /// must be finite and `>= 0`).
+    pub fn set_lod_metric(&mut self, metric: brickray_core::LodMetric) -> Result<(), ConfigError> {
+        validate_metric(metric)?;
+        self.config.lod_metric = metric;
+        Ok(())
     }
 
     /// Sets the screen-space error tolerance (pixels per voxel; finite, `>= 0`).

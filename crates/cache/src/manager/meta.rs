@@ -111,6 +111,7 @@ mod tests {
             kind: NodeKind::Data,
             min: 0.0,
             max: 1.0,
+            error: None,
         }
     }
 

@@ -247,6 +247,7 @@ impl BrickManager {
             mode,
             tf,
             tolerance_px: self.config.tolerance_px,
+            metric: self.config.lod_metric,
             max_data_leaves: self.cut_slots(),
             max_requests: crate::refine::requests_per_frame(
                 self.pool.slot_count(),

@@ -75,6 +75,7 @@ fn refine_in(
         mode: RenderMode::Mip,
         tf: &s.tf,
         tolerance_px: 1.0,
+        metric: brickray_core::LodMetric::Geometric,
         max_data_leaves: slots,
         max_requests: MIN_REQUESTS_PER_FRAME,
         brick_upload_bytes: 1000,

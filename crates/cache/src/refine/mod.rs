@@ -1,11 +1,16 @@
 //! View- and transfer-function-dependent refinement (Gobbetti et al. 2008, sect. 4).
 //!
 //! Each frame the cut is rebuilt from the root: a max-heap of the cut's refinable
-//! nodes, keyed by the projected screen-space size of their voxels, is refined
-//! greedily. Terminal nodes are those outside the view frustum, empty or invisible
-//! under the current mode and transfer function, uniform, at the finest level,
-//! already within the screen-error tolerance, or whose projected size is not
-//! finite (a non-finite camera or frame). A node is split only when the metadata
+//! nodes, keyed by their screen error, is refined greedily. The screen error is
+//! the projected screen-space size of their voxels ([`LodMetric::Geometric`]),
+//! or that size times the node's recorded error under the current mode and
+//! transfer function, in 8-bit levels ([`LodMetric::ErrorAware`],
+//! `brickray_core::lod`; from metadata only, so a new transfer function
+//! re-prioritises without reading anything). Terminal nodes are those outside
+//! the view frustum, empty or invisible under the current mode and transfer
+//! function, uniform, at the finest level, already within the tolerance (or
+//! error budget), or whose screen error is not finite (a non-finite camera or
+//! frame). A node is split only when the metadata
 //! of its children is known (missing metadata is requested), the bricks of all its
 //! visible children are on the GPU or in CPU memory (missing ones are requested
 //! with the parent's priority), none of them failed, the pool has slots for them
@@ -21,14 +26,16 @@
 mod fault_tests;
 mod geometry;
 #[cfg(test)]
+mod lod_tests;
+#[cfg(test)]
 pub(crate) mod tests;
 
 pub use geometry::{ViewGeometry, is_visible, lod_voxel_world};
 
 use crate::upload::UploadBudget;
 use brickray_core::{
-    Camera, EmptyReason, NodeInfo, NodeKey, NodeKind, OctreeLayout, RenderMode, TransferFunction,
-    VolumeFrame,
+    Camera, EmptyReason, LodMetric, NodeInfo, NodeKey, NodeKind, OctreeLayout, RenderMode,
+    TfErrorTable, TransferFunction, VolumeFrame, node_pixel_error, node_tf_error,
 };
 use std::collections::BinaryHeap;
 
@@ -127,8 +134,12 @@ pub struct RefineParams<'a> {
     /// Transfer function (decides DVR transparency).
     pub tf: &'a TransferFunction,
     /// Screen-space error tolerance: a node whose voxels project to at most this
-    /// many pixels is not refined (default 1).
+    /// many pixels is not refined (default 1). The rule of
+    /// [`LodMetric::Geometric`], and of error-aware refinement over a source
+    /// without error bounds.
     pub tolerance_px: f32,
+    /// The refinement rule (see [`LodMetric`]).
+    pub metric: LodMetric,
     /// Most leaves needing a brick (the pool's slot count).
     pub max_data_leaves: u32,
     /// Most bricks to request this frame ([`requests_per_frame`]).
@@ -145,8 +156,10 @@ pub struct RefinedLeaf {
     pub key: NodeKey,
     /// Whether it needs its brick.
     pub class: NodeClass,
-    /// Projected voxel size in pixels (0 for culled and empty leaves and when
-    /// not finite).
+    /// Its screen error: projected voxel size in pixels
+    /// ([`LodMetric::Geometric`]), times its error in 8-bit levels
+    /// ([`LodMetric::ErrorAware`]); 0 for culled and empty leaves and when not
+    /// finite.
     pub priority: f32,
     /// True when the brick is needed and not on the GPU (an upload this frame).
     pub needs_upload: bool,
@@ -272,6 +285,61 @@ fn classify(
     })
 }
 
+/// How one refinement weighs a node's projected voxel size.
+struct ScreenError {
+    /// `Some` for error-aware refinement over a source with error bounds.
+    table: Option<TfErrorTable>,
+    /// The strict bound ([`LodMetric::ErrorBound`]) instead of the expected error.
+    strict: bool,
+    threshold: f64,
+}
+
+impl ScreenError {
+    fn new(params: &RefineParams<'_>, root: Option<&NodeInfo>) -> ScreenError {
+        let has_errors = root.is_some_and(|i| i.error.is_some());
+        match params.metric {
+            LodMetric::ErrorAware { budget } | LodMetric::ErrorBound { budget } if has_errors => {
+                ScreenError {
+                    table: Some(TfErrorTable::new(params.tf)),
+                    strict: matches!(params.metric, LodMetric::ErrorBound { .. }),
+                    threshold: budget.max(0.0) as f64,
+                }
+            }
+            _ => ScreenError {
+                table: None,
+                strict: false,
+                threshold: params.tolerance_px.max(0.0) as f64,
+            },
+        }
+    }
+
+    /// The node's priority: its projected voxel size, times 255 x its
+    /// expected error (or its bound) under the mode and transfer function when
+    /// error-aware (a node without error data counts as full-scale error).
+    fn priority(
+        &self,
+        px: f64,
+        key: NodeKey,
+        info: Option<&NodeInfo>,
+        params: &RefineParams<'_>,
+        layout: &OctreeLayout,
+    ) -> f64 {
+        match (&self.table, info) {
+            (Some(t), Some(i)) => {
+                let e = if self.strict {
+                    node_tf_error(i, params.mode, t, layout)
+                } else {
+                    node_pixel_error(i, key.level, params.mode, t, layout)
+                }
+                .unwrap_or(1.0);
+                // 0 x inf (a degenerate camera on a flat node) stays NaN: never refined.
+                px * 255.0 * e
+            }
+            _ => px,
+        }
+    }
+}
+
 /// Refines the octree of `layout` for one frame. `budget` is the frame's upload
 /// budget (already started); bricks of split children not on the GPU are charged
 /// to it, as is the root when it is the only leaf and not on the GPU.
@@ -290,7 +358,6 @@ pub fn refine(
     );
     let brick_bytes = params.brick_upload_bytes;
     let finest = layout.levels.saturating_sub(1);
-    let tol = params.tolerance_px.max(0.0) as f64;
     let max_requests = params.max_data_leaves.min(params.max_requests) as usize;
     let max_meta = MAX_META_REQUESTS_PER_FRAME as usize;
     let mut out = Refinement::default();
@@ -304,6 +371,7 @@ pub fn refine(
     };
 
     let root = NodeKey::ROOT;
+    let screen: ScreenError;
     let root_info = match classify(root, layout, params, &geo, env) {
         Ok(Classified {
             class: NodeClass::Empty(r),
@@ -313,12 +381,20 @@ pub fn refine(
             return out;
         }
         Ok(c) => {
+            let se = ScreenError::new(params, c.info.as_ref());
             heap.push(HeapItem {
-                priority: geo.voxel_pixels(root),
+                priority: se.priority(
+                    geo.voxel_pixels(root),
+                    root,
+                    c.info.as_ref(),
+                    params,
+                    layout,
+                ),
                 key: root,
                 uniform: c.uniform,
                 charged: false,
             });
+            screen = se;
             c.info
         }
         Err(Unknown::Pending) => {
@@ -351,6 +427,7 @@ pub fn refine(
         });
     }
 
+    let tol = screen.threshold;
     // Nodes that stay leaves and need their brick: (key, priority).
     let mut finals: Vec<(NodeKey, f64)> = Vec::new();
     while let Some(HeapItem {
@@ -456,7 +533,13 @@ pub fn refine(
             match classes[i].class {
                 NodeClass::Empty(r) => out.leaves.push(empty_leaf(children[i], r)),
                 NodeClass::Data => heap.push(HeapItem {
-                    priority: geo.voxel_pixels(children[i]),
+                    priority: screen.priority(
+                        geo.voxel_pixels(children[i]),
+                        children[i],
+                        classes[i].info.as_ref(),
+                        params,
+                        layout,
+                    ),
                     key: children[i],
                     uniform: classes[i].uniform,
                     charged: state.next() == Some(&DataState::InCpu),

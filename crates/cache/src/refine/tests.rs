@@ -26,7 +26,12 @@ pub(crate) fn ball_info(layout: &OctreeLayout, key: NodeKey) -> NodeInfo {
     } else {
         NodeKind::Data
     };
-    NodeInfo { kind, min, max }
+    NodeInfo {
+        kind,
+        min,
+        max,
+        error: None,
+    }
 }
 
 pub(crate) fn ball_layout(dim: u32) -> OctreeLayout {
@@ -123,6 +128,7 @@ fn run(
         mode,
         tf,
         tolerance_px: 1.0,
+        metric: brickray_core::LodMetric::Geometric,
         max_data_leaves: slots,
         max_requests: u32::MAX,
         brick_upload_bytes: s.layout.brick_bytes() as u64,
@@ -341,7 +347,7 @@ proptest! {
         let frame = VolumeFrame::centered([dim; 3], [1.0; 3]);
         let tf = TransferFunction::ramp(0.3, 1.0, 0.5);
         let mut env = AllInCpu { layout: layout.clone(), on_gpu: HashSet::new(), meta_reads: 0 };
-        let params = RefineParams { camera: &cam, aspect: 1.3, viewport_height_px: 400, volume_frame: &frame, mode, tf: &tf, tolerance_px: tol, max_data_leaves: slots, max_requests: MIN_REQUESTS_PER_FRAME, brick_upload_bytes: 1000 };
+        let params = RefineParams { camera: &cam, aspect: 1.3, viewport_height_px: 400, volume_frame: &frame, mode, tf: &tf, tolerance_px: tol, metric: brickray_core::LodMetric::Geometric, max_data_leaves: slots, max_requests: MIN_REQUESTS_PER_FRAME, brick_upload_bytes: 1000 };
         let mut b = UploadBudget::new(u64::MAX);
         let r = refine(&layout, &params, &mut env, &mut b);
         assert_exact_cover(&keys(&r), layout.levels);
@@ -410,6 +416,7 @@ fn invisible_nodes_stay_at_their_level_and_request_nothing() {
             mode: RenderMode::Dvr,
             tf: &s.tf,
             tolerance_px: 0.0,
+            metric: brickray_core::LodMetric::Geometric,
             max_data_leaves: u32::MAX,
             max_requests: u32::MAX,
             brick_upload_bytes: 1,

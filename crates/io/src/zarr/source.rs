@@ -195,6 +195,7 @@ impl BrickSource for ZarrBrickSource {
                 kind: NodeKind::Empty,
                 min: 0.0,
                 max: 0.0,
+                error: None,
             });
         }
         if let Some(n) = self.nodes.lock().get(&key) {
@@ -225,6 +226,7 @@ impl BrickSource for ZarrBrickSource {
             },
             min: mn,
             max: mx,
+            error: None,
         };
         self.nodes.lock().insert(key, info);
         Ok(info)

@@ -20,7 +20,8 @@
 
 use crate::error::StoreError;
 use crate::format::{
-    ENTRY_LEN, Entry, FLAG_SPLIT_MASKS, FLAG_THRESHOLD, HEADER_LEN, Header, KIND_DATA, KIND_EMPTY,
+    ENTRY_LEN, Entry, FLAG_ERRORS, FLAG_SPLIT_MASKS, FLAG_THRESHOLD, HEADER_LEN, Header, KIND_DATA,
+    KIND_EMPTY,
     KIND_UNIFORM, MAX_APRON, MAX_BRICK, MAX_BRICK_BYTES, TableGeometry, VERSION, dtype_code,
     filter_code,
 };
@@ -33,6 +34,7 @@ use std::io::{BufWriter, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+mod errors;
 mod level;
 
 use level::{LevelBuf, Sink};
@@ -77,6 +79,9 @@ impl Default for BuildOptions {
 /// What a build did.
 #[derive(Debug, Clone, PartialEq)]
 pub struct BuildReport {
+    /// Whether the store has the error section (per-node error bounds; left
+    /// out when that pass would exceed the memory bound).
+    pub errors: bool,
     /// The octree geometry.
     pub layout: OctreeLayout,
     /// Nodes in the table (every node that overlaps the volume).
@@ -313,6 +318,21 @@ pub fn build(
     }
     w.write_all(&table)
         .map_err(|e| StoreError::io(&tmp_path, e))?;
+    // The error section (format version 2), computed from the payloads just
+    // written; left out when it does not fit the memory bound.
+    w.flush().map_err(|e| StoreError::io(&tmp_path, e))?;
+    let errors = errors::compute(
+        tmp.file(),
+        &tmp_path,
+        &layout,
+        &ctx.geo,
+        &ctx.entries,
+        opts.memory_bound,
+    )?;
+    let error_bytes = errors.as_deref().map(crate::errsec::encode_all);
+    if let Some(b) = &error_bytes {
+        w.write_all(b).map_err(|e| StoreError::io(&tmp_path, e))?;
+    }
     let data_range = if ctx.data_range[0] <= ctx.data_range[1] {
         ctx.data_range
     } else {
@@ -332,6 +352,10 @@ pub fn build(
             0
         } else {
             FLAG_SPLIT_MASKS
+        } | if error_bytes.is_some() {
+            FLAG_ERRORS
+        } else {
+            0
         },
         split_masks: layout.split_masks(),
         levels: layout.levels,
@@ -346,6 +370,7 @@ pub fn build(
         table_len: table.len() as u64,
         payload_bytes: table_offset - HEADER_LEN as u64,
         table_crc: crc32fast::hash(&table),
+        errors_crc: error_bytes.as_deref().map_or(0, crc32fast::hash),
     };
     w.seek(SeekFrom::Start(0))
         .map_err(|e| StoreError::io(&tmp_path, e))?;
@@ -359,7 +384,8 @@ pub fn build(
     // Again: the output may have been replaced while the build ran.
     check_output(out, &inputs)?;
     tmp.persist(out)?;
-    let file_bytes = table_offset + table.len() as u64;
+    let file_bytes =
+        table_offset + table.len() as u64 + error_bytes.as_ref().map_or(0, |b| b.len() as u64);
     Ok(BuildReport {
         layout,
         nodes: ctx.entries.len() as u64,
@@ -373,6 +399,7 @@ pub fn build(
         file_bytes,
         buffer_estimate: needed,
         banded_levels: banded,
+        errors: error_bytes.is_some(),
         seconds: t0.elapsed().as_secs_f64(),
     })
 }

@@ -1,0 +1,403 @@
+//! The `lod` suite: error-aware vs geometric level of detail at equal working
+//! sets.
+//!
+//! Each scene's volume is built into a brick store (format version 2, with
+//! per-node error bounds) and drawn out of core at `--size` px (256) on the
+//! adapter, converged, for a sweep of geometric tolerances (px) and a sweep of
+//! error budgets (8-bit levels x px, `brickray_core::LodMetric`). Each point
+//! gives the working set (data leaves of the converged cut, and their bytes)
+//! and the PSNR of the image against the CPU reference (f64, exact trilinear,
+//! the finest data). The comparison is at equal working sets: each error-aware
+//! point's PSNR minus the geometric curve's PSNR interpolated (linearly in
+//! log bricks) at the same brick count, where the geometric sweep covers it,
+//! one point per distinct working set.
+//! A third sweep ranks by the strict bound (`LodMetric::ErrorBound`), reported
+//! apart.
+//!
+//! `cargo run --release -p brickray-bench -- lod [--size PX] [--scenes a,b] [--brick N]`
+//!
+//! Scenes: `mri` (shared T1 MRI, shaded DVR), `ct` (shared head CT,
+//! translucent DVR), `ct_iso` (head CT, bone isosurface), `ml` (Marschner-Lobb
+//! 128^3, DVR with a sharp band).
+
+use crate::runner::{Runner, round2};
+use crate::{Figures, arg};
+use brickray_core::{
+    BrickSource, Camera, LodMetric, RenderMode, RenderSettings, Shading, TransferFunction, Volume,
+    VolumeFrame,
+};
+use brickray_harness::{GpuContext, ct};
+use brickray_reference::{ReferenceOptions, compare, render_reference};
+use brickray_render::{OutOfCoreConfig, VolumeRenderer};
+use serde_json::json;
+use std::sync::Arc;
+
+/// One converged out-of-core image under one refinement rule.
+pub(crate) struct LodPoint {
+    /// Data leaves of the converged cut (the working set).
+    pub(crate) bricks: u32,
+    /// Their bytes as the source stores them.
+    pub(crate) bytes: u64,
+    /// The image (RGBA8, `size x size`).
+    pub(crate) rgba: Vec<u8>,
+    /// Frames to converge.
+    pub(crate) frames: usize,
+}
+
+/// Draws `renderer` (out of core over its source) under `metric` with the
+/// geometric `tolerance_px`, converged, and reads the image back. The
+/// renderer is reused across calls: only the refinement rule changes.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn lod_point(
+    run: &Runner<'_>,
+    renderer: &mut VolumeRenderer,
+    camera: Camera,
+    frame: VolumeFrame,
+    settings: RenderSettings,
+    metric: LodMetric,
+    tolerance_px: f32,
+    brick_bytes: u64,
+) -> Result<LodPoint, String> {
+    renderer.set_lod_metric(metric).map_err(|e| e.to_string())?;
+    renderer
+        .set_lod_tolerance(tolerance_px)
+        .map_err(|e| e.to_string())?;
+    let (frames, stats) = run.converge(renderer, camera, frame, settings, 400)?;
+    let frames = frames.ok_or_else(|| format!("not converged: {stats:?}"))?;
+    let shot = run.frame(renderer, camera, frame, settings, true)?;
+    let stats = renderer.out_of_core_stats().ok_or("not out of core")?;
+    let bricks = stats.cache.working_set_bricks;
+    Ok(LodPoint {
+        bricks,
+        bytes: bricks as u64 * brick_bytes,
+        rgba: shot.rgba,
+        frames,
+    })
+}
+
+struct Scene {
+    name: &'static str,
+    vol: Volume,
+    settings: RenderSettings,
+    tf: TransferFunction,
+}
+
+fn mri_dvr() -> Result<Scene, String> {
+    let path = brickray_harness::shared_volume("pycortex_s1_t1_mri")
+        .ok_or("the lod suite needs ../shared/data/pycortex_s1_t1_mri")?;
+    Ok(Scene {
+        name: "mri",
+        vol: brickray_io::read_volume(&path).map_err(|e| e.to_string())?,
+        settings: RenderSettings {
+            mode: RenderMode::Dvr,
+            shading: Shading {
+                enabled: true,
+                ..Default::default()
+            },
+            ..Default::default()
+        },
+        // The u8 suite's DVR scene.
+        tf: TransferFunction::from_points(
+            &[
+                (0.15, [0.2, 0.4, 1.0, 0.0]),
+                (0.3, [0.3, 0.7, 1.0, 0.05]),
+                (0.5, [1.0, 0.8, 0.4, 0.15]),
+                (0.9, [1.0, 1.0, 1.0, 0.6]),
+            ],
+            256,
+        ),
+    })
+}
+
+fn ct_scene(iso: bool) -> Result<Scene, String> {
+    let path = brickray_harness::shared_volume("invesalius_cranium_ct")
+        .ok_or("the lod suite needs ../shared/data/invesalius_cranium_ct")?;
+    let vol = brickray_io::read_volume(&path).map_err(|e| e.to_string())?;
+    let [(_, _, translucent), _, (_, iso_mode, iso_tf), _] = ct::scenes();
+    Ok(if iso {
+        Scene {
+            name: "ct_iso",
+            vol,
+            settings: RenderSettings {
+                mode: iso_mode,
+                ..Default::default()
+            },
+            tf: iso_tf,
+        }
+    } else {
+        Scene {
+            name: "ct",
+            vol,
+            settings: RenderSettings {
+                mode: RenderMode::Dvr,
+                shading: Shading {
+                    enabled: true,
+                    ..Default::default()
+                },
+                ..Default::default()
+            },
+            tf: translucent,
+        }
+    })
+}
+
+fn ml_scene() -> Scene {
+    Scene {
+        name: "ml",
+        vol: brickray_core::synthetic::marschner_lobb(128),
+        settings: RenderSettings {
+            mode: RenderMode::Dvr,
+            ..Default::default()
+        },
+        // A sharp opaque band around the classic 0.5 isovalue over a faint haze.
+        tf: TransferFunction::from_points(
+            &[
+                (0.0, [0.2, 0.3, 0.8, 0.0]),
+                (0.45, [0.2, 0.3, 0.8, 0.01]),
+                (0.48, [1.0, 0.7, 0.3, 0.5]),
+                (0.52, [1.0, 0.7, 0.3, 0.5]),
+                (0.55, [0.2, 0.3, 0.8, 0.01]),
+                (1.0, [0.2, 0.3, 0.8, 0.01]),
+            ],
+            256,
+        ),
+    }
+}
+
+/// PSNR of the geometric curve at `bricks` (linear in log bricks), `None`
+/// outside its range.
+fn interpolate(curve: &[(f64, f64)], bricks: f64) -> Option<f64> {
+    let mut c: Vec<(f64, f64)> = curve.to_vec();
+    c.sort_by(|a, b| a.0.total_cmp(&b.0));
+    // Equal brick counts: keep the best PSNR.
+    c.dedup_by(|b, a| {
+        if a.0 == b.0 {
+            a.1 = a.1.max(b.1);
+            true
+        } else {
+            false
+        }
+    });
+    for w in c.windows(2) {
+        let ((b0, p0), (b1, p1)) = (w[0], w[1]);
+        if b0 <= bricks && bricks <= b1 {
+            if b1 == b0 {
+                return Some(p0.max(p1));
+            }
+            let t = (bricks.ln() - b0.ln()) / (b1.ln() - b0.ln());
+            return Some(p0 + t * (p1 - p0));
+        }
+    }
+    c.iter().find(|p| p.0 == bricks).map(|p| p.1)
+}
+
+fn median(v: &mut [f64]) -> f64 {
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    }
+}
+
+pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
+    let size: u32 = arg(args, "--size", 256)?;
+    let brick: u32 = arg(args, "--brick", 32)?;
+    let scenes: String = arg(args, "--scenes", "mri,ct,ml".to_string())?;
+    // Both sweeps in steps of sqrt(2): tolerances 0 and 0.5..16 px, budgets
+    // 2..8192 (8-bit levels x px).
+    let tolerances: Vec<f32> = std::iter::once(0.0)
+        .chain((0..11).map(|k| 0.5 * 2f32.powf(k as f32 / 2.0)))
+        .collect();
+    let budgets: Vec<f32> = (0..25).map(|k| 2.0 * 2f32.powf(k as f32 / 2.0)).collect();
+    let gpu = GpuContext::new().map_err(|e| e.to_string())?;
+    println!("adapter: {}", gpu.describe());
+    println!(
+        "lod: {size}x{size}, bricks {brick}+2x2, geometric tolerances {tolerances:?} px vs error budgets {budgets:?} (8-bit levels x px)"
+    );
+    let run = Runner::new(&gpu, size);
+    let mut fig = Figures::new();
+    let mut all_gains = Vec::new();
+    for name in scenes.split(',') {
+        let scene = match name {
+            "mri" => mri_dvr()?,
+            "ct" => ct_scene(false)?,
+            "ct_iso" => ct_scene(true)?,
+            "ml" => ml_scene(),
+            other => return Err(format!("unknown scene {other}")),
+        };
+        let d = scene.vol.desc().clone();
+        let frame = VolumeFrame::centered(d.dims, d.spacing);
+        let camera = Camera::orbit(frame.center(), 2.0, 0.7, 0.35);
+        let t = std::time::Instant::now();
+        let reference = render_reference(
+            &scene.vol,
+            &frame,
+            &scene.tf,
+            &camera,
+            &scene.settings,
+            &ReferenceOptions::new(size, size),
+        )
+        .to_rgba8([0.0; 3]);
+        println!(
+            "\n{}: {:?} {:?}, {:?}; reference in {:.1} s",
+            scene.name,
+            d.dims,
+            d.dtype,
+            scene.settings.mode,
+            t.elapsed().as_secs_f64()
+        );
+        let dir = tempfile::tempdir().map_err(|e| e.to_string())?;
+        let store_path = dir.path().join("v.brs");
+        let mut reader = brickray_io::MemoryReader::new(scene.vol, "memory");
+        let report = brickray_store::build(
+            &mut reader,
+            &store_path,
+            &brickray_store::BuildOptions {
+                brick,
+                ..Default::default()
+            },
+        )
+        .map_err(|e| e.to_string())?;
+        if !report.errors {
+            return Err("the store has no error section".into());
+        }
+        let store = brickray_store::open(&store_path).map_err(|e| e.to_string())?;
+        let brick_bytes = store.layout().brick_bytes() as u64;
+        println!(
+            "  store: {} nodes, {} data, built in {:.1} s",
+            report.nodes, report.data_nodes, report.seconds
+        );
+        let source: Arc<dyn BrickSource> = Arc::new(store);
+        let mut renderer = VolumeRenderer::new(&gpu.device, brickray_harness::target_desc())
+            .map_err(|e| e.to_string())?;
+        renderer
+            .set_volume_source(
+                &gpu.device,
+                &gpu.queue,
+                source,
+                frame,
+                OutOfCoreConfig {
+                    gpu_budget_bytes: 1 << 30,
+                    upload_budget_bytes: 1 << 30,
+                    ..Default::default()
+                },
+            )
+            .map_err(|e| e.to_string())?;
+        renderer
+            .set_transfer_function(&gpu.device, &gpu.queue, &scene.tf)
+            .map_err(|e| e.to_string())?;
+        println!(
+            "  {:>10} {:>9} {:>7} {:>9} {:>9} {:>7}",
+            "metric", "budget", "bricks", "MiB", "PSNR dB", "frames"
+        );
+        let mut geo = Vec::new();
+        let mut err = Vec::new();
+        let mut bound = Vec::new();
+        let mut points = Vec::new();
+        let sweeps = tolerances
+            .iter()
+            .map(|&t| ("geometric", LodMetric::Geometric, t, t))
+            .chain(
+                budgets
+                    .iter()
+                    .map(|&b| ("error", LodMetric::ErrorAware { budget: b }, 1.0, b)),
+            )
+            .chain(
+                budgets
+                    .iter()
+                    .step_by(2)
+                    .map(|&b| ("bound", LodMetric::ErrorBound { budget: b }, 1.0, b)),
+            );
+        for (label, metric, tol, knob) in sweeps {
+            let p = lod_point(
+                &run,
+                &mut renderer,
+                camera,
+                frame,
+                scene.settings,
+                metric,
+                tol,
+                brick_bytes,
+            )?;
+            let psnr = compare(&p.rgba, &reference, size, size).psnr_db.min(99.0);
+            println!(
+                "  {label:>10} {knob:>9.2} {:>7} {:>9.1} {psnr:>9.2} {:>7}",
+                p.bricks,
+                p.bytes as f64 / (1 << 20) as f64,
+                p.frames
+            );
+            match label {
+                "geometric" => geo.push((p.bricks as f64, psnr)),
+                "error" => err.push((p.bricks as f64, psnr)),
+                _ => bound.push((p.bricks as f64, psnr)),
+            }
+            points.push(
+                json!({"metric": label, "knob": knob, "bricks": p.bricks, "psnr_db": round2(psnr)}),
+            );
+        }
+        // One point per distinct working set (a budget sweep repeats the
+        // coarsest and finest cuts many times).
+        let distinct = |v: &[(f64, f64)]| {
+            let mut v = v.to_vec();
+            v.sort_by(|a, b| a.0.total_cmp(&b.0));
+            v.dedup_by(|b, a| a.0 == b.0);
+            v
+        };
+        let (err, bound) = (distinct(&err), distinct(&bound));
+        let mut gains: Vec<f64> = err
+            .iter()
+            .filter_map(|&(b, p)| interpolate(&geo, b).map(|g| p - g))
+            .collect();
+        let matched = gains.len();
+        all_gains.extend(gains.iter().copied());
+        let med = median(&mut gains);
+        println!(
+            "  {}: error-aware minus geometric PSNR at equal bricks: median {med:.2} dB over {matched} matched distinct working sets (gains {:?})",
+            scene.name,
+            gains.iter().map(|g| round2(*g)).collect::<Vec<_>>()
+        );
+        let mut bgains: Vec<f64> = bound
+            .iter()
+            .filter_map(|&(b, p)| interpolate(&geo, b).map(|g| p - g))
+            .collect();
+        let bmed = median(&mut bgains);
+        println!(
+            "  {}: strict-bound rule minus geometric: median {bmed:.2} dB over {} matched points",
+            scene.name,
+            bgains.len()
+        );
+        fig.insert(
+            format!("{}_bound_median_gain_db", scene.name),
+            json!(round2(bmed)),
+        );
+        fig.insert(format!("{}_median_gain_db", scene.name), json!(round2(med)));
+        fig.insert(format!("{}_matched_points", scene.name), json!(matched));
+        fig.insert(format!("{}_points", scene.name), json!(points));
+    }
+    let med = median(&mut all_gains);
+    println!("\nall scenes: median gain {med:.2} dB at equal working set (target >= 3 dB)");
+    fig.insert("median_gain_db".into(), json!(round2(med)));
+    fig.insert("image_size".into(), json!(size));
+    fig.insert("brick".into(), json!(brick));
+    fig.insert("adapter".into(), json!(gpu.adapter.get_info().name));
+    Ok(fig)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::interpolate;
+
+    #[test]
+    fn interpolation_is_linear_in_log_bricks_and_bounded() {
+        let c = [(10.0, 20.0), (100.0, 40.0), (1000.0, 50.0)];
+        assert_eq!(interpolate(&c, 5.0), None);
+        assert_eq!(interpolate(&c, 2000.0), None);
+        assert!((interpolate(&c, 10.0f64.powf(1.5)).unwrap() - 30.0).abs() < 1e-9);
+        assert_eq!(interpolate(&c, 1000.0), Some(50.0));
+    }
+}

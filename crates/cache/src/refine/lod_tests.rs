@@ -1,0 +1,279 @@
+//! Error-aware refinement ([`LodMetric::ErrorAware`]) over synthetic metadata:
+//! a ramp along x whose nodes record error bounds.
+
+use super::tests::{assert_exact_cover, ball_layout};
+use super::*;
+use brickray_core::{
+    BinStats, ERROR_BINS, NodeError, TfErrorTable, node_pixel_error, node_tf_error,
+};
+use proptest::prelude::*;
+use std::collections::HashMap;
+
+/// Metadata of a ramp `value = x` (normalized) whose nodes carry error bounds
+/// that shrink with the level (`dev` fraction `rough * 2^-level` of the range,
+/// varied per node by `seed`); counts its reads.
+struct RampSource {
+    layout: OctreeLayout,
+    rough: f64,
+    seed: u64,
+    reads: usize,
+}
+
+impl RampSource {
+    fn info(&mut self, key: NodeKey) -> NodeInfo {
+        self.reads += 1;
+        let (o, side) = key.unit_box();
+        let scale = self.layout.volume_scale();
+        let (lo, hi) = (
+            (o[0] / scale[0]).min(1.0),
+            ((o[0] + side) / scale[0]).min(1.0),
+        );
+        let (min, max) = (lo as f32, hi as f32);
+        let mut h = (self.seed ^ ((key.x as u64) << 40 ^ (key.y as u64) << 20 ^ key.z as u64))
+            .wrapping_mul(0x9E37_79B9_7F4A_7C15)
+            | 1;
+        let finest = self.layout.levels - 1;
+        let mut bins = [BinStats::default(); ERROR_BINS];
+        if key.level < finest {
+            for st in bins.iter_mut() {
+                h ^= h << 13;
+                h ^= h >> 7;
+                h ^= h << 17;
+                let r = (h % 1000) as f64 / 1000.0;
+                let count = 1 + h % 50;
+                let dev = self.rough * r * 0.5f64.powi(key.level as i32);
+                *st = BinStats {
+                    count,
+                    dev,
+                    sum_sq: count as f64 * (0.3 * dev) * (0.3 * dev),
+                };
+            }
+        }
+        NodeInfo {
+            kind: NodeKind::Data,
+            min,
+            max: max.max(min + 1e-3),
+            error: Some(NodeError::encode(
+                &bins,
+                min as f64,
+                max.max(min + 1e-3) as f64,
+            )),
+        }
+    }
+}
+
+/// All bricks resident; metadata from a cache filled once from the source.
+struct Cached {
+    meta: HashMap<NodeKey, NodeInfo>,
+}
+
+impl RefineEnv for Cached {
+    fn node(&mut self, key: NodeKey) -> MetaState {
+        self.meta
+            .get(&key)
+            .copied()
+            .map_or(MetaState::Pending, MetaState::Known)
+    }
+    fn data(&mut self, _key: NodeKey) -> DataState {
+        DataState::OnGpu
+    }
+}
+
+fn cache_all(src: &mut RampSource) -> HashMap<NodeKey, NodeInfo> {
+    let mut m = HashMap::new();
+    let mut stack = vec![NodeKey::ROOT];
+    while let Some(k) = stack.pop() {
+        if !src.layout.in_volume(k) {
+            continue;
+        }
+        m.insert(k, src.info(k));
+        if k.level + 1 < src.layout.levels {
+            stack.extend(k.children());
+        }
+    }
+    m
+}
+
+fn refine_with(
+    layout: &OctreeLayout,
+    env: &mut Cached,
+    cam: &Camera,
+    tf: &TransferFunction,
+    metric: LodMetric,
+) -> Refinement {
+    let frame = VolumeFrame::centered(layout.volume.dims, [1.0; 3]);
+    let params = RefineParams {
+        camera: cam,
+        aspect: 1.0,
+        viewport_height_px: 256,
+        volume_frame: &frame,
+        mode: RenderMode::Dvr,
+        tf,
+        tolerance_px: 1.0,
+        metric,
+        max_data_leaves: u32::MAX,
+        max_requests: u32::MAX,
+        brick_upload_bytes: 1,
+    };
+    let mut b = UploadBudget::new(u64::MAX / 4);
+    b.begin_frame();
+    refine(layout, &params, env, &mut b)
+}
+
+/// A step in opacity and colour at `edge`, flat on both sides.
+fn step_tf(edge: f32) -> TransferFunction {
+    TransferFunction::from_points(
+        &[
+            (0.0, [1.0, 1.0, 1.0, 0.2]),
+            (edge - 0.01, [1.0, 1.0, 1.0, 0.2]),
+            (edge + 0.01, [1.0, 0.3, 0.1, 0.9]),
+            (1.0, [1.0, 0.3, 0.1, 0.9]),
+        ],
+        256,
+    )
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 48, ..ProptestConfig::default() })]
+
+    /// With everything resident, no leaf that could be split stays coarser
+    /// than the budget: its projected voxel size times 255 x its error under
+    /// the TF (expected, or the bound) is within the budget.
+    #[test]
+    fn never_coarsens_a_node_over_the_budget(
+        seed in any::<u64>(),
+        rough in 0.0f64..0.5,
+        budget in 0.0f32..400.0,
+        strict in any::<bool>(),
+        dist in 1.2f32..6.0,
+        yaw in 0.0f32..std::f32::consts::TAU,
+        entries in proptest::collection::vec(proptest::array::uniform4(0.0f32..1.0), 2..10),
+    ) {
+        let layout = ball_layout(64);
+        let mut src = RampSource { layout: layout.clone(), rough, seed, reads: 0 };
+        let mut env = Cached { meta: cache_all(&mut src) };
+        let tf = TransferFunction::from_entries(entries);
+        let frame = VolumeFrame::centered(layout.volume.dims, [1.0; 3]);
+        let cam = Camera::orbit(frame.center(), dist, yaw, 0.3);
+        let metric = if strict {
+            LodMetric::ErrorBound { budget }
+        } else {
+            LodMetric::ErrorAware { budget }
+        };
+        let r = refine_with(&layout, &mut env, &cam, &tf, metric);
+        let keys: Vec<NodeKey> = r.leaves.iter().map(|l| l.key).collect();
+        assert_exact_cover(&keys, layout.levels);
+        let geo = ViewGeometry::new(&layout, &cam, 1.0, 256, &frame);
+        let table = TfErrorTable::new(&tf);
+        let finest = layout.levels - 1;
+        for l in &r.leaves {
+            if l.class != NodeClass::Data || l.key.level >= finest {
+                continue;
+            }
+            let info = env.meta[&l.key];
+            let e = if strict {
+                node_tf_error(&info, RenderMode::Dvr, &table, &layout)
+            } else {
+                node_pixel_error(&info, l.key.level, RenderMode::Dvr, &table, &layout)
+            }
+            .unwrap();
+            let px = geo.voxel_pixels(l.key);
+            prop_assert!(
+                px * 255.0 * e <= budget as f64 * (1.0 + 1e-6) + 1e-9,
+                "{:?}: {px} px x {} levels > budget {budget}", l.key, 255.0 * e
+            );
+        }
+        prop_assert_eq!(r.blocked, SplitBlocks::default());
+    }
+}
+
+/// A new transfer function moves the refinement to where its edge is, from
+/// cached metadata only: no source read.
+#[test]
+fn a_new_tf_reprioritises_without_reading_the_source() {
+    let layout = ball_layout(64);
+    let mut src = RampSource {
+        layout: layout.clone(),
+        rough: 0.3,
+        seed: 7,
+        reads: 0,
+    };
+    let mut env = Cached {
+        meta: cache_all(&mut src),
+    };
+    let reads = src.reads;
+    let frame = VolumeFrame::centered(layout.volume.dims, [1.0; 3]);
+    let cam = Camera::orbit(frame.center(), 2.5, 0.0, 0.0);
+    let metric = LodMetric::ErrorAware { budget: 64.0 };
+    // Mean level of the data leaves whose x range is near `x`.
+    let depth_near = |r: &Refinement, x: f64| {
+        let geo = ViewGeometry::new(&layout, &cam, 1.0, 256, &frame);
+        let ls: Vec<f64> = r
+            .leaves
+            .iter()
+            .filter(|l| l.class == NodeClass::Data)
+            .filter(|l| {
+                let (lo, hi) = geo.tex_box(l.key);
+                lo.x <= x && x <= hi.x
+            })
+            .map(|l| l.key.level as f64)
+            .collect();
+        ls.iter().sum::<f64>() / ls.len().max(1) as f64
+    };
+    let a = refine_with(&layout, &mut env, &cam, &step_tf(0.25), metric);
+    let b = refine_with(&layout, &mut env, &cam, &step_tf(0.75), metric);
+    assert_eq!(src.reads, reads, "refinement read the source");
+    assert!(a.meta_requests.is_empty() && b.meta_requests.is_empty());
+    assert!(
+        depth_near(&a, 0.25) > depth_near(&b, 0.25) + 0.5,
+        "edge at 0.25: {} vs {}",
+        depth_near(&a, 0.25),
+        depth_near(&b, 0.25)
+    );
+    assert!(
+        depth_near(&b, 0.75) > depth_near(&a, 0.75) + 0.5,
+        "edge at 0.75: {} vs {}",
+        depth_near(&b, 0.75),
+        depth_near(&a, 0.75)
+    );
+    // Far from either edge the TF is flat: both stay coarse there, and coarser
+    // than the geometric rule at 1 px.
+    let g = refine_with(
+        &layout,
+        &mut env,
+        &cam,
+        &step_tf(0.25),
+        LodMetric::Geometric,
+    );
+    assert!(g.data_leaves > a.data_leaves && g.data_leaves > b.data_leaves);
+    assert!(depth_near(&a, 0.9) < depth_near(&g, 0.9));
+}
+
+/// A source without error bounds: error-aware refinement is the geometric rule.
+#[test]
+fn without_error_bounds_it_is_geometric() {
+    let layout = ball_layout(64);
+    let mut src = RampSource {
+        layout: layout.clone(),
+        rough: 0.3,
+        seed: 1,
+        reads: 0,
+    };
+    let mut meta = cache_all(&mut src);
+    for v in meta.values_mut() {
+        v.error = None;
+    }
+    let mut env = Cached { meta };
+    let frame = VolumeFrame::centered(layout.volume.dims, [1.0; 3]);
+    let cam = Camera::orbit(frame.center(), 2.0, 0.4, 0.2);
+    let tf = step_tf(0.5);
+    let g = refine_with(&layout, &mut env, &cam, &tf, LodMetric::Geometric);
+    let e = refine_with(
+        &layout,
+        &mut env,
+        &cam,
+        &tf,
+        LodMetric::ErrorAware { budget: 3.0 },
+    );
+    assert_eq!(g, e);
+}

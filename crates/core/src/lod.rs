@@ -1,0 +1,481 @@
+//! Error-aware level of detail: what drawing a node instead of the finest data
+//! can change, recorded per node ([`NodeError`], store format version 2), and
+//! what that costs under a render mode and transfer function ([`TfErrorTable`]).
+//!
+//! # The recorded bound
+//!
+//! A node's value range `[min, max]` ([`NodeInfo`]) is cut into
+//! [`ERROR_BINS`] equal bins. For each coarse voxel `C` of the node (the voxels
+//! its samples interpolate: interior `0..=brick` per axis) the bound is
+//! `dev(C) = max |F - C|` over the finest-level voxels `F` of the footprints of
+//! `C` and of its 26 neighbours at its level (the finest voxels any trilinear
+//! sample at the finest level reads where `C` has a non-zero weight). Bin `b`
+//! records whether some `C` falls in it (`occupied`) and the largest `dev(C)`
+//! of those (`dev`, rounded up to 1/65535 of `max - min`).
+//!
+//! Then for any point `p` of the node, with `c(p)` the coarse sample and
+//! `f(p)` the finest-level sample (both trilinear, clamp-to-edge): every
+//! coarse voxel `C_k` with a non-zero weight satisfies `|f(p) - C_k| <=
+//! dev(C_k)`, so `f(p)` lies in every widened bin
+//! `W_b = [bin_lo(b) - dev_b, bin_hi(b) + dev_b]` of those voxels, and `c(p)`
+//! lies between the smallest and largest `C_k`; hence both `c(p)` and `f(p)`
+//! lie in **one** widened bin (the one whose lower end is lowest, if `c < f`;
+//! the highest otherwise). So the change of anything computed from the sample
+//! value alone is at most its oscillation (max - min) over the widened bins of
+//! the occupied bins. The bound is against the finest level, so it holds for
+//! a node drawn instead of any refinement of it. It does not bound gradients
+//! (shading).
+//!
+//! # The expected error
+//!
+//! The worst case over 27 footprints is rarely much below a node's value
+//! range, so each bin also records its typical deviation (`rms`: the RMS of
+//! `F - C` over each coarse voxel's own footprint) and its share of the
+//! node's voxels (`weight`). [`node_tf_error_expected`] and
+//! [`node_pixel_error`] (what [`LodMetric::ErrorAware`] ranks by) use them;
+//! [`node_tf_error`] (what [`LodMetric::ErrorBound`] ranks by) is the bound.
+
+use crate::{NodeInfo, NodeKind, OctreeLayout, RenderMode, TransferFunction};
+
+/// How refinement decides that a node is fine enough (`docs/cache.md`).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub enum LodMetric {
+    /// A node is refined while one of its voxels projects to more than the
+    /// tolerance in pixels, whatever the data and transfer function do there.
+    #[default]
+    Geometric,
+    /// A node is refined while its projected voxel size (pixels) times its
+    /// expected pixel error under the current mode and transfer function
+    /// ([`node_pixel_error`], in 8-bit levels: 255 x the share-weighted change
+    /// of the opacity-weighted classified sample, accumulated over the node's
+    /// depth in DVR) exceeds `budget`. The unit of `budget` is therefore
+    /// "8-bit levels x pixels": 16 lets a voxel covering one pixel err by
+    /// 16/255, or one covering 4 pixels by 4/255; 255 refines a node of
+    /// full-scale error to 1 px, like the geometric rule at 1 px. A flat
+    /// transfer-function region or smooth data costs nothing and coarsens
+    /// freely; a sharp edge refines first. Sources without error bounds (a
+    /// version-1 store) fall back to [`LodMetric::Geometric`].
+    ErrorAware {
+        /// The error budget (finite, `>= 0`).
+        budget: f32,
+    },
+    /// Like [`LodMetric::ErrorAware`] with the strict bound
+    /// ([`node_tf_error`]) instead of the expected error: every leaf's
+    /// projected size times 255 x its worst-case change stays within the budget
+    /// (when nothing else blocks a split), but the worst case over a node's
+    /// neighbourhood is rarely much below its value range, so this ranks
+    /// nodes almost like the geometric rule (docs/benchmarks.md).
+    ErrorBound {
+        /// The error budget (finite, `>= 0`).
+        budget: f32,
+    },
+}
+
+/// Bins of a node's value range in [`NodeError`].
+pub const ERROR_BINS: usize = 16;
+
+/// Largest quantised deviation ([`NodeError::dev`]): `max - min`.
+pub const DEV_SCALE: u16 = u16::MAX;
+
+/// A node's recorded error bound and expected error (see the module
+/// documentation).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub struct NodeError {
+    /// Bit `b` set: some coarse voxel of the node falls in bin `b`.
+    pub occupied: u16,
+    /// Bin `b`'s largest deviation from the finest level (the bound), in units
+    /// of `(max - min) / 65535`, rounded up (so decoding never underestimates).
+    pub dev: [u16; ERROR_BINS],
+    /// Bin `b`'s typical deviation: the root mean square over its coarse
+    /// voxels `C` of the RMS of `F - C` over the finest voxels `F` of `C`'s own
+    /// footprint; same unit, rounded up.
+    pub rms: [u16; ERROR_BINS],
+    /// Bin `b`'s share of the node's coarse voxels, in units of 1/65535, rounded.
+    pub weight: [u16; ERROR_BINS],
+}
+
+/// What the builder measured in one bin of a node.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct BinStats {
+    /// Coarse voxels in the bin.
+    pub count: u64,
+    /// Their largest deviation from the finest voxels of their 3x3x3
+    /// neighbourhood of footprints (raw units).
+    pub dev: f64,
+    /// Sum over them of the mean square of `F - C` over their own footprint.
+    pub sum_sq: f64,
+}
+
+/// The bin of raw value `v` in a node of range `[min, max]` (values outside
+/// clamp to the first or last bin; a zero-width range has only bin 0).
+pub fn bin_of(v: f64, min: f64, max: f64) -> usize {
+    let span = max - min;
+    if span.is_nan() || span <= 0.0 {
+        return 0;
+    }
+    let b = ((v - min) / span * ERROR_BINS as f64).floor();
+    if b.is_nan() {
+        0
+    } else {
+        b.clamp(0.0, (ERROR_BINS - 1) as f64) as usize
+    }
+}
+
+impl NodeError {
+    /// Encodes what the builder measured per bin of a node of range
+    /// `[min, max]`, rounding deviations up. Deviations are clamped to
+    /// `0..=max - min` (no fine and coarse value of a subtree lie further apart).
+    pub fn encode(bins: &[BinStats; ERROR_BINS], min: f64, max: f64) -> NodeError {
+        let span = max - min;
+        let total: u64 = bins.iter().map(|b| b.count).sum();
+        let q = |d: f64| -> u16 {
+            if span > 0.0 && d.is_finite() {
+                (d.max(0.0) / span * DEV_SCALE as f64)
+                    .ceil()
+                    .clamp(0.0, DEV_SCALE as f64) as u16
+            } else if span > 0.0 {
+                DEV_SCALE
+            } else {
+                0
+            }
+        };
+        let mut e = NodeError::default();
+        for (b, st) in bins.iter().enumerate() {
+            if st.count == 0 {
+                continue;
+            }
+            e.occupied |= 1 << b;
+            e.dev[b] = q(st.dev);
+            e.rms[b] = q((st.sum_sq / st.count as f64).sqrt()).min(e.dev[b]);
+            e.weight[b] = ((st.count as f64 / total as f64) * DEV_SCALE as f64).round() as u16;
+        }
+        e
+    }
+
+    /// Whether bin `b` is occupied.
+    pub fn is_occupied(&self, b: usize) -> bool {
+        b < ERROR_BINS && self.occupied & (1 << b) != 0
+    }
+
+    /// Bin `b`'s deviation bound in raw units, for a node of range `[min, max]`.
+    pub fn deviation(&self, b: usize, min: f64, max: f64) -> f64 {
+        let span = (max - min).max(0.0);
+        self.dev
+            .get(b)
+            .map_or(0.0, |&q| q as f64 / DEV_SCALE as f64 * span)
+    }
+
+    /// Bin `b`'s typical (RMS) deviation in raw units.
+    pub fn typical_deviation(&self, b: usize, min: f64, max: f64) -> f64 {
+        let span = (max - min).max(0.0);
+        self.rms
+            .get(b)
+            .map_or(0.0, |&q| q as f64 / DEV_SCALE as f64 * span)
+    }
+
+    /// Bin `b`'s share of the node's coarse voxels (0..=1).
+    pub fn share(&self, b: usize) -> f64 {
+        self.weight
+            .get(b)
+            .map_or(0.0, |&w| w as f64 / DEV_SCALE as f64)
+    }
+
+    /// The widened bin `W_b = [bin_lo - dev_b, bin_hi + dev_b]` (raw units).
+    pub fn widened(&self, b: usize, min: f64, max: f64) -> (f64, f64) {
+        self.widened_by(b, min, max, self.deviation(b, min, max))
+    }
+
+    /// Bin `b` widened by `d` on each side (raw units).
+    pub fn widened_by(&self, b: usize, min: f64, max: f64, d: f64) -> (f64, f64) {
+        let w = (max - min).max(0.0) / ERROR_BINS as f64;
+        let (lo, hi) = (min + b as f64 * w, min + (b + 1) as f64 * w);
+        (lo - d, hi + d)
+    }
+
+    /// The largest deviation over the occupied bins (raw units).
+    pub fn max_deviation(&self, min: f64, max: f64) -> f64 {
+        (0..ERROR_BINS)
+            .filter(|&b| self.is_occupied(b))
+            .map(|b| self.deviation(b, min, max))
+            .fold(0.0, f64::max)
+    }
+}
+
+/// Range minima and maxima of a transfer function's entries (a sparse table),
+/// for the oscillation of a lookup over a value interval in O(1).
+#[derive(Debug, Clone)]
+pub struct TfErrorTable {
+    tf: TransferFunction,
+    /// `levels[k][i]`: per channel (min, max) of entries `i .. i + 2^k`.
+    levels: Vec<Vec<[[f32; 2]; 4]>>,
+}
+
+impl TfErrorTable {
+    /// The table of `tf`.
+    pub fn new(tf: &TransferFunction) -> TfErrorTable {
+        let e = tf.entries();
+        let mut levels = vec![
+            e.iter()
+                .map(|c| std::array::from_fn(|k| [c[k], c[k]]))
+                .collect::<Vec<[[f32; 2]; 4]>>(),
+        ];
+        let mut w = 1usize;
+        while 2 * w <= e.len() {
+            let prev = &levels[levels.len() - 1];
+            let next = (0..=e.len() - 2 * w)
+                .map(|i| {
+                    let (a, b) = (prev[i], prev[i + w]);
+                    std::array::from_fn(|k| [a[k][0].min(b[k][0]), a[k][1].max(b[k][1])])
+                })
+                .collect();
+            levels.push(next);
+            w *= 2;
+        }
+        TfErrorTable {
+            tf: tf.clone(),
+            levels,
+        }
+    }
+
+    /// The transfer function.
+    pub fn tf(&self) -> &TransferFunction {
+        &self.tf
+    }
+
+    /// Per channel (min, max) of the lookup over the normalized interval
+    /// `[a, b]` (clamped to 0..1, in either order): the end points and every
+    /// entry between them (lookups interpolate linearly between entries).
+    pub fn range(&self, a: f64, b: f64) -> [[f64; 2]; 4] {
+        let (a, b) = if a <= b { (a, b) } else { (b, a) };
+        let (a, b) = (clamp01(a), clamp01(b));
+        let (la, lb) = (self.tf.lookup(a), self.tf.lookup(b));
+        let mut r: [[f64; 2]; 4] = std::array::from_fn(|k| [la[k].min(lb[k]), la[k].max(lb[k])]);
+        let n1 = (self.tf.len() - 1) as f64;
+        let i0 = (a * n1).ceil() as usize;
+        let i1 = ((b * n1).floor() as usize).min(self.tf.len() - 1);
+        if i0 <= i1 {
+            let len = i1 - i0 + 1;
+            let k = (usize::BITS - 1 - len.leading_zeros()) as usize;
+            let (x, y) = (self.levels[k][i0], self.levels[k][i1 + 1 - (1 << k)]);
+            for c in 0..4 {
+                r[c][0] = r[c][0].min(x[c][0].min(y[c][0]) as f64);
+                r[c][1] = r[c][1].max(x[c][1].max(y[c][1]) as f64);
+            }
+        }
+        r
+    }
+
+    /// Bound on the change of the opacity-weighted classified sample
+    /// `(a, a*r, a*g, a*b)` between any two values of the normalized interval
+    /// `[a, b]`: `osc(alpha) + max(alpha) * max osc(colour)`
+    /// (`|a1 c1 - a2 c2| <= |a1 - a2| c1 + a2 |c1 - c2|`, colours in 0..1).
+    pub fn classified_change(&self, a: f64, b: f64) -> f64 {
+        let r = self.range(a, b);
+        let osc = |c: usize| r[c][1] - r[c][0];
+        let colour = osc(0).max(osc(1)).max(osc(2));
+        osc(3) + r[3][1].max(0.0) * colour
+    }
+}
+
+fn clamp01(v: f64) -> f64 {
+    if v.is_nan() { 0.0 } else { v.clamp(0.0, 1.0) }
+}
+
+/// The error of drawing a node instead of the finest data, as the image sees
+/// it, in 0..=1, from its metadata only; `None` when the node records no
+/// error bound (a version-1 store, a source without error data).
+///
+/// * DVR: the largest change of the opacity-weighted classified sample
+///   ([`TfErrorTable::classified_change`]) over the widened bins of the
+///   occupied bins: a flat transfer-function region costs 0, a sharp edge up
+///   to 1;
+/// * iso-surface: 1 when the isovalue lies in a widened bin (the crossing may
+///   move or vanish), else 0;
+/// * MIP: the largest deviation, as a fraction of the value range.
+///
+/// Uniform and empty nodes have no error of their own here (0); the refiner
+/// decides about them as before.
+pub fn node_tf_error(
+    info: &NodeInfo,
+    mode: RenderMode,
+    table: &TfErrorTable,
+    layout: &OctreeLayout,
+) -> Option<f64> {
+    let err = info.error?;
+    if info.kind != NodeKind::Data {
+        return Some(0.0);
+    }
+    let (min, max) = (info.min as f64, info.max as f64);
+    let norm = |v: f64| -> f64 {
+        let [lo, hi] = layout.volume.value_range;
+        let span = hi as f64 - lo as f64;
+        if span > 0.0 {
+            (v - lo as f64) / span
+        } else {
+            0.0
+        }
+    };
+    let bins = (0..ERROR_BINS).filter(|&b| err.is_occupied(b));
+    let e = match mode {
+        RenderMode::Dvr => bins
+            .map(|b| {
+                let (lo, hi) = err.widened(b, min, max);
+                table.classified_change(norm(lo), norm(hi))
+            })
+            .fold(0.0, f64::max),
+        RenderMode::Iso { value, .. } => {
+            let hit = bins.into_iter().any(|b| {
+                let (lo, hi) = err.widened(b, min, max);
+                let (a, c) = (norm(lo), norm(hi));
+                let (a, c) = if a <= c { (a, c) } else { (c, a) };
+                // A bin that is not widened cannot move the crossing.
+                err.dev[b] > 0 && a <= value as f64 && value as f64 <= c
+            });
+            if hit { 1.0 } else { 0.0 }
+        }
+        RenderMode::Mip => {
+            let span = (layout.volume.value_range[1] as f64 - layout.volume.value_range[0] as f64)
+                .abs()
+                .max(f64::MIN_POSITIVE);
+            err.max_deviation(min, max) / span
+        }
+    };
+    Some(if e.is_nan() { 1.0 } else { e.clamp(0.0, 1.0) })
+}
+
+/// The *expected* error of drawing a node instead of the finest data, in
+/// 0..=1, from its metadata only (`None` without error data): like
+/// [`node_tf_error`], but each occupied bin is widened by its typical (RMS)
+/// deviation instead of its largest. Not a bound: a guide to where
+/// refinement pays most, which error-aware refinement
+/// ([`LodMetric::ErrorAware`], through [`node_pixel_error`]) ranks nodes by.
+///
+/// * DVR: `max_b change(bin_b +- rms_b)` of the opacity-weighted classified
+///   sample (the worst bin, not weighted by its share: a few visible voxels in
+///   a node of transparent ones are what the image shows);
+/// * iso-surface: 1 when a bin's RMS-widened range holds the isovalue (and
+///   its deviation is not zero), else 0 (weighting by the bins' shares lost
+///   up to 11 dB on the head CT's bone surface: docs/benchmarks.md);
+/// * MIP: the share-weighted RMS deviation as a fraction of the value range.
+pub fn node_tf_error_expected(
+    info: &NodeInfo,
+    mode: RenderMode,
+    table: &TfErrorTable,
+    layout: &OctreeLayout,
+) -> Option<f64> {
+    let err = info.error?;
+    if info.kind != NodeKind::Data {
+        return Some(0.0);
+    }
+    let (min, max) = (info.min as f64, info.max as f64);
+    let [vlo, vhi] = layout.volume.value_range;
+    let vspan = vhi as f64 - vlo as f64;
+    let norm = |v: f64| -> f64 {
+        if vspan > 0.0 {
+            (v - vlo as f64) / vspan
+        } else {
+            0.0
+        }
+    };
+    let bins = (0..ERROR_BINS).filter(|&b| err.is_occupied(b));
+    let e: f64 = match mode {
+        RenderMode::Dvr => bins
+            .map(|b| {
+                let (lo, hi) = err.widened_by(b, min, max, err.typical_deviation(b, min, max));
+                table.classified_change(norm(lo), norm(hi))
+            })
+            .fold(0.0, f64::max),
+        RenderMode::Iso { value, .. } => {
+            let hit = bins.into_iter().any(|b| {
+                let (lo, hi) = err.widened_by(b, min, max, err.typical_deviation(b, min, max));
+                let (a, c) = (norm(lo), norm(hi));
+                let (a, c) = if a <= c { (a, c) } else { (c, a) };
+                err.dev[b] > 0 && a <= value as f64 && value as f64 <= c
+            });
+            if hit { 1.0 } else { 0.0 }
+        }
+        RenderMode::Mip => {
+            bins.map(|b| err.share(b) * err.typical_deviation(b, min, max))
+                .sum::<f64>()
+                / vspan.abs().max(f64::MIN_POSITIVE)
+        }
+    };
+    Some(if e.is_nan() { 1.0 } else { e.clamp(0.0, 1.0) })
+}
+
+/// The expected error a node adds to a pixel, in 0..=1: for DVR the
+/// per-sample [`node_tf_error_expected`] accumulated over the node's depth
+/// along a ray, `brick * 2^(levels - 1 - level)` finest voxels (opacity is per
+/// voxel length, so a change of the classified sample of `e` over `n` voxels
+/// changes the composited pixel by up to about `n * e` while that is small),
+/// capped at 1; for iso-surfaces and MIP, where one sample decides the pixel,
+/// the per-sample error itself. What [`LodMetric::ErrorAware`] ranks by.
+pub fn node_pixel_error(
+    info: &NodeInfo,
+    level: u8,
+    mode: RenderMode,
+    table: &TfErrorTable,
+    layout: &OctreeLayout,
+) -> Option<f64> {
+    let e = node_tf_error_expected(info, mode, table, layout)?;
+    Some(match mode {
+        RenderMode::Dvr => {
+            let finest = layout.levels.saturating_sub(1);
+            let depth = layout.brick as f64 * 2f64.powi((finest - level.min(finest)) as i32);
+            (e * depth).min(1.0)
+        }
+        _ => e,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    proptest! {
+        /// The sparse table agrees with a scan of the lookup.
+        #[test]
+        fn range_matches_a_scan(
+            entries in proptest::collection::vec(proptest::array::uniform4(0.0f32..1.0), 2..40),
+            a in 0.0f64..1.0, b in 0.0f64..1.0,
+        ) {
+            let tf = TransferFunction::from_entries(entries);
+            let t = TfErrorTable::new(&tf);
+            let r = t.range(a, b);
+            let (lo, hi) = if a <= b { (a, b) } else { (b, a) };
+            for i in 0..=200 {
+                let v = tf.lookup(lo + (hi - lo) * i as f64 / 200.0);
+                for c in 0..4 {
+                    prop_assert!(v[c] >= r[c][0] - 1e-6 && v[c] <= r[c][1] + 1e-6);
+                }
+            }
+            // Tight: the end points are attained.
+            let la = tf.lookup(lo);
+            for c in 0..4 {
+                prop_assert!(r[c][0] <= la[c] && la[c] <= r[c][1]);
+            }
+        }
+
+        /// Encoding rounds up and stays within the node's range.
+        #[test]
+        fn encoding_never_underestimates(d in 0.0f64..300.0, min in -100.0f64..100.0, span in 0.001f64..500.0) {
+            let mut bins = [BinStats::default(); ERROR_BINS];
+            bins[3] = BinStats { count: 5, dev: d, sum_sq: 5.0 * d * d * 0.25 };
+            let e = NodeError::encode(&bins, min, min + span);
+            prop_assert!(e.typical_deviation(3, min, min + span) >= (d * 0.5).min(span) * (1.0 - 1e-12));
+            prop_assert_eq!(e.weight[3], DEV_SCALE);
+            prop_assert!(e.is_occupied(3) && !e.is_occupied(2));
+            prop_assert!(e.deviation(3, min, min + span) >= d.min(span) * (1.0 - 1e-12));
+        }
+    }
+
+    #[test]
+    fn bins_cover_the_range() {
+        assert_eq!(bin_of(0.0, 0.0, 16.0), 0);
+        assert_eq!(bin_of(15.99, 0.0, 16.0), 15);
+        assert_eq!(bin_of(16.0, 0.0, 16.0), 15);
+        assert_eq!(bin_of(1.0, 1.0, 1.0), 0);
+        assert_eq!(bin_of(f64::NAN, 0.0, 1.0), 0);
+    }
+}

@@ -1,0 +1,399 @@
+//! Format version 2's per-node error bounds: the bound holds (drawing a node
+//! instead of the finest data never changes a classified sample by more than
+//! the recorded bound says), version 2 round trip, version-1 stores still
+//! open, a corrupt error section is a typed error.
+#![allow(missing_docs)]
+
+mod common;
+
+use brickray_core::{
+    BrickSource, DType, NodeKey, NodeKind, RenderMode, TfErrorTable, TransferFunction,
+    node_tf_error,
+};
+use brickray_store::{BuildOptions, ERROR_ENTRY_LEN, Filter, StoreError, build, open};
+use common::*;
+use proptest::prelude::*;
+use std::path::Path;
+
+const HEADER_LEN: usize = 128;
+const ENTRY_LEN: usize = 48;
+
+/// Trilinear, clamp-to-edge, voxel `k` at coordinate `k`.
+fn trilinear(vol: &[f32], d: [u32; 3], p: [f64; 3]) -> f64 {
+    let mut i0 = [0usize; 3];
+    let mut i1 = [0usize; 3];
+    let mut f = [0f64; 3];
+    for a in 0..3 {
+        let m = (d[a] - 1) as f64;
+        let q = p[a].clamp(0.0, m);
+        let fl = q.floor();
+        i0[a] = fl as usize;
+        i1[a] = (i0[a] + 1).min(d[a] as usize - 1);
+        f[a] = q - fl;
+    }
+    let at = |x: usize, y: usize, z: usize| vol[x + d[0] as usize * (y + d[1] as usize * z)] as f64;
+    let mut s = 0.0;
+    for c in 0..8 {
+        let (x, wx) = if c & 1 == 0 {
+            (i0[0], 1.0 - f[0])
+        } else {
+            (i1[0], f[0])
+        };
+        let (y, wy) = if c & 2 == 0 {
+            (i0[1], 1.0 - f[1])
+        } else {
+            (i1[1], f[1])
+        };
+        let (z, wz) = if c & 4 == 0 {
+            (i0[2], 1.0 - f[2])
+        } else {
+            (i1[2], f[2])
+        };
+        s += wx * wy * wz * at(x, y, z);
+    }
+    s
+}
+
+/// The opacity-weighted classified sample.
+fn classify(tf: &TransferFunction, v: f64) -> [f64; 4] {
+    let c = tf.lookup(v);
+    [c[3], c[3] * c[0], c[3] * c[1], c[3] * c[2]]
+}
+
+fn volume(dims: [u32; 3], dtype: DType, seed: u64, smooth: f32) -> Vec<u8> {
+    let n = dims.iter().map(|&d| d as usize).product::<usize>();
+    let mut h = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
+    let mut v = Vec::with_capacity(n);
+    for z in 0..dims[2] {
+        for y in 0..dims[1] {
+            for x in 0..dims[0] {
+                h ^= h << 13;
+                h ^= h >> 7;
+                h ^= h << 17;
+                let noise = (h % 1000) as f32 / 1000.0;
+                let wave = ((x as f32 * 0.7).sin() + (y as f32 * 0.4).cos() + z as f32 * 0.1) / 3.0
+                    * 0.5
+                    + 0.5;
+                let t = smooth * wave + (1.0 - smooth) * noise;
+                v.push(match dtype {
+                    DType::U8 => (t * 255.0).round().clamp(0.0, 255.0),
+                    _ => t * 3.0 - 1.0,
+                });
+            }
+        }
+    }
+    encode(dtype, &v)
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 20, ..ProptestConfig::default() })]
+
+    /// For random volumes, transfer functions and points of every coarser
+    /// node, the classified coarse and finest samples differ by at most the
+    /// node's DVR error (both placements of coarse voxels: centre at
+    /// `k * 2^s` and at `(k + 1/2) * 2^s - 1/2` finest voxels).
+    #[test]
+    fn drawing_a_node_never_exceeds_its_bound(
+        dims in proptest::array::uniform3(1u32..14),
+        f32_data in any::<bool>(),
+        seed in any::<u64>(),
+        smooth in 0.0f32..1.0,
+        brick in 2u32..6,
+        apron in 1u32..3,
+        max_filter in any::<bool>(),
+        entries in proptest::collection::vec(proptest::array::uniform4(0.0f32..1.0), 2..12),
+        pts in proptest::collection::vec(proptest::array::uniform3(0.0f64..1.0), 12),
+    ) {
+        let dtype = if f32_data { DType::F32 } else { DType::U8 };
+        let dir = tempfile::tempdir().unwrap();
+        let bytes = volume(dims, dtype, seed, smooth);
+        let mut r = MemReader::new(dims, dtype, bytes.clone());
+        let out = dir.path().join("v.brs");
+        let filter = if max_filter { Filter::Max } else { Filter::Average };
+        let o = BuildOptions { brick, apron, filter, ..BuildOptions::default() };
+        let report = build(&mut r, &out, &o).unwrap();
+        prop_assert!(report.errors);
+        let store = open(&out).unwrap();
+        prop_assert!(store.has_errors());
+        let layout = store.layout().clone();
+        let levels = reference_levels(&layout, decode(dtype, &bytes), filter);
+        let tf = TransferFunction::from_entries(entries);
+        let table = TfErrorTable::new(&tf);
+        let finest = layout.levels - 1;
+        let fd = layout.level_dims(finest);
+        for rec in store.nodes() {
+            let key = rec.key;
+            if key.level >= finest || rec.info.kind != NodeKind::Data {
+                continue;
+            }
+            let bound = node_tf_error(&rec.info, RenderMode::Dvr, &table, &layout).unwrap();
+            let s = (finest - key.level) as i32;
+            let scale = 2f64.powi(s);
+            let ld = layout.level_dims(key.level);
+            for p in &pts {
+                // A point of the node's region (level coordinates), inside the level volume.
+                let q: [f64; 3] = std::array::from_fn(|a| {
+                    let lo = ([key.x, key.y, key.z][a] * brick) as f64;
+                    let hi = (lo + brick as f64).min((ld[a] - 1) as f64);
+                    lo + (hi - lo).max(0.0) * p[a]
+                });
+                let c = trilinear(&levels[key.level as usize], ld, q);
+                let cv = classify(&tf, layout.volume.normalize(c as f32) as f64);
+                for centred in [false, true] {
+                    let fq: [f64; 3] = std::array::from_fn(|a| {
+                        if centred { (q[a] + 0.5) * scale - 0.5 } else { q[a] * scale }
+                    });
+                    let f = trilinear(&levels[finest as usize], fd, fq);
+                    let fv = classify(&tf, layout.volume.normalize(f as f32) as f64);
+                    for ch in 0..4 {
+                        prop_assert!(
+                            (cv[ch] - fv[ch]).abs() <= bound + 1e-5,
+                            "node {key:?} point {q:?} channel {ch}: coarse {c} fine {f}, change {} > bound {bound}",
+                            (cv[ch] - fv[ch]).abs()
+                        );
+                    }
+                    // The raw deviation bound itself.
+                    let err = rec.info.error.unwrap();
+                    let dmax = err.max_deviation(rec.info.min as f64, rec.info.max as f64);
+                    let spread = rec.info.max as f64 - rec.info.min as f64;
+                    prop_assert!((f - c).abs() <= dmax + 1e-4 * (1.0 + spread), "raw change {} > {dmax}", (f - c).abs());
+                }
+            }
+        }
+    }
+}
+
+fn small_store(dir: &Path) -> (std::path::PathBuf, Vec<u8>) {
+    let dims = [12, 10, 7];
+    let mut r = MemReader::new(dims, DType::U8, test_volume(dims, DType::U8, 11));
+    let out = dir.join("small.brs");
+    let o = BuildOptions {
+        brick: 4,
+        apron: 1,
+        ..BuildOptions::default()
+    };
+    build(&mut r, &out, &o).unwrap();
+    let b = std::fs::read(&out).unwrap();
+    (out, b)
+}
+
+fn u64_at(b: &[u8], o: usize) -> u64 {
+    u64::from_le_bytes(b[o..o + 8].try_into().unwrap())
+}
+
+fn reseal_header(b: &mut [u8]) {
+    let crc = crc32fast::hash(&b[..124]);
+    b[124..128].copy_from_slice(&crc.to_le_bytes());
+}
+
+fn error_section(b: &[u8]) -> std::ops::Range<usize> {
+    let end = (u64_at(b, 80) + u64_at(b, 88)) as usize;
+    end..b.len()
+}
+
+fn reseal_errors(b: &mut [u8]) {
+    let r = error_section(b);
+    let crc = crc32fast::hash(&b[r]);
+    b[120..124].copy_from_slice(&crc.to_le_bytes());
+    reseal_header(b);
+}
+
+/// The same store as format version 1: no error section, version 1, flag
+/// and error fields cleared.
+fn as_version1(b: &[u8]) -> Vec<u8> {
+    let mut v = b[..error_section(b).start].to_vec();
+    v[8..12].copy_from_slice(&1u32.to_le_bytes());
+    v[30] &= !4;
+    v[108..124].fill(0);
+    reseal_header(&mut v);
+    v
+}
+
+fn open_bytes(dir: &Path, name: &str, b: &[u8]) -> Result<brickray_store::Store, StoreError> {
+    let p = dir.join(name);
+    std::fs::write(&p, b).unwrap();
+    open(&p)
+}
+
+#[test]
+fn version_2_round_trip() {
+    let dir = tempfile::tempdir().unwrap();
+    let (path, b) = small_store(dir.path());
+    assert_eq!(u32::from_le_bytes(b[8..12].try_into().unwrap()), 2);
+    assert_eq!(b[30] & 4, 4, "error flag");
+    let s = open(&path).unwrap();
+    assert_eq!(s.version(), 2);
+    assert!(s.has_errors());
+    let n = s.nodes().count();
+    assert_eq!(error_section(&b).len(), n * ERROR_ENTRY_LEN);
+    assert_eq!(b[108..120], [0u8; 12], "reserved");
+    assert_eq!(
+        u32::from_le_bytes(b[120..124].try_into().unwrap()),
+        crc32fast::hash(&b[error_section(&b)])
+    );
+    let finest = s.levels() - 1;
+    let mut some_error = false;
+    for rec in s.nodes() {
+        let e = rec.info.error.expect("every node has an error entry");
+        if rec.key.level == finest || rec.info.kind == NodeKind::Empty {
+            assert_eq!(e.occupied, 0, "{:?}", rec.key);
+        } else {
+            assert_ne!(e.occupied, 0, "{:?}", rec.key);
+        }
+        some_error |= e.dev.iter().any(|&d| d > 0);
+        // The typical deviation never exceeds the bound; shares sum to 1.
+        for b in 0..brickray_core::ERROR_BINS {
+            assert!(e.rms[b] <= e.dev[b], "{:?} bin {b}", rec.key);
+            if !e.is_occupied(b) {
+                assert_eq!((e.dev[b], e.rms[b], e.weight[b]), (0, 0, 0));
+            }
+        }
+        if e.occupied != 0 {
+            let total: f64 = (0..brickray_core::ERROR_BINS).map(|b| e.share(b)).sum();
+            assert!(
+                (total - 1.0).abs() < 1e-3,
+                "{:?}: shares sum to {total}",
+                rec.key
+            );
+        }
+        // Through the BrickSource too.
+        assert_eq!(s.node(rec.key).unwrap().error, Some(e));
+    }
+    assert!(some_error, "a noisy volume has coarse error somewhere");
+    // Byte-identical on a rebuild (deterministic).
+    let dir2 = tempfile::tempdir().unwrap();
+    let (_, b2) = small_store(dir2.path());
+    assert_eq!(b, b2);
+}
+
+#[test]
+fn version_1_stores_still_open() {
+    let dir = tempfile::tempdir().unwrap();
+    let (path, b) = small_store(dir.path());
+    let v2 = open(&path).unwrap();
+    let v1 = open_bytes(dir.path(), "v1.brs", &as_version1(&b)).unwrap();
+    assert_eq!(v1.version(), 1);
+    assert!(!v1.has_errors());
+    let bb = v1.layout().brick_bytes();
+    let (mut x, mut y) = (vec![0u8; bb], vec![0u8; bb]);
+    for rec in v2.nodes() {
+        let i1 = v1.info(rec.key).unwrap();
+        assert_eq!(i1.error, None);
+        assert_eq!(
+            (i1.kind, i1.min, i1.max),
+            (rec.info.kind, rec.info.min, rec.info.max)
+        );
+        v1.read(rec.key, &mut x).unwrap();
+        v2.read(rec.key, &mut y).unwrap();
+        assert_eq!(x, y);
+    }
+    // A version-1 header may not carry the error flag or fields.
+    let mut bad = as_version1(&b);
+    bad[30] |= 4;
+    reseal_header(&mut bad);
+    assert!(matches!(
+        open_bytes(dir.path(), "bad.brs", &bad),
+        Err(StoreError::BadHeader { field: "flags", .. })
+    ));
+    let mut bad = as_version1(&b);
+    bad[121] = 1;
+    reseal_header(&mut bad);
+    assert!(matches!(
+        open_bytes(dir.path(), "bad.brs", &bad),
+        Err(StoreError::BadHeader {
+            field: "reserved",
+            ..
+        })
+    ));
+    // Version 3 is not read.
+    let mut bad = b.clone();
+    bad[8..12].copy_from_slice(&3u32.to_le_bytes());
+    reseal_header(&mut bad);
+    assert!(matches!(
+        open_bytes(dir.path(), "bad.brs", &bad),
+        Err(StoreError::UnsupportedVersion { version: 3, .. })
+    ));
+}
+
+#[test]
+fn corrupt_error_sections_are_typed_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_, b) = small_store(dir.path());
+    let sec = error_section(&b);
+    // A flipped byte: checksum.
+    let mut bad = b.clone();
+    bad[sec.start + 7] ^= 0x40;
+    assert!(matches!(
+        open_bytes(dir.path(), "c.brs", &bad),
+        Err(StoreError::ErrorsChecksum { .. })
+    ));
+    // A non-zero reserved field, checksum recomputed: names the node.
+    let mut bad = b.clone();
+    bad[sec.start + 3 * ERROR_ENTRY_LEN + 2] = 1;
+    reseal_errors(&mut bad);
+    assert!(matches!(
+        open_bytes(dir.path(), "c.brs", &bad),
+        Err(StoreError::BadNode {
+            field: "error reserved",
+            ..
+        })
+    ));
+    // Truncated anywhere inside the section: typed.
+    for cut in [1, ERROR_ENTRY_LEN, sec.len() - 1] {
+        let bad = &b[..b.len() - cut];
+        assert!(
+            matches!(
+                open_bytes(dir.path(), "c.brs", bad),
+                Err(StoreError::Truncated {
+                    section: "error section",
+                    ..
+                })
+            ),
+            "cut {cut}"
+        );
+    }
+    // Trailing bytes after it.
+    let mut bad = b.clone();
+    bad.push(0);
+    assert!(open_bytes(dir.path(), "c.brs", &bad).is_err());
+    // The section's flag cleared with the section present: the file is
+    // longer than the store; its CRC without the flag: refused.
+    let mut bad = b.clone();
+    bad[30] &= !4;
+    reseal_header(&mut bad);
+    assert!(matches!(
+        open_bytes(dir.path(), "c.brs", &bad),
+        Err(StoreError::BadHeader { .. })
+    ));
+    let mut bad = b[..sec.start].to_vec();
+    bad[30] &= !4;
+    reseal_header(&mut bad);
+    assert!(matches!(
+        open_bytes(dir.path(), "c.brs", &bad),
+        Err(StoreError::BadHeader {
+            field: "errors_crc",
+            ..
+        })
+    ));
+    // Reserved header bytes 108..120 of version 2.
+    let mut bad = b.clone();
+    bad[110] = 1;
+    reseal_header(&mut bad);
+    assert!(matches!(
+        open_bytes(dir.path(), "c.brs", &bad),
+        Err(StoreError::BadHeader {
+            field: "reserved",
+            ..
+        })
+    ));
+    // Without the section (flag and fields cleared, bytes removed): a valid
+    // version-2 store without error bounds.
+    let mut ok = b[..sec.start].to_vec();
+    ok[30] &= !4;
+    ok[120..124].fill(0);
+    reseal_header(&mut ok);
+    let s = open_bytes(dir.path(), "ok.brs", &ok).unwrap();
+    assert_eq!(s.version(), 2);
+    assert!(!s.has_errors());
+    let _ = (HEADER_LEN, ENTRY_LEN, NodeKey::ROOT);
+}
