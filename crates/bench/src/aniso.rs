@@ -129,16 +129,10 @@ fn cut_volume(
     Ok((vol, r.data_leaves, per_level))
 }
 
-pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
-    let size: u32 = crate::arg(args, "--size", 160)?;
-    let step: f32 = crate::arg(args, "--step", 0.5)?;
-    let scene: String = crate::arg(args, "--scene", "dvr_translucent".to_string())?;
-    let (_, mode, tf) = ct::scenes()
-        .into_iter()
-        .find(|(n, _, _)| *n == scene)
-        .ok_or("--scene: one of dvr_translucent, dvr_opaque, iso, mip")?;
+/// The shared head CT with every third slice kept (0.96 x 0.96 x 4.5 mm).
+pub(crate) fn ct_every_third_slice() -> Result<Volume, String> {
     let path = brickray_harness::shared_volume("invesalius_cranium_ct")
-        .ok_or("the aniso suite needs ../shared/data/invesalius_cranium_ct")?;
+        .ok_or("this suite needs ../shared/data/invesalius_cranium_ct")?;
     let full = brickray_io::read_volume(&path).map_err(|e| e.to_string())?;
     let d = full.desc().clone();
     let slice = d.dims[0] as usize * d.dims[1] as usize;
@@ -152,9 +146,21 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
     let desc = VolumeDesc {
         dims: [d.dims[0], d.dims[1], nz],
         spacing: [d.spacing[0], d.spacing[1], d.spacing[2] * 3.0],
-        ..d.clone()
+        ..d
     };
-    let vol = Volume::new(desc.clone(), VolumeData::I16(thick)).map_err(|e| e.to_string())?;
+    Volume::new(desc, VolumeData::I16(thick)).map_err(|e| e.to_string())
+}
+
+pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
+    let size: u32 = crate::arg(args, "--size", 160)?;
+    let step: f32 = crate::arg(args, "--step", 0.5)?;
+    let scene: String = crate::arg(args, "--scene", "dvr_translucent".to_string())?;
+    let (_, mode, tf) = ct::scenes()
+        .into_iter()
+        .find(|(n, _, _)| *n == scene)
+        .ok_or("--scene: one of dvr_translucent, dvr_opaque, iso, mip")?;
+    let vol = ct_every_third_slice()?;
+    let desc = vol.desc().clone();
     let frame = VolumeFrame::centered(desc.dims, desc.spacing);
     let camera = Camera::orbit(frame.center(), 1.6, 0.6, 0.35);
     let settings = RenderSettings {

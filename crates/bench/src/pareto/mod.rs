@@ -21,7 +21,9 @@ mod scenes;
 
 use crate::Figures;
 use crate::runner::{Runner, finite_db, median, round2};
-use brickray_core::{Accel, RenderMode, RenderSettings, Shading, TransferFunction, U8Filtering};
+use brickray_core::{
+    Accel, LodMetric, RenderMode, RenderSettings, Shading, TransferFunction, U8Filtering,
+};
 use brickray_harness::GpuContext;
 use brickray_reference::{ReferenceOptions, mean_flip, psnr, render_reference, ssim};
 use brickray_render::{
@@ -38,6 +40,7 @@ use std::sync::Arc;
 struct RendererKey {
     in_core: bool,
     tolerance_px: f32,
+    metric: LodMetric,
     u8_filtering: U8Filtering,
     policy: VisibilityPolicy,
 }
@@ -46,6 +49,7 @@ struct RendererKey {
 const DEFAULT_KEY: RendererKey = RendererKey {
     in_core: false,
     tolerance_px: 1.0,
+    metric: LodMetric::Geometric,
     u8_filtering: U8Filtering::Exact,
     policy: VisibilityPolicy::None,
 };
@@ -105,6 +109,15 @@ fn configs(mode: RenderMode, u8_volume: bool) -> Vec<Config> {
             ..DEFAULT_KEY
         };
         out.push(cfg("lod_geometric", format!("{tol} px"), key, base));
+    }
+    // The error budget in 8-bit levels x pixels: 255 refines a node of
+    // full-scale error to 1 px, like the geometric rule at 1 px.
+    for budget in [32.0f32, 64.0, 128.0, 255.0, 510.0, 1020.0, 2040.0] {
+        let key = RendererKey {
+            metric: LodMetric::ErrorAware { budget },
+            ..DEFAULT_KEY
+        };
+        out.push(cfg("lod_error", format!("{budget}"), key, base));
     }
     for ert in [None, Some(0.9f32), Some(0.95), Some(0.999)] {
         let s = RenderSettings {
@@ -201,9 +214,18 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
     let mut all_on_front = true;
     let mut per_scene = serde_json::Map::new();
     let (mut lod_gains, mut preint_gains) = (Vec::new(), Vec::new());
+    let mut aniso_bricks = None;
     for scene in &scenes {
         let dir = tempfile::tempdir().map_err(|e| e.to_string())?;
-        let store = brickray_harness::store_of(&scene.volume, &dir.path().join("v.brs"));
+        let path = dir.path().join("v.brs");
+        let mut reader = brickray_io::MemoryReader::new(scene.volume.clone(), "memory");
+        let build = brickray_store::BuildOptions {
+            anisotropic: scene.anisotropic,
+            ..Default::default()
+        };
+        brickray_store::build(&mut reader, &path, &build).map_err(|e| e.to_string())?;
+        let store: Arc<dyn brickray_core::BrickSource> =
+            Arc::new(brickray_store::open(&path).map_err(|e| e.to_string())?);
         for (mode_name, mode, tf) in &scene.modes {
             let name = format!("{}_{}", scene.name, mode_name);
             let cfgs = configs(*mode, scene.volume.desc().dtype == brickray_core::DType::U8);
@@ -279,6 +301,9 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
                 preint_gains.push(g);
             }
             let d = &m[0];
+            if scene.anisotropic && *mode_name == "dvr" {
+                aniso_bricks = Some(d.bricks);
+            }
             per_scene.insert(
                 name,
                 json!({
@@ -308,6 +333,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         "preintegration_gain_db_at_step_2".into(),
         json!(med(&preint_gains)),
     );
+    f.insert("anisotropic_ct_bricks_at_1px".into(), json!(aniso_bricks));
     f.insert("scenes".into(), serde_json::Value::Object(per_scene));
     Ok(f)
 }
@@ -420,6 +446,7 @@ fn measure(
                 scene.frame,
                 OutOfCoreConfig {
                     tolerance_px: k.tolerance_px,
+                    lod_metric: k.metric,
                     upload_budget_bytes: 1 << 30,
                     ..Default::default()
                 },

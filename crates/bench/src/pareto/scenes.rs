@@ -11,12 +11,16 @@ pub(crate) struct Scene {
     pub(crate) volume: Volume,
     pub(crate) frame: VolumeFrame,
     pub(crate) camera: Camera,
+    /// Whether its store is built as an anisotropic pyramid.
+    pub(crate) anisotropic: bool,
     /// `(mode name, mode, TF)`.
     pub(crate) modes: Vec<(&'static str, RenderMode, TransferFunction)>,
 }
 
-/// The volumes, by name, of `wanted` (all when empty): `ct`, `mri`, `nuclei`,
-/// `ml` (Marschner-Lobb, high frequency), `noise` (procedural fractal noise).
+/// The volumes, by name, of `wanted` (all when empty): `ct`, `ct5` (the head
+/// CT with every third slice, 4.5 mm, stored as an anisotropic pyramid), `mri`,
+/// `nuclei`, `ml` (Marschner-Lobb, high frequency), `noise` (procedural
+/// fractal noise).
 pub(crate) fn scenes(wanted: &[String], ml_side: u32) -> Result<Vec<Scene>, String> {
     let want = |n: &str| wanted.is_empty() || wanted.iter().any(|w| w == n);
     let mut out = Vec::new();
@@ -32,6 +36,16 @@ pub(crate) fn scenes(wanted: &[String], ml_side: u32) -> Result<Vec<Scene>, Stri
             (iso.0, iso.1, iso.2),
             (mip.0, mip.1, mip.2),
         ]));
+    }
+    if want("ct5") {
+        let [translucent, ..] = ct::scenes();
+        let mut s = scene("ct5", crate::aniso::ct_every_third_slice()?, vec![(
+            "dvr",
+            translucent.1,
+            translucent.2,
+        )]);
+        s.anisotropic = true;
+        out.push(s);
     }
     if want("mri") {
         let tf = TransferFunction::from_points(
@@ -94,7 +108,9 @@ pub(crate) fn scenes(wanted: &[String], ml_side: u32) -> Result<Vec<Scene>, Stri
         out.push(scene("noise", noise(ml_side), vec![("dvr", RenderMode::Dvr, tf)]));
     }
     if out.is_empty() {
-        return Err(format!("no scene among {wanted:?} (ct, mri, nuclei, ml, noise)"));
+        return Err(format!(
+            "no scene among {wanted:?} (ct, ct5, mri, nuclei, ml, noise)"
+        ));
     }
     Ok(out)
 }
@@ -112,6 +128,7 @@ fn scene(
         volume,
         frame,
         camera,
+        anisotropic: false,
         modes,
     }
 }
