@@ -67,4 +67,4 @@ pub use metrics::{
     ImageComparison, assert_close, compare, compare_and_report, max_abs_diff, mean_flip, psnr,
     test_output_dir,
 };
-pub use render::{DEFAULT_STEP_FACTOR, ReferenceOptions, render_reference};
+pub use render::{DEFAULT_STEP_FACTOR, EXACT_STEP_FACTOR, ReferenceOptions, render_reference};
