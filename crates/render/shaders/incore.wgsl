@@ -149,7 +149,10 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             acc.samples = acc.samples + 1u;
             if (MODE == MODE_DVR) {
                 var front = v;
-                if (PREINT) { front = preint_front(&acc, cur, t, dt, t0, v); }
+                if (PREINT) {
+                    preint_fetch(&acc, cur, t, dt, t0);
+                    front = preint_front(&acc, t, dt, v);
+                }
                 if (dvr_sample(&acc, cur, r, t, front, v, tf_v)) { break; }
             } else if (MODE == MODE_ISO) {
                 if (v >= frame.isovalue) {

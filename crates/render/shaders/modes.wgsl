@@ -73,20 +73,28 @@ fn preint_joined(acc: Accum, t: f32, dt: f32) -> bool {
 // Pre-integration: the front value of the segment [t - dt, t] ending at the
 // sample of value v, and that sample recorded as the next segment's front. The
 // front is the previous sample's value when it was taken one step before; else
-// (after skipped empty space) it is sampled at t - dt when that lies at or after
-// `t_min` (the ray's start, or out of core the leaf's entry); else the segment
-// is taken as constant (front = v, the corrected single sample).
-fn preint_front(acc: ptr<function, Accum>, c: Cursor, t: f32, dt: f32, t_min: f32, v: f32) -> f32 {
-    var front = v;
-    if (preint_joined(*acc, t, dt)) {
-        front = (*acc).prev_v;
-    } else if (t - dt >= t_min) {
-        front = cursor_value(c, t - dt);
-        (*acc).samples = (*acc).samples + 1u;
-    }
+// the segment is taken as constant (front = v, the corrected single sample).
+// In core the kernel samples the front at t - dt first after skipped empty
+// space (`preint_fetch`), so the constant segment remains only at a ray's first
+// sample. Out of core it does not (a second atlas sample in the march loop, in
+// any form tried, crashed lavapipe's shader compiler): the first sample after
+// skipped space (an empty leaf or sub-cell, transparent by construction) or a
+// change of level composites a constant segment.
+fn preint_front(acc: ptr<function, Accum>, t: f32, dt: f32, v: f32) -> f32 {
+    let front = select(v, (*acc).prev_v, preint_joined(*acc, t, dt));
     (*acc).prev_t = t;
     (*acc).prev_v = v;
     return front;
+}
+
+// Pre-integration after skipped space: records the value at t - dt (when at or
+// after t_min, the ray's start) as the front of the segment ending at t.
+fn preint_fetch(acc: ptr<function, Accum>, c: Cursor, t: f32, dt: f32, t_min: f32) {
+    if (!preint_joined(*acc, t, dt) && t - dt >= t_min) {
+        (*acc).prev_t = t - dt;
+        (*acc).prev_v = cursor_value(c, t - dt);
+        (*acc).samples = (*acc).samples + 1u;
+    }
 }
 
 // Blinn-Phong with a headlight (two-sided), clamped to 0..1. `g.xyz` is the
