@@ -32,7 +32,6 @@ const TABLE_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
 struct TableKey {
     step_factor: f32,
     rows: u32,
-    preint: bool,
 }
 
 /// Columns and rows of a pre-integrated table layer.
@@ -50,6 +49,9 @@ pub(crate) struct TfTables {
     /// The pre-integrated table (or the 1x1 stand-in while it is off).
     preint: Option<(wgpu::Texture, wgpu::TextureView)>,
     table_key: Option<TableKey>,
+    /// What the pre-integrated table was built for (`None`: the stand-in, or
+    /// stale). Kept while pre-integration is off, so toggling it rebuilds nothing.
+    preint_key: Option<TableKey>,
     bind_group: Option<wgpu::BindGroup>,
     current: Option<TransferFunction>,
 }
@@ -128,6 +130,7 @@ impl TfTables {
             table: None,
             preint: None,
             table_key: None,
+            preint_key: None,
             bind_group: None,
             current: None,
         })
@@ -194,11 +197,7 @@ impl TfTables {
         let Some(tf) = self.current.as_ref() else {
             return Ok(0);
         };
-        let key = TableKey {
-            step_factor,
-            rows,
-            preint,
-        };
+        let key = TableKey { step_factor, rows };
         let mut written = 0;
         if self.table_key != Some(key) {
             let max_width = device.limits().max_texture_dimension_2d;
@@ -248,19 +247,7 @@ impl TfTables {
                 size,
             );
             written += halfs.len() as u64 * 2;
-            let old = self.preint.take();
-            let old_size = old.as_ref().map(|(tex, _)| tex.size());
-            let (preint, bytes) = upload_preint(
-                device,
-                queue,
-                old,
-                preint.then(|| tf.preintegrated_table(step_factor, t.rows, PREINT_SIZE)),
-            )?;
-            if old_size != Some(preint.0.size()) {
-                self.bind_group = None;
-            }
-            self.preint = Some(preint);
-            written += bytes;
+            self.preint_key = None;
             written += self.info.write(
                 queue,
                 TfInfo {
@@ -271,6 +258,21 @@ impl TfTables {
                 },
             );
             self.table_key = Some(key);
+        }
+        // The pre-integrated table when asked for and stale; a stand-in until the
+        // first one.
+        let build = preint && self.preint_key != Some(key);
+        if build || self.preint.is_none() {
+            let old = self.preint.take();
+            let old_size = old.as_ref().map(|(tex, _)| tex.size());
+            let table = build.then(|| tf.preintegrated_table(step_factor, rows.max(1), PREINT_SIZE));
+            let (pair, bytes) = upload_preint(device, queue, old, table)?;
+            if old_size != Some(pair.0.size()) {
+                self.bind_group = None;
+            }
+            self.preint = Some(pair);
+            self.preint_key = build.then_some(key);
+            written += bytes;
         }
         if self.bind_group.is_none() {
             let (_, view) = self.table.as_ref().expect("built above");
