@@ -84,7 +84,8 @@ fn in_core(sc: &Scene) -> VolumeRenderer {
     let g = gpu();
     let mut r = VolumeRenderer::new(&g.device, targets()).unwrap();
     r.set_volume(&g.device, &g.queue, &sc.vol).unwrap();
-    r.set_transfer_function(&g.device, &g.queue, &sc.tf).unwrap();
+    r.set_transfer_function(&g.device, &g.queue, &sc.tf)
+        .unwrap();
     r
 }
 
@@ -108,7 +109,10 @@ fn against_exact(name: &str, r: &mut VolumeRenderer, sc: &Scene) {
             pre.chunks_exact(4).any(|p| p[0] > 40),
             "{name}: pre-integrated image is black"
         );
-        assert!(p_plain < 35.0, "{name}: plain is not measurably off: {p_plain}");
+        assert!(
+            p_plain < 35.0,
+            "{name}: plain is not measurably off: {p_plain}"
+        );
         assert!(
             p_pre >= p_plain + 3.0,
             "{name}, shaded {shaded}: plain {p_plain}, pre-integrated {p_pre}"
@@ -219,7 +223,8 @@ fn out_of_core_preintegration_is_closer_to_the_exact_integral() {
     };
     r.set_volume_source(&g.device, &g.queue, source, sc.frame, config)
         .unwrap();
-    r.set_transfer_function(&g.device, &g.queue, &sc.tf).unwrap();
+    r.set_transfer_function(&g.device, &g.queue, &sc.tf)
+        .unwrap();
     against_exact("out of core", &mut r, &sc);
     // And against the CPU reference's pre-integration (reported; brick
     // boundaries after empty leaves take their first segment as constant).

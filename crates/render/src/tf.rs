@@ -265,7 +265,8 @@ impl TfTables {
         if build || self.preint.is_none() {
             let old = self.preint.take();
             let old_size = old.as_ref().map(|(tex, _)| tex.size());
-            let table = build.then(|| tf.preintegrated_table(step_factor, rows.max(1), PREINT_SIZE));
+            let table =
+                build.then(|| tf.preintegrated_table(step_factor, rows.max(1), PREINT_SIZE));
             let (pair, bytes) = upload_preint(device, queue, old, table)?;
             if old_size != Some(pair.0.size()) {
                 self.bind_group = None;

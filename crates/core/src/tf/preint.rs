@@ -59,7 +59,11 @@ fn tau_piece(u0: f64, u1: f64, len: f64) -> f64 {
     let f = |u: f64| if u > 0.0 { u - u * u.ln() } else { 0.0 };
     let v = if (u1 - u0).abs() < 1e-12 {
         let u = 0.5 * (u0 + u1);
-        if u > 0.0 { -u.ln() * len } else { f64::INFINITY }
+        if u > 0.0 {
+            -u.ln() * len
+        } else {
+            f64::INFINITY
+        }
     } else {
         len * (f(u1) - f(u0)) / (u1 - u0)
     };

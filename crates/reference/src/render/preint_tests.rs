@@ -45,14 +45,24 @@ fn constant_field_gives_the_plain_image() {
     let s = RenderSettings::default();
     let opts = ReferenceOptions::new(24, 24).with_step_factor(0.7);
     let plain = render_reference(&vol, &frame, &tf, &camera, &s, &opts);
-    let pre = render_reference(&vol, &frame, &tf, &camera, &s, &opts.with_preintegration(true));
+    let pre = render_reference(
+        &vol,
+        &frame,
+        &tf,
+        &camera,
+        &s,
+        &opts.with_preintegration(true),
+    );
     let mut worst = 0.0f64;
     for (a, b) in plain.color.iter().zip(&pre.color) {
         for k in 0..4 {
             worst = worst.max((a[k] - b[k]).abs() as f64);
         }
     }
-    assert!(plain.color.iter().any(|c| c[3] > 0.5), "the slab is visible");
+    assert!(
+        plain.color.iter().any(|c| c[3] > 0.5),
+        "the slab is visible"
+    );
     assert!(worst < 1e-6, "{worst}");
 }
 
@@ -75,8 +85,16 @@ fn preintegration_is_closer_to_the_exact_integral() {
         let plain = img(&opts.with_step_factor(2.0));
         let pre = img(&opts.with_step_factor(2.0).with_preintegration(true));
         let (p_plain, p_pre) = (psnr(&plain, &exact), psnr(&pre, &exact));
-        println!("reference, shaded {shaded}, step 2: plain {p_plain:.2} dB, pre-integrated {p_pre:.2} dB vs exact");
-        assert!(p_plain < 35.0, "the plain image is not measurably off: {p_plain}");
-        assert!(p_pre >= p_plain + 3.0, "plain {p_plain}, pre-integrated {p_pre}");
+        println!(
+            "reference, shaded {shaded}, step 2: plain {p_plain:.2} dB, pre-integrated {p_pre:.2} dB vs exact"
+        );
+        assert!(
+            p_plain < 35.0,
+            "the plain image is not measurably off: {p_plain}"
+        );
+        assert!(
+            p_pre >= p_plain + 3.0,
+            "plain {p_plain}, pre-integrated {p_pre}"
+        );
     }
 }

@@ -487,7 +487,15 @@ fn every_shader_file_is_covered() {
 /// combination of ERT, ESS and shading.
 #[test]
 fn every_override_permutation_validates() {
-    let switches = ["ERT", "ESS", "SHADE", "PREDICT", "GUARD", "SPARSE_ESS", "PREINT"];
+    let switches = [
+        "ERT",
+        "ESS",
+        "SHADE",
+        "PREDICT",
+        "GUARD",
+        "SPARSE_ESS",
+        "PREINT",
+    ];
     let mut combos = Vec::new();
     for (_, mode) in KernelMode::ALL {
         for bits in 0..8u32 {

@@ -24,14 +24,21 @@ fn tf_of(entries: &[(f32, f32, f32)]) -> TransferFunction {
 
 fn entries() -> impl Strategy<Value = Vec<(f32, f32, f32)>> {
     prop::collection::vec(
-        (0.0f32..=1.0, 0.0f32..=1.0, prop_oneof![Just(0.0f32), Just(1.0f32), 0.0f32..=1.0]),
+        (
+            0.0f32..=1.0,
+            0.0f32..=1.0,
+            prop_oneof![Just(0.0f32), Just(1.0f32), 0.0f32..=1.0],
+        ),
         2..24,
     )
 }
 
 #[test]
 fn tau_integral_matches_a_fine_sum() {
-    let tf = TransferFunction::from_points(&[(0.2, [1.0, 1.0, 1.0, 0.0]), (0.6, [1.0, 1.0, 1.0, 0.9])], 7);
+    let tf = TransferFunction::from_points(
+        &[(0.2, [1.0, 1.0, 1.0, 0.0]), (0.6, [1.0, 1.0, 1.0, 0.9])],
+        7,
+    );
     let n = 200_000;
     let fine: f64 = (0..n)
         .map(|i| -(1.0 - tf.lookup((i as f64 + 0.5) / n as f64)[3]).ln() / n as f64)
