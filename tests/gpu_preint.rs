@@ -10,8 +10,8 @@
 //! reference pre-integrated (exact f64 segment integrals) >= 45 dB.
 
 use brickray::{
-    Camera, FrameDesc, OutOfCoreConfig, RenderSettings, Shading, TransferFunction, Volume,
-    VolumeFrame, VolumeRenderer,
+    Camera, FrameDesc, OutOfCoreConfig, PrepareError, RenderError, RenderSettings, Shading,
+    TransferFunction, Volume, VolumeFrame, VolumeRenderer,
 };
 use brickray_harness::{Offscreen, shared_gpu as gpu, target_desc as targets};
 use brickray_reference::{ReferenceOptions, psnr, render_reference};
@@ -240,4 +240,45 @@ fn out_of_core_preintegration_is_closer_to_the_exact_integral() {
     let db = psnr(&img, &cpu);
     eprintln!("out of core: GPU vs CPU pre-integrated {db:.2} dB");
     assert!(db >= 40.0, "{db} dB");
+}
+
+/// A device whose 2D arrays hold fewer layers than the octree has levels: plain
+/// DVR still renders, pre-integrated DVR is a typed error naming the limit
+/// (checked before the table is computed), never a validation error.
+#[test]
+fn too_few_array_layers_is_a_typed_error() {
+    let g =
+        brickray_harness::GpuContext::with_limits(brickray_harness::WANTED_FEATURES, |mut l| {
+            l.max_texture_array_layers = 1;
+            l
+        })
+        .expect("a device with one array layer");
+    let source = std::sync::Arc::new(
+        brickray::store::ProceduralSource::fractal_noise([256; 3], 32, 1).unwrap(),
+    );
+    let frame = VolumeFrame::centered([256; 3], [1.0; 3]);
+    let mut r = VolumeRenderer::new(&g.device, targets()).unwrap();
+    r.set_volume_source(
+        &g.device,
+        &g.queue,
+        source,
+        frame,
+        OutOfCoreConfig::default(),
+    )
+    .unwrap();
+    r.set_transfer_function(&g.device, &g.queue, &spike_tf())
+        .unwrap();
+    let target = Offscreen::new(&g.device, 32, 32);
+    let camera = Camera::orbit(frame.center(), 2.0, 0.5, 0.3);
+    let mut desc = FrameDesc::new(camera, frame, 32, 32);
+    brickray_harness::draw_frame(&g, &mut r, &target, &desc, None).expect("plain DVR renders");
+    desc.settings.preintegrated = true;
+    match brickray_harness::draw_frame(&g, &mut r, &target, &desc, None) {
+        Err(PrepareError::Render(RenderError::LowDeviceLimit {
+            limit: "max_texture_array_layers",
+            required,
+            available: 1,
+        })) => assert!(required > 1, "{required}"),
+        other => panic!("expected LowDeviceLimit(max_texture_array_layers), got {other:?}"),
+    }
 }

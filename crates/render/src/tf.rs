@@ -262,6 +262,14 @@ impl TfTables {
         // The pre-integrated table when asked for and stale; a stand-in until the
         // first one.
         let build = preint && self.preint_key != Some(key);
+        if build {
+            // Checked before the (costly) table is computed.
+            gpu::need(
+                "max_texture_array_layers",
+                rows.max(1) as u64,
+                device.limits().max_texture_array_layers as u64,
+            )?;
+        }
         if build || self.preint.is_none() {
             let old = self.preint.take();
             let old_size = old.as_ref().map(|(tex, _)| tex.size());
