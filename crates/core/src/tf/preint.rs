@@ -101,12 +101,32 @@ impl<'a> Preintegrator<'a> {
     /// The premultiplied RGBA of a segment from value `sf` to `sb` (clamped to
     /// 0..1) of `d` reference lengths, front to back.
     pub fn segment(&self, sf: f64, sb: f64, d: f64) -> [f64; 4] {
+        let mut out = [[0.0; 4]];
+        self.segment_layers(sf, sb, d, &mut out);
+        out[0]
+    }
+
+    /// [`Self::segment`] for the lengths `d * 2^l`, `l` in `0..out.len()`, at
+    /// once: the attenuation of a cell at length `2d` is the square of that at
+    /// `d`, so the exponentials are taken once for all lengths.
+    pub fn segment_layers(&self, sf: f64, sb: f64, d: f64, out: &mut [[f64; 4]]) {
+        const CHUNK: usize = 32;
+        if out.len() > CHUNK {
+            for (c, part) in out.chunks_mut(CHUNK).enumerate() {
+                self.segment_layers(sf, sb, d * ((c * CHUNK) as f64).exp2(), part);
+            }
+            return;
+        }
+        let layers = out.len();
         let (sf, sb) = (sf.clamp(0.0, 1.0), sb.clamp(0.0, 1.0));
         let delta = sb - sf;
         if delta.abs() < 1e-9 || d <= 0.0 {
             let e = self.tf.lookup(sf);
-            let a = corrected_alpha(e[3], d.max(0.0));
-            return [e[0] * a, e[1] * a, e[2] * a, a];
+            for (l, o) in out.iter_mut().enumerate() {
+                let a = corrected_alpha(e[3], (d * (l as f64).exp2()).max(0.0));
+                *o = [e[0] * a, e[1] * a, e[2] * a, a];
+            }
+            return;
         }
         let k = d / delta.abs();
         let tf0 = self.t_at(sf);
@@ -115,17 +135,27 @@ impl<'a> Preintegrator<'a> {
         let (lo, hi) = if delta > 0.0 { (sf, sb) } else { (sb, sf) };
         let m_lo = (lo * n).floor() as usize + 1;
         let m_hi = ((hi * n).ceil() as usize).saturating_sub(1);
-        let mut rgb = [0.0f64; 3];
-        let mut prev_w = 1.0f64;
+        for o in out.iter_mut() {
+            *o = [0.0; 4];
+        }
+        let mut prev_w = [1.0f64; CHUNK];
         let mut prev_c = self.colour(sf);
         // Each fine cell adds its mean colour times its exact opacity increment.
         let mut cell = |t: f64, c: [f64; 3]| {
-            let w = (-k * (t - tf0).abs()).exp();
-            let dw = (prev_w - w).max(0.0);
-            for (acc, (a, b)) in rgb.iter_mut().zip(prev_c.iter().zip(c)) {
-                *acc += 0.5 * (a + b) * dw;
+            let mut w = (-k * (t - tf0).abs()).exp();
+            let mean = [
+                0.5 * (prev_c[0] + c[0]),
+                0.5 * (prev_c[1] + c[1]),
+                0.5 * (prev_c[2] + c[2]),
+            ];
+            for (o, pw) in out.iter_mut().zip(prev_w.iter_mut()) {
+                let dw = (*pw - w).max(0.0);
+                for i in 0..3 {
+                    o[i] += mean[i] * dw;
+                }
+                *pw = w;
+                w *= w;
             }
-            prev_w = w;
             prev_c = c;
         };
         if m_lo <= m_hi {
@@ -137,8 +167,11 @@ impl<'a> Preintegrator<'a> {
         }
         let tb = self.t_at(sb);
         cell(tb, self.colour(sb));
-        let alpha = 1.0 - (-k * (tb - tf0).abs()).exp();
-        [rgb[0], rgb[1], rgb[2], alpha]
+        let mut w_end = (-k * (tb - tf0).abs()).exp();
+        for o in out.iter_mut().take(layers) {
+            o[3] = 1.0 - w_end;
+            w_end *= w_end;
+        }
     }
 
     fn colour(&self, s: f64) -> [f64; 3] {
@@ -188,7 +221,8 @@ impl TransferFunction {
 
     /// The pre-integrated table of `layers` step lengths (`step_factor * 2^l`
     /// reference lengths) at `size x size` (at least [`PREINT_MIN_SIZE`]).
-    /// Layers are computed on up to `available_parallelism` threads.
+    /// Rows are computed on up to `available_parallelism` threads, all layers
+    /// of a texel at once ([`Preintegrator::segment_layers`]).
     pub fn preintegrated_table(&self, step_factor: f32, layers: u32, size: u32) -> PreintTable {
         let size = size.max(PREINT_MIN_SIZE);
         self.preintegrated_table_any(step_factor, layers, size)
@@ -200,29 +234,47 @@ impl TransferFunction {
         let layers = layers.max(1);
         let p = Preintegrator::new(self, (size - 1) * FINE);
         let n = size as usize;
-        let mut texels = vec![[0.0f32; 4]; layers as usize * n * n];
+        let nl = layers as usize;
         let threads = std::thread::available_parallelism().map_or(1, |t| t.get());
-        let work: Vec<(usize, &mut [[f32; 4]])> = texels.chunks_mut(n).enumerate().collect();
-        let per = work.len().div_ceil(threads).max(1);
-        let mut work = work;
-        std::thread::scope(|scope| {
-            while !work.is_empty() {
-                let rest = work.split_off(per.min(work.len()));
-                let chunk = std::mem::replace(&mut work, rest);
-                let p = &p;
-                scope.spawn(move || {
-                    for (row, out) in chunk {
-                        let (l, j) = (row / n, row % n);
-                        let d = step_factor as f64 * (l as f64).exp2();
-                        let sb = j as f64 / (n - 1) as f64;
-                        for (i, texel) in out.iter_mut().enumerate() {
-                            let sf = i as f64 / (n - 1) as f64;
-                            *texel = p.segment(sf, sb, d).map(|x| x as f32);
+        let per = n.div_ceil(threads).max(1);
+        // Rows of back values per thread, every layer at once.
+        let parts: Vec<Vec<[f32; 4]>> = std::thread::scope(|scope| {
+            let handles: Vec<_> = (0..n)
+                .step_by(per)
+                .map(|j0| {
+                    let p = &p;
+                    scope.spawn(move || {
+                        let j1 = (j0 + per).min(n);
+                        let mut part = vec![[0.0f32; 4]; (j1 - j0) * n * nl];
+                        let mut seg = vec![[0.0f64; 4]; nl];
+                        for j in j0..j1 {
+                            let sb = j as f64 / (n - 1) as f64;
+                            for i in 0..n {
+                                let sf = i as f64 / (n - 1) as f64;
+                                p.segment_layers(sf, sb, step_factor as f64, &mut seg);
+                                for (l, x) in seg.iter().enumerate() {
+                                    part[(l * (j1 - j0) + (j - j0)) * n + i] = x.map(|c| c as f32);
+                                }
+                            }
                         }
-                    }
-                });
-            }
+                        part
+                    })
+                })
+                .collect();
+            handles
+                .into_iter()
+                .map(|h| h.join().expect("table thread"))
+                .collect()
         });
+        let mut texels = vec![[0.0f32; 4]; nl * n * n];
+        for (c, part) in parts.iter().enumerate() {
+            let j0 = c * per;
+            let rows = part.len() / (n * nl);
+            for l in 0..nl {
+                let src = &part[l * rows * n..(l + 1) * rows * n];
+                texels[(l * n + j0) * n..(l * n + j0 + rows) * n].copy_from_slice(src);
+            }
+        }
         PreintTable {
             size,
             layers,

@@ -78,6 +78,23 @@ proptest! {
         }
     }
 
+    /// All lengths at once (squared attenuations) equal one length at a time.
+    #[test]
+    fn layers_at_once_match_one_at_a_time(
+        e in entries(), sf in 0.0f64..=1.0, sb in 0.0f64..=1.0, d in 0.05f64..2.0,
+    ) {
+        let tf = tf_of(&e);
+        let p = Preintegrator::new(&tf, 255 * FINE);
+        let mut all = [[0.0; 4]; 5];
+        p.segment_layers(sf, sb, d, &mut all);
+        for (l, x) in all.iter().enumerate() {
+            let one = p.segment(sf, sb, d * (l as f64).exp2());
+            for k in 0..4 {
+                prop_assert!((x[k] - one[k]).abs() < 1e-9, "layer {} {:?} vs {:?}", l, x, one);
+            }
+        }
+    }
+
     /// The diagonal is the corrected single sample; every texel is a valid
     /// premultiplied colour (0 <= rgb <= alpha <= 1, up to f32 rounding); the
     /// opacity is symmetric in (front, back).
