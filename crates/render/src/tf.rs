@@ -107,6 +107,12 @@ pub(crate) fn layout_entries() -> [wgpu::BindGroupLayoutEntry; 6] {
 
 impl TfTables {
     pub(crate) fn new(device: &wgpu::Device) -> Result<TfTables, RenderError> {
+        // The corrected and the pre-integrated table.
+        gpu::need(
+            "max_sampled_textures_per_shader_stage",
+            2,
+            device.limits().max_sampled_textures_per_shader_stage as u64,
+        )?;
         let layout = gpu::scoped(device, "brickray-render tf layout", || {
             device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
                 label: Some("brickray-render transfer function"),
