@@ -14,6 +14,7 @@ mod ooc;
 mod pareto;
 mod prediction;
 mod prediction_chart;
+mod preint;
 mod raw;
 mod runner;
 mod soak;
@@ -163,6 +164,16 @@ enum Suite {
         #[arg(long)]
         brute: Option<u32>,
     },
+    /// Pre-integrated DVR: table build time, frame time against the plain
+    /// path (interleaved, head CT) and PSNR against the exact integral.
+    Preint {
+        /// Image side in pixels of the timed frames (default 256).
+        #[arg(long)]
+        size: Option<u32>,
+        /// Interleaved rounds (default 5).
+        #[arg(long)]
+        rounds: Option<usize>,
+    },
     /// Per-sample cost: brickray against a minimal kernel (the device's rate), in
     /// core and out of core, DVR, shaded DVR, iso and MIP.
     Raw {
@@ -268,6 +279,7 @@ fn main() -> ExitCode {
         Suite::Ooc { .. } => ooc::run(rest),
         Suite::Pareto { .. } => pareto::run(rest),
         Suite::Prediction { .. } => prediction::run(rest),
+        Suite::Preint { .. } => preint::run(rest),
         Suite::Raw { .. } => raw::run(rest),
         Suite::Soak { .. } => soak::run(rest),
         Suite::Stability { .. } => stability::run(rest),

@@ -126,6 +126,11 @@ pub struct RenderSettings {
     pub depth_opacity: f32,
     /// The part of the volume that is drawn (default: all of it).
     pub clip: ClipBox,
+    /// DVR with a pre-integrated transfer function (Engel et al. 2001): each
+    /// sample composites the segment from the previous sample's value to its own,
+    /// integrated through the TF, instead of the TF at one point (default off;
+    /// `docs/rendering-model.md`, "Pre-integration"). Iso and MIP ignore it.
+    pub preintegrated: bool,
 }
 
 impl Default for RenderSettings {
@@ -138,6 +143,7 @@ impl Default for RenderSettings {
             iso_refine_steps: 8,
             depth_opacity: 0.5,
             clip: ClipBox::FULL,
+            preintegrated: false,
         }
     }
 }

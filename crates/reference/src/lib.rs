@@ -69,7 +69,7 @@ pub use metrics::{
     ImageComparison, assert_close, compare, compare_and_report, max_abs_diff, mean_flip, psnr,
     test_output_dir,
 };
-pub use render::{DEFAULT_STEP_FACTOR, ReferenceOptions, render_reference};
+pub use render::{DEFAULT_STEP_FACTOR, EXACT_STEP_FACTOR, ReferenceOptions, render_reference};
 pub use ssim::ssim;
 pub use temporal::{
     CHANGE_EPS, TemporalError, TemporalOptions, TemporalReport, temporal_stability,

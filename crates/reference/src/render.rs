@@ -1,6 +1,6 @@
 //! The brute-force ray marcher.
 
-use brickray_core::tf::corrected_alpha;
+use brickray_core::tf::{Preintegrator, corrected_alpha};
 use brickray_core::{
     Camera, Ray, RayGen, RenderMode, RenderSettings, Shading, TransferFunction, Volume, VolumeFrame,
 };
@@ -12,6 +12,13 @@ use crate::Image;
 /// The reference's default step: 1/8 of the smallest voxel side (the GPU's
 /// default is 1/2).
 pub const DEFAULT_STEP_FACTOR: f32 = 0.125;
+
+/// The step of [`ReferenceOptions::exact_integral`]: 1/16 of the smallest voxel.
+pub const EXACT_STEP_FACTOR: f32 = 1.0 / 16.0;
+
+/// Fine value cells of the reference's segment integrals (16 per column of a
+/// 256-column table).
+const PREINT_CELLS: u32 = 4096;
 
 /// Gradients shorter than this (normalized-value units per voxel) leave a sample
 /// unshaded.
@@ -36,6 +43,14 @@ pub struct ReferenceOptions<'a> {
     /// Host clip depth per pixel (`width * height`, row 0 at the top): each ray of
     /// that pixel stops there.
     pub host_depth: Option<&'a [f32]>,
+    /// DVR composites pre-integrated segments (Engel et al. 2001): sample `k`
+    /// composites the segment from the value of sample `k - 1` (its own value at
+    /// the first sample) to its own, `step_factor` reference lengths long,
+    /// integrated exactly through the TF in f64
+    /// ([`Preintegrator::segment`](brickray_core::tf::Preintegrator::segment)),
+    /// shaded at sample `k`. `settings.preintegrated` is ignored, like
+    /// `settings.step_factor`. Default off.
+    pub preintegrated: bool,
 }
 
 impl ReferenceOptions<'static> {
@@ -47,6 +62,7 @@ impl ReferenceOptions<'static> {
             step_factor: DEFAULT_STEP_FACTOR,
             supersample: 1,
             host_depth: None,
+            preintegrated: false,
         }
     }
 }
@@ -75,6 +91,26 @@ impl<'a> ReferenceOptions<'a> {
         }
     }
 
+    /// With or without pre-integrated segments ([`Self::preintegrated`]).
+    pub fn with_preintegration(self, preintegrated: bool) -> Self {
+        ReferenceOptions {
+            preintegrated,
+            ..self
+        }
+    }
+
+    /// The exact-integral mode: the TF point-sampled at a very fine step
+    /// ([`EXACT_STEP_FACTOR`], 1/16 voxel) without pre-integration, whose sum
+    /// converges to the emission-absorption integral; what pre-integrated and
+    /// plain images at coarse steps are measured against.
+    pub fn exact_integral(self) -> Self {
+        ReferenceOptions {
+            step_factor: EXACT_STEP_FACTOR,
+            preintegrated: false,
+            ..self
+        }
+    }
+
     /// With a host depth buffer.
     pub fn with_host_depth<'b>(self, depth: &'b [f32]) -> ReferenceOptions<'b> {
         ReferenceOptions {
@@ -83,6 +119,7 @@ impl<'a> ReferenceOptions<'a> {
             step_factor: self.step_factor,
             supersample: self.supersample,
             host_depth: Some(depth),
+            preintegrated: self.preintegrated,
         }
     }
 }
@@ -139,7 +176,10 @@ pub fn render_reference(
         );
     }
 
-    let marcher = Marcher::new(vol, frame, tf, camera, settings, step_factor, width, height);
+    let mut marcher = Marcher::new(vol, frame, tf, camera, settings, step_factor, width, height);
+    if opts.preintegrated {
+        marcher.preint = Some(Preintegrator::new(tf, PREINT_CELLS));
+    }
     let n = opts.supersample.max(1);
     let far = camera.depth.far_value();
     img.depth.fill(far);
@@ -173,6 +213,8 @@ struct Marcher<'a> {
     dt: f64,
     width: u32,
     height: u32,
+    /// Pre-integrated DVR ([`ReferenceOptions::preintegrated`]).
+    preint: Option<Preintegrator<'a>>,
 }
 
 /// The result of one ray: premultiplied RGBA and clip depth.
@@ -204,6 +246,7 @@ impl<'a> Marcher<'a> {
             dt: step_factor * frame.voxel_world as f64,
             width,
             height,
+            preint: None,
         }
     }
 }
@@ -280,10 +323,23 @@ impl Marcher<'_> {
         let mut c_acc = [0.0f64; 3];
         let mut a_acc = 0.0f64;
         let mut depth = None;
+        let mut prev = None;
         for t in span.samples() {
             let v = self.value(ray, t);
-            let [r, g, b, a] = self.tf.lookup(v);
-            let a = corrected_alpha(a, self.step_factor);
+            let [r, g, b, a] = match &self.preint {
+                // The segment's associated colour, made straight again (shading
+                // applies to the straight colour; compositing multiplies back).
+                Some(p) => {
+                    let [r, g, b, a] = p.segment(prev.unwrap_or(v), v, self.step_factor);
+                    prev = Some(v);
+                    let s = if a > 0.0 { 1.0 / a } else { 0.0 };
+                    [r * s, g * s, b * s, a]
+                }
+                None => {
+                    let [r, g, b, a] = self.tf.lookup(v);
+                    [r, g, b, corrected_alpha(a, self.step_factor)]
+                }
+            };
             if a <= 0.0 {
                 // Contributes nothing (and cannot change A or the depth).
                 continue;
@@ -428,3 +484,6 @@ impl Span {
 
 #[cfg(test)]
 mod tests;
+
+#[cfg(test)]
+mod preint_tests;

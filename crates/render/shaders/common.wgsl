@@ -83,7 +83,8 @@ struct TfInfo {
     // Columns and rows of the corrected table, as floats.
     width: f32,
     rows: f32,
-    pad0: f32,
+    // Columns (and rows) of a pre-integrated table layer, as a float.
+    preint_size: f32,
 }
 
 @group(1) @binding(0) var<storage, read> tf: array<vec4<f32>>;
@@ -95,6 +96,11 @@ struct TfInfo {
 // hardware linear filtering: no interpolation by hand and no pow per sample.
 @group(1) @binding(3) var tf_table: texture_2d<f32>;
 @group(1) @binding(4) var tf_sampler: sampler;
+// The pre-integrated table (brickray_core::tf::PreintTable; a 1x1 stand-in
+// unless the pipeline pre-integrates): layer r holds, at (front, back), the
+// associated colour and opacity of a segment of step_factor * 2^r reference
+// lengths whose value runs linearly from front to back.
+@group(1) @binding(5) var tf_preint: texture_2d_array<f32>;
 
 // A ray through one pixel, parametrised by world distance t from its origin on
 // the near plane.
@@ -241,6 +247,15 @@ fn tf_sample(v: f32, row: f32) -> vec4<f32> {
     let w = tf_info.width;
     let x = (clamp(v, 0.0, 1.0) * (w - 1.0) + 0.5) / w;
     return textureSampleLevel(tf_table, tf_sampler, vec2<f32>(x, row), 0.0);
+}
+
+// The pre-integrated segment from value `front` to `back` (clamped to 0..1) at
+// the step of row coordinate `row` (its layer: floor(row * rows)): associated
+// colour and opacity, one filtered texture read.
+fn tf_preint_sample(front: f32, back: f32, row: f32) -> vec4<f32> {
+    let n = tf_info.preint_size;
+    let uv = (clamp(vec2<f32>(front, back), vec2<f32>(0.0), vec2<f32>(1.0)) * (n - 1.0) + 0.5) / n;
+    return textureSampleLevel(tf_preint, tf_sampler, uv, i32(row * tf_info.rows), 0.0);
 }
 
 // Linear interpolation between the two nearest TF entries (clamped to 0..1),

@@ -111,6 +111,9 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         // Skips land on the same sample grid, so skipping never changes the image.
         var k = 0u;
         var k_cell = 0u;
+        // Pre-integration: the last sample was taken in a cell that could be
+        // skipped, only to composite the segment entering it.
+        var forced = false;
         loop {
             if (k >= n) { break; }
             let t = t0 + f32(k) * dt;
@@ -131,16 +134,26 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                     reach = max(d, 1u);
                 }
                 let k_exit = max(k + 1u, first_k_after(cell_exit(r, inv_dir, c, reach), t0, dt));
-                if (skip) {
+                // Pre-integrated DVR: the segment from the last sample into a
+                // skipped cell can still contribute; this sample is taken, and
+                // the cell tested again at the next one.
+                let force = PREINT && MODE == MODE_DVR && skip && !forced && preint_joined(acc, t, dt);
+                forced = force;
+                if (skip && !force) {
                     k = k_exit;
                     continue;
                 }
-                k_cell = k_exit;
+                k_cell = select(k_exit, k + 1u, force);
             }
             let v = sample_value(u);
             acc.samples = acc.samples + 1u;
             if (MODE == MODE_DVR) {
-                if (dvr_sample(&acc, cur, r, t, v, tf_v)) { break; }
+                var front = v;
+                if (PREINT) {
+                    preint_fetch(&acc, cur, t, dt, t0);
+                    front = preint_front(&acc, t, dt, v);
+                }
+                if (dvr_sample(&acc, cur, r, t, front, v, tf_v)) { break; }
             } else if (MODE == MODE_ISO) {
                 if (v >= frame.isovalue) {
                     // The first sample inside is a capped cut, else the crossing

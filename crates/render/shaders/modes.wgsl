@@ -14,6 +14,8 @@ override MODE: u32 = 0u;
 override ERT: bool = true;
 override ESS: bool = true;
 override SHADE: bool = false;
+// DVR with the pre-integrated table (RenderSettings::preintegrated).
+override PREINT: bool = false;
 
 const MODE_DVR: u32 = 0u;
 const MODE_ISO: u32 = 1u;
@@ -41,6 +43,9 @@ struct Accum {
     hit_b: f32,
     // Volume samples taken (march and bisection).
     samples: u32,
+    // Pre-integration: t and value of the last sample composited.
+    prev_t: f32,
+    prev_v: f32,
 }
 
 fn accum_new() -> Accum {
@@ -54,7 +59,42 @@ fn accum_new() -> Accum {
     a.hit_a = 0.0;
     a.hit_b = 0.0;
     a.samples = 0u;
+    a.prev_t = -3.0e38;
+    a.prev_v = 0.0;
     return a;
+}
+
+// Pre-integration: true when the last sample composited lies one step `dt`
+// before t (the segment ending at t starts there).
+fn preint_joined(acc: Accum, t: f32, dt: f32) -> bool {
+    return abs(acc.prev_t - (t - dt)) <= 0.01 * dt;
+}
+
+// Pre-integration: the front value of the segment [t - dt, t] ending at the
+// sample of value v, and that sample recorded as the next segment's front. The
+// front is the previous sample's value when it was taken one step before; else
+// the segment is taken as constant (front = v, the corrected single sample).
+// In core the kernel samples the front at t - dt first after skipped empty
+// space (`preint_fetch`), so the constant segment remains only at a ray's first
+// sample. Out of core it does not (a second atlas sample in the march loop, in
+// any form tried, crashed lavapipe's shader compiler): the first sample after
+// skipped space (an empty leaf or sub-cell, transparent by construction) or a
+// change of level composites a constant segment.
+fn preint_front(acc: ptr<function, Accum>, t: f32, dt: f32, v: f32) -> f32 {
+    let front = select(v, (*acc).prev_v, preint_joined(*acc, t, dt));
+    (*acc).prev_t = t;
+    (*acc).prev_v = v;
+    return front;
+}
+
+// Pre-integration after skipped space: records the value at t - dt (when at or
+// after t_min, the ray's start) as the front of the segment ending at t.
+fn preint_fetch(acc: ptr<function, Accum>, c: Cursor, t: f32, dt: f32, t_min: f32) {
+    if (!preint_joined(*acc, t, dt) && t - dt >= t_min) {
+        (*acc).prev_t = t - dt;
+        (*acc).prev_v = cursor_value(c, t - dt);
+        (*acc).samples = (*acc).samples + 1u;
+    }
 }
 
 // Blinn-Phong with a headlight (two-sided), clamped to 0..1. `g.xyz` is the
@@ -71,20 +111,37 @@ fn shade(c: vec3<f32>, g: vec4<f32>, dir: vec3<f32>) -> vec3<f32> {
 }
 
 // DVR: composites the sample of value `v` at `t` front to back, its opacity
-// corrected to the step by the corrected table's row `tf_v` (see tf_row). True
-// when early ray termination ends the ray.
-fn dvr_sample(acc: ptr<function, Accum>, c: Cursor, r: Ray, t: f32, v: f32, tf_v: f32) -> bool {
-    let s = tf_sample(v, tf_v);
-    if (s.a <= 0.0) {
-        return false;
-    }
-    let a = s.a;
-    var rgb = s.rgb;
-    if (SHADE) {
-        rgb = shade(rgb, cursor_gradient(c, t), r.dir);
+// corrected to the step by the corrected table's row `tf_v` (see tf_row); with
+// PREINT the pre-integrated segment from value `front` to `v` instead (shaded:
+// its straight colour, associated / opacity, shaded at t and multiplied back).
+// True when early ray termination ends the ray.
+fn dvr_sample(acc: ptr<function, Accum>, c: Cursor, r: Ray, t: f32, front: f32, v: f32, tf_v: f32) -> bool {
+    var a: f32;
+    var prem: vec3<f32>;
+    if (PREINT) {
+        let p = tf_preint_sample(front, v, tf_v);
+        if (p.a <= 0.0) {
+            return false;
+        }
+        a = p.a;
+        prem = p.rgb;
+        if (SHADE) {
+            prem = shade(p.rgb / a, cursor_gradient(c, t), r.dir) * a;
+        }
+    } else {
+        let s = tf_sample(v, tf_v);
+        if (s.a <= 0.0) {
+            return false;
+        }
+        a = s.a;
+        var rgb = s.rgb;
+        if (SHADE) {
+            rgb = shade(rgb, cursor_gradient(c, t), r.dir);
+        }
+        prem = a * rgb;
     }
     let acc_a = (*acc).color.a;
-    (*acc).color = vec4<f32>((*acc).color.rgb + (1.0 - acc_a) * a * rgb, acc_a + (1.0 - acc_a) * a);
+    (*acc).color = vec4<f32>((*acc).color.rgb + (1.0 - acc_a) * prem, acc_a + (1.0 - acc_a) * a);
     if (!(*acc).depth_set && (*acc).color.a >= frame.depth_opacity) {
         (*acc).depth = depth_at(r, t);
         (*acc).depth_set = true;

@@ -241,6 +241,8 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             k = max(k, first_k_after(st.hit.t_enter, t0, dtl));
             let t_end = min(st.hit.t_exit, t1);
             var k_cell = 0u;
+            // Pre-integration: as in incore.wgsl.
+            var forced = false;
             loop {
                 let t = t0 + f32(k) * dtl;
                 if (t >= t_end) { break; }
@@ -256,17 +258,21 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                     let skip = (MODE == MODE_DVR && tf_transparent(range))
                         || (MODE == MODE_ISO && range.y < frame.isovalue)
                         || (MODE == MODE_MIP && range.y <= acc.max_v);
-                    if (skip) {
+                    let force = PREINT && MODE == MODE_DVR && skip && !forced && preint_joined(acc, t, dtl);
+                    forced = force;
+                    if (skip && !force) {
                         t_last = select(t_last, t0 + f32(k_exit - 1u) * dtl, MODE == MODE_ISO);
                         k = k_exit;
                         continue;
                     }
-                    k_cell = k_exit;
+                    k_cell = select(k_exit, k + 1u, force);
                 }
                 let v = cursor_value(cur, t);
                 acc.samples = acc.samples + 1u;
                 if (MODE == MODE_DVR) {
-                    if (dvr_sample(&acc, cur, r, t, v, cur.b.tf_v)) { done = true; break; }
+                    var front = v;
+                    if (PREINT) { front = preint_front(&acc, t, dtl, v); }
+                    if (dvr_sample(&acc, cur, r, t, front, v, cur.b.tf_v)) { done = true; break; }
                 } else if (MODE == MODE_ISO) {
                     if (v >= frame.isovalue) {
                         var a = t;

@@ -246,6 +246,11 @@ pub(crate) fn texture(
                 m,
                 limits.max_texture_dimension_2d as u64,
             )?;
+            need(
+                "max_texture_array_layers",
+                s.depth_or_array_layers as u64,
+                limits.max_texture_array_layers as u64,
+            )?;
         }
     }
     scoped(

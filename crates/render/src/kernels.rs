@@ -54,11 +54,13 @@ pub(crate) struct Variant {
     pub(crate) predict: bool,
     pub(crate) guard: bool,
     pub(crate) sparse_ess: bool,
+    /// DVR with the pre-integrated table.
+    pub(crate) preint: bool,
 }
 
 /// The override constants of a pipeline, by WGSL name (modes.wgsl,
 /// predict.wgsl).
-pub(crate) const OVERRIDES: [&str; 7] = [
+pub(crate) const OVERRIDES: [&str; 8] = [
     "MODE",
     "ERT",
     "ESS",
@@ -66,6 +68,7 @@ pub(crate) const OVERRIDES: [&str; 7] = [
     "PREDICT",
     "GUARD",
     "SPARSE_ESS",
+    "PREINT",
 ];
 
 impl Variant {
@@ -89,6 +92,7 @@ impl Variant {
             predict: false,
             guard: false,
             sparse_ess: false,
+            preint: s.preintegrated && mode == KernelMode::Dvr,
         };
         match prediction {
             Some(p) if mode == KernelMode::Iso && kind == KernelKind::InCore => Variant {
@@ -106,7 +110,7 @@ impl Variant {
         self.predict
     }
 
-    fn constants(&self) -> [(&'static str, f64); 7] {
+    fn constants(&self) -> [(&'static str, f64); 8] {
         let b = |x: bool| if x { 1.0 } else { 0.0 };
         let v = [
             self.mode as u32 as f64,
@@ -116,6 +120,7 @@ impl Variant {
             b(self.predict),
             b(self.guard),
             b(self.sparse_ess),
+            b(self.preint),
         ];
         std::array::from_fn(|i| (OVERRIDES[i], v[i]))
     }

@@ -421,6 +421,8 @@ impl VolumeRenderer {
             queue,
             desc.settings.step_factor,
             backend.step_lengths(),
+            desc.settings.preintegrated
+                && matches!(desc.settings.mode, brickray_core::RenderMode::Dvr),
         )?;
         let uniforms = FrameUniforms::new(desc, backend.max_leaves());
         let variant = Variant::of(&desc.settings, backend.kind(), self.prediction);

@@ -1,7 +1,10 @@
 //! Group 1 of every ray-cast kernel: the transfer function's entries, its
 //! opacity prefix sums, and the corrected table (a filtered `Rgba16Float` 2D
 //! texture, one row per step length in use: `brickray_core::tf::CorrectedTable`)
-//! with its sampler, their sizes, and the bind group.
+//! with its sampler, their sizes, the pre-integrated table (a filtered
+//! `Rgba16Float` 2D array, one layer per step length:
+//! `brickray_core::tf::PreintTable`; a 1x1 stand-in while pre-integration is
+//! off), and the bind group.
 
 use crate::error::RenderError;
 use crate::gpu::{self, GrowBuffer, Uniform};
@@ -17,7 +20,8 @@ pub(crate) struct TfInfo {
     pub(crate) width: f32,
     /// Rows of the corrected table, as a float.
     pub(crate) rows: f32,
-    pub(crate) pad0: f32,
+    /// Columns (and rows) of a pre-integrated table layer, as a float.
+    pub(crate) preint_size: f32,
 }
 
 /// Texel format of the corrected table (filterable on every WebGPU device).
@@ -30,6 +34,9 @@ struct TableKey {
     rows: u32,
 }
 
+/// Columns and rows of a pre-integrated table layer.
+pub(crate) const PREINT_SIZE: u32 = brickray_core::tf::PREINT_MIN_SIZE;
+
 /// Owner of group 1.
 #[derive(Debug)]
 pub(crate) struct TfTables {
@@ -39,7 +46,12 @@ pub(crate) struct TfTables {
     info: Uniform<TfInfo>,
     sampler: wgpu::Sampler,
     table: Option<(wgpu::Texture, wgpu::TextureView)>,
+    /// The pre-integrated table (or the 1x1 stand-in while it is off).
+    preint: Option<(wgpu::Texture, wgpu::TextureView)>,
     table_key: Option<TableKey>,
+    /// What the pre-integrated table was built for (`None`: the stand-in, or
+    /// stale). Kept while pre-integration is off, so toggling it rebuilds nothing.
+    preint_key: Option<TableKey>,
     bind_group: Option<wgpu::BindGroup>,
     current: Option<TransferFunction>,
 }
@@ -61,9 +73,10 @@ fn buffer(ty: wgpu::BufferBindingType) -> wgpu::BindingType {
     }
 }
 
-/// Group 1's layout: entries (0), prefix sums (1), info (2), corrected table (3)
-/// and its sampler (4).
-pub(crate) fn layout_entries() -> [wgpu::BindGroupLayoutEntry; 5] {
+/// Group 1's layout: entries (0), prefix sums (1), info (2), corrected table (3),
+/// its sampler (4, also the pre-integrated table's) and the pre-integrated table
+/// (5).
+pub(crate) fn layout_entries() -> [wgpu::BindGroupLayoutEntry; 6] {
     let storage = wgpu::BufferBindingType::Storage { read_only: true };
     [
         entry(0, buffer(storage)),
@@ -81,11 +94,25 @@ pub(crate) fn layout_entries() -> [wgpu::BindGroupLayoutEntry; 5] {
             4,
             wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
         ),
+        entry(
+            5,
+            wgpu::BindingType::Texture {
+                sample_type: wgpu::TextureSampleType::Float { filterable: true },
+                view_dimension: wgpu::TextureViewDimension::D2Array,
+                multisampled: false,
+            },
+        ),
     ]
 }
 
 impl TfTables {
     pub(crate) fn new(device: &wgpu::Device) -> Result<TfTables, RenderError> {
+        // The corrected and the pre-integrated table.
+        gpu::need(
+            "max_sampled_textures_per_shader_stage",
+            2,
+            device.limits().max_sampled_textures_per_shader_stage as u64,
+        )?;
         let layout = gpu::scoped(device, "brickray-render tf layout", || {
             device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
                 label: Some("brickray-render transfer function"),
@@ -107,7 +134,9 @@ impl TfTables {
             info: Uniform::new(device, "brickray-render tf info")?,
             sampler,
             table: None,
+            preint: None,
             table_key: None,
+            preint_key: None,
             bind_group: None,
             current: None,
         })
@@ -160,14 +189,16 @@ impl TfTables {
     }
 
     /// Builds the corrected table of the current TF for `step_factor` and `rows`
-    /// step lengths when it is stale, and the bind group when a resource
-    /// changed; returns the bytes written.
+    /// step lengths when it is stale (and with `preint` the pre-integrated
+    /// table of as many layers), and the bind group when a resource changed;
+    /// returns the bytes written.
     pub(crate) fn prepare(
         &mut self,
         device: &wgpu::Device,
         queue: &wgpu::Queue,
         step_factor: f32,
         rows: u32,
+        preint: bool,
     ) -> Result<u64, RenderError> {
         let Some(tf) = self.current.as_ref() else {
             return Ok(0);
@@ -222,19 +253,45 @@ impl TfTables {
                 size,
             );
             written += halfs.len() as u64 * 2;
+            self.preint_key = None;
             written += self.info.write(
                 queue,
                 TfInfo {
                     count: tf.len() as f32,
                     width: t.width as f32,
                     rows: t.rows as f32,
-                    pad0: 0.0,
+                    preint_size: PREINT_SIZE as f32,
                 },
             );
             self.table_key = Some(key);
         }
+        // The pre-integrated table when asked for and stale; a stand-in until the
+        // first one.
+        let build = preint && self.preint_key != Some(key);
+        if build {
+            // Checked before the (costly) table is computed.
+            gpu::need(
+                "max_texture_array_layers",
+                rows.max(1) as u64,
+                device.limits().max_texture_array_layers as u64,
+            )?;
+        }
+        if build || self.preint.is_none() {
+            let old = self.preint.take();
+            let old_size = old.as_ref().map(|(tex, _)| tex.size());
+            let table =
+                build.then(|| tf.preintegrated_table(step_factor, rows.max(1), PREINT_SIZE));
+            let (pair, bytes) = upload_preint(device, queue, old, table)?;
+            if old_size != Some(pair.0.size()) {
+                self.bind_group = None;
+            }
+            self.preint = Some(pair);
+            self.preint_key = build.then_some(key);
+            written += bytes;
+        }
         if self.bind_group.is_none() {
             let (_, view) = self.table.as_ref().expect("built above");
+            let (_, preint_view) = self.preint.as_ref().expect("built above");
             self.bind_group = Some(gpu::scoped(
                 device,
                 "brickray-render tf bind group",
@@ -263,6 +320,10 @@ impl TfTables {
                                 binding: 4,
                                 resource: wgpu::BindingResource::Sampler(&self.sampler),
                             },
+                            wgpu::BindGroupEntry {
+                                binding: 5,
+                                resource: wgpu::BindingResource::TextureView(preint_view),
+                            },
                         ],
                     })
                 },
@@ -270,4 +331,63 @@ impl TfTables {
         }
         Ok(written)
     }
+}
+
+/// Uploads a pre-integrated table (`None`: a 1x1 transparent stand-in) into
+/// `old` when it has the right size, else into a new texture (device limits
+/// checked first); returns the texture and view and the bytes written.
+fn upload_preint(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    old: Option<(wgpu::Texture, wgpu::TextureView)>,
+    table: Option<brickray_core::tf::PreintTable>,
+) -> Result<((wgpu::Texture, wgpu::TextureView), u64), RenderError> {
+    let (side, layers, texels) = match &table {
+        Some(t) => (t.size, t.layers, t.texels.as_slice()),
+        None => (1, 1, &[[0.0f32; 4]][..]),
+    };
+    let size = wgpu::Extent3d {
+        width: side,
+        height: side,
+        depth_or_array_layers: layers,
+    };
+    let pair = match old {
+        Some(p) if p.0.size() == size => p,
+        _ => {
+            let tex = gpu::texture(
+                device,
+                &wgpu::TextureDescriptor {
+                    label: Some("brickray-render tf pre-integrated table"),
+                    size,
+                    mip_level_count: 1,
+                    sample_count: 1,
+                    dimension: wgpu::TextureDimension::D2,
+                    format: TABLE_FORMAT,
+                    usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+                    view_formats: &[],
+                },
+            )?;
+            let view = tex.create_view(&wgpu::TextureViewDescriptor {
+                dimension: Some(wgpu::TextureViewDimension::D2Array),
+                ..Default::default()
+            });
+            (tex, view)
+        }
+    };
+    let halfs: Vec<u16> = texels
+        .iter()
+        .flatten()
+        .map(|&x| half::f16::from_f32(x).to_bits())
+        .collect();
+    queue.write_texture(
+        pair.0.as_image_copy(),
+        bytemuck::cast_slice(&halfs),
+        wgpu::TexelCopyBufferLayout {
+            offset: 0,
+            bytes_per_row: Some(side * 8),
+            rows_per_image: Some(side),
+        },
+        size,
+    );
+    Ok((pair, halfs.len() as u64 * 2))
 }

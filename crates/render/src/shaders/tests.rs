@@ -203,7 +203,7 @@ fn check_kernel(name: &str, m: &naga::Module, volume: &[wgpu::BindGroupLayoutEnt
     check_struct(
         m,
         "TfInfo",
-        rust_fields!(TfInfo, [count, width, rows, pad0]),
+        rust_fields!(TfInfo, [count, width, rows, preint_size]),
         std::mem::size_of::<TfInfo>(),
     );
     // The prediction buffer's uniforms and traversal classes (both kernels
@@ -484,10 +484,19 @@ fn every_shader_file_is_covered() {
 /// validates with the switches as constants: naga then checks each specialised
 /// kernel as a pipeline compiles it. Every mode with every combination of ERT,
 /// ESS and shading; the iso mode with prediction on and every combination of
-/// its guard, its sparse skipping, ERT and ESS.
+/// its guard, its sparse skipping, ERT and ESS; DVR pre-integrated with every
+/// combination of ERT, ESS and shading.
 #[test]
 fn every_override_permutation_validates() {
-    let switches = ["ERT", "ESS", "SHADE", "PREDICT", "GUARD", "SPARSE_ESS"];
+    let switches = [
+        "ERT",
+        "ESS",
+        "SHADE",
+        "PREDICT",
+        "GUARD",
+        "SPARSE_ESS",
+        "PREINT",
+    ];
     let mut combos = Vec::new();
     for (_, mode) in KernelMode::ALL {
         for bits in 0..8u32 {
@@ -498,6 +507,9 @@ fn every_override_permutation_validates() {
         // ERT, ESS from bits 0-1; GUARD, SPARSE_ESS from bits 2-3.
         let b = (bits & 3) | 1 << 3 | (bits >> 2) << 4;
         combos.push((KernelMode::Iso, b));
+    }
+    for bits in 0..8u32 {
+        combos.push((KernelMode::Dvr, bits | 1 << 6));
     }
     for (name, src) in [("incore", incore()), ("ooc", ooc())] {
         for &(mode, bits) in &combos {
@@ -515,7 +527,7 @@ fn every_override_permutation_validates() {
                 s = s.replace(&from, &format!("const {sw}: bool = {on};"));
             }
             assert!(!s.contains("override "), "{name}: an override left");
-            module(&format!("{name} {mode:?} {bits:06b}"), &s);
+            module(&format!("{name} {mode:?} {bits:07b}"), &s);
         }
     }
 }

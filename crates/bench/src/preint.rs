@@ -1,0 +1,201 @@
+//! The `preint` suite: what pre-integrated DVR (`RenderSettings::preintegrated`)
+//! costs and buys.
+//!
+//! * CPU: building the pre-integrated table (256 x 256 per step length) against
+//!   the corrected table, median of 3.
+//! * GPU, in core, the shared head CT (soft-tissue TF), DVR and shaded DVR at
+//!   steps of 0.5 and 2 voxels: plain and pre-integrated frames interleaved
+//!   round by round (order rotated), each variant's time the median over rounds
+//!   of `prepare + submit + wait`; printed as the ratio pre-integrated / plain.
+//! * Quality, synthetic: a ball with a narrow-spike TF (the GPU tests' scene),
+//!   PSNR of plain and pre-integrated GPU images against the exact integral
+//!   (CPU reference at 1/16 voxel) at steps of 0.5 to 4 voxels.
+
+use crate::Figures;
+use crate::runner::{Runner, finite_db, median, round2};
+use brickray_core::{Camera, RenderSettings, Shading, TransferFunction, VolumeFrame};
+use brickray_harness::{GpuContext, ct};
+use brickray_reference::{ReferenceOptions, psnr, render_reference};
+use brickray_render::VolumeRenderer;
+use serde_json::json;
+use std::time::Instant;
+
+fn arg<T: std::str::FromStr>(args: &[String], name: &str) -> Result<Option<T>, String> {
+    args.iter()
+        .position(|a| a == name)
+        .and_then(|i| args.get(i + 1))
+        .map(|s| s.parse().map_err(|_| format!("bad {name}")))
+        .transpose()
+}
+
+fn spike_tf() -> TransferFunction {
+    TransferFunction::from_points(
+        &[
+            (0.47, [1.0, 0.6, 0.2, 0.0]),
+            (0.5, [1.0, 0.9, 0.5, 0.8]),
+            (0.53, [0.3, 0.6, 1.0, 0.0]),
+        ],
+        1024,
+    )
+}
+
+fn ms_of(f: impl Fn()) -> f64 {
+    let mut t = Vec::new();
+    for _ in 0..3 {
+        let t0 = Instant::now();
+        f();
+        t.push(t0.elapsed().as_secs_f64() * 1e3);
+    }
+    median(&t)
+}
+
+pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
+    let rounds: usize = arg(args, "--rounds")?.unwrap_or(5);
+    let size: u32 = arg(args, "--size")?.unwrap_or(256);
+    let mut fig = Figures::new();
+
+    // CPU table builds.
+    let soft = ct::soft_tissue();
+    let corrected = ms_of(|| {
+        std::hint::black_box(soft.corrected_table(0.5, 1, 8192));
+    });
+    println!(
+        "CPU tables ({} threads):",
+        std::thread::available_parallelism().map_or(1, |n| n.get())
+    );
+    println!("  corrected table, 1 row: {corrected:.2} ms");
+    fig.insert("ms_corrected_table".into(), json!(round2(corrected)));
+    for layers in [1u32, 8] {
+        let ms = ms_of(|| {
+            std::hint::black_box(soft.preintegrated_table(0.5, layers, 256));
+        });
+        println!("  pre-integrated table, 256x256 x {layers} layer(s): {ms:.1} ms");
+        fig.insert(
+            format!("ms_preint_table_{layers}_layers"),
+            json!(round2(ms)),
+        );
+    }
+
+    let gpu = GpuContext::new().map_err(|e| e.to_string())?;
+    println!("adapter: {}", gpu.describe());
+
+    // GPU cost on the head CT.
+    let path = brickray_harness::shared_volume("invesalius_cranium_ct")
+        .ok_or("the preint suite needs ../shared/data/invesalius_cranium_ct")?;
+    let vol = brickray_io::read_volume(&path).map_err(|e| e.to_string())?;
+    let d = vol.desc();
+    println!(
+        "head CT {:?}, soft tissue, {size}x{size}, {rounds} interleaved rounds",
+        d.dims
+    );
+    let mut r = VolumeRenderer::new(&gpu.device, brickray_harness::target_desc())
+        .map_err(|e| e.to_string())?;
+    r.set_volume(&gpu.device, &gpu.queue, &vol)
+        .map_err(|e| e.to_string())?;
+    r.set_transfer_function(&gpu.device, &gpu.queue, &soft)
+        .map_err(|e| e.to_string())?;
+    let frame = VolumeFrame::centered(d.dims, d.spacing);
+    let camera = Camera::orbit(frame.center(), 2.0, 0.5, 0.3);
+    let run = Runner::new(&gpu, size);
+    println!(
+        "  {:<16} {:>5} {:>10} {:>10} {:>7} {:>14}",
+        "mode", "step", "plain ms", "preint ms", "ratio", "PSNR vs plain"
+    );
+    let mut worst_ratio = 0.0f64;
+    for shaded in [false, true] {
+        for step in [0.5f32, 2.0] {
+            let settings = |preintegrated| RenderSettings {
+                step_factor: step,
+                preintegrated,
+                shading: Shading {
+                    enabled: shaded,
+                    ..Default::default()
+                },
+                ..Default::default()
+            };
+            // Warm-up (pipelines, tables) and the images.
+            let mut images = Vec::new();
+            for p in [false, true] {
+                images.push(run.frame(&mut r, camera, frame, settings(p), true)?.rgba);
+            }
+            let mut times = [Vec::new(), Vec::new()];
+            for round in 0..rounds {
+                for k in 0..2 {
+                    let i = (k + round) % 2;
+                    times[i].push(
+                        run.frame(&mut r, camera, frame, settings(i == 1), false)?
+                            .ms,
+                    );
+                }
+            }
+            let (plain, pre) = (median(&times[0]), median(&times[1]));
+            let ratio = pre / plain;
+            worst_ratio = worst_ratio.max(ratio);
+            let db = psnr(&images[1], &images[0]);
+            let mode = if shaded { "dvr_shaded" } else { "dvr" };
+            println!(
+                "  {mode:<16} {step:>5} {plain:>10.1} {pre:>10.1} {ratio:>6.2}x {db:>11.2} dB"
+            );
+            let key = format!("{mode}_step{step}");
+            fig.insert(format!("ms_plain_{key}"), json!(round2(plain)));
+            fig.insert(format!("ms_preint_{key}"), json!(round2(pre)));
+            fig.insert(format!("ratio_{key}"), json!(round2(ratio)));
+            fig.insert(
+                format!("psnr_preint_vs_plain_{key}_db"),
+                json!(finite_db(db)),
+            );
+        }
+    }
+    fig.insert("worst_ratio".into(), json!(round2(worst_ratio)));
+
+    // Quality on the spike scene.
+    let ball = brickray_core::synthetic::sphere(64);
+    let bd = ball.desc();
+    let bframe = VolumeFrame::centered(bd.dims, bd.spacing);
+    let bcam = Camera::orbit(bframe.center(), 2.0, 0.5, 0.3);
+    let tf = spike_tf();
+    let q = 96;
+    let mut rb = VolumeRenderer::new(&gpu.device, brickray_harness::target_desc())
+        .map_err(|e| e.to_string())?;
+    rb.set_volume(&gpu.device, &gpu.queue, &ball)
+        .map_err(|e| e.to_string())?;
+    rb.set_transfer_function(&gpu.device, &gpu.queue, &tf)
+        .map_err(|e| e.to_string())?;
+    let qrun = Runner::new(&gpu, q);
+    let base = RenderSettings::default();
+    let exact = render_reference(
+        &ball,
+        &bframe,
+        &tf,
+        &bcam,
+        &base,
+        &ReferenceOptions::new(q, q).exact_integral(),
+    )
+    .to_rgba8([0.0; 3]);
+    println!("spike ball 64^3, {q}x{q}, PSNR vs the exact integral (1/16 voxel):");
+    println!("  {:>5} {:>9} {:>9}", "step", "plain", "preint");
+    for step in [0.5f32, 1.0, 2.0, 4.0] {
+        let mut db = [0.0; 2];
+        for (i, p) in [false, true].into_iter().enumerate() {
+            let s = RenderSettings {
+                step_factor: step,
+                preintegrated: p,
+                ..base
+            };
+            db[i] = psnr(&qrun.frame(&mut rb, bcam, bframe, s, true)?.rgba, &exact);
+        }
+        println!("  {step:>5} {:>6.2} dB {:>6.2} dB", db[0], db[1]);
+        fig.insert(
+            format!("spike_psnr_plain_step{step}_db"),
+            json!(finite_db(db[0])),
+        );
+        fig.insert(
+            format!("spike_psnr_preint_step{step}_db"),
+            json!(finite_db(db[1])),
+        );
+    }
+    fig.insert("image_size".into(), json!(size));
+    fig.insert("rounds".into(), json!(rounds));
+    fig.insert("adapter".into(), json!(gpu.adapter.get_info().name));
+    Ok(fig)
+}
