@@ -103,6 +103,16 @@ fn configs(mode: RenderMode, u8_volume: bool) -> Vec<Config> {
         };
         out.push(cfg("step", format!("{step}"), DEFAULT_KEY, s));
     }
+    if matches!(mode, RenderMode::Dvr) {
+        for step in [0.5f32, 1.0, 2.0, 4.0] {
+            let s = RenderSettings {
+                step_factor: step,
+                preintegrated: true,
+                ..base
+            };
+            out.push(cfg("preint", format!("{step}"), DEFAULT_KEY, s));
+        }
+    }
     for tol in [0.0f32, 0.5, 2.0, 4.0, 8.0] {
         let key = RendererKey {
             tolerance_px: tol,

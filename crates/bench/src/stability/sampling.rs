@@ -4,7 +4,7 @@
 use super::{Case, Ctx, Series, line_chart, noise, quality, s};
 use crate::runner::{Runner, finest_ooc_renderer, median, round2};
 use brickray_core::{Accel, Camera, RenderSettings, TransferFunction, VolumeFrame};
-use brickray_render::{RendererOptions, VolumeRenderer};
+use brickray_render::RendererOptions;
 use serde_json::json;
 
 /// A narrow opacity spike: opacity 0.8 at 0.5, zero 0.005 either side (about
@@ -31,19 +31,9 @@ const HF_SHIPPED_DB: f64 = 15.0;
 /// Least gain per halving of the step from 1 to 1/8 voxel (in core).
 const HF_GAIN_DB: f64 = 3.0;
 
-/// The TF variants of case 3's columns.
-///
-/// MERGE (pre-integration): the lead adds `"preintegrated"` here and turns it
-/// on in [`apply_variant`]; every step then gets that column too.
-const TF_VARIANTS: &[&str] = &["plain"];
-
-/// Configures `r` for a TF variant of [`TF_VARIANTS`].
-fn apply_variant(variant: &str, _r: &mut VolumeRenderer) -> Result<(), String> {
-    match variant {
-        "plain" => Ok(()),
-        other => Err(format!("unknown TF variant {other}")),
-    }
-}
+/// The TF variants of case 3's columns: the opacity-corrected table, and the
+/// pre-integrated table (`RenderSettings::preintegrated`).
+const TF_VARIANTS: &[&str] = &["plain", "preintegrated"];
 
 /// Case 3: PSNR against the reference (step 1/32) per step, in core and out of
 /// core at the finest level.
@@ -77,13 +67,12 @@ pub(crate) fn high_frequency_tf(ctx: &Ctx<'_>) -> Result<Case, String> {
     let mut shipped_db = f64::INFINITY;
     let mut fails_at = None;
     for variant in TF_VARIANTS {
-        apply_variant(variant, &mut incore)?;
-        apply_variant(variant, &mut ooc)?;
         let mut pin = Vec::new();
         let mut pout = Vec::new();
         for step in STEPS {
             let settings = RenderSettings {
                 step_factor: step,
+                preintegrated: *variant == "preintegrated",
                 ..base
             };
             let a = run.frame(&mut incore, cam, frame, settings, true)?;
@@ -136,6 +125,19 @@ pub(crate) fn high_frequency_tf(ctx: &Ctx<'_>) -> Result<Case, String> {
         .map(|&(a, b)| at(b) - at(a))
         .fold(f64::INFINITY, f64::min);
     fig.insert("min_gain_per_halving_db".into(), json!(round2(min_gain)));
+    // Pre-integration's gain over the plain table at each step, in core.
+    let pre_in = &series[2].points;
+    for (p, q) in plain_in.iter().zip(pre_in) {
+        println!(
+            "  pre-integration at step {}: {:+.2} dB in core",
+            p.0,
+            q.1 - p.1
+        );
+        fig.insert(
+            format!("preint_gain_db_step_{}", p.0),
+            json!(round2(q.1 - p.1)),
+        );
+    }
     line_chart(
         &ctx.charts,
         "stability_hf_tf_psnr_vs_step.svg",
