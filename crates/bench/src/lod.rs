@@ -165,8 +165,8 @@ fn ml_scene() -> Scene {
 }
 
 /// PSNR of the geometric curve at `bricks` (linear in log bricks), `None`
-/// outside its range.
-fn interpolate(curve: &[(f64, f64)], bricks: f64) -> Option<f64> {
+/// outside its range (equal brick counts keep the best PSNR).
+pub(crate) fn interpolate(curve: &[(f64, f64)], bricks: f64) -> Option<f64> {
     let mut c: Vec<(f64, f64)> = curve.to_vec();
     c.sort_by(|a, b| a.0.total_cmp(&b.0));
     // Equal brick counts: keep the best PSNR.

@@ -39,29 +39,6 @@ pub(crate) fn within(points: &[(f64, f64)], i: usize, eps: f64) -> bool {
         .any(|&(t, e)| t.is_finite() && e.is_finite() && t <= k * ti && e <= k * ei)
 }
 
-/// The error a set of `(bricks, error)` points reaches at `bricks`, by linear
-/// interpolation in log(bricks) between the two points that bracket it (the
-/// points sorted by bricks; `None` outside their range). Used to compare two
-/// level-of-detail metrics at equal working-set size.
-pub(crate) fn at_equal(points: &[(f64, f64)], bricks: f64) -> Option<f64> {
-    let mut p: Vec<(f64, f64)> = points
-        .iter()
-        .copied()
-        .filter(|(b, e)| *b > 0.0 && b.is_finite() && e.is_finite())
-        .collect();
-    p.sort_by(|a, b| a.0.total_cmp(&b.0));
-    let x = bricks.ln();
-    p.windows(2).find_map(|w| {
-        let ((b0, e0), (b1, e1)) = (w[0], w[1]);
-        let (x0, x1) = (b0.ln(), b1.ln());
-        if x < x0 || x > x1 {
-            return None;
-        }
-        let f = if x1 > x0 { (x - x0) / (x1 - x0) } else { 0.0 };
-        Some(e0 + (e1 - e0) * f)
-    })
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -83,14 +60,6 @@ mod tests {
         let p = [(1.0, f64::NAN), (2.0, 1.0), (f64::INFINITY, 0.0)];
         assert_eq!(front(&p), vec![1]);
         assert!(!within(&p, 0, 0.05));
-    }
-
-    #[test]
-    fn interpolates_in_log_bricks() {
-        let p = [(100.0, 10.0), (400.0, 30.0)];
-        assert_eq!(at_equal(&p, 200.0), Some(20.0));
-        assert_eq!(at_equal(&p, 50.0), None);
-        assert_eq!(at_equal(&p, 400.0), Some(30.0));
     }
 
     proptest! {

@@ -546,7 +546,7 @@ fn lod_gain(cfgs: &[Config], m: &[Measured]) -> Option<f64> {
     let (geo, err) = (series("lod_geometric"), series("lod_error"));
     let gains: Vec<f64> = err
         .iter()
-        .filter_map(|&(b, p)| front::at_equal(&geo, b).map(|g| p - g))
+        .filter_map(|&(b, p)| crate::lod::interpolate(&geo, b).map(|g| p - g))
         .collect();
     (!gains.is_empty()).then(|| median(&gains))
 }
