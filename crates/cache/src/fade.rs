@@ -122,6 +122,10 @@ impl Displayed {
 /// The fade state carried from frame to frame.
 #[derive(Debug, Default, Clone)]
 pub struct Fader {
+    /// The octree's layout when its levels may split fewer than three axes
+    /// (an anisotropic pyramid: parents follow its split masks); `None`: an
+    /// octree.
+    layout: Option<brickray_core::OctreeLayout>,
     /// The last displayed cut.
     prev: Vec<RefinedLeaf>,
     /// Active fades by displayed leaf.
@@ -136,6 +140,22 @@ impl Fader {
     /// No history: the next cut is drawn as it is.
     pub fn new() -> Fader {
         Fader::default()
+    }
+
+    /// No history, over `layout` (parents follow its split masks).
+    pub fn for_layout(layout: &brickray_core::OctreeLayout) -> Fader {
+        Fader {
+            layout: (!layout.is_isotropic()).then(|| layout.clone()),
+            ..Fader::default()
+        }
+    }
+
+    /// The parent of `key` in the layout.
+    fn parent(&self, key: NodeKey) -> Option<NodeKey> {
+        match &self.layout {
+            Some(l) => l.parent(key),
+            None => key.parent(),
+        }
     }
 
     /// Forgets the history and every fade (the next cut switches at once).
@@ -189,13 +209,13 @@ impl Fader {
         // The last displayed leaves strictly inside each refined leaf.
         let mut under: HashMap<usize, Vec<usize>> = HashMap::new();
         for (j, d) in self.prev.iter().enumerate() {
-            let mut p = d.key.parent();
+            let mut p = self.parent(d.key);
             while let Some(k) = p {
                 if let Some(&i) = refined_keys.get(&k) {
                     under.entry(i).or_default().push(j);
                     break;
                 }
-                p = k.parent();
+                p = self.parent(k);
             }
         }
 
@@ -216,14 +236,14 @@ impl Fader {
                 continue;
             }
             // A split: the nearest ancestor drawn as a data leaf last frame.
-            let mut p = n.key.parent();
+            let mut p = self.parent(n.key);
             let mut from = None;
             while let Some(k) = p {
                 if prev_data.contains(&k) {
                     from = Some(k);
                     break;
                 }
-                p = k.parent();
+                p = self.parent(k);
             }
             if let Some(a) = from {
                 // `a` was drawn as mix(a, a0, w). Start from whichever of

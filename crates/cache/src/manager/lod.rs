@@ -81,7 +81,7 @@ impl BrickManager {
             }
             // Top down: below a parent known to need its children's bricks
             // (an empty or uniform parent covers its children).
-            if let Some(p) = key.parent() {
+            if let Some(p) = self.layout.parent(key) {
                 match self.meta.get(p) {
                     Some(info) if matches!(info.kind, NodeKind::Data) => {}
                     _ => continue,

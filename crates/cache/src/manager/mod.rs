@@ -168,7 +168,7 @@ impl BrickManager {
         .map_err(CacheError::Spawn)?;
         let floor = lod::floor_nodes(&layout, pool.slot_count(), config.floor_slots);
         Ok(BrickManager {
-            fader: Fader::new(),
+            fader: Fader::for_layout(&layout),
             floor,
             frame_time: None,
             last_fade_time: None,
