@@ -2,15 +2,16 @@
 //!
 //! For each scene (a volume, its transfer function and a mode) it renders one
 //! view with a set of configurations: the defaults, and one knob at a time swept
-//! around them (step, level-of-detail budget, early-termination threshold, the u8
-//! interpolation, the visibility policy, in core instead of out of core). Each
+//! around them (step, pre-integration, geometric and error-aware level-of-detail
+//! budgets, early-termination threshold, the u8 interpolation, the visibility
+//! policy, in core instead of out of core). Each
 //! configuration gets its own renderer state (a renderer per cache setting,
 //! converged before timing); frames are interleaved round by round over all the
-//! configurations (the machine's speed drifts) and each time is the median of
-//! `prepare + submit + wait`. Each configuration's converged image is compared
-//! with the f64 CPU reference at a step of 1/8 voxel with 2 x 2 supersampling:
-//! PSNR, mean FLIP and SSIM. Working set: the cut's data bricks on the GPU and
-//! their bytes.
+//! configurations (the machine's speed drifts), each round starting at another
+//! configuration, and each time is the median of `prepare + submit + wait`.
+//! Each configuration's converged image is compared with the f64 CPU
+//! reference at a step of 1/8 voxel with 2 x 2 supersampling: PSNR, mean FLIP
+//! and SSIM. Working set: the cut's data bricks on the GPU and their bytes.
 //!
 //! Output: a CSV of every point, one SVG chart per scene (time against PSNR, the
 //! front, the default marked) and, as the last line, the figures as JSON.
@@ -492,8 +493,13 @@ fn measure(
     }
     let mut times = vec![Vec::new(); cfgs.len()];
     let mut cpu = vec![Vec::new(); cfgs.len()];
-    for _ in 0..rounds {
-        for (i, c) in cfgs.iter().enumerate() {
+    // Each round starts at another configuration, so a position effect in the
+    // round (the first frames after a pause run slower) falls on each in turn.
+    let n = cfgs.len();
+    for round in 0..rounds {
+        for j in 0..n {
+            let i = (j + round * n / rounds) % n;
+            let c = &cfgs[i];
             let r = &mut renderers[slot(c)];
             // One untimed frame absorbs a settings change (tables, pipelines).
             run.frame(r, scene.camera, scene.frame, c.settings, false)?;
