@@ -84,11 +84,14 @@ pub fn ssim(a: &[u8], b: &[u8], width: u32, height: u32) -> f64 {
     }
     let (c1, c2) = ((0.01f64 * 255.0).powi(2), (0.03f64 * 255.0).powi(2));
     let index = |mx: f64, my: f64, sxx: f64, syy: f64, sxy: f64| {
-        ((2.0 * mx * my + c1) * (2.0 * sxy + c2))
-            / ((mx * mx + my * my + c1) * (sxx + syy + c2))
+        ((2.0 * mx * my + c1) * (2.0 * sxy + c2)) / ((mx * mx + my * my + c1) * (sxx + syy + c2))
     };
     if width <= 2 * RADIUS || height <= 2 * RADIUS {
-        let s: f64 = x.iter().zip(&y).map(|(&p, &q)| index(p, q, 0.0, 0.0, 0.0)).sum();
+        let s: f64 = x
+            .iter()
+            .zip(&y)
+            .map(|(&p, &q)| index(p, q, 0.0, 0.0, 0.0))
+            .sum();
         return s / (width * height) as f64;
     }
     let w = weights();

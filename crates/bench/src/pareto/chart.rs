@@ -28,9 +28,9 @@ pub(crate) fn draw(
         .iter()
         .filter(|p| p.ms.is_finite() && p.psnr_db.is_finite())
         .collect();
-    let (t0, t1) = finite.iter().fold((f64::MAX, 0.0f64), |(a, b), p| {
-        (a.min(p.ms), b.max(p.ms))
-    });
+    let (t0, t1) = finite
+        .iter()
+        .fold((f64::MAX, 0.0f64), |(a, b), p| (a.min(p.ms), b.max(p.ms)));
     let (p0, p1) = finite.iter().fold((f64::MAX, 0.0f64), |(a, b), p| {
         (a.min(p.psnr_db), b.max(p.psnr_db))
     });
@@ -63,7 +63,15 @@ pub(crate) fn draw(
         .map_err(|x| e(&x))?
         .label("Pareto front")
         .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK.mix(0.5)));
-    let colors = [BLUE, RED, GREEN, MAGENTA, CYAN, RGBColor(230, 140, 0), RGBColor(120, 80, 40)];
+    let colors = [
+        BLUE,
+        RED,
+        GREEN,
+        MAGENTA,
+        CYAN,
+        RGBColor(230, 140, 0),
+        RGBColor(120, 80, 40),
+    ];
     let mut knobs: Vec<&str> = Vec::new();
     for p in points {
         if !knobs.contains(&p.knob) {

@@ -52,7 +52,10 @@ mod tests {
         // (2.5, 4.0) is dominated by (2.0, 3.0) by more than 5% on both axes,
         // but within 25% of it.
         assert!(within(&p, 2, 0.25));
-        assert!(within(&p, 4, 0.05), "equal error, slower: not 5% better in error");
+        assert!(
+            within(&p, 4, 0.05),
+            "equal error, slower: not 5% better in error"
+        );
     }
 
     #[test]

@@ -27,9 +27,7 @@ use brickray_core::{
 };
 use brickray_harness::GpuContext;
 use brickray_reference::{ReferenceOptions, mean_flip, psnr, render_reference, ssim};
-use brickray_render::{
-    OutOfCoreConfig, RendererOptions, VisibilityPolicy, VolumeRenderer,
-};
+use brickray_render::{OutOfCoreConfig, RendererOptions, VisibilityPolicy, VolumeRenderer};
 use scenes::Scene;
 use serde_json::json;
 use std::fmt::Write as _;
@@ -309,7 +307,10 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
             let svg = o.charts.join(format!("{name}.svg"));
             chart::draw(
                 &svg,
-                &format!("{} {}: time against error ({}x{} px)", scene.name, mode_name, o.size, o.size),
+                &format!(
+                    "{} {}: time against error ({}x{} px)",
+                    scene.name, mode_name, o.size, o.size
+                ),
                 &chart_pts,
                 &on,
                 0,
@@ -480,7 +481,8 @@ fn measure(
                 },
             )
             .map_err(|e| e.to_string())?;
-            r.set_visibility_policy(k.policy).map_err(|e| e.to_string())?;
+            r.set_visibility_policy(k.policy)
+                .map_err(|e| e.to_string())?;
         }
         r.set_transfer_function(&gpu.device, &gpu.queue, tf)
             .map_err(|e| e.to_string())?;
@@ -505,7 +507,10 @@ fn measure(
             std::thread::sleep(std::time::Duration::from_millis(5));
         }
         if !settled {
-            println!("  warning: {}={} did not converge in 400 frames", c.knob, c.value);
+            println!(
+                "  warning: {}={} did not converge in 400 frames",
+                c.knob, c.value
+            );
         }
     }
     let mut times = vec![Vec::new(); cfgs.len()];

@@ -31,19 +31,23 @@ pub(crate) fn scenes(wanted: &[String], ml_side: u32) -> Result<Vec<Scene>, Stri
     };
     if want("ct") {
         let [translucent, _, iso, mip] = ct::scenes();
-        out.push(scene("ct", shared("invesalius_cranium_ct")?, vec![
-            ("dvr", translucent.1, translucent.2),
-            (iso.0, iso.1, iso.2),
-            (mip.0, mip.1, mip.2),
-        ]));
+        out.push(scene(
+            "ct",
+            shared("invesalius_cranium_ct")?,
+            vec![
+                ("dvr", translucent.1, translucent.2),
+                (iso.0, iso.1, iso.2),
+                (mip.0, mip.1, mip.2),
+            ],
+        ));
     }
     if want("ct5") {
         let [translucent, ..] = ct::scenes();
-        let mut s = scene("ct5", crate::aniso::ct_every_third_slice()?, vec![(
-            "dvr",
-            translucent.1,
-            translucent.2,
-        )]);
+        let mut s = scene(
+            "ct5",
+            crate::aniso::ct_every_third_slice()?,
+            vec![("dvr", translucent.1, translucent.2)],
+        );
         s.anisotropic = true;
         out.push(s);
     }
@@ -56,10 +60,18 @@ pub(crate) fn scenes(wanted: &[String], ml_side: u32) -> Result<Vec<Scene>, Stri
             ],
             512,
         );
-        out.push(scene("mri", shared("pycortex_s1_t1_mri")?, vec![
-            ("dvr", RenderMode::Dvr, tf),
-            ("mip", RenderMode::Mip, TransferFunction::ramp(0.0, 1.0, 1.0)),
-        ]));
+        out.push(scene(
+            "mri",
+            shared("pycortex_s1_t1_mri")?,
+            vec![
+                ("dvr", RenderMode::Dvr, tf),
+                (
+                    "mip",
+                    RenderMode::Mip,
+                    TransferFunction::ramp(0.0, 1.0, 1.0),
+                ),
+            ],
+        ));
     }
     if want("nuclei") {
         let tf = TransferFunction::from_points(
@@ -70,10 +82,18 @@ pub(crate) fn scenes(wanted: &[String], ml_side: u32) -> Result<Vec<Scene>, Stri
             ],
             512,
         );
-        out.push(scene("nuclei", shared("cells3d_nuclei_fluo")?, vec![
-            ("dvr", RenderMode::Dvr, tf),
-            ("mip", RenderMode::Mip, TransferFunction::ramp(0.0, 1.0, 1.0)),
-        ]));
+        out.push(scene(
+            "nuclei",
+            shared("cells3d_nuclei_fluo")?,
+            vec![
+                ("dvr", RenderMode::Dvr, tf),
+                (
+                    "mip",
+                    RenderMode::Mip,
+                    TransferFunction::ramp(0.0, 1.0, 1.0),
+                ),
+            ],
+        ));
     }
     if want("ml") {
         let tf = TransferFunction::from_points(
@@ -84,17 +104,21 @@ pub(crate) fn scenes(wanted: &[String], ml_side: u32) -> Result<Vec<Scene>, Stri
             ],
             512,
         );
-        out.push(scene("ml", synthetic::marschner_lobb(ml_side), vec![
-            ("dvr", RenderMode::Dvr, tf),
-            (
-                "iso",
-                RenderMode::Iso {
-                    value: 0.5,
-                    color: [0.9, 0.85, 0.75],
-                },
-                TransferFunction::ramp(0.0, 1.0, 1.0),
-            ),
-        ]));
+        out.push(scene(
+            "ml",
+            synthetic::marschner_lobb(ml_side),
+            vec![
+                ("dvr", RenderMode::Dvr, tf),
+                (
+                    "iso",
+                    RenderMode::Iso {
+                        value: 0.5,
+                        color: [0.9, 0.85, 0.75],
+                    },
+                    TransferFunction::ramp(0.0, 1.0, 1.0),
+                ),
+            ],
+        ));
     }
     if want("noise") {
         let tf = TransferFunction::from_points(
@@ -105,7 +129,11 @@ pub(crate) fn scenes(wanted: &[String], ml_side: u32) -> Result<Vec<Scene>, Stri
             ],
             512,
         );
-        out.push(scene("noise", noise(ml_side), vec![("dvr", RenderMode::Dvr, tf)]));
+        out.push(scene(
+            "noise",
+            noise(ml_side),
+            vec![("dvr", RenderMode::Dvr, tf)],
+        ));
     }
     if out.is_empty() {
         return Err(format!(

@@ -158,7 +158,6 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         done.push(case);
     }
 
-
     println!("\nsummary (case | where it fails | by how much | shipped | bound | kept):");
     for c in &done {
         println!(
