@@ -190,3 +190,38 @@ fn retry_delays_grow_and_saturate() {
     let flat = RetryPolicy { factor: 1.0, ..p };
     assert_eq!(flat.delay(50), Duration::from_secs(1));
 }
+
+#[test]
+fn bad_fade_durations_are_typed_errors() {
+    let layout = ball_layout(64);
+    let g = gpu(&layout);
+    for bad in [
+        FadeDuration::Frames(0),
+        FadeDuration::Millis(f32::NAN),
+        FadeDuration::Millis(-1.0),
+        FadeDuration::Millis(f32::INFINITY),
+    ] {
+        let c = CacheConfig {
+            fade: Some(bad),
+            ..CacheConfig::default()
+        };
+        // NaN != NaN: compare the variant, then the value as printed.
+        match c.validate(&layout, &g) {
+            Err(ConfigError::Fade { value }) => {
+                assert_eq!(format!("{value:?}"), format!("{bad:?}"))
+            }
+            other => panic!("{bad:?}: {other:?}"),
+        }
+    }
+    for good in [
+        None,
+        Some(FadeDuration::Frames(1)),
+        Some(FadeDuration::Millis(0.0)),
+    ] {
+        let c = CacheConfig {
+            fade: good,
+            ..CacheConfig::default()
+        };
+        assert_eq!(c.validate(&layout, &g), Ok(()));
+    }
+}
