@@ -10,6 +10,7 @@
 //! free entry (the host's GPU is more than [`RING`] frames behind) records no
 //! copy and loses only that frame's feedback.
 
+use super::readback::{COPIED, FREE, Polled, STAMP_BYTES, poll_entry};
 use crate::error::RenderError;
 use crate::gpu;
 use brickray_core::NodeKey;
@@ -18,14 +19,6 @@ use std::sync::atomic::{AtomicU8, Ordering};
 
 /// Read-back buffers in flight at most.
 pub(crate) const RING: usize = 4;
-/// Bytes before the counters in a ring entry: the frame stamp.
-const STAMP_BYTES: u64 = 16;
-
-const FREE: u8 = 0;
-const COPIED: u8 = 1;
-const MAPPING: u8 = 2;
-const READY: u8 = 3;
-const FAILED: u8 = 4;
 
 struct Entry {
     buffer: wgpu::Buffer,
@@ -118,50 +111,25 @@ impl UsageFeedback {
     pub(crate) fn poll(&mut self, frame: u64) -> Vec<UsageFrame> {
         let mut out = Vec::new();
         for e in &mut self.ring {
-            match e.state.load(Ordering::Acquire) {
-                COPIED if e.frame < frame => {
-                    e.state.store(MAPPING, Ordering::Release);
-                    let state = e.state.clone();
-                    e.buffer.slice(..).map_async(wgpu::MapMode::Read, move |r| {
-                        state.store(if r.is_ok() { READY } else { FAILED }, Ordering::Release);
+            let leaves = &e.leaves;
+            let polled = poll_entry(&e.buffer, &e.state, e.frame, frame, |payload| {
+                let counts: &[u32] = bytemuck::cast_slice(payload);
+                leaves
+                    .iter()
+                    .map(|&(slot, key)| (key, counts.get(slot as usize).copied().unwrap_or(0)))
+                    .collect::<Vec<_>>()
+            });
+            match polled {
+                Polled::Read(counts) => {
+                    self.stats.frames_applied += 1;
+                    self.stats.last_latency_frames = frame - e.frame;
+                    out.push(UsageFrame {
+                        frame: e.frame,
+                        counts,
                     });
                 }
-                READY => {
-                    let counts = match e.buffer.slice(..).get_mapped_range() {
-                        Err(_) => None,
-                        Ok(view) => {
-                            let words: &[u32] = bytemuck::cast_slice(&view);
-                            let stamp = words[0] as u64 | (words[1] as u64) << 32;
-                            (stamp == e.frame).then(|| {
-                                let counts = &words[(STAMP_BYTES / 4) as usize..];
-                                e.leaves
-                                    .iter()
-                                    .map(|&(slot, key)| {
-                                        (key, counts.get(slot as usize).copied().unwrap_or(0))
-                                    })
-                                    .collect::<Vec<_>>()
-                            })
-                        }
-                    };
-                    e.buffer.unmap();
-                    e.state.store(FREE, Ordering::Release);
-                    match counts {
-                        Some(counts) => {
-                            self.stats.frames_applied += 1;
-                            self.stats.last_latency_frames = frame - e.frame;
-                            out.push(UsageFrame {
-                                frame: e.frame,
-                                counts,
-                            });
-                        }
-                        None => self.stats.frames_discarded += 1,
-                    }
-                }
-                FAILED => {
-                    e.state.store(FREE, Ordering::Release);
-                    self.stats.frames_discarded += 1;
-                }
-                _ => {}
+                Polled::Discarded => self.stats.frames_discarded += 1,
+                Polled::Pending => {}
             }
         }
         out.sort_by_key(|u| u.frame);

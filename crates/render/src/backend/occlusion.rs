@@ -19,6 +19,7 @@
 //! ring one or two frames later whatever the order, so splitting the dispatch
 //! would only add passes.
 
+use super::readback::{COPIED, FREE, Polled, STAMP_BYTES, poll_entry};
 use crate::error::RenderError;
 use crate::gpu;
 use brickray_cache::refine::ViewGeometry;
@@ -29,12 +30,6 @@ use std::sync::atomic::{AtomicU8, Ordering};
 
 /// Read-back buffers in flight at most.
 const RING: usize = 4;
-const STAMP_BYTES: u64 = 16;
-const FREE: u8 = 0;
-const COPIED: u8 = 1;
-const MAPPING: u8 = 2;
-const READY: u8 = 3;
-const FAILED: u8 = 4;
 /// Bytes of one box instance: corner and three edges, `vec4<f32>` each.
 const BOX_BYTES: u64 = 64;
 
@@ -378,43 +373,18 @@ impl OcclusionFeedback {
     pub(crate) fn poll(&mut self, frame: u64) -> Vec<(u64, NodeKey, u32)> {
         let mut out = Vec::new();
         for e in &mut self.ring {
-            match e.state.load(Ordering::Acquire) {
-                COPIED if e.frame < frame => {
-                    e.state.store(MAPPING, Ordering::Release);
-                    let state = e.state.clone();
-                    e.buffer.slice(..).map_async(wgpu::MapMode::Read, move |r| {
-                        state.store(if r.is_ok() { READY } else { FAILED }, Ordering::Release);
-                    });
+            let (keys, entry_frame) = (&e.keys, e.frame);
+            let polled = poll_entry(&e.buffer, &e.state, e.frame, frame, |payload| {
+                let r: &[u64] = bytemuck::cast_slice(payload);
+                for (i, k) in keys.iter().enumerate() {
+                    let n = r.get(i).copied().unwrap_or(0);
+                    out.push((entry_frame, *k, n.min(u32::MAX as u64) as u32));
                 }
-                READY => {
-                    let ok = match e.buffer.slice(..).get_mapped_range() {
-                        Err(_) => false,
-                        Ok(view) => {
-                            let w: &[u32] = bytemuck::cast_slice(&view);
-                            let stamp = w[0] as u64 | (w[1] as u64) << 32;
-                            if stamp == e.frame {
-                                let r: &[u64] = bytemuck::cast_slice(&view[STAMP_BYTES as usize..]);
-                                for (i, k) in e.keys.iter().enumerate() {
-                                    let n = r.get(i).copied().unwrap_or(0);
-                                    out.push((e.frame, *k, n.min(u32::MAX as u64) as u32));
-                                }
-                            }
-                            stamp == e.frame
-                        }
-                    };
-                    e.buffer.unmap();
-                    e.state.store(FREE, Ordering::Release);
-                    if ok {
-                        self.stats.frames_applied += 1;
-                    } else {
-                        self.stats.frames_discarded += 1;
-                    }
-                }
-                FAILED => {
-                    e.state.store(FREE, Ordering::Release);
-                    self.stats.frames_discarded += 1;
-                }
-                _ => {}
+            });
+            match polled {
+                Polled::Read(()) => self.stats.frames_applied += 1,
+                Polled::Discarded => self.stats.frames_discarded += 1,
+                Polled::Pending => {}
             }
         }
         out
