@@ -239,6 +239,13 @@ enum Suite {
         /// Write the working-set chart (SVG) here.
         #[arg(long)]
         svg: Option<String>,
+        /// GPU pool budget per renderer in MiB (default 1024).
+        #[arg(long)]
+        gpu_mib: Option<u64>,
+        /// Policies, comma-separated, of rayguided, occlusion, both (none, the
+        /// baseline, always runs; default all).
+        #[arg(long)]
+        policies: Option<String>,
     },
     /// Stability: scripted scenes that drive each method to where it breaks
     /// (streaming, memory pressure, high-frequency TF, thin structures,

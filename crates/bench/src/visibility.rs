@@ -173,6 +173,9 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
     let size: u32 = arg(args, "--size", 256)?;
     let hold: usize = arg(args, "--hold", 120)?;
     let turn: usize = arg(args, "--turn", 12)?;
+    // The GPU pool per renderer: the unculled run must not be capped by it, or
+    // the cut is measured against a pool-limited baseline.
+    let gpu_mib: u64 = arg(args, "--gpu-mib", 1024)?;
     let shell_dims: u64 = arg(args, "--shell-dims", 4096)?;
     let shell_size: u32 = arg(args, "--shell-size", 512)?;
     let scenes_arg: String = arg(args, "--scenes", "head,shells".to_string())?;
@@ -182,8 +185,18 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         .and_then(|i| args.get(i + 1).cloned());
     let gpu = GpuContext::new().map_err(|e| e.to_string())?;
     println!("adapter: {}", gpu.describe());
-    let mut policies = vec![VisibilityPolicy::None, VisibilityPolicy::RayGuided];
+    // `--policies none,rayguided,...` restricts the run (none always runs: it
+    // is the baseline every figure is relative to).
+    let wanted: String = arg(args, "--policies", "none,rayguided,occlusion,both".to_string())?;
+    let want = |p: VisibilityPolicy| wanted.split(',').any(|w| w.trim() == p.name());
+    let mut policies = vec![VisibilityPolicy::None];
+    if want(VisibilityPolicy::RayGuided) {
+        policies.push(VisibilityPolicy::RayGuided);
+    }
     for p in [VisibilityPolicy::OcclusionQueries, VisibilityPolicy::Both] {
+        if !want(p) {
+            continue;
+        }
         if supported(&gpu, p) {
             policies.push(p);
         } else {
@@ -218,7 +231,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
             "\n{} ({px}x{px}): hold <= {hold}, turn {turn} frames, hold <= {hold}",
             scene.name
         );
-        let tracks = run_scene(&runner, scene, &policies, hold, turn)?;
+        let tracks = run_scene(&runner, scene, &policies, (hold, turn, gpu_mib))?;
         report(scene, &policies, &tracks, &mut fig)?;
         chart.push((
             format!("{} ({px}x{px})", scene.name),
@@ -360,8 +373,7 @@ fn run_scene(
     runner: &Runner<'_>,
     scene: &Scene,
     policies: &[VisibilityPolicy],
-    hold: usize,
-    turn: usize,
+    (hold, turn, gpu_mib): (usize, usize, u64),
 ) -> Result<Vec<Track>, String> {
     let g = runner.gpu;
     let mut rs = Vec::new();
@@ -372,7 +384,10 @@ fn run_scene(
             &g.queue,
             (scene.source)()?,
             scene.frame,
-            OutOfCoreConfig::default(),
+            OutOfCoreConfig {
+                gpu_budget_bytes: gpu_mib << 20,
+                ..Default::default()
+            },
         )
         .map_err(|e| e.to_string())?;
         r.set_transfer_function(&g.device, &g.queue, &scene.tf)
@@ -412,6 +427,11 @@ fn run_scene(
             step(r, t, start, false)?;
         }
         let (s, img) = step(r, t, start, true)?;
+        let c = &s.cache;
+        println!(
+            "  converged start: {} bricks, pool {} slots ({} occupied), splits blocked: {:?}",
+            c.working_set_bricks, c.pool_slots, c.pool_occupied, c.blocked
+        );
         t.start = Some((img.unwrap_or_default(), s));
         t.oracle_usage = r.last_usage().map(|u| u.counts.clone());
     }
@@ -445,6 +465,11 @@ fn run_scene(
     }
     for (r, t) in rs.iter_mut().zip(tracks.iter_mut()) {
         let (s, img) = step(r, t, back, true)?;
+        let c = &s.cache;
+        println!(
+            "  back view: {} bricks, pool {} slots ({} occupied), splits blocked: {:?}, converged {}",
+            c.working_set_bricks, c.pool_slots, c.pool_occupied, c.blocked, s.converged
+        );
         t.back = Some((img.unwrap_or_default(), s));
     }
     // 4. A jump back to the start view in one frame: the side hidden from

@@ -37,9 +37,11 @@ impl UploadBudget {
 
     /// Like [`try_reserve`](Self::try_reserve), but also gives back `release` bytes
     /// reserved earlier this frame for an item no longer needed, if it succeeds.
+    /// An item larger than the whole allowance goes when nothing is held (first
+    /// of the frame, or everything reserved before was given back).
     pub fn try_exchange(&mut self, release: u64, bytes: u64) -> bool {
         let used = self.used.saturating_sub(release);
-        if self.items == 0 || used.saturating_add(bytes) <= self.per_frame {
+        if self.items == 0 || used == 0 || used.saturating_add(bytes) <= self.per_frame {
             self.used = used.saturating_add(bytes);
             self.items += 1;
             true

@@ -135,10 +135,10 @@ impl FrameStats {
             && self.blocked.missing_data == 0
             && self.blocked.missing_meta == 0
             && self.fading == 0
-        // Splits the upload budget refused in a frame that uploaded nothing were
-        // refused on speculative charges (a split charges its children's uploads
-        // before knowing they split further into resident bricks); the same frame
-        // repeats identically, so the image will not change: settled.
+            // Refinement retries splits refused on charges given back later in
+            // the frame, so a refusal means the budget is really spent: the next
+            // frame uploads and splits more.
+            && self.blocked.upload_budget == 0
     }
 }
 

@@ -430,13 +430,28 @@ pub fn refine(
     let tol = screen.threshold;
     // Nodes that stay leaves and need their brick: (key, priority).
     let mut finals: Vec<(NodeKey, f64)> = Vec::new();
-    while let Some(HeapItem {
-        priority,
-        key,
-        uniform,
-        charged,
-    }) = heap.pop()
-    {
+    // Splits the upload budget refused. The budget may be held by speculative
+    // charges (children charged at their parent's split) that come back when
+    // those children split into bricks already on the GPU; the refused splits
+    // are retried once the heap is empty, as long as a round still splits
+    // something (each node splits at most once, so this ends).
+    let mut deferred: Vec<HeapItem> = Vec::new();
+    let mut split_since_retry = false;
+    loop {
+        if heap.is_empty() {
+            if deferred.is_empty() || !split_since_retry {
+                break;
+            }
+            split_since_retry = false;
+            heap.extend(deferred.drain(..));
+        }
+        let Some(item) = heap.pop() else { break };
+        let HeapItem {
+            priority,
+            key,
+            uniform,
+            charged,
+        } = item;
         // A non-finite size (a non-finite camera or frame) is never refined.
         if uniform || key.level >= finest || !priority.is_finite() || priority <= tol {
             finals.push((key, priority));
@@ -520,10 +535,10 @@ pub fn refine(
         let uploads = states.iter().filter(|s| **s == DataState::InCpu).count() as u64;
         let release = if charged { brick_bytes } else { 0 };
         if uploads > 0 && !budget.try_exchange(release, uploads * brick_bytes) {
-            out.blocked.upload_budget += 1;
-            finals.push((key, priority));
+            deferred.push(item);
             continue;
         }
+        split_since_retry = true;
         out.data_leaves = out.data_leaves - 1 + data.len() as u32;
         if uploads == 0 && charged {
             budget.release(brick_bytes);
@@ -548,6 +563,10 @@ pub fn refine(
         }
     }
 
+    for item in deferred {
+        out.blocked.upload_budget += 1;
+        finals.push((item.key, item.priority));
+    }
     for (key, priority) in finals {
         let state = env.data(key);
         let available = match state {

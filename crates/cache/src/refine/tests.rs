@@ -285,6 +285,78 @@ fn upload_budget_limits_splits_but_progresses() {
     }
 }
 
+/// Bricks of `in_cpu` in CPU memory, every other brick on the GPU.
+struct SomeInCpu {
+    layout: OctreeLayout,
+    in_cpu: HashSet<NodeKey>,
+}
+
+impl RefineEnv for SomeInCpu {
+    fn node(&mut self, key: NodeKey) -> MetaState {
+        MetaState::Known(ball_info(&self.layout, key))
+    }
+    fn data(&mut self, key: NodeKey) -> DataState {
+        if self.in_cpu.contains(&key) {
+            DataState::InCpu
+        } else {
+            DataState::OnGpu
+        }
+    }
+}
+
+/// A split refused while the budget is held by speculative charges (children
+/// charged at their parent's split that then split into bricks already on the
+/// GPU, giving the charge back) is retried once the charges are returned.
+/// Before, the frame ended with nothing uploaded and the split still refused,
+/// and every later frame repeated it: the view stopped refining for good while
+/// reporting itself converged (found on the 4096^3 shells at 512 x 512 after a
+/// half turn, stuck at 1244 bricks of the 2840 the view needs).
+#[test]
+fn splits_refused_on_returned_charges_are_retried() {
+    let s = setup();
+    let cam = Camera::orbit(Vec3::ZERO, 1.5, 0.3, 0.2);
+    let geo = ViewGeometry::new(&s.layout, &cam, 1.0, 512, &s.frame);
+    // The level-1 node refinement pops first (the largest on screen) is on the
+    // GPU with its children in CPU memory; the other level-1 nodes are in CPU
+    // memory, their children on the GPU.
+    let level1 = s.layout.children(NodeKey::ROOT);
+    let first = *level1
+        .iter()
+        .max_by(|a, b| geo.voxel_pixels(**a).total_cmp(&geo.voxel_pixels(**b)))
+        .unwrap();
+    let mut in_cpu: HashSet<NodeKey> = level1.iter().copied().filter(|k| *k != first).collect();
+    in_cpu.extend(s.layout.children(first).iter().copied());
+    let brick = s.layout.brick_bytes() as u64;
+    let params = RefineParams {
+        camera: &cam,
+        aspect: 1.0,
+        viewport_height_px: 512,
+        volume_frame: &s.frame,
+        mode: RenderMode::Mip,
+        tf: &s.tf,
+        tolerance_px: 1.0,
+        metric: brickray_core::LodMetric::Geometric,
+        max_data_leaves: 10_000,
+        max_requests: u32::MAX,
+        brick_upload_bytes: brick,
+    };
+    // Room for the 7 charged level-1 bricks or for the first node's children,
+    // not both at once.
+    let mut b = UploadBudget::new(8 * brick);
+    let mut env = SomeInCpu {
+        layout: s.layout.clone(),
+        in_cpu,
+    };
+    let r = refine(&s.layout, &params, &mut env, &mut b);
+    assert_exact_cover(&keys(&r), s.layout.levels);
+    assert!(
+        r.leaves.iter().all(|l| l.key != first),
+        "the first node was not split"
+    );
+    assert_eq!(r.blocked.upload_budget, 0);
+    assert!(r.leaves.iter().filter(|l| l.needs_upload).count() as u64 <= 8);
+}
+
 #[test]
 fn tf_change_reclassifies_from_metadata_only() {
     let s = setup();
