@@ -43,10 +43,10 @@ pub struct ReferenceOptions<'a> {
     /// Host clip depth per pixel (`width * height`, row 0 at the top): each ray of
     /// that pixel stops there.
     pub host_depth: Option<&'a [f32]>,
-    /// DVR composites pre-integrated segments (Engel et al. 2001): sample `k`
-    /// composites the segment from the value of sample `k - 1` (its own value at
-    /// the first sample) to its own, `step_factor` reference lengths long,
-    /// integrated exactly through the TF in f64
+    /// DVR composites pre-integrated segments (Engel et al. 2001): sample `k >= 1`
+    /// composites the segment from the value of sample `k - 1` to its own,
+    /// `step_factor` reference lengths long (the first sample composites
+    /// nothing: the ray starts there), integrated exactly through the TF in f64
     /// ([`Preintegrator::segment`](brickray_core::tf::Preintegrator::segment)),
     /// shaded at sample `k`. `settings.preintegrated` is ignored, like
     /// `settings.step_factor`. Default off.
@@ -329,9 +329,14 @@ impl Marcher<'_> {
             let [r, g, b, a] = match &self.preint {
                 // The segment's associated colour, made straight again (shading
                 // applies to the straight colour; compositing multiplies back).
+                // The ray's first sample only records the front of the next
+                // segment: the segment ending there would start a step before
+                // the ray does.
                 Some(p) => {
-                    let [r, g, b, a] = p.segment(prev.unwrap_or(v), v, self.step_factor);
-                    prev = Some(v);
+                    let Some(front) = prev.replace(v) else {
+                        continue;
+                    };
+                    let [r, g, b, a] = p.segment(front, v, self.step_factor);
                     let s = if a > 0.0 { 1.0 / a } else { 0.0 };
                     [r * s, g * s, b * s, a]
                 }

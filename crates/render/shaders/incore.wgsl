@@ -149,11 +149,14 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             acc.samples = acc.samples + 1u;
             if (MODE == MODE_DVR) {
                 var front = v;
+                // Pre-integration: the ray's first sample composites nothing.
+                var first = false;
                 if (PREINT) {
                     preint_fetch(&acc, cur, t, dt, t0);
+                    first = preint_before_start(t, dt, t0);
                     front = preint_front(&acc, t, dt, v);
                 }
-                if (dvr_sample(&acc, cur, r, t, front, v, tf_v)) { break; }
+                if (!first && dvr_sample(&acc, cur, r, t, front, v, tf_v)) { break; }
             } else if (MODE == MODE_ISO) {
                 if (v >= frame.isovalue) {
                     // The first sample inside is a capped cut, else the crossing

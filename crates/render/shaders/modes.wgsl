@@ -70,16 +70,25 @@ fn preint_joined(acc: Accum, t: f32, dt: f32) -> bool {
     return abs(acc.prev_t - (t - dt)) <= 0.01 * dt;
 }
 
+// Pre-integration: true when the segment [t - dt, t] starts before t_min, the
+// ray's start (the ray's first sample, k = 0 on the grid t_min + k dt; the
+// tolerance keeps k = 1 after it whatever the rounding of t - dt). Such a
+// sample composites nothing: it only records the next segment's front.
+fn preint_before_start(t: f32, dt: f32, t_min: f32) -> bool {
+    return t - dt < t_min - 0.01 * dt;
+}
+
 // Pre-integration: the front value of the segment [t - dt, t] ending at the
 // sample of value v, and that sample recorded as the next segment's front. The
 // front is the previous sample's value when it was taken one step before; else
 // the segment is taken as constant (front = v, the corrected single sample).
-// In core the kernel samples the front at t - dt first after skipped empty
-// space (`preint_fetch`), so the constant segment remains only at a ray's first
-// sample. Out of core it does not (a second atlas sample in the march loop, in
-// any form tried, crashed lavapipe's shader compiler): the first sample after
-// skipped space (an empty leaf or sub-cell, transparent by construction) or a
-// change of level composites a constant segment.
+// A ray's first sample composites no segment (`preint_before_start`). In core
+// the kernel samples the front at t - dt first after skipped empty space
+// (`preint_fetch`), so no constant segment remains. Out of core it does not (a
+// second atlas sample in the march loop, in any form tried, crashed lavapipe's
+// shader compiler): the first sample after skipped space (an empty leaf or
+// sub-cell, transparent by construction) or a change of level composites a
+// constant segment.
 fn preint_front(acc: ptr<function, Accum>, t: f32, dt: f32, v: f32) -> f32 {
     let front = select(v, (*acc).prev_v, preint_joined(*acc, t, dt));
     (*acc).prev_t = t;
@@ -87,10 +96,10 @@ fn preint_front(acc: ptr<function, Accum>, t: f32, dt: f32, v: f32) -> f32 {
     return front;
 }
 
-// Pre-integration after skipped space: records the value at t - dt (when at or
-// after t_min, the ray's start) as the front of the segment ending at t.
+// Pre-integration after skipped space: records the value at t - dt (when not
+// before t_min, the ray's start) as the front of the segment ending at t.
 fn preint_fetch(acc: ptr<function, Accum>, c: Cursor, t: f32, dt: f32, t_min: f32) {
-    if (!preint_joined(*acc, t, dt) && t - dt >= t_min) {
+    if (!preint_joined(*acc, t, dt) && !preint_before_start(t, dt, t_min)) {
         (*acc).prev_t = t - dt;
         (*acc).prev_v = cursor_value(c, t - dt);
         (*acc).samples = (*acc).samples + 1u;

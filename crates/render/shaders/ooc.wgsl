@@ -271,8 +271,13 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 acc.samples = acc.samples + 1u;
                 if (MODE == MODE_DVR) {
                     var front = v;
-                    if (PREINT) { front = preint_front(&acc, t, dtl, v); }
-                    if (dvr_sample(&acc, cur, r, t, front, v, cur.b.tf_v)) { done = true; break; }
+                    // Pre-integration: the ray's first sample composites nothing.
+                    var first = false;
+                    if (PREINT) {
+                        first = preint_before_start(t, dtl, t0);
+                        front = preint_front(&acc, t, dtl, v);
+                    }
+                    if (!first && dvr_sample(&acc, cur, r, t, front, v, cur.b.tf_v)) { done = true; break; }
                 } else if (MODE == MODE_ISO) {
                     if (v >= frame.isovalue) {
                         var a = t;

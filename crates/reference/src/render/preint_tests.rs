@@ -25,10 +25,17 @@ fn scene(n: u32) -> (Volume, VolumeFrame, Camera) {
     (vol, frame, camera)
 }
 
-/// Through a constant field every segment is the corrected single sample, so
-/// pre-integrated and plain images agree to f64 rounding.
+/// Through a constant field (value 0.5, opacity `a` per reference length) every
+/// segment is the corrected single sample, so a ray whose samples are
+/// `t0 + k dt`, `k < n`, composites exactly the emission-absorption integral
+/// over its sampled extent `[t0, t0 + (n - 1) dt]`: opacity `1 - exp(-sigma L)`,
+/// `sigma = -ln(1 - a)` per reference length, `L = (n - 1) dt`, and the TF's
+/// colour times that (within 1e-6, f32 output). The ray starts at `t0`: the old
+/// model also composited a constant segment `[t0 - dt, t0]` at the first
+/// sample, one step of material too many (`L = n dt`), which this test rejects
+/// (that model's worst error here is > 0.05).
 #[test]
-fn constant_field_gives_the_plain_image() {
+fn constant_field_integrates_exactly_over_the_sampled_extent() {
     let vol = Volume::new(
         brickray_core::VolumeDesc {
             dims: [8; 3],
@@ -43,27 +50,52 @@ fn constant_field_gives_the_plain_image() {
     let frame = VolumeFrame::centered([8; 3], [1.0; 3]);
     let camera = Camera::orbit(frame.center(), 2.0, 0.5, 0.3);
     let s = RenderSettings::default();
-    let opts = ReferenceOptions::new(24, 24).with_step_factor(0.7);
-    let plain = render_reference(&vol, &frame, &tf, &camera, &s, &opts);
-    let pre = render_reference(
-        &vol,
-        &frame,
-        &tf,
-        &camera,
-        &s,
-        &opts.with_preintegration(true),
-    );
-    let mut worst = 0.0f64;
-    for (a, b) in plain.color.iter().zip(&pre.color) {
-        for k in 0..4 {
-            worst = worst.max((a[k] - b[k]).abs() as f64);
+    let (w, h, step) = (24u32, 24u32, 0.7f32);
+    let opts = ReferenceOptions::new(w, h)
+        .with_step_factor(step)
+        .with_preintegration(true);
+    let pre = render_reference(&vol, &frame, &tf, &camera, &s, &opts);
+    // The rays and their sample counts, as the marcher takes them.
+    let marcher = Marcher::new(&vol, &frame, &tf, &camera, &s, step as f64, w, h);
+    let [r, g, b, a] = tf.lookup(0.5);
+    assert!(a > 0.5, "the field is visibly opaque: {a}");
+    let sigma = -(1.0 - a).ln() / frame.voxel_world as f64; // per world unit
+    let (mut worst, mut worst_old, mut multi) = (0.0f64, 0.0f64, 0);
+    for py in 0..h {
+        for px in 0..w {
+            let ray = marcher
+                .rays
+                .pixel_ray(&marcher.inv_model, px as f64, py as f64, w, h);
+            let n = ray
+                .clip_box(s.clip.min.map(f64::from), s.clip.max.map(f64::from))
+                .map_or(0, |(t0, t1)| {
+                    Span {
+                        t0,
+                        t1,
+                        dt: marcher.dt,
+                    }
+                    .samples()
+                    .count()
+                });
+            let closed = |steps: usize| 1.0 - (-sigma * steps as f64 * marcher.dt).exp();
+            let want = closed(n.saturating_sub(1));
+            let got = pre.color[(py * w + px) as usize].map(f64::from);
+            for (k, x) in [r * want, g * want, b * want, want].into_iter().enumerate() {
+                worst = worst.max((got[k] - x).abs());
+            }
+            worst_old = worst_old.max((got[3] - closed(n)).abs());
+            multi += usize::from(n >= 2 && got[3] > 0.5);
         }
     }
-    assert!(
-        plain.color.iter().any(|c| c[3] > 0.5),
-        "the slab is visible"
+    println!(
+        "constant field: worst error {worst:.2e}, old model's {worst_old:.3}, {multi} opaque rays"
     );
+    assert!(multi > 100, "the slab is visible on most rays: {multi}");
     assert!(worst < 1e-6, "{worst}");
+    assert!(
+        worst_old > 0.05,
+        "the old model is not told apart: {worst_old}"
+    );
 }
 
 /// At a step of 2 voxels through a narrow spike, plain sampling misses most of
