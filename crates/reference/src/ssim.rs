@@ -178,7 +178,7 @@ mod tests {
             let b: Vec<u8> = (0..w * h * 4).map(|_| next()).collect();
             let (ab, ba) = (ssim(&a, &b, w as u32, h as u32), ssim(&b, &a, w as u32, h as u32));
             prop_assert!((ab - ba).abs() < 1e-9);
-            prop_assert!(ab <= 1.0 + 1e-12 && ab >= -1.0 - 1e-12);
+            prop_assert!((-1.0 - 1e-12..=1.0 + 1e-12).contains(&ab));
         }
     }
 }
