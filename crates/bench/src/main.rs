@@ -242,6 +242,9 @@ enum Suite {
         /// GPU pool budget per renderer in MiB (default 1024).
         #[arg(long)]
         gpu_mib: Option<u64>,
+        /// Only the start view: working set, oracle and image, no turn.
+        #[arg(long)]
+        start_only: bool,
         /// Policies, comma-separated, of rayguided, occlusion, both (none, the
         /// baseline, always runs; default all).
         #[arg(long)]
