@@ -242,6 +242,9 @@ enum Suite {
         /// GPU pool budget per renderer in MiB (default 1024).
         #[arg(long)]
         gpu_mib: Option<u64>,
+        /// CPU brick cache budget per renderer in MiB (default 512).
+        #[arg(long)]
+        cpu_mib: Option<u64>,
         /// Only the start view: working set, oracle and image, no turn.
         #[arg(long)]
         start_only: bool,

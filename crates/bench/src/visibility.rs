@@ -176,6 +176,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
     // The GPU pool per renderer: the unculled run must not be capped by it, or
     // the cut is measured against a pool-limited baseline.
     let gpu_mib: u64 = arg(args, "--gpu-mib", 1024)?;
+    let cpu_mib: u64 = arg(args, "--cpu-mib", 512)?;
     // Only the start view (working set, oracle, image): no turn, no latency.
     let start_only = args.iter().any(|a| a == "--start-only");
     let shell_dims: u64 = arg(args, "--shell-dims", 4096)?;
@@ -189,7 +190,11 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
     println!("adapter: {}", gpu.describe());
     // `--policies none,rayguided,...` restricts the run (none always runs: it
     // is the baseline every figure is relative to).
-    let wanted: String = arg(args, "--policies", "none,rayguided,occlusion,both".to_string())?;
+    let wanted: String = arg(
+        args,
+        "--policies",
+        "none,rayguided,occlusion,both".to_string(),
+    )?;
     let want = |p: VisibilityPolicy| wanted.split(',').any(|w| w.trim() == p.name());
     let mut policies = vec![VisibilityPolicy::None];
     if want(VisibilityPolicy::RayGuided) {
@@ -233,7 +238,12 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
             "\n{} ({px}x{px}): hold <= {hold}, turn {turn} frames, hold <= {hold}",
             scene.name
         );
-        let tracks = run_scene(&runner, scene, &policies, (hold, turn, gpu_mib, start_only))?;
+        let tracks = run_scene(
+            &runner,
+            scene,
+            &policies,
+            (hold, turn, (gpu_mib, cpu_mib), start_only),
+        )?;
         report(scene, &policies, &tracks, &mut fig)?;
         chart.push((
             format!("{} ({px}x{px})", scene.name),
@@ -375,7 +385,7 @@ fn run_scene(
     runner: &Runner<'_>,
     scene: &Scene,
     policies: &[VisibilityPolicy],
-    (hold, turn, gpu_mib, start_only): (usize, usize, u64, bool),
+    (hold, turn, (gpu_mib, cpu_mib), start_only): (usize, usize, (u64, u64), bool),
 ) -> Result<Vec<Track>, String> {
     let g = runner.gpu;
     let mut rs = Vec::new();
@@ -388,6 +398,7 @@ fn run_scene(
             scene.frame,
             OutOfCoreConfig {
                 gpu_budget_bytes: gpu_mib << 20,
+                cpu_budget_bytes: cpu_mib << 20,
                 ..Default::default()
             },
         )
@@ -567,11 +578,15 @@ fn report(
         let ws = s.cache.working_set_bricks as f64;
         let cut_frac = 1.0 - ws / (base_s.cache.working_set_bricks.max(1) as f64);
         // Back view: (working set, cut, PSNR), when it was run.
-        let back = t.back.as_ref().zip(base_back).map(|((bimg, bs), (base_img, base_bs))| {
-            let n = bs.cache.working_set_bricks;
-            let cut = 1.0 - n as f64 / base_bs.cache.working_set_bricks.max(1) as f64;
-            (n, cut, brickray_reference::psnr(bimg, base_img))
-        });
+        let back = t
+            .back
+            .as_ref()
+            .zip(base_back)
+            .map(|((bimg, bs), (base_img, base_bs))| {
+                let n = bs.cache.working_set_bricks;
+                let cut = 1.0 - n as f64 / base_bs.cache.working_set_bricks.max(1) as f64;
+                (n, cut, brickray_reference::psnr(bimg, base_img))
+            });
         let psnr_s = brickray_reference::psnr(img, base_start);
         let d = disocc(t);
         let peak = t.working.iter().cloned().fold(0.0, f64::max);
