@@ -187,7 +187,11 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
     println!("adapter: {}", gpu.describe());
     // `--policies none,rayguided,...` restricts the run (none always runs: it
     // is the baseline every figure is relative to).
-    let wanted: String = arg(args, "--policies", "none,rayguided,occlusion,both".to_string())?;
+    let wanted: String = arg(
+        args,
+        "--policies",
+        "none,rayguided,occlusion,both".to_string(),
+    )?;
     let want = |p: VisibilityPolicy| wanted.split(',').any(|w| w.trim() == p.name());
     let mut policies = vec![VisibilityPolicy::None];
     if want(VisibilityPolicy::RayGuided) {
