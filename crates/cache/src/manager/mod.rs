@@ -125,7 +125,12 @@ impl RefineEnv for Env<'_, '_> {
 
     fn data(&mut self, key: NodeKey) -> DataState {
         if self.pool.contains(key) {
-            self.cpu.touch(key);
+            // Not touched in the CPU cache: a brick on the GPU has its copy
+            // there, so its CPU copy ages and goes before the bricks that are
+            // only in CPU memory (those loaded for a split still waiting for its
+            // other children, or waiting for upload budget). Touching it made
+            // those the least recently used whenever the working set outgrew
+            // the CPU cache, and the split never happened.
             DataState::OnGpu
         } else if self.cpu.get(key).is_some() {
             DataState::InCpu
