@@ -41,6 +41,8 @@ struct LeafVis {
     visible: Option<u64>,
     /// The latest frame it showed any pixel in (propagation uses it).
     reached: Option<u64>,
+    /// Pixels of its latest observation.
+    pixels: u32,
     /// It became a leaf by collapsing, invisible.
     collapsed: bool,
 }
@@ -163,6 +165,7 @@ impl VisibilityState {
                     observed: collapsed_hidden.then_some(frame),
                     visible: None,
                     reached: None,
+                    pixels: 0,
                     collapsed: collapsed_hidden,
                 }
             });
@@ -185,6 +188,9 @@ impl VisibilityState {
             return false;
         }
         let latest = |x: Option<u64>| Some(x.map_or(frame, |o| o.max(frame)));
+        if l.observed.is_none_or(|o| frame >= o) {
+            l.pixels = pixels;
+        }
         l.observed = latest(l.observed);
         if pixels >= threshold {
             l.visible = latest(l.visible);
@@ -253,6 +259,14 @@ impl VisibilityState {
         self.inner.get(&key).copied().unwrap_or(true) || self.bounced.contains(&key)
     }
 
+    /// Pixels the latest observation of `key`, a data leaf of the cut, found
+    /// (`None` for any other node or a leaf not observed yet).
+    pub fn pixels(&self, key: NodeKey) -> Option<u32> {
+        self.leaves
+            .get(&key)
+            .and_then(|l| l.observed.map(|_| l.pixels))
+    }
+
     /// Counts of the cut's data leaves by visibility.
     pub fn counts(&self) -> VisibilityCounts {
         let mut c = VisibilityCounts::default();
@@ -294,6 +308,26 @@ mod tests {
         assert!(s.visible(NodeKey::ROOT));
         assert!(s.visible(NodeKey::ROOT.child(5).child(1)));
         assert_eq!(s.counts().unobserved, 1);
+    }
+
+    #[test]
+    fn pixels_are_the_latest_observation_of_a_leaf() {
+        let mut s = VisibilityState::new(cfg());
+        let a = NodeKey::ROOT.child(0);
+        s.set_cut(5, [a]);
+        assert_eq!(s.pixels(a), None);
+        assert_eq!(s.pixels(NodeKey::ROOT), None);
+        s.observe(6, a, 40);
+        assert_eq!(s.pixels(a), Some(40));
+        // A late observation of an older frame does not replace a newer one.
+        s.observe(5, a, 7);
+        assert_eq!(s.pixels(a), Some(40));
+        s.observe(7, a, 0);
+        assert_eq!(s.pixels(a), Some(0));
+        // A leaf that re-enters the cut starts over.
+        s.set_cut(8, [a.child(1)]);
+        s.set_cut(9, [a]);
+        assert_eq!(s.pixels(a), None);
     }
 
     #[test]

@@ -144,6 +144,10 @@ impl RefineEnv for Env<'_, '_> {
     fn may_split(&mut self, key: NodeKey) -> bool {
         self.filter.as_mut().is_none_or(|f| f.may_split(key))
     }
+
+    fn request_weight(&mut self, key: NodeKey) -> f64 {
+        self.filter.as_mut().map_or(1.0, |f| f.request_weight(key))
+    }
 }
 
 impl BrickManager {

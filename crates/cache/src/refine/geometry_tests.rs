@@ -116,3 +116,48 @@ proptest! {
         }
     }
 }
+
+#[test]
+fn centre_weight_is_highest_at_the_centre_of_the_image() {
+    let d = desc([64; 3], [1.0; 3]);
+    let layout = OctreeLayout::new(d, 8, 1);
+    let frame = VolumeFrame::centered([64; 3], [1.0; 3]);
+    // Looking at the volume's centre from straight ahead, close enough for
+    // the volume to fill most of the view.
+    let cam = Camera::orbit(Vec3::ZERO, 1.3, 0.0, 0.0);
+    let geo = ViewGeometry::new(&layout, &cam, 1.0, 256, &frame);
+    // Level 2 (4 nodes an axis): a central node against a corner node.
+    let centre = NodeKey {
+        level: 2,
+        x: 1,
+        y: 1,
+        z: 1,
+    };
+    let corner = NodeKey {
+        level: 2,
+        x: 0,
+        y: 0,
+        z: 0,
+    };
+    let (wc, wk) = (geo.centre_weight(centre), geo.centre_weight(corner));
+    assert!(wc > wk + 0.1, "{wc} vs {wk}");
+    assert!(wc <= 1.0 && wk > 0.0 && wk < 0.7, "{wc} {wk}");
+    // The whole volume is centred.
+    assert!((geo.centre_weight(NodeKey::ROOT) - 1.0).abs() < 1e-9);
+    // The eye inside the volume: of two nodes at either end of the view axis,
+    // the one behind the eye weighs exactly 0.5, the one in front is projected.
+    let inside = Camera::orbit(Vec3::ZERO, 0.05, 0.0, 0.0);
+    let geo = ViewGeometry::new(&layout, &inside, 1.0, 256, &frame);
+    let w: Vec<f64> = [0, 3]
+        .map(|z| {
+            geo.centre_weight(NodeKey {
+                level: 2,
+                x: 1,
+                y: 1,
+                z,
+            })
+        })
+        .to_vec();
+    assert_eq!(w.iter().filter(|x| **x == 0.5).count(), 1, "{w:?}");
+    assert!(w.iter().all(|x| *x > 0.0 && *x <= 1.0), "{w:?}");
+}

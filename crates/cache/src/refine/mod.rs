@@ -13,7 +13,9 @@
 //! frame). A node is split only when the metadata
 //! of its children is known (missing metadata is requested), the bricks of all its
 //! visible children are on the GPU or in CPU memory (missing ones are requested
-//! with the parent's priority), none of them failed, the pool has slots for them
+//! with the parent's priority times its [`ViewGeometry::centre_weight`] and its
+//! [`RefineEnv::request_weight`]: the centre of the image and what rays asked
+//! for load first), none of them failed, the pool has slots for them
 //! and the frame's upload budget can take those not yet on the GPU.
 //!
 //! Classification uses node metadata only ([`RefineEnv::node`]); no brick is read
@@ -109,6 +111,15 @@ pub trait RefineEnv {
         let _ = key;
         true
     }
+    /// How strongly the image asks for `key`'s detail (for example from the
+    /// pixels its brick showed, [`SplitFilter::request_weight`]): the priority
+    /// of the load requests for its children is multiplied by it (with the
+    /// node's [`ViewGeometry::centre_weight`]). It orders loads, never decides
+    /// the cut. 1 by default.
+    fn request_weight(&mut self, key: NodeKey) -> f64 {
+        let _ = key;
+        1.0
+    }
 }
 
 /// Visibility as refinement sees it: whether a node may be split (see
@@ -116,6 +127,12 @@ pub trait RefineEnv {
 pub trait SplitFilter {
     /// False for a node that must not be split this frame.
     fn may_split(&mut self, key: NodeKey) -> bool;
+    /// How strongly the image asks for `key`'s detail ([`RefineEnv::request_weight`]);
+    /// 1 by default.
+    fn request_weight(&mut self, key: NodeKey) -> f64 {
+        let _ = key;
+        1.0
+    }
 }
 
 /// The view and the knobs of one refinement.
@@ -513,11 +530,13 @@ pub fn refine(
             .map(|(i, _)| *i)
             .collect();
         if !missing.is_empty() {
+            // What rays asked for, and the centre of the image, load first.
+            let order = priority * env.request_weight(key) * geo.centre_weight(key);
             for i in missing {
-                if let (true, Some(info)) = (out.requests.len() < max_requests, classes[i].info) {
+                if let Some(info) = classes[i].info {
                     out.requests.push(LoadRequest {
                         key: children[i],
-                        priority: priority as f32,
+                        priority: order as f32,
                         info,
                     });
                 }
@@ -563,6 +582,11 @@ pub fn refine(
         }
     }
 
+    // Highest (weighted) priority first, then the frame's cap: the weights
+    // choose which bricks are asked for, not only their order.
+    out.requests
+        .sort_by(|a, b| b.priority.total_cmp(&a.priority).then(a.key.cmp(&b.key)));
+    out.requests.truncate(max_requests);
     for item in deferred {
         out.blocked.upload_budget += 1;
         finals.push((item.key, item.priority));

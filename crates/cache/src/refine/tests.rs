@@ -523,3 +523,76 @@ fn invisible_nodes_stay_at_their_level_and_request_nothing() {
         }
     }
 }
+
+/// Nothing in memory but the root; `favoured`'s detail is asked for 100 times
+/// more strongly than any other node's.
+struct Favour {
+    layout: OctreeLayout,
+    favoured: NodeKey,
+}
+
+impl RefineEnv for Favour {
+    fn node(&mut self, key: NodeKey) -> MetaState {
+        MetaState::Known(ball_info(&self.layout, key))
+    }
+    fn data(&mut self, key: NodeKey) -> DataState {
+        if key.level == 0 {
+            DataState::OnGpu
+        } else {
+            DataState::Missing
+        }
+    }
+    fn request_weight(&mut self, key: NodeKey) -> f64 {
+        if key == self.favoured { 100.0 } else { 1.0 }
+    }
+}
+
+/// The request weight orders the load requests and nothing else: the cut is
+/// the same whatever it is.
+#[test]
+fn request_weight_orders_loads_not_the_cut() {
+    let s = setup();
+    let cam = Camera::orbit(Vec3::ZERO, 1.5, 0.3, 0.2);
+    let params = RefineParams {
+        camera: &cam,
+        aspect: 1.0,
+        viewport_height_px: 512,
+        volume_frame: &s.frame,
+        mode: RenderMode::Mip,
+        tf: &s.tf,
+        tolerance_px: 1.0,
+        metric: brickray_core::LodMetric::Geometric,
+        max_data_leaves: 10_000,
+        max_requests: u32::MAX,
+        brick_upload_bytes: s.layout.brick_bytes() as u64,
+    };
+    let run = |favoured: NodeKey| {
+        let mut env = Favour {
+            layout: s.layout.clone(),
+            favoured,
+        };
+        refine(
+            &s.layout,
+            &params,
+            &mut env,
+            &mut UploadBudget::new(u64::MAX),
+        )
+    };
+    // The root splits into its children, whose bricks are all wanted.
+    let plain = run(NodeKey {
+        level: 9,
+        x: 0,
+        y: 0,
+        z: 0,
+    });
+    assert!(plain.requests.len() > 1);
+    for r in &plain.requests {
+        assert_eq!(r.key.level, 1);
+    }
+    let favoured = run(NodeKey::ROOT);
+    assert_eq!(keys(&favoured), keys(&plain));
+    for (a, b) in favoured.requests.iter().zip(&plain.requests) {
+        assert_eq!(a.key, b.key);
+        assert!((a.priority / b.priority - 100.0).abs() < 1e-3);
+    }
+}

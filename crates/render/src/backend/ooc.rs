@@ -222,6 +222,14 @@ impl brickray_cache::SplitFilter for Filter<'_> {
     fn may_split(&mut self, key: NodeKey) -> bool {
         self.0.visible(key)
     }
+
+    /// The pixels a leaf last showed order its children's loads: `1 + ln(1 +
+    /// pixels)` (1 when not observed; an invisible leaf is not split at all).
+    fn request_weight(&mut self, key: NodeKey) -> f64 {
+        self.0
+            .pixels(key)
+            .map_or(1.0, |p| 1.0 + (1.0 + p as f64).ln())
+    }
 }
 
 impl std::fmt::Debug for OutOfCore {
