@@ -89,6 +89,24 @@ fn in_core(sc: &Scene) -> VolumeRenderer {
     r
 }
 
+/// The scene out of core, converging to the finest level at once; the store
+/// lives in `dir`.
+fn out_of_core(sc: &Scene, dir: &std::path::Path) -> VolumeRenderer {
+    let g = gpu();
+    let source = brickray_harness::store_of(&sc.vol, &dir.join("ball.brs"));
+    let mut r = VolumeRenderer::new(&g.device, targets()).unwrap();
+    let config = OutOfCoreConfig {
+        tolerance_px: 0.0,
+        upload_budget_bytes: 1 << 30,
+        ..Default::default()
+    };
+    r.set_volume_source(&g.device, &g.queue, source, sc.frame, config)
+        .unwrap();
+    r.set_transfer_function(&g.device, &g.queue, &sc.tf)
+        .unwrap();
+    r
+}
+
 /// Plain and pre-integrated images at step 2 against the exact integral, shaded
 /// and not; returns the PSNRs (plain, pre-integrated) per case.
 fn against_exact(name: &str, r: &mut VolumeRenderer, sc: &Scene) {
@@ -212,19 +230,8 @@ fn in_core_skipping_keeps_the_preintegrated_image() {
 #[test]
 fn out_of_core_preintegration_is_closer_to_the_exact_integral() {
     let sc = scene();
-    let g = gpu();
     let dir = tempfile::tempdir().unwrap();
-    let source = brickray_harness::store_of(&sc.vol, &dir.path().join("ball.brs"));
-    let mut r = VolumeRenderer::new(&g.device, targets()).unwrap();
-    let config = OutOfCoreConfig {
-        tolerance_px: 0.0,
-        upload_budget_bytes: 1 << 30,
-        ..Default::default()
-    };
-    r.set_volume_source(&g.device, &g.queue, source, sc.frame, config)
-        .unwrap();
-    r.set_transfer_function(&g.device, &g.queue, &sc.tf)
-        .unwrap();
+    let mut r = out_of_core(&sc, dir.path());
     against_exact("out of core", &mut r, &sc);
     // And against the CPU reference's pre-integration (reported; brick
     // boundaries after empty leaves take their first segment as constant).
@@ -257,20 +264,9 @@ fn first_sample_composites_nothing() {
         ),
         ..scene()
     };
-    let g = gpu();
     let mut core = in_core(&sc);
     let dir = tempfile::tempdir().unwrap();
-    let source = brickray_harness::store_of(&sc.vol, &dir.path().join("ball.brs"));
-    let mut ooc = VolumeRenderer::new(&g.device, targets()).unwrap();
-    let config = OutOfCoreConfig {
-        tolerance_px: 0.0,
-        upload_budget_bytes: 1 << 30,
-        ..Default::default()
-    };
-    ooc.set_volume_source(&g.device, &g.queue, source, sc.frame, config)
-        .unwrap();
-    ooc.set_transfer_function(&g.device, &g.queue, &sc.tf)
-        .unwrap();
+    let mut ooc = out_of_core(&sc, dir.path());
     for shaded in [false, true] {
         let s = settings(true, shaded);
         let cpu = reference(

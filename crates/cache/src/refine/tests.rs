@@ -285,6 +285,23 @@ fn upload_budget_limits_splits_but_progresses() {
     }
 }
 
+/// MIP at 512 px, 1 px tolerance, no pool or request limit.
+fn mip_params<'a>(s: &'a Setup, cam: &'a Camera) -> RefineParams<'a> {
+    RefineParams {
+        camera: cam,
+        aspect: 1.0,
+        viewport_height_px: 512,
+        volume_frame: &s.frame,
+        mode: RenderMode::Mip,
+        tf: &s.tf,
+        tolerance_px: 1.0,
+        metric: brickray_core::LodMetric::Geometric,
+        max_data_leaves: 10_000,
+        max_requests: u32::MAX,
+        brick_upload_bytes: s.layout.brick_bytes() as u64,
+    }
+}
+
 /// Bricks of `in_cpu` in CPU memory, every other brick on the GPU.
 struct SomeInCpu {
     layout: OctreeLayout,
@@ -310,7 +327,7 @@ impl RefineEnv for SomeInCpu {
 /// Before, the frame ended with nothing uploaded and the split still refused,
 /// and every later frame repeated it: the view stopped refining for good while
 /// reporting itself converged (found on the 4096^3 shells at 512 x 512 after a
-/// half turn, stuck at 1244 bricks of the 2840 the view needs).
+/// half turn, stuck at 1244 bricks where the pool allowed 2430).
 #[test]
 fn splits_refused_on_returned_charges_are_retried() {
     let s = setup();
@@ -327,19 +344,7 @@ fn splits_refused_on_returned_charges_are_retried() {
     let mut in_cpu: HashSet<NodeKey> = level1.iter().copied().filter(|k| *k != first).collect();
     in_cpu.extend(s.layout.children(first).iter().copied());
     let brick = s.layout.brick_bytes() as u64;
-    let params = RefineParams {
-        camera: &cam,
-        aspect: 1.0,
-        viewport_height_px: 512,
-        volume_frame: &s.frame,
-        mode: RenderMode::Mip,
-        tf: &s.tf,
-        tolerance_px: 1.0,
-        metric: brickray_core::LodMetric::Geometric,
-        max_data_leaves: 10_000,
-        max_requests: u32::MAX,
-        brick_upload_bytes: brick,
-    };
+    let params = mip_params(&s, &cam);
     // Room for the 7 charged level-1 bricks or for the first node's children,
     // not both at once.
     let mut b = UploadBudget::new(8 * brick);
@@ -553,19 +558,7 @@ impl RefineEnv for Favour {
 fn request_weight_orders_loads_not_the_cut() {
     let s = setup();
     let cam = Camera::orbit(Vec3::ZERO, 1.5, 0.3, 0.2);
-    let params = RefineParams {
-        camera: &cam,
-        aspect: 1.0,
-        viewport_height_px: 512,
-        volume_frame: &s.frame,
-        mode: RenderMode::Mip,
-        tf: &s.tf,
-        tolerance_px: 1.0,
-        metric: brickray_core::LodMetric::Geometric,
-        max_data_leaves: 10_000,
-        max_requests: u32::MAX,
-        brick_upload_bytes: s.layout.brick_bytes() as u64,
-    };
+    let params = mip_params(&s, &cam);
     let run = |favoured: NodeKey| {
         let mut env = Favour {
             layout: s.layout.clone(),
