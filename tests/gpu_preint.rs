@@ -107,6 +107,17 @@ fn out_of_core(sc: &Scene, dir: &std::path::Path) -> VolumeRenderer {
     r
 }
 
+/// The CPU reference's own pre-integration at step 2.
+fn preint_reference(sc: &Scene, s: &RenderSettings) -> Vec<u8> {
+    reference(
+        sc,
+        s,
+        ReferenceOptions::new(SIZE, SIZE)
+            .with_step_factor(2.0)
+            .with_preintegration(true),
+    )
+}
+
 /// Plain and pre-integrated images at step 2 against the exact integral, shaded
 /// and not; returns the PSNRs (plain, pre-integrated) per case.
 fn against_exact(name: &str, r: &mut VolumeRenderer, sc: &Scene) {
@@ -152,13 +163,7 @@ fn in_core_preintegration_matches_the_reference() {
     for shaded in [false, true] {
         let s = settings(true, shaded);
         let gpu_img = render(&mut r, &sc, s);
-        let cpu = reference(
-            &sc,
-            &s,
-            ReferenceOptions::new(SIZE, SIZE)
-                .with_step_factor(2.0)
-                .with_preintegration(true),
-        );
+        let cpu = preint_reference(&sc, &s);
         let db = psnr(&gpu_img, &cpu);
         eprintln!("in core, shaded {shaded}: GPU vs CPU pre-integrated {db:.2} dB");
         assert!(db >= 45.0, "shaded {shaded}: {db} dB");
@@ -237,13 +242,7 @@ fn out_of_core_preintegration_is_closer_to_the_exact_integral() {
     // boundaries after empty leaves take their first segment as constant).
     let s = settings(true, false);
     let img = render(&mut r, &sc, s);
-    let cpu = reference(
-        &sc,
-        &s,
-        ReferenceOptions::new(SIZE, SIZE)
-            .with_step_factor(2.0)
-            .with_preintegration(true),
-    );
+    let cpu = preint_reference(&sc, &s);
     let db = psnr(&img, &cpu);
     eprintln!("out of core: GPU vs CPU pre-integrated {db:.2} dB");
     assert!(db >= 40.0, "{db} dB");
@@ -269,13 +268,7 @@ fn first_sample_composites_nothing() {
     let mut ooc = out_of_core(&sc, dir.path());
     for shaded in [false, true] {
         let s = settings(true, shaded);
-        let cpu = reference(
-            &sc,
-            &s,
-            ReferenceOptions::new(SIZE, SIZE)
-                .with_step_factor(2.0)
-                .with_preintegration(true),
-        );
+        let cpu = preint_reference(&sc, &s);
         for (name, r) in [("in core", &mut core), ("out of core", &mut ooc)] {
             let img = render(r, &sc, s);
             let db = psnr(&img, &cpu);
