@@ -397,10 +397,10 @@ fn reference(
         o.supersample,
         cache_tag(scene, tf)
     ));
-    if let Ok(b) = std::fs::read(&path) {
-        if b.len() == (o.size * o.size * 4) as usize {
-            return Ok(b);
-        }
+    if let Ok(b) = std::fs::read(&path)
+        && b.len() == (o.size * o.size * 4) as usize
+    {
+        return Ok(b);
     }
     let t = std::time::Instant::now();
     let img = render_reference(
