@@ -9,27 +9,9 @@ mod support;
 
 use support::*;
 
-/// The thin-structures volume of the bench (case 4) at 64^3.
+/// The thin-structures volume of the bench (case 4).
 fn thin_volume(n: u32) -> Volume {
-    let nn = n as usize;
-    let mut data = vec![0u8; nn * nn * nn];
-    let idx = |x: usize, y: usize, z: usize| (z * nn + y) * nn + x;
-    let f = |k: f32| ((n as f32 * k) as usize).min(nn - 1);
-    for a in f(0.125)..f(0.875) {
-        for b in f(0.125)..f(0.875) {
-            data[idx(f(0.3125), a, b)] = 200;
-        }
-        data[idx(f(0.75), a, f(0.5))] = 220;
-        data[idx(f(0.5), f(0.25), a)] = 220;
-    }
-    for x in [0.44, 0.53, 0.63] {
-        for y in [0.31, 0.5, 0.69] {
-            for z in [0.19, 0.34, 0.81] {
-                data[idx(f(x), f(y), f(z))] = 255;
-            }
-        }
-    }
-    u8_volume(n, data)
+    brickray_harness::scenes::thin_volume(n).unwrap()
 }
 
 fn retention(img: &[u8], reference: &[u8]) -> f64 {

@@ -9,6 +9,7 @@ pub(crate) use brickray::{
     OutOfCoreStats, Projection, RenderMode, RenderSettings, TransferFunction, Volume, VolumeFrame,
     VolumeRenderer,
 };
+pub(crate) use brickray_harness::scenes::ortho;
 pub(crate) use brickray_harness::{Offscreen, shared_gpu as gpu, target_desc as targets};
 pub(crate) use brickray_reference::{ReferenceOptions, max_abs_diff, psnr, render_reference};
 pub(crate) use glam::Vec3;
@@ -31,16 +32,7 @@ pub(crate) fn region(src: &ProceduralSource, lo: [u64; 3], n: u64) -> Volume {
 }
 
 pub(crate) fn u8_volume(n: u32, data: Vec<u8>) -> Volume {
-    Volume::new(
-        brickray::VolumeDesc {
-            dims: [n; 3],
-            dtype: brickray::DType::U8,
-            spacing: [1.0; 3],
-            value_range: [0.0, 255.0],
-        },
-        brickray::core::VolumeData::U8(data),
-    )
-    .unwrap()
+    brickray_harness::scenes::u8_volume([n; 3], data).unwrap()
 }
 
 pub(crate) fn noise_tf() -> TransferFunction {
@@ -143,16 +135,4 @@ pub(crate) fn mean_abs_diff(a: &[u8], b: &[u8]) -> f64 {
         .map(|(p, q)| (0..3).map(|c| p[c].abs_diff(q[c]) as u64).sum::<u64>())
         .sum();
     s as f64 / (3 * a.len() / 4) as f64
-}
-
-pub(crate) fn ortho(c: Vec3, dir: Vec3, height: f32) -> Camera {
-    Camera {
-        eye: c + dir.normalize() * 2.0,
-        target: c,
-        up: Vec3::Y,
-        projection: Projection::Orthographic { height },
-        near: 0.01,
-        far: 10.0,
-        depth: DepthConvention::Standard,
-    }
 }

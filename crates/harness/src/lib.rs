@@ -12,6 +12,7 @@
 //!   needs it may skip.
 
 pub mod predict;
+pub mod scenes;
 pub mod soak;
 
 use std::path::PathBuf;

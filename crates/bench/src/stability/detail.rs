@@ -1,11 +1,10 @@
 //! Case 4: thin structures and small bright features at coarse levels, with
 //! average and max downsampling of the store's inner nodes.
 
-use super::{Case, Ctx, Series, line_chart, quality, s, u8_volume};
+use super::{Case, Ctx, Series, line_chart, quality, s};
 use crate::runner::{Runner, round2};
 use brickray_core::{
-    BrickSource, Camera, DepthConvention, Projection, RenderMode, RenderSettings, TransferFunction,
-    Volume, VolumeFrame,
+    BrickSource, RenderMode, RenderSettings, TransferFunction, Volume, VolumeFrame,
 };
 use brickray_render::OutOfCoreConfig;
 use brickray_store::Filter;
@@ -13,42 +12,11 @@ use glam::Vec3;
 use serde_json::json;
 use std::sync::Arc;
 
-/// A volume of air (0) holding a one-voxel sheet (200), two one-voxel lines
-/// (220) and 27 single bright voxels (255).
-pub(crate) fn thin_volume(n: u32) -> Result<Volume, String> {
-    let nn = n as usize;
-    let mut data = vec![0u8; nn * nn * nn];
-    let idx = |x: usize, y: usize, z: usize| (z * nn + y) * nn + x;
-    let f = |k: f32| ((n as f32 * k) as usize).min(nn - 1);
-    for a in f(0.125)..f(0.875) {
-        for b in f(0.125)..f(0.875) {
-            data[idx(f(0.3125), a, b)] = 200;
-        }
-        data[idx(f(0.75), a, f(0.5))] = 220;
-        data[idx(f(0.5), f(0.25), a)] = 220;
-    }
-    for x in [0.44, 0.53, 0.63] {
-        for y in [0.31, 0.5, 0.69] {
-            for z in [0.19, 0.34, 0.81] {
-                data[idx(f(x), f(y), f(z))] = 255;
-            }
-        }
-    }
-    u8_volume([n; 3], data)
-}
+pub(crate) use brickray_harness::scenes::ortho;
 
-/// An orthographic camera looking at the box centre from `dir`, the view
-/// `height` world units tall.
-pub(crate) fn ortho(c: Vec3, dir: Vec3, height: f32) -> Camera {
-    Camera {
-        eye: c + dir.normalize() * 2.0,
-        target: c,
-        up: Vec3::Y,
-        projection: Projection::Orthographic { height },
-        near: 0.01,
-        far: 10.0,
-        depth: DepthConvention::Standard,
-    }
+/// The thin-structures volume ([`brickray_harness::scenes::thin_volume`]).
+pub(crate) fn thin_volume(n: u32) -> Result<Volume, String> {
+    brickray_harness::scenes::thin_volume(n).map_err(s)
 }
 
 /// The modes of case 4: `(name, settings, TF)`.

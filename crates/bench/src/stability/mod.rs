@@ -120,17 +120,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
                     if s.holds { "kept" } else { "NOT KEPT" },
                     t0.elapsed().as_secs_f64()
                 );
-                done.push(Case {
-                    name: s.name,
-                    varied: s.varied,
-                    fails: s.fails,
-                    by: s.by,
-                    shipped: s.shipped,
-                    bound: s.bound,
-                    holds: s.holds,
-                    holes_max: s.holes_max,
-                    fig: s.fig,
-                });
+                done.push(s);
             }
             continue;
         }

@@ -244,30 +244,15 @@ pub(crate) fn cases(gpu: &GpuContext, opt: &PathOptions) -> Result<Vec<CaseResul
 /// Bound of the cases with fades: the change excess in dB.
 pub(crate) const EXCESS_DB_BOUND: f64 = 0.5;
 
-/// One case as the stability suite summarises it (the fields of its `Case`,
-/// so that wiring it in is a field-by-field copy).
-#[derive(Debug, Clone)]
-pub(crate) struct CaseSummary {
-    pub(crate) name: &'static str,
-    pub(crate) varied: String,
-    pub(crate) fails: String,
-    pub(crate) by: String,
-    pub(crate) shipped: String,
-    pub(crate) bound: String,
-    pub(crate) holds: bool,
-    pub(crate) holes_max: u64,
-    pub(crate) fig: serde_json::Value,
-}
-
 /// The suite's summary of each case: it holds when, with fades, no frame pops,
 /// the change excess is within [`EXCESS_DB_BOUND`] and no frame has a hole.
-pub(crate) fn summaries(results: &[CaseResult], opt: &PathOptions) -> Vec<CaseSummary> {
+pub(crate) fn summaries(results: &[CaseResult], opt: &PathOptions) -> Vec<super::Case> {
     results
         .iter()
         .map(|c| {
             let (on, off) = (&c.fades.temporal, &c.no_fades.temporal);
             let holes = c.fades.holes_max.max(c.no_fades.holes_max);
-            CaseSummary {
+            super::Case {
                 name: c.name,
                 varied: format!(
                     "LOD fades of {} frames vs off along the path (tolerance {} px)",

@@ -2,7 +2,7 @@
 //! visibility feedback's disocclusion (the scenes of the `prediction` and
 //! `visibility` suites), against the reference of each frame's camera.
 
-use super::{Case, Ctx, Series, holes, line_chart, quality, region_volume, s};
+use super::{Case, Ctx, holes, line_chart, named_series, quality, region_volume, s};
 use crate::runner::{Runner, round2};
 use brickray_core::{Accel, Camera, RenderMode, RenderSettings, TransferFunction, VolumeFrame};
 use brickray_harness::predict;
@@ -117,14 +117,7 @@ fn prediction_path(ctx: &Ctx<'_>) -> Result<(serde_json::Value, f64, bool), Stri
     }
     println!("  guard identical to full traversal every frame: {guard_exact}");
     fig.insert("guard_equals_full".into(), json!(guard_exact));
-    let series: Vec<Series> = variants
-        .iter()
-        .zip(psnr)
-        .map(|((n, _), p)| Series {
-            name: n.to_string(),
-            points: p,
-        })
-        .collect();
+    let series = named_series(&variants, psnr);
     line_chart(
         &ctx.charts,
         "stability_prediction_psnr.svg",
@@ -218,14 +211,7 @@ fn disocclusion(ctx: &Ctx<'_>) -> Result<(serde_json::Value, Option<usize>, u64)
         recovery.map_or("never".into(), |r| r.to_string())
     );
     fig.insert("recovery_frames".into(), json!(recovery));
-    let series: Vec<Series> = policies
-        .iter()
-        .zip(psnr)
-        .map(|((n, _), p)| Series {
-            name: n.to_string(),
-            points: p,
-        })
-        .collect();
+    let series = named_series(&policies, psnr);
     line_chart(
         &ctx.charts,
         "stability_disocclusion_psnr.svg",

@@ -2,8 +2,8 @@
 //! a slow source, renderers, image measures and charts.
 
 use brickray_core::{
-    BrickError, BrickSource, Camera, DType, NodeInfo, NodeKey, OctreeLayout, RenderSettings,
-    TransferFunction, Volume, VolumeData, VolumeDesc, VolumeFrame,
+    BrickError, BrickSource, Camera, NodeInfo, NodeKey, OctreeLayout, RenderSettings,
+    TransferFunction, Volume, VolumeFrame,
 };
 use brickray_harness::{GpuContext, target_desc};
 use brickray_render::{OutOfCoreConfig, VolumeRenderer};
@@ -19,16 +19,7 @@ pub(crate) fn s<E: std::fmt::Display>(e: E) -> String {
 
 /// A u8 volume of `dims` voxels from `data` (x fastest), value range 0..255.
 pub(crate) fn u8_volume(dims: [u32; 3], data: Vec<u8>) -> Result<Volume, String> {
-    Volume::new(
-        VolumeDesc {
-            dims,
-            dtype: DType::U8,
-            spacing: [1.0; 3],
-            value_range: [0.0, 255.0],
-        },
-        VolumeData::U8(data),
-    )
-    .map_err(s)
+    brickray_harness::scenes::u8_volume(dims, data).map_err(s)
 }
 
 /// The finest-level box `lo .. lo + n` of a procedural source as a volume (the
@@ -171,6 +162,18 @@ impl BrickSource for SlowSource {
 pub(crate) struct Series {
     pub(crate) name: String,
     pub(crate) points: Vec<(f64, f64)>,
+}
+
+/// One series per named variant, its points taken in the same order.
+pub(crate) fn named_series<T>(names: &[(&str, T)], points: Vec<Vec<(f64, f64)>>) -> Vec<Series> {
+    names
+        .iter()
+        .zip(points)
+        .map(|((n, _), p)| Series {
+            name: n.to_string(),
+            points: p,
+        })
+        .collect()
 }
 
 /// A line chart (SVG) at `dir/file`; `log2_x` puts x on a log2 axis. Does

@@ -1,0 +1,58 @@
+//! Small scenes shared by the stability tests and the `stability` bench suite.
+
+use brickray_core::{
+    Camera, DType, DepthConvention, Projection, Volume, VolumeData, VolumeDesc, VolumeError,
+};
+use glam::Vec3;
+
+/// A u8 volume of `dims` voxels from `data` (x fastest), value range 0..255.
+pub fn u8_volume(dims: [u32; 3], data: Vec<u8>) -> Result<Volume, VolumeError> {
+    Volume::new(
+        VolumeDesc {
+            dims,
+            dtype: DType::U8,
+            spacing: [1.0; 3],
+            value_range: [0.0, 255.0],
+        },
+        VolumeData::U8(data),
+    )
+}
+
+/// An `n^3` volume of air (0) holding a one-voxel sheet (200), two one-voxel
+/// lines (220) and 27 single bright voxels (255): thin structures that
+/// coarser levels average away.
+pub fn thin_volume(n: u32) -> Result<Volume, VolumeError> {
+    let nn = n as usize;
+    let mut data = vec![0u8; nn * nn * nn];
+    let idx = |x: usize, y: usize, z: usize| (z * nn + y) * nn + x;
+    let f = |k: f32| ((n as f32 * k) as usize).min(nn - 1);
+    for a in f(0.125)..f(0.875) {
+        for b in f(0.125)..f(0.875) {
+            data[idx(f(0.3125), a, b)] = 200;
+        }
+        data[idx(f(0.75), a, f(0.5))] = 220;
+        data[idx(f(0.5), f(0.25), a)] = 220;
+    }
+    for x in [0.44, 0.53, 0.63] {
+        for y in [0.31, 0.5, 0.69] {
+            for z in [0.19, 0.34, 0.81] {
+                data[idx(f(x), f(y), f(z))] = 255;
+            }
+        }
+    }
+    u8_volume([n; 3], data)
+}
+
+/// An orthographic camera looking at `c` from the direction `dir`, the view
+/// `height` world units tall.
+pub fn ortho(c: Vec3, dir: Vec3, height: f32) -> Camera {
+    Camera {
+        eye: c + dir.normalize() * 2.0,
+        target: c,
+        up: Vec3::Y,
+        projection: Projection::Orthographic { height },
+        near: 0.01,
+        far: 10.0,
+        depth: DepthConvention::Standard,
+    }
+}
