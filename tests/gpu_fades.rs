@@ -16,7 +16,6 @@ use brickray::{
     Camera, FadeDuration, FrameDesc, OutOfCoreConfig, RenderMode, RenderSettings, TransferFunction,
     Volume, VolumeFrame, VolumeRenderer,
 };
-use brickray_core::{DType, VolumeData, VolumeDesc, synthetic::fractal_noise};
 use brickray_harness::{Offscreen, draw_frame, draw_until_settled};
 use brickray_harness::{shared_gpu as gpu, target_desc as targets};
 use brickray_reference::{TemporalOptions, temporal_stability};
@@ -26,22 +25,7 @@ use std::sync::Arc;
 const SIZE: u32 = 64;
 
 fn noise(n: u32) -> Volume {
-    let mut data = Vec::with_capacity((n as usize).pow(3));
-    for z in 0..n {
-        for y in 0..n {
-            for x in 0..n {
-                let p = [x, y, z].map(|i| i as f64 + 0.5);
-                data.push((fractal_noise(p, n as f64 / 4.0, 4) * 255.0).round() as u8);
-            }
-        }
-    }
-    let desc = VolumeDesc {
-        dims: [n; 3],
-        dtype: DType::U8,
-        spacing: [1.0; 3],
-        value_range: [0.0, 255.0],
-    };
-    Volume::new(desc, VolumeData::U8(data)).unwrap()
+    brickray_harness::scenes::noise_volume(n).unwrap()
 }
 
 /// A store of `vol` with 8-voxel bricks (4 levels at 64^3).

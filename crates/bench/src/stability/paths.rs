@@ -7,10 +7,7 @@
 //! Library functions: [`cases`] runs them, [`figures`] sums them up for the
 //! suite's JSON line.
 
-use brickray_core::{
-    Camera, DType, RenderMode, RenderSettings, TransferFunction, Volume, VolumeData, VolumeDesc,
-    VolumeFrame, synthetic::fractal_noise,
-};
+use brickray_core::{Camera, RenderMode, RenderSettings, TransferFunction, Volume, VolumeFrame};
 use brickray_harness::{GpuContext, Offscreen, draw_frame, draw_until_settled, target_desc};
 use brickray_reference::{
     ReferenceOptions, TemporalOptions, TemporalReport, render_reference, temporal_stability,
@@ -82,22 +79,7 @@ pub(crate) struct CaseResult {
 /// A 8-bit fractal-noise volume (detail at every level, so level changes
 /// show).
 pub(crate) fn noise_volume(n: u32) -> Volume {
-    let mut data = Vec::with_capacity((n as usize).pow(3));
-    for z in 0..n {
-        for y in 0..n {
-            for x in 0..n {
-                let p = [x, y, z].map(|i| i as f64 + 0.5);
-                data.push((fractal_noise(p, n as f64 / 4.0, 4) * 255.0).round() as u8);
-            }
-        }
-    }
-    let desc = VolumeDesc {
-        dims: [n; 3],
-        dtype: DType::U8,
-        spacing: [1.0; 3],
-        value_range: [0.0, 255.0],
-    };
-    Volume::new(desc, VolumeData::U8(data)).expect("valid by construction")
+    brickray_harness::scenes::noise_volume(n).expect("valid by construction")
 }
 
 /// The transfer function of the cases.
