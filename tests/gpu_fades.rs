@@ -25,7 +25,7 @@ use std::sync::Arc;
 const SIZE: u32 = 64;
 
 fn noise(n: u32) -> Volume {
-    brickray_harness::scenes::noise_volume(n).unwrap()
+    brickray_harness::scenes::noise_volume(n)
 }
 
 /// A store of `vol` with 8-voxel bricks (4 levels at 64^3).

@@ -27,6 +27,26 @@ pub fn sphere(n: u32) -> Volume {
     Volume::new(desc, VolumeData::U8(data)).expect("valid by construction")
 }
 
+/// An `n^3` u8 volume (value range 0..255, unit spacing) of `f` at each voxel's
+/// integer coordinates `[x, y, z]`, clamped to 0..1 and rounded to 8 bits.
+pub fn u8_field(n: u32, f: impl Fn([u32; 3]) -> f64) -> Volume {
+    let mut data = Vec::with_capacity((n as usize).pow(3));
+    for z in 0..n {
+        for y in 0..n {
+            for x in 0..n {
+                data.push((f([x, y, z]).clamp(0.0, 1.0) * 255.0).round() as u8);
+            }
+        }
+    }
+    let desc = VolumeDesc {
+        dims: [n; 3],
+        dtype: DType::U8,
+        spacing: [1.0; 3],
+        value_range: [0.0, 255.0],
+    };
+    Volume::new(desc, VolumeData::U8(data)).expect("valid by construction")
+}
+
 /// The Marschner-Lobb test signal (fM = 6, alpha = 0.25) sampled on an `n^3`
 /// grid over `[-1, 1]^3`, as f32 in 0..1.
 pub fn marschner_lobb(n: u32) -> Volume {

@@ -60,16 +60,8 @@ pub fn ortho(c: Vec3, dir: Vec3, height: f32) -> Camera {
 /// An `n^3` 8-bit fractal-noise volume (detail at every level, so level
 /// changes show), from [`brickray_core::synthetic::fractal_noise`] at voxel
 /// centres.
-pub fn noise_volume(n: u32) -> Result<Volume, VolumeError> {
-    let mut data = Vec::with_capacity((n as usize).pow(3));
-    for z in 0..n {
-        for y in 0..n {
-            for x in 0..n {
-                let p = [x, y, z].map(|i| i as f64 + 0.5);
-                let v = brickray_core::synthetic::fractal_noise(p, n as f64 / 4.0, 4);
-                data.push((v * 255.0).round() as u8);
-            }
-        }
-    }
-    u8_volume([n; 3], data)
+pub fn noise_volume(n: u32) -> Volume {
+    brickray_core::synthetic::u8_field(n, |p| {
+        brickray_core::synthetic::fractal_noise(p.map(|i| i as f64 + 0.5), n as f64 / 4.0, 4)
+    })
 }

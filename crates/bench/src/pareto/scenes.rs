@@ -163,21 +163,5 @@ fn scene(
 
 /// Four octaves of value noise on an `n^3` u8 grid (base period 32 voxels).
 fn noise(n: u32) -> Volume {
-    use brickray_core::{DType, VolumeData, VolumeDesc};
-    let mut data = Vec::with_capacity((n as usize).pow(3));
-    for z in 0..n {
-        for y in 0..n {
-            for x in 0..n {
-                let v = synthetic::fractal_noise([x as f64, y as f64, z as f64], 32.0, 4);
-                data.push((v.clamp(0.0, 1.0) * 255.0).round() as u8);
-            }
-        }
-    }
-    let desc = VolumeDesc {
-        dims: [n; 3],
-        dtype: DType::U8,
-        spacing: [1.0; 3],
-        value_range: [0.0, 255.0],
-    };
-    Volume::new(desc, VolumeData::U8(data)).expect("valid by construction")
+    synthetic::u8_field(n, |p| synthetic::fractal_noise(p.map(f64::from), 32.0, 4))
 }
