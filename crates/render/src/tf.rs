@@ -218,19 +218,7 @@ impl TfTables {
                 .as_ref()
                 .is_none_or(|(tex, _)| tex.size() != size)
             {
-                let tex = gpu::texture(
-                    device,
-                    &wgpu::TextureDescriptor {
-                        label: Some("brickray-render tf table"),
-                        size,
-                        mip_level_count: 1,
-                        sample_count: 1,
-                        dimension: wgpu::TextureDimension::D2,
-                        format: TABLE_FORMAT,
-                        usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-                        view_formats: &[],
-                    },
-                )?;
+                let tex = table_texture(device, "brickray-render tf table", size)?;
                 let view = tex.create_view(&Default::default());
                 self.table = Some((tex, view));
                 self.bind_group = None;
@@ -333,6 +321,28 @@ impl TfTables {
     }
 }
 
+/// A sampled 2D (array) texture of `TABLE_FORMAT` texels for a TF table,
+/// written by copies.
+fn table_texture(
+    device: &wgpu::Device,
+    label: &'static str,
+    size: wgpu::Extent3d,
+) -> Result<wgpu::Texture, RenderError> {
+    gpu::texture(
+        device,
+        &wgpu::TextureDescriptor {
+            label: Some(label),
+            size,
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format: TABLE_FORMAT,
+            usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+            view_formats: &[],
+        },
+    )
+}
+
 /// Uploads a pre-integrated table (`None`: a 1x1 transparent stand-in) into
 /// `old` when it has the right size, else into a new texture (device limits
 /// checked first); returns the texture and view and the bytes written.
@@ -354,19 +364,7 @@ fn upload_preint(
     let pair = match old {
         Some(p) if p.0.size() == size => p,
         _ => {
-            let tex = gpu::texture(
-                device,
-                &wgpu::TextureDescriptor {
-                    label: Some("brickray-render tf pre-integrated table"),
-                    size,
-                    mip_level_count: 1,
-                    sample_count: 1,
-                    dimension: wgpu::TextureDimension::D2,
-                    format: TABLE_FORMAT,
-                    usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-                    view_formats: &[],
-                },
-            )?;
+            let tex = table_texture(device, "brickray-render tf pre-integrated table", size)?;
             let view = tex.create_view(&wgpu::TextureViewDescriptor {
                 dimension: Some(wgpu::TextureViewDimension::D2Array),
                 ..Default::default()
