@@ -163,6 +163,10 @@ enum Suite {
         /// 1: also time full traversal without empty-space skipping (default 1).
         #[arg(long)]
         brute: Option<u32>,
+        /// `incore` (default) or `ooc`: brick stores drawn out of core at the
+        /// finest level.
+        #[arg(long)]
+        backend: Option<String>,
     },
     /// Pre-integrated DVR: table build time, frame time against the plain
     /// path (interleaved, head CT) and PSNR against the exact integral.

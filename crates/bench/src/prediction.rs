@@ -1,5 +1,14 @@
 //! The `prediction` suite: the isosurface prediction buffer (Braley et al.;
-//! docs/prediction.md) against the full traversal, in core.
+//! docs/prediction.md) against the full traversal, in core or (`--backend ooc`)
+//! out of core.
+//!
+//! Out of core, each scene is built into a brick store (default options:
+//! 32-voxel bricks) and drawn at its finest level (`tolerance_px` 0), so the
+//! images are those of the in-core path up to the bricks' seams; every
+//! renderer first settles on the path's first view without prediction (the
+//! whole volume stays in view along the paths, so the cut stays the same),
+//! then switches its prediction on. Frames where a renderer's cut was not
+//! settled are counted (`unsettled_frames`).
 //!
 //! Variants, interleaved frame by frame (the order rotates each frame): `full`
 //! (no prediction: the reference), `paper` (alpha 10, kappa 0.5), `ess`
@@ -24,7 +33,7 @@ use brickray_core::{
 use brickray_harness::predict::{self, FrameResult};
 use brickray_harness::{GpuContext, Offscreen, ct};
 use brickray_reference::psnr;
-use brickray_render::{FrameDesc, Prediction, TraversalClass, VolumeRenderer};
+use brickray_render::{FrameDesc, OutOfCoreConfig, Prediction, TraversalClass, VolumeRenderer};
 use glam::Vec3;
 use serde_json::json;
 
@@ -71,6 +80,63 @@ struct Scene {
     isovalue: f32,
 }
 
+/// Where the suite's volumes live: a 3D texture, or brick stores in a
+/// temporary directory drawn out of core.
+enum Backend {
+    InCore,
+    OutOfCore(tempfile::TempDir),
+}
+
+impl Backend {
+    fn parse(name: &str) -> Result<Backend, String> {
+        match name {
+            "incore" => Ok(Backend::InCore),
+            "ooc" => Ok(Backend::OutOfCore(
+                tempfile::tempdir().map_err(|e| e.to_string())?,
+            )),
+            _ => Err(format!("--backend {name}: expected incore or ooc")),
+        }
+    }
+
+    fn name(&self) -> &'static str {
+        match self {
+            Backend::InCore => "incore",
+            Backend::OutOfCore(_) => "ooc",
+        }
+    }
+
+    /// Gives `r` the scene's volume (out of core: its store, built once).
+    fn load(&self, gpu: &GpuContext, r: &mut VolumeRenderer, scene: &Scene) -> Result<(), String> {
+        match self {
+            Backend::InCore => r
+                .set_volume(&gpu.device, &gpu.queue, &scene.vol)
+                .map_err(|e| e.to_string()),
+            Backend::OutOfCore(dir) => {
+                let path = dir.path().join(format!("{}.brs", scene.name));
+                let source: std::sync::Arc<dyn brickray_core::BrickSource> = if path.exists() {
+                    std::sync::Arc::new(brickray_store::open(&path).map_err(|e| e.to_string())?)
+                } else {
+                    brickray_harness::store_of(&scene.vol, &path)
+                };
+                let d = scene.vol.desc();
+                let config = OutOfCoreConfig {
+                    tolerance_px: 0.0,
+                    upload_budget_bytes: 1 << 30,
+                    ..Default::default()
+                };
+                r.set_volume_source(
+                    &gpu.device,
+                    &gpu.queue,
+                    source,
+                    VolumeFrame::centered(d.dims, d.spacing),
+                    config,
+                )
+                .map_err(|e| e.to_string())
+            }
+        }
+    }
+}
+
 fn iso(value: f32, accel: Accel) -> RenderSettings {
     RenderSettings {
         mode: RenderMode::Iso {
@@ -101,6 +167,8 @@ struct Track {
     samples: Vec<f64>,
     /// Wrong pixels by the traversal class that drew them (summed over frames).
     wrong_by_class: [u64; 6],
+    /// Frames drawn while this renderer's cut was not settled (out of core).
+    unsettled: usize,
 }
 
 impl Track {
@@ -121,6 +189,7 @@ impl Track {
             "wrong_max_pct": (self.wrong.iter().copied().fold(0.0, f64::max) * 1e4).round() / 1e2,
             "psnr_min_db": finite_db(finite.iter().copied().fold(f64::INFINITY, f64::min)),
             "frames_exact": self.wrong.iter().filter(|&&w| w == 0.0).count(),
+            "unsettled_frames": self.unsettled,
             "wrong_px_by_class": TraversalClass::ALL
                 .iter()
                 .filter(|(_, c)| self.wrong_by_class[*c as usize] > 0)
@@ -140,6 +209,7 @@ fn run_path(
     cameras: &[Camera],
     accel: Accel,
     kappa: f32,
+    backend: &Backend,
 ) -> Result<(Vec<Track>, Option<FrameResult>), String> {
     let d = scene.vol.desc();
     let frame = VolumeFrame::centered(d.dims, d.spacing);
@@ -148,19 +218,28 @@ fn run_path(
     for (_, p) in &vs {
         let mut r = VolumeRenderer::new(&gpu.device, brickray_harness::target_desc())
             .map_err(|e| e.to_string())?;
-        r.set_volume(&gpu.device, &gpu.queue, &scene.vol)
-            .map_err(|e| e.to_string())?;
+        backend.load(gpu, &mut r, scene)?;
         r.set_transfer_function(
             &gpu.device,
             &gpu.queue,
             &TransferFunction::ramp(0.0, 1.0, 1.0),
         )
         .map_err(|e| e.to_string())?;
+        let t = Offscreen::new(&gpu.device, size, size);
+        // Settle on the first view (out of core: load its cut), then predict
+        // from frame 0 of the path.
+        let first = FrameDesc {
+            settings: iso(scene.isovalue, accel),
+            ..FrameDesc::new(cameras[0], frame, size, size)
+        };
+        brickray_harness::draw_until_settled(gpu, &mut r, &t, &first, 400)
+            .map_err(|e| e.to_string())?
+            .ok_or("the renderer did not settle on the first view")?;
         r.set_prediction(*p).map_err(|e| e.to_string())?;
         // Compile the pipeline before the timed frames.
         r.warm_up(&gpu.device, &[iso(scene.isovalue, accel)])
             .map_err(|e| e.to_string())?;
-        rs.push((r, Offscreen::new(&gpu.device, size, size)));
+        rs.push((r, t));
     }
     let mut tracks = vec![Track::default(); vs.len()];
     let mut last_paper = None;
@@ -174,6 +253,9 @@ fn run_path(
             let k = (i + j) % vs.len();
             let (r, t) = &mut rs[k];
             shots[k] = Some(predict::draw(gpu, r, t, &desc).map_err(|e| e.to_string())?);
+            if r.out_of_core_stats().is_some_and(|s| !s.converged) {
+                tracks[k].unsettled += 1;
+            }
         }
         let shots: Vec<FrameResult> = shots.into_iter().map(Option::unwrap).collect();
         for (k, s) in shots.iter().enumerate() {
@@ -246,10 +328,12 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
     let classes_png: String = arg(args, "--classes-png", String::new())?;
     let kappa: f32 = arg(args, "--kappa", Prediction::PAPER.kappa)?;
     let brute: bool = arg(args, "--brute", 1u32)? == 1;
+    let backend = Backend::parse(&arg(args, "--backend", "incore".to_string())?)?;
     let gpu = GpuContext::new().map_err(|e| e.to_string())?;
     println!("adapter: {}", gpu.describe());
     println!(
-        "image {size}x{size}; orbit of {frames} frames; kappa {kappa}; variants interleaved frame by frame"
+        "image {size}x{size}; orbit of {frames} frames; kappa {kappa}; {} ; variants interleaved frame by frame",
+        backend.name()
     );
     let mut scenes = Vec::new();
     if let Some(p) = brickray_harness::shared_volume("invesalius_cranium_ct") {
@@ -302,6 +386,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
                 &orbit(frame.center(), 2.0, frames),
                 accel,
                 kappa,
+                &backend,
             )?;
             let default = accel_name == "default";
             println!(
@@ -361,7 +446,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
             Camera::orbit(frame.center(), 2.2, yaw, 0.1)
         })
         .collect();
-    let (tracks, _) = run_path(&gpu, &occ, size, &cams, Accel::default(), kappa)?;
+    let (tracks, _) = run_path(&gpu, &occ, size, &cams, Accel::default(), kappa, &backend)?;
     println!("\nfailure path (occluder; camera moves {moving} frames, then stops {still}):");
     let mut fail = serde_json::Map::new();
     for (k, t) in tracks.iter().enumerate() {
@@ -420,7 +505,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
             cam
         })
         .collect();
-    let (tracks, _) = run_path(&gpu, scene, size, &cams, Accel::default(), kappa)?;
+    let (tracks, _) = run_path(&gpu, scene, size, &cams, Accel::default(), kappa, &backend)?;
     println!("\ntranslation + zoom, {} ({n} frames):", scene.name);
     let mut tz = serde_json::Map::new();
     for (k, t) in tracks.iter().enumerate() {
@@ -440,6 +525,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         names[best_exact], speed_ct[best_exact]
     );
     fig.insert("size".into(), json!(size));
+    fig.insert("backend".into(), json!(backend.name()));
     fig.insert("kappa".into(), json!(kappa));
     fig.insert("frames".into(), json!(frames));
     fig.insert("speedup_paper".into(), json!(speedup_paper));

@@ -38,25 +38,6 @@ fn iso_march(acc: ptr<function, Accum>, r: Ray, t0: f32, t1: f32, dt: f32, ess: 
     }
 }
 
-// Bisects a sparse bracket `pred.sparse_refine` times, so that the remaining
-// bracket is as long as a full traversal's before `finish_ray` refines it.
-fn sparse_refine(acc: ptr<function, Accum>, r: Ray) {
-    var a = (*acc).hit_a;
-    var b = (*acc).hit_b;
-    let steps = select(0u, pred.sparse_refine, b > a);
-    for (var i = 0u; i < steps; i = i + 1u) {
-        let m = 0.5 * (a + b);
-        (*acc).samples = (*acc).samples + 1u;
-        if (sample_value(tex_at(r, m)) >= frame.isovalue) {
-            b = m;
-        } else {
-            a = m;
-        }
-    }
-    (*acc).hit_a = a;
-    (*acc).hit_b = b;
-}
-
 // The sparse traversal: a march at the coarse step from the ray start, its
 // bracket bisected down to the full step's length. With the guard it marches
 // at the full step instead (with skipping, which never changes the result): a
@@ -69,7 +50,7 @@ fn sparse_traversal(acc: ptr<function, Accum>, r: Ray, t0: f32, t1: f32) {
     }
     iso_march(acc, r, t0, t1, pred.sparse_dt, SPARSE_ESS);
     if ((*acc).hit) {
-        sparse_refine(acc, r);
+        sparse_refine(acc, Cursor(r));
     }
 }
 
@@ -185,17 +166,11 @@ fn predict_ray(px: vec2<u32>, start: RayStart) {
     let cur = Cursor(r);
     var kind = TRAVERSAL_NONE;
     if (t1 > t0) {
-        // The refresh flag is mixed with the pixel's entry (never a branch on a
-        // uniform alone; see common.wgsl).
-        let refresh = pred.refresh != 0u;
-        // No information means a cleared history (full traversal), or with
-        // reprojection a hole of the warp (sparse traversal).
-        let full = refresh || (last == PRED_NO_INFO && pred.reprojected == 0u);
-        let local = !full && pred_is_hit(last);
-        if (full) {
+        let choice = pred_choice(last);
+        if (choice == TRAVERSAL_FULL) {
             kind = TRAVERSAL_FULL;
             iso_march(&acc, r, t0, t1, frame.dt, ESS);
-        } else if (local) {
+        } else if (choice == TRAVERSAL_LOCAL) {
             kind = TRAVERSAL_LOCAL;
             let tp = pred_decode_hit(last) - eye_offset;
             var ok = local_traversal(&acc, r, t0, t1, tp);
@@ -221,11 +196,6 @@ fn predict_ray(px: vec2<u32>, start: RayStart) {
             sparse_traversal(&acc, r, t0, t1);
         }
     }
-    var entry = select(PRED_MISS_SURFACE, PRED_MISS_BOX, t1 <= t0);
-    if (acc.hit) {
-        entry = pred_encode_hit(acc.hit_b + eye_offset);
-    }
-    pred_buf[pred.write_off + p] = entry;
-    pred_buf[pred.class_off + p] = kind;
+    pred_store(p, acc, t1 <= t0, eye_offset, kind);
     finish_ray(px, &acc, cur, r, start.host);
 }

@@ -217,6 +217,112 @@ fn sub_cell_exit(b: Brick, j: vec3<u32>, oo: vec3<f32>, od: vec3<f32>, inv_od: v
     return box_exit(oo, od, inv_od, lo, lo + side);
 }
 
+// The iso march over the index from t_from to t_to (iso frames of the full
+// traversal, and the prediction buffer's traversals, ooc_predict.wgsl). Samples
+// lie on the full traversal's grid t0 + k dt f (f: the leaf level's step
+// multiple; `dt` the finest level's step: frame.dt, or the prediction's sparse
+// step), from its first point at or after t_from. Skips data leaves whose
+// maximum lies below the isovalue and, when `ess`, such sub-cells (never a
+// fading brick's: its range does not bound its ancestor's); every data leaf
+// walked is counted as reached (ray-guided feedback). A brick skipped whole
+// takes no set-up (the cursor, the sub-cell walk).
+//
+// A crossing needs a value below the isovalue in front of it: `below` says
+// whether that is known at t_from (the ray start, where a first sample inside
+// is a capped cut; a point the guard proved). Without it a first sample inside
+// ends the march without a hit (the local search lost the surface).
+//
+// `probe` (the first-hit guard): no sample is taken; the march stops at the
+// first sample it would take, having proven everything before it below the
+// isovalue (its range reads are counted as samples).
+//
+// Returns where it stopped: the upper sample of the bracket on a hit (then the
+// bracket is in `acc` and its brick in `cur`), the first sample a probe would
+// take, or t_to (also when the sample budget ran out).
+fn ooc_iso_march(acc: ptr<function, Accum>, cur: ptr<function, Cursor>, t0: f32, t_from: f32, t_to: f32, dt: f32, ess: bool, below_in: bool, probe: bool) -> f32 {
+    let oo = (*cur).oo;
+    let od = (*cur).od;
+    let inv_od = safe_inverse(od);
+    // Each march of a ray has the budget that is left (a bound, not a cost).
+    var budget = frame.max_samples - min((*acc).samples, frame.max_samples);
+    // A bracket never reaches further back into the previous leaf than the
+    // brick's apron (beyond it the atlas holds another brick): apron_t * f.
+    let apron_t = frame.dt / max(frame.step_factor, 1e-6) * f32(ooc.apron);
+    var below = below_in;
+    var grid_f = 0.0;
+    var k = 0u;
+    var t_last = t0;
+    var st = oct_begin(oo, od, t_from, t_to, frame.max_leaves, ooc.splits.xy);
+    loop {
+        // Walk to the next data leaf that can hold the isovalue.
+        var found = false;
+        loop {
+            if (!oct_next_leaf(&st)) { break; }
+            if (st.hit.tag == OCT_TAG_DATA) {
+                feedback_reached(st.hit.data);
+                let sl = slots[st.hit.data];
+                if (probe) {
+                    (*acc).samples = (*acc).samples + 1u;
+                }
+                if (!((ess || probe) && sl.range.y < frame.isovalue && sl.offset.w == 0.0)) {
+                    found = true;
+                    break;
+                }
+            }
+            below = true;
+        }
+        if (!found) { break; }
+        cursor_enter(cur, brick_of(st.hit.leaf, st.hit.data));
+        let f = (*cur).b.f;
+        let dtl = dt * f;
+        if (f != grid_f) {
+            grid_f = f;
+            k = first_k_after(max(st.hit.t_enter, t_last), t0, dtl);
+        }
+        k = max(k, first_k_after(st.hit.t_enter, t0, dtl));
+        let t_end = min(st.hit.t_exit, t_to);
+        var k_cell = 0u;
+        loop {
+            let t = t0 + f32(k) * dtl;
+            if (t >= t_end) { break; }
+            if (budget == 0u) { return t_to; }
+            budget = budget - 1u;
+            if ((ess || probe) && k >= k_cell && (*cur).b.fb_w == 0.0) {
+                let j = sub_cell_of((*cur).b, oo + od * t);
+                let range = sub_cell_range((*cur).b, j);
+                let te = min(sub_cell_exit((*cur).b, j, oo, od, inv_od), st.hit.t_exit);
+                let k_exit = max(k + 1u, first_k_after(te, t0, dtl));
+                if (probe) {
+                    (*acc).samples = (*acc).samples + 1u;
+                }
+                if (range.y < frame.isovalue) {
+                    t_last = t0 + f32(k_exit - 1u) * dtl;
+                    below = true;
+                    k = k_exit;
+                    continue;
+                }
+                k_cell = k_exit;
+            }
+            if (probe) { return t; }
+            let v = cursor_value(*cur, t);
+            (*acc).samples = (*acc).samples + 1u;
+            if (v >= frame.isovalue) {
+                if (!below && t > t0) { return t; }
+                var a = t;
+                if (t > t0 && t_last < t) {
+                    a = max(max(t_last, st.hit.t_enter - apron_t * f), max(st.hit.t_enter - dtl, t - dtl));
+                }
+                iso_bracket(acc, a, t);
+                return t;
+            }
+            below = true;
+            t_last = t;
+            k = k + 1u;
+        }
+    }
+    return t_to;
+}
+
 @compute @workgroup_size(8, 8, 1)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     if (gid.x >= frame.viewport_size.x || gid.y >= frame.viewport_size.y) {
@@ -224,6 +330,12 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     let px = gid.xy;
     let start = start_ray(px);
+    // Iso with the prediction buffer: ooc_predict.wgsl (an override: pipelines
+    // without prediction compile none of it).
+    if (MODE == MODE_ISO && PREDICT) {
+        ooc_predict_ray(px, start);
+        return;
+    }
     let r = start.r;
     let t0 = start.t0;
     let t1 = start.t1;
@@ -237,94 +349,89 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         let inv_od = safe_inverse(od);
         cur.oo = oo;
         cur.od = od;
-        let dt = frame.dt;
-        var budget = frame.max_samples;
-        // Sampling state carried across leaves: the grid (level, spacing, index).
-        var grid_f = 0.0;
-        var k = 0u;
-        var t_last = t0;
-        var st = oct_begin(oo, od, t0, t1, frame.max_leaves, ooc.splits.xy);
-        var dtl = dt;
-        var done = false;
-        loop {
-            // Walk to the next data leaf (skipping empty ones, and for MIP
-            // bricks below the running maximum) in one go.
-            var found = false;
+        // Where the ray stopped, for the occlusion feedback.
+        var t_stop = t1;
+        if (MODE == MODE_ISO) {
+            t_stop = ooc_iso_march(&acc, &cur, t0, t0, t1, frame.dt, ESS, true, false);
+        } else {
+            let dt = frame.dt;
+            var budget = frame.max_samples;
+            // Sampling state carried across leaves: the grid (level, spacing, index).
+            var grid_f = 0.0;
+            var k = 0u;
+            var t_last = t0;
+            var st = oct_begin(oo, od, t0, t1, frame.max_leaves, ooc.splits.xy);
+            var dtl = dt;
+            var done = false;
             loop {
-                if (!oct_next_leaf(&st)) { break; }
-                if (st.hit.tag == OCT_TAG_DATA) { feedback_reached(st.hit.data); }
-                // (A fading brick's range does not bound its ancestor's.)
-                if (st.hit.tag == OCT_TAG_DATA && !(MODE == MODE_MIP && ESS && slots[st.hit.data].range.y <= acc.max_v && slots[st.hit.data].offset.w == 0.0)) {
-                    found = true;
-                    break;
-                }
-            }
-            if (!found) { break; }
-            cursor_enter(&cur, brick_of(st.hit.leaf, st.hit.data));
-            dtl = dt * cur.b.f;
-            if (cur.b.f != grid_f) {
-                grid_f = cur.b.f;
-                k = first_k_after(max(st.hit.t_enter, t_last), t0, dtl);
-            }
-            k = max(k, first_k_after(st.hit.t_enter, t0, dtl));
-            let t_end = min(st.hit.t_exit, t1);
-            var k_cell = 0u;
-            // Pre-integration: as in incore.wgsl.
-            var forced = false;
-            loop {
-                let t = t0 + f32(k) * dtl;
-                if (t >= t_end) { break; }
-                if (budget == 0u) { done = true; break; }
-                budget = budget - 1u;
-                // A fading brick's sub-cells do not bound its ancestor's values:
-                // no skipping inside it while it fades.
-                if (ESS && k >= k_cell && cur.b.fb_w == 0.0) {
-                    let j = sub_cell_of(cur.b, oo + od * t);
-                    let range = sub_cell_range(cur.b, j);
-                    let te = min(sub_cell_exit(cur.b, j, oo, od, inv_od), st.hit.t_exit);
-                    let k_exit = max(k + 1u, first_k_after(te, t0, dtl));
-                    let skip = (MODE == MODE_DVR && tf_transparent(range))
-                        || (MODE == MODE_ISO && range.y < frame.isovalue)
-                        || (MODE == MODE_MIP && range.y <= acc.max_v);
-                    let force = PREINT && MODE == MODE_DVR && skip && !forced && preint_joined(acc, t, dtl);
-                    forced = force;
-                    if (skip && !force) {
-                        t_last = select(t_last, t0 + f32(k_exit - 1u) * dtl, MODE == MODE_ISO);
-                        k = k_exit;
-                        continue;
-                    }
-                    k_cell = select(k_exit, k + 1u, force);
-                }
-                let v = cursor_value(cur, t);
-                acc.samples = acc.samples + 1u;
-                if (MODE == MODE_DVR) {
-                    var front = v;
-                    // Pre-integration: the ray's first sample composites nothing.
-                    var first = false;
-                    if (PREINT) {
-                        first = preint_before_start(t, dtl, t0);
-                        front = preint_front(&acc, t, dtl, v);
-                    }
-                    if (!first && dvr_sample(&acc, cur, r, t, front, v, cur.b.tf_v)) { done = true; break; }
-                } else if (MODE == MODE_ISO) {
-                    if (v >= frame.isovalue) {
-                        var a = t;
-                        if (t > t0 && t_last < t) {
-                            a = max(t_last, max(st.hit.t_enter - dtl, t - dtl));
-                        }
-                        iso_bracket(&acc, a, t);
-                        done = true;
+                // Walk to the next data leaf (skipping empty ones, and for MIP
+                // bricks below the running maximum) in one go.
+                var found = false;
+                loop {
+                    if (!oct_next_leaf(&st)) { break; }
+                    if (st.hit.tag == OCT_TAG_DATA) { feedback_reached(st.hit.data); }
+                    // (A fading brick's range does not bound its ancestor's.)
+                    if (st.hit.tag == OCT_TAG_DATA && !(MODE == MODE_MIP && ESS && slots[st.hit.data].range.y <= acc.max_v && slots[st.hit.data].offset.w == 0.0)) {
+                        found = true;
                         break;
                     }
-                } else {
-                    if (mip_sample(&acc, t, v)) { done = true; break; }
                 }
-                t_last = t;
-                k = k + 1u;
+                if (!found) { break; }
+                cursor_enter(&cur, brick_of(st.hit.leaf, st.hit.data));
+                dtl = dt * cur.b.f;
+                if (cur.b.f != grid_f) {
+                    grid_f = cur.b.f;
+                    k = first_k_after(max(st.hit.t_enter, t_last), t0, dtl);
+                }
+                k = max(k, first_k_after(st.hit.t_enter, t0, dtl));
+                let t_end = min(st.hit.t_exit, t1);
+                var k_cell = 0u;
+                // Pre-integration: as in incore.wgsl.
+                var forced = false;
+                loop {
+                    let t = t0 + f32(k) * dtl;
+                    if (t >= t_end) { break; }
+                    if (budget == 0u) { done = true; break; }
+                    budget = budget - 1u;
+                    // A fading brick's sub-cells do not bound its ancestor's values:
+                    // no skipping inside it while it fades.
+                    if (ESS && k >= k_cell && cur.b.fb_w == 0.0) {
+                        let j = sub_cell_of(cur.b, oo + od * t);
+                        let range = sub_cell_range(cur.b, j);
+                        let te = min(sub_cell_exit(cur.b, j, oo, od, inv_od), st.hit.t_exit);
+                        let k_exit = max(k + 1u, first_k_after(te, t0, dtl));
+                        let skip = (MODE == MODE_DVR && tf_transparent(range))
+                            || (MODE == MODE_MIP && range.y <= acc.max_v);
+                        let force = PREINT && MODE == MODE_DVR && skip && !forced && preint_joined(acc, t, dtl);
+                        forced = force;
+                        if (skip && !force) {
+                            k = k_exit;
+                            continue;
+                        }
+                        k_cell = select(k_exit, k + 1u, force);
+                    }
+                    let v = cursor_value(cur, t);
+                    acc.samples = acc.samples + 1u;
+                    if (MODE == MODE_DVR) {
+                        var front = v;
+                        // Pre-integration: the ray's first sample composites nothing.
+                        var first = false;
+                        if (PREINT) {
+                            first = preint_before_start(t, dtl, t0);
+                            front = preint_front(&acc, t, dtl, v);
+                        }
+                        if (!first && dvr_sample(&acc, cur, r, t, front, v, cur.b.tf_v)) { done = true; break; }
+                    } else {
+                        if (mip_sample(&acc, t, v)) { done = true; break; }
+                    }
+                    t_last = t;
+                    k = k + 1u;
+                }
+                if (done) { break; }
             }
-            if (done) { break; }
+            t_stop = t0 + f32(k) * dtl;
         }
-        feedback_stop(px, depth_at(r, select(t1, t0 + f32(k) * dtl, feedback_terminated(acc))));
+        feedback_stop(px, depth_at(r, select(t1, t_stop, feedback_terminated(acc))));
     }
     finish_ray(px, &acc, cur, r, start.host);
 }

@@ -1,13 +1,14 @@
 // The isosurface prediction buffer (Braley et al., "GPU accelerated isosurface
 // volume rendering using depth-based coherence"; docs/prediction.md), shared by
 // both kernels: its bindings in group 0 (owned by `frame.rs`), its switches and
-// its per-pixel encoding. The in-core traversals are in incore_predict.wgsl.
+// its per-pixel encoding, and what both kernels' traversals share.
 //
 // Per pixel the buffer holds last frame's result: the hit's distance from the
 // eye along the ray (at the upper sample of the crossing's bracket) or a flag. The next frame picks a traversal: local
 // (search outward from the predicted t), sparse (march with a coarse step and
 // bisect) or full (the ordinary march); a pixel whose ray misses the box is not
-// traversed. Pipelines without PREDICT compile none of this.
+// traversed. Pipelines without PREDICT compile none of this. The traversals
+// are in incore_predict.wgsl and ooc_predict.wgsl.
 
 override PREDICT: bool = false;
 // The first-hit guard: a local hit is accepted only once the macro cells in
@@ -75,4 +76,46 @@ fn pred_last(p: u32) -> u32 {
 
 fn pred_pixel(px: vec2<u32>) -> u32 {
     return px.y * frame.viewport_size.x + px.x;
+}
+
+// The traversal a pixel takes for last frame's entry `last`: full, local or
+// sparse. The refresh flag is mixed with the pixel's entry (never a branch on
+// a uniform alone; see common.wgsl). No information means a cleared history
+// (full traversal), or with reprojection a hole of the warp (sparse); a miss
+// of the surface or of the box (which the ray now enters) is sparse.
+fn pred_choice(last: u32) -> u32 {
+    let full = pred.refresh != 0u || (last == PRED_NO_INFO && pred.reprojected == 0u);
+    let local = !full && pred_is_hit(last);
+    return select(select(TRAVERSAL_SPARSE, TRAVERSAL_LOCAL, local), TRAVERSAL_FULL, full);
+}
+
+// Writes this frame's entry of pixel p (the hit's eye distance, or the flag
+// for a miss of the surface or, `missed_box`, of the box) and its class.
+fn pred_store(p: u32, acc: Accum, missed_box: bool, eye_offset: f32, kind: u32) {
+    var entry = select(PRED_MISS_SURFACE, PRED_MISS_BOX, missed_box);
+    if (acc.hit) {
+        entry = pred_encode_hit(acc.hit_b + eye_offset);
+    }
+    pred_buf[pred.write_off + p] = entry;
+    pred_buf[pred.class_off + p] = kind;
+}
+
+// Bisects a sparse bracket `pred.sparse_refine` times (in the cursor where it
+// was found), so that the remaining bracket is as long as a full traversal's
+// before `finish_ray` refines it.
+fn sparse_refine(acc: ptr<function, Accum>, c: Cursor) {
+    var a = (*acc).hit_a;
+    var b = (*acc).hit_b;
+    let steps = select(0u, pred.sparse_refine, b > a);
+    for (var i = 0u; i < steps; i = i + 1u) {
+        let m = 0.5 * (a + b);
+        (*acc).samples = (*acc).samples + 1u;
+        if (cursor_value(c, m) >= frame.isovalue) {
+            b = m;
+        } else {
+            a = m;
+        }
+    }
+    (*acc).hit_a = a;
+    (*acc).hit_b = b;
 }

@@ -49,7 +49,7 @@ pub(crate) struct Variant {
     pub(crate) ert: bool,
     pub(crate) ess: bool,
     pub(crate) shade: bool,
-    /// The prediction buffer (in-core iso only; predict.wgsl) and its guard and
+    /// The prediction buffer (iso only; predict.wgsl) and its guard and
     /// sparse skipping switches.
     pub(crate) predict: bool,
     pub(crate) guard: bool,
@@ -72,13 +72,9 @@ pub(crate) const OVERRIDES: [&str; 8] = [
 ];
 
 impl Variant {
-    /// The variant of validated settings for a `kind` kernel, with `prediction`
-    /// when the host enabled it (it applies to the in-core iso mode only).
-    pub(crate) fn of(
-        s: &RenderSettings,
-        kind: KernelKind,
-        prediction: Option<Prediction>,
-    ) -> Variant {
+    /// The variant of validated settings, with `prediction`
+    /// when the host enabled it (it applies to the iso mode, in both kernels).
+    pub(crate) fn of(s: &RenderSettings, prediction: Option<Prediction>) -> Variant {
         let mode = match s.mode {
             RenderMode::Iso { .. } => KernelMode::Iso,
             RenderMode::Mip => KernelMode::Mip,
@@ -95,7 +91,7 @@ impl Variant {
             preint: s.preintegrated && mode == KernelMode::Dvr,
         };
         match prediction {
-            Some(p) if mode == KernelMode::Iso && kind == KernelKind::InCore => Variant {
+            Some(p) if mode == KernelMode::Iso => Variant {
                 predict: true,
                 guard: p.guard,
                 sparse_ess: p.sparse_ess,

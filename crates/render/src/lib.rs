@@ -184,7 +184,7 @@ impl VolumeRenderer {
 
     /// Turns the isosurface prediction buffer (Braley et al.; see
     /// `docs/prediction.md`) on with `settings`, or off with `None`. It applies
-    /// to iso frames of the in-core path; the history is per viewport and is
+    /// to iso frames of both paths; the history is per viewport and is
     /// cleared whenever the viewport's size, the isovalue, the volume, its frame,
     /// the camera's projection, the step, the host depth's presence or these
     /// settings change.
@@ -367,7 +367,7 @@ impl VolumeRenderer {
         };
         let layouts = [self.frame.layout(), self.tf.layout(), backend.layout()];
         for s in settings {
-            let v = Variant::of(s, backend.kind(), self.prediction);
+            let v = Variant::of(s, self.prediction);
             self.kernels.pipeline(device, backend.kind(), layouts, v)?;
         }
         Ok(())
@@ -425,7 +425,7 @@ impl VolumeRenderer {
                 && matches!(desc.settings.mode, brickray_core::RenderMode::Dvr),
         )?;
         let uniforms = FrameUniforms::new(desc, backend.max_leaves());
-        let variant = Variant::of(&desc.settings, backend.kind(), self.prediction);
+        let variant = Variant::of(&desc.settings, self.prediction);
         let predict = self
             .prediction
             .filter(|_| variant.predicts())

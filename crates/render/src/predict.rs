@@ -1,14 +1,16 @@
 //! The isosurface prediction buffer (Braley et al.): its settings, its per-pixel
 //! history (ping-pong, per viewport; owned by `frame.rs` as part of group 0) and
 //! its statistics. The method and its failure analysis are in
-//! `docs/prediction.md`; the traversals in `shaders/incore_predict.wgsl`.
+//! `docs/prediction.md`; the traversals in `shaders/incore_predict.wgsl` and
+//! `shaders/ooc_predict.wgsl`.
 
 use crate::error::RenderError;
 use crate::gpu;
 use brickray_core::{Camera, RenderMode, VolumeFrame};
 use thiserror::Error;
 
-/// Settings of the isosurface prediction buffer (iso mode, in core).
+/// Settings of the isosurface prediction buffer (iso mode, in core and out of
+/// core).
 ///
 /// Each pixel keeps last frame's hit (or a flag) and picks a traversal: local
 /// (outward from the predicted t), sparse (a coarse march, bisected) or full.

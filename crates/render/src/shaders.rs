@@ -9,7 +9,8 @@
 //!   and its march; the out-of-core kernel also includes brickray-index's
 //!   traversal library and `feedback.wgsl` (ray-guided usage counters);
 //! * `predict.wgsl`: the isosurface prediction buffer's bindings (group 0) and
-//!   switches, in both kernels; `incore_predict.wgsl`: its in-core traversals;
+//!   switches, in both kernels; `incore_predict.wgsl`, `ooc_predict.wgsl`:
+//!   its traversals in each kernel;
 //! * `composite.wgsl`: the draw into the host's pass.
 //!
 //! Every composed kernel is validated by naga in this module's tests, which also
@@ -29,6 +30,8 @@ pub const OOC: &str = include_str!("../shaders/ooc.wgsl");
 pub const PREDICT: &str = include_str!("../shaders/predict.wgsl");
 /// The in-core traversals of the prediction buffer.
 pub const INCORE_PREDICT: &str = include_str!("../shaders/incore_predict.wgsl");
+/// The out-of-core traversals of the prediction buffer.
+pub const OOC_PREDICT: &str = include_str!("../shaders/ooc_predict.wgsl");
 /// The prediction buffer's reprojection pass (a module of its own).
 pub const REPROJECT: &str = include_str!("../shaders/reproject.wgsl");
 /// The out-of-core kernel's usage feedback (group 2, binding 6).
@@ -44,7 +47,7 @@ pub fn incore() -> String {
 /// The out-of-core ray caster as compiled (with the octree traversal library).
 pub fn ooc() -> String {
     format!(
-        "{COMMON}\n{MODES}\n{PREDICT}\n{}\n{OOC}\n{FEEDBACK}",
+        "{COMMON}\n{MODES}\n{PREDICT}\n{}\n{OOC}\n{OOC_PREDICT}\n{FEEDBACK}",
         brickray_index::OCTREE_TRAVERSAL_WGSL
     )
 }

@@ -467,6 +467,7 @@ fn every_shader_file_is_covered() {
         "composite.wgsl",
         "predict.wgsl",
         "incore_predict.wgsl",
+        "ooc_predict.wgsl",
         "reproject.wgsl",
     ];
     for entry in std::fs::read_dir(dir).unwrap() {

@@ -1,0 +1,89 @@
+// Out-of-core traversals of the isosurface prediction buffer (predict.wgsl),
+// after ooc.wgsl. Every traversal is `ooc_iso_march` over the index from some
+// start: the traversal of the octree-with-ropes begins at any t by descending
+// from the root, so a local search starts near the prediction without walking
+// the leaves in front of it. Samples lie on the full traversal's grid, so a
+// local hit that is the ray's first crossing has the full traversal's bracket
+// (up to the bracket's lower end at a level change). See docs/prediction.md.
+
+// The sparse traversal: the march at the sparse step from the ray start, its
+// bracket bisected down to the full step's length. With the guard, the full
+// step (with skipping), as in core: only the full step keeps it exact.
+fn ooc_sparse_traversal(acc: ptr<function, Accum>, cur: ptr<function, Cursor>, t0: f32, t1: f32) {
+    if (GUARD) {
+        ooc_iso_march(acc, cur, t0, t0, t1, frame.dt, true, true, false);
+        return;
+    }
+    ooc_iso_march(acc, cur, t0, t0, t1, pred.sparse_dt, SPARSE_ESS, true, false);
+    if ((*acc).hit) {
+        sparse_refine(acc, *cur);
+    }
+}
+
+// One pixel of the iso mode with prediction, out of core: picks the traversal
+// from last frame's entry, traverses, writes this frame's entry and class.
+//
+// Local: the march over the window of `pred.local_steps` full steps (finest
+// level) either side of the prediction, from its front. It finds the first
+// crossing in the window, entering from below (a first sample inside means
+// the surface moved in front of the window: the search failed). Unguarded, a
+// failed search takes the sparse traversal from the ray start.
+//
+// Guarded: a probe walks the leaf and sub-cell ranges from the ray start to
+// the window's front. Where it stops, a range may hold the isovalue (the guard
+// rejects the prediction); before it, no sample can. The march from there to
+// the ray's end is then the full traversal's remainder, so the result is the
+// full traversal's whether the guard accepted or rejected: the guard costs a
+// range walk and saves the sampling in front of the window.
+fn ooc_predict_ray(px: vec2<u32>, start: RayStart) {
+    let r = start.r;
+    let t0 = start.t0;
+    let t1 = start.t1;
+    let p = pred_pixel(px);
+    let eye_offset = frame.near / r.dist_per_t;
+    let last = pred_last(p);
+    var acc = accum_new();
+    var cur: Cursor;
+    var kind = TRAVERSAL_NONE;
+    feedback_stop(px, far_depth());
+    if (t1 > t0) {
+        cur.oo = r.tex_origin * ooc.octree_scale;
+        cur.od = r.tex_dir * ooc.octree_scale;
+        let choice = pred_choice(last);
+        if (choice == TRAVERSAL_FULL) {
+            kind = TRAVERSAL_FULL;
+            ooc_iso_march(&acc, &cur, t0, t0, t1, frame.dt, ESS, true, false);
+        } else if (choice == TRAVERSAL_LOCAL) {
+            kind = TRAVERSAL_LOCAL;
+            let tp = pred_decode_hit(last) - eye_offset;
+            let w = f32(pred.local_steps) * frame.dt;
+            let ta = clamp(tp - w, t0, t1);
+            let tb = clamp(tp + w, t0, t1);
+            if (GUARD) {
+                let tg = ooc_iso_march(&acc, &cur, t0, t0, ta, frame.dt, true, true, true);
+                kind = select(TRAVERSAL_LOCAL, TRAVERSAL_GUARD_REJECTED, tg < ta);
+                // Start just before the probe's stop, so the march takes its sample.
+                let t_resume = max(t0, tg - 1.0e-3 * frame.dt);
+                ooc_iso_march(&acc, &cur, t0, t_resume, t1, frame.dt, ESS, true, false);
+                if (kind == TRAVERSAL_LOCAL && !(acc.hit && acc.hit_b <= tb)) {
+                    kind = TRAVERSAL_LOCAL_MISSED;
+                }
+            } else {
+                ooc_iso_march(&acc, &cur, t0, ta, tb, frame.dt, ESS, ta <= t0, false);
+                if (!acc.hit) {
+                    kind = TRAVERSAL_LOCAL_MISSED;
+                    let spent = acc.samples;
+                    acc = accum_new();
+                    acc.samples = spent;
+                    ooc_sparse_traversal(&acc, &cur, t0, t1);
+                }
+            }
+        } else {
+            kind = TRAVERSAL_SPARSE;
+            ooc_sparse_traversal(&acc, &cur, t0, t1);
+        }
+        feedback_stop(px, depth_at(r, select(t1, acc.hit_b, acc.hit)));
+    }
+    pred_store(p, acc, t1 <= t0, eye_offset, kind);
+    finish_ray(px, &acc, cur, r, start.host);
+}
