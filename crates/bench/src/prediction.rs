@@ -13,7 +13,7 @@
 //! Variants, interleaved frame by frame (the order rotates each frame): `full`
 //! (no prediction: the reference), `paper` (alpha 10, kappa 0.5), `ess`
 //! (+ empty-space skipping in the sparse traversal), `reproj` (+ reprojection),
-//! `guard` (+ the first-hit guard) and `all` (all three). Every variant's image is compared with the full
+//! `reproj_ess` (both), `guard` (+ the first-hit guard) and `all` (all three). Every variant's image is compared with the full
 //! traversal's image of the same frame: wrong pixels (a channel off by more
 //! than 2 levels; mean and max share over frames) and PSNR. Time is
 //! `prepare + submit + wait` wall time; speedups are ratios of the summed
@@ -58,6 +58,14 @@ fn variants(kappa: f32) -> Vec<(&'static str, Option<Prediction>)> {
             "reproj",
             Some(Prediction {
                 reproject: true,
+                ..p
+            }),
+        ),
+        (
+            "reproj_ess",
+            Some(Prediction {
+                reproject: true,
+                sparse_ess: true,
                 ..p
             }),
         ),
