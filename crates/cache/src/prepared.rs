@@ -16,8 +16,10 @@ pub struct PreparedBrick {
     /// `n` = [`GpuFormat::sub_cells_per_axis`]); see
     /// [`sub_cell_ranges`](brickray_core::sub_cell_ranges).
     pub sub_cells: Arc<[[f32; 2]]>,
-    /// The node's normalized `[min, max]` from its metadata (`[-inf, inf]` when
-    /// the metadata is not finite: never skipped).
+    /// Normalized `[min, max]` bounding every sample inside the brick: the
+    /// node's metadata range (its interior voxels) widened to its sub-cells'
+    /// ranges, which cover the apron voxels that samples near a face read.
+    /// `[-inf, inf]` when either is not finite: never skipped.
     pub range: [f32; 2],
 }
 
@@ -77,10 +79,17 @@ impl Preparer {
         let texels: Arc<[u8]> = Arc::from(self.encoding.encode(raw).as_ref());
         let sub_cells: Arc<[[f32; 2]]> =
             sub_cell_ranges(&self.layout, raw, self.sub_cells_per_axis).into();
+        let range = sub_cells.iter().fold(self.range(info), |[lo, hi], c| {
+            if lo.is_finite() && c[0].is_finite() && c[1].is_finite() {
+                [lo.min(c[0]), hi.max(c[1])]
+            } else {
+                [f32::NEG_INFINITY, f32::INFINITY]
+            }
+        });
         PreparedBrick {
             texels,
             sub_cells,
-            range: self.range(info),
+            range,
         }
     }
 }
@@ -116,7 +125,9 @@ mod tests {
         assert_eq!(&b.texels[1998..], &[9, 9]);
         // One sub-cell (8^3 interior voxels) spanning the whole brick.
         assert_eq!(&*b.sub_cells, &[[0.0, 9.0]]);
-        assert_eq!(b.range, [0.1, 0.9]);
+        // The metadata says 0.1..0.9 of the interior; samples read 0..9 (the
+        // apron included): the range bounds what they read.
+        assert_eq!(b.range, [0.0, 9.0]);
         assert_eq!(b.bytes(), 2008);
         assert_eq!(Some(b.bytes()), gpu.prepared_brick_bytes(&layout).ok());
         let nan = NodeInfo {
@@ -124,5 +135,17 @@ mod tests {
             ..info
         };
         assert_eq!(p.range(&nan), [f32::NEG_INFINITY, f32::INFINITY]);
+        assert_eq!(
+            p.prepare(&raw, &nan).range,
+            [f32::NEG_INFINITY, f32::INFINITY]
+        );
+        // Interior values within the metadata: the range is the metadata's.
+        let flat = vec![5u8; 1000];
+        let wide = NodeInfo {
+            min: 1.0,
+            max: 7.0,
+            ..info
+        };
+        assert_eq!(p.prepare(&flat, &wide).range, [1.0, 7.0]);
     }
 }
