@@ -157,22 +157,18 @@ fn predict_ray(px: vec2<u32>, start: RayStart) {
     let r = start.r;
     let t0 = start.t0;
     let t1 = start.t1;
-    let p = pred_pixel(px);
-    // Entries are distances from the eye (t is from the near plane, which moves
-    // with the near distance).
-    let eye_offset = frame.near / r.dist_per_t;
-    let last = pred_last(p);
+    let pp = pred_begin(px, r);
     var acc = accum_new();
     let cur = Cursor(r);
     var kind = TRAVERSAL_NONE;
     if (t1 > t0) {
-        let choice = pred_choice(last);
+        let choice = pred_choice(pp.last);
         if (choice == TRAVERSAL_FULL) {
             kind = TRAVERSAL_FULL;
             iso_march(&acc, r, t0, t1, frame.dt, ESS);
         } else if (choice == TRAVERSAL_LOCAL) {
             kind = TRAVERSAL_LOCAL;
-            let tp = pred_decode_hit(last) - eye_offset;
+            let tp = pred_decode_hit(pp.last) - pp.eye_offset;
             var ok = local_traversal(&acc, r, t0, t1, tp);
             if (!ok) {
                 kind = TRAVERSAL_LOCAL_MISSED;
@@ -196,6 +192,6 @@ fn predict_ray(px: vec2<u32>, start: RayStart) {
             sparse_traversal(&acc, r, t0, t1);
         }
     }
-    pred_store(p, acc, t1 <= t0, eye_offset, kind);
+    pred_store(pp.p, acc, t1 <= t0, pp.eye_offset, kind);
     finish_ray(px, &acc, cur, r, start.host);
 }

@@ -168,14 +168,11 @@ fn iso_bracket(acc: ptr<function, Accum>, a: f32, b: f32) {
     (*acc).hit_b = b;
 }
 
-// Iso: bisects [a, b] `iso_refine_steps` times, shades at the midpoint of the
-// final interval and sets the opaque result.
-fn iso_hit(acc: ptr<function, Accum>, c: Cursor, r: Ray, a_in: f32, b_in: f32) {
+// Iso: bisects the bracket [a, b] (below the isovalue at a, at or above at b)
+// `steps` times in cursor `c`; returns the final [a, b].
+fn iso_bisect(acc: ptr<function, Accum>, c: Cursor, a_in: f32, b_in: f32, steps: u32) -> vec2<f32> {
     var a = a_in;
     var b = b_in;
-    // The trip count involves the ray's bracket, never the uniform alone (see
-    // pixel_ray in common.wgsl).
-    let steps = select(0u, frame.iso_refine_steps, b_in > a_in);
     for (var i = 0u; i < steps; i = i + 1u) {
         if (b <= a) {
             break;
@@ -188,7 +185,16 @@ fn iso_hit(acc: ptr<function, Accum>, c: Cursor, r: Ray, a_in: f32, b_in: f32) {
             a = m;
         }
     }
-    let th = 0.5 * (a + b);
+    return vec2<f32>(a, b);
+}
+
+// Iso: bisects [a, b] `iso_refine_steps` times, shades at the midpoint of the
+// final interval and sets the opaque result.
+fn iso_hit(acc: ptr<function, Accum>, c: Cursor, r: Ray, a_in: f32, b_in: f32) {
+    // The trip count involves the ray's bracket, never the uniform alone (see
+    // pixel_ray in common.wgsl).
+    let ab = iso_bisect(acc, c, a_in, b_in, select(0u, frame.iso_refine_steps, b_in > a_in));
+    let th = 0.5 * (ab.x + ab.y);
     (*acc).color = vec4<f32>(shade(frame.iso_color, cursor_gradient(c, th), r.dir), 1.0);
     (*acc).depth = depth_at(r, th);
     (*acc).depth_set = true;

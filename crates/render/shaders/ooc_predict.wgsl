@@ -39,9 +39,7 @@ fn ooc_predict_ray(px: vec2<u32>, start: RayStart) {
     let r = start.r;
     let t0 = start.t0;
     let t1 = start.t1;
-    let p = pred_pixel(px);
-    let eye_offset = frame.near / r.dist_per_t;
-    let last = pred_last(p);
+    let pp = pred_begin(px, r);
     var acc = accum_new();
     var cur: Cursor;
     var kind = TRAVERSAL_NONE;
@@ -49,13 +47,13 @@ fn ooc_predict_ray(px: vec2<u32>, start: RayStart) {
     if (t1 > t0) {
         cur.oo = r.tex_origin * ooc.octree_scale;
         cur.od = r.tex_dir * ooc.octree_scale;
-        let choice = pred_choice(last);
+        let choice = pred_choice(pp.last);
         if (choice == TRAVERSAL_FULL) {
             kind = TRAVERSAL_FULL;
             ooc_iso_march(&acc, &cur, t0, t0, t1, frame.dt, ESS, true, false);
         } else if (choice == TRAVERSAL_LOCAL) {
             kind = TRAVERSAL_LOCAL;
-            let tp = pred_decode_hit(last) - eye_offset;
+            let tp = pred_decode_hit(pp.last) - pp.eye_offset;
             let w = f32(pred.local_steps) * frame.dt;
             let ta = clamp(tp - w, t0, t1);
             let tb = clamp(tp + w, t0, t1);
@@ -84,6 +82,6 @@ fn ooc_predict_ray(px: vec2<u32>, start: RayStart) {
         }
         feedback_stop(px, depth_at(r, select(t1, acc.hit_b, acc.hit)));
     }
-    pred_store(p, acc, t1 <= t0, eye_offset, kind);
+    pred_store(pp.p, acc, t1 <= t0, pp.eye_offset, kind);
     finish_ray(px, &acc, cur, r, start.host);
 }

@@ -78,6 +78,21 @@ fn pred_pixel(px: vec2<u32>) -> u32 {
     return px.y * frame.viewport_size.x + px.x;
 }
 
+// What a predicting pixel starts from: its index in the history, the eye's
+// distance from its ray's origin (entries are distances from the eye; t is
+// from the near plane, which moves with the near distance) and last frame's
+// entry.
+struct PredPixel {
+    p: u32,
+    eye_offset: f32,
+    last: u32,
+}
+
+fn pred_begin(px: vec2<u32>, r: Ray) -> PredPixel {
+    let p = pred_pixel(px);
+    return PredPixel(p, frame.near / r.dist_per_t, pred_last(p));
+}
+
 // The traversal a pixel takes for last frame's entry `last`: full, local or
 // sparse. The refresh flag is mixed with the pixel's entry (never a branch on
 // a uniform alone; see common.wgsl). No information means a cleared history
@@ -104,18 +119,9 @@ fn pred_store(p: u32, acc: Accum, missed_box: bool, eye_offset: f32, kind: u32) 
 // was found), so that the remaining bracket is as long as a full traversal's
 // before `finish_ray` refines it.
 fn sparse_refine(acc: ptr<function, Accum>, c: Cursor) {
-    var a = (*acc).hit_a;
-    var b = (*acc).hit_b;
-    let steps = select(0u, pred.sparse_refine, b > a);
-    for (var i = 0u; i < steps; i = i + 1u) {
-        let m = 0.5 * (a + b);
-        (*acc).samples = (*acc).samples + 1u;
-        if (cursor_value(c, m) >= frame.isovalue) {
-            b = m;
-        } else {
-            a = m;
-        }
-    }
-    (*acc).hit_a = a;
-    (*acc).hit_b = b;
+    let a = (*acc).hit_a;
+    let b = (*acc).hit_b;
+    let ab = iso_bisect(acc, c, a, b, select(0u, pred.sparse_refine, b > a));
+    (*acc).hit_a = ab.x;
+    (*acc).hit_b = ab.y;
 }
