@@ -470,6 +470,100 @@ mod tests {
         }
     }
 
+    /// A 128^3 f32 volume over 0..1 in bricks of 32 (levels 0..=2).
+    fn layout() -> OctreeLayout {
+        OctreeLayout::new(
+            crate::VolumeDesc {
+                dims: [128; 3],
+                dtype: crate::DType::F32,
+                spacing: [1.0; 3],
+                value_range: [0.0, 1.0],
+            },
+            32,
+            2,
+        )
+    }
+
+    /// A data node over `[min, max]` whose every bin is occupied, with
+    /// deviation `dev` and typical deviation `rms` (fractions of its range).
+    fn node(min: f64, max: f64, dev: f64, rms: f64) -> NodeInfo {
+        let span = max - min;
+        let bins = [BinStats {
+            count: 10,
+            dev: dev * span,
+            sum_sq: 10.0 * (rms * span).powi(2),
+        }; ERROR_BINS];
+        NodeInfo {
+            kind: NodeKind::Data,
+            min: min as f32,
+            max: max as f32,
+            error: Some(NodeError::encode(&bins, min, max)),
+        }
+    }
+
+    proptest! {
+        /// Where the transfer function is flat over a node's values (widened
+        /// by its deviations), drawing the node coarse changes nothing the
+        /// image sees: its expected pixel error, and its bound, are 0 in DVR,
+        /// whatever its data error.
+        #[test]
+        fn a_flat_tf_region_costs_nothing(
+            colour in proptest::array::uniform4(0.0f32..1.0),
+            min in 0.05f64..0.5, width in 0.01f64..0.3,
+            dev in 0.0f64..1.0, rms in 0.0f64..1.0, level in 0u8..2,
+        ) {
+            let layout = layout();
+            // Flat from 0.4 below the node's range to 0.4 above it (more
+            // than any widening), then a jump.
+            let (a, b) = (min - 0.4, min + width + 0.4);
+            let mut pts = vec![(a.max(0.0) as f32, colour), (b.min(1.0) as f32, colour)];
+            if a > 0.0 {
+                pts.insert(0, (0.0, [1.0, 0.0, 0.0, 1.0]));
+            }
+            if b < 1.0 {
+                pts.push((1.0, [0.0, 1.0, 0.0, 0.0]));
+            }
+            let table = TfErrorTable::new(&TransferFunction::from_points(&pts, 256));
+            let info = node(min, min + width, dev, rms.min(dev));
+            let e = node_pixel_error(&info, level, RenderMode::Dvr, &table, &layout).unwrap();
+            prop_assert!(e <= 1e-6, "pixel error {e}");
+            let bound = node_tf_error(&info, RenderMode::Dvr, &table, &layout).unwrap();
+            prop_assert!(bound <= 1e-6, "bound {bound}");
+        }
+    }
+
+    /// Under one transfer function, a node whose values straddle a sharp edge
+    /// outranks a node of the same level and the same data error whose values
+    /// lie on a gentle linear ramp; both outrank a node in a flat region.
+    #[test]
+    fn a_sharp_edge_outranks_a_smooth_ramp() {
+        let layout = layout();
+        let tf = TransferFunction::from_points(
+            &[
+                (0.0, [1.0, 1.0, 1.0, 0.0]),
+                (0.5, [1.0, 1.0, 1.0, 0.1]),
+                (0.74, [1.0, 1.0, 1.0, 0.1]),
+                (0.76, [1.0, 0.4, 0.2, 0.9]),
+                (1.0, [1.0, 0.4, 0.2, 0.9]),
+            ],
+            256,
+        );
+        let table = TfErrorTable::new(&tf);
+        let edge = node(0.7, 0.8, 0.1, 0.05);
+        let ramp = node(0.2, 0.3, 0.1, 0.05);
+        let flat = node(0.55, 0.65, 0.1, 0.05);
+        for level in 0..2 {
+            let e = |n: &NodeInfo| {
+                node_pixel_error(n, level, RenderMode::Dvr, &table, &layout).unwrap()
+            };
+            let (e_edge, e_ramp, e_flat) = (e(&edge), e(&ramp), e(&flat));
+            assert!(
+                e_edge > 2.0 * e_ramp && e_ramp > 0.0 && e_flat == 0.0,
+                "level {level}: edge {e_edge}, ramp {e_ramp}, flat {e_flat}"
+            );
+        }
+    }
+
     #[test]
     fn bins_cover_the_range() {
         assert_eq!(bin_of(0.0, 0.0, 16.0), 0);

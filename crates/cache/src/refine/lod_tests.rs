@@ -277,3 +277,46 @@ fn without_error_bounds_it_is_geometric() {
     );
     assert_eq!(g, e);
 }
+
+/// A transfer function flat over the whole value range: no node's error can
+/// show, so error-aware refinement keeps the root (priority 0, whatever the
+/// budget), where the geometric rule refines the view to 1 px; an edge in the
+/// transfer function makes it refine again, from the same cached metadata.
+#[test]
+fn a_flat_tf_coarsens_freely() {
+    let layout = ball_layout(64);
+    let mut src = RampSource {
+        layout: layout.clone(),
+        rough: 0.3,
+        seed: 3,
+        reads: 0,
+    };
+    let mut env = Cached {
+        meta: cache_all(&mut src),
+    };
+    let reads = src.reads;
+    let frame = VolumeFrame::centered(layout.volume.dims, [1.0; 3]);
+    let cam = Camera::orbit(frame.center(), 2.0, 0.4, 0.2);
+    let flat = TransferFunction::from_points(
+        &[(0.0, [0.8, 0.5, 0.3, 0.4]), (1.0, [0.8, 0.5, 0.3, 0.4])],
+        256,
+    );
+    let metric = LodMetric::ErrorAware { budget: 0.0 };
+    let r = refine_with(&layout, &mut env, &cam, &flat, metric);
+    let data: Vec<&RefinedLeaf> = r
+        .leaves
+        .iter()
+        .filter(|l| l.class == NodeClass::Data)
+        .collect();
+    assert_eq!(data.len(), 1, "{:?}", r.leaves);
+    assert_eq!((data[0].key, data[0].priority), (NodeKey::ROOT, 0.0));
+    let g = refine_with(&layout, &mut env, &cam, &flat, LodMetric::Geometric);
+    assert!(
+        g.data_leaves > 8,
+        "geometric: {} data leaves",
+        g.data_leaves
+    );
+    let e = refine_with(&layout, &mut env, &cam, &step_tf(0.5), metric);
+    assert!(e.data_leaves > 8, "edge: {} data leaves", e.data_leaves);
+    assert_eq!(src.reads, reads, "refinement read the source");
+}
