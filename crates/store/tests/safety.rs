@@ -285,81 +285,56 @@ fn big_sparse_input(dir: &Path, n: u64) -> PathBuf {
     json
 }
 
-/// Starts a build of `json` into `out`, waits for its first temporary, lets it
-/// run `delay` longer and sends it `sig`. Returns its exit status, or `None`
-/// when the build had finished before the signal (the attempt says nothing).
-fn signal_mid_build(
-    exe: &str,
-    json: &Path,
-    out: &Path,
-    d: &Path,
-    sig: &str,
-    delay: Duration,
-) -> Option<std::process::ExitStatus> {
-    let mut child = Command::new(exe)
-        .args(["build", "--quiet"])
-        .arg(json)
-        .arg(out)
-        .stdout(std::process::Stdio::null())
-        .stderr(std::process::Stdio::null())
-        .spawn()
-        .unwrap();
-    // Wait for the temporary to appear, then signal.
-    let t = Instant::now();
-    let inputs = ["big.json", "big.raw"];
-    loop {
-        let extra = names(d).into_iter().any(|n| !inputs.contains(&n.as_str()));
-        if extra {
-            break;
-        }
-        assert!(
-            child.try_wait().unwrap().is_none(),
-            "SIG{sig}: the build ended before writing anything"
-        );
-        assert!(
-            t.elapsed() < Duration::from_secs(30),
-            "no temporary appeared"
-        );
-        std::thread::sleep(Duration::from_millis(2));
-    }
-    // Let the build get going (temporaries of later stages too).
-    std::thread::sleep(delay);
-    let st = Command::new("kill")
-        .arg(format!("-{sig}"))
-        .arg(child.id().to_string())
-        .status()
-        .unwrap();
-    assert!(st.success());
-    let status = wait_timeout(&mut child, Duration::from_secs(30)).unwrap_or_else(|| {
-        let _ = child.kill();
-        panic!("SIG{sig}: the build did not stop");
-    });
-    if status.success() {
-        // Finished before the signal arrived: remove its output, try again.
-        std::fs::remove_file(out).unwrap();
-        return None;
-    }
-    Some(status)
-}
-
 #[test]
 fn signals_during_a_build_leave_no_temporaries() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     let json = big_sparse_input(d, 1024);
     let exe = env!("CARGO_BIN_EXE_brickray-store");
-    let inputs = ["big.json", "big.raw"];
     for sig in ["INT", "TERM", "HUP"] {
         let out = d.join("big.brs");
-        // The build of this input takes a few hundred milliseconds to seconds
-        // depending on the machine's load: signal later first (so later
-        // stages' temporaries exist), sooner when the build beat the signal.
-        let status = [100, 30, 10, 0]
-            .into_iter()
-            .find_map(|ms| signal_mid_build(exe, &json, &out, d, sig, Duration::from_millis(ms)))
-            .unwrap_or_else(|| {
-                panic!("SIG{sig}: the build finished before every signal; make the input larger")
-            });
+        let mut child = Command::new(exe)
+            .args(["build", "--quiet"])
+            .arg(&json)
+            .arg(&out)
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .unwrap();
+        // Wait for the temporary to appear, then signal.
+        let t = Instant::now();
+        let inputs = ["big.json", "big.raw"];
+        loop {
+            let extra = names(d).into_iter().any(|n| !inputs.contains(&n.as_str()));
+            if extra {
+                break;
+            }
+            assert!(
+                child.try_wait().unwrap().is_none(),
+                "SIG{sig}: the build ended before writing anything"
+            );
+            assert!(
+                t.elapsed() < Duration::from_secs(30),
+                "no temporary appeared"
+            );
+            std::thread::sleep(Duration::from_millis(2));
+        }
+        // Let the build get going (temporaries of later stages too).
+        std::thread::sleep(Duration::from_millis(100));
+        let st = Command::new("kill")
+            .arg(format!("-{sig}"))
+            .arg(child.id().to_string())
+            .status()
+            .unwrap();
+        assert!(st.success());
+        let status = wait_timeout(&mut child, Duration::from_secs(30)).unwrap_or_else(|| {
+            let _ = child.kill();
+            panic!("SIG{sig}: the build did not stop");
+        });
+        assert!(
+            !status.success(),
+            "SIG{sig}: the build finished before the signal; make the input larger"
+        );
         // It died of the signal, as without a handler.
         let num = match sig {
             "INT" => 2,
