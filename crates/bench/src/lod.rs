@@ -14,7 +14,9 @@
 //! A third sweep ranks by the strict bound (`LodMetric::ErrorBound`), reported
 //! apart.
 //!
-//! `cargo run --release -p brickray-bench -- lod [--size PX] [--scenes a,b] [--brick N]`
+//! `cargo run --release -p brickray-bench -- lod [--size PX] [--scenes a,b] [--brick N]
+//! [--policy none|rayguided|occlusion]` (visibility feedback under both rules; its
+//! points converge over rendered frames, so that the feedback arrives)
 //!
 //! Scenes: `mri` (shared T1 MRI, shaded DVR), `ct` (shared head CT,
 //! translucent DVR), `ct_iso` (head CT, bone isosurface), `ml` (Marschner-Lobb
@@ -57,13 +59,29 @@ pub(crate) fn lod_point(
     metric: LodMetric,
     tolerance_px: f32,
     brick_bytes: u64,
+    rendered: bool,
 ) -> Result<LodPoint, String> {
     renderer.set_lod_metric(metric).map_err(|e| e.to_string())?;
     renderer
         .set_lod_tolerance(tolerance_px)
         .map_err(|e| e.to_string())?;
-    let (frames, stats) = run.converge(renderer, camera, frame, settings, 400)?;
-    let frames = frames.ok_or_else(|| format!("not converged: {stats:?}"))?;
+    // Rendered frames (not only planned ones) when visibility feedback is on,
+    // so that its read-backs arrive.
+    let frames = if !rendered {
+        let (frames, stats) = run.converge(renderer, camera, frame, settings, 400)?;
+        frames.ok_or_else(|| format!("not converged: {stats:?}"))?
+    } else {
+        let mut done = None;
+        for i in 1..=400 {
+            run.frame(renderer, camera, frame, settings, false)?;
+            if renderer.out_of_core_stats().is_some_and(|s| s.converged) && i >= 8 {
+                done = Some(i);
+                break;
+            }
+            std::thread::sleep(std::time::Duration::from_millis(10));
+        }
+        done.ok_or_else(|| format!("not converged: {:?}", renderer.out_of_core_stats()))?
+    };
     let shot = run.frame(renderer, camera, frame, settings, true)?;
     let stats = renderer.out_of_core_stats().ok_or("not out of core")?;
     let bricks = stats.cache.working_set_bricks;
@@ -208,6 +226,12 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
     let size: u32 = arg(args, "--size", 256)?;
     let brick: u32 = arg(args, "--brick", 32)?;
     let scenes: String = arg(args, "--scenes", "mri,ct,ml".to_string())?;
+    let policy = match arg(args, "--policy", "none".to_string())?.as_str() {
+        "none" => brickray_render::VisibilityPolicy::None,
+        "rayguided" => brickray_render::VisibilityPolicy::RayGuided,
+        "occlusion" => brickray_render::VisibilityPolicy::OcclusionQueries,
+        other => return Err(format!("--policy {other}: none, rayguided or occlusion")),
+    };
     // Both sweeps in steps of sqrt(2): tolerances 0 and 0.5..16 px, budgets
     // 2..8192 (8-bit levels x px).
     let tolerances: Vec<f32> = std::iter::once(0.0)
@@ -291,6 +315,9 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         renderer
             .set_transfer_function(&gpu.device, &gpu.queue, &scene.tf)
             .map_err(|e| e.to_string())?;
+        renderer
+            .set_visibility_policy(policy)
+            .map_err(|e| e.to_string())?;
         println!(
             "  {:>10} {:>9} {:>7} {:>9} {:>9} {:>7}",
             "metric", "budget", "bricks", "MiB", "PSNR dB", "frames"
@@ -323,6 +350,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
                 metric,
                 tol,
                 brick_bytes,
+                policy != brickray_render::VisibilityPolicy::None,
             )?;
             let psnr = compare(&p.rgba, &reference, size, size).psnr_db.min(99.0);
             println!(

@@ -215,6 +215,10 @@ enum Suite {
         /// Brick side of the stores (default 32).
         #[arg(long)]
         brick: Option<u32>,
+        /// Visibility feedback under both rules: none (default), rayguided or
+        /// occlusion.
+        #[arg(long)]
+        policy: Option<String>,
     },
     /// Visibility feedback: working set, image and latency per policy along a
     /// camera path with a half turn (head CT and procedural shells).
