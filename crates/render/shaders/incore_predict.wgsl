@@ -38,22 +38,6 @@ fn iso_march(acc: ptr<function, Accum>, r: Ray, t0: f32, t1: f32, dt: f32, ess: 
     }
 }
 
-// The sparse traversal: a march at the coarse step from the ray start, its
-// bracket bisected down to the full step's length. With the guard it marches
-// at the full step instead (with skipping, which never changes the result): a
-// coarse step can pass over a thin or grazing crossing the full traversal
-// finds, so only the full step keeps the guarded variant exact.
-fn sparse_traversal(acc: ptr<function, Accum>, r: Ray, t0: f32, t1: f32) {
-    if (GUARD) {
-        iso_march(acc, r, t0, t1, frame.dt, ESS || SPARSE_ESS);
-        return;
-    }
-    iso_march(acc, r, t0, t1, pred.sparse_dt, SPARSE_ESS);
-    if ((*acc).hit) {
-        sparse_refine(acc, Cursor(r));
-    }
-}
-
 // The local traversal: from the full-step sample nearest the prediction `tp`,
 // alternately one step back and one step forward (back only when that sample
 // is inside the surface), until two neighbouring
@@ -163,33 +147,45 @@ fn predict_ray(px: vec2<u32>, start: RayStart) {
     var kind = TRAVERSAL_NONE;
     if (t1 > t0) {
         let choice = pred_choice(pp.last);
-        if (choice == TRAVERSAL_FULL) {
-            kind = TRAVERSAL_FULL;
-            iso_march(&acc, r, t0, t1, frame.dt, ESS);
-        } else if (choice == TRAVERSAL_LOCAL) {
-            kind = TRAVERSAL_LOCAL;
+        kind = choice;
+        // Every pixel that marches from the ray start (full, sparse, a failed
+        // local search, a rejected guard) does so in one call below: a SIMD
+        // group of rays with mixed traversals runs one march loop, not one per
+        // traversal (lavapipe runs each loop a group reaches while any lane is
+        // in it).
+        var march = choice != TRAVERSAL_LOCAL;
+        if (choice == TRAVERSAL_LOCAL) {
             let tp = pred_decode_hit(pp.last) - pp.eye_offset;
-            var ok = local_traversal(&acc, r, t0, t1, tp);
-            if (!ok) {
+            if (!local_traversal(&acc, r, t0, t1, tp)) {
                 kind = TRAVERSAL_LOCAL_MISSED;
-                acc = accum_new();
-                sparse_traversal(&acc, r, t0, t1);
-            } else if (GUARD) {
-                if (!guard_first_hit(&acc, r, t0)) {
-                    // Something in front may hold the isovalue: the full march,
-                    // so the guarded result is the full traversal's.
-                    kind = TRAVERSAL_GUARD_REJECTED;
-                    let spent = acc.samples;
-                    acc = accum_new();
-                    acc.samples = spent;
-                    iso_march(&acc, r, t0, t1, frame.dt, ESS);
-                }
+                march = true;
+            } else if (GUARD && !guard_first_hit(&acc, r, t0)) {
+                // Something in front may hold the isovalue: the full march, so
+                // the guarded result is the full traversal's.
+                kind = TRAVERSAL_GUARD_REJECTED;
+                march = true;
             }
-        } else {
-            // Missed the surface (or the box, and the ray now enters it; or a
-            // hole of the reprojection).
-            kind = TRAVERSAL_SPARSE;
-            sparse_traversal(&acc, r, t0, t1);
+            if (march) {
+                let spent = acc.samples;
+                acc = accum_new();
+                acc.samples = spent;
+            }
+        }
+        if (march) {
+            // Sparse (missed the surface, or the box and the ray now enters it,
+            // or a hole of the reprojection; or a failed local search): a
+            // coarse step whose bracket is bisected down to the full step's
+            // length. With the guard, the full step (with skipping, which never
+            // changes the result): a coarse step can pass over a thin or
+            // grazing crossing the full traversal finds, so only the full step
+            // keeps the guarded variant exact.
+            let sparse = kind == TRAVERSAL_SPARSE || kind == TRAVERSAL_LOCAL_MISSED;
+            let coarse = sparse && !GUARD;
+            let ess = select(ESS, select(ESS || SPARSE_ESS, SPARSE_ESS, coarse), sparse);
+            iso_march(&acc, r, t0, t1, select(frame.dt, pred.sparse_dt, coarse), ess);
+            if (coarse && acc.hit) {
+                sparse_refine(&acc, cur);
+            }
         }
     }
     pred_store(pp.p, acc, t1 <= t0, pp.eye_offset, kind);
