@@ -100,7 +100,8 @@ fn local_traversal(acc: ptr<function, Accum>, r: Ray, t0: f32, t1: f32, tp: f32)
 // (else 0: the guard rejects the hit); the hit's own cell is sampled at the
 // full step up to the hit, and an earlier crossing found there replaces the
 // bracket (exactly the full traversal's). 1: the hit is the first crossing.
-// The cell walk's range reads are counted as samples.
+// The walk reads the cells' skip distances, as the full traversal does, and
+// passes an empty cube with one read; each read is counted as a sample.
 fn guard_first_hit(acc: ptr<function, Accum>, r: Ray, t0: f32) -> bool {
     let dt = frame.dt;
     let inv_dir = safe_inverse(r.tex_dir);
@@ -112,7 +113,11 @@ fn guard_first_hit(acc: ptr<function, Accum>, r: Ray, t0: f32) -> bool {
         if (k >= k_hit) { break; }
         let t = t0 + f32(k) * dt;
         let c = cell_of(tex_at(r, t));
-        let k_exit = max(k + 1u, first_k_after(cell_exit(r, inv_dir, c, 1u), t0, dt));
+        // As the full traversal's skipping: a cell at skip distance d > 0 lies
+        // in an empty cube of side 2d - 1 (no value at or above the isovalue),
+        // passed with one test; the hit's own cell is never in one.
+        let d = cell_skip[cell_index(c)];
+        let k_exit = max(k + 1u, first_k_after(cell_exit(r, inv_dir, c, max(d, 1u)), t0, dt));
         if (all(c == c_hit)) {
             let k_end = min(k_exit, k_hit);
             for (var j = k; j < k_end; j = j + 1u) {
@@ -127,7 +132,7 @@ fn guard_first_hit(acc: ptr<function, Accum>, r: Ray, t0: f32) -> bool {
             continue;
         }
         (*acc).samples = (*acc).samples + 1u;
-        if (cell_range(c).y >= frame.isovalue) {
+        if (d == 0u) {
             return false;
         }
         k = k_exit;
