@@ -7,24 +7,12 @@ use crate::volume::{DType, Volume, VolumeData, VolumeDesc};
 pub fn sphere(n: u32) -> Volume {
     let c = (n as f32 - 1.0) * 0.5;
     let r = n as f32 * 0.4;
-    let mut data = Vec::with_capacity((n * n * n) as usize);
-    for z in 0..n {
-        for y in 0..n {
-            for x in 0..n {
-                let d = ((x as f32 - c).powi(2) + (y as f32 - c).powi(2) + (z as f32 - c).powi(2))
-                    .sqrt();
-                let v = (1.0 - d / r).clamp(0.0, 1.0);
-                data.push((v * 255.0).round() as u8);
-            }
-        }
-    }
-    let desc = VolumeDesc {
-        dims: [n; 3],
-        dtype: DType::U8,
-        spacing: [1.0; 3],
-        value_range: [0.0, 255.0],
-    };
-    Volume::new(desc, VolumeData::U8(data)).expect("valid by construction")
+    u8_field(n, |[x, y, z]| {
+        let d = ((x as f32 - c).powi(2) + (y as f32 - c).powi(2) + (z as f32 - c).powi(2)).sqrt();
+        let v = (1.0 - d / r).clamp(0.0, 1.0);
+        // The 8-bit level as computed in f32 (exact through u8_field).
+        (v * 255.0).round() as f64 / 255.0
+    })
 }
 
 /// An `n^3` u8 volume (value range 0..255, unit spacing) of `f` at each voxel's
