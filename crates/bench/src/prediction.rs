@@ -33,7 +33,7 @@ use brickray_core::{
 use brickray_harness::predict::{self, FrameResult};
 use brickray_harness::{GpuContext, Offscreen, ct};
 use brickray_reference::psnr;
-use brickray_render::{FrameDesc, OutOfCoreConfig, Prediction, TraversalClass, VolumeRenderer};
+use brickray_render::{FrameDesc, Prediction, TraversalClass, VolumeRenderer};
 use glam::Vec3;
 use serde_json::json;
 
@@ -113,12 +113,18 @@ impl Backend {
         }
     }
 
-    /// Gives `r` the scene's volume (out of core: its store, built once).
-    fn load(&self, gpu: &GpuContext, r: &mut VolumeRenderer, scene: &Scene) -> Result<(), String> {
+    /// A renderer of the scene's volume (out of core: its store, built once,
+    /// at the finest level).
+    fn renderer(&self, gpu: &GpuContext, scene: &Scene) -> Result<VolumeRenderer, String> {
+        let d = scene.vol.desc();
         match self {
-            Backend::InCore => r
-                .set_volume(&gpu.device, &gpu.queue, &scene.vol)
-                .map_err(|e| e.to_string()),
+            Backend::InCore => {
+                let mut r = VolumeRenderer::new(&gpu.device, brickray_harness::target_desc())
+                    .map_err(|e| e.to_string())?;
+                r.set_volume(&gpu.device, &gpu.queue, &scene.vol)
+                    .map_err(|e| e.to_string())?;
+                Ok(r)
+            }
             Backend::OutOfCore(dir) => {
                 let path = dir.path().join(format!("{}.brs", scene.name));
                 let source: std::sync::Arc<dyn brickray_core::BrickSource> = if path.exists() {
@@ -126,20 +132,12 @@ impl Backend {
                 } else {
                     brickray_harness::store_of(&scene.vol, &path)
                 };
-                let d = scene.vol.desc();
-                let config = OutOfCoreConfig {
-                    tolerance_px: 0.0,
-                    upload_budget_bytes: 1 << 30,
-                    ..Default::default()
-                };
-                r.set_volume_source(
-                    &gpu.device,
-                    &gpu.queue,
+                crate::runner::finest_ooc_renderer(
+                    gpu,
                     source,
                     VolumeFrame::centered(d.dims, d.spacing),
-                    config,
+                    Default::default(),
                 )
-                .map_err(|e| e.to_string())
             }
         }
     }
@@ -224,9 +222,7 @@ fn run_path(
     let vs = variants(kappa);
     let mut rs = Vec::new();
     for (_, p) in &vs {
-        let mut r = VolumeRenderer::new(&gpu.device, brickray_harness::target_desc())
-            .map_err(|e| e.to_string())?;
-        backend.load(gpu, &mut r, scene)?;
+        let mut r = backend.renderer(gpu, scene)?;
         r.set_transfer_function(
             &gpu.device,
             &gpu.queue,
