@@ -470,13 +470,20 @@ pub fn refine(
             charged,
         } = item;
         // A non-finite size (a non-finite camera or frame) is never refined.
-        if uniform || key.level >= finest || !priority.is_finite() || priority <= tol {
+        if uniform || key.level >= finest || !priority.is_finite() {
             finals.push((key, priority));
             continue;
         }
+        // Within the tolerance (or error budget): a node still splits when the
+        // split costs no brick, i.e. at most one child needs data (the others
+        // are empty, invisible under the mode or outside the view), so the cut
+        // gets finer without growing; otherwise it stays.
+        let within = priority <= tol;
         // Hidden in the previous frames: stays at its level, requests nothing.
         if !env.may_split(key) {
-            out.blocked.invisible += 1;
+            if !within {
+                out.blocked.invisible += 1;
+            }
             finals.push((key, priority));
             continue;
         }
@@ -495,6 +502,17 @@ pub fn refine(
                 Err(Unknown::Pending) => pending.push(c),
                 Err(Unknown::Failed) => failed += 1,
             }
+        }
+        if within && (failed > 0 || !pending.is_empty()) {
+            // Whether the split is free is known once the children's metadata
+            // is: asked for after every wanted split's (the heap pops those first).
+            for c in pending {
+                if out.meta_requests.len() < max_meta {
+                    out.meta_requests.push((c, priority as f32));
+                }
+            }
+            finals.push((key, priority));
+            continue;
         }
         if failed > 0 {
             out.blocked.failed += 1;
@@ -515,6 +533,10 @@ pub fn refine(
         let data: Vec<usize> = (0..n)
             .filter(|&i| classes[i].class == NodeClass::Data)
             .collect();
+        if within && data.len() > 1 {
+            finals.push((key, priority));
+            continue;
+        }
         let states: Vec<DataState> = data.iter().map(|&i| env.data(children[i])).collect();
         let failed = states.iter().filter(|s| **s == DataState::Failed).count() as u32;
         if failed > 0 {

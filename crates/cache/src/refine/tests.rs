@@ -589,3 +589,79 @@ fn request_weight_orders_loads_not_the_cut() {
         assert!((a.priority / b.priority - 100.0).abs() < 1e-3);
     }
 }
+
+/// A node within the tolerance still splits when at most one child needs
+/// data: the cut gets finer and never grows. On the ball's iso-surface at 0.9
+/// (values >= 0.9 only within 0.05 of the centre) every node around the centre
+/// has one data child down to the finest level, so a view whose tolerance
+/// stops refinement at level 1 or 2 (its voxels project to less than the
+/// tolerance there) still draws the 8 finest bricks around the centre once
+/// the root splits; and no data leaf of any view is left above the finest
+/// level with fewer than two data children.
+#[test]
+fn splits_that_cost_no_brick_are_taken_within_the_tolerance() {
+    let s = setup();
+    let iso = RenderMode::Iso {
+        value: 0.9,
+        color: [1.0; 3],
+    };
+    let finest = s.layout.levels - 1;
+    for (dist, tolerance) in [(1.5, 1.0), (4.0, 6.0), (4.0, 12.0), (30.0, 1.0)] {
+        let cam = Camera::orbit(Vec3::ZERO, dist, 0.3, 0.2);
+        let mut env = AllInCpu {
+            layout: s.layout.clone(),
+            on_gpu: HashSet::new(),
+            meta_reads: 0,
+        };
+        let params = RefineParams {
+            camera: &cam,
+            aspect: 1.0,
+            viewport_height_px: 512,
+            volume_frame: &s.frame,
+            mode: iso,
+            tf: &s.tf,
+            tolerance_px: tolerance,
+            metric: brickray_core::LodMetric::Geometric,
+            max_data_leaves: 10_000,
+            max_requests: u32::MAX,
+            brick_upload_bytes: s.layout.brick_bytes() as u64,
+        };
+        let r = refine(
+            &s.layout,
+            &params,
+            &mut env,
+            &mut UploadBudget::new(u64::MAX),
+        );
+        assert_exact_cover(&keys(&r), s.layout.levels);
+        for l in r.leaves.iter().filter(|l| l.class == NodeClass::Data) {
+            if l.key.level == finest {
+                continue;
+            }
+            let holding = s
+                .layout
+                .children(l.key)
+                .iter()
+                .filter(|&&c| {
+                    let i = ball_info(&s.layout, c);
+                    i.kind == NodeKind::Data && i.min <= 0.9 && 0.9 <= i.max
+                })
+                .count();
+            assert!(
+                holding >= 2,
+                "{:?} stays coarse with {holding} data children (distance {dist}, tolerance {tolerance})",
+                l.key
+            );
+        }
+        // The root has eight data children (the centre is their common
+        // corner); below it the split never grows the cut.
+        if r.data_leaves > 1 {
+            assert_eq!(r.data_leaves, 8, "distance {dist}, tolerance {tolerance}");
+            assert!(
+                r.leaves
+                    .iter()
+                    .filter(|l| l.class == NodeClass::Data)
+                    .all(|l| l.key.level == finest)
+            );
+        }
+    }
+}
