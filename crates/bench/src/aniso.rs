@@ -12,8 +12,8 @@ use crate::Figures;
 use brickray_cache::refine::{DataState, MetaState, RefineEnv, RefineParams, refine};
 use brickray_cache::{NodeClass, UploadBudget};
 use brickray_core::{
-    BrickSource, Camera, DType, NodeKey, OctreeLayout, RenderMode, RenderSettings, Volume,
-    VolumeData, VolumeDesc, VolumeFrame,
+    BrickSource, Camera, DType, LodMetric, NodeKey, OctreeLayout, RenderMode, RenderSettings,
+    Volume, VolumeData, VolumeDesc, VolumeFrame,
 };
 use brickray_harness::ct;
 use brickray_reference::{ReferenceOptions, psnr, render_reference};
@@ -35,27 +35,35 @@ impl RefineEnv for AllAvailable<'_> {
     }
 }
 
+/// What a cut is refined for: the store, the classification and the view.
+struct CutView<'a> {
+    store: &'a Store,
+    tf: &'a brickray_core::TransferFunction,
+    mode: RenderMode,
+    camera: &'a Camera,
+    frame: &'a VolumeFrame,
+    size: u32,
+}
+
 /// The finest-grid volume the cut's leaves sample to, and its data-leaf count.
 fn cut_volume(
-    store: &Store,
-    tf: &brickray_core::TransferFunction,
-    mode: RenderMode,
-    camera: &Camera,
-    frame: &VolumeFrame,
-    size: u32,
+    view: &CutView<'_>,
     tolerance_px: f32,
+    max_data_leaves: u32,
+    metric: brickray_core::LodMetric,
 ) -> Result<(Volume, u32, Vec<u32>), String> {
+    let store = view.store;
     let layout = store.layout().clone();
     let params = RefineParams {
-        camera,
+        camera: view.camera,
         aspect: 1.0,
-        viewport_height_px: size,
-        volume_frame: frame,
-        mode,
-        tf,
+        viewport_height_px: view.size,
+        volume_frame: view.frame,
+        mode: view.mode,
+        tf: view.tf,
         tolerance_px,
-        metric: brickray_core::LodMetric::Geometric,
-        max_data_leaves: u32::MAX / 2,
+        metric,
+        max_data_leaves,
         max_requests: u32::MAX / 2,
         brick_upload_bytes: layout.brick_bytes() as u64,
     };
@@ -155,6 +163,22 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
     let size: u32 = crate::arg(args, "--size", 160)?;
     let step: f32 = crate::arg(args, "--step", 0.5)?;
     let scene: String = crate::arg(args, "--scene", "dvr_translucent".to_string())?;
+    // Brick budgets, largest first.
+    let budgets: Vec<u32> = crate::arg(
+        args,
+        "--budgets",
+        "78,75,72,69,66,63,60,57,54,51,48,45,42,39,36,33,30,27,24,21,18,15,12,9".to_string(),
+    )?
+    .split(',')
+    .map(|t| {
+        t.trim()
+            .parse::<u32>()
+            .map_err(|e| format!("--budgets: {e}"))
+    })
+    .collect::<Result<_, _>>()?;
+    // An SVG chart of error against working set, when given a path.
+    let chart: String = crate::arg(args, "--chart", String::new())?;
+    let mut curves: Vec<Curve> = Vec::new();
     let (_, mode, tf) = ct::scenes()
         .into_iter()
         .find(|(n, _, _)| *n == scene)
@@ -191,19 +215,29 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         brickray_store::build(&mut reader, &out, &o).map_err(|e| e.to_string())?;
         let store = brickray_store::open(&out).map_err(|e| e.to_string())?;
         let layout: &OctreeLayout = store.layout();
+        let view = CutView {
+            store: &store,
+            tf: &tf,
+            mode,
+            camera: &camera,
+            frame: &frame,
+            size,
+        };
         let masks: String = layout
             .split_masks()
             .iter()
             .map(|m| format!("{m:o}"))
             .collect::<Vec<_>>()
             .join(",");
-        for tol in [0.5f32, 1.0, 2.0, 4.0, 8.0] {
+        let mut tol_curve = Vec::new();
+        for tol in [0.5f32, 1.0, 1.41, 2.0, 2.83, 4.0, 5.66, 8.0] {
             let (cv, bricks, per_level) =
-                cut_volume(&store, &tf, mode, &camera, &frame, size, tol)?;
+                cut_volume(&view, tol, u32::MAX / 2, LodMetric::Geometric)?;
             let img = render_reference(&cv, &frame, &tf, &camera, &settings, &opts)
                 .to_rgba8([0.0, 0.0, 0.0]);
             let p = psnr(&img, &reference);
             println!("{name:<7} {tol:>6} {bricks:>8} {p:>9.2} {masks:>10}  {per_level:?}");
+            tol_curve.push((bricks as f64, rmse_of(p)));
             let t = format!("{tol}").replace('.', "_");
             fig.insert(format!("{name}_bricks_at_{t}px"), bricks.into());
             fig.insert(
@@ -214,6 +248,144 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
                 fig.insert("anisotropic_ct_bricks_at_1px".into(), bricks.into());
             }
         }
+        curves.push((format!("{name}, tolerance"), tol_curve));
+        for (rule, metric) in [
+            ("geometric", LodMetric::Geometric),
+            ("error-aware", LodMetric::ErrorAware { budget: 0.0 }),
+        ] {
+            budget_sweep(&mut BudgetSweep {
+                name,
+                rule,
+                metric,
+                view: &view,
+                settings: &settings,
+                opts: &opts,
+                reference: &reference,
+                budgets: &budgets,
+                fig: &mut fig,
+                curves: &mut curves,
+            })?;
+        }
+    }
+    if !chart.is_empty() {
+        write_chart(&chart, &curves)?;
+        println!("chart: {chart}");
     }
     Ok(fig)
+}
+
+/// One layout's sweep of the brick budget.
+struct BudgetSweep<'a> {
+    name: &'a str,
+    /// The refinement rule's name and metric (its threshold 0: only the
+    /// budget stops refinement, the metric orders the splits).
+    rule: &'a str,
+    metric: LodMetric,
+    view: &'a CutView<'a>,
+    settings: &'a RenderSettings,
+    opts: &'a ReferenceOptions<'a>,
+    reference: &'a [u8],
+    budgets: &'a [u32],
+    fig: &'a mut Figures,
+    /// Charted curves (name, (bricks, RMSE) points).
+    curves: &'a mut Vec<Curve>,
+}
+
+/// A charted curve: its name and its (bricks, RMSE) points.
+type Curve = (String, Vec<(f64, f64)>);
+
+/// RMSE in 8-bit levels from PSNR (0 for identical images).
+fn rmse_of(psnr_db: f64) -> f64 {
+    255.0 / 10f64.powf(psnr_db / 20.0)
+}
+
+/// RMSE against working-set bricks, one line per curve (SVG).
+fn write_chart(path: &str, curves: &[Curve]) -> Result<(), String> {
+    use plotters::prelude::*;
+    let root = SVGBackend::new(path, (760, 480)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| e.to_string())?;
+    let pts = || curves.iter().flat_map(|c| c.1.iter());
+    let xmax = pts().map(|p| p.0).fold(1.0, f64::max);
+    let ymax = pts().map(|p| p.1).fold(1.0, f64::max);
+    let mut c = ChartBuilder::on(&root)
+        .caption(
+            "Head CT at 4.5 mm: image error against working set",
+            ("sans-serif", 18),
+        )
+        .margin(10)
+        .x_label_area_size(36)
+        .y_label_area_size(52)
+        .build_cartesian_2d(0.0..xmax * 1.05, 0.0..ymax * 1.08)
+        .map_err(|e| e.to_string())?;
+    c.configure_mesh()
+        .x_desc("working-set bricks")
+        .y_desc("RMSE against the finest level (8-bit levels)")
+        .draw()
+        .map_err(|e| e.to_string())?;
+    let colors = [BLACK, RED, BLUE, GREEN, MAGENTA, CYAN];
+    for (i, (name, points)) in curves.iter().enumerate() {
+        let color = colors[i % colors.len()];
+        let mut p = points.clone();
+        p.sort_by(|a, b| a.0.total_cmp(&b.0));
+        c.draw_series(LineSeries::new(p.iter().cloned(), color))
+            .map_err(|e| e.to_string())?
+            .label(name.as_str())
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], color));
+        c.draw_series(p.iter().map(|&q| Circle::new(q, 3, color.filled())))
+            .map_err(|e| e.to_string())?;
+    }
+    c.configure_series_labels()
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()
+        .map_err(|e| e.to_string())?;
+    root.present().map_err(|e| e.to_string())?;
+    Ok(())
+}
+
+/// The cut under a brick budget (the GPU pool's capacity) at tolerance 0:
+/// nodes split in priority order (largest projected voxel first) until the
+/// next split would exceed the budget. Prints bricks, PSNR and RMSE (8-bit
+/// levels) per budget, and the largest RMSE rise between neighbouring budgets
+/// as a share of the sweep's whole range (1: everything in one step, a cliff).
+fn budget_sweep(b: &mut BudgetSweep<'_>) -> Result<(), String> {
+    println!(
+        "\n{} octree, {} order: brick budget sweep (threshold 0)\n{:>7} {:>8} {:>9} {:>7}  data leaves per level",
+        b.name, b.rule, "budget", "bricks", "PSNR dB", "RMSE"
+    );
+    let mut rmse = Vec::new();
+    let mut points = Vec::new();
+    for &n in b.budgets {
+        let (cv, bricks, per_level) = cut_volume(b.view, 0.0, n, b.metric)?;
+        let v = b.view;
+        let img = render_reference(&cv, v.frame, v.tf, v.camera, b.settings, b.opts)
+            .to_rgba8([0.0, 0.0, 0.0]);
+        let p = psnr(&img, b.reference);
+        let e = rmse_of(p);
+        println!("{n:>7} {bricks:>8} {p:>9.2} {e:>7.2}  {per_level:?}");
+        b.fig.insert(
+            format!("{}_{}_rmse_at_budget_{n}", b.name, b.rule),
+            ((e * 100.0).round() / 100.0).into(),
+        );
+        rmse.push(e);
+        points.push((bricks as f64, e));
+    }
+    let range =
+        rmse.iter().cloned().fold(0.0f64, f64::max) - rmse.iter().cloned().fold(f64::MAX, f64::min);
+    let step = rmse
+        .windows(2)
+        .map(|w| (w[1] - w[0]).abs())
+        .fold(0.0f64, f64::max);
+    let share = if range > 0.0 { step / range } else { 0.0 };
+    println!(
+        "largest RMSE change between neighbouring budgets: {step:.2} of {range:.2} ({:.0}% of the range)",
+        share * 100.0
+    );
+    b.fig.insert(
+        format!("{}_{}_worst_budget_step_share", b.name, b.rule),
+        ((share * 1000.0).round() / 1000.0).into(),
+    );
+    b.curves
+        .push((format!("{}, budget, {} order", b.name, b.rule), points));
+    Ok(())
 }

@@ -61,7 +61,8 @@ enum Suite {
         size: Option<u32>,
     },
     /// LOD sweep on the head CT at 4.5 mm slices: bricks and PSNR per
-    /// tolerance, all-axes octree vs anisotropic pyramid (CPU only).
+    /// tolerance and per brick budget, all-axes octree vs anisotropic pyramid
+    /// (CPU only).
     Aniso {
         /// Image side in pixels (default 160).
         #[arg(long)]
@@ -72,6 +73,13 @@ enum Suite {
         /// Head CT scene: dvr_translucent (default), dvr_opaque, iso, mip.
         #[arg(long)]
         scene: Option<String>,
+        /// Brick budgets to sweep, comma-separated (default 78 down to 9 in
+        /// steps of 3).
+        #[arg(long)]
+        budgets: Option<String>,
+        /// Write an SVG chart of error against working set to this path.
+        #[arg(long)]
+        chart: Option<String>,
     },
     /// The brick-store builder: throughput, memory bound, banded levels.
     Build {
