@@ -453,14 +453,20 @@ pub fn refine(
     // are retried once the heap is empty, as long as a round still splits
     // something (each node splits at most once, so this ends).
     let mut deferred: Vec<HeapItem> = Vec::new();
+    // Splits the pool refused, retried the same way: a later split whose
+    // children are all empty or invisible gives its brick back (nodes within
+    // the tolerance, which pop last, do that), and the refused node, of higher
+    // priority, may then fit.
+    let mut pool_deferred: Vec<HeapItem> = Vec::new();
     let mut split_since_retry = false;
     loop {
         if heap.is_empty() {
-            if deferred.is_empty() || !split_since_retry {
+            if (deferred.is_empty() && pool_deferred.is_empty()) || !split_since_retry {
                 break;
             }
             split_since_retry = false;
             heap.extend(deferred.drain(..));
+            heap.extend(pool_deferred.drain(..));
         }
         let Some(item) = heap.pop() else { break };
         let HeapItem {
@@ -568,8 +574,7 @@ pub fn refine(
             continue;
         }
         if out.data_leaves - 1 + data.len() as u32 > params.max_data_leaves {
-            out.blocked.pool_full += 1;
-            finals.push((key, priority));
+            pool_deferred.push(item);
             continue;
         }
         // A split node charged at its parent's split is not uploaded after all.
@@ -611,6 +616,10 @@ pub fn refine(
     out.requests.truncate(max_requests);
     for item in deferred {
         out.blocked.upload_budget += 1;
+        finals.push((item.key, item.priority));
+    }
+    for item in pool_deferred {
+        out.blocked.pool_full += 1;
         finals.push((item.key, item.priority));
     }
     for (key, priority) in finals {

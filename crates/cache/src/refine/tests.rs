@@ -665,3 +665,81 @@ fn splits_that_cost_no_brick_are_taken_within_the_tolerance() {
         }
     }
 }
+
+/// Two level-1 nodes hold data: `full`, whose 8 children all hold data, and
+/// `hollow`, whose children are all empty (its own range reaches into its
+/// neighbours' through the apron); the rest of the volume is empty.
+struct FullAndHollow {
+    full: NodeKey,
+    hollow: NodeKey,
+}
+
+impl RefineEnv for FullAndHollow {
+    fn node(&mut self, key: NodeKey) -> MetaState {
+        let data = NodeInfo {
+            kind: NodeKind::Data,
+            min: 0.0,
+            max: 1.0,
+            error: None,
+        };
+        let empty = NodeInfo {
+            kind: NodeKind::Empty,
+            min: 0.0,
+            max: 0.0,
+            error: None,
+        };
+        let under = |a: NodeKey| key == a || key.parent() == Some(a);
+        MetaState::Known(
+            if key.level == 0 || under(self.full) || key == self.hollow {
+                data
+            } else {
+                empty
+            },
+        )
+    }
+    fn data(&mut self, _key: NodeKey) -> DataState {
+        DataState::OnGpu
+    }
+}
+
+/// A split the pool refused is retried once a later split gives a brick back
+/// (a node whose children are all empty leaves the cut): with a pool of 8
+/// bricks, the cut ends with `full`'s 8 children whichever of the two nodes
+/// the view ranks first. Before, a refused split stayed refused for the frame,
+/// so when `full` came first the cut kept it whole and ended with 1 brick of
+/// the 8 it could hold.
+#[test]
+fn splits_the_pool_refused_are_retried_when_bricks_come_back() {
+    let layout = ball_layout(32);
+    let frame = VolumeFrame::centered([32; 3], [1.0; 3]);
+    let tf = TransferFunction::ramp(0.0, 1.0, 1.0);
+    let cam = Camera::orbit(Vec3::ZERO, 1.5, 0.3, 0.2);
+    let (a, b) = (NodeKey::new(1, 0, 0, 0), NodeKey::new(1, 1, 1, 1));
+    for (full, hollow) in [(a, b), (b, a)] {
+        let params = RefineParams {
+            camera: &cam,
+            aspect: 1.0,
+            viewport_height_px: 512,
+            volume_frame: &frame,
+            mode: RenderMode::Dvr,
+            tf: &tf,
+            tolerance_px: 0.0,
+            metric: brickray_core::LodMetric::Geometric,
+            max_data_leaves: 8,
+            max_requests: u32::MAX,
+            brick_upload_bytes: layout.brick_bytes() as u64,
+        };
+        let mut env = FullAndHollow { full, hollow };
+        let r = refine(&layout, &params, &mut env, &mut UploadBudget::new(u64::MAX));
+        assert_exact_cover(&keys(&r), layout.levels);
+        assert_eq!(r.data_leaves, 8, "full {full:?}");
+        assert!(
+            r.leaves
+                .iter()
+                .filter(|l| l.class == NodeClass::Data)
+                .all(|l| l.key.parent() == Some(full)),
+            "full {full:?}"
+        );
+        assert_eq!(r.blocked.pool_full, 0);
+    }
+}
