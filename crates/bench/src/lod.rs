@@ -18,6 +18,17 @@
 //! [--policy none|rayguided|occlusion]` (visibility feedback under both rules; its
 //! points converge over rendered frames, so that the feedback arrives)
 //!
+//! `--by budget` compares the two orders under a brick budget instead (GPU-free):
+//! each scene's cut is refined on the CPU with every brick available, limited
+//! only by a budget of data leaves (10% to 100% of the finest cut, the GPU
+//! pool's capacity), split in priority order (geometric: projected voxel size;
+//! error-aware: projected size x expected error, `LodMetric::ErrorAware` at
+//! threshold 0), resampled as the out-of-core kernel samples it
+//! (`crate::cut`), and rendered by the f64 reference; PSNR against the
+//! reference render of the finest cut. The gain at a budget is the error-aware
+//! PSNR minus the geometric (a cut never exceeds its budget; the error-aware
+//! one may stay below it where nodes have no expected error).
+//!
 //! Scenes: `mri` (shared T1 MRI, shaded DVR), `ct` (shared head CT,
 //! translucent DVR), `ct_iso` (head CT, bone isosurface), `ml` (Marschner-Lobb
 //! 128^3, DVR with a sharp band).
@@ -222,10 +233,124 @@ fn median(v: &mut [f64]) -> f64 {
     }
 }
 
+/// A scene by name.
+fn scene(name: &str) -> Result<Scene, String> {
+    match name {
+        "mri" => mri_dvr(),
+        "ct" => ct_scene(false),
+        "ct_iso" => ct_scene(true),
+        "ml" => Ok(ml_scene()),
+        other => Err(format!("unknown scene {other}")),
+    }
+}
+
+/// `--by budget`: the geometric and the error-aware order under the same
+/// brick budgets (module docs).
+fn budget_run(size: u32, brick: u32, scenes: &str) -> Result<Figures, String> {
+    use crate::cut::{CutView, cut_volume};
+    let fractions = [1.0, 0.9, 0.8, 0.7, 0.6, 0.5, 0.4, 0.3, 0.2, 0.1];
+    println!(
+        "lod by budget: {size}x{size}, bricks {brick}+2x2, budgets {fractions:?} of the finest cut"
+    );
+    let mut fig = Figures::new();
+    let mut all = Vec::new();
+    for name in scenes.split(',') {
+        let scene = scene(name)?;
+        let d = scene.vol.desc().clone();
+        let frame = VolumeFrame::centered(d.dims, d.spacing);
+        let camera = Camera::orbit(frame.center(), 2.0, 0.7, 0.35);
+        let dir = tempfile::tempdir().map_err(|e| e.to_string())?;
+        let store_path = dir.path().join("v.brs");
+        let mut reader = brickray_io::MemoryReader::new(scene.vol, "memory");
+        brickray_store::build(
+            &mut reader,
+            &store_path,
+            &brickray_store::BuildOptions {
+                brick,
+                ..Default::default()
+            },
+        )
+        .map_err(|e| e.to_string())?;
+        let store = brickray_store::open(&store_path).map_err(|e| e.to_string())?;
+        let view = CutView {
+            store: &store,
+            tf: &scene.tf,
+            mode: scene.settings.mode,
+            camera: &camera,
+            frame: &frame,
+            size,
+        };
+        let opts = ReferenceOptions::new(size, size);
+        let draw = |v: &Volume| {
+            render_reference(v, &frame, &scene.tf, &camera, &scene.settings, &opts)
+                .to_rgba8([0.0; 3])
+        };
+        let (finest, n, _) = cut_volume(&view, 0.0, u32::MAX / 2, LodMetric::Geometric)?;
+        let reference = draw(&finest);
+        println!(
+            "\n{}: {:?} {:?}, {:?}; finest cut {n} bricks",
+            scene.name, d.dims, d.dtype, scene.settings.mode
+        );
+        println!(
+            "  {:>7} {:>17} {:>17} {:>8}",
+            "budget", "geometric b / dB", "error-aware b / dB", "gain dB"
+        );
+        let mut gains = Vec::new();
+        let mut rows = Vec::new();
+        for f in fractions {
+            let budget = ((n as f64 * f).round() as u32).max(1);
+            let one = |metric| -> Result<(u32, f64), String> {
+                let (v, bricks, _) = cut_volume(&view, 0.0, budget, metric)?;
+                let p = brickray_reference::psnr(&draw(&v), &reference);
+                Ok((bricks, p.min(99.0)))
+            };
+            let (gb, gp) = one(LodMetric::Geometric)?;
+            let (eb, ep) = one(LodMetric::ErrorAware { budget: 0.0 })?;
+            let gain = ep - gp;
+            println!("  {budget:>7} {gb:>7} / {gp:>7.2} {eb:>7} / {ep:>7.2} {gain:>8.2}");
+            // Budgets where both cuts are the finest data say nothing.
+            if gp < 99.0 || ep < 99.0 {
+                gains.push(gain);
+            }
+            rows.push(
+                json!({"budget": budget, "geometric_bricks": gb, "geometric_psnr_db": round2(gp),
+                "error_aware_bricks": eb, "error_aware_psnr_db": round2(ep)}),
+            );
+        }
+        let m = median(&mut gains.clone());
+        println!(
+            "  {}: median gain {m:.2} dB over {} budgets (gains {:?})",
+            scene.name,
+            gains.len(),
+            gains.iter().map(|g| round2(*g)).collect::<Vec<_>>()
+        );
+        fig.insert(
+            format!("{}_budget_median_gain_db", scene.name),
+            round2(m).into(),
+        );
+        fig.insert(format!("{}_budget_points", scene.name), rows.into());
+        all.push(m);
+    }
+    let m = median(&mut all);
+    println!(
+        "\nall scenes: median of the scenes' median gains {m:.2} dB under equal brick budgets"
+    );
+    fig.insert(
+        "error_aware_gain_db_at_equal_budget".into(),
+        round2(m).into(),
+    );
+    Ok(fig)
+}
+
 pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
     let size: u32 = arg(args, "--size", 256)?;
     let brick: u32 = arg(args, "--brick", 32)?;
     let scenes: String = arg(args, "--scenes", "mri,ct,ml".to_string())?;
+    match arg(args, "--by", "knob".to_string())?.as_str() {
+        "knob" => {}
+        "budget" => return budget_run(size, brick, &scenes),
+        other => return Err(format!("--by {other}: knob or budget")),
+    }
     let policy = match arg(args, "--policy", "none".to_string())?.as_str() {
         "none" => brickray_render::VisibilityPolicy::None,
         "rayguided" => brickray_render::VisibilityPolicy::RayGuided,
@@ -247,13 +372,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
     let mut fig = Figures::new();
     let mut all_gains = Vec::new();
     for name in scenes.split(',') {
-        let scene = match name {
-            "mri" => mri_dvr()?,
-            "ct" => ct_scene(false)?,
-            "ct_iso" => ct_scene(true)?,
-            "ml" => ml_scene(),
-            other => return Err(format!("unknown scene {other}")),
-        };
+        let scene = scene(name)?;
         let d = scene.vol.desc().clone();
         let frame = VolumeFrame::centered(d.dims, d.spacing);
         let camera = Camera::orbit(frame.center(), 2.0, 0.7, 0.35);

@@ -8,6 +8,7 @@
 mod accel;
 mod aniso;
 mod build;
+mod cut;
 mod formats;
 mod lod;
 mod ooc;
@@ -227,6 +228,10 @@ enum Suite {
         /// occlusion.
         #[arg(long)]
         policy: Option<String>,
+        /// knob (default): sweep the tolerance and the error budget on the
+        /// GPU; budget: both orders under the same brick budgets, on the CPU.
+        #[arg(long)]
+        by: Option<String>,
     },
     /// Visibility feedback: working set, image and latency per policy along a
     /// camera path with a half turn (head CT and procedural shells).
