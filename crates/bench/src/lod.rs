@@ -261,16 +261,7 @@ fn budget_run(size: u32, brick: u32, scenes: &str) -> Result<Figures, String> {
         let camera = Camera::orbit(frame.center(), 2.0, 0.7, 0.35);
         let dir = tempfile::tempdir().map_err(|e| e.to_string())?;
         let store_path = dir.path().join("v.brs");
-        let mut reader = brickray_io::MemoryReader::new(scene.vol, "memory");
-        brickray_store::build(
-            &mut reader,
-            &store_path,
-            &brickray_store::BuildOptions {
-                brick,
-                ..Default::default()
-            },
-        )
-        .map_err(|e| e.to_string())?;
+        crate::runner::build_store(scene.vol, brick, &store_path)?;
         let store = brickray_store::open(&store_path).map_err(|e| e.to_string())?;
         let view = CutView {
             store: &store,
@@ -396,16 +387,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         );
         let dir = tempfile::tempdir().map_err(|e| e.to_string())?;
         let store_path = dir.path().join("v.brs");
-        let mut reader = brickray_io::MemoryReader::new(scene.vol, "memory");
-        let report = brickray_store::build(
-            &mut reader,
-            &store_path,
-            &brickray_store::BuildOptions {
-                brick,
-                ..Default::default()
-            },
-        )
-        .map_err(|e| e.to_string())?;
+        let report = crate::runner::build_store(scene.vol, brick, &store_path)?;
         if !report.errors {
             return Err("the store has no error section".into());
         }

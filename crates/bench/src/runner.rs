@@ -81,6 +81,25 @@ pub(crate) fn lane_samples(counts: &[u32], width: usize) -> u64 {
         .sum()
 }
 
+/// Builds `vol` into a brick store of `brick`-voxel bricks at `path` (default
+/// options otherwise).
+pub(crate) fn build_store(
+    vol: brickray_core::Volume,
+    brick: u32,
+    path: &std::path::Path,
+) -> Result<brickray_store::BuildReport, String> {
+    let mut reader = brickray_io::MemoryReader::new(vol, "memory");
+    brickray_store::build(
+        &mut reader,
+        path,
+        &brickray_store::BuildOptions {
+            brick,
+            ..Default::default()
+        },
+    )
+    .map_err(|e| e.to_string())
+}
+
 /// Draws frames of one size into an offscreen target and times them.
 pub(crate) struct Runner<'a> {
     pub(crate) gpu: &'a GpuContext,

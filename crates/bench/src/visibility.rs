@@ -294,16 +294,7 @@ fn head_scenes(brick: u32) -> Result<Vec<Scene>, String> {
     let d = vol.desc().clone();
     let dir = tempfile::tempdir().map_err(|e| e.to_string())?;
     let store_path = dir.path().join("head.brs");
-    let mut reader = brickray_io::MemoryReader::new(vol, "memory");
-    brickray_store::build(
-        &mut reader,
-        &store_path,
-        &brickray_store::BuildOptions {
-            brick,
-            ..Default::default()
-        },
-    )
-    .map_err(|e| e.to_string())?;
+    crate::runner::build_store(vol, brick, &store_path)?;
     // The store is opened once per renderer; the directory lives as long as
     // the closure.
     let dir = Arc::new(dir);
