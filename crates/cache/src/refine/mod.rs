@@ -457,16 +457,22 @@ pub fn refine(
     // children are all empty or invisible gives its brick back (nodes within
     // the tolerance, which pop last, do that), and the refused node, of higher
     // priority, may then fit.
-    let mut pool_deferred: Vec<HeapItem> = Vec::new();
+    // With each, the bricks its split adds: only those that now fit are
+    // retried.
+    let mut pool_deferred: Vec<(HeapItem, u32)> = Vec::new();
     let mut split_since_retry = false;
     loop {
         if heap.is_empty() {
-            if (deferred.is_empty() && pool_deferred.is_empty()) || !split_since_retry {
+            let room = params.max_data_leaves.saturating_sub(out.data_leaves);
+            let fits = |d: &(HeapItem, u32)| d.1 <= room;
+            if (deferred.is_empty() && !pool_deferred.iter().any(fits)) || !split_since_retry {
                 break;
             }
             split_since_retry = false;
             heap.extend(deferred.drain(..));
-            heap.extend(pool_deferred.drain(..));
+            let (retry, keep): (Vec<_>, Vec<_>) = pool_deferred.drain(..).partition(fits);
+            pool_deferred = keep;
+            heap.extend(retry.into_iter().map(|d| d.0));
         }
         let Some(item) = heap.pop() else { break };
         let HeapItem {
@@ -495,6 +501,47 @@ pub fn refine(
         }
         let children = layout.children(key);
         let n = children.len();
+        if within {
+            // Free only if at most one child needs data: stop at the second
+            // (most nodes of a dense region stop after two or three children).
+            // A node that is free by this count is classified in full below.
+            // By metadata alone (the frustum test, the costly part, is left
+            // to the split: a culled child counts as data here).
+            let (mut data, mut failed) = (0, false);
+            let mut pending: Vec<NodeKey> = Vec::new();
+            for &c in children.iter() {
+                if !layout.in_volume(c) {
+                    continue;
+                }
+                match env.node(c) {
+                    MetaState::Known(info) => {
+                        if info.kind != NodeKind::Empty
+                            && is_visible(&info, params.mode, params.tf, layout)
+                        {
+                            data += 1;
+                        }
+                    }
+                    MetaState::Pending => pending.push(c),
+                    MetaState::Failed => failed = true,
+                }
+                if data > 1 {
+                    break;
+                }
+            }
+            if data > 1 || failed || !pending.is_empty() {
+                // Known once the metadata arrives: asked for after every
+                // wanted split's (the heap pops those first).
+                if data <= 1 && !failed {
+                    for c in pending {
+                        if out.meta_requests.len() < max_meta {
+                            out.meta_requests.push((c, priority as f32));
+                        }
+                    }
+                }
+                finals.push((key, priority));
+                continue;
+            }
+        }
         // Classify the children.
         let mut classes = [Classified {
             class: NodeClass::Empty(EmptyReason::Empty),
@@ -508,17 +555,6 @@ pub fn refine(
                 Err(Unknown::Pending) => pending.push(c),
                 Err(Unknown::Failed) => failed += 1,
             }
-        }
-        if within && (failed > 0 || !pending.is_empty()) {
-            // Whether the split is free is known once the children's metadata
-            // is: asked for after every wanted split's (the heap pops those first).
-            for c in pending {
-                if out.meta_requests.len() < max_meta {
-                    out.meta_requests.push((c, priority as f32));
-                }
-            }
-            finals.push((key, priority));
-            continue;
         }
         if failed > 0 {
             out.blocked.failed += 1;
@@ -539,10 +575,6 @@ pub fn refine(
         let data: Vec<usize> = (0..n)
             .filter(|&i| classes[i].class == NodeClass::Data)
             .collect();
-        if within && data.len() > 1 {
-            finals.push((key, priority));
-            continue;
-        }
         let states: Vec<DataState> = data.iter().map(|&i| env.data(children[i])).collect();
         let failed = states.iter().filter(|s| **s == DataState::Failed).count() as u32;
         if failed > 0 {
@@ -574,7 +606,7 @@ pub fn refine(
             continue;
         }
         if out.data_leaves - 1 + data.len() as u32 > params.max_data_leaves {
-            pool_deferred.push(item);
+            pool_deferred.push((item, data.len() as u32 - 1));
             continue;
         }
         // A split node charged at its parent's split is not uploaded after all.
@@ -618,7 +650,7 @@ pub fn refine(
         out.blocked.upload_budget += 1;
         finals.push((item.key, item.priority));
     }
-    for item in pool_deferred {
+    for (item, _) in pool_deferred {
         out.blocked.pool_full += 1;
         finals.push((item.key, item.priority));
     }

@@ -743,3 +743,47 @@ fn splits_the_pool_refused_are_retried_when_bricks_come_back() {
         assert_eq!(r.blocked.pool_full, 0);
     }
 }
+
+/// Refinement time on large cuts of a dense volume (the ball at 2048^3,
+/// bricks of 8: every node holds data), printed; see them with
+/// `cargo test --release -p brickray-cache refine_time -- --nocapture`
+/// (docs/cache.md, "free split", quotes them). It asserts what every cut must
+/// satisfy, never a time.
+#[test]
+fn refine_time_on_dense_cuts() {
+    let layout = ball_layout(2048);
+    let frame = VolumeFrame::centered([2048; 3], [1.0; 3]);
+    let tf = TransferFunction::ramp(0.0, 1.0, 1.0);
+    for dist in [1.5f32, 3.0, 6.0] {
+        let cam = Camera::orbit(Vec3::ZERO, dist, 0.3, 0.2);
+        let params = RefineParams {
+            camera: &cam,
+            aspect: 1.0,
+            viewport_height_px: 1024,
+            volume_frame: &frame,
+            mode: RenderMode::Dvr,
+            tf: &tf,
+            tolerance_px: 1.0,
+            metric: brickray_core::LodMetric::Geometric,
+            max_data_leaves: 100_000,
+            max_requests: u32::MAX,
+            brick_upload_bytes: layout.brick_bytes() as u64,
+        };
+        let mut env = AllInCpu {
+            layout: layout.clone(),
+            on_gpu: HashSet::new(),
+            meta_reads: 0,
+        };
+        let t = std::time::Instant::now();
+        let r = refine(&layout, &params, &mut env, &mut UploadBudget::new(u64::MAX));
+        let ms = t.elapsed().as_secs_f64() * 1e3;
+        eprintln!(
+            "distance {dist}: {} leaves, {} data, {ms:.1} ms, {} metadata reads",
+            r.leaves.len(),
+            r.data_leaves,
+            env.meta_reads
+        );
+        assert_exact_cover(&keys(&r), layout.levels);
+        assert!(r.data_leaves <= 100_000);
+    }
+}
