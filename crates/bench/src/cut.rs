@@ -11,7 +11,7 @@ use brickray_core::{
     BrickSource, Camera, DType, NodeKey, NodeKind, RenderMode, Volume, VolumeData, VolumeFrame,
 };
 use brickray_store::Store;
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 
 /// Every brick available; metadata from the store.
 pub(crate) struct AllAvailable<'a>(&'a Store);
@@ -63,7 +63,7 @@ pub(crate) fn cut_volume(
     let mut budget = UploadBudget::new(u64::MAX / 4);
     let r = refine(&layout, &params, &mut AllAvailable(store), &mut budget);
     let mut per_level = vec![0u32; layout.levels as usize];
-    let leaves: HashMap<NodeKey, ()> = r.leaves.iter().map(|l| (l.key, ())).collect();
+    let leaves: HashSet<NodeKey> = r.leaves.iter().map(|l| l.key).collect();
     for l in &r.leaves {
         if l.class == NodeClass::Data {
             per_level[l.key.level as usize] += 1;
@@ -88,7 +88,7 @@ pub(crate) fn cut_volume(
                     let p: [u32; 3] =
                         std::array::from_fn(|i| (v[i] as f64 / (f[i] * b)).floor() as u32);
                     let k = NodeKey::new(l, p[0], p[1], p[2]);
-                    if leaves.contains_key(&k) {
+                    if leaves.contains(&k) {
                         key = Some(k);
                         break;
                     }
