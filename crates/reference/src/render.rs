@@ -48,7 +48,7 @@ pub struct ReferenceOptions<'a> {
     /// `step_factor` reference lengths long (the first sample composites
     /// nothing: the ray starts there), integrated exactly through the TF in f64
     /// ([`Preintegrator::segment`](brickray_core::tf::Preintegrator::segment)),
-    /// shaded at sample `k`. `settings.preintegrated` is ignored, like
+    /// shaded at the segment's midpoint. `settings.preintegrated` is ignored, like
     /// `settings.step_factor`. Default off.
     pub preintegrated: bool,
 }
@@ -350,7 +350,15 @@ impl Marcher<'_> {
                 continue;
             }
             let c = if shading.enabled {
-                self.shade(ray, t, [r, g, b], shading)
+                // A pre-integrated segment [t - dt, t] is shaded at its
+                // midpoint: at its back sample the shading would lag the
+                // emission by half a step.
+                let ts = if self.preint.is_some() {
+                    t - 0.5 * self.dt
+                } else {
+                    t
+                };
+                self.shade(ray, ts, [r, g, b], shading)
             } else {
                 [r, g, b]
             };

@@ -156,7 +156,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                     first = preint_before_start(t, dt, t0);
                     front = preint_front(&acc, t, dt, v);
                 }
-                if (!first && dvr_sample(&acc, cur, r, t, front, v, tf_v)) { break; }
+                if (!first && dvr_sample(&acc, cur, r, t, t - 0.5 * dt, front, v, tf_v)) { break; }
             } else if (MODE == MODE_ISO) {
                 if (v >= frame.isovalue) {
                     // The first sample inside is a capped cut, else the crossing

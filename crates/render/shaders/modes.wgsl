@@ -122,9 +122,11 @@ fn shade(c: vec3<f32>, g: vec4<f32>, dir: vec3<f32>) -> vec3<f32> {
 // DVR: composites the sample of value `v` at `t` front to back, its opacity
 // corrected to the step by the corrected table's row `tf_v` (see tf_row); with
 // PREINT the pre-integrated segment from value `front` to `v` instead (shaded:
-// its straight colour, associated / opacity, shaded at t and multiplied back).
+// its straight colour, associated / opacity, shaded at `ts` and multiplied
+// back; the kernels pass the segment's midpoint, where the reference shades
+// it, clamped out of core to the brick's entry).
 // True when early ray termination ends the ray.
-fn dvr_sample(acc: ptr<function, Accum>, c: Cursor, r: Ray, t: f32, front: f32, v: f32, tf_v: f32) -> bool {
+fn dvr_sample(acc: ptr<function, Accum>, c: Cursor, r: Ray, t: f32, ts: f32, front: f32, v: f32, tf_v: f32) -> bool {
     var a: f32;
     var prem: vec3<f32>;
     if (PREINT) {
@@ -135,7 +137,7 @@ fn dvr_sample(acc: ptr<function, Accum>, c: Cursor, r: Ray, t: f32, front: f32, 
         a = p.a;
         prem = p.rgb;
         if (SHADE) {
-            prem = shade(p.rgb / a, cursor_gradient(c, t), r.dir) * a;
+            prem = shade(p.rgb / a, cursor_gradient(c, ts), r.dir) * a;
         }
     } else {
         let s = tf_sample(v, tf_v);

@@ -423,7 +423,8 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                             first = preint_before_start(t, dtl, t0);
                             front = preint_front(&acc, t, dtl, v);
                         }
-                        if (!first && dvr_sample(&acc, cur, r, t, front, v, cur.b.tf_v)) { done = true; break; }
+                        let ts = max(t - 0.5 * dtl, st.hit.t_enter);
+                        if (!first && dvr_sample(&acc, cur, r, t, ts, front, v, cur.b.tf_v)) { done = true; break; }
                     } else {
                         if (mip_sample(&acc, t, v)) { done = true; break; }
                     }
