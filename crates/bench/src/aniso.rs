@@ -102,6 +102,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
             camera: &camera,
             frame: &frame,
             size,
+            visible: None,
         };
         let masks: String = layout
             .split_masks()

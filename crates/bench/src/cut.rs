@@ -13,8 +13,9 @@ use brickray_core::{
 use brickray_store::Store;
 use std::collections::{HashMap, HashSet};
 
-/// Every brick available; metadata from the store.
-pub(crate) struct AllAvailable<'a>(&'a Store);
+/// Every brick available; metadata from the store; the visible weights, when
+/// given.
+pub(crate) struct AllAvailable<'a>(&'a Store, Option<&'a HashMap<NodeKey, f64>>);
 
 impl RefineEnv for AllAvailable<'_> {
     fn node(&mut self, key: NodeKey) -> MetaState {
@@ -26,6 +27,9 @@ impl RefineEnv for AllAvailable<'_> {
     fn data(&mut self, _key: NodeKey) -> DataState {
         DataState::OnGpu
     }
+    fn visible_weight(&mut self, key: NodeKey) -> Option<f64> {
+        self.1.map(|w| w.get(&key).copied().unwrap_or(0.0))
+    }
 }
 
 /// What a cut is refined for: the store, the classification and the view.
@@ -36,6 +40,9 @@ pub(crate) struct CutView<'a> {
     pub(crate) camera: &'a Camera,
     pub(crate) frame: &'a VolumeFrame,
     pub(crate) size: u32,
+    /// What the image shows of each node (`crate::visible`), for refinement
+    /// ranked by it; `None`: not measured.
+    pub(crate) visible: Option<&'a HashMap<NodeKey, f64>>,
 }
 
 /// The finest-grid volume the cut's leaves sample to, and its data-leaf count.
@@ -61,7 +68,12 @@ pub(crate) fn cut_volume(
         brick_upload_bytes: layout.brick_bytes() as u64,
     };
     let mut budget = UploadBudget::new(u64::MAX / 4);
-    let r = refine(&layout, &params, &mut AllAvailable(store), &mut budget);
+    let r = refine(
+        &layout,
+        &params,
+        &mut AllAvailable(store, view.visible),
+        &mut budget,
+    );
     let mut per_level = vec![0u32; layout.levels as usize];
     let leaves: HashSet<NodeKey> = r.leaves.iter().map(|l| l.key).collect();
     for l in &r.leaves {

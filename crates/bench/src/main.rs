@@ -22,6 +22,7 @@ mod soak;
 mod stability;
 mod u8;
 mod visibility;
+mod visible;
 
 use std::process::ExitCode;
 

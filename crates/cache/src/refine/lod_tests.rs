@@ -320,3 +320,95 @@ fn a_flat_tf_coarsens_freely() {
     assert!(e.data_leaves > 8, "edge: {} data leaves", e.data_leaves);
     assert_eq!(src.reads, reads, "refinement read the source");
 }
+
+/// [`Cached`] with the renderer's measure of what the image shows of each node
+/// ([`RefineEnv::visible_weight`]): here the half `x < 1/2` of the volume, in
+/// proportion to a node's volume; the other half is hidden (weight 0).
+struct Seen {
+    inner: Cached,
+    scale: [f64; 3],
+}
+
+impl RefineEnv for Seen {
+    fn node(&mut self, key: NodeKey) -> MetaState {
+        self.inner.node(key)
+    }
+    fn data(&mut self, key: NodeKey) -> DataState {
+        self.inner.data(key)
+    }
+    fn visible_weight(&mut self, key: NodeKey) -> Option<f64> {
+        let (o, side) = key.unit_box();
+        let (lo, hi) = (o[0] / self.scale[0], (o[0] + side) / self.scale[0]);
+        let seen = (hi.min(0.5) - lo).max(0.0) / (hi - lo);
+        Some(seen * side.powi(3))
+    }
+}
+
+/// Under a brick budget, error-aware refinement with visible weights spends
+/// the bricks on the half the image shows: no node of the hidden half is split
+/// (so no brick below level 1 lies there), while the same budget without the
+/// weights splits nodes in both halves (the test can fail). Only the order
+/// changes: the cut stays an exact cover within the budget.
+#[test]
+fn visible_weights_keep_hidden_nodes_coarse() {
+    let layout = ball_layout(64);
+    let mut src = RampSource {
+        layout: layout.clone(),
+        rough: 0.3,
+        seed: 5,
+        reads: 0,
+    };
+    let meta = cache_all(&mut src);
+    let frame = VolumeFrame::centered(layout.volume.dims, [1.0; 3]);
+    let cam = Camera::orbit(frame.center(), 2.0, 0.4, 0.2);
+    // Colour and opacity change over the whole range: every node has error.
+    let tf = TransferFunction::from_points(
+        &[(0.0, [0.1, 0.2, 0.9, 0.0]), (1.0, [0.9, 0.6, 0.1, 0.8])],
+        256,
+    );
+    let scale = layout.volume_scale();
+    let hidden_splits = |r: &Refinement| {
+        r.leaves
+            .iter()
+            .filter(|l| l.key.level >= 2)
+            .filter(|l| {
+                let (o, _) = l.key.parent().unwrap().unit_box();
+                o[0] / scale[0] >= 0.5
+            })
+            .count()
+    };
+    let run = |env: &mut dyn RefineEnv| {
+        let params = RefineParams {
+            camera: &cam,
+            aspect: 1.0,
+            viewport_height_px: 256,
+            volume_frame: &frame,
+            mode: RenderMode::Dvr,
+            tf: &tf,
+            tolerance_px: 0.0,
+            metric: LodMetric::ErrorAware { budget: 0.0 },
+            max_data_leaves: 120,
+            max_requests: u32::MAX,
+            brick_upload_bytes: 1,
+        };
+        let mut b = UploadBudget::new(u64::MAX / 4);
+        b.begin_frame();
+        refine(&layout, &params, env, &mut b)
+    };
+    let plain = run(&mut Cached { meta: meta.clone() });
+    let seen = run(&mut Seen {
+        inner: Cached { meta },
+        scale,
+    });
+    for r in [&plain, &seen] {
+        let keys: Vec<NodeKey> = r.leaves.iter().map(|l| l.key).collect();
+        assert_exact_cover(&keys, layout.levels);
+        assert!(r.data_leaves <= 120, "{} data leaves", r.data_leaves);
+    }
+    assert!(seen.data_leaves > 64, "{} data leaves", seen.data_leaves);
+    assert!(
+        hidden_splits(&plain) > 0,
+        "the unweighted cut never split the hidden half"
+    );
+    assert_eq!(hidden_splits(&seen), 0, "{:?}", seen.leaves);
+}

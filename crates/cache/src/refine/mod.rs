@@ -38,6 +38,7 @@ use crate::upload::UploadBudget;
 use brickray_core::{
     Camera, EmptyReason, LodMetric, NodeInfo, NodeKey, NodeKind, OctreeLayout, RenderMode,
     TfErrorTable, TransferFunction, VolumeFrame, node_pixel_error, node_tf_error,
+    node_tf_error_expected,
 };
 use std::collections::BinaryHeap;
 
@@ -119,6 +120,18 @@ pub trait RefineEnv {
     fn request_weight(&mut self, key: NodeKey) -> f64 {
         let _ = key;
         1.0
+    }
+    /// How much of `key` the image shows, where the renderer measured it: the
+    /// transmittance-weighted length of the rays through the node, summed over
+    /// pixels, in finest voxels (an isosurface ray counts its length up to its
+    /// hit). With error-aware refinement ([`LodMetric::ErrorAware`]) a node
+    /// that has it is ranked by it times its per-sample expected error
+    /// ([`node_tf_error_expected`]), the linearised change
+    /// of the image, instead of by its projected voxel size times its pixel
+    /// error. `None` (not measured) by default.
+    fn visible_weight(&mut self, key: NodeKey) -> Option<f64> {
+        let _ = key;
+        None
     }
 }
 
@@ -332,17 +345,26 @@ impl ScreenError {
 
     /// The node's priority: its projected voxel size, times 255 x its
     /// expected error (or its bound) under the mode and transfer function when
-    /// error-aware (a node without error data counts as full-scale error).
+    /// error-aware (a node without error data counts as full-scale error); for
+    /// the expected error with a `visible` weight, that weight times 255 x
+    /// the per-sample expected error instead.
+    #[allow(clippy::too_many_arguments)]
     fn priority(
         &self,
         px: f64,
+        visible: Option<f64>,
         key: NodeKey,
         info: Option<&NodeInfo>,
         params: &RefineParams<'_>,
         layout: &OctreeLayout,
     ) -> f64 {
-        match (&self.table, info) {
-            (Some(t), Some(i)) => {
+        match (&self.table, info, visible) {
+            // The node's summed pixel change, linearised (RefineEnv::visible_weight).
+            (Some(t), Some(i), Some(w)) if !self.strict => {
+                let e = node_tf_error_expected(i, params.mode, t, layout).unwrap_or(1.0);
+                w * 255.0 * e
+            }
+            (Some(t), Some(i), _) => {
                 let e = if self.strict {
                     node_tf_error(i, params.mode, t, layout)
                 } else {
@@ -402,6 +424,7 @@ pub fn refine(
             heap.push(HeapItem {
                 priority: se.priority(
                     geo.voxel_pixels(root),
+                    env.visible_weight(root),
                     root,
                     c.info.as_ref(),
                     params,
@@ -628,6 +651,7 @@ pub fn refine(
                 NodeClass::Data => heap.push(HeapItem {
                     priority: screen.priority(
                         geo.voxel_pixels(children[i]),
+                        env.visible_weight(children[i]),
                         children[i],
                         classes[i].info.as_ref(),
                         params,
