@@ -248,6 +248,19 @@ fn scene(name: &str) -> Result<Scene, String> {
     }
 }
 
+/// Prints a scene's median gain over the budgets and records it as
+/// `<scene>_<key>_median_gain_db`; returns it.
+fn scene_median(fig: &mut Figures, scene: &str, label: &str, key: &str, gains: &[f64]) -> f64 {
+    let m = median(&mut gains.to_vec());
+    println!(
+        "  {scene}: {label} gain {m:.2} dB over {} budgets (gains {:?})",
+        gains.len(),
+        gains.iter().map(|g| round2(*g)).collect::<Vec<_>>()
+    );
+    fig.insert(format!("{scene}_{key}_median_gain_db"), round2(m).into());
+    m
+}
+
 /// `--by budget`: the geometric and the error-aware order under the same
 /// brick budgets (module docs).
 fn budget_run(size: u32, brick: u32, scenes: &str) -> Result<Figures, String> {
@@ -343,31 +356,17 @@ fn budget_run(size: u32, brick: u32, scenes: &str) -> Result<Figures, String> {
                 "visible_bricks": vb, "visible_psnr_db": round2(vp)}),
             );
         }
-        let vm = median(&mut vgains.clone());
-        println!(
-            "  {}: visibility-weighted median gain {vm:.2} dB over {} budgets (gains {:?})",
+        vall.push(scene_median(
+            &mut fig,
             scene.name,
-            vgains.len(),
-            vgains.iter().map(|g| round2(*g)).collect::<Vec<_>>()
-        );
-        fig.insert(
-            format!("{}_budget_visible_median_gain_db", scene.name),
-            round2(vm).into(),
-        );
-        vall.push(vm);
-        let m = median(&mut gains.clone());
-        println!(
-            "  {}: median gain {m:.2} dB over {} budgets (gains {:?})",
-            scene.name,
-            gains.len(),
-            gains.iter().map(|g| round2(*g)).collect::<Vec<_>>()
-        );
-        fig.insert(
-            format!("{}_budget_median_gain_db", scene.name),
-            round2(m).into(),
-        );
+            "visibility-weighted median",
+            "budget_visible",
+            &vgains,
+        ));
+        all.push(scene_median(
+            &mut fig, scene.name, "median", "budget", &gains,
+        ));
         fig.insert(format!("{}_budget_points", scene.name), rows.into());
-        all.push(m);
     }
     let m = median(&mut all);
     println!(
