@@ -101,6 +101,19 @@ fn refine_with(
     tf: &TransferFunction,
     metric: LodMetric,
 ) -> Refinement {
+    refine_limited(layout, env, cam, tf, metric, 1.0, u32::MAX)
+}
+
+/// [`refine_with`] at a tolerance and a cap of data leaves, over any source.
+fn refine_limited(
+    layout: &OctreeLayout,
+    env: &mut dyn RefineEnv,
+    cam: &Camera,
+    tf: &TransferFunction,
+    metric: LodMetric,
+    tolerance_px: f32,
+    max_data_leaves: u32,
+) -> Refinement {
     let frame = VolumeFrame::centered(layout.volume.dims, [1.0; 3]);
     let params = RefineParams {
         camera: cam,
@@ -109,9 +122,9 @@ fn refine_with(
         volume_frame: &frame,
         mode: RenderMode::Dvr,
         tf,
-        tolerance_px: 1.0,
+        tolerance_px,
         metric,
-        max_data_leaves: u32::MAX,
+        max_data_leaves,
         max_requests: u32::MAX,
         brick_upload_bytes: 1,
     };
@@ -377,24 +390,8 @@ fn visible_weights_keep_hidden_nodes_coarse() {
             })
             .count()
     };
-    let run = |env: &mut dyn RefineEnv| {
-        let params = RefineParams {
-            camera: &cam,
-            aspect: 1.0,
-            viewport_height_px: 256,
-            volume_frame: &frame,
-            mode: RenderMode::Dvr,
-            tf: &tf,
-            tolerance_px: 0.0,
-            metric: LodMetric::ErrorAware { budget: 0.0 },
-            max_data_leaves: 120,
-            max_requests: u32::MAX,
-            brick_upload_bytes: 1,
-        };
-        let mut b = UploadBudget::new(u64::MAX / 4);
-        b.begin_frame();
-        refine(&layout, &params, env, &mut b)
-    };
+    let metric = LodMetric::ErrorAware { budget: 0.0 };
+    let run = |env: &mut dyn RefineEnv| refine_limited(&layout, env, &cam, &tf, metric, 0.0, 120);
     let plain = run(&mut Cached { meta: meta.clone() });
     let seen = run(&mut Seen {
         inner: Cached { meta },
