@@ -30,7 +30,8 @@
 //! one may stay below it where nodes have no expected error). A third order,
 //! "visible", ranks by what the image shows of each node
 //! (`RefineEnv::visible_weight`, measured on the CPU from the finest data by
-//! `crate::visible`) times its per-sample expected error; its gain over the
+//! `crate::visible`) times its per-sample expected error
+//! (`LodMetric::VisibleError` at threshold 0); its gain over the
 //! geometric order is reported beside the error-aware one.
 //!
 //! Scenes: `mri` (shared T1 MRI, shaded DVR), `ct` (shared head CT,
@@ -337,7 +338,7 @@ fn budget_run(size: u32, brick: u32, scenes: &str) -> Result<Figures, String> {
             };
             let (gb, gp) = one(&view, LodMetric::Geometric)?;
             let (eb, ep) = one(&view, LodMetric::ErrorAware { budget: 0.0 })?;
-            let (vb, vp) = one(&seen, LodMetric::ErrorAware { budget: 0.0 })?;
+            let (vb, vp) = one(&seen, LodMetric::VisibleError { budget: 0.0 })?;
             let gain = ep - gp;
             let vgain = vp - gp;
             println!(

@@ -69,6 +69,36 @@ pub enum LodMetric {
         /// The error budget (finite, `>= 0`).
         budget: f32,
     },
+    /// Like [`LodMetric::ErrorAware`], but a node is ranked by what the image
+    /// shows of it where the renderer measured that: its *visible weight*
+    /// `w`, the transmittance-weighted length in finest voxels of every
+    /// pixel's ray through it (an isosurface ray's up to its hit), summed over
+    /// pixels, times 255 x its per-sample expected error
+    /// ([`node_tf_error_expected`]): the node's summed change of the image,
+    /// linearised, in 8-bit levels x pixels. It is divided by `brick^2` so that
+    /// for a fully visible node whose voxels project to 1 px it equals
+    /// [`LodMetric::ErrorAware`]'s priority, and the same `budget` means the
+    /// same there; a nearer node ranks higher by the extra pixels it covers, a
+    /// half-hidden one lower by its transmittance, a hidden one (weight 0) is
+    /// never split. Nodes without a measured weight (the first frames of a
+    /// view, in-core rendering, refinement on the CPU without weights) are
+    /// ranked as by [`LodMetric::ErrorAware`].
+    VisibleError {
+        /// The error budget (finite, `>= 0`).
+        budget: f32,
+    },
+}
+
+impl LodMetric {
+    /// The error budget of an error-aware metric (`None` for the geometric one).
+    pub fn budget(self) -> Option<f32> {
+        match self {
+            LodMetric::Geometric => None,
+            LodMetric::ErrorAware { budget }
+            | LodMetric::ErrorBound { budget }
+            | LodMetric::VisibleError { budget } => Some(budget),
+        }
+    }
 }
 
 /// Bins of a node's value range in [`NodeError`].

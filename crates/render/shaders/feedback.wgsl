@@ -10,12 +10,39 @@
 // still counted: coarser data may have a lower maximum than finer data, so
 // only the traversal, not the skip, says the brick is unneeded.
 
-// One counter per pool slot (`OutOfCore`'s usage buffer, backend/ooc.rs).
+//
+// The second word of each slot sums what the image shows of the brick, its
+// visible weight (docs/visibility.md): each ray adds its transmittance-weighted
+// length through the leaf (the trapezoid of the transmittance at the ray's
+// entry and exit of the leaf, times the length it marched there; an
+// isosurface ray's up to its hit), in voxels of the leaf's level (at most
+// brick x sqrt(3) per ray, so the sum stays within 32 bits up to
+// 2^32 / (4 x 55.5) = 19 M rays per brick of 32) in fixed point of
+// 1/WEIGHT_SCALE. The host multiplies by the level's step multiple to get
+// finest voxels.
+
+// Two words per pool slot (`OutOfCore`'s usage buffer, backend/ooc.rs): the
+// rays that reached it, and its visible weight.
 @group(2) @binding(6) var<storage, read_write> usage: array<atomic<u32>>;
+
+// Fixed-point scale of the visible weight (feedback.rs reads it back with the
+// same constant).
+const WEIGHT_SCALE: f32 = 4.0;
 
 // Records that this ray reached the brick in `slot`.
 fn feedback_reached(slot: u32) {
-    atomicAdd(&usage[slot], 1u);
+    atomicAdd(&usage[2u * slot], 1u);
+}
+
+// Adds what this ray showed of the brick in `slot`: transmittance `trans_in`
+// at `t_in`, `trans_out` at `t_out`, over ray parameter `t_out - t_in`;
+// `t_voxel`: the ray parameter of one voxel of the leaf's level.
+fn feedback_seen(slot: u32, t_in: f32, t_out: f32, trans_in: f32, trans_out: f32, t_voxel: f32) {
+    let w = 0.5 * (trans_in + trans_out) * max(t_out - t_in, 0.0) / max(t_voxel, 1e-30);
+    let q = u32(min(w * WEIGHT_SCALE + 0.5, 1e9));
+    if (q > 0u) {
+        atomicAdd(&usage[2u * slot + 1u], q);
+    }
 }
 
 // Occlusion-query feedback: the clip depth of the last sample each ray visited

@@ -198,6 +198,14 @@ fn cursor_gradient(c: Cursor, t: f32) -> vec4<f32> {
     return vec4<f32>(frame.normal_mat * (g * ooc.dims), length(g));
 }
 
+// The ray parameter of one voxel of `level` along its finest axes (the
+// visible weight's unit, feedback.wgsl): the finest voxel times the level's
+// step multiple (Brick::f).
+fn level_voxel_t(level: u32) -> f32 {
+    let hd = oct_halvings(ooc.splits.xy, ooc.finest_level) - oct_halvings(ooc.splits.xy, level);
+    return frame.dt / max(frame.step_factor, 1e-6) * oct_exp2_pos(min(hd.x, min(hd.y, hd.z)));
+}
+
 // The sub-cell of the brick holding octree point o (integer coordinates).
 fn sub_cell_of(b: Brick, o: vec3<f32>) -> vec3<u32> {
     let n = f32(ooc.sub_cells);
@@ -285,10 +293,17 @@ fn ooc_iso_march(acc: ptr<function, Accum>, cur: ptr<function, Cursor>, t0: f32,
         k = max(k, first_k_after(st.hit.t_enter, t0, dtl));
         let t_end = min(st.hit.t_exit, t_to);
         var k_cell = 0u;
+        // The visible weight (feedback.wgsl): the length marched in the brick
+        // (a probe adds none).
+        let t_in = max(st.hit.t_enter, t_from);
+        let t_voxel = frame.dt / max(frame.step_factor, 1e-6) * f;
         loop {
             let t = t0 + f32(k) * dtl;
             if (t >= t_end) { break; }
-            if (budget == 0u) { return t_to; }
+            if (budget == 0u) {
+                if (!probe) { feedback_seen((*cur).b.slot, t_in, t, 1.0, 1.0, t_voxel); }
+                return t_to;
+            }
             budget = budget - 1u;
             if ((ess || probe) && k >= k_cell && (*cur).b.fb_w == 0.0) {
                 let j = sub_cell_of((*cur).b, oo + od * t);
@@ -310,6 +325,7 @@ fn ooc_iso_march(acc: ptr<function, Accum>, cur: ptr<function, Cursor>, t0: f32,
             let v = cursor_value(*cur, t);
             (*acc).samples = (*acc).samples + 1u;
             if (v >= frame.isovalue) {
+                feedback_seen((*cur).b.slot, t_in, t, 1.0, 1.0, t_voxel);
                 if (!below && t > t0) { return t; }
                 var a = t;
                 if (t > t0 && t_last < t) {
@@ -322,6 +338,7 @@ fn ooc_iso_march(acc: ptr<function, Accum>, cur: ptr<function, Cursor>, t0: f32,
             t_last = t;
             k = k + 1u;
         }
+        if (!probe) { feedback_seen((*cur).b.slot, t_in, t_end, 1.0, 1.0, t_voxel); }
     }
     return t_to;
 }
@@ -378,6 +395,10 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                         found = true;
                         break;
                     }
+                    // A MIP brick skipped whole is still crossed in full.
+                    if (st.hit.tag == OCT_TAG_DATA) {
+                        feedback_seen(st.hit.data, max(st.hit.t_enter, t0), min(st.hit.t_exit, t1), 1.0, 1.0, level_voxel_t(st.hit.leaf.level));
+                    }
                 }
                 if (!found) { break; }
                 cursor_enter(&cur, brick_of(st.hit.leaf, st.hit.data));
@@ -389,6 +410,10 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 k = max(k, first_k_after(st.hit.t_enter, t0, dtl));
                 let t_end = min(st.hit.t_exit, t1);
                 var k_cell = 0u;
+                // The visible weight's start (feedback.wgsl); MIP and iso rays
+                // are transparent.
+                let t_in = max(st.hit.t_enter, t0);
+                let trans_in = select(1.0, 1.0 - acc.color.a, MODE == MODE_DVR);
                 // Pre-integration: as in incore.wgsl.
                 var forced = false;
                 loop {
@@ -431,6 +456,10 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                     t_last = t;
                     k = k + 1u;
                 }
+                // Where the ray left the brick, or stopped in it.
+                let t_out = clamp(t0 + f32(k) * dtl, t_in, t_end);
+                let trans_out = select(1.0, 1.0 - acc.color.a, MODE == MODE_DVR);
+                feedback_seen(cur.b.slot, t_in, t_out, trans_in, trans_out, frame.dt / max(frame.step_factor, 1e-6) * cur.b.f);
                 if (done) { break; }
             }
             t_stop = t0 + f32(k) * dtl;

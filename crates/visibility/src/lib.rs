@@ -18,6 +18,10 @@
 //!   isolate a subset of projected leaf rectangles inside one tile; the subsets
 //!   rotate so every on-screen leaf is queried within
 //!   [`TileSchedule::period`] frames.
+//! * [`VisibleWeights`]: what the image shows of each node (the ray caster's
+//!   transmittance-weighted ray length through it), summed to the root and
+//!   spread to the nodes a split would create, for refinement ranked by
+//!   the image change a node makes (`LodMetric::VisibleError`).
 //! * [`VisibilityPolicy`]: the switch between no feedback, occlusion queries,
 //!   ray-guided usage feedback, or both.
 //!
@@ -26,7 +30,9 @@
 mod policy;
 mod state;
 mod tiles;
+mod weights;
 
 pub use policy::VisibilityPolicy;
 pub use state::{VisibilityConfig, VisibilityCounts, VisibilityState};
 pub use tiles::{PxRect, TileSchedule, TileSchedulerConfig, schedule_tiles};
+pub use weights::VisibleWeights;

@@ -425,10 +425,8 @@ pub(crate) fn validate_tolerance(value: f32) -> Result<(), ConfigError> {
 }
 
 pub(crate) fn validate_metric(metric: LodMetric) -> Result<(), ConfigError> {
-    match metric {
-        LodMetric::ErrorAware { budget } | LodMetric::ErrorBound { budget }
-            if !(budget.is_finite() && budget >= 0.0) =>
-        {
+    match metric.budget() {
+        Some(budget) if !(budget.is_finite() && budget >= 0.0) => {
             Err(ConfigError::ErrorBudget { value: budget })
         }
         _ => Ok(()),

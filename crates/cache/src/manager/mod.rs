@@ -148,6 +148,10 @@ impl RefineEnv for Env<'_, '_> {
     fn request_weight(&mut self, key: NodeKey) -> f64 {
         self.filter.as_mut().map_or(1.0, |f| f.request_weight(key))
     }
+
+    fn visible_weight(&mut self, key: NodeKey) -> Option<f64> {
+        self.filter.as_mut().and_then(|f| f.visible_weight(key))
+    }
 }
 
 impl BrickManager {

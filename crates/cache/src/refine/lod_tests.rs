@@ -353,7 +353,9 @@ impl RefineEnv for Seen {
         let (o, side) = key.unit_box();
         let (lo, hi) = (o[0] / self.scale[0], (o[0] + side) / self.scale[0]);
         let seen = (hi.min(0.5) - lo).max(0.0) / (hi - lo);
-        Some(seen * side.powi(3))
+        // About what a 256 px view of a 64-voxel volume measures: pixels x
+        // ray length (finest voxels) in proportion to the node's volume.
+        Some(seen * side.powi(3) * 256.0 * 256.0 * 64.0)
     }
 }
 
@@ -390,13 +392,29 @@ fn visible_weights_keep_hidden_nodes_coarse() {
             })
             .count()
     };
-    let metric = LodMetric::ErrorAware { budget: 0.0 };
-    let run = |env: &mut dyn RefineEnv| refine_limited(&layout, env, &cam, &tf, metric, 0.0, 120);
-    let plain = run(&mut Cached { meta: meta.clone() });
-    let seen = run(&mut Seen {
-        inner: Cached { meta },
+    let metric = LodMetric::VisibleError { budget: 0.0 };
+    let run =
+        |env: &mut dyn RefineEnv, metric| refine_limited(&layout, env, &cam, &tf, metric, 0.0, 120);
+    let plain = run(&mut Cached { meta: meta.clone() }, metric);
+    let mut seen_env = Seen {
+        inner: Cached { meta: meta.clone() },
         scale,
-    });
+    };
+    let seen = run(&mut seen_env, metric);
+    // The plain error-aware rule ignores the weights; without weights the
+    // visible one falls back to it.
+    let aware = run(&mut seen_env, LodMetric::ErrorAware { budget: 0.0 });
+    let keys = |r: &Refinement| r.leaves.iter().map(|l| l.key).collect::<Vec<_>>();
+    assert_eq!(keys(&aware), keys(&plain));
+    // With an error budget instead of a brick budget, no hidden node splits
+    // either, and the seen half still refines.
+    let mut budgeted =
+        |metric| refine_limited(&layout, &mut seen_env, &cam, &tf, metric, 0.0, u32::MAX);
+    let unweighted = budgeted(LodMetric::ErrorAware { budget: 64.0 });
+    assert!(hidden_splits(&unweighted) > 0);
+    let budgeted = budgeted(LodMetric::VisibleError { budget: 64.0 });
+    assert_eq!(hidden_splits(&budgeted), 0, "{:?}", budgeted.leaves);
+    assert!(budgeted.leaves.iter().any(|l| l.key.level >= 2));
     for r in [&plain, &seen] {
         let keys: Vec<NodeKey> = r.leaves.iter().map(|l| l.key).collect();
         assert_exact_cover(&keys, layout.levels);

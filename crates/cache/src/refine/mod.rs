@@ -124,11 +124,10 @@ pub trait RefineEnv {
     /// How much of `key` the image shows, where the renderer measured it: the
     /// transmittance-weighted length of the rays through the node, summed over
     /// pixels, in finest voxels (an isosurface ray counts its length up to its
-    /// hit). With error-aware refinement ([`LodMetric::ErrorAware`]) a node
-    /// that has it is ranked by it times its per-sample expected error
-    /// ([`node_tf_error_expected`]), the linearised change
-    /// of the image, instead of by its projected voxel size times its pixel
-    /// error. `None` (not measured) by default.
+    /// hit). Under [`LodMetric::VisibleError`] a node that has it is ranked by
+    /// it times its per-sample expected error ([`node_tf_error_expected`]),
+    /// the linearised change of the image, instead of by its projected voxel
+    /// size times its pixel error. `None` (not measured) by default.
     fn visible_weight(&mut self, key: NodeKey) -> Option<f64> {
         let _ = key;
         None
@@ -145,6 +144,12 @@ pub trait SplitFilter {
     fn request_weight(&mut self, key: NodeKey) -> f64 {
         let _ = key;
         1.0
+    }
+    /// What the image shows of `key` ([`RefineEnv::visible_weight`]); `None`
+    /// (not measured) by default.
+    fn visible_weight(&mut self, key: NodeKey) -> Option<f64> {
+        let _ = key;
+        None
     }
 }
 
@@ -321,23 +326,31 @@ struct ScreenError {
     table: Option<TfErrorTable>,
     /// The strict bound ([`LodMetric::ErrorBound`]) instead of the expected error.
     strict: bool,
+    /// Ranks by measured visible weights ([`LodMetric::VisibleError`]), divided
+    /// by this (`brick^2`); `None`: weights are not used.
+    weight_norm: Option<f64>,
     threshold: f64,
 }
 
 impl ScreenError {
-    fn new(params: &RefineParams<'_>, root: Option<&NodeInfo>) -> ScreenError {
+    fn new(
+        params: &RefineParams<'_>,
+        root: Option<&NodeInfo>,
+        layout: &OctreeLayout,
+    ) -> ScreenError {
         let has_errors = root.is_some_and(|i| i.error.is_some());
-        match params.metric {
-            LodMetric::ErrorAware { budget } | LodMetric::ErrorBound { budget } if has_errors => {
-                ScreenError {
-                    table: Some(TfErrorTable::new(params.tf)),
-                    strict: matches!(params.metric, LodMetric::ErrorBound { .. }),
-                    threshold: budget.max(0.0) as f64,
-                }
-            }
+        match params.metric.budget() {
+            Some(budget) if has_errors => ScreenError {
+                table: Some(TfErrorTable::new(params.tf)),
+                strict: matches!(params.metric, LodMetric::ErrorBound { .. }),
+                weight_norm: matches!(params.metric, LodMetric::VisibleError { .. })
+                    .then(|| (layout.brick as f64).powi(2).max(1.0)),
+                threshold: budget.max(0.0) as f64,
+            },
             _ => ScreenError {
                 table: None,
                 strict: false,
+                weight_norm: None,
                 threshold: params.tolerance_px.max(0.0) as f64,
             },
         }
@@ -345,9 +358,10 @@ impl ScreenError {
 
     /// The node's priority: its projected voxel size, times 255 x its
     /// expected error (or its bound) under the mode and transfer function when
-    /// error-aware (a node without error data counts as full-scale error); for
-    /// the expected error with a `visible` weight, that weight times 255 x
-    /// the per-sample expected error instead.
+    /// error-aware (a node without error data counts as full-scale error);
+    /// under [`LodMetric::VisibleError`], for a node with a `visible` weight,
+    /// that weight times 255 x the per-sample expected error over `brick^2`
+    /// instead.
     #[allow(clippy::too_many_arguments)]
     fn priority(
         &self,
@@ -358,11 +372,12 @@ impl ScreenError {
         params: &RefineParams<'_>,
         layout: &OctreeLayout,
     ) -> f64 {
-        match (&self.table, info, visible) {
-            // The node's summed pixel change, linearised (RefineEnv::visible_weight).
-            (Some(t), Some(i), Some(w)) if !self.strict => {
+        match (&self.table, info, visible.zip(self.weight_norm)) {
+            // The node's summed pixel change, linearised (RefineEnv::visible_weight),
+            // per brick^2 (LodMetric::VisibleError).
+            (Some(t), Some(i), Some((w, norm))) => {
                 let e = node_tf_error_expected(i, params.mode, t, layout).unwrap_or(1.0);
-                w * 255.0 * e
+                w.max(0.0) * 255.0 * e / norm
             }
             (Some(t), Some(i), _) => {
                 let e = if self.strict {
@@ -420,7 +435,7 @@ pub fn refine(
             return out;
         }
         Ok(c) => {
-            let se = ScreenError::new(params, c.info.as_ref());
+            let se = ScreenError::new(params, c.info.as_ref(), layout);
             heap.push(HeapItem {
                 priority: se.priority(
                     geo.voxel_pixels(root),

@@ -1,6 +1,7 @@
 //! Ray-guided usage feedback (docs/visibility.md): the out-of-core kernel counts,
-//! per pool slot, the rays that reached the slot's brick before terminating
-//! (`shaders/feedback.wgsl`). This owns the counters and a ring of read-back
+//! per pool slot, the rays that reached the slot's brick before terminating,
+//! and sums their transmittance-weighted length through it, the brick's
+//! visible weight (`shaders/feedback.wgsl`). This owns the counters and a ring of read-back
 //! buffers, and never blocks: before the ray-cast pass the counters are
 //! cleared; after it they are copied, with a frame stamp, into a free ring
 //! entry; at the next `poll` (the host has submitted the frame by then) the
@@ -20,6 +21,13 @@ use std::sync::atomic::{AtomicU8, Ordering};
 /// Read-back buffers in flight at most.
 pub(crate) const RING: usize = 4;
 
+/// Words per pool slot: the ray count and the visible weight.
+const WORDS_PER_SLOT: u64 = 2;
+
+/// The fixed-point scale of the visible weight (`WEIGHT_SCALE` in
+/// `shaders/feedback.wgsl`).
+const WEIGHT_SCALE: f64 = 4.0;
+
 struct Entry {
     buffer: wgpu::Buffer,
     state: Arc<AtomicU8>,
@@ -30,12 +38,16 @@ struct Entry {
 }
 
 /// One frame's counts, as read back.
-#[derive(Debug, Clone, Default, PartialEq, Eq)]
+#[derive(Debug, Clone, Default, PartialEq)]
 pub struct UsageFrame {
     /// The frame (the out-of-core backend's frame counter) they were rendered in.
     pub frame: u64,
     /// Rays that reached each data leaf of that frame's cut.
     pub counts: Vec<(NodeKey, u32)>,
+    /// The visible weight of each of those leaves, in the order of `counts`:
+    /// the transmittance-weighted length of the rays through it, in finest
+    /// voxels, summed over pixels (what `LodMetric::VisibleError` ranks by).
+    pub weights: Vec<f64>,
 }
 
 /// Counters of the feedback path.
@@ -53,10 +65,13 @@ pub struct FeedbackStats {
 }
 
 pub(crate) struct UsageFeedback {
-    /// One `u32` counter per pool slot (group 2, binding 6).
+    /// Two `u32` words per pool slot (group 2, binding 6): rays, weight.
     pub(crate) usage: wgpu::Buffer,
     stamp: wgpu::Buffer,
     slots: u32,
+    /// Per level, the finest voxels of one of the level's voxels along the
+    /// ray (the kernel's step multiple: the weights' unit).
+    level_voxels: Vec<f64>,
     ring: Vec<Entry>,
     pub(crate) stats: FeedbackStats,
     /// The latest counts read back.
@@ -64,9 +79,21 @@ pub(crate) struct UsageFeedback {
 }
 
 impl UsageFeedback {
-    pub(crate) fn new(device: &wgpu::Device, slots: u32) -> Result<UsageFeedback, RenderError> {
+    pub(crate) fn new(
+        device: &wgpu::Device,
+        slots: u32,
+        layout: &brickray_core::OctreeLayout,
+    ) -> Result<UsageFeedback, RenderError> {
         let slots = slots.max(1);
-        let bytes = slots as u64 * 4;
+        let bytes = slots as u64 * 4 * WORDS_PER_SLOT;
+        let level_voxels = (0..layout.levels)
+            .map(|l| {
+                layout
+                    .voxel_factor(l)
+                    .into_iter()
+                    .fold(f64::INFINITY, f64::min)
+            })
+            .collect();
         let usage = gpu::buffer(
             device,
             "brickray-render usage counters",
@@ -99,6 +126,7 @@ impl UsageFeedback {
             usage,
             stamp,
             slots,
+            level_voxels,
             ring,
             stats: FeedbackStats::default(),
             last: None,
@@ -110,22 +138,38 @@ impl UsageFeedback {
     /// oldest first. Never waits.
     pub(crate) fn poll(&mut self, frame: u64) -> Vec<UsageFrame> {
         let mut out = Vec::new();
+        let level_voxels = &self.level_voxels;
         for e in &mut self.ring {
             let leaves = &e.leaves;
             let polled = poll_entry(&e.buffer, &e.state, e.frame, frame, |payload| {
-                let counts: &[u32] = bytemuck::cast_slice(payload);
-                leaves
+                let words: &[u32] = bytemuck::cast_slice(payload);
+                let word = |slot: u32, i: u64| {
+                    words
+                        .get((slot as u64 * WORDS_PER_SLOT + i) as usize)
+                        .copied()
+                        .unwrap_or(0)
+                };
+                let counts = leaves
                     .iter()
-                    .map(|&(slot, key)| (key, counts.get(slot as usize).copied().unwrap_or(0)))
-                    .collect::<Vec<_>>()
+                    .map(|&(slot, key)| (key, word(slot, 0)))
+                    .collect();
+                let weights = leaves
+                    .iter()
+                    .map(|&(slot, key)| {
+                        let unit = level_voxels.get(key.level as usize).copied().unwrap_or(1.0);
+                        word(slot, 1) as f64 / WEIGHT_SCALE * unit
+                    })
+                    .collect();
+                (counts, weights)
             });
             match polled {
-                Polled::Read(counts) => {
+                Polled::Read((counts, weights)) => {
                     self.stats.frames_applied += 1;
                     self.stats.last_latency_frames = frame - e.frame;
                     out.push(UsageFrame {
                         frame: e.frame,
                         counts,
+                        weights,
                     });
                 }
                 Polled::Discarded => self.stats.frames_discarded += 1,
@@ -172,7 +216,7 @@ impl UsageFeedback {
             0,
             &e.buffer,
             STAMP_BYTES,
-            self.slots as u64 * 4,
+            self.slots as u64 * 4 * WORDS_PER_SLOT,
         );
         e.frame = frame;
         e.leaves.clear();

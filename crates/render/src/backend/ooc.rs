@@ -17,8 +17,10 @@ use brickray_cache::{
     BrickManager, CacheConfig, FadeSlot, FrameStats as CacheStats, GpuFormat, RetryPolicy,
     StreamError, Upload,
 };
-use brickray_core::{BrickSource, NodeKey, OctreeLayout, TransferFunction, VolumeFrame};
-use brickray_visibility::{VisibilityConfig, VisibilityCounts, VisibilityPolicy, VisibilityState};
+use brickray_core::{BrickSource, LodMetric, NodeKey, OctreeLayout, TransferFunction, VolumeFrame};
+use brickray_visibility::{
+    VisibilityConfig, VisibilityCounts, VisibilityPolicy, VisibilityState, VisibleWeights,
+};
 use std::sync::Arc;
 use std::time::Instant;
 
@@ -177,7 +179,7 @@ impl Pool {
             "brickray-render brick sub-cell table",
             slot_count as u64 * (gpu.sub_cells_per_axis as u64).pow(3) * 8,
         )?;
-        let feedback = UsageFeedback::new(device, slot_count as u32)?;
+        let feedback = UsageFeedback::new(device, slot_count as u32, manager.layout())?;
         Ok(Pool {
             feedback,
             atlas_view: atlas.create_view(&Default::default()),
@@ -208,6 +210,9 @@ pub(crate) struct OutOfCore {
     frame_of_world: VolumeFrame,
     policy: VisibilityPolicy,
     visibility: VisibilityState,
+    /// What the image shows of each node (the usage feedback's weights), for
+    /// `LodMetric::VisibleError`.
+    weights: VisibleWeights,
     /// `(slot, node)` of the current cut's data leaves.
     leaves: Vec<(u32, NodeKey)>,
     /// True when the last frame's cut differed from the one before.
@@ -215,20 +220,29 @@ pub(crate) struct OutOfCore {
     occlusion: OcclusionFeedback,
 }
 
-/// Refinement's view of the visibility state.
-struct Filter<'a>(&'a mut VisibilityState);
+/// Refinement's view of the feedback: the visibility state where a policy
+/// culls, the visible weights where the metric ranks by them.
+struct Filter<'a> {
+    visibility: Option<&'a mut VisibilityState>,
+    weights: Option<&'a mut VisibleWeights>,
+}
 
 impl brickray_cache::SplitFilter for Filter<'_> {
     fn may_split(&mut self, key: NodeKey) -> bool {
-        self.0.visible(key)
+        self.visibility.as_mut().is_none_or(|v| v.visible(key))
     }
 
     /// The pixels a leaf last showed order its children's loads: `1 + ln(1 +
     /// pixels)` (1 when not observed; an invisible leaf is not split at all).
     fn request_weight(&mut self, key: NodeKey) -> f64 {
-        self.0
-            .pixels(key)
+        self.visibility
+            .as_ref()
+            .and_then(|v| v.pixels(key))
             .map_or(1.0, |p| 1.0 + (1.0 + p as f64).ln())
+    }
+
+    fn visible_weight(&mut self, key: NodeKey) -> Option<f64> {
+        self.weights.as_mut().and_then(|w| w.weight(key))
     }
 }
 
@@ -296,6 +310,7 @@ impl OutOfCore {
             stop: occlusion.stop_view(),
         }
         .bind_group(device)?;
+        let weights = VisibleWeights::new(&layout);
         let mut ooc = OutOfCore {
             manager,
             layout,
@@ -311,6 +326,7 @@ impl OutOfCore {
             frame_of_world: frame,
             policy: VisibilityPolicy::None,
             visibility: VisibilityState::new(VisibilityConfig::default()),
+            weights,
             leaves: Vec::new(),
             cut_changed: false,
             occlusion,
@@ -401,6 +417,7 @@ impl OutOfCore {
         self.pool = Pool::new(device, &self.manager, self.format)?;
         // Slots are forgotten: so are the observations made through them.
         self.visibility.clear();
+        self.weights.clear();
         self.write_params(queue);
         self.rebuild_bind_group(device)
     }
@@ -581,10 +598,19 @@ impl VolumeBackend for OutOfCore {
         let vp = desc.viewport;
         let t = Instant::now();
         // Usage counts read back since the last frame (never waits).
+        let weighted = matches!(
+            self.manager.config().lod_metric,
+            LodMetric::VisibleError { .. }
+        );
         for u in self.pool.feedback.poll(self.frame) {
             if self.policy.ray_guided() {
                 for &(key, count) in &u.counts {
                     self.visibility.observe(u.frame, key, count);
+                }
+            }
+            if weighted {
+                for (&(key, _), &w) in u.counts.iter().zip(&u.weights) {
+                    self.weights.observe(u.frame, key, w);
                 }
             }
         }
@@ -596,12 +622,11 @@ impl VolumeBackend for OutOfCore {
                 self.visibility.observe(frame, key, samples);
             }
         }
-        let mut filter = Filter(&mut self.visibility);
-        let filter: Option<&mut dyn brickray_cache::SplitFilter> = if self.policy.culls() {
-            Some(&mut filter)
-        } else {
-            None
+        let mut filter = Filter {
+            visibility: self.policy.culls().then_some(&mut self.visibility),
+            weights: weighted.then_some(&mut self.weights),
         };
+        let filter: Option<&mut dyn brickray_cache::SplitFilter> = Some(&mut filter);
         let plan = self.manager.update_filtered(
             &desc.camera,
             vp.aspect() as f32,
@@ -621,6 +646,12 @@ impl VolumeBackend for OutOfCore {
         if self.policy.culls() {
             self.visibility
                 .set_cut(self.frame, self.leaves.iter().map(|l| l.1));
+        }
+        if weighted {
+            self.weights
+                .set_cut(self.frame, self.leaves.iter().map(|l| l.1));
+        } else {
+            self.weights.clear();
         }
         if self.policy.occlusion_queries() {
             let geo = brickray_cache::refine::ViewGeometry::new(
@@ -682,7 +713,11 @@ impl VolumeBackend for OutOfCore {
         let visibility = self.visibility.counts();
         // With culling, the view has converged only once every leaf was
         // observed and the feedback no longer changes the cut.
-        let vis_settled = !self.policy.culls() || (visibility.unobserved == 0 && !self.cut_changed);
+        // So has the weighted order, once every leaf's weight was observed.
+        let (leaves, weighed) = self.weights.counts();
+        let vis_settled = (!self.policy.culls() || visibility.unobserved == 0)
+            && (!weighted || weighed == leaves)
+            && !((self.policy.culls() || weighted) && self.cut_changed);
         self.stats = OutOfCoreStats {
             cache: plan.stats,
             index_words: words.len() as u32,

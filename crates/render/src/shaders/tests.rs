@@ -424,7 +424,12 @@ fn reflection_catches_drift() {
         "var<storage, read_write> usage: array<atomic<u32>>",
         "var<storage, read> usage: array<u32>",
     );
-    let ro = ro.replace("atomicAdd(&usage[slot], 1u);", "let _u = usage[slot];");
+    let ro = ro
+        .replace("atomicAdd(&usage[2u * slot], 1u);", "let _u = usage[slot];")
+        .replace(
+            "atomicAdd(&usage[2u * slot + 1u], q);",
+            "let _w = usage[slot];",
+        );
     assert_ne!(
         wgsl_bindings(&module("read-only usage", &ro)),
         kernel_bindings(&crate::backend::ooc::layout_entries())

@@ -1,0 +1,283 @@
+//! What the image shows of each node, as the ray caster measured it: the
+//! visible weights that [`LodMetric::VisibleError`] ranks refinement by.
+//!
+//! [`LodMetric::VisibleError`]: brickray_core::LodMetric::VisibleError
+
+use brickray_core::{NodeKey, OctreeLayout};
+use std::collections::HashMap;
+
+/// One data leaf of the current cut.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Leaf {
+    /// The frame it became a leaf of the cut (earlier observations are about
+    /// another cut and are ignored).
+    entered: u64,
+    /// Its weight: observed, or estimated from the previous cut.
+    weight: Option<f64>,
+    /// The frame of the observation `weight` comes from (`None`: estimated).
+    observed: Option<u64>,
+}
+
+/// Per node, the transmittance-weighted length (finest voxels) of every
+/// pixel's ray through it, summed over pixels (an isosurface ray's up to its
+/// hit): the *visible weight* of `RefineEnv::visible_weight`.
+///
+/// The ray caster measures it per data leaf of a cut, a few frames late
+/// ([`observe`](Self::observe)); [`weight`](Self::weight) answers for any node:
+///
+/// * a leaf of the cut: its latest observation; before its first one, the
+///   estimate it got when it entered the cut (below);
+/// * an inner node of the cut: the sum over the leaves below it that have a
+///   weight (weights add up over a partition: a ray's length through a node is
+///   the sum of its lengths through the node's children);
+/// * a node below a leaf of the cut (a split refinement considers): the leaf's
+///   weight in proportion to the node's share of the leaf's volume (inside the
+///   volume), as if the leaf's rays were spread evenly over it;
+/// * any other node: `None` (not measured).
+///
+/// A leaf that enters the cut by a split is estimated from the leaf it split
+/// (as above); one that enters by a collapse, from the sum of the leaves it
+/// replaces. So a split does not leave its children without a weight, or its
+/// parent with a weight of 0, for the frames until they are observed (which
+/// would make the parent collapse again).
+#[derive(Debug, Clone)]
+pub struct VisibleWeights {
+    layout: OctreeLayout,
+    leaves: HashMap<NodeKey, Leaf>,
+    /// Sums over the leaves below each inner node of the cut (lazily rebuilt).
+    inner: HashMap<NodeKey, f64>,
+    dirty: bool,
+}
+
+impl VisibleWeights {
+    /// No weights yet, over the octree `layout`.
+    pub fn new(layout: &OctreeLayout) -> VisibleWeights {
+        VisibleWeights {
+            layout: layout.clone(),
+            leaves: HashMap::new(),
+            inner: HashMap::new(),
+            dirty: false,
+        }
+    }
+
+    /// Forgets every weight.
+    pub fn clear(&mut self) {
+        self.leaves.clear();
+        self.inner.clear();
+        self.dirty = false;
+    }
+
+    /// The data leaves of the cut planned for `frame`. Leaves already in the
+    /// previous cut keep their weights; new ones get an estimate from it.
+    pub fn set_cut(&mut self, frame: u64, data_leaves: impl IntoIterator<Item = NodeKey>) {
+        self.rebuild();
+        let mut next = HashMap::with_capacity(self.leaves.len());
+        for key in data_leaves {
+            let leaf = self.leaves.get(&key).copied().unwrap_or_else(|| Leaf {
+                entered: frame,
+                weight: self.weight(key),
+                observed: None,
+            });
+            next.insert(key, leaf);
+        }
+        self.leaves = next;
+        self.dirty = true;
+    }
+
+    /// Records that `key`, a data leaf of the cut, showed `weight` in the
+    /// frame `frame`. Returns false when ignored: `key` is not a data leaf of
+    /// the cut, became one after `frame`, or has a later observation; or
+    /// `weight` is not finite or negative.
+    pub fn observe(&mut self, frame: u64, key: NodeKey, weight: f64) -> bool {
+        let Some(l) = self.leaves.get_mut(&key) else {
+            return false;
+        };
+        if frame < l.entered || l.observed.is_some_and(|o| o > frame) {
+            return false;
+        }
+        if !(weight.is_finite() && weight >= 0.0) {
+            return false;
+        }
+        l.weight = Some(weight);
+        l.observed = Some(frame);
+        self.dirty = true;
+        true
+    }
+
+    /// The visible weight of `key` (see the type's documentation).
+    pub fn weight(&mut self, key: NodeKey) -> Option<f64> {
+        if let Some(l) = self.leaves.get(&key) {
+            return l.weight;
+        }
+        self.rebuild();
+        if let Some(w) = self.inner.get(&key) {
+            return Some(*w);
+        }
+        // Below a leaf of the cut?
+        let mut a = self.layout.parent(key);
+        while let Some(p) = a {
+            if let Some(l) = self.leaves.get(&p) {
+                let whole = self.clipped_volume(p);
+                return l.weight.map(|w| {
+                    if whole > 0.0 {
+                        w * self.clipped_volume(key) / whole
+                    } else {
+                        0.0
+                    }
+                });
+            }
+            a = self.layout.parent(p);
+        }
+        None
+    }
+
+    /// Data leaves of the cut, and those of them observed.
+    pub fn counts(&self) -> (usize, usize) {
+        let observed = self
+            .leaves
+            .values()
+            .filter(|l| l.observed.is_some())
+            .count();
+        (self.leaves.len(), observed)
+    }
+
+    /// The node's volume inside the volume, in octree unit-box coordinates.
+    fn clipped_volume(&self, key: NodeKey) -> f64 {
+        let (o, size) = self.layout.unit_box(key);
+        let scale = self.layout.volume_scale();
+        (0..3)
+            .map(|a| ((o[a] + size[a]).min(scale[a]) - o[a]).max(0.0))
+            .product()
+    }
+
+    fn rebuild(&mut self) {
+        if !self.dirty {
+            return;
+        }
+        self.inner.clear();
+        for (&key, l) in &self.leaves {
+            let Some(w) = l.weight else { continue };
+            let mut a = self.layout.parent(key);
+            while let Some(p) = a {
+                *self.inner.entry(p).or_insert(0.0) += w;
+                a = self.layout.parent(p);
+            }
+        }
+        self.dirty = false;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use brickray_core::{DType, VolumeDesc};
+    use proptest::prelude::*;
+
+    fn layout(dims: [u32; 3]) -> OctreeLayout {
+        OctreeLayout::new(
+            VolumeDesc {
+                dims,
+                dtype: DType::U8,
+                spacing: [1.0; 3],
+                value_range: [0.0, 255.0],
+            },
+            8,
+            1,
+        )
+    }
+
+    /// A cut: the root split `depth` times along the path of child `path[i]`.
+    fn cut(l: &OctreeLayout, path: &[u8]) -> Vec<NodeKey> {
+        let mut out = Vec::new();
+        let mut node = NodeKey::new(0, 0, 0, 0);
+        for &c in path {
+            for &k in l.children(node).iter() {
+                if l.child_index(k) != c && l.in_volume(k) {
+                    out.push(k);
+                }
+            }
+            node = l.child(node, c);
+        }
+        out.push(node);
+        out
+    }
+
+    #[test]
+    fn a_split_spreads_the_parent_and_a_collapse_sums_the_children() {
+        let l = layout([64, 64, 64]);
+        let root = NodeKey::new(0, 0, 0, 0);
+        let mut w = VisibleWeights::new(&l);
+        assert_eq!(w.weight(root), None);
+        w.set_cut(1, [root]);
+        assert!(w.observe(1, root, 800.0));
+        // Below the leaf: its share of the volume.
+        let child = l.child(root, 3);
+        assert_eq!(w.weight(child), Some(100.0));
+        assert_eq!(w.weight(l.child(child, 0)), Some(12.5));
+        // The split: children estimated, the root their sum.
+        let kids: Vec<NodeKey> = l.children(root).to_vec();
+        w.set_cut(2, kids.clone());
+        assert_eq!(w.weight(child), Some(100.0));
+        assert_eq!(w.weight(root), Some(800.0));
+        assert_eq!(w.counts(), (8, 0));
+        // Observations replace the estimates; an older frame's is ignored.
+        assert!(!w.observe(1, child, 5.0), "from before the split");
+        assert!(w.observe(3, child, 500.0));
+        assert!(!w.observe(2, child, 7.0), "older than the latest");
+        assert_eq!(w.weight(child), Some(500.0));
+        assert_eq!(w.weight(root), Some(1200.0));
+        assert!(!w.observe(3, NodeKey::new(3, 0, 0, 0), 1.0), "not a leaf");
+        assert!(!w.observe(3, child, f64::NAN));
+        // The collapse: the root inherits the sum.
+        w.set_cut(4, [root]);
+        assert_eq!(w.weight(root), Some(1200.0));
+        w.clear();
+        assert_eq!(w.weight(root), None);
+    }
+
+    #[test]
+    fn children_outside_the_volume_get_nothing() {
+        // 48 voxels along x in an octree box of 64: the root's upper children
+        // along x hold 16 of their 32 voxels, the lower ones all 32.
+        let l = layout([48, 64, 64]);
+        let root = NodeKey::new(0, 0, 0, 0);
+        let mut w = VisibleWeights::new(&l);
+        w.set_cut(1, [root]);
+        w.observe(1, root, 600.0);
+        let total: f64 = l.children(root).iter().map(|&k| w.weight(k).unwrap()).sum();
+        assert!((total - 600.0).abs() < 1e-9, "{total}");
+        let lo = w.weight(l.child(root, 0)).unwrap();
+        let hi = w.weight(l.child(root, 1)).unwrap();
+        assert!((lo - 2.0 * hi).abs() < 1e-9, "{lo} {hi}");
+    }
+
+    proptest! {
+        /// Inner nodes weigh the sum of their leaves, whatever the cut and the
+        /// observations; an observed leaf weighs its observation.
+        #[test]
+        fn inner_weights_add_up(
+            path in proptest::collection::vec(0u8..8, 1..4),
+            seen in proptest::collection::vec(proptest::option::of(0.0f64..1e6), 32),
+        ) {
+            let l = layout([64, 64, 64]);
+            let leaves = cut(&l, &path);
+            let mut w = VisibleWeights::new(&l);
+            w.set_cut(1, leaves.clone());
+            let mut sum = 0.0;
+            for (k, s) in leaves.iter().zip(&seen) {
+                if let Some(x) = s {
+                    prop_assert!(w.observe(1, *k, *x));
+                    sum += x;
+                    prop_assert_eq!(w.weight(*k), Some(*x));
+                }
+            }
+            let root = w.weight(NodeKey::new(0, 0, 0, 0));
+            if seen.iter().take(leaves.len()).any(Option::is_some) {
+                let r = root.unwrap();
+                prop_assert!((r - sum).abs() <= 1e-9 * sum.max(1.0), "{} {}", r, sum);
+            } else {
+                prop_assert_eq!(root, None);
+            }
+        }
+    }
+}
