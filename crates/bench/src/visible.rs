@@ -2,9 +2,10 @@
 //! finest data: for every pixel's ray, the transmittance-weighted length
 //! through each node (finest voxels), summed over pixels, at the default step
 //! (an isosurface ray counts its length up to its first sample inside). It is
-//! the measure `RefineEnv::visible_weight` asks a renderer for, taken here
-//! without a GPU (the renderer does not measure it yet), for the `lod --by
-//! budget` suite's visibility-weighted order.
+//! the measure `RefineEnv::visible_weight` asks a renderer for (the
+//! out-of-core kernel measures it per brick, `shaders/feedback.wgsl`), taken
+//! here without a GPU for the `lod --by budget` suite's visibility-weighted
+//! order.
 
 use brickray_core::tf::corrected_alpha;
 use brickray_core::{

@@ -37,7 +37,12 @@ fn feedback_reached(slot: u32) {
 // Adds what this ray showed of the brick in `slot`: transmittance `trans_in`
 // at `t_in`, `trans_out` at `t_out`, over ray parameter `t_out - t_in`;
 // `t_voxel`: the ray parameter of one voxel of the leaf's level.
+// Pipelines without WEIGHTS (every metric but LodMetric::VisibleError) compile
+// none of it.
 fn feedback_seen(slot: u32, t_in: f32, t_out: f32, trans_in: f32, trans_out: f32, t_voxel: f32) {
+    if (!WEIGHTS) {
+        return;
+    }
     let w = 0.5 * (trans_in + trans_out) * max(t_out - t_in, 0.0) / max(t_voxel, 1e-30);
     let q = u32(min(w * WEIGHT_SCALE + 0.5, 1e9));
     if (q > 0u) {

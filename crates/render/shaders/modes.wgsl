@@ -16,6 +16,9 @@ override ESS: bool = true;
 override SHADE: bool = false;
 // DVR with the pre-integrated table (RenderSettings::preintegrated).
 override PREINT: bool = false;
+// Out of core: measure the visible weights (feedback.wgsl; the in-core kernel
+// ignores it).
+override WEIGHTS: bool = false;
 
 const MODE_DVR: u32 = 0u;
 const MODE_ISO: u32 = 1u;

@@ -56,11 +56,14 @@ pub(crate) struct Variant {
     pub(crate) sparse_ess: bool,
     /// DVR with the pre-integrated table.
     pub(crate) preint: bool,
+    /// Out of core: the visible weights of the usage feedback
+    /// (`shaders/feedback.wgsl`, `LodMetric::VisibleError`).
+    pub(crate) weights: bool,
 }
 
 /// The override constants of a pipeline, by WGSL name (modes.wgsl,
 /// predict.wgsl).
-pub(crate) const OVERRIDES: [&str; 8] = [
+pub(crate) const OVERRIDES: [&str; 9] = [
     "MODE",
     "ERT",
     "ESS",
@@ -69,6 +72,7 @@ pub(crate) const OVERRIDES: [&str; 8] = [
     "GUARD",
     "SPARSE_ESS",
     "PREINT",
+    "WEIGHTS",
 ];
 
 impl Variant {
@@ -89,6 +93,7 @@ impl Variant {
             guard: false,
             sparse_ess: false,
             preint: s.preintegrated && mode == KernelMode::Dvr,
+            weights: false,
         };
         match prediction {
             Some(p) if mode == KernelMode::Iso => Variant {
@@ -101,12 +106,20 @@ impl Variant {
         }
     }
 
+    /// The variant with the visible weights measured (`on`) or not.
+    pub(crate) fn with_weights(self, on: bool) -> Variant {
+        Variant {
+            weights: on,
+            ..self
+        }
+    }
+
     /// True when the variant predicts (its frames use the history).
     pub(crate) fn predicts(&self) -> bool {
         self.predict
     }
 
-    fn constants(&self) -> [(&'static str, f64); 8] {
+    fn constants(&self) -> [(&'static str, f64); 9] {
         let b = |x: bool| if x { 1.0 } else { 0.0 };
         let v = [
             self.mode as u32 as f64,
@@ -117,6 +130,7 @@ impl Variant {
             b(self.guard),
             b(self.sparse_ess),
             b(self.preint),
+            b(self.weights),
         ];
         std::array::from_fn(|i| (OVERRIDES[i], v[i]))
     }

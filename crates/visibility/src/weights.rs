@@ -46,6 +46,9 @@ pub struct VisibleWeights {
     leaves: HashMap<NodeKey, Leaf>,
     /// Sums over the leaves below each inner node of the cut (lazily rebuilt).
     inner: HashMap<NodeKey, f64>,
+    /// Inner nodes of the cut that split in this view, with the weight they
+    /// had as a leaf when they split (see [`ranked_weight`](Self::ranked_weight)).
+    split_from: HashMap<NodeKey, f64>,
     dirty: bool,
 }
 
@@ -56,6 +59,7 @@ impl VisibleWeights {
             layout: layout.clone(),
             leaves: HashMap::new(),
             inner: HashMap::new(),
+            split_from: HashMap::new(),
             dirty: false,
         }
     }
@@ -64,13 +68,46 @@ impl VisibleWeights {
     pub fn clear(&mut self) {
         self.leaves.clear();
         self.inner.clear();
+        self.split_from.clear();
         self.dirty = false;
+    }
+
+    /// Forgets the weights nodes had when they split (the view changed: what
+    /// they showed then says nothing of what they show now).
+    pub fn forget_splits(&mut self) {
+        self.split_from.clear();
     }
 
     /// The data leaves of the cut planned for `frame`. Leaves already in the
     /// previous cut keep their weights; new ones get an estimate from it.
     pub fn set_cut(&mut self, frame: u64, data_leaves: impl IntoIterator<Item = NodeKey>) {
         self.rebuild();
+        let data_leaves: Vec<NodeKey> = data_leaves.into_iter().collect();
+        // The new cut's inner nodes: those that were leaves split now and
+        // remember their weight; the others keep what they remembered.
+        let mut inner = std::collections::HashSet::new();
+        for &key in &data_leaves {
+            let mut a = self.layout.parent(key);
+            while let Some(p) = a {
+                if !inner.insert(p) {
+                    break;
+                }
+                a = self.layout.parent(p);
+            }
+        }
+        let mut split_from: HashMap<NodeKey, f64> = HashMap::new();
+        for &key in &inner {
+            let was = match self.leaves.get(&key) {
+                // Only what was observed: a leaf split on an estimate (its
+                // parent's, spread evenly) may be one no ray reaches.
+                Some(l) => l.observed.and(l.weight),
+                None => self.split_from.get(&key).copied(),
+            };
+            if let Some(w) = was {
+                split_from.insert(key, w);
+            }
+        }
+        self.split_from = split_from;
         let mut next = HashMap::with_capacity(self.leaves.len());
         for key in data_leaves {
             let leaf = self.leaves.get(&key).copied().unwrap_or_else(|| Leaf {
@@ -129,6 +166,35 @@ impl VisibleWeights {
             a = self.layout.parent(p);
         }
         None
+    }
+
+    /// The weight refinement ranks `key` by: [`weight`](Self::weight); for
+    /// an inner node of the cut, the larger of that times `hysteresis` and the
+    /// weight it had been observed with as a leaf when it split in this view (until
+    /// [`forget_splits`](Self::forget_splits)). A node splits while its
+    /// priority exceeds the error budget; once split, it collapses only when
+    /// its weight falls below `1 / hysteresis` of that, and never for the
+    /// weight its own split took away. Without both, a view whose cut changes
+    /// what the rays see never settles: a coarse brick in front makes the
+    /// bricks behind it more or less visible than a fine one, and a coarse
+    /// brick blurs a thin opaque layer so rays pass further into it than into
+    /// the fine one (its own weight drops when it splits). Measured on
+    /// semi-transparent shells: the cut cycled between 159 and 174 bricks with
+    /// a period of about 6 frames.
+    pub fn ranked_weight(&mut self, key: NodeKey, hysteresis: f64) -> Option<f64> {
+        let inner = !self.leaves.contains_key(&key) && {
+            self.rebuild();
+            self.inner.contains_key(&key) || self.split_from.contains_key(&key)
+        };
+        let w = self.weight(key);
+        if !inner {
+            return w;
+        }
+        let held = self.split_from.get(&key).copied();
+        match (w.map(|w| w * hysteresis.max(1.0)), held) {
+            (Some(a), Some(b)) => Some(a.max(b)),
+            (a, b) => a.or(b),
+        }
     }
 
     /// Data leaves of the cut, and those of them observed.
@@ -233,6 +299,53 @@ mod tests {
         assert_eq!(w.weight(root), Some(1200.0));
         w.clear();
         assert_eq!(w.weight(root), None);
+    }
+
+    #[test]
+    fn only_inner_nodes_get_the_hysteresis() {
+        let l = layout([64, 64, 64]);
+        let root = NodeKey::new(0, 0, 0, 0);
+        let mut w = VisibleWeights::new(&l);
+        w.set_cut(1, l.children(root).to_vec());
+        for &k in l.children(root).iter() {
+            w.observe(1, k, 10.0);
+        }
+        let child = l.child(root, 0);
+        assert_eq!(w.ranked_weight(root, 2.0), Some(160.0));
+        assert_eq!(w.ranked_weight(child, 2.0), Some(10.0));
+        assert_eq!(w.ranked_weight(l.child(child, 1), 2.0), Some(1.25));
+        assert_eq!(w.ranked_weight(root, 0.5), Some(80.0), "never below 1");
+    }
+
+    #[test]
+    fn a_split_node_keeps_the_weight_it_split_with() {
+        let l = layout([64, 64, 64]);
+        let root = NodeKey::new(0, 0, 0, 0);
+        let mut w = VisibleWeights::new(&l);
+        w.set_cut(1, [root]);
+        w.observe(1, root, 800.0);
+        w.set_cut(2, l.children(root).to_vec());
+        for &k in l.children(root).iter() {
+            w.observe(2, k, 10.0);
+        }
+        // Its children weigh 80 in all (x 2), but it split with 800.
+        assert_eq!(w.weight(root), Some(80.0));
+        assert_eq!(w.ranked_weight(root, 2.0), Some(800.0));
+        // Kept while it stays split, across cuts.
+        let mut deeper: Vec<NodeKey> = l.children(root)[1..].to_vec();
+        deeper.extend(l.children(l.child(root, 0)).iter());
+        w.set_cut(3, deeper);
+        assert_eq!(w.ranked_weight(root, 2.0), Some(800.0));
+        w.forget_splits();
+        assert_eq!(w.ranked_weight(root, 2.0), Some(160.0));
+        // A collapse forgets it.
+        w.set_cut(4, [root]);
+        w.set_cut(5, l.children(root).to_vec());
+        assert_eq!(
+            w.ranked_weight(root, 2.0),
+            Some(160.0),
+            "split with its estimate, 80"
+        );
     }
 
     #[test]

@@ -71,6 +71,9 @@ pub(crate) fn draw(
         CYAN,
         RGBColor(230, 140, 0),
         RGBColor(120, 80, 40),
+        RGBColor(128, 128, 128),
+        RGBColor(110, 0, 160),
+        RGBColor(0, 120, 90),
     ];
     let mut knobs: Vec<&str> = Vec::new();
     for p in points {

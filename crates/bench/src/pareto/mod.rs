@@ -2,8 +2,8 @@
 //!
 //! For each scene (a volume, its transfer function and a mode) it renders one
 //! view with a set of configurations: the defaults, and one knob at a time swept
-//! around them (step, pre-integration, geometric and error-aware level-of-detail
-//! budgets, early-termination threshold, the u8 interpolation, the visibility
+//! around them (step, pre-integration, geometric, error-aware and
+//! visible-error level-of-detail budgets, early-termination threshold, the u8 interpolation, the visibility
 //! policy, in core instead of out of core). Each
 //! configuration gets its own renderer state (a renderer per cache setting,
 //! converged before timing); frames are interleaved round by round over all the
@@ -128,6 +128,19 @@ fn configs(mode: RenderMode, u8_volume: bool) -> Vec<Config> {
         };
         out.push(cfg("lod_error", format!("{budget}"), key, base));
     }
+    // The same budgets ranked by what the image shows (the renderer's
+    // measured visible weights, LodMetric::VisibleError): equal to lod_error's
+    // priority for a fully visible node at 1 px; nearer nodes weigh more, so
+    // the sweep goes further to reach the coarse cuts.
+    for budget in [
+        32.0f32, 64.0, 128.0, 255.0, 510.0, 1020.0, 2040.0, 4080.0, 8160.0, 16320.0,
+    ] {
+        let key = RendererKey {
+            metric: LodMetric::VisibleError { budget },
+            ..DEFAULT_KEY
+        };
+        out.push(cfg("lod_visible", format!("{budget}"), key, base));
+    }
     for ert in [None, Some(0.9f32), Some(0.95), Some(0.999)] {
         let s = RenderSettings {
             accel: Accel {
@@ -222,7 +235,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
     );
     let (mut all_on_front, mut all_on_ooc_front) = (true, true);
     let mut per_scene = serde_json::Map::new();
-    let (mut lod_gains, mut preint_gains) = (Vec::new(), Vec::new());
+    let (mut lod_gains, mut visible_gains, mut preint_gains) = (Vec::new(), Vec::new(), Vec::new());
     let mut aniso_bricks = None;
     for scene in &scenes {
         let dir = tempfile::tempdir().map_err(|e| e.to_string())?;
@@ -316,9 +329,13 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
                 0,
             )?;
             println!("  chart: {}", svg.display());
-            if let Some(g) = lod_gain(&cfgs, &m) {
+            if let Some(g) = lod_gain(&cfgs, &m, "lod_error") {
                 println!("  error-aware LOD over geometric at equal bricks: {g:+.2} dB");
                 lod_gains.push(g);
+            }
+            if let Some(g) = lod_gain(&cfgs, &m, "lod_visible") {
+                println!("  visible-error LOD over geometric at equal bricks: {g:+.2} dB");
+                visible_gains.push(g);
             }
             if let Some(g) = preint_gain(&cfgs, &m) {
                 println!("  pre-integration at step 2: {g:+.2} dB");
@@ -357,6 +374,10 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
     f.insert(
         "error_aware_gain_db_at_equal_bricks".into(),
         json!(med(&lod_gains)),
+    );
+    f.insert(
+        "visible_error_gain_db_at_equal_bricks".into(),
+        json!(med(&visible_gains)),
     );
     f.insert(
         "preintegration_gain_db_at_step_2".into(),
@@ -559,11 +580,11 @@ fn measure(
     Ok(out)
 }
 
-/// The median PSNR gain of the error-aware LOD sweep over the geometric one at
+/// The median PSNR gain of an error-aware LOD sweep (`knob`) over the geometric one at
 /// equal working-set size: each error-aware point's PSNR minus the geometric
 /// sweep's PSNR interpolated (in log bricks) at its brick count; points outside
 /// the geometric sweep's range are left out. `None` without both sweeps.
-fn lod_gain(cfgs: &[Config], m: &[Measured]) -> Option<f64> {
+fn lod_gain(cfgs: &[Config], m: &[Measured], knob: &str) -> Option<f64> {
     let series = |knob: &str| -> Vec<(f64, f64)> {
         cfgs.iter()
             .zip(m)
@@ -571,7 +592,7 @@ fn lod_gain(cfgs: &[Config], m: &[Measured]) -> Option<f64> {
             .map(|(_, x)| (x.bricks as f64, x.psnr_db.min(99.0)))
             .collect()
     };
-    let (geo, err) = (series("lod_geometric"), series("lod_error"));
+    let (geo, err) = (series("lod_geometric"), series(knob));
     let gains: Vec<f64> = err
         .iter()
         .filter_map(|&(b, p)| crate::lod::interpolate(&geo, b).map(|g| p - g))

@@ -47,6 +47,7 @@ pub struct UsageFrame {
     /// The visible weight of each of those leaves, in the order of `counts`:
     /// the transmittance-weighted length of the rays through it, in finest
     /// voxels, summed over pixels (what `LodMetric::VisibleError` ranks by).
+    /// The kernel measures them only under that metric: 0 otherwise.
     pub weights: Vec<f64>,
 }
 

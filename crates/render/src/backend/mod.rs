@@ -47,6 +47,11 @@ pub(crate) trait VolumeBackend: std::fmt::Debug {
     fn after_pass(&mut self, queue: &wgpu::Queue, encoder: &mut wgpu::CommandEncoder) {
         let _ = (queue, encoder);
     }
+    /// True when the kernel must measure the visible weights
+    /// (`shaders/feedback.wgsl`; out of core under `LodMetric::VisibleError`).
+    fn measures_weights(&self) -> bool {
+        false
+    }
     /// Most index leaves one ray may visit (0 in core).
     fn max_leaves(&self) -> u32;
     /// Step lengths the kernel samples with (rows of the corrected TF table):

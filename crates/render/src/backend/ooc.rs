@@ -213,12 +213,20 @@ pub(crate) struct OutOfCore {
     /// What the image shows of each node (the usage feedback's weights), for
     /// `LodMetric::VisibleError`.
     weights: VisibleWeights,
+    /// The view the weights' split memory is about.
+    weights_view: Option<(brickray_core::Camera, VolumeFrame)>,
     /// `(slot, node)` of the current cut's data leaves.
     leaves: Vec<(u32, NodeKey)>,
     /// True when the last frame's cut differed from the one before.
     cut_changed: bool,
     occlusion: OcclusionFeedback,
 }
+
+/// How much more an inner node of the cut weighs for refinement than a leaf
+/// (`VisibleWeights::ranked_weight`, which also holds the weight a node split
+/// with while the view stays): a split node collapses only once its priority
+/// falls below half the error budget.
+const WEIGHT_HYSTERESIS: f64 = 2.0;
 
 /// Refinement's view of the feedback: the visibility state where a policy
 /// culls, the visible weights where the metric ranks by them.
@@ -242,7 +250,9 @@ impl brickray_cache::SplitFilter for Filter<'_> {
     }
 
     fn visible_weight(&mut self, key: NodeKey) -> Option<f64> {
-        self.weights.as_mut().and_then(|w| w.weight(key))
+        self.weights
+            .as_mut()
+            .and_then(|w| w.ranked_weight(key, WEIGHT_HYSTERESIS))
     }
 }
 
@@ -327,6 +337,7 @@ impl OutOfCore {
             policy: VisibilityPolicy::None,
             visibility: VisibilityState::new(VisibilityConfig::default()),
             weights,
+            weights_view: None,
             leaves: Vec::new(),
             cut_changed: false,
             occlusion,
@@ -598,16 +609,22 @@ impl VolumeBackend for OutOfCore {
         let vp = desc.viewport;
         let t = Instant::now();
         // Usage counts read back since the last frame (never waits).
-        let weighted = matches!(
-            self.manager.config().lod_metric,
-            LodMetric::VisibleError { .. }
-        );
+        let weighted = self.measures_weights();
+        // What split nodes showed as leaves holds for their view only.
+        let view = (desc.camera, desc.frame);
+        if self.weights_view != Some(view) {
+            self.weights.forget_splits();
+            self.weights_view = Some(view);
+        }
         for u in self.pool.feedback.poll(self.frame) {
             if self.policy.ray_guided() {
                 for &(key, count) in &u.counts {
                     self.visibility.observe(u.frame, key, count);
                 }
             }
+            // (Read-backs of frames drawn before the switch to VisibleError
+            // hold no weights; VisibleWeights ignores them: their frames
+            // precede every leaf's entry into its cut.)
             if weighted {
                 for (&(key, _), &w) in u.counts.iter().zip(&u.weights) {
                     self.weights.observe(u.frame, key, w);
@@ -745,6 +762,13 @@ impl VolumeBackend for OutOfCore {
         if self.policy.occlusion_queries() {
             self.occlusion.record(queue, encoder, self.frame);
         }
+    }
+
+    fn measures_weights(&self) -> bool {
+        matches!(
+            self.manager.config().lod_metric,
+            LodMetric::VisibleError { .. }
+        )
     }
 
     fn max_leaves(&self) -> u32 {

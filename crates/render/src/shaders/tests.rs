@@ -489,7 +489,9 @@ fn every_shader_file_is_covered() {
 /// kernel as a pipeline compiles it. Every mode with every combination of ERT,
 /// ESS and shading; the iso mode with prediction on and every combination of
 /// its guard, its sparse skipping, ERT and ESS; DVR pre-integrated with every
-/// combination of ERT, ESS and shading.
+/// combination of ERT, ESS and shading; the visible weights (WEIGHTS) with
+/// every mode and combination of ERT, ESS and shading, with pre-integration
+/// and with prediction.
 #[test]
 fn every_override_permutation_validates() {
     let switches = [
@@ -500,6 +502,7 @@ fn every_override_permutation_validates() {
         "GUARD",
         "SPARSE_ESS",
         "PREINT",
+        "WEIGHTS",
     ];
     let mut combos = Vec::new();
     for (_, mode) in KernelMode::ALL {
@@ -515,6 +518,16 @@ fn every_override_permutation_validates() {
     for bits in 0..8u32 {
         combos.push((KernelMode::Dvr, bits | 1 << 6));
     }
+    // The visible weights with every mode and combination of ERT, ESS and
+    // shading, pre-integrated DVR and the predicting iso kernel.
+    for (_, mode) in KernelMode::ALL {
+        for bits in 0..8u32 {
+            combos.push((mode, bits | 1 << 7));
+        }
+    }
+    combos.push((KernelMode::Dvr, 0b111 | 1 << 6 | 1 << 7));
+    // Iso predicting with its guard and sparse skipping, ERT and ESS.
+    combos.push((KernelMode::Iso, 0b1011_1011));
     for (name, src) in [("incore", incore()), ("ooc", ooc())] {
         for &(mode, bits) in &combos {
             let mut s = src.replace(
@@ -531,7 +544,7 @@ fn every_override_permutation_validates() {
                 s = s.replace(&from, &format!("const {sw}: bool = {on};"));
             }
             assert!(!s.contains("override "), "{name}: an override left");
-            module(&format!("{name} {mode:?} {bits:07b}"), &s);
+            module(&format!("{name} {mode:?} {bits:08b}"), &s);
         }
     }
 }
