@@ -9,7 +9,6 @@
 // reach. A leaf skipped because the running MIP maximum exceeds its range is
 // still counted: coarser data may have a lower maximum than finer data, so
 // only the traversal, not the skip, says the brick is unneeded.
-
 //
 // The second word of each slot sums what the image shows of the brick, its
 // visible weight (docs/visibility.md): each ray adds its transmittance-weighted

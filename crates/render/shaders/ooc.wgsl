@@ -198,12 +198,17 @@ fn cursor_gradient(c: Cursor, t: f32) -> vec4<f32> {
     return vec4<f32>(frame.normal_mat * (g * ooc.dims), length(g));
 }
 
+// The ray parameter of one finest voxel (the step is step_factor of it).
+fn finest_voxel_t() -> f32 {
+    return frame.dt / max(frame.step_factor, 1e-6);
+}
+
 // The ray parameter of one voxel of `level` along its finest axes (the
 // visible weight's unit, feedback.wgsl): the finest voxel times the level's
 // step multiple (Brick::f).
 fn level_voxel_t(level: u32) -> f32 {
     let hd = oct_halvings(ooc.splits.xy, ooc.finest_level) - oct_halvings(ooc.splits.xy, level);
-    return frame.dt / max(frame.step_factor, 1e-6) * oct_exp2_pos(min(hd.x, min(hd.y, hd.z)));
+    return finest_voxel_t() * oct_exp2_pos(min(hd.x, min(hd.y, hd.z)));
 }
 
 // The sub-cell of the brick holding octree point o (integer coordinates).
@@ -258,7 +263,7 @@ fn ooc_iso_march(acc: ptr<function, Accum>, cur: ptr<function, Cursor>, t0: f32,
     var budget = frame.max_samples - min((*acc).samples, frame.max_samples);
     // A bracket never reaches further back into the previous leaf than the
     // brick's apron (beyond it the atlas holds another brick): apron_t * f.
-    let apron_t = frame.dt / max(frame.step_factor, 1e-6) * f32(ooc.apron);
+    let apron_t = finest_voxel_t() * f32(ooc.apron);
     var below = below_in;
     var grid_f = 0.0;
     var k = 0u;
@@ -296,7 +301,7 @@ fn ooc_iso_march(acc: ptr<function, Accum>, cur: ptr<function, Cursor>, t0: f32,
         // The visible weight (feedback.wgsl): the length marched in the brick
         // (a probe adds none).
         let t_in = max(st.hit.t_enter, t_from);
-        let t_voxel = frame.dt / max(frame.step_factor, 1e-6) * f;
+        let t_voxel = finest_voxel_t() * f;
         loop {
             let t = t0 + f32(k) * dtl;
             if (t >= t_end) { break; }
@@ -459,7 +464,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 // Where the ray left the brick, or stopped in it.
                 let t_out = clamp(t0 + f32(k) * dtl, t_in, t_end);
                 let trans_out = select(1.0, 1.0 - acc.color.a, MODE == MODE_DVR);
-                feedback_seen(cur.b.slot, t_in, t_out, trans_in, trans_out, frame.dt / max(frame.step_factor, 1e-6) * cur.b.f);
+                feedback_seen(cur.b.slot, t_in, t_out, trans_in, trans_out, finest_voxel_t() * cur.b.f);
                 if (done) { break; }
             }
             t_stop = t0 + f32(k) * dtl;

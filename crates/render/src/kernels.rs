@@ -77,8 +77,10 @@ pub(crate) const OVERRIDES: [&str; 9] = [
 
 impl Variant {
     /// The variant of validated settings, with `prediction`
-    /// when the host enabled it (it applies to the iso mode, in both kernels).
-    pub(crate) fn of(s: &RenderSettings, prediction: Option<Prediction>) -> Variant {
+    /// when the host enabled it (it applies to the iso mode, in both kernels)
+    /// and the visible weights when the backend measures them
+    /// (`VolumeBackend::measures_weights`).
+    pub(crate) fn of(s: &RenderSettings, prediction: Option<Prediction>, weights: bool) -> Variant {
         let mode = match s.mode {
             RenderMode::Iso { .. } => KernelMode::Iso,
             RenderMode::Mip => KernelMode::Mip,
@@ -93,7 +95,7 @@ impl Variant {
             guard: false,
             sparse_ess: false,
             preint: s.preintegrated && mode == KernelMode::Dvr,
-            weights: false,
+            weights,
         };
         match prediction {
             Some(p) if mode == KernelMode::Iso => Variant {
@@ -103,14 +105,6 @@ impl Variant {
                 ..v
             },
             _ => v,
-        }
-    }
-
-    /// The variant with the visible weights measured (`on`) or not.
-    pub(crate) fn with_weights(self, on: bool) -> Variant {
-        Variant {
-            weights: on,
-            ..self
         }
     }
 

@@ -367,7 +367,7 @@ impl VolumeRenderer {
         };
         let layouts = [self.frame.layout(), self.tf.layout(), backend.layout()];
         for s in settings {
-            let v = Variant::of(s, self.prediction).with_weights(backend.measures_weights());
+            let v = Variant::of(s, self.prediction, backend.measures_weights());
             self.kernels.pipeline(device, backend.kind(), layouts, v)?;
         }
         Ok(())
@@ -425,8 +425,7 @@ impl VolumeRenderer {
                 && matches!(desc.settings.mode, brickray_core::RenderMode::Dvr),
         )?;
         let uniforms = FrameUniforms::new(desc, backend.max_leaves());
-        let variant =
-            Variant::of(&desc.settings, self.prediction).with_weights(backend.measures_weights());
+        let variant = Variant::of(&desc.settings, self.prediction, backend.measures_weights());
         let predict = self
             .prediction
             .filter(|_| variant.predicts())

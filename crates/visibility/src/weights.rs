@@ -170,8 +170,8 @@ impl VisibleWeights {
 
     /// The weight refinement ranks `key` by: [`weight`](Self::weight); for
     /// an inner node of the cut, the larger of that times `hysteresis` and the
-    /// weight it had been observed with as a leaf when it split in this view (until
-    /// [`forget_splits`](Self::forget_splits)). A node splits while its
+    /// weight it was observed with as a leaf when it split in this view
+    /// (until [`forget_splits`](Self::forget_splits)). A node splits while its
     /// priority exceeds the error budget; once split, it collapses only when
     /// its weight falls below `1 / hysteresis` of that, and never for the
     /// weight its own split took away. Without both, a view whose cut changes
@@ -191,10 +191,10 @@ impl VisibleWeights {
             return w;
         }
         let held = self.split_from.get(&key).copied();
-        match (w.map(|w| w * hysteresis.max(1.0)), held) {
-            (Some(a), Some(b)) => Some(a.max(b)),
-            (a, b) => a.or(b),
-        }
+        [w.map(|w| w * hysteresis.max(1.0)), held]
+            .into_iter()
+            .flatten()
+            .reduce(f64::max)
     }
 
     /// Data leaves of the cut, and those of them observed.

@@ -732,9 +732,10 @@ impl VolumeBackend for OutOfCore {
         // observed and the feedback no longer changes the cut.
         // So has the weighted order, once every leaf's weight was observed.
         let (leaves, weighed) = self.weights.counts();
+        let fed_back = self.policy.culls() || weighted;
         let vis_settled = (!self.policy.culls() || visibility.unobserved == 0)
             && (!weighted || weighed == leaves)
-            && !((self.policy.culls() || weighted) && self.cut_changed);
+            && !(fed_back && self.cut_changed);
         self.stats = OutOfCoreStats {
             cache: plan.stats,
             index_words: words.len() as u32,
