@@ -40,6 +40,20 @@ fn every_violation_is_a_typed_error() {
             ..ok
         });
         assert!(matches!(e, Err(ConfigError::Tolerance { .. })), "{value}");
+        for metric in [
+            LodMetric::ErrorAware { budget: value },
+            LodMetric::ErrorBound { budget: value },
+            LodMetric::VisibleError { budget: value },
+        ] {
+            let e = check(CacheConfig {
+                lod_metric: metric,
+                ..ok
+            });
+            assert!(
+                matches!(e, Err(ConfigError::ErrorBudget { .. })),
+                "{metric:?}"
+            );
+        }
     }
     for threads in [0, MAX_LOADER_THREADS + 1, 2000] {
         assert_eq!(
