@@ -136,7 +136,7 @@ enum Suite {
         /// Interleaved rounds (default 3).
         #[arg(long)]
         rounds: Option<usize>,
-        /// Volumes, comma-separated, of ct, mri, nuclei, ml, noise (default all).
+        /// Volumes, comma-separated, of ct, ct5, mri, nuclei, ml, noise (default all).
         #[arg(long)]
         scenes: Option<String>,
         /// Voxels per side of the procedural volumes (default 128).
@@ -151,6 +151,15 @@ enum Suite {
         /// Rays per pixel side of the reference (default 2).
         #[arg(long)]
         supersample: Option<u32>,
+        /// Knobs swept, comma-separated (default all; the defaults always run):
+        /// step, preint, lod_geometric, lod_error, lod_visible,
+        /// bricks_geometric, bricks_visible, ert, u8_filtering, visibility,
+        /// in_core.
+        #[arg(long)]
+        knobs: Option<String>,
+        /// Interior voxels per brick side of the stores (default 32).
+        #[arg(long)]
+        brick: Option<u32>,
     },
     /// The isosurface prediction buffer (Braley et al.): orbits, a failure path,
     /// translation and zoom; variants interleaved frame by frame.

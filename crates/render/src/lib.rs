@@ -255,6 +255,15 @@ impl VolumeRenderer {
         Ok(m.set_tolerance_px(tolerance_px)?)
     }
 
+    /// Out of core: sets the most data bricks the cut may hold
+    /// ([`OutOfCoreConfig::brick_budget`]; `None`: the pool's capacity). The
+    /// working-set knob that degrades gradually: refinement splits in its
+    /// metric's priority order until the next split would exceed it.
+    pub fn set_brick_budget(&mut self, budget: Option<u32>) -> Result<(), RenderError> {
+        let m = self.out_of_core()?.manager_mut();
+        Ok(m.set_brick_budget(budget)?)
+    }
+
     /// Out of core: sets where refinement's visibility comes from
     /// (`docs/visibility.md`). With [`VisibilityPolicy::RayGuided`] the ray
     /// caster's per-brick usage counts, read back a few frames later without

@@ -1,6 +1,7 @@
 //! The Pareto suite's charts: time per frame against PSNR for one volume and
 //! mode, each knob's sweep in its colour, the front as a line, the default
-//! marked (SVG).
+//! marked (SVG); and the level-of-detail sweeps' PSNR against their working
+//! set (data bricks).
 
 use plotters::prelude::*;
 
@@ -10,13 +11,48 @@ pub(crate) struct ChartPoint<'a> {
     pub(crate) knob: &'a str,
     pub(crate) ms: f64,
     pub(crate) psnr_db: f64,
+    /// Data bricks of the cut (0 in core).
+    pub(crate) bricks: f64,
 }
 
-/// Draws `points` into an SVG at `path`; `front` lists the indices on the front
-/// (by increasing time) and `default` the default configuration's index.
+/// What a chart's horizontal axis shows.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Axis {
+    /// Milliseconds per frame, every knob, the front drawn.
+    Time,
+    /// Data bricks of the cut, the level-of-detail knobs only, no front.
+    Bricks,
+}
+
+impl Axis {
+    fn x(self, p: &ChartPoint<'_>) -> f64 {
+        match self {
+            Axis::Time => p.ms,
+            Axis::Bricks => p.bricks,
+        }
+    }
+
+    fn shows(self, p: &ChartPoint<'_>) -> bool {
+        let x = self.x(p);
+        x.is_finite()
+            && x > 0.0
+            && p.psnr_db.is_finite()
+            && match self {
+                Axis::Time => true,
+                Axis::Bricks => {
+                    p.knob == "default" || p.knob.starts_with("lod_") || p.knob.starts_with("bricks_")
+                }
+            }
+    }
+}
+
+/// Draws `points` into an SVG at `path` against `axis`; `front` lists the
+/// indices on the front (by increasing time; drawn on the time axis only) and
+/// `default` the default configuration's index.
 pub(crate) fn draw(
     path: &std::path::Path,
     title: &str,
+    axis: Axis,
     points: &[ChartPoint<'_>],
     front: &[usize],
     default: usize,
@@ -24,13 +60,10 @@ pub(crate) fn draw(
     let e = |x: &dyn std::fmt::Display| x.to_string();
     let root = SVGBackend::new(path, (760, 520)).into_drawing_area();
     root.fill(&WHITE).map_err(|x| e(&x))?;
-    let finite: Vec<&ChartPoint<'_>> = points
-        .iter()
-        .filter(|p| p.ms.is_finite() && p.psnr_db.is_finite())
-        .collect();
-    let (t0, t1) = finite
-        .iter()
-        .fold((f64::MAX, 0.0f64), |(a, b), p| (a.min(p.ms), b.max(p.ms)));
+    let finite: Vec<&ChartPoint<'_>> = points.iter().filter(|p| axis.shows(p)).collect();
+    let (t0, t1) = finite.iter().fold((f64::MAX, 0.0f64), |(a, b), p| {
+        (a.min(axis.x(p)), b.max(axis.x(p)))
+    });
     let (p0, p1) = finite.iter().fold((f64::MAX, 0.0f64), |(a, b), p| {
         (a.min(p.psnr_db), b.max(p.psnr_db))
     });
@@ -45,12 +78,16 @@ pub(crate) fn draw(
         .map_err(|x| e(&x))?;
     chart
         .configure_mesh()
-        .x_desc("ms per frame (median of interleaved rounds, log scale)")
+        .x_desc(match axis {
+            Axis::Time => "ms per frame (median of interleaved rounds, log scale)",
+            Axis::Bricks => "data bricks of the cut (working set, log scale)",
+        })
         .y_desc("PSNR against the f64 reference, dB")
         .draw()
         .map_err(|x| e(&x))?;
     // The front as a staircase: from each front point, level until the next.
     let mut stair = Vec::new();
+    let front = if axis == Axis::Time { front } else { &[] };
     for (k, &i) in front.iter().enumerate() {
         let p = &points[i];
         stair.push((p.ms, p.psnr_db));
@@ -58,11 +95,13 @@ pub(crate) fn draw(
             stair.push((points[j].ms, p.psnr_db));
         }
     }
-    chart
-        .draw_series(LineSeries::new(stair, BLACK.mix(0.5)))
-        .map_err(|x| e(&x))?
-        .label("Pareto front")
-        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK.mix(0.5)));
+    if !stair.is_empty() {
+        chart
+            .draw_series(LineSeries::new(stair, BLACK.mix(0.5)))
+            .map_err(|x| e(&x))?
+            .label("Pareto front")
+            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK.mix(0.5)));
+    }
     let colors = [
         BLUE,
         RED,
@@ -74,9 +113,12 @@ pub(crate) fn draw(
         RGBColor(128, 128, 128),
         RGBColor(110, 0, 160),
         RGBColor(0, 120, 90),
+        RGBColor(200, 0, 100),
+        RGBColor(0, 60, 140),
+        RGBColor(160, 160, 0),
     ];
     let mut knobs: Vec<&str> = Vec::new();
-    for p in points {
+    for p in points.iter().filter(|p| axis.shows(p)) {
         if !knobs.contains(&p.knob) {
             knobs.push(p.knob);
         }
@@ -85,8 +127,8 @@ pub(crate) fn draw(
         let c = colors[k % colors.len()];
         let series: Vec<(f64, f64)> = points
             .iter()
-            .filter(|p| p.knob == *knob && p.ms.is_finite() && p.psnr_db.is_finite())
-            .map(|p| (p.ms, p.psnr_db))
+            .filter(|p| p.knob == *knob && axis.shows(p))
+            .map(|p| (axis.x(p), p.psnr_db))
             .collect();
         chart
             .draw_series(series.iter().map(|&xy| Circle::new(xy, 4, c.filled())))
@@ -95,9 +137,9 @@ pub(crate) fn draw(
             .legend(move |(x, y)| Circle::new((x + 10, y), 4, c.filled()));
     }
     let d = &points[default];
-    if d.ms.is_finite() && d.psnr_db.is_finite() {
+    if axis.shows(d) {
         chart
-            .draw_series([Circle::new((d.ms, d.psnr_db), 9, BLACK.stroke_width(2))])
+            .draw_series([Circle::new((axis.x(d), d.psnr_db), 9, BLACK.stroke_width(2))])
             .map_err(|x| e(&x))?
             .label("default")
             .legend(|(x, y)| Circle::new((x + 10, y), 6, BLACK.stroke_width(2)));

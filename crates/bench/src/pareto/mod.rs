@@ -42,6 +42,8 @@ struct RendererKey {
     metric: LodMetric,
     u8_filtering: U8Filtering,
     policy: VisibilityPolicy,
+    /// The cut's brick budget (`OutOfCoreConfig::brick_budget`).
+    brick_budget: Option<u32>,
 }
 
 /// The defaults: out of core with the cache's default LOD tolerance.
@@ -51,7 +53,12 @@ const DEFAULT_KEY: RendererKey = RendererKey {
     metric: LodMetric::Geometric,
     u8_filtering: U8Filtering::Exact,
     policy: VisibilityPolicy::None,
+    brick_budget: None,
 };
+
+/// The brick budgets of the equal-working-set sweeps, as fractions of the
+/// finest cut's data bricks.
+const BRICK_FRACTIONS: [f64; 5] = [0.1, 0.2, 0.35, 0.5, 0.7];
 
 /// One configuration of a scene.
 #[derive(Debug, Clone)]
@@ -79,7 +86,9 @@ struct Measured {
 }
 
 /// The configurations of one mode: the defaults first, then each knob's sweep.
-fn configs(mode: RenderMode, u8_volume: bool) -> Vec<Config> {
+/// `finest_bricks` is the data bricks of the finest cut (the brick-budget
+/// sweeps give fractions of it).
+fn configs(mode: RenderMode, u8_volume: bool, finest_bricks: u32) -> Vec<Config> {
     let base = RenderSettings {
         mode,
         shading: Shading {
@@ -141,6 +150,25 @@ fn configs(mode: RenderMode, u8_volume: bool) -> Vec<Config> {
         };
         out.push(cfg("lod_visible", format!("{budget}"), key, base));
     }
+    // Equal working sets by construction: the same brick budgets, filled in
+    // the geometric order (projected voxel size, tolerance 0) and in the
+    // visible-error order (`VisibleError` at budget 0: only the brick budget
+    // stops refinement).
+    for frac in BRICK_FRACTIONS {
+        let bricks = ((finest_bricks as f64 * frac).round() as u32).max(1);
+        for (knob, metric, tolerance_px) in [
+            ("bricks_geometric", LodMetric::Geometric, 0.0),
+            ("bricks_visible", LodMetric::VisibleError { budget: 0.0 }, 0.0),
+        ] {
+            let key = RendererKey {
+                tolerance_px,
+                metric,
+                brick_budget: Some(bricks),
+                ..DEFAULT_KEY
+            };
+            out.push(cfg(knob, format!("{bricks}"), key, base));
+        }
+    }
     for ert in [None, Some(0.9f32), Some(0.95), Some(0.999)] {
         let s = RenderSettings {
             accel: Accel {
@@ -188,6 +216,10 @@ struct Options {
     out: PathBuf,
     charts: PathBuf,
     supersample: u32,
+    /// Knobs swept (all when empty; the defaults always).
+    knobs: Vec<String>,
+    /// Interior voxels per brick side of the stores.
+    brick: u32,
 }
 
 fn options(args: &[String]) -> Result<Options, String> {
@@ -212,6 +244,8 @@ fn options(args: &[String]) -> Result<Options, String> {
         out: path("--out", "target/pareto"),
         charts: path("--charts", "docs/charts/pareto"),
         supersample: crate::arg(args, "--supersample", 2)?,
+        knobs: list("--knobs"),
+        brick: crate::arg(args, "--brick", 32)?,
     })
 }
 
@@ -236,6 +270,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
     let (mut all_on_front, mut all_on_ooc_front) = (true, true);
     let mut per_scene = serde_json::Map::new();
     let (mut lod_gains, mut visible_gains, mut preint_gains) = (Vec::new(), Vec::new(), Vec::new());
+    let mut budget_gains = Vec::new();
     let mut aniso_bricks = None;
     for scene in &scenes {
         let dir = tempfile::tempdir().map_err(|e| e.to_string())?;
@@ -243,6 +278,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         let mut reader = brickray_io::MemoryReader::new(scene.volume.clone(), "memory");
         let build = brickray_store::BuildOptions {
             anisotropic: scene.anisotropic,
+            brick: o.brick,
             ..Default::default()
         };
         brickray_store::build(&mut reader, &path, &build).map_err(|e| e.to_string())?;
@@ -250,7 +286,17 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
             Arc::new(brickray_store::open(&path).map_err(|e| e.to_string())?);
         for (mode_name, mode, tf) in &scene.modes {
             let name = format!("{}_{}", scene.name, mode_name);
-            let cfgs = configs(*mode, scene.volume.desc().dtype == brickray_core::DType::U8);
+            let finest = finest_bricks(&run, scene, store.clone(), tf, *mode)?;
+            let cfgs: Vec<Config> = configs(
+                *mode,
+                scene.volume.desc().dtype == brickray_core::DType::U8,
+                finest,
+            )
+            .into_iter()
+            .filter(|c| {
+                c.knob == "default" || o.knobs.is_empty() || o.knobs.iter().any(|k| k == c.knob)
+            })
+            .collect();
             let reference = reference(scene, *mode, tf, &o)?;
             let m = measure(&run, scene, store.clone(), tf, &cfgs, &reference, o.rounds)?;
             let pts: Vec<(f64, f64)> = m.iter().map(|x| (x.ms, x.mse)).collect();
@@ -315,20 +361,25 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
                     knob: c.knob,
                     ms: x.ms,
                     psnr_db: x.psnr_db,
+                    bricks: if c.key.in_core { 0.0 } else { x.bricks as f64 },
                 })
                 .collect();
-            let svg = o.charts.join(format!("{name}.svg"));
-            chart::draw(
-                &svg,
-                &format!(
-                    "{} {}: time against error ({}x{} px)",
-                    scene.name, mode_name, o.size, o.size
+            for (axis, file, what) in [
+                (chart::Axis::Time, format!("{name}.svg"), "time against error"),
+                (
+                    chart::Axis::Bricks,
+                    format!("{name}_bricks.svg"),
+                    "working set against error",
                 ),
-                &chart_pts,
-                &on,
-                0,
-            )?;
-            println!("  chart: {}", svg.display());
+            ] {
+                let svg = o.charts.join(file);
+                let title = format!(
+                    "{} {}: {what} ({}x{} px)",
+                    scene.name, mode_name, o.size, o.size
+                );
+                chart::draw(&svg, &title, axis, &chart_pts, &on, 0)?;
+                println!("  chart: {}", svg.display());
+            }
             if let Some(g) = lod_gain(&cfgs, &m, "lod_error") {
                 println!("  error-aware LOD over geometric at equal bricks: {g:+.2} dB");
                 lod_gains.push(g);
@@ -336,6 +387,12 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
             if let Some(g) = lod_gain(&cfgs, &m, "lod_visible") {
                 println!("  visible-error LOD over geometric at equal bricks: {g:+.2} dB");
                 visible_gains.push(g);
+            }
+            if let Some(g) = brick_budget_gain(&cfgs, &m) {
+                println!(
+                    "  visible-error order over geometric order at equal brick budgets: {g:+.2} dB"
+                );
+                budget_gains.push(g);
             }
             if let Some(g) = preint_gain(&cfgs, &m) {
                 println!("  pre-integration at step 2: {g:+.2} dB");
@@ -379,6 +436,11 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         "visible_error_gain_db_at_equal_bricks".into(),
         json!(med(&visible_gains)),
     );
+    f.insert(
+        "visible_error_gain_db_at_equal_brick_budget".into(),
+        json!(med(&budget_gains)),
+    );
+    f.insert("brick".into(), json!(o.brick));
     f.insert(
         "preintegration_gain_db_at_step_2".into(),
         json!(med(&preint_gains)),
@@ -497,6 +559,7 @@ fn measure(
                 OutOfCoreConfig {
                     tolerance_px: k.tolerance_px,
                     lod_metric: k.metric,
+                    brick_budget: k.brick_budget,
                     upload_budget_bytes: 1 << 30,
                     ..Default::default()
                 },
@@ -597,6 +660,66 @@ fn lod_gain(cfgs: &[Config], m: &[Measured], knob: &str) -> Option<f64> {
         .iter()
         .filter_map(|&(b, p)| crate::lod::interpolate(&geo, b).map(|g| p - g))
         .collect();
+    (!gains.is_empty()).then(|| median(&gains))
+}
+
+/// The data bricks of the finest cut (tolerance 0, geometric) of a scene's
+/// mode: what the brick-budget sweeps take fractions of.
+fn finest_bricks(
+    run: &Runner<'_>,
+    scene: &Scene,
+    store: Arc<dyn brickray_core::BrickSource>,
+    tf: &TransferFunction,
+    mode: RenderMode,
+) -> Result<u32, String> {
+    let gpu = run.gpu;
+    let mut r = VolumeRenderer::new(&gpu.device, brickray_harness::target_desc())
+        .map_err(|e| e.to_string())?;
+    r.set_volume_source(
+        &gpu.device,
+        &gpu.queue,
+        store,
+        scene.frame,
+        OutOfCoreConfig {
+            tolerance_px: 0.0,
+            upload_budget_bytes: 1 << 30,
+            ..Default::default()
+        },
+    )
+    .map_err(|e| e.to_string())?;
+    r.set_transfer_function(&gpu.device, &gpu.queue, tf)
+        .map_err(|e| e.to_string())?;
+    let settings = RenderSettings {
+        mode,
+        ..RenderSettings::default()
+    };
+    let (frames, stats) = run.converge(&mut r, scene.camera, scene.frame, settings, 400)?;
+    frames.ok_or_else(|| format!("the finest cut did not converge: {stats:?}"))?;
+    Ok(stats.cache.working_set_bricks)
+}
+
+/// The median over brick budgets of the visible-error order's PSNR minus the
+/// geometric order's at the same budget (`None` without both sweeps).
+fn brick_budget_gain(cfgs: &[Config], m: &[Measured]) -> Option<f64> {
+    let at = |knob: &str, value: &str| {
+        cfgs.iter()
+            .zip(m)
+            .find(|(c, _)| c.knob == knob && c.value == value)
+            .map(|(_, x)| x)
+    };
+    let mut gains = Vec::new();
+    for c in cfgs.iter().filter(|c| c.knob == "bricks_visible") {
+        let (Some(v), Some(g)) = (at("bricks_visible", &c.value), at("bricks_geometric", &c.value))
+        else {
+            continue;
+        };
+        let d = v.psnr_db.min(99.0) - g.psnr_db.min(99.0);
+        println!(
+            "  brick budget {:>5}: geometric {:>4} bricks {:>6.2} dB, visible {:>4} bricks {:>6.2} dB, {d:+.2} dB",
+            c.value, g.bricks, g.psnr_db, v.bricks, v.psnr_db
+        );
+        gains.push(d);
+    }
     (!gains.is_empty()).then(|| median(&gains))
 }
 

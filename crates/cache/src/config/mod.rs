@@ -101,6 +101,12 @@ pub struct CacheConfig {
     /// that a region evicted under memory pressure falls back to an ancestor,
     /// never to nothing. 0: no floor.
     pub floor_slots: u32,
+    /// Most data bricks the cut may hold (its working set), below what the
+    /// pool holds: refinement splits in its priority order until the next
+    /// split would exceed it, so the working set degrades gradually with the
+    /// budget (`docs/cache.md`, "Brick budget"). `None` (the default): the
+    /// pool's capacity. Must be `>= 1` (the root's brick).
+    pub brick_budget: Option<u32>,
 }
 
 /// Default [`CacheConfig::floor_slots`]: levels 0 to 2 of a cubic volume.
@@ -121,6 +127,7 @@ impl Default for CacheConfig {
             retry: Some(RetryPolicy::default()),
             fade: Some(FadeDuration::default()),
             floor_slots: DEFAULT_FLOOR_SLOTS,
+            brick_budget: None,
         }
     }
 }
@@ -163,6 +170,12 @@ pub enum ConfigError {
     Tolerance {
         /// The value given.
         value: f32,
+    },
+    /// A brick budget of 0 (the root's brick is always needed).
+    #[error("brick_budget must be >= 1, got {value}")]
+    BrickBudget {
+        /// The value given.
+        value: u32,
     },
     /// The error budget of [`LodMetric::ErrorAware`] is NaN, negative or infinite.
     #[error("the error budget must be finite and >= 0, got {value}")]
@@ -396,6 +409,7 @@ impl CacheConfig {
     pub fn validate(&self, layout: &OctreeLayout, gpu: &GpuFormat) -> Result<(), ConfigError> {
         validate_tolerance(self.tolerance_px)?;
         validate_metric(self.lod_metric)?;
+        validate_brick_budget(self.brick_budget)?;
         if self.loader_threads == 0 || self.loader_threads > MAX_LOADER_THREADS {
             return Err(ConfigError::LoaderThreads {
                 threads: self.loader_threads,
@@ -421,6 +435,13 @@ pub(crate) fn validate_tolerance(value: f32) -> Result<(), ConfigError> {
         Ok(())
     } else {
         Err(ConfigError::Tolerance { value })
+    }
+}
+
+pub(crate) fn validate_brick_budget(budget: Option<u32>) -> Result<(), ConfigError> {
+    match budget {
+        Some(0) => Err(ConfigError::BrickBudget { value: 0 }),
+        _ => Ok(()),
     }
 }
 

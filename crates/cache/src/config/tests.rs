@@ -55,6 +55,23 @@ fn every_violation_is_a_typed_error() {
             );
         }
     }
+    assert_eq!(
+        check(CacheConfig {
+            brick_budget: Some(0),
+            ..ok
+        }),
+        Err(ConfigError::BrickBudget { value: 0 })
+    );
+    for budget in [None, Some(1), Some(u32::MAX)] {
+        assert_eq!(
+            check(CacheConfig {
+                brick_budget: budget,
+                ..ok
+            }),
+            Ok(()),
+            "{budget:?}"
+        );
+    }
     for threads in [0, MAX_LOADER_THREADS + 1, 2000] {
         assert_eq!(
             check(CacheConfig {

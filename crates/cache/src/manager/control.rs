@@ -3,7 +3,7 @@
 use super::{BrickManager, Residency, ResidencyCounts};
 use crate::config::{
     CacheConfig, ConfigError, GpuFormat, MIN_RESIDENT_BRICKS, RetryPolicy, validate_cpu_budget,
-    validate_metric, validate_tolerance,
+    validate_brick_budget, validate_metric, validate_tolerance,
 };
 use crate::cpu_cache::CpuCache;
 use crate::fade::FadeDuration;
@@ -159,6 +159,17 @@ impl BrickManager {
     pub fn set_tolerance_px(&mut self, tolerance_px: f32) -> Result<(), ConfigError> {
         validate_tolerance(tolerance_px)?;
         self.config.tolerance_px = tolerance_px;
+        Ok(())
+    }
+
+    /// Sets the most data bricks the cut may hold ([`CacheConfig::brick_budget`];
+    /// `None`: the pool's capacity; `Some(0)` is refused). The next frame's
+    /// refinement keeps within it.
+    ///
+    /// [`CacheConfig::brick_budget`]: crate::CacheConfig::brick_budget
+    pub fn set_brick_budget(&mut self, budget: Option<u32>) -> Result<(), ConfigError> {
+        validate_brick_budget(budget)?;
+        self.config.brick_budget = budget;
         Ok(())
     }
 

@@ -467,11 +467,12 @@ impl BrickManager {
 
     /// Most data leaves refinement may use: the pool less the floor and, with
     /// fades on, an eighth of it for the bricks fades keep (fallbacks, merged
-    /// leaves still fading).
+    /// leaves still fading); at most the brick budget.
     fn cut_slots(&self) -> u32 {
         let n = self.pool.slot_count();
         let fades = if self.config.fade.is_some() { n / 8 } else { 0 };
-        n.saturating_sub(self.floor.len() as u32 + fades).max(1)
+        let pool = n.saturating_sub(self.floor.len() as u32 + fades).max(1);
+        self.config.brick_budget.map_or(pool, |b| pool.min(b.max(1)))
     }
 
     /// True when some child of `key` inside the volume has no known metadata (and

@@ -324,6 +324,58 @@ fn tiny_pool_gives_a_coarser_complete_cut() {
     assert!(plan.stats.pool_occupied <= 9);
 }
 
+/// A brick budget caps the cut below what the pool holds, and changing it at
+/// run time moves the cut with it: fewer bricks, then the full cut again.
+/// Fades are off so that every frame's cut is the refined one (a fading
+/// split shows its parent's bricks beside its children's for a few frames).
+#[test]
+fn a_brick_budget_caps_the_cut_below_the_pool() {
+    let src = Arc::new(TestSource::new(64));
+    let cam = Camera::orbit(Vec3::ZERO, 1.6, 0.4, 0.3);
+    let tf = TransferFunction::ramp(0.1, 1.0, 0.5);
+    let unlimited = CacheConfig {
+        gpu_budget_bytes: 4 << 20,
+        fade: None,
+        ..config()
+    };
+    let mut free = manager(&src, unlimited);
+    let mut frame = 0;
+    let plan = converge(&mut free, &mut frame, &cam, RenderMode::Mip, &tf, |_, _| {});
+    let full = plan.stats.working_set_bricks;
+    assert_eq!(plan.stats.blocked.pool_full, 0, "the pool limits the cut");
+    assert!(full > 24, "the unlimited cut holds {full} bricks");
+    let budget = full / 2;
+    let mut m = manager(
+        &src,
+        CacheConfig {
+            brick_budget: Some(budget),
+            ..unlimited
+        },
+    );
+    assert!(m.pool().slot_count() > full);
+    let mut frame = 0;
+    let capped = converge(&mut m, &mut frame, &cam, RenderMode::Mip, &tf, |_, p| {
+        assert!(p.stats.working_set_bricks <= budget, "{:?}", p.stats);
+    });
+    let n = capped.stats.working_set_bricks;
+    // Within the budget, and no split of 8 children more would have fit.
+    assert!(n <= budget && n + 8 > budget, "{n} bricks for a budget of {budget}");
+    assert!(capped.stats.blocked.pool_full > 0);
+    // Smaller at run time: the next frames keep within it.
+    m.set_brick_budget(Some(9)).unwrap();
+    converge(&mut m, &mut frame, &cam, RenderMode::Mip, &tf, |_, p| {
+        assert!(p.stats.working_set_bricks <= 9, "{:?}", p.stats);
+    });
+    // Lifted: back to the unlimited cut.
+    m.set_brick_budget(None).unwrap();
+    let again = converge(&mut m, &mut frame, &cam, RenderMode::Mip, &tf, |_, _| {});
+    assert_eq!(again.stats.working_set_bricks, full);
+    assert_eq!(
+        m.set_brick_budget(Some(0)),
+        Err(ConfigError::BrickBudget { value: 0 })
+    );
+}
+
 #[test]
 fn upload_budget_makes_progress_every_frame() {
     let src = Arc::new(TestSource::new(64));
