@@ -40,7 +40,9 @@ impl Axis {
             && match self {
                 Axis::Time => true,
                 Axis::Bricks => {
-                    p.knob == "default" || p.knob.starts_with("lod_") || p.knob.starts_with("bricks_")
+                    p.knob == "default"
+                        || p.knob.starts_with("lod_")
+                        || p.knob.starts_with("bricks_")
                 }
             }
     }
@@ -139,7 +141,11 @@ pub(crate) fn draw(
     let d = &points[default];
     if axis.shows(d) {
         chart
-            .draw_series([Circle::new((axis.x(d), d.psnr_db), 9, BLACK.stroke_width(2))])
+            .draw_series([Circle::new(
+                (axis.x(d), d.psnr_db),
+                9,
+                BLACK.stroke_width(2),
+            )])
             .map_err(|x| e(&x))?
             .label("default")
             .legend(|(x, y)| Circle::new((x + 10, y), 6, BLACK.stroke_width(2)));

@@ -4,17 +4,22 @@
 //! view with a set of configurations: the defaults, and one knob at a time swept
 //! around them (step, pre-integration, geometric, error-aware and
 //! visible-error level-of-detail budgets, early-termination threshold, the u8 interpolation, the visibility
-//! policy, in core instead of out of core). Each
+//! policy, in core instead of out of core), and the geometric and
+//! visible-error orders under equal brick budgets (10-90% of the finest
+//! cut: equal working sets by construction). Each
 //! configuration gets its own renderer state (a renderer per cache setting,
 //! converged before timing); frames are interleaved round by round over all the
 //! configurations (the machine's speed drifts), each round starting at another
 //! configuration, and each time is the median of `prepare + submit + wait`.
 //! Each configuration's converged image is compared with the f64 CPU
 //! reference at a step of 1/8 voxel with 2 x 2 supersampling: PSNR, mean FLIP
-//! and SSIM. Working set: the cut's data bricks on the GPU and their bytes.
+//! and SSIM; and, for the level of detail's own error, PSNR against the
+//! finest cut's image from the same renderer. Working set: the cut's data
+//! bricks on the GPU and their bytes.
 //!
-//! Output: a CSV of every point, one SVG chart per scene (time against PSNR, the
-//! front, the default marked) and, as the last line, the figures as JSON.
+//! Output: a CSV of every point, two SVG charts per scene (time against PSNR,
+//! the front, the default marked; PSNR against the working set of the
+//! level-of-detail sweeps) and, as the last line, the figures as JSON.
 
 mod chart;
 mod front;
@@ -58,7 +63,7 @@ const DEFAULT_KEY: RendererKey = RendererKey {
 
 /// The brick budgets of the equal-working-set sweeps, as fractions of the
 /// finest cut's data bricks.
-const BRICK_FRACTIONS: [f64; 5] = [0.1, 0.2, 0.35, 0.5, 0.7];
+const BRICK_FRACTIONS: [f64; 9] = [0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9];
 
 /// One configuration of a scene.
 #[derive(Debug, Clone)]
@@ -80,23 +85,33 @@ struct Measured {
     bricks: u32,
     bytes: u64,
     psnr_db: f64,
+    /// PSNR against the finest cut's image from the same renderer and
+    /// settings: the level of detail's own error, without the pixel aliasing
+    /// and sampling error every configuration shares against the reference.
+    psnr_lod_db: f64,
     mse: f64,
     flip: f64,
     ssim: f64,
 }
 
-/// The configurations of one mode: the defaults first, then each knob's sweep.
-/// `finest_bricks` is the data bricks of the finest cut (the brick-budget
-/// sweeps give fractions of it).
-fn configs(mode: RenderMode, u8_volume: bool, finest_bricks: u32) -> Vec<Config> {
-    let base = RenderSettings {
+/// The settings every configuration of a mode starts from: the defaults, DVR
+/// shaded.
+fn base_settings(mode: RenderMode) -> RenderSettings {
+    RenderSettings {
         mode,
         shading: Shading {
             enabled: matches!(mode, RenderMode::Dvr),
             ..Shading::default()
         },
         ..RenderSettings::default()
-    };
+    }
+}
+
+/// The configurations of one mode: the defaults first, then each knob's sweep.
+/// `finest_bricks` is the data bricks of the finest cut (the brick-budget
+/// sweeps give fractions of it).
+fn configs(mode: RenderMode, u8_volume: bool, finest_bricks: u32) -> Vec<Config> {
+    let base = base_settings(mode);
     let cfg = |knob, value: String, key, settings| Config {
         knob,
         value,
@@ -158,7 +173,11 @@ fn configs(mode: RenderMode, u8_volume: bool, finest_bricks: u32) -> Vec<Config>
         let bricks = ((finest_bricks as f64 * frac).round() as u32).max(1);
         for (knob, metric, tolerance_px) in [
             ("bricks_geometric", LodMetric::Geometric, 0.0),
-            ("bricks_visible", LodMetric::VisibleError { budget: 0.0 }, 0.0),
+            (
+                "bricks_visible",
+                LodMetric::VisibleError { budget: 0.0 },
+                0.0,
+            ),
         ] {
             let key = RendererKey {
                 tolerance_px,
@@ -265,12 +284,12 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
     std::fs::create_dir_all(&o.charts).map_err(|e| format!("{}: {e}", o.charts.display()))?;
     let run = Runner::new(&gpu, o.size);
     let mut csv = String::from(
-        "volume,mode,knob,value,ms,cpu_ms,samples_per_ray,bricks,bytes,psnr_db,mean_flip,ssim,on_front,default_within_5pct\n",
+        "volume,mode,knob,value,ms,cpu_ms,samples_per_ray,bricks,bytes,psnr_db,mean_flip,ssim,on_front,default_within_5pct,psnr_vs_finest_db\n",
     );
     let (mut all_on_front, mut all_on_ooc_front) = (true, true);
     let mut per_scene = serde_json::Map::new();
     let (mut lod_gains, mut visible_gains, mut preint_gains) = (Vec::new(), Vec::new(), Vec::new());
-    let mut budget_gains = Vec::new();
+    let (mut budget_gains, mut budget_lod_gains) = (Vec::new(), Vec::new());
     let mut aniso_bricks = None;
     for scene in &scenes {
         let dir = tempfile::tempdir().map_err(|e| e.to_string())?;
@@ -286,7 +305,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
             Arc::new(brickray_store::open(&path).map_err(|e| e.to_string())?);
         for (mode_name, mode, tf) in &scene.modes {
             let name = format!("{}_{}", scene.name, mode_name);
-            let finest = finest_bricks(&run, scene, store.clone(), tf, *mode)?;
+            let (finest, finest_rgba) = finest_cut(&run, scene, store.clone(), tf, *mode)?;
             let cfgs: Vec<Config> = configs(
                 *mode,
                 scene.volume.desc().dtype == brickray_core::DType::U8,
@@ -298,7 +317,11 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
             })
             .collect();
             let reference = reference(scene, *mode, tf, &o)?;
-            let m = measure(&run, scene, store.clone(), tf, &cfgs, &reference, o.rounds)?;
+            let images = Images {
+                reference: &reference,
+                finest: &finest_rgba,
+            };
+            let m = measure(&run, scene, store.clone(), tf, &cfgs, images, o.rounds)?;
             let pts: Vec<(f64, f64)> = m.iter().map(|x| (x.ms, x.mse)).collect();
             let on = front::front(&pts);
             let default_ok = front::within(&pts, 0, 0.05);
@@ -334,7 +357,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
                 );
                 let _ = writeln!(
                     csv,
-                    "{},{},{},{},{:.3},{:.3},{:.2},{},{},{:.3},{:.5},{:.5},{},{}",
+                    "{},{},{},{},{:.3},{:.3},{:.2},{},{},{:.3},{:.5},{:.5},{},{},{:.3}",
                     scene.name,
                     mode_name,
                     c.knob,
@@ -348,7 +371,8 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
                     x.flip,
                     x.ssim,
                     f,
-                    i == 0 && default_ok
+                    i == 0 && default_ok,
+                    x.psnr_lod_db.min(99.0)
                 );
             }
             println!(
@@ -365,7 +389,11 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
                 })
                 .collect();
             for (axis, file, what) in [
-                (chart::Axis::Time, format!("{name}.svg"), "time against error"),
+                (
+                    chart::Axis::Time,
+                    format!("{name}.svg"),
+                    "time against error",
+                ),
                 (
                     chart::Axis::Bricks,
                     format!("{name}_bricks.svg"),
@@ -388,11 +416,13 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
                 println!("  visible-error LOD over geometric at equal bricks: {g:+.2} dB");
                 visible_gains.push(g);
             }
-            if let Some(g) = brick_budget_gain(&cfgs, &m) {
+            if let Some((g, gl)) = brick_budget_gain(&cfgs, &m) {
                 println!(
-                    "  visible-error order over geometric order at equal brick budgets: {g:+.2} dB"
+                    "  visible-error order over geometric order at equal brick budgets: {g:+.2} dB \
+                     against the reference, {gl:+.2} dB against the finest cut"
                 );
                 budget_gains.push(g);
+                budget_lod_gains.push(gl);
             }
             if let Some(g) = preint_gain(&cfgs, &m) {
                 println!("  pre-integration at step 2: {g:+.2} dB");
@@ -427,24 +457,21 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         "default_on_out_of_core_front_all".into(),
         json!(all_on_ooc_front),
     );
-    let med = |v: &[f64]| (!v.is_empty()).then(|| round2(median(v)));
-    f.insert(
-        "error_aware_gain_db_at_equal_bricks".into(),
-        json!(med(&lod_gains)),
-    );
-    f.insert(
-        "visible_error_gain_db_at_equal_bricks".into(),
-        json!(med(&visible_gains)),
-    );
-    f.insert(
-        "visible_error_gain_db_at_equal_brick_budget".into(),
-        json!(med(&budget_gains)),
-    );
+    // Each gain's median over the scenes (null where no scene had it).
+    for (key, gains) in [
+        ("error_aware_gain_db_at_equal_bricks", &lod_gains),
+        ("visible_error_gain_db_at_equal_bricks", &visible_gains),
+        ("visible_error_gain_db_at_equal_brick_budget", &budget_gains),
+        (
+            "visible_error_gain_db_at_equal_brick_budget_vs_finest",
+            &budget_lod_gains,
+        ),
+        ("preintegration_gain_db_at_step_2", &preint_gains),
+    ] {
+        let med = (!gains.is_empty()).then(|| round2(median(gains)));
+        f.insert(key.into(), json!(med));
+    }
     f.insert("brick".into(), json!(o.brick));
-    f.insert(
-        "preintegration_gain_db_at_step_2".into(),
-        json!(med(&preint_gains)),
-    );
     f.insert("anisotropic_ct_bricks_at_1px".into(), json!(aniso_bricks));
     f.insert("scenes".into(), serde_json::Value::Object(per_scene));
     Ok(f)
@@ -458,14 +485,7 @@ fn reference(
     tf: &TransferFunction,
     o: &Options,
 ) -> Result<Vec<u8>, String> {
-    let settings = RenderSettings {
-        mode,
-        shading: Shading {
-            enabled: matches!(mode, RenderMode::Dvr),
-            ..Shading::default()
-        },
-        ..RenderSettings::default()
-    };
+    let settings = base_settings(mode);
     let tag = match mode {
         RenderMode::Dvr => "dvr".to_string(),
         RenderMode::Iso { value, .. } => format!("iso{value}"),
@@ -518,6 +538,16 @@ fn cache_tag(scene: &Scene, tf: &TransferFunction) -> String {
     format!("{:016x}", h.finish())
 }
 
+/// The images a configuration's is compared with (RGBA8, the suite's size).
+#[derive(Clone, Copy)]
+struct Images<'a> {
+    /// The f64 CPU reference.
+    reference: &'a [u8],
+    /// The finest cut's (tolerance 0), drawn by the renderer with the base
+    /// settings.
+    finest: &'a [u8],
+}
+
 /// Builds one renderer per distinct key, converges each on the view, then times
 /// every configuration over interleaved rounds and reads its image.
 fn measure(
@@ -526,9 +556,10 @@ fn measure(
     store: Arc<dyn brickray_core::BrickSource>,
     tf: &TransferFunction,
     cfgs: &[Config],
-    reference: &[u8],
+    images: Images<'_>,
     rounds: usize,
 ) -> Result<Vec<Measured>, String> {
+    let reference = images.reference;
     let gpu = run.gpu;
     let mut keys: Vec<RendererKey> = Vec::new();
     for c in cfgs {
@@ -628,6 +659,7 @@ fn measure(
             bricks as u64 * brick_bytes
         };
         let p = psnr(&shot.rgba, reference);
+        let psnr_lod_db = psnr(&shot.rgba, images.finest);
         out.push(Measured {
             ms: median(&times[i]),
             cpu_ms: median(&cpu[i]),
@@ -635,6 +667,7 @@ fn measure(
             bricks,
             bytes,
             psnr_db: p,
+            psnr_lod_db,
             mse: 255.0f64.powi(2) / 10f64.powf(p / 10.0),
             flip: mean_flip(&shot.rgba, reference, w, h) as f64,
             ssim: ssim(&shot.rgba, reference, w, h),
@@ -664,14 +697,15 @@ fn lod_gain(cfgs: &[Config], m: &[Measured], knob: &str) -> Option<f64> {
 }
 
 /// The data bricks of the finest cut (tolerance 0, geometric) of a scene's
-/// mode: what the brick-budget sweeps take fractions of.
-fn finest_bricks(
+/// mode, what the brick-budget sweeps take fractions of, and its image with
+/// the base settings.
+fn finest_cut(
     run: &Runner<'_>,
     scene: &Scene,
     store: Arc<dyn brickray_core::BrickSource>,
     tf: &TransferFunction,
     mode: RenderMode,
-) -> Result<u32, String> {
+) -> Result<(u32, Vec<u8>), String> {
     let gpu = run.gpu;
     let mut r = VolumeRenderer::new(&gpu.device, brickray_harness::target_desc())
         .map_err(|e| e.to_string())?;
@@ -689,38 +723,47 @@ fn finest_bricks(
     .map_err(|e| e.to_string())?;
     r.set_transfer_function(&gpu.device, &gpu.queue, tf)
         .map_err(|e| e.to_string())?;
-    let settings = RenderSettings {
-        mode,
-        ..RenderSettings::default()
-    };
+    let settings = base_settings(mode);
     let (frames, stats) = run.converge(&mut r, scene.camera, scene.frame, settings, 400)?;
     frames.ok_or_else(|| format!("the finest cut did not converge: {stats:?}"))?;
-    Ok(stats.cache.working_set_bricks)
+    let shot = run.frame(&mut r, scene.camera, scene.frame, settings, true)?;
+    Ok((stats.cache.working_set_bricks, shot.rgba))
 }
 
 /// The median over brick budgets of the visible-error order's PSNR minus the
-/// geometric order's at the same budget (`None` without both sweeps).
-fn brick_budget_gain(cfgs: &[Config], m: &[Measured]) -> Option<f64> {
+/// geometric order's at the same budget, against the reference and against
+/// the finest cut's image (`None` without both sweeps).
+fn brick_budget_gain(cfgs: &[Config], m: &[Measured]) -> Option<(f64, f64)> {
     let at = |knob: &str, value: &str| {
         cfgs.iter()
             .zip(m)
             .find(|(c, _)| c.knob == knob && c.value == value)
             .map(|(_, x)| x)
     };
-    let mut gains = Vec::new();
+    let (mut gains, mut lod_gains) = (Vec::new(), Vec::new());
     for c in cfgs.iter().filter(|c| c.knob == "bricks_visible") {
-        let (Some(v), Some(g)) = (at("bricks_visible", &c.value), at("bricks_geometric", &c.value))
-        else {
+        let (Some(v), Some(g)) = (
+            at("bricks_visible", &c.value),
+            at("bricks_geometric", &c.value),
+        ) else {
             continue;
         };
         let d = v.psnr_db.min(99.0) - g.psnr_db.min(99.0);
+        let dl = v.psnr_lod_db.min(99.0) - g.psnr_lod_db.min(99.0);
         println!(
-            "  brick budget {:>5}: geometric {:>4} bricks {:>6.2} dB, visible {:>4} bricks {:>6.2} dB, {d:+.2} dB",
-            c.value, g.bricks, g.psnr_db, v.bricks, v.psnr_db
+            "  brick budget {:>5}: geometric {:>5} bricks {:>6.2} dB ({:>6.2}), visible {:>5} bricks {:>6.2} dB ({:>6.2}), {d:+.2} dB ({dl:+.2})",
+            c.value,
+            g.bricks,
+            g.psnr_db,
+            g.psnr_lod_db.min(99.0),
+            v.bricks,
+            v.psnr_db,
+            v.psnr_lod_db.min(99.0)
         );
         gains.push(d);
+        lod_gains.push(dl);
     }
-    (!gains.is_empty()).then(|| median(&gains))
+    (!gains.is_empty()).then(|| (median(&gains), median(&lod_gains)))
 }
 
 /// PSNR of pre-integration at step 2 voxels minus the plain step-2 PSNR.

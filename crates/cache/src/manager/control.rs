@@ -2,8 +2,8 @@
 
 use super::{BrickManager, Residency, ResidencyCounts};
 use crate::config::{
-    CacheConfig, ConfigError, GpuFormat, MIN_RESIDENT_BRICKS, RetryPolicy, validate_cpu_budget,
-    validate_brick_budget, validate_metric, validate_tolerance,
+    CacheConfig, ConfigError, GpuFormat, MIN_RESIDENT_BRICKS, RetryPolicy, validate_brick_budget,
+    validate_cpu_budget, validate_metric, validate_tolerance,
 };
 use crate::cpu_cache::CpuCache;
 use crate::fade::FadeDuration;

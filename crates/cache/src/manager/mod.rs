@@ -472,7 +472,9 @@ impl BrickManager {
         let n = self.pool.slot_count();
         let fades = if self.config.fade.is_some() { n / 8 } else { 0 };
         let pool = n.saturating_sub(self.floor.len() as u32 + fades).max(1);
-        self.config.brick_budget.map_or(pool, |b| pool.min(b.max(1)))
+        self.config
+            .brick_budget
+            .map_or(pool, |b| pool.min(b.max(1)))
     }
 
     /// True when some child of `key` inside the volume has no known metadata (and

@@ -359,7 +359,10 @@ fn a_brick_budget_caps_the_cut_below_the_pool() {
     });
     let n = capped.stats.working_set_bricks;
     // Within the budget, and no split of 8 children more would have fit.
-    assert!(n <= budget && n + 8 > budget, "{n} bricks for a budget of {budget}");
+    assert!(
+        n <= budget && n + 8 > budget,
+        "{n} bricks for a budget of {budget}"
+    );
     assert!(capped.stats.blocked.pool_full > 0);
     // Smaller at run time: the next frames keep within it.
     m.set_brick_budget(Some(9)).unwrap();
