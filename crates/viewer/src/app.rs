@@ -46,6 +46,8 @@ struct PendingShot {
     path: PathBuf,
     viewport: Viewport,
     camera: brickray::Camera,
+    /// Out of core: the data bricks of the last frame's cut.
+    working_set_bricks: Option<u32>,
     image: Arc<Mutex<Option<Arc<egui::ColorImage>>>>,
 }
 
@@ -284,6 +286,7 @@ impl ViewerApp {
             let c = self.ooc;
             let res = self.with_gpu(frame, |d, q, r| -> Result<(), brickray::RenderError> {
                 r.renderer.set_lod_tolerance(c.tolerance_px)?;
+                r.renderer.set_brick_budget(c.brick_budget)?;
                 r.renderer.set_upload_budget(c.upload_budget_bytes)?;
                 r.renderer.set_cpu_budget(c.cpu_budget_bytes)?;
                 if r.renderer.stats().out_of_core.is_some() {
@@ -341,10 +344,16 @@ impl ViewerApp {
             }
             c.request_repaint();
         });
+        let streamed = self.shown.as_ref().is_some_and(|s| s.streamed);
         self.shot = Some(PendingShot {
             path,
             viewport,
             camera: cb.camera,
+            working_set_bricks: self
+                .stats
+                .last()
+                .filter(|_| streamed)
+                .map(|s| s.working_set as u32),
             image: slot,
         });
     }
@@ -463,6 +472,10 @@ impl ViewerApp {
                     return;
                 }
                 Action::Clip(min, max) => self.settings.clip = brickray::ClipBox { min, max },
+                Action::Bricks(budget) => {
+                    self.ooc.brick_budget = budget;
+                    self.ooc_dirty = true;
+                }
                 // Changes above take effect in this frame's drawing; waits
                 // count frames drawn after it.
                 Action::Wait(n) => {
@@ -672,6 +685,29 @@ impl ViewerApp {
                     );
                     mib(ui, &mut c.cpu_budget_bytes, 64..=16384, "CPU cache MiB");
                     mib(ui, &mut c.gpu_budget_bytes, 16..=4096, "GPU pool MiB");
+                    // The working set's cap in bricks: the level of detail then
+                    // degrades gradually, splitting the most needed first.
+                    let mut capped = c.brick_budget.is_some();
+                    let mut bricks = c.brick_budget.unwrap_or(4096);
+                    ui.horizontal(|ui| {
+                        changed |= ui
+                            .checkbox(&mut capped, "brick budget")
+                            .on_hover_text(
+                                "most data bricks the cut holds; refinement fills it in the \
+                                 LOD rule's order (docs/cache.md, \"Brick budget\")",
+                            )
+                            .changed();
+                        let r = ui.add_enabled(
+                            capped,
+                            egui::Slider::new(&mut bricks, 9..=65536)
+                                .logarithmic(true)
+                                .text("bricks"),
+                        );
+                        if r.drag_stopped() || (r.changed() && !r.dragged()) {
+                            changed = true;
+                        }
+                    });
+                    c.brick_budget = capped.then_some(bricks);
                     self.ooc_dirty |= changed;
                 });
         }
@@ -855,6 +891,7 @@ fn save_shot(shot: &PendingShot, image: &egui::ColorImage) -> Result<(), String>
             "near": c.near,
             "far": c.far,
         },
+        "working_set_bricks": shot.working_set_bricks,
     });
     let text = serde_json::to_string_pretty(&sidecar).map_err(|e| e.to_string())?;
     std::fs::write(shot.path.with_extension("json"), text).map_err(|e| e.to_string())

@@ -14,6 +14,7 @@
 //! background R G B               0..255, behind the volume
 //! clip X0 Y0 Z0 X1 Y1 Z1 | clip off   the clip box, texture space 0..1
 //! u8 exact | fast                u8 interpolation (reopens the volume)
+//! bricks N | off                 out of core: the brick budget (N >= 1 data bricks), or none
 //! wait N                         draw N frames
 //! wait converged [MAX]           draw until no brick is pending (at most MAX frames, default 600)
 //! screenshot FILE.png            the volume view, plus FILE.json (camera, viewport)
@@ -56,6 +57,8 @@ pub(crate) enum Action {
     Clip([f32; 3], [f32; 3]),
     /// u8 volumes interpolated exactly (true) or from 8-bit texels.
     U8Exact(bool),
+    /// The out-of-core brick budget (`None`: the pool's capacity).
+    Bricks(Option<u32>),
     /// Draw frames.
     Wait(u32),
     /// Draw until converged, at most this many frames.
@@ -196,6 +199,13 @@ pub(crate) fn parse(text: &str) -> Result<Vec<Action>, ScriptError> {
             ["overlays", v] => Action::Overlays(on_off(v)?),
             ["u8", "exact"] => Action::U8Exact(true),
             ["u8", "fast"] => Action::U8Exact(false),
+            ["bricks", "off"] => Action::Bricks(None),
+            ["bricks", n] => Action::Bricks(Some(
+                n.parse()
+                    .ok()
+                    .filter(|&n: &u32| n >= 1)
+                    .ok_or_else(|| err("expected a brick count >= 1, or off"))?,
+            )),
             ["clip", "off"] => Action::Clip([0.0; 3], [1.0; 3]),
             ["clip", x0, y0, z0, x1, y1, z1] => {
                 let lo = [unit(x0)?, unit(y0)?, unit(z0)?];
@@ -253,6 +263,8 @@ mod tests {
             overlays off
             background 0 0 0
             clip 0 0 0.5 1 1 1
+            bricks 300
+            bricks off
             wait 3
             wait converged
             wait converged 50
@@ -261,18 +273,20 @@ mod tests {
             quit
         ";
         let a = parse(text).unwrap();
-        assert_eq!(a.len(), 21);
-        assert_eq!(a[19], Action::WindowScreenshot("out/w.png".into()));
+        assert_eq!(a.len(), 23);
+        assert_eq!(a[21], Action::WindowScreenshot("out/w.png".into()));
+        assert_eq!(a[15], Action::Bricks(Some(300)));
+        assert_eq!(a[16], Action::Bricks(None));
         assert_eq!(a[0], Action::Open("/data/head ct.json".into()));
         assert_eq!(a[3], Action::TfLoad("my tf.json".into()));
         assert_eq!(a[5], Action::Mode(ModeName::Iso, Some(0.35)));
         assert_eq!(a[8], Action::Orbit(30.0, 20.0, 1.5));
         assert_eq!(a[9], Action::Axis(Axis::NegY));
         assert_eq!(a[13], Action::Background([0, 0, 0]));
-        assert_eq!(a[16], Action::WaitConverged(600));
-        assert_eq!(a[17], Action::WaitConverged(50));
+        assert_eq!(a[18], Action::WaitConverged(600));
+        assert_eq!(a[19], Action::WaitConverged(50));
         assert_eq!(a[14], Action::Clip([0.0, 0.0, 0.5], [1.0; 3]));
-        assert_eq!(a[20], Action::Quit);
+        assert_eq!(a[22], Action::Quit);
     }
 
     #[test]
@@ -293,6 +307,8 @@ mod tests {
             ("u8 slow", 1),
             ("clip 0.5 0 0 0.4 1 1", 1),
             ("clip 0 0 0 1 1", 1),
+            ("bricks 0", 1),
+            ("bricks many", 1),
             ("\n\n\nfly away", 4),
         ] {
             let e = parse(text).unwrap_err();

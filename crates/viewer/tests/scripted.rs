@@ -344,6 +344,53 @@ fn opens_a_store_and_a_procedural_volume_out_of_core() {
     );
 }
 
+/// The script's `bricks N` caps the out-of-core working set (what the
+/// sidecar of a screenshot reports), and `bricks off` lifts the cap.
+#[test]
+#[cfg_attr(
+    no_display,
+    ignore = "needs an X server (DISPLAY unset when the tests were built; scripts/test.sh starts Xvfb)"
+)]
+fn a_brick_budget_caps_the_viewers_working_set() {
+    if !display_available() {
+        return;
+    }
+    let dir = tempfile::tempdir().expect("temp dir");
+    let out = |name: &str| -> PathBuf { dir.path().join(name) };
+    let script = format!(
+        "open procedural:256\ntf grey\nwait converged 600\nscreenshot {a}\n\
+         bricks 40\nwait converged 600\nscreenshot {b}\n\
+         bricks off\nwait converged 600\nscreenshot {c}\nquit\n",
+        a = out("free.png").display(),
+        b = out("capped.png").display(),
+        c = out("lifted.png").display(),
+    );
+    std::fs::write(out("script.txt"), script).expect("write the script");
+    let run = run_viewer(&out("script.txt"), Duration::from_secs(180));
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(
+        run.status.success(),
+        "the viewer failed ({:?}): {stderr}",
+        run.status
+    );
+    let bricks = |name: &str| -> u64 {
+        let text = std::fs::read_to_string(out(name).with_extension("json")).expect("sidecar");
+        let v: serde_json::Value = serde_json::from_str(&text).expect("sidecar JSON");
+        v["working_set_bricks"].as_u64().expect("a working set")
+    };
+    let (free, capped, lifted) = (
+        bricks("free.png"),
+        bricks("capped.png"),
+        bricks("lifted.png"),
+    );
+    assert!(free > 40, "the unbudgeted working set holds {free} bricks");
+    assert!(
+        (1..=40).contains(&capped),
+        "budget 40: {capped} bricks (unbudgeted {free})"
+    );
+    assert_eq!(lifted, free, "the cap lifted");
+}
+
 /// Every format of the shared fixtures opens in the viewer (through
 /// `brickray::io::open`) and shows an image (MIP, grey TF): NIfTI, a TIFF
 /// stack, a folder of TIFF slices, a DICOM series and OME-Zarr 0.4 and 0.5.
