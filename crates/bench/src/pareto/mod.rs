@@ -538,7 +538,8 @@ fn cache_tag(scene: &Scene, tf: &TransferFunction) -> String {
     format!("{:016x}", h.finish())
 }
 
-/// The images a configuration's is compared with (RGBA8, the suite's size).
+/// The images a configuration's image is compared with (RGBA8, the suite's
+/// size).
 #[derive(Clone, Copy)]
 struct Images<'a> {
     /// The f64 CPU reference.
