@@ -1,0 +1,255 @@
+//! The side panel's widgets: camera, rendering (out-of-core budgets
+//! included) and transfer function.
+
+use super::*;
+
+impl ViewerApp {
+    pub(super) fn camera_ui(&mut self, ui: &mut egui::Ui) {
+        let Some(c) = self.camera.as_mut() else {
+            ui.label("no volume");
+            return;
+        };
+        ui.horizontal(|ui| {
+            ui.selectable_value(&mut c.navigation, Navigation::Orbit, "Orbit");
+            ui.selectable_value(&mut c.navigation, Navigation::Fly, "Fly");
+            ui.separator();
+            ui.selectable_value(&mut c.orthographic, false, "Perspective");
+            ui.selectable_value(&mut c.orthographic, true, "Orthographic");
+        });
+        ui.horizontal(|ui| {
+            if ui.button("Reset").clicked() {
+                c.reset();
+            }
+            for a in Axis::ALL {
+                if ui.button(a.label()).clicked() {
+                    c.axis_view(a);
+                }
+            }
+        });
+        let mut fov = c.fov_y.to_degrees();
+        if ui
+            .add(egui::Slider::new(&mut fov, 10.0..=100.0).text("field of view °"))
+            .changed()
+        {
+            c.fov_y = fov.to_radians();
+        }
+        ui.label(
+            egui::RichText::new(
+                "drag: orbit (fly: look) · right/middle drag: pan · wheel: zoom · WASD/QE: fly · R: reset",
+            )
+            .small()
+            .weak(),
+        );
+    }
+
+    pub(super) fn render_ui(&mut self, ui: &mut egui::Ui) {
+        egui::ComboBox::from_label("mode")
+            .selected_text(self.mode.label())
+            .show_ui(ui, |ui| {
+                for m in ModeName::ALL {
+                    ui.selectable_value(&mut self.mode, m, m.label());
+                }
+            });
+        if self.mode == ModeName::Iso
+            && let Some(s) = &self.shown
+        {
+            let raw =
+                s.desc.value_range[0] + self.iso * (s.desc.value_range[1] - s.desc.value_range[0]);
+            ui.add(
+                egui::Slider::new(&mut self.iso, 0.0..=1.0)
+                    .text(format!("isovalue (raw {raw:.1})")),
+            );
+            histogram_strip(
+                ui,
+                &s.histogram,
+                self.tf_editor.log_histogram,
+                Some(self.iso),
+            );
+        }
+        let s = &mut self.settings;
+        ui.add(
+            egui::Slider::new(&mut s.step_factor, RenderSettings::MIN_STEP_FACTOR..=2.0)
+                .logarithmic(true)
+                .text("step (voxels)"),
+        );
+        let mut ert = s.accel.early_termination.is_some();
+        ui.horizontal(|ui| {
+            ui.checkbox(&mut ert, "early ray termination");
+            let mut t = s.accel.early_termination.unwrap_or(0.99);
+            ui.add_enabled(ert, egui::Slider::new(&mut t, 0.5..=1.0));
+            s.accel.early_termination = ert.then_some(t);
+        });
+        ui.checkbox(&mut s.accel.empty_space_skipping, "empty-space skipping");
+        if ui
+            .checkbox(&mut self.u8_exact, "exact u8 interpolation")
+            .on_hover_text("u8 volumes in 16-bit texels (exact) or 8-bit (half the memory); reopens the volume")
+            .changed()
+        {
+            self.renderer_dirty = true;
+        }
+        ui.add(egui::Slider::new(&mut s.depth_opacity, 0.01..=1.0).text("depth at opacity"));
+        ui.add(
+            egui::Slider::new(
+                &mut s.iso_refine_steps,
+                0..=RenderSettings::MAX_ISO_REFINE_STEPS,
+            )
+            .text("iso refinement"),
+        );
+        egui::CollapsingHeader::new("shading").show(ui, |ui| {
+            ui.add(egui::Slider::new(&mut s.shading.ambient, 0.0..=1.0).text("ambient"));
+            ui.add(egui::Slider::new(&mut s.shading.diffuse, 0.0..=1.0).text("diffuse"));
+            ui.add(egui::Slider::new(&mut s.shading.specular, 0.0..=1.0).text("specular"));
+            ui.add(egui::Slider::new(&mut s.shading.shininess, 1.0..=128.0).text("shininess"));
+        });
+        if self.shown.as_ref().is_some_and(|s| s.streamed) {
+            egui::CollapsingHeader::new("out of core")
+                .default_open(true)
+                .show(ui, |ui| {
+                    let c = &mut self.ooc;
+                    let mut changed = ui
+                        .add(
+                            egui::Slider::new(&mut c.tolerance_px, 0.0..=8.0)
+                                .text("LOD tolerance (px per voxel)"),
+                        )
+                        .changed();
+                    let mut mib = |ui: &mut egui::Ui,
+                                   v: &mut u64,
+                                   range: std::ops::RangeInclusive<u64>,
+                                   text: &str| {
+                        let mut m = *v >> 20;
+                        let r = ui.add(
+                            egui::Slider::new(&mut m, range)
+                                .logarithmic(true)
+                                .text(text),
+                        );
+                        if r.drag_stopped() || (r.changed() && !r.dragged()) {
+                            *v = m << 20;
+                            changed = true;
+                        }
+                    };
+                    mib(
+                        ui,
+                        &mut c.upload_budget_bytes,
+                        1..=256,
+                        "upload MiB per frame",
+                    );
+                    mib(ui, &mut c.cpu_budget_bytes, 64..=16384, "CPU cache MiB");
+                    mib(ui, &mut c.gpu_budget_bytes, 16..=4096, "GPU pool MiB");
+                    // The working set's cap in bricks: the level of detail then
+                    // degrades gradually, splitting the most needed first.
+                    let mut capped = c.brick_budget.is_some();
+                    let mut bricks = c.brick_budget.unwrap_or(4096);
+                    ui.horizontal(|ui| {
+                        changed |= ui
+                            .checkbox(&mut capped, "brick budget")
+                            .on_hover_text(
+                                "most data bricks the cut holds; refinement fills it in the \
+                                 LOD rule's order (docs/cache.md, \"Brick budget\")",
+                            )
+                            .changed();
+                        let r = ui.add_enabled(
+                            capped,
+                            egui::Slider::new(&mut bricks, 9..=65536)
+                                .logarithmic(true)
+                                .text("bricks"),
+                        );
+                        if r.drag_stopped() || (r.changed() && !r.dragged()) {
+                            changed = true;
+                        }
+                    });
+                    c.brick_budget = capped.then_some(bricks);
+                    self.ooc_dirty |= changed;
+                });
+        }
+        egui::CollapsingHeader::new("clip box").show(ui, |ui| {
+            let c = &mut self.settings.clip;
+            for (a, name) in ["x", "y", "z"].iter().enumerate() {
+                ui.horizontal(|ui| {
+                    ui.label(*name);
+                    ui.add(egui::Slider::new(&mut c.min[a], 0.0..=1.0).show_value(false));
+                    ui.add(egui::Slider::new(&mut c.max[a], 0.0..=1.0).show_value(false));
+                    // Dragging a bound past the other pushes it along.
+                    if c.min[a] > c.max[a] {
+                        c.max[a] = c.min[a];
+                    }
+                });
+            }
+            if ui.button("whole volume").clicked() {
+                *c = brickray::ClipBox::FULL;
+            }
+        });
+        ui.horizontal(|ui| {
+            ui.checkbox(&mut self.overlays, "bounding box and axes");
+            ui.label("background");
+            ui.color_edit_button_srgb(&mut self.background);
+        });
+    }
+
+    pub(super) fn tf_ui(&mut self, ui: &mut egui::Ui) {
+        let range = self
+            .shown
+            .as_ref()
+            .map_or([0.0, 1.0], |s| s.desc.value_range);
+        ui.horizontal(|ui| {
+            egui::ComboBox::from_id_salt("brickray-viewer preset")
+                .selected_text("preset")
+                .show_ui(ui, |ui| {
+                    for p in Preset::ALL {
+                        if ui.button(p.name()).clicked() {
+                            self.tf = TfModel::preset(p, range);
+                            self.tf_dirty = true;
+                        }
+                    }
+                });
+            ui.checkbox(&mut self.tf_editor.log_histogram, "log histogram");
+        });
+        let empty = Histogram::new(1);
+        let h = self.shown.as_ref().map_or(&empty, |s| &s.histogram);
+        if self.tf_editor.show(ui, &mut self.tf, h) {
+            self.tf_dirty = true;
+        }
+        ui.horizontal(|ui| {
+            ui.add(egui::TextEdit::singleline(&mut self.tf_path).desired_width(160.0));
+            if ui.button("Save").clicked() {
+                let r = self.tf.save(Path::new(&self.tf_path));
+                self.messages
+                    .push(r.map_or_else(|e| e.to_string(), |_| format!("saved {}", self.tf_path)));
+            }
+            if ui.button("Load").clicked() {
+                match TfModel::load(Path::new(&self.tf_path)) {
+                    Ok(m) => {
+                        self.tf = m;
+                        self.tf_dirty = true;
+                    }
+                    Err(e) => self.messages.push(e.to_string()),
+                }
+            }
+        });
+    }
+}
+
+/// The histogram as a strip with a marker (the isovalue slider's background).
+fn histogram_strip(ui: &mut egui::Ui, h: &Histogram, log: bool, marker: Option<f32>) {
+    let (rect, _) =
+        ui.allocate_exact_size(egui::vec2(ui.available_width(), 40.0), egui::Sense::hover());
+    let p = ui.painter_at(rect);
+    p.rect_filled(rect, 2.0, Color32::from_gray(24));
+    let heights = h.heights(log);
+    let n = heights.len().max(1) as f32;
+    for (i, v) in heights.iter().enumerate() {
+        let x0 = rect.left() + i as f32 / n * rect.width();
+        let x1 = rect.left() + (i + 1) as f32 / n * rect.width();
+        let bar = egui::Rect::from_min_max(
+            egui::pos2(x0, rect.bottom() - v * rect.height()),
+            egui::pos2(x1, rect.bottom()),
+        );
+        p.rect_filled(bar, 0.0, Color32::from_gray(90));
+    }
+    if let Some(m) = marker {
+        let x = rect.left() + m * rect.width();
+        p.line_segment(
+            [egui::pos2(x, rect.top()), egui::pos2(x, rect.bottom())],
+            egui::Stroke::new(2.0, Color32::YELLOW),
+        );
+    }
+}
