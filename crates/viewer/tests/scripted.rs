@@ -82,6 +82,20 @@ fn run_viewer(script: &Path, limit: Duration) -> std::process::Output {
     child.wait_with_output().expect("the viewer's output")
 }
 
+/// Writes `script` to `dir/script.txt`, runs the viewer on it (killed after
+/// `limit`) and asserts that every action succeeded.
+fn run_script(dir: &Path, script: &str, limit: Duration) {
+    let path = dir.join("script.txt");
+    std::fs::write(&path, script).expect("write the script");
+    let run = run_viewer(&path, limit);
+    assert!(
+        run.status.success(),
+        "the viewer failed ({:?}): {}",
+        run.status,
+        String::from_utf8_lossy(&run.stderr)
+    );
+}
+
 /// The camera and viewport size recorded next to a screenshot.
 fn sidecar(png: &Path) -> (Camera, u32, u32) {
     let text = std::fs::read_to_string(png.with_extension("json")).expect("the sidecar");
@@ -218,15 +232,8 @@ fn scripted_screenshots_match_the_library() {
         isopng = out("iso.png").display(),
         clippng = out("clip.png").display(),
     );
-    std::fs::write(out("script.txt"), script).expect("write the script");
     let t = Instant::now();
-    let run = run_viewer(&out("script.txt"), Duration::from_secs(120));
-    let stderr = String::from_utf8_lossy(&run.stderr);
-    assert!(
-        run.status.success(),
-        "the viewer failed ({:?}): {stderr}",
-        run.status
-    );
+    run_script(dir.path(), &script, Duration::from_secs(120));
     eprintln!(
         "viewer ran the script in {:.1} s",
         t.elapsed().as_secs_f64()
@@ -312,14 +319,7 @@ fn opens_a_store_and_a_procedural_volume_out_of_core() {
         a = out("store.png").display(),
         b = out("procedural.png").display(),
     );
-    std::fs::write(out("script.txt"), script).expect("write the script");
-    let run = run_viewer(&out("script.txt"), Duration::from_secs(120));
-    let stderr = String::from_utf8_lossy(&run.stderr);
-    assert!(
-        run.status.success(),
-        "the viewer failed ({:?}): {stderr}",
-        run.status
-    );
+    run_script(dir.path(), &script, Duration::from_secs(120));
 
     let (shot, w, h) = read_png(&out("store.png"));
     let (camera, _, _) = sidecar(&out("store.png"));
@@ -365,14 +365,7 @@ fn a_brick_budget_caps_the_viewers_working_set() {
         b = out("capped.png").display(),
         c = out("lifted.png").display(),
     );
-    std::fs::write(out("script.txt"), script).expect("write the script");
-    let run = run_viewer(&out("script.txt"), Duration::from_secs(180));
-    let stderr = String::from_utf8_lossy(&run.stderr);
-    assert!(
-        run.status.success(),
-        "the viewer failed ({:?}): {stderr}",
-        run.status
-    );
+    run_script(dir.path(), &script, Duration::from_secs(180));
     let bricks = |name: &str| -> u64 {
         let text = std::fs::read_to_string(out(name).with_extension("json")).expect("sidecar");
         let v: serde_json::Value = serde_json::from_str(&text).expect("sidecar JSON");
@@ -428,15 +421,7 @@ fn opens_every_shared_format() {
         );
     }
     script += "quit\n";
-    let path = dir.path().join("script.txt");
-    std::fs::write(&path, script).expect("write the script");
-    let run = run_viewer(&path, Duration::from_secs(240));
-    assert!(
-        run.status.success(),
-        "the viewer failed ({:?}): {}",
-        run.status,
-        String::from_utf8_lossy(&run.stderr)
-    );
+    run_script(dir.path(), &script, Duration::from_secs(240));
     for (name, _) in inputs {
         let (shot, w, h) = read_png(&dir.path().join(format!("{name}.png")));
         let lit = shot
