@@ -35,4 +35,4 @@ mod weights;
 pub use policy::VisibilityPolicy;
 pub use state::{VisibilityConfig, VisibilityCounts, VisibilityState};
 pub use tiles::{PxRect, TileSchedule, TileSchedulerConfig, schedule_tiles};
-pub use weights::VisibleWeights;
+pub use weights::{MAX_COLLAPSES, VisibleWeights};

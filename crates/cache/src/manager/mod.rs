@@ -461,6 +461,12 @@ impl BrickManager {
             cut,
             uploads,
             fades,
+            refined: refined
+                .leaves
+                .iter()
+                .filter(|l| l.class == NodeClass::Data)
+                .map(|l| l.key)
+                .collect(),
             stats,
         }
     }

@@ -153,6 +153,9 @@ pub struct FramePlan {
     /// Leaves of `cut` fading from or toward an ancestor's brick: the
     /// renderer writes them to its per-slot fade table.
     pub fades: Vec<super::FadeSlot>,
+    /// The data leaves of the cut refinement chose this frame, before fades
+    /// (`cut` shows a change of level while it fades; this is the decision).
+    pub refined: Vec<NodeKey>,
     /// Statistics.
     pub stats: FrameStats,
 }

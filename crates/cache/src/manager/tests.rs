@@ -379,6 +379,53 @@ fn a_brick_budget_caps_the_cut_below_the_pool() {
     );
 }
 
+/// `FramePlan::refined` is refinement's decision, `cut` what is drawn while
+/// level changes fade: after the budget shrinks, the refined cut keeps within
+/// it at once while the drawn cut still shows the finer leaves fading toward
+/// their ancestors; once the fades end the two agree.
+#[test]
+fn the_plan_gives_the_refined_cut_before_fades() {
+    let src = Arc::new(TestSource::new(64));
+    let cam = Camera::orbit(Vec3::ZERO, 1.6, 0.4, 0.3);
+    let tf = TransferFunction::ramp(0.1, 1.0, 0.5);
+    let mut m = manager(
+        &src,
+        CacheConfig {
+            gpu_budget_bytes: 4 << 20,
+            fade: Some(crate::fade::FadeDuration::Frames(4)),
+            ..config()
+        },
+    );
+    let drawn = |p: &FramePlan| -> HashSet<NodeKey> {
+        p.cut
+            .iter()
+            .filter(|l| l.kind.is_data())
+            .map(|l| l.key)
+            .collect()
+    };
+    let refined = |p: &FramePlan| -> HashSet<NodeKey> { p.refined.iter().copied().collect() };
+    let mut frame = 0;
+    let full = converge(&mut m, &mut frame, &cam, RenderMode::Mip, &tf, |_, _| {});
+    assert!(full.refined.len() > 24, "{} bricks", full.refined.len());
+    assert_eq!(refined(&full), drawn(&full));
+    m.set_brick_budget(Some(9)).unwrap();
+    frame += 1;
+    let p = m.update(&cam, 1.0, 128, frame, RenderMode::Mip, &tf);
+    assert!(p.refined.len() <= 9, "{} bricks", p.refined.len());
+    assert!(drawn(&p).len() > 9, "the merges fade");
+    // Every drawn leaf lies under a refined one.
+    let r = refined(&p);
+    for k in drawn(&p) {
+        let mut a = Some(k);
+        while a.is_some_and(|n| !r.contains(&n)) {
+            a = m.layout().parent(a.unwrap());
+        }
+        assert!(a.is_some(), "{k:?} under no refined leaf");
+    }
+    let end = converge(&mut m, &mut frame, &cam, RenderMode::Mip, &tf, |_, _| {});
+    assert_eq!(refined(&end), drawn(&end));
+}
+
 #[test]
 fn upload_budget_makes_progress_every_frame() {
     let src = Arc::new(TestSource::new(64));

@@ -213,8 +213,8 @@ pub(crate) struct OutOfCore {
     /// What the image shows of each node (the usage feedback's weights), for
     /// `LodMetric::VisibleError`.
     weights: VisibleWeights,
-    /// The view the weights' split memory is about.
-    weights_view: Option<(brickray_core::Camera, VolumeFrame)>,
+    /// The view the weights' memory (splits, collapses) is about.
+    weights_view: Option<WeightsView>,
     /// `(slot, node)` of the current cut's data leaves.
     leaves: Vec<(u32, NodeKey)>,
     /// True when the last frame's cut differed from the one before.
@@ -228,6 +228,19 @@ pub(crate) struct OutOfCore {
 /// falls below half the error budget.
 const WEIGHT_HYSTERESIS: f64 = 2.0;
 
+/// What the visible weights' memory of a view holds for: the camera, the
+/// volume's placement, and what decides the ranking (the mode, the transfer
+/// function, the error and brick budgets). Any change starts a new view.
+#[derive(Debug, Clone, PartialEq)]
+struct WeightsView {
+    camera: brickray_core::Camera,
+    frame: VolumeFrame,
+    mode: brickray_core::RenderMode,
+    tf: TransferFunction,
+    metric: LodMetric,
+    brick_budget: Option<u32>,
+}
+
 /// Refinement's view of the feedback: the visibility state where a policy
 /// culls, the visible weights where the metric ranks by them.
 struct Filter<'a> {
@@ -236,8 +249,11 @@ struct Filter<'a> {
 }
 
 impl brickray_cache::SplitFilter for Filter<'_> {
+    /// Not when hidden in the previous frames, nor when it collapsed
+    /// `MAX_COLLAPSES` times in this view (`VisibleWeights::may_split`).
     fn may_split(&mut self, key: NodeKey) -> bool {
         self.visibility.as_mut().is_none_or(|v| v.visible(key))
+            && self.weights.as_ref().is_none_or(|w| w.may_split(key))
     }
 
     /// The pixels a leaf last showed order its children's loads: `1 + ln(1 +
@@ -610,11 +626,26 @@ impl VolumeBackend for OutOfCore {
         let t = Instant::now();
         // Usage counts read back since the last frame (never waits).
         let weighted = self.measures_weights();
-        // What split nodes showed as leaves holds for their view only.
-        let view = (desc.camera, desc.frame);
-        if self.weights_view != Some(view) {
-            self.weights.forget_splits();
-            self.weights_view = Some(view);
+        // What split nodes showed as leaves, and how often nodes collapsed,
+        // hold for their view only.
+        let same_view = self.weights_view.as_ref().is_some_and(|v| {
+            v.camera == desc.camera
+                && v.frame == desc.frame
+                && v.mode == desc.settings.mode
+                && v.metric == self.manager.config().lod_metric
+                && v.brick_budget == self.manager.config().brick_budget
+                && v.tf == *tf
+        });
+        if !same_view {
+            self.weights.forget_view();
+            self.weights_view = Some(WeightsView {
+                camera: desc.camera,
+                frame: desc.frame,
+                mode: desc.settings.mode,
+                tf: tf.clone(),
+                metric: self.manager.config().lod_metric,
+                brick_budget: self.manager.config().brick_budget,
+            });
         }
         for u in self.pool.feedback.poll(self.frame) {
             if self.policy.ray_guided() {
@@ -667,6 +698,7 @@ impl VolumeBackend for OutOfCore {
         if weighted {
             self.weights
                 .set_cut(self.frame, self.leaves.iter().map(|l| l.1));
+            self.weights.set_refined_cut(&plan.refined);
         } else {
             self.weights.clear();
         }
