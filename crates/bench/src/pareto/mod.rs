@@ -4,8 +4,8 @@
 //! view with a set of configurations: the defaults, and one knob at a time swept
 //! around them (step, pre-integration, geometric, error-aware and
 //! visible-error level-of-detail budgets, early-termination threshold, the u8 interpolation, the visibility
-//! policy, in core instead of out of core), and the geometric and
-//! visible-error orders under equal brick budgets (10-90% of the finest
+//! policy, in core instead of out of core), and the geometric, error-aware
+//! and visible-error orders under equal brick budgets (10-90% of the finest
 //! cut: equal working sets by construction). Each
 //! configuration gets its own renderer state (a renderer per cache setting,
 //! converged before timing); frames are interleaved round by round over all the
@@ -166,13 +166,16 @@ fn configs(mode: RenderMode, u8_volume: bool, finest_bricks: u32) -> Vec<Config>
         out.push(cfg("lod_visible", format!("{budget}"), key, base));
     }
     // Equal working sets by construction: the same brick budgets, filled in
-    // the geometric order (projected voxel size, tolerance 0) and in the
-    // visible-error order (`VisibleError` at budget 0: only the brick budget
-    // stops refinement).
+    // the geometric order (projected voxel size, tolerance 0), the
+    // error-aware order (`ErrorAware` at budget 0: the node's error under the
+    // TF times its projected size) and the visible-error order
+    // (`VisibleError` at budget 0); at budget 0 only the brick budget stops
+    // refinement.
     for frac in BRICK_FRACTIONS {
         let bricks = ((finest_bricks as f64 * frac).round() as u32).max(1);
         for (knob, metric, tolerance_px) in [
             ("bricks_geometric", LodMetric::Geometric, 0.0),
+            ("bricks_error", LodMetric::ErrorAware { budget: 0.0 }, 0.0),
             (
                 "bricks_visible",
                 LodMetric::VisibleError { budget: 0.0 },
@@ -290,6 +293,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
     let mut per_scene = serde_json::Map::new();
     let (mut lod_gains, mut visible_gains, mut preint_gains) = (Vec::new(), Vec::new(), Vec::new());
     let (mut budget_gains, mut budget_lod_gains) = (Vec::new(), Vec::new());
+    let (mut error_budget_gains, mut error_budget_lod_gains) = (Vec::new(), Vec::new());
     let mut aniso_bricks = None;
     for scene in &scenes {
         let dir = tempfile::tempdir().map_err(|e| e.to_string())?;
@@ -416,7 +420,15 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
                 println!("  visible-error LOD over geometric at equal bricks: {g:+.2} dB");
                 visible_gains.push(g);
             }
-            if let Some((g, gl)) = brick_budget_gain(&cfgs, &m) {
+            if let Some((g, gl)) = brick_budget_gain(&cfgs, &m, "bricks_error") {
+                println!(
+                    "  error-aware order over geometric order at equal brick budgets: {g:+.2} dB \
+                     against the reference, {gl:+.2} dB against the finest cut"
+                );
+                error_budget_gains.push(g);
+                error_budget_lod_gains.push(gl);
+            }
+            if let Some((g, gl)) = brick_budget_gain(&cfgs, &m, "bricks_visible") {
                 println!(
                     "  visible-error order over geometric order at equal brick budgets: {g:+.2} dB \
                      against the reference, {gl:+.2} dB against the finest cut"
@@ -461,6 +473,14 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
     for (key, gains) in [
         ("error_aware_gain_db_at_equal_bricks", &lod_gains),
         ("visible_error_gain_db_at_equal_bricks", &visible_gains),
+        (
+            "error_aware_gain_db_at_equal_brick_budget",
+            &error_budget_gains,
+        ),
+        (
+            "error_aware_gain_db_at_equal_brick_budget_vs_finest",
+            &error_budget_lod_gains,
+        ),
         ("visible_error_gain_db_at_equal_brick_budget", &budget_gains),
         (
             "visible_error_gain_db_at_equal_brick_budget_vs_finest",
@@ -731,10 +751,10 @@ fn finest_cut(
     Ok((stats.cache.working_set_bricks, shot.rgba))
 }
 
-/// The median over brick budgets of the visible-error order's PSNR minus the
+/// The median over brick budgets of the PSNR of the order `knob` minus the
 /// geometric order's at the same budget, against the reference and against
 /// the finest cut's image (`None` without both sweeps).
-fn brick_budget_gain(cfgs: &[Config], m: &[Measured]) -> Option<(f64, f64)> {
+fn brick_budget_gain(cfgs: &[Config], m: &[Measured], knob: &str) -> Option<(f64, f64)> {
     let at = |knob: &str, value: &str| {
         cfgs.iter()
             .zip(m)
@@ -742,17 +762,14 @@ fn brick_budget_gain(cfgs: &[Config], m: &[Measured]) -> Option<(f64, f64)> {
             .map(|(_, x)| x)
     };
     let (mut gains, mut lod_gains) = (Vec::new(), Vec::new());
-    for c in cfgs.iter().filter(|c| c.knob == "bricks_visible") {
-        let (Some(v), Some(g)) = (
-            at("bricks_visible", &c.value),
-            at("bricks_geometric", &c.value),
-        ) else {
+    for c in cfgs.iter().filter(|c| c.knob == knob) {
+        let (Some(v), Some(g)) = (at(knob, &c.value), at("bricks_geometric", &c.value)) else {
             continue;
         };
         let d = v.psnr_db.min(99.0) - g.psnr_db.min(99.0);
         let dl = v.psnr_lod_db.min(99.0) - g.psnr_lod_db.min(99.0);
         println!(
-            "  brick budget {:>5}: geometric {:>5} bricks {:>6.2} dB ({:>6.2}), visible {:>5} bricks {:>6.2} dB ({:>6.2}), {d:+.2} dB ({dl:+.2})",
+            "  brick budget {:>5}: geometric {:>5} bricks {:>6.2} dB ({:>6.2}), {knob} {:>5} bricks {:>6.2} dB ({:>6.2}), {d:+.2} dB ({dl:+.2})",
             c.value,
             g.bricks,
             g.psnr_db,
