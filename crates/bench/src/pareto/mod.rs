@@ -420,21 +420,28 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
                 println!("  visible-error LOD over geometric at equal bricks: {g:+.2} dB");
                 visible_gains.push(g);
             }
-            if let Some((g, gl)) = brick_budget_gain(&cfgs, &m, "bricks_error") {
-                println!(
-                    "  error-aware order over geometric order at equal brick budgets: {g:+.2} dB \
-                     against the reference, {gl:+.2} dB against the finest cut"
-                );
-                error_budget_gains.push(g);
-                error_budget_lod_gains.push(gl);
-            }
-            if let Some((g, gl)) = brick_budget_gain(&cfgs, &m, "bricks_visible") {
-                println!(
-                    "  visible-error order over geometric order at equal brick budgets: {g:+.2} dB \
-                     against the reference, {gl:+.2} dB against the finest cut"
-                );
-                budget_gains.push(g);
-                budget_lod_gains.push(gl);
+            for (knob, order, gains, lod_gains) in [
+                (
+                    "bricks_error",
+                    "error-aware",
+                    &mut error_budget_gains,
+                    &mut error_budget_lod_gains,
+                ),
+                (
+                    "bricks_visible",
+                    "visible-error",
+                    &mut budget_gains,
+                    &mut budget_lod_gains,
+                ),
+            ] {
+                if let Some((g, gl)) = brick_budget_gain(&cfgs, &m, knob) {
+                    println!(
+                        "  {order} order over geometric order at equal brick budgets: {g:+.2} dB \
+                         against the reference, {gl:+.2} dB against the finest cut"
+                    );
+                    gains.push(g);
+                    lod_gains.push(gl);
+                }
             }
             if let Some(g) = preint_gain(&cfgs, &m) {
                 println!("  pre-integration at step 2: {g:+.2} dB");
