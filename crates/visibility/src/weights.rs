@@ -109,6 +109,9 @@ impl VisibleWeights {
     pub fn forget_view(&mut self) {
         self.split_from.clear();
         self.collapses.clear();
+        // A change between the last view's cut and the new view's first is
+        // the view's doing, not a collapse within it.
+        self.refined_inner.clear();
     }
 
     /// The data leaves of the cut refinement chose (before fades): counts the
@@ -430,11 +433,15 @@ mod tests {
         w.set_refined_cut(&[root]);
         assert!(!w.may_split(root));
         assert!(w.may_split(child), "{child:?} collapsed with its parent");
-        // A new view starts over.
+        // A new view starts over, and a collapse from the last view's cut to
+        // the new view's first is not counted.
+        w.set_refined_cut(&kids);
         w.forget_view();
         assert!(w.may_split(root));
+        w.set_refined_cut(&[root]);
         w.set_refined_cut(&kids);
         w.set_refined_cut(&[root]);
+        assert!(w.may_split(root), "one collapse in this view");
         w.set_refined_cut(&kids);
         w.set_refined_cut(&[root]);
         assert!(!w.may_split(root));
