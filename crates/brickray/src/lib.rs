@@ -22,7 +22,7 @@ pub use brickray_render as render;
 pub use brickray_store as store;
 
 pub use brickray_core::{
-    Accel, Camera, CameraError, ClipBox, DType, DepthConvention, FrameError, Projection,
+    Accel, Camera, CameraError, ClipBox, DType, DepthConvention, FrameError, LodMetric, Projection,
     RenderMode, RenderSettings, SettingsError, Shading, TfError, TransferFunction, Volume,
     VolumeDesc, VolumeFrame,
 };

@@ -51,6 +51,8 @@ struct PendingShot {
     camera: brickray::Camera,
     /// Out of core: the data bricks of the last frame's cut.
     working_set_bricks: Option<u32>,
+    /// Out of core: the level-of-detail rule and tolerance in force.
+    lod: Option<(brickray::LodMetric, f32)>,
     image: Arc<Mutex<Option<Arc<egui::ColorImage>>>>,
 }
 
@@ -289,6 +291,7 @@ impl ViewerApp {
             let c = self.ooc;
             let res = self.with_gpu(frame, |d, q, r| -> Result<(), brickray::RenderError> {
                 r.renderer.set_lod_tolerance(c.tolerance_px)?;
+                r.renderer.set_lod_metric(c.lod_metric)?;
                 r.renderer.set_brick_budget(c.brick_budget)?;
                 r.renderer.set_upload_budget(c.upload_budget_bytes)?;
                 r.renderer.set_cpu_budget(c.cpu_budget_bytes)?;
@@ -357,6 +360,7 @@ impl ViewerApp {
                 .last()
                 .filter(|_| streamed)
                 .map(|s| s.working_set as u32),
+            lod: streamed.then_some((self.ooc.lod_metric, self.ooc.tolerance_px)),
             image: slot,
         });
     }
@@ -477,6 +481,13 @@ impl ViewerApp {
                 Action::Clip(min, max) => self.settings.clip = brickray::ClipBox { min, max },
                 Action::Bricks(budget) => {
                     self.ooc.brick_budget = budget;
+                    self.ooc_dirty = true;
+                }
+                Action::Lod(metric, tolerance_px) => {
+                    self.ooc.lod_metric = metric;
+                    if let Some(t) = tolerance_px {
+                        self.ooc.tolerance_px = t;
+                    }
                     self.ooc_dirty = true;
                 }
                 // Changes above take effect in this frame's drawing; waits
@@ -600,6 +611,16 @@ impl ViewerApp {
     }
 }
 
+/// The short name of a level-of-detail rule (the sidecar's, the panel's).
+pub(crate) fn lod_rule_name(metric: brickray::LodMetric) -> &'static str {
+    match metric {
+        brickray::LodMetric::Geometric => "geometric",
+        brickray::LodMetric::ErrorAware { .. } => "error-aware",
+        brickray::LodMetric::ErrorBound { .. } => "error bound",
+        brickray::LodMetric::VisibleError { .. } => "visible error",
+    }
+}
+
 /// Writes the view's pixels as PNG and the camera and viewport as JSON.
 fn save_shot(shot: &PendingShot, image: &egui::ColorImage) -> Result<(), String> {
     let vp = shot.viewport;
@@ -646,6 +667,10 @@ fn save_shot(shot: &PendingShot, image: &egui::ColorImage) -> Result<(), String>
             "far": c.far,
         },
         "working_set_bricks": shot.working_set_bricks,
+        "lod": shot.lod.map(|(metric, tolerance_px)| match metric.budget() {
+            None => serde_json::json!({"rule": "geometric", "tolerance_px": tolerance_px}),
+            Some(budget) => serde_json::json!({"rule": lod_rule_name(metric), "error_budget": budget}),
+        }),
     });
     let text = serde_json::to_string_pretty(&sidecar).map_err(|e| e.to_string())?;
     std::fs::write(shot.path.with_extension("json"), text).map_err(|e| e.to_string())

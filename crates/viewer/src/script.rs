@@ -15,6 +15,9 @@
 //! clip X0 Y0 Z0 X1 Y1 Z1 | clip off   the clip box, texture space 0..1
 //! u8 exact | fast                u8 interpolation (reopens the volume)
 //! bricks N | off                 out of core: the brick budget (N >= 1 data bricks), or none
+//! lod geometric [TOL] | error [BUDGET] | visible [BUDGET]
+//!                                out of core: the level-of-detail rule, with its tolerance
+//!                                (px per voxel) or error budget (8-bit levels x px, default 255)
 //! wait N                         draw N frames
 //! wait converged [MAX]           draw until no brick is pending (at most MAX frames, default 600)
 //! screenshot FILE.png            the volume view, plus FILE.json (camera, viewport)
@@ -59,6 +62,9 @@ pub(crate) enum Action {
     U8Exact(bool),
     /// The out-of-core brick budget (`None`: the pool's capacity).
     Bricks(Option<u32>),
+    /// The out-of-core level-of-detail rule, and the geometric tolerance
+    /// when given.
+    Lod(brickray::LodMetric, Option<f32>),
     /// Draw frames.
     Wait(u32),
     /// Draw until converged, at most this many frames.
@@ -103,6 +109,12 @@ impl ModeName {
         }
     }
 }
+
+/// The error budget of `lod error` and `lod visible` without one, and of
+/// the viewer's error-aware rules when chosen: 255 (8-bit levels x px) lets a
+/// node of full-scale error be as coarse as the geometric rule at 1 px
+/// (`brickray::LodMetric::ErrorAware`).
+pub(crate) const DEFAULT_ERROR_BUDGET: f32 = 255.0;
 
 /// A script line that cannot be run.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -206,6 +218,27 @@ pub(crate) fn parse(text: &str) -> Result<Vec<Action>, ScriptError> {
                     .filter(|&n: &u32| n >= 1)
                     .ok_or_else(|| err("expected a brick count >= 1, or off"))?,
             )),
+            ["lod", rule, value @ ..] if value.len() <= 1 => {
+                let value = value
+                    .first()
+                    .map(|v| num(v))
+                    .transpose()?
+                    .map(|v| {
+                        if v >= 0.0 {
+                            Ok(v)
+                        } else {
+                            Err(err("expected a tolerance or budget >= 0"))
+                        }
+                    })
+                    .transpose()?;
+                let budget = value.unwrap_or(DEFAULT_ERROR_BUDGET);
+                match *rule {
+                    "geometric" => Action::Lod(brickray::LodMetric::Geometric, value),
+                    "error" => Action::Lod(brickray::LodMetric::ErrorAware { budget }, None),
+                    "visible" => Action::Lod(brickray::LodMetric::VisibleError { budget }, None),
+                    _ => return Err(err("expected geometric, error or visible")),
+                }
+            }
             ["clip", "off"] => Action::Clip([0.0; 3], [1.0; 3]),
             ["clip", x0, y0, z0, x1, y1, z1] => {
                 let lo = [unit(x0)?, unit(y0)?, unit(z0)?];
@@ -265,6 +298,9 @@ mod tests {
             clip 0 0 0.5 1 1 1
             bricks 300
             bricks off
+            lod geometric 0.5
+            lod error
+            lod visible 16
             wait 3
             wait converged
             wait converged 50
@@ -273,8 +309,25 @@ mod tests {
             quit
         ";
         let a = parse(text).unwrap();
-        assert_eq!(a.len(), 23);
-        assert_eq!(a[21], Action::WindowScreenshot("out/w.png".into()));
+        assert_eq!(a.len(), 26);
+        assert_eq!(a[24], Action::WindowScreenshot("out/w.png".into()));
+        assert_eq!(
+            a[17],
+            Action::Lod(brickray::LodMetric::Geometric, Some(0.5))
+        );
+        assert_eq!(
+            a[18],
+            Action::Lod(
+                brickray::LodMetric::ErrorAware {
+                    budget: DEFAULT_ERROR_BUDGET
+                },
+                None
+            )
+        );
+        assert_eq!(
+            a[19],
+            Action::Lod(brickray::LodMetric::VisibleError { budget: 16.0 }, None)
+        );
         assert_eq!(a[15], Action::Bricks(Some(300)));
         assert_eq!(a[16], Action::Bricks(None));
         assert_eq!(a[0], Action::Open("/data/head ct.json".into()));
@@ -283,10 +336,10 @@ mod tests {
         assert_eq!(a[8], Action::Orbit(30.0, 20.0, 1.5));
         assert_eq!(a[9], Action::Axis(Axis::NegY));
         assert_eq!(a[13], Action::Background([0, 0, 0]));
-        assert_eq!(a[18], Action::WaitConverged(600));
-        assert_eq!(a[19], Action::WaitConverged(50));
+        assert_eq!(a[21], Action::WaitConverged(600));
+        assert_eq!(a[22], Action::WaitConverged(50));
         assert_eq!(a[14], Action::Clip([0.0, 0.0, 0.5], [1.0; 3]));
-        assert_eq!(a[22], Action::Quit);
+        assert_eq!(a[25], Action::Quit);
     }
 
     #[test]
@@ -309,6 +362,10 @@ mod tests {
             ("clip 0 0 0 1 1", 1),
             ("bricks 0", 1),
             ("bricks many", 1),
+            ("lod fast", 1),
+            ("lod visible -1", 1),
+            ("lod error x", 1),
+            ("lod geometric 1 2", 1),
             ("\n\n\nfly away", 4),
         ] {
             let e = parse(text).unwrap_err();

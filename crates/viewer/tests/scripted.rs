@@ -384,6 +384,74 @@ fn a_brick_budget_caps_the_viewers_working_set() {
     assert_eq!(lifted, free, "the cap lifted");
 }
 
+/// The script's `lod` chooses the level-of-detail rule and its budget, and
+/// the screenshot sidecar reports them: on a store with error records, an
+/// error-aware budget of 1e9 keeps the cut coarse, 0 refines it, and the
+/// visible-error rule under a brick budget of 8 keeps within it and settles
+/// (`wait converged` fails the script otherwise).
+#[test]
+#[cfg_attr(
+    no_display,
+    ignore = "needs an X server (DISPLAY unset when the tests were built; scripts/test.sh starts Xvfb)"
+)]
+fn the_lod_rule_and_its_budget_reach_the_renderer() {
+    if !display_available() {
+        return;
+    }
+    let dir = tempfile::tempdir().expect("temp dir");
+    let out = |name: &str| -> PathBuf { dir.path().join(name) };
+    let store = out("sphere.brs");
+    brickray_harness::store_of(&brickray::core::synthetic::sphere(96), &store);
+    let script = format!(
+        "open {store}\ntf grey\ncamera orbit -20 25 0.9\n\
+         lod error 1e9\nwait converged 600\nscreenshot {a}\n\
+         lod error 0\nwait converged 600\nscreenshot {b}\n\
+         lod visible 0\nbricks 8\nwait converged 600\nscreenshot {c}\n\
+         lod geometric 2\nbricks off\nwait converged 600\nscreenshot {d}\nquit\n",
+        store = store.display(),
+        a = out("coarse.png").display(),
+        b = out("fine.png").display(),
+        c = out("visible.png").display(),
+        d = out("geometric.png").display(),
+    );
+    run_script(dir.path(), &script, Duration::from_secs(180));
+    let read = |name: &str| -> serde_json::Value {
+        let text = std::fs::read_to_string(out(name).with_extension("json")).expect("sidecar");
+        serde_json::from_str(&text).expect("sidecar JSON")
+    };
+    let bricks = |v: &serde_json::Value| v["working_set_bricks"].as_u64().expect("a working set");
+    let (coarse, fine, visible, geometric) = (
+        read("coarse.png"),
+        read("fine.png"),
+        read("visible.png"),
+        read("geometric.png"),
+    );
+    assert_eq!(coarse["lod"]["rule"], "error-aware");
+    assert_eq!(coarse["lod"]["error_budget"], 1e9);
+    assert_eq!(fine["lod"]["error_budget"], 0.0);
+    assert_eq!(visible["lod"]["rule"], "visible error");
+    assert_eq!(geometric["lod"]["rule"], "geometric");
+    assert_eq!(geometric["lod"]["tolerance_px"], 2.0);
+    assert!(
+        bricks(&coarse) < bricks(&fine),
+        "error budget 1e9: {} bricks, 0: {}",
+        bricks(&coarse),
+        bricks(&fine)
+    );
+    assert!(
+        (1..=8).contains(&bricks(&visible)),
+        "brick budget 8: {} bricks",
+        bricks(&visible)
+    );
+    eprintln!(
+        "bricks: error budget 1e9 {}, 0 {}, visible under 8 {}, geometric 2 px {}",
+        bricks(&coarse),
+        bricks(&fine),
+        bricks(&visible),
+        bricks(&geometric)
+    );
+}
+
 /// Every format of the shared fixtures opens in the viewer (through
 /// `brickray::io::open`) and shows an image (MIP, grey TF): NIfTI, a TIFF
 /// stack, a folder of TIFF slices, a DICOM series and OME-Zarr 0.4 and 0.5.

@@ -106,12 +106,7 @@ impl ViewerApp {
                 .default_open(true)
                 .show(ui, |ui| {
                     let c = &mut self.ooc;
-                    let mut changed = ui
-                        .add(
-                            egui::Slider::new(&mut c.tolerance_px, 0.0..=8.0)
-                                .text("LOD tolerance (px per voxel)"),
-                        )
-                        .changed();
+                    let mut changed = lod_ui(ui, &mut c.lod_metric, &mut c.tolerance_px);
                     let mut mib = |ui: &mut egui::Ui,
                                    v: &mut u64,
                                    range: std::ops::RangeInclusive<u64>,
@@ -151,6 +146,8 @@ impl ViewerApp {
                             capped,
                             egui::Slider::new(&mut bricks, 9..=65536)
                                 .logarithmic(true)
+                                // A script's budget outside the range stays.
+                                .clamping(egui::SliderClamping::Edits)
                                 .text("bricks"),
                         );
                         if r.drag_stopped() || (r.changed() && !r.dragged()) {
@@ -252,4 +249,73 @@ fn histogram_strip(ui: &mut egui::Ui, h: &Histogram, log: bool, marker: Option<f
             egui::Stroke::new(2.0, Color32::YELLOW),
         );
     }
+}
+
+/// The level-of-detail rule (docs/cache.md) and its knob: the geometric
+/// tolerance in pixels per voxel, or the error budget of the error-aware
+/// rules in 8-bit levels x pixels (values a script set outside the sliders'
+/// ranges stay). True when either changed.
+fn lod_ui(ui: &mut egui::Ui, metric: &mut brickray::LodMetric, tolerance_px: &mut f32) -> bool {
+    use brickray::LodMetric;
+    let budget = metric
+        .budget()
+        .unwrap_or(crate::script::DEFAULT_ERROR_BUDGET);
+    let rules = [
+        (
+            LodMetric::Geometric,
+            "refine while a voxel projects to more than the tolerance",
+        ),
+        (
+            LodMetric::ErrorAware { budget },
+            "refine by projected size x the node's error under the transfer function \
+             (from the store's error records; sources without them refine geometrically)",
+        ),
+        (
+            LodMetric::VisibleError { budget },
+            "refine by what the image shows of each node, as the renderer measures it, \
+             x its error under the transfer function",
+        ),
+    ];
+    let mut changed = false;
+    egui::ComboBox::from_label("LOD rule")
+        .selected_text(crate::app::lod_rule_name(*metric))
+        .show_ui(ui, |ui| {
+            for (rule, hover) in rules {
+                let same = std::mem::discriminant(&rule) == std::mem::discriminant(metric);
+                if ui
+                    .selectable_label(same, crate::app::lod_rule_name(rule))
+                    .on_hover_text(hover)
+                    .clicked()
+                    && !same
+                {
+                    *metric = rule;
+                    changed = true;
+                }
+            }
+        });
+    match metric {
+        LodMetric::Geometric => {
+            changed |= ui
+                .add(
+                    egui::Slider::new(tolerance_px, 0.0..=8.0)
+                        .clamping(egui::SliderClamping::Edits)
+                        .text("tolerance (px per voxel)"),
+                )
+                .changed();
+        }
+        LodMetric::ErrorAware { budget }
+        | LodMetric::ErrorBound { budget }
+        | LodMetric::VisibleError { budget } => {
+            changed |= ui
+                .add(
+                    egui::Slider::new(budget, 0.0..=16384.0)
+                        .logarithmic(true)
+                        .clamping(egui::SliderClamping::Edits)
+                        .text("error budget (8-bit levels x px)"),
+                )
+                .on_hover_text("0 refines as far as the pool and the brick budget allow")
+                .changed();
+        }
+    }
+    changed
 }
