@@ -96,10 +96,22 @@ fn run_script(dir: &Path, script: &str, limit: Duration) {
     );
 }
 
+/// The JSON sidecar of a screenshot.
+fn sidecar_json(png: &Path) -> serde_json::Value {
+    let text = std::fs::read_to_string(png.with_extension("json")).expect("the sidecar");
+    serde_json::from_str(&text).expect("sidecar JSON")
+}
+
+/// A brick store of a 96^3 sphere (with error records) in `dir`.
+fn sphere_store(dir: &Path) -> PathBuf {
+    let store = dir.join("sphere.brs");
+    brickray_harness::store_of(&brickray::core::synthetic::sphere(96), &store);
+    store
+}
+
 /// The camera and viewport size recorded next to a screenshot.
 fn sidecar(png: &Path) -> (Camera, u32, u32) {
-    let text = std::fs::read_to_string(png.with_extension("json")).expect("the sidecar");
-    let v: serde_json::Value = serde_json::from_str(&text).expect("sidecar JSON");
+    let v = sidecar_json(png);
     let f = |v: &serde_json::Value| v.as_f64().expect("a number") as f32;
     let v3 = |v: &serde_json::Value| glam::Vec3::new(f(&v[0]), f(&v[1]), f(&v[2]));
     let c = &v["camera"];
@@ -310,8 +322,7 @@ fn opens_a_store_and_a_procedural_volume_out_of_core() {
     }
     let dir = tempfile::tempdir().expect("temp dir");
     let out = |name: &str| -> PathBuf { dir.path().join(name) };
-    let store = out("sphere.brs");
-    brickray_harness::store_of(&brickray::core::synthetic::sphere(96), &store);
+    let store = sphere_store(dir.path());
     let script = format!(
         "open {store}\nbackground 0 0 0\noverlays off\ntf grey\ncamera orbit -20 25 0.9\n\
          wait converged 600\nscreenshot {a}\nopen procedural:4096\ntf grey\nwait 4\nscreenshot {b}\nquit\n",
@@ -367,9 +378,9 @@ fn a_brick_budget_caps_the_viewers_working_set() {
     );
     run_script(dir.path(), &script, Duration::from_secs(180));
     let bricks = |name: &str| -> u64 {
-        let text = std::fs::read_to_string(out(name).with_extension("json")).expect("sidecar");
-        let v: serde_json::Value = serde_json::from_str(&text).expect("sidecar JSON");
-        v["working_set_bricks"].as_u64().expect("a working set")
+        sidecar_json(&out(name))["working_set_bricks"]
+            .as_u64()
+            .expect("a working set")
     };
     let (free, capped, lifted) = (
         bricks("free.png"),
@@ -400,8 +411,7 @@ fn the_lod_rule_and_its_budget_reach_the_renderer() {
     }
     let dir = tempfile::tempdir().expect("temp dir");
     let out = |name: &str| -> PathBuf { dir.path().join(name) };
-    let store = out("sphere.brs");
-    brickray_harness::store_of(&brickray::core::synthetic::sphere(96), &store);
+    let store = sphere_store(dir.path());
     let script = format!(
         "open {store}\ntf grey\ncamera orbit -20 25 0.9\n\
          lod error 1e9\nwait converged 600\nscreenshot {a}\n\
@@ -415,10 +425,7 @@ fn the_lod_rule_and_its_budget_reach_the_renderer() {
         d = out("geometric.png").display(),
     );
     run_script(dir.path(), &script, Duration::from_secs(180));
-    let read = |name: &str| -> serde_json::Value {
-        let text = std::fs::read_to_string(out(name).with_extension("json")).expect("sidecar");
-        serde_json::from_str(&text).expect("sidecar JSON")
-    };
+    let read = |name: &str| sidecar_json(&out(name));
     let bricks = |v: &serde_json::Value| v["working_set_bricks"].as_u64().expect("a working set");
     let (coarse, fine, visible, geometric) = (
         read("coarse.png"),
