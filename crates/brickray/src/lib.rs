@@ -35,6 +35,7 @@ pub use brickray_render::{
 pub use brickray_render::{
     FeedbackStats, UsageFrame, VisibilityConfig, VisibilityCounts, VisibilityPolicy,
 };
+pub use brickray_render::{Prediction, PredictionError, PredictionFrame, TraversalClass};
 pub use wgpu;
 
 /// The README's code, compiled as doc tests (the embedding program is complete).

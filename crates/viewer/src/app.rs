@@ -4,7 +4,7 @@
 mod panels;
 
 use crate::camera::{Axis, CameraController, Navigation};
-use crate::script::{Action, ModeName};
+use crate::script::{Action, ModeName, PredictionChoice};
 use crate::source::{Input, Loaded, OpenOptions, Opened, Opening};
 use crate::stats::Stats;
 use crate::tf::{Histogram, Preset, TABLE_ENTRIES, TfModel};
@@ -53,6 +53,11 @@ struct PendingShot {
     working_set_bricks: Option<u32>,
     /// Out of core: the level-of-detail rule and tolerance in force.
     lod: Option<(brickray::LodMetric, f32)>,
+    /// Out of core: the visibility policy in force.
+    visibility: Option<brickray::VisibilityPolicy>,
+    /// The prediction buffer's setting, and the last frame's state of it
+    /// (`None`: that frame did not predict).
+    prediction: (PredictionChoice, Option<brickray::PredictionFrame>),
     image: Arc<Mutex<Option<Arc<egui::ColorImage>>>>,
 }
 
@@ -71,7 +76,12 @@ struct ScriptRunner {
 pub(crate) struct ViewerApp {
     open_opts: OpenOptions,
     ooc: OutOfCoreConfig,
+    /// Out of core: where refinement's visibility comes from.
+    visibility: brickray::VisibilityPolicy,
     ooc_dirty: bool,
+    /// The isosurface prediction buffer.
+    prediction: PredictionChoice,
+    prediction_dirty: bool,
     opening: Option<Opening>,
     shown: Option<Shown>,
     camera: Option<CameraController>,
@@ -133,6 +143,9 @@ impl ViewerApp {
         let mut app = ViewerApp {
             open_opts,
             ooc: startup.ooc,
+            visibility: brickray::VisibilityPolicy::None,
+            prediction: PredictionChoice::Off,
+            prediction_dirty: false,
             ooc_dirty: false,
             opening: None,
             shown: None,
@@ -215,6 +228,9 @@ impl ViewerApp {
             self.tf = TfModel::preset(preset, desc.value_range);
         }
         self.tf_dirty = true;
+        // The visibility policy belongs to the out-of-core backend the open
+        // replaced.
+        self.ooc_dirty = true;
         self.messages.push(loaded.note.clone());
         if !reopened || self.camera.is_none() {
             self.camera = Some(CameraController::new(&vframe));
@@ -288,10 +304,11 @@ impl ViewerApp {
         }
         if self.ooc_dirty && self.shown.as_ref().is_some_and(|s| s.streamed) {
             self.ooc_dirty = false;
-            let c = self.ooc;
+            let (c, policy) = (self.ooc, self.visibility);
             let res = self.with_gpu(frame, |d, q, r| -> Result<(), brickray::RenderError> {
                 r.renderer.set_lod_tolerance(c.tolerance_px)?;
                 r.renderer.set_lod_metric(c.lod_metric)?;
+                r.renderer.set_visibility_policy(policy)?;
                 r.renderer.set_brick_budget(c.brick_budget)?;
                 r.renderer.set_upload_budget(c.upload_budget_bytes)?;
                 r.renderer.set_cpu_budget(c.cpu_budget_bytes)?;
@@ -302,6 +319,13 @@ impl ViewerApp {
             });
             if let Some(Err(e)) = res {
                 self.fail(format!("budgets: {e}"));
+            }
+        }
+        if self.prediction_dirty {
+            self.prediction_dirty = false;
+            let p = self.prediction.settings();
+            if let Some(Err(e)) = self.with_gpu(frame, |_, _, r| r.renderer.set_prediction(p)) {
+                self.fail(format!("prediction: {e}"));
             }
         }
     }
@@ -361,6 +385,8 @@ impl ViewerApp {
                 .filter(|_| streamed)
                 .map(|s| s.working_set as u32),
             lod: streamed.then_some((self.ooc.lod_metric, self.ooc.tolerance_px)),
+            visibility: streamed.then_some(self.visibility),
+            prediction: (self.prediction, self.stats.prediction()),
             image: slot,
         });
     }
@@ -482,6 +508,14 @@ impl ViewerApp {
                 Action::Bricks(budget) => {
                     self.ooc.brick_budget = budget;
                     self.ooc_dirty = true;
+                }
+                Action::Visibility(policy) => {
+                    self.visibility = policy;
+                    self.ooc_dirty = true;
+                }
+                Action::Prediction(choice) => {
+                    self.prediction = choice;
+                    self.prediction_dirty = true;
                 }
                 Action::Lod(metric, tolerance_px) => {
                     self.ooc.lod_metric = metric;
@@ -671,6 +705,13 @@ fn save_shot(shot: &PendingShot, image: &egui::ColorImage) -> Result<(), String>
             None => serde_json::json!({"rule": "geometric", "tolerance_px": tolerance_px}),
             Some(budget) => serde_json::json!({"rule": lod_rule_name(metric), "error_budget": budget}),
         }),
+        "visibility": shot.visibility.map(crate::script::visibility_name),
+        "prediction": {
+            "setting": shot.prediction.0.name(),
+            // Frames since the history was cleared, as the renderer reported
+            // for the last frame drawn.
+            "frames": shot.prediction.1.map(|p| p.frames),
+        },
     });
     let text = serde_json::to_string_pretty(&sidecar).map_err(|e| e.to_string())?;
     std::fs::write(shot.path.with_extension("json"), text).map_err(|e| e.to_string())

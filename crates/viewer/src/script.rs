@@ -15,6 +15,10 @@
 //! clip X0 Y0 Z0 X1 Y1 Z1 | clip off   the clip box, texture space 0..1
 //! u8 exact | fast                u8 interpolation (reopens the volume)
 //! bricks N | off                 out of core: the brick budget (N >= 1 data bricks), or none
+//! visibility none | occlusion | rayguided | both
+//!                                out of core: where refinement's visibility comes from
+//! prediction off | paper | fast | exact
+//!                                the isosurface prediction buffer (iso frames)
 //! lod geometric [TOL] | error [BUDGET] | visible [BUDGET]
 //!                                out of core: the level-of-detail rule, with its tolerance
 //!                                (px per voxel) or error budget (8-bit levels x px, default 255)
@@ -65,6 +69,10 @@ pub(crate) enum Action {
     /// The out-of-core level-of-detail rule, and the geometric tolerance
     /// when given.
     Lod(brickray::LodMetric, Option<f32>),
+    /// The out-of-core visibility policy.
+    Visibility(brickray::VisibilityPolicy),
+    /// The isosurface prediction buffer.
+    Prediction(PredictionChoice),
     /// Draw frames.
     Wait(u32),
     /// Draw until converged, at most this many frames.
@@ -115,6 +123,94 @@ impl ModeName {
 /// node of full-scale error be as coarse as the geometric rule at 1 px
 /// (`brickray::LodMetric::ErrorAware`).
 pub(crate) const DEFAULT_ERROR_BUDGET: f32 = 255.0;
+
+/// The isosurface prediction buffer's settings the viewer offers
+/// (`brickray::Prediction`, docs/prediction.md).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub(crate) enum PredictionChoice {
+    /// Every pixel takes the full traversal.
+    #[default]
+    Off,
+    /// Braley et al.'s method (alpha 10, kappa 0.5): fast, with wrong pixels
+    /// under motion until the next full refresh.
+    Paper,
+    /// The paper's method with reprojection and empty-space skipping in the
+    /// sparse traversal: the fastest variant measured, with fewer wrong
+    /// pixels, not exact.
+    Fast,
+    /// Reprojection, skipping and the first-hit guard: the full traversal's
+    /// image.
+    Exact,
+}
+
+impl PredictionChoice {
+    /// All, in menu order.
+    pub(crate) const ALL: [PredictionChoice; 4] = [
+        PredictionChoice::Off,
+        PredictionChoice::Paper,
+        PredictionChoice::Fast,
+        PredictionChoice::Exact,
+    ];
+
+    /// Its script name and label.
+    pub(crate) fn name(self) -> &'static str {
+        match self {
+            PredictionChoice::Off => "off",
+            PredictionChoice::Paper => "paper",
+            PredictionChoice::Fast => "fast",
+            PredictionChoice::Exact => "exact",
+        }
+    }
+
+    /// What it does, for the menu.
+    pub(crate) fn hover(self) -> &'static str {
+        match self {
+            PredictionChoice::Off => "every pixel takes the full traversal",
+            PredictionChoice::Paper => {
+                "the paper's method: fastest to start, wrong pixels under motion \
+                 until the next full refresh (every 10 frames)"
+            }
+            PredictionChoice::Fast => {
+                "the paper's method with reprojection and empty-space skipping: \
+                 fewer wrong pixels, not exact"
+            }
+            PredictionChoice::Exact => {
+                "reprojection, skipping and the first-hit guard: the full traversal's \
+                 image (on a renderer that already skips empty space, not faster)"
+            }
+        }
+    }
+
+    /// The renderer's settings.
+    pub(crate) fn settings(self) -> Option<brickray::Prediction> {
+        let paper = brickray::Prediction::PAPER;
+        match self {
+            PredictionChoice::Off => None,
+            PredictionChoice::Paper => Some(paper),
+            PredictionChoice::Fast => Some(brickray::Prediction {
+                reproject: true,
+                sparse_ess: true,
+                ..paper
+            }),
+            PredictionChoice::Exact => Some(brickray::Prediction {
+                reproject: true,
+                sparse_ess: true,
+                guard: true,
+                ..paper
+            }),
+        }
+    }
+}
+
+/// The script name of a visibility policy.
+pub(crate) fn visibility_name(policy: brickray::VisibilityPolicy) -> &'static str {
+    match policy {
+        brickray::VisibilityPolicy::None => "none",
+        brickray::VisibilityPolicy::OcclusionQueries => "occlusion",
+        brickray::VisibilityPolicy::RayGuided => "rayguided",
+        brickray::VisibilityPolicy::Both => "both",
+    }
+}
 
 /// A script line that cannot be run.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -239,6 +335,18 @@ pub(crate) fn parse(text: &str) -> Result<Vec<Action>, ScriptError> {
                     _ => return Err(err("expected geometric, error or visible")),
                 }
             }
+            ["visibility", name] => Action::Visibility(
+                brickray::VisibilityPolicy::ALL
+                    .into_iter()
+                    .find(|p| visibility_name(*p) == *name)
+                    .ok_or_else(|| err("expected none, occlusion, rayguided or both"))?,
+            ),
+            ["prediction", name] => Action::Prediction(
+                PredictionChoice::ALL
+                    .into_iter()
+                    .find(|p| p.name() == *name)
+                    .ok_or_else(|| err("expected off, paper, fast or exact"))?,
+            ),
             ["clip", "off"] => Action::Clip([0.0; 3], [1.0; 3]),
             ["clip", x0, y0, z0, x1, y1, z1] => {
                 let lo = [unit(x0)?, unit(y0)?, unit(z0)?];
@@ -301,6 +409,8 @@ mod tests {
             lod geometric 0.5
             lod error
             lod visible 16
+            visibility rayguided
+            prediction exact
             wait 3
             wait converged
             wait converged 50
@@ -309,8 +419,13 @@ mod tests {
             quit
         ";
         let a = parse(text).unwrap();
-        assert_eq!(a.len(), 26);
-        assert_eq!(a[24], Action::WindowScreenshot("out/w.png".into()));
+        assert_eq!(a.len(), 28);
+        assert_eq!(a[26], Action::WindowScreenshot("out/w.png".into()));
+        assert_eq!(
+            a[20],
+            Action::Visibility(brickray::VisibilityPolicy::RayGuided)
+        );
+        assert_eq!(a[21], Action::Prediction(PredictionChoice::Exact));
         assert_eq!(
             a[17],
             Action::Lod(brickray::LodMetric::Geometric, Some(0.5))
@@ -336,10 +451,22 @@ mod tests {
         assert_eq!(a[8], Action::Orbit(30.0, 20.0, 1.5));
         assert_eq!(a[9], Action::Axis(Axis::NegY));
         assert_eq!(a[13], Action::Background([0, 0, 0]));
-        assert_eq!(a[21], Action::WaitConverged(600));
-        assert_eq!(a[22], Action::WaitConverged(50));
+        assert_eq!(a[23], Action::WaitConverged(600));
+        assert_eq!(a[24], Action::WaitConverged(50));
         assert_eq!(a[14], Action::Clip([0.0, 0.0, 0.5], [1.0; 3]));
-        assert_eq!(a[25], Action::Quit);
+        assert_eq!(a[27], Action::Quit);
+    }
+
+    #[test]
+    fn every_prediction_choice_is_valid_and_only_exact_guards() {
+        for c in PredictionChoice::ALL {
+            if let Some(p) = c.settings() {
+                p.validate().unwrap();
+                assert_eq!(p.guard, c == PredictionChoice::Exact, "{c:?}");
+            } else {
+                assert_eq!(c, PredictionChoice::Off);
+            }
+        }
     }
 
     #[test]
@@ -366,6 +493,8 @@ mod tests {
             ("lod visible -1", 1),
             ("lod error x", 1),
             ("lod geometric 1 2", 1),
+            ("visibility some", 1),
+            ("prediction on", 1),
             ("\n\n\nfly away", 4),
         ] {
             let e = parse(text).unwrap_err();

@@ -35,6 +35,8 @@ pub(crate) struct Stats {
     levels: [u32; 16],
     since_converged: u64,
     streamed: bool,
+    /// The last frame's prediction buffer state (`None`: it did not predict).
+    prediction: Option<brickray::PredictionFrame>,
 }
 
 impl Stats {
@@ -52,6 +54,7 @@ impl Stats {
             ..Default::default()
         };
         self.streamed = s.out_of_core.is_some();
+        self.prediction = s.frame.prediction;
         if let Some(o) = &s.out_of_core {
             let c = &o.cache;
             sample.working_set = c.working_set_bricks as f64;
@@ -69,6 +72,11 @@ impl Stats {
         while self.samples.front().is_some_and(|f| t - f.t > WINDOW_S) {
             self.samples.pop_front();
         }
+    }
+
+    /// The last frame's prediction buffer state.
+    pub(crate) fn prediction(&self) -> Option<brickray::PredictionFrame> {
+        self.prediction
     }
 
     /// The last sample.

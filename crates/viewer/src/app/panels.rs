@@ -65,6 +65,18 @@ impl ViewerApp {
                 self.tf_editor.log_histogram,
                 Some(self.iso),
             );
+            let before = self.prediction;
+            egui::ComboBox::from_label("prediction buffer")
+                .selected_text(self.prediction.name())
+                .show_ui(ui, |ui| {
+                    for p in PredictionChoice::ALL {
+                        ui.selectable_value(&mut self.prediction, p, p.name())
+                            .on_hover_text(p.hover());
+                    }
+                })
+                .response
+                .on_hover_text("reuse last frame's hit depths (Braley et al.; docs/prediction.md)");
+            self.prediction_dirty |= self.prediction != before;
         }
         let s = &mut self.settings;
         ui.add(
@@ -107,6 +119,25 @@ impl ViewerApp {
                 .show(ui, |ui| {
                     let c = &mut self.ooc;
                     let mut changed = lod_ui(ui, &mut c.lod_metric, &mut c.tolerance_px);
+                    let before = self.visibility;
+                    egui::ComboBox::from_label("visibility")
+                        .selected_text(crate::script::visibility_name(self.visibility))
+                        .show_ui(ui, |ui| {
+                            for p in brickray::VisibilityPolicy::ALL {
+                                ui.selectable_value(
+                                    &mut self.visibility,
+                                    p,
+                                    crate::script::visibility_name(p),
+                                );
+                            }
+                        })
+                        .response
+                        .on_hover_text(
+                            "bricks hidden behind opaque matter are neither refined nor \
+                             loaded: occlusion queries (the paper's), the ray caster's usage \
+                             counts (rayguided), or both (docs/visibility.md)",
+                        );
+                    changed |= self.visibility != before;
                     let mut mib = |ui: &mut egui::Ui,
                                    v: &mut u64,
                                    range: std::ops::RangeInclusive<u64>,
