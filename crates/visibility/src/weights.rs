@@ -72,12 +72,15 @@ pub struct VisibleWeights {
 /// ranks as an inner node by their smaller sum, collapses to give its bricks to
 /// other nodes, is observed as a leaf again and splits again (measured on the
 /// head CT's bone surface at 78 and 391 bricks of 16: periods of 3 and 5 frames
-/// that never ended; docs/visibility.md). A node that collapsed twice in a view
-/// has shown that its ranking does not hold; it stays a leaf, and the cut
-/// settles. One collapse is allowed to pass: a node split on an estimate
-/// (before any ray measured it) may rightly collapse once its children are
-/// observed, and split again when the view's weights say so.
-pub const MAX_COLLAPSES: u32 = 2;
+/// that never ended; docs/visibility.md). A node that collapsed three times in
+/// a view has shown that its ranking does not hold; it stays a leaf, and the
+/// cut settles. Fewer collapses pass: a node split on an estimate (before any
+/// ray measured it) may rightly collapse once its children are observed, and
+/// cuts that settle without the limit pass through such changes on the way.
+/// With a limit of 2 one of the `pareto` suite's error-budget configurations
+/// that settled without it (the bone surface at budget 1020) settled 5 bricks
+/// coarser and 4.2 dB worse; with 3 it settles where it did without the limit.
+pub const MAX_COLLAPSES: u32 = 3;
 
 impl VisibleWeights {
     /// No weights yet, over the octree `layout`.
@@ -407,7 +410,8 @@ mod tests {
     }
 
     #[test]
-    fn a_node_that_collapsed_twice_in_a_view_may_not_split_again() {
+    fn a_node_that_collapsed_max_collapses_times_in_a_view_may_not_split_again() {
+        assert_eq!(MAX_COLLAPSES, 3, "the sequence below counts to 3");
         let l = layout([64, 64, 64]);
         let root = NodeKey::new(0, 0, 0, 0);
         let kids: Vec<NodeKey> = l.children(root).to_vec();
@@ -431,6 +435,9 @@ mod tests {
         w.set_refined_cut(&kids);
         assert!(w.may_split(root), "staying split is no collapse");
         w.set_refined_cut(&[root]);
+        assert!(w.may_split(root), "two collapses pass");
+        w.set_refined_cut(&kids);
+        w.set_refined_cut(&[root]);
         assert!(!w.may_split(root));
         assert!(w.may_split(child), "{child:?} collapsed with its parent");
         // A new view starts over, and a collapse from the last view's cut to
@@ -439,9 +446,11 @@ mod tests {
         w.forget_view();
         assert!(w.may_split(root));
         w.set_refined_cut(&[root]);
-        w.set_refined_cut(&kids);
-        w.set_refined_cut(&[root]);
-        assert!(w.may_split(root), "one collapse in this view");
+        for _ in 0..MAX_COLLAPSES - 1 {
+            w.set_refined_cut(&kids);
+            w.set_refined_cut(&[root]);
+        }
+        assert!(w.may_split(root), "the first cut's change is not counted");
         w.set_refined_cut(&kids);
         w.set_refined_cut(&[root]);
         assert!(!w.may_split(root));
