@@ -50,6 +50,12 @@ fn tf_json() -> String {
     )
 }
 
+/// A temporary folder for a windowed test, or `None` (the test returns)
+/// without a display ([`display_available`]).
+fn windowed_test_dir() -> Option<tempfile::TempDir> {
+    display_available().then(|| tempfile::tempdir().expect("temp dir"))
+}
+
 fn display_available() -> bool {
     if std::env::var_os("DISPLAY").is_some() || std::env::var_os("WAYLAND_DISPLAY").is_some() {
         return true;
@@ -317,10 +323,9 @@ fn scripted_screenshots_match_the_library() {
     ignore = "needs an X server (DISPLAY unset when the tests were built; scripts/test.sh starts Xvfb)"
 )]
 fn opens_a_store_and_a_procedural_volume_out_of_core() {
-    if !display_available() {
+    let Some(dir) = windowed_test_dir() else {
         return;
-    }
-    let dir = tempfile::tempdir().expect("temp dir");
+    };
     let out = |name: &str| -> PathBuf { dir.path().join(name) };
     let store = sphere_store(dir.path());
     let script = format!(
@@ -363,10 +368,9 @@ fn opens_a_store_and_a_procedural_volume_out_of_core() {
     ignore = "needs an X server (DISPLAY unset when the tests were built; scripts/test.sh starts Xvfb)"
 )]
 fn a_brick_budget_caps_the_viewers_working_set() {
-    if !display_available() {
+    let Some(dir) = windowed_test_dir() else {
         return;
-    }
-    let dir = tempfile::tempdir().expect("temp dir");
+    };
     let out = |name: &str| -> PathBuf { dir.path().join(name) };
     let script = format!(
         "open procedural:256\ntf grey\nwait converged 600\nscreenshot {a}\n\
@@ -406,10 +410,9 @@ fn a_brick_budget_caps_the_viewers_working_set() {
     ignore = "needs an X server (DISPLAY unset when the tests were built; scripts/test.sh starts Xvfb)"
 )]
 fn the_lod_rule_and_its_budget_reach_the_renderer() {
-    if !display_available() {
+    let Some(dir) = windowed_test_dir() else {
         return;
-    }
-    let dir = tempfile::tempdir().expect("temp dir");
+    };
     let out = |name: &str| -> PathBuf { dir.path().join(name) };
     let store = sphere_store(dir.path());
     let script = format!(
@@ -472,10 +475,9 @@ fn the_lod_rule_and_its_budget_reach_the_renderer() {
     ignore = "needs an X server (DISPLAY unset when the tests were built; scripts/test.sh starts Xvfb)"
 )]
 fn visibility_and_prediction_reach_the_renderer() {
-    if !display_available() {
+    let Some(dir) = windowed_test_dir() else {
         return;
-    }
-    let dir = tempfile::tempdir().expect("temp dir");
+    };
     let out = |name: &str| -> PathBuf { dir.path().join(name) };
     let store = sphere_store(dir.path());
     let mut script = format!(
