@@ -37,6 +37,8 @@ pub(crate) struct Stats {
     streamed: bool,
     /// The last frame's prediction buffer state (`None`: it did not predict).
     prediction: Option<brickray::PredictionFrame>,
+    /// Out of core: the visibility policy and the cut's leaves by visibility.
+    visibility: Option<(brickray::VisibilityPolicy, brickray::VisibilityCounts)>,
 }
 
 impl Stats {
@@ -61,6 +63,7 @@ impl Stats {
             sample.pool = c.pool_occupied as f64 / c.pool_slots.max(1) as f64;
             sample.in_flight = c.requests_in_flight as f64;
             self.levels = o.data_leaves_per_level;
+            self.visibility = Some((o.policy, o.visibility));
             self.since_converged = if o.converged {
                 0
             } else {
@@ -115,6 +118,27 @@ impl Stats {
                 } else {
                     String::new()
                 }
+            ));
+        }
+        // What the visibility feedback and the prediction buffer did.
+        if let Some((policy, v)) = self
+            .visibility
+            .filter(|(p, _)| *p != brickray::VisibilityPolicy::None)
+        {
+            ui.label(format!(
+                "visibility ({}): {} bricks visible, {} hidden, {} not yet observed",
+                crate::script::visibility_name(policy),
+                v.visible,
+                v.invisible,
+                v.unobserved
+            ));
+        }
+        if let Some(p) = self.prediction {
+            ui.label(format!(
+                "prediction: {} frames of history{}{}",
+                p.frames,
+                if p.refresh { ", full refresh" } else { "" },
+                if p.reprojected { ", reprojected" } else { "" }
             ));
         }
         let plot = |id: &str| {
