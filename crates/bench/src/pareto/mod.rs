@@ -22,59 +22,24 @@
 //! level-of-detail sweeps) and, as the last line, the figures as JSON.
 
 mod chart;
+mod configs;
 mod front;
+mod gains;
 mod scenes;
 
 use crate::Figures;
 use crate::runner::{Runner, finite_db, median, round2};
-use brickray_core::{
-    Accel, LodMetric, RenderMode, RenderSettings, Shading, TransferFunction, U8Filtering,
-};
+use brickray_core::{RenderMode, TransferFunction};
 use brickray_harness::GpuContext;
 use brickray_reference::{ReferenceOptions, mean_flip, psnr, render_reference, ssim};
-use brickray_render::{OutOfCoreConfig, RendererOptions, VisibilityPolicy, VolumeRenderer};
+use brickray_render::{OutOfCoreConfig, RendererOptions, VolumeRenderer};
+use configs::{Config, RendererKey, base_settings, configs};
+use gains::{brick_budget_gain, lod_gain, preint_gain};
 use scenes::Scene;
 use serde_json::json;
 use std::fmt::Write as _;
 use std::path::PathBuf;
 use std::sync::Arc;
-
-/// A configuration's renderer state: what needs its own renderer.
-#[derive(Debug, Clone, Copy, PartialEq)]
-struct RendererKey {
-    in_core: bool,
-    tolerance_px: f32,
-    metric: LodMetric,
-    u8_filtering: U8Filtering,
-    policy: VisibilityPolicy,
-    /// The cut's brick budget (`OutOfCoreConfig::brick_budget`).
-    brick_budget: Option<u32>,
-}
-
-/// The defaults: out of core with the cache's default LOD tolerance.
-const DEFAULT_KEY: RendererKey = RendererKey {
-    in_core: false,
-    tolerance_px: 1.0,
-    metric: LodMetric::Geometric,
-    u8_filtering: U8Filtering::Exact,
-    policy: VisibilityPolicy::None,
-    brick_budget: None,
-};
-
-/// The brick budgets of the equal-working-set sweeps, as fractions of the
-/// finest cut's data bricks.
-const BRICK_FRACTIONS: [f64; 9] = [0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9];
-
-/// One configuration of a scene.
-#[derive(Debug, Clone)]
-struct Config {
-    /// The knob swept (`default` for the defaults).
-    knob: &'static str,
-    /// The knob's value, as printed.
-    value: String,
-    key: RendererKey,
-    settings: RenderSettings,
-}
 
 /// What a configuration measured.
 #[derive(Debug, Clone, Default)]
@@ -92,141 +57,6 @@ struct Measured {
     mse: f64,
     flip: f64,
     ssim: f64,
-}
-
-/// The settings every configuration of a mode starts from: the defaults, DVR
-/// shaded.
-fn base_settings(mode: RenderMode) -> RenderSettings {
-    RenderSettings {
-        mode,
-        shading: Shading {
-            enabled: matches!(mode, RenderMode::Dvr),
-            ..Shading::default()
-        },
-        ..RenderSettings::default()
-    }
-}
-
-/// The configurations of one mode: the defaults first, then each knob's sweep.
-/// `finest_bricks` is the data bricks of the finest cut (the brick-budget
-/// sweeps give fractions of it).
-fn configs(mode: RenderMode, u8_volume: bool, finest_bricks: u32) -> Vec<Config> {
-    let base = base_settings(mode);
-    let cfg = |knob, value: String, key, settings| Config {
-        knob,
-        value,
-        key,
-        settings,
-    };
-    let mut out = vec![cfg("default", "defaults".into(), DEFAULT_KEY, base)];
-    for step in [0.125f32, 0.25, 1.0, 2.0, 4.0] {
-        let s = RenderSettings {
-            step_factor: step,
-            ..base
-        };
-        out.push(cfg("step", format!("{step}"), DEFAULT_KEY, s));
-    }
-    if matches!(mode, RenderMode::Dvr) {
-        for step in [0.5f32, 1.0, 2.0, 4.0] {
-            let s = RenderSettings {
-                step_factor: step,
-                preintegrated: true,
-                ..base
-            };
-            out.push(cfg("preint", format!("{step}"), DEFAULT_KEY, s));
-        }
-    }
-    for tol in [0.0f32, 0.5, 2.0, 4.0, 8.0] {
-        let key = RendererKey {
-            tolerance_px: tol,
-            ..DEFAULT_KEY
-        };
-        out.push(cfg("lod_geometric", format!("{tol} px"), key, base));
-    }
-    // The error budget in 8-bit levels x pixels: 255 refines a node of
-    // full-scale error to 1 px, like the geometric rule at 1 px.
-    for budget in [32.0f32, 64.0, 128.0, 255.0, 510.0, 1020.0, 2040.0] {
-        let key = RendererKey {
-            metric: LodMetric::ErrorAware { budget },
-            ..DEFAULT_KEY
-        };
-        out.push(cfg("lod_error", format!("{budget}"), key, base));
-    }
-    // The same budgets ranked by what the image shows (the renderer's
-    // measured visible weights, LodMetric::VisibleError): equal to lod_error's
-    // priority for a fully visible node at 1 px; nearer nodes weigh more, so
-    // the sweep goes further to reach the coarse cuts.
-    for budget in [
-        32.0f32, 64.0, 128.0, 255.0, 510.0, 1020.0, 2040.0, 4080.0, 8160.0, 16320.0,
-    ] {
-        let key = RendererKey {
-            metric: LodMetric::VisibleError { budget },
-            ..DEFAULT_KEY
-        };
-        out.push(cfg("lod_visible", format!("{budget}"), key, base));
-    }
-    // Equal working sets by construction: the same brick budgets, filled in
-    // the geometric order (projected voxel size, tolerance 0), the
-    // error-aware order (`ErrorAware` at budget 0: the node's error under the
-    // TF times its projected size) and the visible-error order
-    // (`VisibleError` at budget 0); at budget 0 only the brick budget stops
-    // refinement.
-    for frac in BRICK_FRACTIONS {
-        let bricks = ((finest_bricks as f64 * frac).round() as u32).max(1);
-        for (knob, metric, tolerance_px) in [
-            ("bricks_geometric", LodMetric::Geometric, 0.0),
-            ("bricks_error", LodMetric::ErrorAware { budget: 0.0 }, 0.0),
-            (
-                "bricks_visible",
-                LodMetric::VisibleError { budget: 0.0 },
-                0.0,
-            ),
-        ] {
-            let key = RendererKey {
-                tolerance_px,
-                metric,
-                brick_budget: Some(bricks),
-                ..DEFAULT_KEY
-            };
-            out.push(cfg(knob, format!("{bricks}"), key, base));
-        }
-    }
-    for ert in [None, Some(0.9f32), Some(0.95), Some(0.999)] {
-        let s = RenderSettings {
-            accel: Accel {
-                early_termination: ert,
-                ..base.accel
-            },
-            ..base
-        };
-        let v = ert.map_or("off".to_string(), |t| format!("{t}"));
-        out.push(cfg("ert", v, DEFAULT_KEY, s));
-    }
-    if u8_volume {
-        let key = RendererKey {
-            u8_filtering: U8Filtering::Fast,
-            ..DEFAULT_KEY
-        };
-        out.push(cfg("u8_filtering", "fast".into(), key, base));
-    }
-    if !matches!(mode, RenderMode::Mip) {
-        for (name, policy) in [
-            ("ray-guided", VisibilityPolicy::RayGuided),
-            ("occlusion", VisibilityPolicy::OcclusionQueries),
-        ] {
-            let key = RendererKey {
-                policy,
-                ..DEFAULT_KEY
-            };
-            out.push(cfg("visibility", name.into(), key, base));
-        }
-    }
-    let key = RendererKey {
-        in_core: true,
-        ..DEFAULT_KEY
-    };
-    out.push(cfg("in_core", "in core".into(), key, base));
-    out
 }
 
 /// Options of the suite.
@@ -704,26 +534,6 @@ fn measure(
     Ok(out)
 }
 
-/// The median PSNR gain of an error-aware LOD sweep (`knob`) over the geometric one at
-/// equal working-set size: each error-aware point's PSNR minus the geometric
-/// sweep's PSNR interpolated (in log bricks) at its brick count; points outside
-/// the geometric sweep's range are left out. `None` without both sweeps.
-fn lod_gain(cfgs: &[Config], m: &[Measured], knob: &str) -> Option<f64> {
-    let series = |knob: &str| -> Vec<(f64, f64)> {
-        cfgs.iter()
-            .zip(m)
-            .filter(|(c, _)| c.knob == knob || (knob == "lod_geometric" && c.knob == "default"))
-            .map(|(_, x)| (x.bricks as f64, x.psnr_db.min(99.0)))
-            .collect()
-    };
-    let (geo, err) = (series("lod_geometric"), series(knob));
-    let gains: Vec<f64> = err
-        .iter()
-        .filter_map(|&(b, p)| crate::lod::interpolate(&geo, b).map(|g| p - g))
-        .collect();
-    (!gains.is_empty()).then(|| median(&gains))
-}
-
 /// The data bricks of the finest cut (tolerance 0, geometric) of a scene's
 /// mode, what the brick-budget sweeps take fractions of, and its image with
 /// the base settings.
@@ -756,48 +566,4 @@ fn finest_cut(
     frames.ok_or_else(|| format!("the finest cut did not converge: {stats:?}"))?;
     let shot = run.frame(&mut r, scene.camera, scene.frame, settings, true)?;
     Ok((stats.cache.working_set_bricks, shot.rgba))
-}
-
-/// The median over brick budgets of the PSNR of the order `knob` minus the
-/// geometric order's at the same budget, against the reference and against
-/// the finest cut's image (`None` without both sweeps).
-fn brick_budget_gain(cfgs: &[Config], m: &[Measured], knob: &str) -> Option<(f64, f64)> {
-    let at = |knob: &str, value: &str| {
-        cfgs.iter()
-            .zip(m)
-            .find(|(c, _)| c.knob == knob && c.value == value)
-            .map(|(_, x)| x)
-    };
-    let (mut gains, mut lod_gains) = (Vec::new(), Vec::new());
-    for c in cfgs.iter().filter(|c| c.knob == knob) {
-        let (Some(v), Some(g)) = (at(knob, &c.value), at("bricks_geometric", &c.value)) else {
-            continue;
-        };
-        let d = v.psnr_db.min(99.0) - g.psnr_db.min(99.0);
-        let dl = v.psnr_lod_db.min(99.0) - g.psnr_lod_db.min(99.0);
-        println!(
-            "  brick budget {:>5}: geometric {:>5} bricks {:>6.2} dB ({:>6.2}), {knob} {:>5} bricks {:>6.2} dB ({:>6.2}), {d:+.2} dB ({dl:+.2})",
-            c.value,
-            g.bricks,
-            g.psnr_db,
-            g.psnr_lod_db.min(99.0),
-            v.bricks,
-            v.psnr_db,
-            v.psnr_lod_db.min(99.0)
-        );
-        gains.push(d);
-        lod_gains.push(dl);
-    }
-    (!gains.is_empty()).then(|| (median(&gains), median(&lod_gains)))
-}
-
-/// PSNR of pre-integration at step 2 voxels minus the plain step-2 PSNR.
-fn preint_gain(cfgs: &[Config], m: &[Measured]) -> Option<f64> {
-    let at = |knob: &str| {
-        cfgs.iter()
-            .zip(m)
-            .find(|(c, _)| c.knob == knob && c.settings.step_factor == 2.0)
-            .map(|(_, x)| x.psnr_db)
-    };
-    Some(at("preint")? - at("step")?)
 }
