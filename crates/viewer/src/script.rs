@@ -202,6 +202,16 @@ impl PredictionChoice {
     }
 }
 
+/// The short name of a level-of-detail rule (the sidecar's, the panel's).
+pub(crate) fn lod_rule_name(metric: brickray::LodMetric) -> &'static str {
+    match metric {
+        brickray::LodMetric::Geometric => "geometric",
+        brickray::LodMetric::ErrorAware { .. } => "error-aware",
+        brickray::LodMetric::ErrorBound { .. } => "error bound",
+        brickray::LodMetric::VisibleError { .. } => "visible error",
+    }
+}
+
 /// The script name of a visibility policy.
 pub(crate) fn visibility_name(policy: brickray::VisibilityPolicy) -> &'static str {
     match policy {

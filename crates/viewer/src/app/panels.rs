@@ -309,12 +309,12 @@ fn lod_ui(ui: &mut egui::Ui, metric: &mut brickray::LodMetric, tolerance_px: &mu
     ];
     let mut changed = false;
     egui::ComboBox::from_label("LOD rule")
-        .selected_text(crate::app::lod_rule_name(*metric))
+        .selected_text(crate::script::lod_rule_name(*metric))
         .show_ui(ui, |ui| {
             for (rule, hover) in rules {
                 let same = std::mem::discriminant(&rule) == std::mem::discriminant(metric);
                 if ui
-                    .selectable_label(same, crate::app::lod_rule_name(rule))
+                    .selectable_label(same, crate::script::lod_rule_name(rule))
                     .on_hover_text(hover)
                     .clicked()
                     && !same
