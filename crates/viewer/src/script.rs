@@ -212,16 +212,6 @@ pub(crate) fn lod_rule_name(metric: brickray::LodMetric) -> &'static str {
     }
 }
 
-/// The script name of a visibility policy.
-pub(crate) fn visibility_name(policy: brickray::VisibilityPolicy) -> &'static str {
-    match policy {
-        brickray::VisibilityPolicy::None => "none",
-        brickray::VisibilityPolicy::OcclusionQueries => "occlusion",
-        brickray::VisibilityPolicy::RayGuided => "rayguided",
-        brickray::VisibilityPolicy::Both => "both",
-    }
-}
-
 /// A script line that cannot be run.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 #[error("script line {line}: {reason}: {text:?}")]
@@ -348,7 +338,7 @@ pub(crate) fn parse(text: &str) -> Result<Vec<Action>, ScriptError> {
             ["visibility", name] => Action::Visibility(
                 brickray::VisibilityPolicy::ALL
                     .into_iter()
-                    .find(|p| visibility_name(*p) == *name)
+                    .find(|p| p.name() == *name)
                     .ok_or_else(|| err("expected none, occlusion, rayguided or both"))?,
             ),
             ["prediction", name] => Action::Prediction(

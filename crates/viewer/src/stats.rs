@@ -127,7 +127,7 @@ impl Stats {
         {
             ui.label(format!(
                 "visibility ({}): {} bricks visible, {} hidden, {} not yet observed",
-                crate::script::visibility_name(policy),
+                policy.name(),
                 v.visible,
                 v.invisible,
                 v.unobserved

@@ -121,14 +121,10 @@ impl ViewerApp {
                     let mut changed = lod_ui(ui, &mut c.lod_metric, &mut c.tolerance_px);
                     let before = self.visibility;
                     egui::ComboBox::from_label("visibility")
-                        .selected_text(crate::script::visibility_name(self.visibility))
+                        .selected_text(self.visibility.name())
                         .show_ui(ui, |ui| {
                             for p in brickray::VisibilityPolicy::ALL {
-                                ui.selectable_value(
-                                    &mut self.visibility,
-                                    p,
-                                    crate::script::visibility_name(p),
-                                );
+                                ui.selectable_value(&mut self.visibility, p, p.name());
                             }
                         })
                         .response

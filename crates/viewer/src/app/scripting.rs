@@ -302,7 +302,7 @@ fn save_shot(shot: &PendingShot, image: &egui::ColorImage) -> Result<(), String>
             None => serde_json::json!({"rule": "geometric", "tolerance_px": tolerance_px}),
             Some(budget) => serde_json::json!({"rule": crate::script::lod_rule_name(metric), "error_budget": budget}),
         }),
-        "visibility": shot.visibility.map(crate::script::visibility_name),
+        "visibility": shot.visibility.map(brickray::VisibilityPolicy::name),
         "prediction": {
             "setting": shot.prediction.0.name(),
             // Frames since the history was cleared, as the renderer reported
