@@ -66,7 +66,11 @@ fn local_traversal(acc: ptr<function, Accum>, r: Ray, t0: f32, t1: f32, tp: f32)
             let inside = sample_value(tex_at(r, t)) >= frame.isovalue;
             (*acc).samples = (*acc).samples + 1u;
             if (in_b && !inside) {
-                iso_bracket(acc, t, t + dt);
+                // The bracket as the full traversal computes it from its upper
+                // sample (t0 + (k + 1) dt, not t + dt, which can round
+                // differently), so the hit and its pixel are bit-identical.
+                let tb = t0 + f32(kb) * dt;
+                iso_bracket(acc, tb - dt, tb);
                 return true;
             }
             kb = k;
