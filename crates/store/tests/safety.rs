@@ -269,6 +269,19 @@ fn wait_timeout(
     }
 }
 
+/// True when this process ignores signal `num` (`SigIgn` of
+/// /proc/self/status; false where that cannot be read).
+fn ignored_here(num: i32) -> bool {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find_map(|l| l.strip_prefix("SigIgn:"))
+                .and_then(|m| u64::from_str_radix(m.trim(), 16).ok())
+        })
+        .is_some_and(|mask| mask & (1u64 << (num - 1)) != 0)
+}
+
 /// A sparse u8 input of zeros, `n`^3 voxels (1024: 1 GiB, slow enough to
 /// build that a signal sent as soon as the temporary appears arrives
 /// mid-build).
@@ -292,6 +305,18 @@ fn signals_during_a_build_leave_no_temporaries() {
     let json = big_sparse_input(d, 1024);
     let exe = env!("CARGO_BIN_EXE_brickray-store");
     for sig in ["INT", "TERM", "HUP"] {
+        let num = match sig {
+            "INT" => 2,
+            "TERM" => 15,
+            _ => 1,
+        };
+        // A signal this process ignores (the suite run under `nohup`) is
+        // ignored by the child too, which is the build's documented behaviour
+        // (`a_build_started_under_nohup_survives_sighup`), not this test's.
+        if ignored_here(num) {
+            eprintln!("SIG{sig} is ignored in this process: the child would ignore it too");
+            continue;
+        }
         let out = d.join("big.brs");
         let mut child = Command::new(exe)
             .args(["build", "--quiet"])
@@ -336,11 +361,6 @@ fn signals_during_a_build_leave_no_temporaries() {
             "SIG{sig}: the build finished before the signal; make the input larger"
         );
         // It died of the signal, as without a handler.
-        let num = match sig {
-            "INT" => 2,
-            "TERM" => 15,
-            _ => 1,
-        };
         assert_eq!(
             std::os::unix::process::ExitStatusExt::signal(&status),
             Some(num),
