@@ -4,7 +4,9 @@
 //!   reads any [`brickray_io::VolumeReader`] and writes one store file
 //!   (temporary name, renamed when complete; never over one of its inputs or
 //!   a non-regular file); [`remove_partial_files`] removes the temporaries of
-//!   builds in progress (for signal handlers);
+//!   builds in progress (for signal handlers; [`ignored_signals`] says which
+//!   signals the process started with ignored, which such handlers leave
+//!   alone);
 //! * [`open`] / [`Store`]: validated open, lock-free positional brick reads with
 //!   checksum verification and a check of every decoded brick against its
 //!   node's table entry, metadata queries; implements [`BrickSource`];
@@ -31,7 +33,7 @@ pub use build::{BuildOptions, BuildReport, build, build_file, check_output};
 pub use convert::{ConvertReport, convert};
 pub use error::{Mismatch, StoreError};
 pub use errsec::ERROR_ENTRY_LEN;
-pub use partial::remove_partial_files;
+pub use partial::{ignored_signals, remove_partial_files};
 pub use procedural::ProceduralSource;
 pub use reader::{NodeRecord, Store, StoreStats, decode_payload, open};
 

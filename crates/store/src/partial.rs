@@ -149,6 +149,21 @@ pub fn remove_partial_files() -> usize {
         .count()
 }
 
+/// The signals this process ignores (bit `n - 1` for signal `n`), from
+/// `/proc/self/status`; none where that cannot be read. A signal ignored at
+/// start (`nohup`, a background job of a non-interactive shell) should stay
+/// ignored: signal handlers that remove partial files skip those.
+pub fn ignored_signals() -> u64 {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find_map(|l| l.strip_prefix("SigIgn:"))
+                .and_then(|m| u64::from_str_radix(m.trim(), 16).ok())
+        })
+        .unwrap_or(0)
+}
+
 /// At most `NAME_BYTES` bytes of a file name (on a character boundary where
 /// the name is UTF-8).
 fn truncated_name(name: &OsStr) -> OsString {

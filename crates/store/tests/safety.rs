@@ -269,19 +269,6 @@ fn wait_timeout(
     }
 }
 
-/// True when this process ignores signal `num` (`SigIgn` of
-/// /proc/self/status; false where that cannot be read).
-fn ignored_here(num: i32) -> bool {
-    std::fs::read_to_string("/proc/self/status")
-        .ok()
-        .and_then(|s| {
-            s.lines()
-                .find_map(|l| l.strip_prefix("SigIgn:"))
-                .and_then(|m| u64::from_str_radix(m.trim(), 16).ok())
-        })
-        .is_some_and(|mask| mask & (1u64 << (num - 1)) != 0)
-}
-
 /// A sparse u8 input of zeros, `n`^3 voxels (1024: 1 GiB, slow enough to
 /// build that a signal sent as soon as the temporary appears arrives
 /// mid-build).
@@ -313,7 +300,7 @@ fn signals_during_a_build_leave_no_temporaries() {
         // A signal this process ignores (the suite run under `nohup`) is
         // ignored by the child too, which is the build's documented behaviour
         // (`a_build_started_under_nohup_survives_sighup`), not this test's.
-        if ignored_here(num) {
+        if brickray_store::ignored_signals() & (1u64 << (num - 1)) != 0 {
             eprintln!("SIG{sig} is ignored in this process: the child would ignore it too");
             continue;
         }

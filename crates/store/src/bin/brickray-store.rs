@@ -229,7 +229,7 @@ fn main() -> ExitCode {
 /// non-interactive shell) stays ignored.
 fn remove_temporaries_on_signals() -> Result<(), String> {
     use signal_hook::consts::{SIGHUP, SIGINT, SIGTERM};
-    let ignored = ignored_signals();
+    let ignored = brickray_store::ignored_signals();
     let wanted: Vec<i32> = [SIGINT, SIGTERM, SIGHUP]
         .into_iter()
         .filter(|&s| ignored & (1u64 << (s - 1)) == 0)
@@ -246,19 +246,6 @@ fn remove_temporaries_on_signals() -> Result<(), String> {
         }
     });
     Ok(())
-}
-
-/// The signals this process ignores (bit `n - 1` for signal `n`), from
-/// `/proc/self/status`; none where that cannot be read.
-fn ignored_signals() -> u64 {
-    std::fs::read_to_string("/proc/self/status")
-        .ok()
-        .and_then(|s| {
-            s.lines()
-                .find_map(|l| l.strip_prefix("SigIgn:"))
-                .and_then(|m| u64::from_str_radix(m.trim(), 16).ok())
-        })
-        .unwrap_or(0)
 }
 
 fn cmd_build(
