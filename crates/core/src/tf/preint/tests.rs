@@ -53,12 +53,16 @@ fn tau_integral_matches_a_fine_sum() {
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(48))]
 
-    /// Against brute force (20 000 sub-steps), at the table's own fine grid
+    /// Against brute force (200 000 sub-steps), at the table's own fine grid
     /// (255 x FINE cells). The opacity is exact, so it agrees within the brute
     /// force's own error (1e-4); the colour is off by at most the colour's
     /// variation across one fine cell (the quadrature's only approximation) plus
     /// the brute force's variation across one sub-step: `slope * (1/cells +
-    /// |sb - sf| / 20 000) + 1e-4`, `slope` the TF's steepest colour slope.
+    /// |sb - sf| / 200 000) + 1e-4`, `slope` the TF's steepest colour slope.
+    /// (With 20 000 sub-steps a spike of opacity 1, where the optical depth
+    /// has a logarithmic singularity, left the brute force 2.3e-4 off in
+    /// opacity: the saved regression case, which converges to the table's
+    /// value as the sub-steps grow.)
     #[test]
     fn segment_matches_brute_force(
         e in entries(), sf in 0.0f64..=1.0, sb in 0.0f64..=1.0, d in 0.05f64..8.0,
@@ -67,7 +71,7 @@ proptest! {
         let cells = 255 * FINE;
         let p = Preintegrator::new(&tf, cells);
         let got = p.segment(sf, sb, d);
-        let n = 20_000;
+        let n = 200_000;
         let want = brute(&tf, sf, sb, d, n);
         let slope = tf.entries().windows(2).flat_map(|w| (0..3).map(move |k| (w[1][k] - w[0][k]).abs() as f64))
             .fold(0.0, f64::max) * (tf.len() - 1) as f64;
@@ -183,3 +187,4 @@ fn full_table_on_a_sharp_peak() {
     println!("peak 0.45..0.55, step 2: worst bilinear table error {worst:.2e}");
     assert!(worst < 0.05, "{worst}");
 }
+
