@@ -34,6 +34,9 @@
 //! (`LodMetric::VisibleError` at threshold 0); its gain over the
 //! geometric order is reported beside the error-aware one.
 //!
+//! `--by oracle` (`crate::oracle`) ranks by each node's exact cost to the
+//! image instead, on the pareto suite's scenes: the ceiling of any order.
+//!
 //! Scenes: `mri` (shared T1 MRI, shaded DVR), `ct` (shared head CT,
 //! translucent DVR), `ct_iso` (head CT, bone isosurface), `ml` (Marschner-Lobb
 //! 128^3, DVR with a sharp band).
@@ -395,7 +398,8 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
     match arg(args, "--by", "knob".to_string())?.as_str() {
         "knob" => {}
         "budget" => return budget_run(size, brick, &scenes),
-        other => return Err(format!("--by {other}: knob or budget")),
+        "oracle" => return crate::oracle::run(size, brick, &scenes),
+        other => return Err(format!("--by {other}: knob, budget or oracle")),
     }
     let policy = match arg(args, "--policy", "none".to_string())?.as_str() {
         "none" => brickray_render::VisibilityPolicy::None,

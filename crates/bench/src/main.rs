@@ -12,6 +12,7 @@ mod cut;
 mod formats;
 mod lod;
 mod ooc;
+mod oracle;
 mod pareto;
 mod prediction;
 mod prediction_chart;
@@ -229,7 +230,9 @@ enum Suite {
         /// Image side in pixels (default 256).
         #[arg(long)]
         size: Option<u32>,
-        /// Scenes, comma-separated, of mri, ct, ct_iso, ml (default mri,ct,ml).
+        /// Scenes, comma-separated, of mri, ct, ct_iso, ml (default mri,ct,ml);
+        /// with `--by oracle`, volumes of the pareto suite (ct, ct5, mri,
+        /// nuclei, ml, noise; every mode of each).
         #[arg(long)]
         scenes: Option<String>,
         /// Brick side of the stores (default 32).
@@ -240,7 +243,9 @@ enum Suite {
         #[arg(long)]
         policy: Option<String>,
         /// knob (default): sweep the tolerance and the error budget on the
-        /// GPU; budget: both orders under the same brick budgets, on the CPU.
+        /// GPU; budget: both orders under the same brick budgets, on the CPU;
+        /// oracle: the geometric and visible orders against a ranking by each
+        /// node's exact cost to the image, on the CPU.
         #[arg(long)]
         by: Option<String>,
     },

@@ -43,7 +43,7 @@ pub(super) struct Config {
 
 /// The settings every configuration of a mode starts from: the defaults, DVR
 /// shaded.
-pub(super) fn base_settings(mode: RenderMode) -> RenderSettings {
+pub(crate) fn base_settings(mode: RenderMode) -> RenderSettings {
     RenderSettings {
         mode,
         shading: Shading {

@@ -33,9 +33,14 @@ use brickray_core::{RenderMode, TransferFunction};
 use brickray_harness::GpuContext;
 use brickray_reference::{ReferenceOptions, mean_flip, psnr, render_reference, ssim};
 use brickray_render::{OutOfCoreConfig, RendererOptions, VolumeRenderer};
-use configs::{Config, RendererKey, base_settings, configs};
+pub(crate) use configs::base_settings;
+use configs::{Config, RendererKey, configs};
 use gains::{brick_budget_gain, lod_gain, preint_gain};
 use scenes::Scene;
+pub(crate) use scenes::scenes;
+
+/// Voxels per side of the procedural volumes, by default.
+pub(crate) const ML_SIDE: u32 = 128;
 use serde_json::json;
 use std::fmt::Write as _;
 use std::path::PathBuf;
@@ -92,7 +97,7 @@ fn options(args: &[String]) -> Result<Options, String> {
         size: crate::arg(args, "--size", 512)?,
         rounds: crate::arg(args, "--rounds", 3)?,
         scenes: list("--scenes"),
-        ml_side: crate::arg(args, "--ml-side", 128)?,
+        ml_side: crate::arg(args, "--ml-side", ML_SIDE)?,
         out: path("--out", "target/pareto"),
         charts: path("--charts", "docs/charts/pareto"),
         supersample: crate::arg(args, "--supersample", 2)?,
@@ -106,7 +111,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
     if o.size == 0 || o.rounds == 0 {
         return Err("--size and --rounds must be > 0".into());
     }
-    let scenes = scenes::scenes(&o.scenes, o.ml_side)?;
+    let scenes = scenes(&o.scenes, o.ml_side)?;
     let gpu = GpuContext::new().map_err(|e| e.to_string())?;
     println!("adapter: {}", gpu.describe());
     println!(
