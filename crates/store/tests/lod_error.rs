@@ -91,7 +91,9 @@ proptest! {
     /// For random volumes, transfer functions and points of every coarser
     /// node, the classified coarse and finest samples differ by at most the
     /// node's DVR error (both placements of coarse voxels: centre at
-    /// `k * 2^s` and at `(k + 1/2) * 2^s - 1/2` finest voxels).
+    /// `k * f` and at `(k + 1/2) * f - 1/2` finest voxels, `f` the level's
+    /// voxel factor per axis), in isotropic octrees and in the anisotropic
+    /// pyramids of thick-slice volumes.
     #[test]
     fn drawing_a_node_never_exceeds_its_bound(
         dims in proptest::array::uniform3(1u32..14),
@@ -103,14 +105,18 @@ proptest! {
         max_filter in any::<bool>(),
         entries in proptest::collection::vec(proptest::array::uniform4(0.0f32..1.0), 2..12),
         pts in proptest::collection::vec(proptest::array::uniform3(0.0f64..1.0), 12),
+        slice in prop_oneof![Just(1.0f32), Just(2.0), Just(5.0)],
     ) {
         let dtype = if f32_data { DType::F32 } else { DType::U8 };
         let dir = tempfile::tempdir().unwrap();
         let bytes = volume(dims, dtype, seed, smooth);
         let mut r = MemReader::new(dims, dtype, bytes.clone());
+        // Thick slices: an anisotropic pyramid (the finer axes halve first).
+        let anisotropic = slice != 1.0;
+        r.desc.spacing = [1.0, 1.0, slice];
         let out = dir.path().join("v.brs");
         let filter = if max_filter { Filter::Max } else { Filter::Average };
-        let o = BuildOptions { brick, apron, filter, ..BuildOptions::default() };
+        let o = BuildOptions { brick, apron, filter, anisotropic, ..BuildOptions::default() };
         let report = build(&mut r, &out, &o).unwrap();
         prop_assert!(report.errors);
         let store = open(&out).unwrap();
@@ -127,8 +133,7 @@ proptest! {
                 continue;
             }
             let bound = node_tf_error(&rec.info, RenderMode::Dvr, &table, &layout).unwrap();
-            let s = (finest - key.level) as i32;
-            let scale = 2f64.powi(s);
+            let scale = layout.voxel_factor(key.level);
             let ld = layout.level_dims(key.level);
             for p in &pts {
                 // A point of the node's region (level coordinates), inside the level volume.
@@ -141,7 +146,7 @@ proptest! {
                 let cv = classify(&tf, layout.volume.normalize(c as f32) as f64);
                 for centred in [false, true] {
                     let fq: [f64; 3] = std::array::from_fn(|a| {
-                        if centred { (q[a] + 0.5) * scale - 0.5 } else { q[a] * scale }
+                        if centred { (q[a] + 0.5) * scale[a] - 0.5 } else { q[a] * scale[a] }
                     });
                     let f = trilinear(&levels[finest as usize], fd, fq);
                     let fv = classify(&tf, layout.volume.normalize(f as f32) as f64);

@@ -6,7 +6,8 @@
 //! Computed after the payloads are written, from them: one pass over the
 //! finest-level bricks fills, for every voxel of every coarser level, the
 //! min, max, sum and sum of squares of the finest voxels of its footprint
-//! (composed level by level over the 2x2x2 children); then every coarser
+//! (composed level by level over its children: 2x2x2, or 2 along only the
+//! axes the level halves in an anisotropic pyramid); then every coarser
 //! node's brick is decoded and each of its interior voxels `C` (`0..=brick`
 //! per axis, clamped) gets `dev = max(hi - C, C - lo)` over the 3x3x3
 //! neighbourhood of its footprint and the mean square of `F - C` over its own
@@ -167,9 +168,16 @@ pub(super) fn compute(
     // Level finest-1 from the finest bricks (their interior voxels): per leaf,
     // a dense block of the parent voxels it touches, in parallel; merged
     // serially, 256 leaves at a time.
+    // Per axis, 2 where the level above halves it, else 1 (an anisotropic
+    // pyramid halves only the finer axes first).
+    let ratio = |l: u8| -> [u32; 3] {
+        let m = layout.split_mask(l);
+        std::array::from_fn(|a| 1 + ((m >> a) & 1) as u32)
+    };
     {
         let parent = &mut pyramid[finest as usize - 1];
         let pd = parent.dims;
+        let r = ratio(finest - 1);
         let first = geo.first[finest as usize] as usize;
         for group in entries[first..].chunks(256) {
             let per_leaf: Vec<Result<Vec<(usize, Acc)>, StoreError>> = group
@@ -180,9 +188,9 @@ pub(super) fn compute(
                         let key = e.key();
                         let has = brick_values(file, path, layout, e, raw, vals)?;
                         let (x0, y0, z0) = (key.x * b, key.y * b, key.z * b);
-                        let p0 = [x0 / 2, y0 / 2, z0 / 2];
-                        let n = (b / 2 + 2) as usize;
-                        let mut acc = vec![Acc::EMPTY; n * n * n];
+                        let p0 = [x0 / r[0], y0 / r[1], z0 / r[2]];
+                        let n: [usize; 3] = std::array::from_fn(|i| (b / r[i] + 2) as usize);
+                        let mut acc = vec![Acc::EMPTY; n[0] * n[1] * n[2]];
                         for k in 0..b.min(fdims[2].saturating_sub(z0)) {
                             for j in 0..b.min(fdims[1].saturating_sub(y0)) {
                                 for i in 0..b.min(fdims[0].saturating_sub(x0)) {
@@ -196,9 +204,10 @@ pub(super) fn compute(
                                     } else {
                                         (e.min, e.max)
                                     };
-                                    let q = ((x0 + i) / 2 - p0[0]) as usize
-                                        + n * (((y0 + j) / 2 - p0[1]) as usize
-                                            + n * ((z0 + k) / 2 - p0[2]) as usize);
+                                    let q = ((x0 + i) / r[0] - p0[0]) as usize
+                                        + n[0]
+                                            * (((y0 + j) / r[1] - p0[1]) as usize
+                                                + n[1] * ((z0 + k) / r[2] - p0[2]) as usize);
                                     let v = lo as f64;
                                     acc[q].add(&Acc {
                                         lo,
@@ -215,7 +224,7 @@ pub(super) fn compute(
                             if c.n == 0 {
                                 continue;
                             }
-                            let (qx, qy, qz) = (q % n, (q / n) % n, q / (n * n));
+                            let (qx, qy, qz) = (q % n[0], (q / n[0]) % n[1], q / (n[0] * n[1]));
                             let p = (p0[0] as usize + qx)
                                 + pd[0] as usize
                                     * ((p0[1] as usize + qy)
@@ -233,8 +242,10 @@ pub(super) fn compute(
             }
         }
     }
-    // Coarser levels: the children that exist (an odd edge has one).
+    // Coarser levels: the children that exist (an odd edge has one; an axis
+    // the level does not halve has one).
     for l in (0..finest - 1).rev() {
+        let r = ratio(l);
         let (coarse, fine) = pyramid.split_at_mut(l as usize + 1);
         let (c, f) = (&mut coarse[l as usize], &fine[0]);
         let cd = c.dims;
@@ -247,10 +258,11 @@ pub(super) fn compute(
                 for y in 0..cd[1] {
                     for x in 0..cd[0] {
                         let mut s = Acc::EMPTY;
-                        for dz in 0..2 {
-                            for dy in 0..2 {
-                                for dx in 0..2 {
-                                    let (fx, fy, fz) = (2 * x + dx, 2 * y + dy, 2 * z as u32 + dz);
+                        for dz in 0..r[2] {
+                            for dy in 0..r[1] {
+                                for dx in 0..r[0] {
+                                    let (fx, fy, fz) =
+                                        (r[0] * x + dx, r[1] * y + dy, r[2] * z as u32 + dz);
                                     if fx < fd[0] && fy < fd[1] && fz < fd[2] {
                                         s.add(&f.acc[f.idx(fx, fy, fz)]);
                                     }
