@@ -36,7 +36,7 @@ pub use camera::{
 };
 pub use lod::{
     BinStats, ERROR_BINS, LodMetric, NodeError, TfErrorTable, node_pixel_error, node_tf_error,
-    node_tf_error_expected,
+    node_tf_error_expected, node_visible_error,
 };
 pub use macrocell::{MacroCellGrid, sub_cell_ranges, sub_cells_per_axis};
 pub use pyramid::{ALL_AXES, Children, LayoutError, MAX_LEVELS, anisotropic_split_masks};

@@ -74,11 +74,11 @@ pub enum LodMetric {
     /// `w`, the transmittance-weighted length in finest voxels of every
     /// pixel's ray through it (an isosurface ray's up to its hit), summed over
     /// pixels, times 255 x its per-sample expected error
-    /// ([`node_tf_error_expected`]): the node's summed change of the image,
-    /// linearised, in 8-bit levels x pixels. It is divided by `brick^2` so that
-    /// for a fully visible node whose voxels project to 1 px it equals
-    /// [`LodMetric::ErrorAware`]'s priority, and the same `budget` means the
-    /// same there; a nearer node ranks higher by the extra pixels it covers, a
+    /// ([`node_visible_error`]: the mean change of a sample, where
+    /// [`LodMetric::ErrorAware`] takes the worst bin's): the node's summed
+    /// change of the image, linearised, in 8-bit levels x pixels. It is
+    /// divided by `brick^2` so that for a fully visible node whose voxels
+    /// project to 1 px it is that mean change per pixel; a nearer node ranks higher by the extra pixels it covers, a
     /// half-hidden one lower by its transmittance, a hidden one (weight 0) is
     /// never split. Nodes without a measured weight (the first frames of a
     /// view, in-core rendering, refinement on the CPU without weights) are
@@ -311,6 +311,67 @@ fn clamp01(v: f64) -> f64 {
     if v.is_nan() { 0.0 } else { v.clamp(0.0, 1.0) }
 }
 
+/// A data node's error record and range, for the error functions below.
+struct NodeBins<'a> {
+    err: NodeError,
+    min: f64,
+    max: f64,
+    layout: &'a OctreeLayout,
+}
+
+impl<'a> NodeBins<'a> {
+    /// `Err` holds the answer without bins: `None` when the node records no
+    /// error bound, 0 for a node without data of its own (uniform, empty).
+    fn of(info: &NodeInfo, layout: &'a OctreeLayout) -> Result<NodeBins<'a>, Option<f64>> {
+        let err = info.error.ok_or(None)?;
+        if info.kind != NodeKind::Data {
+            return Err(Some(0.0));
+        }
+        Ok(NodeBins {
+            err,
+            min: info.min as f64,
+            max: info.max as f64,
+            layout,
+        })
+    }
+
+    /// A raw value on the volume's 0..1 scale (0 for a flat value range).
+    fn norm(&self, v: f64) -> f64 {
+        let [lo, hi] = self.layout.volume.value_range;
+        let span = hi as f64 - lo as f64;
+        if span > 0.0 {
+            (v - lo as f64) / span
+        } else {
+            0.0
+        }
+    }
+
+    fn occupied(&self) -> impl Iterator<Item = usize> + '_ {
+        (0..ERROR_BINS).filter(|&b| self.err.is_occupied(b))
+    }
+
+    /// Bin `b` widened by `d` (raw units), on the 0..1 scale.
+    fn widened(&self, b: usize, d: f64) -> (f64, f64) {
+        let (lo, hi) = self.err.widened_by(b, self.min, self.max, d);
+        (self.norm(lo), self.norm(hi))
+    }
+
+    /// Whether the isovalue lies in some bin widened by its `d(b)` (a bin that
+    /// does not deviate cannot move the crossing).
+    fn iso_in_a_bin(&self, value: f32, d: impl Fn(usize) -> f64) -> bool {
+        self.occupied().any(|b| {
+            let (a, c) = self.widened(b, d(b));
+            let (a, c) = if a <= c { (a, c) } else { (c, a) };
+            self.err.dev[b] > 0 && a <= value as f64 && value as f64 <= c
+        })
+    }
+}
+
+/// An error in 0..=1 (NaN, from a degenerate record, counts as full scale).
+fn unit(e: f64) -> f64 {
+    if e.is_nan() { 1.0 } else { e.clamp(0.0, 1.0) }
+}
+
 /// The error of drawing a node instead of the finest data, as the image sees
 /// it, in 0..=1, from its metadata only; `None` when the node records no
 /// error bound (a version-1 store, a source without error data).
@@ -331,46 +392,34 @@ pub fn node_tf_error(
     table: &TfErrorTable,
     layout: &OctreeLayout,
 ) -> Option<f64> {
-    let err = info.error?;
-    if info.kind != NodeKind::Data {
-        return Some(0.0);
-    }
-    let (min, max) = (info.min as f64, info.max as f64);
-    let norm = |v: f64| -> f64 {
-        let [lo, hi] = layout.volume.value_range;
-        let span = hi as f64 - lo as f64;
-        if span > 0.0 {
-            (v - lo as f64) / span
-        } else {
-            0.0
-        }
+    let n = match NodeBins::of(info, layout) {
+        Ok(n) => n,
+        Err(e) => return e,
     };
-    let bins = (0..ERROR_BINS).filter(|&b| err.is_occupied(b));
+    let dev = |b| n.err.deviation(b, n.min, n.max);
     let e = match mode {
-        RenderMode::Dvr => bins
+        RenderMode::Dvr => n
+            .occupied()
             .map(|b| {
-                let (lo, hi) = err.widened(b, min, max);
-                table.classified_change(norm(lo), norm(hi))
+                let (lo, hi) = n.widened(b, dev(b));
+                table.classified_change(lo, hi)
             })
             .fold(0.0, f64::max),
         RenderMode::Iso { value, .. } => {
-            let hit = bins.into_iter().any(|b| {
-                let (lo, hi) = err.widened(b, min, max);
-                let (a, c) = (norm(lo), norm(hi));
-                let (a, c) = if a <= c { (a, c) } else { (c, a) };
-                // A bin that is not widened cannot move the crossing.
-                err.dev[b] > 0 && a <= value as f64 && value as f64 <= c
-            });
-            if hit { 1.0 } else { 0.0 }
+            if n.iso_in_a_bin(value, dev) {
+                1.0
+            } else {
+                0.0
+            }
         }
         RenderMode::Mip => {
             let span = (layout.volume.value_range[1] as f64 - layout.volume.value_range[0] as f64)
                 .abs()
                 .max(f64::MIN_POSITIVE);
-            err.max_deviation(min, max) / span
+            n.err.max_deviation(n.min, n.max) / span
         }
     };
-    Some(if e.is_nan() { 1.0 } else { e.clamp(0.0, 1.0) })
+    Some(unit(e))
 }
 
 /// The *expected* error of drawing a node instead of the finest data, in
@@ -393,44 +442,83 @@ pub fn node_tf_error_expected(
     table: &TfErrorTable,
     layout: &OctreeLayout,
 ) -> Option<f64> {
-    let err = info.error?;
-    if info.kind != NodeKind::Data {
-        return Some(0.0);
-    }
-    let (min, max) = (info.min as f64, info.max as f64);
-    let [vlo, vhi] = layout.volume.value_range;
-    let vspan = vhi as f64 - vlo as f64;
-    let norm = |v: f64| -> f64 {
-        if vspan > 0.0 {
-            (v - vlo as f64) / vspan
-        } else {
-            0.0
-        }
+    let n = match NodeBins::of(info, layout) {
+        Ok(n) => n,
+        Err(e) => return e,
     };
-    let bins = (0..ERROR_BINS).filter(|&b| err.is_occupied(b));
+    let rms = |b| n.err.typical_deviation(b, n.min, n.max);
     let e: f64 = match mode {
-        RenderMode::Dvr => bins
+        RenderMode::Dvr => n
+            .occupied()
             .map(|b| {
-                let (lo, hi) = err.widened_by(b, min, max, err.typical_deviation(b, min, max));
-                table.classified_change(norm(lo), norm(hi))
+                let (lo, hi) = n.widened(b, rms(b));
+                table.classified_change(lo, hi)
             })
             .fold(0.0, f64::max),
         RenderMode::Iso { value, .. } => {
-            let hit = bins.into_iter().any(|b| {
-                let (lo, hi) = err.widened_by(b, min, max, err.typical_deviation(b, min, max));
-                let (a, c) = (norm(lo), norm(hi));
-                let (a, c) = if a <= c { (a, c) } else { (c, a) };
-                err.dev[b] > 0 && a <= value as f64 && value as f64 <= c
-            });
-            if hit { 1.0 } else { 0.0 }
+            if n.iso_in_a_bin(value, rms) {
+                1.0
+            } else {
+                0.0
+            }
         }
         RenderMode::Mip => {
-            bins.map(|b| err.share(b) * err.typical_deviation(b, min, max))
-                .sum::<f64>()
-                / vspan.abs().max(f64::MIN_POSITIVE)
+            let [vlo, vhi] = layout.volume.value_range;
+            n.occupied().map(|b| n.err.share(b) * rms(b)).sum::<f64>()
+                / (vhi as f64 - vlo as f64).abs().max(f64::MIN_POSITIVE)
         }
     };
-    Some(if e.is_nan() { 1.0 } else { e.clamp(0.0, 1.0) })
+    Some(unit(e))
+}
+
+/// The per-sample error [`LodMetric::VisibleError`] weighs a node's visible
+/// weight by, in 0..=1; `None` when the node records no error bound.
+///
+/// * DVR: the change of the opacity-weighted classified sample that a sample
+///   of the node typically undergoes, averaged over its coarse voxels: each
+///   occupied bin contributes its share of the voxels times the change over
+///   the bin widened by its typical deviation `s` times `s / (w + 2 s)` (`w`
+///   the bin's width): the chance that a value of the bin moved by `s` crosses
+///   a given point of the widened bin. A node with a sharp transfer-function
+///   edge in a bin few of its voxels occupy then ranks below one whose every
+///   voxel sits on a slope, where [`node_tf_error_expected`] (the worst bin)
+///   ranks them alike. Never above [`node_tf_error_expected`].
+/// * iso-surface: 1 when the isovalue lies in a bin widened by its deviation
+///   *bound*, else 0 ([`node_tf_error`]'s rule). The bound covers the footprints of the node's
+///   neighbours (docs/store-format.md, "Deviation"), where the hit's
+///   refinement and its gradient read across the node's faces: a node next
+///   to the surface changes the image though its own typical values never
+///   reach the isovalue.
+/// * MIP: as [`node_tf_error_expected`].
+pub fn node_visible_error(
+    info: &NodeInfo,
+    mode: RenderMode,
+    table: &TfErrorTable,
+    layout: &OctreeLayout,
+) -> Option<f64> {
+    if !matches!(mode, RenderMode::Dvr) {
+        return match mode {
+            RenderMode::Iso { .. } => node_tf_error(info, mode, table, layout),
+            _ => node_tf_error_expected(info, mode, table, layout),
+        };
+    }
+    let n = match NodeBins::of(info, layout) {
+        Ok(n) => n,
+        Err(e) => return e,
+    };
+    let width = (n.max - n.min).max(0.0) / ERROR_BINS as f64;
+    let e: f64 = n
+        .occupied()
+        .map(|b| {
+            let s = n.err.typical_deviation(b, n.min, n.max);
+            if s <= 0.0 {
+                return 0.0;
+            }
+            let (lo, hi) = n.widened(b, s);
+            n.err.share(b) * table.classified_change(lo, hi) * s / (width + 2.0 * s)
+        })
+        .sum();
+    Some(unit(e))
 }
 
 /// The expected error a node adds to a pixel, in 0..=1: for DVR the
@@ -517,18 +605,7 @@ mod tests {
     /// A data node over `[min, max]` whose every bin is occupied, with
     /// deviation `dev` and typical deviation `rms` (fractions of its range).
     fn node(min: f64, max: f64, dev: f64, rms: f64) -> NodeInfo {
-        let span = max - min;
-        let bins = [BinStats {
-            count: 10,
-            dev: dev * span,
-            sum_sq: 10.0 * (rms * span).powi(2),
-        }; ERROR_BINS];
-        NodeInfo {
-            kind: NodeKind::Data,
-            min: min as f32,
-            max: max as f32,
-            error: Some(NodeError::encode(&bins, min, max)),
-        }
+        node_with(min, max, [10; ERROR_BINS], dev, rms)
     }
 
     proptest! {
@@ -592,6 +669,120 @@ mod tests {
                 "level {level}: edge {e_edge}, ramp {e_ramp}, flat {e_flat}"
             );
         }
+    }
+
+    /// A data node over `[min, max]` with bin `b` holding `count[b]` coarse
+    /// voxels at deviation `dev` and typical deviation `rms` (fractions of the
+    /// range).
+    fn node_with(min: f64, max: f64, count: [u64; ERROR_BINS], dev: f64, rms: f64) -> NodeInfo {
+        let span = max - min;
+        let bins = count.map(|c| BinStats {
+            count: c,
+            dev: if c > 0 { dev * span } else { 0.0 },
+            sum_sq: c as f64 * (rms * span).powi(2),
+        });
+        NodeInfo {
+            kind: NodeKind::Data,
+            min: min as f32,
+            max: max as f32,
+            error: Some(NodeError::encode(&bins, min, max)),
+        }
+    }
+
+    proptest! {
+        /// The visible order's per-sample error is a mean where the expected
+        /// error is the worst bin's, so in DVR it never exceeds it; on
+        /// isosurfaces it flags every node the expected error flags (its
+        /// bins are widened by the bound, never less than the typical
+        /// deviation); in MIP the two agree.
+        #[test]
+        fn the_visible_error_is_a_mean_of_the_expected(
+            entries in proptest::collection::vec(proptest::array::uniform4(0.0f32..1.0), 2..24),
+            count in proptest::array::uniform16(0u64..6),
+            min in 0.0f64..0.9, width in 0.0f64..0.5,
+            dev in 0.0f64..0.5, rms in 0.0f64..0.5, iso in 0.0f32..1.0,
+        ) {
+            prop_assume!(count.iter().any(|&c| c > 0));
+            let layout = layout();
+            let table = TfErrorTable::new(&TransferFunction::from_entries(entries));
+            let info = node_with(min, (min + width).min(1.0), count, dev, rms.min(dev));
+            let iso = RenderMode::Iso { value: iso, color: [1.0; 3] };
+            for mode in [RenderMode::Dvr, iso, RenderMode::Mip] {
+                let v = node_visible_error(&info, mode, &table, &layout).unwrap();
+                let e = node_tf_error_expected(&info, mode, &table, &layout).unwrap();
+                prop_assert!((0.0..=1.0).contains(&v), "{mode:?}: {v}");
+                match mode {
+                    RenderMode::Dvr => prop_assert!(v <= e + 1e-12, "visible {v} > expected {e}"),
+                    RenderMode::Iso { .. } => prop_assert!(v >= e, "visible {v} < expected {e}"),
+                    RenderMode::Mip => prop_assert_eq!(v, e),
+                }
+            }
+        }
+    }
+
+    /// A node with a few voxels on a sharp transfer-function edge and the rest
+    /// where it is flat changes a typical sample less than a node whose every
+    /// voxel lies on a gentle slope: the visible order ranks it lower, where
+    /// the worst bin (the expected error) ranks it higher.
+    #[test]
+    fn a_few_voxels_on_an_edge_weigh_less_than_all_on_a_slope() {
+        let layout = layout();
+        let tf = TransferFunction::from_points(
+            &[
+                (0.0, [1.0, 1.0, 1.0, 0.0]),
+                (0.3, [1.0, 1.0, 1.0, 0.0]),
+                (0.7, [1.0, 1.0, 1.0, 0.4]),
+                (0.795, [1.0, 1.0, 1.0, 0.4]),
+                (0.805, [1.0, 1.0, 1.0, 1.0]),
+                (1.0, [1.0, 1.0, 1.0, 1.0]),
+            ],
+            1024,
+        );
+        let table = TfErrorTable::new(&tf);
+        // Values 0.7..0.81: 1 voxel in 100 in the top bin, on the edge at 0.8.
+        let mut few = [0u64; ERROR_BINS];
+        few[0] = 99;
+        few[15] = 1;
+        let edge = node_with(0.7, 0.81, few, 0.02, 0.01);
+        // Values 0.4..0.6, all on the slope (0.1 opacity per 0.1 of value).
+        let slope = node_with(0.4, 0.6, [10; ERROR_BINS], 0.02, 0.01);
+        let v = |n: &NodeInfo| node_visible_error(n, RenderMode::Dvr, &table, &layout).unwrap();
+        let e = |n: &NodeInfo| node_tf_error_expected(n, RenderMode::Dvr, &table, &layout).unwrap();
+        assert!(
+            e(&edge) > e(&slope),
+            "expected: edge {} slope {}",
+            e(&edge),
+            e(&slope)
+        );
+        assert!(
+            v(&edge) < v(&slope),
+            "visible: edge {} slope {}",
+            v(&edge),
+            v(&slope)
+        );
+        assert!(v(&edge) > 0.0);
+    }
+
+    /// A node whose typical values stay clear of the isovalue but whose bound
+    /// (which covers its neighbours' footprints, where the hit's gradient
+    /// reads) reaches it counts in the visible order, not in the expected
+    /// error.
+    #[test]
+    fn a_node_next_to_the_surface_counts() {
+        let layout = layout();
+        let table = TfErrorTable::new(&TransferFunction::ramp(0.0, 1.0, 1.0));
+        let near = node(0.2, 0.4, 0.5, 0.01);
+        let iso = RenderMode::Iso {
+            value: 0.48,
+            color: [1.0; 3],
+        };
+        assert_eq!(
+            node_tf_error_expected(&near, iso, &table, &layout),
+            Some(0.0)
+        );
+        assert_eq!(node_visible_error(&near, iso, &table, &layout), Some(1.0));
+        let far = node(0.2, 0.4, 0.1, 0.01);
+        assert_eq!(node_visible_error(&far, iso, &table, &layout), Some(0.0));
     }
 
     #[test]

@@ -38,7 +38,7 @@ use crate::upload::UploadBudget;
 use brickray_core::{
     Camera, EmptyReason, LodMetric, NodeInfo, NodeKey, NodeKind, OctreeLayout, RenderMode,
     TfErrorTable, TransferFunction, VolumeFrame, node_pixel_error, node_tf_error,
-    node_tf_error_expected,
+    node_visible_error,
 };
 use std::collections::BinaryHeap;
 
@@ -125,7 +125,7 @@ pub trait RefineEnv {
     /// transmittance-weighted length of the rays through the node, summed over
     /// pixels, in finest voxels (an isosurface ray counts its length up to its
     /// hit). Under [`LodMetric::VisibleError`] a node that has it is ranked by
-    /// it times its per-sample expected error ([`node_tf_error_expected`]),
+    /// it times its per-sample expected error ([`node_visible_error`]),
     /// the linearised change of the image, instead of by its projected voxel
     /// size times its pixel error. `None` (not measured) by default.
     fn visible_weight(&mut self, key: NodeKey) -> Option<f64> {
@@ -360,8 +360,8 @@ impl ScreenError {
     /// expected error (or its bound) under the mode and transfer function when
     /// error-aware (a node without error data counts as full-scale error);
     /// under [`LodMetric::VisibleError`], for a node with a `visible` weight,
-    /// that weight times 255 x the per-sample expected error over `brick^2`
-    /// instead.
+    /// that weight times 255 x the per-sample expected error
+    /// ([`node_visible_error`]) over `brick^2` instead.
     #[allow(clippy::too_many_arguments)]
     fn priority(
         &self,
@@ -376,7 +376,7 @@ impl ScreenError {
             // The node's summed pixel change, linearised (RefineEnv::visible_weight),
             // per brick^2 (LodMetric::VisibleError).
             (Some(t), Some(i), Some((w, norm))) => {
-                let e = node_tf_error_expected(i, params.mode, t, layout).unwrap_or(1.0);
+                let e = node_visible_error(i, params.mode, t, layout).unwrap_or(1.0);
                 w.max(0.0) * 255.0 * e / norm
             }
             (Some(t), Some(i), _) => {

@@ -187,4 +187,3 @@ fn full_table_on_a_sharp_peak() {
     println!("peak 0.45..0.55, step 2: worst bilinear table error {worst:.2e}");
     assert!(worst < 0.05, "{worst}");
 }
-
