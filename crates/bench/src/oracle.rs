@@ -9,8 +9,10 @@
 //! exactly, not an estimate. Refinement then ranks nodes by it (passed to
 //! `LodMetric::VisibleError` as the weight that makes weight x expected error
 //! equal to it), under the same budgets of data leaves as the geometric order
-//! and the visible order (`crate::visible`'s weights x expected error), and
-//! each cut's image is compared with the finest cut's (PSNR, capped at 99).
+//! and the visible order (`crate::visible`'s weights x
+//! `brickray_core::node_visible_error`), and each cut's image is compared
+//! with the finest cut's (PSNR, capped at 99). The suite also prints the rank
+//! correlation (Spearman) of the visible order's priorities with the costs.
 //!
 //! The oracle is a greedy top-down ranking by single-node costs: the ideal
 //! of every order the refiner can express (a priority per node), not of every
@@ -24,7 +26,7 @@
 use crate::Figures;
 use crate::cut::{CutView, Resampler, cut_volume, refine_cut, typed};
 use crate::runner::{median, round2};
-use brickray_core::{LodMetric, NodeKey, TfErrorTable, Volume, node_tf_error_expected};
+use brickray_core::{LodMetric, NodeKey, TfErrorTable, Volume, node_visible_error};
 use brickray_reference::{ReferenceOptions, psnr, render_reference};
 use serde_json::json;
 use std::collections::{HashMap, HashSet};
@@ -44,6 +46,28 @@ fn sse(a: &[u8], b: &[u8]) -> f64 {
         .sum()
 }
 
+/// Spearman's rank correlation of two samples (ties ranked by position).
+fn spearman(a: &[f64], b: &[f64]) -> f64 {
+    let rank = |v: &[f64]| {
+        let mut idx: Vec<usize> = (0..v.len()).collect();
+        idx.sort_by(|&i, &j| v[i].total_cmp(&v[j]));
+        let mut r = vec![0.0; v.len()];
+        for (pos, &i) in idx.iter().enumerate() {
+            r[i] = pos as f64;
+        }
+        r
+    };
+    let (ra, rb) = (rank(a), rank(b));
+    let m = (a.len() as f64 - 1.0) / 2.0;
+    let (mut sab, mut saa, mut sbb) = (0.0, 0.0, 0.0);
+    for (x, y) in ra.iter().zip(&rb) {
+        sab += (x - m) * (y - m);
+        saa += (x - m) * (x - m);
+        sbb += (y - m) * (y - m);
+    }
+    sab / (saa * sbb).sqrt()
+}
+
 pub(crate) fn run(size: u32, brick: u32, scenes: &str) -> Result<Figures, String> {
     let wanted: Vec<String> = scenes.split(',').map(str::to_string).collect();
     let scenes = crate::pareto::scenes(&wanted, crate::pareto::ML_SIDE)?;
@@ -56,13 +80,7 @@ pub(crate) fn run(size: u32, brick: u32, scenes: &str) -> Result<Figures, String
     for scene in &scenes {
         let dir = tempfile::tempdir().map_err(|e| e.to_string())?;
         let path = dir.path().join("v.brs");
-        let mut reader = brickray_io::MemoryReader::new(scene.volume.clone(), "memory");
-        let build = brickray_store::BuildOptions {
-            anisotropic: scene.anisotropic,
-            brick,
-            ..Default::default()
-        };
-        brickray_store::build(&mut reader, &path, &build).map_err(|e| e.to_string())?;
+        scene.build_store(brick, &path)?;
         let store = brickray_store::open(&path).map_err(|e| e.to_string())?;
         let layout = store.layout().clone();
         for (mode_name, mode, tf) in &scene.modes {
@@ -105,6 +123,8 @@ pub(crate) fn run(size: u32, brick: u32, scenes: &str) -> Result<Figures, String
             let norm = (layout.brick as f64).powi(2).max(1.0);
             let mut oracle: HashMap<NodeKey, f64> = HashMap::new();
             let mut unranked = 0;
+            // (node, its cost, its per-sample expected error)
+            let mut costs = Vec::new();
             for &k in &inner {
                 let mut s = samples.clone();
                 resampler.splice(k, &mut s)?;
@@ -112,7 +132,8 @@ pub(crate) fn run(size: u32, brick: u32, scenes: &str) -> Result<Figures, String
                 let info = store.info(k).map_err(|e| e.to_string())?;
                 // The refiner ranks by weight x 255 x expected error / brick^2
                 // (unranked where the expected error is 0).
-                let e = node_tf_error_expected(&info, *mode, &table, &layout).unwrap_or(1.0);
+                let e = node_visible_error(&info, *mode, &table, &layout).unwrap_or(1.0);
+                costs.push((k, cost, e));
                 if e > 0.0 {
                     oracle.insert(k, cost * norm / (255.0 * e));
                 } else if cost > 0.0 {
@@ -128,11 +149,22 @@ pub(crate) fn run(size: u32, brick: u32, scenes: &str) -> Result<Figures, String
                 *mode,
                 size,
             );
+            let visible_priority: Vec<f64> = costs
+                .iter()
+                .map(|(k, _, e)| weights.get(k).copied().unwrap_or(0.0) * e)
+                .collect();
+            let cost: Vec<f64> = costs.iter().map(|c| c.1).collect();
+            let rho = spearman(&cost, &visible_priority);
             println!(
                 "\n{name}: finest cut {n} bricks, {} nodes above it costed ({unranked} with a cost \
-                 but no expected error: the refiner cannot rank them) in {:.0} s",
+                 but no expected error: the refiner cannot rank them) in {:.0} s; rank \
+                 correlation of the visible order's priority with the cost {rho:.2}",
                 inner.len(),
                 t.elapsed().as_secs_f64()
+            );
+            fig.insert(
+                format!("{name}_visible_rank_correlation"),
+                round2(rho).into(),
             );
             println!(
                 "  {:>7} {:>17} {:>17} {:>17} {:>8} {:>8}",

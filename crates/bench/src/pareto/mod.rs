@@ -133,13 +133,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
     for scene in &scenes {
         let dir = tempfile::tempdir().map_err(|e| e.to_string())?;
         let path = dir.path().join("v.brs");
-        let mut reader = brickray_io::MemoryReader::new(scene.volume.clone(), "memory");
-        let build = brickray_store::BuildOptions {
-            anisotropic: scene.anisotropic,
-            brick: o.brick,
-            ..Default::default()
-        };
-        brickray_store::build(&mut reader, &path, &build).map_err(|e| e.to_string())?;
+        scene.build_store(o.brick, &path)?;
         let store: Arc<dyn brickray_core::BrickSource> =
             Arc::new(brickray_store::open(&path).map_err(|e| e.to_string())?);
         for (mode_name, mode, tf) in &scene.modes {

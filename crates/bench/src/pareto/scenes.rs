@@ -17,6 +17,21 @@ pub(crate) struct Scene {
     pub(crate) modes: Vec<(&'static str, RenderMode, TransferFunction)>,
 }
 
+impl Scene {
+    /// Builds the scene's brick store at `path` (bricks of `brick` voxels; an
+    /// anisotropic pyramid where the scene asks for one).
+    pub(crate) fn build_store(&self, brick: u32, path: &std::path::Path) -> Result<(), String> {
+        let mut reader = brickray_io::MemoryReader::new(self.volume.clone(), "memory");
+        let build = brickray_store::BuildOptions {
+            anisotropic: self.anisotropic,
+            brick,
+            ..Default::default()
+        };
+        brickray_store::build(&mut reader, path, &build).map_err(|e| e.to_string())?;
+        Ok(())
+    }
+}
+
 /// The volumes, by name, of `wanted` (all when empty): `ct`, `ct5` (the head
 /// CT with every third slice, 4.5 mm, stored as an anisotropic pyramid), `mri`,
 /// `nuclei`, `ml` (Marschner-Lobb, high frequency), `noise` (procedural
