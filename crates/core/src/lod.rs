@@ -78,9 +78,9 @@ pub enum LodMetric {
     /// [`LodMetric::ErrorAware`] takes the worst bin's): the node's summed
     /// change of the image, linearised, in 8-bit levels x pixels. It is
     /// divided by `brick^2` so that for a fully visible node whose voxels
-    /// project to 1 px it is that mean change per pixel; a nearer node ranks higher by the extra pixels it covers, a
-    /// half-hidden one lower by its transmittance, a hidden one (weight 0) is
-    /// never split. Nodes without a measured weight (the first frames of a
+    /// project to 1 px it is that mean change per pixel; a nearer node ranks
+    /// higher by the extra pixels it covers, a half-hidden one lower by its
+    /// transmittance, a hidden one (weight 0) is never split. Nodes without a measured weight (the first frames of a
     /// view, in-core rendering, refinement on the CPU without weights) are
     /// ranked as by [`LodMetric::ErrorAware`].
     VisibleError {
