@@ -106,6 +106,10 @@ pub(crate) struct Resampler<'a> {
     /// Each brick read so far, decoded.
     bricks: HashMap<NodeKey, Vec<f32>>,
     buf: Vec<u8>,
+    /// Stored voxels per brick side; interior voxels and apron per side.
+    side: i64,
+    brick: f64,
+    apron: f64,
 }
 
 impl<'a> Resampler<'a> {
@@ -116,15 +120,16 @@ impl<'a> Resampler<'a> {
             factors: (0..layout.levels).map(|l| layout.voxel_factor(l)).collect(),
             bricks: HashMap::new(),
             buf: vec![0u8; layout.brick_bytes()],
+            side: layout.stored_side() as i64,
+            brick: layout.brick as f64,
+            apron: layout.apron as f64,
         }
     }
 
     /// The finest voxel `v` as the leaf `key` draws it.
     fn sample(&mut self, key: NodeKey, v: [u32; 3]) -> Result<f32, String> {
-        let layout = self.store.layout();
-        let dtype = layout.volume.dtype;
-        let side = layout.stored_side() as i64;
-        let (b, a) = (layout.brick as f64, layout.apron as f64);
+        let dtype = self.store.layout().volume.dtype;
+        let (side, b, a) = (self.side, self.brick, self.apron);
         let br = match self.bricks.entry(key) {
             std::collections::hash_map::Entry::Occupied(e) => e.into_mut(),
             std::collections::hash_map::Entry::Vacant(e) => {
@@ -171,7 +176,7 @@ impl<'a> Resampler<'a> {
     /// The node of level `l` holding the finest voxel `v`.
     fn node_at(&self, l: u8, v: [u32; 3]) -> NodeKey {
         let f = self.factors[l as usize];
-        let b = self.store.layout().brick as f64;
+        let b = self.brick;
         let p: [u32; 3] = std::array::from_fn(|i| (v[i] as f64 / (f[i] * b)).floor() as u32);
         NodeKey::new(l, p[0], p[1], p[2])
     }
@@ -202,7 +207,7 @@ impl<'a> Resampler<'a> {
     pub(crate) fn splice(&mut self, key: NodeKey, out: &mut [f32]) -> Result<(), String> {
         let d = self.store.layout().volume.dims;
         let f = self.factors[key.level as usize];
-        let b = self.store.layout().brick as f64;
+        let b = self.brick;
         let kp = [key.x, key.y, key.z];
         let lo: [u32; 3] =
             std::array::from_fn(|i| ((kp[i] as f64 * f[i] * b).ceil() as u32).min(d[i]));
