@@ -4,20 +4,20 @@
 //!
 //! The kernel measures them only under `VisibleError` (a pipeline override);
 //! the noise source has no error bounds, so its cut is the geometric one at
-//! tolerance 0 all the same. Weights are checked per data leaf against exact
-//! sums on the CPU (the
-//! analytic chord of every pixel's ray through the leaf's box):
-//! * MIP (nothing attenuates): the weight is the chord length, in finest
-//!   voxels, summed over pixels;
+//! tolerance 0 all the same. Weights are checked per data leaf against sums
+//! on the CPU:
+//! * MIP: each ray counts its chord through the leaf that holds its maximum
+//!   only, against the CPU twin `brickray_reference::visible_weights` (the
+//!   test states its thresholds);
 //! * DVR with a constant opacity `a` per voxel: the integral of `(1 - a)^l`
-//!   over the chord, with `l` the distance marched from the ray's entry.
+//!   over the analytic chord of every pixel's ray through the leaf's box,
+//!   with `l` the distance marched from the ray's entry.
 //!
-//! Thresholds: every leaf within 2% (MIP) or 3% (DVR) of its exact sum, plus
-//! 1 voxel x pixel; the total within 0.5% (MIP) or 1.5% (DVR). Measured on
-//! lavapipe: largest leaf errors 0.06% (MIP) and 0.17% (DVR), totals 0.000%
-//! and 0.12%. The error sources are the fixed point (1/4 voxel of the leaf's
-//! level per ray and brick), the trapezoid over each brick (`(1 - a)^l` is
-//! not linear) and the step: a few tenths of a percent each.
+//! DVR thresholds: every leaf within 3% of its exact sum, plus 1 voxel x
+//! pixel; the total within 1.5%. Measured on lavapipe: largest leaf error
+//! 0.17%, total 0.12%. The error sources are the fixed point (1/4 voxel of
+//! the leaf's level per ray and brick), the trapezoid over each brick
+//! (`(1 - a)^l` is not linear) and the step: a few tenths of a percent each.
 //!
 //! Refinement: on opaque shells (256^3, bricks of 32, stored with error
 //! bounds), `VisibleError` with budget 0 keeps what no ray reaches coarse (it
@@ -178,9 +178,24 @@ fn noise() -> (Arc<dyn brickray::BrickSource>, OctreeLayout) {
     (Arc::new(s), layout)
 }
 
+/// MIP: each ray counts its length through the leaf that holds its maximum
+/// only. Compared per leaf with the CPU twin (`brickray_reference::
+/// visible_weights`, f64, on the same voxels at the same step): the weights
+/// may differ where a ray's two largest samples lie in different leaves and
+/// within the GPU's rounding of each other, so the test bounds the sum of the
+/// per-leaf differences (2% of the total; measured on lavapipe: 0.25%) and
+/// the total (1%; measured 0.20%), and checks that the rule is not the
+/// chords' (measured: the chord sum is 3.6x the total; asked: at least 2x).
 #[test]
-fn mip_weights_are_the_chords() {
+fn mip_weights_go_to_each_ray_s_maximum() {
     let (source, layout) = noise();
+    let finest = layout.levels - 1;
+    let data = brickray::store::ProceduralSource::fractal_noise([DIM; 3], 32, 2)
+        .and_then(|p| p.region(finest, [0; 3], [DIM - 1; 3]))
+        .expect("noise voxels");
+    let volume =
+        brickray::core::Volume::new(layout.volume.clone(), brickray::core::VolumeData::U8(data))
+            .expect("noise volume");
     let tf = TransferFunction::ramp(0.0, 1.0, 1.0);
     let mut r = renderer(source, LodMetric::VisibleError { budget: 0.0 }, &tf);
     let mut settings = RenderSettings {
@@ -188,18 +203,47 @@ fn mip_weights_are_the_chords() {
         ..RenderSettings::default()
     };
     // MIP's termination at the largest value would cut rays short; its
-    // skipping of whole bricks below the running maximum stays on (a skipped
-    // brick is still crossed).
+    // skipping of whole bricks below the running maximum stays on (such a
+    // brick cannot hold the maximum).
     settings.accel.early_termination = None;
     converge(&mut r, DIM, settings, 200);
-    let (worst, total) = compare(&r, &layout, |a, b| b - a);
-    eprintln!(
-        "MIP: largest leaf error {:.3}%, total {:.3}%",
-        worst * 100.0,
-        total * 100.0
+    let u = r.last_usage().expect("usage read back");
+    assert!(u.counts.iter().all(|c| c.0.level == finest), "finest cut");
+    let cpu = brickray_reference::visible_weights(
+        &volume,
+        &layout,
+        &world(DIM),
+        &tf,
+        &camera(),
+        RenderMode::Mip,
+        SIZE,
     );
-    assert!(worst <= 0.02, "largest leaf error {worst}");
-    assert!(total <= 0.005, "total error {total}");
+    let chords = exact(
+        &layout,
+        &u.counts.iter().map(|c| c.0).collect::<Vec<_>>(),
+        |a, b| b - a,
+    );
+    let (mut diff, mut got, mut want, mut chord) = (0.0, 0.0, 0.0, 0.0);
+    for (&(k, _), &w) in u.counts.iter().zip(&u.weights) {
+        let e = cpu.get(&k).copied().unwrap_or(0.0);
+        diff += (w - e).abs();
+        got += w;
+        want += e;
+        chord += chords[&k];
+    }
+    eprintln!(
+        "MIP: per-leaf differences {:.3}% of the total, total {:.3}%, chords {:.2}x the total",
+        100.0 * diff / want,
+        100.0 * (got - want).abs() / want,
+        chord / want
+    );
+    assert!(want > 0.0);
+    assert!(diff <= 0.02 * want, "per-leaf differences {diff} of {want}");
+    assert!(
+        (got - want).abs() <= 0.01 * want,
+        "total {got} against {want}"
+    );
+    assert!(chord >= 2.0 * want, "chords {chord}, total {want}");
 }
 
 #[test]

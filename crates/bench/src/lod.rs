@@ -296,7 +296,7 @@ fn budget_run(size: u32, brick: u32, scenes: &str) -> Result<Figures, String> {
             size,
             visible: None,
         };
-        let weights = crate::visible::visible_weights(
+        let weights = brickray_reference::visible_weights(
             &data,
             store.layout(),
             &frame,

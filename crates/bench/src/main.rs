@@ -23,7 +23,6 @@ mod soak;
 mod stability;
 mod u8;
 mod visibility;
-mod visible;
 
 use std::process::ExitCode;
 

@@ -140,7 +140,7 @@ pub(crate) fn run(size: u32, brick: u32, scenes: &str) -> Result<Figures, String
                     unranked += 1;
                 }
             }
-            let weights = crate::visible::visible_weights(
+            let weights = brickray_reference::visible_weights(
                 &scene.volume,
                 &layout,
                 &scene.frame,

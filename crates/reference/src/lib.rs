@@ -63,6 +63,7 @@ mod metrics;
 mod render;
 mod ssim;
 mod temporal;
+mod visible;
 
 pub use image_buf::{Image, ImageIoError, save_rgba8_png};
 pub use metrics::{
@@ -74,3 +75,4 @@ pub use ssim::ssim;
 pub use temporal::{
     CHANGE_EPS, TemporalError, TemporalOptions, TemporalReport, temporal_stability,
 };
+pub use visible::visible_weights;

@@ -14,7 +14,8 @@
 // visible weight (docs/visibility.md): each ray adds its transmittance-weighted
 // length through the leaf (the trapezoid of the transmittance at the ray's
 // entry and exit of the leaf, times the length it marched there; an
-// isosurface ray's up to its hit), in voxels of the leaf's level (at most
+// isosurface ray's up to its hit; a MIP ray's only through the leaf that
+// holds its maximum, the one sample that decides its pixel), in voxels of the leaf's level (at most
 // brick x sqrt(3) per ray, so the sum stays within 32 bits up to
 // 2^32 / (4 x 55.5) = 19 M rays per brick of 32) in fixed point of
 // 1/WEIGHT_SCALE. The host multiplies by the level's step multiple to get
@@ -42,7 +43,19 @@ fn feedback_seen(slot: u32, t_in: f32, t_out: f32, trans_in: f32, trans_out: f32
     if (!WEIGHTS) {
         return;
     }
-    let w = 0.5 * (trans_in + trans_out) * max(t_out - t_in, 0.0) / max(t_voxel, 1e-30);
+    feedback_add(slot, feedback_weight(t_in, t_out, trans_in, trans_out, t_voxel));
+}
+
+// The weight `feedback_seen` adds, in voxels of the leaf's level.
+fn feedback_weight(t_in: f32, t_out: f32, trans_in: f32, trans_out: f32, t_voxel: f32) -> f32 {
+    return 0.5 * (trans_in + trans_out) * max(t_out - t_in, 0.0) / max(t_voxel, 1e-30);
+}
+
+// Adds weight `w` (voxels of the leaf's level) to the brick in `slot`.
+fn feedback_add(slot: u32, w: f32) {
+    if (!WEIGHTS) {
+        return;
+    }
     let q = u32(min(w * WEIGHT_SCALE + 0.5, 1e9));
     if (q > 0u) {
         atomicAdd(&usage[2u * slot + 1u], q);

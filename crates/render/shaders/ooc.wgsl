@@ -388,6 +388,10 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             var st = oct_begin(oo, od, t0, t1, frame.max_leaves, ooc.splits.xy);
             var dtl = dt;
             var done = false;
+            // MIP: the leaf that holds the running maximum and the weight of
+            // the ray through it (feedback.wgsl: only it is counted).
+            var mip_slot = 0xffffffffu;
+            var mip_w = 0.0;
             loop {
                 // Walk to the next data leaf (skipping empty ones, and for MIP
                 // bricks below the running maximum) in one go.
@@ -400,10 +404,8 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                         found = true;
                         break;
                     }
-                    // A MIP brick skipped whole is still crossed in full.
-                    if (st.hit.tag == OCT_TAG_DATA) {
-                        feedback_seen(st.hit.data, max(st.hit.t_enter, t0), min(st.hit.t_exit, t1), 1.0, 1.0, level_voxel_t(st.hit.leaf.level));
-                    }
+                    // (A MIP brick skipped whole, below the running maximum,
+                    // cannot hold the ray's maximum: it adds no weight.)
                 }
                 if (!found) { break; }
                 cursor_enter(&cur, brick_of(st.hit.leaf, st.hit.data));
@@ -421,6 +423,8 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 let trans_in = select(1.0, 1.0 - acc.color.a, MODE == MODE_DVR);
                 // Pre-integration: as in incore.wgsl.
                 var forced = false;
+                // MIP: whether a sample of this leaf raised the maximum.
+                var holds_max = false;
                 loop {
                     let t = t0 + f32(k) * dtl;
                     if (t >= t_end) { break; }
@@ -456,7 +460,10 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                         let ts = max(t - 0.5 * dtl, st.hit.t_enter);
                         if (!first && dvr_sample(&acc, cur, r, t, ts, front, v, cur.b.tf_v)) { done = true; break; }
                     } else {
-                        if (mip_sample(&acc, t, v)) { done = true; break; }
+                        let before = acc.max_v;
+                        let stop = mip_sample(&acc, t, v);
+                        holds_max = holds_max || acc.max_v > before;
+                        if (stop) { done = true; break; }
                     }
                     t_last = t;
                     k = k + 1u;
@@ -464,8 +471,18 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 // Where the ray left the brick, or stopped in it.
                 let t_out = clamp(t0 + f32(k) * dtl, t_in, t_end);
                 let trans_out = select(1.0, 1.0 - acc.color.a, MODE == MODE_DVR);
-                feedback_seen(cur.b.slot, t_in, t_out, trans_in, trans_out, finest_voxel_t() * cur.b.f);
+                if (MODE == MODE_MIP) {
+                    if (holds_max) {
+                        mip_slot = cur.b.slot;
+                        mip_w = feedback_weight(t_in, t_out, 1.0, 1.0, finest_voxel_t() * cur.b.f);
+                    }
+                } else {
+                    feedback_seen(cur.b.slot, t_in, t_out, trans_in, trans_out, finest_voxel_t() * cur.b.f);
+                }
                 if (done) { break; }
+            }
+            if (MODE == MODE_MIP && mip_slot != 0xffffffffu) {
+                feedback_add(mip_slot, mip_w);
             }
             t_stop = t0 + f32(k) * dtl;
         }

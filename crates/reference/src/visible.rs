@@ -1,11 +1,13 @@
 //! What the image shows of each octree node, measured on the CPU from the
-//! finest data: for every pixel's ray, the transmittance-weighted length
-//! through each node (finest voxels), summed over pixels, at the default step
-//! (an isosurface ray counts its length up to its first sample inside). It is
-//! the measure `RefineEnv::visible_weight` asks a renderer for (the
-//! out-of-core kernel measures it per brick, `shaders/feedback.wgsl`), taken
-//! here without a GPU for the `lod --by budget` suite's visibility-weighted
-//! order.
+//! finest data ([`visible_weights`]): for every pixel's ray, the
+//! transmittance-weighted length through each node (finest voxels), summed
+//! over pixels, at the default step. An isosurface ray counts its length up
+//! to its first sample inside; a MIP ray only its length through the nodes
+//! that hold its maximum, the sample that decides its pixel. It is the
+//! measure `RefineEnv::visible_weight` asks a renderer for (the out-of-core
+//! kernel measures it per brick, `shaders/feedback.wgsl`), taken here without
+//! a GPU: the CPU twin of that measure (`tests/gpu_weights.rs` compares them)
+//! and the benchmarks' visibility-weighted order.
 
 use brickray_core::tf::corrected_alpha;
 use brickray_core::{
@@ -21,7 +23,7 @@ use std::collections::HashMap;
 const STOP: f64 = 1e-4;
 
 /// The visible weight of every node any ray reaches (see the module docs).
-pub(crate) fn visible_weights(
+pub fn visible_weights(
     vol: &Volume,
     layout: &OctreeLayout,
     frame: &VolumeFrame,
@@ -48,6 +50,7 @@ pub(crate) fn visible_weights(
         .iter()
         .map(|(n, _)| vec![0.0; n[0] * n[1] * n[2]])
         .collect();
+    let mip = matches!(mode, RenderMode::Mip);
     let iso = match mode {
         RenderMode::Iso { value, .. } => Some(value as f64),
         _ => None,
@@ -60,6 +63,8 @@ pub(crate) fn visible_weights(
             };
             let mut trans = 1.0f64;
             let mut k = 0u64;
+            // MIP: the ray's maximum and where it lies.
+            let mut best = (f64::NEG_INFINITY, [0.0; 3]);
             loop {
                 let t = t0 + k as f64 * dt;
                 if t >= t1 || trans < STOP {
@@ -69,11 +74,14 @@ pub(crate) fn visible_weights(
                 let u = ray.tex_origin + ray.tex_dir * t;
                 let pos = [u.x * dims[0], u.y * dims[1], u.z * dims[2]];
                 let v = vol.sample_trilinear([pos[0] - 0.5, pos[1] - 0.5, pos[2] - 0.5]);
+                if mip {
+                    if v > best.0 {
+                        best = (v, pos);
+                    }
+                    continue;
+                }
                 for (l, (n, span)) in levels.iter().enumerate() {
-                    let i: [usize; 3] = std::array::from_fn(|a| {
-                        ((pos[a] / span[a]).floor().max(0.0) as usize).min(n[a] - 1)
-                    });
-                    acc[l][i[0] + n[0] * (i[1] + n[1] * i[2])] += trans * step;
+                    acc[l][node_index(pos, n, span)] += trans * step;
                 }
                 match iso {
                     Some(value) => {
@@ -81,8 +89,24 @@ pub(crate) fn visible_weights(
                             break;
                         }
                     }
-                    None if matches!(mode, RenderMode::Mip) => {}
                     None => trans *= 1.0 - corrected_alpha(tf.lookup(v)[3], step),
+                }
+            }
+            // A MIP ray counts its length through the nodes that hold its
+            // maximum only: the samples there are what decide its pixel.
+            if mip && best.0 > f64::NEG_INFINITY {
+                let held: Vec<usize> = levels
+                    .iter()
+                    .map(|(n, span)| node_index(best.1, n, span))
+                    .collect();
+                for j in 0..k {
+                    let u = ray.tex_origin + ray.tex_dir * (t0 + j as f64 * dt);
+                    let pos = [u.x * dims[0], u.y * dims[1], u.z * dims[2]];
+                    for (l, (n, span)) in levels.iter().enumerate() {
+                        if node_index(pos, n, span) == held[l] {
+                            acc[l][held[l]] += step;
+                        }
+                    }
                 }
             }
         }
@@ -101,6 +125,14 @@ pub(crate) fn visible_weights(
         }
     }
     out
+}
+
+/// The index, within its level's grid of `n` nodes spanning `span` finest
+/// voxels each, of the node holding `pos` (finest voxels).
+fn node_index(pos: [f64; 3], n: &[usize; 3], span: &[f64; 3]) -> usize {
+    let i: [usize; 3] =
+        std::array::from_fn(|a| ((pos[a] / span[a]).floor().max(0.0) as usize).min(n[a] - 1));
+    i[0] + n[0] * (i[1] + n[1] * i[2])
 }
 
 #[cfg(test)]
@@ -163,6 +195,55 @@ mod tests {
         assert!(
             o1.iter().filter(|&&v| v < 1e-6 * total(&wo)).count() >= 4,
             "opaque: {o1:?}"
+        );
+    }
+
+    /// A MIP ray counts only its length through the nodes that hold its
+    /// maximum: the root still gets every ray's whole length (as under a
+    /// clear transfer function), and so does the level-1 node of a ball (every
+    /// ray that crosses it peaks in it), but the node in front of the ball's
+    /// along the view keeps less than half its clear weight (measured: 26%):
+    /// its rays that go on through the ball count there. (Rays that see
+    /// nothing count at their entry, where their first sample is their
+    /// maximum.)
+    #[test]
+    fn mip_weights_go_to_the_maximum() {
+        let vol = synthetic::u8_field(32, |[x, y, z]| {
+            let d =
+                ((x as f64 - 8.0).powi(2) + (y as f64 - 8.0).powi(2) + (z as f64 - 8.0).powi(2))
+                    .sqrt();
+            1.0 - d / 12.0
+        });
+        let layout = OctreeLayout::new(vol.desc().clone(), 8, 1);
+        let d = vol.desc();
+        let frame = VolumeFrame::centered(d.dims, d.spacing);
+        // Looking down z from above the volume (z = 1 is the near half).
+        let camera = Camera::orbit(frame.center(), 2.0, 0.0, 0.0);
+        let clear = TransferFunction::from_points(
+            &[(0.0, [1.0, 1.0, 1.0, 0.0]), (1.0, [1.0, 1.0, 1.0, 0.0])],
+            16,
+        );
+        let at = |mode| visible_weights(&vol, &layout, &frame, &clear, &camera, mode, 32);
+        let (mip, dvr) = (at(RenderMode::Mip), at(RenderMode::Dvr));
+        let get = |w: &HashMap<NodeKey, f64>, k: NodeKey| w.get(&k).copied().unwrap_or(0.0);
+        let close = |a: f64, b: f64| (a - b).abs() <= 1e-9 * b.abs().max(1.0);
+        let root = NodeKey::ROOT;
+        assert!(get(&dvr, root) > 0.0);
+        assert!(close(get(&mip, root), get(&dvr, root)));
+        let ball = NodeKey::new(1, 0, 0, 0);
+        assert!(get(&dvr, ball) > 0.0);
+        assert!(
+            close(get(&mip, ball), get(&dvr, ball)),
+            "ball {} of {}",
+            get(&mip, ball),
+            get(&dvr, ball)
+        );
+        let front = NodeKey::new(1, 0, 0, 1);
+        assert!(
+            get(&mip, front) < 0.5 * get(&dvr, front),
+            "in front of the ball: {} of {}",
+            get(&mip, front),
+            get(&dvr, front)
         );
     }
 }
