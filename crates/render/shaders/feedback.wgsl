@@ -15,7 +15,8 @@
 // length through the leaf (the trapezoid of the transmittance at the ray's
 // entry and exit of the leaf, times the length it marched there; an
 // isosurface ray's up to its hit; a MIP ray's only through the leaf that
-// holds its maximum, the one sample that decides its pixel), in voxels of the leaf's level (at most
+// holds its maximum, the one sample that decides its pixel), in voxels of the
+// leaf's level (at most
 // brick x sqrt(3) per ray, so the sum stays within 32 bits up to
 // 2^32 / (4 x 55.5) = 19 M rays per brick of 32) in fixed point of
 // 1/WEIGHT_SCALE. The host multiplies by the level's step multiple to get

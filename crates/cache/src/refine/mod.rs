@@ -124,7 +124,8 @@ pub trait RefineEnv {
     /// How much of `key` the image shows, where the renderer measured it: the
     /// transmittance-weighted length of the rays through the node, summed over
     /// pixels, in finest voxels (an isosurface ray counts its length up to its
-    /// hit, a MIP ray only its length through the node holding its maximum). Under [`LodMetric::VisibleError`] a node that has it is ranked by
+    /// hit, a MIP ray only its length through the node holding its maximum).
+    /// Under [`LodMetric::VisibleError`] a node that has it is ranked by
     /// it times its per-sample expected error ([`node_visible_error`]),
     /// the linearised change of the image, instead of by its projected voxel
     /// size times its pixel error. `None` (not measured) by default.
