@@ -41,6 +41,14 @@ pub enum RenderError {
         /// The device's value.
         available: u64,
     },
+    /// The device's graphics API cannot run the library's kernels.
+    #[error("the {backend:?} backend cannot run brickray's ray casters: {reason}")]
+    UnsupportedBackend {
+        /// The device's backend (`wgpu::Device::adapter_info`).
+        backend: wgpu::Backend,
+        /// What it lacks.
+        reason: &'static str,
+    },
     /// The target format cannot be rendered to with blending.
     #[error("target format {0:?} is not a blendable colour format")]
     BadTargetFormat(wgpu::TextureFormat),

@@ -146,6 +146,21 @@ pub(crate) struct Kernels {
 }
 
 /// Checks the device limits every kernel needs.
+/// Whether the kernels can run on `backend`. OpenGL's shading language
+/// cannot load from a depth texture, which both ray casters do to clip their
+/// rays at the host's depth, so wgpu would refuse their pipelines; the check
+/// says so before any GPU object is created.
+pub(crate) fn check_backend(backend: wgpu::Backend) -> Result<(), RenderError> {
+    match backend {
+        wgpu::Backend::Gl => Err(RenderError::UnsupportedBackend {
+            backend,
+            reason: "GLSL cannot load from the depth texture the ray casters read \
+                     (the host's depth); use Vulkan, Metal or DirectX 12",
+        }),
+        _ => Ok(()),
+    }
+}
+
 pub(crate) fn check_limits(device: &wgpu::Device) -> Result<(), RenderError> {
     let l = device.limits();
     gpu::need(
@@ -237,5 +252,34 @@ impl Kernel {
             layout,
             pipelines: HashMap::new(),
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// OpenGL is refused with a typed error naming the backend (its GLSL
+    /// cannot compile the kernels: `WGPU_BACKEND=gl` on lavapipe's machine
+    /// showed every pipeline refused); every other backend passes.
+    #[test]
+    fn opengl_is_refused_before_any_gpu_object() {
+        for b in wgpu::Backend::ALL {
+            let r = check_backend(b);
+            if b == wgpu::Backend::Gl {
+                assert!(
+                    matches!(
+                        r,
+                        Err(RenderError::UnsupportedBackend {
+                            backend: wgpu::Backend::Gl,
+                            ..
+                        })
+                    ),
+                    "{r:?}"
+                );
+            } else {
+                assert!(r.is_ok(), "{b:?}: {r:?}");
+            }
+        }
     }
 }

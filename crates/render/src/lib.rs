@@ -95,13 +95,15 @@ impl VolumeRenderer {
         VolumeRenderer::with_options(device, targets, RendererOptions::default())
     }
 
-    /// A renderer for the host's targets. Checks the device's limits and the
+    /// A renderer for the host's targets. Checks the device's backend
+    /// ([`RenderError::UnsupportedBackend`] on OpenGL), its limits and the
     /// targets first; creates no GPU object on failure.
     pub fn with_options(
         device: &wgpu::Device,
         targets: TargetDesc,
         options: RendererOptions,
     ) -> Result<VolumeRenderer, RenderError> {
+        kernels::check_backend(device.adapter_info().backend)?;
         kernels::check_limits(device)?;
         composite::check_targets(device, &targets)?;
         Ok(VolumeRenderer {
