@@ -172,7 +172,7 @@ fn compare(
     (worst, (got_sum - want_sum).abs() / want_sum)
 }
 
-fn noise() -> (Arc<dyn brickray::BrickSource>, OctreeLayout) {
+fn noise() -> (Arc<brickray::store::ProceduralSource>, OctreeLayout) {
     let s = brickray::store::ProceduralSource::fractal_noise([DIM; 3], 32, 2).expect("noise");
     let layout = brickray::BrickSource::layout(&s).clone();
     (Arc::new(s), layout)
@@ -190,8 +190,8 @@ fn noise() -> (Arc<dyn brickray::BrickSource>, OctreeLayout) {
 fn mip_weights_go_to_each_ray_s_maximum() {
     let (source, layout) = noise();
     let finest = layout.levels - 1;
-    let data = brickray::store::ProceduralSource::fractal_noise([DIM; 3], 32, 2)
-        .and_then(|p| p.region(finest, [0; 3], [DIM - 1; 3]))
+    let data = source
+        .region(finest, [0; 3], [DIM - 1; 3])
         .expect("noise voxels");
     let volume =
         brickray::core::Volume::new(layout.volume.clone(), brickray::core::VolumeData::U8(data))
