@@ -427,3 +427,84 @@ fn visible_weights_keep_hidden_nodes_coarse() {
     );
     assert_eq!(hidden_splits(&seen), 0, "{:?}", seen.leaves);
 }
+
+/// Metadata where every node above the finest level records the same error,
+/// so that the visible weights alone rank nodes; `sparse` has only two of its
+/// eight children holding data (the others empty).
+struct PerBrick {
+    sparse: NodeKey,
+    weights: HashMap<NodeKey, f64>,
+}
+
+impl RefineEnv for PerBrick {
+    fn node(&mut self, key: NodeKey) -> MetaState {
+        let bins: [BinStats; ERROR_BINS] = std::array::from_fn(|_| BinStats {
+            count: 10,
+            dev: 0.1,
+            sum_sq: 10.0 * 0.05 * 0.05,
+        });
+        let empty = key.level == 2
+            && key.parent() == Some(self.sparse)
+            && key != self.sparse.child(0)
+            && key != self.sparse.child(7);
+        MetaState::Known(NodeInfo {
+            kind: if empty {
+                NodeKind::Empty
+            } else {
+                NodeKind::Data
+            },
+            min: 0.0,
+            max: 1.0,
+            error: (key.level < 2).then(|| NodeError::encode(&bins, 0.0, 1.0)),
+        })
+    }
+    fn data(&mut self, _key: NodeKey) -> DataState {
+        DataState::OnGpu
+    }
+    fn visible_weight(&mut self, key: NodeKey) -> Option<f64> {
+        Some(self.weights.get(&key).copied().unwrap_or(1.0))
+    }
+}
+
+/// Error-aware refinement under a brick budget ranks a split by its priority
+/// per brick it adds: with room for one more split after the root's, a node
+/// whose split adds one brick (two children with data) goes before one of
+/// higher priority whose split adds seven, as long as its priority per brick
+/// is higher (60 over 1 against 100 over 7), and after it once it is not (10
+/// over 1 against 100 over 7). Ranked by priority alone (as before the
+/// per-brick order) the dense node would split first in both cases.
+#[test]
+fn splits_are_ranked_per_brick_they_add() {
+    let layout = ball_layout(32); // levels 0..=2, bricks of 8
+    let frame = VolumeFrame::centered(layout.volume.dims, [1.0; 3]);
+    let cam = Camera::orbit(frame.center(), 2.0, 0.4, 0.2);
+    let tf = TransferFunction::from_points(
+        &[(0.0, [0.1, 0.2, 0.9, 0.1]), (1.0, [0.9, 0.6, 0.1, 0.8])],
+        256,
+    );
+    let (sparse, dense) = (NodeKey::new(1, 0, 0, 0), NodeKey::new(1, 1, 1, 1));
+    let split = |r: &Refinement, k: NodeKey| r.leaves.iter().all(|l| l.key != k);
+    let run = |sparse_weight: f64, metric| {
+        let mut env = PerBrick {
+            sparse,
+            weights: HashMap::from([
+                (NodeKey::ROOT, 1000.0),
+                (sparse, sparse_weight),
+                (dense, 100.0),
+            ]),
+        };
+        // The root's 8 children, then room for 7 more bricks.
+        let r = refine_limited(&layout, &mut env, &cam, &tf, metric, 0.0, 15);
+        let keys: Vec<NodeKey> = r.leaves.iter().map(|l| l.key).collect();
+        assert_exact_cover(&keys, layout.levels);
+        assert!(r.data_leaves <= 15, "{} data leaves", r.data_leaves);
+        (split(&r, sparse), split(&r, dense))
+    };
+    let metric = LodMetric::VisibleError { budget: 0.0 };
+    // 60 per brick against 100/7: the sparse node first, and then the dense
+    // one no longer fits (9 + 7 > 15).
+    assert_eq!(run(60.0, metric), (true, false));
+    // 10 per brick against 100/7: the dense node first (15 bricks), then no
+    // room for the sparse one.
+    assert_eq!(run(10.0, metric), (false, true));
+}

@@ -18,6 +18,10 @@
 //! for load first), none of them failed, the pool has slots for them
 //! and the frame's upload budget can take those not yet on the GPU.
 //!
+//! Under the error-aware metrics the heap ranks a split by its screen error
+//! per brick it adds (its children that need data, less its own brick), once
+//! its children's metadata is known: the order changes, the stop test does not.
+//!
 //! Classification uses node metadata only ([`RefineEnv::node`]); no brick is read
 //! and refinement never calls the source: it only says what to request. At most
 //! `min(max_data_leaves, max_requests)` bricks ([`requests_per_frame`]) and
@@ -249,7 +253,14 @@ pub struct Refinement {
 
 #[derive(Debug, PartialEq)]
 struct HeapItem {
+    /// The heap's key: the priority, or under error-aware refinement, once
+    /// the node's children are known, the priority per brick its split adds.
+    order: f64,
+    /// The node's screen error (the tolerance test, its requests and leaf).
     priority: f64,
+    /// Set once `order` is the priority per brick: the index of its
+    /// children's classification (kept for the split).
+    classified: Option<u32>,
     key: NodeKey,
     uniform: bool,
     /// Its upload was charged to the budget when its parent was split.
@@ -263,8 +274,8 @@ impl PartialOrd for HeapItem {
 }
 impl Ord for HeapItem {
     fn cmp(&self, other: &Self) -> std::cmp::Ordering {
-        self.priority
-            .total_cmp(&other.priority)
+        self.order
+            .total_cmp(&other.order)
             .then_with(|| other.key.cmp(&self.key))
     }
 }
@@ -320,6 +331,29 @@ fn classify(
         info: Some(info),
     })
 }
+
+/// The classification of a node's children (`children.len()` first
+/// entries), or `None` while a child's metadata is pending or failed.
+fn classify_children(
+    children: &[NodeKey],
+    layout: &OctreeLayout,
+    params: &RefineParams<'_>,
+    geo: &ViewGeometry,
+    env: &mut dyn RefineEnv,
+) -> Option<[Classified; 8]> {
+    let mut classes = [UNCLASSIFIED; 8];
+    for (c, out) in children.iter().zip(classes.iter_mut()) {
+        *out = classify(*c, layout, params, geo, env).ok()?;
+    }
+    Some(classes)
+}
+
+/// Placeholder of a child array's unused entries.
+const UNCLASSIFIED: Classified = Classified {
+    class: NodeClass::Empty(EmptyReason::Empty),
+    uniform: false,
+    info: None,
+};
 
 /// How one refinement weighs a node's projected voxel size.
 struct ScreenError {
@@ -437,15 +471,18 @@ pub fn refine(
         }
         Ok(c) => {
             let se = ScreenError::new(params, c.info.as_ref(), layout);
+            let priority = se.priority(
+                geo.voxel_pixels(root),
+                env.visible_weight(root),
+                root,
+                c.info.as_ref(),
+                params,
+                layout,
+            );
             heap.push(HeapItem {
-                priority: se.priority(
-                    geo.voxel_pixels(root),
-                    env.visible_weight(root),
-                    root,
-                    c.info.as_ref(),
-                    params,
-                    layout,
-                ),
+                order: priority,
+                priority,
+                classified: None,
                 key: root,
                 uniform: c.uniform,
                 charged: false,
@@ -492,6 +529,8 @@ pub fn refine(
     // are retried once the heap is empty, as long as a round still splits
     // something (each node splits at most once, so this ends).
     let mut deferred: Vec<HeapItem> = Vec::new();
+    // Children's classifications of the nodes ranked per brick.
+    let mut arena: Vec<[Classified; 8]> = Vec::new();
     // Splits the pool refused, retried the same way: a later split whose
     // children are all empty or invisible gives its brick back (nodes within
     // the tolerance, which pop last, do that), and the refused node, of higher
@@ -519,6 +558,7 @@ pub fn refine(
             key,
             uniform,
             charged,
+            ..
         } = item;
         // A non-finite size (a non-finite camera or frame) is never refined.
         if uniform || key.level >= finest || !priority.is_finite() {
@@ -540,6 +580,31 @@ pub fn refine(
         }
         let children = layout.children(key);
         let n = children.len();
+        // Error-aware refinement ranks a split by the error it removes per
+        // brick it adds (a node whose split needs one more brick before one
+        // that needs seven): once the children are known, the node goes back
+        // into the heap at its priority over those bricks, and splits when it
+        // comes out again. Only the order changes, so under a tolerance (or
+        // error budget) the cut is the same; under a brick budget the bricks
+        // go where they buy the most error. Unknown children leave the order
+        // as it is (the split below requests them).
+        if !within
+            && item.classified.is_none()
+            && screen.table.is_some()
+            && let Some(classes) = classify_children(&children, layout, params, &geo, env)
+        {
+            let data = classes[..n]
+                .iter()
+                .filter(|c| c.class == NodeClass::Data)
+                .count() as u32;
+            arena.push(classes);
+            heap.push(HeapItem {
+                order: priority / f64::from(data.saturating_sub(1).max(1)),
+                classified: Some(arena.len() as u32 - 1),
+                ..item
+            });
+            continue;
+        }
         if within {
             // Free only if at most one child needs data: stop at the second
             // (most nodes of a dense region stop after two or three children).
@@ -581,18 +646,18 @@ pub fn refine(
                 continue;
             }
         }
-        // Classify the children.
-        let mut classes = [Classified {
-            class: NodeClass::Empty(EmptyReason::Empty),
-            uniform: false,
-            info: None,
-        }; 8];
+        // Classify the children (a node ranked per brick has them already).
+        let mut classes = [UNCLASSIFIED; 8];
         let (mut pending, mut failed) = (Vec::new(), 0u32);
-        for (i, &c) in children.iter().enumerate() {
-            match classify(c, layout, params, &geo, env) {
-                Ok(cl) => classes[i] = cl,
-                Err(Unknown::Pending) => pending.push(c),
-                Err(Unknown::Failed) => failed += 1,
+        if let Some(i) = item.classified {
+            classes = arena[i as usize];
+        } else {
+            for (i, &c) in children.iter().enumerate() {
+                match classify(c, layout, params, &geo, env) {
+                    Ok(cl) => classes[i] = cl,
+                    Err(Unknown::Pending) => pending.push(c),
+                    Err(Unknown::Failed) => failed += 1,
+                }
             }
         }
         if failed > 0 {
@@ -664,19 +729,24 @@ pub fn refine(
         for i in 0..n {
             match classes[i].class {
                 NodeClass::Empty(r) => out.leaves.push(empty_leaf(children[i], r)),
-                NodeClass::Data => heap.push(HeapItem {
-                    priority: screen.priority(
+                NodeClass::Data => {
+                    let priority = screen.priority(
                         geo.voxel_pixels(children[i]),
                         env.visible_weight(children[i]),
                         children[i],
                         classes[i].info.as_ref(),
                         params,
                         layout,
-                    ),
-                    key: children[i],
-                    uniform: classes[i].uniform,
-                    charged: state.next() == Some(&DataState::InCpu),
-                }),
+                    );
+                    heap.push(HeapItem {
+                        order: priority,
+                        priority,
+                        classified: None,
+                        key: children[i],
+                        uniform: classes[i].uniform,
+                        charged: state.next() == Some(&DataState::InCpu),
+                    })
+                }
             }
         }
     }
