@@ -198,6 +198,69 @@ proptest! {
         }
         prop_assert_eq!(r.blocked, SplitBlocks::default());
     }
+
+    /// Under a brick budget the per-brick order (children classified once,
+    /// kept for the split, refused splits retried) still yields an exact
+    /// cover within the budget, with or without visible weights, and fills
+    /// the budget as far as whole splits allow: every leaf left unsplit
+    /// (above the error budget of 0, nothing else blocking) would add more
+    /// bricks than the budget has left.
+    #[test]
+    fn per_brick_order_keeps_the_cut_whole_and_within_the_brick_budget(
+        seed in any::<u64>(),
+        rough in 0.05f64..0.5,
+        bricks in 1u32..200,
+        visible in any::<bool>(),
+        dist in 1.2f32..6.0,
+        yaw in 0.0f32..std::f32::consts::TAU,
+        entries in proptest::collection::vec(proptest::array::uniform4(0.0f32..1.0), 2..10),
+    ) {
+        let layout = ball_layout(64);
+        let mut src = RampSource { layout: layout.clone(), rough, seed, reads: 0 };
+        let meta = cache_all(&mut src);
+        let tf = TransferFunction::from_entries(entries);
+        let frame = VolumeFrame::centered(layout.volume.dims, [1.0; 3]);
+        let cam = Camera::orbit(frame.center(), dist, yaw, 0.3);
+        let scale = layout.volume_scale();
+        let metric = if visible {
+            LodMetric::VisibleError { budget: 0.0 }
+        } else {
+            LodMetric::ErrorAware { budget: 0.0 }
+        };
+        let mut env: Box<dyn RefineEnv> = if visible {
+            Box::new(Seen { inner: Cached { meta: meta.clone() }, scale })
+        } else {
+            Box::new(Cached { meta: meta.clone() })
+        };
+        let r = refine_limited(&layout, env.as_mut(), &cam, &tf, metric, 0.0, bricks);
+        let keys: Vec<NodeKey> = r.leaves.iter().map(|l| l.key).collect();
+        assert_exact_cover(&keys, layout.levels);
+        prop_assert!(r.data_leaves <= bricks.max(1), "{} > {bricks}", r.data_leaves);
+        prop_assert_eq!(r.data_leaves as usize, r.leaves.iter().filter(|l| l.class == NodeClass::Data).count());
+        // Every leaf that wants splitting (positive priority, above the
+        // finest level) stayed because its split adds more bricks than the
+        // budget has left.
+        let geo = ViewGeometry::new(&layout, &cam, 1.0, 256, &frame);
+        let left = bricks.saturating_sub(r.data_leaves);
+        for l in &r.leaves {
+            if l.class != NodeClass::Data || l.key.level + 1 >= layout.levels || l.priority <= 0.0 {
+                continue;
+            }
+            let data = layout
+                .children(l.key)
+                .iter()
+                .filter(|c| {
+                    layout.in_volume(**c)
+                        && !geo.culled(**c)
+                        && is_visible(&meta[*c], RenderMode::Dvr, &tf, &layout)
+                })
+                .count() as u32;
+            prop_assert!(
+                data.saturating_sub(1) > left,
+                "{:?} (priority {}) adds {} bricks, {left} left", l.key, l.priority, data.saturating_sub(1)
+            );
+        }
+    }
 }
 
 /// A new transfer function moves the refinement to where its edge is, from
