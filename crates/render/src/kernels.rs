@@ -145,7 +145,6 @@ pub(crate) struct Kernels {
     kernels: HashMap<KernelKind, Kernel>,
 }
 
-/// Checks the device limits every kernel needs.
 /// Whether the kernels can run on `backend`. OpenGL's shading language
 /// cannot load from a depth texture, which both ray casters do to clip their
 /// rays at the host's depth, so wgpu would refuse their pipelines; the check
@@ -161,6 +160,7 @@ pub(crate) fn check_backend(backend: wgpu::Backend) -> Result<(), RenderError> {
     }
 }
 
+/// Checks the device limits every kernel needs.
 pub(crate) fn check_limits(device: &wgpu::Device) -> Result<(), RenderError> {
     let l = device.limits();
     gpu::need(
