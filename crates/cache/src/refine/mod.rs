@@ -33,16 +33,17 @@ mod fault_tests;
 mod geometry;
 #[cfg(test)]
 mod lod_tests;
+mod rank;
 #[cfg(test)]
 pub(crate) mod tests;
 
 pub use geometry::{ViewGeometry, is_visible, lod_voxel_world};
+use rank::{Classified, HeapItem, ScreenError, UNCLASSIFIED, Unknown, classify, classify_children};
 
 use crate::upload::UploadBudget;
 use brickray_core::{
     Camera, EmptyReason, LodMetric, NodeInfo, NodeKey, NodeKind, OctreeLayout, RenderMode,
-    TfErrorTable, TransferFunction, VolumeFrame, node_pixel_error, node_tf_error,
-    node_visible_error,
+    TransferFunction, VolumeFrame,
 };
 use std::collections::BinaryHeap;
 
@@ -130,7 +131,7 @@ pub trait RefineEnv {
     /// pixels, in finest voxels (an isosurface ray counts its length up to its
     /// hit, a MIP ray only its length through the node holding its maximum).
     /// Under [`LodMetric::VisibleError`] a node that has it is ranked by
-    /// it times its per-sample expected error ([`node_visible_error`]),
+    /// it times its per-sample expected error ([`node_visible_error`](brickray_core::node_visible_error)),
     /// the linearised change of the image, instead of by its projected voxel
     /// size times its pixel error. `None` (not measured) by default.
     fn visible_weight(&mut self, key: NodeKey) -> Option<f64> {
@@ -249,184 +250,6 @@ pub struct Refinement {
     /// Nodes the cut needs (children of a wanted split, or the root) whose
     /// metadata or brick failed: the image is degraded there.
     pub failed_needed: u32,
-}
-
-#[derive(Debug, PartialEq)]
-struct HeapItem {
-    /// The heap's key: the priority, or under error-aware refinement, once
-    /// the node's children are known, the priority per brick its split adds.
-    order: f64,
-    /// The node's screen error (the tolerance test, its requests and leaf).
-    priority: f64,
-    /// Set once `order` is the priority per brick: the index of its
-    /// children's classification (kept for the split).
-    classified: Option<u32>,
-    key: NodeKey,
-    uniform: bool,
-    /// Its upload was charged to the budget when its parent was split.
-    charged: bool,
-}
-impl Eq for HeapItem {}
-impl PartialOrd for HeapItem {
-    fn partial_cmp(&self, other: &Self) -> Option<std::cmp::Ordering> {
-        Some(self.cmp(other))
-    }
-}
-impl Ord for HeapItem {
-    fn cmp(&self, other: &Self) -> std::cmp::Ordering {
-        self.order
-            .total_cmp(&other.order)
-            .then_with(|| other.key.cmp(&self.key))
-    }
-}
-
-/// A classified node.
-#[derive(Debug, Clone, Copy)]
-struct Classified {
-    class: NodeClass,
-    uniform: bool,
-    /// Its metadata (for nodes inside the volume).
-    info: Option<NodeInfo>,
-}
-
-/// Why a node could not be classified.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Unknown {
-    Pending,
-    Failed,
-}
-
-fn classify(
-    key: NodeKey,
-    layout: &OctreeLayout,
-    params: &RefineParams<'_>,
-    geo: &ViewGeometry,
-    env: &mut dyn RefineEnv,
-) -> Result<Classified, Unknown> {
-    let empty = |reason, info| Classified {
-        class: NodeClass::Empty(reason),
-        uniform: false,
-        info,
-    };
-    if !layout.in_volume(key) {
-        return Ok(empty(EmptyReason::Empty, None));
-    }
-    let info = match env.node(key) {
-        MetaState::Known(info) => info,
-        MetaState::Pending => return Err(Unknown::Pending),
-        MetaState::Failed => return Err(Unknown::Failed),
-    };
-    if info.kind == NodeKind::Empty {
-        return Ok(empty(EmptyReason::Empty, Some(info)));
-    }
-    if !is_visible(&info, params.mode, params.tf, layout) {
-        return Ok(empty(EmptyReason::Invisible, Some(info)));
-    }
-    if geo.culled(key) {
-        return Ok(empty(EmptyReason::Culled, Some(info)));
-    }
-    Ok(Classified {
-        class: NodeClass::Data,
-        uniform: matches!(info.kind, NodeKind::Uniform(_)),
-        info: Some(info),
-    })
-}
-
-/// The classification of a node's children (`children.len()` first
-/// entries), or `None` while a child's metadata is pending or failed.
-fn classify_children(
-    children: &[NodeKey],
-    layout: &OctreeLayout,
-    params: &RefineParams<'_>,
-    geo: &ViewGeometry,
-    env: &mut dyn RefineEnv,
-) -> Option<[Classified; 8]> {
-    let mut classes = [UNCLASSIFIED; 8];
-    for (c, out) in children.iter().zip(classes.iter_mut()) {
-        *out = classify(*c, layout, params, geo, env).ok()?;
-    }
-    Some(classes)
-}
-
-/// Placeholder of a child array's unused entries.
-const UNCLASSIFIED: Classified = Classified {
-    class: NodeClass::Empty(EmptyReason::Empty),
-    uniform: false,
-    info: None,
-};
-
-/// How one refinement weighs a node's projected voxel size.
-struct ScreenError {
-    /// `Some` for error-aware refinement over a source with error bounds.
-    table: Option<TfErrorTable>,
-    /// The strict bound ([`LodMetric::ErrorBound`]) instead of the expected error.
-    strict: bool,
-    /// Ranks by measured visible weights ([`LodMetric::VisibleError`]), divided
-    /// by this (`brick^2`); `None`: weights are not used.
-    weight_norm: Option<f64>,
-    threshold: f64,
-}
-
-impl ScreenError {
-    fn new(
-        params: &RefineParams<'_>,
-        root: Option<&NodeInfo>,
-        layout: &OctreeLayout,
-    ) -> ScreenError {
-        let has_errors = root.is_some_and(|i| i.error.is_some());
-        match params.metric.budget() {
-            Some(budget) if has_errors => ScreenError {
-                table: Some(TfErrorTable::new(params.tf)),
-                strict: matches!(params.metric, LodMetric::ErrorBound { .. }),
-                weight_norm: matches!(params.metric, LodMetric::VisibleError { .. })
-                    .then(|| (layout.brick as f64).powi(2).max(1.0)),
-                threshold: budget.max(0.0) as f64,
-            },
-            _ => ScreenError {
-                table: None,
-                strict: false,
-                weight_norm: None,
-                threshold: params.tolerance_px.max(0.0) as f64,
-            },
-        }
-    }
-
-    /// The node's priority: its projected voxel size, times 255 x its
-    /// expected error (or its bound) under the mode and transfer function when
-    /// error-aware (a node without error data counts as full-scale error);
-    /// under [`LodMetric::VisibleError`], for a node with a `visible` weight,
-    /// that weight times 255 x the per-sample expected error
-    /// ([`node_visible_error`]) over `brick^2` instead.
-    #[allow(clippy::too_many_arguments)]
-    fn priority(
-        &self,
-        px: f64,
-        visible: Option<f64>,
-        key: NodeKey,
-        info: Option<&NodeInfo>,
-        params: &RefineParams<'_>,
-        layout: &OctreeLayout,
-    ) -> f64 {
-        match (&self.table, info, visible.zip(self.weight_norm)) {
-            // The node's summed pixel change, linearised (RefineEnv::visible_weight),
-            // per brick^2 (LodMetric::VisibleError).
-            (Some(t), Some(i), Some((w, norm))) => {
-                let e = node_visible_error(i, params.mode, t, layout).unwrap_or(1.0);
-                w.max(0.0) * 255.0 * e / norm
-            }
-            (Some(t), Some(i), _) => {
-                let e = if self.strict {
-                    node_tf_error(i, params.mode, t, layout)
-                } else {
-                    node_pixel_error(i, key.level, params.mode, t, layout)
-                }
-                .unwrap_or(1.0);
-                // 0 x inf (a degenerate camera on a flat node) stays NaN: never refined.
-                px * 255.0 * e
-            }
-            _ => px,
-        }
-    }
 }
 
 /// Refines the octree of `layout` for one frame. `budget` is the frame's upload
