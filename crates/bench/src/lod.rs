@@ -398,7 +398,10 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
     match arg(args, "--by", "knob".to_string())?.as_str() {
         "knob" => {}
         "budget" => return budget_run(size, brick, &scenes),
-        "oracle" => return crate::oracle::run(size, brick, &scenes),
+        "oracle" => {
+            let o = crate::oracle::OracleOptions::parse(args, size, brick, &scenes)?;
+            return crate::oracle::run(&o);
+        }
         other => return Err(format!("--by {other}: knob, budget or oracle")),
     }
     let policy = match arg(args, "--policy", "none".to_string())?.as_str() {

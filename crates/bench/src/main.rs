@@ -247,6 +247,18 @@ enum Suite {
         /// node's exact cost to the image, on the CPU.
         #[arg(long)]
         by: Option<String>,
+        /// With `--by oracle`: on (default) costs every node; off skips the
+        /// oracle order and compares the geometric and visible orders only.
+        #[arg(long)]
+        costs: Option<String>,
+        /// With `--by oracle`: on (default) draws DVR shaded, as the pareto
+        /// suite does; off unshaded.
+        #[arg(long)]
+        shading: Option<String>,
+        /// With `--by oracle`: writes every costed node (scene, level,
+        /// position, cost, per-sample expected error, visible weight) as CSV.
+        #[arg(long)]
+        nodes: Option<String>,
     },
     /// Visibility feedback: working set, image and latency per policy along a
     /// camera path with a half turn (head CT and procedural shells).

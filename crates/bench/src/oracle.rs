@@ -21,7 +21,12 @@
 //!
 //! `cargo run --release -p brickray-bench -- lod --by oracle --size 128
 //! --brick 16 --scenes noise,ml,nuclei` (volumes of the pareto suite: ct,
-//! ct5, mri, nuclei, ml, noise; every mode of each).
+//! ct5, mri, nuclei, ml, noise; every mode of each). Diagnostics:
+//! `--nodes FILE.csv` writes every costed node (scene, level, position, cost,
+//! per-sample expected error, visible weight) for fits against other
+//! estimates; `--costs off` skips the oracle (its column then reads 0), which
+//! makes the visible and geometric orders cheap to compare at large sizes;
+//! `--shading off` draws DVR unshaded, to see what shading adds to the costs.
 
 use crate::Figures;
 use crate::cut::{CutView, Resampler, cut_volume, refine_cut, typed};
@@ -68,13 +73,60 @@ fn spearman(a: &[f64], b: &[f64]) -> f64 {
     sab / (saa * sbb).sqrt()
 }
 
-pub(crate) fn run(size: u32, brick: u32, scenes: &str) -> Result<Figures, String> {
-    let wanted: Vec<String> = scenes.split(',').map(str::to_string).collect();
+/// What `lod --by oracle` runs.
+pub(crate) struct OracleOptions {
+    pub(crate) size: u32,
+    pub(crate) brick: u32,
+    pub(crate) scenes: String,
+    /// Cost every node (the oracle order); off: geometric and visible only.
+    pub(crate) costs: bool,
+    /// DVR shaded, as the pareto suite draws it.
+    pub(crate) shading: bool,
+    /// Where to write the per-node CSV, if anywhere.
+    pub(crate) nodes: Option<std::path::PathBuf>,
+}
+
+impl OracleOptions {
+    pub(crate) fn parse(
+        args: &[String],
+        size: u32,
+        brick: u32,
+        scenes: &str,
+    ) -> Result<Self, String> {
+        let on_off = |name: &str| -> Result<bool, String> {
+            match crate::arg(args, name, "on".to_string())?.as_str() {
+                "on" => Ok(true),
+                "off" => Ok(false),
+                other => Err(format!("{name} {other}: on or off")),
+            }
+        };
+        let nodes: String = crate::arg(args, "--nodes", String::new())?;
+        Ok(OracleOptions {
+            size,
+            brick,
+            scenes: scenes.to_string(),
+            costs: on_off("--costs")?,
+            shading: on_off("--shading")?,
+            nodes: (!nodes.is_empty()).then(|| nodes.into()),
+        })
+    }
+}
+
+pub(crate) fn run(o: &OracleOptions) -> Result<Figures, String> {
+    let (size, brick) = (o.size, o.brick);
+    let wanted: Vec<String> = o.scenes.split(',').map(str::to_string).collect();
     let scenes = crate::pareto::scenes(&wanted, crate::pareto::ML_SIDE)?;
     println!(
         "lod by oracle: {size}x{size}, bricks {brick}, budgets {FRACTIONS:?} of the finest cut; \
          PSNR against the finest cut's image (f64 reference, one ray per pixel)"
     );
+    if !o.costs {
+        println!("  --costs off: no oracle order (its columns read 0)");
+    }
+    if !o.shading {
+        println!("  --shading off: DVR unshaded");
+    }
+    let mut csv = String::from("scene,level,x,y,z,cost,expected_error,visible_weight\n");
     let mut fig = Figures::new();
     let (mut vis_all, mut oracle_all) = (Vec::new(), Vec::new());
     for scene in &scenes {
@@ -86,7 +138,8 @@ pub(crate) fn run(size: u32, brick: u32, scenes: &str) -> Result<Figures, String
         for (mode_name, mode, tf) in &scene.modes {
             let name = format!("{}_{}", scene.name, mode_name);
             let t = std::time::Instant::now();
-            let settings = crate::pareto::base_settings(*mode);
+            let mut settings = crate::pareto::base_settings(*mode);
+            settings.shading.enabled &= o.shading;
             let opts = ReferenceOptions::new(size, size);
             let draw = |v: &Volume| {
                 render_reference(v, &scene.frame, tf, &scene.camera, &settings, &opts)
@@ -125,16 +178,21 @@ pub(crate) fn run(size: u32, brick: u32, scenes: &str) -> Result<Figures, String
             let mut unranked = 0;
             // (node, its cost, its per-sample expected error)
             let mut costs = Vec::new();
+            // Without costs (--costs off) every node's cost reads NaN.
             for &k in &inner {
-                let mut s = samples.clone();
-                resampler.splice(k, &mut s)?;
-                let cost = sse(&draw(&typed(&layout, s)?), &finest_rgba);
+                let cost = if o.costs {
+                    let mut s = samples.clone();
+                    resampler.splice(k, &mut s)?;
+                    sse(&draw(&typed(&layout, s)?), &finest_rgba)
+                } else {
+                    f64::NAN
+                };
                 let info = store.info(k).map_err(|e| e.to_string())?;
                 // The refiner ranks by weight x 255 x expected error / brick^2
                 // (unranked where the expected error is 0).
                 let e = node_visible_error(&info, *mode, &table, &layout).unwrap_or(1.0);
                 costs.push((k, cost, e));
-                if e > 0.0 {
+                if e > 0.0 && o.costs {
                     oracle.insert(k, cost * norm / (255.0 * e));
                 } else if cost > 0.0 {
                     unranked += 1;
@@ -153,19 +211,28 @@ pub(crate) fn run(size: u32, brick: u32, scenes: &str) -> Result<Figures, String
                 .iter()
                 .map(|(k, _, e)| weights.get(k).copied().unwrap_or(0.0) * e)
                 .collect();
+            for (k, c, e) in &costs {
+                let w = weights.get(k).copied().unwrap_or(0.0);
+                let (l, x, y, z) = (k.level, k.x, k.y, k.z);
+                csv.push_str(&format!("{name},{l},{x},{y},{z},{c:.6e},{e:.6e},{w:.6e}\n"));
+            }
             let cost: Vec<f64> = costs.iter().map(|c| c.1).collect();
-            let rho = spearman(&cost, &visible_priority);
             println!(
-                "\n{name}: finest cut {n} bricks, {} nodes above it costed ({unranked} with a cost \
-                 but no expected error: the refiner cannot rank them) in {:.0} s; rank \
-                 correlation of the visible order's priority with the cost {rho:.2}",
+                "\n{name}: finest cut {n} bricks, {} nodes above it, in {:.0} s",
                 inner.len(),
                 t.elapsed().as_secs_f64()
             );
-            fig.insert(
-                format!("{name}_visible_rank_correlation"),
-                round2(rho).into(),
-            );
+            if o.costs {
+                let rho = spearman(&cost, &visible_priority);
+                println!(
+                    "  {unranked} with a cost but no expected error (the refiner cannot rank \
+                     them); rank correlation of the visible order's priority with the cost {rho:.2}"
+                );
+                fig.insert(
+                    format!("{name}_visible_rank_correlation"),
+                    round2(rho).into(),
+                );
+            }
             println!(
                 "  {:>7} {:>17} {:>17} {:>17} {:>8} {:>8}",
                 "budget",
@@ -186,33 +253,49 @@ pub(crate) fn run(size: u32, brick: u32, scenes: &str) -> Result<Figures, String
                 let by_error = LodMetric::VisibleError { budget: 0.0 };
                 let (gb, gp) = one(None, LodMetric::Geometric)?;
                 let (vb, vp) = one(Some(&weights), by_error)?;
-                let (ob, op) = one(Some(&oracle), by_error)?;
+                let (ob, op) = if o.costs {
+                    one(Some(&oracle), by_error)?
+                } else {
+                    (0, f64::NAN)
+                };
                 println!(
                     "  {budget:>7} {gb:>7} / {gp:>7.2} {vb:>7} / {vp:>7.2} {ob:>7} / {op:>7.2} {:>8.2} {:>8.2}",
                     vp - gp,
                     op - gp
                 );
                 vg.push(vp - gp);
-                og.push(op - gp);
+                if o.costs {
+                    og.push(op - gp);
+                }
                 rows.push(json!({"budget": budget, "geometric_bricks": gb,
                     "geometric_psnr_db": round2(gp), "visible_bricks": vb,
                     "visible_psnr_db": round2(vp), "oracle_bricks": ob,
                     "oracle_psnr_db": round2(op)}));
             }
-            let (v, o) = (median(&vg), median(&og));
-            println!(
-                "  median gain over the geometric order: visible {v:+.2} dB, oracle {o:+.2} dB"
-            );
+            let v = median(&vg);
+            println!("  median gain over the geometric order: visible {v:+.2} dB");
             vis_all.push(v);
-            oracle_all.push(o);
             fig.insert(format!("{name}_visible_gain_db"), round2(v).into());
-            fig.insert(format!("{name}_oracle_gain_db"), round2(o).into());
+            if o.costs {
+                let om = median(&og);
+                println!("  median gain over the geometric order: oracle {om:+.2} dB");
+                oracle_all.push(om);
+                fig.insert(format!("{name}_oracle_gain_db"), round2(om).into());
+            }
             fig.insert(format!("{name}_points"), rows.into());
         }
     }
-    let (v, o) = (median(&vis_all), median(&oracle_all));
-    println!("\nmedian over the scenes: visible {v:+.2} dB, oracle {o:+.2} dB");
+    if let Some(path) = &o.nodes {
+        std::fs::write(path, csv).map_err(|e| format!("{}: {e}", path.display()))?;
+        println!("per-node costs written to {}", path.display());
+    }
+    let v = median(&vis_all);
+    println!("\nmedian over the scenes: visible {v:+.2} dB");
     fig.insert("visible_gain_db_at_equal_budget".into(), round2(v).into());
-    fig.insert("oracle_gain_db_at_equal_budget".into(), round2(o).into());
+    if o.costs {
+        let or = median(&oracle_all);
+        println!("median over the scenes: oracle {or:+.2} dB");
+        fig.insert("oracle_gain_db_at_equal_budget".into(), round2(or).into());
+    }
     Ok(fig)
 }
