@@ -24,7 +24,7 @@
 //! ct5, mri, nuclei, ml, noise; every mode of each). Diagnostics:
 //! `--nodes FILE.csv` writes every costed node (scene, level, position, cost,
 //! per-sample expected error, visible weight) for fits against other
-//! estimates; `--costs off` skips the oracle (its column then reads 0), which
+//! estimates; `--costs off` skips the oracle (its columns read NaN), which
 //! makes the visible and geometric orders cheap to compare at large sizes;
 //! `--shading off` draws DVR unshaded, to see what shading adds to the costs.
 
@@ -121,7 +121,7 @@ pub(crate) fn run(o: &OracleOptions) -> Result<Figures, String> {
          PSNR against the finest cut's image (f64 reference, one ray per pixel)"
     );
     if !o.costs {
-        println!("  --costs off: no oracle order (its columns read 0)");
+        println!("  --costs off: no oracle order (its columns read NaN)");
     }
     if !o.shading {
         println!("  --shading off: DVR unshaded");
