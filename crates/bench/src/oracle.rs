@@ -207,22 +207,22 @@ pub(crate) fn run(o: &OracleOptions) -> Result<Figures, String> {
                 *mode,
                 size,
             );
-            let visible_priority: Vec<f64> = costs
-                .iter()
-                .map(|(k, _, e)| weights.get(k).copied().unwrap_or(0.0) * e)
-                .collect();
             for (k, c, e) in &costs {
                 let w = weights.get(k).copied().unwrap_or(0.0);
                 let (l, x, y, z) = (k.level, k.x, k.y, k.z);
                 csv.push_str(&format!("{name},{l},{x},{y},{z},{c:.6e},{e:.6e},{w:.6e}\n"));
             }
-            let cost: Vec<f64> = costs.iter().map(|c| c.1).collect();
             println!(
                 "\n{name}: finest cut {n} bricks, {} nodes above it, in {:.0} s",
                 inner.len(),
                 t.elapsed().as_secs_f64()
             );
             if o.costs {
+                let visible_priority: Vec<f64> = costs
+                    .iter()
+                    .map(|(k, _, e)| weights.get(k).copied().unwrap_or(0.0) * e)
+                    .collect();
+                let cost: Vec<f64> = costs.iter().map(|c| c.1).collect();
                 let rho = spearman(&cost, &visible_priority);
                 println!(
                     "  {unranked} with a cost but no expected error (the refiner cannot rank \
