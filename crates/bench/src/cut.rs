@@ -127,7 +127,7 @@ impl<'a> Resampler<'a> {
     }
 
     /// The finest voxel `v` as the leaf `key` draws it.
-    fn sample(&mut self, key: NodeKey, v: [u32; 3]) -> Result<f32, String> {
+    pub(crate) fn sample(&mut self, key: NodeKey, v: [u32; 3]) -> Result<f32, String> {
         let dtype = self.store.layout().volume.dtype;
         let (side, b, a) = (self.side, self.brick, self.apron);
         let br = match self.bricks.entry(key) {
@@ -183,6 +183,17 @@ impl<'a> Resampler<'a> {
 
     /// Every finest voxel, from the leaf of `leaves` that holds it.
     pub(crate) fn resample(&mut self, leaves: &HashSet<NodeKey>) -> Result<Vec<f32>, String> {
+        self.resample_from(leaves, false)
+    }
+
+    /// Every finest voxel, from the deepest node of `nodes` that holds it
+    /// (`crate::octant`'s cuts: a node draws the regions of its children
+    /// that are not in the set).
+    pub(crate) fn resample_deepest(&mut self, nodes: &HashSet<NodeKey>) -> Result<Vec<f32>, String> {
+        self.resample_from(nodes, true)
+    }
+
+    fn resample_from(&mut self, set: &HashSet<NodeKey>, deepest: bool) -> Result<Vec<f32>, String> {
         let d = self.store.layout().volume.dims;
         let levels = self.store.layout().levels;
         let mut out = vec![0f32; d.iter().map(|&n| n as usize).product()];
@@ -190,15 +201,32 @@ impl<'a> Resampler<'a> {
             for y in 0..d[1] {
                 for x in 0..d[0] {
                     let v = [x, y, z];
-                    let key = (0..levels)
+                    let found = |l: &u8| set.contains(&self.node_at(*l, v));
+                    let l = if deepest {
+                        (0..levels).rev().find(found)
+                    } else {
+                        (0..levels).find(found)
+                    };
+                    let key = l
                         .map(|l| self.node_at(l, v))
-                        .find(|k| leaves.contains(k))
                         .ok_or_else(|| format!("voxel {v:?} in no leaf"))?;
                     out[(x + d[0] * (y + d[1] * z)) as usize] = self.sample(key, v)?;
                 }
             }
         }
         Ok(out)
+    }
+
+    /// The finest voxels under `key`: per axis, `lo..hi`.
+    pub(crate) fn region(&self, key: NodeKey) -> ([u32; 3], [u32; 3]) {
+        let d = self.store.layout().volume.dims;
+        let f = self.factors[key.level as usize];
+        let b = self.brick;
+        let kp = [key.x, key.y, key.z];
+        (
+            std::array::from_fn(|i| ((kp[i] as f64 * f[i] * b).ceil() as u32).min(d[i])),
+            std::array::from_fn(|i| (((kp[i] + 1) as f64 * f[i] * b).ceil() as u32).min(d[i])),
+        )
     }
 
     /// Overwrites the finest voxels under `key` in `out` (a finest-grid

@@ -11,6 +11,7 @@ mod build;
 mod cut;
 mod formats;
 mod lod;
+mod octant;
 mod ooc;
 mod oracle;
 mod pareto;
@@ -259,6 +260,12 @@ enum Suite {
         /// position, cost, per-sample expected error, visible weight) as CSV.
         #[arg(long)]
         nodes: Option<String>,
+        /// With `--by oracle`: on also draws octant-granular cuts (children
+        /// refined one at a time, the others drawn from the parent's brick)
+        /// and the per-node order by errors measured on the data; off
+        /// (default).
+        #[arg(long)]
+        octants: Option<String>,
     },
     /// Visibility feedback: working set, image and latency per policy along a
     /// camera path with a half turn (head CT and procedural shells).

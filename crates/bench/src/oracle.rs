@@ -27,6 +27,12 @@
 //! estimates; `--costs off` skips the oracle (its columns read NaN), which
 //! makes the visible and geometric orders cheap to compare at large sizes;
 //! `--shading off` draws DVR unshaded, to see what shading adds to the costs.
+//! `--octants on` adds three cuts a budget: the per-node order by each
+//! node's error measured on the data (`crate::octant::data_error`) instead
+//! of the store's estimate, and octant-granular cuts (`crate::octant`)
+//! ranked by the store's per-node errors and by per-octant errors measured
+//! on the data: whether a better estimate or a finer-grained cut is what the
+//! per-node order lacks.
 
 use crate::Figures;
 use crate::cut::{CutView, Resampler, cut_volume, refine_cut, typed};
@@ -38,6 +44,10 @@ use std::collections::{HashMap, HashSet};
 
 /// Fractions of the finest cut's data leaves compared.
 const FRACTIONS: [f64; 9] = [0.9, 0.8, 0.7, 0.6, 0.5, 0.4, 0.3, 0.2, 0.1];
+
+/// Figure names of `--octants`' three orders: per-node by errors measured
+/// on the data, octant-granular by the store's errors and by the data's.
+const OCTANT_KEYS: [&str; 3] = ["node_data", "octant_store", "octant_data"];
 
 /// Squared RGB error between two RGBA8 images (8-bit units).
 fn sse(a: &[u8], b: &[u8]) -> f64 {
@@ -84,6 +94,9 @@ pub(crate) struct OracleOptions {
     pub(crate) shading: bool,
     /// Where to write the per-node CSV, if anywhere.
     pub(crate) nodes: Option<std::path::PathBuf>,
+    /// Octant-granular cuts (`crate::octant`) and the per-node order by
+    /// errors measured on the data.
+    pub(crate) octants: bool,
 }
 
 impl OracleOptions {
@@ -93,8 +106,8 @@ impl OracleOptions {
         brick: u32,
         scenes: &str,
     ) -> Result<Self, String> {
-        let on_off = |name: &str| -> Result<bool, String> {
-            match crate::arg(args, name, "on".to_string())?.as_str() {
+        let on_off = |name: &str, default: &str| -> Result<bool, String> {
+            match crate::arg(args, name, default.to_string())?.as_str() {
                 "on" => Ok(true),
                 "off" => Ok(false),
                 other => Err(format!("{name} {other}: on or off")),
@@ -105,9 +118,10 @@ impl OracleOptions {
             size,
             brick,
             scenes: scenes.to_string(),
-            costs: on_off("--costs")?,
-            shading: on_off("--shading")?,
+            costs: on_off("--costs", "on")?,
+            shading: on_off("--shading", "on")?,
             nodes: (!nodes.is_empty()).then(|| nodes.into()),
+            octants: on_off("--octants", "off")?,
         })
     }
 }
@@ -129,6 +143,7 @@ pub(crate) fn run(o: &OracleOptions) -> Result<Figures, String> {
     let mut csv = String::from("scene,level,x,y,z,cost,expected_error,visible_weight\n");
     let mut fig = Figures::new();
     let (mut vis_all, mut oracle_all) = (Vec::new(), Vec::new());
+    let mut octant_all: [Vec<f64>; 3] = Default::default();
     for scene in &scenes {
         let dir = tempfile::tempdir().map_err(|e| e.to_string())?;
         let path = dir.path().join("v.brs");
@@ -242,6 +257,35 @@ pub(crate) fn run(o: &OracleOptions) -> Result<Figures, String> {
                 "vis gain",
                 "or gain"
             );
+            // With --octants: each node's error measured on the data, as
+            // the weight that makes the refiner's weight x expected error
+            // equal to visible weight x measured error.
+            let data_weights = if o.octants {
+                println!(
+                    "  {:>7} {:>17} {:>17} {:>17} {:>8} {:>8} {:>8}",
+                    "",
+                    "node (data) b/dB",
+                    "oct (store) b/dB",
+                    "oct (data) b/dB",
+                    "gain",
+                    "gain",
+                    "gain"
+                );
+                let mut r = Resampler::new(&store);
+                let mut dw: HashMap<NodeKey, f64> = HashMap::new();
+                for (k, _, e) in &costs {
+                    let measured =
+                        crate::octant::data_error(&mut r, *k, *k, *mode, &table, &scene.volume)?;
+                    if *e > 0.0 {
+                        dw.insert(*k, weights.get(k).copied().unwrap_or(0.0) * measured / e);
+                    }
+                }
+                Some(dw)
+            } else {
+                None
+            };
+            let mut octant_gains: [Vec<f64>; 3] = Default::default();
+            let mut octant_rows = Vec::new();
             let (mut vg, mut og, mut rows) = (Vec::new(), Vec::new(), Vec::new());
             for f in FRACTIONS {
                 let budget = ((n as f64 * f).round() as u32).max(1);
@@ -263,6 +307,33 @@ pub(crate) fn run(o: &OracleOptions) -> Result<Figures, String> {
                     vp - gp,
                     op - gp
                 );
+                if let Some(dw) = &data_weights {
+                    // The per-node order by errors measured on the data, and
+                    // octant-granular cuts by the store's and the data's.
+                    let (nb, np) = one(Some(dw), by_error)?;
+                    let octant = |error| -> Result<(u32, f64), String> {
+                        let (set, bricks) =
+                            crate::octant::octant_cut(&store, *mode, tf, &weights, budget, error)?;
+                        let s = Resampler::new(&store).resample_deepest(&set)?;
+                        Ok((bricks, psnr(&draw(&typed(&layout, s)?), &finest_rgba).min(99.0)))
+                    };
+                    let (sb, sp) = octant(crate::octant::OctantError::Store)?;
+                    let (db, dp) = octant(crate::octant::OctantError::Data(&scene.volume))?;
+                    println!(
+                        "  {:>7} {nb:>7} / {np:>7.2} {sb:>7} / {sp:>7.2} {db:>7} / {dp:>7.2} {:>8.2} {:>8.2} {:>8.2}",
+                        "",
+                        np - gp,
+                        sp - gp,
+                        dp - gp
+                    );
+                    for (g, p) in octant_gains.iter_mut().zip([np, sp, dp]) {
+                        g.push(p - gp);
+                    }
+                    octant_rows.push(json!({"budget": budget, "node_data_bricks": nb,
+                        "node_data_psnr_db": round2(np), "octant_store_bricks": sb,
+                        "octant_store_psnr_db": round2(sp), "octant_data_bricks": db,
+                        "octant_data_psnr_db": round2(dp)}));
+                }
                 vg.push(vp - gp);
                 if o.costs {
                     og.push(op - gp);
@@ -283,6 +354,19 @@ pub(crate) fn run(o: &OracleOptions) -> Result<Figures, String> {
                 fig.insert(format!("{name}_oracle_gain_db"), round2(om).into());
             }
             fig.insert(format!("{name}_points"), rows.into());
+            if o.octants {
+                let m = octant_gains.each_ref().map(|g| median(g));
+                println!(
+                    "  median gain over the geometric order: per-node (data) {:+.2} dB, octants \
+                     (store) {:+.2} dB, octants (data) {:+.2} dB",
+                    m[0], m[1], m[2]
+                );
+                for (all, (key, v)) in octant_all.iter_mut().zip(OCTANT_KEYS.iter().zip(m)) {
+                    all.push(v);
+                    fig.insert(format!("{name}_{key}_gain_db"), round2(v).into());
+                }
+                fig.insert(format!("{name}_octant_points"), octant_rows.into());
+            }
         }
     }
     if let Some(path) = &o.nodes {
@@ -296,6 +380,17 @@ pub(crate) fn run(o: &OracleOptions) -> Result<Figures, String> {
         let or = median(&oracle_all);
         println!("median over the scenes: oracle {or:+.2} dB");
         fig.insert("oracle_gain_db_at_equal_budget".into(), round2(or).into());
+    }
+    if o.octants {
+        let m = octant_all.each_ref().map(|g| median(g));
+        println!(
+            "median over the scenes: per-node (data) {:+.2} dB, octants (store) {:+.2} dB, \
+             octants (data) {:+.2} dB",
+            m[0], m[1], m[2]
+        );
+        for (key, v) in OCTANT_KEYS.iter().zip(m) {
+            fig.insert(format!("{key}_gain_db_at_equal_budget"), round2(v).into());
+        }
     }
     Ok(fig)
 }
