@@ -189,7 +189,10 @@ impl<'a> Resampler<'a> {
     /// Every finest voxel, from the deepest node of `nodes` that holds it
     /// (`crate::octant`'s cuts: a node draws the regions of its children
     /// that are not in the set).
-    pub(crate) fn resample_deepest(&mut self, nodes: &HashSet<NodeKey>) -> Result<Vec<f32>, String> {
+    pub(crate) fn resample_deepest(
+        &mut self,
+        nodes: &HashSet<NodeKey>,
+    ) -> Result<Vec<f32>, String> {
         self.resample_from(nodes, true)
     }
 

@@ -20,8 +20,8 @@
 //! word names its own brick); this measures what they would buy, on the
 //! f64 reference, at the equal brick budgets of the other orders.
 
-use brickray_cache::refine::is_visible;
 use crate::cut::Resampler;
+use brickray_cache::refine::is_visible;
 use brickray_core::{
     NodeKey, NodeKind, OctreeLayout, RenderMode, TfErrorTable, TransferFunction, Volume,
     node_visible_error,
@@ -82,10 +82,10 @@ pub(crate) fn octant_cut(
     // candidates, ranked by what they show times the error of drawing them
     // from `k`'s brick.
     let add = |k: NodeKey,
-                   refined: &mut HashSet<NodeKey>,
-                   open: &mut HashMap<NodeKey, u32>,
-                   heap: &mut BinaryHeap<Item>,
-                   bricks: &mut u32|
+               refined: &mut HashSet<NodeKey>,
+               open: &mut HashMap<NodeKey, u32>,
+               heap: &mut BinaryHeap<Item>,
+               bricks: &mut u32|
      -> Result<(), String> {
         refined.insert(k);
         *bricks += 1;
@@ -265,7 +265,10 @@ mod tests {
                     }
                 }
             }
-            let deepest = weights.keys().filter(|k| k.level + 1 == layout.levels).count();
+            let deepest = weights
+                .keys()
+                .filter(|k| k.level + 1 == layout.levels)
+                .count();
             assert!(deepest > 0);
             let (set, _) =
                 octant_cut(&store, RenderMode::Dvr, &tf, &weights, 100_000, error).unwrap();
@@ -289,7 +292,12 @@ mod tests {
             .collect();
         let split = *leaves.iter().min().unwrap();
         leaves.remove(&split);
-        leaves.extend(layout.children(split).iter().filter(|c| layout.in_volume(**c)));
+        leaves.extend(
+            layout
+                .children(split)
+                .iter()
+                .filter(|c| layout.in_volume(**c)),
+        );
         let mut closed = leaves.clone();
         closed.insert(NodeKey::ROOT);
         closed.insert(split);
@@ -299,7 +307,10 @@ mod tests {
         assert_eq!(got, want);
         // And the coarsest-first resampling of the closed set is the root.
         let root: HashSet<NodeKey> = [NodeKey::ROOT].into();
-        assert_eq!(r.resample(&closed).unwrap(), r.resample_deepest(&root).unwrap());
+        assert_eq!(
+            r.resample(&closed).unwrap(),
+            r.resample_deepest(&root).unwrap()
+        );
         assert_ne!(got, r.resample(&root).unwrap());
     }
 }

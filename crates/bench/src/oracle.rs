@@ -315,7 +315,10 @@ pub(crate) fn run(o: &OracleOptions) -> Result<Figures, String> {
                         let (set, bricks) =
                             crate::octant::octant_cut(&store, *mode, tf, &weights, budget, error)?;
                         let s = Resampler::new(&store).resample_deepest(&set)?;
-                        Ok((bricks, psnr(&draw(&typed(&layout, s)?), &finest_rgba).min(99.0)))
+                        Ok((
+                            bricks,
+                            psnr(&draw(&typed(&layout, s)?), &finest_rgba).min(99.0),
+                        ))
                     };
                     let (sb, sp) = octant(crate::octant::OctantError::Store)?;
                     let (db, dp) = octant(crate::octant::OctantError::Data(&scene.volume))?;
