@@ -237,13 +237,7 @@ impl<'a> Resampler<'a> {
     /// instead of its descendants.
     pub(crate) fn splice(&mut self, key: NodeKey, out: &mut [f32]) -> Result<(), String> {
         let d = self.store.layout().volume.dims;
-        let f = self.factors[key.level as usize];
-        let b = self.brick;
-        let kp = [key.x, key.y, key.z];
-        let lo: [u32; 3] =
-            std::array::from_fn(|i| ((kp[i] as f64 * f[i] * b).ceil() as u32).min(d[i]));
-        let hi: [u32; 3] =
-            std::array::from_fn(|i| (((kp[i] + 1) as f64 * f[i] * b).ceil() as u32).min(d[i]));
+        let (lo, hi) = self.region(key);
         for z in lo[2]..hi[2] {
             for y in lo[1]..hi[1] {
                 for x in lo[0]..hi[0] {
