@@ -87,6 +87,18 @@ pub enum LodMetric {
         /// The error budget (finite, `>= 0`).
         budget: f32,
     },
+    /// Ranked like [`LodMetric::VisibleError`], but the cut is refined one
+    /// octant at a time (`docs/cache.md`, "Octant-granular cuts"): a split
+    /// node keeps its brick, its children are drawn from it until each gets
+    /// its own brick, in order of its visible weight times the error of
+    /// drawing it from its parent's brick. A brick then goes to the octant
+    /// that shows error, not to all the children of a node at once; the
+    /// parent's brick stays in the working set while a child is drawn from
+    /// it. Out of core only (the in-core renderer has no cut).
+    VisibleOctants {
+        /// The error budget (finite, `>= 0`).
+        budget: f32,
+    },
 }
 
 impl LodMetric {
@@ -96,8 +108,18 @@ impl LodMetric {
             LodMetric::Geometric => None,
             LodMetric::ErrorAware { budget }
             | LodMetric::ErrorBound { budget }
-            | LodMetric::VisibleError { budget } => Some(budget),
+            | LodMetric::VisibleError { budget }
+            | LodMetric::VisibleOctants { budget } => Some(budget),
         }
+    }
+
+    /// Whether refinement ranks by the renderer's measured visible weights
+    /// ([`LodMetric::VisibleError`], [`LodMetric::VisibleOctants`]).
+    pub fn uses_visible_weights(self) -> bool {
+        matches!(
+            self,
+            LodMetric::VisibleError { .. } | LodMetric::VisibleOctants { .. }
+        )
     }
 }
 

@@ -63,7 +63,13 @@ struct Brick {
     f3: vec3<f32>,
     // The corrected TF table's row for this level's step.
     tf_v: f32,
+    // The slot sampled (sub-cells): the leaf's, or the ancestor's it is
+    // borrowed from.
     slot: u32,
+    // The leaf's own slot (feedback counters) and its level's step multiple
+    // (the visible weight's unit): a borrowed leaf's differ from `slot`, `f`.
+    usage: u32,
+    usage_f: f32,
     box_min: vec3<f32>,
     box_size: vec3<f32>,
     // A level-of-detail fade: the ancestor brick's mapping (as uv0, kuv), its
@@ -87,6 +93,8 @@ fn brick_of(leaf: OctBox, slot: u32) -> Brick {
     b.f = oct_exp2_pos(e);
     b.tf_v = tf_row(f32(e));
     b.slot = slot;
+    b.usage = slot;
+    b.usage_f = b.f;
     b.box_min = leaf.box_min;
     b.box_size = leaf.box_size;
     // Fading: the ancestor `up` levels coarser, sampled at the same points.
@@ -108,6 +116,21 @@ fn brick_of(leaf: OctBox, slot: u32) -> Brick {
         let hf = hd + hu;
         b.fb_f3 = vec3<f32>(oct_exp2_pos(hf.x), oct_exp2_pos(hf.y), oct_exp2_pos(hf.z));
         b.fb_w = clamp(slots[slot].range.w, 0.0, 1.0);
+        // A borrowed leaf (weight above 1; an octant-granular cut): drawn
+        // from the ancestor alone, as the ancestor draws it (its mapping,
+        // box, step and sub-cells); counted as itself.
+        if (slots[slot].range.w > 1.5) {
+            b.uv0 = b.fb_uv0;
+            b.kuv = b.fb_kuv;
+            b.f3 = b.fb_f3;
+            let ea = min(hf.x, min(hf.y, hf.z));
+            b.f = oct_exp2_pos(ea);
+            b.tf_v = tf_row(f32(ea));
+            b.slot = fs;
+            b.box_min = fmin;
+            b.box_size = size;
+            b.fb_w = 0.0;
+        }
     }
     return b;
 }
@@ -301,12 +324,12 @@ fn ooc_iso_march(acc: ptr<function, Accum>, cur: ptr<function, Cursor>, t0: f32,
         // The visible weight (feedback.wgsl): the length marched in the brick
         // (a probe adds none).
         let t_in = max(st.hit.t_enter, t_from);
-        let t_voxel = finest_voxel_t() * f;
+        let t_voxel = finest_voxel_t() * (*cur).b.usage_f;
         loop {
             let t = t0 + f32(k) * dtl;
             if (t >= t_end) { break; }
             if (budget == 0u) {
-                if (!probe) { feedback_seen((*cur).b.slot, t_in, t, 1.0, 1.0, t_voxel); }
+                if (!probe) { feedback_seen((*cur).b.usage, t_in, t, 1.0, 1.0, t_voxel); }
                 return t_to;
             }
             budget = budget - 1u;
@@ -330,7 +353,7 @@ fn ooc_iso_march(acc: ptr<function, Accum>, cur: ptr<function, Cursor>, t0: f32,
             let v = cursor_value(*cur, t);
             (*acc).samples = (*acc).samples + 1u;
             if (v >= frame.isovalue) {
-                feedback_seen((*cur).b.slot, t_in, t, 1.0, 1.0, t_voxel);
+                feedback_seen((*cur).b.usage, t_in, t, 1.0, 1.0, t_voxel);
                 if (!below && t > t0) { return t; }
                 var a = t;
                 if (t > t0 && t_last < t) {
@@ -343,7 +366,7 @@ fn ooc_iso_march(acc: ptr<function, Accum>, cur: ptr<function, Cursor>, t0: f32,
             t_last = t;
             k = k + 1u;
         }
-        if (!probe) { feedback_seen((*cur).b.slot, t_in, t_end, 1.0, 1.0, t_voxel); }
+        if (!probe) { feedback_seen((*cur).b.usage, t_in, t_end, 1.0, 1.0, t_voxel); }
     }
     return t_to;
 }
@@ -473,11 +496,11 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 let trans_out = select(1.0, 1.0 - acc.color.a, MODE == MODE_DVR);
                 if (MODE == MODE_MIP) {
                     if (holds_max) {
-                        mip_slot = cur.b.slot;
-                        mip_w = feedback_weight(t_in, t_out, 1.0, 1.0, finest_voxel_t() * cur.b.f);
+                        mip_slot = cur.b.usage;
+                        mip_w = feedback_weight(t_in, t_out, 1.0, 1.0, finest_voxel_t() * cur.b.usage_f);
                     }
                 } else {
-                    feedback_seen(cur.b.slot, t_in, t_out, trans_in, trans_out, finest_voxel_t() * cur.b.f);
+                    feedback_seen(cur.b.usage, t_in, t_out, trans_in, trans_out, finest_voxel_t() * cur.b.usage_f);
                 }
                 if (done) { break; }
             }

@@ -209,6 +209,7 @@ pub(crate) fn lod_rule_name(metric: brickray::LodMetric) -> &'static str {
         brickray::LodMetric::ErrorAware { .. } => "error-aware",
         brickray::LodMetric::ErrorBound { .. } => "error bound",
         brickray::LodMetric::VisibleError { .. } => "visible error",
+        brickray::LodMetric::VisibleOctants { .. } => "visible octants",
     }
 }
 
@@ -332,7 +333,10 @@ pub(crate) fn parse(text: &str) -> Result<Vec<Action>, ScriptError> {
                     "geometric" => Action::Lod(brickray::LodMetric::Geometric, value),
                     "error" => Action::Lod(brickray::LodMetric::ErrorAware { budget }, None),
                     "visible" => Action::Lod(brickray::LodMetric::VisibleError { budget }, None),
-                    _ => return Err(err("expected geometric, error or visible")),
+                    "octants" => {
+                        Action::Lod(brickray::LodMetric::VisibleOctants { budget }, None)
+                    }
+                    _ => return Err(err("expected geometric, error, visible or octants")),
                 }
             }
             ["visibility", name] => Action::Visibility(

@@ -254,6 +254,16 @@ impl BrickManager {
         &self.pool
     }
 
+    /// Borrowed slots a plan may use past the pool's: slot ids
+    /// `pool().slot_count()..` name the octants of an octant-granular cut
+    /// drawn from their parent's brick ([`FadeSlot::borrowed`](super::FadeSlot::borrowed)),
+    /// rows of the renderer's slot table with no atlas space. Eight per slot:
+    /// a parent lends its brick to at most its eight children, and at most
+    /// every slot lends.
+    pub fn borrowed_slots(&self) -> u32 {
+        self.pool.slot_count().saturating_mul(8)
+    }
+
     /// The CPU cache.
     pub fn cpu_cache(&self) -> &CpuCache {
         &self.cpu

@@ -22,6 +22,14 @@ pub struct FadeSlot {
     pub levels_up: u32,
     /// Weight of the ancestor's value.
     pub weight: f32,
+    /// The leaf is drawn from the ancestor alone, at the ancestor's step, as
+    /// the ancestor itself would draw it: an octant of an octant-granular cut
+    /// ([`LodMetric::VisibleOctants`](brickray_core::LodMetric::VisibleOctants)),
+    /// whose `slot` is a *borrowed slot* (at or past the pool's slot count:
+    /// a row of the renderer's slot table and feedback, no atlas space;
+    /// [`BrickManager::borrowed_slots`](super::BrickManager::borrowed_slots)).
+    /// `weight` is then 1.
+    pub borrowed: bool,
 }
 
 /// Priority of floor requests: after the root (`f32::MAX`), before the view's.

@@ -34,8 +34,8 @@ use crate::refine::{
 };
 use crate::upload::UploadBudget;
 use brickray_core::{
-    BrickSource, Camera, CutLeaf, EmptyReason, LeafKind, NodeInfo, NodeKey, NodeKind, OctreeLayout,
-    RenderMode, TransferFunction, VolumeFrame,
+    BrickSource, Camera, CutLeaf, EmptyReason, LeafKind, LodMetric, NodeInfo, NodeKey, NodeKind,
+    OctreeLayout, RenderMode, TransferFunction, VolumeFrame,
 };
 use std::sync::Arc;
 use thiserror::Error;
@@ -283,7 +283,13 @@ impl BrickManager {
         // The displayed cut: the refined one, with level changes fading
         // (crate::fade). If its bricks, their fallbacks and the floor do not fit
         // in the pool, the fades are dropped (the refined cut always fits).
-        let step = self.config.fade.map(|d| d.step(self.fade_dt(now)));
+        // Octant-granular cuts are drawn as they are (no fades).
+        let octants = matches!(self.config.lod_metric, LodMetric::VisibleOctants { .. });
+        let step = self
+            .config
+            .fade
+            .filter(|_| !octants)
+            .map(|d| d.step(self.fade_dt(now)));
         let mut shown = self.fader.advance(&refined.leaves, step);
         if !shown.fades.is_empty() {
             let mut need: std::collections::HashSet<NodeKey> = shown
@@ -304,9 +310,23 @@ impl BrickManager {
         let mut cut = Vec::with_capacity(shown.leaves.len());
         let mut pending = Vec::new();
         let mut resident = 0u32;
+        // Octants drawn from their parent's brick (index in `cut`), and the
+        // parents lending their bricks, with their slots once known.
+        let mut borrowed = Vec::new();
+        let mut lenders: std::collections::HashMap<NodeKey, Option<u32>> =
+            std::collections::HashMap::new();
         for l in &shown.leaves {
             let kind = match l.class {
                 NodeClass::Empty(r) => LeafKind::Empty(r),
+                NodeClass::Borrowed => {
+                    if let Some(p) = self.layout.parent(l.key) {
+                        lenders
+                            .entry(p)
+                            .or_insert_with(|| self.pool.touch(p, frame));
+                    }
+                    borrowed.push(cut.len());
+                    LeafKind::Empty(EmptyReason::NotLoaded)
+                }
                 NodeClass::Data => match self.pool.touch(l.key, frame) {
                     Some(slot) => {
                         resident += 1;
@@ -364,6 +384,42 @@ impl BrickManager {
             // ancestor was drawn last frame, so it is resident.
             assign(&mut self.pool, &self.cpu, a);
         }
+        // Refinement gave a lender its brick only when it was on the GPU or
+        // in CPU memory (and charged its upload).
+        let mut lent: Vec<(NodeKey, Option<u32>)> = lenders.into_iter().collect();
+        lent.sort_by_key(|l| l.0);
+        for (p, slot) in &mut lent {
+            if slot.is_none() {
+                *slot = assign(&mut self.pool, &self.cpu, *p);
+            } else {
+                resident += 1;
+            }
+        }
+        let lent: std::collections::HashMap<NodeKey, Option<u32>> = lent.into_iter().collect();
+        let mut borrowed_fades = Vec::with_capacity(borrowed.len());
+        let base = self.pool.slot_count();
+        for (n, &i) in borrowed.iter().enumerate() {
+            let key = cut[i].key;
+            if n as u32 >= self.borrowed_slots() {
+                break;
+            }
+            let lender = self
+                .layout
+                .parent(key)
+                .and_then(|p| lent.get(&p).copied().flatten().map(|s| (p, s)));
+            if let Some((p, fallback)) = lender {
+                let slot = base + n as u32;
+                cut[i].kind = LeafKind::Data { slot };
+                borrowed_fades.push(FadeSlot {
+                    slot,
+                    fallback,
+                    levels_up: (key.level - p.level) as u32,
+                    weight: 1.0,
+                    borrowed: true,
+                });
+            }
+        }
+        let lenders_drawn = lent.values().filter(|s| s.is_some()).count() as u32;
         let floor = self.floor_step(frame);
         uploads.extend(floor.uploads);
         let slot_of: std::collections::HashMap<NodeKey, u32> = cut
@@ -378,6 +434,7 @@ impl BrickManager {
                     fallback,
                     levels_up: (f.leaf.level - f.ancestor.level) as u32,
                     weight: f.weight,
+                    borrowed: false,
                 }),
                 _ => self.fader.cancel(f.leaf),
             }
@@ -424,7 +481,13 @@ impl BrickManager {
         }
         self.loader.submit(&meta_requests, &bricks);
 
-        let working = cut.iter().filter(|l| l.kind.is_data()).count() as u32;
+        fades.extend(borrowed_fades);
+        // Bricks drawn: data leaves with their own slot, and lenders.
+        let working = cut
+            .iter()
+            .filter(|l| l.slot().is_some_and(|s| s < base))
+            .count() as u32
+            + lenders_drawn;
         let residency = self.residency_counts();
         self.meta.trim();
         let stats = FrameStats {
@@ -464,7 +527,7 @@ impl BrickManager {
             refined: refined
                 .leaves
                 .iter()
-                .filter(|l| l.class == NodeClass::Data)
+                .filter(|l| matches!(l.class, NodeClass::Data | NodeClass::Borrowed))
                 .map(|l| l.key)
                 .collect(),
             stats,

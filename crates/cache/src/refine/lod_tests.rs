@@ -12,11 +12,11 @@ use std::collections::HashMap;
 /// Metadata of a ramp `value = x` (normalized) whose nodes carry error bounds
 /// that shrink with the level (`dev` fraction `rough * 2^-level` of the range,
 /// varied per node by `seed`); counts its reads.
-struct RampSource {
-    layout: OctreeLayout,
-    rough: f64,
-    seed: u64,
-    reads: usize,
+pub(super) struct RampSource {
+    pub(super) layout: OctreeLayout,
+    pub(super) rough: f64,
+    pub(super) seed: u64,
+    pub(super) reads: usize,
 }
 
 impl RampSource {
@@ -63,8 +63,8 @@ impl RampSource {
 }
 
 /// All bricks resident; metadata from a cache filled once from the source.
-struct Cached {
-    meta: HashMap<NodeKey, NodeInfo>,
+pub(super) struct Cached {
+    pub(super) meta: HashMap<NodeKey, NodeInfo>,
 }
 
 impl RefineEnv for Cached {
@@ -79,7 +79,7 @@ impl RefineEnv for Cached {
     }
 }
 
-fn cache_all(src: &mut RampSource) -> HashMap<NodeKey, NodeInfo> {
+pub(super) fn cache_all(src: &mut RampSource) -> HashMap<NodeKey, NodeInfo> {
     let mut m = HashMap::new();
     let mut stack = vec![NodeKey::ROOT];
     while let Some(k) = stack.pop() {
@@ -105,7 +105,7 @@ fn refine_with(
 }
 
 /// [`refine_with`] at a tolerance and a cap of data leaves, over any source.
-fn refine_limited(
+pub(super) fn refine_limited(
     layout: &OctreeLayout,
     env: &mut dyn RefineEnv,
     cam: &Camera,
@@ -400,9 +400,9 @@ fn a_flat_tf_coarsens_freely() {
 /// [`Cached`] with the renderer's measure of what the image shows of each node
 /// ([`RefineEnv::visible_weight`]): here the half `x < 1/2` of the volume, in
 /// proportion to a node's volume; the other half is hidden (weight 0).
-struct Seen {
-    inner: Cached,
-    scale: [f64; 3],
+pub(super) struct Seen {
+    pub(super) inner: Cached,
+    pub(super) scale: [f64; 3],
 }
 
 impl RefineEnv for Seen {

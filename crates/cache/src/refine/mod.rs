@@ -33,6 +33,9 @@ mod fault_tests;
 mod geometry;
 #[cfg(test)]
 mod lod_tests;
+mod octant;
+#[cfg(test)]
+mod octant_tests;
 mod rank;
 #[cfg(test)]
 pub(crate) mod tests;
@@ -75,6 +78,9 @@ pub enum NodeClass {
     Empty(EmptyReason),
     /// Needs its brick.
     Data,
+    /// Drawn from its parent's brick (an octant-granular cut,
+    /// [`LodMetric::VisibleOctants`]): needs the parent's brick, not its own.
+    Borrowed,
 }
 
 /// Where a node's brick is.
@@ -261,6 +267,9 @@ pub fn refine(
     env: &mut dyn RefineEnv,
     budget: &mut UploadBudget,
 ) -> Refinement {
+    if matches!(params.metric, LodMetric::VisibleOctants { .. }) {
+        return octant::refine_octants(layout, params, env, budget);
+    }
     let geo = ViewGeometry::new(
         layout,
         params.camera,
@@ -552,7 +561,8 @@ pub fn refine(
         for i in 0..n {
             match classes[i].class {
                 NodeClass::Empty(r) => out.leaves.push(empty_leaf(children[i], r)),
-                NodeClass::Data => {
+                // (classify never borrows.)
+                NodeClass::Data | NodeClass::Borrowed => {
                     let priority = screen.priority(
                         geo.voxel_pixels(children[i]),
                         env.visible_weight(children[i]),

@@ -139,7 +139,9 @@ impl ScreenError {
             Some(budget) if has_errors => ScreenError {
                 table: Some(TfErrorTable::new(params.tf)),
                 strict: matches!(params.metric, LodMetric::ErrorBound { .. }),
-                weight_norm: matches!(params.metric, LodMetric::VisibleError { .. })
+                weight_norm: params
+                    .metric
+                    .uses_visible_weights()
                     .then(|| (layout.brick as f64).powi(2).max(1.0)),
                 threshold: budget.max(0.0) as f64,
             },

@@ -19,7 +19,7 @@ use brickray_cache::{
     BrickManager, CacheConfig, FadeSlot, FrameStats as CacheStats, GpuFormat, RetryPolicy,
     StreamError, Upload,
 };
-use brickray_core::{BrickSource, LodMetric, NodeKey, OctreeLayout, TransferFunction, VolumeFrame};
+use brickray_core::{BrickSource, NodeKey, OctreeLayout, TransferFunction, VolumeFrame};
 use brickray_visibility::{
     VisibilityConfig, VisibilityCounts, VisibilityPolicy, VisibilityState, VisibleWeights,
 };
@@ -101,6 +101,10 @@ pub struct OutOfCoreStats {
     pub occlusion: OcclusionStats,
 }
 
+/// `range[3]` of a borrowed slot's row ([`FadeSlot::borrowed`]): above 1,
+/// ooc.wgsl draws the leaf from the ancestor alone, at the ancestor's step.
+const BORROWED_WEIGHT: f32 = 2.0;
+
 /// `struct SlotInfo` of ooc.wgsl: one row of the slot table. `offset[3]`
 /// (levels up to the fade fallback, 0: none), `range[2]` (the fallback's slot)
 /// and `range[3]` (its weight) carry a level-of-detail fade ([`FadeSlot`]).
@@ -172,24 +176,27 @@ impl Pool {
         let atlas_bytes =
             dims.iter().map(|&d| d as u64).product::<u64>() * gpu.encoding.texel_bytes() as u64;
         let slot_count = manager.pool().slot_count().max(1) as usize;
+        // Rows past the pool's slots: the borrowed slots of octant-granular
+        // cuts (drawn from an ancestor's brick; no atlas space, no sub-cells).
+        let rows = slot_count + manager.borrowed_slots() as usize;
         let slots = gpu::storage_buffer(
             device,
             "brickray-render brick slot table",
-            (slot_count * std::mem::size_of::<SlotInfo>()) as u64,
+            (rows * std::mem::size_of::<SlotInfo>()) as u64,
         )?;
         let sub_cells = gpu::storage_buffer(
             device,
             "brickray-render brick sub-cell table",
             slot_count as u64 * (gpu.sub_cells_per_axis as u64).pow(3) * 8,
         )?;
-        let feedback = UsageFeedback::new(device, slot_count as u32, manager.layout())?;
+        let feedback = UsageFeedback::new(device, rows as u32, manager.layout())?;
         Ok(Pool {
             feedback,
             atlas_view: atlas.create_view(&Default::default()),
             atlas,
             atlas_bytes,
             slots,
-            slots_cpu: vec![bytemuck::Zeroable::zeroed(); slot_count],
+            slots_cpu: vec![bytemuck::Zeroable::zeroed(); rows],
             slots_dirty: true,
             sub_cells,
             faded: Vec::new(),
@@ -474,6 +481,20 @@ impl OutOfCore {
             }
         }
         for f in fades {
+            // A borrowed slot's row is its ancestor's (offset, range), drawn
+            // from the ancestor alone: weight 2 tells ooc.wgsl.
+            if f.borrowed
+                && let Some(&lender) = pool.slots_cpu.get(f.fallback as usize)
+                && let Some(s) = pool.slots_cpu.get_mut(f.slot as usize)
+            {
+                *s = lender;
+                s.offset[3] = f.levels_up as f32;
+                s.range[2] = f.fallback as f32;
+                s.range[3] = BORROWED_WEIGHT;
+                pool.faded.push(f.slot);
+                pool.slots_dirty = true;
+                continue;
+            }
             if let Some(s) = pool.slots_cpu.get_mut(f.slot as usize) {
                 s.offset[3] = f.levels_up as f32;
                 s.range[2] = f.fallback as f32;
@@ -670,10 +691,7 @@ impl VolumeBackend for OutOfCore {
     }
 
     fn measures_weights(&self) -> bool {
-        matches!(
-            self.manager.config().lod_metric,
-            LodMetric::VisibleError { .. }
-        )
+        self.manager.config().lod_metric.uses_visible_weights()
     }
 
     fn max_leaves(&self) -> u32 {

@@ -302,6 +302,11 @@ fn lod_ui(ui: &mut egui::Ui, metric: &mut brickray::LodMetric, tolerance_px: &mu
             "refine by what the image shows of each node, as the renderer measures it, \
              x its error under the transfer function",
         ),
+        (
+            LodMetric::VisibleOctants { budget },
+            "as by what the image shows, but one octant at a time: a split node's \
+             children are drawn from its brick until each earns its own",
+        ),
     ];
     let mut changed = false;
     egui::ComboBox::from_label("LOD rule")
@@ -332,7 +337,8 @@ fn lod_ui(ui: &mut egui::Ui, metric: &mut brickray::LodMetric, tolerance_px: &mu
         }
         LodMetric::ErrorAware { budget }
         | LodMetric::ErrorBound { budget }
-        | LodMetric::VisibleError { budget } => {
+        | LodMetric::VisibleError { budget }
+        | LodMetric::VisibleOctants { budget } => {
             changed |= ui
                 .add(
                     egui::Slider::new(budget, 0.0..=16384.0)

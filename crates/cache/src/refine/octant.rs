@@ -1,0 +1,328 @@
+//! Octant-granular refinement ([`LodMetric::VisibleOctants`]): a refined
+//! node keeps its brick and its children are drawn from it
+//! ([`NodeClass::Borrowed`]) until each gets its own brick, one at a time.
+//!
+//! The cut is grown from the root: every node with its own brick is split at
+//! once (a split costs nothing: its data children are drawn from its brick),
+//! and its data children become candidates, ranked by their visible weight
+//! times the error of drawing them from their parent's brick (the parent's
+//! recorded error, [`ScreenError::priority`] with the child's weight; the
+//! child's projected size times it where no weight is measured). The best
+//! candidate gets its own brick when it is on the GPU or in CPU memory (else
+//! it is requested), the pool has room and the upload budget takes it; it
+//! costs one brick, none when it is the last of its parent's children drawn
+//! from the parent (the parent's brick then draws nothing). Refinement stops
+//! at the error budget, the brick budget or the heap's end. A node hidden in
+//! the previous frames ([`RefineEnv::may_split`]) is not given its brick.
+//!
+//! The root's brick must be available before anything is drawn (it is
+//! requested first). Everything else follows [`refine`](super::refine):
+//! metadata and bricks are requested, never read, failures are counted.
+
+use super::rank::{HeapItem, ScreenError, Unknown, classify};
+use super::{
+    DataState, LoadRequest, MAX_META_REQUESTS_PER_FRAME, NodeClass, RefineEnv, RefineParams,
+    RefinedLeaf, Refinement, ViewGeometry,
+};
+use crate::upload::UploadBudget;
+use brickray_core::{EmptyReason, NodeInfo, NodeKey, OctreeLayout};
+use std::collections::{BinaryHeap, HashMap};
+
+fn empty_leaf(key: NodeKey, reason: EmptyReason) -> RefinedLeaf {
+    RefinedLeaf {
+        key,
+        class: NodeClass::Empty(reason),
+        priority: 0.0,
+        needs_upload: false,
+    }
+}
+
+fn finite(p: f64) -> f32 {
+    if p.is_finite() { p as f32 } else { 0.0 }
+}
+
+/// The refinement state of one frame.
+struct Octants<'p, 'a> {
+    layout: &'p OctreeLayout,
+    params: &'p RefineParams<'a>,
+    geo: ViewGeometry,
+    screen: ScreenError,
+    out: Refinement,
+    heap: BinaryHeap<HeapItem>,
+    /// Nodes with their own brick that draw some children: how many.
+    open: HashMap<NodeKey, u32>,
+}
+
+impl Octants<'_, '_> {
+    /// `key` has its own brick: split it (its data children become
+    /// candidates drawn from it), or keep it a leaf (uniform, finest,
+    /// children unknown or failed).
+    fn expand(
+        &mut self,
+        env: &mut dyn RefineEnv,
+        key: NodeKey,
+        info: NodeInfo,
+        uniform: bool,
+        priority: f64,
+        needs_upload: bool,
+    ) {
+        let finest = self.layout.levels.saturating_sub(1);
+        let leaf = RefinedLeaf {
+            key,
+            class: NodeClass::Data,
+            priority: finite(priority),
+            needs_upload,
+        };
+        if uniform || key.level >= finest {
+            self.out.leaves.push(leaf);
+            return;
+        }
+        let children = self.layout.children(key);
+        let mut classes = Vec::with_capacity(children.len());
+        let (mut pending, mut failed) = (Vec::new(), 0u32);
+        for &c in children.iter() {
+            match classify(c, self.layout, self.params, &self.geo, env) {
+                Ok(cl) => classes.push(cl),
+                Err(Unknown::Pending) => pending.push(c),
+                Err(Unknown::Failed) => failed += 1,
+            }
+        }
+        if failed > 0 {
+            self.out.blocked.failed += 1;
+            self.out.failed_needed += failed;
+            self.out.leaves.push(leaf);
+            return;
+        }
+        if !pending.is_empty() {
+            for c in pending {
+                if self.out.meta_requests.len() < MAX_META_REQUESTS_PER_FRAME as usize {
+                    self.out.meta_requests.push((c, finite(priority)));
+                }
+            }
+            self.out.blocked.missing_meta += 1;
+            self.out.leaves.push(leaf);
+            return;
+        }
+        let mut drawn = 0;
+        for (&c, cl) in children.iter().zip(&classes) {
+            match cl.class {
+                NodeClass::Empty(r) => self.out.leaves.push(empty_leaf(c, r)),
+                _ => {
+                    drawn += 1;
+                    // The error of drawing `c` from `key`'s brick, seen
+                    // through what the image shows of `c`.
+                    let p = self.screen.priority(
+                        self.geo.voxel_pixels(key),
+                        env.visible_weight(c),
+                        key,
+                        Some(&info),
+                        self.params,
+                        self.layout,
+                    );
+                    self.heap.push(HeapItem {
+                        order: p,
+                        priority: p,
+                        classified: None,
+                        key: c,
+                        uniform: cl.uniform,
+                        charged: false,
+                    });
+                }
+            }
+        }
+        if drawn == 0 {
+            // Every child empty, invisible or culled: the brick draws nothing.
+            self.out.data_leaves -= 1;
+        } else {
+            self.open.insert(key, drawn);
+        }
+    }
+}
+
+/// [`refine`](super::refine) under [`LodMetric::VisibleOctants`](brickray_core::LodMetric::VisibleOctants).
+pub(super) fn refine_octants(
+    layout: &OctreeLayout,
+    params: &RefineParams<'_>,
+    env: &mut dyn RefineEnv,
+    budget: &mut UploadBudget,
+) -> Refinement {
+    let geo = ViewGeometry::new(
+        layout,
+        params.camera,
+        params.aspect,
+        params.viewport_height_px,
+        params.volume_frame,
+    );
+    let brick_bytes = params.brick_upload_bytes;
+    let max_requests = params.max_data_leaves.min(params.max_requests) as usize;
+    let mut out = Refinement::default();
+    let root = NodeKey::ROOT;
+    let root_class = match classify(root, layout, params, &geo, env) {
+        Ok(c) => c,
+        Err(Unknown::Pending) => {
+            out.leaves.push(empty_leaf(root, EmptyReason::NotLoaded));
+            out.meta_requests.push((root, f32::MAX));
+            out.blocked.missing_meta += 1;
+            return out;
+        }
+        Err(Unknown::Failed) => {
+            out.leaves.push(empty_leaf(root, EmptyReason::Failed));
+            out.blocked.failed += 1;
+            out.failed_needed += 1;
+            return out;
+        }
+    };
+    let (NodeClass::Data, Some(root_info)) = (root_class.class, root_class.info) else {
+        let reason = match root_class.class {
+            NodeClass::Empty(r) => r,
+            _ => EmptyReason::Empty,
+        };
+        out.leaves.push(empty_leaf(root, reason));
+        return out;
+    };
+    if params.max_data_leaves == 0 {
+        out.leaves.push(empty_leaf(root, EmptyReason::NotLoaded));
+        out.blocked.pool_full += 1;
+        return out;
+    }
+    let root_upload = match env.data(root) {
+        DataState::OnGpu => false,
+        DataState::InCpu if budget.try_reserve(brick_bytes) => true,
+        DataState::InCpu => {
+            out.leaves.push(empty_leaf(root, EmptyReason::NotLoaded));
+            out.blocked.upload_budget += 1;
+            return out;
+        }
+        DataState::Missing => {
+            out.leaves.push(empty_leaf(root, EmptyReason::NotLoaded));
+            out.requests.push(LoadRequest {
+                key: root,
+                priority: f32::MAX,
+                info: root_info,
+            });
+            out.blocked.missing_data += 1;
+            return out;
+        }
+        DataState::Failed => {
+            out.leaves.push(empty_leaf(root, EmptyReason::Failed));
+            out.blocked.failed += 1;
+            out.failed_needed += 1;
+            return out;
+        }
+    };
+    let screen = ScreenError::new(params, Some(&root_info), layout);
+    let root_priority = screen.priority(
+        geo.voxel_pixels(root),
+        env.visible_weight(root),
+        root,
+        Some(&root_info),
+        params,
+        layout,
+    );
+    out.data_leaves = 1;
+    let mut s = Octants {
+        layout,
+        params,
+        geo,
+        screen,
+        out,
+        heap: BinaryHeap::new(),
+        open: HashMap::new(),
+    };
+    s.expand(
+        env,
+        root,
+        root_info,
+        root_class.uniform,
+        root_priority,
+        root_upload,
+    );
+    let tol = s.screen.threshold;
+    // Candidates that stay drawn from their parent's brick.
+    let mut borrowed: Vec<(NodeKey, f64)> = Vec::new();
+    while let Some(item) = s.heap.pop() {
+        let (c, priority) = (item.key, item.priority);
+        let parent = layout.parent(c).expect("a candidate has a parent");
+        if !priority.is_finite() || priority <= tol {
+            borrowed.push((c, priority));
+            continue;
+        }
+        if !env.may_split(c) {
+            s.out.blocked.invisible += 1;
+            borrowed.push((c, priority));
+            continue;
+        }
+        let Some(info) = (match env.node(c) {
+            super::MetaState::Known(i) => Some(i),
+            _ => None,
+        }) else {
+            borrowed.push((c, priority));
+            continue;
+        };
+        let state = env.data(c);
+        match state {
+            DataState::Failed => {
+                s.out.blocked.failed += 1;
+                borrowed.push((c, priority));
+                continue;
+            }
+            DataState::Missing => {
+                let order =
+                    priority * env.request_weight(parent) * s.geo.centre_weight(parent);
+                s.out.requests.push(LoadRequest {
+                    key: c,
+                    priority: order as f32,
+                    info,
+                });
+                s.out.blocked.missing_data += 1;
+                borrowed.push((c, priority));
+                continue;
+            }
+            DataState::OnGpu | DataState::InCpu => {}
+        }
+        // The last child drawn from its parent frees the parent's brick.
+        let frees = s.open.get(&parent) == Some(&1);
+        let cost = u32::from(!frees);
+        if s.out.data_leaves + cost > params.max_data_leaves {
+            s.out.blocked.pool_full += 1;
+            borrowed.push((c, priority));
+            continue;
+        }
+        let upload = state == DataState::InCpu;
+        if upload && !budget.try_reserve(brick_bytes) {
+            s.out.blocked.upload_budget += 1;
+            borrowed.push((c, priority));
+            continue;
+        }
+        if let Some(n) = s.open.get_mut(&parent) {
+            *n -= 1;
+            if *n == 0 {
+                s.open.remove(&parent);
+            }
+        }
+        s.out.data_leaves += cost;
+        // Its own rank, for its children's requests and its leaf.
+        let own = s.screen.priority(
+            s.geo.voxel_pixels(c),
+            env.visible_weight(c),
+            c,
+            Some(&info),
+            params,
+            layout,
+        );
+        s.expand(env, c, info, item.uniform, own, upload);
+    }
+    for (c, priority) in borrowed {
+        s.out.leaves.push(RefinedLeaf {
+            key: c,
+            class: NodeClass::Borrowed,
+            priority: finite(priority),
+            needs_upload: false,
+        });
+    }
+    let mut out = s.out;
+    out.requests
+        .sort_by(|a, b| b.priority.total_cmp(&a.priority).then(a.key.cmp(&b.key)));
+    out.requests.truncate(max_requests);
+    out
+}
