@@ -154,7 +154,8 @@ enum Suite {
         supersample: Option<u32>,
         /// Knobs swept, comma-separated (default all; the defaults always run):
         /// step, preint, lod_geometric, lod_error, lod_visible,
-        /// bricks_geometric, bricks_error, bricks_visible, ert, u8_filtering,
+        /// bricks_geometric, bricks_error, bricks_visible, bricks_octants, ert,
+        /// u8_filtering,
         /// visibility,
         /// in_core.
         #[arg(long)]

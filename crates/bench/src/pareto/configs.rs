@@ -116,8 +116,9 @@ pub(super) fn configs(mode: RenderMode, u8_volume: bool, finest_bricks: u32) -> 
     // the geometric order (projected voxel size, tolerance 0), the
     // error-aware order (`ErrorAware` at budget 0: the node's error under the
     // TF times its projected size) and the visible-error order
-    // (`VisibleError` at budget 0); at budget 0 only the brick budget stops
-    // refinement.
+    // (`VisibleError` at budget 0), and that order one octant at a time
+    // (`VisibleOctants` at budget 0); at budget 0 only the brick budget
+    // stops refinement.
     for frac in BRICK_FRACTIONS {
         let bricks = ((finest_bricks as f64 * frac).round() as u32).max(1);
         for (knob, metric, tolerance_px) in [
@@ -126,6 +127,13 @@ pub(super) fn configs(mode: RenderMode, u8_volume: bool, finest_bricks: u32) -> 
             (
                 "bricks_visible",
                 LodMetric::VisibleError { budget: 0.0 },
+                0.0,
+            ),
+            // The visible-error order, one octant at a time (children drawn
+            // from their parent's brick until each gets its own).
+            (
+                "bricks_octants",
+                LodMetric::VisibleOctants { budget: 0.0 },
                 0.0,
             ),
         ] {

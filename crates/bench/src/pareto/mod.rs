@@ -129,6 +129,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
     let (mut lod_gains, mut visible_gains, mut preint_gains) = (Vec::new(), Vec::new(), Vec::new());
     let (mut budget_gains, mut budget_lod_gains) = (Vec::new(), Vec::new());
     let (mut error_budget_gains, mut error_budget_lod_gains) = (Vec::new(), Vec::new());
+    let (mut octant_gains, mut octant_lod_gains) = (Vec::new(), Vec::new());
     let mut aniso_bricks = None;
     for scene in &scenes {
         let dir = tempfile::tempdir().map_err(|e| e.to_string())?;
@@ -262,6 +263,12 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
                     &mut budget_gains,
                     &mut budget_lod_gains,
                 ),
+                (
+                    "bricks_octants",
+                    "octant-granular visible-error",
+                    &mut octant_gains,
+                    &mut octant_lod_gains,
+                ),
             ] {
                 if let Some((g, gl)) = brick_budget_gain(&cfgs, &m, knob) {
                     println!(
@@ -321,6 +328,14 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         (
             "visible_error_gain_db_at_equal_brick_budget_vs_finest",
             &budget_lod_gains,
+        ),
+        (
+            "octant_gain_db_at_equal_brick_budget",
+            &octant_gains,
+        ),
+        (
+            "octant_gain_db_at_equal_brick_budget_vs_finest",
+            &octant_lod_gains,
         ),
         ("preintegration_gain_db_at_step_2", &preint_gains),
     ] {

@@ -516,7 +516,8 @@ impl BrickManager {
             allocation_failures,
             failed_needed: refined.failed_needed,
             failures: self.failures.counts(),
-            fading: fades.len() as u32,
+            // (Borrowed leaves are drawn as they are, not fading.)
+            fading: fades.iter().filter(|f| !f.borrowed).count() as u32,
             holes,
             floor_pinned: self.floor_pinned(),
         };
