@@ -118,6 +118,7 @@ mod tests {
             min: 0.9,
             max: 0.1,
             error: None,
+            parent_error: None,
         };
         let b = p.prepare(&raw, &info);
         assert_eq!(b.texels.len(), 2000);

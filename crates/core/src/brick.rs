@@ -186,6 +186,12 @@ pub struct NodeInfo {
     /// finest data ([`crate::lod`]); `None` when the source records none (a
     /// version-1 store): error-aware refinement then uses the geometric rule.
     pub error: Option<crate::lod::NodeError>,
+    /// The recorded error of drawing this node's region from its *parent's*
+    /// brick instead of the finest data, binned over the parent's value range
+    /// (store format version 3; `docs/store-format.md`): what an
+    /// octant-granular cut ([`crate::LodMetric::VisibleOctants`]) ranks an
+    /// octant by. `None` at the root and when the source records none.
+    pub parent_error: Option<crate::lod::NodeError>,
 }
 
 /// Why a leaf of a cut needs no brick.

@@ -708,6 +708,7 @@ mod tests {
             min: min as f32,
             max: max as f32,
             error: Some(NodeError::encode(&bins, min, max)),
+            parent_error: None,
         }
     }
 

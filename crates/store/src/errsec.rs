@@ -54,15 +54,41 @@ pub(crate) fn read(
     offset: u64,
     len: u64,
 ) -> Result<Vec<NodeError>, StoreError> {
+    read_with(file, path, h.errors_crc, geo, offset, len)
+}
+
+/// Reads and validates the parent-error section at `offset` (`len` bytes of
+/// entries, then their CRC-32; bounds checked by the caller).
+pub(crate) fn read_parent(
+    file: &File,
+    path: &Path,
+    geo: &TableGeometry,
+    offset: u64,
+    len: u64,
+) -> Result<Vec<NodeError>, StoreError> {
+    let mut c = [0u8; 4];
+    file.read_exact_at(&mut c, offset + len)
+        .map_err(|e| StoreError::io(path, e))?;
+    read_with(file, path, u32::from_le_bytes(c), geo, offset, len)
+}
+
+fn read_with(
+    file: &File,
+    path: &Path,
+    stored: u32,
+    geo: &TableGeometry,
+    offset: u64,
+    len: u64,
+) -> Result<Vec<NodeError>, StoreError> {
     // Bounded by the file size checked by the caller.
     let mut b = vec![0u8; len as usize];
     file.read_exact_at(&mut b, offset)
         .map_err(|e| StoreError::io(path, e))?;
     let crc = crc32fast::hash(&b);
-    if crc != h.errors_crc {
+    if crc != stored {
         return Err(StoreError::ErrorsChecksum {
             path: path.to_owned(),
-            stored: h.errors_crc,
+            stored,
             computed: crc,
         });
     }

@@ -6,8 +6,9 @@ use brickray_core::{DType, NodeKey, OctreeLayout};
 /// The file's first eight bytes.
 pub const MAGIC: [u8; 8] = *b"BRKSTORE";
 /// The format version this crate writes (it also reads [`MIN_VERSION`]..=this).
-/// Version 2 adds the optional per-node error section (`docs/store-format.md`).
-pub const VERSION: u32 = 2;
+/// Version 2 adds the optional per-node error section, version 3 the
+/// parent-error section after it (`docs/store-format.md`).
+pub const VERSION: u32 = 3;
 /// The oldest format version this crate reads (version 1: no error section).
 pub const MIN_VERSION: u32 = 1;
 /// Bytes of the header.
@@ -118,6 +119,11 @@ pub(crate) fn packed_masks(b: &[u8]) -> u128 {
 pub(crate) const FLAG_ERRORS: u8 = 4;
 /// Where the error section's CRC is in the header (version 2).
 pub(crate) const ERRORS_CRC_AT: std::ops::Range<usize> = 120..124;
+/// Header flag (version 3, bit 3, only with [`FLAG_ERRORS`]): the
+/// parent-error section follows the error section: one entry per node of
+/// the same layout (the error of drawing the node's region from its
+/// parent's brick), then the CRC-32 of those entries.
+pub(crate) const FLAG_PARENT_ERRORS: u8 = 8;
 
 fn u32_at(b: &[u8], o: usize) -> u32 {
     u32::from_le_bytes([b[o], b[o + 1], b[o + 2], b[o + 3]])

@@ -321,6 +321,7 @@ impl BrickSource for ProceduralSource {
                 min: 0.0,
                 max: 0.0,
                 error: None,
+                parent_error: None,
             });
         }
         let (lo, hi) = self.footprint(key);
@@ -343,6 +344,7 @@ impl BrickSource for ProceduralSource {
                 min: mn as f32,
                 max: mn as f32,
                 error: None,
+                parent_error: None,
             });
         }
         let r = self.reach[m as usize];
@@ -351,6 +353,7 @@ impl BrickSource for ProceduralSource {
             min: (mn - r).max(0) as f32,
             max: (mx + r).min(255) as f32,
             error: None,
+            parent_error: None,
         })
     }
 

@@ -4,7 +4,7 @@ use crate::Filter;
 use crate::error::{Mismatch, StoreError};
 use crate::errsec::{self, ERROR_ENTRY_LEN};
 use crate::format::{
-    ENTRY_LEN, Entry, FLAG_ERRORS, FLAG_SPLIT_MASKS, FLAG_THRESHOLD, HEADER_LEN, Header, KIND_DATA,
+    ENTRY_LEN, Entry, FLAG_ERRORS, FLAG_PARENT_ERRORS, FLAG_SPLIT_MASKS, FLAG_THRESHOLD, HEADER_LEN, Header, KIND_DATA,
     KIND_EMPTY, KIND_UNIFORM, MAGIC, MAX_APRON, MAX_BRICK, MAX_BRICK_BYTES, MAX_SPLIT_MASKS,
     MIN_VERSION, TableGeometry, VERSION, dtype_from_code, filter_from_code, packed_masks,
 };
@@ -38,6 +38,8 @@ pub struct Store {
     payload_bytes: u64,
     /// Per table entry (format version 2 with the error section).
     errors: Option<Vec<NodeError>>,
+    /// The parent-error section (format version 3), table order.
+    parent_errors: Option<Vec<NodeError>>,
     version: u32,
 }
 
@@ -166,7 +168,9 @@ impl Store {
             .ok_or_else(|| bad(path, "dtype", format!("unknown code {}", h.dtype)))?;
         let filter = filter_from_code(h.filter)
             .ok_or_else(|| bad(path, "filter", format!("unknown code {}", h.filter)))?;
-        let known_flags = if h.version >= 2 {
+        let known_flags = if h.version >= 3 {
+            FLAG_THRESHOLD | FLAG_SPLIT_MASKS | FLAG_ERRORS | FLAG_PARENT_ERRORS
+        } else if h.version >= 2 {
             FLAG_THRESHOLD | FLAG_SPLIT_MASKS | FLAG_ERRORS
         } else {
             FLAG_THRESHOLD | FLAG_SPLIT_MASKS
@@ -275,6 +279,16 @@ impl Store {
         } else {
             0
         };
+        let has_parent_errors = h.flags & FLAG_PARENT_ERRORS != 0;
+        if has_parent_errors && !has_errors {
+            return Err(bad(
+                path,
+                "flags",
+                "the parent-error section without the error section",
+            ));
+        }
+        // Its entries, then their CRC.
+        let parent_len = if has_parent_errors { errors_len + 4 } else { 0 };
         if !has_errors && h.errors_crc != 0 {
             return Err(bad(
                 path,
@@ -286,16 +300,21 @@ impl Store {
             .table_offset
             .checked_add(table_len)
             .ok_or_else(|| bad(path, "table_offset", "overflow"))?;
-        let end = table_end
+        let errors_end = table_end
             .checked_add(errors_len)
+            .ok_or_else(|| bad(path, "node_count", "overflow"))?;
+        let end = errors_end
+            .checked_add(parent_len)
             .ok_or_else(|| bad(path, "node_count", "overflow"))?;
         if end > file_len {
             return Err(StoreError::Truncated {
                 path: path.to_owned(),
                 section: if table_end > file_len {
                     "node table"
-                } else {
+                } else if errors_end > file_len {
                     "error section"
+                } else {
+                    "parent-error section"
                 },
                 needed: end,
                 actual: file_len,
@@ -383,8 +402,16 @@ impl Store {
         } else {
             None
         };
+        let parent_errors = if has_parent_errors {
+            Some(errsec::read_parent(
+                &file, path, &geo, errors_end, errors_len,
+            )?)
+        } else {
+            None
+        };
         Ok(Store {
             errors,
+            parent_errors,
             version: h.version,
             path: path.to_owned(),
             file,
@@ -479,12 +506,17 @@ impl Store {
             let i = self.geo.index(e.key())?;
             self.errors.as_ref()?.get(i).copied()
         });
+        let parent_error = e.filter(|e| e.key().level > 0).and_then(|e| {
+            let i = self.geo.index(e.key())?;
+            self.parent_errors.as_ref()?.get(i).copied()
+        });
         match e {
             None => NodeInfo {
                 kind: NodeKind::Empty,
                 min: self.data_range[0],
                 max: self.data_range[0],
                 error: None,
+                parent_error: None,
             },
             Some(e) => NodeInfo {
                 kind: match e.kind {
@@ -495,6 +527,7 @@ impl Store {
                 min: e.min,
                 max: e.max,
                 error,
+                parent_error,
             },
         }
     }

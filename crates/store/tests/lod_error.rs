@@ -1,7 +1,8 @@
-//! Format version 2's per-node error bounds: the bound holds (drawing a node
-//! instead of the finest data never changes a classified sample by more than
-//! the recorded bound says), version 2 round trip, version-1 stores still
-//! open, a corrupt error section is a typed error.
+//! Format version 2's per-node error bounds and version 3's parent-error
+//! records: the bounds hold (drawing a node instead of the finest data, or a
+//! node's region from its parent's brick, never changes a sample by more than
+//! the recorded bound says), version 3 round trip, version-1 and -2 stores
+//! still open, corrupt error sections are typed errors.
 #![allow(missing_docs)]
 
 mod common;
@@ -165,6 +166,50 @@ proptest! {
                 }
             }
         }
+        // The parent-error records (format version 3): drawing a node's
+        // region from its parent's brick never changes a sample by more than
+        // the node's record says (raw deviation, over the parent's range).
+        for rec in store.nodes() {
+            let key = rec.key;
+            let Some(parent) = layout.parent(key) else {
+                prop_assert!(rec.info.parent_error.is_none());
+                continue;
+            };
+            let pinfo = store.info(parent).unwrap();
+            if pinfo.kind != NodeKind::Data || rec.info.kind == NodeKind::Empty {
+                continue;
+            }
+            let pe = rec.info.parent_error.expect("a parent-error record");
+            let dmax = pe.max_deviation(pinfo.min as f64, pinfo.max as f64);
+            let spread = pinfo.max as f64 - pinfo.min as f64;
+            let scale = layout.voxel_factor(parent.level);
+            let pd = layout.level_dims(parent.level);
+            let m = layout.split_mask(parent.level);
+            for p in &pts {
+                // A point of the node's region in the parent's level coordinates.
+                let q: [f64; 3] = std::array::from_fn(|a| {
+                    let r = 1 + ((m >> a) & 1) as u32;
+                    let lo = ([key.x, key.y, key.z][a] * brick) as f64 / r as f64;
+                    let hi = (lo + brick as f64 / r as f64).min((pd[a] - 1) as f64);
+                    lo + (hi - lo).max(0.0) * p[a]
+                });
+                if q.iter().zip(pd).any(|(v, d)| *v > (d - 1) as f64) {
+                    continue;
+                }
+                let c = trilinear(&levels[parent.level as usize], pd, q);
+                for centred in [false, true] {
+                    let fq: [f64; 3] = std::array::from_fn(|a| {
+                        if centred { (q[a] + 0.5) * scale[a] - 0.5 } else { q[a] * scale[a] }
+                    });
+                    let f = trilinear(&levels[finest as usize], fd, fq);
+                    prop_assert!(
+                        (f - c).abs() <= dmax + 1e-4 * (1.0 + spread),
+                        "node {key:?} from {parent:?} point {q:?}: raw change {} > {dmax}",
+                        (f - c).abs()
+                    );
+                }
+            }
+        }
     }
 }
 
@@ -193,7 +238,22 @@ fn reseal_header(b: &mut [u8]) {
 
 fn error_section(b: &[u8]) -> std::ops::Range<usize> {
     let end = (u64_at(b, 80) + u64_at(b, 88)) as usize;
-    end..b.len()
+    let len = u64_at(b, 88) as usize / ENTRY_LEN * ERROR_ENTRY_LEN;
+    end..end + len
+}
+
+/// The parent-error section's entries (its CRC follows them).
+fn parent_section(b: &[u8]) -> std::ops::Range<usize> {
+    error_section(b).end..b.len() - 4
+}
+
+/// The same store as format version 2: no parent-error section.
+fn as_version2(b: &[u8]) -> Vec<u8> {
+    let mut v = b[..error_section(b).end].to_vec();
+    v[8..12].copy_from_slice(&2u32.to_le_bytes());
+    v[30] &= !8;
+    reseal_header(&mut v);
+    v
 }
 
 fn reseal_errors(b: &mut [u8]) {
@@ -208,7 +268,7 @@ fn reseal_errors(b: &mut [u8]) {
 fn as_version1(b: &[u8]) -> Vec<u8> {
     let mut v = b[..error_section(b).start].to_vec();
     v[8..12].copy_from_slice(&1u32.to_le_bytes());
-    v[30] &= !4;
+    v[30] &= !12;
     v[108..124].fill(0);
     reseal_header(&mut v);
     v
@@ -221,16 +281,45 @@ fn open_bytes(dir: &Path, name: &str, b: &[u8]) -> Result<brickray_store::Store,
 }
 
 #[test]
-fn version_2_round_trip() {
+fn version_3_round_trip() {
     let dir = tempfile::tempdir().unwrap();
     let (path, b) = small_store(dir.path());
-    assert_eq!(u32::from_le_bytes(b[8..12].try_into().unwrap()), 2);
-    assert_eq!(b[30] & 4, 4, "error flag");
+    assert_eq!(u32::from_le_bytes(b[8..12].try_into().unwrap()), 3);
+    assert_eq!(b[30] & 12, 12, "error and parent-error flags");
     let s = open(&path).unwrap();
-    assert_eq!(s.version(), 2);
+    assert_eq!(s.version(), 3);
     assert!(s.has_errors());
     let n = s.nodes().count();
     assert_eq!(error_section(&b).len(), n * ERROR_ENTRY_LEN);
+    assert_eq!(parent_section(&b).len(), n * ERROR_ENTRY_LEN);
+    assert_eq!(
+        u32::from_le_bytes(b[b.len() - 4..].try_into().unwrap()),
+        crc32fast::hash(&b[parent_section(&b)])
+    );
+    // Every node below a data parent records what drawing it from the
+    // parent's brick costs; the root has none.
+    let mut some_parent_error = false;
+    for rec in s.nodes() {
+        match s.layout().parent(rec.key) {
+            None => assert_eq!(rec.info.parent_error, None),
+            Some(p) => {
+                let e = rec.info.parent_error.expect("a parent-error entry");
+                if s.info(p).unwrap().kind != NodeKind::Data {
+                    assert_eq!(e.occupied, 0, "{:?}", rec.key);
+                }
+                some_parent_error |= e.dev.iter().any(|&d| d > 0);
+            }
+        }
+    }
+    assert!(some_parent_error);
+    // A version-2 store (the section and its flag removed) still opens,
+    // with the same error records and no parent-error records.
+    let v2 = open_bytes(dir.path(), "v2.brs", &as_version2(&b)).unwrap();
+    assert_eq!(v2.version(), 2);
+    for rec in s.nodes() {
+        let i = v2.info(rec.key).unwrap();
+        assert_eq!((i.error, i.parent_error), (rec.info.error, None));
+    }
     assert_eq!(b[108..120], [0u8; 12], "reserved");
     assert_eq!(
         u32::from_le_bytes(b[120..124].try_into().unwrap()),
@@ -310,13 +399,21 @@ fn version_1_stores_still_open() {
             ..
         })
     ));
-    // Version 3 is not read.
-    let mut bad = b.clone();
-    bad[8..12].copy_from_slice(&3u32.to_le_bytes());
+    // A version-2 header may not carry the parent-error flag.
+    let mut bad = as_version2(&b);
+    bad[30] |= 8;
     reseal_header(&mut bad);
     assert!(matches!(
         open_bytes(dir.path(), "bad.brs", &bad),
-        Err(StoreError::UnsupportedVersion { version: 3, .. })
+        Err(StoreError::BadHeader { field: "flags", .. })
+    ));
+    // Version 4 is not read.
+    let mut bad = b.clone();
+    bad[8..12].copy_from_slice(&4u32.to_le_bytes());
+    reseal_header(&mut bad);
+    assert!(matches!(
+        open_bytes(dir.path(), "bad.brs", &bad),
+        Err(StoreError::UnsupportedVersion { version: 4, .. })
     ));
 }
 
@@ -343,9 +440,9 @@ fn corrupt_error_sections_are_typed_errors() {
             ..
         })
     ));
-    // Truncated anywhere inside the section: typed.
-    for cut in [1, ERROR_ENTRY_LEN, sec.len() - 1] {
-        let bad = &b[..b.len() - cut];
+    // Truncated anywhere inside either section: typed.
+    for keep in [1, ERROR_ENTRY_LEN, sec.len() - 1] {
+        let bad = &b[..sec.start + keep];
         assert!(
             matches!(
                 open_bytes(dir.path(), "c.brs", bad),
@@ -354,9 +451,40 @@ fn corrupt_error_sections_are_typed_errors() {
                     ..
                 })
             ),
+            "keep {keep}"
+        );
+    }
+    for cut in [1, 4, ERROR_ENTRY_LEN, sec.len() + 3] {
+        let bad = &b[..b.len() - cut];
+        assert!(
+            matches!(
+                open_bytes(dir.path(), "c.brs", bad),
+                Err(StoreError::Truncated {
+                    section: "parent-error section",
+                    ..
+                })
+            ),
             "cut {cut}"
         );
     }
+    // A flipped byte in the parent-error section, or its CRC: checksum.
+    for at in [parent_section(&b).start + 9, b.len() - 2] {
+        let mut bad = b.clone();
+        bad[at] ^= 0x10;
+        assert!(matches!(
+            open_bytes(dir.path(), "c.brs", &bad),
+            Err(StoreError::ErrorsChecksum { .. })
+        ));
+    }
+    // The parent-error flag without the error section's: refused.
+    let mut bad = b.clone();
+    bad[30] &= !4;
+    bad[120..124].fill(0);
+    reseal_header(&mut bad);
+    assert!(matches!(
+        open_bytes(dir.path(), "c.brs", &bad),
+        Err(StoreError::BadHeader { field: "flags", .. })
+    ));
     // Trailing bytes after it.
     let mut bad = b.clone();
     bad.push(0);
@@ -371,7 +499,7 @@ fn corrupt_error_sections_are_typed_errors() {
         Err(StoreError::BadHeader { .. })
     ));
     let mut bad = b[..sec.start].to_vec();
-    bad[30] &= !4;
+    bad[30] &= !12;
     reseal_header(&mut bad);
     assert!(matches!(
         open_bytes(dir.path(), "c.brs", &bad),
@@ -394,11 +522,11 @@ fn corrupt_error_sections_are_typed_errors() {
     // Without the section (flag and fields cleared, bytes removed): a valid
     // version-2 store without error bounds.
     let mut ok = b[..sec.start].to_vec();
-    ok[30] &= !4;
+    ok[30] &= !12;
     ok[120..124].fill(0);
     reseal_header(&mut ok);
     let s = open_bytes(dir.path(), "ok.brs", &ok).unwrap();
-    assert_eq!(s.version(), 2);
+    assert_eq!(s.version(), 3);
     assert!(!s.has_errors());
     let _ = (HEADER_LEN, ENTRY_LEN, NodeKey::ROOT);
 }

@@ -112,6 +112,7 @@ mod tests {
             min: 0.0,
             max: 1.0,
             error: None,
+            parent_error: None,
         }
     }
 

@@ -58,6 +58,7 @@ impl RampSource {
                 min as f64,
                 max.max(min + 1e-3) as f64,
             )),
+            parent_error: None,
         }
     }
 }
@@ -519,6 +520,7 @@ impl RefineEnv for PerBrick {
             min: 0.0,
             max: 1.0,
             error: (key.level < 2).then(|| NodeError::encode(&bins, 0.0, 1.0)),
+            parent_error: None,
         })
     }
     fn data(&mut self, _key: NodeKey) -> DataState {

@@ -5,9 +5,10 @@
 //! The cut is grown from the root: every node with its own brick is split at
 //! once (a split costs nothing: its data children are drawn from its brick),
 //! and its data children become candidates, ranked by their visible weight
-//! times the error of drawing them from their parent's brick (the parent's
-//! recorded error, [`ScreenError::priority`] with the child's weight; the
-//! child's projected size times it where no weight is measured). The best
+//! times the error of drawing them from their parent's brick (the child's
+//! parent-error record, `NodeInfo::parent_error`, or the parent's own where
+//! the source has none; [`ScreenError::priority`] with the child's weight,
+//! the parent's projected voxel size times it where no weight is measured). The best
 //! candidate gets its own brick when it is on the GPU or in CPU memory (else
 //! it is requested), the pool has room and the upload budget takes it; it
 //! costs one brick, none when it is the last of its parent's children drawn
@@ -109,13 +110,22 @@ impl Octants<'_, '_> {
                 NodeClass::Empty(r) => self.out.leaves.push(empty_leaf(c, r)),
                 _ => {
                     drawn += 1;
-                    // The error of drawing `c` from `key`'s brick, seen
-                    // through what the image shows of `c`.
+                    // The error of drawing `c` from `key`'s brick (`c`'s
+                    // parent-error record, over `key`'s range; `key`'s own
+                    // record where the source has none), seen through what
+                    // the image shows of `c`.
+                    let drawn_from = match cl.info.and_then(|i| i.parent_error) {
+                        Some(e) => NodeInfo {
+                            error: Some(e),
+                            ..info
+                        },
+                        None => info,
+                    };
                     let p = self.screen.priority(
                         self.geo.voxel_pixels(key),
                         env.visible_weight(c),
                         key,
-                        Some(&info),
+                        Some(&drawn_from),
                         self.params,
                         self.layout,
                     );

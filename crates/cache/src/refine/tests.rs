@@ -31,6 +31,7 @@ pub(crate) fn ball_info(layout: &OctreeLayout, key: NodeKey) -> NodeInfo {
         min,
         max,
         error: None,
+        parent_error: None,
     }
 }
 
@@ -681,12 +682,14 @@ impl RefineEnv for FullAndHollow {
             min: 0.0,
             max: 1.0,
             error: None,
+            parent_error: None,
         };
         let empty = NodeInfo {
             kind: NodeKind::Empty,
             min: 0.0,
             max: 0.0,
             error: None,
+            parent_error: None,
         };
         let under = |a: NodeKey| key == a || key.parent() == Some(a);
         MetaState::Known(

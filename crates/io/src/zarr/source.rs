@@ -196,6 +196,7 @@ impl BrickSource for ZarrBrickSource {
                 min: 0.0,
                 max: 0.0,
                 error: None,
+                parent_error: None,
             });
         }
         if let Some(n) = self.nodes.lock().get(&key) {
@@ -227,6 +228,7 @@ impl BrickSource for ZarrBrickSource {
             min: mn,
             max: mx,
             error: None,
+            parent_error: None,
         };
         self.nodes.lock().insert(key, info);
         Ok(info)

@@ -131,6 +131,15 @@ fn brick_values(
     }
 }
 
+/// The two error sections, one entry per node in table order.
+pub(super) struct ErrorSections {
+    /// Each node's own error (its brick against the finest level).
+    pub(super) errors: Vec<NodeError>,
+    /// The error of drawing each node's region from its parent's brick,
+    /// binned over the parent's range (zero for the root; format version 3).
+    pub(super) parent_errors: Vec<NodeError>,
+}
+
 /// The error entries of every node (table order), or `None` when the pass
 /// would exceed `memory_bound`.
 pub(super) fn compute(
@@ -140,14 +149,18 @@ pub(super) fn compute(
     geo: &TableGeometry,
     entries: &[Entry],
     memory_bound: u64,
-) -> Result<Option<Vec<NodeError>>, StoreError> {
+) -> Result<Option<ErrorSections>, StoreError> {
     if memory_needed(layout) > memory_bound {
         return Ok(None);
     }
     let mut errors = vec![NodeError::default(); entries.len()];
+    let mut parent_errors = vec![NodeError::default(); entries.len()];
     let levels = layout.levels;
     if levels < 2 {
-        return Ok(Some(errors));
+        return Ok(Some(ErrorSections {
+            errors,
+            parent_errors,
+        }));
     }
     let finest = levels - 1;
     let b = layout.brick;
@@ -283,7 +296,8 @@ pub(super) fn compute(
             .first
             .get(l as usize + 1)
             .map_or(entries.len(), |&n| n as usize);
-        let out: Vec<Result<NodeError, StoreError>> = entries[first..end]
+        let out: Vec<Result<(NodeError, Vec<(NodeKey, NodeError)>), StoreError>> = entries
+            [first..end]
             .par_iter()
             .map_init(
                 || (Vec::new(), Vec::new()),
@@ -291,10 +305,19 @@ pub(super) fn compute(
             )
             .collect();
         for (i, r) in out.into_iter().enumerate() {
-            errors[first + i] = r?;
+            let (own, octants) = r?;
+            errors[first + i] = own;
+            for (c, err) in octants {
+                if let Some(ci) = geo.index(c) {
+                    parent_errors[ci] = err;
+                }
+            }
         }
     }
-    Ok(Some(errors))
+    Ok(Some(ErrorSections {
+        errors,
+        parent_errors,
+    }))
 }
 
 /// Min of `lo` and max of `hi` over each voxel's 3x3x3 neighbourhood (clamped).
@@ -335,9 +358,9 @@ fn node_error(
     ext: &(Vec<f32>, Vec<f32>),
     raw: &mut Vec<u8>,
     vals: &mut Vec<f32>,
-) -> Result<NodeError, StoreError> {
+) -> Result<(NodeError, Vec<(NodeKey, NodeError)>), StoreError> {
     if !brick_values(file, path, layout, e, raw, vals)? {
-        return Ok(NodeError::default());
+        return Ok((NodeError::default(), Vec::new()));
     }
     let key: NodeKey = e.key();
     let b = layout.brick as i64;
@@ -346,8 +369,17 @@ fn node_error(
     let d = level.dims.map(|v| v as i64);
     let (min, max) = (e.min as f64, e.max as f64);
     let mut bins = [BinStats::default(); ERROR_BINS];
+    // Per child (octant): the same statistics over the coarse voxels its
+    // region interpolates, binned over this node's range.
+    let children = layout.children(key);
+    let mut child_bins = vec![[BinStats::default(); ERROR_BINS]; children.len()];
+    let mask = layout.split_mask(key.level);
     // Interior voxels 0..=brick (the high one is the first apron voxel).
     let hi_i = b.min(b + a - 1).max(0);
+    // The children's halves meet at `brick / 2` of this node's voxels: the
+    // low half interpolates voxels up to its ceiling, the high one from its
+    // floor.
+    let (low_end, high_start) = ((b + 1) / 2, b / 2);
     for k in 0..=hi_i {
         let z = (key.z as i64 * b + k).clamp(0, d[2] - 1) as u32;
         for j in 0..=hi_i {
@@ -359,12 +391,38 @@ fn node_error(
                     as f64;
                 let p = level.idx(x, y, z);
                 let dev = (ext.1[p] as f64 - c).max(c - ext.0[p] as f64).max(0.0);
-                let st = &mut bins[bin_of(c, min, max)];
-                st.count += 1;
-                st.dev = st.dev.max(dev);
-                st.sum_sq += level.acc[p].mean_sq(c);
+                let sq = level.acc[p].mean_sq(c);
+                let bin = bin_of(c, min, max);
+                let add = |st: &mut BinStats| {
+                    st.count += 1;
+                    st.dev = st.dev.max(dev);
+                    st.sum_sq += sq;
+                };
+                add(&mut bins[bin]);
+                // The children whose half of each split axis interpolates
+                // the voxel (the middle ones in both halves).
+                for (ci, cb) in child_bins.iter_mut().enumerate() {
+                    let (mut bit, mut inside) = (0, true);
+                    for (axis, v) in [i, j, k].into_iter().enumerate() {
+                        if mask & (1 << axis) == 0 {
+                            continue;
+                        }
+                        let high = (ci >> bit) & 1 == 1;
+                        bit += 1;
+                        inside &= if high { v >= high_start } else { v <= low_end };
+                    }
+                    if inside {
+                        add(&mut cb[bin]);
+                    }
+                }
             }
         }
     }
-    Ok(NodeError::encode(&bins, min, max))
+    let own = NodeError::encode(&bins, min, max);
+    let octants = children
+        .iter()
+        .zip(&child_bins)
+        .map(|(c, cb)| (*c, NodeError::encode(cb, min, max)))
+        .collect();
+    Ok((own, octants))
 }

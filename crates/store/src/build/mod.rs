@@ -20,7 +20,7 @@
 
 use crate::error::StoreError;
 use crate::format::{
-    ENTRY_LEN, Entry, FLAG_ERRORS, FLAG_SPLIT_MASKS, FLAG_THRESHOLD, HEADER_LEN, Header, KIND_DATA,
+    ENTRY_LEN, Entry, FLAG_ERRORS, FLAG_PARENT_ERRORS, FLAG_SPLIT_MASKS, FLAG_THRESHOLD, HEADER_LEN, Header, KIND_DATA,
     KIND_EMPTY, KIND_UNIFORM, MAX_APRON, MAX_BRICK, MAX_BRICK_BYTES, TableGeometry, VERSION,
     dtype_code, filter_code,
 };
@@ -328,9 +328,18 @@ pub fn build(
         &ctx.entries,
         opts.memory_bound,
     )?;
-    let error_bytes = errors.as_deref().map(crate::errsec::encode_all);
+    let error_bytes = errors
+        .as_ref()
+        .map(|e| crate::errsec::encode_all(&e.errors));
     if let Some(b) = &error_bytes {
         w.write_all(b).map_err(|e| StoreError::io(&tmp_path, e))?;
+    }
+    // The parent-error section (format version 3), with its CRC at its end.
+    if let Some(e) = &errors {
+        let b = crate::errsec::encode_all(&e.parent_errors);
+        w.write_all(&b).map_err(|e| StoreError::io(&tmp_path, e))?;
+        w.write_all(&crc32fast::hash(&b).to_le_bytes())
+            .map_err(|e| StoreError::io(&tmp_path, e))?;
     }
     let data_range = if ctx.data_range[0] <= ctx.data_range[1] {
         ctx.data_range
@@ -352,7 +361,7 @@ pub fn build(
         } else {
             FLAG_SPLIT_MASKS
         } | if error_bytes.is_some() {
-            FLAG_ERRORS
+            FLAG_ERRORS | FLAG_PARENT_ERRORS
         } else {
             0
         },
@@ -383,8 +392,11 @@ pub fn build(
     // Again: the output may have been replaced while the build ran.
     check_output(out, &inputs)?;
     tmp.persist(out)?;
-    let file_bytes =
-        table_offset + table.len() as u64 + error_bytes.as_ref().map_or(0, |b| b.len() as u64);
+    // The error section, then the parent-error section of the same length
+    // and its CRC.
+    let file_bytes = table_offset
+        + table.len() as u64
+        + error_bytes.as_ref().map_or(0, |b| 2 * b.len() as u64 + 4);
     Ok(BuildReport {
         layout,
         nodes: ctx.entries.len() as u64,
