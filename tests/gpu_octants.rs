@@ -7,7 +7,9 @@ use brickray::{
     Camera, FrameDesc, OutOfCoreConfig, OutOfCoreStats, RenderSettings, TransferFunction,
     VolumeFrame, VolumeRenderer,
 };
-use brickray_harness::{Offscreen, draw_frame, shared_gpu as gpu, store_of, target_desc as targets};
+use brickray_harness::{
+    Offscreen, draw_frame, shared_gpu as gpu, store_of, target_desc as targets,
+};
 use brickray_reference::psnr;
 use std::sync::Arc;
 
@@ -43,6 +45,15 @@ fn converged(
     metric: LodMetric,
     bricks: Option<u32>,
 ) -> (Vec<u8>, OutOfCoreStats) {
+    converged_in(source, metric, bricks, RenderSettings::default())
+}
+
+fn converged_in(
+    source: Arc<dyn brickray::BrickSource>,
+    metric: LodMetric,
+    bricks: Option<u32>,
+    settings: RenderSettings,
+) -> (Vec<u8>, OutOfCoreStats) {
     let g = gpu();
     let mut r = VolumeRenderer::new(&g.device, targets()).unwrap();
     let config = OutOfCoreConfig {
@@ -60,7 +71,7 @@ fn converged(
         camera: Camera::orbit(world().center(), 1.7, 0.6, 0.35),
         frame: world(),
         viewport: brickray::Viewport::full(SIZE, SIZE),
-        settings: RenderSettings::default(),
+        settings,
         host_depth: None,
     };
     let mut since = None;
@@ -90,7 +101,11 @@ fn borrowed_octants_draw_as_their_parent() {
     assert_eq!(os.cache.working_set_bricks, 1);
     assert_eq!(rs.data_leaves_per_level[0], 1);
     assert_eq!(os.data_leaves_per_level[0], 0);
-    assert!(os.data_leaves_per_level[1] >= 2, "{:?}", os.data_leaves_per_level);
+    assert!(
+        os.data_leaves_per_level[1] >= 2,
+        "{:?}",
+        os.data_leaves_per_level
+    );
     let p = psnr(&root, &oct);
     eprintln!("root alone against its octants: {p:.1} dB");
     assert!(p >= 55.0, "{p:.1} dB");
@@ -105,7 +120,11 @@ fn octant_cuts_keep_the_budget_and_track_the_finest_cut() {
     let s = shells(&dir);
     let (finest, fs) = converged(s.clone(), LodMetric::VisibleError { budget: 0.0 }, None);
     let budget = (fs.cache.working_set_bricks / 4).max(2);
-    let (node, ns) = converged(s.clone(), LodMetric::VisibleError { budget: 0.0 }, Some(budget));
+    let (node, ns) = converged(
+        s.clone(),
+        LodMetric::VisibleError { budget: 0.0 },
+        Some(budget),
+    );
     let (oct, os) = converged(s, LodMetric::VisibleOctants { budget: 0.0 }, Some(budget));
     let (pn, po) = (psnr(&finest, &node), psnr(&finest, &oct));
     eprintln!(
@@ -114,4 +133,31 @@ fn octant_cuts_keep_the_budget_and_track_the_finest_cut() {
     );
     assert!(os.cache.working_set_bricks <= budget);
     assert!(po >= pn, "octants {po:.1} dB, per node {pn:.1} dB");
+}
+
+/// Octant cuts settle in every mode under a brick budget (a cut that never
+/// converges keeps loading and redrawing).
+#[test]
+fn octant_cuts_converge_in_every_mode() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = shells(&dir);
+    for mode in [
+        brickray::RenderMode::Mip,
+        brickray::RenderMode::Iso {
+            value: 0.3,
+            color: [0.9, 0.8, 0.7],
+        },
+    ] {
+        let settings = RenderSettings {
+            mode,
+            ..RenderSettings::default()
+        };
+        let (_, st) = converged_in(
+            s.clone(),
+            LodMetric::VisibleOctants { budget: 0.0 },
+            Some(20),
+            settings,
+        );
+        assert!(st.cache.working_set_bricks <= 20);
+    }
 }

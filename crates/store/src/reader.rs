@@ -4,9 +4,10 @@ use crate::Filter;
 use crate::error::{Mismatch, StoreError};
 use crate::errsec::{self, ERROR_ENTRY_LEN};
 use crate::format::{
-    ENTRY_LEN, Entry, FLAG_ERRORS, FLAG_PARENT_ERRORS, FLAG_SPLIT_MASKS, FLAG_THRESHOLD, HEADER_LEN, Header, KIND_DATA,
-    KIND_EMPTY, KIND_UNIFORM, MAGIC, MAX_APRON, MAX_BRICK, MAX_BRICK_BYTES, MAX_SPLIT_MASKS,
-    MIN_VERSION, TableGeometry, VERSION, dtype_from_code, filter_from_code, packed_masks,
+    ENTRY_LEN, Entry, FLAG_ERRORS, FLAG_PARENT_ERRORS, FLAG_SPLIT_MASKS, FLAG_THRESHOLD,
+    HEADER_LEN, Header, KIND_DATA, KIND_EMPTY, KIND_UNIFORM, MAGIC, MAX_APRON, MAX_BRICK,
+    MAX_BRICK_BYTES, MAX_SPLIT_MASKS, MIN_VERSION, TableGeometry, VERSION, dtype_from_code,
+    filter_from_code, packed_masks,
 };
 use crate::sample::{fill, first_nan, representable, stats_dyn};
 use brickray_core::{

@@ -333,9 +333,7 @@ pub(crate) fn parse(text: &str) -> Result<Vec<Action>, ScriptError> {
                     "geometric" => Action::Lod(brickray::LodMetric::Geometric, value),
                     "error" => Action::Lod(brickray::LodMetric::ErrorAware { budget }, None),
                     "visible" => Action::Lod(brickray::LodMetric::VisibleError { budget }, None),
-                    "octants" => {
-                        Action::Lod(brickray::LodMetric::VisibleOctants { budget }, None)
-                    }
+                    "octants" => Action::Lod(brickray::LodMetric::VisibleOctants { budget }, None),
                     _ => return Err(err("expected geometric, error, visible or octants")),
                 }
             }

@@ -329,10 +329,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
             "visible_error_gain_db_at_equal_brick_budget_vs_finest",
             &budget_lod_gains,
         ),
-        (
-            "octant_gain_db_at_equal_brick_budget",
-            &octant_gains,
-        ),
+        ("octant_gain_db_at_equal_brick_budget", &octant_gains),
         (
             "octant_gain_db_at_equal_brick_budget_vs_finest",
             &octant_lod_gains,

@@ -30,7 +30,7 @@ use crate::loader::{BrickRequest, Loader, LoaderConfig};
 use crate::pool::{BrickPool, PoolError};
 use crate::prepared::Preparer;
 use crate::refine::{
-    DataState, MetaState, NodeClass, RefineEnv, RefineParams, SplitFilter, refine,
+    DataState, MetaState, NodeClass, OctantMemory, RefineEnv, RefineParams, SplitFilter, refine,
 };
 use crate::upload::UploadBudget;
 use brickray_core::{
@@ -73,6 +73,8 @@ pub struct BrickManager {
     clock: Arc<dyn Clock>,
     /// Level-of-detail fades between the refined and the displayed cut.
     fader: Fader,
+    /// Octant refinement's memory of the view (`LodMetric::VisibleOctants`).
+    octants: OctantMemory,
     /// The coarse floor's nodes (pinned for good once resident).
     floor: Vec<NodeKey>,
     /// Host time of the next update, if given.
@@ -112,6 +114,7 @@ struct Env<'a, 'f> {
     cpu: &'a mut CpuCache,
     pool: &'a BrickPool,
     filter: Option<&'f mut dyn SplitFilter>,
+    octants: &'a OctantMemory,
 }
 
 impl RefineEnv for Env<'_, '_> {
@@ -152,6 +155,14 @@ impl RefineEnv for Env<'_, '_> {
     fn visible_weight(&mut self, key: NodeKey) -> Option<f64> {
         self.filter.as_mut().and_then(|f| f.visible_weight(key))
     }
+
+    fn held(&mut self, key: NodeKey) -> bool {
+        self.octants.held(key)
+    }
+
+    fn may_promote(&mut self, key: NodeKey) -> bool {
+        self.octants.may_promote(key)
+    }
 }
 
 impl BrickManager {
@@ -182,6 +193,7 @@ impl BrickManager {
         let floor = lod::floor_nodes(&layout, pool.slot_count(), config.floor_slots);
         Ok(BrickManager {
             fader: Fader::for_layout(&layout),
+            octants: OctantMemory::default(),
             floor,
             frame_time: None,
             last_fade_time: None,
@@ -269,6 +281,7 @@ impl BrickManager {
             ),
             brick_upload_bytes: self.brick_bytes,
         };
+        self.octants.begin(&params);
         let refined = {
             let mut env = Env {
                 meta: &self.meta,
@@ -276,9 +289,11 @@ impl BrickManager {
                 cpu: &mut self.cpu,
                 pool: &self.pool,
                 filter,
+                octants: &self.octants,
             };
             refine(&self.layout, &params, &mut env, &mut self.budget)
         };
+        self.octants.end(&refined, &self.layout);
 
         // The displayed cut: the refined one, with level changes fading
         // (crate::fade). If its bricks, their fallbacks and the floor do not fit

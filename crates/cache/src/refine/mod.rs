@@ -36,6 +36,7 @@ mod lod_tests;
 mod octant;
 #[cfg(test)]
 mod octant_tests;
+pub use octant::{MAX_DEMOTIONS, OCTANT_HYSTERESIS, OctantMemory};
 mod rank;
 #[cfg(test)]
 pub(crate) mod tests;
@@ -143,6 +144,19 @@ pub trait RefineEnv {
     fn visible_weight(&mut self, key: NodeKey) -> Option<f64> {
         let _ = key;
         None
+    }
+    /// Under [`LodMetric::VisibleOctants`]: whether `key` had its own brick in
+    /// the previous frame's cut ([`OctantMemory::held`]). False by default.
+    fn held(&mut self, key: NodeKey) -> bool {
+        let _ = key;
+        false
+    }
+    /// Under [`LodMetric::VisibleOctants`]: false for a node that may not get
+    /// its own brick again in this view ([`OctantMemory::may_promote`]).
+    /// Every node by default.
+    fn may_promote(&mut self, key: NodeKey) -> bool {
+        let _ = key;
+        true
     }
 }
 

@@ -14,7 +14,11 @@
 //! costs one brick, none when it is the last of its parent's children drawn
 //! from the parent (the parent's brick then draws nothing). Refinement stops
 //! at the error budget, the brick budget or the heap's end. A node hidden in
-//! the previous frames ([`RefineEnv::may_split`]) is not given its brick.
+//! the previous frames ([`RefineEnv::may_split`]) is not given its brick. A
+//! candidate that had its own brick in the previous frame ranks
+//! [`OCTANT_HYSTERESIS`] times higher, and one that lost it
+//! [`MAX_DEMOTIONS`] times in the view is not given it again
+//! ([`OctantMemory`]): the cut settles.
 //!
 //! The root's brick must be available before anything is drawn (it is
 //! requested first). Everything else follows [`refine`](super::refine):
@@ -26,8 +30,84 @@ use super::{
     RefinedLeaf, Refinement, ViewGeometry,
 };
 use crate::upload::UploadBudget;
-use brickray_core::{EmptyReason, NodeInfo, NodeKey, OctreeLayout};
-use std::collections::{BinaryHeap, HashMap};
+use brickray_core::{
+    Camera, EmptyReason, NodeInfo, NodeKey, OctreeLayout, RenderMode, TransferFunction,
+};
+use std::collections::{BinaryHeap, HashMap, HashSet};
+
+/// How much more a candidate that had its own brick in the previous frame
+/// ranks ([`RefineEnv::held`]): it loses its brick only to a candidate that
+/// ranks more than this much higher. The weights it is ranked by depend on
+/// the cut (an octant drawn from its own brick shows other detail, and a MIP
+/// ray's maximum moves), so without it a budget-limited cut can alternate
+/// between two states forever (measured: a 2-frame cycle on MIP shells).
+pub const OCTANT_HYSTERESIS: f64 = 2.0;
+
+/// Times a node may lose its own brick within one view before it is drawn
+/// from its parent for the rest of the view ([`RefineEnv::may_promote`]).
+pub const MAX_DEMOTIONS: u32 = 3;
+
+/// What octant refinement remembers from frame to frame within one view (the
+/// camera, viewport, mode and transfer function): the nodes that had their
+/// own brick, and how often each lost it. GPU-free; the manager keeps one.
+#[derive(Debug, Clone, Default)]
+pub struct OctantMemory {
+    view: Option<(Camera, f32, u32, RenderMode, TransferFunction)>,
+    held: HashSet<NodeKey>,
+    demotions: HashMap<NodeKey, u32>,
+}
+
+impl OctantMemory {
+    /// Starts a frame of `params`' view: a different view forgets everything.
+    pub fn begin(&mut self, params: &RefineParams<'_>) {
+        let view = (
+            *params.camera,
+            params.aspect,
+            params.viewport_height_px,
+            params.mode,
+            params.tf.clone(),
+        );
+        if self.view.as_ref() != Some(&view) {
+            self.held.clear();
+            self.demotions.clear();
+            self.view = Some(view);
+        }
+    }
+
+    /// Whether `key` had its own brick in the previous frame.
+    pub fn held(&self, key: NodeKey) -> bool {
+        self.held.contains(&key)
+    }
+
+    /// False once `key` lost its own brick [`MAX_DEMOTIONS`] times in this view.
+    pub fn may_promote(&self, key: NodeKey) -> bool {
+        self.demotions.get(&key).copied().unwrap_or(0) < MAX_DEMOTIONS
+    }
+
+    /// Ends the frame with its refined cut: the nodes with their own brick
+    /// (data leaves, and parents lending theirs), and a demotion for each
+    /// node that had one and is now drawn from its parent.
+    pub fn end(&mut self, r: &Refinement, layout: &OctreeLayout) {
+        let mut held = HashSet::new();
+        for l in &r.leaves {
+            match l.class {
+                NodeClass::Data => {
+                    held.insert(l.key);
+                }
+                NodeClass::Borrowed => {
+                    if self.held.contains(&l.key) {
+                        *self.demotions.entry(l.key).or_insert(0) += 1;
+                    }
+                    if let Some(p) = layout.parent(l.key) {
+                        held.insert(p);
+                    }
+                }
+                NodeClass::Empty(_) => {}
+            }
+        }
+        self.held = held;
+    }
+}
 
 fn empty_leaf(key: NodeKey, reason: EmptyReason) -> RefinedLeaf {
     RefinedLeaf {
@@ -121,14 +201,16 @@ impl Octants<'_, '_> {
                         },
                         None => info,
                     };
-                    let p = self.screen.priority(
-                        self.geo.voxel_pixels(key),
-                        env.visible_weight(c),
-                        key,
-                        Some(&drawn_from),
-                        self.params,
-                        self.layout,
-                    );
+                    let hold = if env.held(c) { OCTANT_HYSTERESIS } else { 1.0 };
+                    let p = hold
+                        * self.screen.priority(
+                            self.geo.voxel_pixels(key),
+                            env.visible_weight(c),
+                            key,
+                            Some(&drawn_from),
+                            self.params,
+                            self.layout,
+                        );
                     self.heap.push(HeapItem {
                         order: p,
                         priority: p,
@@ -257,7 +339,7 @@ pub(super) fn refine_octants(
             borrowed.push((c, priority));
             continue;
         }
-        if !env.may_split(c) {
+        if !env.may_split(c) || !env.may_promote(c) {
             s.out.blocked.invisible += 1;
             borrowed.push((c, priority));
             continue;
@@ -277,8 +359,7 @@ pub(super) fn refine_octants(
                 continue;
             }
             DataState::Missing => {
-                let order =
-                    priority * env.request_weight(parent) * s.geo.centre_weight(parent);
+                let order = priority * env.request_weight(parent) * s.geo.centre_weight(parent);
                 s.out.requests.push(LoadRequest {
                     key: c,
                     priority: order as f32,
@@ -331,6 +412,9 @@ pub(super) fn refine_octants(
         });
     }
     let mut out = s.out;
+    // In key order: the same cut is the same list (and its borrowed slots,
+    // numbered in cut order, the same) whatever order the heap took.
+    out.leaves.sort_by_key(|l| l.key);
     out.requests
         .sort_by(|a, b| b.priority.total_cmp(&a.priority).then(a.key.cmp(&b.key)));
     out.requests.truncate(max_requests);

@@ -20,9 +20,9 @@
 
 use crate::error::StoreError;
 use crate::format::{
-    ENTRY_LEN, Entry, FLAG_ERRORS, FLAG_PARENT_ERRORS, FLAG_SPLIT_MASKS, FLAG_THRESHOLD, HEADER_LEN, Header, KIND_DATA,
-    KIND_EMPTY, KIND_UNIFORM, MAX_APRON, MAX_BRICK, MAX_BRICK_BYTES, TableGeometry, VERSION,
-    dtype_code, filter_code,
+    ENTRY_LEN, Entry, FLAG_ERRORS, FLAG_PARENT_ERRORS, FLAG_SPLIT_MASKS, FLAG_THRESHOLD,
+    HEADER_LEN, Header, KIND_DATA, KIND_EMPTY, KIND_UNIFORM, MAX_APRON, MAX_BRICK, MAX_BRICK_BYTES,
+    TableGeometry, VERSION, dtype_code, filter_code,
 };
 use crate::partial::{PartialFile, parent_dir, remove_stale};
 use crate::{Filter, NO_ENTRY_LEVEL};
