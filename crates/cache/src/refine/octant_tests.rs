@@ -183,3 +183,63 @@ fn missing_octants_are_requested_and_drawn_from_their_parent() {
     assert_eq!(r.leaves[0].class, NodeClass::Empty(EmptyReason::NotLoaded));
     assert_eq!(r.requests[0].key, NodeKey::ROOT);
 }
+
+/// The memory counts a demotion when a node that had its own brick is drawn
+/// from its parent, stops promoting it after `MAX_DEMOTIONS`, and forgets
+/// everything when the view changes.
+#[test]
+fn octant_memory_counts_demotions_per_view() {
+    let layout = ball_layout(64);
+    let frame = VolumeFrame::centered(layout.volume.dims, [1.0; 3]);
+    let tf = full_tf();
+    let cam = Camera::orbit(frame.center(), 2.0, 0.4, 0.2);
+    fn params<'a>(
+        cam: &'a Camera,
+        frame: &'a VolumeFrame,
+        tf: &'a TransferFunction,
+    ) -> RefineParams<'a> {
+        RefineParams {
+            camera: cam,
+            aspect: 1.0,
+            viewport_height_px: 64,
+            volume_frame: frame,
+            mode: RenderMode::Dvr,
+            tf,
+            tolerance_px: 0.0,
+            metric: LodMetric::VisibleOctants { budget: 0.0 },
+            max_data_leaves: 8,
+            max_requests: 8,
+            brick_upload_bytes: 1,
+        }
+    }
+    let c = NodeKey::ROOT.child(3);
+    let leaf = |key, class| RefinedLeaf {
+        key,
+        class,
+        priority: 1.0,
+        needs_upload: false,
+    };
+    let own = Refinement {
+        leaves: vec![leaf(c, NodeClass::Data)],
+        ..Default::default()
+    };
+    let lent = Refinement {
+        leaves: vec![leaf(c, NodeClass::Borrowed)],
+        ..Default::default()
+    };
+    let mut m = OctantMemory::default();
+    for i in 0..MAX_DEMOTIONS {
+        m.begin(&params(&cam, &frame, &tf));
+        assert!(m.may_promote(c), "demotion {i}");
+        m.end(&own, &layout);
+        assert!(m.held(c) && !m.held(NodeKey::ROOT));
+        m.begin(&params(&cam, &frame, &tf));
+        m.end(&lent, &layout);
+        // Drawn from the root: the root holds its brick, `c` does not.
+        assert!(m.held(NodeKey::ROOT) && !m.held(c));
+    }
+    assert!(!m.may_promote(c));
+    let moved = Camera::orbit(frame.center(), 2.5, 0.4, 0.2);
+    m.begin(&params(&moved, &frame, &tf));
+    assert!(m.may_promote(c) && !m.held(NodeKey::ROOT));
+}
