@@ -272,6 +272,36 @@ pub struct Refinement {
     pub failed_needed: u32,
 }
 
+/// A leaf that needs no brick.
+fn empty_leaf(key: NodeKey, reason: EmptyReason) -> RefinedLeaf {
+    RefinedLeaf {
+        key,
+        class: NodeClass::Empty(reason),
+        priority: 0.0,
+        needs_upload: false,
+    }
+}
+
+/// The refinement of a frame whose root cannot be classified: its metadata
+/// is requested, or its failure counted.
+fn unknown_root(u: Unknown) -> Refinement {
+    let mut out = Refinement::default();
+    let root = NodeKey::ROOT;
+    match u {
+        Unknown::Pending => {
+            out.leaves.push(empty_leaf(root, EmptyReason::NotLoaded));
+            out.meta_requests.push((root, f32::MAX));
+            out.blocked.missing_meta += 1;
+        }
+        Unknown::Failed => {
+            out.leaves.push(empty_leaf(root, EmptyReason::Failed));
+            out.blocked.failed += 1;
+            out.failed_needed += 1;
+        }
+    }
+    out
+}
+
 /// Refines the octree of `layout` for one frame. `budget` is the frame's upload
 /// budget (already started); bricks of split children not on the GPU are charged
 /// to it, as is the root when it is the only leaf and not on the GPU.
@@ -297,13 +327,6 @@ pub fn refine(
     let max_meta = MAX_META_REQUESTS_PER_FRAME as usize;
     let mut out = Refinement::default();
     let mut heap = BinaryHeap::new();
-
-    let empty_leaf = |key, reason| RefinedLeaf {
-        key,
-        class: NodeClass::Empty(reason),
-        priority: 0.0,
-        needs_upload: false,
-    };
 
     let root = NodeKey::ROOT;
     let screen: ScreenError;
@@ -336,18 +359,7 @@ pub fn refine(
             screen = se;
             c.info
         }
-        Err(Unknown::Pending) => {
-            out.leaves.push(empty_leaf(root, EmptyReason::NotLoaded));
-            out.meta_requests.push((root, f32::MAX));
-            out.blocked.missing_meta += 1;
-            return out;
-        }
-        Err(Unknown::Failed) => {
-            out.leaves.push(empty_leaf(root, EmptyReason::Failed));
-            out.blocked.failed += 1;
-            out.failed_needed += 1;
-            return out;
-        }
+        Err(u) => return unknown_root(u),
     };
     out.data_leaves = 1;
     if params.max_data_leaves == 0 {

@@ -27,7 +27,7 @@
 use super::rank::{HeapItem, ScreenError, Unknown, classify};
 use super::{
     DataState, LoadRequest, MAX_META_REQUESTS_PER_FRAME, NodeClass, RefineEnv, RefineParams,
-    RefinedLeaf, Refinement, ViewGeometry,
+    RefinedLeaf, Refinement, ViewGeometry, empty_leaf, unknown_root,
 };
 use crate::upload::UploadBudget;
 use brickray_core::{
@@ -106,15 +106,6 @@ impl OctantMemory {
             }
         }
         self.held = held;
-    }
-}
-
-fn empty_leaf(key: NodeKey, reason: EmptyReason) -> RefinedLeaf {
-    RefinedLeaf {
-        key,
-        class: NodeClass::Empty(reason),
-        priority: 0.0,
-        needs_upload: false,
     }
 }
 
@@ -251,18 +242,7 @@ pub(super) fn refine_octants(
     let root = NodeKey::ROOT;
     let root_class = match classify(root, layout, params, &geo, env) {
         Ok(c) => c,
-        Err(Unknown::Pending) => {
-            out.leaves.push(empty_leaf(root, EmptyReason::NotLoaded));
-            out.meta_requests.push((root, f32::MAX));
-            out.blocked.missing_meta += 1;
-            return out;
-        }
-        Err(Unknown::Failed) => {
-            out.leaves.push(empty_leaf(root, EmptyReason::Failed));
-            out.blocked.failed += 1;
-            out.failed_needed += 1;
-            return out;
-        }
+        Err(u) => return unknown_root(u),
     };
     let (NodeClass::Data, Some(root_info)) = (root_class.class, root_class.info) else {
         let reason = match root_class.class {
