@@ -272,6 +272,17 @@ pub struct Refinement {
     pub failed_needed: u32,
 }
 
+/// The view geometry of `params`.
+fn view_geometry(layout: &OctreeLayout, params: &RefineParams<'_>) -> ViewGeometry {
+    ViewGeometry::new(
+        layout,
+        params.camera,
+        params.aspect,
+        params.viewport_height_px,
+        params.volume_frame,
+    )
+}
+
 /// A leaf that needs no brick.
 fn empty_leaf(key: NodeKey, reason: EmptyReason) -> RefinedLeaf {
     RefinedLeaf {
@@ -314,13 +325,7 @@ pub fn refine(
     if matches!(params.metric, LodMetric::VisibleOctants { .. }) {
         return octant::refine_octants(layout, params, env, budget);
     }
-    let geo = ViewGeometry::new(
-        layout,
-        params.camera,
-        params.aspect,
-        params.viewport_height_px,
-        params.volume_frame,
-    );
+    let geo = view_geometry(layout, params);
     let brick_bytes = params.brick_upload_bytes;
     let finest = layout.levels.saturating_sub(1);
     let max_requests = params.max_data_leaves.min(params.max_requests) as usize;

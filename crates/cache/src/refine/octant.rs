@@ -27,7 +27,7 @@
 use super::rank::{HeapItem, ScreenError, Unknown, classify};
 use super::{
     DataState, LoadRequest, MAX_META_REQUESTS_PER_FRAME, NodeClass, RefineEnv, RefineParams,
-    RefinedLeaf, Refinement, ViewGeometry, empty_leaf, unknown_root,
+    RefinedLeaf, Refinement, ViewGeometry, empty_leaf, unknown_root, view_geometry,
 };
 use crate::upload::UploadBudget;
 use brickray_core::{
@@ -229,13 +229,7 @@ pub(super) fn refine_octants(
     env: &mut dyn RefineEnv,
     budget: &mut UploadBudget,
 ) -> Refinement {
-    let geo = ViewGeometry::new(
-        layout,
-        params.camera,
-        params.aspect,
-        params.viewport_height_px,
-        params.volume_frame,
-    );
+    let geo = view_geometry(layout, params);
     let brick_bytes = params.brick_upload_bytes;
     let max_requests = params.max_data_leaves.min(params.max_requests) as usize;
     let mut out = Refinement::default();
