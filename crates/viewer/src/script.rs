@@ -19,7 +19,7 @@
 //!                                out of core: where refinement's visibility comes from
 //! prediction off | paper | fast | exact
 //!                                the isosurface prediction buffer (iso frames)
-//! lod geometric [TOL] | error [BUDGET] | visible [BUDGET]
+//! lod geometric [TOL] | error [BUDGET] | visible [BUDGET] | octants [BUDGET]
 //!                                out of core: the level-of-detail rule, with its tolerance
 //!                                (px per voxel) or error budget (8-bit levels x px, default 255)
 //! wait N                         draw N frames
@@ -118,7 +118,7 @@ impl ModeName {
     }
 }
 
-/// The error budget of `lod error` and `lod visible` without one, and of
+/// The error budget of `lod error`, `lod visible` and `lod octants` without one, and of
 /// the viewer's error-aware rules when chosen: 255 (8-bit levels x px) lets a
 /// node of full-scale error be as coarse as the geometric rule at 1 px
 /// (`brickray::LodMetric::ErrorAware`).
@@ -502,5 +502,23 @@ mod tests {
             let e = parse(text).unwrap_err();
             assert_eq!(e.line, line, "{text:?}: {e}");
         }
+    }
+
+    #[test]
+    fn lod_octants_parses() {
+        let a = parse("lod octants 8\nlod octants").unwrap();
+        assert_eq!(
+            a[0],
+            Action::Lod(brickray::LodMetric::VisibleOctants { budget: 8.0 }, None)
+        );
+        assert_eq!(
+            a[1],
+            Action::Lod(
+                brickray::LodMetric::VisibleOctants {
+                    budget: DEFAULT_ERROR_BUDGET
+                },
+                None
+            )
+        );
     }
 }
