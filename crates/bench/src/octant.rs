@@ -12,13 +12,14 @@
 //! is not refined, or the node is at the finest level, or uniform. Candidates
 //! (the unrefined children of refined nodes) are ranked by their visible
 //! weight times the error of drawing them from their parent's brick, from
-//! the store's per-node record ([`OctantError::Store`]: the parent's, the
-//! same for its eight octants) or measured on the data for each octant
-//! ([`OctantError::Data`]: what a store could record per octant).
+//! the store's records ([`OctantError::Store`]: each octant's parent-error
+//! record since store format 3; before, the parent's own record, the same
+//! for its eight octants) or measured on the data for each octant
+//! ([`OctantError::Data`]).
 //!
-//! Neither the index nor the renderers draw such cuts today (a leaf's data
-//! word names its own brick); this measures what they would buy, on the
-//! f64 reference, at the equal brick budgets of the other orders.
+//! The GPU renderer draws such cuts (`LodMetric::VisibleOctants`); this
+//! measures them on the f64 reference, with the oracle's weights, at the
+//! equal brick budgets of the other orders.
 
 use crate::cut::Resampler;
 use brickray_cache::refine::is_visible;
@@ -46,8 +47,10 @@ impl Ord for Item {
 /// Where a candidate octant's error comes from.
 #[derive(Clone, Copy)]
 pub(crate) enum OctantError<'a> {
-    /// The parent's per-sample expected error from the store
-    /// (`brickray_core::node_visible_error`), the same for every octant.
+    /// The per-sample expected error (`brickray_core::node_visible_error`)
+    /// of the octant's parent-error record (store format 3), over the
+    /// parent's range; on a store without those records, the parent's own
+    /// record, the same for every octant.
     Store,
     /// Measured on the data: [`data_error`] of the parent over the octant
     /// against the finest volume.
@@ -101,7 +104,18 @@ pub(crate) fn octant_cut(
                     n += 1;
                     let w = weights.get(&c).copied().unwrap_or(0.0);
                     let e = match error {
-                        OctantError::Store => e,
+                        // The child's parent-error record (store format 3),
+                        // over the parent's range; the parent's own without.
+                        OctantError::Store => match info(c)?.parent_error {
+                            Some(pe) => {
+                                let from = brickray_core::NodeInfo {
+                                    error: Some(pe),
+                                    ..i
+                                };
+                                node_visible_error(&from, mode, &table, layout).unwrap_or(1.0)
+                            }
+                            None => e,
+                        },
                         OctantError::Data(finest) => {
                             data_error(&mut res.borrow_mut(), k, c, mode, &table, finest)?
                         }
