@@ -161,3 +161,57 @@ fn octant_cuts_converge_in_every_mode() {
         assert!(st.cache.working_set_bricks <= 20);
     }
 }
+
+/// Switching to octant cuts at run time grows the renderer's slot table and
+/// usage counters (the other metrics allocate no borrowed rows): the cut then
+/// settles as a renderer created with the metric does, with the same image.
+#[test]
+fn switching_to_octant_cuts_at_run_time() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = shells(&dir);
+    let (fresh, fs) = converged(
+        s.clone(),
+        LodMetric::VisibleOctants { budget: 0.0 },
+        Some(14),
+    );
+    let g = gpu();
+    let mut r = VolumeRenderer::new(&g.device, targets()).unwrap();
+    let config = OutOfCoreConfig {
+        tolerance_px: 0.0,
+        lod_metric: LodMetric::VisibleError { budget: 0.0 },
+        brick_budget: Some(14),
+        upload_budget_bytes: 1 << 30,
+        ..Default::default()
+    };
+    r.set_volume_source(&g.device, &g.queue, s, world(), config)
+        .unwrap();
+    r.set_transfer_function(&g.device, &g.queue, &tf()).unwrap();
+    let target = Offscreen::new(&g.device, SIZE, SIZE);
+    let desc = FrameDesc {
+        camera: Camera::orbit(world().center(), 1.7, 0.6, 0.35),
+        frame: world(),
+        viewport: brickray::Viewport::full(SIZE, SIZE),
+        settings: RenderSettings::default(),
+        host_depth: None,
+    };
+    for _ in 0..20 {
+        draw_frame(g, &mut r, &target, &desc, Some(wgpu::Color::BLACK)).expect("frame");
+    }
+    r.set_lod_metric(LodMetric::VisibleOctants { budget: 0.0 })
+        .unwrap();
+    let mut done = None;
+    for f in 1..=300u64 {
+        draw_frame(g, &mut r, &target, &desc, Some(wgpu::Color::BLACK)).expect("frame");
+        let st = r.out_of_core_stats().unwrap();
+        if st.converged && f > 10 {
+            done = Some(st);
+            break;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(2));
+    }
+    let st = done.expect("converged after the switch");
+    assert_eq!(st.cache.working_set_bricks, fs.cache.working_set_bricks);
+    let p = psnr(&fresh, &target.read_color(g));
+    eprintln!("switched against fresh: {p:.1} dB");
+    assert!(p >= 40.0, "{p:.1} dB");
+}

@@ -257,11 +257,19 @@ impl BrickManager {
     /// Borrowed slots a plan may use past the pool's: slot ids
     /// `pool().slot_count()..` name the octants of an octant-granular cut
     /// drawn from their parent's brick ([`FadeSlot::borrowed`](super::FadeSlot::borrowed)),
-    /// rows of the renderer's slot table with no atlas space. Eight per slot:
-    /// a parent lends its brick to at most its eight children, and at most
-    /// every slot lends.
+    /// rows of the renderer's slot table with no atlas space. Eight per slot
+    /// under [`LodMetric::VisibleOctants`](brickray_core::LodMetric::VisibleOctants)
+    /// (a parent lends its brick to at most its eight children, and at most
+    /// every slot lends), none under the other metrics.
     pub fn borrowed_slots(&self) -> u32 {
-        self.pool.slot_count().saturating_mul(8)
+        if matches!(
+            self.config.lod_metric,
+            brickray_core::LodMetric::VisibleOctants { .. }
+        ) {
+            self.pool.slot_count().saturating_mul(8)
+        } else {
+            0
+        }
     }
 
     /// The CPU cache.

@@ -176,14 +176,8 @@ impl Pool {
         let atlas_bytes =
             dims.iter().map(|&d| d as u64).product::<u64>() * gpu.encoding.texel_bytes() as u64;
         let slot_count = manager.pool().slot_count().max(1) as usize;
-        // Rows past the pool's slots: the borrowed slots of octant-granular
-        // cuts (drawn from an ancestor's brick; no atlas space, no sub-cells).
-        let rows = slot_count + manager.borrowed_slots() as usize;
-        let slots = gpu::storage_buffer(
-            device,
-            "brickray-render brick slot table",
-            (rows * std::mem::size_of::<SlotInfo>()) as u64,
-        )?;
+        let rows = Pool::rows(manager);
+        let slots = Pool::slot_table(device, rows)?;
         let sub_cells = gpu::storage_buffer(
             device,
             "brickray-render brick sub-cell table",
@@ -201,6 +195,44 @@ impl Pool {
             sub_cells,
             faded: Vec::new(),
         })
+    }
+
+    /// Rows of the slot table and the usage counters `manager` needs: one a
+    /// pool slot, and past them the borrowed slots of octant-granular cuts
+    /// (drawn from an ancestor's brick; no atlas space, no sub-cells), only
+    /// under `LodMetric::VisibleOctants`.
+    fn rows(manager: &BrickManager) -> usize {
+        manager.pool().slot_count().max(1) as usize + manager.borrowed_slots() as usize
+    }
+
+    fn slot_table(device: &wgpu::Device, rows: usize) -> Result<wgpu::Buffer, RenderError> {
+        gpu::storage_buffer(
+            device,
+            "brickray-render brick slot table",
+            (rows * std::mem::size_of::<SlotInfo>()) as u64,
+        )
+    }
+
+    /// Grows the slot table and the usage counters to what `manager` needs
+    /// now (a switch to octant-granular cuts at run time); the atlas and the
+    /// pool's slots stay. True when they were recreated (the bind group must
+    /// be rebuilt; read-backs in flight are dropped).
+    fn ensure_rows(
+        &mut self,
+        device: &wgpu::Device,
+        manager: &BrickManager,
+    ) -> Result<bool, RenderError> {
+        let rows = Pool::rows(manager);
+        if rows <= self.slots_cpu.len() {
+            return Ok(false);
+        }
+        let slots = Pool::slot_table(device, rows)?;
+        let feedback = UsageFeedback::new(device, rows as u32, manager.layout())?;
+        self.slots = slots;
+        self.feedback = feedback;
+        self.slots_cpu.resize(rows, bytemuck::Zeroable::zeroed());
+        self.slots_dirty = true;
+        Ok(true)
     }
 }
 
@@ -626,6 +658,9 @@ impl VolumeBackend for OutOfCore {
         self.cut_changed = leaves != self.leaves;
         self.leaves = leaves;
         self.note_cut(queue, desc, &plan.refined, weighted);
+        if self.pool.ensure_rows(device, &self.manager)? {
+            self.rebuild_bind_group(device)?;
+        }
         let refine_ms = t.elapsed().as_secs_f64() * 1e3;
 
         let t = Instant::now();
