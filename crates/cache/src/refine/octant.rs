@@ -84,9 +84,10 @@ impl OctantMemory {
         self.demotions.get(&key).copied().unwrap_or(0) < MAX_DEMOTIONS
     }
 
-    /// Ends the frame with its refined cut: the nodes with their own brick
-    /// (data leaves, and parents lending theirs), and a demotion for each
-    /// node that had one and is now drawn from its parent.
+    /// Ends the frame with its refined cut: the nodes that got their own
+    /// brick (data leaves, and every ancestor of a leaf: each was given its
+    /// brick and split, whether it still lends it or not), and a demotion
+    /// for each node that had one and is now drawn from its parent.
     pub fn end(&mut self, r: &Refinement, layout: &OctreeLayout) {
         let mut held = HashSet::new();
         for l in &r.leaves {
@@ -98,11 +99,15 @@ impl OctantMemory {
                     if self.held.contains(&l.key) {
                         *self.demotions.entry(l.key).or_insert(0) += 1;
                     }
-                    if let Some(p) = layout.parent(l.key) {
-                        held.insert(p);
-                    }
                 }
                 NodeClass::Empty(_) => {}
+            }
+            let mut a = layout.parent(l.key);
+            while let Some(p) = a {
+                if !held.insert(p) {
+                    break;
+                }
+                a = layout.parent(p);
             }
         }
         self.held = held;

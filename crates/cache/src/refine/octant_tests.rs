@@ -232,7 +232,8 @@ fn octant_memory_counts_demotions_per_view() {
         m.begin(&params(&cam, &frame, &tf));
         assert!(m.may_promote(c), "demotion {i}");
         m.end(&own, &layout);
-        assert!(m.held(c) && !m.held(NodeKey::ROOT));
+        // `c` and its ancestor, split to give `c` its brick.
+        assert!(m.held(c) && m.held(NodeKey::ROOT));
         m.begin(&params(&cam, &frame, &tf));
         m.end(&lent, &layout);
         // Drawn from the root: the root holds its brick, `c` does not.
@@ -242,4 +243,38 @@ fn octant_memory_counts_demotions_per_view() {
     let moved = Camera::orbit(frame.center(), 2.5, 0.4, 0.2);
     m.begin(&params(&moved, &frame, &tf));
     assert!(m.may_promote(c) && !m.held(NodeKey::ROOT));
+    // A node that got its brick but lends it to none of its children (all of
+    // them have their own) is held too: losing it is a demotion.
+    let d = c.child(5);
+    let deeper = Refinement {
+        leaves: vec![leaf(d.child(0), NodeClass::Data)],
+        ..Default::default()
+    };
+    m.end(&deeper, &layout);
+    assert!(m.held(d) && m.held(c));
+    m.begin(&params(&moved, &frame, &tf));
+    m.end(
+        &Refinement {
+            leaves: vec![leaf(d, NodeClass::Borrowed)],
+            ..Default::default()
+        },
+        &layout,
+    );
+    m.end(&deeper, &layout);
+    m.end(
+        &Refinement {
+            leaves: vec![leaf(d, NodeClass::Borrowed)],
+            ..Default::default()
+        },
+        &layout,
+    );
+    m.end(&deeper, &layout);
+    m.end(
+        &Refinement {
+            leaves: vec![leaf(d, NodeClass::Borrowed)],
+            ..Default::default()
+        },
+        &layout,
+    );
+    assert!(!m.may_promote(d));
 }
