@@ -39,6 +39,27 @@ fn tf() -> TransferFunction {
     )
 }
 
+/// A renderer of `source` under `metric` and a brick budget.
+fn renderer(
+    source: Arc<dyn brickray::BrickSource>,
+    metric: LodMetric,
+    bricks: Option<u32>,
+) -> VolumeRenderer {
+    let g = gpu();
+    let mut r = VolumeRenderer::new(&g.device, targets()).unwrap();
+    let config = OutOfCoreConfig {
+        tolerance_px: 0.0,
+        lod_metric: metric,
+        brick_budget: bricks,
+        upload_budget_bytes: 1 << 30,
+        ..Default::default()
+    };
+    r.set_volume_source(&g.device, &g.queue, source, world(), config)
+        .unwrap();
+    r.set_transfer_function(&g.device, &g.queue, &tf()).unwrap();
+    r
+}
+
 /// The converged image and stats of `metric` under a brick budget.
 fn converged(
     source: Arc<dyn brickray::BrickSource>,
@@ -55,17 +76,7 @@ fn converged_in(
     settings: RenderSettings,
 ) -> (Vec<u8>, OutOfCoreStats) {
     let g = gpu();
-    let mut r = VolumeRenderer::new(&g.device, targets()).unwrap();
-    let config = OutOfCoreConfig {
-        tolerance_px: 0.0,
-        lod_metric: metric,
-        brick_budget: bricks,
-        upload_budget_bytes: 1 << 30,
-        ..Default::default()
-    };
-    r.set_volume_source(&g.device, &g.queue, source, world(), config)
-        .unwrap();
-    r.set_transfer_function(&g.device, &g.queue, &tf()).unwrap();
+    let mut r = renderer(source, metric, bricks);
     let target = Offscreen::new(&g.device, SIZE, SIZE);
     let desc = FrameDesc {
         camera: Camera::orbit(world().center(), 1.7, 0.6, 0.35),
@@ -175,17 +186,7 @@ fn switching_to_octant_cuts_at_run_time() {
         Some(14),
     );
     let g = gpu();
-    let mut r = VolumeRenderer::new(&g.device, targets()).unwrap();
-    let config = OutOfCoreConfig {
-        tolerance_px: 0.0,
-        lod_metric: LodMetric::VisibleError { budget: 0.0 },
-        brick_budget: Some(14),
-        upload_budget_bytes: 1 << 30,
-        ..Default::default()
-    };
-    r.set_volume_source(&g.device, &g.queue, s, world(), config)
-        .unwrap();
-    r.set_transfer_function(&g.device, &g.queue, &tf()).unwrap();
+    let mut r = renderer(s, LodMetric::VisibleError { budget: 0.0 }, Some(14));
     let target = Offscreen::new(&g.device, SIZE, SIZE);
     let desc = FrameDesc {
         camera: Camera::orbit(world().center(), 1.7, 0.6, 0.35),

@@ -252,29 +252,15 @@ fn octant_memory_counts_demotions_per_view() {
     };
     m.end(&deeper, &layout);
     assert!(m.held(d) && m.held(c));
+    let lent_d = Refinement {
+        leaves: vec![leaf(d, NodeClass::Borrowed)],
+        ..Default::default()
+    };
     m.begin(&params(&moved, &frame, &tf));
-    m.end(
-        &Refinement {
-            leaves: vec![leaf(d, NodeClass::Borrowed)],
-            ..Default::default()
-        },
-        &layout,
-    );
+    m.end(&lent_d, &layout);
     m.end(&deeper, &layout);
-    m.end(
-        &Refinement {
-            leaves: vec![leaf(d, NodeClass::Borrowed)],
-            ..Default::default()
-        },
-        &layout,
-    );
+    m.end(&lent_d, &layout);
     m.end(&deeper, &layout);
-    m.end(
-        &Refinement {
-            leaves: vec![leaf(d, NodeClass::Borrowed)],
-            ..Default::default()
-        },
-        &layout,
-    );
+    m.end(&lent_d, &layout);
     assert!(!m.may_promote(d));
 }
