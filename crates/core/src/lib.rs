@@ -19,6 +19,7 @@ pub mod brick;
 pub mod camera;
 pub mod lod;
 pub mod macrocell;
+mod node_error;
 mod pyramid;
 pub mod settings;
 pub mod synthetic;
