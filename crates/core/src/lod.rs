@@ -266,6 +266,61 @@ fn unit(e: f64) -> f64 {
     if e.is_nan() { 1.0 } else { e.clamp(0.0, 1.0) }
 }
 
+/// Which deviation of a bin widens it when a node's error is read.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Deviation {
+    /// The recorded bound (the largest deviation): [`node_tf_error`].
+    Bound,
+    /// The typical (RMS) deviation: [`node_tf_error_expected`].
+    Typical,
+}
+
+/// The error of drawing a node, each occupied bin widened by `which`
+/// deviation (see the two public functions for what each mode reads).
+fn tf_error(
+    info: &NodeInfo,
+    mode: RenderMode,
+    table: &TfErrorTable,
+    layout: &OctreeLayout,
+    which: Deviation,
+) -> Option<f64> {
+    let n = match NodeBins::of(info, layout) {
+        Ok(n) => n,
+        Err(e) => return e,
+    };
+    let dev = |b| match which {
+        Deviation::Bound => n.err.deviation(b, n.min, n.max),
+        Deviation::Typical => n.err.typical_deviation(b, n.min, n.max),
+    };
+    let e = match mode {
+        RenderMode::Dvr => n
+            .occupied()
+            .map(|b| {
+                let (lo, hi) = n.widened(b, dev(b));
+                table.classified_change(lo, hi)
+            })
+            .fold(0.0, f64::max),
+        RenderMode::Iso { value, .. } => {
+            if n.iso_in_a_bin(value, dev) {
+                1.0
+            } else {
+                0.0
+            }
+        }
+        RenderMode::Mip => {
+            let [vlo, vhi] = layout.volume.value_range;
+            let span = (vhi as f64 - vlo as f64).abs().max(f64::MIN_POSITIVE);
+            match which {
+                Deviation::Bound => n.err.max_deviation(n.min, n.max) / span,
+                Deviation::Typical => {
+                    n.occupied().map(|b| n.err.share(b) * dev(b)).sum::<f64>() / span
+                }
+            }
+        }
+    };
+    Some(unit(e))
+}
+
 /// The error of drawing a node instead of the finest data, as the image sees
 /// it, in 0..=1, from its metadata only; `None` when the node records no
 /// error bound (a version-1 store, a source without error data).
@@ -286,34 +341,7 @@ pub fn node_tf_error(
     table: &TfErrorTable,
     layout: &OctreeLayout,
 ) -> Option<f64> {
-    let n = match NodeBins::of(info, layout) {
-        Ok(n) => n,
-        Err(e) => return e,
-    };
-    let dev = |b| n.err.deviation(b, n.min, n.max);
-    let e = match mode {
-        RenderMode::Dvr => n
-            .occupied()
-            .map(|b| {
-                let (lo, hi) = n.widened(b, dev(b));
-                table.classified_change(lo, hi)
-            })
-            .fold(0.0, f64::max),
-        RenderMode::Iso { value, .. } => {
-            if n.iso_in_a_bin(value, dev) {
-                1.0
-            } else {
-                0.0
-            }
-        }
-        RenderMode::Mip => {
-            let span = (layout.volume.value_range[1] as f64 - layout.volume.value_range[0] as f64)
-                .abs()
-                .max(f64::MIN_POSITIVE);
-            n.err.max_deviation(n.min, n.max) / span
-        }
-    };
-    Some(unit(e))
+    tf_error(info, mode, table, layout, Deviation::Bound)
 }
 
 /// The *expected* error of drawing a node instead of the finest data, in
@@ -336,33 +364,7 @@ pub fn node_tf_error_expected(
     table: &TfErrorTable,
     layout: &OctreeLayout,
 ) -> Option<f64> {
-    let n = match NodeBins::of(info, layout) {
-        Ok(n) => n,
-        Err(e) => return e,
-    };
-    let rms = |b| n.err.typical_deviation(b, n.min, n.max);
-    let e: f64 = match mode {
-        RenderMode::Dvr => n
-            .occupied()
-            .map(|b| {
-                let (lo, hi) = n.widened(b, rms(b));
-                table.classified_change(lo, hi)
-            })
-            .fold(0.0, f64::max),
-        RenderMode::Iso { value, .. } => {
-            if n.iso_in_a_bin(value, rms) {
-                1.0
-            } else {
-                0.0
-            }
-        }
-        RenderMode::Mip => {
-            let [vlo, vhi] = layout.volume.value_range;
-            n.occupied().map(|b| n.err.share(b) * rms(b)).sum::<f64>()
-                / (vhi as f64 - vlo as f64).abs().max(f64::MIN_POSITIVE)
-        }
-    };
-    Some(unit(e))
+    tf_error(info, mode, table, layout, Deviation::Typical)
 }
 
 /// The per-sample error [`LodMetric::VisibleError`] weighs a node's visible
