@@ -90,7 +90,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 args.pool_mib
             );
             let frame = VolumeFrame::centered([4096; 3], [1.0; 3]);
-            renderer.set_volume_source(&gpu.device, &gpu.queue, source, frame, config)?;
+            renderer.set_volume_source(&gpu.device, &gpu.queue, source, config)?;
             let tf = TransferFunction::from_points(
                 &[
                     (0.45, [0.1, 0.3, 0.8, 0.0]),
@@ -130,7 +130,6 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     &gpu.device,
                     &gpu.queue,
                     Arc::new(brickray::store::open(&store)?),
-                    frame,
                     config,
                 )?;
             }
@@ -166,6 +165,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             viewport: brickray::Viewport::full(args.size, args.size),
             settings,
             host_depth: None,
+            time: None,
         };
         renderer.prepare(&gpu.device, &gpu.queue, &mut enc, &desc)?;
         {
@@ -182,7 +182,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             args.size,
             image::ExtendedColorType::Rgba8,
         )?;
-        match renderer.out_of_core_stats() {
+        match renderer.stats().out_of_core {
             Some(s) => println!(
                 "frame {i:2}: {ms:7.1} ms | working set {:4} bricks, pool {:4}/{:4} slots | uploaded {:6.2} MiB | in flight {:4} | cpu hit {:.2} | refine {:.1} ms, index {} words{}",
                 s.cache.working_set_bricks,

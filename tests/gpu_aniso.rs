@@ -67,6 +67,7 @@ fn frame(
         viewport: brickray::Viewport::full(size, size),
         settings,
         host_depth: None,
+        time: None,
     };
     r.prepare(&g.device, &g.queue, &mut enc, &desc)
         .expect("prepare");
@@ -102,7 +103,7 @@ fn anisotropic_ct_out_of_core_matches_reference_and_in_core() {
             upload_budget_bytes: 1 << 30,
             ..Default::default()
         };
-        ooc.set_volume_source(&g.device, &g.queue, src, wf, config)
+        ooc.set_volume_source(&g.device, &g.queue, src, config)
             .unwrap();
         for (name, mode, tf) in ct::scenes().into_iter().take(3) {
             let settings = RenderSettings {
@@ -117,14 +118,14 @@ fn anisotropic_ct_out_of_core_matches_reference_and_in_core() {
             let mut converged = false;
             for _ in 0..60 {
                 img = frame(&mut ooc, camera, wf, settings, size);
-                if ooc.out_of_core_stats().unwrap().converged {
+                if ooc.stats().out_of_core.unwrap().converged {
                     converged = true;
                     break;
                 }
                 std::thread::sleep(std::time::Duration::from_millis(5));
             }
             assert!(converged, "{tag} {name}: not converged");
-            let stats = ooc.out_of_core_stats().unwrap();
+            let stats = ooc.stats().out_of_core.unwrap();
             let inc = frame(&mut incore, camera, wf, settings, size);
             let cmp = assert_close(
                 &format!("{tag}_ooc_vs_incore_{name}"),
@@ -173,10 +174,10 @@ fn anisotropic_ct_out_of_core_matches_reference_and_in_core() {
         let settings = RenderSettings::default();
         let finest = frame(&mut incore, near, wf, settings, size);
         for tol in [0.5f32, 1.0, 2.0, 4.0, 8.0] {
-            ooc.set_lod_tolerance(tol).unwrap();
+            brickray_harness::configure(gpu(), &ooc, |c| c.tolerance_px = tol).unwrap();
             let mut img = frame(&mut ooc, near, wf, settings, size);
             for _ in 0..60 {
-                if ooc.out_of_core_stats().unwrap().converged {
+                if ooc.stats().out_of_core.unwrap().converged {
                     break;
                 }
                 std::thread::sleep(std::time::Duration::from_millis(5));
@@ -187,7 +188,7 @@ fn anisotropic_ct_out_of_core_matches_reference_and_in_core() {
                     .any(|p| p[0] > 10 || p[1] > 10 || p[2] > 10),
                 "{tag} tol {tol}: black"
             );
-            let s = ooc.out_of_core_stats().unwrap();
+            let s = ooc.stats().out_of_core.unwrap();
             eprintln!(
                 "{tag} tol {tol} px: {} bricks, PSNR {:.2} dB vs in core at the finest level",
                 s.cache.working_set_bricks,

@@ -63,7 +63,7 @@ fn out_of_core(vol: &Volume, desc: &FrameDesc<'_>) -> Vec<u8> {
         tolerance_px: 0.0,
         ..Default::default()
     };
-    r.set_volume_source(&g.device, &g.queue, source, desc.frame, config)
+    r.set_volume_source(&g.device, &g.queue, source, config)
         .unwrap();
     r.set_transfer_function(&g.device, &g.queue, &tf()).unwrap();
     let target = Offscreen::new(&g.device, SIZE, SIZE);

@@ -46,9 +46,8 @@ fn tf() -> TransferFunction {
 
 fn renderer(source: Arc<dyn brickray::BrickSource>, config: OutOfCoreConfig) -> VolumeRenderer {
     let g = gpu();
-    let wf = VolumeFrame::centered([64; 3], [1.0; 3]);
     let mut r = VolumeRenderer::new(&g.device, targets()).unwrap();
-    r.set_volume_source(&g.device, &g.queue, source, wf, config)
+    r.set_volume_source(&g.device, &g.queue, source, config)
         .unwrap();
     r.set_transfer_function(&g.device, &g.queue, &tf()).unwrap();
     r
@@ -106,14 +105,14 @@ fn switch(
     let t = Offscreen::new(&gpu().device, SIZE, SIZE);
     let d = desc(Camera::orbit(Vec3::ZERO, 1.8, 0.5, 0.3), mode);
     let new = settle(&mut r, &t, &d);
-    r.set_lod_tolerance(1e6).unwrap();
+    brickray_harness::configure(gpu(), &r, |c| c.tolerance_px = 1e6).unwrap();
     let old = settle(&mut r, &t, &d);
     assert_eq!(
-        r.out_of_core_stats().unwrap().data_leaves_per_level[0],
+        r.stats().out_of_core.unwrap().data_leaves_per_level[0],
         1,
         "coarse: the root"
     );
-    r.set_lod_tolerance(0.0).unwrap();
+    brickray_harness::configure(gpu(), &r, |c| c.tolerance_px = 0.0).unwrap();
     let after = (0..frames).map(|_| draw(&mut r, &t, &d)).collect();
     (old, new, after)
 }
@@ -202,7 +201,7 @@ fn the_floor_prevents_holes_under_a_tiny_pool_while_circling() {
             RenderMode::Dvr,
         );
         draw(&mut r, &t, &d);
-        let s = r.out_of_core_stats().unwrap();
+        let s = r.stats().out_of_core.unwrap();
         holes = holes.max(s.cache.holes);
         floor = floor.max(s.cache.floor_pinned);
         std::thread::sleep(std::time::Duration::from_millis(2));

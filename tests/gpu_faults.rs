@@ -103,7 +103,7 @@ fn setup(
         retry,
         ..Default::default()
     };
-    r.set_volume_source(&g.device, &g.queue, source, frame, config)
+    r.set_volume_source(&g.device, &g.queue, source, config)
         .unwrap();
     let tf = TransferFunction::ramp(0.3, 0.8, 0.3);
     r.set_transfer_function(&g.device, &g.queue, &tf).unwrap();
@@ -148,19 +148,20 @@ fn failing_and_panicking_sources_are_surfaced_then_retried() {
             !settle(&mut r, &desc, 40),
             "{what}: degraded image reported converged"
         );
-        let stats = r.out_of_core_stats().unwrap();
+        let stats = r.stats().out_of_core.unwrap();
         assert!(
             !stats.converged && stats.cache.degraded(),
             "{what}: {stats:?}"
         );
-        let e = r.take_streaming_error().expect("one error surfaced");
+        let volume = r.streamed_volume().expect("out of core").clone();
+        let e = volume.take_streaming_error().expect("one error surfaced");
         eprintln!("{what}: {e}");
-        assert!(r.take_streaming_error().is_none(), "{what}: surfaced twice");
+        assert!(volume.take_streaming_error().is_none(), "{what}: surfaced twice");
         // Repaired, then retried on request: the view completes.
         *target.lock().unwrap() = Fault::None;
-        r.retry_failed_bricks().unwrap();
+        volume.retry_failed_bricks();
         assert!(settle(&mut r, &desc, 300), "{what}: never recovered");
-        assert!(r.out_of_core_stats().unwrap().converged);
+        assert!(r.stats().out_of_core.unwrap().converged);
     }
 }
 
@@ -210,26 +211,26 @@ fn budgets_and_tolerance_change_at_run_time() {
     let source = FaultySource::new();
     let (mut r, desc) = setup(source, None);
     assert!(settle(&mut r, &desc, 300));
-    let before = r.out_of_core_stats().unwrap();
+    let before = r.stats().out_of_core.unwrap();
     let bytes = r.volume_bytes();
     // A smaller pool: the atlas is recreated and the view completes again with
     // at most as many bricks as it holds.
     let g = gpu();
-    r.set_gpu_budget(&g.device, &g.queue, 16 << 20).unwrap();
+    brickray_harness::configure(g, &r, |c| c.gpu_budget_bytes = 16 << 20).unwrap();
     assert!(r.volume_bytes() < bytes);
     assert!(settle(&mut r, &desc, 300));
-    let after = r.out_of_core_stats().unwrap();
+    let after = r.stats().out_of_core.unwrap();
     assert!(after.cache.working_set_bricks <= after.cache.pool_slots);
     // A coarser tolerance needs fewer bricks.
-    r.set_lod_tolerance(4.0).unwrap();
+    brickray_harness::configure(gpu(), &r, |c| c.tolerance_px = 4.0).unwrap();
     assert!(settle(&mut r, &desc, 300));
-    let coarse = r.out_of_core_stats().unwrap();
+    let coarse = r.stats().out_of_core.unwrap();
     assert!(coarse.cache.working_set_bricks < before.cache.working_set_bricks);
     // Bad values are typed errors, the renderer keeps working.
-    assert!(r.set_lod_tolerance(f32::NAN).is_err());
-    assert!(r.set_lod_tolerance(-1.0).is_err());
-    assert!(r.set_cpu_budget(1).is_err());
-    assert!(r.set_gpu_budget(&g.device, &g.queue, 1).is_err());
-    r.set_upload_budget(1 << 20).unwrap();
+    assert!(brickray_harness::configure(gpu(), &r, |c| c.tolerance_px = f32::NAN).is_err());
+    assert!(brickray_harness::configure(gpu(), &r, |c| c.tolerance_px = -1.0).is_err());
+    assert!(brickray_harness::configure(gpu(), &r, |c| c.cpu_budget_bytes = 1).is_err());
+    assert!(brickray_harness::configure(g, &r, |c| c.gpu_budget_bytes = 1).is_err());
+    brickray_harness::configure(gpu(), &r, |c| c.upload_budget_bytes = 1 << 20).unwrap();
     assert!(settle(&mut r, &desc, 300));
 }

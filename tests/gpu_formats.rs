@@ -29,6 +29,7 @@ fn frame(
         viewport: brickray::Viewport::full(size, size),
         settings: s,
         host_depth: None,
+        time: None,
     };
     r.prepare(&g.device, &g.queue, &mut enc, &desc)
         .expect("prepare");
@@ -51,12 +52,12 @@ fn converge(
 ) -> Vec<u8> {
     for _ in 0..600 {
         let img = frame(r, camera, wf, s, size);
-        if r.out_of_core_stats().is_some_and(|st| st.converged) {
+        if r.stats().out_of_core.is_some_and(|st| st.converged) {
             return img;
         }
         std::thread::sleep(std::time::Duration::from_millis(10));
     }
-    panic!("not converged: {:?}", r.out_of_core_stats());
+    panic!("not converged: {:?}", r.stats().out_of_core);
 }
 
 #[test]
@@ -92,10 +93,10 @@ fn streamed_ome_zarr_renders_as_the_built_store() {
         };
         let g = gpu();
         let mut a = VolumeRenderer::new(&g.device, targets()).unwrap();
-        a.set_volume_source(&g.device, &g.queue, store, wf, cfg)
+        a.set_volume_source(&g.device, &g.queue, store, cfg)
             .unwrap();
         let mut b = VolumeRenderer::new(&g.device, targets()).unwrap();
-        b.set_volume_source(&g.device, &g.queue, streamed, wf, cfg)
+        b.set_volume_source(&g.device, &g.queue, streamed, cfg)
             .unwrap();
         let tf = TransferFunction::from_points(
             &[

@@ -61,6 +61,7 @@ impl Scene<'_> {
             viewport: brickray::Viewport::full(self.size, self.size),
             settings: self.settings,
             host_depth: None,
+            time: None,
         };
         r.prepare(&g.device, &g.queue, &mut enc, &desc).unwrap();
         {
@@ -358,6 +359,7 @@ fn typed_errors_not_panics() {
         viewport: brickray::Viewport::full(16, 16),
         settings: RenderSettings::default(),
         host_depth: None,
+        time: None,
     };
     let mut enc = g.device.create_command_encoder(&Default::default());
     assert!(matches!(
@@ -459,6 +461,7 @@ fn missing_texture_features_fall_back() {
             viewport: brickray::Viewport::full(size, size),
             settings,
             host_depth: None,
+            time: None,
         };
         r.prepare(&g.device, &g.queue, &mut enc, &desc).unwrap();
         {

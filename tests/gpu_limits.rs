@@ -93,13 +93,11 @@ fn limits_below_a_backends_needs_are_typed_errors() {
     let g = device_with(|l| l.max_storage_buffers_per_shader_stage = 6);
     let mut r = new_renderer(&g).unwrap();
     r.set_volume(&g.device, &g.queue, &sphere()).unwrap();
-    let frame = VolumeFrame::centered([1024; 3], [1.0; 3]);
     expect_limit(
         r.set_volume_source(
             &g.device,
             &g.queue,
             procedural(32),
-            frame,
             OutOfCoreConfig::default(),
         ),
         "max_storage_buffers_per_shader_stage",
@@ -126,13 +124,12 @@ fn tables_beyond_the_storage_binding_limit_are_typed_errors() {
     r.set_transfer_function(&g.device, &g.queue, &small)
         .unwrap();
     // Small bricks and a large pool: the slot table exceeds the binding.
-    let frame = VolumeFrame::centered([1024; 3], [1.0; 3]);
     let config = OutOfCoreConfig {
         gpu_budget_bytes: 4 << 20,
         ..Default::default()
     };
     expect_limit(
-        r.set_volume_source(&g.device, &g.queue, procedural(8), frame, config),
+        r.set_volume_source(&g.device, &g.queue, procedural(8), config),
         "max_storage_buffer_binding_size",
     );
 }
@@ -155,7 +152,7 @@ fn an_index_beyond_the_storage_binding_limit_is_a_typed_error() {
     let desc = FrameDesc::new(camera, frame, 96, 96);
     let run = |g: &GpuContext| -> Result<(VolumeRenderer, Option<PrepareError>), RenderError> {
         let mut r = new_renderer(g)?;
-        r.set_volume_source(&g.device, &g.queue, procedural(8), frame, config)?;
+        r.set_volume_source(&g.device, &g.queue, procedural(8), config)?;
         r.set_transfer_function(&g.device, &g.queue, &tf)?;
         let target = Offscreen::new(&g.device, 96, 96);
         for _ in 0..300 {
@@ -171,7 +168,7 @@ fn an_index_beyond_the_storage_binding_limit_is_a_typed_error() {
     };
     let (r, err) = run(shared_gpu()).unwrap();
     assert!(err.is_none(), "{err:?}");
-    let s = r.out_of_core_stats().unwrap();
+    let s = r.stats().out_of_core.unwrap();
     let index_bytes = s.index_words as u64 * 4;
     // The slot table (32 B a slot) and the sub-cell table (8 B a slot with 8^3
     // bricks) are the other storage buffers.
@@ -368,7 +365,7 @@ fn non_finite_or_degenerate_frames_are_refused_before_gpu_work() {
     .unwrap();
     // Out-of-core knobs on an in-core renderer are typed errors.
     assert!(matches!(
-        r.set_lod_tolerance(1.0),
+        brickray_harness::configure(g, &r, |c| c.tolerance_px = 1.0),
         Err(RenderError::NotOutOfCore)
     ));
     // A viewport of zero pixels.

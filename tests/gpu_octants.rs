@@ -54,7 +54,7 @@ fn renderer(
         upload_budget_bytes: 1 << 30,
         ..Default::default()
     };
-    r.set_volume_source(&g.device, &g.queue, source, world(), config)
+    r.set_volume_source(&g.device, &g.queue, source, config)
         .unwrap();
     r.set_transfer_function(&g.device, &g.queue, &tf()).unwrap();
     r
@@ -84,18 +84,19 @@ fn converged_in(
         viewport: brickray::Viewport::full(SIZE, SIZE),
         settings,
         host_depth: None,
+        time: None,
     };
     let mut since = None;
     for f in 1..=300u64 {
         draw_frame(g, &mut r, &target, &desc, Some(wgpu::Color::BLACK)).expect("frame");
-        let s = r.out_of_core_stats().unwrap();
+        let s = r.stats().out_of_core.unwrap();
         since = if s.converged { since.or(Some(f)) } else { None };
         if since.is_some_and(|c| f >= c + 4 && r.last_usage().is_some_and(|u| u.frame >= c)) {
             return (target.read_color(g), s);
         }
         std::thread::sleep(std::time::Duration::from_millis(2));
     }
-    panic!("not converged: {:?}", r.out_of_core_stats());
+    panic!("not converged: {:?}", r.stats().out_of_core);
 }
 
 /// With one brick, the octant cut is the root's children, all drawn from
@@ -194,16 +195,17 @@ fn switching_to_octant_cuts_at_run_time() {
         viewport: brickray::Viewport::full(SIZE, SIZE),
         settings: RenderSettings::default(),
         host_depth: None,
+        time: None,
     };
     for _ in 0..20 {
         draw_frame(g, &mut r, &target, &desc, Some(wgpu::Color::BLACK)).expect("frame");
     }
-    r.set_lod_metric(LodMetric::VisibleOctants { budget: 0.0 })
+    brickray_harness::configure(gpu(), &r, |c| c.lod_metric = LodMetric::VisibleOctants { budget: 0.0 })
         .unwrap();
     let mut done = None;
     for f in 1..=300u64 {
         draw_frame(g, &mut r, &target, &desc, Some(wgpu::Color::BLACK)).expect("frame");
-        let st = r.out_of_core_stats().unwrap();
+        let st = r.stats().out_of_core.unwrap();
         if st.converged && f > 10 {
             done = Some(st);
             break;

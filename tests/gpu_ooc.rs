@@ -37,6 +37,7 @@ fn frame(r: &mut VolumeRenderer, v: &View) -> Vec<u8> {
         viewport: brickray::Viewport::full(v.size, v.size),
         settings: v.settings,
         host_depth: None,
+        time: None,
     };
     r.prepare(&g.device, &g.queue, &mut enc, &desc)
         .expect("prepare");
@@ -56,7 +57,7 @@ fn converge(
 ) -> (Vec<u8>, OutOfCoreStats, usize) {
     for i in 1..=max_frames {
         let img = frame(r, v);
-        let s = r.out_of_core_stats().unwrap();
+        let s = r.stats().out_of_core.unwrap();
         if s.converged {
             return (img, s, i);
         }
@@ -64,7 +65,7 @@ fn converge(
     }
     panic!(
         "not converged after {max_frames} frames: {:?}",
-        r.out_of_core_stats()
+        r.stats().out_of_core
     );
 }
 
@@ -99,7 +100,7 @@ fn finest_level_matches_in_core_on_head_ct() {
     let mut incore = VolumeRenderer::new(&g.device, targets()).unwrap();
     incore.set_volume(&g.device, &g.queue, &vol).unwrap();
     let mut ooc = VolumeRenderer::new(&g.device, targets()).unwrap();
-    ooc.set_volume_source(&g.device, &g.queue, source, wf, finest())
+    ooc.set_volume_source(&g.device, &g.queue, source, finest())
         .unwrap();
     for (name, mode, tf) in cases {
         let v = View {
@@ -172,7 +173,7 @@ fn small_pool_renders_coarser_but_complete() {
         tolerance_px: 0.5,
         ..Default::default()
     };
-    r.set_volume_source(&g.device, &g.queue, source, wf, config)
+    r.set_volume_source(&g.device, &g.queue, source, config)
         .unwrap();
     r.set_transfer_function(&g.device, &g.queue, &tf).unwrap();
     let v = View {
@@ -184,7 +185,7 @@ fn small_pool_renders_coarser_but_complete() {
     let mut last = None;
     for _ in 0..40 {
         let img = frame(&mut r, &v);
-        let s = r.out_of_core_stats().unwrap();
+        let s = r.stats().out_of_core.unwrap();
         last = Some((img, s));
         if s.converged {
             break;
@@ -221,7 +222,6 @@ fn drop_with_loads_in_flight() {
         &g.device,
         &g.queue,
         source,
-        wf,
         OutOfCoreConfig {
             tolerance_px: 0.0,
             ..Default::default()
@@ -239,7 +239,7 @@ fn drop_with_loads_in_flight() {
     for _ in 0..3 {
         frame(&mut r, &v);
     }
-    let s = r.out_of_core_stats().unwrap();
+    let s = r.stats().out_of_core.unwrap();
     eprintln!("in flight at drop: {}", s.cache.requests_in_flight);
     drop(r);
 }
@@ -300,7 +300,7 @@ fn mixed_levels_show_no_seams() {
             upload_budget_bytes: 1 << 30,
             ..Default::default()
         };
-        ooc.set_volume_source(&g.device, &g.queue, source.clone(), wf, config)
+        ooc.set_volume_source(&g.device, &g.queue, source.clone(), config)
             .unwrap();
         ooc.set_transfer_function(&g.device, &g.queue, &tf).unwrap();
         let (img, stats, _) = converge(&mut ooc, &v, 60);

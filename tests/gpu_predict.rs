@@ -93,7 +93,7 @@ fn renderer(
                 upload_budget_bytes: 1 << 30,
                 ..Default::default()
             };
-            r.set_volume_source(&g.device, &g.queue, source.clone(), scene.frame, config)
+            r.set_volume_source(&g.device, &g.queue, source.clone(), config)
                 .unwrap();
         }
     }
@@ -112,7 +112,7 @@ fn renderer(
 /// Out of core: the cut is still the settled one (no brick in flight), so
 /// images of two renderers compare only their traversals.
 fn assert_settled(r: &VolumeRenderer, what: &str) {
-    if let Some(s) = r.out_of_core_stats() {
+    if let Some(s) = r.stats().out_of_core {
         assert!(s.converged, "{what}: the cut changed: {s:?}");
     }
 }

@@ -71,6 +71,7 @@ fn render(r: &mut VolumeRenderer, sc: &Scene, s: RenderSettings) -> Vec<u8> {
         viewport: brickray::Viewport::full(SIZE, SIZE),
         settings: s,
         host_depth: None,
+        time: None,
     };
     let frames = brickray_harness::draw_until_settled(g, r, &target, &desc, 60).expect("frame");
     assert!(frames.is_some(), "did not settle");
@@ -101,7 +102,7 @@ fn out_of_core(sc: &Scene, dir: &std::path::Path) -> VolumeRenderer {
         upload_budget_bytes: 1 << 30,
         ..Default::default()
     };
-    r.set_volume_source(&g.device, &g.queue, source, sc.frame, config)
+    r.set_volume_source(&g.device, &g.queue, source, config)
         .unwrap();
     r.set_transfer_function(&g.device, &g.queue, &sc.tf)
         .unwrap();
@@ -307,7 +308,6 @@ fn too_few_array_layers_is_a_typed_error() {
         &g.device,
         &g.queue,
         source,
-        frame,
         OutOfCoreConfig::default(),
     )
     .unwrap();
@@ -346,7 +346,7 @@ fn out_of_core_coarse_levels_read_their_layers() {
         upload_budget_bytes: 1 << 30,
         ..Default::default()
     };
-    r.set_volume_source(&g.device, &g.queue, source, frame, config)
+    r.set_volume_source(&g.device, &g.queue, source, config)
         .unwrap();
     let tf = TransferFunction::from_points(
         &[(0.1, [0.2, 0.5, 1.0, 0.0]), (0.9, [1.0, 0.8, 0.4, 0.3])],
@@ -364,7 +364,7 @@ fn out_of_core_coarse_levels_read_their_layers() {
         ..Default::default()
     };
     let plain = render(&mut r, &sc, s);
-    let stats = r.out_of_core_stats().unwrap();
+    let stats = r.stats().out_of_core.unwrap();
     let levels = stats.data_leaves_per_level;
     eprintln!("data leaves per level: {levels:?}");
     // The root (level 0, the longest step: the last table layer) is drawn.

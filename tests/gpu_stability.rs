@@ -44,8 +44,8 @@ impl BrickSource for Slow {
 /// without it (`Empty(NotLoaded)`, `Empty(Failed)`, allocation failures) and a
 /// cut that does not tile the octree cube.
 struct Twin {
-    m: brickray::cache::BrickManager,
-    frame: u64,
+    m: brickray::cache::Streamer,
+    placement: VolumeFrame,
     levels: u8,
 }
 
@@ -68,24 +68,31 @@ impl Twin {
             32,
             2048,
         );
-        let mut m = brickray::cache::BrickManager::new(source, frame, config, gpu).unwrap();
+        let mut m = brickray::cache::Streamer::new(source, config, gpu).unwrap();
         if preload {
             m.preload_root().unwrap();
         }
         Twin {
             m,
-            frame: 0,
+            placement: frame,
             levels: layout.levels,
         }
     }
 
     fn plan(&mut self, cam: &Camera, tf: &TransferFunction) -> u64 {
         use brickray::cache::{EmptyReason, LeafKind};
-        self.frame += 1;
-        let plan = self
-            .m
-            .update(cam, 1.0, SIZE, self.frame, RenderMode::Dvr, tf);
-        let mut holes = plan.stats.allocation_failures as u64;
+        let views = [brickray::core::FrameView::new(*cam, self.placement, [SIZE, SIZE])];
+        let plan = self.m.plan(&brickray::cache::StreamFrame {
+            views: &views,
+            classification: brickray::cache::Classification {
+                mode: RenderMode::Dvr,
+                tf,
+                tf_generation: 0,
+            },
+            feedback: &[],
+            time: None,
+        });
+        let mut holes = plan.stats.cache.allocation_failures as u64;
         let mut covered = 0u128;
         for leaf in &plan.cut {
             covered += 1u128 << (3 * (self.levels - 1 - leaf.key.level) as u32);
@@ -127,12 +134,12 @@ fn streaming_with_a_tiny_pool_and_a_slow_source_shows_no_holes() {
         gpu_budget_bytes: 1 << 20,
         ..Default::default()
     };
-    let mut r = ooc(slow(&src), frame, config, &tf);
+    let mut r = ooc(slow(&src), config, &tf);
     let mut twin = Twin::new(slow(&src), frame, config, true);
     for cam in views {
         for i in 0..15 {
             draw(&mut r, cam, frame, st);
-            let s = r.out_of_core_stats().unwrap();
+            let s = r.stats().out_of_core.unwrap();
             assert_eq!(
                 s.cache.allocation_failures + s.cache.failed_needed,
                 0,
@@ -169,7 +176,7 @@ fn memory_pressure_does_not_flicker() {
         ..Default::default()
     };
     let big = 64u64 << 20;
-    let mut r = ooc(src.clone(), frame, cfg(big), &tf);
+    let mut r = ooc(src.clone(), cfg(big), &tf);
     let (_, s) = converge(&mut r, cam(0), frame, st);
     let per_slot = big / s.cache.pool_slots as u64;
     // A quarter of the need in slots (at least the 9 the cache requires).
@@ -185,7 +192,7 @@ fn memory_pressure_does_not_flicker() {
             .sum()
     };
     let ref_change = change(&refs);
-    let mut r = ooc(src.clone(), frame, cfg(budget), &tf);
+    let mut r = ooc(src.clone(), cfg(budget), &tf);
     let (_, s) = converge(&mut r, cam(0), frame, st);
     eprintln!("need {need} bricks, pool {} slots", s.cache.pool_slots);
     assert!(
@@ -204,10 +211,10 @@ fn memory_pressure_does_not_flicker() {
     eprintln!("flicker ratio {flicker:.3}");
     assert!(flicker <= 1.25, "flicker ratio {flicker:.3} > 1.25");
     // Guard: a level toggled every frame.
-    let mut g = ooc(src, frame, cfg(big), &tf);
+    let mut g = ooc(src, cfg(big), &tf);
     let toggled: Vec<Vec<u8>> = (0..10)
         .map(|i| {
-            g.set_lod_tolerance(if i % 2 == 0 { 0.0 } else { 8.0 })
+            brickray_harness::configure(gpu(), &g, |c| c.tolerance_px = if i % 2 == 0 { 0.0 } else { 8.0 })
                 .unwrap();
             converge(&mut g, cam(i), frame, st).0
         })
@@ -336,8 +343,8 @@ fn ray_guided_culling_recovers_after_a_half_turn() {
     ]
     .into_iter()
     .map(|p| {
-        let mut r = ooc(src.clone(), frame, config, &tf);
-        r.set_visibility_policy(p).unwrap();
+        let mut r = ooc(src.clone(), config, &tf);
+        brickray_harness::configure(gpu(), &r, |c| c.visibility = p).unwrap();
         converge(&mut r, cam(0), frame, st);
         r
     })

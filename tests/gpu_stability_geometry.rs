@@ -62,7 +62,7 @@ fn max_filter_keeps_small_bright_features_in_coarse_mip() {
             upload_budget_bytes: 1 << 30,
             ..Default::default()
         };
-        let mut r = ooc(source, frame, config, &tf);
+        let mut r = ooc(source, config, &tf);
         let (img, s) = converge(&mut r, cam, frame, st);
         assert!(
             s.data_leaves_per_level[finest] == 0 && s.data_leaves_per_level[finest - 1] > 0,
@@ -101,7 +101,7 @@ fn rays_exactly_on_brick_faces_show_no_seams() {
         upload_budget_bytes: 1 << 30,
         ..Default::default()
     };
-    let mut r = ooc(src, frame, config, &tf);
+    let mut r = ooc(src, config, &tf);
     let (img, _) = converge(&mut r, cam, frame, st);
     let seam = |img: &[u8]| {
         let (mut on, mut n_on, mut off, mut n_off) = (0.0, 0.0, 0.0, 0.0);
@@ -251,7 +251,7 @@ fn finest_voxels_of_a_65536_cubed_volume_match_the_reference() {
         upload_budget_bytes: 1 << 30,
         ..Default::default()
     };
-    let mut r = ooc(src, big, config, &tf);
+    let mut r = ooc(src, config, &tf);
     let (img, _) = converge(&mut r, cam, big, st_big);
     let mut inc = incore(&sub, &tf);
     let uimg = draw(&mut inc, ucam, unit, st_sub);

@@ -160,7 +160,7 @@ fn check(name: &str, vol: &Volume, iso: f32, size: u32) {
         upload_budget_bytes: 1 << 30,
         ..Default::default()
     };
-    ooc.set_volume_source(&g.device, &g.queue, source, frame, config)
+    ooc.set_volume_source(&g.device, &g.queue, source, config)
         .unwrap();
     assert_eq!(ooc.volume_format(), incore.volume_format());
     let target = Offscreen::new(&g.device, size, size);

@@ -52,11 +52,11 @@ fn renderer(policy: VisibilityPolicy) -> VolumeRenderer {
         upload_budget_bytes: 1 << 30,
         ..Default::default()
     };
-    r.set_volume_source(&g.device, &g.queue, source, world(), config)
+    r.set_volume_source(&g.device, &g.queue, source, config)
         .unwrap();
     r.set_transfer_function(&g.device, &g.queue, &opaque())
         .unwrap();
-    r.set_visibility_policy(policy).unwrap();
+    brickray_harness::configure(gpu(), &r, |c| c.visibility = policy).unwrap();
     r
 }
 
@@ -71,6 +71,7 @@ fn desc(camera: Camera) -> FrameDesc<'static> {
         viewport: brickray::Viewport::full(SIZE, SIZE),
         settings: RenderSettings::default(),
         host_depth: None,
+        time: None,
     }
 }
 
@@ -87,7 +88,7 @@ fn frame(r: &mut VolumeRenderer, camera: Camera) -> (Vec<u8>, OutOfCoreStats) {
         r.render(&mut pass).unwrap();
     }
     g.submit_wait(enc);
-    (target.read_color(g), r.out_of_core_stats().unwrap())
+    (target.read_color(g), r.stats().out_of_core.unwrap())
 }
 
 /// Frames until converged (at most `max`): the image, stats and frames drawn.
@@ -103,7 +104,7 @@ fn converge(
         }
         std::thread::sleep(std::time::Duration::from_millis(2));
     }
-    panic!("not converged in {max} frames: {:?}", r.out_of_core_stats());
+    panic!("not converged in {max} frames: {:?}", r.stats().out_of_core);
 }
 
 /// Draws frames of the start view until the usage counts read back are those
@@ -205,7 +206,7 @@ fn culls_hidden(
 ) {
     let mut culled = renderer(policy);
     if let Some(c) = config {
-        culled.set_visibility_config(c).unwrap();
+        brickray_harness::configure(gpu(), &culled, |cfg| cfg.visibility_config = c).unwrap();
     }
     let (img1, s1, frames) = converge(&mut culled, camera(0.0), 200);
     read_back_since(&mut culled, s1.cache.frame);
@@ -289,7 +290,7 @@ fn half_turn(policy: VisibilityPolicy) {
             break (img, s);
         }
     };
-    let s_ref = none.out_of_core_stats().unwrap();
+    let s_ref = none.stats().out_of_core.unwrap();
     let p = psnr(&img_b, &ref_b);
     eprintln!(
         "{}: after the turn: converged in {frames} frames, {} bricks (unculled {}), {p:.1} dB",
@@ -330,7 +331,7 @@ fn never_waits(policy: VisibilityPolicy) {
             r.render(&mut pass).unwrap();
         }
         g.queue.submit([enc.finish()]);
-        let s = r.out_of_core_stats().unwrap();
+        let s = r.stats().out_of_core.unwrap();
         if s.visibility.invisible > 0 && s.cache.blocked.invisible > 0 {
             culled_at = Some((i, s));
             break;
@@ -385,7 +386,7 @@ fn mip_culls_nothing() {
                 r.render(&mut pass).unwrap();
             }
             g.submit_wait(enc);
-            let s = r.out_of_core_stats().unwrap();
+            let s = r.stats().out_of_core.unwrap();
             if s.converged {
                 return (target.read_color(g), s, i);
             }

@@ -65,8 +65,7 @@ fn renderer(
         upload_budget_bytes: 1 << 30,
         ..Default::default()
     };
-    let dim = source.layout().volume.dims[0] as u64;
-    r.set_volume_source(&g.device, &g.queue, source, world(dim), config)
+    r.set_volume_source(&g.device, &g.queue, source, config)
         .unwrap();
     r.set_transfer_function(&g.device, &g.queue, tf).unwrap();
     r
@@ -81,9 +80,10 @@ fn frame(r: &mut VolumeRenderer, dim: u64, settings: RenderSettings) -> (Vec<u8>
         viewport: brickray::Viewport::full(SIZE, SIZE),
         settings,
         host_depth: None,
+        time: None,
     };
     draw_frame(g, r, &target, &desc, Some(wgpu::Color::BLACK)).expect("frame");
-    (target.read_color(g), r.out_of_core_stats().unwrap())
+    (target.read_color(g), r.stats().out_of_core.unwrap())
 }
 
 /// Frames until converged (at most `max`), then until the usage read back is
@@ -104,7 +104,7 @@ fn converge(
         }
         std::thread::sleep(std::time::Duration::from_millis(2));
     }
-    panic!("not converged in {max} frames: {:?}", r.out_of_core_stats());
+    panic!("not converged in {max} frames: {:?}", r.stats().out_of_core);
 }
 
 /// The exact weight of every data leaf: over the pixels' rays, the integral
@@ -400,7 +400,7 @@ fn switching_to_visible_error_never_collapses_the_cut() {
         &tf,
     );
     converge(&mut r, 2 * DIM, settings, 300);
-    r.set_lod_metric(LodMetric::VisibleError { budget: 0.0 })
+    brickray_harness::configure(gpu(), &r, |c| c.lod_metric = LodMetric::VisibleError { budget: 0.0 })
         .unwrap();
     let mut seen = Vec::new();
     for _ in 0..40 {
@@ -473,7 +473,7 @@ fn bone_surface_settles(metric: LodMetric, budget: u32) {
         upload_budget_bytes: 1 << 30,
         ..Default::default()
     };
-    r.set_volume_source(&g.device, &g.queue, source, frame, config)
+    r.set_volume_source(&g.device, &g.queue, source, config)
         .unwrap();
     r.set_transfer_function(&g.device, &g.queue, &tf).unwrap();
     let desc = FrameDesc {
@@ -485,12 +485,13 @@ fn bone_surface_settles(metric: LodMetric, budget: u32) {
             ..RenderSettings::default()
         },
         host_depth: None,
+        time: None,
     };
     let target = Offscreen::new(&g.device, 128, 128);
     let mut step = || {
         draw_frame(g, &mut r, &target, &desc, Some(wgpu::Color::BLACK)).expect("frame");
         std::thread::sleep(std::time::Duration::from_millis(5));
-        let s = r.out_of_core_stats().unwrap();
+        let s = r.stats().out_of_core.unwrap();
         (
             s.converged,
             s.data_leaves_per_level,

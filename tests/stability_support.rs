@@ -72,6 +72,7 @@ pub(crate) fn draw(
         viewport: brickray::Viewport::full(SIZE, SIZE),
         settings: st,
         host_depth: None,
+        time: None,
     };
     brickray_harness::draw_frame(g, r, &target, &desc, Some(brickray::wgpu::Color::BLACK))
         .expect("frame");
@@ -86,13 +87,13 @@ pub(crate) fn converge(
 ) -> (Vec<u8>, OutOfCoreStats) {
     for _ in 0..150 {
         let img = draw(r, cam, frame, st);
-        let s = r.out_of_core_stats().unwrap();
+        let s = r.stats().out_of_core.unwrap();
         if s.converged {
             return (img, s);
         }
         std::thread::sleep(Duration::from_millis(3));
     }
-    panic!("not converged: {:?}", r.out_of_core_stats());
+    panic!("not converged: {:?}", r.stats().out_of_core);
 }
 
 pub(crate) fn incore(vol: &Volume, tf: &TransferFunction) -> VolumeRenderer {
@@ -105,13 +106,12 @@ pub(crate) fn incore(vol: &Volume, tf: &TransferFunction) -> VolumeRenderer {
 
 pub(crate) fn ooc(
     source: Arc<dyn BrickSource>,
-    frame: VolumeFrame,
     config: OutOfCoreConfig,
     tf: &TransferFunction,
 ) -> VolumeRenderer {
     let g = gpu();
     let mut r = VolumeRenderer::new(&g.device, targets()).unwrap();
-    r.set_volume_source(&g.device, &g.queue, source, frame, config)
+    r.set_volume_source(&g.device, &g.queue, source, config)
         .unwrap();
     r.set_transfer_function(&g.device, &g.queue, tf).unwrap();
     r

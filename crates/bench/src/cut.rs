@@ -5,7 +5,9 @@
 //! for the f64 reference to render. The `aniso` and `lod` suites compare such
 //! cuts; `tests/gpu_aniso.rs` checks that the GPU draws what they resample.
 
-use brickray_cache::refine::{DataState, MetaState, RefineEnv, RefineParams, Refinement, refine};
+use brickray_cache::refine::{
+    DataState, MetaState, RefineEnv, RefineParams, Refinement, ViewGeometry, Views, refine,
+};
 use brickray_cache::{NodeClass, UploadBudget};
 use brickray_core::{
     BrickSource, Camera, DType, NodeKey, NodeKind, OctreeLayout, RenderMode, Volume, VolumeData,
@@ -56,10 +58,8 @@ pub(crate) fn refine_cut(
 ) -> Refinement {
     let layout = view.store.layout();
     let params = RefineParams {
-        camera: view.camera,
-        aspect: 1.0,
-        viewport_height_px: view.size,
-        volume_frame: view.frame,
+        views: &Views::one(ViewGeometry::new(&layout, view.camera, 1.0, view.size, view.frame)),
+        generation: 0,
         mode: view.mode,
         tf: view.tf,
         tolerance_px,

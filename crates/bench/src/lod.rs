@@ -80,10 +80,10 @@ pub(crate) fn lod_point(
     brick_bytes: u64,
     rendered: bool,
 ) -> Result<LodPoint, String> {
-    renderer.set_lod_metric(metric).map_err(|e| e.to_string())?;
-    renderer
-        .set_lod_tolerance(tolerance_px)
-        .map_err(|e| e.to_string())?;
+    crate::runner::configure(run.gpu, renderer, |c| {
+        c.lod_metric = metric;
+        c.tolerance_px = tolerance_px;
+    })?;
     // Rendered frames (not only planned ones) when visibility feedback is on,
     // so that its read-backs arrive.
     let frames = if !rendered {
@@ -93,16 +93,16 @@ pub(crate) fn lod_point(
         let mut done = None;
         for i in 1..=400 {
             run.frame(renderer, camera, frame, settings, false)?;
-            if renderer.out_of_core_stats().is_some_and(|s| s.converged) && i >= 8 {
+            if renderer.stats().out_of_core.is_some_and(|s| s.converged) && i >= 8 {
                 done = Some(i);
                 break;
             }
             std::thread::sleep(std::time::Duration::from_millis(10));
         }
-        done.ok_or_else(|| format!("not converged: {:?}", renderer.out_of_core_stats()))?
+        done.ok_or_else(|| format!("not converged: {:?}", renderer.stats().out_of_core))?
     };
     let shot = run.frame(renderer, camera, frame, settings, true)?;
-    let stats = renderer.out_of_core_stats().ok_or("not out of core")?;
+    let stats = renderer.stats().out_of_core.ok_or("not out of core")?;
     let bricks = stats.cache.working_set_bricks;
     Ok(LodPoint {
         bricks,
@@ -467,7 +467,6 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
                 &gpu.device,
                 &gpu.queue,
                 source,
-                frame,
                 OutOfCoreConfig {
                     gpu_budget_bytes: 1 << 30,
                     upload_budget_bytes: 1 << 30,
@@ -478,9 +477,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         renderer
             .set_transfer_function(&gpu.device, &gpu.queue, &scene.tf)
             .map_err(|e| e.to_string())?;
-        renderer
-            .set_visibility_policy(policy)
-            .map_err(|e| e.to_string())?;
+        crate::runner::configure(&gpu, &renderer, |c| c.visibility = policy)?;
         println!(
             "  {:>10} {:>9} {:>7} {:>9} {:>9} {:>7}",
             "metric", "budget", "bricks", "MiB", "PSNR dB", "frames"

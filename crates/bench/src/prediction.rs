@@ -116,7 +116,6 @@ impl Backend {
     /// A renderer of the scene's volume (out of core: its store, built once,
     /// at the finest level).
     fn renderer(&self, gpu: &GpuContext, scene: &Scene) -> Result<VolumeRenderer, String> {
-        let d = scene.vol.desc();
         match self {
             Backend::InCore => {
                 let mut r = VolumeRenderer::new(&gpu.device, brickray_harness::target_desc())
@@ -135,7 +134,6 @@ impl Backend {
                 crate::runner::finest_ooc_renderer(
                     gpu,
                     source,
-                    VolumeFrame::centered(d.dims, d.spacing),
                     Default::default(),
                 )
             }
@@ -257,7 +255,7 @@ fn run_path(
             let k = (i + j) % vs.len();
             let (r, t) = &mut rs[k];
             shots[k] = Some(predict::draw(gpu, r, t, &desc).map_err(|e| e.to_string())?);
-            if r.out_of_core_stats().is_some_and(|s| !s.converged) {
+            if r.stats().out_of_core.is_some_and(|s| !s.converged) {
                 tracks[k].unsettled += 1;
             }
         }

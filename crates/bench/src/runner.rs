@@ -28,6 +28,18 @@ pub(crate) struct Shot {
 /// threads run in it), in ms, from `/proc/self/stat` at its 10 ms tick; NaN
 /// where that is not available. On a machine shared with other work, CPU time
 /// moves far less than wall time, so suites report both.
+/// Changes the configuration of the streamed volume `r` draws.
+pub(crate) fn configure(
+    gpu: &GpuContext,
+    r: &VolumeRenderer,
+    f: impl FnOnce(&mut brickray_render::OutOfCoreConfig),
+) -> Result<(), String> {
+    r.streamed_volume()
+        .ok_or("the renderer draws no streamed volume")?
+        .edit(&gpu.device, &gpu.queue, f)
+        .map_err(|e| e.to_string())
+}
+
 pub(crate) fn process_cpu_ms() -> f64 {
     let ticks = || -> Option<f64> {
         let s = std::fs::read_to_string("/proc/self/stat").ok()?;
@@ -47,7 +59,6 @@ pub(crate) fn process_cpu_ms() -> f64 {
 pub(crate) fn finest_ooc_renderer(
     gpu: &GpuContext,
     source: std::sync::Arc<dyn brickray_core::BrickSource>,
-    frame: VolumeFrame,
     options: brickray_render::RendererOptions,
 ) -> Result<VolumeRenderer, String> {
     let mut ooc =
@@ -57,7 +68,6 @@ pub(crate) fn finest_ooc_renderer(
         &gpu.device,
         &gpu.queue,
         source,
-        frame,
         brickray_render::OutOfCoreConfig {
             tolerance_px: 0.0,
             upload_budget_bytes: 1 << 30,
@@ -121,6 +131,7 @@ impl<'a> Runner<'a> {
             viewport: brickray_render::Viewport::full(self.size, self.size),
             settings,
             host_depth: None,
+            time: None,
         }
     }
 
@@ -219,14 +230,14 @@ impl<'a> Runner<'a> {
     ) -> Result<(Option<usize>, OutOfCoreStats), String> {
         for i in 1..=max_frames {
             self.plan(r, camera, frame, settings)?;
-            let s = r.out_of_core_stats().ok_or("not out of core")?;
+            let s = r.stats().out_of_core.ok_or("not out of core")?;
             if s.converged {
                 return Ok((Some(i), s));
             }
             // Give the loader threads the CPU (2 cores, shared with lavapipe).
             std::thread::sleep(Duration::from_millis(10));
         }
-        Ok((None, r.out_of_core_stats().ok_or("not out of core")?))
+        Ok((None, r.stats().out_of_core.ok_or("not out of core")?))
     }
 }
 

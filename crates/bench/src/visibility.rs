@@ -104,6 +104,7 @@ impl Runner<'_> {
             viewport: brickray_render::Viewport::full(self.size, self.size),
             settings: scene.settings,
             host_depth: None,
+            time: None,
         };
         let fs = r
             .prepare(&g.device, &g.queue, &mut enc, &desc)
@@ -275,16 +276,14 @@ fn supported(gpu: &GpuContext, p: VisibilityPolicy) -> bool {
         Ok(s) => Arc::new(s),
         Err(_) => return false,
     };
-    let frame = VolumeFrame::centered([64; 3], [1.0; 3]);
     r.set_volume_source(
         &gpu.device,
         &gpu.queue,
         src,
-        frame,
         OutOfCoreConfig::default(),
     )
     .is_ok()
-        && r.set_visibility_policy(p).is_ok()
+        && crate::runner::configure(gpu, &r, |c| c.visibility = p).is_ok()
 }
 
 fn head_scenes(brick: u32) -> Result<Vec<Scene>, String> {
@@ -386,7 +385,6 @@ fn run_scene(
             &g.device,
             &g.queue,
             (scene.source)()?,
-            scene.frame,
             OutOfCoreConfig {
                 gpu_budget_bytes: gpu_mib << 20,
                 cpu_budget_bytes: cpu_mib << 20,
@@ -396,13 +394,13 @@ fn run_scene(
         .map_err(|e| e.to_string())?;
         r.set_transfer_function(&g.device, &g.queue, &scene.tf)
             .map_err(|e| e.to_string())?;
-        r.set_visibility_policy(p).map_err(|e| e.to_string())?;
+        crate::runner::configure(g, &r, |c| c.visibility = p)?;
         rs.push(r);
     }
     let mut tracks: Vec<Track> = policies.iter().map(|_| Track::default()).collect();
     let step = |r: &mut VolumeRenderer, t: &mut Track, cam: Camera, read: bool| {
         let (ms, host, bytes, img) = runner.frame(r, scene, cam, read)?;
-        let s = r.out_of_core_stats().ok_or("not out of core")?;
+        let s = r.stats().out_of_core.ok_or("not out of core")?;
         t.working.push(s.cache.working_set_bricks as f64);
         t.uploaded += bytes;
         t.ms.push(ms);

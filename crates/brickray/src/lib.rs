@@ -30,7 +30,8 @@ pub use brickray_core::{BrickSource, NodeKey, OctreeLayout};
 pub use brickray_render::{
     ConfigError, FadeDuration, FrameDesc, FrameStats, GpuErrorKind, HostDepthError,
     OutOfCoreConfig, OutOfCoreStats, PrepareError, RenderError, RendererOptions, RendererStats,
-    RetryPolicy, StreamError, TargetDesc, U8Filtering, Viewport, VolumeRenderer, required_limits,
+    RetryPolicy, StreamError, StreamedVolume, TargetDesc, U8Filtering, Viewport, VolumeRenderer,
+    required_limits,
 };
 pub use brickray_render::{
     FeedbackStats, UsageFrame, VisibilityConfig, VisibilityCounts, VisibilityPolicy,

@@ -201,126 +201,33 @@ impl Fader {
             .filter(|l| is_data(l))
             .map(|l| l.key)
             .collect();
-        let refined_keys: HashMap<NodeKey, usize> = refined
-            .iter()
-            .enumerate()
-            .map(|(i, l)| (l.key, i))
-            .collect();
-        // The last displayed leaves strictly inside each refined leaf.
-        let mut under: HashMap<usize, Vec<usize>> = HashMap::new();
-        for (j, d) in self.prev.iter().enumerate() {
-            let mut p = self.parent(d.key);
-            while let Some(k) = p {
-                if let Some(&i) = refined_keys.get(&k) {
-                    under.entry(i).or_default().push(j);
-                    break;
-                }
-                p = self.parent(k);
-            }
-        }
-
+        let under = self.drawn_under(refined);
         let mut states: HashMap<NodeKey, State> = HashMap::new();
         let mut out = Displayed::default();
         for (i, n) in refined.iter().enumerate() {
             if !is_data(n) {
                 out.leaves.push(*n);
-                continue;
-            }
-            if prev_data.contains(&n.key) {
+            } else if prev_data.contains(&n.key) {
                 // Drawn before: a fade in progress goes on toward the leaf.
                 if let Some(mut s) = self.states.get(&n.key).copied() {
                     s.target = 0.0;
                     states.insert(n.key, s);
                 }
                 out.leaves.push(*n);
-                continue;
-            }
-            // A split: the nearest ancestor drawn as a data leaf last frame.
-            let mut p = self.parent(n.key);
-            let mut from = None;
-            while let Some(k) = p {
-                if prev_data.contains(&k) {
-                    from = Some(k);
-                    break;
-                }
-                p = self.parent(k);
-            }
-            if let Some(a) = from {
-                // `a` was drawn as mix(a, a0, w). Start from whichever of
-                // mix(n, a, 1) = a and mix(n, a0, w) is nearer to it: the jump
-                // is at most half a level's difference, w (a0 - a) or
-                // (1 - w) (n - a).
-                let state = match self.states.get(&a) {
-                    Some(s) if s.target == 0.0 && s.weight > 0.5 => State {
-                        ancestor: s.ancestor,
-                        weight: s.weight,
-                        target: 0.0,
-                    },
-                    _ => State {
-                        ancestor: a,
-                        weight: 1.0,
-                        target: 0.0,
-                    },
-                };
+            } else if let Some(state) = self.split_from(n.key, &prev_data) {
                 states.insert(n.key, state);
                 out.leaves.push(*n);
-                continue;
+            } else {
+                let inside = under.get(&i).map(Vec::as_slice).unwrap_or(&[]);
+                self.merge(n, inside, step, &mut states, &mut out.leaves);
             }
-            // A merge: finer data leaves were drawn inside it.
-            let inside = under.get(&i).map(Vec::as_slice).unwrap_or(&[]);
-            if inside.iter().any(|&j| is_data(&self.prev[j])) {
-                let mut group = Vec::new();
-                for &j in inside {
-                    let d = self.prev[j];
-                    if is_data(&d) {
-                        let old = self.states.get(&d.key).copied();
-                        let weight = match old {
-                            Some(s) if s.ancestor == n.key => s.weight,
-                            _ => 0.0,
-                        };
-                        let s = State {
-                            ancestor: n.key,
-                            weight: (weight + step).min(1.0),
-                            target: 1.0,
-                        };
-                        group.push((d, s));
-                    } else {
-                        group.push((
-                            d,
-                            State {
-                                ancestor: n.key,
-                                weight: 1.0,
-                                target: 1.0,
-                            },
-                        ));
-                    }
-                }
-                let done = group
-                    .iter()
-                    .filter(|(d, _)| is_data(d))
-                    .all(|(_, s)| s.weight >= 1.0);
-                if done {
-                    out.leaves.push(*n);
-                } else {
-                    for (d, s) in group {
-                        if is_data(&d) {
-                            states.insert(d.key, s);
-                        }
-                        out.leaves.push(d);
-                    }
-                }
-                continue;
-            }
-            // Newly drawn (nothing was drawn here): at once.
-            out.leaves.push(*n);
         }
         // Advance the splits and the reversals (merges advanced above).
-        states.retain(|leaf, s| {
+        states.retain(|_, s| {
             if s.target == 0.0 {
                 s.weight = (s.weight - step).max(0.0);
                 s.weight > 0.0
             } else {
-                let _ = leaf;
                 true
             }
         });
@@ -336,6 +243,109 @@ impl Fader {
         self.states = states;
         self.prev = out.leaves.clone();
         out
+    }
+
+    /// Per refined leaf (its index), the last displayed leaves strictly
+    /// inside it (their indices in `prev`).
+    fn drawn_under(&self, refined: &[RefinedLeaf]) -> HashMap<usize, Vec<usize>> {
+        let refined_keys: HashMap<NodeKey, usize> = refined
+            .iter()
+            .enumerate()
+            .map(|(i, l)| (l.key, i))
+            .collect();
+        let mut under: HashMap<usize, Vec<usize>> = HashMap::new();
+        for (j, d) in self.prev.iter().enumerate() {
+            let mut p = self.parent(d.key);
+            while let Some(k) = p {
+                if let Some(&i) = refined_keys.get(&k) {
+                    under.entry(i).or_default().push(j);
+                    break;
+                }
+                p = self.parent(k);
+            }
+        }
+        under
+    }
+
+    /// A split: the fade of `key` from the nearest ancestor drawn as a data
+    /// leaf last frame, `None` when there is none.
+    fn split_from(&self, key: NodeKey, prev_data: &HashSet<NodeKey>) -> Option<State> {
+        let mut p = self.parent(key);
+        while let Some(a) = p {
+            if prev_data.contains(&a) {
+                // `a` was drawn as mix(a, a0, w). Start from whichever of
+                // mix(n, a, 1) = a and mix(n, a0, w) is nearer to it: the jump
+                // is at most half a level's difference, w (a0 - a) or
+                // (1 - w) (n - a).
+                return Some(match self.states.get(&a) {
+                    Some(s) if s.target == 0.0 && s.weight > 0.5 => State {
+                        ancestor: s.ancestor,
+                        weight: s.weight,
+                        target: 0.0,
+                    },
+                    _ => State {
+                        ancestor: a,
+                        weight: 1.0,
+                        target: 0.0,
+                    },
+                });
+            }
+            p = self.parent(a);
+        }
+        None
+    }
+
+    /// A merge (finer data leaves, `inside`, were drawn in `n`): they stay
+    /// displayed, fading toward `n`, until all of them reach it; then `n` is
+    /// drawn alone. A leaf drawn where nothing was drawn before (no finer
+    /// data leaf inside) shows at once.
+    fn merge(
+        &self,
+        n: &RefinedLeaf,
+        inside: &[usize],
+        step: f32,
+        states: &mut HashMap<NodeKey, State>,
+        leaves: &mut Vec<RefinedLeaf>,
+    ) {
+        if !inside.iter().any(|&j| is_data(&self.prev[j])) {
+            leaves.push(*n);
+            return;
+        }
+        let group: Vec<(RefinedLeaf, State)> = inside
+            .iter()
+            .map(|&j| {
+                let d = self.prev[j];
+                let weight = if is_data(&d) {
+                    let old = match self.states.get(&d.key) {
+                        Some(s) if s.ancestor == n.key => s.weight,
+                        _ => 0.0,
+                    };
+                    (old + step).min(1.0)
+                } else {
+                    1.0
+                };
+                let s = State {
+                    ancestor: n.key,
+                    weight,
+                    target: 1.0,
+                };
+                (d, s)
+            })
+            .collect();
+        let done = group
+            .iter()
+            .filter(|(d, _)| is_data(d))
+            .all(|(_, s)| s.weight >= 1.0);
+        if done {
+            leaves.push(*n);
+            return;
+        }
+        for (d, s) in group {
+            if is_data(&d) {
+                states.insert(d.key, s);
+            }
+            leaves.push(d);
+        }
     }
 }
 

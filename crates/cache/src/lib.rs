@@ -17,7 +17,11 @@
 //! * [`BrickManager`]: the per-frame façade tying them together; its
 //!   [`update`](BrickManager::update) returns a [`FramePlan`] (cut, uploads, stats)
 //!   and never calls the source; failures are counted, surfaced once
-//!   ([`BrickManager::take_error`]) and retried after a back-off ([`RetryPolicy`]).
+//!   ([`BrickManager::take_error`]) and retried after a back-off ([`RetryPolicy`]);
+//! * [`Streamer`]: the out-of-core planner a renderer executes: the manager,
+//!   the visibility feedback (`brickray-visibility`), the visible weights,
+//!   occlusion scheduling and the convergence rule, over one or several views
+//!   ([`StreamPlan`]).
 //!
 //! The cut vocabulary ([`CutLeaf`], [`LeafKind`], [`EmptyReason`]) is
 //! `brickray_core`'s, re-exported here. See `docs/cache.md` for the design.
@@ -31,6 +35,7 @@ mod manager;
 mod pool;
 mod prepared;
 pub mod refine;
+pub mod stream;
 mod upload;
 
 #[cfg(test)]
@@ -48,9 +53,14 @@ pub use loader::{
     BrickRequest, LoadError, Loader, LoaderConfig, PollReport, RequestOutcome, SHUTDOWN_WAIT,
 };
 pub use manager::{
-    BrickManager, CacheError, FadeSlot, FramePlan, FrameStats, Residency, ResidencyCounts, Upload,
+    BrickManager, CacheError, FadeSlot, FrameInput, FramePlan, FrameStats, Reconfigured, Residency,
+    ResidencyCounts, UNTIMED_FRAME_RATE, Upload,
 };
 pub use pool::{Allocation, BrickPool, PoolError, PoolLimits, SlotId};
 pub use prepared::{PreparedBrick, Preparer};
-pub use refine::{NodeClass, SplitBlocks, SplitFilter, lod_voxel_world};
+pub use refine::{NodeClass, SplitBlocks, SplitFilter, Views, lod_voxel_world};
+pub use stream::{
+    Classification, MAX_QUERIES_PER_FRAME, QueryBatch, QueryResult, QuerySchedule, StreamFrame,
+    StreamPlan, StreamStats, Streamer, UsageFrame, ViewFeedback,
+};
 pub use upload::{UploadBudget, UploadCandidate};

@@ -37,6 +37,9 @@ pub(crate) struct TestSource {
     gate_cv: Condvar,
     calls: Mutex<Vec<(FetchKind, NodeKey, ThreadId)>>,
     pub(crate) meta_reads: AtomicUsize,
+    /// Data nodes above the finest level carry an error record (the same
+    /// mid-size error everywhere), as a store's do.
+    pub(crate) errors: bool,
 }
 
 pub(crate) fn fill_byte(key: NodeKey) -> u8 {
@@ -66,6 +69,7 @@ impl TestSource {
             gate_cv: Condvar::new(),
             calls: Mutex::new(Vec::new()),
             meta_reads: AtomicUsize::new(0),
+            errors: false,
         }
     }
 
@@ -160,7 +164,19 @@ impl BrickSource for TestSource {
         if !self.layout.in_volume(key) && key.level >= self.layout.levels {
             return Err(BrickError::OutOfRange { key });
         }
-        Ok(ball_info(&self.layout, key))
+        let mut info = ball_info(&self.layout, key);
+        if self.errors
+            && info.kind == brickray_core::NodeKind::Data
+            && key.level + 1 < self.layout.levels
+        {
+            info.error = Some(brickray_core::NodeError {
+                occupied: 0xffff,
+                dev: [u16::MAX / 4; brickray_core::ERROR_BINS],
+                rms: [u16::MAX / 8; brickray_core::ERROR_BINS],
+                weight: [u16::MAX / 16; brickray_core::ERROR_BINS],
+            });
+        }
+        Ok(info)
     }
 
     fn read_brick(&self, key: NodeKey, out: &mut [u8]) -> Result<(), BrickError> {

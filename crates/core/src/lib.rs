@@ -32,8 +32,8 @@ pub use brick::{
     OctreeLayout,
 };
 pub use camera::{
-    Camera, CameraError, DepthConvention, DepthMap, FrameError, Projection, Ray, RayGen,
-    VolumeFrame,
+    Camera, CameraError, DepthConvention, DepthMap, FrameError, FrameView, Projection, Ray, RayGen,
+    ViewGenerations, VolumeFrame,
 };
 pub use lod::{
     BinStats, ERROR_BINS, LodMetric, NodeError, TfErrorTable, node_pixel_error, node_tf_error,

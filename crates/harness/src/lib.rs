@@ -246,6 +246,18 @@ pub const COLOR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
 /// Depth format of [`Offscreen`].
 pub const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
 
+/// Changes the configuration of the streamed volume `r` draws
+/// ([`brickray_render::StreamedVolume::edit`]); `NotOutOfCore` in core.
+pub fn configure(
+    gpu: &GpuContext,
+    r: &brickray_render::VolumeRenderer,
+    f: impl FnOnce(&mut brickray_render::OutOfCoreConfig),
+) -> Result<(), brickray_render::RenderError> {
+    r.streamed_volume()
+        .ok_or(brickray_render::RenderError::NotOutOfCore)?
+        .edit(&gpu.device, &gpu.queue, f)
+}
+
 /// The renderer's view of [`Offscreen`]'s targets (single-sampled colour and
 /// depth).
 pub fn target_desc() -> brickray_render::TargetDesc {

@@ -258,7 +258,7 @@ pub fn run(
         ..Default::default()
     };
     renderer
-        .set_volume_source(&gpu.device, &gpu.queue, source, frame, ooc)
+        .set_volume_source(&gpu.device, &gpu.queue, source, ooc)
         .map_err(|e| e.to_string())?;
     let tf = TransferFunction::from_points(
         &[(0.5, [0.2, 0.5, 1.0, 0.0]), (0.75, [1.0, 0.8, 0.5, 0.05])],

@@ -94,6 +94,11 @@ pub struct FrameDesc<'a> {
     /// `TEXTURE_BINDING` usage covering the viewport (the same texture the host's
     /// pass uses, drawn before `prepare`'s work runs). Rays stop there.
     pub host_depth: Option<&'a wgpu::TextureView>,
+    /// The host's time of this frame in seconds (any origin, non-decreasing):
+    /// level-of-detail fades given in milliseconds advance by the time since
+    /// the last frame. `None`: frames 1/60 s apart. No clock is read on the
+    /// frame path.
+    pub time: Option<f64>,
 }
 
 impl FrameDesc<'_> {
@@ -106,6 +111,7 @@ impl FrameDesc<'_> {
             viewport: Viewport::full(width, height),
             settings: RenderSettings::default(),
             host_depth: None,
+            time: None,
         }
     }
 }

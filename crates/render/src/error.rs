@@ -157,4 +157,16 @@ pub enum PrepareError {
     /// Creating or updating GPU resources failed.
     #[error(transparent)]
     Render(#[from] RenderError),
+    /// Two views of one streamed volume prepared together differ in render
+    /// mode or transfer function (the views planned together share the
+    /// classification).
+    #[error(
+        "views {first} and {other} draw one streamed volume with different modes or transfer functions"
+    )]
+    ViewsDisagree {
+        /// The first view drawing the volume (index into the views).
+        first: usize,
+        /// The view that differs.
+        other: usize,
+    },
 }

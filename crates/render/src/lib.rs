@@ -34,12 +34,14 @@ mod limits;
 mod predict;
 pub mod shaders;
 mod tf;
+mod volume;
 
-pub use backend::{FeedbackStats, OcclusionStats, OutOfCoreStats, UsageFrame};
-/// Budgets, tolerance, loader threads and retry policy of the out-of-core path:
-/// the cache's own configuration.
+pub use backend::{FeedbackStats, OcclusionStats, OutOfCoreStats};
+/// Budgets, LOD metric and tolerance, fades, retry, visibility policy and its
+/// settings, loader threads and floor of the out-of-core path: the cache's own
+/// configuration, one value ([`StreamedVolume::configure`]).
 pub use brickray_cache::CacheConfig as OutOfCoreConfig;
-pub use brickray_cache::{ConfigError, FadeDuration, RetryPolicy, StreamError};
+pub use brickray_cache::{ConfigError, FadeDuration, RetryPolicy, StreamError, UsageFrame};
 pub use brickray_visibility::{VisibilityConfig, VisibilityCounts, VisibilityPolicy};
 pub use desc::{FrameDesc, FrameStats, RendererStats, TargetDesc, Viewport};
 pub use encoding::U8Filtering;
@@ -48,8 +50,11 @@ pub use frame::PredictionFrame;
 pub use limits::required_limits;
 pub use predict::{Prediction, PredictionCounts, PredictionError, TraversalClass};
 
+pub use volume::StreamedVolume;
+
 use backend::{Backend, InCore, OutOfCore};
-use brickray_core::{BrickSource, DepthConvention, TransferFunction, Volume, VolumeFrame};
+use brickray_cache::{Classification, StreamFrame};
+use brickray_core::{BrickSource, DepthConvention, FrameView, TransferFunction, Volume};
 use composite::Compositor;
 use frame::{FrameState, FrameUniforms};
 use kernels::{Kernels, Variant};
@@ -136,41 +141,61 @@ impl VolumeRenderer {
         volume: &Volume,
     ) -> Result<(), RenderError> {
         // Free the old volume first: two large volumes need not fit at once.
-        self.backend = None;
-        self.prepared = None;
-        self.volume_epoch += 1;
-        self.frame.drop_history();
+        self.drop_volume();
         let b = InCore::new(device, queue, volume, self.options.u8_filtering)?;
         self.backend = Some(Backend::InCore(b));
         Ok(())
     }
 
     /// Switches to the out-of-core path over a brick source (a brick-octree file
-    /// store or a procedural source): bricks stream in asynchronously, a coarse
-    /// image appears at once and sharpens over frames. `frame` places the volume
-    /// in the world (as later passed in [`FrameDesc::frame`]).
+    /// store, an OME-Zarr image or a procedural source): bricks stream in
+    /// asynchronously, a coarse image appears at once and sharpens over frames.
+    /// A convenience for a volume only this renderer draws: it creates a
+    /// [`StreamedVolume`] with `config` and this renderer's texel options and
+    /// draws it ([`Self::streamed_volume`] hands it out, to configure it or to
+    /// give it to another renderer).
     pub fn set_volume_source(
         &mut self,
         device: &wgpu::Device,
         queue: &wgpu::Queue,
         source: Arc<dyn BrickSource>,
-        frame: VolumeFrame,
         config: OutOfCoreConfig,
     ) -> Result<(), RenderError> {
+        // Free the old volume first: two large volumes need not fit at once.
+        self.drop_volume();
+        let v = StreamedVolume::new(device, queue, source, config, self.options.u8_filtering)?;
+        self.set_streamed_volume(device, &v)
+    }
+
+    /// Draws a streamed volume the host owns, which other renderers may draw
+    /// too (a stereo pair, a 3D view beside an orthogonal view): views of one
+    /// volume prepared together ([`Self::prepare_views`]) refine one cut that
+    /// satisfies all of them, load each brick once and share one pool.
+    pub fn set_streamed_volume(
+        &mut self,
+        device: &wgpu::Device,
+        volume: &StreamedVolume,
+    ) -> Result<(), RenderError> {
+        self.drop_volume();
+        let b = OutOfCore::new(device, volume.clone())?;
+        self.backend = Some(Backend::OutOfCore(Box::new(b)));
+        Ok(())
+    }
+
+    /// The streamed volume drawn, `None` in core or without a volume: its
+    /// configuration ([`StreamedVolume::configure`]), failures and retries.
+    pub fn streamed_volume(&self) -> Option<&StreamedVolume> {
+        self.backend
+            .as_ref()
+            .and_then(Backend::out_of_core)
+            .map(OutOfCore::volume)
+    }
+
+    fn drop_volume(&mut self) {
         self.backend = None;
         self.prepared = None;
         self.volume_epoch += 1;
         self.frame.drop_history();
-        let b = OutOfCore::new(
-            device,
-            queue,
-            source,
-            frame,
-            config,
-            self.options.u8_filtering,
-        )?;
-        self.backend = Some(Backend::OutOfCore(Box::new(b)));
-        Ok(())
     }
 
     /// Sets the transfer function (and its opacity prefix-sum table), written to
@@ -213,20 +238,16 @@ impl VolumeRenderer {
         Some((&h.buffer, offset, size))
     }
 
-    /// Statistics of the last frame.
+    /// Statistics of the last frame (out of core: this view's).
     pub fn stats(&self) -> RendererStats {
         RendererStats {
             frame: self.last_frame,
-            out_of_core: self.out_of_core_stats(),
+            out_of_core: self
+                .backend
+                .as_ref()
+                .and_then(Backend::out_of_core)
+                .map(OutOfCore::stats),
         }
-    }
-
-    /// Statistics of the out-of-core path's last frame (`None` in core).
-    pub fn out_of_core_stats(&self) -> Option<OutOfCoreStats> {
-        self.backend
-            .as_ref()
-            .and_then(Backend::out_of_core)
-            .map(OutOfCore::stats)
     }
 
     /// True when another frame of the same view would change the image (out of
@@ -238,119 +259,14 @@ impl VolumeRenderer {
             .is_some_and(|b| b.get().wants_redraw())
     }
 
-    fn out_of_core(&mut self) -> Result<&mut OutOfCore, RenderError> {
-        let b = self.backend.as_mut().ok_or(RenderError::NotOutOfCore)?;
-        b.out_of_core_mut()
-    }
-
-    /// Out of core: sets the refinement rule, geometric or error-aware with an
-    /// error budget (`brickray_core::LodMetric`, `docs/cache.md`).
-    pub fn set_lod_metric(&mut self, metric: brickray_core::LodMetric) -> Result<(), RenderError> {
-        let m = self.out_of_core()?.manager_mut();
-        Ok(m.set_lod_metric(metric)?)
-    }
-
-    /// Out of core: sets the screen-space error tolerance (pixels per voxel; 0
-    /// = always the finest level).
-    pub fn set_lod_tolerance(&mut self, tolerance_px: f32) -> Result<(), RenderError> {
-        let m = self.out_of_core()?.manager_mut();
-        Ok(m.set_tolerance_px(tolerance_px)?)
-    }
-
-    /// Out of core: sets the most data bricks the cut may hold
-    /// ([`OutOfCoreConfig::brick_budget`]; `None`: the pool's capacity). The
-    /// working-set knob that degrades gradually: refinement splits in its
-    /// metric's priority order until the next split would exceed it.
-    pub fn set_brick_budget(&mut self, budget: Option<u32>) -> Result<(), RenderError> {
-        let m = self.out_of_core()?.manager_mut();
-        Ok(m.set_brick_budget(budget)?)
-    }
-
-    /// Out of core: sets where refinement's visibility comes from
-    /// (`docs/visibility.md`). With [`VisibilityPolicy::RayGuided`] the ray
-    /// caster's per-brick usage counts, read back a few frames later without
-    /// waiting, stop refinement of bricks no ray reaches (hidden behind opaque
-    /// material): they stay at the level they have and request nothing.
-    /// Switching forgets what was observed.
-    pub fn set_visibility_policy(&mut self, policy: VisibilityPolicy) -> Result<(), RenderError> {
-        self.out_of_core()?.set_visibility_policy(policy);
-        Ok(())
-    }
-
-    /// Out of core: the visibility threshold (pixels) and hold (frames).
-    pub fn set_visibility_config(&mut self, config: VisibilityConfig) -> Result<(), RenderError> {
-        self.out_of_core()?.set_visibility_config(config);
-        Ok(())
-    }
-
-    /// Out of core, diagnostics: the latest usage counts read back (rays that
-    /// reached each data leaf of that frame's cut), whatever the policy.
+    /// Out of core, diagnostics: the latest usage counts read back for this
+    /// view (rays that reached each data leaf of that frame's cut), whatever
+    /// the policy; `None` in core or before the first read-back.
     pub fn last_usage(&self) -> Option<&UsageFrame> {
         self.backend
             .as_ref()
             .and_then(Backend::out_of_core)
             .and_then(OutOfCore::last_usage)
-    }
-
-    /// Out of core: level-of-detail transitions. When the cut changes, a
-    /// region blends from its old level to its new one over `fade` (frames or
-    /// milliseconds of frame time) instead of switching in one frame; `None`
-    /// switches at once. Default 120 ms (`docs/stability.md`).
-    pub fn set_lod_fade(&mut self, fade: Option<FadeDuration>) -> Result<(), RenderError> {
-        Ok(self.out_of_core()?.manager_mut().set_fade(fade)?)
-    }
-
-    /// Out of core: the time of the next `prepare` in seconds (any origin,
-    /// non-decreasing), which times fades given in milliseconds. Without it the
-    /// wall clock between `prepare` calls is used.
-    pub fn set_frame_time(&mut self, seconds: f64) -> Result<(), RenderError> {
-        self.out_of_core()?.manager_mut().set_frame_time(seconds);
-        Ok(())
-    }
-
-    /// Out of core: sets the bytes of bricks uploaded per frame.
-    pub fn set_upload_budget(&mut self, bytes: u64) -> Result<(), RenderError> {
-        Ok(self.out_of_core()?.manager_mut().set_upload_budget(bytes)?)
-    }
-
-    /// Out of core: sets the system memory for prepared bricks (shrinking evicts
-    /// the least recently used).
-    pub fn set_cpu_budget(&mut self, bytes: u64) -> Result<(), RenderError> {
-        Ok(self.out_of_core()?.manager_mut().set_cpu_budget(bytes)?)
-    }
-
-    /// Out of core: sets the GPU memory of the brick pool. The atlas is
-    /// recreated at the new size and the working set uploaded again over the
-    /// next frames.
-    pub fn set_gpu_budget(
-        &mut self,
-        device: &wgpu::Device,
-        queue: &wgpu::Queue,
-        bytes: u64,
-    ) -> Result<(), RenderError> {
-        self.prepared = None;
-        self.out_of_core()?.set_gpu_budget(device, queue, bytes)
-    }
-
-    /// Out of core: how failed bricks are retried on their own (`None`: only
-    /// through [`Self::retry_failed_bricks`]).
-    pub fn set_retry_policy(&mut self, policy: Option<RetryPolicy>) -> Result<(), RenderError> {
-        self.out_of_core()?.set_retry_policy(policy)
-    }
-
-    /// Out of core: forgets every failed brick so it is requested again when the
-    /// view needs it (after the source was repaired).
-    pub fn retry_failed_bricks(&mut self) -> Result<(), RenderError> {
-        self.out_of_core()?.manager_mut().retry_failed();
-        Ok(())
-    }
-
-    /// Out of core: the first streaming failure (a brick or its metadata could
-    /// not be read) since the last call, with the count of further ones, so a
-    /// viewer shows one message, not thousands. Failures never fail `prepare`:
-    /// the image stays at a coarser level there and `wants_redraw` stays true.
-    pub fn take_streaming_error(&mut self) -> Option<StreamError> {
-        self.out_of_core().ok()?.take_error()
     }
 
     /// The GPU texture format chosen for the volume, if one is set.
@@ -419,12 +335,74 @@ impl VolumeRenderer {
         encoder: &mut wgpu::CommandEncoder,
         desc: &FrameDesc<'_>,
     ) -> Result<FrameStats, PrepareError> {
-        self.prepared = None;
+        let stats = Self::prepare_views(device, queue, encoder, &mut [(self, desc)])?;
+        Ok(stats[0])
+    }
+
+    /// [`Self::prepare`] for several renderers in one frame (a stereo pair, a
+    /// 3D view beside an orthogonal view, several viewports of a viewer). Each
+    /// streamed volume they share is planned once for all the views that draw
+    /// it: one cut holds each node at the finest level any of them needs, each
+    /// brick is loaded once into the one pool, and what each view's rays
+    /// observed feeds one visibility state. Views planned together must share
+    /// the render mode and the transfer function
+    /// ([`PrepareError::ViewsDisagree`]). Every frame is checked before any
+    /// GPU work; the stats are in the order of `views`.
+    pub fn prepare_views(
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        encoder: &mut wgpu::CommandEncoder,
+        views: &mut [(&mut VolumeRenderer, &FrameDesc<'_>)],
+    ) -> Result<Vec<FrameStats>, PrepareError> {
         // Everything is checked first, so that a rejected frame touches nothing.
-        self.check_frame(device, desc)?;
+        for (r, desc) in views.iter_mut() {
+            r.prepared = None;
+            r.check_frame(device, desc)?;
+            if r.backend.is_none() {
+                return Err(PrepareError::NoVolume);
+            }
+            if r.tf.current().is_none() {
+                return Err(PrepareError::NoTransferFunction);
+            }
+        }
+        let mut uploaded = vec![0u64; views.len()];
+        let mut done = vec![false; views.len()];
+        for i in 0..views.len() {
+            if done[i] {
+                continue;
+            }
+            let (r, desc) = &mut views[i];
+            if let Some(Backend::InCore(b)) = r.backend.as_mut() {
+                let tf = r.tf.current().ok_or(PrepareError::NoTransferFunction)?;
+                uploaded[i] = b.update(queue, desc.settings.mode, tf, r.tf.generation());
+                done[i] = true;
+                continue;
+            }
+            let group = streamed_group(views, i, &done)?;
+            plan_group(device, queue, views, &group, &mut uploaded)?;
+            for j in group {
+                done[j] = true;
+            }
+        }
+        views
+            .iter_mut()
+            .zip(uploaded)
+            .map(|((r, desc), bytes)| r.record(device, queue, encoder, desc, bytes))
+            .collect()
+    }
+
+    /// Records this renderer's frame after its volume was updated: the
+    /// transfer function's tables, the frame's uniforms and prediction, the
+    /// composite's inputs and the ray-cast pass.
+    fn record(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        encoder: &mut wgpu::CommandEncoder,
+        desc: &FrameDesc<'_>,
+        mut uploaded: u64,
+    ) -> Result<FrameStats, PrepareError> {
         let backend = self.backend.as_mut().ok_or(PrepareError::NoVolume)?;
-        let tf = self.tf.current().ok_or(PrepareError::NoTransferFunction)?;
-        let mut uploaded = backend.get_mut().update(device, queue, desc, tf)?;
         backend.get_mut().before_pass(encoder);
         let backend = backend.get();
         uploaded += self.tf.prepare(
@@ -445,7 +423,7 @@ impl VolumeRenderer {
             .frame
             .update(device, queue, encoder, desc, uniforms, predict)?;
         uploaded += written;
-        let outputs = self.frame.outputs().expect("sized by update");
+        let outputs = self.frame.outputs().ok_or(PrepareError::NoVolume)?;
         uploaded += self
             .compositor
             .update(device, queue, outputs, desc.viewport)?;
@@ -504,4 +482,83 @@ impl VolumeRenderer {
         let p = self.prepared.ok_or(RenderError::NotPrepared)?;
         self.compositor.draw(pass, p.viewport, p.convention)
     }
+}
+
+/// The views among `views[i..]` not `done` that draw the streamed volume of
+/// `views[i]`, `i` first; they must agree on the classification.
+fn streamed_group(
+    views: &[(&mut VolumeRenderer, &FrameDesc<'_>)],
+    i: usize,
+    done: &[bool],
+) -> Result<Vec<usize>, PrepareError> {
+    let volume = |j: usize| views[j].0.streamed_volume();
+    let lead = volume(i).ok_or(PrepareError::NoVolume)?;
+    let group: Vec<usize> = (i..views.len())
+        .filter(|&j| !done[j] && volume(j).is_some_and(|v| v.same(lead)))
+        .collect();
+    let (first, desc) = (&views[i].0, views[i].1);
+    for &j in &group[1..] {
+        let (r, d) = (&views[j].0, views[j].1);
+        if d.settings.mode != desc.settings.mode || r.tf.current() != first.tf.current() {
+            return Err(PrepareError::ViewsDisagree { first: i, other: j });
+        }
+    }
+    Ok(group)
+}
+
+/// Plans the streamed volume drawn by the views `group` of `views` once for
+/// all of them (their feedback read back first), and hands each its part.
+fn plan_group(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    views: &mut [(&mut VolumeRenderer, &FrameDesc<'_>)],
+    group: &[usize],
+    uploaded: &mut [u64],
+) -> Result<(), PrepareError> {
+    let lead = group[0];
+    let volume = views[lead]
+        .0
+        .streamed_volume()
+        .cloned()
+        .ok_or(PrepareError::NoVolume)?;
+    let next = volume.lock().streamer.next_frame();
+    let mut frame_views = Vec::with_capacity(group.len());
+    let mut feedback = Vec::with_capacity(group.len());
+    for &j in group {
+        let (r, desc) = &mut views[j];
+        let vp = desc.viewport;
+        frame_views.push(FrameView::new(
+            desc.camera,
+            desc.frame,
+            [vp.width, vp.height],
+        ));
+        if let Some(Backend::OutOfCore(o)) = r.backend.as_mut() {
+            feedback.push(o.poll(next));
+        }
+    }
+    let planned = {
+        let (r, desc) = &views[lead];
+        let tf = r.tf.current().ok_or(PrepareError::NoTransferFunction)?;
+        let frame = StreamFrame {
+            views: &frame_views,
+            classification: Classification {
+                mode: desc.settings.mode,
+                tf,
+                tf_generation: r.tf.generation(),
+            },
+            feedback: &feedback,
+            time: desc.time,
+        };
+        volume.lock().plan(device, queue, &frame)?
+    };
+    uploaded[lead] += planned.bytes;
+    for (k, &j) in group.iter().enumerate() {
+        let (r, desc) = &mut views[j];
+        let vp = desc.viewport;
+        let queries = planned.plan.queries.get(k).cloned().unwrap_or_default();
+        if let Some(Backend::OutOfCore(o)) = r.backend.as_mut() {
+            o.apply(device, queue, &planned, &queries, [vp.width, vp.height])?;
+        }
+    }
+    Ok(())
 }

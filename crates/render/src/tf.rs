@@ -54,6 +54,9 @@ pub(crate) struct TfTables {
     preint_key: Option<TableKey>,
     bind_group: Option<wgpu::BindGroup>,
     current: Option<TransferFunction>,
+    /// A number no other transfer function set in this process had: bumped
+    /// whenever `current` changes (what depends on the function keys on it).
+    generation: u64,
 }
 
 fn entry(binding: u32, ty: wgpu::BindingType) -> wgpu::BindGroupLayoutEntry {
@@ -76,6 +79,13 @@ fn buffer(ty: wgpu::BufferBindingType) -> wgpu::BindingType {
 /// Group 1's layout: entries (0), prefix sums (1), info (2), corrected table (3),
 /// its sampler (4, also the pre-integrated table's) and the pre-integrated table
 /// (5).
+/// Generations of transfer functions, unique in the process: renderers that
+/// share a volume plan it with the generation of whichever draws it first.
+fn next_generation() -> u64 {
+    static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
+    NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
+}
+
 pub(crate) fn layout_entries() -> [wgpu::BindGroupLayoutEntry; 6] {
     let storage = wgpu::BufferBindingType::Storage { read_only: true };
     [
@@ -139,6 +149,7 @@ impl TfTables {
             preint_key: None,
             bind_group: None,
             current: None,
+            generation: 0,
         })
     }
 
@@ -149,6 +160,11 @@ impl TfTables {
     /// The transfer function set last.
     pub(crate) fn current(&self) -> Option<&TransferFunction> {
         self.current.as_ref()
+    }
+
+    /// The generation of the current transfer function (see the field).
+    pub(crate) fn generation(&self) -> u64 {
+        self.generation
     }
 
     /// The bind group, once [`Self::prepare`] built the table.
@@ -184,6 +200,7 @@ impl TfTables {
             self.bind_group = None;
         }
         self.current = Some(tf.clone());
+        self.generation = next_generation();
         self.table_key = None;
         Ok(a + b)
     }

@@ -51,8 +51,6 @@ struct Shown {
 pub(crate) struct ViewerApp {
     open_opts: OpenOptions,
     ooc: OutOfCoreConfig,
-    /// Out of core: where refinement's visibility comes from.
-    visibility: brickray::VisibilityPolicy,
     ooc_dirty: bool,
     /// The isosurface prediction buffer.
     prediction: PredictionChoice,
@@ -118,7 +116,6 @@ impl ViewerApp {
         let mut app = ViewerApp {
             open_opts,
             ooc: startup.ooc,
-            visibility: brickray::VisibilityPolicy::None,
             prediction: PredictionChoice::Off,
             prediction_dirty: false,
             ooc_dirty: false,
@@ -186,7 +183,7 @@ impl ViewerApp {
         let streamed = matches!(loaded.volume, Opened::Streamed(_));
         self.with_gpu(frame, |device, queue, r| match loaded.volume {
             Opened::InCore(v) => r.renderer.set_volume(device, queue, &v),
-            Opened::Streamed(s) => r.renderer.set_volume_source(device, queue, s, vframe, ooc),
+            Opened::Streamed(s) => r.renderer.set_volume_source(device, queue, s, ooc),
         })
         .ok_or("no GPU")?
         .map_err(|e| format!("{}: {e}", loaded.input.name()))?;
@@ -203,9 +200,6 @@ impl ViewerApp {
             self.tf = TfModel::preset(preset, desc.value_range);
         }
         self.tf_dirty = true;
-        // The visibility policy belongs to the out-of-core backend the open
-        // replaced.
-        self.ooc_dirty = true;
         self.messages.push(loaded.note.clone());
         if !reopened || self.camera.is_none() {
             self.camera = Some(CameraController::new(&vframe));
@@ -279,16 +273,12 @@ impl ViewerApp {
         }
         if self.ooc_dirty && self.shown.as_ref().is_some_and(|s| s.streamed) {
             self.ooc_dirty = false;
-            let (c, policy) = (self.ooc, self.visibility);
+            let c = self.ooc;
             let res = self.with_gpu(frame, |d, q, r| -> Result<(), brickray::RenderError> {
-                r.renderer.set_lod_tolerance(c.tolerance_px)?;
-                r.renderer.set_lod_metric(c.lod_metric)?;
-                r.renderer.set_visibility_policy(policy)?;
-                r.renderer.set_brick_budget(c.brick_budget)?;
-                r.renderer.set_upload_budget(c.upload_budget_bytes)?;
-                r.renderer.set_cpu_budget(c.cpu_budget_bytes)?;
-                if r.renderer.stats().out_of_core.is_some() {
-                    r.renderer.set_gpu_budget(d, q, c.gpu_budget_bytes)?;
+                // One configuration: only what changed is rebuilt (the
+                // pool only when the GPU budget changes).
+                if let Some(v) = r.renderer.streamed_volume() {
+                    v.configure(d, q, c)?;
                 }
                 Ok(())
             });

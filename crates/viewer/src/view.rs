@@ -388,6 +388,7 @@ impl egui_wgpu::CallbackTrait for VolumeCallback {
             viewport: vp,
             settings: self.settings,
             host_depth: host_depth.as_ref(),
+            time: None,
         };
         match r.renderer.prepare(device, queue, encoder, &desc) {
             Ok(_) => {

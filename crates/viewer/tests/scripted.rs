@@ -193,7 +193,7 @@ fn library_store_image(store: &Path, camera: Camera, w: u32, h: u32) -> Vec<u8> 
     let mut renderer =
         VolumeRenderer::new(&gpu.device, brickray_harness::target_desc()).expect("renderer");
     renderer
-        .set_volume_source(&gpu.device, &gpu.queue, source, frame, config)
+        .set_volume_source(&gpu.device, &gpu.queue, source, config)
         .expect("source");
     // The viewer's "grey" preset: colour and opacity ramps over the range.
     let tf = TransferFunction::from_points(

@@ -137,7 +137,7 @@ fn part_a(gpu: &GpuContext, size: u32, rounds: usize, fig: &mut Figures) -> Resu
     incore
         .set_volume(&gpu.device, &gpu.queue, &vol)
         .map_err(|e| e.to_string())?;
-    let mut ooc = finest_ooc_renderer(gpu, source, frame, RendererOptions::default())?;
+    let mut ooc = finest_ooc_renderer(gpu, source, RendererOptions::default())?;
     let run = Runner::new(gpu, size);
     let settings = |accel| RenderSettings {
         mode: RenderMode::Dvr,
@@ -193,7 +193,7 @@ fn part_a(gpu: &GpuContext, size: u32, rounds: usize, fig: &mut Figures) -> Resu
             let b = run.frame(&mut ooc, camera, frame, settings(accel), true)?;
             shots.push((a, b));
         }
-        let stats = ooc.out_of_core_stats().ok_or("not out of core")?;
+        let stats = ooc.stats().out_of_core.ok_or("not out of core")?;
         // Timing: rounds over (renderer, variant), the order rotated each round.
         let mut times = vec![Vec::new(); 2 * variants.len()];
         for r in 0..rounds {

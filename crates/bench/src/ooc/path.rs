@@ -44,7 +44,6 @@ pub(super) fn part_c(
             &gpu.device,
             &gpu.queue,
             source,
-            frame,
             OutOfCoreConfig {
                 gpu_budget_bytes: path.gpu_mib << 20,
                 ..Default::default()
@@ -92,7 +91,7 @@ pub(super) fn part_c(
     let mut worst = (0.0f64, 0usize);
     for (i, cam) in cams.iter().enumerate() {
         let shot = run.frame(&mut renderer, *cam, frame, settings, false)?;
-        let s = renderer.out_of_core_stats().ok_or("not out of core")?;
+        let s = renderer.stats().out_of_core.ok_or("not out of core")?;
         times.push(shot.ms);
         max_uploaded = max_uploaded.max(s.cache.upload_bytes);
         max_refine = max_refine.max(s.refine_ms);

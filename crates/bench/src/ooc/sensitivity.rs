@@ -27,10 +27,10 @@ fn cut_levels(
 ) -> Vec<u32> {
     let layout = source.layout().clone();
     let params = RefineParams {
-        camera,
-        aspect: 1.0,
-        viewport_height_px: size,
-        volume_frame: frame,
+        views: &brickray_cache::Views::one(brickray_cache::refine::ViewGeometry::new(
+            &layout, camera, 1.0, size, frame,
+        )),
+        generation: 0,
         mode: RenderMode::Dvr,
         tf,
         tolerance_px,
@@ -104,7 +104,7 @@ pub(super) fn part_b(
         let mut renderer =
             VolumeRenderer::new(&gpu.device, targets()).map_err(|e| e.to_string())?;
         renderer
-            .set_volume_source(&gpu.device, &gpu.queue, source.clone(), frame, config)
+            .set_volume_source(&gpu.device, &gpu.queue, source.clone(), config)
             .map_err(|e| e.to_string())?;
         renderer
             .set_transfer_function(
@@ -121,7 +121,7 @@ pub(super) fn part_b(
             t.elapsed().as_secs_f64()
         );
         let shot = run.frame(&mut renderer, cam, frame, settings, true)?;
-        let stats = renderer.out_of_core_stats().ok_or("not out of core")?;
+        let stats = renderer.stats().out_of_core.ok_or("not out of core")?;
         entries.push(Entry {
             dims,
             frame,

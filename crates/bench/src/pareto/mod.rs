@@ -455,7 +455,6 @@ fn measure(
                 &gpu.device,
                 &gpu.queue,
                 store.clone(),
-                scene.frame,
                 OutOfCoreConfig {
                     tolerance_px: k.tolerance_px,
                     lod_metric: k.metric,
@@ -465,8 +464,7 @@ fn measure(
                 },
             )
             .map_err(|e| e.to_string())?;
-            r.set_visibility_policy(k.policy)
-                .map_err(|e| e.to_string())?;
+            crate::runner::configure(gpu, &r, |c| c.visibility = k.policy)?;
         }
         r.set_transfer_function(&gpu.device, &gpu.queue, tf)
             .map_err(|e| e.to_string())?;
@@ -483,7 +481,7 @@ fn measure(
         let mut settled = false;
         for i in 0..400 {
             run.frame(r, scene.camera, scene.frame, c.settings, false)?;
-            let s = r.out_of_core_stats().ok_or("not out of core")?;
+            let s = r.stats().out_of_core.ok_or("not out of core")?;
             if s.converged && i >= 8 {
                 settled = true;
                 break;
@@ -520,7 +518,7 @@ fn measure(
         let r = &mut renderers[slot(c)];
         let shot = run.frame(r, scene.camera, scene.frame, c.settings, true)?;
         let bricks = r
-            .out_of_core_stats()
+            .stats().out_of_core
             .map_or(0, |s| s.cache.working_set_bricks);
         let bytes = if c.key.in_core {
             scene.volume.desc().byte_len()
@@ -562,7 +560,6 @@ fn finest_cut(
         &gpu.device,
         &gpu.queue,
         store,
-        scene.frame,
         OutOfCoreConfig {
             tolerance_px: 0.0,
             upload_budget_bytes: 1 << 30,

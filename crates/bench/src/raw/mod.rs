@@ -126,7 +126,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         .map_err(|e| e.to_string())?;
     let dir = tempfile::tempdir().map_err(|e| e.to_string())?;
     let source = brickray_harness::store_of(&vol, &dir.path().join("mri.brs"));
-    let mut ooc = finest_ooc_renderer(&gpu, source, frame, options)?;
+    let mut ooc = finest_ooc_renderer(&gpu, source, options)?;
     let mut raw = RawKernel::new(&gpu, &vol, size)?;
     let run = Runner::new(&gpu, size);
     let dvr_tf = TransferFunction::from_points(

@@ -113,10 +113,10 @@ pub(crate) fn thin_structures(ctx: &Ctx<'_>) -> Result<Case, String> {
                 upload_budget_bytes: 1 << 30,
                 ..Default::default()
             };
-            let mut r = super::ooc(ctx.gpu, source.clone(), frame, config, tf)?;
+            let mut r = super::ooc(ctx.gpu, source.clone(), config, tf)?;
             let mut pts = Vec::new();
             for tol in TOLERANCES {
-                r.set_lod_tolerance(tol).map_err(s)?;
+                crate::runner::configure(ctx.gpu, &r, |c| c.tolerance_px = tol)?;
                 let (_, st) = run.converge(&mut r, cam, frame, *settings, 100)?;
                 let level = (0..16)
                     .rev()

@@ -93,7 +93,6 @@ pub(crate) fn grazing(ctx: &Ctx<'_>) -> Result<Case, String> {
     let mut finest = finest_ooc_renderer(
         ctx.gpu,
         src.clone() as Arc<dyn BrickSource>,
-        frame,
         RendererOptions::default(),
     )?;
     finest
@@ -104,7 +103,7 @@ pub(crate) fn grazing(ctx: &Ctx<'_>) -> Result<Case, String> {
         upload_budget_bytes: 1 << 30,
         ..Default::default()
     };
-    let mut mixed = super::ooc(ctx.gpu, src.clone(), frame, mixed_cfg, &tf)?;
+    let mut mixed = super::ooc(ctx.gpu, src.clone(), mixed_cfg, &tf)?;
     println!(
         "  {:<6} {:<5} {:<10} {:>9} {:>8} {:>6} {:>7} {:>7}",
         "view", "mode", "renderer", "PSNR", "FLIP", "holes", "seam", "levels"
@@ -333,7 +332,6 @@ pub(crate) fn precision(ctx: &Ctx<'_>) -> Result<Case, String> {
     let mut r = super::ooc(
         ctx.gpu,
         src.clone(),
-        big,
         OutOfCoreConfig {
             upload_budget_bytes: 1 << 30,
             ..Default::default()
@@ -407,7 +405,7 @@ pub(crate) fn precision(ctx: &Ctx<'_>) -> Result<Case, String> {
         let mut reader = brickray_io::MemoryReader::new(sub.clone(), "box");
         brickray_store::build(&mut reader, &path, &Default::default()).map_err(s)?;
         let box_src: Arc<dyn BrickSource> = Arc::new(brickray_store::open(&path).map_err(s)?);
-        let mut uooc = finest_ooc_renderer(ctx.gpu, box_src, unit, RendererOptions::default())?;
+        let mut uooc = finest_ooc_renderer(ctx.gpu, box_src, RendererOptions::default())?;
         uooc.set_transfer_function(&ctx.gpu.device, &ctx.gpu.queue, &tf)
             .map_err(s)?;
         // Inside the box (20 voxels from its centre): rays start at the near

@@ -136,7 +136,7 @@ fn render_path(
         tolerance_px: opt.tolerance_px,
         ..Default::default()
     };
-    r.set_volume_source(&gpu.device, &gpu.queue, source, frame, config)
+    r.set_volume_source(&gpu.device, &gpu.queue, source, config)
         .map_err(e)?;
     r.set_transfer_function(&gpu.device, &gpu.queue, tf)
         .map_err(e)?;
@@ -153,7 +153,7 @@ fn render_path(
         draw_frame(gpu, &mut r, &target, &desc(*cam), Some(wgpu::Color::BLACK))
             .map_err(|e| e.to_string())?;
         images.push(target.read_color(gpu));
-        let s = r.out_of_core_stats().ok_or("not out of core")?;
+        let s = r.stats().out_of_core.ok_or("not out of core")?;
         holes = holes.max(s.cache.holes);
         fading += (s.cache.fading > 0) as usize;
         std::thread::sleep(std::time::Duration::from_millis(opt.pause_ms));

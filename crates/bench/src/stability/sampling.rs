@@ -54,7 +54,7 @@ pub(crate) fn high_frequency_tf(ctx: &Ctx<'_>) -> Result<Case, String> {
     println!("  reference at 1/8 vs 1/32: {ref_self:.2} dB (the reference's own convergence)");
     let run = Runner::new(ctx.gpu, size);
     let mut incore = super::incore(ctx.gpu, &vol, &tf)?;
-    let mut ooc = finest_ooc_renderer(ctx.gpu, src, frame, RendererOptions::default())?;
+    let mut ooc = finest_ooc_renderer(ctx.gpu, src, RendererOptions::default())?;
     ooc.set_transfer_function(&ctx.gpu.device, &ctx.gpu.queue, &tf)
         .map_err(s)?;
     run.converge(&mut ooc, cam, frame, base, 200)?;

@@ -2,7 +2,7 @@
 //! pressure with the camera circling.
 
 use super::{
-    Case, Ctx, CutCheck, Series, SlowSource, dark, line_chart, mean_abs_diff, noise, quality, s,
+    Case, Ctx, CutCheck, Series, SlowSource, dark, line_chart, mean_abs_diff, noise, quality,
 };
 use crate::runner::{Runner, median, quantile, round2};
 use brickray_core::{BrickSource, Camera, RenderSettings, TransferFunction, VolumeFrame};
@@ -80,7 +80,7 @@ pub(crate) fn streaming(ctx: &Ctx<'_>) -> Result<Case, String> {
             gpu_budget_bytes: 2 << 20,
             ..Default::default()
         };
-        let mut r = super::ooc(ctx.gpu, slow.clone(), frame, config, &tf)?;
+        let mut r = super::ooc(ctx.gpu, slow.clone(), config, &tf)?;
         let twin_src = Arc::new(SlowSource::new(
             src.clone() as Arc<dyn BrickSource>,
             Duration::from_millis(delay),
@@ -100,7 +100,7 @@ pub(crate) fn streaming(ctx: &Ctx<'_>) -> Result<Case, String> {
                 dark_max = dark_max.max(dk);
                 hole_track.push((hole_track.len() as f64, dk as f64));
                 holes_max = holes_max.max(h);
-                let st = r.out_of_core_stats().ok_or("not out of core")?;
+                let st = r.stats().out_of_core.ok_or("not out of core")?;
                 if st.converged && converged_at[v].is_none() {
                     converged_at[v] = Some(i + 1);
                 }
@@ -149,8 +149,8 @@ pub(crate) fn streaming(ctx: &Ctx<'_>) -> Result<Case, String> {
     )?;
     // Scale for the dark pixels: the root alone (always resident) against
     // the reference: detail the coarsest level lacks, not holes.
-    let mut root = super::ooc(ctx.gpu, src.clone(), frame, OutOfCoreConfig::default(), &tf)?;
-    root.set_lod_tolerance(1.0e6).map_err(s)?;
+    let mut root = super::ooc(ctx.gpu, src.clone(), OutOfCoreConfig::default(), &tf)?;
+    crate::runner::configure(ctx.gpu, &root, |c| c.tolerance_px = 1.0e6)?;
     let mut root_dark = Vec::new();
     for (v, cam) in views.iter().enumerate() {
         let shot = run.frame(&mut root, *cam, frame, settings, true)?;
@@ -214,7 +214,7 @@ pub(crate) fn pressure(ctx: &Ctx<'_>) -> Result<Case, String> {
         tolerance_px: tolerance,
         ..Default::default()
     };
-    let mut r = super::ooc(ctx.gpu, src.clone(), frame, config(big), &tf)?;
+    let mut r = super::ooc(ctx.gpu, src.clone(), config(big), &tf)?;
     let (_, st) = run.converge(&mut r, cam(0), frame, settings, 200)?;
     let need = st.cache.working_set_bricks as f64;
     let per_slot = big as f64 / st.cache.pool_slots as f64;
@@ -248,7 +248,7 @@ pub(crate) fn pressure(ctx: &Ctx<'_>) -> Result<Case, String> {
     for frac in POOL_FRACTIONS {
         // The cache needs at least 9 slots.
         let budget = ((frac * need).max(9.0) * per_slot + per_slot / 2.0) as u64;
-        let mut r = super::ooc(ctx.gpu, src.clone(), frame, config(budget), &tf)?;
+        let mut r = super::ooc(ctx.gpu, src.clone(), config(budget), &tf)?;
         run.converge(&mut r, cam(0), frame, settings, 200)?;
         let mut twin = CutCheck::new(src.clone(), frame, config(budget))?;
         for _ in 0..50 {
@@ -263,7 +263,7 @@ pub(crate) fn pressure(ctx: &Ctx<'_>) -> Result<Case, String> {
         let mut slots = 0;
         for (i, reference) in refs.iter().enumerate() {
             let shot = run.frame(&mut r, cam(i), frame, settings, true)?;
-            let st = r.out_of_core_stats().ok_or("not out of core")?;
+            let st = r.stats().out_of_core.ok_or("not out of core")?;
             slots = st.cache.pool_slots;
             uploads.push(st.cache.upload_bricks as f64);
             h = h.max(twin.plan(&cam(i), size, settings.mode, &tf));

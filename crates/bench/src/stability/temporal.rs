@@ -169,12 +169,12 @@ fn disocclusion(ctx: &Ctx<'_>) -> Result<(serde_json::Value, Option<usize>, u64)
     ];
     let mut rs = Vec::new();
     for (_, p) in policies {
-        let mut r = super::ooc(ctx.gpu, src.clone(), frame, config, &tf)?;
-        r.set_visibility_policy(p).map_err(s)?;
+        let mut r = super::ooc(ctx.gpu, src.clone(), config, &tf)?;
+        crate::runner::configure(ctx.gpu, &r, |c| c.visibility = p)?;
         // Converge at the start view (frames drawn: the feedback needs them).
         for _ in 0..60 {
             run.frame(&mut r, cam(0), frame, settings, false)?;
-            if r.out_of_core_stats().is_some_and(|s| s.converged) {
+            if r.stats().out_of_core.is_some_and(|s| s.converged) {
                 break;
             }
         }

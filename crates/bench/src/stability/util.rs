@@ -112,12 +112,11 @@ pub(crate) fn incore(
 pub(crate) fn ooc(
     gpu: &GpuContext,
     source: Arc<dyn BrickSource>,
-    frame: VolumeFrame,
     config: OutOfCoreConfig,
     tf: &TransferFunction,
 ) -> Result<VolumeRenderer, String> {
     let mut r = VolumeRenderer::new(&gpu.device, target_desc()).map_err(s)?;
-    r.set_volume_source(&gpu.device, &gpu.queue, source, frame, config)
+    r.set_volume_source(&gpu.device, &gpu.queue, source, config)
         .map_err(s)?;
     r.set_transfer_function(&gpu.device, &gpu.queue, tf)
         .map_err(s)?;
@@ -244,14 +243,14 @@ pub(crate) fn line_chart(
     Ok(())
 }
 
-/// A GPU-free twin of the renderer's planning (a `BrickManager` over the same
+/// A GPU-free twin of the renderer's planning (a `Streamer` over the same
 /// source, configuration and cameras, root preloaded as the renderer does)
 /// that checks every planned cut for holes: leaves that want data and hold
 /// none (`Empty(NotLoaded)`, `Empty(Failed)`, data leaves without a slot,
 /// allocation failures), and leaves that do not tile the octree cube.
 pub(crate) struct CutCheck {
-    manager: brickray_cache::BrickManager,
-    frame: u64,
+    streamer: brickray_cache::Streamer,
+    placement: VolumeFrame,
     levels: u8,
 }
 
@@ -273,12 +272,11 @@ impl CutCheck {
             32,
             2048,
         );
-        let mut manager =
-            brickray_cache::BrickManager::new(source, frame, config, gpu).map_err(s)?;
-        manager.preload_root().map_err(s)?;
+        let mut streamer = brickray_cache::Streamer::new(source, config, gpu).map_err(s)?;
+        streamer.preload_root().map_err(s)?;
         Ok(CutCheck {
-            manager,
-            frame: 0,
+            streamer,
+            placement: frame,
             levels: layout.levels,
         })
     }
@@ -292,9 +290,18 @@ impl CutCheck {
         tf: &TransferFunction,
     ) -> u64 {
         use brickray_core::{EmptyReason, LeafKind};
-        self.frame += 1;
-        let plan = self.manager.update(camera, 1.0, size, self.frame, mode, tf);
-        let mut holes = plan.stats.allocation_failures as u64;
+        let views = [brickray_core::FrameView::new(*camera, self.placement, [size, size])];
+        let plan = self.streamer.plan(&brickray_cache::StreamFrame {
+            views: &views,
+            classification: brickray_cache::Classification {
+                mode,
+                tf,
+                tf_generation: 0,
+            },
+            feedback: &[],
+            time: None,
+        });
+        let mut holes = plan.stats.cache.allocation_failures as u64;
         // Each leaf covers 8^(levels - 1 - level) finest-level cells.
         let mut covered: u128 = 0;
         for leaf in &plan.cut {

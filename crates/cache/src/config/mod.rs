@@ -7,6 +7,7 @@ use crate::pool::PoolLimits;
 use brickray_core::{
     DType, LodMetric, OctreeLayout, SampleEncoding, TexelCaps, U8Filtering, sub_cells_per_axis,
 };
+use brickray_visibility::{VisibilityConfig, VisibilityPolicy};
 use std::time::Duration;
 use thiserror::Error;
 
@@ -107,6 +108,16 @@ pub struct CacheConfig {
     /// budget (`docs/cache.md`, "Brick budget"). `None` (the default): the
     /// pool's capacity. Must be `>= 1` (the root's brick).
     pub brick_budget: Option<u32>,
+    /// Where refinement's visibility comes from (`docs/visibility.md`): with
+    /// [`VisibilityPolicy::RayGuided`] the ray caster's per-brick usage
+    /// counts, read back a few frames later without waiting, stop refinement
+    /// of bricks no ray reaches (hidden behind opaque material): they stay at
+    /// the level they have and request nothing. Default: none. A change
+    /// forgets what was observed.
+    pub visibility: VisibilityPolicy,
+    /// The visibility threshold (pixels), hold (frames) and occlusion
+    /// queries per frame.
+    pub visibility_config: VisibilityConfig,
 }
 
 /// Default [`CacheConfig::floor_slots`]: levels 0 to 2 of a cubic volume.
@@ -115,7 +126,7 @@ pub const DEFAULT_FLOOR_SLOTS: u32 = 73;
 impl Default for CacheConfig {
     /// 512 MiB CPU, 256 MiB GPU, 16 MiB uploaded per frame, 1 px, 2 threads,
     /// retries after 1 s doubling to 60 s, fades of 120 ms, a floor of up to
-    /// 73 slots.
+    /// 73 slots, no visibility feedback.
     fn default() -> Self {
         CacheConfig {
             cpu_budget_bytes: 512 << 20,
@@ -128,6 +139,8 @@ impl Default for CacheConfig {
             fade: Some(FadeDuration::default()),
             floor_slots: DEFAULT_FLOOR_SLOTS,
             brick_budget: None,
+            visibility: VisibilityPolicy::None,
+            visibility_config: VisibilityConfig::default(),
         }
     }
 }
@@ -226,6 +239,12 @@ pub enum ConfigError {
         slots: u32,
         /// Slots needed.
         needed: u32,
+    },
+    /// A loader thread could not be started (a thread-count change).
+    #[error("cannot start a loader thread: {reason}")]
+    LoaderStart {
+        /// What the OS said.
+        reason: String,
     },
     /// A fade duration of 0 frames, or milliseconds negative or not finite.
     #[error("fade duration must be >= 1 frame or finite >= 0 ms, got {value:?}")]

@@ -1,18 +1,26 @@
 //! The manager's queries, failure handling, set-up read and runtime setters.
 
 use super::{BrickManager, Residency, ResidencyCounts};
-use crate::config::{
-    CacheConfig, ConfigError, GpuFormat, MIN_RESIDENT_BRICKS, RetryPolicy, validate_brick_budget,
-    validate_cpu_budget, validate_metric, validate_tolerance,
-};
+
+/// What [`BrickManager::configure`] rebuilt.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Reconfigured {
+    /// The pool bookkeeping (a GPU budget or floor change): every slot is
+    /// forgotten and the renderer must recreate its atlas and slot tables
+    /// (sized by [`BrickManager::pool`]) before the next update, which
+    /// uploads the working set again.
+    pub pool: bool,
+    /// The loader (a thread-count change).
+    pub loader: bool,
+}
+use crate::config::{CacheConfig, ConfigError, GpuFormat, MIN_RESIDENT_BRICKS};
 use crate::cpu_cache::CpuCache;
-use crate::fade::FadeDuration;
 use crate::failures::{FetchKind, StreamError};
 use crate::loader::worker::{children_in_volume, fetch_brick, fetch_meta};
-use crate::loader::{LoadError, Loader};
+use crate::loader::{LoadError, Loader, LoaderConfig};
 use crate::pool::BrickPool;
 use crate::upload::UploadBudget;
-use brickray_core::{NodeInfo, NodeKey, NodeKind, OctreeLayout, VolumeFrame};
+use brickray_core::{NodeInfo, NodeKey, NodeKind, OctreeLayout};
 use std::sync::Arc;
 
 impl BrickManager {
@@ -142,96 +150,66 @@ impl BrickManager {
         Ok(())
     }
 
-    /// Moves the volume in the world.
-    pub fn set_volume_frame(&mut self, frame: VolumeFrame) {
-        self.volume_frame = frame;
-    }
-
-    /// Sets the refinement rule ([`brickray_core::LodMetric`]; an error budget
-    /// must be finite and `>= 0`).
-    pub fn set_lod_metric(&mut self, metric: brickray_core::LodMetric) -> Result<(), ConfigError> {
-        validate_metric(metric)?;
-        self.config.lod_metric = metric;
-        Ok(())
-    }
-
-    /// Sets the screen-space error tolerance (pixels per voxel; finite, `>= 0`).
-    pub fn set_tolerance_px(&mut self, tolerance_px: f32) -> Result<(), ConfigError> {
-        validate_tolerance(tolerance_px)?;
-        self.config.tolerance_px = tolerance_px;
-        Ok(())
-    }
-
-    /// Sets the most data bricks the cut may hold ([`CacheConfig::brick_budget`];
-    /// `None`: the pool's capacity; `Some(0)` is refused). The next frame's
-    /// refinement keeps within it.
-    ///
-    /// [`CacheConfig::brick_budget`]: crate::CacheConfig::brick_budget
-    pub fn set_brick_budget(&mut self, budget: Option<u32>) -> Result<(), ConfigError> {
-        validate_brick_budget(budget)?;
-        self.config.brick_budget = budget;
-        Ok(())
-    }
-
-    /// Sets the bytes uploaded per frame (any value: 0 means one split or one brick
-    /// per frame).
-    pub fn set_upload_budget(&mut self, bytes_per_frame: u64) -> Result<(), ConfigError> {
-        self.config.upload_budget_bytes = bytes_per_frame;
-        self.budget = UploadBudget::new(bytes_per_frame);
-        Ok(())
-    }
-
-    /// Sets the CPU cache budget (at least nine prepared bricks); shrinking evicts
-    /// the least recently used bricks.
-    pub fn set_cpu_budget(&mut self, bytes: u64) -> Result<(), ConfigError> {
-        validate_cpu_budget(bytes, &self.layout, &self.gpu)?;
-        self.config.cpu_budget_bytes = bytes;
-        self.cpu.set_budget(bytes);
-        self.meta
-            .set_capacity(super::meta_capacity(bytes, self.brick_bytes));
-        Ok(())
-    }
-
-    /// Sets the GPU pool budget (at least nine slots) and rebuilds the pool
-    /// bookkeeping: every slot is forgotten. Returns the new atlas size in voxels
-    /// ([`BrickPool::atlas_dims`]): the renderer recreates its atlas and slot
-    /// tables (sized by [`pool`](Self::pool)) before the next update, which
-    /// uploads the working set again.
-    pub fn set_gpu_budget(&mut self, bytes: u64) -> Result<[u32; 3], ConfigError> {
-        let limits = self.gpu.pool_limits(&self.layout, bytes)?;
-        let pool = BrickPool::new(limits).map_err(|_| ConfigError::GpuBudgetTooSmall {
-            budget_bytes: bytes,
-            slot_bytes: limits.slot_bytes,
-            stored_side: limits.stored_side,
-            max_texture_dim_3d: limits.max_dim,
-            slots: 0,
-            needed: MIN_RESIDENT_BRICKS,
-        })?;
-        self.pool = pool;
-        self.config.gpu_budget_bytes = bytes;
-        self.reset_floor();
-        Ok(self.pool.atlas_dims())
-    }
-
-    /// Sets (or, with `None`, turns off) level-of-detail fades
-    /// ([`CacheConfig::fade`]); fades in progress end at once when turned off.
-    pub fn set_fade(&mut self, fade: Option<FadeDuration>) -> Result<(), ConfigError> {
-        if let Some(f) = fade.filter(|f| !f.is_valid()) {
-            return Err(ConfigError::Fade { value: f });
+    /// Applies a configuration: the whole of it is validated first
+    /// ([`CacheConfig::validate`]; on error nothing changes), then only what
+    /// differs from the current one is rebuilt. A tolerance, metric, brick
+    /// budget, fade, retry, upload budget or visibility change takes effect at
+    /// the next update and rebuilds nothing; a CPU budget change resizes the
+    /// CPU cache (evicting the least recently used); a loader-thread change
+    /// restarts the loader (loads in flight are asked for again); a GPU
+    /// budget or floor change rebuilds the pool bookkeeping (every slot
+    /// forgotten; the renderer recreates its atlas, [`Reconfigured::pool`]).
+    pub fn configure(&mut self, config: CacheConfig) -> Result<Reconfigured, ConfigError> {
+        config.validate(&self.layout, &self.gpu)?;
+        let old = self.config;
+        let mut out = Reconfigured::default();
+        if config.gpu_budget_bytes != old.gpu_budget_bytes || config.floor_slots != old.floor_slots
+        {
+            let limits = self
+                .gpu
+                .pool_limits(&self.layout, config.gpu_budget_bytes)?;
+            let pool = BrickPool::new(limits).map_err(|_| ConfigError::GpuBudgetTooSmall {
+                budget_bytes: config.gpu_budget_bytes,
+                slot_bytes: limits.slot_bytes,
+                stored_side: limits.stored_side,
+                max_texture_dim_3d: limits.max_dim,
+                slots: 0,
+                needed: MIN_RESIDENT_BRICKS,
+            })?;
+            self.pool = pool;
+            out.pool = true;
         }
-        self.config.fade = fade;
-        Ok(())
-    }
-
-    /// Sets (or, with `None`, turns off) the automatic retry of failures. Failures
-    /// already kept keep the time of their next retry.
-    pub fn set_retry_policy(&mut self, policy: Option<RetryPolicy>) -> Result<(), ConfigError> {
-        if let Some(p) = &policy {
-            p.validate()?;
+        if config.loader_threads != old.loader_threads {
+            self.loader = Loader::new(
+                self.source.clone(),
+                self.preparer.clone(),
+                LoaderConfig {
+                    workers: config.loader_threads,
+                },
+            )
+            .map_err(|e| ConfigError::LoaderStart {
+                reason: e.to_string(),
+            })?;
+            out.loader = true;
         }
-        self.failures.set_policy(policy);
-        self.config.retry = policy;
-        Ok(())
+        if config.upload_budget_bytes != old.upload_budget_bytes {
+            self.budget = UploadBudget::new(config.upload_budget_bytes);
+        }
+        if config.cpu_budget_bytes != old.cpu_budget_bytes {
+            self.cpu.set_budget(config.cpu_budget_bytes);
+            self.meta.set_capacity(super::meta_capacity(
+                config.cpu_budget_bytes,
+                self.brick_bytes,
+            ));
+        }
+        if config.retry != old.retry {
+            self.failures.set_policy(config.retry);
+        }
+        self.config = config;
+        if out.pool {
+            self.reset_floor();
+        }
+        Ok(out)
     }
 
     /// The octree layout.

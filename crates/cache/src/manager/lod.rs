@@ -149,26 +149,6 @@ impl BrickManager {
         self.fader.clear();
     }
 
-    /// The frame's time step in seconds for the fades: from the host's
-    /// timestamps when given ([`set_frame_time`](Self::set_frame_time)), else
-    /// from the manager's clock.
-    pub(crate) fn fade_dt(&mut self, now: std::time::Instant) -> f64 {
-        let t = match self.frame_time.take() {
-            Some(t) => t,
-            None => now.duration_since(self.epoch).as_secs_f64(),
-        };
-        let dt = self.last_fade_time.map_or(0.0, |l| (t - l).max(0.0));
-        self.last_fade_time = Some(t);
-        if dt.is_finite() { dt } else { 0.0 }
-    }
-
-    /// Gives the time of the next [`update`](Self::update) in seconds (any
-    /// origin, non-decreasing): fades in milliseconds advance by the
-    /// difference to the last one. Without it the manager's clock is used.
-    pub fn set_frame_time(&mut self, seconds: f64) {
-        self.frame_time = Some(seconds);
-    }
-
     /// The coarse floor's nodes ([`CacheConfig::floor_slots`](crate::CacheConfig::floor_slots)).
     pub fn floor(&self) -> &[NodeKey] {
         &self.floor

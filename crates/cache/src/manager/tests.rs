@@ -6,7 +6,9 @@ use crate::failures::FetchKind;
 use crate::loader::LoadError;
 use crate::refine::tests::{assert_exact_cover, ball_info};
 use crate::test_source::{TestSource, fill_byte, test_gpu};
-use brickray_core::BrickError;
+use brickray_core::{
+    BrickError, Camera, EmptyReason, FrameView, LeafKind, RenderMode, TransferFunction, VolumeFrame,
+};
 use glam::Vec3;
 use parking_lot::Mutex;
 use proptest::prelude::*;
@@ -36,13 +38,121 @@ pub(super) fn manager_with_clock(
     src: &Arc<TestSource>,
     config: CacheConfig,
 ) -> (BrickManager, Arc<ManualClock>) {
-    let dims = src.layout.volume.dims;
     let gpu = test_gpu(&src.layout);
-    let frame = VolumeFrame::centered(dims, [1.0; 3]);
-    let mut m = BrickManager::new(src.clone(), frame, config, gpu).unwrap();
+    let mut m = BrickManager::new(src.clone(), config, gpu).unwrap();
     let clock = Arc::new(ManualClock(Mutex::new(Instant::now())));
     m.set_clock(clock.clone());
     (m, clock)
+}
+
+/// The old single-view entry of the manager's tests: one view of `camera`
+/// over a square-ish viewport, the volume centred (`VolumeFrame::centered`),
+/// no host time. The generation follows the view and the classification.
+impl BrickManager {
+    pub(crate) fn update_view(
+        &mut self,
+        camera: &Camera,
+        aspect: f32,
+        viewport_height_px: u32,
+        frame: u64,
+        mode: RenderMode,
+        tf: &TransferFunction,
+    ) -> FramePlan {
+        self.update_view_filtered(camera, aspect, viewport_height_px, frame, mode, tf, None)
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn update_view_filtered(
+        &mut self,
+        camera: &Camera,
+        aspect: f32,
+        viewport_height_px: u32,
+        frame: u64,
+        mode: RenderMode,
+        tf: &TransferFunction,
+        filter: Option<&mut dyn SplitFilter>,
+    ) -> FramePlan {
+        use std::hash::{Hash, Hasher};
+        let placement = VolumeFrame::centered(self.layout().volume.dims, [1.0; 3]);
+        let h = viewport_height_px;
+        let w = ((h as f64) * aspect as f64).round().max(1.0) as u32;
+        let mut view = FrameView::new(*camera, placement, [w, h]);
+        view.aspect = aspect;
+        view.view_proj = camera.view_proj(aspect).as_dmat4();
+        let views = crate::refine::Views::of(self.layout(), &[view]);
+        let mut hasher = std::collections::hash_map::DefaultHasher::new();
+        format!("{camera:?}{aspect}{h}{mode:?}{tf:?}").hash(&mut hasher);
+        let input = FrameInput {
+            views: &views,
+            generation: hasher.finish(),
+            frame,
+            mode,
+            tf,
+            time: None,
+        };
+        self.update(&input, filter)
+    }
+
+    pub(crate) fn set_tolerance_px(&mut self, tolerance_px: f32) -> Result<(), ConfigError> {
+        self.configure(CacheConfig {
+            tolerance_px,
+            ..*self.config()
+        })
+        .map(drop)
+    }
+
+    pub(crate) fn set_brick_budget(
+        &mut self,
+        brick_budget: Option<u32>,
+    ) -> Result<(), ConfigError> {
+        self.configure(CacheConfig {
+            brick_budget,
+            ..*self.config()
+        })
+        .map(drop)
+    }
+
+    pub(crate) fn set_cpu_budget(&mut self, cpu_budget_bytes: u64) -> Result<(), ConfigError> {
+        self.configure(CacheConfig {
+            cpu_budget_bytes,
+            ..*self.config()
+        })
+        .map(drop)
+    }
+
+    pub(crate) fn set_upload_budget(
+        &mut self,
+        upload_budget_bytes: u64,
+    ) -> Result<(), ConfigError> {
+        self.configure(CacheConfig {
+            upload_budget_bytes,
+            ..*self.config()
+        })
+        .map(drop)
+    }
+
+    pub(crate) fn set_gpu_budget(
+        &mut self,
+        gpu_budget_bytes: u64,
+    ) -> Result<[u32; 3], ConfigError> {
+        let r = self.configure(CacheConfig {
+            gpu_budget_bytes,
+            ..*self.config()
+        })?;
+        assert!(r.pool || gpu_budget_bytes == self.config().gpu_budget_bytes);
+        Ok(self.pool().atlas_dims())
+    }
+
+    pub(crate) fn set_retry_policy(
+        &mut self,
+        retry: Option<crate::RetryPolicy>,
+    ) -> Result<(), ConfigError> {
+        self.configure(CacheConfig {
+            retry,
+            ..*self.config()
+        })
+        .map(drop)
+    }
 }
 
 pub(super) fn manager(src: &Arc<TestSource>, config: CacheConfig) -> BrickManager {
@@ -135,7 +245,7 @@ pub(super) fn converge(
     let t = Instant::now();
     loop {
         *frame += 1;
-        let plan = m.update(cam, 1.0, 128, *frame, mode, tf);
+        let plan = m.update_view(cam, 1.0, 128, *frame, mode, tf);
         check_plan(m, &plan);
         each(m, &plan);
         if plan.stats.settled() {
@@ -157,7 +267,7 @@ fn converges_to_a_complete_resident_cut() {
     let cam = Camera::orbit(Vec3::ZERO, 1.6, 0.4, 0.3);
     let tf = TransferFunction::ramp(0.1, 1.0, 0.5);
     let mut frame = 0;
-    let first = m.update(&cam, 1.0, 128, 1, RenderMode::Dvr, &tf);
+    let first = m.update_view(&cam, 1.0, 128, 1, RenderMode::Dvr, &tf);
     frame += 1;
     // Nothing known yet: the root's metadata is wanted and the cut is still
     // complete.
@@ -192,7 +302,7 @@ fn converges_to_a_complete_resident_cut() {
     ));
     // A static view keeps the same cut and uploads nothing.
     frame += 1;
-    let again = m.update(&cam, 1.0, 128, frame, RenderMode::Dvr, &tf);
+    let again = m.update_view(&cam, 1.0, 128, frame, RenderMode::Dvr, &tf);
     assert_eq!(again.cut, plan.cut);
     assert!(again.uploads.is_empty());
 }
@@ -210,7 +320,7 @@ fn tf_and_isovalue_changes_reclassify_without_reads() {
     // A TF that hides the outer shell only coarsens or hides nodes already known.
     let narrow = TransferFunction::ramp(0.8, 1.0, 0.5);
     frame += 1;
-    let b = m.update(&cam, 1.0, 128, frame, RenderMode::Dvr, &narrow);
+    let b = m.update_view(&cam, 1.0, 128, frame, RenderMode::Dvr, &narrow);
     check_plan(&m, &b);
     let invisible = |p: &FramePlan| {
         p.cut
@@ -232,7 +342,7 @@ fn tf_and_isovalue_changes_reclassify_without_reads() {
     );
     // Isovalue changes likewise.
     frame += 1;
-    let iso = m.update(
+    let iso = m.update_view(
         &cam,
         1.0,
         128,
@@ -248,7 +358,7 @@ fn tf_and_isovalue_changes_reclassify_without_reads() {
     assert_eq!(src.reads().len(), reads);
     // Back to the first TF: the same cut, all still resident.
     frame += 1;
-    let back = m.update(&cam, 1.0, 128, frame, RenderMode::Dvr, &wide);
+    let back = m.update_view(&cam, 1.0, 128, frame, RenderMode::Dvr, &wide);
     assert_eq!(back.cut, a.cut);
     assert!(back.uploads.is_empty());
 }
@@ -270,7 +380,7 @@ fn planning_the_same_frame_twice_does_not_panic() {
     // Same frame number, other view: pins of both plans add up.
     let b = Camera::orbit(Vec3::ZERO, 1.6, 2.5, -0.3);
     for _ in 0..50 {
-        let plan = m.update(&b, 1.0, 128, frame, RenderMode::Mip, &tf);
+        let plan = m.update_view(&b, 1.0, 128, frame, RenderMode::Mip, &tf);
         let keys: Vec<NodeKey> = plan.leaves().map(|l| l.0).collect();
         assert_exact_cover(&keys, m.layout().levels);
         std::thread::sleep(Duration::from_millis(1));
@@ -410,7 +520,7 @@ fn the_plan_gives_the_refined_cut_before_fades() {
     assert_eq!(refined(&full), drawn(&full));
     m.set_brick_budget(Some(9)).unwrap();
     frame += 1;
-    let p = m.update(&cam, 1.0, 128, frame, RenderMode::Mip, &tf);
+    let p = m.update_view(&cam, 1.0, 128, frame, RenderMode::Mip, &tf);
     assert!(p.refined.len() <= 9, "{} bricks", p.refined.len());
     assert!(drawn(&p).len() > 9, "the merges fade");
     // Every drawn leaf lies under a refined one.
@@ -477,7 +587,7 @@ fn moving_camera_with_small_pool_never_reuses_a_slot_within_a_frame() {
             yaw,
             0.3,
         );
-        let plan = m.update(&cam, 1.3, 128, frame, RenderMode::Dvr, &tf);
+        let plan = m.update_view(&cam, 1.3, 128, frame, RenderMode::Dvr, &tf);
         check_plan(&m, &plan);
         assert!(plan.stats.pool_occupied <= 40);
         assert!(m.cpu_cache().bytes() <= 60 * brick);
@@ -506,7 +616,7 @@ proptest! {
             let cam = Camera::orbit(Vec3::ZERO, dist, yaw, pitch);
             for _ in 0..6 {
                 frame += 1;
-                let plan = m.update(&cam, 1.5, 96, frame, mode, &tf);
+                let plan = m.update_view(&cam, 1.5, 96, frame, mode, &tf);
                 check_plan(&m, &plan);
                 prop_assert!(plan.stats.working_set_bricks as u64 <= slots);
                 prop_assert!(plan.stats.requested_this_frame as u64 <= slots);

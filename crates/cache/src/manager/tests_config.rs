@@ -4,12 +4,13 @@ use super::tests::{brick_bytes, check_plan, config, converge, manager, slot_byte
 use super::*;
 use crate::config::RetryPolicy;
 use crate::test_source::{TestSource, test_gpu};
+#[allow(unused_imports)]
+use brickray_core::{Camera, RenderMode, TransferFunction, VolumeFrame};
 use glam::Vec3;
 use std::time::{Duration, Instant};
 
 fn try_new(src: &Arc<TestSource>, config: CacheConfig) -> Result<BrickManager, CacheError> {
-    let frame = VolumeFrame::centered(src.layout.volume.dims, [1.0; 3]);
-    BrickManager::new(src.clone(), frame, config, test_gpu(&src.layout))
+    BrickManager::new(src.clone(), config, test_gpu(&src.layout))
 }
 
 #[test]
@@ -53,8 +54,7 @@ fn new_rejects_unusable_configs() {
     // A format for another volume.
     let mut other = src.layout.clone();
     other.volume.value_range = [0.0, 255.0];
-    let frame = VolumeFrame::centered([64; 3], [1.0; 3]);
-    let e = BrickManager::new(src.clone(), frame, ok, test_gpu(&other));
+    let e = BrickManager::new(src.clone(), ok, test_gpu(&other));
     assert!(matches!(
         e,
         Err(CacheError::Config(ConfigError::EncodingMismatch { .. }))
@@ -77,7 +77,7 @@ fn a_cpu_cache_of_nine_bricks_splits_the_root() {
     let tf = TransferFunction::ramp(0.1, 1.0, 0.5);
     let t = Instant::now();
     for frame in 1.. {
-        let plan = m.update(&cam, 1.0, 128, frame, RenderMode::Mip, &tf);
+        let plan = m.update_view(&cam, 1.0, 128, frame, RenderMode::Mip, &tf);
         check_plan(&m, &plan);
         if plan.cut.iter().any(|l| l.key.level > 0 && l.kind.is_data()) {
             break;

@@ -7,6 +7,8 @@ use crate::loader::LoadError;
 use crate::refine::MIN_REQUESTS_PER_FRAME;
 use crate::test_source::TestSource;
 use brickray_core::BrickError;
+#[allow(unused_imports)]
+use brickray_core::{Camera, RenderMode, TransferFunction, VolumeFrame};
 use glam::Vec3;
 use std::time::{Duration, Instant};
 
@@ -35,7 +37,7 @@ fn frames(m: &mut BrickManager, frame: &mut u64, clock: &ManualClock, step: Dura
     for _ in 0..n {
         clock.advance(step);
         *frame += 1;
-        m.update(&cam(), 1.0, 128, *frame, RenderMode::Mip, &tf());
+        m.update_view(&cam(), 1.0, 128, *frame, RenderMode::Mip, &tf());
         std::thread::sleep(Duration::from_millis(2));
     }
 }
@@ -75,7 +77,7 @@ fn a_split_waits_for_metadata_and_bricks_bring_their_childrens() {
     // The root arrives; its split waits for the held child's metadata.
     let held = loop {
         frame += 1;
-        let plan = m.update(&cam(), 1.0, 128, frame, RenderMode::Mip, &tf());
+        let plan = m.update_view(&cam(), 1.0, 128, frame, RenderMode::Mip, &tf());
         if plan.stats.blocked.missing_meta > 0 && plan.cut[0].kind.is_data() {
             break plan;
         }
@@ -185,7 +187,7 @@ fn drop_returns_while_a_read_hangs() {
     let mut frame = 0;
     while m.residency(hung) != Some(Residency::Loading) {
         frame += 1;
-        m.update(&cam(), 1.0, 128, frame, RenderMode::Mip, &tf());
+        m.update_view(&cam(), 1.0, 128, frame, RenderMode::Mip, &tf());
         assert!(t.elapsed() < Duration::from_secs(5));
         std::thread::sleep(Duration::from_millis(1));
     }
@@ -297,7 +299,7 @@ fn converged_means_another_frame_changes_nothing() {
     let t = Instant::now();
     let done = loop {
         frame += 1;
-        let plan = m.update(&cam(), 1.0, 128, frame, RenderMode::Mip, &tf());
+        let plan = m.update_view(&cam(), 1.0, 128, frame, RenderMode::Mip, &tf());
         let s = plan.stats;
         if s.requests_in_flight > 0 || s.upload_bricks > 0 || s.metadata_in_flight > 0 {
             assert!(!s.converged());
@@ -313,7 +315,7 @@ fn converged_means_another_frame_changes_nothing() {
     for _ in 0..5 {
         std::thread::sleep(Duration::from_millis(3));
         frame += 1;
-        let plan = m.update(&cam(), 1.0, 128, frame, RenderMode::Mip, &tf());
+        let plan = m.update_view(&cam(), 1.0, 128, frame, RenderMode::Mip, &tf());
         assert_eq!(plan.cut, done.cut);
         assert!(plan.uploads.is_empty() && plan.stats.converged());
     }
@@ -328,7 +330,7 @@ fn non_finite_cameras_and_huge_pools_request_boundedly() {
         ..cam()
     };
     for frame in 1..40 {
-        let plan = m.update(&nan, f32::NAN, 128, frame, RenderMode::Dvr, &tf());
+        let plan = m.update_view(&nan, f32::NAN, 128, frame, RenderMode::Dvr, &tf());
         assert_eq!(plan.cut.len(), 1);
         // The root, and the coarse floor's nodes (loaded whatever the view).
         let floor = m.floor().len() as u32;
@@ -356,7 +358,7 @@ fn non_finite_cameras_and_huge_pools_request_boundedly() {
     // The close-up wants far more bricks than the cap (the refine-level test
     // shows the cap binding); here every frame of a streaming run stays within it.
     for frame in 1..=60u64 {
-        let plan = m.update(&close, 1.0, 1024, frame, RenderMode::Mip, &tf());
+        let plan = m.update_view(&close, 1.0, 1024, frame, RenderMode::Mip, &tf());
         let n = plan.stats.requested_this_frame;
         assert!(n <= MIN_REQUESTS_PER_FRAME, "{n} requests in frame {frame}");
         most = most.max(n);

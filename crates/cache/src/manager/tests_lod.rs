@@ -6,6 +6,8 @@ use super::tests::{brick_bytes, check_plan, config, manager, slot_bytes};
 use super::*;
 use crate::fade::FadeDuration;
 use crate::test_source::TestSource;
+#[allow(unused_imports)]
+use brickray_core::{Camera, RenderMode, TransferFunction, VolumeFrame};
 use glam::Vec3;
 use std::time::Duration;
 
@@ -30,7 +32,7 @@ fn circle(floor_slots: u32, fade: Option<FadeDuration>, slots: u64) -> (u32, u32
         let a = frame as f32 * 0.05;
         let d = 0.9 + 0.7 * (frame as f32 * 0.031).sin();
         let cam = Camera::orbit(Vec3::ZERO, d, a, 0.3 * a.cos());
-        let plan = m.update(&cam, 1.0, 128, frame, RenderMode::Dvr, &tf);
+        let plan = m.update_view(&cam, 1.0, 128, frame, RenderMode::Dvr, &tf);
         check_plan(&m, &plan);
         drawn |= plan.stats.holes == 0;
         if drawn {

@@ -4,6 +4,8 @@
 use super::tests::{assert_exact_cover, ball_info, keys, setup};
 use super::*;
 use brickray_core::Projection;
+#[allow(unused_imports)]
+use brickray_core::{Camera, RenderMode, TransferFunction, VolumeFrame};
 use glam::{Mat4, Vec3};
 use std::collections::HashSet;
 
@@ -68,10 +70,8 @@ fn refine_in(
 ) -> Refinement {
     let s = setup();
     let params = RefineParams {
-        camera: cam,
-        aspect,
-        viewport_height_px: 512,
-        volume_frame: frame,
+        views: &Views::one(ViewGeometry::new(&s.layout, cam, aspect, 512, frame)),
+        generation: 0,
         mode: RenderMode::Mip,
         tf: &s.tf,
         tolerance_px: 1.0,

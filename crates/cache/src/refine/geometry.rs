@@ -2,8 +2,8 @@
 //! size) and the metadata-only visibility test.
 
 use brickray_core::{
-    Camera, NodeInfo, NodeKey, NodeKind, OctreeLayout, Projection, RenderMode, TransferFunction,
-    VolumeFrame,
+    Camera, FrameView, NodeInfo, NodeKey, NodeKind, OctreeLayout, Projection, RenderMode,
+    TransferFunction, VolumeFrame,
 };
 use glam::{DMat4, DVec3, DVec4};
 
@@ -35,7 +35,29 @@ impl ViewGeometry {
         viewport_height_px: u32,
         frame: &VolumeFrame,
     ) -> Self {
-        let vp = camera.view_proj(aspect).as_dmat4();
+        let view_proj = camera.view_proj(aspect).as_dmat4();
+        Self::build(layout, camera, view_proj, viewport_height_px, frame)
+    }
+
+    /// Geometry of one frame's view over `layout` (its view-projection as
+    /// the view computed it).
+    pub fn of(layout: &OctreeLayout, view: &FrameView) -> Self {
+        Self::build(
+            layout,
+            &view.camera,
+            view.view_proj,
+            view.height(),
+            &view.placement,
+        )
+    }
+
+    fn build(
+        layout: &OctreeLayout,
+        camera: &Camera,
+        vp: DMat4,
+        viewport_height_px: u32,
+        frame: &VolumeFrame,
+    ) -> Self {
         let r = [vp.row(0), vp.row(1), vp.row(2), vp.row(3)];
         // wgpu clip space: -w <= x, y <= w, 0 <= z <= w.
         let planes = [
@@ -79,6 +101,11 @@ impl ViewGeometry {
             px_per_unit,
             perspective,
         }
+    }
+
+    /// The view-projection the geometry projects with.
+    pub fn view_proj(&self) -> DMat4 {
+        self.view_proj
     }
 
     /// The node's box in texture space, clipped to the volume `[0,1]^3`.
@@ -148,6 +175,64 @@ impl ViewGeometry {
             .fold(DVec3::splat(f64::NEG_INFINITY), |m, p| m.max(*p));
         let d = (self.eye.clamp(lo, hi) - self.eye).length().max(self.near);
         voxel * self.px_per_unit / d
+    }
+}
+
+/// The views one refinement serves (one for a single view; two for a
+/// stereo pair; a 3D view and slice views): a node is culled when every view
+/// culls it, and its projected voxel size and centrality are the largest any
+/// view gives it, so the cut holds each node at the finest level any view
+/// needs.
+#[derive(Debug, Clone)]
+pub struct Views {
+    views: Vec<ViewGeometry>,
+}
+
+impl Views {
+    /// The geometry of each of `views` over `layout`.
+    pub fn of(layout: &OctreeLayout, views: &[FrameView]) -> Views {
+        Views {
+            views: views.iter().map(|v| ViewGeometry::of(layout, v)).collect(),
+        }
+    }
+
+    /// One view's geometry.
+    pub fn one(view: ViewGeometry) -> Views {
+        Views { views: vec![view] }
+    }
+
+    /// The views' geometries.
+    pub fn geometries(&self) -> &[ViewGeometry] {
+        &self.views
+    }
+
+    /// True when every view culls the node (no view: culled).
+    pub fn culled(&self, key: NodeKey) -> bool {
+        self.views.iter().all(|v| v.culled(key))
+    }
+
+    /// The largest projected voxel size of the node over the views (NaN when
+    /// a view's is NaN: a degenerate view refines nothing).
+    pub fn voxel_pixels(&self, key: NodeKey) -> f64 {
+        self.views
+            .iter()
+            .map(|v| v.voxel_pixels(key))
+            .reduce(|a, b| {
+                if a.is_nan() || b.is_nan() {
+                    f64::NAN
+                } else {
+                    a.max(b)
+                }
+            })
+            .unwrap_or(f64::NAN)
+    }
+
+    /// The largest [`ViewGeometry::centre_weight`] over the views.
+    pub fn centre_weight(&self, key: NodeKey) -> f64 {
+        self.views
+            .iter()
+            .map(|v| v.centre_weight(key))
+            .fold(0.0, f64::max)
     }
 }
 

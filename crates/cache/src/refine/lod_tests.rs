@@ -6,6 +6,8 @@ use super::*;
 use brickray_core::{
     BinStats, ERROR_BINS, NodeError, TfErrorTable, node_pixel_error, node_tf_error,
 };
+#[allow(unused_imports)]
+use brickray_core::{Camera, RenderMode, TransferFunction, VolumeFrame};
 use proptest::prelude::*;
 use std::collections::HashMap;
 
@@ -117,10 +119,8 @@ pub(super) fn refine_limited(
 ) -> Refinement {
     let frame = VolumeFrame::centered(layout.volume.dims, [1.0; 3]);
     let params = RefineParams {
-        camera: cam,
-        aspect: 1.0,
-        viewport_height_px: 256,
-        volume_frame: &frame,
+        views: &Views::one(ViewGeometry::new(&layout, cam, 1.0, 256, &frame)),
+        generation: 0,
         mode: RenderMode::Dvr,
         tf,
         tolerance_px,

@@ -31,6 +31,7 @@
 #[cfg(test)]
 mod fault_tests;
 mod geometry;
+mod greedy;
 #[cfg(test)]
 mod lod_tests;
 mod octant;
@@ -41,15 +42,13 @@ mod rank;
 #[cfg(test)]
 pub(crate) mod tests;
 
-pub use geometry::{ViewGeometry, is_visible, lod_voxel_world};
-use rank::{Classified, HeapItem, ScreenError, UNCLASSIFIED, Unknown, classify, classify_children};
+pub use geometry::{ViewGeometry, Views, is_visible, lod_voxel_world};
+use rank::Unknown;
 
 use crate::upload::UploadBudget;
 use brickray_core::{
-    Camera, EmptyReason, LodMetric, NodeInfo, NodeKey, NodeKind, OctreeLayout, RenderMode,
-    TransferFunction, VolumeFrame,
+    EmptyReason, LodMetric, NodeInfo, NodeKey, NodeKind, OctreeLayout, RenderMode, TransferFunction,
 };
-use std::collections::BinaryHeap;
 
 /// Bricks a frame may request at least (when the pool has the slots), whatever
 /// the upload budget.
@@ -179,17 +178,16 @@ pub trait SplitFilter {
     }
 }
 
-/// The view and the knobs of one refinement.
+/// The views and the knobs of one refinement.
 #[derive(Debug, Clone, Copy)]
 pub struct RefineParams<'a> {
-    /// The camera.
-    pub camera: &'a Camera,
-    /// Viewport width / height.
-    pub aspect: f32,
-    /// Viewport height in pixels.
-    pub viewport_height_px: u32,
-    /// The volume's placement in the world.
-    pub volume_frame: &'a VolumeFrame,
+    /// The geometry of the frame's views (built once per frame; a node is
+    /// refined as finely as the view that needs it most).
+    pub views: &'a Views,
+    /// Changes whenever the views or the classification (mode, transfer
+    /// function) change: what refinement remembers from frame to frame
+    /// ([`OctantMemory`]) holds for one generation.
+    pub generation: u64,
     /// Render mode (decides emptiness).
     pub mode: RenderMode,
     /// Transfer function (decides DVR transparency).
@@ -272,17 +270,6 @@ pub struct Refinement {
     pub failed_needed: u32,
 }
 
-/// The view geometry of `params`.
-fn view_geometry(layout: &OctreeLayout, params: &RefineParams<'_>) -> ViewGeometry {
-    ViewGeometry::new(
-        layout,
-        params.camera,
-        params.aspect,
-        params.viewport_height_px,
-        params.volume_frame,
-    )
-}
-
 /// A leaf that needs no brick.
 fn empty_leaf(key: NodeKey, reason: EmptyReason) -> RefinedLeaf {
     RefinedLeaf {
@@ -325,341 +312,11 @@ pub fn refine(
     if matches!(params.metric, LodMetric::VisibleOctants { .. }) {
         return octant::refine_octants(layout, params, env, budget);
     }
-    let geo = view_geometry(layout, params);
-    let brick_bytes = params.brick_upload_bytes;
-    let finest = layout.levels.saturating_sub(1);
-    let max_requests = params.max_data_leaves.min(params.max_requests) as usize;
-    let max_meta = MAX_META_REQUESTS_PER_FRAME as usize;
-    let mut out = Refinement::default();
-    let mut heap = BinaryHeap::new();
-
-    let root = NodeKey::ROOT;
-    let screen: ScreenError;
-    let root_info = match classify(root, layout, params, &geo, env) {
-        Ok(Classified {
-            class: NodeClass::Empty(r),
-            ..
-        }) => {
-            out.leaves.push(empty_leaf(root, r));
-            return out;
+    match greedy::Greedy::root(layout, params, env, budget) {
+        Ok(mut g) => {
+            g.run();
+            g.finish()
         }
-        Ok(c) => {
-            let se = ScreenError::new(params, c.info.as_ref(), layout);
-            let priority = se.priority(
-                geo.voxel_pixels(root),
-                env.visible_weight(root),
-                root,
-                c.info.as_ref(),
-                params,
-                layout,
-            );
-            heap.push(HeapItem {
-                order: priority,
-                priority,
-                classified: None,
-                key: root,
-                uniform: c.uniform,
-                charged: false,
-            });
-            screen = se;
-            c.info
-        }
-        Err(u) => return unknown_root(u),
-    };
-    out.data_leaves = 1;
-    if params.max_data_leaves == 0 {
-        out.leaves.push(empty_leaf(root, EmptyReason::NotLoaded));
-        out.data_leaves = 0;
-        out.blocked.pool_full += 1;
-        return out;
+        Err(done) => done,
     }
-    // The root's brick is wanted first (it is charged to the upload budget only if
-    // it ends up a leaf).
-    if let (DataState::Missing, Some(info)) = (env.data(root), root_info) {
-        out.requests.push(LoadRequest {
-            key: root,
-            priority: f32::MAX,
-            info,
-        });
-    }
-
-    let tol = screen.threshold;
-    // Nodes that stay leaves and need their brick: (key, priority).
-    let mut finals: Vec<(NodeKey, f64)> = Vec::new();
-    // Splits the upload budget refused. The budget may be held by speculative
-    // charges (children charged at their parent's split) that come back when
-    // those children split into bricks already on the GPU; the refused splits
-    // are retried once the heap is empty, as long as a round still splits
-    // something (each node splits at most once, so this ends).
-    let mut deferred: Vec<HeapItem> = Vec::new();
-    // Children's classifications of the nodes ranked per brick.
-    let mut arena: Vec<[Classified; 8]> = Vec::new();
-    // Splits the pool refused, retried the same way: a later split whose
-    // children are all empty or invisible gives its brick back (nodes within
-    // the tolerance, which pop last, do that), and the refused node, of higher
-    // priority, may then fit.
-    // With each, the bricks its split adds: only those that now fit are
-    // retried.
-    let mut pool_deferred: Vec<(HeapItem, u32)> = Vec::new();
-    let mut split_since_retry = false;
-    loop {
-        if heap.is_empty() {
-            let room = params.max_data_leaves.saturating_sub(out.data_leaves);
-            let fits = |d: &(HeapItem, u32)| d.1 <= room;
-            if (deferred.is_empty() && !pool_deferred.iter().any(fits)) || !split_since_retry {
-                break;
-            }
-            split_since_retry = false;
-            heap.extend(deferred.drain(..));
-            let (retry, keep): (Vec<_>, Vec<_>) = pool_deferred.drain(..).partition(fits);
-            pool_deferred = keep;
-            heap.extend(retry.into_iter().map(|d| d.0));
-        }
-        let Some(item) = heap.pop() else { break };
-        let HeapItem {
-            priority,
-            key,
-            uniform,
-            charged,
-            ..
-        } = item;
-        // A non-finite size (a non-finite camera or frame) is never refined.
-        if uniform || key.level >= finest || !priority.is_finite() {
-            finals.push((key, priority));
-            continue;
-        }
-        // Within the tolerance (or error budget): a node still splits when the
-        // split costs no brick, i.e. at most one child needs data (the others
-        // are empty, invisible under the mode or outside the view), so the cut
-        // gets finer without growing; otherwise it stays.
-        let within = priority <= tol;
-        // Hidden in the previous frames: stays at its level, requests nothing.
-        if !env.may_split(key) {
-            if !within {
-                out.blocked.invisible += 1;
-            }
-            finals.push((key, priority));
-            continue;
-        }
-        let children = layout.children(key);
-        let n = children.len();
-        // Error-aware refinement ranks a split by the error it removes per
-        // brick it adds (a node whose split needs one more brick before one
-        // that needs seven): once the children are known, the node goes back
-        // into the heap at its priority over those bricks, and splits when it
-        // comes out again. Only the order changes, so under a tolerance (or
-        // error budget) the cut is the same; under a brick budget the bricks
-        // go where they buy the most error. Unknown children leave the order
-        // as it is (the split below requests them).
-        if !within
-            && item.classified.is_none()
-            && screen.table.is_some()
-            && let Some(classes) = classify_children(&children, layout, params, &geo, env)
-        {
-            let data = classes[..n]
-                .iter()
-                .filter(|c| c.class == NodeClass::Data)
-                .count() as u32;
-            arena.push(classes);
-            heap.push(HeapItem {
-                order: priority / f64::from(data.saturating_sub(1).max(1)),
-                classified: Some(arena.len() as u32 - 1),
-                ..item
-            });
-            continue;
-        }
-        if within {
-            // Free only if at most one child needs data: stop at the second
-            // (most nodes of a dense region stop after two or three children).
-            // A node that is free by this count is classified in full below.
-            // By metadata alone (the frustum test, the costly part, is left
-            // to the split: a culled child counts as data here).
-            let (mut data, mut failed) = (0, false);
-            let mut pending: Vec<NodeKey> = Vec::new();
-            for &c in children.iter() {
-                if !layout.in_volume(c) {
-                    continue;
-                }
-                match env.node(c) {
-                    MetaState::Known(info) => {
-                        if info.kind != NodeKind::Empty
-                            && is_visible(&info, params.mode, params.tf, layout)
-                        {
-                            data += 1;
-                        }
-                    }
-                    MetaState::Pending => pending.push(c),
-                    MetaState::Failed => failed = true,
-                }
-                if data > 1 {
-                    break;
-                }
-            }
-            if data > 1 || failed || !pending.is_empty() {
-                // Known once the metadata arrives: asked for after every
-                // wanted split's (the heap pops those first).
-                if data <= 1 && !failed {
-                    for c in pending {
-                        if out.meta_requests.len() < max_meta {
-                            out.meta_requests.push((c, priority as f32));
-                        }
-                    }
-                }
-                finals.push((key, priority));
-                continue;
-            }
-        }
-        // Classify the children (a node ranked per brick has them already).
-        let mut classes = [UNCLASSIFIED; 8];
-        let (mut pending, mut failed) = (Vec::new(), 0u32);
-        if let Some(i) = item.classified {
-            classes = arena[i as usize];
-        } else {
-            for (i, &c) in children.iter().enumerate() {
-                match classify(c, layout, params, &geo, env) {
-                    Ok(cl) => classes[i] = cl,
-                    Err(Unknown::Pending) => pending.push(c),
-                    Err(Unknown::Failed) => failed += 1,
-                }
-            }
-        }
-        if failed > 0 {
-            out.blocked.failed += 1;
-            out.failed_needed += failed;
-            finals.push((key, priority));
-            continue;
-        }
-        if !pending.is_empty() {
-            for c in pending {
-                if out.meta_requests.len() < max_meta {
-                    out.meta_requests.push((c, priority as f32));
-                }
-            }
-            out.blocked.missing_meta += 1;
-            finals.push((key, priority));
-            continue;
-        }
-        let data: Vec<usize> = (0..n)
-            .filter(|&i| classes[i].class == NodeClass::Data)
-            .collect();
-        let states: Vec<DataState> = data.iter().map(|&i| env.data(children[i])).collect();
-        let failed = states.iter().filter(|s| **s == DataState::Failed).count() as u32;
-        if failed > 0 {
-            out.blocked.failed += 1;
-            out.failed_needed += failed;
-            finals.push((key, priority));
-            continue;
-        }
-        let missing: Vec<usize> = data
-            .iter()
-            .zip(&states)
-            .filter(|(_, s)| **s == DataState::Missing)
-            .map(|(i, _)| *i)
-            .collect();
-        if !missing.is_empty() {
-            // What rays asked for, and the centre of the image, load first.
-            let order = priority * env.request_weight(key) * geo.centre_weight(key);
-            for i in missing {
-                if let Some(info) = classes[i].info {
-                    out.requests.push(LoadRequest {
-                        key: children[i],
-                        priority: order as f32,
-                        info,
-                    });
-                }
-            }
-            out.blocked.missing_data += 1;
-            finals.push((key, priority));
-            continue;
-        }
-        if out.data_leaves - 1 + data.len() as u32 > params.max_data_leaves {
-            pool_deferred.push((item, data.len() as u32 - 1));
-            continue;
-        }
-        // A split node charged at its parent's split is not uploaded after all.
-        let uploads = states.iter().filter(|s| **s == DataState::InCpu).count() as u64;
-        let release = if charged { brick_bytes } else { 0 };
-        if uploads > 0 && !budget.try_exchange(release, uploads * brick_bytes) {
-            deferred.push(item);
-            continue;
-        }
-        split_since_retry = true;
-        out.data_leaves = out.data_leaves - 1 + data.len() as u32;
-        if uploads == 0 && charged {
-            budget.release(brick_bytes);
-        }
-        let mut state = states.iter();
-        for i in 0..n {
-            match classes[i].class {
-                NodeClass::Empty(r) => out.leaves.push(empty_leaf(children[i], r)),
-                // (classify never borrows.)
-                NodeClass::Data | NodeClass::Borrowed => {
-                    let priority = screen.priority(
-                        geo.voxel_pixels(children[i]),
-                        env.visible_weight(children[i]),
-                        children[i],
-                        classes[i].info.as_ref(),
-                        params,
-                        layout,
-                    );
-                    heap.push(HeapItem {
-                        order: priority,
-                        priority,
-                        classified: None,
-                        key: children[i],
-                        uniform: classes[i].uniform,
-                        charged: state.next() == Some(&DataState::InCpu),
-                    })
-                }
-            }
-        }
-    }
-
-    // Highest (weighted) priority first, then the frame's cap: the weights
-    // choose which bricks are asked for, not only their order.
-    out.requests
-        .sort_by(|a, b| b.priority.total_cmp(&a.priority).then(a.key.cmp(&b.key)));
-    out.requests.truncate(max_requests);
-    for item in deferred {
-        out.blocked.upload_budget += 1;
-        finals.push((item.key, item.priority));
-    }
-    for (item, _) in pool_deferred {
-        out.blocked.pool_full += 1;
-        finals.push((item.key, item.priority));
-    }
-    for (key, priority) in finals {
-        let state = env.data(key);
-        let available = match state {
-            DataState::OnGpu => true,
-            // Split children were charged when split; the root, if a leaf, is the
-            // only leaf, so nothing else was charged and the reservation succeeds.
-            DataState::InCpu => key != root || budget.try_reserve(brick_bytes),
-            DataState::Missing | DataState::Failed => false,
-        };
-        if available {
-            out.leaves.push(RefinedLeaf {
-                key,
-                class: NodeClass::Data,
-                priority: if priority.is_finite() {
-                    priority as f32
-                } else {
-                    0.0
-                },
-                needs_upload: state == DataState::InCpu,
-            });
-        } else {
-            out.data_leaves -= 1;
-            let reason = if state == DataState::Failed {
-                // Only the root can get here: other nodes are split only when
-                // their brick is available.
-                out.failed_needed += 1;
-                EmptyReason::Failed
-            } else {
-                EmptyReason::NotLoaded
-            };
-            out.leaves.push(empty_leaf(key, reason));
-        }
-    }
-    out
 }

@@ -27,12 +27,10 @@
 use super::rank::{HeapItem, ScreenError, Unknown, classify};
 use super::{
     DataState, LoadRequest, MAX_META_REQUESTS_PER_FRAME, NodeClass, RefineEnv, RefineParams,
-    RefinedLeaf, Refinement, ViewGeometry, empty_leaf, unknown_root, view_geometry,
+    RefinedLeaf, Refinement, Views, empty_leaf, unknown_root,
 };
 use crate::upload::UploadBudget;
-use brickray_core::{
-    Camera, EmptyReason, NodeInfo, NodeKey, OctreeLayout, RenderMode, TransferFunction,
-};
+use brickray_core::{EmptyReason, NodeInfo, NodeKey, OctreeLayout};
 use std::collections::{BinaryHeap, HashMap, HashSet};
 
 /// How much more a candidate that had its own brick in the previous frame
@@ -48,11 +46,12 @@ pub const OCTANT_HYSTERESIS: f64 = 2.0;
 pub const MAX_DEMOTIONS: u32 = 3;
 
 /// What octant refinement remembers from frame to frame within one view (the
-/// camera, viewport, mode and transfer function): the nodes that had their
-/// own brick, and how often each lost it. GPU-free; the manager keeps one.
+/// views and the classification, one [`RefineParams::generation`]): the nodes
+/// that had their own brick, and how often each lost it. GPU-free; the
+/// manager keeps one.
 #[derive(Debug, Clone, Default)]
 pub struct OctantMemory {
-    view: Option<(Camera, f32, u32, RenderMode, TransferFunction)>,
+    view: Option<u64>,
     held: HashSet<NodeKey>,
     demotions: HashMap<NodeKey, u32>,
 }
@@ -60,14 +59,8 @@ pub struct OctantMemory {
 impl OctantMemory {
     /// Starts a frame of `params`' view: a different view forgets everything.
     pub fn begin(&mut self, params: &RefineParams<'_>) {
-        let view = (
-            *params.camera,
-            params.aspect,
-            params.viewport_height_px,
-            params.mode,
-            params.tf.clone(),
-        );
-        if self.view.as_ref() != Some(&view) {
+        let view = params.generation;
+        if self.view != Some(view) {
             self.held.clear();
             self.demotions.clear();
             self.view = Some(view);
@@ -122,7 +115,7 @@ fn finite(p: f64) -> f32 {
 struct Octants<'p, 'a> {
     layout: &'p OctreeLayout,
     params: &'p RefineParams<'a>,
-    geo: ViewGeometry,
+    geo: &'p Views,
     screen: ScreenError,
     out: Refinement,
     heap: BinaryHeap<HeapItem>,
@@ -158,7 +151,7 @@ impl Octants<'_, '_> {
         let mut classes = Vec::with_capacity(children.len());
         let (mut pending, mut failed) = (Vec::new(), 0u32);
         for &c in children.iter() {
-            match classify(c, self.layout, self.params, &self.geo, env) {
+            match classify(c, self.layout, self.params, self.geo, env) {
                 Ok(cl) => classes.push(cl),
                 Err(Unknown::Pending) => pending.push(c),
                 Err(Unknown::Failed) => failed += 1,
@@ -234,35 +227,76 @@ pub(super) fn refine_octants(
     env: &mut dyn RefineEnv,
     budget: &mut UploadBudget,
 ) -> Refinement {
-    let geo = view_geometry(layout, params);
-    let brick_bytes = params.brick_upload_bytes;
-    let max_requests = params.max_data_leaves.min(params.max_requests) as usize;
+    let geo = params.views;
+    let (root_info, uniform, root_upload) = match root(layout, params, env, budget) {
+        Ok(r) => r,
+        Err(done) => return done,
+    };
+    let screen = ScreenError::new(params, Some(&root_info), layout);
+    let root = NodeKey::ROOT;
+    let root_priority = screen.priority(
+        geo.voxel_pixels(root),
+        env.visible_weight(root),
+        root,
+        Some(&root_info),
+        params,
+        layout,
+    );
+    let mut s = Octants {
+        layout,
+        params,
+        geo,
+        screen,
+        out: Refinement {
+            data_leaves: 1,
+            ..Default::default()
+        },
+        heap: BinaryHeap::new(),
+        open: HashMap::new(),
+    };
+    s.expand(env, root, root_info, uniform, root_priority, root_upload);
+    // Candidates that stay drawn from their parent's brick.
+    let mut borrowed: Vec<(NodeKey, f64)> = Vec::new();
+    while let Some(item) = s.heap.pop() {
+        if !s.promote(env, budget, &item) {
+            borrowed.push((item.key, item.priority));
+        }
+    }
+    s.finish(borrowed)
+}
+
+/// The root, which must have its own brick before anything is drawn: its
+/// metadata, whether it is uniform and whether its brick is uploaded this
+/// frame; `Err` holds the whole refinement when the root is all there is.
+fn root(
+    layout: &OctreeLayout,
+    params: &RefineParams<'_>,
+    env: &mut dyn RefineEnv,
+    budget: &mut UploadBudget,
+) -> Result<(NodeInfo, bool, bool), Refinement> {
     let mut out = Refinement::default();
     let root = NodeKey::ROOT;
-    let root_class = match classify(root, layout, params, &geo, env) {
-        Ok(c) => c,
-        Err(u) => return unknown_root(u),
-    };
+    let root_class = classify(root, layout, params, params.views, env).map_err(unknown_root)?;
     let (NodeClass::Data, Some(root_info)) = (root_class.class, root_class.info) else {
         let reason = match root_class.class {
             NodeClass::Empty(r) => r,
             _ => EmptyReason::Empty,
         };
         out.leaves.push(empty_leaf(root, reason));
-        return out;
+        return Err(out);
     };
     if params.max_data_leaves == 0 {
         out.leaves.push(empty_leaf(root, EmptyReason::NotLoaded));
         out.blocked.pool_full += 1;
-        return out;
+        return Err(out);
     }
-    let root_upload = match env.data(root) {
+    let upload = match env.data(root) {
         DataState::OnGpu => false,
-        DataState::InCpu if budget.try_reserve(brick_bytes) => true,
+        DataState::InCpu if budget.try_reserve(params.brick_upload_bytes) => true,
         DataState::InCpu => {
             out.leaves.push(empty_leaf(root, EmptyReason::NotLoaded));
             out.blocked.upload_budget += 1;
-            return out;
+            return Err(out);
         }
         DataState::Missing => {
             out.leaves.push(empty_leaf(root, EmptyReason::NotLoaded));
@@ -272,130 +306,111 @@ pub(super) fn refine_octants(
                 info: root_info,
             });
             out.blocked.missing_data += 1;
-            return out;
+            return Err(out);
         }
         DataState::Failed => {
             out.leaves.push(empty_leaf(root, EmptyReason::Failed));
             out.blocked.failed += 1;
             out.failed_needed += 1;
-            return out;
+            return Err(out);
         }
     };
-    let screen = ScreenError::new(params, Some(&root_info), layout);
-    let root_priority = screen.priority(
-        geo.voxel_pixels(root),
-        env.visible_weight(root),
-        root,
-        Some(&root_info),
-        params,
-        layout,
-    );
-    out.data_leaves = 1;
-    let mut s = Octants {
-        layout,
-        params,
-        geo,
-        screen,
-        out,
-        heap: BinaryHeap::new(),
-        open: HashMap::new(),
-    };
-    s.expand(
-        env,
-        root,
-        root_info,
-        root_class.uniform,
-        root_priority,
-        root_upload,
-    );
-    let tol = s.screen.threshold;
-    // Candidates that stay drawn from their parent's brick.
-    let mut borrowed: Vec<(NodeKey, f64)> = Vec::new();
-    while let Some(item) = s.heap.pop() {
+    Ok((root_info, root_class.uniform, upload))
+}
+
+impl Octants<'_, '_> {
+    /// Gives the candidate `item` its own brick (and makes its children
+    /// candidates) when its rank beats the error budget, it may split and be
+    /// promoted, its brick is on the GPU or in CPU memory (else it is
+    /// requested), the pool has room and the upload budget takes it. False
+    /// when it stays drawn from its parent.
+    fn promote(
+        &mut self,
+        env: &mut dyn RefineEnv,
+        budget: &mut UploadBudget,
+        item: &HeapItem,
+    ) -> bool {
         let (c, priority) = (item.key, item.priority);
-        let parent = layout.parent(c).expect("a candidate has a parent");
-        if !priority.is_finite() || priority <= tol {
-            borrowed.push((c, priority));
-            continue;
+        let parent = self.layout.parent(c).expect("a candidate has a parent");
+        if !priority.is_finite() || priority <= self.screen.threshold {
+            return false;
         }
         if !env.may_split(c) || !env.may_promote(c) {
-            s.out.blocked.invisible += 1;
-            borrowed.push((c, priority));
-            continue;
+            self.out.blocked.invisible += 1;
+            return false;
         }
-        let Some(info) = (match env.node(c) {
-            super::MetaState::Known(i) => Some(i),
-            _ => None,
-        }) else {
-            borrowed.push((c, priority));
-            continue;
+        let super::MetaState::Known(info) = env.node(c) else {
+            return false;
         };
         let state = env.data(c);
         match state {
             DataState::Failed => {
-                s.out.blocked.failed += 1;
-                borrowed.push((c, priority));
-                continue;
+                self.out.blocked.failed += 1;
+                return false;
             }
             DataState::Missing => {
-                let order = priority * env.request_weight(parent) * s.geo.centre_weight(parent);
-                s.out.requests.push(LoadRequest {
+                let order = priority * env.request_weight(parent) * self.geo.centre_weight(parent);
+                self.out.requests.push(LoadRequest {
                     key: c,
                     priority: order as f32,
                     info,
                 });
-                s.out.blocked.missing_data += 1;
-                borrowed.push((c, priority));
-                continue;
+                self.out.blocked.missing_data += 1;
+                return false;
             }
             DataState::OnGpu | DataState::InCpu => {}
         }
         // The last child drawn from its parent frees the parent's brick.
-        let frees = s.open.get(&parent) == Some(&1);
+        let frees = self.open.get(&parent) == Some(&1);
         let cost = u32::from(!frees);
-        if s.out.data_leaves + cost > params.max_data_leaves {
-            s.out.blocked.pool_full += 1;
-            borrowed.push((c, priority));
-            continue;
+        if self.out.data_leaves + cost > self.params.max_data_leaves {
+            self.out.blocked.pool_full += 1;
+            return false;
         }
         let upload = state == DataState::InCpu;
-        if upload && !budget.try_reserve(brick_bytes) {
-            s.out.blocked.upload_budget += 1;
-            borrowed.push((c, priority));
-            continue;
+        if upload && !budget.try_reserve(self.params.brick_upload_bytes) {
+            self.out.blocked.upload_budget += 1;
+            return false;
         }
-        if let Some(n) = s.open.get_mut(&parent) {
+        if let Some(n) = self.open.get_mut(&parent) {
             *n -= 1;
             if *n == 0 {
-                s.open.remove(&parent);
+                self.open.remove(&parent);
             }
         }
-        s.out.data_leaves += cost;
+        self.out.data_leaves += cost;
         // Its own rank, for its children's requests and its leaf.
-        let own = s.screen.priority(
-            s.geo.voxel_pixels(c),
+        let own = self.screen.priority(
+            self.geo.voxel_pixels(c),
             env.visible_weight(c),
             c,
             Some(&info),
-            params,
-            layout,
+            self.params,
+            self.layout,
         );
-        s.expand(env, c, info, item.uniform, own, upload);
+        self.expand(env, c, info, item.uniform, own, upload);
+        true
     }
-    for (c, priority) in borrowed {
-        s.out.leaves.push(RefinedLeaf {
-            key: c,
-            class: NodeClass::Borrowed,
-            priority: finite(priority),
-            needs_upload: false,
-        });
+
+    /// The refinement: the borrowed candidates as leaves, every leaf in key
+    /// order (the same cut is the same list, and its borrowed slots, numbered
+    /// in cut order, the same, whatever order the heap took), the requests
+    /// in priority order within the frame's cap.
+    fn finish(self, borrowed: Vec<(NodeKey, f64)>) -> Refinement {
+        let max_requests = self.params.max_data_leaves.min(self.params.max_requests) as usize;
+        let mut out = self.out;
+        for (c, priority) in borrowed {
+            out.leaves.push(RefinedLeaf {
+                key: c,
+                class: NodeClass::Borrowed,
+                priority: finite(priority),
+                needs_upload: false,
+            });
+        }
+        out.leaves.sort_by_key(|l| l.key);
+        out.requests
+            .sort_by(|a, b| b.priority.total_cmp(&a.priority).then(a.key.cmp(&b.key)));
+        out.requests.truncate(max_requests);
+        out
     }
-    let mut out = s.out;
-    // In key order: the same cut is the same list (and its borrowed slots,
-    // numbered in cut order, the same) whatever order the heap took.
-    out.leaves.sort_by_key(|l| l.key);
-    out.requests
-        .sort_by(|a, b| b.priority.total_cmp(&a.priority).then(a.key.cmp(&b.key)));
-    out.requests.truncate(max_requests);
-    out
 }

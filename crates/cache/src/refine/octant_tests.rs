@@ -4,6 +4,8 @@
 use super::lod_tests::{Cached, RampSource, Seen, cache_all, refine_limited};
 use super::tests::{assert_exact_cover, ball_layout};
 use super::*;
+#[allow(unused_imports)]
+use brickray_core::{Camera, RenderMode, TransferFunction, VolumeFrame};
 use proptest::prelude::*;
 use std::collections::{HashMap, HashSet};
 
@@ -193,16 +195,11 @@ fn octant_memory_counts_demotions_per_view() {
     let frame = VolumeFrame::centered(layout.volume.dims, [1.0; 3]);
     let tf = full_tf();
     let cam = Camera::orbit(frame.center(), 2.0, 0.4, 0.2);
-    fn params<'a>(
-        cam: &'a Camera,
-        frame: &'a VolumeFrame,
-        tf: &'a TransferFunction,
-    ) -> RefineParams<'a> {
+    let views = Views::one(ViewGeometry::new(&layout, &cam, 1.0, 64, &frame));
+    fn params<'a>(views: &'a Views, generation: u64, tf: &'a TransferFunction) -> RefineParams<'a> {
         RefineParams {
-            camera: cam,
-            aspect: 1.0,
-            viewport_height_px: 64,
-            volume_frame: frame,
+            views,
+            generation,
             mode: RenderMode::Dvr,
             tf,
             tolerance_px: 0.0,
@@ -229,19 +226,19 @@ fn octant_memory_counts_demotions_per_view() {
     };
     let mut m = OctantMemory::default();
     for i in 0..MAX_DEMOTIONS {
-        m.begin(&params(&cam, &frame, &tf));
+        m.begin(&params(&views, 1, &tf));
         assert!(m.may_promote(c), "demotion {i}");
         m.end(&own, &layout);
         // `c` and its ancestor, split to give `c` its brick.
         assert!(m.held(c) && m.held(NodeKey::ROOT));
-        m.begin(&params(&cam, &frame, &tf));
+        m.begin(&params(&views, 1, &tf));
         m.end(&lent, &layout);
         // Drawn from the root: the root holds its brick, `c` does not.
         assert!(m.held(NodeKey::ROOT) && !m.held(c));
     }
     assert!(!m.may_promote(c));
-    let moved = Camera::orbit(frame.center(), 2.5, 0.4, 0.2);
-    m.begin(&params(&moved, &frame, &tf));
+    // A moved camera: a new generation.
+    m.begin(&params(&views, 2, &tf));
     assert!(m.may_promote(c) && !m.held(NodeKey::ROOT));
     // A node that got its brick but lends it to none of its children (all of
     // them have their own) is held too: losing it is a demotion.
@@ -256,7 +253,7 @@ fn octant_memory_counts_demotions_per_view() {
         leaves: vec![leaf(d, NodeClass::Borrowed)],
         ..Default::default()
     };
-    m.begin(&params(&moved, &frame, &tf));
+    m.begin(&params(&views, 2, &tf));
     m.end(&lent_d, &layout);
     m.end(&deeper, &layout);
     m.end(&lent_d, &layout);

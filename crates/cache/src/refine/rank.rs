@@ -3,7 +3,7 @@
 //! ([`ScreenError`]) and the heap's order, which under the error-aware
 //! metrics is that error per brick a split adds ([`HeapItem`]).
 
-use super::{MetaState, NodeClass, RefineEnv, RefineParams, ViewGeometry, is_visible};
+use super::{MetaState, NodeClass, RefineEnv, RefineParams, Views, is_visible};
 use brickray_core::{
     EmptyReason, LodMetric, NodeInfo, NodeKey, NodeKind, OctreeLayout, TfErrorTable,
     node_pixel_error, node_tf_error, node_visible_error,
@@ -61,7 +61,7 @@ pub(super) fn classify(
     key: NodeKey,
     layout: &OctreeLayout,
     params: &RefineParams<'_>,
-    geo: &ViewGeometry,
+    geo: &Views,
     env: &mut dyn RefineEnv,
 ) -> Result<Classified, Unknown> {
     let empty = |reason, info| Classified {
@@ -99,7 +99,7 @@ pub(super) fn classify_children(
     children: &[NodeKey],
     layout: &OctreeLayout,
     params: &RefineParams<'_>,
-    geo: &ViewGeometry,
+    geo: &Views,
     env: &mut dyn RefineEnv,
 ) -> Option<[Classified; 8]> {
     let mut classes = [UNCLASSIFIED; 8];

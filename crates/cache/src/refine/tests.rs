@@ -1,4 +1,6 @@
 use super::*;
+#[allow(unused_imports)]
+use brickray_core::{Camera, RenderMode, TransferFunction, VolumeFrame};
 use brickray_core::{DType, Projection, VolumeDesc};
 use glam::Vec3;
 use proptest::prelude::*;
@@ -122,10 +124,8 @@ fn run(
         meta_reads: 0,
     };
     let params = RefineParams {
-        camera: cam,
-        aspect: 1.0,
-        viewport_height_px: 512,
-        volume_frame: &s.frame,
+        views: &Views::one(ViewGeometry::new(&s.layout, cam, 1.0, 512, &s.frame)),
+        generation: 0,
         mode,
         tf,
         tolerance_px: 1.0,
@@ -287,12 +287,10 @@ fn upload_budget_limits_splits_but_progresses() {
 }
 
 /// MIP at 512 px, 1 px tolerance, no pool or request limit.
-fn mip_params<'a>(s: &'a Setup, cam: &'a Camera) -> RefineParams<'a> {
+fn mip_params<'a>(s: &'a Setup, views: &'a Views) -> RefineParams<'a> {
     RefineParams {
-        camera: cam,
-        aspect: 1.0,
-        viewport_height_px: 512,
-        volume_frame: &s.frame,
+        views,
+        generation: 0,
         mode: RenderMode::Mip,
         tf: &s.tf,
         tolerance_px: 1.0,
@@ -345,7 +343,8 @@ fn splits_refused_on_returned_charges_are_retried() {
     let mut in_cpu: HashSet<NodeKey> = level1.iter().copied().filter(|k| *k != first).collect();
     in_cpu.extend(s.layout.children(first).iter().copied());
     let brick = s.layout.brick_bytes() as u64;
-    let params = mip_params(&s, &cam);
+    let views = Views::one(ViewGeometry::new(&s.layout, &cam, 1.0, 512, &s.frame));
+    let params = mip_params(&s, &views);
     // Room for the 7 charged level-1 bricks or for the first node's children,
     // not both at once.
     let mut b = UploadBudget::new(8 * brick);
@@ -425,7 +424,8 @@ proptest! {
         let frame = VolumeFrame::centered([dim; 3], [1.0; 3]);
         let tf = TransferFunction::ramp(0.3, 1.0, 0.5);
         let mut env = AllInCpu { layout: layout.clone(), on_gpu: HashSet::new(), meta_reads: 0 };
-        let params = RefineParams { camera: &cam, aspect: 1.3, viewport_height_px: 400, volume_frame: &frame, mode, tf: &tf, tolerance_px: tol, metric: brickray_core::LodMetric::Geometric, max_data_leaves: slots, max_requests: MIN_REQUESTS_PER_FRAME, brick_upload_bytes: 1000 };
+        let params = RefineParams { views: &Views::one(ViewGeometry::new(&layout, &cam, 1.3, 400, &frame)),
+        generation: 0, mode, tf: &tf, tolerance_px: tol, metric: brickray_core::LodMetric::Geometric, max_data_leaves: slots, max_requests: MIN_REQUESTS_PER_FRAME, brick_upload_bytes: 1000 };
         let mut b = UploadBudget::new(u64::MAX);
         let r = refine(&layout, &params, &mut env, &mut b);
         assert_exact_cover(&keys(&r), layout.levels);
@@ -487,10 +487,8 @@ fn invisible_nodes_stay_at_their_level_and_request_nothing() {
             asked: Vec::new(),
         };
         let params = RefineParams {
-            camera: &cam,
-            aspect: 1.0,
-            viewport_height_px: 512,
-            volume_frame: &s.frame,
+            views: &Views::one(ViewGeometry::new(&s.layout, &cam, 1.0, 512, &s.frame)),
+            generation: 0,
             mode: RenderMode::Dvr,
             tf: &s.tf,
             tolerance_px: 0.0,
@@ -559,7 +557,8 @@ impl RefineEnv for Favour {
 fn request_weight_orders_loads_not_the_cut() {
     let s = setup();
     let cam = Camera::orbit(Vec3::ZERO, 1.5, 0.3, 0.2);
-    let params = mip_params(&s, &cam);
+    let views = Views::one(ViewGeometry::new(&s.layout, &cam, 1.0, 512, &s.frame));
+    let params = mip_params(&s, &views);
     let run = |favoured: NodeKey| {
         let mut env = Favour {
             layout: s.layout.clone(),
@@ -615,10 +614,8 @@ fn splits_that_cost_no_brick_are_taken_within_the_tolerance() {
             meta_reads: 0,
         };
         let params = RefineParams {
-            camera: &cam,
-            aspect: 1.0,
-            viewport_height_px: 512,
-            volume_frame: &s.frame,
+            views: &Views::one(ViewGeometry::new(&s.layout, &cam, 1.0, 512, &s.frame)),
+            generation: 0,
             mode: iso,
             tf: &s.tf,
             tolerance_px: tolerance,
@@ -720,10 +717,8 @@ fn splits_the_pool_refused_are_retried_when_bricks_come_back() {
     let (a, b) = (NodeKey::new(1, 0, 0, 0), NodeKey::new(1, 1, 1, 1));
     for (full, hollow) in [(a, b), (b, a)] {
         let params = RefineParams {
-            camera: &cam,
-            aspect: 1.0,
-            viewport_height_px: 512,
-            volume_frame: &frame,
+            views: &Views::one(ViewGeometry::new(&layout, &cam, 1.0, 512, &frame)),
+            generation: 0,
             mode: RenderMode::Dvr,
             tf: &tf,
             tolerance_px: 0.0,
@@ -760,10 +755,8 @@ fn refine_time_on_dense_cuts() {
     for dist in [1.5f32, 3.0, 6.0] {
         let cam = Camera::orbit(Vec3::ZERO, dist, 0.3, 0.2);
         let params = RefineParams {
-            camera: &cam,
-            aspect: 1.0,
-            viewport_height_px: 1024,
-            volume_frame: &frame,
+            views: &Views::one(ViewGeometry::new(&layout, &cam, 1.0, 1024, &frame)),
+            generation: 0,
             mode: RenderMode::Dvr,
             tf: &tf,
             tolerance_px: 1.0,

@@ -21,9 +21,11 @@
 
 mod frame;
 mod ray;
+mod view;
 
 pub use frame::{FrameError, VolumeFrame};
 pub use ray::{Ray, RayGen};
+pub use view::{FrameView, ViewGenerations};
 
 use glam::{DMat4, Mat4, Vec3};
 use thiserror::Error;

@@ -2,9 +2,8 @@
 //! macro-cell grid (Krueger and Westermann 2003), and its group 2.
 
 use super::{VolumeBackend, check_stage_limits, volume_layout_entries, volume_sampler};
-use crate::desc::FrameDesc;
 use crate::encoding::{self, SampleEncoding, U8Filtering};
-use crate::error::{PrepareError, RenderError};
+use crate::error::RenderError;
 use crate::gpu::{self, Uniform};
 use crate::kernels::KernelKind;
 use brickray_core::{MacroCellGrid, RenderMode, TransferFunction, Volume};
@@ -20,10 +19,10 @@ pub(crate) const STORAGE_BUFFERS: u32 = 2;
 const SKIP_CAP: u32 = 8;
 
 /// What the skip distances were computed for.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 enum SkipKey {
-    /// DVR: cells transparent through this TF.
-    Dvr(TransferFunction),
+    /// DVR: cells transparent through the TF of this generation.
+    Dvr(u64),
     /// Iso: cells whose values all lie below this isovalue.
     Iso(f32),
 }
@@ -202,6 +201,40 @@ impl InCore {
     }
 }
 
+impl InCore {
+    /// Keeps the skip distances current for the frame's mode: the volume was
+    /// uploaded at set-up; only they follow the TF (DVR, `tf` of generation
+    /// `tf_generation`) or the isovalue (kept current whatever the switches,
+    /// since the prediction buffer's sparse traversal skips with them too).
+    /// Returns the bytes written.
+    pub(crate) fn update(
+        &mut self,
+        queue: &wgpu::Queue,
+        mode: RenderMode,
+        tf: &TransferFunction,
+        tf_generation: u64,
+    ) -> u64 {
+        let key = match mode {
+            RenderMode::Iso { value, .. } => SkipKey::Iso(value),
+            RenderMode::Mip => return 0,
+            _ => SkipKey::Dvr(tf_generation),
+        };
+        if self.skip_key == Some(key) {
+            return 0;
+        }
+        let d = match key {
+            SkipKey::Dvr(_) => self
+                .grid
+                .empty_distance(|r| tf.is_transparent(r[0], r[1]), SKIP_CAP),
+            SkipKey::Iso(iso) => self.grid.empty_distance(|r| r[1] < iso, SKIP_CAP),
+        };
+        let bytes: &[u8] = bytemuck::cast_slice(&d);
+        queue.write_buffer(&self.skip, 0, bytes);
+        self.skip_key = Some(key);
+        bytes.len() as u64
+    }
+}
+
 impl VolumeBackend for InCore {
     fn kind(&self) -> KernelKind {
         KernelKind::InCore
@@ -213,36 +246,6 @@ impl VolumeBackend for InCore {
 
     fn bind_group(&self) -> &wgpu::BindGroup {
         &self.bind_group
-    }
-
-    fn update(
-        &mut self,
-        _device: &wgpu::Device,
-        queue: &wgpu::Queue,
-        frame: &FrameDesc<'_>,
-        tf: &TransferFunction,
-    ) -> Result<u64, PrepareError> {
-        // The volume was uploaded at set-up; only the skip distances follow the
-        // TF (DVR) or the isovalue (kept current whatever the switches, since
-        // the prediction buffer's sparse traversal skips with them too).
-        let key = match frame.settings.mode {
-            RenderMode::Iso { value, .. } => SkipKey::Iso(value),
-            RenderMode::Mip => return Ok(0),
-            _ => SkipKey::Dvr(tf.clone()),
-        };
-        if self.skip_key.as_ref() == Some(&key) {
-            return Ok(0);
-        }
-        let d = match &key {
-            SkipKey::Dvr(tf) => self
-                .grid
-                .empty_distance(|r| tf.is_transparent(r[0], r[1]), SKIP_CAP),
-            SkipKey::Iso(iso) => self.grid.empty_distance(|r| r[1] < *iso, SKIP_CAP),
-        };
-        let bytes: &[u8] = bytemuck::cast_slice(&d);
-        queue.write_buffer(&self.skip, 0, bytes);
-        self.skip_key = Some(key);
-        Ok(bytes.len() as u64)
     }
 
     fn max_leaves(&self) -> u32 {

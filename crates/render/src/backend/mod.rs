@@ -9,16 +9,14 @@ pub(crate) mod occlusion;
 pub(crate) mod ooc;
 mod readback;
 
-pub use feedback::{FeedbackStats, UsageFrame};
+pub use feedback::FeedbackStats;
 pub(crate) use incore::InCore;
 pub use occlusion::OcclusionStats;
 pub(crate) use ooc::OutOfCore;
 pub use ooc::OutOfCoreStats;
 
-use crate::desc::FrameDesc;
-use crate::error::{PrepareError, RenderError};
+use crate::error::RenderError;
 use crate::kernels::KernelKind;
-use brickray_core::TransferFunction;
 
 /// What every backend does for the coordinator.
 pub(crate) trait VolumeBackend: std::fmt::Debug {
@@ -28,15 +26,6 @@ pub(crate) trait VolumeBackend: std::fmt::Debug {
     fn layout(&self) -> &wgpu::BindGroupLayout;
     /// Group 2.
     fn bind_group(&self) -> &wgpu::BindGroup;
-    /// Updates what the frame needs (out of core: plans the cut, writes prepared
-    /// bricks and the index); returns the bytes written.
-    fn update(
-        &mut self,
-        device: &wgpu::Device,
-        queue: &wgpu::Queue,
-        frame: &FrameDesc<'_>,
-        tf: &TransferFunction,
-    ) -> Result<u64, PrepareError>;
     /// Records what must precede the ray-cast pass (out of core: clearing the
     /// usage counters).
     fn before_pass(&mut self, encoder: &mut wgpu::CommandEncoder) {
@@ -91,13 +80,6 @@ impl Backend {
         match self {
             Backend::OutOfCore(b) => Some(b),
             Backend::InCore(_) => None,
-        }
-    }
-
-    pub(crate) fn out_of_core_mut(&mut self) -> Result<&mut OutOfCore, RenderError> {
-        match self {
-            Backend::OutOfCore(b) => Ok(b),
-            Backend::InCore(_) => Err(RenderError::NotOutOfCore),
         }
     }
 }

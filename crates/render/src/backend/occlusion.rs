@@ -1,15 +1,16 @@
-//! Occlusion-query feedback (Gobbetti et al. 2008, section 6; docs/visibility.md).
+//! Occlusion-query feedback (Gobbetti et al. 2008, section 6; docs/visibility.md),
+//! the GPU half (the planner, `brickray_cache::Streamer`, schedules the
+//! queries and projects the boxes).
 //!
 //! The out-of-core kernel writes, per pixel, the clip depth of the last sample
 //! its ray visited into an R32Float texture (`feedback.wgsl`). After the ray
 //! cast this records one depth-only render pass (`occlusion.wgsl`): a
 //! fullscreen triangle copies that depth into a depth attachment, then the
-//! boxes of the leaves the screen-tile scheduler
-//! ([`brickray_visibility::schedule_tiles`]) picked for this frame are drawn
-//! against it, depth test on and writes off, each in its own occlusion query.
-//! The query results are resolved and copied, with a frame stamp, into a ring
-//! of read-back buffers mapped asynchronously, exactly as the usage counters
-//! are (`feedback.rs`): nothing here polls or waits.
+//! boxes of the leaves the plan's [`QueryBatch`] holds are drawn against it,
+//! depth test on and writes off, each in its own occlusion query. The query
+//! results are resolved and copied, with a frame stamp, into a ring of
+//! read-back buffers mapped asynchronously (`readback.rs`), as the usage
+//! counters are: nothing here polls or waits.
 //!
 //! wgpu records the ray cast as one compute dispatch and the queries as a
 //! later render pass of the same submission; it gives no control over their
@@ -19,14 +20,11 @@
 //! ring one or two frames later whatever the order, so splitting the dispatch
 //! would only add passes.
 
-use super::readback::{COPIED, FREE, Polled, STAMP_BYTES, poll_entry};
+use super::readback::ReadbackRing;
 use crate::error::RenderError;
 use crate::gpu;
-use brickray_cache::refine::ViewGeometry;
-use brickray_core::{Camera, DepthConvention, NodeKey};
-use brickray_visibility::{PxRect, TileSchedulerConfig, schedule_tiles};
-use std::sync::Arc;
-use std::sync::atomic::{AtomicU8, Ordering};
+use brickray_cache::{QueryBatch, QueryResult, QuerySchedule};
+use brickray_core::NodeKey;
 
 /// Read-back buffers in flight at most.
 const RING: usize = 4;
@@ -70,13 +68,6 @@ pub(crate) fn layout_entries() -> Vec<wgpu::BindGroupLayoutEntry> {
     ]
 }
 
-struct Entry {
-    buffer: wgpu::Buffer,
-    state: Arc<AtomicU8>,
-    frame: u64,
-    keys: Vec<NodeKey>,
-}
-
 /// Counters of the occlusion-query path.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct OcclusionStats {
@@ -116,12 +107,12 @@ pub(crate) struct OcclusionFeedback {
     box_buffer: wgpu::Buffer,
     queries: wgpu::QuerySet,
     resolve: wgpu::Buffer,
-    stamp: wgpu::Buffer,
-    ring: Vec<Entry>,
+    /// Each entry remembers the leaves its frame queried.
+    ring: ReadbackRing<Vec<NodeKey>>,
     /// This frame's queried leaves (recorded after the pass).
     pending: Vec<NodeKey>,
     reversed: bool,
-    pub(crate) stats: OcclusionStats,
+    schedule: QuerySchedule,
 }
 
 const STOP_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::R32Float;
@@ -246,26 +237,12 @@ impl OcclusionFeedback {
             budget as u64 * 8,
             wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
         )?;
-        let stamp = gpu::buffer(
+        let ring = ReadbackRing::new(
             device,
-            "brickray-render occlusion stamp",
-            STAMP_BYTES,
-            wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
+            "brickray-render occlusion read-back",
+            RING,
+            budget as u64 * 8,
         )?;
-        let mut ring = Vec::with_capacity(RING);
-        for _ in 0..RING {
-            ring.push(Entry {
-                buffer: gpu::buffer(
-                    device,
-                    "brickray-render occlusion read-back",
-                    STAMP_BYTES + budget as u64 * 8,
-                    wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-                )?,
-                state: Arc::new(AtomicU8::new(FREE)),
-                frame: 0,
-                keys: Vec::new(),
-            });
-        }
         let targets = Self::targets(device, &group_layout, &uniforms, [1, 1])?;
         Ok(OcclusionFeedback {
             budget,
@@ -278,11 +255,10 @@ impl OcclusionFeedback {
             box_buffer,
             queries,
             resolve,
-            stamp,
             ring,
             pending: Vec::new(),
             reversed: false,
-            stats: OcclusionStats::default(),
+            schedule: QuerySchedule::default(),
         })
     }
 
@@ -369,103 +345,55 @@ impl OcclusionFeedback {
         Ok(true)
     }
 
-    /// Observations read back since the last call: `(frame, node, samples)`.
-    pub(crate) fn poll(&mut self, frame: u64) -> Vec<(u64, NodeKey, u32)> {
-        let mut out = Vec::new();
-        for e in &mut self.ring {
-            let (keys, entry_frame) = (&e.keys, e.frame);
-            let polled = poll_entry(&e.buffer, &e.state, e.frame, frame, |payload| {
-                let r: &[u64] = bytemuck::cast_slice(payload);
-                for (i, k) in keys.iter().enumerate() {
-                    let n = r.get(i).copied().unwrap_or(0);
-                    out.push((entry_frame, *k, n.min(u32::MAX as u64) as u32));
-                }
-            });
-            match polled {
-                Polled::Read(()) => self.stats.frames_applied += 1,
-                Polled::Discarded => self.stats.frames_discarded += 1,
-                Polled::Pending => {}
-            }
+    /// The schedule of the last frame and the ring's counters.
+    pub(crate) fn stats(&self) -> OcclusionStats {
+        let r = self.ring.stats;
+        OcclusionStats {
+            queries: self.schedule.queries,
+            period: self.schedule.period,
+            tiles: self.schedule.tiles,
+            near_visible: self.schedule.near_visible,
+            frames_applied: r.applied,
+            frames_discarded: r.discarded,
+            frames_skipped: r.skipped,
         }
-        out
     }
 
-    /// Schedules this frame's queries over the cut's data leaves and writes
-    /// their boxes. Leaves whose box reaches behind the eye's near side are
-    /// returned (visible without a query).
-    #[allow(clippy::too_many_arguments)]
-    pub(crate) fn schedule(
-        &mut self,
-        queue: &wgpu::Queue,
-        geo: &ViewGeometry,
-        camera: &Camera,
-        aspect: f32,
-        size: [u32; 2],
-        frame: u64,
-        leaves: &[NodeKey],
-        queries_per_frame: u32,
-        min_tile_px: u32,
-    ) -> Vec<NodeKey> {
-        let vp = camera.view_proj(aspect).as_dmat4();
-        self.reversed = camera.depth == DepthConvention::ReversedZ;
-        let (w, h) = (size[0] as f64, size[1] as f64);
-        let mut near = Vec::new();
-        let mut rects = Vec::with_capacity(leaves.len());
-        let mut boxes = Vec::with_capacity(leaves.len());
-        let mut keys = Vec::with_capacity(leaves.len());
-        for &k in leaves {
-            let c = geo.world_corners(k);
-            let (mut lo, mut hi) = ([f64::MAX; 2], [f64::MIN; 2]);
-            let mut behind = false;
-            for p in &c {
-                let q = vp * p.extend(1.0);
-                if q.w.is_nan() || q.w <= 1e-9 || !q.z.is_finite() {
-                    behind = true;
-                    break;
-                }
-                let (x, y) = (q.x / q.w, q.y / q.w);
-                lo = [lo[0].min(x), lo[1].min(y)];
-                hi = [hi[0].max(x), hi[1].max(y)];
-            }
-            if behind {
-                near.push(k);
-                continue;
-            }
-            // NDC to pixels (y down), widened to whole pixels.
-            let px = |v: f64, n: f64| ((v * 0.5 + 0.5) * n).clamp(0.0, n);
-            let rect = PxRect::new(
-                px(lo[0], w).floor() as u32,
-                (h - px(hi[1], h)).floor() as u32,
-                px(hi[0], w).ceil() as u32,
-                (h - px(lo[1], h)).ceil() as u32,
+    /// Results read back since the last call. Never waits.
+    pub(crate) fn poll(&mut self, frame: u64) -> Vec<QueryResult> {
+        self.ring
+            .poll(frame, |entry_frame, keys, payload| {
+                let r: &[u64] = bytemuck::cast_slice(payload);
+                keys.iter()
+                    .enumerate()
+                    .map(|(i, &key)| QueryResult {
+                        frame: entry_frame,
+                        key,
+                        samples: r.get(i).copied().unwrap_or(0).min(u32::MAX as u64) as u32,
+                    })
+                    .collect::<Vec<_>>()
+            })
+            .into_iter()
+            .flat_map(|(_, r)| r)
+            .collect()
+    }
+
+    /// Writes this frame's boxes (the plan's batch for this view).
+    pub(crate) fn write(&mut self, queue: &wgpu::Queue, batch: &QueryBatch) {
+        let n = batch.keys.len().min(self.budget as usize);
+        self.reversed = batch.reversed;
+        self.pending = batch.keys[..n].to_vec();
+        self.schedule = batch.schedule;
+        if n > 0 {
+            queue.write_buffer(&self.box_buffer, 0, bytemuck::cast_slice(&batch.boxes[..n]));
+            queue.write_buffer(
+                &self.uniforms,
+                0,
+                bytemuck::bytes_of(&OcclusionUniforms {
+                    view_proj: batch.view_proj,
+                }),
             );
-            rects.push(rect);
-            keys.push(k);
-            let f = |v: glam::DVec3| [v.x as f32, v.y as f32, v.z as f32, 0.0];
-            boxes.push([f(c[0]), f(c[1] - c[0]), f(c[2] - c[0]), f(c[4] - c[0])]);
         }
-        let cfg = TileSchedulerConfig {
-            queries_per_frame: queries_per_frame.clamp(1, self.budget) as usize,
-            min_tile_px,
-        };
-        let s = schedule_tiles(PxRect::new(0, 0, size[0], size[1]), &rects, &cfg, frame);
-        let data: Vec<[[f32; 4]; 4]> = s.queried.iter().map(|&i| boxes[i]).collect();
-        self.pending = s.queried.iter().map(|&i| keys[i]).collect();
-        if !data.is_empty() {
-            queue.write_buffer(&self.box_buffer, 0, bytemuck::cast_slice(&data));
-        }
-        queue.write_buffer(
-            &self.uniforms,
-            0,
-            bytemuck::bytes_of(&OcclusionUniforms {
-                view_proj: camera.view_proj(aspect).to_cols_array_2d(),
-            }),
-        );
-        self.stats.queries = self.pending.len() as u32;
-        self.stats.period = s.period as u32;
-        self.stats.tiles = s.tiles.len() as u32;
-        self.stats.near_visible = near.len() as u32;
-        near
     }
 
     /// Records the depth fill and this frame's queries after the ray cast,
@@ -479,15 +407,6 @@ impl OcclusionFeedback {
         if self.pending.is_empty() {
             return;
         }
-        let Some(e) = self
-            .ring
-            .iter_mut()
-            .find(|e| e.state.load(Ordering::Acquire) == FREE)
-        else {
-            self.stats.frames_skipped += 1;
-            self.pending.clear();
-            return;
-        };
         let n = self.pending.len() as u32;
         let far = if self.reversed { 0.0 } else { 1.0 };
         {
@@ -522,12 +441,11 @@ impl OcclusionFeedback {
             }
         }
         encoder.resolve_query_set(&self.queries, 0..n, &self.resolve, 0);
-        let stamp = [frame as u32, (frame >> 32) as u32, 0, 0];
-        queue.write_buffer(&self.stamp, 0, bytemuck::cast_slice(&stamp));
-        encoder.copy_buffer_to_buffer(&self.stamp, 0, &e.buffer, 0, STAMP_BYTES);
-        encoder.copy_buffer_to_buffer(&self.resolve, 0, &e.buffer, STAMP_BYTES, n as u64 * 8);
-        e.frame = frame;
-        e.keys = std::mem::take(&mut self.pending);
-        e.state.store(COPIED, Ordering::Release);
+        let resolve = &self.resolve;
+        let keys = std::mem::take(&mut self.pending);
+        self.ring
+            .record(queue, encoder, frame, keys, |enc, dst, at| {
+                enc.copy_buffer_to_buffer(resolve, 0, dst, at, n as u64 * 8);
+            });
     }
 }

@@ -1,7 +1,18 @@
-//! What the usage feedback and the occlusion queries share: a ring of
-//! read-back buffers, each a 16-byte frame stamp then a payload, mapped
-//! asynchronously and read when ready, never waited for.
+//! A ring of read-back buffers, each a 16-byte frame stamp then a payload,
+//! mapped asynchronously and read when ready, never waited for: what the
+//! usage feedback and the occlusion queries share.
+//!
+//! After a pass, [`ReadbackRing::record`] copies the stamp and the payload
+//! into a free entry (a frame that finds none loses only its own read-back:
+//! the host's GPU is more than the ring's length behind). At each later
+//! [`ReadbackRing::poll`] (the host has submitted that frame by then) the
+//! entry is mapped with `map_async`; once wgpu reports it mapped (during any
+//! later `submit` or `poll` of the host) its payload is read, if its stamp
+//! says the frame's commands ran, and the entry is freed. Nothing here calls
+//! `poll` or waits.
 
+use crate::error::RenderError;
+use crate::gpu;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU8, Ordering};
 
@@ -9,59 +20,156 @@ use std::sync::atomic::{AtomicU8, Ordering};
 pub(crate) const STAMP_BYTES: u64 = 16;
 
 /// Entry states.
-pub(crate) const FREE: u8 = 0;
-pub(crate) const COPIED: u8 = 1;
+const FREE: u8 = 0;
+const COPIED: u8 = 1;
 const MAPPING: u8 = 2;
 const READY: u8 = 3;
 const FAILED: u8 = 4;
 
-/// What one step of an entry gave.
-pub(crate) enum Polled<T> {
-    /// Nothing to read yet (free, copied this frame, or mapping).
-    Pending,
-    /// The payload was read (its stamp was the entry's frame); the entry is free.
-    Read(T),
-    /// The mapping failed or the stamp did not match; the entry is free.
-    Discarded,
+/// Counters of a ring.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub(crate) struct RingStats {
+    /// Frames whose payload was read back.
+    pub(crate) applied: u64,
+    /// Read-backs discarded: the stamp said the frame's commands never ran
+    /// (the host dropped or reordered the encoder) or mapping failed.
+    pub(crate) discarded: u64,
+    /// Frames that found no free entry (nothing recorded).
+    pub(crate) skipped: u64,
+    /// Frames between rendering and reading, of the last read-back.
+    pub(crate) last_latency: u64,
 }
 
-/// Advances one ring entry copied in `entry_frame`: starts mapping it once a
-/// later frame (`frame`) runs, so the copy was submitted; when mapped, reads
-/// its payload with `read` if the stamp is `entry_frame`, then unmaps and
-/// frees it. Never waits.
-pub(crate) fn poll_entry<T>(
-    buffer: &wgpu::Buffer,
-    state: &Arc<AtomicU8>,
-    entry_frame: u64,
+struct Entry<M> {
+    buffer: wgpu::Buffer,
+    state: Arc<AtomicU8>,
+    /// The frame whose payload it holds.
     frame: u64,
-    read: impl FnOnce(&[u8]) -> T,
-) -> Polled<T> {
-    match state.load(Ordering::Acquire) {
-        COPIED if entry_frame < frame => {
-            state.store(MAPPING, Ordering::Release);
-            let s = state.clone();
-            buffer.slice(..).map_async(wgpu::MapMode::Read, move |r| {
-                s.store(if r.is_ok() { READY } else { FAILED }, Ordering::Release);
+    /// What the payload is about (the frame's leaves, its queried keys).
+    meta: M,
+}
+
+/// A ring of `len` read-back buffers of `payload` bytes each, after the stamp.
+pub(crate) struct ReadbackRing<M> {
+    entries: Vec<Entry<M>>,
+    stamp: wgpu::Buffer,
+    pub(crate) stats: RingStats,
+}
+
+impl<M: Default> ReadbackRing<M> {
+    pub(crate) fn new(
+        device: &wgpu::Device,
+        label: &'static str,
+        len: usize,
+        payload: u64,
+    ) -> Result<Self, RenderError> {
+        let stamp = gpu::buffer(
+            device,
+            label,
+            STAMP_BYTES,
+            wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
+        )?;
+        let mut entries = Vec::with_capacity(len);
+        for _ in 0..len {
+            entries.push(Entry {
+                buffer: gpu::buffer(
+                    device,
+                    label,
+                    STAMP_BYTES + payload,
+                    wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                )?,
+                state: Arc::new(AtomicU8::new(FREE)),
+                frame: 0,
+                meta: M::default(),
             });
-            Polled::Pending
         }
-        READY => {
-            let got = match buffer.slice(..).get_mapped_range() {
-                Err(_) => None,
-                Ok(view) => {
-                    let w: &[u32] = bytemuck::cast_slice(&view[..8]);
-                    let stamp = w[0] as u64 | (w[1] as u64) << 32;
-                    (stamp == entry_frame).then(|| read(&view[STAMP_BYTES as usize..]))
+        Ok(ReadbackRing {
+            entries,
+            stamp,
+            stats: RingStats::default(),
+        })
+    }
+
+    /// Records into a free entry, after what `encoder` holds so far: the
+    /// stamp of `frame`, then `copy(encoder, buffer, offset)`'s copy of the
+    /// payload at `offset`. False (and counted) when no entry is free.
+    pub(crate) fn record(
+        &mut self,
+        queue: &wgpu::Queue,
+        encoder: &mut wgpu::CommandEncoder,
+        frame: u64,
+        meta: M,
+        copy: impl FnOnce(&mut wgpu::CommandEncoder, &wgpu::Buffer, u64),
+    ) -> bool {
+        let Some(e) = self
+            .entries
+            .iter_mut()
+            .find(|e| e.state.load(Ordering::Acquire) == FREE)
+        else {
+            self.stats.skipped += 1;
+            return false;
+        };
+        // The stamp lands in the buffer when the host submits; if this frame's
+        // encoder never runs, or runs after the next frame's stamp, the copy
+        // carries another stamp and is discarded.
+        let stamp = [frame as u32, (frame >> 32) as u32, 0, 0];
+        queue.write_buffer(&self.stamp, 0, bytemuck::cast_slice(&stamp));
+        encoder.copy_buffer_to_buffer(&self.stamp, 0, &e.buffer, 0, STAMP_BYTES);
+        copy(encoder, &e.buffer, STAMP_BYTES);
+        e.frame = frame;
+        e.meta = meta;
+        e.state.store(COPIED, Ordering::Release);
+        true
+    }
+
+    /// Starts mapping the entries copied in frames before `frame` (submitted
+    /// by now) and reads, with `read(entry frame, meta, payload)`, every entry
+    /// whose mapping completed and whose stamp matches; oldest first. Never
+    /// waits.
+    pub(crate) fn poll<T>(
+        &mut self,
+        frame: u64,
+        mut read: impl FnMut(u64, &M, &[u8]) -> T,
+    ) -> Vec<(u64, T)> {
+        let mut out = Vec::new();
+        for e in &mut self.entries {
+            match e.state.load(Ordering::Acquire) {
+                COPIED if e.frame < frame => {
+                    e.state.store(MAPPING, Ordering::Release);
+                    let s = e.state.clone();
+                    e.buffer.slice(..).map_async(wgpu::MapMode::Read, move |r| {
+                        s.store(if r.is_ok() { READY } else { FAILED }, Ordering::Release);
+                    });
                 }
-            };
-            buffer.unmap();
-            state.store(FREE, Ordering::Release);
-            got.map_or(Polled::Discarded, Polled::Read)
+                READY => {
+                    let got = match e.buffer.slice(..).get_mapped_range() {
+                        Err(_) => None,
+                        Ok(view) => {
+                            let w: &[u32] = bytemuck::cast_slice(&view[..8]);
+                            let stamp = w[0] as u64 | (w[1] as u64) << 32;
+                            (stamp == e.frame)
+                                .then(|| read(e.frame, &e.meta, &view[STAMP_BYTES as usize..]))
+                        }
+                    };
+                    e.buffer.unmap();
+                    e.state.store(FREE, Ordering::Release);
+                    match got {
+                        Some(t) => {
+                            self.stats.applied += 1;
+                            self.stats.last_latency = frame.saturating_sub(e.frame);
+                            out.push((e.frame, t));
+                        }
+                        None => self.stats.discarded += 1,
+                    }
+                }
+                FAILED => {
+                    e.state.store(FREE, Ordering::Release);
+                    self.stats.discarded += 1;
+                }
+                _ => {}
+            }
         }
-        FAILED => {
-            state.store(FREE, Ordering::Release);
-            Polled::Discarded
-        }
-        _ => Polled::Pending,
+        out.sort_by_key(|r| r.0);
+        out
     }
 }

@@ -1,12 +1,13 @@
 //! naga validation and reflection of every composed shader against the Rust side.
 
 use super::*;
-use crate::backend::{incore::VolumeParams, ooc::OocParams, ooc::SlotInfo, volume_layout_entries};
+use crate::backend::{incore::VolumeParams, volume_layout_entries};
 use crate::composite::CompositeUniforms;
 use crate::frame::{FrameFlags, FrameUniforms};
 use crate::kernels::{KernelMode, OVERRIDES, WORKGROUP};
 use crate::predict::{PredictUniforms, ReprojectUniforms, TraversalClass};
 use crate::tf::TfInfo;
+use crate::volume::{OocParams, SlotInfo};
 use naga::valid::{Capabilities, ValidationFlags, Validator};
 use std::collections::BTreeSet;
 

@@ -119,12 +119,12 @@ impl ViewerApp {
                 .show(ui, |ui| {
                     let c = &mut self.ooc;
                     let mut changed = lod_ui(ui, &mut c.lod_metric, &mut c.tolerance_px);
-                    let before = self.visibility;
+                    let before = c.visibility;
                     egui::ComboBox::from_label("visibility")
-                        .selected_text(self.visibility.name())
+                        .selected_text(c.visibility.name())
                         .show_ui(ui, |ui| {
                             for p in brickray::VisibilityPolicy::ALL {
-                                ui.selectable_value(&mut self.visibility, p, p.name());
+                                ui.selectable_value(&mut c.visibility, p, p.name());
                             }
                         })
                         .response
@@ -133,7 +133,7 @@ impl ViewerApp {
                              loaded: occlusion queries (the paper's), the ray caster's usage \
                              counts (rayguided), or both (docs/visibility.md)",
                         );
-                    changed |= self.visibility != before;
+                    changed |= c.visibility != before;
                     let mut mib = |ui: &mut egui::Ui,
                                    v: &mut u64,
                                    range: std::ops::RangeInclusive<u64>,

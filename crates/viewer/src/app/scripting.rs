@@ -79,7 +79,7 @@ impl ViewerApp {
                 .filter(|_| streamed)
                 .map(|s| s.working_set as u32),
             lod: streamed.then_some((self.ooc.lod_metric, self.ooc.tolerance_px)),
-            visibility: streamed.then_some(self.visibility),
+            visibility: streamed.then_some(self.ooc.visibility),
             prediction: (self.prediction, self.stats.prediction()),
             image: slot,
         });
@@ -204,7 +204,7 @@ impl ViewerApp {
                     self.ooc_dirty = true;
                 }
                 Action::Visibility(policy) => {
-                    self.visibility = policy;
+                    self.ooc.visibility = policy;
                     self.ooc_dirty = true;
                 }
                 Action::Prediction(choice) => {

@@ -1,0 +1,537 @@
+//! A streamed volume the host owns ([`StreamedVolume`]): one brick source,
+//! its caches, loader and planner (`brickray_cache::Streamer`), and the GPU
+//! objects every view of it shares: the brick atlas, the slot and sub-cell
+//! tables, the out-of-core parameters and the index over the frame's cut. The
+//! host creates it once and hands it to every renderer that draws it, as
+//! glyphon's `TextAtlas` is handed to its text renderers; the renderers'
+//! `prepare` plans it once per frame for all the views that draw it
+//! ([`crate::VolumeRenderer::prepare_views`]). A clone is another handle to
+//! the same volume.
+
+use crate::encoding::{self, U8Filtering};
+use crate::error::{PrepareError, RenderError};
+use crate::gpu::{self, GrowBuffer, Uniform};
+use brickray_cache::{
+    CacheConfig, FadeSlot, GpuFormat, StreamError, StreamFrame, StreamPlan, StreamStats, Streamer,
+    Upload,
+};
+use brickray_core::{BrickSource, OctreeLayout};
+use brickray_index::Splits;
+use parking_lot::{Mutex, MutexGuard};
+use std::sync::Arc;
+use std::time::Instant;
+
+/// `range[3]` of a borrowed slot's row ([`FadeSlot::borrowed`]): above 1,
+/// ooc.wgsl draws the leaf from the ancestor alone, at the ancestor's step.
+const BORROWED_WEIGHT: f32 = 2.0;
+
+/// `struct SlotInfo` of ooc.wgsl: one row of the slot table. `offset[3]`
+/// (levels up to the fade fallback, 0: none), `range[2]` (the fallback's slot)
+/// and `range[3]` (its weight) carry a level-of-detail fade ([`FadeSlot`]).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub(crate) struct SlotInfo {
+    pub(crate) offset: [f32; 4],
+    pub(crate) range: [f32; 4],
+}
+
+/// `struct OocParams` of ooc.wgsl.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub(crate) struct OocParams {
+    pub(crate) dims: [f32; 3],
+    pub(crate) value_scale: f32,
+    pub(crate) octree_scale: [f32; 3],
+    pub(crate) value_offset: f32,
+    pub(crate) atlas_size: [f32; 3],
+    pub(crate) finest_level: u32,
+    pub(crate) brick: u32,
+    pub(crate) apron: u32,
+    pub(crate) stored_side: u32,
+    pub(crate) sub_cells: u32,
+    pub(crate) splits: [u32; 4],
+}
+
+/// The pool's GPU side, sized by the pool's slot grid: the atlas and the
+/// per-slot tables (recreated when the GPU budget changes).
+struct Pool {
+    atlas: wgpu::Texture,
+    atlas_view: wgpu::TextureView,
+    atlas_bytes: u64,
+    slots: wgpu::Buffer,
+    slots_cpu: Vec<SlotInfo>,
+    slots_dirty: bool,
+    sub_cells: wgpu::Buffer,
+    /// Slots whose rows carry a fade (cleared before the next frame's fades).
+    faded: Vec<u32>,
+}
+
+impl Pool {
+    fn new(
+        device: &wgpu::Device,
+        streamer: &Streamer,
+        format: wgpu::TextureFormat,
+    ) -> Result<Pool, RenderError> {
+        let gpu = streamer.gpu_format();
+        let dims = streamer.pool().atlas_dims();
+        let atlas = gpu::texture(
+            device,
+            &wgpu::TextureDescriptor {
+                label: Some("brickray-render brick atlas"),
+                size: wgpu::Extent3d {
+                    width: dims[0],
+                    height: dims[1],
+                    depth_or_array_layers: dims[2],
+                },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D3,
+                format,
+                usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+                view_formats: &[],
+            },
+        )?;
+        let atlas_bytes =
+            dims.iter().map(|&d| d as u64).product::<u64>() * gpu.encoding.texel_bytes() as u64;
+        let slot_count = streamer.pool().slot_count().max(1) as u64;
+        let rows = streamer.slot_rows() as usize;
+        let sub_cells = gpu::storage_buffer(
+            device,
+            "brickray-render brick sub-cell table",
+            slot_count * (gpu.sub_cells_per_axis as u64).pow(3) * 8,
+        )?;
+        Ok(Pool {
+            atlas_view: atlas.create_view(&Default::default()),
+            atlas,
+            atlas_bytes,
+            slots: Pool::slot_table(device, rows)?,
+            slots_cpu: vec![bytemuck::Zeroable::zeroed(); rows],
+            slots_dirty: true,
+            sub_cells,
+            faded: Vec::new(),
+        })
+    }
+
+    fn slot_table(device: &wgpu::Device, rows: usize) -> Result<wgpu::Buffer, RenderError> {
+        gpu::storage_buffer(
+            device,
+            "brickray-render brick slot table",
+            (rows * std::mem::size_of::<SlotInfo>()) as u64,
+        )
+    }
+
+    /// Grows the slot table to the rows the planner needs now (a switch to
+    /// octant-granular cuts at run time); the atlas and the pool's slots
+    /// stay. True when it was recreated.
+    fn ensure_rows(&mut self, device: &wgpu::Device, rows: usize) -> Result<bool, RenderError> {
+        if rows <= self.slots_cpu.len() {
+            return Ok(false);
+        }
+        self.slots = Pool::slot_table(device, rows)?;
+        self.slots_cpu.resize(rows, bytemuck::Zeroable::zeroed());
+        self.slots_dirty = true;
+        Ok(true)
+    }
+
+    /// Writes this frame's uploads, prepared by the loader threads: texels into
+    /// the atlas, sub-cell ranges and slot rows into their tables; then the
+    /// rows of fading and borrowed leaves. Returns the bytes written.
+    fn write(
+        &mut self,
+        queue: &wgpu::Queue,
+        uploads: &[Upload],
+        fades: &[FadeSlot],
+        side: u32,
+        bpp: u32,
+    ) -> u64 {
+        let mut bytes = 0u64;
+        for up in uploads {
+            bytes += self.write_upload(queue, up, side, bpp);
+        }
+        // Fades: last frame's cleared, this frame's set (after the uploads,
+        // which reset their slots' rows).
+        for slot in std::mem::take(&mut self.faded) {
+            if let Some(s) = self.slots_cpu.get_mut(slot as usize) {
+                s.offset[3] = 0.0;
+                s.range[2] = 0.0;
+                s.range[3] = 0.0;
+                self.slots_dirty = true;
+            }
+        }
+        for f in fades {
+            self.write_fade(f);
+        }
+        if self.slots_dirty {
+            queue.write_buffer(&self.slots, 0, bytemuck::cast_slice(&self.slots_cpu));
+            bytes += std::mem::size_of_val(self.slots_cpu.as_slice()) as u64;
+            self.slots_dirty = false;
+        }
+        bytes
+    }
+
+    fn write_upload(&mut self, queue: &wgpu::Queue, up: &Upload, side: u32, bpp: u32) -> u64 {
+        let b = &up.brick;
+        queue.write_texture(
+            wgpu::TexelCopyTextureInfo {
+                texture: &self.atlas,
+                mip_level: 0,
+                origin: wgpu::Origin3d {
+                    x: up.atlas_offset[0],
+                    y: up.atlas_offset[1],
+                    z: up.atlas_offset[2],
+                },
+                aspect: wgpu::TextureAspect::All,
+            },
+            &b.texels,
+            wgpu::TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some(side * bpp),
+                rows_per_image: Some(side),
+            },
+            wgpu::Extent3d {
+                width: side,
+                height: side,
+                depth_or_array_layers: side,
+            },
+        );
+        let cells: &[u8] = bytemuck::cast_slice(&b.sub_cells);
+        queue.write_buffer(&self.sub_cells, up.slot as u64 * cells.len() as u64, cells);
+        if let Some(s) = self.slots_cpu.get_mut(up.slot as usize) {
+            let o = up.atlas_offset;
+            *s = SlotInfo {
+                offset: [o[0] as f32, o[1] as f32, o[2] as f32, 0.0],
+                range: [b.range[0], b.range[1], 0.0, 0.0],
+            };
+            self.slots_dirty = true;
+        }
+        (b.texels.len() + cells.len()) as u64
+    }
+
+    fn write_fade(&mut self, f: &FadeSlot) {
+        // A borrowed slot's row is its ancestor's (offset, range), drawn
+        // from the ancestor alone: weight 2 tells ooc.wgsl.
+        let row = if f.borrowed {
+            let Some(&lender) = self.slots_cpu.get(f.fallback as usize) else {
+                return;
+            };
+            SlotInfo {
+                offset: [lender.offset[0], lender.offset[1], lender.offset[2], 0.0],
+                range: [lender.range[0], lender.range[1], 0.0, 0.0],
+            }
+        } else {
+            match self.slots_cpu.get(f.slot as usize) {
+                Some(&s) => s,
+                None => return,
+            }
+        };
+        if let Some(s) = self.slots_cpu.get_mut(f.slot as usize) {
+            *s = row;
+            s.offset[3] = f.levels_up as f32;
+            s.range[2] = f.fallback as f32;
+            s.range[3] = if f.borrowed {
+                BORROWED_WEIGHT
+            } else {
+                f.weight
+            };
+            self.faded.push(f.slot);
+            self.slots_dirty = true;
+        }
+    }
+}
+
+/// What one plan of the volume gave the views that draw it.
+#[derive(Debug, Clone)]
+pub(crate) struct Planned {
+    pub(crate) plan: StreamPlan,
+    /// Words of the encoded index.
+    pub(crate) index_words: u32,
+    /// Bytes written (bricks, tables, index).
+    pub(crate) bytes: u64,
+    pub(crate) refine_ms: f64,
+    pub(crate) upload_ms: f64,
+    pub(crate) encode_ms: f64,
+}
+
+/// The shared state behind a [`StreamedVolume`].
+pub(crate) struct Shared {
+    pub(crate) streamer: Streamer,
+    pub(crate) format: wgpu::TextureFormat,
+    pool: Pool,
+    pub(crate) params: Uniform<OocParams>,
+    pub(crate) index: GrowBuffer,
+    pub(crate) sampler: wgpu::Sampler,
+    splits: Splits,
+    /// Bumped whenever an object a view's bind group holds is recreated.
+    pub(crate) generation: u64,
+}
+
+impl Shared {
+    /// The atlas, slot table, sub-cell table, index and parameters, as the
+    /// views' bind groups hold them.
+    pub(crate) fn bound(&self) -> Bound<'_> {
+        Bound {
+            params: &self.params.buffer,
+            atlas: &self.pool.atlas_view,
+            sampler: &self.sampler,
+            slots: &self.pool.slots,
+            sub_cells: &self.pool.sub_cells,
+            index: &self.index.buffer,
+        }
+    }
+
+    fn write_params(&mut self, queue: &wgpu::Queue) {
+        let l = self.streamer.layout();
+        let gpu = self.streamer.gpu_format();
+        let params = OocParams {
+            dims: l.volume.dims.map(|d| d as f32),
+            value_scale: gpu.encoding.scale,
+            octree_scale: l.volume_scale().map(|s| s as f32),
+            value_offset: gpu.encoding.offset,
+            atlas_size: self.streamer.pool().atlas_dims().map(|d| d as f32),
+            finest_level: (l.levels - 1) as u32,
+            brick: l.brick,
+            apron: l.apron,
+            stored_side: l.stored_side(),
+            sub_cells: gpu.sub_cells_per_axis,
+            splits: {
+                let [lo, hi] = self.splits.gpu_words();
+                [lo, hi, 0, 0]
+            },
+        };
+        self.params.write(queue, params);
+    }
+
+    /// Plans the frame for its views, writes what the plan uploads and the
+    /// index over its cut.
+    pub(crate) fn plan(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        frame: &StreamFrame<'_>,
+    ) -> Result<Planned, PrepareError> {
+        let t = Instant::now();
+        let plan = self.streamer.plan(frame);
+        if self
+            .pool
+            .ensure_rows(device, self.streamer.slot_rows() as usize)?
+        {
+            self.generation += 1;
+        }
+        let refine_ms = t.elapsed().as_secs_f64() * 1e3;
+
+        let t = Instant::now();
+        let side = self.streamer.layout().stored_side();
+        let bpp = self.streamer.gpu_format().encoding.texel_bytes();
+        let mut bytes = self
+            .pool
+            .write(queue, &plan.uploads, &plan.fades, side, bpp);
+        let upload_ms = t.elapsed().as_secs_f64() * 1e3;
+
+        let t = Instant::now();
+        let index =
+            brickray_index::encode_cut_with(&plan.cut, self.splits).map_err(RenderError::from)?;
+        let words = index.words();
+        let (written, grew) = self
+            .index
+            .write(device, queue, bytemuck::cast_slice(words))?;
+        bytes += written;
+        if grew {
+            self.generation += 1;
+        }
+        let encode_ms = t.elapsed().as_secs_f64() * 1e3;
+        Ok(Planned {
+            index_words: words.len() as u32,
+            plan,
+            bytes,
+            refine_ms,
+            upload_ms,
+            encode_ms,
+        })
+    }
+}
+
+/// What a view's group 2 binds of the shared volume.
+pub(crate) struct Bound<'a> {
+    pub(crate) params: &'a wgpu::Buffer,
+    pub(crate) atlas: &'a wgpu::TextureView,
+    pub(crate) sampler: &'a wgpu::Sampler,
+    pub(crate) slots: &'a wgpu::Buffer,
+    pub(crate) sub_cells: &'a wgpu::Buffer,
+    pub(crate) index: &'a wgpu::Buffer,
+}
+
+/// A streamed (out-of-core) volume the host owns and hands to every renderer
+/// that draws it (see the module documentation). Out-of-core settings live
+/// here, in one [`CacheConfig`] applied with [`configure`](Self::configure).
+#[derive(Clone)]
+pub struct StreamedVolume {
+    shared: Arc<Mutex<Shared>>,
+}
+
+impl std::fmt::Debug for StreamedVolume {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let s = self.shared.lock();
+        f.debug_struct("StreamedVolume")
+            .field("dims", &s.streamer.layout().volume.dims)
+            .field("levels", &s.streamer.layout().levels)
+            .field("format", &s.format)
+            .finish_non_exhaustive()
+    }
+}
+
+impl StreamedVolume {
+    /// A volume streamed from `source` (a brick-octree file store, an
+    /// OME-Zarr image, a procedural source) with `config`, its texels stored
+    /// as `u8_filtering` says for u8 volumes. Validates the configuration
+    /// against the source and the device, sizes the pool within the device's
+    /// limits and reads the root (set-up time, not the frame path), so the
+    /// first frame already shows a coarse image. Creates no GPU object when a
+    /// check fails.
+    pub fn new(
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        source: Arc<dyn BrickSource>,
+        config: CacheConfig,
+        u8_filtering: U8Filtering,
+    ) -> Result<StreamedVolume, RenderError> {
+        crate::backend::ooc::check_limits(device)?;
+        let layout = source.layout().clone();
+        let gpu_format = GpuFormat::for_layout(
+            &layout,
+            encoding::caps(device),
+            u8_filtering,
+            std::mem::size_of::<SlotInfo>() as u32,
+            device.limits().max_texture_dimension_3d,
+        );
+        let format = encoding::wgpu_format(gpu_format.encoding.format);
+        let mut streamer = Streamer::new(source, config, gpu_format)?;
+        streamer.preload_root()?;
+        let pool = Pool::new(device, &streamer, format)?;
+        let mut shared = Shared {
+            pool,
+            params: Uniform::new(device, "brickray-render out-of-core params")?,
+            index: GrowBuffer::new(device, "brickray-render octree index", 1 << 12)?,
+            sampler: crate::backend::volume_sampler(device)?,
+            splits: Splits::from_layout(&layout),
+            generation: 0,
+            format,
+            streamer,
+        };
+        shared.write_params(queue);
+        Ok(StreamedVolume {
+            shared: Arc::new(Mutex::new(shared)),
+        })
+    }
+
+    pub(crate) fn lock(&self) -> MutexGuard<'_, Shared> {
+        self.shared.lock()
+    }
+
+    /// True when `other` is a handle to the same volume.
+    pub fn same(&self, other: &StreamedVolume) -> bool {
+        Arc::ptr_eq(&self.shared, &other.shared)
+    }
+
+    /// Applies an out-of-core configuration: validated whole first (nothing
+    /// changes on error), then only what differs is rebuilt. Budgets other
+    /// than the GPU's, the LOD metric and tolerance, fades, retry and the
+    /// visibility policy and its settings take effect at the next frame and
+    /// upload nothing again; a loader-thread change restarts the loader; a
+    /// GPU budget or floor change recreates the atlas and its tables, and the
+    /// next frames upload the working set again.
+    pub fn configure(
+        &self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        config: CacheConfig,
+    ) -> Result<(), RenderError> {
+        let mut s = self.shared.lock();
+        if *s.streamer.config() == config {
+            return Ok(());
+        }
+        let old = *s.streamer.config();
+        let r = s.streamer.configure(config)?;
+        if r.pool {
+            // (The pool's size is within the 3D texture limit by the
+            // planner's own check; its tables may still exceed a buffer
+            // limit: then the old configuration is put back.)
+            match Pool::new(device, &s.streamer, s.format) {
+                Ok(pool) => s.pool = pool,
+                Err(e) => {
+                    s.streamer.configure(old)?;
+                    s.pool = Pool::new(device, &s.streamer, s.format)?;
+                    s.generation += 1;
+                    s.write_params(queue);
+                    return Err(e);
+                }
+            }
+            s.generation += 1;
+            s.write_params(queue);
+        }
+        Ok(())
+    }
+
+    /// [`configure`](Self::configure) with the configuration in force
+    /// changed by `f`: `volume.edit(device, queue, |c| c.tolerance_px = 2.0)`.
+    pub fn edit(
+        &self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        f: impl FnOnce(&mut CacheConfig),
+    ) -> Result<(), RenderError> {
+        let mut c = self.config();
+        f(&mut c);
+        self.configure(device, queue, c)
+    }
+
+    /// The configuration in force.
+    pub fn config(&self) -> CacheConfig {
+        *self.shared.lock().streamer.config()
+    }
+
+    /// The planner's statistics of the last frame.
+    pub fn stats(&self) -> StreamStats {
+        self.shared.lock().streamer.stats()
+    }
+
+    /// True when another frame of the same views would change the image
+    /// (bricks still arriving or being refined).
+    pub fn wants_redraw(&self) -> bool {
+        self.shared.lock().streamer.wants_redraw()
+    }
+
+    /// Forgets every failed brick so it is requested again when the views
+    /// need it (after the source was repaired).
+    pub fn retry_failed_bricks(&self) {
+        self.shared.lock().streamer.retry_failed();
+    }
+
+    /// The first streaming failure (a brick or its metadata could not be
+    /// read) since the last call, with the count of further ones, so a viewer
+    /// shows one message, not thousands. Failures never fail `prepare`: the
+    /// image stays at a coarser level there and `wants_redraw` stays true.
+    pub fn take_streaming_error(&self) -> Option<StreamError> {
+        self.shared.lock().streamer.take_error()
+    }
+
+    /// The octree layout of the source.
+    pub fn layout(&self) -> OctreeLayout {
+        self.shared.lock().streamer.layout().clone()
+    }
+
+    /// The texture format of the atlas.
+    pub fn texel_format(&self) -> wgpu::TextureFormat {
+        self.shared.lock().format
+    }
+
+    /// Bytes of the atlas.
+    pub fn resident_bytes(&self) -> u64 {
+        self.shared.lock().pool.atlas_bytes
+    }
+
+    /// Reads the planner's state (the brick manager's residency and
+    /// failures, the visibility state, the visible weights): diagnostics.
+    pub fn inspect<R>(&self, f: impl FnOnce(&Streamer) -> R) -> R {
+        f(&self.shared.lock().streamer)
+    }
+}
