@@ -231,9 +231,27 @@ where
     I: IntoIterator,
     I::Item: Borrow<CutLeaf>,
 {
+    let arena = insert(leaves, splits)?;
+    let n = number(&arena, splits)?;
+    let words = write_words(&arena, &n, splits);
+    Ok(EncodedIndex {
+        words,
+        keys: n.keys,
+        stats: n.stats,
+        splits,
+    })
+}
+
+/// Step 1: every leaf inserted into an arena octree; children are allocated
+/// in blocks (8, or fewer along unsplit axes) when a node is first
+/// subdivided. Overlaps, out-of-range keys and too-deep or too-large cuts are
+/// refused here.
+fn insert<I>(leaves: I, splits: Splits) -> Result<Vec<ArenaNode>, CutError>
+where
+    I: IntoIterator,
+    I::Item: Borrow<CutLeaf>,
+{
     let hv = Halvings::new(splits);
-    // 1. Insert every leaf into an arena octree; children are allocated in blocks
-    //    of 8 when a node is first subdivided.
     let leaves = leaves.into_iter();
     let mut arena: Vec<ArenaNode> = Vec::with_capacity(leaves.size_hint().0 * 8 / 7 + 8);
     arena.push(UNSET_NODE);
@@ -276,19 +294,9 @@ where
                 });
             }
             INNER => {
-                // Some earlier leaf lies below: find one (the first in child order).
-                let mut below = key;
-                let mut a = cur;
-                while arena[a].state == INNER {
-                    let fc = arena[a].first_child as usize;
-                    let n = splits.child_count(below.level as u32) as usize;
-                    let ci = (0..n).find(|&i| arena[fc + i].state != UNSET).unwrap_or(0);
-                    a = fc + ci;
-                    below = splits.child(below, ci as u32);
-                }
                 return Err(CutError::Overlap {
                     outer: key,
-                    inner: below,
+                    inner: leaf_below(&arena, cur, key, splits),
                 });
             }
             _ => {
@@ -303,9 +311,38 @@ where
             });
         }
     }
+    Ok(arena)
+}
 
-    // 2. Breadth-first numbering: `order[q]` is the arena node numbered `q`. The
-    //    children of a node are consecutive in both numberings.
+/// A leaf inserted below the inner arena node `a` (of `key`): the first in
+/// child order.
+fn leaf_below(arena: &[ArenaNode], mut a: usize, key: NodeKey, splits: Splits) -> NodeKey {
+    let mut below = key;
+    while arena[a].state == INNER {
+        let fc = arena[a].first_child as usize;
+        let n = splits.child_count(below.level as u32) as usize;
+        let ci = (0..n).find(|&i| arena[fc + i].state != UNSET).unwrap_or(0);
+        a = fc + ci;
+        below = splits.child(below, ci as u32);
+    }
+    below
+}
+
+/// The arena numbered breadth first.
+struct Numbered {
+    /// `order[q]` is the arena node numbered `q`.
+    order: Vec<u32>,
+    /// The key of node `q`.
+    keys: Vec<NodeKey>,
+    /// The number of node `q`'s first child (`NONE` for a leaf).
+    first_child: Vec<u32>,
+    stats: IndexStats,
+}
+
+/// Step 2: breadth-first numbering; the children of a node are consecutive
+/// in both numberings. A gap (an unset node) and an index past
+/// [`MAX_WORDS`] are refused here.
+fn number(arena: &[ArenaNode], splits: Splits) -> Result<Numbered, CutError> {
     let nodes = arena.len();
     let mut order: Vec<u32> = Vec::with_capacity(nodes);
     let mut keys: Vec<NodeKey> = Vec::with_capacity(nodes);
@@ -348,15 +385,26 @@ where
     }
     stats.nodes = nodes as u32;
     stats.words = words_len as u32;
+    Ok(Numbered {
+        order,
+        keys,
+        first_child,
+        stats,
+    })
+}
 
-    // 3. Neighbours of every node (same-level node if it exists, else the coarser
-    //    leaf containing it), top-down in O(1) per face: a child's neighbour across
-    //    an inner face is its sibling; across an outer face it is the parent's
-    //    neighbour if that is a leaf, else that neighbour's mirrored child. Along
-    //    an axis the node is not split along, both of a child's faces are outer
-    //    faces and the neighbour's child has the same index.
+/// Step 3: the words. Neighbours of every node (same-level node if it
+/// exists, else the coarser leaf containing it), top-down in O(1) per face:
+/// a child's neighbour across an inner face is its sibling; across an outer
+/// face it is the parent's neighbour if that is a leaf, else that
+/// neighbour's mirrored child. Along an axis the node is not split along,
+/// both of a child's faces are outer faces and the neighbour's child has the
+/// same index.
+fn write_words(arena: &[ArenaNode], n: &Numbered, splits: Splits) -> Vec<u32> {
+    let nodes = arena.len();
+    let (keys, first_child) = (&n.keys, &n.first_child);
     let mut neigh: Vec<[u32; 6]> = vec![[NULL; 6]; nodes];
-    let mut words: Vec<u32> = vec![0; words_len];
+    let mut words: Vec<u32> = vec![0; n.stats.words as usize];
     let mut record = nodes as u32;
     for q in 0..nodes {
         let fc = first_child[q];
@@ -390,7 +438,7 @@ where
                 neigh[(fc + ci) as usize] = cn;
             }
         } else {
-            let a = &arena[order[q] as usize];
+            let a = &arena[n.order[q] as usize];
             let (tag, data) = match a.slot {
                 None => (TAG_EMPTY, NULL),
                 Some(slot) => (TAG_DATA, slot),
@@ -409,10 +457,5 @@ where
             record += LEAF_RECORD_WORDS;
         }
     }
-    Ok(EncodedIndex {
-        words,
-        keys,
-        stats,
-        splits,
-    })
+    words
 }
