@@ -217,124 +217,160 @@ impl TfTables {
         rows: u32,
         preint: bool,
     ) -> Result<u64, RenderError> {
-        let Some(tf) = self.current.as_ref() else {
+        if self.current.is_none() {
             return Ok(0);
-        };
+        }
         let key = TableKey { step_factor, rows };
         let mut written = 0;
         if self.table_key != Some(key) {
-            let max_width = device.limits().max_texture_dimension_2d;
-            let t = tf.corrected_table(step_factor, rows, max_width);
-            let size = wgpu::Extent3d {
-                width: t.width,
-                height: t.rows,
-                depth_or_array_layers: 1,
-            };
-            if self
-                .table
-                .as_ref()
-                .is_none_or(|(tex, _)| tex.size() != size)
-            {
-                let tex = table_texture(device, "brickray-render tf table", size)?;
-                let view = tex.create_view(&Default::default());
-                self.table = Some((tex, view));
-                self.bind_group = None;
-            }
-            let halfs: Vec<u16> = t
-                .texels
-                .iter()
-                .flatten()
-                .map(|&x| half::f16::from_f32(x).to_bits())
-                .collect();
-            let (tex, _) = self.table.as_ref().expect("created above");
-            queue.write_texture(
-                tex.as_image_copy(),
-                bytemuck::cast_slice(&halfs),
-                wgpu::TexelCopyBufferLayout {
-                    offset: 0,
-                    bytes_per_row: Some(t.width * 8),
-                    rows_per_image: None,
-                },
-                size,
-            );
-            written += halfs.len() as u64 * 2;
-            self.preint_key = None;
-            written += self.info.write(
-                queue,
-                TfInfo {
-                    count: tf.len() as f32,
-                    width: t.width as f32,
-                    rows: t.rows as f32,
-                    preint_size: PREINT_SIZE as f32,
-                },
-            );
-            self.table_key = Some(key);
+            written += self.write_table(device, queue, key)?;
         }
-        // The pre-integrated table when asked for and stale; a stand-in until the
-        // first one.
+        written += self.write_preintegrated(device, queue, key, preint)?;
+        if self.bind_group.is_none() {
+            self.bind_group = Some(self.make_bind_group(device)?);
+        }
+        Ok(written)
+    }
+
+    /// The corrected table of the current TF for `key` (recreated when its
+    /// size changes) and the TF's uniform.
+    fn write_table(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        key: TableKey,
+    ) -> Result<u64, RenderError> {
+        let Some(tf) = self.current.as_ref() else {
+            return Ok(0);
+        };
+        let max_width = device.limits().max_texture_dimension_2d;
+        let t = tf.corrected_table(key.step_factor, key.rows, max_width);
+        let count = tf.len();
+        let size = wgpu::Extent3d {
+            width: t.width,
+            height: t.rows,
+            depth_or_array_layers: 1,
+        };
+        if self
+            .table
+            .as_ref()
+            .is_none_or(|(tex, _)| tex.size() != size)
+        {
+            let tex = table_texture(device, "brickray-render tf table", size)?;
+            let view = tex.create_view(&Default::default());
+            self.table = Some((tex, view));
+            self.bind_group = None;
+        }
+        let halfs: Vec<u16> = t
+            .texels
+            .iter()
+            .flatten()
+            .map(|&x| half::f16::from_f32(x).to_bits())
+            .collect();
+        let Some((tex, _)) = self.table.as_ref() else {
+            return Ok(0);
+        };
+        queue.write_texture(
+            tex.as_image_copy(),
+            bytemuck::cast_slice(&halfs),
+            wgpu::TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some(t.width * 8),
+                rows_per_image: None,
+            },
+            size,
+        );
+        let mut written = halfs.len() as u64 * 2;
+        self.preint_key = None;
+        written += self.info.write(
+            queue,
+            TfInfo {
+                count: count as f32,
+                width: t.width as f32,
+                rows: t.rows as f32,
+                preint_size: PREINT_SIZE as f32,
+            },
+        );
+        self.table_key = Some(key);
+        Ok(written)
+    }
+
+    /// The pre-integrated table when asked for and stale; a stand-in until
+    /// the first one.
+    fn write_preintegrated(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        key: TableKey,
+        preint: bool,
+    ) -> Result<u64, RenderError> {
         let build = preint && self.preint_key != Some(key);
         if build {
             // Checked before the (costly) table is computed.
             gpu::need(
                 "max_texture_array_layers",
-                rows.max(1) as u64,
+                key.rows.max(1) as u64,
                 device.limits().max_texture_array_layers as u64,
             )?;
         }
-        if build || self.preint.is_none() {
-            let old = self.preint.take();
-            let old_size = old.as_ref().map(|(tex, _)| tex.size());
-            let table =
-                build.then(|| tf.preintegrated_table(step_factor, rows.max(1), PREINT_SIZE));
-            let (pair, bytes) = upload_preint(device, queue, old, table)?;
-            if old_size != Some(pair.0.size()) {
-                self.bind_group = None;
+        if !build && self.preint.is_some() {
+            return Ok(0);
+        }
+        let table = match (build, self.current.as_ref()) {
+            (true, Some(tf)) => {
+                Some(tf.preintegrated_table(key.step_factor, key.rows.max(1), PREINT_SIZE))
             }
-            self.preint = Some(pair);
-            self.preint_key = build.then_some(key);
-            written += bytes;
+            _ => None,
+        };
+        let old = self.preint.take();
+        let old_size = old.as_ref().map(|(tex, _)| tex.size());
+        let (pair, bytes) = upload_preint(device, queue, old, table)?;
+        if old_size != Some(pair.0.size()) {
+            self.bind_group = None;
         }
-        if self.bind_group.is_none() {
-            let (_, view) = self.table.as_ref().expect("built above");
-            let (_, preint_view) = self.preint.as_ref().expect("built above");
-            self.bind_group = Some(gpu::scoped(
-                device,
-                "brickray-render tf bind group",
-                || {
-                    device.create_bind_group(&wgpu::BindGroupDescriptor {
-                        label: Some("brickray-render transfer function"),
-                        layout: &self.layout,
-                        entries: &[
-                            wgpu::BindGroupEntry {
-                                binding: 0,
-                                resource: self.entries.buffer.as_entire_binding(),
-                            },
-                            wgpu::BindGroupEntry {
-                                binding: 1,
-                                resource: self.prefix.buffer.as_entire_binding(),
-                            },
-                            wgpu::BindGroupEntry {
-                                binding: 2,
-                                resource: self.info.buffer.as_entire_binding(),
-                            },
-                            wgpu::BindGroupEntry {
-                                binding: 3,
-                                resource: wgpu::BindingResource::TextureView(view),
-                            },
-                            wgpu::BindGroupEntry {
-                                binding: 4,
-                                resource: wgpu::BindingResource::Sampler(&self.sampler),
-                            },
-                            wgpu::BindGroupEntry {
-                                binding: 5,
-                                resource: wgpu::BindingResource::TextureView(preint_view),
-                            },
-                        ],
-                    })
-                },
-            )?);
-        }
-        Ok(written)
+        self.preint = Some(pair);
+        self.preint_key = build.then_some(key);
+        Ok(bytes)
+    }
+
+    /// Group 1 over the entries, prefix sums, uniform and both tables.
+    fn make_bind_group(&self, device: &wgpu::Device) -> Result<wgpu::BindGroup, RenderError> {
+        let (Some((_, view)), Some((_, preint_view))) = (self.table.as_ref(), self.preint.as_ref())
+        else {
+            return Err(RenderError::NotPrepared);
+        };
+        gpu::scoped(device, "brickray-render tf bind group", || {
+            device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("brickray-render transfer function"),
+                layout: &self.layout,
+                entries: &[
+                    wgpu::BindGroupEntry {
+                        binding: 0,
+                        resource: self.entries.buffer.as_entire_binding(),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 1,
+                        resource: self.prefix.buffer.as_entire_binding(),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 2,
+                        resource: self.info.buffer.as_entire_binding(),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 3,
+                        resource: wgpu::BindingResource::TextureView(view),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 4,
+                        resource: wgpu::BindingResource::Sampler(&self.sampler),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 5,
+                        resource: wgpu::BindingResource::TextureView(preint_view),
+                    },
+                ],
+            })
+        })
     }
 }
 

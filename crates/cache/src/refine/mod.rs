@@ -47,7 +47,7 @@ use rank::Unknown;
 
 use crate::upload::UploadBudget;
 use brickray_core::{
-    EmptyReason, LodMetric, NodeInfo, NodeKey, NodeKind, OctreeLayout, RenderMode, TransferFunction,
+    EmptyReason, LodMetric, NodeInfo, NodeKey, OctreeLayout, RenderMode, TransferFunction,
 };
 
 /// Bricks a frame may request at least (when the pool has the slots), whatever
