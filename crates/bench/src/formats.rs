@@ -69,7 +69,7 @@ pub(crate) fn run(args: &[String]) -> Result<crate::Figures, String> {
     let tmp = tempfile::tempdir().map_err(|e| e.to_string())?;
     let opts = BuildOptions {
         memory_bound: memory_mib << 20,
-        progress: false,
+        progress: None,
         ..Default::default()
     };
     let mut fig = crate::Figures::new();

@@ -4,8 +4,6 @@
 use crate::error::StoreError;
 use crate::format::{Header, TableGeometry};
 use brickray_core::{ERROR_BINS, NodeError};
-use std::fs::File;
-use std::os::unix::fs::FileExt;
 use std::path::Path;
 
 /// Bytes of one error entry: `occupied` (u16), reserved (u16, zero), then
@@ -47,7 +45,7 @@ pub(crate) fn encode_all(errors: &[NodeError]) -> Vec<u8> {
 /// Reads and validates the section at `offset` (its length and presence were
 /// checked against the header and the file size by the caller).
 pub(crate) fn read(
-    file: &File,
+    file: &dyn crate::opening::ReadAt,
     path: &Path,
     h: &Header,
     geo: &TableGeometry,
@@ -60,7 +58,7 @@ pub(crate) fn read(
 /// Reads and validates the parent-error section at `offset` (`len` bytes of
 /// entries, then their CRC-32; bounds checked by the caller).
 pub(crate) fn read_parent(
-    file: &File,
+    file: &dyn crate::opening::ReadAt,
     path: &Path,
     geo: &TableGeometry,
     offset: u64,
@@ -73,7 +71,7 @@ pub(crate) fn read_parent(
 }
 
 fn read_with(
-    file: &File,
+    file: &dyn crate::opening::ReadAt,
     path: &Path,
     stored: u32,
     geo: &TableGeometry,

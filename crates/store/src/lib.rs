@@ -24,18 +24,19 @@ mod convert;
 mod error;
 mod errsec;
 pub mod format;
+mod opening;
 mod partial;
 mod procedural;
 mod reader;
 mod sample;
 
-pub use build::{BuildOptions, BuildReport, build, build_file, check_output};
+pub use build::{BuildOptions, BuildProgress, BuildReport, build, build_file, check_output};
 pub use convert::{ConvertReport, convert};
 pub use error::{Mismatch, StoreError};
 pub use errsec::ERROR_ENTRY_LEN;
 pub use partial::{ignored_signals, remove_partial_files};
 pub use procedural::ProceduralSource;
-pub use reader::{NodeRecord, Store, StoreStats, decode_payload, open};
+pub use reader::{NodeRecord, ReadAt, Store, StoreStats, decode_payload, open};
 
 /// The 2x downsampling filter that computes a level-`l-1` voxel from the 2x2x2
 /// level-`l` voxels `(2i + {0,1}, 2j + {0,1}, 2k + {0,1})`, indices clamped to the

@@ -2,20 +2,18 @@
 
 use crate::Filter;
 use crate::error::{Mismatch, StoreError};
-use crate::errsec::{self, ERROR_ENTRY_LEN};
+use crate::errsec;
 use crate::format::{
-    ENTRY_LEN, Entry, FLAG_ERRORS, FLAG_PARENT_ERRORS, FLAG_SPLIT_MASKS, FLAG_THRESHOLD,
-    HEADER_LEN, Header, KIND_DATA, KIND_EMPTY, KIND_UNIFORM, MAGIC, MAX_APRON, MAX_BRICK,
-    MAX_BRICK_BYTES, MAX_SPLIT_MASKS, MIN_VERSION, TableGeometry, VERSION, dtype_from_code,
-    filter_from_code, packed_masks,
+    Entry, FLAG_THRESHOLD, HEADER_LEN, KIND_DATA, KIND_EMPTY, KIND_UNIFORM, TableGeometry,
 };
-use crate::sample::{fill, first_nan, representable, stats_dyn};
+use crate::opening;
+pub use crate::opening::ReadAt;
+use crate::sample::{fill, first_nan, stats_dyn};
 use brickray_core::{
     BrickError, BrickSource, NodeError, NodeInfo, NodeKey, NodeKind, OctreeLayout, VolumeDesc,
 };
 use brickray_io::FileKind;
 use std::fs::File;
-use std::os::unix::fs::FileExt;
 use std::path::{Path, PathBuf};
 
 /// Opens a store file, validating its header and node table.
@@ -28,7 +26,7 @@ pub fn open(path: impl AsRef<Path>) -> Result<Store, StoreError> {
 #[derive(Debug)]
 pub struct Store {
     path: PathBuf,
-    file: File,
+    file: Box<dyn ReadAt>,
     layout: OctreeLayout,
     geo: TableGeometry,
     entries: Vec<Entry>,
@@ -72,7 +70,7 @@ pub struct StoreStats {
     pub raw_payload_bytes: u64,
 }
 
-fn bad(path: &Path, field: &'static str, reason: impl Into<String>) -> StoreError {
+pub(crate) fn bad(path: &Path, field: &'static str, reason: impl Into<String>) -> StoreError {
     StoreError::BadHeader {
         path: path.to_owned(),
         field,
@@ -81,7 +79,7 @@ fn bad(path: &Path, field: &'static str, reason: impl Into<String>) -> StoreErro
 }
 
 /// Largest lz4 block a brick of `n` bytes can compress to.
-fn max_compressed(n: usize) -> u64 {
+pub(crate) fn max_compressed(n: usize) -> u64 {
     lz4_flex::block::get_maximum_output_size(n) as u64
 }
 
@@ -112,300 +110,40 @@ impl Store {
                 kind,
             });
         }
-        let file_len = md.len();
-        let mut hb = [0u8; HEADER_LEN];
-        if file_len < HEADER_LEN as u64 {
-            return Err(StoreError::Truncated {
-                path: path.to_owned(),
-                section: "header",
-                needed: HEADER_LEN as u64,
-                actual: file_len,
-            });
-        }
-        file.read_exact_at(&mut hb, 0)
-            .map_err(|e| StoreError::io(path, e))?;
-        if hb[..8] != MAGIC {
-            return Err(StoreError::NotAStore {
-                path: path.to_owned(),
-            });
-        }
-        let (stored, computed) = Header::checksums(&hb);
-        let h = Header::decode(&hb);
-        if !(MIN_VERSION..=VERSION).contains(&h.version) {
-            return Err(StoreError::UnsupportedVersion {
-                path: path.to_owned(),
-                version: h.version,
-            });
-        }
-        if stored != computed {
-            return Err(StoreError::HeaderChecksum {
-                path: path.to_owned(),
-                stored,
-                computed,
-            });
-        }
-        // Reserved bytes are zero, but for the split masks of an anisotropic
-        // pyramid (3 bits per level but the finest, in 108..120) and, from
-        // version 2, the error section's CRC (120..124, zero without it).
-        let masks_used = if h.flags & FLAG_SPLIT_MASKS != 0 {
-            (3 * h.levels.saturating_sub(1) as u32).min(96)
-        } else {
-            0
-        };
-        if (h.version < 2 && hb[120..124].iter().any(|&b| b != 0))
-            || packed_masks(&hb).checked_shr(masks_used).unwrap_or(0) != 0
-            || (h.flags & FLAG_SPLIT_MASKS != 0 && h.levels as usize > MAX_SPLIT_MASKS + 1)
-        {
-            return Err(bad(path, "reserved", "non-zero"));
-        }
-        if h.header_len != HEADER_LEN as u32 {
-            return Err(bad(
-                path,
-                "header_len",
-                format!("{} (expected {HEADER_LEN})", h.header_len),
-            ));
-        }
-        let dtype = dtype_from_code(h.dtype)
-            .ok_or_else(|| bad(path, "dtype", format!("unknown code {}", h.dtype)))?;
-        let filter = filter_from_code(h.filter)
-            .ok_or_else(|| bad(path, "filter", format!("unknown code {}", h.filter)))?;
-        let known_flags = if h.version >= 3 {
-            FLAG_THRESHOLD | FLAG_SPLIT_MASKS | FLAG_ERRORS | FLAG_PARENT_ERRORS
-        } else if h.version >= 2 {
-            FLAG_THRESHOLD | FLAG_SPLIT_MASKS | FLAG_ERRORS
-        } else {
-            FLAG_THRESHOLD | FLAG_SPLIT_MASKS
-        };
-        if h.flags & !known_flags != 0 {
-            return Err(bad(path, "flags", format!("unknown bits {:#x}", h.flags)));
-        }
-        let desc = VolumeDesc {
-            dims: h.dims,
-            dtype,
-            spacing: h.spacing,
-            value_range: h.value_range,
-        };
-        if let Err(e) = brickray_core::volume::voxel_count(h.dims.map(u64::from)) {
-            return Err(bad(path, "dims", e.to_string()));
-        }
-        if h.spacing.iter().any(|s| !s.is_finite() || *s <= 0.0) {
-            return Err(bad(path, "spacing", format!("{:?}", h.spacing)));
-        }
-        if h.value_range.iter().any(|v| !v.is_finite()) {
-            return Err(bad(path, "value_range", format!("{:?}", h.value_range)));
-        }
-        if h.data_range.iter().any(|v| !v.is_finite()) || h.data_range[0] > h.data_range[1] {
-            return Err(bad(path, "data_range", format!("{:?}", h.data_range)));
-        }
-        if !h.empty_below.is_finite() {
-            return Err(bad(path, "empty_below", format!("{}", h.empty_below)));
-        }
-        if h.brick == 0 || h.brick > MAX_BRICK {
-            return Err(bad(
-                path,
-                "brick",
-                format!("{} (must be in 1..={MAX_BRICK})", h.brick),
-            ));
-        }
-        if h.apron > MAX_APRON {
-            return Err(bad(
-                path,
-                "apron",
-                format!("{} (must be in 0..={MAX_APRON})", h.apron),
-            ));
-        }
-        let layout = if h.flags & FLAG_SPLIT_MASKS != 0 {
-            OctreeLayout::with_split_masks(desc, h.brick, h.apron, &h.split_masks)
-                .map_err(|e| bad(path, "split_masks", e.to_string()))?
-        } else {
-            OctreeLayout::new(desc, h.brick, h.apron)
-        };
-        if layout.levels != h.levels {
-            return Err(bad(
-                path,
-                "levels",
-                format!("{} (dims and brick imply {})", h.levels, layout.levels),
-            ));
-        }
-        if layout.brick_bytes() > MAX_BRICK_BYTES {
-            return Err(bad(
-                path,
-                "brick",
-                format!("stored brick of {} bytes", layout.brick_bytes()),
-            ));
-        }
+        Store::from_reader(Box::new(file), md.len(), path)
+    }
+
+    /// Opens a store from any positional reader of `len` bytes (a local
+    /// file, or a range reader over remote storage); `path` names it in
+    /// errors. Validates the header, the sections' extents against `len`, the
+    /// node table and the error sections, in that order.
+    pub fn from_reader(file: Box<dyn ReadAt>, len: u64, path: &Path) -> Result<Store, StoreError> {
+        let h = opening::header(file.as_ref(), path, len)?;
+        let (layout, filter) = opening::layout(&h, path)?;
         let geo =
             TableGeometry::new(&layout).ok_or_else(|| bad(path, "dims", "node count overflows"))?;
-        if h.node_count != geo.count {
-            return Err(bad(
-                path,
-                "node_count",
-                format!("{} (geometry implies {})", h.node_count, geo.count),
-            ));
-        }
-        let table_len = geo
-            .count
-            .checked_mul(ENTRY_LEN as u64)
-            .ok_or_else(|| bad(path, "node_count", "overflow"))?;
-        if h.table_len != table_len {
-            return Err(bad(
-                path,
-                "table_len",
-                format!("{} (expected {table_len})", h.table_len),
-            ));
-        }
-        if h.table_offset < HEADER_LEN as u64 {
-            return Err(bad(
-                path,
-                "table_offset",
-                format!("{} overlaps the header", h.table_offset),
-            ));
-        }
-        if h.payload_bytes != h.table_offset - HEADER_LEN as u64 {
-            return Err(bad(
-                path,
-                "payload_bytes",
-                format!(
-                    "{} (table offset implies {})",
-                    h.payload_bytes,
-                    h.table_offset - HEADER_LEN as u64
-                ),
-            ));
-        }
-        let has_errors = h.flags & FLAG_ERRORS != 0;
-        let errors_len = if has_errors {
-            geo.count
-                .checked_mul(ERROR_ENTRY_LEN as u64)
-                .ok_or_else(|| bad(path, "node_count", "overflow"))?
-        } else {
-            0
-        };
-        let has_parent_errors = h.flags & FLAG_PARENT_ERRORS != 0;
-        if has_parent_errors && !has_errors {
-            return Err(bad(
-                path,
-                "flags",
-                "the parent-error section without the error section",
-            ));
-        }
-        // Its entries, then their CRC.
-        let parent_len = if has_parent_errors { errors_len + 4 } else { 0 };
-        if !has_errors && h.errors_crc != 0 {
-            return Err(bad(
-                path,
-                "errors_crc",
-                "set without the error section's flag",
-            ));
-        }
-        let table_end = h
-            .table_offset
-            .checked_add(table_len)
-            .ok_or_else(|| bad(path, "table_offset", "overflow"))?;
-        let errors_end = table_end
-            .checked_add(errors_len)
-            .ok_or_else(|| bad(path, "node_count", "overflow"))?;
-        let end = errors_end
-            .checked_add(parent_len)
-            .ok_or_else(|| bad(path, "node_count", "overflow"))?;
-        if end > file_len {
-            return Err(StoreError::Truncated {
-                path: path.to_owned(),
-                section: if table_end > file_len {
-                    "node table"
-                } else if errors_end > file_len {
-                    "error section"
-                } else {
-                    "parent-error section"
-                },
-                needed: end,
-                actual: file_len,
-            });
-        }
-        if end < file_len {
-            return Err(bad(
-                path,
-                "table_offset",
-                format!("the store ends at {end} but the file holds {file_len} bytes"),
-            ));
-        }
-        // Bounded by the file size checked above.
-        let mut table = vec![0u8; table_len as usize];
-        file.read_exact_at(&mut table, h.table_offset)
-            .map_err(|e| StoreError::io(path, e))?;
-        let crc = crc32fast::hash(&table);
-        if crc != h.table_crc {
-            return Err(StoreError::TableChecksum {
-                path: path.to_owned(),
-                stored: h.table_crc,
-                computed: crc,
-            });
-        }
-        let max_len = max_compressed(layout.brick_bytes());
-        let mut entries = Vec::with_capacity(geo.count as usize);
-        for (i, b) in table.chunks_exact(ENTRY_LEN).enumerate() {
-            let key = geo.key(i as u64);
-            let (e, reserved) = Entry::decode(b);
-            let node = |field: &'static str, reason: String| StoreError::BadNode {
-                path: path.to_owned(),
-                key,
-                field,
-                reason,
-            };
-            if e.key() != key {
-                return Err(node("position", format!("entry names {:?}", e.key())));
-            }
-            if reserved != [0; 6] {
-                return Err(node("reserved", "non-zero".into()));
-            }
-            if !(e.min.is_finite() && e.max.is_finite() && e.min <= e.max) {
-                return Err(node("min/max", format!("[{}, {}]", e.min, e.max)));
-            }
-            if !representable(dtype, e.value) {
-                return Err(node(
-                    "value",
-                    format!("{} is not a {} sample", e.value, dtype.name()),
-                ));
-            }
-            match e.kind {
-                KIND_EMPTY | KIND_UNIFORM => {
-                    if e.len != 0 || e.offset != 0 || e.crc != 0 {
-                        return Err(node(
-                            "payload",
-                            "payload fields set on a node without payload".into(),
-                        ));
-                    }
-                    if e.kind == KIND_UNIFORM && !(e.min <= e.value && e.value <= e.max) {
-                        return Err(node(
-                            "value",
-                            format!("{} outside [{}, {}]", e.value, e.min, e.max),
-                        ));
-                    }
-                }
-                KIND_DATA => {
-                    if e.len == 0 || e.len as u64 > max_len {
-                        return Err(node("len", format!("{} (must be in 1..={max_len})", e.len)));
-                    }
-                    let pend = e.offset.checked_add(e.len as u64);
-                    if e.offset < HEADER_LEN as u64 || pend.is_none_or(|p| p > h.table_offset) {
-                        return Err(node(
-                            "offset",
-                            format!("{}+{} outside the payload section", e.offset, e.len),
-                        ));
-                    }
-                }
-                k => return Err(node("kind", format!("unknown kind {k}"))),
-            }
-            entries.push(e);
-        }
+        let sec = opening::Sections::of(&h, &geo, path, len)?;
+        let entries = opening::table(file.as_ref(), path, &h, &geo, &layout)?;
         check_tiling(path, &entries, h.table_offset)?;
-        let errors = if has_errors {
-            Some(errsec::read(&file, path, &h, &geo, table_end, errors_len)?)
+        let errors = if sec.errors_len > 0 {
+            Some(errsec::read(
+                file.as_ref(),
+                path,
+                &h,
+                &geo,
+                sec.table_end,
+                sec.errors_len,
+            )?)
         } else {
             None
         };
-        let parent_errors = if has_parent_errors {
+        let parent_errors = if sec.parent_len > 0 {
             Some(errsec::read_parent(
-                &file, path, &geo, errors_end, errors_len,
+                file.as_ref(),
+                path,
+                &geo,
+                sec.errors_end,
+                sec.errors_len,
             )?)
         } else {
             None
@@ -422,7 +160,7 @@ impl Store {
             filter,
             empty_below: (h.flags & FLAG_THRESHOLD != 0).then_some(h.empty_below),
             data_range: h.data_range,
-            file_len,
+            file_len: len,
             payload_bytes: h.payload_bytes,
         })
     }

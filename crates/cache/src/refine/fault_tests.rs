@@ -5,7 +5,7 @@ use super::tests::{assert_exact_cover, ball_info, keys, setup};
 use super::*;
 use brickray_core::Projection;
 #[allow(unused_imports)]
-use brickray_core::{Camera, RenderMode, TransferFunction, VolumeFrame};
+use brickray_core::{Camera, NodeKind, RenderMode, TransferFunction, VolumeFrame};
 use glam::{Mat4, Vec3};
 use std::collections::HashSet;
 

@@ -7,7 +7,7 @@ use brickray_core::{
     BinStats, ERROR_BINS, NodeError, TfErrorTable, node_pixel_error, node_tf_error,
 };
 #[allow(unused_imports)]
-use brickray_core::{Camera, RenderMode, TransferFunction, VolumeFrame};
+use brickray_core::{Camera, NodeKind, RenderMode, TransferFunction, VolumeFrame};
 use proptest::prelude::*;
 use std::collections::HashMap;
 

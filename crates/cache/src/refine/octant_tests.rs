@@ -5,7 +5,7 @@ use super::lod_tests::{Cached, RampSource, Seen, cache_all, refine_limited};
 use super::tests::{assert_exact_cover, ball_layout};
 use super::*;
 #[allow(unused_imports)]
-use brickray_core::{Camera, RenderMode, TransferFunction, VolumeFrame};
+use brickray_core::{Camera, NodeKind, RenderMode, TransferFunction, VolumeFrame};
 use proptest::prelude::*;
 use std::collections::{HashMap, HashSet};
 

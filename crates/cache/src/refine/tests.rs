@@ -1,6 +1,6 @@
 use super::*;
 #[allow(unused_imports)]
-use brickray_core::{Camera, RenderMode, TransferFunction, VolumeFrame};
+use brickray_core::{Camera, NodeKind, RenderMode, TransferFunction, VolumeFrame};
 use brickray_core::{DType, Projection, VolumeDesc};
 use glam::Vec3;
 use proptest::prelude::*;

@@ -185,7 +185,7 @@ fn main() -> ExitCode {
                 filter,
                 empty_below,
                 memory_bound,
-                progress: !quiet,
+                progress: (!quiet).then(progress_bar),
                 anisotropic,
             };
             cmd_build(&input, &output, &o, &select.options())
@@ -248,6 +248,25 @@ fn remove_temporaries_on_signals() -> Result<(), String> {
     Ok(())
 }
 
+/// A progress bar on stderr, drawn from the build's progress reports.
+fn progress_bar() -> brickray_store::BuildProgress {
+    let pb = indicatif::ProgressBar::new(0);
+    pb.set_style(
+        indicatif::ProgressStyle::with_template(
+            "{spinner} [{elapsed_precise}] {wide_bar} {percent}% {human_pos}/{human_len} voxels, \
+             {per_sec}, {eta} left",
+        )
+        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    );
+    brickray_store::BuildProgress(std::sync::Arc::new(move |done, total| {
+        pb.set_length(total);
+        pb.set_position(done);
+        if done >= total {
+            pb.finish_and_clear();
+        }
+    }))
+}
+
 fn cmd_build(
     input: &std::path::Path,
     out: &std::path::Path,
@@ -257,7 +276,7 @@ fn cmd_build(
     let output = out.display();
     let mut reader =
         brickray_io::open_with(input, read).map_err(|e| StoreError::Input(e).to_string())?;
-    if o.progress {
+    if o.progress.is_some() {
         for n in reader.notes() {
             eprintln!("{}: {n}", reader.format());
         }

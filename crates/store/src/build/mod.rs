@@ -52,8 +52,10 @@ pub struct BuildOptions {
     pub empty_below: Option<f32>,
     /// Upper bound in bytes on the builder's buffers (default 1 GiB).
     pub memory_bound: u64,
-    /// Show a progress bar on stderr (default false).
-    pub progress: bool,
+    /// Told the voxels of the finest level done so far and their total as the
+    /// build goes (default: none). The command-line tool draws a progress
+    /// bar with it.
+    pub progress: Option<BuildProgress>,
     /// Build an anisotropic pyramid ([`OctreeLayout::anisotropic`]): coarser
     /// levels first halve only the axes with the finer voxel sides (default
     /// false: every level halves all axes). Volumes with near-isotropic voxels
@@ -69,8 +71,45 @@ impl Default for BuildOptions {
             filter: Filter::Average,
             empty_below: None,
             memory_bound: 1 << 30,
-            progress: false,
+            progress: None,
             anisotropic: false,
+        }
+    }
+}
+
+/// A build's progress callback: `(done, total)` voxels of the finest level.
+#[derive(Clone)]
+pub struct BuildProgress(pub std::sync::Arc<dyn Fn(u64, u64) + Send + Sync>);
+
+impl BuildProgress {
+    fn report(&self, done: u64, total: u64) {
+        (self.0)(done, total)
+    }
+}
+
+impl std::fmt::Debug for BuildProgress {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("BuildProgress(..)")
+    }
+}
+
+impl PartialEq for BuildProgress {
+    /// The same callback.
+    fn eq(&self, other: &Self) -> bool {
+        std::sync::Arc::ptr_eq(&self.0, &other.0)
+    }
+}
+
+/// Where the build reports its progress: to the caller's callback, if any.
+struct Progress<'a> {
+    to: Option<&'a BuildProgress>,
+    total: u64,
+}
+
+impl Progress<'_> {
+    fn set_position(&self, done: u64) {
+        if let Some(p) = self.to {
+            p.report(done.min(self.total), self.total);
         }
     }
 }
@@ -232,18 +271,9 @@ pub fn build(
     };
     ctx.entries = vec![fill_entry; ctx.geo.count as usize];
 
-    let pb = if opts.progress {
-        let pb = indicatif::ProgressBar::new(desc.voxel_count());
-        pb.set_style(
-            indicatif::ProgressStyle::with_template(
-                "{spinner} [{elapsed_precise}] {wide_bar} {percent}% {human_pos}/{human_len} voxels, \
-                 {per_sec}, {eta} left",
-            )
-            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
-        );
-        pb
-    } else {
-        indicatif::ProgressBar::hidden()
+    let pb = Progress {
+        to: opts.progress.as_ref(),
+        total: desc.voxel_count(),
     };
 
     // Levels `0..=top` remain to be built from `input` (the level-`top` volume):
@@ -301,7 +331,7 @@ pub fn build(
             reason: "internal: octree not complete".into(),
         });
     }
-    pb.finish_and_clear();
+    pb.set_position(pb.total);
 
     // Node table, then the header.
     let table_offset = ctx.offset;
@@ -574,7 +604,7 @@ fn run_stream<W: Write>(
     top: u8,
     per: u32,
     w: &mut W,
-    pb: &indicatif::ProgressBar,
+    pb: &Progress<'_>,
 ) -> Result<(), StoreError> {
     let layout = ctx.layout.clone();
     let mut levels: Vec<LevelBuf> = (0..=top).map(|l| LevelBuf::new(&layout, l, per)).collect();
@@ -617,7 +647,7 @@ fn run_bands<W: Write>(
     file: &std::fs::File,
     path: &Path,
     w: &mut W,
-    pb: &indicatif::ProgressBar,
+    pb: &Progress<'_>,
 ) -> Result<(), StoreError> {
     let layout = ctx.layout.clone();
     let d = layout.level_dims(top);

@@ -1,0 +1,404 @@
+//! Opening a store, as phases: the [`header`] (magic, version, checksum,
+//! reserved bytes), the octree [`layout`] it describes, the extents of its
+//! [`Sections`] against the file's length, and the node [`table`]. Every
+//! read goes through [`ReadAt`], a positional-read seam: a local file today,
+//! a range reader over object storage or HTTP tomorrow.
+
+use crate::Filter;
+use crate::error::StoreError;
+use crate::errsec::ERROR_ENTRY_LEN;
+use crate::format::{
+    ENTRY_LEN, Entry, FLAG_ERRORS, FLAG_PARENT_ERRORS, FLAG_SPLIT_MASKS, FLAG_THRESHOLD,
+    HEADER_LEN, Header, KIND_DATA, KIND_EMPTY, KIND_UNIFORM, MAGIC, MAX_APRON, MAX_BRICK,
+    MAX_BRICK_BYTES, MAX_SPLIT_MASKS, MIN_VERSION, TableGeometry, VERSION, dtype_from_code,
+    filter_from_code, packed_masks,
+};
+use crate::reader::{bad, max_compressed};
+use crate::sample::representable;
+use brickray_core::{OctreeLayout, VolumeDesc};
+use std::path::Path;
+
+/// Positional reads of a store's bytes: any number of threads may read at
+/// once, without a lock.
+pub trait ReadAt: Send + Sync + std::fmt::Debug {
+    /// Fills `buf` with the bytes at `offset` (an error if they are not all
+    /// there).
+    fn read_exact_at(&self, buf: &mut [u8], offset: u64) -> std::io::Result<()>;
+}
+
+impl ReadAt for std::fs::File {
+    #[cfg(unix)]
+    fn read_exact_at(&self, buf: &mut [u8], offset: u64) -> std::io::Result<()> {
+        std::os::unix::fs::FileExt::read_exact_at(self, buf, offset)
+    }
+
+    #[cfg(windows)]
+    fn read_exact_at(&self, mut buf: &mut [u8], mut offset: u64) -> std::io::Result<()> {
+        use std::os::windows::fs::FileExt;
+        while !buf.is_empty() {
+            match self.seek_read(buf, offset) {
+                Ok(0) => return Err(std::io::ErrorKind::UnexpectedEof.into()),
+                Ok(n) => {
+                    buf = &mut buf[n..];
+                    offset += n as u64;
+                }
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                Err(e) => return Err(e),
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Phase 1: the header, checked: long enough, the magic, a known version,
+/// its checksum, reserved bytes zero, its length.
+pub(crate) fn header(file: &dyn ReadAt, path: &Path, file_len: u64) -> Result<Header, StoreError> {
+    let mut hb = [0u8; HEADER_LEN];
+    if file_len < HEADER_LEN as u64 {
+        return Err(StoreError::Truncated {
+            path: path.to_owned(),
+            section: "header",
+            needed: HEADER_LEN as u64,
+            actual: file_len,
+        });
+    }
+    file.read_exact_at(&mut hb, 0)
+        .map_err(|e| StoreError::io(path, e))?;
+    if hb[..8] != MAGIC {
+        return Err(StoreError::NotAStore {
+            path: path.to_owned(),
+        });
+    }
+    let (stored, computed) = Header::checksums(&hb);
+    let h = Header::decode(&hb);
+    if !(MIN_VERSION..=VERSION).contains(&h.version) {
+        return Err(StoreError::UnsupportedVersion {
+            path: path.to_owned(),
+            version: h.version,
+        });
+    }
+    if stored != computed {
+        return Err(StoreError::HeaderChecksum {
+            path: path.to_owned(),
+            stored,
+            computed,
+        });
+    }
+    // Reserved bytes are zero, but for the split masks of an anisotropic
+    // pyramid (3 bits per level but the finest, in 108..120) and, from
+    // version 2, the error section's CRC (120..124, zero without it).
+    let masks_used = if h.flags & FLAG_SPLIT_MASKS != 0 {
+        (3 * h.levels.saturating_sub(1) as u32).min(96)
+    } else {
+        0
+    };
+    if (h.version < 2 && hb[120..124].iter().any(|&b| b != 0))
+        || packed_masks(&hb).checked_shr(masks_used).unwrap_or(0) != 0
+        || (h.flags & FLAG_SPLIT_MASKS != 0 && h.levels as usize > MAX_SPLIT_MASKS + 1)
+    {
+        return Err(bad(path, "reserved", "non-zero"));
+    }
+    if h.header_len != HEADER_LEN as u32 {
+        return Err(bad(
+            path,
+            "header_len",
+            format!("{} (expected {HEADER_LEN})", h.header_len),
+        ));
+    }
+    Ok(h)
+}
+
+/// The flags a version knows.
+fn known_flags(version: u32) -> u8 {
+    match version {
+        v if v >= 3 => FLAG_THRESHOLD | FLAG_SPLIT_MASKS | FLAG_ERRORS | FLAG_PARENT_ERRORS,
+        2 => FLAG_THRESHOLD | FLAG_SPLIT_MASKS | FLAG_ERRORS,
+        _ => FLAG_THRESHOLD | FLAG_SPLIT_MASKS,
+    }
+}
+
+/// Phase 2: the volume and octree the header describes, every field in its
+/// range (dtype, filter, flags, dims, spacing, ranges, brick, apron, split
+/// masks, levels), and the filter of its inner nodes.
+pub(crate) fn layout(h: &Header, path: &Path) -> Result<(OctreeLayout, Filter), StoreError> {
+    let dtype = dtype_from_code(h.dtype)
+        .ok_or_else(|| bad(path, "dtype", format!("unknown code {}", h.dtype)))?;
+    let filter = filter_from_code(h.filter)
+        .ok_or_else(|| bad(path, "filter", format!("unknown code {}", h.filter)))?;
+    if h.flags & !known_flags(h.version) != 0 {
+        return Err(bad(path, "flags", format!("unknown bits {:#x}", h.flags)));
+    }
+    let desc = VolumeDesc {
+        dims: h.dims,
+        dtype,
+        spacing: h.spacing,
+        value_range: h.value_range,
+    };
+    if let Err(e) = brickray_core::volume::voxel_count(h.dims.map(u64::from)) {
+        return Err(bad(path, "dims", e.to_string()));
+    }
+    if h.spacing.iter().any(|s| !s.is_finite() || *s <= 0.0) {
+        return Err(bad(path, "spacing", format!("{:?}", h.spacing)));
+    }
+    if h.value_range.iter().any(|v| !v.is_finite()) {
+        return Err(bad(path, "value_range", format!("{:?}", h.value_range)));
+    }
+    if h.data_range.iter().any(|v| !v.is_finite()) || h.data_range[0] > h.data_range[1] {
+        return Err(bad(path, "data_range", format!("{:?}", h.data_range)));
+    }
+    if !h.empty_below.is_finite() {
+        return Err(bad(path, "empty_below", format!("{}", h.empty_below)));
+    }
+    if h.brick == 0 || h.brick > MAX_BRICK {
+        return Err(bad(
+            path,
+            "brick",
+            format!("{} (must be in 1..={MAX_BRICK})", h.brick),
+        ));
+    }
+    if h.apron > MAX_APRON {
+        return Err(bad(
+            path,
+            "apron",
+            format!("{} (must be in 0..={MAX_APRON})", h.apron),
+        ));
+    }
+    let layout = if h.flags & FLAG_SPLIT_MASKS != 0 {
+        OctreeLayout::with_split_masks(desc, h.brick, h.apron, &h.split_masks)
+            .map_err(|e| bad(path, "split_masks", e.to_string()))?
+    } else {
+        OctreeLayout::new(desc, h.brick, h.apron)
+    };
+    if layout.levels != h.levels {
+        return Err(bad(
+            path,
+            "levels",
+            format!("{} (dims and brick imply {})", h.levels, layout.levels),
+        ));
+    }
+    if layout.brick_bytes() > MAX_BRICK_BYTES {
+        return Err(bad(
+            path,
+            "brick",
+            format!("stored brick of {} bytes", layout.brick_bytes()),
+        ));
+    }
+    Ok((layout, filter))
+}
+
+/// Phase 3: where the node table and the error sections lie; they must end
+/// exactly at the file's end.
+pub(crate) struct Sections {
+    /// Bytes of the error section's entries (0 without it).
+    pub(crate) errors_len: u64,
+    /// Bytes of the parent-error section, entries and CRC (0 without it).
+    pub(crate) parent_len: u64,
+    /// Where the node table ends (the error section starts).
+    pub(crate) table_end: u64,
+    /// Where the error section ends (the parent-error section starts).
+    pub(crate) errors_end: u64,
+}
+
+impl Sections {
+    pub(crate) fn of(
+        h: &Header,
+        geo: &TableGeometry,
+        path: &Path,
+        file_len: u64,
+    ) -> Result<Sections, StoreError> {
+        if h.node_count != geo.count {
+            return Err(bad(
+                path,
+                "node_count",
+                format!("{} (geometry implies {})", h.node_count, geo.count),
+            ));
+        }
+        let overflow = |field| bad(path, field, "overflow");
+        let table_len = geo
+            .count
+            .checked_mul(ENTRY_LEN as u64)
+            .ok_or_else(|| overflow("node_count"))?;
+        if h.table_len != table_len {
+            return Err(bad(
+                path,
+                "table_len",
+                format!("{} (expected {table_len})", h.table_len),
+            ));
+        }
+        if h.table_offset < HEADER_LEN as u64 {
+            return Err(bad(
+                path,
+                "table_offset",
+                format!("{} overlaps the header", h.table_offset),
+            ));
+        }
+        if h.payload_bytes != h.table_offset - HEADER_LEN as u64 {
+            return Err(bad(
+                path,
+                "payload_bytes",
+                format!(
+                    "{} (table offset implies {})",
+                    h.payload_bytes,
+                    h.table_offset - HEADER_LEN as u64
+                ),
+            ));
+        }
+        let has_errors = h.flags & FLAG_ERRORS != 0;
+        let errors_len = if has_errors {
+            geo.count
+                .checked_mul(ERROR_ENTRY_LEN as u64)
+                .ok_or_else(|| overflow("node_count"))?
+        } else {
+            0
+        };
+        let has_parent_errors = h.flags & FLAG_PARENT_ERRORS != 0;
+        if has_parent_errors && !has_errors {
+            return Err(bad(
+                path,
+                "flags",
+                "the parent-error section without the error section",
+            ));
+        }
+        // Its entries, then their CRC.
+        let parent_len = if has_parent_errors { errors_len + 4 } else { 0 };
+        if !has_errors && h.errors_crc != 0 {
+            return Err(bad(
+                path,
+                "errors_crc",
+                "set without the error section's flag",
+            ));
+        }
+        let table_end = h
+            .table_offset
+            .checked_add(table_len)
+            .ok_or_else(|| overflow("table_offset"))?;
+        let errors_end = table_end
+            .checked_add(errors_len)
+            .ok_or_else(|| overflow("node_count"))?;
+        let end = errors_end
+            .checked_add(parent_len)
+            .ok_or_else(|| overflow("node_count"))?;
+        if end > file_len {
+            return Err(StoreError::Truncated {
+                path: path.to_owned(),
+                section: if table_end > file_len {
+                    "node table"
+                } else if errors_end > file_len {
+                    "error section"
+                } else {
+                    "parent-error section"
+                },
+                needed: end,
+                actual: file_len,
+            });
+        }
+        if end < file_len {
+            return Err(bad(
+                path,
+                "table_offset",
+                format!("the store ends at {end} but the file holds {file_len} bytes"),
+            ));
+        }
+        Ok(Sections {
+            errors_len,
+            parent_len,
+            table_end,
+            errors_end,
+        })
+    }
+}
+
+/// Phase 4: the node table, read (its length bounded by the file's, checked
+/// in phase 3), its CRC verified and every entry checked ([`entry`]).
+pub(crate) fn table(
+    file: &dyn ReadAt,
+    path: &Path,
+    h: &Header,
+    geo: &TableGeometry,
+    layout: &OctreeLayout,
+) -> Result<Vec<Entry>, StoreError> {
+    let mut table = vec![0u8; (geo.count * ENTRY_LEN as u64) as usize];
+    file.read_exact_at(&mut table, h.table_offset)
+        .map_err(|e| StoreError::io(path, e))?;
+    let crc = crc32fast::hash(&table);
+    if crc != h.table_crc {
+        return Err(StoreError::TableChecksum {
+            path: path.to_owned(),
+            stored: h.table_crc,
+            computed: crc,
+        });
+    }
+    let max_len = max_compressed(layout.brick_bytes());
+    table
+        .chunks_exact(ENTRY_LEN)
+        .enumerate()
+        .map(|(i, b)| entry(path, geo, layout, h.table_offset, max_len, i, b))
+        .collect()
+}
+
+/// One table entry, checked: its position, reserved bytes, range, value, and
+/// payload fields by kind.
+fn entry(
+    path: &Path,
+    geo: &TableGeometry,
+    layout: &OctreeLayout,
+    table_offset: u64,
+    max_len: u64,
+    i: usize,
+    b: &[u8],
+) -> Result<Entry, StoreError> {
+    let dtype = layout.volume.dtype;
+    let key = geo.key(i as u64);
+    let (e, reserved) = Entry::decode(b);
+    let node = |field: &'static str, reason: String| StoreError::BadNode {
+        path: path.to_owned(),
+        key,
+        field,
+        reason,
+    };
+    if e.key() != key {
+        return Err(node("position", format!("entry names {:?}", e.key())));
+    }
+    if reserved != [0; 6] {
+        return Err(node("reserved", "non-zero".into()));
+    }
+    if !(e.min.is_finite() && e.max.is_finite() && e.min <= e.max) {
+        return Err(node("min/max", format!("[{}, {}]", e.min, e.max)));
+    }
+    if !representable(dtype, e.value) {
+        return Err(node(
+            "value",
+            format!("{} is not a {} sample", e.value, dtype.name()),
+        ));
+    }
+    match e.kind {
+        KIND_EMPTY | KIND_UNIFORM => {
+            if e.len != 0 || e.offset != 0 || e.crc != 0 {
+                return Err(node(
+                    "payload",
+                    "payload fields set on a node without payload".into(),
+                ));
+            }
+            if e.kind == KIND_UNIFORM && !(e.min <= e.value && e.value <= e.max) {
+                return Err(node(
+                    "value",
+                    format!("{} outside [{}, {}]", e.value, e.min, e.max),
+                ));
+            }
+        }
+        KIND_DATA => {
+            if e.len == 0 || e.len as u64 > max_len {
+                return Err(node("len", format!("{} (must be in 1..={max_len})", e.len)));
+            }
+            let pend = e.offset.checked_add(e.len as u64);
+            if e.offset < HEADER_LEN as u64 || pend.is_none_or(|p| p > table_offset) {
+                return Err(node(
+                    "offset",
+                    format!("{}+{} outside the payload section", e.offset, e.len),
+                ));
+            }
+        }
+        k => return Err(node("kind", format!("unknown kind {k}"))),
+    }
+    Ok(e)
+}
