@@ -470,7 +470,7 @@ impl NiftiReader {
             dims,
             dtype: conv.dst,
             spacing,
-            value_range: desc_range(range),
+            value_range: desc_range(&header_path, range)?,
         };
         desc.validate()
             .map_err(|e| IoError::volume(&header_path, e))?;

@@ -452,12 +452,21 @@ pub(crate) fn scan_converted(
 }
 
 /// The value range stored in a [`brickray_core::VolumeDesc`]: `[lo, hi]` as
-/// f32, widened to `lo..lo+1` when flat.
-pub(crate) fn desc_range(r: [f64; 2]) -> [f32; 2] {
+/// f32, widened to `lo..lo+1` when flat. A range beyond f32's (a rescale that
+/// overflows, f64 samples of 1e39) is [`crate::IoError::SampleOverflow`]: the
+/// samples would be stored as infinity.
+pub(crate) fn desc_range(path: &std::path::Path, r: [f64; 2]) -> Result<[f32; 2], crate::IoError> {
     let lo = r[0] as f32;
     let mut hi = r[1] as f32;
+    if !(lo.is_finite() && hi.is_finite()) {
+        return Err(crate::IoError::SampleOverflow {
+            path: path.to_owned(),
+            lo: r[0],
+            hi: r[1],
+        });
+    }
     if hi <= lo {
         hi = lo + 1.0;
     }
-    [lo, hi]
+    Ok([lo, hi])
 }

@@ -367,7 +367,7 @@ impl TiffReader {
         let range = [lo, hi];
         r.conv = SampleConverter::choose(src, false, 1.0, 0.0, Some(range));
         r.desc.dtype = r.conv.dst;
-        r.desc.value_range = desc_range(range);
+        r.desc.value_range = desc_range(path, range)?;
         r.notes.push(format!("samples: {}", r.conv.describe()));
         r.desc.validate().map_err(|e| IoError::volume(path, e))?;
         Ok(r)

@@ -67,7 +67,7 @@ impl ZarrBrickSource {
             dims: dims64.map(|d| d as u32),
             dtype: conv.dst,
             spacing: s.map(|v| v as f32),
-            value_range: desc_range(range),
+            value_range: desc_range(root, range)?,
         };
         desc.validate().map_err(|e| IoError::volume(root, e))?;
         let layout = OctreeLayout::new(desc, brick, apron);
