@@ -291,7 +291,9 @@ fn ooc_iso_march(acc: ptr<function, Accum>, cur: ptr<function, Cursor>, t0: f32,
     var grid_f = 0.0;
     var k = 0u;
     var t_last = t0;
-    var st = oct_begin(oo, od, t_from, t_to, frame.max_leaves, ooc.splits.xy);
+    // [t_from, t_to] lies in the clip box's [t0, t1]: not clipped again (see
+    // the main march).
+    var st = oct_begin_inside(oo, od, t_from, t_to, frame.max_leaves, ooc.splits.xy);
     loop {
         // Walk to the next data leaf that can hold the isovalue.
         var found = false;
@@ -408,7 +410,13 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             var grid_f = 0.0;
             var k = 0u;
             var t_last = t0;
-            var st = oct_begin(oo, od, t0, t1, frame.max_leaves, ooc.splits.xy);
+            // [t0, t1] is the clip box's (start_ray), inside the octree cube:
+            // the walk enters its first leaf at t0 and leaves its last at t1
+            // exactly, so the first sample is sample 0, as in core. (Clipped
+            // to the cube again, the entry through a face the volume shares
+            // with the cube rounded above t0 on about one ray in eight, which
+            // lost its first sample.)
+            var st = oct_begin_inside(oo, od, t0, t1, frame.max_leaves, ooc.splits.xy);
             var dtl = dt;
             var done = false;
             // MIP: the leaf that holds the running maximum and the weight of
