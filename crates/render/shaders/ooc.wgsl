@@ -328,7 +328,7 @@ fn ooc_iso_march(acc: ptr<function, Accum>, cur: ptr<function, Cursor>, t0: f32,
         let t_in = max(st.hit.t_enter, t_from);
         let t_voxel = finest_voxel_t() * (*cur).b.usage_f;
         loop {
-            let t = t0 + f32(k) * dtl;
+            let t = grid_t(t0, k, dtl);
             if (t >= t_end) { break; }
             if (budget == 0u) {
                 if (!probe) { feedback_seen((*cur).b.usage, t_in, t, 1.0, 1.0, t_voxel); }
@@ -344,7 +344,7 @@ fn ooc_iso_march(acc: ptr<function, Accum>, cur: ptr<function, Cursor>, t0: f32,
                     (*acc).samples = (*acc).samples + 1u;
                 }
                 if (range.y < frame.isovalue) {
-                    t_last = t0 + f32(k_exit - 1u) * dtl;
+                    t_last = grid_t(t0, k_exit - 1u, dtl);
                     below = true;
                     k = k_exit;
                     continue;
@@ -457,7 +457,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 // MIP: whether a sample of this leaf raised the maximum.
                 var holds_max = false;
                 loop {
-                    let t = t0 + f32(k) * dtl;
+                    let t = grid_t(t0, k, dtl);
                     if (t >= t_end) { break; }
                     if (budget == 0u) { done = true; break; }
                     budget = budget - 1u;
@@ -500,7 +500,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                     k = k + 1u;
                 }
                 // Where the ray left the brick, or stopped in it.
-                let t_out = clamp(t0 + f32(k) * dtl, t_in, t_end);
+                let t_out = clamp(grid_t(t0, k, dtl), t_in, t_end);
                 let trans_out = select(1.0, 1.0 - acc.color.a, MODE == MODE_DVR);
                 if (MODE == MODE_MIP) {
                     if (holds_max) {
@@ -515,7 +515,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             if (MODE == MODE_MIP && mip_slot != 0xffffffffu) {
                 feedback_add(mip_slot, mip_w);
             }
-            t_stop = t0 + f32(k) * dtl;
+            t_stop = grid_t(t0, k, dtl);
         }
         feedback_stop(px, depth_at(r, select(t1, t_stop, feedback_terminated(acc))));
     }
