@@ -103,6 +103,12 @@ impl ZarrBrickSource {
         })
     }
 
+    /// What was assumed where the metadata did not say (see
+    /// [`VolumeReader::warnings`]), one line each.
+    pub fn warnings(&self) -> Vec<String> {
+        self.zarr.warnings.clone()
+    }
+
     /// Where the volume lies (the finest level's transforms).
     pub fn placement(&self) -> Placement {
         let (s, t) = self.zarr.xyz(0);
