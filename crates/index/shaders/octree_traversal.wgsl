@@ -22,6 +22,9 @@
 //         // st.hit.t_enter < st.hit.t_exit
 //         if (done) { break; }
 //     }
+//     // oct_begin_inside instead for a segment already clipped to a box
+//     // inside the cube: its ends are then the first leaf's t_enter and the
+//     // last leaf's t_exit exactly.
 //     // st.status: OCT_STATUS_FINISHED, _STEP_LIMIT or _CORRUPT (or _RUNNING
 //     // when the caller broke out early)
 
@@ -153,25 +156,41 @@ fn oct_clip_unit_cube(origin: vec3<f32>, dir: vec3<f32>, inv_dir: vec3<f32>, t_m
     return vec2<f32>(t0, t1);
 }
 
-// Rust: ray_setup + traverse. Flushes |d| < 1e-30 to 0, clips to the cube.
-fn oct_begin(origin: vec3<f32>, dir_in: vec3<f32>, t_min: f32, t_max: f32, max_steps: u32, splits: vec2<u32>) -> OctState {
+// Rust: Traversal::inside. A walk over a segment [t_min, t_max] that the caller
+// already clipped to a box inside the cube (the ray caster's clip box, in
+// octree coordinates): not clipped again, so the first leaf is entered at t_min
+// and the last one left at t_max, exactly. A second clip, to the cube, computes
+// the same entry another way where the two boxes share a face, and rounds to
+// either side of it (the ray caster lost its first sample, at t_min, where it
+// rounded above). A start point off the cube by rounding is located in the
+// leaf at that face. Flushes |d| < 1e-30 to 0.
+fn oct_begin_inside(origin: vec3<f32>, dir_in: vec3<f32>, t_min: f32, t_max: f32, max_steps: u32, splits: vec2<u32>) -> OctState {
     var st: OctState;
     let d = select(dir_in, vec3<f32>(0.0), abs(dir_in) < vec3<f32>(OCT_DIR_EPSILON));
     let nz = d != vec3<f32>(0.0);
     st.origin = origin;
     st.dir = d;
     st.inv_dir = select(vec3<f32>(0.0), vec3<f32>(1.0) / select(vec3<f32>(1.0), d, nz), nz);
-    let tc = oct_clip_unit_cube(origin, d, st.inv_dir, t_min, t_max);
-    st.t = tc.x;
-    st.t_end = tc.y;
+    st.t = t_min;
+    st.t_end = t_max;
     st.cur = OctBox(0u, 0u, vec3<f32>(0.0), vec3<f32>(1.0));
     st.splits = splits;
-    if (!(tc.x < tc.y)) {
+    if (!(t_min < t_max)) {
         st.cur.node = OCT_NULL;
     }
     st.steps = 0u;
     st.max_steps = max_steps;
     st.status = OCT_STATUS_RUNNING;
+    return st;
+}
+
+// Rust: traverse_with. oct_begin_inside over [t_min, t_max] clipped to the cube.
+fn oct_begin(origin: vec3<f32>, dir_in: vec3<f32>, t_min: f32, t_max: f32, max_steps: u32, splits: vec2<u32>) -> OctState {
+    var st = oct_begin_inside(origin, dir_in, t_min, t_max, max_steps, splits);
+    let tc = oct_clip_unit_cube(origin, st.dir, st.inv_dir, t_min, t_max);
+    st.t = tc.x;
+    st.t_end = tc.y;
+    st.cur.node = select(0u, OCT_NULL, !(tc.x < tc.y));
     return st;
 }
 
@@ -299,7 +318,12 @@ fn oct_next_leaf(st: ptr<function, OctState>) -> bool {
                 return false;
             }
             rope = index_words[record + 1u + ex.face];
-        } else {
+        }
+        // The walk ends in this leaf (a NULL rope: t_end reached, or the leaf
+        // left through the cube's face): it is left at t_end. After oct_begin
+        // the cube's exit is t_end; after oct_begin_inside the caller's end,
+        // which the cube's face only equals up to rounding.
+        if (rope == OCT_NULL) {
             t_exit = (*st).t_end;
         }
         let t_enter = (*st).t;

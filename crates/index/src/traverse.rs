@@ -22,6 +22,13 @@
 //!   caused by rounding, count as steps but are not reported: only leaves with
 //!   `t_exit > t_enter` are yielded, and consecutive yields share the boundary
 //!   `t` exactly (`t_enter` of one is `t_exit` of the previous).
+//! * **Ends**: [`traverse`] clips `[t_min, t_max]` to the cube;
+//!   [`Traversal::inside`] keeps a segment the caller already clipped to a box
+//!   inside the cube, so its first leaf is entered at `t_min` and its last left
+//!   at `t_max` exactly (the ray caster samples from its own `t_min`; a second
+//!   clip computed a shared face's entry another way, rounded above it and
+//!   lost the first sample). Either way a leaf whose exit face is on the
+//!   cube's boundary (a NULL rope) is left at the walk's end.
 
 use crate::format::{
     MAX_LEVEL, NULL, ROPE_LEVEL_SHIFT, ROPE_NODE_MASK, Splits, TAG_DATA, TAG_EMPTY, TAG_INNER,
@@ -336,26 +343,48 @@ pub fn traverse(words: &[u32], ray: Ray, max_steps: u32) -> Traversal<'_> {
 /// ([`encode_cut_with`](crate::encode_cut_with)); the same `splits` must be given.
 /// With [`Splits::ALL`] this is `traverse`.
 pub fn traverse_with(words: &[u32], splits: Splits, ray: Ray, max_steps: u32) -> Traversal<'_> {
-    let (dir, inv_dir) = ray_setup(ray.dir);
-    let (t0, t1) = clip_unit_cube(ray.origin, dir, inv_dir, ray.t_min, ray.t_max);
-    let mut cur = NodeBox::ROOT;
+    let mut tr = Traversal::inside(words, splits, ray, max_steps);
+    let (t0, t1) = clip_unit_cube(ray.origin, tr.dir, tr.inv_dir, ray.t_min, ray.t_max);
+    tr.t = t0;
+    tr.t_end = t1;
     // `!(t0 < t1)` also catches NaN.
-    let hit = t0 < t1;
-    if !hit {
-        cur.node = NULL;
-    }
-    Traversal {
-        words,
-        origin: ray.origin,
-        dir,
-        inv_dir,
-        t: t0,
-        t_end: t1,
-        cur,
-        steps: 0,
-        max_steps,
-        status: TraversalStatus::Running,
-        splits,
+    tr.cur.node = if t0 < t1 { NodeBox::ROOT.node } else { NULL };
+    tr
+}
+
+impl<'a> Traversal<'a> {
+    /// A walk over a segment `[t_min, t_max]` that the caller already clipped
+    /// to a box inside the unit cube (WGSL `oct_begin_inside`; the ray
+    /// caster's clip box in octree coordinates): not clipped again, so the
+    /// first reported leaf has `t_enter == ray.t_min` and the last one
+    /// `t_exit == ray.t_max`, exactly. [`traverse_with`] clips to the cube,
+    /// which computes the entry through a face the box shares with the cube a
+    /// second way, and rounds to either side of the caller's (the ray caster
+    /// lost its first sample, at `t_min`, where it rounded above). A start
+    /// point off the cube by rounding is located in the leaf at that face. The
+    /// segment must be finite; parts of it outside the cube are attributed to
+    /// the leaves at the faces.
+    pub fn inside(words: &'a [u32], splits: Splits, ray: Ray, max_steps: u32) -> Traversal<'a> {
+        let (dir, inv_dir) = ray_setup(ray.dir);
+        let mut cur = NodeBox::ROOT;
+        // A NaN end misses too.
+        let hit = ray.t_min < ray.t_max;
+        if !hit {
+            cur.node = NULL;
+        }
+        Traversal {
+            words,
+            origin: ray.origin,
+            dir,
+            inv_dir,
+            t: ray.t_min,
+            t_end: ray.t_max,
+            cur,
+            steps: 0,
+            max_steps,
+            status: TraversalStatus::Running,
+            splits,
+        }
     }
 }
 
@@ -378,7 +407,13 @@ impl Traversal<'_> {
         let mut rope = NULL;
         if t_exit < self.t_end {
             rope = read(self.words, record + 1 + face)?;
-        } else {
+        }
+        // The walk ends in this leaf (a NULL rope: `t_end` reached, or the leaf
+        // left through the cube's face): it is left at `t_end`. After the clip
+        // of [`traverse_with`] the cube's exit is `t_end`; after
+        // [`Traversal::inside`] the caller's end, which the cube's face only
+        // equals up to rounding.
+        if rope == NULL {
             t_exit = self.t_end;
         }
         let t_enter = self.t;

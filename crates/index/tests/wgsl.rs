@@ -17,6 +17,11 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     while (oct_next_leaf(&st)) {
         acc = acc + st.hit.data + st.hit.leaf.level + st.hit.tag + bitcast<u32>(st.hit.t_exit - st.hit.t_enter);
     }
+    // A segment already clipped to a box inside the cube.
+    var si = oct_begin_inside(o, d, 0.5, 1.5, 4096u, OCT_SPLITS_ALL);
+    while (oct_next_leaf(&si)) {
+        acc = acc + bitcast<u32>(si.hit.t_enter);
+    }
     // The building blocks on their own.
     let loc = oct_locate_leaf(OctBox(0u, 0u, vec3<f32>(0.0), vec3<f32>(1.0)), vec3<f32>(0.3), d, OCT_SPLITS_ALL);
     let ex = oct_exit_face(loc.leaf, o, d, vec3<f32>(1.0, 10.0, 0.0));

@@ -202,6 +202,21 @@ pub enum IoError {
         /// The formats tried, and what each expects.
         tried: String,
     },
+    /// Samples decode, after the file's rescale, to values beyond the range of
+    /// the stored sample type (f32): they would be stored as infinity. Refused
+    /// at open, like NaN and infinite samples.
+    #[error(
+        "{path}: samples decode to {lo:e}..{hi:e} (after the file's rescale), \
+         beyond the range of f32: they would be stored as infinity"
+    )]
+    SampleOverflow {
+        /// The file (or folder).
+        path: PathBuf,
+        /// The smallest decoded value.
+        lo: f64,
+        /// The largest decoded value.
+        hi: f64,
+    },
     /// A slab outside the volume was asked for.
     #[error("slices {z0}..{z1} requested from a volume of depth {depth}")]
     BadSlab {
@@ -452,6 +467,19 @@ pub trait VolumeReader: Send {
     /// What the reader noticed and the user should know (a conversion of the
     /// sample type, a gantry tilt, non-uniform slice spacing, ...), one line each.
     fn notes(&self) -> Vec<String> {
+        Vec::new()
+    }
+
+    /// What the reader had to assume because the file did not say, or said
+    /// something unusable where the format's readers customarily fall back
+    /// (a DICOM slice without PixelSpacing read at 1 mm, a TIFF without
+    /// spacing read at 1, 1, 1, a NIfTI `scl_slope` that is not finite read
+    /// as no rescale, ...), one line each. Empty when the volume is as the
+    /// file states it. A caller should show these to the user (the
+    /// command-line tools print them, the viewer shows them): a value that is
+    /// invalid and has no customary fallback is an error instead, never a
+    /// silent default.
+    fn warnings(&self) -> Vec<String> {
         Vec::new()
     }
 

@@ -261,6 +261,64 @@ impl NiftiHeader {
         Ok(t)
     }
 
+    /// Checks the transform [`affine`](Self::affine) uses: the sform's rows
+    /// (when `sform_code > 0`) or the qform's quaternion and offsets (when
+    /// `qform_code > 0`) must be finite, and the voxel axes they give must
+    /// span space (no zero column, a non-zero determinant): a placement that
+    /// cannot be drawn is a typed error, never read as something else.
+    pub fn check_affine(&self, path: &Path) -> Result<(), IoError> {
+        let form = if self.sform_code > 0 {
+            if self.srow.iter().flatten().any(|v| !v.is_finite()) {
+                return Err(IoError::header(
+                    path,
+                    format!("the sform holds a non-finite number: {:?}", self.srow),
+                ));
+            }
+            "sform"
+        } else if self.qform_code > 0 {
+            if self
+                .quatern
+                .iter()
+                .chain(&self.qoffset)
+                .any(|v| !v.is_finite())
+            {
+                return Err(IoError::header(
+                    path,
+                    format!(
+                        "the qform holds a non-finite number: quatern {:?}, qoffset {:?}",
+                        self.quatern, self.qoffset
+                    ),
+                ));
+            }
+            "qform"
+        } else {
+            return Ok(());
+        };
+        let a = self.affine();
+        for c in 0..3 {
+            let norm = (0..3).map(|r| a[r][c] * a[r][c]).sum::<f64>().sqrt();
+            if !(norm.is_finite() && norm > 0.0) {
+                return Err(IoError::header(
+                    path,
+                    format!("the {form} maps voxel axis {c} to no direction (a zero column)"),
+                ));
+            }
+        }
+        let det = a[0][0] * (a[1][1] * a[2][2] - a[1][2] * a[2][1])
+            - a[0][1] * (a[1][0] * a[2][2] - a[1][2] * a[2][0])
+            + a[0][2] * (a[1][0] * a[2][1] - a[1][1] * a[2][0]);
+        let scale: f64 = (0..3)
+            .map(|c| (0..3).map(|r| a[r][c] * a[r][c]).sum::<f64>().sqrt())
+            .product();
+        if !(det.is_finite() && det.abs() > 1e-9 * scale) {
+            return Err(IoError::header(
+                path,
+                format!("the {form}'s voxel axes do not span space (determinant {det})"),
+            ));
+        }
+        Ok(())
+    }
+
     /// The voxel-to-world affine (RAS+ mm): sform, else qform, else scaling.
     pub fn affine(&self) -> [[f64; 4]; 4] {
         let mut a = [[0.0; 4]; 4];
@@ -326,6 +384,7 @@ pub struct NiftiReader {
     t_offset: u64,
     stream: ByteStream,
     buf: Vec<u8>,
+    warnings: Vec<String>,
 }
 
 fn is_gz(p: &Path) -> bool {
@@ -421,7 +480,17 @@ impl NiftiReader {
             }
             spacing[i] = p as f32;
         }
-        let (slope, inter) = if h.scl_slope == 0.0 || !h.scl_slope.is_finite() {
+        h.check_affine(&header_path)?;
+        let mut warnings = Vec::new();
+        // slope 0: no rescale (the standard's rule); a slope that is not
+        // finite is read as none too (as other NIfTI readers do), but said
+        let (slope, inter) = if h.scl_slope == 0.0 {
+            (1.0, 0.0)
+        } else if !h.scl_slope.is_finite() {
+            warnings.push(format!(
+                "scl_slope is {}: read as no rescale (slope 1, intercept 0)",
+                h.scl_slope
+            ));
             (1.0, 0.0)
         } else {
             (h.scl_slope, h.scl_inter)
@@ -459,18 +528,22 @@ impl NiftiReader {
                 });
             }
         }
-        let t_offset = t * vol_bytes;
+        let t_offset = t
+            .checked_mul(vol_bytes)
+            .ok_or_else(|| bad(format!("time point {t} of {vol_bytes}-byte volumes")))?;
         let mut stream = ByteStream::new(&data_path, offset, total, gz);
         let probe = SampleConverter::choose(src, h.big_endian, slope, inter, None);
         let range = scan_converted(&data_path, &probe, dims, &mut |pos, buf| {
             stream.read_at(t_offset + pos, buf)
         })?;
+        // gzip: on to the trailer, so that its CRC and length are checked
+        stream.verify_to_end()?;
         let conv = SampleConverter::choose(src, h.big_endian, slope, inter, Some(range));
         let desc = VolumeDesc {
             dims,
             dtype: conv.dst,
             spacing,
-            value_range: desc_range(range),
+            value_range: desc_range(&header_path, range)?,
         };
         desc.validate()
             .map_err(|e| IoError::volume(&header_path, e))?;
@@ -483,6 +556,7 @@ impl NiftiReader {
             t_offset,
             stream,
             buf: Vec::new(),
+            warnings,
         })
     }
 
@@ -535,6 +609,10 @@ impl VolumeReader for NiftiReader {
         };
         n.push(format!("placement from the {form}"));
         n
+    }
+
+    fn warnings(&self) -> Vec<String> {
+        self.warnings.clone()
     }
 
     fn read_slices(&mut self, z0: u32, z1: u32, out: &mut [u8]) -> Result<(), IoError> {

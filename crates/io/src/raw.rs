@@ -138,6 +138,15 @@ impl RawReader {
                 resolve_data_file(json, Path::new(name.file_name().unwrap_or_default()), opts)?
             }
         };
+        if same_file(json, &raw) {
+            return Err(IoError::header(
+                json,
+                format!(
+                    "the sidecar names itself as its raw file ({})",
+                    raw.display()
+                ),
+            ));
+        }
         if let Some(&v) = range_f32
             .as_deref()
             .and_then(|r| r.iter().find(|v| !v.is_finite()))
@@ -171,6 +180,19 @@ impl RawReader {
         }
         Ok(reader)
     }
+}
+
+/// Whether two paths name one file (the same path after `.` and `..`, a
+/// symbolic or a hard link): by device and inode where the OS has them.
+fn same_file(a: &Path, b: &Path) -> bool {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::MetadataExt;
+        if let (Ok(x), Ok(y)) = (std::fs::metadata(a), std::fs::metadata(b)) {
+            return x.dev() == y.dev() && x.ino() == y.ino();
+        }
+    }
+    matches!((a.canonicalize(), b.canonicalize()), (Ok(x), Ok(y)) if x == y)
 }
 
 impl RawReader {

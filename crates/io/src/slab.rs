@@ -365,14 +365,14 @@ impl ByteStream {
             }
             let f = self.plain.as_mut().expect("opened above");
             let r = f
-                .seek(SeekFrom::Start(self.offset + start))
+                .seek(SeekFrom::Start(self.offset.saturating_add(start)))
                 .and_then(|_| f.read_exact(out));
             let len = f.metadata().map(|m| m.len()).unwrap_or(0);
             return r.map_err(|e| self.map_err(e, len.saturating_sub(self.offset)));
         }
         // gzip: decoded positions count from the stream's start (header
         // included, for a .nii.gz), so the offset is skipped by decoding
-        let start = self.offset + start;
+        let start = self.offset.saturating_add(start);
         if self.gz.as_ref().is_none_or(|(_, pos)| *pos > start) {
             let f = crate::open_regular(&self.path)?;
             self.gz = Some((flate2::read::GzDecoder::new(std::io::BufReader::new(f)), 0));
@@ -396,6 +396,48 @@ impl ByteStream {
         }
         self.gz = Some((gz, pos + filled as u64));
         Ok(())
+    }
+}
+
+impl ByteStream {
+    /// For gzip, decodes the rest of the stream from where the last read
+    /// stopped, so that the CRC and the length in the gzip trailer are
+    /// checked: a damaged stream whose data still decodes (a flipped byte in
+    /// a stored block) is a [`crate::IoError::Decode`], not a wrong voxel.
+    /// Nothing to do for a plain file.
+    pub(crate) fn verify_to_end(&mut self) -> Result<(), crate::IoError> {
+        use std::io::Read;
+        if !self.gzip {
+            return Ok(());
+        }
+        let (mut gz, pos) = match self.gz.take() {
+            Some(g) => g,
+            None => {
+                let f = crate::open_regular(&self.path)?;
+                (flate2::read::GzDecoder::new(std::io::BufReader::new(f)), 0)
+            }
+        };
+        let mut buf = [0u8; 1 << 14];
+        loop {
+            match gz.read(&mut buf) {
+                Ok(0) => return Ok(()),
+                Ok(_) => {}
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                Err(e) => {
+                    return Err(match e.kind() {
+                        std::io::ErrorKind::UnexpectedEof => crate::IoError::decode(
+                            &self.path,
+                            "gzip",
+                            "the stream ends before its trailer (CRC and length)",
+                        ),
+                        std::io::ErrorKind::InvalidInput | std::io::ErrorKind::InvalidData => {
+                            crate::IoError::decode(&self.path, "gzip", e)
+                        }
+                        _ => self.map_err(e, pos),
+                    });
+                }
+            }
+        }
     }
 }
 
@@ -452,12 +494,21 @@ pub(crate) fn scan_converted(
 }
 
 /// The value range stored in a [`brickray_core::VolumeDesc`]: `[lo, hi]` as
-/// f32, widened to `lo..lo+1` when flat.
-pub(crate) fn desc_range(r: [f64; 2]) -> [f32; 2] {
+/// f32, widened to `lo..lo+1` when flat. A range beyond f32's (a rescale that
+/// overflows, f64 samples of 1e39) is [`crate::IoError::SampleOverflow`]: the
+/// samples would be stored as infinity.
+pub(crate) fn desc_range(path: &std::path::Path, r: [f64; 2]) -> Result<[f32; 2], crate::IoError> {
     let lo = r[0] as f32;
     let mut hi = r[1] as f32;
+    if !(lo.is_finite() && hi.is_finite()) {
+        return Err(crate::IoError::SampleOverflow {
+            path: path.to_owned(),
+            lo: r[0],
+            hi: r[1],
+        });
+    }
     if hi <= lo {
         hi = lo + 1.0;
     }
-    [lo, hi]
+    Ok([lo, hi])
 }

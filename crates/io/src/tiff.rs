@@ -141,16 +141,45 @@ struct StackMeta {
     /// Pages ordered channel fastest, then z, then t (ImageJ's order, OME's XYCZT).
     spacing: [Option<f64>; 3],
     source: &'static str,
+    /// What was assumed (a resolution tag of 0 read as spacing 1, ...).
+    warnings: Vec<String>,
 }
 
 fn attr(xml: &str, name: &str) -> Option<String> {
-    let key = format!("{name}=\"");
+    let key = format!(" {name}=\"");
     let i = xml.find(&key)? + key.len();
     let j = xml[i..].find('"')?;
     Some(xml[i..i + j].to_owned())
 }
 
-fn parse_description(desc: &str, xres: Option<f64>, yres: Option<f64>) -> Option<StackMeta> {
+/// A count (channels, slices, frames, SizeC/Z/T): a positive integer.
+fn count(field: &str, v: &str) -> Result<u64, String> {
+    v.trim()
+        .parse::<u64>()
+        .ok()
+        .filter(|&n| n > 0)
+        .ok_or_else(|| format!("{field} is {v:?}, not a positive integer"))
+}
+
+/// A voxel size: a positive finite number.
+fn size(field: &str, v: &str) -> Result<f64, String> {
+    v.trim()
+        .parse::<f64>()
+        .ok()
+        .filter(|s| s.is_finite() && *s > 0.0)
+        .ok_or_else(|| format!("{field} is {v:?}, not a positive finite number"))
+}
+
+/// Parses an ImageJ or OME-XML description; `Ok(None)`: neither (or an
+/// OME order read as a plain stack). Counts and sizes the description
+/// states must be valid (an error naming the field otherwise, never a
+/// silent 1); a resolution tag ImageJ takes the x or y size from that is
+/// 0 or not finite reads as 1, with a warning.
+fn parse_description(
+    desc: &str,
+    xres: Option<f64>,
+    yres: Option<f64>,
+) -> Result<Option<StackMeta>, String> {
     if desc.starts_with("ImageJ=") {
         let mut m = StackMeta {
             channels: 1,
@@ -164,46 +193,91 @@ fn parse_description(desc: &str, xres: Option<f64>, yres: Option<f64>) -> Option
                 continue;
             };
             match k.trim() {
-                "channels" => m.channels = v.trim().parse().unwrap_or(1),
-                "slices" => m.slices = v.trim().parse().unwrap_or(0),
-                "frames" => m.frames = v.trim().parse().unwrap_or(1),
-                "spacing" => m.spacing[2] = v.trim().parse().ok(),
+                "channels" => m.channels = count("ImageJ channels", v)?,
+                "slices" => m.slices = count("ImageJ slices", v)?,
+                "frames" => m.frames = count("ImageJ frames", v)?,
+                "spacing" => m.spacing[2] = Some(size("ImageJ spacing", v)?),
                 _ => {}
             }
         }
-        let inv = |r: Option<f64>| r.filter(|r| *r > 0.0 && r.is_finite()).map(|r| 1.0 / r);
-        m.spacing[0] = inv(xres);
-        m.spacing[1] = inv(yres);
-        return Some(m);
+        for (a, (tag, r)) in [("XResolution", xres), ("YResolution", yres)]
+            .into_iter()
+            .enumerate()
+        {
+            match r {
+                Some(r) if r.is_finite() && r > 0.0 && (1.0 / r).is_finite() => {
+                    m.spacing[a] = Some(1.0 / r);
+                }
+                Some(r) => m.warnings.push(format!(
+                    "{tag} is {r}: the {} spacing is taken as 1",
+                    ["x", "y"][a]
+                )),
+                None => m.warnings.push(format!(
+                    "no {tag}: the {} spacing is taken as 1",
+                    ["x", "y"][a]
+                )),
+            }
+        }
+        return Ok(Some(m));
     }
     if desc.contains("<OME") {
-        let pixels = &desc[desc.find("<Pixels")?..];
-        let num = |n: &str| attr(pixels, n).and_then(|v| v.parse::<f64>().ok());
+        let Some(at) = desc.find("<Pixels") else {
+            return Ok(None);
+        };
+        let pixels = &desc[at..];
         let order = attr(pixels, "DimensionOrder").unwrap_or_else(|| "XYCZT".into());
         if order != "XYCZT" {
             // other orders would need a page map; read as a plain stack
-            return None;
+            return Ok(None);
         }
-        return Some(StackMeta {
-            channels: num("SizeC").unwrap_or(1.0) as u64,
-            slices: num("SizeZ").unwrap_or(0.0) as u64,
-            frames: num("SizeT").unwrap_or(1.0) as u64,
-            spacing: [
-                num("PhysicalSizeX"),
-                num("PhysicalSizeY"),
-                num("PhysicalSizeZ"),
-            ],
+        let n = |name: &str, default: u64| -> Result<u64, String> {
+            attr(pixels, name).map_or(Ok(default), |v| count(&format!("OME {name}"), &v))
+        };
+        let mut m = StackMeta {
+            channels: n("SizeC", 1)?,
+            slices: n("SizeZ", 0)?,
+            frames: n("SizeT", 1)?,
             source: "OME-TIFF",
-        });
+            ..Default::default()
+        };
+        for (a, name) in ["PhysicalSizeX", "PhysicalSizeY", "PhysicalSizeZ"]
+            .into_iter()
+            .enumerate()
+        {
+            match attr(pixels, name) {
+                Some(v) => m.spacing[a] = Some(size(&format!("OME {name}"), &v)?),
+                None => m
+                    .warnings
+                    .push(format!("no OME {name}: that spacing is taken as 1")),
+            }
+        }
+        return Ok(Some(m));
     }
-    None
+    Ok(None)
 }
 
+/// A resolution tag's value (a RATIONAL in practice; the `tiff` crate's
+/// `into_f64` reads only DOUBLE, which once made every ImageJ x and y
+/// spacing a silent 1). A zero denominator gives infinity or NaN, which the
+/// caller refuses.
 fn rational(d: &mut Dec, tag: Tag) -> Option<f64> {
-    d.find_tag(tag)
-        .ok()
-        .flatten()
-        .and_then(|v| v.into_f64().ok())
+    use tiff::decoder::ifd::Value;
+    #[allow(deprecated)] // RationalBig: BigTIFF's, still decoded
+    let v = match d.find_tag(tag).ok().flatten()? {
+        Value::Rational(n, dd) => n as f64 / dd as f64,
+        Value::SRational(n, dd) => n as f64 / dd as f64,
+        Value::RationalBig(n, dd) => n as f64 / dd as f64,
+        Value::Double(x) => x,
+        Value::Float(x) => x as f64,
+        Value::Unsigned(x) => x as f64,
+        Value::Short(x) => x as f64,
+        Value::List(l) if l.len() == 1 => match &l[0] {
+            Value::Rational(n, dd) => *n as f64 / *dd as f64,
+            _ => return None,
+        },
+        _ => return None,
+    };
+    Some(v)
 }
 
 /// Where slice `z` lives: a file and its page.
@@ -222,6 +296,7 @@ pub struct TiffReader {
     conv: SampleConverter,
     desc: VolumeDesc,
     notes: Vec<String>,
+    warnings: Vec<String>,
     /// The open decoder and the file it reads.
     dec: Option<(usize, Dec)>,
     buf: Vec<u8>,
@@ -245,18 +320,24 @@ impl TiffReader {
             let slices: Vec<SliceRef> = (0..n).map(|file| SliceRef { file, page: 0 }).collect();
             // spacing from the first file's metadata, if any
             let mut d = open_decoder(&files[0])?;
-            let meta = describe(&mut d);
+            let meta = describe(&files[0], &mut d)?;
             (files, slices, meta, Vec::new())
         } else {
             let mut d = open_decoder(path)?;
-            let meta = describe(&mut d);
+            let meta = describe(path, &mut d)?;
             let mut pages = 1usize;
             while d.more_images() {
                 d.next_image().map_err(|e| terr(path, e))?;
                 pages += 1;
             }
             let (c, z, t) = match &meta {
-                Some(m) if m.slices > 0 && m.channels * m.slices * m.frames == pages as u64 => {
+                Some(m)
+                    if m.slices > 0
+                        && m.channels
+                            .checked_mul(m.slices)
+                            .and_then(|v| v.checked_mul(m.frames))
+                            == Some(pages as u64) =>
+                {
                     (m.channels, m.slices, m.frames)
                 }
                 _ => (1, pages as u64, 1),
@@ -305,22 +386,43 @@ impl TiffReader {
         brickray_core::volume::voxel_count(dims64).map_err(|e| IoError::volume(path, e))?;
         let dims = dims64.map(|v| v as u32);
         let mut spacing = [1f32; 3];
+        let mut warnings = Vec::new();
         match &meta {
             Some(m) => {
                 for a in 0..3 {
-                    if let Some(s) = m.spacing[a].filter(|s| s.is_finite() && *s > 0.0) {
-                        spacing[a] = s as f32;
+                    match m.spacing[a] {
+                        Some(s) if (s as f32).is_finite() && s as f32 > 0.0 => {
+                            spacing[a] = s as f32;
+                        }
+                        Some(s) => {
+                            return Err(IoError::header(
+                                path,
+                                format!("{} spacing {s} is not a positive f32", m.source),
+                            ));
+                        }
+                        // ImageJ's z spacing of a single page, or said in
+                        // the warnings
+                        None => {}
                     }
+                }
+                warnings.extend(m.warnings.iter().cloned());
+                if m.source == "ImageJ" && m.spacing[2].is_none() && slices.len() > 1 {
+                    warnings.push("no ImageJ spacing=: the z spacing is taken as 1".into());
                 }
                 notes.push(format!("spacing from {} metadata", m.source));
             }
             None => notes.push("the TIFF states no spacing".into()),
         }
-        if meta.is_none()
-            && let Some(s) = opts.spacing
-        {
-            spacing = s;
-            notes.push("spacing given by the caller".into());
+        if meta.is_none() {
+            if let Some(s) = opts.spacing {
+                spacing = s;
+                notes.push("spacing given by the caller".into());
+            } else {
+                warnings.push(
+                    "the TIFF states no spacing: 1, 1, 1 is assumed (give it with --spacing)"
+                        .into(),
+                );
+            }
         }
         let mut r = TiffReader {
             path: path.to_owned(),
@@ -334,6 +436,7 @@ impl TiffReader {
                 value_range: [0.0, 1.0],
             },
             notes,
+            warnings,
             dec: None,
             buf: Vec::new(),
             entries,
@@ -367,7 +470,7 @@ impl TiffReader {
         let range = [lo, hi];
         r.conv = SampleConverter::choose(src, false, 1.0, 0.0, Some(range));
         r.desc.dtype = r.conv.dst;
-        r.desc.value_range = desc_range(range);
+        r.desc.value_range = desc_range(path, range)?;
         r.notes.push(format!("samples: {}", r.conv.describe()));
         r.desc.validate().map_err(|e| IoError::volume(path, e))?;
         Ok(r)
@@ -417,11 +520,13 @@ impl TiffReader {
     }
 }
 
-fn describe(d: &mut Dec) -> Option<StackMeta> {
-    let desc = d.get_tag_ascii_string(Tag::ImageDescription).ok()?;
+fn describe(path: &Path, d: &mut Dec) -> Result<Option<StackMeta>, IoError> {
+    let Ok(desc) = d.get_tag_ascii_string(Tag::ImageDescription) else {
+        return Ok(None);
+    };
     let x = rational(d, Tag::XResolution);
     let y = rational(d, Tag::YResolution);
-    parse_description(&desc, x, y)
+    parse_description(&desc, x, y).map_err(|m| IoError::header(path, m))
 }
 
 fn list_tiffs(dir: &Path) -> Result<Vec<PathBuf>, IoError> {
@@ -473,6 +578,10 @@ impl VolumeReader for TiffReader {
 
     fn notes(&self) -> Vec<String> {
         self.notes.clone()
+    }
+
+    fn warnings(&self) -> Vec<String> {
+        self.warnings.clone()
     }
 
     fn read_slices(&mut self, z0: u32, z1: u32, out: &mut [u8]) -> Result<(), IoError> {
@@ -563,6 +672,7 @@ mod tests {
             Some(4.0),
             Some(2.0),
         )
+        .unwrap()
         .unwrap();
         assert_eq!((m.channels, m.slices, m.frames), (2, 3, 1));
         assert_eq!(m.spacing, [Some(0.25), Some(0.5), Some(0.5)]);

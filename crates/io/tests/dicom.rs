@@ -200,3 +200,189 @@ fn missing_slice_mixed_sizes_and_unknown_syntax_are_refused() {
     let e = io::open(d.path()).err().expect("truncated file refused");
     assert!(e.to_string().contains("cut.dcm"), "{e}");
 }
+
+// ---------------------------------------------------------------------------
+// Encapsulated pixel data (RLE, JPEG, JPEG 2000) and hostile headers.
+
+mod fixtures;
+
+/// The shared CT series in RLE Lossless and JPEG 2000 Lossless (the same
+/// slices as `cranium_ct`) decode voxel for voxel to the raw volume.
+#[test]
+#[cfg_attr(no_shared_data, ignore = "needs ../shared/data/formats (absent)")]
+fn encapsulated_series_decode_voxel_for_voxel() {
+    let Some(dir) = formats_dir() else { return };
+    let list: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.join("dicom/truth_compressed.json")).unwrap())
+            .unwrap();
+    let folders = list["folders"].as_object().unwrap();
+    for want in ["cranium_ct_rle", "cranium_ct_j2k"] {
+        assert!(folders.contains_key(want), "{want} not in {list}");
+    }
+    for (folder, raw) in folders {
+        let name = Path::new(raw.as_str().unwrap()).file_stem().unwrap();
+        let t = truth(name.to_str().unwrap());
+        let mut r =
+            io::open(dir.join("dicom").join(folder)).unwrap_or_else(|e| panic!("{folder}: {e}"));
+        assert_eq!(r.format(), "DICOM");
+        assert_eq!(r.desc().dims, t.desc.dims, "{folder}");
+        assert_eq!(r.desc().dtype, DType::I16, "{folder}");
+        assert_spacing(r.desc().spacing, t.desc.spacing, folder);
+        assert_eq!(r.input_files().len(), 108, "{folder}");
+        assert_same_voxels(&read_by_slabs(r.as_mut(), 10), &t, folder);
+        assert_eq!(r.desc().value_range, t.desc.value_range, "{folder}");
+    }
+}
+
+/// A series generated here in each syntax (RLE encoded by the test) reads
+/// as the volume it was made from, in Hounsfield units.
+#[test]
+fn generated_series_decode_in_every_syntax() {
+    for syntax in [
+        fixtures::Syntax::Explicit,
+        fixtures::Syntax::Implicit,
+        fixtures::Syntax::Rle,
+    ] {
+        let d = TempDir::new().unwrap();
+        fixtures::dicom_series(d.path(), syntax);
+        let mut r = io::open(d.path()).unwrap_or_else(|e| panic!("{syntax:?}: {e}"));
+        assert_eq!(r.desc().dims, fixtures::DIMS, "{syntax:?}");
+        assert_eq!(r.desc().dtype, DType::I16, "{syntax:?}");
+        assert_eq!(r.desc().spacing, [0.5, 0.5, 1.5], "{syntax:?}");
+        let got = read_by_slabs(r.as_mut(), 3);
+        let want: Vec<u8> = fixtures::volume_u16()
+            .iter()
+            .flat_map(|&v| (v as i16 - 1024).to_le_bytes())
+            .collect();
+        assert!(got == want, "{syntax:?}: voxels differ");
+    }
+}
+
+/// JPEG baseline (encoded by dicom-pixeldata here) decodes within the
+/// encoder's loss.
+#[test]
+fn generated_jpeg_baseline_series_decodes() {
+    let d = TempDir::new().unwrap();
+    for z in 0..fixtures::DIMS[2] {
+        fixtures::dicom_jpeg_slice(&d.path().join(format!("j{z}.dcm")), z);
+    }
+    let mut r = io::open(d.path()).unwrap();
+    assert_eq!(r.desc().dims, fixtures::DIMS);
+    assert_eq!(r.desc().dtype, DType::U8);
+    let got = read_by_slabs(r.as_mut(), 4);
+    let [nx, ny, _] = fixtures::DIMS;
+    let mut worst = 0i32;
+    for (i, &g) in got.iter().enumerate() {
+        let i = i as u32;
+        let want = fixtures::jpeg_sample(i % nx, (i / nx) % ny, i / (nx * ny));
+        worst = worst.max((g as i32 - want as i32).abs());
+    }
+    assert!(worst <= 12, "JPEG error up to {worst}");
+}
+
+/// A folder with the encapsulated slices: the header walk once refused them
+/// as `unknown value representation` at the offset table; a damaged
+/// fragment, item or offset table is a typed error naming the file.
+#[test]
+fn forged_encapsulated_pixel_data_is_a_typed_error() {
+    let d = TempDir::new().unwrap();
+    let files = fixtures::dicom_series(d.path(), fixtures::Syntax::Rle);
+    let base = std::fs::read(&files[1]).unwrap();
+    // the RLE header: 2 segments, the first at 64
+    let at = base
+        .windows(8)
+        .position(|w| w == [2, 0, 0, 0, 64, 0, 0, 0])
+        .expect("RLE header");
+    let cases: Vec<(&str, Box<dyn Fn(&mut Vec<u8>)>)> = vec![
+        ("segment count", Box::new(move |b| b[at] = 9)),
+        (
+            "segment offset",
+            Box::new(move |b| b[at + 4..at + 8].copy_from_slice(&u32::MAX.to_le_bytes())),
+        ),
+        ("truncated", Box::new(move |b| b.truncate(at + 20))),
+        (
+            "item length",
+            Box::new(move |b| b[at - 4..at].copy_from_slice(&u32::MAX.to_le_bytes())),
+        ),
+        ("item tag", Box::new(move |b| b[at - 8] = 0)),
+    ];
+    for (what, edit) in cases {
+        let mut b = base.clone();
+        edit(&mut b);
+        std::fs::write(&files[1], &b).unwrap();
+        let e = io::open(d.path())
+            .err()
+            .unwrap_or_else(|| panic!("{what}: opened"));
+        assert!(e.to_string().contains("s1.dcm"), "{what}: {e}");
+    }
+}
+
+/// PixelSpacing NaN, negative, 0 or of the wrong count is a typed error,
+/// never a silent 1; so are a RescaleSlope of 0 or NaN and an intercept NaN.
+#[test]
+fn invalid_pixel_spacing_and_rescale_are_typed_errors() {
+    for (tag, value) in [
+        (tags::PIXEL_SPACING, "NaN\\0.5"),
+        (tags::PIXEL_SPACING, "-0.5\\0.5"),
+        (tags::PIXEL_SPACING, "0\\0"),
+        (tags::PIXEL_SPACING, "0.5"),
+        (tags::PIXEL_SPACING, "inf\\0.5"),
+        (tags::RESCALE_SLOPE, "0"),
+        (tags::RESCALE_SLOPE, "NaN"),
+        (tags::RESCALE_INTERCEPT, "NaN"),
+        (tags::RESCALE_INTERCEPT, "abc"),
+    ] {
+        let d = TempDir::new().unwrap();
+        fixtures::dicom_series(d.path(), fixtures::Syntax::Explicit);
+        fixtures::dicom_slice(
+            &d.path().join("s2.dcm"),
+            2,
+            fixtures::Syntax::Explicit,
+            &|o| {
+                o.put(DataElement::new(tag, VR::DS, PrimitiveValue::from(value)));
+            },
+        );
+        match io::open(d.path()) {
+            Ok(r) => panic!("{tag} {value:?} opened with spacing {:?}", r.desc().spacing),
+            Err(e) => assert!(
+                matches!(&e, IoError::BadHeader { path, .. } if path.ends_with("s2.dcm")),
+                "{tag} {value:?}: {e}"
+            ),
+        }
+    }
+}
+
+/// A RescaleIntercept of 1e39 (finite in the file, infinite as f32) is
+/// refused at open: the samples would be stored as +inf.
+#[test]
+fn rescale_beyond_f32_is_refused_at_open() {
+    for (slope, inter) in [("1", "1e39"), ("1e300", "0"), ("-1e39", "0")] {
+        let d = TempDir::new().unwrap();
+        for z in 0..fixtures::DIMS[2] {
+            fixtures::dicom_slice(
+                &d.path().join(format!("s{z}.dcm")),
+                z,
+                fixtures::Syntax::Explicit,
+                &|o| {
+                    o.put(DataElement::new(
+                        tags::RESCALE_INTERCEPT,
+                        VR::DS,
+                        PrimitiveValue::from(inter),
+                    ));
+                    o.put(DataElement::new(
+                        tags::RESCALE_SLOPE,
+                        VR::DS,
+                        PrimitiveValue::from(slope),
+                    ));
+                },
+            );
+        }
+        match io::open(d.path()) {
+            Ok(r) => panic!(
+                "slope {slope}, intercept {inter}: opened, range {:?}",
+                r.desc().value_range
+            ),
+            Err(e) => assert!(format!("{e:?}").starts_with("SampleOverflow"), "{e:?}"),
+        }
+    }
+}

@@ -194,3 +194,20 @@ fn streamed_bricks_equal_the_built_store_at_the_finest_level() {
         src.read_brick(NodeKey::new(l, 0, 0, 0), &mut b).unwrap();
     }
 }
+
+/// The sharded fixture (zarr v3 sharding, index at the end of each shard,
+/// zstd inner chunks) decodes voxel for voxel at level 0: every shard index
+/// is checked against its shard before zarrs reads it.
+#[test]
+#[cfg_attr(no_shared_data, ignore = "needs ../shared/data/formats (absent)")]
+fn sharded_fixture_decodes_at_the_finest_level() {
+    let Some(p) = fixture("cells3d_nuclei_sharded_v05.ome.zarr") else {
+        return;
+    };
+    let t = truth("cells3d_nuclei_fluo");
+    let mut r = io::open(&p).unwrap();
+    assert_eq!(r.desc().dims, t.desc.dims);
+    assert_eq!(r.desc().dtype, t.desc.dtype);
+    assert_same_voxels(&read_by_slabs(r.as_mut(), 16), &t, "sharded");
+    assert!(r.warnings().is_empty(), "{:?}", r.warnings());
+}

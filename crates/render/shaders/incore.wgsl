@@ -101,7 +101,9 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         let dt = frame.dt;
         let tf_v = tf_row(0.0);
         let inv_dir = safe_inverse(r.tex_dir);
-        let n = min(u32(ceil((t1 - t0) / dt)), frame.max_samples);
+        // The samples before t1 (out of core: those before the last leaf's
+        // exit, t1).
+        let n = min(first_k_after(t1, t0, dt), frame.max_samples);
         // Empty-space skipping tests a macro cell once, when the ray enters it
         // (k reaches k_cell), not at every sample: the samples of a cell known to
         // contribute run without tests. A cell is skipped when it cannot
@@ -116,7 +118,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         var forced = false;
         loop {
             if (k >= n) { break; }
-            let t = t0 + f32(k) * dt;
+            let t = grid_t(t0, k, dt);
             if (t >= t1) { break; }
             let u = tex_at(r, t);
             if (ESS && k >= k_cell) {

@@ -8,12 +8,12 @@
 // isovalue when `ess`: the in-core kernel's iso loop, with the step a parameter.
 fn iso_march(acc: ptr<function, Accum>, r: Ray, t0: f32, t1: f32, dt: f32, ess: bool) {
     let inv_dir = safe_inverse(r.tex_dir);
-    let n = min(u32(ceil((t1 - t0) / dt)), frame.max_samples);
+    let n = min(first_k_after(t1, t0, dt), frame.max_samples);
     var k = 0u;
     var k_cell = 0u;
     loop {
         if (k >= n) { break; }
-        let t = t0 + f32(k) * dt;
+        let t = grid_t(t0, k, dt);
         if (t >= t1) { break; }
         let u = tex_at(r, t);
         if (ess && k >= k_cell) {
@@ -46,12 +46,12 @@ fn iso_march(acc: ptr<function, Accum>, r: Ray, t0: f32, t1: f32, dt: f32, ess: 
 // is in `acc`).
 fn local_traversal(acc: ptr<function, Accum>, r: Ray, t0: f32, t1: f32, tp: f32) -> bool {
     let dt = frame.dt;
-    let n = min(u32(ceil((t1 - t0) / dt)), frame.max_samples);
+    let n = min(first_k_after(t1, t0, dt), frame.max_samples);
     if (n == 0u) {
         return false;
     }
     let kp = u32(clamp(round((tp - t0) / dt), 0.0, f32(n - 1u)));
-    let inside_p = sample_value(tex_at(r, t0 + f32(kp) * dt)) >= frame.isovalue;
+    let inside_p = sample_value(tex_at(r, grid_t(t0, kp, dt))) >= frame.isovalue;
     (*acc).samples = (*acc).samples + 1u;
     var kb = kp;
     var in_b = inside_p;
@@ -62,14 +62,14 @@ fn local_traversal(acc: ptr<function, Accum>, r: Ray, t0: f32, t1: f32, tp: f32)
         // One step back.
         if (kb > 0u) {
             let k = kb - 1u;
-            let t = t0 + f32(k) * dt;
+            let t = grid_t(t0, k, dt);
             let inside = sample_value(tex_at(r, t)) >= frame.isovalue;
             (*acc).samples = (*acc).samples + 1u;
             if (in_b && !inside) {
                 // The bracket as the full traversal computes it from its upper
                 // sample (t0 + (k + 1) dt, not t + dt, which can round
                 // differently), so the hit and its pixel are bit-identical.
-                let tb = t0 + f32(kb) * dt;
+                let tb = grid_t(t0, kb, dt);
                 iso_bracket(acc, tb - dt, tb);
                 return true;
             }
@@ -83,7 +83,7 @@ fn local_traversal(acc: ptr<function, Accum>, r: Ray, t0: f32, t1: f32, tp: f32)
         // One step forward, only from a predicted sample below the isovalue:
         // from one at or above it, an entering crossing ahead lies behind an
         // exit from the surface, so it is never the ray's first.
-        let t = t0 + f32(kf + 1u) * dt;
+        let t = grid_t(t0, kf + 1u, dt);
         if (!inside_p && kf + 1u < n && t < t1) {
             let inside = sample_value(tex_at(r, t)) >= frame.isovalue;
             (*acc).samples = (*acc).samples + 1u;
@@ -115,7 +115,7 @@ fn guard_first_hit(acc: ptr<function, Accum>, r: Ray, t0: f32) -> bool {
     var k = 0u;
     loop {
         if (k >= k_hit) { break; }
-        let t = t0 + f32(k) * dt;
+        let t = grid_t(t0, k, dt);
         let c = cell_of(tex_at(r, t));
         // As the full traversal's skipping: a cell at skip distance d > 0 lies
         // in an empty cube of side 2d - 1 (no value at or above the isovalue),
@@ -125,7 +125,7 @@ fn guard_first_hit(acc: ptr<function, Accum>, r: Ray, t0: f32) -> bool {
         if (all(c == c_hit)) {
             let k_end = min(k_exit, k_hit);
             for (var j = k; j < k_end; j = j + 1u) {
-                let tj = t0 + f32(j) * dt;
+                let tj = grid_t(t0, j, dt);
                 (*acc).samples = (*acc).samples + 1u;
                 if (sample_value(tex_at(r, tj)) >= frame.isovalue) {
                     iso_bracket(acc, select(tj - dt, tj, j == 0u), tj);

@@ -24,10 +24,24 @@ const MODE_DVR: u32 = 0u;
 const MODE_ISO: u32 = 1u;
 const MODE_MIP: u32 = 2u;
 
-// The first index k of the sample grid t0 + k dt at or after t (skips land on
-// the same grid, so empty-space skipping never changes which samples are taken).
+// Sample k of the grid t0 + k dt. Every kernel computes the grid's points with
+// this one expression, so a march's end test (t >= t_end) and the first sample
+// of the next leaf or cell (first_k_after) agree on which side of a boundary
+// each sample lies.
+fn grid_t(t0: f32, k: u32, dt: f32) -> f32 {
+    return t0 + f32(k) * dt;
+}
+
+// The first index k of the sample grid at or after t: the smallest k with
+// grid_t(t0, k, dt) >= t, exactly (skips land on the same grid, so empty-space
+// skipping never changes which samples are taken). The quotient rounds apart
+// from grid_t by up to one index: a sample within rounding of a leaf's
+// boundary was in neither leaf (out of core lost it), or in both.
 fn first_k_after(t: f32, t0: f32, dt: f32) -> u32 {
-    return u32(max(ceil((t - t0) / dt), 0.0));
+    let k = u32(max(ceil((t - t0) / dt), 0.0));
+    let down = (k > 0u) & (grid_t(t0, max(k, 1u) - 1u, dt) >= t);
+    let up = grid_t(t0, k, dt) < t;
+    return select(select(k, k + 1u, up), k - 1u, down);
 }
 
 // What a ray has accumulated so far.

@@ -291,7 +291,9 @@ fn ooc_iso_march(acc: ptr<function, Accum>, cur: ptr<function, Cursor>, t0: f32,
     var grid_f = 0.0;
     var k = 0u;
     var t_last = t0;
-    var st = oct_begin(oo, od, t_from, t_to, frame.max_leaves, ooc.splits.xy);
+    // [t_from, t_to] lies in the clip box's [t0, t1]: not clipped again (see
+    // the main march).
+    var st = oct_begin_inside(oo, od, t_from, t_to, frame.max_leaves, ooc.splits.xy);
     loop {
         // Walk to the next data leaf that can hold the isovalue.
         var found = false;
@@ -326,7 +328,7 @@ fn ooc_iso_march(acc: ptr<function, Accum>, cur: ptr<function, Cursor>, t0: f32,
         let t_in = max(st.hit.t_enter, t_from);
         let t_voxel = finest_voxel_t() * (*cur).b.usage_f;
         loop {
-            let t = t0 + f32(k) * dtl;
+            let t = grid_t(t0, k, dtl);
             if (t >= t_end) { break; }
             if (budget == 0u) {
                 if (!probe) { feedback_seen((*cur).b.usage, t_in, t, 1.0, 1.0, t_voxel); }
@@ -342,7 +344,7 @@ fn ooc_iso_march(acc: ptr<function, Accum>, cur: ptr<function, Cursor>, t0: f32,
                     (*acc).samples = (*acc).samples + 1u;
                 }
                 if (range.y < frame.isovalue) {
-                    t_last = t0 + f32(k_exit - 1u) * dtl;
+                    t_last = grid_t(t0, k_exit - 1u, dtl);
                     below = true;
                     k = k_exit;
                     continue;
@@ -408,7 +410,13 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             var grid_f = 0.0;
             var k = 0u;
             var t_last = t0;
-            var st = oct_begin(oo, od, t0, t1, frame.max_leaves, ooc.splits.xy);
+            // [t0, t1] is the clip box's (start_ray), inside the octree cube:
+            // the walk enters its first leaf at t0 and leaves its last at t1
+            // exactly, so the first sample is sample 0, as in core. (Clipped
+            // to the cube again, the entry through a face the volume shares
+            // with the cube rounded above t0 on about one ray in eight, which
+            // lost its first sample.)
+            var st = oct_begin_inside(oo, od, t0, t1, frame.max_leaves, ooc.splits.xy);
             var dtl = dt;
             var done = false;
             // MIP: the leaf that holds the running maximum and the weight of
@@ -449,7 +457,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 // MIP: whether a sample of this leaf raised the maximum.
                 var holds_max = false;
                 loop {
-                    let t = t0 + f32(k) * dtl;
+                    let t = grid_t(t0, k, dtl);
                     if (t >= t_end) { break; }
                     if (budget == 0u) { done = true; break; }
                     budget = budget - 1u;
@@ -492,7 +500,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                     k = k + 1u;
                 }
                 // Where the ray left the brick, or stopped in it.
-                let t_out = clamp(t0 + f32(k) * dtl, t_in, t_end);
+                let t_out = clamp(grid_t(t0, k, dtl), t_in, t_end);
                 let trans_out = select(1.0, 1.0 - acc.color.a, MODE == MODE_DVR);
                 if (MODE == MODE_MIP) {
                     if (holds_max) {
@@ -507,7 +515,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             if (MODE == MODE_MIP && mip_slot != 0xffffffffu) {
                 feedback_add(mip_slot, mip_w);
             }
-            t_stop = t0 + f32(k) * dtl;
+            t_stop = grid_t(t0, k, dtl);
         }
         feedback_stop(px, depth_at(r, select(t1, t_stop, feedback_terminated(acc))));
     }

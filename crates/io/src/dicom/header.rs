@@ -3,6 +3,9 @@
 //! decoders this build has.
 
 use super::*;
+use dicom_object::file::ReadPreamble;
+use std::io::Read;
+use std::ops::Range;
 /// The header fields of one image file.
 #[derive(Debug, Clone)]
 pub(super) struct SliceHeader {
@@ -19,7 +22,8 @@ pub(super) struct SliceHeader {
     pub(super) frames: u32,
     pub(super) position: [f64; 3],
     pub(super) orientation: [f64; 6],
-    pub(super) pixel_spacing: [f64; 2],
+    /// `None`: the file states no PixelSpacing (read as 1 mm, with a warning).
+    pub(super) pixel_spacing: Option<[f64; 2]>,
     pub(super) slope: f64,
     pub(super) inter: f64,
     pub(super) ts: String,
@@ -51,13 +55,61 @@ pub(super) fn get_u32(obj: &DefaultDicomObject, tag: Tag) -> Option<u32> {
         .and_then(|e| e.to_int::<u32>().ok())
 }
 
+/// The numbers of a decimal-string element: `Ok(None)` when it is absent or
+/// empty; an error naming the element when it is present but holds anything
+/// other than `n` finite numbers (`n = 0`: any count but none).
+pub(super) fn get_numbers(
+    file: &Path,
+    obj: &DefaultDicomObject,
+    tag: Tag,
+    name: &str,
+    n: usize,
+) -> Result<Option<Vec<f64>>, IoError> {
+    let Some(e) = obj.element_opt(tag).ok().flatten() else {
+        return Ok(None);
+    };
+    let text = e.to_str().map(|s| s.trim().to_owned()).unwrap_or_default();
+    if text.trim_matches(['\\', '\0', ' ']).is_empty() {
+        return Ok(None);
+    }
+    match e.to_multi_float64() {
+        Ok(v) if (n == 0 || v.len() == n) && !v.is_empty() && v.iter().all(|x| x.is_finite()) => {
+            Ok(Some(v))
+        }
+        _ => Err(IoError::header(
+            file,
+            format!(
+                "{name} is {text:?}, not {} finite number(s)",
+                if n == 0 {
+                    "some".to_owned()
+                } else {
+                    n.to_string()
+                }
+            ),
+        )),
+    }
+}
+
+/// Where a file's pixel data lies, as the element walk found it.
+#[derive(Debug, Clone, PartialEq)]
+pub(super) enum Pixels {
+    /// Native pixel data: the element's length.
+    Native(u32),
+    /// Encapsulated pixel data (undefined length, a compressed transfer
+    /// syntax): the byte ranges of its fragments, after the basic offset table.
+    Encapsulated(Vec<Range<usize>>),
+}
+
 /// Checks that no element length in a DICOM file (up to and including the
 /// pixel data's) runs past the end of the file, walking the element headers
 /// (meta group explicit VR little endian; the data set implicit or explicit
 /// VR little endian; sequences and items are descended into). A forged
 /// length would otherwise make the parser allocate and zero up to 4 GiB.
-/// Files with the DICM magic only; other files are left to the parser.
-pub(super) fn check_lengths(file: &Path, b: &[u8]) -> Result<Option<u32>, IoError> {
+/// Encapsulated pixel data (undefined length) is walked as what it is: a
+/// basic offset table and fragments, each an item whose length is checked,
+/// ended by a sequence delimiter. Files with the DICM magic only; other
+/// files are left to the parser.
+pub(super) fn check_lengths(file: &Path, b: &[u8]) -> Result<Option<Pixels>, IoError> {
     if b.len() < 132 || &b[128..132] != b"DICM" {
         return Ok(None);
     }
@@ -131,6 +183,9 @@ pub(super) fn check_lengths(file: &Path, b: &[u8]) -> Result<Option<u32>, IoErro
             )
         };
         let body = i + head;
+        if group == 0x7FE0 && elem == 0x0010 && len == u32::MAX {
+            return fragments(file, b, body).map(|f| Some(Pixels::Encapsulated(f)));
+        }
         let is_sq = explicit && group != 0xFFFE && &b[i + 4..i + 6] == b"SQ";
         if len == u32::MAX || is_sq || (group == 0xFFFE && elem == 0xE000) {
             // undefined length, a sequence or an item: walk into it (its
@@ -145,27 +200,127 @@ pub(super) fn check_lengths(file: &Path, b: &[u8]) -> Result<Option<u32>, IoErro
             return Err(bad(body, len as u64));
         }
         if group == 0x7FE0 && elem == 0x0010 {
-            return Ok(Some(len));
+            return Ok(Some(Pixels::Native(len)));
         }
         i = body + len as usize;
     }
     Ok(None)
 }
 
-/// Reads one file's header (up to the pixel data). `Ok(None)`: not a DICOM
-/// image (no pixel geometry): skipped.
-pub(super) fn read_header(file: &Path) -> Result<Option<SliceHeader>, IoError> {
-    let md = crate::regular_file_metadata(file)?;
-    if md.len() < 132 {
+/// The items of encapsulated pixel data starting at byte `i`: the basic
+/// offset table (dropped) and the fragments, up to the sequence delimiter.
+fn fragments(file: &Path, b: &[u8], mut i: usize) -> Result<Vec<Range<usize>>, IoError> {
+    let mut items = Vec::new();
+    loop {
+        let Some(h) = b.get(i..i + 8) else {
+            return Err(IoError::Truncated {
+                path: file.to_owned(),
+                expected: i as u64 + 8,
+                actual: b.len() as u64,
+            });
+        };
+        let group = u16::from_le_bytes([h[0], h[1]]);
+        let elem = u16::from_le_bytes([h[2], h[3]]);
+        let len = u32::from_le_bytes([h[4], h[5], h[6], h[7]]);
+        match (group, elem) {
+            (0xFFFE, 0xE000) if len != u32::MAX => {
+                let end = (i + 8) as u64 + len as u64;
+                if end > b.len() as u64 {
+                    return Err(IoError::Truncated {
+                        path: file.to_owned(),
+                        expected: end,
+                        actual: b.len() as u64,
+                    });
+                }
+                items.push(i + 8..end as usize);
+                i = end as usize;
+            }
+            (0xFFFE, 0xE0DD) => break,
+            _ => {
+                return Err(IoError::header(
+                    file,
+                    format!(
+                        "encapsulated pixel data: ({group:04X},{elem:04X}) of length {len} \
+                         at byte {i} where an item or the sequence delimiter belongs"
+                    ),
+                ));
+            }
+        }
+    }
+    if items.len() < 2 {
+        return Err(IoError::header(
+            file,
+            "encapsulated pixel data without a fragment (only the offset table)",
+        ));
+    }
+    items.remove(0);
+    Ok(items)
+}
+
+/// Largest DICOM file read whole: one slice of at most 2^28 pixels of 4
+/// bytes, with room for its header.
+const MAX_FILE: u64 = (1 << 30) + (64 << 20);
+
+/// The bytes of a DICOM Part 10 file (128-byte preamble and `DICM`), read
+/// whole; `Ok(None)` when the file is not one (only its first 132 bytes are
+/// read then). Regular files only: a FIFO is refused before it is opened.
+pub(super) fn read_part10(file: &Path) -> Result<Option<Vec<u8>>, IoError> {
+    let mut f = crate::open_regular(file)?;
+    let len = f.metadata().map_err(|e| IoError::io(file, e))?.len();
+    if len < 132 {
         return Ok(None);
     }
-    // Only DICOM Part 10 files (preamble, "DICM", meta group) are read: their
-    // transfer syntax is checked, then every element length, before the
-    // parser sees them.
-    let bytes = std::fs::read(file).map_err(|e| IoError::io(file, e))?;
+    let mut bytes = vec![0u8; 132];
+    if let Err(e) = f.read_exact(&mut bytes) {
+        return match e.kind() {
+            std::io::ErrorKind::UnexpectedEof => Ok(None),
+            _ => Err(IoError::io(file, e)),
+        };
+    }
     if &bytes[128..132] != b"DICM" {
         return Ok(None);
     }
+    if len > MAX_FILE {
+        return Err(IoError::unsupported(
+            file,
+            format!("a DICOM file of {len} bytes (one slice is at most {MAX_FILE})"),
+        ));
+    }
+    f.take(MAX_FILE - 132)
+        .read_to_end(&mut bytes)
+        .map_err(|e| IoError::io(file, e))?;
+    Ok(Some(bytes))
+}
+
+/// Parses the data set of a Part 10 file held in memory (its lengths
+/// checked first by [`check_lengths`]), up to `until` if given.
+pub(super) fn parse(
+    file: &Path,
+    bytes: &[u8],
+    until: Option<Tag>,
+) -> Result<DefaultDicomObject, IoError> {
+    let mut o = OpenFileOptions::new().read_preamble(ReadPreamble::Always);
+    if let Some(t) = until {
+        o = o.read_until(t);
+    }
+    o.from_reader(bytes).map_err(|e| {
+        // an unknown transfer syntax is named, anything else reported
+        match meta_transfer_syntax(bytes).map(|uid| check_syntax(file, &uid)) {
+            Some(Err(named)) => named,
+            _ => dec_err(file, e),
+        }
+    })
+}
+
+/// Reads one file's header (up to the pixel data). `Ok(None)`: not a DICOM
+/// image (no pixel geometry): skipped.
+pub(super) fn read_header(file: &Path) -> Result<Option<SliceHeader>, IoError> {
+    // Only DICOM Part 10 files (preamble, "DICM", meta group) are read: their
+    // transfer syntax is checked, then every element length, before the
+    // parser sees them.
+    let Some(bytes) = read_part10(file)? else {
+        return Ok(None);
+    };
     let Some(ts) = meta_transfer_syntax(&bytes) else {
         return Err(IoError::header(
             file,
@@ -174,25 +329,8 @@ pub(super) fn read_header(file: &Path) -> Result<Option<SliceHeader>, IoError> {
     };
     check_syntax(file, &ts)?;
     check_lengths(file, &bytes)?;
+    let obj = parse(file, &bytes, Some(tags::PIXEL_DATA))?;
     drop(bytes);
-    let obj = match OpenFileOptions::new()
-        .read_until(tags::PIXEL_DATA)
-        .open_file(file)
-    {
-        Ok(o) => o,
-        Err(e) => {
-            // A DICOM file (it has the magic) that dicom-object cannot parse:
-            // an unknown transfer syntax is named, anything else reported.
-            let head = std::fs::read(file).map_err(|e| IoError::io(file, e))?;
-            if head.len() < 132 || &head[128..132] != b"DICM" {
-                return Ok(None);
-            }
-            if let Some(uid) = meta_transfer_syntax(&head) {
-                check_syntax(file, &uid)?;
-            }
-            return Err(dec_err(file, e));
-        }
-    };
     let (Some(rows), Some(cols)) = (get_u32(&obj, tags::ROWS), get_u32(&obj, tags::COLUMNS)) else {
         return Ok(None);
     };
@@ -203,9 +341,29 @@ pub(super) fn read_header(file: &Path) -> Result<Option<SliceHeader>, IoError> {
     let orientation = get_f64s(&obj, tags::IMAGE_ORIENTATION_PATIENT)
         .filter(|v| v.len() == 6 && v.iter().all(|x| x.is_finite()))
         .ok_or_else(|| bad("no usable ImageOrientationPatient (6 numbers)"))?;
-    let pixel_spacing = get_f64s(&obj, tags::PIXEL_SPACING)
-        .filter(|v| v.len() == 2 && v.iter().all(|x| x.is_finite() && *x > 0.0))
-        .unwrap_or_else(|| vec![1.0, 1.0]);
+    // Absent: 1 mm with a warning (the customary fallback); present but not
+    // two positive finite numbers: an error, never a silent 1.
+    let pixel_spacing = match get_numbers(file, &obj, tags::PIXEL_SPACING, "PixelSpacing", 2)? {
+        None => None,
+        Some(v) if v.iter().all(|x| *x > 0.0) => Some([v[0], v[1]]),
+        Some(v) => {
+            return Err(IoError::header(
+                file,
+                format!("PixelSpacing is {v:?}, not two positive numbers"),
+            ));
+        }
+    };
+    let slope = match get_numbers(file, &obj, tags::RESCALE_SLOPE, "RescaleSlope", 0)? {
+        None => 1.0,
+        Some(v) if v[0] != 0.0 => v[0],
+        Some(_) => {
+            return Err(bad(
+                "RescaleSlope is 0: every sample would be the intercept",
+            ));
+        }
+    };
+    let inter = get_numbers(file, &obj, tags::RESCALE_INTERCEPT, "RescaleIntercept", 0)?
+        .map_or(0.0, |v| v[0]);
     let bits_allocated = get_u32(&obj, tags::BITS_ALLOCATED).unwrap_or(16) as u16;
     Ok(Some(SliceHeader {
         file: file.to_owned(),
@@ -230,21 +388,191 @@ pub(super) fn read_header(file: &Path) -> Result<Option<SliceHeader>, IoError> {
             orientation[4],
             orientation[5],
         ],
-        pixel_spacing: [pixel_spacing[0], pixel_spacing[1]],
-        slope: get_f64s(&obj, tags::RESCALE_SLOPE)
-            .and_then(|v| v.first().copied())
-            .filter(|s| s.is_finite() && *s != 0.0)
-            .unwrap_or(1.0),
-        inter: get_f64s(&obj, tags::RESCALE_INTERCEPT)
-            .and_then(|v| v.first().copied())
-            .filter(|s| s.is_finite())
-            .unwrap_or(0.0),
+        pixel_spacing,
+        slope,
+        inter,
         ts: obj
             .meta()
             .transfer_syntax()
             .trim_end_matches('\0')
             .to_owned(),
     }))
+}
+
+/// Checks the first bytes of a frame's compressed stream before a decoder
+/// sees it: the image size and sample count it declares must be the
+/// header's (a decoder allocates for the size its stream declares: a forged
+/// JPEG or JPEG 2000 header could otherwise make it allocate gigabytes), and
+/// an RLE header's segment table must fit the frame.
+pub(super) fn check_frame(h: &SliceHeader, frame: &[u8]) -> Result<(), IoError> {
+    let file = &h.file;
+    let bad = |msg: String| IoError::header(file, msg);
+    let bytes_per_sample = (h.bits_allocated as usize).div_ceil(8);
+    match h.ts.as_str() {
+        // RLE Lossless: a 64-byte header of 16 little-endian u32: the number
+        // of segments (one per byte of each sample) and their offsets.
+        "1.2.840.10008.1.2.5" => {
+            let n_expected = h.samples as usize * bytes_per_sample;
+            let Some(head) = frame.get(..64) else {
+                return Err(bad(format!(
+                    "RLE frame of {} bytes has no 64-byte header",
+                    frame.len()
+                )));
+            };
+            let word = |k: usize| {
+                u32::from_le_bytes([
+                    head[4 * k],
+                    head[4 * k + 1],
+                    head[4 * k + 2],
+                    head[4 * k + 3],
+                ]) as usize
+            };
+            let n = word(0);
+            if n != n_expected {
+                return Err(bad(format!(
+                    "RLE header declares {n} segments, {n_expected} expected"
+                )));
+            }
+            let mut prev = 63;
+            for k in 1..=n {
+                let off = word(k);
+                if off <= prev || off >= frame.len() {
+                    return Err(bad(format!(
+                        "RLE segment {k} starts at byte {off} of a {}-byte frame",
+                        frame.len()
+                    )));
+                }
+                prev = off;
+            }
+            Ok(())
+        }
+        // JPEG (baseline, extended, lossless): the SOF marker.
+        "1.2.840.10008.1.2.4.50"
+        | "1.2.840.10008.1.2.4.51"
+        | "1.2.840.10008.1.2.4.57"
+        | "1.2.840.10008.1.2.4.70" => {
+            let (x, y, nf) = jpeg_sof(frame).map_err(|m| bad(format!("JPEG stream: {m}")))?;
+            if (x, y, nf) != (h.cols, h.rows, h.samples as u32) {
+                return Err(bad(format!(
+                    "the JPEG stream is {x}x{y} with {nf} components, the header says {}x{} with {}",
+                    h.cols, h.rows, h.samples
+                )));
+            }
+            Ok(())
+        }
+        // JPEG 2000 (and High-Throughput JPEG 2000): the SIZ marker.
+        "1.2.840.10008.1.2.4.90"
+        | "1.2.840.10008.1.2.4.91"
+        | "1.2.840.10008.1.2.4.201"
+        | "1.2.840.10008.1.2.4.202"
+        | "1.2.840.10008.1.2.4.203" => {
+            let (x, y, c) = j2k_siz(frame).map_err(|m| bad(format!("JPEG 2000 stream: {m}")))?;
+            if (x, y, c) != (h.cols, h.rows, h.samples as u32) {
+                return Err(bad(format!(
+                    "the JPEG 2000 stream is {x}x{y} with {c} components, the header says {}x{} with {}",
+                    h.cols, h.rows, h.samples
+                )));
+            }
+            Ok(())
+        }
+        _ => Ok(()),
+    }
+}
+
+/// Width, height and component count of a JPEG stream's frame header.
+fn jpeg_sof(b: &[u8]) -> Result<(u32, u32, u32), String> {
+    if !b.starts_with(&[0xFF, 0xD8]) {
+        return Err("no start-of-image marker".into());
+    }
+    let mut i = 2;
+    loop {
+        // markers may be preceded by fill bytes 0xFF
+        while b.get(i) == Some(&0xFF) && b.get(i + 1) == Some(&0xFF) {
+            i += 1;
+        }
+        let (Some(&0xFF), Some(&m)) = (b.get(i), b.get(i + 1)) else {
+            return Err(format!("no marker at byte {i}"));
+        };
+        i += 2;
+        match m {
+            0x01 | 0xD0..=0xD7 => continue,
+            0xD9 | 0xDA => return Err("no frame header before the scan".into()),
+            _ => {}
+        }
+        let Some(l) = b.get(i..i + 2) else {
+            return Err("truncated marker segment".into());
+        };
+        let len = u16::from_be_bytes([l[0], l[1]]) as usize;
+        if len < 2 || i + len > b.len() {
+            return Err(format!("marker segment of length {len} at byte {i}"));
+        }
+        let is_sof = matches!(m, 0xC0..=0xCF) && !matches!(m, 0xC4 | 0xC8 | 0xCC);
+        if is_sof {
+            let s = &b[i + 2..i + len];
+            if s.len() < 6 {
+                return Err("short frame header".into());
+            }
+            let y = u16::from_be_bytes([s[1], s[2]]) as u32;
+            let x = u16::from_be_bytes([s[3], s[4]]) as u32;
+            let nf = s[5] as u32;
+            if s.len() < 6 + 3 * nf as usize {
+                return Err("short frame header".into());
+            }
+            return Ok((x, y, nf));
+        }
+        i += len;
+    }
+}
+
+/// Width, height and component count of a JPEG 2000 codestream's SIZ
+/// marker (a raw codestream, or one inside JP2 boxes); also refuses tilings
+/// and subsamplings a decoder would choke on.
+fn j2k_siz(b: &[u8]) -> Result<(u32, u32, u32), String> {
+    let at = b
+        .windows(4)
+        .take(4096)
+        .position(|w| w == [0xFF, 0x4F, 0xFF, 0x51])
+        .ok_or("no codestream header (SOC, SIZ)")?;
+    let s = &b[at + 4..];
+    let u32_at = |k: usize| -> Result<u64, String> {
+        s.get(k..k + 4)
+            .map(|v| u32::from_be_bytes([v[0], v[1], v[2], v[3]]) as u64)
+            .ok_or_else(|| "truncated SIZ marker".to_owned())
+    };
+    let u16_at = |k: usize| -> Result<u64, String> {
+        s.get(k..k + 2)
+            .map(|v| u16::from_be_bytes([v[0], v[1]]) as u64)
+            .ok_or_else(|| "truncated SIZ marker".to_owned())
+    };
+    // Lsiz, Rsiz, Xsiz, Ysiz, XOsiz, YOsiz, XTsiz, YTsiz, XTOsiz, YTOsiz, Csiz
+    let (xs, ys, xo, yo) = (u32_at(4)?, u32_at(8)?, u32_at(12)?, u32_at(16)?);
+    let (xt, yt, xto, yto) = (u32_at(20)?, u32_at(24)?, u32_at(28)?, u32_at(32)?);
+    let c = u16_at(36)?;
+    if xs <= xo || ys <= yo {
+        return Err(format!("image area {xs}x{ys} at offset {xo}, {yo}"));
+    }
+    if xt == 0 || yt == 0 || xto > xo || yto > yo || xto + xt <= xo || yto + yt <= yo {
+        return Err(format!("tiles of {xt}x{yt} at {xto}, {yto}"));
+    }
+    let tiles = (xs - xto).div_ceil(xt) * (ys - yto).div_ceil(yt);
+    if tiles > 1 << 16 {
+        return Err(format!("{tiles} tiles"));
+    }
+    if c == 0 || c > 4 {
+        return Err(format!("{c} components"));
+    }
+    for k in 0..c as usize {
+        let p = 38 + 3 * k;
+        let prec = s.get(p).ok_or("truncated SIZ marker")? & 0x7F;
+        let (dx, dy) = (s.get(p + 1), s.get(p + 2));
+        if prec >= 32 || dx != Some(&1) || dy != Some(&1) {
+            return Err(format!(
+                "component {k}: {} bits, subsampling {dx:?} x {dy:?}",
+                prec as u32 + 1
+            ));
+        }
+    }
+    Ok(((xs - xo) as u32, (ys - yo) as u32, c as u32))
 }
 
 /// The TransferSyntaxUID (0002,0010) of a file's meta group, found by its

@@ -36,7 +36,10 @@ use std::path::{Path, PathBuf};
 
 mod header;
 
-use header::{SliceHeader, check_lengths, check_syntax, dec_err, read_header};
+use header::{
+    Pixels, SliceHeader, check_frame, check_lengths, check_syntax, dec_err, parse, read_header,
+    read_part10,
+};
 
 /// Every regular file under `dir`, recursively, in path order.
 fn walk(dir: &Path, out: &mut Vec<PathBuf>, depth: u32) -> Result<(), IoError> {
@@ -159,6 +162,7 @@ pub struct DicomReader {
     desc: VolumeDesc,
     placement: Placement,
     notes: Vec<String>,
+    warnings: Vec<String>,
     entries: Vec<Entry>,
     buf: Vec<u8>,
 }
@@ -200,9 +204,24 @@ impl DicomReader {
                 s.slices.len()
             ));
         }
+        let mut warnings = Vec::new();
         let mut slices = s.slices.clone();
         let first = slices[0].clone();
         for h in &slices {
+            if h.pixel_spacing.is_some() != first.pixel_spacing.is_some()
+                || h.pixel_spacing
+                    .zip(first.pixel_spacing)
+                    .is_some_and(|(a, b)| (0..2).any(|k| (a[k] - b[k]).abs() > 1e-4 * b[k]))
+            {
+                return Err(IoError::Inconsistent {
+                    path: root.clone(),
+                    file: h.file.clone(),
+                    msg: format!(
+                        "PixelSpacing {:?} differs from the series' first slice's {:?}",
+                        h.pixel_spacing, first.pixel_spacing
+                    ),
+                });
+            }
             let same = h.rows == first.rows
                 && h.cols == first.cols
                 && h.bits_allocated == first.bits_allocated
@@ -319,7 +338,16 @@ impl DicomReader {
             }
         }
         // Pixel spacing: [row spacing (between rows, along columns), column spacing].
-        let (dx, dy) = (first.pixel_spacing[1], first.pixel_spacing[0]);
+        let (dx, dy) = match first.pixel_spacing {
+            Some([row, col]) => (col, row),
+            None => {
+                warnings.push(format!(
+                    "no PixelSpacing in the series ({} and the others): 1 mm x 1 mm assumed",
+                    first.file.display()
+                ));
+                (1.0, 1.0)
+            }
+        };
         let spacing = [dx as f32, dy as f32, slice_step.abs() as f32];
         let mut affine = [[0.0; 4]; 4];
         for a in 0..3 {
@@ -367,20 +395,27 @@ impl DicomReader {
                 space: "LPS",
             },
             notes,
+            warnings,
             entries,
             buf: Vec::new(),
         };
         let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
         for z in 0..n {
             r.decode(z)?;
-            if let Some([a, b]) = r.convs[z].range(&r.buf) {
-                lo = lo.min(a);
-                hi = hi.max(b);
+            let conv = r.convs[z];
+            for c in r.buf.chunks_exact(conv.src.size()) {
+                let v = conv.value(c);
+                lo = lo.min(v);
+                hi = hi.max(v);
             }
-        }
-        if lo > hi {
-            lo = 0.0;
-            hi = 0.0;
+            if !(lo.is_finite() && hi.is_finite()) {
+                // integer samples rescaled beyond f64's range
+                return Err(IoError::SampleOverflow {
+                    path: r.slices[z].file.clone(),
+                    lo,
+                    hi,
+                });
+            }
         }
         let dst = if same_rescale {
             SampleConverter::choose(src, false, first.slope, first.inter, Some([lo, hi])).dst
@@ -393,7 +428,7 @@ impl DicomReader {
             c.dst = dst;
         }
         r.desc.dtype = dst;
-        r.desc.value_range = desc_range([lo, hi]);
+        r.desc.value_range = desc_range(&root, [lo, hi])?;
         r.notes.push(format!("samples: {}", r.convs[0].describe()));
         r.desc.validate().map_err(|e| IoError::volume(&root, e))?;
         Ok(r)
@@ -413,30 +448,49 @@ impl DicomReader {
     /// bits above BitsStored masked or sign-extended).
     fn decode(&mut self, z: usize) -> Result<(), IoError> {
         let h = &self.slices[z];
-        let bytes = std::fs::read(&h.file).map_err(|e| IoError::io(&h.file, e))?;
-        let pixel_len = check_lengths(&h.file, &bytes)?;
-        drop(bytes);
-        let want = h.rows as u64 * h.cols as u64 * (h.bits_allocated as u64).div_ceil(8);
-        // native (unencapsulated) pixel data must hold the whole image before
-        // a decoder allocates for it; no slice is larger than 2^28 pixels
+        // no slice is larger than 2^28 pixels
         if h.rows as u64 * h.cols as u64 > 1 << 28 {
             return Err(IoError::header(
                 &h.file,
                 format!("{}x{} pixels per slice", h.cols, h.rows),
             ));
         }
-        if let Some(len) = pixel_len.filter(|&l| l != u32::MAX)
-            && (len as u64) < want
-        {
-            return Err(IoError::Truncated {
-                path: h.file.clone(),
-                expected: want,
-                actual: len as u64,
-            });
+        let want = h.rows as u64 * h.cols as u64 * (h.bits_allocated as u64).div_ceil(8);
+        let bytes = read_part10(&h.file)?
+            .ok_or_else(|| IoError::header(&h.file, "no longer a DICOM file (no DICM magic)"))?;
+        match check_lengths(&h.file, &bytes)? {
+            // native pixel data must hold the whole image before a decoder
+            // allocates for it
+            Some(Pixels::Native(len)) if (len as u64) < want => {
+                return Err(IoError::Truncated {
+                    path: h.file.clone(),
+                    expected: want,
+                    actual: len as u64,
+                });
+            }
+            // encapsulated: the compressed stream's own header must declare
+            // the header's image before a decoder allocates for it
+            Some(Pixels::Encapsulated(frags)) => {
+                let frame: Vec<u8> = frags
+                    .iter()
+                    .flat_map(|r| &bytes[r.clone()])
+                    .copied()
+                    .collect();
+                check_frame(h, &frame)?;
+            }
+            _ => {}
         }
-        let obj = dicom_object::open_file(&h.file).map_err(|e| dec_err(&h.file, e))?;
+        let obj = parse(&h.file, &bytes, None)?;
+        drop(bytes);
         let ts = obj.meta().transfer_syntax().trim_end_matches('\0');
         check_syntax(&h.file, ts)?;
+        if ts != h.ts {
+            return Err(IoError::Inconsistent {
+                path: self.path.clone(),
+                file: h.file.clone(),
+                msg: format!("transfer syntax {ts} where the header scan read {}", h.ts),
+            });
+        }
         let px = obj.decode_pixel_data().map_err(|e| dec_err(&h.file, e))?;
         let data = px.frame_data(0).map_err(|e| dec_err(&h.file, e))?;
         let want = want as usize;
@@ -489,6 +543,10 @@ impl VolumeReader for DicomReader {
 
     fn notes(&self) -> Vec<String> {
         self.notes.clone()
+    }
+
+    fn warnings(&self) -> Vec<String> {
+        self.warnings.clone()
     }
 
     fn read_slices(&mut self, z0: u32, z1: u32, out: &mut [u8]) -> Result<(), IoError> {

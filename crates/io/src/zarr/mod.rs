@@ -28,14 +28,15 @@ use serde_json::Value;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
-use zarrs::array::{Array, ArraySubset};
-use zarrs::filesystem::FilesystemStore;
+use zarrs::array::{Array, ArrayMetadata, ArraySubset};
 
+mod safe;
 mod source;
 
+use safe::{MAX_CHUNK_BYTES, SafeStore};
 pub use source::ZarrBrickSource;
 
-type ZArray = Array<FilesystemStore>;
+type ZArray = Array<SafeStore>;
 
 /// One level of the multiscale image.
 #[derive(Debug)]
@@ -56,56 +57,245 @@ pub struct OmeZarr {
     /// Array axis of x, y, z (z may be absent), c, t.
     ax: [Option<usize>; 5],
     src: SourceType,
+    store: Arc<SafeStore>,
+    /// What was assumed (see [`VolumeReader::warnings`]).
+    warnings: Vec<String>,
 }
 
+/// A metadata file's JSON; `Ok(None)` when it does not exist. Regular files
+/// only (a FIFO is refused before it is opened), at most 1 MiB.
 fn read_json(path: &Path) -> Result<Option<Value>, IoError> {
-    match std::fs::read(path) {
-        Ok(b) => {
-            if b.len() > crate::MAX_HEADER {
-                return Err(IoError::header(path, "metadata longer than 1 MiB"));
-            }
-            serde_json::from_slice(&b)
-                .map(Some)
-                .map_err(|e| IoError::header(path, e.to_string()))
+    let f = match crate::open_regular(path) {
+        Ok(f) => f,
+        Err(IoError::Io { source, .. }) if source.kind() == std::io::ErrorKind::NotFound => {
+            return Ok(None);
         }
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
-        Err(e) => Err(IoError::io(path, e)),
+        Err(e) => return Err(e),
+    };
+    let mut b = Vec::new();
+    std::io::Read::read_to_end(
+        &mut std::io::Read::take(f, crate::MAX_HEADER as u64 + 1),
+        &mut b,
+    )
+    .map_err(|e| IoError::io(path, e))?;
+    if b.len() > crate::MAX_HEADER {
+        return Err(IoError::header(path, "metadata longer than 1 MiB"));
     }
+    serde_json::from_slice(&b)
+        .map(Some)
+        .map_err(|e| IoError::header(path, e.to_string()))
 }
 
 fn zerr(path: &Path, e: impl std::fmt::Display) -> IoError {
     IoError::decode(path, "OME-Zarr", e)
 }
 
-fn transforms(v: &Value, n: usize) -> (Vec<f64>, Vec<f64>) {
-    let mut scale = vec![1.0; n];
-    let mut trans = vec![0.0; n];
-    if let Some(list) = v.get("coordinateTransformations").and_then(Value::as_array) {
-        for t in list {
-            let nums = |k: &str| -> Option<Vec<f64>> {
-                t.get(k)?.as_array()?.iter().map(Value::as_f64).collect()
+/// A node's `coordinateTransformations` (the multiscale's or a dataset's):
+/// its scale and translation, each `n` finite numbers when present
+/// (identity otherwise), and whether it had a scale. Anything else (a
+/// scale of the wrong length, `"NaN"`, a transform read from a file) is a
+/// typed error, never a silent 1.
+fn transforms(
+    v: &Value,
+    n: usize,
+    file: &Path,
+    what: &str,
+) -> Result<(Vec<f64>, Vec<f64>, bool), IoError> {
+    let bad = |msg: String| IoError::header(file, format!("{what}: {msg}"));
+    let (mut scale, mut trans) = (None, None);
+    let list = match v.get("coordinateTransformations") {
+        None => return Ok((vec![1.0; n], vec![0.0; n], false)),
+        Some(Value::Array(list)) => list,
+        Some(other) => {
+            return Err(bad(format!(
+                "coordinateTransformations is {other}, not a list"
+            )));
+        }
+    };
+    for t in list {
+        let kind = t.get("type").and_then(Value::as_str).unwrap_or("");
+        let nums = |k: &str| -> Result<Vec<f64>, IoError> {
+            let Some(a) = t.get(k).and_then(Value::as_array) else {
+                return Err(if t.get("path").is_some() {
+                    IoError::unsupported(
+                        file,
+                        format!("{what}: a {kind} transform stored in a file"),
+                    )
+                } else {
+                    bad(format!("a {kind} transform without a `{k}` list"))
+                });
             };
-            match t.get("type").and_then(Value::as_str) {
-                Some("scale") => {
-                    if let Some(s) = nums("scale").filter(|s| s.len() == n) {
-                        scale = s;
-                    }
-                }
-                Some("translation") => {
-                    if let Some(s) = nums("translation").filter(|s| s.len() == n) {
-                        trans = s;
-                    }
-                }
-                _ => {}
+            if a.len() != n {
+                return Err(bad(format!("{k} has {} entries for {n} axes", a.len())));
             }
+            a.iter()
+                .map(|x| {
+                    x.as_f64()
+                        .filter(|f| f.is_finite())
+                        .ok_or_else(|| bad(format!("{k} entry {x} is not a finite number")))
+                })
+                .collect()
+        };
+        let slot = match kind {
+            "scale" => &mut scale,
+            "translation" => &mut trans,
+            "identity" => continue,
+            other => {
+                return Err(IoError::unsupported(
+                    file,
+                    format!("{what}: a coordinate transformation of type {other:?}"),
+                ));
+            }
+        };
+        if slot.replace(nums(kind)?).is_some() {
+            return Err(bad(format!("two {kind} transforms")));
         }
     }
-    (scale, trans)
+    let had = scale.is_some();
+    Ok((
+        scale.unwrap_or_else(|| vec![1.0; n]),
+        trans.unwrap_or_else(|| vec![0.0; n]),
+        had,
+    ))
+}
+
+/// Opens the array at `path` in the store, re-created from its zarr v3 form
+/// (so that a v2 compressor goes through the bounded codecs too), and
+/// checks its chunk geometry: no decoded chunk or shard index larger than
+/// [`MAX_CHUNK_BYTES`] (a chunk shape forged to 2^31 per axis would
+/// otherwise read as fill values, or make a decoder allocate for it).
+fn open_array(
+    store: &Arc<SafeStore>,
+    lp: &Path,
+    path: &str,
+    sample: u64,
+) -> Result<ZArray, IoError> {
+    let err = |e: &dyn std::fmt::Display| store.take_error().unwrap_or_else(|| zerr(lp, e));
+    let array = ZArray::open(store.clone(), path).map_err(|e| err(&e))?;
+    let array = array.to_v3().map_err(|e| err(&e))?;
+    let ArrayMetadata::V3(meta) = array.metadata().clone() else {
+        return Err(zerr(lp, "not convertible to zarr v3 metadata"));
+    };
+    let json = serde_json::to_value(&meta).map_err(|e| err(&e))?;
+    let array = ZArray::new_with_metadata(store.clone(), path, ArrayMetadata::V3(meta))
+        .map_err(|e| err(&e))?;
+    let zeros = vec![0u64; array.shape().len()];
+    let chunk: Vec<u64> = array
+        .chunk_shape(&zeros)
+        .map_err(|e| err(&e))?
+        .iter()
+        .map(|c| c.get())
+        .collect();
+    let codecs = json.get("codecs").cloned().unwrap_or(Value::Null);
+    if let Some(ix) = check_chunk(lp, &chunk, &codecs, sample)? {
+        store.add_sharded(format!("{}/", path.trim_matches('/')), ix);
+    }
+    Ok(array)
+}
+
+/// Checks one chunk shape (or shard shape) and, through a sharding codec,
+/// the inner chunks and the index; the index's layout when sharded.
+fn check_chunk(
+    lp: &Path,
+    chunk: &[u64],
+    codecs: &Value,
+    sample: u64,
+) -> Result<Option<safe::ShardIndex>, IoError> {
+    let elems = chunk
+        .iter()
+        .try_fold(1u64, |a, &c| a.checked_mul(c))
+        .filter(|&e| e > 0);
+    let sharding = codecs.as_array().and_then(|l| {
+        l.iter()
+            .find(|c| c.get("name").and_then(Value::as_str) == Some("sharding_indexed"))
+    });
+    let Some(sh) = sharding else {
+        let bytes = elems.and_then(|e| e.checked_mul(sample));
+        if bytes.is_none_or(|b| b > MAX_CHUNK_BYTES) {
+            return Err(IoError::header(
+                lp,
+                format!(
+                    "chunks of {chunk:?} samples ({}) exceed {MAX_CHUNK_BYTES} bytes",
+                    bytes.map_or("overflowing u64".into(), |b| format!("{b} bytes"))
+                ),
+            ));
+        }
+        return Ok(None);
+    };
+    // A shard is read in parts: its index (16 bytes per inner chunk) and the
+    // inner chunks it needs.
+    let cfg = sh.get("configuration").cloned().unwrap_or(Value::Null);
+    let inner: Vec<u64> = cfg
+        .get("chunk_shape")
+        .and_then(Value::as_array)
+        .map(|a| a.iter().filter_map(Value::as_u64).collect())
+        .unwrap_or_default();
+    if inner.len() != chunk.len() || inner.contains(&0) {
+        return Err(IoError::header(
+            lp,
+            format!("sharding: inner chunks {inner:?} for shards {chunk:?}"),
+        ));
+    }
+    let entries = chunk
+        .iter()
+        .zip(&inner)
+        .try_fold(1u64, |a, (&s, &c)| a.checked_mul(s.div_ceil(c)));
+    let Some(entries) = entries.filter(|&e| e <= MAX_CHUNK_BYTES / 16) else {
+        return Err(IoError::header(
+            lp,
+            format!(
+                "sharding: shards of {chunk:?} in inner chunks of {inner:?}: the index exceeds {MAX_CHUNK_BYTES} bytes"
+            ),
+        ));
+    };
+    // The index: little-endian u64 pairs, optionally with a crc32c, at the
+    // start or the end; anything else is not read.
+    let names: Vec<&str> = cfg
+        .get("index_codecs")
+        .and_then(Value::as_array)
+        .map(|l| l.iter().filter_map(|c| c.get("name")?.as_str()).collect())
+        .unwrap_or_default();
+    let endian = cfg
+        .get("index_codecs")
+        .and_then(|l| l.get(0))
+        .and_then(|c| c.get("configuration"))
+        .and_then(|c| c.get("endian"))
+        .and_then(Value::as_str);
+    let trailer = match (names.as_slice(), endian) {
+        (["bytes"], Some("little") | None) => 0,
+        (["bytes", "crc32c"], Some("little") | None) => 4,
+        _ => {
+            return Err(IoError::unsupported(
+                lp,
+                format!("a shard index encoded as {names:?} ({endian:?} endian)"),
+            ));
+        }
+    };
+    let at_end = match cfg.get("index_location").and_then(Value::as_str) {
+        None | Some("end") => true,
+        Some("start") => false,
+        Some(other) => {
+            return Err(IoError::unsupported(
+                lp,
+                format!("a shard index at {other:?}"),
+            ));
+        }
+    };
+    let inner_codecs = cfg.get("codecs").unwrap_or(&Value::Null);
+    if check_chunk(lp, &inner, inner_codecs, sample)?.is_some() {
+        return Err(IoError::unsupported(lp, "shards within shards"));
+    }
+    Ok(Some(safe::ShardIndex {
+        entries,
+        trailer,
+        at_end,
+    }))
 }
 
 impl OmeZarr {
     /// Opens the group at `root` (a `.zarr` folder).
     pub fn open(root: &Path) -> Result<OmeZarr, IoError> {
+        safe::install();
         let (attrs, meta_path) = if let Some(v) = read_json(&root.join("zarr.json"))? {
             let a = v
                 .get("attributes")
@@ -177,10 +367,9 @@ impl OmeZarr {
                 "axes not in the standard t, c, z, y, x order",
             ));
         }
-        let (gscale, gtrans) = transforms(ms, n);
-        let store = Arc::new(
-            FilesystemStore::new(root).map_err(|e| IoError::io(root, std::io::Error::other(e)))?,
-        );
+        let (gscale, gtrans, _) = transforms(ms, n, &meta_path, "multiscales")?;
+        let store = Arc::new(SafeStore::new(root));
+        let mut warnings = Vec::new();
         let datasets = ms
             .get("datasets")
             .and_then(Value::as_array)
@@ -198,8 +387,10 @@ impl OmeZarr {
             if path.split('/').any(|c| c == ".." || c.is_empty()) {
                 return Err(bad("a dataset path leaves the group"));
             }
-            let array =
-                ZArray::open(store.clone(), &format!("/{path}")).map_err(|e| zerr(&lp, e))?;
+            // the array's own metadata first (a FIFO there is refused by
+            // name), then zarrs' view of it
+            let dtype = array_dtype(&lp)?;
+            let array = open_array(&store, &lp, &format!("/{path}"), dtype.size() as u64)?;
             let shape = array.shape().to_vec();
             if shape.len() != n {
                 return Err(IoError::header(
@@ -207,7 +398,6 @@ impl OmeZarr {
                     format!("{} dims, the axes say {n}", shape.len()),
                 ));
             }
-            let dtype = array_dtype(&lp)?;
             if src.is_some_and(|s| s != dtype) {
                 return Err(IoError::Inconsistent {
                     path: root.to_owned(),
@@ -216,7 +406,13 @@ impl OmeZarr {
                 });
             }
             src = Some(dtype);
-            let (mut scale, mut trans) = transforms(d, n);
+            let (mut scale, mut trans, had_scale) =
+                transforms(d, n, &meta_path, &format!("dataset {path:?}"))?;
+            if !had_scale {
+                warnings.push(format!(
+                    "level {path} has no scale transform: its voxels are taken as 1 x 1 x 1"
+                ));
+            }
             for i in 0..n {
                 trans[i] = trans[i] * gscale[i] + gtrans[i];
                 scale[i] *= gscale[i];
@@ -235,13 +431,24 @@ impl OmeZarr {
                 array,
             });
         }
+        let Some(src) = src else {
+            return Err(bad("multiscales has no datasets"));
+        };
         Ok(OmeZarr {
             root: root.to_owned(),
             version,
             levels,
             ax,
-            src: src.expect("datasets is not empty"),
+            src,
+            store,
+            warnings,
         })
+    }
+
+    /// What was assumed where the metadata did not say (a level without a
+    /// scale transform), one line each.
+    pub fn warnings(&self) -> &[String] {
+        &self.warnings
     }
 
     /// The OME-Zarr version (`"0.4"`, `"0.5"`).
@@ -298,12 +505,14 @@ impl OmeZarr {
         }
         let subset = ArraySubset::new_with_ranges(&ranges);
         let lp = self.root.join(&l.path);
+        let _ = self.store.take_error();
         macro_rules! get {
             ($t:ty) => {{
-                let v: Vec<$t> = l
-                    .array
-                    .retrieve_array_subset(&subset)
-                    .map_err(|e| zerr(&lp, e))?;
+                let v: Vec<$t> = l.array.retrieve_array_subset(&subset).map_err(|e| {
+                    // a refused file (a FIFO, a range outside it) as the
+                    // typed error it is
+                    self.store.take_error().unwrap_or_else(|| zerr(&lp, e))
+                })?;
                 v.iter().flat_map(|x| x.to_le_bytes()).collect()
             }};
         }
@@ -481,7 +690,7 @@ impl ZarrReader {
             dims: dims64.map(|d| d as u32),
             dtype: conv.dst,
             spacing: s.map(|v| v as f32),
-            value_range: desc_range(range),
+            value_range: desc_range(root, range)?,
         };
         desc.validate().map_err(|e| IoError::volume(root, e))?;
         let notes = vec![
@@ -529,6 +738,10 @@ impl VolumeReader for ZarrReader {
 
     fn notes(&self) -> Vec<String> {
         self.notes.clone()
+    }
+
+    fn warnings(&self) -> Vec<String> {
+        self.zarr.warnings.clone()
     }
 
     fn read_slices(&mut self, z0: u32, z1: u32, out: &mut [u8]) -> Result<(), IoError> {

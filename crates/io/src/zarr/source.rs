@@ -67,7 +67,7 @@ impl ZarrBrickSource {
             dims: dims64.map(|d| d as u32),
             dtype: conv.dst,
             spacing: s.map(|v| v as f32),
-            value_range: desc_range(range),
+            value_range: desc_range(root, range)?,
         };
         desc.validate().map_err(|e| IoError::volume(root, e))?;
         let layout = OctreeLayout::new(desc, brick, apron);
@@ -101,6 +101,12 @@ impl ZarrBrickSource {
             plan,
             nodes: Mutex::new(HashMap::new()),
         })
+    }
+
+    /// What was assumed where the metadata did not say (see
+    /// [`VolumeReader::warnings`]), one line each.
+    pub fn warnings(&self) -> Vec<String> {
+        self.zarr.warnings.clone()
     }
 
     /// Where the volume lies (the finest level's transforms).
