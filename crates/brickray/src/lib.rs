@@ -1,25 +1,37 @@
 //! brickray: explore massive scalar volumes in any wgpu application by single-pass
 //! GPU ray casting.
 //!
-//! This facade re-exports the public API of the workspace's crates:
-//! * [`core`]: volumes, transfer functions, cameras, settings;
+//! This facade re-exports what a host uses:
+//! * the renderer ([`VolumeRenderer`]: takes `&Device`, `&Queue` and target
+//!   formats; `prepare` records GPU work, `render` draws into the host's pass
+//!   and writes depth), streamed volumes the host owns ([`StreamedVolume`])
+//!   and their settings, frame descriptions and statistics, at the top level;
+//! * [`core`]: volumes, transfer functions, cameras, settings, the brick
+//!   vocabulary;
 //! * [`io`]: volume input: the `VolumeReader` seam, the format registry and the
-//!   readers (raw + JSON, NRRD, NIfTI, TIFF, DICOM, OME-Zarr);
+//!   readers (raw + JSON, NRRD, and by feature NIfTI, TIFF, DICOM, OME-Zarr);
 //! * [`store`]: the brick-octree file format, its builder and reader, and the
 //!   procedural source of virtual volumes;
-//! * [`cache`]: CPU and GPU brick caches, the asynchronous loader, refinement;
-//! * [`index`]: the octree-with-ropes index over a cut, and the CPU twin of the
-//!   GPU traversal;
-//! * [`render`]: the [`VolumeRenderer`] middleware (takes `&Device`, `&Queue` and
-//!   target formats; `prepare` records GPU work, `render` draws into the host's
-//!   pass and writes depth).
+//! * [`cache`]: the GPU-free out-of-core planner ([`cache::Streamer`]) and its
+//!   vocabulary, for hosts that plan on the CPU (a twin of what a renderer
+//!   streams, a custom executor).
+//!
+//! The workspace's other crates (the caches' and the index's internals, the
+//! shaders) are the library's own.
 
-pub use brickray_cache as cache;
 pub use brickray_core as core;
-pub use brickray_index as index;
 pub use brickray_io as io;
-pub use brickray_render as render;
 pub use brickray_store as store;
+
+/// The GPU-free out-of-core planner and its vocabulary (`brickray-cache`).
+pub mod cache {
+    pub use brickray_cache::{
+        CacheConfig, Classification, ConfigError, CutLeaf, EmptyReason, FadeDuration, FrameStats,
+        GpuFormat, LeafKind, QueryBatch, QueryResult, QuerySchedule, Residency, ResidencyCounts,
+        RetryPolicy, StreamError, StreamFrame, StreamPlan, StreamStats, Streamer, UsageFrame,
+        ViewFeedback,
+    };
+}
 
 pub use brickray_core::{
     Accel, Camera, CameraError, ClipBox, DType, DepthConvention, FrameError, LodMetric, Projection,
@@ -34,9 +46,12 @@ pub use brickray_render::{
     required_limits,
 };
 pub use brickray_render::{
-    FeedbackStats, UsageFrame, VisibilityConfig, VisibilityCounts, VisibilityPolicy,
+    FeedbackStats, OcclusionStats, UsageFrame, VisibilityConfig, VisibilityCounts,
+    VisibilityPolicy,
 };
-pub use brickray_render::{Prediction, PredictionError, PredictionFrame, TraversalClass};
+pub use brickray_render::{
+    Prediction, PredictionCounts, PredictionError, PredictionFrame, TraversalClass,
+};
 pub use wgpu;
 
 /// The README's code, compiled as doc tests (the embedding program is complete).

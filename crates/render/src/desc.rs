@@ -1,8 +1,10 @@
 //! What the host tells the renderer: its targets, each frame's view, and what it
 //! reads back: statistics.
 
-use crate::backend::OutOfCoreStats;
+use crate::backend::{FeedbackStats, OcclusionStats};
+use brickray_cache::FrameStats as CacheStats;
 use brickray_core::{Camera, RenderSettings, VolumeFrame};
+use brickray_visibility::{VisibilityCounts, VisibilityPolicy};
 
 /// The host's render targets that [`crate::VolumeRenderer::render`] draws into.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -137,4 +139,35 @@ pub struct RendererStats {
     /// uploaded, CPU and GPU cache hit rates, requests in flight, frame phases);
     /// `None` in core.
     pub out_of_core: Option<OutOfCoreStats>,
+}
+
+/// What the out-of-core path did in the last frame.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct OutOfCoreStats {
+    /// The cache's view: working set, pool occupancy, uploads, hit rates,
+    /// requests in flight, residency counts, failures.
+    pub cache: CacheStats,
+    /// Words of the encoded index.
+    pub index_words: u32,
+    /// Milliseconds spent planning (the streamer's frame).
+    pub refine_ms: f64,
+    /// Milliseconds spent writing prepared bricks and tables.
+    pub upload_ms: f64,
+    /// Milliseconds spent encoding and writing the index.
+    pub encode_ms: f64,
+    /// True when another frame of this view would not change the image: nothing
+    /// in flight or pending, and no brick the view needs has failed
+    /// (`cache.converged()`), and the feedback settled.
+    pub converged: bool,
+    /// Data leaves of the cut per octree level (level 0 = root; levels past 15
+    /// are counted in 15).
+    pub data_leaves_per_level: [u32; 16],
+    /// The visibility policy in force.
+    pub policy: VisibilityPolicy,
+    /// The cut's data leaves by visibility (all unobserved without culling).
+    pub visibility: VisibilityCounts,
+    /// This view's usage feedback's read-back counters.
+    pub feedback: FeedbackStats,
+    /// This view's occlusion queries' schedule and read-back counters.
+    pub occlusion: OcclusionStats,
 }

@@ -57,6 +57,10 @@ fn ready<T>(f: impl Future<Output = Option<T>>) -> Option<T> {
     }
 }
 
+/// The workgroup of both ray casters and the reprojection pass: 8 x 8
+/// invocations, one per pixel.
+pub(crate) const WORKGROUP: [u32; 2] = [8, 8];
+
 /// Fails with [`RenderError::LowDeviceLimit`] when `required > available`.
 pub(crate) fn need(limit: &'static str, required: u64, available: u64) -> Result<(), RenderError> {
     if required > available {

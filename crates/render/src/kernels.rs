@@ -11,7 +11,7 @@ use brickray_core::{RenderMode, RenderSettings};
 use std::collections::HashMap;
 
 /// The workgroup size of the kernels (`@workgroup_size(8, 8, 1)`).
-pub(crate) const WORKGROUP: [u32; 2] = [8, 8];
+pub(crate) use crate::gpu::WORKGROUP;
 
 /// Bind groups of a kernel: frame, transfer function, volume.
 pub(crate) const BIND_GROUPS: u32 = 3;

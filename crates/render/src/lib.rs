@@ -29,6 +29,7 @@ mod encoding;
 mod error;
 mod frame;
 mod gpu;
+mod group2;
 mod kernels;
 mod limits;
 mod predict;
@@ -36,14 +37,14 @@ pub mod shaders;
 mod tf;
 mod volume;
 
-pub use backend::{FeedbackStats, OcclusionStats, OutOfCoreStats};
+pub use backend::{FeedbackStats, OcclusionStats};
 /// Budgets, LOD metric and tolerance, fades, retry, visibility policy and its
 /// settings, loader threads and floor of the out-of-core path: the cache's own
 /// configuration, one value ([`StreamedVolume::configure`]).
 pub use brickray_cache::CacheConfig as OutOfCoreConfig;
 pub use brickray_cache::{ConfigError, FadeDuration, RetryPolicy, StreamError, UsageFrame};
 pub use brickray_visibility::{VisibilityConfig, VisibilityCounts, VisibilityPolicy};
-pub use desc::{FrameDesc, FrameStats, RendererStats, TargetDesc, Viewport};
+pub use desc::{FrameDesc, FrameStats, OutOfCoreStats, RendererStats, TargetDesc, Viewport};
 pub use encoding::U8Filtering;
 pub use error::{GpuErrorKind, HostDepthError, PrepareError, RenderError};
 pub use frame::PredictionFrame;
@@ -306,7 +307,7 @@ impl VolumeRenderer {
         let vp = f.viewport;
         let limit = limits.max_texture_dimension_2d;
         let groups = limits.max_compute_workgroups_per_dimension;
-        let too_big = |n: u32| n > limit || n.div_ceil(kernels::WORKGROUP[0]) > groups;
+        let too_big = |n: u32| n > limit || n.div_ceil(gpu::WORKGROUP[0]) > groups;
         if vp.width == 0 || vp.height == 0 || too_big(vp.width) || too_big(vp.height) {
             return Err(PrepareError::BadViewport {
                 width: vp.width,
@@ -447,8 +448,8 @@ impl VolumeRenderer {
             }
             let vp = desc.viewport;
             pass.dispatch_workgroups(
-                vp.width.div_ceil(kernels::WORKGROUP[0]),
-                vp.height.div_ceil(kernels::WORKGROUP[1]),
+                vp.width.div_ceil(gpu::WORKGROUP[0]),
+                vp.height.div_ceil(gpu::WORKGROUP[1]),
                 1,
             );
         }

@@ -1,8 +1,8 @@
 //! The device limits the library needs.
 
-use crate::backend;
 use crate::frame::{self, FrameUniforms};
 use crate::kernels;
+use crate::{gpu, group2};
 
 /// The device limits brickray needs, all within WebGPU's defaults
 /// (`wgpu::Limits::default()`): request at least these when creating the
@@ -13,16 +13,16 @@ use crate::kernels;
 pub fn required_limits() -> wgpu::Limits {
     wgpu::Limits {
         max_bind_groups: kernels::BIND_GROUPS,
-        max_storage_buffers_per_shader_stage: backend::MAX_VOLUME_STORAGE
-            + backend::STORAGE_OUTSIDE_VOLUME,
+        max_storage_buffers_per_shader_stage: group2::MAX_VOLUME_STORAGE
+            + group2::STORAGE_OUTSIDE_VOLUME,
         max_storage_textures_per_shader_stage: frame::OUTPUT_FORMATS.len() as u32
-            + backend::ooc::STORAGE_TEXTURES,
-        max_sampled_textures_per_shader_stage: backend::SAMPLED_TEXTURES,
-        max_samplers_per_shader_stage: backend::SAMPLERS,
-        max_uniform_buffers_per_shader_stage: backend::UNIFORM_BUFFERS,
-        max_compute_invocations_per_workgroup: kernels::WORKGROUP[0] * kernels::WORKGROUP[1],
-        max_compute_workgroup_size_x: kernels::WORKGROUP[0],
-        max_compute_workgroup_size_y: kernels::WORKGROUP[1],
+            + group2::STORAGE_TEXTURES,
+        max_sampled_textures_per_shader_stage: group2::SAMPLED_TEXTURES,
+        max_samplers_per_shader_stage: group2::SAMPLERS,
+        max_uniform_buffers_per_shader_stage: group2::UNIFORM_BUFFERS,
+        max_compute_invocations_per_workgroup: gpu::WORKGROUP[0] * gpu::WORKGROUP[1],
+        max_compute_workgroup_size_x: gpu::WORKGROUP[0],
+        max_compute_workgroup_size_y: gpu::WORKGROUP[1],
         max_compute_workgroup_size_z: 1,
         max_uniform_buffer_binding_size: std::mem::size_of::<FrameUniforms>() as u64,
         ..wgpu::Limits::downlevel_defaults()

@@ -405,8 +405,8 @@ impl Reprojector {
         pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(0, self.bind_group.as_ref().map(|(b, _)| b), &[]);
         pass.dispatch_workgroups(
-            u.size[0].div_ceil(crate::kernels::WORKGROUP[0]),
-            u.size[1].div_ceil(crate::kernels::WORKGROUP[1]),
+            u.size[0].div_ceil(crate::gpu::WORKGROUP[0]),
+            u.size[1].div_ceil(crate::gpu::WORKGROUP[1]),
             1,
         );
         Ok(written)

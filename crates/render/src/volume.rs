@@ -394,7 +394,7 @@ impl StreamedVolume {
         config: CacheConfig,
         u8_filtering: U8Filtering,
     ) -> Result<StreamedVolume, RenderError> {
-        crate::backend::ooc::check_limits(device)?;
+        crate::group2::check_ooc_limits(device)?;
         let layout = source.layout().clone();
         let gpu_format = GpuFormat::for_layout(
             &layout,
@@ -411,7 +411,7 @@ impl StreamedVolume {
             pool,
             params: Uniform::new(device, "brickray-render out-of-core params")?,
             index: GrowBuffer::new(device, "brickray-render octree index", 1 << 12)?,
-            sampler: crate::backend::volume_sampler(device)?,
+            sampler: crate::group2::volume_sampler(device)?,
             splits: Splits::from_layout(&layout),
             generation: 0,
             format,

@@ -1,18 +1,19 @@
 //! The in-core backend: the whole volume in one 3D texture plus its min/max
 //! macro-cell grid (Krueger and Westermann 2003), and its group 2.
 
-use super::{VolumeBackend, check_stage_limits, volume_layout_entries, volume_sampler};
+use super::VolumeBackend;
 use crate::encoding::{self, SampleEncoding, U8Filtering};
 use crate::error::RenderError;
 use crate::gpu::{self, Uniform};
+use crate::group2::{
+    INCORE_STORAGE_BUFFERS as STORAGE_BUFFERS, check_stage_limits, volume_layout_entries,
+    volume_sampler,
+};
 use crate::kernels::KernelKind;
 use brickray_core::{MacroCellGrid, RenderMode, TransferFunction, Volume};
 
 /// Macro-cell size in voxels for empty-space skipping.
 pub(crate) const CELL: u32 = 8;
-
-/// Storage buffers of group 2: the macro-cell ranges and skip distances.
-pub(crate) const STORAGE_BUFFERS: u32 = 2;
 
 /// The largest jump of the skip distances, in cells: bounds the host's work
 /// when the transfer function or isovalue changes (O(cells * SKIP_CAP)).

@@ -7,98 +7,17 @@
 //! (`feedback.rs`), and the stop-depth texture and occlusion pass
 //! (`occlusion.rs`). It decides nothing: it reads back, and executes plans.
 
-use super::feedback::{FeedbackStats, UsageFeedback};
-use super::occlusion::{OcclusionFeedback, OcclusionStats};
-use super::{VolumeBackend, check_stage_limits, volume_layout_entries};
+use super::VolumeBackend;
+use super::feedback::UsageFeedback;
+use super::occlusion::OcclusionFeedback;
+use crate::desc::OutOfCoreStats;
 use crate::error::RenderError;
 use crate::gpu;
+use crate::group2::{STOP_DEPTH_BINDING, USAGE_BINDING, check_ooc_limits};
 use crate::kernels::KernelKind;
 use crate::volume::{Bound, Planned, StreamedVolume};
-use brickray_cache::{
-    FrameStats as CacheStats, MAX_QUERIES_PER_FRAME, QueryBatch, UsageFrame, ViewFeedback,
-};
+use brickray_cache::{MAX_QUERIES_PER_FRAME, QueryBatch, UsageFrame, ViewFeedback};
 use brickray_core::NodeKey;
-use brickray_visibility::{VisibilityCounts, VisibilityPolicy};
-
-/// Read-only storage buffers of group 2: slots, sub-cells, index.
-pub(crate) const READ_ONLY_STORAGE: u32 = 3;
-/// Storage buffers of group 2: the read-only ones and the usage counters
-/// (read-write, binding 6).
-pub(crate) const STORAGE_BUFFERS: u32 = READ_ONLY_STORAGE + 1;
-/// The binding of the usage counters (`shaders/feedback.wgsl`).
-pub(crate) const USAGE_BINDING: u32 = 6;
-/// The binding of the stop-depth texture (`shaders/feedback.wgsl`).
-pub(crate) const STOP_DEPTH_BINDING: u32 = 7;
-/// Storage textures of group 2: the stop depth.
-pub(crate) const STORAGE_TEXTURES: u32 = 1;
-
-/// The layout of group 2 out of core: the shared volume entries and the
-/// read-write usage counters.
-pub(crate) fn layout_entries() -> Vec<wgpu::BindGroupLayoutEntry> {
-    let mut e = volume_layout_entries(READ_ONLY_STORAGE);
-    e.push(wgpu::BindGroupLayoutEntry {
-        binding: USAGE_BINDING,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::Buffer {
-            ty: wgpu::BufferBindingType::Storage { read_only: false },
-            has_dynamic_offset: false,
-            min_binding_size: None,
-        },
-        count: None,
-    });
-    e.push(wgpu::BindGroupLayoutEntry {
-        binding: STOP_DEPTH_BINDING,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::StorageTexture {
-            access: wgpu::StorageTextureAccess::WriteOnly,
-            format: wgpu::TextureFormat::R32Float,
-            view_dimension: wgpu::TextureViewDimension::D2,
-        },
-        count: None,
-    });
-    e
-}
-
-/// The per-stage limits the out-of-core kernel needs.
-pub(crate) fn check_limits(device: &wgpu::Device) -> Result<(), RenderError> {
-    check_stage_limits(device, STORAGE_BUFFERS)?;
-    gpu::need(
-        "max_storage_textures_per_shader_stage",
-        (crate::frame::OUTPUT_FORMATS.len() as u32 + STORAGE_TEXTURES) as u64,
-        device.limits().max_storage_textures_per_shader_stage as u64,
-    )
-}
-
-/// What the out-of-core path did in the last frame.
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
-pub struct OutOfCoreStats {
-    /// The cache's view: working set, pool occupancy, uploads, hit rates,
-    /// requests in flight, residency counts, failures.
-    pub cache: CacheStats,
-    /// Words of the encoded index.
-    pub index_words: u32,
-    /// Milliseconds spent planning (the streamer's frame).
-    pub refine_ms: f64,
-    /// Milliseconds spent writing prepared bricks and tables.
-    pub upload_ms: f64,
-    /// Milliseconds spent encoding and writing the index.
-    pub encode_ms: f64,
-    /// True when another frame of this view would not change the image: nothing
-    /// in flight or pending, and no brick the view needs has failed
-    /// (`cache.converged()`), and the feedback settled.
-    pub converged: bool,
-    /// Data leaves of the cut per octree level (level 0 = root; levels past 15
-    /// are counted in 15).
-    pub data_leaves_per_level: [u32; 16],
-    /// The visibility policy in force.
-    pub policy: VisibilityPolicy,
-    /// The cut's data leaves by visibility (all unobserved without culling).
-    pub visibility: VisibilityCounts,
-    /// This view's usage feedback's read-back counters.
-    pub feedback: FeedbackStats,
-    /// This view's occlusion queries' schedule and read-back counters.
-    pub occlusion: OcclusionStats,
-}
 
 /// One renderer's view of a streamed volume.
 pub(crate) struct OutOfCore {
@@ -133,11 +52,11 @@ impl OutOfCore {
         device: &wgpu::Device,
         volume: StreamedVolume,
     ) -> Result<OutOfCore, RenderError> {
-        check_limits(device)?;
+        check_ooc_limits(device)?;
         let group_layout = gpu::scoped(device, "brickray-render out-of-core layout", || {
             device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
                 label: Some("brickray-render out of core"),
-                entries: &layout_entries(),
+                entries: &crate::group2::ooc_layout_entries(),
             })
         })?;
         let occlusion = OcclusionFeedback::new(device, MAX_QUERIES_PER_FRAME)?;

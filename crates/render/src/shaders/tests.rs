@@ -1,9 +1,10 @@
 //! naga validation and reflection of every composed shader against the Rust side.
 
 use super::*;
-use crate::backend::{incore::VolumeParams, volume_layout_entries};
+use crate::backend::incore::VolumeParams;
 use crate::composite::CompositeUniforms;
 use crate::frame::{FrameFlags, FrameUniforms};
+use crate::group2::volume_layout_entries;
 use crate::kernels::{KernelMode, OVERRIDES, WORKGROUP};
 use crate::predict::{PredictUniforms, ReprojectUniforms, TraversalClass};
 use crate::tf::TfInfo;
@@ -244,7 +245,7 @@ fn incore_kernel_matches_the_rust_side() {
     check_kernel(
         "incore",
         &m,
-        &volume_layout_entries(crate::backend::incore::STORAGE_BUFFERS),
+        &volume_layout_entries(crate::group2::INCORE_STORAGE_BUFFERS),
     );
     check_struct(
         &m,
@@ -269,7 +270,7 @@ fn incore_kernel_matches_the_rust_side() {
 #[test]
 fn ooc_kernel_matches_the_rust_side() {
     let m = module("ooc", &ooc());
-    check_kernel("ooc", &m, &crate::backend::ooc::layout_entries());
+    check_kernel("ooc", &m, &crate::group2::ooc_layout_entries());
     check_struct(
         &m,
         "OocParams",
@@ -433,7 +434,7 @@ fn reflection_catches_drift() {
         );
     assert_ne!(
         wgsl_bindings(&module("read-only usage", &ro)),
-        kernel_bindings(&crate::backend::ooc::layout_entries())
+        kernel_bindings(&crate::group2::ooc_layout_entries())
     );
     // A renamed prediction override, a moved prediction binding.
     // (Every use renamed too, so that the kernel still parses.)

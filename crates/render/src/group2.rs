@@ -1,0 +1,168 @@
+//! The layout of a kernel's group 2 (the volume's bindings) and the
+//! per-stage binding counts both ray casters need, checked against the
+//! device before anything is created: what the backends, the shared streamed
+//! volume and `required_limits` all read.
+
+use crate::error::RenderError;
+use crate::gpu;
+
+/// Storage buffers of the in-core group 2: the macro-cell ranges and skip
+/// distances.
+pub(crate) const INCORE_STORAGE_BUFFERS: u32 = 2;
+
+/// The linear, clamp-to-edge sampler of a volume texture.
+pub(crate) fn volume_sampler(device: &wgpu::Device) -> Result<wgpu::Sampler, RenderError> {
+    gpu::scoped(device, "brickray-render volume sampler", || {
+        device.create_sampler(&wgpu::SamplerDescriptor {
+            label: Some("brickray-render volume"),
+            address_mode_u: wgpu::AddressMode::ClampToEdge,
+            address_mode_v: wgpu::AddressMode::ClampToEdge,
+            address_mode_w: wgpu::AddressMode::ClampToEdge,
+            mag_filter: wgpu::FilterMode::Linear,
+            min_filter: wgpu::FilterMode::Linear,
+            ..Default::default()
+        })
+    })
+}
+
+/// Layout entries shared by both backends' group 2: the uniform (0), the volume
+/// texture (1), its sampler (2), then `storage` read-only storage buffers
+/// (3, 4, ...).
+pub(crate) fn volume_layout_entries(storage: u32) -> Vec<wgpu::BindGroupLayoutEntry> {
+    let c = wgpu::ShaderStages::COMPUTE;
+    let mut e = vec![
+        wgpu::BindGroupLayoutEntry {
+            binding: 0,
+            visibility: c,
+            ty: wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Uniform,
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+            count: None,
+        },
+        wgpu::BindGroupLayoutEntry {
+            binding: 1,
+            visibility: c,
+            ty: wgpu::BindingType::Texture {
+                sample_type: wgpu::TextureSampleType::Float { filterable: true },
+                view_dimension: wgpu::TextureViewDimension::D3,
+                multisampled: false,
+            },
+            count: None,
+        },
+        wgpu::BindGroupLayoutEntry {
+            binding: 2,
+            visibility: c,
+            ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
+            count: None,
+        },
+    ];
+    for i in 0..storage {
+        e.push(wgpu::BindGroupLayoutEntry {
+            binding: 3 + i,
+            visibility: c,
+            ty: wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Storage { read_only: true },
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+            count: None,
+        });
+    }
+    e
+}
+
+/// Per-stage bindings of a kernel besides group 2's storage buffers: the
+/// transfer function's 2 storage buffers and the prediction history; uniforms
+/// of frame, prediction, TF and volume; the
+/// sampled volume, host depth, corrected TF table and pre-integrated table; the volume and TF
+/// samplers.
+pub(crate) const STORAGE_OUTSIDE_VOLUME: u32 = 3;
+pub(crate) const UNIFORM_BUFFERS: u32 = 4;
+pub(crate) const SAMPLED_TEXTURES: u32 = 4;
+pub(crate) const SAMPLERS: u32 = 2;
+/// The most storage buffers group 2 holds (out of core: slots, sub-cells,
+/// index, usage counters).
+pub(crate) const MAX_VOLUME_STORAGE: u32 = OOC_STORAGE_BUFFERS;
+
+/// Checks the per-stage binding counts of a kernel whose group 2 has `storage`
+/// storage buffers.
+pub(crate) fn check_stage_limits(device: &wgpu::Device, storage: u32) -> Result<(), RenderError> {
+    let l = device.limits();
+    let checks = [
+        (
+            "max_storage_buffers_per_shader_stage",
+            storage + STORAGE_OUTSIDE_VOLUME,
+            l.max_storage_buffers_per_shader_stage,
+        ),
+        (
+            "max_uniform_buffers_per_shader_stage",
+            UNIFORM_BUFFERS,
+            l.max_uniform_buffers_per_shader_stage,
+        ),
+        (
+            "max_sampled_textures_per_shader_stage",
+            SAMPLED_TEXTURES,
+            l.max_sampled_textures_per_shader_stage,
+        ),
+        (
+            "max_samplers_per_shader_stage",
+            SAMPLERS,
+            l.max_samplers_per_shader_stage,
+        ),
+    ];
+    for (limit, required, available) in checks {
+        gpu::need(limit, required as u64, available as u64)?;
+    }
+    Ok(())
+}
+
+/// Read-only storage buffers of group 2: slots, sub-cells, index.
+pub(crate) const READ_ONLY_STORAGE: u32 = 3;
+/// Storage buffers of group 2: the read-only ones and the usage counters
+/// (read-write, binding 6).
+pub(crate) const OOC_STORAGE_BUFFERS: u32 = READ_ONLY_STORAGE + 1;
+/// The binding of the usage counters (`shaders/feedback.wgsl`).
+pub(crate) const USAGE_BINDING: u32 = 6;
+/// The binding of the stop-depth texture (`shaders/feedback.wgsl`).
+pub(crate) const STOP_DEPTH_BINDING: u32 = 7;
+/// Storage textures of group 2: the stop depth.
+pub(crate) const STORAGE_TEXTURES: u32 = 1;
+
+/// The layout of group 2 out of core: the shared volume entries and the
+/// read-write usage counters.
+pub(crate) fn ooc_layout_entries() -> Vec<wgpu::BindGroupLayoutEntry> {
+    let mut e = volume_layout_entries(READ_ONLY_STORAGE);
+    e.push(wgpu::BindGroupLayoutEntry {
+        binding: USAGE_BINDING,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Storage { read_only: false },
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
+        count: None,
+    });
+    e.push(wgpu::BindGroupLayoutEntry {
+        binding: STOP_DEPTH_BINDING,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::StorageTexture {
+            access: wgpu::StorageTextureAccess::WriteOnly,
+            format: wgpu::TextureFormat::R32Float,
+            view_dimension: wgpu::TextureViewDimension::D2,
+        },
+        count: None,
+    });
+    e
+}
+
+/// The per-stage limits the out-of-core kernel needs.
+pub(crate) fn check_ooc_limits(device: &wgpu::Device) -> Result<(), RenderError> {
+    check_stage_limits(device, OOC_STORAGE_BUFFERS)?;
+    gpu::need(
+        "max_storage_textures_per_shader_stage",
+        (crate::frame::OUTPUT_FORMATS.len() as u32 + STORAGE_TEXTURES) as u64,
+        device.limits().max_storage_textures_per_shader_stage as u64,
+    )
+}
