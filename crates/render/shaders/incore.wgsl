@@ -79,6 +79,46 @@ fn cell_exit(r: Ray, inv_dir: vec3<f32>, c: vec3<u32>, reach: u32) -> f32 {
     return box_exit(r.tex_origin, r.tex_dir, inv_dir, lo, hi);
 }
 
+// The iso march from the ray start at step `dt`, skipping macro cells below the
+// isovalue when `ess`: the one in-core iso loop. The kernel's iso mode is it at
+// frame.dt; the prediction buffer's full traversal too, and its sparse one at
+// pred.sparse_dt (incore_predict.wgsl). A cell is skipped when its values are
+// all below the isovalue: a crossing needs a value at or above it, and the
+// bracket's lower end may lie in the skipped cell.
+fn iso_march(acc: ptr<function, Accum>, r: Ray, t0: f32, t1: f32, dt: f32, ess: bool) {
+    let inv_dir = safe_inverse(r.tex_dir);
+    let n = min(first_k_after(t1, t0, dt), frame.max_samples);
+    var k = 0u;
+    var k_cell = 0u;
+    loop {
+        if (k >= n) { break; }
+        let t = grid_t(t0, k, dt);
+        if (t >= t1) { break; }
+        let u = tex_at(r, t);
+        if (ess && k >= k_cell) {
+            // A cell at skip distance d > 0 lies in an empty cube of side
+            // 2d - 1, skipped with one test.
+            let c = cell_of(u);
+            let d = cell_skip[cell_index(c)];
+            let k_exit = max(k + 1u, first_k_after(cell_exit(r, inv_dir, c, max(d, 1u)), t0, dt));
+            if (d > 0u) {
+                k = k_exit;
+                continue;
+            }
+            k_cell = k_exit;
+        }
+        let v = sample_value(u);
+        (*acc).samples = (*acc).samples + 1u;
+        if (v >= frame.isovalue) {
+            // The first sample inside is a capped cut, else the crossing
+            // lies since the previous sample.
+            iso_bracket(acc, select(t - dt, t, k == 0u), t);
+            break;
+        }
+        k = k + 1u;
+    }
+}
+
 @compute @workgroup_size(8, 8, 1)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     if (gid.x >= frame.viewport_size.x || gid.y >= frame.viewport_size.y) {
@@ -97,20 +137,21 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let t1 = start.t1;
     var acc = accum_new();
     let cur = Cursor(r);
-    if (t1 > t0) {
+    if (MODE == MODE_ISO && t1 > t0) {
+        iso_march(&acc, r, t0, t1, frame.dt, ESS);
+    } else if (t1 > t0) {
         let dt = frame.dt;
         let tf_v = tf_row(0.0);
         let inv_dir = safe_inverse(r.tex_dir);
         // The samples before t1 (out of core: those before the last leaf's
         // exit, t1).
         let n = min(first_k_after(t1, t0, dt), frame.max_samples);
-        // Empty-space skipping tests a macro cell once, when the ray enters it
-        // (k reaches k_cell), not at every sample: the samples of a cell known to
-        // contribute run without tests. A cell is skipped when it cannot
-        // contribute: transparent (DVR), below the isovalue (iso: a crossing needs
-        // a value at or above it; the bracket's lower end may lie in the skipped
-        // cell, whose values are all below), or below the running maximum (MIP).
-        // Skips land on the same sample grid, so skipping never changes the image.
+        // DVR and MIP (iso: iso_march). Empty-space skipping tests a macro cell
+        // once, when the ray enters it (k reaches k_cell), not at every sample:
+        // the samples of a cell known to contribute run without tests. A cell is
+        // skipped when it cannot contribute: transparent (DVR) or below the
+        // running maximum (MIP). Skips land on the same sample grid, so skipping
+        // never changes the image.
         var k = 0u;
         var k_cell = 0u;
         // Pre-integration: the last sample was taken in a cell that could be
@@ -123,7 +164,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             let u = tex_at(r, t);
             if (ESS && k >= k_cell) {
                 let c = cell_of(u);
-                // DVR and iso: a cell at distance d > 0 from any cell that can
+                // DVR: a cell at distance d > 0 from any cell that can
                 // contribute lies in an empty cube of side 2d - 1: one test skips
                 // it whole. MIP: the cell alone, by its range.
                 var reach = 1u;
@@ -159,13 +200,6 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                     front = preint_front(&acc, t, dt, v);
                 }
                 if (!first && dvr_sample(&acc, cur, r, t, t - 0.5 * dt, front, v, tf_v)) { break; }
-            } else if (MODE == MODE_ISO) {
-                if (v >= frame.isovalue) {
-                    // The first sample inside is a capped cut, else the crossing
-                    // lies since the previous sample.
-                    iso_bracket(&acc, select(t - dt, t, k == 0u), t);
-                    break;
-                }
             } else {
                 if (mip_sample(&acc, t, v)) { break; }
             }

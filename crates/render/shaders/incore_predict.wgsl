@@ -3,41 +3,6 @@
 // a local hit that is the first crossing has exactly the full traversal's
 // bracket and pixel. See docs/prediction.md.
 
-// The iso march from the ray start at step `dt` (the full traversal at
-// frame.dt, the sparse one at pred.sparse_dt), skipping macro cells below the
-// isovalue when `ess`: the in-core kernel's iso loop, with the step a parameter.
-fn iso_march(acc: ptr<function, Accum>, r: Ray, t0: f32, t1: f32, dt: f32, ess: bool) {
-    let inv_dir = safe_inverse(r.tex_dir);
-    let n = min(first_k_after(t1, t0, dt), frame.max_samples);
-    var k = 0u;
-    var k_cell = 0u;
-    loop {
-        if (k >= n) { break; }
-        let t = grid_t(t0, k, dt);
-        if (t >= t1) { break; }
-        let u = tex_at(r, t);
-        if (ess && k >= k_cell) {
-            // As the in-core kernel: a cell at skip distance d > 0 lies in an
-            // empty cube of side 2d - 1, skipped with one test.
-            let c = cell_of(u);
-            let d = cell_skip[cell_index(c)];
-            let k_exit = max(k + 1u, first_k_after(cell_exit(r, inv_dir, c, max(d, 1u)), t0, dt));
-            if (d > 0u) {
-                k = k_exit;
-                continue;
-            }
-            k_cell = k_exit;
-        }
-        let v = sample_value(u);
-        (*acc).samples = (*acc).samples + 1u;
-        if (v >= frame.isovalue) {
-            iso_bracket(acc, select(t - dt, t, k == 0u), t);
-            break;
-        }
-        k = k + 1u;
-    }
-}
-
 // The local traversal: from the full-step sample nearest the prediction `tp`,
 // alternately one step back and one step forward (back only when that sample
 // is inside the surface), until two neighbouring
