@@ -25,6 +25,8 @@ fn run(out: &std::path::Path) -> Result<Camera, Box<dyn std::error::Error>> {
     let adapter = pollster::block_on(instance.request_adapter(&Default::default()))?;
     let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
         required_limits: brickray::required_limits().using_resolution(adapter.limits()),
+        // Optional: exact 16-bit and float texels where the adapter has them.
+        required_features: adapter.features() & brickray::optional_features(),
         ..Default::default()
     }))?;
     // The host's targets: colour (read back), and depth that brickray also samples.

@@ -78,6 +78,7 @@ impl Gpu {
         let (device, queue) =
             pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
                 required_limits: brickray::required_limits().using_resolution(adapter.limits()),
+                required_features: adapter.features() & brickray::optional_features(),
                 ..Default::default()
             }))?;
         let size = window.inner_size();

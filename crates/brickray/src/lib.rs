@@ -43,7 +43,7 @@ pub use brickray_render::{
     ConfigError, FadeDuration, FrameDesc, FrameStats, GpuErrorKind, HostDepthError,
     OutOfCoreConfig, OutOfCoreStats, PrepareError, RenderError, RendererOptions, RendererStats,
     RetryPolicy, StreamError, StreamedVolume, TargetDesc, U8Filtering, Viewport, VolumeRenderer,
-    required_limits,
+    OPTIONAL_FEATURES, OptionalFeature, optional_features, required_limits,
 };
 pub use brickray_render::{
     FeedbackStats, OcclusionStats, UsageFrame, VisibilityConfig, VisibilityCounts,

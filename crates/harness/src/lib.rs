@@ -58,8 +58,9 @@ pub struct GpuContext {
 }
 
 /// Optional features brickray uses when present.
-pub const WANTED_FEATURES: wgpu::Features = wgpu::Features::TEXTURE_FORMAT_16BIT_NORM
-    .union(wgpu::Features::FLOAT32_FILTERABLE)
+pub const WANTED_FEATURES: wgpu::Features = brickray_render::OPTIONAL_FEATURES[0]
+    .feature
+    .union(brickray_render::OPTIONAL_FEATURES[1].feature)
     .union(wgpu::Features::TIMESTAMP_QUERY);
 
 impl GpuContext {

@@ -48,7 +48,7 @@ pub use desc::{FrameDesc, FrameStats, OutOfCoreStats, RendererStats, TargetDesc,
 pub use encoding::U8Filtering;
 pub use error::{GpuErrorKind, HostDepthError, PrepareError, RenderError};
 pub use frame::PredictionFrame;
-pub use limits::required_limits;
+pub use limits::{OPTIONAL_FEATURES, OptionalFeature, optional_features, required_limits};
 pub use predict::{Prediction, PredictionCounts, PredictionError, TraversalClass};
 
 pub use volume::StreamedVolume;
@@ -528,11 +528,10 @@ fn plan_group(
     for &j in group {
         let (r, desc) = &mut views[j];
         let vp = desc.viewport;
-        frame_views.push(FrameView::new(
-            desc.camera,
-            desc.frame,
-            [vp.width, vp.height],
-        ));
+        frame_views.push(
+            FrameView::new(desc.camera, desc.frame, [vp.width, vp.height])
+                .with_clip(desc.settings.clip),
+        );
         if let Some(Backend::OutOfCore(o)) = r.backend.as_mut() {
             feedback.push(o.poll(next));
         }

@@ -29,6 +29,40 @@ pub fn required_limits() -> wgpu::Limits {
     }
 }
 
+/// An optional device feature brickray uses when the host enables it, and
+/// what it buys.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct OptionalFeature {
+    /// The feature.
+    pub feature: wgpu::Features,
+    /// What brickray does with it, and without it.
+    pub buys: &'static str,
+}
+
+/// The optional device features brickray uses (none is required): enable
+/// those the adapter has, `adapter.features() & brickray::optional_features()`.
+pub fn optional_features() -> wgpu::Features {
+    OPTIONAL_FEATURES
+        .iter()
+        .fold(wgpu::Features::empty(), |f, o| f | o.feature)
+}
+
+/// [`optional_features`], each with what it buys
+/// (`docs/rendering-model.md`, "Texel formats").
+pub const OPTIONAL_FEATURES: [OptionalFeature; 2] = [
+    OptionalFeature {
+        feature: wgpu::Features::TEXTURE_FORMAT_16BIT_NORM,
+        buys: "R16Unorm texels: u16 and i16 volumes (and u8 volumes, filtered exactly) are \
+               stored and interpolated exactly; without it they are stored as R16Float, \
+               whose 11-bit mantissa quantises wide-range values and moves isosurfaces",
+    },
+    OptionalFeature {
+        feature: wgpu::Features::FLOAT32_FILTERABLE,
+        buys: "filterable R32Float texels: f32 volumes are interpolated in full precision; \
+               without it they are stored as normalized R16Float",
+    },
+];
+
 #[cfg(test)]
 mod tests {
     /// What the library needs fits WebGPU's default limits, so any conformant

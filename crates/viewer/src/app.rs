@@ -514,7 +514,7 @@ impl eframe::App for ViewerApp {
 /// The device needs: brickray's limits within the adapter's, and the
 /// optional features it benefits from.
 pub(crate) fn device_descriptor(adapter: &wgpu::Adapter) -> wgpu::DeviceDescriptor<'static> {
-    let wanted = wgpu::Features::TEXTURE_FORMAT_16BIT_NORM | wgpu::Features::FLOAT32_FILTERABLE;
+    let wanted = brickray::optional_features();
     let mut limits = brickray::required_limits().using_resolution(adapter.limits());
     // egui's depth buffer spans the window.
     limits.max_texture_dimension_2d = limits

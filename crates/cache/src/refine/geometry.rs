@@ -2,7 +2,7 @@
 //! size) and the metadata-only visibility test.
 
 use brickray_core::{
-    Camera, FrameView, NodeInfo, NodeKey, NodeKind, OctreeLayout, Projection, RenderMode,
+    Camera, ClipBox, FrameView, NodeInfo, NodeKey, NodeKind, OctreeLayout, Projection, RenderMode,
     TransferFunction, VolumeFrame,
 };
 use glam::{DMat4, DVec3, DVec4};
@@ -24,6 +24,8 @@ pub struct ViewGeometry {
     /// Pixels per world unit at distance 1 (perspective) or anywhere (ortho).
     px_per_unit: f64,
     perspective: bool,
+    /// The clip box (texture space): nodes wholly outside it are culled.
+    clip: [DVec3; 2],
 }
 
 impl ViewGeometry {
@@ -36,7 +38,14 @@ impl ViewGeometry {
         frame: &VolumeFrame,
     ) -> Self {
         let view_proj = camera.view_proj(aspect).as_dmat4();
-        Self::build(layout, camera, view_proj, viewport_height_px, frame)
+        Self::build(
+            layout,
+            camera,
+            view_proj,
+            viewport_height_px,
+            frame,
+            ClipBox::FULL,
+        )
     }
 
     /// Geometry of one frame's view over `layout` (its view-projection as
@@ -48,6 +57,7 @@ impl ViewGeometry {
             view.view_proj,
             view.height(),
             &view.placement,
+            view.clip,
         )
     }
 
@@ -57,6 +67,7 @@ impl ViewGeometry {
         vp: DMat4,
         viewport_height_px: u32,
         frame: &VolumeFrame,
+        clip: ClipBox,
     ) -> Self {
         let r = [vp.row(0), vp.row(1), vp.row(2), vp.row(3)];
         // wgpu clip space: -w <= x, y <= w, 0 <= z <= w.
@@ -100,6 +111,10 @@ impl ViewGeometry {
             near: (camera.near as f64).max(1e-9),
             px_per_unit,
             perspective,
+            clip: [
+                DVec3::from_array(clip.min.map(f64::from)),
+                DVec3::from_array(clip.max.map(f64::from)),
+            ],
         }
     }
 
@@ -132,9 +147,14 @@ impl ViewGeometry {
         })
     }
 
-    /// True when the node's box lies wholly outside one frustum plane (conservative:
-    /// a node reported visible may still be off-screen).
+    /// True when the node's box lies wholly outside one frustum plane or
+    /// wholly outside the clip box, where no ray samples (conservative: a node
+    /// reported visible may still be off-screen).
     pub fn culled(&self, key: NodeKey) -> bool {
+        let (lo, hi) = self.tex_box(key);
+        if hi.cmplt(self.clip[0]).any() || lo.cmpgt(self.clip[1]).any() {
+            return true;
+        }
         let c = self.world_corners(key);
         self.planes
             .iter()

@@ -783,3 +783,60 @@ fn refine_time_on_dense_cuts() {
         assert!(r.data_leaves <= 100_000);
     }
 }
+
+/// Bricks wholly outside the view's clip box are culled: a clip box over one
+/// half of the ball needs no brick of the other half, and fewer bricks than
+/// the whole ball; the cut still tiles the cube.
+#[test]
+fn nodes_outside_the_clip_box_need_no_brick() {
+    let layout = ball_layout(64);
+    let frame = VolumeFrame::centered([64; 3], [1.0; 3]);
+    let tf = TransferFunction::ramp(0.05, 1.0, 0.5);
+    let cam = Camera::orbit(frame.center(), 1.8, 0.5, 0.3);
+    let cut = |clip: brickray_core::ClipBox| {
+        let view = brickray_core::FrameView::new(cam, frame, [256, 256]).with_clip(clip);
+        let views = Views::of(&layout, &[view]);
+        let params = RefineParams {
+            views: &views,
+            generation: 0,
+            mode: RenderMode::Dvr,
+            tf: &tf,
+            tolerance_px: 0.0,
+            metric: brickray_core::LodMetric::Geometric,
+            max_data_leaves: 10_000,
+            max_requests: u32::MAX,
+            brick_upload_bytes: 1,
+        };
+        let mut env = AllInCpu {
+            layout: layout.clone(),
+            on_gpu: HashSet::new(),
+            meta_reads: 0,
+        };
+        let r = refine(&layout, &params, &mut env, &mut UploadBudget::new(u64::MAX));
+        assert_exact_cover(&keys(&r), layout.levels);
+        r
+    };
+    let whole = cut(brickray_core::ClipBox::FULL);
+    let half = brickray_core::ClipBox {
+        min: [0.0; 3],
+        max: [0.4, 1.0, 1.0],
+    };
+    let clipped = cut(half);
+    let geo = ViewGeometry::new(&layout, &cam, 1.0, 256, &frame);
+    for l in clipped.leaves.iter().filter(|l| l.class == NodeClass::Data) {
+        let (lo, _) = geo.tex_box(l.key);
+        assert!(lo.x <= 0.4, "{:?} lies outside the clip box", l.key);
+    }
+    assert!(
+        clipped.data_leaves * 2 <= whole.data_leaves,
+        "{} of {} bricks",
+        clipped.data_leaves,
+        whole.data_leaves
+    );
+    assert!(
+        clipped
+            .leaves
+            .iter()
+            .any(|l| l.class == NodeClass::Empty(EmptyReason::Culled))
+    );
+}

@@ -4,6 +4,7 @@
 //! uniforms.
 
 use super::{Camera, VolumeFrame};
+use crate::settings::ClipBox;
 use glam::{DMat4, Mat4};
 
 /// One view of the volume in one frame: the camera, the volume's placement,
@@ -22,6 +23,9 @@ pub struct FrameView {
     /// The camera's view-projection at this aspect ratio (f64: refinement
     /// and occlusion project box corners with it).
     pub view_proj: DMat4,
+    /// The part of the volume the view draws (texture space; the whole volume
+    /// by default): what lies wholly outside it needs no brick.
+    pub clip: ClipBox,
 }
 
 impl FrameView {
@@ -35,7 +39,13 @@ impl FrameView {
             size,
             aspect,
             view_proj: camera.view_proj(aspect).as_dmat4(),
+            clip: ClipBox::FULL,
         }
+    }
+
+    /// The view drawing only `clip` of the volume.
+    pub fn with_clip(self, clip: ClipBox) -> FrameView {
+        FrameView { clip, ..self }
     }
 
     /// The view-projection in f32 (what shaders receive).
@@ -51,7 +61,8 @@ impl FrameView {
 
 /// Tracks a sequence of frames' views and numbers them: the generation changes
 /// exactly when a view differs from the previous frame's (a camera, a
-/// placement or a viewport size changed, or the number of views did). What
+/// placement, a viewport size or a clip box changed, or the number of views
+/// did). What
 /// belongs to one view (refinement's memories, the prediction history) keys on
 /// the generation instead of comparing and cloning the values it depends on.
 #[derive(Debug, Clone, Default)]
@@ -65,7 +76,10 @@ impl ViewGenerations {
     pub fn note(&mut self, views: &[FrameView]) -> u64 {
         let same = self.last.len() == views.len()
             && self.last.iter().zip(views).all(|(a, b)| {
-                a.camera == b.camera && a.placement == b.placement && a.size == b.size
+                a.camera == b.camera
+                    && a.placement == b.placement
+                    && a.size == b.size
+                    && a.clip == b.clip
             });
         if !same {
             self.generation += 1;
