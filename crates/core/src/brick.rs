@@ -143,6 +143,48 @@ impl OctreeLayout {
         })
     }
 
+    /// The voxel box `lo..=hi` of `key`'s level that its stored brick (its
+    /// voxels and the apron around them) reads, clamped to the level's
+    /// dimensions.
+    pub fn brick_footprint(&self, key: NodeKey) -> ([u64; 3], [u64; 3]) {
+        let d = self.level_dims(key.level).map(|d| d as i64);
+        let b = self.brick as i64;
+        let a = self.apron as i64;
+        let p = [key.x, key.y, key.z].map(|c| c as i64);
+        let lo = [0, 1, 2].map(|i| (p[i] * b - a).clamp(0, d[i] - 1) as u64);
+        let hi = [0, 1, 2].map(|i| (p[i] * b + b + a - 1).clamp(0, d[i] - 1) as u64);
+        (lo, hi)
+    }
+
+    /// Gathers `key`'s stored brick from the values of its footprint
+    /// ([`brick_footprint`](Self::brick_footprint): `lo..=hi`, x fastest): for
+    /// each stored voxel in order (x fastest, `stored_side()^3` of them), the
+    /// index of the footprint value it holds, edge-clamped where the brick
+    /// reaches past the volume. `put(i)` is called once per stored voxel.
+    pub fn gather_brick(
+        &self,
+        key: NodeKey,
+        (lo, hi): ([u64; 3], [u64; 3]),
+        mut put: impl FnMut(usize),
+    ) {
+        let n = [0, 1, 2].map(|a| (hi[a] - lo[a] + 1) as i64);
+        let d = self.level_dims(key.level).map(|d| d as i64);
+        let b = self.brick as i64;
+        let a = self.apron as i64;
+        let side = self.stored_side() as i64;
+        let origin = [key.x, key.y, key.z].map(|c| c as i64 * b - a);
+        let idx = |axis: usize, i: i64| (origin[axis] + i).clamp(0, d[axis] - 1) - lo[axis] as i64;
+        for k in 0..side {
+            let zk = idx(2, k);
+            for j in 0..side {
+                let row = (zk * n[1] + idx(1, j)) * n[0];
+                for i in 0..side {
+                    put((row + idx(0, i)) as usize);
+                }
+            }
+        }
+    }
+
     /// True when `key` is a valid position and its box overlaps the volume.
     pub fn in_volume(&self, key: NodeKey) -> bool {
         if key.level >= self.levels {

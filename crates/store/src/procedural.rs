@@ -296,17 +296,6 @@ impl ProceduralSource {
         }
         Ok(self.layout.in_volume(key))
     }
-
-    /// The level-`level` voxel box `lo..=hi` a node's stored brick reads (clamped).
-    fn footprint(&self, key: NodeKey) -> ([u64; 3], [u64; 3]) {
-        let d = self.layout.level_dims(key.level).map(|d| d as i64);
-        let b = self.layout.brick as i64;
-        let a = self.layout.apron as i64;
-        let p = [key.x, key.y, key.z].map(|c| c as i64);
-        let lo = [0, 1, 2].map(|i| (p[i] * b - a).clamp(0, d[i] - 1) as u64);
-        let hi = [0, 1, 2].map(|i| (p[i] * b + b + a - 1).clamp(0, d[i] - 1) as u64);
-        (lo, hi)
-    }
 }
 
 impl BrickSource for ProceduralSource {
@@ -324,7 +313,7 @@ impl BrickSource for ProceduralSource {
                 parent_error: None,
             });
         }
-        let (lo, hi) = self.footprint(key);
+        let (lo, hi) = self.layout.brick_footprint(key);
         // Step up until the footprint is about 3 voxels a side.
         let mut m = key.level;
         let (mut lo, mut hi) = (lo, hi);
@@ -369,27 +358,13 @@ impl BrickSource for ProceduralSource {
             out.fill(0);
             return Ok(());
         }
-        let (lo, hi) = self.footprint(key);
-        let vals = self.region_u8(key.level, lo, hi);
-        let n = [0, 1, 2].map(|a| (hi[a] - lo[a] + 1) as i64);
-        let d = self.layout.level_dims(key.level).map(|d| d as i64);
-        let b = self.layout.brick as i64;
-        let a = self.layout.apron as i64;
-        let side = self.layout.stored_side() as i64;
-        let origin = [key.x, key.y, key.z].map(|c| c as i64 * b - a);
-        let idx = |axis: usize, i: i64| (origin[axis] + i).clamp(0, d[axis] - 1) - lo[axis] as i64;
+        let fp = self.layout.brick_footprint(key);
+        let vals = self.region_u8(key.level, fp.0, fp.1);
         let mut o = 0;
-        for k in 0..side {
-            let zk = idx(2, k);
-            for j in 0..side {
-                let yj = idx(1, j);
-                let row = (zk * n[1] + yj) * n[0];
-                for i in 0..side {
-                    out[o] = vals[(row + idx(0, i)) as usize];
-                    o += 1;
-                }
-            }
-        }
+        self.layout.gather_brick(key, fp, |i| {
+            out[o] = vals[i];
+            o += 1;
+        });
         Ok(())
     }
 }
