@@ -293,7 +293,8 @@ fn forged_encapsulated_pixel_data_is_a_typed_error() {
         .windows(8)
         .position(|w| w == [2, 0, 0, 0, 64, 0, 0, 0])
         .expect("RLE header");
-    let cases: Vec<(&str, Box<dyn Fn(&mut Vec<u8>)>)> = vec![
+    type Edit = Box<dyn Fn(&mut Vec<u8>)>;
+    let cases: Vec<(&str, Edit)> = vec![
         ("segment count", Box::new(move |b| b[at] = 9)),
         (
             "segment offset",

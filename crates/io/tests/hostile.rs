@@ -221,7 +221,7 @@ fn forged_chunk_shape_is_a_typed_error() {
                     serde_json::json!([1 << 14, 1 << 14, 1 << 14]);
             }
         });
-        let e = read(&root).err().expect("forged sharding opened");
+        let e = read(&root).expect_err("forged sharding opened");
         assert!(matches!(&e, IoError::BadHeader { .. }), "{inner}: {e:?}");
     }
 }
@@ -367,7 +367,7 @@ fn nifti_non_finite_scl_slope_is_read_as_no_rescale_with_a_warning() {
     // a slope that takes the samples beyond f32: refused
     b[112..116].copy_from_slice(&f32::MAX.to_le_bytes());
     fixtures::write(&p, &b);
-    let e = read(&p).err().expect("overflowing rescale opened");
+    let e = read(&p).expect_err("overflowing rescale opened");
     assert!(matches!(&e, IoError::SampleOverflow { .. }), "{e:?}");
 }
 
@@ -519,7 +519,7 @@ fn raw_sidecar_naming_itself_is_a_typed_error() {
     {
         std::fs::write(&json, self_sidecar("link.raw")).unwrap();
         std::fs::hard_link(&json, d.path().join("link.raw")).unwrap();
-        let e = io::read_volume(&json).err().expect("hard link opened");
+        let e = io::read_volume(&json).expect_err("hard link opened");
         assert!(
             matches!(&e, IoError::BadHeader { msg, .. } if msg.contains("itself")),
             "{e:?}"
@@ -540,8 +540,7 @@ fn read_slices_with_a_wrong_buffer_is_a_typed_error() {
         let mut buf = vec![0u8; len];
         let e = r
             .read_slices(z0, z1, &mut buf)
-            .err()
-            .expect("wrong buffer read");
+            .expect_err("wrong buffer read");
         assert!(
             matches!(e, IoError::SlabBuffer { .. }),
             "{z0}..{z1}, {len}: {e:?}"
@@ -552,8 +551,7 @@ fn read_slices_with_a_wrong_buffer_is_a_typed_error() {
     let mut buf = vec![0u8; 3];
     let e = m
         .read_slices(0, 1, &mut buf)
-        .err()
-        .expect("wrong buffer read");
+        .expect_err("wrong buffer read");
     assert!(matches!(e, IoError::SlabBuffer { .. }), "{e:?}");
 }
 

@@ -508,7 +508,11 @@ pub(super) fn decode_rle(h: &SliceHeader, frame: &[u8], out: &mut Vec<u8>) -> Re
     let mut seg = Vec::with_capacity(n);
     for k in 0..bps {
         let start = offset(k + 1);
-        let end = if k + 1 < bps { offset(k + 2) } else { frame.len() };
+        let end = if k + 1 < bps {
+            offset(k + 2)
+        } else {
+            frame.len()
+        };
         let src = frame
             .get(start..end)
             .ok_or_else(|| bad(format!("segment {k} at bytes {start}..{end}")))?;
