@@ -217,6 +217,15 @@ pub enum IoError {
         /// The largest decoded value.
         hi: f64,
     },
+    /// The buffer given to [`VolumeReader::read_slices`] is not the slab's
+    /// size.
+    #[error("read_slices: a buffer of {actual} bytes for a slab of {expected}")]
+    SlabBuffer {
+        /// The slab's bytes.
+        expected: u64,
+        /// The buffer's.
+        actual: u64,
+    },
     /// A slab outside the volume was asked for.
     #[error("slices {z0}..{z1} requested from a volume of depth {depth}")]
     BadSlab {
@@ -443,7 +452,7 @@ pub trait VolumeReader: Send {
     fn desc(&self) -> &VolumeDesc;
 
     /// Reads slices `z0..z1` as little-endian samples into `out`, whose length must
-    /// be `(z1 - z0) * nx * ny * dtype.size()`. Reading slabs in increasing z is
+    /// be `(z1 - z0) * nx * ny * dtype.size()` (else [`IoError::SlabBuffer`]). Reading slabs in increasing z is
     /// always efficient; other orders may re-read compressed inputs.
     fn read_slices(&mut self, z0: u32, z1: u32, out: &mut [u8]) -> Result<(), IoError>;
 
@@ -608,11 +617,12 @@ pub(crate) fn check_slab(desc: &VolumeDesc, z0: u32, z1: u32, out: &[u8]) -> Res
     }
     let slice = desc.dims[0] as u64 * desc.dims[1] as u64 * desc.dtype.size() as u64;
     let need = (z1 - z0) as u64 * slice;
-    assert_eq!(
-        out.len() as u64,
-        need,
-        "read_slices: output buffer has the wrong length"
-    );
+    if out.len() as u64 != need {
+        return Err(IoError::SlabBuffer {
+            expected: need,
+            actual: out.len() as u64,
+        });
+    }
     Ok(slice)
 }
 
@@ -719,10 +729,7 @@ pub(crate) fn scan_stream(
         ));
     }
     // Both finite here (NaN/Inf returned above, and there is at least one voxel).
-    if hi <= lo {
-        hi = lo + 1.0;
-    }
-    Ok([lo, hi])
+    Ok(slab::widen_flat(lo, hi))
 }
 
 fn bytes_non_finite(dtype: DType, bytes: &[u8]) -> u64 {

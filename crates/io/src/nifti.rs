@@ -295,21 +295,17 @@ impl NiftiHeader {
             return Ok(());
         };
         let a = self.affine();
-        for c in 0..3 {
-            let norm = (0..3).map(|r| a[r][c] * a[r][c]).sum::<f64>().sqrt();
-            if !(norm.is_finite() && norm > 0.0) {
-                return Err(IoError::header(
-                    path,
-                    format!("the {form} maps voxel axis {c} to no direction (a zero column)"),
-                ));
-            }
+        let norms = [0, 1, 2].map(|c| a[..3].iter().map(|row| row[c] * row[c]).sum::<f64>().sqrt());
+        if let Some(c) = norms.iter().position(|n| !(n.is_finite() && *n > 0.0)) {
+            return Err(IoError::header(
+                path,
+                format!("the {form} maps voxel axis {c} to no direction (a zero column)"),
+            ));
         }
         let det = a[0][0] * (a[1][1] * a[2][2] - a[1][2] * a[2][1])
             - a[0][1] * (a[1][0] * a[2][2] - a[1][2] * a[2][0])
             + a[0][2] * (a[1][0] * a[2][1] - a[1][1] * a[2][0]);
-        let scale: f64 = (0..3)
-            .map(|c| (0..3).map(|r| a[r][c] * a[r][c]).sum::<f64>().sqrt())
-            .product();
+        let scale: f64 = norms.iter().product();
         if !(det.is_finite() && det.abs() > 1e-9 * scale) {
             return Err(IoError::header(
                 path,

@@ -191,8 +191,10 @@ impl SampleConverter {
     fn raw_value(&self, b: &[u8]) -> f64 {
         macro_rules! get {
             ($t:ty, $n:expr) => {{
+                // a short slice (a caller's mistake) reads as zero-padded
                 let mut a = [0u8; $n];
-                a.copy_from_slice(&b[..$n]);
+                let k = b.len().min($n);
+                a[..k].copy_from_slice(&b[..k]);
                 if self.big_endian {
                     <$t>::from_be_bytes(a) as f64
                 } else {
@@ -201,8 +203,8 @@ impl SampleConverter {
             }};
         }
         match self.src {
-            SourceType::U8 => b[0] as f64,
-            SourceType::I8 => b[0] as i8 as f64,
+            SourceType::U8 => b.first().copied().unwrap_or(0) as f64,
+            SourceType::I8 => b.first().copied().unwrap_or(0) as i8 as f64,
             SourceType::U16 => get!(u16, 2),
             SourceType::I16 => get!(i16, 2),
             SourceType::U32 => get!(u32, 4),
@@ -232,7 +234,9 @@ impl SampleConverter {
     /// data's range); floats round to nearest for integer targets.
     pub fn convert(&self, src: &[u8], out: &mut [u8]) {
         if self.is_copy() {
-            out.copy_from_slice(src);
+            // lengths that disagree (a caller's mistake) copy what both hold
+            let n = src.len().min(out.len());
+            out[..n].copy_from_slice(&src[..n]);
             return;
         }
         let n = self.src.size();
@@ -499,7 +503,7 @@ pub(crate) fn scan_converted(
 /// samples would be stored as infinity.
 pub(crate) fn desc_range(path: &std::path::Path, r: [f64; 2]) -> Result<[f32; 2], crate::IoError> {
     let lo = r[0] as f32;
-    let mut hi = r[1] as f32;
+    let hi = r[1] as f32;
     if !(lo.is_finite() && hi.is_finite()) {
         return Err(crate::IoError::SampleOverflow {
             path: path.to_owned(),
@@ -507,8 +511,22 @@ pub(crate) fn desc_range(path: &std::path::Path, r: [f64; 2]) -> Result<[f32; 2]
             hi: r[1],
         });
     }
+    Ok(widen_flat(lo, hi))
+}
+
+/// A finite range made strictly increasing: a flat one becomes `lo..lo+1`;
+/// beyond 2^24, where adding 1 rounds back to `lo` (values of 9e9 once gave
+/// a range of zero width), `lo` and the next f32 up (or down, at f32's end).
+pub(crate) fn widen_flat(mut lo: f32, mut hi: f32) -> [f32; 2] {
     if hi <= lo {
         hi = lo + 1.0;
     }
-    Ok([lo, hi])
+    if hi <= lo {
+        hi = lo.next_up();
+        if !hi.is_finite() {
+            hi = lo;
+            lo = lo.next_down();
+        }
+    }
+    [lo, hi]
 }

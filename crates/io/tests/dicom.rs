@@ -293,7 +293,8 @@ fn forged_encapsulated_pixel_data_is_a_typed_error() {
         .windows(8)
         .position(|w| w == [2, 0, 0, 0, 64, 0, 0, 0])
         .expect("RLE header");
-    let cases: Vec<(&str, Box<dyn Fn(&mut Vec<u8>)>)> = vec![
+    type Edit = Box<dyn Fn(&mut Vec<u8>)>;
+    let cases: Vec<(&str, Edit)> = vec![
         ("segment count", Box::new(move |b| b[at] = 9)),
         (
             "segment offset",
@@ -385,4 +386,32 @@ fn rescale_beyond_f32_is_refused_at_open() {
             Err(e) => assert!(format!("{e:?}").starts_with("SampleOverflow"), "{e:?}"),
         }
     }
+}
+
+/// Found by the mutation suite: an RLE segment that decodes to fewer bytes
+/// than the image has pixels made dicom-pixeldata's RLE decoder index past
+/// its buffer (a panic). The frame is decoded here now: a typed error.
+#[test]
+fn rle_segment_decoding_short_is_a_typed_error() {
+    let d = TempDir::new().unwrap();
+    let files = fixtures::dicom_series(d.path(), fixtures::Syntax::Rle);
+    let mut b = std::fs::read(&files[1]).unwrap();
+    let at = b
+        .windows(8)
+        .position(|w| w == [2, 0, 0, 0, 64, 0, 0, 0])
+        .expect("RLE header");
+    let seg2 = u32::from_le_bytes(b[at + 8..at + 12].try_into().unwrap()) as usize;
+    // the second segment: one literal byte, then no-op runs to its end
+    let end = b.len() - 8; // the sequence delimiter follows the fragment
+    b[at + seg2] = 0x00;
+    b[at + seg2 + 1] = 0x05;
+    for x in &mut b[at + seg2 + 2..end] {
+        *x = 0x80;
+    }
+    std::fs::write(&files[1], &b).unwrap();
+    let e = io::open(d.path()).err().expect("short segment opened");
+    assert!(
+        matches!(&e, IoError::Decode { path, .. } if path.ends_with("s1.dcm")),
+        "{e:?}"
+    );
 }

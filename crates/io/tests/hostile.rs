@@ -10,7 +10,7 @@
 
 mod fixtures;
 
-use brickray_io::{self as io, FileKind, IoError, ReadOptions};
+use brickray_io::{self as io, FileKind, IoError, ReadOptions, VolumeReader};
 use fixtures::{DIMS, ZARR_CODECS, ZarrCodec};
 use std::path::Path;
 use tempfile::TempDir;
@@ -221,7 +221,7 @@ fn forged_chunk_shape_is_a_typed_error() {
                     serde_json::json!([1 << 14, 1 << 14, 1 << 14]);
             }
         });
-        let e = read(&root).err().expect("forged sharding opened");
+        let e = read(&root).expect_err("forged sharding opened");
         assert!(matches!(&e, IoError::BadHeader { .. }), "{inner}: {e:?}");
     }
 }
@@ -367,7 +367,7 @@ fn nifti_non_finite_scl_slope_is_read_as_no_rescale_with_a_warning() {
     // a slope that takes the samples beyond f32: refused
     b[112..116].copy_from_slice(&f32::MAX.to_le_bytes());
     fixtures::write(&p, &b);
-    let e = read(&p).err().expect("overflowing rescale opened");
+    let e = read(&p).expect_err("overflowing rescale opened");
     assert!(matches!(&e, IoError::SampleOverflow { .. }), "{e:?}");
 }
 
@@ -519,10 +519,100 @@ fn raw_sidecar_naming_itself_is_a_typed_error() {
     {
         std::fs::write(&json, self_sidecar("link.raw")).unwrap();
         std::fs::hard_link(&json, d.path().join("link.raw")).unwrap();
-        let e = io::read_volume(&json).err().expect("hard link opened");
+        let e = io::read_volume(&json).expect_err("hard link opened");
         assert!(
             matches!(&e, IoError::BadHeader { msg, .. } if msg.contains("itself")),
             "{e:?}"
         );
     }
+}
+
+// ---------------------------------------------------------------------------
+// A careless host: values a caller passes are checked, never a panic.
+
+#[test]
+fn read_slices_with_a_wrong_buffer_is_a_typed_error() {
+    let d = TempDir::new().unwrap();
+    let p = fixtures::write(&d.path().join("v.nii"), &fixtures::nifti());
+    let mut r = io::open(&p).unwrap();
+    let slice = (DIMS[0] * DIMS[1] * 2) as usize;
+    for (z0, z1, len) in [(0, 1, slice - 1), (0, 2, slice), (1, 1, 1), (0, 1, 0)] {
+        let mut buf = vec![0u8; len];
+        let e = r
+            .read_slices(z0, z1, &mut buf)
+            .expect_err("wrong buffer read");
+        assert!(
+            matches!(e, IoError::SlabBuffer { .. }),
+            "{z0}..{z1}, {len}: {e:?}"
+        );
+    }
+    let v = r.read_volume().unwrap();
+    let mut m = io::MemoryReader::new(v, "mem");
+    let mut buf = vec![0u8; 3];
+    let e = m
+        .read_slices(0, 1, &mut buf)
+        .expect_err("wrong buffer read");
+    assert!(matches!(e, IoError::SlabBuffer { .. }), "{e:?}");
+}
+
+#[test]
+fn sample_converter_with_slices_of_the_wrong_length_does_not_panic() {
+    use io::{SampleConverter, SourceType};
+    for src in [SourceType::U8, SourceType::U16, SourceType::F64] {
+        let c = SampleConverter::choose(src, false, 1.0, 0.0, None);
+        let _ = c.value(&[]);
+        let _ = c.value(&[1]);
+        let mut out = [0u8; 3];
+        c.convert(&[1, 2, 3, 4, 5], &mut out);
+        c.convert(&[1], &mut out);
+    }
+}
+
+#[test]
+fn zarr_brick_source_refuses_bricks_it_cannot_lay_out() {
+    let d = TempDir::new().unwrap();
+    let root = d.path().join("b.ome.zarr");
+    fixtures::zarr(&root, ZarrCodec::Raw);
+    for (brick, apron) in [(0, 0), (8, u32::MAX), (u32::MAX, 1), (8, 9)] {
+        let e = io::zarr::ZarrBrickSource::open(&root, &ReadOptions::default(), brick, apron, None)
+            .err()
+            .unwrap_or_else(|| panic!("brick {brick}, apron {apron} opened"));
+        assert!(matches!(e, IoError::Unsupported { .. }), "{e:?}");
+    }
+    let z = io::zarr::OmeZarr::open(&root).unwrap();
+    assert_eq!(z.level_dims(0), Some([8, 6, 4]));
+    assert_eq!(z.level_dims(7), None);
+}
+
+/// Found by the mutation suite: a flat volume of large values (9e9) got a
+/// value range of zero width (lo + 1 rounds back to lo in f32), which a
+/// renderer divides by. The range is strictly increasing now.
+#[test]
+fn flat_volume_of_large_values_has_a_range_of_positive_width() {
+    let d = TempDir::new().unwrap();
+    for inter in [8_936_756_000f32, -3.0e38, 3.0e38, f32::MAX / 2.0] {
+        let mut b = fixtures::nifti();
+        let n = b.len();
+        b[352..n].fill(0);
+        b[112..116].copy_from_slice(&1f32.to_le_bytes());
+        b[116..120].copy_from_slice(&inter.to_le_bytes());
+        let p = fixtures::write(&d.path().join("f.nii"), &b);
+        let r = io::open(&p).unwrap();
+        let [lo, hi] = r.desc().value_range;
+        assert!(
+            lo.is_finite() && hi.is_finite() && lo < hi,
+            "{inter}: {lo}..{hi}"
+        );
+    }
+    // raw f32 samples, through the other scan
+    let json = d.path().join("r.json");
+    std::fs::write(
+        d.path().join("r.raw"),
+        [9.0e9f32; 8].map(f32::to_le_bytes).concat(),
+    )
+    .unwrap();
+    std::fs::write(&json, r#"{"dims": [2, 2, 2], "dtype": "f32"}"#).unwrap();
+    let r = io::open(&json).unwrap();
+    let [lo, hi] = r.desc().value_range;
+    assert!(lo < hi, "{lo}..{hi}");
 }

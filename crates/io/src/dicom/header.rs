@@ -479,6 +479,78 @@ pub(super) fn check_frame(h: &SliceHeader, frame: &[u8]) -> Result<(), IoError> 
     }
 }
 
+/// Decodes one RLE Lossless frame (DICOM PS3.5 Annex G) of a single-sample
+/// image into little-endian samples: one PackBits segment per byte of the
+/// sample, most significant first, each of exactly rows x columns bytes.
+/// Read here rather than by dicom-pixeldata, whose RLE decoder indexes past
+/// a segment that decodes short (a panic the mutation suite found). The
+/// header was checked by [`check_frame`].
+pub(super) fn decode_rle(h: &SliceHeader, frame: &[u8], out: &mut Vec<u8>) -> Result<(), IoError> {
+    let bps = (h.bits_allocated as usize).div_ceil(8);
+    let n = h.rows as usize * h.cols as usize;
+    let bad = |msg: String| IoError::decode(&h.file, "DICOM RLE", msg);
+    if h.samples != 1 || !(1..=4).contains(&bps) {
+        return Err(bad(format!(
+            "{} samples of {} bits",
+            h.samples, h.bits_allocated
+        )));
+    }
+    let offset = |k: usize| -> usize {
+        u32::from_le_bytes([
+            frame[4 * k],
+            frame[4 * k + 1],
+            frame[4 * k + 2],
+            frame[4 * k + 3],
+        ]) as usize
+    };
+    out.clear();
+    out.resize(n * bps, 0);
+    let mut seg = Vec::with_capacity(n);
+    for k in 0..bps {
+        let start = offset(k + 1);
+        let end = if k + 1 < bps {
+            offset(k + 2)
+        } else {
+            frame.len()
+        };
+        let src = frame
+            .get(start..end)
+            .ok_or_else(|| bad(format!("segment {k} at bytes {start}..{end}")))?;
+        seg.clear();
+        let mut i = 0;
+        while seg.len() < n && i < src.len() {
+            let c = src[i] as i8;
+            i += 1;
+            if c >= 0 {
+                let m = c as usize + 1;
+                let lit = src
+                    .get(i..i + m)
+                    .ok_or_else(|| bad(format!("segment {k}: a literal run past its end")))?;
+                seg.extend_from_slice(lit);
+                i += m;
+            } else if c != -128 {
+                let &v = src
+                    .get(i)
+                    .ok_or_else(|| bad(format!("segment {k}: a replicate run past its end")))?;
+                seg.extend(std::iter::repeat_n(v, (1 - c as isize) as usize));
+                i += 1;
+            }
+        }
+        if seg.len() < n {
+            return Err(bad(format!(
+                "segment {k} decodes to {} bytes, the image has {n} pixels",
+                seg.len()
+            )));
+        }
+        // segment 0 holds the most significant bytes
+        let byte = bps - 1 - k;
+        for (p, &v) in seg[..n].iter().enumerate() {
+            out[p * bps + byte] = v;
+        }
+    }
+    Ok(())
+}
+
 /// Width, height and component count of a JPEG stream's frame header.
 fn jpeg_sof(b: &[u8]) -> Result<(u32, u32, u32), String> {
     if !b.starts_with(&[0xFF, 0xD8]) {

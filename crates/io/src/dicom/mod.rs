@@ -37,8 +37,8 @@ use std::path::{Path, PathBuf};
 mod header;
 
 use header::{
-    Pixels, SliceHeader, check_frame, check_lengths, check_syntax, dec_err, parse, read_header,
-    read_part10,
+    Pixels, SliceHeader, check_frame, check_lengths, check_syntax, dec_err, decode_rle, parse,
+    read_header, read_part10,
 };
 
 /// Every regular file under `dir`, recursively, in path order.
@@ -458,6 +458,7 @@ impl DicomReader {
         let want = h.rows as u64 * h.cols as u64 * (h.bits_allocated as u64).div_ceil(8);
         let bytes = read_part10(&h.file)?
             .ok_or_else(|| IoError::header(&h.file, "no longer a DICOM file (no DICM magic)"))?;
+        let mut rle = None;
         match check_lengths(&h.file, &bytes)? {
             // native pixel data must hold the whole image before a decoder
             // allocates for it
@@ -477,6 +478,9 @@ impl DicomReader {
                     .copied()
                     .collect();
                 check_frame(h, &frame)?;
+                if h.ts == "1.2.840.10008.1.2.5" {
+                    rle = Some(frame);
+                }
             }
             _ => {}
         }
@@ -491,18 +495,38 @@ impl DicomReader {
                 msg: format!("transfer syntax {ts} where the header scan read {}", h.ts),
             });
         }
-        let px = obj.decode_pixel_data().map_err(|e| dec_err(&h.file, e))?;
-        let data = px.frame_data(0).map_err(|e| dec_err(&h.file, e))?;
         let want = want as usize;
-        if data.len() != want {
+        if let Some(frame) = rle {
+            decode_rle(h, &frame, &mut self.buf)?;
+        } else {
+            // A panic in a decoder (a bug of its own on hostile input) is
+            // contained as a decode error naming the file, where panics
+            // unwind (the default); the data set is local, nothing outlives it.
+            let decoded = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                let px = obj.decode_pixel_data().map_err(|e| dec_err(&h.file, e))?;
+                let data = px.frame_data(0).map_err(|e| dec_err(&h.file, e))?;
+                Ok::<Vec<u8>, IoError>(data.to_vec())
+            }));
+            let data = match decoded {
+                Ok(r) => r?,
+                Err(p) => {
+                    let msg = p
+                        .downcast_ref::<String>()
+                        .cloned()
+                        .or_else(|| p.downcast_ref::<&str>().map(|s| s.to_string()))
+                        .unwrap_or_default();
+                    return Err(dec_err(&h.file, format!("the pixel decoder failed: {msg}")));
+                }
+            };
+            self.buf = data;
+        }
+        if self.buf.len() != want {
             return Err(IoError::Truncated {
                 path: h.file.clone(),
                 expected: want as u64,
-                actual: data.len() as u64,
+                actual: self.buf.len() as u64,
             });
         }
-        self.buf.clear();
-        self.buf.extend_from_slice(data);
         let (bits, stored, signed) = (h.bits_allocated, h.bits_stored, h.signed);
         if bits == 16 && stored > 0 && stored < 16 {
             let shift = 16 - stored;

@@ -461,10 +461,15 @@ impl OmeZarr {
         self.levels.len()
     }
 
-    /// Voxel dims (x, y, z) of a level.
-    pub fn dims(&self, level: usize) -> [u64; 3] {
-        let s = &self.levels[level].shape;
-        [0, 1, 2].map(|a| self.ax[a].map_or(1, |i| s[i]))
+    /// Voxel dims (x, y, z) of a level; `None` past the last level.
+    pub fn level_dims(&self, level: usize) -> Option<[u64; 3]> {
+        let s = &self.levels.get(level)?.shape;
+        Some([0, 1, 2].map(|a| self.ax[a].map_or(1, |i| s[i])))
+    }
+
+    /// Voxel dims (x, y, z) of a level that exists.
+    pub(crate) fn dims(&self, level: usize) -> [u64; 3] {
+        self.level_dims(level).unwrap_or([1; 3])
     }
 
     fn extent(&self, slot: usize) -> u64 {

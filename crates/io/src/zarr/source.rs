@@ -50,6 +50,14 @@ impl ZarrBrickSource {
         apron: u32,
         value_range: Option<[f32; 2]>,
     ) -> Result<ZarrBrickSource, IoError> {
+        if brick == 0 || brick > 1 << 12 || apron > brick {
+            return Err(IoError::unsupported(
+                root,
+                format!(
+                    "bricks of {brick} voxels with an apron of {apron} (1..=4096, apron at most the brick)"
+                ),
+            ));
+        }
         let zarr = OmeZarr::open(root)?;
         let (_, c, t) = zarr.check_choice(&ReadOptions {
             level: None,
