@@ -156,7 +156,10 @@ fn failing_and_panicking_sources_are_surfaced_then_retried() {
         let volume = r.streamed_volume().expect("out of core").clone();
         let e = volume.take_streaming_error().expect("one error surfaced");
         eprintln!("{what}: {e}");
-        assert!(volume.take_streaming_error().is_none(), "{what}: surfaced twice");
+        assert!(
+            volume.take_streaming_error().is_none(),
+            "{what}: surfaced twice"
+        );
         // Repaired, then retried on request: the view completes.
         *target.lock().unwrap() = Fault::None;
         volume.retry_failed_bricks();

@@ -200,8 +200,10 @@ fn switching_to_octant_cuts_at_run_time() {
     for _ in 0..20 {
         draw_frame(g, &mut r, &target, &desc, Some(wgpu::Color::BLACK)).expect("frame");
     }
-    brickray_harness::configure(gpu(), &r, |c| c.lod_metric = LodMetric::VisibleOctants { budget: 0.0 })
-        .unwrap();
+    brickray_harness::configure(gpu(), &r, |c| {
+        c.lod_metric = LodMetric::VisibleOctants { budget: 0.0 }
+    })
+    .unwrap();
     let mut done = None;
     for f in 1..=300u64 {
         draw_frame(g, &mut r, &target, &desc, Some(wgpu::Color::BLACK)).expect("frame");

@@ -304,13 +304,8 @@ fn too_few_array_layers_is_a_typed_error() {
     );
     let frame = VolumeFrame::centered([256; 3], [1.0; 3]);
     let mut r = VolumeRenderer::new(&g.device, targets()).unwrap();
-    r.set_volume_source(
-        &g.device,
-        &g.queue,
-        source,
-        OutOfCoreConfig::default(),
-    )
-    .unwrap();
+    r.set_volume_source(&g.device, &g.queue, source, OutOfCoreConfig::default())
+        .unwrap();
     r.set_transfer_function(&g.device, &g.queue, &spike_tf())
         .unwrap();
     let target = Offscreen::new(&g.device, 32, 32);

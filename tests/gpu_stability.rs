@@ -81,7 +81,11 @@ impl Twin {
 
     fn plan(&mut self, cam: &Camera, tf: &TransferFunction) -> u64 {
         use brickray::cache::{EmptyReason, LeafKind};
-        let views = [brickray::core::FrameView::new(*cam, self.placement, [SIZE, SIZE])];
+        let views = [brickray::core::FrameView::new(
+            *cam,
+            self.placement,
+            [SIZE, SIZE],
+        )];
         let plan = self.m.plan(&brickray::cache::StreamFrame {
             views: &views,
             classification: brickray::cache::Classification {
@@ -214,8 +218,10 @@ fn memory_pressure_does_not_flicker() {
     let mut g = ooc(src, cfg(big), &tf);
     let toggled: Vec<Vec<u8>> = (0..10)
         .map(|i| {
-            brickray_harness::configure(gpu(), &g, |c| c.tolerance_px = if i % 2 == 0 { 0.0 } else { 8.0 })
-                .unwrap();
+            brickray_harness::configure(gpu(), &g, |c| {
+                c.tolerance_px = if i % 2 == 0 { 0.0 } else { 8.0 }
+            })
+            .unwrap();
             converge(&mut g, cam(i), frame, st).0
         })
         .collect();

@@ -133,24 +133,48 @@ fn check_pair(name: &str, cams: [Camera; 2]) {
     let shared = converge(&mut rs, &cams);
     // One volume, one pool.
     let (a, b) = (&rs[0], &rs[1]);
-    assert!(a.streamed_volume().unwrap().same(b.streamed_volume().unwrap()));
-    let (sa, sb) = (a.stats().out_of_core.unwrap(), b.stats().out_of_core.unwrap());
-    assert_eq!(sa.cache.frame, sb.cache.frame, "{name}: planned once per frame");
+    assert!(
+        a.streamed_volume()
+            .unwrap()
+            .same(b.streamed_volume().unwrap())
+    );
+    let (sa, sb) = (
+        a.stats().out_of_core.unwrap(),
+        b.stats().out_of_core.unwrap(),
+    );
+    assert_eq!(
+        sa.cache.frame, sb.cache.frame,
+        "{name}: planned once per frame"
+    );
     assert_eq!(sa.cache.working_set_bricks, sb.cache.working_set_bricks);
     let reads = src.reads.lock().unwrap().clone();
     let twice: Vec<_> = reads.iter().filter(|(_, n)| **n > 1).collect();
-    assert!(twice.is_empty(), "{name}: bricks read more than once: {twice:?}");
+    assert!(
+        twice.is_empty(),
+        "{name}: bricks read more than once: {twice:?}"
+    );
     // Each view alone, from a volume of its own.
     for (i, cam) in cams.iter().enumerate() {
-        let own = StreamedVolume::new(&g.device, &g.queue, counting(&dir), config(), Default::default())
-            .unwrap();
+        let own = StreamedVolume::new(
+            &g.device,
+            &g.queue,
+            counting(&dir),
+            config(),
+            Default::default(),
+        )
+        .unwrap();
         let mut alone = [renderer(&own)];
         let img = converge(&mut alone, &[*cam]).remove(0);
         let db = psnr(&shared[i], &img);
         eprintln!(
             "{name}, view {i}: {db:.1} dB against the view alone ({} bricks shared, {} alone)",
             sa.cache.working_set_bricks,
-            alone[0].stats().out_of_core.unwrap().cache.working_set_bricks
+            alone[0]
+                .stats()
+                .out_of_core
+                .unwrap()
+                .cache
+                .working_set_bricks
         );
         assert!(db >= 50.0, "{name}, view {i}: {db:.1} dB");
     }
@@ -178,17 +202,30 @@ fn a_3d_view_and_an_orthogonal_view_share_one_cut() {
 fn views_planned_together_share_the_transfer_function() {
     let g = gpu();
     let dir = tempfile::tempdir().unwrap();
-    let volume =
-        StreamedVolume::new(&g.device, &g.queue, counting(&dir), config(), Default::default())
-            .unwrap();
+    let volume = StreamedVolume::new(
+        &g.device,
+        &g.queue,
+        counting(&dir),
+        config(),
+        Default::default(),
+    )
+    .unwrap();
     let mut a = renderer(&volume);
     let mut b = renderer(&volume);
     b.set_transfer_function(&g.device, &g.queue, &TransferFunction::ramp(0.1, 0.2, 0.3))
         .unwrap();
     let d = desc(Camera::orbit(Vec3::ZERO, 1.6, 0.4, 0.3));
     let mut enc = g.device.create_command_encoder(&Default::default());
-    let e = VolumeRenderer::prepare_views(&g.device, &g.queue, &mut enc, &mut [(&mut a, &d), (&mut b, &d)]);
-    assert!(matches!(e, Err(PrepareError::ViewsDisagree { first: 0, other: 1 })), "{e:?}");
+    let e = VolumeRenderer::prepare_views(
+        &g.device,
+        &g.queue,
+        &mut enc,
+        &mut [(&mut a, &d), (&mut b, &d)],
+    );
+    assert!(
+        matches!(e, Err(PrepareError::ViewsDisagree { first: 0, other: 1 })),
+        "{e:?}"
+    );
     drop(enc);
     // Apart, in submissions of their own, each is planned for its own view.
     for r in [&mut a, &mut b] {

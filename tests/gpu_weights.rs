@@ -400,8 +400,10 @@ fn switching_to_visible_error_never_collapses_the_cut() {
         &tf,
     );
     converge(&mut r, 2 * DIM, settings, 300);
-    brickray_harness::configure(gpu(), &r, |c| c.lod_metric = LodMetric::VisibleError { budget: 0.0 })
-        .unwrap();
+    brickray_harness::configure(gpu(), &r, |c| {
+        c.lod_metric = LodMetric::VisibleError { budget: 0.0 }
+    })
+    .unwrap();
     let mut seen = Vec::new();
     for _ in 0..40 {
         let (_, s) = frame(&mut r, 2 * DIM, settings);

@@ -58,7 +58,13 @@ pub(crate) fn refine_cut(
 ) -> Refinement {
     let layout = view.store.layout();
     let params = RefineParams {
-        views: &Views::one(ViewGeometry::new(&layout, view.camera, 1.0, view.size, view.frame)),
+        views: &Views::one(ViewGeometry::new(
+            &layout,
+            view.camera,
+            1.0,
+            view.size,
+            view.frame,
+        )),
         generation: 0,
         mode: view.mode,
         tf: view.tf,

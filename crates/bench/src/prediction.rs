@@ -131,11 +131,7 @@ impl Backend {
                 } else {
                     brickray_harness::store_of(&scene.vol, &path)
                 };
-                crate::runner::finest_ooc_renderer(
-                    gpu,
-                    source,
-                    Default::default(),
-                )
+                crate::runner::finest_ooc_renderer(gpu, source, Default::default())
             }
         }
     }

@@ -276,13 +276,8 @@ fn supported(gpu: &GpuContext, p: VisibilityPolicy) -> bool {
         Ok(s) => Arc::new(s),
         Err(_) => return false,
     };
-    r.set_volume_source(
-        &gpu.device,
-        &gpu.queue,
-        src,
-        OutOfCoreConfig::default(),
-    )
-    .is_ok()
+    r.set_volume_source(&gpu.device, &gpu.queue, src, OutOfCoreConfig::default())
+        .is_ok()
         && crate::runner::configure(gpu, &r, |c| c.visibility = p).is_ok()
 }
 

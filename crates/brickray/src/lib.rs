@@ -41,13 +41,12 @@ pub use brickray_core::{
 pub use brickray_core::{BrickSource, NodeKey, OctreeLayout};
 pub use brickray_render::{
     ConfigError, FadeDuration, FrameDesc, FrameStats, GpuErrorKind, HostDepthError,
-    OutOfCoreConfig, OutOfCoreStats, PrepareError, RenderError, RendererOptions, RendererStats,
-    RetryPolicy, StreamError, StreamedVolume, TargetDesc, U8Filtering, Viewport, VolumeRenderer,
-    OPTIONAL_FEATURES, OptionalFeature, optional_features, required_limits,
+    OPTIONAL_FEATURES, OptionalFeature, OutOfCoreConfig, OutOfCoreStats, PrepareError, RenderError,
+    RendererOptions, RendererStats, RetryPolicy, StreamError, StreamedVolume, TargetDesc,
+    U8Filtering, Viewport, VolumeRenderer, optional_features, required_limits,
 };
 pub use brickray_render::{
-    FeedbackStats, OcclusionStats, UsageFrame, VisibilityConfig, VisibilityCounts,
-    VisibilityPolicy,
+    FeedbackStats, OcclusionStats, UsageFrame, VisibilityConfig, VisibilityCounts, VisibilityPolicy,
 };
 pub use brickray_render::{
     Prediction, PredictionCounts, PredictionError, PredictionFrame, TraversalClass,

@@ -231,6 +231,9 @@ pub(crate) fn open(
                 return open_store(input, path, "brick store".into());
             }
             let mut reader = brickray::io::open(path)?;
+            // What the reader assumed where the file did not say, shown with
+            // the volume's note.
+            let warned = warning_note(&reader.warnings());
             let desc = reader.desc().clone();
             let bytes = desc.byte_len();
             progress.total.store(bytes, Ordering::Relaxed);
@@ -245,7 +248,7 @@ pub(crate) fn open(
                     histogram.add(d.normalize(volume.data().get(i)));
                 }
                 let note = format!(
-                    "{:?} {} loaded whole ({:.1} MiB)",
+                    "{:?} {} loaded whole ({:.1} MiB){warned}",
                     d.dims,
                     d.dtype.name(),
                     bytes as f64 / (1 << 20) as f64
@@ -280,9 +283,18 @@ pub(crate) fn open(
             open_store(
                 input,
                 &store,
-                format!("{how} brick store {}", store.display()),
+                format!("{how} brick store {}{warned}", store.display()),
             )
         }
+    }
+}
+
+/// The reader's warnings as a suffix of a note (empty without any).
+fn warning_note(warnings: &[String]) -> String {
+    if warnings.is_empty() {
+        String::new()
+    } else {
+        format!("; warning: {}", warnings.join("; "))
     }
 }
 

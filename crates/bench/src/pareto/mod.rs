@@ -518,7 +518,8 @@ fn measure(
         let r = &mut renderers[slot(c)];
         let shot = run.frame(r, scene.camera, scene.frame, c.settings, true)?;
         let bricks = r
-            .stats().out_of_core
+            .stats()
+            .out_of_core
             .map_or(0, |s| s.cache.working_set_bricks);
         let bytes = if c.key.in_core {
             scene.volume.desc().byte_len()

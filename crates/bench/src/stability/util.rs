@@ -290,7 +290,11 @@ impl CutCheck {
         tf: &TransferFunction,
     ) -> u64 {
         use brickray_core::{EmptyReason, LeafKind};
-        let views = [brickray_core::FrameView::new(*camera, self.placement, [size, size])];
+        let views = [brickray_core::FrameView::new(
+            *camera,
+            self.placement,
+            [size, size],
+        )];
         let plan = self.streamer.plan(&brickray_cache::StreamFrame {
             views: &views,
             classification: brickray_cache::Classification {

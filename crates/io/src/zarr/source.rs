@@ -123,17 +123,6 @@ impl ZarrBrickSource {
         Placement::axis_aligned(s, t, "image")
     }
 
-    /// The level-`l` voxel box `lo..=hi` a node's brick reads (clamped).
-    fn footprint(&self, key: NodeKey) -> ([u64; 3], [u64; 3]) {
-        let d = self.layout.level_dims(key.level).map(|d| d as i64);
-        let b = self.layout.brick as i64;
-        let a = self.layout.apron as i64;
-        let p = [key.x, key.y, key.z].map(|c| c as i64);
-        let lo = [0, 1, 2].map(|i| (p[i] * b - a).clamp(0, d[i] - 1) as u64);
-        let hi = [0, 1, 2].map(|i| (p[i] * b + b + a - 1).clamp(0, d[i] - 1) as u64);
-        (lo, hi)
-    }
-
     /// Values (rescaled, f64) of the octree-level box `lo..=hi`, x fastest.
     fn values(&self, level: u8, lo: [u64; 3], hi: [u64; 3]) -> Result<Vec<f64>, IoError> {
         let (m, r) = self.plan[level as usize];
@@ -216,7 +205,7 @@ impl BrickSource for ZarrBrickSource {
         if let Some(n) = self.nodes.lock().get(&key) {
             return Ok(*n);
         }
-        let (lo, hi) = self.footprint(key);
+        let (lo, hi) = self.layout.brick_footprint(key);
         let v = self
             .values(key.level, lo, hi)
             .map_err(|e| Self::brick_err(key, e))?;
@@ -265,29 +254,15 @@ impl BrickSource for ZarrBrickSource {
             }
             return Ok(());
         }
-        let (lo, hi) = self.footprint(key);
+        let fp = self.layout.brick_footprint(key);
         let vals = self
-            .values(key.level, lo, hi)
+            .values(key.level, fp.0, fp.1)
             .map_err(|e| Self::brick_err(key, e))?;
-        let n = [0, 1, 2].map(|a| (hi[a] - lo[a] + 1) as i64);
-        let d = self.layout.level_dims(key.level).map(|d| d as i64);
-        let b = self.layout.brick as i64;
-        let a = self.layout.apron as i64;
-        let side = self.layout.stored_side() as i64;
-        let origin = [key.x, key.y, key.z].map(|c| c as i64 * b - a);
-        let idx = |axis: usize, i: i64| (origin[axis] + i).clamp(0, d[axis] - 1) - lo[axis] as i64;
         let mut o = 0;
-        for k in 0..side {
-            let zk = idx(2, k);
-            for j in 0..side {
-                let yj = idx(1, j);
-                let row = (zk * n[1] + yj) * n[0];
-                for i in 0..side {
-                    store_value(dst, vals[(row + idx(0, i)) as usize], &mut out[o..o + sz]);
-                    o += sz;
-                }
-            }
-        }
+        self.layout.gather_brick(key, fp, |i| {
+            store_value(dst, vals[i], &mut out[o..o + sz]);
+            o += sz;
+        });
         Ok(())
     }
 }

@@ -281,6 +281,7 @@ fn cmd_build(
             eprintln!("{}: {n}", reader.format());
         }
     }
+    print_warnings(reader.as_ref());
     let r = brickray_store::build(reader.as_mut(), out, o).map_err(|e| e.to_string())?;
     println!(
         "built {output}: {} levels, {} nodes ({} data, {} uniform, {} empty), {:.1} MiB from {:.1} MiB in {:.2} s ({:.1} Mvoxel/s)",
@@ -297,6 +298,13 @@ fn cmd_build(
     Ok(())
 }
 
+/// What the reader assumed where the input did not say, on stderr.
+fn print_warnings(reader: &dyn brickray_io::VolumeReader) {
+    for w in reader.warnings() {
+        eprintln!("warning: {}: {w}", reader.format());
+    }
+}
+
 fn cmd_convert(
     input: &std::path::Path,
     out: &std::path::Path,
@@ -305,6 +313,7 @@ fn cmd_convert(
 ) -> Result<(), String> {
     let mut reader =
         brickray_io::open_with(input, read).map_err(|e| StoreError::Input(e).to_string())?;
+    print_warnings(reader.as_ref());
     let r =
         brickray_store::convert(reader.as_mut(), out, memory_bound).map_err(|e| e.to_string())?;
     println!(
@@ -346,6 +355,9 @@ fn cmd_info_input(input: &std::path::Path, read: &ReadOptions) -> Result<(), Str
     println!("files       {}", reader.input_files().len());
     for n in reader.notes() {
         println!("note        {n}");
+    }
+    for w in reader.warnings() {
+        println!("warning     {w}");
     }
     let entries = brickray_io::list(input, read).map_err(|e| StoreError::Input(e).to_string())?;
     for e in entries {
