@@ -131,7 +131,8 @@ impl<'a> Runner<'a> {
             viewport: brickray_render::Viewport::full(self.size, self.size),
             settings,
             host_depth: None,
-            time: None,
+            // A host's frame time: fades in milliseconds advance with it.
+            time: Some(brickray_harness::host_time()),
         }
     }
 

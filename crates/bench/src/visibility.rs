@@ -104,7 +104,7 @@ impl Runner<'_> {
             viewport: brickray_render::Viewport::full(self.size, self.size),
             settings: scene.settings,
             host_depth: None,
-            time: None,
+            time: Some(brickray_harness::host_time()),
         };
         let fs = r
             .prepare(&g.device, &g.queue, &mut enc, &desc)

@@ -247,6 +247,17 @@ pub const COLOR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
 /// Depth format of [`Offscreen`].
 pub const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
 
+/// The host's clock for frame descriptions (`FrameDesc::time`): seconds since
+/// the first call in this process, as a host would pass its frame time (fades
+/// in milliseconds advance with it).
+pub fn host_time() -> f64 {
+    static START: std::sync::OnceLock<std::time::Instant> = std::sync::OnceLock::new();
+    START
+        .get_or_init(std::time::Instant::now)
+        .elapsed()
+        .as_secs_f64()
+}
+
 /// Changes the configuration of the streamed volume `r` draws
 /// ([`brickray_render::StreamedVolume::edit`]); `NotOutOfCore` in core.
 pub fn configure(

@@ -486,6 +486,7 @@ impl eframe::App for ViewerApp {
                         frame: s.frame,
                         settings: self.frame_settings(),
                         overlays: self.overlays,
+                        time: ui.input(|i| i.time),
                     };
                     ui.painter()
                         .add(egui_wgpu::Callback::new_paint_callback(rect, cb.clone()));

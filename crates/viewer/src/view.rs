@@ -318,6 +318,9 @@ pub(crate) struct VolumeCallback {
     pub(crate) settings: RenderSettings,
     /// Draw the bounding box and axes.
     pub(crate) overlays: bool,
+    /// The frame's time in seconds (egui's clock): level-of-detail fades
+    /// advance with it.
+    pub(crate) time: f64,
 }
 
 /// The viewport in the target's pixels for a rectangle in points (egui's own
@@ -388,7 +391,7 @@ impl egui_wgpu::CallbackTrait for VolumeCallback {
             viewport: vp,
             settings: self.settings,
             host_depth: host_depth.as_ref(),
-            time: None,
+            time: Some(self.time),
         };
         match r.renderer.prepare(device, queue, encoder, &desc) {
             Ok(_) => {
