@@ -10,6 +10,7 @@ mod aniso;
 mod build;
 mod cut;
 mod formats;
+mod host;
 mod lod;
 mod octant;
 mod ooc;
@@ -102,6 +103,26 @@ enum Suite {
         /// Best of this many builds (default 3).
         #[arg(long)]
         rounds: Option<u64>,
+    },
+    /// What the render thread pays per frame out of core: `prepare`'s time
+    /// along a moving camera path at cuts of about 1k to 50k bricks.
+    Host {
+        /// Viewport side in pixels (default 1024).
+        #[arg(long)]
+        size: Option<u32>,
+        /// Path frames timed per cut (default 60).
+        #[arg(long)]
+        frames: Option<usize>,
+        /// Brick budgets setting the cut sizes, comma-separated (default
+        /// 1000,5000,20000,50000).
+        #[arg(long)]
+        cuts: Option<String>,
+        /// Also draw the path under ray-guided visibility.
+        #[arg(long)]
+        culling: bool,
+        /// Viewport side of the drawn (culling) path (default 256).
+        #[arg(long)]
+        culling_size: Option<u32>,
     },
     /// Out of core vs in core, output sensitivity, a camera path.
     Ooc {
@@ -351,6 +372,7 @@ fn main() -> ExitCode {
         Suite::Preint { .. } => preint::run(rest),
         Suite::Raw { .. } => raw::run(rest),
         Suite::Soak { .. } => soak::run(rest),
+        Suite::Host { .. } => host::run(rest),
         Suite::Stability { .. } => stability::run(rest),
         Suite::U8 { .. } => u8::run(rest),
         Suite::Lod { .. } => lod::run(rest),

@@ -1,0 +1,222 @@
+//! The `host` suite: what the render thread pays per frame out of core.
+//!
+//! A procedural 4096^3 volume of concentric shells (bricks of 16) is drawn at
+//! a large viewport with a brick budget that sets the cut's size (about 1k, 5k,
+//! 20k and 50k bricks). After the start view converged, the camera turns a
+//! little every frame along a path; each frame's `prepare` is timed on the
+//! render thread (wall time: it never waits for I/O or the GPU), with its
+//! parts as the renderer reports them: planning (`refine_ms`: the streamer's
+//! frame), writing uploads and tables (`upload_ms`) and encoding the index
+//! (`encode_ms`). The path's frames are planned, not ray cast (their GPU work
+//! is recorded and dropped): the host's cost does not depend on the ray cast,
+//! and lavapipe takes seconds for one 1024^2 frame of a large cut. With
+//! `--culling`, the path is also drawn, ray cast at `--culling-size`, under
+//! ray-guided visibility (its feedback needs the frames rendered).
+//!
+//! `cargo run --release -p brickray-bench -- host [--size 1024] [--frames 60]
+//! [--cuts 1000,5000,20000,50000] [--culling] [--culling-size 256]`
+
+use crate::runner::{Runner, median, quantile, round2};
+use crate::{Figures, arg};
+use brickray_core::{Camera, RenderSettings, VolumeFrame};
+use brickray_harness::GpuContext;
+use brickray_render::{OutOfCoreConfig, VisibilityPolicy, VolumeRenderer};
+use serde_json::json;
+use std::sync::Arc;
+use std::time::Instant;
+
+/// Voxels per side of the volume.
+const DIMS: u64 = 4096;
+/// Interior voxels per brick side.
+const BRICK: u32 = 16;
+
+/// What one path measured.
+struct PathTimes {
+    host_ms: Vec<f64>,
+    plan_ms: Vec<f64>,
+    upload_ms: Vec<f64>,
+    encode_ms: Vec<f64>,
+    working_set: u32,
+    converge_frames: usize,
+}
+
+fn config(cut: u32, policy: VisibilityPolicy) -> OutOfCoreConfig {
+    // A stored brick of 20^3 u8 texels is at most 16 KB (R16) plus its
+    // sub-cells and row: room for the cut, its fades and the floor.
+    let slot = 20u64.pow(3) * 2 + 1024;
+    let slots = cut as u64 * 13 / 10 + 256;
+    OutOfCoreConfig {
+        tolerance_px: 0.0,
+        brick_budget: Some(cut),
+        gpu_budget_bytes: slots * slot,
+        cpu_budget_bytes: slots * slot,
+        upload_budget_bytes: 64 << 20,
+        visibility: policy,
+        ..Default::default()
+    }
+}
+
+fn renderer(
+    gpu: &GpuContext,
+    cut: u32,
+    policy: VisibilityPolicy,
+) -> Result<(VolumeRenderer, VolumeFrame), String> {
+    let src = brickray_store::ProceduralSource::sphere_shells([DIMS; 3], BRICK, 2)
+        .map_err(|e| e.to_string())?;
+    let frame = VolumeFrame::centered([DIMS as u32; 3], [1.0; 3]);
+    let mut r = VolumeRenderer::new(&gpu.device, brickray_harness::target_desc())
+        .map_err(|e| e.to_string())?;
+    r.set_volume_source(&gpu.device, &gpu.queue, Arc::new(src), config(cut, policy))
+        .map_err(|e| e.to_string())?;
+    let tf = brickray_core::TransferFunction::ramp(0.3, 0.9, 0.3);
+    r.set_transfer_function(&gpu.device, &gpu.queue, &tf)
+        .map_err(|e| e.to_string())?;
+    Ok((r, frame))
+}
+
+fn camera(frame: &VolumeFrame, i: usize) -> Camera {
+    Camera::orbit(frame.center(), 1.4, 0.5 + 0.004 * i as f32, 0.3)
+}
+
+/// Converges the start view, then times `frames` frames of the path.
+fn path(
+    run: &Runner<'_>,
+    r: &mut VolumeRenderer,
+    frame: VolumeFrame,
+    frames: usize,
+    draw: bool,
+) -> Result<PathTimes, String> {
+    let settings = RenderSettings::default();
+    let mut converge_frames = 0;
+    for i in 1..=600 {
+        if draw {
+            run.frame(r, camera(&frame, 0), frame, settings, false)?;
+        } else {
+            run.plan(r, camera(&frame, 0), frame, settings)?;
+        }
+        converge_frames = i;
+        if r.stats().out_of_core.is_some_and(|s| s.converged) {
+            break;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    let mut t = PathTimes {
+        host_ms: Vec::new(),
+        plan_ms: Vec::new(),
+        upload_ms: Vec::new(),
+        encode_ms: Vec::new(),
+        working_set: 0,
+        converge_frames,
+    };
+    for i in 1..=frames {
+        let cam = camera(&frame, i);
+        let g = run.gpu;
+        let mut enc = g.device.create_command_encoder(&Default::default());
+        let desc = brickray_render::FrameDesc {
+            settings,
+            time: Some(brickray_harness::host_time()),
+            ..brickray_render::FrameDesc::new(cam, frame, run.size, run.size)
+        };
+        let t0 = Instant::now();
+        r.prepare(&g.device, &g.queue, &mut enc, &desc)
+            .map_err(|e| e.to_string())?;
+        t.host_ms.push(t0.elapsed().as_secs_f64() * 1e3);
+        if draw {
+            let mut pass = run.target.pass(&mut enc, true);
+            r.render(&mut pass).map_err(|e| e.to_string())?;
+            drop(pass);
+            g.submit_wait(enc);
+        } else {
+            // The recorded ray cast is dropped; the queued writes are flushed.
+            drop(enc);
+            g.submit_wait(g.device.create_command_encoder(&Default::default()));
+        }
+        let s = r.stats().out_of_core.ok_or("not out of core")?;
+        t.plan_ms.push(s.refine_ms);
+        t.upload_ms.push(s.upload_ms);
+        t.encode_ms.push(s.encode_ms);
+        t.working_set = s.cache.working_set_bricks;
+    }
+    Ok(t)
+}
+
+pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
+    let size: u32 = arg(args, "--size", 1024)?;
+    let frames: usize = arg(args, "--frames", 60)?;
+    let culling = args.iter().any(|a| a == "--culling");
+    let culling_size: u32 = arg(args, "--culling-size", 256)?;
+    let cuts_arg: String = arg(args, "--cuts", "1000,5000,20000,50000".to_string())?;
+    let cuts: Vec<u32> = cuts_arg
+        .split(',')
+        .map(|c| c.trim().parse().map_err(|_| format!("bad cut size {c:?}")))
+        .collect::<Result<_, _>>()?;
+    if frames == 0 || size == 0 || cuts.iter().any(|&c| c == 0) {
+        return Err("--frames, --size and every cut must be at least 1".into());
+    }
+    let gpu = GpuContext::new().map_err(|e| e.to_string())?;
+    println!("adapter: {}", gpu.describe());
+    println!(
+        "host: {DIMS}^3 shells, bricks of {BRICK}, {size}x{size}, {frames} path frames per cut \
+         (planned, not ray cast); prepare's wall time on the render thread"
+    );
+    println!(
+        "  {:>7} {:>8} {:>9} {:>8} {:>8} {:>8} {:>9} {:>7}",
+        "budget", "bricks", "host med", "host p99", "plan med", "plan p99", "upload med", "index"
+    );
+    let mut fig = Figures::new();
+    let mut variants = vec![(VisibilityPolicy::None, size, false)];
+    if culling {
+        variants.push((VisibilityPolicy::RayGuided, culling_size, true));
+    }
+    for (policy, px, draw) in variants {
+        let run = Runner::new(&gpu, px);
+        let tag = if draw { "_culled" } else { "" };
+        for &cut in &cuts {
+            let (mut r, frame) = renderer(&gpu, cut, policy)?;
+            let t = path(&run, &mut r, frame, frames, draw)?;
+            let name = format!("{}k{tag}", (cut as f64 / 1000.0).round() as u32);
+            println!(
+                "  {:>7} {:>8} {:>9.2} {:>8.2} {:>8.2} {:>8.2} {:>9.2} {:>7.2}{}",
+                cut,
+                t.working_set,
+                median(&t.host_ms),
+                quantile(&t.host_ms, 0.99),
+                median(&t.plan_ms),
+                quantile(&t.plan_ms, 0.99),
+                median(&t.upload_ms),
+                median(&t.encode_ms),
+                if draw {
+                    format!(" ({} px, ray-guided, drawn)", px)
+                } else {
+                    String::new()
+                }
+            );
+            fig.insert(
+                format!("host_ms_median_{name}"),
+                json!(round2(median(&t.host_ms))),
+            );
+            fig.insert(
+                format!("host_ms_p99_{name}"),
+                json!(round2(quantile(&t.host_ms, 0.99))),
+            );
+            fig.insert(
+                format!("plan_ms_median_{name}"),
+                json!(round2(median(&t.plan_ms))),
+            );
+            fig.insert(
+                format!("upload_ms_median_{name}"),
+                json!(round2(median(&t.upload_ms))),
+            );
+            fig.insert(
+                format!("encode_ms_median_{name}"),
+                json!(round2(median(&t.encode_ms))),
+            );
+            fig.insert(format!("working_set_{name}"), json!(t.working_set));
+            fig.insert(format!("converge_frames_{name}"), json!(t.converge_frames));
+        }
+    }
+    fig.insert("size".into(), json!(size));
+    fig.insert("frames".into(), json!(frames));
+    fig.insert("adapter".into(), json!(gpu.describe()));
+    Ok(fig)
+}
