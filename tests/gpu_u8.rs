@@ -143,6 +143,7 @@ fn check(name: &str, vol: &Volume, iso: f32, size: u32) {
     let exact = RendererOptions::default();
     let fast = RendererOptions {
         u8_filtering: U8Filtering::Fast,
+        ..Default::default()
     };
     let targets = brickray_harness::target_desc();
     let mut incore = VolumeRenderer::with_options(&g.device, targets, exact).unwrap();

@@ -39,7 +39,10 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
     let targets = brickray_harness::target_desc();
     let mut renderers = Vec::new();
     for (name, u8_filtering) in [("exact", U8Filtering::Exact), ("fast", U8Filtering::Fast)] {
-        let options = RendererOptions { u8_filtering };
+        let options = RendererOptions {
+            u8_filtering,
+            ..Default::default()
+        };
         let mut r = VolumeRenderer::with_options(&gpu.device, targets, options)
             .map_err(|e| e.to_string())?;
         r.set_volume(&gpu.device, &gpu.queue, &vol)

@@ -43,7 +43,7 @@ pub use brickray_render::{
     ConfigError, FadeDuration, FrameDesc, FrameStats, GpuErrorKind, HostDepthError,
     OPTIONAL_FEATURES, OptionalFeature, OutOfCoreConfig, OutOfCoreStats, PrepareError, RenderError,
     RendererOptions, RendererStats, RetryPolicy, StreamError, StreamedVolume, TargetDesc,
-    U8Filtering, Viewport, VolumeRenderer, optional_features, required_limits,
+    U8Filtering, Viewport, VolumeOptions, VolumeRenderer, optional_features, required_limits,
 };
 pub use brickray_render::{
     FeedbackStats, OcclusionStats, UsageFrame, VisibilityConfig, VisibilityCounts, VisibilityPolicy,

@@ -32,6 +32,7 @@ mod gpu;
 mod group2;
 mod kernels;
 mod limits;
+mod planner;
 mod predict;
 pub mod shaders;
 mod tf;
@@ -51,7 +52,7 @@ pub use frame::PredictionFrame;
 pub use limits::{OPTIONAL_FEATURES, OptionalFeature, optional_features, required_limits};
 pub use predict::{Prediction, PredictionCounts, PredictionError, TraversalClass};
 
-pub use volume::StreamedVolume;
+pub use volume::{StreamedVolume, VolumeOptions};
 
 use backend::{Backend, InCore, OutOfCore};
 use brickray_cache::{Classification, StreamFrame};
@@ -68,6 +69,9 @@ pub struct RendererOptions {
     /// How u8 volumes are stored and filtered (default: exactly, as the rendering
     /// model says; see `docs/rendering-model.md` for the measured cost).
     pub u8_filtering: U8Filtering,
+    /// Streamed volumes made by [`VolumeRenderer::set_volume_source`] plan in
+    /// the background ([`VolumeOptions::background_planning`]; default off).
+    pub background_planning: bool,
 }
 
 /// What `render` needs from the last `prepare`.
@@ -164,7 +168,11 @@ impl VolumeRenderer {
     ) -> Result<(), RenderError> {
         // Free the old volume first: two large volumes need not fit at once.
         self.drop_volume();
-        let v = StreamedVolume::new(device, queue, source, config, self.options.u8_filtering)?;
+        let options = VolumeOptions {
+            u8_filtering: self.options.u8_filtering,
+            background_planning: self.options.background_planning,
+        };
+        let v = StreamedVolume::new(device, queue, source, config, options)?;
         self.set_streamed_volume(device, &v)
     }
 
@@ -522,10 +530,10 @@ fn plan_group(
         .streamed_volume()
         .cloned()
         .ok_or(PrepareError::NoVolume)?;
-    let next = volume.lock().streamer.next_frame();
+    let mut shared = volume.lock();
+    let next = shared.planner.next_frame();
     let mut frame_views = Vec::with_capacity(group.len());
-    let mut feedback = Vec::with_capacity(group.len());
-    for &j in group {
+    for (k, &j) in group.iter().enumerate() {
         let (r, desc) = &mut views[j];
         let vp = desc.viewport;
         frame_views.push(
@@ -533,7 +541,7 @@ fn plan_group(
                 .with_clip(desc.settings.clip),
         );
         if let Some(Backend::OutOfCore(o)) = r.backend.as_mut() {
-            feedback.push(o.poll(next));
+            shared.planner.add_feedback(k, o.poll(next));
         }
     }
     let planned = {
@@ -546,10 +554,16 @@ fn plan_group(
                 tf,
                 tf_generation: r.tf.generation(),
             },
-            feedback: &feedback,
+            feedback: &[],
             time: desc.time,
         };
-        volume.lock().plan(device, queue, &frame)?
+        shared.plan(device, queue, &frame)?
+    };
+    drop(shared);
+    // Without a new plan (in the background, the worker is still planning)
+    // the views draw the last one.
+    let Some(planned) = planned else {
+        return Ok(());
     };
     uploaded[lead] += planned.bytes;
     for (k, &j) in group.iter().enumerate() {

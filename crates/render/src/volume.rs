@@ -11,6 +11,7 @@
 use crate::encoding::{self, U8Filtering};
 use crate::error::{PrepareError, RenderError};
 use crate::gpu::{self, GrowBuffer, Uniform};
+use crate::planner::Planner;
 use brickray_cache::{
     CacheConfig, FadeSlot, GpuFormat, StreamError, StreamFrame, StreamPlan, StreamStats, Streamer,
     Upload,
@@ -252,9 +253,32 @@ pub(crate) struct Planned {
     pub(crate) encode_ms: f64,
 }
 
+/// How a streamed volume stores and plans: chosen at creation.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct VolumeOptions {
+    /// How u8 volumes are stored and filtered.
+    pub u8_filtering: U8Filtering,
+    /// Plan in the background: a worker thread of the volume's own plans
+    /// the next frame (refinement, placement, index) while the current one
+    /// renders, and `prepare` only applies the latest plan, so the render
+    /// thread's cost no longer grows with the cut. A camera move shows one
+    /// frame later; the image at convergence is the same. Off by default
+    /// (every frame planned in `prepare`, deterministic frame by frame).
+    pub background_planning: bool,
+}
+
 /// The shared state behind a [`StreamedVolume`].
 pub(crate) struct Shared {
-    pub(crate) streamer: Streamer,
+    pub(crate) planner: Planner,
+    /// What does not change for the volume, or changes only with
+    /// `configure`: read without the planner's lock.
+    pub(crate) layout: OctreeLayout,
+    gpu: GpuFormat,
+    config: CacheConfig,
+    /// Rows of the slot table and usage counters the last plan needs.
+    pub(crate) slot_rows: u32,
+    /// The last applied plan's statistics.
+    stats: StreamStats,
     pub(crate) format: wgpu::TextureFormat,
     pool: Pool,
     pub(crate) params: Uniform<OocParams>,
@@ -279,15 +303,21 @@ impl Shared {
         }
     }
 
-    fn write_params(&mut self, queue: &wgpu::Queue) {
-        let l = self.streamer.layout();
-        let gpu = self.streamer.gpu_format();
+    /// True when the kernel must measure visible weights (the metric ranks
+    /// by them).
+    pub(crate) fn measures_weights(&self) -> bool {
+        self.config.lod_metric.uses_visible_weights()
+    }
+
+    fn write_params(&mut self, queue: &wgpu::Queue, atlas_dims: [u32; 3]) {
+        let l = &self.layout;
+        let gpu = &self.gpu;
         let params = OocParams {
             dims: l.volume.dims.map(|d| d as f32),
             value_scale: gpu.encoding.scale,
             octree_scale: l.volume_scale().map(|s| s as f32),
             value_offset: gpu.encoding.offset,
-            atlas_size: self.streamer.pool().atlas_dims().map(|d| d as f32),
+            atlas_size: atlas_dims.map(|d| d as f32),
             finest_level: (l.levels - 1) as u32,
             brick: l.brick,
             apron: l.apron,
@@ -301,52 +331,48 @@ impl Shared {
         self.params.write(queue, params);
     }
 
-    /// Plans the frame for its views, writes what the plan uploads and the
-    /// index over its cut.
+    /// Plans the frame for its views (or takes the background planner's
+    /// latest plan), writes what the plan uploads and the index over its
+    /// cut; `None` when no new plan is to be applied this frame (the views
+    /// draw the last one). The feedback is what `Planner::add_feedback` kept.
     pub(crate) fn plan(
         &mut self,
         device: &wgpu::Device,
         queue: &wgpu::Queue,
         frame: &StreamFrame<'_>,
-    ) -> Result<Planned, PrepareError> {
-        let t = Instant::now();
-        let plan = self.streamer.plan(frame);
-        if self
-            .pool
-            .ensure_rows(device, self.streamer.slot_rows() as usize)?
-        {
+    ) -> Result<Option<Planned>, PrepareError> {
+        let Some(reply) = self.planner.plan(frame) else {
+            return Ok(None);
+        };
+        if self.pool.ensure_rows(device, reply.slot_rows as usize)? {
             self.generation += 1;
         }
-        let refine_ms = t.elapsed().as_secs_f64() * 1e3;
-
+        self.slot_rows = reply.slot_rows;
         let t = Instant::now();
-        let side = self.streamer.layout().stored_side();
-        let bpp = self.streamer.gpu_format().encoding.texel_bytes();
+        let side = self.layout.stored_side();
+        let bpp = self.gpu.encoding.texel_bytes();
+        let plan = reply.plan;
         let mut bytes = self
             .pool
             .write(queue, &plan.uploads, &plan.fades, side, bpp);
-        let upload_ms = t.elapsed().as_secs_f64() * 1e3;
-
-        let t = Instant::now();
-        let index =
-            brickray_index::encode_cut_with(&plan.cut, self.splits).map_err(RenderError::from)?;
-        let words = index.words();
+        let words = reply.words.map_err(RenderError::from)?;
         let (written, grew) = self
             .index
-            .write(device, queue, bytemuck::cast_slice(words))?;
+            .write(device, queue, bytemuck::cast_slice(&words))?;
         bytes += written;
         if grew {
             self.generation += 1;
         }
-        let encode_ms = t.elapsed().as_secs_f64() * 1e3;
-        Ok(Planned {
+        let upload_ms = t.elapsed().as_secs_f64() * 1e3;
+        self.stats = plan.stats;
+        Ok(Some(Planned {
             index_words: words.len() as u32,
             plan,
             bytes,
-            refine_ms,
+            refine_ms: reply.plan_ms,
             upload_ms,
-            encode_ms,
-        })
+            encode_ms: reply.encode_ms,
+        }))
     }
 }
 
@@ -372,8 +398,8 @@ impl std::fmt::Debug for StreamedVolume {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         let s = self.shared.lock();
         f.debug_struct("StreamedVolume")
-            .field("dims", &s.streamer.layout().volume.dims)
-            .field("levels", &s.streamer.layout().levels)
+            .field("dims", &s.layout.volume.dims)
+            .field("levels", &s.layout.levels)
             .field("format", &s.format)
             .finish_non_exhaustive()
     }
@@ -381,8 +407,8 @@ impl std::fmt::Debug for StreamedVolume {
 
 impl StreamedVolume {
     /// A volume streamed from `source` (a brick-octree file store, an
-    /// OME-Zarr image, a procedural source) with `config`, its texels stored
-    /// as `u8_filtering` says for u8 volumes. Validates the configuration
+    /// OME-Zarr image, a procedural source) with `config`, stored and planned
+    /// as `options` say. Validates the configuration
     /// against the source and the device, sizes the pool within the device's
     /// limits and reads the root (set-up time, not the frame path), so the
     /// first frame already shows a coarse image. Creates no GPU object when a
@@ -392,14 +418,14 @@ impl StreamedVolume {
         queue: &wgpu::Queue,
         source: Arc<dyn BrickSource>,
         config: CacheConfig,
-        u8_filtering: U8Filtering,
+        options: VolumeOptions,
     ) -> Result<StreamedVolume, RenderError> {
         crate::group2::check_ooc_limits(device)?;
         let layout = source.layout().clone();
         let gpu_format = GpuFormat::for_layout(
             &layout,
             encoding::caps(device),
-            u8_filtering,
+            options.u8_filtering,
             std::mem::size_of::<SlotInfo>() as u32,
             device.limits().max_texture_dimension_3d,
         );
@@ -407,17 +433,27 @@ impl StreamedVolume {
         let mut streamer = Streamer::new(source, config, gpu_format)?;
         streamer.preload_root()?;
         let pool = Pool::new(device, &streamer, format)?;
+        let atlas_dims = streamer.pool().atlas_dims();
+        let slot_rows = streamer.slot_rows();
+        let splits = Splits::from_layout(&layout);
+        let planner = Planner::new(streamer, splits, options.background_planning)
+            .map_err(|e| RenderError::from(brickray_cache::CacheError::Spawn(e)))?;
         let mut shared = Shared {
             pool,
             params: Uniform::new(device, "brickray-render out-of-core params")?,
             index: GrowBuffer::new(device, "brickray-render octree index", 1 << 12)?,
             sampler: crate::group2::volume_sampler(device)?,
-            splits: Splits::from_layout(&layout),
+            splits,
             generation: 0,
             format,
-            streamer,
+            planner,
+            layout,
+            gpu: gpu_format,
+            config,
+            slot_rows,
+            stats: StreamStats::default(),
         };
-        shared.write_params(queue);
+        shared.write_params(queue, atlas_dims);
         Ok(StreamedVolume {
             shared: Arc::new(Mutex::new(shared)),
         })
@@ -445,29 +481,43 @@ impl StreamedVolume {
         queue: &wgpu::Queue,
         config: CacheConfig,
     ) -> Result<(), RenderError> {
-        let mut s = self.shared.lock();
-        if *s.streamer.config() == config {
+        let mut guard = self.shared.lock();
+        let s = &mut *guard;
+        if s.config == config {
             return Ok(());
         }
-        let old = *s.streamer.config();
-        let r = s.streamer.configure(config)?;
+        // (Waits for a plan in progress in the background.)
+        let streamer = s.planner.streamer.clone();
+        let mut st = streamer.lock();
+        let old = *st.config();
+        let r = st.configure(config)?;
         if r.pool {
             // (The pool's size is within the 3D texture limit by the
             // planner's own check; its tables may still exceed a buffer
             // limit: then the old configuration is put back.)
-            match Pool::new(device, &s.streamer, s.format) {
-                Ok(pool) => s.pool = pool,
+            let pool = match Pool::new(device, &st, s.format) {
+                Ok(pool) => pool,
                 Err(e) => {
-                    s.streamer.configure(old)?;
-                    s.pool = Pool::new(device, &s.streamer, s.format)?;
+                    st.configure(old)?;
+                    s.pool = Pool::new(device, &st, s.format)?;
+                    s.slot_rows = st.slot_rows();
                     s.generation += 1;
-                    s.write_params(queue);
+                    s.planner.pool_rebuilt();
+                    let dims = st.pool().atlas_dims();
+                    drop(st);
+                    s.write_params(queue, dims);
                     return Err(e);
                 }
-            }
+            };
+            s.pool = pool;
+            s.slot_rows = st.slot_rows();
             s.generation += 1;
-            s.write_params(queue);
+            s.planner.pool_rebuilt();
+            let dims = st.pool().atlas_dims();
+            drop(st);
+            s.write_params(queue, dims);
         }
+        s.config = config;
         Ok(())
     }
 
@@ -486,24 +536,29 @@ impl StreamedVolume {
 
     /// The configuration in force.
     pub fn config(&self) -> CacheConfig {
-        *self.shared.lock().streamer.config()
+        self.shared.lock().config
     }
 
-    /// The planner's statistics of the last frame.
+    /// The planner's statistics of the last plan applied.
     pub fn stats(&self) -> StreamStats {
-        self.shared.lock().streamer.stats()
+        self.shared.lock().stats
     }
 
     /// True when another frame of the same views would change the image
-    /// (bricks still arriving or being refined).
+    /// (bricks still arriving or being refined, or a plan in progress in the
+    /// background).
     pub fn wants_redraw(&self) -> bool {
-        self.shared.lock().streamer.wants_redraw()
+        self.shared.lock().planner.wants_redraw()
+    }
+
+    fn streamer(&self) -> Arc<Mutex<Streamer>> {
+        self.shared.lock().planner.streamer.clone()
     }
 
     /// Forgets every failed brick so it is requested again when the views
     /// need it (after the source was repaired).
     pub fn retry_failed_bricks(&self) {
-        self.shared.lock().streamer.retry_failed();
+        self.streamer().lock().retry_failed();
     }
 
     /// The first streaming failure (a brick or its metadata could not be
@@ -511,12 +566,12 @@ impl StreamedVolume {
     /// shows one message, not thousands. Failures never fail `prepare`: the
     /// image stays at a coarser level there and `wants_redraw` stays true.
     pub fn take_streaming_error(&self) -> Option<StreamError> {
-        self.shared.lock().streamer.take_error()
+        self.streamer().lock().take_error()
     }
 
     /// The octree layout of the source.
     pub fn layout(&self) -> OctreeLayout {
-        self.shared.lock().streamer.layout().clone()
+        self.shared.lock().layout.clone()
     }
 
     /// The texture format of the atlas.
@@ -532,6 +587,6 @@ impl StreamedVolume {
     /// Reads the planner's state (the brick manager's residency and
     /// failures, the visibility state, the visible weights): diagnostics.
     pub fn inspect<R>(&self, f: impl FnOnce(&Streamer) -> R) -> R {
-        f(&self.shared.lock().streamer)
+        f(&self.streamer().lock())
     }
 }

@@ -99,7 +99,12 @@ impl ViewerApp {
         let mut gpu_error = None;
         match cc.wgpu_render_state.as_ref() {
             Some(rs) => {
-                match ViewResources::new(&rs.device, rs.target_format, Default::default()) {
+                let options = brickray::RendererOptions {
+                    // An interactive host: the render thread only applies plans.
+                    background_planning: true,
+                    ..Default::default()
+                };
+                match ViewResources::new(&rs.device, rs.target_format, options) {
                     Ok(r) => {
                         rs.renderer.write().callback_resources.insert(r);
                     }
@@ -227,6 +232,8 @@ impl ViewerApp {
             } else {
                 brickray::U8Filtering::Fast
             },
+            // An interactive host: the render thread only applies plans.
+            background_planning: true,
         };
         match ViewResources::new(&rs.device, rs.target_format, options) {
             Ok(r) => {

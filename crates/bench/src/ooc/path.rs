@@ -35,7 +35,10 @@ pub(super) fn part_c(
     );
     let source = noise_source(dims)?;
     let frame = VolumeFrame::centered([dims as u32; 3], [1.0; 3]);
-    let options = RendererOptions { u8_filtering };
+    let options = RendererOptions {
+        u8_filtering,
+        ..Default::default()
+    };
     println!("  u8 texels: {u8_filtering:?}");
     let mut renderer =
         VolumeRenderer::with_options(&gpu.device, targets(), options).map_err(|e| e.to_string())?;

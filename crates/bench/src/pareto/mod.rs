@@ -444,6 +444,7 @@ fn measure(
             brickray_harness::target_desc(),
             RendererOptions {
                 u8_filtering: k.u8_filtering,
+                ..Default::default()
             },
         )
         .map_err(|e| e.to_string())?;

@@ -118,6 +118,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
     let camera = Camera::orbit(frame.center(), 2.0, 0.7, 0.35);
     let options = RendererOptions {
         u8_filtering: U8Filtering::Fast,
+        ..Default::default()
     };
     let mut incore = VolumeRenderer::with_options(&gpu.device, target_desc(), options)
         .map_err(|e| e.to_string())?;

@@ -62,8 +62,8 @@ impl OutOfCore {
         let occlusion = OcclusionFeedback::new(device, MAX_QUERIES_PER_FRAME)?;
         let (feedback, bind_group, bound, levels, format) = {
             let s = volume.lock();
-            let layout = s.streamer.layout();
-            let feedback = UsageFeedback::new(device, s.streamer.slot_rows(), layout)?;
+            let layout = &s.layout;
+            let feedback = UsageFeedback::new(device, s.slot_rows, layout)?;
             let bind_group = bind_group(device, &group_layout, &s.bound(), &feedback, &occlusion)?;
             (feedback, bind_group, s.generation, layout.levels, s.format)
         };
@@ -110,10 +110,10 @@ impl OutOfCore {
     ) -> Result<(), RenderError> {
         let s = self.volume.lock();
         let mut rebuild = self.occlusion.resize(device, viewport)? || s.generation != self.bound;
-        let rows = s.streamer.slot_rows();
+        let rows = s.slot_rows;
         if rows != self.feedback.rows() {
             // (Read-backs in flight are dropped with the old counters.)
-            self.feedback = UsageFeedback::new(device, rows, s.streamer.layout())?;
+            self.feedback = UsageFeedback::new(device, rows, &s.layout)?;
             rebuild = true;
         }
         if rebuild {
@@ -238,7 +238,7 @@ impl VolumeBackend for OutOfCore {
     }
 
     fn measures_weights(&self) -> bool {
-        self.volume.lock().streamer.measures_weights()
+        self.volume.lock().measures_weights()
     }
 
     fn max_leaves(&self) -> u32 {
@@ -253,7 +253,8 @@ impl VolumeBackend for OutOfCore {
     }
 
     fn wants_redraw(&self) -> bool {
-        !self.stats.converged
+        // (In the background, also while a plan is in flight.)
+        !self.stats.converged || self.volume.wants_redraw()
     }
 
     fn texel_format(&self) -> wgpu::TextureFormat {
