@@ -142,6 +142,21 @@ pub enum PrepareError {
         /// `max_texture_dimension_2d`.
         limit: u32,
     },
+    /// The viewport's right or bottom edge overflows or lies past the
+    /// largest 2D target the device can create (no target holds it).
+    #[error(
+        "viewport at ({x}, {y}) of {width}x{height} reaches past {limit}, the device's largest target",
+        x = viewport.x,
+        y = viewport.y,
+        width = viewport.width,
+        height = viewport.height
+    )]
+    ViewportOutOfRange {
+        /// The viewport.
+        viewport: crate::desc::Viewport,
+        /// `max_texture_dimension_2d`.
+        limit: u32,
+    },
     /// The camera cannot form an image.
     #[error(transparent)]
     Camera(#[from] CameraError),

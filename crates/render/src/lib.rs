@@ -314,6 +314,16 @@ impl VolumeRenderer {
                 limit,
             });
         }
+        // `render` sets the pass's viewport to it: its far edges must exist
+        // and lie inside a target the device can create.
+        let inside =
+            |origin: u32, extent: u32| origin.checked_add(extent).is_some_and(|e| e <= limit);
+        if !inside(vp.x, vp.width) || !inside(vp.y, vp.height) {
+            return Err(PrepareError::ViewportOutOfRange {
+                viewport: vp,
+                limit,
+            });
+        }
         f.camera.validate()?;
         f.frame.validate()?;
         f.settings.validate()?;
