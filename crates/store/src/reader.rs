@@ -86,9 +86,21 @@ pub(crate) fn max_compressed(n: usize) -> u64 {
 impl Store {
     /// Opens a store file (see [`open`]). A path that is not a regular file (a
     /// FIFO, a device, a directory) is refused from its metadata, before it is
-    /// opened: opening a FIFO would block.
+    /// opened: opening a FIFO would block. A path named as a build's temporary
+    /// (`.<name>.brickray-partial.<pid>-<seq>`, or a link to one) is refused
+    /// by its name ([`StoreError::PartialBuild`]): a build in progress or
+    /// killed, whatever it holds.
     pub fn open(path: impl AsRef<Path>) -> Result<Store, StoreError> {
         let path = path.as_ref();
+        let temporary = |p: &Path| {
+            p.file_name()
+                .is_some_and(|n| crate::partial::temporary_pid(n).is_some())
+        };
+        if temporary(path) || std::fs::canonicalize(path).is_ok_and(|c| temporary(&c)) {
+            return Err(StoreError::PartialBuild {
+                path: path.to_owned(),
+            });
+        }
         let md = std::fs::metadata(path).map_err(|e| StoreError::io(path, e))?;
         if let Some(kind) = FileKind::of(md.file_type()) {
             return Err(StoreError::NotRegularFile {
