@@ -26,14 +26,13 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
     let gpu = GpuContext::new().map_err(|e| e.to_string())?;
     println!("adapter: {}", gpu.describe());
     println!(
-        "soak: {} frames at {}x{} of a {}^3 procedural volume, pool {} MiB, CPU cache {} MiB, each view held {} frames, prediction {}, visibility {:?}",
+        "soak: {} frames at {}x{} of a {}^3 procedural volume, pool {} MiB, CPU cache {} MiB, prediction {}, visibility {:?}",
         config.frames,
         config.size,
         config.size,
         config.volume,
         config.gpu_budget_bytes >> 20,
         config.cpu_budget_bytes >> 20,
-        config.hold,
         if config.prediction.is_some() {
             "on"
         } else {

@@ -1,10 +1,9 @@
 //! The soak: thousands of frames of an out-of-core volume far larger than its
-//! pool, with every feature of the out-of-core path at work: random views
-//! (jumps, inside the volume, extreme zoom, every depth convention), each held
-//! for a few frames while the camera glides, so that bricks stream in and
-//! level-of-detail changes fade; DVR, iso with the prediction buffer, and MIP;
-//! visibility feedback from both the ray caster's usage counts and occlusion
-//! queries. Process memory is sampled as it goes, and [`FeatureFrames`]
+//! pool, with every feature of the out-of-core path at work: a random camera
+//! each frame (jumps, inside the volume, extreme zoom, every depth
+//! convention); DVR, iso with the prediction buffer, and MIP; visibility
+//! feedback from both the ray caster's usage counts and occlusion queries;
+//! level-of-detail fades. Process memory is sampled as it goes, and [`FeatureFrames`]
 //! counts the frames in which each feature was active. Shared by
 //! `brickray-bench soak` (10,000 frames) and the CI test (1,000 frames).
 
@@ -35,10 +34,6 @@ pub struct SoakConfig {
     pub sample_every: usize,
     /// Seed of the camera path.
     pub seed: u64,
-    /// Frames each random view (and its render mode) is held, the camera
-    /// gliding around its target (1: a new view every frame, as the soak
-    /// did before it had fades to show).
-    pub hold: usize,
     /// The isosurface prediction buffer on iso frames (`None`: off).
     pub prediction: Option<Prediction>,
     /// Visibility feedback.
@@ -47,9 +42,9 @@ pub struct SoakConfig {
 
 impl Default for SoakConfig {
     /// The soak: 10,000 frames at 64x64 of a 65536^3 volume through a
-    /// 64 MiB pool and a 32 MiB CPU cache, memory every 250 frames; each view
-    /// held 8 frames, the prediction buffer on iso frames, visibility from
-    /// usage counts and occlusion queries, fades of the default 120 ms.
+    /// 64 MiB pool and a 32 MiB CPU cache, memory every 250 frames; the
+    /// prediction buffer on iso frames, visibility from usage counts and
+    /// occlusion queries, fades of the default 120 ms.
     fn default() -> Self {
         SoakConfig {
             frames: 10_000,
@@ -59,7 +54,6 @@ impl Default for SoakConfig {
             cpu_budget_bytes: 32 << 20,
             sample_every: 250,
             seed: 0x5eed_b71c,
-            hold: 8,
             prediction: Some(Prediction::PAPER),
             visibility: VisibilityPolicy::Both,
         }
@@ -306,17 +300,6 @@ fn random_camera(rng: &mut Rng, centre: Vec3) -> Camera {
     c
 }
 
-/// The camera of the `k`th frame of a held view: turned about its target by
-/// 0.6 degrees a frame (the target stays in view; a camera inside the volume
-/// moves along a small arc).
-fn glide(c: Camera, k: usize) -> Camera {
-    let turn = glam::Quat::from_axis_angle(c.up.normalize_or(Vec3::Y), 0.0105 * k as f32);
-    Camera {
-        eye: c.target + turn * (c.eye - c.target),
-        ..c
-    }
-}
-
 fn modes_list() -> [RenderMode; 3] {
     [
         RenderMode::Dvr,
@@ -378,15 +361,10 @@ pub fn run(
     let mut rng = Rng(config.seed | 1);
     let mut report = SoakReport::default();
     let modes = modes_list();
-    let hold = config.hold.max(1);
-    let (mut view, mut mode) = (Camera::orbit(frame.center(), 2.0, 0.0, 0.0), modes[0]);
     let mut usage_applied = 0;
     for i in 0..config.frames {
-        if i % hold == 0 {
-            view = random_camera(&mut rng, frame.center());
-            mode = modes[(rng.next() * 3.0) as usize % 3];
-        }
-        let camera = glide(view, i % hold);
+        let camera = random_camera(&mut rng, frame.center());
+        let mode = modes[(rng.next() * 3.0) as usize % 3];
         let settings = RenderSettings {
             mode,
             ..Default::default()
