@@ -542,3 +542,63 @@ fn viewport_offsets_past_any_target_are_typed_errors() {
     let mut enc = g.device.create_command_encoder(&Default::default());
     r.prepare(&g.device, &g.queue, &mut enc, &desc).unwrap();
 }
+
+/// A frame description whose volume frame has other dims than the volume
+/// drawn (in core and out of core) is a typed error at `prepare`, not an
+/// empty image; a volume whose value range is not finite is refused by
+/// `set_volume`. `render` then draws nothing and does not panic.
+#[test]
+fn frames_and_volumes_that_do_not_fit_are_typed_errors() {
+    let g = gpu();
+    let (vol, tf, frame, camera) = sphere_scene();
+    let target = Offscreen::new(&g.device, 64, 64);
+    let mut r = VolumeRenderer::new(&g.device, brickray_harness::target_desc()).unwrap();
+    r.set_volume(&g.device, &g.queue, &vol).unwrap();
+    r.set_transfer_function(&g.device, &g.queue, &tf).unwrap();
+    let mismatched = |r: &mut VolumeRenderer, frame: VolumeFrame, volume: [u32; 3]| {
+        let desc = FrameDesc::new(camera, frame, 64, 64);
+        let mut enc = g.device.create_command_encoder(&Default::default());
+        let got = r.prepare(&g.device, &g.queue, &mut enc, &desc);
+        assert!(
+            matches!(
+                got,
+                Err(brickray::PrepareError::FrameDoesNotFit { frame: f, volume: v })
+                    if f == frame.dims && v == volume
+            ),
+            "{:?} over {volume:?}: {got:?}",
+            frame.dims
+        );
+        {
+            let mut pass = target.pass(&mut enc, true);
+            assert!(matches!(
+                r.render(&mut pass),
+                Err(brickray::RenderError::NotPrepared)
+            ));
+        }
+        g.submit_wait(enc);
+    };
+    mismatched(&mut r, VolumeFrame::centered([64; 3], [1.0; 3]), vol.dims());
+    mismatched(&mut r, VolumeFrame::centered([48, 48, 47], [1.0; 3]), vol.dims());
+    // The matching frame still draws.
+    draw_frame(g, &mut r, &target, &FrameDesc::new(camera, frame, 64, 64), None).unwrap();
+    // Out of core.
+    let (mut s, desc, _) = streamed_scene();
+    mismatched(&mut s, VolumeFrame::centered([256; 3], [1.0; 3]), [128; 3]);
+    draw_frame(g, &mut s, &target, &desc, None).unwrap();
+    // Value ranges that normalize every sample to NaN or to one value.
+    for range in [
+        [f32::NAN, 1.0],
+        [0.0, f32::NAN],
+        [0.0, f32::INFINITY],
+        [f32::NEG_INFINITY, 1.0],
+        [-3e38, 3e38],
+    ] {
+        let mut bad = vol.clone();
+        bad.set_value_range(range);
+        let got = r.set_volume(&g.device, &g.queue, &bad);
+        assert!(
+            matches!(got, Err(brickray::RenderError::BadValueRange { .. })),
+            "{range:?}: {got:?}"
+        );
+    }
+}
