@@ -578,9 +578,20 @@ fn frames_and_volumes_that_do_not_fit_are_typed_errors() {
         g.submit_wait(enc);
     };
     mismatched(&mut r, VolumeFrame::centered([64; 3], [1.0; 3]), vol.dims());
-    mismatched(&mut r, VolumeFrame::centered([48, 48, 47], [1.0; 3]), vol.dims());
+    mismatched(
+        &mut r,
+        VolumeFrame::centered([48, 48, 47], [1.0; 3]),
+        vol.dims(),
+    );
     // The matching frame still draws.
-    draw_frame(g, &mut r, &target, &FrameDesc::new(camera, frame, 64, 64), None).unwrap();
+    draw_frame(
+        g,
+        &mut r,
+        &target,
+        &FrameDesc::new(camera, frame, 64, 64),
+        None,
+    )
+    .unwrap();
     // Out of core.
     let (mut s, desc, _) = streamed_scene();
     mismatched(&mut s, VolumeFrame::centered([256; 3], [1.0; 3]), [128; 3]);

@@ -80,7 +80,8 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let out = dir.path().join("v.brs");
         let snaps = tempfile::tempdir().unwrap();
-        let seen: Rc<RefCell<Vec<(&'static str, Vec<PathBuf>)>>> = Rc::default();
+        type Seen = Vec<(&'static str, Vec<PathBuf>)>;
+        let seen: Rc<RefCell<Seen>> = Rc::default();
         let opts = BuildOptions {
             brick: 8,
             memory_bound: 1_500_000,
