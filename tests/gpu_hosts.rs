@@ -400,3 +400,216 @@ fn viewport_sub_rectangle_renders_the_right_pixels() {
         ))
     ));
 }
+
+/// A streamed volume's view of a 128^3 procedural volume, a 64x64 frame of
+/// it, and a target.
+fn streamed_scene() -> (VolumeRenderer, FrameDesc<'static>, Offscreen) {
+    let g = gpu();
+    let source = brickray::store::ProceduralSource::fractal_noise([128; 3], 32, 1).unwrap();
+    let frame = VolumeFrame::centered([128; 3], [1.0; 3]);
+    let camera = Camera::orbit(frame.center(), 1.8, 0.5, 0.3);
+    let mut r = VolumeRenderer::new(&g.device, brickray_harness::target_desc()).unwrap();
+    r.set_volume_source(
+        &g.device,
+        &g.queue,
+        std::sync::Arc::new(source),
+        brickray::OutOfCoreConfig::default(),
+    )
+    .unwrap();
+    let tf = TransferFunction::ramp(0.3, 0.8, 0.3);
+    r.set_transfer_function(&g.device, &g.queue, &tf).unwrap();
+    let target = Offscreen::new(&g.device, 64, 64);
+    (r, FrameDesc::new(camera, frame, 64, 64), target)
+}
+
+fn feedback_applied(r: &VolumeRenderer) -> u64 {
+    r.stats().out_of_core.unwrap().feedback.frames_applied
+}
+
+/// A host that prepares one streamed view two or three times into one
+/// encoder before submitting it (a redraw before the submit, say) submits
+/// without a panic: no read-back buffer is mapped while an encoder not yet
+/// submitted copies into it. The usage feedback keeps arriving, in these
+/// frames and in ordinary ones after them.
+#[test]
+fn several_prepares_into_one_encoder_out_of_core() {
+    let g = gpu();
+    for prepares in [2, 3] {
+        let (mut r, desc, target) = streamed_scene();
+        for _ in 0..12 {
+            let mut enc = g.device.create_command_encoder(&Default::default());
+            for _ in 0..prepares {
+                r.prepare(&g.device, &g.queue, &mut enc, &desc).unwrap();
+            }
+            {
+                let mut pass = target.pass(&mut enc, true);
+                r.render(&mut pass).unwrap();
+            }
+            g.submit_wait(enc);
+        }
+        let applied = feedback_applied(&r);
+        assert!(
+            applied >= 8,
+            "{prepares} prepares: {applied} read-backs applied"
+        );
+        for _ in 0..4 {
+            draw_frame(g, &mut r, &target, &desc, None).unwrap();
+        }
+        assert!(
+            feedback_applied(&r) >= applied + 3,
+            "{prepares} prepares: feedback stopped"
+        );
+    }
+}
+
+/// Encoders the host drops without submitting them hold no read-back entry
+/// for ever: after more dropped frames than the read-back rings hold, the
+/// feedback still arrives.
+#[test]
+fn dropped_encoders_do_not_exhaust_the_read_back_rings() {
+    let g = gpu();
+    let (mut r, desc, target) = streamed_scene();
+    for _ in 0..3 {
+        draw_frame(g, &mut r, &target, &desc, None).unwrap();
+    }
+    for _ in 0..10 {
+        let mut enc = g.device.create_command_encoder(&Default::default());
+        r.prepare(&g.device, &g.queue, &mut enc, &desc).unwrap();
+        drop(enc);
+    }
+    let applied = feedback_applied(&r);
+    for _ in 0..6 {
+        draw_frame(g, &mut r, &target, &desc, None).unwrap();
+    }
+    let fb = r.stats().out_of_core.unwrap().feedback;
+    eprintln!("feedback: {fb:?}");
+    assert!(fb.frames_applied >= applied + 4, "feedback stopped: {fb:?}");
+}
+
+/// A viewport whose far edge overflows `u32` (x = u32::MAX - 8) or lies past
+/// the largest target the device can create is a typed error at `prepare`,
+/// and `render` then draws nothing and does not panic.
+#[test]
+fn viewport_offsets_past_any_target_are_typed_errors() {
+    let g = gpu();
+    let (vol, tf, frame, camera) = sphere_scene();
+    let mut r = VolumeRenderer::new(&g.device, brickray_harness::target_desc()).unwrap();
+    r.set_volume(&g.device, &g.queue, &vol).unwrap();
+    r.set_transfer_function(&g.device, &g.queue, &tf).unwrap();
+    let limit = g.device.limits().max_texture_dimension_2d;
+    let target = Offscreen::new(&g.device, 64, 64);
+    let cases = [
+        (u32::MAX - 8, 0),
+        (0, u32::MAX - 8),
+        (limit - 32, 0),
+        (0, limit),
+    ];
+    for (x, y) in cases {
+        let desc = FrameDesc {
+            viewport: Viewport {
+                x,
+                y,
+                width: 64,
+                height: 64,
+            },
+            ..FrameDesc::new(camera, frame, 64, 64)
+        };
+        let mut enc = g.device.create_command_encoder(&Default::default());
+        let got = r.prepare(&g.device, &g.queue, &mut enc, &desc);
+        assert!(
+            matches!(got, Err(brickray::PrepareError::ViewportOutOfRange { .. })),
+            "({x}, {y}): {got:?}"
+        );
+        {
+            let mut pass = target.pass(&mut enc, true);
+            assert!(matches!(
+                r.render(&mut pass),
+                Err(brickray::RenderError::NotPrepared)
+            ));
+        }
+        g.submit_wait(enc);
+    }
+    // The largest viewport that fits still renders.
+    let desc = FrameDesc {
+        viewport: Viewport {
+            x: limit - 64,
+            y: 0,
+            width: 64,
+            height: 64,
+        },
+        ..FrameDesc::new(camera, frame, 64, 64)
+    };
+    let mut enc = g.device.create_command_encoder(&Default::default());
+    r.prepare(&g.device, &g.queue, &mut enc, &desc).unwrap();
+}
+
+/// A frame description whose volume frame has other dims than the volume
+/// drawn (in core and out of core) is a typed error at `prepare`, not an
+/// empty image; a volume whose value range is not finite is refused by
+/// `set_volume`. `render` then draws nothing and does not panic.
+#[test]
+fn frames_and_volumes_that_do_not_fit_are_typed_errors() {
+    let g = gpu();
+    let (vol, tf, frame, camera) = sphere_scene();
+    let target = Offscreen::new(&g.device, 64, 64);
+    let mut r = VolumeRenderer::new(&g.device, brickray_harness::target_desc()).unwrap();
+    r.set_volume(&g.device, &g.queue, &vol).unwrap();
+    r.set_transfer_function(&g.device, &g.queue, &tf).unwrap();
+    let mismatched = |r: &mut VolumeRenderer, frame: VolumeFrame, volume: [u32; 3]| {
+        let desc = FrameDesc::new(camera, frame, 64, 64);
+        let mut enc = g.device.create_command_encoder(&Default::default());
+        let got = r.prepare(&g.device, &g.queue, &mut enc, &desc);
+        assert!(
+            matches!(
+                got,
+                Err(brickray::PrepareError::FrameDoesNotFit { frame: f, volume: v })
+                    if f == frame.dims && v == volume
+            ),
+            "{:?} over {volume:?}: {got:?}",
+            frame.dims
+        );
+        {
+            let mut pass = target.pass(&mut enc, true);
+            assert!(matches!(
+                r.render(&mut pass),
+                Err(brickray::RenderError::NotPrepared)
+            ));
+        }
+        g.submit_wait(enc);
+    };
+    mismatched(&mut r, VolumeFrame::centered([64; 3], [1.0; 3]), vol.dims());
+    mismatched(
+        &mut r,
+        VolumeFrame::centered([48, 48, 47], [1.0; 3]),
+        vol.dims(),
+    );
+    // The matching frame still draws.
+    draw_frame(
+        g,
+        &mut r,
+        &target,
+        &FrameDesc::new(camera, frame, 64, 64),
+        None,
+    )
+    .unwrap();
+    // Out of core.
+    let (mut s, desc, _) = streamed_scene();
+    mismatched(&mut s, VolumeFrame::centered([256; 3], [1.0; 3]), [128; 3]);
+    draw_frame(g, &mut s, &target, &desc, None).unwrap();
+    // Value ranges that normalize every sample to NaN or to one value.
+    for range in [
+        [f32::NAN, 1.0],
+        [0.0, f32::NAN],
+        [0.0, f32::INFINITY],
+        [f32::NEG_INFINITY, 1.0],
+        [-3e38, 3e38],
+    ] {
+        let mut bad = vol.clone();
+        bad.set_value_range(range);
+        let got = r.set_volume(&g.device, &g.queue, &bad);
+        assert!(
+            matches!(got, Err(brickray::RenderError::BadValueRange { .. })),
+            "{range:?}: {got:?}"
+        );
+    }
+}

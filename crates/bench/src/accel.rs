@@ -64,7 +64,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         .map_err(|e| e.to_string())?;
     let frame = VolumeFrame::centered(d.dims, d.spacing);
     let camera = Camera::orbit(frame.center(), 2.0, 0.5, 0.3);
-    let run = Runner::new(&gpu, size);
+    let run = Runner::new(&gpu, size)?;
     let shading = Shading {
         enabled: true,
         ..Default::default()

@@ -169,7 +169,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         variants.push((VisibilityPolicy::RayGuided, culling_size, true));
     }
     for (policy, px, draw) in variants {
-        let run = Runner::new(&gpu, px);
+        let run = Runner::new(&gpu, px)?;
         let tag = if draw { "_culled" } else { "" };
         for &cut in &cuts {
             let (mut r, frame) = renderer(&gpu, cut, policy)?;

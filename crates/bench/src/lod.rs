@@ -421,7 +421,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
     println!(
         "lod: {size}x{size}, bricks {brick}+2x2, geometric tolerances {tolerances:?} px vs error budgets {budgets:?} (8-bit levels x px)"
     );
-    let run = Runner::new(&gpu, size);
+    let run = Runner::new(&gpu, size)?;
     let mut fig = Figures::new();
     let mut all_gains = Vec::new();
     for name in scenes.split(',') {

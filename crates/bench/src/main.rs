@@ -42,6 +42,47 @@ fn arg<T: std::str::FromStr>(args: &[String], name: &str, default: T) -> Result<
     }
 }
 
+/// The largest image side a suite accepts, in pixels: the 2D texture limit
+/// of most desktop devices and of Mesa's lavapipe (a suite also checks its
+/// device's own limit before it creates a target).
+const MAX_IMAGE_SIDE: u32 = 16384;
+
+/// An image side: 1 to [`MAX_IMAGE_SIDE`] pixels.
+fn image_side(s: &str) -> Result<u32, String> {
+    let n: u32 = s.parse().map_err(|e| format!("{e}"))?;
+    if (1..=MAX_IMAGE_SIDE).contains(&n) {
+        Ok(n)
+    } else {
+        Err(format!(
+            "{n} is not an image side in 1..={MAX_IMAGE_SIDE} pixels"
+        ))
+    }
+}
+
+/// A count of rounds or frames: at least 1.
+fn at_least_one<T: std::str::FromStr + PartialOrd + From<u8>>(s: &str) -> Result<T, String>
+where
+    T::Err: std::fmt::Display,
+{
+    let n: T = s.parse().map_err(|e| format!("{e}"))?;
+    if n >= T::from(1) {
+        Ok(n)
+    } else {
+        Err(format!("{s} is not at least 1"))
+    }
+}
+
+/// The parts of the `ooc` suite: one or more of a, b and c.
+fn ooc_parts(s: &str) -> Result<String, String> {
+    if !s.is_empty() && s.chars().all(|c| matches!(c, 'a' | 'b' | 'c')) {
+        Ok(s.to_string())
+    } else {
+        Err(format!(
+            "{s:?} names no parts: use one or more of a, b and c"
+        ))
+    }
+}
+
 /// brickray's benchmarks: each suite prints what it measured and ends with one
 /// line holding a JSON object of the figures.
 #[derive(Debug, clap::Parser)]
@@ -58,10 +99,10 @@ enum Suite {
     /// Early ray termination and empty-space skipping vs brute force on the head CT.
     Accel {
         /// Interleaved rounds (default 5).
-        #[arg(long)]
+        #[arg(long, value_parser = at_least_one::<usize>)]
         rounds: Option<usize>,
         /// Image side in pixels (default 512).
-        #[arg(long)]
+        #[arg(long, value_parser = image_side)]
         size: Option<u32>,
     },
     /// LOD sweep on the head CT at 4.5 mm slices: bricks and PSNR per
@@ -69,7 +110,7 @@ enum Suite {
     /// (CPU only).
     Aniso {
         /// Image side in pixels (default 160).
-        #[arg(long)]
+        #[arg(long, value_parser = image_side)]
         size: Option<u32>,
         /// Reference step factor (default 0.5).
         #[arg(long)]
@@ -101,17 +142,17 @@ enum Suite {
         #[arg(long)]
         memory_mib: Option<u64>,
         /// Best of this many builds (default 3).
-        #[arg(long)]
+        #[arg(long, value_parser = at_least_one::<u64>)]
         rounds: Option<u64>,
     },
     /// What the render thread pays per frame out of core: `prepare`'s time
     /// along a moving camera path at cuts of about 1k to 50k bricks.
     Host {
         /// Viewport side in pixels (default 1024).
-        #[arg(long)]
+        #[arg(long, value_parser = image_side)]
         size: Option<u32>,
         /// Path frames timed per cut (default 60).
-        #[arg(long)]
+        #[arg(long, value_parser = at_least_one::<usize>)]
         frames: Option<usize>,
         /// Brick budgets setting the cut sizes, comma-separated (default
         /// 1000,5000,20000,50000).
@@ -121,22 +162,22 @@ enum Suite {
         #[arg(long)]
         culling: bool,
         /// Viewport side of the drawn (culling) path (default 256).
-        #[arg(long)]
+        #[arg(long, value_parser = image_side)]
         culling_size: Option<u32>,
     },
     /// Out of core vs in core, output sensitivity, a camera path.
     Ooc {
         /// Image side in pixels (default 512).
-        #[arg(long)]
+        #[arg(long, value_parser = image_side)]
         size: Option<u32>,
         /// Interleaved rounds (default 3).
-        #[arg(long)]
+        #[arg(long, value_parser = at_least_one::<usize>)]
         rounds: Option<usize>,
         /// Parts to run: any of a (vs in core), b (output sensitivity), c (camera path) (default abc).
-        #[arg(long)]
+        #[arg(long, value_parser = ooc_parts)]
         parts: Option<String>,
         /// Image side of the camera path (default 256).
-        #[arg(long)]
+        #[arg(long, value_parser = image_side)]
         path_size: Option<u32>,
         /// Voxels per side of the path's procedural volume (default 65536).
         #[arg(long)]
@@ -153,10 +194,10 @@ enum Suite {
     /// charted (SVG).
     Pareto {
         /// Image side in pixels (default 512).
-        #[arg(long)]
+        #[arg(long, value_parser = image_side)]
         size: Option<u32>,
         /// Interleaved rounds (default 3).
-        #[arg(long)]
+        #[arg(long, value_parser = at_least_one::<usize>)]
         rounds: Option<usize>,
         /// Volumes, comma-separated, of ct, ct5, mri, nuclei, ml, noise (default all).
         #[arg(long)]
@@ -189,10 +230,10 @@ enum Suite {
     /// translation and zoom; variants interleaved frame by frame.
     Prediction {
         /// Image side in pixels (default 256).
-        #[arg(long)]
+        #[arg(long, value_parser = image_side)]
         size: Option<u32>,
         /// Frames of each orbit (default 120).
-        #[arg(long)]
+        #[arg(long, value_parser = at_least_one::<usize>)]
         frames: Option<usize>,
         /// Write the failure path's chart (SVG) here.
         #[arg(long)]
@@ -215,20 +256,20 @@ enum Suite {
     /// path (interleaved, head CT) and PSNR against the exact integral.
     Preint {
         /// Image side in pixels of the timed frames (default 256).
-        #[arg(long)]
+        #[arg(long, value_parser = image_side)]
         size: Option<u32>,
         /// Interleaved rounds (default 5).
-        #[arg(long)]
+        #[arg(long, value_parser = at_least_one::<usize>)]
         rounds: Option<usize>,
     },
     /// Per-sample cost: brickray against a minimal kernel (the device's rate), in
     /// core and out of core, DVR, shaded DVR, iso and MIP.
     Raw {
         /// Image side in pixels (default 512).
-        #[arg(long)]
+        #[arg(long, value_parser = image_side)]
         size: Option<u32>,
         /// Interleaved rounds (default 3).
-        #[arg(long)]
+        #[arg(long, value_parser = at_least_one::<usize>)]
         rounds: Option<usize>,
         /// Step in voxels (default 0.5).
         #[arg(long)]
@@ -240,17 +281,17 @@ enum Suite {
     /// Memory and frame time over a long random-camera run.
     Soak {
         /// Frames (default 10000).
-        #[arg(long)]
+        #[arg(long, value_parser = at_least_one::<usize>)]
         frames: Option<usize>,
         /// Image side in pixels (default 64).
-        #[arg(long)]
+        #[arg(long, value_parser = image_side)]
         size: Option<u32>,
     },
     /// Error-aware vs geometric level of detail at equal working sets (PSNR
     /// against the CPU reference; shared MRI and head CT, Marschner-Lobb).
     Lod {
         /// Image side in pixels (default 256).
-        #[arg(long)]
+        #[arg(long, value_parser = image_side)]
         size: Option<u32>,
         /// Scenes, comma-separated, of mri, ct, ct_iso, ml (default mri,ct,ml);
         /// with `--by oracle`, volumes of the pareto suite (ct, ct5, mri,
@@ -296,13 +337,13 @@ enum Suite {
         #[arg(long)]
         scenes: Option<String>,
         /// Image side of the head CT scenes (default 256).
-        #[arg(long)]
+        #[arg(long, value_parser = image_side)]
         size: Option<u32>,
         /// Brick side of the head CT's store (default 32).
         #[arg(long)]
         head_brick: Option<u32>,
         /// Image side of the shells scene (default 512).
-        #[arg(long)]
+        #[arg(long, value_parser = image_side)]
         shell_size: Option<u32>,
         /// Voxels per side of the shells volume (default 4096).
         #[arg(long)]
@@ -336,7 +377,7 @@ enum Suite {
     /// against the f64 reference.
     Stability {
         /// Image side in pixels (default 128; also the volumes' side).
-        #[arg(long)]
+        #[arg(long, value_parser = image_side)]
         size: Option<u32>,
         /// Cases, comma-separated numbers 1-8 (default all).
         #[arg(long)]
@@ -348,10 +389,10 @@ enum Suite {
     /// u8 volumes: exact interpolation vs 8-bit texels.
     U8 {
         /// Image side in pixels (default 512).
-        #[arg(long)]
+        #[arg(long, value_parser = image_side)]
         size: Option<u32>,
         /// Interleaved rounds (default 5).
-        #[arg(long)]
+        #[arg(long, value_parser = at_least_one::<usize>)]
         rounds: Option<usize>,
     },
 }

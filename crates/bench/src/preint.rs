@@ -96,7 +96,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         .map_err(|e| e.to_string())?;
     let frame = VolumeFrame::centered(d.dims, d.spacing);
     let camera = Camera::orbit(frame.center(), 2.0, 0.5, 0.3);
-    let run = Runner::new(&gpu, size);
+    let run = Runner::new(&gpu, size)?;
     println!(
         "  {:<16} {:>5} {:>10} {:>10} {:>7} {:>14}",
         "mode", "step", "plain ms", "preint ms", "ratio", "PSNR vs plain"
@@ -161,7 +161,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         .map_err(|e| e.to_string())?;
     rb.set_transfer_function(&gpu.device, &gpu.queue, &tf)
         .map_err(|e| e.to_string())?;
-    let qrun = Runner::new(&gpu, q);
+    let qrun = Runner::new(&gpu, q)?;
     let base = RenderSettings::default();
     let exact = render_reference(
         &ball,

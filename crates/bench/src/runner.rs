@@ -136,12 +136,20 @@ impl<'a> Runner<'a> {
         }
     }
 
-    pub(crate) fn new(gpu: &'a GpuContext, size: u32) -> Self {
-        Runner {
+    /// A runner drawing `size x size` frames; an error when the device
+    /// cannot create such a target.
+    pub(crate) fn new(gpu: &'a GpuContext, size: u32) -> Result<Self, String> {
+        let limit = gpu.device.limits().max_texture_dimension_2d;
+        if size == 0 || size > limit {
+            return Err(format!(
+                "an image side of {size} px is not in 1..={limit}, the device's 2D texture limit"
+            ));
+        }
+        Ok(Runner {
             gpu,
             target: Offscreen::new(&gpu.device, size, size),
             size,
-        }
+        })
     }
 
     /// One frame: `prepare + submit + wait` wall time, and optionally the image

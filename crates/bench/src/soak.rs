@@ -26,13 +26,19 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
     let gpu = GpuContext::new().map_err(|e| e.to_string())?;
     println!("adapter: {}", gpu.describe());
     println!(
-        "soak: {} frames at {}x{} of a {}^3 procedural volume, pool {} MiB, CPU cache {} MiB",
+        "soak: {} frames at {}x{} of a {}^3 procedural volume, pool {} MiB, CPU cache {} MiB, prediction {}, visibility {:?}",
         config.frames,
         config.size,
         config.size,
         config.volume,
         config.gpu_budget_bytes >> 20,
-        config.cpu_budget_bytes >> 20
+        config.cpu_budget_bytes >> 20,
+        if config.prediction.is_some() {
+            "on"
+        } else {
+            "off"
+        },
+        config.visibility
     );
     let every = config.sample_every;
     let r = soak::run(&gpu, config, |i, _| {
@@ -68,6 +74,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         r.errors,
         r.panics
     );
+    println!("features active: {}", r.features.describe());
     for (i, ms, samples) in &stall_list {
         println!("  stall: frame {i}, {ms:.1} ms, {samples} samples");
     }
@@ -94,6 +101,24 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
     );
     fig.insert("stalls".into(), json!(stalls));
     fig.insert("frames_over_10x_median".into(), json!(slow));
+    let f = r.features;
+    fig.insert(
+        "feature_frames".into(),
+        json!({
+            "frames": f.frames,
+            "dvr": f.dvr,
+            "iso": f.iso,
+            "mip": f.mip,
+            "reversed_z": f.reversed_z,
+            "prediction": f.prediction,
+            "visibility": f.visibility,
+            "culled": f.culled,
+            "occlusion_queries": f.occlusion_queries,
+            "usage_feedback": f.usage_feedback,
+            "fades": f.fades,
+            "uploads": f.uploads,
+        }),
+    );
     fig.insert("errors".into(), json!(r.errors));
     fig.insert("panics".into(), json!(r.panics));
     Ok(fig)

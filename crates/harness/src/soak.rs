@@ -1,13 +1,17 @@
 //! The soak: thousands of frames of an out-of-core volume far larger than its
-//! pool, a random camera each frame (jumps, inside the volume, extreme zoom,
-//! every depth convention), process memory sampled as it goes. Shared by
+//! pool, with every feature of the out-of-core path at work: a random camera
+//! each frame (jumps, inside the volume, extreme zoom, every depth
+//! convention); DVR, iso with the prediction buffer, and MIP; visibility
+//! feedback from both the ray caster's usage counts and occlusion queries;
+//! level-of-detail fades. Process memory is sampled as it goes, and [`FeatureFrames`]
+//! counts the frames in which each feature was active. Shared by
 //! `brickray-bench soak` (10,000 frames) and the CI test (1,000 frames).
 
 use crate::{GpuContext, Offscreen, draw_frame};
 use brickray_core::{
     Camera, DepthConvention, Projection, RenderMode, RenderSettings, TransferFunction, VolumeFrame,
 };
-use brickray_render::{FrameDesc, OutOfCoreConfig, VolumeRenderer};
+use brickray_render::{FrameDesc, OutOfCoreConfig, Prediction, VisibilityPolicy, VolumeRenderer};
 use glam::Vec3;
 use std::panic::AssertUnwindSafe;
 use std::sync::Arc;
@@ -30,11 +34,17 @@ pub struct SoakConfig {
     pub sample_every: usize,
     /// Seed of the camera path.
     pub seed: u64,
+    /// The isosurface prediction buffer on iso frames (`None`: off).
+    pub prediction: Option<Prediction>,
+    /// Visibility feedback.
+    pub visibility: VisibilityPolicy,
 }
 
 impl Default for SoakConfig {
     /// The soak: 10,000 frames at 64x64 of a 65536^3 volume through a
-    /// 64 MiB pool and a 32 MiB CPU cache, memory every 250 frames.
+    /// 64 MiB pool and a 32 MiB CPU cache, memory every 250 frames; the
+    /// prediction buffer on iso frames, visibility from usage counts and
+    /// occlusion queries, fades of the default 120 ms.
     fn default() -> Self {
         SoakConfig {
             frames: 10_000,
@@ -44,7 +54,68 @@ impl Default for SoakConfig {
             cpu_budget_bytes: 32 << 20,
             sample_every: 250,
             seed: 0x5eed_b71c,
+            prediction: Some(Prediction::PAPER),
+            visibility: VisibilityPolicy::Both,
         }
+    }
+}
+
+/// Frames in which each feature of the soak was at work.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct FeatureFrames {
+    /// Frames drawn without error (the share's denominator).
+    pub frames: usize,
+    /// DVR frames.
+    pub dvr: usize,
+    /// Isosurface frames.
+    pub iso: usize,
+    /// MIP frames.
+    pub mip: usize,
+    /// Frames with reversed-Z depth.
+    pub reversed_z: usize,
+    /// Frames that predicted (`FrameStats::prediction`: iso frames with the
+    /// prediction buffer on).
+    pub prediction: usize,
+    /// Frames whose cut held leaves visibility feedback had observed
+    /// (visible or invisible).
+    pub visibility: usize,
+    /// Frames whose cut held leaves observed invisible (refinement culls
+    /// them).
+    pub culled: usize,
+    /// Frames that issued occlusion queries.
+    pub occlusion_queries: usize,
+    /// Frames that applied a usage-count read-back.
+    pub usage_feedback: usize,
+    /// Frames with leaves fading between levels of detail.
+    pub fades: usize,
+    /// Frames that uploaded bricks.
+    pub uploads: usize,
+}
+
+impl FeatureFrames {
+    /// `count` as a share of the frames drawn.
+    pub fn share(&self, count: usize) -> f64 {
+        count as f64 / self.frames.max(1) as f64
+    }
+
+    /// One line: each feature's frames and share.
+    pub fn describe(&self) -> String {
+        let f = |name: &str, n: usize| format!("{name} {n} ({:.0}%)", 100.0 * self.share(n));
+        [
+            f("dvr", self.dvr),
+            f("iso", self.iso),
+            f("mip", self.mip),
+            f("reversed-z", self.reversed_z),
+            f("prediction", self.prediction),
+            f("visibility", self.visibility),
+            f("culled", self.culled),
+            f("occlusion queries", self.occlusion_queries),
+            f("usage feedback", self.usage_feedback),
+            f("fades", self.fades),
+            f("uploads", self.uploads),
+        ]
+        .join(", ")
+            + &format!(" of {} frames", self.frames)
     }
 }
 
@@ -63,6 +134,8 @@ pub struct SoakReport {
     pub panics: usize,
     /// The first error or panic message.
     pub first_failure: Option<String>,
+    /// Frames in which each feature was active.
+    pub features: FeatureFrames,
 }
 
 fn median(v: &[f64]) -> f64 {
@@ -255,6 +328,7 @@ pub fn run(
     let ooc = OutOfCoreConfig {
         gpu_budget_bytes: config.gpu_budget_bytes,
         cpu_budget_bytes: config.cpu_budget_bytes,
+        visibility: config.visibility,
         ..Default::default()
     };
     renderer
@@ -266,6 +340,9 @@ pub fn run(
     );
     renderer
         .set_transfer_function(&gpu.device, &gpu.queue, &tf)
+        .map_err(|e| e.to_string())?;
+    renderer
+        .set_prediction(config.prediction)
         .map_err(|e| e.to_string())?;
     // Pipelines compile at set-up, as a viewer would, not in the first frames.
     let all: Vec<RenderSettings> = modes_list()
@@ -284,10 +361,12 @@ pub fn run(
     let mut rng = Rng(config.seed | 1);
     let mut report = SoakReport::default();
     let modes = modes_list();
+    let mut usage_applied = 0;
     for i in 0..config.frames {
         let camera = random_camera(&mut rng, frame.center());
+        let mode = modes[(rng.next() * 3.0) as usize % 3];
         let settings = RenderSettings {
-            mode: modes[(rng.next() * 3.0) as usize % 3],
+            mode,
             ..Default::default()
         };
         let target = &targets[(camera.depth == DepthConvention::ReversedZ) as usize];
@@ -301,7 +380,27 @@ pub fn run(
         }));
         let ms = t.elapsed().as_secs_f64() * 1e3;
         match result {
-            Ok(Ok(_)) => {}
+            Ok(Ok(stats)) => {
+                let f = &mut report.features;
+                f.frames += 1;
+                match mode {
+                    RenderMode::Dvr => f.dvr += 1,
+                    RenderMode::Iso { .. } => f.iso += 1,
+                    _ => f.mip += 1,
+                }
+                f.reversed_z += (camera.depth == DepthConvention::ReversedZ) as usize;
+                f.prediction += stats.prediction.is_some() as usize;
+                if let Some(o) = renderer.stats().out_of_core {
+                    let v = o.visibility;
+                    f.visibility += (v.visible + v.invisible > 0) as usize;
+                    f.culled += (v.invisible > 0) as usize;
+                    f.occlusion_queries += (o.occlusion.queries > 0) as usize;
+                    f.usage_feedback += (o.feedback.frames_applied > usage_applied) as usize;
+                    usage_applied = o.feedback.frames_applied;
+                    f.fades += (o.cache.fading > 0) as usize;
+                    f.uploads += (o.cache.upload_bricks > 0) as usize;
+                }
+            }
             Ok(Err(e)) => {
                 report.errors += 1;
                 report

@@ -63,6 +63,11 @@ pub enum RenderError {
         /// The sample count asked for.
         count: u32,
     },
+    /// The volume's value range (what maps to the transfer function's 0..1)
+    /// is not finite, or its width is not: every sample would normalize to
+    /// NaN or to one value.
+    #[error("the volume's value range {0:?} is not a finite range")]
+    BadValueRange([f32; 2]),
     /// The out-of-core cache refused its configuration or could not start.
     #[error(transparent)]
     Cache(#[from] brickray_cache::CacheError),
@@ -141,6 +146,30 @@ pub enum PrepareError {
         height: u32,
         /// `max_texture_dimension_2d`.
         limit: u32,
+    },
+    /// The viewport's right or bottom edge overflows or lies past the
+    /// largest 2D target the device can create (no target holds it).
+    #[error(
+        "viewport at ({x}, {y}) of {width}x{height} reaches past {limit}, the device's largest target",
+        x = viewport.x,
+        y = viewport.y,
+        width = viewport.width,
+        height = viewport.height
+    )]
+    ViewportOutOfRange {
+        /// The viewport.
+        viewport: crate::desc::Viewport,
+        /// `max_texture_dimension_2d`.
+        limit: u32,
+    },
+    /// The frame description's volume frame is for a volume of other dims
+    /// than the volume drawn (its rays would sample the wrong place).
+    #[error("the frame places a volume of {frame:?} voxels, but the volume drawn has {volume:?}")]
+    FrameDoesNotFit {
+        /// `FrameDesc::frame.dims`.
+        frame: [u32; 3],
+        /// The dims of the volume drawn.
+        volume: [u32; 3],
     },
     /// The camera cannot form an image.
     #[error(transparent)]

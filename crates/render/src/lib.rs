@@ -97,6 +97,8 @@ pub struct VolumeRenderer {
     prediction: Option<Prediction>,
     /// Counts the volumes set (the prediction history is the volume's).
     volume_epoch: u64,
+    /// The voxel dims of the volume drawn (a frame must place these).
+    volume_dims: Option<[u32; 3]>,
 }
 
 impl VolumeRenderer {
@@ -128,6 +130,7 @@ impl VolumeRenderer {
             last_frame: FrameStats::default(),
             prediction: None,
             volume_epoch: 0,
+            volume_dims: None,
         })
     }
 
@@ -138,17 +141,20 @@ impl VolumeRenderer {
 
     /// Uploads a volume into one 3D texture (the in-core path) and builds its
     /// macro-cell grid. Fails with [`RenderError::VolumeTooLarge`] when a dimension
-    /// exceeds the device's 3D texture limit.
+    /// exceeds the device's 3D texture limit, and with
+    /// [`RenderError::BadValueRange`] when its value range is not finite.
     pub fn set_volume(
         &mut self,
         device: &wgpu::Device,
         queue: &wgpu::Queue,
         volume: &Volume,
     ) -> Result<(), RenderError> {
+        check_value_range(volume.desc().value_range)?;
         // Free the old volume first: two large volumes need not fit at once.
         self.drop_volume();
         let b = InCore::new(device, queue, volume, self.options.u8_filtering)?;
         self.backend = Some(Backend::InCore(b));
+        self.volume_dims = Some(volume.dims());
         Ok(())
     }
 
@@ -166,6 +172,7 @@ impl VolumeRenderer {
         source: Arc<dyn BrickSource>,
         config: OutOfCoreConfig,
     ) -> Result<(), RenderError> {
+        check_value_range(source.layout().volume.value_range)?;
         // Free the old volume first: two large volumes need not fit at once.
         self.drop_volume();
         let options = VolumeOptions {
@@ -185,9 +192,12 @@ impl VolumeRenderer {
         device: &wgpu::Device,
         volume: &StreamedVolume,
     ) -> Result<(), RenderError> {
+        let desc = volume.layout().volume;
+        check_value_range(desc.value_range)?;
         self.drop_volume();
         let b = OutOfCore::new(device, volume.clone())?;
         self.backend = Some(Backend::OutOfCore(Box::new(b)));
+        self.volume_dims = Some(desc.dims);
         Ok(())
     }
 
@@ -202,6 +212,7 @@ impl VolumeRenderer {
 
     fn drop_volume(&mut self) {
         self.backend = None;
+        self.volume_dims = None;
         self.prepared = None;
         self.volume_epoch += 1;
         self.frame.drop_history();
@@ -323,6 +334,16 @@ impl VolumeRenderer {
                 limit,
             });
         }
+        // `render` sets the pass's viewport to it: its far edges must exist
+        // and lie inside a target the device can create.
+        let inside =
+            |origin: u32, extent: u32| origin.checked_add(extent).is_some_and(|e| e <= limit);
+        if !inside(vp.x, vp.width) || !inside(vp.y, vp.height) {
+            return Err(PrepareError::ViewportOutOfRange {
+                viewport: vp,
+                limit,
+            });
+        }
         f.camera.validate()?;
         f.frame.validate()?;
         f.settings.validate()?;
@@ -367,8 +388,14 @@ impl VolumeRenderer {
         for (r, desc) in views.iter_mut() {
             r.prepared = None;
             r.check_frame(device, desc)?;
-            if r.backend.is_none() {
+            let Some(volume) = r.volume_dims.filter(|_| r.backend.is_some()) else {
                 return Err(PrepareError::NoVolume);
+            };
+            if desc.frame.dims != volume {
+                return Err(PrepareError::FrameDoesNotFit {
+                    frame: desc.frame.dims,
+                    volume,
+                });
             }
             if r.tf.current().is_none() {
                 return Err(PrepareError::NoTransferFunction);
@@ -490,6 +517,17 @@ impl VolumeRenderer {
     pub fn render(&self, pass: &mut wgpu::RenderPass<'_>) -> Result<(), RenderError> {
         let p = self.prepared.ok_or(RenderError::NotPrepared)?;
         self.compositor.draw(pass, p.viewport, p.convention)
+    }
+}
+
+/// Refuses a value range that is not finite or whose width is not (every
+/// sample would normalize to NaN or to one value).
+fn check_value_range(range: [f32; 2]) -> Result<(), RenderError> {
+    let [lo, hi] = range;
+    if lo.is_finite() && hi.is_finite() && (hi - lo).is_finite() {
+        Ok(())
+    } else {
+        Err(RenderError::BadValueRange(range))
     }
 }
 

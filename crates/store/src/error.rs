@@ -28,6 +28,14 @@ pub enum StoreError {
         /// The file.
         path: PathBuf,
     },
+    /// The path names a build's temporary file
+    /// (`.<name>.brickray-partial.<pid>-<seq>`): a build in progress, or one
+    /// that was killed, never a store, whatever it holds.
+    #[error("{path}: a store build's temporary file, not a store")]
+    PartialBuild {
+        /// The file.
+        path: PathBuf,
+    },
     /// The file's format version is not one this reader understands.
     #[error("{path}: unsupported store format version {version}")]
     UnsupportedVersion {

@@ -15,6 +15,7 @@ use brickray_core::{
 use brickray_io::FileKind;
 use std::fs::File;
 use std::path::{Path, PathBuf};
+use std::sync::{Arc, RwLock};
 
 /// Opens a store file, validating its header and node table.
 pub fn open(path: impl AsRef<Path>) -> Result<Store, StoreError> {
@@ -22,11 +23,23 @@ pub fn open(path: impl AsRef<Path>) -> Result<Store, StoreError> {
 }
 
 /// An open brick store. Reads are positional (`pread`), so any number of threads
-/// may read bricks concurrently without a lock.
+/// may read bricks concurrently (they share the file behind a read lock, taken
+/// only to clone a handle).
+///
+/// A store opened from a path ([`Store::open`]) survives its file being
+/// replaced: when a payload read fails (an I/O error, or a checksum that does
+/// not match, as on a file truncated, deleted and restored), it reopens its
+/// path once and, if the file there is the same store (the same length and
+/// header bytes, so the same table and section checksums), reads from it
+/// instead; a different file is never read, the read fails.
 #[derive(Debug)]
 pub struct Store {
     path: PathBuf,
-    file: Box<dyn ReadAt>,
+    file: RwLock<Arc<dyn ReadAt>>,
+    /// The header's bytes as opened (what a reopened file must hold).
+    header: [u8; HEADER_LEN],
+    /// Reopen `path` after a failed read (stores opened from a path).
+    reopen: bool,
     layout: OctreeLayout,
     geo: TableGeometry,
     entries: Vec<Entry>,
@@ -86,9 +99,21 @@ pub(crate) fn max_compressed(n: usize) -> u64 {
 impl Store {
     /// Opens a store file (see [`open`]). A path that is not a regular file (a
     /// FIFO, a device, a directory) is refused from its metadata, before it is
-    /// opened: opening a FIFO would block.
+    /// opened: opening a FIFO would block. A path named as a build's temporary
+    /// (`.<name>.brickray-partial.<pid>-<seq>`, or a link to one) is refused
+    /// by its name ([`StoreError::PartialBuild`]): a build in progress or
+    /// killed, whatever it holds.
     pub fn open(path: impl AsRef<Path>) -> Result<Store, StoreError> {
         let path = path.as_ref();
+        let temporary = |p: &Path| {
+            p.file_name()
+                .is_some_and(|n| crate::partial::temporary_pid(n).is_some())
+        };
+        if temporary(path) || std::fs::canonicalize(path).is_ok_and(|c| temporary(&c)) {
+            return Err(StoreError::PartialBuild {
+                path: path.to_owned(),
+            });
+        }
         let md = std::fs::metadata(path).map_err(|e| StoreError::io(path, e))?;
         if let Some(kind) = FileKind::of(md.file_type()) {
             return Err(StoreError::NotRegularFile {
@@ -97,7 +122,9 @@ impl Store {
             });
         }
         let file = File::open(path).map_err(|e| StoreError::io(path, e))?;
-        Store::from_file(file, path)
+        let mut store = Store::from_file(file, path)?;
+        store.reopen = true;
+        Ok(store)
     }
 
     /// Opens a store from an open file; `path` names it in errors. The file must
@@ -148,12 +175,17 @@ impl Store {
         } else {
             None
         };
+        let mut header = [0u8; HEADER_LEN];
+        file.read_exact_at(&mut header, 0)
+            .map_err(|e| StoreError::io(path, e))?;
         Ok(Store {
             errors,
             parent_errors,
             version: h.version,
             path: path.to_owned(),
-            file,
+            file: RwLock::new(Arc::from(file)),
+            header,
+            reopen: false,
             layout,
             geo,
             entries,
@@ -351,10 +383,33 @@ impl Store {
         }
         // `len` was bounded by the brick size and the file at open.
         let mut buf = vec![0u8; e.len as usize];
-        self.file
-            .read_exact_at(&mut buf, e.offset)
+        let file = self.file();
+        match self.read_payload(file.as_ref(), key, e, &mut buf) {
+            // Read again from the file reopened at the store's path.
+            Err(_) if self.reopened(&file) => {
+                self.read_payload(self.file().as_ref(), key, e, &mut buf)?
+            }
+            r => r?,
+        }
+        Ok(Some(buf))
+    }
+
+    /// The file reads go to.
+    fn file(&self) -> Arc<dyn ReadAt> {
+        self.file.read().unwrap_or_else(|p| p.into_inner()).clone()
+    }
+
+    /// Reads `e`'s payload into `buf` from `file` and checks its checksum.
+    fn read_payload(
+        &self,
+        file: &dyn ReadAt,
+        key: NodeKey,
+        e: &Entry,
+        buf: &mut [u8],
+    ) -> Result<(), StoreError> {
+        file.read_exact_at(buf, e.offset)
             .map_err(|source| StoreError::NodeIo { key, source })?;
-        let crc = crc32fast::hash(&buf);
+        let crc = crc32fast::hash(buf);
         if crc != e.crc {
             return Err(StoreError::PayloadChecksum {
                 key,
@@ -362,7 +417,39 @@ impl Store {
                 computed: crc,
             });
         }
-        Ok(Some(buf))
+        Ok(())
+    }
+
+    /// After a read from `failed` failed: reopens the store's path when it
+    /// was opened from one and the file there is this store (its length and
+    /// header bytes), and reads go to it from then on. True when reads go to
+    /// another file than `failed` now (reopened here or by another thread).
+    fn reopened(&self, failed: &Arc<dyn ReadAt>) -> bool {
+        if !self.reopen {
+            return false;
+        }
+        let mut current = self.file.write().unwrap_or_else(|p| p.into_inner());
+        if !Arc::ptr_eq(&current, failed) {
+            return true;
+        }
+        let same = || -> Option<File> {
+            // Never open a FIFO or a device (opening a FIFO blocks).
+            let md = std::fs::metadata(&self.path).ok()?;
+            if FileKind::of(md.file_type()).is_some() || md.len() != self.file_len {
+                return None;
+            }
+            let f = File::open(&self.path).ok()?;
+            let mut hb = [0u8; HEADER_LEN];
+            f.read_exact_at(&mut hb, 0).ok()?;
+            (hb == self.header && f.metadata().ok()?.len() == self.file_len).then_some(f)
+        };
+        match same() {
+            Some(f) => {
+                *current = Arc::new(f);
+                true
+            }
+            None => false,
+        }
     }
 
     /// Reads the node's stored brick into `out` (`layout().brick_bytes()` bytes),

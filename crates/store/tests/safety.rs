@@ -291,10 +291,11 @@ fn signals_during_a_build_leave_no_temporaries() {
     let d = dir.path();
     let json = big_sparse_input(d, 1024);
     let exe = env!("CARGO_BIN_EXE_brickray-store");
-    for sig in ["INT", "TERM", "HUP"] {
+    for sig in ["INT", "TERM", "HUP", "USR1"] {
         let num = match sig {
             "INT" => 2,
             "TERM" => 15,
+            "USR1" => 10,
             _ => 1,
         };
         // A signal this process ignores (the suite run under `nohup`) is
@@ -355,6 +356,48 @@ fn signals_during_a_build_leave_no_temporaries() {
         );
         assert_eq!(names(d), inputs, "SIG{sig} left files behind");
     }
+}
+
+/// Over the file size limit (`ulimit -f`) a build used to die of SIGXFSZ
+/// with its temporary left behind: now it fails (the write refused, or the
+/// signal handled) and leaves nothing.
+#[test]
+fn a_build_over_the_file_size_limit_leaves_no_temporaries() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    // 64^3 u8 of noise: about 300 KiB of store, past the 64-block limit.
+    let mut x = 12345u32;
+    let noise: Vec<u8> = (0..64 * 64 * 64)
+        .map(|_| {
+            x = x.wrapping_mul(1_103_515_245).wrapping_add(12345);
+            (x >> 24) as u8
+        })
+        .collect();
+    std::fs::write(d.join("n.raw"), noise).unwrap();
+    std::fs::write(
+        d.join("n.json"),
+        r#"{"dims": [64, 64, 64], "dtype": "u8", "file": "n.raw", "value_range": [0, 255]}"#,
+    )
+    .unwrap();
+    if brickray_store::ignored_signals() & (1u64 << (25 - 1)) != 0 {
+        eprintln!("SIGXFSZ is ignored in this process: the write fails either way");
+    }
+    let exe = env!("CARGO_BIN_EXE_brickray-store");
+    let out = Command::new("sh")
+        .arg("-c")
+        .arg(r#"ulimit -c 0; ulimit -f 64; exec "$0" build --quiet --brick 16 "$1" "$2""#)
+        .arg(exe)
+        .arg(d.join("n.json"))
+        .arg(d.join("n.brs"))
+        .output()
+        .unwrap();
+    assert!(!out.status.success(), "{out:?}");
+    eprintln!(
+        "{:?}: {}",
+        out.status,
+        String::from_utf8_lossy(&out.stderr).trim()
+    );
+    assert_eq!(names(d), ["n.json", "n.raw"], "files left behind");
 }
 
 #[test]

@@ -138,7 +138,7 @@ fn part_a(gpu: &GpuContext, size: u32, rounds: usize, fig: &mut Figures) -> Resu
         .set_volume(&gpu.device, &gpu.queue, &vol)
         .map_err(|e| e.to_string())?;
     let mut ooc = finest_ooc_renderer(gpu, source, RendererOptions::default())?;
-    let run = Runner::new(gpu, size);
+    let run = Runner::new(gpu, size)?;
     let settings = |accel| RenderSettings {
         mode: RenderMode::Dvr,
         shading: Shading {

@@ -61,7 +61,7 @@ pub(super) fn part_c(
         )
         .expect("transfer function");
     let settings = RenderSettings::default();
-    let run = Runner::new(gpu, size);
+    let run = Runner::new(gpu, size)?;
     let c = frame.center();
     // Warm start: the first view converged (not timed as part of the path).
     let start = Camera::orbit(c, 2.0, 0.5, 0.3);

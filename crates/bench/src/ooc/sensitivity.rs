@@ -79,7 +79,7 @@ pub(super) fn part_b(
         "  TF opacity per world length of the {TF_REFERENCE_DIMS}^3 voxel (the same image at every size)"
     );
     let settings = RenderSettings::default();
-    let run = Runner::new(gpu, size);
+    let run = Runner::new(gpu, size)?;
     let config = OutOfCoreConfig {
         gpu_budget_bytes: 1 << 30,
         upload_budget_bytes: 1 << 30,

@@ -120,7 +120,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
     );
     std::fs::create_dir_all(&o.out).map_err(|e| format!("{}: {e}", o.out.display()))?;
     std::fs::create_dir_all(&o.charts).map_err(|e| format!("{}: {e}", o.charts.display()))?;
-    let run = Runner::new(&gpu, o.size);
+    let run = Runner::new(&gpu, o.size)?;
     let mut csv = String::from(
         "volume,mode,knob,value,ms,cpu_ms,samples_per_ray,bricks,bytes,psnr_db,mean_flip,ssim,on_front,default_within_5pct,psnr_vs_finest_db\n",
     );

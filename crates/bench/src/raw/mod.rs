@@ -129,7 +129,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
     let source = brickray_harness::store_of(&vol, &dir.path().join("mri.brs"));
     let mut ooc = finest_ooc_renderer(&gpu, source, options)?;
     let mut raw = RawKernel::new(&gpu, &vol, size)?;
-    let run = Runner::new(&gpu, size);
+    let run = Runner::new(&gpu, size)?;
     let dvr_tf = TransferFunction::from_points(
         &[
             (0.15, [0.2, 0.4, 1.0, 0.0]),

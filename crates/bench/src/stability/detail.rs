@@ -82,7 +82,7 @@ pub(crate) fn thin_structures(ctx: &Ctx<'_>) -> Result<Case, String> {
         "\n4. thin structures: {n}^3 air with a one-voxel sheet, two lines and 27 bright voxels; orthographic; bricks 16; levels forced by tolerance {TOLERANCES:?} px; reference step 0.5"
     );
     let dir = tempfile::tempdir().map_err(s)?;
-    let run = Runner::new(ctx.gpu, size);
+    let run = Runner::new(ctx.gpu, size)?;
     let modes = thin_modes();
     let refs: Vec<Vec<u8>> = modes
         .iter()

@@ -124,7 +124,7 @@ pub(crate) fn grazing(ctx: &Ctx<'_>) -> Result<Case, String> {
         ("ortho_off", off_cam, n),
         ("persp", persp_cam, n - 1),
     ] {
-        let run = Runner::new(ctx.gpu, px);
+        let run = Runner::new(ctx.gpu, px)?;
         let w = px as usize;
         let face: Box<dyn Fn(usize) -> bool> = if view != "persp" {
             Box::new(move |x| x % b == 0)
@@ -328,7 +328,7 @@ pub(crate) fn precision(ctx: &Ctx<'_>) -> Result<Case, String> {
     );
     let src = Arc::new(ProceduralSource::fractal_noise([DIMS; 3], 32, 2).map_err(s)?);
     let big = VolumeFrame::centered([DIMS as u32; 3], [1.0; 3]);
-    let run = Runner::new(ctx.gpu, size);
+    let run = Runner::new(ctx.gpu, size)?;
     let mut r = super::ooc(
         ctx.gpu,
         src.clone(),

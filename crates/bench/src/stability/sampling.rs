@@ -52,7 +52,7 @@ pub(crate) fn high_frequency_tf(ctx: &Ctx<'_>) -> Result<Case, String> {
     let ref8 = super::reference(&vol, &frame, &tf, &cam, &base, size, 0.125);
     let (ref_self, _) = quality(&ref8, &reference, size);
     println!("  reference at 1/8 vs 1/32: {ref_self:.2} dB (the reference's own convergence)");
-    let run = Runner::new(ctx.gpu, size);
+    let run = Runner::new(ctx.gpu, size)?;
     let mut incore = super::incore(ctx.gpu, &vol, &tf)?;
     let mut ooc = finest_ooc_renderer(ctx.gpu, src, RendererOptions::default())?;
     ooc.set_transfer_function(&ctx.gpu.device, &ctx.gpu.queue, &tf)
@@ -206,7 +206,7 @@ pub(crate) fn ert(ctx: &Ctx<'_>) -> Result<Case, String> {
             ),
         ),
     ];
-    let run = Runner::new(ctx.gpu, size);
+    let run = Runner::new(ctx.gpu, size)?;
     let mut fig = serde_json::Map::new();
     let mut all_within = true;
     let mut shipped = String::new();

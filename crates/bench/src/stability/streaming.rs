@@ -51,7 +51,7 @@ pub(crate) fn streaming(ctx: &Ctx<'_>) -> Result<Case, String> {
         .iter()
         .map(|v| super::reference(&vol, &frame, &tf, v, &settings, size, 0.5))
         .collect();
-    let run = Runner::new(ctx.gpu, size);
+    let run = Runner::new(ctx.gpu, size)?;
     println!(
         "  {:>6} {:>6} {:>6} {:>9} {:>9} {:>8} {:>8} {:>7} {:>7} {:>8} {:>8}",
         "delay",
@@ -206,7 +206,7 @@ pub(crate) fn pressure(ctx: &Ctx<'_>) -> Result<Case, String> {
     let c = frame.center();
     let cam = |i: usize| Camera::orbit(c, 1.4, 0.5 + 0.1 * i as f32, 0.3);
     let tolerance = 0.5;
-    let run = Runner::new(ctx.gpu, size);
+    let run = Runner::new(ctx.gpu, size)?;
     // What the start view needs, with a pool that holds it all.
     let big: u64 = 64 << 20;
     let config = |gpu_budget_bytes| OutOfCoreConfig {

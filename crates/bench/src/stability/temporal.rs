@@ -80,7 +80,7 @@ fn prediction_path(ctx: &Ctx<'_>) -> Result<(serde_json::Value, f64, bool), Stri
             }),
         ),
     ];
-    let run = Runner::new(ctx.gpu, size);
+    let run = Runner::new(ctx.gpu, size)?;
     let mut rs = Vec::new();
     for (_, p) in &variants {
         let mut r = super::incore(ctx.gpu, &vol, &tf)?;
@@ -157,7 +157,7 @@ fn disocclusion(ctx: &Ctx<'_>) -> Result<(serde_json::Value, Option<usize>, u64)
     let refs: Vec<Vec<u8>> = (0..=TURN)
         .map(|k| super::reference(&vol, &frame, &tf, &cam(k), &settings, size, 0.5))
         .collect();
-    let run = Runner::new(ctx.gpu, size);
+    let run = Runner::new(ctx.gpu, size)?;
     let config = OutOfCoreConfig {
         tolerance_px: 0.0,
         upload_budget_bytes: 1 << 30,

@@ -105,7 +105,7 @@ impl UsageFeedback {
     }
 
     /// The counts of every frame whose read-back completed, oldest first
-    /// (mapping is started for frames before `frame`). Never waits.
+    /// (`frame`: the frame about to be planned). Never waits.
     pub(crate) fn poll(&mut self, frame: u64) -> Vec<UsageFrame> {
         let level_voxels = &self.level_voxels;
         let out: Vec<UsageFrame> = self

@@ -4,12 +4,16 @@
 //!
 //! After a pass, [`ReadbackRing::record`] copies the stamp and the payload
 //! into a free entry (a frame that finds none loses only its own read-back:
-//! the host's GPU is more than the ring's length behind). At each later
-//! [`ReadbackRing::poll`] (the host has submitted that frame by then) the
-//! entry is mapped with `map_async`; once wgpu reports it mapped (during any
-//! later `submit` or `poll` of the host) its payload is read, if its stamp
-//! says the frame's commands ran, and the entry is freed. Nothing here calls
-//! `poll` or waits.
+//! the host's GPU is more than the ring's length behind) and asks the
+//! encoder to map the entry once the host submits it
+//! (`CommandEncoder::map_buffer_on_submit`). The mapping therefore never
+//! starts while an encoder that copies into the entry is still unsubmitted,
+//! however many frames the host prepares into one encoder. Once wgpu
+//! reports the entry mapped (during any later `submit` or `poll` of the
+//! host), a later [`ReadbackRing::poll`] reads its payload, if its stamp says
+//! the frame's commands ran, and frees the entry. An encoder the host drops
+//! without submitting drops the mapping request: the entry is freed and
+//! counted as discarded. Nothing here calls `poll` or waits.
 
 use crate::error::RenderError;
 use crate::gpu;
@@ -21,10 +25,32 @@ pub(crate) const STAMP_BYTES: u64 = 16;
 
 /// Entry states.
 const FREE: u8 = 0;
-const COPIED: u8 = 1;
-const MAPPING: u8 = 2;
-const READY: u8 = 3;
-const FAILED: u8 = 4;
+/// Copied into a host encoder, mapped when the host submits it.
+const MAPPING: u8 = 1;
+const READY: u8 = 2;
+/// Mapping failed, or the encoder was dropped without being submitted.
+const FAILED: u8 = 3;
+
+/// The state of an entry whose mapping was requested: the mapping callback
+/// takes it and sets `READY` or `FAILED`; dropped without being called (the
+/// host dropped the encoder unsubmitted) it sets `FAILED`.
+struct Pending(Option<Arc<AtomicU8>>);
+
+impl Pending {
+    fn complete(mut self, ok: bool) {
+        if let Some(s) = self.0.take() {
+            s.store(if ok { READY } else { FAILED }, Ordering::Release);
+        }
+    }
+}
+
+impl Drop for Pending {
+    fn drop(&mut self) {
+        if let Some(s) = self.0.take() {
+            s.store(FAILED, Ordering::Release);
+        }
+    }
+}
 
 /// Counters of a ring.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -92,7 +118,8 @@ impl<M: Default> ReadbackRing<M> {
 
     /// Records into a free entry, after what `encoder` holds so far: the
     /// stamp of `frame`, then `copy(encoder, buffer, offset)`'s copy of the
-    /// payload at `offset`. False (and counted) when no entry is free.
+    /// payload at `offset`; the entry is mapped when the host submits
+    /// `encoder`. False (and counted) when no entry is free.
     pub(crate) fn record(
         &mut self,
         queue: &wgpu::Queue,
@@ -118,14 +145,18 @@ impl<M: Default> ReadbackRing<M> {
         copy(encoder, &e.buffer, STAMP_BYTES);
         e.frame = frame;
         e.meta = meta;
-        e.state.store(COPIED, Ordering::Release);
+        e.state.store(MAPPING, Ordering::Release);
+        let pending = Pending(Some(e.state.clone()));
+        encoder.map_buffer_on_submit(&e.buffer, wgpu::MapMode::Read, .., move |r| {
+            pending.complete(r.is_ok());
+        });
         true
     }
 
-    /// Starts mapping the entries copied in frames before `frame` (submitted
-    /// by now) and reads, with `read(entry frame, meta, payload)`, every entry
-    /// whose mapping completed and whose stamp matches; oldest first. Never
-    /// waits.
+    /// Reads, with `read(entry frame, meta, payload)`, every entry whose
+    /// mapping completed and whose stamp matches, oldest first, and frees the
+    /// entries it read or whose mapping failed; `frame` is the frame about to
+    /// be planned (for the latency). Never waits.
     pub(crate) fn poll<T>(
         &mut self,
         frame: u64,
@@ -134,13 +165,6 @@ impl<M: Default> ReadbackRing<M> {
         let mut out = Vec::new();
         for e in &mut self.entries {
             match e.state.load(Ordering::Acquire) {
-                COPIED if e.frame < frame => {
-                    e.state.store(MAPPING, Ordering::Release);
-                    let s = e.state.clone();
-                    e.buffer.slice(..).map_async(wgpu::MapMode::Read, move |r| {
-                        s.store(if r.is_ok() { READY } else { FAILED }, Ordering::Release);
-                    });
-                }
                 READY => {
                     let got = match e.buffer.slice(..).get_mapped_range() {
                         Err(_) => None,

@@ -13,8 +13,11 @@
 //! TIFF (a stack or a folder of slices), DICOM (a folder) or OME-Zarr. `info`
 //! on an input lists its series, levels, channels and time points.
 //!
-//! On SIGINT, SIGTERM or SIGHUP a build removes its temporary files, then dies
-//! of the signal.
+//! On a signal that would end it and that a process may catch (SIGHUP,
+//! SIGINT, SIGQUIT, SIGTERM, SIGUSR1, SIGUSR2, SIGALRM, SIGXCPU, SIGXFSZ) a
+//! build removes its temporary files, then dies of the signal. Over the file
+//! size limit (SIGXFSZ caught) the write fails instead, and the build removes
+//! its temporaries as on any error.
 
 use brickray_core::{BrickSource, NodeKind};
 use brickray_io::ReadOptions;
@@ -223,17 +226,23 @@ fn main() -> ExitCode {
     }
 }
 
-/// On SIGINT, SIGTERM and SIGHUP: remove the temporary files of the build in
-/// progress, then die of the signal (as without a handler). A signal that the
-/// process was started with ignored (`nohup`, a background job of a
-/// non-interactive shell) stays ignored.
+/// On every signal that ends a process by default and that it may catch:
+/// remove the temporary files of the build in progress, then die of the
+/// signal (as without a handler). A signal that the process was started with
+/// ignored (`nohup`, a background job of a non-interactive shell) stays
+/// ignored. (SIGKILL cannot be caught, nor a crash handled safely: the next
+/// build into the folder removes what they leave.)
 fn remove_temporaries_on_signals() -> Result<(), String> {
-    use signal_hook::consts::{SIGHUP, SIGINT, SIGTERM};
+    use signal_hook::consts::{
+        SIGALRM, SIGHUP, SIGINT, SIGQUIT, SIGTERM, SIGUSR1, SIGUSR2, SIGXCPU, SIGXFSZ,
+    };
     let ignored = brickray_store::ignored_signals();
-    let wanted: Vec<i32> = [SIGINT, SIGTERM, SIGHUP]
-        .into_iter()
-        .filter(|&s| ignored & (1u64 << (s - 1)) == 0)
-        .collect();
+    let wanted: Vec<i32> = [
+        SIGINT, SIGTERM, SIGHUP, SIGQUIT, SIGUSR1, SIGUSR2, SIGALRM, SIGXCPU, SIGXFSZ,
+    ]
+    .into_iter()
+    .filter(|&s| ignored & (1u64 << (s - 1)) == 0)
+    .collect();
     let mut signals = signal_hook::iterator::Signals::new(wanted)
         .map_err(|e| format!("cannot install signal handlers: {e}"))?;
     std::thread::spawn(move || {

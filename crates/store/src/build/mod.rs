@@ -21,8 +21,8 @@
 use crate::error::StoreError;
 use crate::format::{
     ENTRY_LEN, Entry, FLAG_ERRORS, FLAG_PARENT_ERRORS, FLAG_SPLIT_MASKS, FLAG_THRESHOLD,
-    HEADER_LEN, Header, KIND_DATA, KIND_EMPTY, KIND_UNIFORM, MAX_APRON, MAX_BRICK, MAX_BRICK_BYTES,
-    TableGeometry, VERSION, dtype_code, filter_code,
+    HEADER_LEN, Header, KIND_DATA, KIND_EMPTY, KIND_UNIFORM, MAGIC, MAX_APRON, MAX_BRICK,
+    MAX_BRICK_BYTES, TableGeometry, VERSION, dtype_code, filter_code,
 };
 use crate::partial::{PartialFile, parent_dir, remove_stale};
 use crate::{Filter, NO_ENTRY_LEVEL};
@@ -35,6 +35,7 @@ use std::time::Instant;
 
 mod errors;
 mod level;
+mod stage;
 
 use level::{LevelBuf, Sink};
 
@@ -161,9 +162,11 @@ pub fn build_file(
 }
 
 /// Builds a store at `out` from `reader`. The file is written under a temporary
-/// name in the same directory (`.<name>.brickray-partial.<pid>-<seq>`) and
-/// renamed only when complete; temporaries are removed on error, and stale
-/// ones of earlier builds (their process gone) are removed first.
+/// name in the same directory (`.<name>.brickray-partial.<pid>-<seq>`), its
+/// magic written last, after everything else is synced, and renamed only when
+/// complete; temporaries are removed on error, and stale ones of earlier
+/// builds (their process gone) are removed first. [`crate::open`] refuses a
+/// temporary by its name ([`StoreError::PartialBuild`]).
 ///
 /// `out` must not be one of the reader's input files
 /// ([`VolumeReader::input_files`], compared by file identity, so links and
@@ -347,6 +350,7 @@ pub fn build(
     }
     w.write_all(&table)
         .map_err(|e| StoreError::io(&tmp_path, e))?;
+    stage::reached("table");
     // The error section (format version 2), computed from the payloads just
     // written; left out when it does not fit the memory bound.
     w.flush().map_err(|e| StoreError::io(&tmp_path, e))?;
@@ -410,17 +414,28 @@ pub fn build(
         table_crc: crc32fast::hash(&table),
         errors_crc: error_bytes.as_deref().map_or(0, crc32fast::hash),
     };
+    // The header without its magic: until the magic is written, last, the
+    // temporary is not a store (`open` refuses it by its name too).
+    let mut hb = header.encode();
+    hb[..MAGIC.len()].fill(0);
     w.seek(SeekFrom::Start(0))
         .map_err(|e| StoreError::io(&tmp_path, e))?;
-    w.write_all(&header.encode())
-        .map_err(|e| StoreError::io(&tmp_path, e))?;
+    w.write_all(&hb).map_err(|e| StoreError::io(&tmp_path, e))?;
     w.flush().map_err(|e| StoreError::io(&tmp_path, e))?;
     drop(w);
+    stage::reached("header");
     tmp.file()
         .sync_all()
         .map_err(|e| StoreError::io(&tmp_path, e))?;
     // Again: the output may have been replaced while the build ran.
     check_output(out, &inputs)?;
+    // Everything else is on disk: the magic, synced, then the rename.
+    let mut f = tmp.file();
+    f.seek(SeekFrom::Start(0))
+        .and_then(|_| f.write_all(&MAGIC))
+        .and_then(|()| f.sync_data())
+        .map_err(|e| StoreError::io(&tmp_path, e))?;
+    stage::reached("rename");
     tmp.persist(out)?;
     // The error section, then the parent-error section of the same length
     // and its CRC.
