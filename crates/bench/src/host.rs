@@ -9,9 +9,12 @@
 //! frame), writing uploads and tables (`upload_ms`) and encoding the index
 //! (`encode_ms`). The path's frames are planned, not ray cast (their GPU work
 //! is recorded and dropped): the host's cost does not depend on the ray cast,
-//! and lavapipe takes seconds for one 1024^2 frame of a large cut. With
-//! `--culling`, the path is also drawn, ray cast at `--culling-size`, under
-//! ray-guided visibility (its feedback needs the frames rendered).
+//! and lavapipe takes seconds for one 1024^2 frame of a large cut. Each cut
+//! runs twice, planned in `prepare` (inline) and in the background
+//! (`VolumeOptions::background_planning`: a worker plans while the frame
+//! renders; `prepare` applies the latest plan), the two paths interleaved.
+//! With `--culling`, the path is also drawn, ray cast at `--culling-size`,
+//! under ray-guided visibility (its feedback needs the frames rendered).
 //!
 //! `cargo run --release -p brickray-bench -- host [--size 1024] [--frames 60]
 //! [--cuts 1000,5000,20000,50000] [--culling] [--culling-size 256]`
@@ -60,11 +63,16 @@ fn renderer(
     gpu: &GpuContext,
     cut: u32,
     policy: VisibilityPolicy,
+    background: bool,
 ) -> Result<(VolumeRenderer, VolumeFrame), String> {
     let src = brickray_store::ProceduralSource::sphere_shells([DIMS; 3], BRICK, 2)
         .map_err(|e| e.to_string())?;
     let frame = VolumeFrame::centered([DIMS as u32; 3], [1.0; 3]);
-    let mut r = VolumeRenderer::new(&gpu.device, brickray_harness::target_desc())
+    let options = brickray_render::RendererOptions {
+        background_planning: background,
+        ..Default::default()
+    };
+    let mut r = VolumeRenderer::with_options(&gpu.device, brickray_harness::target_desc(), options)
         .map_err(|e| e.to_string())?;
     r.set_volume_source(&gpu.device, &gpu.queue, Arc::new(src), config(cut, policy))
         .map_err(|e| e.to_string())?;
@@ -95,7 +103,7 @@ fn path(
             run.plan(r, camera(&frame, 0), frame, settings)?;
         }
         converge_frames = i;
-        if r.stats().out_of_core.is_some_and(|s| s.converged) {
+        if r.stats().out_of_core.is_some_and(|s| s.converged) && !r.wants_redraw() {
             break;
         }
         std::thread::sleep(std::time::Duration::from_millis(5));
@@ -172,47 +180,53 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         let run = Runner::new(&gpu, px)?;
         let tag = if draw { "_culled" } else { "" };
         for &cut in &cuts {
-            let (mut r, frame) = renderer(&gpu, cut, policy)?;
-            let t = path(&run, &mut r, frame, frames, draw)?;
-            let name = format!("{}k{tag}", (cut as f64 / 1000.0).round() as u32);
-            println!(
-                "  {:>7} {:>8} {:>9.2} {:>8.2} {:>8.2} {:>8.2} {:>9.2} {:>7.2}{}",
-                cut,
-                t.working_set,
-                median(&t.host_ms),
-                quantile(&t.host_ms, 0.99),
-                median(&t.plan_ms),
-                quantile(&t.plan_ms, 0.99),
-                median(&t.upload_ms),
-                median(&t.encode_ms),
-                if draw {
-                    format!(" ({} px, ray-guided, drawn)", px)
-                } else {
-                    String::new()
-                }
-            );
-            fig.insert(
-                format!("host_ms_median_{name}"),
-                json!(round2(median(&t.host_ms))),
-            );
-            fig.insert(
-                format!("host_ms_p99_{name}"),
-                json!(round2(quantile(&t.host_ms, 0.99))),
-            );
-            fig.insert(
-                format!("plan_ms_median_{name}"),
-                json!(round2(median(&t.plan_ms))),
-            );
-            fig.insert(
-                format!("upload_ms_median_{name}"),
-                json!(round2(median(&t.upload_ms))),
-            );
-            fig.insert(
-                format!("encode_ms_median_{name}"),
-                json!(round2(median(&t.encode_ms))),
-            );
-            fig.insert(format!("working_set_{name}"), json!(t.working_set));
-            fig.insert(format!("converge_frames_{name}"), json!(t.converge_frames));
+            for background in [false, true] {
+                let (mut r, frame) = renderer(&gpu, cut, policy, background)?;
+                let t = path(&run, &mut r, frame, frames, draw)?;
+                let name = format!(
+                    "{}k{tag}{}",
+                    (cut as f64 / 1000.0).round() as u32,
+                    if background { "_background" } else { "" }
+                );
+                println!(
+                    "  {:>7} {:>8} {:>9.2} {:>8.2} {:>8.2} {:>8.2} {:>9.2} {:>7.2}{}",
+                    cut,
+                    t.working_set,
+                    median(&t.host_ms),
+                    quantile(&t.host_ms, 0.99),
+                    median(&t.plan_ms),
+                    quantile(&t.plan_ms, 0.99),
+                    median(&t.upload_ms),
+                    median(&t.encode_ms),
+                    match (draw, background) {
+                        (true, _) => format!(" ({} px, ray-guided, drawn)", px),
+                        (false, true) => " (background)".to_string(),
+                        (false, false) => " (inline)".to_string(),
+                    }
+                );
+                fig.insert(
+                    format!("host_ms_median_{name}"),
+                    json!(round2(median(&t.host_ms))),
+                );
+                fig.insert(
+                    format!("host_ms_p99_{name}"),
+                    json!(round2(quantile(&t.host_ms, 0.99))),
+                );
+                fig.insert(
+                    format!("plan_ms_median_{name}"),
+                    json!(round2(median(&t.plan_ms))),
+                );
+                fig.insert(
+                    format!("upload_ms_median_{name}"),
+                    json!(round2(median(&t.upload_ms))),
+                );
+                fig.insert(
+                    format!("encode_ms_median_{name}"),
+                    json!(round2(median(&t.encode_ms))),
+                );
+                fig.insert(format!("working_set_{name}"), json!(t.working_set));
+                fig.insert(format!("converge_frames_{name}"), json!(t.converge_frames));
+            }
         }
     }
     fig.insert("size".into(), json!(size));
