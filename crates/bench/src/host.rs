@@ -46,13 +46,15 @@ struct PathTimes {
 fn config(cut: u32, policy: VisibilityPolicy) -> OutOfCoreConfig {
     // A stored brick of 20^3 u8 texels is at most 16 KB (R16) plus its
     // sub-cells and row: room for the cut, its fades and the floor.
+    // The CPU cache holds the bricks refinement asks for beyond the budget
+    // (children of nodes it would split next) without evicting the cut's.
     let slot = 20u64.pow(3) * 2 + 1024;
     let slots = cut as u64 * 13 / 10 + 256;
     OutOfCoreConfig {
         tolerance_px: 0.0,
         brick_budget: Some(cut),
         gpu_budget_bytes: slots * slot,
-        cpu_budget_bytes: slots * slot,
+        cpu_budget_bytes: 4 * slots * slot,
         upload_budget_bytes: 64 << 20,
         visibility: policy,
         ..Default::default()
