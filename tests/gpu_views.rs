@@ -268,6 +268,21 @@ fn background_planning_converges_to_the_inline_image() {
             let again = converge(&mut r, &[cam]).remove(0);
             let db = psnr(&images[0], &again);
             assert!(db >= 50.0, "after the pool rebuild: {db:.1} dB");
+            // A change that keeps the pool (a brick budget) is planned too:
+            // the converged view wants a redraw at once and settles within
+            // the budget.
+            let free = volume.stats().cache.working_set_bricks;
+            let budget = (free / 2).max(1);
+            volume
+                .edit(&g.device, &g.queue, |c| c.brick_budget = Some(budget))
+                .unwrap();
+            assert!(volume.wants_redraw(), "a new budget wants a redraw");
+            converge(&mut r, &[cam]);
+            let capped = volume.stats().cache.working_set_bricks;
+            assert!(
+                (1..=budget).contains(&capped) && capped < free,
+                "budget {budget}: {capped} bricks (free {free})"
+            );
         }
     }
     let db = psnr(&images[0], &images[1]);

@@ -7,10 +7,10 @@
 //! Each plan is applied exactly once and in order (one request is in flight
 //! at a time), so the planner's pool bookkeeping and the GPU atlas agree. A
 //! request is sent unless the last plan converged and the views and the
-//! classification are those it was made for: the planner's own convergence
-//! rule says that more frames of it (and their feedback, which is then
-//! dropped) would change nothing, so a converged, unchanged view sends none
-//! and wants no redraw. Background
+//! classification are those it was made for and the configuration did not
+//! change since: the planner's own convergence rule says that more frames of
+//! it (and their feedback, which is then dropped) would change nothing, so a
+//! converged, unchanged view sends none and wants no redraw. Background
 //! planning adds one frame of latency to a camera move (the frame after the
 //! move is drawn with the plan of the view before); the first frame, and the
 //! first after the pool was rebuilt, wait for their plan.
@@ -191,6 +191,16 @@ impl Planner {
     pub(crate) fn pool_rebuilt(&mut self) {
         self.epoch += 1;
         self.applied = false;
+    }
+
+    /// The configuration changed without a pool rebuild (a budget, the LOD
+    /// rule, visibility): the views are planned again, and the image has
+    /// not converged until a plan made after the change is applied.
+    pub(crate) fn reconfigured(&mut self) {
+        self.converged = false;
+        if let Some(w) = self.worker.as_mut() {
+            w.last = None;
+        }
     }
 
     /// True when another frame of the same views would change the image.

@@ -516,6 +516,8 @@ impl StreamedVolume {
             let dims = st.pool().atlas_dims();
             drop(st);
             s.write_params(queue, dims);
+        } else {
+            s.planner.reconfigured();
         }
         s.config = config;
         Ok(())
