@@ -56,6 +56,8 @@ pub(crate) struct ViewerApp {
     prediction: PredictionChoice,
     prediction_dirty: bool,
     opening: Option<Opening>,
+    /// A script failed: the window closes on the next frame.
+    close_requested: bool,
     shown: Option<Shown>,
     camera: Option<CameraController>,
     mode: ModeName,
@@ -125,6 +127,7 @@ impl ViewerApp {
             prediction_dirty: false,
             ooc_dirty: false,
             opening: None,
+            close_requested: false,
             shown: None,
             camera: None,
             mode: ModeName::Dvr,
@@ -316,7 +319,7 @@ impl ViewerApp {
             ui.label("Open:");
             let edit = ui.add(
                 egui::TextEdit::singleline(&mut self.open_path)
-                    .hint_text("volume.json | volume.nrrd | store.brs | procedural:N")
+                    .hint_text("volume.json | .nrrd | .nii.gz | .tif | .zarr | DICOM folder | store.brs | procedural:N")
                     .desired_width(320.0),
             );
             let enter = edit.lost_focus() && ui.input(|i| i.key_pressed(egui::Key::Enter));
@@ -401,6 +404,16 @@ impl ViewerApp {
 
 impl eframe::App for ViewerApp {
     fn ui(&mut self, ui: &mut egui::Ui, frame: &mut eframe::Frame) {
+        self.frame_ui(ui, frame);
+        if self.close_requested {
+            ui.ctx().send_viewport_cmd(egui::ViewportCommand::Close);
+        }
+    }
+}
+
+impl ViewerApp {
+    /// One frame of the UI.
+    fn frame_ui(&mut self, ui: &mut egui::Ui, frame: &mut eframe::Frame) {
         let ctx = ui.ctx().clone();
         // A finished open.
         if let Some(result) = self.opening.as_ref().and_then(Opening::poll) {

@@ -28,8 +28,10 @@ use std::sync::{Arc, Mutex};
     about = "Interactive out-of-core volume viewer (brickray)"
 )]
 struct Cli {
-    /// A volume (.json sidecar, .raw, .nrrd, .nhdr), a brick store (.brs), or
-    /// `procedural:N` (fractal noise, N^3 voxels). Default: procedural:4096.
+    /// A volume (.json sidecar, .raw, .nrrd, .nhdr, NIfTI .nii/.nii.gz, TIFF
+    /// .tif/.tiff, a DICOM series folder, OME-Zarr .zarr), a brick store
+    /// (.brs), or `procedural:N` (fractal noise, N^3 voxels). Default:
+    /// procedural:4096.
     path: Option<String>,
     /// Run the actions of FILE (see docs/viewer.md); the exit status says
     /// whether they all succeeded.

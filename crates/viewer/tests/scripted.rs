@@ -360,6 +360,44 @@ fn opens_a_store_and_a_procedural_volume_out_of_core() {
     );
 }
 
+/// A script whose step fails ends the run at once with a failing exit status
+/// and the reason on stderr: an `open` of a missing file, and a failed
+/// `wait converged` is covered by the same path (the window closes on the
+/// first failure; before, it stayed open until killed).
+#[test]
+#[cfg_attr(
+    no_display,
+    ignore = "needs an X server (DISPLAY unset when the tests were built; scripts/test.sh starts Xvfb)"
+)]
+fn a_failed_step_ends_the_script_with_a_failure() {
+    let Some(dir) = windowed_test_dir() else {
+        return;
+    };
+    let path = dir.path().join("script.txt");
+    let never = dir.path().join("never.png");
+    std::fs::write(
+        &path,
+        format!(
+            "open /nonexistent/vol.nii.gz\nwait 10\nscreenshot {}\nquit\n",
+            never.display()
+        ),
+    )
+    .expect("write the script");
+    let t = Instant::now();
+    let limit = Duration::from_secs(60);
+    let run = run_viewer(&path, limit);
+    let took = t.elapsed();
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(took < limit, "killed after {took:?}: the viewer did not exit");
+    assert!(!run.status.success(), "exit status {:?}", run.status);
+    assert!(
+        stderr.contains("script failed") && stderr.contains("/nonexistent/vol.nii.gz"),
+        "stderr: {stderr}"
+    );
+    assert!(!never.exists(), "a step after the failure ran");
+    eprintln!("a failed open ended the viewer in {took:?}");
+}
+
 /// The script's `bricks N` caps the out-of-core working set (what the
 /// sidecar of a screenshot reports), and `bricks off` lifts the cap.
 #[test]

@@ -214,12 +214,17 @@ impl ViewerApp {
             .shown
             .as_ref()
             .map_or([0.0, 1.0], |s| s.desc.value_range);
+        // The preset the TF equals, if any (an edited TF is "custom").
+        let active = Preset::ALL
+            .into_iter()
+            .find(|&p| TfModel::preset(p, range) == self.tf)
+            .map_or("custom", Preset::name);
         ui.horizontal(|ui| {
             egui::ComboBox::from_id_salt("brickray-viewer preset")
-                .selected_text("preset")
+                .selected_text(format!("preset: {active}"))
                 .show_ui(ui, |ui| {
                     for p in Preset::ALL {
-                        if ui.button(p.name()).clicked() {
+                        if ui.selectable_label(p.name() == active, p.name()).clicked() {
                             self.tf = TfModel::preset(p, range);
                             self.tf_dirty = true;
                         }

@@ -34,6 +34,9 @@ pub(super) struct ScriptRunner {
 
 impl ViewerApp {
     pub(super) fn finish_script(&mut self, r: Result<(), String>) {
+        // A failed step ends the run: the window closes and the exit status
+        // says why (a script never leaves the viewer waiting on a failure).
+        self.close_requested |= r.is_err();
         if let Ok(mut o) = self.outcome.lock()
             && o.is_none()
         {
