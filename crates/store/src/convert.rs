@@ -24,7 +24,8 @@ pub struct ConvertReport {
 
 /// Writes `reader`'s volume as `<stem>.raw` (little-endian, x fastest) beside
 /// the sidecar `json` (dims, dtype, spacing, value range, the format read,
-/// its placement and notes). Slabs hold at most `memory_bound` bytes (at
+/// its placement and notes; `.json` is appended to a path that does not end
+/// in it, so `out` writes `out.json` and `out.raw`). Slabs hold at most `memory_bound` bytes (at
 /// least one slice). The raw file is written under a temporary name and
 /// renamed when complete; neither output may be one of the reader's inputs.
 pub fn convert(
@@ -33,6 +34,7 @@ pub fn convert(
     memory_bound: u64,
 ) -> Result<ConvertReport, StoreError> {
     let t0 = Instant::now();
+    let json = &sidecar_path(json);
     let raw = json.with_extension("raw");
     let inputs = reader.input_files();
     check_output(json, &inputs)?;
@@ -91,4 +93,34 @@ pub fn convert(
         slab,
         seconds: t0.elapsed().as_secs_f64(),
     })
+}
+
+/// `path` if it ends in `.json`, else `path` with `.json` appended.
+fn sidecar_path(path: &Path) -> PathBuf {
+    if path.extension().is_some_and(|e| e.eq_ignore_ascii_case("json")) {
+        return path.to_owned();
+    }
+    let mut s = path.as_os_str().to_owned();
+    s.push(".json");
+    PathBuf::from(s)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::sidecar_path;
+    use std::path::Path;
+
+    #[test]
+    fn the_sidecar_always_ends_in_json() {
+        let p = |s: &str| sidecar_path(Path::new(s)).display().to_string();
+        assert_eq!(p("out.json"), "out.json");
+        assert_eq!(p("dir/out.JSON"), "dir/out.JSON");
+        assert_eq!(p("out"), "out.json");
+        assert_eq!(p("dir/head.nii"), "dir/head.nii.json");
+        // The raw file then sits beside it with the same stem.
+        assert_eq!(
+            sidecar_path(Path::new("out")).with_extension("raw"),
+            Path::new("out.raw")
+        );
+    }
 }

@@ -263,8 +263,16 @@ fn progress_bar() -> brickray_store::BuildProgress {
     pb.set_style(
         indicatif::ProgressStyle::with_template(
             "{spinner} [{elapsed_precise}] {wide_bar} {percent}% {human_pos}/{human_len} voxels, \
-             {per_sec}, {eta} left",
+             {rate}, {eta} left",
         )
+        .map(|s| {
+            s.with_key(
+                "rate",
+                |st: &indicatif::ProgressState, w: &mut dyn std::fmt::Write| {
+                    let _ = write!(w, "{:.1} Mvoxel/s", st.per_sec() / 1e6);
+                },
+            )
+        })
         .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
     );
     brickray_store::BuildProgress(std::sync::Arc::new(move |done, total| {
