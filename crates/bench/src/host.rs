@@ -13,6 +13,10 @@
 //! runs twice, planned in `prepare` (inline) and in the background
 //! (`VolumeOptions::background_planning`: a worker plans while the frame
 //! renders; `prepare` applies the latest plan), the two paths interleaved.
+//! The JSON keys without a suffix (`host_ms_median_20k`, `host_ms_p99_20k`,
+//! `plan_ms_median_20k`) are the background path's: what the render thread
+//! pays when planning runs off it, and the planning it no longer pays;
+//! `_inline` keys are the same frames planned in `prepare`.
 //! With `--culling`, the path is also drawn, ray cast at `--culling-size`,
 //! under ray-guided visibility (its feedback needs the frames rendered).
 //!
@@ -188,7 +192,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
                 let name = format!(
                     "{}k{tag}{}",
                     (cut as f64 / 1000.0).round() as u32,
-                    if background { "_background" } else { "" }
+                    if background { "" } else { "_inline" }
                 );
                 println!(
                     "  {:>7} {:>8} {:>9.2} {:>8.2} {:>8.2} {:>8.2} {:>9.2} {:>7.2}{}",
