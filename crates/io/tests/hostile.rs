@@ -226,6 +226,91 @@ fn forged_chunk_shape_is_a_typed_error() {
     }
 }
 
+/// Forges the shape of level `s0` (z, y, x) and its fill value.
+fn forge_shape(root: &Path, shape: [u64; 3], fill: u16) {
+    edit_json(&fixtures::zarr_array_meta(root), |v| {
+        v["shape"] = serde_json::json!(shape);
+        v["fill_value"] = serde_json::json!(fill);
+    });
+}
+
+/// A shape forged huge over the few small chunks of an image: [2^31]^3 is
+/// refused at once; 2^16 per axis (2^48 voxels, within what a volume may
+/// have) opens, its range scanned from the chunks stored (and the fill value
+/// of those that are not) in an instant. Before, the scan read the declared
+/// voxels in slabs of whole slices: 8 GiB for the first one (the process
+/// aborted where that could not be had), and then 2^48 voxels of fill.
+/// Served as bricks, its single level would make the root read all 2^48
+/// voxels: refused at open.
+#[test]
+fn forged_huge_shape_is_refused_or_scanned_in_bounded_time() {
+    for codec in ZARR_CODECS {
+        let d = TempDir::new().unwrap();
+        let root = d.path().join("h.ome.zarr");
+        fixtures::zarr(&root, codec);
+        forge_shape(&root, [1 << 31; 3], 0);
+        let t = std::time::Instant::now();
+        let e = io::open(&root).map(|_| ()).expect_err("[2^31]^3 opened");
+        assert!(matches!(e, IoError::Volume { .. }), "{codec:?}: {e:?}");
+        assert!(io::zarr::ZarrBrickSource::open(&root, &Default::default(), 16, 1, None).is_err());
+        assert!(
+            t.elapsed().as_secs_f64() < 2.0,
+            "{codec:?}: {:?}",
+            t.elapsed()
+        );
+
+        forge_shape(&root, [1 << 16; 3], 4000);
+        let t = std::time::Instant::now();
+        let r = io::open(&root).unwrap_or_else(|e| panic!("{codec:?}: {e}"));
+        assert_eq!(r.desc().dims, [1 << 16; 3], "{codec:?}");
+        // The stored samples (0..=2999) and the fill value of the chunks
+        // that are not stored.
+        assert_eq!(r.desc().value_range, [0.0, 4000.0], "{codec:?}");
+        let e = io::zarr::ZarrBrickSource::open(&root, &Default::default(), 16, 1, None)
+            .map(|_| ())
+            .expect_err("a root brick of 2^48 voxels");
+        assert!(
+            matches!(&e, IoError::Unsupported { what, .. } if what.contains("too few levels")),
+            "{codec:?}: {e:?}"
+        );
+        let took = t.elapsed();
+        assert!(took.as_secs_f64() < 2.0, "{codec:?}: scanned in {took:?}");
+    }
+}
+
+/// The scan reads the chunks stored and the fill value of a chunk that is
+/// not: the range it finds is the range of the voxels read, for every codec.
+#[test]
+fn a_missing_chunk_counts_with_its_fill_value() {
+    for codec in ZARR_CODECS {
+        let d = TempDir::new().unwrap();
+        let root = d.path().join("m.ome.zarr");
+        let chunks = fixtures::zarr(&root, codec);
+        let [nx, ny, nz] = DIMS.map(u64::from);
+        forge_shape(&root, [nz, ny, nx], 4000);
+        for missing in [false, true] {
+            if missing {
+                std::fs::remove_file(&chunks[chunks.len() / 2]).unwrap();
+            }
+            let mut r = io::open(&root).unwrap_or_else(|e| panic!("{codec:?}: {e}"));
+            let v = r.read_volume().unwrap();
+            let (lo, hi) = v
+                .data()
+                .as_bytes()
+                .chunks_exact(2)
+                .map(|b| u16::from_le_bytes([b[0], b[1]]))
+                .fold((u16::MAX, 0), |(a, b), s| (a.min(s), b.max(s)));
+            assert_eq!(hi == 4000, missing, "{codec:?}");
+            let want = if lo == hi {
+                [lo as f32, lo as f32 + 1.0]
+            } else {
+                [lo as f32, hi as f32]
+            };
+            assert_eq!(r.desc().value_range, want, "{codec:?} missing {missing}");
+        }
+    }
+}
+
 /// OME-Zarr scales of `"NaN"` or of the wrong length were silently 1.
 #[test]
 fn ome_zarr_bad_scales_are_typed_errors() {

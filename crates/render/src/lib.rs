@@ -164,7 +164,8 @@ impl VolumeRenderer {
     /// A convenience for a volume only this renderer draws: it creates a
     /// [`StreamedVolume`] with `config` and this renderer's texel options and
     /// draws it ([`Self::streamed_volume`] hands it out, to configure it or to
-    /// give it to another renderer).
+    /// give it to another renderer). Blocks on the source at most
+    /// `config.setup_deadline` ([`StreamedVolume::new`]).
     pub fn set_volume_source(
         &mut self,
         device: &wgpu::Device,

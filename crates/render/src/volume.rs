@@ -412,7 +412,10 @@ impl StreamedVolume {
     /// against the source and the device, sizes the pool within the device's
     /// limits and reads the root (set-up time, not the frame path), so the
     /// first frame already shows a coarse image. Creates no GPU object when a
-    /// check fails.
+    /// check fails. Waits for the source at most
+    /// [`CacheConfig::setup_deadline`] (30 s by default): a root that does not
+    /// come back by then is [`RenderError::Stream`] with
+    /// [`LoadError::TimedOut`](brickray_cache::LoadError::TimedOut).
     pub fn new(
         device: &wgpu::Device,
         queue: &wgpu::Queue,

@@ -7,8 +7,11 @@ use brickray_core::{DType, NodeKey, OctreeLayout};
 pub const MAGIC: [u8; 8] = *b"BRKSTORE";
 /// The format version this crate writes (it also reads [`MIN_VERSION`]..=this).
 /// Version 2 adds the optional per-node error section, version 3 the
-/// parent-error section after it (`docs/store-format.md`).
-pub const VERSION: u32 = 3;
+/// parent-error section after it, version 4 binds each payload's checksum to
+/// its node ([`payload_crc`]; `docs/store-format.md`).
+pub const VERSION: u32 = 4;
+/// The first format version whose payload checksums cover the node's key.
+pub(crate) const KEYED_CRC_VERSION: u32 = 4;
 /// The oldest format version this crate reads (version 1: no error section).
 pub const MIN_VERSION: u32 = 1;
 /// Bytes of the header.
@@ -58,6 +61,24 @@ pub(crate) fn filter_from_code(c: u8) -> Option<Filter> {
         1 => Filter::Max,
         _ => return None,
     })
+}
+
+/// The checksum of data node `key`'s compressed `payload` in a store of
+/// format `version`: from version 4 the CRC-32 of the key (level as one byte,
+/// then x, y, z as little-endian u32) followed by the payload, so a payload
+/// moved to another node fails its checksum; before, the CRC-32 of the
+/// payload alone.
+pub(crate) fn payload_crc(version: u32, key: NodeKey, payload: &[u8]) -> u32 {
+    if version < KEYED_CRC_VERSION {
+        return crc32fast::hash(payload);
+    }
+    let mut h = crc32fast::Hasher::new();
+    h.update(&[key.level]);
+    for p in [key.x, key.y, key.z] {
+        h.update(&p.to_le_bytes());
+    }
+    h.update(payload);
+    h.finalize()
 }
 
 /// Decoded header fields (unvalidated).

@@ -15,7 +15,7 @@ use crate::format::{
 };
 use crate::reader::{bad, max_compressed};
 use crate::sample::representable;
-use brickray_core::{OctreeLayout, VolumeDesc};
+use brickray_core::{NodeKey, OctreeLayout, VolumeDesc};
 use std::path::Path;
 
 /// Positional reads of a store's bytes: any number of threads may read at
@@ -334,6 +334,58 @@ pub(crate) fn table(
         .enumerate()
         .map(|(i, b)| entry(path, geo, layout, h.table_offset, max_len, i, b))
         .collect()
+}
+
+/// Phase 5: the ranges nest as the builder writes them: the header's
+/// `data_range` is the root's subtree range, and every node's subtree range
+/// lies within its parent's. (A forged `data_range` would otherwise let
+/// empty nodes and nodes outside the volume read outside every recorded
+/// range.)
+pub(crate) fn ranges(
+    path: &Path,
+    h: &Header,
+    geo: &TableGeometry,
+    layout: &OctreeLayout,
+    entries: &[Entry],
+) -> Result<(), StoreError> {
+    let root = geo.index(NodeKey::ROOT).and_then(|i| entries.get(i));
+    if root.is_none_or(|r| [r.min, r.max] != h.data_range) {
+        return Err(bad(
+            path,
+            "data_range",
+            format!(
+                "{:?} is not the root's range {:?}",
+                h.data_range,
+                root.map(|r| [r.min, r.max])
+            ),
+        ));
+    }
+    for e in entries {
+        let key = e.key();
+        let Some(p) = layout
+            .parent(key)
+            .and_then(|p| geo.index(p))
+            .and_then(|i| entries.get(i))
+        else {
+            continue;
+        };
+        if e.min < p.min || e.max > p.max {
+            return Err(StoreError::BadNode {
+                path: path.to_owned(),
+                key,
+                field: "min/max",
+                reason: format!(
+                    "[{}, {}] outside the parent {:?}'s range [{}, {}]",
+                    e.min,
+                    e.max,
+                    p.key(),
+                    p.min,
+                    p.max
+                ),
+            });
+        }
+    }
+    Ok(())
 }
 
 /// One table entry, checked: its position, reserved bytes, range, value, and

@@ -5,6 +5,7 @@ use crate::error::{Mismatch, StoreError};
 use crate::errsec;
 use crate::format::{
     Entry, FLAG_THRESHOLD, HEADER_LEN, KIND_DATA, KIND_EMPTY, KIND_UNIFORM, TableGeometry,
+    payload_crc,
 };
 use crate::opening;
 pub use crate::opening::ReadAt;
@@ -151,6 +152,7 @@ impl Store {
             TableGeometry::new(&layout).ok_or_else(|| bad(path, "dims", "node count overflows"))?;
         let sec = opening::Sections::of(&h, &geo, path, len)?;
         let entries = opening::table(file.as_ref(), path, &h, &geo, &layout)?;
+        opening::ranges(path, &h, &geo, &layout, &entries)?;
         check_tiling(path, &entries, h.table_offset)?;
         let errors = if sec.errors_len > 0 {
             Some(errsec::read(
@@ -197,7 +199,7 @@ impl Store {
         })
     }
 
-    /// The file's format version (1 or 2).
+    /// The file's format version (1 to [`VERSION`](crate::format::VERSION)).
     pub fn version(&self) -> u32 {
         self.version
     }
@@ -409,7 +411,7 @@ impl Store {
     ) -> Result<(), StoreError> {
         file.read_exact_at(buf, e.offset)
             .map_err(|source| StoreError::NodeIo { key, source })?;
-        let crc = crc32fast::hash(buf);
+        let crc = payload_crc(self.version, key, buf);
         if crc != e.crc {
             return Err(StoreError::PayloadChecksum {
                 key,

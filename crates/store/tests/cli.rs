@@ -178,3 +178,56 @@ fn shared_formats_dir() -> Option<std::path::PathBuf> {
     eprintln!("skipping: shared data not found at {}", dir.display());
     None
 }
+
+/// `info` on an OME-Zarr 0.5 whose shape is forged huge over no stored
+/// chunk: [2^31]^3 is refused, 2^16 a side (2^48 voxels of fill) is listed;
+/// both at once (the scan used to read the declared voxels: 8 GiB for the
+/// first slab).
+#[test]
+fn info_on_a_forged_huge_zarr_shape_returns_at_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let exe = env!("CARGO_BIN_EXE_brickray-store");
+    for (side, ok) in [(1u64 << 31, false), (1 << 16, true)] {
+        let root = dir.path().join(format!("h{side}.ome.zarr"));
+        std::fs::create_dir_all(root.join("0")).unwrap();
+        std::fs::write(
+            root.join("zarr.json"),
+            r#"{"zarr_format":3,"node_type":"group","attributes":{"ome":{"version":"0.5","multiscales":[{"axes":[{"name":"z","type":"space"},{"name":"y","type":"space"},{"name":"x","type":"space"}],"datasets":[{"path":"0","coordinateTransformations":[{"type":"scale","scale":[1,1,1]}]}]}]}}}"#,
+        )
+        .unwrap();
+        std::fs::write(
+            root.join("0/zarr.json"),
+            format!(
+                r#"{{"zarr_format":3,"node_type":"array","shape":[{side},{side},{side}],"data_type":"uint16","chunk_grid":{{"name":"regular","configuration":{{"chunk_shape":[4,4,4]}}}},"chunk_key_encoding":{{"name":"default","configuration":{{"separator":"/"}}}},"fill_value":7,"codecs":[{{"name":"bytes","configuration":{{"endian":"little"}}}}]}}"#
+            ),
+        )
+        .unwrap();
+        let t = std::time::Instant::now();
+        let mut child = Command::new(exe)
+            .arg("info")
+            .arg(&root)
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        let status = loop {
+            if let Some(s) = child.try_wait().unwrap() {
+                break s;
+            }
+            if t.elapsed().as_secs() >= 20 {
+                let _ = child.kill();
+                panic!("info on a shape of {side}^3 still running after 20 s");
+            }
+            std::thread::sleep(std::time::Duration::from_millis(20));
+        };
+        let took = t.elapsed();
+        let out = child.wait_with_output().unwrap();
+        let text = String::from_utf8_lossy(&out.stdout);
+        assert_eq!(status.success(), ok, "{side}: {text}");
+        if ok {
+            assert!(text.contains("65536x65536x65536"), "{text}");
+            assert!(text.contains("value range [7.0, 8.0]"), "{text}");
+        }
+        assert!(took.as_secs_f64() < 5.0, "{side}^3: info took {took:?}");
+    }
+}

@@ -174,7 +174,7 @@ fn ten_thousand_mutations_never_panic() {
                         b[eo + 28..eo + 32].copy_from_slice(&nl.max(1).to_le_bytes());
                     }
                     let nl = u32::from_le_bytes(b[eo + 28..eo + 32].try_into().unwrap()) as usize;
-                    let crc = crc32fast::hash(&b[off..off + nl]);
+                    let crc = keyed_crc(&b, eo, &b[off..off + nl]);
                     b[eo + 40..eo + 44].copy_from_slice(&crc.to_le_bytes());
                     reseal_table(&mut b);
                     reseal_header(&mut b);
@@ -434,7 +434,8 @@ fn payload_of(b: &[u8], eo: usize) -> Vec<u8> {
 
 /// Rebuilds the payload section with `with` as the payload of the entry at
 /// `eo`, in the original order, so the payloads still tile the section; all
-/// offsets, lengths and checksums are recomputed.
+/// offsets, lengths and checksums are recomputed (payload checksums as format
+/// version 4 defines them, over the node's key and the payload).
 fn rewrite_payload(good: &[u8], eo: usize, with: &[u8]) -> Vec<u8> {
     let table_off = u64_at(good, 80) as usize;
     let mut entries = data_entries(good);
@@ -451,7 +452,7 @@ fn rewrite_payload(good: &[u8], eo: usize, with: &[u8]) -> Vec<u8> {
         let off = (HEADER_LEN + payload.len()) as u64;
         table[t + 28..t + 32].copy_from_slice(&(p.len() as u32).to_le_bytes());
         table[t + 32..t + 40].copy_from_slice(&off.to_le_bytes());
-        table[t + 40..t + 44].copy_from_slice(&crc32fast::hash(&p).to_le_bytes());
+        table[t + 40..t + 44].copy_from_slice(&keyed_crc(good, e, &p).to_le_bytes());
         payload.extend_from_slice(&p);
     }
     let mut out = good[..HEADER_LEN].to_vec();
@@ -497,8 +498,15 @@ fn judge(path: &Path, bytes: &[u8], bricks: &[(NodeKey, Vec<u8>)], out: &mut Out
     for (key, want) in bricks {
         match store.read(*key, &mut buf) {
             Err(e) => {
+                // A payload moved to another node fails its checksum (bound
+                // to the node since format version 4), a forged one whose
+                // checksum was recomputed the check against its entry.
                 assert!(
-                    matches!(e, StoreError::BrickMismatch { key: k, .. } if k == *key),
+                    matches!(
+                        e,
+                        StoreError::BrickMismatch { key: k, .. }
+                        | StoreError::PayloadChecksum { key: k, .. } if k == *key
+                    ),
                     "{key:?}: unexpected error {e}"
                 );
                 assert!(e.to_string().contains(&format!("{key:?}")), "{e}");
@@ -635,4 +643,170 @@ fn uniform_value_outside_its_range_is_refused() {
             );
         }
     }
+}
+
+/// Two leaves with the same statistics (the same values, permuted: equal
+/// minimum, maximum and smallest own voxel) whose payload references are
+/// swapped, with every checksum recomputed. Their decoded bricks agree with
+/// each other's entries, so only a checksum bound to the node (format version
+/// 4) tells; a version-3 store decodes the swapped bricks without a word.
+#[test]
+fn swapped_payloads_of_bricks_with_equal_statistics_fail_their_checksum() {
+    let dir = tempfile::tempdir().unwrap();
+    let dims = [8u32, 4, 4];
+    let mut v = Vec::new();
+    for z in 0..4u32 {
+        for y in 0..4u32 {
+            for x in 0..8u32 {
+                let i = (x % 4) + 4 * y + 16 * z;
+                // The right half holds the left half's values in reverse order.
+                v.push(10 + if x < 4 { i } else { 63 - i } as u8);
+            }
+        }
+    }
+    let mut r = MemReader::new(dims, DType::U8, v);
+    let out = dir.path().join("twins.brs");
+    let o = BuildOptions {
+        brick: 4,
+        apron: 0,
+        ..BuildOptions::default()
+    };
+    build(&mut r, &out, &o).unwrap();
+    let good = std::fs::read(&out).unwrap();
+    let (a, b) = (NodeKey::new(1, 0, 0, 0), NodeKey::new(1, 1, 0, 0));
+    let store = open(&out).unwrap();
+    let bb = store.layout().brick_bytes();
+    let (mut ba, mut bb_) = (vec![0u8; bb], vec![0u8; bb]);
+    store.read(a, &mut ba).unwrap();
+    store.read(b, &mut bb_).unwrap();
+    assert_ne!(ba, bb_);
+    let stats = |k| {
+        let i = store.info(k).unwrap();
+        (i.kind, i.min, i.max)
+    };
+    assert_eq!(stats(a), stats(b), "equal statistics");
+    let at = |k: NodeKey| {
+        entry_offsets(&good)
+            .into_iter()
+            .find(|&eo| good[eo] == k.level && good[eo + 4..eo + 8] == k.x.to_le_bytes())
+            .unwrap()
+    };
+    let (ea, eb) = (at(a), at(b));
+    assert_eq!((good[ea + 1], good[eb + 1]), (2, 2), "both data nodes");
+    // Swap offset, length and checksum (bytes 28..44) and reseal.
+    let swap = |bytes: &[u8]| {
+        let mut m = bytes.to_vec();
+        m[ea + 28..ea + 44].copy_from_slice(&bytes[eb + 28..eb + 44]);
+        m[eb + 28..eb + 44].copy_from_slice(&bytes[ea + 28..ea + 44]);
+        reseal_table_and_header(&mut m);
+        m
+    };
+    let path = dir.path().join("swapped.brs");
+    std::fs::write(&path, swap(&good)).unwrap();
+    let forged = open(&path).unwrap();
+    let mut buf = vec![0u8; bb];
+    for k in [a, b] {
+        let err = forged.read(k, &mut buf).unwrap_err();
+        assert!(
+            matches!(err, StoreError::PayloadChecksum { key, .. } if key == k),
+            "{k:?}: {err}"
+        );
+        assert!(forged.read_brick(k, &mut buf).is_err());
+    }
+    // The same forgery of the store as version 3 wrote it: undetectable
+    // there (the blind spot version 4 closes); the bricks come back swapped.
+    let path3 = dir.path().join("swapped3.brs");
+    std::fs::write(&path3, swap(&as_version3(&good))).unwrap();
+    let v3 = open(&path3).unwrap();
+    assert_eq!(v3.version(), 3);
+    v3.read(a, &mut buf).unwrap();
+    assert_eq!(buf, bb_);
+    v3.read(b, &mut buf).unwrap();
+    assert_eq!(buf, ba);
+}
+
+/// A header `data_range` other than the root's subtree range (narrower, so
+/// that bricks decode outside it, or wider, so that empty nodes read a value
+/// no voxel has) is refused at open, checksums recomputed or not.
+#[test]
+fn forged_data_range_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("r.brs");
+    for dtype in [DType::U16, DType::F32] {
+        let (good, _) = gradient_store(dir.path(), dtype);
+        std::fs::write(&path, &good).unwrap();
+        let range = open(&path).unwrap().data_range();
+        let root = open(&path).unwrap().info(NodeKey::ROOT).unwrap();
+        assert_eq!(range, [root.min, root.max]);
+        let step = (range[1] - range[0]) / 4.0;
+        for forged in [
+            [range[0], range[1] - step],
+            [range[0] + step, range[1]],
+            [range[0] - step, range[1]],
+            [range[0], range[1] + step],
+            [range[0] + step, range[1] - step],
+        ] {
+            let mut b = good.clone();
+            b[60..64].copy_from_slice(&forged[0].to_le_bytes());
+            b[64..68].copy_from_slice(&forged[1].to_le_bytes());
+            reseal_header(&mut b);
+            std::fs::write(&path, &b).unwrap();
+            match open(&path) {
+                Err(StoreError::BadHeader {
+                    field: "data_range",
+                    ..
+                }) => {}
+                Err(e) => panic!("{} {forged:?}: unexpected {e}", dtype.name()),
+                Ok(_) => panic!("{} data_range {forged:?} opened", dtype.name()),
+            }
+        }
+    }
+}
+
+/// A node whose subtree range reaches outside its parent's (its range, or
+/// its parent's, forged; checksums recomputed) is refused at open, whatever
+/// its kind: an empty or uniform node has no payload to contradict it.
+#[test]
+fn node_range_outside_its_parent_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("n.brs");
+    let (good, _) = gradient_store(dir.path(), DType::U16);
+    std::fs::write(&path, &good).unwrap();
+    let store = open(&path).unwrap();
+    let f32_at = |b: &[u8], o: usize| f32::from_le_bytes(b[o..o + 4].try_into().unwrap());
+    let key_at = |b: &[u8], eo: usize| {
+        let u = |o: usize| u32::from_le_bytes(b[o..o + 4].try_into().unwrap());
+        NodeKey::new(b[eo], u(eo + 4), u(eo + 8), u(eo + 12))
+    };
+    let mut forged = 0;
+    for eo in entry_offsets(&good) {
+        let key = key_at(&good, eo);
+        let Some(parent) = store.layout().parent(key) else {
+            continue;
+        };
+        let p = store.info(parent).unwrap();
+        for (field, value) in [(16usize, p.min - 1.0), (20, p.max + 1.0)] {
+            if !(0.0..=65535.0).contains(&value) {
+                continue;
+            }
+            let mut b = good.clone();
+            b[eo + field..eo + field + 4].copy_from_slice(&value.to_le_bytes());
+            // Keep min <= max and a uniform value within the range.
+            if f32_at(&b, eo + 16) > f32_at(&b, eo + 20) {
+                continue;
+            }
+            reseal_table_and_header(&mut b);
+            std::fs::write(&path, &b).unwrap();
+            match open(&path) {
+                Err(StoreError::BadNode {
+                    key: k,
+                    field: "min/max",
+                    ..
+                }) if k == key => forged += 1,
+                Err(e) => panic!("{key:?} offset {field} = {value}: unexpected {e}"),
+                Ok(_) => panic!("{key:?} offset {field} = {value}: opened"),
+            }
+        }
+    }
+    assert!(forged > 20, "{forged} forgeries");
 }

@@ -1,8 +1,8 @@
 //! Format version 2's per-node error bounds and version 3's parent-error
 //! records: the bounds hold (drawing a node instead of the finest data, or a
 //! node's region from its parent's brick, never changes a sample by more than
-//! the recorded bound says), version 3 round trip, version-1 and -2 stores
-//! still open, corrupt error sections are typed errors.
+//! the recorded bound says), version 4 round trip, version-1, -2 and -3
+//! stores still open, corrupt error sections are typed errors.
 #![allow(missing_docs)]
 
 mod common;
@@ -247,9 +247,10 @@ fn parent_section(b: &[u8]) -> std::ops::Range<usize> {
     error_section(b).end..b.len() - 4
 }
 
-/// The same store as format version 2: no parent-error section.
+/// The same store as format version 2: no parent-error section (and
+/// payload checksums over the payload alone, as before version 4).
 fn as_version2(b: &[u8]) -> Vec<u8> {
-    let mut v = b[..error_section(b).end].to_vec();
+    let mut v = as_version3(b)[..error_section(b).end].to_vec();
     v[8..12].copy_from_slice(&2u32.to_le_bytes());
     v[30] &= !8;
     reseal_header(&mut v);
@@ -266,7 +267,7 @@ fn reseal_errors(b: &mut [u8]) {
 /// The same store as format version 1: no error section, version 1, flag
 /// and error fields cleared.
 fn as_version1(b: &[u8]) -> Vec<u8> {
-    let mut v = b[..error_section(b).start].to_vec();
+    let mut v = as_version3(b)[..error_section(b).start].to_vec();
     v[8..12].copy_from_slice(&1u32.to_le_bytes());
     v[30] &= !12;
     v[108..124].fill(0);
@@ -281,13 +282,52 @@ fn open_bytes(dir: &Path, name: &str, b: &[u8]) -> Result<brickray_store::Store,
 }
 
 #[test]
-fn version_3_round_trip() {
+fn version_4_round_trip() {
     let dir = tempfile::tempdir().unwrap();
     let (path, b) = small_store(dir.path());
-    assert_eq!(u32::from_le_bytes(b[8..12].try_into().unwrap()), 3);
+    assert_eq!(u32::from_le_bytes(b[8..12].try_into().unwrap()), 4);
     assert_eq!(b[30] & 12, 12, "error and parent-error flags");
     let s = open(&path).unwrap();
-    assert_eq!(s.version(), 3);
+    assert_eq!(s.version(), 4);
+    // Each payload's checksum covers its node's key (version 4).
+    let data: Vec<usize> = entry_offsets(&b)
+        .into_iter()
+        .filter(|&eo| b[eo + 1] == 2)
+        .collect();
+    assert!(!data.is_empty());
+    for &eo in &data {
+        let stored = u32::from_le_bytes(b[eo + 40..eo + 44].try_into().unwrap());
+        assert_eq!(stored, keyed_crc(&b, eo, entry_payload(&b, eo)));
+        assert_ne!(stored, crc32fast::hash(entry_payload(&b, eo)));
+    }
+    // A version-3 store (payload checksums over the payload alone) still
+    // opens and reads the same bricks; a version-4 checksum in a version-3
+    // store, or the reverse, is a checksum error.
+    let v3b = as_version3(&b);
+    let v3 = open_bytes(dir.path(), "v3.brs", &v3b).unwrap();
+    assert_eq!(v3.version(), 3);
+    let bb = s.layout().brick_bytes();
+    let (mut x, mut y) = (vec![0u8; bb], vec![0u8; bb]);
+    for rec in s.nodes() {
+        assert_eq!(v3.info(rec.key).unwrap(), rec.info);
+        v3.read(rec.key, &mut x).unwrap();
+        s.read(rec.key, &mut y).unwrap();
+        assert_eq!(x, y);
+    }
+    for (bytes, version) in [(&b, 3u32), (&v3b, 4)] {
+        let mut m = bytes.clone();
+        m[8..12].copy_from_slice(&version.to_le_bytes());
+        reseal_table_and_header(&mut m);
+        let st = open_bytes(dir.path(), "mixed.brs", &m).unwrap();
+        let key = st.nodes().find(|r| r.payload_len > 0).unwrap().key;
+        assert!(
+            matches!(
+                st.read(key, &mut x),
+                Err(StoreError::PayloadChecksum { key: k, .. }) if k == key
+            ),
+            "version {version} with the other version's checksums"
+        );
+    }
     assert!(s.has_errors());
     let n = s.nodes().count();
     assert_eq!(error_section(&b).len(), n * ERROR_ENTRY_LEN);
@@ -407,13 +447,13 @@ fn version_1_stores_still_open() {
         open_bytes(dir.path(), "bad.brs", &bad),
         Err(StoreError::BadHeader { field: "flags", .. })
     ));
-    // Version 4 is not read.
+    // Version 5 is not read.
     let mut bad = b.clone();
-    bad[8..12].copy_from_slice(&4u32.to_le_bytes());
+    bad[8..12].copy_from_slice(&5u32.to_le_bytes());
     reseal_header(&mut bad);
     assert!(matches!(
         open_bytes(dir.path(), "bad.brs", &bad),
-        Err(StoreError::UnsupportedVersion { version: 4, .. })
+        Err(StoreError::UnsupportedVersion { version: 5, .. })
     ));
 }
 
@@ -526,7 +566,7 @@ fn corrupt_error_sections_are_typed_errors() {
     ok[120..124].fill(0);
     reseal_header(&mut ok);
     let s = open_bytes(dir.path(), "ok.brs", &ok).unwrap();
-    assert_eq!(s.version(), 3);
+    assert_eq!(s.version(), 4);
     assert!(!s.has_errors());
     let _ = (HEADER_LEN, ENTRY_LEN, NodeKey::ROOT);
 }

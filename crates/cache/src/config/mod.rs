@@ -118,7 +118,16 @@ pub struct CacheConfig {
     /// The visibility threshold (pixels), hold (frames) and occlusion
     /// queries per frame.
     pub visibility_config: VisibilityConfig,
+    /// How long set-up ([`BrickManager::preload_root`](crate::BrickManager::preload_root))
+    /// waits for the source to answer for the root (its metadata and brick)
+    /// before it fails with [`LoadError::TimedOut`](crate::LoadError::TimedOut)
+    /// (> 0). The read runs on a thread of its own, so a source that never
+    /// answers cannot hold set-up; what it answers later is dropped.
+    pub setup_deadline: Duration,
 }
+
+/// Default [`CacheConfig::setup_deadline`]: 30 s.
+pub const DEFAULT_SETUP_DEADLINE: Duration = Duration::from_secs(30);
 
 /// Default [`CacheConfig::floor_slots`]: levels 0 to 2 of a cubic volume.
 pub const DEFAULT_FLOOR_SLOTS: u32 = 73;
@@ -126,7 +135,7 @@ pub const DEFAULT_FLOOR_SLOTS: u32 = 73;
 impl Default for CacheConfig {
     /// 512 MiB CPU, 256 MiB GPU, 16 MiB uploaded per frame, 1 px, 2 threads,
     /// retries after 1 s doubling to 60 s, fades of 120 ms, a floor of up to
-    /// 73 slots, no visibility feedback.
+    /// 73 slots, no visibility feedback, a set-up deadline of 30 s.
     fn default() -> Self {
         CacheConfig {
             cpu_budget_bytes: 512 << 20,
@@ -141,6 +150,7 @@ impl Default for CacheConfig {
             brick_budget: None,
             visibility: VisibilityPolicy::None,
             visibility_config: VisibilityConfig::default(),
+            setup_deadline: DEFAULT_SETUP_DEADLINE,
         }
     }
 }
@@ -286,6 +296,12 @@ pub enum ConfigError {
     RetryFactor {
         /// The value given.
         factor: f32,
+    },
+    /// A set-up deadline of zero.
+    #[error("setup_deadline must be > 0, got {value:?}")]
+    SetupDeadline {
+        /// The value given.
+        value: Duration,
     },
     /// The retry delays are zero or `max < initial`.
     #[error("retry delays must satisfy 0 < initial <= max, got {initial:?} and {max:?}")]
@@ -440,6 +456,11 @@ impl CacheConfig {
         }
         if let Some(f) = self.fade.filter(|f| !f.is_valid()) {
             return Err(ConfigError::Fade { value: f });
+        }
+        if self.setup_deadline.is_zero() {
+            return Err(ConfigError::SetupDeadline {
+                value: self.setup_deadline,
+            });
         }
         gpu.validate(layout)?;
         raw_brick_bytes(layout)?;

@@ -154,6 +154,16 @@ fn every_violation_is_a_typed_error() {
         assert!(matches!(e, Err(ConfigError::RetryFactor { .. })));
     }
     assert_eq!(check(CacheConfig { retry: None, ..ok }), Ok(()));
+    assert_eq!(
+        check(CacheConfig {
+            setup_deadline: Duration::ZERO,
+            ..ok
+        }),
+        Err(ConfigError::SetupDeadline {
+            value: Duration::ZERO
+        })
+    );
+    assert_eq!(ok.setup_deadline, DEFAULT_SETUP_DEADLINE);
 }
 
 #[test]

@@ -47,6 +47,19 @@ pub enum LoadError {
         /// The panic message, when it was a string.
         message: String,
     },
+    /// The source did not answer within the set-up deadline
+    /// ([`CacheConfig::setup_deadline`](crate::CacheConfig::setup_deadline)).
+    #[error(
+        "the source did not answer for the {kind} of {key:?} within the set-up deadline of {deadline:?}"
+    )]
+    TimedOut {
+        /// The node.
+        key: NodeKey,
+        /// What was being read.
+        kind: FetchKind,
+        /// The deadline that passed.
+        deadline: Duration,
+    },
 }
 
 /// Loader configuration.

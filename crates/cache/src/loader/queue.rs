@@ -9,6 +9,8 @@ use std::collections::{BTreeMap, HashMap, HashSet};
 pub(crate) type JobKey = (FetchKind, NodeKey);
 
 /// What a worker does.
+// (Queued by value; boxing the brick job would allocate per request.)
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(crate) enum Job {
     /// Read a node's metadata.

@@ -19,9 +19,82 @@ use crate::failures::{FetchKind, StreamError};
 use crate::loader::worker::{children_in_volume, fetch_brick, fetch_meta};
 use crate::loader::{LoadError, Loader, LoaderConfig};
 use crate::pool::BrickPool;
+use crate::prepared::{PreparedBrick, Preparer};
 use crate::upload::UploadBudget;
-use brickray_core::{NodeInfo, NodeKey, NodeKind, OctreeLayout};
+use brickray_core::{BrickSource, NodeInfo, NodeKey, NodeKind, OctreeLayout};
+use crossbeam_channel::{RecvTimeoutError, Sender};
 use std::sync::Arc;
+use std::time::Instant;
+
+/// What set-up reads from the source ([`BrickManager::preload_root`]), on a
+/// thread of its own.
+#[derive(Clone)]
+struct SetupReads {
+    source: Arc<dyn BrickSource>,
+    preparer: Arc<Preparer>,
+    /// The root's metadata, when known.
+    root: Option<NodeInfo>,
+    /// The root's brick is in a cache.
+    has_brick: bool,
+    /// The root's children in the volume whose metadata is not known.
+    children: Vec<NodeKey>,
+}
+
+/// One step of the set-up reads, sent as it happens.
+enum SetupRead {
+    /// A read begins (what a deadline that passes names).
+    Start(FetchKind, NodeKey),
+    Meta(NodeKey, Result<NodeInfo, LoadError>),
+    Brick(Result<PreparedBrick, LoadError>),
+}
+
+impl SetupReads {
+    /// Reads the root's metadata, its brick, then its children's metadata,
+    /// sending each result as it comes; stops at a failure of the root, or
+    /// when set-up no longer listens (its deadline passed).
+    fn run(&self, tx: &Sender<SetupRead>) {
+        let key = NodeKey::ROOT;
+        let source = self.source.as_ref();
+        let info = match self.root {
+            Some(info) => info,
+            None => {
+                if tx.send(SetupRead::Start(FetchKind::Metadata, key)).is_err() {
+                    return;
+                }
+                let r = fetch_meta(source, key);
+                let info = r.as_ref().ok().copied();
+                match (tx.send(SetupRead::Meta(key, r)), info) {
+                    (Ok(()), Some(info)) => info,
+                    _ => return,
+                }
+            }
+        };
+        if matches!(info.kind, NodeKind::Empty) {
+            return;
+        }
+        if !self.has_brick {
+            if tx.send(SetupRead::Start(FetchKind::Brick, key)).is_err() {
+                return;
+            }
+            let r = fetch_brick(source, &self.preparer, key, &info);
+            let ok = r.is_ok();
+            if tx.send(SetupRead::Brick(r)).is_err() || !ok {
+                return;
+            }
+        }
+        if matches!(info.kind, NodeKind::Uniform(_)) {
+            return;
+        }
+        for &c in &self.children {
+            if tx.send(SetupRead::Start(FetchKind::Metadata, c)).is_err() {
+                return;
+            }
+            if tx.send(SetupRead::Meta(c, fetch_meta(source, c))).is_err() {
+                return;
+            }
+        }
+    }
+}
 
 impl BrickManager {
     /// The residency of a node's brick, `None` when it is nowhere.
@@ -99,55 +172,82 @@ impl BrickManager {
     /// Reads the root's metadata and brick (and its children's metadata)
     /// synchronously, so the very first frame already shows a coarse image and
     /// can request the next level. Meant for set-up time, not the frame path: it
-    /// blocks on the source. A failure (or panic) of the root is returned and
-    /// kept like any failure (retried after the back-off); a child's failure is
-    /// kept and surfaced by [`take_error`](Self::take_error).
+    /// blocks on the source, for at most [`CacheConfig::setup_deadline`]: the
+    /// reads run on a thread of their own, and when the root's metadata or
+    /// brick has not come back by the deadline, set-up fails with
+    /// [`LoadError::TimedOut`] (what the thread reads later is dropped).
+    /// Children whose metadata has not come back by then are left to the
+    /// loader. A failure (or panic) of the root is returned and kept like any
+    /// failure (retried after the back-off); a child's failure is kept and
+    /// surfaced by [`take_error`](Self::take_error).
     pub fn preload_root(&mut self) -> Result<(), StreamError> {
         let key = NodeKey::ROOT;
+        let deadline = self.config.setup_deadline;
+        let started = Instant::now();
         let now = self.clock.now();
-        let info = match self.meta.get(key) {
-            Some(info) => info,
-            None => match fetch_meta(self.source.as_ref(), key) {
-                Ok(info) => {
-                    self.meta.insert(key, info);
-                    self.failures.succeeded(FetchKind::Metadata, key);
-                    info
-                }
-                Err(e) => {
-                    return Err(self
-                        .failures
-                        .record(FetchKind::Metadata, key, e, now, false));
-                }
-            },
+        let reads = SetupReads {
+            source: self.source.clone(),
+            preparer: self.preparer.clone(),
+            root: self.meta.get(key),
+            has_brick: self.cpu.contains(key) || self.pool.contains(key),
+            children: children_in_volume(&self.layout, key)
+                .into_iter()
+                .filter(|c| !self.meta.contains(*c))
+                .collect(),
         };
-        if matches!(info.kind, NodeKind::Empty) {
-            return Ok(());
+        let (tx, rx) = crossbeam_channel::unbounded();
+        let inline = reads.clone();
+        let thread_tx = tx.clone();
+        let spawned = std::thread::Builder::new()
+            .name("brickray-setup".into())
+            .spawn(move || reads.run(&thread_tx));
+        if spawned.is_err() {
+            // No thread to be had: read here, without a deadline.
+            inline.run(&tx);
         }
-        if !self.cpu.contains(key) && !self.pool.contains(key) {
-            match fetch_brick(self.source.as_ref(), &self.preparer, key, &info) {
-                Ok(brick) => {
+        drop(tx);
+        let mut reading = (FetchKind::Metadata, key);
+        loop {
+            let left = deadline.saturating_sub(started.elapsed());
+            let read = match rx.recv_timeout(left) {
+                Ok(read) => read,
+                Err(RecvTimeoutError::Disconnected) => return Ok(()),
+                // The root and its brick are in; the children's metadata
+                // still missing is the loader's to read.
+                Err(RecvTimeoutError::Timeout) if reading.1 != key => return Ok(()),
+                Err(RecvTimeoutError::Timeout) => {
+                    let (kind, key) = reading;
+                    let e = LoadError::TimedOut {
+                        key,
+                        kind,
+                        deadline,
+                    };
+                    return Err(self.failures.record(kind, key, e, now, false));
+                }
+            };
+            match read {
+                SetupRead::Start(kind, k) => reading = (kind, k),
+                SetupRead::Meta(k, Ok(info)) => {
+                    self.meta.insert(k, info);
+                    self.failures.succeeded(FetchKind::Metadata, k);
+                }
+                SetupRead::Meta(k, Err(e)) => {
+                    let err = self
+                        .failures
+                        .record(FetchKind::Metadata, k, e, now, k != key);
+                    if k == key {
+                        return Err(err);
+                    }
+                }
+                SetupRead::Brick(Ok(brick)) => {
                     self.cpu.insert(key, brick);
                     self.failures.succeeded(FetchKind::Brick, key);
                 }
-                Err(e) => {
+                SetupRead::Brick(Err(e)) => {
                     return Err(self.failures.record(FetchKind::Brick, key, e, now, false));
                 }
             }
         }
-        if self.children_meta_missing(key, &info) {
-            for c in children_in_volume(&self.layout, key) {
-                match fetch_meta(self.source.as_ref(), c) {
-                    Ok(info) => {
-                        self.meta.insert(c, info);
-                        self.failures.succeeded(FetchKind::Metadata, c);
-                    }
-                    Err(e) => {
-                        self.failures.record(FetchKind::Metadata, c, e, now, true);
-                    }
-                }
-            }
-        }
-        Ok(())
     }
 
     /// Applies a configuration: the whole of it is validated first

@@ -56,13 +56,94 @@ fn update_never_calls_the_source_on_the_render_thread() {
     assert!(plan.stats.working_set_bricks > 8);
     assert!(src.meta_reads.load(std::sync::atomic::Ordering::Relaxed) > 8);
     assert_eq!(src.calls_on(me), 0);
-    // `preload_root` is set-up time: it reads here, and updates still do not.
+    // `preload_root` is set-up time: it waits for its reads (on a thread of
+    // its own, under its deadline), and updates still read nothing here.
     let mut m = manager(&src, config());
+    let before = src.calls().len();
     m.preload_root().unwrap();
-    let at_setup = src.calls_on(me);
-    assert_eq!(at_setup, 1 + 1 + 8, "root metadata, root brick, children");
+    assert_eq!(
+        src.calls().len() - before,
+        1 + 1 + 8,
+        "root metadata, root brick, children"
+    );
+    assert_eq!(m.residency(NodeKey::ROOT), Some(Residency::InCpu));
     settle(&mut m, &mut 0);
-    assert_eq!(src.calls_on(me), at_setup);
+    assert_eq!(src.calls_on(me), 0);
+}
+
+/// Set-up waits for the source at most `setup_deadline`: a root whose
+/// metadata or brick does not come back by then fails set-up with a typed
+/// error naming the deadline, promptly; the read still blocked finishes
+/// later into nothing, and the manager streams normally once the source
+/// answers. A child's metadata past the deadline is left to the loader.
+#[test]
+fn set_up_fails_at_its_deadline_when_the_source_does_not_answer() {
+    let deadline = Duration::from_millis(150);
+    let child = NodeKey::new(1, 0, 0, 0);
+    for (kind, gated) in [
+        (FetchKind::Metadata, NodeKey::ROOT),
+        (FetchKind::Brick, NodeKey::ROOT),
+        (FetchKind::Metadata, child),
+    ] {
+        let mut src = TestSource::new(64);
+        match kind {
+            FetchKind::Metadata => src.meta_gate_key = Some(gated),
+            FetchKind::Brick => src.gate_key = Some(gated),
+        }
+        let src = Arc::new(src);
+        let m = manager(
+            &src,
+            CacheConfig {
+                setup_deadline: deadline,
+                ..config()
+            },
+        );
+        // (On a thread of the test's, so that a set-up still blocked fails
+        // the test instead of hanging it.)
+        let (tx, rx) = std::sync::mpsc::channel();
+        std::thread::spawn(move || {
+            let mut m = m;
+            let t = Instant::now();
+            let r = m.preload_root();
+            let _ = tx.send((m, r, t.elapsed()));
+        });
+        let Ok((mut m, r, took)) = rx.recv_timeout(Duration::from_secs(5)) else {
+            src.open_gate();
+            panic!("{kind} {gated:?}: set-up still blocked after 5 s");
+        };
+        assert!(
+            took >= deadline,
+            "{kind} {gated:?}: returned after {took:?}"
+        );
+        if gated == child {
+            r.unwrap();
+            assert_eq!(m.residency(NodeKey::ROOT), Some(Residency::InCpu));
+            assert!(m.metadata(child).is_none());
+        } else {
+            let e = r.unwrap_err();
+            assert_eq!((e.key, e.kind), (NodeKey::ROOT, kind));
+            assert!(
+                matches!(
+                    *e.error,
+                    LoadError::TimedOut { key: NodeKey::ROOT, kind: k, deadline: d }
+                        if k == kind && d == deadline
+                ),
+                "{e}"
+            );
+            assert!(e.to_string().contains("150ms"), "{e}");
+            assert!(m.failure(NodeKey::ROOT).is_some());
+        }
+        // The source answers now: the blocked read ends into nothing, and
+        // the manager (the root retried) converges.
+        src.open_gate();
+        std::thread::sleep(Duration::from_millis(20));
+        m.retry_failed();
+        let plan = settle(&mut m, &mut 0);
+        assert!(
+            plan.stats.converged() && plan.cut.len() > 8,
+            "{kind} {gated:?}"
+        );
+    }
 }
 
 #[test]

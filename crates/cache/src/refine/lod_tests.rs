@@ -119,7 +119,7 @@ pub(super) fn refine_limited(
 ) -> Refinement {
     let frame = VolumeFrame::centered(layout.volume.dims, [1.0; 3]);
     let params = RefineParams {
-        views: &Views::one(ViewGeometry::new(&layout, cam, 1.0, 256, &frame)),
+        views: &Views::one(ViewGeometry::new(layout, cam, 1.0, 256, &frame)),
         generation: 0,
         mode: RenderMode::Dvr,
         tf,

@@ -97,6 +97,8 @@ pub enum DataState {
 }
 
 /// What is known of a node's metadata.
+// (A copy out of the metadata cache per lookup: boxing would allocate.)
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum MetaState {
     /// Known.

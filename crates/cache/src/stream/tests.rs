@@ -371,7 +371,8 @@ fn configuration_changes_upload_nothing_resident() {
     let views = [rig.view(camera(0.3))];
     let all: &Script = &|_| (500, 1.0, 500);
     rig.converge(&views, all);
-    let changes: Vec<(&str, Box<dyn Fn(&mut CacheConfig)>)> = vec![
+    type Change = Box<dyn Fn(&mut CacheConfig)>;
+    let changes: Vec<(&str, Change)> = vec![
         ("tolerance", Box::new(|c| c.tolerance_px = 0.5)),
         (
             "metric",

@@ -31,10 +31,12 @@ use std::sync::Arc;
 use zarrs::array::{Array, ArrayMetadata, ArraySubset};
 
 mod safe;
+mod scan;
 mod source;
 
 use safe::{MAX_CHUNK_BYTES, SafeStore};
-pub use source::ZarrBrickSource;
+use scan::scan;
+pub use source::{MAX_BRICK_READ, ZarrBrickSource};
 
 type ZArray = Array<SafeStore>;
 
@@ -632,40 +634,6 @@ fn array_dtype(level: &Path) -> Result<SourceType, IoError> {
             return Err(IoError::UnknownDType { path: file, name });
         }
     })
-}
-
-/// One pass over a level in z-slabs: the value range (NaN/Inf refused).
-fn scan(z: &OmeZarr, level: usize, c: u64, t: u64) -> Result<[f64; 2], IoError> {
-    let [nx, ny, nz] = z.dims(level);
-    let conv = SampleConverter::choose(z.src, false, 1.0, 0.0, None);
-    let step = (((1u64 << 24) / (nx * ny).max(1)).max(1)).min(nz);
-    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-    let mut k = 0;
-    while k < nz {
-        let k1 = (k + step).min(nz);
-        let b = z.region(level, c, t, [0, 0, k], [nx, ny, k1])?;
-        for (i, s) in b.chunks_exact(z.src.size()).enumerate() {
-            let v = conv.value(s);
-            if !v.is_finite() {
-                let i = i as u64;
-                return Err(IoError::volume(
-                    &z.root,
-                    brickray_core::VolumeError::NonFinite {
-                        count: 1,
-                        first: [
-                            (i % nx) as u32,
-                            ((i / nx) % ny) as u32,
-                            (k + i / (nx * ny)) as u32,
-                        ],
-                    },
-                ));
-            }
-            lo = lo.min(v);
-            hi = hi.max(v);
-        }
-        k = k1;
-    }
-    Ok([lo, hi])
 }
 
 /// Streams one level, channel and time point of an OME-Zarr image in z-slabs.

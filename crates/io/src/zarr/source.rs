@@ -3,6 +3,10 @@
 
 use super::*;
 
+/// Most voxels of a pyramid level one brick of a [`ZarrBrickSource`] reads
+/// (its footprint, box-filtered down to the brick).
+pub const MAX_BRICK_READ: u64 = 1 << 30;
+
 /// An OME-Zarr image served as a brick octree, without building a store.
 ///
 /// The octree is the one a store built from the finest level would have
@@ -12,7 +16,9 @@ use super::*;
 /// on any axis (its own scale transform says how much larger than the finest
 /// they are, rounded to a power of two), and box-filtered by the remaining
 /// factor per axis: a file whose pyramid halves only x and y (as
-/// ome-zarr-py's does) is filtered along z only. Aprons come from the
+/// ome-zarr-py's does) is filtered along z only. An image whose pyramid
+/// would make one brick read more than [`MAX_BRICK_READ`] voxels is refused
+/// at open ([`IoError::Unsupported`]). Aprons come from the
 /// neighbouring chunks, clamped at the volume's faces, as in a built store.
 /// Node min/max are those of the brick's footprint, computed on first ask
 /// and kept.
@@ -99,7 +105,26 @@ impl ZarrBrickSource {
                     .unwrap_or(0);
                 (best, factors[best].map(|x| f / x))
             })
-            .collect();
+            .collect::<Vec<(usize, [u64; 3])>>();
+        // One brick reads its footprint at the pyramid level planned for it
+        // whole: a pyramid too shallow for the volume (or a shape forged
+        // huge) is refused here rather than allocated for when it is read.
+        let side = layout.stored_side() as u64;
+        for (l, &(m, r)) in plan.iter().enumerate() {
+            let md = zarr.dims(m);
+            let n = [0, 1, 2].map(|a| side.saturating_mul(r[a]).min(md[a]));
+            let voxels = n.iter().try_fold(1u64, |v, &x| v.checked_mul(x));
+            if voxels.is_none_or(|v| v > MAX_BRICK_READ) {
+                return Err(IoError::unsupported(
+                    root,
+                    format!(
+                        "a brick of octree level {l} reads {n:?} voxels (x, y, z) of pyramid \
+                         level {m}, more than {MAX_BRICK_READ}: the image has too few levels \
+                         to stream; build a store from it"
+                    ),
+                ));
+            }
+        }
         Ok(ZarrBrickSource {
             zarr,
             c,

@@ -296,8 +296,7 @@ pub(super) fn compute(
             .first
             .get(l as usize + 1)
             .map_or(entries.len(), |&n| n as usize);
-        let out: Vec<Result<(NodeError, Vec<(NodeKey, NodeError)>), StoreError>> = entries
-            [first..end]
+        let out: Vec<Result<NodeErrors, StoreError>> = entries[first..end]
             .par_iter()
             .map_init(
                 || (Vec::new(), Vec::new()),
@@ -348,6 +347,9 @@ fn neighbourhood(src: &Level) -> (Vec<f32>, Vec<f32>) {
     (lo, hi)
 }
 
+/// A node's own error record and its children's parent-error records.
+type NodeErrors = (NodeError, Vec<(NodeKey, NodeError)>);
+
 #[allow(clippy::too_many_arguments)]
 fn node_error(
     file: &File,
@@ -358,7 +360,7 @@ fn node_error(
     ext: &(Vec<f32>, Vec<f32>),
     raw: &mut Vec<u8>,
     vals: &mut Vec<f32>,
-) -> Result<(NodeError, Vec<(NodeKey, NodeError)>), StoreError> {
+) -> Result<NodeErrors, StoreError> {
     if !brick_values(file, path, layout, e, raw, vals)? {
         return Ok((NodeError::default(), Vec::new()));
     }

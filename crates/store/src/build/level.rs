@@ -4,7 +4,7 @@
 
 use super::Ctx;
 use crate::error::StoreError;
-use crate::format::{Entry, KIND_DATA, KIND_EMPTY, KIND_UNIFORM};
+use crate::format::{Entry, KIND_DATA, KIND_EMPTY, KIND_UNIFORM, VERSION, payload_crc};
 use crate::sample::{Sample, range_dyn, with_sample};
 use crate::{Filter, NO_ENTRY_LEVEL};
 use brickray_core::{NodeKey, OctreeLayout};
@@ -225,7 +225,7 @@ impl LevelBuf {
                 if let Some(p) = payload {
                     e.offset = ctx.offset;
                     e.len = p.len() as u32;
-                    e.crc = crc32fast::hash(&p);
+                    e.crc = payload_crc(VERSION, e.key(), &p);
                     w.write_all(&p)
                         .map_err(|err| StoreError::io(&ctx.path, err))?;
                     ctx.offset += p.len() as u64;

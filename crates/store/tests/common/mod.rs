@@ -282,3 +282,60 @@ pub fn shared_data() -> Option<PathBuf> {
     eprintln!("skipping: shared data not found at {}", p.display());
     None
 }
+
+// ---------------------------------------------------------------------------
+// Store bytes, as a forger edits them (offsets from docs/store-format.md).
+
+fn le_u64(b: &[u8], o: usize) -> u64 {
+    u64::from_le_bytes(b[o..o + 8].try_into().unwrap())
+}
+
+/// File offsets of the node table's entries.
+pub fn entry_offsets(b: &[u8]) -> Vec<usize> {
+    let off = le_u64(b, 80) as usize;
+    (off..off + le_u64(b, 88) as usize).step_by(48).collect()
+}
+
+/// The compressed payload of the entry at file offset `eo`.
+pub fn entry_payload(b: &[u8], eo: usize) -> &[u8] {
+    let len = u32::from_le_bytes(b[eo + 28..eo + 32].try_into().unwrap()) as usize;
+    let off = le_u64(b, eo + 32) as usize;
+    &b[off..off + len]
+}
+
+/// A payload checksum of format version 4 for the entry at file offset
+/// `eo`: CRC-32 of the node's key (level byte, then x, y, z as LE u32: the
+/// entry's bytes 0 and 4..16) followed by the payload.
+pub fn keyed_crc(b: &[u8], eo: usize, payload: &[u8]) -> u32 {
+    let mut h = crc32fast::Hasher::new();
+    h.update(&b[eo..eo + 1]);
+    h.update(&b[eo + 4..eo + 16]);
+    h.update(payload);
+    h.finalize()
+}
+
+/// Recomputes the node table's checksum, then the header's.
+pub fn reseal_table_and_header(b: &mut [u8]) {
+    let off = le_u64(b, 80) as usize;
+    let len = le_u64(b, 88) as usize;
+    let crc = crc32fast::hash(&b[off..off + len]);
+    b[104..108].copy_from_slice(&crc.to_le_bytes());
+    let crc = crc32fast::hash(&b[..124]);
+    b[124..128].copy_from_slice(&crc.to_le_bytes());
+}
+
+/// A version-4 store as format version 3 wrote it: the version field 3 and
+/// each payload's checksum over its payload alone.
+pub fn as_version3(b: &[u8]) -> Vec<u8> {
+    assert_eq!(u32::from_le_bytes(b[8..12].try_into().unwrap()), 4);
+    let mut v = b.to_vec();
+    v[8..12].copy_from_slice(&3u32.to_le_bytes());
+    for eo in entry_offsets(b) {
+        if b[eo + 1] == 2 {
+            let crc = crc32fast::hash(entry_payload(b, eo));
+            v[eo + 40..eo + 44].copy_from_slice(&crc.to_le_bytes());
+        }
+    }
+    reseal_table_and_header(&mut v);
+    v
+}
