@@ -7,11 +7,12 @@ mod scripting;
 
 use scripting::{PendingShot, ScriptRunner};
 
-use crate::camera::{Axis, CameraController, Navigation};
+use brickray::core::camera::{AxisView, CameraController, CameraInput, DragButton, Navigation};
 use crate::script::{Action, ModeName, PredictionChoice};
 use crate::source::{Input, Loaded, OpenOptions, Opened, Opening};
 use crate::stats::Stats;
-use crate::tf::{Histogram, Preset, TABLE_ENTRIES, TfModel};
+use crate::tf::Histogram;
+use brickray::core::tf::{TABLE_ENTRIES, TfModel, TfPreset as Preset};
 use crate::tf_widget::TfEditor;
 use crate::view::{ViewResources, VolumeCallback, viewport_px};
 use brickray::{OutOfCoreConfig, RenderMode, RenderSettings, Viewport, VolumeDesc, VolumeFrame};
@@ -365,18 +366,24 @@ impl ViewerApp {
             return false;
         };
         let d = response.drag_delta();
+        let drag = |button| CameraInput::Drag {
+            button,
+            dx: d.x,
+            dy: d.y,
+            viewport_height: response.rect.height(),
+        };
         if response.dragged_by(egui::PointerButton::Primary) {
-            c.rotate(d.x, d.y);
+            c.apply(drag(DragButton::Primary));
         }
         if response.dragged_by(egui::PointerButton::Secondary)
             || response.dragged_by(egui::PointerButton::Middle)
         {
-            c.pan(d.x, d.y, response.rect.height());
+            c.apply(drag(DragButton::Secondary));
         }
         if response.hovered() {
             let scroll = ui.input(|i| i.smooth_scroll_delta.y);
             if scroll != 0.0 {
-                c.zoom(scroll / 50.0);
+                c.apply(CameraInput::Wheel(scroll / 50.0));
             }
         }
         if ui.ctx().egui_wants_keyboard_input() {
@@ -390,12 +397,15 @@ impl ViewerApp {
                 k(egui::Key::W) - k(egui::Key::S),
             );
             if i.key_pressed(egui::Key::R) {
-                c.reset();
+                c.apply(CameraInput::Reset);
             }
             (v, i.stable_dt.min(0.1))
         });
         if keys != glam::Vec3::ZERO {
-            c.fly(keys * 0.5, dt);
+            c.apply(CameraInput::Move {
+                velocity: keys * 0.5,
+                dt,
+            });
             return true;
         }
         false

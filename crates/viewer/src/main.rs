@@ -7,7 +7,6 @@
 //! any other. See `docs/viewer.md`.
 
 mod app;
-mod camera;
 mod script;
 mod source;
 mod stats;

@@ -29,8 +29,8 @@
 //! quit
 //! ```
 
-use crate::camera::Axis;
-use crate::tf::Preset;
+use brickray::core::camera::AxisView as Axis;
+use brickray::core::tf::TfPreset as Preset;
 use std::path::PathBuf;
 
 /// One action.

@@ -6,7 +6,8 @@
 //! right-click a point to remove it. Colour strip: the same, and a click
 //! selects a point for the colour picker.
 
-use crate::tf::{Histogram, TfModel};
+use crate::tf::Histogram;
+use brickray::core::tf::TfModel;
 use eframe::egui::{self, Color32, Pos2, Rect, Sense, Stroke, Vec2};
 
 /// Pick radius in points.
@@ -211,7 +212,7 @@ impl TfEditor {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::tf::Preset;
+    use brickray::core::tf::TfPreset as Preset;
 
     /// The widget in a headless egui context, driven by pointer events.
     struct Ui {
@@ -291,7 +292,7 @@ mod tests {
         }
     }
 
-    fn near(p: &crate::tf::OpacityPoint, x: f32, a: f32) -> bool {
+    fn near(p: &brickray::core::tf::OpacityPoint, x: f32, a: f32) -> bool {
         (p.x - x).abs() < 0.01 && (p.a - a).abs() < 0.02
     }
 

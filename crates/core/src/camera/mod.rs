@@ -19,10 +19,12 @@
 //! small near planes (a near plane at 1e-4 of the scene cost 40 dB in f32) and
 //! singular for an infinite far plane. The basis is exact for any near and far.
 
+mod controller;
 mod frame;
 mod ray;
 mod view;
 
+pub use controller::{AxisView, CameraController, CameraInput, DragButton, MAX_PITCH, Navigation};
 pub use frame::{FrameError, VolumeFrame};
 pub use ray::{Ray, RayGen};
 pub use view::{FrameView, ViewGenerations};

@@ -13,9 +13,11 @@
 //! `floor(min*(N-1)) ..= ceil(max*(N-1))`, so the range is transparent exactly when
 //! that run of entries has no non-zero alpha.
 
+mod model;
 mod preint;
 mod table;
 
+pub use model::{ColorPoint, OpacityPoint, TABLE_ENTRIES, TfFileError, TfModel, TfPreset};
 pub use preint::{FINE as PREINT_FINE, PREINT_MIN_SIZE, PreintTable, Preintegrator, TAU_MAX};
 pub use table::{CorrectedTable, MIN_WIDTH as TABLE_MIN_WIDTH};
 

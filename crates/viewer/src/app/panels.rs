@@ -20,18 +20,18 @@ impl ViewerApp {
             if ui.button("Reset").clicked() {
                 c.reset();
             }
-            for a in Axis::ALL {
+            for a in AxisView::ALL {
                 if ui.button(a.label()).clicked() {
                     c.axis_view(a);
                 }
             }
         });
-        let mut fov = c.fov_y.to_degrees();
+        let mut fov = c.fov_y().to_degrees();
         if ui
             .add(egui::Slider::new(&mut fov, 10.0..=100.0).text("field of view °"))
             .changed()
         {
-            c.fov_y = fov.to_radians();
+            c.set_fov_y(fov.to_radians());
         }
         ui.label(
             egui::RichText::new(

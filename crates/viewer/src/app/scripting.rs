@@ -168,7 +168,7 @@ impl ViewerApp {
                     let home = self
                         .shown
                         .as_ref()
-                        .map(|s| CameraController::new(&s.frame).distance);
+                        .map(|s| CameraController::new(&s.frame).distance());
                     if let (Some(c), Some(home)) = (self.camera.as_mut(), home) {
                         c.set_orbit(yaw.to_radians(), pitch.to_radians(), d * home);
                     }

@@ -1,13 +1,15 @@
-//! The camera controller: orbit, pan, zoom and fly, reset and axis views,
-//! perspective and orthographic. GPU-free: it turns input deltas into a
-//! [`Camera`].
+//! A camera controller for hosts: orbit, pan, zoom and fly, reset and axis
+//! views, perspective and orthographic. GPU-free: it turns abstract input
+//! ([`CameraInput`]: drags in pixels, wheel notches, a fly velocity held for
+//! a time) into a [`Camera`], whatever the windowing toolkit. Every input,
+//! including non-finite deltas, leaves a camera that validates.
 
-use brickray::{Camera, DepthConvention, Projection, VolumeFrame};
+use super::{Camera, DepthConvention, Projection, VolumeFrame};
 use glam::Vec3;
 
 /// How mouse drags and keys move the camera.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(crate) enum Navigation {
+pub enum Navigation {
     /// Turn about the target; drag to orbit, pan with the right button.
     Orbit,
     /// Move the eye; drag to look around, WASD/QE to move.
@@ -16,7 +18,7 @@ pub(crate) enum Navigation {
 
 /// An axis-aligned view direction: the camera looks *from* this side.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(crate) enum Axis {
+pub enum AxisView {
     /// From +x.
     PosX,
     /// From -x.
@@ -31,32 +33,32 @@ pub(crate) enum Axis {
     NegZ,
 }
 
-impl Axis {
+impl AxisView {
     /// All six, in menu order.
-    pub(crate) const ALL: [Axis; 6] = [
-        Axis::PosX,
-        Axis::NegX,
-        Axis::PosY,
-        Axis::NegY,
-        Axis::PosZ,
-        Axis::NegZ,
+    pub const ALL: [AxisView; 6] = [
+        AxisView::PosX,
+        AxisView::NegX,
+        AxisView::PosY,
+        AxisView::NegY,
+        AxisView::PosZ,
+        AxisView::NegZ,
     ];
 
     /// Its label.
-    pub(crate) fn label(self) -> &'static str {
+    pub fn label(self) -> &'static str {
         match self {
-            Axis::PosX => "+X",
-            Axis::NegX => "-X",
-            Axis::PosY => "+Y",
-            Axis::NegY => "-Y",
-            Axis::PosZ => "+Z",
-            Axis::NegZ => "-Z",
+            AxisView::PosX => "+X",
+            AxisView::NegX => "-X",
+            AxisView::PosY => "+Y",
+            AxisView::NegY => "-Y",
+            AxisView::PosZ => "+Z",
+            AxisView::NegZ => "-Z",
         }
     }
 
     /// Parses `+x`, `-y`, ... (case-insensitive).
-    pub(crate) fn parse(s: &str) -> Option<Axis> {
-        Axis::ALL
+    pub fn parse(s: &str) -> Option<AxisView> {
+        AxisView::ALL
             .into_iter()
             .find(|a| a.label().eq_ignore_ascii_case(s))
     }
@@ -65,41 +67,81 @@ impl Axis {
     fn angles(self) -> (f32, f32) {
         use std::f32::consts::FRAC_PI_2;
         match self {
-            Axis::PosX => (FRAC_PI_2, 0.0),
-            Axis::NegX => (-FRAC_PI_2, 0.0),
-            Axis::PosY => (0.0, MAX_PITCH),
-            Axis::NegY => (0.0, -MAX_PITCH),
-            Axis::PosZ => (0.0, 0.0),
-            Axis::NegZ => (std::f32::consts::PI, 0.0),
+            AxisView::PosX => (FRAC_PI_2, 0.0),
+            AxisView::NegX => (-FRAC_PI_2, 0.0),
+            AxisView::PosY => (0.0, MAX_PITCH),
+            AxisView::NegY => (0.0, -MAX_PITCH),
+            AxisView::PosZ => (0.0, 0.0),
+            AxisView::NegZ => (std::f32::consts::PI, 0.0),
         }
     }
 }
 
 /// Pitch stays this far from the poles, so the up vector (+y) is never
 /// parallel to the view.
-pub(crate) const MAX_PITCH: f32 = std::f32::consts::FRAC_PI_2 - 1e-3;
+pub const MAX_PITCH: f32 = std::f32::consts::FRAC_PI_2 - 1e-3;
 /// Radians of orbit per pixel dragged.
 const ORBIT_PER_PX: f32 = 0.008;
 /// Distance factor per zoom step (a wheel notch).
 const ZOOM_PER_STEP: f32 = 0.9;
 
+/// Which button drags.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum DragButton {
+    /// Orbits (or turns the view when flying).
+    Primary,
+    /// Pans (the secondary or middle button).
+    Secondary,
+}
+
+/// One input event, in toolkit-independent units.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum CameraInput {
+    /// The pointer dragged `(dx, dy)` pixels with `button` held, over a
+    /// viewport `viewport_height` pixels high (panning follows the cursor).
+    Drag {
+        /// The button held.
+        button: DragButton,
+        /// Pixels right.
+        dx: f32,
+        /// Pixels down.
+        dy: f32,
+        /// The viewport's height in pixels.
+        viewport_height: f32,
+    },
+    /// Wheel notches (positive: closer).
+    Wheel(f32),
+    /// A fly velocity `(right, up, forward)` in scene radii per second, held
+    /// for `dt` seconds (keys such as WASD/QE).
+    Move {
+        /// The velocity.
+        velocity: Vec3,
+        /// Seconds.
+        dt: f32,
+    },
+    /// Back to the home framing.
+    Reset,
+    /// The home framing seen from an axis.
+    Axis(AxisView),
+}
+
 /// The controller's state. The eye is `target + dir(yaw, pitch) * distance`.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub(crate) struct CameraController {
+pub struct CameraController {
     /// The point looked at (orbit centre).
-    pub(crate) target: Vec3,
+    target: Vec3,
     /// Radians about +y.
-    pub(crate) yaw: f32,
+    yaw: f32,
     /// Radians above the horizon, within `±MAX_PITCH`.
-    pub(crate) pitch: f32,
+    pitch: f32,
     /// Eye to target.
-    pub(crate) distance: f32,
+    distance: f32,
     /// Vertical field of view of the perspective projection (radians).
-    pub(crate) fov_y: f32,
+    fov_y: f32,
     /// Orthographic instead of perspective (the same framing at the target).
-    pub(crate) orthographic: bool,
+    pub orthographic: bool,
     /// How input moves the camera.
-    pub(crate) navigation: Navigation,
+    pub navigation: Navigation,
     /// The scene's bounding radius (sets zoom limits, clip planes and speeds).
     radius: f32,
     /// The framing `reset` returns to.
@@ -108,7 +150,7 @@ pub(crate) struct CameraController {
 
 impl CameraController {
     /// A controller framing the volume's box, seen from a three-quarter view.
-    pub(crate) fn new(frame: &VolumeFrame) -> CameraController {
+    pub fn new(frame: &VolumeFrame) -> CameraController {
         let radius = (frame.world_size().length() * 0.5).max(1e-6);
         let fov_y = 40f32.to_radians();
         // Far enough that the bounding sphere fits the vertical field of view.
@@ -127,19 +169,74 @@ impl CameraController {
         }
     }
 
+    /// The point looked at (the orbit centre).
+    pub fn target(&self) -> Vec3 {
+        self.target
+    }
+
+    /// Radians about +y.
+    pub fn yaw(&self) -> f32 {
+        self.yaw
+    }
+
+    /// Radians above the horizon, within `±MAX_PITCH`.
+    pub fn pitch(&self) -> f32 {
+        self.pitch
+    }
+
+    /// Eye to target.
+    pub fn distance(&self) -> f32 {
+        self.distance
+    }
+
+    /// The vertical field of view of the perspective projection (radians).
+    pub fn fov_y(&self) -> f32 {
+        self.fov_y
+    }
+
+    /// Sets the vertical field of view, clamped to 1-170 degrees (a
+    /// non-finite value is ignored).
+    pub fn set_fov_y(&mut self, radians: f32) {
+        if radians.is_finite() {
+            self.fov_y = radians.clamp(1f32.to_radians(), 170f32.to_radians());
+        }
+    }
+
+    /// Applies one input event.
+    pub fn apply(&mut self, input: CameraInput) {
+        match input {
+            CameraInput::Drag {
+                button: DragButton::Primary,
+                dx,
+                dy,
+                ..
+            } => self.rotate(dx, dy),
+            CameraInput::Drag {
+                button: DragButton::Secondary,
+                dx,
+                dy,
+                viewport_height,
+            } => self.pan(dx, dy, viewport_height),
+            CameraInput::Wheel(steps) => self.zoom(steps),
+            CameraInput::Move { velocity, dt } => self.fly(velocity, dt),
+            CameraInput::Reset => self.reset(),
+            CameraInput::Axis(a) => self.axis_view(a),
+        }
+    }
+
     /// Back to the initial framing (projection and navigation kept).
-    pub(crate) fn reset(&mut self) {
+    pub fn reset(&mut self) {
         (self.target, self.yaw, self.pitch, self.distance) = self.home;
     }
 
     /// Looks at the home target from `axis` at the home distance.
-    pub(crate) fn axis_view(&mut self, axis: Axis) {
+    pub fn axis_view(&mut self, axis: AxisView) {
         self.reset();
         (self.yaw, self.pitch) = axis.angles();
     }
 
     /// Sets the orbit explicitly (scripts): angles in radians, distance > 0.
-    pub(crate) fn set_orbit(&mut self, yaw: f32, pitch: f32, distance: f32) {
+    pub fn set_orbit(&mut self, yaw: f32, pitch: f32, distance: f32) {
         self.target = self.home.0;
         self.yaw = wrap(yaw);
         self.pitch = pitch.clamp(-MAX_PITCH, MAX_PITCH);
@@ -162,7 +259,7 @@ impl CameraController {
     }
 
     /// The eye position.
-    pub(crate) fn eye(&self) -> Vec3 {
+    pub fn eye(&self) -> Vec3 {
         self.target + self.dir() * self.distance
     }
 
@@ -175,7 +272,7 @@ impl CameraController {
 
     /// A drag of `(dx, dy)` pixels with the primary button: orbit about the
     /// target, or turn the view about the eye when flying.
-    pub(crate) fn rotate(&mut self, dx: f32, dy: f32) {
+    pub fn rotate(&mut self, dx: f32, dy: f32) {
         if !(dx.is_finite() && dy.is_finite()) {
             return;
         }
@@ -197,7 +294,7 @@ impl CameraController {
     /// A drag of `(dx, dy)` pixels with the secondary button in a viewport
     /// `height` pixels high: moves eye and target in the view plane so the
     /// point at the target's depth follows the cursor.
-    pub(crate) fn pan(&mut self, dx: f32, dy: f32, height: f32) {
+    pub fn pan(&mut self, dx: f32, dy: f32, height: f32) {
         if !(dx.is_finite() && dy.is_finite()) {
             return;
         }
@@ -208,7 +305,7 @@ impl CameraController {
 
     /// Zooms by `steps` wheel notches (positive: closer). Orbit moves the eye
     /// towards the target; fly moves both forward.
-    pub(crate) fn zoom(&mut self, steps: f32) {
+    pub fn zoom(&mut self, steps: f32) {
         if !steps.is_finite() {
             return;
         }
@@ -224,7 +321,7 @@ impl CameraController {
 
     /// Flies: `v = (right, up, forward)` in units of the scene radius per
     /// second, for `dt` seconds. Eye and target move together.
-    pub(crate) fn fly(&mut self, v: Vec3, dt: f32) {
+    pub fn fly(&mut self, v: Vec3, dt: f32) {
         if !v.is_finite() || !dt.is_finite() {
             return;
         }
@@ -244,7 +341,7 @@ impl CameraController {
     }
 
     /// The camera (standard depth, clip planes around the scene).
-    pub(crate) fn camera(&self) -> Camera {
+    pub fn camera(&self) -> Camera {
         let eye = self.eye();
         let projection = if self.orthographic {
             Projection::Orthographic {
@@ -300,36 +397,59 @@ mod tests {
         VolumeFrame::centered([256, 256, 108], [0.957, 0.957, 1.5])
     }
 
+    /// One scripted step: an input event or a setting a host's UI changes.
     #[derive(Debug, Clone)]
     enum Op {
-        Rotate(f32, f32),
-        Pan(f32, f32),
-        Zoom(f32),
-        Fly(f32, f32, f32),
+        Input(CameraInput),
         Nav(bool),
         Ortho(bool),
-        Axis(usize),
+        Fov(f32),
     }
 
     fn op() -> impl Strategy<Value = Op> {
         let px = -2000.0f32..2000.0;
+        let button = prop_oneof![Just(DragButton::Primary), Just(DragButton::Secondary)];
+        let odd = prop_oneof![
+            Just(f32::NAN),
+            Just(f32::INFINITY),
+            Just(-f32::INFINITY),
+            Just(0.0f32),
+            Just(1e30f32)
+        ];
         prop_oneof![
-            (px.clone(), px.clone()).prop_map(|(a, b)| Op::Rotate(a, b)),
-            (px.clone(), px).prop_map(|(a, b)| Op::Pan(a, b)),
-            (-20.0f32..20.0).prop_map(Op::Zoom),
-            (-3.0f32..3.0, -3.0f32..3.0, -3.0f32..3.0).prop_map(|(a, b, c)| Op::Fly(a, b, c)),
+            (button, px.clone(), px.clone(), 0.0f32..2000.0).prop_map(|(button, dx, dy, h)| {
+                Op::Input(CameraInput::Drag {
+                    button,
+                    dx,
+                    dy,
+                    viewport_height: h,
+                })
+            }),
+            (-20.0f32..20.0).prop_map(|s| Op::Input(CameraInput::Wheel(s))),
+            (-3.0f32..3.0, -3.0f32..3.0, -3.0f32..3.0, 0.0f32..0.5).prop_map(|(a, b, c, dt)| {
+                Op::Input(CameraInput::Move {
+                    velocity: Vec3::new(a, b, c),
+                    dt,
+                })
+            }),
+            odd.clone().prop_map(|v| Op::Input(CameraInput::Wheel(v))),
+            (odd.clone(), px).prop_map(|(v, d)| Op::Input(CameraInput::Drag {
+                button: DragButton::Secondary,
+                dx: v,
+                dy: d,
+                viewport_height: v,
+            })),
+            Just(Op::Input(CameraInput::Reset)),
+            (0usize..6).prop_map(|i| Op::Input(CameraInput::Axis(AxisView::ALL[i]))),
             any::<bool>().prop_map(Op::Nav),
             any::<bool>().prop_map(Op::Ortho),
-            (0usize..6).prop_map(Op::Axis),
+            prop_oneof![-1.0f32..4.0, odd].prop_map(Op::Fov),
         ]
     }
 
     fn apply(c: &mut CameraController, op: &Op) {
         match *op {
-            Op::Rotate(x, y) => c.rotate(x, y),
-            Op::Pan(x, y) => c.pan(x, y, 300.0),
-            Op::Zoom(s) => c.zoom(s),
-            Op::Fly(x, y, z) => c.fly(Vec3::new(x, y, z), 0.1),
+            Op::Input(i) => c.apply(i),
             Op::Nav(f) => {
                 c.navigation = if f {
                     Navigation::Fly
@@ -338,8 +458,49 @@ mod tests {
                 }
             }
             Op::Ortho(o) => c.orthographic = o,
-            Op::Axis(i) => c.axis_view(Axis::ALL[i]),
+            Op::Fov(f) => c.set_fov_y(f),
         }
+    }
+
+    /// Events do what the methods they stand for do.
+    #[test]
+    fn events_route_to_their_movements() {
+        let mut a = CameraController::new(&frame());
+        let mut b = a;
+        a.apply(CameraInput::Drag {
+            button: DragButton::Primary,
+            dx: 30.0,
+            dy: -12.0,
+            viewport_height: 200.0,
+        });
+        b.rotate(30.0, -12.0);
+        assert_eq!(a, b);
+        a.apply(CameraInput::Drag {
+            button: DragButton::Secondary,
+            dx: 5.0,
+            dy: 7.0,
+            viewport_height: 200.0,
+        });
+        b.pan(5.0, 7.0, 200.0);
+        assert_eq!(a, b);
+        a.apply(CameraInput::Wheel(2.5));
+        b.zoom(2.5);
+        assert_eq!(a, b);
+        a.apply(CameraInput::Move {
+            velocity: Vec3::new(0.1, 0.0, 1.0),
+            dt: 0.2,
+        });
+        b.fly(Vec3::new(0.1, 0.0, 1.0), 0.2);
+        assert_eq!(a, b);
+        a.apply(CameraInput::Axis(AxisView::NegZ));
+        b.axis_view(AxisView::NegZ);
+        assert_eq!(a, b);
+        assert_ne!(a, CameraController::new(&frame()), "the inputs moved the camera");
+        a.apply(CameraInput::Reset);
+        let mut home = CameraController::new(&frame());
+        home.axis_view(AxisView::NegZ);
+        home.reset();
+        assert_eq!(a, home);
     }
 
     proptest! {
@@ -438,18 +599,18 @@ mod tests {
     fn axis_views_look_along_the_axis() {
         let mut c = CameraController::new(&frame());
         for (axis, from) in [
-            (Axis::PosX, Vec3::X),
-            (Axis::NegX, -Vec3::X),
-            (Axis::PosY, Vec3::Y),
-            (Axis::NegY, -Vec3::Y),
-            (Axis::PosZ, Vec3::Z),
-            (Axis::NegZ, -Vec3::Z),
+            (AxisView::PosX, Vec3::X),
+            (AxisView::NegX, -Vec3::X),
+            (AxisView::PosY, Vec3::Y),
+            (AxisView::NegY, -Vec3::Y),
+            (AxisView::PosZ, Vec3::Z),
+            (AxisView::NegZ, -Vec3::Z),
         ] {
             c.axis_view(axis);
             let d = (c.eye() - c.target).normalize();
             assert!(d.dot(from) > 0.999, "{axis:?}: {d}");
             assert!(c.camera().validate().is_ok());
-            assert_eq!(Axis::parse(&axis.label().to_lowercase()), Some(axis));
+            assert_eq!(AxisView::parse(&axis.label().to_lowercase()), Some(axis));
         }
     }
 
