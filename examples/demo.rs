@@ -11,10 +11,9 @@
 //! streams that (or, with `--in-core`, uploads the file whole).
 
 use brickray::{
-    Camera, FrameDesc, OutOfCoreConfig, RenderMode, RenderSettings, Shading, TransferFunction,
-    VolumeFrame, VolumeRenderer,
+    Camera, FrameDesc, OutOfCoreConfig, RenderMode, RenderSettings, Shading, TargetDesc,
+    TransferFunction, VolumeFrame, VolumeRenderer,
 };
-use brickray_harness::{GpuContext, Offscreen};
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Instant;
@@ -68,9 +67,10 @@ fn parse() -> Result<Args, Box<dyn std::error::Error>> {
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args = parse()?;
     std::fs::create_dir_all(&args.out)?;
-    let gpu = GpuContext::new()?;
-    println!("adapter: {}", gpu.describe());
-    let mut renderer = VolumeRenderer::new(&gpu.device, brickray_harness::target_desc())?;
+    let gpu = Gpu::new()?;
+    println!("adapter: {}", gpu.adapter);
+    let targets = TargetDesc::new(COLOR).with_depth(DEPTH);
+    let mut renderer = VolumeRenderer::new(&gpu.device, targets)?;
     let config = OutOfCoreConfig {
         gpu_budget_bytes: args.pool_mib << 20,
         ..Default::default()
@@ -145,7 +145,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         }
     };
     renderer.set_transfer_function(&gpu.device, &gpu.queue, &tf)?;
-    let target = Offscreen::new(&gpu.device, args.size, args.size);
+    let target = Target::new(&gpu.device, args.size);
     let settings = RenderSettings {
         mode,
         shading: Shading {
@@ -169,15 +169,15 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         };
         renderer.prepare(&gpu.device, &gpu.queue, &mut enc, &desc)?;
         {
-            let mut pass = target.pass(&mut enc, true);
+            let mut pass = target.pass(&mut enc);
             renderer.render(&mut pass)?;
         }
-        gpu.submit_wait(enc);
+        let pixels = target.read_rgba(&gpu, enc)?;
         let ms = t.elapsed().as_secs_f64() * 1e3;
         let path = args.out.join(format!("frame_{i:02}.png"));
         image::save_buffer(
             &path,
-            &target.read_color(&gpu),
+            &pixels,
             args.size,
             args.size,
             image::ExtendedColorType::Rgba8,
@@ -207,4 +207,131 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         std::fs::canonicalize(&args.out)?.display()
     );
     Ok(())
+}
+
+/// The colour and depth formats the demo renders into.
+const COLOR: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
+const DEPTH: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
+
+/// The demo's device: any adapter (Mesa's lavapipe where there is no GPU),
+/// with the limits brickray needs and the optional features it can use.
+struct Gpu {
+    adapter: String,
+    device: wgpu::Device,
+    queue: wgpu::Queue,
+}
+
+impl Gpu {
+    fn new() -> Result<Gpu, Box<dyn std::error::Error>> {
+        let instance =
+            wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+        let adapter = pollster::block_on(instance.request_adapter(&Default::default()))?;
+        let info = adapter.get_info();
+        let (device, queue) =
+            pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+                required_limits: brickray::required_limits().using_resolution(adapter.limits()),
+                required_features: adapter.features() & brickray::optional_features(),
+                ..Default::default()
+            }))?;
+        Ok(Gpu {
+            adapter: format!("{} ({:?})", info.name, info.backend),
+            device,
+            queue,
+        })
+    }
+}
+
+/// A square offscreen colour and depth target, read back after each frame.
+struct Target {
+    size: u32,
+    color: wgpu::Texture,
+    color_view: wgpu::TextureView,
+    depth_view: wgpu::TextureView,
+}
+
+impl Target {
+    fn new(device: &wgpu::Device, size: u32) -> Target {
+        let texture = |format, usage| {
+            device.create_texture(&wgpu::TextureDescriptor {
+                label: Some("demo target"),
+                size: wgpu::Extent3d {
+                    width: size,
+                    height: size,
+                    depth_or_array_layers: 1,
+                },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format,
+                usage: wgpu::TextureUsages::RENDER_ATTACHMENT | usage,
+                view_formats: &[],
+            })
+        };
+        let color = texture(COLOR, wgpu::TextureUsages::COPY_SRC);
+        let depth = texture(DEPTH, wgpu::TextureUsages::TEXTURE_BINDING);
+        Target {
+            size,
+            color_view: color.create_view(&Default::default()),
+            depth_view: depth.create_view(&Default::default()),
+            color,
+        }
+    }
+
+    /// A pass that clears colour to black and depth to 1 (standard depth).
+    fn pass<'e>(&self, encoder: &'e mut wgpu::CommandEncoder) -> wgpu::RenderPass<'e> {
+        let store = wgpu::StoreOp::Store;
+        encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+            label: Some("demo pass"),
+            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                view: &self.color_view,
+                depth_slice: None,
+                resolve_target: None,
+                ops: wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(wgpu::Color::BLACK),
+                    store,
+                },
+            })],
+            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                view: &self.depth_view,
+                depth_ops: Some(wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(1.0),
+                    store,
+                }),
+                stencil_ops: None,
+            }),
+            ..Default::default()
+        })
+    }
+
+    /// Submits the frame's work and reads the colour back (tightly packed RGBA).
+    fn read_rgba(
+        &self,
+        gpu: &Gpu,
+        mut encoder: wgpu::CommandEncoder,
+    ) -> Result<Vec<u8>, Box<dyn std::error::Error>> {
+        let row = (4 * self.size).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
+        let buffer = gpu.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("demo read-back"),
+            size: (row * self.size) as u64,
+            usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+            mapped_at_creation: false,
+        });
+        let dst = wgpu::TexelCopyBufferInfo {
+            buffer: &buffer,
+            layout: wgpu::TexelCopyBufferLayout {
+                bytes_per_row: Some(row),
+                ..Default::default()
+            },
+        };
+        encoder.copy_texture_to_buffer(self.color.as_image_copy(), dst, self.color.size());
+        gpu.queue.submit([encoder.finish()]);
+        buffer.slice(..).map_async(wgpu::MapMode::Read, |_| {});
+        gpu.device.poll(wgpu::PollType::wait_indefinitely())?;
+        let data = buffer.slice(..).get_mapped_range()?;
+        Ok(data
+            .chunks(row as usize)
+            .flat_map(|r| &r[..4 * self.size as usize])
+            .copied()
+            .collect())
+    }
 }
