@@ -10,3 +10,8 @@ ensure_display
 trap stop_display EXIT
 export BRICKRAY_TEST_OUTPUT="${BRICKRAY_TEST_OUTPUT:-$PWD/target/test-images}"
 cargo test --workspace --no-fail-fast "$@"
+# The API documentation builds without warnings (broken intra-doc links among
+# them); skipped when the run is filtered to some tests.
+if [ $# -eq 0 ]; then
+    RUSTDOCFLAGS="-D warnings" cargo doc --workspace --no-deps
+fi

@@ -19,14 +19,17 @@
 //! The workspace's other crates (the caches' and the index's internals, the
 //! shaders) are the library's own.
 
+#[doc(inline)]
 pub use brickray_core as core;
+#[doc(inline)]
 pub use brickray_io as io;
+#[doc(inline)]
 pub use brickray_store as store;
 
 /// The GPU-free out-of-core planner and its vocabulary (`brickray-cache`).
 pub mod cache {
     pub use brickray_cache::{
-        CacheConfig, Classification, ConfigError, CutLeaf, EmptyReason, FadeDuration, FrameStats,
+        OutOfCoreConfig, Classification, ConfigError, CutLeaf, EmptyReason, FadeDuration, FrameStats,
         GpuFormat, LeafKind, QueryBatch, QueryResult, QuerySchedule, Residency, ResidencyCounts,
         RetryPolicy, StreamError, StreamFrame, StreamPlan, StreamStats, Streamer, UsageFrame,
         ViewFeedback,

@@ -1,7 +1,7 @@
 //! Out-of-core brick management for brickray, after Gobbetti et al. 2008 (sect. 3
 //! and 4), free of any GPU API:
 //!
-//! * [`CacheConfig`]: budgets and knobs, validated ([`ConfigError`]); with
+//! * [`OutOfCoreConfig`]: budgets and knobs, validated ([`ConfigError`]); with
 //!   [`GpuFormat`], what the renderer's device stores per pool slot;
 //! * [`CpuCache`]: the level-2 cache of [`PreparedBrick`]s (texels and sub-cell
 //!   ranges, made off the frame path), LRU within a byte budget;
@@ -43,7 +43,7 @@ mod test_source;
 
 pub use brickray_core::{CutLeaf, EmptyReason, LeafKind};
 pub use config::{
-    CacheConfig, ConfigError, DEFAULT_FLOOR_SLOTS, DEFAULT_SETUP_DEADLINE, GpuFormat,
+    OutOfCoreConfig, ConfigError, DEFAULT_FLOOR_SLOTS, DEFAULT_SETUP_DEADLINE, GpuFormat,
     MAX_LOADER_THREADS, MIN_RESIDENT_BRICKS, RetryPolicy, SizeQuantity,
 };
 pub use cpu_cache::CpuCache;

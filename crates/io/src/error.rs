@@ -85,7 +85,7 @@ pub enum IoError {
     /// A header or sidecar names a data file that does not resolve inside the
     /// header's folder (an absolute path, `..`, or a symbolic link leading out),
     /// and the reader was not allowed to read outside it
-    /// ([`ReadOptions::allow_outside_dir`]).
+    /// ([`ReadOptions::allow_outside_dir`](crate::ReadOptions::allow_outside_dir)).
     #[error(
         "{path}: data file {data} resolves outside the header's folder {dir} \
          (allowed only on request: ReadOptions::allow_outside_dir, \
@@ -177,7 +177,7 @@ pub enum IoError {
         /// The largest decoded value.
         hi: f64,
     },
-    /// The buffer given to [`VolumeReader::read_slices`] is not the slab's
+    /// The buffer given to [`VolumeReader::read_slices`](crate::VolumeReader::read_slices) is not the slab's
     /// size.
     #[error("read_slices: a buffer of {actual} bytes for a slab of {expected}")]
     SlabBuffer {

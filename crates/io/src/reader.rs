@@ -7,8 +7,8 @@ use brickray_core::VolumeFrame;
 use brickray_core::volume::{Volume, VolumeData, VolumeDesc, VolumeError};
 use std::path::{Path, PathBuf};
 
-/// Options of the readers ([`open_with`], [`RawReader::open_sidecar_with`],
-/// [`NrrdReader::open_with`], ...): safety switches and which part of a
+/// Options of the readers ([`open_with`](crate::open_with), [`RawReader::open_sidecar_with`](crate::RawReader::open_sidecar_with),
+/// [`NrrdReader::open_with`](crate::NrrdReader::open_with), ...): safety switches and which part of a
 /// multi-part input to read. The default is strict and reads the default part
 /// (the largest DICOM series, the finest OME-Zarr level, the first channel and
 /// time point).
@@ -21,7 +21,7 @@ pub struct ReadOptions {
     /// cannot make the reader read any file the process can read.
     pub allow_outside_dir: bool,
     /// The DICOM series to read (its SeriesInstanceUID, or its index in
-    /// [`Registry::list`]'s order); `None`: the series with the most slices.
+    /// [`Registry::list`](crate::Registry::list)'s order); `None`: the series with the most slices.
     pub series: Option<String>,
     /// The OME-Zarr multiscale level (0 = finest); `None`: 0.
     pub level: Option<usize>,

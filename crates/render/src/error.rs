@@ -74,7 +74,7 @@ pub enum RenderError {
     /// The out-of-core configuration is not usable (a budget too small for the
     /// texel format, a NaN tolerance, too many loader threads, ...).
     #[error(transparent)]
-    CacheConfig(#[from] brickray_cache::ConfigError),
+    OutOfCoreConfig(#[from] brickray_cache::ConfigError),
     /// The brick source failed at set-up (reading the root).
     #[error(transparent)]
     Stream(#[from] brickray_cache::StreamError),

@@ -42,7 +42,7 @@ pub use backend::{FeedbackStats, OcclusionStats};
 /// Budgets, LOD metric and tolerance, fades, retry, visibility policy and its
 /// settings, loader threads and floor of the out-of-core path: the cache's own
 /// configuration, one value ([`StreamedVolume::configure`]).
-pub use brickray_cache::CacheConfig as OutOfCoreConfig;
+pub use brickray_cache::OutOfCoreConfig;
 pub use brickray_cache::{ConfigError, FadeDuration, RetryPolicy, StreamError, UsageFrame};
 pub use brickray_visibility::{VisibilityConfig, VisibilityCounts, VisibilityPolicy};
 pub use desc::{FrameDesc, FrameStats, OutOfCoreStats, RendererStats, TargetDesc, Viewport};

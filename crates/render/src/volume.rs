@@ -13,7 +13,7 @@ use crate::error::{PrepareError, RenderError};
 use crate::gpu::{self, GrowBuffer, Uniform};
 use crate::planner::Planner;
 use brickray_cache::{
-    CacheConfig, FadeSlot, GpuFormat, StreamError, StreamFrame, StreamPlan, StreamStats, Streamer,
+    OutOfCoreConfig, FadeSlot, GpuFormat, StreamError, StreamFrame, StreamPlan, StreamStats, Streamer,
     Upload,
 };
 use brickray_core::{BrickSource, OctreeLayout};
@@ -274,7 +274,7 @@ pub(crate) struct Shared {
     /// `configure`: read without the planner's lock.
     pub(crate) layout: OctreeLayout,
     gpu: GpuFormat,
-    config: CacheConfig,
+    config: OutOfCoreConfig,
     /// Rows of the slot table and usage counters the last plan needs.
     pub(crate) slot_rows: u32,
     /// The last applied plan's statistics.
@@ -388,7 +388,7 @@ pub(crate) struct Bound<'a> {
 
 /// A streamed (out-of-core) volume the host owns and hands to every renderer
 /// that draws it (see the module documentation). Out-of-core settings live
-/// here, in one [`CacheConfig`] applied with [`configure`](Self::configure).
+/// here, in one [`OutOfCoreConfig`] applied with [`configure`](Self::configure).
 #[derive(Clone)]
 pub struct StreamedVolume {
     shared: Arc<Mutex<Shared>>,
@@ -413,14 +413,14 @@ impl StreamedVolume {
     /// limits and reads the root (set-up time, not the frame path), so the
     /// first frame already shows a coarse image. Creates no GPU object when a
     /// check fails. Waits for the source at most
-    /// [`CacheConfig::setup_deadline`] (30 s by default): a root that does not
+    /// [`OutOfCoreConfig::setup_deadline`] (30 s by default): a root that does not
     /// come back by then is [`RenderError::Stream`] with
     /// [`LoadError::TimedOut`](brickray_cache::LoadError::TimedOut).
     pub fn new(
         device: &wgpu::Device,
         queue: &wgpu::Queue,
         source: Arc<dyn BrickSource>,
-        config: CacheConfig,
+        config: OutOfCoreConfig,
         options: VolumeOptions,
     ) -> Result<StreamedVolume, RenderError> {
         crate::group2::check_ooc_limits(device)?;
@@ -482,7 +482,7 @@ impl StreamedVolume {
         &self,
         device: &wgpu::Device,
         queue: &wgpu::Queue,
-        config: CacheConfig,
+        config: OutOfCoreConfig,
     ) -> Result<(), RenderError> {
         let mut guard = self.shared.lock();
         let s = &mut *guard;
@@ -532,7 +532,7 @@ impl StreamedVolume {
         &self,
         device: &wgpu::Device,
         queue: &wgpu::Queue,
-        f: impl FnOnce(&mut CacheConfig),
+        f: impl FnOnce(&mut OutOfCoreConfig),
     ) -> Result<(), RenderError> {
         let mut c = self.config();
         f(&mut c);
@@ -540,7 +540,7 @@ impl StreamedVolume {
     }
 
     /// The configuration in force.
-    pub fn config(&self) -> CacheConfig {
+    pub fn config(&self) -> OutOfCoreConfig {
         self.shared.lock().config
     }
 

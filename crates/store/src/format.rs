@@ -8,7 +8,7 @@ pub const MAGIC: [u8; 8] = *b"BRKSTORE";
 /// The format version this crate writes (it also reads [`MIN_VERSION`]..=this).
 /// Version 2 adds the optional per-node error section, version 3 the
 /// parent-error section after it, version 4 binds each payload's checksum to
-/// its node ([`payload_crc`]; `docs/store-format.md`).
+/// its node (`docs/store-format.md`, "Payload checksums").
 pub const VERSION: u32 = 4;
 /// The first format version whose payload checksums cover the node's key.
 pub(crate) const KEYED_CRC_VERSION: u32 = 4;

@@ -1,4 +1,4 @@
-//! The cache's configuration ([`CacheConfig`]), what the renderer's device stores
+//! The cache's configuration ([`OutOfCoreConfig`]), what the renderer's device stores
 //! per pool slot ([`GpuFormat`]), the retry back-off ([`RetryPolicy`]) and their
 //! validation ([`ConfigError`]).
 
@@ -11,7 +11,7 @@ use brickray_visibility::{VisibilityConfig, VisibilityPolicy};
 use std::time::Duration;
 use thiserror::Error;
 
-/// Most loader threads a [`CacheConfig`] accepts.
+/// Most loader threads a [`OutOfCoreConfig`] accepts.
 pub const MAX_LOADER_THREADS: usize = 64;
 
 /// Fewest bricks the CPU cache and the GPU pool must hold: the root and its
@@ -71,7 +71,7 @@ impl RetryPolicy {
 /// Budgets and knobs of a [`BrickManager`](crate::BrickManager). Nothing here
 /// depends on the device: what the device stores per slot is a [`GpuFormat`].
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct CacheConfig {
+pub struct OutOfCoreConfig {
     /// System memory for prepared bricks (texels + sub-cell ranges), the level-2
     /// cache; at least [`MIN_RESIDENT_BRICKS`] prepared bricks.
     pub cpu_budget_bytes: u64,
@@ -126,18 +126,18 @@ pub struct CacheConfig {
     pub setup_deadline: Duration,
 }
 
-/// Default [`CacheConfig::setup_deadline`]: 30 s.
+/// Default [`OutOfCoreConfig::setup_deadline`]: 30 s.
 pub const DEFAULT_SETUP_DEADLINE: Duration = Duration::from_secs(30);
 
-/// Default [`CacheConfig::floor_slots`]: levels 0 to 2 of a cubic volume.
+/// Default [`OutOfCoreConfig::floor_slots`]: levels 0 to 2 of a cubic volume.
 pub const DEFAULT_FLOOR_SLOTS: u32 = 73;
 
-impl Default for CacheConfig {
+impl Default for OutOfCoreConfig {
     /// 512 MiB CPU, 256 MiB GPU, 16 MiB uploaded per frame, 1 px, 2 threads,
     /// retries after 1 s doubling to 60 s, fades of 120 ms, a floor of up to
     /// 73 slots, no visibility feedback, a set-up deadline of 30 s.
     fn default() -> Self {
-        CacheConfig {
+        OutOfCoreConfig {
             cpu_budget_bytes: 512 << 20,
             gpu_budget_bytes: 256 << 20,
             upload_budget_bytes: 16 << 20,
@@ -438,7 +438,7 @@ pub(crate) fn raw_brick_bytes(layout: &OctreeLayout) -> Result<usize, ConfigErro
         })
 }
 
-impl CacheConfig {
+impl OutOfCoreConfig {
     /// Checks every field against the layout and the GPU format (see each
     /// field's doc); the first violation found is returned.
     pub fn validate(&self, layout: &OctreeLayout, gpu: &GpuFormat) -> Result<(), ConfigError> {

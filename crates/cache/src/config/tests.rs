@@ -20,7 +20,7 @@ fn gpu(layout: &OctreeLayout) -> GpuFormat {
 fn defaults_are_valid_and_sizes_count_the_format() {
     let layout = ball_layout(64);
     let g = gpu(&layout);
-    assert_eq!(CacheConfig::default().validate(&layout, &g), Ok(()));
+    assert_eq!(OutOfCoreConfig::default().validate(&layout, &g), Ok(()));
     // 10^3 voxels as R16Unorm, one sub-cell, one 32-byte slot row.
     assert_eq!(g.prepared_brick_bytes(&layout), Ok(2000 + 8));
     assert_eq!(g.slot_bytes(&layout), Ok(2000 + 8 + 32));
@@ -32,10 +32,10 @@ fn defaults_are_valid_and_sizes_count_the_format() {
 fn every_violation_is_a_typed_error() {
     let layout = ball_layout(64);
     let g = gpu(&layout);
-    let ok = CacheConfig::default();
-    let check = |c: CacheConfig| c.validate(&layout, &g);
+    let ok = OutOfCoreConfig::default();
+    let check = |c: OutOfCoreConfig| c.validate(&layout, &g);
     for value in [f32::NAN, -0.5, f32::INFINITY] {
-        let e = check(CacheConfig {
+        let e = check(OutOfCoreConfig {
             tolerance_px: value,
             ..ok
         });
@@ -45,7 +45,7 @@ fn every_violation_is_a_typed_error() {
             LodMetric::ErrorBound { budget: value },
             LodMetric::VisibleError { budget: value },
         ] {
-            let e = check(CacheConfig {
+            let e = check(OutOfCoreConfig {
                 lod_metric: metric,
                 ..ok
             });
@@ -56,7 +56,7 @@ fn every_violation_is_a_typed_error() {
         }
     }
     assert_eq!(
-        check(CacheConfig {
+        check(OutOfCoreConfig {
             brick_budget: Some(0),
             ..ok
         }),
@@ -64,7 +64,7 @@ fn every_violation_is_a_typed_error() {
     );
     for budget in [None, Some(1), Some(u32::MAX)] {
         assert_eq!(
-            check(CacheConfig {
+            check(OutOfCoreConfig {
                 brick_budget: budget,
                 ..ok
             }),
@@ -74,7 +74,7 @@ fn every_violation_is_a_typed_error() {
     }
     for threads in [0, MAX_LOADER_THREADS + 1, 2000] {
         assert_eq!(
-            check(CacheConfig {
+            check(OutOfCoreConfig {
                 loader_threads: threads,
                 ..ok
             }),
@@ -85,7 +85,7 @@ fn every_violation_is_a_typed_error() {
         );
     }
     assert_eq!(
-        check(CacheConfig {
+        check(OutOfCoreConfig {
             cpu_budget_bytes: 8 * 2008,
             ..ok
         }),
@@ -97,14 +97,14 @@ fn every_violation_is_a_typed_error() {
         })
     );
     assert_eq!(
-        check(CacheConfig {
+        check(OutOfCoreConfig {
             cpu_budget_bytes: 9 * 2008,
             gpu_budget_bytes: 9 * 2040,
             ..ok
         }),
         Ok(())
     );
-    let e = check(CacheConfig {
+    let e = check(OutOfCoreConfig {
         gpu_budget_bytes: 8 * 2040 + 2039,
         ..ok
     });
@@ -135,7 +135,7 @@ fn every_violation_is_a_typed_error() {
         (Duration::ZERO, Duration::from_secs(1), 2.0),
         (Duration::from_secs(2), Duration::from_secs(1), 2.0),
     ] {
-        let e = check(CacheConfig {
+        let e = check(OutOfCoreConfig {
             retry: Some(RetryPolicy {
                 initial,
                 max,
@@ -150,12 +150,12 @@ fn every_violation_is_a_typed_error() {
             factor,
             ..RetryPolicy::default()
         });
-        let e = check(CacheConfig { retry, ..ok });
+        let e = check(OutOfCoreConfig { retry, ..ok });
         assert!(matches!(e, Err(ConfigError::RetryFactor { .. })));
     }
-    assert_eq!(check(CacheConfig { retry: None, ..ok }), Ok(()));
+    assert_eq!(check(OutOfCoreConfig { retry: None, ..ok }), Ok(()));
     assert_eq!(
-        check(CacheConfig {
+        check(OutOfCoreConfig {
             setup_deadline: Duration::ZERO,
             ..ok
         }),
@@ -170,7 +170,7 @@ fn every_violation_is_a_typed_error() {
 fn format_mismatches_and_overflows_are_typed_errors() {
     let layout = ball_layout(64);
     let g = gpu(&layout);
-    let ok = CacheConfig::default();
+    let ok = OutOfCoreConfig::default();
     let mut other = layout.clone();
     other.volume.dtype = DType::U16;
     assert!(matches!(
@@ -242,9 +242,9 @@ fn bad_fade_durations_are_typed_errors() {
         FadeDuration::Millis(-1.0),
         FadeDuration::Millis(f32::INFINITY),
     ] {
-        let c = CacheConfig {
+        let c = OutOfCoreConfig {
             fade: Some(bad),
-            ..CacheConfig::default()
+            ..OutOfCoreConfig::default()
         };
         // NaN != NaN: compare the variant, then the value as printed.
         match c.validate(&layout, &g) {
@@ -259,9 +259,9 @@ fn bad_fade_durations_are_typed_errors() {
         Some(FadeDuration::Frames(1)),
         Some(FadeDuration::Millis(0.0)),
     ] {
-        let c = CacheConfig {
+        let c = OutOfCoreConfig {
             fade: good,
-            ..CacheConfig::default()
+            ..OutOfCoreConfig::default()
         };
         assert_eq!(c.validate(&layout, &g), Ok(()));
     }

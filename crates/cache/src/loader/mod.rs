@@ -48,7 +48,7 @@ pub enum LoadError {
         message: String,
     },
     /// The source did not answer within the set-up deadline
-    /// ([`CacheConfig::setup_deadline`](crate::CacheConfig::setup_deadline)).
+    /// ([`OutOfCoreConfig::setup_deadline`](crate::OutOfCoreConfig::setup_deadline)).
     #[error(
         "the source did not answer for the {kind} of {key:?} within the set-up deadline of {deadline:?}"
     )]

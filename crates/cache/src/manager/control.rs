@@ -13,7 +13,7 @@ pub struct Reconfigured {
     /// The loader (a thread-count change).
     pub loader: bool,
 }
-use crate::config::{CacheConfig, ConfigError, GpuFormat, MIN_RESIDENT_BRICKS};
+use crate::config::{OutOfCoreConfig, ConfigError, GpuFormat, MIN_RESIDENT_BRICKS};
 use crate::cpu_cache::CpuCache;
 use crate::failures::{FetchKind, StreamError};
 use crate::loader::worker::{children_in_volume, fetch_brick, fetch_meta};
@@ -172,7 +172,7 @@ impl BrickManager {
     /// Reads the root's metadata and brick (and its children's metadata)
     /// synchronously, so the very first frame already shows a coarse image and
     /// can request the next level. Meant for set-up time, not the frame path: it
-    /// blocks on the source, for at most [`CacheConfig::setup_deadline`]: the
+    /// blocks on the source, for at most [`OutOfCoreConfig::setup_deadline`]: the
     /// reads run on a thread of their own, and when the root's metadata or
     /// brick has not come back by the deadline, set-up fails with
     /// [`LoadError::TimedOut`] (what the thread reads later is dropped).
@@ -251,7 +251,7 @@ impl BrickManager {
     }
 
     /// Applies a configuration: the whole of it is validated first
-    /// ([`CacheConfig::validate`]; on error nothing changes), then only what
+    /// ([`OutOfCoreConfig::validate`]; on error nothing changes), then only what
     /// differs from the current one is rebuilt. A tolerance, metric, brick
     /// budget, fade, retry, upload budget or visibility change takes effect at
     /// the next update and rebuilds nothing; a CPU budget change resizes the
@@ -259,7 +259,7 @@ impl BrickManager {
     /// restarts the loader (loads in flight are asked for again); a GPU
     /// budget or floor change rebuilds the pool bookkeeping (every slot
     /// forgotten; the renderer recreates its atlas, [`Reconfigured::pool`]).
-    pub fn configure(&mut self, config: CacheConfig) -> Result<Reconfigured, ConfigError> {
+    pub fn configure(&mut self, config: OutOfCoreConfig) -> Result<Reconfigured, ConfigError> {
         config.validate(&self.layout, &self.gpu)?;
         let old = self.config;
         let mut out = Reconfigured::default();
@@ -318,7 +318,7 @@ impl BrickManager {
     }
 
     /// The configuration (as changed by the setters).
-    pub fn config(&self) -> &CacheConfig {
+    pub fn config(&self) -> &OutOfCoreConfig {
         &self.config
     }
 

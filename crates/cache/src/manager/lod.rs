@@ -149,7 +149,7 @@ impl BrickManager {
         self.fader.clear();
     }
 
-    /// The coarse floor's nodes ([`CacheConfig::floor_slots`](crate::CacheConfig::floor_slots)).
+    /// The coarse floor's nodes ([`OutOfCoreConfig::floor_slots`](crate::OutOfCoreConfig::floor_slots)).
     pub fn floor(&self) -> &[NodeKey] {
         &self.floor
     }

@@ -25,7 +25,7 @@ pub use frame::{FrameInput, UNTIMED_FRAME_RATE};
 pub use lod::FadeSlot;
 pub use stats::{FramePlan, FrameStats, Residency, ResidencyCounts, Upload};
 
-use crate::config::{CacheConfig, ConfigError, GpuFormat};
+use crate::config::{OutOfCoreConfig, ConfigError, GpuFormat};
 use crate::cpu_cache::CpuCache;
 use crate::fade::Fader;
 use crate::failures::{Clock, Failures, FetchKind, SystemClock};
@@ -57,7 +57,7 @@ pub enum CacheError {
 pub struct BrickManager {
     source: Arc<dyn BrickSource>,
     layout: OctreeLayout,
-    config: CacheConfig,
+    config: OutOfCoreConfig,
     gpu: GpuFormat,
     preparer: Arc<Preparer>,
     brick_bytes: u64,
@@ -160,12 +160,12 @@ impl RefineEnv for Env<'_, '_> {
 
 impl BrickManager {
     /// A manager over `source`, preparing bricks for a device storing `gpu`. Validates `config` against the layout and
-    /// `gpu` ([`CacheConfig::validate`]). Reads nothing: the root's metadata and
+    /// `gpu` ([`OutOfCoreConfig::validate`]). Reads nothing: the root's metadata and
     /// brick arrive through the loader, or at once with
     /// [`preload_root`](Self::preload_root).
     pub fn new(
         source: Arc<dyn BrickSource>,
-        config: CacheConfig,
+        config: OutOfCoreConfig,
         gpu: GpuFormat,
     ) -> Result<BrickManager, CacheError> {
         let layout = source.layout().clone();

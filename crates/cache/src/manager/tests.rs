@@ -36,7 +36,7 @@ impl Clock for ManualClock {
 /// happens unless the test advances it).
 pub(super) fn manager_with_clock(
     src: &Arc<TestSource>,
-    config: CacheConfig,
+    config: OutOfCoreConfig,
 ) -> (BrickManager, Arc<ManualClock>) {
     let gpu = test_gpu(&src.layout);
     let mut m = BrickManager::new(src.clone(), config, gpu).unwrap();
@@ -94,7 +94,7 @@ impl BrickManager {
     }
 
     pub(crate) fn set_tolerance_px(&mut self, tolerance_px: f32) -> Result<(), ConfigError> {
-        self.configure(CacheConfig {
+        self.configure(OutOfCoreConfig {
             tolerance_px,
             ..*self.config()
         })
@@ -105,7 +105,7 @@ impl BrickManager {
         &mut self,
         brick_budget: Option<u32>,
     ) -> Result<(), ConfigError> {
-        self.configure(CacheConfig {
+        self.configure(OutOfCoreConfig {
             brick_budget,
             ..*self.config()
         })
@@ -113,7 +113,7 @@ impl BrickManager {
     }
 
     pub(crate) fn set_cpu_budget(&mut self, cpu_budget_bytes: u64) -> Result<(), ConfigError> {
-        self.configure(CacheConfig {
+        self.configure(OutOfCoreConfig {
             cpu_budget_bytes,
             ..*self.config()
         })
@@ -124,7 +124,7 @@ impl BrickManager {
         &mut self,
         upload_budget_bytes: u64,
     ) -> Result<(), ConfigError> {
-        self.configure(CacheConfig {
+        self.configure(OutOfCoreConfig {
             upload_budget_bytes,
             ..*self.config()
         })
@@ -135,7 +135,7 @@ impl BrickManager {
         &mut self,
         gpu_budget_bytes: u64,
     ) -> Result<[u32; 3], ConfigError> {
-        let r = self.configure(CacheConfig {
+        let r = self.configure(OutOfCoreConfig {
             gpu_budget_bytes,
             ..*self.config()
         })?;
@@ -147,7 +147,7 @@ impl BrickManager {
         &mut self,
         retry: Option<crate::RetryPolicy>,
     ) -> Result<(), ConfigError> {
-        self.configure(CacheConfig {
+        self.configure(OutOfCoreConfig {
             retry,
             ..*self.config()
         })
@@ -155,15 +155,15 @@ impl BrickManager {
     }
 }
 
-pub(super) fn manager(src: &Arc<TestSource>, config: CacheConfig) -> BrickManager {
+pub(super) fn manager(src: &Arc<TestSource>, config: OutOfCoreConfig) -> BrickManager {
     manager_with_clock(src, config).0
 }
 
-pub(super) fn config() -> CacheConfig {
-    CacheConfig {
+pub(super) fn config() -> OutOfCoreConfig {
+    OutOfCoreConfig {
         cpu_budget_bytes: 4 << 20,
         gpu_budget_bytes: 1 << 20,
-        ..CacheConfig::default()
+        ..OutOfCoreConfig::default()
     }
 }
 
@@ -368,7 +368,7 @@ fn planning_the_same_frame_twice_does_not_panic() {
     let src = Arc::new(TestSource::new(64));
     let mut m = manager(
         &src,
-        CacheConfig {
+        OutOfCoreConfig {
             gpu_budget_bytes: 12 * slot_bytes(&src),
             ..config()
         },
@@ -417,7 +417,7 @@ fn tiny_pool_gives_a_coarser_complete_cut() {
     let src = Arc::new(TestSource::new(64));
     let mut m = manager(
         &src,
-        CacheConfig {
+        OutOfCoreConfig {
             gpu_budget_bytes: 9 * slot_bytes(&src),
             ..config()
         },
@@ -443,7 +443,7 @@ fn a_brick_budget_caps_the_cut_below_the_pool() {
     let src = Arc::new(TestSource::new(64));
     let cam = Camera::orbit(Vec3::ZERO, 1.6, 0.4, 0.3);
     let tf = TransferFunction::ramp(0.1, 1.0, 0.5);
-    let unlimited = CacheConfig {
+    let unlimited = OutOfCoreConfig {
         gpu_budget_bytes: 4 << 20,
         fade: None,
         ..config()
@@ -457,7 +457,7 @@ fn a_brick_budget_caps_the_cut_below_the_pool() {
     let budget = full / 2;
     let mut m = manager(
         &src,
-        CacheConfig {
+        OutOfCoreConfig {
             brick_budget: Some(budget),
             ..unlimited
         },
@@ -500,7 +500,7 @@ fn the_plan_gives_the_refined_cut_before_fades() {
     let tf = TransferFunction::ramp(0.1, 1.0, 0.5);
     let mut m = manager(
         &src,
-        CacheConfig {
+        OutOfCoreConfig {
             gpu_budget_bytes: 4 << 20,
             fade: Some(crate::fade::FadeDuration::Frames(4)),
             ..config()
@@ -542,7 +542,7 @@ fn upload_budget_makes_progress_every_frame() {
     let brick = brick_bytes(&src);
     let mut m = manager(
         &src,
-        CacheConfig {
+        OutOfCoreConfig {
             upload_budget_bytes: brick,
             ..config()
         },
@@ -569,7 +569,7 @@ fn moving_camera_with_small_pool_never_reuses_a_slot_within_a_frame() {
     let brick = brick_bytes(&src);
     let mut m = manager(
         &src,
-        CacheConfig {
+        OutOfCoreConfig {
             gpu_budget_bytes: 40 * slot_bytes(&src),
             cpu_budget_bytes: 60 * brick,
             ..config()
@@ -608,7 +608,7 @@ proptest! {
     ) {
         let src = Arc::new(TestSource::new(64));
         let (slot, brick) = (slot_bytes(&src), brick_bytes(&src));
-        let mut m = manager(&src, CacheConfig { gpu_budget_bytes: slots * slot, upload_budget_bytes: 4 * brick, ..config() });
+        let mut m = manager(&src, OutOfCoreConfig { gpu_budget_bytes: slots * slot, upload_budget_bytes: 4 * brick, ..config() });
         let tf = TransferFunction::ramp(0.2, 1.0, 0.5);
         let mode = iso.map_or(RenderMode::Dvr, |value| RenderMode::Iso { value, color: [1.0; 3] });
         let mut frame = 0u64;
@@ -639,7 +639,7 @@ fn a_cpu_cache_smaller_than_the_working_set_still_converges() {
     let src = Arc::new(TestSource::new(64));
     let cam = Camera::orbit(Vec3::ZERO, 1.2, 0.4, 0.3);
     let tf = TransferFunction::ramp(0.1, 1.0, 0.5);
-    let big = CacheConfig {
+    let big = OutOfCoreConfig {
         cpu_budget_bytes: 64 << 20,
         gpu_budget_bytes: 64 << 20,
         ..config()
@@ -650,7 +650,7 @@ fn a_cpu_cache_smaller_than_the_working_set_still_converges() {
     let need = full.stats.working_set_bricks as u64;
     assert!(need > 64, "the view needs only {need} bricks");
     // A CPU cache for a quarter of the working set.
-    let small = CacheConfig {
+    let small = OutOfCoreConfig {
         cpu_budget_bytes: need / 4 * brick_bytes(&src),
         ..big
     };

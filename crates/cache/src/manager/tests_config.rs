@@ -9,20 +9,20 @@ use brickray_core::{Camera, RenderMode, TransferFunction, VolumeFrame};
 use glam::Vec3;
 use std::time::{Duration, Instant};
 
-fn try_new(src: &Arc<TestSource>, config: CacheConfig) -> Result<BrickManager, CacheError> {
+fn try_new(src: &Arc<TestSource>, config: OutOfCoreConfig) -> Result<BrickManager, CacheError> {
     BrickManager::new(src.clone(), config, test_gpu(&src.layout))
 }
 
 #[test]
 fn new_rejects_unusable_configs() {
     let src = Arc::new(TestSource::new(64));
-    let err = |c: CacheConfig| match try_new(&src, c) {
+    let err = |c: OutOfCoreConfig| match try_new(&src, c) {
         Err(CacheError::Config(e)) => e,
         other => panic!("expected a config error, got {other:?}"),
     };
     let ok = config();
     assert!(matches!(
-        err(CacheConfig {
+        err(OutOfCoreConfig {
             tolerance_px: f32::NAN,
             ..ok
         }),
@@ -30,7 +30,7 @@ fn new_rejects_unusable_configs() {
     ));
     // 2000 threads would have started 2000 threads; now they are refused.
     assert!(matches!(
-        err(CacheConfig {
+        err(OutOfCoreConfig {
             loader_threads: 2000,
             ..ok
         }),
@@ -38,14 +38,14 @@ fn new_rejects_unusable_configs() {
     ));
     // A CPU cache of 8 bricks could never hold the root and its 8 children.
     assert!(matches!(
-        err(CacheConfig {
+        err(OutOfCoreConfig {
             cpu_budget_bytes: 8 * brick_bytes(&src),
             ..ok
         }),
         ConfigError::CpuBudgetTooSmall { bricks: 8, .. }
     ));
     assert!(matches!(
-        err(CacheConfig {
+        err(OutOfCoreConfig {
             gpu_budget_bytes: 5 * slot_bytes(&src),
             ..ok
         }),
@@ -68,7 +68,7 @@ fn a_cpu_cache_of_nine_bricks_splits_the_root() {
     let src = Arc::new(TestSource::new(64));
     let mut m = manager(
         &src,
-        CacheConfig {
+        OutOfCoreConfig {
             cpu_budget_bytes: 9 * brick_bytes(&src),
             ..config()
         },

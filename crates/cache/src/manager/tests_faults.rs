@@ -93,7 +93,7 @@ fn set_up_fails_at_its_deadline_when_the_source_does_not_answer() {
         let src = Arc::new(src);
         let m = manager(
             &src,
-            CacheConfig {
+            OutOfCoreConfig {
                 setup_deadline: deadline,
                 ..config()
             },
@@ -423,7 +423,7 @@ fn non_finite_cameras_and_huge_pools_request_boundedly() {
     let src = Arc::new(TestSource::new(256));
     let mut m = manager(
         &src,
-        CacheConfig {
+        OutOfCoreConfig {
             gpu_budget_bytes: 64 << 20,
             cpu_budget_bytes: 64 << 20,
             // Uploads of about 30 prepared bricks a frame: four frames of them

@@ -18,7 +18,7 @@ fn circle(floor_slots: u32, fade: Option<FadeDuration>, slots: u64) -> (u32, u32
     let src = Arc::new(TestSource::new(128));
     let mut m = manager(
         &src,
-        CacheConfig {
+        OutOfCoreConfig {
             gpu_budget_bytes: slots * slot_bytes(&src),
             cpu_budget_bytes: 9 * brick_bytes(&src),
             floor_slots,

@@ -22,7 +22,7 @@ mod tests;
 pub use feedback::{QueryResult, UsageFrame, ViewFeedback};
 pub use occlusion::{MAX_QUERIES_PER_FRAME, MIN_TILE_PX, QueryBatch, QuerySchedule};
 
-use crate::config::{CacheConfig, ConfigError, GpuFormat};
+use crate::config::{OutOfCoreConfig, ConfigError, GpuFormat};
 use crate::failures::StreamError;
 use crate::manager::{
     BrickManager, CacheError, FadeSlot, FrameInput, FrameStats, Reconfigured, Upload,
@@ -151,7 +151,7 @@ impl Streamer {
     /// (validates `config`; reads nothing).
     pub fn new(
         source: Arc<dyn BrickSource>,
-        config: CacheConfig,
+        config: OutOfCoreConfig,
         gpu: GpuFormat,
     ) -> Result<Streamer, CacheError> {
         let manager = BrickManager::new(source, config, gpu)?;
@@ -299,7 +299,7 @@ impl Streamer {
     /// was observed; a metric or brick-budget change starts a new view for
     /// the weights; a pool rebuild forgets the observations made through its
     /// slots.
-    pub fn configure(&mut self, config: CacheConfig) -> Result<Reconfigured, ConfigError> {
+    pub fn configure(&mut self, config: OutOfCoreConfig) -> Result<Reconfigured, ConfigError> {
         let old = *self.manager.config();
         let out = self.manager.configure(config)?;
         if config.visibility != old.visibility {
@@ -320,7 +320,7 @@ impl Streamer {
     }
 
     /// The configuration in force.
-    pub fn config(&self) -> &CacheConfig {
+    pub fn config(&self) -> &OutOfCoreConfig {
         self.manager.config()
     }
 

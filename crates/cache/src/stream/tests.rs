@@ -3,7 +3,7 @@
 //! configuration path.
 
 use super::*;
-use crate::config::CacheConfig;
+use crate::config::OutOfCoreConfig;
 use crate::test_source::{TestSource, test_gpu};
 use brickray_core::{Camera, LodMetric, VolumeFrame};
 use brickray_visibility::{VisibilityConfig, VisibilityPolicy};
@@ -31,11 +31,11 @@ struct Rig {
 }
 
 impl Rig {
-    fn new(dim: u32, config: CacheConfig) -> Rig {
+    fn new(dim: u32, config: OutOfCoreConfig) -> Rig {
         Rig::over(TestSource::new(dim), config)
     }
 
-    fn over(src: TestSource, config: CacheConfig) -> Rig {
+    fn over(src: TestSource, config: OutOfCoreConfig) -> Rig {
         let dim = src.layout.volume.dims[0];
         let src = Arc::new(src);
         let mut streamer =
@@ -131,14 +131,14 @@ impl Rig {
     }
 }
 
-fn config() -> CacheConfig {
-    CacheConfig {
+fn config() -> OutOfCoreConfig {
+    OutOfCoreConfig {
         cpu_budget_bytes: 8 << 20,
         gpu_budget_bytes: 4 << 20,
         upload_budget_bytes: 1 << 30,
         tolerance_px: 0.0,
         fade: None,
-        ..CacheConfig::default()
+        ..OutOfCoreConfig::default()
     }
 }
 
@@ -165,7 +165,7 @@ fn data_leaves(plan: &StreamPlan) -> Vec<NodeKey> {
 fn ray_guided_culling_keeps_hidden_bricks_out_and_brings_them_back() {
     let mut rig = Rig::new(
         64,
-        CacheConfig {
+        OutOfCoreConfig {
             visibility: VisibilityPolicy::RayGuided,
             ..config()
         },
@@ -220,7 +220,7 @@ fn ray_guided_culling_keeps_hidden_bricks_out_and_brings_them_back() {
 fn occlusion_queries_cover_every_leaf_within_their_period() {
     let mut rig = Rig::new(
         64,
-        CacheConfig {
+        OutOfCoreConfig {
             visibility: VisibilityPolicy::OcclusionQueries,
             visibility_config: VisibilityConfig {
                 queries_per_frame: 5,
@@ -284,7 +284,7 @@ fn visible_weights_order_refinement() {
     src.errors = true;
     let mut rig = Rig::over(
         src,
-        CacheConfig {
+        OutOfCoreConfig {
             lod_metric: LodMetric::VisibleError { budget: 0.0 },
             brick_budget: Some(budget),
             ..config()
@@ -321,7 +321,7 @@ fn visible_weights_order_refinement() {
     src.errors = true;
     let mut rig = Rig::over(
         src,
-        CacheConfig {
+        OutOfCoreConfig {
             lod_metric: LodMetric::VisibleError { budget: 0.0 },
             brick_budget: Some(budget),
             ..config()
@@ -363,7 +363,7 @@ fn uploaded(plans: &[StreamPlan]) -> Vec<NodeKey> {
 fn configuration_changes_upload_nothing_resident() {
     let mut rig = Rig::new(
         64,
-        CacheConfig {
+        OutOfCoreConfig {
             tolerance_px: 2.0,
             ..config()
         },
@@ -371,7 +371,7 @@ fn configuration_changes_upload_nothing_resident() {
     let views = [rig.view(camera(0.3))];
     let all: &Script = &|_| (500, 1.0, 500);
     rig.converge(&views, all);
-    type Change = Box<dyn Fn(&mut CacheConfig)>;
+    type Change = Box<dyn Fn(&mut OutOfCoreConfig)>;
     let changes: Vec<(&str, Change)> = vec![
         ("tolerance", Box::new(|c| c.tolerance_px = 0.5)),
         (
@@ -390,7 +390,7 @@ fn configuration_changes_upload_nothing_resident() {
         (
             "back",
             Box::new(|c| {
-                *c = CacheConfig {
+                *c = OutOfCoreConfig {
                     tolerance_px: 2.0,
                     ..config()
                 }
@@ -414,7 +414,7 @@ fn configuration_changes_upload_nothing_resident() {
     }
     // The GPU budget: the pool is rebuilt, the working set uploaded again.
     let resident: HashSet<NodeKey> = rig.streamer.pool().resident().map(|(k, _)| k).collect();
-    let c = CacheConfig {
+    let c = OutOfCoreConfig {
         gpu_budget_bytes: 2 << 20,
         ..*rig.streamer.config()
     };
@@ -423,7 +423,7 @@ fn configuration_changes_upload_nothing_resident() {
     let plans = rig.converge(&views, all);
     assert!(uploaded(&plans).iter().any(|k| resident.contains(k)));
     // A refused configuration changes nothing.
-    let bad = CacheConfig {
+    let bad = OutOfCoreConfig {
         tolerance_px: f32::NAN,
         ..*rig.streamer.config()
     };
@@ -472,7 +472,7 @@ fn two_views_refine_one_cut_that_satisfies_both() {
     ];
     let all: &Script = &|_| (500, 1.0, 500);
     for (name, cams) in cases {
-        let cfg = CacheConfig {
+        let cfg = OutOfCoreConfig {
             tolerance_px: 1.0,
             ..config()
         };
