@@ -1,14 +1,17 @@
 //! The demo: streams a volume far larger than its GPU brick pool out of core,
-//! renders a short orbit to PNG files and prints a stats line per frame.
+//! renders a camera path to PNG files and prints a stats line per frame.
 //!
 //! ```text
 //! cargo run -p brickray --example demo -- [--volume vol.json|vol.nrrd] [--in-core]
 //!     [--frames N] [--size PX] [--pool-mib M] [--out DIR]
 //! ```
-//! With no `--volume` it renders a procedural 4096^3 fractal-noise volume (64 GiB
-//! of u8 voxels, never stored anywhere) through a 64 MiB pool, so it needs no data.
+//! With no `--volume` it renders a procedural 4096^3 Mandelbulb (64 GiB of u8
+//! voxels, computed on demand and never stored anywhere) through a 64 MiB pool,
+//! so it needs no data, and flies from the whole volume down to a patch of its
+//! surface a few dozen voxels across: the level of detail follows the camera,
+//! and the last frames wait until every brick the view needs has arrived.
 //! With `--volume` it builds a brick store of the file next to the output and
-//! streams that (or, with `--in-core`, uploads the file whole).
+//! streams that (or, with `--in-core`, uploads the file whole) along an orbit.
 
 use brickray::{
     Camera, FrameDesc, OutOfCoreConfig, RenderMode, RenderSettings, Shading, TargetDesc,
@@ -19,9 +22,9 @@ use std::sync::Arc;
 use std::time::Instant;
 
 const USAGE: &str = "Usage: demo [--volume FILE.json|FILE.nrrd] [--in-core] [--frames N] [--size PX] [--pool-mib M] [--out DIR]
-  --volume FILE  a volume to build into a brick store and stream (default: procedural 4096^3)
+  --volume FILE  a volume to build into a brick store and stream (default: a procedural 4096^3 Mandelbulb)
   --in-core      upload --volume whole instead
-  --frames N     frames of the orbit (default 12)
+  --frames N     frames of the camera path (default 16)
   --size PX      image side (default 256)
   --pool-mib M   GPU brick pool in MiB (default 64)
   --out DIR      where the PNGs go (default out/demo)";
@@ -39,7 +42,7 @@ fn parse() -> Result<Args, Box<dyn std::error::Error>> {
     let mut a = Args {
         volume: None,
         in_core: false,
-        frames: 12,
+        frames: 16,
         size: 256,
         pool_mib: 64,
         out: "out/demo".into(),
@@ -61,6 +64,9 @@ fn parse() -> Result<Args, Box<dyn std::error::Error>> {
             _ => return Err(format!("unknown argument {arg}").into()),
         }
     }
+    if a.frames == 0 || a.size == 0 {
+        return Err("--frames and --size must be at least 1".into());
+    }
     Ok(a)
 }
 
@@ -77,25 +83,24 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     };
     let (frame, tf, mode) = match &args.volume {
         None => {
-            let dims = [4096u64; 3];
-            let source = Arc::new(brickray::store::ProceduralSource::fractal_noise(
-                dims, 32, 2,
-            )?);
+            let side = 4096u64;
+            let source = Arc::new(brickray::store::MandelbulbSource::new(side, 32, 2)?);
             let l = brickray::BrickSource::layout(&*source).clone();
             println!(
-                "volume: procedural fractal noise {dims:?} u8 ({:.0} GiB virtual), {} levels of {}^3 bricks; GPU pool {} MiB",
-                (dims[0] * dims[1] * dims[2]) as f64 / (1u64 << 30) as f64,
+                "volume: procedural Mandelbulb {side}^3 u8 ({:.0} GiB virtual), {} levels of {}^3 bricks; GPU pool {} MiB",
+                (side * side * side) as f64 / (1u64 << 30) as f64,
                 l.levels,
                 l.brick,
                 args.pool_mib
             );
-            let frame = VolumeFrame::centered([4096; 3], [1.0; 3]);
+            let frame = VolumeFrame::centered([side as u32; 3], [1.0; 3]);
             renderer.set_volume_source(&gpu.device, &gpu.queue, source, config)?;
+            // Opaque within the surface band, ivory; the shading draws the folds.
             let tf = TransferFunction::from_points(
                 &[
-                    (0.45, [0.1, 0.3, 0.8, 0.0]),
-                    (0.6, [0.3, 0.7, 1.0, 0.05]),
-                    (0.75, [1.0, 0.9, 0.6, 0.6]),
+                    (0.08, [0.85, 0.7, 0.55, 0.0]),
+                    (0.3, [0.95, 0.88, 0.75, 0.9]),
+                    (1.0, [1.0, 0.97, 0.92, 1.0]),
                 ],
                 256,
             );
@@ -154,9 +159,15 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         },
         ..Default::default()
     };
-    for i in 0..args.frames {
-        let yaw = 0.6 + i as f32 * std::f32::consts::TAU / args.frames.max(1) as f32 * 0.25;
-        let camera = Camera::orbit(frame.center(), 1.9, yaw, 0.35);
+    let path = CameraPath::new(&frame, args.volume.is_none(), args.frames);
+    // Out of core, the first view is held while its bricks arrive (up to
+    // HOLD_START frames), then the path runs, then its last view is held (up
+    // to as many frames as the path has).
+    const HOLD_START: u32 = 8;
+    let last = args.frames - 1;
+    let (mut view, mut held, mut i) = (0u32, 0u32, 0u32);
+    loop {
+        let camera = path.camera(view);
         let t = Instant::now();
         let mut enc = gpu.device.create_command_encoder(&Default::default());
         let desc = FrameDesc {
@@ -174,9 +185,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         }
         let pixels = target.read_rgba(&gpu, enc)?;
         let ms = t.elapsed().as_secs_f64() * 1e3;
-        let path = args.out.join(format!("frame_{i:02}.png"));
+        let file = args.out.join(format!("frame_{i:02}.png"));
         image::save_buffer(
-            &path,
+            &file,
             &pixels,
             args.size,
             args.size,
@@ -200,13 +211,85 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 renderer.volume_bytes() >> 20
             ),
         }
+        i += 1;
+        let arriving = renderer.wants_redraw();
+        if view == 0 && view < last && arriving && held < HOLD_START {
+            held += 1;
+        } else if view < last {
+            (view, held) = (view + 1, 0);
+        } else if arriving && held < args.frames {
+            held += 1;
+        } else {
+            break;
+        }
     }
     println!(
-        "wrote {} PNG files to {}",
-        args.frames,
+        "wrote {i} PNG files to {}",
         std::fs::canonicalize(&args.out)?.display()
     );
     Ok(())
+}
+
+/// The demo's camera: for the Mandelbulb, a flight from the whole volume to a
+/// patch of its surface about 230 voxels high (a voxel per pixel at the
+/// default size), the distance shrinking by the same factor every frame; for
+/// a file, a quarter orbit.
+struct CameraPath {
+    frames: u32,
+    centre: glam::Vec3,
+    /// Where the flight ends, and the unit direction it looks from.
+    zoom: Option<(glam::Vec3, glam::Vec3)>,
+    /// One voxel in world units.
+    voxel: f32,
+}
+
+impl CameraPath {
+    const START: f32 = 1.9;
+
+    fn new(frame: &VolumeFrame, bulb: bool, frames: u32) -> CameraPath {
+        let from = glam::DVec3::new(0.55, 0.45, 0.7).normalize();
+        let zoom = bulb
+            .then(|| brickray::store::MandelbulbSource::surface_point(from.to_array(), 1e-4))
+            .flatten()
+            .map(|u| {
+                let p = frame
+                    .model
+                    .transform_point3(glam::Vec3::from_array(u.map(|c| c as f32)));
+                (p, from.as_vec3())
+            });
+        let voxel = frame.voxel_world;
+        CameraPath {
+            frames: frames.max(1),
+            centre: frame.center(),
+            zoom,
+            voxel,
+        }
+    }
+
+    fn camera(&self, i: u32) -> Camera {
+        let t = i as f32 / (self.frames - 1).max(1) as f32;
+        match self.zoom {
+            Some((surface, dir)) => {
+                let end = 320.0 * self.voxel;
+                let distance = Self::START * (end / Self::START).powf(t);
+                // The target slides to the surface point as the distance shrinks.
+                let s = (Self::START - distance) / (Self::START - end);
+                let target = self.centre.lerp(surface, s.clamp(0.0, 1.0));
+                Camera {
+                    eye: target + dir * distance,
+                    target,
+                    up: glam::Vec3::Y,
+                    projection: brickray::Projection::Perspective {
+                        fov_y: 40f32.to_radians(),
+                    },
+                    near: distance * 0.05,
+                    far: distance + 2.0,
+                    depth: brickray::DepthConvention::Standard,
+                }
+            }
+            None => Camera::orbit(self.centre, Self::START, 0.6 + t * 1.2, 0.35),
+        }
+    }
 }
 
 /// The colour and depth formats the demo renders into.

@@ -9,15 +9,19 @@ usage() {
 Usage: scripts/demo.sh [options]
 
 Installs what is missing (compiler, Rust, a Vulkan driver), builds the demo
-and runs it: it streams a volume out of core, renders a short orbit to PNG
-files and prints one line of statistics per frame.
+and runs it: it streams a volume out of core, renders a camera path to PNG
+files and prints one line of statistics per frame. By default the volume is a
+procedural 4096^3 Mandelbulb and the path flies from the whole volume down to
+about a voxel per pixel.
 
 Options (passed to the demo, examples/demo.rs):
   --volume FILE    a raw+JSON (.json) or NRRD (.nrrd/.nhdr) volume; it is built
                    into a brick store next to the output and streamed from it
-                   (default: a procedural 4096^3 volume, 64 GiB virtual, no data needed)
+                   and shown along an orbit (default: a procedural 4096^3
+                   Mandelbulb, 64 GiB virtual, no data needed)
   --in-core        upload --volume whole instead of streaming it
-  --frames N       frames of the orbit (default 12)
+  --frames N       frames of the camera path (default 16; out of core the
+                   first and last views are held while bricks arrive)
   --size PX        image side in pixels (default 256)
   --pool-mib M     GPU brick pool in MiB (default 64)
   --out DIR        where the PNGs go (default out/demo)

@@ -20,6 +20,7 @@
 //! [`BrickSource`]: brickray_core::BrickSource
 
 mod build;
+mod bulb;
 mod convert;
 mod error;
 mod errsec;
@@ -30,6 +31,7 @@ mod procedural;
 mod reader;
 mod sample;
 
+pub use bulb::MandelbulbSource;
 pub use build::{BuildOptions, BuildProgress, BuildReport, build, build_file, check_output};
 pub use convert::{ConvertReport, convert};
 pub use error::{Mismatch, StoreError};

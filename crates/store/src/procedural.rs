@@ -56,6 +56,27 @@ enum Field {
     Shells,
 }
 
+/// The options every procedural volume checks: dimensions, brick and apron.
+pub(crate) fn check_options(dims: [u64; 3], brick: u32, apron: u32) -> Result<(), StoreError> {
+    brickray_core::volume::voxel_count(dims).map_err(|e| StoreError::BadOption {
+        option: "dims",
+        reason: e.to_string(),
+    })?;
+    if brick == 0 || brick > crate::format::MAX_BRICK {
+        return Err(StoreError::BadOption {
+            option: "brick",
+            reason: "must be in 1..=512".into(),
+        });
+    }
+    if apron > crate::format::MAX_APRON {
+        return Err(StoreError::BadOption {
+            option: "apron",
+            reason: "must be in 0..=16".into(),
+        });
+    }
+    Ok(())
+}
+
 fn mix(mut h: u64) -> u64 {
     h ^= h >> 30;
     h = h.wrapping_mul(0xBF58_476D_1CE4_E5B9);
@@ -97,22 +118,7 @@ impl ProceduralSource {
         apron: u32,
         seed: u64,
     ) -> Result<ProceduralSource, StoreError> {
-        brickray_core::volume::voxel_count(dims).map_err(|e| StoreError::BadOption {
-            option: "dims",
-            reason: e.to_string(),
-        })?;
-        if brick == 0 || brick > crate::format::MAX_BRICK {
-            return Err(StoreError::BadOption {
-                option: "brick",
-                reason: "must be in 1..=512".into(),
-            });
-        }
-        if apron > crate::format::MAX_APRON {
-            return Err(StoreError::BadOption {
-                option: "apron",
-                reason: "must be in 0..=16".into(),
-            });
-        }
+        check_options(dims, brick, apron)?;
         let desc = VolumeDesc {
             dims: dims.map(|d| d as u32),
             dtype: DType::U8,

@@ -203,6 +203,8 @@ impl ViewerApp {
         if !reopened {
             let preset = if desc.value_range[0] <= -900.0 {
                 Preset::CtBone
+            } else if matches!(loaded.input, Input::Bulb(_)) {
+                Preset::Surface
             } else {
                 Preset::Grey
             };
@@ -330,7 +332,10 @@ impl ViewerApp {
                     Err(e) => self.messages.push(e.to_string()),
                 }
             }
-            if ui.button("Procedural 4096³").clicked() {
+            if ui.button("Mandelbulb 4096³").clicked() {
+                self.start_open(Input::Bulb(4096));
+            }
+            if ui.button("Noise 4096³").clicked() {
                 self.start_open(Input::Procedural(4096));
             }
             if ui

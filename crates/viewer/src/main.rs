@@ -2,7 +2,7 @@
 //!
 //! Opens a raw+JSON or NRRD volume (loaded whole when small, built into a
 //! brick store in the background when large), a brick store (`.brs`), or with
-//! no argument a procedural 4096^3 volume streamed out of core. The volume is
+//! no argument a procedural 4096^3 Mandelbulb streamed out of core. The volume is
 //! drawn through egui-wgpu's paint callback: the viewer is a brickray host like
 //! any other. See `docs/viewer.md`.
 
@@ -29,8 +29,8 @@ use std::sync::{Arc, Mutex};
 struct Cli {
     /// A volume (.json sidecar, .raw, .nrrd, .nhdr, NIfTI .nii/.nii.gz, TIFF
     /// .tif/.tiff, a DICOM series folder, OME-Zarr .zarr), a brick store
-    /// (.brs), or `procedural:N` (fractal noise, N^3 voxels). Default:
-    /// procedural:4096.
+    /// (.brs), `bulb:N` (a Mandelbulb, N^3 voxels computed on demand) or
+    /// `procedural:N` (fractal noise, N^3 voxels). Default: bulb:4096.
     path: Option<String>,
     /// Run the actions of FILE (see docs/viewer.md); the exit status says
     /// whether they all succeeded.
@@ -84,7 +84,7 @@ fn main() -> ExitCode {
     let input = match (&cli.path, &script) {
         (Some(p), _) => Some(p.as_str()),
         (None, Some(a)) if a.iter().any(|a| matches!(a, script::Action::Open(_))) => None,
-        (None, _) => Some("procedural"),
+        (None, _) => Some("bulb"),
     };
     let input = match input.map(source::Input::parse).transpose() {
         Ok(i) => i,

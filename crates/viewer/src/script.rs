@@ -2,7 +2,7 @@
 //! reproducible figures. One action per line; `#` starts a comment.
 //!
 //! ```text
-//! open PATH | procedural[:N]     open a volume (waits until it is loaded)
+//! open PATH | bulb[:N] | procedural[:N]   open a volume (waits until it is loaded)
 //! tf PRESET | tf load FILE.json  transfer function (presets: ct-bone, ct-soft, mri, microscopy, grey)
 //! mode dvr | shaded | iso [VALUE] | mip
 //! iso VALUE                      isovalue, normalized 0..1

@@ -22,22 +22,31 @@ pub(crate) enum Input {
     Path(PathBuf),
     /// A procedural fractal-noise volume of `n^3` voxels (never stored).
     Procedural(u64),
+    /// A procedural Mandelbulb of `n^3` voxels (never stored).
+    Bulb(u64),
 }
 
 impl Input {
-    /// Parses a command-line or script argument: `procedural[:N]` or a path.
+    /// Parses a command-line or script argument: `procedural[:N]`,
+    /// `bulb[:N]` or a path.
     pub(crate) fn parse(s: &str) -> Result<Input, OpenError> {
-        match s.strip_prefix("procedural") {
-            Some("") => Ok(Input::Procedural(4096)),
-            Some(rest) => rest
+        let sized = |name: &str, rest: &str, make: fn(u64) -> Input| match rest {
+            "" => Ok(make(4096)),
+            _ => rest
                 .strip_prefix(':')
                 .and_then(|n| n.parse().ok())
                 .filter(|&n| (1..=1 << 24).contains(&n))
-                .map(Input::Procedural)
+                .map(make)
                 .ok_or_else(|| {
-                    OpenError::BadInput(format!("{s}: expected procedural:N, N in 1..=16777216"))
+                    OpenError::BadInput(format!("{s}: expected {name}:N, N in 1..=16777216"))
                 }),
-            None => Ok(Input::Path(s.into())),
+        };
+        if let Some(rest) = s.strip_prefix("procedural") {
+            sized("procedural", rest, Input::Procedural)
+        } else if let Some(rest) = s.strip_prefix("bulb") {
+            sized("bulb", rest, Input::Bulb)
+        } else {
+            Ok(Input::Path(s.into()))
         }
     }
 
@@ -46,6 +55,7 @@ impl Input {
         match self {
             Input::Path(p) => p.display().to_string(),
             Input::Procedural(n) => format!("procedural {n}^3"),
+            Input::Bulb(n) => format!("Mandelbulb {n}^3"),
         }
     }
 }
@@ -210,6 +220,23 @@ pub(crate) fn open(
             let histogram = source_histogram(&*source)?;
             let note = format!(
                 "procedural fractal noise {n}^3 u8 ({:.1} GiB virtual), computed on demand",
+                (*n as f64).powi(3) / (1u64 << 30) as f64
+            );
+            Ok(Loaded {
+                input: input.clone(),
+                desc,
+                volume: Opened::Streamed(source),
+                histogram,
+                note,
+            })
+        }
+        Input::Bulb(n) => {
+            progress.set_stage("generating the histogram");
+            let source = Arc::new(brickray::store::MandelbulbSource::new(*n, 32, 2)?);
+            let desc = source.layout().volume.clone();
+            let histogram = source_histogram(&*source)?;
+            let note = format!(
+                "procedural Mandelbulb {n}^3 u8 ({:.1} GiB virtual), computed on demand",
                 (*n as f64).powi(3) / (1u64 << 30) as f64
             );
             Ok(Loaded {
@@ -425,6 +452,10 @@ mod tests {
         );
         assert!(Input::parse("procedural:0").is_err());
         assert!(Input::parse("procedural:x").is_err());
+        assert_eq!(Input::parse("bulb").unwrap(), Input::Bulb(4096));
+        assert_eq!(Input::parse("bulb:512").unwrap(), Input::Bulb(512));
+        assert!(Input::parse("bulb:").is_err());
+        assert!(Input::parse("bulb:99999999").is_err());
         assert_eq!(
             Input::parse("a/b.json").unwrap(),
             Input::Path("a/b.json".into())
@@ -504,5 +535,11 @@ mod tests {
         assert!(matches!(l.volume, Opened::Streamed(_)));
         assert_eq!(l.desc.dims, [128; 3]);
         assert!(l.histogram.bins.iter().filter(|&&c| c > 0).count() > 10);
+        let b = open(&Input::Bulb(128), &opts, &Progress::default()).unwrap();
+        assert!(matches!(b.volume, Opened::Streamed(_)));
+        assert_eq!(b.desc.dims, [128; 3]);
+        // Air and a solid: the first bin (air) and the solid's bins are filled.
+        assert!(b.histogram.bins[0] > 0);
+        assert!(b.histogram.bins[b.histogram.bins.len() / 2..].iter().any(|&c| c > 0));
     }
 }

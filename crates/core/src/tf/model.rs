@@ -83,16 +83,21 @@ pub enum TfPreset {
     Microscopy,
     /// A grey ramp over the whole range.
     Grey,
+    /// An opaque ivory surface where values rise above about 0.1 (solids
+    /// with a soft edge, such as the procedural Mandelbulb); shading draws
+    /// the shape.
+    Surface,
 }
 
 impl TfPreset {
     /// All, in menu order.
-    pub const ALL: [TfPreset; 5] = [
+    pub const ALL: [TfPreset; 6] = [
         TfPreset::CtBone,
         TfPreset::CtSoft,
         TfPreset::Mri,
         TfPreset::Microscopy,
         TfPreset::Grey,
+        TfPreset::Surface,
     ];
 
     /// Its name (also its script name).
@@ -103,6 +108,7 @@ impl TfPreset {
             TfPreset::Mri => "mri",
             TfPreset::Microscopy => "microscopy",
             TfPreset::Grey => "grey",
+            TfPreset::Surface => "surface",
         }
     }
 
@@ -178,6 +184,10 @@ impl TfModel {
             TfPreset::Grey => TfModel {
                 colors: vec![c(0.0, [0.0; 3]), c(1.0, [1.0; 3])],
                 opacity: vec![o(0.0, 0.0), o(1.0, 0.5)],
+            },
+            TfPreset::Surface => TfModel {
+                colors: vec![c(0.08, [0.85, 0.7, 0.55]), c(0.3, [0.95, 0.88, 0.75])],
+                opacity: vec![o(0.08, 0.0), o(0.3, 0.9), o(1.0, 1.0)],
             },
         };
         m.sort();
