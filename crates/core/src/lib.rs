@@ -46,8 +46,8 @@ pub use lod::{
 pub use macrocell::{MacroCellGrid, sub_cell_ranges, sub_cells_per_axis};
 pub use pyramid::{ALL_AXES, Children, LayoutError, MAX_LEVELS, anisotropic_split_masks};
 pub use settings::{Accel, ClipBox, RenderMode, RenderSettings, SettingsError, Shading};
+pub use slice::{Slab, SlabMode, SliceAxis, SliceError, SliceGeometry, SliceView};
 pub use texel::{SampleEncoding, TexelCaps, TexelFormat, U8Filtering};
 pub use tf::{TfError, TransferFunction};
-pub use slice::{Slab, SlabMode, SliceAxis, SliceError, SliceGeometry, SliceView};
 pub use volume::{DType, Volume, VolumeData, VolumeDesc, VolumeError};
 pub use window::{ColorMap, CtPreset, Intensity, Window, WindowError};

@@ -149,7 +149,9 @@ impl Window {
         let (mut min, mut max) = (quantile(lo), quantile(hi));
         if max <= min {
             // All the mass at one point: that point's bin.
-            let i = ((min - a) / bin_width).floor().clamp(0.0, bins.len() as f64 - 1.0);
+            let i = ((min - a) / bin_width)
+                .floor()
+                .clamp(0.0, bins.len() as f64 - 1.0);
             min = a + i * bin_width;
             max = min + bin_width;
         }
