@@ -50,4 +50,4 @@ pub use slice::{Slab, SlabMode, SliceAxis, SliceError, SliceGeometry, SliceView}
 pub use texel::{SampleEncoding, TexelCaps, TexelFormat, U8Filtering};
 pub use tf::{TfError, TransferFunction};
 pub use volume::{DType, Volume, VolumeData, VolumeDesc, VolumeError};
-pub use window::{ColorMap, CtPreset, Intensity, Window, WindowError};
+pub use window::{ColorMap, CtPreset, Intensity, Window, WindowError, histogram};

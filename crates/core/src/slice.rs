@@ -283,7 +283,7 @@ impl SliceView {
             return Err(SliceError::NotFinite { field: "thickness" });
         }
         let samples = (thickness * SLAB_SAMPLES_PER_VOXEL / voxel_world).ceil();
-        if !(thickness >= 0.0) || samples > MAX_SLAB_SAMPLES as f64 {
+        if thickness < 0.0 || samples > MAX_SLAB_SAMPLES as f64 {
             return Err(SliceError::BadSlab { thickness });
         }
         let tex = (centre + DVec3::splat(0.5)) / dims;

@@ -117,6 +117,13 @@ impl Window {
         Window::from_percentiles(bins, range, 0.005, 0.995)
     }
 
+    /// [`Self::auto`] over a histogram of a volume's raw values (`bins` equal
+    /// bins over its value range; values outside it count in the end bins).
+    pub fn auto_of(volume: &crate::Volume, bins: usize) -> Result<Window, WindowError> {
+        let range = volume.desc().value_range.map(f64::from);
+        Window::auto(&histogram(volume, bins, range)?, range)
+    }
+
     /// The window between the `lo` and `hi` quantiles (0..1) of a histogram
     /// (see [`Self::auto`]).
     pub fn from_percentiles(
@@ -157,6 +164,34 @@ impl Window {
         }
         Window::from_min_max(min, max)
     }
+}
+
+/// A histogram of `bins` equal bins over the raw range `range` of a volume's
+/// values (values outside the range count in the end bins, NaN in none).
+pub fn histogram(
+    volume: &crate::Volume,
+    bins: usize,
+    range: [f64; 2],
+) -> Result<Vec<u64>, WindowError> {
+    let [a, b] = range;
+    if !(a.is_finite() && b.is_finite() && b > a) {
+        return Err(WindowError::BadRange(range));
+    }
+    if bins == 0 {
+        return Err(WindowError::EmptyHistogram);
+    }
+    let mut out = vec![0u64; bins];
+    let scale = bins as f64 / (b - a);
+    let data = volume.data();
+    for i in 0..data.len() {
+        let v = data.get(i) as f64;
+        if v.is_nan() {
+            continue;
+        }
+        let k = ((v - a) * scale).floor().clamp(0.0, (bins - 1) as f64) as usize;
+        out[k] += 1;
+    }
+    Ok(out)
 }
 
 /// Standard CT windows in Hounsfield units (centre, width).
@@ -369,6 +404,33 @@ mod tests {
         one[3] = 50;
         let w = Window::auto(&one, [0.0, 10.0]).unwrap();
         assert!(w.min() >= 3.0 && w.max() <= 4.0 && w.width() > 0.0, "{w:?}");
+    }
+
+    #[test]
+    fn auto_window_of_a_volume() {
+        // Values 0..=999, one each (a ramp): the window spans 5..995.
+        let v = crate::Volume::new(
+            crate::VolumeDesc {
+                dims: [10, 10, 10],
+                dtype: crate::DType::F32,
+                spacing: [1.0; 3],
+                value_range: [0.0, 1000.0],
+            },
+            crate::VolumeData::F32((0..1000).map(|i| i as f32).collect()),
+        )
+        .unwrap();
+        let w = Window::auto_of(&v, 1000).unwrap();
+        assert!(
+            (w.min() - 5.0).abs() < 1e-9 && (w.max() - 995.0).abs() < 1e-9,
+            "{w:?}"
+        );
+        assert_eq!(
+            histogram(&v, 0, [0.0, 1.0]),
+            Err(WindowError::EmptyHistogram)
+        );
+        assert!(histogram(&v, 4, [1.0, 0.0]).is_err());
+        let h = histogram(&v, 4, [0.0, 500.0]).unwrap();
+        assert_eq!(h, vec![125, 125, 125, 625]);
     }
 
     proptest! {
