@@ -153,6 +153,8 @@ pub struct SliceGeometry {
     inv_model: DMat4,
     /// The smallest voxel side (world).
     voxel_world: f64,
+    /// Voxel dimensions.
+    dims: DVec3,
 }
 
 fn finite3(v: [f64; 3], field: &'static str) -> Result<DVec3, SliceError> {
@@ -230,6 +232,36 @@ impl SliceView {
         })
     }
 
+    /// The orthogonal slice along `axis` through `point` (index
+    /// coordinates), fitted as [`Self::orthogonal`]: the slices of a linked
+    /// crosshair, each through the crosshair's point.
+    pub fn through(
+        axis: SliceAxis,
+        point: [f64; 3],
+        frame: &VolumeFrame,
+        aspect: f64,
+    ) -> Result<SliceView, SliceError> {
+        SliceView::orthogonal(axis, point[axis.normal_axis()], frame, aspect)
+    }
+
+    /// The same view moved `distance` world units along its normal
+    /// (scrolling through slices: one voxel of an orthogonal slice is
+    /// `SliceGeometry::normal_voxel`).
+    pub fn stepped(&self, frame: &VolumeFrame, distance: f64) -> Result<SliceView, SliceError> {
+        if !distance.is_finite() {
+            return Err(SliceError::NotFinite { field: "distance" });
+        }
+        let g = self.resolve(frame, 1.0)?;
+        let dims = DVec3::from_array(frame.dims.map(|d| d.max(1) as f64));
+        // World displacement to index displacement.
+        let d_tex = g.inv_model.transform_vector3(g.normal * distance);
+        let c = DVec3::from_array(self.centre) + d_tex * dims;
+        Ok(SliceView {
+            centre: c.to_array(),
+            ..*self
+        })
+    }
+
     /// With a thick slab.
     pub fn with_slab(self, thickness: f64, mode: SlabMode) -> SliceView {
         SliceView {
@@ -300,6 +332,7 @@ impl SliceView {
             model,
             inv_model,
             voxel_world,
+            dims,
         })
     }
 }
@@ -327,6 +360,43 @@ impl SliceGeometry {
     pub fn texture_point(&self, x: u32, y: u32, width: u32, height: u32, k: u32) -> DVec3 {
         self.inv_model
             .transform_point3(self.world_point(x, y, width, height, k))
+    }
+
+    /// The index coordinates (voxel centres at integers) of image position
+    /// `(px, py)` on the plane (pixel `(x, y)`'s centre is `(x + 0.5, y +
+    /// 0.5)`; y down): where a click in a slice puts the crosshair.
+    pub fn index_at(&self, px: f64, py: f64, width: u32, height: u32) -> [f64; 3] {
+        let nx = 2.0 * px / width.max(1) as f64 - 1.0;
+        let ny = 1.0 - 2.0 * py / height.max(1) as f64;
+        let w =
+            self.centre + self.right * (nx * self.half_width) + self.up * (ny * self.half_height);
+        let t = self.inv_model.transform_point3(w);
+        (t * self.dims - DVec3::splat(0.5)).to_array()
+    }
+
+    /// The image position `(px, py)` of index point `index` projected onto
+    /// the plane, and its world distance in front of (+) or behind the plane
+    /// along the normal: where a slice draws the crosshair.
+    pub fn image_of(&self, index: [f64; 3], width: u32, height: u32) -> ([f64; 2], f64) {
+        let t = (DVec3::from_array(index) + DVec3::splat(0.5)) / self.dims;
+        let d = self.model.transform_point3(t) - self.centre;
+        let nx = d.dot(self.right) / self.half_width;
+        let ny = d.dot(self.up) / self.half_height;
+        (
+            [
+                (nx + 1.0) * 0.5 * width as f64,
+                (1.0 - ny) * 0.5 * height as f64,
+            ],
+            -d.dot(self.normal),
+        )
+    }
+
+    /// The world length of one voxel step along the normal of an
+    /// orthogonal slice (in general: the normal's world length per index
+    /// unit along it).
+    pub fn normal_voxel(&self) -> f64 {
+        let n_tex = self.inv_model.transform_vector3(self.normal);
+        1.0 / (n_tex * self.dims).length()
     }
 
     /// The world size of one pixel.
@@ -392,6 +462,30 @@ mod tests {
             let fwd = rays.fwd;
             assert!((fwd - g.normal).length() < 1e-6, "{axis:?}");
         }
+    }
+
+    #[test]
+    fn a_linked_crosshair_round_trips_and_slices_step() {
+        let f = frame();
+        let point = [20.25, 11.5, 9.0];
+        for axis in [SliceAxis::Axial, SliceAxis::Coronal, SliceAxis::Sagittal] {
+            let s = SliceView::through(axis, point, &f, 1.25).unwrap();
+            let g = s.resolve(&f, 1.25).unwrap();
+            // The point lies on the plane: its image maps back to it.
+            let (px, behind) = g.image_of(point, 160, 128);
+            assert!(behind.abs() < 1e-9, "{axis:?}: {behind}");
+            let back = g.index_at(px[0], px[1], 160, 128);
+            for a in 0..3 {
+                assert!((back[a] - point[a]).abs() < 1e-9, "{axis:?}: {back:?}");
+            }
+            // One voxel along the normal moves the plane to the next index.
+            let a = axis.normal_axis();
+            let next = s.stepped(&f, g.normal_voxel()).unwrap();
+            let moved = (next.centre[a] - s.centre[a]).abs();
+            assert!((moved - 1.0).abs() < 1e-9, "{axis:?}: {moved}");
+        }
+        let s = SliceView::through(SliceAxis::Axial, point, &f, 1.0).unwrap();
+        assert!(s.stepped(&f, f64::NAN).is_err());
     }
 
     #[test]
