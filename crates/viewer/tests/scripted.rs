@@ -388,7 +388,10 @@ fn a_failed_step_ends_the_script_with_a_failure() {
     let run = run_viewer(&path, limit);
     let took = t.elapsed();
     let stderr = String::from_utf8_lossy(&run.stderr);
-    assert!(took < limit, "killed after {took:?}: the viewer did not exit");
+    assert!(
+        took < limit,
+        "killed after {took:?}: the viewer did not exit"
+    );
     assert!(!run.status.success(), "exit status {:?}", run.status);
     assert!(
         stderr.contains("script failed") && stderr.contains("/nonexistent/vol.nii.gz"),
@@ -622,5 +625,68 @@ fn opens_every_shared_format() {
             lit * 100 > (w * h) as usize,
             "{name}: only {lit} lit pixels"
         );
+    }
+}
+
+/// The four-view layout (`layout four`): axial, coronal and sagittal slices
+/// through the crosshair and the 3D view, one streamed volume (a 96^3 ball,
+/// out of core). Each slice quadrant shows the ball's disc through the
+/// crosshair (lit near the centre, dark at its corners) and the crosshair's
+/// lines; the 3D quadrant shows the ball.
+#[test]
+#[cfg_attr(
+    no_display,
+    ignore = "needs an X server (DISPLAY unset when the tests were built; scripts/test.sh starts Xvfb)"
+)]
+fn the_four_view_layout_shows_three_slices_and_3d() {
+    let Some(dir) = windowed_test_dir() else {
+        return;
+    };
+    let store = sphere_store(dir.path());
+    let shot = dir.path().join("four.png");
+    let script = format!(
+        "open {store}\nbackground 0 0 0\ntf grey\nlayout four\ncrosshair 47.5 47.5 47.5\n\
+         wait converged 600\nscreenshot {shot}\nquit\n",
+        store = store.display(),
+        shot = shot.display(),
+    );
+    run_script(dir.path(), &script, Duration::from_secs(120));
+    let (img, w, h) = read_png(&shot);
+    let px = |x: f32, y: f32| {
+        let (x, y) = ((x as u32).min(w - 1), (y as u32).min(h - 1));
+        let i = ((y * w + x) * 4) as usize;
+        [img[i], img[i + 1], img[i + 2]]
+    };
+    let (qw, qh) = (w as f32 * 0.5, h as f32 * 0.5);
+    for q in 0..4 {
+        let (x0, y0) = ((q % 2) as f32 * qw, (q / 2) as f32 * qh);
+        let quadrant = |fx: f32, fy: f32| px(x0 + fx * qw, y0 + fy * qh);
+        let (mut lit, mut yellow) = (0usize, 0usize);
+        for j in 0..qh as u32 {
+            for i in 0..qw as u32 {
+                let p = quadrant(i as f32 / qw, j as f32 / qh);
+                if p.iter().any(|&c| c > 40) {
+                    lit += 1;
+                }
+                if p[0] > 200 && p[1] > 170 && p[2] < 90 {
+                    yellow += 1;
+                }
+            }
+        }
+        let area = (qw * qh) as usize;
+        eprintln!("quadrant {q}: {lit} lit, {yellow} crosshair pixels of {area}");
+        assert!(lit * 20 > area, "quadrant {q}: only {lit} lit pixels");
+        if q < 3 {
+            // A slice: the disc near the crosshair, dark corners.
+            let near = quadrant(0.56, 0.56);
+            assert!(near[0] > 60, "slice {q}: {near:?} near the centre");
+            for (fx, fy) in [(0.03, 0.03), (0.97, 0.03), (0.03, 0.97), (0.97, 0.97)] {
+                let c = quadrant(fx, fy);
+                assert!(c[0] < 20, "slice {q}: corner {c:?}");
+            }
+            assert!(yellow > (qw.min(qh) as usize), "slice {q}: no crosshair");
+        } else {
+            assert_eq!(yellow, 0, "the 3D view has no crosshair");
+        }
     }
 }

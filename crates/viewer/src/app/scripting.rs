@@ -189,6 +189,8 @@ impl ViewerApp {
                     }
                 }
                 Action::Overlays(on) => self.overlays = on,
+                Action::FourViews(on) => self.four_views = on,
+                Action::Crosshair(p) => self.crosshair = Some(p),
                 Action::Background(c) => self.background = c,
                 Action::U8Exact(exact) => {
                     if exact != self.u8_exact {
