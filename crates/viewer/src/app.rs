@@ -93,6 +93,9 @@ pub(crate) struct ViewerApp {
     /// The slices' crosshair in voxel index coordinates (`None`: the
     /// volume's centre).
     crosshair: Option<[f64; 3]>,
+    /// The slices drawn last in the four-view layout, with their rectangles
+    /// (recorded in screenshots' sidecars).
+    shown_slices: Vec<(egui::Rect, SliceView)>,
 }
 
 impl std::fmt::Debug for ViewerApp {
@@ -167,6 +170,7 @@ impl ViewerApp {
             gpu_error,
             four_views: false,
             crosshair: None,
+            shown_slices: Vec::new(),
         };
         if let Some(input) = startup.input {
             app.start_open(input);
@@ -515,9 +519,10 @@ impl ViewerApp {
         };
         ui.painter()
             .add(egui_wgpu::Callback::new_paint_callback(rect, cb));
-        // The crosshair over each slice.
+        self.shown_slices = views.clone();
+        // The crosshair over each slice (with the other overlays).
         let stroke = egui::Stroke::new(1.0, Color32::from_rgb(230, 200, 40));
-        for (r, v) in &views {
+        for (r, v) in views.iter().filter(|_| self.overlays) {
             let aspect = (r.width() / r.height().max(1.0)) as f64;
             if let Ok(g) = v.resolve(&vframe, aspect) {
                 let (p, _) = g.image_of(point, r.width() as u32, r.height() as u32);
@@ -639,6 +644,7 @@ impl ViewerApp {
                     callback = cb;
                     return;
                 }
+                self.shown_slices.clear();
                 flying = self.camera_input(ui, &response);
                 if let (Some(s), Some(c)) = (&self.shown, &self.camera) {
                     let cb = VolumeCallback {

@@ -10,7 +10,7 @@
 //! camera orbit YAW PITCH DIST    degrees, degrees, multiple of the home distance
 //! camera axis +x|-x|+y|-y|+z|-z  camera reset
 //! projection perspective | orthographic
-//! overlays on | off              the bounding box and axes
+//! overlays on | off              the bounding box and axes, and the slices' crosshair
 //! layout four | single           three orthogonal slices and 3D, or the 3D view alone
 //! crosshair X Y Z                the four views' crosshair, voxel index coordinates
 //! background R G B               0..255, behind the volume

@@ -180,6 +180,27 @@ fn library_image(
 
 /// The library's out-of-core rendering of a store with the viewer's default
 /// budgets and its grey preset, drawn until converged.
+/// The library's own rendering of a slice view of a store (grey over the
+/// value range, as the viewer's slices), converged.
+fn library_store_slice(store: &Path, view: brickray::SliceView, w: u32, h: u32) -> Vec<u8> {
+    let gpu = brickray_harness::shared_gpu();
+    let source = std::sync::Arc::new(brickray::store::open(store).expect("open the store"));
+    let d = source.desc().clone();
+    let frame = VolumeFrame::centered(d.dims, d.spacing);
+    let mut renderer =
+        VolumeRenderer::new(&gpu.device, brickray_harness::target_desc()).expect("renderer");
+    renderer
+        .set_volume_source(&gpu.device, &gpu.queue, source, Default::default())
+        .expect("source");
+    renderer.set_slice(Some(view));
+    let target = brickray_harness::Offscreen::new(&gpu.device, w, h);
+    let desc = FrameDesc::new(Camera::orbit(glam::Vec3::ZERO, 2.0, 0.3, 0.2), frame, w, h);
+    let settled = brickray_harness::draw_until_settled(gpu, &mut renderer, &target, &desc, 600)
+        .expect("draw");
+    assert!(settled.is_some(), "the library's slice did not converge");
+    target.read_color(gpu)
+}
+
 fn library_store_image(store: &Path, camera: Camera, w: u32, h: u32) -> Vec<u8> {
     let gpu = brickray_harness::shared_gpu();
     let source = std::sync::Arc::new(brickray::store::open(store).expect("open the store"));
@@ -644,11 +665,14 @@ fn the_four_view_layout_shows_three_slices_and_3d() {
     };
     let store = sphere_store(dir.path());
     let shot = dir.path().join("four.png");
+    let plain = dir.path().join("plain.png");
     let script = format!(
         "open {store}\nbackground 0 0 0\ntf grey\nlayout four\ncrosshair 47.5 47.5 47.5\n\
-         wait converged 600\nscreenshot {shot}\nquit\n",
+         wait converged 600\nscreenshot {shot}\noverlays off\ncrosshair 40 52 45.5\n\
+         wait converged 600\nscreenshot {plain}\nquit\n",
         store = store.display(),
         shot = shot.display(),
+        plain = plain.display(),
     );
     run_script(dir.path(), &script, Duration::from_secs(120));
     let (img, w, h) = read_png(&shot);
@@ -688,5 +712,35 @@ fn the_four_view_layout_shows_three_slices_and_3d() {
         } else {
             assert_eq!(yellow, 0, "the 3D view has no crosshair");
         }
+    }
+    // Without overlays (no crosshair lines), each slice of the screenshot
+    // is the library's own rendering of that slice view.
+    let (img, w, _) = read_png(&plain);
+    let side = sidecar_json(&plain);
+    let slices = side["slices"]
+        .as_array()
+        .expect("the slices in the sidecar");
+    assert_eq!(slices.len(), 3);
+    for (i, s) in slices.iter().enumerate() {
+        let f = |v: &serde_json::Value| v.as_f64().expect("a number");
+        let v3 = |v: &serde_json::Value| [f(&v[0]), f(&v[1]), f(&v[2])];
+        let vp: Vec<u32> = (0..4).map(|k| f(&s["viewport"][k]) as u32).collect();
+        let view = brickray::SliceView {
+            centre: v3(&s["centre"]),
+            right: v3(&s["right"]),
+            up: v3(&s["up"]),
+            height: f(&s["height"]),
+            slab: None,
+        };
+        let mut crop = Vec::with_capacity((vp[2] * vp[3] * 4) as usize);
+        for y in vp[1]..vp[1] + vp[3] {
+            let row = ((y * w + vp[0]) * 4) as usize;
+            crop.extend_from_slice(&img[row..row + (vp[2] * 4) as usize]);
+        }
+        let lib = library_store_slice(&store, view, vp[2], vp[3]);
+        let name = format!("viewer-slice-{i}");
+        let cmp = brickray_reference::assert_close(&name, &crop, &lib, vp[2], vp[3], MIN_PSNR_DB)
+            .unwrap_or_else(|e| panic!("{e}"));
+        eprintln!("four views, slice {i} vs library: {cmp}");
     }
 }
