@@ -580,13 +580,16 @@ impl ViewerApp {
         }
         self.apply(frame);
 
-        // Statistics of the frame drawn last time, and GPU errors.
+        // Statistics of the frame drawn last time, and GPU errors (the
+        // slices only count in the four-view layout, which draws them).
+        let four = self.four_views;
         let (stats, frames, wants_redraw, err) = self
             .with_gpu(frame, |_, _, r| {
                 (
                     r.renderer.stats(),
                     r.frames,
-                    r.renderer.wants_redraw() || r.slices.iter().any(|s| s.wants_redraw()),
+                    r.renderer.wants_redraw()
+                        || (four && r.slices.iter().any(|s| s.wants_redraw())),
                     r.take_error(),
                 )
             })
