@@ -8,7 +8,7 @@ mod scripting;
 use scripting::{PendingShot, ScriptRunner};
 
 use crate::camera::{Axis, CameraController, Navigation};
-use crate::script::{Action, ModeName, PredictionChoice};
+use crate::script::{Action, ModeName, PredictionChoice, WindowChoice};
 use crate::source::{Input, Loaded, OpenOptions, Opened, Opening};
 use crate::stats::Stats;
 use crate::tf::{Histogram, Preset, TABLE_ENTRIES, TfModel};
@@ -96,6 +96,9 @@ pub(crate) struct ViewerApp {
     /// The slices drawn last in the four-view layout, with their rectangles
     /// (recorded in screenshots' sidecars).
     shown_slices: Vec<(egui::Rect, SliceView)>,
+    /// The slices' and MIP's window, and whether the renderers have it.
+    window: WindowChoice,
+    window_dirty: bool,
 }
 
 impl std::fmt::Debug for ViewerApp {
@@ -171,6 +174,8 @@ impl ViewerApp {
             four_views: false,
             crosshair: None,
             shown_slices: Vec::new(),
+            window: WindowChoice::Off,
+            window_dirty: false,
         };
         if let Some(input) = startup.input {
             app.start_open(input);
@@ -243,6 +248,7 @@ impl ViewerApp {
         if !reopened {
             self.crosshair = None;
         }
+        self.window_dirty = true;
         self.shown = Some(Shown {
             input: loaded.input,
             desc,
@@ -324,6 +330,31 @@ impl ViewerApp {
             });
             if let Some(Err(e)) = res {
                 self.fail(format!("budgets: {e}"));
+            }
+        }
+        if self.window_dirty
+            && let Some(shown) = &self.shown
+        {
+            self.window_dirty = false;
+            let range = shown.desc.value_range;
+            let raw = range.map(f64::from);
+            let window = match self.window {
+                WindowChoice::Off => Ok(None),
+                WindowChoice::Auto => brickray::Window::auto(&shown.histogram.bins, raw).map(Some),
+                WindowChoice::Preset(p) => Ok(Some(p.window())),
+                WindowChoice::CentreWidth(c, w) => brickray::Window::new(c, w).map(Some),
+            };
+            match window {
+                Ok(w) => {
+                    let i = w.map(|w| brickray::Intensity::new(w, brickray::ColorMap::Grey));
+                    self.with_gpu(frame, |_, _, r| {
+                        r.renderer.set_intensity(i);
+                        for s in &mut r.slices {
+                            s.set_intensity(i);
+                        }
+                    });
+                }
+                Err(e) => self.fail(format!("window: {e}")),
             }
         }
         if self.prediction_dirty {

@@ -204,6 +204,10 @@ impl ViewerApp {
                 Action::Overlays(on) => self.overlays = on,
                 Action::FourViews(on) => self.four_views = on,
                 Action::Crosshair(p) => self.crosshair = Some(p),
+                Action::Window(w) => {
+                    self.window = w;
+                    self.window_dirty = true;
+                }
                 Action::Background(c) => self.background = c,
                 Action::U8Exact(exact) => {
                     if exact != self.u8_exact {
