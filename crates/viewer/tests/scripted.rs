@@ -180,9 +180,15 @@ fn library_image(
 
 /// The library's out-of-core rendering of a store with the viewer's default
 /// budgets and its grey preset, drawn until converged.
-/// The library's own rendering of a slice view of a store (grey over the
-/// value range, as the viewer's slices), converged.
-fn library_store_slice(store: &Path, view: brickray::SliceView, w: u32, h: u32) -> Vec<u8> {
+/// The library's own rendering of a slice view of a store through a grey
+/// window, converged.
+fn library_store_slice(
+    store: &Path,
+    view: brickray::SliceView,
+    window: brickray::Window,
+    w: u32,
+    h: u32,
+) -> Vec<u8> {
     let gpu = brickray_harness::shared_gpu();
     let source = std::sync::Arc::new(brickray::store::open(store).expect("open the store"));
     let d = source.desc().clone();
@@ -193,6 +199,10 @@ fn library_store_slice(store: &Path, view: brickray::SliceView, w: u32, h: u32) 
         .set_volume_source(&gpu.device, &gpu.queue, source, Default::default())
         .expect("source");
     renderer.set_slice(Some(view));
+    renderer.set_intensity(Some(brickray::Intensity::new(
+        window,
+        brickray::ColorMap::Grey,
+    )));
     let target = brickray_harness::Offscreen::new(&gpu.device, w, h);
     let desc = FrameDesc::new(Camera::orbit(glam::Vec3::ZERO, 2.0, 0.3, 0.2), frame, w, h);
     let settled = brickray_harness::draw_until_settled(gpu, &mut renderer, &target, &desc, 600)
@@ -668,7 +678,7 @@ fn the_four_view_layout_shows_three_slices_and_3d() {
     let plain = dir.path().join("plain.png");
     let script = format!(
         "open {store}\nbackground 0 0 0\ntf grey\nlayout four\ncrosshair 47.5 47.5 47.5\n\
-         wait converged 600\nscreenshot {shot}\noverlays off\ncrosshair 40 52 45.5\n\
+         wait converged 600\nscreenshot {shot}\noverlays off\ncrosshair 40 52 45.5\nwindow 100 120\n\
          wait converged 600\nscreenshot {plain}\nquit\n",
         store = store.display(),
         shot = shot.display(),
@@ -713,8 +723,9 @@ fn the_four_view_layout_shows_three_slices_and_3d() {
             assert_eq!(yellow, 0, "the 3D view has no crosshair");
         }
     }
-    // Without overlays (no crosshair lines), each slice of the screenshot
-    // is the library's own rendering of that slice view.
+    // Without overlays (no crosshair lines) and through a window (raw
+    // 40..160 of the ball's 0..255), each slice of the screenshot is the
+    // library's own rendering of that slice view.
     let (img, w, _) = read_png(&plain);
     let side = sidecar_json(&plain);
     let slices = side["slices"]
@@ -737,7 +748,8 @@ fn the_four_view_layout_shows_three_slices_and_3d() {
             let row = ((y * w + vp[0]) * 4) as usize;
             crop.extend_from_slice(&img[row..row + (vp[2] * 4) as usize]);
         }
-        let lib = library_store_slice(&store, view, vp[2], vp[3]);
+        let window = brickray::Window::new(100.0, 120.0).unwrap();
+        let lib = library_store_slice(&store, view, window, vp[2], vp[3]);
         let name = format!("viewer-slice-{i}");
         let cmp = brickray_reference::assert_close(&name, &crop, &lib, vp[2], vp[3], MIN_PSNR_DB)
             .unwrap_or_else(|e| panic!("{e}"));
