@@ -14,7 +14,7 @@
 //! * [`lod`]: per-node error bounds of level of detail and their cost under a
 //!   transfer function (error-aware refinement);
 //! * [`synthetic`]: procedural test volumes (sphere, Marschner-Lobb);
-//! * [`slice`]: slice views (a plane or a thick slab through the volume);
+//! * [`slice`](mod@slice): slice views (a plane or a thick slab through the volume);
 //! * [`window`]: window and level, CT presets and colour maps of MIP and slices.
 
 pub mod brick;
