@@ -43,6 +43,10 @@ pub use brickray_core::{
 };
 pub use brickray_core::{BrickSource, NodeKey, OctreeLayout};
 pub use brickray_render::{
+    ColorMap, CtPreset, Intensity, Slab, SlabMode, SliceAxis, SliceError, SliceGeometry, SliceView,
+    Window, WindowError,
+};
+pub use brickray_render::{
     ConfigError, FadeDuration, FrameDesc, FrameStats, GpuErrorKind, HostDepthError,
     OPTIONAL_FEATURES, OptionalFeature, OutOfCoreConfig, OutOfCoreStats, PrepareError, RenderError,
     RendererOptions, RendererStats, RetryPolicy, StreamError, StreamedVolume, TargetDesc,

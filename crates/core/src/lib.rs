@@ -13,7 +13,9 @@
 //! * [`texel`]: how samples are stored in GPU textures ([`SampleEncoding`]);
 //! * [`lod`]: per-node error bounds of level of detail and their cost under a
 //!   transfer function (error-aware refinement);
-//! * [`synthetic`]: procedural test volumes (sphere, Marschner-Lobb).
+//! * [`synthetic`]: procedural test volumes (sphere, Marschner-Lobb);
+//! * [`slice`](mod@slice): slice views (a plane or a thick slab through the volume);
+//! * [`window`]: window and level, CT presets and colour maps of MIP and slices.
 
 pub mod brick;
 pub mod camera;
@@ -22,10 +24,12 @@ pub mod macrocell;
 mod node_error;
 mod pyramid;
 pub mod settings;
+pub mod slice;
 pub mod synthetic;
 pub mod texel;
 pub mod tf;
 pub mod volume;
+pub mod window;
 
 pub use brick::{
     BrickError, BrickSource, CutLeaf, EmptyReason, LeafKind, NodeInfo, NodeKey, NodeKind,
@@ -42,6 +46,8 @@ pub use lod::{
 pub use macrocell::{MacroCellGrid, sub_cell_ranges, sub_cells_per_axis};
 pub use pyramid::{ALL_AXES, Children, LayoutError, MAX_LEVELS, anisotropic_split_masks};
 pub use settings::{Accel, ClipBox, RenderMode, RenderSettings, SettingsError, Shading};
+pub use slice::{Slab, SlabMode, SliceAxis, SliceError, SliceGeometry, SliceView};
 pub use texel::{SampleEncoding, TexelCaps, TexelFormat, U8Filtering};
 pub use tf::{TfError, TransferFunction};
 pub use volume::{DType, Volume, VolumeData, VolumeDesc, VolumeError};
+pub use window::{ColorMap, CtPreset, Intensity, Window, WindowError, histogram};

@@ -51,6 +51,9 @@
 //! (a test checks it on a rotated, sheared, anisotropic frame); for the default
 //! centred frame it is the direction of the physical gradient `g_i / spacing_i`.
 //!
+//! [`render_slice`] is the reference of slice views: exact trilinear samples
+//! of a plane or a slab (max or mean), mapped through a window and colour map.
+//!
 //! # Metrics
 //!
 //! [`psnr`], [`mean_flip`] (NVIDIA's FLIP, through the `nv-flip` crate), [`ssim`],
@@ -61,6 +64,7 @@
 mod image_buf;
 mod metrics;
 mod render;
+mod slice;
 mod ssim;
 mod temporal;
 mod visible;
@@ -71,6 +75,7 @@ pub use metrics::{
     test_output_dir,
 };
 pub use render::{DEFAULT_STEP_FACTOR, EXACT_STEP_FACTOR, ReferenceOptions, render_reference};
+pub use slice::{SliceReferenceError, render_slice};
 pub use ssim::ssim;
 pub use temporal::{
     CHANGE_EPS, TemporalError, TemporalOptions, TemporalReport, temporal_stability,

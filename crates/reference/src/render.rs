@@ -2,7 +2,8 @@
 
 use brickray_core::tf::{Preintegrator, corrected_alpha};
 use brickray_core::{
-    Camera, Ray, RayGen, RenderMode, RenderSettings, Shading, TransferFunction, Volume, VolumeFrame,
+    Camera, Intensity, Ray, RayGen, RenderMode, RenderSettings, Shading, TransferFunction, Volume,
+    VolumeFrame,
 };
 use glam::{DMat3, DMat4, DVec3};
 use rayon::prelude::*;
@@ -51,6 +52,10 @@ pub struct ReferenceOptions<'a> {
     /// shaded at the segment's midpoint. `settings.preintegrated` is ignored, like
     /// `settings.step_factor`. Default off.
     pub preintegrated: bool,
+    /// MIP maps its maximum through this window and colour map, opaque,
+    /// instead of the transfer function (`VolumeRenderer::set_intensity`).
+    /// Default `None`.
+    pub intensity: Option<Intensity>,
 }
 
 impl ReferenceOptions<'static> {
@@ -63,6 +68,7 @@ impl ReferenceOptions<'static> {
             supersample: 1,
             host_depth: None,
             preintegrated: false,
+            intensity: None,
         }
     }
 }
@@ -120,6 +126,15 @@ impl<'a> ReferenceOptions<'a> {
             supersample: self.supersample,
             host_depth: Some(depth),
             preintegrated: self.preintegrated,
+            intensity: self.intensity,
+        }
+    }
+
+    /// With MIP mapped through `intensity` ([`Self::intensity`]).
+    pub fn with_intensity(self, intensity: Intensity) -> Self {
+        ReferenceOptions {
+            intensity: Some(intensity),
+            ..self
         }
     }
 }
@@ -177,6 +192,7 @@ pub fn render_reference(
     }
 
     let mut marcher = Marcher::new(vol, frame, tf, camera, settings, step_factor, width, height);
+    marcher.intensity = opts.intensity;
     if opts.preintegrated {
         marcher.preint = Some(Preintegrator::new(tf, PREINT_CELLS));
     }
@@ -215,6 +231,8 @@ struct Marcher<'a> {
     height: u32,
     /// Pre-integrated DVR ([`ReferenceOptions::preintegrated`]).
     preint: Option<Preintegrator<'a>>,
+    /// MIP's window and colour map ([`ReferenceOptions::intensity`]).
+    intensity: Option<Intensity>,
 }
 
 /// The result of one ray: premultiplied RGBA and clip depth.
@@ -247,6 +265,7 @@ impl<'a> Marcher<'a> {
             width,
             height,
             preint: None,
+            intensity: None,
         }
     }
 }
@@ -421,6 +440,13 @@ impl Marcher<'_> {
         }
         match best {
             None => ([0.0; 4], None),
+            Some((m, t)) if self.intensity.is_some() => {
+                let i = self.intensity.expect("matched");
+                let [r, g, b] = i
+                    .map(m, self.vol.desc().value_range)
+                    .expect("the renderer refuses a volume without a finite value range");
+                ([r, g, b, 1.0], Some(self.clip_depth(ray, t)))
+            }
             Some((m, t)) => {
                 let [r, g, b, a] = self.tf.lookup(m);
                 ([r * a, g * a, b * a, a], Some(self.clip_depth(ray, t)))

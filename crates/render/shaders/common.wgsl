@@ -61,7 +61,25 @@ struct Frame {
     clip_pad_a: f32,
     clip_max: vec3<f32>,
     clip_pad_b: f32,
+    // The intensity window in normalized values (MIP and slice views).
+    window_lo: f32,
+    window_hi: f32,
+    // MAP_*: the colour map (0: MIP through the transfer function).
+    color_map: u32,
+    // Slice views (slice.wgsl): SLAB_*, the samples across the slab and their
+    // spacing in ray parameter (0 for a plane).
+    slab_mode: u32,
+    slab_samples: u32,
+    slab_dt: f32,
+    map_pad_a: f32,
+    map_pad_b: f32,
 }
+
+// Colour maps of the intensity window (brickray_core::ColorMap::id).
+const MAP_TF: u32 = 0u;
+const MAP_GREY: u32 = 1u;
+const MAP_HOT: u32 = 2u;
+const MAP_VIRIDIS: u32 = 3u;
 
 const FLAG_HOST_DEPTH: u32 = 1u;
 const FLAG_PERSPECTIVE: u32 = 2u;
@@ -284,4 +302,21 @@ fn store_pixel(px: vec2<u32>, color: vec4<f32>, depth: f32, host: f32, samples: 
     textureStore(out_color, p, color);
     textureStore(out_depth, p, vec4<f32>(nearer_depth(depth, host), 0.0, 0.0, 0.0));
     textureStore(out_samples, p, vec4<u32>(samples, 0u, 0u, 0u));
+}
+
+// The opaque colour of normalized value v through the intensity window and
+// colour map (brickray_core::Intensity::map): x = clamp((v - lo) / (hi - lo)),
+// grey x, hot (3x, 3x - 1, 3x - 2) clamped, viridis interpolated in its table
+// (VIRIDIS, generated from brickray_core::window::VIRIDIS). Every map is
+// computed and one selected: no branch on a uniform alone.
+fn intensity_color(v: f32) -> vec3<f32> {
+    let x = clamp((v - frame.window_lo) / (frame.window_hi - frame.window_lo), 0.0, 1.0);
+    let grey = vec3<f32>(x);
+    let hot = clamp(vec3<f32>(3.0 * x) - vec3<f32>(0.0, 1.0, 2.0), vec3<f32>(0.0), vec3<f32>(1.0));
+    let n = f32(VIRIDIS_N - 1u);
+    let i = min(u32(floor(x * n)), VIRIDIS_N - 2u);
+    let f = x * n - f32(i);
+    var table = VIRIDIS;
+    let viridis = mix(table[i], table[i + 1u], f);
+    return select(select(grey, hot, frame.color_map == MAP_HOT), viridis, frame.color_map == MAP_VIRIDIS);
 }

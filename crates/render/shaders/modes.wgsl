@@ -229,11 +229,14 @@ fn mip_sample(acc: ptr<function, Accum>, t: f32, v: f32) -> bool {
     return ERT && (*acc).max_v >= 1.0;
 }
 
-// MIP: maps the maximum through the TF (premultiplied, no step correction).
+// MIP: maps the maximum through the TF (premultiplied, no step correction),
+// or, with an intensity window (frame.color_map != MAP_TF), through the window
+// and colour map, opaque.
 fn mip_finish(acc: ptr<function, Accum>, r: Ray) {
     if ((*acc).max_v > -1.0e38) {
         let s = tf_lookup((*acc).max_v);
-        (*acc).color = vec4<f32>(s.rgb * s.a, s.a);
+        let windowed = vec4<f32>(intensity_color((*acc).max_v), 1.0);
+        (*acc).color = select(vec4<f32>(s.rgb * s.a, s.a), windowed, frame.color_map != MAP_TF);
         (*acc).depth = depth_at(r, (*acc).max_t);
         (*acc).depth_set = true;
     }

@@ -1,7 +1,7 @@
 //! Errors of the render crate, one enum per phase. No variant carries only a
 //! string: each names what failed with structured fields.
 
-use brickray_core::{CameraError, FrameError, SettingsError};
+use brickray_core::{CameraError, FrameError, SettingsError, SliceError, WindowError};
 use thiserror::Error;
 
 /// What kind of error wgpu reported inside one of the library's error scopes.
@@ -186,9 +186,17 @@ pub enum PrepareError {
     /// Creating or updating GPU resources failed.
     #[error(transparent)]
     Render(#[from] RenderError),
-    /// Two views of one streamed volume prepared together differ in render
-    /// mode or transfer function (the views planned together share the
-    /// classification).
+    /// The renderer's slice view cannot be drawn in this frame (a NaN or
+    /// degenerate plane, a bad slab).
+    #[error(transparent)]
+    Slice(#[from] SliceError),
+    /// The intensity window cannot map the volume's values (a degenerate
+    /// value range, or a window narrower than f32 resolves).
+    #[error(transparent)]
+    Window(#[from] WindowError),
+    /// Two 3D views of one streamed volume prepared together differ in
+    /// render mode or transfer function (the views planned together share
+    /// the classification; slice views agree with any).
     #[error(
         "views {first} and {other} draw one streamed volume with different modes or transfer functions"
     )]

@@ -74,6 +74,18 @@ pub(crate) struct FrameUniforms {
     pub(crate) clip_pad_a: f32,
     pub(crate) clip_max: [f32; 3],
     pub(crate) clip_pad_b: f32,
+    /// The intensity window in normalized values (MIP and slices).
+    pub(crate) window_lo: f32,
+    pub(crate) window_hi: f32,
+    /// `MAP_*` of common.wgsl: 0 maps MIP through the transfer function.
+    pub(crate) color_map: u32,
+    /// `SLAB_*` of slice.wgsl: how a slice's slab reduces its samples.
+    pub(crate) slab_mode: u32,
+    /// Samples across a slice's slab and their spacing (ray parameter).
+    pub(crate) slab_samples: u32,
+    pub(crate) slab_dt: f32,
+    pub(crate) map_pad_a: f32,
+    pub(crate) map_pad_b: f32,
 }
 
 /// Upper bound of samples (and skips) along one ray as a multiple of the samples
@@ -145,6 +157,14 @@ impl FrameUniforms {
             clip_pad_a: 0.0,
             clip_max: s.clip.max,
             clip_pad_b: 0.0,
+            window_lo: 0.0,
+            window_hi: 1.0,
+            color_map: 0,
+            slab_mode: 0,
+            slab_samples: 1,
+            slab_dt: 0.0,
+            map_pad_a: 0.0,
+            map_pad_b: 0.0,
         }
     }
 }

@@ -13,6 +13,11 @@ use std::collections::HashMap;
 /// The workgroup size of the kernels (`@workgroup_size(8, 8, 1)`).
 pub(crate) use crate::gpu::WORKGROUP;
 
+/// The ray caster's entry point in both kernels.
+pub(crate) const ENTRY_RAYCAST: &str = "main";
+/// The slice view's entry point in both kernels (slice.wgsl).
+pub(crate) const ENTRY_SLICE: &str = "slice_main";
+
 /// Bind groups of a kernel: frame, transfer function, volume.
 pub(crate) const BIND_GROUPS: u32 = 3;
 
@@ -59,6 +64,8 @@ pub(crate) struct Variant {
     /// Out of core: the visible weights of the usage feedback
     /// (`shaders/feedback.wgsl`, `LodMetric::VisibleError`).
     pub(crate) weights: bool,
+    /// The slice view's entry point (slice.wgsl) instead of the ray caster.
+    pub(crate) slice: bool,
 }
 
 /// The override constants of a pipeline, by WGSL name (modes.wgsl,
@@ -96,6 +103,7 @@ impl Variant {
             sparse_ess: false,
             preint: s.preintegrated && mode == KernelMode::Dvr,
             weights,
+            slice: false,
         };
         match prediction {
             Some(p) if mode == KernelMode::Iso => Variant {
@@ -105,6 +113,23 @@ impl Variant {
                 ..v
             },
             _ => v,
+        }
+    }
+
+    /// The slice view's pipeline (the switches of the ray caster off; the
+    /// visible weights when the backend measures them).
+    pub(crate) fn slice(weights: bool) -> Variant {
+        Variant {
+            mode: KernelMode::Mip,
+            ert: false,
+            ess: false,
+            shade: false,
+            predict: false,
+            guard: false,
+            sparse_ess: false,
+            preint: false,
+            weights,
+            slice: true,
         }
     }
 
@@ -209,7 +234,11 @@ impl Kernels {
                     label: Some(k.label),
                     layout: Some(&k.layout),
                     module: &k.module,
-                    entry_point: Some("main"),
+                    entry_point: Some(if variant.slice {
+                        ENTRY_SLICE
+                    } else {
+                        ENTRY_RAYCAST
+                    }),
                     compilation_options: wgpu::PipelineCompilationOptions {
                         constants: &constants,
                         ..Default::default()

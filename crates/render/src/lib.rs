@@ -35,6 +35,7 @@ mod limits;
 mod planner;
 mod predict;
 pub mod shaders;
+mod slice;
 mod tf;
 mod volume;
 
@@ -52,6 +53,11 @@ pub use frame::PredictionFrame;
 pub use limits::{OPTIONAL_FEATURES, OptionalFeature, optional_features, required_limits};
 pub use predict::{Prediction, PredictionCounts, PredictionError, TraversalClass};
 
+/// Slice views and the intensity window (GPU-free, from `brickray-core`).
+pub use brickray_core::{
+    ColorMap, CtPreset, Intensity, Slab, SlabMode, SliceAxis, SliceError, SliceGeometry, SliceView,
+    Window, WindowError,
+};
 pub use volume::{StreamedVolume, VolumeOptions};
 
 use backend::{Backend, InCore, OutOfCore};
@@ -60,6 +66,7 @@ use brickray_core::{BrickSource, DepthConvention, FrameView, TransferFunction, V
 use composite::Compositor;
 use frame::{FrameState, FrameUniforms};
 use kernels::{Kernels, Variant};
+use slice::FrameMapping;
 use std::sync::Arc;
 use tf::TfTables;
 
@@ -99,6 +106,14 @@ pub struct VolumeRenderer {
     volume_epoch: u64,
     /// The voxel dims of the volume drawn (a frame must place these).
     volume_dims: Option<[u32; 3]>,
+    /// The raw value range of the volume drawn (the window maps through it).
+    value_range: [f32; 2],
+    /// The slice view drawn instead of the 3D view ([`Self::set_slice`]).
+    slice: Option<SliceView>,
+    /// The intensity window of MIP and slices ([`Self::set_intensity`]).
+    intensity: Option<Intensity>,
+    /// The frame being prepared's intensity mapping and slice.
+    mapping: Option<FrameMapping>,
 }
 
 impl VolumeRenderer {
@@ -131,6 +146,10 @@ impl VolumeRenderer {
             prediction: None,
             volume_epoch: 0,
             volume_dims: None,
+            value_range: [0.0, 1.0],
+            slice: None,
+            intensity: None,
+            mapping: None,
         })
     }
 
@@ -155,6 +174,7 @@ impl VolumeRenderer {
         let b = InCore::new(device, queue, volume, self.options.u8_filtering)?;
         self.backend = Some(Backend::InCore(b));
         self.volume_dims = Some(volume.dims());
+        self.value_range = volume.desc().value_range;
         Ok(())
     }
 
@@ -199,6 +219,7 @@ impl VolumeRenderer {
         let b = OutOfCore::new(device, volume.clone())?;
         self.backend = Some(Backend::OutOfCore(Box::new(b)));
         self.volume_dims = Some(desc.dims);
+        self.value_range = desc.value_range;
         Ok(())
     }
 
@@ -242,6 +263,39 @@ impl VolumeRenderer {
         }
         self.prediction = settings;
         Ok(())
+    }
+
+    /// Makes this renderer draw a slice view of its volume (`None`: the 3D
+    /// view again): a plane or a thick slab (maximum or mean), sampled at the
+    /// frame's viewport resolution from the same data as the 3D view (out of
+    /// core: the bricks of the one cut the views of a [`StreamedVolume`]
+    /// share, refined for the slice's pixel size) and mapped through the
+    /// intensity window ([`Self::set_intensity`]; grey over the volume's
+    /// value range without one). The frame's camera, mode and shading are
+    /// not used: the slice's orthographic camera (its frustum is the slab) is
+    /// ([`SliceGeometry::camera`]). A bad plane is a typed error of
+    /// `prepare` ([`PrepareError::Slice`]).
+    pub fn set_slice(&mut self, slice: Option<SliceView>) {
+        self.slice = slice;
+    }
+
+    /// The slice view drawn, `None` for the 3D view.
+    pub fn slice(&self) -> Option<SliceView> {
+        self.slice
+    }
+
+    /// Sets the intensity window and colour map of MIP frames (`None`: MIP
+    /// maps through the transfer function, opaque mapping off) and slice
+    /// views. The window is in the volume's raw values and maps through its
+    /// value range ([`Window::normalized`]); MIP through a window is opaque
+    /// where a ray met the volume.
+    pub fn set_intensity(&mut self, intensity: Option<Intensity>) {
+        self.intensity = intensity;
+    }
+
+    /// The intensity window in use.
+    pub fn intensity(&self) -> Option<Intensity> {
+        self.intensity
     }
 
     /// The prediction settings in use.
@@ -375,10 +429,12 @@ impl VolumeRenderer {
     /// streamed volume they share is planned once for all the views that draw
     /// it: one cut holds each node at the finest level any of them needs, each
     /// brick is loaded once into the one pool, and what each view's rays
-    /// observed feeds one visibility state. Views planned together must share
-    /// the render mode and the transfer function
-    /// ([`PrepareError::ViewsDisagree`]). Every frame is checked before any
-    /// GPU work; the stats are in the order of `views`.
+    /// observed feeds one visibility state. The 3D views planned together
+    /// must share the render mode and the transfer function
+    /// ([`PrepareError::ViewsDisagree`]); slice views ([`Self::set_slice`])
+    /// join any group, which then classifies as MIP (every node with data is
+    /// visible). Every frame is checked before any GPU work; the stats are in
+    /// the order of `views`.
     pub fn prepare_views(
         device: &wgpu::Device,
         queue: &wgpu::Queue,
@@ -386,9 +442,14 @@ impl VolumeRenderer {
         views: &mut [(&mut VolumeRenderer, &FrameDesc<'_>)],
     ) -> Result<Vec<FrameStats>, PrepareError> {
         // Everything is checked first, so that a rejected frame touches nothing.
+        let mut frames = Vec::with_capacity(views.len());
         for (r, desc) in views.iter_mut() {
             r.prepared = None;
-            r.check_frame(device, desc)?;
+            r.mapping = None;
+            let mapping = FrameMapping::new(r.slice.as_ref(), r.intensity, r.value_range, desc)?;
+            // A slice is checked as the frame it is drawn as.
+            let desc = mapping.frame(desc);
+            r.check_frame(device, &desc)?;
             let Some(volume) = r.volume_dims.filter(|_| r.backend.is_some()) else {
                 return Err(PrepareError::NoVolume);
             };
@@ -398,10 +459,24 @@ impl VolumeRenderer {
                     volume,
                 });
             }
-            if r.tf.current().is_none() {
+            if r.tf.current().is_none() && r.slice.is_none() {
                 return Err(PrepareError::NoTransferFunction);
             }
+            r.mapping = Some(mapping);
+            frames.push(desc);
         }
+        // A renderer that draws only slices binds a stand-in transfer function.
+        for (r, _) in views.iter_mut() {
+            if r.tf.current().is_none() {
+                r.tf.set(device, queue, &slice::slice_tf())?;
+            }
+        }
+        let mut views: Vec<(&mut VolumeRenderer, &FrameDesc<'_>)> = views
+            .iter_mut()
+            .zip(&frames)
+            .map(|((r, _), d)| (&mut **r, d))
+            .collect();
+        let views = views.as_mut_slice();
         let mut uploaded = vec![0u64; views.len()];
         let mut done = vec![false; views.len()];
         for i in 0..views.len() {
@@ -450,8 +525,14 @@ impl VolumeRenderer {
             desc.settings.preintegrated
                 && matches!(desc.settings.mode, brickray_core::RenderMode::Dvr),
         )?;
-        let uniforms = FrameUniforms::new(desc, backend.max_leaves());
-        let variant = Variant::of(&desc.settings, self.prediction, backend.measures_weights());
+        let mut uniforms = FrameUniforms::new(desc, backend.max_leaves());
+        let mapping = self.mapping.ok_or(PrepareError::NoVolume)?;
+        mapping.apply(&mut uniforms);
+        let variant = if mapping.slice.is_some() {
+            Variant::slice(backend.measures_weights())
+        } else {
+            Variant::of(&desc.settings, self.prediction, backend.measures_weights())
+        };
         let predict = self
             .prediction
             .filter(|_| variant.predicts())
@@ -544,11 +625,18 @@ fn streamed_group(
     let group: Vec<usize> = (i..views.len())
         .filter(|&j| !done[j] && volume(j).is_some_and(|v| v.same(lead)))
         .collect();
-    let (first, desc) = (&views[i].0, views[i].1);
-    for &j in &group[1..] {
-        let (r, d) = (&views[j].0, views[j].1);
-        if d.settings.mode != desc.settings.mode || r.tf.current() != first.tf.current() {
-            return Err(PrepareError::ViewsDisagree { first: i, other: j });
+    // The 3D views must agree; a slice agrees with any view.
+    let mut views_3d = group
+        .iter()
+        .copied()
+        .filter(|&j| views[j].0.slice.is_none());
+    if let Some(first) = views_3d.next() {
+        let (f, desc) = (&views[first].0, views[first].1);
+        for j in views_3d {
+            let (r, d) = (&views[j].0, views[j].1);
+            if d.settings.mode != desc.settings.mode || r.tf.current() != f.tf.current() {
+                return Err(PrepareError::ViewsDisagree { first, other: j });
+            }
         }
     }
     Ok(group)
@@ -584,12 +672,26 @@ fn plan_group(
         }
     }
     let planned = {
-        let (r, desc) = &views[lead];
+        // The classification is the 3D views' (they agree), MIP when a slice
+        // is among the views: every node with data is visible, as a slice
+        // shows every value (a superset of what DVR and iso classify as
+        // visible, so the 3D views draw the same image).
+        let sliced = group.iter().any(|&j| views[j].0.slice.is_some());
+        let lead_3d = group
+            .iter()
+            .copied()
+            .find(|&j| views[j].0.slice.is_none())
+            .unwrap_or(lead);
+        let (r, desc) = &views[lead_3d];
         let tf = r.tf.current().ok_or(PrepareError::NoTransferFunction)?;
         let frame = StreamFrame {
             views: &frame_views,
             classification: Classification {
-                mode: desc.settings.mode,
+                mode: if sliced {
+                    brickray_core::RenderMode::Mip
+                } else {
+                    desc.settings.mode
+                },
                 tf,
                 tf_generation: r.tf.generation(),
             },

@@ -11,6 +11,8 @@
 //! * `predict.wgsl`: the isosurface prediction buffer's bindings (group 0) and
 //!   switches, in both kernels; `incore_predict.wgsl`, `ooc_predict.wgsl`:
 //!   its traversals in each kernel;
+//! * `slice.wgsl`: slice views, a second entry point (`slice_main`) of each
+//!   kernel; `slice_incore.wgsl`, `slice_ooc.wgsl`: where each samples;
 //! * `composite.wgsl`: the draw into the host's pass.
 //!
 //! Every composed kernel is validated by naga in this module's tests, which also
@@ -36,18 +38,44 @@ pub const OOC_PREDICT: &str = include_str!("../shaders/ooc_predict.wgsl");
 pub const REPROJECT: &str = include_str!("../shaders/reproject.wgsl");
 /// The out-of-core kernel's usage feedback (group 2, binding 6).
 pub const FEEDBACK: &str = include_str!("../shaders/feedback.wgsl");
+/// Slice views: the entry point `slice_main` of both kernels.
+pub const SLICE: &str = include_str!("../shaders/slice.wgsl");
+/// Where an in-core slice samples.
+pub const SLICE_INCORE: &str = include_str!("../shaders/slice_incore.wgsl");
+/// Where an out-of-core slice samples.
+pub const SLICE_OOC: &str = include_str!("../shaders/slice_ooc.wgsl");
 /// The composite (fullscreen) shader.
 pub const COMPOSITE: &str = include_str!("../shaders/composite.wgsl");
 
-/// The in-core ray caster as compiled.
-pub fn incore() -> String {
-    format!("{COMMON}\n{MODES}\n{PREDICT}\n{INCORE}\n{INCORE_PREDICT}")
+/// The colour maps' tables as WGSL constants, from `brickray_core::window`
+/// (one source for the kernels and the CPU reference).
+pub fn color_tables() -> String {
+    let v = brickray_core::window::VIRIDIS;
+    let entries: Vec<String> = v
+        .iter()
+        .map(|c| format!("vec3<f32>({:?}, {:?}, {:?})", c[0], c[1], c[2]))
+        .collect();
+    format!(
+        "const VIRIDIS_N: u32 = {n}u;\nconst VIRIDIS: array<vec3<f32>, {n}> = array<vec3<f32>, {n}>({});\n",
+        entries.join(", "),
+        n = v.len()
+    )
 }
 
-/// The out-of-core ray caster as compiled (with the octree traversal library).
+/// The in-core ray caster as compiled (with its slice entry point).
+pub fn incore() -> String {
+    format!(
+        "{COMMON}\n{}\n{MODES}\n{PREDICT}\n{INCORE}\n{INCORE_PREDICT}\n{SLICE}\n{SLICE_INCORE}",
+        color_tables()
+    )
+}
+
+/// The out-of-core ray caster as compiled (with the octree traversal library
+/// and its slice entry point).
 pub fn ooc() -> String {
     format!(
-        "{COMMON}\n{MODES}\n{PREDICT}\n{}\n{OOC}\n{OOC_PREDICT}\n{FEEDBACK}",
+        "{COMMON}\n{}\n{MODES}\n{PREDICT}\n{}\n{OOC}\n{OOC_PREDICT}\n{FEEDBACK}\n{SLICE}\n{SLICE_OOC}",
+        color_tables(),
         brickray_index::OCTREE_TRAVERSAL_WGSL
     )
 }

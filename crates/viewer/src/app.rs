@@ -8,14 +8,15 @@ mod scripting;
 use scripting::{PendingShot, ScriptRunner};
 
 use brickray::core::camera::{AxisView, CameraController, CameraInput, DragButton, Navigation};
-use crate::script::{Action, ModeName, PredictionChoice};
+use crate::script::{Action, ModeName, PredictionChoice, WindowChoice};
 use crate::source::{Input, Loaded, OpenOptions, Opened, Opening};
 use crate::stats::Stats;
 use crate::tf::Histogram;
 use brickray::core::tf::{TABLE_ENTRIES, TfModel, TfPreset as Preset};
 use crate::tf_widget::TfEditor;
-use crate::view::{ViewResources, VolumeCallback, viewport_px};
+use crate::view::{FourViewCallback, ViewResources, VolumeCallback, viewport_px};
 use brickray::{OutOfCoreConfig, RenderMode, RenderSettings, Viewport, VolumeDesc, VolumeFrame};
+use brickray::{SliceAxis, SliceView};
 use eframe::egui::{self, Color32};
 use eframe::egui_wgpu;
 use std::path::{Path, PathBuf};
@@ -88,6 +89,17 @@ pub(crate) struct ViewerApp {
     u8_exact: bool,
     renderer_dirty: bool,
     gpu_error: Option<String>,
+    /// The four-view layout (three orthogonal slices and 3D).
+    four_views: bool,
+    /// The slices' crosshair in voxel index coordinates (`None`: the
+    /// volume's centre).
+    crosshair: Option<[f64; 3]>,
+    /// The slices drawn last in the four-view layout, with their rectangles
+    /// (recorded in screenshots' sidecars).
+    shown_slices: Vec<(egui::Rect, SliceView)>,
+    /// The slices' and MIP's window, and whether the renderers have it.
+    window: WindowChoice,
+    window_dirty: bool,
 }
 
 impl std::fmt::Debug for ViewerApp {
@@ -160,6 +172,11 @@ impl ViewerApp {
             u8_exact: true,
             renderer_dirty: false,
             gpu_error,
+            four_views: false,
+            crosshair: None,
+            shown_slices: Vec::new(),
+            window: WindowChoice::Off,
+            window_dirty: false,
         };
         if let Some(input) = startup.input {
             app.start_open(input);
@@ -190,9 +207,24 @@ impl ViewerApp {
         let vframe = VolumeFrame::centered(desc.dims, desc.spacing);
         let ooc = self.ooc;
         let streamed = matches!(loaded.volume, Opened::Streamed(_));
-        self.with_gpu(frame, |device, queue, r| match loaded.volume {
-            Opened::InCore(v) => r.renderer.set_volume(device, queue, &v),
-            Opened::Streamed(s) => r.renderer.set_volume_source(device, queue, s, ooc),
+        self.with_gpu(frame, |device, queue, r| {
+            match loaded.volume {
+                Opened::InCore(v) => {
+                    r.renderer.set_volume(device, queue, &v)?;
+                    for s in &mut r.slices {
+                        s.set_volume(device, queue, &v)?;
+                    }
+                }
+                Opened::Streamed(src) => {
+                    r.renderer.set_volume_source(device, queue, src, ooc)?;
+                    if let Some(v) = r.renderer.streamed_volume().cloned() {
+                        for s in &mut r.slices {
+                            s.set_streamed_volume(device, &v)?;
+                        }
+                    }
+                }
+            }
+            Ok::<(), brickray::RenderError>(())
         })
         .ok_or("no GPU")?
         .map_err(|e| format!("{}: {e}", loaded.input.name()))?;
@@ -216,6 +248,10 @@ impl ViewerApp {
             self.camera = Some(CameraController::new(&vframe));
         }
         self.stats.clear();
+        if !reopened {
+            self.crosshair = None;
+        }
+        self.window_dirty = true;
         self.shown = Some(Shown {
             input: loaded.input,
             desc,
@@ -297,6 +333,31 @@ impl ViewerApp {
             });
             if let Some(Err(e)) = res {
                 self.fail(format!("budgets: {e}"));
+            }
+        }
+        if self.window_dirty
+            && let Some(shown) = &self.shown
+        {
+            self.window_dirty = false;
+            let range = shown.desc.value_range;
+            let raw = range.map(f64::from);
+            let window = match self.window {
+                WindowChoice::Off => Ok(None),
+                WindowChoice::Auto => brickray::Window::auto(&shown.histogram.bins, raw).map(Some),
+                WindowChoice::Preset(p) => Ok(Some(p.window())),
+                WindowChoice::CentreWidth(c, w) => brickray::Window::new(c, w).map(Some),
+            };
+            match window {
+                Ok(w) => {
+                    let i = w.map(|w| brickray::Intensity::new(w, brickray::ColorMap::Grey));
+                    self.with_gpu(frame, |_, _, r| {
+                        r.renderer.set_intensity(i);
+                        for s in &mut r.slices {
+                            s.set_intensity(i);
+                        }
+                    });
+                }
+                Err(e) => self.fail(format!("window: {e}")),
             }
         }
         if self.prediction_dirty {
@@ -417,6 +478,116 @@ impl ViewerApp {
     }
 }
 
+impl ViewerApp {
+    /// The four-view layout in `rect`: axial (top left), coronal (top
+    /// right), sagittal (bottom left) and the 3D view (bottom right), drawn
+    /// by one callback. A click in a slice moves the crosshair there (the
+    /// other slices follow), the wheel steps a slice by a voxel. Returns the
+    /// callback (for screenshots: the whole rectangle, the 3D camera) and
+    /// whether the 3D camera is flying.
+    fn four_views_ui(
+        &mut self,
+        ui: &mut egui::Ui,
+        rect: egui::Rect,
+    ) -> (Option<VolumeCallback>, bool) {
+        let (Some(shown), Some(_)) = (&self.shown, &self.camera) else {
+            return (None, false);
+        };
+        let vframe = shown.frame;
+        let dims = vframe.dims.map(|d| d as f64);
+        let mut point = self
+            .crosshair
+            .unwrap_or(dims.map(|d| (d * 0.5 - 0.5).floor()));
+        let half = rect.size() * 0.5;
+        let quad = |i: usize| {
+            let min = rect.min + egui::vec2((i % 2) as f32 * half.x, (i / 2) as f32 * half.y);
+            egui::Rect::from_min_size(min, half).shrink(1.0)
+        };
+        let axes = [SliceAxis::Axial, SliceAxis::Coronal, SliceAxis::Sagittal];
+        let mut slices = Vec::with_capacity(3);
+        for (i, axis) in axes.into_iter().enumerate() {
+            let r = quad(i);
+            let aspect = (r.width() / r.height().max(1.0)) as f64;
+            let Ok(view) = SliceView::through(axis, point, &vframe, aspect) else {
+                return (None, false);
+            };
+            let resp = ui.interact(r, ui.scope_id().with(("slice", i)), egui::Sense::click());
+            if let Ok(g) = view.resolve(&vframe, aspect) {
+                if let Some(pos) = resp.interact_pointer_pos().filter(|_| resp.clicked()) {
+                    let p = pos - r.min;
+                    let q = g.index_at(p.x as f64, p.y as f64, r.width() as u32, r.height() as u32);
+                    for a in 0..3 {
+                        if a != axis.normal_axis() {
+                            point[a] = q[a].clamp(0.0, dims[a] - 1.0);
+                        }
+                    }
+                }
+                if resp.hovered() {
+                    let scroll = ui.input(|i| i.smooth_scroll_delta.y);
+                    if scroll != 0.0 {
+                        let a = axis.normal_axis();
+                        point[a] = (point[a] + scroll.signum() as f64).clamp(0.0, dims[a] - 1.0);
+                    }
+                }
+            }
+            slices.push((r, axis));
+        }
+        self.crosshair = Some(point);
+        let r3 = quad(3);
+        let resp = ui.interact(
+            r3,
+            ui.scope_id().with("view 3d"),
+            egui::Sense::click_and_drag(),
+        );
+        let flying = self.camera_input(ui, &resp);
+        let Some(c) = &self.camera else {
+            return (None, flying);
+        };
+        let view_3d = VolumeCallback {
+            rect: r3,
+            camera: c.camera(),
+            frame: vframe,
+            settings: self.frame_settings(),
+            overlays: false,
+            time: ui.input(|i| i.time),
+        };
+        let mut views = Vec::with_capacity(3);
+        for (r, axis) in &slices {
+            let aspect = (r.width() / r.height().max(1.0)) as f64;
+            match SliceView::through(*axis, point, &vframe, aspect) {
+                Ok(v) => views.push((*r, v)),
+                Err(_) => return (None, flying),
+            }
+        }
+        let cb = FourViewCallback {
+            view_3d: view_3d.clone(),
+            slices: [views[0], views[1], views[2]],
+        };
+        ui.painter()
+            .add(egui_wgpu::Callback::new_paint_callback(rect, cb));
+        self.shown_slices = views.clone();
+        // The crosshair over each slice (with the other overlays).
+        let stroke = egui::Stroke::new(1.0, Color32::from_rgb(230, 200, 40));
+        for (r, v) in views.iter().filter(|_| self.overlays) {
+            let aspect = (r.width() / r.height().max(1.0)) as f64;
+            if let Ok(g) = v.resolve(&vframe, aspect) {
+                let (p, _) = g.image_of(point, r.width() as u32, r.height() as u32);
+                let c = r.min + egui::vec2(p[0] as f32, p[1] as f32);
+                let painter = ui.painter().with_clip_rect(*r);
+                painter.line_segment(
+                    [egui::pos2(r.left(), c.y), egui::pos2(r.right(), c.y)],
+                    stroke,
+                );
+                painter.line_segment(
+                    [egui::pos2(c.x, r.top()), egui::pos2(c.x, r.bottom())],
+                    stroke,
+                );
+            }
+        }
+        (Some(VolumeCallback { rect, ..view_3d }), flying)
+    }
+}
+
 impl eframe::App for ViewerApp {
     fn ui(&mut self, ui: &mut egui::Ui, frame: &mut eframe::Frame) {
         self.frame_ui(ui, frame);
@@ -455,13 +626,16 @@ impl ViewerApp {
         }
         self.apply(frame);
 
-        // Statistics of the frame drawn last time, and GPU errors.
+        // Statistics of the frame drawn last time, and GPU errors (the
+        // slices only count in the four-view layout, which draws them).
+        let four = self.four_views;
         let (stats, frames, wants_redraw, err) = self
             .with_gpu(frame, |_, _, r| {
                 (
                     r.renderer.stats(),
                     r.frames,
-                    r.renderer.wants_redraw(),
+                    r.renderer.wants_redraw()
+                        || (four && r.slices.iter().any(|s| s.wants_redraw())),
                     r.take_error(),
                 )
             })
@@ -513,6 +687,13 @@ impl ViewerApp {
                 let [r, g, b] = self.background;
                 ui.painter()
                     .rect_filled(rect, 0.0, Color32::from_rgb(r, g, b));
+                if self.four_views && self.shown.is_some() && self.camera.is_some() {
+                    let (cb, fly) = self.four_views_ui(ui, rect);
+                    flying = fly;
+                    callback = cb;
+                    return;
+                }
+                self.shown_slices.clear();
                 flying = self.camera_input(ui, &response);
                 if let (Some(s), Some(c)) = (&self.shown, &self.camera) {
                     let cb = VolumeCallback {

@@ -10,7 +10,12 @@
 //! camera orbit YAW PITCH DIST    degrees, degrees, multiple of the home distance
 //! camera axis +x|-x|+y|-y|+z|-z  camera reset
 //! projection perspective | orthographic
-//! overlays on | off              the bounding box and axes
+//! overlays on | off              the bounding box and axes, and the slices' crosshair
+//! layout four | single           three orthogonal slices and 3D, or the 3D view alone
+//! crosshair X Y Z                the four views' crosshair, voxel index coordinates
+//! window C W | brain | bone | lung | abdomen | auto | off
+//!                                the slices' and MIP's window (raw values, e.g. HU; auto: the
+//!                                histogram's 0.5-99.5 percentiles; off: grey over the range, MIP by the TF)
 //! background R G B               0..255, behind the volume
 //! clip X0 Y0 Z0 X1 Y1 Z1 | clip off   the clip box, texture space 0..1
 //! u8 exact | fast                u8 interpolation (reopens the volume)
@@ -32,6 +37,20 @@
 use brickray::core::camera::AxisView as Axis;
 use brickray::core::tf::TfPreset as Preset;
 use std::path::PathBuf;
+
+/// The intensity window of the slices and MIP.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub(crate) enum WindowChoice {
+    /// None: slices grey over the value range, MIP through the TF.
+    #[default]
+    Off,
+    /// The histogram's 0.5 and 99.5 percentiles.
+    Auto,
+    /// A CT preset.
+    Preset(brickray::CtPreset),
+    /// Centre and width in raw values.
+    CentreWidth(f64, f64),
+}
 
 /// One action.
 #[derive(Debug, Clone, PartialEq)]
@@ -58,6 +77,13 @@ pub(crate) enum Action {
     Orthographic(bool),
     /// Show the bounding box and axes.
     Overlays(bool),
+    /// The four-view layout (three orthogonal slices and 3D; true) or the
+    /// 3D view alone.
+    FourViews(bool),
+    /// The crosshair of the four-view layout (voxel index coordinates).
+    Crosshair([f64; 3]),
+    /// The intensity window of the slices and MIP.
+    Window(WindowChoice),
     /// The background colour.
     Background([u8; 3]),
     /// The clip box (texture space).
@@ -306,6 +332,32 @@ pub(crate) fn parse(text: &str) -> Result<Vec<Action>, ScriptError> {
             ["projection", "perspective"] => Action::Orthographic(false),
             ["projection", "orthographic"] => Action::Orthographic(true),
             ["overlays", v] => Action::Overlays(on_off(v)?),
+            ["window", "off"] => Action::Window(WindowChoice::Off),
+            ["window", "auto"] => Action::Window(WindowChoice::Auto),
+            ["window", "brain"] => Action::Window(WindowChoice::Preset(brickray::CtPreset::Brain)),
+            ["window", "bone"] => Action::Window(WindowChoice::Preset(brickray::CtPreset::Bone)),
+            ["window", "lung"] => Action::Window(WindowChoice::Preset(brickray::CtPreset::Lung)),
+            ["window", "abdomen"] => {
+                Action::Window(WindowChoice::Preset(brickray::CtPreset::Abdomen))
+            }
+            ["window", c, w] => {
+                let (c, w) = (num(c)? as f64, num(w)? as f64);
+                if w <= 0.0 {
+                    return Err(err("expected a window width > 0"));
+                }
+                Action::Window(WindowChoice::CentreWidth(c, w))
+            }
+            ["layout", "four"] => Action::FourViews(true),
+            ["layout", "single"] => Action::FourViews(false),
+            ["crosshair", x, y, z] => {
+                let f = |v: &str| -> Result<f64, ScriptError> {
+                    v.parse::<f64>()
+                        .ok()
+                        .filter(|v| v.is_finite())
+                        .ok_or_else(|| err("expected three finite voxel coordinates"))
+                };
+                Action::Crosshair([f(x)?, f(y)?, f(z)?])
+            }
             ["u8", "exact"] => Action::U8Exact(true),
             ["u8", "fast"] => Action::U8Exact(false),
             ["bricks", "off"] => Action::Bricks(None),
@@ -418,11 +470,28 @@ mod tests {
             wait converged 50
             screenshot out/a.png
             screenshot-window out/w.png
+            layout four
+            crosshair 10 20.5 3
+            layout single
+            window 40 80
+            window bone
+            window auto
+            window off
             quit
         ";
         let a = parse(text).unwrap();
-        assert_eq!(a.len(), 28);
+        assert_eq!(a.len(), 35);
         assert_eq!(a[26], Action::WindowScreenshot("out/w.png".into()));
+        assert_eq!(a[27], Action::FourViews(true));
+        assert_eq!(a[28], Action::Crosshair([10.0, 20.5, 3.0]));
+        assert_eq!(a[29], Action::FourViews(false));
+        assert_eq!(a[30], Action::Window(WindowChoice::CentreWidth(40.0, 80.0)));
+        assert_eq!(
+            a[31],
+            Action::Window(WindowChoice::Preset(brickray::CtPreset::Bone))
+        );
+        assert_eq!(a[32], Action::Window(WindowChoice::Auto));
+        assert_eq!(a[33], Action::Window(WindowChoice::Off));
         assert_eq!(
             a[20],
             Action::Visibility(brickray::VisibilityPolicy::RayGuided)
@@ -456,7 +525,7 @@ mod tests {
         assert_eq!(a[23], Action::WaitConverged(600));
         assert_eq!(a[24], Action::WaitConverged(50));
         assert_eq!(a[14], Action::Clip([0.0, 0.0, 0.5], [1.0; 3]));
-        assert_eq!(a[27], Action::Quit);
+        assert_eq!(a[34], Action::Quit);
     }
 
     #[test]
@@ -486,6 +555,12 @@ mod tests {
             ("background 0 0 300", 1),
             ("wait x", 1),
             ("overlays maybe", 1),
+            ("layout three", 1),
+            ("window 40 0", 1),
+            ("window 40", 1),
+            ("window spine", 1),
+            ("crosshair 1 2", 1),
+            ("crosshair 1 2 nan", 1),
             ("u8 slow", 1),
             ("clip 0.5 0 0 0.4 1 1", 1),
             ("clip 0 0 0 1 1", 1),

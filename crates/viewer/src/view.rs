@@ -11,7 +11,7 @@
 //!    `VolumeRenderer::render` blends the volume over them and writes depth.
 
 use brickray::{
-    Camera, FrameDesc, RenderSettings, TargetDesc, Viewport, VolumeFrame, VolumeRenderer,
+    Camera, FrameDesc, RenderSettings, SliceView, TargetDesc, Viewport, VolumeFrame, VolumeRenderer,
 };
 use eframe::{egui, egui_wgpu};
 use glam::{Mat4, Vec3};
@@ -225,6 +225,10 @@ impl Overlay {
 pub(crate) struct ViewResources {
     /// The volume renderer (the app sets its volume, TF and budgets).
     pub(crate) renderer: VolumeRenderer,
+    /// The four-view layout's axial, coronal and sagittal slice renderers
+    /// (the app gives them the volume: in core a copy of the texture each,
+    /// out of core the 3D view's `StreamedVolume`).
+    pub(crate) slices: [VolumeRenderer; 3],
     overlay: Overlay,
     /// The host-depth texture (screen-sized, sampled by the rays).
     host_depth: Option<(wgpu::Texture, wgpu::TextureView)>,
@@ -244,8 +248,10 @@ impl ViewResources {
         options: brickray::RendererOptions,
     ) -> Result<ViewResources, brickray::RenderError> {
         let targets = TargetDesc::new(color_format).with_depth(DEPTH_FORMAT);
+        let slice = || VolumeRenderer::with_options(device, targets, options);
         Ok(ViewResources {
             renderer: VolumeRenderer::with_options(device, targets, options)?,
+            slices: [slice()?, slice()?, slice()?],
             overlay: Overlay::new(device, color_format),
             host_depth: None,
             prepared: false,
@@ -321,6 +327,95 @@ pub(crate) struct VolumeCallback {
     /// The frame's time in seconds (egui's clock): level-of-detail fades
     /// advance with it.
     pub(crate) time: f64,
+}
+
+/// One frame of the four-view layout: the 3D view and three slices, prepared
+/// together (one plan of a streamed volume for all four) and drawn in one
+/// paint callback over the central rectangle.
+#[derive(Debug, Clone)]
+pub(crate) struct FourViewCallback {
+    /// The 3D view (its rectangle is the bottom-right quadrant).
+    pub(crate) view_3d: VolumeCallback,
+    /// The axial, coronal and sagittal slices and their rectangles.
+    pub(crate) slices: [(egui::Rect, SliceView); 3],
+}
+
+impl egui_wgpu::CallbackTrait for FourViewCallback {
+    fn prepare(
+        &self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        screen: &egui_wgpu::ScreenDescriptor,
+        encoder: &mut wgpu::CommandEncoder,
+        resources: &mut egui_wgpu::CallbackResources,
+    ) -> Vec<wgpu::CommandBuffer> {
+        let Some(r) = resources.get_mut::<ViewResources>() else {
+            return Vec::new();
+        };
+        r.prepared = false;
+        let px =
+            |rect: &egui::Rect| viewport_px(rect, screen.pixels_per_point, screen.size_in_pixels);
+        let cb = &self.view_3d;
+        let Some(vp) = px(&cb.rect) else {
+            return Vec::new();
+        };
+        let mut descs = vec![FrameDesc {
+            camera: cb.camera,
+            frame: cb.frame,
+            viewport: vp,
+            settings: cb.settings,
+            host_depth: None,
+            time: Some(cb.time),
+        }];
+        for (i, (rect, slice)) in self.slices.iter().enumerate() {
+            let Some(vp) = px(rect) else {
+                return Vec::new();
+            };
+            r.slices[i].set_slice(Some(*slice));
+            descs.push(FrameDesc {
+                viewport: vp,
+                ..descs[0].clone()
+            });
+        }
+        let ViewResources {
+            renderer, slices, ..
+        } = &mut *r;
+        let [a, b, c] = slices;
+        let mut views = [
+            (renderer, &descs[0]),
+            (a, &descs[1]),
+            (b, &descs[2]),
+            (c, &descs[3]),
+        ];
+        match VolumeRenderer::prepare_views(device, queue, encoder, &mut views) {
+            Ok(_) => {
+                r.prepared = true;
+                r.frames += 1;
+            }
+            Err(brickray::PrepareError::NoVolume) => {}
+            Err(e) => r.set_error(format!("prepare: {e}")),
+        }
+        Vec::new()
+    }
+
+    fn paint(
+        &self,
+        _info: egui::PaintCallbackInfo,
+        pass: &mut wgpu::RenderPass<'static>,
+        resources: &egui_wgpu::CallbackResources,
+    ) {
+        let Some(r) = resources.get::<ViewResources>() else {
+            return;
+        };
+        if !r.prepared {
+            return;
+        }
+        for v in std::iter::once(&r.renderer).chain(&r.slices) {
+            if let Err(e) = v.render(pass) {
+                r.set_error(format!("render: {e}"));
+            }
+        }
+    }
 }
 
 /// The viewport in the target's pixels for a rectangle in points (egui's own

@@ -180,6 +180,37 @@ fn library_image(
 
 /// The library's out-of-core rendering of a store with the viewer's default
 /// budgets and its grey preset, drawn until converged.
+/// The library's own rendering of a slice view of a store through a grey
+/// window, converged.
+fn library_store_slice(
+    store: &Path,
+    view: brickray::SliceView,
+    window: brickray::Window,
+    w: u32,
+    h: u32,
+) -> Vec<u8> {
+    let gpu = brickray_harness::shared_gpu();
+    let source = std::sync::Arc::new(brickray::store::open(store).expect("open the store"));
+    let d = source.desc().clone();
+    let frame = VolumeFrame::centered(d.dims, d.spacing);
+    let mut renderer =
+        VolumeRenderer::new(&gpu.device, brickray_harness::target_desc()).expect("renderer");
+    renderer
+        .set_volume_source(&gpu.device, &gpu.queue, source, Default::default())
+        .expect("source");
+    renderer.set_slice(Some(view));
+    renderer.set_intensity(Some(brickray::Intensity::new(
+        window,
+        brickray::ColorMap::Grey,
+    )));
+    let target = brickray_harness::Offscreen::new(&gpu.device, w, h);
+    let desc = FrameDesc::new(Camera::orbit(glam::Vec3::ZERO, 2.0, 0.3, 0.2), frame, w, h);
+    let settled = brickray_harness::draw_until_settled(gpu, &mut renderer, &target, &desc, 600)
+        .expect("draw");
+    assert!(settled.is_some(), "the library's slice did not converge");
+    target.read_color(gpu)
+}
+
 fn library_store_image(store: &Path, camera: Camera, w: u32, h: u32) -> Vec<u8> {
     let gpu = brickray_harness::shared_gpu();
     let source = std::sync::Arc::new(brickray::store::open(store).expect("open the store"));
@@ -388,7 +419,10 @@ fn a_failed_step_ends_the_script_with_a_failure() {
     let run = run_viewer(&path, limit);
     let took = t.elapsed();
     let stderr = String::from_utf8_lossy(&run.stderr);
-    assert!(took < limit, "killed after {took:?}: the viewer did not exit");
+    assert!(
+        took < limit,
+        "killed after {took:?}: the viewer did not exit"
+    );
     assert!(!run.status.success(), "exit status {:?}", run.status);
     assert!(
         stderr.contains("script failed") && stderr.contains("/nonexistent/vol.nii.gz"),
@@ -622,5 +656,103 @@ fn opens_every_shared_format() {
             lit * 100 > (w * h) as usize,
             "{name}: only {lit} lit pixels"
         );
+    }
+}
+
+/// The four-view layout (`layout four`): axial, coronal and sagittal slices
+/// through the crosshair and the 3D view, one streamed volume (a 96^3 ball,
+/// out of core). Each slice quadrant shows the ball's disc through the
+/// crosshair (lit near the centre, dark at its corners) and the crosshair's
+/// lines; the 3D quadrant shows the ball.
+#[test]
+#[cfg_attr(
+    no_display,
+    ignore = "needs an X server (DISPLAY unset when the tests were built; scripts/test.sh starts Xvfb)"
+)]
+fn the_four_view_layout_shows_three_slices_and_3d() {
+    let Some(dir) = windowed_test_dir() else {
+        return;
+    };
+    let store = sphere_store(dir.path());
+    let shot = dir.path().join("four.png");
+    let plain = dir.path().join("plain.png");
+    let script = format!(
+        "open {store}\nbackground 0 0 0\ntf grey\nlayout four\ncrosshair 47.5 47.5 47.5\n\
+         wait converged 600\nscreenshot {shot}\noverlays off\ncrosshair 40 52 45.5\nwindow 100 120\n\
+         wait converged 600\nscreenshot {plain}\nquit\n",
+        store = store.display(),
+        shot = shot.display(),
+        plain = plain.display(),
+    );
+    run_script(dir.path(), &script, Duration::from_secs(120));
+    let (img, w, h) = read_png(&shot);
+    let px = |x: f32, y: f32| {
+        let (x, y) = ((x as u32).min(w - 1), (y as u32).min(h - 1));
+        let i = ((y * w + x) * 4) as usize;
+        [img[i], img[i + 1], img[i + 2]]
+    };
+    let (qw, qh) = (w as f32 * 0.5, h as f32 * 0.5);
+    for q in 0..4 {
+        let (x0, y0) = ((q % 2) as f32 * qw, (q / 2) as f32 * qh);
+        let quadrant = |fx: f32, fy: f32| px(x0 + fx * qw, y0 + fy * qh);
+        let (mut lit, mut yellow) = (0usize, 0usize);
+        for j in 0..qh as u32 {
+            for i in 0..qw as u32 {
+                let p = quadrant(i as f32 / qw, j as f32 / qh);
+                if p.iter().any(|&c| c > 40) {
+                    lit += 1;
+                }
+                if p[0] > 200 && p[1] > 170 && p[2] < 90 {
+                    yellow += 1;
+                }
+            }
+        }
+        let area = (qw * qh) as usize;
+        eprintln!("quadrant {q}: {lit} lit, {yellow} crosshair pixels of {area}");
+        assert!(lit * 20 > area, "quadrant {q}: only {lit} lit pixels");
+        if q < 3 {
+            // A slice: the disc near the crosshair, dark corners.
+            let near = quadrant(0.56, 0.56);
+            assert!(near[0] > 60, "slice {q}: {near:?} near the centre");
+            for (fx, fy) in [(0.03, 0.03), (0.97, 0.03), (0.03, 0.97), (0.97, 0.97)] {
+                let c = quadrant(fx, fy);
+                assert!(c[0] < 20, "slice {q}: corner {c:?}");
+            }
+            assert!(yellow > (qw.min(qh) as usize), "slice {q}: no crosshair");
+        } else {
+            assert_eq!(yellow, 0, "the 3D view has no crosshair");
+        }
+    }
+    // Without overlays (no crosshair lines) and through a window (raw
+    // 40..160 of the ball's 0..255), each slice of the screenshot is the
+    // library's own rendering of that slice view.
+    let (img, w, _) = read_png(&plain);
+    let side = sidecar_json(&plain);
+    let slices = side["slices"]
+        .as_array()
+        .expect("the slices in the sidecar");
+    assert_eq!(slices.len(), 3);
+    for (i, s) in slices.iter().enumerate() {
+        let f = |v: &serde_json::Value| v.as_f64().expect("a number");
+        let v3 = |v: &serde_json::Value| [f(&v[0]), f(&v[1]), f(&v[2])];
+        let vp: Vec<u32> = (0..4).map(|k| f(&s["viewport"][k]) as u32).collect();
+        let view = brickray::SliceView {
+            centre: v3(&s["centre"]),
+            right: v3(&s["right"]),
+            up: v3(&s["up"]),
+            height: f(&s["height"]),
+            slab: None,
+        };
+        let mut crop = Vec::with_capacity((vp[2] * vp[3] * 4) as usize);
+        for y in vp[1]..vp[1] + vp[3] {
+            let row = ((y * w + vp[0]) * 4) as usize;
+            crop.extend_from_slice(&img[row..row + (vp[2] * 4) as usize]);
+        }
+        let window = brickray::Window::new(100.0, 120.0).unwrap();
+        let lib = library_store_slice(&store, view, window, vp[2], vp[3]);
+        let name = format!("viewer-slice-{i}");
+        let cmp = brickray_reference::assert_close(&name, &crop, &lib, vp[2], vp[3], MIN_PSNR_DB)
+            .unwrap_or_else(|e| panic!("{e}"));
+        eprintln!("four views, slice {i} vs library: {cmp}");
     }
 }

@@ -93,6 +93,14 @@ fn frame_fields() -> Vec<(String, u32)> {
             clip_pad_a,
             clip_max,
             clip_pad_b,
+            window_lo,
+            window_hi,
+            color_map,
+            slab_mode,
+            slab_samples,
+            slab_dt,
+            map_pad_a,
+            map_pad_b,
         ]
     )
 }
@@ -174,12 +182,17 @@ fn rust_bindings(groups: &[&[wgpu::BindGroupLayoutEntry]]) -> BTreeSet<(u32, u32
 }
 
 fn check_kernel(name: &str, m: &naga::Module, volume: &[wgpu::BindGroupLayoutEntry]) {
-    // Entry point and workgroup size.
-    assert_eq!(m.entry_points.len(), 1, "{name}");
-    let ep = &m.entry_points[0];
-    assert_eq!(ep.name, "main", "{name}");
-    assert_eq!(ep.stage, naga::ShaderStage::Compute, "{name}");
-    assert_eq!(ep.workgroup_size, [WORKGROUP[0], WORKGROUP[1], 1], "{name}");
+    // Entry points (the ray caster and the slice view) and workgroup size.
+    let names: Vec<&str> = m.entry_points.iter().map(|e| e.name.as_str()).collect();
+    assert_eq!(
+        names,
+        [crate::kernels::ENTRY_RAYCAST, crate::kernels::ENTRY_SLICE],
+        "{name}"
+    );
+    for ep in &m.entry_points {
+        assert_eq!(ep.stage, naga::ShaderStage::Compute, "{name}");
+        assert_eq!(ep.workgroup_size, [WORKGROUP[0], WORKGROUP[1], 1], "{name}");
+    }
     // Overrides, by name.
     let overrides: BTreeSet<String> = m
         .overrides
@@ -194,6 +207,26 @@ fn check_kernel(name: &str, m: &naga::Module, volume: &[wgpu::BindGroupLayoutEnt
     }
     for (wgsl, flag) in FrameFlags::ALL {
         assert_eq!(const_u32(m, wgsl), flag.0, "{name}: {wgsl}");
+    }
+    // Colour map ids and the viridis table (generated from the Rust side).
+    for (wgsl, map) in [
+        ("MAP_GREY", brickray_core::ColorMap::Grey),
+        ("MAP_HOT", brickray_core::ColorMap::Hot),
+        ("MAP_VIRIDIS", brickray_core::ColorMap::Viridis),
+    ] {
+        assert_eq!(const_u32(m, wgsl), map.id(), "{name}: {wgsl}");
+    }
+    assert_eq!(const_u32(m, "MAP_TF"), 0, "{name}");
+    assert_eq!(
+        const_u32(m, "VIRIDIS_N") as usize,
+        brickray_core::window::VIRIDIS.len(),
+        "{name}"
+    );
+    for (wgsl, mode) in [
+        ("SLAB_MAX", crate::slice::SLAB_MAX),
+        ("SLAB_MEAN", crate::slice::SLAB_MEAN),
+    ] {
+        assert_eq!(const_u32(m, wgsl), mode, "{name}: {wgsl}");
     }
     // Uniform layouts of groups 0 and 1.
     check_struct(
@@ -474,6 +507,9 @@ fn every_shader_file_is_covered() {
         "incore_predict.wgsl",
         "ooc_predict.wgsl",
         "reproject.wgsl",
+        "slice.wgsl",
+        "slice_incore.wgsl",
+        "slice_ooc.wgsl",
     ];
     for entry in std::fs::read_dir(dir).unwrap() {
         let name = entry.unwrap().file_name().into_string().unwrap();

@@ -18,6 +18,9 @@ pub(super) struct PendingShot {
     /// The prediction buffer's setting, and the last frame's state of it
     /// (`None`: that frame did not predict).
     pub(super) prediction: (PredictionChoice, Option<brickray::PredictionFrame>),
+    /// The four-view layout's slices: each one's viewport in the shot's
+    /// pixels and its view.
+    pub(super) slices: Vec<(Viewport, brickray::SliceView)>,
     pub(super) image: Arc<Mutex<Option<Arc<egui::ColorImage>>>>,
 }
 
@@ -63,6 +66,15 @@ impl ViewerApp {
         let Some(viewport) = viewport_px(&rect, ctx.pixels_per_point(), screen) else {
             return self.fail("screenshot: the view is empty".into());
         };
+        let slices = self
+            .shown_slices
+            .iter()
+            .filter_map(|(r, v)| {
+                let p = viewport_px(r, ctx.pixels_per_point(), screen)?;
+                let (x, y) = (p.x.checked_sub(viewport.x)?, p.y.checked_sub(viewport.y)?);
+                Some((Viewport { x, y, ..p }, *v))
+            })
+            .collect();
         let slot = Arc::new(Mutex::new(None));
         let (s, c) = (slot.clone(), ctx.clone());
         ctx.request_screenshot(move |image| {
@@ -84,6 +96,7 @@ impl ViewerApp {
             lod: streamed.then_some((self.ooc.lod_metric, self.ooc.tolerance_px)),
             visibility: streamed.then_some(self.ooc.visibility),
             prediction: (self.prediction, self.stats.prediction()),
+            slices,
             image: slot,
         });
     }
@@ -189,6 +202,12 @@ impl ViewerApp {
                     }
                 }
                 Action::Overlays(on) => self.overlays = on,
+                Action::FourViews(on) => self.four_views = on,
+                Action::Crosshair(p) => self.crosshair = Some(p),
+                Action::Window(w) => {
+                    self.window = w;
+                    self.window_dirty = true;
+                }
                 Action::Background(c) => self.background = c,
                 Action::U8Exact(exact) => {
                     if exact != self.u8_exact {
@@ -312,6 +331,15 @@ fn save_shot(shot: &PendingShot, image: &egui::ColorImage) -> Result<(), String>
             // for the last frame drawn.
             "frames": shot.prediction.1.map(|p| p.frames),
         },
+        // The four-view layout's slices (viewport x, y, width, height in
+        // this image's pixels; the view in voxel index coordinates).
+        "slices": shot.slices.iter().map(|(vp, v)| serde_json::json!({
+            "viewport": [vp.x, vp.y, vp.width, vp.height],
+            "centre": v.centre,
+            "right": v.right,
+            "up": v.up,
+            "height": v.height,
+        })).collect::<Vec<_>>(),
     });
     let text = serde_json::to_string_pretty(&sidecar).map_err(|e| e.to_string())?;
     std::fs::write(shot.path.with_extension("json"), text).map_err(|e| e.to_string())

@@ -1,0 +1,62 @@
+// Slice views (docs/rendering-model.md, "Slice views"): a second entry point of
+// each ray-cast kernel, after the kernel's own file, which provides
+//     fn slice_begin(px: vec2<u32>)
+//     fn slice_sample(u: vec3<f32>, dir: vec3<f32>, last: ptr<function, u32>) -> SliceSample
+// (the normalized value at texture point u, sampled from the volume texture in
+// core and from the brick atlas through the index out of core).
+//
+// The frame's camera is the slice's: orthographic, looking along the plane's
+// normal, its near plane the slab's front face. Pixel (x, y) takes the samples
+// t_k = (k + 1/2) slab_dt, k < slab_samples (t = 0, the plane, for a thin
+// slice) that lie in the ray's extent in the clip box, reduces them by their
+// maximum or mean and maps the result through the intensity window and colour
+// map, opaque. A pixel with no sample is transparent; no depth is written.
+
+const SLAB_MAX: u32 = 0u;
+const SLAB_MEAN: u32 = 1u;
+
+struct SliceSample {
+    v: f32,
+    ok: bool,
+}
+
+@compute @workgroup_size(8, 8, 1)
+fn slice_main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    if (gid.x >= frame.viewport_size.x || gid.y >= frame.viewport_size.y) {
+        return;
+    }
+    let px = gid.xy;
+    let start = start_ray(px);
+    slice_begin(px);
+    let sdt = frame.slab_dt;
+    // The first sample at or after t0, and a bound from the ray's extent (no
+    // loop bound on a uniform alone: common.wgsl).
+    let k0 = select(0u, u32(max(ceil(start.t0 / max(sdt, 1e-30) - 0.5), 0.0)), sdt > 0.0);
+    let span = select(0.0, min((start.t1 - start.t0) / max(sdt, 1e-30), 1.0e6), sdt > 0.0 && start.t1 > start.t0);
+    let n = min(frame.slab_samples, k0 + u32(span) + 2u);
+    var k = k0;
+    var count = 0u;
+    var sum = 0.0;
+    var best = -3.0e38;
+    var last = 0xffffffffu;
+    loop {
+        if (k >= n) { break; }
+        let t = (f32(k) + 0.5) * sdt;
+        if (t > start.t1) { break; }
+        if (t >= start.t0) {
+            let s = slice_sample(tex_at(start.r, t), start.r.tex_dir, &last);
+            if (s.ok) {
+                count = count + 1u;
+                sum = sum + s.v;
+                best = max(best, s.v);
+            }
+        }
+        k = k + 1u;
+    }
+    var color = vec4<f32>(0.0);
+    if (count > 0u) {
+        let v = select(best, sum / f32(count), frame.slab_mode == SLAB_MEAN);
+        color = vec4<f32>(intensity_color(v), 1.0);
+    }
+    store_pixel(px, color, far_depth(), start.host, count);
+}
