@@ -14,9 +14,11 @@
 //! that run of entries has no non-zero alpha.
 
 mod preint;
+pub mod spread;
 mod table;
 
 pub use preint::{FINE as PREINT_FINE, PREINT_MIN_SIZE, PreintTable, Preintegrator, TAU_MAX};
+pub use spread::{SPREAD_ROWS, SpreadTable};
 pub use table::{CorrectedTable, MIN_WIDTH as TABLE_MIN_WIDTH};
 
 /// A 1D RGBA transfer function.
