@@ -86,36 +86,53 @@ impl TransferFunction {
         if sigma.is_nan() || sigma <= 0.0 {
             return self.lookup(v);
         }
+        self.convolve_kernel(v, &self.spread_kernel(sigma))
+    }
+
+    /// The quadrature of a spread `sigma > 0`: Simpson nodes as (offset from
+    /// the value, weight), the same for every value, so a table row computes
+    /// its weights once.
+    fn spread_kernel(&self, sigma: f64) -> Vec<(f64, f64)> {
         let sigma = sigma.min(SIGMA_MAX);
         // Not clipped to 0..1: mass beyond an end classifies as that end (the
         // lookup clamps), so a linear TF maps a symmetric density to its mean
         // even next to 0 or 1; renormalizing a clipped Gaussian instead moved
         // its mean inwards (0.1 of opacity on a volume of noisy zeros).
-        let a = v - TRUNCATE * sigma;
-        let b = v + TRUNCATE * sigma;
+        let reach = TRUNCATE * sigma;
         let interval = 1.0 / (self.len() - 1) as f64;
         // Four nodes per sigma, and per TF interval while that is at least
         // sigma / 128 (a wide Gaussian over a long TF: 768 nodes, not one per
-        // quarter interval; a ramp narrower than a node then costs at most
-        // about 2e-3 of opacity, measured against the fine rule).
+        // quarter interval; `quadrature_matches_a_fine_rule` bounds the cost).
         let h = (sigma / 4.0).min((interval / 4.0).max(sigma / 128.0));
-        let mut n = (((b - a) / h).ceil() as usize).clamp(2, 8192);
+        let mut n = ((2.0 * reach / h).ceil() as usize).clamp(2, 8192);
         n += n % 2;
-        let dx = (b - a) / n as f64;
+        let dx = 2.0 * reach / n as f64;
         let inv = 1.0 / (2.0 * sigma * sigma);
+        (0..=n)
+            .map(|k| {
+                let off = if k == n {
+                    reach
+                } else {
+                    -reach + k as f64 * dx
+                };
+                let simpson = if k == 0 || k == n {
+                    1.0
+                } else if k % 2 == 1 {
+                    4.0
+                } else {
+                    2.0
+                };
+                (off, simpson * (-off * off * inv).exp())
+            })
+            .collect()
+    }
+
+    /// The classification of `v` under a [`Self::spread_kernel`].
+    fn convolve_kernel(&self, v: f64, kernel: &[(f64, f64)]) -> [f64; 4] {
         // Sums of w, w*a, w*rgb*a, w*rgb.
         let mut acc = [0.0f64; 8];
-        for k in 0..=n {
-            let x = if k == n { b } else { a + k as f64 * dx };
-            let simpson = if k == 0 || k == n {
-                1.0
-            } else if k % 2 == 1 {
-                4.0
-            } else {
-                2.0
-            };
-            let w = simpson * (-(x - v) * (x - v) * inv).exp();
-            let c = self.lookup(x);
+        for &(off, w) in kernel {
+            let c = self.lookup(v + off);
             acc[0] += w;
             acc[1] += w * c[3];
             for i in 0..3 {
@@ -138,11 +155,15 @@ impl TransferFunction {
         let width = self.table_width(max_width);
         let rows = rows.max(2);
         let mut texels = Vec::with_capacity((rows * width) as usize);
-        for r in 0..rows {
-            let s = spread_row_sigma(r, rows);
+        // Row 0 is the TF itself.
+        texels.extend(
+            (0..width).map(|i| self.lookup(i as f64 / (width - 1) as f64).map(|x| x as f32)),
+        );
+        for r in 1..rows {
+            let kernel = self.spread_kernel(spread_row_sigma(r, rows));
             texels.extend((0..width).map(|i| {
-                let c = self.convolved(i as f64 / (width - 1) as f64, s);
-                c.map(|x| x as f32)
+                let v = i as f64 / (width - 1) as f64;
+                self.convolve_kernel(v, &kernel).map(|x| x as f32)
             }));
         }
         SpreadTable {
