@@ -37,7 +37,7 @@
 //! stand for, the spread is at most `(max - min) / 2` (Popoviciu's inequality on
 //! variances), which is the bound to pass when no stored maximum is known.
 
-use super::TransferFunction;
+use super::{TransferFunction, corrected_alpha};
 
 /// The largest standard deviation of values in 0..1 (half the range).
 pub const SIGMA_MAX: f64 = 0.5;
@@ -199,6 +199,30 @@ impl TransferFunction {
 }
 
 impl SpreadTable {
+    /// The table as a GPU would read it out of core: `levels` layers, layer
+    /// `e` with every opacity corrected to `step_factor * 2^e` reference
+    /// lengths *after* the spread's average (the model's order), layer-major,
+    /// then row, then column. Layer `e`, row 0 is row `e` of the corrected
+    /// table ([`TransferFunction::corrected_table`]) of the same TF and width
+    /// (exactly where the columns fall on the TF's entries, else to f32
+    /// rounding). Not used by the GPU renderers yet.
+    pub fn corrected_layers(&self, step_factor: f32, levels: u32) -> Vec<[f32; 4]> {
+        let levels = levels.max(1);
+        let mut out = Vec::with_capacity(self.texels.len() * levels as usize);
+        for e in 0..levels {
+            let exponent = step_factor as f64 * (e as f64).exp2();
+            out.extend(self.texels.iter().map(|c| {
+                [
+                    c[0],
+                    c[1],
+                    c[2],
+                    corrected_alpha(c[3] as f64, exponent) as f32,
+                ]
+            }));
+        }
+        out
+    }
+
     /// The model's classification of value `v` with spread `sigma` (straight
     /// colour, reference opacity): bilinear in (column, sigma row coordinate),
     /// with row 0 read as the exact `tf.lookup(v)` (`tf` must be the table's
@@ -333,6 +357,27 @@ mod tests {
         }
         println!("largest difference from the fine rule: {worst:.2e}");
         assert!(worst < 2e-3, "{worst}");
+    }
+
+    #[test]
+    fn corrected_layers_correct_after_the_average() {
+        let tf = TransferFunction::ramp(0.3, 0.6, 0.8);
+        let t = tf.spread_table(8, 8192);
+        let layers = t.corrected_layers(0.5, 3);
+        let (w, r) = (t.width as usize, t.rows as usize);
+        assert_eq!(layers.len(), 3 * r * w);
+        let plain = tf.corrected_table(0.5, 3, 8192);
+        assert_eq!(plain.width, t.width);
+        for e in 0..3 {
+            // Spread 0: exactly the corrected table's row.
+            assert_eq!(&layers[e * r * w..][..w], &plain.texels[e * w..][..w]);
+            // A spread row: the averaged opacity, corrected.
+            let texel = layers[(e * r + 5) * w + 100];
+            let reference = t.texels[5 * w + 100];
+            let want = corrected_alpha(reference[3] as f64, 0.5 * (e as f64).exp2()) as f32;
+            assert_eq!(texel[3], want);
+            assert_eq!(texel[..3], reference[..3]);
+        }
     }
 
     proptest! {
