@@ -13,6 +13,9 @@
 //! * [`texel`]: how samples are stored in GPU textures ([`SampleEncoding`]);
 //! * [`lod`]: per-node error bounds of level of detail and their cost under a
 //!   transfer function (error-aware refinement);
+//! * [`moments`]: the mean and spread of the finest voxels each coarse voxel
+//!   stands for, composed exactly across levels (consistent classification of
+//!   coarse levels with [`tf::spread`]);
 //! * [`synthetic`]: procedural test volumes (sphere, Marschner-Lobb);
 //! * [`slice`](mod@slice): slice views (a plane or a thick slab through the volume);
 //! * [`window`]: window and level, CT presets and colour maps of MIP and slices.
@@ -21,6 +24,7 @@ pub mod brick;
 pub mod camera;
 pub mod lod;
 pub mod macrocell;
+pub mod moments;
 mod node_error;
 mod pyramid;
 pub mod settings;
@@ -44,6 +48,7 @@ pub use lod::{
     node_tf_error_expected, node_visible_error,
 };
 pub use macrocell::{MacroCellGrid, sub_cell_ranges, sub_cells_per_axis};
+pub use moments::{MomentGrid, Moments};
 pub use pyramid::{ALL_AXES, Children, LayoutError, MAX_LEVELS, anisotropic_split_masks};
 pub use settings::{Accel, ClipBox, RenderMode, RenderSettings, SettingsError, Shading};
 pub use slice::{Slab, SlabMode, SliceAxis, SliceError, SliceGeometry, SliceView};

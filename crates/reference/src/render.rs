@@ -1,6 +1,7 @@
 //! The brute-force ray marcher.
 
-use brickray_core::tf::{Preintegrator, corrected_alpha};
+use brickray_core::moments::field_trilinear;
+use brickray_core::tf::{Preintegrator, SPREAD_ROWS, SpreadTable, corrected_alpha};
 use brickray_core::{
     Camera, Intensity, Ray, RayGen, RenderMode, RenderSettings, Shading, TransferFunction, Volume,
     VolumeFrame,
@@ -20,6 +21,9 @@ pub const EXACT_STEP_FACTOR: f32 = 1.0 / 16.0;
 /// Fine value cells of the reference's segment integrals (16 per column of a
 /// 256-column table).
 const PREINT_CELLS: u32 = 4096;
+
+/// Most columns of the reference's spread table (the GPU's default limit).
+const SPREAD_TABLE_WIDTH: u32 = 8192;
 
 /// Gradients shorter than this (normalized-value units per voxel) leave a sample
 /// unshaded.
@@ -56,6 +60,18 @@ pub struct ReferenceOptions<'a> {
     /// instead of the transfer function (`VolumeRenderer::set_intensity`).
     /// Default `None`.
     pub intensity: Option<Intensity>,
+    /// The spread of each voxel of `vol` (normalized units, x fastest, one per
+    /// voxel): the standard deviation of the finest values a coarse level's
+    /// voxel stands for ([`brickray_core::MomentGrid::sigmas`]). Point-sampled
+    /// DVR (shaded or not) then classifies each sample with the TF convolved
+    /// by a Gaussian of the trilinearly interpolated spread
+    /// ([`brickray_core::tf::spread`], a table of
+    /// [`SPREAD_ROWS`](brickray_core::tf::SPREAD_ROWS) rows); a sample of
+    /// spread 0 is classified exactly as without it. Iso and MIP use the mean
+    /// field alone, and pre-integrated segments ignore the spread. Default
+    /// `None` (the finest level, or a coarse level drawn as the TF of its
+    /// mean).
+    pub spread: Option<&'a [f32]>,
 }
 
 impl ReferenceOptions<'static> {
@@ -69,6 +85,7 @@ impl ReferenceOptions<'static> {
             host_depth: None,
             preintegrated: false,
             intensity: None,
+            spread: None,
         }
     }
 }
@@ -118,7 +135,10 @@ impl<'a> ReferenceOptions<'a> {
     }
 
     /// With a host depth buffer.
-    pub fn with_host_depth<'b>(self, depth: &'b [f32]) -> ReferenceOptions<'b> {
+    pub fn with_host_depth<'b>(self, depth: &'b [f32]) -> ReferenceOptions<'b>
+    where
+        'a: 'b,
+    {
         ReferenceOptions {
             width: self.width,
             height: self.height,
@@ -127,6 +147,7 @@ impl<'a> ReferenceOptions<'a> {
             host_depth: Some(depth),
             preintegrated: self.preintegrated,
             intensity: self.intensity,
+            spread: self.spread,
         }
     }
 
@@ -135,6 +156,23 @@ impl<'a> ReferenceOptions<'a> {
         ReferenceOptions {
             intensity: Some(intensity),
             ..self
+        }
+    }
+
+    /// With a spread per voxel ([`Self::spread`]).
+    pub fn with_spread<'b>(self, sigma: &'b [f32]) -> ReferenceOptions<'b>
+    where
+        'a: 'b,
+    {
+        ReferenceOptions {
+            width: self.width,
+            height: self.height,
+            step_factor: self.step_factor,
+            supersample: self.supersample,
+            host_depth: self.host_depth,
+            preintegrated: self.preintegrated,
+            intensity: self.intensity,
+            spread: Some(sigma),
         }
     }
 }
@@ -148,7 +186,8 @@ impl<'a> ReferenceOptions<'a> {
 ///
 /// # Panics
 /// If `opts.step_factor` is not finite and positive, if `frame.voxel_world` is not
-/// finite and positive, if `opts.host_depth` is not `width * height` long, or if
+/// finite and positive, if `opts.host_depth` is not `width * height` long, if
+/// `opts.spread` does not hold one value per voxel of `vol`, or if
 /// `settings.mode` is a mode this reference does not define (a variant added to
 /// the non-exhaustive [`RenderMode`] after DVR, Iso and MIP): the oracle refuses
 /// rather than guessing.
@@ -191,8 +230,19 @@ pub fn render_reference(
         );
     }
 
+    if let Some(s) = opts.spread {
+        assert_eq!(
+            s.len() as u64,
+            vol.desc().voxel_count(),
+            "spread must hold one value per voxel"
+        );
+    }
+
     let mut marcher = Marcher::new(vol, frame, tf, camera, settings, step_factor, width, height);
     marcher.intensity = opts.intensity;
+    if let Some(s) = opts.spread {
+        marcher.spread = Some((s, tf.spread_table(SPREAD_ROWS, SPREAD_TABLE_WIDTH)));
+    }
     if opts.preintegrated {
         marcher.preint = Some(Preintegrator::new(tf, PREINT_CELLS));
     }
@@ -233,6 +283,8 @@ struct Marcher<'a> {
     preint: Option<Preintegrator<'a>>,
     /// MIP's window and colour map ([`ReferenceOptions::intensity`]).
     intensity: Option<Intensity>,
+    /// Spread per voxel and the TF's spread table ([`ReferenceOptions::spread`]).
+    spread: Option<(&'a [f32], SpreadTable)>,
 }
 
 /// The result of one ray: premultiplied RGBA and clip depth.
@@ -266,6 +318,7 @@ impl<'a> Marcher<'a> {
             height,
             preint: None,
             intensity: None,
+            spread: None,
         }
     }
 }
@@ -360,7 +413,14 @@ impl Marcher<'_> {
                     [r * s, g * s, b * s, a]
                 }
                 None => {
-                    let [r, g, b, a] = self.tf.lookup(v);
+                    let [r, g, b, a] = match &self.spread {
+                        Some((sigma, table)) => {
+                            let p = self.voxel_pos(ray, t).to_array();
+                            let s = field_trilinear(sigma, self.vol.dims(), p);
+                            table.lookup(self.tf, v, s)
+                        }
+                        None => self.tf.lookup(v),
+                    };
                     [r, g, b, corrected_alpha(a, self.step_factor)]
                 }
             };
