@@ -13,7 +13,9 @@
 //! * [`texel`]: how samples are stored in GPU textures ([`SampleEncoding`]);
 //! * [`lod`]: per-node error bounds of level of detail and their cost under a
 //!   transfer function (error-aware refinement);
-//! * [`synthetic`]: procedural test volumes (sphere, Marschner-Lobb).
+//! * [`synthetic`]: procedural test volumes (sphere, Marschner-Lobb);
+//! * [`range`]: byte-range reads ([`RangeReader`]), the seam between a
+//!   format's parser and where its bytes live.
 
 pub mod brick;
 pub mod camera;
@@ -21,6 +23,7 @@ pub mod lod;
 pub mod macrocell;
 mod node_error;
 mod pyramid;
+pub mod range;
 pub mod settings;
 pub mod synthetic;
 pub mod texel;
@@ -41,6 +44,7 @@ pub use lod::{
 };
 pub use macrocell::{MacroCellGrid, sub_cell_ranges, sub_cells_per_axis};
 pub use pyramid::{ALL_AXES, Children, LayoutError, MAX_LEVELS, anisotropic_split_masks};
+pub use range::{MemRangeReader, RangeRead, RangeReader};
 pub use settings::{Accel, ClipBox, RenderMode, RenderSettings, SettingsError, Shading};
 pub use texel::{SampleEncoding, TexelCaps, TexelFormat, U8Filtering};
 pub use tf::{TfError, TransferFunction};
