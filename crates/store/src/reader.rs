@@ -23,6 +23,33 @@ pub fn open(path: impl AsRef<Path>) -> Result<Store, StoreError> {
     Store::open(path)
 }
 
+/// Opens a store over S3, GCS, Azure or HTTP(S) (`s3://bucket/key`,
+/// `gs://…`, `az://…`, `https://…`) through a
+/// [`RemoteRangeReader`](brickray_remote::RemoteRangeReader) configured by
+/// `opts`. Three requests: the object's size, the header, the metadata
+/// after the payload. Errors name the URL; a remote failure is a
+/// [`StoreError::Io`] whose source holds the typed
+/// [`RemoteError`](brickray_remote::RemoteError) (see
+/// [`RemoteError::from_io`](brickray_remote::RemoteError::from_io)).
+#[cfg(feature = "remote")]
+pub fn open_url(url: &str, opts: &brickray_remote::RemoteOptions) -> Result<Store, StoreError> {
+    let reader = brickray_remote::RemoteRangeReader::open(url, opts)
+        .map_err(|e| StoreError::io(Path::new(url), e.into()))?;
+    Store::open_with(reader, url)
+}
+
+/// Opens a store from a URL ([`open_url`], configured by
+/// [`RemoteOptions::from_env`](brickray_remote::RemoteOptions::from_env))
+/// or a local path ([`open`]).
+#[cfg(feature = "remote")]
+pub fn open_any(path_or_url: &str) -> Result<Store, StoreError> {
+    if brickray_remote::is_url(path_or_url) {
+        open_url(path_or_url, &brickray_remote::RemoteOptions::from_env())
+    } else {
+        open(path_or_url)
+    }
+}
+
 /// An open brick store. Reads are positional (`pread`), so any number of threads
 /// may read bricks concurrently (they share the file behind a read lock, taken
 /// only to clone a handle).
