@@ -658,7 +658,7 @@ mod tests {
     use super::*;
 
     fn err(url: &str, opts: &RemoteOptions) -> RemoteError {
-        object_store_for(url, opts).err().expect("an error")
+        object_store_for(url, opts).expect_err("an error")
     }
 
     #[test]

@@ -248,7 +248,8 @@ fn store_bytes() -> (tempfile::TempDir, Store, Vec<u8>) {
 #[test]
 fn transient_faults_are_retried_to_the_exact_bytes() {
     let (_dir, local, bytes) = store_bytes();
-    let plans: Vec<(&str, Box<dyn Fn(usize) -> Act + Send + Sync>)> = vec![
+    type Plan = Box<dyn Fn(usize) -> Act + Send + Sync>;
+    let plans: Vec<(&str, Plan)> = vec![
         ("latency", Box::new(|n| Act::Delay(5 + (n as u64 * 7) % 25))),
         (
             "503 then 429 bursts",

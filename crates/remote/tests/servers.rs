@@ -215,7 +215,7 @@ fn reads_through_a_faulty_proxy_are_exact_or_typed_never_wrong() {
     let faulty = |o: RemoteOptions| RemoteOptions {
         max_retries: 6,
         timeout: std::time::Duration::from_secs(5),
-        read_timeout: std::time::Duration::from_millis(800),
+        read_timeout: std::time::Duration::from_millis(300),
         retry_timeout: std::time::Duration::from_secs(20),
         ..o
     };
