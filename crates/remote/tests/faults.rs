@@ -370,3 +370,33 @@ fn a_missing_object_is_missing() {
     let io: std::io::Error = e.into();
     assert_eq!(io.kind(), std::io::ErrorKind::NotFound);
 }
+
+#[test]
+fn opening_takes_two_gets_and_a_batch_of_payloads_is_coalesced() {
+    let (_dir, local, bytes) = store_bytes();
+    let srv = serve(bytes.clone(), |_| Act::Serve);
+    let url = format!("http://127.0.0.1:{}/s.brs", srv.port);
+    let remote =
+        Store::open_with(RemoteRangeReader::open(&url, &opts()).unwrap(), url.clone()).unwrap();
+    // A HEAD (not counted), the header, then the table and error sections.
+    assert_eq!(srv.gets.load(Ordering::SeqCst), 2);
+    let keys: Vec<_> = local.nodes().map(|n| n.key).collect();
+    let with_payload = local.nodes().filter(|n| n.payload_len > 0).count();
+    let many = remote.read_compressed_many(&keys).unwrap();
+    let batch_gets = srv.gets.load(Ordering::SeqCst) - 2;
+    // The payloads tile less than 1 MiB: object_store merges them into one
+    // request.
+    assert!(bytes.len() < 1 << 20);
+    assert_eq!(
+        batch_gets, 1,
+        "{with_payload} payloads in {batch_gets} GETs"
+    );
+    for (k, p) in keys.iter().zip(&many) {
+        assert_eq!(&local.read_compressed(*k).unwrap(), p);
+    }
+    // One by one: a GET each.
+    for k in &keys {
+        remote.read_compressed(*k).unwrap();
+    }
+    assert_eq!(srv.gets.load(Ordering::SeqCst) - 3, with_payload);
+}
