@@ -16,7 +16,7 @@
 //! out and are retried with exponential backoff (object_store's `RetryConfig`,
 //! defaults in [`RemoteOptions::default`]). Every failure is a typed
 //! [`RemoteError`] carrying the URL and the cause; through the
-//! [`RangeReader`](brickray_core::RangeReader) seam it travels inside an
+//! [`RangeReader`] seam it travels inside an
 //! [`std::io::Error`] (see [`RemoteError::from_io`]).
 
 use brickray_core::{RangeRead, RangeReader};
