@@ -184,20 +184,21 @@ ensure_remote_servers() {
     echo "brickray: Range HTTP test server on $BRICKRAY_TEST_HTTP" >&2
   fi
   if [ -z "${BRICKRAY_TEST_S3:-}" ]; then
-    if ! command -v moto_server >/dev/null 2>&1; then
+    # moto's server: its script, or the module where pip put the script off PATH.
+    have_moto() { python3 -c 'import moto.server, flask' >/dev/null 2>&1; }
+    if ! have_moto; then
       echo "brickray: installing moto[server] (an S3 server for the tests) ..." >&2
       python3 -m pip install --quiet 'moto[server]' >&2 ||
         python3 -m pip install --quiet --break-system-packages 'moto[server]' >&2 || true
-      hash -r
     fi
-    if ! command -v moto_server >/dev/null 2>&1; then
+    if ! have_moto; then
       echo "brickray: no S3 test server (moto). Install it with:" >&2
       echo "  python3 -m pip install 'moto[server]'" >&2
       exit 1
     fi
     local s3port i
     s3port="$(free_port)"
-    moto_server -H 127.0.0.1 -p "$s3port" >"$BRICKRAY_REMOTE_DIR/moto.log" 2>&1 &
+    python3 -m moto.server -H 127.0.0.1 -p "$s3port" >"$BRICKRAY_REMOTE_DIR/moto.log" 2>&1 &
     BRICKRAY_MOTO_PID=$!
     for i in $(seq 1 300); do
       if python3 -c "import urllib.request,sys; urllib.request.urlopen('http://127.0.0.1:$s3port/moto-api/', timeout=1)" 2>/dev/null; then
