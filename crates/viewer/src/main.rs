@@ -30,8 +30,8 @@ use std::sync::{Arc, Mutex};
 struct Cli {
     /// A volume (.json sidecar, .raw, .nrrd, .nhdr, NIfTI .nii/.nii.gz, TIFF
     /// .tif/.tiff, a DICOM series folder, OME-Zarr .zarr), a brick store
-    /// (.brs), or `procedural:N` (fractal noise, N^3 voxels). Default:
-    /// procedural:4096.
+    /// (.brs) or its URL (s3://, gs://, az://, https://; docs/remote.md), or
+    /// `procedural:N` (fractal noise, N^3 voxels). Default: procedural:4096.
     path: Option<String>,
     /// Run the actions of FILE (see docs/viewer.md); the exit status says
     /// whether they all succeeded.

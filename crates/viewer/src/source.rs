@@ -305,8 +305,23 @@ fn newer(out: &Path, inputs: &[PathBuf]) -> bool {
     inputs.iter().all(|i| modified(i).is_some_and(|ti| ti <= t))
 }
 
+/// Opens a store at a local path, or (feature `remote`) at a URL
+/// (`s3://…`, `gs://…`, `az://…`, `https://…`), configured by the
+/// environment (docs/remote.md).
+fn open_store_at(path: &Path) -> Result<brickray::store::Store, OpenError> {
+    #[cfg(feature = "remote")]
+    {
+        let s = path.to_string_lossy();
+        if brickray::remote::is_url(&s) {
+            let o = brickray::remote::RemoteOptions::from_env();
+            return Ok(brickray::store::open_url(&s, &o)?);
+        }
+    }
+    Ok(brickray::store::open(path)?)
+}
+
 fn open_store(input: &Input, path: &Path, how: String) -> Result<Loaded, OpenError> {
-    let store = Arc::new(brickray::store::open(path)?);
+    let store = Arc::new(open_store_at(path)?);
     let desc = store.desc().clone();
     let histogram = source_histogram(&*store)?;
     let note = format!(
@@ -491,6 +506,14 @@ mod tests {
         ));
         let unknown = Input::Path("v.xyz".into());
         assert!(open(&unknown, &opts, &p).is_err());
+        // A URL is opened as a remote store: one without a bucket is refused
+        // before any request, with the URL in the message.
+        #[cfg(feature = "remote")]
+        for url in ["s3:///v.brs", "gs:///v.brs"] {
+            let e = open(&Input::parse(url).unwrap(), &opts, &p).err().unwrap();
+            assert!(matches!(e, OpenError::Store(_)), "{url}: {e}");
+            assert!(e.to_string().contains(url), "{url}: {e}");
+        }
     }
 
     #[test]
