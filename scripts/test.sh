@@ -17,4 +17,5 @@ cargo test --workspace --no-fail-fast "$@" || status=$?
 # The tests that need the servers (ignored in a plain `cargo test`).
 cargo test -p brickray-remote --no-fail-fast --tests -- --ignored || status=$?
 cargo test -p brickray-store --no-fail-fast --features remote --test cli -- --ignored || status=$?
+BRICKRAY_ALLOW_HTTP=1 cargo test -p brickray-viewer --no-fail-fast --bin brickray-viewer -- --ignored source:: || status=$?
 exit "$status"

@@ -516,6 +516,61 @@ mod tests {
         }
     }
 
+    /// A store's URL on the Range HTTP test server (scripts/test.sh starts
+    /// it and allows plain HTTP for this test with BRICKRAY_ALLOW_HTTP=1)
+    /// opens as the local store does: the same description and histogram.
+    #[cfg(feature = "remote")]
+    #[test]
+    #[ignore = "needs BRICKRAY_TEST_HTTP and BRICKRAY_ALLOW_HTTP=1 (scripts/test.sh sets both)"]
+    fn a_store_url_opens_as_its_file() {
+        use std::io::{Read, Write};
+        let ci = std::env::var("CI").is_ok_and(|v| v == "true");
+        let (Ok(http), Ok(_)) = (
+            std::env::var("BRICKRAY_TEST_HTTP"),
+            std::env::var("BRICKRAY_ALLOW_HTTP"),
+        ) else {
+            assert!(
+                !ci,
+                "CI=true but BRICKRAY_TEST_HTTP or BRICKRAY_ALLOW_HTTP is unset"
+            );
+            return eprintln!("skipping: BRICKRAY_TEST_HTTP or BRICKRAY_ALLOW_HTTP is unset");
+        };
+        let dir = tempfile::tempdir().unwrap();
+        let json = write_sphere(dir.path());
+        let opts = OpenOptions {
+            in_core_max_bytes: 0,
+            max_3d_side: 2048,
+            store_dir: dir.path().join("stores"),
+        };
+        let p = Progress::default();
+        let local = open(&Input::Path(json), &opts, &p).unwrap();
+        let store = dir.path().join("stores/s.brs");
+        let bytes = std::fs::read(&store).unwrap();
+        let url = format!(
+            "{}/viewer-{}/s.brs",
+            http.trim_end_matches('/'),
+            std::process::id()
+        );
+        let rest = url.strip_prefix("http://").unwrap();
+        let (host, path) = rest.split_once('/').unwrap();
+        let mut c = std::net::TcpStream::connect(host).unwrap();
+        write!(
+            c,
+            "PUT /{path} HTTP/1.1\r\nHost: {host}\r\nContent-Length: {}\r\nConnection: close\r\n\r\n",
+            bytes.len()
+        )
+        .unwrap();
+        c.write_all(&bytes).unwrap();
+        let mut resp = String::new();
+        let _ = c.read_to_string(&mut resp);
+        assert!(resp.starts_with("HTTP/1.1 201"), "{resp}");
+        let remote = open(&Input::parse(&url).unwrap(), &opts, &p).unwrap();
+        assert!(matches!(remote.volume, Opened::Streamed(_)));
+        assert_eq!(remote.desc, local.desc);
+        assert_eq!(remote.histogram, local.histogram);
+        assert!(remote.note.contains("brick store"), "{}", remote.note);
+    }
+
     #[test]
     fn procedural_volumes_open_with_a_histogram() {
         let opts = OpenOptions {
