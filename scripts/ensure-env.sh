@@ -126,3 +126,125 @@ stop_display() {
     BRICKRAY_XVFB_PID=""
   fi
 }
+
+# Servers for the remote-store tests, on loopback only (called by test.sh,
+# not by the demo): `ensure_remote_servers` starts a Range-capable HTTP
+# server (scripts/test-servers/range_http.py, Python's standard library) and
+# moto's S3 server, installing Python 3 and `moto[server]` when missing (as
+# above: as root, with password-less sudo, or it stops with the exact
+# command), and exports their addresses as BRICKRAY_TEST_HTTP and
+# BRICKRAY_TEST_S3 (an address a caller already set is kept, and no server
+# of that kind is started). In front of each it starts a fault-injecting
+# proxy (scripts/test-servers/fault_proxy.py: latency, 503 and 429, resets,
+# truncated and stalled bodies) as BRICKRAY_TEST_HTTP_FAULTY and
+# BRICKRAY_TEST_S3_FAULTY. `stop_remote_servers` stops what it started.
+BRICKRAY_HTTP_PID=""
+BRICKRAY_MOTO_PID=""
+BRICKRAY_PROXY_PIDS=""
+BRICKRAY_REMOTE_DIR=""
+
+# Waits for a port file written by a server of PID; echoes the port.
+wait_port_file() {
+  local file=$1 pid=$2 i
+  for i in $(seq 1 150); do
+    if [ -s "$file" ]; then
+      cat "$file"
+      return 0
+    fi
+    kill -0 "$pid" 2>/dev/null || return 1
+    sleep 0.1
+  done
+  return 1
+}
+
+free_port() {
+  python3 -c 'import socket; s = socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])'
+}
+
+ensure_remote_servers() {
+  if ! command -v python3 >/dev/null 2>&1; then
+    if ! apt_install python3 python3-pip; then
+      echo "brickray: no Python 3 for the remote-store test servers. Install it with:" >&2
+      echo "  sudo apt-get install -y python3 python3-pip" >&2
+      exit 1
+    fi
+  fi
+  BRICKRAY_REMOTE_DIR="$(mktemp -d "${TMPDIR:-/tmp}/brickray-remote.XXXXXX")"
+  if [ -z "${BRICKRAY_TEST_HTTP:-}" ]; then
+    mkdir -p "$BRICKRAY_REMOTE_DIR/http"
+    python3 scripts/test-servers/range_http.py --root "$BRICKRAY_REMOTE_DIR/http" \
+      --port-file "$BRICKRAY_REMOTE_DIR/http.port" >/dev/null 2>&1 &
+    BRICKRAY_HTTP_PID=$!
+    local port
+    if ! port="$(wait_port_file "$BRICKRAY_REMOTE_DIR/http.port" "$BRICKRAY_HTTP_PID")"; then
+      echo "brickray: the Range HTTP test server did not start" >&2
+      exit 1
+    fi
+    export BRICKRAY_TEST_HTTP="http://127.0.0.1:$port"
+    echo "brickray: Range HTTP test server on $BRICKRAY_TEST_HTTP" >&2
+  fi
+  if [ -z "${BRICKRAY_TEST_S3:-}" ]; then
+    # moto's server: its script, or the module where pip put the script off PATH.
+    have_moto() { python3 -c 'import moto.server, flask' >/dev/null 2>&1; }
+    if ! have_moto; then
+      echo "brickray: installing moto[server] (an S3 server for the tests) ..." >&2
+      python3 -m pip install --quiet 'moto[server]' >&2 ||
+        python3 -m pip install --quiet --break-system-packages 'moto[server]' >&2 || true
+    fi
+    if ! have_moto; then
+      echo "brickray: no S3 test server (moto). Install it with:" >&2
+      echo "  python3 -m pip install 'moto[server]'" >&2
+      exit 1
+    fi
+    local s3port i
+    s3port="$(free_port)"
+    python3 -m moto.server -H 127.0.0.1 -p "$s3port" >"$BRICKRAY_REMOTE_DIR/moto.log" 2>&1 &
+    BRICKRAY_MOTO_PID=$!
+    for i in $(seq 1 300); do
+      if python3 -c "import urllib.request,sys; urllib.request.urlopen('http://127.0.0.1:$s3port/moto-api/', timeout=1)" 2>/dev/null; then
+        break
+      fi
+      if ! kill -0 "$BRICKRAY_MOTO_PID" 2>/dev/null || [ "$i" = 300 ]; then
+        echo "brickray: moto_server did not start (log: $BRICKRAY_REMOTE_DIR/moto.log)" >&2
+        exit 1
+      fi
+      sleep 0.1
+    done
+    export BRICKRAY_TEST_S3="http://127.0.0.1:$s3port"
+    echo "brickray: S3 test server (moto) on $BRICKRAY_TEST_S3" >&2
+  fi
+  local name upstream pid pport
+  for name in HTTP S3; do
+    upstream="BRICKRAY_TEST_$name"
+    if [ -n "$(eval echo "\${BRICKRAY_TEST_${name}_FAULTY:-}")" ]; then
+      continue
+    fi
+    python3 scripts/test-servers/fault_proxy.py --upstream "${!upstream}" \
+      --port-file "$BRICKRAY_REMOTE_DIR/proxy-$name.port" >/dev/null 2>&1 &
+    pid=$!
+    BRICKRAY_PROXY_PIDS="$BRICKRAY_PROXY_PIDS $pid"
+    if ! pport="$(wait_port_file "$BRICKRAY_REMOTE_DIR/proxy-$name.port" "$pid")"; then
+      echo "brickray: the fault-injecting proxy did not start" >&2
+      exit 1
+    fi
+    export "BRICKRAY_TEST_${name}_FAULTY=http://127.0.0.1:$pport"
+    echo "brickray: fault-injecting proxy to ${!upstream} on http://127.0.0.1:$pport" >&2
+  done
+}
+
+stop_remote_servers() {
+  local pid
+  for pid in "$BRICKRAY_HTTP_PID" "$BRICKRAY_MOTO_PID" $BRICKRAY_PROXY_PIDS; do
+    if [ -n "$pid" ]; then
+      kill "$pid" 2>/dev/null || true
+      wait "$pid" 2>/dev/null || true
+    fi
+  done
+  BRICKRAY_HTTP_PID=""
+  BRICKRAY_MOTO_PID=""
+  BRICKRAY_PROXY_PIDS=""
+  if [ -n "$BRICKRAY_REMOTE_DIR" ]; then
+    rm -rf "$BRICKRAY_REMOTE_DIR"
+    BRICKRAY_REMOTE_DIR=""
+  fi
+}

@@ -11,7 +11,10 @@
 //! * [`io`]: volume input: the `VolumeReader` seam, the format registry and the
 //!   readers (raw + JSON, NRRD, and by feature NIfTI, TIFF, DICOM, OME-Zarr);
 //! * [`store`]: the brick-octree file format, its builder and reader, and the
-//!   procedural source of virtual volumes;
+//!   procedural source of virtual volumes (with feature `remote`, stores
+//!   over S3, GCS, Azure and HTTP(S): `store::open_url`);
+//! * `remote` (feature `remote`): range readers over object storage and
+//!   HTTP(S), their options and typed errors;
 //! * [`cache`]: the GPU-free out-of-core planner ([`cache::Streamer`]) and its
 //!   vocabulary, for hosts that plan on the CPU (a twin of what a renderer
 //!   streams, a custom executor).
@@ -23,6 +26,9 @@
 pub use brickray_core as core;
 #[doc(inline)]
 pub use brickray_io as io;
+/// Range readers over object storage and HTTP(S) (feature `remote`).
+#[cfg(feature = "remote")]
+pub use brickray_remote as remote;
 #[doc(inline)]
 pub use brickray_store as store;
 

@@ -19,6 +19,8 @@
 //! * [`synthetic`]: procedural test volumes (sphere, Marschner-Lobb);
 //! * [`slice`](mod@slice): slice views (a plane or a thick slab through the volume);
 //! * [`window`]: window and level, CT presets and colour maps of MIP and slices.
+//! * [`range`]: byte-range reads ([`RangeReader`]), the seam between a
+//!   format's parser and where its bytes live.
 
 pub mod brick;
 pub mod camera;
@@ -27,6 +29,7 @@ pub mod macrocell;
 pub mod moments;
 mod node_error;
 mod pyramid;
+pub mod range;
 pub mod settings;
 pub mod slice;
 pub mod synthetic;
@@ -50,6 +53,7 @@ pub use lod::{
 pub use macrocell::{MacroCellGrid, sub_cell_ranges, sub_cells_per_axis};
 pub use moments::{MomentGrid, Moments};
 pub use pyramid::{ALL_AXES, Children, LayoutError, MAX_LEVELS, anisotropic_split_masks};
+pub use range::{MemRangeReader, RangeRead, RangeReader};
 pub use settings::{Accel, ClipBox, RenderMode, RenderSettings, SettingsError, Shading};
 pub use slice::{Slab, SlabMode, SliceAxis, SliceError, SliceGeometry, SliceView};
 pub use texel::{SampleEncoding, TexelCaps, TexelFormat, U8Filtering};

@@ -45,44 +45,34 @@ pub(crate) fn encode_all(errors: &[NodeError]) -> Vec<u8> {
 /// Reads and validates the section at `offset` (its length and presence were
 /// checked against the header and the file size by the caller).
 pub(crate) fn read(
-    file: &dyn crate::opening::ReadAt,
+    section: &[u8],
     path: &Path,
     h: &Header,
     geo: &TableGeometry,
-    offset: u64,
-    len: u64,
 ) -> Result<Vec<NodeError>, StoreError> {
-    read_with(file, path, h.errors_crc, geo, offset, len)
+    read_with(section, path, h.errors_crc, geo)
 }
 
-/// Reads and validates the parent-error section at `offset` (`len` bytes of
-/// entries, then their CRC-32; bounds checked by the caller).
+/// Validates the parent-error section (its entries, then their CRC-32; its
+/// length checked by the caller).
 pub(crate) fn read_parent(
-    file: &dyn crate::opening::ReadAt,
+    section: &[u8],
     path: &Path,
     geo: &TableGeometry,
-    offset: u64,
-    len: u64,
 ) -> Result<Vec<NodeError>, StoreError> {
-    let mut c = [0u8; 4];
-    file.read_exact_at(&mut c, offset + len)
-        .map_err(|e| StoreError::io(path, e))?;
-    read_with(file, path, u32::from_le_bytes(c), geo, offset, len)
+    let split = section.len().saturating_sub(4);
+    let (entries, c) = section.split_at(split);
+    let stored = <[u8; 4]>::try_from(c).map_or(0, u32::from_le_bytes);
+    read_with(entries, path, stored, geo)
 }
 
 fn read_with(
-    file: &dyn crate::opening::ReadAt,
+    b: &[u8],
     path: &Path,
     stored: u32,
     geo: &TableGeometry,
-    offset: u64,
-    len: u64,
 ) -> Result<Vec<NodeError>, StoreError> {
-    // Bounded by the file size checked by the caller.
-    let mut b = vec![0u8; len as usize];
-    file.read_exact_at(&mut b, offset)
-        .map_err(|e| StoreError::io(path, e))?;
-    let crc = crc32fast::hash(&b);
+    let crc = crc32fast::hash(b);
     if crc != stored {
         return Err(StoreError::ErrorsChecksum {
             path: path.to_owned(),

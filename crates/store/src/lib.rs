@@ -9,7 +9,10 @@
 //!   alone);
 //! * [`open`] / [`Store`]: validated open, lock-free positional brick reads with
 //!   checksum verification and a check of every decoded brick against its
-//!   node's table entry, metadata queries; implements [`BrickSource`];
+//!   node's table entry, metadata queries; implements [`BrickSource`]; the
+//!   parser reads through [`RangeReader`] ([`Store::open_with`]), so a store
+//!   opens from a file, from memory, or (feature `remote`) from S3, GCS,
+//!   Azure or HTTP(S) (`open_url`);
 //! * [`ProceduralSource`]: a virtual volume of up to `65536^3` voxels (and more)
 //!   whose bricks are computed on demand, with exactly filtered inner nodes;
 //!   implements [`BrickSource`].
@@ -32,13 +35,19 @@ mod reader;
 mod sample;
 
 pub use bulb::MandelbulbSource;
+pub use brickray_core::{MemRangeReader, RangeRead, RangeReader};
+/// Range readers over object storage and HTTP(S) (feature `remote`).
+#[cfg(feature = "remote")]
+pub use brickray_remote as remote;
 pub use build::{BuildOptions, BuildProgress, BuildReport, build, build_file, check_output};
 pub use convert::{ConvertReport, convert};
 pub use error::{Mismatch, StoreError};
 pub use errsec::ERROR_ENTRY_LEN;
 pub use partial::{ignored_signals, remove_partial_files};
 pub use procedural::ProceduralSource;
-pub use reader::{NodeRecord, ReadAt, Store, StoreStats, decode_payload, open};
+pub use reader::{NodeRecord, Store, StoreStats, decode_payload, open};
+#[cfg(feature = "remote")]
+pub use reader::{open_any, open_url};
 
 /// The 2x downsampling filter that computes a level-`l-1` voxel from the 2x2x2
 /// level-`l` voxels `(2i + {0,1}, 2j + {0,1}, 2k + {0,1})`, indices clamped to the

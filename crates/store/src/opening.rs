@@ -1,8 +1,10 @@
 //! Opening a store, as phases: the [`header`] (magic, version, checksum,
 //! reserved bytes), the octree [`layout`] it describes, the extents of its
 //! [`Sections`] against the file's length, and the node [`table`]. Every
-//! read goes through [`ReadAt`], a positional-read seam: a local file today,
-//! a range reader over object storage or HTTP tomorrow.
+//! read goes through [`RangeReader`], the byte-range seam: a local file, bytes
+//! in memory, or a range reader over object storage or HTTP. Opening takes
+//! two reads: the header, then everything after the payload (the node table
+//! and the error sections, which end the file) in one range.
 
 use crate::Filter;
 use crate::error::StoreError;
@@ -15,44 +17,16 @@ use crate::format::{
 };
 use crate::reader::{bad, max_compressed};
 use crate::sample::representable;
-use brickray_core::{NodeKey, OctreeLayout, VolumeDesc};
+use brickray_core::{NodeKey, OctreeLayout, RangeReader, VolumeDesc};
 use std::path::Path;
-
-/// Positional reads of a store's bytes: any number of threads may read at
-/// once, without a lock.
-pub trait ReadAt: Send + Sync + std::fmt::Debug {
-    /// Fills `buf` with the bytes at `offset` (an error if they are not all
-    /// there).
-    fn read_exact_at(&self, buf: &mut [u8], offset: u64) -> std::io::Result<()>;
-}
-
-impl ReadAt for std::fs::File {
-    #[cfg(unix)]
-    fn read_exact_at(&self, buf: &mut [u8], offset: u64) -> std::io::Result<()> {
-        std::os::unix::fs::FileExt::read_exact_at(self, buf, offset)
-    }
-
-    #[cfg(windows)]
-    fn read_exact_at(&self, mut buf: &mut [u8], mut offset: u64) -> std::io::Result<()> {
-        use std::os::windows::fs::FileExt;
-        while !buf.is_empty() {
-            match self.seek_read(buf, offset) {
-                Ok(0) => return Err(std::io::ErrorKind::UnexpectedEof.into()),
-                Ok(n) => {
-                    buf = &mut buf[n..];
-                    offset += n as u64;
-                }
-                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
-                Err(e) => return Err(e),
-            }
-        }
-        Ok(())
-    }
-}
 
 /// Phase 1: the header, checked: long enough, the magic, a known version,
 /// its checksum, reserved bytes zero, its length.
-pub(crate) fn header(file: &dyn ReadAt, path: &Path, file_len: u64) -> Result<Header, StoreError> {
+pub(crate) fn header(
+    file: &dyn RangeReader,
+    path: &Path,
+    file_len: u64,
+) -> Result<(Header, [u8; HEADER_LEN]), StoreError> {
     let mut hb = [0u8; HEADER_LEN];
     if file_len < HEADER_LEN as u64 {
         return Err(StoreError::Truncated {
@@ -105,7 +79,7 @@ pub(crate) fn header(file: &dyn ReadAt, path: &Path, file_len: u64) -> Result<He
             format!("{} (expected {HEADER_LEN})", h.header_len),
         ));
     }
-    Ok(h)
+    Ok((h, hb))
 }
 
 /// The flags a version knows.
@@ -308,19 +282,40 @@ impl Sections {
     }
 }
 
-/// Phase 4: the node table, read (its length bounded by the file's, checked
-/// in phase 3), its CRC verified and every entry checked ([`entry`]).
+/// Reads the metadata that follows the payload: from the table's offset to
+/// the end of the file (phase 3 checked that the sections end it exactly),
+/// in one range.
+pub(crate) fn tail(
+    file: &dyn RangeReader,
+    path: &Path,
+    h: &Header,
+    file_len: u64,
+) -> Result<Vec<u8>, StoreError> {
+    // Bounded by the file's length (phase 3), which the reader reported.
+    let mut tail = vec![0u8; (file_len - h.table_offset) as usize];
+    file.read_exact_at(&mut tail, h.table_offset)
+        .map_err(|e| StoreError::io(path, e))?;
+    Ok(tail)
+}
+
+/// Phase 4: the node table, the first bytes of the [`tail`] (its length
+/// checked in phase 3), its CRC verified and every entry checked
+/// ([`entry`]).
 pub(crate) fn table(
-    file: &dyn ReadAt,
+    tail: &[u8],
     path: &Path,
     h: &Header,
     geo: &TableGeometry,
     layout: &OctreeLayout,
 ) -> Result<Vec<Entry>, StoreError> {
-    let mut table = vec![0u8; (geo.count * ENTRY_LEN as u64) as usize];
-    file.read_exact_at(&mut table, h.table_offset)
-        .map_err(|e| StoreError::io(path, e))?;
-    let crc = crc32fast::hash(&table);
+    let table_len = (geo.count * ENTRY_LEN as u64) as usize;
+    let table = tail.get(..table_len).ok_or_else(|| StoreError::Truncated {
+        path: path.to_owned(),
+        section: "node table",
+        needed: h.table_offset + table_len as u64,
+        actual: h.table_offset + tail.len() as u64,
+    })?;
+    let crc = crc32fast::hash(table);
     if crc != h.table_crc {
         return Err(StoreError::TableChecksum {
             path: path.to_owned(),

@@ -8,10 +8,10 @@ use crate::format::{
     payload_crc,
 };
 use crate::opening;
-pub use crate::opening::ReadAt;
 use crate::sample::{fill, first_nan, stats_dyn};
 use brickray_core::{
-    BrickError, BrickSource, NodeError, NodeInfo, NodeKey, NodeKind, OctreeLayout, VolumeDesc,
+    BrickError, BrickSource, NodeError, NodeInfo, NodeKey, NodeKind, OctreeLayout, RangeRead,
+    RangeReader, VolumeDesc,
 };
 use brickray_io::FileKind;
 use std::fs::File;
@@ -21,6 +21,33 @@ use std::sync::{Arc, RwLock};
 /// Opens a store file, validating its header and node table.
 pub fn open(path: impl AsRef<Path>) -> Result<Store, StoreError> {
     Store::open(path)
+}
+
+/// Opens a store over S3, GCS, Azure or HTTP(S) (`s3://bucket/key`,
+/// `gs://…`, `az://…`, `https://…`) through a
+/// [`RemoteRangeReader`](brickray_remote::RemoteRangeReader) configured by
+/// `opts`. Three requests: the object's size, the header, the metadata
+/// after the payload. Errors name the URL; a remote failure is a
+/// [`StoreError::Io`] whose source holds the typed
+/// [`RemoteError`](brickray_remote::RemoteError) (see
+/// [`RemoteError::from_io`](brickray_remote::RemoteError::from_io)).
+#[cfg(feature = "remote")]
+pub fn open_url(url: &str, opts: &brickray_remote::RemoteOptions) -> Result<Store, StoreError> {
+    let reader = brickray_remote::RemoteRangeReader::open(url, opts)
+        .map_err(|e| StoreError::io(Path::new(url), e.into()))?;
+    Store::open_with(reader, url)
+}
+
+/// Opens a store from a URL ([`open_url`], configured by
+/// [`RemoteOptions::from_env`](brickray_remote::RemoteOptions::from_env))
+/// or a local path ([`open`]).
+#[cfg(feature = "remote")]
+pub fn open_any(path_or_url: &str) -> Result<Store, StoreError> {
+    if brickray_remote::is_url(path_or_url) {
+        open_url(path_or_url, &brickray_remote::RemoteOptions::from_env())
+    } else {
+        open(path_or_url)
+    }
 }
 
 /// An open brick store. Reads are positional (`pread`), so any number of threads
@@ -36,7 +63,7 @@ pub fn open(path: impl AsRef<Path>) -> Result<Store, StoreError> {
 #[derive(Debug)]
 pub struct Store {
     path: PathBuf,
-    file: RwLock<Arc<dyn ReadAt>>,
+    file: RwLock<Arc<dyn RangeReader>>,
     /// The header's bytes as opened (what a reopened file must hold).
     header: [u8; HEADER_LEN],
     /// Reopen `path` after a failed read (stores opened from a path).
@@ -141,45 +168,53 @@ impl Store {
         Store::from_reader(Box::new(file), md.len(), path)
     }
 
-    /// Opens a store from any positional reader of `len` bytes (a local
-    /// file, or a range reader over remote storage); `path` names it in
+    /// Opens a store from any range reader (a local file, bytes in memory,
+    /// or a range reader over object storage or HTTP); `name` names it in
+    /// errors (a path or a URL). Takes the reader's length, then validates
+    /// the header, the sections' extents against the length, the node table
+    /// and the error sections, in that order. Two reads: the header, then the
+    /// metadata after the payload in one range.
+    pub fn open_with(
+        reader: impl RangeReader + 'static,
+        name: impl Into<PathBuf>,
+    ) -> Result<Store, StoreError> {
+        let name = name.into();
+        let len = reader.len().map_err(|e| StoreError::io(&name, e))?;
+        Store::from_reader(Box::new(reader), len, &name)
+    }
+
+    /// Opens a store from any range reader of `len` bytes; `path` names it in
     /// errors. Validates the header, the sections' extents against `len`, the
     /// node table and the error sections, in that order.
-    pub fn from_reader(file: Box<dyn ReadAt>, len: u64, path: &Path) -> Result<Store, StoreError> {
-        let h = opening::header(file.as_ref(), path, len)?;
+    pub fn from_reader(
+        file: Box<dyn RangeReader>,
+        len: u64,
+        path: &Path,
+    ) -> Result<Store, StoreError> {
+        let (h, header) = opening::header(file.as_ref(), path, len)?;
         let (layout, filter) = opening::layout(&h, path)?;
         let geo =
             TableGeometry::new(&layout).ok_or_else(|| bad(path, "dims", "node count overflows"))?;
         let sec = opening::Sections::of(&h, &geo, path, len)?;
-        let entries = opening::table(file.as_ref(), path, &h, &geo, &layout)?;
+        let tail = opening::tail(file.as_ref(), path, &h, len)?;
+        let entries = opening::table(&tail, path, &h, &geo, &layout)?;
         opening::ranges(path, &h, &geo, &layout, &entries)?;
         check_tiling(path, &entries, h.table_offset)?;
+        // The sections as offsets into the tail (phase 3 checked that they
+        // follow each other to its end).
+        let at = |o: u64| (o - h.table_offset) as usize;
         let errors = if sec.errors_len > 0 {
-            Some(errsec::read(
-                file.as_ref(),
-                path,
-                &h,
-                &geo,
-                sec.table_end,
-                sec.errors_len,
-            )?)
+            let b = &tail[at(sec.table_end)..at(sec.errors_end)];
+            Some(errsec::read(b, path, &h, &geo)?)
         } else {
             None
         };
         let parent_errors = if sec.parent_len > 0 {
-            Some(errsec::read_parent(
-                file.as_ref(),
-                path,
-                &geo,
-                sec.errors_end,
-                sec.errors_len,
-            )?)
+            let b = &tail[at(sec.errors_end)..];
+            Some(errsec::read_parent(b, path, &geo)?)
         } else {
             None
         };
-        let mut header = [0u8; HEADER_LEN];
-        file.read_exact_at(&mut header, 0)
-            .map_err(|e| StoreError::io(path, e))?;
         Ok(Store {
             errors,
             parent_errors,
@@ -209,7 +244,8 @@ impl Store {
         self.errors.is_some()
     }
 
-    /// The file's path.
+    /// The file's path (or the name it was opened with: a URL for a remote
+    /// store).
     pub fn path(&self) -> &Path {
         &self.path
     }
@@ -396,15 +432,64 @@ impl Store {
         Ok(Some(buf))
     }
 
+    /// The compressed payloads of several nodes (checksums verified), `None`
+    /// for nodes without one, in the order of `keys`: one
+    /// [`RangeReader::read_ranges`] call, which a reader over the network
+    /// turns into few requests (neighbouring payloads coalesced). A batch
+    /// that fails is read again node by node (so a store opened from a path
+    /// reopens it as [`read_compressed`](Self::read_compressed) does), and
+    /// the first error is returned.
+    pub fn read_compressed_many(
+        &self,
+        keys: &[NodeKey],
+    ) -> Result<Vec<Option<Vec<u8>>>, StoreError> {
+        let mut entries = Vec::with_capacity(keys.len());
+        for &key in keys {
+            entries.push(self.check_key(key)?.filter(|e| e.kind == KIND_DATA));
+        }
+        // `len` was bounded by the brick size and the file at open.
+        let mut out: Vec<Option<Vec<u8>>> = entries
+            .iter()
+            .map(|e| e.map(|e| vec![0u8; e.len as usize]))
+            .collect();
+        let file = self.file();
+        let batch = {
+            let mut reads: Vec<RangeRead<'_>> = entries
+                .iter()
+                .zip(out.iter_mut())
+                .filter_map(|(e, b)| {
+                    Some(RangeRead {
+                        offset: e.as_ref()?.offset,
+                        buf: b.as_mut()?,
+                    })
+                })
+                .collect();
+            file.read_ranges(&mut reads)
+        };
+        let checked = batch.is_ok()
+            && keys
+                .iter()
+                .zip(&entries)
+                .zip(&out)
+                .all(|((&key, e), b)| match (e, b) {
+                    (Some(e), Some(b)) => payload_crc(self.version, key, b) == e.crc,
+                    _ => true,
+                });
+        if !checked {
+            return keys.iter().map(|&k| self.read_compressed(k)).collect();
+        }
+        Ok(out)
+    }
+
     /// The file reads go to.
-    fn file(&self) -> Arc<dyn ReadAt> {
+    fn file(&self) -> Arc<dyn RangeReader> {
         self.file.read().unwrap_or_else(|p| p.into_inner()).clone()
     }
 
     /// Reads `e`'s payload into `buf` from `file` and checks its checksum.
     fn read_payload(
         &self,
-        file: &dyn ReadAt,
+        file: &dyn RangeReader,
         key: NodeKey,
         e: &Entry,
         buf: &mut [u8],
@@ -426,7 +511,7 @@ impl Store {
     /// was opened from one and the file there is this store (its length and
     /// header bytes), and reads go to it from then on. True when reads go to
     /// another file than `failed` now (reopened here or by another thread).
-    fn reopened(&self, failed: &Arc<dyn ReadAt>) -> bool {
+    fn reopened(&self, failed: &Arc<dyn RangeReader>) -> bool {
         if !self.reopen {
             return false;
         }
@@ -442,7 +527,7 @@ impl Store {
             }
             let f = File::open(&self.path).ok()?;
             let mut hb = [0u8; HEADER_LEN];
-            f.read_exact_at(&mut hb, 0).ok()?;
+            RangeReader::read_exact_at(&f, &mut hb, 0).ok()?;
             (hb == self.header && f.metadata().ok()?.len() == self.file_len).then_some(f)
         };
         match same() {

@@ -231,3 +231,110 @@ fn info_on_a_forged_huge_zarr_shape_returns_at_once() {
         assert!(took.as_secs_f64() < 5.0, "{side}^3: info took {took:?}");
     }
 }
+
+/// Puts `bytes` at `url` on the Range HTTP test server (it stores PUTs).
+#[cfg(feature = "remote")]
+fn http_put(url: &str, bytes: &[u8]) {
+    use std::io::{Read, Write};
+    let rest = url.strip_prefix("http://").unwrap();
+    let (host, path) = rest.split_once('/').unwrap();
+    let mut s = std::net::TcpStream::connect(host).unwrap();
+    write!(
+        s,
+        "PUT /{path} HTTP/1.1\r\nHost: {host}\r\nContent-Length: {}\r\nConnection: close\r\n\r\n",
+        bytes.len()
+    )
+    .unwrap();
+    s.write_all(bytes).unwrap();
+    let mut resp = String::new();
+    let _ = s.read_to_string(&mut resp);
+    assert!(resp.starts_with("HTTP/1.1 201"), "PUT {url}: {resp}");
+}
+
+/// `info URL` describes a store over HTTP exactly as `info` on the file.
+#[cfg(feature = "remote")]
+#[test]
+#[ignore = "needs BRICKRAY_TEST_HTTP (a Range HTTP server; scripts/test.sh starts one)"]
+fn info_on_a_url_matches_info_on_the_file() {
+    let http = match std::env::var("BRICKRAY_TEST_HTTP") {
+        Ok(v) if !v.is_empty() => v,
+        _ if std::env::var("CI").is_ok_and(|v| v == "true") => {
+            panic!("CI=true but BRICKRAY_TEST_HTTP is unset (scripts/test.sh starts the server)")
+        }
+        _ => return eprintln!("skipping: BRICKRAY_TEST_HTTP is unset"),
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let dims = [19u32, 23, 11];
+    let mut r = MemReader::new(dims, DType::U16, test_volume(dims, DType::U16, 9));
+    let out = dir.path().join("v.brs");
+    let o = brickray_store::BuildOptions {
+        brick: 8,
+        apron: 1,
+        ..Default::default()
+    };
+    brickray_store::build(&mut r, &out, &o).unwrap();
+    let nanos = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap()
+        .as_nanos();
+    let url = format!(
+        "{}/cli-{}-{nanos}/v.brs",
+        http.trim_end_matches('/'),
+        std::process::id()
+    );
+    http_put(&url, &std::fs::read(&out).unwrap());
+    let exe = env!("CARGO_BIN_EXE_brickray-store");
+    let run = |target: &str, extra: &[&str]| {
+        Command::new(exe)
+            .args(["info", "--bins", "5"])
+            .args(extra)
+            .arg(target)
+            .output()
+            .unwrap()
+    };
+    let local = run(out.to_str().unwrap(), &[]);
+    let remote = run(&url, &["--allow-http"]);
+    assert!(
+        remote.status.success(),
+        "{}",
+        String::from_utf8_lossy(&remote.stderr)
+    );
+    let body = |o: &std::process::Output| {
+        String::from_utf8_lossy(&o.stdout)
+            .lines()
+            .filter(|l| !l.starts_with("store "))
+            .collect::<Vec<_>>()
+            .join("\n")
+    };
+    assert!(String::from_utf8_lossy(&remote.stdout).contains(&url));
+    assert_eq!(body(&local), body(&remote));
+    assert!(body(&remote).contains("histogram"));
+    // A missing object: a message naming the URL, a failure status.
+    let missing = url.replace("v.brs", "absent.brs");
+    let e = run(&missing, &["--allow-http"]);
+    assert!(!e.status.success());
+    let err = String::from_utf8_lossy(&e.stderr);
+    assert!(err.contains(&missing) && err.contains("not found"), "{err}");
+}
+
+/// A plain-HTTP URL is refused unless allowed, before any request.
+#[cfg(feature = "remote")]
+#[test]
+fn info_refuses_plain_http_unless_allowed() {
+    let exe = env!("CARGO_BIN_EXE_brickray-store");
+    let out = Command::new(exe)
+        .args(["info", "http://127.0.0.1:9/x.brs"])
+        .env_remove("AWS_ALLOW_HTTP")
+        .env_remove("BRICKRAY_ALLOW_HTTP")
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("--allow-http"), "{err}");
+    let out = Command::new(exe)
+        .args(["info", "ftp://host/x.brs"])
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("unsupported scheme"));
+}

@@ -29,7 +29,8 @@ use std::sync::{Arc, Mutex};
 struct Cli {
     /// A volume (.json sidecar, .raw, .nrrd, .nhdr, NIfTI .nii/.nii.gz, TIFF
     /// .tif/.tiff, a DICOM series folder, OME-Zarr .zarr), a brick store
-    /// (.brs), `bulb:N` (a Mandelbulb, N^3 voxels computed on demand) or
+    /// (.brs) or its URL (s3://, gs://, az://, https://; docs/remote.md),
+    /// `bulb:N` (a Mandelbulb, N^3 voxels computed on demand) or
     /// `procedural:N` (fractal noise, N^3 voxels). Default: bulb:4096.
     path: Option<String>,
     /// Run the actions of FILE (see docs/viewer.md); the exit status says

@@ -332,8 +332,23 @@ fn newer(out: &Path, inputs: &[PathBuf]) -> bool {
     inputs.iter().all(|i| modified(i).is_some_and(|ti| ti <= t))
 }
 
+/// Opens a store at a local path, or (feature `remote`) at a URL
+/// (`s3://…`, `gs://…`, `az://…`, `https://…`), configured by the
+/// environment (docs/remote.md).
+fn open_store_at(path: &Path) -> Result<brickray::store::Store, OpenError> {
+    #[cfg(feature = "remote")]
+    {
+        let s = path.to_string_lossy();
+        if brickray::remote::is_url(&s) {
+            let o = brickray::remote::RemoteOptions::from_env();
+            return Ok(brickray::store::open_url(&s, &o)?);
+        }
+    }
+    Ok(brickray::store::open(path)?)
+}
+
 fn open_store(input: &Input, path: &Path, how: String) -> Result<Loaded, OpenError> {
-    let store = Arc::new(brickray::store::open(path)?);
+    let store = Arc::new(open_store_at(path)?);
     let desc = store.desc().clone();
     let histogram = source_histogram(&*store)?;
     let note = format!(
@@ -522,6 +537,69 @@ mod tests {
         ));
         let unknown = Input::Path("v.xyz".into());
         assert!(open(&unknown, &opts, &p).is_err());
+        // A URL is opened as a remote store: one without a bucket is refused
+        // before any request, with the URL in the message.
+        #[cfg(feature = "remote")]
+        for url in ["s3:///v.brs", "gs:///v.brs"] {
+            let e = open(&Input::parse(url).unwrap(), &opts, &p).err().unwrap();
+            assert!(matches!(e, OpenError::Store(_)), "{url}: {e}");
+            assert!(e.to_string().contains(url), "{url}: {e}");
+        }
+    }
+
+    /// A store's URL on the Range HTTP test server (scripts/test.sh starts
+    /// it and allows plain HTTP for this test with BRICKRAY_ALLOW_HTTP=1)
+    /// opens as the local store does: the same description and histogram.
+    #[cfg(feature = "remote")]
+    #[test]
+    #[ignore = "needs BRICKRAY_TEST_HTTP and BRICKRAY_ALLOW_HTTP=1 (scripts/test.sh sets both)"]
+    fn a_store_url_opens_as_its_file() {
+        use std::io::{Read, Write};
+        let ci = std::env::var("CI").is_ok_and(|v| v == "true");
+        let (Ok(http), Ok(_)) = (
+            std::env::var("BRICKRAY_TEST_HTTP"),
+            std::env::var("BRICKRAY_ALLOW_HTTP"),
+        ) else {
+            assert!(
+                !ci,
+                "CI=true but BRICKRAY_TEST_HTTP or BRICKRAY_ALLOW_HTTP is unset"
+            );
+            return eprintln!("skipping: BRICKRAY_TEST_HTTP or BRICKRAY_ALLOW_HTTP is unset");
+        };
+        let dir = tempfile::tempdir().unwrap();
+        let json = write_sphere(dir.path());
+        let opts = OpenOptions {
+            in_core_max_bytes: 0,
+            max_3d_side: 2048,
+            store_dir: dir.path().join("stores"),
+        };
+        let p = Progress::default();
+        let local = open(&Input::Path(json), &opts, &p).unwrap();
+        let store = dir.path().join("stores/s.brs");
+        let bytes = std::fs::read(&store).unwrap();
+        let url = format!(
+            "{}/viewer-{}/s.brs",
+            http.trim_end_matches('/'),
+            std::process::id()
+        );
+        let rest = url.strip_prefix("http://").unwrap();
+        let (host, path) = rest.split_once('/').unwrap();
+        let mut c = std::net::TcpStream::connect(host).unwrap();
+        write!(
+            c,
+            "PUT /{path} HTTP/1.1\r\nHost: {host}\r\nContent-Length: {}\r\nConnection: close\r\n\r\n",
+            bytes.len()
+        )
+        .unwrap();
+        c.write_all(&bytes).unwrap();
+        let mut resp = String::new();
+        let _ = c.read_to_string(&mut resp);
+        assert!(resp.starts_with("HTTP/1.1 201"), "{resp}");
+        let remote = open(&Input::parse(&url).unwrap(), &opts, &p).unwrap();
+        assert!(matches!(remote.volume, Opened::Streamed(_)));
+        assert_eq!(remote.desc, local.desc);
+        assert_eq!(remote.histogram, local.histogram);
+        assert!(remote.note.contains("brick store"), "{}", remote.note);
     }
 
     #[test]

@@ -5,13 +5,17 @@
 //!                      [--filter average|max] [--empty-below V] [--memory-mib N]
 //!                      [--series UID|N] [--level N] [--channel N] [--time N]
 //!                      [--spacing X,Y,Z] [--allow-outside-dir] [--quiet]
-//! brickray-store info <store.brs | input> [--bins N]
+//! brickray-store info <store.brs | URL | input> [--bins N]
+//!                     [--allow-http] [--anonymous] [--endpoint URL]
 //! brickray-store convert <input> <out.json> [--memory-mib N] [selection as for build]
 //! ```
 //!
 //! An input is any format `brickray_io::open` reads: raw + JSON, NRRD, NIfTI,
 //! TIFF (a stack or a folder of slices), DICOM (a folder) or OME-Zarr. `info`
-//! on an input lists its series, levels, channels and time points.
+//! on an input lists its series, levels, channels and time points. `info`
+//! also reads a store over S3, GCS, Azure or HTTP(S) (`s3://bucket/key`,
+//! `https://host/store.brs`; feature `remote`, on by default), configured
+//! by the usual environment variables (`AWS_*`, see docs/remote.md).
 //!
 //! On a signal that would end it and that a process may catch (SIGHUP,
 //! SIGINT, SIGQUIT, SIGTERM, SIGUSR1, SIGUSR2, SIGALRM, SIGXCPU, SIGXFSZ) a
@@ -98,7 +102,59 @@ enum Command {
         /// Histogram bins.
         #[arg(long, default_value_t = 16)]
         bins: usize,
+        #[command(flatten)]
+        remote: RemoteArgs,
     },
+}
+
+/// How to reach a store named by a URL.
+#[derive(Debug, clap::Args)]
+struct RemoteArgs {
+    /// Allow a plain `http://` URL or endpoint (also `AWS_ALLOW_HTTP=true`).
+    #[arg(long)]
+    allow_http: bool,
+    /// Unsigned requests, for a public bucket (also `AWS_SKIP_SIGNATURE=true`).
+    #[arg(long)]
+    anonymous: bool,
+    /// An S3-compatible endpoint (also `AWS_ENDPOINT_URL`).
+    #[arg(long)]
+    endpoint: Option<String>,
+}
+
+/// Opens a store from a local path or (feature `remote`) a URL.
+fn open_store(store: &std::path::Path, remote: &RemoteArgs) -> Result<Store, String> {
+    let name = store.to_string_lossy();
+    if looks_like_url(&name) {
+        #[cfg(feature = "remote")]
+        {
+            let mut o = brickray_store::remote::RemoteOptions::from_env();
+            o.allow_http |= remote.allow_http;
+            o.anonymous |= remote.anonymous;
+            if remote.endpoint.is_some() {
+                o.endpoint.clone_from(&remote.endpoint);
+            }
+            return brickray_store::open_url(&name, &o).map_err(|e| e.to_string());
+        }
+        #[cfg(not(feature = "remote"))]
+        {
+            let _ = remote;
+            return Err(format!(
+                "{name}: this brickray-store was built without the `remote` feature \
+                 (cargo install with --features remote)"
+            ));
+        }
+    }
+    Store::open(store).map_err(|e| e.to_string())
+}
+
+/// A scheme before `://` (a URL rather than a path).
+fn looks_like_url(s: &str) -> bool {
+    s.split_once("://").is_some_and(|(scheme, _)| {
+        scheme.len() > 1
+            && scheme
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || "+-.".contains(c))
+    })
 }
 
 /// What to read from an input, and how.
@@ -203,12 +259,16 @@ fn main() -> ExitCode {
             store,
             bins,
             select,
+            remote,
         } => {
-            // A path a volume format claims is an input; anything else a store.
-            if brickray_io::Registry::global().find(&store).is_ok() {
+            // A URL is a store; a path a volume format claims is an input;
+            // anything else a store.
+            if !looks_like_url(&store.to_string_lossy())
+                && brickray_io::Registry::global().find(&store).is_ok()
+            {
                 cmd_info_input(&store, &select.options())
             } else {
-                cmd_info(&store, bins.clamp(1, 4096))
+                open_store(&store, &remote).and_then(|s| cmd_info(&s, bins.clamp(1, 4096)))
             }
         }
     };
@@ -384,9 +444,8 @@ fn cmd_info_input(input: &std::path::Path, read: &ReadOptions) -> Result<(), Str
     Ok(())
 }
 
-fn cmd_info(store_path: &std::path::Path, bins: usize) -> Result<(), String> {
-    let path = store_path.display();
-    let store = Store::open(store_path).map_err(|e| e.to_string())?;
+fn cmd_info(store: &Store, bins: usize) -> Result<(), String> {
+    let path = store.path().display();
     let lay = store.layout().clone();
     let d = store.desc();
     println!("store       {path}");

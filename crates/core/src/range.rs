@@ -1,0 +1,238 @@
+//! Byte-range reads: the seam between a format's parser and where its bytes
+//! live (a local file, memory, object storage or an HTTP server).
+//!
+//! A [`RangeReader`] knows its length and reads one range or several; the
+//! brick store's parser and reader go through it only. Local files implement
+//! it with positional reads (`pread` on unix, `seek_read` on Windows),
+//! [`MemRangeReader`] holds the bytes in memory, and `brickray-remote` reads
+//! ranges over the network.
+
+use std::fmt;
+use std::io;
+use std::sync::Arc;
+
+/// One range to read: `buf.len()` bytes at `offset`.
+#[derive(Debug)]
+pub struct RangeRead<'a> {
+    /// The first byte's offset.
+    pub offset: u64,
+    /// Where the bytes go; its length is the range's.
+    pub buf: &'a mut [u8],
+}
+
+/// Positional reads of an immutable sequence of bytes. Any number of threads
+/// may read at once. A read either fills its buffer with exactly the bytes at
+/// its offset or fails: a non-empty range that ends past [`len`](Self::len)
+/// is an error (`UnexpectedEof`), never a short read. An empty range reads
+/// nothing and succeeds.
+pub trait RangeReader: Send + Sync + fmt::Debug {
+    /// The length in bytes.
+    fn len(&self) -> io::Result<u64>;
+
+    /// Whether there are no bytes.
+    fn is_empty(&self) -> io::Result<bool> {
+        Ok(self.len()? == 0)
+    }
+
+    /// Fills `buf` with the bytes at `offset` (an error if they are not all
+    /// there).
+    fn read_exact_at(&self, buf: &mut [u8], offset: u64) -> io::Result<()>;
+
+    /// Fills every range's buffer. The default reads them one after the
+    /// other; a reader over the network fetches them concurrently and
+    /// coalesces neighbours into one request. Fails as a whole: on an error
+    /// the buffers' contents are unspecified.
+    fn read_ranges(&self, ranges: &mut [RangeRead<'_>]) -> io::Result<()> {
+        for r in ranges {
+            self.read_exact_at(r.buf, r.offset)?;
+        }
+        Ok(())
+    }
+}
+
+impl<T: RangeReader + ?Sized> RangeReader for Arc<T> {
+    fn len(&self) -> io::Result<u64> {
+        (**self).len()
+    }
+    fn read_exact_at(&self, buf: &mut [u8], offset: u64) -> io::Result<()> {
+        (**self).read_exact_at(buf, offset)
+    }
+    fn read_ranges(&self, ranges: &mut [RangeRead<'_>]) -> io::Result<()> {
+        (**self).read_ranges(ranges)
+    }
+}
+
+impl<T: RangeReader + ?Sized> RangeReader for Box<T> {
+    fn len(&self) -> io::Result<u64> {
+        (**self).len()
+    }
+    fn read_exact_at(&self, buf: &mut [u8], offset: u64) -> io::Result<()> {
+        (**self).read_exact_at(buf, offset)
+    }
+    fn read_ranges(&self, ranges: &mut [RangeRead<'_>]) -> io::Result<()> {
+        (**self).read_ranges(ranges)
+    }
+}
+
+impl RangeReader for std::fs::File {
+    fn len(&self) -> io::Result<u64> {
+        Ok(self.metadata()?.len())
+    }
+
+    #[cfg(unix)]
+    fn read_exact_at(&self, buf: &mut [u8], offset: u64) -> io::Result<()> {
+        std::os::unix::fs::FileExt::read_exact_at(self, buf, offset)
+    }
+
+    #[cfg(windows)]
+    fn read_exact_at(&self, mut buf: &mut [u8], mut offset: u64) -> io::Result<()> {
+        use std::os::windows::fs::FileExt;
+        while !buf.is_empty() {
+            match self.seek_read(buf, offset) {
+                Ok(0) => return Err(io::ErrorKind::UnexpectedEof.into()),
+                Ok(n) => {
+                    buf = &mut buf[n..];
+                    offset += n as u64;
+                }
+                Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
+                Err(e) => return Err(e),
+            }
+        }
+        Ok(())
+    }
+
+    // Neither unix nor Windows: a file behind a lock, seek then read.
+    #[cfg(not(any(unix, windows)))]
+    fn read_exact_at(&self, buf: &mut [u8], offset: u64) -> io::Result<()> {
+        use std::io::{Read, Seek, SeekFrom};
+        static LOCK: std::sync::Mutex<()> = std::sync::Mutex::new(());
+        let _guard = LOCK.lock().unwrap_or_else(|p| p.into_inner());
+        let mut f = self;
+        f.seek(SeekFrom::Start(offset))?;
+        f.read_exact(buf)
+    }
+}
+
+/// Bytes in memory as a [`RangeReader`] (tests, and stores fetched whole).
+#[derive(Clone)]
+pub struct MemRangeReader {
+    bytes: Arc<[u8]>,
+}
+
+impl MemRangeReader {
+    /// Reads from `bytes`.
+    pub fn new(bytes: impl Into<Arc<[u8]>>) -> MemRangeReader {
+        MemRangeReader {
+            bytes: bytes.into(),
+        }
+    }
+
+    /// The bytes.
+    pub fn bytes(&self) -> &[u8] {
+        &self.bytes
+    }
+}
+
+impl fmt::Debug for MemRangeReader {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("MemRangeReader")
+            .field("len", &self.bytes.len())
+            .finish()
+    }
+}
+
+impl RangeReader for MemRangeReader {
+    fn len(&self) -> io::Result<u64> {
+        Ok(self.bytes.len() as u64)
+    }
+
+    fn read_exact_at(&self, buf: &mut [u8], offset: u64) -> io::Result<()> {
+        if buf.is_empty() {
+            return Ok(());
+        }
+        let src = usize::try_from(offset)
+            .ok()
+            .and_then(|start| self.bytes.get(start..start.checked_add(buf.len())?))
+            .ok_or_else(|| {
+                io::Error::new(
+                    io::ErrorKind::UnexpectedEof,
+                    format!(
+                        "range {offset}+{} ends past the {} bytes held",
+                        buf.len(),
+                        self.bytes.len()
+                    ),
+                )
+            })?;
+        buf.copy_from_slice(src);
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn bytes(n: usize) -> Vec<u8> {
+        (0..n).map(|i| (i * 7 + i / 251) as u8).collect()
+    }
+
+    proptest! {
+        #[test]
+        fn mem_and_file_agree_on_every_range(
+            n in 0usize..4096,
+            ranges in proptest::collection::vec((0u64..5000, 0usize..700), 1..12),
+        ) {
+            let data = bytes(n);
+            let mem = MemRangeReader::new(data.clone());
+            let dir = tempfile::tempdir().unwrap();
+            let path = dir.path().join("bytes");
+            std::fs::write(&path, &data).unwrap();
+            let file = std::fs::File::open(&path).unwrap();
+            prop_assert_eq!(mem.len().unwrap(), n as u64);
+            prop_assert_eq!(RangeReader::len(&file).unwrap(), n as u64);
+            for &(off, len) in &ranges {
+                let mut a = vec![0xAA; len];
+                let mut b = vec![0x55; len];
+                let ra = mem.read_exact_at(&mut a, off);
+                let rb = RangeReader::read_exact_at(&file, &mut b, off);
+                let inside = len == 0 || off as usize + len <= n;
+                prop_assert_eq!(ra.is_ok(), inside);
+                prop_assert_eq!(rb.is_ok(), inside);
+                if inside && len > 0 {
+                    prop_assert_eq!(&a[..], &data[off as usize..off as usize + len]);
+                    prop_assert_eq!(&a, &b);
+                } else if !inside {
+                    prop_assert_eq!(ra.unwrap_err().kind(), io::ErrorKind::UnexpectedEof);
+                    prop_assert_eq!(rb.unwrap_err().kind(), io::ErrorKind::UnexpectedEof);
+                }
+            }
+            // Several ranges at once: all inside, the same bytes; one outside, an error.
+            let mut bufs: Vec<Vec<u8>> = ranges.iter().map(|&(_, l)| vec![0; l]).collect();
+            let mut reads: Vec<RangeRead<'_>> = ranges
+                .iter()
+                .zip(bufs.iter_mut())
+                .map(|(&(offset, _), buf)| RangeRead { offset, buf })
+                .collect();
+            let all_inside = ranges.iter().all(|&(o, l)| l == 0 || o as usize + l <= n);
+            prop_assert_eq!(mem.read_ranges(&mut reads).is_ok(), all_inside);
+            if all_inside {
+                for (&(o, l), b) in ranges.iter().zip(&bufs).filter(|(r, _)| r.1 > 0) {
+                    prop_assert_eq!(&b[..], &data[o as usize..o as usize + l]);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn offsets_past_usize_are_errors_not_panics() {
+        let mem = MemRangeReader::new(vec![1u8; 8]);
+        let mut b = [0u8; 4];
+        assert!(mem.read_exact_at(&mut b, u64::MAX).is_err());
+        assert!(mem.read_exact_at(&mut b, u64::MAX - 2).is_err());
+        assert!(mem.read_exact_at(&mut [], u64::MAX).is_ok());
+        assert!(mem.read_exact_at(&mut b, 5).is_err());
+        mem.read_exact_at(&mut b, 4).unwrap();
+        assert_eq!(b, [1; 4]);
+    }
+}

@@ -1,0 +1,751 @@
+//! Range readers over object storage and HTTP(S) for brickray.
+//!
+//! [`RemoteRangeReader`] implements [`brickray_core::RangeReader`] over the
+//! Apache [`object_store`] crate: `s3://bucket/key` (AWS S3 and any
+//! S3-compatible endpoint), `gs://bucket/key`, `az://container/key` and
+//! `http(s)://host/path`. Each reader owns one small tokio runtime (two
+//! worker threads, `brickray-remote`); a caller's thread hands each read to
+//! the runtime and waits on a channel, so no runtime thread ever blocks and
+//! the reader may be called from any thread (a brick loader's) but not from
+//! inside one of its own tasks.
+//!
+//! Configuration follows the usual conventions ([`RemoteOptions`]): the
+//! `AWS_*`, `GOOGLE_*` and `AZURE_*` environment variables object_store reads,
+//! an explicit endpoint, anonymous (unsigned) requests for public buckets,
+//! plain HTTP only when [`RemoteOptions::allow_http`] is set. Requests time
+//! out and are retried with exponential backoff (object_store's `RetryConfig`,
+//! defaults in [`RemoteOptions::default`]). Every failure is a typed
+//! [`RemoteError`] carrying the URL and the cause; through the
+//! [`RangeReader`] seam it travels inside an
+//! [`std::io::Error`] (see [`RemoteError::from_io`]).
+
+use brickray_core::{RangeRead, RangeReader};
+use object_store::path::Path as ObjectPath;
+use object_store::{ClientOptions, ObjectStore, ObjectStoreExt, RetryConfig};
+use std::fmt;
+use std::future::Future;
+use std::io;
+use std::ops::Range;
+use std::sync::Arc;
+use std::time::Duration;
+use thiserror::Error;
+
+pub use object_store;
+
+/// What went wrong reading a remote object. Every variant names the URL.
+#[derive(Debug, Error)]
+#[non_exhaustive]
+pub enum RemoteError {
+    /// The URL cannot be parsed or names no supported store.
+    #[error("{url}: {reason}")]
+    BadUrl {
+        /// The URL as given.
+        url: String,
+        /// What is wrong.
+        reason: String,
+    },
+    /// The URL or the endpoint is plain `http://` and plain HTTP was not
+    /// allowed.
+    #[error(
+        "{url}: plain HTTP ({endpoint}) is not allowed; allow it explicitly \
+         (RemoteOptions::allow_http, --allow-http, or AWS_ALLOW_HTTP=true)"
+    )]
+    HttpNotAllowed {
+        /// The URL.
+        url: String,
+        /// The plain-HTTP address.
+        endpoint: String,
+    },
+    /// The store could not be configured (an unknown option key, a missing
+    /// bucket or region, ...).
+    #[error("{url}: configuration: {source}")]
+    Config {
+        /// The URL.
+        url: String,
+        /// object_store's error.
+        #[source]
+        source: object_store::Error,
+    },
+    /// The object does not exist: the server answered 404, or 403, which S3
+    /// answers for a missing key when the caller may not list the bucket.
+    #[error("{url}: not found{}: {source}", if *.denied { " (403: missing, or access denied)" } else { "" })]
+    Missing {
+        /// The URL.
+        url: String,
+        /// The server answered 403 rather than 404.
+        denied: bool,
+        /// object_store's error.
+        #[source]
+        source: object_store::Error,
+    },
+    /// The request lacked valid credentials (401, or no credentials found).
+    #[error(
+        "{url}: authentication failed: {source}; set credentials the usual way \
+         (S3: AWS_ACCESS_KEY_ID and AWS_SECRET_ACCESS_KEY, with AWS_SESSION_TOKEN for \
+         temporary ones; GCS: GOOGLE_SERVICE_ACCOUNT or GOOGLE_APPLICATION_CREDENTIALS; \
+         Azure: AZURE_STORAGE_ACCOUNT_NAME and AZURE_STORAGE_ACCOUNT_KEY), or read a \
+         public bucket anonymously (RemoteOptions::anonymous, --anonymous)"
+    )]
+    Auth {
+        /// The URL.
+        url: String,
+        /// object_store's error.
+        #[source]
+        source: object_store::Error,
+    },
+    /// A request failed after its retries (a timeout, 5xx or 429 answers, a
+    /// reset connection, a body cut short), or the server's answer was
+    /// refused (a wrong `Content-Range`).
+    #[error("{url}: request failed: {source}")]
+    Request {
+        /// The URL.
+        url: String,
+        /// object_store's error, with the retries made.
+        #[source]
+        source: object_store::Error,
+    },
+    /// The whole read, retries included, took longer than its deadline.
+    #[error("{url}: no answer within {deadline:?} (retries included)")]
+    Deadline {
+        /// The URL.
+        url: String,
+        /// The deadline.
+        deadline: Duration,
+    },
+    /// The server returned another number of bytes than the range asked for.
+    #[error("{url}: range {offset}+{expected} returned {actual} bytes")]
+    WrongLength {
+        /// The URL.
+        url: String,
+        /// The range's first byte.
+        offset: u64,
+        /// Bytes asked for.
+        expected: u64,
+        /// Bytes received.
+        actual: u64,
+    },
+    /// A range ends past the object.
+    #[error("{url}: range {offset}+{len} ends past the object's {object_len} bytes")]
+    OutOfBounds {
+        /// The URL.
+        url: String,
+        /// The range's first byte.
+        offset: u64,
+        /// Its length.
+        len: u64,
+        /// The object's length.
+        object_len: u64,
+    },
+    /// The reader's runtime could not be started or is gone.
+    #[error("{url}: runtime: {reason}")]
+    Runtime {
+        /// The URL.
+        url: String,
+        /// What happened.
+        reason: String,
+    },
+}
+
+impl RemoteError {
+    /// The URL the error concerns.
+    pub fn url(&self) -> &str {
+        match self {
+            RemoteError::BadUrl { url, .. }
+            | RemoteError::HttpNotAllowed { url, .. }
+            | RemoteError::Config { url, .. }
+            | RemoteError::Missing { url, .. }
+            | RemoteError::Auth { url, .. }
+            | RemoteError::Request { url, .. }
+            | RemoteError::Deadline { url, .. }
+            | RemoteError::WrongLength { url, .. }
+            | RemoteError::OutOfBounds { url, .. }
+            | RemoteError::Runtime { url, .. } => url,
+        }
+    }
+
+    /// Whether the object is missing (404, or S3's 403).
+    pub fn is_missing(&self) -> bool {
+        matches!(self, RemoteError::Missing { .. })
+    }
+
+    /// The remote error inside an I/O error returned through the
+    /// [`RangeReader`] seam (or a store error's source), if it is one.
+    pub fn from_io(e: &io::Error) -> Option<&RemoteError> {
+        e.get_ref()?.downcast_ref::<RemoteError>()
+    }
+
+    fn of(url: &str, e: object_store::Error) -> RemoteError {
+        let url = url.to_owned();
+        match e {
+            object_store::Error::NotFound { .. } => RemoteError::Missing {
+                url,
+                denied: false,
+                source: e,
+            },
+            object_store::Error::PermissionDenied { .. } => RemoteError::Missing {
+                url,
+                denied: true,
+                source: e,
+            },
+            object_store::Error::Unauthenticated { .. } => RemoteError::Auth { url, source: e },
+            object_store::Error::UnknownConfigurationKey { .. }
+            | object_store::Error::InvalidPath { .. } => RemoteError::Config { url, source: e },
+            _ => RemoteError::Request { url, source: e },
+        }
+    }
+
+    fn io_kind(&self) -> io::ErrorKind {
+        match self {
+            RemoteError::Missing { .. } => io::ErrorKind::NotFound,
+            RemoteError::Auth { .. } => io::ErrorKind::PermissionDenied,
+            RemoteError::Deadline { .. } => io::ErrorKind::TimedOut,
+            RemoteError::WrongLength { .. } | RemoteError::OutOfBounds { .. } => {
+                io::ErrorKind::UnexpectedEof
+            }
+            RemoteError::BadUrl { .. }
+            | RemoteError::HttpNotAllowed { .. }
+            | RemoteError::Config { .. } => io::ErrorKind::InvalidInput,
+            _ => io::ErrorKind::Other,
+        }
+    }
+}
+
+impl From<RemoteError> for io::Error {
+    fn from(e: RemoteError) -> io::Error {
+        io::Error::new(e.io_kind(), e)
+    }
+}
+
+/// How to reach remote objects. `Default` reads no environment beyond what
+/// object_store's builders read (`AWS_*`, `GOOGLE_*`, `AZURE_*`); see
+/// [`RemoteOptions::from_env`] for brickray's own variables.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RemoteOptions {
+    /// An S3-compatible endpoint (`https://minio.example:9000`), instead of
+    /// AWS's (object_store also reads `AWS_ENDPOINT_URL`). Requests are
+    /// path-style (`endpoint/bucket/key`).
+    pub endpoint: Option<String>,
+    /// The S3 region (else `AWS_REGION` / `AWS_DEFAULT_REGION`, else
+    /// `us-east-1`).
+    pub region: Option<String>,
+    /// Unsigned requests, for public buckets: no credentials are looked for.
+    pub anonymous: bool,
+    /// Allow plain `http://` URLs and endpoints (off: only HTTPS).
+    pub allow_http: bool,
+    /// More object_store configuration keys (`aws_access_key_id`,
+    /// `google_service_account`, `azure_storage_account_name`, ...), for the
+    /// URL's store.
+    pub config: Vec<(String, String)>,
+    /// Longest a single request may take, body included (30 s).
+    pub timeout: Duration,
+    /// Longest a connection may take to open (5 s).
+    pub connect_timeout: Duration,
+    /// Longest a response body may stall between two chunks (10 s).
+    pub read_timeout: Duration,
+    /// Retries of a failed request: timeouts, 5xx, 429, reset connections
+    /// (5).
+    pub max_retries: usize,
+    /// No retry starts later than this after the first attempt (60 s).
+    pub retry_timeout: Duration,
+    /// The first backoff between retries (100 ms); it doubles up to
+    /// [`max_backoff`](Self::max_backoff) (5 s), with jitter.
+    pub init_backoff: Duration,
+    /// The largest backoff between retries.
+    pub max_backoff: Duration,
+    /// Worker threads of the reader's runtime (2).
+    pub worker_threads: usize,
+}
+
+impl Default for RemoteOptions {
+    fn default() -> Self {
+        RemoteOptions {
+            endpoint: None,
+            region: None,
+            anonymous: false,
+            allow_http: false,
+            config: Vec::new(),
+            timeout: Duration::from_secs(30),
+            connect_timeout: Duration::from_secs(5),
+            read_timeout: Duration::from_secs(10),
+            max_retries: 5,
+            retry_timeout: Duration::from_secs(60),
+            init_backoff: Duration::from_millis(100),
+            max_backoff: Duration::from_secs(5),
+            worker_threads: 2,
+        }
+    }
+}
+
+fn env_true(name: &str) -> bool {
+    std::env::var(name)
+        .is_ok_and(|v| matches!(v.to_ascii_lowercase().as_str(), "1" | "true" | "yes"))
+}
+
+impl RemoteOptions {
+    /// The defaults, with `AWS_ALLOW_HTTP=true` (or `BRICKRAY_ALLOW_HTTP=1`)
+    /// allowing plain HTTP, `AWS_SKIP_SIGNATURE=true` (or
+    /// `AWS_NO_SIGN_REQUEST=true`) asking for anonymous requests, and
+    /// `AWS_ENDPOINT_URL` as the endpoint.
+    pub fn from_env() -> RemoteOptions {
+        RemoteOptions {
+            endpoint: std::env::var("AWS_ENDPOINT_URL")
+                .or_else(|_| std::env::var("AWS_ENDPOINT"))
+                .ok()
+                .filter(|e| !e.is_empty()),
+            anonymous: env_true("AWS_SKIP_SIGNATURE") || env_true("AWS_NO_SIGN_REQUEST"),
+            allow_http: env_true("AWS_ALLOW_HTTP") || env_true("BRICKRAY_ALLOW_HTTP"),
+            ..RemoteOptions::default()
+        }
+    }
+
+    /// Longest one read may take, retries included: past it the read fails
+    /// with [`RemoteError::Deadline`] whatever the server does.
+    pub fn deadline(&self) -> Duration {
+        self.retry_timeout + self.timeout + self.max_backoff
+    }
+
+    fn client(&self) -> ClientOptions {
+        ClientOptions::new()
+            .with_allow_http(self.allow_http)
+            .with_timeout(self.timeout)
+            .with_connect_timeout(self.connect_timeout)
+            .with_read_timeout(self.read_timeout)
+    }
+
+    fn retry(&self) -> RetryConfig {
+        RetryConfig {
+            backoff: object_store::BackoffConfig {
+                init_backoff: self.init_backoff,
+                max_backoff: self.max_backoff,
+                base: 2.0,
+            },
+            max_retries: self.max_retries,
+            retry_timeout: self.retry_timeout,
+        }
+    }
+}
+
+/// The store and the object's path for `url`.
+pub fn object_store_for(
+    url: &str,
+    opts: &RemoteOptions,
+) -> Result<(Arc<dyn ObjectStore>, ObjectPath), RemoteError> {
+    let bad = |reason: String| RemoteError::BadUrl {
+        url: url.to_owned(),
+        reason,
+    };
+    let config = |source| RemoteError::Config {
+        url: url.to_owned(),
+        source,
+    };
+    let parsed = url::Url::parse(url).map_err(|e| bad(e.to_string()))?;
+    let plain = |addr: &str| -> Result<(), RemoteError> {
+        if addr.to_ascii_lowercase().starts_with("http://") && !opts.allow_http {
+            return Err(RemoteError::HttpNotAllowed {
+                url: url.to_owned(),
+                endpoint: addr.to_owned(),
+            });
+        }
+        Ok(())
+    };
+    let key = |p: &str| -> Result<ObjectPath, RemoteError> {
+        let p = p.trim_start_matches('/');
+        if p.is_empty() || p.ends_with('/') {
+            return Err(bad(
+                "names no object (the path is empty or ends with /)".into()
+            ));
+        }
+        ObjectPath::from_url_path(p).map_err(|e| bad(e.to_string()))
+    };
+    let host = || {
+        parsed
+            .host_str()
+            .filter(|h| !h.is_empty())
+            .map(str::to_owned)
+            .ok_or_else(|| bad("no bucket (the URL's host)".into()))
+    };
+    match parsed.scheme() {
+        "s3" | "s3a" => {
+            use object_store::aws::{AmazonS3Builder, AmazonS3ConfigKey};
+            let mut b = AmazonS3Builder::from_env()
+                .with_bucket_name(host()?)
+                .with_client_options(opts.client())
+                .with_retry(opts.retry())
+                .with_skip_signature(opts.anonymous);
+            let endpoint = opts
+                .endpoint
+                .clone()
+                .or_else(|| std::env::var("AWS_ENDPOINT_URL").ok())
+                .or_else(|| std::env::var("AWS_ENDPOINT").ok())
+                .filter(|e| !e.is_empty());
+            if let Some(e) = &endpoint {
+                plain(e)?;
+                b = b.with_endpoint(e).with_virtual_hosted_style_request(false);
+            }
+            if let Some(r) = &opts.region {
+                b = b.with_region(r);
+            }
+            for (k, v) in &opts.config {
+                let key: AmazonS3ConfigKey = k.parse().map_err(config)?;
+                b = b.with_config(key, v);
+            }
+            let path = key(parsed.path())?;
+            Ok((Arc::new(b.build().map_err(config)?), path))
+        }
+        "gs" => {
+            use object_store::gcp::{GoogleCloudStorageBuilder, GoogleConfigKey};
+            let mut b = GoogleCloudStorageBuilder::from_env()
+                .with_bucket_name(host()?)
+                .with_client_options(opts.client())
+                .with_retry(opts.retry())
+                .with_skip_signature(opts.anonymous);
+            for (k, v) in &opts.config {
+                let key: GoogleConfigKey = k.parse().map_err(config)?;
+                b = b.with_config(key, v);
+            }
+            let path = key(parsed.path())?;
+            Ok((Arc::new(b.build().map_err(config)?), path))
+        }
+        "az" | "azure" => {
+            use object_store::azure::{AzureConfigKey, MicrosoftAzureBuilder};
+            let mut b = MicrosoftAzureBuilder::from_env()
+                .with_container_name(host()?)
+                .with_client_options(opts.client())
+                .with_retry(opts.retry())
+                .with_skip_signature(opts.anonymous);
+            if let Some(e) = &opts.endpoint {
+                plain(e)?;
+                b = b.with_endpoint(e.clone());
+            }
+            for (k, v) in &opts.config {
+                let key: AzureConfigKey = k.parse().map_err(config)?;
+                b = b.with_config(key, v);
+            }
+            let path = key(parsed.path())?;
+            Ok((Arc::new(b.build().map_err(config)?), path))
+        }
+        "http" | "https" => {
+            plain(url)?;
+            if parsed.query().is_some() || parsed.fragment().is_some() {
+                return Err(bad("a query or fragment is not supported".into()));
+            }
+            // The store is the URL's directory; the object its last segment.
+            let full = parsed.as_str();
+            let cut = full.rfind('/').map_or(full.len(), |i| i + 1);
+            let (base, name) = full.split_at(cut);
+            if parsed.path() == "/" || name.is_empty() {
+                return Err(bad(
+                    "names no object (the path is empty or ends with /)".into()
+                ));
+            }
+            let store = object_store::http::HttpBuilder::new()
+                .with_url(base)
+                .with_client_options(opts.client())
+                .with_retry(opts.retry())
+                .build()
+                .map_err(config)?;
+            Ok((Arc::new(store), key(name)?))
+        }
+        other => Err(bad(format!(
+            "unsupported scheme `{other}` (s3://, gs://, az://, http://, https://)"
+        ))),
+    }
+}
+
+/// The runtime a reader owns: shut down in the background when the reader
+/// goes (a drop never blocks, even inside another runtime).
+struct Runtime(Option<tokio::runtime::Runtime>);
+
+impl Drop for Runtime {
+    fn drop(&mut self) {
+        if let Some(rt) = self.0.take() {
+            rt.shutdown_background();
+        }
+    }
+}
+
+/// A [`RangeReader`] over one remote object (see the crate's
+/// documentation). Opening asks for the object's size (one `HEAD`); reads
+/// are ranged `GET`s, several ranges at once coalesced by object_store
+/// (neighbours less than 1 MiB apart become one request). Every returned
+/// range is checked for its length.
+pub struct RemoteRangeReader {
+    url: String,
+    store: Arc<dyn ObjectStore>,
+    path: ObjectPath,
+    len: u64,
+    etag: Option<String>,
+    deadline: Duration,
+    runtime: Runtime,
+}
+
+impl fmt::Debug for RemoteRangeReader {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("RemoteRangeReader")
+            .field("url", &self.url)
+            .field("len", &self.len)
+            .field("etag", &self.etag)
+            .finish()
+    }
+}
+
+impl RemoteRangeReader {
+    /// Opens `url` (configured by `opts`): starts the reader's runtime and
+    /// asks for the object's size. A missing object is
+    /// [`RemoteError::Missing`].
+    pub fn open(url: &str, opts: &RemoteOptions) -> Result<RemoteRangeReader, RemoteError> {
+        let (store, path) = object_store_for(url, opts)?;
+        let rt = tokio::runtime::Builder::new_multi_thread()
+            .worker_threads(opts.worker_threads.max(1))
+            .thread_name("brickray-remote")
+            .enable_all()
+            .build()
+            .map_err(|e| RemoteError::Runtime {
+                url: url.to_owned(),
+                reason: e.to_string(),
+            })?;
+        let mut reader = RemoteRangeReader {
+            url: url.to_owned(),
+            store,
+            path,
+            len: 0,
+            etag: None,
+            deadline: opts.deadline(),
+            runtime: Runtime(Some(rt)),
+        };
+        let (store, path) = (reader.store.clone(), reader.path.clone());
+        let meta = reader.run(async move { store.head(&path).await })?;
+        reader.len = meta.size;
+        reader.etag = meta.e_tag;
+        Ok(reader)
+    }
+
+    /// The URL.
+    pub fn url(&self) -> &str {
+        &self.url
+    }
+
+    /// The object's size in bytes (asked for at open).
+    pub fn object_len(&self) -> u64 {
+        self.len
+    }
+
+    /// The object's ETag at open, if the server sent one.
+    pub fn etag(&self) -> Option<&str> {
+        self.etag.as_deref()
+    }
+
+    /// Runs `f` on the reader's runtime and waits for it on this thread (a
+    /// channel, never a runtime thread), for at most the deadline.
+    fn run<T: Send + 'static>(
+        &self,
+        f: impl Future<Output = object_store::Result<T>> + Send + 'static,
+    ) -> Result<T, RemoteError> {
+        let gone = |reason: &str| RemoteError::Runtime {
+            url: self.url.clone(),
+            reason: reason.to_owned(),
+        };
+        let rt = self.runtime.0.as_ref().ok_or_else(|| gone("shut down"))?;
+        let (tx, rx) = std::sync::mpsc::sync_channel(1);
+        let deadline = self.deadline;
+        let task = rt.spawn(async move {
+            let r = tokio::time::timeout(deadline, f).await;
+            // The caller may have stopped waiting; nothing to do then.
+            let _ = tx.send(r);
+        });
+        match rx.recv() {
+            Ok(Ok(r)) => r.map_err(|e| RemoteError::of(&self.url, e)),
+            Ok(Err(_elapsed)) => Err(RemoteError::Deadline {
+                url: self.url.clone(),
+                deadline,
+            }),
+            Err(_) => {
+                task.abort();
+                Err(gone("the read's task was dropped"))
+            }
+        }
+    }
+
+    fn check_bounds(&self, offset: u64, len: u64) -> Result<Range<u64>, RemoteError> {
+        match offset.checked_add(len) {
+            Some(end) if end <= self.len => Ok(offset..end),
+            _ => Err(RemoteError::OutOfBounds {
+                url: self.url.clone(),
+                offset,
+                len,
+                object_len: self.len,
+            }),
+        }
+    }
+
+    fn check_len(&self, offset: u64, expected: usize, actual: usize) -> Result<(), RemoteError> {
+        if expected != actual {
+            return Err(RemoteError::WrongLength {
+                url: self.url.clone(),
+                offset,
+                expected: expected as u64,
+                actual: actual as u64,
+            });
+        }
+        Ok(())
+    }
+
+    /// Reads `range` of the object (typed errors; the [`RangeReader`]
+    /// methods wrap them in I/O errors).
+    pub fn read_range(&self, buf: &mut [u8], offset: u64) -> Result<(), RemoteError> {
+        if buf.is_empty() {
+            return Ok(());
+        }
+        let range = self.check_bounds(offset, buf.len() as u64)?;
+        let (store, path) = (self.store.clone(), self.path.clone());
+        let bytes = self.run(async move { store.get_range(&path, range).await })?;
+        self.check_len(offset, buf.len(), bytes.len())?;
+        buf.copy_from_slice(&bytes);
+        Ok(())
+    }
+
+    /// Reads several ranges: object_store coalesces neighbours and fetches
+    /// the rest concurrently.
+    pub fn read_many(&self, ranges: &mut [RangeRead<'_>]) -> Result<(), RemoteError> {
+        let mut wanted = Vec::with_capacity(ranges.len());
+        for r in ranges.iter() {
+            if !r.buf.is_empty() {
+                wanted.push(self.check_bounds(r.offset, r.buf.len() as u64)?);
+            }
+        }
+        if wanted.is_empty() {
+            return Ok(());
+        }
+        let (store, path) = (self.store.clone(), self.path.clone());
+        let got = self.run(async move { store.get_ranges(&path, &wanted).await })?;
+        let mut got = got.into_iter();
+        for r in ranges.iter_mut().filter(|r| !r.buf.is_empty()) {
+            let bytes = got.next().unwrap_or_default();
+            self.check_len(r.offset, r.buf.len(), bytes.len())?;
+            r.buf.copy_from_slice(&bytes);
+        }
+        Ok(())
+    }
+}
+
+impl RangeReader for RemoteRangeReader {
+    fn len(&self) -> io::Result<u64> {
+        Ok(self.len)
+    }
+
+    fn read_exact_at(&self, buf: &mut [u8], offset: u64) -> io::Result<()> {
+        Ok(self.read_range(buf, offset)?)
+    }
+
+    fn read_ranges(&self, ranges: &mut [RangeRead<'_>]) -> io::Result<()> {
+        Ok(self.read_many(ranges)?)
+    }
+}
+
+/// Whether `s` names a remote object (a URL with a scheme this crate
+/// reads), rather than a local path.
+pub fn is_url(s: &str) -> bool {
+    let lower = s.to_ascii_lowercase();
+    [
+        "s3://", "s3a://", "gs://", "az://", "azure://", "http://", "https://",
+    ]
+    .iter()
+    .any(|p| lower.starts_with(p))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn err(url: &str, opts: &RemoteOptions) -> RemoteError {
+        object_store_for(url, opts).expect_err("an error")
+    }
+
+    #[test]
+    fn urls_are_checked_before_any_request() {
+        let o = RemoteOptions::default();
+        assert!(matches!(
+            err("ftp://host/x", &o),
+            RemoteError::BadUrl { .. }
+        ));
+        assert!(matches!(err("not a url", &o), RemoteError::BadUrl { .. }));
+        assert!(matches!(
+            err("s3://bucket/", &o),
+            RemoteError::BadUrl { .. }
+        ));
+        assert!(matches!(
+            err("https://host/dir/", &o),
+            RemoteError::BadUrl { .. }
+        ));
+        assert!(matches!(
+            err("https://host/a?b=c", &o),
+            RemoteError::BadUrl { .. }
+        ));
+        match err("http://127.0.0.1:1/a.brs", &o) {
+            RemoteError::HttpNotAllowed { url, .. } => assert_eq!(url, "http://127.0.0.1:1/a.brs"),
+            e => panic!("{e}"),
+        }
+        let s3 = RemoteOptions {
+            endpoint: Some("http://127.0.0.1:1".into()),
+            ..RemoteOptions::default()
+        };
+        assert!(matches!(
+            err("s3://b/k.brs", &s3),
+            RemoteError::HttpNotAllowed { .. }
+        ));
+        let unknown = RemoteOptions {
+            config: vec![("no_such_key".into(), "1".into())],
+            anonymous: true,
+            ..RemoteOptions::default()
+        };
+        assert!(matches!(
+            err("s3://b/k.brs", &unknown),
+            RemoteError::Config { .. }
+        ));
+        // Allowed: the store builds, and the key is the URL's path.
+        let ok = RemoteOptions {
+            allow_http: true,
+            anonymous: true,
+            region: Some("us-east-1".into()),
+            ..s3
+        };
+        let (_, p) = object_store_for("s3://b/dir/k%20x.brs", &ok).unwrap();
+        assert_eq!(p.as_ref(), "dir/k x.brs");
+        let (_, p) = object_store_for("http://127.0.0.1:1/d/e/f.brs", &ok).unwrap();
+        assert_eq!(p.as_ref(), "f.brs");
+    }
+
+    #[test]
+    fn an_unreachable_server_is_a_typed_error_within_the_deadline() {
+        // A port nothing listens on: connection refused, retried, reported.
+        let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+        let port = listener.local_addr().unwrap().port();
+        drop(listener);
+        let o = RemoteOptions {
+            allow_http: true,
+            max_retries: 2,
+            init_backoff: Duration::from_millis(10),
+            max_backoff: Duration::from_millis(20),
+            retry_timeout: Duration::from_secs(5),
+            ..RemoteOptions::default()
+        };
+        let url = format!("http://127.0.0.1:{port}/x.brs");
+        let t = std::time::Instant::now();
+        let e = RemoteRangeReader::open(&url, &o).unwrap_err();
+        assert!(t.elapsed() < o.deadline(), "{:?}", t.elapsed());
+        assert_eq!(e.url(), url);
+        assert!(matches!(e, RemoteError::Request { .. }), "{e}");
+        let io: io::Error = e.into();
+        assert!(RemoteError::from_io(&io).is_some());
+    }
+
+    #[test]
+    fn is_url_tells_urls_from_paths() {
+        assert!(is_url("s3://b/k"));
+        assert!(is_url("HTTPS://h/k"));
+        assert!(is_url("gs://b/k"));
+        assert!(!is_url("/data/x.brs"));
+        assert!(!is_url("x.brs"));
+        assert!(!is_url("C:\\x.brs"));
+    }
+}
