@@ -21,6 +21,13 @@
 //! | DICOM series | `dicom` | `DicomReader` |
 //! | OME-Zarr 0.4 / 0.5 | `zarr` | `ZarrReader`, and `ZarrBrickSource` (streamed) |
 
+// Helpers that only the optional formats use (decoders, slab reads) are dead
+// code in a build without any of them.
+#![cfg_attr(
+    not(any(feature = "nifti", feature = "tiff", feature = "dicom", feature = "zarr")),
+    allow(dead_code)
+)]
+
 mod nrrd;
 mod raw;
 mod registry;

@@ -179,11 +179,7 @@ impl MandelbulbSource {
     }
 
     fn check(&self, key: NodeKey) -> Result<bool, BrickError> {
-        let n = 1u64 << key.level.min(63);
-        if key.level >= self.layout.levels || [key.x, key.y, key.z].iter().any(|&p| p as u64 >= n) {
-            return Err(BrickError::OutOfRange { key });
-        }
-        Ok(self.layout.in_volume(key))
+        crate::procedural::check_key(&self.layout, key)
     }
 }
 
@@ -235,25 +231,9 @@ impl BrickSource for MandelbulbSource {
     }
 
     fn read_brick(&self, key: NodeKey, out: &mut [u8]) -> Result<(), BrickError> {
-        let expected = self.layout.brick_bytes();
-        if out.len() != expected {
-            return Err(BrickError::BufferSize {
-                expected,
-                actual: out.len(),
-            });
-        }
-        if !self.check(key)? {
-            out.fill(0);
-            return Ok(());
-        }
-        let fp = self.layout.brick_footprint(key);
-        let vals = self.region_unchecked(key.level, fp.0, fp.1);
-        let mut o = 0;
-        self.layout.gather_brick(key, fp, |i| {
-            out[o] = vals[i];
-            o += 1;
-        });
-        Ok(())
+        crate::procedural::read_u8_brick(&self.layout, key, out, |l, lo, hi| {
+            self.region_unchecked(l, lo, hi)
+        })
     }
 }
 

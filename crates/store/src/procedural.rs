@@ -296,12 +296,48 @@ impl ProceduralSource {
     }
 
     fn check(&self, key: NodeKey) -> Result<bool, BrickError> {
-        let n = 1u64 << key.level.min(63);
-        if key.level >= self.layout.levels || [key.x, key.y, key.z].iter().any(|&p| p as u64 >= n) {
-            return Err(BrickError::OutOfRange { key });
-        }
-        Ok(self.layout.in_volume(key))
+        check_key(&self.layout, key)
     }
+}
+
+/// A key of a procedural volume: an error outside the octree, `false` for a
+/// node outside the volume.
+pub(crate) fn check_key(layout: &OctreeLayout, key: NodeKey) -> Result<bool, BrickError> {
+    let n = 1u64 << key.level.min(63);
+    if key.level >= layout.levels || [key.x, key.y, key.z].iter().any(|&p| p as u64 >= n) {
+        return Err(BrickError::OutOfRange { key });
+    }
+    Ok(layout.in_volume(key))
+}
+
+/// Fills `out` with `key`'s stored u8 brick, gathered from `region(level, lo,
+/// hi)` (the values of its footprint, x fastest), or with zeros for a node
+/// outside the volume.
+pub(crate) fn read_u8_brick(
+    layout: &OctreeLayout,
+    key: NodeKey,
+    out: &mut [u8],
+    region: impl FnOnce(u8, [u64; 3], [u64; 3]) -> Vec<u8>,
+) -> Result<(), BrickError> {
+    let expected = layout.brick_bytes();
+    if out.len() != expected {
+        return Err(BrickError::BufferSize {
+            expected,
+            actual: out.len(),
+        });
+    }
+    if !check_key(layout, key)? {
+        out.fill(0);
+        return Ok(());
+    }
+    let fp = layout.brick_footprint(key);
+    let vals = region(key.level, fp.0, fp.1);
+    let mut o = 0;
+    layout.gather_brick(key, fp, |i| {
+        out[o] = vals[i];
+        o += 1;
+    });
+    Ok(())
 }
 
 impl BrickSource for ProceduralSource {
@@ -353,24 +389,8 @@ impl BrickSource for ProceduralSource {
     }
 
     fn read_brick(&self, key: NodeKey, out: &mut [u8]) -> Result<(), BrickError> {
-        let expected = self.layout.brick_bytes();
-        if out.len() != expected {
-            return Err(BrickError::BufferSize {
-                expected,
-                actual: out.len(),
-            });
-        }
-        if !self.check(key)? {
-            out.fill(0);
-            return Ok(());
-        }
-        let fp = self.layout.brick_footprint(key);
-        let vals = self.region_u8(key.level, fp.0, fp.1);
-        let mut o = 0;
-        self.layout.gather_brick(key, fp, |i| {
-            out[o] = vals[i];
-            o += 1;
-        });
-        Ok(())
+        read_u8_brick(&self.layout, key, out, |l, lo, hi| {
+            self.region_u8(l, lo, hi)
+        })
     }
 }

@@ -211,32 +211,24 @@ pub(crate) fn open(
     progress: &Progress,
 ) -> Result<Loaded, OpenError> {
     match input {
-        Input::Procedural(n) => {
+        Input::Procedural(n) | Input::Bulb(n) => {
             progress.set_stage("generating the histogram");
-            let source = Arc::new(brickray::store::ProceduralSource::fractal_noise(
-                [*n; 3], 32, 2,
-            )?);
+            let (source, what): (Arc<dyn BrickSource>, _) = match input {
+                Input::Bulb(_) => (
+                    Arc::new(brickray::store::MandelbulbSource::new(*n, 32, 2)?),
+                    "Mandelbulb",
+                ),
+                _ => (
+                    Arc::new(brickray::store::ProceduralSource::fractal_noise(
+                        [*n; 3], 32, 2,
+                    )?),
+                    "fractal noise",
+                ),
+            };
             let desc = source.layout().volume.clone();
             let histogram = source_histogram(&*source)?;
             let note = format!(
-                "procedural fractal noise {n}^3 u8 ({:.1} GiB virtual), computed on demand",
-                (*n as f64).powi(3) / (1u64 << 30) as f64
-            );
-            Ok(Loaded {
-                input: input.clone(),
-                desc,
-                volume: Opened::Streamed(source),
-                histogram,
-                note,
-            })
-        }
-        Input::Bulb(n) => {
-            progress.set_stage("generating the histogram");
-            let source = Arc::new(brickray::store::MandelbulbSource::new(*n, 32, 2)?);
-            let desc = source.layout().volume.clone();
-            let histogram = source_histogram(&*source)?;
-            let note = format!(
-                "procedural Mandelbulb {n}^3 u8 ({:.1} GiB virtual), computed on demand",
+                "procedural {what} {n}^3 u8 ({:.1} GiB virtual), computed on demand",
                 (*n as f64).powi(3) / (1u64 << 30) as f64
             );
             Ok(Loaded {

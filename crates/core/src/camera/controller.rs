@@ -369,10 +369,15 @@ impl CameraController {
         } else {
             far
         };
+        // The up vector from the angles, orthogonal to the view (the same
+        // orientation as +y): with the eye far from the origin and close to
+        // the target, `target - eye` in f32 can lose the view's horizontal
+        // part near the poles and come out parallel to +y.
+        let (_, up) = self.basis();
         Camera {
             eye,
             target: self.target,
-            up: Vec3::Y,
+            up,
             projection,
             near,
             far,
