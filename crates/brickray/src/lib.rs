@@ -35,10 +35,10 @@ pub use brickray_store as store;
 /// The GPU-free out-of-core planner and its vocabulary (`brickray-cache`).
 pub mod cache {
     pub use brickray_cache::{
-        OutOfCoreConfig, Classification, ConfigError, CutLeaf, EmptyReason, FadeDuration, FrameStats,
-        GpuFormat, LeafKind, QueryBatch, QueryResult, QuerySchedule, Residency, ResidencyCounts,
-        RetryPolicy, StreamError, StreamFrame, StreamPlan, StreamStats, Streamer, UsageFrame,
-        ViewFeedback,
+        Classification, ConfigError, CutLeaf, EmptyReason, FadeDuration, FrameStats, GpuFormat,
+        LeafKind, OutOfCoreConfig, QueryBatch, QueryResult, QuerySchedule, Residency,
+        ResidencyCounts, RetryPolicy, StreamError, StreamFrame, StreamPlan, StreamStats, Streamer,
+        UsageFrame, ViewFeedback,
     };
 }
 

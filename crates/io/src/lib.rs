@@ -24,7 +24,12 @@
 // Helpers that only the optional formats use (decoders, slab reads) are dead
 // code in a build without any of them.
 #![cfg_attr(
-    not(any(feature = "nifti", feature = "tiff", feature = "dicom", feature = "zarr")),
+    not(any(
+        feature = "nifti",
+        feature = "tiff",
+        feature = "dicom",
+        feature = "zarr"
+    )),
     allow(dead_code)
 )]
 

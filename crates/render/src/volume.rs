@@ -13,8 +13,8 @@ use crate::error::{PrepareError, RenderError};
 use crate::gpu::{self, GrowBuffer, Uniform};
 use crate::planner::Planner;
 use brickray_cache::{
-    OutOfCoreConfig, FadeSlot, GpuFormat, StreamError, StreamFrame, StreamPlan, StreamStats, Streamer,
-    Upload,
+    FadeSlot, GpuFormat, OutOfCoreConfig, StreamError, StreamFrame, StreamPlan, StreamStats,
+    Streamer, Upload,
 };
 use brickray_core::{BrickSource, OctreeLayout};
 use brickray_index::Splits;

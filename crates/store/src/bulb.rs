@@ -62,11 +62,7 @@ pub(crate) fn estimate(c: [f64; 3]) -> (f64, f64) {
         let zr = r.powf(POWER);
         let (st, ct) = (theta * POWER).sin_cos();
         let (sp, cp) = (phi * POWER).sin_cos();
-        z = [
-            zr * st * cp + c[0],
-            zr * st * sp + c[1],
-            zr * ct + c[2],
-        ];
+        z = [zr * st * cp + c[0], zr * st * sp + c[1], zr * ct + c[2]];
     }
     let d = if r > BAILOUT {
         0.5 * r.ln() * r / dr
@@ -296,7 +292,10 @@ mod tests {
             v.iter().filter(|&&x| x >= 48).count() as f64 / v.len() as f64
         };
         let (a, b) = (solid(finest), solid(finest - 1));
-        assert!(a > 0.05 && (a - b).abs() < 0.3 * a, "solid share {a} vs {b}");
+        assert!(
+            a > 0.05 && (a - b).abs() < 0.3 * a,
+            "solid share {a} vs {b}"
+        );
     }
 
     #[test]

@@ -97,7 +97,10 @@ pub fn convert(
 
 /// `path` if it ends in `.json`, else `path` with `.json` appended.
 fn sidecar_path(path: &Path) -> PathBuf {
-    if path.extension().is_some_and(|e| e.eq_ignore_ascii_case("json")) {
+    if path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("json"))
+    {
         return path.to_owned();
     }
     let mut s = path.as_os_str().to_owned();

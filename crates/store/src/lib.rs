@@ -34,12 +34,12 @@ mod procedural;
 mod reader;
 mod sample;
 
-pub use bulb::MandelbulbSource;
 pub use brickray_core::{MemRangeReader, RangeRead, RangeReader};
 /// Range readers over object storage and HTTP(S) (feature `remote`).
 #[cfg(feature = "remote")]
 pub use brickray_remote as remote;
 pub use build::{BuildOptions, BuildProgress, BuildReport, build, build_file, check_output};
+pub use bulb::MandelbulbSource;
 pub use convert::{ConvertReport, convert};
 pub use error::{Mismatch, StoreError};
 pub use errsec::ERROR_ENTRY_LEN;

@@ -7,14 +7,14 @@ mod scripting;
 
 use scripting::{PendingShot, ScriptRunner};
 
-use brickray::core::camera::{AxisView, CameraController, CameraInput, DragButton, Navigation};
 use crate::script::{Action, ModeName, PredictionChoice, WindowChoice};
 use crate::source::{Input, Loaded, OpenOptions, Opened, Opening};
 use crate::stats::Stats;
 use crate::tf::Histogram;
-use brickray::core::tf::{TABLE_ENTRIES, TfModel, TfPreset as Preset};
 use crate::tf_widget::TfEditor;
 use crate::view::{FourViewCallback, ViewResources, VolumeCallback, viewport_px};
+use brickray::core::camera::{AxisView, CameraController, CameraInput, DragButton, Navigation};
+use brickray::core::tf::{TABLE_ENTRIES, TfModel, TfPreset as Preset};
 use brickray::{OutOfCoreConfig, RenderMode, RenderSettings, Viewport, VolumeDesc, VolumeFrame};
 use brickray::{SliceAxis, SliceView};
 use eframe::egui::{self, Color32};

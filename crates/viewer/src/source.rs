@@ -610,6 +610,10 @@ mod tests {
         assert_eq!(b.desc.dims, [128; 3]);
         // Air and a solid: the first bin (air) and the solid's bins are filled.
         assert!(b.histogram.bins[0] > 0);
-        assert!(b.histogram.bins[b.histogram.bins.len() / 2..].iter().any(|&c| c > 0));
+        assert!(
+            b.histogram.bins[b.histogram.bins.len() / 2..]
+                .iter()
+                .any(|&c| c > 0)
+        );
     }
 }

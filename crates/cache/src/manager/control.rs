@@ -13,7 +13,7 @@ pub struct Reconfigured {
     /// The loader (a thread-count change).
     pub loader: bool,
 }
-use crate::config::{OutOfCoreConfig, ConfigError, GpuFormat, MIN_RESIDENT_BRICKS};
+use crate::config::{ConfigError, GpuFormat, MIN_RESIDENT_BRICKS, OutOfCoreConfig};
 use crate::cpu_cache::CpuCache;
 use crate::failures::{FetchKind, StreamError};
 use crate::loader::worker::{children_in_volume, fetch_brick, fetch_meta};

@@ -25,7 +25,7 @@ pub use frame::{FrameInput, UNTIMED_FRAME_RATE};
 pub use lod::FadeSlot;
 pub use stats::{FramePlan, FrameStats, Residency, ResidencyCounts, Upload};
 
-use crate::config::{OutOfCoreConfig, ConfigError, GpuFormat};
+use crate::config::{ConfigError, GpuFormat, OutOfCoreConfig};
 use crate::cpu_cache::CpuCache;
 use crate::fade::Fader;
 use crate::failures::{Clock, Failures, FetchKind, SystemClock};

@@ -22,7 +22,7 @@ mod tests;
 pub use feedback::{QueryResult, UsageFrame, ViewFeedback};
 pub use occlusion::{MAX_QUERIES_PER_FRAME, MIN_TILE_PX, QueryBatch, QuerySchedule};
 
-use crate::config::{OutOfCoreConfig, ConfigError, GpuFormat};
+use crate::config::{ConfigError, GpuFormat, OutOfCoreConfig};
 use crate::failures::StreamError;
 use crate::manager::{
     BrickManager, CacheError, FadeSlot, FrameInput, FrameStats, Reconfigured, Upload,

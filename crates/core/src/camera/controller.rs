@@ -500,7 +500,11 @@ mod tests {
         a.apply(CameraInput::Axis(AxisView::NegZ));
         b.axis_view(AxisView::NegZ);
         assert_eq!(a, b);
-        assert_ne!(a, CameraController::new(&frame()), "the inputs moved the camera");
+        assert_ne!(
+            a,
+            CameraController::new(&frame()),
+            "the inputs moved the camera"
+        );
         a.apply(CameraInput::Reset);
         let mut home = CameraController::new(&frame());
         home.axis_view(AxisView::NegZ);

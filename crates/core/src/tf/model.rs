@@ -254,14 +254,7 @@ impl TfModel {
 
     /// The opacity point nearest to `(x, a)` within `radius` pixels, where one
     /// unit of `x` is `sx` pixels and one unit of opacity `sy` pixels.
-    pub fn hit_opacity(
-        &self,
-        x: f32,
-        a: f32,
-        sx: f32,
-        sy: f32,
-        radius: f32,
-    ) -> Option<usize> {
+    pub fn hit_opacity(&self, x: f32, a: f32, sx: f32, sy: f32, radius: f32) -> Option<usize> {
         nearest(
             self.opacity
                 .iter()
