@@ -11,17 +11,16 @@
 //! * MIP through a window and colour map against the reference;
 //! * bad planes and windows are typed errors of `prepare`.
 
-use brickray::core::{BrickSource, DType, NodeInfo, NodeKey, OctreeLayout, VolumeData, VolumeDesc};
+use brickray::core::{DType, VolumeData, VolumeDesc};
 use brickray::{
     Camera, ColorMap, FrameDesc, Intensity, OutOfCoreConfig, PrepareError, RenderMode,
     RenderSettings, SlabMode, SliceAxis, SliceView, StreamedVolume, TransferFunction, Volume,
     VolumeFrame, VolumeRenderer, Window,
 };
-use brickray_harness::{Offscreen, shared_gpu as gpu, target_desc as targets};
+use brickray_harness::{CountingSource, Offscreen, shared_gpu as gpu, target_desc as targets};
 use brickray_reference::{ReferenceOptions, assert_close, render_reference, render_slice};
 use glam::Vec3;
-use std::collections::HashMap;
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
 
 const N: u32 = 64;
 /// Two pixels per voxel across the fitted slices: the finest level.
@@ -211,36 +210,8 @@ fn anisotropic_slices_match_the_reference() {
 }
 
 /// A store of `vol` in a temporary directory, read through a counting source.
-struct Counting {
-    inner: Arc<dyn BrickSource>,
-    reads: Mutex<HashMap<NodeKey, u32>>,
-}
-
-impl BrickSource for Counting {
-    fn layout(&self) -> &OctreeLayout {
-        self.inner.layout()
-    }
-    fn node(&self, key: NodeKey) -> Result<NodeInfo, brickray::core::BrickError> {
-        self.inner.node(key)
-    }
-    fn read_brick(&self, key: NodeKey, out: &mut [u8]) -> Result<(), brickray::core::BrickError> {
-        *self.reads.lock().unwrap().entry(key).or_insert(0) += 1;
-        self.inner.read_brick(key, out)
-    }
-}
-
-fn store(vol: Volume, dir: &tempfile::TempDir) -> Arc<Counting> {
-    let path = dir.path().join("field.brs");
-    let mut reader = brickray::io::MemoryReader::new(vol, "memory");
-    let opt = brickray::store::BuildOptions {
-        brick: 16,
-        ..Default::default()
-    };
-    brickray::store::build(&mut reader, &path, &opt).unwrap();
-    Arc::new(Counting {
-        inner: Arc::new(brickray::store::open(&path).unwrap()),
-        reads: Mutex::new(HashMap::new()),
-    })
+fn store(vol: Volume, dir: &tempfile::TempDir) -> Arc<CountingSource> {
+    CountingSource::store(vol, dir.path(), "field", 16)
 }
 
 fn config() -> OutOfCoreConfig {
@@ -304,7 +275,7 @@ fn a_slice_and_a_3d_view_share_one_pool() {
         )
     };
     converge(&mut [&mut view_3d], std::slice::from_ref(&d3));
-    let before = src.reads.lock().unwrap().clone();
+    let before = src.reads();
     let resident = view_3d
         .stats()
         .out_of_core
@@ -331,7 +302,7 @@ fn a_slice_and_a_3d_view_share_one_pool() {
     );
     assert_eq!(a.cache.frame, b.cache.frame, "planned once per frame");
     assert_eq!(a.cache.working_set_bricks, b.cache.working_set_bricks);
-    let after = src.reads.lock().unwrap().clone();
+    let after = src.reads();
     let twice: Vec<_> = after.iter().filter(|(_, n)| **n > 1).collect();
     assert!(twice.is_empty(), "bricks read more than once: {twice:?}");
     let added: Vec<_> = after.keys().filter(|k| !before.contains_key(k)).collect();

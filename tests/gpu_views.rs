@@ -10,51 +10,21 @@
 //! * views prepared together that disagree on the transfer function are a
 //!   typed error.
 
-use brickray::core::{NodeInfo, NodeKey, OctreeLayout};
 use brickray::{
-    BrickSource, Camera, FrameDesc, OutOfCoreConfig, PrepareError, Projection, RenderSettings,
-    StreamedVolume, TransferFunction, VolumeFrame, VolumeRenderer,
+    Camera, FrameDesc, OutOfCoreConfig, PrepareError, Projection, RenderSettings, StreamedVolume,
+    TransferFunction, VolumeFrame, VolumeRenderer,
 };
-use brickray_harness::{Offscreen, shared_gpu as gpu, target_desc as targets};
+use brickray_harness::{CountingSource, Offscreen, shared_gpu as gpu, target_desc as targets};
 use brickray_reference::psnr;
 use glam::Vec3;
-use std::collections::HashMap;
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
 
 const SIZE: u32 = 96;
 
-/// A source that counts the reads of each brick.
-struct Counting {
-    inner: Arc<dyn BrickSource>,
-    reads: Mutex<HashMap<NodeKey, u32>>,
-}
-
-impl BrickSource for Counting {
-    fn layout(&self) -> &OctreeLayout {
-        self.inner.layout()
-    }
-    fn node(&self, key: NodeKey) -> Result<NodeInfo, brickray::core::BrickError> {
-        self.inner.node(key)
-    }
-    fn read_brick(&self, key: NodeKey, out: &mut [u8]) -> Result<(), brickray::core::BrickError> {
-        *self.reads.lock().unwrap().entry(key).or_insert(0) += 1;
-        self.inner.read_brick(key, out)
-    }
-}
-
-fn counting(dir: &tempfile::TempDir) -> Arc<Counting> {
+/// The noise volume as a store whose brick reads are counted.
+fn counting(dir: &tempfile::TempDir) -> Arc<CountingSource> {
     let vol = brickray_harness::scenes::noise_volume(64);
-    let path = dir.path().join("noise.brs");
-    let mut reader = brickray::io::MemoryReader::new(vol, "memory");
-    let opt = brickray::store::BuildOptions {
-        brick: 8,
-        ..Default::default()
-    };
-    brickray::store::build(&mut reader, &path, &opt).unwrap();
-    Arc::new(Counting {
-        inner: Arc::new(brickray::store::open(&path).unwrap()),
-        reads: Mutex::new(HashMap::new()),
-    })
+    CountingSource::store(vol, dir.path(), "noise", 8)
 }
 
 fn config() -> OutOfCoreConfig {
@@ -147,7 +117,7 @@ fn check_pair(name: &str, cams: [Camera; 2]) {
         "{name}: planned once per frame"
     );
     assert_eq!(sa.cache.working_set_bricks, sb.cache.working_set_bricks);
-    let reads = src.reads.lock().unwrap().clone();
+    let reads = src.reads();
     let twice: Vec<_> = reads.iter().filter(|(_, n)| **n > 1).collect();
     assert!(
         twice.is_empty(),

@@ -11,6 +11,8 @@
 //! * [`shared_data_dir`] finds `../shared/data` and decides whether a test that
 //!   needs it may skip.
 
+mod counting;
+pub use counting::CountingSource;
 pub mod predict;
 pub mod scenes;
 pub mod soak;

@@ -265,6 +265,19 @@ impl ViewResources {
         self.error.lock().ok().and_then(|mut e| e.take())
     }
 
+    /// Records a `prepare`'s outcome: a frame drawn, or its error (no
+    /// volume yet is not one).
+    fn after_prepare<T>(&mut self, result: Result<T, brickray::PrepareError>) {
+        match result {
+            Ok(_) => {
+                self.prepared = true;
+                self.frames += 1;
+            }
+            Err(brickray::PrepareError::NoVolume) => {}
+            Err(e) => self.set_error(format!("prepare: {e}")),
+        }
+    }
+
     fn set_error(&self, e: String) {
         if let Ok(mut slot) = self.error.lock() {
             *slot = Some(e);
@@ -387,14 +400,8 @@ impl egui_wgpu::CallbackTrait for FourViewCallback {
             (b, &descs[2]),
             (c, &descs[3]),
         ];
-        match VolumeRenderer::prepare_views(device, queue, encoder, &mut views) {
-            Ok(_) => {
-                r.prepared = true;
-                r.frames += 1;
-            }
-            Err(brickray::PrepareError::NoVolume) => {}
-            Err(e) => r.set_error(format!("prepare: {e}")),
-        }
+        let result = VolumeRenderer::prepare_views(device, queue, encoder, &mut views);
+        r.after_prepare(result);
         Vec::new()
     }
 
@@ -488,14 +495,8 @@ impl egui_wgpu::CallbackTrait for VolumeCallback {
             host_depth: host_depth.as_ref(),
             time: Some(self.time),
         };
-        match r.renderer.prepare(device, queue, encoder, &desc) {
-            Ok(_) => {
-                r.prepared = true;
-                r.frames += 1;
-            }
-            Err(brickray::PrepareError::NoVolume) => {}
-            Err(e) => r.set_error(format!("prepare: {e}")),
-        }
+        let result = r.renderer.prepare(device, queue, encoder, &desc);
+        r.after_prepare(result);
         Vec::new()
     }
 
