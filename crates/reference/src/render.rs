@@ -586,3 +586,6 @@ mod tests;
 
 #[cfg(test)]
 mod preint_tests;
+
+#[cfg(test)]
+mod spread_tests;
