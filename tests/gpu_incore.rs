@@ -304,6 +304,7 @@ fn anisotropic_spacing_keeps_proportions() {
         dtype: brickray::DType::U8,
         spacing: [1.0, 1.0, 4.0],
         value_range: [0.0, 255.0],
+        kind: Default::default(),
     };
     let vol = Volume::new(desc, brickray::core::VolumeData::U8(data)).unwrap();
     let tf = TransferFunction::ramp(0.0, 0.5, 1.0);
@@ -373,6 +374,7 @@ fn typed_errors_not_panics() {
         dtype: brickray::DType::U8,
         spacing: [1.0; 3],
         value_range: [0.0, 255.0],
+        kind: Default::default(),
     };
     let big = Volume::new(
         desc_big,

@@ -200,6 +200,7 @@ fn step_ball() -> Scene {
             dtype: brickray::DType::F32,
             spacing: [1.0; 3],
             value_range: [0.0, 1.0],
+            kind: Default::default(),
         },
         brickray::core::VolumeData::F32(data),
     )

@@ -52,6 +52,7 @@ fn field_of(dims: [u32; 3], spacing: [f32; 3]) -> Volume {
             dtype: DType::F32,
             spacing,
             value_range: [0.0, 1.0],
+            kind: Default::default(),
         },
         VolumeData::F32(data),
     )
@@ -416,6 +417,7 @@ fn bad_slices_and_windows_are_typed_errors() {
             dtype: DType::F32,
             spacing: [1.0; 3],
             value_range: [3.0, 3.0],
+            kind: Default::default(),
         },
         VolumeData::F32(vec![3.0; 64]),
     )

@@ -42,6 +42,7 @@ fn label_phantom(n: u32) -> Volume {
         dtype: brickray::DType::U8,
         spacing: [1.0; 3],
         value_range: [0.0, 255.0],
+        kind: Default::default(),
     };
     Volume::new(desc, brickray::core::VolumeData::U8(data)).unwrap()
 }

@@ -19,11 +19,14 @@
 //! * [`synthetic`]: procedural test volumes (sphere, Marschner-Lobb);
 //! * [`slice`](mod@slice): slice views (a plane or a thick slab through the volume);
 //! * [`window`]: window and level, CT presets and colour maps of MIP and slices.
+//! * [`labels`]: label maps (segmentations): the mode pyramid, label tables
+//!   (colour, opacity, visibility, selection, hover) and their exact TF;
 //! * [`range`]: byte-range reads ([`RangeReader`]), the seam between a
 //!   format's parser and where its bytes live.
 
 pub mod brick;
 pub mod camera;
+pub mod labels;
 pub mod lod;
 pub mod macrocell;
 pub mod moments;
@@ -46,6 +49,7 @@ pub use camera::{
     Camera, CameraError, DepthConvention, DepthMap, FrameError, FrameView, Projection, Ray, RayGen,
     ViewGenerations, VolumeFrame,
 };
+pub use labels::{LABEL_TABLE_ENTRIES, LabelError, LabelStyle, LabelTable};
 pub use lod::{
     BinStats, ERROR_BINS, LodMetric, NodeError, TfErrorTable, node_pixel_error, node_tf_error,
     node_tf_error_expected, node_visible_error,
@@ -58,5 +62,5 @@ pub use settings::{Accel, ClipBox, RenderMode, RenderSettings, SettingsError, Sh
 pub use slice::{Slab, SlabMode, SliceAxis, SliceError, SliceGeometry, SliceView};
 pub use texel::{SampleEncoding, TexelCaps, TexelFormat, U8Filtering};
 pub use tf::{TfError, TransferFunction};
-pub use volume::{DType, Volume, VolumeData, VolumeDesc, VolumeError};
+pub use volume::{DType, Volume, VolumeData, VolumeDesc, VolumeError, VolumeKind};
 pub use window::{ColorMap, CtPreset, Intensity, Window, WindowError, histogram};

@@ -492,6 +492,7 @@ mod tests {
                 dtype: crate::DType::F32,
                 spacing: [1.0; 3],
                 value_range: [0.0, 1.0],
+                kind: Default::default(),
             },
             32,
             2,

@@ -251,6 +251,7 @@ mod tests {
             dtype: DType::U8,
             spacing: [1.0; 3],
             value_range: [0.0, 255.0],
+            kind: Default::default(),
         };
         let layout = OctreeLayout::new(desc, 16, 2);
         let side = layout.stored_side() as usize;
@@ -309,6 +310,7 @@ mod tests {
             dtype: DType::U16,
             spacing: [1.0; 3],
             value_range: [0.0, 1.0],
+            kind: Default::default(),
         };
         let layout = OctreeLayout::new(desc, 8, 1);
         let all = [f32::NEG_INFINITY, f32::INFINITY];
@@ -331,7 +333,7 @@ mod tests {
             let n = (dims[0] * dims[1] * dims[2]) as usize;
             let mut s = seed | 1;
             let data: Vec<u8> = (0..n).map(|_| { s ^= s << 13; s ^= s >> 7; s ^= s << 17; s as u8 }).collect();
-            let desc = VolumeDesc { dims, dtype: DType::U8, spacing: [1.0; 3], value_range: [0.0, 255.0] };
+            let desc = VolumeDesc { dims, dtype: DType::U8, spacing: [1.0; 3], value_range: [0.0, 255.0], kind: Default::default() };
             let vol = Volume::new(desc, VolumeData::U8(data)).unwrap();
             let g = MacroCellGrid::build(&vol, cell);
             for (fx, fy, fz) in probes {

@@ -163,6 +163,7 @@ impl MomentGrid {
                 spacing: self.spacing,
                 dtype: DType::F32,
                 value_range: [0.0, 1.0],
+                kind: Default::default(),
             },
             VolumeData::F32(data),
         )
@@ -225,6 +226,7 @@ mod tests {
                 spacing: [1.0, 1.0, 5.0],
                 dtype: DType::F32,
                 value_range: [0.0, 1.0],
+                kind: Default::default(),
             },
             VolumeData::F32(d),
         )
@@ -360,6 +362,7 @@ mod consistency {
                 spacing: [1.0; 3],
                 dtype: DType::F32,
                 value_range: [0.0, 1.0],
+                kind: Default::default(),
             },
             VolumeData::F32(d),
         )

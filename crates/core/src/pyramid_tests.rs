@@ -8,6 +8,7 @@ fn desc(dims: [u32; 3], spacing: [f32; 3]) -> VolumeDesc {
         dtype: DType::U8,
         spacing,
         value_range: [0.0, 255.0],
+        kind: Default::default(),
     }
 }
 

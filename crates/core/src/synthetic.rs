@@ -31,6 +31,7 @@ pub fn u8_field(n: u32, f: impl Fn([u32; 3]) -> f64) -> Volume {
         dtype: DType::U8,
         spacing: [1.0; 3],
         value_range: [0.0, 255.0],
+        kind: Default::default(),
     };
     Volume::new(desc, VolumeData::U8(data)).expect("valid by construction")
 }
@@ -58,6 +59,7 @@ pub fn marschner_lobb(n: u32) -> Volume {
         dtype: DType::F32,
         spacing: [1.0; 3],
         value_range: [0.0, 1.0],
+        kind: Default::default(),
     };
     Volume::new(desc, VolumeData::F32(data)).expect("valid by construction")
 }

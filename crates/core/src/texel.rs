@@ -75,6 +75,9 @@ pub struct SampleEncoding {
     pub offset: f32,
     dtype: DType,
     value_range: [f32; 2],
+    /// The fallback half-float texel holds the raw sample (label ids), not
+    /// the normalized value.
+    raw_f16: bool,
 }
 
 impl SampleEncoding {
@@ -110,6 +113,42 @@ impl SampleEncoding {
             offset,
             dtype,
             value_range,
+            raw_f16: false,
+        }
+    }
+
+    /// The encoding of label ids ([`crate::VolumeKind::Labels`], value range
+    /// [`crate::labels::label_value_range`]), exact on every device and read
+    /// at the nearest texel: u8 ids as R8Unorm, u16 and u32 ids as a half
+    /// float holding the id (exact below 2048, the ids a label table draws).
+    pub fn for_labels(dtype: DType) -> SampleEncoding {
+        let value_range = crate::labels::label_value_range();
+        let [lo, span] = lo_span(value_range);
+        let (format, scale) = match dtype {
+            DType::U8 => (TexelFormat::R8Unorm, 255.0 / span),
+            _ => (TexelFormat::R16Float, 1.0 / span),
+        };
+        SampleEncoding {
+            format,
+            scale,
+            offset: -lo / span,
+            dtype,
+            value_range,
+            raw_f16: true,
+        }
+    }
+
+    /// The encoding of a volume: [`for_labels`](Self::for_labels) for label
+    /// volumes, else [`choose`](Self::choose).
+    pub fn for_volume(
+        desc: &crate::VolumeDesc,
+        caps: TexelCaps,
+        u8_filtering: U8Filtering,
+    ) -> SampleEncoding {
+        if desc.kind.is_labels() {
+            Self::for_labels(desc.dtype)
+        } else {
+            Self::choose(desc.dtype, desc.value_range, caps, u8_filtering)
         }
     }
 
@@ -172,8 +211,10 @@ impl SampleEncoding {
                             DType::I16 => i16::from_le_bytes([c[0], c[1]]) as f32,
                             DType::F32 => f32::from_le_bytes([c[0], c[1], c[2], c[3]]),
                             DType::U8 => c[0] as f32,
+                            DType::U32 => u32::from_le_bytes([c[0], c[1], c[2], c[3]]) as f32,
                         };
-                        f16_bits((raw - lo) / span).to_le_bytes()
+                        let texel = if self.raw_f16 { raw } else { (raw - lo) / span };
+                        f16_bits(texel).to_le_bytes()
                     })
                     .collect(),
             ),
@@ -282,6 +323,10 @@ mod tests {
             DType::F32 => vec![
                 -1000.0, -3.25, -1.0, 0.0, 0.1, 0.5, 1.0, 7.75, 999.0, 1000.0,
             ],
+            DType::U32 => [0u32, 1, 2, 255, 256, 1000, 2047, 4095, 65535, 1 << 20]
+                .iter()
+                .map(|&v| v as f32)
+                .collect(),
         };
         let bytes = vals
             .iter()
@@ -290,6 +335,7 @@ mod tests {
                 DType::U16 => (v as u16).to_le_bytes().to_vec(),
                 DType::I16 => (v as i16).to_le_bytes().to_vec(),
                 DType::F32 => v.to_le_bytes().to_vec(),
+                DType::U32 => (v as u32).to_le_bytes().to_vec(),
             })
             .collect();
         (vals, bytes)
@@ -301,6 +347,36 @@ mod tests {
             DType::U16 => vec![[0.0, 65535.0], [100.0, 4095.0]],
             DType::I16 => vec![[-32768.0, 32767.0], [-1024.0, 3071.0]],
             DType::F32 => vec![[-1000.0, 1000.0], [0.0, 1.0]],
+            DType::U32 => vec![[0.0, 1048576.0], [0.0, 2047.0]],
+        }
+    }
+
+    /// Label ids round-trip exactly (to f32 rounding of the map) to
+    /// `id / (LABEL_TABLE_ENTRIES - 1)`, the centre of their table entry, in
+    /// every label type.
+    #[test]
+    fn label_ids_encode_exactly() {
+        let n = crate::labels::LABEL_TABLE_ENTRIES as u32;
+        for dtype in [DType::U8, DType::U16, DType::U32] {
+            let top = if dtype == DType::U8 { 256 } else { n };
+            let bytes: Vec<u8> = (0..top)
+                .flat_map(|id| match dtype {
+                    DType::U8 => vec![id as u8],
+                    DType::U16 => (id as u16).to_le_bytes().to_vec(),
+                    _ => id.to_le_bytes().to_vec(),
+                })
+                .collect();
+            let enc = SampleEncoding::for_labels(dtype);
+            let texels = enc.encode(&bytes);
+            for id in 0..top {
+                let got = enc.normalized(texel_value(enc.format, &texels, id as usize));
+                let want = id as f64 / (n - 1) as f64;
+                // Well within half an entry (0.5 / 2047 = 2.4e-4).
+                assert!(
+                    (got as f64 - want).abs() < 1e-6,
+                    "{dtype:?} id {id}: {got} vs {want}"
+                );
+            }
         }
     }
 
@@ -316,7 +392,7 @@ mod tests {
                 float32_filterable,
             },
         );
-        for dtype in [DType::U8, DType::U16, DType::I16, DType::F32] {
+        for dtype in [DType::U8, DType::U16, DType::I16, DType::F32, DType::U32] {
             let (vals, bytes) = raw_values(dtype);
             for range in ranges(dtype) {
                 for caps in all_caps {

@@ -17,6 +17,9 @@ pub enum DType {
     I16,
     /// 32-bit IEEE float.
     F32,
+    /// Unsigned 32-bit: label ids ([`VolumeKind::Labels`]); an intensity
+    /// volume of this type is read as f32 (exact up to 2^24).
+    U32,
 }
 
 impl DType {
@@ -25,7 +28,7 @@ impl DType {
         match self {
             DType::U8 => 1,
             DType::U16 | DType::I16 => 2,
-            DType::F32 => 4,
+            DType::F32 | DType::U32 => 4,
         }
     }
 
@@ -37,6 +40,7 @@ impl DType {
             "u16" | "uint16" | "ushort" | "unsigned short" | "uint16_t" => Some(DType::U16),
             "i16" | "int16" | "short" | "signed short" | "int16_t" => Some(DType::I16),
             "f32" | "float32" | "float" => Some(DType::F32),
+            "u32" | "uint32" | "uint" | "unsigned int" | "uint32_t" => Some(DType::U32),
             _ => None,
         }
     }
@@ -58,7 +62,16 @@ impl DType {
                 .chunks_exact(4)
                 .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
                 .collect(),
+            DType::U32 => bytes
+                .chunks_exact(4)
+                .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]) as f32)
+                .collect(),
         }
+    }
+
+    /// True for the integer types a label volume may have (u8, u16, u32).
+    pub fn holds_labels(self) -> bool {
+        matches!(self, DType::U8 | DType::U16 | DType::U32)
     }
 
     /// The short name (`u8`, `u16`, `i16`, `f32`).
@@ -68,6 +81,7 @@ impl DType {
             DType::U16 => "u16",
             DType::I16 => "i16",
             DType::F32 => "f32",
+            DType::U32 => "u32",
         }
     }
 }
@@ -109,6 +123,11 @@ pub enum VolumeError {
     /// A voxel spacing is not a positive finite number.
     #[error("invalid voxel spacing {0:?}: each must be finite and > 0")]
     BadSpacing([f32; 3]),
+    /// A label volume whose samples are not unsigned integers.
+    #[error(
+        "a label volume must hold u8, u16 or u32 ids, not {0:?} (u64 labels are not supported: convert them to u32 ids)"
+    )]
+    LabelType(DType),
 }
 
 /// Checks dimensions and returns the voxel count.
@@ -124,6 +143,40 @@ pub fn voxel_count(dims: [u64; 3]) -> Result<u64, VolumeError> {
         .ok_or_else(bad)
 }
 
+/// What a volume's samples are: intensities (a scalar field, filtered and
+/// classified by a transfer function) or labels (integer ids of a
+/// segmentation: never filtered or averaged; drawn through a label table,
+/// [`crate::labels::LabelTable`]).
+#[derive(
+    Debug, Clone, Copy, Default, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize,
+)]
+#[serde(rename_all = "lowercase")]
+pub enum VolumeKind {
+    /// A scalar field (CT, MRI, microscopy, simulation).
+    #[default]
+    Intensity,
+    /// A segmentation: each voxel holds a label id (u8, u16 or u32).
+    Labels,
+}
+
+impl VolumeKind {
+    /// Parses `intensity`/`image`/`scalar` and `labels`/`label`/`segmentation`.
+    pub fn parse(name: &str) -> Option<VolumeKind> {
+        match name.trim().to_ascii_lowercase().as_str() {
+            "intensity" | "image" | "scalar" => Some(VolumeKind::Intensity),
+            "labels" | "label" | "segmentation" | "labelmap" | "label map" => {
+                Some(VolumeKind::Labels)
+            }
+            _ => None,
+        }
+    }
+
+    /// True for [`VolumeKind::Labels`].
+    pub fn is_labels(self) -> bool {
+        self == VolumeKind::Labels
+    }
+}
+
 /// Describes a volume: its grid, sample type, spacing and value range.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct VolumeDesc {
@@ -134,15 +187,25 @@ pub struct VolumeDesc {
     /// Physical size of a voxel along x, y, z (any unit, the same on each axis).
     pub spacing: [f32; 3],
     /// The range that maps to normalized value 0..1 (transfer-function space).
+    /// For labels, [`crate::labels::label_value_range`]: label `i` maps to
+    /// entry `i` of the label table.
     pub value_range: [f32; 2],
+    /// Intensities or labels (absent in older sidecars and stores:
+    /// intensity).
+    #[serde(default)]
+    pub kind: VolumeKind,
 }
 
 impl VolumeDesc {
-    /// Validates dims, spacing and range.
+    /// Validates dims, spacing and range, and that a label volume has an
+    /// integer type.
     pub fn validate(&self) -> Result<(), VolumeError> {
         voxel_count(self.dims.map(u64::from))?;
         if self.spacing.iter().any(|s| !s.is_finite() || *s <= 0.0) {
             return Err(VolumeError::BadSpacing(self.spacing));
+        }
+        if self.kind.is_labels() && !self.dtype.holds_labels() {
+            return Err(VolumeError::LabelType(self.dtype));
         }
         Ok(())
     }
@@ -183,6 +246,8 @@ pub enum VolumeData {
     I16(Vec<i16>),
     /// f32 samples.
     F32(Vec<f32>),
+    /// u32 samples (label ids).
+    U32(Vec<u32>),
 }
 
 impl VolumeData {
@@ -193,6 +258,7 @@ impl VolumeData {
             VolumeData::U16(_) => DType::U16,
             VolumeData::I16(_) => DType::I16,
             VolumeData::F32(_) => DType::F32,
+            VolumeData::U32(_) => DType::U32,
         }
     }
 
@@ -203,6 +269,7 @@ impl VolumeData {
             VolumeData::U16(v) => v.len(),
             VolumeData::I16(v) => v.len(),
             VolumeData::F32(v) => v.len(),
+            VolumeData::U32(v) => v.len(),
         }
     }
 
@@ -219,6 +286,20 @@ impl VolumeData {
             VolumeData::U16(v) => v[i] as f32,
             VolumeData::I16(v) => v[i] as f32,
             VolumeData::F32(v) => v[i],
+            VolumeData::U32(v) => v[i] as f32,
+        }
+    }
+
+    /// Sample `i` as an integer label id (exact for u8, u16 and u32; other
+    /// types are rounded and clamped to `0..=u32::MAX`).
+    #[inline]
+    pub fn label(&self, i: usize) -> u32 {
+        match self {
+            VolumeData::U8(v) => v[i] as u32,
+            VolumeData::U16(v) => v[i] as u32,
+            VolumeData::U32(v) => v[i],
+            VolumeData::I16(v) => v[i].max(0) as u32,
+            VolumeData::F32(v) => v[i].round().clamp(0.0, u32::MAX as f32) as u32,
         }
     }
 
@@ -229,6 +310,7 @@ impl VolumeData {
             VolumeData::U16(v) => bytemuck::cast_slice(v),
             VolumeData::I16(v) => bytemuck::cast_slice(v),
             VolumeData::F32(v) => bytemuck::cast_slice(v),
+            VolumeData::U32(v) => bytemuck::cast_slice(v),
         }
     }
 
@@ -254,6 +336,12 @@ impl VolumeData {
                     .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
                     .collect(),
             ),
+            DType::U32 => VolumeData::U32(
+                bytes
+                    .chunks_exact(4)
+                    .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+                    .collect(),
+            ),
         }
     }
 
@@ -269,6 +357,11 @@ impl VolumeData {
             VolumeData::U16(v) => mm(v),
             VolumeData::I16(v) => mm(v),
             VolumeData::F32(v) => mm(v),
+            VolumeData::U32(v) => {
+                let lo = v.iter().min()?;
+                let hi = v.iter().max()?;
+                Some((*lo as f32, *hi as f32))
+            }
         }
     }
 }
@@ -331,6 +424,7 @@ impl Volume {
                 dtype,
                 spacing,
                 value_range: [lo, hi],
+                kind: VolumeKind::Intensity,
             },
             data,
         )
@@ -370,6 +464,16 @@ impl Volume {
     #[inline]
     pub fn voxel_normalized(&self, x: i64, y: i64, z: i64) -> f32 {
         self.desc.normalize(self.voxel_clamped(x, y, z))
+    }
+
+    /// The normalized value of the voxel nearest to continuous voxel
+    /// coordinates `p` (voxel centres at integers; clamp-to-edge), as a GPU
+    /// texture read with a nearest sampler: how label maps are sampled.
+    pub fn sample_nearest(&self, p: [f64; 3]) -> f64 {
+        let i = p.map(|c| (c + 0.5).floor() as i64);
+        let raw = self.voxel_clamped(i[0], i[1], i[2]) as f64;
+        let [lo, hi] = self.desc.value_range.map(f64::from);
+        if hi > lo { (raw - lo) / (hi - lo) } else { 0.0 }
     }
 
     /// Exact trilinear interpolation of the normalized value at continuous voxel
@@ -422,6 +526,7 @@ mod tests {
             dtype: DType::U8,
             spacing: [1.0; 3],
             value_range: [0.0, 255.0],
+            kind: Default::default(),
         };
         assert!(matches!(
             Volume::new(desc.clone(), VolumeData::U8(vec![0; 7])),
@@ -446,6 +551,7 @@ mod tests {
             dtype: DType::F32,
             spacing: [1.0; 3],
             value_range: [0.0, 1.0],
+            kind: Default::default(),
         };
         let err = Volume::new(
             desc,
@@ -477,6 +583,7 @@ mod tests {
             dtype: DType::F32,
             spacing: [1.0; 3],
             value_range: [0.0, 1.0],
+            kind: Default::default(),
         };
         let vol = Volume::new(desc, VolumeData::F32(v)).unwrap();
         let s = vol.sample_trilinear([1.25, 2.5, 0.75]);

@@ -415,6 +415,7 @@ mod tests {
                 dtype: crate::DType::F32,
                 spacing: [1.0; 3],
                 value_range: [0.0, 1000.0],
+                kind: Default::default(),
             },
             crate::VolumeData::F32((0..1000).map(|i| i as f32).collect()),
         )

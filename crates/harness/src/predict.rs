@@ -26,6 +26,7 @@ fn f32_volume(n: u32, f: impl Fn([f32; 3]) -> f32) -> Volume {
         dtype: DType::F32,
         spacing: [1.0; 3],
         value_range: [0.0, 1.0],
+        kind: Default::default(),
     };
     Volume::new(desc, VolumeData::F32(data)).expect("valid by construction")
 }

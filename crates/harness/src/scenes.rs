@@ -13,6 +13,7 @@ pub fn u8_volume(dims: [u32; 3], data: Vec<u8>) -> Result<Volume, VolumeError> {
             dtype: DType::U8,
             spacing: [1.0; 3],
             value_range: [0.0, 255.0],
+            kind: Default::default(),
         },
         VolumeData::U8(data),
     )

@@ -540,6 +540,7 @@ impl NiftiReader {
             dtype: conv.dst,
             spacing,
             value_range: desc_range(&header_path, range)?,
+            kind: Default::default(),
         };
         desc.validate()
             .map_err(|e| IoError::volume(&header_path, e))?;

@@ -214,6 +214,7 @@ impl NrrdReader {
             dtype,
             spacing,
             value_range: declared.unwrap_or([0.0, 1.0]),
+            kind: Default::default(),
         };
         desc.validate().map_err(|e| IoError::volume(path, e))?;
         let mut r = NrrdReader {

@@ -4,7 +4,7 @@ use super::{
     IoError, MAX_HEADER, ReadOptions, VolumeReader, check_slab, open_regular, resolve_data_file,
     scan_stream,
 };
-use brickray_core::volume::{DType, VolumeDesc};
+use brickray_core::volume::{DType, VolumeDesc, VolumeKind};
 use std::fs::File;
 use std::io::{Read, Seek, SeekFrom};
 use std::path::{Path, PathBuf};
@@ -34,6 +34,12 @@ struct Sidecar {
     byte_order: Option<String>,
     #[serde(default)]
     value_range: Option<Vec<f64>>,
+    /// `"labels"` (or `"intensity"`); a `labels` list also declares a label
+    /// map.
+    #[serde(default)]
+    kind: Option<String>,
+    #[serde(default)]
+    labels: Option<serde_json::Value>,
 }
 
 impl RawReader {
@@ -167,15 +173,32 @@ impl RawReader {
             }
             None => None,
         };
+        let kind = match sc.kind.as_deref() {
+            Some(k) => VolumeKind::parse(k).ok_or_else(|| {
+                IoError::header(
+                    json,
+                    format!("kind {k:?}: expected \"labels\" or \"intensity\""),
+                )
+            })?,
+            None if sc.labels.is_some() => VolumeKind::Labels,
+            None => VolumeKind::Intensity,
+        };
+        let labels = kind.is_labels();
         let desc = VolumeDesc {
             dims,
             dtype,
             spacing,
-            value_range: declared.unwrap_or([0.0, 1.0]),
+            value_range: if labels {
+                brickray_core::labels::label_value_range()
+            } else {
+                declared.unwrap_or([0.0, 1.0])
+            },
+            kind,
         };
+        desc.validate().map_err(|e| IoError::volume(json, e))?;
         let mut reader = RawReader::new(raw, 0, desc)?;
         reader.sidecar = Some(json.to_owned());
-        if declared.is_none() {
+        if declared.is_none() && !labels {
             reader.desc.value_range = reader.scan()?;
         }
         Ok(reader)

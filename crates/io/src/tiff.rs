@@ -434,6 +434,7 @@ impl TiffReader {
                 dtype: brickray_core::DType::U8,
                 spacing,
                 value_range: [0.0, 1.0],
+                kind: Default::default(),
             },
             notes,
             warnings,

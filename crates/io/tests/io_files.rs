@@ -125,6 +125,7 @@ fn fifos_and_directories_are_refused_fast() {
         dtype: DType::U8,
         spacing: [1.0; 3],
         value_range: [0.0, 1.0],
+        kind: Default::default(),
     };
     let p = data.clone();
     let r = within(&data, move || RawReader::new(p, 0, desc).map(|_| ()));

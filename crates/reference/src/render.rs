@@ -238,12 +238,25 @@ pub fn render_reference(
         );
     }
 
+    // A label map: nearest samples through the label table, unshaded and
+    // without pre-integration (the GPU kernels' rule, `Variant::of`).
+    let labels = vol.desc().kind.is_labels();
+    let unshaded;
+    let settings = if labels {
+        let mut s = *settings;
+        s.shading.enabled = false;
+        unshaded = s;
+        &unshaded
+    } else {
+        settings
+    };
     let mut marcher = Marcher::new(vol, frame, tf, camera, settings, step_factor, width, height);
+    marcher.labels = labels;
     marcher.intensity = opts.intensity;
     if let Some(s) = opts.spread {
         marcher.spread = Some((s, tf.spread_table(SPREAD_ROWS, SPREAD_TABLE_WIDTH)));
     }
-    if opts.preintegrated {
+    if opts.preintegrated && !labels {
         marcher.preint = Some(Preintegrator::new(tf, PREINT_CELLS));
     }
     let n = opts.supersample.max(1);
@@ -285,6 +298,8 @@ struct Marcher<'a> {
     intensity: Option<Intensity>,
     /// Spread per voxel and the TF's spread table ([`ReferenceOptions::spread`]).
     spread: Option<(&'a [f32], SpreadTable)>,
+    /// A label map: values are read at the nearest voxel.
+    labels: bool,
 }
 
 /// The result of one ray: premultiplied RGBA and clip depth.
@@ -319,6 +334,7 @@ impl<'a> Marcher<'a> {
             preint: None,
             intensity: None,
             spread: None,
+            labels: false,
         }
     }
 }
@@ -520,10 +536,16 @@ impl Marcher<'_> {
         (ray.tex_origin + ray.tex_dir * t) * self.dims - DVec3::splat(0.5)
     }
 
-    /// The normalized trilinear value at `t`.
+    /// The normalized trilinear value at `t` (a label map: the nearest
+    /// voxel's).
     #[inline]
     fn value(&self, ray: &Ray, t: f64) -> f64 {
-        self.vol.sample_trilinear(self.voxel_pos(ray, t).to_array())
+        let p = self.voxel_pos(ray, t).to_array();
+        if self.labels {
+            self.vol.sample_nearest(p)
+        } else {
+            self.vol.sample_trilinear(p)
+        }
     }
 
     /// Clip depth of the ray's point at `t`.

@@ -97,6 +97,7 @@ mod tests {
                 dtype: DType::F32,
                 spacing: [1.0; 3],
                 value_range: [0.0, (n - 1) as f32],
+                kind: Default::default(),
             },
             VolumeData::F32(data),
         )

@@ -10,16 +10,25 @@ use crate::gpu;
 /// distances.
 pub(crate) const INCORE_STORAGE_BUFFERS: u32 = 2;
 
-/// The linear, clamp-to-edge sampler of a volume texture.
-pub(crate) fn volume_sampler(device: &wgpu::Device) -> Result<wgpu::Sampler, RenderError> {
+/// The clamp-to-edge sampler of a volume texture: linear for intensities,
+/// nearest for label maps (a label id is never interpolated).
+pub(crate) fn volume_sampler(
+    device: &wgpu::Device,
+    labels: bool,
+) -> Result<wgpu::Sampler, RenderError> {
+    let filter = if labels {
+        wgpu::FilterMode::Nearest
+    } else {
+        wgpu::FilterMode::Linear
+    };
     gpu::scoped(device, "brickray-render volume sampler", || {
         device.create_sampler(&wgpu::SamplerDescriptor {
             label: Some("brickray-render volume"),
             address_mode_u: wgpu::AddressMode::ClampToEdge,
             address_mode_v: wgpu::AddressMode::ClampToEdge,
             address_mode_w: wgpu::AddressMode::ClampToEdge,
-            mag_filter: wgpu::FilterMode::Linear,
-            min_filter: wgpu::FilterMode::Linear,
+            mag_filter: filter,
+            min_filter: filter,
             ..Default::default()
         })
     })

@@ -87,7 +87,15 @@ impl Variant {
     /// when the host enabled it (it applies to the iso mode, in both kernels)
     /// and the visible weights when the backend measures them
     /// (`VolumeBackend::measures_weights`).
-    pub(crate) fn of(s: &RenderSettings, prediction: Option<Prediction>, weights: bool) -> Variant {
+    /// A label map (`labels`) is drawn unshaded and without pre-integration
+    /// (the gradient of ids, and segments interpolated between ids, are not
+    /// the data).
+    pub(crate) fn of(
+        s: &RenderSettings,
+        prediction: Option<Prediction>,
+        weights: bool,
+        labels: bool,
+    ) -> Variant {
         let mode = match s.mode {
             RenderMode::Iso { .. } => KernelMode::Iso,
             RenderMode::Mip => KernelMode::Mip,
@@ -97,11 +105,11 @@ impl Variant {
             mode,
             ert: s.accel.early_termination.is_some(),
             ess: s.accel.empty_space_skipping,
-            shade: s.shading.enabled,
+            shade: s.shading.enabled && !labels,
             predict: false,
             guard: false,
             sparse_ess: false,
-            preint: s.preintegrated && mode == KernelMode::Dvr,
+            preint: s.preintegrated && mode == KernelMode::Dvr && !labels,
             weights,
             slice: false,
         };

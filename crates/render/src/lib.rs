@@ -369,7 +369,12 @@ impl VolumeRenderer {
         };
         let layouts = [self.frame.layout(), self.tf.layout(), backend.layout()];
         for s in settings {
-            let v = Variant::of(s, self.prediction, backend.measures_weights());
+            let v = Variant::of(
+                s,
+                self.prediction,
+                backend.measures_weights(),
+                backend.labels(),
+            );
             self.kernels.pipeline(device, backend.kind(), layouts, v)?;
         }
         Ok(())
@@ -523,6 +528,7 @@ impl VolumeRenderer {
             desc.settings.step_factor,
             backend.step_lengths(),
             desc.settings.preintegrated
+                && !backend.labels()
                 && matches!(desc.settings.mode, brickray_core::RenderMode::Dvr),
         )?;
         let mut uniforms = FrameUniforms::new(desc, backend.max_leaves());
@@ -531,7 +537,12 @@ impl VolumeRenderer {
         let variant = if mapping.slice.is_some() {
             Variant::slice(backend.measures_weights())
         } else {
-            Variant::of(&desc.settings, self.prediction, backend.measures_weights())
+            Variant::of(
+                &desc.settings,
+                self.prediction,
+                backend.measures_weights(),
+                backend.labels(),
+            )
         };
         let predict = self
             .prediction

@@ -445,7 +445,7 @@ impl StreamedVolume {
             pool,
             params: Uniform::new(device, "brickray-render out-of-core params")?,
             index: GrowBuffer::new(device, "brickray-render octree index", 1 << 12)?,
-            sampler: crate::group2::volume_sampler(device)?,
+            sampler: crate::group2::volume_sampler(device, layout.volume.kind.is_labels())?,
             splits,
             generation: 0,
             format,

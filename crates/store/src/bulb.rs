@@ -83,6 +83,7 @@ impl MandelbulbSource {
             dtype: DType::U8,
             spacing: [1.0; 3],
             value_range: [0.0, 255.0],
+            kind: Default::default(),
         };
         Ok(MandelbulbSource {
             layout: OctreeLayout::new(desc, brick, apron),

@@ -8,8 +8,9 @@ pub const MAGIC: [u8; 8] = *b"BRKSTORE";
 /// The format version this crate writes (it also reads [`MIN_VERSION`]..=this).
 /// Version 2 adds the optional per-node error section, version 3 the
 /// parent-error section after it, version 4 binds each payload's checksum to
-/// its node (`docs/store-format.md`, "Payload checksums").
-pub const VERSION: u32 = 4;
+/// its node (`docs/store-format.md`, "Payload checksums"), version 5 adds
+/// label stores ([`FLAG_LABELS`], u32 samples, the mode filter).
+pub const VERSION: u32 = 5;
 /// The first format version whose payload checksums cover the node's key.
 pub(crate) const KEYED_CRC_VERSION: u32 = 4;
 /// The oldest format version this crate reads (version 1: no error section).
@@ -34,6 +35,7 @@ pub(crate) fn dtype_code(d: DType) -> u8 {
         DType::U8 => 0,
         DType::U16 => 1,
         DType::I16 => 2,
+        DType::U32 => 4,
         _ => 3,
     }
 }
@@ -44,6 +46,7 @@ pub(crate) fn dtype_from_code(c: u8) -> Option<DType> {
         1 => DType::U16,
         2 => DType::I16,
         3 => DType::F32,
+        4 => DType::U32,
         _ => return None,
     })
 }
@@ -52,6 +55,7 @@ pub(crate) fn filter_code(f: Filter) -> u8 {
     match f {
         Filter::Average => 0,
         Filter::Max => 1,
+        Filter::Mode => 2,
     }
 }
 
@@ -59,6 +63,7 @@ pub(crate) fn filter_from_code(c: u8) -> Option<Filter> {
     Some(match c {
         0 => Filter::Average,
         1 => Filter::Max,
+        2 => Filter::Mode,
         _ => return None,
     })
 }
@@ -110,6 +115,9 @@ pub(crate) struct Header {
     pub(crate) errors_crc: u32,
 }
 
+/// Header flag (version 5, bit 4): the volume is a label map
+/// ([`brickray_core::VolumeKind::Labels`]).
+pub(crate) const FLAG_LABELS: u8 = 16;
 /// Header flag: the empty threshold is set.
 pub(crate) const FLAG_THRESHOLD: u8 = 1;
 /// Header flag: the octree is an anisotropic pyramid whose split masks are

@@ -58,17 +58,22 @@ pub enum Filter {
     /// in f64 in the order x fastest, then y, then z. For intensities.
     #[default]
     Average,
-    /// The largest of the eight. For label volumes (a label present anywhere in
-    /// the block survives) and for maximum-intensity projection.
+    /// The largest of the eight. For maximum-intensity projection.
     Max,
+    /// The most frequent of the eight, ties to the smallest
+    /// ([`brickray_core::labels::mode_of`]): the filter of label volumes (a
+    /// coarser level holds no label the finer data lacks; the builder uses it
+    /// for every label volume).
+    Mode,
 }
 
 impl Filter {
-    /// Parses `average`/`avg`/`mean` and `max`.
+    /// Parses `average`/`avg`/`mean`, `max` and `mode`.
     pub fn parse(s: &str) -> Option<Filter> {
         match s.to_ascii_lowercase().as_str() {
             "average" | "avg" | "mean" => Some(Filter::Average),
             "max" => Some(Filter::Max),
+            "mode" | "labels" => Some(Filter::Mode),
             _ => None,
         }
     }

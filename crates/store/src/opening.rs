@@ -10,14 +10,14 @@ use crate::Filter;
 use crate::error::StoreError;
 use crate::errsec::ERROR_ENTRY_LEN;
 use crate::format::{
-    ENTRY_LEN, Entry, FLAG_ERRORS, FLAG_PARENT_ERRORS, FLAG_SPLIT_MASKS, FLAG_THRESHOLD,
-    HEADER_LEN, Header, KIND_DATA, KIND_EMPTY, KIND_UNIFORM, MAGIC, MAX_APRON, MAX_BRICK,
-    MAX_BRICK_BYTES, MAX_SPLIT_MASKS, MIN_VERSION, TableGeometry, VERSION, dtype_from_code,
-    filter_from_code, packed_masks,
+    ENTRY_LEN, Entry, FLAG_ERRORS, FLAG_LABELS, FLAG_PARENT_ERRORS, FLAG_SPLIT_MASKS,
+    FLAG_THRESHOLD, HEADER_LEN, Header, KIND_DATA, KIND_EMPTY, KIND_UNIFORM, MAGIC, MAX_APRON,
+    MAX_BRICK, MAX_BRICK_BYTES, MAX_SPLIT_MASKS, MIN_VERSION, TableGeometry, VERSION,
+    dtype_from_code, filter_from_code, packed_masks,
 };
 use crate::reader::{bad, max_compressed};
 use crate::sample::representable;
-use brickray_core::{NodeKey, OctreeLayout, RangeReader, VolumeDesc};
+use brickray_core::{NodeKey, OctreeLayout, RangeReader, VolumeDesc, VolumeKind};
 use std::path::Path;
 
 /// Phase 1: the header, checked: long enough, the magic, a known version,
@@ -85,7 +85,10 @@ pub(crate) fn header(
 /// The flags a version knows.
 fn known_flags(version: u32) -> u8 {
     match version {
-        v if v >= 3 => FLAG_THRESHOLD | FLAG_SPLIT_MASKS | FLAG_ERRORS | FLAG_PARENT_ERRORS,
+        v if v >= 5 => {
+            FLAG_THRESHOLD | FLAG_SPLIT_MASKS | FLAG_ERRORS | FLAG_PARENT_ERRORS | FLAG_LABELS
+        }
+        3 | 4 => FLAG_THRESHOLD | FLAG_SPLIT_MASKS | FLAG_ERRORS | FLAG_PARENT_ERRORS,
         2 => FLAG_THRESHOLD | FLAG_SPLIT_MASKS | FLAG_ERRORS,
         _ => FLAG_THRESHOLD | FLAG_SPLIT_MASKS,
     }
@@ -102,12 +105,30 @@ pub(crate) fn layout(h: &Header, path: &Path) -> Result<(OctreeLayout, Filter), 
     if h.flags & !known_flags(h.version) != 0 {
         return Err(bad(path, "flags", format!("unknown bits {:#x}", h.flags)));
     }
+    let labels = h.flags & FLAG_LABELS != 0;
+    if labels && filter != Filter::Mode {
+        return Err(bad(
+            path,
+            "filter",
+            format!("{filter:?} in a label store (label stores are filtered by the mode)"),
+        ));
+    }
     let desc = VolumeDesc {
         dims: h.dims,
         dtype,
         spacing: h.spacing,
         value_range: h.value_range,
+        kind: if labels {
+            VolumeKind::Labels
+        } else {
+            VolumeKind::Intensity
+        },
     };
+    if let Err(e) = desc.validate()
+        && labels
+    {
+        return Err(bad(path, "dtype", e.to_string()));
+    }
     if let Err(e) = brickray_core::volume::voxel_count(h.dims.map(u64::from)) {
         return Err(bad(path, "dims", e.to_string()));
     }

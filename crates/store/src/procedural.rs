@@ -124,6 +124,7 @@ impl ProceduralSource {
             dtype: DType::U8,
             spacing: [1.0; 3],
             value_range: [0.0, 255.0],
+            kind: Default::default(),
         };
         let layout = OctreeLayout::new(desc, brick, apron);
         let n = layout.levels as usize;

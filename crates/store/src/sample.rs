@@ -42,10 +42,11 @@ macro_rules! int_sample {
                 match filter {
                     Filter::Max => v.into_iter().fold(v[0], |a, b| a.max(b)),
                     Filter::Average => {
-                        let s: i32 = v.iter().map(|&x| x as i32).sum();
+                        let s: i64 = v.iter().map(|&x| x as i64).sum();
                         // Round half up: floor(s / 8 + 1/2).
                         (s + 4).div_euclid(8) as $t
                     }
+                    Filter::Mode => brickray_core::labels::mode_of(&mut { v }),
                 }
             }
             #[inline(always)]
@@ -59,6 +60,7 @@ macro_rules! int_sample {
 int_sample!(u8, 1);
 int_sample!(u16, 2);
 int_sample!(i16, 2);
+int_sample!(u32, 4);
 
 impl Sample for f32 {
     const SIZE: usize = 4;
@@ -79,6 +81,11 @@ impl Sample for f32 {
         match filter {
             Filter::Max => v.into_iter().fold(v[0], f32::max),
             Filter::Average => (v.iter().map(|&x| x as f64).sum::<f64>() / 8.0) as f32,
+            // (Refused for f32 by the builder; the total order keeps it defined.)
+            Filter::Mode => {
+                let mut k = v.map(f32::to_bits);
+                f32::from_bits(brickray_core::labels::mode_of(&mut k))
+            }
         }
     }
     #[inline(always)]
@@ -101,6 +108,10 @@ macro_rules! with_sample {
             }
             brickray_core::DType::I16 => {
                 type $T = i16;
+                $body
+            }
+            brickray_core::DType::U32 => {
+                type $T = u32;
                 $body
             }
             _ => {
@@ -169,6 +180,7 @@ pub(crate) fn representable(dtype: DType, v: f32) -> bool {
         DType::U8 => v.fract() == 0.0 && (0.0..=255.0).contains(&v),
         DType::U16 => v.fract() == 0.0 && (0.0..=65535.0).contains(&v),
         DType::I16 => v.fract() == 0.0 && (-32768.0..=32767.0).contains(&v),
+        DType::U32 => v.fract() == 0.0 && (0.0..=u32::MAX as f32).contains(&v),
         _ => true,
     }
 }
@@ -218,6 +230,7 @@ pub(crate) fn stats_dyn(dtype: DType, bytes: &[u8]) -> (f32, f32, bool) {
             }
         }
         DType::I16 => int_stats!(i16, 2),
+        DType::U32 => int_stats!(u32, 4),
         _ => {
             // Compare-and-select (NaN never selected) plus an unordered test,
             // which map to vector min, max and compare instructions.

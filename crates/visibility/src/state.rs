@@ -371,6 +371,7 @@ mod tests {
                 dtype: DType::U8,
                 spacing: [1.0, 1.0, 4.0],
                 value_range: [0.0, 1.0],
+                kind: Default::default(),
             },
             32,
             1,

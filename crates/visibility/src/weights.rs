@@ -307,6 +307,7 @@ mod tests {
                 dtype: DType::U8,
                 spacing: [1.0; 3],
                 value_range: [0.0, 255.0],
+                kind: Default::default(),
             },
             8,
             1,

@@ -315,7 +315,7 @@ pub enum ConfigError {
 
 impl GpuFormat {
     /// The format a device with `caps` stores for `layout`: the encoding chosen for
-    /// the volume's dtype and value range, [`sub_cells_per_axis`] of the brick.
+    /// the volume's kind, dtype and value range, [`sub_cells_per_axis`] of the brick.
     pub fn for_layout(
         layout: &OctreeLayout,
         caps: TexelCaps,
@@ -324,12 +324,7 @@ impl GpuFormat {
         max_texture_dim_3d: u32,
     ) -> GpuFormat {
         GpuFormat {
-            encoding: SampleEncoding::choose(
-                layout.volume.dtype,
-                layout.volume.value_range,
-                caps,
-                u8_filtering,
-            ),
+            encoding: SampleEncoding::for_volume(&layout.volume, caps, u8_filtering),
             sub_cells_per_axis: sub_cells_per_axis(layout.brick),
             slot_row_bytes,
             max_texture_dim_3d,

@@ -160,11 +160,17 @@ impl BrickManager {
     /// Phase 3: the displayed cut, the refined one with level changes fading
     /// (`crate::fade`). If its bricks, their fallbacks and the floor do not
     /// fit in the pool, the fades are dropped (the refined cut always fits).
-    /// Octant-granular cuts are drawn as they are (no fades).
+    /// Octant-granular cuts and label maps are drawn as they are (no fades: a
+    /// fade mixes the values of two levels, which would invent label ids).
     fn display(&mut self, refined: &Refinement, time: Option<f64>) -> Displayed {
         let octants = matches!(self.config.lod_metric, LodMetric::VisibleOctants { .. });
+        let labels = self.layout.volume.kind.is_labels();
         let dt = self.fade_dt(time);
-        let step = self.config.fade.filter(|_| !octants).map(|d| d.step(dt));
+        let step = self
+            .config
+            .fade
+            .filter(|_| !octants && !labels)
+            .map(|d| d.step(dt));
         let shown = self.fader.advance(&refined.leaves, step);
         if shown.fades.is_empty() {
             return shown;

@@ -43,6 +43,7 @@ pub(crate) fn ball_layout(dim: u32) -> OctreeLayout {
         dtype: DType::U8,
         spacing: [1.0; 3],
         value_range: [0.0, 1.0],
+        kind: Default::default(),
     };
     OctreeLayout::new(desc, 8, 1)
 }

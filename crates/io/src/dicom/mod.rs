@@ -389,6 +389,7 @@ impl DicomReader {
                 dtype: brickray_core::DType::F32,
                 spacing,
                 value_range: [0.0, 1.0],
+                kind: Default::default(),
             },
             placement: Placement {
                 affine,

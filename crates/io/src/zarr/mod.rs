@@ -664,6 +664,7 @@ impl ZarrReader {
             dtype: conv.dst,
             spacing: s.map(|v| v as f32),
             value_range: desc_range(root, range)?,
+            kind: Default::default(),
         };
         desc.validate().map_err(|e| IoError::volume(root, e))?;
         let notes = vec![

@@ -54,6 +54,7 @@ pub(crate) fn read_shared(dir: &Path, name: &str) -> Result<Volume, String> {
             spacing: [0, 1, 2].map(|i| spacing[i] as f32),
             dtype,
             value_range: [range[0] as f32, range[1] as f32],
+            kind: Default::default(),
         },
         VolumeData::from_le_bytes(dtype, &bytes),
     )

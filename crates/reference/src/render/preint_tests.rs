@@ -42,6 +42,7 @@ fn constant_field_integrates_exactly_over_the_sampled_extent() {
             dtype: brickray_core::DType::F32,
             spacing: [1.0; 3],
             value_range: [0.0, 1.0],
+            kind: Default::default(),
         },
         brickray_core::VolumeData::F32(vec![0.5; 512]),
     )

@@ -32,6 +32,7 @@ pub(super) fn f32_volume(
             dtype: DType::F32,
             spacing,
             value_range: range,
+            kind: Default::default(),
         },
         VolumeData::F32(data),
     )

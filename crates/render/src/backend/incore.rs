@@ -55,6 +55,7 @@ pub(crate) struct InCore {
     /// contribute, for the current TF (DVR) or isovalue; MIP uses the ranges.
     skip: wgpu::Buffer,
     skip_key: Option<SkipKey>,
+    labels: bool,
 }
 
 impl InCore {
@@ -72,7 +73,7 @@ impl InCore {
             return Err(RenderError::VolumeTooLarge { dims, limit });
         }
         let desc = vol.desc();
-        let enc = SampleEncoding::choose(desc.dtype, desc.value_range, encoding::caps(device), u8);
+        let enc = SampleEncoding::for_volume(desc, encoding::caps(device), u8);
         let format = encoding::wgpu_format(enc.format);
         let bpp = enc.texel_bytes();
         let row = dims[0] * bpp;
@@ -154,7 +155,8 @@ impl InCore {
                 pad2: 0.0,
             },
         );
-        let sampler = volume_sampler(device)?;
+        let labels = desc.kind.is_labels();
+        let sampler = volume_sampler(device, labels)?;
         let layout = gpu::scoped(device, "brickray-render in-core layout", || {
             device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
                 label: Some("brickray-render in core"),
@@ -198,6 +200,7 @@ impl InCore {
             grid,
             skip,
             skip_key: None,
+            labels,
         })
     }
 }
@@ -251,6 +254,10 @@ impl VolumeBackend for InCore {
 
     fn max_leaves(&self) -> u32 {
         0
+    }
+
+    fn labels(&self) -> bool {
+        self.labels
     }
 
     fn step_lengths(&self) -> u32 {

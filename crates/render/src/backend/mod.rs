@@ -39,6 +39,10 @@ pub(crate) trait VolumeBackend: std::fmt::Debug {
     fn measures_weights(&self) -> bool {
         false
     }
+    /// True when the volume is a label map (nearest samples through the
+    /// label table: the kernels draw it unshaded and without
+    /// pre-integration, which would interpolate between ids).
+    fn labels(&self) -> bool;
     /// Most index leaves one ray may visit (0 in core).
     fn max_leaves(&self) -> u32;
     /// Step lengths the kernel samples with (rows of the corrected TF table):

@@ -241,6 +241,10 @@ impl VolumeBackend for OutOfCore {
         self.volume.lock().measures_weights()
     }
 
+    fn labels(&self) -> bool {
+        self.volume.lock().layout.volume.kind.is_labels()
+    }
+
     fn max_leaves(&self) -> u32 {
         // A ray crosses at most about 3 * 2^finest leaves of the finest level,
         // plus zero-length visits at edges: a guard, not a quality setting.

@@ -20,9 +20,9 @@
 
 use crate::error::StoreError;
 use crate::format::{
-    ENTRY_LEN, Entry, FLAG_ERRORS, FLAG_PARENT_ERRORS, FLAG_SPLIT_MASKS, FLAG_THRESHOLD,
-    HEADER_LEN, Header, KIND_DATA, KIND_EMPTY, KIND_UNIFORM, MAGIC, MAX_APRON, MAX_BRICK,
-    MAX_BRICK_BYTES, TableGeometry, VERSION, dtype_code, filter_code,
+    ENTRY_LEN, Entry, FLAG_ERRORS, FLAG_LABELS, FLAG_PARENT_ERRORS, FLAG_SPLIT_MASKS,
+    FLAG_THRESHOLD, HEADER_LEN, Header, KIND_DATA, KIND_EMPTY, KIND_UNIFORM, MAGIC, MAX_APRON,
+    MAX_BRICK, MAX_BRICK_BYTES, TableGeometry, VERSION, dtype_code, filter_code,
 };
 use crate::partial::{PartialFile, parent_dir, remove_stale};
 use crate::{Filter, NO_ENTRY_LEVEL};
@@ -209,6 +209,10 @@ pub fn build(
             reason: "must be finite".into(),
         });
     }
+    // Label maps are filtered by the mode whatever the options say: an
+    // average or a maximum of label ids invents labels.
+    let labels = desc.kind.is_labels();
+    let filter = if labels { Filter::Mode } else { opts.filter };
     let layout = if opts.anisotropic {
         OctreeLayout::anisotropic(desc.clone(), opts.brick, opts.apron)
     } else {
@@ -263,7 +267,7 @@ pub fn build(
     let mut ctx = Ctx {
         layout: layout.clone(),
         geo,
-        filter: opts.filter,
+        filter,
         empty_below: opts.empty_below,
         entries: Vec::new(),
         offset: HEADER_LEN as u64,
@@ -354,14 +358,20 @@ pub fn build(
     // The error section (format version 2), computed from the payloads just
     // written; left out when it does not fit the memory bound.
     w.flush().map_err(|e| StoreError::io(&tmp_path, e))?;
-    let errors = errors::compute(
-        tmp.file(),
-        &tmp_path,
-        &layout,
-        &ctx.geo,
-        &ctx.entries,
-        opts.memory_bound,
-    )?;
+    // (Label maps: the value-bin error model does not apply; their stores
+    // carry no error section and refine by geometry.)
+    let errors = if labels {
+        None
+    } else {
+        errors::compute(
+            tmp.file(),
+            &tmp_path,
+            &layout,
+            &ctx.geo,
+            &ctx.entries,
+            opts.memory_bound,
+        )?
+    };
     let error_bytes = errors
         .as_ref()
         .map(|e| crate::errsec::encode_all(&e.errors));
@@ -385,7 +395,7 @@ pub fn build(
         header_len: HEADER_LEN as u32,
         dims: desc.dims,
         dtype: dtype_code(desc.dtype),
-        filter: filter_code(opts.filter),
+        filter: filter_code(filter),
         flags: if opts.empty_below.is_some() {
             FLAG_THRESHOLD
         } else {
@@ -398,7 +408,7 @@ pub fn build(
             FLAG_ERRORS | FLAG_PARENT_ERRORS
         } else {
             0
-        },
+        } | if labels { FLAG_LABELS } else { 0 },
         split_masks: layout.split_masks(),
         levels: layout.levels,
         brick: layout.brick,

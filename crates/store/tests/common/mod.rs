@@ -32,6 +32,7 @@ impl MemReader {
             dtype,
             spacing: [1.0, 0.5, 2.0],
             value_range: [lo, hi.max(lo + 1.0)],
+            kind: Default::default(),
         };
         MemReader {
             desc,
@@ -78,6 +79,7 @@ pub fn encode(dtype: DType, v: &[f32]) -> Vec<u8> {
             DType::U8 => out.push(x as u8),
             DType::U16 => out.extend_from_slice(&(x as u16).to_le_bytes()),
             DType::I16 => out.extend_from_slice(&(x as i16).to_le_bytes()),
+            DType::U32 => out.extend_from_slice(&(x as u32).to_le_bytes()),
             _ => out.extend_from_slice(&x.to_le_bytes()),
         }
     }
@@ -160,6 +162,7 @@ pub fn reference_levels(
 pub fn filter_ref(dtype: DType, filter: Filter, v: [f32; 8]) -> f32 {
     match filter {
         Filter::Max => v.iter().copied().fold(f32::NEG_INFINITY, f32::max),
+        Filter::Mode => brickray_core::labels::mode_of(&mut v.map(|x| x as u32)) as f32,
         _ => match dtype {
             DType::F32 => (v.iter().map(|&x| x as f64).sum::<f64>() / 8.0) as f32,
             _ => {
@@ -324,10 +327,11 @@ pub fn reseal_table_and_header(b: &mut [u8]) {
     b[124..128].copy_from_slice(&crc.to_le_bytes());
 }
 
-/// A version-4 store as format version 3 wrote it: the version field 3 and
-/// each payload's checksum over its payload alone.
+/// An intensity store of version 4 or later (keyed checksums) as format
+/// version 3 wrote it: the version field 3 and each payload's checksum over
+/// its payload alone.
 pub fn as_version3(b: &[u8]) -> Vec<u8> {
-    assert_eq!(u32::from_le_bytes(b[8..12].try_into().unwrap()), 4);
+    assert!(u32::from_le_bytes(b[8..12].try_into().unwrap()) >= 4);
     let mut v = b.to_vec();
     v[8..12].copy_from_slice(&3u32.to_le_bytes());
     for eo in entry_offsets(b) {

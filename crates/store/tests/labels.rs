@@ -1,0 +1,105 @@
+//! Label stores: built by the mode of the children whatever the filter asked,
+//! recorded as labels, and every node equal to the reference mode pyramid
+//! (so no coarse node holds a label the data lacks).
+#![allow(missing_docs)]
+
+mod common;
+
+use brickray_core::{BrickSource, DType, VolumeKind};
+use brickray_store::{BuildOptions, Filter, build, open};
+use common::*;
+use proptest::prelude::*;
+use std::collections::BTreeSet;
+
+/// Label ids in runs along x (segments), a few ids, some large for u32.
+fn label_bytes(dims: [u32; 3], dtype: DType, ids: &[u32], seed: u64) -> Vec<u8> {
+    let n = dims.iter().map(|&d| d as usize).product::<usize>();
+    let mut h = seed | 1;
+    let mut cur = ids[0];
+    let mut v = Vec::with_capacity(n);
+    for _ in 0..n {
+        h ^= h << 13;
+        h ^= h >> 7;
+        h ^= h << 17;
+        if h % 4 == 0 {
+            cur = ids[(h >> 9) as usize % ids.len()];
+        }
+        v.push(cur as f32);
+    }
+    encode(dtype, &v)
+}
+
+fn label_reader(dims: [u32; 3], dtype: DType, bytes: Vec<u8>) -> MemReader {
+    let mut r = MemReader::new(dims, dtype, bytes);
+    r.desc.kind = VolumeKind::Labels;
+    r.desc.value_range = brickray_core::labels::label_value_range();
+    r
+}
+
+fn check_label_store(dims: [u32; 3], dtype: DType, ids: &[u32], seed: u64, brick: u32) {
+    let bytes = label_bytes(dims, dtype, ids, seed);
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("labels.brs");
+    let mut r = label_reader(dims, dtype, bytes.clone());
+    // Asked for the average: a label map is filtered by the mode anyway.
+    let o = BuildOptions {
+        brick,
+        apron: 1,
+        filter: Filter::Average,
+        ..BuildOptions::default()
+    };
+    let report = build(&mut r, &out, &o).unwrap();
+    assert!(
+        !report.errors,
+        "label stores carry no value-bin error section"
+    );
+    let store = open(&out).unwrap();
+    assert_eq!(store.desc().kind, VolumeKind::Labels);
+    assert_eq!(store.filter(), Filter::Mode);
+    assert_eq!(store.version(), 5);
+    let levels = reference_levels(store.layout(), decode(dtype, &bytes), Filter::Mode);
+    check_source(&store, &levels, None);
+    // No level holds a label the finest lacks.
+    let finest: BTreeSet<u32> = levels.last().unwrap().iter().map(|&v| v as u32).collect();
+    for (l, level) in levels.iter().enumerate() {
+        for v in level {
+            assert!(finest.contains(&(*v as u32)), "level {l} holds {v}");
+        }
+    }
+    let mut buf = vec![0u8; store.layout().brick_bytes()];
+    store
+        .read_brick(brickray_core::NodeKey::ROOT, &mut buf)
+        .unwrap();
+    for v in decode(dtype, &buf) {
+        assert!(finest.contains(&(v as u32)), "root brick holds {v}");
+    }
+}
+
+#[test]
+fn label_stores_of_every_label_type() {
+    check_label_store([37, 20, 9], DType::U8, &[0, 7, 9, 200], 1, 8);
+    check_label_store([16, 33, 17], DType::U16, &[0, 1, 2, 3, 60_000], 2, 8);
+    check_label_store([21, 21, 21], DType::U32, &[0, 5, 4_000_000_000, 77], 3, 4);
+}
+
+#[test]
+fn float_label_maps_are_refused() {
+    let dims = [4, 4, 4];
+    let mut r = label_reader(dims, DType::F32, encode(DType::F32, &[1.0; 64]));
+    let dir = tempfile::tempdir().unwrap();
+    let err = build(&mut r, &dir.path().join("x.brs"), &BuildOptions::default()).unwrap_err();
+    assert!(err.to_string().contains("label"), "{err}");
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(12))]
+    #[test]
+    fn label_pyramids_keep_labels(
+        dims in prop::array::uniform3(1u32..24),
+        ids in prop::collection::btree_set(0u32..70_000, 1..5),
+        seed in any::<u64>(),
+    ) {
+        let ids: Vec<u32> = ids.into_iter().collect();
+        check_label_store(dims, DType::U32, &ids, seed, 4);
+    }
+}
