@@ -272,6 +272,12 @@ pub struct LabelTable {
     /// Opacity of labels without an explicit style.
     #[serde(default = "default_opacity")]
     pub default_opacity: f32,
+    /// Whether labels without an explicit style are drawn (false after
+    /// [`show_only`](Self::show_only): every other id is hidden, also ids
+    /// absent from the data, so empty-space skipping by id ranges skips what
+    /// holds hidden labels only).
+    #[serde(default = "default_visible")]
+    pub default_visible: bool,
     /// The id drawn as nothing unless styled (`None`: every id is drawn).
     #[serde(default = "default_background")]
     pub background: Option<u32>,
@@ -292,6 +298,9 @@ pub struct LabelTable {
 fn default_opacity() -> f32 {
     0.5
 }
+fn default_visible() -> bool {
+    true
+}
 fn default_background() -> Option<u32> {
     Some(0)
 }
@@ -304,6 +313,7 @@ impl Default for LabelTable {
         LabelTable {
             styles: BTreeMap::new(),
             default_opacity: default_opacity(),
+            default_visible: true,
             background: default_background(),
             selected: BTreeSet::new(),
             selected_opacity: default_selected_opacity(),
@@ -322,7 +332,7 @@ impl LabelTable {
         LabelStyle {
             color: hashed_color(id),
             opacity: self.default_opacity,
-            visible: self.background != Some(id),
+            visible: self.default_visible && self.background != Some(id),
         }
     }
 
@@ -372,10 +382,22 @@ impl LabelTable {
         self.styles.insert(id, s);
     }
 
-    /// Hides every label of `ids` but those in `keep`.
-    pub fn show_only(&mut self, ids: impl IntoIterator<Item = u32>, keep: &[u32]) {
-        for id in ids {
-            self.set_visible(id, keep.contains(&id));
+    /// Shows the labels of `keep` and hides every other id (styled or not).
+    pub fn show_only(&mut self, keep: &[u32]) {
+        self.default_visible = false;
+        for s in self.styles.values_mut() {
+            s.visible = false;
+        }
+        for &id in keep {
+            self.set_visible(id, true);
+        }
+    }
+
+    /// Shows every label (but an unstyled background).
+    pub fn show_all(&mut self) {
+        self.default_visible = true;
+        for s in self.styles.values_mut() {
+            s.visible = true;
         }
     }
 

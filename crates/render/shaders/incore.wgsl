@@ -31,6 +31,12 @@ struct VolumeParams {
 @group(2) @binding(4) var<storage, read> cell_skip: array<u32>;
 
 fn sample_value(u: vec3<f32>) -> f32 {
+    if LABELS {
+        // The voxel whose cell holds u (voxel centres at (i + 0.5) / dims).
+        let hi = vec3<i32>(vol.dims) - vec3<i32>(1);
+        let i = clamp(vec3<i32>(floor(u * vol.dims)), vec3<i32>(0), hi);
+        return textureLoad(volume_tex, i, 0).r * vol.value_scale + vol.value_offset;
+    }
     return textureSampleLevel(volume_tex, volume_sampler, u, 0.0).r * vol.value_scale + vol.value_offset;
 }
 

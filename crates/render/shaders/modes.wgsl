@@ -19,6 +19,10 @@ override PREINT: bool = false;
 // Out of core: measure the visible weights (feedback.wgsl; the in-core kernel
 // ignores it).
 override WEIGHTS: bool = false;
+// A label map: samples are the nearest texel's, loaded at integer
+// coordinates (textureLoad), never filtered (a label id is not interpolated;
+// the sampler's fixed-point coordinates would also move boundaries).
+override LABELS: bool = false;
 
 const MODE_DVR: u32 = 0u;
 const MODE_ISO: u32 = 1u;

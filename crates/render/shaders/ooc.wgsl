@@ -136,6 +136,13 @@ fn brick_of(leaf: OctBox, slot: u32) -> Brick {
 }
 
 fn atlas_value(uv: vec3<f32>) -> f32 {
+    if LABELS {
+        // The atlas texel whose cell holds uv (a brick's apron holds its
+        // neighbours' voxels, so the nearest voxel is always in the brick).
+        let hi = vec3<i32>(ooc.atlas_size) - vec3<i32>(1);
+        let i = clamp(vec3<i32>(floor(uv * ooc.atlas_size)), vec3<i32>(0), hi);
+        return textureLoad(atlas_tex, i, 0).r * ooc.value_scale + ooc.value_offset;
+    }
     return textureSampleLevel(atlas_tex, atlas_sampler, uv, 0.0).r * ooc.value_scale + ooc.value_offset;
 }
 

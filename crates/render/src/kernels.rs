@@ -66,11 +66,13 @@ pub(crate) struct Variant {
     pub(crate) weights: bool,
     /// The slice view's entry point (slice.wgsl) instead of the ray caster.
     pub(crate) slice: bool,
+    /// A label map: nearest texels loaded at integer coordinates.
+    pub(crate) labels: bool,
 }
 
 /// The override constants of a pipeline, by WGSL name (modes.wgsl,
 /// predict.wgsl).
-pub(crate) const OVERRIDES: [&str; 9] = [
+pub(crate) const OVERRIDES: [&str; 10] = [
     "MODE",
     "ERT",
     "ESS",
@@ -80,6 +82,7 @@ pub(crate) const OVERRIDES: [&str; 9] = [
     "SPARSE_ESS",
     "PREINT",
     "WEIGHTS",
+    "LABELS",
 ];
 
 impl Variant {
@@ -112,6 +115,7 @@ impl Variant {
             preint: s.preintegrated && mode == KernelMode::Dvr && !labels,
             weights,
             slice: false,
+            labels,
         };
         match prediction {
             Some(p) if mode == KernelMode::Iso => Variant {
@@ -126,7 +130,7 @@ impl Variant {
 
     /// The slice view's pipeline (the switches of the ray caster off; the
     /// visible weights when the backend measures them).
-    pub(crate) fn slice(weights: bool) -> Variant {
+    pub(crate) fn slice(weights: bool, labels: bool) -> Variant {
         Variant {
             mode: KernelMode::Mip,
             ert: false,
@@ -138,6 +142,7 @@ impl Variant {
             preint: false,
             weights,
             slice: true,
+            labels,
         }
     }
 
@@ -146,7 +151,7 @@ impl Variant {
         self.predict
     }
 
-    fn constants(&self) -> [(&'static str, f64); 9] {
+    fn constants(&self) -> [(&'static str, f64); 10] {
         let b = |x: bool| if x { 1.0 } else { 0.0 };
         let v = [
             self.mode as u32 as f64,
@@ -158,6 +163,7 @@ impl Variant {
             b(self.sparse_ess),
             b(self.preint),
             b(self.weights),
+            b(self.labels),
         ];
         std::array::from_fn(|i| (OVERRIDES[i], v[i]))
     }

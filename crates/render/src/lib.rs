@@ -535,7 +535,7 @@ impl VolumeRenderer {
         let mapping = self.mapping.ok_or(PrepareError::NoVolume)?;
         mapping.apply(&mut uniforms);
         let variant = if mapping.slice.is_some() {
-            Variant::slice(backend.measures_weights())
+            Variant::slice(backend.measures_weights(), backend.labels())
         } else {
             Variant::of(
                 &desc.settings,

@@ -136,6 +136,13 @@ fn table_selection_hover_and_files() {
     assert_eq!(t.rgba(4)[3], 0.0, "the rest dimmed to unselected_opacity");
     t.hover = Some(4);
     assert_eq!(t.rgba(4)[3], 0.5);
+    t.selected.clear();
+    t.show_only(&[5]);
+    assert_eq!(t.rgba(5)[3], 0.5);
+    assert_eq!(t.rgba(3)[3], 0.0);
+    assert_eq!(t.rgba(1234)[3], 0.0, "absent ids hidden too");
+    t.show_all();
+    assert_eq!(t.rgba(3)[3], 0.5);
     let back = LabelTable::from_file_bytes(t.to_json().as_bytes()).unwrap();
     assert_eq!(back, t);
     let mut lut = vec![0u8; 768];

@@ -529,7 +529,8 @@ fn every_shader_file_is_covered() {
 /// its guard, its sparse skipping, ERT and ESS; DVR pre-integrated with every
 /// combination of ERT, ESS and shading; the visible weights (WEIGHTS) with
 /// every mode and combination of ERT, ESS and shading, with pre-integration
-/// and with prediction.
+/// and with prediction; label maps (LABELS) with every mode and combination of
+/// ERT and ESS, with the visible weights, and the slice views of both.
 #[test]
 fn every_override_permutation_validates() {
     let switches = [
@@ -541,6 +542,7 @@ fn every_override_permutation_validates() {
         "SPARSE_ESS",
         "PREINT",
         "WEIGHTS",
+        "LABELS",
     ];
     let mut combos = Vec::new();
     for (_, mode) in KernelMode::ALL {
@@ -566,6 +568,14 @@ fn every_override_permutation_validates() {
     combos.push((KernelMode::Dvr, 0b111 | 1 << 6 | 1 << 7));
     // Iso predicting with its guard and sparse skipping, ERT and ESS.
     combos.push((KernelMode::Iso, 0b1011_1011));
+    // Label maps (never shaded nor pre-integrated): every mode with ERT and
+    // ESS, and with the visible weights.
+    for (_, mode) in KernelMode::ALL {
+        for bits in 0..4u32 {
+            combos.push((mode, bits | 1 << 8));
+            combos.push((mode, bits | 1 << 7 | 1 << 8));
+        }
+    }
     for (name, src) in [("incore", incore()), ("ooc", ooc())] {
         for &(mode, bits) in &combos {
             let mut s = src.replace(
