@@ -54,6 +54,7 @@ pub use slab::{SampleConverter, SourceType};
 
 mod error;
 mod files;
+mod labels;
 mod memory;
 mod reader;
 mod scan;
@@ -61,6 +62,7 @@ mod scan;
 pub use error::IoError;
 pub use files::{FileKind, regular_file_metadata};
 pub(crate) use files::{MAX_HEADER, open_regular, resolve_data_file};
+pub use labels::AsLabels;
 pub use memory::MemoryReader;
 pub use reader::{Placement, ReadOptions, VolumeReader};
 pub use scan::scan_range;

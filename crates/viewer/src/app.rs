@@ -7,7 +7,7 @@ mod scripting;
 
 use scripting::{PendingShot, ScriptRunner};
 
-use crate::script::{Action, ModeName, PredictionChoice, WindowChoice};
+use crate::script::{Action, LabelAction, ModeName, PredictionChoice, WindowChoice};
 use crate::source::{Input, Loaded, OpenOptions, Opened, Opening};
 use crate::stats::Stats;
 use crate::tf::Histogram;
@@ -15,7 +15,9 @@ use crate::tf_widget::TfEditor;
 use crate::view::{FourViewCallback, ViewResources, VolumeCallback, viewport_px};
 use brickray::core::camera::{AxisView, CameraController, CameraInput, DragButton, Navigation};
 use brickray::core::tf::{TABLE_ENTRIES, TfModel, TfPreset as Preset};
-use brickray::{OutOfCoreConfig, RenderMode, RenderSettings, Viewport, VolumeDesc, VolumeFrame};
+use brickray::{
+    LabelTable, OutOfCoreConfig, RenderMode, RenderSettings, Viewport, VolumeDesc, VolumeFrame,
+};
 use brickray::{SliceAxis, SliceView};
 use eframe::egui::{self, Color32};
 use eframe::egui_wgpu;
@@ -100,6 +102,11 @@ pub(crate) struct ViewerApp {
     /// The slices' and MIP's window, and whether the renderers have it.
     window: WindowChoice,
     window_dirty: bool,
+    /// A label map is shown: its table (drawn instead of the TF), the labels
+    /// present (in core; empty when streamed) and the table file field.
+    labels: Option<LabelTable>,
+    label_ids: Vec<u32>,
+    label_path: String,
 }
 
 impl std::fmt::Debug for ViewerApp {
@@ -177,6 +184,9 @@ impl ViewerApp {
             shown_slices: Vec::new(),
             window: WindowChoice::Off,
             window_dirty: false,
+            labels: None,
+            label_ids: Vec::new(),
+            label_path: "labels.json".into(),
         };
         if let Some(input) = startup.input {
             app.start_open(input);
@@ -207,6 +217,10 @@ impl ViewerApp {
         let vframe = VolumeFrame::centered(desc.dims, desc.spacing);
         let ooc = self.ooc;
         let streamed = matches!(loaded.volume, Opened::Streamed(_));
+        let label_ids = match &loaded.volume {
+            Opened::InCore(v) if desc.kind.is_labels() => brickray::core::labels::labels_present(v),
+            _ => Vec::new(),
+        };
         self.with_gpu(frame, |device, queue, r| {
             match loaded.volume {
                 Opened::InCore(v) => {
@@ -242,6 +256,19 @@ impl ViewerApp {
             };
             self.tf = TfModel::preset(preset, desc.value_range);
         }
+        if desc.kind.is_labels() {
+            if !reopened || self.labels.is_none() {
+                let (table, note) = crate::source::label_table_beside(&loaded.input);
+                self.labels = Some(table);
+                if let Some(n) = note {
+                    self.messages.push(n);
+                }
+                self.mode = ModeName::Dvr;
+            }
+        } else {
+            self.labels = None;
+        }
+        self.label_ids = label_ids;
         self.tf_dirty = true;
         self.messages.push(loaded.note.clone());
         if !reopened || self.camera.is_none() {
@@ -309,7 +336,12 @@ impl ViewerApp {
     fn apply(&mut self, frame: &eframe::Frame) {
         if self.tf_dirty && self.shown.is_some() {
             self.tf_dirty = false;
-            match self.tf.to_table(TABLE_ENTRIES) {
+            // A label map is drawn through its label table.
+            let table = match &self.labels {
+                Some(t) => Ok(t.to_transfer_function()),
+                None => self.tf.to_table(TABLE_ENTRIES),
+            };
+            match table {
                 Ok(table) => {
                     if let Some(Err(e)) = self.with_gpu(frame, |d, q, r| {
                         r.renderer.set_transfer_function(d, q, &table)
@@ -669,9 +701,19 @@ impl ViewerApp {
                     egui::CollapsingHeader::new("Rendering")
                         .default_open(true)
                         .show(ui, |ui| self.render_ui(ui));
-                    egui::CollapsingHeader::new("Transfer function")
-                        .default_open(true)
-                        .show(ui, |ui| self.tf_ui(ui));
+                    egui::CollapsingHeader::new(if self.labels.is_some() {
+                        "Labels"
+                    } else {
+                        "Transfer function"
+                    })
+                    .default_open(true)
+                    .show(ui, |ui| {
+                        if self.labels.is_some() {
+                            self.labels_ui(ui)
+                        } else {
+                            self.tf_ui(ui)
+                        }
+                    });
                     egui::CollapsingHeader::new("Statistics")
                         .default_open(true)
                         .show(ui, |ui| self.stats.show(ui));

@@ -53,6 +53,12 @@ struct Cli {
     /// CPU brick cache of the out-of-core path, MiB.
     #[arg(long, default_value_t = 1024, value_name = "MiB")]
     cpu_cache: u64,
+    /// Open the volume as a label map (a segmentation of u8, u16 or u32
+    /// ids; docs/labels.md). A sidecar with `"kind": "labels"` or a
+    /// `labels` list, and a label store, are label maps anyway. A colour
+    /// table beside it (NAME.lut, mricron's, or NAME.labels.json) is loaded.
+    #[arg(long)]
+    labels: bool,
 }
 
 fn parse_size(s: &str) -> Result<(u32, u32), String> {
@@ -108,6 +114,7 @@ fn main() -> ExitCode {
             // Replaced by the device's 3D texture limit once it exists.
             max_3d_side: 2048,
             store_dir,
+            labels: cli.labels,
         },
         ooc: brickray::OutOfCoreConfig {
             gpu_budget_bytes: cli.gpu_pool << 20,

@@ -109,6 +109,23 @@ pub(crate) enum Action {
     WindowScreenshot(PathBuf),
     /// Close the viewer.
     Quit,
+    /// A label map's table.
+    Labels(LabelAction),
+}
+
+/// What a `labels ...` script line does to the shown label map's table.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) enum LabelAction {
+    /// Show these ids, hide every other one.
+    ShowOnly(Vec<u32>),
+    /// Show every id (but the background).
+    ShowAll,
+    /// Select these ids (empty: clear the selection).
+    Select(Vec<u32>),
+    /// The opacity of labels without their own.
+    Opacity(f32),
+    /// Load a colour table (mricron .lut or JSON).
+    Table(PathBuf),
 }
 
 /// Render modes by name.
@@ -347,6 +364,28 @@ pub(crate) fn parse(text: &str) -> Result<Vec<Action>, ScriptError> {
                 }
                 Action::Window(WindowChoice::CentreWidth(c, w))
             }
+            ["labels", "show-all"] => Action::Labels(LabelAction::ShowAll),
+            ["labels", "select", "none"] => Action::Labels(LabelAction::Select(Vec::new())),
+            ["labels", "opacity", v] => {
+                let v = num(v)?;
+                if !(0.0..=1.0).contains(&v) {
+                    return Err(err("expected an opacity in 0..=1"));
+                }
+                Action::Labels(LabelAction::Opacity(v))
+            }
+            ["labels", "table", path] => Action::Labels(LabelAction::Table(PathBuf::from(path))),
+            ["labels", what @ ("show-only" | "select"), ids @ ..] if !ids.is_empty() => {
+                let ids = ids
+                    .iter()
+                    .map(|v| v.parse::<u32>())
+                    .collect::<Result<Vec<u32>, _>>()
+                    .map_err(|_| err("expected label ids (integers >= 0)"))?;
+                Action::Labels(if *what == "select" {
+                    LabelAction::Select(ids)
+                } else {
+                    LabelAction::ShowOnly(ids)
+                })
+            }
             ["layout", "four"] => Action::FourViews(true),
             ["layout", "single"] => Action::FourViews(false),
             ["crosshair", x, y, z] => {
@@ -478,9 +517,32 @@ mod tests {
             window auto
             window off
             quit
+            labels show-only 3 5 7
+            labels show-all
+            labels select 9
+            labels select none
+            labels opacity 0.25
+            labels table atlas.nii.lut
         ";
         let a = parse(text).unwrap();
-        assert_eq!(a.len(), 35);
+        assert_eq!(a.len(), 41);
+        assert_eq!(a[35], Action::Labels(LabelAction::ShowOnly(vec![3, 5, 7])));
+        assert_eq!(a[36], Action::Labels(LabelAction::ShowAll));
+        assert_eq!(a[37], Action::Labels(LabelAction::Select(vec![9])));
+        assert_eq!(a[38], Action::Labels(LabelAction::Select(Vec::new())));
+        assert_eq!(a[39], Action::Labels(LabelAction::Opacity(0.25)));
+        assert_eq!(
+            a[40],
+            Action::Labels(LabelAction::Table("atlas.nii.lut".into()))
+        );
+        for bad in [
+            "labels show-only x",
+            "labels opacity 2",
+            "labels select",
+            "labels",
+        ] {
+            assert!(parse(bad).is_err(), "{bad}");
+        }
         assert_eq!(a[26], Action::WindowScreenshot("out/w.png".into()));
         assert_eq!(a[27], Action::FourViews(true));
         assert_eq!(a[28], Action::Crosshair([10.0, 20.5, 3.0]));

@@ -159,6 +159,9 @@ pub(crate) struct OpenOptions {
     pub(crate) max_3d_side: u32,
     /// Where built stores go.
     pub(crate) store_dir: PathBuf,
+    /// Open files as label maps (`--labels`; a sidecar or store that says
+    /// so is one anyway).
+    pub(crate) labels: bool,
 }
 
 /// A background open in progress.
@@ -250,6 +253,9 @@ pub(crate) fn open(
                 return open_store(input, path, "brick store".into());
             }
             let mut reader = brickray::io::open(path)?;
+            if opts.labels && !reader.desc().kind.is_labels() {
+                reader = Box::new(brickray::io::AsLabels::new(reader)?);
+            }
             // What the reader assumed where the file did not say, shown with
             // the volume's note.
             let warned = warning_note(&reader.warnings());
@@ -260,16 +266,30 @@ pub(crate) fn open(
                 bytes <= opts.in_core_max_bytes && desc.dims.iter().all(|&d| d <= opts.max_3d_side);
             if small {
                 progress.set_stage("reading the volume");
-                let volume = read_with_progress(reader.as_mut(), progress)?;
+                let mut volume = read_with_progress(reader.as_mut(), progress)?;
+                // Label ids beyond the table are renumbered (in core only).
+                let mut renumbered = String::new();
+                if volume.desc().kind.is_labels()
+                    && volume
+                        .data()
+                        .min_max()
+                        .is_some_and(|(_, hi)| hi as usize >= brickray::core::LABEL_TABLE_ENTRIES)
+                {
+                    let (v, ids) = brickray::core::labels::relabel_dense(&volume)
+                        .map_err(|e| OpenError::BadInput(e.to_string()))?;
+                    volume = v;
+                    renumbered = format!("; {} labels renumbered 0..{}", ids.len(), ids.len());
+                }
                 let mut histogram = Histogram::new(HISTOGRAM_BINS);
                 let d = volume.desc().clone();
                 for i in 0..volume.data().len() {
                     histogram.add(d.normalize(volume.data().get(i)));
                 }
                 let note = format!(
-                    "{:?} {} loaded whole ({:.1} MiB){warned}",
+                    "{:?} {}{} loaded whole ({:.1} MiB){renumbered}{warned}",
                     d.dims,
                     d.dtype.name(),
+                    if d.kind.is_labels() { " labels" } else { "" },
                     bytes as f64 / (1 << 20) as f64
                 );
                 return Ok(Loaded {
@@ -493,6 +513,7 @@ mod tests {
             in_core_max_bytes: 1 << 20,
             max_3d_side: 2048,
             store_dir: dir.path().join("stores"),
+            labels: false,
         };
         let input = Input::Path(json);
         let p = Progress::default();
@@ -518,6 +539,7 @@ mod tests {
             in_core_max_bytes: 1 << 20,
             max_3d_side: 2048,
             store_dir: std::env::temp_dir(),
+            labels: false,
         };
         let p = Progress::default();
         let missing = Input::Path("/nonexistent/v.json".into());
@@ -564,6 +586,7 @@ mod tests {
             in_core_max_bytes: 0,
             max_3d_side: 2048,
             store_dir: dir.path().join("stores"),
+            labels: false,
         };
         let p = Progress::default();
         let local = open(&Input::Path(json), &opts, &p).unwrap();
@@ -600,6 +623,7 @@ mod tests {
             in_core_max_bytes: 0,
             max_3d_side: 2048,
             store_dir: std::env::temp_dir(),
+            labels: false,
         };
         let l = open(&Input::Procedural(128), &opts, &Progress::default()).unwrap();
         assert!(matches!(l.volume, Opened::Streamed(_)));
@@ -616,4 +640,36 @@ mod tests {
                 .any(|&c| c > 0)
         );
     }
+}
+
+/// The colour table beside a label map, if there is one: `NAME.lut` or
+/// `NAME.json` for `NAME.nii.gz` also tried as `NAME.nii.lut` (mricron's
+/// convention); else the default table. The note says which file was used or
+/// why it was not.
+pub(crate) fn label_table_beside(input: &Input) -> (brickray::LabelTable, Option<String>) {
+    let Input::Path(path) = input else {
+        return (Default::default(), None);
+    };
+    let name = path.to_string_lossy().to_string();
+    let base = name.strip_suffix(".gz").unwrap_or(&name).to_string();
+    let stem = path.with_extension("").to_string_lossy().to_string();
+    let candidates = [
+        format!("{base}.lut"),
+        format!("{stem}.lut"),
+        format!("{stem}.labels.json"),
+    ];
+    for c in candidates {
+        let p = Path::new(&c);
+        if !p.is_file() {
+            continue;
+        }
+        return match std::fs::read(p)
+            .map_err(|e| e.to_string())
+            .and_then(|b| brickray::LabelTable::from_file_bytes(&b).map_err(|e| e.to_string()))
+        {
+            Ok(t) => (t, Some(format!("label colours from {c}"))),
+            Err(e) => (Default::default(), Some(format!("{c}: {e}"))),
+        };
+    }
+    (Default::default(), None)
 }

@@ -756,3 +756,66 @@ fn the_four_view_layout_shows_three_slices_and_3d() {
         eprintln!("four views, slice {i} vs library: {cmp}");
     }
 }
+
+/// A label map: the shared Brodmann atlas opened from its sidecar (a label
+/// map by its `labels` list), its mricron colour table loaded and three areas
+/// shown; the screenshot against the library drawing the same table.
+#[test]
+#[cfg_attr(
+    no_shared_data,
+    ignore = "needs ../shared/data (the shared volumes), absent when the tests were built"
+)]
+#[cfg_attr(
+    no_display,
+    ignore = "needs an X server (DISPLAY unset when the tests were built; scripts/test.sh starts Xvfb)"
+)]
+fn label_map_with_its_colour_table_matches_the_library() {
+    let Some(dir) = windowed_test_dir() else {
+        return;
+    };
+    let Some(data) = brickray_harness::shared_data_dir() else {
+        return;
+    };
+    let atlas = data.join("labels/mricron_brodmann_labels/mricron_brodmann_labels.json");
+    let lut = data.join("formats/nifti/mricron_brodmann.nii.lut");
+    let png = dir.path().join("labels.png");
+    let script = format!(
+        "open {atlas}\nbackground 0 0 0\noverlays off\nlabels table {lut}\n\
+         labels show-only 4 6 17 22\ncamera orbit 30 15 1.0\nwait converged\n\
+         screenshot {png}\nquit\n",
+        atlas = atlas.display(),
+        lut = lut.display(),
+        png = png.display(),
+    );
+    run_script(dir.path(), &script, Duration::from_secs(120));
+    let volume = brickray::io::read_volume(&atlas).expect("the atlas");
+    assert!(volume.desc().kind.is_labels());
+    let mut table =
+        brickray::LabelTable::from_file_bytes(&std::fs::read(&lut).expect("the .lut")).unwrap();
+    table.show_only(&[4, 6, 17, 22]);
+    let (shot, w, h) = read_png(&png);
+    let (camera, _, _) = sidecar(&png);
+    let gpu = brickray_harness::shared_gpu();
+    let mut renderer =
+        VolumeRenderer::new(&gpu.device, brickray_harness::target_desc()).expect("renderer");
+    renderer
+        .set_volume(&gpu.device, &gpu.queue, &volume)
+        .expect("volume");
+    renderer
+        .set_transfer_function(&gpu.device, &gpu.queue, &table.to_transfer_function())
+        .expect("table");
+    let target = brickray_harness::Offscreen::new(&gpu.device, w, h);
+    let d = volume.desc();
+    let desc = FrameDesc::new(camera, VolumeFrame::centered(d.dims, d.spacing), w, h);
+    brickray_harness::draw_frame(gpu, &mut renderer, &target, &desc, Some(wgpu::Color::BLACK))
+        .expect("draw");
+    let lib = target.read_color(gpu);
+    let lit = shot
+        .chunks(4)
+        .filter(|p| p[..3].iter().any(|&c| c > 20))
+        .count();
+    assert!(lit * 50 > (w * h) as usize, "only {lit} lit pixels");
+    let cmp = brickray_reference::assert_close("viewer-labels", &shot, &lib, w, h, MIN_PSNR_DB)
+        .unwrap_or_else(|e| panic!("{e}"));
+    eprintln!("viewer label map: {cmp}");
+}

@@ -257,6 +257,95 @@ impl ViewerApp {
     }
 }
 
+impl ViewerApp {
+    /// A label map's table: every label present (in core) with its colour
+    /// and visibility, show all / none, the selection's and the default
+    /// opacity, and the table file.
+    pub(super) fn labels_ui(&mut self, ui: &mut egui::Ui) {
+        let Some(t) = self.labels.as_mut() else {
+            return;
+        };
+        let mut changed = false;
+        ui.horizontal(|ui| {
+            if ui.button("show all").clicked() {
+                t.show_all();
+                changed = true;
+            }
+            if ui.button("hide all").clicked() {
+                t.show_only(&[]);
+                changed = true;
+            }
+            if !t.selected.is_empty() && ui.button("clear selection").clicked() {
+                t.selected.clear();
+                changed = true;
+            }
+        });
+        changed |= ui
+            .add(egui::Slider::new(&mut t.default_opacity, 0.0..=1.0).text("opacity"))
+            .changed();
+        if !t.selected.is_empty() {
+            changed |= ui
+                .add(egui::Slider::new(&mut t.unselected_opacity, 0.0..=1.0).text("others"))
+                .changed();
+        }
+        if self.label_ids.is_empty() {
+            ui.label("(labels streamed: use the script's `labels` commands)");
+        }
+        egui::ScrollArea::vertical()
+            .max_height(240.0)
+            .show(ui, |ui| {
+                for &id in &self.label_ids {
+                    let mut s = t.style(id);
+                    ui.horizontal(|ui| {
+                        let mut rgb = s.color;
+                        if ui.checkbox(&mut s.visible, format!("{id}")).changed() {
+                            t.set_visible(id, s.visible);
+                            changed = true;
+                        }
+                        if ui.color_edit_button_rgb(&mut rgb).changed() {
+                            t.set_color(id, rgb);
+                            changed = true;
+                        }
+                        let mut sel = t.selected.contains(&id);
+                        if ui.checkbox(&mut sel, "select").changed() {
+                            if sel {
+                                t.selected.insert(id);
+                            } else {
+                                t.selected.remove(&id);
+                            }
+                            changed = true;
+                        }
+                    });
+                }
+            });
+        ui.horizontal(|ui| {
+            ui.add(egui::TextEdit::singleline(&mut self.label_path).desired_width(160.0));
+            if ui.button("Save").clicked() {
+                let r = std::fs::write(&self.label_path, t.to_json());
+                self.messages.push(
+                    r.map_or_else(|e| e.to_string(), |_| format!("saved {}", self.label_path)),
+                );
+            }
+            if ui.button("Load").clicked() {
+                match std::fs::read(&self.label_path)
+                    .map_err(|e| e.to_string())
+                    .and_then(|b| {
+                        brickray::LabelTable::from_file_bytes(&b).map_err(|e| e.to_string())
+                    }) {
+                    Ok(table) => {
+                        *t = table;
+                        changed = true;
+                    }
+                    Err(e) => self.messages.push(format!("{}: {e}", self.label_path)),
+                }
+            }
+        });
+        if changed {
+            self.tf_dirty = true;
+        }
+    }
+}
+
 /// The histogram as a strip with a marker (the isovalue slider's background).
 fn histogram_strip(ui: &mut egui::Ui, h: &Histogram, log: bool, marker: Option<f32>) {
     let (rect, _) =

@@ -264,6 +264,29 @@ impl ViewerApp {
                     self.request_shot(ctx, p, callback, true);
                     return;
                 }
+                Action::Labels(l) => {
+                    let Some(t) = self.labels.as_mut() else {
+                        return self.fail("labels: the volume shown is not a label map".into());
+                    };
+                    match l {
+                        LabelAction::ShowOnly(ids) => t.show_only(&ids),
+                        LabelAction::ShowAll => t.show_all(),
+                        LabelAction::Select(ids) => t.selected = ids.into_iter().collect(),
+                        LabelAction::Opacity(o) => t.default_opacity = o,
+                        LabelAction::Table(path) => {
+                            match std::fs::read(&path)
+                                .map_err(|e| e.to_string())
+                                .and_then(|b| {
+                                    brickray::LabelTable::from_file_bytes(&b)
+                                        .map_err(|e| e.to_string())
+                                }) {
+                                Ok(table) => *t = table,
+                                Err(e) => return self.fail(format!("{}: {e}", path.display())),
+                            }
+                        }
+                    }
+                    self.tf_dirty = true;
+                }
                 Action::Quit => {
                     self.finish_script(Ok(()));
                     ctx.send_viewport_cmd(egui::ViewportCommand::Close);
