@@ -56,7 +56,8 @@ enum Command {
         /// Apron voxels on each side of a brick.
         #[arg(long, default_value_t = 2)]
         apron: u32,
-        /// Filter of inner nodes: `average` (intensities) or `max` (labels).
+        /// Filter of inner nodes: `average` (intensities), `max`, or `mode`
+        /// (label maps are always filtered by the mode).
         #[arg(long, default_value = "average", value_parser = parse_filter)]
         filter: Filter,
         /// Store nodes whose values all lie below this raw value as empty
@@ -76,6 +77,12 @@ enum Command {
         /// axes with the finer voxel sides (docs/store-format.md).
         #[arg(long)]
         anisotropic: bool,
+        /// The input is a label map (u8, u16 or u32 ids; docs/labels.md):
+        /// coarser levels take the most frequent label of their children
+        /// and the store records it. A sidecar with `"kind": "labels"` or a
+        /// `labels` list says so itself.
+        #[arg(long)]
+        labels: bool,
     },
     /// Write any input as raw samples + a JSON sidecar (`<out>.json` and
     /// `<out>.raw`), streamed within the memory bound.
@@ -230,6 +237,7 @@ fn main() -> ExitCode {
             select,
             quiet,
             anisotropic,
+            labels,
         } => remove_temporaries_on_signals().and_then(|()| {
             let memory_bound = memory_mib.checked_mul(1 << 20).ok_or_else(|| {
                 StoreError::BadOption {
@@ -247,7 +255,7 @@ fn main() -> ExitCode {
                 progress: (!quiet).then(progress_bar),
                 anisotropic,
             };
-            cmd_build(&input, &output, &o, &select.options())
+            cmd_build(&input, &output, &o, &select.options(), labels)
         }),
         Command::Convert {
             input,
@@ -349,10 +357,16 @@ fn cmd_build(
     out: &std::path::Path,
     o: &BuildOptions,
     read: &ReadOptions,
+    labels: bool,
 ) -> Result<(), String> {
     let output = out.display();
     let mut reader =
         brickray_io::open_with(input, read).map_err(|e| StoreError::Input(e).to_string())?;
+    if labels && !reader.desc().kind.is_labels() {
+        reader = Box::new(
+            brickray_io::AsLabels::new(reader).map_err(|e| StoreError::Input(e).to_string())?,
+        );
+    }
     if o.progress.is_some() {
         for n in reader.notes() {
             eprintln!("{}: {n}", reader.format());
@@ -412,11 +426,12 @@ fn cmd_info_input(input: &std::path::Path, read: &ReadOptions) -> Result<(), Str
     let d = reader.desc();
     println!("input       {} ({})", input.display(), reader.format());
     println!(
-        "volume      {}x{}x{} {}, spacing {:?}, value range {:?}",
+        "volume      {}x{}x{} {}{}, spacing {:?}, value range {:?}",
         d.dims[0],
         d.dims[1],
         d.dims[2],
         d.dtype.name(),
+        if d.kind.is_labels() { " labels" } else { "" },
         d.spacing,
         d.value_range
     );
@@ -450,11 +465,12 @@ fn cmd_info(store: &Store, bins: usize) -> Result<(), String> {
     let d = store.desc();
     println!("store       {path}");
     println!(
-        "volume      {}x{}x{} {}, spacing {:?}, value range {:?}",
+        "volume      {}x{}x{} {}{}, spacing {:?}, value range {:?}",
         d.dims[0],
         d.dims[1],
         d.dims[2],
         d.dtype.name(),
+        if d.kind.is_labels() { " labels" } else { "" },
         d.spacing,
         d.value_range
     );
