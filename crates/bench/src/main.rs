@@ -11,6 +11,7 @@ mod build;
 mod cut;
 mod formats;
 mod host;
+mod labels;
 mod lod;
 mod octant;
 mod ooc;
@@ -386,6 +387,17 @@ enum Suite {
         #[arg(long)]
         charts: Option<String>,
     },
+    /// Label maps: cost against intensity DVR of the same view, hidden-label
+    /// skipping, error against the reference and of coarse levels (needs
+    /// ../shared/data).
+    Labels {
+        /// Image side in pixels of the timed frames (default 256).
+        #[arg(long, value_parser = image_side)]
+        size: Option<u32>,
+        /// Interleaved rounds (default 5).
+        #[arg(long, value_parser = at_least_one::<usize>)]
+        rounds: Option<usize>,
+    },
     /// u8 volumes: exact interpolation vs 8-bit texels.
     U8 {
         /// Image side in pixels (default 512).
@@ -416,6 +428,7 @@ fn main() -> ExitCode {
         Suite::Host { .. } => host::run(rest),
         Suite::Stability { .. } => stability::run(rest),
         Suite::U8 { .. } => u8::run(rest),
+        Suite::Labels { .. } => labels::run(rest),
         Suite::Lod { .. } => lod::run(rest),
         Suite::Visibility { .. } => visibility::run(rest),
     };

@@ -1,0 +1,314 @@
+//! The `labels` suite: what label maps cost and how far their coarse levels
+//! stray (docs/labels.md).
+//!
+//! The two shared label maps (the Brodmann atlas, u8 181x217x181, and the
+//! cells3d nuclei, u32 256x256x60), drawn through the default label table:
+//!
+//! * **cost**: ms per frame of the label map against the same ids drawn as an
+//!   intensity volume (trilinear, the same table as its TF) in the same view,
+//!   in core and out of core at the finest level, interleaved round by round
+//!   (`--rounds`, 5) at `--size` px (256), median of `prepare + submit +
+//!   wait`; samples per ray;
+//! * **hidden labels**: three labels shown, the rest hidden: samples per ray
+//!   and ms with empty-space skipping against without;
+//! * **error**: against the CPU reference at its step (1/8 voxel) at 128 px,
+//!   in core and out of core at the finest level; out of core at 1, 2 and 4
+//!   px against the finest level, and the same ids as an averaged intensity
+//!   store at 2 px.
+//!
+//! Overlays of a label map on its image and smooth label boundaries are not
+//! implemented yet: `overlay_cost_ratio` and `smooth_cost_ratio` are null.
+//!
+//! `cargo run --release -p brickray-bench -- labels [--size PX] [--rounds N]`
+
+use crate::runner::median;
+use crate::{Figures, arg};
+use brickray_core::labels::{LabelTable, label_value_range};
+use brickray_core::{
+    BrickSource, Camera, RenderMode, RenderSettings, TransferFunction, Volume, VolumeDesc,
+    VolumeFrame, VolumeKind,
+};
+use brickray_harness::predict::{draw, samples_per_ray};
+use brickray_harness::{GpuContext, Offscreen, draw_frame, draw_until_settled};
+use brickray_reference::{DEFAULT_STEP_FACTOR, ReferenceOptions, compare, render_reference};
+use brickray_render::{FrameDesc, OutOfCoreConfig, VolumeRenderer};
+use serde_json::json;
+use std::sync::Arc;
+
+/// The error images' side.
+const ERROR_SIZE: u32 = 128;
+
+pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
+    let size: u32 = arg(args, "--size", 256)?;
+    let rounds: usize = arg(args, "--rounds", 5)?;
+    let gpu = GpuContext::new().map_err(|e| e.to_string())?;
+    println!("adapter: {}", gpu.describe());
+    println!("timing at {size}x{size}, {rounds} interleaved rounds; errors at {ERROR_SIZE} px");
+    let dir = tempfile::tempdir().map_err(|e| e.to_string())?;
+    let mut fig = Figures::new();
+    let (mut finest_min, mut two_px_min, mut cost_max, mut ooc_cost_max) =
+        (f64::INFINITY, f64::INFINITY, 0.0f64, 0.0f64);
+    let mut skip_ratio_max = 0.0f64;
+    println!(
+        "| map | labels / intensity ms (in core) | (out of core) | samples per ray | hidden: samples with / without skipping | finest dB (in core, ooc) | 1 / 2 / 4 px vs finest dB | averaged 2 px dB |"
+    );
+    println!("|---|---:|---:|---:|---:|---:|---:|---:|");
+    for (name, dirname) in [
+        ("brodmann", "mricron_brodmann_labels"),
+        ("nuclei", "cells3d_nuclei_labels"),
+    ] {
+        let path = brickray_harness::shared_data_dir()
+            .ok_or("the labels suite needs ../shared/data (the shared label maps)")?
+            .join("labels")
+            .join(dirname)
+            .join(format!("{dirname}.json"));
+        let vol = brickray_io::read_volume(&path).map_err(|e| e.to_string())?;
+        if !vol.desc().kind.is_labels() {
+            return Err(format!("{}: not a label map", path.display()));
+        }
+        let intensity = as_intensity(&vol)?;
+        let d = vol.desc();
+        let frame = VolumeFrame::centered(d.dims, d.spacing);
+        let camera = Camera::orbit(frame.center(), 2.2, 0.8, 0.45);
+        let table = LabelTable::default();
+        let tf = table.to_transfer_function();
+        let settings = RenderSettings {
+            mode: RenderMode::Dvr,
+            ..Default::default()
+        };
+        let big = Offscreen::new(&gpu.device, size, size);
+        let desc = FrameDesc {
+            settings,
+            ..FrameDesc::new(camera, frame, size, size)
+        };
+
+        // Cost, in core and out of core, interleaved.
+        let mut incore = Vec::new();
+        for v in [&vol, &intensity] {
+            let mut r = renderer(&gpu, &tf)?;
+            r.set_volume(&gpu.device, &gpu.queue, v)
+                .map_err(|e| e.to_string())?;
+            incore.push(r);
+        }
+        let (in_ms, samples) = timed(&gpu, &mut incore, &big, &desc, rounds)?;
+        let mut ooc = Vec::new();
+        for v in [&vol, &intensity] {
+            let mut r = renderer(&gpu, &tf)?;
+            r.set_volume_source(
+                &gpu.device,
+                &gpu.queue,
+                store(v, dir.path(), name)?,
+                finest(0.0),
+            )
+            .map_err(|e| e.to_string())?;
+            draw_until_settled(&gpu, &mut r, &big, &desc, 300)
+                .map_err(|e| e.to_string())?
+                .ok_or("out of core did not settle")?;
+            ooc.push(r);
+        }
+        let (ooc_ms, _) = timed(&gpu, &mut ooc, &big, &desc, rounds)?;
+        let cost = in_ms[0] / in_ms[1];
+        let ooc_cost = ooc_ms[0] / ooc_ms[1];
+
+        // Hidden labels: three shown.
+        let present = brickray_core::labels::labels_present(&vol);
+        let keep: Vec<u32> = present
+            .iter()
+            .copied()
+            .filter(|&i| i != 0)
+            .take(3)
+            .collect();
+        let mut hidden = table.clone();
+        hidden.show_only(&keep);
+        let r = &mut incore[0];
+        r.set_transfer_function(&gpu.device, &gpu.queue, &hidden.to_transfer_function())
+            .map_err(|e| e.to_string())?;
+        let mut hidden_samples = Vec::new();
+        for ess in [true, false] {
+            let mut s = settings;
+            s.accel.empty_space_skipping = ess;
+            let desc = FrameDesc {
+                settings: s,
+                ..desc.clone()
+            };
+            let f = draw(&gpu, r, &big, &desc).map_err(|e| e.to_string())?;
+            hidden_samples.push(samples_per_ray(&f.samples));
+        }
+        r.set_transfer_function(&gpu.device, &gpu.queue, &tf)
+            .map_err(|e| e.to_string())?;
+        let skip_ratio = hidden_samples[0] / hidden_samples[1].max(1e-9);
+
+        // Error against the reference at its step, and coarse levels.
+        let fine = RenderSettings {
+            step_factor: DEFAULT_STEP_FACTOR,
+            ..settings
+        };
+        let small = Offscreen::new(&gpu.device, ERROR_SIZE, ERROR_SIZE);
+        let sdesc = FrameDesc {
+            settings: fine,
+            ..FrameDesc::new(camera, frame, ERROR_SIZE, ERROR_SIZE)
+        };
+        let reference = render_reference(
+            &vol,
+            &frame,
+            &tf,
+            &camera,
+            &fine,
+            &ReferenceOptions::new(ERROR_SIZE, ERROR_SIZE),
+        )
+        .to_rgba8([0.0; 3]);
+        draw_frame(
+            &gpu,
+            &mut incore[0],
+            &small,
+            &sdesc,
+            Some(wgpu::Color::BLACK),
+        )
+        .map_err(|e| e.to_string())?;
+        let in_db = compare(&small.read_color(&gpu), &reference, ERROR_SIZE, ERROR_SIZE).psnr_db;
+        let mut levels = Vec::new();
+        let mut finest_img = Vec::new();
+        for (v, tol) in [
+            (&vol, 0.0f32),
+            (&vol, 1.0),
+            (&vol, 2.0),
+            (&vol, 4.0),
+            (&intensity, 2.0),
+        ] {
+            let mut r = renderer(&gpu, &tf)?;
+            r.set_volume_source(
+                &gpu.device,
+                &gpu.queue,
+                store(v, dir.path(), name)?,
+                finest(tol),
+            )
+            .map_err(|e| e.to_string())?;
+            draw_until_settled(&gpu, &mut r, &small, &sdesc, 300)
+                .map_err(|e| e.to_string())?
+                .ok_or("out of core did not settle")?;
+            let img = small.read_color(&gpu);
+            if finest_img.is_empty() {
+                finest_img = img;
+                levels.push(compare(&finest_img, &reference, ERROR_SIZE, ERROR_SIZE).psnr_db);
+            } else {
+                levels.push(compare(&img, &finest_img, ERROR_SIZE, ERROR_SIZE).psnr_db);
+            }
+        }
+        println!(
+            "| {name} | {cost:.3} ({:.1} / {:.1} ms) | {ooc_cost:.3} ({:.1} / {:.1} ms) | {:.1} / {:.1} | {:.1} / {:.1} | {in_db:.1}, {:.1} | {:.1} / {:.1} / {:.1} | {:.1} |",
+            in_ms[0],
+            in_ms[1],
+            ooc_ms[0],
+            ooc_ms[1],
+            samples[0],
+            samples[1],
+            hidden_samples[0],
+            hidden_samples[1],
+            levels[0],
+            levels[1],
+            levels[2],
+            levels[3],
+            levels[4]
+        );
+        finest_min = finest_min.min(in_db).min(levels[0]);
+        two_px_min = two_px_min.min(levels[2]);
+        cost_max = cost_max.max(cost);
+        ooc_cost_max = ooc_cost_max.max(ooc_cost);
+        skip_ratio_max = skip_ratio_max.max(skip_ratio);
+        fig.insert(format!("{name}_ms_labels_incore"), json!(in_ms[0]));
+        fig.insert(format!("{name}_ms_intensity_incore"), json!(in_ms[1]));
+        fig.insert(format!("{name}_ms_labels_ooc"), json!(ooc_ms[0]));
+        fig.insert(format!("{name}_ms_intensity_ooc"), json!(ooc_ms[1]));
+        fig.insert(format!("{name}_samples_per_ray"), json!(samples[0]));
+        fig.insert(
+            format!("{name}_hidden_skip_sample_ratio"),
+            json!(skip_ratio),
+        );
+        fig.insert(format!("{name}_psnr_incore_db"), json!(in_db));
+        fig.insert(format!("{name}_psnr_ooc_finest_db"), json!(levels[0]));
+        fig.insert(format!("{name}_psnr_1px_db"), json!(levels[1]));
+        fig.insert(format!("{name}_psnr_2px_db"), json!(levels[2]));
+        fig.insert(format!("{name}_psnr_4px_db"), json!(levels[3]));
+        fig.insert(format!("{name}_psnr_averaged_2px_db"), json!(levels[4]));
+    }
+    fig.insert("psnr_finest_db_min".into(), json!(finest_min));
+    fig.insert("psnr_2px_db_min".into(), json!(two_px_min));
+    fig.insert("label_cost_ratio_max".into(), json!(cost_max));
+    fig.insert("label_cost_ratio_ooc_max".into(), json!(ooc_cost_max));
+    fig.insert("hidden_skip_sample_ratio_max".into(), json!(skip_ratio_max));
+    fig.insert("overlay_cost_ratio".into(), json!(null));
+    fig.insert("smooth_cost_ratio".into(), json!(null));
+    fig.insert("image_size".into(), json!(size));
+    fig.insert("rounds".into(), json!(rounds));
+    fig.insert("adapter".into(), json!(gpu.adapter.get_info().name));
+    Ok(fig)
+}
+
+/// The same ids as an intensity volume over the label value range (what
+/// brickray drew before it knew labels: trilinear, averaged levels).
+fn as_intensity(vol: &Volume) -> Result<Volume, String> {
+    let desc = VolumeDesc {
+        kind: VolumeKind::Intensity,
+        value_range: label_value_range(),
+        ..vol.desc().clone()
+    };
+    Volume::new(desc, vol.data().clone()).map_err(|e| e.to_string())
+}
+
+fn renderer(gpu: &GpuContext, tf: &TransferFunction) -> Result<VolumeRenderer, String> {
+    let mut r = VolumeRenderer::new(&gpu.device, brickray_harness::target_desc())
+        .map_err(|e| e.to_string())?;
+    r.set_transfer_function(&gpu.device, &gpu.queue, tf)
+        .map_err(|e| e.to_string())?;
+    Ok(r)
+}
+
+/// Out of core at `tolerance_px`, with room for every brick.
+fn finest(tolerance_px: f32) -> OutOfCoreConfig {
+    OutOfCoreConfig {
+        tolerance_px,
+        upload_budget_bytes: 1 << 30,
+        ..Default::default()
+    }
+}
+
+fn store(vol: &Volume, dir: &std::path::Path, name: &str) -> Result<Arc<dyn BrickSource>, String> {
+    let path = dir.join(format!("{name}-{:?}.brs", vol.desc().kind));
+    if !path.exists() {
+        let mut reader = brickray_io::MemoryReader::new(vol.clone(), "memory");
+        let options = brickray_store::BuildOptions {
+            brick: 16,
+            ..Default::default()
+        };
+        brickray_store::build(&mut reader, &path, &options).map_err(|e| e.to_string())?;
+    }
+    Ok(Arc::new(
+        brickray_store::open(&path).map_err(|e| e.to_string())?,
+    ))
+}
+
+/// Median ms per frame of each renderer, interleaved round by round (after a
+/// warm-up round), and the samples per ray of each.
+fn timed(
+    gpu: &GpuContext,
+    renderers: &mut [VolumeRenderer],
+    target: &Offscreen,
+    desc: &FrameDesc<'_>,
+    rounds: usize,
+) -> Result<(Vec<f64>, Vec<f64>), String> {
+    let n = renderers.len();
+    let mut times = vec![Vec::new(); n];
+    let mut samples = vec![0.0; n];
+    for round in 0..=rounds {
+        for k in 0..n {
+            let i = (k + round) % n;
+            let f = draw(gpu, &mut renderers[i], target, desc).map_err(|e| e.to_string())?;
+            if round > 0 {
+                times[i].push(f.ms);
+            } else {
+                samples[i] = samples_per_ray(&f.samples);
+            }
+        }
+    }
+    Ok((times.iter().map(|t| median(t)).collect(), samples))
+}
