@@ -298,3 +298,101 @@ fn float_volumes_are_not_label_maps() {
     let e = labels::label_volume([2, 2, 2], [1.0; 3], v).unwrap_err();
     assert!(e.to_string().contains("u8, u16 or u32"), "{e}");
 }
+
+/// Picks 1,000 pixels (a fixed pseudo-random set) on the GPU and finds the
+/// labels under them; the CPU reference's depth image, unprojected the same
+/// way, gives its own. Where the reference's 8 neighbouring pixels show the
+/// same label as the pixel (not on a boundary), the two agree everywhere;
+/// returns (agreeing, compared, on a boundary and disagreeing).
+fn check_picks(name: &str, vol: &Volume) -> (usize, usize, usize) {
+    let g = gpu();
+    let d = vol.desc();
+    let frame = VolumeFrame::centered(d.dims, d.spacing);
+    let tf = table().to_transfer_function();
+    let camera = Camera::orbit(frame.center(), 2.0, 0.6, 0.3);
+    // Depth where the opacity reaches 0.25: no exact tie with the table's
+    // per-step opacities.
+    let s = RenderSettings {
+        depth_opacity: 0.25,
+        ..settings()
+    };
+    let reference = render_reference(
+        vol,
+        &frame,
+        &tf,
+        &camera,
+        &s,
+        &ReferenceOptions::new(SIZE, SIZE),
+    );
+    let label_of = |depth: f32, px: [u32; 2]| {
+        camera
+            .unproject(&frame, [SIZE, SIZE], px, depth)
+            .map(|(tex, _)| labels::label_at(vol, tex))
+    };
+    let ref_label = |x: i64, y: i64| -> Option<u32> {
+        if x < 0 || y < 0 || x >= SIZE as i64 || y >= SIZE as i64 {
+            return None;
+        }
+        let depth = reference.depth[(y * SIZE as i64 + x) as usize];
+        label_of(depth, [x as u32, y as u32])
+    };
+    let mut h = 0x2545_f491_4f6c_dd1du64;
+    let pixels: Vec<[u32; 2]> = (0..1000)
+        .map(|_| {
+            h ^= h << 13;
+            h ^= h >> 7;
+            h ^= h << 17;
+            [(h % SIZE as u64) as u32, ((h >> 20) % SIZE as u64) as u32]
+        })
+        .collect();
+    let target = Offscreen::new(&g.device, SIZE, SIZE);
+    let mut r = VolumeRenderer::new(&g.device, target_desc()).unwrap();
+    r.set_volume(&g.device, &g.queue, vol).unwrap();
+    r.set_transfer_function(&g.device, &g.queue, &tf).unwrap();
+    r.request_picks(&pixels).unwrap();
+    let desc = FrameDesc {
+        settings: s,
+        ..FrameDesc::new(camera, frame, SIZE, SIZE)
+    };
+    let mut picks = Vec::new();
+    for _ in 0..5 {
+        brickray_harness::draw_frame(g, &mut r, &target, &desc, None).unwrap();
+        picks.extend(r.take_picks());
+        if !picks.is_empty() {
+            break;
+        }
+    }
+    assert_eq!(picks.len(), pixels.len(), "every pick read back");
+    let (mut agree, mut compared, mut boundary_misses) = (0, 0, 0);
+    for p in &picks {
+        let gpu_label = p.point.map(|q| labels::label_at(vol, q.texture));
+        let [x, y] = p.pixel.map(i64::from);
+        let mine = ref_label(x, y);
+        let interior = (-1..=1).all(|dy| (-1..=1).all(|dx| ref_label(x + dx, y + dy) == mine));
+        if interior {
+            compared += 1;
+            assert_eq!(
+                gpu_label, mine,
+                "{name}: pixel {:?} picks {gpu_label:?}, the reference {mine:?}",
+                p.pixel
+            );
+            agree += 1;
+        } else if gpu_label != mine {
+            boundary_misses += 1;
+        }
+    }
+    eprintln!(
+        "picks {name}: {agree} of {compared} interior pixels agree; {boundary_misses} of {} boundary pixels differ",
+        picks.len() - compared
+    );
+    assert!(compared > 500, "{name}: only {compared} interior pixels");
+    (agree, compared, boundary_misses)
+}
+
+#[test]
+fn picks_find_the_reference_labels() {
+    check_picks("phantom", &phantom(64));
+    if let Some(vol) = shared_label_map("mricron_brodmann_labels") {
+        check_picks("brodmann", &vol);
+    }
+}

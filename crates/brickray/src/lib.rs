@@ -62,6 +62,7 @@ pub use brickray_render::{
 pub use brickray_render::{
     FeedbackStats, OcclusionStats, UsageFrame, VisibilityConfig, VisibilityCounts, VisibilityPolicy,
 };
+pub use brickray_render::{MAX_PICKS, Pick, PickPoint};
 pub use brickray_render::{
     Prediction, PredictionCounts, PredictionError, PredictionFrame, TraversalClass,
 };

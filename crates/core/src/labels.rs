@@ -152,6 +152,17 @@ pub fn relabel_dense(volume: &Volume) -> Result<(Volume, Vec<u32>), LabelError> 
     Ok((vol, ids))
 }
 
+/// The label of the voxel at volume texture coordinates `tex` (0..1 over the
+/// volume, the nearest voxel, clamped to the grid): what a pick lands on.
+pub fn label_at(volume: &Volume, tex: [f64; 3]) -> u32 {
+    let d = volume.dims();
+    let i = [0, 1, 2].map(|a| ((tex[a] * d[a] as f64).floor() as i64).clamp(0, d[a] as i64 - 1));
+    let [nx, ny, _] = d.map(|v| v as i64);
+    volume
+        .data()
+        .label((i[0] + nx * (i[1] + ny * i[2])) as usize)
+}
+
 /// The labels present in a label volume, in increasing order.
 pub fn labels_present(volume: &Volume) -> Vec<u32> {
     let data = volume.data();

@@ -137,6 +137,14 @@ pub enum PrepareError {
     /// No transfer function has been set.
     #[error("no transfer function set: call set_transfer_function first")]
     NoTransferFunction,
+    /// More pixels queued for picking than one frame reads back.
+    #[error("{requested} pixels queued for picking: at most {max} a frame")]
+    TooManyPicks {
+        /// Pixels queued.
+        requested: usize,
+        /// Most a frame picks.
+        max: usize,
+    },
     /// The viewport is empty or larger than the device's 2D texture limit.
     #[error("viewport {width}x{height} is empty or exceeds the device limit {limit}")]
     BadViewport {

@@ -175,6 +175,8 @@ pub(crate) struct Outputs {
     pub(crate) size: [u32; 2],
     pub(crate) color: wgpu::TextureView,
     pub(crate) depth: wgpu::TextureView,
+    /// The depth output (`COPY_SRC`: picks read it back).
+    pub(crate) depth_tex: wgpu::Texture,
     pub(crate) samples: wgpu::Texture,
     samples_view: wgpu::TextureView,
     /// Changes whenever the outputs are recreated (bind groups holding them follow).
@@ -566,7 +568,11 @@ impl FrameState {
         };
         let none = wgpu::TextureUsages::empty();
         let color = make("brickray-render ray colour", OUTPUT_FORMATS[0], none)?;
-        let depth = make("brickray-render ray depth", OUTPUT_FORMATS[1], none)?;
+        let depth = make(
+            "brickray-render ray depth",
+            OUTPUT_FORMATS[1],
+            wgpu::TextureUsages::COPY_SRC,
+        )?;
         let samples = make(
             "brickray-render ray samples",
             OUTPUT_FORMATS[2],
@@ -577,6 +583,7 @@ impl FrameState {
             size,
             color: color.create_view(&Default::default()),
             depth: depth.create_view(&Default::default()),
+            depth_tex: depth,
             samples_view: samples.create_view(&Default::default()),
             samples,
             generation: self.generation,

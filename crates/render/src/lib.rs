@@ -32,6 +32,7 @@ mod gpu;
 mod group2;
 mod kernels;
 mod limits;
+mod pick;
 mod planner;
 mod predict;
 pub mod shaders;
@@ -51,6 +52,7 @@ pub use encoding::U8Filtering;
 pub use error::{GpuErrorKind, HostDepthError, PrepareError, RenderError};
 pub use frame::PredictionFrame;
 pub use limits::{OPTIONAL_FEATURES, OptionalFeature, optional_features, required_limits};
+pub use pick::{MAX_PICKS, Pick, PickPoint};
 pub use predict::{Prediction, PredictionCounts, PredictionError, TraversalClass};
 
 /// Slice views and the intensity window (GPU-free, from `brickray-core`).
@@ -114,6 +116,8 @@ pub struct VolumeRenderer {
     intensity: Option<Intensity>,
     /// The frame being prepared's intensity mapping and slice.
     mapping: Option<FrameMapping>,
+    /// Pixels to pick and their read-back ([`Self::request_picks`]).
+    picker: pick::Picker,
 }
 
 impl VolumeRenderer {
@@ -137,6 +141,7 @@ impl VolumeRenderer {
             targets,
             options,
             frame: FrameState::new(device)?,
+            picker: pick::Picker::new(device)?,
             tf: TfTables::new(device)?,
             kernels: Kernels::default(),
             compositor: Compositor::new(device, &targets)?,
@@ -584,6 +589,17 @@ impl VolumeRenderer {
         if let Some(b) = self.backend.as_mut() {
             b.get_mut().after_pass(queue, encoder);
         }
+        if let Some(out) = self.frame.outputs() {
+            let size = [desc.viewport.width, desc.viewport.height];
+            self.picker.record(
+                queue,
+                encoder,
+                &out.depth_tex,
+                desc.camera,
+                desc.frame,
+                size,
+            );
+        }
         self.prepared = Some(Prepared {
             viewport: desc.viewport,
             convention: desc.camera.depth,
@@ -594,6 +610,25 @@ impl VolumeRenderer {
             prediction,
         };
         Ok(self.last_frame)
+    }
+
+    /// Asks what lies under `pixels` (viewport coordinates): the next
+    /// [`prepare`](Self::prepare) copies their depth after its pass, and
+    /// [`take_picks`](Self::take_picks) returns them a frame or two later,
+    /// once the host's GPU has run that frame (never waited for). At most
+    /// [`MAX_PICKS`] pixels may be queued ([`PrepareError::TooManyPicks`]);
+    /// pixels outside the next frame's viewport are dropped.
+    pub fn request_picks(&mut self, pixels: &[[u32; 2]]) -> Result<(), PrepareError> {
+        self.picker.request(pixels)
+    }
+
+    /// The picks read back since the last call ([`Pick`]: the depth written
+    /// under the pixel and the point there, in volume texture coordinates
+    /// and world space, unprojected with the camera of the frame that drew
+    /// it). A label map's id there is
+    /// `brickray_core::labels::label_at(volume, point.texture)`.
+    pub fn take_picks(&mut self) -> Vec<Pick> {
+        self.picker.take()
     }
 
     /// Diagnostics for benchmarks and tests: an `R32Uint` texture (the viewport's

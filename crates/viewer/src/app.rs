@@ -107,6 +107,12 @@ pub(crate) struct ViewerApp {
     labels: Option<LabelTable>,
     label_ids: Vec<u32>,
     label_path: String,
+    /// The label map's voxels (in core), to name what a click picks.
+    label_volume: Option<Arc<brickray::Volume>>,
+    /// View pixels clicked (or scripted) to pick at the next frame.
+    pick_queue: Vec<[u32; 2]>,
+    /// Frames left to redraw while picks are read back.
+    pick_frames: u32,
 }
 
 impl std::fmt::Debug for ViewerApp {
@@ -187,6 +193,9 @@ impl ViewerApp {
             labels: None,
             label_ids: Vec::new(),
             label_path: "labels.json".into(),
+            label_volume: None,
+            pick_queue: Vec::new(),
+            pick_frames: 0,
         };
         if let Some(input) = startup.input {
             app.start_open(input);
@@ -217,9 +226,12 @@ impl ViewerApp {
         let vframe = VolumeFrame::centered(desc.dims, desc.spacing);
         let ooc = self.ooc;
         let streamed = matches!(loaded.volume, Opened::Streamed(_));
-        let label_ids = match &loaded.volume {
-            Opened::InCore(v) if desc.kind.is_labels() => brickray::core::labels::labels_present(v),
-            _ => Vec::new(),
+        let (label_ids, label_volume) = match &loaded.volume {
+            Opened::InCore(v) if desc.kind.is_labels() => (
+                brickray::core::labels::labels_present(v),
+                Some(Arc::new(v.clone())),
+            ),
+            _ => (Vec::new(), None),
         };
         self.with_gpu(frame, |device, queue, r| {
             match loaded.volume {
@@ -269,6 +281,7 @@ impl ViewerApp {
             self.labels = None;
         }
         self.label_ids = label_ids;
+        self.label_volume = label_volume;
         self.tf_dirty = true;
         self.messages.push(loaded.note.clone());
         if !reopened || self.camera.is_none() {
@@ -317,6 +330,49 @@ impl ViewerApp {
         }
     }
 
+    /// Picks read back: on a label map a click selects the label under it
+    /// (or clears the selection on the background); the message says which.
+    fn apply_picks(&mut self, frame: &eframe::Frame) {
+        if !self.pick_queue.is_empty() {
+            let q = std::mem::take(&mut self.pick_queue);
+            if let Some(Err(e)) = self.with_gpu(frame, |_, _, r| r.renderer.request_picks(&q)) {
+                self.messages.push(format!("pick: {e}"));
+            }
+            // (Read back a frame or two later: keep drawing until then.)
+            self.pick_frames = 8;
+        }
+        self.pick_frames = self.pick_frames.saturating_sub(1);
+        let picks = self
+            .with_gpu(frame, |_, _, r| r.renderer.take_picks())
+            .unwrap_or_default();
+        for p in picks {
+            let (Some(t), Some(point)) = (self.labels.as_mut(), p.point) else {
+                if let Some(t) = self.labels.as_mut() {
+                    t.selected.clear();
+                    self.tf_dirty = true;
+                }
+                continue;
+            };
+            let Some(vol) = &self.label_volume else {
+                self.messages
+                    .push("picking a streamed label map is not supported yet".into());
+                continue;
+            };
+            let id = brickray::core::labels::label_at(vol, point.texture);
+            let w = point.world;
+            if t.background == Some(id) {
+                t.selected.clear();
+            } else if !t.selected.remove(&id) {
+                t.selected.insert(id);
+            }
+            self.tf_dirty = true;
+            self.messages.push(format!(
+                "label {id} at ({:.1}, {:.1}, {:.1}); selected {:?}",
+                w[0], w[1], w[2], t.selected
+            ));
+        }
+    }
+
     /// The settings of the current mode.
     fn frame_settings(&self) -> RenderSettings {
         let mut s = self.settings;
@@ -334,6 +390,7 @@ impl ViewerApp {
 
     /// Applies pending TF and budget changes.
     fn apply(&mut self, frame: &eframe::Frame) {
+        self.apply_picks(frame);
         if self.tf_dirty && self.shown.is_some() {
             self.tf_dirty = false;
             // A label map is drawn through its label table.
@@ -737,6 +794,17 @@ impl ViewerApp {
                 }
                 self.shown_slices.clear();
                 flying = self.camera_input(ui, &response);
+                // A click on a label map picks the label under it.
+                if self.labels.is_some()
+                    && let Some(pos) = response
+                        .interact_pointer_pos()
+                        .filter(|_| response.clicked())
+                {
+                    let ppp = ui.ctx().pixels_per_point();
+                    let p = (pos - rect.min) * ppp;
+                    self.pick_queue
+                        .push([p.x.max(0.0) as u32, p.y.max(0.0) as u32]);
+                }
                 if let (Some(s), Some(c)) = (&self.shown, &self.camera) {
                     let cb = VolumeCallback {
                         rect,
@@ -761,7 +829,12 @@ impl ViewerApp {
         self.step_script(&ctx, converged, callback.as_ref());
 
         // Redraw only while the image can change.
-        self.continuous = self.script.is_some() || self.shot.is_some() || wants_redraw || flying;
+        self.continuous = self.script.is_some()
+            || self.shot.is_some()
+            || wants_redraw
+            || flying
+            || self.pick_frames > 0
+            || !self.pick_queue.is_empty();
         if self.continuous {
             ctx.request_repaint();
         } else if self.opening.is_some() {

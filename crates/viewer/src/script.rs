@@ -111,6 +111,9 @@ pub(crate) enum Action {
     Quit,
     /// A label map's table.
     Labels(LabelAction),
+    /// A click on the 3D view at view pixel (x, y): on a label map, selects
+    /// the label there (a frame or two later).
+    Pick([u32; 2]),
 }
 
 /// What a `labels ...` script line does to the shown label map's table.
@@ -364,6 +367,13 @@ pub(crate) fn parse(text: &str) -> Result<Vec<Action>, ScriptError> {
                 }
                 Action::Window(WindowChoice::CentreWidth(c, w))
             }
+            ["pick", x, y] => {
+                let p = |v: &str| {
+                    v.parse::<u32>()
+                        .map_err(|_| err("expected view pixels x y"))
+                };
+                Action::Pick([p(x)?, p(y)?])
+            }
             ["labels", "show-all"] => Action::Labels(LabelAction::ShowAll),
             ["labels", "select", "none"] => Action::Labels(LabelAction::Select(Vec::new())),
             ["labels", "opacity", v] => {
@@ -523,9 +533,11 @@ mod tests {
             labels select none
             labels opacity 0.25
             labels table atlas.nii.lut
+            pick 10 20
         ";
         let a = parse(text).unwrap();
-        assert_eq!(a.len(), 41);
+        assert_eq!(a.len(), 42);
+        assert_eq!(a[41], Action::Pick([10, 20]));
         assert_eq!(a[35], Action::Labels(LabelAction::ShowOnly(vec![3, 5, 7])));
         assert_eq!(a[36], Action::Labels(LabelAction::ShowAll));
         assert_eq!(a[37], Action::Labels(LabelAction::Select(vec![9])));

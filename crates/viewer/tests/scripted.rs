@@ -819,3 +819,80 @@ fn label_map_with_its_colour_table_matches_the_library() {
         .unwrap_or_else(|e| panic!("{e}"));
     eprintln!("viewer label map: {cmp}");
 }
+
+/// A click selects: the Brodmann atlas seen from close by, a scripted click
+/// (`pick`) at view pixel (100, 100) selects the label there (the others
+/// fade to 0), and the screenshot equals the library's image with the label
+/// the library's own pick finds at that pixel selected.
+#[test]
+#[cfg_attr(
+    no_shared_data,
+    ignore = "needs ../shared/data (the shared volumes), absent when the tests were built"
+)]
+#[cfg_attr(
+    no_display,
+    ignore = "needs an X server (DISPLAY unset when the tests were built; scripts/test.sh starts Xvfb)"
+)]
+fn a_click_selects_the_label_under_it() {
+    let Some(dir) = windowed_test_dir() else {
+        return;
+    };
+    let Some(data) = brickray_harness::shared_data_dir() else {
+        return;
+    };
+    let atlas = data.join("labels/mricron_brodmann_labels/mricron_brodmann_labels.json");
+    let png = dir.path().join("picked.png");
+    let script = format!(
+        "open {atlas}\nbackground 0 0 0\noverlays off\ncamera orbit 30 15 0.5\nwait converged\n\
+         pick 100 100\nwait 4\nscreenshot {png}\nquit\n",
+        atlas = atlas.display(),
+        png = png.display(),
+    );
+    run_script(dir.path(), &script, Duration::from_secs(120));
+    let volume = brickray::io::read_volume(&atlas).expect("the atlas");
+    let (shot, w, h) = read_png(&png);
+    let (camera, _, _) = sidecar(&png);
+    let gpu = brickray_harness::shared_gpu();
+    let mut renderer =
+        VolumeRenderer::new(&gpu.device, brickray_harness::target_desc()).expect("renderer");
+    renderer
+        .set_volume(&gpu.device, &gpu.queue, &volume)
+        .expect("volume");
+    let mut table = brickray::LabelTable::default();
+    renderer
+        .set_transfer_function(&gpu.device, &gpu.queue, &table.to_transfer_function())
+        .expect("table");
+    let target = brickray_harness::Offscreen::new(&gpu.device, w, h);
+    let d = volume.desc();
+    let desc = FrameDesc::new(camera, VolumeFrame::centered(d.dims, d.spacing), w, h);
+    renderer.request_picks(&[[100, 100]]).expect("pick");
+    let mut picks = Vec::new();
+    for _ in 0..4 {
+        brickray_harness::draw_frame(gpu, &mut renderer, &target, &desc, None).expect("draw");
+        picks.extend(renderer.take_picks());
+    }
+    let point = picks
+        .first()
+        .and_then(|p| p.point)
+        .expect("the pixel shows the atlas");
+    let id = brickray::core::labels::label_at(&volume, point.texture);
+    assert_ne!(id, 0, "a label, not the background");
+    table.selected.insert(id);
+    renderer
+        .set_transfer_function(&gpu.device, &gpu.queue, &table.to_transfer_function())
+        .expect("table");
+    brickray_harness::draw_frame(gpu, &mut renderer, &target, &desc, Some(wgpu::Color::BLACK))
+        .expect("draw");
+    let lib = target.read_color(gpu);
+    let lit = shot
+        .chunks(4)
+        .filter(|p| p[..3].iter().any(|&c| c > 20))
+        .count();
+    assert!(
+        lit > 50,
+        "only {lit} lit pixels: the selected label is drawn"
+    );
+    let cmp = brickray_reference::assert_close("viewer-picked", &shot, &lib, w, h, MIN_PSNR_DB)
+        .unwrap_or_else(|e| panic!("{e}"));
+    eprintln!("viewer click on label {id}: {cmp}");
+}

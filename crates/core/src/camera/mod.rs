@@ -289,6 +289,33 @@ impl Camera {
         }
     }
 
+    /// The point seen at clip depth `depth` under pixel `(px, py)` of a
+    /// `width x height` view of `frame` (pixel centres at +0.5): its volume
+    /// texture coordinates (0..1 over the volume) and world position; `None`
+    /// at the far end (nothing drawn there) or for a depth that is not
+    /// finite. What a renderer's pick returns, and its CPU twin.
+    pub fn unproject(
+        &self,
+        frame: &VolumeFrame,
+        [width, height]: [u32; 2],
+        [px, py]: [u32; 2],
+        depth: f32,
+    ) -> Option<([f64; 3], [f64; 3])> {
+        if !depth.is_finite() || depth == self.depth.far_value() || width == 0 || height == 0 {
+            return None;
+        }
+        let rays = self.rays(width as f64 / height as f64);
+        let inv_model = frame.model.as_dmat4().inverse();
+        let ray = rays.pixel_ray(&inv_model, px as f64, py as f64, width, height);
+        let t = rays.t_at_depth(&ray, depth as f64);
+        t.is_finite().then(|| {
+            (
+                (ray.tex_origin + ray.tex_dir * t).to_array(),
+                (ray.origin + ray.dir * t).to_array(),
+            )
+        })
+    }
+
     /// The f64 ray generator of this camera for a viewport aspect ratio.
     pub fn rays(&self, aspect: f64) -> RayGen {
         let eye = self.eye.as_dvec3();

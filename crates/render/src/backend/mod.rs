@@ -7,7 +7,7 @@ pub(crate) mod feedback;
 pub(crate) mod incore;
 pub(crate) mod occlusion;
 pub(crate) mod ooc;
-mod readback;
+pub(crate) mod readback;
 
 pub use feedback::FeedbackStats;
 pub(crate) use incore::InCore;

@@ -264,6 +264,7 @@ impl ViewerApp {
                     self.request_shot(ctx, p, callback, true);
                     return;
                 }
+                Action::Pick(px) => self.pick_queue.push(px),
                 Action::Labels(l) => {
                     let Some(t) = self.labels.as_mut() else {
                         return self.fail("labels: the volume shown is not a label map".into());
