@@ -52,7 +52,8 @@
 //! centred frame it is the direction of the physical gradient `g_i / spacing_i`.
 //!
 //! [`render_slice`] is the reference of slice views: exact trilinear samples
-//! of a plane or a slab (max or mean), mapped through a window and colour map.
+//! of a plane or a slab (max or mean), mapped through a window and colour map;
+//! [`render_label_slice`] that of a label map's slices (nearest, label table).
 //!
 //! # Metrics
 //!
@@ -75,7 +76,7 @@ pub use metrics::{
     test_output_dir,
 };
 pub use render::{DEFAULT_STEP_FACTOR, EXACT_STEP_FACTOR, ReferenceOptions, render_reference};
-pub use slice::{SliceReferenceError, render_slice};
+pub use slice::{SliceReferenceError, render_label_slice, render_slice};
 pub use ssim::ssim;
 pub use temporal::{
     CHANGE_EPS, TemporalError, TemporalOptions, TemporalReport, temporal_stability,

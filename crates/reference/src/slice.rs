@@ -6,7 +6,9 @@
 //! with no sample in the box is transparent.
 
 use crate::Image;
-use brickray_core::{Intensity, SlabMode, SliceError, SliceView, Volume, VolumeFrame, WindowError};
+use brickray_core::{
+    Intensity, SlabMode, SliceError, SliceView, TransferFunction, Volume, VolumeFrame, WindowError,
+};
 use rayon::prelude::*;
 
 /// Why the reference cannot draw a slice.
@@ -30,23 +32,63 @@ pub fn render_slice(
     width: u32,
     height: u32,
 ) -> Result<Image, SliceReferenceError> {
+    let range = vol.desc().value_range;
+    // Checked once: every pixel maps through it.
+    intensity.map(0.0, range)?;
+    slab_pixels(vol, frame, slice, width, height, |samples, mode| {
+        let v = match mode {
+            SlabMode::Max => samples.iter().copied().fold(f64::NEG_INFINITY, f64::max),
+            SlabMode::Mean => samples.iter().sum::<f64>() / samples.len() as f64,
+        };
+        let [r, gr, b] = intensity.map(v, range).expect("checked above");
+        Some([r as f32, gr as f32, b as f32, 1.0])
+    })
+}
+
+/// Renders `slice` of the label map `vol` through its label table `tf`
+/// (`LabelTable::to_transfer_function`): each pixel takes the slab's front
+/// sample at the nearest voxel and draws its label's colour, opaque, or
+/// nothing where the label is hidden (the renderer's `LABELS` slices).
+pub fn render_label_slice(
+    vol: &Volume,
+    frame: &VolumeFrame,
+    slice: &SliceView,
+    tf: &TransferFunction,
+    width: u32,
+    height: u32,
+) -> Result<Image, SliceReferenceError> {
+    slab_pixels(vol, frame, slice, width, height, |samples, _| {
+        let [r, g, b, a] = tf.lookup(samples[0]);
+        (a > 0.0).then_some([r as f32, g as f32, b as f32, 1.0])
+    })
+}
+
+/// Each pixel's slab samples that lie in the volume's texture box (front
+/// first; exact trilinear values, or the nearest voxel's for a label map),
+/// coloured by `color` (nothing: transparent).
+fn slab_pixels(
+    vol: &Volume,
+    frame: &VolumeFrame,
+    slice: &SliceView,
+    width: u32,
+    height: u32,
+    color: impl Fn(&[f64], SlabMode) -> Option<[f32; 4]> + Sync,
+) -> Result<Image, SliceReferenceError> {
     let mut img = Image::new(width, height);
     if width == 0 || height == 0 {
         return Ok(img);
     }
     let g = slice.resolve(frame, width as f64 / height as f64)?;
-    let range = vol.desc().value_range;
-    // Checked once: every pixel maps through it.
-    intensity.map(0.0, range)?;
+    let labels = vol.desc().kind.is_labels();
     let dims = vol.dims().map(f64::from);
     let w = width as usize;
     img.color
         .par_chunks_mut(w)
         .enumerate()
         .for_each(|(py, row)| {
+            let mut samples = Vec::new();
             for (px, out) in row.iter_mut().enumerate() {
-                let mut acc: Option<f64> = None;
-                let mut count = 0u32;
+                samples.clear();
                 for k in 0..g.samples {
                     let t = g.texture_point(px as u32, py as u32, width, height, k);
                     let inside = (0..3).all(|a| (0.0..=1.0).contains(&t[a]));
@@ -54,21 +96,16 @@ pub fn render_slice(
                         continue;
                     }
                     let p = [0, 1, 2].map(|a| t[a] * dims[a] - 0.5);
-                    let v = vol.sample_trilinear(p);
-                    count += 1;
-                    acc = Some(match (acc, g.mode) {
-                        (None, _) => v,
-                        (Some(m), SlabMode::Max) => m.max(v),
-                        (Some(s), SlabMode::Mean) => s + v,
+                    samples.push(if labels {
+                        vol.sample_nearest(p)
+                    } else {
+                        vol.sample_trilinear(p)
                     });
                 }
-                if let Some(a) = acc {
-                    let v = match g.mode {
-                        SlabMode::Max => a,
-                        SlabMode::Mean => a / count as f64,
-                    };
-                    let [r, gr, b] = intensity.map(v, range).expect("checked above");
-                    *out = [r as f32, gr as f32, b as f32, 1.0];
+                if !samples.is_empty()
+                    && let Some(c) = color(&samples, g.mode)
+                {
+                    *out = c;
                 }
             }
         });

@@ -10,7 +10,10 @@
 // t_k = (k + 1/2) slab_dt, k < slab_samples (t = 0, the plane, for a thin
 // slice) that lie in the ray's extent in the clip box, reduces them by their
 // maximum or mean and maps the result through the intensity window and colour
-// map, opaque. A pixel with no sample is transparent; no depth is written.
+// map, opaque. A label map (LABELS) takes the slab's front sample instead
+// (ids are neither maximised nor averaged) and draws its label's colour from
+// the label table (the TF), opaque, or nothing for a hidden label. A pixel
+// with no sample is transparent; no depth is written.
 
 const SLAB_MAX: u32 = 0u;
 const SLAB_MEAN: u32 = 1u;
@@ -38,6 +41,7 @@ fn slice_main(@builtin(global_invocation_id) gid: vec3<u32>) {
     var count = 0u;
     var sum = 0.0;
     var best = -3.0e38;
+    var front = 0.0;
     var last = 0xffffffffu;
     loop {
         if (k >= n) { break; }
@@ -46,6 +50,9 @@ fn slice_main(@builtin(global_invocation_id) gid: vec3<u32>) {
         if (t >= start.t0) {
             let s = slice_sample(tex_at(start.r, t), start.r.tex_dir, &last);
             if (s.ok) {
+                if (count == 0u) {
+                    front = s.v;
+                }
                 count = count + 1u;
                 sum = sum + s.v;
                 best = max(best, s.v);
@@ -55,8 +62,13 @@ fn slice_main(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     var color = vec4<f32>(0.0);
     if (count > 0u) {
-        let v = select(best, sum / f32(count), frame.slab_mode == SLAB_MEAN);
-        color = vec4<f32>(intensity_color(v), 1.0);
+        if (LABELS) {
+            let c = tf_lookup(front);
+            color = select(vec4<f32>(0.0), vec4<f32>(c.rgb, 1.0), c.a > 0.0);
+        } else {
+            let v = select(best, sum / f32(count), frame.slab_mode == SLAB_MEAN);
+            color = vec4<f32>(intensity_color(v), 1.0);
+        }
     }
     store_pixel(px, color, far_depth(), start.host, count);
 }
