@@ -338,3 +338,51 @@ fn info_refuses_plain_http_unless_allowed() {
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("unsupported scheme"));
 }
+
+/// `--labels` builds a label store (`info` says so), and `info` whose
+/// reader closes early (`| head`) ends quietly with SIGPIPE's status, not a
+/// panic.
+#[test]
+fn labels_build_and_info_into_a_closed_pipe() {
+    let dir = tempfile::tempdir().unwrap();
+    let dims = [20u32, 12, 9];
+    let ids: Vec<f32> = (0..dims.iter().product::<u32>())
+        .map(|i| (i / 37 % 5) as f32)
+        .collect();
+    std::fs::write(dir.path().join("l.raw"), encode(DType::U8, &ids)).unwrap();
+    std::fs::write(
+        dir.path().join("l.json"),
+        r#"{"dims": [20, 12, 9], "dtype": "u8"}"#,
+    )
+    .unwrap();
+    let exe = env!("CARGO_BIN_EXE_brickray-store");
+    let out = dir.path().join("l.brs");
+    let st = Command::new(exe)
+        .args(["build", "--labels", "--brick", "8", "--quiet"])
+        .arg(dir.path().join("l.json"))
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
+    let info = Command::new(exe).arg("info").arg(&out).output().unwrap();
+    let text = String::from_utf8_lossy(&info.stdout);
+    assert!(text.contains("u8 labels"), "{text}");
+    assert!(text.contains("filter Mode"), "{text}");
+    // The reader closes before the tool writes.
+    let mut child = Command::new(exe)
+        .arg("info")
+        .arg(&out)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(child.stdout.take());
+    let done = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&done.stderr);
+    assert!(!err.contains("panicked"), "{err}");
+    assert_eq!(done.status.code(), Some(141), "{err}");
+}

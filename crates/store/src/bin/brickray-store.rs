@@ -224,7 +224,27 @@ fn parse_filter(v: &str) -> Result<Filter, String> {
     Filter::parse(v).ok_or_else(|| format!("expected average or max, got {v:?}"))
 }
 
+/// Ends the process quietly when stdout is closed early (`brickray-store
+/// info store.brs | head`), as a shell tool does on SIGPIPE; any other
+/// panic keeps the default report.
+fn quiet_on_closed_stdout() {
+    let default = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        let msg = info
+            .payload()
+            .downcast_ref::<String>()
+            .map(String::as_str)
+            .or_else(|| info.payload().downcast_ref::<&str>().copied())
+            .unwrap_or("");
+        if msg.contains("failed printing to stdout") && msg.contains("Broken pipe") {
+            std::process::exit(141);
+        }
+        default(info);
+    }));
+}
+
 fn main() -> ExitCode {
+    quiet_on_closed_stdout();
     let r = match Cli::parse().command {
         Command::Build {
             input,
