@@ -3,7 +3,8 @@
 //!
 //! * the two shared label maps (the Brodmann atlas, u8, and the cells3d
 //!   nuclei, u32) in core and out of core at the finest level, each >= 45 dB
-//!   PSNR against the reference, marched at the reference's step (1/8
+//!   PSNR against the reference, nearest and with smooth boundaries
+//!   (`RenderSettings::smooth_labels`), marched at the reference's step (1/8
 //!   voxel): a label's boundary is a step in the data, so where a coarser
 //!   step lands on it is a sampling error, not the model's (the default half
 //!   voxel's is printed beside it);
@@ -116,6 +117,56 @@ fn check(name: &str, vol: &Volume) {
     );
 
     let dir = tempfile::tempdir().unwrap();
+    // Smooth boundaries, in core and out of core at the finest level.
+    let smooth = RenderSettings {
+        smooth_labels: true,
+        ..settings()
+    };
+    let smooth_ref = render_reference(
+        vol,
+        &frame,
+        &tf,
+        &camera,
+        &smooth,
+        &ReferenceOptions::new(SIZE, SIZE),
+    )
+    .to_rgba8([0.0; 3]);
+    let sdesc = FrameDesc {
+        settings: smooth,
+        ..desc.clone()
+    };
+    let s_in = draw(g, &mut incore, &target, &sdesc).unwrap();
+    let label = format!("labels_{name}_smooth_incore");
+    let cmp = assert_close(&label, &s_in.color, &smooth_ref, SIZE, SIZE, MIN_DB)
+        .unwrap_or_else(|e| panic!("{e}"));
+    eprintln!(
+        "{label}: {cmp}; nearest vs smooth: {}",
+        compare(&got.color, &s_in.color, SIZE, SIZE)
+    );
+    let mut ooc = VolumeRenderer::new(&g.device, target_desc()).unwrap();
+    let config = OutOfCoreConfig {
+        tolerance_px: 0.0,
+        upload_budget_bytes: 1 << 30,
+        ..Default::default()
+    };
+    ooc.set_volume_source(&g.device, &g.queue, store(vol, dir.path()), config)
+        .unwrap();
+    ooc.set_transfer_function(&g.device, &g.queue, &tf).unwrap();
+    draw_until_settled(g, &mut ooc, &target, &sdesc, 300)
+        .unwrap()
+        .expect("out of core settles");
+    let label = format!("labels_{name}_smooth_ooc_finest");
+    let cmp = assert_close(
+        &label,
+        &target.read_color(g),
+        &smooth_ref,
+        SIZE,
+        SIZE,
+        MIN_DB,
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    eprintln!("{label}: {cmp}");
+
     // The same ids as an intensity volume, as brickray drew a label map
     // before it knew labels: trilinear samples, averaged coarse levels.
     let mut as_intensity = Volume::new(

@@ -16,8 +16,9 @@
 //!   px against the finest level, and the same ids as an averaged intensity
 //!   store at 2 px.
 //!
-//! Overlays of a label map on its image and smooth label boundaries are not
-//! implemented yet: `overlay_cost_ratio` and `smooth_cost_ratio` are null.
+//! Smooth boundaries (`RenderSettings::smooth_labels`) are timed against
+//! nearest samples in core, interleaved. Overlays of a label map on its image
+//! are not implemented yet: `overlay_cost_ratio` is null.
 //!
 //! `cargo run --release -p brickray-bench -- labels [--size PX] [--rounds N]`
 
@@ -49,10 +50,11 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
     let (mut finest_min, mut two_px_min, mut cost_max, mut ooc_cost_max) =
         (f64::INFINITY, f64::INFINITY, 0.0f64, 0.0f64);
     let mut skip_ratio_max = 0.0f64;
+    let mut smooth_max = 0.0f64;
     println!(
-        "| map | labels / intensity ms (in core) | (out of core) | samples per ray | hidden: samples with / without skipping | finest dB (in core, ooc) | 1 / 2 / 4 px vs finest dB | averaged 2 px dB |"
+        "| map | labels / intensity ms (in core) | (out of core) | smooth / nearest | samples per ray | hidden: samples with / without skipping | finest dB (in core, ooc) | 1 / 2 / 4 px vs finest dB | averaged 2 px dB |"
     );
-    println!("|---|---:|---:|---:|---:|---:|---:|---:|");
+    println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|");
     for (name, dirname) in [
         ("brodmann", "mricron_brodmann_labels"),
         ("nuclei", "cells3d_nuclei_labels"),
@@ -90,7 +92,33 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
                 .map_err(|e| e.to_string())?;
             incore.push(r);
         }
-        let (in_ms, samples) = timed(&gpu, &mut incore, &big, &desc, rounds)?;
+        let (in_ms, samples) = {
+            let [a, b] = &mut incore[..] else {
+                unreachable!()
+            };
+            timed(&gpu, &mut [(a, &desc), (b, &desc)], &big, rounds)?
+        };
+        // Smooth boundaries against nearest, the same renderer interleaved.
+        let smooth_desc = FrameDesc {
+            settings: RenderSettings {
+                smooth_labels: true,
+                ..settings
+            },
+            ..desc.clone()
+        };
+        let (smooth_ms, _) = {
+            let mut s = renderer(&gpu, &tf)?;
+            s.set_volume(&gpu.device, &gpu.queue, &vol)
+                .map_err(|e| e.to_string())?;
+            let r = &mut incore[0];
+            timed(
+                &gpu,
+                &mut [(r, &desc), (&mut s, &smooth_desc)],
+                &big,
+                rounds,
+            )?
+        };
+        let smooth_cost = smooth_ms[1] / smooth_ms[0];
         let mut ooc = Vec::new();
         for v in [&vol, &intensity] {
             let mut r = renderer(&gpu, &tf)?;
@@ -106,7 +134,10 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
                 .ok_or("out of core did not settle")?;
             ooc.push(r);
         }
-        let (ooc_ms, _) = timed(&gpu, &mut ooc, &big, &desc, rounds)?;
+        let (ooc_ms, _) = {
+            let [a, b] = &mut ooc[..] else { unreachable!() };
+            timed(&gpu, &mut [(a, &desc), (b, &desc)], &big, rounds)?
+        };
         let cost = in_ms[0] / in_ms[1];
         let ooc_cost = ooc_ms[0] / ooc_ms[1];
 
@@ -195,7 +226,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
             }
         }
         println!(
-            "| {name} | {cost:.3} ({:.1} / {:.1} ms) | {ooc_cost:.3} ({:.1} / {:.1} ms) | {:.1} / {:.1} | {:.1} / {:.1} | {in_db:.1}, {:.1} | {:.1} / {:.1} / {:.1} | {:.1} |",
+            "| {name} | {cost:.3} ({:.1} / {:.1} ms) | {ooc_cost:.3} ({:.1} / {:.1} ms) | {smooth_cost:.3} | {:.1} / {:.1} | {:.1} / {:.1} | {in_db:.1}, {:.1} | {:.1} / {:.1} / {:.1} | {:.1} |",
             in_ms[0],
             in_ms[1],
             ooc_ms[0],
@@ -215,11 +246,13 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         cost_max = cost_max.max(cost);
         ooc_cost_max = ooc_cost_max.max(ooc_cost);
         skip_ratio_max = skip_ratio_max.max(skip_ratio);
+        smooth_max = smooth_max.max(smooth_cost);
         fig.insert(format!("{name}_ms_labels_incore"), json!(in_ms[0]));
         fig.insert(format!("{name}_ms_intensity_incore"), json!(in_ms[1]));
         fig.insert(format!("{name}_ms_labels_ooc"), json!(ooc_ms[0]));
         fig.insert(format!("{name}_ms_intensity_ooc"), json!(ooc_ms[1]));
         fig.insert(format!("{name}_samples_per_ray"), json!(samples[0]));
+        fig.insert(format!("{name}_smooth_cost_ratio"), json!(smooth_cost));
         fig.insert(
             format!("{name}_hidden_skip_sample_ratio"),
             json!(skip_ratio),
@@ -237,7 +270,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
     fig.insert("label_cost_ratio_ooc_max".into(), json!(ooc_cost_max));
     fig.insert("hidden_skip_sample_ratio_max".into(), json!(skip_ratio_max));
     fig.insert("overlay_cost_ratio".into(), json!(null));
-    fig.insert("smooth_cost_ratio".into(), json!(null));
+    fig.insert("smooth_cost_ratio".into(), json!(smooth_max));
     fig.insert("image_size".into(), json!(size));
     fig.insert("rounds".into(), json!(rounds));
     fig.insert("adapter".into(), json!(gpu.adapter.get_info().name));
@@ -291,9 +324,8 @@ fn store(vol: &Volume, dir: &std::path::Path, name: &str) -> Result<Arc<dyn Bric
 /// warm-up round), and the samples per ray of each.
 fn timed(
     gpu: &GpuContext,
-    renderers: &mut [VolumeRenderer],
+    renderers: &mut [(&mut VolumeRenderer, &FrameDesc<'_>)],
     target: &Offscreen,
-    desc: &FrameDesc<'_>,
     rounds: usize,
 ) -> Result<(Vec<f64>, Vec<f64>), String> {
     let n = renderers.len();
@@ -302,7 +334,8 @@ fn timed(
     for round in 0..=rounds {
         for k in 0..n {
             let i = (k + round) % n;
-            let f = draw(gpu, &mut renderers[i], target, desc).map_err(|e| e.to_string())?;
+            let (r, desc) = &mut renderers[i];
+            let f = draw(gpu, r, target, desc).map_err(|e| e.to_string())?;
             if round > 0 {
                 times[i].push(f.ms);
             } else {

@@ -163,6 +163,38 @@ pub fn label_at(volume: &Volume, tex: [f64; 3]) -> u32 {
         .label((i[0] + nx * (i[1] + ny * i[2])) as usize)
 }
 
+/// The label with the largest trilinear weight among the 8 voxels around
+/// continuous voxel coordinates `p` (voxel centres at integers, clamped to
+/// the grid): the label whose filtered indicator is largest there, ties to
+/// the first corner's label in the order x fastest, then y, then z. A label
+/// map's smooth boundaries (`RenderSettings::smooth_labels`); the kernels
+/// compute the same.
+pub fn smooth_label_at(volume: &Volume, p: [f64; 3]) -> u32 {
+    let f = p.map(f64::floor);
+    let t = [p[0] - f[0], p[1] - f[1], p[2] - f[2]];
+    let d = volume.dims().map(|v| v as i64);
+    let mut ids = [0u32; 8];
+    let mut w = [0f64; 8];
+    for c in 0..8 {
+        let o = [c & 1, (c >> 1) & 1, (c >> 2) & 1];
+        let i = [0, 1, 2].map(|a| (f[a] as i64 + o[a] as i64).clamp(0, d[a] - 1));
+        ids[c] = volume
+            .data()
+            .label((i[0] + d[0] * (i[1] + d[1] * i[2])) as usize);
+        w[c] = (0..3)
+            .map(|a| if o[a] == 1 { t[a] } else { 1.0 - t[a] })
+            .product();
+    }
+    let mut best = (ids[0], -1.0);
+    for c in 0..8 {
+        let total: f64 = (0..8).filter(|&k| ids[k] == ids[c]).map(|k| w[k]).sum();
+        if total > best.1 {
+            best = (ids[c], total);
+        }
+    }
+    best.0
+}
+
 /// The labels present in a label volume, in increasing order.
 pub fn labels_present(volume: &Volume) -> Vec<u32> {
     let data = volume.data();

@@ -131,6 +131,12 @@ pub struct RenderSettings {
     /// integrated through the TF, instead of the TF at one point (default off;
     /// `docs/rendering-model.md`, "Pre-integration"). Iso and MIP ignore it.
     pub preintegrated: bool,
+    /// Label maps: smooth boundaries. Each sample takes the label with the
+    /// largest trilinear weight among its 8 neighbouring voxels (the label
+    /// whose indicator, filtered, is largest: `labels::smooth_label_at`),
+    /// so boundaries are reconstructed between voxels instead of as voxel
+    /// steps (default off: the nearest voxel). Intensity volumes ignore it.
+    pub smooth_labels: bool,
 }
 
 impl Default for RenderSettings {
@@ -144,6 +150,7 @@ impl Default for RenderSettings {
             depth_opacity: 0.5,
             clip: ClipBox::FULL,
             preintegrated: false,
+            smooth_labels: false,
         }
     }
 }

@@ -541,7 +541,11 @@ impl Marcher<'_> {
     #[inline]
     fn value(&self, ray: &Ray, t: f64) -> f64 {
         let p = self.voxel_pos(ray, t).to_array();
-        if self.labels {
+        if self.labels && self.settings.smooth_labels {
+            let id = brickray_core::labels::smooth_label_at(self.vol, p) as f64;
+            let [lo, hi] = self.vol.desc().value_range.map(f64::from);
+            (id - lo) / (hi - lo)
+        } else if self.labels {
             self.vol.sample_nearest(p)
         } else {
             self.vol.sample_trilinear(p)

@@ -23,6 +23,41 @@ override WEIGHTS: bool = false;
 // coordinates (textureLoad), never filtered (a label id is not interpolated;
 // the sampler's fixed-point coordinates would also move boundaries).
 override LABELS: bool = false;
+// A label map with smooth boundaries (RenderSettings::smooth_labels): the
+// label with the largest trilinear weight among a sample's 8 voxels.
+override SMOOTH_LABELS: bool = false;
+
+// Of 8 voxels' label texels and trilinear weights, the label whose weights
+// sum highest, ties to the first corner's (labels::smooth_label_at).
+fn heaviest_label(ids: array<f32, 8>, w: array<f32, 8>) -> f32 {
+    var best = ids[0];
+    var best_w = -1.0;
+    for (var c = 0u; c < 8u; c = c + 1u) {
+        var total = 0.0;
+        for (var k = 0u; k < 8u; k = k + 1u) {
+            if (ids[k] == ids[c]) {
+                total = total + w[k];
+            }
+        }
+        if (total > best_w) {
+            best_w = total;
+            best = ids[c];
+        }
+    }
+    return best;
+}
+
+// The trilinear weight of corner c (bit 0 +x, bit 1 +y, bit 2 +z) at
+// fractions t.
+fn corner_weight(c: u32, t: vec3<f32>) -> f32 {
+    let o = vec3<bool>((c & 1u) != 0u, (c & 2u) != 0u, (c & 4u) != 0u);
+    let w = select(vec3<f32>(1.0) - t, t, o);
+    return w.x * w.y * w.z;
+}
+
+fn corner_offset(c: u32) -> vec3<i32> {
+    return vec3<i32>(i32(c & 1u), i32((c >> 1u) & 1u), i32(c >> 2u));
+}
 
 const MODE_DVR: u32 = 0u;
 const MODE_ISO: u32 = 1u;

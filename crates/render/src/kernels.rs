@@ -68,11 +68,13 @@ pub(crate) struct Variant {
     pub(crate) slice: bool,
     /// A label map: nearest texels loaded at integer coordinates.
     pub(crate) labels: bool,
+    /// A label map with smooth boundaries.
+    pub(crate) smooth_labels: bool,
 }
 
 /// The override constants of a pipeline, by WGSL name (modes.wgsl,
 /// predict.wgsl).
-pub(crate) const OVERRIDES: [&str; 10] = [
+pub(crate) const OVERRIDES: [&str; 11] = [
     "MODE",
     "ERT",
     "ESS",
@@ -83,6 +85,7 @@ pub(crate) const OVERRIDES: [&str; 10] = [
     "PREINT",
     "WEIGHTS",
     "LABELS",
+    "SMOOTH_LABELS",
 ];
 
 impl Variant {
@@ -116,6 +119,7 @@ impl Variant {
             weights,
             slice: false,
             labels,
+            smooth_labels: labels && s.smooth_labels,
         };
         match prediction {
             Some(p) if mode == KernelMode::Iso => Variant {
@@ -143,6 +147,7 @@ impl Variant {
             weights,
             slice: true,
             labels,
+            smooth_labels: false,
         }
     }
 
@@ -151,7 +156,7 @@ impl Variant {
         self.predict
     }
 
-    fn constants(&self) -> [(&'static str, f64); 10] {
+    fn constants(&self) -> [(&'static str, f64); 11] {
         let b = |x: bool| if x { 1.0 } else { 0.0 };
         let v = [
             self.mode as u32 as f64,
@@ -164,6 +169,7 @@ impl Variant {
             b(self.preint),
             b(self.weights),
             b(self.labels),
+            b(self.smooth_labels),
         ];
         std::array::from_fn(|i| (OVERRIDES[i], v[i]))
     }

@@ -530,7 +530,8 @@ fn every_shader_file_is_covered() {
 /// combination of ERT, ESS and shading; the visible weights (WEIGHTS) with
 /// every mode and combination of ERT, ESS and shading, with pre-integration
 /// and with prediction; label maps (LABELS) with every mode and combination of
-/// ERT and ESS, with the visible weights, and the slice views of both.
+/// ERT and ESS, with the visible weights, with smooth boundaries
+/// (SMOOTH_LABELS), and the slice views of both.
 #[test]
 fn every_override_permutation_validates() {
     let switches = [
@@ -543,6 +544,7 @@ fn every_override_permutation_validates() {
         "PREINT",
         "WEIGHTS",
         "LABELS",
+        "SMOOTH_LABELS",
     ];
     let mut combos = Vec::new();
     for (_, mode) in KernelMode::ALL {
@@ -574,6 +576,8 @@ fn every_override_permutation_validates() {
         for bits in 0..4u32 {
             combos.push((mode, bits | 1 << 8));
             combos.push((mode, bits | 1 << 7 | 1 << 8));
+            combos.push((mode, bits | 1 << 8 | 1 << 9));
+            combos.push((mode, bits | 1 << 7 | 1 << 8 | 1 << 9));
         }
     }
     for (name, src) in [("incore", incore()), ("ooc", ooc())] {
