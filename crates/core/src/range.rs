@@ -113,6 +113,59 @@ impl RangeReader for std::fs::File {
     }
 }
 
+/// A part of one object read by an [`ObjectReader`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ObjectSpan {
+    /// The whole object.
+    All,
+    /// `len` bytes from `offset` (a range past the object's end is an error).
+    At {
+        /// The first byte.
+        offset: u64,
+        /// Bytes wanted.
+        len: u64,
+    },
+    /// The last `n` bytes (the whole object when it is shorter), in one
+    /// request: a zarr shard's index, read without asking the size first.
+    Suffix(u64),
+}
+
+/// Objects under one root (a folder of a bucket, a URL's directory) read by
+/// key: the seam between a multi-file format (OME-Zarr) and where its
+/// objects live. A missing object is `Ok(None)`, not an error, so that a
+/// reader can apply the format's rule for it (zarr: the fill value).
+pub trait ObjectReader: Send + Sync + fmt::Debug {
+    /// Where the objects live (a URL), for messages.
+    fn location(&self) -> &str;
+
+    /// The bytes of `span` of the object `key` (relative to the root,
+    /// `/`-separated) and the object's whole length; `None` when the object
+    /// does not exist.
+    fn read_object(&self, key: &str, span: ObjectSpan) -> io::Result<Option<(Vec<u8>, u64)>>;
+
+    /// Several ranges (`offset..end`) of one object; `None` when it does not
+    /// exist. The default reads them one after the other; a reader over the
+    /// network fetches them concurrently and coalesces neighbours.
+    fn read_object_ranges(
+        &self,
+        key: &str,
+        ranges: &[std::ops::Range<u64>],
+    ) -> io::Result<Option<Vec<Vec<u8>>>> {
+        let mut out = Vec::with_capacity(ranges.len());
+        for r in ranges {
+            let span = ObjectSpan::At {
+                offset: r.start,
+                len: r.end.saturating_sub(r.start),
+            };
+            match self.read_object(key, span)? {
+                Some((b, _)) => out.push(b),
+                None => return Ok(None),
+            }
+        }
+        Ok(Some(out))
+    }
+}
+
 /// Bytes in memory as a [`RangeReader`] (tests, and stores fetched whole).
 #[derive(Clone)]
 pub struct MemRangeReader {
