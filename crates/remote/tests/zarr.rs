@@ -549,6 +549,36 @@ fn faults_give_the_exact_bricks_or_a_typed_error_never_a_hang() {
 
 #[test]
 #[cfg_attr(no_shared_data, ignore = "needs ../shared/data/formats (absent)")]
+fn image_urls_are_told_from_store_urls() {
+    let Some(data) = data() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    // An image in a folder whose name does not say so, and a folder of
+    // plain zarr metadata without multiscales.
+    copy_tree(&data.join(SHARDED), &dir.path().join("image"));
+    std::fs::create_dir_all(dir.path().join("plain")).unwrap();
+    std::fs::write(
+        dir.path().join("plain/zarr.json"),
+        br#"{"zarr_format": 3, "node_type": "group", "attributes": {}}"#,
+    )
+    .unwrap();
+    let server = serve_dir(dir.path(), 404, |_, _| Act::Serve);
+    let o = opts();
+    assert!(brickray_store::is_zarr_url(&server.url("image"), &o));
+    assert!(brickray_store::is_zarr_url(&server.url("image/"), &o));
+    assert!(!brickray_store::is_zarr_url(&server.url("plain"), &o));
+    assert!(!brickray_store::is_zarr_url(&server.url("absent"), &o));
+    let before = server.count();
+    // By name, without a request.
+    assert!(brickray_store::is_zarr_url(&server.url("x.ome.zarr"), &o));
+    assert!(!brickray_store::is_zarr_url(&server.url("x.brs"), &o));
+    assert_eq!(server.count(), before);
+    // The folder streams as the local image.
+    let (local, remote) = pair(&data.join(SHARDED), &server.url("image"), &o);
+    assert_same(&local, &remote);
+}
+
+#[test]
+#[cfg_attr(no_shared_data, ignore = "needs ../shared/data/formats (absent)")]
 fn bad_urls_and_keys_are_typed_errors() {
     let o = opts();
     assert!(matches!(
@@ -585,4 +615,156 @@ fn bad_urls_and_keys_are_typed_errors() {
         ZarrBrickSource::open_objects(objects, &ReadOptions::default(), 32, 2, None),
         Err(brickray_io::IoError::UnknownFormat { .. })
     ));
+}
+
+// ---------------------------------------------------------------------------
+// Against the test servers of scripts/test.sh (ignored in a plain `cargo
+// test`; run by the script's second pass, failing when CI=true and an
+// address is missing).
+
+/// Uploads the image folder `dir` under `url` (one object per file).
+fn upload_image(dir: &Path, url: &str, o: &RemoteOptions) -> usize {
+    let files = walk(dir);
+    for f in &files {
+        let rel = f
+            .strip_prefix(dir)
+            .unwrap()
+            .to_string_lossy()
+            .replace('\\', "/");
+        upload(&format!("{url}/{rel}"), o, &std::fs::read(f).unwrap());
+    }
+    files.len()
+}
+
+#[test]
+#[ignore = "needs BRICKRAY_TEST_HTTP and BRICKRAY_TEST_S3 (scripts/test.sh starts them)"]
+fn zarr_from_the_http_server_and_s3_equals_the_local_reader() {
+    let (Some(http), Some(s3)) = (server("BRICKRAY_TEST_HTTP"), server("BRICKRAY_TEST_S3")) else {
+        return;
+    };
+    let Some(data) = data() else { return };
+    let name = unique("zarr");
+    let bucket = name.to_ascii_lowercase();
+    create_bucket(&s3, &bucket, false);
+    for image in IMAGES {
+        let dir = data.join(image);
+        let http_url = format!("{http}/{name}/{image}");
+        upload_image(&dir, &http_url, &loopback(None));
+        let s3_url = format!("s3://{bucket}/images/{image}");
+        upload_image(&dir, &s3_url, &s3_signed(&s3));
+        for (url, o) in [(http_url, loopback(None)), (s3_url, s3_signed(&s3))] {
+            assert!(brickray_store::is_zarr_url(&url, &o), "{url}");
+            let (local, remote) = pair(&dir, &url, &o);
+            let n = assert_same(&local, &remote);
+            assert!(n > 8, "{url}: only {n} bricks with data");
+            // The store-level entry point: the default brick, the value
+            // range from the coarsest level (a warning says so).
+            let src =
+                brickray_store::open_zarr_url(&url, &o, &ReadOptions::default(), 32, 2).unwrap();
+            assert_eq!(src.layout().volume.dims, local.layout().volume.dims);
+            assert!(
+                src.warnings().iter().any(|w| w.contains("coarsest level")),
+                "{url}: {:?}",
+                src.warnings()
+            );
+        }
+    }
+    // A key missing in a private bucket read anonymously is a 403: the
+    // image's metadata cannot be read, a typed error (not a fill value).
+    let anon = RemoteOptions {
+        anonymous: true,
+        ..loopback(Some(&s3))
+    };
+    let url = format!("s3://{bucket}/images/{SHARDED}");
+    match brickray_store::open_zarr_url(&url, &anon, &ReadOptions::default(), 32, 2) {
+        Err(e @ brickray_store::StoreError::Input(brickray_io::IoError::UnknownFormat { .. })) => {
+            assert!(e.to_string().contains("access denied"), "{e}");
+        }
+        Err(e) => panic!("{url}: {e}"),
+        Ok(_) => panic!("{url}: a private bucket opened anonymously"),
+    }
+    // A chunk removed from the S3 copy reads as the fill value, exactly as
+    // the local reader of a copy without it.
+    let tmp = tempfile::tempdir().unwrap();
+    let damaged = tmp.path().join(SHARDED);
+    copy_tree(&data.join(SHARDED), &damaged);
+    std::fs::remove_file(damaged.join("s0/c/0/0/0")).unwrap();
+    let s3_url = format!("s3://{bucket}/damaged/{SHARDED}");
+    upload_image(&damaged, &s3_url, &s3_signed(&s3));
+    let (local, remote) = pair(&damaged, &s3_url, &s3_signed(&s3));
+    assert_same(&local, &remote);
+}
+
+#[test]
+#[ignore = "needs BRICKRAY_TEST_HTTP(_FAULTY) and BRICKRAY_TEST_S3(_FAULTY) (scripts/test.sh starts them)"]
+fn zarr_through_a_faulty_proxy_is_exact_or_typed_never_wrong() {
+    let (Some(http), Some(http_faulty), Some(s3), Some(s3_faulty)) = (
+        server("BRICKRAY_TEST_HTTP"),
+        server("BRICKRAY_TEST_HTTP_FAULTY"),
+        server("BRICKRAY_TEST_S3"),
+        server("BRICKRAY_TEST_S3_FAULTY"),
+    ) else {
+        return;
+    };
+    let Some(data) = data() else { return };
+    let faulty = |o: RemoteOptions| RemoteOptions {
+        max_retries: 6,
+        timeout: Duration::from_secs(5),
+        read_timeout: Duration::from_millis(300),
+        retry_timeout: Duration::from_secs(20),
+        ..o
+    };
+    let name = unique("zarr-faulty");
+    let bucket = name.to_ascii_lowercase();
+    create_bucket(&s3, &bucket, false);
+    let dir = data.join(SHARDED);
+    upload_image(&dir, &format!("{http}/{name}/{SHARDED}"), &loopback(None));
+    let s3_url = format!("s3://{bucket}/{SHARDED}");
+    upload_image(&dir, &s3_url, &s3_signed(&s3));
+    let local = ZarrBrickSource::open(&dir, &ReadOptions::default(), 32, 2, None).unwrap();
+    let range = local.layout().volume.value_range;
+    for (url, o) in [
+        (
+            format!("{http_faulty}/{name}/{SHARDED}"),
+            faulty(loopback(None)),
+        ),
+        (s3_url, faulty(s3_signed(&s3_faulty))),
+    ] {
+        let t = std::time::Instant::now();
+        let objects = Arc::new(RemoteObjects::open(&url, &o).unwrap());
+        let remote =
+            ZarrBrickSource::open_objects(objects, &ReadOptions::default(), 32, 2, Some(range))
+                .unwrap_or_else(|e| panic!("{url}: open failed after its retries: {e}"));
+        let (mut ok, mut failed) = (0usize, 0usize);
+        let mut a = vec![0u8; local.layout().brick_bytes()];
+        let mut b = a.clone();
+        for k in keys(&local) {
+            local.read_brick(k, &mut a).unwrap();
+            let t = std::time::Instant::now();
+            match remote.read_brick(k, &mut b) {
+                Ok(()) => {
+                    assert!(a == b, "{url}: brick {k:?} differs");
+                    ok += 1;
+                }
+                Err(BrickError::Io { source, .. }) => {
+                    assert!(RemoteError::from_io(&source).is_some(), "{source}");
+                    failed += 1;
+                }
+                Err(e) => panic!("{url}: {k:?}: untyped failure {e}"),
+            }
+            assert!(
+                t.elapsed() <= o.deadline(),
+                "{url}: a read took {:?}",
+                t.elapsed()
+            );
+        }
+        eprintln!(
+            "{url}: {ok} bricks exact, {failed} failed typed, {:?}",
+            t.elapsed()
+        );
+        assert!(
+            ok > 10 * failed.max(1) || failed == 0,
+            "{url}: {ok} ok, {failed} failed"
+        );
+    }
 }

@@ -353,7 +353,13 @@ impl OmeZarr {
         } else {
             return Err(IoError::UnknownFormat {
                 path: root.to_owned(),
-                tried: "OME-Zarr: no zarr.json or .zattrs".into(),
+                tried: if store.is_local() {
+                    "OME-Zarr: no zarr.json or .zattrs".into()
+                } else {
+                    "OME-Zarr: no zarr.json or .zattrs (not found, or access denied: \
+                     S3 answers 403 for both; check the URL and the credentials)"
+                        .into()
+                },
             });
         };
         let bad = |msg: &str| IoError::header(&meta_path, msg.to_owned());
