@@ -771,9 +771,29 @@ impl RemoteObjects {
         let (path, url) = self.locate(key)?;
         let range = match span {
             ObjectSpan::All => None,
-            ObjectSpan::At { len: 0, .. } => {
-                // nothing to read; the object's existence is not asked
-                return Ok(Some((Vec::new(), 0)));
+            ObjectSpan::At { len: 0, offset } => {
+                // no bytes: the object's length (a HEAD) says whether the
+                // empty range lies in it
+                self.reads
+                    .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                let store = self.store.clone();
+                let p = path.clone();
+                let size = match run_on(&self.runtime, &url, self.deadline, async move {
+                    store.head(&p).await
+                }) {
+                    Ok(m) => m.size,
+                    Err(e) if e.is_missing() => return Ok(None),
+                    Err(e) => return Err(e),
+                };
+                if offset > size {
+                    return Err(RemoteError::OutOfBounds {
+                        url,
+                        offset,
+                        len: 0,
+                        object_len: size,
+                    });
+                }
+                return Ok(Some((Vec::new(), size)));
             }
             ObjectSpan::At { offset, len } => {
                 let end = offset

@@ -355,6 +355,15 @@ fn each_shard_index_is_fetched_once_with_a_suffix_range() {
         }
     }
     assert!(seen.iter().all(|s| s.0 == "GET"), "{seen:?}");
+    // With the whole image within the chunk cache's budget, no range of any
+    // object is asked for twice (metadata, indices, inner chunks).
+    let mut distinct: Vec<(&str, Option<&str>)> = seen
+        .iter()
+        .map(|s| (s.1.as_str(), s.2.as_deref()))
+        .collect();
+    distinct.sort();
+    distinct.dedup();
+    assert_eq!(distinct.len(), seen.len(), "a range fetched twice");
     eprintln!(
         "{SHARDED}: {} requests for {} shards ({} index reads)",
         seen.len(),
