@@ -671,35 +671,35 @@ impl OmeZarr {
         } else {
             let threads = missing.len().min(8);
             let next = std::sync::atomic::AtomicUsize::new(0);
-            let results: Vec<Vec<(usize, Result<Arc<Vec<u8>>, IoError>)>> =
-                std::thread::scope(|sc| {
-                    let workers: Vec<_> = (0..threads)
-                        .map(|_| {
-                            sc.spawn(|| {
-                                let mut got = Vec::new();
-                                loop {
-                                    let k = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                                    let Some(&i) = missing.get(k) else { break };
-                                    let r = load(i);
-                                    let failed = r.is_err();
-                                    got.push((i, r));
-                                    if failed {
-                                        break;
-                                    }
+            type Loaded = (usize, Result<Arc<Vec<u8>>, IoError>);
+            let results: Vec<Vec<Loaded>> = std::thread::scope(|sc| {
+                let workers: Vec<_> = (0..threads)
+                    .map(|_| {
+                        sc.spawn(|| {
+                            let mut got = Vec::new();
+                            loop {
+                                let k = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                                let Some(&i) = missing.get(k) else { break };
+                                let r = load(i);
+                                let failed = r.is_err();
+                                got.push((i, r));
+                                if failed {
+                                    break;
                                 }
-                                got
-                            })
+                            }
+                            got
                         })
-                        .collect();
-                    workers
-                        .into_iter()
-                        .map(|w| {
-                            w.join().unwrap_or_else(|_| {
-                                vec![(usize::MAX, Err(zerr(&self.root, "a chunk reader panicked")))]
-                            })
+                    })
+                    .collect();
+                workers
+                    .into_iter()
+                    .map(|w| {
+                        w.join().unwrap_or_else(|_| {
+                            vec![(usize::MAX, Err(zerr(&self.root, "a chunk reader panicked")))]
                         })
-                        .collect()
-                });
+                    })
+                    .collect()
+            });
             for (i, r) in results.into_iter().flatten() {
                 let v = r?;
                 if let Some(slot) = out.get_mut(i) {
