@@ -777,3 +777,67 @@ fn zarr_through_a_faulty_proxy_is_exact_or_typed_never_wrong() {
         );
     }
 }
+
+#[test]
+#[cfg_attr(no_shared_data, ignore = "needs ../shared/data/formats (absent)")]
+fn a_forged_shard_index_or_huge_metadata_is_a_typed_error() {
+    let Some(data) = data() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path().join(SHARDED);
+    copy_tree(&data.join(SHARDED), &root);
+    // The first entry of a shard's index points past the shard (the crc32c
+    // after the entries rewritten to match, so only the bounds check can
+    // refuse it).
+    let shard = root.join("s0/c/0/0/0");
+    let mut b = std::fs::read(&shard).unwrap();
+    let n = b.len();
+    let at = n - (32 * 16 + 4);
+    b[at..at + 8].copy_from_slice(&(n as u64 * 2).to_le_bytes());
+    let crc = crc32c(&b[at..n - 4]);
+    b[n - 4..].copy_from_slice(&crc.to_le_bytes());
+    std::fs::write(&shard, &b).unwrap();
+    let server = serve_dir(dir.path(), 404, |_, _| Act::Serve);
+    let objects = Arc::new(RemoteObjects::open(&server.url(SHARDED), &opts()).unwrap());
+    let remote =
+        ZarrBrickSource::open_objects(objects, &ReadOptions::default(), 32, 2, Some([0.0, 1.0]))
+            .unwrap();
+    let finest = remote.layout().levels - 1;
+    let k = NodeKey {
+        level: finest,
+        x: 0,
+        y: 0,
+        z: 0,
+    };
+    let mut out = vec![0u8; remote.layout().brick_bytes()];
+    match remote.read_brick(k, &mut out) {
+        Err(BrickError::Corrupt { reason, .. }) => {
+            assert!(reason.contains("outside the shard"), "{reason}")
+        }
+        other => panic!("{other:?}"),
+    }
+    // A group metadata object over 1 MiB: refused, not parsed.
+    let big = dir.path().join("big.zarr");
+    std::fs::create_dir_all(&big).unwrap();
+    std::fs::write(big.join("zarr.json"), vec![b' '; (1 << 20) + 10]).unwrap();
+    let objects = Arc::new(RemoteObjects::open(&server.url("big.zarr"), &opts()).unwrap());
+    match ZarrBrickSource::open_objects(objects, &ReadOptions::default(), 32, 2, None) {
+        Err(brickray_io::IoError::BadHeader { msg, .. }) => assert!(msg.contains("1 MiB"), "{msg}"),
+        other => panic!("{other:?}"),
+    }
+}
+
+/// CRC-32C (Castagnoli), bitwise.
+fn crc32c(bytes: &[u8]) -> u32 {
+    let mut crc = !0u32;
+    for &b in bytes {
+        crc ^= u32::from(b);
+        for _ in 0..8 {
+            crc = if crc & 1 != 0 {
+                (crc >> 1) ^ 0x82F6_3B78
+            } else {
+                crc >> 1
+            };
+        }
+    }
+    !crc
+}
