@@ -224,6 +224,51 @@ impl RangeReader for MemRangeReader {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Objects in memory by key.
+    #[derive(Debug)]
+    struct Objects(std::collections::HashMap<&'static str, Vec<u8>>);
+
+    impl ObjectReader for Objects {
+        fn location(&self) -> &str {
+            "memory"
+        }
+        fn read_object(&self, key: &str, span: ObjectSpan) -> io::Result<Option<(Vec<u8>, u64)>> {
+            let Some(b) = self.0.get(key) else {
+                return Ok(None);
+            };
+            let n = b.len() as u64;
+            let (lo, hi) = match span {
+                ObjectSpan::All => (0, n),
+                ObjectSpan::At { offset, len } => (offset, offset.saturating_add(len)),
+                ObjectSpan::Suffix(k) => (n.saturating_sub(k), n),
+            };
+            if hi > n {
+                return Err(io::ErrorKind::UnexpectedEof.into());
+            }
+            Ok(Some((b[lo as usize..hi as usize].to_vec(), n)))
+        }
+    }
+
+    #[test]
+    fn object_ranges_default_to_one_read_each_and_missing_is_none() {
+        let o = Objects([("a", bytes(100))].into_iter().collect());
+        let got = o
+            .read_object_ranges("a", &[3..9, 90..100, 5..5])
+            .unwrap()
+            .unwrap();
+        assert_eq!(
+            got,
+            vec![bytes(100)[3..9].to_vec(), bytes(100)[90..].to_vec(), vec![]]
+        );
+        assert!(o.read_object_ranges("b", &[0..1, 2..3]).unwrap().is_none());
+        assert!(o.read_object_ranges("a", &[0..1, 95..101]).is_err());
+        let (tail, len) = o
+            .read_object("a", ObjectSpan::Suffix(500))
+            .unwrap()
+            .unwrap();
+        assert_eq!((tail, len), (bytes(100), 100));
+    }
     use proptest::prelude::*;
 
     fn bytes(n: usize) -> Vec<u8> {
