@@ -12,7 +12,8 @@
 //!   readers (raw + JSON, NRRD, and by feature NIfTI, TIFF, DICOM, OME-Zarr);
 //! * [`store`]: the brick-octree file format, its builder and reader, and the
 //!   procedural source of virtual volumes (with feature `remote`, stores
-//!   over S3, GCS, Azure and HTTP(S): `store::open_url`);
+//!   and OME-Zarr images over S3, GCS, Azure and HTTP(S): `store::open_url`,
+//!   `store::open_zarr_url`, `store::open_source_any`);
 //! * `remote` (feature `remote`): range readers over object storage and
 //!   HTTP(S), their options and typed errors;
 //! * [`cache`]: the GPU-free out-of-core planner ([`cache::Streamer`]) and its

@@ -113,6 +113,59 @@ impl RangeReader for std::fs::File {
     }
 }
 
+/// A part of one object read by an [`ObjectReader`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ObjectSpan {
+    /// The whole object.
+    All,
+    /// `len` bytes from `offset` (a range past the object's end is an error).
+    At {
+        /// The first byte.
+        offset: u64,
+        /// Bytes wanted.
+        len: u64,
+    },
+    /// The last `n` bytes (the whole object when it is shorter), in one
+    /// request: a zarr shard's index, read without asking the size first.
+    Suffix(u64),
+}
+
+/// Objects under one root (a folder of a bucket, a URL's directory) read by
+/// key: the seam between a multi-file format (OME-Zarr) and where its
+/// objects live. A missing object is `Ok(None)`, not an error, so that a
+/// reader can apply the format's rule for it (zarr: the fill value).
+pub trait ObjectReader: Send + Sync + fmt::Debug {
+    /// Where the objects live (a URL), for messages.
+    fn location(&self) -> &str;
+
+    /// The bytes of `span` of the object `key` (relative to the root,
+    /// `/`-separated) and the object's whole length; `None` when the object
+    /// does not exist.
+    fn read_object(&self, key: &str, span: ObjectSpan) -> io::Result<Option<(Vec<u8>, u64)>>;
+
+    /// Several ranges (`offset..end`) of one object; `None` when it does not
+    /// exist. The default reads them one after the other; a reader over the
+    /// network fetches them concurrently and coalesces neighbours.
+    fn read_object_ranges(
+        &self,
+        key: &str,
+        ranges: &[std::ops::Range<u64>],
+    ) -> io::Result<Option<Vec<Vec<u8>>>> {
+        let mut out = Vec::with_capacity(ranges.len());
+        for r in ranges {
+            let span = ObjectSpan::At {
+                offset: r.start,
+                len: r.end.saturating_sub(r.start),
+            };
+            match self.read_object(key, span)? {
+                Some((b, _)) => out.push(b),
+                None => return Ok(None),
+            }
+        }
+        Ok(Some(out))
+    }
+}
+
 /// Bytes in memory as a [`RangeReader`] (tests, and stores fetched whole).
 #[derive(Clone)]
 pub struct MemRangeReader {
@@ -171,6 +224,51 @@ impl RangeReader for MemRangeReader {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Objects in memory by key.
+    #[derive(Debug)]
+    struct Objects(std::collections::HashMap<&'static str, Vec<u8>>);
+
+    impl ObjectReader for Objects {
+        fn location(&self) -> &str {
+            "memory"
+        }
+        fn read_object(&self, key: &str, span: ObjectSpan) -> io::Result<Option<(Vec<u8>, u64)>> {
+            let Some(b) = self.0.get(key) else {
+                return Ok(None);
+            };
+            let n = b.len() as u64;
+            let (lo, hi) = match span {
+                ObjectSpan::All => (0, n),
+                ObjectSpan::At { offset, len } => (offset, offset.saturating_add(len)),
+                ObjectSpan::Suffix(k) => (n.saturating_sub(k), n),
+            };
+            if hi > n {
+                return Err(io::ErrorKind::UnexpectedEof.into());
+            }
+            Ok(Some((b[lo as usize..hi as usize].to_vec(), n)))
+        }
+    }
+
+    #[test]
+    fn object_ranges_default_to_one_read_each_and_missing_is_none() {
+        let o = Objects([("a", bytes(100))].into_iter().collect());
+        let got = o
+            .read_object_ranges("a", &[3..9, 90..100, 5..5])
+            .unwrap()
+            .unwrap();
+        assert_eq!(
+            got,
+            vec![bytes(100)[3..9].to_vec(), bytes(100)[90..].to_vec(), vec![]]
+        );
+        assert!(o.read_object_ranges("b", &[0..1, 2..3]).unwrap().is_none());
+        assert!(o.read_object_ranges("a", &[0..1, 95..101]).is_err());
+        let (tail, len) = o
+            .read_object("a", ObjectSpan::Suffix(500))
+            .unwrap()
+            .unwrap();
+        assert_eq!((tail, len), (bytes(100), 100));
+    }
     use proptest::prelude::*;
 
     fn bytes(n: usize) -> Vec<u8> {

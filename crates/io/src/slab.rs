@@ -315,6 +315,8 @@ mod tests {
 /// Sample bytes at an offset in a file, plain or gzip-compressed, read at any
 /// position: a plain file seeks; a gzip stream decodes forward (reopened when
 /// asked for an earlier position), so reading in increasing order is one pass.
+/// (NIfTI's.)
+#[cfg(feature = "nifti")]
 #[derive(Debug)]
 pub(crate) struct ByteStream {
     path: std::path::PathBuf,
@@ -329,6 +331,7 @@ pub(crate) struct ByteStream {
     )>,
 }
 
+#[cfg(feature = "nifti")]
 impl ByteStream {
     /// The stream of `total` bytes at `offset` in `path` (decoded bytes for gzip).
     pub(crate) fn new(path: &std::path::Path, offset: u64, total: u64, gzip: bool) -> ByteStream {
@@ -403,6 +406,7 @@ impl ByteStream {
     }
 }
 
+#[cfg(feature = "nifti")]
 impl ByteStream {
     /// For gzip, decodes the rest of the stream from where the last read
     /// stopped, so that the CRC and the length in the gzip trailer are
@@ -446,11 +450,13 @@ impl ByteStream {
 }
 
 /// Reads source bytes at a decoded position into a buffer.
+#[cfg(feature = "nifti")]
 pub(crate) type SlabRead<'a> = dyn FnMut(u64, &mut [u8]) -> Result<(), crate::IoError> + 'a;
 
 /// One bounded-memory pass over `n` samples of `conv.src` read through
 /// `read(start, buf)`: the rescaled min..max, or the volume error for the first
 /// non-finite sample (voxel coordinates in `dims`).
+#[cfg(feature = "nifti")]
 pub(crate) fn scan_converted(
     path: &std::path::Path,
     conv: &SampleConverter,

@@ -438,6 +438,13 @@ pub fn object_store_for(
                     "names no object (the path is empty or ends with /)".into()
                 ));
             }
+            // The directory without its trailing `/` (object_store appends
+            // the key's segments to the URL's: `dir/` would give `dir//key`).
+            let base = if parsed.path().rfind('/') == Some(0) {
+                base
+            } else {
+                base.strip_suffix('/').unwrap_or(base)
+            };
             let store = object_store::http::HttpBuilder::new()
                 .with_url(base)
                 .with_client_options(opts.client())
@@ -460,6 +467,52 @@ impl Drop for Runtime {
     fn drop(&mut self) {
         if let Some(rt) = self.0.take() {
             rt.shutdown_background();
+        }
+    }
+}
+
+/// Starts a reader's runtime.
+fn start_runtime(url: &str, opts: &RemoteOptions) -> Result<Runtime, RemoteError> {
+    tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(opts.worker_threads.max(1))
+        .thread_name("brickray-remote")
+        .enable_all()
+        .build()
+        .map(|rt| Runtime(Some(rt)))
+        .map_err(|e| RemoteError::Runtime {
+            url: url.to_owned(),
+            reason: e.to_string(),
+        })
+}
+
+/// Runs `f` on `runtime` and waits for it on this thread (a channel, never
+/// a runtime thread), for at most `deadline`; errors name `url`.
+fn run_on<T: Send + 'static>(
+    runtime: &Runtime,
+    url: &str,
+    deadline: Duration,
+    f: impl Future<Output = object_store::Result<T>> + Send + 'static,
+) -> Result<T, RemoteError> {
+    let gone = |reason: &str| RemoteError::Runtime {
+        url: url.to_owned(),
+        reason: reason.to_owned(),
+    };
+    let rt = runtime.0.as_ref().ok_or_else(|| gone("shut down"))?;
+    let (tx, rx) = std::sync::mpsc::sync_channel(1);
+    let task = rt.spawn(async move {
+        let r = tokio::time::timeout(deadline, f).await;
+        // The caller may have stopped waiting; nothing to do then.
+        let _ = tx.send(r);
+    });
+    match rx.recv() {
+        Ok(Ok(r)) => r.map_err(|e| RemoteError::of(url, e)),
+        Ok(Err(_elapsed)) => Err(RemoteError::Deadline {
+            url: url.to_owned(),
+            deadline,
+        }),
+        Err(_) => {
+            task.abort();
+            Err(gone("the read's task was dropped"))
         }
     }
 }
@@ -495,15 +548,7 @@ impl RemoteRangeReader {
     /// [`RemoteError::Missing`].
     pub fn open(url: &str, opts: &RemoteOptions) -> Result<RemoteRangeReader, RemoteError> {
         let (store, path) = object_store_for(url, opts)?;
-        let rt = tokio::runtime::Builder::new_multi_thread()
-            .worker_threads(opts.worker_threads.max(1))
-            .thread_name("brickray-remote")
-            .enable_all()
-            .build()
-            .map_err(|e| RemoteError::Runtime {
-                url: url.to_owned(),
-                reason: e.to_string(),
-            })?;
+        let runtime = start_runtime(url, opts)?;
         let mut reader = RemoteRangeReader {
             url: url.to_owned(),
             store,
@@ -511,7 +556,7 @@ impl RemoteRangeReader {
             len: 0,
             etag: None,
             deadline: opts.deadline(),
-            runtime: Runtime(Some(rt)),
+            runtime,
         };
         let (store, path) = (reader.store.clone(), reader.path.clone());
         let meta = reader.run(async move { store.head(&path).await })?;
@@ -535,35 +580,11 @@ impl RemoteRangeReader {
         self.etag.as_deref()
     }
 
-    /// Runs `f` on the reader's runtime and waits for it on this thread (a
-    /// channel, never a runtime thread), for at most the deadline.
     fn run<T: Send + 'static>(
         &self,
         f: impl Future<Output = object_store::Result<T>> + Send + 'static,
     ) -> Result<T, RemoteError> {
-        let gone = |reason: &str| RemoteError::Runtime {
-            url: self.url.clone(),
-            reason: reason.to_owned(),
-        };
-        let rt = self.runtime.0.as_ref().ok_or_else(|| gone("shut down"))?;
-        let (tx, rx) = std::sync::mpsc::sync_channel(1);
-        let deadline = self.deadline;
-        let task = rt.spawn(async move {
-            let r = tokio::time::timeout(deadline, f).await;
-            // The caller may have stopped waiting; nothing to do then.
-            let _ = tx.send(r);
-        });
-        match rx.recv() {
-            Ok(Ok(r)) => r.map_err(|e| RemoteError::of(&self.url, e)),
-            Ok(Err(_elapsed)) => Err(RemoteError::Deadline {
-                url: self.url.clone(),
-                deadline,
-            }),
-            Err(_) => {
-                task.abort();
-                Err(gone("the read's task was dropped"))
-            }
-        }
+        run_on(&self.runtime, &self.url, self.deadline, f)
     }
 
     fn check_bounds(&self, offset: u64, len: u64) -> Result<Range<u64>, RemoteError> {
@@ -639,6 +660,264 @@ impl RangeReader for RemoteRangeReader {
 
     fn read_ranges(&self, ranges: &mut [RangeRead<'_>]) -> io::Result<()> {
         Ok(self.read_many(ranges)?)
+    }
+}
+
+/// The objects under one remote root, read by key (an
+/// [`ObjectReader`](brickray_core::ObjectReader)): an OME-Zarr image's
+/// folder in a bucket (`s3://bucket/path/image.zarr`) or at a URL
+/// (`https://host/path/image.zarr`). Opening sends no request; each read is
+/// one ranged `GET` (several ranges of one object: coalesced by
+/// object_store), retried and bounded by the deadline as
+/// [`RemoteRangeReader`]'s. A missing object (404, or the 403 S3 answers for
+/// a missing key) reads as `None`.
+pub struct RemoteObjects {
+    url: String,
+    store: Arc<dyn ObjectStore>,
+    /// The root's path in the store (`""` for an HTTP root).
+    prefix: String,
+    deadline: Duration,
+    runtime: Runtime,
+    reads: std::sync::atomic::AtomicU64,
+}
+
+impl fmt::Debug for RemoteObjects {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("RemoteObjects")
+            .field("url", &self.url)
+            .finish()
+    }
+}
+
+impl RemoteObjects {
+    /// The objects under `url` (a folder: `s3://bucket/dir/image.zarr`,
+    /// `https://host/dir/image.zarr`; a trailing `/` is ignored), configured
+    /// by `opts`. Starts the runtime; sends no request.
+    pub fn open(url: &str, opts: &RemoteOptions) -> Result<RemoteObjects, RemoteError> {
+        let root = url.trim_end_matches('/');
+        // The store and path of an object in the folder: its parent is the
+        // root's path.
+        let (store, probe) =
+            object_store_for(&format!("{root}/zarr.json"), opts).map_err(|e| match e {
+                RemoteError::BadUrl { reason, .. } => RemoteError::BadUrl {
+                    url: url.to_owned(),
+                    reason,
+                },
+                other => other,
+            })?;
+        let prefix = probe
+            .as_ref()
+            .strip_suffix("zarr.json")
+            .unwrap_or("")
+            .trim_end_matches('/')
+            .to_owned();
+        Ok(RemoteObjects {
+            url: root.to_owned(),
+            store,
+            prefix,
+            deadline: opts.deadline(),
+            runtime: start_runtime(url, opts)?,
+            reads: std::sync::atomic::AtomicU64::new(0),
+        })
+    }
+
+    /// The root's URL (without a trailing `/`).
+    pub fn url(&self) -> &str {
+        &self.url
+    }
+
+    /// Reads issued so far (one per [`get`](Self::get), one per batch of
+    /// [`get_ranges`](Self::get_ranges)), retries not counted.
+    pub fn reads(&self) -> u64 {
+        self.reads.load(std::sync::atomic::Ordering::Relaxed)
+    }
+
+    /// The store path and URL of `key`; a key that leaves the root (`..`,
+    /// `.`, an empty segment) is refused.
+    fn locate(&self, key: &str) -> Result<(ObjectPath, String), RemoteError> {
+        let url = format!("{}/{key}", self.url);
+        if key.is_empty()
+            || key
+                .split('/')
+                .any(|c| c.is_empty() || c == "." || c == ".." || c.contains('\\'))
+        {
+            return Err(RemoteError::BadUrl {
+                url,
+                reason: "the key leaves the root".into(),
+            });
+        }
+        let full = if self.prefix.is_empty() {
+            key.to_owned()
+        } else {
+            format!("{}/{key}", self.prefix)
+        };
+        let path = ObjectPath::parse(&full).map_err(|e| RemoteError::BadUrl {
+            url: url.clone(),
+            reason: e.to_string(),
+        })?;
+        Ok((path, url))
+    }
+
+    /// `span` of the object `key` and the object's length; `None` when it
+    /// is missing (404, or S3's 403). The bytes returned are checked against
+    /// the span (a server that answers another range is an error).
+    pub fn get(
+        &self,
+        key: &str,
+        span: brickray_core::ObjectSpan,
+    ) -> Result<Option<(Vec<u8>, u64)>, RemoteError> {
+        use brickray_core::ObjectSpan;
+        use object_store::{GetOptions, GetRange};
+        let (path, url) = self.locate(key)?;
+        let range = match span {
+            ObjectSpan::All => None,
+            ObjectSpan::At { len: 0, offset } => {
+                // no bytes: the object's length (a HEAD) says whether the
+                // empty range lies in it
+                self.reads
+                    .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                let store = self.store.clone();
+                let p = path.clone();
+                let size = match run_on(&self.runtime, &url, self.deadline, async move {
+                    store.head(&p).await
+                }) {
+                    Ok(m) => m.size,
+                    Err(e) if e.is_missing() => return Ok(None),
+                    Err(e) => return Err(e),
+                };
+                if offset > size {
+                    return Err(RemoteError::OutOfBounds {
+                        url,
+                        offset,
+                        len: 0,
+                        object_len: size,
+                    });
+                }
+                return Ok(Some((Vec::new(), size)));
+            }
+            ObjectSpan::At { offset, len } => {
+                let end = offset
+                    .checked_add(len)
+                    .ok_or_else(|| RemoteError::OutOfBounds {
+                        url: url.clone(),
+                        offset,
+                        len,
+                        object_len: u64::MAX,
+                    })?;
+                Some(GetRange::Bounded(offset..end))
+            }
+            ObjectSpan::Suffix(n) => Some(GetRange::Suffix(n)),
+        };
+        self.reads
+            .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        let store = self.store.clone();
+        let got = run_on(&self.runtime, &url, self.deadline, async move {
+            let options = GetOptions {
+                range,
+                ..GetOptions::default()
+            };
+            let r = store.get_opts(&path, options).await?;
+            let (size, got) = (r.meta.size, r.range.clone());
+            let bytes = r.bytes().await?;
+            Ok((bytes, size, got))
+        });
+        let (bytes, size, got) = match got {
+            Ok(x) => x,
+            Err(e) if e.is_missing() => return Ok(None),
+            Err(e) => return Err(e),
+        };
+        let expected = match span {
+            ObjectSpan::All => 0..size,
+            ObjectSpan::At { offset, len } => offset..offset + len,
+            ObjectSpan::Suffix(n) => size.saturating_sub(n)..size,
+        };
+        if expected.end > size {
+            return Err(RemoteError::OutOfBounds {
+                url,
+                offset: expected.start,
+                len: expected.end - expected.start,
+                object_len: size,
+            });
+        }
+        if got != expected || bytes.len() as u64 != expected.end - expected.start {
+            return Err(RemoteError::WrongLength {
+                url,
+                offset: expected.start,
+                expected: expected.end - expected.start,
+                actual: bytes.len() as u64,
+            });
+        }
+        Ok(Some((bytes.to_vec(), size)))
+    }
+
+    /// Several ranges of the object `key` (coalesced by object_store);
+    /// `None` when it is missing.
+    pub fn get_ranges(
+        &self,
+        key: &str,
+        ranges: &[Range<u64>],
+    ) -> Result<Option<Vec<Vec<u8>>>, RemoteError> {
+        let (path, url) = self.locate(key)?;
+        if ranges.iter().any(|r| r.start > r.end) {
+            return Err(RemoteError::BadUrl {
+                url,
+                reason: "a range ends before it starts".into(),
+            });
+        }
+        self.reads
+            .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        let store = self.store.clone();
+        let wanted = ranges.to_vec();
+        let got = match run_on(&self.runtime, &url, self.deadline, async move {
+            store.get_ranges(&path, &wanted).await
+        }) {
+            Ok(g) => g,
+            Err(e) if e.is_missing() => return Ok(None),
+            Err(e) => return Err(e),
+        };
+        if got.len() != ranges.len() {
+            return Err(RemoteError::WrongLength {
+                url,
+                offset: 0,
+                expected: ranges.len() as u64,
+                actual: got.len() as u64,
+            });
+        }
+        let mut out = Vec::with_capacity(ranges.len());
+        for (r, b) in ranges.iter().zip(got) {
+            if b.len() as u64 != r.end - r.start {
+                return Err(RemoteError::WrongLength {
+                    url,
+                    offset: r.start,
+                    expected: r.end - r.start,
+                    actual: b.len() as u64,
+                });
+            }
+            out.push(b.to_vec());
+        }
+        Ok(Some(out))
+    }
+}
+
+impl brickray_core::ObjectReader for RemoteObjects {
+    fn location(&self) -> &str {
+        &self.url
+    }
+
+    fn read_object(
+        &self,
+        key: &str,
+        span: brickray_core::ObjectSpan,
+    ) -> io::Result<Option<(Vec<u8>, u64)>> {
+        Ok(self.get(key, span)?)
+    }
+
+    fn read_object_ranges(
+        &self,
+        key: &str,
+        ranges: &[Range<u64>],
+    ) -> io::Result<Option<Vec<Vec<u8>>>> {
+        Ok(self.get_ranges(key, ranges)?)
     }
 }
 

@@ -12,7 +12,8 @@
 //!   node's table entry, metadata queries; implements [`BrickSource`]; the
 //!   parser reads through [`RangeReader`] ([`Store::open_with`]), so a store
 //!   opens from a file, from memory, or (feature `remote`) from S3, GCS,
-//!   Azure or HTTP(S) (`open_url`);
+//!   Azure or HTTP(S) (`open_url`); OME-Zarr images stream from the same
+//!   places as brick sources (`open_zarr_url`, `open_source_any`);
 //! * [`ProceduralSource`]: a virtual volume of up to `65536^3` voxels (and more)
 //!   whose bricks are computed on demand, with exactly filtered inner nodes;
 //!   implements [`BrickSource`].
@@ -47,7 +48,7 @@ pub use partial::{ignored_signals, remove_partial_files};
 pub use procedural::ProceduralSource;
 pub use reader::{NodeRecord, Store, StoreStats, decode_payload, open};
 #[cfg(feature = "remote")]
-pub use reader::{open_any, open_url};
+pub use reader::{is_zarr_url, open_any, open_source_any, open_url, open_zarr_url};
 
 /// The 2x downsampling filter that computes a level-`l-1` voxel from the 2x2x2
 /// level-`l` voxels `(2i + {0,1}, 2j + {0,1}, 2k + {0,1})`, indices clamped to the

@@ -50,6 +50,88 @@ pub fn open_any(path_or_url: &str) -> Result<Store, StoreError> {
     }
 }
 
+/// Opens an OME-Zarr image (0.4 or 0.5) over S3, GCS, Azure or HTTP(S)
+/// (`s3://bucket/path/image.zarr`, `https://host/path/image.zarr`) as a
+/// streamed brick source ([`ZarrBrickSource`](brickray_io::zarr::ZarrBrickSource)
+/// over [`RemoteObjects`](brickray_remote::RemoteObjects)): the channel and
+/// time point of `read`, bricks of `brick` voxels with `apron` voxels of
+/// apron. Set-up reads the metadata and the coarsest level (for the value
+/// range); bricks read the chunks they need, each shard's index once. A
+/// missing chunk (404, or S3's 403) reads as the fill value; a remote
+/// failure is a [`StoreError::Input`] whose I/O source holds the typed
+/// [`RemoteError`](brickray_remote::RemoteError).
+#[cfg(feature = "remote")]
+pub fn open_zarr_url(
+    url: &str,
+    opts: &brickray_remote::RemoteOptions,
+    read: &brickray_io::ReadOptions,
+    brick: u32,
+    apron: u32,
+) -> Result<brickray_io::zarr::ZarrBrickSource, StoreError> {
+    let objects = brickray_remote::RemoteObjects::open(url, opts)
+        .map_err(|e| StoreError::io(Path::new(url), e.into()))?;
+    Ok(brickray_io::zarr::ZarrBrickSource::open_objects(
+        Arc::new(objects),
+        read,
+        brick,
+        apron,
+        None,
+    )?)
+}
+
+/// Whether the remote `url` names an OME-Zarr image rather than a store:
+/// its path ends in `.zarr` (or `.zarr/`), or, for a name ending in neither
+/// `.zarr` nor `.brs`, the folder it names holds a `zarr.json` or `.zattrs`
+/// with `multiscales` (one or two small requests).
+#[cfg(feature = "remote")]
+pub fn is_zarr_url(url: &str, opts: &brickray_remote::RemoteOptions) -> bool {
+    let name = url.trim_end_matches('/').to_ascii_lowercase();
+    if name.ends_with(".zarr") {
+        return true;
+    }
+    if name.ends_with(&format!(".{}", crate::EXTENSION)) {
+        return false;
+    }
+    let Ok(objects) = brickray_remote::RemoteObjects::open(url, opts) else {
+        return false;
+    };
+    ["zarr.json", ".zattrs"].iter().any(|key| {
+        objects
+            .get(key, brickray_core::ObjectSpan::Suffix(1 << 20))
+            .ok()
+            .flatten()
+            .and_then(|(b, _)| serde_json::from_slice::<serde_json::Value>(&b).ok())
+            .is_some_and(|v| {
+                let attrs = v.get("attributes").and_then(|a| a.get("ome")).unwrap_or(&v);
+                attrs.get("multiscales").is_some()
+            })
+    })
+}
+
+/// Opens a brick source from a URL or a local path: an OME-Zarr image over
+/// the network ([`is_zarr_url`], [`open_zarr_url`] with the default store's
+/// brick and apron, the first channel and time point), a store over the
+/// network ([`open_url`]), or a local store ([`open`]). Remote access is
+/// configured by [`RemoteOptions::from_env`](brickray_remote::RemoteOptions::from_env).
+#[cfg(feature = "remote")]
+pub fn open_source_any(path_or_url: &str) -> Result<Arc<dyn BrickSource>, StoreError> {
+    if brickray_remote::is_url(path_or_url) {
+        let o = brickray_remote::RemoteOptions::from_env();
+        if is_zarr_url(path_or_url, &o) {
+            let d = crate::BuildOptions::default();
+            return Ok(Arc::new(open_zarr_url(
+                path_or_url,
+                &o,
+                &brickray_io::ReadOptions::default(),
+                d.brick,
+                d.apron,
+            )?));
+        }
+        return Ok(Arc::new(open_url(path_or_url, &o)?));
+    }
+    Ok(Arc::new(open(path_or_url)?))
+}
+
 /// An open brick store. Reads are positional (`pread`), so any number of threads
 /// may read bricks concurrently (they share the file behind a read lock, taken
 /// only to clone a handle).

@@ -317,6 +317,94 @@ fn info_on_a_url_matches_info_on_the_file() {
     assert!(err.contains(&missing) && err.contains("not found"), "{err}");
 }
 
+/// `info URL` of an OME-Zarr image on the HTTP server lists the levels
+/// `info` lists for the local folder, and says it streams the image.
+#[cfg(feature = "remote")]
+#[test]
+#[ignore = "needs BRICKRAY_TEST_HTTP (a Range HTTP server; scripts/test.sh starts one)"]
+fn info_on_an_ome_zarr_url_lists_the_local_levels() {
+    let http = match std::env::var("BRICKRAY_TEST_HTTP") {
+        Ok(v) if !v.is_empty() => v,
+        _ if std::env::var("CI").is_ok_and(|v| v == "true") => {
+            panic!("CI=true but BRICKRAY_TEST_HTTP is unset (scripts/test.sh starts the server)")
+        }
+        _ => return eprintln!("skipping: BRICKRAY_TEST_HTTP is unset"),
+    };
+    let image = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../../shared/data/formats/ome-zarr/cells3d_nuclei_sharded_v05.ome.zarr");
+    if !image.is_dir() {
+        assert!(
+            !std::env::var("CI").is_ok_and(|v| v == "true"),
+            "CI=true but {} is missing",
+            image.display()
+        );
+        return eprintln!("skipping: no shared data");
+    }
+    let nanos = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap()
+        .as_nanos();
+    let url = format!(
+        "{}/cli-zarr-{}-{nanos}/cells.ome.zarr",
+        http.trim_end_matches('/'),
+        std::process::id()
+    );
+    fn files(dir: &std::path::Path, out: &mut Vec<std::path::PathBuf>) {
+        for e in std::fs::read_dir(dir).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                files(&p, out);
+            } else {
+                out.push(p);
+            }
+        }
+    }
+    let mut all = Vec::new();
+    files(&image, &mut all);
+    for f in &all {
+        let rel = f
+            .strip_prefix(&image)
+            .unwrap()
+            .to_string_lossy()
+            .into_owned();
+        http_put(&format!("{url}/{rel}"), &std::fs::read(f).unwrap());
+    }
+    let exe = env!("CARGO_BIN_EXE_brickray-store");
+    let run = |target: &str, extra: &[&str]| {
+        Command::new(exe)
+            .arg("info")
+            .args(extra)
+            .arg(target)
+            .output()
+            .unwrap()
+    };
+    let local = run(image.to_str().unwrap(), &[]);
+    let remote = run(&url, &["--allow-http"]);
+    let text = String::from_utf8_lossy(&remote.stdout);
+    assert!(
+        remote.status.success(),
+        "{}",
+        String::from_utf8_lossy(&remote.stderr)
+    );
+    assert!(
+        text.contains(&url) && text.contains("OME-Zarr 0.5"),
+        "{text}"
+    );
+    let levels: Vec<String> = String::from_utf8_lossy(&local.stdout)
+        .lines()
+        .filter(|l| l.starts_with("level ") || l.starts_with("volume "))
+        .map(|l| l.split(", value range").next().unwrap().to_owned())
+        .collect();
+    assert!(levels.len() >= 3, "{levels:?}");
+    for l in &levels {
+        assert!(text.contains(l.as_str()), "{l:?} not in {text}");
+    }
+    // Without --allow-http: refused before any request.
+    let e = run(&url, &[]);
+    assert!(!e.status.success());
+    assert!(String::from_utf8_lossy(&e.stderr).contains("--allow-http"));
+}
+
 /// A plain-HTTP URL is refused unless allowed, before any request.
 #[cfg(feature = "remote")]
 #[test]

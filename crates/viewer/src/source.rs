@@ -252,6 +252,42 @@ pub(crate) fn open(
                 progress.set_stage("opening the brick store");
                 return open_store(input, path, "brick store".into());
             }
+            // An OME-Zarr image over the network streams as it is (no store
+            // is built from it).
+            #[cfg(feature = "remote")]
+            {
+                let s = path.to_string_lossy();
+                if brickray::remote::is_url(&s) {
+                    let o = brickray::remote::RemoteOptions::from_env();
+                    if brickray::store::is_zarr_url(&s, &o) {
+                        progress.set_stage("opening the OME-Zarr image");
+                        let d = brickray::store::BuildOptions::default();
+                        let src = brickray::store::open_zarr_url(
+                            &s,
+                            &o,
+                            &brickray::io::ReadOptions::default(),
+                            d.brick,
+                            d.apron,
+                        )?;
+                        let warned = warning_note(&src.warnings());
+                        let source: Arc<dyn BrickSource> = Arc::new(src);
+                        let desc = source.layout().volume.clone();
+                        let histogram = source_histogram(&*source)?;
+                        let note = format!(
+                            "{:?} {} streamed from the OME-Zarr image {s}{warned}",
+                            desc.dims,
+                            desc.dtype.name()
+                        );
+                        return Ok(Loaded {
+                            input: input.clone(),
+                            desc,
+                            volume: Opened::Streamed(source),
+                            histogram,
+                            note,
+                        });
+                    }
+                }
+            }
             let mut reader = brickray::io::open(path)?;
             if opts.labels && !reader.desc().kind.is_labels() {
                 reader = Box::new(brickray::io::AsLabels::new(reader)?);
@@ -615,6 +651,106 @@ mod tests {
         assert_eq!(remote.desc, local.desc);
         assert_eq!(remote.histogram, local.histogram);
         assert!(remote.note.contains("brick store"), "{}", remote.note);
+    }
+
+    /// An OME-Zarr image's URL on the Range HTTP test server streams as a
+    /// brick source: the dims and sample type of the local image, and its
+    /// bricks equal the local reader's.
+    #[cfg(feature = "remote")]
+    #[test]
+    #[ignore = "needs BRICKRAY_TEST_HTTP and BRICKRAY_ALLOW_HTTP=1 (scripts/test.sh sets both)"]
+    fn an_ome_zarr_url_streams_as_the_local_image() {
+        use std::io::{Read, Write};
+        let ci = std::env::var("CI").is_ok_and(|v| v == "true");
+        let (Ok(http), Ok(_)) = (
+            std::env::var("BRICKRAY_TEST_HTTP"),
+            std::env::var("BRICKRAY_ALLOW_HTTP"),
+        ) else {
+            assert!(
+                !ci,
+                "CI=true but BRICKRAY_TEST_HTTP or BRICKRAY_ALLOW_HTTP is unset"
+            );
+            return eprintln!("skipping: BRICKRAY_TEST_HTTP or BRICKRAY_ALLOW_HTTP is unset");
+        };
+        let image = Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../../shared/data/formats/ome-zarr/pycortex_s1_t1_v05.ome.zarr");
+        if !image.is_dir() {
+            assert!(!ci, "CI=true but {} is missing", image.display());
+            return eprintln!("skipping: no shared data");
+        }
+        let url = format!(
+            "{}/viewer-zarr-{}/t1.ome.zarr",
+            http.trim_end_matches('/'),
+            std::process::id()
+        );
+        fn put(dir: &Path, root: &Path, url: &str) {
+            for e in std::fs::read_dir(dir).unwrap() {
+                let p = e.unwrap().path();
+                if p.is_dir() {
+                    put(&p, root, url);
+                    continue;
+                }
+                let rel = p.strip_prefix(root).unwrap().to_string_lossy().into_owned();
+                let full = format!("{url}/{rel}");
+                let bytes = std::fs::read(&p).unwrap();
+                let rest = full.strip_prefix("http://").unwrap();
+                let (host, path) = rest.split_once('/').unwrap();
+                let mut c = std::net::TcpStream::connect(host).unwrap();
+                write!(
+                    c,
+                    "PUT /{path} HTTP/1.1\r\nHost: {host}\r\nContent-Length: {}\r\nConnection: close\r\n\r\n",
+                    bytes.len()
+                )
+                .unwrap();
+                c.write_all(&bytes).unwrap();
+                let mut resp = String::new();
+                let _ = c.read_to_string(&mut resp);
+                assert!(resp.starts_with("HTTP/1.1 201"), "{resp}");
+            }
+        }
+        put(&image, &image, &url);
+        let opts = OpenOptions {
+            in_core_max_bytes: 0,
+            max_3d_side: 2048,
+            store_dir: std::env::temp_dir(),
+        };
+        let remote = open(&Input::parse(&url).unwrap(), &opts, &Progress::default()).unwrap();
+        let Opened::Streamed(src) = &remote.volume else {
+            panic!("not streamed")
+        };
+        assert!(remote.note.contains("OME-Zarr"), "{}", remote.note);
+        let d = brickray::store::BuildOptions::default();
+        let range = src.layout().volume.value_range;
+        let local = brickray::io::zarr::ZarrBrickSource::open(
+            &image,
+            &brickray::io::ReadOptions::default(),
+            d.brick,
+            d.apron,
+            Some(range),
+        )
+        .unwrap();
+        assert_eq!(local.layout(), src.layout());
+        let (mut a, mut b) = (
+            vec![0u8; local.layout().brick_bytes()],
+            vec![0u8; local.layout().brick_bytes()],
+        );
+        let leaf = local.layout().levels - 1;
+        let mut data = 0;
+        for z in 0..1u32 << leaf {
+            for x in 0..1u32 << leaf {
+                let k = NodeKey {
+                    level: leaf,
+                    x,
+                    y: 0,
+                    z,
+                };
+                local.read_brick(k, &mut a).unwrap();
+                src.read_brick(k, &mut b).unwrap();
+                assert!(a == b, "brick {k:?}");
+                data += usize::from(a.iter().any(|&v| v != a[0]));
+            }
+        }
+        assert!(data > 0, "no brick with data compared");
     }
 
     #[test]

@@ -13,7 +13,16 @@
 //!   level;
 //! * two ways in: [`ZarrReader`] streams z-slabs to the store builder, and
 //!   [`ZarrBrickSource`] serves octree bricks straight from the chunks (see
-//!   its documentation), so a store need not be built at all.
+//!   its documentation), so a store need not be built at all;
+//! * from a folder, or from objects read by key through an
+//!   [`ObjectReader`] ([`OmeZarr::open_objects`],
+//!   [`ZarrBrickSource::open_objects`]: an image over HTTP or in a bucket,
+//!   with `brickray-remote`); a missing object (404, or S3's 403) is a
+//!   missing chunk;
+//! * decoded chunks (a sharded array's inner chunks) are kept within
+//!   [`CHUNK_CACHE_BYTES`], least recently used first out, so that
+//!   neighbouring bricks and slabs that share a chunk decode (and, remotely,
+//!   fetch) it once.
 
 use crate::slab::desc_range;
 use crate::{
@@ -21,7 +30,8 @@ use crate::{
     SampleConverter, SourceType, VolumeReader, check_slab,
 };
 use brickray_core::{
-    BrickError, BrickSource, DType, NodeInfo, NodeKey, NodeKind, OctreeLayout, VolumeDesc,
+    BrickError, BrickSource, DType, NodeInfo, NodeKey, NodeKind, ObjectReader, OctreeLayout,
+    VolumeDesc,
 };
 use parking_lot::Mutex;
 use serde_json::Value;
@@ -30,10 +40,13 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use zarrs::array::{Array, ArrayMetadata, ArraySubset};
 
+mod cache;
 mod safe;
 mod scan;
 mod source;
 
+use cache::ChunkCache;
+pub use cache::{CHUNK_CACHE_BYTES, ChunkCacheStats};
 use safe::{MAX_CHUNK_BYTES, SafeStore};
 use scan::scan;
 pub use source::{MAX_BRICK_READ, ZarrBrickSource};
@@ -47,6 +60,9 @@ struct Level {
     shape: Vec<u64>,
     scale: Vec<f64>,
     translation: Vec<f64>,
+    /// The decoded unit: the chunk shape, or a sharded array's inner chunk
+    /// shape.
+    unit: Vec<u64>,
     array: ZArray,
 }
 
@@ -60,13 +76,15 @@ pub struct OmeZarr {
     ax: [Option<usize>; 5],
     src: SourceType,
     store: Arc<SafeStore>,
+    /// Decoded chunks, by level and unit indices.
+    cache: ChunkCache,
     /// What was assumed (see [`VolumeReader::warnings`]).
     warnings: Vec<String>,
 }
 
 /// A metadata file's JSON; `Ok(None)` when it does not exist. Regular files
 /// only (a FIFO is refused before it is opened), at most 1 MiB.
-fn read_json(path: &Path) -> Result<Option<Value>, IoError> {
+pub(super) fn read_json(path: &Path) -> Result<Option<Value>, IoError> {
     let f = match crate::open_regular(path) {
         Ok(f) => f,
         Err(IoError::Io { source, .. }) if source.kind() == std::io::ErrorKind::NotFound => {
@@ -171,7 +189,7 @@ fn open_array(
     lp: &Path,
     path: &str,
     sample: u64,
-) -> Result<ZArray, IoError> {
+) -> Result<(ZArray, Vec<u64>), IoError> {
     let err = |e: &dyn std::fmt::Display| store.take_error().unwrap_or_else(|| zerr(lp, e));
     let array = ZArray::open(store.clone(), path).map_err(|e| err(&e))?;
     let array = array.to_v3().map_err(|e| err(&e))?;
@@ -189,10 +207,22 @@ fn open_array(
         .map(|c| c.get())
         .collect();
     let codecs = json.get("codecs").cloned().unwrap_or(Value::Null);
+    let mut unit = chunk.clone();
     if let Some(ix) = check_chunk(lp, &chunk, &codecs, sample)? {
         store.add_sharded(format!("{}/", path.trim_matches('/')), ix);
+        // checked there: the sharding codec's inner chunk shape
+        unit = codecs
+            .as_array()
+            .and_then(|l| {
+                l.iter().find_map(|c| {
+                    (c.get("name")?.as_str()? == "sharding_indexed")
+                        .then(|| c.get("configuration")?.get("chunk_shape")?.as_array())?
+                })
+            })
+            .map(|a| a.iter().filter_map(Value::as_u64).collect())
+            .unwrap_or(chunk);
     }
-    Ok(array)
+    Ok((array, unit))
 }
 
 /// Checks one chunk shape (or shard shape) and, through a sharding codec,
@@ -297,20 +327,39 @@ fn check_chunk(
 impl OmeZarr {
     /// Opens the group at `root` (a `.zarr` folder).
     pub fn open(root: &Path) -> Result<OmeZarr, IoError> {
+        OmeZarr::open_in(Arc::new(SafeStore::new(root)))
+    }
+
+    /// Opens the group whose objects `reader` reads by key (`zarr.json`,
+    /// `s0/c/0/0/0`, ...): an image over HTTP or in a bucket. Reads the
+    /// metadata only (the group's and each level's).
+    pub fn open_objects(reader: Arc<dyn ObjectReader>) -> Result<OmeZarr, IoError> {
+        OmeZarr::open_in(Arc::new(SafeStore::objects(reader)))
+    }
+
+    fn open_in(store: Arc<SafeStore>) -> Result<OmeZarr, IoError> {
         safe::install();
-        let (attrs, meta_path) = if let Some(v) = read_json(&root.join("zarr.json"))? {
+        let root = store.root().to_owned();
+        let root = root.as_path();
+        let (attrs, meta_path) = if let Some(v) = store.json("zarr.json")? {
             let a = v
                 .get("attributes")
                 .and_then(|a| a.get("ome"))
                 .cloned()
                 .unwrap_or(Value::Null);
             (a, root.join("zarr.json"))
-        } else if let Some(v) = read_json(&root.join(".zattrs"))? {
+        } else if let Some(v) = store.json(".zattrs")? {
             (v, root.join(".zattrs"))
         } else {
             return Err(IoError::UnknownFormat {
                 path: root.to_owned(),
-                tried: "OME-Zarr: no zarr.json or .zattrs".into(),
+                tried: if store.is_local() {
+                    "OME-Zarr: no zarr.json or .zattrs".into()
+                } else {
+                    "OME-Zarr: no zarr.json or .zattrs (not found, or access denied: \
+                     S3 answers 403 for both; check the URL and the credentials)"
+                        .into()
+                },
             });
         };
         let bad = |msg: &str| IoError::header(&meta_path, msg.to_owned());
@@ -370,7 +419,6 @@ impl OmeZarr {
             ));
         }
         let (gscale, gtrans, _) = transforms(ms, n, &meta_path, "multiscales")?;
-        let store = Arc::new(SafeStore::new(root));
         let mut warnings = Vec::new();
         let datasets = ms
             .get("datasets")
@@ -391,8 +439,8 @@ impl OmeZarr {
             }
             // the array's own metadata first (a FIFO there is refused by
             // name), then zarrs' view of it
-            let dtype = array_dtype(&lp)?;
-            let array = open_array(&store, &lp, &format!("/{path}"), dtype.size() as u64)?;
+            let dtype = array_dtype(&store, &path, &lp)?;
+            let (array, unit) = open_array(&store, &lp, &format!("/{path}"), dtype.size() as u64)?;
             let shape = array.shape().to_vec();
             if shape.len() != n {
                 return Err(IoError::header(
@@ -430,6 +478,7 @@ impl OmeZarr {
                 shape,
                 scale,
                 translation: trans,
+                unit,
                 array,
             });
         }
@@ -443,6 +492,7 @@ impl OmeZarr {
             ax,
             src,
             store,
+            cache: ChunkCache::new(CHUNK_CACHE_BYTES),
             warnings,
         })
     }
@@ -510,14 +560,176 @@ impl OmeZarr {
         if let Some(i) = self.ax[4] {
             ranges[i] = t..t + 1;
         }
+        let sz = self.src.size();
+        let n = ranges.len();
+        let dims: Vec<u64> = ranges
+            .iter()
+            .map(|r| r.end.saturating_sub(r.start))
+            .collect();
+        let total = dims
+            .iter()
+            .try_fold(sz as u64, |a, &d| a.checked_mul(d))
+            .and_then(|b| usize::try_from(b).ok())
+            .ok_or_else(|| zerr(&self.root.join(&l.path), "a region too large to read"))?;
+        let mut out = vec![0u8; total];
+        if total == 0 {
+            return Ok(out);
+        }
+        // The chunks (inner chunks of a sharded array) the region touches,
+        // in index order.
+        let ulo: Vec<u64> = (0..n).map(|i| ranges[i].start / l.unit[i]).collect();
+        let uhi: Vec<u64> = (0..n)
+            .map(|i| (ranges[i].end - 1) / l.unit[i] + 1)
+            .collect();
+        let mut units = Vec::new();
+        let mut u = ulo.clone();
+        'all: loop {
+            units.push(u.clone());
+            let mut a = n;
+            loop {
+                if a == 0 {
+                    break 'all;
+                }
+                a -= 1;
+                u[a] += 1;
+                if u[a] < uhi[a] {
+                    break;
+                }
+                u[a] = ulo[a];
+            }
+        }
+        let data = self.units(level, &units)?;
+        // Output strides (x, the last axis, fastest).
+        let mut ostride = vec![sz as u64; n];
+        for i in (0..n.saturating_sub(1)).rev() {
+            ostride[i] = ostride[i + 1] * dims[i + 1];
+        }
+        for (u, d) in units.iter().zip(&data) {
+            let blo: Vec<u64> = (0..n).map(|i| u[i] * l.unit[i]).collect();
+            let bhi: Vec<u64> = (0..n)
+                .map(|i| (blo[i] + l.unit[i]).min(l.shape[i]))
+                .collect();
+            let mut ustride = vec![sz as u64; n];
+            for i in (0..n.saturating_sub(1)).rev() {
+                ustride[i] = ustride[i + 1] * (bhi[i + 1] - blo[i + 1]);
+            }
+            let ilo: Vec<u64> = (0..n).map(|i| ranges[i].start.max(blo[i])).collect();
+            let ihi: Vec<u64> = (0..n).map(|i| ranges[i].end.min(bhi[i])).collect();
+            let run = ((ihi[n - 1] - ilo[n - 1]) * sz as u64) as usize;
+            let mut idx = ilo.clone();
+            'rows: loop {
+                let (mut so, mut dst) = (0u64, 0u64);
+                for i in 0..n {
+                    so += (idx[i] - blo[i]) * ustride[i];
+                    dst += (idx[i] - ranges[i].start) * ostride[i];
+                }
+                let (so, dst) = (so as usize, dst as usize);
+                let src = d.get(so..so + run).ok_or_else(|| {
+                    zerr(
+                        &self.root.join(&l.path),
+                        format!("chunk {u:?} decoded to {} bytes", d.len()),
+                    )
+                })?;
+                out[dst..dst + run].copy_from_slice(src);
+                // next row: every axis but the last
+                let mut a = n - 1;
+                loop {
+                    if a == 0 {
+                        break 'rows;
+                    }
+                    a -= 1;
+                    idx[a] += 1;
+                    if idx[a] < ihi[a] {
+                        break;
+                    }
+                    idx[a] = ilo[a];
+                }
+            }
+        }
+        Ok(out)
+    }
+
+    /// The decoded samples (little-endian) of each unit (chunk, or a
+    /// sharded array's inner chunk) of `level`, clipped to the array: from
+    /// the cache, else decoded (several at once, on up to 8 threads, so that
+    /// a remote image's round trips overlap) and kept.
+    fn units(&self, level: usize, units: &[Vec<u64>]) -> Result<Vec<Arc<Vec<u8>>>, IoError> {
+        let mut out: Vec<Option<Arc<Vec<u8>>>> = units
+            .iter()
+            .map(|u| self.cache.get(&(level, u.clone())))
+            .collect();
+        let missing: Vec<usize> = (0..units.len()).filter(|&i| out[i].is_none()).collect();
+        let load = |i: usize| -> Result<Arc<Vec<u8>>, IoError> {
+            let v = Arc::new(self.unit(level, &units[i])?);
+            self.cache.insert((level, units[i].clone()), v.clone());
+            Ok(v)
+        };
+        if missing.len() <= 1 {
+            for &i in &missing {
+                out[i] = Some(load(i)?);
+            }
+        } else {
+            let threads = missing.len().min(8);
+            let next = std::sync::atomic::AtomicUsize::new(0);
+            type Loaded = (usize, Result<Arc<Vec<u8>>, IoError>);
+            let results: Vec<Vec<Loaded>> = std::thread::scope(|sc| {
+                let workers: Vec<_> = (0..threads)
+                    .map(|_| {
+                        sc.spawn(|| {
+                            let mut got = Vec::new();
+                            loop {
+                                let k = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                                let Some(&i) = missing.get(k) else { break };
+                                let r = load(i);
+                                let failed = r.is_err();
+                                got.push((i, r));
+                                if failed {
+                                    break;
+                                }
+                            }
+                            got
+                        })
+                    })
+                    .collect();
+                workers
+                    .into_iter()
+                    .map(|w| {
+                        w.join().unwrap_or_else(|_| {
+                            vec![(usize::MAX, Err(zerr(&self.root, "a chunk reader panicked")))]
+                        })
+                    })
+                    .collect()
+            });
+            for (i, r) in results.into_iter().flatten() {
+                let v = r?;
+                if let Some(slot) = out.get_mut(i) {
+                    *slot = Some(v);
+                }
+            }
+        }
+        out.into_iter()
+            .map(|o| o.ok_or_else(|| zerr(&self.root, "a chunk was not read")))
+            .collect()
+    }
+
+    /// One unit of `level` (its indices on every axis), clipped to the
+    /// array, decoded: samples little-endian, the last axis fastest.
+    fn unit(&self, level: usize, u: &[u64]) -> Result<Vec<u8>, IoError> {
+        let l = &self.levels[level];
+        let ranges: Vec<std::ops::Range<u64>> = (0..u.len())
+            .map(|i| {
+                let lo = u[i] * l.unit[i];
+                lo..(lo + l.unit[i]).min(l.shape[i])
+            })
+            .collect();
         let subset = ArraySubset::new_with_ranges(&ranges);
         let lp = self.root.join(&l.path);
         let _ = self.store.take_error();
         macro_rules! get {
             ($t:ty) => {{
                 let v: Vec<$t> = l.array.retrieve_array_subset(&subset).map_err(|e| {
-                    // a refused file (a FIFO, a range outside it) as the
-                    // typed error it is
+                    // a refused file (a FIFO, a range outside it) or a
+                    // remote failure as the typed error it is
                     self.store.take_error().unwrap_or_else(|| zerr(&lp, e))
                 })?;
                 v.iter().flat_map(|x| x.to_le_bytes()).collect()
@@ -533,6 +745,17 @@ impl OmeZarr {
             SourceType::F32 => get!(f32),
             SourceType::F64 => get!(f64),
         })
+    }
+
+    /// What the decoded-chunk cache holds and has done.
+    pub fn chunk_cache_stats(&self) -> ChunkCacheStats {
+        self.cache.stats()
+    }
+
+    /// Sets the decoded-chunk cache's budget in bytes (default
+    /// [`CHUNK_CACHE_BYTES`]; 0 keeps no chunk).
+    pub fn set_chunk_cache_budget(&self, bytes: u64) {
+        self.cache.set_budget(bytes);
     }
 
     fn check_choice(&self, opts: &ReadOptions) -> Result<(usize, u64, u64), IoError> {
@@ -595,8 +818,8 @@ impl OmeZarr {
 }
 
 /// The sample type from the array's own metadata.
-fn array_dtype(level: &Path) -> Result<SourceType, IoError> {
-    let (name, file) = if let Some(v) = read_json(&level.join("zarr.json"))? {
+fn array_dtype(store: &SafeStore, key: &str, level: &Path) -> Result<SourceType, IoError> {
+    let (name, file) = if let Some(v) = store.json(&format!("{key}/zarr.json"))? {
         (
             v.get("data_type")
                 .and_then(Value::as_str)
@@ -604,7 +827,7 @@ fn array_dtype(level: &Path) -> Result<SourceType, IoError> {
                 .to_owned(),
             level.join("zarr.json"),
         )
-    } else if let Some(v) = read_json(&level.join(".zarray"))? {
+    } else if let Some(v) = store.json(&format!("{key}/.zarray"))? {
         let d = v.get("dtype").and_then(Value::as_str).unwrap_or("");
         let n = match d.trim_start_matches(['<', '>', '|', '=']) {
             "u1" => "uint8",

@@ -8,6 +8,12 @@
 //!   opened (opening a FIFO blocks), and a byte range that does not lie in
 //!   the file (a forged shard index) is refused before a buffer is allocated
 //!   for it (the filesystem store allocates the range's length first).
+//! * [`SafeStore::objects`] reads the same keys through an
+//!   [`ObjectReader`] (an image over HTTP or in a bucket): a missing object
+//!   (404, or the 403 S3 answers for one) is a missing key, read as the
+//!   fill value; each shard's index is fetched once, with a suffix range
+//!   (the index and the shard's length in one request), checked, and kept
+//!   (at most [`INDEX_CACHE_BYTES`]), so zarrs' own reads of it cost nothing.
 //! * [`install`] registers bounded variants of the `zstd`, `gzip` and
 //!   `blosc` codecs with zarrs (they take precedence over its own, for every
 //!   array zarrs opens in the process; encoding is unchanged). Each decodes
@@ -19,8 +25,10 @@
 //!   compressors go through these codecs too.
 
 use crate::IoError;
+use brickray_core::{ObjectReader, ObjectSpan};
 use parking_lot::Mutex;
 use std::borrow::Cow;
+use std::collections::{HashMap, VecDeque};
 use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Once};
@@ -39,6 +47,42 @@ use zarrs::storage::{Bytes, MaybeBytesIterator, ReadableStorageTraits, StorageEr
 /// geometry says more is refused when the array is opened.
 pub(crate) const MAX_CHUNK_BYTES: u64 = 1 << 30;
 
+/// Most bytes of shard indices a store over an [`ObjectReader`] keeps (the
+/// oldest go first).
+pub(crate) const INDEX_CACHE_BYTES: u64 = 64 << 20;
+
+/// Where a [`SafeStore`]'s keys live.
+#[derive(Debug)]
+enum Backend {
+    /// Files under the root folder.
+    Local,
+    /// Objects read by key (over HTTP, in a bucket).
+    Objects(Arc<dyn ObjectReader>),
+}
+
+/// Shard indices fetched from an [`ObjectReader`], checked, by key: one
+/// slot per key, locked while its index is fetched (so that two readers of
+/// one shard fetch its index once).
+#[derive(Debug, Default)]
+struct IndexCache {
+    map: HashMap<String, Arc<Mutex<Option<Arc<Fetched>>>>>,
+    /// Keys with a fetched index, oldest first, and their cost.
+    order: VecDeque<(String, u64)>,
+    bytes: u64,
+}
+
+/// Metadata objects (`zarr.json`, `.zarray`, `.zattrs`, `.zgroup`) read from
+/// an [`ObjectReader`] (`None`: missing), so that zarrs' reads of them cost
+/// no second request.
+type MetaCache = HashMap<String, Option<Vec<u8>>>;
+
+/// A shard's index as fetched (`None`: the shard is missing) and the
+/// shard's length.
+#[derive(Debug)]
+struct Fetched {
+    index: Option<(Vec<u8>, u64)>,
+}
+
 /// A read-only store over a folder: regular files only, byte ranges checked
 /// against the file's size. The first refusal is kept ([`SafeStore::take_error`])
 /// so that the reader reports it as the typed error it is, not as the text
@@ -51,6 +95,9 @@ pub(crate) const MAX_CHUNK_BYTES: u64 = 1 << 30;
 #[derive(Debug)]
 pub(crate) struct SafeStore {
     root: PathBuf,
+    backend: Backend,
+    indices: Mutex<IndexCache>,
+    meta: Mutex<MetaCache>,
     refused: Mutex<Option<IoError>>,
     /// Per sharded array (its key prefix, `s0/`), the layout of its shards'
     /// index.
@@ -72,9 +119,52 @@ impl SafeStore {
     pub(crate) fn new(root: &Path) -> SafeStore {
         SafeStore {
             root: root.to_owned(),
+            backend: Backend::Local,
+            indices: Mutex::new(IndexCache::default()),
+            meta: Mutex::new(MetaCache::new()),
             refused: Mutex::new(None),
             shards: Mutex::new(Vec::new()),
         }
+    }
+
+    /// A store over the objects of `reader` (its location names them in
+    /// errors).
+    pub(crate) fn objects(reader: Arc<dyn ObjectReader>) -> SafeStore {
+        SafeStore {
+            root: PathBuf::from(reader.location()),
+            backend: Backend::Objects(reader),
+            indices: Mutex::new(IndexCache::default()),
+            meta: Mutex::new(MetaCache::new()),
+            refused: Mutex::new(None),
+            shards: Mutex::new(Vec::new()),
+        }
+    }
+
+    /// Whether the keys are files of a local folder (which can be listed).
+    pub(crate) fn is_local(&self) -> bool {
+        matches!(self.backend, Backend::Local)
+    }
+
+    /// The root (a folder, or the objects' location as a path).
+    pub(crate) fn root(&self) -> &Path {
+        &self.root
+    }
+
+    /// A metadata object's JSON (`key`: `zarr.json`, `s0/.zarray`, ...);
+    /// `Ok(None)` when it does not exist. At most 1 MiB; locally, regular
+    /// files only.
+    pub(crate) fn json(&self, key: &str) -> Result<Option<serde_json::Value>, IoError> {
+        let path = self.root.join(key);
+        let reader = match &self.backend {
+            Backend::Local => return super::read_json(&path),
+            Backend::Objects(r) => r,
+        };
+        let Some(b) = self.meta_object(&**reader, key, &path)? else {
+            return Ok(None);
+        };
+        serde_json::from_slice(&b)
+            .map(Some)
+            .map_err(|e| IoError::header(&path, e.to_string()))
     }
 
     /// Declares the array at `prefix` (`s0/`) sharded, its shards indexed as
@@ -96,28 +186,70 @@ impl SafeStore {
             .map(|(_, i)| *i)
     }
 
-    /// Checks every entry of a shard's index against the shard's size.
-    fn check_shard(
+    /// A metadata object's bytes (`None`: missing), fetched once: its last
+    /// 1 MiB + 1 byte, which is the whole object when it is shorter, and its
+    /// length says whether it is longer, in one request.
+    fn meta_object(
+        &self,
+        reader: &dyn ObjectReader,
+        key: &str,
+        path: &Path,
+    ) -> Result<Option<Vec<u8>>, IoError> {
+        if let Some(m) = self.meta.lock().get(key) {
+            return Ok(m.clone());
+        }
+        let cap = crate::MAX_HEADER as u64;
+        let got = reader
+            .read_object(key, ObjectSpan::Suffix(cap + 1))
+            .map_err(|e| IoError::io(path, e))?;
+        let bytes = match got {
+            None => None,
+            Some((_, len)) if len > cap => {
+                return Err(IoError::header(path, "metadata longer than 1 MiB"));
+            }
+            Some((b, _)) => Some(b),
+        };
+        self.meta.lock().insert(key.to_owned(), bytes.clone());
+        Ok(bytes)
+    }
+
+    /// The index's length in bytes (entries and trailer), if the shard of
+    /// `size` bytes (`None`: not known yet) can hold it.
+    fn index_len(
         &self,
         path: &Path,
-        file: &mut std::fs::File,
+        size: Option<u64>,
+        ix: ShardIndex,
+    ) -> Result<u64, StorageError> {
+        ix.entries
+            .checked_mul(16)
+            .and_then(|l| l.checked_add(ix.trailer))
+            .filter(|&l| size.is_none_or(|s| l <= s))
+            .ok_or_else(|| {
+                self.refuse(IoError::decode(
+                    path,
+                    "OME-Zarr",
+                    format!(
+                        "a {}-byte shard cannot hold its index of {} entries",
+                        size.unwrap_or(0),
+                        ix.entries
+                    ),
+                ))
+            })
+    }
+
+    /// Checks every entry of a shard's index (its bytes) against the
+    /// shard's size.
+    fn check_index(
+        &self,
+        path: &Path,
+        index: &[u8],
         size: u64,
         ix: ShardIndex,
     ) -> Result<(), StorageError> {
         let bad = |msg: String| self.refuse(IoError::decode(path, "OME-Zarr", msg));
-        let len = ix
-            .entries
-            .checked_mul(16)
-            .and_then(|l| l.checked_add(ix.trailer))
-            .filter(|&l| l <= size)
-            .ok_or_else(|| {
-                bad(format!(
-                    "a {size}-byte shard cannot hold its index of {} entries",
-                    ix.entries
-                ))
-            })?;
+        let len = index.len() as u64;
         let start = if ix.at_end { size - len } else { 0 };
-        let index = read_range(file, start, len).map_err(|e| self.refuse(IoError::io(path, e)))?;
         // the data lies outside the index
         let (lo, hi) = if ix.at_end { (0, start) } else { (len, size) };
         for (k, e) in index[..(len - ix.trailer) as usize]
@@ -137,6 +269,167 @@ impl SafeStore {
             }
         }
         Ok(())
+    }
+
+    /// Checks every entry of a shard's index against the shard's size.
+    fn check_shard(
+        &self,
+        path: &Path,
+        file: &mut std::fs::File,
+        size: u64,
+        ix: ShardIndex,
+    ) -> Result<(), StorageError> {
+        let len = self.index_len(path, Some(size), ix)?;
+        let start = if ix.at_end { size - len } else { 0 };
+        let index = read_range(file, start, len).map_err(|e| self.refuse(IoError::io(path, e)))?;
+        self.check_index(path, &index, size, ix)
+    }
+
+    /// A shard's index over an [`ObjectReader`]: fetched once (at the end,
+    /// a suffix range: the index and the shard's length in one request),
+    /// checked, and kept; `index: None` when the shard is missing.
+    fn shard_index(
+        &self,
+        reader: &dyn ObjectReader,
+        key: &str,
+        path: &Path,
+        ix: ShardIndex,
+    ) -> Result<Arc<Fetched>, StorageError> {
+        let slot = self
+            .indices
+            .lock()
+            .map
+            .entry(key.to_owned())
+            .or_default()
+            .clone();
+        let mut held = slot.lock();
+        if let Some(f) = &*held {
+            return Ok(f.clone());
+        }
+        let len = self.index_len(path, None, ix)?;
+        let span = if ix.at_end {
+            ObjectSpan::Suffix(len)
+        } else {
+            ObjectSpan::At { offset: 0, len }
+        };
+        let got = match reader.read_object(key, span) {
+            Ok(g) => g,
+            // a shard shorter than an index at its start
+            Err(e) if e.kind() == std::io::ErrorKind::UnexpectedEof => {
+                self.index_len(path, Some(0), ix)?;
+                return Err(self.refuse(IoError::io(path, e)));
+            }
+            Err(e) => return Err(self.refuse(IoError::io(path, e))),
+        };
+        let fetched = Arc::new(Fetched {
+            index: match got {
+                None => None,
+                Some((bytes, size)) => {
+                    self.index_len(path, Some(size), ix)?;
+                    self.check_index(path, &bytes, size, ix)?;
+                    Some((bytes, size))
+                }
+            },
+        });
+        *held = Some(fetched.clone());
+        drop(held);
+        let mut c = self.indices.lock();
+        c.bytes += len;
+        c.order.push_back((key.to_owned(), len));
+        while c.bytes > INDEX_CACHE_BYTES {
+            let Some((old, cost)) = c.order.pop_front() else {
+                break;
+            };
+            c.map.remove(&old);
+            c.bytes = c.bytes.saturating_sub(cost);
+        }
+        Ok(fetched)
+    }
+
+    /// [`ReadableStorageTraits::get_partial_many`] over an [`ObjectReader`].
+    fn objects_get<'a>(
+        &'a self,
+        reader: &dyn ObjectReader,
+        key: &StoreKey,
+        byte_ranges: ByteRangeIterator<'a>,
+    ) -> Result<MaybeBytesIterator<'a>, StorageError> {
+        let path = self.path(key)?;
+        let k = key.as_str();
+        let ranges: Vec<ByteRange> = byte_ranges.collect();
+        let io = |e: std::io::Error| self.refuse(IoError::io(&path, e));
+        let (size, index) = if let Some(ix) = self.shard_of(k) {
+            let f = self.shard_index(reader, k, &path, ix)?;
+            match &f.index {
+                None => return Ok(None),
+                Some((index, size)) => (*size, Some((index.clone(), ix))),
+            }
+        } else if let ([ByteRange::FromStart(0, None)], Some(m)) =
+            (ranges.as_slice(), self.meta.lock().get(k).cloned())
+        {
+            // metadata already read
+            let Some(bytes) = m else { return Ok(None) };
+            let out: Vec<Result<Bytes, StorageError>> = vec![Ok(Bytes::from(bytes))];
+            return Ok(Some(Box::new(out.into_iter())));
+        } else if let [ByteRange::FromStart(0, None)] = ranges.as_slice() {
+            // a whole chunk or metadata object: one request
+            let Some((bytes, _)) = reader.read_object(k, ObjectSpan::All).map_err(io)? else {
+                return Ok(None);
+            };
+            let out: Vec<Result<Bytes, StorageError>> = vec![Ok(Bytes::from(bytes))];
+            return Ok(Some(Box::new(out.into_iter())));
+        } else {
+            // ranges of an unsharded object: its length first
+            match reader.read_object(k, ObjectSpan::Suffix(1)).map_err(io)? {
+                None => return Ok(None),
+                Some((_, size)) => (size, None),
+            }
+        };
+        // Each range as offset..end within the object; the index itself
+        // from the cache.
+        let mut out: Vec<Option<Result<Bytes, StorageError>>> = Vec::with_capacity(ranges.len());
+        let mut wanted = Vec::new();
+        for (i, range) in ranges.iter().enumerate() {
+            let (start, len) = match *range {
+                ByteRange::FromStart(start, None) => (start, size.checked_sub(start)),
+                ByteRange::FromStart(start, Some(len)) => (start, Some(len)),
+                ByteRange::Suffix(len) => (size.saturating_sub(len), Some(len)),
+            };
+            let Some(len) = len.filter(|&l| start.checked_add(l).is_some_and(|end| end <= size))
+            else {
+                out.push(Some(Err(StorageError::from(InvalidByteRangeError::new(
+                    *range, size,
+                )))));
+                continue;
+            };
+            if let Some((ixb, ix)) = &index {
+                let at = if ix.at_end {
+                    size - ixb.len() as u64
+                } else {
+                    0
+                };
+                if start == at && len == ixb.len() as u64 {
+                    out.push(Some(Ok(Bytes::from(ixb.clone()))));
+                    continue;
+                }
+            }
+            out.push(None);
+            wanted.push((i, start..start + len));
+        }
+        if !wanted.is_empty() {
+            let rs: Vec<std::ops::Range<u64>> = wanted.iter().map(|(_, r)| r.clone()).collect();
+            let Some(got) = reader.read_object_ranges(k, &rs).map_err(io)? else {
+                // gone between the index and the data
+                return Ok(None);
+            };
+            for ((i, _), b) in wanted.iter().zip(got) {
+                out[*i] = Some(Ok(Bytes::from(b)));
+            }
+        }
+        let out: Vec<Result<Bytes, StorageError>> = out
+            .into_iter()
+            .map(|o| o.unwrap_or_else(|| Err(StorageError::Other("a range not read".into()))))
+            .collect();
+        Ok(Some(Box::new(out.into_iter())))
     }
 
     /// The typed error behind the last refused read, if any.
@@ -192,6 +485,9 @@ impl ReadableStorageTraits for SafeStore {
         key: &StoreKey,
         byte_ranges: ByteRangeIterator<'a>,
     ) -> Result<MaybeBytesIterator<'a>, StorageError> {
+        if let Backend::Objects(r) = &self.backend {
+            return self.objects_get(&**r, key, byte_ranges);
+        }
         let path = self.path(key)?;
         if self.regular(&path)?.is_none() {
             return Ok(None);
@@ -235,6 +531,12 @@ impl ReadableStorageTraits for SafeStore {
 
     fn size_key(&self, key: &StoreKey) -> Result<Option<u64>, StorageError> {
         let path = self.path(key)?;
+        if let Backend::Objects(r) = &self.backend {
+            return Ok(r
+                .read_object(key.as_str(), ObjectSpan::Suffix(1))
+                .map_err(|e| self.refuse(IoError::io(&path, e)))?
+                .map(|(_, len)| len));
+        }
         Ok(self.regular(&path)?.map(|md| md.len()))
     }
 

@@ -56,15 +56,61 @@ impl ZarrBrickSource {
         apron: u32,
         value_range: Option<[f32; 2]>,
     ) -> Result<ZarrBrickSource, IoError> {
-        if brick == 0 || brick > 1 << 12 || apron > brick {
-            return Err(IoError::unsupported(
-                root,
-                format!(
-                    "bricks of {brick} voxels with an apron of {apron} (1..=4096, apron at most the brick)"
-                ),
-            ));
-        }
+        check_brick(root, brick, apron)?;
         let zarr = OmeZarr::open(root)?;
+        ZarrBrickSource::with(zarr, opts, brick, apron, value_range)
+    }
+
+    /// Opens the image whose objects `reader` reads by key (an OME-Zarr
+    /// image over HTTP or in a bucket; see [`ZarrBrickSource::open`]). Set-up
+    /// reads the metadata and, without a `value_range`, the coarsest level
+    /// (its range stands for the image's, which a mean pyramid's coarser
+    /// levels lie within; a warning says so), or the finest level where the
+    /// sample type's conversion depends on the range (32-bit integers).
+    /// A missing object (404, or S3's 403) is a missing chunk: the fill
+    /// value.
+    pub fn open_objects(
+        reader: Arc<dyn ObjectReader>,
+        opts: &ReadOptions,
+        brick: u32,
+        apron: u32,
+        value_range: Option<[f32; 2]>,
+    ) -> Result<ZarrBrickSource, IoError> {
+        let root = PathBuf::from(reader.location());
+        check_brick(&root, brick, apron)?;
+        let mut zarr = OmeZarr::open_objects(reader)?;
+        let value_range = match value_range {
+            Some(r) => Some(r),
+            None if SampleConverter::needs_range(zarr.src, 1.0, 0.0) => None,
+            None => {
+                let (_, c, t) = zarr.check_choice(&ReadOptions {
+                    level: None,
+                    ..opts.clone()
+                })?;
+                let coarsest = zarr.levels.len() - 1;
+                let [a, b] = scan(&zarr, coarsest, c, t)?;
+                if coarsest > 0 {
+                    zarr.warnings.push(format!(
+                        "value range {a}..{b} from the coarsest level ({}), not a scan of \
+                         the finest",
+                        zarr.levels[coarsest].path
+                    ));
+                }
+                Some([a as f32, b as f32])
+            }
+        };
+        ZarrBrickSource::with(zarr, opts, brick, apron, value_range)
+    }
+
+    fn with(
+        zarr: OmeZarr,
+        opts: &ReadOptions,
+        brick: u32,
+        apron: u32,
+        value_range: Option<[f32; 2]>,
+    ) -> Result<ZarrBrickSource, IoError> {
+        let root = zarr.root.clone();
+        let root = root.as_path();
         let (_, c, t) = zarr.check_choice(&ReadOptions {
             level: None,
             ..opts.clone()
@@ -143,6 +189,12 @@ impl ZarrBrickSource {
         self.zarr.warnings.clone()
     }
 
+    /// The image: its levels, version, and decoded-chunk cache
+    /// ([`OmeZarr::chunk_cache_stats`], [`OmeZarr::set_chunk_cache_budget`]).
+    pub fn image(&self) -> &OmeZarr {
+        &self.zarr
+    }
+
     /// Where the volume lies (the finest level's transforms).
     pub fn placement(&self) -> Placement {
         let (s, t) = self.zarr.xyz(0);
@@ -196,12 +248,31 @@ impl ZarrBrickSource {
         Ok(self.layout.in_volume(key))
     }
 
+    /// A failed read as a brick error: an I/O failure (a remote one among
+    /// them, its typed error kept as the source) as [`BrickError::Io`],
+    /// anything else (a corrupt chunk) as [`BrickError::Corrupt`].
     fn brick_err(key: NodeKey, e: IoError) -> BrickError {
-        BrickError::Corrupt {
-            key,
-            reason: e.to_string(),
+        match e {
+            IoError::Io { source, .. } => BrickError::Io { key, source },
+            e => BrickError::Corrupt {
+                key,
+                reason: e.to_string(),
+            },
         }
     }
+}
+
+/// Bricks of 1..=4096 voxels, the apron at most the brick.
+fn check_brick(root: &Path, brick: u32, apron: u32) -> Result<(), IoError> {
+    if brick == 0 || brick > 1 << 12 || apron > brick {
+        return Err(IoError::unsupported(
+            root,
+            format!(
+                "bricks of {brick} voxels with an apron of {apron} (1..=4096, apron at most the brick)"
+            ),
+        ));
+    }
+    Ok(())
 }
 
 fn store_value(dst: DType, v: f64, out: &mut [u8]) {

@@ -128,18 +128,25 @@ struct RemoteArgs {
     endpoint: Option<String>,
 }
 
+/// The remote options: the environment's, then the flags.
+#[cfg(feature = "remote")]
+fn remote_options(remote: &RemoteArgs) -> brickray_store::remote::RemoteOptions {
+    let mut o = brickray_store::remote::RemoteOptions::from_env();
+    o.allow_http |= remote.allow_http;
+    o.anonymous |= remote.anonymous;
+    if remote.endpoint.is_some() {
+        o.endpoint.clone_from(&remote.endpoint);
+    }
+    o
+}
+
 /// Opens a store from a local path or (feature `remote`) a URL.
 fn open_store(store: &std::path::Path, remote: &RemoteArgs) -> Result<Store, String> {
     let name = store.to_string_lossy();
     if looks_like_url(&name) {
         #[cfg(feature = "remote")]
         {
-            let mut o = brickray_store::remote::RemoteOptions::from_env();
-            o.allow_http |= remote.allow_http;
-            o.anonymous |= remote.anonymous;
-            if remote.endpoint.is_some() {
-                o.endpoint.clone_from(&remote.endpoint);
-            }
+            let o = remote_options(remote);
             return brickray_store::open_url(&name, &o).map_err(|e| e.to_string());
         }
         #[cfg(not(feature = "remote"))]
@@ -152,6 +159,66 @@ fn open_store(store: &std::path::Path, remote: &RemoteArgs) -> Result<Store, Str
         }
     }
     Store::open(store).map_err(|e| e.to_string())
+}
+
+/// `info` of an OME-Zarr image named by a URL (`None`: the name is not a
+/// URL, or names a store).
+fn info_zarr_url(
+    name: &std::path::Path,
+    remote: &RemoteArgs,
+    read: &brickray_io::ReadOptions,
+) -> Option<Result<(), String>> {
+    let name = name.to_string_lossy();
+    if !looks_like_url(&name) {
+        return None;
+    }
+    #[cfg(feature = "remote")]
+    {
+        let o = remote_options(remote);
+        if !brickray_store::is_zarr_url(&name, &o) {
+            return None;
+        }
+        let d = BuildOptions::default();
+        let src = match brickray_store::open_zarr_url(&name, &o, read, d.brick, d.apron) {
+            Ok(s) => s,
+            Err(e) => return Some(Err(e.to_string())),
+        };
+        let img = src.image();
+        let lay = src.layout();
+        let v = &lay.volume;
+        println!("image       {name}");
+        println!(
+            "format      OME-Zarr {}, {} levels, streamed (not a store)",
+            img.version(),
+            img.level_count()
+        );
+        println!(
+            "volume      {}x{}x{} {}, spacing {:?}, value range {:?}",
+            v.dims[0],
+            v.dims[1],
+            v.dims[2],
+            v.dtype.name(),
+            v.spacing,
+            v.value_range
+        );
+        println!(
+            "bricks      {} interior + 2x{} apron, {} octree levels",
+            lay.brick, lay.apron, lay.levels
+        );
+        for e in img.entries(read) {
+            let mark = if e.default { "*" } else { " " };
+            println!("{:<11} {mark} {}  {}", e.kind.to_string(), e.id, e.summary);
+        }
+        for w in src.warnings() {
+            println!("warning     {w}");
+        }
+        Some(Ok(()))
+    }
+    #[cfg(not(feature = "remote"))]
+    {
+        let _ = (remote, read);
+        None
+    }
 }
 
 /// A scheme before `://` (a URL rather than a path).
@@ -295,6 +362,8 @@ fn main() -> ExitCode {
                 && brickray_io::Registry::global().find(&store).is_ok()
             {
                 cmd_info_input(&store, &select.options())
+            } else if let Some(r) = info_zarr_url(&store, &remote, &select.options()) {
+                r
             } else {
                 open_store(&store, &remote).and_then(|s| cmd_info(&s, bins.clamp(1, 4096)))
             }

@@ -1,0 +1,843 @@
+//! OME-Zarr images read over HTTP as brick sources, against the local
+//! reader of the same folders (the shared copies in
+//! `../shared/data/formats/ome-zarr/`: zarr v2, zarr v3, and v3 sharded).
+//!
+//! The tests here serve the folders from an in-test HTTP server on loopback
+//! that counts every request (and can answer 403 for a missing key, or
+//! inject faults), so they run in a plain `cargo test`. The tests against
+//! the Range HTTP server and moto of scripts/test.sh are in `servers.rs`'s
+//! pattern: ignored here, run by the script's second pass.
+#![allow(missing_docs)]
+
+mod common;
+
+use brickray_core::{BrickError, BrickSource, NodeKey};
+use brickray_io::ReadOptions;
+use brickray_io::zarr::ZarrBrickSource;
+use brickray_remote::{RemoteError, RemoteObjects, RemoteOptions};
+use common::*;
+use std::io::{BufRead, BufReader, Write};
+use std::net::{TcpListener, TcpStream};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+const IMAGES: [&str; 3] = [
+    "cryoet_tomo_v04.ome.zarr",
+    "pycortex_s1_t1_v05.ome.zarr",
+    "cells3d_nuclei_sharded_v05.ome.zarr",
+];
+const SHARDED: &str = "cells3d_nuclei_sharded_v05.ome.zarr";
+
+/// The shared OME-Zarr folder (the tests that need it are ignored, with the
+/// reason, when `../shared/data` is absent; with `CI=true` they run and fail
+/// without it).
+fn data() -> Option<PathBuf> {
+    let d = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/formats/ome-zarr");
+    if d.join(SHARDED).is_dir() {
+        return Some(d);
+    }
+    if std::env::var("CI").is_ok_and(|v| v == "true") {
+        panic!(
+            "CI=true but the shared OME-Zarr data is missing at {}",
+            d.display()
+        );
+    }
+    eprintln!("skipping: no shared data at {}", d.display());
+    None
+}
+
+/// What the server does with the n-th GET.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Act {
+    Serve,
+    Status(u16),
+    Reset,
+    Truncate,
+}
+
+/// One request the server saw: method, path, Range header.
+type Seen = (String, String, Option<String>);
+
+/// Serves the files under a folder on loopback, with ranges; a missing file
+/// is 404, or 403 (as S3 answers without list permission).
+struct DirServer {
+    port: u16,
+    seen: Arc<Mutex<Vec<Seen>>>,
+    stop: Arc<AtomicBool>,
+}
+
+impl Drop for DirServer {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::SeqCst);
+        let _ = TcpStream::connect(("127.0.0.1", self.port));
+    }
+}
+
+impl DirServer {
+    fn url(&self, name: &str) -> String {
+        format!("http://127.0.0.1:{}/{name}", self.port)
+    }
+
+    fn seen(&self) -> Vec<Seen> {
+        self.seen.lock().unwrap().clone()
+    }
+
+    fn count(&self) -> usize {
+        self.seen.lock().unwrap().len()
+    }
+}
+
+fn serve_dir(
+    root: &Path,
+    missing: u16,
+    plan: impl Fn(usize, &str) -> Act + Send + Sync + 'static,
+) -> DirServer {
+    let listener = TcpListener::bind("127.0.0.1:0").unwrap();
+    let port = listener.local_addr().unwrap().port();
+    let seen = Arc::new(Mutex::new(Vec::new()));
+    let stop = Arc::new(AtomicBool::new(false));
+    let gets = Arc::new(AtomicUsize::new(0));
+    let (sn, st, root) = (seen.clone(), stop.clone(), root.to_owned());
+    let plan = Arc::new(plan);
+    std::thread::spawn(move || {
+        for conn in listener.incoming() {
+            if st.load(Ordering::SeqCst) {
+                break;
+            }
+            let Ok(conn) = conn else { continue };
+            let (sn, root, plan, gets) = (sn.clone(), root.clone(), plan.clone(), gets.clone());
+            std::thread::spawn(move || {
+                let _ = handle(conn, &root, missing, &*plan, &gets, &sn);
+            });
+        }
+    });
+    DirServer { port, seen, stop }
+}
+
+fn handle(
+    conn: TcpStream,
+    root: &Path,
+    missing: u16,
+    plan: &(dyn Fn(usize, &str) -> Act + Send + Sync),
+    gets: &AtomicUsize,
+    seen: &Mutex<Vec<Seen>>,
+) -> std::io::Result<()> {
+    let mut reader = BufReader::new(conn.try_clone()?);
+    let mut out = conn;
+    loop {
+        let mut line = String::new();
+        if reader.read_line(&mut line)? == 0 {
+            return Ok(());
+        }
+        let method = line.split_whitespace().next().unwrap_or("").to_owned();
+        let path = line.split_whitespace().nth(1).unwrap_or("").to_owned();
+        let mut range = None;
+        loop {
+            let mut h = String::new();
+            if reader.read_line(&mut h)? == 0 {
+                return Ok(());
+            }
+            let h = h.trim_end();
+            if h.is_empty() {
+                break;
+            }
+            if let Some((k, v)) = h.split_once(':')
+                && k.eq_ignore_ascii_case("range")
+            {
+                range = Some(v.trim().to_owned());
+            }
+        }
+        seen.lock()
+            .unwrap()
+            .push((method.clone(), path.clone(), range.clone()));
+        let rel = path.trim_start_matches('/');
+        let file = root.join(rel);
+        let bytes = if rel.split('/').any(|c| c == "..") {
+            None
+        } else {
+            std::fs::read(&file).ok()
+        };
+        let Some(bytes) = bytes else {
+            let reason = if missing == 403 {
+                "Forbidden"
+            } else {
+                "Not Found"
+            };
+            write!(
+                out,
+                "HTTP/1.1 {missing} {reason}\r\nContent-Length: 0\r\n\r\n"
+            )?;
+            continue;
+        };
+        let len = bytes.len();
+        let common = "Accept-Ranges: bytes\r\nETag: \"v1\"\r\nLast-Modified: Thu, 01 Jan 2026 00:00:00 GMT\r\n";
+        if method == "HEAD" {
+            write!(
+                out,
+                "HTTP/1.1 200 OK\r\n{common}Content-Length: {len}\r\n\r\n"
+            )?;
+            continue;
+        }
+        let act = plan(gets.fetch_add(1, Ordering::SeqCst), &path);
+        let (start, end, partial) = match range.as_deref().and_then(|r| r.strip_prefix("bytes=")) {
+            Some(r) => {
+                let (a, b) = r.split_once('-').unwrap_or(("", ""));
+                let (s, e) = match (a.parse::<usize>(), b.parse::<usize>()) {
+                    (Ok(a), Ok(b)) => (a, (b + 1).min(len)),
+                    (Ok(a), Err(_)) => (a, len),
+                    (Err(_), Ok(n)) => (len.saturating_sub(n), len),
+                    _ => (0, len),
+                };
+                (s, e, true)
+            }
+            None => (0, len, false),
+        };
+        if start >= end {
+            write!(
+                out,
+                "HTTP/1.1 416 Range Not Satisfiable\r\nContent-Range: bytes */{len}\r\nContent-Length: 0\r\n\r\n"
+            )?;
+            continue;
+        }
+        let body = &bytes[start..end];
+        let head = |out: &mut TcpStream| {
+            if partial {
+                write!(
+                    out,
+                    "HTTP/1.1 206 Partial Content\r\n{common}Content-Range: bytes {start}-{}/{len}\r\nContent-Length: {}\r\n\r\n",
+                    end - 1,
+                    body.len()
+                )
+            } else {
+                write!(
+                    out,
+                    "HTTP/1.1 200 OK\r\n{common}Content-Length: {}\r\n\r\n",
+                    body.len()
+                )
+            }
+        };
+        match act {
+            Act::Serve => {
+                head(&mut out)?;
+                out.write_all(body)?;
+            }
+            Act::Status(code) => {
+                write!(
+                    out,
+                    "HTTP/1.1 {code} Busy\r\nRetry-After: 0\r\nContent-Length: 0\r\nConnection: close\r\n\r\n"
+                )?;
+                return Ok(());
+            }
+            Act::Reset => return out.shutdown(std::net::Shutdown::Both),
+            Act::Truncate => {
+                head(&mut out)?;
+                out.write_all(&body[..body.len() / 2])?;
+                out.flush()?;
+                return out.shutdown(std::net::Shutdown::Both);
+            }
+        }
+        out.flush()?;
+    }
+}
+
+fn opts() -> RemoteOptions {
+    RemoteOptions {
+        max_retries: 4,
+        init_backoff: Duration::from_millis(5),
+        max_backoff: Duration::from_millis(40),
+        ..loopback(None)
+    }
+}
+
+/// Every node key of the octree, coarse to fine.
+fn keys(src: &dyn BrickSource) -> Vec<NodeKey> {
+    let levels = src.layout().levels;
+    let mut v = Vec::new();
+    for level in 0..levels {
+        let n = 1u32 << level;
+        for z in 0..n {
+            for y in 0..n {
+                for x in 0..n {
+                    v.push(NodeKey { level, x, y, z });
+                }
+            }
+        }
+    }
+    v
+}
+
+/// The local reader of `dir` and the remote one of `url`, with the local
+/// value range (so both convert alike).
+fn pair(dir: &Path, url: &str, o: &RemoteOptions) -> (ZarrBrickSource, ZarrBrickSource) {
+    let local = ZarrBrickSource::open(dir, &ReadOptions::default(), 32, 2, None).unwrap();
+    let range = local.layout().volume.value_range;
+    let objects = Arc::new(RemoteObjects::open(url, o).unwrap());
+    let remote =
+        ZarrBrickSource::open_objects(objects, &ReadOptions::default(), 32, 2, Some(range))
+            .unwrap_or_else(|e| panic!("{url}: {e}"));
+    (local, remote)
+}
+
+/// Asserts every node and brick of `remote` equals `local`'s; returns the
+/// number of bricks with data.
+fn assert_same(local: &ZarrBrickSource, remote: &ZarrBrickSource) -> usize {
+    assert_eq!(local.layout(), remote.layout());
+    let mut a = vec![0u8; local.layout().brick_bytes()];
+    let mut b = a.clone();
+    let mut data = 0;
+    for k in keys(local) {
+        let (nl, nr) = (local.node(k).unwrap(), remote.node(k).unwrap());
+        assert_eq!(nl, nr, "node {k:?}");
+        local.read_brick(k, &mut a).unwrap();
+        b.fill(0xA5);
+        remote.read_brick(k, &mut b).unwrap();
+        assert!(a == b, "brick {k:?} differs");
+        data += usize::from(nl.min != nl.max);
+    }
+    data
+}
+
+#[test]
+#[cfg_attr(no_shared_data, ignore = "needs ../shared/data/formats (absent)")]
+fn zarr_over_http_equals_the_local_reader_brick_for_brick() {
+    let Some(data) = data() else { return };
+    let server = serve_dir(&data, 404, |_, _| Act::Serve);
+    for name in IMAGES {
+        let (local, remote) = pair(&data.join(name), &server.url(name), &opts());
+        let n = assert_same(&local, &remote);
+        assert!(n > 8, "{name}: only {n} bricks with data");
+        assert_eq!(local.image().version(), remote.image().version());
+        assert_eq!(local.placement(), remote.placement());
+    }
+    // The object reads sent no HEAD (no size requests).
+    let heads = server.seen().iter().filter(|s| s.0 == "HEAD").count();
+    assert_eq!(heads, 0, "{:?}", server.seen());
+}
+
+#[test]
+#[cfg_attr(no_shared_data, ignore = "needs ../shared/data/formats (absent)")]
+fn each_shard_index_is_fetched_once_with_a_suffix_range() {
+    let Some(data) = data() else { return };
+    let server = serve_dir(&data, 404, |_, _| Act::Serve);
+    let (local, remote) = pair(&data.join(SHARDED), &server.url(SHARDED), &opts());
+    assert_same(&local, &remote);
+    let seen = server.seen();
+    // The shards: the level folders' chunk keys (not metadata).
+    let shards: Vec<&Seen> = seen
+        .iter()
+        .filter(|s| s.1.contains("/c/") && s.0 == "GET")
+        .collect();
+    assert!(!shards.is_empty());
+    // 2 x 4 x 4 inner chunks per shard of 32 x 128 x 128 in 16 x 32 x 32:
+    // 32 entries of 16 bytes and a crc32c.
+    let index = format!("bytes=-{}", 32 * 16 + 4);
+    let mut paths: Vec<&str> = shards.iter().map(|s| s.1.as_str()).collect();
+    paths.sort();
+    paths.dedup();
+    let on_disk: Vec<PathBuf> = ["s0", "s1"]
+        .iter()
+        .flat_map(|l| walk(&data.join(SHARDED).join(l).join("c")))
+        .collect();
+    assert_eq!(paths.len(), on_disk.len(), "every shard read: {paths:?}");
+    for p in &paths {
+        let suffix: Vec<_> = shards
+            .iter()
+            .filter(|s| s.1 == *p && s.2.as_deref().is_some_and(|r| r.starts_with("bytes=-")))
+            .collect();
+        assert_eq!(suffix.len(), 1, "{p}: index reads {suffix:?}");
+        assert_eq!(suffix[0].2.as_deref(), Some(index.as_str()), "{p}");
+        // everything else read from a shard is a bounded range of its data
+        for s in shards.iter().filter(|s| s.1 == *p) {
+            let r = s.2.as_deref().unwrap_or("");
+            assert!(r.starts_with("bytes="), "{p}: a whole-shard read {s:?}");
+        }
+    }
+    assert!(seen.iter().all(|s| s.0 == "GET"), "{seen:?}");
+    // With the whole image within the chunk cache's budget, no range of any
+    // object is asked for twice (metadata, indices, inner chunks).
+    let mut distinct: Vec<(&str, Option<&str>)> = seen
+        .iter()
+        .map(|s| (s.1.as_str(), s.2.as_deref()))
+        .collect();
+    distinct.sort();
+    distinct.dedup();
+    assert_eq!(distinct.len(), seen.len(), "a range fetched twice");
+    eprintln!(
+        "{SHARDED}: {} requests for {} shards ({} index reads)",
+        seen.len(),
+        paths.len(),
+        paths.len()
+    );
+}
+
+fn walk(dir: &Path) -> Vec<PathBuf> {
+    let mut v = Vec::new();
+    for e in std::fs::read_dir(dir).unwrap() {
+        let p = e.unwrap().path();
+        if p.is_dir() {
+            v.extend(walk(&p));
+        } else {
+            v.push(p);
+        }
+    }
+    v
+}
+
+#[test]
+#[cfg_attr(no_shared_data, ignore = "needs ../shared/data/formats (absent)")]
+fn decoded_chunks_are_cached_within_the_budget() {
+    let Some(data) = data() else { return };
+    let server = serve_dir(&data, 404, |_, _| Act::Serve);
+    for name in [SHARDED, "cryoet_tomo_v04.ome.zarr"] {
+        let (local, remote) = pair(&data.join(name), &server.url(name), &opts());
+        let keys = keys(&local);
+        let mut b = vec![0u8; remote.layout().brick_bytes()];
+        for &k in &keys {
+            remote.read_brick(k, &mut b).unwrap();
+        }
+        let s = remote.image().chunk_cache_stats();
+        assert!(s.bytes <= s.budget && s.chunks > 0, "{s:?}");
+        // Everything read again: from the cache, not one request.
+        let before = server.count();
+        for &k in &keys {
+            remote.read_brick(k, &mut b).unwrap();
+        }
+        assert_eq!(server.count(), before, "{name}: requests on a second pass");
+        let again = remote.image().chunk_cache_stats();
+        assert!(again.hits > s.hits && again.misses == s.misses, "{again:?}");
+        // A budget of one small chunk: kept within it, still exact.
+        let budget = 64 << 10;
+        remote.image().set_chunk_cache_budget(budget);
+        let mut a = vec![0u8; local.layout().brick_bytes()];
+        let with_data: Vec<NodeKey> = keys
+            .iter()
+            .rev()
+            .copied()
+            .filter(|&k| local.node(k).is_ok_and(|n| n.min != n.max))
+            .take(40)
+            .collect();
+        assert!(
+            with_data.len() > 8,
+            "{name}: {} bricks with data",
+            with_data.len()
+        );
+        for &k in &with_data {
+            local.read_brick(k, &mut a).unwrap();
+            remote.read_brick(k, &mut b).unwrap();
+            assert!(a == b, "{name}: brick {k:?} with a small cache");
+            assert!(remote.image().chunk_cache_stats().bytes <= budget);
+        }
+        assert!(
+            server.count() > before,
+            "{name}: a small cache fetched nothing"
+        );
+    }
+}
+
+/// Copies a folder tree.
+fn copy_tree(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for e in std::fs::read_dir(from).unwrap() {
+        let e = e.unwrap();
+        let (src, dst) = (e.path(), to.join(e.file_name()));
+        if src.is_dir() {
+            copy_tree(&src, &dst);
+        } else {
+            std::fs::copy(&src, &dst).unwrap();
+        }
+    }
+}
+
+#[test]
+#[cfg_attr(no_shared_data, ignore = "needs ../shared/data/formats (absent)")]
+fn a_missing_chunk_404_or_403_reads_as_the_fill_value() {
+    let Some(data) = data() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    // A shard of the sharded image and a chunk of the v2 image removed.
+    let sharded = dir.path().join(SHARDED);
+    copy_tree(&data.join(SHARDED), &sharded);
+    std::fs::remove_file(sharded.join("s0/c/0/0/0")).unwrap();
+    let v2 = dir.path().join("cryoet_tomo_v04.ome.zarr");
+    copy_tree(&data.join("cryoet_tomo_v04.ome.zarr"), &v2);
+    std::fs::remove_file(v2.join("s0/0/0/0")).unwrap();
+    for status in [404, 403] {
+        let server = serve_dir(dir.path(), status, |_, _| Act::Serve);
+        for (root, name) in [(&sharded, SHARDED), (&v2, "cryoet_tomo_v04.ome.zarr")] {
+            // The local reader of the same (damaged) copy reads fill values.
+            let (local, remote) = pair(root, &server.url(name), &opts());
+            assert_same(&local, &remote);
+            // and the removed chunk made a difference to the first brick of
+            // the finest level
+            let whole = ZarrBrickSource::open(
+                &data.join(name),
+                &ReadOptions::default(),
+                32,
+                2,
+                Some(local.layout().volume.value_range),
+            )
+            .unwrap();
+            let finest = local.layout().levels - 1;
+            let k = NodeKey {
+                level: finest,
+                x: 0,
+                y: 0,
+                z: 0,
+            };
+            let mut a = vec![0u8; local.layout().brick_bytes()];
+            let mut b = a.clone();
+            whole.read_brick(k, &mut a).unwrap();
+            remote.read_brick(k, &mut b).unwrap();
+            assert!(a != b, "{name}: the missing chunk changed nothing");
+        }
+        let missing = server
+            .seen()
+            .iter()
+            .filter(|s| s.1.ends_with("/s0/c/0/0/0") || s.1.ends_with("/s0/0/0/0"))
+            .count();
+        assert!(
+            missing >= 2,
+            "{status}: the missing keys were not asked for"
+        );
+    }
+}
+
+#[test]
+#[cfg_attr(no_shared_data, ignore = "needs ../shared/data/formats (absent)")]
+fn faults_give_the_exact_bricks_or_a_typed_error_never_a_hang() {
+    let Some(data) = data() else { return };
+    // Transient: every 4th GET a 503, a reset or a truncated body.
+    let server = serve_dir(&data, 404, |n, _| match n % 12 {
+        3 => Act::Status(503),
+        7 => Act::Reset,
+        11 => Act::Truncate,
+        _ => Act::Serve,
+    });
+    for name in [SHARDED, "pycortex_s1_t1_v05.ome.zarr"] {
+        let (local, remote) = pair(&data.join(name), &server.url(name), &opts());
+        assert_same(&local, &remote);
+    }
+    // Persistent: every chunk read fails (metadata served): typed errors
+    // naming the URL, within the deadline.
+    let server = serve_dir(&data, 404, |_, path| {
+        if path.contains("/c/") {
+            Act::Status(500)
+        } else {
+            Act::Serve
+        }
+    });
+    let o = RemoteOptions {
+        max_retries: 2,
+        retry_timeout: Duration::from_secs(3),
+        ..opts()
+    };
+    let url = server.url(SHARDED);
+    let objects = Arc::new(RemoteObjects::open(&url, &o).unwrap());
+    let t = std::time::Instant::now();
+    let remote =
+        ZarrBrickSource::open_objects(objects, &ReadOptions::default(), 32, 2, Some([0.0, 1.0]))
+            .unwrap();
+    let mut b = vec![0u8; remote.layout().brick_bytes()];
+    let k = NodeKey {
+        level: 0,
+        x: 0,
+        y: 0,
+        z: 0,
+    };
+    match remote.read_brick(k, &mut b) {
+        Err(BrickError::Io { source, .. }) => {
+            let e = RemoteError::from_io(&source).unwrap_or_else(|| panic!("untyped: {source}"));
+            assert!(matches!(e, RemoteError::Request { .. }), "{e}");
+            assert!(e.url().starts_with(&url), "{e}");
+        }
+        other => panic!("{other:?}"),
+    }
+    assert!(t.elapsed() < o.deadline() * 2, "{:?}", t.elapsed());
+}
+
+#[test]
+#[cfg_attr(no_shared_data, ignore = "needs ../shared/data/formats (absent)")]
+fn image_urls_are_told_from_store_urls() {
+    let Some(data) = data() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    // An image in a folder whose name does not say so, and a folder of
+    // plain zarr metadata without multiscales.
+    copy_tree(&data.join(SHARDED), &dir.path().join("image"));
+    std::fs::create_dir_all(dir.path().join("plain")).unwrap();
+    std::fs::write(
+        dir.path().join("plain/zarr.json"),
+        br#"{"zarr_format": 3, "node_type": "group", "attributes": {}}"#,
+    )
+    .unwrap();
+    let server = serve_dir(dir.path(), 404, |_, _| Act::Serve);
+    let o = opts();
+    assert!(brickray_store::is_zarr_url(&server.url("image"), &o));
+    assert!(brickray_store::is_zarr_url(&server.url("image/"), &o));
+    assert!(!brickray_store::is_zarr_url(&server.url("plain"), &o));
+    assert!(!brickray_store::is_zarr_url(&server.url("absent"), &o));
+    let before = server.count();
+    // By name, without a request.
+    assert!(brickray_store::is_zarr_url(&server.url("x.ome.zarr"), &o));
+    assert!(!brickray_store::is_zarr_url(&server.url("x.brs"), &o));
+    assert_eq!(server.count(), before);
+    // The folder streams as the local image.
+    let (local, remote) = pair(&data.join(SHARDED), &server.url("image"), &o);
+    assert_same(&local, &remote);
+}
+
+#[test]
+#[cfg_attr(no_shared_data, ignore = "needs ../shared/data/formats (absent)")]
+fn bad_urls_and_keys_are_typed_errors() {
+    let o = opts();
+    assert!(matches!(
+        RemoteObjects::open("ftp://h/x.zarr", &o),
+        Err(RemoteError::BadUrl { .. })
+    ));
+    let r = RemoteObjects::open("http://127.0.0.1:1/x.zarr/", &o).unwrap();
+    assert_eq!(r.url(), "http://127.0.0.1:1/x.zarr");
+    for key in ["../secret", "a//b", "", "./a"] {
+        assert!(
+            matches!(
+                r.get(key, brickray_core::ObjectSpan::All),
+                Err(RemoteError::BadUrl { .. })
+            ),
+            "{key}"
+        );
+    }
+    let s3 = RemoteObjects::open(
+        "s3://bucket/dir/img.zarr",
+        &RemoteOptions {
+            anonymous: true,
+            endpoint: Some("http://127.0.0.1:1".into()),
+            region: Some("us-east-1".into()),
+            ..o.clone()
+        },
+    )
+    .unwrap();
+    assert_eq!(s3.url(), "s3://bucket/dir/img.zarr");
+    // A root that serves no image: a typed error, not a panic.
+    let Some(data) = data() else { return };
+    let server = serve_dir(&data, 404, |_, _| Act::Serve);
+    let objects = Arc::new(RemoteObjects::open(&server.url("nothing.zarr"), &o).unwrap());
+    assert!(matches!(
+        ZarrBrickSource::open_objects(objects, &ReadOptions::default(), 32, 2, None),
+        Err(brickray_io::IoError::UnknownFormat { .. })
+    ));
+}
+
+// ---------------------------------------------------------------------------
+// Against the test servers of scripts/test.sh (ignored in a plain `cargo
+// test`; run by the script's second pass, failing when CI=true and an
+// address is missing).
+
+/// Uploads the image folder `dir` under `url` (one object per file).
+fn upload_image(dir: &Path, url: &str, o: &RemoteOptions) -> usize {
+    let files = walk(dir);
+    for f in &files {
+        let rel = f
+            .strip_prefix(dir)
+            .unwrap()
+            .to_string_lossy()
+            .replace('\\', "/");
+        upload(&format!("{url}/{rel}"), o, &std::fs::read(f).unwrap());
+    }
+    files.len()
+}
+
+#[test]
+#[ignore = "needs BRICKRAY_TEST_HTTP and BRICKRAY_TEST_S3 (scripts/test.sh starts them)"]
+fn zarr_from_the_http_server_and_s3_equals_the_local_reader() {
+    let (Some(http), Some(s3)) = (server("BRICKRAY_TEST_HTTP"), server("BRICKRAY_TEST_S3")) else {
+        return;
+    };
+    let Some(data) = data() else { return };
+    let name = unique("zarr");
+    let bucket = name.to_ascii_lowercase();
+    create_bucket(&s3, &bucket, false);
+    for image in IMAGES {
+        let dir = data.join(image);
+        let http_url = format!("{http}/{name}/{image}");
+        upload_image(&dir, &http_url, &loopback(None));
+        let s3_url = format!("s3://{bucket}/images/{image}");
+        upload_image(&dir, &s3_url, &s3_signed(&s3));
+        for (url, o) in [(http_url, loopback(None)), (s3_url, s3_signed(&s3))] {
+            assert!(brickray_store::is_zarr_url(&url, &o), "{url}");
+            let (local, remote) = pair(&dir, &url, &o);
+            let n = assert_same(&local, &remote);
+            assert!(n > 8, "{url}: only {n} bricks with data");
+            // The store-level entry point: the default brick, the value
+            // range from the coarsest level (a warning says so).
+            let src =
+                brickray_store::open_zarr_url(&url, &o, &ReadOptions::default(), 32, 2).unwrap();
+            assert_eq!(src.layout().volume.dims, local.layout().volume.dims);
+            assert!(
+                src.warnings().iter().any(|w| w.contains("coarsest level")),
+                "{url}: {:?}",
+                src.warnings()
+            );
+        }
+    }
+    // A key missing in a private bucket read anonymously is a 403: the
+    // image's metadata cannot be read, a typed error (not a fill value).
+    let anon = RemoteOptions {
+        anonymous: true,
+        ..loopback(Some(&s3))
+    };
+    let url = format!("s3://{bucket}/images/{SHARDED}");
+    match brickray_store::open_zarr_url(&url, &anon, &ReadOptions::default(), 32, 2) {
+        Err(e @ brickray_store::StoreError::Input(brickray_io::IoError::UnknownFormat { .. })) => {
+            assert!(e.to_string().contains("access denied"), "{e}");
+        }
+        Err(e) => panic!("{url}: {e}"),
+        Ok(_) => panic!("{url}: a private bucket opened anonymously"),
+    }
+    // A chunk removed from the S3 copy reads as the fill value, exactly as
+    // the local reader of a copy without it.
+    let tmp = tempfile::tempdir().unwrap();
+    let damaged = tmp.path().join(SHARDED);
+    copy_tree(&data.join(SHARDED), &damaged);
+    std::fs::remove_file(damaged.join("s0/c/0/0/0")).unwrap();
+    let s3_url = format!("s3://{bucket}/damaged/{SHARDED}");
+    upload_image(&damaged, &s3_url, &s3_signed(&s3));
+    let (local, remote) = pair(&damaged, &s3_url, &s3_signed(&s3));
+    assert_same(&local, &remote);
+}
+
+#[test]
+#[ignore = "needs BRICKRAY_TEST_HTTP(_FAULTY) and BRICKRAY_TEST_S3(_FAULTY) (scripts/test.sh starts them)"]
+fn zarr_through_a_faulty_proxy_is_exact_or_typed_never_wrong() {
+    let (Some(http), Some(http_faulty), Some(s3), Some(s3_faulty)) = (
+        server("BRICKRAY_TEST_HTTP"),
+        server("BRICKRAY_TEST_HTTP_FAULTY"),
+        server("BRICKRAY_TEST_S3"),
+        server("BRICKRAY_TEST_S3_FAULTY"),
+    ) else {
+        return;
+    };
+    let Some(data) = data() else { return };
+    let faulty = |o: RemoteOptions| RemoteOptions {
+        max_retries: 6,
+        timeout: Duration::from_secs(5),
+        read_timeout: Duration::from_millis(300),
+        retry_timeout: Duration::from_secs(20),
+        ..o
+    };
+    let name = unique("zarr-faulty");
+    let bucket = name.to_ascii_lowercase();
+    create_bucket(&s3, &bucket, false);
+    let dir = data.join(SHARDED);
+    upload_image(&dir, &format!("{http}/{name}/{SHARDED}"), &loopback(None));
+    let s3_url = format!("s3://{bucket}/{SHARDED}");
+    upload_image(&dir, &s3_url, &s3_signed(&s3));
+    let local = ZarrBrickSource::open(&dir, &ReadOptions::default(), 32, 2, None).unwrap();
+    let range = local.layout().volume.value_range;
+    for (url, o) in [
+        (
+            format!("{http_faulty}/{name}/{SHARDED}"),
+            faulty(loopback(None)),
+        ),
+        (s3_url, faulty(s3_signed(&s3_faulty))),
+    ] {
+        let t = std::time::Instant::now();
+        let objects = Arc::new(RemoteObjects::open(&url, &o).unwrap());
+        let remote =
+            ZarrBrickSource::open_objects(objects, &ReadOptions::default(), 32, 2, Some(range))
+                .unwrap_or_else(|e| panic!("{url}: open failed after its retries: {e}"));
+        let (mut ok, mut failed) = (0usize, 0usize);
+        let mut a = vec![0u8; local.layout().brick_bytes()];
+        let mut b = a.clone();
+        for k in keys(&local) {
+            local.read_brick(k, &mut a).unwrap();
+            let t = std::time::Instant::now();
+            match remote.read_brick(k, &mut b) {
+                Ok(()) => {
+                    assert!(a == b, "{url}: brick {k:?} differs");
+                    ok += 1;
+                }
+                Err(BrickError::Io { source, .. }) => {
+                    assert!(RemoteError::from_io(&source).is_some(), "{source}");
+                    failed += 1;
+                }
+                Err(e) => panic!("{url}: {k:?}: untyped failure {e}"),
+            }
+            assert!(
+                t.elapsed() <= o.deadline(),
+                "{url}: a read took {:?}",
+                t.elapsed()
+            );
+        }
+        eprintln!(
+            "{url}: {ok} bricks exact, {failed} failed typed, {:?}",
+            t.elapsed()
+        );
+        assert!(
+            ok > 10 * failed.max(1) || failed == 0,
+            "{url}: {ok} ok, {failed} failed"
+        );
+    }
+}
+
+#[test]
+#[cfg_attr(no_shared_data, ignore = "needs ../shared/data/formats (absent)")]
+fn a_forged_shard_index_or_huge_metadata_is_a_typed_error() {
+    let Some(data) = data() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path().join(SHARDED);
+    copy_tree(&data.join(SHARDED), &root);
+    // The first entry of a shard's index points past the shard (the crc32c
+    // after the entries rewritten to match, so only the bounds check can
+    // refuse it).
+    let shard = root.join("s0/c/0/0/0");
+    let mut b = std::fs::read(&shard).unwrap();
+    let n = b.len();
+    let at = n - (32 * 16 + 4);
+    b[at..at + 8].copy_from_slice(&(n as u64 * 2).to_le_bytes());
+    let crc = crc32c(&b[at..n - 4]);
+    b[n - 4..].copy_from_slice(&crc.to_le_bytes());
+    std::fs::write(&shard, &b).unwrap();
+    let server = serve_dir(dir.path(), 404, |_, _| Act::Serve);
+    let objects = Arc::new(RemoteObjects::open(&server.url(SHARDED), &opts()).unwrap());
+    let remote =
+        ZarrBrickSource::open_objects(objects, &ReadOptions::default(), 32, 2, Some([0.0, 1.0]))
+            .unwrap();
+    let finest = remote.layout().levels - 1;
+    let k = NodeKey {
+        level: finest,
+        x: 0,
+        y: 0,
+        z: 0,
+    };
+    let mut out = vec![0u8; remote.layout().brick_bytes()];
+    match remote.read_brick(k, &mut out) {
+        Err(BrickError::Corrupt { reason, .. }) => {
+            assert!(reason.contains("outside the shard"), "{reason}")
+        }
+        other => panic!("{other:?}"),
+    }
+    // A group metadata object over 1 MiB: refused, not parsed.
+    let big = dir.path().join("big.zarr");
+    std::fs::create_dir_all(&big).unwrap();
+    std::fs::write(big.join("zarr.json"), vec![b' '; (1 << 20) + 10]).unwrap();
+    let objects = Arc::new(RemoteObjects::open(&server.url("big.zarr"), &opts()).unwrap());
+    match ZarrBrickSource::open_objects(objects, &ReadOptions::default(), 32, 2, None) {
+        Err(brickray_io::IoError::BadHeader { msg, .. }) => assert!(msg.contains("1 MiB"), "{msg}"),
+        other => panic!("{other:?}"),
+    }
+}
+
+/// CRC-32C (Castagnoli), bitwise.
+fn crc32c(bytes: &[u8]) -> u32 {
+    let mut crc = !0u32;
+    for &b in bytes {
+        crc ^= u32::from(b);
+        for _ in 0..8 {
+            crc = if crc & 1 != 0 {
+                (crc >> 1) ^ 0x82F6_3B78
+            } else {
+                crc >> 1
+            };
+        }
+    }
+    !crc
+}
