@@ -713,6 +713,7 @@ mod tests {
             in_core_max_bytes: 0,
             max_3d_side: 2048,
             store_dir: std::env::temp_dir(),
+            labels: false,
         };
         let remote = open(&Input::parse(&url).unwrap(), &opts, &Progress::default()).unwrap();
         let Opened::Streamed(src) = &remote.volume else {
