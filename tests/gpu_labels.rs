@@ -54,6 +54,15 @@ fn table() -> LabelTable {
     LabelTable::default()
 }
 
+/// Out of core at `tolerance_px`, with room to upload every brick at once.
+fn ooc_config(tolerance_px: f32) -> OutOfCoreConfig {
+    OutOfCoreConfig {
+        tolerance_px,
+        upload_budget_bytes: 1 << 30,
+        ..Default::default()
+    }
+}
+
 fn store(vol: &Volume, dir: &std::path::Path) -> Arc<dyn brickray::core::BrickSource> {
     let path = dir.join(format!("{:?}.brs", vol.desc().kind));
     let mut reader = brickray::io::MemoryReader::new(vol.clone(), "memory");
@@ -144,11 +153,7 @@ fn check(name: &str, vol: &Volume) {
         compare(&got.color, &s_in.color, SIZE, SIZE)
     );
     let mut ooc = VolumeRenderer::new(&g.device, target_desc()).unwrap();
-    let config = OutOfCoreConfig {
-        tolerance_px: 0.0,
-        upload_budget_bytes: 1 << 30,
-        ..Default::default()
-    };
+    let config = ooc_config(0.0);
     ooc.set_volume_source(&g.device, &g.queue, store(vol, dir.path()), config)
         .unwrap();
     ooc.set_transfer_function(&g.device, &g.queue, &tf).unwrap();
@@ -187,11 +192,7 @@ fn check(name: &str, vol: &Volume) {
         let source = store(volume, dir.path());
         for &tolerance_px in tolerances {
             let mut ooc = VolumeRenderer::new(&g.device, target_desc()).unwrap();
-            let config = OutOfCoreConfig {
-                tolerance_px,
-                upload_budget_bytes: 1 << 30,
-                ..Default::default()
-            };
+            let config = ooc_config(tolerance_px);
             ooc.set_volume_source(&g.device, &g.queue, source.clone(), config)
                 .unwrap();
             ooc.set_transfer_function(&g.device, &g.queue, &tf).unwrap();
@@ -465,11 +466,7 @@ fn label_slices_match_the_reference() {
     let mut incore = VolumeRenderer::new(&g.device, target_desc()).unwrap();
     incore.set_volume(&g.device, &g.queue, &vol).unwrap();
     let mut ooc = VolumeRenderer::new(&g.device, target_desc()).unwrap();
-    let config = OutOfCoreConfig {
-        tolerance_px: 0.0,
-        upload_budget_bytes: 1 << 30,
-        ..Default::default()
-    };
+    let config = ooc_config(0.0);
     ooc.set_volume_source(&g.device, &g.queue, store(&vol, dir.path()), config)
         .unwrap();
     let target = Offscreen::new(&g.device, SIZE, SIZE);

@@ -32,23 +32,7 @@ struct VolumeParams {
 
 fn sample_value(u: vec3<f32>) -> f32 {
     if LABELS {
-        let hi = vec3<i32>(vol.dims) - vec3<i32>(1);
-        if SMOOTH_LABELS {
-            let p = u * vol.dims - vec3<f32>(0.5);
-            let f = floor(p);
-            let t = p - f;
-            var ids: array<f32, 8>;
-            var w: array<f32, 8>;
-            for (var c = 0u; c < 8u; c = c + 1u) {
-                let at = clamp(vec3<i32>(f) + corner_offset(c), vec3<i32>(0), hi);
-                ids[c] = textureLoad(volume_tex, at, 0).r;
-                w[c] = corner_weight(c, t);
-            }
-            return heaviest_label(ids, w) * vol.value_scale + vol.value_offset;
-        }
-        // The voxel whose cell holds u (voxel centres at (i + 0.5) / dims).
-        let i = clamp(vec3<i32>(floor(u * vol.dims)), vec3<i32>(0), hi);
-        return textureLoad(volume_tex, i, 0).r * vol.value_scale + vol.value_offset;
+        return label_texel(volume_tex, u, vol.dims) * vol.value_scale + vol.value_offset;
     }
     return textureSampleLevel(volume_tex, volume_sampler, u, 0.0).r * vol.value_scale + vol.value_offset;
 }

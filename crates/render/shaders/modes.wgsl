@@ -59,6 +59,30 @@ fn corner_offset(c: u32) -> vec3<i32> {
     return vec3<i32>(i32(c & 1u), i32((c >> 1u) & 1u), i32(c >> 2u));
 }
 
+// A label map's texel at texture point u of `tex` (`size` texels a side),
+// loaded at integer coordinates: the texel whose cell holds u (texel
+// centres at (i + 0.5) / size), or with SMOOTH_LABELS the heaviest label of
+// the 8 around it. Both kernels read label maps through it (out of core a
+// brick's apron holds its neighbours' voxels, so the 8 lie in the brick).
+fn label_texel(tex: texture_3d<f32>, u: vec3<f32>, size: vec3<f32>) -> f32 {
+    let hi = vec3<i32>(size) - vec3<i32>(1);
+    if SMOOTH_LABELS {
+        let p = u * size - vec3<f32>(0.5);
+        let f = floor(p);
+        let t = p - f;
+        var ids: array<f32, 8>;
+        var w: array<f32, 8>;
+        for (var c = 0u; c < 8u; c = c + 1u) {
+            let at = clamp(vec3<i32>(f) + corner_offset(c), vec3<i32>(0), hi);
+            ids[c] = textureLoad(tex, at, 0).r;
+            w[c] = corner_weight(c, t);
+        }
+        return heaviest_label(ids, w);
+    }
+    let i = clamp(vec3<i32>(floor(u * size)), vec3<i32>(0), hi);
+    return textureLoad(tex, i, 0).r;
+}
+
 const MODE_DVR: u32 = 0u;
 const MODE_ISO: u32 = 1u;
 const MODE_MIP: u32 = 2u;

@@ -137,26 +137,7 @@ fn brick_of(leaf: OctBox, slot: u32) -> Brick {
 
 fn atlas_value(uv: vec3<f32>) -> f32 {
     if LABELS {
-        let hi = vec3<i32>(ooc.atlas_size) - vec3<i32>(1);
-        if SMOOTH_LABELS {
-            // The 8 voxels around uv, in the brick (its apron holds the
-            // neighbours' voxels).
-            let p = uv * ooc.atlas_size - vec3<f32>(0.5);
-            let f = floor(p);
-            let t = p - f;
-            var ids: array<f32, 8>;
-            var w: array<f32, 8>;
-            for (var c = 0u; c < 8u; c = c + 1u) {
-                let at = clamp(vec3<i32>(f) + corner_offset(c), vec3<i32>(0), hi);
-                ids[c] = textureLoad(atlas_tex, at, 0).r;
-                w[c] = corner_weight(c, t);
-            }
-            return heaviest_label(ids, w) * ooc.value_scale + ooc.value_offset;
-        }
-        // The atlas texel whose cell holds uv (a brick's apron holds its
-        // neighbours' voxels, so the nearest voxel is always in the brick).
-        let i = clamp(vec3<i32>(floor(uv * ooc.atlas_size)), vec3<i32>(0), hi);
-        return textureLoad(atlas_tex, i, 0).r * ooc.value_scale + ooc.value_offset;
+        return label_texel(atlas_tex, uv, ooc.atlas_size) * ooc.value_scale + ooc.value_offset;
     }
     return textureSampleLevel(atlas_tex, atlas_sampler, uv, 0.0).r * ooc.value_scale + ooc.value_offset;
 }

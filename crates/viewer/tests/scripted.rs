@@ -795,21 +795,8 @@ fn label_map_with_its_colour_table_matches_the_library() {
     table.show_only(&[4, 6, 17, 22]);
     let (shot, w, h) = read_png(&png);
     let (camera, _, _) = sidecar(&png);
-    let gpu = brickray_harness::shared_gpu();
-    let mut renderer =
-        VolumeRenderer::new(&gpu.device, brickray_harness::target_desc()).expect("renderer");
-    renderer
-        .set_volume(&gpu.device, &gpu.queue, &volume)
-        .expect("volume");
-    renderer
-        .set_transfer_function(&gpu.device, &gpu.queue, &table.to_transfer_function())
-        .expect("table");
-    let target = brickray_harness::Offscreen::new(&gpu.device, w, h);
-    let d = volume.desc();
-    let desc = FrameDesc::new(camera, VolumeFrame::centered(d.dims, d.spacing), w, h);
-    brickray_harness::draw_frame(gpu, &mut renderer, &target, &desc, Some(wgpu::Color::BLACK))
-        .expect("draw");
-    let lib = target.read_color(gpu);
+    let mut lib = LabelLibrary::new(&volume, camera, w, h);
+    let lib = lib.draw(&table);
     let lit = shot
         .chunks(4)
         .filter(|p| p[..3].iter().any(|&c| c > 20))
@@ -852,24 +839,13 @@ fn a_click_selects_the_label_under_it() {
     let volume = brickray::io::read_volume(&atlas).expect("the atlas");
     let (shot, w, h) = read_png(&png);
     let (camera, _, _) = sidecar(&png);
-    let gpu = brickray_harness::shared_gpu();
-    let mut renderer =
-        VolumeRenderer::new(&gpu.device, brickray_harness::target_desc()).expect("renderer");
-    renderer
-        .set_volume(&gpu.device, &gpu.queue, &volume)
-        .expect("volume");
+    let mut lib = LabelLibrary::new(&volume, camera, w, h);
     let mut table = brickray::LabelTable::default();
-    renderer
-        .set_transfer_function(&gpu.device, &gpu.queue, &table.to_transfer_function())
-        .expect("table");
-    let target = brickray_harness::Offscreen::new(&gpu.device, w, h);
-    let d = volume.desc();
-    let desc = FrameDesc::new(camera, VolumeFrame::centered(d.dims, d.spacing), w, h);
-    renderer.request_picks(&[[100, 100]]).expect("pick");
+    lib.renderer.request_picks(&[[100, 100]]).expect("pick");
     let mut picks = Vec::new();
     for _ in 0..4 {
-        brickray_harness::draw_frame(gpu, &mut renderer, &target, &desc, None).expect("draw");
-        picks.extend(renderer.take_picks());
+        lib.draw(&table);
+        picks.extend(lib.renderer.take_picks());
     }
     let point = picks
         .first()
@@ -878,12 +854,7 @@ fn a_click_selects_the_label_under_it() {
     let id = brickray::core::labels::label_at(&volume, point.texture);
     assert_ne!(id, 0, "a label, not the background");
     table.selected.insert(id);
-    renderer
-        .set_transfer_function(&gpu.device, &gpu.queue, &table.to_transfer_function())
-        .expect("table");
-    brickray_harness::draw_frame(gpu, &mut renderer, &target, &desc, Some(wgpu::Color::BLACK))
-        .expect("draw");
-    let lib = target.read_color(gpu);
+    let lib = lib.draw(&table);
     let lit = shot
         .chunks(4)
         .filter(|p| p[..3].iter().any(|&c| c > 20))
@@ -895,4 +866,46 @@ fn a_click_selects_the_label_under_it() {
     let cmp = brickray_reference::assert_close("viewer-picked", &shot, &lib, w, h, MIN_PSNR_DB)
         .unwrap_or_else(|e| panic!("{e}"));
     eprintln!("viewer click on label {id}: {cmp}");
+}
+
+/// The library drawing a label map in core, as the viewer's screenshots are
+/// compared with.
+struct LabelLibrary {
+    renderer: VolumeRenderer,
+    target: brickray_harness::Offscreen,
+    desc: FrameDesc<'static>,
+}
+
+impl LabelLibrary {
+    fn new(volume: &brickray::Volume, camera: Camera, w: u32, h: u32) -> LabelLibrary {
+        let gpu = brickray_harness::shared_gpu();
+        let mut renderer =
+            VolumeRenderer::new(&gpu.device, brickray_harness::target_desc()).expect("renderer");
+        renderer
+            .set_volume(&gpu.device, &gpu.queue, volume)
+            .expect("volume");
+        let d = volume.desc();
+        LabelLibrary {
+            renderer,
+            target: brickray_harness::Offscreen::new(&gpu.device, w, h),
+            desc: FrameDesc::new(camera, VolumeFrame::centered(d.dims, d.spacing), w, h),
+        }
+    }
+
+    /// One frame through `table` over black, read back.
+    fn draw(&mut self, table: &brickray::LabelTable) -> Vec<u8> {
+        let gpu = brickray_harness::shared_gpu();
+        self.renderer
+            .set_transfer_function(&gpu.device, &gpu.queue, &table.to_transfer_function())
+            .expect("table");
+        brickray_harness::draw_frame(
+            gpu,
+            &mut self.renderer,
+            &self.target,
+            &self.desc,
+            Some(wgpu::Color::BLACK),
+        )
+        .expect("draw");
+        self.target.read_color(gpu)
+    }
 }
