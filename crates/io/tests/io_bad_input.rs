@@ -44,7 +44,8 @@ fn sidecar_errors_are_typed() {
     let d = dir.path();
     let (le, _) = samples(DType::U8, DIMS, 2);
     let case = |name: &str, json: serde_json::Value| err_of(&write_sidecar(d, name, json, &le));
-    for ty in ["f64", "double", "int32", "u32", "", "u 8"] {
+    // (u32 is a sample type since label maps; u64 is not.)
+    for ty in ["f64", "double", "int32", "u64", "uint64", "", "u 8"] {
         let e = case("ty", sidecar_json(ty, [7, 5, 3], SPACING));
         assert!(
             matches!(&e, IoError::UnknownDType { name, .. } if name == ty),

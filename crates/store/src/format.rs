@@ -9,7 +9,7 @@ pub const MAGIC: [u8; 8] = *b"BRKSTORE";
 /// Version 2 adds the optional per-node error section, version 3 the
 /// parent-error section after it, version 4 binds each payload's checksum to
 /// its node (`docs/store-format.md`, "Payload checksums"), version 5 adds
-/// label stores ([`FLAG_LABELS`], u32 samples, the mode filter).
+/// label stores (a header flag, u32 samples, the mode filter).
 pub const VERSION: u32 = 5;
 /// The first format version whose payload checksums cover the node's key.
 pub(crate) const KEYED_CRC_VERSION: u32 = 4;
