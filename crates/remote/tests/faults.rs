@@ -12,7 +12,7 @@ use brickray_core::RangeReader;
 use brickray_remote::{RemoteError, RemoteOptions, RemoteRangeReader};
 use brickray_store::{Store, StoreError};
 use common::*;
-use std::io::{BufRead, BufReader, Write};
+use std::io::{BufReader, Write};
 use std::net::{TcpListener, TcpStream};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
@@ -77,28 +77,14 @@ fn handle(
     let mut reader = BufReader::new(conn.try_clone()?);
     let mut out = conn;
     loop {
-        let mut line = String::new();
-        if reader.read_line(&mut line)? == 0 {
+        let Some(Request {
+            method,
+            path,
+            range,
+        }) = read_request(&mut reader)?
+        else {
             return Ok(());
-        }
-        let method = line.split_whitespace().next().unwrap_or("").to_owned();
-        let path = line.split_whitespace().nth(1).unwrap_or("").to_owned();
-        let mut range = None;
-        loop {
-            let mut h = String::new();
-            if reader.read_line(&mut h)? == 0 {
-                return Ok(());
-            }
-            let h = h.trim_end();
-            if h.is_empty() {
-                break;
-            }
-            if let Some((k, v)) = h.split_once(':')
-                && k.eq_ignore_ascii_case("range")
-            {
-                range = Some(v.trim().to_owned());
-            }
-        }
+        };
         let len = bytes.len();
         if path != "/s.brs" {
             write!(out, "HTTP/1.1 404 Not Found\r\nContent-Length: 0\r\n\r\n")?;

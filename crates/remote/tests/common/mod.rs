@@ -149,3 +149,43 @@ pub fn assert_same_store(local: &Store, remote: &Store) {
         assert_eq!(&local.read_compressed(*k).unwrap(), p, "payload {k:?}");
     }
 }
+
+/// One HTTP/1.1 request line and its headers, as the in-test servers read
+/// them: the method, the path and the `Range` header's value.
+pub struct Request {
+    pub method: String,
+    pub path: String,
+    pub range: Option<String>,
+}
+
+/// Reads the next request from a connection; `None` when the client closed
+/// it.
+pub fn read_request(reader: &mut impl std::io::BufRead) -> std::io::Result<Option<Request>> {
+    let mut line = String::new();
+    if reader.read_line(&mut line)? == 0 {
+        return Ok(None);
+    }
+    let method = line.split_whitespace().next().unwrap_or("").to_owned();
+    let path = line.split_whitespace().nth(1).unwrap_or("").to_owned();
+    let mut range = None;
+    loop {
+        let mut h = String::new();
+        if reader.read_line(&mut h)? == 0 {
+            return Ok(None);
+        }
+        let h = h.trim_end();
+        if h.is_empty() {
+            break;
+        }
+        if let Some((k, v)) = h.split_once(':')
+            && k.eq_ignore_ascii_case("range")
+        {
+            range = Some(v.trim().to_owned());
+        }
+    }
+    Ok(Some(Request {
+        method,
+        path,
+        range,
+    }))
+}
