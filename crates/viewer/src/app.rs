@@ -2,6 +2,7 @@
 //! panel's widgets are in `panels`, the script runner and screenshots in
 //! `scripting`).
 
+mod labels;
 mod panels;
 mod scripting;
 
@@ -327,49 +328,6 @@ impl ViewerApp {
                 }
             }
             Err(e) => self.fail(format!("renderer: {e}")),
-        }
-    }
-
-    /// Picks read back: on a label map a click selects the label under it
-    /// (or clears the selection on the background); the message says which.
-    fn apply_picks(&mut self, frame: &eframe::Frame) {
-        if !self.pick_queue.is_empty() {
-            let q = std::mem::take(&mut self.pick_queue);
-            if let Some(Err(e)) = self.with_gpu(frame, |_, _, r| r.renderer.request_picks(&q)) {
-                self.messages.push(format!("pick: {e}"));
-            }
-            // (Read back a frame or two later: keep drawing until then.)
-            self.pick_frames = 8;
-        }
-        self.pick_frames = self.pick_frames.saturating_sub(1);
-        let picks = self
-            .with_gpu(frame, |_, _, r| r.renderer.take_picks())
-            .unwrap_or_default();
-        for p in picks {
-            let (Some(t), Some(point)) = (self.labels.as_mut(), p.point) else {
-                if let Some(t) = self.labels.as_mut() {
-                    t.selected.clear();
-                    self.tf_dirty = true;
-                }
-                continue;
-            };
-            let Some(vol) = &self.label_volume else {
-                self.messages
-                    .push("picking a streamed label map is not supported yet".into());
-                continue;
-            };
-            let id = brickray::core::labels::label_at(vol, point.texture);
-            let w = point.world;
-            if t.background == Some(id) {
-                t.selected.clear();
-            } else if !t.selected.remove(&id) {
-                t.selected.insert(id);
-            }
-            self.tf_dirty = true;
-            self.messages.push(format!(
-                "label {id} at ({:.1}, {:.1}, {:.1}); selected {:?}",
-                w[0], w[1], w[2], t.selected
-            ));
         }
     }
 
