@@ -41,9 +41,18 @@ pub struct PickPoint {
     pub world: [f64; 3],
 }
 
-/// The frame a ring entry's picks belong to.
+/// A ring entry's picks: their pixels and the frame they were drawn in
+/// (`None`: the entry holds none).
 #[derive(Debug, Default)]
-pub(crate) struct PickMeta(Option<(Vec<[u32; 2]>, Camera, VolumeFrame, [u32; 2])>);
+pub(crate) struct PickMeta(Option<PickFrame>);
+
+#[derive(Debug)]
+pub(crate) struct PickFrame {
+    pixels: Vec<[u32; 2]>,
+    camera: Camera,
+    frame: VolumeFrame,
+    size: [u32; 2],
+}
 
 /// Owner of the pick queue and its read-back ring.
 pub(crate) struct Picker {
@@ -109,7 +118,12 @@ impl Picker {
             .copied()
             .filter(|p| p[0] < size[0] && p[1] < size[1])
             .collect();
-        let meta = PickMeta(Some((pixels.clone(), camera, frame, size)));
+        let meta = PickMeta(Some(PickFrame {
+            pixels: pixels.clone(),
+            camera,
+            frame,
+            size,
+        }));
         let recorded = self
             .ring
             .record(queue, encoder, self.frame, meta, |enc, buf, offset| {
@@ -149,7 +163,13 @@ impl Picker {
     /// The picks read back since the last call, oldest frame first.
     pub(crate) fn take(&mut self) -> Vec<Pick> {
         let done = self.ring.poll(self.frame, |_, meta, payload| {
-            let Some((pixels, camera, frame, size)) = &meta.0 else {
+            let Some(PickFrame {
+                pixels,
+                camera,
+                frame,
+                size,
+            }) = &meta.0
+            else {
                 return Vec::new();
             };
             let depths: &[f32] = bytemuck::cast_slice(&payload[..pixels.len() * 4]);

@@ -502,6 +502,38 @@ fn source_histogram(source: &dyn BrickSource) -> Result<Histogram, OpenError> {
     Ok(h)
 }
 
+/// The colour table beside a label map, if there is one: `NAME.lut` or
+/// `NAME.json` for `NAME.nii.gz` also tried as `NAME.nii.lut` (mricron's
+/// convention); else the default table. The note says which file was used or
+/// why it was not.
+pub(crate) fn label_table_beside(input: &Input) -> (brickray::LabelTable, Option<String>) {
+    let Input::Path(path) = input else {
+        return (Default::default(), None);
+    };
+    let name = path.to_string_lossy().to_string();
+    let base = name.strip_suffix(".gz").unwrap_or(&name).to_string();
+    let stem = path.with_extension("").to_string_lossy().to_string();
+    let candidates = [
+        format!("{base}.lut"),
+        format!("{stem}.lut"),
+        format!("{stem}.labels.json"),
+    ];
+    for c in candidates {
+        let p = Path::new(&c);
+        if !p.is_file() {
+            continue;
+        }
+        return match std::fs::read(p)
+            .map_err(|e| e.to_string())
+            .and_then(|b| brickray::LabelTable::from_file_bytes(&b).map_err(|e| e.to_string()))
+        {
+            Ok(t) => (t, Some(format!("label colours from {c}"))),
+            Err(e) => (Default::default(), Some(format!("{c}: {e}"))),
+        };
+    }
+    (Default::default(), None)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -777,36 +809,4 @@ mod tests {
                 .any(|&c| c > 0)
         );
     }
-}
-
-/// The colour table beside a label map, if there is one: `NAME.lut` or
-/// `NAME.json` for `NAME.nii.gz` also tried as `NAME.nii.lut` (mricron's
-/// convention); else the default table. The note says which file was used or
-/// why it was not.
-pub(crate) fn label_table_beside(input: &Input) -> (brickray::LabelTable, Option<String>) {
-    let Input::Path(path) = input else {
-        return (Default::default(), None);
-    };
-    let name = path.to_string_lossy().to_string();
-    let base = name.strip_suffix(".gz").unwrap_or(&name).to_string();
-    let stem = path.with_extension("").to_string_lossy().to_string();
-    let candidates = [
-        format!("{base}.lut"),
-        format!("{stem}.lut"),
-        format!("{stem}.labels.json"),
-    ];
-    for c in candidates {
-        let p = Path::new(&c);
-        if !p.is_file() {
-            continue;
-        }
-        return match std::fs::read(p)
-            .map_err(|e| e.to_string())
-            .and_then(|b| brickray::LabelTable::from_file_bytes(&b).map_err(|e| e.to_string()))
-        {
-            Ok(t) => (t, Some(format!("label colours from {c}"))),
-            Err(e) => (Default::default(), Some(format!("{c}: {e}"))),
-        };
-    }
-    (Default::default(), None)
 }
