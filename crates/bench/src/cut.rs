@@ -59,7 +59,7 @@ pub(crate) fn refine_cut(
     let layout = view.store.layout();
     let params = RefineParams {
         views: &Views::one(ViewGeometry::new(
-            &layout,
+            layout,
             view.camera,
             1.0,
             view.size,

@@ -164,7 +164,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         .split(',')
         .map(|c| c.trim().parse().map_err(|_| format!("bad cut size {c:?}")))
         .collect::<Result<_, _>>()?;
-    if frames == 0 || size == 0 || cuts.iter().any(|&c| c == 0) {
+    if frames == 0 || size == 0 || cuts.contains(&0) {
         return Err("--frames, --size and every cut must be at least 1".into());
     }
     let gpu = GpuContext::new().map_err(|e| e.to_string())?;

@@ -95,8 +95,7 @@ mod tests {
     #[test]
     fn float_volumes_are_refused() {
         let e = AsLabels::new(reader(VolumeData::F32(vec![0.5, 1.0])))
-            .err()
-            .expect("f32 is not a label type");
+            .expect_err("f32 is not a label type");
         assert!(e.to_string().contains("u8, u16 or u32"), "{e}");
     }
 }

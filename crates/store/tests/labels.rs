@@ -21,7 +21,7 @@ fn label_bytes(dims: [u32; 3], dtype: DType, ids: &[u32], seed: u64) -> Vec<u8> 
         h ^= h << 13;
         h ^= h >> 7;
         h ^= h << 17;
-        if h % 4 == 0 {
+        if h.is_multiple_of(4) {
             cur = ids[(h >> 9) as usize % ids.len()];
         }
         v.push(cur as f32);

@@ -29,7 +29,7 @@ fn random_labels(dims: [u32; 3], ids: &[u32], seed: u64) -> Volume {
         s ^= s >> 7;
         s ^= s << 17;
         // Runs of one label (segments), switching now and then.
-        if s % 5 == 0 {
+        if s.is_multiple_of(5) {
             cur = ids[(s >> 8) as usize % ids.len()];
         }
         data.push(cur);
