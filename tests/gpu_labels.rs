@@ -15,7 +15,12 @@
 //!   before) at 2 px: labels at least 5 dB closer to the finest;
 //! * hidden labels: empty-space skipping skips what only hidden labels fill
 //!   (fewer samples) and the image equals the one drawn without skipping;
-//! * a float volume cannot be made a label map (typed error).
+//! * a float volume cannot be made a label map (typed error);
+//! * label maps over the images they segment: the `overlay` module
+//!   (`gpu_overlay.rs`, in this binary to save a link).
+
+#[path = "gpu_overlay.rs"]
+mod overlay;
 
 use brickray::core::labels::{self, LabelTable};
 use brickray::{

@@ -17,8 +17,10 @@
 //!   store at 2 px.
 //!
 //! Smooth boundaries (`RenderSettings::smooth_labels`) are timed against
-//! nearest samples in core, interleaved. Overlays of a label map on its image
-//! are not implemented yet: `overlay_cost_ratio` is null.
+//! nearest samples in core, interleaved. **Overlays**: each map over the image
+//! it segments (the Colin27 MRI, the nuclei fluorescence; colour mode) against
+//! the image alone, in core and out of core at the finest level, interleaved;
+//! the overlay's error against the reference's overlay at 128 px in core.
 //!
 //! `cargo run --release -p brickray-bench -- labels [--size PX] [--rounds N]`
 
@@ -26,8 +28,8 @@ use crate::runner::median;
 use crate::{Figures, arg};
 use brickray_core::labels::{LabelTable, label_value_range};
 use brickray_core::{
-    BrickSource, Camera, RenderMode, RenderSettings, TransferFunction, Volume, VolumeDesc,
-    VolumeFrame, VolumeKind,
+    BrickSource, Camera, LabelOverlay, OverlayStyle, RenderMode, RenderSettings, TransferFunction,
+    Volume, VolumeDesc, VolumeFrame, VolumeKind, overlay_transform,
 };
 use brickray_harness::predict::{draw, samples_per_ray};
 use brickray_harness::{GpuContext, Offscreen, draw_frame, draw_until_settled};
@@ -51,13 +53,15 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         (f64::INFINITY, f64::INFINITY, 0.0f64, 0.0f64);
     let mut skip_ratio_max = 0.0f64;
     let mut smooth_max = 0.0f64;
+    let (mut overlay_max, mut overlay_db_min) = (0.0f64, f64::INFINITY);
+    let mut overlay_rows = Vec::new();
     println!(
         "| map | labels / intensity ms (in core) | (out of core) | smooth / nearest | samples per ray | hidden: samples with / without skipping | finest dB (in core, ooc) | 1 / 2 / 4 px vs finest dB | averaged 2 px dB |"
     );
     println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|");
-    for (name, dirname) in [
-        ("brodmann", "mricron_brodmann_labels"),
-        ("nuclei", "cells3d_nuclei_labels"),
+    for (name, dirname, image_dir) in [
+        ("brodmann", "mricron_brodmann_labels", "mricron_ch2_mri"),
+        ("nuclei", "cells3d_nuclei_labels", "cells3d_nuclei_fluo"),
     ] {
         let path = brickray_harness::shared_data_dir()
             .ok_or("the labels suite needs ../shared/data (the shared label maps)")?
@@ -263,18 +267,176 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         fig.insert(format!("{name}_psnr_2px_db"), json!(levels[2]));
         fig.insert(format!("{name}_psnr_4px_db"), json!(levels[3]));
         fig.insert(format!("{name}_psnr_averaged_2px_db"), json!(levels[4]));
+
+        let o = overlay(&gpu, &vol, image_dir, name, dir.path(), size, rounds)?;
+        overlay_max = overlay_max.max(o.cost_incore).max(o.cost_ooc);
+        overlay_db_min = overlay_db_min.min(o.psnr_db);
+        fig.insert(format!("{name}_overlay_ms_incore"), json!(o.ms_incore));
+        fig.insert(
+            format!("{name}_overlay_cost_ratio_incore"),
+            json!(o.cost_incore),
+        );
+        fig.insert(format!("{name}_overlay_cost_ratio_ooc"), json!(o.cost_ooc));
+        fig.insert(format!("{name}_overlay_psnr_db"), json!(o.psnr_db));
+        overlay_rows.push(format!(
+            "| {name} over {image_dir} | {:.3} ({:.1} / {:.1} ms) | {:.3} ({:.1} / {:.1} ms) | {:.1} |",
+            o.cost_incore,
+            o.ms_incore[0],
+            o.ms_incore[1],
+            o.cost_ooc,
+            o.ms_ooc[0],
+            o.ms_ooc[1],
+            o.psnr_db
+        ));
+    }
+    println!();
+    println!(
+        "| overlay | with / without, in core | out of core (finest) | vs reference dB (in core, 128 px) |"
+    );
+    println!("|---|---:|---:|---:|");
+    for row in &overlay_rows {
+        println!("{row}");
     }
     fig.insert("psnr_finest_db_min".into(), json!(finest_min));
     fig.insert("psnr_2px_db_min".into(), json!(two_px_min));
     fig.insert("label_cost_ratio_max".into(), json!(cost_max));
     fig.insert("label_cost_ratio_ooc_max".into(), json!(ooc_cost_max));
     fig.insert("hidden_skip_sample_ratio_max".into(), json!(skip_ratio_max));
-    fig.insert("overlay_cost_ratio".into(), json!(null));
+    fig.insert("overlay_cost_ratio".into(), json!(overlay_max));
+    fig.insert("overlay_psnr_db_min".into(), json!(overlay_db_min));
     fig.insert("smooth_cost_ratio".into(), json!(smooth_max));
     fig.insert("image_size".into(), json!(size));
     fig.insert("rounds".into(), json!(rounds));
     fig.insert("adapter".into(), json!(gpu.adapter.get_info().name));
     Ok(fig)
+}
+
+/// What an overlay costs and how far it is from the reference's.
+struct OverlayFigures {
+    /// ms per frame with / without the overlay, in core.
+    ms_incore: [f64; 2],
+    /// The same out of core at the finest level.
+    ms_ooc: [f64; 2],
+    cost_incore: f64,
+    cost_ooc: f64,
+    /// In core against the reference's overlay at 128 px, at its step.
+    psnr_db: f64,
+}
+
+/// The label map `labels` over the shared image `image_dir` (same grid).
+fn overlay(
+    gpu: &GpuContext,
+    labels: &Volume,
+    image_dir: &str,
+    name: &str,
+    dir: &std::path::Path,
+    size: u32,
+    rounds: usize,
+) -> Result<OverlayFigures, String> {
+    let path = brickray_harness::shared_data_dir()
+        .ok_or("the labels suite needs ../shared/data")?
+        .join(image_dir)
+        .join(format!("{image_dir}.json"));
+    let image = brickray_io::read_volume(&path).map_err(|e| e.to_string())?;
+    let d = image.desc();
+    let frame = VolumeFrame::centered(d.dims, d.spacing);
+    let lframe = VolumeFrame::centered(labels.dims(), labels.desc().spacing);
+    let table = LabelTable::default();
+    let o = LabelOverlay {
+        labels,
+        image_to_labels: overlay_transform(&frame, &lframe),
+        table: &table,
+        style: OverlayStyle::default(),
+    };
+    // A soft-tissue ramp: the labels colour what it shows.
+    let tf = TransferFunction::from_points(
+        &[
+            (0.15, [0.8, 0.8, 0.8, 0.0]),
+            (0.35, [0.9, 0.9, 0.9, 0.05]),
+            (0.7, [1.0, 1.0, 1.0, 0.3]),
+        ],
+        256,
+    );
+    let camera = Camera::orbit(frame.center(), 2.2, 0.8, 0.45);
+    let settings = RenderSettings {
+        mode: RenderMode::Dvr,
+        ..Default::default()
+    };
+    let big = Offscreen::new(&gpu.device, size, size);
+    let desc = FrameDesc {
+        settings,
+        ..FrameDesc::new(camera, frame, size, size)
+    };
+    let map = |e: brickray_render::RenderError| e.to_string();
+    let mut incore = Vec::new();
+    for with in [true, false] {
+        let mut r = renderer(gpu, &tf)?;
+        r.set_volume(&gpu.device, &gpu.queue, &image).map_err(map)?;
+        if with {
+            r.set_overlay(&gpu.device, &gpu.queue, Some(&o))
+                .map_err(map)?;
+        }
+        incore.push(r);
+    }
+    let (ms_in, _) = {
+        let [a, b] = &mut incore[..] else {
+            unreachable!()
+        };
+        timed(gpu, &mut [(a, &desc), (b, &desc)], &big, rounds)?
+    };
+    let source = store(&image, dir, &format!("{name}-image"))?;
+    let mut ooc = Vec::new();
+    for with in [true, false] {
+        let mut r = renderer(gpu, &tf)?;
+        r.set_volume_source(&gpu.device, &gpu.queue, source.clone(), finest(0.0))
+            .map_err(map)?;
+        if with {
+            r.set_overlay(&gpu.device, &gpu.queue, Some(&o))
+                .map_err(map)?;
+        }
+        draw_until_settled(gpu, &mut r, &big, &desc, 300)
+            .map_err(|e| e.to_string())?
+            .ok_or("out of core did not settle")?;
+        ooc.push(r);
+    }
+    let (ms_ooc, _) = {
+        let [a, b] = &mut ooc[..] else { unreachable!() };
+        timed(gpu, &mut [(a, &desc), (b, &desc)], &big, rounds)?
+    };
+    let fine = RenderSettings {
+        step_factor: DEFAULT_STEP_FACTOR,
+        ..settings
+    };
+    let small = Offscreen::new(&gpu.device, ERROR_SIZE, ERROR_SIZE);
+    let sdesc = FrameDesc {
+        settings: fine,
+        ..FrameDesc::new(camera, frame, ERROR_SIZE, ERROR_SIZE)
+    };
+    let reference = render_reference(
+        &image,
+        &frame,
+        &tf,
+        &camera,
+        &fine,
+        &ReferenceOptions::new(ERROR_SIZE, ERROR_SIZE).with_overlay(&o),
+    )
+    .to_rgba8([0.0; 3]);
+    draw_frame(
+        gpu,
+        &mut incore[0],
+        &small,
+        &sdesc,
+        Some(wgpu::Color::BLACK),
+    )
+    .map_err(|e| e.to_string())?;
+    let psnr_db = compare(&small.read_color(gpu), &reference, ERROR_SIZE, ERROR_SIZE).psnr_db;
+    Ok(OverlayFigures {
+        ms_incore: [ms_in[0], ms_in[1]],
+        ms_ooc: [ms_ooc[0], ms_ooc[1]],
+        cost_incore: ms_in[0] / ms_in[1],
+        cost_ooc: ms_ooc[0] / ms_ooc[1],
+        psnr_db,
+    })
 }
 
 /// The same ids as an intensity volume over the label value range (what

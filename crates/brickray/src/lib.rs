@@ -46,10 +46,13 @@ pub mod cache {
 pub use brickray_core::{
     Accel, Camera, CameraError, ClipBox, DType, DepthConvention, FrameError, LodMetric, Projection,
     RenderMode, RenderSettings, SettingsError, Shading, TfError, TransferFunction, Volume,
-    VolumeDesc, VolumeFrame, VolumeKind,
+    VolumeData, VolumeDesc, VolumeFrame, VolumeKind,
 };
 pub use brickray_core::{BrickSource, NodeKey, OctreeLayout};
-pub use brickray_core::{LabelError, LabelStyle, LabelTable};
+pub use brickray_core::{
+    LabelError, LabelOverlay, LabelStyle, LabelTable, OverlayError, OverlayMode, OverlayStyle,
+    overlay_transform,
+};
 pub use brickray_render::{
     ColorMap, CtPreset, Intensity, Slab, SlabMode, SliceAxis, SliceError, SliceGeometry, SliceView,
     Window, WindowError,

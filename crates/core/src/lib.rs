@@ -31,6 +31,7 @@ pub mod lod;
 pub mod macrocell;
 pub mod moments;
 mod node_error;
+pub mod overlay;
 mod pyramid;
 pub mod range;
 pub mod settings;
@@ -56,6 +57,7 @@ pub use lod::{
 };
 pub use macrocell::{MacroCellGrid, sub_cell_ranges, sub_cells_per_axis};
 pub use moments::{MomentGrid, Moments};
+pub use overlay::{LabelOverlay, OverlayError, OverlayMode, OverlayStyle, overlay_transform};
 pub use pyramid::{ALL_AXES, Children, LayoutError, MAX_LEVELS, anisotropic_split_masks};
 pub use range::{MemRangeReader, ObjectReader, ObjectSpan, RangeRead, RangeReader};
 pub use settings::{Accel, ClipBox, RenderMode, RenderSettings, SettingsError, Shading};

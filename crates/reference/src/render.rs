@@ -3,8 +3,8 @@
 use brickray_core::moments::field_trilinear;
 use brickray_core::tf::{Preintegrator, SPREAD_ROWS, SpreadTable, corrected_alpha};
 use brickray_core::{
-    Camera, Intensity, Ray, RayGen, RenderMode, RenderSettings, Shading, TransferFunction, Volume,
-    VolumeFrame,
+    Camera, Intensity, LabelOverlay, Ray, RayGen, RenderMode, RenderSettings, Shading,
+    TransferFunction, Volume, VolumeFrame,
 };
 use glam::{DMat3, DMat4, DVec3};
 use rayon::prelude::*;
@@ -72,6 +72,11 @@ pub struct ReferenceOptions<'a> {
     /// `None` (the finest level, or a coarse level drawn as the TF of its
     /// mean).
     pub spread: Option<&'a [f32]>,
+    /// A label map drawn over the image (`brickray_core::overlay`): DVR
+    /// samples take the label under them ([`LabelOverlay::apply`], nearest,
+    /// or the heaviest of 8 with `settings.smooth_labels`) before shading.
+    /// Iso and MIP ignore it. Default `None`.
+    pub overlay: Option<&'a LabelOverlay<'a>>,
 }
 
 impl ReferenceOptions<'static> {
@@ -86,6 +91,7 @@ impl ReferenceOptions<'static> {
             preintegrated: false,
             intensity: None,
             spread: None,
+            overlay: None,
         }
     }
 }
@@ -148,6 +154,7 @@ impl<'a> ReferenceOptions<'a> {
             preintegrated: self.preintegrated,
             intensity: self.intensity,
             spread: self.spread,
+            overlay: self.overlay,
         }
     }
 
@@ -173,6 +180,25 @@ impl<'a> ReferenceOptions<'a> {
             preintegrated: self.preintegrated,
             intensity: self.intensity,
             spread: Some(sigma),
+            overlay: self.overlay,
+        }
+    }
+
+    /// With a label map over the image ([`Self::overlay`]).
+    pub fn with_overlay<'b>(self, overlay: &'b LabelOverlay<'b>) -> ReferenceOptions<'b>
+    where
+        'a: 'b,
+    {
+        ReferenceOptions {
+            width: self.width,
+            height: self.height,
+            step_factor: self.step_factor,
+            supersample: self.supersample,
+            host_depth: self.host_depth,
+            preintegrated: self.preintegrated,
+            intensity: self.intensity,
+            spread: self.spread,
+            overlay: Some(overlay),
         }
     }
 }
@@ -187,7 +213,8 @@ impl<'a> ReferenceOptions<'a> {
 /// # Panics
 /// If `opts.step_factor` is not finite and positive, if `frame.voxel_world` is not
 /// finite and positive, if `opts.host_depth` is not `width * height` long, if
-/// `opts.spread` does not hold one value per voxel of `vol`, or if
+/// `opts.spread` does not hold one value per voxel of `vol`, if `opts.overlay`
+/// cannot be drawn over `vol` ([`LabelOverlay::validate`]), or if
 /// `settings.mode` is a mode this reference does not define (a variant added to
 /// the non-exhaustive [`RenderMode`] after DVR, Iso and MIP): the oracle refuses
 /// rather than guessing.
@@ -250,8 +277,13 @@ pub fn render_reference(
     } else {
         settings
     };
+    if let Some(o) = opts.overlay {
+        o.validate(labels)
+            .unwrap_or_else(|e| panic!("the overlay cannot be drawn: {e}"));
+    }
     let mut marcher = Marcher::new(vol, frame, tf, camera, settings, step_factor, width, height);
     marcher.labels = labels;
+    marcher.overlay = opts.overlay;
     marcher.intensity = opts.intensity;
     if let Some(s) = opts.spread {
         marcher.spread = Some((s, tf.spread_table(SPREAD_ROWS, SPREAD_TABLE_WIDTH)));
@@ -300,6 +332,8 @@ struct Marcher<'a> {
     spread: Option<(&'a [f32], SpreadTable)>,
     /// A label map: values are read at the nearest voxel.
     labels: bool,
+    /// A label map over the image ([`ReferenceOptions::overlay`]).
+    overlay: Option<&'a LabelOverlay<'a>>,
 }
 
 /// The result of one ray: premultiplied RGBA and clip depth.
@@ -335,6 +369,7 @@ impl<'a> Marcher<'a> {
             intensity: None,
             spread: None,
             labels: false,
+            overlay: None,
         }
     }
 }
@@ -439,6 +474,13 @@ impl Marcher<'_> {
                     };
                     [r, g, b, corrected_alpha(a, self.step_factor)]
                 }
+            };
+            let [r, g, b, a] = match self.overlay {
+                Some(o) => {
+                    let u = (ray.tex_origin + ray.tex_dir * t).to_array();
+                    o.apply([r, g, b, a], u, self.settings.smooth_labels)
+                }
+                None => [r, g, b, a],
             };
             if a <= 0.0 {
                 // Contributes nothing (and cannot change A or the depth).

@@ -207,30 +207,34 @@ fn shade(c: vec3<f32>, g: vec4<f32>, dir: vec3<f32>) -> vec3<f32> {
 // it, clamped out of core to the brick's entry).
 // True when early ray termination ends the ray.
 fn dvr_sample(acc: ptr<function, Accum>, c: Cursor, r: Ray, t: f32, ts: f32, front: f32, v: f32, tf_v: f32) -> bool {
-    var a: f32;
-    var prem: vec3<f32>;
+    // A label map over the image (overlay.wgsl) colours or masks the sample
+    // before shading; it never raises the opacity, so a transparent sample
+    // stays skipped.
+    var s: vec4<f32>;
     if (PREINT) {
         let p = tf_preint_sample(front, v, tf_v);
         if (p.a <= 0.0) {
             return false;
         }
-        a = p.a;
-        prem = p.rgb;
-        if (SHADE) {
-            prem = shade(p.rgb / a, cursor_gradient(c, ts), r.dir) * a;
-        }
+        s = vec4<f32>(p.rgb / p.a, p.a);
     } else {
-        let s = tf_sample(v, tf_v);
+        s = tf_sample(v, tf_v);
         if (s.a <= 0.0) {
             return false;
         }
-        a = s.a;
-        var rgb = s.rgb;
-        if (SHADE) {
-            rgb = shade(rgb, cursor_gradient(c, t), r.dir);
-        }
-        prem = a * rgb;
     }
+    if (OVERLAY != 0u) {
+        s = overlay_apply(s, r.tex_origin + t * r.tex_dir);
+        if (s.a <= 0.0) {
+            return false;
+        }
+    }
+    let a = s.a;
+    var rgb = s.rgb;
+    if (SHADE) {
+        rgb = shade(rgb, cursor_gradient(c, select(t, ts, PREINT)), r.dir);
+    }
+    let prem = a * rgb;
     let acc_a = (*acc).color.a;
     (*acc).color = vec4<f32>((*acc).color.rgb + (1.0 - acc_a) * prem, acc_a + (1.0 - acc_a) * a);
     if (!(*acc).depth_set && (*acc).color.a >= frame.depth_opacity) {

@@ -84,6 +84,10 @@ pub enum RenderError {
     /// The transfer function is not usable.
     #[error(transparent)]
     TransferFunction(#[from] brickray_core::TfError),
+    /// A label map over the image cannot be drawn (not a label map, over a
+    /// label map, a singular placement, an opacity outside 0..1).
+    #[error(transparent)]
+    Overlay(#[from] brickray_core::OverlayError),
     /// wgpu reported an error creating one of the library's objects (caught by an
     /// error scope, never a panic in the host).
     #[error("wgpu {kind:?} error creating {what}: {message}")]

@@ -173,6 +173,11 @@ impl<T: bytemuck::Pod + PartialEq> Uniform<T> {
         self.last = Some(value);
         std::mem::size_of::<T>() as u64
     }
+
+    /// The last value written.
+    pub(crate) fn last(&self) -> Option<T> {
+        self.last
+    }
 }
 
 /// A storage buffer that grows geometrically and is rewritten only on change.
@@ -262,4 +267,70 @@ pub(crate) fn texture(
         desc.label.unwrap_or("brickray-render texture"),
         || device.create_texture(desc),
     )
+}
+
+/// A volume in one limit-checked 3D texture of `enc`'s format, uploaded in
+/// slabs of at most 64 MiB so staging memory stays bounded (each slab is
+/// converted on its own: no full-volume copy in the texel format). Returns
+/// the texture and its bytes.
+pub(crate) fn volume_texture(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    vol: &brickray_core::Volume,
+    enc: &brickray_core::SampleEncoding,
+    label: &'static str,
+) -> Result<(wgpu::Texture, u64), RenderError> {
+    let dims = vol.dims();
+    let format = crate::encoding::wgpu_format(enc.format);
+    let row = dims[0] * enc.texel_bytes();
+    let slice = row as usize * dims[1] as usize;
+    let bytes = slice as u64 * dims[2] as u64;
+    let texture = texture(
+        device,
+        &wgpu::TextureDescriptor {
+            label: Some(label),
+            size: wgpu::Extent3d {
+                width: dims[0],
+                height: dims[1],
+                depth_or_array_layers: dims[2],
+            },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D3,
+            format,
+            usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+            view_formats: &[],
+        },
+    )?;
+    let src = vol.data().as_bytes();
+    let src_slice = dims[0] as usize * dims[1] as usize * vol.desc().dtype.size();
+    let per = ((64usize << 20) / slice.max(1)).clamp(1, dims[2] as usize) as u32;
+    let mut z = 0;
+    while z < dims[2] {
+        let z1 = (z + per).min(dims[2]);
+        let texels = enc.encode(&src[z as usize * src_slice..z1 as usize * src_slice]);
+        scoped(device, label, || {
+            queue.write_texture(
+                wgpu::TexelCopyTextureInfo {
+                    texture: &texture,
+                    mip_level: 0,
+                    origin: wgpu::Origin3d { x: 0, y: 0, z },
+                    aspect: wgpu::TextureAspect::All,
+                },
+                &texels,
+                wgpu::TexelCopyBufferLayout {
+                    offset: 0,
+                    bytes_per_row: Some(row),
+                    rows_per_image: Some(dims[1]),
+                },
+                wgpu::Extent3d {
+                    width: dims[0],
+                    height: dims[1],
+                    depth_or_array_layers: z1 - z,
+                },
+            )
+        })?;
+        z = z1;
+    }
+    Ok((texture, bytes))
 }

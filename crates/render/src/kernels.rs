@@ -7,7 +7,7 @@ use crate::error::RenderError;
 use crate::gpu;
 use crate::predict::Prediction;
 use crate::shaders;
-use brickray_core::{RenderMode, RenderSettings};
+use brickray_core::{OverlayMode, RenderMode, RenderSettings};
 use std::collections::HashMap;
 
 /// The workgroup size of the kernels (`@workgroup_size(8, 8, 1)`).
@@ -18,8 +18,8 @@ pub(crate) const ENTRY_RAYCAST: &str = "main";
 /// The slice view's entry point in both kernels (slice.wgsl).
 pub(crate) const ENTRY_SLICE: &str = "slice_main";
 
-/// Bind groups of a kernel: frame, transfer function, volume.
-pub(crate) const BIND_GROUPS: u32 = 3;
+/// Bind groups of a kernel: frame, transfer function, volume, overlay.
+pub(crate) const BIND_GROUPS: u32 = 4;
 
 /// The kernel's mode (`MODE_*` in modes.wgsl).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -68,13 +68,17 @@ pub(crate) struct Variant {
     pub(crate) slice: bool,
     /// A label map: nearest texels loaded at integer coordinates.
     pub(crate) labels: bool,
-    /// A label map with smooth boundaries.
+    /// A label map with smooth boundaries (also a label map over the
+    /// image).
     pub(crate) smooth_labels: bool,
+    /// A label map over the image (`OVERLAY` in overlay.wgsl: 0 none, 1
+    /// colour, 2 mask).
+    pub(crate) overlay: u32,
 }
 
 /// The override constants of a pipeline, by WGSL name (modes.wgsl,
 /// predict.wgsl).
-pub(crate) const OVERRIDES: [&str; 11] = [
+pub(crate) const OVERRIDES: [&str; 12] = [
     "MODE",
     "ERT",
     "ESS",
@@ -86,6 +90,7 @@ pub(crate) const OVERRIDES: [&str; 11] = [
     "WEIGHTS",
     "LABELS",
     "SMOOTH_LABELS",
+    "OVERLAY",
 ];
 
 impl Variant {
@@ -95,12 +100,14 @@ impl Variant {
     /// (`VolumeBackend::measures_weights`).
     /// A label map (`labels`) is drawn unshaded and without pre-integration
     /// (the gradient of ids, and segments interpolated between ids, are not
-    /// the data).
+    /// the data). A label map over an intensity image (`overlay`) applies to
+    /// DVR.
     pub(crate) fn of(
         s: &RenderSettings,
         prediction: Option<Prediction>,
         weights: bool,
         labels: bool,
+        overlay: Option<OverlayMode>,
     ) -> Variant {
         let mode = match s.mode {
             RenderMode::Iso { .. } => KernelMode::Iso,
@@ -119,7 +126,11 @@ impl Variant {
             weights,
             slice: false,
             labels,
-            smooth_labels: labels && s.smooth_labels,
+            smooth_labels: s.smooth_labels && (labels || overlay.is_some()),
+            overlay: match overlay {
+                Some(m) if mode == KernelMode::Dvr && !labels => overlay_id(m),
+                _ => 0,
+            },
         };
         match prediction {
             Some(p) if mode == KernelMode::Iso => Variant {
@@ -148,6 +159,7 @@ impl Variant {
             slice: true,
             labels,
             smooth_labels: false,
+            overlay: 0,
         }
     }
 
@@ -156,7 +168,7 @@ impl Variant {
         self.predict
     }
 
-    fn constants(&self) -> [(&'static str, f64); 11] {
+    fn constants(&self) -> [(&'static str, f64); 12] {
         let b = |x: bool| if x { 1.0 } else { 0.0 };
         let v = [
             self.mode as u32 as f64,
@@ -170,8 +182,17 @@ impl Variant {
             b(self.weights),
             b(self.labels),
             b(self.smooth_labels),
+            self.overlay as f64,
         ];
         std::array::from_fn(|i| (OVERRIDES[i], v[i]))
+    }
+}
+
+/// The `OVERLAY` id of a mode (overlay.wgsl).
+pub(crate) fn overlay_id(mode: OverlayMode) -> u32 {
+    match mode {
+        OverlayMode::Color => 1,
+        OverlayMode::Mask => 2,
     }
 }
 
@@ -233,12 +254,13 @@ pub(crate) fn check_limits(device: &wgpu::Device) -> Result<(), RenderError> {
 
 impl Kernels {
     /// The pipeline of `variant` for the `kind` backend, whose bind group layouts
-    /// are `groups` (frame, transfer function, volume); compiled on first use.
+    /// are `groups` (frame, transfer function, volume, overlay); compiled on
+    /// first use.
     pub(crate) fn pipeline(
         &mut self,
         device: &wgpu::Device,
         kind: KernelKind,
-        groups: [&wgpu::BindGroupLayout; 3],
+        groups: [&wgpu::BindGroupLayout; 4],
         variant: Variant,
     ) -> Result<&wgpu::ComputePipeline, RenderError> {
         let k = match self.kernels.entry(kind) {
@@ -276,7 +298,7 @@ impl Kernel {
     fn new(
         device: &wgpu::Device,
         kind: KernelKind,
-        groups: [&wgpu::BindGroupLayout; 3],
+        groups: [&wgpu::BindGroupLayout; 4],
     ) -> Result<Kernel, RenderError> {
         let (label, source) = match kind {
             KernelKind::InCore => ("brickray-render raycast in core", shaders::incore()),

@@ -32,6 +32,7 @@ mod gpu;
 mod group2;
 mod kernels;
 mod limits;
+mod overlay;
 mod pick;
 mod planner;
 mod predict;
@@ -64,7 +65,10 @@ pub use volume::{StreamedVolume, VolumeOptions};
 
 use backend::{Backend, InCore, OutOfCore};
 use brickray_cache::{Classification, StreamFrame};
-use brickray_core::{BrickSource, DepthConvention, FrameView, TransferFunction, Volume};
+use brickray_core::{
+    BrickSource, DepthConvention, FrameView, LabelOverlay, LabelTable, OverlayStyle,
+    TransferFunction, Volume,
+};
 use composite::Compositor;
 use frame::{FrameState, FrameUniforms};
 use kernels::{Kernels, Variant};
@@ -118,6 +122,8 @@ pub struct VolumeRenderer {
     mapping: Option<FrameMapping>,
     /// Pixels to pick and their read-back ([`Self::request_picks`]).
     picker: pick::Picker,
+    /// A label map over the image ([`Self::set_overlay`]; group 3).
+    overlay: overlay::OverlayState,
 }
 
 impl VolumeRenderer {
@@ -142,6 +148,7 @@ impl VolumeRenderer {
             options,
             frame: FrameState::new(device)?,
             picker: pick::Picker::new(device)?,
+            overlay: overlay::OverlayState::new(device)?,
             tf: TfTables::new(device)?,
             kernels: Kernels::default(),
             compositor: Compositor::new(device, &targets)?,
@@ -254,6 +261,65 @@ impl VolumeRenderer {
         tf: &TransferFunction,
     ) -> Result<u64, RenderError> {
         self.tf.set(device, queue, tf)
+    }
+
+    /// Draws a label map over the image in the same ray, or removes it
+    /// (`None`): its labels colour or mask the image's DVR samples
+    /// ([`brickray_core::overlay`]; Iso and MIP draw the image alone). The
+    /// two volumes may have different grids and placements
+    /// ([`LabelOverlay::image_to_labels`],
+    /// [`overlay_transform`](brickray_core::overlay_transform)); the image may
+    /// be in core or out of core, and the label map is uploaded whole into
+    /// one texture (it must fit the device's 3D texture limit). Fails with
+    /// [`RenderError::Overlay`] when it cannot be drawn over the volume set
+    /// (checked again when either changes: an overlay over a label map is
+    /// not drawn) and [`RenderError::VolumeTooLarge`] past the 3D texture
+    /// limit.
+    pub fn set_overlay(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        overlay: Option<&LabelOverlay<'_>>,
+    ) -> Result<(), RenderError> {
+        if let Some(o) = overlay {
+            let image_is_labels = self.backend.as_ref().is_some_and(|b| b.get().labels());
+            o.validate(image_is_labels)?;
+            let dims = o.labels.dims();
+            let limit = device.limits().max_texture_dimension_3d;
+            if dims.iter().any(|&d| d > limit) {
+                return Err(RenderError::VolumeTooLarge { dims, limit });
+            }
+        }
+        self.overlay.set(device, queue, overlay)
+    }
+
+    /// Rewrites the overlay's label table (colours, visibility, selection,
+    /// hover) without uploading its labels again. Returns the bytes written
+    /// (0 without an overlay).
+    pub fn set_overlay_table(&mut self, queue: &wgpu::Queue, table: &LabelTable) -> u64 {
+        self.overlay.set_table(queue, table)
+    }
+
+    /// Changes what the overlay does ([`OverlayStyle`]); nothing without an
+    /// overlay.
+    pub fn set_overlay_style(
+        &mut self,
+        queue: &wgpu::Queue,
+        style: OverlayStyle,
+    ) -> Result<(), RenderError> {
+        style.validate()?;
+        self.overlay.set_style(queue, style);
+        Ok(())
+    }
+
+    /// The style of the overlay drawn, `None` without one.
+    pub fn overlay_style(&self) -> Option<OverlayStyle> {
+        self.overlay.style()
+    }
+
+    /// Bytes of the overlay's label map on the GPU (0 without one).
+    pub fn overlay_bytes(&self) -> u64 {
+        self.overlay.bytes()
     }
 
     /// Turns the isosurface prediction buffer (Braley et al.; see
@@ -372,13 +438,19 @@ impl VolumeRenderer {
         let Some(backend) = self.backend.as_ref().map(Backend::get) else {
             return Ok(());
         };
-        let layouts = [self.frame.layout(), self.tf.layout(), backend.layout()];
+        let layouts = [
+            self.frame.layout(),
+            self.tf.layout(),
+            backend.layout(),
+            self.overlay.layout(),
+        ];
         for s in settings {
             let v = Variant::of(
                 s,
                 self.prediction,
                 backend.measures_weights(),
                 backend.labels(),
+                self.overlay.style().map(|o| o.mode),
             );
             self.kernels.pipeline(device, backend.kind(), layouts, v)?;
         }
@@ -547,6 +619,7 @@ impl VolumeRenderer {
                 self.prediction,
                 backend.measures_weights(),
                 backend.labels(),
+                self.overlay.style().map(|o| o.mode),
             )
         };
         let predict = self
@@ -561,7 +634,12 @@ impl VolumeRenderer {
         uploaded += self
             .compositor
             .update(device, queue, outputs, desc.viewport)?;
-        let layouts = [self.frame.layout(), self.tf.layout(), backend.layout()];
+        let layouts = [
+            self.frame.layout(),
+            self.tf.layout(),
+            backend.layout(),
+            self.overlay.layout(),
+        ];
         let pipeline = self
             .kernels
             .pipeline(device, backend.kind(), layouts, variant)?;
@@ -569,6 +647,7 @@ impl VolumeRenderer {
             self.frame.bind_group(),
             self.tf.bind_group(),
             Some(backend.bind_group()),
+            Some(self.overlay.bind_group()),
         ];
         {
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {

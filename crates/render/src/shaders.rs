@@ -8,6 +8,7 @@
 //! * `incore.wgsl`, `ooc.wgsl`: each backend's group 2, its sampling `Cursor`
 //!   and its march; the out-of-core kernel also includes brickray-index's
 //!   traversal library and `feedback.wgsl` (ray-guided usage counters);
+//! * `overlay.wgsl`: group 3, a label map over the image (both kernels);
 //! * `predict.wgsl`: the isosurface prediction buffer's bindings (group 0) and
 //!   switches, in both kernels; `incore_predict.wgsl`, `ooc_predict.wgsl`:
 //!   its traversals in each kernel;
@@ -28,6 +29,8 @@ pub const MODES: &str = include_str!("../shaders/modes.wgsl");
 pub const INCORE: &str = include_str!("../shaders/incore.wgsl");
 /// The out-of-core kernel's own part.
 pub const OOC: &str = include_str!("../shaders/ooc.wgsl");
+/// A label map over the image (group 3, both kernels).
+pub const OVERLAY: &str = include_str!("../shaders/overlay.wgsl");
 /// The prediction buffer's bindings, switches and encoding (both kernels).
 pub const PREDICT: &str = include_str!("../shaders/predict.wgsl");
 /// The in-core traversals of the prediction buffer.
@@ -65,7 +68,7 @@ pub fn color_tables() -> String {
 /// The in-core ray caster as compiled (with its slice entry point).
 pub fn incore() -> String {
     format!(
-        "{COMMON}\n{}\n{MODES}\n{PREDICT}\n{INCORE}\n{INCORE_PREDICT}\n{SLICE}\n{SLICE_INCORE}",
+        "{COMMON}\n{}\n{MODES}\n{OVERLAY}\n{PREDICT}\n{INCORE}\n{INCORE_PREDICT}\n{SLICE}\n{SLICE_INCORE}",
         color_tables()
     )
 }
@@ -74,7 +77,7 @@ pub fn incore() -> String {
 /// and its slice entry point).
 pub fn ooc() -> String {
     format!(
-        "{COMMON}\n{}\n{MODES}\n{PREDICT}\n{}\n{OOC}\n{OOC_PREDICT}\n{FEEDBACK}\n{SLICE}\n{SLICE_OOC}",
+        "{COMMON}\n{}\n{MODES}\n{OVERLAY}\n{PREDICT}\n{}\n{OOC}\n{OOC_PREDICT}\n{FEEDBACK}\n{SLICE}\n{SLICE_OOC}",
         color_tables(),
         brickray_index::OCTREE_TRAVERSAL_WGSL
     )

@@ -3,6 +3,7 @@
 //! `scripting`).
 
 mod labels;
+mod overlay;
 mod panels;
 mod scripting;
 
@@ -39,6 +40,8 @@ pub(crate) struct Startup {
     pub(crate) open: OpenOptions,
     /// Out-of-core budgets.
     pub(crate) ooc: OutOfCoreConfig,
+    /// A label map to draw over the first image opened (`--overlay`).
+    pub(crate) overlay: Option<PathBuf>,
 }
 
 /// The volume on display.
@@ -110,6 +113,12 @@ pub(crate) struct ViewerApp {
     label_path: String,
     /// The label map's voxels (in core), to name what a click picks.
     label_volume: Option<Arc<brickray::Volume>>,
+    /// A label map drawn over the image (its table is `labels`).
+    label_overlay: Option<overlay::OverlayLayer>,
+    /// The label map to draw over the next image installed (`--overlay`).
+    pending_overlay: Option<PathBuf>,
+    /// The script's overlay lines, run at the next `apply`.
+    overlay_queue: Vec<crate::script::OverlayAction>,
     /// View pixels clicked (or scripted) to pick at the next frame.
     pick_queue: Vec<[u32; 2]>,
     /// Frames left to redraw while picks are read back.
@@ -195,6 +204,9 @@ impl ViewerApp {
             label_ids: Vec::new(),
             label_path: "labels.json".into(),
             label_volume: None,
+            label_overlay: None,
+            pending_overlay: startup.overlay,
+            overlay_queue: Vec::new(),
             pick_queue: Vec::new(),
             pick_frames: 0,
         };
@@ -257,6 +269,11 @@ impl ViewerApp {
         .map_err(|e| format!("{}: {e}", loaded.input.name()))?;
         // Reopening what is shown (a renderer option changed) keeps the view.
         let reopened = self.shown.as_ref().is_some_and(|s| s.input == loaded.input);
+        // An overlay stays over its image (drawn again by the new renderer
+        // after a reopen) and goes with it.
+        if !reopened || desc.kind.is_labels() {
+            self.remove_overlay(frame);
+        }
         // A TF suited to new data (CT presets for Hounsfield ranges); scripts
         // and users change it after opening.
         if !reopened {
@@ -278,10 +295,12 @@ impl ViewerApp {
                 }
                 self.mode = ModeName::Dvr;
             }
-        } else {
+        } else if self.label_overlay.is_none() {
             self.labels = None;
         }
-        self.label_ids = label_ids;
+        if self.label_overlay.is_none() {
+            self.label_ids = label_ids;
+        }
         self.label_volume = label_volume;
         self.tf_dirty = true;
         self.messages.push(loaded.note.clone());
@@ -301,6 +320,10 @@ impl ViewerApp {
             note: loaded.note,
             streamed,
         });
+        self.upload_overlay(frame)?;
+        if let Some(path) = self.pending_overlay.take() {
+            self.open_overlay(frame, &path)?;
+        }
         Ok(())
     }
 
@@ -348,14 +371,24 @@ impl ViewerApp {
 
     /// Applies pending TF and budget changes.
     fn apply(&mut self, frame: &eframe::Frame) {
+        for o in std::mem::take(&mut self.overlay_queue) {
+            if let Err(e) = self.overlay_action(frame, o) {
+                self.fail(e);
+            }
+            self.tf_dirty = true;
+        }
         self.apply_picks(frame);
         if self.tf_dirty && self.shown.is_some() {
             self.tf_dirty = false;
-            // A label map is drawn through its label table.
-            let table = match &self.labels {
-                Some(t) => Ok(t.to_transfer_function()),
-                None => self.tf.to_table(TABLE_ENTRIES),
+            // A label map is drawn through its label table; an overlay's
+            // table is the overlay's.
+            let table = match (&self.labels, &self.label_overlay) {
+                (Some(t), None) => Ok(t.to_transfer_function()),
+                _ => self.tf.to_table(TABLE_ENTRIES),
             };
+            if let (Some(t), Some(_)) = (&self.labels, &self.label_overlay) {
+                self.with_gpu(frame, |_, q, r| r.renderer.set_overlay_table(q, t));
+            }
             match table {
                 Ok(table) => {
                     if let Some(Err(e)) = self.with_gpu(frame, |d, q, r| {
@@ -716,19 +749,28 @@ impl ViewerApp {
                     egui::CollapsingHeader::new("Rendering")
                         .default_open(true)
                         .show(ui, |ui| self.render_ui(ui));
-                    egui::CollapsingHeader::new(if self.labels.is_some() {
+                    let label_map = self.labels.is_some() && self.label_overlay.is_none();
+                    egui::CollapsingHeader::new(if label_map {
                         "Labels"
                     } else {
                         "Transfer function"
                     })
                     .default_open(true)
                     .show(ui, |ui| {
-                        if self.labels.is_some() {
+                        if label_map {
                             self.labels_ui(ui)
                         } else {
                             self.tf_ui(ui)
                         }
                     });
+                    if self.label_overlay.is_some() {
+                        egui::CollapsingHeader::new("Labels over the image")
+                            .default_open(true)
+                            .show(ui, |ui| {
+                                self.overlay_ui(ui, frame);
+                                self.labels_ui(ui)
+                            });
+                    }
                     egui::CollapsingHeader::new("Statistics")
                         .default_open(true)
                         .show(ui, |ui| self.stats.show(ui));

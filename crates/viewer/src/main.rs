@@ -59,6 +59,12 @@ struct Cli {
     /// table beside it (NAME.lut, mricron's, or NAME.labels.json) is loaded.
     #[arg(long)]
     labels: bool,
+    /// Draw this label map over the image in the same rays (colours over the
+    /// image's TF; docs/labels.md): placed where both files say (their
+    /// affines when both give one, else both from the grid's origin at their
+    /// spacing). Its colour table beside it is loaded, as for `--labels`.
+    #[arg(long, value_name = "LABELS")]
+    overlay: Option<PathBuf>,
 }
 
 fn parse_size(s: &str) -> Result<(u32, u32), String> {
@@ -116,6 +122,7 @@ fn main() -> ExitCode {
             store_dir,
             labels: cli.labels,
         },
+        overlay: cli.overlay.clone(),
         ooc: brickray::OutOfCoreConfig {
             gpu_budget_bytes: cli.gpu_pool << 20,
             cpu_budget_bytes: cli.cpu_cache << 20,

@@ -29,6 +29,9 @@
 //!                                (px per voxel) or error budget (8-bit levels x px, default 255)
 //! wait N                         draw N frames
 //! wait converged [MAX]           draw until no brick is pending (at most MAX frames, default 600)
+//! overlay FILE | off             a label map over the image shown (placed by both files), or none
+//! overlay mode color | mask      label colours over the image, or the image inside visible labels only
+//! overlay opacity A              0..1
 //! screenshot FILE.png            the volume view, plus FILE.json (camera, viewport)
 //! screenshot-window FILE.png     the whole window
 //! quit
@@ -114,6 +117,22 @@ pub(crate) enum Action {
     /// A click on the 3D view at view pixel (x, y): on a label map, selects
     /// the label there (a frame or two later).
     Pick([u32; 2]),
+    /// A label map over the image.
+    Overlay(OverlayAction),
+}
+
+/// What an `overlay ...` script line does.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) enum OverlayAction {
+    /// Draw this label map over the image shown.
+    Open(PathBuf),
+    /// Remove the overlay.
+    Off,
+    /// The overlay's opacity, 0..1.
+    Opacity(f32),
+    /// The image inside the visible labels only (`true`) or label colours
+    /// over the image (`false`).
+    Mask(bool),
 }
 
 /// What a `labels ...` script line does to the shown label map's table.
@@ -367,6 +386,17 @@ pub(crate) fn parse(text: &str) -> Result<Vec<Action>, ScriptError> {
                 }
                 Action::Window(WindowChoice::CentreWidth(c, w))
             }
+            ["overlay", "off"] => Action::Overlay(OverlayAction::Off),
+            ["overlay", "mode", "color" | "colour"] => Action::Overlay(OverlayAction::Mask(false)),
+            ["overlay", "mode", "mask"] => Action::Overlay(OverlayAction::Mask(true)),
+            ["overlay", "opacity", v] => {
+                let v = num(v)?;
+                if !(0.0..=1.0).contains(&v) {
+                    return Err(err("overlay opacity must be within 0..1"));
+                }
+                Action::Overlay(OverlayAction::Opacity(v))
+            }
+            ["overlay", path] => Action::Overlay(OverlayAction::Open(PathBuf::from(path))),
             ["pick", x, y] => {
                 let p = |v: &str| {
                     v.parse::<u32>()

@@ -909,3 +909,88 @@ impl LabelLibrary {
         self.target.read_color(gpu)
     }
 }
+
+/// A label map over its image: the Colin27 MRI with the Brodmann atlas drawn
+/// over it (`overlay`), four areas shown through the atlas's colour table;
+/// the screenshot against the library drawing the same overlay.
+#[test]
+#[cfg_attr(
+    no_shared_data,
+    ignore = "needs ../shared/data (the shared volumes), absent when the tests were built"
+)]
+#[cfg_attr(
+    no_display,
+    ignore = "needs an X server (DISPLAY unset when the tests were built; scripts/test.sh starts Xvfb)"
+)]
+fn a_label_map_over_its_image_matches_the_library() {
+    let Some(dir) = windowed_test_dir() else {
+        return;
+    };
+    let Some(data) = brickray_harness::shared_data_dir() else {
+        return;
+    };
+    let mri = data.join("mricron_ch2_mri/mricron_ch2_mri.json");
+    let atlas = data.join("labels/mricron_brodmann_labels/mricron_brodmann_labels.json");
+    let lut = data.join("formats/nifti/mricron_brodmann.nii.lut");
+    let png = dir.path().join("overlay.png");
+    let script = format!(
+        "open {mri}\nbackground 0 0 0\noverlays off\ntf mri\noverlay {atlas}\n\
+         labels table {lut}\nlabels show-only 4 6 17 22\noverlay opacity 0.8\n\
+         camera orbit 30 15 1.0\nwait converged\nscreenshot {png}\nquit\n",
+        mri = mri.display(),
+        atlas = atlas.display(),
+        lut = lut.display(),
+        png = png.display(),
+    );
+    run_script(dir.path(), &script, Duration::from_secs(120));
+    let image = brickray::io::read_volume(&mri).expect("the MRI");
+    let labels = brickray::io::read_volume(&atlas).expect("the atlas");
+    let mut table =
+        brickray::LabelTable::from_file_bytes(&std::fs::read(&lut).expect("the .lut")).unwrap();
+    table.show_only(&[4, 6, 17, 22]);
+    let (shot, w, h) = read_png(&png);
+    let (camera, _, _) = sidecar(&png);
+    let gpu = brickray_harness::shared_gpu();
+    let mut renderer =
+        VolumeRenderer::new(&gpu.device, brickray_harness::target_desc()).expect("renderer");
+    renderer
+        .set_volume(&gpu.device, &gpu.queue, &image)
+        .expect("volume");
+    let d = image.desc();
+    let tf = brickray::core::tf::TfModel::preset(brickray::core::tf::TfPreset::Mri, d.value_range)
+        .to_table(brickray::core::tf::TABLE_ENTRIES)
+        .expect("tf");
+    renderer
+        .set_transfer_function(&gpu.device, &gpu.queue, &tf)
+        .expect("tf");
+    // Same grid, no placements in the sidecars: the identity.
+    let overlay = brickray::LabelOverlay {
+        labels: &labels,
+        image_to_labels: glam::DMat4::IDENTITY,
+        table: &table,
+        style: brickray::OverlayStyle {
+            mode: brickray::OverlayMode::Color,
+            opacity: 0.8,
+        },
+    };
+    renderer
+        .set_overlay(&gpu.device, &gpu.queue, Some(&overlay))
+        .expect("overlay");
+    let target = brickray_harness::Offscreen::new(&gpu.device, w, h);
+    let desc = FrameDesc::new(camera, VolumeFrame::centered(d.dims, d.spacing), w, h);
+    brickray_harness::draw_frame(gpu, &mut renderer, &target, &desc, Some(wgpu::Color::BLACK))
+        .expect("draw");
+    let lib = target.read_color(gpu);
+    // The image alone differs: the labels are drawn.
+    renderer
+        .set_overlay(&gpu.device, &gpu.queue, None)
+        .expect("no overlay");
+    brickray_harness::draw_frame(gpu, &mut renderer, &target, &desc, Some(wgpu::Color::BLACK))
+        .expect("draw");
+    let alone = target.read_color(gpu);
+    let change = brickray_reference::compare(&alone, &lib, w, h);
+    assert!(change.psnr_db < 40.0, "the overlay shows: {change}");
+    let cmp = brickray_reference::assert_close("viewer-overlay", &shot, &lib, w, h, MIN_PSNR_DB)
+        .unwrap_or_else(|e| panic!("{e}"));
+    eprintln!("viewer overlay: {cmp}; image alone vs overlay: {change}");
+}

@@ -74,60 +74,9 @@ impl InCore {
         }
         let desc = vol.desc();
         let enc = SampleEncoding::for_volume(desc, encoding::caps(device), u8);
-        let format = encoding::wgpu_format(enc.format);
-        let bpp = enc.texel_bytes();
-        let row = dims[0] * bpp;
-        let slice = row as usize * dims[1] as usize;
-        let bytes = slice as u64 * dims[2] as u64;
-        let texture = gpu::texture(
-            device,
-            &wgpu::TextureDescriptor {
-                label: Some("brickray-render volume"),
-                size: wgpu::Extent3d {
-                    width: dims[0],
-                    height: dims[1],
-                    depth_or_array_layers: dims[2],
-                },
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D3,
-                format,
-                usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-                view_formats: &[],
-            },
-        )?;
-        // Upload in slabs of at most 64 MiB so staging memory stays bounded; each
-        // slab is converted on its own (no full-volume copy in the texel format).
-        let src = vol.data().as_bytes();
-        let src_slice = dims[0] as usize * dims[1] as usize * desc.dtype.size();
-        let per = ((64usize << 20) / slice.max(1)).clamp(1, dims[2] as usize) as u32;
-        let mut z = 0;
-        while z < dims[2] {
-            let z1 = (z + per).min(dims[2]);
-            let texels = enc.encode(&src[z as usize * src_slice..z1 as usize * src_slice]);
-            gpu::scoped(device, "brickray-render volume upload", || {
-                queue.write_texture(
-                    wgpu::TexelCopyTextureInfo {
-                        texture: &texture,
-                        mip_level: 0,
-                        origin: wgpu::Origin3d { x: 0, y: 0, z },
-                        aspect: wgpu::TextureAspect::All,
-                    },
-                    &texels,
-                    wgpu::TexelCopyBufferLayout {
-                        offset: 0,
-                        bytes_per_row: Some(row),
-                        rows_per_image: Some(dims[1]),
-                    },
-                    wgpu::Extent3d {
-                        width: dims[0],
-                        height: dims[1],
-                        depth_or_array_layers: z1 - z,
-                    },
-                )
-            })?;
-            z = z1;
-        }
+        let (texture, bytes) =
+            gpu::volume_texture(device, queue, vol, &enc, "brickray-render volume")?;
+        let format = texture.format();
         let grid = MacroCellGrid::build(vol, CELL);
         let ranges: &[u8] = bytemuck::cast_slice(&grid.ranges);
         let cell_ranges = gpu::storage_buffer(

@@ -110,6 +110,7 @@ fn kernel_bindings(volume: &[wgpu::BindGroupLayoutEntry]) -> BTreeSet<(u32, u32,
         &crate::frame::layout_entries(),
         &crate::tf::layout_entries(),
         volume,
+        &crate::overlay::layout_entries(),
     ])
 }
 
@@ -263,6 +264,39 @@ fn check_kernel(name: &str, m: &naga::Module, volume: &[wgpu::BindGroupLayoutEnt
     );
     for (wgsl, class) in TraversalClass::ALL {
         assert_eq!(const_u32(m, wgsl), class as u32, "{name}: {wgsl}");
+    }
+    // The overlay's uniforms, table size and mode ids (both kernels).
+    check_struct(
+        m,
+        "OverlayParams",
+        rust_fields!(
+            crate::overlay::OverlayParams,
+            [
+                image_to_labels,
+                dims,
+                id_scale,
+                id_offset,
+                opacity,
+                pad0,
+                pad1
+            ]
+        ),
+        std::mem::size_of::<crate::overlay::OverlayParams>(),
+    );
+    assert_eq!(
+        const_u32(m, "OVERLAY_ENTRIES") as usize,
+        brickray_core::LABEL_TABLE_ENTRIES,
+        "{name}: OVERLAY_ENTRIES"
+    );
+    for (wgsl, mode) in [
+        ("OVERLAY_COLOR", brickray_core::OverlayMode::Color),
+        ("OVERLAY_MASK", brickray_core::OverlayMode::Mask),
+    ] {
+        assert_eq!(
+            const_u32(m, wgsl),
+            crate::kernels::overlay_id(mode),
+            "{name}: {wgsl}"
+        );
     }
     // Every binding of every group against the Rust layouts.
     assert_eq!(
@@ -510,6 +544,7 @@ fn every_shader_file_is_covered() {
         "slice.wgsl",
         "slice_incore.wgsl",
         "slice_ooc.wgsl",
+        "overlay.wgsl",
     ];
     for entry in std::fs::read_dir(dir).unwrap() {
         let name = entry.unwrap().file_name().into_string().unwrap();
@@ -531,7 +566,9 @@ fn every_shader_file_is_covered() {
 /// every mode and combination of ERT, ESS and shading, with pre-integration
 /// and with prediction; label maps (LABELS) with every mode and combination of
 /// ERT and ESS, with the visible weights, with smooth boundaries
-/// (SMOOTH_LABELS), and the slice views of both.
+/// (SMOOTH_LABELS), and the slice views of both; a label map over the image
+/// (OVERLAY colour and mask) with DVR and every combination of ERT, ESS and
+/// shading, pre-integrated, with the visible weights and smooth boundaries.
 #[test]
 fn every_override_permutation_validates() {
     let switches = [
@@ -580,12 +617,27 @@ fn every_override_permutation_validates() {
             combos.push((mode, bits | 1 << 7 | 1 << 8 | 1 << 9));
         }
     }
+    let mut combos: Vec<(KernelMode, u32, u32)> =
+        combos.into_iter().map(|(m, b)| (m, b, 0)).collect();
+    for overlay in [1u32, 2] {
+        for bits in 0..8u32 {
+            combos.push((KernelMode::Dvr, bits, overlay));
+        }
+        combos.push((KernelMode::Dvr, 0b111 | 1 << 6, overlay));
+        combos.push((KernelMode::Dvr, 0b011 | 1 << 7, overlay));
+        combos.push((KernelMode::Dvr, 0b011 | 1 << 9, overlay));
+    }
     for (name, src) in [("incore", incore()), ("ooc", ooc())] {
-        for &(mode, bits) in &combos {
-            let mut s = src.replace(
-                "override MODE: u32 = 0u;",
-                &format!("const MODE: u32 = {}u;", mode as u32),
-            );
+        for &(mode, bits, overlay) in &combos {
+            let mut s = src
+                .replace(
+                    "override MODE: u32 = 0u;",
+                    &format!("const MODE: u32 = {}u;", mode as u32),
+                )
+                .replace(
+                    "override OVERLAY: u32 = 0u;",
+                    &format!("const OVERLAY: u32 = {overlay}u;"),
+                );
             for (i, sw) in switches.iter().enumerate() {
                 let on = bits >> i & 1 == 1;
                 let from = [true, false]
@@ -596,7 +648,10 @@ fn every_override_permutation_validates() {
                 s = s.replace(&from, &format!("const {sw}: bool = {on};"));
             }
             assert!(!s.contains("override "), "{name}: an override left");
-            module(&format!("{name} {mode:?} {bits:08b}"), &s);
+            module(
+                &format!("{name} {mode:?} {bits:010b} overlay {overlay}"),
+                &s,
+            );
         }
     }
 }

@@ -108,19 +108,27 @@ impl ViewerApp {
             .with_gpu(frame, |_, _, r| r.renderer.take_picks())
             .unwrap_or_default();
         for p in picks {
-            let (Some(t), Some(point)) = (self.labels.as_mut(), p.point) else {
+            let (Some(_), Some(point)) = (self.labels.as_ref(), p.point) else {
                 if let Some(t) = self.labels.as_mut() {
                     t.selected.clear();
                     self.tf_dirty = true;
                 }
                 continue;
             };
-            let Some(vol) = &self.label_volume else {
-                self.messages
-                    .push("picking a streamed label map is not supported yet".into());
+            let id = match (self.overlay_label_at(point.texture), &self.label_volume) {
+                // Over the image: the label under the image's sample, if any.
+                (Some(Some(id)), _) => id,
+                (Some(None), _) => continue,
+                (None, Some(vol)) => brickray::core::labels::label_at(vol, point.texture),
+                (None, None) => {
+                    self.messages
+                        .push("picking a streamed label map is not supported yet".into());
+                    continue;
+                }
+            };
+            let Some(t) = self.labels.as_mut() else {
                 continue;
             };
-            let id = brickray::core::labels::label_at(vol, point.texture);
             let w = point.world;
             if t.background == Some(id) {
                 t.selected.clear();

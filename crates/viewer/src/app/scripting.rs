@@ -265,6 +265,12 @@ impl ViewerApp {
                     return;
                 }
                 Action::Pick(px) => self.pick_queue.push(px),
+                // Run with the GPU at the next frame's `apply`, before the
+                // script's next line.
+                Action::Overlay(o) => {
+                    self.overlay_queue.push(o);
+                    return;
+                }
                 Action::Labels(l) => {
                     let Some(t) = self.labels.as_mut() else {
                         return self.fail("labels: the volume shown is not a label map".into());
