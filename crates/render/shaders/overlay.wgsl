@@ -26,8 +26,8 @@ struct OverlayParams {
 
 @group(3) @binding(0) var<uniform> overlay: OverlayParams;
 @group(3) @binding(1) var overlay_tex: texture_3d<f32>;
-// The label table: straight colour and opacity per id.
-@group(3) @binding(2) var<uniform> overlay_table: array<vec4<f32>, OVERLAY_ENTRIES>;
+// The label table: straight colour and opacity of id i at texel (i, 0).
+@group(3) @binding(2) var overlay_table: texture_2d<f32>;
 
 // The label table's entry of the label under image texture point u (all zero
 // outside the label map): nearest, or with SMOOTH_LABELS the heaviest of 8.
@@ -38,7 +38,7 @@ fn overlay_label(u: vec3<f32>) -> vec4<f32> {
     }
     let texel = label_texel(overlay_tex, q, overlay.dims);
     let id = clamp(round(texel * overlay.id_scale + overlay.id_offset), 0.0, f32(OVERLAY_ENTRIES - 1u));
-    return overlay_table[u32(id)];
+    return textureLoad(overlay_table, vec2<i32>(i32(id), 0), 0);
 }
 
 // The image's sample s (straight colour, opacity) at image texture point u

@@ -84,12 +84,12 @@ pub(crate) fn volume_layout_entries(storage: u32) -> Vec<wgpu::BindGroupLayoutEn
 
 /// Per-stage bindings of a kernel besides group 2's storage buffers: the
 /// transfer function's 2 storage buffers and the prediction history; uniforms
-/// of frame, prediction, TF and volume; the
-/// sampled volume, host depth, corrected TF table and pre-integrated table; the volume and TF
-/// samplers.
+/// of frame, prediction, TF, volume and overlay; the sampled volume, host
+/// depth, corrected TF table, pre-integrated table, and the overlay's labels
+/// and table; the volume and TF samplers.
 pub(crate) const STORAGE_OUTSIDE_VOLUME: u32 = 3;
-pub(crate) const UNIFORM_BUFFERS: u32 = 4;
-pub(crate) const SAMPLED_TEXTURES: u32 = 4;
+pub(crate) const UNIFORM_BUFFERS: u32 = 5;
+pub(crate) const SAMPLED_TEXTURES: u32 = 6;
 pub(crate) const SAMPLERS: u32 = 2;
 /// The most storage buffers group 2 holds (out of core: slots, sub-cells,
 /// index, usage counters).

@@ -21,7 +21,8 @@ pub(crate) struct OverlayParams {
     pub(crate) pad1: f32,
 }
 
-/// The label table's uniform: straight colour and opacity per id.
+/// The label table: straight colour and opacity per id, one Rgba32Float
+/// texel each (a 2048 x 1 texture).
 type Table = [[f32; 4]; LABEL_TABLE_ENTRIES];
 
 /// What is drawn over the image, while an overlay is set.
@@ -38,7 +39,7 @@ struct Drawn {
 pub(crate) struct OverlayState {
     layout: wgpu::BindGroupLayout,
     params: Uniform<OverlayParams>,
-    table: wgpu::Buffer,
+    table: wgpu::Texture,
     bind_group: wgpu::BindGroup,
     drawn: Option<Drawn>,
 }
@@ -68,13 +69,38 @@ pub(crate) fn layout_entries() -> [wgpu::BindGroupLayoutEntry; 3] {
             },
             count: None,
         },
-        uniform(2),
+        wgpu::BindGroupLayoutEntry {
+            binding: 2,
+            visibility: c,
+            ty: wgpu::BindingType::Texture {
+                sample_type: wgpu::TextureSampleType::Float { filterable: false },
+                view_dimension: wgpu::TextureViewDimension::D2,
+                multisampled: false,
+            },
+            count: None,
+        },
     ]
 }
 
 fn table_bytes(table: &LabelTable) -> Vec<u8> {
     let t: Table = std::array::from_fn(|i| table.rgba(i as u32));
     bytemuck::cast_slice(&t).to_vec()
+}
+
+/// Writes `table` into the table texture; returns the bytes written.
+fn write_table(queue: &wgpu::Queue, texture: &wgpu::Texture, table: &LabelTable) -> u64 {
+    let bytes = table_bytes(table);
+    queue.write_texture(
+        texture.as_image_copy(),
+        &bytes,
+        wgpu::TexelCopyBufferLayout {
+            offset: 0,
+            bytes_per_row: Some(bytes.len() as u32),
+            rows_per_image: Some(1),
+        },
+        texture.size(),
+    );
+    bytes.len() as u64
 }
 
 impl OverlayState {
@@ -87,7 +113,23 @@ impl OverlayState {
             })
         })?;
         let params = Uniform::<OverlayParams>::new(device, "brickray-render overlay params")?;
-        let table = gpu::uniform_buffer::<Table>(device, "brickray-render overlay table")?;
+        let table = gpu::texture(
+            device,
+            &wgpu::TextureDescriptor {
+                label: Some("brickray-render overlay table"),
+                size: wgpu::Extent3d {
+                    width: LABEL_TABLE_ENTRIES as u32,
+                    height: 1,
+                    depth_or_array_layers: 1,
+                },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format: wgpu::TextureFormat::Rgba32Float,
+                usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+                view_formats: &[],
+            },
+        )?;
         let stand_in = gpu::texture(
             device,
             &wgpu::TextureDescriptor {
@@ -119,10 +161,11 @@ impl OverlayState {
         device: &wgpu::Device,
         layout: &wgpu::BindGroupLayout,
         params: &Uniform<OverlayParams>,
-        table: &wgpu::Buffer,
+        table: &wgpu::Texture,
         texture: &wgpu::Texture,
     ) -> Result<wgpu::BindGroup, RenderError> {
         let view = texture.create_view(&Default::default());
+        let table = table.create_view(&Default::default());
         gpu::scoped(device, "brickray-render overlay bind group", || {
             device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("brickray-render overlay"),
@@ -138,7 +181,7 @@ impl OverlayState {
                     },
                     wgpu::BindGroupEntry {
                         binding: 2,
-                        resource: table.as_entire_binding(),
+                        resource: wgpu::BindingResource::TextureView(&table),
                     },
                 ],
             })
@@ -179,7 +222,7 @@ impl OverlayState {
                 pad1: 0.0,
             },
         );
-        queue.write_buffer(&self.table, 0, &table_bytes(o.table));
+        write_table(queue, &self.table, o.table);
         self.bind_group = Self::bind(device, &self.layout, &self.params, &self.table, &texture)?;
         self.drawn = Some(Drawn {
             _texture: texture,
@@ -195,9 +238,7 @@ impl OverlayState {
         if self.drawn.is_none() {
             return 0;
         }
-        let bytes = table_bytes(table);
-        queue.write_buffer(&self.table, 0, &bytes);
-        bytes.len() as u64
+        write_table(queue, &self.table, table)
     }
 
     /// Sets the style of the overlay drawn (checked by the caller).
@@ -234,7 +275,7 @@ impl OverlayState {
 mod tests {
     use super::*;
 
-    /// The label table fits the uniform the shader declares (2048 vec4).
+    /// The label table is one texel row of 2048 RGBA floats.
     #[test]
     fn the_table_is_one_vec4_per_label() {
         assert_eq!(std::mem::size_of::<Table>(), LABEL_TABLE_ENTRIES * 16);

@@ -396,7 +396,9 @@ pub(crate) fn parse(text: &str) -> Result<Vec<Action>, ScriptError> {
                 }
                 Action::Overlay(OverlayAction::Opacity(v))
             }
-            ["overlay", path] => Action::Overlay(OverlayAction::Open(PathBuf::from(path))),
+            ["overlay", path] if !matches!(*path, "mode" | "opacity") => {
+                Action::Overlay(OverlayAction::Open(PathBuf::from(path)))
+            }
             ["pick", x, y] => {
                 let p = |v: &str| {
                     v.parse::<u32>()
@@ -564,9 +566,22 @@ mod tests {
             labels opacity 0.25
             labels table atlas.nii.lut
             pick 10 20
+            overlay atlas.json
+            overlay mode mask
+            overlay mode colour
+            overlay opacity 0.5
+            overlay off
         ";
         let a = parse(text).unwrap();
-        assert_eq!(a.len(), 42);
+        assert_eq!(a.len(), 47);
+        assert_eq!(
+            a[42],
+            Action::Overlay(OverlayAction::Open("atlas.json".into()))
+        );
+        assert_eq!(a[43], Action::Overlay(OverlayAction::Mask(true)));
+        assert_eq!(a[44], Action::Overlay(OverlayAction::Mask(false)));
+        assert_eq!(a[45], Action::Overlay(OverlayAction::Opacity(0.5)));
+        assert_eq!(a[46], Action::Overlay(OverlayAction::Off));
         assert_eq!(a[41], Action::Pick([10, 20]));
         assert_eq!(a[35], Action::Labels(LabelAction::ShowOnly(vec![3, 5, 7])));
         assert_eq!(a[36], Action::Labels(LabelAction::ShowAll));
@@ -582,6 +597,9 @@ mod tests {
             "labels opacity 2",
             "labels select",
             "labels",
+            "overlay opacity 1.5",
+            "overlay mode",
+            "overlay",
         ] {
             assert!(parse(bad).is_err(), "{bad}");
         }
