@@ -28,7 +28,7 @@ use crate::runner::median;
 use crate::{Figures, arg};
 use brickray_core::labels::{LabelTable, label_value_range};
 use brickray_core::{
-    BrickSource, Camera, LabelOverlay, OverlayStyle, RenderMode, RenderSettings, TransferFunction,
+    BrickSource, Camera, LabelOverlay, LodMetric, OverlayStyle, RenderMode, RenderSettings, TransferFunction,
     Volume, VolumeDesc, VolumeFrame, VolumeKind, overlay_transform,
 };
 use brickray_harness::predict::{draw, samples_per_ray};
@@ -245,6 +245,40 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
             levels[3],
             levels[4]
         );
+        // The label error in the LOD metric: error-aware cuts (the share of
+        // changed labels times their classified change) against the
+        // geometric ones above, PSNR against the label finest and bricks.
+        let mut sweep = Vec::new();
+        for (metric, budget) in [
+            ("geometric", 2.0f32),
+            ("error", 255.0),
+            ("error", 64.0),
+            ("error", 16.0),
+            ("visible", 255.0),
+            ("visible", 64.0),
+        ] {
+            let mut config = finest(if metric == "geometric" { budget } else { 1.0 });
+            config.lod_metric = match metric {
+                "error" => LodMetric::ErrorAware { budget },
+                "visible" => LodMetric::VisibleError { budget },
+                _ => LodMetric::Geometric,
+            };
+            let mut r = renderer(&gpu, &tf)?;
+            r.set_volume_source(&gpu.device, &gpu.queue, store(&vol, dir.path(), name)?, config)
+                .map_err(|e| e.to_string())?;
+            draw_until_settled(&gpu, &mut r, &small, &sdesc, 300)
+                .map_err(|e| e.to_string())?
+                .ok_or("out of core did not settle")?;
+            let db = compare(&small.read_color(&gpu), &finest_img, ERROR_SIZE, ERROR_SIZE).psnr_db;
+            let bricks = r
+                .stats()
+                .out_of_core
+                .map_or(0, |s| s.cache.working_set_bricks);
+            println!("  {name} LOD {metric} {budget}: {db:.1} dB vs finest, {bricks} bricks");
+            fig.insert(format!("{name}_lod_{metric}_{budget}_db"), json!(db));
+            fig.insert(format!("{name}_lod_{metric}_{budget}_bricks"), json!(bricks));
+            sweep.push((metric, budget, db, bricks));
+        }
         finest_min = finest_min.min(in_db).min(levels[0]);
         two_px_min = two_px_min.min(levels[2]);
         cost_max = cost_max.max(cost);

@@ -250,6 +250,31 @@ impl<'a> NodeBins<'a> {
         (self.norm(lo), self.norm(hi))
     }
 
+    /// A label node's error (a label store's records hold the share `s` of
+    /// the node's finest voxels whose label changes,
+    /// [`NodeError::label_share`]): with `c` the largest change of the
+    /// classified sample among the labels of the node's id range
+    /// ([`TfErrorTable::classified_change`]; 0 when they are all hidden), DVR
+    /// reads `c` when `s > 0` as the bound and `s * c` as the typical error;
+    /// iso reads 1 when `s > 0`; MIP reads `s`.
+    fn label_error(&self, mode: RenderMode, table: &TfErrorTable, which: Deviation) -> f64 {
+        let s = self.err.label_share();
+        if s <= 0.0 {
+            return 0.0;
+        }
+        match mode {
+            RenderMode::Dvr => {
+                let c = table.classified_change(self.norm(self.min), self.norm(self.max));
+                match which {
+                    Deviation::Bound => c,
+                    Deviation::Typical => s * c,
+                }
+            }
+            RenderMode::Iso { .. } => 1.0,
+            _ => s,
+        }
+    }
+
     /// Whether the isovalue lies in some bin widened by its `d(b)` (a bin that
     /// does not deviate cannot move the crossing).
     fn iso_in_a_bin(&self, value: f32, d: impl Fn(usize) -> f64) -> bool {
@@ -288,6 +313,9 @@ fn tf_error(
         Ok(n) => n,
         Err(e) => return e,
     };
+    if layout.volume.kind.is_labels() {
+        return Some(unit(n.label_error(mode, table, which)));
+    }
     let dev = |b| match which {
         Deviation::Bound => n.err.deviation(b, n.min, n.max),
         Deviation::Typical => n.err.typical_deviation(b, n.min, n.max),
@@ -402,6 +430,9 @@ pub fn node_visible_error(
         Ok(n) => n,
         Err(e) => return e,
     };
+    if layout.volume.kind.is_labels() {
+        return Some(unit(n.label_error(mode, table, Deviation::Typical)));
+    }
     let width = (n.max - n.min).max(0.0) / ERROR_BINS as f64;
     let e: f64 = n
         .occupied()
@@ -533,6 +564,59 @@ mod tests {
             prop_assert!(e <= 1e-6, "pixel error {e}");
             let bound = node_tf_error(&info, RenderMode::Dvr, &table, &layout).unwrap();
             prop_assert!(bound <= 1e-6, "bound {bound}");
+        }
+    }
+
+    /// A label node's error is the share of its voxels whose label changes
+    /// times the largest change among its labels' classified samples: zero
+    /// where nothing changes or every label of its id range is hidden; the
+    /// bound is the change itself.
+    #[test]
+    fn label_nodes_read_the_share_of_changed_labels() {
+        let layout = OctreeLayout::new(
+            crate::VolumeDesc {
+                dims: [64; 3],
+                dtype: crate::DType::U8,
+                spacing: [1.0; 3],
+                value_range: crate::labels::label_value_range(),
+                kind: crate::VolumeKind::Labels,
+            },
+            16,
+            1,
+        );
+        let mut labels = crate::LabelTable::default();
+        labels.set_opacity(3, 1.0);
+        labels.set_color(3, [1.0, 0.0, 0.0]);
+        labels.set_opacity(4, 0.2);
+        let table = TfErrorTable::new(&labels.to_transfer_function());
+        let node = |min: f32, max: f32, share: f64| NodeInfo {
+            kind: NodeKind::Data,
+            min,
+            max,
+            error: Some(NodeError::from_label_share(share)),
+            parent_error: None,
+        };
+        let dvr = RenderMode::Dvr;
+        let n = node(3.0, 4.0, 0.25);
+        let c = table.classified_change(3.0 / 2047.0, 4.0 / 2047.0);
+        assert!(c > 0.5, "labels 3 and 4 differ: {c}");
+        let typical = node_tf_error_expected(&n, dvr, &table, &layout).unwrap();
+        assert!((typical - 0.25 * c).abs() < 1e-4, "{typical} vs {}", 0.25 * c);
+        assert_eq!(node_tf_error(&n, dvr, &table, &layout), Some(unit(c)));
+        let visible = node_visible_error(&n, dvr, &table, &layout).unwrap();
+        assert!((visible - typical).abs() < 1e-12);
+        // Nothing changes: no error.
+        let same = node(3.0, 4.0, 0.0);
+        assert_eq!(node_tf_error(&same, dvr, &table, &layout), Some(0.0));
+        // Every label of the range hidden: no error.
+        let mut hidden = labels.clone();
+        hidden.show_only(&[9]);
+        let table = TfErrorTable::new(&hidden.to_transfer_function());
+        assert_eq!(node_tf_error(&n, dvr, &table, &layout), Some(0.0));
+        // The share round-trips to 1/65535.
+        for s in [0.0, 1e-6, 0.3, 1.0] {
+            let r = NodeError::from_label_share(s).label_share();
+            assert!(r >= s && r <= s + 1.0 / 65535.0, "{s} -> {r}");
         }
     }
 

@@ -83,6 +83,32 @@ impl NodeError {
         e
     }
 
+    /// A label store's record (`crate::labels`): the share of the node's
+    /// finest voxels whose label differs from the node's voxel covering them
+    /// (0..=1), rounded up to 1/65535 in bin 0's deviation and typical
+    /// deviation (bin 0 occupied when the share is not zero). Label ids have
+    /// no value bins: a label either changes or does not.
+    pub fn from_label_share(share: f64) -> NodeError {
+        let q = if share.is_nan() {
+            DEV_SCALE
+        } else {
+            (share.clamp(0.0, 1.0) * DEV_SCALE as f64).ceil() as u16
+        };
+        let mut e = NodeError::default();
+        if q > 0 {
+            e.occupied = 1;
+            e.dev[0] = q;
+            e.rms[0] = q;
+            e.weight[0] = DEV_SCALE;
+        }
+        e
+    }
+
+    /// The share a label store's record holds ([`Self::from_label_share`]).
+    pub fn label_share(&self) -> f64 {
+        self.dev[0] as f64 / DEV_SCALE as f64
+    }
+
     /// Whether bin `b` is occupied.
     pub fn is_occupied(&self, b: usize) -> bool {
         b < ERROR_BINS && self.occupied & (1 << b) != 0

@@ -49,16 +49,14 @@ fn check_label_store(dims: [u32; 3], dtype: DType, ids: &[u32], seed: u64, brick
         ..BuildOptions::default()
     };
     let report = build(&mut r, &out, &o).unwrap();
-    assert!(
-        !report.errors,
-        "label stores carry no value-bin error section"
-    );
+    assert!(report.errors, "label stores record the label error");
     let store = open(&out).unwrap();
     assert_eq!(store.desc().kind, VolumeKind::Labels);
     assert_eq!(store.filter(), Filter::Mode);
     assert_eq!(store.version(), 5);
     let levels = reference_levels(store.layout(), decode(dtype, &bytes), Filter::Mode);
     check_source(&store, &levels, None);
+    check_label_errors(&store, &levels);
     // No level holds a label the finest lacks.
     let finest: BTreeSet<u32> = levels.last().unwrap().iter().map(|&v| v as u32).collect();
     for (l, level) in levels.iter().enumerate() {
@@ -73,6 +71,65 @@ fn check_label_store(dims: [u32; 3], dtype: DType, ids: &[u32], seed: u64, brick
     for v in decode(dtype, &buf) {
         assert!(finest.contains(&(v as u32)), "root brick holds {v}");
     }
+}
+
+/// Every node's recorded error is the share of the finest voxels of its
+/// region whose label differs from the reference mode pyramid's voxel of the
+/// node's level covering them (0 at the finest level), and its parent error
+/// the same share against its parent's level (0 at the root); both rounded
+/// up to 1/65535.
+fn check_label_errors(store: &brickray_store::Store, levels: &[Vec<f32>]) {
+    let layout = store.layout();
+    let finest = layout.levels as usize - 1;
+    let fd = layout.level_dims(finest as u8);
+    let b = layout.brick;
+    let share = |key: brickray_core::NodeKey, l: usize| -> f64 {
+        let cd = layout.level_dims(l as u8);
+        let s = 1u32 << (finest - key.level as usize);
+        let cs = 1u32 << (finest - l);
+        let p = [key.x, key.y, key.z];
+        let (mut changed, mut count) = (0u64, 0u64);
+        for z in p[2] * b * s..((p[2] + 1) * b * s).min(fd[2]) {
+            for y in p[1] * b * s..((p[1] + 1) * b * s).min(fd[1]) {
+                for x in p[0] * b * s..((p[0] + 1) * b * s).min(fd[0]) {
+                    let f = levels[finest]
+                        [(x + fd[0] * (y + fd[1] * z)) as usize];
+                    let (cx, cy, cz) = (x / cs, y / cs, z / cs);
+                    let c = levels[l][(cx + cd[0] * (cy + cd[1] * cz)) as usize];
+                    count += 1;
+                    changed += (f != c) as u64;
+                }
+            }
+        }
+        if count == 0 { 0.0 } else { changed as f64 / count as f64 }
+    };
+    let q = 1.0 / 65535.0;
+    let mut nonzero = 0;
+    for rec in store.nodes() {
+        let key = rec.key;
+        let l = key.level as usize;
+        let own = if l < finest { share(key, l) } else { 0.0 };
+        let got = rec.info.error.expect("an error record").label_share();
+        assert!(got >= own && got <= own + q, "{key:?}: recorded {got}, share {own}");
+        nonzero += (own > 0.0) as usize;
+        if l == 0 {
+            assert_eq!(rec.info.parent_error, None, "the root has no parent");
+            continue;
+        }
+        let parent = share(key, l - 1);
+        let got = rec
+            .info
+            .parent_error
+            .expect("a parent-error record")
+            .label_share();
+        assert!(
+            got >= parent && got <= parent + q,
+            "{key:?}: recorded parent {got}, share {parent}"
+        );
+    }
+    // (A map of one label changes nothing anywhere.)
+    let one_label = levels[finest].iter().all(|&v| v == levels[finest][0]);
+    assert!(one_label || finest == 0 || nonzero > 0, "some node changes labels");
 }
 
 #[test]

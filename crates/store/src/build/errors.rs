@@ -90,7 +90,7 @@ impl Level {
 }
 
 /// Decoded samples of a node's stored brick as f32 (`None` for empty nodes).
-fn brick_values(
+pub(super) fn brick_values(
     file: &File,
     path: &Path,
     layout: &OctreeLayout,

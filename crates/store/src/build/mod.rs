@@ -34,6 +34,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 mod errors;
+mod label_errors;
 mod level;
 mod stage;
 
@@ -358,10 +359,17 @@ pub fn build(
     // The error section (format version 2), computed from the payloads just
     // written; left out when it does not fit the memory bound.
     w.flush().map_err(|e| StoreError::io(&tmp_path, e))?;
-    // (Label maps: the value-bin error model does not apply; their stores
-    // carry no error section and refine by geometry.)
+    // Label maps record the share of voxels whose label changes instead of
+    // value bins (label_errors.rs).
     let errors = if labels {
-        None
+        label_errors::compute(
+            tmp.file(),
+            &tmp_path,
+            &layout,
+            &ctx.geo,
+            &ctx.entries,
+            opts.memory_bound,
+        )?
     } else {
         errors::compute(
             tmp.file(),
