@@ -28,8 +28,8 @@ use crate::runner::median;
 use crate::{Figures, arg};
 use brickray_core::labels::{LabelTable, label_value_range};
 use brickray_core::{
-    BrickSource, Camera, LabelOverlay, LodMetric, OverlayStyle, RenderMode, RenderSettings, TransferFunction,
-    Volume, VolumeDesc, VolumeFrame, VolumeKind, overlay_transform,
+    BrickSource, Camera, LabelOverlay, LodMetric, OverlayStyle, RenderMode, RenderSettings,
+    TransferFunction, Volume, VolumeDesc, VolumeFrame, VolumeKind, overlay_transform,
 };
 use brickray_harness::predict::{draw, samples_per_ray};
 use brickray_harness::{GpuContext, Offscreen, draw_frame, draw_until_settled};
@@ -251,22 +251,39 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         let mut sweep = Vec::new();
         for (metric, budget) in [
             ("geometric", 2.0f32),
+            ("geometric-smooth", 2.0),
+            ("geometric-smooth", 1.0),
             ("error", 255.0),
             ("error", 64.0),
             ("error", 16.0),
             ("visible", 255.0),
             ("visible", 64.0),
         ] {
-            let mut config = finest(if metric == "geometric" { budget } else { 1.0 });
+            let geometric = metric.starts_with("geometric");
+            let mut config = finest(if geometric { budget } else { 1.0 });
             config.lod_metric = match metric {
                 "error" => LodMetric::ErrorAware { budget },
                 "visible" => LodMetric::VisibleError { budget },
                 _ => LodMetric::Geometric,
             };
             let mut r = renderer(&gpu, &tf)?;
-            r.set_volume_source(&gpu.device, &gpu.queue, store(&vol, dir.path(), name)?, config)
-                .map_err(|e| e.to_string())?;
-            draw_until_settled(&gpu, &mut r, &small, &sdesc, 300)
+            r.set_volume_source(
+                &gpu.device,
+                &gpu.queue,
+                store(&vol, dir.path(), name)?,
+                config,
+            )
+            .map_err(|e| e.to_string())?;
+            // Coarse levels drawn with smooth boundaries, against the
+            // finest drawn nearest.
+            let d = FrameDesc {
+                settings: RenderSettings {
+                    smooth_labels: metric == "geometric-smooth",
+                    ..fine
+                },
+                ..sdesc.clone()
+            };
+            draw_until_settled(&gpu, &mut r, &small, &d, 300)
                 .map_err(|e| e.to_string())?
                 .ok_or("out of core did not settle")?;
             let db = compare(&small.read_color(&gpu), &finest_img, ERROR_SIZE, ERROR_SIZE).psnr_db;
@@ -276,7 +293,10 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
                 .map_or(0, |s| s.cache.working_set_bricks);
             println!("  {name} LOD {metric} {budget}: {db:.1} dB vs finest, {bricks} bricks");
             fig.insert(format!("{name}_lod_{metric}_{budget}_db"), json!(db));
-            fig.insert(format!("{name}_lod_{metric}_{budget}_bricks"), json!(bricks));
+            fig.insert(
+                format!("{name}_lod_{metric}_{budget}_bricks"),
+                json!(bricks),
+            );
             sweep.push((metric, budget, db, bricks));
         }
         finest_min = finest_min.min(in_db).min(levels[0]);

@@ -601,7 +601,11 @@ mod tests {
         let c = table.classified_change(3.0 / 2047.0, 4.0 / 2047.0);
         assert!(c > 0.5, "labels 3 and 4 differ: {c}");
         let typical = node_tf_error_expected(&n, dvr, &table, &layout).unwrap();
-        assert!((typical - 0.25 * c).abs() < 1e-4, "{typical} vs {}", 0.25 * c);
+        assert!(
+            (typical - 0.25 * c).abs() < 1e-4,
+            "{typical} vs {}",
+            0.25 * c
+        );
         assert_eq!(node_tf_error(&n, dvr, &table, &layout), Some(unit(c)));
         let visible = node_visible_error(&n, dvr, &table, &layout).unwrap();
         assert!((visible - typical).abs() < 1e-12);

@@ -92,8 +92,7 @@ fn check_label_errors(store: &brickray_store::Store, levels: &[Vec<f32>]) {
         for z in p[2] * b * s..((p[2] + 1) * b * s).min(fd[2]) {
             for y in p[1] * b * s..((p[1] + 1) * b * s).min(fd[1]) {
                 for x in p[0] * b * s..((p[0] + 1) * b * s).min(fd[0]) {
-                    let f = levels[finest]
-                        [(x + fd[0] * (y + fd[1] * z)) as usize];
+                    let f = levels[finest][(x + fd[0] * (y + fd[1] * z)) as usize];
                     let (cx, cy, cz) = (x / cs, y / cs, z / cs);
                     let c = levels[l][(cx + cd[0] * (cy + cd[1] * cz)) as usize];
                     count += 1;
@@ -101,7 +100,11 @@ fn check_label_errors(store: &brickray_store::Store, levels: &[Vec<f32>]) {
                 }
             }
         }
-        if count == 0 { 0.0 } else { changed as f64 / count as f64 }
+        if count == 0 {
+            0.0
+        } else {
+            changed as f64 / count as f64
+        }
     };
     let q = 1.0 / 65535.0;
     let mut nonzero = 0;
@@ -110,7 +113,10 @@ fn check_label_errors(store: &brickray_store::Store, levels: &[Vec<f32>]) {
         let l = key.level as usize;
         let own = if l < finest { share(key, l) } else { 0.0 };
         let got = rec.info.error.expect("an error record").label_share();
-        assert!(got >= own && got <= own + q, "{key:?}: recorded {got}, share {own}");
+        assert!(
+            got >= own && got <= own + q,
+            "{key:?}: recorded {got}, share {own}"
+        );
         nonzero += (own > 0.0) as usize;
         if l == 0 {
             assert_eq!(rec.info.parent_error, None, "the root has no parent");
@@ -129,7 +135,10 @@ fn check_label_errors(store: &brickray_store::Store, levels: &[Vec<f32>]) {
     }
     // (A map of one label changes nothing anywhere.)
     let one_label = levels[finest].iter().all(|&v| v == levels[finest][0]);
-    assert!(one_label || finest == 0 || nonzero > 0, "some node changes labels");
+    assert!(
+        one_label || finest == 0 || nonzero > 0,
+        "some node changes labels"
+    );
 }
 
 #[test]

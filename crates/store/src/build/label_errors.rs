@@ -12,8 +12,8 @@
 //! levels' split ratios below it (the mode pyramid's children).
 
 use super::errors::{ErrorSections, brick_values};
-use crate::error::StoreError;
 use crate::NO_ENTRY_LEVEL;
+use crate::error::StoreError;
 use crate::format::{Entry, TableGeometry};
 use brickray_core::{NodeError, OctreeLayout};
 use rayon::prelude::*;
@@ -23,7 +23,13 @@ use std::path::Path;
 /// Bytes the pass needs for `layout`.
 pub(super) fn memory_needed(layout: &OctreeLayout) -> u64 {
     (0..layout.levels)
-        .map(|l| layout.level_dims(l).iter().map(|&d| d as u64).product::<u64>())
+        .map(|l| {
+            layout
+                .level_dims(l)
+                .iter()
+                .map(|&d| d as u64)
+                .product::<u64>()
+        })
         .sum::<u64>()
         .saturating_mul(4)
 }
@@ -36,7 +42,8 @@ struct Ids {
 
 impl Ids {
     fn at(&self, x: u32, y: u32, z: u32) -> u32 {
-        self.ids[x as usize + self.dims[0] as usize * (y as usize + self.dims[1] as usize * z as usize)]
+        self.ids
+            [x as usize + self.dims[0] as usize * (y as usize + self.dims[1] as usize * z as usize)]
     }
 }
 
@@ -99,7 +106,8 @@ pub(super) fn compute(
                             e.min
                         };
                         let (x, y, z) = (key.x * b + i, key.y * b + j, key.z * b + k);
-                        ids[x as usize + dims[0] as usize * (y as usize + dims[1] as usize * z as usize)] =
+                        ids[x as usize
+                            + dims[0] as usize * (y as usize + dims[1] as usize * z as usize)] =
                             v as u32;
                     }
                 }
@@ -127,7 +135,8 @@ pub(super) fn compute(
         let c = &pyramid[l as usize];
         let cs = scale[l as usize];
         let lo = [key.x * b * s[0], key.y * b * s[1], key.z * b * s[2]];
-        let hi: [u32; 3] = std::array::from_fn(|ax| ((([key.x, key.y, key.z][ax] + 1) * b) * s[ax]).min(fd[ax]));
+        let hi: [u32; 3] =
+            std::array::from_fn(|ax| ((([key.x, key.y, key.z][ax] + 1) * b) * s[ax]).min(fd[ax]));
         let (mut changed, mut count) = (0u64, 0u64);
         for z in lo[2]..hi[2] {
             for y in lo[1]..hi[1] {
@@ -139,7 +148,11 @@ pub(super) fn compute(
                 }
             }
         }
-        if count == 0 { 0.0 } else { changed as f64 / count as f64 }
+        if count == 0 {
+            0.0
+        } else {
+            changed as f64 / count as f64
+        }
     };
     let out: Vec<(NodeError, NodeError)> = entries
         .par_iter()
