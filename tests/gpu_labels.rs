@@ -3,8 +3,9 @@
 //!
 //! * the two shared label maps (the Brodmann atlas, u8, and the cells3d
 //!   nuclei, u32) in core and out of core at the finest level, each >= 45 dB
-//!   PSNR against the reference, nearest and with smooth boundaries
-//!   (`RenderSettings::smooth_labels`), marched at the reference's step (1/8
+//!   PSNR against the reference, nearest, with smooth boundaries
+//!   (`RenderSettings::smooth_labels`) and with smooth boundaries shaded by
+//!   their indicator's gradient, marched at the reference's step (1/8
 //!   voxel): a label's boundary is a step in the data, so where a coarser
 //!   step lands on it is a sampling error, not the model's (the default half
 //!   voxel's is printed beside it);
@@ -170,6 +171,50 @@ fn check(name: &str, vol: &Volume) {
         &label,
         &target.read_color(g),
         &smooth_ref,
+        SIZE,
+        SIZE,
+        MIN_DB,
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    eprintln!("{label}: {cmp}");
+
+    // Smooth boundaries shaded by their indicator's gradient, in core and
+    // out of core at the finest level.
+    let shaded = RenderSettings {
+        shading: brickray::Shading {
+            enabled: true,
+            ..Default::default()
+        },
+        ..smooth
+    };
+    let shaded_ref = render_reference(
+        vol,
+        &frame,
+        &tf,
+        &camera,
+        &shaded,
+        &ReferenceOptions::new(SIZE, SIZE),
+    )
+    .to_rgba8([0.0; 3]);
+    let hdesc = FrameDesc {
+        settings: shaded,
+        ..desc.clone()
+    };
+    let h_in = draw(g, &mut incore, &target, &hdesc).unwrap();
+    let label = format!("labels_{name}_smooth_shaded_incore");
+    let cmp = assert_close(&label, &h_in.color, &shaded_ref, SIZE, SIZE, MIN_DB)
+        .unwrap_or_else(|e| panic!("{e}"));
+    let change = compare(&s_in.color, &h_in.color, SIZE, SIZE);
+    eprintln!("{label}: {cmp}; unshaded vs shaded: {change}");
+    assert!(change.psnr_db < 40.0, "shading shows: {change}");
+    draw_until_settled(g, &mut ooc, &target, &hdesc, 300)
+        .unwrap()
+        .expect("out of core settles");
+    let label = format!("labels_{name}_smooth_shaded_ooc_finest");
+    let cmp = assert_close(
+        &label,
+        &target.read_color(g),
+        &shaded_ref,
         SIZE,
         SIZE,
         MIN_DB,

@@ -163,6 +163,51 @@ pub fn label_at(volume: &Volume, tex: [f64; 3]) -> u32 {
         .label((i[0] + nx * (i[1] + ny * i[2])) as usize)
 }
 
+/// The 8 voxels around continuous voxel coordinates `p` (voxel centres at
+/// integers, clamped to the grid) in the order x fastest, then y, then z:
+/// their labels, and the fractions `t` of `p` between them.
+fn corners(volume: &Volume, p: [f64; 3]) -> ([u32; 8], [f64; 3]) {
+    let f = p.map(f64::floor);
+    let t = [p[0] - f[0], p[1] - f[1], p[2] - f[2]];
+    let d = volume.dims().map(|v| v as i64);
+    let ids = std::array::from_fn(|c| {
+        let o = [c & 1, (c >> 1) & 1, (c >> 2) & 1];
+        let i = [0, 1, 2].map(|a| (f[a] as i64 + o[a] as i64).clamp(0, d[a] - 1));
+        volume
+            .data()
+            .label((i[0] + d[0] * (i[1] + d[1] * i[2])) as usize)
+    });
+    (ids, t)
+}
+
+/// The trilinear weight of corner `c` at fractions `t`, and its derivative
+/// along each axis.
+fn corner_weight(c: usize, t: [f64; 3]) -> (f64, [f64; 3]) {
+    let o = [c & 1, (c >> 1) & 1, (c >> 2) & 1];
+    let w = [0, 1, 2].map(|a| if o[a] == 1 { t[a] } else { 1.0 - t[a] });
+    let s = [0, 1, 2].map(|a| if o[a] == 1 { 1.0 } else { -1.0 });
+    (
+        w[0] * w[1] * w[2],
+        [s[0] * w[1] * w[2], s[1] * w[0] * w[2], s[2] * w[0] * w[1]],
+    )
+}
+
+/// The label with the largest trilinear weight among the 8 corners, ties
+/// to the first corner's label.
+fn heaviest(ids: &[u32; 8], t: [f64; 3]) -> u32 {
+    let mut best = (ids[0], -1.0);
+    for c in 0..8 {
+        let total: f64 = (0..8)
+            .filter(|&k| ids[k] == ids[c])
+            .map(|k| corner_weight(k, t).0)
+            .sum();
+        if total > best.1 {
+            best = (ids[c], total);
+        }
+    }
+    best.0
+}
+
 /// The label with the largest trilinear weight among the 8 voxels around
 /// continuous voxel coordinates `p` (voxel centres at integers, clamped to
 /// the grid): the label whose filtered indicator is largest there, ties to
@@ -170,29 +215,27 @@ pub fn label_at(volume: &Volume, tex: [f64; 3]) -> u32 {
 /// map's smooth boundaries (`RenderSettings::smooth_labels`); the kernels
 /// compute the same.
 pub fn smooth_label_at(volume: &Volume, p: [f64; 3]) -> u32 {
-    let f = p.map(f64::floor);
-    let t = [p[0] - f[0], p[1] - f[1], p[2] - f[2]];
-    let d = volume.dims().map(|v| v as i64);
-    let mut ids = [0u32; 8];
-    let mut w = [0f64; 8];
-    for c in 0..8 {
-        let o = [c & 1, (c >> 1) & 1, (c >> 2) & 1];
-        let i = [0, 1, 2].map(|a| (f[a] as i64 + o[a] as i64).clamp(0, d[a] - 1));
-        ids[c] = volume
-            .data()
-            .label((i[0] + d[0] * (i[1] + d[1] * i[2])) as usize);
-        w[c] = (0..3)
-            .map(|a| if o[a] == 1 { t[a] } else { 1.0 - t[a] })
-            .product();
-    }
-    let mut best = (ids[0], -1.0);
-    for c in 0..8 {
-        let total: f64 = (0..8).filter(|&k| ids[k] == ids[c]).map(|k| w[k]).sum();
-        if total > best.1 {
-            best = (ids[c], total);
+    let (ids, t) = corners(volume, p);
+    heaviest(&ids, t)
+}
+
+/// [`smooth_label_at`]'s label and the gradient, per voxel along each axis,
+/// of its trilinearly filtered indicator at `p`: the normal of the smooth
+/// boundary that shades it (zero inside a region of one label). The kernels
+/// compute the same (`label_gradient` in modes.wgsl).
+pub fn smooth_label_gradient(volume: &Volume, p: [f64; 3]) -> (u32, [f64; 3]) {
+    let (ids, t) = corners(volume, p);
+    let label = heaviest(&ids, t);
+    let mut g = [0.0; 3];
+    for (c, &id) in ids.iter().enumerate() {
+        if id == label {
+            let (_, d) = corner_weight(c, t);
+            for a in 0..3 {
+                g[a] += d[a];
+            }
         }
     }
-    best.0
+    (label, g)
 }
 
 /// The labels present in a label volume, in increasing order.

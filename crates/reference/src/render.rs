@@ -265,11 +265,12 @@ pub fn render_reference(
         );
     }
 
-    // A label map: nearest samples through the label table, unshaded and
-    // without pre-integration (the GPU kernels' rule, `Variant::of`).
+    // A label map: nearest samples through the label table, without
+    // pre-integration, shaded only with smooth boundaries (the GPU kernels'
+    // rule, `Variant::of`).
     let labels = vol.desc().kind.is_labels();
     let unshaded;
-    let settings = if labels {
+    let settings = if labels && !settings.smooth_labels {
         let mut s = *settings;
         s.shading.enabled = false;
         unshaded = s;
@@ -599,16 +600,17 @@ impl Marcher<'_> {
         self.rays.depth_at(ray, t)
     }
 
-    /// The unit world normal at `t`, or `None` where the gradient vanishes.
+    /// The unit world normal at `t`, or `None` where the gradient vanishes
+    /// (a smooth label map: of its boundary's filtered indicator).
     fn normal(&self, ray: &Ray, t: f64) -> Option<DVec3> {
         let p = self.voxel_pos(ray, t);
-        let g = DVec3::from_array(std::array::from_fn(|i| {
-            let mut e = DVec3::ZERO;
-            e[i] = 1.0;
-            let hi = self.vol.sample_trilinear((p + e).to_array());
-            let lo = self.vol.sample_trilinear((p - e).to_array());
-            (hi - lo) * 0.5
-        }));
+        let g = if self.labels {
+            DVec3::from_array(
+                brickray_core::labels::smooth_label_gradient(self.vol, p.to_array()).1,
+            )
+        } else {
+            self.central_difference(p)
+        };
         if g.length() < MIN_GRADIENT {
             return None;
         }
@@ -617,6 +619,18 @@ impl Marcher<'_> {
         let n = self.normal_matrix * (g * self.dims);
         let n = n.normalize_or_zero();
         (n != DVec3::ZERO).then_some(n)
+    }
+
+    /// The central difference of the normalized field at voxel point `p`,
+    /// one voxel along each axis.
+    fn central_difference(&self, p: DVec3) -> DVec3 {
+        DVec3::from_array(std::array::from_fn(|i| {
+            let mut e = DVec3::ZERO;
+            e[i] = 1.0;
+            let hi = self.vol.sample_trilinear((p + e).to_array());
+            let lo = self.vol.sample_trilinear((p - e).to_array());
+            (hi - lo) * 0.5
+        }))
     }
 
     /// Blinn-Phong with a headlight, two-sided, clamped to 0..1.

@@ -37,8 +37,13 @@ fn sample_value(u: vec3<f32>) -> f32 {
     return textureSampleLevel(volume_tex, volume_sampler, u, 0.0).r * vol.value_scale + vol.value_offset;
 }
 
-// World-space gradient direction (unnormalized) and the voxel-space magnitude.
+// World-space gradient direction (unnormalized) and the voxel-space magnitude
+// (a smooth label map: of its boundary's indicator).
 fn gradient(u: vec3<f32>) -> vec4<f32> {
+    if (LABELS && SMOOTH_LABELS) {
+        let g = label_gradient(volume_tex, u, vol.dims);
+        return vec4<f32>(frame.normal_mat * (g * vol.dims), length(g));
+    }
     let e = 1.0 / vol.dims;
     let gx = (sample_value(u + vec3<f32>(e.x, 0.0, 0.0)) - sample_value(u - vec3<f32>(e.x, 0.0, 0.0))) * 0.5;
     let gy = (sample_value(u + vec3<f32>(0.0, e.y, 0.0)) - sample_value(u - vec3<f32>(0.0, e.y, 0.0))) * 0.5;

@@ -59,28 +59,65 @@ fn corner_offset(c: u32) -> vec3<i32> {
     return vec3<i32>(i32(c & 1u), i32((c >> 1u) & 1u), i32(c >> 2u));
 }
 
+// The 8 texels around texture point u of `tex` (`size` texels a side,
+// clamped), x fastest, and the fractions of u between them.
+struct LabelCorners {
+    ids: array<f32, 8>,
+    t: vec3<f32>,
+}
+
+fn label_corners(tex: texture_3d<f32>, u: vec3<f32>, size: vec3<f32>) -> LabelCorners {
+    let hi = vec3<i32>(size) - vec3<i32>(1);
+    let p = u * size - vec3<f32>(0.5);
+    let f = floor(p);
+    var k: LabelCorners;
+    k.t = p - f;
+    for (var c = 0u; c < 8u; c = c + 1u) {
+        let at = clamp(vec3<i32>(f) + corner_offset(c), vec3<i32>(0), hi);
+        k.ids[c] = textureLoad(tex, at, 0).r;
+    }
+    return k;
+}
+
+fn corner_weights(t: vec3<f32>) -> array<f32, 8> {
+    var w: array<f32, 8>;
+    for (var c = 0u; c < 8u; c = c + 1u) {
+        w[c] = corner_weight(c, t);
+    }
+    return w;
+}
+
 // A label map's texel at texture point u of `tex` (`size` texels a side),
 // loaded at integer coordinates: the texel whose cell holds u (texel
 // centres at (i + 0.5) / size), or with SMOOTH_LABELS the heaviest label of
 // the 8 around it. Both kernels read label maps through it (out of core a
 // brick's apron holds its neighbours' voxels, so the 8 lie in the brick).
 fn label_texel(tex: texture_3d<f32>, u: vec3<f32>, size: vec3<f32>) -> f32 {
-    let hi = vec3<i32>(size) - vec3<i32>(1);
     if SMOOTH_LABELS {
-        let p = u * size - vec3<f32>(0.5);
-        let f = floor(p);
-        let t = p - f;
-        var ids: array<f32, 8>;
-        var w: array<f32, 8>;
-        for (var c = 0u; c < 8u; c = c + 1u) {
-            let at = clamp(vec3<i32>(f) + corner_offset(c), vec3<i32>(0), hi);
-            ids[c] = textureLoad(tex, at, 0).r;
-            w[c] = corner_weight(c, t);
-        }
-        return heaviest_label(ids, w);
+        let k = label_corners(tex, u, size);
+        return heaviest_label(k.ids, corner_weights(k.t));
     }
+    let hi = vec3<i32>(size) - vec3<i32>(1);
     let i = clamp(vec3<i32>(floor(u * size)), vec3<i32>(0), hi);
     return textureLoad(tex, i, 0).r;
+}
+
+// The gradient, per texel of `tex`, of the trilinearly filtered indicator of
+// the heaviest label at u: the normal of a smooth label boundary, zero
+// inside one label (labels::smooth_label_gradient).
+fn label_gradient(tex: texture_3d<f32>, u: vec3<f32>, size: vec3<f32>) -> vec3<f32> {
+    let k = label_corners(tex, u, size);
+    let l = heaviest_label(k.ids, corner_weights(k.t));
+    var g = vec3<f32>(0.0);
+    for (var c = 0u; c < 8u; c = c + 1u) {
+        if (k.ids[c] == l) {
+            let o = vec3<bool>((c & 1u) != 0u, (c & 2u) != 0u, (c & 4u) != 0u);
+            let w = select(vec3<f32>(1.0) - k.t, k.t, o);
+            let sg = select(vec3<f32>(-1.0), vec3<f32>(1.0), o);
+            g = g + sg * vec3<f32>(w.y * w.z, w.x * w.z, w.x * w.y);
+        }
+    }
+    return g;
 }
 
 const MODE_DVR: u32 = 0u;

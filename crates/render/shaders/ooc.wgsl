@@ -194,8 +194,12 @@ fn cursor_value(c: Cursor, t: f32) -> f32 {
 }
 
 // Central differences of one atlas texel at uv, per finest voxel (f3: finest
-// voxels per texel, per axis).
+// voxels per texel, per axis); a smooth label map: its boundary indicator's
+// gradient.
 fn atlas_gradient(uv: vec3<f32>, f3: vec3<f32>) -> vec3<f32> {
+    if (LABELS && SMOOTH_LABELS) {
+        return label_gradient(atlas_tex, uv, ooc.atlas_size) / f3;
+    }
     let e = 1.0 / ooc.atlas_size;
     let gx = (atlas_value(uv + vec3<f32>(e.x, 0.0, 0.0)) - atlas_value(uv - vec3<f32>(e.x, 0.0, 0.0))) * 0.5;
     let gy = (atlas_value(uv + vec3<f32>(0.0, e.y, 0.0)) - atlas_value(uv - vec3<f32>(0.0, e.y, 0.0))) * 0.5;

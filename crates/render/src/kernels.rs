@@ -98,7 +98,8 @@ impl Variant {
     /// when the host enabled it (it applies to the iso mode, in both kernels)
     /// and the visible weights when the backend measures them
     /// (`VolumeBackend::measures_weights`).
-    /// A label map (`labels`) is drawn unshaded and without pre-integration
+    /// A label map (`labels`) is drawn without pre-integration and shaded
+    /// only with smooth boundaries
     /// (the gradient of ids, and segments interpolated between ids, are not
     /// the data). A label map over an intensity image (`overlay`) applies to
     /// DVR.
@@ -118,7 +119,9 @@ impl Variant {
             mode,
             ert: s.accel.early_termination.is_some(),
             ess: s.accel.empty_space_skipping,
-            shade: s.shading.enabled && !labels,
+            // A label map is shaded only with smooth boundaries (the normal
+            // of its boundary's filtered indicator).
+            shade: s.shading.enabled && (!labels || s.smooth_labels),
             predict: false,
             guard: false,
             sparse_ess: false,

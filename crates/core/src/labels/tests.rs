@@ -155,3 +155,22 @@ fn table_selection_hover_and_files() {
     assert_eq!(c[2], 0.0);
     assert!(LabelTable::from_file_bytes(&[0xff; 10]).is_err());
 }
+
+/// A smooth boundary's normal: the gradient of the heaviest label's
+/// filtered indicator, across the boundary, zero inside one label.
+#[test]
+fn smooth_label_gradients_cross_the_boundary() {
+    let ids: Vec<u8> = (0..64).map(|i| if i % 4 < 2 { 1 } else { 2 }).collect();
+    let v = label_volume([4, 4, 4], [1.0; 3], VolumeData::U8(ids)).unwrap();
+    let (l, g) = smooth_label_gradient(&v, [1.3, 1.5, 1.5]);
+    assert_eq!(l, 1);
+    assert!(
+        (g[0] + 1.0).abs() < 1e-12 && g[1].abs() < 1e-12 && g[2].abs() < 1e-12,
+        "{g:?}"
+    );
+    let (l, g) = smooth_label_gradient(&v, [1.8, 1.5, 1.5]);
+    assert_eq!(l, 2);
+    assert!((g[0] - 1.0).abs() < 1e-12, "{g:?}");
+    assert_eq!(smooth_label_gradient(&v, [0.5, 1.0, 2.0]), (1, [0.0; 3]));
+    assert_eq!(smooth_label_at(&v, [1.3, 1.5, 1.5]), 1);
+}

@@ -566,7 +566,8 @@ fn every_shader_file_is_covered() {
 /// every mode and combination of ERT, ESS and shading, with pre-integration
 /// and with prediction; label maps (LABELS) with every mode and combination of
 /// ERT and ESS, with the visible weights, with smooth boundaries
-/// (SMOOTH_LABELS), and the slice views of both; a label map over the image
+/// (SMOOTH_LABELS), shaded with smooth boundaries, and the slice views of
+/// both; a label map over the image
 /// (OVERLAY colour and mask) with DVR and every combination of ERT, ESS and
 /// shading, pre-integrated, with the visible weights and smooth boundaries.
 #[test]
@@ -615,6 +616,9 @@ fn every_override_permutation_validates() {
             combos.push((mode, bits | 1 << 7 | 1 << 8));
             combos.push((mode, bits | 1 << 8 | 1 << 9));
             combos.push((mode, bits | 1 << 7 | 1 << 8 | 1 << 9));
+            // Shaded by the smooth boundary's gradient.
+            combos.push((mode, bits | 1 << 2 | 1 << 8 | 1 << 9));
+            combos.push((mode, bits | 1 << 2 | 1 << 7 | 1 << 8 | 1 << 9));
         }
     }
     let mut combos: Vec<(KernelMode, u32, u32)> =
