@@ -211,3 +211,74 @@ fn sharded_fixture_decodes_at_the_finest_level() {
     assert_same_voxels(&read_by_slabs(r.as_mut(), 16), &t, "sharded");
     assert!(r.warnings().is_empty(), "{:?}", r.warnings());
 }
+
+/// An image with a `labels/` group: the group lists its label image, which
+/// opens as a label map (kind, label value range, ids unchanged, in a whole
+/// read and streamed) with the colours of its `image-label`; the image
+/// itself stays an intensity image.
+#[test]
+fn label_images_of_an_ome_zarr_open_as_label_maps() {
+    let dir = tempfile::tempdir().unwrap();
+    let image = dir.path().join("cells.ome.zarr");
+    let dims = [70u32, 5, 4];
+    let n = (dims[0] * dims[1] * dims[2]) as usize;
+    let pixels: Vec<u8> = (0..n).map(|i| (i * 7 % 250) as u8).collect();
+    let ids: Vec<u8> = (0..n).map(|i| [0u8, 1, 2, 7][i % 4]).collect();
+    let spacing = [1.0, 1.0, 2.0];
+    let img = brickray_core::Volume::new(
+        brickray_core::VolumeDesc {
+            dims,
+            dtype: brickray_core::DType::U8,
+            spacing,
+            value_range: [0.0, 255.0],
+            kind: Default::default(),
+        },
+        brickray_core::VolumeData::U8(pixels.clone()),
+    )
+    .unwrap();
+    io::zarr::write_ome_zarr(&image, &img, None).unwrap();
+    let labels = brickray_core::labels::label_volume(
+        dims,
+        spacing,
+        brickray_core::VolumeData::U8(ids.clone()),
+    )
+    .unwrap();
+    let mut colours = brickray_core::LabelTable::default();
+    colours.set_color(7, [1.0, 0.0, 0.0]);
+    colours.set_opacity(7, 128.0 / 255.0);
+    io::zarr::add_ome_zarr_labels(&image, "nuclei", &labels, (&colours, &[7])).unwrap();
+    // A hostile name in the list is skipped.
+    let list = image.join("labels/.zattrs");
+    std::fs::write(&list, r#"{"labels": ["nuclei", "../escape", ""]}"#).unwrap();
+    let label_dir = image.join("labels/nuclei");
+    assert!(io::zarr::add_ome_zarr_labels(&image, "../x", &labels, (&colours, &[])).is_err());
+    let img = brickray_io::zarr::OmeZarr::open(&image).unwrap();
+    assert!(!img.is_labels());
+    assert_eq!(img.label_groups().unwrap(), vec!["nuclei".to_string()]);
+    assert!(img.label_table().is_none());
+    let intensity = brickray_io::read_volume(&image).unwrap();
+    assert!(!intensity.desc().kind.is_labels());
+    assert_eq!(
+        intensity.data().as_bytes(),
+        &pixels[..],
+        "the writer round-trips"
+    );
+    assert_eq!(intensity.desc().spacing, spacing);
+
+    let lab = brickray_io::zarr::OmeZarr::open(&label_dir).unwrap();
+    assert!(lab.is_labels());
+    assert!(lab.label_groups().unwrap().is_empty());
+    let table = lab.label_table().unwrap();
+    let rgba = table.rgba(7);
+    assert_eq!(&rgba[..3], &[1.0, 0.0, 0.0]);
+    assert!((rgba[3] - 128.0 / 255.0).abs() < 1e-6);
+    let vol = brickray_io::read_volume(&label_dir).unwrap();
+    assert!(vol.desc().kind.is_labels());
+    assert_eq!(
+        vol.desc().value_range,
+        brickray_core::labels::label_value_range()
+    );
+    assert_eq!(vol.data().as_bytes(), &ids[..]);
+    let src = ZarrBrickSource::open(&label_dir, &ReadOptions::default(), 8, 1, None).unwrap();
+    assert!(src.layout().volume.kind.is_labels());
+}

@@ -323,6 +323,8 @@ impl ViewerApp {
         self.upload_overlay(frame)?;
         if let Some(path) = self.pending_overlay.take() {
             self.open_overlay(frame, &path)?;
+        } else if !reopened && self.labels.is_none() {
+            self.overlay_zarr_labels(frame)?;
         }
         Ok(())
     }

@@ -1000,3 +1000,100 @@ fn a_label_map_over_its_image_matches_the_library() {
         .unwrap_or_else(|e| panic!("{e}"));
     eprintln!("viewer overlay: {cmp}; image alone vs overlay: {change}");
 }
+
+/// An OME-Zarr image with a label image (`labels/`): the cells3d nuclei and
+/// their labels written as one OME-Zarr, opened; the viewer draws the label
+/// image over the image with its `image-label` colours (no `--overlay`), and
+/// the screenshot equals the library's overlay.
+#[test]
+#[cfg_attr(
+    no_shared_data,
+    ignore = "needs ../shared/data (the shared volumes), absent when the tests were built"
+)]
+#[cfg_attr(
+    no_display,
+    ignore = "needs an X server (DISPLAY unset when the tests were built; scripts/test.sh starts Xvfb)"
+)]
+fn an_ome_zarr_opens_with_its_label_image_over_it() {
+    let Some(dir) = windowed_test_dir() else {
+        return;
+    };
+    let Some(data) = brickray_harness::shared_data_dir() else {
+        return;
+    };
+    let image =
+        brickray::io::read_volume(data.join("cells3d_nuclei_fluo/cells3d_nuclei_fluo.json"))
+            .expect("the nuclei");
+    let labels = brickray::io::read_volume(
+        data.join("labels/cells3d_nuclei_labels/cells3d_nuclei_labels.json"),
+    )
+    .expect("their labels");
+    let zarr = dir.path().join("nuclei.ome.zarr");
+    brickray::io::zarr::write_ome_zarr(&zarr, &image, None).expect("write the image");
+    let ids = brickray::core::labels::labels_present(&labels);
+    brickray::io::zarr::add_ome_zarr_labels(
+        &zarr,
+        "nuclei",
+        &labels,
+        (&brickray::LabelTable::default(), &ids),
+    )
+    .expect("write the labels");
+    let png = dir.path().join("zarr-labels.png");
+    let script = format!(
+        "open {zarr}\nbackground 0 0 0\noverlays off\ncamera orbit 30 15 1.0\nwait converged\n\
+         screenshot {png}\nquit\n",
+        zarr = zarr.display(),
+        png = png.display(),
+    );
+    run_script(dir.path(), &script, Duration::from_secs(120));
+    let image = brickray::io::read_volume(&zarr).expect("the image back");
+    let label_dir = zarr.join("labels/nuclei");
+    let labels = brickray::io::read_volume(&label_dir).expect("the labels back");
+    assert!(labels.desc().kind.is_labels());
+    let table = brickray::io::zarr::OmeZarr::open(&label_dir)
+        .expect("the label image")
+        .label_table()
+        .expect("its colours");
+    let (shot, w, h) = read_png(&png);
+    let (camera, _, _) = sidecar(&png);
+    let gpu = brickray_harness::shared_gpu();
+    let mut renderer =
+        VolumeRenderer::new(&gpu.device, brickray_harness::target_desc()).expect("renderer");
+    renderer
+        .set_volume(&gpu.device, &gpu.queue, &image)
+        .expect("volume");
+    let d = image.desc();
+    let tf = brickray::core::tf::TfModel::preset(brickray::core::tf::TfPreset::Grey, d.value_range)
+        .to_table(brickray::core::tf::TABLE_ENTRIES)
+        .expect("tf");
+    renderer
+        .set_transfer_function(&gpu.device, &gpu.queue, &tf)
+        .expect("tf");
+    let frame = VolumeFrame::centered(d.dims, d.spacing);
+    let overlay = brickray::LabelOverlay {
+        labels: &labels,
+        image_to_labels: glam::DMat4::IDENTITY,
+        table: &table,
+        style: brickray::OverlayStyle::default(),
+    };
+    renderer
+        .set_overlay(&gpu.device, &gpu.queue, Some(&overlay))
+        .expect("overlay");
+    let target = brickray_harness::Offscreen::new(&gpu.device, w, h);
+    let desc = FrameDesc::new(camera, frame, w, h);
+    brickray_harness::draw_frame(gpu, &mut renderer, &target, &desc, Some(wgpu::Color::BLACK))
+        .expect("draw");
+    let lib = target.read_color(gpu);
+    renderer
+        .set_overlay(&gpu.device, &gpu.queue, None)
+        .expect("no overlay");
+    brickray_harness::draw_frame(gpu, &mut renderer, &target, &desc, Some(wgpu::Color::BLACK))
+        .expect("draw");
+    let alone = target.read_color(gpu);
+    let change = brickray_reference::compare(&alone, &lib, w, h);
+    assert!(change.psnr_db < 35.0, "the labels show: {change}");
+    let cmp =
+        brickray_reference::assert_close("viewer-zarr-labels", &shot, &lib, w, h, MIN_PSNR_DB)
+            .unwrap_or_else(|e| panic!("{e}"));
+    eprintln!("viewer OME-Zarr with labels: {cmp}; image alone vs overlay: {change}");
+}

@@ -41,15 +41,18 @@ use std::sync::Arc;
 use zarrs::array::{Array, ArrayMetadata, ArraySubset};
 
 mod cache;
+mod labels;
 mod safe;
 mod scan;
 mod source;
+mod write;
 
 use cache::ChunkCache;
 pub use cache::{CHUNK_CACHE_BYTES, ChunkCacheStats};
 use safe::{MAX_CHUNK_BYTES, SafeStore};
 use scan::scan;
 pub use source::{MAX_BRICK_READ, ZarrBrickSource};
+pub use write::{add_ome_zarr_labels, write_ome_zarr};
 
 type ZArray = Array<SafeStore>;
 
@@ -80,6 +83,9 @@ pub struct OmeZarr {
     cache: ChunkCache,
     /// What was assumed (see [`VolumeReader::warnings`]).
     warnings: Vec<String>,
+    /// A label image's colours (`image-label`; `labels.rs`), `None` for an
+    /// intensity image.
+    image_label: Option<Vec<(u32, [f32; 4])>>,
 }
 
 /// A metadata file's JSON; `Ok(None)` when it does not exist. Regular files
@@ -325,6 +331,37 @@ fn check_chunk(
 }
 
 impl OmeZarr {
+    /// The description of `dims` samples of `dtype` at `spacing` whose data
+    /// range is `range`: a label image is a label map
+    /// (`VolumeKind::Labels`, the label value range; u8, u16 or u32 ids).
+    pub(crate) fn volume_desc(
+        &self,
+        root: &Path,
+        dims: [u64; 3],
+        dtype: brickray_core::DType,
+        spacing: [f64; 3],
+        range: [f64; 2],
+    ) -> Result<VolumeDesc, IoError> {
+        let labels = self.is_labels();
+        let desc = VolumeDesc {
+            dims: dims.map(|d| d as u32),
+            dtype,
+            spacing: spacing.map(|v| v as f32),
+            value_range: if labels {
+                brickray_core::labels::label_value_range()
+            } else {
+                desc_range(root, range)?
+            },
+            kind: if labels {
+                brickray_core::VolumeKind::Labels
+            } else {
+                Default::default()
+            },
+        };
+        desc.validate().map_err(|e| IoError::volume(root, e))?;
+        Ok(desc)
+    }
+
     /// Opens the group at `root` (a `.zarr` folder).
     pub fn open(root: &Path) -> Result<OmeZarr, IoError> {
         OmeZarr::open_in(Arc::new(SafeStore::new(root)))
@@ -485,6 +522,7 @@ impl OmeZarr {
         let Some(src) = src else {
             return Err(bad("multiscales has no datasets"));
         };
+        let image_label = attrs.get("image-label").map(labels::image_label_colors);
         Ok(OmeZarr {
             root: root.to_owned(),
             version,
@@ -494,6 +532,7 @@ impl OmeZarr {
             store,
             cache: ChunkCache::new(CHUNK_CACHE_BYTES),
             warnings,
+            image_label,
         })
     }
 
@@ -882,14 +921,7 @@ impl ZarrReader {
         let range = scan(&zarr, level, c, t)?;
         let conv = SampleConverter::choose(zarr.src, false, 1.0, 0.0, Some(range));
         let (s, _) = zarr.xyz(level);
-        let desc = VolumeDesc {
-            dims: dims64.map(|d| d as u32),
-            dtype: conv.dst,
-            spacing: s.map(|v| v as f32),
-            value_range: desc_range(root, range)?,
-            kind: Default::default(),
-        };
-        desc.validate().map_err(|e| IoError::volume(root, e))?;
+        let desc = zarr.volume_desc(root, dims64, conv.dst, s, range)?;
         let notes = vec![
             format!(
                 "OME-Zarr {}: level {level} of {} ({}), channel {c}, time point {t}",

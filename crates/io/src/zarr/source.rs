@@ -123,14 +123,7 @@ impl ZarrBrickSource {
         };
         let conv = SampleConverter::choose(zarr.src, false, 1.0, 0.0, Some(range));
         let (s, _) = zarr.xyz(0);
-        let desc = VolumeDesc {
-            dims: dims64.map(|d| d as u32),
-            dtype: conv.dst,
-            spacing: s.map(|v| v as f32),
-            value_range: desc_range(root, range)?,
-            kind: Default::default(),
-        };
-        desc.validate().map_err(|e| IoError::volume(root, e))?;
+        let desc = zarr.volume_desc(root, dims64, conv.dst, s, range)?;
         let layout = OctreeLayout::new(desc, brick, apron);
         // Each pyramid level's factor per axis, as a power of two.
         let (s0, _) = zarr.xyz(0);

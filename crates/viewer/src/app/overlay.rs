@@ -55,7 +55,14 @@ impl ViewerApp {
         };
         let image = physical_frame(image_path, &shown.desc);
         let labels = physical_frame(Some(path), volume.desc());
-        let (table, note) = crate::source::label_table_beside(&Input::Path(path.to_path_buf()));
+        // An OME-Zarr label image's own colours, else a table beside it.
+        let (table, note) = match brickray::io::zarr::OmeZarr::open(path)
+            .ok()
+            .and_then(|z| z.label_table())
+        {
+            Some(t) => (t, Some(format!("label colours from {}", path.display()))),
+            None => crate::source::label_table_beside(&Input::Path(path.to_path_buf())),
+        };
         let layer = OverlayLayer {
             path: path.to_path_buf(),
             volume: Arc::new(volume),
@@ -78,6 +85,27 @@ impl ViewerApp {
         ));
         self.label_overlay = Some(layer);
         self.upload_overlay(frame)
+    }
+
+    /// An OME-Zarr image with label images (`labels/`): the first is drawn
+    /// over it, and the message names them all.
+    pub(super) fn overlay_zarr_labels(&mut self, frame: &eframe::Frame) -> Result<(), String> {
+        let Some(Input::Path(root)) = self.shown.as_ref().map(|s| s.input.clone()) else {
+            return Ok(());
+        };
+        let Ok(zarr) = brickray::io::zarr::OmeZarr::open(&root) else {
+            return Ok(());
+        };
+        let names = zarr.label_groups().map_err(|e| e.to_string())?;
+        let Some(first) = names.first() else {
+            return Ok(());
+        };
+        self.messages.push(format!(
+            "label images: {} (the script's `overlay {}/labels/NAME` draws another)",
+            names.join(", "),
+            root.display()
+        ));
+        self.open_overlay(frame, &root.join("labels").join(first))
     }
 
     /// Draws the overlay (after it or the renderer changed).
