@@ -163,6 +163,36 @@ pub fn label_at(volume: &Volume, tex: [f64; 3]) -> u32 {
         .label((i[0] + nx * (i[1] + ny * i[2])) as usize)
 }
 
+/// The label at volume texture coordinates `tex` of a label map streamed
+/// from `source` (the finest level's voxel, clamped to the grid, as
+/// [`label_at`] reads an in-memory volume): reads the one finest brick that
+/// holds it. What a pick names on a streamed label map.
+pub fn label_at_source(
+    source: &dyn crate::BrickSource,
+    tex: [f64; 3],
+) -> Result<u32, crate::BrickError> {
+    let layout = source.layout();
+    let finest = layout.levels.saturating_sub(1);
+    let d = layout.level_dims(finest);
+    let i =
+        [0, 1, 2].map(|a| ((tex[a] * d[a] as f64).floor() as i64).clamp(0, d[a] as i64 - 1) as u32);
+    let b = layout.brick;
+    let key = crate::NodeKey {
+        level: finest,
+        x: i[0] / b,
+        y: i[1] / b,
+        z: i[2] / b,
+    };
+    let mut buf = vec![0u8; layout.brick_bytes()];
+    source.read_brick(key, &mut buf)?;
+    let side = layout.stored_side() as usize;
+    let a = layout.apron as usize;
+    let at = [0, 1, 2].map(|k| (i[k] % b) as usize + a);
+    let size = layout.dtype().size();
+    let start = (at[0] + side * (at[1] + side * at[2])) * size;
+    Ok(VolumeData::from_le_bytes(layout.dtype(), &buf[start..start + size]).label(0))
+}
+
 /// The 8 voxels around continuous voxel coordinates `p` (voxel centres at
 /// integers, clamped to the grid) in the order x fastest, then y, then z:
 /// their labels, and the fractions `t` of `p` between them.

@@ -48,7 +48,9 @@ pub use partial::{ignored_signals, remove_partial_files};
 pub use procedural::ProceduralSource;
 pub use reader::{NodeRecord, Store, StoreStats, decode_payload, open};
 #[cfg(feature = "remote")]
-pub use reader::{is_zarr_url, open_any, open_source_any, open_url, open_zarr_url};
+pub use reader::{
+    is_zarr_url, open_any, open_source_any, open_url, open_zarr_reader_url, open_zarr_url,
+};
 
 /// The 2x downsampling filter that computes a level-`l-1` voxel from the 2x2x2
 /// level-`l` voxels `(2i + {0,1}, 2j + {0,1}, 2k + {0,1})`, indices clamped to the

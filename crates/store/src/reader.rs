@@ -79,6 +79,23 @@ pub fn open_zarr_url(
     )?)
 }
 
+/// Reads an OME-Zarr image at `url` slab by slab (level, channel and time
+/// point of `read`): the input of a store build from a URL
+/// (`brickray-store build URL out.brs`).
+#[cfg(feature = "remote")]
+pub fn open_zarr_reader_url(
+    url: &str,
+    opts: &brickray_remote::RemoteOptions,
+    read: &brickray_io::ReadOptions,
+) -> Result<brickray_io::zarr::ZarrReader, StoreError> {
+    let objects = brickray_remote::RemoteObjects::open(url, opts)
+        .map_err(|e| StoreError::io(Path::new(url), e.into()))?;
+    Ok(brickray_io::zarr::ZarrReader::open_objects(
+        Arc::new(objects),
+        read,
+    )?)
+}
+
 /// Whether the remote `url` names an OME-Zarr image rather than a store:
 /// its path ends in `.zarr` (or `.zarr/`), or, for a name ending in neither
 /// `.zarr` nor `.brs`, the folder it names holds a `zarr.json` or `.zattrs`

@@ -318,7 +318,8 @@ fn info_on_a_url_matches_info_on_the_file() {
 }
 
 /// `info URL` of an OME-Zarr image on the HTTP server lists the levels
-/// `info` lists for the local folder, and says it streams the image.
+/// `info` lists for the local folder, and says it streams the image; `build
+/// URL` writes the same store as `build` of the folder.
 #[cfg(feature = "remote")]
 #[test]
 #[ignore = "needs BRICKRAY_TEST_HTTP (a Range HTTP server; scripts/test.sh starts one)"]
@@ -403,6 +404,45 @@ fn info_on_an_ome_zarr_url_lists_the_local_levels() {
     let e = run(&url, &[]);
     assert!(!e.status.success());
     assert!(String::from_utf8_lossy(&e.stderr).contains("--allow-http"));
+    // `build URL` writes the store `build` writes from the local folder.
+    let dir = tempfile::tempdir().unwrap();
+    let build = |input: &str, out: &std::path::Path, extra: &[&str]| {
+        Command::new(exe)
+            .args(["build", "--quiet", "--brick", "16"])
+            .args(extra)
+            .arg(input)
+            .arg(out)
+            .output()
+            .unwrap()
+    };
+    let (a, b) = (dir.path().join("local.brs"), dir.path().join("remote.brs"));
+    let l = build(image.to_str().unwrap(), &a, &[]);
+    assert!(l.status.success(), "{}", String::from_utf8_lossy(&l.stderr));
+    let r = build(&url, &b, &["--allow-http"]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let (a, b) = (
+        brickray_store::open(&a).unwrap(),
+        brickray_store::open(&b).unwrap(),
+    );
+    assert_eq!(a.desc(), b.desc());
+    let mut nodes = 0;
+    for rec in a.nodes() {
+        assert_eq!(
+            a.read_compressed(rec.key).unwrap(),
+            b.read_compressed(rec.key).unwrap(),
+            "{:?}",
+            rec.key
+        );
+        nodes += 1;
+    }
+    assert_eq!(nodes, b.nodes().count());
+    // A store URL is not an input.
+    let e = build(
+        &url.replace("cells.ome.zarr", "v.brs"),
+        &dir.path().join("x.brs"),
+        &["--allow-http"],
+    );
+    assert!(!e.status.success());
 }
 
 /// A plain-HTTP URL is refused unless allowed, before any request.

@@ -57,6 +57,33 @@ fn check_label_store(dims: [u32; 3], dtype: DType, ids: &[u32], seed: u64, brick
     let levels = reference_levels(store.layout(), decode(dtype, &bytes), Filter::Mode);
     check_source(&store, &levels, None);
     check_label_errors(&store, &levels);
+    // A pick on the streamed map names the finest voxel's label.
+    // (Ids past the label table's are fine here: nothing is drawn.)
+    let volume = brickray_core::Volume::new(
+        brickray_core::VolumeDesc {
+            dims,
+            dtype,
+            spacing: [1.0; 3],
+            value_range: brickray_core::labels::label_value_range(),
+            kind: VolumeKind::Labels,
+        },
+        brickray_core::VolumeData::from_le_bytes(dtype, &bytes),
+    )
+    .unwrap();
+    let mut h = seed | 1;
+    for _ in 0..50 {
+        let tex = [0, 1, 2].map(|_| {
+            h ^= h << 13;
+            h ^= h >> 7;
+            h ^= h << 17;
+            (h % 10_000) as f64 / 10_000.0
+        });
+        assert_eq!(
+            brickray_core::labels::label_at_source(&store, tex).unwrap(),
+            brickray_core::labels::label_at(&volume, tex),
+            "at {tex:?}"
+        );
+    }
     // No level holds a label the finest lacks.
     let finest: BTreeSet<u32> = levels.last().unwrap().iter().map(|&v| v as u32).collect();
     for (l, level) in levels.iter().enumerate() {

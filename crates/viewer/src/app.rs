@@ -113,6 +113,9 @@ pub(crate) struct ViewerApp {
     label_path: String,
     /// The label map's voxels (in core), to name what a click picks.
     label_volume: Option<Arc<brickray::Volume>>,
+    /// A streamed label map's source, to name what a click picks (one brick
+    /// read per pick).
+    label_source: Option<Arc<dyn brickray::BrickSource>>,
     /// A label map drawn over the image (its table is `labels`).
     label_overlay: Option<overlay::OverlayLayer>,
     /// The label map to draw over the next image installed (`--overlay`).
@@ -204,6 +207,7 @@ impl ViewerApp {
             label_ids: Vec::new(),
             label_path: "labels.json".into(),
             label_volume: None,
+            label_source: None,
             label_overlay: None,
             pending_overlay: startup.overlay,
             overlay_queue: Vec::new(),
@@ -239,6 +243,10 @@ impl ViewerApp {
         let vframe = VolumeFrame::centered(desc.dims, desc.spacing);
         let ooc = self.ooc;
         let streamed = matches!(loaded.volume, Opened::Streamed(_));
+        let label_source = match &loaded.volume {
+            Opened::Streamed(src) if desc.kind.is_labels() => Some(src.clone()),
+            _ => None,
+        };
         let (label_ids, label_volume) = match &loaded.volume {
             Opened::InCore(v) if desc.kind.is_labels() => (
                 brickray::core::labels::labels_present(v),
@@ -302,6 +310,7 @@ impl ViewerApp {
             self.label_ids = label_ids;
         }
         self.label_volume = label_volume;
+        self.label_source = label_source;
         self.tf_dirty = true;
         self.messages.push(loaded.note.clone());
         if !reopened || self.camera.is_none() {

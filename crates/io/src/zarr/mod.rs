@@ -914,7 +914,23 @@ impl ZarrReader {
     /// Opens `root` with the level, channel and time point of `opts`. Scans the
     /// level once (in slabs) for its value range.
     pub fn open(root: &Path, opts: &ReadOptions) -> Result<ZarrReader, IoError> {
-        let zarr = OmeZarr::open(root)?;
+        ZarrReader::from_zarr(OmeZarr::open(root)?, opts)
+    }
+
+    /// Opens the image whose objects `reader` reads by key (an OME-Zarr
+    /// image over HTTP or in a bucket), as [`ZarrReader::open`] does a
+    /// folder: every chunk of the level is fetched (the scan for the value
+    /// range, then the slabs), through the decoded-chunk cache.
+    pub fn open_objects(
+        reader: Arc<dyn brickray_core::ObjectReader>,
+        opts: &ReadOptions,
+    ) -> Result<ZarrReader, IoError> {
+        ZarrReader::from_zarr(OmeZarr::open_objects(reader)?, opts)
+    }
+
+    fn from_zarr(zarr: OmeZarr, opts: &ReadOptions) -> Result<ZarrReader, IoError> {
+        let root = zarr.root.clone();
+        let root = root.as_path();
         let (level, c, t) = zarr.check_choice(opts)?;
         let dims64 = zarr.dims(level);
         brickray_core::volume::voxel_count(dims64).map_err(|e| IoError::volume(root, e))?;

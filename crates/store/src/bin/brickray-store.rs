@@ -1,10 +1,12 @@
 //! `brickray-store`: build a brick octree store from a volume, or describe one.
 //!
 //! ```text
-//! brickray-store build <input> <out.brs> [--brick N] [--apron N]
-//!                      [--filter average|max] [--empty-below V] [--memory-mib N]
+//! brickray-store build <input | OME-Zarr URL> <out.brs> [--brick N] [--apron N]
+//!                      [--filter average|max|mode] [--empty-below V] [--memory-mib N]
 //!                      [--series UID|N] [--level N] [--channel N] [--time N]
 //!                      [--spacing X,Y,Z] [--allow-outside-dir] [--quiet]
+//!                      [--anisotropic] [--labels]
+//!                      [--allow-http] [--anonymous] [--endpoint URL]
 //! brickray-store info <store.brs | URL | input> [--bins N]
 //!                     [--allow-http] [--anonymous] [--endpoint URL]
 //! brickray-store convert <input> <out.json> [--memory-mib N] [selection as for build]
@@ -15,7 +17,8 @@
 //! on an input lists its series, levels, channels and time points. `info`
 //! also reads a store over S3, GCS, Azure or HTTP(S) (`s3://bucket/key`,
 //! `https://host/store.brs`; feature `remote`, on by default), configured
-//! by the usual environment variables (`AWS_*`, see docs/remote.md).
+//! by the usual environment variables (`AWS_*`, see docs/remote.md), and
+//! `build` reads an OME-Zarr image from such a URL.
 //!
 //! On a signal that would end it and that a process may catch (SIGHUP,
 //! SIGINT, SIGQUIT, SIGTERM, SIGUSR1, SIGUSR2, SIGALRM, SIGXCPU, SIGXFSZ) a
@@ -46,7 +49,8 @@ enum Command {
     Build {
         /// The input volume: .json / .raw + sidecar, .nrrd / .nhdr, .nii /
         /// .nii.gz / .hdr, .tif (or a folder of slices), a DICOM folder, an
-        /// OME-Zarr folder.
+        /// OME-Zarr folder, or an OME-Zarr image's URL (s3://, gs://, az://,
+        /// https://; feature `remote`).
         input: PathBuf,
         /// The store to write (by convention `.brs`).
         output: PathBuf,
@@ -83,6 +87,8 @@ enum Command {
         /// `labels` list says so itself.
         #[arg(long)]
         labels: bool,
+        #[command(flatten)]
+        remote: RemoteArgs,
     },
     /// Write any input as raw samples + a JSON sidecar (`<out>.json` and
     /// `<out>.raw`), streamed within the memory bound.
@@ -325,6 +331,7 @@ fn main() -> ExitCode {
             quiet,
             anisotropic,
             labels,
+            remote,
         } => remove_temporaries_on_signals().and_then(|()| {
             let memory_bound = memory_mib.checked_mul(1 << 20).ok_or_else(|| {
                 StoreError::BadOption {
@@ -342,7 +349,7 @@ fn main() -> ExitCode {
                 progress: (!quiet).then(progress_bar),
                 anisotropic,
             };
-            cmd_build(&input, &output, &o, &select.options(), labels)
+            cmd_build(&input, &output, &o, &select.options(), labels, &remote)
         }),
         Command::Convert {
             input,
@@ -447,10 +454,10 @@ fn cmd_build(
     o: &BuildOptions,
     read: &ReadOptions,
     labels: bool,
+    remote: &RemoteArgs,
 ) -> Result<(), String> {
     let output = out.display();
-    let mut reader =
-        brickray_io::open_with(input, read).map_err(|e| StoreError::Input(e).to_string())?;
+    let mut reader = open_input(input, read, remote)?;
     if labels && !reader.desc().kind.is_labels() {
         reader = Box::new(
             brickray_io::AsLabels::new(reader).map_err(|e| StoreError::Input(e).to_string())?,
@@ -476,6 +483,36 @@ fn cmd_build(
         r.input_voxels as f64 / r.seconds / 1e6
     );
     Ok(())
+}
+
+/// The input of `build`: a file or folder, or an OME-Zarr image's URL.
+fn open_input(
+    input: &std::path::Path,
+    read: &ReadOptions,
+    remote: &RemoteArgs,
+) -> Result<Box<dyn brickray_io::VolumeReader>, String> {
+    let name = input.to_string_lossy();
+    if !looks_like_url(&name) {
+        let _ = remote;
+        return brickray_io::open_with(input, read).map_err(|e| StoreError::Input(e).to_string());
+    }
+    #[cfg(feature = "remote")]
+    {
+        let o = remote_options(remote);
+        if !brickray_store::is_zarr_url(&name, &o) {
+            return Err(format!(
+                "{name}: a store URL is already a store (`info` and the viewer read it \
+                 as it is); `build` takes an OME-Zarr image's URL"
+            ));
+        }
+        let r = brickray_store::open_zarr_reader_url(&name, &o, read).map_err(|e| e.to_string())?;
+        Ok(Box::new(r))
+    }
+    #[cfg(not(feature = "remote"))]
+    Err(format!(
+        "{name}: this brickray-store was built without the `remote` feature \
+         (cargo install with --features remote)"
+    ))
 }
 
 /// What the reader assumed where the input did not say, on stderr.

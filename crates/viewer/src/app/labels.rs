@@ -120,11 +120,19 @@ impl ViewerApp {
                 (Some(Some(id)), _) => id,
                 (Some(None), _) => continue,
                 (None, Some(vol)) => brickray::core::labels::label_at(vol, point.texture),
-                (None, None) => {
-                    self.messages
-                        .push("picking a streamed label map is not supported yet".into());
-                    continue;
-                }
+                // Streamed: the one finest brick under the pick.
+                (None, None) => match self
+                    .label_source
+                    .as_deref()
+                    .map(|src| brickray::core::labels::label_at_source(src, point.texture))
+                {
+                    Some(Ok(id)) => id,
+                    Some(Err(e)) => {
+                        self.messages.push(format!("pick: {e}"));
+                        continue;
+                    }
+                    None => continue,
+                },
             };
             let Some(t) = self.labels.as_mut() else {
                 continue;
