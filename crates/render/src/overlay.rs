@@ -106,6 +106,19 @@ fn write_table(queue: &wgpu::Queue, texture: &wgpu::Texture, table: &LabelTable)
 impl OverlayState {
     /// The layout and the stand-in (no overlay).
     pub(crate) fn new(device: &wgpu::Device) -> Result<Self, RenderError> {
+        // Its own bindings, before any object (the kernels' whole count is
+        // checked with their group 2: `group2::check_stage_limits`).
+        let l = device.limits();
+        gpu::need(
+            "max_sampled_textures_per_shader_stage",
+            2,
+            l.max_sampled_textures_per_shader_stage as u64,
+        )?;
+        gpu::need(
+            "max_uniform_buffers_per_shader_stage",
+            1,
+            l.max_uniform_buffers_per_shader_stage as u64,
+        )?;
         let layout = gpu::scoped(device, "brickray-render overlay layout", || {
             device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
                 label: Some("brickray-render overlay"),

@@ -400,8 +400,14 @@ fn info_on_an_ome_zarr_url_lists_the_local_levels() {
     for l in &levels {
         assert!(text.contains(l.as_str()), "{l:?} not in {text}");
     }
-    // Without --allow-http: refused before any request.
-    let e = run(&url, &[]);
+    // Without --allow-http (nor its variables): refused before any request.
+    let e = Command::new(exe)
+        .arg("info")
+        .arg(&url)
+        .env_remove("AWS_ALLOW_HTTP")
+        .env_remove("BRICKRAY_ALLOW_HTTP")
+        .output()
+        .unwrap();
     assert!(!e.status.success());
     assert!(String::from_utf8_lossy(&e.stderr).contains("--allow-http"));
     // `build URL` writes the store `build` writes from the local folder.
