@@ -5,7 +5,8 @@
 //! * two volumes on different grids and placements (a coarser, anisotropic,
 //!   shifted label map that covers part of the image and reaches past it),
 //!   both modes (colour, mask), nearest and smooth label boundaries, the
-//!   image in core and out of core at its finest level: >= 45 dB PSNR;
+//!   image in core and out of core at its finest level, and iso surfaces and
+//!   MIP maxima tinted in colour mode: >= 45 dB PSNR;
 //! * the shared label maps over the images they segment (the Brodmann atlas
 //!   over the Colin27 MRI, the nuclei over their fluorescence), in core:
 //!   >= 45 dB;
@@ -218,6 +219,74 @@ fn overlays_on_different_grids_match_the_reference() {
                 .unwrap_or_else(|e| panic!("{e}"));
             eprintln!("{name}_ooc_finest: {cmp}");
         }
+    }
+
+    // Iso surfaces and MIP maxima tinted by the label under them (colour
+    // mode), in core and out of core.
+    let overlay = LabelOverlay {
+        labels: &lab,
+        image_to_labels: overlay_transform(&frame, &lframe),
+        table: &table,
+        style: OverlayStyle {
+            mode: OverlayMode::Color,
+            opacity: 1.0,
+        },
+    };
+    incore
+        .set_overlay(&g.device, &g.queue, Some(&overlay))
+        .unwrap();
+    ooc.set_overlay(&g.device, &g.queue, Some(&overlay))
+        .unwrap();
+    for (name, mode) in [
+        (
+            "iso",
+            RenderMode::Iso {
+                value: 0.3,
+                color: [0.9, 0.9, 0.85],
+            },
+        ),
+        ("mip", RenderMode::Mip),
+    ] {
+        let s = RenderSettings {
+            mode,
+            ..settings(false)
+        };
+        let expected = render_reference(
+            &img,
+            &frame,
+            &tf(),
+            &camera,
+            &s,
+            &ReferenceOptions::new(SIZE, SIZE).with_overlay(&overlay),
+        )
+        .to_rgba8([0.0; 3]);
+        let desc = FrameDesc {
+            settings: s,
+            ..plain.clone()
+        };
+        let got = draw(g, &mut incore, &target, &desc).unwrap().color;
+        let label = format!("overlay_{name}_incore");
+        let cmp = assert_close(&label, &got, &expected, SIZE, SIZE, MIN_DB)
+            .unwrap_or_else(|e| panic!("{e}"));
+        let untinted = render_reference(
+            &img,
+            &frame,
+            &tf(),
+            &camera,
+            &s,
+            &ReferenceOptions::new(SIZE, SIZE),
+        )
+        .to_rgba8([0.0; 3]);
+        let change = compare(&untinted, &expected, SIZE, SIZE);
+        eprintln!("{label}: {cmp}; untinted vs tinted: {change}");
+        assert!(change.psnr_db < 35.0, "{name}: the tint shows ({change})");
+        draw_until_settled(g, &mut ooc, &target, &desc, 300)
+            .unwrap()
+            .expect("out of core settles");
+        let label = format!("overlay_{name}_ooc_finest");
+        let cmp = assert_close(&label, &target.read_color(g), &expected, SIZE, SIZE, MIN_DB)
+            .unwrap_or_else(|e| panic!("{e}"));
+        eprintln!("{label}: {cmp}");
     }
 
     // Removing the overlay draws the image alone again.

@@ -20,8 +20,10 @@
 //!   labels: elsewhere its opacity is multiplied by `1 - opacity`.
 //!
 //! The overlay applies before shading (the label's colour is shaded by the
-//! image's gradient, so tinted tissue keeps its shape) and to DVR only; Iso
-//! and MIP draw the image alone.
+//! image's gradient, so tinted tissue keeps its shape). In iso and MIP, where
+//! one sample decides a pixel, `Color` tints that sample's colour (the
+//! surface's before shading, the maximum's after its mapping) by the label
+//! under it ([`LabelOverlay::tint`]); `Mask` applies to DVR only.
 
 use crate::camera::VolumeFrame;
 use crate::labels::{LABEL_TABLE_ENTRIES, LabelTable, label_at, smooth_label_at};
@@ -145,6 +147,16 @@ impl LabelOverlay<'_> {
             label_at(self.labels, q)
         };
         Some(id.min(LABEL_TABLE_ENTRIES as u32 - 1))
+    }
+
+    /// Iso and MIP: colour `rgb` at image texture point `u` tinted by the
+    /// label there (`Color` mode; `Mask` leaves it).
+    pub fn tint(&self, rgb: [f64; 3], u: [f64; 3], smooth: bool) -> [f64; 3] {
+        if self.style.mode != OverlayMode::Color {
+            return rgb;
+        }
+        let [r, g, b, _] = self.apply([rgb[0], rgb[1], rgb[2], 1.0], u, smooth);
+        [r, g, b]
     }
 
     /// The image's sample `s` (straight RGB, opacity) at image texture point

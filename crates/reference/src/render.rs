@@ -74,8 +74,9 @@ pub struct ReferenceOptions<'a> {
     pub spread: Option<&'a [f32]>,
     /// A label map drawn over the image (`brickray_core::overlay`): DVR
     /// samples take the label under them ([`LabelOverlay::apply`], nearest,
-    /// or the heaviest of 8 with `settings.smooth_labels`) before shading.
-    /// Iso and MIP ignore it. Default `None`.
+    /// or the heaviest of 8 with `settings.smooth_labels`) before shading;
+    /// iso surfaces (before shading) and MIP maxima are tinted by the label
+    /// under them in colour mode ([`LabelOverlay::tint`]). Default `None`.
     pub overlay: Option<&'a LabelOverlay<'a>>,
 }
 
@@ -542,6 +543,7 @@ impl Marcher<'_> {
         match hit {
             None => ([0.0; 4], None),
             Some(t) => {
+                let color = self.tint(ray, t, color);
                 let [r, g, b] = self.shade(ray, t, color, &self.settings.shading);
                 ([r, g, b, 1.0], Some(self.clip_depth(ray, t)))
             }
@@ -561,15 +563,30 @@ impl Marcher<'_> {
             None => ([0.0; 4], None),
             Some((m, t)) if self.intensity.is_some() => {
                 let i = self.intensity.expect("matched");
-                let [r, g, b] = i
-                    .map(m, self.vol.desc().value_range)
-                    .expect("the renderer refuses a volume without a finite value range");
+                let [r, g, b] = self.tint(
+                    ray,
+                    t,
+                    i.map(m, self.vol.desc().value_range)
+                        .expect("the renderer refuses a volume without a finite value range"),
+                );
                 ([r, g, b, 1.0], Some(self.clip_depth(ray, t)))
             }
             Some((m, t)) => {
                 let [r, g, b, a] = self.tf.lookup(m);
+                let [r, g, b] = self.tint(ray, t, [r, g, b]);
                 ([r * a, g * a, b * a, a], Some(self.clip_depth(ray, t)))
             }
+        }
+    }
+
+    /// Iso and MIP: `rgb` tinted by the overlay's label at `t`, if any.
+    fn tint(&self, ray: &Ray, t: f64, rgb: [f64; 3]) -> [f64; 3] {
+        match self.overlay {
+            Some(o) => {
+                let u = (ray.tex_origin + ray.tex_dir * t).to_array();
+                o.tint(rgb, u, self.settings.smooth_labels)
+            }
+            None => rgb,
         }
     }
 

@@ -318,7 +318,8 @@ fn iso_hit(acc: ptr<function, Accum>, c: Cursor, r: Ray, a_in: f32, b_in: f32) {
     // pixel_ray in common.wgsl).
     let ab = iso_bisect(acc, c, a_in, b_in, select(0u, frame.iso_refine_steps, b_in > a_in));
     let th = 0.5 * (ab.x + ab.y);
-    (*acc).color = vec4<f32>(shade(frame.iso_color, cursor_gradient(c, th), r.dir), 1.0);
+    let base = overlay_tint(frame.iso_color, r.tex_origin + th * r.tex_dir);
+    (*acc).color = vec4<f32>(shade(base, cursor_gradient(c, th), r.dir), 1.0);
     (*acc).depth = depth_at(r, th);
     (*acc).depth_set = true;
 }
@@ -339,8 +340,10 @@ fn mip_sample(acc: ptr<function, Accum>, t: f32, v: f32) -> bool {
 fn mip_finish(acc: ptr<function, Accum>, r: Ray) {
     if ((*acc).max_v > -1.0e38) {
         let s = tf_lookup((*acc).max_v);
-        let windowed = vec4<f32>(intensity_color((*acc).max_v), 1.0);
-        (*acc).color = select(vec4<f32>(s.rgb * s.a, s.a), windowed, frame.color_map != MAP_TF);
+        let u = r.tex_origin + (*acc).max_t * r.tex_dir;
+        let windowed = vec4<f32>(overlay_tint(intensity_color((*acc).max_v), u), 1.0);
+        let tinted = overlay_tint(s.rgb, u);
+        (*acc).color = select(vec4<f32>(tinted * s.a, s.a), windowed, frame.color_map != MAP_TF);
         (*acc).depth = depth_at(r, (*acc).max_t);
         (*acc).depth_set = true;
     }

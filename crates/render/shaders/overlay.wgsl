@@ -41,6 +41,15 @@ fn overlay_label(u: vec3<f32>) -> vec4<f32> {
     return textureLoad(overlay_table, vec2<i32>(i32(id), 0), 0);
 }
 
+// Iso and MIP: colour rgb at image texture point u tinted by the label there
+// (colour mode; LabelOverlay::tint).
+fn overlay_tint(rgb: vec3<f32>, u: vec3<f32>) -> vec3<f32> {
+    if (OVERLAY != OVERLAY_COLOR) {
+        return rgb;
+    }
+    return overlay_apply(vec4<f32>(rgb, 1.0), u).rgb;
+}
+
 // The image's sample s (straight colour, opacity) at image texture point u
 // with the labels applied (brickray_core::overlay::apply_label).
 fn overlay_apply(s: vec4<f32>, u: vec3<f32>) -> vec4<f32> {

@@ -102,7 +102,7 @@ impl Variant {
     /// only with smooth boundaries
     /// (the gradient of ids, and segments interpolated between ids, are not
     /// the data). A label map over an intensity image (`overlay`) applies to
-    /// DVR.
+    /// DVR, and in colour mode tints iso surfaces and MIP maxima.
     pub(crate) fn of(
         s: &RenderSettings,
         prediction: Option<Prediction>,
@@ -130,8 +130,11 @@ impl Variant {
             slice: false,
             labels,
             smooth_labels: s.smooth_labels && (labels || overlay.is_some()),
+            // Iso and MIP are tinted in colour mode; the mask is DVR's.
             overlay: match overlay {
-                Some(m) if mode == KernelMode::Dvr && !labels => overlay_id(m),
+                Some(m) if !labels && (mode == KernelMode::Dvr || m == OverlayMode::Color) => {
+                    overlay_id(m)
+                }
                 _ => 0,
             },
         };

@@ -264,8 +264,9 @@ impl VolumeRenderer {
     }
 
     /// Draws a label map over the image in the same ray, or removes it
-    /// (`None`): its labels colour or mask the image's DVR samples
-    /// ([`brickray_core::overlay`]; Iso and MIP draw the image alone). The
+    /// (`None`): its labels colour or mask the image's DVR samples, and in
+    /// colour mode tint iso surfaces and MIP maxima
+    /// ([`brickray_core::overlay`]; slice views draw the image alone). The
     /// two volumes may have different grids and placements
     /// ([`LabelOverlay::image_to_labels`],
     /// [`overlay_transform`](brickray_core::overlay_transform)); the image may

@@ -569,7 +569,8 @@ fn every_shader_file_is_covered() {
 /// (SMOOTH_LABELS), shaded with smooth boundaries, and the slice views of
 /// both; a label map over the image
 /// (OVERLAY colour and mask) with DVR and every combination of ERT, ESS and
-/// shading, pre-integrated, with the visible weights and smooth boundaries.
+/// shading, pre-integrated, with the visible weights and smooth boundaries,
+/// and in colour with iso (also predicting) and MIP.
 #[test]
 fn every_override_permutation_validates() {
     let switches = [
@@ -631,6 +632,13 @@ fn every_override_permutation_validates() {
         combos.push((KernelMode::Dvr, 0b011 | 1 << 7, overlay));
         combos.push((KernelMode::Dvr, 0b011 | 1 << 9, overlay));
     }
+    // Colour tints iso surfaces (also predicted) and MIP maxima.
+    for bits in 0..8u32 {
+        combos.push((KernelMode::Iso, bits, 1));
+        combos.push((KernelMode::Mip, bits, 1));
+    }
+    combos.push((KernelMode::Iso, 0b1011_1011, 1));
+    combos.push((KernelMode::Mip, 0b011 | 1 << 7, 1));
     for (name, src) in [("incore", incore()), ("ooc", ooc())] {
         for &(mode, bits, overlay) in &combos {
             let mut s = src
