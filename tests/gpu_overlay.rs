@@ -447,3 +447,90 @@ fn nuclei_over_their_fluorescence_match_reference() {
     );
     check_shared("nuclei", &img, &lab, &tf);
 }
+
+/// Slice views with a label map over the image: each pixel takes the label
+/// under its slab's front sample, in colour and mask modes, axial and
+/// oblique, in core and out of core at the finest level, against the
+/// reference's slices (`render_slice_with_overlay`).
+#[test]
+fn slices_with_an_overlay_match_the_reference() {
+    use brickray::{ColorMap, Intensity, SliceAxis, SliceView, Window};
+    let g = gpu();
+    let img = image();
+    let lab = labels();
+    let (frame, lframe) = frames(&img);
+    let table = LabelTable::default();
+    let grey = Intensity::new(Window::from_min_max(0.0, 60000.0).unwrap(), ColorMap::Grey);
+    let target = Offscreen::new(&g.device, SIZE, SIZE);
+    let mut incore = VolumeRenderer::new(&g.device, target_desc()).unwrap();
+    incore.set_volume(&g.device, &g.queue, &img).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let mut ooc = VolumeRenderer::new(&g.device, target_desc()).unwrap();
+    let config = OutOfCoreConfig {
+        tolerance_px: 0.0,
+        upload_budget_bytes: 1 << 30,
+        ..Default::default()
+    };
+    ooc.set_volume_source(&g.device, &g.queue, store(&img, dir.path()), config)
+        .unwrap();
+    let desc = FrameDesc::new(
+        Camera::orbit(frame.center(), 2.0, 0.3, 0.2),
+        frame,
+        SIZE,
+        SIZE,
+    );
+    let views = [
+        (
+            "axial",
+            SliceView::orthogonal(SliceAxis::Axial, 15.0, &frame, 1.0).unwrap(),
+        ),
+        (
+            "oblique",
+            SliceView::with_normal([20.0, 18.0, 16.0], [1.0, 2.0, 3.0], 1.0).unwrap(),
+        ),
+    ];
+    for (mode, opacity) in [(OverlayMode::Color, 0.8), (OverlayMode::Mask, 1.0)] {
+        let overlay = LabelOverlay {
+            labels: &lab,
+            image_to_labels: overlay_transform(&frame, &lframe),
+            table: &table,
+            style: OverlayStyle { mode, opacity },
+        };
+        for r in [&mut incore, &mut ooc] {
+            r.set_overlay(&g.device, &g.queue, Some(&overlay)).unwrap();
+            r.set_intensity(Some(grey));
+        }
+        for (name, view) in views {
+            let expected = brickray_reference::render_slice_with_overlay(
+                &img,
+                &frame,
+                &view,
+                &grey,
+                Some(&overlay),
+                SIZE,
+                SIZE,
+            )
+            .unwrap()
+            .to_rgba8([0.0; 3]);
+            let plain = brickray_reference::render_slice(&img, &frame, &view, &grey, SIZE, SIZE)
+                .unwrap()
+                .to_rgba8([0.0; 3]);
+            let change = compare(&plain, &expected, SIZE, SIZE);
+            assert!(
+                change.psnr_db < 35.0,
+                "{name} {mode:?}: the labels show ({change})"
+            );
+            for (path, r) in [("incore", &mut incore), ("ooc", &mut ooc)] {
+                r.set_slice(Some(view));
+                draw_until_settled(g, r, &target, &desc, 300)
+                    .unwrap()
+                    .expect("settles");
+                let label = format!("overlay_slice_{name}_{mode:?}_{path}");
+                let cmp =
+                    assert_close(&label, &target.read_color(g), &expected, SIZE, SIZE, MIN_DB)
+                        .unwrap_or_else(|e| panic!("{e}"));
+                eprintln!("{label}: {cmp}; without the labels: {change}");
+            }
+        }
+    }
+}

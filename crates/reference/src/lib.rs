@@ -76,7 +76,7 @@ pub use metrics::{
     test_output_dir,
 };
 pub use render::{DEFAULT_STEP_FACTOR, EXACT_STEP_FACTOR, ReferenceOptions, render_reference};
-pub use slice::{SliceReferenceError, render_label_slice, render_slice};
+pub use slice::{SliceReferenceError, render_label_slice, render_slice, render_slice_with_overlay};
 pub use ssim::ssim;
 pub use temporal::{
     CHANGE_EPS, TemporalError, TemporalOptions, TemporalReport, temporal_stability,

@@ -7,7 +7,8 @@
 
 use crate::Image;
 use brickray_core::{
-    Intensity, SlabMode, SliceError, SliceView, TransferFunction, Volume, VolumeFrame, WindowError,
+    Intensity, LabelOverlay, SlabMode, SliceError, SliceView, TransferFunction, Volume,
+    VolumeFrame, WindowError,
 };
 use rayon::prelude::*;
 
@@ -32,16 +33,37 @@ pub fn render_slice(
     width: u32,
     height: u32,
 ) -> Result<Image, SliceReferenceError> {
+    render_slice_with_overlay(vol, frame, slice, intensity, None, width, height)
+}
+
+/// [`render_slice`] with a label map over the image
+/// (`brickray_core::overlay`): each pixel's colour, opaque, takes the label
+/// under its slab's front sample ([`LabelOverlay::apply`], nearest; a mask
+/// makes a pixel outside the visible labels `1 - opacity` opaque,
+/// premultiplied).
+pub fn render_slice_with_overlay(
+    vol: &Volume,
+    frame: &VolumeFrame,
+    slice: &SliceView,
+    intensity: &Intensity,
+    overlay: Option<&LabelOverlay<'_>>,
+    width: u32,
+    height: u32,
+) -> Result<Image, SliceReferenceError> {
     let range = vol.desc().value_range;
     // Checked once: every pixel maps through it.
     intensity.map(0.0, range)?;
-    slab_pixels(vol, frame, slice, width, height, |samples, mode| {
+    slab_pixels(vol, frame, slice, width, height, |samples, mode, front| {
         let v = match mode {
             SlabMode::Max => samples.iter().copied().fold(f64::NEG_INFINITY, f64::max),
             SlabMode::Mean => samples.iter().sum::<f64>() / samples.len() as f64,
         };
         let [r, gr, b] = intensity.map(v, range).expect("checked above");
-        Some([r as f32, gr as f32, b as f32, 1.0])
+        let [r, gr, b, a] = match overlay {
+            Some(o) => o.apply([r, gr, b, 1.0], front, false),
+            None => [r, gr, b, 1.0],
+        };
+        Some([(r * a) as f32, (gr * a) as f32, (b * a) as f32, a as f32])
     })
 }
 
@@ -57,7 +79,7 @@ pub fn render_label_slice(
     width: u32,
     height: u32,
 ) -> Result<Image, SliceReferenceError> {
-    slab_pixels(vol, frame, slice, width, height, |samples, _| {
+    slab_pixels(vol, frame, slice, width, height, |samples, _, _| {
         let [r, g, b, a] = tf.lookup(samples[0]);
         (a > 0.0).then_some([r as f32, g as f32, b as f32, 1.0])
     })
@@ -65,14 +87,15 @@ pub fn render_label_slice(
 
 /// Each pixel's slab samples that lie in the volume's texture box (front
 /// first; exact trilinear values, or the nearest voxel's for a label map),
-/// coloured by `color` (nothing: transparent).
+/// coloured by `color` (nothing: transparent), which also gets the front
+/// sample's texture point.
 fn slab_pixels(
     vol: &Volume,
     frame: &VolumeFrame,
     slice: &SliceView,
     width: u32,
     height: u32,
-    color: impl Fn(&[f64], SlabMode) -> Option<[f32; 4]> + Sync,
+    color: impl Fn(&[f64], SlabMode, [f64; 3]) -> Option<[f32; 4]> + Sync,
 ) -> Result<Image, SliceReferenceError> {
     let mut img = Image::new(width, height);
     if width == 0 || height == 0 {
@@ -89,11 +112,15 @@ fn slab_pixels(
             let mut samples = Vec::new();
             for (px, out) in row.iter_mut().enumerate() {
                 samples.clear();
+                let mut front = [0.0; 3];
                 for k in 0..g.samples {
                     let t = g.texture_point(px as u32, py as u32, width, height, k);
                     let inside = (0..3).all(|a| (0.0..=1.0).contains(&t[a]));
                     if !inside {
                         continue;
+                    }
+                    if samples.is_empty() {
+                        front = t.to_array();
                     }
                     let p = [0, 1, 2].map(|a| t[a] * dims[a] - 0.5);
                     samples.push(if labels {
@@ -103,7 +130,7 @@ fn slab_pixels(
                     });
                 }
                 if !samples.is_empty()
-                    && let Some(c) = color(&samples, g.mode)
+                    && let Some(c) = color(&samples, g.mode, front)
                 {
                     *out = c;
                 }

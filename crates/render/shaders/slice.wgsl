@@ -12,8 +12,10 @@
 // maximum or mean and maps the result through the intensity window and colour
 // map, opaque. A label map (LABELS) takes the slab's front sample instead
 // (ids are neither maximised nor averaged) and draws its label's colour from
-// the label table (the TF), opaque, or nothing for a hidden label. A pixel
-// with no sample is transparent; no depth is written.
+// the label table (the TF), opaque, or nothing for a hidden label. A label
+// map over an intensity image (OVERLAY) colours or masks each pixel by the
+// label under its front sample. A pixel with no sample is transparent; no
+// depth is written.
 
 const SLAB_MAX: u32 = 0u;
 const SLAB_MEAN: u32 = 1u;
@@ -42,16 +44,19 @@ fn slice_main(@builtin(global_invocation_id) gid: vec3<u32>) {
     var sum = 0.0;
     var best = -3.0e38;
     var front = 0.0;
+    var front_u = vec3<f32>(0.0);
     var last = 0xffffffffu;
     loop {
         if (k >= n) { break; }
         let t = (f32(k) + 0.5) * sdt;
         if (t > start.t1) { break; }
         if (t >= start.t0) {
-            let s = slice_sample(tex_at(start.r, t), start.r.tex_dir, &last);
+            let u = tex_at(start.r, t);
+            let s = slice_sample(u, start.r.tex_dir, &last);
             if (s.ok) {
                 if (count == 0u) {
                     front = s.v;
+                    front_u = u;
                 }
                 count = count + 1u;
                 sum = sum + s.v;
@@ -67,7 +72,10 @@ fn slice_main(@builtin(global_invocation_id) gid: vec3<u32>) {
             color = select(vec4<f32>(0.0), vec4<f32>(c.rgb, 1.0), c.a > 0.0);
         } else {
             let v = select(best, sum / f32(count), frame.slab_mode == SLAB_MEAN);
-            color = vec4<f32>(intensity_color(v), 1.0);
+            // A label map over the image: the label under the front sample
+            // (overlay.wgsl), premultiplied.
+            let c = overlay_apply(vec4<f32>(intensity_color(v), 1.0), front_u);
+            color = vec4<f32>(c.rgb * c.a, c.a);
         }
     }
     store_pixel(px, color, far_depth(), start.host, count);

@@ -150,8 +150,9 @@ impl Variant {
     }
 
     /// The slice view's pipeline (the switches of the ray caster off; the
-    /// visible weights when the backend measures them).
-    pub(crate) fn slice(weights: bool, labels: bool) -> Variant {
+    /// visible weights when the backend measures them; a label map over an
+    /// intensity image, nearest).
+    pub(crate) fn slice(weights: bool, labels: bool, overlay: Option<OverlayMode>) -> Variant {
         Variant {
             mode: KernelMode::Mip,
             ert: false,
@@ -165,7 +166,7 @@ impl Variant {
             slice: true,
             labels,
             smooth_labels: false,
-            overlay: 0,
+            overlay: overlay.filter(|_| !labels).map_or(0, overlay_id),
         }
     }
 

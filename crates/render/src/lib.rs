@@ -265,8 +265,9 @@ impl VolumeRenderer {
 
     /// Draws a label map over the image in the same ray, or removes it
     /// (`None`): its labels colour or mask the image's DVR samples, and in
-    /// colour mode tint iso surfaces and MIP maxima
-    /// ([`brickray_core::overlay`]; slice views draw the image alone). The
+    /// colour mode tint iso surfaces and MIP maxima; a slice view's pixels
+    /// take the label under their slab's front sample
+    /// ([`brickray_core::overlay`]). The
     /// two volumes may have different grids and placements
     /// ([`LabelOverlay::image_to_labels`],
     /// [`overlay_transform`](brickray_core::overlay_transform)); the image may
@@ -613,7 +614,11 @@ impl VolumeRenderer {
         let mapping = self.mapping.ok_or(PrepareError::NoVolume)?;
         mapping.apply(&mut uniforms);
         let variant = if mapping.slice.is_some() {
-            Variant::slice(backend.measures_weights(), backend.labels())
+            Variant::slice(
+                backend.measures_weights(),
+                backend.labels(),
+                self.overlay.style().map(|o| o.mode),
+            )
         } else {
             Variant::of(
                 &desc.settings,

@@ -398,7 +398,12 @@ impl ViewerApp {
                 _ => self.tf.to_table(TABLE_ENTRIES),
             };
             if let (Some(t), Some(_)) = (&self.labels, &self.label_overlay) {
-                self.with_gpu(frame, |_, q, r| r.renderer.set_overlay_table(q, t));
+                self.with_gpu(frame, |_, q, r| {
+                    r.renderer.set_overlay_table(q, t);
+                    for s in &mut r.slices {
+                        s.set_overlay_table(q, t);
+                    }
+                });
             }
             match table {
                 Ok(table) => {

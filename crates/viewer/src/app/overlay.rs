@@ -119,8 +119,13 @@ impl ViewerApp {
             table,
             style: o.style,
         };
+        // The 3D view and the four views' slices.
         self.with_gpu(frame, |d, q, r| {
-            r.renderer.set_overlay(d, q, Some(&overlay))
+            r.renderer.set_overlay(d, q, Some(&overlay))?;
+            for s in &mut r.slices {
+                s.set_overlay(d, q, Some(&overlay))?;
+            }
+            Ok::<(), brickray::RenderError>(())
         })
         .ok_or("no GPU")?
         .map_err(|e| format!("overlay: {e}"))
@@ -131,7 +136,11 @@ impl ViewerApp {
         if self.label_overlay.take().is_some() {
             self.labels = None;
             self.label_ids.clear();
-            self.with_gpu(frame, |d, q, r| r.renderer.set_overlay(d, q, None));
+            self.with_gpu(frame, |d, q, r| {
+                for v in std::iter::once(&mut r.renderer).chain(&mut r.slices) {
+                    let _ = v.set_overlay(d, q, None);
+                }
+            });
         }
     }
 
@@ -167,9 +176,15 @@ impl ViewerApp {
             .ok_or("overlay: none is drawn")?;
         edit(&mut o.style);
         let style = o.style;
-        self.with_gpu(frame, |_, q, r| r.renderer.set_overlay_style(q, style))
-            .ok_or("no GPU")?
-            .map_err(|e| format!("overlay: {e}"))
+        self.with_gpu(frame, |_, q, r| {
+            r.renderer.set_overlay_style(q, style)?;
+            for s in &mut r.slices {
+                s.set_overlay_style(q, style)?;
+            }
+            Ok::<(), brickray::RenderError>(())
+        })
+        .ok_or("no GPU")?
+        .map_err(|e| format!("overlay: {e}"))
     }
 
     /// The overlay's controls: mode, opacity, remove.
