@@ -139,6 +139,26 @@ fn store(vol: &Volume, dir: &std::path::Path) -> Arc<dyn brickray::core::BrickSo
     Arc::new(brickray::store::open(&path).unwrap())
 }
 
+/// Renderers of `img` with the test's TF: in core, and out of core from a
+/// store in `dir` at its finest level.
+fn renderers(img: &Volume, dir: &std::path::Path) -> [VolumeRenderer; 2] {
+    let g = gpu();
+    let mut incore = VolumeRenderer::new(&g.device, target_desc()).unwrap();
+    incore.set_volume(&g.device, &g.queue, img).unwrap();
+    let mut ooc = VolumeRenderer::new(&g.device, target_desc()).unwrap();
+    let config = OutOfCoreConfig {
+        tolerance_px: 0.0,
+        upload_budget_bytes: 1 << 30,
+        ..Default::default()
+    };
+    ooc.set_volume_source(&g.device, &g.queue, store(img, dir), config)
+        .unwrap();
+    for r in [&mut incore, &mut ooc] {
+        r.set_transfer_function(&g.device, &g.queue, &tf()).unwrap();
+    }
+    [incore, ooc]
+}
+
 #[test]
 fn overlays_on_different_grids_match_the_reference() {
     let g = gpu();
@@ -149,22 +169,8 @@ fn overlays_on_different_grids_match_the_reference() {
     table.set_opacity(9, 1.0);
     let camera = Camera::orbit(frame.center(), 2.2, 0.7, 0.35);
     let target = Offscreen::new(&g.device, SIZE, SIZE);
-    let mut incore = VolumeRenderer::new(&g.device, target_desc()).unwrap();
-    incore.set_volume(&g.device, &g.queue, &img).unwrap();
-    incore
-        .set_transfer_function(&g.device, &g.queue, &tf())
-        .unwrap();
     let dir = tempfile::tempdir().unwrap();
-    let mut ooc = VolumeRenderer::new(&g.device, target_desc()).unwrap();
-    let config = OutOfCoreConfig {
-        tolerance_px: 0.0,
-        upload_budget_bytes: 1 << 30,
-        ..Default::default()
-    };
-    ooc.set_volume_source(&g.device, &g.queue, store(&img, dir.path()), config)
-        .unwrap();
-    ooc.set_transfer_function(&g.device, &g.queue, &tf())
-        .unwrap();
+    let [mut incore, mut ooc] = renderers(&img, dir.path());
 
     // The image alone, to show the overlay changes the picture.
     let plain = FrameDesc {
@@ -462,17 +468,8 @@ fn slices_with_an_overlay_match_the_reference() {
     let table = LabelTable::default();
     let grey = Intensity::new(Window::from_min_max(0.0, 60000.0).unwrap(), ColorMap::Grey);
     let target = Offscreen::new(&g.device, SIZE, SIZE);
-    let mut incore = VolumeRenderer::new(&g.device, target_desc()).unwrap();
-    incore.set_volume(&g.device, &g.queue, &img).unwrap();
     let dir = tempfile::tempdir().unwrap();
-    let mut ooc = VolumeRenderer::new(&g.device, target_desc()).unwrap();
-    let config = OutOfCoreConfig {
-        tolerance_px: 0.0,
-        upload_budget_bytes: 1 << 30,
-        ..Default::default()
-    };
-    ooc.set_volume_source(&g.device, &g.queue, store(&img, dir.path()), config)
-        .unwrap();
+    let [mut incore, mut ooc] = renderers(&img, dir.path());
     let desc = FrameDesc::new(
         Camera::orbit(frame.center(), 2.0, 0.3, 0.2),
         frame,

@@ -147,15 +147,8 @@ impl<'a> ReferenceOptions<'a> {
         'a: 'b,
     {
         ReferenceOptions {
-            width: self.width,
-            height: self.height,
-            step_factor: self.step_factor,
-            supersample: self.supersample,
             host_depth: Some(depth),
-            preintegrated: self.preintegrated,
-            intensity: self.intensity,
-            spread: self.spread,
-            overlay: self.overlay,
+            ..self
         }
     }
 
@@ -173,15 +166,8 @@ impl<'a> ReferenceOptions<'a> {
         'a: 'b,
     {
         ReferenceOptions {
-            width: self.width,
-            height: self.height,
-            step_factor: self.step_factor,
-            supersample: self.supersample,
-            host_depth: self.host_depth,
-            preintegrated: self.preintegrated,
-            intensity: self.intensity,
             spread: Some(sigma),
-            overlay: self.overlay,
+            ..self
         }
     }
 
@@ -191,15 +177,8 @@ impl<'a> ReferenceOptions<'a> {
         'a: 'b,
     {
         ReferenceOptions {
-            width: self.width,
-            height: self.height,
-            step_factor: self.step_factor,
-            supersample: self.supersample,
-            host_depth: self.host_depth,
-            preintegrated: self.preintegrated,
-            intensity: self.intensity,
-            spread: self.spread,
             overlay: Some(overlay),
+            ..self
         }
     }
 }

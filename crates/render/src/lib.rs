@@ -16,7 +16,8 @@
 //! The renderer is a thin coordinator of owners, one per GPU object family:
 //! `frame.rs` (group 0: frame uniforms, host depth, per-viewport outputs), `tf.rs`
 //! (group 1: the transfer function), a volume backend (group 2: in core, one 3D
-//! texture; out of core, a brick atlas, its tables and the index), `kernels.rs`
+//! texture; out of core, a brick atlas, its tables and the index), `overlay.rs`
+//! (group 3: a label map over the image, or a one-texel stand-in), `kernels.rs`
 //! (shader modules and specialised pipelines) and `composite.rs` (the draw into the
 //! host's pass). The ray-casting model is specified in `docs/rendering-model.md`;
 //! the CPU reference in `brickray-reference` implements it and is the accuracy

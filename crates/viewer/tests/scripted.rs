@@ -951,44 +951,13 @@ fn a_label_map_over_its_image_matches_the_library() {
     table.show_only(&[4, 6, 17, 22]);
     let (shot, w, h) = read_png(&png);
     let (camera, _, _) = sidecar(&png);
-    let gpu = brickray_harness::shared_gpu();
-    let mut renderer =
-        VolumeRenderer::new(&gpu.device, brickray_harness::target_desc()).expect("renderer");
-    renderer
-        .set_volume(&gpu.device, &gpu.queue, &image)
-        .expect("volume");
-    let d = image.desc();
-    let tf = brickray::core::tf::TfModel::preset(brickray::core::tf::TfPreset::Mri, d.value_range)
-        .to_table(brickray::core::tf::TABLE_ENTRIES)
-        .expect("tf");
-    renderer
-        .set_transfer_function(&gpu.device, &gpu.queue, &tf)
-        .expect("tf");
     // Same grid, no placements in the sidecars: the identity.
-    let overlay = brickray::LabelOverlay {
-        labels: &labels,
-        image_to_labels: glam::DMat4::IDENTITY,
-        table: &table,
-        style: brickray::OverlayStyle {
-            mode: brickray::OverlayMode::Mask,
-            opacity: 1.0,
-        },
+    let style = brickray::OverlayStyle {
+        mode: brickray::OverlayMode::Mask,
+        opacity: 1.0,
     };
-    renderer
-        .set_overlay(&gpu.device, &gpu.queue, Some(&overlay))
-        .expect("overlay");
-    let target = brickray_harness::Offscreen::new(&gpu.device, w, h);
-    let desc = FrameDesc::new(camera, VolumeFrame::centered(d.dims, d.spacing), w, h);
-    brickray_harness::draw_frame(gpu, &mut renderer, &target, &desc, Some(wgpu::Color::BLACK))
-        .expect("draw");
-    let lib = target.read_color(gpu);
-    // The image alone differs: the labels are drawn.
-    renderer
-        .set_overlay(&gpu.device, &gpu.queue, None)
-        .expect("no overlay");
-    brickray_harness::draw_frame(gpu, &mut renderer, &target, &desc, Some(wgpu::Color::BLACK))
-        .expect("draw");
-    let alone = target.read_color(gpu);
+    let tf_preset = brickray::core::tf::TfPreset::Mri;
+    let (lib, alone) = library_overlay(&image, &labels, &table, style, tf_preset, camera, w, h);
     let change = brickray_reference::compare(&alone, &lib, w, h);
     assert!(change.psnr_db < 30.0, "the overlay shows: {change}");
     let lit = shot
@@ -1056,44 +1025,60 @@ fn an_ome_zarr_opens_with_its_label_image_over_it() {
         .expect("its colours");
     let (shot, w, h) = read_png(&png);
     let (camera, _, _) = sidecar(&png);
-    let gpu = brickray_harness::shared_gpu();
-    let mut renderer =
-        VolumeRenderer::new(&gpu.device, brickray_harness::target_desc()).expect("renderer");
-    renderer
-        .set_volume(&gpu.device, &gpu.queue, &image)
-        .expect("volume");
-    let d = image.desc();
-    let tf = brickray::core::tf::TfModel::preset(brickray::core::tf::TfPreset::Grey, d.value_range)
-        .to_table(brickray::core::tf::TABLE_ENTRIES)
-        .expect("tf");
-    renderer
-        .set_transfer_function(&gpu.device, &gpu.queue, &tf)
-        .expect("tf");
-    let frame = VolumeFrame::centered(d.dims, d.spacing);
-    let overlay = brickray::LabelOverlay {
-        labels: &labels,
-        image_to_labels: glam::DMat4::IDENTITY,
-        table: &table,
-        style: brickray::OverlayStyle::default(),
-    };
-    renderer
-        .set_overlay(&gpu.device, &gpu.queue, Some(&overlay))
-        .expect("overlay");
-    let target = brickray_harness::Offscreen::new(&gpu.device, w, h);
-    let desc = FrameDesc::new(camera, frame, w, h);
-    brickray_harness::draw_frame(gpu, &mut renderer, &target, &desc, Some(wgpu::Color::BLACK))
-        .expect("draw");
-    let lib = target.read_color(gpu);
-    renderer
-        .set_overlay(&gpu.device, &gpu.queue, None)
-        .expect("no overlay");
-    brickray_harness::draw_frame(gpu, &mut renderer, &target, &desc, Some(wgpu::Color::BLACK))
-        .expect("draw");
-    let alone = target.read_color(gpu);
+    let grey = brickray::core::tf::TfPreset::Grey;
+    let style = brickray::OverlayStyle::default();
+    let (lib, alone) = library_overlay(&image, &labels, &table, style, grey, camera, w, h);
     let change = brickray_reference::compare(&alone, &lib, w, h);
     assert!(change.psnr_db < 35.0, "the labels show: {change}");
     let cmp =
         brickray_reference::assert_close("viewer-zarr-labels", &shot, &lib, w, h, MIN_PSNR_DB)
             .unwrap_or_else(|e| panic!("{e}"));
     eprintln!("viewer OME-Zarr with labels: {cmp}; image alone vs overlay: {change}");
+}
+
+/// The library drawing `labels` over `image` (same grid: the identity) with
+/// `table` and `style`, the image through `preset` over its value range, in
+/// core, at `camera`, over black; and the image alone.
+#[allow(clippy::too_many_arguments)]
+fn library_overlay(
+    image: &brickray::Volume,
+    labels: &brickray::Volume,
+    table: &brickray::LabelTable,
+    style: brickray::OverlayStyle,
+    preset: brickray::core::tf::TfPreset,
+    camera: Camera,
+    w: u32,
+    h: u32,
+) -> (Vec<u8>, Vec<u8>) {
+    let gpu = brickray_harness::shared_gpu();
+    let mut renderer =
+        VolumeRenderer::new(&gpu.device, brickray_harness::target_desc()).expect("renderer");
+    renderer
+        .set_volume(&gpu.device, &gpu.queue, image)
+        .expect("volume");
+    let d = image.desc();
+    let tf = brickray::core::tf::TfModel::preset(preset, d.value_range)
+        .to_table(brickray::core::tf::TABLE_ENTRIES)
+        .expect("tf");
+    renderer
+        .set_transfer_function(&gpu.device, &gpu.queue, &tf)
+        .expect("tf");
+    let overlay = brickray::LabelOverlay {
+        labels,
+        image_to_labels: glam::DMat4::IDENTITY,
+        table,
+        style,
+    };
+    let target = brickray_harness::Offscreen::new(&gpu.device, w, h);
+    let desc = FrameDesc::new(camera, VolumeFrame::centered(d.dims, d.spacing), w, h);
+    let mut draw = |o: Option<&brickray::LabelOverlay<'_>>| {
+        renderer
+            .set_overlay(&gpu.device, &gpu.queue, o)
+            .expect("overlay");
+        brickray_harness::draw_frame(gpu, &mut renderer, &target, &desc, Some(wgpu::Color::BLACK))
+            .expect("draw");
+        target.read_color(gpu)
+    };
+    let lib = draw(Some(&overlay));
+    (lib, draw(None))
 }

@@ -34,6 +34,9 @@ pub(super) fn memory_needed(layout: &OctreeLayout) -> u64 {
         .saturating_mul(4)
 }
 
+/// A node's table index, its decoded brick and whether it holds one.
+type Decoded = (usize, Vec<f32>, bool);
+
 /// One level's ids, x fastest.
 struct Ids {
     dims: [u32; 3],
@@ -75,17 +78,14 @@ pub(super) fn compute(
         let mut ids = vec![0u32; dims.iter().map(|&d| d as usize).product()];
         let first = geo.first[l as usize] as usize;
         let end = geo.first.get(l as usize + 1).map_or(n, |&f| f as usize);
-        let bricks: Vec<Result<(usize, Vec<f32>, bool), StoreError>> = entries[first..end]
+        let bricks: Vec<Result<Decoded, StoreError>> = entries[first..end]
             .par_iter()
             .enumerate()
-            .map_init(
-                || Vec::new(),
-                |raw, (i, e)| {
-                    let mut vals = Vec::new();
-                    let has = brick_values(file, path, layout, e, raw, &mut vals)?;
-                    Ok((first + i, vals, has))
-                },
-            )
+            .map_init(Vec::new, |raw, (i, e)| {
+                let mut vals = Vec::new();
+                let has = brick_values(file, path, layout, e, raw, &mut vals)?;
+                Ok((first + i, vals, has))
+            })
             .collect();
         for r in bricks {
             let (i, vals, has) = r?;

@@ -361,25 +361,19 @@ pub fn build(
     w.flush().map_err(|e| StoreError::io(&tmp_path, e))?;
     // Label maps record the share of voxels whose label changes instead of
     // value bins (label_errors.rs).
-    let errors = if labels {
-        label_errors::compute(
-            tmp.file(),
-            &tmp_path,
-            &layout,
-            &ctx.geo,
-            &ctx.entries,
-            opts.memory_bound,
-        )?
+    let compute = if labels {
+        label_errors::compute
     } else {
-        errors::compute(
-            tmp.file(),
-            &tmp_path,
-            &layout,
-            &ctx.geo,
-            &ctx.entries,
-            opts.memory_bound,
-        )?
+        errors::compute
     };
+    let errors = compute(
+        tmp.file(),
+        &tmp_path,
+        &layout,
+        &ctx.geo,
+        &ctx.entries,
+        opts.memory_bound,
+    )?;
     let error_bytes = errors
         .as_ref()
         .map(|e| crate::errsec::encode_all(&e.errors));
