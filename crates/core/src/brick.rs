@@ -372,3 +372,60 @@ pub trait BrickSource: Send + Sync {
     /// value (empty: the volume's minimum).
     fn read_brick(&self, key: NodeKey, out: &mut [u8]) -> Result<(), BrickError>;
 }
+
+/// Level `level` of `source` as one in-memory volume: every node of that
+/// level read ([`BrickSource::read_brick`]) and its interior voxels copied,
+/// x fastest. Its dims are the level's and its spacing the finest spacing
+/// times the level's halvings per axis (a coarse voxel covers the finest
+/// voxels `x * 2^h .. (x + 1) * 2^h`), so it covers the box the pyramid maps
+/// it to. What an overlay draws of a label map too large for one texture
+/// (a coarser level), or a whole small map streamed from a store. It holds
+/// the whole level in memory: choose the level by
+/// [`OctreeLayout::level_dims`] first.
+pub fn level_volume(source: &dyn BrickSource, level: u8) -> Result<crate::Volume, BrickError> {
+    let layout = source.layout();
+    let d = layout.level_dims(level);
+    let finest = layout.halvings(layout.levels.saturating_sub(1));
+    let here = layout.halvings(level);
+    let size = layout.dtype().size();
+    let b = layout.brick;
+    let side = layout.stored_side() as usize;
+    let a = layout.apron as usize;
+    let n = d.iter().map(|&v| v as usize).product::<usize>();
+    let mut bytes = vec![0u8; n * size];
+    let mut buf = vec![0u8; layout.brick_bytes()];
+    for z in 0..d[2].div_ceil(b) {
+        for y in 0..d[1].div_ceil(b) {
+            for x in 0..d[0].div_ceil(b) {
+                source.read_brick(NodeKey { level, x, y, z }, &mut buf)?;
+                for k in 0..b.min(d[2] - z * b) {
+                    for j in 0..b.min(d[1] - y * b) {
+                        let row = b.min(d[0] - x * b) as usize;
+                        let from = ((k as usize + a) * side + j as usize + a) * side + a;
+                        let (vx, vy, vz) = (x * b, y * b + j, z * b + k);
+                        let to = vx as usize
+                            + d[0] as usize * (vy as usize + d[1] as usize * vz as usize);
+                        bytes[to * size..(to + row) * size]
+                            .copy_from_slice(&buf[from * size..(from + row) * size]);
+                    }
+                }
+            }
+        }
+    }
+    let v = &layout.volume;
+    let desc = VolumeDesc {
+        dims: d,
+        spacing: std::array::from_fn(|i| v.spacing[i] * (1u32 << (finest[i] - here[i])) as f32),
+        ..v.clone()
+    };
+    let data = crate::VolumeData::from_le_bytes(desc.dtype, &bytes);
+    crate::Volume::new(desc, data).map_err(|e| BrickError::Corrupt {
+        key: NodeKey {
+            level,
+            x: 0,
+            y: 0,
+            z: 0,
+        },
+        reason: e.to_string(),
+    })
+}

@@ -44,7 +44,7 @@ pub mod window;
 
 pub use brick::{
     BrickError, BrickSource, CutLeaf, EmptyReason, LeafKind, NodeInfo, NodeKey, NodeKind,
-    OctreeLayout,
+    OctreeLayout, level_volume,
 };
 pub use camera::{
     Camera, CameraError, DepthConvention, DepthMap, FrameError, FrameView, Projection, Ray, RayGen,

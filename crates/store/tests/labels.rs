@@ -57,6 +57,27 @@ fn check_label_store(dims: [u32; 3], dtype: DType, ids: &[u32], seed: u64, brick
     let levels = reference_levels(store.layout(), decode(dtype, &bytes), Filter::Mode);
     check_source(&store, &levels, None);
     check_label_errors(&store, &levels);
+    // Every level read back whole equals the reference pyramid's.
+    for (l, level) in levels.iter().enumerate() {
+        let v = brickray_core::level_volume(&store, l as u8).unwrap();
+        assert_eq!(v.dims(), store.layout().level_dims(l as u8));
+        assert_eq!(v.desc().kind, VolumeKind::Labels);
+        let ids: Vec<f32> = (0..v.data().len())
+            .map(|i| v.data().label(i) as f32)
+            .collect();
+        assert_eq!(&ids, level, "level {l}");
+        // It covers the finest box, with less than one coarse voxel over.
+        for ax in 0..3 {
+            let (dl, sl) = (v.dims()[ax] as f32, v.desc().spacing[ax]);
+            let fine = dims[ax] as f32 * store.desc().spacing[ax];
+            assert!(
+                dl * sl >= fine && (dl - 1.0) * sl < fine,
+                "level {l} axis {ax}: {:?} x {:?} for {dims:?}",
+                v.dims(),
+                v.desc().spacing
+            );
+        }
+    }
     // A pick on the streamed map names the finest voxel's label.
     // (Ids past the label table's are fine here: nothing is drawn.)
     let volume = brickray_core::Volume::new(

@@ -62,7 +62,8 @@ struct Cli {
     /// Draw this label map over the image in the same rays (colours over the
     /// image's TF; docs/labels.md): placed where both files say (their
     /// affines when both give one, else both from the grid's origin at their
-    /// spacing). Its colour table beside it is loaded, as for `--labels`.
+    /// spacing). Its colour table beside it is loaded, as for `--labels`. A
+    /// label store (.brs) gives its finest level that fits one texture.
     #[arg(long, value_name = "LABELS")]
     overlay: Option<PathBuf>,
 }

@@ -1082,3 +1082,61 @@ fn library_overlay(
     let lib = draw(Some(&overlay));
     (lib, draw(None))
 }
+
+/// A label store over its image: the Brodmann atlas built into a store and
+/// drawn over the Colin27 MRI (`overlay STORE.brs`, mask mode): its finest
+/// level fits one texture and is read whole; the screenshot equals the
+/// library's overlay of that level.
+#[test]
+#[cfg_attr(
+    no_shared_data,
+    ignore = "needs ../shared/data (the shared volumes), absent when the tests were built"
+)]
+#[cfg_attr(
+    no_display,
+    ignore = "needs an X server (DISPLAY unset when the tests were built; scripts/test.sh starts Xvfb)"
+)]
+fn a_label_store_over_its_image_matches_the_library() {
+    let Some(dir) = windowed_test_dir() else {
+        return;
+    };
+    let Some(data) = brickray_harness::shared_data_dir() else {
+        return;
+    };
+    let mri = data.join("mricron_ch2_mri/mricron_ch2_mri.json");
+    let atlas = data.join("labels/mricron_brodmann_labels/mricron_brodmann_labels.json");
+    let store = dir.path().join("atlas.brs");
+    let mut reader = brickray::io::open(&atlas).expect("the atlas");
+    let o = brickray::store::BuildOptions {
+        brick: 16,
+        ..Default::default()
+    };
+    brickray::store::build(reader.as_mut(), &store, &o).expect("build");
+    let png = dir.path().join("store-overlay.png");
+    let script = format!(
+        "open {mri}\nbackground 0 0 0\noverlays off\ntf mri\noverlay {store}\n\
+         overlay mode mask\ncamera orbit 30 15 1.0\nwait converged\nscreenshot {png}\nquit\n",
+        mri = mri.display(),
+        store = store.display(),
+        png = png.display(),
+    );
+    run_script(dir.path(), &script, Duration::from_secs(120));
+    let image = brickray::io::read_volume(&mri).expect("the MRI");
+    let s = brickray::store::open(&store).expect("the store");
+    let labels = brickray::core::level_volume(&s, s.layout().levels - 1).expect("its finest level");
+    let (shot, w, h) = read_png(&png);
+    let (camera, _, _) = sidecar(&png);
+    let style = brickray::OverlayStyle {
+        mode: brickray::OverlayMode::Mask,
+        opacity: 1.0,
+    };
+    let table = brickray::LabelTable::default();
+    let mri_tf = brickray::core::tf::TfPreset::Mri;
+    let (lib, alone) = library_overlay(&image, &labels, &table, style, mri_tf, camera, w, h);
+    let change = brickray_reference::compare(&alone, &lib, w, h);
+    assert!(change.psnr_db < 30.0, "the overlay shows: {change}");
+    let cmp =
+        brickray_reference::assert_close("viewer-store-overlay", &shot, &lib, w, h, MIN_PSNR_DB)
+            .unwrap_or_else(|e| panic!("{e}"));
+    eprintln!("viewer label store over its image: {cmp}; image alone vs overlay: {change}");
+}

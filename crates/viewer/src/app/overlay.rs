@@ -32,6 +32,32 @@ fn physical_frame(path: Option<&Path>, desc: &VolumeDesc) -> VolumeFrame {
     })
 }
 
+/// The finest level of the store at `path` that fits one texture (`side`
+/// voxels a side) and 256 MiB, read whole (`brickray::core::level_volume`),
+/// and a note when it is not the finest.
+fn store_level(path: &Path, side: u32) -> Result<(Volume, Option<String>), String> {
+    let err = |e: &dyn std::fmt::Display| format!("{}: {e}", path.display());
+    let store = brickray::store::open(path).map_err(|e| err(&e))?;
+    let layout = store.layout();
+    let size = layout.dtype().size() as u64;
+    let fits = |l: u8| {
+        let d = layout.level_dims(l);
+        d.iter().all(|&v| v <= side)
+            && d.iter().map(|&v| v as u64).product::<u64>() * size <= 256 << 20
+    };
+    let finest = layout.levels - 1;
+    let level = (0..=finest).rev().find(|&l| fits(l)).unwrap_or(0);
+    let note = (level < finest).then(|| {
+        format!(
+            "overlay: level {level} of {} ({:?} voxels) fits one texture",
+            path.display(),
+            layout.level_dims(level)
+        )
+    });
+    let v = brickray::core::level_volume(&store, level).map_err(|e| err(&e))?;
+    Ok((v, note))
+}
+
 impl ViewerApp {
     /// Reads the label map at `path` and draws it over the image shown.
     pub(super) fn open_overlay(
@@ -43,8 +69,13 @@ impl ViewerApp {
         if shown.desc.kind.is_labels() {
             return Err("overlay: the volume shown is a label map (open an image first)".into());
         }
-        let mut volume =
-            brickray::io::read_volume(path).map_err(|e| format!("{}: {e}", path.display()))?;
+        let mut volume = if path.extension().is_some_and(|e| e == "brs") {
+            let (v, note) = store_level(path, self.open_opts.max_3d_side)?;
+            self.messages.extend(note);
+            v
+        } else {
+            brickray::io::read_volume(path).map_err(|e| format!("{}: {e}", path.display()))?
+        };
         if !volume.desc().kind.is_labels() {
             volume = brickray::core::labels::into_labels(volume)
                 .map_err(|e| format!("{}: {e}", path.display()))?;
