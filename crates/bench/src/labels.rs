@@ -248,7 +248,6 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         // The label error in the LOD metric: error-aware cuts (the share of
         // changed labels times their classified change) against the
         // geometric ones above, PSNR against the label finest and bricks.
-        let mut sweep = Vec::new();
         for (metric, budget) in [
             ("geometric", 2.0f32),
             ("geometric-smooth", 2.0),
@@ -297,7 +296,6 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
                 format!("{name}_lod_{metric}_{budget}_bricks"),
                 json!(bricks),
             );
-            sweep.push((metric, budget, db, bricks));
         }
         finest_min = finest_min.min(in_db).min(levels[0]);
         two_px_min = two_px_min.min(levels[2]);

@@ -78,6 +78,17 @@ pub enum OverlayError {
     /// The opacity is not within 0..1.
     #[error("overlay opacity {0} is not within 0..1")]
     BadOpacity(f32),
+    /// A label id past the label table (renumber the map with
+    /// `labels::relabel_dense`).
+    #[error(
+        "label id {id} is past the label table's {max} entries (renumber with labels::relabel_dense)"
+    )]
+    IdTooLarge {
+        /// The largest id.
+        id: u64,
+        /// `LABEL_TABLE_ENTRIES`.
+        max: usize,
+    },
 }
 
 impl OverlayStyle {
@@ -114,7 +125,9 @@ pub struct LabelOverlay<'a> {
 }
 
 impl LabelOverlay<'_> {
-    /// Checks that the overlay can be drawn over an image of `image_kind`.
+    /// Checks that the overlay can be drawn over an image (a label map when
+    /// `image_is_labels`): a label map, ids within the label table, a
+    /// finite, invertible placement, an opacity within 0..1.
     pub fn validate(&self, image_is_labels: bool) -> Result<(), OverlayError> {
         if !self.labels.desc().kind.is_labels() {
             return Err(OverlayError::NotLabels);
@@ -126,12 +139,21 @@ impl LabelOverlay<'_> {
         if !m.is_finite() || m.determinant().abs() < 1e-12 {
             return Err(OverlayError::BadTransform);
         }
+        if let Some((_, hi)) = self.labels.data().min_max()
+            && hi as u64 >= LABEL_TABLE_ENTRIES as u64
+        {
+            return Err(OverlayError::IdTooLarge {
+                id: hi as u64,
+                max: LABEL_TABLE_ENTRIES,
+            });
+        }
         self.style.validate()
     }
 
     /// The label under image texture point `u` (nearest voxel, or with
     /// `smooth` the heaviest of the 8 around it), `None` outside the label
-    /// map. Ids at or above [`LABEL_TABLE_ENTRIES`] read as the last entry.
+    /// map (ids are below [`LABEL_TABLE_ENTRIES`] in an overlay that
+    /// validates; larger ones read as the last entry).
     pub fn label_at(&self, u: [f64; 3], smooth: bool) -> Option<u32> {
         let q = self
             .image_to_labels
@@ -278,5 +300,25 @@ mod tests {
             ..o
         };
         assert_eq!(singular.validate(false), Err(OverlayError::BadTransform));
+        // Ids past the table: a typed error, not a silent clamp.
+        let big = Volume::new(
+            crate::VolumeDesc {
+                dims: [2, 1, 1],
+                dtype: crate::DType::U32,
+                spacing: [1.0; 3],
+                value_range: crate::labels::label_value_range(),
+                kind: crate::VolumeKind::Labels,
+            },
+            VolumeData::U32(vec![1, 5000]),
+        )
+        .unwrap();
+        let past = LabelOverlay { labels: &big, ..o };
+        assert_eq!(
+            past.validate(false),
+            Err(OverlayError::IdTooLarge {
+                id: 5000,
+                max: LABEL_TABLE_ENTRIES
+            })
+        );
     }
 }
