@@ -27,7 +27,7 @@
 use crate::slab::desc_range;
 use crate::{
     Claim, Entry, EntryKind, Format, IoError, Placement, Probe, ReadOptions, Registry,
-    SampleConverter, SourceType, VolumeReader, check_slab,
+    SampleConverter, SourceType, VolumeReader,
 };
 use brickray_core::{
     BrickError, BrickSource, DType, NodeInfo, NodeKey, NodeKind, ObjectReader, OctreeLayout,
@@ -42,6 +42,7 @@ use zarrs::array::{Array, ArrayMetadata, ArraySubset};
 
 mod cache;
 mod labels;
+mod reader;
 mod safe;
 mod scan;
 mod source;
@@ -49,6 +50,7 @@ mod write;
 
 use cache::ChunkCache;
 pub use cache::{CHUNK_CACHE_BYTES, ChunkCacheStats};
+pub use reader::ZarrReader;
 use safe::{MAX_CHUNK_BYTES, SafeStore};
 use scan::scan;
 pub use source::{MAX_BRICK_READ, ZarrBrickSource};
@@ -896,112 +898,6 @@ fn array_dtype(store: &SafeStore, key: &str, level: &Path) -> Result<SourceType,
             return Err(IoError::UnknownDType { path: file, name });
         }
     })
-}
-
-/// Streams one level, channel and time point of an OME-Zarr image in z-slabs.
-#[derive(Debug)]
-pub struct ZarrReader {
-    zarr: OmeZarr,
-    level: usize,
-    c: u64,
-    t: u64,
-    conv: SampleConverter,
-    desc: VolumeDesc,
-    notes: Vec<String>,
-}
-
-impl ZarrReader {
-    /// Opens `root` with the level, channel and time point of `opts`. Scans the
-    /// level once (in slabs) for its value range.
-    pub fn open(root: &Path, opts: &ReadOptions) -> Result<ZarrReader, IoError> {
-        ZarrReader::from_zarr(OmeZarr::open(root)?, opts)
-    }
-
-    /// Opens the image whose objects `reader` reads by key (an OME-Zarr
-    /// image over HTTP or in a bucket), as [`ZarrReader::open`] does a
-    /// folder: every chunk of the level is fetched (the scan for the value
-    /// range, then the slabs), through the decoded-chunk cache.
-    pub fn open_objects(
-        reader: Arc<dyn brickray_core::ObjectReader>,
-        opts: &ReadOptions,
-    ) -> Result<ZarrReader, IoError> {
-        ZarrReader::from_zarr(OmeZarr::open_objects(reader)?, opts)
-    }
-
-    fn from_zarr(zarr: OmeZarr, opts: &ReadOptions) -> Result<ZarrReader, IoError> {
-        let root = zarr.root.clone();
-        let root = root.as_path();
-        let (level, c, t) = zarr.check_choice(opts)?;
-        let dims64 = zarr.dims(level);
-        brickray_core::volume::voxel_count(dims64).map_err(|e| IoError::volume(root, e))?;
-        let range = scan(&zarr, level, c, t)?;
-        let conv = SampleConverter::choose(zarr.src, false, 1.0, 0.0, Some(range));
-        let (s, _) = zarr.xyz(level);
-        let desc = zarr.volume_desc(root, dims64, conv.dst, s, range)?;
-        let notes = vec![
-            format!(
-                "OME-Zarr {}: level {level} of {} ({}), channel {c}, time point {t}",
-                zarr.version,
-                zarr.levels.len(),
-                zarr.levels[level].path
-            ),
-            format!("samples: {}", conv.describe()),
-        ];
-        Ok(ZarrReader {
-            zarr,
-            level,
-            c,
-            t,
-            conv,
-            desc,
-            notes,
-        })
-    }
-}
-
-impl VolumeReader for ZarrReader {
-    fn desc(&self) -> &VolumeDesc {
-        &self.desc
-    }
-
-    fn format(&self) -> &'static str {
-        "OME-Zarr"
-    }
-
-    fn path(&self) -> &Path {
-        &self.zarr.root
-    }
-
-    fn input_files(&self) -> Vec<PathBuf> {
-        vec![self.zarr.root.clone()]
-    }
-
-    fn placement(&self) -> Option<Placement> {
-        let (s, t) = self.zarr.xyz(self.level);
-        Some(Placement::axis_aligned(s, t, "image"))
-    }
-
-    fn notes(&self) -> Vec<String> {
-        self.notes.clone()
-    }
-
-    fn warnings(&self) -> Vec<String> {
-        self.zarr.warnings.clone()
-    }
-
-    fn read_slices(&mut self, z0: u32, z1: u32, out: &mut [u8]) -> Result<(), IoError> {
-        check_slab(&self.desc, z0, z1, out)?;
-        let [nx, ny, _] = self.desc.dims.map(u64::from);
-        let b = self.zarr.region(
-            self.level,
-            self.c,
-            self.t,
-            [0, 0, z0 as u64],
-            [nx, ny, z1 as u64],
-        )?;
-        self.conv.convert(&b, out);
-        Ok(())
-    }
 }
 
 #[derive(Debug)]
