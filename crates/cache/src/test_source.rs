@@ -40,6 +40,10 @@ pub(crate) struct TestSource {
     /// Data nodes above the finest level carry an error record (the same
     /// mid-size error everywhere), as a store's do.
     pub(crate) errors: bool,
+    /// What [`BrickSource::batch_size`] answers (1: no batches).
+    pub(crate) batch: usize,
+    /// The keys of each [`BrickSource::read_bricks`] call.
+    pub(crate) batches: Mutex<Vec<Vec<NodeKey>>>,
 }
 
 pub(crate) fn fill_byte(key: NodeKey) -> u8 {
@@ -70,6 +74,8 @@ impl TestSource {
             calls: Mutex::new(Vec::new()),
             meta_reads: AtomicUsize::new(0),
             errors: false,
+            batch: 1,
+            batches: Mutex::new(Vec::new()),
         }
     }
 
@@ -198,5 +204,17 @@ impl BrickSource for TestSource {
         }
         out.fill(fill_byte(key));
         Ok(())
+    }
+
+    fn batch_size(&self) -> usize {
+        self.batch
+    }
+
+    fn read_bricks(&self, keys: &[NodeKey], outs: &mut [&mut [u8]]) -> Vec<Result<(), BrickError>> {
+        self.batches.lock().push(keys.to_vec());
+        keys.iter()
+            .zip(outs.iter_mut())
+            .map(|(&key, out)| self.read_brick(key, out))
+            .collect()
     }
 }

@@ -371,6 +371,27 @@ pub trait BrickSource: Send + Sync {
     /// be `layout().brick_bytes()`. Uniform and empty nodes are filled with their
     /// value (empty: the volume's minimum).
     fn read_brick(&self, key: NodeKey, out: &mut [u8]) -> Result<(), BrickError>;
+
+    /// How many bricks one [`read_bricks`](Self::read_bricks) call should
+    /// carry: 1 (the default) for a source whose reads cost no round trip
+    /// (memory, a local file); more for one over the network, where a batch
+    /// of neighbouring bricks costs about one round trip instead of one each.
+    /// The loader takes up to this many queued bricks, in priority order, per
+    /// call.
+    fn batch_size(&self) -> usize {
+        1
+    }
+
+    /// Reads several bricks, each as [`read_brick`](Self::read_brick) would
+    /// into its buffer of `outs` (as many as `keys`), with one result per key:
+    /// a brick that fails does not fail the others. The default reads them
+    /// one after the other; a source over the network fetches them together.
+    fn read_bricks(&self, keys: &[NodeKey], outs: &mut [&mut [u8]]) -> Vec<Result<(), BrickError>> {
+        keys.iter()
+            .zip(outs.iter_mut())
+            .map(|(&key, out)| self.read_brick(key, out))
+            .collect()
+    }
 }
 
 /// Level `level` of `source` as one in-memory volume: every node of that

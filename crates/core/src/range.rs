@@ -48,6 +48,13 @@ pub trait RangeReader: Send + Sync + fmt::Debug {
         }
         Ok(())
     }
+
+    /// Whether a read costs a round trip, so that a caller gains by batching
+    /// ranges into one [`read_ranges`](Self::read_ranges) call (a reader over
+    /// the network); `false` (the default) for local files and memory.
+    fn is_remote(&self) -> bool {
+        false
+    }
 }
 
 impl<T: RangeReader + ?Sized> RangeReader for Arc<T> {
@@ -60,6 +67,9 @@ impl<T: RangeReader + ?Sized> RangeReader for Arc<T> {
     fn read_ranges(&self, ranges: &mut [RangeRead<'_>]) -> io::Result<()> {
         (**self).read_ranges(ranges)
     }
+    fn is_remote(&self) -> bool {
+        (**self).is_remote()
+    }
 }
 
 impl<T: RangeReader + ?Sized> RangeReader for Box<T> {
@@ -71,6 +81,9 @@ impl<T: RangeReader + ?Sized> RangeReader for Box<T> {
     }
     fn read_ranges(&self, ranges: &mut [RangeRead<'_>]) -> io::Result<()> {
         (**self).read_ranges(ranges)
+    }
+    fn is_remote(&self) -> bool {
+        (**self).is_remote()
     }
 }
 

@@ -32,6 +32,70 @@ use thiserror::Error;
 
 pub use object_store;
 
+/// Requests sent and bytes received by a reader so far (retries inside one
+/// request not counted): what a benchmark compares with the bytes a view
+/// needed. Several ranges read at once count the requests they were
+/// coalesced into.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Fetched {
+    /// Requests (`HEAD` and ranged `GET`).
+    pub requests: u64,
+    /// Body bytes received.
+    pub bytes: u64,
+}
+
+/// The counters behind [`Fetched`], shared with the reader's tasks.
+#[derive(Debug, Default)]
+struct Traffic {
+    requests: std::sync::atomic::AtomicU64,
+    bytes: std::sync::atomic::AtomicU64,
+}
+
+impl Traffic {
+    fn count(&self, bytes: u64) {
+        use std::sync::atomic::Ordering::Relaxed;
+        self.requests.fetch_add(1, Relaxed);
+        self.bytes.fetch_add(bytes, Relaxed);
+    }
+
+    fn count_bytes(&self, bytes: u64) {
+        self.bytes
+            .fetch_add(bytes, std::sync::atomic::Ordering::Relaxed);
+    }
+
+    fn get(&self) -> Fetched {
+        use std::sync::atomic::Ordering::Relaxed;
+        Fetched {
+            requests: self.requests.load(Relaxed),
+            bytes: self.bytes.load(Relaxed),
+        }
+    }
+}
+
+/// Fetches `ranges` of `path` as object_store's `get_ranges` does
+/// (neighbours less than 1 MiB apart coalesced into one request, the rest
+/// concurrent), counting each request and its bytes in `traffic`.
+async fn get_ranges_counted(
+    store: Arc<dyn ObjectStore>,
+    path: ObjectPath,
+    ranges: Vec<Range<u64>>,
+    traffic: Arc<Traffic>,
+) -> object_store::Result<Vec<bytes::Bytes>> {
+    object_store::coalesce_ranges(
+        &ranges,
+        |r| {
+            let (store, path, traffic) = (store.clone(), path.clone(), traffic.clone());
+            async move {
+                let b = store.get_range(&path, r).await?;
+                traffic.count(b.len() as u64);
+                Ok(b)
+            }
+        },
+        object_store::OBJECT_STORE_COALESCE_DEFAULT,
+    )
+    .await
+}
+
 /// What went wrong reading a remote object. Every variant names the URL.
 #[derive(Debug, Error)]
 #[non_exhaustive]
@@ -530,6 +594,7 @@ pub struct RemoteRangeReader {
     etag: Option<String>,
     deadline: Duration,
     runtime: Runtime,
+    traffic: Arc<Traffic>,
 }
 
 impl fmt::Debug for RemoteRangeReader {
@@ -557,8 +622,10 @@ impl RemoteRangeReader {
             etag: None,
             deadline: opts.deadline(),
             runtime,
+            traffic: Arc::default(),
         };
         let (store, path) = (reader.store.clone(), reader.path.clone());
+        reader.traffic.count(0);
         let meta = reader.run(async move { store.head(&path).await })?;
         reader.len = meta.size;
         reader.etag = meta.e_tag;
@@ -578,6 +645,11 @@ impl RemoteRangeReader {
     /// The object's ETag at open, if the server sent one.
     pub fn etag(&self) -> Option<&str> {
         self.etag.as_deref()
+    }
+
+    /// Requests and bytes fetched so far, the `HEAD` at open included.
+    pub fn fetched(&self) -> Fetched {
+        self.traffic.get()
     }
 
     fn run<T: Send + 'static>(
@@ -619,7 +691,12 @@ impl RemoteRangeReader {
         }
         let range = self.check_bounds(offset, buf.len() as u64)?;
         let (store, path) = (self.store.clone(), self.path.clone());
-        let bytes = self.run(async move { store.get_range(&path, range).await })?;
+        let traffic = self.traffic.clone();
+        let bytes = self.run(async move {
+            let b = store.get_range(&path, range).await?;
+            traffic.count(b.len() as u64);
+            Ok(b)
+        })?;
         self.check_len(offset, buf.len(), bytes.len())?;
         buf.copy_from_slice(&bytes);
         Ok(())
@@ -638,7 +715,12 @@ impl RemoteRangeReader {
             return Ok(());
         }
         let (store, path) = (self.store.clone(), self.path.clone());
-        let got = self.run(async move { store.get_ranges(&path, &wanted).await })?;
+        let got = self.run(get_ranges_counted(
+            store,
+            path,
+            wanted,
+            self.traffic.clone(),
+        ))?;
         let mut got = got.into_iter();
         for r in ranges.iter_mut().filter(|r| !r.buf.is_empty()) {
             let bytes = got.next().unwrap_or_default();
@@ -661,6 +743,10 @@ impl RangeReader for RemoteRangeReader {
     fn read_ranges(&self, ranges: &mut [RangeRead<'_>]) -> io::Result<()> {
         Ok(self.read_many(ranges)?)
     }
+
+    fn is_remote(&self) -> bool {
+        true
+    }
 }
 
 /// The objects under one remote root, read by key (an
@@ -679,6 +765,7 @@ pub struct RemoteObjects {
     deadline: Duration,
     runtime: Runtime,
     reads: std::sync::atomic::AtomicU64,
+    traffic: Arc<Traffic>,
 }
 
 impl fmt::Debug for RemoteObjects {
@@ -718,6 +805,7 @@ impl RemoteObjects {
             deadline: opts.deadline(),
             runtime: start_runtime(url, opts)?,
             reads: std::sync::atomic::AtomicU64::new(0),
+            traffic: Arc::default(),
         })
     }
 
@@ -730,6 +818,11 @@ impl RemoteObjects {
     /// [`get_ranges`](Self::get_ranges)), retries not counted.
     pub fn reads(&self) -> u64 {
         self.reads.load(std::sync::atomic::Ordering::Relaxed)
+    }
+
+    /// Requests and bytes fetched so far.
+    pub fn fetched(&self) -> Fetched {
+        self.traffic.get()
     }
 
     /// The store path and URL of `key`; a key that leaves the root (`..`,
@@ -778,6 +871,7 @@ impl RemoteObjects {
                     .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
                 let store = self.store.clone();
                 let p = path.clone();
+                self.traffic.count(0);
                 let size = match run_on(&self.runtime, &url, self.deadline, async move {
                     store.head(&p).await
                 }) {
@@ -811,14 +905,17 @@ impl RemoteObjects {
         self.reads
             .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         let store = self.store.clone();
+        let traffic = self.traffic.clone();
         let got = run_on(&self.runtime, &url, self.deadline, async move {
             let options = GetOptions {
                 range,
                 ..GetOptions::default()
             };
+            traffic.count(0);
             let r = store.get_opts(&path, options).await?;
             let (size, got) = (r.meta.size, r.range.clone());
             let bytes = r.bytes().await?;
+            traffic.count_bytes(bytes.len() as u64);
             Ok((bytes, size, got))
         });
         let (bytes, size, got) = match got {
@@ -868,9 +965,13 @@ impl RemoteObjects {
             .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         let store = self.store.clone();
         let wanted = ranges.to_vec();
-        let got = match run_on(&self.runtime, &url, self.deadline, async move {
-            store.get_ranges(&path, &wanted).await
-        }) {
+        let traffic = self.traffic.clone();
+        let got = match run_on(
+            &self.runtime,
+            &url,
+            self.deadline,
+            get_ranges_counted(store, path, wanted, traffic),
+        ) {
             Ok(g) => g,
             Err(e) if e.is_missing() => return Ok(None),
             Err(e) => return Err(e),

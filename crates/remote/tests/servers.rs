@@ -8,7 +8,7 @@
 
 mod common;
 
-use brickray_core::RangeReader;
+use brickray_core::{BrickSource, RangeReader};
 use brickray_remote::{RemoteError, RemoteOptions, RemoteRangeReader};
 use brickray_store::{Store, StoreError, open_url};
 use common::*;
@@ -48,6 +48,37 @@ fn http_store_equals_the_local_file_brick_for_brick() {
     r.read_exact_at(&mut tail, bytes.len() as u64 - 100)
         .unwrap();
     assert_eq!(&tail[..], &bytes[bytes.len() - 100..]);
+    // What it fetched: the HEAD at open and that range.
+    assert_eq!(
+        r.fetched(),
+        brickray_remote::Fetched {
+            requests: 2,
+            bytes: 100
+        }
+    );
+    // Neighbouring ranges are one request; one far away (more than 1 MiB
+    // on) would be another, here the object is small: one.
+    let (mut a, mut b) = ([0u8; 64], [0u8; 32]);
+    let mut ranges = [
+        brickray_core::RangeRead {
+            offset: 200,
+            buf: &mut a,
+        },
+        brickray_core::RangeRead {
+            offset: 300,
+            buf: &mut b,
+        },
+    ];
+    r.read_ranges(&mut ranges).unwrap();
+    assert_eq!(&a[..], &bytes[200..264]);
+    assert_eq!(&b[..], &bytes[300..332]);
+    let f = r.fetched();
+    assert_eq!(f.requests, 3, "{f:?}");
+    // The coalesced request spans both ranges and the gap between.
+    assert_eq!(f.bytes, 100 + 132, "{f:?}");
+    assert!(r.is_remote());
+    // A store over the network reads bricks in batches.
+    assert_eq!(remote.batch_size(), brickray_store::STORE_BATCH);
 }
 
 #[test]

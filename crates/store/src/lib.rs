@@ -46,7 +46,7 @@ pub use error::{Mismatch, StoreError};
 pub use errsec::ERROR_ENTRY_LEN;
 pub use partial::{ignored_signals, remove_partial_files};
 pub use procedural::ProceduralSource;
-pub use reader::{NodeRecord, Store, StoreStats, decode_payload, open};
+pub use reader::{NodeRecord, STORE_BATCH, Store, StoreStats, decode_payload, open};
 #[cfg(feature = "remote")]
 pub use reader::{
     is_zarr_url, open_any, open_source_any, open_url, open_zarr_reader_url, open_zarr_url,

@@ -662,6 +662,54 @@ impl Store {
         Ok(())
     }
 
+    /// Reads several nodes' bricks, each as [`read`](Self::read) does, with
+    /// one result per key: the data nodes' payloads in one
+    /// [`read_compressed_many`](Self::read_compressed_many) (a reader over
+    /// the network coalesces neighbours); when that batch fails, each node is
+    /// read on its own, so one bad node fails only itself.
+    pub fn read_many(
+        &self,
+        keys: &[NodeKey],
+        outs: &mut [&mut [u8]],
+    ) -> Vec<Result<(), StoreError>> {
+        let data: Vec<NodeKey> = keys
+            .iter()
+            .copied()
+            .filter(|&k| matches!(self.check_key(k), Ok(Some(e)) if e.kind == KIND_DATA))
+            .collect();
+        let payloads = match self.read_compressed_many(&data) {
+            Ok(p) => p,
+            Err(_) => {
+                return keys
+                    .iter()
+                    .zip(outs.iter_mut())
+                    .map(|(&k, out)| self.read(k, out))
+                    .collect();
+            }
+        };
+        let mut payloads = data.into_iter().zip(payloads);
+        let mut next = payloads.next();
+        keys.iter()
+            .zip(outs.iter_mut())
+            .map(|(&key, out)| match next.take() {
+                Some((k, payload)) if k == key => {
+                    next = payloads.next();
+                    if out.len() != self.layout.brick_bytes() {
+                        return Err(StoreError::BufferSize {
+                            expected: self.layout.brick_bytes(),
+                            actual: out.len(),
+                        });
+                    }
+                    self.decode(key, &payload.unwrap_or_default(), out)
+                }
+                other => {
+                    next = other;
+                    self.read(key, out)
+                }
+            })
+            .collect()
+    }
+
     /// Decompresses the payload of data node `key` (from
     /// [`read_compressed`](Self::read_compressed)) into `out` and checks the
     /// brick against the node's table entry, like [`read`](Self::read): every
@@ -783,4 +831,27 @@ impl BrickSource for Store {
     fn read_brick(&self, key: NodeKey, out: &mut [u8]) -> Result<(), BrickError> {
         self.read(key, out).map_err(|e| e.into_brick_error(key))
     }
+
+    /// [`STORE_BATCH`] bricks per call over the network, 1 from a local file.
+    fn batch_size(&self) -> usize {
+        if self.file().is_remote() {
+            STORE_BATCH
+        } else {
+            1
+        }
+    }
+
+    fn read_bricks(&self, keys: &[NodeKey], outs: &mut [&mut [u8]]) -> Vec<Result<(), BrickError>> {
+        self.read_many(keys, outs)
+            .into_iter()
+            .zip(keys)
+            .map(|(r, &key)| r.map_err(|e| e.into_brick_error(key)))
+            .collect()
+    }
 }
+
+/// Bricks a store read over the network fetches per call
+/// ([`BrickSource::batch_size`]): their payloads go out as one
+/// [`RangeReader::read_ranges`], neighbours coalesced into one request, the
+/// rest concurrent, so a batch costs about one round trip.
+pub const STORE_BATCH: usize = 16;

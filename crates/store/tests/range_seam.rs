@@ -170,6 +170,77 @@ fn a_flipped_payload_byte_fails_its_checksum_in_a_batch_too() {
     );
 }
 
+/// A reader that says it is remote (each read a round trip).
+#[derive(Debug)]
+struct Remote(Counting);
+
+impl RangeReader for Remote {
+    fn len(&self) -> io::Result<u64> {
+        self.0.len()
+    }
+    fn read_exact_at(&self, buf: &mut [u8], offset: u64) -> io::Result<()> {
+        self.0.read_exact_at(buf, offset)
+    }
+    fn read_ranges(&self, ranges: &mut [RangeRead<'_>]) -> io::Result<()> {
+        self.0.read_ranges(ranges)
+    }
+    fn is_remote(&self) -> bool {
+        true
+    }
+}
+
+#[test]
+fn bricks_read_in_batches_over_a_remote_reader_equal_single_reads() {
+    let (_dir, path, mut bytes) = store_bytes();
+    let file = Store::open(&path).unwrap();
+    assert_eq!(
+        file.batch_size(),
+        1,
+        "a local file reads one brick per call"
+    );
+    let keys: Vec<NodeKey> = file.nodes().map(|n| n.key).collect();
+    let brick = file.layout().brick_bytes();
+    let single: Vec<Vec<u8>> = keys
+        .iter()
+        .map(|&k| {
+            let mut out = vec![0u8; brick];
+            file.read_brick(k, &mut out).unwrap();
+            out
+        })
+        .collect();
+    let read_all = |s: &Store| {
+        let mut bufs = vec![vec![0u8; brick]; keys.len()];
+        let mut outs: Vec<&mut [u8]> = bufs.iter_mut().map(|b| b.as_mut_slice()).collect();
+        let results = s.read_bricks(&keys, &mut outs);
+        (bufs, results)
+    };
+    let reader = std::sync::Arc::new(Remote(Counting::new(bytes.clone(), None)));
+    let remote = Store::open_with(reader.clone(), "memory:remote").unwrap();
+    assert_eq!(remote.batch_size(), brickray_store::STORE_BATCH);
+    let before = reader.0.batches.load(Ordering::SeqCst);
+    let (bufs, results) = read_all(&remote);
+    assert_eq!(reader.0.batches.load(Ordering::SeqCst), before + 1);
+    assert!(results.iter().all(Result::is_ok));
+    assert_eq!(bufs, single);
+    // A flipped payload byte fails its node only; every other brick reads
+    // as it does alone.
+    bytes[128] ^= 0x40;
+    let flipped = Store::open_with(Remote(Counting::new(bytes, None)), "memory:f").unwrap();
+    let (bufs, results) = read_all(&flipped);
+    let failed: Vec<usize> = (0..keys.len()).filter(|&i| results[i].is_err()).collect();
+    assert_eq!(failed.len(), 1, "{results:?}");
+    for i in (0..keys.len()).filter(|i| !failed.contains(i)) {
+        assert_eq!(bufs[i], single[i], "{:?}", keys[i]);
+    }
+    // A buffer of the wrong size is that brick's error.
+    let mut small = vec![0u8; 3];
+    let mut right = vec![0u8; brick];
+    let mut outs: Vec<&mut [u8]> = vec![&mut small, &mut right];
+    let data = file.nodes().find(|n| n.payload_len > 0).unwrap().key;
+    let r = remote.read_bricks(&[data, data], &mut outs);
+    assert!(r[0].is_err() && r[1].is_ok(), "{r:?}");
+}
+
 /// One store for every proptest case (its bytes and an open copy).
 fn shared() -> &'static (Vec<u8>, Store) {
     static S: std::sync::OnceLock<(Vec<u8>, Store)> = std::sync::OnceLock::new();

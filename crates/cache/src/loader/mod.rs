@@ -7,7 +7,11 @@
 //! [`Loader::poll`] collects the result: a prepared brick goes into the
 //! [`CpuCache`], metadata and errors are returned in the [`PollReport`]. Queued
 //! requests can be re-prioritised and cancelled; a read in progress always runs
-//! to completion. Every call into the source is guarded by `catch_unwind`.
+//! to completion. A source over the network asks for batches
+//! ([`BrickSource::batch_size`]): a thread then takes up to that many queued
+//! bricks at once, the highest priorities first, and reads them in one
+//! [`BrickSource::read_bricks`] call (about one round trip for all). Every
+//! call into the source is guarded by `catch_unwind`.
 
 mod queue;
 #[cfg(test)]

@@ -109,6 +109,20 @@ impl Queue {
         Some(job)
     }
 
+    /// After a brick job was taken: takes up to `more` further brick jobs
+    /// from the front of the queue (the next in priority order), marking
+    /// them loading; stops at a metadata job.
+    pub(crate) fn pop_more_bricks(&mut self, more: usize) -> Vec<Job> {
+        let mut jobs = Vec::new();
+        while jobs.len() < more {
+            match self.order.first_key_value() {
+                Some((_, Job::Brick { .. })) => jobs.extend(self.pop()),
+                _ => break,
+            }
+        }
+        jobs
+    }
+
     /// Marks the metadata of `keys` loading for a brick job that reads it (a
     /// queued metadata job of one of them is taken over); returns those claimed,
     /// i.e. all but those already being read.

@@ -267,3 +267,83 @@ fn drop_returns_while_a_read_or_metadata_call_hangs() {
         wait_released(&src);
     }
 }
+
+#[test]
+fn a_batching_source_gets_queued_bricks_together_in_priority_order() {
+    // A source over the network asks for batches of 4: one worker, gated on
+    // the first brick so that the rest queue behind it.
+    let mut src = TestSource::new(64);
+    src.batch = 4;
+    src.gate_key = Some(k(3, 0));
+    src.fail(FetchKind::Brick, k(3, 5));
+    let src = Arc::new(src);
+    let mut loader = loader(&src, 1);
+    let mut cache = CpuCache::new(1 << 22);
+    loader.request_brick(brick(&src, k(3, 0), 100.0));
+    let t = Instant::now();
+    while loader.loading(FetchKind::Brick) == 0 {
+        assert!(t.elapsed() < Duration::from_secs(5));
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    // Queued while the first is held: priority 1..=9 (the highest first).
+    let keys: Vec<NodeKey> = (1..10).map(|x| k(3, x)).collect();
+    for (i, key) in keys.iter().enumerate() {
+        loader.request_brick(brick(&src, *key, (i + 1) as f32));
+    }
+    src.open_gate();
+    let report = poll_until(&mut loader, &mut cache, |l, _| idle(l));
+    let batches = src.batches.lock().clone();
+    // The first was taken alone (nothing else was queued); the other nine in
+    // batches of 4, 4 and 1, highest priority first.
+    assert_eq!(batches[0], vec![k(3, 0)]);
+    let rest: Vec<NodeKey> = batches[1..].iter().flatten().copied().collect();
+    let by_priority: Vec<NodeKey> = keys.iter().rev().copied().collect();
+    assert_eq!(rest, by_priority);
+    let sizes: Vec<usize> = batches.iter().map(Vec::len).collect();
+    assert_eq!(sizes, [1, 4, 4, 1]);
+    // The failing brick failed alone; every other arrived.
+    assert_eq!(report.failed.len(), 1);
+    assert_eq!(report.failed[0].1, k(3, 5));
+    for key in std::iter::once(k(3, 0))
+        .chain(keys)
+        .filter(|&key| key != k(3, 5))
+    {
+        assert!(cache.contains(key), "{key:?} missing");
+    }
+}
+
+#[test]
+fn a_panic_in_a_batch_fails_its_bricks_only() {
+    let mut src = TestSource::new(64);
+    src.batch = 8;
+    src.gate_key = Some(k(3, 0));
+    src.panic_on(FetchKind::Brick, k(3, 2));
+    let src = Arc::new(src);
+    let mut loader = loader(&src, 1);
+    let mut cache = CpuCache::new(1 << 22);
+    loader.request_brick(brick(&src, k(3, 0), 100.0));
+    let t = Instant::now();
+    while loader.loading(FetchKind::Brick) == 0 {
+        assert!(t.elapsed() < Duration::from_secs(5));
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    for x in 1..4 {
+        loader.request_brick(brick(&src, k(3, x), 1.0));
+    }
+    src.open_gate();
+    let report = poll_until(&mut loader, &mut cache, |l, _| idle(l));
+    // The batch of three panicked as a whole: each of its bricks failed,
+    // typed; the loader goes on.
+    assert_eq!(report.failed.len(), 3, "{:?}", report.failed);
+    assert!(
+        report
+            .failed
+            .iter()
+            .all(|f| matches!(f.2, LoadError::Panicked { .. }))
+    );
+    assert!(cache.contains(k(3, 0)));
+    loader.request_brick(brick(&src, k(3, 9), 1.0));
+    poll_until(&mut loader, &mut cache, |l, c| {
+        c.contains(k(3, 9)) && idle(l)
+    });
+}

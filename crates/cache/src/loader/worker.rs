@@ -59,15 +59,20 @@ pub(crate) fn catching<T>(
 ) -> Result<T, LoadError> {
     match std::panic::catch_unwind(AssertUnwindSafe(f)) {
         Ok(r) => r.map_err(LoadError::from),
-        Err(payload) => {
-            let message = payload
-                .downcast_ref::<&str>()
-                .map(|s| s.to_string())
-                .or_else(|| payload.downcast_ref::<String>().cloned())
-                .unwrap_or_default();
-            Err(LoadError::Panicked { key, message })
-        }
+        Err(payload) => Err(LoadError::Panicked {
+            key,
+            message: panic_message(payload.as_ref()),
+        }),
     }
+}
+
+/// A panic's message, when it was a string.
+fn panic_message(payload: &(dyn std::any::Any + Send)) -> String {
+    payload
+        .downcast_ref::<&str>()
+        .map(|s| s.to_string())
+        .or_else(|| payload.downcast_ref::<String>().cloned())
+        .unwrap_or_default()
 }
 
 /// A node's metadata, panics caught.
@@ -87,6 +92,47 @@ pub(crate) fn fetch_brick(
         source.read_brick(key, &mut buf)?;
         Ok(prep.prepare(&buf, info))
     })
+}
+
+/// Several nodes' bricks in one [`BrickSource::read_bricks`] call, each
+/// prepared; one result per key. A panic fails the whole batch.
+pub(crate) fn fetch_bricks(
+    source: &dyn BrickSource,
+    prep: &Preparer,
+    jobs: &[(NodeKey, NodeInfo)],
+) -> Vec<Result<PreparedBrick, LoadError>> {
+    let keys: Vec<NodeKey> = jobs.iter().map(|j| j.0).collect();
+    let mut bufs = vec![vec![0u8; prep.raw_bytes()]; jobs.len()];
+    let read = std::panic::catch_unwind(AssertUnwindSafe(|| {
+        let mut outs: Vec<&mut [u8]> = bufs.iter_mut().map(|b| b.as_mut_slice()).collect();
+        source.read_bricks(&keys, &mut outs)
+    }));
+    match read {
+        Ok(results) if results.len() == jobs.len() => results
+            .into_iter()
+            .zip(jobs)
+            .zip(&bufs)
+            .map(|((r, (_, info)), buf)| {
+                r.map(|()| prep.prepare(buf, info)).map_err(LoadError::from)
+            })
+            .collect(),
+        // A source that answered for other keys than asked: each on its own.
+        Ok(_) => jobs
+            .iter()
+            .map(|(key, info)| fetch_brick(source, prep, *key, info))
+            .collect(),
+        Err(payload) => {
+            let message = panic_message(payload.as_ref());
+            jobs.iter()
+                .map(|&(key, _)| {
+                    Err(LoadError::Panicked {
+                        key,
+                        message: message.clone(),
+                    })
+                })
+                .collect()
+        }
+    }
 }
 
 /// `key`'s children inside the volume (none at the finest level).
@@ -120,19 +166,31 @@ pub(crate) fn worker(
     tx: Sender<Completion>,
 ) {
     let _guard = ExitGuard(shared.clone());
+    let batch = source.batch_size().clamp(1, MAX_BATCH);
     loop {
-        let job = {
+        let (job, more) = {
             let mut q = shared.queue.lock();
             loop {
                 if q.shutdown {
                     return;
                 }
                 if let Some(job) = q.pop() {
-                    break job;
+                    let more = match job {
+                        Job::Brick { .. } if batch > 1 => q.pop_more_bricks(batch - 1),
+                        _ => Vec::new(),
+                    };
+                    break (job, more);
                 }
                 shared.wake.wait(&mut q);
             }
         };
+        if batch > 1 && matches!(job, Job::Brick { .. }) {
+            let jobs: Vec<Job> = std::iter::once(job).chain(more).collect();
+            if !brick_batch(&shared, source.as_ref(), &prep, &tx, &jobs) {
+                return;
+            }
+            continue;
+        }
         let done = match job {
             Job::Meta(key) => Completion::Meta {
                 key,
@@ -144,32 +202,18 @@ pub(crate) fn worker(
                 children_meta,
             } => {
                 let result = fetch_brick(source.as_ref(), &prep, key, &info);
-                // Claim the children's metadata before the brick is delivered, so
-                // that a split of the node finds it in flight, not missing.
-                let claimed = if children_meta && result.is_ok() {
-                    shared
-                        .queue
-                        .lock()
-                        .claim_metadata(&children_in_volume(prep.layout(), key))
-                } else {
-                    Vec::new()
-                };
-                // The brick goes first: a slow or hung metadata call must not
-                // hold it back.
-                if tx.send(Completion::Brick { key, result }).is_err() {
+                if !deliver(
+                    &shared,
+                    source.as_ref(),
+                    &prep,
+                    &tx,
+                    key,
+                    children_meta,
+                    result,
+                ) {
                     return;
                 }
-                if claimed.is_empty() {
-                    continue;
-                }
-                let mut children = Vec::with_capacity(claimed.len());
-                for c in claimed {
-                    if shared.queue.lock().shutdown {
-                        return;
-                    }
-                    children.push((c, fetch_meta(source.as_ref(), c)));
-                }
-                Completion::Children(children)
+                continue;
             }
         };
         // The loader is gone: stop.
@@ -177,4 +221,106 @@ pub(crate) fn worker(
             return;
         }
     }
+}
+
+/// Most bricks one batch carries, whatever the source asks.
+pub(crate) const MAX_BATCH: usize = 64;
+
+/// Reads a batch of brick jobs in one call and delivers each; false when
+/// the thread should stop.
+fn brick_batch(
+    shared: &Shared,
+    source: &dyn BrickSource,
+    prep: &Preparer,
+    tx: &Sender<Completion>,
+    jobs: &[Job],
+) -> bool {
+    let wanted: Vec<(NodeKey, NodeInfo, bool)> = jobs
+        .iter()
+        .filter_map(|j| match *j {
+            Job::Brick {
+                key,
+                info,
+                children_meta,
+            } => Some((key, info, children_meta)),
+            Job::Meta(_) => None,
+        })
+        .collect();
+    let pairs: Vec<(NodeKey, NodeInfo)> = wanted.iter().map(|&(k, i, _)| (k, i)).collect();
+    let results = fetch_bricks(source, prep, &pairs);
+    // Every brick first, then the children's metadata of each.
+    let mut claimed = Vec::new();
+    for ((key, _, children_meta), result) in wanted.into_iter().zip(results) {
+        match send_brick(shared, prep, tx, key, children_meta, result) {
+            Some(c) => claimed.push(c),
+            None => return false,
+        }
+    }
+    claimed
+        .into_iter()
+        .all(|c| send_children(shared, source, tx, c))
+}
+
+/// Sends a brick's result, then (when asked and the brick arrived) reads and
+/// sends its children's metadata; false when the thread should stop.
+fn deliver(
+    shared: &Shared,
+    source: &dyn BrickSource,
+    prep: &Preparer,
+    tx: &Sender<Completion>,
+    key: NodeKey,
+    children_meta: bool,
+    result: Result<PreparedBrick, LoadError>,
+) -> bool {
+    match send_brick(shared, prep, tx, key, children_meta, result) {
+        Some(claimed) => send_children(shared, source, tx, claimed),
+        None => false,
+    }
+}
+
+/// Sends a brick's result; returns the children whose metadata it claimed
+/// (when asked and the brick arrived), `None` when the thread should stop.
+fn send_brick(
+    shared: &Shared,
+    prep: &Preparer,
+    tx: &Sender<Completion>,
+    key: NodeKey,
+    children_meta: bool,
+    result: Result<PreparedBrick, LoadError>,
+) -> Option<Vec<NodeKey>> {
+    // Claim the children's metadata before the brick is delivered, so that a
+    // split of the node finds it in flight, not missing.
+    let claimed = if children_meta && result.is_ok() {
+        shared
+            .queue
+            .lock()
+            .claim_metadata(&children_in_volume(prep.layout(), key))
+    } else {
+        Vec::new()
+    };
+    // The brick goes first: a slow or hung metadata call must not hold it
+    // back.
+    tx.send(Completion::Brick { key, result }).ok()?;
+    Some(claimed)
+}
+
+/// Reads and sends the metadata of claimed children; false when the thread
+/// should stop.
+fn send_children(
+    shared: &Shared,
+    source: &dyn BrickSource,
+    tx: &Sender<Completion>,
+    claimed: Vec<NodeKey>,
+) -> bool {
+    if claimed.is_empty() {
+        return true;
+    }
+    let mut children = Vec::with_capacity(claimed.len());
+    for c in claimed {
+        if shared.queue.lock().shutdown {
+            return false;
+        }
+        children.push((c, fetch_meta(source, c)));
+    }
+    tx.send(Completion::Children(children)).is_ok()
 }
