@@ -13,7 +13,10 @@ into) the answer:
 
     python3 fault_proxy.py --upstream http://127.0.0.1:PORT
         [--cycle ok,503,latency,reset,ok,429,truncate,stall] [--port 0]
-        [--port-file FILE] [--stall 30]
+        [--port-file FILE] [--stall 30] [--delay MS]
+
+--delay holds every request MS milliseconds before it is forwarded: an
+added round-trip time (the `remote` benchmark runs `--cycle ok --delay 80`).
 
 Every connection carries one request (Connection: close), so a fault never
 leaks into the next request. Standard library only.
@@ -29,6 +32,12 @@ import time
 import urllib.parse
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 
+
+class Server(ThreadingHTTPServer):
+    # The standard library's listen backlog of 5 drops connections when a
+    # client opens dozens at once (they come back after a 1 s SYN retry).
+    request_queue_size = 1024
+
 HOP = {"connection", "keep-alive", "proxy-connection", "transfer-encoding", "upgrade", "te", "trailer"}
 
 
@@ -37,6 +46,7 @@ class Proxy(BaseHTTPRequestHandler):
     upstream = None
     cycle = ["ok"]
     stall = 30.0
+    delay = 0.0
     counter = 0
     lock = threading.Lock()
 
@@ -53,6 +63,8 @@ class Proxy(BaseHTTPRequestHandler):
         length = int(self.headers.get("Content-Length") or 0)
         body = self.rfile.read(length) if length else None
         fault = self._fault()
+        if Proxy.delay > 0:
+            time.sleep(Proxy.delay)
         if fault == "reset":
             # RST rather than FIN: SO_LINGER with a zero timeout.
             self.connection.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, b"\x01\x00\x00\x00\x00\x00\x00\x00")
@@ -111,11 +123,13 @@ def main():
     ap.add_argument("--port", type=int, default=0)
     ap.add_argument("--port-file")
     ap.add_argument("--stall", type=float, default=30.0)
+    ap.add_argument("--delay", type=float, default=0.0, help="ms added to every request")
     args = ap.parse_args()
     Proxy.upstream = args.upstream
     Proxy.cycle = [c.strip() for c in args.cycle.split(",") if c.strip()]
     Proxy.stall = args.stall
-    server = ThreadingHTTPServer((args.host, args.port), Proxy)
+    Proxy.delay = args.delay / 1000.0
+    server = Server((args.host, args.port), Proxy)
     server.daemon_threads = True
     if args.port_file:
         with open(args.port_file + ".tmp", "w") as f:

@@ -21,6 +21,7 @@ mod prediction;
 mod prediction_chart;
 mod preint;
 mod raw;
+mod remote;
 mod runner;
 mod soak;
 mod stability;
@@ -398,6 +399,23 @@ enum Suite {
         #[arg(long, value_parser = at_least_one::<usize>)]
         rounds: Option<usize>,
     },
+    /// Streaming over HTTP with added round-trip time against the local
+    /// disk: first image, convergence, bytes and requests, frame times
+    /// (needs ../shared/data and python3).
+    Remote {
+        /// Image side in pixels of the planned frames (default 512).
+        #[arg(long, value_parser = image_side)]
+        size: Option<u32>,
+        /// Added delays in ms, comma-separated (default 0,20,80).
+        #[arg(long)]
+        delays: Option<String>,
+        /// Loader threads (default 8).
+        #[arg(long)]
+        threads: Option<usize>,
+        /// Ranges this close (KiB) are fetched as one request (default 16).
+        #[arg(long)]
+        gap_kib: Option<u64>,
+    },
     /// u8 volumes: exact interpolation vs 8-bit texels.
     U8 {
         /// Image side in pixels (default 512).
@@ -429,6 +447,7 @@ fn main() -> ExitCode {
         Suite::Stability { .. } => stability::run(rest),
         Suite::U8 { .. } => u8::run(rest),
         Suite::Labels { .. } => labels::run(rest),
+        Suite::Remote { .. } => remote::run(rest),
         Suite::Lod { .. } => lod::run(rest),
         Suite::Visibility { .. } => visibility::run(rest),
     };

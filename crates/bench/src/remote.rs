@@ -1,0 +1,583 @@
+//! The `remote` suite: streaming a volume over HTTP with added round-trip
+//! time, against the same volume read from the local disk (docs/remote.md).
+//!
+//! The shared T1 MRI (pycortex S1, u8 256^3) as a brick store (`.brs`, built
+//! here) and as the shared OME-Zarr 0.5 image of it, served by the Range
+//! HTTP test server (`scripts/test-servers/range_http.py`) behind the
+//! fault proxy (`fault_proxy.py --cycle ok --delay MS`) adding `--delays`
+//! milliseconds (0, 20, 80) to every request; both started here and stopped
+//! at the end. Each case opens the source, sets it on a renderer (default
+//! out-of-core configuration, `--threads` loader threads) and walks the
+//! camera path of the `ooc` suite's part (c) at `--size` px (512): the start
+//! view held until it converges, a slow orbit, a jump to a close-up held
+//! until it converges, slow motion. Frames are planned, not ray cast
+//! (`prepare` with its uploads, then a submission: the render thread's whole
+//! share of a frame; lavapipe takes seconds to ray cast 512^2), paced at
+//! 60 Hz like a host's frame loop.
+//!
+//! Per case: the time to the first complete image (set-up, which reads the
+//! metadata and the root brick, plus the first frame: every pixel is drawn
+//! from the root or finer from then on); time and frames to the start
+//! view's convergence; frames to converge after the jump; requests and bytes
+//! fetched (a `.brs`: against the payload bytes of the bricks the cuts drew,
+//! every brick that reached the GPU pool); requests per brick loaded; median
+//! and p99 of the planned frames' wall time while bricks were in flight. The
+//! store at the largest delay runs a second time with batching off (one
+//! request per brick, as the loader read before batches): the requests
+//! batching saves.
+//!
+//! `cargo run --release -p brickray-bench -- remote [--size PX] [--delays
+//! 0,20,80] [--threads N]` (needs ../shared/data and python3).
+
+use crate::runner::{Runner, median, quantile, round2};
+use crate::{Figures, arg};
+use brickray_core::tf::{TfModel, TfPreset};
+use brickray_core::{
+    BrickError, BrickSource, Camera, NodeInfo, NodeKey, OctreeLayout, RangeRead, RangeReader,
+    RenderSettings, VolumeFrame,
+};
+use brickray_harness::GpuContext;
+use brickray_io::zarr::ZarrBrickSource;
+use brickray_remote::{RemoteObjects, RemoteOptions, RemoteRangeReader};
+use brickray_render::{OutOfCoreConfig, VolumeRenderer};
+use brickray_store::{BuildOptions, Store};
+use glam::Vec3;
+use serde_json::json;
+use std::collections::HashSet;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::{Duration, Instant};
+
+/// A host's frame period (60 Hz).
+const FRAME: Duration = Duration::from_micros(16_667);
+/// Frames of the slow orbit and of the slow motion after the close-up.
+const ORBIT: usize = 15;
+const MOVE: usize = 15;
+/// Most frames a view is held waiting for convergence.
+const MAX_HOLD: usize = 1800;
+
+pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
+    let size: u32 = arg(args, "--size", 512)?;
+    let threads: usize = arg(args, "--threads", 8)?;
+    let gap_kib: u64 = arg(
+        args,
+        "--gap-kib",
+        brickray_remote::DEFAULT_COALESCE_GAP >> 10,
+    )?;
+    let delays: Vec<u32> = arg(args, "--delays", "0,20,80".to_string())?
+        .split(',')
+        .map(|d| d.trim().parse().map_err(|_| format!("bad delay {d:?}")))
+        .collect::<Result<_, _>>()?;
+    let shared = brickray_harness::shared_data_dir()
+        .ok_or("the remote suite needs ../shared/data (the shared MRI)")?;
+    let raw = shared.join("pycortex_s1_t1_mri/pycortex_s1_t1_mri.json");
+    let zarr = shared.join("formats/ome-zarr/pycortex_s1_t1_v05.ome.zarr");
+    let gpu = GpuContext::new().map_err(|e| e.to_string())?;
+    println!("adapter: {}", gpu.describe());
+    let dir = tempfile::tempdir().map_err(|e| e.to_string())?;
+    let root = dir.path().join("http");
+    std::fs::create_dir_all(&root).map_err(|e| e.to_string())?;
+    let store_path = root.join("mri.brs");
+    let vol = brickray_io::read_volume(&raw).map_err(|e| e.to_string())?;
+    let mut reader = brickray_io::MemoryReader::new(vol, "memory");
+    brickray_store::build(&mut reader, &store_path, &BuildOptions::default())
+        .map_err(|e| e.to_string())?;
+    copy_dir(&zarr, &root.join("mri.ome.zarr"))?;
+    let scripts = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scripts/test-servers");
+    let server = Server::start(
+        dir.path(),
+        "http",
+        &scripts.join("range_http.py"),
+        &["--root", &root.to_string_lossy()],
+    )?;
+    let upstream = format!("http://127.0.0.1:{}", server.port);
+    let mut proxies = Vec::new();
+    for &d in &delays {
+        let p = Server::start(
+            dir.path(),
+            &format!("proxy{d}"),
+            &scripts.join("fault_proxy.py"),
+            &[
+                "--upstream",
+                &upstream,
+                "--cycle",
+                "ok",
+                "--delay",
+                &d.to_string(),
+            ],
+        )?;
+        proxies.push((d, p));
+    }
+    println!(
+        "pycortex S1 T1 MRI (u8 256^3): a .brs store ({:.1} MiB) and the shared OME-Zarr 0.5 image, over a Range HTTP server with added delay; {size}x{size} frames planned at 60 Hz, {threads} loader threads",
+        std::fs::metadata(&store_path).map_or(0.0, |m| m.len() as f64 / (1 << 20) as f64)
+    );
+    println!(
+        "\n| source | transport | first image s | converged s (frames) | after the jump (frames) | requests | MiB fetched | fetched / drawn bricks | requests per brick | p99 / median ms streaming | slowest frame ms |"
+    );
+    println!("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
+    let opts = RemoteOptions {
+        allow_http: true,
+        coalesce_gap: gap_kib << 10,
+        ..RemoteOptions::default()
+    };
+    let mut cases: Vec<(&str, String, Option<u32>, bool)> = Vec::new();
+    for src in ["brs", "zarr"] {
+        cases.push((src, "local".into(), None, true));
+        for &d in &delays {
+            cases.push((src, format!("http +{d} ms"), Some(d), true));
+        }
+    }
+    if let Some(&worst) = delays.iter().max() {
+        cases.push((
+            "brs",
+            format!("http +{worst} ms, unbatched"),
+            Some(worst),
+            false,
+        ));
+    }
+    let run = Runner::new(&gpu, size)?;
+    let mut fig = Figures::new();
+    let mut results = Vec::new();
+    for (src, transport, delay, batched) in cases {
+        let base = delay.map(|d| {
+            let port = proxies.iter().find(|p| p.0 == d).map_or(0, |p| p.1.port);
+            format!("http://127.0.0.1:{port}")
+        });
+        let opened = open(src, base.as_deref(), &store_path, &zarr, &opts, batched)?;
+        let r = case(&gpu, &run, opened, threads)?;
+        println!(
+            "| {src} | {transport} | {:.2} | {:.2} ({}) | {} | {} | {:.2} | {} | {:.2} | {:.2} / {:.2} = {:.2} | {:.1} |",
+            r.first_image_s,
+            r.converged_s,
+            r.converged_frames,
+            r.after_jump
+                .map_or("not converged".into(), |f| f.to_string()),
+            r.fetched.0,
+            r.fetched.1 as f64 / (1 << 20) as f64,
+            r.bytes_ratio.map_or("-".into(), |x| format!("{x:.2}")),
+            r.requests_per_brick,
+            r.p99_ms,
+            r.median_ms,
+            r.p99_ms / r.median_ms.max(1e-9),
+            r.max_ms,
+        );
+        results.push((src, delay, batched, r));
+    }
+    drop(proxies);
+    drop(server);
+    let find = |src: &str, delay: Option<u32>, batched: bool| {
+        results
+            .iter()
+            .find(|r| r.0 == src && r.1 == delay && r.2 == batched)
+            .map(|r| &r.3)
+    };
+    for (src, _, _, _) in results.iter().filter(|r| r.1.is_none()) {
+        let local = find(src, None, true).ok_or("no local case")?;
+        for &d in &delays {
+            let Some(r) = find(src, Some(d), true) else {
+                continue;
+            };
+            fig.insert(
+                format!("{src}_first_image_s_{d}ms"),
+                json!(round2(r.first_image_s)),
+            );
+            fig.insert(
+                format!("{src}_converged_ratio_{d}ms_vs_local"),
+                json!(round2(r.converged_s / local.converged_s.max(1e-9))),
+            );
+        }
+    }
+    let worst = delays.iter().max().copied();
+    let at = |src| worst.and_then(|d| find(src, Some(d), true));
+    if let (Some(r), Some(local), Some(d)) = (at("brs"), find("brs", None, true), worst) {
+        // The store at the largest delay (80 ms by default): the keys.
+        fig.insert(
+            format!("first_image_s_{d}ms"),
+            json!(round2(r.first_image_s)),
+        );
+        fig.insert(
+            format!("converged_ratio_{d}ms_vs_local"),
+            json!(round2(r.converged_s / local.converged_s.max(1e-9))),
+        );
+        fig.insert(
+            "bytes_ratio_vs_cut".into(),
+            json!(r.bytes_ratio.map(round2)),
+        );
+        fig.insert(
+            "requests_per_brick".into(),
+            json!(round2(r.requests_per_brick)),
+        );
+        fig.insert(
+            "p99_over_median_streaming".into(),
+            json!(round2(r.p99_ms / r.median_ms.max(1e-9))),
+        );
+        fig.insert("slowest_streaming_frame_ms".into(), json!(round2(r.max_ms)));
+    }
+    if let (Some(b), Some(u)) = (at("brs"), worst.and_then(|d| find("brs", Some(d), false))) {
+        fig.insert(
+            "requests_saved_by_batching".into(),
+            json!(round2(1.0 - b.fetched.0 as f64 / u.fetched.0.max(1) as f64)),
+        );
+        fig.insert(
+            "converged_ratio_unbatched_vs_batched".into(),
+            json!(round2(u.converged_s / b.converged_s.max(1e-9))),
+        );
+    }
+    Ok(fig)
+}
+
+/// A source opened for one case, with what counts its traffic.
+struct Opened {
+    source: Arc<dyn BrickSource>,
+    /// Requests and bytes fetched so far.
+    fetched: Box<dyn Fn() -> (u64, u64)>,
+    /// A store's payload bytes per node (for the drawn bricks' bytes).
+    store: Option<Arc<Store>>,
+    /// Set-up so far (opening), in seconds.
+    open_s: f64,
+}
+
+fn open(
+    src: &str,
+    base: Option<&str>,
+    store_path: &Path,
+    zarr: &Path,
+    opts: &RemoteOptions,
+    batched: bool,
+) -> Result<Opened, String> {
+    let t = Instant::now();
+    let (d_brick, d_apron) = {
+        let d = BuildOptions::default();
+        (d.brick, d.apron)
+    };
+    let read = brickray_io::ReadOptions::default();
+    let e = |e: &dyn std::fmt::Display| e.to_string();
+    let (source, fetched, store): (Arc<dyn BrickSource>, Box<dyn Fn() -> (u64, u64)>, _) =
+        match (src, base) {
+            ("brs", None) => {
+                let file = std::fs::File::open(store_path).map_err(|x| e(&x))?;
+                let counting = Arc::new(Counting::new(file));
+                let store =
+                    Arc::new(Store::open_with(counting.clone(), store_path).map_err(|x| e(&x))?);
+                let c = counting.clone();
+                (store.clone(), Box::new(move || c.get()), Some(store))
+            }
+            ("brs", Some(base)) => {
+                let url = format!("{base}/mri.brs");
+                let reader = Arc::new(RemoteRangeReader::open(&url, opts).map_err(|x| e(&x))?);
+                let store = Arc::new(Store::open_with(reader.clone(), &url).map_err(|x| e(&x))?);
+                let source: Arc<dyn BrickSource> = if batched {
+                    store.clone()
+                } else {
+                    Arc::new(Unbatched(store.clone()))
+                };
+                let r = reader.clone();
+                let fetched = Box::new(move || {
+                    let f = r.fetched();
+                    (f.requests, f.bytes)
+                });
+                (source, fetched, Some(store))
+            }
+            ("zarr", None) => {
+                let z = ZarrBrickSource::open(zarr, &read, d_brick, d_apron, None)
+                    .map_err(|x| e(&x))?;
+                (Arc::new(z), Box::new(|| (0, 0)), None)
+            }
+            ("zarr", Some(base)) => {
+                let url = format!("{base}/mri.ome.zarr");
+                let objects = Arc::new(RemoteObjects::open(&url, opts).map_err(|x| e(&x))?);
+                let z =
+                    ZarrBrickSource::open_objects(objects.clone(), &read, d_brick, d_apron, None)
+                        .map_err(|x| e(&x))?;
+                let o = objects.clone();
+                let fetched = Box::new(move || {
+                    let f = o.fetched();
+                    (f.requests, f.bytes)
+                });
+                (Arc::new(z), fetched, None)
+            }
+            _ => return Err(format!("unknown source {src}")),
+        };
+    Ok(Opened {
+        source,
+        fetched,
+        store,
+        open_s: t.elapsed().as_secs_f64(),
+    })
+}
+
+/// What one case measured.
+struct CaseResult {
+    first_image_s: f64,
+    converged_s: f64,
+    converged_frames: usize,
+    after_jump: Option<usize>,
+    /// Requests and bytes fetched over the whole case.
+    fetched: (u64, u64),
+    /// Bytes fetched / payload bytes of the bricks the cuts drew (a store).
+    bytes_ratio: Option<f64>,
+    requests_per_brick: f64,
+    median_ms: f64,
+    p99_ms: f64,
+    max_ms: f64,
+}
+
+fn case(
+    gpu: &GpuContext,
+    run: &Runner<'_>,
+    opened: Opened,
+    threads: usize,
+) -> Result<CaseResult, String> {
+    let layout = opened.source.layout().clone();
+    let d = layout.volume.clone();
+    let frame = VolumeFrame::centered(d.dims, d.spacing);
+    let tf = TfModel::preset(TfPreset::Mri, d.value_range)
+        .to_table(256)
+        .map_err(|e| e.to_string())?;
+    let settings = RenderSettings::default();
+    let start = Instant::now();
+    let mut r = VolumeRenderer::new(&gpu.device, brickray_harness::target_desc())
+        .map_err(|e| e.to_string())?;
+    r.set_volume_source(
+        &gpu.device,
+        &gpu.queue,
+        opened.source.clone(),
+        OutOfCoreConfig {
+            loader_threads: threads,
+            ..OutOfCoreConfig::default()
+        },
+    )
+    .map_err(|e| e.to_string())?;
+    r.set_transfer_function(&gpu.device, &gpu.queue, &tf)
+        .map_err(|e| e.to_string())?;
+    // As a host does at set-up: no frame pays for compiling the pipelines.
+    r.warm_up(&gpu.device, &[settings])
+        .map_err(|e| e.to_string())?;
+    let c = frame.center();
+    // The `ooc` suite's path (the frame's longest side is 1).
+    let close = c + Vec3::new(-0.25, 0.2, -0.35);
+    let radius = 2.0;
+    let start_cam = Camera::orbit(c, radius, 0.5, 0.3);
+    let mut walk = Walk {
+        run,
+        frame,
+        settings,
+        drawn: HashSet::new(),
+        streaming_ms: Vec::new(),
+        frames: 0,
+    };
+    // The first frame: the root (preloaded at set-up) covers every pixel.
+    let first = walk.step(&mut r, start_cam)?;
+    let first_image_s = opened.open_s + start.elapsed().as_secs_f64();
+    let mut converged = first.then_some(1);
+    let mut frames = 1;
+    while converged.is_none() && frames < MAX_HOLD {
+        frames += 1;
+        if walk.step(&mut r, start_cam)? {
+            converged = Some(frames);
+        }
+    }
+    let converged_s = opened.open_s + start.elapsed().as_secs_f64();
+    for i in 0..ORBIT {
+        walk.step(&mut r, Camera::orbit(c, radius, 0.5 + 0.01 * i as f32, 0.3))?;
+    }
+    let close_cam = Camera::orbit(close, 0.2 * radius, 3.3, -0.2);
+    let mut after_jump = None;
+    for i in 1..=MAX_HOLD {
+        if walk.step(&mut r, close_cam)? {
+            after_jump = Some(i);
+            break;
+        }
+    }
+    for i in 0..MOVE {
+        walk.step(
+            &mut r,
+            Camera::orbit(close, 0.2 * radius, 3.3 + 0.005 * (i + 1) as f32, -0.2),
+        )?;
+    }
+    let fetched = (opened.fetched)();
+    let loaded = r
+        .streamed_volume()
+        .ok_or("not out of core")?
+        .inspect(|s| s.manager().loader().loaded_total());
+    let bytes_ratio = opened.store.as_ref().map(|s| {
+        let drawn: u64 = walk
+            .drawn
+            .iter()
+            .filter_map(|&k| s.record(k).ok())
+            .map(|n| n.payload_len as u64)
+            .sum();
+        fetched.1 as f64 / drawn.max(1) as f64
+    });
+    let ms = if walk.streaming_ms.is_empty() {
+        vec![0.0]
+    } else {
+        walk.streaming_ms
+    };
+    Ok(CaseResult {
+        first_image_s,
+        converged_s,
+        converged_frames: converged.unwrap_or(frames),
+        after_jump,
+        fetched,
+        bytes_ratio,
+        requests_per_brick: fetched.0 as f64 / loaded.max(1) as f64,
+        median_ms: median(&ms),
+        p99_ms: quantile(&ms, 0.99),
+        max_ms: ms.iter().copied().fold(0.0, f64::max),
+    })
+}
+
+/// The camera path's frames, paced at 60 Hz.
+struct Walk<'a, 'g> {
+    run: &'a Runner<'g>,
+    frame: VolumeFrame,
+    settings: RenderSettings,
+    /// Every brick that reached the GPU pool (drawn by some frame's cut,
+    /// as a fallback or as the floor).
+    drawn: HashSet<NodeKey>,
+    /// Planned frames' wall time while bricks were in flight, the first
+    /// frame excepted.
+    streaming_ms: Vec<f64>,
+    /// Frames planned.
+    frames: usize,
+}
+
+impl Walk<'_, '_> {
+    /// Plans one frame; returns whether the view has converged.
+    fn step(&mut self, r: &mut VolumeRenderer, camera: Camera) -> Result<bool, String> {
+        let t = Instant::now();
+        self.run.plan(r, camera, self.frame, self.settings)?;
+        let took = t.elapsed();
+        let s = r.stats().out_of_core.ok_or("not out of core")?;
+        // The first frame allocates the pool (set-up, counted in the first
+        // image's time), the others are the host's frames.
+        if self.frames > 0 && (s.cache.requests_in_flight > 0 || !s.converged) {
+            self.streaming_ms.push(took.as_secs_f64() * 1e3);
+        }
+        self.frames += 1;
+        let v = r.streamed_volume().ok_or("not out of core")?;
+        v.inspect(|st| self.drawn.extend(st.pool().resident().map(|(k, _)| k)));
+        std::thread::sleep(FRAME.saturating_sub(t.elapsed()));
+        Ok(s.converged)
+    }
+}
+
+/// A store read one brick per request (the loader before batches).
+struct Unbatched(Arc<Store>);
+
+impl BrickSource for Unbatched {
+    fn layout(&self) -> &OctreeLayout {
+        self.0.layout()
+    }
+    fn node(&self, key: NodeKey) -> Result<NodeInfo, BrickError> {
+        self.0.node(key)
+    }
+    fn read_brick(&self, key: NodeKey, out: &mut [u8]) -> Result<(), BrickError> {
+        self.0.read_brick(key, out)
+    }
+}
+
+/// A local file that counts its reads (each range one request) and bytes.
+#[derive(Debug)]
+struct Counting {
+    file: std::fs::File,
+    requests: AtomicU64,
+    bytes: AtomicU64,
+}
+
+impl Counting {
+    fn new(file: std::fs::File) -> Counting {
+        Counting {
+            file,
+            requests: AtomicU64::new(0),
+            bytes: AtomicU64::new(0),
+        }
+    }
+
+    fn get(&self) -> (u64, u64) {
+        (
+            self.requests.load(Ordering::Relaxed),
+            self.bytes.load(Ordering::Relaxed),
+        )
+    }
+}
+
+impl RangeReader for Counting {
+    fn len(&self) -> std::io::Result<u64> {
+        self.file.len()
+    }
+    fn read_exact_at(&self, buf: &mut [u8], offset: u64) -> std::io::Result<()> {
+        self.requests.fetch_add(1, Ordering::Relaxed);
+        self.bytes.fetch_add(buf.len() as u64, Ordering::Relaxed);
+        RangeReader::read_exact_at(&self.file, buf, offset)
+    }
+    fn read_ranges(&self, ranges: &mut [RangeRead<'_>]) -> std::io::Result<()> {
+        for r in ranges {
+            self.read_exact_at(r.buf, r.offset)?;
+        }
+        Ok(())
+    }
+}
+
+/// A test server (python3) started for the suite, stopped when dropped.
+struct Server {
+    child: Child,
+    port: u16,
+}
+
+impl Server {
+    fn start(dir: &Path, name: &str, script: &Path, args: &[&str]) -> Result<Server, String> {
+        let port_file: PathBuf = dir.join(format!("{name}.port"));
+        let child = Command::new("python3")
+            .arg(script)
+            .args(args)
+            .arg("--port-file")
+            .arg(&port_file)
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .map_err(|e| format!("python3 {}: {e}", script.display()))?;
+        let mut server = Server { child, port: 0 };
+        let t = Instant::now();
+        while t.elapsed() < Duration::from_secs(15) {
+            if let Some(p) = std::fs::read_to_string(&port_file)
+                .ok()
+                .and_then(|s| s.trim().parse().ok())
+            {
+                server.port = p;
+                return Ok(server);
+            }
+            if let Ok(Some(status)) = server.child.try_wait() {
+                return Err(format!("{} exited: {status}", script.display()));
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        Err(format!("{} did not start within 15 s", script.display()))
+    }
+}
+
+impl Drop for Server {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// Copies a folder tree.
+fn copy_dir(from: &Path, to: &Path) -> Result<(), String> {
+    std::fs::create_dir_all(to).map_err(|e| e.to_string())?;
+    for entry in std::fs::read_dir(from).map_err(|e| format!("{}: {e}", from.display()))? {
+        let entry = entry.map_err(|e| e.to_string())?;
+        let target = to.join(entry.file_name());
+        if entry.file_type().map_err(|e| e.to_string())?.is_dir() {
+            copy_dir(&entry.path(), &target)?;
+        } else {
+            std::fs::copy(entry.path(), &target).map_err(|e| e.to_string())?;
+        }
+    }
+    Ok(())
+}
