@@ -137,7 +137,8 @@ stop_display() {
 # of that kind is started). In front of each it starts a fault-injecting
 # proxy (scripts/test-servers/fault_proxy.py: latency, 503 and 429, resets,
 # truncated and stalled bodies) as BRICKRAY_TEST_HTTP_FAULTY and
-# BRICKRAY_TEST_S3_FAULTY. `stop_remote_servers` stops what it started.
+# BRICKRAY_TEST_S3_FAULTY, and one that only delays every request by 300 ms
+# as BRICKRAY_TEST_HTTP_SLOW. `stop_remote_servers` stops what it started.
 BRICKRAY_HTTP_PID=""
 BRICKRAY_MOTO_PID=""
 BRICKRAY_PROXY_PIDS=""
@@ -230,6 +231,20 @@ ensure_remote_servers() {
     export "BRICKRAY_TEST_${name}_FAULTY=http://127.0.0.1:$pport"
     echo "brickray: fault-injecting proxy to ${!upstream} on http://127.0.0.1:$pport" >&2
   done
+  # A slow road to the HTTP server (every request held 300 ms): what the
+  # cancellation tests abort.
+  if [ -z "${BRICKRAY_TEST_HTTP_SLOW:-}" ]; then
+    python3 scripts/test-servers/fault_proxy.py --upstream "$BRICKRAY_TEST_HTTP" \
+      --cycle ok --delay 300 --port-file "$BRICKRAY_REMOTE_DIR/proxy-slow.port" >/dev/null 2>&1 &
+    pid=$!
+    BRICKRAY_PROXY_PIDS="$BRICKRAY_PROXY_PIDS $pid"
+    if ! pport="$(wait_port_file "$BRICKRAY_REMOTE_DIR/proxy-slow.port" "$pid")"; then
+      echo "brickray: the slow proxy did not start" >&2
+      exit 1
+    fi
+    export "BRICKRAY_TEST_HTTP_SLOW=http://127.0.0.1:$pport"
+    echo "brickray: slow proxy (300 ms) to $BRICKRAY_TEST_HTTP on http://127.0.0.1:$pport" >&2
+  fi
 }
 
 stop_remote_servers() {

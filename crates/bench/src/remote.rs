@@ -115,9 +115,9 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         std::fs::metadata(&store_path).map_or(0.0, |m| m.len() as f64 / (1 << 20) as f64)
     );
     println!(
-        "\n| source | transport | first image s | converged s (frames) | after the jump (frames) | requests | MiB fetched | fetched / drawn bricks | requests per brick | p99 / median ms streaming | slowest frame ms |"
+        "\n| source | transport | first image s | converged s (frames) | after the jump (frames) | requests | MiB fetched | fetched / drawn bricks | requests per brick | cancelled queued / in flight | p99 / median ms streaming | slowest frame ms |"
     );
-    println!("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
+    println!("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
     let opts = RemoteOptions {
         allow_http: true,
         coalesce_gap: gap_kib << 10,
@@ -149,7 +149,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         let opened = open(src, base.as_deref(), &store_path, &zarr, &opts, batched)?;
         let r = case(&gpu, &run, opened, threads)?;
         println!(
-            "| {src} | {transport} | {:.2} | {:.2} ({}) | {} | {} | {:.2} | {} | {:.2} | {:.2} / {:.2} = {:.2} | {:.1} |",
+            "| {src} | {transport} | {:.2} | {:.2} ({}) | {} | {} | {:.2} | {} | {:.2} | {} / {} | {:.2} / {:.2} = {:.2} | {:.1} |",
             r.first_image_s,
             r.converged_s,
             r.converged_frames,
@@ -159,6 +159,8 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
             r.fetched.1 as f64 / (1 << 20) as f64,
             r.bytes_ratio.map_or("-".into(), |x| format!("{x:.2}")),
             r.requests_per_brick,
+            r.cancelled[0],
+            r.cancelled[1],
             r.p99_ms,
             r.median_ms,
             r.p99_ms / r.median_ms.max(1e-9),
@@ -229,11 +231,13 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
     Ok(fig)
 }
 
+/// Requests and bytes fetched so far.
+type FetchedFn = Box<dyn Fn() -> (u64, u64)>;
+
 /// A source opened for one case, with what counts its traffic.
 struct Opened {
     source: Arc<dyn BrickSource>,
-    /// Requests and bytes fetched so far.
-    fetched: Box<dyn Fn() -> (u64, u64)>,
+    fetched: FetchedFn,
     /// A store's payload bytes per node (for the drawn bricks' bytes).
     store: Option<Arc<Store>>,
     /// Set-up so far (opening), in seconds.
@@ -255,7 +259,7 @@ fn open(
     };
     let read = brickray_io::ReadOptions::default();
     let e = |e: &dyn std::fmt::Display| e.to_string();
-    let (source, fetched, store): (Arc<dyn BrickSource>, Box<dyn Fn() -> (u64, u64)>, _) =
+    let (source, fetched, store): (Arc<dyn BrickSource>, FetchedFn, _) =
         match (src, base) {
             ("brs", None) => {
                 let file = std::fs::File::open(store_path).map_err(|x| e(&x))?;
@@ -320,6 +324,8 @@ struct CaseResult {
     /// Bytes fetched / payload bytes of the bricks the cuts drew (a store).
     bytes_ratio: Option<f64>,
     requests_per_brick: f64,
+    /// Requests cancelled: queued, in flight.
+    cancelled: [u64; 2],
     median_ms: f64,
     p99_ms: f64,
     max_ms: f64,
@@ -425,6 +431,10 @@ fn case(
         fetched,
         bytes_ratio,
         requests_per_brick: fetched.0 as f64 / loaded.max(1) as f64,
+        cancelled: r
+            .stats()
+            .out_of_core
+            .map_or([0, 0], |s| s.cache.cancelled),
         median_ms: median(&ms),
         p99_ms: quantile(&ms, 0.99),
         max_ms: ms.iter().copied().fold(0.0, f64::max),

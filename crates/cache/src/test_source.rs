@@ -210,8 +210,29 @@ impl BrickSource for TestSource {
         self.batch
     }
 
-    fn read_bricks(&self, keys: &[NodeKey], outs: &mut [&mut [u8]]) -> Vec<Result<(), BrickError>> {
+    /// Records the batch; a batch holding the gate key waits for the gate or
+    /// for `cancel` (then every brick of it is cancelled), as a reader over
+    /// the network aborts its requests.
+    fn read_bricks(
+        &self,
+        keys: &[NodeKey],
+        outs: &mut [&mut [u8]],
+        cancel: &brickray_core::CancelToken,
+    ) -> Vec<Result<(), BrickError>> {
         self.batches.lock().push(keys.to_vec());
+        if self.gate_key.is_some_and(|g| keys.contains(&g)) {
+            let mut open = self.gate.lock();
+            while !*open {
+                if cancel.is_cancelled() {
+                    return keys
+                        .iter()
+                        .map(|&key| Err(BrickError::Cancelled { key }))
+                        .collect();
+                }
+                self.gate_cv
+                    .wait_for(&mut open, std::time::Duration::from_millis(1));
+            }
+        }
         keys.iter()
             .zip(outs.iter_mut())
             .map(|(&key, out)| self.read_brick(key, out))

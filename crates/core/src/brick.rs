@@ -8,6 +8,7 @@
 //! at level `l` has integer position `(x, y, z)` in `0..2^l` and covers the
 //! *octree cube* `[p / 2^l, (p + 1) / 2^l]` of the unit cube.
 
+use crate::range::CancelToken;
 use crate::volume::{DType, VolumeDesc};
 use thiserror::Error;
 
@@ -347,6 +348,13 @@ pub enum BrickError {
         #[source]
         source: std::io::Error,
     },
+    /// The read was cancelled: nobody wants the brick any more
+    /// ([`BrickSource::read_bricks`]).
+    #[error("node {key:?}: the read was cancelled")]
+    Cancelled {
+        /// The key.
+        key: NodeKey,
+    },
     /// The output buffer has the wrong size.
     #[error("brick buffer holds {actual} bytes, expected {expected}")]
     BufferSize {
@@ -385,11 +393,24 @@ pub trait BrickSource: Send + Sync {
     /// Reads several bricks, each as [`read_brick`](Self::read_brick) would
     /// into its buffer of `outs` (as many as `keys`), with one result per key:
     /// a brick that fails does not fail the others. The default reads them
-    /// one after the other; a source over the network fetches them together.
-    fn read_bricks(&self, keys: &[NodeKey], outs: &mut [&mut [u8]]) -> Vec<Result<(), BrickError>> {
+    /// one after the other, skipping (with [`BrickError::Cancelled`]) those
+    /// not begun when `cancel` is cancelled; a source over the network
+    /// fetches them together and aborts its requests when cancelled.
+    fn read_bricks(
+        &self,
+        keys: &[NodeKey],
+        outs: &mut [&mut [u8]],
+        cancel: &CancelToken,
+    ) -> Vec<Result<(), BrickError>> {
         keys.iter()
             .zip(outs.iter_mut())
-            .map(|(&key, out)| self.read_brick(key, out))
+            .map(|(&key, out)| {
+                if cancel.is_cancelled() {
+                    Err(BrickError::Cancelled { key })
+                } else {
+                    self.read_brick(key, out)
+                }
+            })
             .collect()
     }
 }

@@ -59,7 +59,7 @@ pub use macrocell::{MacroCellGrid, sub_cell_ranges, sub_cells_per_axis};
 pub use moments::{MomentGrid, Moments};
 pub use overlay::{LabelOverlay, OverlayError, OverlayMode, OverlayStyle, overlay_transform};
 pub use pyramid::{ALL_AXES, Children, LayoutError, MAX_LEVELS, anisotropic_split_masks};
-pub use range::{MemRangeReader, ObjectReader, ObjectSpan, RangeRead, RangeReader};
+pub use range::{CancelToken, MemRangeReader, ObjectReader, ObjectSpan, RangeRead, RangeReader};
 pub use settings::{Accel, ClipBox, RenderMode, RenderSettings, SettingsError, Shading};
 pub use slice::{Slab, SlabMode, SliceAxis, SliceError, SliceGeometry, SliceView};
 pub use texel::{SampleEncoding, TexelCaps, TexelFormat, U8Filtering};

@@ -11,6 +11,29 @@ use std::fmt;
 use std::io;
 use std::sync::Arc;
 
+/// A flag a reader polls to give up a read that nobody wants any more (a
+/// brick the view left while its request was in flight). Clones share the
+/// flag; cancelling is permanent.
+#[derive(Debug, Clone, Default)]
+pub struct CancelToken(Arc<std::sync::atomic::AtomicBool>);
+
+impl CancelToken {
+    /// A token not cancelled.
+    pub fn new() -> CancelToken {
+        CancelToken::default()
+    }
+
+    /// Cancels every read watching this token (or a clone of it).
+    pub fn cancel(&self) {
+        self.0.store(true, std::sync::atomic::Ordering::Release);
+    }
+
+    /// Whether [`cancel`](Self::cancel) was called.
+    pub fn is_cancelled(&self) -> bool {
+        self.0.load(std::sync::atomic::Ordering::Acquire)
+    }
+}
+
 /// One range to read: `buf.len()` bytes at `offset`.
 #[derive(Debug)]
 pub struct RangeRead<'a> {
@@ -49,6 +72,19 @@ pub trait RangeReader: Send + Sync + fmt::Debug {
         Ok(())
     }
 
+    /// [`read_ranges`](Self::read_ranges), given up (an error) when `cancel`
+    /// is cancelled before the bytes arrive. The default ignores the token: a
+    /// local read is over before anyone could cancel it; a reader over the
+    /// network aborts its requests.
+    fn read_ranges_cancellable(
+        &self,
+        ranges: &mut [RangeRead<'_>],
+        cancel: &CancelToken,
+    ) -> io::Result<()> {
+        let _ = cancel;
+        self.read_ranges(ranges)
+    }
+
     /// Whether a read costs a round trip, so that a caller gains by batching
     /// ranges into one [`read_ranges`](Self::read_ranges) call (a reader over
     /// the network); `false` (the default) for local files and memory.
@@ -70,6 +106,13 @@ impl<T: RangeReader + ?Sized> RangeReader for Arc<T> {
     fn is_remote(&self) -> bool {
         (**self).is_remote()
     }
+    fn read_ranges_cancellable(
+        &self,
+        ranges: &mut [RangeRead<'_>],
+        cancel: &CancelToken,
+    ) -> io::Result<()> {
+        (**self).read_ranges_cancellable(ranges, cancel)
+    }
 }
 
 impl<T: RangeReader + ?Sized> RangeReader for Box<T> {
@@ -84,6 +127,13 @@ impl<T: RangeReader + ?Sized> RangeReader for Box<T> {
     }
     fn is_remote(&self) -> bool {
         (**self).is_remote()
+    }
+    fn read_ranges_cancellable(
+        &self,
+        ranges: &mut [RangeRead<'_>],
+        cancel: &CancelToken,
+    ) -> io::Result<()> {
+        (**self).read_ranges_cancellable(ranges, cancel)
     }
 }
 

@@ -19,7 +19,7 @@
 //! [`RangeReader`] seam it travels inside an
 //! [`std::io::Error`] (see [`RemoteError::from_io`]).
 
-use brickray_core::{RangeRead, RangeReader};
+use brickray_core::{CancelToken, RangeRead, RangeReader};
 use object_store::path::Path as ObjectPath;
 use object_store::{ClientOptions, ObjectStore, ObjectStoreExt, RetryConfig};
 use std::fmt;
@@ -177,6 +177,13 @@ pub enum RemoteError {
         /// The deadline.
         deadline: Duration,
     },
+    /// The caller cancelled the read before its bytes arrived (a brick the
+    /// view no longer wants); its requests were aborted.
+    #[error("{url}: the read was cancelled")]
+    Cancelled {
+        /// The URL.
+        url: String,
+    },
     /// The server returned another number of bytes than the range asked for.
     #[error("{url}: range {offset}+{expected} returned {actual} bytes")]
     WrongLength {
@@ -222,6 +229,7 @@ impl RemoteError {
             | RemoteError::Auth { url, .. }
             | RemoteError::Request { url, .. }
             | RemoteError::Deadline { url, .. }
+            | RemoteError::Cancelled { url }
             | RemoteError::WrongLength { url, .. }
             | RemoteError::OutOfBounds { url, .. }
             | RemoteError::Runtime { url, .. } => url,
@@ -264,6 +272,7 @@ impl RemoteError {
             RemoteError::Missing { .. } => io::ErrorKind::NotFound,
             RemoteError::Auth { .. } => io::ErrorKind::PermissionDenied,
             RemoteError::Deadline { .. } => io::ErrorKind::TimedOut,
+            RemoteError::Cancelled { .. } => io::ErrorKind::Interrupted,
             RemoteError::WrongLength { .. } | RemoteError::OutOfBounds { .. } => {
                 io::ErrorKind::UnexpectedEof
             }
@@ -569,6 +578,21 @@ fn run_on<T: Send + 'static>(
     deadline: Duration,
     f: impl Future<Output = object_store::Result<T>> + Send + 'static,
 ) -> Result<T, RemoteError> {
+    run_until(runtime, url, deadline, f, None)
+}
+
+/// How often a waiting caller looks at its cancel token.
+const CANCEL_POLL: Duration = Duration::from_millis(2);
+
+/// [`run_on`], aborted with [`RemoteError::Cancelled`] (the task and its
+/// requests dropped) once `cancel` is cancelled.
+fn run_until<T: Send + 'static>(
+    runtime: &Runtime,
+    url: &str,
+    deadline: Duration,
+    f: impl Future<Output = object_store::Result<T>> + Send + 'static,
+    cancel: Option<&CancelToken>,
+) -> Result<T, RemoteError> {
     let gone = |reason: &str| RemoteError::Runtime {
         url: url.to_owned(),
         reason: reason.to_owned(),
@@ -580,7 +604,23 @@ fn run_on<T: Send + 'static>(
         // The caller may have stopped waiting; nothing to do then.
         let _ = tx.send(r);
     });
-    match rx.recv() {
+    let got = match cancel {
+        None => rx.recv().map_err(|_| ()),
+        Some(c) => loop {
+            match rx.recv_timeout(CANCEL_POLL) {
+                Ok(r) => break Ok(r),
+                Err(std::sync::mpsc::RecvTimeoutError::Timeout) if c.is_cancelled() => {
+                    task.abort();
+                    return Err(RemoteError::Cancelled {
+                        url: url.to_owned(),
+                    });
+                }
+                Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {}
+                Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => break Err(()),
+            }
+        },
+    };
+    match got {
         Ok(Ok(r)) => r.map_err(|e| RemoteError::of(url, e)),
         Ok(Err(_elapsed)) => Err(RemoteError::Deadline {
             url: url.to_owned(),
@@ -716,9 +756,28 @@ impl RemoteRangeReader {
         Ok(())
     }
 
-    /// Reads several ranges: object_store coalesces neighbours and fetches
-    /// the rest concurrently.
+    /// Reads several ranges: neighbours coalesced, the rest fetched
+    /// concurrently.
     pub fn read_many(&self, ranges: &mut [RangeRead<'_>]) -> Result<(), RemoteError> {
+        self.read_many_until(ranges, None)
+    }
+
+    /// [`read_many`](Self::read_many), aborted with
+    /// [`RemoteError::Cancelled`] when `cancel` is cancelled before the
+    /// bytes arrive (within a few milliseconds; the requests are dropped).
+    pub fn read_many_cancellable(
+        &self,
+        ranges: &mut [RangeRead<'_>],
+        cancel: &CancelToken,
+    ) -> Result<(), RemoteError> {
+        self.read_many_until(ranges, Some(cancel))
+    }
+
+    fn read_many_until(
+        &self,
+        ranges: &mut [RangeRead<'_>],
+        cancel: Option<&CancelToken>,
+    ) -> Result<(), RemoteError> {
         let mut wanted = Vec::with_capacity(ranges.len());
         for r in ranges.iter() {
             if !r.buf.is_empty() {
@@ -729,13 +788,13 @@ impl RemoteRangeReader {
             return Ok(());
         }
         let (store, path) = (self.store.clone(), self.path.clone());
-        let got = self.run(get_ranges_counted(
-            store,
-            path,
-            wanted,
-            self.traffic.clone(),
-            self.gap,
-        ))?;
+        let got = run_until(
+            &self.runtime,
+            &self.url,
+            self.deadline,
+            get_ranges_counted(store, path, wanted, self.traffic.clone(), self.gap),
+            cancel,
+        )?;
         let mut got = got.into_iter();
         for r in ranges.iter_mut().filter(|r| !r.buf.is_empty()) {
             let bytes = got.next().unwrap_or_default();
@@ -757,6 +816,14 @@ impl RangeReader for RemoteRangeReader {
 
     fn read_ranges(&self, ranges: &mut [RangeRead<'_>]) -> io::Result<()> {
         Ok(self.read_many(ranges)?)
+    }
+
+    fn read_ranges_cancellable(
+        &self,
+        ranges: &mut [RangeRead<'_>],
+        cancel: &CancelToken,
+    ) -> io::Result<()> {
+        Ok(self.read_many_cancellable(ranges, cancel)?)
     }
 
     fn is_remote(&self) -> bool {

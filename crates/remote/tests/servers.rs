@@ -317,3 +317,72 @@ fn reads_through_a_faulty_proxy_are_exact_or_typed_never_wrong() {
         );
     }
 }
+
+#[test]
+#[ignore = "needs BRICKRAY_TEST_HTTP and BRICKRAY_TEST_HTTP_SLOW (a proxy delaying every request; scripts/test.sh starts both)"]
+fn a_cancelled_read_gives_up_before_its_answer() {
+    use brickray_core::{CancelToken, RangeRead};
+    use std::sync::Arc;
+    let (Some(http), Some(slow)) = (
+        server("BRICKRAY_TEST_HTTP"),
+        server("BRICKRAY_TEST_HTTP_SLOW"),
+    ) else {
+        return eprintln!("{NEEDS_HTTP}");
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let (_path, bytes) = small_store(dir.path());
+    let name = unique("cancel");
+    upload(&format!("{http}/{name}/small.brs"), &loopback(None), &bytes);
+    // Every request through the slow proxy is answered after 300 ms.
+    let url = format!("{slow}/{name}/small.brs");
+    let reader = Arc::new(RemoteRangeReader::open(&url, &loopback(None)).unwrap());
+    let read = |cancel_after: Option<std::time::Duration>| {
+        let cancel = CancelToken::new();
+        let (r, c) = (reader.clone(), cancel.clone());
+        let t = std::thread::spawn(move || {
+            let mut buf = [0u8; 64];
+            let mut ranges = [RangeRead {
+                offset: 100,
+                buf: &mut buf,
+            }];
+            r.read_many_cancellable(&mut ranges, &c).map(|()| buf)
+        });
+        if let Some(after) = cancel_after {
+            std::thread::sleep(after);
+            cancel.cancel();
+        }
+        t.join().unwrap()
+    };
+    // Cancelled 50 ms in: it gives up (an answer would come at 300 ms).
+    match read(Some(std::time::Duration::from_millis(50))) {
+        Err(RemoteError::Cancelled { url: u }) => assert_eq!(u, url),
+        other => panic!("{other:?}"),
+    }
+    // Not cancelled: the same read completes with the bytes.
+    assert_eq!(read(None).unwrap()[..], bytes[100..164]);
+    // A store's batch cancelled in flight fails its data bricks as
+    // cancelled, and nodes without a payload still read.
+    let store = Arc::new(Store::open_with(reader.clone(), &url).unwrap());
+    let keys: Vec<brickray_core::NodeKey> = store.nodes().map(|n| n.key).collect();
+    let cancel = CancelToken::new();
+    let (s, c, k) = (store.clone(), cancel.clone(), keys.clone());
+    let t = std::thread::spawn(move || {
+        let brick = s.layout().brick_bytes();
+        let mut bufs = vec![vec![0u8; brick]; k.len()];
+        let mut outs: Vec<&mut [u8]> = bufs.iter_mut().map(|b| b.as_mut_slice()).collect();
+        s.read_bricks(&k, &mut outs, &c)
+    });
+    std::thread::sleep(std::time::Duration::from_millis(50));
+    cancel.cancel();
+    let results = t.join().unwrap();
+    for (key, r) in keys.iter().zip(&results) {
+        if store.record(*key).unwrap().payload_len > 0 {
+            assert!(
+                matches!(r, Err(brickray_core::BrickError::Cancelled { .. })),
+                "{key:?}: {r:?}"
+            );
+        } else {
+            assert!(r.is_ok(), "{key:?}: {r:?}");
+        }
+    }
+}

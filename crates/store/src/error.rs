@@ -147,6 +147,9 @@ pub enum StoreError {
         /// The key.
         key: NodeKey,
     },
+    /// A batch read was cancelled: nobody wants its bricks any more.
+    #[error("the read was cancelled")]
+    Cancelled,
     /// The output buffer has the wrong size.
     #[error("brick buffer holds {actual} bytes, expected {expected}")]
     BufferSize {
@@ -360,6 +363,7 @@ impl StoreError {
             StoreError::BufferSize { expected, actual } => {
                 BrickError::BufferSize { expected, actual }
             }
+            StoreError::Cancelled => BrickError::Cancelled { key },
             StoreError::NodeIo { key, source } => BrickError::Io { key, source },
             StoreError::Io { source, .. } => BrickError::Io { key, source },
             other => BrickError::Corrupt {

@@ -10,8 +10,8 @@ use crate::format::{
 use crate::opening;
 use crate::sample::{fill, first_nan, stats_dyn};
 use brickray_core::{
-    BrickError, BrickSource, NodeError, NodeInfo, NodeKey, NodeKind, OctreeLayout, RangeRead,
-    RangeReader, VolumeDesc,
+    BrickError, BrickSource, CancelToken, NodeError, NodeInfo, NodeKey, NodeKind, OctreeLayout,
+    RangeRead, RangeReader, VolumeDesc,
 };
 use brickray_io::FileKind;
 use std::fs::File;
@@ -542,6 +542,17 @@ impl Store {
         &self,
         keys: &[NodeKey],
     ) -> Result<Vec<Option<Vec<u8>>>, StoreError> {
+        self.read_compressed_batch(keys, None)
+    }
+
+    /// [`read_compressed_many`](Self::read_compressed_many), given up with
+    /// [`StoreError::Cancelled`] (no node-by-node retry) when `cancel` is
+    /// cancelled before the payloads arrive.
+    fn read_compressed_batch(
+        &self,
+        keys: &[NodeKey],
+        cancel: Option<&CancelToken>,
+    ) -> Result<Vec<Option<Vec<u8>>>, StoreError> {
         let mut entries = Vec::with_capacity(keys.len());
         for &key in keys {
             entries.push(self.check_key(key)?.filter(|e| e.kind == KIND_DATA));
@@ -563,8 +574,14 @@ impl Store {
                     })
                 })
                 .collect();
-            file.read_ranges(&mut reads)
+            match cancel {
+                Some(c) => file.read_ranges_cancellable(&mut reads, c),
+                None => file.read_ranges(&mut reads),
+            }
         };
+        if batch.is_err() && cancel.is_some_and(CancelToken::is_cancelled) {
+            return Err(StoreError::Cancelled);
+        }
         let checked = batch.is_ok()
             && keys
                 .iter()
@@ -666,19 +683,36 @@ impl Store {
     /// one result per key: the data nodes' payloads in one
     /// [`read_compressed_many`](Self::read_compressed_many) (a reader over
     /// the network coalesces neighbours); when that batch fails, each node is
-    /// read on its own, so one bad node fails only itself.
+    /// read on its own, so one bad node fails only itself. When `cancel` is
+    /// cancelled before the payloads arrive every node fails with
+    /// [`StoreError::Cancelled`].
     pub fn read_many(
         &self,
         keys: &[NodeKey],
         outs: &mut [&mut [u8]],
+        cancel: &CancelToken,
     ) -> Vec<Result<(), StoreError>> {
         let data: Vec<NodeKey> = keys
             .iter()
             .copied()
             .filter(|&k| matches!(self.check_key(k), Ok(Some(e)) if e.kind == KIND_DATA))
             .collect();
-        let payloads = match self.read_compressed_many(&data) {
+        let payloads = match self.read_compressed_batch(&data, Some(cancel)) {
             Ok(p) => p,
+            Err(StoreError::Cancelled) => {
+                // Nodes without a payload need no read.
+                return keys
+                    .iter()
+                    .zip(outs.iter_mut())
+                    .map(|(&k, out)| {
+                        if data.contains(&k) {
+                            Err(StoreError::Cancelled)
+                        } else {
+                            self.read(k, out)
+                        }
+                    })
+                    .collect();
+            }
             Err(_) => {
                 return keys
                     .iter()
@@ -841,8 +875,13 @@ impl BrickSource for Store {
         }
     }
 
-    fn read_bricks(&self, keys: &[NodeKey], outs: &mut [&mut [u8]]) -> Vec<Result<(), BrickError>> {
-        self.read_many(keys, outs)
+    fn read_bricks(
+        &self,
+        keys: &[NodeKey],
+        outs: &mut [&mut [u8]],
+        cancel: &CancelToken,
+    ) -> Vec<Result<(), BrickError>> {
+        self.read_many(keys, outs, cancel)
             .into_iter()
             .zip(keys)
             .map(|(r, &key)| r.map_err(|e| e.into_brick_error(key)))

@@ -5,7 +5,9 @@
 
 mod common;
 
-use brickray_core::{BrickSource, DType, MemRangeReader, NodeKey, RangeRead, RangeReader};
+use brickray_core::{
+    BrickSource, CancelToken, DType, MemRangeReader, NodeKey, RangeRead, RangeReader,
+};
 use brickray_store::{BuildOptions, Store, StoreError, build};
 use common::*;
 use proptest::prelude::*;
@@ -184,6 +186,16 @@ impl RangeReader for Remote {
     fn read_ranges(&self, ranges: &mut [RangeRead<'_>]) -> io::Result<()> {
         self.0.read_ranges(ranges)
     }
+    fn read_ranges_cancellable(
+        &self,
+        ranges: &mut [RangeRead<'_>],
+        cancel: &CancelToken,
+    ) -> io::Result<()> {
+        if cancel.is_cancelled() {
+            return Err(io::Error::new(io::ErrorKind::Interrupted, "cancelled"));
+        }
+        self.read_ranges(ranges)
+    }
     fn is_remote(&self) -> bool {
         true
     }
@@ -211,7 +223,7 @@ fn bricks_read_in_batches_over_a_remote_reader_equal_single_reads() {
     let read_all = |s: &Store| {
         let mut bufs = vec![vec![0u8; brick]; keys.len()];
         let mut outs: Vec<&mut [u8]> = bufs.iter_mut().map(|b| b.as_mut_slice()).collect();
-        let results = s.read_bricks(&keys, &mut outs);
+        let results = s.read_bricks(&keys, &mut outs, &CancelToken::new());
         (bufs, results)
     };
     let reader = std::sync::Arc::new(Remote(Counting::new(bytes.clone(), None)));
@@ -237,8 +249,31 @@ fn bricks_read_in_batches_over_a_remote_reader_equal_single_reads() {
     let mut right = vec![0u8; brick];
     let mut outs: Vec<&mut [u8]> = vec![&mut small, &mut right];
     let data = file.nodes().find(|n| n.payload_len > 0).unwrap().key;
-    let r = remote.read_bricks(&[data, data], &mut outs);
+    let r = remote.read_bricks(&[data, data], &mut outs, &CancelToken::new());
     assert!(r[0].is_err() && r[1].is_ok(), "{r:?}");
+    // A cancelled batch fails every brick as cancelled, without reading
+    // node by node.
+    let cancel = CancelToken::new();
+    cancel.cancel();
+    let before = reader.0.reads.load(Ordering::SeqCst);
+    let mut bufs = vec![vec![0u8; brick]; keys.len()];
+    let mut outs: Vec<&mut [u8]> = bufs.iter_mut().map(|b| b.as_mut_slice()).collect();
+    let r = remote.read_bricks(&keys, &mut outs, &cancel);
+    let data_nodes: Vec<usize> = (0..keys.len())
+        .filter(|&i| remote.record(keys[i]).unwrap().payload_len > 0)
+        .collect();
+    for (i, r) in r.iter().enumerate() {
+        if data_nodes.contains(&i) {
+            assert!(
+                matches!(r, Err(brickray_core::BrickError::Cancelled { .. })),
+                "{r:?}"
+            );
+        } else {
+            // Uniform and empty nodes need no read.
+            assert!(r.is_ok(), "{r:?}");
+        }
+    }
+    assert_eq!(reader.0.reads.load(Ordering::SeqCst), before);
 }
 
 /// One store for every proptest case (its bytes and an open copy).

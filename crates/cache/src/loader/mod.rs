@@ -10,7 +10,9 @@
 //! to completion. A source over the network asks for batches
 //! ([`BrickSource::batch_size`]): a thread then takes up to that many queued
 //! bricks at once, the highest priorities first, and reads them in one
-//! [`BrickSource::read_bricks`] call (about one round trip for all). Every
+//! [`BrickSource::read_bricks`] call (about one round trip for all); a batch
+//! none of whose bricks the view still wants is cancelled in flight (its
+//! requests aborted, its bricks reported as cancelled, not failed). Every
 //! call into the source is guarded by `catch_unwind`.
 
 mod queue;
@@ -50,6 +52,13 @@ pub enum LoadError {
         key: NodeKey,
         /// The panic message, when it was a string.
         message: String,
+    },
+    /// The read was cancelled in flight: the view stopped wanting the brick
+    /// (not a failure; nothing is retried or reported).
+    #[error("the read of {key:?} was cancelled")]
+    Cancelled {
+        /// The node.
+        key: NodeKey,
     },
     /// The source did not answer within the set-up deadline
     /// ([`OutOfCoreConfig::setup_deadline`](crate::OutOfCoreConfig::setup_deadline)).
@@ -116,6 +125,9 @@ pub struct PollReport {
     pub failed: Vec<(FetchKind, NodeKey, LoadError)>,
     /// Bricks the CPU cache evicted to make room.
     pub evicted: Vec<NodeKey>,
+    /// Bricks whose read was cancelled in flight (no longer wanted): neither
+    /// loaded nor failed.
+    pub cancelled: Vec<NodeKey>,
 }
 
 /// Worker threads reading metadata and bricks in priority order. Dropping it
@@ -211,8 +223,11 @@ impl Loader {
         )
     }
 
-    /// Replaces the wanted set: queues or re-prioritises every listed request and
-    /// cancels every queued one not listed. Returns how many were cancelled.
+    /// Replaces the wanted set: queues or re-prioritises every listed request,
+    /// cancels every queued one not listed, and aborts every batch in flight
+    /// none of whose bricks is listed (a source that reads in batches,
+    /// [`BrickSource::batch_size`]). Returns how many queued requests were
+    /// cancelled.
     pub fn submit(&self, metadata: &[(NodeKey, f32)], bricks: &[BrickRequest]) -> usize {
         let jobs: Vec<(Job, f32)> = metadata
             .iter()
@@ -232,6 +247,8 @@ impl Loader {
         for jk in &stale {
             q.cancel(*jk);
         }
+        q.cancelled_queued += stale.len() as u64;
+        q.cancel_unwanted_batches(&keep);
         let mut added = 0;
         for (job, p) in jobs {
             if !q.is_loading(job.key()) {
@@ -280,6 +297,7 @@ impl Loader {
                         report.evicted.extend(cache.insert(key, brick));
                         report.loaded.push(key);
                     }
+                    Err(LoadError::Cancelled { .. }) => report.cancelled.push(key),
                     Err(e) => report.failed.push((FetchKind::Brick, key, e)),
                 },
                 Completion::Children(children) => {
@@ -310,6 +328,15 @@ impl Loader {
     /// Requests of a kind being read or awaiting `poll`.
     pub fn loading(&self, kind: FetchKind) -> usize {
         self.shared.queue.lock().loading_count(kind)
+    }
+
+    /// Requests cancelled so far: `(queued, in flight)`. A queued request
+    /// (brick or metadata) is cancelled when the wanted set drops it; a
+    /// batch in flight when it drops every brick of the batch (counted per
+    /// brick).
+    pub fn cancelled(&self) -> (u64, u64) {
+        let q = self.shared.queue.lock();
+        (q.cancelled_queued, q.cancelled_in_flight)
     }
 
     /// Bricks delivered by `poll` so far.

@@ -2,7 +2,7 @@
 //! (descending) then FIFO, with an index for re-prioritising and cancelling.
 
 use crate::failures::FetchKind;
-use brickray_core::{NodeInfo, NodeKey};
+use brickray_core::{CancelToken, NodeInfo, NodeKey};
 use std::collections::{BTreeMap, HashMap, HashSet};
 
 /// A job's identity: one of each kind per node.
@@ -70,6 +70,12 @@ pub(crate) struct Queue {
     loading: HashSet<JobKey>,
     seq: u64,
     pub(crate) shutdown: bool,
+    /// Brick batches being read, each with the token that aborts it.
+    in_flight: Vec<(u64, CancelToken, Vec<NodeKey>)>,
+    next_batch: u64,
+    /// Requests cancelled so far: queued ones dropped, in-flight ones aborted.
+    pub(crate) cancelled_queued: u64,
+    pub(crate) cancelled_in_flight: u64,
 }
 
 impl Queue {
@@ -121,6 +127,34 @@ impl Queue {
             }
         }
         jobs
+    }
+
+    /// Registers a batch being read; returns its id and its token.
+    pub(crate) fn begin_batch(&mut self, keys: Vec<NodeKey>) -> (u64, CancelToken) {
+        self.next_batch += 1;
+        let token = CancelToken::new();
+        self.in_flight.push((self.next_batch, token.clone(), keys));
+        (self.next_batch, token)
+    }
+
+    /// The batch's read returned.
+    pub(crate) fn end_batch(&mut self, id: u64) {
+        self.in_flight.retain(|b| b.0 != id);
+    }
+
+    /// Cancels every batch in flight none of whose bricks is in `keep`;
+    /// returns how many bricks they carried.
+    pub(crate) fn cancel_unwanted_batches(&mut self, keep: &HashSet<JobKey>) -> usize {
+        let mut n = 0;
+        for (_, token, keys) in &self.in_flight {
+            if !token.is_cancelled() && !keys.iter().any(|&k| keep.contains(&(FetchKind::Brick, k)))
+            {
+                token.cancel();
+                n += keys.len();
+            }
+        }
+        self.cancelled_in_flight += n as u64;
+        n
     }
 
     /// Marks the metadata of `keys` loading for a brick job that reads it (a

@@ -41,6 +41,7 @@ fn poll_until(
         all.metadata.extend(r.metadata);
         all.failed.extend(r.failed);
         all.evicted.extend(r.evicted);
+        all.cancelled.extend(r.cancelled);
         assert!(
             t.elapsed() < Duration::from_secs(5),
             "timed out: {loader:?}"
@@ -173,6 +174,9 @@ fn submit_cancels_what_is_no_longer_wanted() {
     // no metadata.
     let next = [brick(&src, k(3, 4), 1.0), brick(&src, k(3, 1), 5.0)];
     assert_eq!(loader.submit(&[], &next), 5);
+    // (The brick being read is not wanted either, but a source without
+    // batches cannot abort it.)
+    assert_eq!(loader.cancelled(), (5, 0));
     assert!(loader.cancel(FetchKind::Brick, k(3, 4)));
     assert!(!loader.cancel(FetchKind::Brick, k(3, 4)));
     src.open_gate();
@@ -346,4 +350,41 @@ fn a_panic_in_a_batch_fails_its_bricks_only() {
     poll_until(&mut loader, &mut cache, |l, c| {
         c.contains(k(3, 9)) && idle(l)
     });
+}
+
+#[test]
+fn a_batch_the_view_left_is_cancelled_in_flight() {
+    // Batches of 4 over a "network" that holds the batch with k(3, 0) until
+    // the gate opens or the batch is cancelled.
+    let mut src = TestSource::new(64);
+    src.batch = 4;
+    src.gate_key = Some(k(3, 0));
+    let src = Arc::new(src);
+    let mut loader = loader(&src, 1);
+    let mut cache = CpuCache::new(1 << 22);
+    let first: Vec<BrickRequest> = (0..3).map(|x| brick(&src, k(3, x), 10.0)).collect();
+    loader.submit(&[], &first);
+    let t = Instant::now();
+    while loader.loading(FetchKind::Brick) < 3 {
+        assert!(t.elapsed() < Duration::from_secs(5));
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    // Still wanted in part: the batch goes on.
+    loader.submit(&[], &first[1..2]);
+    std::thread::sleep(Duration::from_millis(20));
+    assert_eq!(loader.cancelled(), (0, 0));
+    assert_eq!(loader.loading(FetchKind::Brick), 3);
+    // The view moved on: none of its bricks is wanted, a new one is.
+    let moved = [brick(&src, k(3, 7), 10.0)];
+    loader.submit(&[], &moved);
+    let report = poll_until(&mut loader, &mut cache, |l, c| {
+        c.contains(k(3, 7)) && idle(l)
+    });
+    assert_eq!(loader.cancelled(), (0, 3));
+    let mut cancelled = report.cancelled.clone();
+    cancelled.sort_by_key(|k| k.x);
+    assert_eq!(cancelled, vec![k(3, 0), k(3, 1), k(3, 2)]);
+    assert!(report.failed.is_empty(), "{:?}", report.failed);
+    assert!(!cache.contains(k(3, 0)));
+    src.open_gate();
 }

@@ -6,7 +6,7 @@ use super::LoadError;
 use super::queue::{Job, JobKey, Queue};
 use crate::failures::FetchKind;
 use crate::prepared::{PreparedBrick, Preparer};
-use brickray_core::{BrickError, BrickSource, NodeInfo, NodeKey, OctreeLayout};
+use brickray_core::{BrickError, BrickSource, CancelToken, NodeInfo, NodeKey, OctreeLayout};
 use crossbeam_channel::Sender;
 use parking_lot::{Condvar, Mutex};
 use std::panic::AssertUnwindSafe;
@@ -100,20 +100,24 @@ pub(crate) fn fetch_bricks(
     source: &dyn BrickSource,
     prep: &Preparer,
     jobs: &[(NodeKey, NodeInfo)],
+    cancel: &CancelToken,
 ) -> Vec<Result<PreparedBrick, LoadError>> {
     let keys: Vec<NodeKey> = jobs.iter().map(|j| j.0).collect();
     let mut bufs = vec![vec![0u8; prep.raw_bytes()]; jobs.len()];
     let read = std::panic::catch_unwind(AssertUnwindSafe(|| {
         let mut outs: Vec<&mut [u8]> = bufs.iter_mut().map(|b| b.as_mut_slice()).collect();
-        source.read_bricks(&keys, &mut outs)
+        source.read_bricks(&keys, &mut outs, cancel)
     }));
     match read {
         Ok(results) if results.len() == jobs.len() => results
             .into_iter()
             .zip(jobs)
             .zip(&bufs)
-            .map(|((r, (_, info)), buf)| {
-                r.map(|()| prep.prepare(buf, info)).map_err(LoadError::from)
+            .map(|((r, (key, info)), buf)| match r {
+                Ok(()) => Ok(prep.prepare(buf, info)),
+                // Whatever the source says of a cancelled read, nobody wants it.
+                Err(_) if cancel.is_cancelled() => Err(LoadError::Cancelled { key: *key }),
+                Err(e) => Err(LoadError::from(e)),
             })
             .collect(),
         // A source that answered for other keys than asked: each on its own.
@@ -247,7 +251,12 @@ fn brick_batch(
         })
         .collect();
     let pairs: Vec<(NodeKey, NodeInfo)> = wanted.iter().map(|&(k, i, _)| (k, i)).collect();
-    let results = fetch_bricks(source, prep, &pairs);
+    let (id, cancel) = shared
+        .queue
+        .lock()
+        .begin_batch(pairs.iter().map(|p| p.0).collect());
+    let results = fetch_bricks(source, prep, &pairs, &cancel);
+    shared.queue.lock().end_batch(id);
     // Every brick first, then the children's metadata of each.
     let mut claimed = Vec::new();
     for ((key, _, children_meta), result) in wanted.into_iter().zip(results) {

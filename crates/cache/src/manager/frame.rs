@@ -415,6 +415,7 @@ impl BrickManager {
             cpu_hit_rate: self.cpu.hit_rate(),
             requests_in_flight: residency.requested + residency.loading,
             requested_this_frame: requested.bricks,
+            cancelled: self.loader.cancelled().into(),
             metadata_in_flight: (self.loader.queued(FetchKind::Metadata)
                 + self.loader.loading(FetchKind::Metadata)) as u32,
             metadata_requested_this_frame: requested.metadata,

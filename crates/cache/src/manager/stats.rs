@@ -77,6 +77,10 @@ pub struct FrameStats {
     pub requests_in_flight: u32,
     /// Bricks requested this frame.
     pub requested_this_frame: u32,
+    /// Requests cancelled so far because the view stopped wanting them:
+    /// `[queued (bricks and metadata), in flight (the bricks of the batches
+    /// aborted)]` ([`Loader::cancelled`](crate::Loader::cancelled)).
+    pub cancelled: [u64; 2],
     /// Metadata requests queued or being read.
     pub metadata_in_flight: u32,
     /// Metadata reads requested this frame.
