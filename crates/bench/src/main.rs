@@ -415,6 +415,9 @@ enum Suite {
         /// Ranges this close (KiB) are fetched as one request (default 16).
         #[arg(long)]
         gap_kib: Option<u64>,
+        /// Rounds of every case (default 3; each row is the median round).
+        #[arg(long, value_parser = at_least_one::<usize>)]
+        rounds: Option<usize>,
     },
     /// u8 volumes: exact interpolation vs 8-bit texels.
     U8 {

@@ -26,8 +26,13 @@
 //! request per brick, as the loader read before batches): the requests
 //! batching saves.
 //!
+//! Every case runs `--rounds` times (3), the cases in turn each round; a
+//! case's row is its round of median convergence time, with the median
+//! time to the first image.
+//!
 //! `cargo run --release -p brickray-bench -- remote [--size PX] [--delays
-//! 0,20,80] [--threads N]` (needs ../shared/data and python3).
+//! 0,20,80] [--threads N] [--rounds N] [--gap-kib K]` (needs ../shared/data
+//! and python3).
 
 use crate::runner::{Runner, median, quantile, round2};
 use crate::{Figures, arg};
@@ -61,6 +66,7 @@ const MAX_HOLD: usize = 1800;
 pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
     let size: u32 = arg(args, "--size", 512)?;
     let threads: usize = arg(args, "--threads", 8)?;
+    let rounds: usize = arg(args, "--rounds", 3)?.max(1);
     let gap_kib: u64 = arg(
         args,
         "--gap-kib",
@@ -140,19 +146,35 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
     }
     let run = Runner::new(&gpu, size)?;
     let mut fig = Figures::new();
+    // Rounds of every case in turn (this machine's speed drifts): each
+    // case's row is its median round.
+    let mut rounds_of: Vec<Vec<CaseResult>> = cases.iter().map(|_| Vec::new()).collect();
+    for _ in 0..rounds {
+        for ((src, _, delay, batched), done) in cases.iter().zip(&mut rounds_of) {
+            let base = delay.map(|d| {
+                let port = proxies.iter().find(|p| p.0 == d).map_or(0, |p| p.1.port);
+                format!("http://127.0.0.1:{port}")
+            });
+            let opened = open(src, base.as_deref(), &store_path, &zarr, &opts, *batched)?;
+            done.push(case(&gpu, &run, opened, threads)?);
+        }
+    }
     let mut results = Vec::new();
-    for (src, transport, delay, batched) in cases {
-        let base = delay.map(|d| {
-            let port = proxies.iter().find(|p| p.0 == d).map_or(0, |p| p.1.port);
-            format!("http://127.0.0.1:{port}")
-        });
-        let opened = open(src, base.as_deref(), &store_path, &zarr, &opts, batched)?;
-        let r = case(&gpu, &run, opened, threads)?;
+    for ((src, transport, delay, batched), mut done) in cases.into_iter().zip(rounds_of) {
+        let first: Vec<f64> = done.iter().map(|r| r.first_image_s).collect();
+        let converged: Vec<String> = done
+            .iter()
+            .map(|r| format!("{:.2}", r.converged_s))
+            .collect();
+        done.sort_by(|a, b| a.converged_s.total_cmp(&b.converged_s));
+        let mut r = done.swap_remove(done.len() / 2);
+        r.first_image_s = median(&first);
         println!(
-            "| {src} | {transport} | {:.2} | {:.2} ({}) | {} | {} | {:.2} | {} | {:.2} | {} / {} | {:.2} / {:.2} = {:.2} | {:.1} |",
+            "| {src} | {transport} | {:.2} | {:.2} ({}; rounds {}) | {} | {} | {:.2} | {} | {:.2} | {} / {} | {:.2} / {:.2} = {:.2} | {:.1} |",
             r.first_image_s,
             r.converged_s,
             r.converged_frames,
+            converged.join(", "),
             r.after_jump
                 .map_or("not converged".into(), |f| f.to_string()),
             r.fetched.0,
@@ -259,52 +281,50 @@ fn open(
     };
     let read = brickray_io::ReadOptions::default();
     let e = |e: &dyn std::fmt::Display| e.to_string();
-    let (source, fetched, store): (Arc<dyn BrickSource>, FetchedFn, _) =
-        match (src, base) {
-            ("brs", None) => {
-                let file = std::fs::File::open(store_path).map_err(|x| e(&x))?;
-                let counting = Arc::new(Counting::new(file));
-                let store =
-                    Arc::new(Store::open_with(counting.clone(), store_path).map_err(|x| e(&x))?);
-                let c = counting.clone();
-                (store.clone(), Box::new(move || c.get()), Some(store))
-            }
-            ("brs", Some(base)) => {
-                let url = format!("{base}/mri.brs");
-                let reader = Arc::new(RemoteRangeReader::open(&url, opts).map_err(|x| e(&x))?);
-                let store = Arc::new(Store::open_with(reader.clone(), &url).map_err(|x| e(&x))?);
-                let source: Arc<dyn BrickSource> = if batched {
-                    store.clone()
-                } else {
-                    Arc::new(Unbatched(store.clone()))
-                };
-                let r = reader.clone();
-                let fetched = Box::new(move || {
-                    let f = r.fetched();
-                    (f.requests, f.bytes)
-                });
-                (source, fetched, Some(store))
-            }
-            ("zarr", None) => {
-                let z = ZarrBrickSource::open(zarr, &read, d_brick, d_apron, None)
-                    .map_err(|x| e(&x))?;
-                (Arc::new(z), Box::new(|| (0, 0)), None)
-            }
-            ("zarr", Some(base)) => {
-                let url = format!("{base}/mri.ome.zarr");
-                let objects = Arc::new(RemoteObjects::open(&url, opts).map_err(|x| e(&x))?);
-                let z =
-                    ZarrBrickSource::open_objects(objects.clone(), &read, d_brick, d_apron, None)
-                        .map_err(|x| e(&x))?;
-                let o = objects.clone();
-                let fetched = Box::new(move || {
-                    let f = o.fetched();
-                    (f.requests, f.bytes)
-                });
-                (Arc::new(z), fetched, None)
-            }
-            _ => return Err(format!("unknown source {src}")),
-        };
+    let (source, fetched, store): (Arc<dyn BrickSource>, FetchedFn, _) = match (src, base) {
+        ("brs", None) => {
+            let file = std::fs::File::open(store_path).map_err(|x| e(&x))?;
+            let counting = Arc::new(Counting::new(file));
+            let store =
+                Arc::new(Store::open_with(counting.clone(), store_path).map_err(|x| e(&x))?);
+            let c = counting.clone();
+            (store.clone(), Box::new(move || c.get()), Some(store))
+        }
+        ("brs", Some(base)) => {
+            let url = format!("{base}/mri.brs");
+            let reader = Arc::new(RemoteRangeReader::open(&url, opts).map_err(|x| e(&x))?);
+            let store = Arc::new(Store::open_with(reader.clone(), &url).map_err(|x| e(&x))?);
+            let source: Arc<dyn BrickSource> = if batched {
+                store.clone()
+            } else {
+                Arc::new(Unbatched(store.clone()))
+            };
+            let r = reader.clone();
+            let fetched = Box::new(move || {
+                let f = r.fetched();
+                (f.requests, f.bytes)
+            });
+            (source, fetched, Some(store))
+        }
+        ("zarr", None) => {
+            let z =
+                ZarrBrickSource::open(zarr, &read, d_brick, d_apron, None).map_err(|x| e(&x))?;
+            (Arc::new(z), Box::new(|| (0, 0)), None)
+        }
+        ("zarr", Some(base)) => {
+            let url = format!("{base}/mri.ome.zarr");
+            let objects = Arc::new(RemoteObjects::open(&url, opts).map_err(|x| e(&x))?);
+            let z = ZarrBrickSource::open_objects(objects.clone(), &read, d_brick, d_apron, None)
+                .map_err(|x| e(&x))?;
+            let o = objects.clone();
+            let fetched = Box::new(move || {
+                let f = o.fetched();
+                (f.requests, f.bytes)
+            });
+            (Arc::new(z), fetched, None)
+        }
+        _ => return Err(format!("unknown source {src}")),
+    };
     Ok(Opened {
         source,
         fetched,
@@ -314,6 +334,7 @@ fn open(
 }
 
 /// What one case measured.
+#[derive(Debug, Clone)]
 struct CaseResult {
     first_image_s: f64,
     converged_s: f64,
@@ -431,10 +452,7 @@ fn case(
         fetched,
         bytes_ratio,
         requests_per_brick: fetched.0 as f64 / loaded.max(1) as f64,
-        cancelled: r
-            .stats()
-            .out_of_core
-            .map_or([0, 0], |s| s.cache.cancelled),
+        cancelled: r.stats().out_of_core.map_or([0, 0], |s| s.cache.cancelled),
         median_ms: median(&ms),
         p99_ms: quantile(&ms, 0.99),
         max_ms: ms.iter().copied().fold(0.0, f64::max),

@@ -285,6 +285,37 @@ fn assert_same(local: &ZarrBrickSource, remote: &ZarrBrickSource) -> usize {
     data
 }
 
+/// Over the network the image reads bricks in batches (each brick on a
+/// thread of its own), equal to the local reader's one by one.
+fn assert_same_batched(local: &ZarrBrickSource, remote: &ZarrBrickSource) {
+    assert_eq!(local.batch_size(), 1);
+    assert_eq!(remote.batch_size(), brickray_io::zarr::ZARR_BATCH);
+    let brick = local.layout().brick_bytes();
+    let all = keys(local);
+    for batch in all.chunks(remote.batch_size()) {
+        let mut bufs = vec![vec![0xA5u8; brick]; batch.len()];
+        let mut outs: Vec<&mut [u8]> = bufs.iter_mut().map(|b| b.as_mut_slice()).collect();
+        let results = remote.read_bricks(batch, &mut outs, &brickray_core::CancelToken::new());
+        let mut a = vec![0u8; brick];
+        for ((k, r), b) in batch.iter().zip(results).zip(&bufs) {
+            r.unwrap();
+            local.read_brick(*k, &mut a).unwrap();
+            assert!(&a == b, "brick {k:?} differs in a batch");
+        }
+    }
+    // A cancelled batch reads nothing.
+    let cancel = brickray_core::CancelToken::new();
+    cancel.cancel();
+    let mut bufs = vec![vec![0u8; brick]; 2];
+    let mut outs: Vec<&mut [u8]> = bufs.iter_mut().map(|b| b.as_mut_slice()).collect();
+    let r = remote.read_bricks(&all[..2], &mut outs, &cancel);
+    assert!(
+        r.iter()
+            .all(|r| matches!(r, Err(brickray_core::BrickError::Cancelled { .. }))),
+        "{r:?}"
+    );
+}
+
 #[test]
 #[cfg_attr(no_shared_data, ignore = "needs ../shared/data/formats (absent)")]
 fn zarr_over_http_equals_the_local_reader_brick_for_brick() {
@@ -294,6 +325,7 @@ fn zarr_over_http_equals_the_local_reader_brick_for_brick() {
         let (local, remote) = pair(&data.join(name), &server.url(name), &opts());
         let n = assert_same(&local, &remote);
         assert!(n > 8, "{name}: only {n} bricks with data");
+        assert_same_batched(&local, &remote);
         assert_eq!(local.image().version(), remote.image().version());
         assert_eq!(local.placement(), remote.placement());
     }

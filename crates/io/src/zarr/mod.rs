@@ -53,7 +53,7 @@ pub use cache::{CHUNK_CACHE_BYTES, ChunkCacheStats};
 pub use reader::ZarrReader;
 use safe::{MAX_CHUNK_BYTES, SafeStore};
 use scan::scan;
-pub use source::{MAX_BRICK_READ, ZarrBrickSource};
+pub use source::{MAX_BRICK_READ, ZARR_BATCH, ZarrBrickSource};
 pub use write::{add_ome_zarr_labels, write_ome_zarr};
 
 type ZArray = Array<SafeStore>;
@@ -464,6 +464,16 @@ impl OmeZarr {
             .and_then(Value::as_array)
             .filter(|d| !d.is_empty())
             .ok_or_else(|| bad("multiscales has no datasets"))?;
+        // Every level's array metadata in one round trip over the network
+        // (the loop below then reads it from the cache).
+        let v3 = meta_path.ends_with("zarr.json");
+        let keys: Vec<String> = datasets
+            .iter()
+            .filter_map(|d| d.get("path").and_then(Value::as_str))
+            .filter(|p| !p.split('/').any(|c| c == ".." || c.is_empty()))
+            .map(|p| format!("{p}/{}", if v3 { "zarr.json" } else { ".zarray" }))
+            .collect();
+        store.prefetch_json(&keys);
         let mut levels = Vec::new();
         let mut src = None;
         for d in datasets {

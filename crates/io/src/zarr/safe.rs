@@ -167,6 +167,25 @@ impl SafeStore {
             .map_err(|e| IoError::header(&path, e.to_string()))
     }
 
+    /// Reads the metadata objects `keys` at once (over an object reader:
+    /// concurrently, each on a thread of its own, so that an image's levels
+    /// cost one round trip, not one each); the later [`json`](Self::json)
+    /// calls find them. Errors are left for those calls to meet; local
+    /// files need no warming.
+    pub(crate) fn prefetch_json(&self, keys: &[String]) {
+        let Backend::Objects(reader) = &self.backend else {
+            return;
+        };
+        std::thread::scope(|scope| {
+            for key in keys {
+                let path = self.root.join(key);
+                scope.spawn(move || {
+                    let _ = self.meta_object(&**reader, key, &path);
+                });
+            }
+        });
+    }
+
     /// Declares the array at `prefix` (`s0/`) sharded, its shards indexed as
     /// `index` says.
     pub(crate) fn add_sharded(&self, prefix: String, index: ShardIndex) {

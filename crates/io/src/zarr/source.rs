@@ -355,4 +355,48 @@ impl BrickSource for ZarrBrickSource {
         });
         Ok(())
     }
+
+    /// [`ZARR_BATCH`] bricks per call over the network, 1 from a folder.
+    fn batch_size(&self) -> usize {
+        if self.zarr.store.is_local() {
+            1
+        } else {
+            ZARR_BATCH
+        }
+    }
+
+    /// The bricks at once, each on a thread of its own: their chunks are
+    /// requested together, so a batch costs about the round trips of one
+    /// brick (chunks two bricks share are fetched once, by the decoded-chunk
+    /// cache). A brick not begun when `cancel` is cancelled is skipped.
+    fn read_bricks(
+        &self,
+        keys: &[NodeKey],
+        outs: &mut [&mut [u8]],
+        cancel: &brickray_core::CancelToken,
+    ) -> Vec<Result<(), BrickError>> {
+        std::thread::scope(|scope| {
+            let reads: Vec<_> = keys
+                .iter()
+                .zip(outs.iter_mut())
+                .map(|(&key, out)| {
+                    scope.spawn(move || {
+                        if cancel.is_cancelled() {
+                            Err(BrickError::Cancelled { key })
+                        } else {
+                            self.read_brick(key, out)
+                        }
+                    })
+                })
+                .collect();
+            reads
+                .into_iter()
+                .map(|r| r.join().unwrap_or_else(|p| std::panic::resume_unwind(p)))
+                .collect()
+        })
+    }
 }
+
+/// Bricks an OME-Zarr image read over the network reads per call
+/// ([`BrickSource::batch_size`]).
+pub const ZARR_BATCH: usize = 16;
