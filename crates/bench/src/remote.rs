@@ -24,7 +24,8 @@
 //! and p99 of the planned frames' wall time while bricks were in flight. The
 //! store at the largest delay runs a second time with batching off (one
 //! request per brick, as the loader read before batches): the requests
-//! batching saves.
+//! batching saves; and twice through a disk cache (`DiskCached`, empty each
+//! round): its first visit fills the cache, its second reads from it.
 //!
 //! Every case runs `--rounds` times (3), the cases in turn each round; a
 //! case's row is its round of median convergence time, with the median
@@ -43,7 +44,9 @@ use brickray_core::{
 };
 use brickray_harness::GpuContext;
 use brickray_io::zarr::ZarrBrickSource;
-use brickray_remote::{RemoteObjects, RemoteOptions, RemoteRangeReader};
+use brickray_remote::{
+    DiskCacheConfig, DiskCached, RemoteObjects, RemoteOptions, RemoteRangeReader,
+};
 use brickray_render::{OutOfCoreConfig, VolumeRenderer};
 use brickray_store::{BuildOptions, Store};
 use glam::Vec3;
@@ -129,38 +132,50 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         coalesce_gap: gap_kib << 10,
         ..RemoteOptions::default()
     };
-    let mut cases: Vec<(&str, String, Option<u32>, bool)> = Vec::new();
+    let mut cases: Vec<(&str, String, Option<u32>, Variant)> = Vec::new();
     for src in ["brs", "zarr"] {
-        cases.push((src, "local".into(), None, true));
+        cases.push((src, "local".into(), None, Variant::Batched));
         for &d in &delays {
-            cases.push((src, format!("http +{d} ms"), Some(d), true));
+            cases.push((src, format!("http +{d} ms"), Some(d), Variant::Batched));
         }
     }
     if let Some(&worst) = delays.iter().max() {
-        cases.push((
-            "brs",
-            format!("http +{worst} ms, unbatched"),
-            Some(worst),
-            false,
-        ));
+        for (variant, what) in [
+            (Variant::Unbatched, "unbatched"),
+            (Variant::CacheCold, "disk cache, first visit"),
+            (Variant::CacheWarm, "disk cache, second visit"),
+        ] {
+            cases.push((
+                "brs",
+                format!("http +{worst} ms, {what}"),
+                Some(worst),
+                variant,
+            ));
+        }
     }
     let run = Runner::new(&gpu, size)?;
     let mut fig = Figures::new();
     // Rounds of every case in turn (this machine's speed drifts): each
     // case's row is its median round.
     let mut rounds_of: Vec<Vec<CaseResult>> = cases.iter().map(|_| Vec::new()).collect();
-    for _ in 0..rounds {
-        for ((src, _, delay, batched), done) in cases.iter().zip(&mut rounds_of) {
+    for round in 0..rounds {
+        // A fresh disk cache each round: its first visit fills it.
+        let cache = DiskCacheConfig {
+            dir: dir.path().join(format!("cache{round}")),
+            max_bytes: 1 << 30,
+        };
+        for ((src, _, delay, variant), done) in cases.iter().zip(&mut rounds_of) {
             let base = delay.map(|d| {
                 let port = proxies.iter().find(|p| p.0 == d).map_or(0, |p| p.1.port);
                 format!("http://127.0.0.1:{port}")
             });
-            let opened = open(src, base.as_deref(), &store_path, &zarr, &opts, *batched)?;
+            let paths = (store_path.as_path(), zarr.as_path());
+            let opened = open(src, base.as_deref(), paths, &opts, *variant, &cache)?;
             done.push(case(&gpu, &run, opened, threads)?);
         }
     }
     let mut results = Vec::new();
-    for ((src, transport, delay, batched), mut done) in cases.into_iter().zip(rounds_of) {
+    for ((src, transport, delay, variant), mut done) in cases.into_iter().zip(rounds_of) {
         let first: Vec<f64> = done.iter().map(|r| r.first_image_s).collect();
         let converged: Vec<String> = done
             .iter()
@@ -188,20 +203,20 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
             r.p99_ms / r.median_ms.max(1e-9),
             r.max_ms,
         );
-        results.push((src, delay, batched, r));
+        results.push((src, delay, variant, r));
     }
     drop(proxies);
     drop(server);
-    let find = |src: &str, delay: Option<u32>, batched: bool| {
+    let find = |src: &str, delay: Option<u32>, variant: Variant| {
         results
             .iter()
-            .find(|r| r.0 == src && r.1 == delay && r.2 == batched)
+            .find(|r| r.0 == src && r.1 == delay && r.2 == variant)
             .map(|r| &r.3)
     };
     for (src, _, _, _) in results.iter().filter(|r| r.1.is_none()) {
-        let local = find(src, None, true).ok_or("no local case")?;
+        let local = find(src, None, Variant::Batched).ok_or("no local case")?;
         for &d in &delays {
-            let Some(r) = find(src, Some(d), true) else {
+            let Some(r) = find(src, Some(d), Variant::Batched) else {
                 continue;
             };
             fig.insert(
@@ -215,8 +230,9 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         }
     }
     let worst = delays.iter().max().copied();
-    let at = |src| worst.and_then(|d| find(src, Some(d), true));
-    if let (Some(r), Some(local), Some(d)) = (at("brs"), find("brs", None, true), worst) {
+    let at = |src| worst.and_then(|d| find(src, Some(d), Variant::Batched));
+    if let (Some(r), Some(local), Some(d)) = (at("brs"), find("brs", None, Variant::Batched), worst)
+    {
         // The store at the largest delay (80 ms by default): the keys.
         fig.insert(
             format!("first_image_s_{d}ms"),
@@ -240,7 +256,10 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         );
         fig.insert("slowest_streaming_frame_ms".into(), json!(round2(r.max_ms)));
     }
-    if let (Some(b), Some(u)) = (at("brs"), worst.and_then(|d| find("brs", Some(d), false))) {
+    if let (Some(b), Some(u)) = (
+        at("brs"),
+        worst.and_then(|d| find("brs", Some(d), Variant::Unbatched)),
+    ) {
         fig.insert(
             "requests_saved_by_batching".into(),
             json!(round2(1.0 - b.fetched.0 as f64 / u.fetched.0.max(1) as f64)),
@@ -248,6 +267,19 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         fig.insert(
             "converged_ratio_unbatched_vs_batched".into(),
             json!(round2(u.converged_s / b.converged_s.max(1e-9))),
+        );
+    }
+    if let (Some(cold), Some(warm)) = (
+        worst.and_then(|d| find("brs", Some(d), Variant::CacheCold)),
+        worst.and_then(|d| find("brs", Some(d), Variant::CacheWarm)),
+    ) {
+        fig.insert(
+            "disk_cache_second_visit_converged_ratio".into(),
+            json!(round2(warm.converged_s / cold.converged_s.max(1e-9))),
+        );
+        fig.insert(
+            "disk_cache_second_visit_requests".into(),
+            json!(warm.fetched.0),
         );
     }
     Ok(fig)
@@ -266,13 +298,26 @@ struct Opened {
     open_s: f64,
 }
 
+/// How a case reads the store over the network.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Variant {
+    /// Bricks in batches (the default).
+    Batched,
+    /// One request per brick.
+    Unbatched,
+    /// Through a disk cache, empty.
+    CacheCold,
+    /// Through the disk cache the cold case filled.
+    CacheWarm,
+}
+
 fn open(
     src: &str,
     base: Option<&str>,
-    store_path: &Path,
-    zarr: &Path,
+    (store_path, zarr): (&Path, &Path),
     opts: &RemoteOptions,
-    batched: bool,
+    variant: Variant,
+    cache: &DiskCacheConfig,
 ) -> Result<Opened, String> {
     let t = Instant::now();
     let (d_brick, d_apron) = {
@@ -290,14 +335,30 @@ fn open(
             let c = counting.clone();
             (store.clone(), Box::new(move || c.get()), Some(store))
         }
+        ("brs", Some(base)) if matches!(variant, Variant::CacheCold | Variant::CacheWarm) => {
+            let url = format!("{base}/mri.brs");
+            let reader = RemoteRangeReader::open(&url, opts).map_err(|x| e(&x))?;
+            let id = format!(
+                "{url}\n{}\n{}",
+                reader.etag().unwrap_or(""),
+                reader.object_len()
+            );
+            let cached = Arc::new(DiskCached::new(reader, &id, cache).map_err(|x| e(&x))?);
+            let store = Arc::new(Store::open_with(cached.clone(), &url).map_err(|x| e(&x))?);
+            let fetched = Box::new(move || {
+                let f = cached.inner().fetched();
+                (f.requests, f.bytes)
+            });
+            (store.clone(), fetched, Some(store))
+        }
         ("brs", Some(base)) => {
             let url = format!("{base}/mri.brs");
             let reader = Arc::new(RemoteRangeReader::open(&url, opts).map_err(|x| e(&x))?);
             let store = Arc::new(Store::open_with(reader.clone(), &url).map_err(|x| e(&x))?);
-            let source: Arc<dyn BrickSource> = if batched {
-                store.clone()
-            } else {
+            let source: Arc<dyn BrickSource> = if variant == Variant::Unbatched {
                 Arc::new(Unbatched(store.clone()))
+            } else {
+                store.clone()
             };
             let r = reader.clone();
             let fetched = Box::new(move || {

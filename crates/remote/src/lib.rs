@@ -32,6 +32,9 @@ use thiserror::Error;
 
 pub use object_store;
 
+mod disk_cache;
+pub use disk_cache::{DEFAULT_DISK_CACHE_BYTES, DiskCacheConfig, DiskCacheStats, DiskCached};
+
 /// Requests sent and bytes received by a reader so far (retries inside one
 /// request not counted): what a benchmark compares with the bytes a view
 /// needed. Several ranges read at once count the requests they were
@@ -334,6 +337,10 @@ pub struct RemoteOptions {
     /// requests and costs bytes: object_store's own 1 MiB fetched 4.3-4.9x
     /// the bytes of the bricks a streamed MRI needed (docs/remote.md).
     pub coalesce_gap: u64,
+    /// A local disk cache of fetched ranges for the stores opened with
+    /// these options (`brickray_store::open_url`), `None`: no cache
+    /// ([`DiskCached`]).
+    pub disk_cache: Option<DiskCacheConfig>,
 }
 
 /// Default [`RemoteOptions::coalesce_gap`]: 16 KiB, about one compressed
@@ -357,6 +364,7 @@ impl Default for RemoteOptions {
             max_backoff: Duration::from_secs(5),
             worker_threads: 2,
             coalesce_gap: DEFAULT_COALESCE_GAP,
+            disk_cache: None,
         }
     }
 }
@@ -369,8 +377,9 @@ fn env_true(name: &str) -> bool {
 impl RemoteOptions {
     /// The defaults, with `AWS_ALLOW_HTTP=true` (or `BRICKRAY_ALLOW_HTTP=1`)
     /// allowing plain HTTP, `AWS_SKIP_SIGNATURE=true` (or
-    /// `AWS_NO_SIGN_REQUEST=true`) asking for anonymous requests, and
-    /// `AWS_ENDPOINT_URL` as the endpoint.
+    /// `AWS_NO_SIGN_REQUEST=true`) asking for anonymous requests,
+    /// `AWS_ENDPOINT_URL` as the endpoint, and `BRICKRAY_CACHE_DIR` (with
+    /// `BRICKRAY_CACHE_MAX_MB`) as a disk cache ([`DiskCacheConfig::from_env`]).
     pub fn from_env() -> RemoteOptions {
         RemoteOptions {
             endpoint: std::env::var("AWS_ENDPOINT_URL")
@@ -379,6 +388,7 @@ impl RemoteOptions {
                 .filter(|e| !e.is_empty()),
             anonymous: env_true("AWS_SKIP_SIGNATURE") || env_true("AWS_NO_SIGN_REQUEST"),
             allow_http: env_true("AWS_ALLOW_HTTP") || env_true("BRICKRAY_ALLOW_HTTP"),
+            disk_cache: DiskCacheConfig::from_env(),
             ..RemoteOptions::default()
         }
     }

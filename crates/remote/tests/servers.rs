@@ -386,3 +386,45 @@ fn a_cancelled_read_gives_up_before_its_answer() {
         }
     }
 }
+
+#[test]
+#[ignore = "needs BRICKRAY_TEST_HTTP (a Range HTTP server; scripts/test.sh starts one)"]
+fn a_second_visit_reads_the_disk_cache_not_the_network() {
+    use brickray_remote::{DiskCacheConfig, DiskCached};
+    let Some(http) = server("BRICKRAY_TEST_HTTP") else {
+        return eprintln!("{NEEDS_HTTP}");
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let (path, bytes) = small_store(dir.path());
+    let url = format!("{http}/{}/small.brs", unique("cache"));
+    upload(&url, &loopback(None), &bytes);
+    let config = DiskCacheConfig {
+        dir: dir.path().join("cache"),
+        max_bytes: 64 << 20,
+    };
+    let local = Store::open(&path).unwrap();
+    // Through open_url with the cache configured: the same store.
+    let opts = RemoteOptions {
+        disk_cache: Some(config.clone()),
+        ..loopback(None)
+    };
+    assert_same_store(&local, &open_url(&url, &opts).unwrap());
+    // A second visit: only the size request (which validates the cache
+    // against the object's ETag and length) reaches the server.
+    let visit = || {
+        let reader = RemoteRangeReader::open(&url, &loopback(None)).unwrap();
+        let id = format!(
+            "{url}\n{}\n{}",
+            reader.etag().unwrap_or(""),
+            reader.object_len()
+        );
+        let cached = std::sync::Arc::new(DiskCached::new(reader, &id, &config).unwrap());
+        let store = Store::open_with(cached.clone(), &url).unwrap();
+        assert_same_store(&local, &store);
+        (cached.inner().fetched(), cached.stats())
+    };
+    let (fetched, stats) = visit();
+    assert_eq!(fetched.requests, 1, "{fetched:?} {stats:?}");
+    assert_eq!(stats.misses, 0, "{stats:?}");
+    assert!(stats.hits > 2, "{stats:?}");
+}

@@ -27,7 +27,10 @@ pub fn open(path: impl AsRef<Path>) -> Result<Store, StoreError> {
 /// `gs://…`, `az://…`, `https://…`) through a
 /// [`RemoteRangeReader`](brickray_remote::RemoteRangeReader) configured by
 /// `opts`. Three requests: the object's size, the header, the metadata
-/// after the payload. Errors name the URL; a remote failure is a
+/// after the payload. With [`RemoteOptions::disk_cache`](brickray_remote::RemoteOptions::disk_cache)
+/// the ranges it fetches are kept on the local disk
+/// ([`DiskCached`](brickray_remote::DiskCached)). Errors name the URL; a
+/// remote failure is a
 /// [`StoreError::Io`] whose source holds the typed
 /// [`RemoteError`](brickray_remote::RemoteError) (see
 /// [`RemoteError::from_io`](brickray_remote::RemoteError::from_io)).
@@ -35,7 +38,21 @@ pub fn open(path: impl AsRef<Path>) -> Result<Store, StoreError> {
 pub fn open_url(url: &str, opts: &brickray_remote::RemoteOptions) -> Result<Store, StoreError> {
     let reader = brickray_remote::RemoteRangeReader::open(url, opts)
         .map_err(|e| StoreError::io(Path::new(url), e.into()))?;
-    Store::open_with(reader, url)
+    match &opts.disk_cache {
+        Some(config) => {
+            // What changes when the object does: a new ETag or length is
+            // another folder of the cache.
+            let identity = format!(
+                "{url}\n{}\n{}",
+                reader.etag().unwrap_or(""),
+                reader.object_len()
+            );
+            let cached = brickray_remote::DiskCached::new(reader, &identity, config)
+                .map_err(|e| StoreError::io(&config.dir, e))?;
+            Store::open_with(cached, url)
+        }
+        None => Store::open_with(reader, url),
+    }
 }
 
 /// Opens a store from a URL ([`open_url`], configured by
