@@ -418,6 +418,9 @@ enum Suite {
         /// Rounds of every case (default 3; each row is the median round).
         #[arg(long, value_parser = at_least_one::<usize>)]
         rounds: Option<usize>,
+        /// Ray cast every frame too (whole frames; default: planned only).
+        #[arg(long)]
+        raycast: bool,
     },
     /// u8 volumes: exact interpolation vs 8-bit texels.
     U8 {

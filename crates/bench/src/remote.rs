@@ -27,13 +27,17 @@
 //! batching saves; and twice through a disk cache (`DiskCached`, empty each
 //! round): its first visit fills the cache, its second reads from it.
 //!
+//! With `--raycast` every frame is also ray cast (`prepare`, the ray cast,
+//! submit and wait: a host's whole frame), so the frame times include what
+//! the device does; use a smaller `--size` on a software device.
+//!
 //! Every case runs `--rounds` times (3), the cases in turn each round; a
 //! case's row is its round of median convergence time, with the median
 //! time to the first image.
 //!
 //! `cargo run --release -p brickray-bench -- remote [--size PX] [--delays
-//! 0,20,80] [--threads N] [--rounds N] [--gap-kib K]` (needs ../shared/data
-//! and python3).
+//! 0,20,80] [--threads N] [--rounds N] [--gap-kib K] [--raycast]` (needs
+//! ../shared/data and python3).
 
 use crate::runner::{Runner, median, quantile, round2};
 use crate::{Figures, arg};
@@ -70,6 +74,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
     let size: u32 = arg(args, "--size", 512)?;
     let threads: usize = arg(args, "--threads", 8)?;
     let rounds: usize = arg(args, "--rounds", 3)?.max(1);
+    let raycast = args.iter().any(|a| a == "--raycast");
     let gap_kib: u64 = arg(
         args,
         "--gap-kib",
@@ -120,8 +125,9 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         proxies.push((d, p));
     }
     println!(
-        "pycortex S1 T1 MRI (u8 256^3): a .brs store ({:.1} MiB) and the shared OME-Zarr 0.5 image, over a Range HTTP server with added delay; {size}x{size} frames planned at 60 Hz, {threads} loader threads",
-        std::fs::metadata(&store_path).map_or(0.0, |m| m.len() as f64 / (1 << 20) as f64)
+        "pycortex S1 T1 MRI (u8 256^3): a .brs store ({:.1} MiB) and the shared OME-Zarr 0.5 image, over a Range HTTP server with added delay; {size}x{size} frames {} at 60 Hz at most, {threads} loader threads",
+        std::fs::metadata(&store_path).map_or(0.0, |m| m.len() as f64 / (1 << 20) as f64),
+        if raycast { "ray cast" } else { "planned" },
     );
     println!(
         "\n| source | transport | first image s | converged s (frames) | after the jump (frames) | requests | MiB fetched | fetched / drawn bricks | requests per brick | cancelled queued / in flight | p99 / median ms streaming | slowest frame ms |"
@@ -171,7 +177,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
             });
             let paths = (store_path.as_path(), zarr.as_path());
             let opened = open(src, base.as_deref(), paths, &opts, *variant, &cache)?;
-            done.push(case(&gpu, &run, opened, threads)?);
+            done.push(case(&gpu, &run, opened, threads, raycast)?);
         }
     }
     let mut results = Vec::new();
@@ -418,6 +424,7 @@ fn case(
     run: &Runner<'_>,
     opened: Opened,
     threads: usize,
+    raycast: bool,
 ) -> Result<CaseResult, String> {
     let layout = opened.source.layout().clone();
     let d = layout.volume.clone();
@@ -456,6 +463,7 @@ fn case(
         drawn: HashSet::new(),
         streaming_ms: Vec::new(),
         frames: 0,
+        raycast,
     };
     // The first frame: the root (preloaded at set-up) covers every pixel.
     let first = walk.step(&mut r, start_cam)?;
@@ -533,13 +541,20 @@ struct Walk<'a, 'g> {
     streaming_ms: Vec<f64>,
     /// Frames planned.
     frames: usize,
+    /// Ray cast every frame too (`--raycast`), not only plan it.
+    raycast: bool,
 }
 
 impl Walk<'_, '_> {
     /// Plans one frame; returns whether the view has converged.
     fn step(&mut self, r: &mut VolumeRenderer, camera: Camera) -> Result<bool, String> {
         let t = Instant::now();
-        self.run.plan(r, camera, self.frame, self.settings)?;
+        if self.raycast {
+            self.run
+                .frame(r, camera, self.frame, self.settings, false)?;
+        } else {
+            self.run.plan(r, camera, self.frame, self.settings)?;
+        }
         let took = t.elapsed();
         let s = r.stats().out_of_core.ok_or("not out of core")?;
         // The first frame allocates the pool (set-up, counted in the first
