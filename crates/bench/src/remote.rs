@@ -35,6 +35,10 @@
 //! case's row is its round of median convergence time, with the median
 //! time to the first image.
 //!
+//! Where moto is installed (`python3 -m pip install 'moto[server]'`, as
+//! scripts/test.sh does) the same objects are also read from an S3 bucket
+//! on it, behind proxies with the same delays.
+//!
 //! `cargo run --release -p brickray-bench -- remote [--size PX] [--delays
 //! 0,20,80] [--threads N] [--rounds N] [--gap-kib K] [--raycast]` (needs
 //! ../shared/data and python3).
@@ -124,6 +128,41 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         )?;
         proxies.push((d, p));
     }
+    // S3 (moto) when it is installed: the same objects in a bucket, behind
+    // proxies with the same delays.
+    let moto = start_moto()?;
+    let mut s3_proxies = Vec::new();
+    if let Some(m) = &moto {
+        let endpoint = format!("http://127.0.0.1:{}", m.port);
+        create_bucket(m.port, "bench")?;
+        let direct = s3_options(&endpoint, gap_kib);
+        let put = |key: &str, file: &Path| {
+            let bytes = std::fs::read(file).map_err(|e| format!("{}: {e}", file.display()))?;
+            brickray_remote::put_object(&format!("s3://bench/{key}"), &direct, bytes)
+                .map_err(|e| e.to_string())
+        };
+        put("mri.brs", &store_path)?;
+        for f in files(&root.join("mri.ome.zarr"))? {
+            let rel = f.strip_prefix(&root).map_err(|e| e.to_string())?;
+            put(&rel.to_string_lossy(), &f)?;
+        }
+        for &d in &delays {
+            let p = Server::start(
+                dir.path(),
+                &format!("s3proxy{d}"),
+                &scripts.join("fault_proxy.py"),
+                &[
+                    "--upstream",
+                    &endpoint,
+                    "--cycle",
+                    "ok",
+                    "--delay",
+                    &d.to_string(),
+                ],
+            )?;
+            s3_proxies.push((d, p));
+        }
+    }
     println!(
         "pycortex S1 T1 MRI (u8 256^3): a .brs store ({:.1} MiB) and the shared OME-Zarr 0.5 image, over a Range HTTP server with added delay; {size}x{size} frames {} at 60 Hz at most, {threads} loader threads",
         std::fs::metadata(&store_path).map_or(0.0, |m| m.len() as f64 / (1 << 20) as f64),
@@ -143,6 +182,11 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         cases.push((src, "local".into(), None, Variant::Batched));
         for &d in &delays {
             cases.push((src, format!("http +{d} ms"), Some(d), Variant::Batched));
+        }
+        if moto.is_some() {
+            for &d in &delays {
+                cases.push((src, format!("s3 +{d} ms"), Some(d), Variant::S3));
+            }
         }
     }
     if let Some(&worst) = delays.iter().max() {
@@ -171,12 +215,22 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
             max_bytes: 1 << 30,
         };
         for ((src, _, delay, variant), done) in cases.iter().zip(&mut rounds_of) {
-            let base = delay.map(|d| {
-                let port = proxies.iter().find(|p| p.0 == d).map_or(0, |p| p.1.port);
-                format!("http://127.0.0.1:{port}")
-            });
+            let via = if *variant == Variant::S3 {
+                &s3_proxies
+            } else {
+                &proxies
+            };
+            let port = |d: u32| via.iter().find(|p| p.0 == d).map_or(0, |p| p.1.port);
+            let (base, case_opts) = match delay {
+                None => (None, opts.clone()),
+                Some(d) if *variant == Variant::S3 => (
+                    Some("s3://bench".to_string()),
+                    s3_options(&format!("http://127.0.0.1:{}", port(*d)), gap_kib),
+                ),
+                Some(d) => (Some(format!("http://127.0.0.1:{}", port(*d))), opts.clone()),
+            };
             let paths = (store_path.as_path(), zarr.as_path());
-            let opened = open(src, base.as_deref(), paths, &opts, *variant, &cache)?;
+            let opened = open(src, base.as_deref(), paths, &case_opts, *variant, &cache)?;
             done.push(case(&gpu, &run, opened, threads, raycast)?);
         }
     }
@@ -212,6 +266,8 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         results.push((src, delay, variant, r));
     }
     drop(proxies);
+    drop(s3_proxies);
+    drop(moto);
     drop(server);
     let find = |src: &str, delay: Option<u32>, variant: Variant| {
         results
@@ -275,6 +331,23 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
             json!(round2(u.converged_s / b.converged_s.max(1e-9))),
         );
     }
+    for src in ["brs", "zarr"] {
+        let Some(local) = find(src, None, Variant::Batched) else {
+            continue;
+        };
+        for &d in &delays {
+            if let Some(r) = find(src, Some(d), Variant::S3) {
+                fig.insert(
+                    format!("{src}_s3_first_image_s_{d}ms"),
+                    json!(round2(r.first_image_s)),
+                );
+                fig.insert(
+                    format!("{src}_s3_converged_ratio_{d}ms_vs_local"),
+                    json!(round2(r.converged_s / local.converged_s.max(1e-9))),
+                );
+            }
+        }
+    }
     if let (Some(cold), Some(warm)) = (
         worst.and_then(|d| find("brs", Some(d), Variant::CacheCold)),
         worst.and_then(|d| find("brs", Some(d), Variant::CacheWarm)),
@@ -315,6 +388,8 @@ enum Variant {
     CacheCold,
     /// Through the disk cache the cold case filled.
     CacheWarm,
+    /// From S3 (moto), batched.
+    S3,
 }
 
 fn open(
@@ -669,6 +744,98 @@ impl Drop for Server {
         let _ = self.child.kill();
         let _ = self.child.wait();
     }
+}
+
+/// Options for the moto server at `endpoint` (its accepted test
+/// credentials, plain HTTP).
+fn s3_options(endpoint: &str, gap_kib: u64) -> RemoteOptions {
+    RemoteOptions {
+        allow_http: true,
+        endpoint: Some(endpoint.to_owned()),
+        region: Some("us-east-1".into()),
+        config: vec![
+            ("aws_access_key_id".into(), "testing".into()),
+            ("aws_secret_access_key".into(), "testing".into()),
+        ],
+        coalesce_gap: gap_kib << 10,
+        ..RemoteOptions::default()
+    }
+}
+
+/// moto's S3 server on a free loopback port, or `None` (said why) when moto
+/// is not installed.
+fn start_moto() -> Result<Option<Server>, String> {
+    let installed = Command::new("python3")
+        .args(["-c", "import moto.server, flask"])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .status()
+        .is_ok_and(|s| s.success());
+    if !installed {
+        println!("no S3 rows: moto is not installed (python3 -m pip install 'moto[server]')");
+        return Ok(None);
+    }
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .and_then(|l| l.local_addr())
+        .map_err(|e| e.to_string())?
+        .port();
+    let child = Command::new("python3")
+        .args([
+            "-m",
+            "moto.server",
+            "-H",
+            "127.0.0.1",
+            "-p",
+            &port.to_string(),
+        ])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .map_err(|e| format!("moto: {e}"))?;
+    let server = Server { child, port };
+    let t = Instant::now();
+    while std::net::TcpStream::connect(("127.0.0.1", port)).is_err() {
+        if t.elapsed() > Duration::from_secs(30) {
+            return Err("moto did not start within 30 s".into());
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    Ok(Some(server))
+}
+
+/// Creates a bucket on the moto server at `port` (one unsigned `PUT`, which
+/// moto accepts; object_store has no bucket API).
+fn create_bucket(port: u16, bucket: &str) -> Result<(), String> {
+    use std::io::{Read, Write};
+    let mut s = std::net::TcpStream::connect(("127.0.0.1", port)).map_err(|e| e.to_string())?;
+    s.set_read_timeout(Some(Duration::from_secs(10)))
+        .map_err(|e| e.to_string())?;
+    write!(
+        s,
+        "PUT /{bucket} HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\nContent-Length: 0\r\nConnection: close\r\n\r\n"
+    )
+    .map_err(|e| e.to_string())?;
+    let mut answer = String::new();
+    let _ = s.read_to_string(&mut answer);
+    if answer.starts_with("HTTP/1.1 200") {
+        Ok(())
+    } else {
+        Err(format!("creating bucket {bucket}: {answer}"))
+    }
+}
+
+/// Every file under `dir`.
+fn files(dir: &Path) -> Result<Vec<PathBuf>, String> {
+    let mut out = Vec::new();
+    for entry in std::fs::read_dir(dir).map_err(|e| format!("{}: {e}", dir.display()))? {
+        let entry = entry.map_err(|e| e.to_string())?;
+        if entry.file_type().map_err(|e| e.to_string())?.is_dir() {
+            out.extend(files(&entry.path())?);
+        } else {
+            out.push(entry.path());
+        }
+    }
+    Ok(out)
 }
 
 /// Copies a folder tree.

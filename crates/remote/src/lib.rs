@@ -1116,6 +1116,17 @@ impl brickray_core::ObjectReader for RemoteObjects {
     }
 }
 
+/// Writes `bytes` as the object at `url` (configured by `opts`): one `PUT`
+/// (object_store's `put`, retried as reads are). What a tool uses to publish
+/// a store it built, and the benchmarks to fill a bucket.
+pub fn put_object(url: &str, opts: &RemoteOptions, bytes: Vec<u8>) -> Result<(), RemoteError> {
+    let (store, path) = object_store_for(url, opts)?;
+    let runtime = start_runtime(url, opts)?;
+    run_on(&runtime, url, opts.deadline(), async move {
+        store.put(&path, bytes.into()).await.map(|_| ())
+    })
+}
+
 /// Whether `s` names a remote object (a URL with a scheme this crate
 /// reads), rather than a local path.
 pub fn is_url(s: &str) -> bool {

@@ -3,9 +3,8 @@
 #![allow(dead_code, unreachable_pub, missing_docs)]
 
 use brickray_core::{BrickSource, NodeKey};
-use brickray_remote::{RemoteOptions, object_store_for};
+use brickray_remote::RemoteOptions;
 use brickray_store::{BuildOptions, Store, build};
-use object_store::ObjectStoreExt;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Duration;
@@ -83,14 +82,9 @@ pub fn s3_signed(endpoint: &str) -> RemoteOptions {
     }
 }
 
-/// Uploads `bytes` to `url` with object_store itself.
+/// Uploads `bytes` to `url` (`brickray_remote::put_object`).
 pub fn upload(url: &str, opts: &RemoteOptions, bytes: &[u8]) {
-    let (store, path) = object_store_for(url, opts).unwrap();
-    let rt = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .unwrap();
-    rt.block_on(store.put(&path, bytes.to_vec().into()))
+    brickray_remote::put_object(url, opts, bytes.to_vec())
         .unwrap_or_else(|e| panic!("upload to {url}: {e}"));
 }
 
