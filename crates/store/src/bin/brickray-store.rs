@@ -656,35 +656,47 @@ fn cmd_info(store: &Store, bins: usize) -> Result<(), String> {
     let [lo, hi] = store.data_range();
     let span = (hi - lo).max(f32::MIN_POSITIVE);
     let keys: Vec<_> = store.nodes().filter(|n| n.key.level == leaf).collect();
+    // Over the network a store reads its bricks in batches (one round trip
+    // each); a local file one by one.
     let hist = keys
-        .par_iter()
-        .map(|rec| -> Result<Vec<u64>, String> {
+        .par_chunks(store.batch_size().max(1))
+        .map(|chunk| -> Result<Vec<u64>, String> {
             let mut h = vec![0u64; bins];
             let bin = |v: f32| (((v - lo) / span * bins as f32) as usize).min(bins - 1);
-            let b = lay.brick as u64;
-            let ext = [rec.key.x, rec.key.y, rec.key.z]
-                .map(|p| p as u64 * b)
+            let data: Vec<_> = chunk
                 .iter()
-                .zip(d.dims)
-                .map(|(&o, n)| (n as u64 - o).min(b))
-                .collect::<Vec<_>>();
-            let count = ext.iter().product::<u64>();
-            match rec.info.kind {
-                NodeKind::Uniform(v) => h[bin(v)] += count,
-                NodeKind::Empty => h[bin(lo)] += count,
-                NodeKind::Data => {
-                    let mut buf = vec![0u8; lay.brick_bytes()];
-                    store
-                        .read_brick(rec.key, &mut buf)
-                        .map_err(|e| e.to_string())?;
-                    let vals = d.dtype.decode_le(&buf);
-                    let s = lay.stored_side() as usize;
-                    let a = lay.apron as usize;
-                    for k in 0..ext[2] as usize {
-                        for j in 0..ext[1] as usize {
-                            let row = ((k + a) * s + j + a) * s + a;
-                            for v in &vals[row..row + ext[0] as usize] {
-                                h[bin(*v)] += 1;
+                .filter(|r| matches!(r.info.kind, NodeKind::Data))
+                .collect();
+            let mut bufs = vec![vec![0u8; lay.brick_bytes()]; data.len()];
+            let mut outs: Vec<&mut [u8]> = bufs.iter_mut().map(|b| b.as_mut_slice()).collect();
+            let keys: Vec<_> = data.iter().map(|r| r.key).collect();
+            for r in store.read_bricks(&keys, &mut outs, &brickray_core::CancelToken::new()) {
+                r.map_err(|e| e.to_string())?;
+            }
+            let mut next = bufs.iter();
+            for rec in chunk {
+                let b = lay.brick as u64;
+                let ext = [rec.key.x, rec.key.y, rec.key.z]
+                    .map(|p| p as u64 * b)
+                    .iter()
+                    .zip(d.dims)
+                    .map(|(&o, n)| (n as u64 - o).min(b))
+                    .collect::<Vec<_>>();
+                let count = ext.iter().product::<u64>();
+                match rec.info.kind {
+                    NodeKind::Uniform(v) => h[bin(v)] += count,
+                    NodeKind::Empty => h[bin(lo)] += count,
+                    NodeKind::Data => {
+                        let buf = next.next().ok_or("a brick was not read")?;
+                        let vals = d.dtype.decode_le(buf);
+                        let s = lay.stored_side() as usize;
+                        let a = lay.apron as usize;
+                        for k in 0..ext[2] as usize {
+                            for j in 0..ext[1] as usize {
+                                let row = ((k + a) * s + j + a) * s + a;
+                                for v in &vals[row..row + ext[0] as usize] {
+                                    h[bin(*v)] += 1;
+                                }
                             }
                         }
                     }
