@@ -89,6 +89,13 @@ pub struct OutOfCoreConfig {
     pub lod_metric: LodMetric,
     /// Loader threads, `1..=`[`MAX_LOADER_THREADS`].
     pub loader_threads: usize,
+    /// Most bytes of bricks being read at once, counted at the stored brick
+    /// size (one brick is always allowed): what bounds the memory and the
+    /// bandwidth a source over the network ties up, separately from the
+    /// CPU cache. With batches ([`BrickSource::batch_size`](brickray_core::BrickSource::batch_size))
+    /// the threads x batch bricks in flight are cut to it. 64 MiB by
+    /// default.
+    pub max_bytes_in_flight: u64,
     /// Automatic retry of failed reads; `None`: only on request
     /// ([`BrickManager::retry_failed`](crate::BrickManager::retry_failed)).
     pub retry: Option<RetryPolicy>,
@@ -126,6 +133,9 @@ pub struct OutOfCoreConfig {
     pub setup_deadline: Duration,
 }
 
+/// Default [`OutOfCoreConfig::max_bytes_in_flight`]: 64 MiB.
+pub const DEFAULT_MAX_BYTES_IN_FLIGHT: u64 = 64 << 20;
+
 /// Default [`OutOfCoreConfig::setup_deadline`]: 30 s.
 pub const DEFAULT_SETUP_DEADLINE: Duration = Duration::from_secs(30);
 
@@ -133,7 +143,8 @@ pub const DEFAULT_SETUP_DEADLINE: Duration = Duration::from_secs(30);
 pub const DEFAULT_FLOOR_SLOTS: u32 = 73;
 
 impl Default for OutOfCoreConfig {
-    /// 512 MiB CPU, 256 MiB GPU, 16 MiB uploaded per frame, 1 px, 2 threads,
+    /// 512 MiB CPU, 256 MiB GPU, 16 MiB uploaded per frame, 1 px, 2 threads
+    /// with at most 64 MiB of bricks in flight,
     /// retries after 1 s doubling to 60 s, fades of 120 ms, a floor of up to
     /// 73 slots, no visibility feedback, a set-up deadline of 30 s.
     fn default() -> Self {
@@ -144,6 +155,7 @@ impl Default for OutOfCoreConfig {
             tolerance_px: 1.0,
             lod_metric: LodMetric::Geometric,
             loader_threads: 2,
+            max_bytes_in_flight: DEFAULT_MAX_BYTES_IN_FLIGHT,
             retry: Some(RetryPolicy::default()),
             fade: Some(FadeDuration::default()),
             floor_slots: DEFAULT_FLOOR_SLOTS,

@@ -80,11 +80,18 @@ pub enum LoadError {
 pub struct LoaderConfig {
     /// Worker threads (clamped to `1..=`[`MAX_LOADER_THREADS`]).
     pub workers: usize,
+    /// Most bricks being read at once (taken by a thread, result not yet
+    /// polled); at least 1 ([`Loader::set_max_in_flight`]).
+    pub max_in_flight: usize,
 }
 
 impl Default for LoaderConfig {
+    /// 2 threads, no bound on bricks in flight beyond threads x batch.
     fn default() -> Self {
-        LoaderConfig { workers: 2 }
+        LoaderConfig {
+            workers: 2,
+            max_in_flight: usize::MAX,
+        }
     }
 }
 
@@ -161,6 +168,7 @@ impl Loader {
         config: LoaderConfig,
     ) -> std::io::Result<Loader> {
         let shared = Arc::new(Shared::default());
+        shared.queue.lock().max_in_flight = config.max_in_flight;
         let (tx, rx) = crossbeam_channel::unbounded();
         let mut loader = Loader {
             shared,
@@ -263,6 +271,13 @@ impl Loader {
         stale.len()
     }
 
+    /// Sets the most bricks being read at once (at least 1); threads waiting
+    /// for room wake.
+    pub fn set_max_in_flight(&self, bricks: usize) {
+        self.shared.queue.lock().max_in_flight = bricks.max(1);
+        self.shared.wake.notify_all();
+    }
+
     /// Cancels a queued request; returns whether it was queued.
     pub fn cancel(&self, kind: FetchKind, key: NodeKey) -> bool {
         self.shared.queue.lock().cancel((kind, key))
@@ -284,6 +299,8 @@ impl Loader {
                 }
             }
         }
+        // Room in the budget of bricks in flight: threads waiting for it go on.
+        self.shared.wake.notify_all();
         let meta = |report: &mut PollReport, key, result| match result {
             Ok(info) => report.metadata.push((key, info)),
             Err(e) => report.failed.push((FetchKind::Metadata, key, e)),

@@ -73,6 +73,8 @@ pub(crate) struct Queue {
     /// Brick batches being read, each with the token that aborts it.
     in_flight: Vec<(u64, CancelToken, Vec<NodeKey>)>,
     next_batch: u64,
+    /// Most bricks being read at once (taken, result not polled); at least 1.
+    pub(crate) max_in_flight: usize,
     /// Requests cancelled so far: queued ones dropped, in-flight ones aborted.
     pub(crate) cancelled_queued: u64,
     pub(crate) cancelled_in_flight: u64,
@@ -115,10 +117,29 @@ impl Queue {
         Some(job)
     }
 
+    /// Takes the first job within the budget of bricks in flight: a
+    /// metadata job always, a brick job only while fewer than
+    /// `max_in_flight` bricks are being read.
+    pub(crate) fn pop_within_budget(&mut self) -> Option<Job> {
+        let (_, first) = self.order.first_key_value()?;
+        if matches!(first, Job::Brick { .. })
+            && self.loading_count(FetchKind::Brick) >= self.max_in_flight.max(1)
+        {
+            return None;
+        }
+        self.pop()
+    }
+
     /// After a brick job was taken: takes up to `more` further brick jobs
     /// from the front of the queue (the next in priority order), marking
-    /// them loading; stops at a metadata job.
+    /// them loading, within the budget of bricks in flight; stops at a
+    /// metadata job.
     pub(crate) fn pop_more_bricks(&mut self, more: usize) -> Vec<Job> {
+        let room = self
+            .max_in_flight
+            .max(1)
+            .saturating_sub(self.loading_count(FetchKind::Brick));
+        let more = more.min(room);
         let mut jobs = Vec::new();
         while jobs.len() < more {
             match self.order.first_key_value() {

@@ -9,7 +9,11 @@ fn k(level: u8, x: u32) -> NodeKey {
 
 fn loader(src: &Arc<TestSource>, workers: usize) -> Loader {
     let prep = Preparer::new(&src.layout, &test_gpu(&src.layout)).unwrap();
-    Loader::new(src.clone(), Arc::new(prep), LoaderConfig { workers }).unwrap()
+    let config = LoaderConfig {
+        workers,
+        ..LoaderConfig::default()
+    };
+    Loader::new(src.clone(), Arc::new(prep), config).unwrap()
 }
 
 fn brick(src: &TestSource, key: NodeKey, priority: f32) -> BrickRequest {
@@ -387,4 +391,52 @@ fn a_batch_the_view_left_is_cancelled_in_flight() {
     assert!(report.failed.is_empty(), "{:?}", report.failed);
     assert!(!cache.contains(k(3, 0)));
     src.open_gate();
+}
+
+#[test]
+fn bricks_in_flight_stay_within_the_budget() {
+    // Four threads, batches of 4, but room for 3 bricks in flight: the gated
+    // first brick holds one; at most two more may be read meanwhile.
+    let mut src = TestSource::new(64);
+    src.batch = 4;
+    src.gate_key = Some(k(3, 0));
+    let src = Arc::new(src);
+    let prep = Preparer::new(&src.layout, &test_gpu(&src.layout)).unwrap();
+    let config = LoaderConfig {
+        workers: 4,
+        max_in_flight: 3,
+    };
+    let mut loader = Loader::new(src.clone(), Arc::new(prep), config).unwrap();
+    let mut cache = CpuCache::new(1 << 22);
+    loader.request_brick(brick(&src, k(3, 0), 100.0));
+    let t = Instant::now();
+    while loader.loading(FetchKind::Brick) == 0 {
+        assert!(t.elapsed() < Duration::from_secs(5));
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    let rest: Vec<BrickRequest> = (1..12).map(|x| brick(&src, k(3, x), 1.0)).collect();
+    for r in &rest {
+        loader.request_brick(*r);
+    }
+    // Metadata is never held back by the budget.
+    loader.request_metadata(k(2, 1), 1.0);
+    let mut most = 0;
+    let t = Instant::now();
+    while t.elapsed() < Duration::from_millis(100) {
+        most = most.max(loader.loading(FetchKind::Brick));
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    assert!(most <= 3, "{most} bricks in flight");
+    // (The two others were read; their results wait for a poll.)
+    assert_eq!(loader.loading(FetchKind::Brick), 3);
+    assert!(src.calls_of(FetchKind::Metadata).contains(&k(2, 1)));
+    // Polling makes room; a larger budget lets the rest through.
+    loader.set_max_in_flight(8);
+    src.open_gate();
+    let report = poll_until(&mut loader, &mut cache, |l, c| {
+        most = most.max(l.loading(FetchKind::Brick));
+        (0..12).all(|x| c.contains(k(3, x))) && idle(l)
+    });
+    assert!(report.failed.is_empty());
+    assert!(most <= 8, "{most}");
 }

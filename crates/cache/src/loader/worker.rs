@@ -178,7 +178,7 @@ pub(crate) fn worker(
                 if q.shutdown {
                     return;
                 }
-                if let Some(job) = q.pop() {
+                if let Some(job) = q.pop_within_budget() {
                     let more = match job {
                         Job::Brick { .. } if batch > 1 => q.pop_more_bricks(batch - 1),
                         _ => Vec::new(),

@@ -285,12 +285,17 @@ impl BrickManager {
                 self.preparer.clone(),
                 LoaderConfig {
                     workers: config.loader_threads,
+                    max_in_flight: super::bricks_in_flight(&config, &self.layout),
                 },
             )
             .map_err(|e| ConfigError::LoaderStart {
                 reason: e.to_string(),
             })?;
             out.loader = true;
+        }
+        if config.max_bytes_in_flight != old.max_bytes_in_flight {
+            self.loader
+                .set_max_in_flight(super::bricks_in_flight(&config, &self.layout));
         }
         if config.upload_budget_bytes != old.upload_budget_bytes {
             self.budget = UploadBudget::new(config.upload_budget_bytes);

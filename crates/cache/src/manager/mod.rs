@@ -96,6 +96,13 @@ impl std::fmt::Debug for BrickManager {
 /// for the views before it. About 48 bytes an entry, under 4% of the budget.
 const META_PER_BRICK: u64 = 64;
 
+/// [`OutOfCoreConfig::max_bytes_in_flight`] in stored bricks of `layout`
+/// (at least 1).
+fn bricks_in_flight(config: &OutOfCoreConfig, layout: &OctreeLayout) -> usize {
+    let brick = layout.brick_bytes().max(1) as u64;
+    (config.max_bytes_in_flight / brick).clamp(1, usize::MAX as u64) as usize
+}
+
 fn meta_capacity(cpu_budget_bytes: u64, brick_bytes: u64) -> usize {
     (META_PER_BRICK * (cpu_budget_bytes / brick_bytes.max(1))).clamp(16_384, 1 << 24) as usize
 }
@@ -178,6 +185,7 @@ impl BrickManager {
             preparer.clone(),
             LoaderConfig {
                 workers: config.loader_threads,
+                max_in_flight: bricks_in_flight(&config, &layout),
             },
         )
         .map_err(CacheError::Spawn)?;
