@@ -111,23 +111,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         &["--root", &root.to_string_lossy()],
     )?;
     let upstream = format!("http://127.0.0.1:{}", server.port);
-    let mut proxies = Vec::new();
-    for &d in &delays {
-        let p = Server::start(
-            dir.path(),
-            &format!("proxy{d}"),
-            &scripts.join("fault_proxy.py"),
-            &[
-                "--upstream",
-                &upstream,
-                "--cycle",
-                "ok",
-                "--delay",
-                &d.to_string(),
-            ],
-        )?;
-        proxies.push((d, p));
-    }
+    let proxies = start_proxies(dir.path(), &scripts, "http", &upstream, &delays)?;
     // S3 (moto) when it is installed: the same objects in a bucket, behind
     // proxies with the same delays.
     let moto = start_moto()?;
@@ -146,22 +130,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
             let rel = f.strip_prefix(&root).map_err(|e| e.to_string())?;
             put(&rel.to_string_lossy(), &f)?;
         }
-        for &d in &delays {
-            let p = Server::start(
-                dir.path(),
-                &format!("s3proxy{d}"),
-                &scripts.join("fault_proxy.py"),
-                &[
-                    "--upstream",
-                    &endpoint,
-                    "--cycle",
-                    "ok",
-                    "--delay",
-                    &d.to_string(),
-                ],
-            )?;
-            s3_proxies.push((d, p));
-        }
+        s3_proxies = start_proxies(dir.path(), &scripts, "s3", &endpoint, &delays)?;
     }
     println!(
         "pycortex S1 T1 MRI (u8 256^3): a .brs store ({:.1} MiB) and the shared OME-Zarr 0.5 image, over a Range HTTP server with added delay; {size}x{size} frames {} at 60 Hz at most, {threads} loader threads",
@@ -744,6 +713,31 @@ impl Drop for Server {
         let _ = self.child.kill();
         let _ = self.child.wait();
     }
+}
+
+/// A delaying proxy (`fault_proxy.py --cycle ok --delay D`) in front of
+/// `upstream` per delay of `delays`.
+fn start_proxies(
+    dir: &Path,
+    scripts: &Path,
+    tag: &str,
+    upstream: &str,
+    delays: &[u32],
+) -> Result<Vec<(u32, Server)>, String> {
+    delays
+        .iter()
+        .map(|&d| {
+            let delay = d.to_string();
+            let args = ["--upstream", upstream, "--cycle", "ok", "--delay", &delay];
+            let p = Server::start(
+                dir,
+                &format!("{tag}-proxy{d}"),
+                &scripts.join("fault_proxy.py"),
+                &args,
+            )?;
+            Ok((d, p))
+        })
+        .collect()
 }
 
 /// Options for the moto server at `endpoint` (its accepted test

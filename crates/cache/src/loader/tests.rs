@@ -276,23 +276,35 @@ fn drop_returns_while_a_read_or_metadata_call_hangs() {
     }
 }
 
-#[test]
-fn a_batching_source_gets_queued_bricks_together_in_priority_order() {
-    // A source over the network asks for batches of 4: one worker, gated on
-    // the first brick so that the rest queue behind it.
+/// A source asking for batches of `batch`, whose read of `k(3, 0)` waits
+/// for its gate (what it is also told: `setup`).
+fn batching(batch: usize, setup: impl FnOnce(&TestSource)) -> Arc<TestSource> {
     let mut src = TestSource::new(64);
-    src.batch = 4;
+    src.batch = batch;
     src.gate_key = Some(k(3, 0));
-    src.fail(FetchKind::Brick, k(3, 5));
-    let src = Arc::new(src);
-    let mut loader = loader(&src, 1);
-    let mut cache = CpuCache::new(1 << 22);
-    loader.request_brick(brick(&src, k(3, 0), 100.0));
+    setup(&src);
+    Arc::new(src)
+}
+
+/// Requests `k(3, 0)` at a high priority and waits (at most 5 s) until a
+/// thread holds it.
+fn hold_first(loader: &Loader, src: &TestSource) {
+    loader.request_brick(brick(src, k(3, 0), 100.0));
     let t = Instant::now();
     while loader.loading(FetchKind::Brick) == 0 {
         assert!(t.elapsed() < Duration::from_secs(5));
         std::thread::sleep(Duration::from_millis(1));
     }
+}
+
+#[test]
+fn a_batching_source_gets_queued_bricks_together_in_priority_order() {
+    // A source over the network asks for batches of 4: one worker, gated on
+    // the first brick so that the rest queue behind it.
+    let src = batching(4, |s| s.fail(FetchKind::Brick, k(3, 5)));
+    let mut loader = loader(&src, 1);
+    let mut cache = CpuCache::new(1 << 22);
+    hold_first(&loader, &src);
     // Queued while the first is held: priority 1..=9 (the highest first).
     let keys: Vec<NodeKey> = (1..10).map(|x| k(3, x)).collect();
     for (i, key) in keys.iter().enumerate() {
@@ -322,19 +334,10 @@ fn a_batching_source_gets_queued_bricks_together_in_priority_order() {
 
 #[test]
 fn a_panic_in_a_batch_fails_its_bricks_only() {
-    let mut src = TestSource::new(64);
-    src.batch = 8;
-    src.gate_key = Some(k(3, 0));
-    src.panic_on(FetchKind::Brick, k(3, 2));
-    let src = Arc::new(src);
+    let src = batching(8, |s| s.panic_on(FetchKind::Brick, k(3, 2)));
     let mut loader = loader(&src, 1);
     let mut cache = CpuCache::new(1 << 22);
-    loader.request_brick(brick(&src, k(3, 0), 100.0));
-    let t = Instant::now();
-    while loader.loading(FetchKind::Brick) == 0 {
-        assert!(t.elapsed() < Duration::from_secs(5));
-        std::thread::sleep(Duration::from_millis(1));
-    }
+    hold_first(&loader, &src);
     for x in 1..4 {
         loader.request_brick(brick(&src, k(3, x), 1.0));
     }
@@ -360,10 +363,7 @@ fn a_panic_in_a_batch_fails_its_bricks_only() {
 fn a_batch_the_view_left_is_cancelled_in_flight() {
     // Batches of 4 over a "network" that holds the batch with k(3, 0) until
     // the gate opens or the batch is cancelled.
-    let mut src = TestSource::new(64);
-    src.batch = 4;
-    src.gate_key = Some(k(3, 0));
-    let src = Arc::new(src);
+    let src = batching(4, |_| ());
     let mut loader = loader(&src, 1);
     let mut cache = CpuCache::new(1 << 22);
     let first: Vec<BrickRequest> = (0..3).map(|x| brick(&src, k(3, x), 10.0)).collect();
@@ -397,10 +397,7 @@ fn a_batch_the_view_left_is_cancelled_in_flight() {
 fn bricks_in_flight_stay_within_the_budget() {
     // Four threads, batches of 4, but room for 3 bricks in flight: the gated
     // first brick holds one; at most two more may be read meanwhile.
-    let mut src = TestSource::new(64);
-    src.batch = 4;
-    src.gate_key = Some(k(3, 0));
-    let src = Arc::new(src);
+    let src = batching(4, |_| ());
     let prep = Preparer::new(&src.layout, &test_gpu(&src.layout)).unwrap();
     let config = LoaderConfig {
         workers: 4,

@@ -170,7 +170,10 @@ pub(crate) fn worker(
     tx: Sender<Completion>,
 ) {
     let _guard = ExitGuard(shared.clone());
-    let batch = source.batch_size().clamp(1, MAX_BATCH);
+    // (Guarded like every call into the source: a panic means no batches.)
+    let batch = std::panic::catch_unwind(AssertUnwindSafe(|| source.batch_size()))
+        .unwrap_or(1)
+        .clamp(1, MAX_BATCH);
     loop {
         let (job, more) = {
             let mut q = shared.queue.lock();
