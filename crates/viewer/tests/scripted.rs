@@ -31,6 +31,14 @@ mod labels;
 /// The required PSNR of a screenshot against the library's image.
 const MIN_PSNR_DB: f64 = 40.0;
 
+/// Pixels of an RGBA8 screenshot with a channel above 20: what a test
+/// checks the view shows something with before comparing it.
+fn lit_pixels(shot: &[u8]) -> usize {
+    shot.chunks(4)
+        .filter(|p| p[..3].iter().any(|&c| c > 20))
+        .count()
+}
+
 /// Hounsfield units to the head CT's normalized value (range -1024..2986).
 fn hu(v: f32) -> f32 {
     (v + 1024.0) / 4010.0
@@ -317,10 +325,7 @@ fn scripted_screenshots_match_the_library() {
         assert!(w >= 64 && h >= 64, "{name}: a {w}x{h} view");
         let lib = library_image(&volume, camera, w, h, mode, clip);
         // The head covers a good part of the view (not a blank image).
-        let lit = shot
-            .chunks(4)
-            .filter(|p| p[..3].iter().any(|&c| c > 20))
-            .count();
+        let lit = lit_pixels(&shot);
         assert!(lit * 10 > (w * h) as usize, "{name}: only {lit} lit pixels");
         let cmp = brickray_reference::assert_close(
             &format!("viewer-{name}"),
@@ -374,20 +379,14 @@ fn opens_a_store_and_a_procedural_volume_out_of_core() {
     let (shot, w, h) = read_png(&out("store.png"));
     let (camera, _, _) = sidecar(&out("store.png"));
     let lib = library_store_image(&store, camera, w, h);
-    let lit = shot
-        .chunks(4)
-        .filter(|p| p[..3].iter().any(|&c| c > 20))
-        .count();
+    let lit = lit_pixels(&shot);
     assert!(lit * 20 > (w * h) as usize, "store: only {lit} lit pixels");
     let cmp = brickray_reference::assert_close("viewer-store", &shot, &lib, w, h, MIN_PSNR_DB)
         .unwrap_or_else(|e| panic!("{e}"));
     eprintln!("viewer store vs library: {cmp}");
     // The procedural volume streams: a coarse image shows at once.
     let (shot, w, h) = read_png(&out("procedural.png"));
-    let lit = shot
-        .chunks(4)
-        .filter(|p| p[..3].iter().any(|&c| c > 20))
-        .count();
+    let lit = lit_pixels(&shot);
     assert!(
         lit * 20 > (w * h) as usize,
         "procedural: only {lit} lit pixels of {w}x{h}"
@@ -648,10 +647,7 @@ fn opens_every_shared_format() {
     run_script(dir.path(), &script, Duration::from_secs(240));
     for (name, _) in inputs {
         let (shot, w, h) = read_png(&dir.path().join(format!("{name}.png")));
-        let lit = shot
-            .chunks(4)
-            .filter(|p| p[..3].iter().any(|&c| c > 20))
-            .count();
+        let lit = lit_pixels(&shot);
         eprintln!("{name}: {lit} lit pixels of {w}x{h}");
         // The nuclei stack is thin (60 slices of 256x256): about 2.5% of the
         // view; a failed open or an empty volume draws none.

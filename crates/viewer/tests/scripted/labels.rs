@@ -44,10 +44,7 @@ fn label_map_with_its_colour_table_matches_the_library() {
     let (camera, _, _) = sidecar(&png);
     let mut lib = LabelLibrary::new(&volume, camera, w, h);
     let lib = lib.draw(&table);
-    let lit = shot
-        .chunks(4)
-        .filter(|p| p[..3].iter().any(|&c| c > 20))
-        .count();
+    let lit = lit_pixels(&shot);
     assert!(lit * 50 > (w * h) as usize, "only {lit} lit pixels");
     let cmp = brickray_reference::assert_close("viewer-labels", &shot, &lib, w, h, MIN_PSNR_DB)
         .unwrap_or_else(|e| panic!("{e}"));
@@ -102,10 +99,7 @@ fn a_click_selects_the_label_under_it() {
     assert_ne!(id, 0, "a label, not the background");
     table.selected.insert(id);
     let lib = lib.draw(&table);
-    let lit = shot
-        .chunks(4)
-        .filter(|p| p[..3].iter().any(|&c| c > 20))
-        .count();
+    let lit = lit_pixels(&shot);
     assert!(
         lit > 50,
         "only {lit} lit pixels: the selected label is drawn"
@@ -207,10 +201,7 @@ fn a_label_map_over_its_image_matches_the_library() {
     let (lib, alone) = library_overlay(&image, &labels, &table, style, tf_preset, camera, w, h);
     let change = brickray_reference::compare(&alone, &lib, w, h);
     assert!(change.psnr_db < 30.0, "the overlay shows: {change}");
-    let lit = shot
-        .chunks(4)
-        .filter(|p| p[..3].iter().any(|&c| c > 20))
-        .count();
+    let lit = lit_pixels(&shot);
     assert!(lit * 50 > (w * h) as usize, "only {lit} lit pixels");
     let cmp = brickray_reference::assert_close("viewer-overlay", &shot, &lib, w, h, MIN_PSNR_DB)
         .unwrap_or_else(|e| panic!("{e}"));
