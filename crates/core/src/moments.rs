@@ -288,6 +288,7 @@ mod tests {
 #[cfg(test)]
 mod consistency {
     use super::*;
+    use crate::tf::spread::{TRUNCATE, spread_row_coord, spread_row_sigma};
     use crate::tf::{SPREAD_ROWS, SpreadTable, TransferFunction};
     use proptest::prelude::*;
     use proptest::strategy::ValueTree;
@@ -447,23 +448,92 @@ mod consistency {
         assert!(max[0][1] < 0.40 && max[1][1] < 0.20, "{max:?}");
     }
 
+    /// The widest gap, over the premultiplied channels, between the TF's
+    /// extremes on `[lo, hi]`: straight colour between `cmin` and `cmax`,
+    /// opacity between `amin` and `amax`, premultiplied between
+    /// `cmin * amin` and `cmax * amax` (the TF is linear between entries, so
+    /// its extremes sit at the ends or at entries inside).
+    fn tf_gap(tf: &TransferFunction, lo: f64, hi: f64) -> f64 {
+        let (lo, hi) = (lo.clamp(0.0, 1.0), hi.clamp(0.0, 1.0));
+        let n1 = (tf.len() - 1) as f64;
+        let inner = ((lo * n1).ceil() as usize)..=((hi * n1).floor() as usize);
+        let mut min = [f64::INFINITY; 4];
+        let mut max = [f64::NEG_INFINITY; 4];
+        for v in [lo, hi].into_iter().chain(inner.map(|i| i as f64 / n1)) {
+            let c = tf.lookup(v);
+            for k in 0..4 {
+                min[k] = min[k].min(c[k]);
+                max[k] = max[k].max(c[k]);
+            }
+        }
+        (0..3)
+            .map(|k| max[k] * max[3] - min[k] * min[3])
+            .fold(max[3] - min[3], f64::max)
+    }
+
+    /// How far the worst voxel of the first coarse level above `vol` goes
+    /// past the bound it can be held to. Its children have spread 0, so the
+    /// truth (their mean classification) lies between the TF's extremes over
+    /// their values' range; the model reads table texels that average the TF
+    /// over the value plus or minus `3 s` at the row above the voxel's
+    /// spread `s`, plus one column, so its classification lies between the
+    /// extremes over that reach. Both premultiplied, their difference is at
+    /// most the TF's gap over the union (`tf_gap`); 1e-5 covers the table's
+    /// f32 texels.
+    fn bound_excess(vol: &Volume, tf: &TransferFunction, table: &SpreadTable) -> f64 {
+        let fine = MomentGrid::from_volume(vol);
+        let coarse = fine.downsample(7);
+        let [cx, cy, cz] = coarse.dims.map(|d| d as i64);
+        let mut worst = f64::NEG_INFINITY;
+        for z in 0..cz {
+            for y in 0..cy {
+                for x in 0..cx {
+                    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+                    let mut truth = [0.0f64; 4];
+                    for k in 0..8i64 {
+                        let m = fine.at(2 * x + (k & 1), 2 * y + ((k >> 1) & 1), 2 * z + (k >> 2));
+                        lo = lo.min(m.mean);
+                        hi = hi.max(m.mean);
+                        let c = premul(tf.lookup(m.mean));
+                        for i in 0..4 {
+                            truth[i] += c[i] / 8.0;
+                        }
+                    }
+                    let m = coarse.at(x, y, z);
+                    let row = spread_row_coord(m.sigma(), table.rows).ceil() as u32;
+                    let reach = TRUNCATE * spread_row_sigma(row, table.rows)
+                        + 1.0 / (table.width - 1) as f64;
+                    let ours = premul(table.lookup(tf, m.mean, m.sigma()));
+                    let gap = tf_gap(tf, lo.min(m.mean - reach), hi.max(m.mean + reach));
+                    worst = worst.max(diff(ours, truth) - gap - 1e-5);
+                }
+            }
+        }
+        worst
+    }
+
     proptest! {
         #![proptest_config(ProptestConfig::with_cases(48))]
-        /// On any random volume and TF no coarse voxel is further than 0.5
-        /// from its children's mean classification. The model's mean gain
-        /// over the TF of the mean holds on the fixed run above, not on every
-        /// volume: this test also asserted "never more than 0.06 above
-        /// today's" until 2026-12-04, when it found two-valued volumes under
-        /// TFs nearly linear between the two values where the model loses
-        /// 0.075 against 0.008 and 0.170 against 0.048 (a Gaussian of the
-        /// children's spread misdescribes two values; seeds kept in
-        /// `proptest-regressions/moments.txt`). Issue 35's model is off by
-        /// default; the clause is printed, not asserted, until it is fixed.
+        /// On any random volume and TF every voxel of the first coarse level
+        /// keeps within the bound `bound_excess` derives (a check that the
+        /// moments compose and the table reads only the reach it claims).
+        /// The model's accuracy is asserted on the fixed run above, not here:
+        /// no fixed bound holds on every volume. This test asserted "never
+        /// more than 0.06 above the TF of the mean" until 2026-12-04 (two-valued
+        /// volumes under TFs nearly linear between the two values lose 0.075
+        /// against 0.008 and 0.170 against 0.048; seeds in
+        /// `proptest-regressions/moments.txt`), then "no voxel more than 0.5
+        /// from its children" until 2026-12-05, when a two-valued volume
+        /// (0.22 and 0.71 under a TF opaque below 0.09) gave 0.516: a
+        /// Gaussian of that spread reaches three sigmas past both values. The
+        /// figures are printed with `--nocapture`.
         #[test]
         fn coarse_voxels_stay_within_the_bound((vol, tf) in strategy()) {
+            let table = tf.spread_table(SPREAD_ROWS, 8192);
+            let excess = bound_excess(&vol, &tf, &table);
+            prop_assert!(excess <= 0.0, "{excess}");
             for e in both_levels(&vol, &tf) {
-                prop_assert!(e[1] <= 0.5, "{e:?}");
-                if e[0] > e[2] + 0.06 {
+                if e[1] > 0.5 || e[0] > e[2] + 0.06 {
                     eprintln!("spread model behind the TF of the mean: {e:?}");
                 }
             }
