@@ -523,7 +523,7 @@ mod consistency {
         /// volumes under TFs nearly linear between the two values lose 0.075
         /// against 0.008 and 0.170 against 0.048; seeds in
         /// `proptest-regressions/moments.txt`), then "no voxel more than 0.5
-        /// from its children" until 2026-12-05, when a two-valued volume
+        /// from its children" later that day, when a two-valued volume
         /// (0.22 and 0.71 under a TF opaque below 0.09) gave 0.516: a
         /// Gaussian of that spread reaches three sigmas past both values. The
         /// figures are printed with `--nocapture`.
