@@ -1,6 +1,6 @@
 //! Decoded chunks kept within a byte budget, least recently used first out.
 
-use parking_lot::Mutex;
+use parking_lot::{Condvar, Mutex};
 use std::collections::{BTreeMap, HashMap};
 use std::sync::Arc;
 
@@ -25,9 +25,42 @@ pub struct ChunkCacheStats {
 /// A chunk: its level and its unit indices (every array axis).
 pub(crate) type ChunkKey = (usize, Vec<u64>);
 
+/// A chunk one thread is loading; others that want it wait for it.
+#[derive(Debug, Default)]
+struct Flight {
+    done: Mutex<bool>,
+    cv: Condvar,
+}
+
+impl Flight {
+    fn wait(&self) {
+        let mut done = self.done.lock();
+        while !*done {
+            self.cv.wait(&mut done);
+        }
+    }
+}
+
+/// Ends a flight however its load ends (a panic included), waking those
+/// that wait.
+struct Landing<'c> {
+    cache: &'c ChunkCache,
+    key: &'c ChunkKey,
+}
+
+impl Drop for Landing<'_> {
+    fn drop(&mut self) {
+        if let Some(f) = self.cache.inner.lock().flights.remove(self.key) {
+            *f.done.lock() = true;
+            f.cv.notify_all();
+        }
+    }
+}
+
 #[derive(Debug, Default)]
 struct Inner {
     map: HashMap<ChunkKey, (Arc<Vec<u8>>, u64)>,
+    flights: HashMap<ChunkKey, Arc<Flight>>,
     lru: BTreeMap<u64, ChunkKey>,
     tick: u64,
     bytes: u64,
@@ -37,6 +70,18 @@ struct Inner {
 }
 
 impl Inner {
+    /// The chunk if held, counted as a hit and made the most recently used.
+    fn hit(&mut self, key: &ChunkKey) -> Option<Arc<Vec<u8>>> {
+        let tick = self.tick + 1;
+        let (v, old) = self.map.get_mut(key)?;
+        let (v, old_tick) = (v.clone(), std::mem::replace(old, tick));
+        self.tick = tick;
+        self.lru.remove(&old_tick);
+        self.lru.insert(tick, key.clone());
+        self.hits += 1;
+        Some(v)
+    }
+
     fn evict_to(&mut self, budget: u64) {
         while self.bytes > budget {
             let Some((_, key)) = self.lru.pop_first() else {
@@ -67,19 +112,62 @@ impl ChunkCache {
     }
 
     /// The chunk if held (counted as a hit or a miss).
+    #[cfg(test)]
     pub(crate) fn get(&self, key: &ChunkKey) -> Option<Arc<Vec<u8>>> {
         let mut g = self.inner.lock();
-        let tick = g.tick + 1;
-        let Some((v, old)) = g.map.get_mut(key) else {
+        let v = g.hit(key);
+        if v.is_none() {
             g.misses += 1;
-            return None;
+        }
+        v
+    }
+
+    /// The chunk if held (a hit); a chunk not held is not counted (its
+    /// [`get_or_load`](Self::get_or_load) counts it).
+    pub(crate) fn held(&self, key: &ChunkKey) -> Option<Arc<Vec<u8>>> {
+        self.inner.lock().hit(key)
+    }
+
+    /// The chunk: held (a hit), or loaded by `load` (a miss) and kept. One
+    /// thread loads a chunk at a time: another that wants it meanwhile waits
+    /// and takes what it kept (a hit), or loads it itself when the first load
+    /// failed or kept nothing (a chunk over a quarter of the budget), so the
+    /// neighbouring bricks and nodes read together fetch a chunk they share
+    /// once.
+    pub(crate) fn get_or_load<E>(
+        &self,
+        key: &ChunkKey,
+        load: impl FnOnce() -> Result<Arc<Vec<u8>>, E>,
+    ) -> Result<Arc<Vec<u8>>, E> {
+        let flight = {
+            let mut g = self.inner.lock();
+            if let Some(v) = g.hit(key) {
+                return Ok(v);
+            }
+            g.misses += 1;
+            match g.flights.get(key) {
+                Some(f) => Some(f.clone()),
+                None => {
+                    g.flights.insert(key.clone(), Arc::default());
+                    None
+                }
+            }
         };
-        let (v, old_tick) = (v.clone(), std::mem::replace(old, tick));
-        g.tick = tick;
-        g.lru.remove(&old_tick);
-        g.lru.insert(tick, key.clone());
-        g.hits += 1;
-        Some(v)
+        if let Some(f) = flight {
+            f.wait();
+            let mut g = self.inner.lock();
+            if let Some(v) = g.hit(key) {
+                // Counted as a miss above; it was served.
+                g.misses -= 1;
+                return Ok(v);
+            }
+            drop(g);
+            return load();
+        }
+        let _landing = Landing { cache: self, key };
+        let v = load()?;
+        self.insert(key.clone(), v.clone());
+        Ok(v)
     }
 
     /// Keeps a decoded chunk (evicting the least recently used to fit).
@@ -145,5 +233,49 @@ mod tests {
         assert!(c.stats().bytes <= 150);
         c.set_budget(0);
         assert_eq!(c.stats().chunks, 0);
+    }
+
+    #[test]
+    fn a_chunk_wanted_by_many_threads_at_once_is_loaded_once() {
+        use std::sync::atomic::{AtomicUsize, Ordering};
+        let c = ChunkCache::new(1 << 20);
+        let loads = AtomicUsize::new(0);
+        let key = (0usize, vec![3u64]);
+        std::thread::scope(|s| {
+            for _ in 0..8 {
+                s.spawn(|| {
+                    let v = c
+                        .get_or_load(&key, || {
+                            loads.fetch_add(1, Ordering::SeqCst);
+                            std::thread::sleep(std::time::Duration::from_millis(100));
+                            Ok::<_, ()>(Arc::new(vec![7u8; 10]))
+                        })
+                        .unwrap();
+                    assert_eq!(v[0], 7);
+                });
+            }
+        });
+        assert_eq!(loads.load(Ordering::SeqCst), 1);
+        let st = c.stats();
+        assert_eq!((st.hits, st.misses, st.chunks), (7, 1, 1));
+    }
+
+    #[test]
+    fn a_failed_or_panicked_load_leaves_the_others_to_load_it() {
+        let c = ChunkCache::new(1 << 20);
+        let key = (1usize, vec![0u64]);
+        // A panic in the load ends its flight: the next caller is not left
+        // waiting and loads it.
+        let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            c.get_or_load(&key, || -> Result<Arc<Vec<u8>>, ()> { panic!("decoder") })
+        }));
+        assert!(r.is_err());
+        assert_eq!(
+            c.get_or_load(&key, || Err::<Arc<Vec<u8>>, _>("down")),
+            Err("down")
+        );
+        let v = c.get_or_load(&key, || Ok::<_, ()>(Arc::new(vec![1u8])));
+        assert_eq!(*v.unwrap(), vec![1u8]);
+        assert!(c.inner.lock().flights.is_empty());
     }
 }

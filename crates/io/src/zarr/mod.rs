@@ -703,17 +703,18 @@ impl OmeZarr {
     /// The decoded samples (little-endian) of each unit (chunk, or a
     /// sharded array's inner chunk) of `level`, clipped to the array: from
     /// the cache, else decoded (several at once, on up to 8 threads, so that
-    /// a remote image's round trips overlap) and kept.
+    /// a remote image's round trips overlap; a unit another thread is
+    /// decoding is waited for, not fetched twice) and kept.
     fn units(&self, level: usize, units: &[Vec<u64>]) -> Result<Vec<Arc<Vec<u8>>>, IoError> {
         let mut out: Vec<Option<Arc<Vec<u8>>>> = units
             .iter()
-            .map(|u| self.cache.get(&(level, u.clone())))
+            .map(|u| self.cache.held(&(level, u.clone())))
             .collect();
         let missing: Vec<usize> = (0..units.len()).filter(|&i| out[i].is_none()).collect();
         let load = |i: usize| -> Result<Arc<Vec<u8>>, IoError> {
-            let v = Arc::new(self.unit(level, &units[i])?);
-            self.cache.insert((level, units[i].clone()), v.clone());
-            Ok(v)
+            self.cache.get_or_load(&(level, units[i].clone()), || {
+                self.unit(level, &units[i]).map(Arc::new)
+            })
         };
         if missing.len() <= 1 {
             for &i in &missing {
