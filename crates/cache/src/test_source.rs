@@ -44,6 +44,8 @@ pub(crate) struct TestSource {
     pub(crate) batch: usize,
     /// The keys of each [`BrickSource::read_bricks`] call.
     pub(crate) batches: Mutex<Vec<Vec<NodeKey>>>,
+    /// The keys of each [`BrickSource::nodes`] call.
+    pub(crate) node_batches: Mutex<Vec<Vec<NodeKey>>>,
 }
 
 pub(crate) fn fill_byte(key: NodeKey) -> u8 {
@@ -76,6 +78,7 @@ impl TestSource {
             errors: false,
             batch: 1,
             batches: Mutex::new(Vec::new()),
+            node_batches: Mutex::new(Vec::new()),
         }
     }
 
@@ -208,6 +211,12 @@ impl BrickSource for TestSource {
 
     fn batch_size(&self) -> usize {
         self.batch
+    }
+
+    /// Records the call, then reads each node.
+    fn nodes(&self, keys: &[NodeKey]) -> Vec<Result<NodeInfo, BrickError>> {
+        self.node_batches.lock().push(keys.to_vec());
+        keys.iter().map(|&key| self.node(key)).collect()
     }
 
     /// Records the batch; a batch holding the gate key waits for the gate or

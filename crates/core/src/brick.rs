@@ -374,6 +374,16 @@ pub trait BrickSource: Send + Sync {
     /// Metadata of a node.
     fn node(&self, key: NodeKey) -> Result<NodeInfo, BrickError>;
 
+    /// Metadata of several nodes, one result per key, each as
+    /// [`node`](Self::node) gives it (a node that fails does not fail the
+    /// others). The default reads them one after the other; a source whose
+    /// metadata costs a round trip (an OME-Zarr image over the network
+    /// reads it from the data) reads them together. The loader asks for the
+    /// children of a brick it has just read in one call.
+    fn nodes(&self, keys: &[NodeKey]) -> Vec<Result<NodeInfo, BrickError>> {
+        keys.iter().map(|&key| self.node(key)).collect()
+    }
+
     /// Writes the node's stored brick (`stored_side()^3` little-endian samples of
     /// the volume's dtype, x fastest, apron included) into `out`, whose length must
     /// be `layout().brick_bytes()`. Uniform and empty nodes are filled with their

@@ -334,6 +334,38 @@ fn zarr_over_http_equals_the_local_reader_brick_for_brick() {
     assert_eq!(heads, 0, "{:?}", server.seen());
 }
 
+/// Over the network the metadata of many nodes is read at once (each node
+/// on a thread of its own, as the loader asks for a brick's children), equal
+/// to the local reader's, and a chunk (or shard index) that several nodes
+/// share is fetched once: one thread fetches it while the others wait.
+#[test]
+#[cfg_attr(no_shared_data, ignore = "needs ../shared/data/formats (absent)")]
+fn nodes_read_together_equal_the_local_ones_and_fetch_each_range_once() {
+    let Some(data) = data() else { return };
+    let server = serve_dir(&data, 404, |_, _| Act::Serve);
+    for name in IMAGES {
+        let (local, remote) = pair(&data.join(name), &server.url(name), &opts());
+        let before = server.count();
+        let wanted: Vec<NodeKey> = keys(&local).into_iter().filter(|k| k.level <= 2).collect();
+        let got = remote.nodes(&wanted);
+        assert_eq!(got.len(), wanted.len());
+        for (k, r) in wanted.iter().zip(got) {
+            assert_eq!(r.unwrap(), local.node(*k).unwrap(), "{name}: node {k:?}");
+        }
+        let seen = server.seen()[before..].to_vec();
+        assert!(!seen.is_empty(), "{name}: nothing fetched");
+        let mut distinct: Vec<&Seen> = seen.iter().collect();
+        distinct.sort();
+        distinct.dedup();
+        assert_eq!(
+            distinct.len(),
+            seen.len(),
+            "{name}: a range fetched twice by {} nodes read together",
+            wanted.len()
+        );
+    }
+}
+
 #[test]
 #[cfg_attr(no_shared_data, ignore = "needs ../shared/data/formats (absent)")]
 fn each_shard_index_is_fetched_once_with_a_suffix_range() {

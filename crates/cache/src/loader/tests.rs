@@ -437,3 +437,40 @@ fn bricks_in_flight_stay_within_the_budget() {
     assert!(report.failed.is_empty());
     assert!(most <= 8, "{most}");
 }
+
+/// A brick's children's metadata is asked for in one `nodes` call (a source
+/// over the network reads them together); a child whose metadata panics or
+/// fails fails alone.
+#[test]
+fn a_bricks_children_are_read_in_one_call_and_fail_alone() {
+    let src = TestSource::new(64);
+    src.panic_on(FetchKind::Metadata, k(2, 1));
+    let failing = NodeKey::new(2, 0, 1, 0);
+    src.fail(FetchKind::Metadata, failing);
+    let src = Arc::new(src);
+    let mut loader = loader(&src, 1);
+    let mut cache = CpuCache::new(1 << 22);
+    loader.request_brick(BrickRequest {
+        children_meta: true,
+        ..brick(&src, k(1, 0), 1.0)
+    });
+    let report = poll_until(&mut loader, &mut cache, |l, _| idle(l));
+    let children: Vec<NodeKey> = NodeKey::new(1, 0, 0, 0).children().to_vec();
+    assert!(
+        src.node_batches.lock().first() == Some(&children),
+        "{:?}",
+        src.node_batches.lock()
+    );
+    let failed: Vec<NodeKey> = report.failed.iter().map(|f| f.1).collect();
+    assert_eq!(failed.len(), 2, "{:?}", report.failed);
+    assert!(failed.contains(&k(2, 1)) && failed.contains(&failing));
+    let got: Vec<NodeKey> = report.metadata.iter().map(|m| m.0).collect();
+    assert_eq!(got.len(), 6, "{got:?}");
+    for c in children.iter().filter(|c| !failed.contains(c)) {
+        assert!(got.contains(c), "{c:?}");
+        assert_eq!(
+            report.metadata.iter().find(|m| m.0 == *c).unwrap().1,
+            ball_info(&src.layout, *c)
+        );
+    }
+}

@@ -80,6 +80,23 @@ pub(crate) fn fetch_meta(source: &dyn BrickSource, key: NodeKey) -> Result<NodeI
     catching(key, || source.node(key))
 }
 
+/// Several nodes' metadata in one [`BrickSource::nodes`] call, one result
+/// per key. When the call panics, or answers for other keys than asked, the
+/// nodes are read one by one, so a panic fails only its own node.
+pub(crate) fn fetch_metas(
+    source: &dyn BrickSource,
+    keys: &[NodeKey],
+) -> Vec<(NodeKey, Result<NodeInfo, LoadError>)> {
+    match std::panic::catch_unwind(AssertUnwindSafe(|| source.nodes(keys))) {
+        Ok(results) if results.len() == keys.len() => keys
+            .iter()
+            .zip(results)
+            .map(|(&key, r)| (key, r.map_err(LoadError::from)))
+            .collect(),
+        _ => keys.iter().map(|&k| (k, fetch_meta(source, k))).collect(),
+    }
+}
+
 /// A node's brick, read and prepared, panics caught.
 pub(crate) fn fetch_brick(
     source: &dyn BrickSource,
@@ -327,12 +344,9 @@ fn send_children(
     if claimed.is_empty() {
         return true;
     }
-    let mut children = Vec::with_capacity(claimed.len());
-    for c in claimed {
-        if shared.queue.lock().shutdown {
-            return false;
-        }
-        children.push((c, fetch_meta(source, c)));
+    if shared.queue.lock().shutdown {
+        return false;
     }
-    tx.send(Completion::Children(children)).is_ok()
+    tx.send(Completion::Children(fetch_metas(source, &claimed)))
+        .is_ok()
 }

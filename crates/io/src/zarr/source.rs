@@ -375,26 +375,40 @@ impl BrickSource for ZarrBrickSource {
         outs: &mut [&mut [u8]],
         cancel: &brickray_core::CancelToken,
     ) -> Vec<Result<(), BrickError>> {
-        std::thread::scope(|scope| {
-            let reads: Vec<_> = keys
-                .iter()
-                .zip(outs.iter_mut())
-                .map(|(&key, out)| {
-                    scope.spawn(move || {
-                        if cancel.is_cancelled() {
-                            Err(BrickError::Cancelled { key })
-                        } else {
-                            self.read_brick(key, out)
-                        }
-                    })
-                })
-                .collect();
-            reads
-                .into_iter()
-                .map(|r| r.join().unwrap_or_else(|p| std::panic::resume_unwind(p)))
-                .collect()
+        on_threads(keys.iter().zip(outs.iter_mut()), |(&key, out)| {
+            if cancel.is_cancelled() {
+                Err(BrickError::Cancelled { key })
+            } else {
+                self.read_brick(key, out)
+            }
         })
     }
+
+    /// Over the network, every node on a thread of its own: a node's
+    /// metadata is read from its data, so eight children cost about the
+    /// round trips of one, not eight times them.
+    fn nodes(&self, keys: &[NodeKey]) -> Vec<Result<NodeInfo, BrickError>> {
+        if self.zarr.store.is_local() {
+            keys.iter().map(|&key| self.node(key)).collect()
+        } else {
+            on_threads(keys.iter(), |&key| self.node(key))
+        }
+    }
+}
+
+/// `f` of every item, each on a scoped thread of its own, in order (a panic
+/// goes on to the caller).
+fn on_threads<I: Send, T: Send>(
+    items: impl Iterator<Item = I>,
+    f: impl Fn(I) -> T + Sync,
+) -> Vec<T> {
+    std::thread::scope(|scope| {
+        let f = &f;
+        let runs: Vec<_> = items.map(|item| scope.spawn(move || f(item))).collect();
+        runs.into_iter()
+            .map(|r| r.join().unwrap_or_else(|p| std::panic::resume_unwind(p)))
+            .collect()
+    })
 }
 
 /// Bricks an OME-Zarr image read over the network reads per call
