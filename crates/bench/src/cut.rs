@@ -73,6 +73,7 @@ pub(crate) fn refine_cut(
         max_data_leaves,
         max_requests: u32::MAX / 2,
         brick_upload_bytes: layout.brick_bytes() as u64,
+        lookahead: false,
     };
     let mut budget = UploadBudget::new(u64::MAX / 4);
     refine(

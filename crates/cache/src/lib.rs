@@ -44,7 +44,8 @@ mod test_source;
 pub use brickray_core::{CutLeaf, EmptyReason, LeafKind};
 pub use config::{
     ConfigError, DEFAULT_FLOOR_SLOTS, DEFAULT_MAX_BYTES_IN_FLIGHT, DEFAULT_SETUP_DEADLINE,
-    GpuFormat, MAX_LOADER_THREADS, MIN_RESIDENT_BRICKS, OutOfCoreConfig, RetryPolicy, SizeQuantity,
+    GpuFormat, Lookahead, MAX_LOADER_THREADS, MIN_RESIDENT_BRICKS, OutOfCoreConfig, RetryPolicy,
+    SizeQuantity,
 };
 pub use cpu_cache::CpuCache;
 pub use fade::{Displayed, Fade, FadeDuration, Fader, MAX_FADE_FRAMES};

@@ -38,6 +38,7 @@ fn cut_levels(
         max_data_leaves,
         max_requests: u32::MAX,
         brick_upload_bytes: layout.brick_bytes() as u64,
+        lookahead: false,
     };
     let mut budget = brickray_cache::UploadBudget::new(u64::MAX / 4);
     budget.begin_frame();

@@ -131,6 +131,40 @@ pub struct OutOfCoreConfig {
     /// (> 0). The read runs on a thread of its own, so a source that never
     /// answers cannot hold set-up; what it answers later is dropped.
     pub setup_deadline: Duration,
+    /// When refinement also requests the bricks one level past those a split
+    /// waits for ([`Lookahead`]); over the network by default.
+    pub lookahead: Lookahead,
+}
+
+/// When refinement requests the bricks one level past those a split waits
+/// for ([`RefineParams::lookahead`](crate::refine::RefineParams::lookahead)).
+/// Over the network every level of the octree costs a round trip before the
+/// next is known to be wanted; asking for the next one with it, at a lower
+/// priority, halves those round trips. On a local disk the levels come as
+/// fast as they are planned, and the bricks asked ahead are ones the
+/// visibility feedback had no frame to rule out.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub enum Lookahead {
+    /// For a source read in batches ([`BrickSource::batch_size`](brickray_core::BrickSource::batch_size)
+    /// above 1: a store or an OME-Zarr image over the network). The default.
+    #[default]
+    Remote,
+    /// For every source.
+    Always,
+    /// Never: only what the cut waits for is requested.
+    Never,
+}
+
+impl Lookahead {
+    /// Whether it applies to a source that is (`remote`) or is not read in
+    /// batches.
+    pub fn applies(self, remote: bool) -> bool {
+        match self {
+            Lookahead::Remote => remote,
+            Lookahead::Always => true,
+            Lookahead::Never => false,
+        }
+    }
 }
 
 /// Default [`OutOfCoreConfig::max_bytes_in_flight`]: 64 MiB.
@@ -163,6 +197,7 @@ impl Default for OutOfCoreConfig {
             visibility: VisibilityPolicy::None,
             visibility_config: VisibilityConfig::default(),
             setup_deadline: DEFAULT_SETUP_DEADLINE,
+            lookahead: Lookahead::Remote,
         }
     }
 }

@@ -140,6 +140,7 @@ impl BrickManager {
                 self.brick_bytes,
             ),
             brick_upload_bytes: self.brick_bytes,
+            lookahead: self.config.lookahead.applies(self.remote),
         };
         self.octants.begin(&params);
         let refined = {

@@ -68,6 +68,9 @@ pub struct BrickManager {
     budget: UploadBudget,
     failures: Failures,
     clock: Arc<dyn Clock>,
+    /// The source is read in batches (over the network): what
+    /// [`Lookahead::Remote`](crate::Lookahead::Remote) asks.
+    remote: bool,
     /// Level-of-detail fades between the refined and the displayed cut.
     fader: Fader,
     /// Octant refinement's memory of the view (`LodMetric::VisibleOctants`).
@@ -190,6 +193,9 @@ impl BrickManager {
         )
         .map_err(CacheError::Spawn)?;
         let floor = lod::floor_nodes(&layout, pool.slot_count(), config.floor_slots);
+        // A source that panics here is not remote; its reads fail typed later.
+        let remote = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| source.batch_size()))
+            .is_ok_and(|b| b > 1);
         Ok(BrickManager {
             fader: Fader::for_layout(&layout),
             octants: OctantMemory::default(),
@@ -208,6 +214,7 @@ impl BrickManager {
             preparer,
             brick_bytes,
             clock: Arc::new(SystemClock),
+            remote,
         })
     }
 

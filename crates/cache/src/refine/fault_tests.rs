@@ -79,6 +79,7 @@ fn refine_in(
         max_data_leaves: slots,
         max_requests: MIN_REQUESTS_PER_FRAME,
         brick_upload_bytes: 1000,
+        lookahead: false,
     };
     let mut b = UploadBudget::new(u64::MAX);
     let r = refine(&s.layout, &params, env, &mut b);

@@ -331,6 +331,11 @@ impl<'p, 'a, 'e> Greedy<'p, 'a, 'e> {
             }
             self.out.blocked.missing_data += 1;
             self.finals.push((key, priority));
+            if self.params.lookahead {
+                for &i in &data {
+                    self.look_ahead(children[i], &classes[i]);
+                }
+            }
             return;
         }
         if self.out.data_leaves - 1 + data.len() as u32 > self.params.max_data_leaves {
@@ -375,6 +380,48 @@ impl<'p, 'a, 'e> Greedy<'p, 'a, 'e> {
                 }
             }
         }
+    }
+
+    /// [`RefineParams::lookahead`](super::RefineParams::lookahead): the
+    /// bricks child `c` (classified as data) would split into, when it would
+    /// split, requested at its own priority; their missing metadata asked
+    /// for.
+    fn look_ahead(&mut self, c: NodeKey, class: &Classified) {
+        let finest = self.layout.levels.saturating_sub(1);
+        if class.uniform || c.level >= finest || !self.env.may_split(c) {
+            return;
+        }
+        let priority = self.screen.priority(
+            self.params.views.voxel_pixels(c),
+            self.env.visible_weight(c),
+            c,
+            class.info.as_ref(),
+            self.params,
+            self.layout,
+        );
+        if !priority.is_finite() || priority <= self.screen.threshold {
+            return;
+        }
+        let order = priority * self.env.request_weight(c) * self.params.views.centre_weight(c);
+        let mut pending = Vec::new();
+        for &g in self.layout.children(c).iter() {
+            match classify(g, self.layout, self.params, self.params.views, self.env) {
+                Ok(Classified {
+                    class: NodeClass::Data,
+                    info: Some(info),
+                    ..
+                }) if self.env.data(g) == DataState::Missing => {
+                    self.out.requests.push(LoadRequest {
+                        key: g,
+                        priority: order as f32,
+                        info,
+                    });
+                }
+                Err(Unknown::Pending) => pending.push(g),
+                _ => {}
+            }
+        }
+        self.request_meta(&pending, priority);
     }
 
     /// The requests in priority order within the frame's cap, and every

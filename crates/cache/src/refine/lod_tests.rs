@@ -128,6 +128,7 @@ pub(super) fn refine_limited(
         max_data_leaves,
         max_requests: u32::MAX,
         brick_upload_bytes: 1,
+        lookahead: false,
     };
     let mut b = UploadBudget::new(u64::MAX / 4);
     b.begin_frame();

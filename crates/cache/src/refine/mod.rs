@@ -27,6 +27,15 @@
 //! `min(max_data_leaves, max_requests)` bricks ([`requests_per_frame`]) and
 //! [`MAX_META_REQUESTS_PER_FRAME`] metadata reads are requested per frame,
 //! highest priority first.
+//!
+//! With [`RefineParams::lookahead`] a split that waits for its children's
+//! bricks also requests, at each such child's own priority (below its
+//! parent's, so after every brick a split waits for), the bricks of the
+//! children's children the child would split into: those of a child whose
+//! screen error is above the tolerance, that is not uniform, not at the
+//! finest level and that the visibility feedback lets split, classified
+//! (frustum, emptiness, transparency) as any child is. When they arrive with
+//! or soon after the child's, the next level splits a round trip earlier.
 
 #[cfg(test)]
 mod fault_tests;
@@ -207,6 +216,11 @@ pub struct RefineParams<'a> {
     pub max_requests: u32,
     /// Bytes one brick upload costs against the frame's upload budget.
     pub brick_upload_bytes: u64,
+    /// Also request the bricks one level past a split that waits for its
+    /// children's (those of children that would split in turn): a source
+    /// whose every level costs a round trip converges in about half the
+    /// round trips ([`Lookahead`](crate::Lookahead)).
+    pub lookahead: bool,
 }
 
 /// One leaf of a refined cut (the manager turns it into a

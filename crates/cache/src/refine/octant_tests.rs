@@ -207,6 +207,7 @@ fn octant_memory_counts_demotions_per_view() {
             max_data_leaves: 8,
             max_requests: 8,
             brick_upload_bytes: 1,
+            lookahead: false,
         }
     }
     let c = NodeKey::ROOT.child(3);
