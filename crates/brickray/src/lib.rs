@@ -37,7 +37,7 @@ pub use brickray_store as store;
 pub mod cache {
     pub use brickray_cache::{
         Classification, ConfigError, CutLeaf, EmptyReason, FadeDuration, FrameStats, GpuFormat,
-        LeafKind, OutOfCoreConfig, QueryBatch, QueryResult, QuerySchedule, Residency,
+        LeafKind, Lookahead, OutOfCoreConfig, QueryBatch, QueryResult, QuerySchedule, Residency,
         ResidencyCounts, RetryPolicy, StreamError, StreamFrame, StreamPlan, StreamStats, Streamer,
         UsageFrame, ViewFeedback,
     };

@@ -47,7 +47,9 @@ pub use backend::{FeedbackStats, OcclusionStats};
 /// settings, loader threads and floor of the out-of-core path: the cache's own
 /// configuration, one value ([`StreamedVolume::configure`]).
 pub use brickray_cache::OutOfCoreConfig;
-pub use brickray_cache::{ConfigError, FadeDuration, RetryPolicy, StreamError, UsageFrame};
+pub use brickray_cache::{
+    ConfigError, FadeDuration, Lookahead, RetryPolicy, StreamError, UsageFrame,
+};
 pub use brickray_visibility::{VisibilityConfig, VisibilityCounts, VisibilityPolicy};
 pub use desc::{FrameDesc, FrameStats, OutOfCoreStats, RendererStats, TargetDesc, Viewport};
 pub use encoding::U8Filtering;

@@ -21,7 +21,9 @@
 //! view's convergence; frames to converge after the jump; requests and bytes
 //! fetched (a `.brs`: against the payload bytes of the bricks the cuts drew,
 //! every brick that reached the GPU pool); requests per brick loaded; median
-//! and p99 of the planned frames' wall time while bricks were in flight. The
+//! and p99 of the planned frames' wall time while bricks were in flight.
+//! Both sources at the largest delay run again without the lookahead
+//! (`Lookahead::Never`): what asking for the next level ahead saves. The
 //! store at the largest delay runs a second time with batching off (one
 //! request per brick, as the loader read before batches): the requests
 //! batching saves; and twice through a disk cache (`DiskCached`, empty each
@@ -57,7 +59,7 @@ use brickray_io::zarr::ZarrBrickSource;
 use brickray_remote::{
     DiskCacheConfig, DiskCached, RemoteObjects, RemoteOptions, RemoteRangeReader,
 };
-use brickray_render::{OutOfCoreConfig, VolumeRenderer};
+use brickray_render::{Lookahead, OutOfCoreConfig, VolumeRenderer};
 use brickray_store::{BuildOptions, Store};
 use glam::Vec3;
 use serde_json::json;
@@ -161,6 +163,14 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         }
     }
     if let Some(&worst) = delays.iter().max() {
+        for src in ["brs", "zarr"] {
+            cases.push((
+                src,
+                format!("http +{worst} ms, no lookahead"),
+                Some(worst),
+                Variant::NoLookahead,
+            ));
+        }
         for (variant, what) in [
             (Variant::Unbatched, "unbatched"),
             (Variant::CacheCold, "disk cache, first visit"),
@@ -202,7 +212,12 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
             };
             let paths = (store_path.as_path(), zarr.as_path());
             let opened = open(src, base.as_deref(), paths, &case_opts, *variant, &cache)?;
-            done.push(case(&gpu, &run, opened, threads, raycast)?);
+            let lookahead = if *variant == Variant::NoLookahead {
+                Lookahead::Never
+            } else {
+                Lookahead::default()
+            };
+            done.push(case(&gpu, &run, opened, threads, lookahead, raycast)?);
         }
     }
     let mut results = Vec::new();
@@ -303,6 +318,17 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         );
     }
     for src in ["brs", "zarr"] {
+        if let (Some(with), Some(without)) = (
+            at(src),
+            worst.and_then(|d| find(src, Some(d), Variant::NoLookahead)),
+        ) {
+            fig.insert(
+                format!("{src}_converged_ratio_no_lookahead_vs_lookahead"),
+                json!(round2(without.converged_s / with.converged_s.max(1e-9))),
+            );
+        }
+    }
+    for src in ["brs", "zarr"] {
         let Some(local) = find(src, None, Variant::Batched) else {
             continue;
         };
@@ -361,6 +387,9 @@ enum Variant {
     CacheWarm,
     /// From S3 (moto), batched.
     S3,
+    /// Batched, without asking for the next level ahead
+    /// ([`Lookahead::Never`]).
+    NoLookahead,
 }
 
 fn open(
@@ -470,6 +499,7 @@ fn case(
     run: &Runner<'_>,
     opened: Opened,
     threads: usize,
+    lookahead: Lookahead,
     raycast: bool,
 ) -> Result<CaseResult, String> {
     let layout = opened.source.layout().clone();
@@ -488,6 +518,7 @@ fn case(
         opened.source.clone(),
         OutOfCoreConfig {
             loader_threads: threads,
+            lookahead,
             ..OutOfCoreConfig::default()
         },
     )

@@ -317,8 +317,8 @@ impl Loader {
                     Err(LoadError::Cancelled { .. }) => report.cancelled.push(key),
                     Err(e) => report.failed.push((FetchKind::Brick, key, e)),
                 },
-                Completion::Children(children) => {
-                    for (c, r) in children {
+                Completion::Nodes(nodes) => {
+                    for (c, r) in nodes {
                         meta(&mut report, c, r);
                     }
                 }

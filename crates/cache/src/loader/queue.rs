@@ -150,6 +150,20 @@ impl Queue {
         jobs
     }
 
+    /// Up to `more` further metadata jobs, while they are next in order (a
+    /// batch of metadata for a source read in batches; metadata is never held
+    /// back by the budget in flight).
+    pub(crate) fn pop_more_meta(&mut self, more: usize) -> Vec<Job> {
+        let mut jobs = Vec::new();
+        while jobs.len() < more {
+            match self.order.first_key_value() {
+                Some((_, Job::Meta(_))) => jobs.extend(self.pop()),
+                _ => break,
+            }
+        }
+        jobs
+    }
+
     /// Registers a batch being read; returns its id and its token.
     pub(crate) fn begin_batch(&mut self, keys: Vec<NodeKey>) -> (u64, CancelToken) {
         self.next_batch += 1;

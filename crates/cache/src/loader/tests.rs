@@ -474,3 +474,28 @@ fn a_bricks_children_are_read_in_one_call_and_fail_alone() {
         );
     }
 }
+
+/// A source read in batches gets its queued metadata jobs in batches too,
+/// highest priority first, each batch in one `nodes` call.
+#[test]
+fn a_batching_source_gets_queued_metadata_together() {
+    let src = batching(4, |_| {});
+    let mut loader = loader(&src, 1);
+    let mut cache = CpuCache::new(1 << 22);
+    hold_first(&loader, &src);
+    let keys: Vec<NodeKey> = (0..8).map(|x| k(3, x)).chain([k(2, 0)]).collect();
+    for (i, key) in keys.iter().enumerate() {
+        loader.request_metadata(*key, (i + 1) as f32);
+    }
+    src.open_gate();
+    let report = poll_until(&mut loader, &mut cache, |l, _| idle(l));
+    let batches = src.node_batches.lock().clone();
+    let sizes: Vec<usize> = batches.iter().map(Vec::len).collect();
+    assert_eq!(sizes, [4, 4, 1], "{batches:?}");
+    let order: Vec<NodeKey> = batches.into_iter().flatten().collect();
+    assert_eq!(order, keys.iter().rev().copied().collect::<Vec<_>>());
+    assert_eq!(report.metadata.len(), keys.len());
+    for (key, info) in &report.metadata {
+        assert_eq!(*info, ball_info(&src.layout, *key));
+    }
+}

@@ -24,7 +24,8 @@ pub(crate) struct Shared {
     pub(crate) exited: Condvar,
 }
 
-/// A finished job (or, for `Children`, the second half of a brick job).
+/// A finished job (or, for `Nodes`, several: a brick job's second half, or a
+/// batch of metadata jobs).
 #[derive(Debug)]
 pub(crate) enum Completion {
     Meta {
@@ -35,10 +36,11 @@ pub(crate) enum Completion {
         key: NodeKey,
         result: Result<PreparedBrick, LoadError>,
     },
-    /// Metadata of a brick's children, read by the brick's job right after the
-    /// brick (claimed as loading before the brick was sent, so nobody requests
-    /// them again meanwhile).
-    Children(Vec<(NodeKey, Result<NodeInfo, LoadError>)>),
+    /// Metadata of several nodes in one call: a brick's children, read by the
+    /// brick's job right after the brick (claimed as loading before the brick
+    /// was sent, so nobody requests them again meanwhile), or a batch of
+    /// metadata jobs from a source read in batches.
+    Nodes(Vec<(NodeKey, Result<NodeInfo, LoadError>)>),
 }
 
 impl Completion {
@@ -47,7 +49,7 @@ impl Completion {
         match self {
             Completion::Meta { key, .. } => vec![(FetchKind::Metadata, *key)],
             Completion::Brick { key, .. } => vec![(FetchKind::Brick, *key)],
-            Completion::Children(c) => c.iter().map(|c| (FetchKind::Metadata, c.0)).collect(),
+            Completion::Nodes(c) => c.iter().map(|c| (FetchKind::Metadata, c.0)).collect(),
         }
     }
 }
@@ -201,6 +203,7 @@ pub(crate) fn worker(
                 if let Some(job) = q.pop_within_budget() {
                     let more = match job {
                         Job::Brick { .. } if batch > 1 => q.pop_more_bricks(batch - 1),
+                        Job::Meta(_) if batch > 1 => q.pop_more_meta(batch - 1),
                         _ => Vec::new(),
                     };
                     break (job, more);
@@ -211,6 +214,23 @@ pub(crate) fn worker(
         if batch > 1 && matches!(job, Job::Brick { .. }) {
             let jobs: Vec<Job> = std::iter::once(job).chain(more).collect();
             if !brick_batch(&shared, source.as_ref(), &prep, &tx, &jobs) {
+                return;
+            }
+            continue;
+        }
+        if batch > 1 && matches!(job, Job::Meta(_)) {
+            // Metadata in one call, as a brick's children are read.
+            let keys: Vec<NodeKey> = std::iter::once(job)
+                .chain(more)
+                .filter_map(|j| match j {
+                    Job::Meta(key) => Some(key),
+                    Job::Brick { .. } => None,
+                })
+                .collect();
+            if tx
+                .send(Completion::Nodes(fetch_metas(source.as_ref(), &keys)))
+                .is_err()
+            {
                 return;
             }
             continue;
@@ -347,6 +367,6 @@ fn send_children(
     if shared.queue.lock().shutdown {
         return false;
     }
-    tx.send(Completion::Children(fetch_metas(source, &claimed)))
+    tx.send(Completion::Nodes(fetch_metas(source, &claimed)))
         .is_ok()
 }

@@ -16,7 +16,7 @@ pub struct Reconfigured {
 use crate::config::{ConfigError, GpuFormat, MIN_RESIDENT_BRICKS, OutOfCoreConfig};
 use crate::cpu_cache::CpuCache;
 use crate::failures::{FetchKind, StreamError};
-use crate::loader::worker::{children_in_volume, fetch_brick, fetch_meta};
+use crate::loader::worker::{children_in_volume, fetch_brick, fetch_meta, fetch_metas};
 use crate::loader::{LoadError, Loader, LoaderConfig};
 use crate::pool::BrickPool;
 use crate::prepared::{PreparedBrick, Preparer};
@@ -49,7 +49,8 @@ enum SetupRead {
 }
 
 impl SetupReads {
-    /// Reads the root's metadata, its brick, then its children's metadata,
+    /// Reads the root's metadata, its brick, then its children's metadata
+    /// (in one [`BrickSource::nodes`](brickray_core::BrickSource::nodes) call),
     /// sending each result as it comes; stops at a failure of the root, or
     /// when set-up no longer listens (its deadline passed).
     fn run(&self, tx: &Sender<SetupRead>) {
@@ -85,11 +86,19 @@ impl SetupReads {
         if matches!(info.kind, NodeKind::Uniform(_)) {
             return;
         }
-        for &c in &self.children {
-            if tx.send(SetupRead::Start(FetchKind::Metadata, c)).is_err() {
-                return;
-            }
-            if tx.send(SetupRead::Meta(c, fetch_meta(source, c))).is_err() {
+        // The children in one call (a source over the network reads them
+        // together).
+        let Some(&first) = self.children.first() else {
+            return;
+        };
+        if tx
+            .send(SetupRead::Start(FetchKind::Metadata, first))
+            .is_err()
+        {
+            return;
+        }
+        for (c, r) in fetch_metas(source, &self.children) {
+            if tx.send(SetupRead::Meta(c, r)).is_err() {
                 return;
             }
         }
