@@ -22,8 +22,8 @@
 //! fetched (a `.brs`: against the payload bytes of the bricks the cuts drew,
 //! every brick that reached the GPU pool); requests per brick loaded; median
 //! and p99 of the planned frames' wall time while bricks were in flight.
-//! Both sources at the largest delay run again without the lookahead
-//! (`Lookahead::Never`): what asking for the next level ahead saves. The
+//! Both sources at the largest delay run again with the lookahead
+//! (`Lookahead::Remote`): what asking for the next level ahead saves. The
 //! store at the largest delay runs a second time with batching off (one
 //! request per brick, as the loader read before batches): the requests
 //! batching saves; and twice through a disk cache (`DiskCached`, empty each
@@ -166,9 +166,9 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         for src in ["brs", "zarr"] {
             cases.push((
                 src,
-                format!("http +{worst} ms, no lookahead"),
+                format!("http +{worst} ms, lookahead"),
                 Some(worst),
-                Variant::NoLookahead,
+                Variant::Lookahead,
             ));
         }
         for (variant, what) in [
@@ -212,8 +212,8 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
             };
             let paths = (store_path.as_path(), zarr.as_path());
             let opened = open(src, base.as_deref(), paths, &case_opts, *variant, &cache)?;
-            let lookahead = if *variant == Variant::NoLookahead {
-                Lookahead::Never
+            let lookahead = if *variant == Variant::Lookahead {
+                Lookahead::Remote
             } else {
                 Lookahead::default()
             };
@@ -318,9 +318,9 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         );
     }
     for src in ["brs", "zarr"] {
-        if let (Some(with), Some(without)) = (
+        if let (Some(without), Some(with)) = (
             at(src),
-            worst.and_then(|d| find(src, Some(d), Variant::NoLookahead)),
+            worst.and_then(|d| find(src, Some(d), Variant::Lookahead)),
         ) {
             fig.insert(
                 format!("{src}_converged_ratio_no_lookahead_vs_lookahead"),
@@ -387,9 +387,8 @@ enum Variant {
     CacheWarm,
     /// From S3 (moto), batched.
     S3,
-    /// Batched, without asking for the next level ahead
-    /// ([`Lookahead::Never`]).
-    NoLookahead,
+    /// Batched, asking for the next level ahead ([`Lookahead::Remote`]).
+    Lookahead,
 }
 
 fn open(

@@ -132,27 +132,29 @@ pub struct OutOfCoreConfig {
     /// answers cannot hold set-up; what it answers later is dropped.
     pub setup_deadline: Duration,
     /// When refinement also requests the bricks one level past those a split
-    /// waits for ([`Lookahead`]); over the network by default.
+    /// waits for ([`Lookahead`]); never by default.
     pub lookahead: Lookahead,
 }
 
 /// When refinement requests the bricks one level past those a split waits
-/// for ([`RefineParams::lookahead`](crate::refine::RefineParams::lookahead)).
-/// Over the network every level of the octree costs a round trip before the
-/// next is known to be wanted; asking for the next one with it, at a lower
-/// priority, halves those round trips. On a local disk the levels come as
-/// fast as they are planned, and the bricks asked ahead are ones the
-/// visibility feedback had no frame to rule out.
+/// for ([`RefineParams::lookahead`](crate::refine::RefineParams::lookahead)),
+/// at the child's priority, so after every brick a split waits for. Each
+/// level of the octree costs a round trip before refinement knows the next
+/// is wanted; asking for the next with it saves those round trips where the
+/// levels, not the bricks per round trip, bound the time. Measured on the
+/// shared MRI over HTTP (docs/remote.md) it gained at most 1.10x at 80 and
+/// 300 ms once metadata went in batches, so it is off by default; a deep
+/// octree reached through few bricks per level is where it would pay.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub enum Lookahead {
-    /// For a source read in batches ([`BrickSource::batch_size`](brickray_core::BrickSource::batch_size)
-    /// above 1: a store or an OME-Zarr image over the network). The default.
+    /// Never: only what the cut waits for is requested. The default.
     #[default]
+    Never,
+    /// For a source read in batches ([`BrickSource::batch_size`](brickray_core::BrickSource::batch_size)
+    /// above 1: a store or an OME-Zarr image over the network).
     Remote,
     /// For every source.
     Always,
-    /// Never: only what the cut waits for is requested.
-    Never,
 }
 
 impl Lookahead {
@@ -197,7 +199,7 @@ impl Default for OutOfCoreConfig {
             visibility: VisibilityPolicy::None,
             visibility_config: VisibilityConfig::default(),
             setup_deadline: DEFAULT_SETUP_DEADLINE,
-            lookahead: Lookahead::Remote,
+            lookahead: Lookahead::Never,
         }
     }
 }
