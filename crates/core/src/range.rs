@@ -32,6 +32,32 @@ impl CancelToken {
     pub fn is_cancelled(&self) -> bool {
         self.0.load(std::sync::atomic::Ordering::Acquire)
     }
+
+    /// Runs `f` with this token as the thread's [`current`](Self::current)
+    /// one (the previous restored after, however `f` ends): a read deep in a
+    /// call chain that carries no token (an object a format library asks
+    /// for) aborts on it. A thread `f` starts does not inherit it; pass
+    /// [`current`](Self::current) on.
+    pub fn scope<T>(&self, f: impl FnOnce() -> T) -> T {
+        struct Restore(Option<CancelToken>);
+        impl Drop for Restore {
+            fn drop(&mut self) {
+                CURRENT.with(|c| *c.borrow_mut() = self.0.take());
+            }
+        }
+        let _restore = Restore(CURRENT.with(|c| c.replace(Some(self.clone()))));
+        f()
+    }
+
+    /// The token of the innermost [`scope`](Self::scope) running on this
+    /// thread, if any.
+    pub fn current() -> Option<CancelToken> {
+        CURRENT.with(|c| c.borrow().clone())
+    }
+}
+
+thread_local! {
+    static CURRENT: std::cell::RefCell<Option<CancelToken>> = const { std::cell::RefCell::new(None) };
 }
 
 /// One range to read: `buf.len()` bytes at `offset`.
@@ -395,5 +421,29 @@ mod tests {
         assert!(mem.read_exact_at(&mut b, 5).is_err());
         mem.read_exact_at(&mut b, 4).unwrap();
         assert_eq!(b, [1; 4]);
+    }
+
+    #[test]
+    fn a_cancel_scope_nests_and_is_restored_however_it_ends() {
+        assert!(CancelToken::current().is_none());
+        let (outer, inner) = (CancelToken::new(), CancelToken::new());
+        outer.scope(|| {
+            inner.cancel();
+            let seen = inner.scope(|| CancelToken::current().unwrap().is_cancelled());
+            assert!(seen);
+            // back to the outer token (not cancelled)
+            assert!(!CancelToken::current().unwrap().is_cancelled());
+            // a panic inside a scope restores it too
+            let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                inner.scope(|| panic!("read failed"))
+            }));
+            assert!(r.is_err());
+            assert!(!CancelToken::current().unwrap().is_cancelled());
+            // another thread does not see it
+            std::thread::scope(|s| {
+                s.spawn(|| assert!(CancelToken::current().is_none()));
+            });
+        });
+        assert!(CancelToken::current().is_none());
     }
 }

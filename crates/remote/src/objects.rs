@@ -4,8 +4,9 @@
 
 use crate::{
     Fetched, RemoteError, RemoteOptions, Runtime, Traffic, get_ranges_counted, object_store_for,
-    run_on, start_runtime,
+    run_on, run_until, start_runtime,
 };
+use brickray_core::CancelToken;
 use object_store::path::Path as ObjectPath;
 use object_store::{ObjectStore, ObjectStoreExt};
 use std::fmt;
@@ -173,18 +174,25 @@ impl RemoteObjects {
             .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         let store = self.store.clone();
         let traffic = self.traffic.clone();
-        let got = run_on(&self.runtime, &url, self.deadline, async move {
-            let options = GetOptions {
-                range,
-                ..GetOptions::default()
-            };
-            traffic.count(0);
-            let r = store.get_opts(&path, options).await?;
-            let (size, got) = (r.meta.size, r.range.clone());
-            let bytes = r.bytes().await?;
-            traffic.count_bytes(bytes.len() as u64);
-            Ok((bytes, size, got))
-        });
+        let cancel = CancelToken::current();
+        let got = run_until(
+            &self.runtime,
+            &url,
+            self.deadline,
+            async move {
+                let options = GetOptions {
+                    range,
+                    ..GetOptions::default()
+                };
+                traffic.count(0);
+                let r = store.get_opts(&path, options).await?;
+                let (size, got) = (r.meta.size, r.range.clone());
+                let bytes = r.bytes().await?;
+                traffic.count_bytes(bytes.len() as u64);
+                Ok((bytes, size, got))
+            },
+            cancel.as_ref(),
+        );
         let (bytes, size, got) = match got {
             Ok(x) => x,
             Err(e) if e.is_missing() => return Ok(None),
@@ -233,11 +241,12 @@ impl RemoteObjects {
         let store = self.store.clone();
         let wanted = ranges.to_vec();
         let traffic = self.traffic.clone();
-        let got = match run_on(
+        let got = match run_until(
             &self.runtime,
             &url,
             self.deadline,
             get_ranges_counted(store, path, wanted, traffic, self.gap),
+            CancelToken::current().as_ref(),
         ) {
             Ok(g) => g,
             Err(e) if e.is_missing() => return Ok(None),

@@ -55,6 +55,8 @@ enum Act {
     Status(u16),
     Reset,
     Truncate,
+    /// Served after this many milliseconds.
+    Stall(u64),
 }
 
 /// One request the server saw: method, path, Range header.
@@ -206,6 +208,11 @@ fn handle(
         };
         match act {
             Act::Serve => {
+                head(&mut out)?;
+                out.write_all(body)?;
+            }
+            Act::Stall(ms) => {
+                std::thread::sleep(Duration::from_millis(ms));
                 head(&mut out)?;
                 out.write_all(body)?;
             }
@@ -364,6 +371,57 @@ fn nodes_read_together_equal_the_local_ones_and_fetch_each_range_once() {
             wanted.len()
         );
     }
+}
+
+/// A batch of bricks cancelled while its chunk requests are in flight gives
+/// up without their answers (the loader cancels a batch the view left) and
+/// fails every brick as cancelled.
+#[test]
+#[cfg_attr(no_shared_data, ignore = "needs ../shared/data/formats (absent)")]
+fn a_batch_cancelled_in_flight_aborts_its_chunk_requests() {
+    let Some(data) = data() else { return };
+    // Every chunk or shard read (not metadata) is answered after 5 s.
+    let server = serve_dir(&data, 404, |_, path| {
+        if path.contains("/c/") {
+            Act::Stall(5000)
+        } else {
+            Act::Serve
+        }
+    });
+    let (local, remote) = pair(&data.join(SHARDED), &server.url(SHARDED), &opts());
+    let finest = local.layout().levels - 1;
+    let keys: Vec<NodeKey> = keys(&local)
+        .into_iter()
+        .filter(|k| k.level == finest && local.layout().in_volume(*k))
+        .take(4)
+        .collect();
+    assert_eq!(keys.len(), 4);
+    let brick = local.layout().brick_bytes();
+    let mut bufs = vec![vec![0u8; brick]; keys.len()];
+    let mut outs: Vec<&mut [u8]> = bufs.iter_mut().map(|b| b.as_mut_slice()).collect();
+    let cancel = brickray_core::CancelToken::new();
+    let c = cancel.clone();
+    let canceller = std::thread::spawn(move || {
+        std::thread::sleep(Duration::from_millis(200));
+        c.cancel();
+    });
+    let started = std::time::Instant::now();
+    let results = remote.read_bricks(&keys, &mut outs, &cancel);
+    let took = started.elapsed();
+    canceller.join().unwrap();
+    for (k, r) in keys.iter().zip(&results) {
+        assert!(
+            matches!(r, Err(BrickError::Cancelled { key }) if key == k),
+            "{k:?}: {r:?}"
+        );
+    }
+    // It did not wait for the stalled answers (5 s, and the reader's
+    // retries after them).
+    assert!(took < Duration::from_secs(4), "gave up after {took:?}");
+    assert!(
+        server.seen().iter().any(|s| s.1.contains("/c/")),
+        "no chunk was requested before the cancel"
+    );
 }
 
 #[test]

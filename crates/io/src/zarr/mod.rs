@@ -723,6 +723,12 @@ impl OmeZarr {
         } else {
             let threads = missing.len().min(8);
             let next = std::sync::atomic::AtomicUsize::new(0);
+            // The caller's cancel token goes on to the threads that fetch.
+            let cancel = brickray_core::CancelToken::current();
+            let load = |i: usize| match &cancel {
+                Some(c) => c.scope(|| load(i)),
+                None => load(i),
+            };
             type Loaded = (usize, Result<Arc<Vec<u8>>, IoError>);
             let results: Vec<Vec<Loaded>> = std::thread::scope(|sc| {
                 let workers: Vec<_> = (0..threads)

@@ -368,7 +368,11 @@ impl BrickSource for ZarrBrickSource {
     /// The bricks at once, each on a thread of its own: their chunks are
     /// requested together, so a batch costs about the round trips of one
     /// brick (chunks two bricks share are fetched once, by the decoded-chunk
-    /// cache). A brick not begun when `cancel` is cancelled is skipped.
+    /// cache). A brick not begun when `cancel` is cancelled is skipped, and
+    /// the chunk requests of one begun are aborted (through
+    /// [`CancelToken::scope`](brickray_core::CancelToken::scope), which an
+    /// image over the network's object reads watch): it fails as
+    /// [`BrickError::Cancelled`].
     fn read_bricks(
         &self,
         keys: &[NodeKey],
@@ -379,7 +383,11 @@ impl BrickSource for ZarrBrickSource {
             if cancel.is_cancelled() {
                 Err(BrickError::Cancelled { key })
             } else {
-                self.read_brick(key, out)
+                // The chunk reads under it abort when `cancel` is cancelled.
+                match cancel.scope(|| self.read_brick(key, out)) {
+                    Err(_) if cancel.is_cancelled() => Err(BrickError::Cancelled { key }),
+                    r => r,
+                }
             }
         })
     }
