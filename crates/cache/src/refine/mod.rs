@@ -43,6 +43,8 @@ mod geometry;
 mod greedy;
 #[cfg(test)]
 mod lod_tests;
+#[cfg(test)]
+mod lookahead_tests;
 mod octant;
 #[cfg(test)]
 mod octant_tests;
