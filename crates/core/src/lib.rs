@@ -4,6 +4,8 @@
 //!   value ranges;
 //! * [`tf`]: 1D RGBA transfer functions and the opacity prefix-sum table that
 //!   answers "is the value range `[min, max]` transparent?" in O(1);
+//! * [`anatomy`]: anatomical orientation (RAS+ axis codes, the upright
+//!   display frame, views from A/P/L/R/S/I, radiological slices);
 //! * [`brick`]: the brick-octree vocabulary (node keys, layout, [`BrickSource`]);
 //! * [`camera`]: perspective and orthographic cameras and the ray model shared by
 //!   the GPU ray caster and the CPU reference;
@@ -24,6 +26,7 @@
 //! * [`range`]: byte-range reads ([`RangeReader`]), the seam between a
 //!   format's parser and where its bytes live.
 
+pub mod anatomy;
 pub mod brick;
 pub mod camera;
 pub mod labels;

@@ -176,24 +176,45 @@ impl SliceView {
         frame: &VolumeFrame,
         aspect: f64,
     ) -> Result<SliceView, SliceError> {
+        let (r, u) = axis.image_axes();
+        SliceView::oriented(axis.normal_axis(), index, (r, 1.0), (u, 1.0), frame, aspect)
+    }
+
+    /// The slice normal to index axis `normal` through index `index`, the
+    /// screen's right along index axis `right.0` (toward `+` when `right.1`
+    /// is positive, else toward `-`) and its up along `up`, centred and
+    /// fitted as [`Self::orthogonal`] (which is this with positive signs):
+    /// the anatomical slices of
+    /// [`Orientation::slice`](crate::anatomy::Orientation::slice).
+    pub fn oriented(
+        normal: usize,
+        index: f64,
+        right: (usize, f64),
+        up: (usize, f64),
+        frame: &VolumeFrame,
+        aspect: f64,
+    ) -> Result<SliceView, SliceError> {
         if !(aspect > 0.0 && aspect.is_finite()) {
             return Err(SliceError::BadAspect { aspect });
         }
+        let distinct = normal != right.0 && normal != up.0 && right.0 != up.0;
+        let sign_ok = |s: f64| s.is_finite() && s != 0.0;
+        if !distinct || normal.max(right.0).max(up.0) > 2 || !sign_ok(right.1) || !sign_ok(up.1) {
+            return Err(SliceError::NoPlane);
+        }
         let dims = frame.dims.map(|d| d as f64);
         let mut centre = dims.map(|d| d * 0.5 - 0.5);
-        centre[axis.normal_axis()] = index;
-        let (r, u) = axis.image_axes();
-        let mut right = [0.0; 3];
-        let mut up = [0.0; 3];
-        right[r] = 1.0;
-        up[u] = 1.0;
+        centre[normal] = index;
+        let (mut r, mut u) = ([0.0; 3], [0.0; 3]);
+        r[right.0] = right.1.signum();
+        u[up.0] = up.1.signum();
         let model = frame.model.as_dmat4();
         let len = |a: usize| model.col(a).truncate().length();
-        let height = len(u).max(len(r) / aspect);
+        let height = len(up.0).max(len(right.0) / aspect);
         Ok(SliceView {
             centre,
-            right,
-            up,
+            right: r,
+            up: u,
             height,
             slab: None,
         })

@@ -105,6 +105,25 @@ impl Placement {
             .to_array()
     }
 
+    /// The voxel-to-patient matrix in RAS+ (an LPS+ placement with its first
+    /// two rows negated), or `None` when the placement is not anatomical
+    /// (`"image"`: a microscope's stage axes).
+    pub fn voxel_to_ras(&self) -> Option<glam::DMat4> {
+        let flip = match self.space {
+            "RAS" => glam::DVec4::ONE,
+            "LPS" => glam::DVec4::new(-1.0, -1.0, 1.0, 1.0),
+            _ => return None,
+        };
+        Some(glam::DMat4::from_diagonal(flip) * self.matrix())
+    }
+
+    /// The volume's anatomical orientation (its axis code, display frame,
+    /// views and slices: [`brickray_core::anatomy`]), or `None` when the
+    /// placement is not anatomical or cannot orient (a singular matrix).
+    pub fn orientation(&self) -> Option<brickray_core::anatomy::Orientation> {
+        brickray_core::anatomy::Orientation::new(self.voxel_to_ras()?).ok()
+    }
+
     /// The [`VolumeFrame`] that puts the volume's texture space `[0,1]^3` where
     /// this placement says (voxel `i` is at texture coordinate `(i + 0.5) / n`),
     /// so that a mirrored or rotated acquisition is shown as acquired.

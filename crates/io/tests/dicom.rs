@@ -71,6 +71,9 @@ fn ct_series_fixture_decodes_in_hounsfield_units() {
     let p9 = pl.voxel_to_world([0.0, 0.0, 9.0]);
     let d = ((p9[0] - p0[0]).powi(2) + (p9[1] - p0[1]).powi(2) + (p9[2] - p0[2]).powi(2)).sqrt();
     assert!((d - 13.5).abs() < 1e-3, "9 slices span {d} mm");
+    // An axial series: rows toward the patient's left, columns toward
+    // posterior, slices toward the head.
+    assert_eq!(pl.orientation().expect("anatomical").code(), "LPS");
 }
 
 #[test]

@@ -26,6 +26,8 @@ fn nifti_fixture_decodes_with_its_affine() {
     // placement: the sidecar's affine (FreeSurfer LIA), not a mirrored one
     let pl = r.placement().expect("NIfTI has a placement");
     assert_eq!(pl.space, "RAS");
+    // FreeSurfer's conformed order.
+    assert_eq!(pl.orientation().expect("anatomical").code(), "LIA");
     let want = t.json["affine"].as_array().unwrap();
     for i in 0..4 {
         for j in 0..4 {

@@ -5,6 +5,7 @@
 //! including non-finite deltas, leaves a camera that validates.
 
 use super::{Camera, DepthConvention, Projection, VolumeFrame};
+use crate::anatomy::Direction;
 use glam::Vec3;
 
 /// How mouse drags and keys move the camera.
@@ -123,6 +124,9 @@ pub enum CameraInput {
     Reset,
     /// The home framing seen from an axis.
     Axis(AxisView),
+    /// The home framing seen from an anatomical direction (a volume placed
+    /// by [`Orientation::frame`](crate::anatomy::Orientation::frame)).
+    Anatomical(Direction),
 }
 
 /// The controller's state. The eye is `target + dir(yaw, pitch) * distance`.
@@ -221,6 +225,7 @@ impl CameraController {
             CameraInput::Move { velocity, dt } => self.fly(velocity, dt),
             CameraInput::Reset => self.reset(),
             CameraInput::Axis(a) => self.axis_view(a),
+            CameraInput::Anatomical(d) => self.anatomical_view(d),
         }
     }
 
@@ -233,6 +238,28 @@ impl CameraController {
     pub fn axis_view(&mut self, axis: AxisView) {
         self.reset();
         (self.yaw, self.pitch) = axis.angles();
+    }
+
+    /// Looks at the home target from anatomical direction `from` at the home
+    /// distance, for a volume placed by
+    /// [`Orientation::frame`](crate::anatomy::Orientation::frame): from R, L,
+    /// A and P the head is up; from S and I anterior is up.
+    pub fn anatomical_view(&mut self, from: Direction) {
+        self.reset();
+        (self.yaw, self.pitch) = from.view_angles(MAX_PITCH);
+    }
+
+    /// A controller framing a volume placed by
+    /// [`Orientation::frame`](crate::anatomy::Orientation::frame), its home
+    /// a three-quarter view from the patient's front left, a little above
+    /// (the face toward the viewer, the head up).
+    pub fn anatomical(frame: &VolumeFrame) -> CameraController {
+        let mut c = CameraController::new(frame);
+        // The eye direction (sin yaw, _, cos yaw) = (-0.56, _, -0.83): toward
+        // -x (the patient's left) and -z (anterior), 0.6 rad off the front.
+        c.home.1 = 0.6 - std::f32::consts::PI;
+        c.reset();
+        c
     }
 
     /// Sets the orbit explicitly (scripts): angles in radians, distance > 0.
@@ -446,6 +473,7 @@ mod tests {
             })),
             Just(Op::Input(CameraInput::Reset)),
             (0usize..6).prop_map(|i| Op::Input(CameraInput::Axis(AxisView::ALL[i]))),
+            (0usize..6).prop_map(|i| Op::Input(CameraInput::Anatomical(Direction::ALL[i]))),
             any::<bool>().prop_map(Op::Nav),
             any::<bool>().prop_map(Op::Ortho),
             prop_oneof![-1.0f32..4.0, odd].prop_map(Op::Fov),
