@@ -100,6 +100,32 @@ pub enum StoreError {
         /// The checksum of the bytes read.
         computed: u32,
     },
+    /// The placement record's checksum does not match (format version 6).
+    #[error(
+        "{path}: placement record checksum mismatch (stored {stored:#010x}, computed {computed:#010x})"
+    )]
+    PlacementChecksum {
+        /// The file.
+        path: PathBuf,
+        /// The stored checksum.
+        stored: u32,
+        /// The checksum of the bytes read.
+        computed: u32,
+    },
+    /// The placement record (format version 6) does not place the volume, or
+    /// a build's input gave a placement the record cannot hold: a non-finite
+    /// number, voxel axes that do not span space (a singular affine), an
+    /// affine whose last row is not `0 0 0 1`, a space other than `RAS`,
+    /// `LPS` and `image`, or non-zero reserved bytes.
+    #[error("{path}: placement field `{field}` is invalid: {reason}")]
+    BadPlacement {
+        /// The store file (opening) or the input (building).
+        path: PathBuf,
+        /// The field: `affine`, `space` or `reserved`.
+        field: &'static str,
+        /// What is wrong.
+        reason: String,
+    },
     /// A node table entry is invalid.
     #[error("{path}: node {key:?}: table field `{field}` is invalid: {reason}")]
     BadNode {

@@ -9,8 +9,12 @@ pub const MAGIC: [u8; 8] = *b"BRKSTORE";
 /// Version 2 adds the optional per-node error section, version 3 the
 /// parent-error section after it, version 4 binds each payload's checksum to
 /// its node (`docs/store-format.md`, "Payload checksums"), version 5 adds
-/// label stores (a header flag, u32 samples, the mode filter).
-pub const VERSION: u32 = 5;
+/// label stores (a header flag, u32 samples, the mode filter), version 6 the
+/// optional placement record at the end of the file (the volume's
+/// voxel-to-world affine and its space, [`brickray_io::Placement`]).
+pub const VERSION: u32 = 6;
+/// The first format version with the placement record ([`FLAG_PLACEMENT`]).
+pub(crate) const PLACEMENT_VERSION: u32 = 6;
 /// The first format version whose payload checksums cover the node's key.
 pub(crate) const KEYED_CRC_VERSION: u32 = 4;
 /// The oldest format version this crate reads (version 1: no error section).
@@ -118,6 +122,14 @@ pub(crate) struct Header {
 /// Header flag (version 5, bit 4): the volume is a label map
 /// ([`brickray_core::VolumeKind::Labels`]).
 pub(crate) const FLAG_LABELS: u8 = 16;
+/// Header flag (version 6, bit 5): the placement record ends the file
+/// ([`PLACEMENT_LEN`] bytes after every other section; `crate::placement`).
+pub(crate) const FLAG_PLACEMENT: u8 = 32;
+/// Bytes of the placement record (format version 6): the first three rows
+/// of the row-major voxel-to-world affine (12 x f64), the space code (u8),
+/// three reserved zero bytes, then the CRC-32 of the record's first 100
+/// bytes (see `docs/store-format.md`).
+pub const PLACEMENT_LEN: usize = 104;
 /// Header flag: the empty threshold is set.
 pub(crate) const FLAG_THRESHOLD: u8 = 1;
 /// Header flag: the octree is an anisotropic pyramid whose split masks are

@@ -31,6 +31,7 @@ mod errsec;
 pub mod format;
 mod opening;
 mod partial;
+mod placement;
 mod procedural;
 mod reader;
 mod sample;

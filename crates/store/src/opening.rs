@@ -3,17 +3,18 @@
 //! [`Sections`] against the file's length, and the node [`table`]. Every
 //! read goes through [`RangeReader`], the byte-range seam: a local file, bytes
 //! in memory, or a range reader over object storage or HTTP. Opening takes
-//! two reads: the header, then everything after the payload (the node table
-//! and the error sections, which end the file) in one range.
+//! two reads: the header, then everything after the payload (the node table,
+//! the error sections and the placement record, which end the file) in one
+//! range.
 
 use crate::Filter;
 use crate::error::StoreError;
 use crate::errsec::ERROR_ENTRY_LEN;
 use crate::format::{
-    ENTRY_LEN, Entry, FLAG_ERRORS, FLAG_LABELS, FLAG_PARENT_ERRORS, FLAG_SPLIT_MASKS,
-    FLAG_THRESHOLD, HEADER_LEN, Header, KIND_DATA, KIND_EMPTY, KIND_UNIFORM, MAGIC, MAX_APRON,
-    MAX_BRICK, MAX_BRICK_BYTES, MAX_SPLIT_MASKS, MIN_VERSION, TableGeometry, VERSION,
-    dtype_from_code, filter_from_code, packed_masks,
+    ENTRY_LEN, Entry, FLAG_ERRORS, FLAG_LABELS, FLAG_PARENT_ERRORS, FLAG_PLACEMENT,
+    FLAG_SPLIT_MASKS, FLAG_THRESHOLD, HEADER_LEN, Header, KIND_DATA, KIND_EMPTY, KIND_UNIFORM,
+    MAGIC, MAX_APRON, MAX_BRICK, MAX_BRICK_BYTES, MAX_SPLIT_MASKS, MIN_VERSION, PLACEMENT_LEN,
+    PLACEMENT_VERSION, TableGeometry, VERSION, dtype_from_code, filter_from_code, packed_masks,
 };
 use crate::reader::{bad, max_compressed};
 use crate::sample::representable;
@@ -84,10 +85,10 @@ pub(crate) fn header(
 
 /// The flags a version knows.
 fn known_flags(version: u32) -> u8 {
+    let v5 = FLAG_THRESHOLD | FLAG_SPLIT_MASKS | FLAG_ERRORS | FLAG_PARENT_ERRORS | FLAG_LABELS;
     match version {
-        v if v >= 5 => {
-            FLAG_THRESHOLD | FLAG_SPLIT_MASKS | FLAG_ERRORS | FLAG_PARENT_ERRORS | FLAG_LABELS
-        }
+        v if v >= PLACEMENT_VERSION => v5 | FLAG_PLACEMENT,
+        5 => v5,
         3 | 4 => FLAG_THRESHOLD | FLAG_SPLIT_MASKS | FLAG_ERRORS | FLAG_PARENT_ERRORS,
         2 => FLAG_THRESHOLD | FLAG_SPLIT_MASKS | FLAG_ERRORS,
         _ => FLAG_THRESHOLD | FLAG_SPLIT_MASKS,
@@ -181,8 +182,8 @@ pub(crate) fn layout(h: &Header, path: &Path) -> Result<(OctreeLayout, Filter), 
     Ok((layout, filter))
 }
 
-/// Phase 3: where the node table and the error sections lie; they must end
-/// exactly at the file's end.
+/// Phase 3: where the node table, the error sections and the placement
+/// record lie; they must end exactly at the file's end.
 pub(crate) struct Sections {
     /// Bytes of the error section's entries (0 without it).
     pub(crate) errors_len: u64,
@@ -192,6 +193,10 @@ pub(crate) struct Sections {
     pub(crate) table_end: u64,
     /// Where the error section ends (the parent-error section starts).
     pub(crate) errors_end: u64,
+    /// Where the parent-error section ends (the placement record starts).
+    pub(crate) parent_end: u64,
+    /// Bytes of the placement record (0 without it).
+    pub(crate) placement_len: u64,
 }
 
 impl Sections {
@@ -270,8 +275,17 @@ impl Sections {
         let errors_end = table_end
             .checked_add(errors_len)
             .ok_or_else(|| overflow("node_count"))?;
-        let end = errors_end
+        let parent_end = errors_end
             .checked_add(parent_len)
+            .ok_or_else(|| overflow("node_count"))?;
+        // The placement record (version 6) ends the file.
+        let placement_len = if h.flags & FLAG_PLACEMENT != 0 {
+            PLACEMENT_LEN as u64
+        } else {
+            0
+        };
+        let end = parent_end
+            .checked_add(placement_len)
             .ok_or_else(|| overflow("node_count"))?;
         if end > file_len {
             return Err(StoreError::Truncated {
@@ -280,8 +294,10 @@ impl Sections {
                     "node table"
                 } else if errors_end > file_len {
                     "error section"
-                } else {
+                } else if parent_end > file_len {
                     "parent-error section"
+                } else {
+                    "placement record"
                 },
                 needed: end,
                 actual: file_len,
@@ -299,6 +315,8 @@ impl Sections {
             parent_len,
             table_end,
             errors_end,
+            parent_end,
+            placement_len,
         })
     }
 }

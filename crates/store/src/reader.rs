@@ -13,7 +13,7 @@ use brickray_core::{
     BrickError, BrickSource, CancelToken, NodeError, NodeInfo, NodeKey, NodeKind, OctreeLayout,
     RangeRead, RangeReader, VolumeDesc,
 };
-use brickray_io::FileKind;
+use brickray_io::{FileKind, Placement};
 use std::fs::File;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, RwLock};
@@ -196,6 +196,8 @@ pub struct Store {
     errors: Option<Vec<NodeError>>,
     /// The parent-error section (format version 3), table order.
     parent_errors: Option<Vec<NodeError>>,
+    /// The placement record (format version 6).
+    placement: Option<Placement>,
     version: u32,
 }
 
@@ -287,9 +289,10 @@ impl Store {
     /// Opens a store from any range reader (a local file, bytes in memory,
     /// or a range reader over object storage or HTTP); `name` names it in
     /// errors (a path or a URL). Takes the reader's length, then validates
-    /// the header, the sections' extents against the length, the node table
-    /// and the error sections, in that order. Two reads: the header, then the
-    /// metadata after the payload in one range.
+    /// the header, the sections' extents against the length, the node
+    /// table, the error sections and the placement record, in that order.
+    /// Two reads: the header, then the metadata after the payload in one
+    /// range.
     pub fn open_with(
         reader: impl RangeReader + 'static,
         name: impl Into<PathBuf>,
@@ -301,7 +304,7 @@ impl Store {
 
     /// Opens a store from any range reader of `len` bytes; `path` names it in
     /// errors. Validates the header, the sections' extents against `len`, the
-    /// node table and the error sections, in that order.
+    /// node table, the error sections and the placement record, in that order.
     pub fn from_reader(
         file: Box<dyn RangeReader>,
         len: u64,
@@ -326,14 +329,20 @@ impl Store {
             None
         };
         let parent_errors = if sec.parent_len > 0 {
-            let b = &tail[at(sec.errors_end)..];
+            let b = &tail[at(sec.errors_end)..at(sec.parent_end)];
             Some(errsec::read_parent(b, path, &geo)?)
+        } else {
+            None
+        };
+        let placement = if sec.placement_len > 0 {
+            Some(crate::placement::decode(&tail[at(sec.parent_end)..], path)?)
         } else {
             None
         };
         Ok(Store {
             errors,
             parent_errors,
+            placement,
             version: h.version,
             path: path.to_owned(),
             file: RwLock::new(Arc::from(file)),
@@ -353,6 +362,16 @@ impl Store {
     /// The file's format version (1 to [`VERSION`](crate::format::VERSION)).
     pub fn version(&self) -> u32 {
         self.version
+    }
+
+    /// Where the volume lies in the world, as the file the store was built
+    /// from said ([`brickray_io::VolumeReader::placement`]: NIfTI's
+    /// qform/sform, DICOM's patient position and orientation, OME-Zarr's
+    /// transformations), bit for bit. `None` for a store built from an input
+    /// that does not say, and for every store before format version 6. Read
+    /// at open with the rest of the metadata (no request of its own).
+    pub fn placement(&self) -> Option<Placement> {
+        self.placement
     }
 
     /// Whether the store records per-node error bounds (`NodeInfo::error`).

@@ -20,15 +20,15 @@
 
 use crate::error::StoreError;
 use crate::format::{
-    ENTRY_LEN, Entry, FLAG_ERRORS, FLAG_LABELS, FLAG_PARENT_ERRORS, FLAG_SPLIT_MASKS,
-    FLAG_THRESHOLD, HEADER_LEN, Header, KIND_DATA, KIND_EMPTY, KIND_UNIFORM, MAGIC, MAX_APRON,
-    MAX_BRICK, MAX_BRICK_BYTES, TableGeometry, VERSION, dtype_code, filter_code,
+    ENTRY_LEN, Entry, FLAG_ERRORS, FLAG_LABELS, FLAG_PARENT_ERRORS, FLAG_PLACEMENT,
+    FLAG_SPLIT_MASKS, FLAG_THRESHOLD, HEADER_LEN, Header, KIND_DATA, KIND_EMPTY, KIND_UNIFORM,
+    MAGIC, MAX_APRON, MAX_BRICK, MAX_BRICK_BYTES, TableGeometry, VERSION, dtype_code, filter_code,
 };
 use crate::partial::{PartialFile, parent_dir, remove_stale};
 use crate::{Filter, NO_ENTRY_LEVEL};
 use brickray_core::OctreeLayout;
 use brickray_io::FileKind;
-use brickray_io::VolumeReader;
+use brickray_io::{Placement, VolumeReader};
 use std::io::{BufWriter, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -122,6 +122,9 @@ pub struct BuildReport {
     /// Whether the store has the error section (per-node error bounds; left
     /// out when that pass would exceed the memory bound).
     pub errors: bool,
+    /// The placement recorded in the store (the reader's
+    /// [`VolumeReader::placement`]; `None` when the input does not say).
+    pub placement: Option<Placement>,
     /// The octree geometry.
     pub layout: OctreeLayout,
     /// Nodes in the table (every node that overlaps the volume).
@@ -173,6 +176,12 @@ pub fn build_file(
 /// ([`VolumeReader::input_files`], compared by file identity, so links and
 /// other spellings are caught: [`StoreError::OutputIsInput`]), and if it exists
 /// it must be a regular file ([`StoreError::OutputNotRegularFile`]).
+///
+/// The reader's [`placement`](VolumeReader::placement), when it has one, is
+/// recorded in the store ([`Store::placement`](crate::Store::placement)); one
+/// the store cannot hold (a non-finite or singular affine, a last row other
+/// than `0 0 0 1`, a space other than `RAS`, `LPS` and `image`) fails the
+/// build before anything is written ([`StoreError::BadPlacement`]).
 pub fn build(
     reader: &mut dyn VolumeReader,
     out: &Path,
@@ -186,6 +195,13 @@ pub fn build(
         option: "input",
         reason: e.to_string(),
     })?;
+    // The placement record (format version 6), checked before anything is
+    // written.
+    let placement = reader.placement();
+    let placement_bytes = placement
+        .as_ref()
+        .map(|p| crate::placement::encode(p, reader.path()))
+        .transpose()?;
     if opts.brick == 0 || opts.brick > MAX_BRICK {
         return Err(StoreError::BadOption {
             option: "brick",
@@ -387,6 +403,10 @@ pub fn build(
         w.write_all(&crc32fast::hash(&b).to_le_bytes())
             .map_err(|e| StoreError::io(&tmp_path, e))?;
     }
+    // The placement record (format version 6) ends the file.
+    if let Some(b) = &placement_bytes {
+        w.write_all(b).map_err(|e| StoreError::io(&tmp_path, e))?;
+    }
     let data_range = if ctx.data_range[0] <= ctx.data_range[1] {
         ctx.data_range
     } else {
@@ -410,7 +430,12 @@ pub fn build(
             FLAG_ERRORS | FLAG_PARENT_ERRORS
         } else {
             0
-        } | if labels { FLAG_LABELS } else { 0 },
+        } | if labels { FLAG_LABELS } else { 0 }
+            | if placement_bytes.is_some() {
+                FLAG_PLACEMENT
+            } else {
+                0
+            },
         split_masks: layout.split_masks(),
         levels: layout.levels,
         brick: layout.brick,
@@ -450,10 +475,11 @@ pub fn build(
     stage::reached("rename");
     tmp.persist(out)?;
     // The error section, then the parent-error section of the same length
-    // and its CRC.
+    // and its CRC, then the placement record.
     let file_bytes = table_offset
         + table.len() as u64
-        + error_bytes.as_ref().map_or(0, |b| 2 * b.len() as u64 + 4);
+        + error_bytes.as_ref().map_or(0, |b| 2 * b.len() as u64 + 4)
+        + placement_bytes.as_ref().map_or(0, |b| b.len() as u64);
     Ok(BuildReport {
         layout,
         nodes: ctx.entries.len() as u64,
@@ -468,6 +494,7 @@ pub fn build(
         buffer_estimate: needed,
         banded_levels: banded,
         errors: error_bytes.is_some(),
+        placement,
         seconds: t0.elapsed().as_secs_f64(),
     })
 }
