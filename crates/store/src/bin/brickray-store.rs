@@ -104,9 +104,9 @@ enum Command {
         #[command(flatten)]
         select: Select,
     },
-    /// Describe a store (levels, bricks, empty and uniform fractions,
-    /// compression, value histogram) or an input volume (format, size,
-    /// placement, and its series, levels, channels and time points).
+    /// Describe a store (placement, levels, bricks, empty and uniform
+    /// fractions, compression, value histogram) or an input volume (format,
+    /// size, placement, and its series, levels, channels and time points).
     Info {
         /// The store, or an input volume.
         store: PathBuf,
@@ -546,6 +546,18 @@ fn cmd_convert(
     Ok(())
 }
 
+/// The placement's voxel-to-world affine (its first three rows), for `info`
+/// on an input and on a store.
+fn print_placement(p: &brickray_io::Placement) {
+    println!("placement   voxel to world ({}):", p.space);
+    for row in &p.affine[..3] {
+        println!(
+            "              [{:>10.4} {:>10.4} {:>10.4} {:>10.4}]",
+            row[0], row[1], row[2], row[3]
+        );
+    }
+}
+
 fn cmd_info_input(input: &std::path::Path, read: &ReadOptions) -> Result<(), String> {
     let reader =
         brickray_io::open_with(input, read).map_err(|e| StoreError::Input(e).to_string())?;
@@ -562,13 +574,7 @@ fn cmd_info_input(input: &std::path::Path, read: &ReadOptions) -> Result<(), Str
         d.value_range
     );
     if let Some(p) = reader.placement() {
-        println!("placement   voxel to world ({}):", p.space);
-        for row in &p.affine[..3] {
-            println!(
-                "              [{:>10.4} {:>10.4} {:>10.4} {:>10.4}]",
-                row[0], row[1], row[2], row[3]
-            );
-        }
+        print_placement(&p);
     }
     println!("files       {}", reader.input_files().len());
     for n in reader.notes() {
@@ -600,6 +606,9 @@ fn cmd_info(store: &Store, bins: usize) -> Result<(), String> {
         d.spacing,
         d.value_range
     );
+    if let Some(p) = store.placement() {
+        print_placement(&p);
+    }
     println!("data range  {:?}", store.data_range());
     println!(
         "bricks      {} interior + 2x{} apron = {} stored voxels a side ({} bytes), filter {:?}, empty below {:?}",
