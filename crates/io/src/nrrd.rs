@@ -1,8 +1,18 @@
 //! NRRD (<https://teem.sourceforge.net/nrrd/format.html>): attached or detached
 //! data, `raw` and `gzip` encodings, 3D scalar volumes of u8/u16/i16/f32.
+//!
+//! Placement: with `space directions` (one vector per axis, `none` for the
+//! leading non-spatial axis of a 4D volume of size 1), the affine's columns are
+//! the direction vectors and its translation `space origin` (the world origin,
+//! with a warning, when absent); the spacing is each vector's length. `space`
+//! `right-anterior-superior` (`RAS`) gives `"RAS"`, `left-posterior-superior`
+//! (`LPS`) `"LPS"`, `left-anterior-superior` (`LAS`) `"RAS"` with x negated,
+//! `scanner-xyz`, `3D-right-handed`, `3D-left-handed` or a bare `space
+//! dimension: 3` `"image"`; the spaces with time are refused. Without `space
+//! directions` there is no placement and the spacing is `spacings` (else 1).
 
 use super::{
-    IoError, MAX_HEADER, ReadOptions, VolumeReader, check_slab, open_regular,
+    IoError, MAX_HEADER, Placement, ReadOptions, VolumeReader, check_slab, open_regular,
     regular_file_metadata, resolve_data_file, scan_stream,
 };
 use brickray_core::volume::{DType, VolumeDesc};
@@ -26,6 +36,8 @@ pub struct NrrdReader {
     encoding: Encoding,
     big_endian: bool,
     desc: VolumeDesc,
+    placement: Option<Placement>,
+    warnings: Vec<String>,
     /// Open gzip stream and the decoded byte position it stands at.
     gz: Option<(GzDecoder<BufReader<File>>, u64)>,
 }
@@ -163,12 +175,7 @@ impl NrrdReader {
             None => return Err(IoError::header(path, "no encoding field")),
         };
         let big_endian = matches!(get("endian"), Some(e) if e.eq_ignore_ascii_case("big"));
-        let spacing = parse_spacing(
-            path,
-            get("spacings"),
-            get("space directions"),
-            sizes.len() == 4,
-        )?;
+        let geometry = parse_geometry(path, &fields, sizes.len() == 4)?;
         if get("line skip").is_some_and(|v| v != "0") || get("byte skip").is_some_and(|v| v != "0")
         {
             return Err(IoError::Unsupported {
@@ -212,7 +219,7 @@ impl NrrdReader {
         let desc = VolumeDesc {
             dims,
             dtype,
-            spacing,
+            spacing: geometry.spacing,
             value_range: declared.unwrap_or([0.0, 1.0]),
             kind: Default::default(),
         };
@@ -224,6 +231,8 @@ impl NrrdReader {
             encoding,
             big_endian,
             desc,
+            placement: geometry.placement,
+            warnings: geometry.warnings,
             gz: None,
         };
         let file_len = regular_file_metadata(&r.data_path)?.len();
@@ -356,65 +365,274 @@ fn gz_error(path: &Path, e: std::io::Error, expected: u64, pos: u64) -> IoError 
     }
 }
 
-fn parse_spacing(
-    path: &Path,
-    spacings: Option<&str>,
-    directions: Option<&str>,
-    four_d: bool,
-) -> Result<[f32; 3], IoError> {
-    if let Some(s) = spacings {
-        // "nan" parses (as NaN) and is then rejected by validation, except on
-        // the leading non-spatial axis of a 4D file, which is dropped.
-        let mut v: Vec<f32> = s
-            .split_whitespace()
-            .map(|t| t.parse::<f32>())
-            .collect::<Result<_, _>>()
-            .map_err(|_| IoError::header(path, "spacings are not numbers"))?;
-        if four_d && v.len() == 4 {
-            v.remove(0);
-        }
-        if v.len() == 3 {
-            return Ok([v[0], v[1], v[2]]);
-        }
-        return Err(IoError::header(path, "spacings must give 3 values"));
+/// Where the header places the volume, and the spacing that goes with it.
+struct Geometry {
+    spacing: [f32; 3],
+    placement: Option<Placement>,
+    warnings: Vec<String>,
+}
+
+/// A NRRD `space` name as brickray's space, and the signs that turn the
+/// NRRD space's axes into it (LAS is RAS with x negated).
+fn nrrd_space(path: &Path, name: &str) -> Result<(&'static str, [f64; 3]), IoError> {
+    match name.to_ascii_lowercase().as_str() {
+        "right-anterior-superior" | "ras" => Ok(("RAS", [1.0, 1.0, 1.0])),
+        "left-anterior-superior" | "las" => Ok(("RAS", [-1.0, 1.0, 1.0])),
+        "left-posterior-superior" | "lps" => Ok(("LPS", [1.0, 1.0, 1.0])),
+        "scanner-xyz" | "3d-right-handed" | "3d-left-handed" => Ok(("image", [1.0, 1.0, 1.0])),
+        "right-anterior-superior-time"
+        | "rast"
+        | "left-anterior-superior-time"
+        | "last"
+        | "left-posterior-superior-time"
+        | "lpst"
+        | "scanner-xyz-time"
+        | "3d-right-handed-time"
+        | "3d-left-handed-time" => Err(IoError::unsupported(
+            path,
+            format!("space {name:?}: a world space with time (3D world spaces only)"),
+        )),
+        _ => Err(IoError::header(
+            path,
+            format!(
+                "unknown space {name:?} (expected right-anterior-superior, \
+                 left-anterior-superior, left-posterior-superior, scanner-xyz, \
+                 3D-right-handed or 3D-left-handed, or their abbreviations)"
+            ),
+        )),
     }
-    if let Some(d) = directions {
-        // "(a,b,c) (d,e,f) (g,h,i)", possibly preceded by "none" for a 4D axis.
-        let vecs: Vec<f32> = d
-            .split(')')
-            .map(|t| {
-                t.trim()
-                    .trim_start_matches("none")
-                    .trim()
-                    .trim_start_matches('(')
-            })
-            .filter(|t| !t.is_empty())
-            .map(|t| {
-                let c: Vec<f32> = t
-                    .split(',')
-                    .map(|x| x.trim().parse::<f32>())
-                    .collect::<Result<_, _>>()
-                    .map_err(|_| {
-                        IoError::header(path, format!("space direction ({t}) is not numeric"))
-                    })?;
-                if c.len() != 3 {
-                    return Err(IoError::header(
-                        path,
-                        format!("space direction ({t}) needs 3 components"),
-                    ));
-                }
-                Ok(c.iter().map(|x| x * x).sum::<f32>().sqrt())
-            })
-            .collect::<Result<_, _>>()?;
-        if vecs.len() == 3 {
-            return Ok([vecs[0], vecs[1], vecs[2]]);
+}
+
+/// Parses a list of NRRD vectors (`(x,y,z)`, each 3 finite numbers) and
+/// `none`s, one per axis.
+fn parse_vectors(
+    path: &Path,
+    field: &'static str,
+    s: &str,
+) -> Result<Vec<Option<[f64; 3]>>, IoError> {
+    let mut out = Vec::new();
+    let mut rest = s.trim_start();
+    while !rest.is_empty() {
+        if let Some(after) = rest.strip_prefix("none") {
+            if after.starts_with(|c: char| !c.is_whitespace() && c != '(') {
+                return Err(IoError::header(
+                    path,
+                    format!("{field}: unparsable {rest:?} (expected (x,y,z) or none)"),
+                ));
+            }
+            out.push(None);
+            rest = after.trim_start();
+            continue;
         }
+        let Some(inner_rest) = rest.strip_prefix('(') else {
+            return Err(IoError::header(
+                path,
+                format!("{field}: unparsable {rest:?} (expected (x,y,z) or none)"),
+            ));
+        };
+        let Some((inner, after)) = inner_rest.split_once(')') else {
+            return Err(IoError::header(
+                path,
+                format!("{field}: vector {rest:?} has no closing parenthesis"),
+            ));
+        };
+        if inner.contains('(') {
+            return Err(IoError::header(
+                path,
+                format!("{field}: vector ({inner} has no closing parenthesis"),
+            ));
+        }
+        let c: Vec<f64> = inner
+            .split(',')
+            .map(|x| x.trim().parse::<f64>())
+            .collect::<Result<_, _>>()
+            .map_err(|_| IoError::header(path, format!("{field}: ({inner}) is not numeric")))?;
+        let [x, y, z] = c[..] else {
+            return Err(IoError::header(
+                path,
+                format!("{field}: ({inner}) needs 3 components"),
+            ));
+        };
+        if let Some(&v) = c.iter().find(|v| !v.is_finite()) {
+            return Err(IoError::NonFiniteValue {
+                path: path.to_owned(),
+                field,
+                value: v as f32,
+            });
+        }
+        out.push(Some([x, y, z]));
+        rest = after.trim_start();
+    }
+    Ok(out)
+}
+
+/// The spacing and placement the header's `spacings`, `space`, `space
+/// dimension`, `space directions` and `space origin` give. `four_d`: the
+/// volume has a leading non-spatial axis (of size 1), whose spacing and
+/// direction are dropped.
+fn parse_geometry(
+    path: &Path,
+    fields: &[(String, String)],
+    four_d: bool,
+) -> Result<Geometry, IoError> {
+    let get = |k: &str| fields.iter().find(|(n, _)| n == k).map(|(_, v)| v.as_str());
+    let spacings = match get("spacings") {
+        Some(s) => {
+            // "nan" parses (as NaN) and is then rejected by validation, except on
+            // the leading non-spatial axis of a 4D file, which is dropped.
+            let mut v: Vec<f32> = s
+                .split_whitespace()
+                .map(|t| t.parse::<f32>())
+                .collect::<Result<_, _>>()
+                .map_err(|_| IoError::header(path, "spacings are not numbers"))?;
+            if four_d && v.len() == 4 {
+                v.remove(0);
+            }
+            let [a, b, c] = v[..] else {
+                return Err(IoError::header(path, "spacings must give 3 values"));
+            };
+            Some([a, b, c])
+        }
+        None => None,
+    };
+    // The world space: `space` (named), or `space dimension` (unnamed: image).
+    let space = match (get("space"), get("space dimension")) {
+        (Some(name), dim) => {
+            let sp = nrrd_space(path, name)?;
+            if let Some(d) = dim
+                && d.trim() != "3"
+            {
+                return Err(IoError::header(
+                    path,
+                    format!("space dimension {d:?} disagrees with space {name:?} (3D)"),
+                ));
+            }
+            Some(sp)
+        }
+        (None, Some(d)) => match d.trim().parse::<u32>() {
+            Ok(3) => Some(("image", [1.0; 3])),
+            Ok(n) => {
+                return Err(IoError::unsupported(
+                    path,
+                    format!("space dimension {n} (3D world spaces only)"),
+                ));
+            }
+            Err(_) => {
+                return Err(IoError::header(
+                    path,
+                    format!("space dimension {d:?} is not a number"),
+                ));
+            }
+        },
+        (None, None) => None,
+    };
+    let origin = match get("space origin") {
+        Some(s) => match parse_vectors(path, "space origin", s)?[..] {
+            [Some(o)] => Some(o),
+            _ => {
+                return Err(IoError::header(
+                    path,
+                    format!("space origin {s:?} must be one vector (x,y,z)"),
+                ));
+            }
+        },
+        None => None,
+    };
+    let Some(d) = get("space directions") else {
+        return Ok(Geometry {
+            spacing: spacings.unwrap_or([1.0; 3]),
+            placement: None,
+            warnings: Vec::new(),
+        });
+    };
+    // "(a,b,c) (d,e,f) (g,h,i)", preceded by "none" for the leading axis of a
+    // 4D volume: one entry per axis.
+    let axes = parse_vectors(path, "space directions", d)?;
+    let want = if four_d { 4 } else { 3 };
+    if axes.len() != want {
         return Err(IoError::header(
             path,
-            "space directions must give 3 vectors",
+            format!(
+                "space directions must give 3 vectors (one per axis, none for a \
+                 non-spatial one), got {} entries for {want} axes",
+                axes.len()
+            ),
         ));
     }
-    Ok([1.0; 3])
+    if four_d && axes[0].is_some() {
+        return Err(IoError::header(
+            path,
+            "space directions: the leading axis of a 4D volume must be none \
+             (3D scalar volumes only)",
+        ));
+    }
+    let spatial = &axes[axes.len() - 3..];
+    let mut dirs = [[0.0f64; 3]; 3];
+    for (a, v) in spatial.iter().enumerate() {
+        dirs[a] = v.ok_or_else(|| {
+            IoError::header(
+                path,
+                format!("space directions: spatial axis {a} has direction none"),
+            )
+        })?;
+    }
+    let norms = dirs.map(|v| v.iter().map(|x| x * x).sum::<f64>().sqrt());
+    let spacing = norms.map(|n| n as f32);
+    if let Some(sp) = spacings {
+        for a in 0..3 {
+            let (s, n) = (sp[a], spacing[a]);
+            if !s.is_nan() && (s - n).abs() > 1e-6 * n.abs().max(s.abs()) {
+                return Err(IoError::header(
+                    path,
+                    format!(
+                        "axis {a}: spacings gives {s} but its space direction is {n} long \
+                         (a spatial axis takes one or the other)"
+                    ),
+                ));
+            }
+        }
+    }
+    // A zero or overflowing vector is a bad spacing (reported by validation);
+    // otherwise the vectors must span space.
+    if spacing.iter().all(|s| s.is_finite() && *s > 0.0) {
+        let m = dirs;
+        let det = m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
+            - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+            + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]);
+        let scale: f64 = norms.iter().product();
+        if !(det.is_finite() && det.abs() > 1e-9 * scale) {
+            return Err(IoError::header(
+                path,
+                format!("space directions do not span space (determinant {det})"),
+            ));
+        }
+    }
+    let mut warnings = Vec::new();
+    let (space, sign) = space.unwrap_or_else(|| {
+        warnings.push(
+            "space directions without a space or space dimension: placed in image space".to_owned(),
+        );
+        ("image", [1.0; 3])
+    });
+    let origin = origin.unwrap_or_else(|| {
+        warnings.push("no space origin: voxel (0,0,0) placed at the world's origin".to_owned());
+        [0.0; 3]
+    });
+    // Columns are the axes' directions, the translation the origin; rows
+    // negated where the NRRD space's axis is brickray's reversed (LAS).
+    let mut affine = [[0.0; 4]; 4];
+    for r in 0..3 {
+        for (c, v) in dirs.iter().enumerate() {
+            affine[r][c] = sign[r] * v[r];
+        }
+        affine[r][3] = sign[r] * origin[r];
+    }
+    affine[3][3] = 1.0;
+    Ok(Geometry {
+        spacing,
+        placement: Some(Placement { affine, space }),
+        warnings,
+    })
 }
 
 impl VolumeReader for NrrdReader {
@@ -428,6 +646,14 @@ impl VolumeReader for NrrdReader {
 
     fn path(&self) -> &Path {
         &self.path
+    }
+
+    fn placement(&self) -> Option<Placement> {
+        self.placement
+    }
+
+    fn warnings(&self) -> Vec<String> {
+        self.warnings.clone()
     }
 
     fn input_files(&self) -> Vec<PathBuf> {
