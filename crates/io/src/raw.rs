@@ -1,8 +1,15 @@
 //! Raw little-endian samples with a JSON sidecar (the form of `shared/data`).
+//!
+//! A sidecar with `"affine"` (a row-major voxel-to-world matrix, 4x4 with last
+//! row `0 0 0 1`, or its first 3 rows) and `"affine_space"` (`"RAS"`, `"LPS"`
+//! or `"image"`), as `brickray-store convert` writes them, places the volume
+//! ([`VolumeReader::placement`]). An `"affine"` without `"affine_space"` (older
+//! sidecars copied a NIfTI affine so) is not used, and the reader's notes say
+//! so; an `"affine_space"` without `"affine"` is an error.
 
 use super::{
-    IoError, MAX_HEADER, ReadOptions, VolumeReader, check_slab, open_regular, resolve_data_file,
-    scan_stream,
+    IoError, MAX_HEADER, Placement, ReadOptions, VolumeReader, check_slab, open_regular,
+    resolve_data_file, scan_stream,
 };
 use brickray_core::volume::{DType, VolumeDesc, VolumeKind};
 use std::fs::File;
@@ -18,6 +25,9 @@ pub struct RawReader {
     file: File,
     offset: u64,
     desc: VolumeDesc,
+    /// The sidecar's `affine` and `affine_space`.
+    placement: Option<Placement>,
+    notes: Vec<String>,
 }
 
 #[derive(serde::Deserialize)]
@@ -40,6 +50,12 @@ struct Sidecar {
     kind: Option<String>,
     #[serde(default)]
     labels: Option<serde_json::Value>,
+    /// Row-major voxel-to-world matrix (4x4, or 3x4 without the last row).
+    #[serde(default)]
+    affine: Option<serde_json::Value>,
+    /// `"RAS"`, `"LPS"` or `"image"`.
+    #[serde(default)]
+    affine_space: Option<serde_json::Value>,
 }
 
 impl RawReader {
@@ -69,6 +85,8 @@ impl RawReader {
             file,
             offset,
             desc,
+            placement: None,
+            notes: Vec::new(),
         })
     }
 
@@ -183,6 +201,23 @@ impl RawReader {
             None if sc.labels.is_some() => VolumeKind::Labels,
             None => VolumeKind::Intensity,
         };
+        let (placement, notes) = match (&sc.affine, &sc.affine_space) {
+            (Some(a), Some(sp)) => (Some(sidecar_placement(json, a, sp)?), Vec::new()),
+            (Some(_), None) => (
+                None,
+                vec![
+                    "the sidecar's \"affine\" has no \"affine_space\": not used as a placement"
+                        .to_owned(),
+                ],
+            ),
+            (None, Some(_)) => {
+                return Err(IoError::header(
+                    json,
+                    "\"affine_space\" without an \"affine\"",
+                ));
+            }
+            (None, None) => (None, Vec::new()),
+        };
         let labels = kind.is_labels();
         let desc = VolumeDesc {
             dims,
@@ -198,11 +233,85 @@ impl RawReader {
         desc.validate().map_err(|e| IoError::volume(json, e))?;
         let mut reader = RawReader::new(raw, 0, desc)?;
         reader.sidecar = Some(json.to_owned());
+        reader.placement = placement;
+        reader.notes = notes;
         if declared.is_none() && !labels {
             reader.desc.value_range = reader.scan()?;
         }
         Ok(reader)
     }
+}
+
+/// The placement a sidecar's `affine` and `affine_space` give: 3 or 4 rows of
+/// 4 finite numbers (a 4th row must be `0 0 0 1`) whose 3x3 part spans space,
+/// in `"RAS"`, `"LPS"` or `"image"` space.
+fn sidecar_placement(
+    json: &Path,
+    affine: &serde_json::Value,
+    space: &serde_json::Value,
+) -> Result<Placement, IoError> {
+    let space = match space.as_str() {
+        Some(s) if s.eq_ignore_ascii_case("RAS") => "RAS",
+        Some(s) if s.eq_ignore_ascii_case("LPS") => "LPS",
+        Some(s) if s.eq_ignore_ascii_case("image") => "image",
+        _ => {
+            return Err(IoError::header(
+                json,
+                format!("affine_space {space}: expected \"RAS\", \"LPS\" or \"image\""),
+            ));
+        }
+    };
+    let bad = |what: &str| {
+        IoError::header(
+            json,
+            format!("affine must be 4 rows (or 3) of 4 numbers, row-major: {what}"),
+        )
+    };
+    let rows = affine.as_array().ok_or_else(|| bad("not an array"))?;
+    if !(rows.len() == 3 || rows.len() == 4) {
+        return Err(bad(&format!("{} rows", rows.len())));
+    }
+    let mut a = [[0.0f64; 4]; 4];
+    a[3][3] = 1.0;
+    for (r, row) in rows.iter().enumerate() {
+        let row = row
+            .as_array()
+            .ok_or_else(|| bad(&format!("row {r} is not an array")))?;
+        if row.len() != 4 {
+            return Err(bad(&format!("row {r} has {} entries", row.len())));
+        }
+        for (c, v) in row.iter().enumerate() {
+            let x = v
+                .as_f64()
+                .ok_or_else(|| bad(&format!("[{r}][{c}] is {v}, not a number")))?;
+            if !x.is_finite() {
+                return Err(IoError::NonFiniteValue {
+                    path: json.to_owned(),
+                    field: "affine",
+                    value: x as f32,
+                });
+            }
+            a[r][c] = x;
+        }
+    }
+    if a[3] != [0.0, 0.0, 0.0, 1.0] {
+        return Err(IoError::header(
+            json,
+            format!("affine's last row is {:?}, not [0, 0, 0, 1]", a[3]),
+        ));
+    }
+    let col = |c: usize| (a[0][c] * a[0][c] + a[1][c] * a[1][c] + a[2][c] * a[2][c]).sqrt();
+    let scale = col(0) * col(1) * col(2);
+    let det = a[0][0] * (a[1][1] * a[2][2] - a[1][2] * a[2][1])
+        - a[0][1] * (a[1][0] * a[2][2] - a[1][2] * a[2][0])
+        + a[0][2] * (a[1][0] * a[2][1] - a[1][1] * a[2][0]);
+    if !(scale > 0.0 && det.is_finite() && det.abs() > 1e-9 * scale) {
+        return Err(IoError::header(
+            json,
+            format!("affine's voxel axes do not span space (determinant {det})"),
+        ));
+    }
+    Ok(Placement { affine: a, space })
 }
 
 /// Whether two paths name one file (the same path after `.` and `..`, a
@@ -241,6 +350,14 @@ impl VolumeReader for RawReader {
 
     fn path(&self) -> &Path {
         &self.path
+    }
+
+    fn placement(&self) -> Option<Placement> {
+        self.placement
+    }
+
+    fn notes(&self) -> Vec<String> {
+        self.notes.clone()
     }
 
     fn input_files(&self) -> Vec<PathBuf> {
