@@ -179,7 +179,7 @@ impl Orientation {
         }
         let determinant = lin.determinant();
         let scale = lin.x_axis.length() * lin.y_axis.length() * lin.z_axis.length();
-        if !(determinant.abs() > 1e-12 * scale) {
+        if determinant.is_nan() || determinant.abs() <= 1e-12 * scale {
             return Err(AnatomyError::Singular { determinant });
         }
         let unit = |i: usize| lin.col(i).normalize();
