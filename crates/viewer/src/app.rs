@@ -3,6 +3,7 @@
 //! `scripting`).
 
 mod labels;
+mod orient;
 mod overlay;
 mod panels;
 mod scripting;
@@ -15,6 +16,7 @@ use crate::stats::Stats;
 use crate::tf::Histogram;
 use crate::tf_widget::TfEditor;
 use crate::view::{FourViewCallback, ViewResources, VolumeCallback, viewport_px};
+use brickray::core::anatomy::{Direction, Orientation};
 use brickray::core::camera::{AxisView, CameraController, CameraInput, DragButton, Navigation};
 use brickray::core::tf::{TABLE_ENTRIES, TfModel, TfPreset as Preset};
 use brickray::{
@@ -23,6 +25,7 @@ use brickray::{
 use brickray::{SliceAxis, SliceView};
 use eframe::egui::{self, Color32};
 use eframe::egui_wgpu;
+use orient::{slice_normal, slice_through};
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
@@ -50,6 +53,10 @@ struct Shown {
     input: Input,
     desc: VolumeDesc,
     frame: VolumeFrame,
+    /// The volume's anatomical orientation (its file places it in patient
+    /// space): the frame shows the patient upright, the views and slices are
+    /// anatomical.
+    orientation: Option<Orientation>,
     histogram: Histogram,
     note: String,
     streamed: bool,
@@ -103,6 +110,8 @@ pub(crate) struct ViewerApp {
     /// The slices drawn last in the four-view layout, with their rectangles
     /// (recorded in screenshots' sidecars).
     shown_slices: Vec<(egui::Rect, SliceView)>,
+    /// The four-view layout's 3D view rectangle (recorded in sidecars).
+    shown_view_3d: Option<egui::Rect>,
     /// The slices' and MIP's window, and whether the renderers have it.
     window: WindowChoice,
     window_dirty: bool,
@@ -201,6 +210,7 @@ impl ViewerApp {
             four_views: false,
             crosshair: None,
             shown_slices: Vec::new(),
+            shown_view_3d: None,
             window: WindowChoice::Off,
             window_dirty: false,
             labels: None,
@@ -240,7 +250,11 @@ impl ViewerApp {
     /// Installs a loaded volume in the renderer.
     fn install(&mut self, frame: &eframe::Frame, loaded: Loaded) -> Result<(), String> {
         let desc = loaded.desc.clone();
-        let vframe = VolumeFrame::centered(desc.dims, desc.spacing);
+        let orientation = loaded.placement.as_ref().and_then(|p| p.orientation());
+        let vframe = match &orientation {
+            Some(o) => o.frame(desc.dims),
+            None => VolumeFrame::centered(desc.dims, desc.spacing),
+        };
         let ooc = self.ooc;
         let streamed = matches!(loaded.volume, Opened::Streamed(_));
         let label_source = match &loaded.volume {
@@ -314,7 +328,17 @@ impl ViewerApp {
         self.tf_dirty = true;
         self.messages.push(loaded.note.clone());
         if !reopened || self.camera.is_none() {
-            self.camera = Some(CameraController::new(&vframe));
+            self.camera = Some(match orientation {
+                Some(_) => CameraController::anatomical(&vframe),
+                None => CameraController::new(&vframe),
+            });
+        }
+        if let Some(o) = &orientation {
+            self.messages.push(format!(
+                "oriented {} (index axes toward {}), shown upright",
+                o.code(),
+                o.axes().map(|d| format!("{d:?}").to_lowercase()).join(", ")
+            ));
         }
         self.stats.clear();
         if !reopened {
@@ -325,6 +349,7 @@ impl ViewerApp {
             input: loaded.input,
             desc,
             frame: vframe,
+            orientation,
             histogram: loaded.histogram,
             note: loaded.note,
             streamed,
@@ -590,6 +615,7 @@ impl ViewerApp {
             return (None, false);
         };
         let vframe = shown.frame;
+        let orientation = shown.orientation;
         let dims = vframe.dims.map(|d| d as f64);
         let mut point = self
             .crosshair
@@ -604,7 +630,7 @@ impl ViewerApp {
         for (i, axis) in axes.into_iter().enumerate() {
             let r = quad(i);
             let aspect = (r.width() / r.height().max(1.0)) as f64;
-            let Ok(view) = SliceView::through(axis, point, &vframe, aspect) else {
+            let Ok(view) = slice_through(orientation.as_ref(), axis, point, &vframe, aspect) else {
                 return (None, false);
             };
             let resp = ui.interact(r, ui.scope_id().with(("slice", i)), egui::Sense::click());
@@ -613,7 +639,7 @@ impl ViewerApp {
                     let p = pos - r.min;
                     let q = g.index_at(p.x as f64, p.y as f64, r.width() as u32, r.height() as u32);
                     for a in 0..3 {
-                        if a != axis.normal_axis() {
+                        if a != slice_normal(orientation.as_ref(), axis) {
                             point[a] = q[a].clamp(0.0, dims[a] - 1.0);
                         }
                     }
@@ -621,7 +647,7 @@ impl ViewerApp {
                 if resp.hovered() {
                     let scroll = ui.input(|i| i.smooth_scroll_delta.y);
                     if scroll != 0.0 {
-                        let a = axis.normal_axis();
+                        let a = slice_normal(orientation.as_ref(), axis);
                         point[a] = (point[a] + scroll.signum() as f64).clamp(0.0, dims[a] - 1.0);
                     }
                 }
@@ -650,7 +676,7 @@ impl ViewerApp {
         let mut views = Vec::with_capacity(3);
         for (r, axis) in &slices {
             let aspect = (r.width() / r.height().max(1.0)) as f64;
-            match SliceView::through(*axis, point, &vframe, aspect) {
+            match slice_through(orientation.as_ref(), *axis, point, &vframe, aspect) {
                 Ok(v) => views.push((*r, v)),
                 Err(_) => return (None, flying),
             }
@@ -662,6 +688,7 @@ impl ViewerApp {
         ui.painter()
             .add(egui_wgpu::Callback::new_paint_callback(rect, cb));
         self.shown_slices = views.clone();
+        self.shown_view_3d = Some(r3);
         // The crosshair over each slice (with the other overlays).
         let stroke = egui::Stroke::new(1.0, Color32::from_rgb(230, 200, 40));
         for (r, v) in views.iter().filter(|_| self.overlays) {
@@ -679,6 +706,12 @@ impl ViewerApp {
                     stroke,
                 );
             }
+        }
+        if let Some(o) = orientation.filter(|_| self.overlays) {
+            for (r, v) in &views {
+                orient::slice_letters(ui.painter(), *r, &o, v);
+            }
+            orient::marker(ui.painter(), r3, &view_3d.camera);
         }
         (Some(VolumeCallback { rect, ..view_3d }), flying)
     }
@@ -809,6 +842,7 @@ impl ViewerApp {
                     return;
                 }
                 self.shown_slices.clear();
+                self.shown_view_3d = None;
                 flying = self.camera_input(ui, &response);
                 // A click on a label map picks the label under it.
                 if self.labels.is_some()
@@ -832,6 +866,9 @@ impl ViewerApp {
                     };
                     ui.painter()
                         .add(egui_wgpu::Callback::new_paint_callback(rect, cb.clone()));
+                    if s.orientation.is_some() && self.overlays {
+                        orient::marker(ui.painter(), rect, &cb.camera);
+                    }
                     callback = Some(cb);
                 } else if self.opening.is_some() {
                     ui.centered_and_justified(|ui| ui.spinner());

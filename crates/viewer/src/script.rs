@@ -9,6 +9,7 @@
 //! step FACTOR                    sampling step in voxels
 //! camera orbit YAW PITCH DIST    degrees, degrees, multiple of the home distance
 //! camera axis +x|-x|+y|-y|+z|-z  camera reset
+//! camera view A|P|L|R|S|I          (an anatomical view: an oriented volume)
 //! projection perspective | orthographic
 //! overlays on | off              the bounding box and axes, and the slices' crosshair
 //! layout four | single           three orthogonal slices and 3D, or the 3D view alone
@@ -37,6 +38,7 @@
 //! quit
 //! ```
 
+use brickray::core::anatomy::Direction;
 use brickray::core::camera::AxisView as Axis;
 use brickray::core::tf::TfPreset as Preset;
 use std::path::PathBuf;
@@ -74,6 +76,8 @@ pub(crate) enum Action {
     Orbit(f32, f32, f32),
     /// An axis view.
     Axis(Axis),
+    /// `camera view A|P|L|R|S|I`: an anatomical view (an oriented volume).
+    View(Direction),
     /// The home view.
     Reset,
     /// Orthographic (true) or perspective.
@@ -367,6 +371,9 @@ pub(crate) fn parse(text: &str) -> Result<Vec<Action>, ScriptError> {
             ["camera", "axis", a] => Action::Axis(
                 Axis::parse(a).ok_or_else(|| err("expected +x, -x, +y, -y, +z or -z"))?,
             ),
+            ["camera", "view", d] => {
+                Action::View(Direction::parse(d).ok_or_else(|| err("expected A, P, L, R, S or I"))?)
+            }
             ["camera", "reset"] => Action::Reset,
             ["projection", "perspective"] => Action::Orthographic(false),
             ["projection", "orthographic"] => Action::Orthographic(true),
@@ -571,9 +578,13 @@ mod tests {
             overlay mode colour
             overlay opacity 0.5
             overlay off
+            camera view a
+            camera view inferior
         ";
         let a = parse(text).unwrap();
-        assert_eq!(a.len(), 47);
+        assert_eq!(a.len(), 49);
+        assert_eq!(a[47], Action::View(Direction::Anterior));
+        assert_eq!(a[48], Action::View(Direction::Inferior));
         assert_eq!(
             a[42],
             Action::Overlay(OverlayAction::Open("atlas.json".into()))
@@ -672,6 +683,7 @@ mod tests {
             ("step 100", 1),
             ("camera orbit 1 2 0", 1),
             ("camera axis w", 1),
+            ("camera view x", 1),
             ("tf nope", 1),
             ("tf load", 1),
             ("background 0 0 300", 1),

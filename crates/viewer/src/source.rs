@@ -112,6 +112,9 @@ pub(crate) struct Loaded {
     pub(crate) histogram: Histogram,
     /// One line on how it was opened.
     pub(crate) note: String,
+    /// Where the file places the volume (its anatomical orientation when
+    /// the placement is in patient space).
+    pub(crate) placement: Option<brickray::io::Placement>,
 }
 
 /// Progress of a background open, shared with the UI thread.
@@ -240,6 +243,7 @@ pub(crate) fn open(
                 volume: Opened::Streamed(source),
                 histogram,
                 note,
+                placement: None,
             })
         }
         Input::Path(path) => {
@@ -270,6 +274,7 @@ pub(crate) fn open(
                             d.apron,
                         )?;
                         let warned = warning_note(&src.warnings());
+                        let placement = Some(src.placement());
                         let source: Arc<dyn BrickSource> = Arc::new(src);
                         let desc = source.layout().volume.clone();
                         let histogram = source_histogram(&*source)?;
@@ -284,6 +289,7 @@ pub(crate) fn open(
                             volume: Opened::Streamed(source),
                             histogram,
                             note,
+                            placement,
                         });
                     }
                 }
@@ -295,6 +301,7 @@ pub(crate) fn open(
             // What the reader assumed where the file did not say, shown with
             // the volume's note.
             let warned = warning_note(&reader.warnings());
+            let placement = reader.placement();
             let desc = reader.desc().clone();
             let bytes = desc.byte_len();
             progress.total.store(bytes, Ordering::Relaxed);
@@ -334,6 +341,7 @@ pub(crate) fn open(
                     volume: Opened::InCore(volume),
                     histogram,
                     note,
+                    placement,
                 });
             }
             // Large: build a brick store once (reused while newer than the input).
@@ -404,12 +412,14 @@ fn open_store(input: &Input, path: &Path, how: String) -> Result<Loaded, OpenErr
         desc.dims,
         desc.dtype.name()
     );
+    let placement = store.placement();
     Ok(Loaded {
         input: input.clone(),
         desc,
         volume: Opened::Streamed(store),
         histogram,
         note,
+        placement,
     })
 }
 

@@ -25,6 +25,8 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::{Duration, Instant};
 
+#[path = "scripted/anatomy.rs"]
+mod anatomy;
 #[path = "scripted/labels.rs"]
 mod labels;
 

@@ -5,6 +5,7 @@ use super::*;
 
 impl ViewerApp {
     pub(super) fn camera_ui(&mut self, ui: &mut egui::Ui) {
+        let oriented = self.shown.as_ref().and_then(|s| s.orientation);
         let Some(c) = self.camera.as_mut() else {
             ui.label("no volume");
             return;
@@ -26,6 +27,25 @@ impl ViewerApp {
                 }
             }
         });
+        if let Some(o) = oriented {
+            ui.horizontal(|ui| {
+                ui.label("from").on_hover_text(format!(
+                    "anatomical views (the volume is {}: its index axes point {})",
+                    o.code(),
+                    o.axes().map(|d| format!("{d:?}").to_lowercase()).join(", ")
+                ));
+                for d in Direction::ALL {
+                    let hint = format!("seen from {:?}", d).to_lowercase();
+                    if ui
+                        .button(d.letter().to_string())
+                        .on_hover_text(hint)
+                        .clicked()
+                    {
+                        c.anatomical_view(d);
+                    }
+                }
+            });
+        }
         let mut fov = c.fov_y().to_degrees();
         if ui
             .add(egui::Slider::new(&mut fov, 10.0..=100.0).text("field of view °"))

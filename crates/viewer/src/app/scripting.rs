@@ -9,6 +9,10 @@ pub(super) struct PendingShot {
     pub(super) path: PathBuf,
     pub(super) viewport: Viewport,
     pub(super) camera: brickray::Camera,
+    /// Where the volume was placed (its model matrix) and its anatomical
+    /// axis code, if it has one.
+    pub(super) frame: brickray::VolumeFrame,
+    pub(super) orientation: Option<String>,
     /// Out of core: the data bricks of the last frame's cut.
     pub(super) working_set_bricks: Option<u32>,
     /// Out of core: the level-of-detail rule and tolerance in force.
@@ -21,6 +25,8 @@ pub(super) struct PendingShot {
     /// The four-view layout's slices: each one's viewport in the shot's
     /// pixels and its view.
     pub(super) slices: Vec<(Viewport, brickray::SliceView)>,
+    /// The four-view layout's 3D view, in the shot's pixels.
+    pub(super) view_3d: Option<Viewport>,
     pub(super) image: Arc<Mutex<Option<Arc<egui::ColorImage>>>>,
 }
 
@@ -75,6 +81,11 @@ impl ViewerApp {
                 Some((Viewport { x, y, ..p }, *v))
             })
             .collect();
+        let view_3d = self.shown_view_3d.and_then(|r| {
+            let p = viewport_px(&r, ctx.pixels_per_point(), screen)?;
+            let (x, y) = (p.x.checked_sub(viewport.x)?, p.y.checked_sub(viewport.y)?);
+            Some(Viewport { x, y, ..p })
+        });
         let slot = Arc::new(Mutex::new(None));
         let (s, c) = (slot.clone(), ctx.clone());
         ctx.request_screenshot(move |image| {
@@ -88,6 +99,12 @@ impl ViewerApp {
             path,
             viewport,
             camera: cb.camera,
+            frame: cb.frame,
+            orientation: self
+                .shown
+                .as_ref()
+                .and_then(|s| s.orientation)
+                .map(|o| o.code()),
             working_set_bricks: self
                 .stats
                 .last()
@@ -97,6 +114,7 @@ impl ViewerApp {
             visibility: streamed.then_some(self.ooc.visibility),
             prediction: (self.prediction, self.stats.prediction()),
             slices,
+            view_3d,
             image: slot,
         });
     }
@@ -189,6 +207,15 @@ impl ViewerApp {
                 Action::Axis(a) => {
                     if let Some(c) = self.camera.as_mut() {
                         c.axis_view(a);
+                    }
+                }
+                Action::View(d) => {
+                    if self.shown.as_ref().is_some_and(|s| s.orientation.is_none()) {
+                        return self
+                            .fail("camera view: the volume has no anatomical orientation".into());
+                    }
+                    if let Some(c) = self.camera.as_mut() {
+                        c.anatomical_view(d);
                     }
                 }
                 Action::Reset => {
@@ -349,6 +376,12 @@ fn save_shot(shot: &PendingShot, image: &egui::ColorImage) -> Result<(), String>
             "near": c.near,
             "far": c.far,
         },
+        // Texture space to world, column-major, and the volume's dims.
+        "frame": {
+            "model": shot.frame.model.to_cols_array(),
+            "dims": shot.frame.dims,
+        },
+        "orientation": shot.orientation,
         "working_set_bricks": shot.working_set_bricks,
         "lod": shot.lod.map(|(metric, tolerance_px)| match metric.budget() {
             None => serde_json::json!({"rule": "geometric", "tolerance_px": tolerance_px}),
@@ -370,6 +403,7 @@ fn save_shot(shot: &PendingShot, image: &egui::ColorImage) -> Result<(), String>
             "up": v.up,
             "height": v.height,
         })).collect::<Vec<_>>(),
+        "view_3d": shot.view_3d.map(|vp| [vp.x, vp.y, vp.width, vp.height]),
     });
     let text = serde_json::to_string_pretty(&sidecar).map_err(|e| e.to_string())?;
     std::fs::write(shot.path.with_extension("json"), text).map_err(|e| e.to_string())
