@@ -80,6 +80,7 @@ fn parse_size(s: &str) -> Result<(u32, u32), String> {
 }
 
 fn main() -> ExitCode {
+    ensure_runtime_dir();
     let cli = Cli::parse();
     let script = match &cli.script {
         None => None,
@@ -170,4 +171,37 @@ fn main() -> ExitCode {
         }
     }
     ExitCode::SUCCESS
+}
+
+/// Gives the process a private `XDG_RUNTIME_DIR` when the environment has
+/// none (a bare X server, a container, CI under Xvfb): Mesa's Vulkan
+/// device-selection layer looks for a Wayland display through it when a
+/// window's surface is made, and prints `XDG_RUNTIME_DIR is invalid or not
+/// set` three times on every launch without it. One that is set and is a
+/// directory is kept.
+#[allow(unsafe_code)]
+fn ensure_runtime_dir() {
+    let valid =
+        std::env::var_os("XDG_RUNTIME_DIR").is_some_and(|d| std::path::Path::new(&d).is_dir());
+    if valid {
+        return;
+    }
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::{DirBuilderExt, MetadataExt, PermissionsExt};
+        let uid = std::fs::metadata("/proc/self")
+            .map(|m| m.uid())
+            .unwrap_or(0);
+        let dir = std::env::temp_dir().join(format!("brickray-runtime-{uid}"));
+        let _ = std::fs::DirBuilder::new().mode(0o700).create(&dir);
+        // Only a directory of ours that no one else can read (as the XDG
+        // specification asks of a runtime directory).
+        let ours = std::fs::symlink_metadata(&dir)
+            .is_ok_and(|m| m.is_dir() && m.uid() == uid && m.permissions().mode() & 0o077 == 0);
+        if ours {
+            // SAFETY: the first thing `main` does, before any other thread
+            // exists, so nothing reads the environment concurrently.
+            unsafe { std::env::set_var("XDG_RUNTIME_DIR", &dir) };
+        }
+    }
 }

@@ -86,6 +86,9 @@ fn run_viewer(script: &Path, limit: Duration) -> std::process::Output {
     let mut child = Command::new(env!("CARGO_BIN_EXE_brickray-viewer"))
         .args(["--window", "640x400", "--script"])
         .arg(script)
+        // As on a bare X server: the viewer makes its own runtime directory
+        // (no library complains of a missing one; `run_script` checks).
+        .env_remove("XDG_RUNTIME_DIR")
         .stdout(std::process::Stdio::piped())
         .stderr(std::process::Stdio::piped())
         .spawn()
@@ -112,6 +115,11 @@ fn run_script(dir: &Path, script: &str, limit: Duration) {
         "the viewer failed ({:?}): {}",
         run.status,
         String::from_utf8_lossy(&run.stderr)
+    );
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(
+        !err.contains("XDG_RUNTIME_DIR"),
+        "the viewer's launch printed a runtime-directory warning: {err}"
     );
 }
 
