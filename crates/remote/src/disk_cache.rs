@@ -72,6 +72,14 @@ pub struct DiskCacheStats {
 #[derive(Debug)]
 pub struct DiskCached<R> {
     inner: R,
+    entries: Entries,
+}
+
+/// One object's folder of entries under a cache root: validated loads,
+/// atomic saves, the root's bound, and the counts of hits and misses
+/// (shared by [`DiskCached`] and [`DiskCachedObjects`](crate::DiskCachedObjects)).
+#[derive(Debug)]
+pub(crate) struct Entries {
     root: PathBuf,
     dir: PathBuf,
     max_bytes: u64,
@@ -83,7 +91,7 @@ pub struct DiskCached<R> {
 }
 
 /// FNV-1a, 64 bits: a stable name for an object's folder.
-fn fnv1a(bytes: &[u8]) -> u64 {
+pub(crate) fn fnv1a(bytes: &[u8]) -> u64 {
     let mut h: u64 = 0xcbf2_9ce4_8422_2325;
     for &b in bytes {
         h ^= u64::from(b);
@@ -115,10 +123,9 @@ fn entries(root: &Path) -> Vec<(SystemTime, PathBuf, u64)> {
     out
 }
 
-impl<R: RangeReader> DiskCached<R> {
-    /// Caches `inner`, the object named by `identity` (its URL, ETag and
-    /// length: what changes when the object does), under `config.dir`.
-    pub fn new(inner: R, identity: &str, config: &DiskCacheConfig) -> io::Result<DiskCached<R>> {
+impl Entries {
+    /// The folder of the object named by `identity` under `config.dir`.
+    pub(crate) fn new(identity: &str, config: &DiskCacheConfig) -> io::Result<Entries> {
         let dir = config
             .dir
             .join(format!("{:016x}", fnv1a(identity.as_bytes())));
@@ -129,8 +136,7 @@ impl<R: RangeReader> DiskCached<R> {
             let _ = fs::write(&id, identity);
         }
         let used = entries(&config.dir).iter().map(|e| e.2).sum();
-        Ok(DiskCached {
-            inner,
+        Ok(Entries {
             root: config.dir.clone(),
             dir,
             max_bytes: config.max_bytes,
@@ -141,13 +147,7 @@ impl<R: RangeReader> DiskCached<R> {
         })
     }
 
-    /// The reader it caches.
-    pub fn inner(&self) -> &R {
-        &self.inner
-    }
-
-    /// Hits, misses and corrupt entries so far.
-    pub fn stats(&self) -> DiskCacheStats {
+    pub(crate) fn stats(&self) -> DiskCacheStats {
         DiskCacheStats {
             hits: self.hits.load(Ordering::Relaxed),
             misses: self.misses.load(Ordering::Relaxed),
@@ -155,46 +155,43 @@ impl<R: RangeReader> DiskCached<R> {
         }
     }
 
-    /// The object's folder.
-    pub fn dir(&self) -> &Path {
+    pub(crate) fn dir(&self) -> &Path {
         &self.dir
     }
 
-    fn entry(&self, offset: u64, len: usize) -> PathBuf {
-        self.dir.join(format!("{offset}-{len}"))
-    }
-
-    /// Fills `buf` from the entry at `offset` if a valid one is there.
-    fn load(&self, buf: &mut [u8], offset: u64) -> bool {
-        let path = self.entry(offset, buf.len());
-        let Ok(bytes) = fs::read(&path) else {
-            return false;
-        };
-        let n = buf.len();
-        let valid =
-            bytes.len() == n + 4 && crc32fast::hash(&bytes[..n]).to_le_bytes() == bytes[n..];
+    /// The bytes of entry `name` if a valid one is there (its trailing
+    /// CRC-32 checked; `len`, when given, its length), counted as a hit;
+    /// a torn or corrupt one is deleted and counted.
+    pub(crate) fn load(&self, name: &str, len: Option<usize>) -> Option<Vec<u8>> {
+        let path = self.dir.join(name);
+        let mut bytes = fs::read(&path).ok()?;
+        let n = bytes.len().checked_sub(4);
+        let valid = n.is_some_and(|n| {
+            len.is_none_or(|l| l == n) && crc32fast::hash(&bytes[..n]).to_le_bytes() == bytes[n..]
+        });
         if !valid {
             self.corrupt.fetch_add(1, Ordering::Relaxed);
             let _ = fs::remove_file(&path);
-            return false;
+            return None;
         }
-        buf.copy_from_slice(&bytes[..n]);
+        bytes.truncate(bytes.len() - 4);
         // Recently used: keep it longest.
         if let Ok(f) = fs::File::options().append(true).open(&path) {
             let _ = f.set_modified(SystemTime::now());
         }
         self.hits.fetch_add(1, Ordering::Relaxed);
-        true
+        Some(bytes)
     }
 
-    /// Writes the entry for `bytes` at `offset` (best effort: a full disk or
-    /// a read-only folder leaves the read uncached, never failed).
-    fn save(&self, bytes: &[u8], offset: u64) {
+    /// Writes entry `name` holding `bytes`, counted as a miss (best effort:
+    /// a full disk or a read-only folder leaves the read uncached, never
+    /// failed).
+    pub(crate) fn save(&self, name: &str, bytes: &[u8]) {
         static SEQ: AtomicU64 = AtomicU64::new(0);
-        let path = self.entry(offset, bytes.len());
+        self.misses.fetch_add(1, Ordering::Relaxed);
+        let path = self.dir.join(name);
         let tmp = self.dir.join(format!(
-            "{offset}-{}.tmp.{}.{}",
-            bytes.len(),
+            "{name}.tmp.{}.{}",
             std::process::id(),
             SEQ.fetch_add(1, Ordering::Relaxed)
         ));
@@ -236,6 +233,32 @@ impl<R: RangeReader> DiskCached<R> {
         }
         *self.used.lock() = total;
     }
+}
+
+impl<R: RangeReader> DiskCached<R> {
+    /// Caches `inner`, the object named by `identity` (its URL, ETag and
+    /// length: what changes when the object does), under `config.dir`.
+    pub fn new(inner: R, identity: &str, config: &DiskCacheConfig) -> io::Result<DiskCached<R>> {
+        Ok(DiskCached {
+            inner,
+            entries: Entries::new(identity, config)?,
+        })
+    }
+
+    /// The reader it caches.
+    pub fn inner(&self) -> &R {
+        &self.inner
+    }
+
+    /// Hits, misses and corrupt entries so far.
+    pub fn stats(&self) -> DiskCacheStats {
+        self.entries.stats()
+    }
+
+    /// The object's folder.
+    pub fn dir(&self) -> &Path {
+        self.entries.dir()
+    }
 
     /// Reads `ranges`: hits from the disk, the misses in one call of
     /// `fetch` (then saved).
@@ -244,9 +267,16 @@ impl<R: RangeReader> DiskCached<R> {
         ranges: &mut [RangeRead<'_>],
         fetch: impl FnOnce(&mut [RangeRead<'_>]) -> io::Result<()>,
     ) -> io::Result<()> {
+        let name = |offset: u64, len: usize| format!("{offset}-{len}");
         let mut misses: Vec<RangeRead<'_>> = Vec::new();
         for r in ranges.iter_mut() {
-            if r.buf.is_empty() || !self.load(r.buf, r.offset) {
+            let hit = !r.buf.is_empty()
+                && self
+                    .entries
+                    .load(&name(r.offset, r.buf.len()), Some(r.buf.len()))
+                    .map(|b| r.buf.copy_from_slice(&b))
+                    .is_some();
+            if !hit {
                 misses.push(RangeRead {
                     offset: r.offset,
                     buf: &mut *r.buf,
@@ -259,8 +289,7 @@ impl<R: RangeReader> DiskCached<R> {
         fetch(&mut misses)?;
         for m in &misses {
             if !m.buf.is_empty() {
-                self.misses.fetch_add(1, Ordering::Relaxed);
-                self.save(m.buf, m.offset);
+                self.entries.save(&name(m.offset, m.buf.len()), m.buf);
             }
         }
         Ok(())

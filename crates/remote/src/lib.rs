@@ -33,9 +33,11 @@ use thiserror::Error;
 pub use object_store;
 
 mod disk_cache;
+mod object_cache;
 mod objects;
 mod runtime;
 pub use disk_cache::{DEFAULT_DISK_CACHE_BYTES, DiskCacheConfig, DiskCacheStats, DiskCached};
+pub use object_cache::DiskCachedObjects;
 pub use objects::RemoteObjects;
 use runtime::{Runtime, run_on, run_until, start_runtime};
 

@@ -761,3 +761,60 @@ fn crc32c(bytes: &[u8]) -> u32 {
     }
     !crc
 }
+
+/// With a disk cache (`RemoteOptions::disk_cache`) a second visit of an
+/// image reads its chunks, shard indices and absent keys from the disk:
+/// over the network it sends only the metadata requests, and every brick
+/// is the local reader's.
+#[test]
+#[cfg_attr(no_shared_data, ignore = "needs ../shared/data/formats (absent)")]
+fn a_second_visit_through_the_disk_cache_fetches_only_the_metadata() {
+    let Some(data) = data() else { return };
+    let server = serve_dir(&data, 404, |_, _| Act::Serve);
+    let cache = tempfile::tempdir().unwrap();
+    let o = RemoteOptions {
+        disk_cache: Some(brickray_remote::DiskCacheConfig {
+            dir: cache.path().to_owned(),
+            max_bytes: 1 << 30,
+        }),
+        ..opts()
+    };
+    let is_metadata = |s: &Seen| {
+        let name = s.1.rsplit('/').next().unwrap_or("");
+        ["zarr.json", ".zattrs", ".zarray", ".zgroup", ".zmetadata"].contains(&name)
+    };
+    for name in [SHARDED, "cryoet_tomo_v04.ome.zarr"] {
+        let mut requests = Vec::new();
+        for visit in 0..2 {
+            let before = server.count();
+            let remote = brickray_store::open_zarr_url(
+                &server.url(name),
+                &o,
+                &ReadOptions::default(),
+                32,
+                2,
+            )
+            .unwrap_or_else(|e| panic!("{name}: {e}"));
+            // The local reader with the remote one's value range (both
+            // convert alike).
+            let range = Some(remote.layout().volume.value_range);
+            let local =
+                ZarrBrickSource::open(&data.join(name), &ReadOptions::default(), 32, 2, range)
+                    .unwrap();
+            assert_same(&local, &remote);
+            let seen = server.seen()[before..].to_vec();
+            let data_requests = seen.iter().filter(|s| !is_metadata(s)).count();
+            eprintln!(
+                "{name}, visit {visit}: {} requests, {data_requests} for samples",
+                seen.len()
+            );
+            requests.push((seen.len(), data_requests));
+        }
+        assert!(
+            requests[0].1 > 0,
+            "{name}: the first visit fetched no samples"
+        );
+        assert_eq!(requests[1].1, 0, "{name}: the second visit fetched samples");
+        assert!(requests[1].0 < requests[0].0);
+    }
+}

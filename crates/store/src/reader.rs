@@ -76,7 +76,11 @@ pub fn open_any(path_or_url: &str) -> Result<Store, StoreError> {
 /// range); bricks read the chunks they need, each shard's index once. A
 /// missing chunk (404, or S3's 403) reads as the fill value; a remote
 /// failure is a [`StoreError::Input`] whose I/O source holds the typed
-/// [`RemoteError`](brickray_remote::RemoteError).
+/// [`RemoteError`](brickray_remote::RemoteError). With
+/// [`RemoteOptions::disk_cache`](brickray_remote::RemoteOptions::disk_cache)
+/// the chunks, shard indices and absent keys it fetches are kept on the
+/// local disk ([`DiskCachedObjects`](brickray_remote::DiskCachedObjects);
+/// metadata is always fetched).
 #[cfg(feature = "remote")]
 pub fn open_zarr_url(
     url: &str,
@@ -85,15 +89,32 @@ pub fn open_zarr_url(
     brick: u32,
     apron: u32,
 ) -> Result<brickray_io::zarr::ZarrBrickSource, StoreError> {
-    let objects = brickray_remote::RemoteObjects::open(url, opts)
-        .map_err(|e| StoreError::io(Path::new(url), e.into()))?;
     Ok(brickray_io::zarr::ZarrBrickSource::open_objects(
-        Arc::new(objects),
+        zarr_objects(url, opts)?,
         read,
         brick,
         apron,
         None,
     )?)
+}
+
+/// The objects of the OME-Zarr image at `url`, through the disk cache of
+/// [`RemoteOptions::disk_cache`](brickray_remote::RemoteOptions::disk_cache)
+/// when there is one ([`DiskCachedObjects`](brickray_remote::DiskCachedObjects)).
+#[cfg(feature = "remote")]
+fn zarr_objects(
+    url: &str,
+    opts: &brickray_remote::RemoteOptions,
+) -> Result<Arc<dyn brickray_core::ObjectReader>, StoreError> {
+    let objects = brickray_remote::RemoteObjects::open(url, opts)
+        .map_err(|e| StoreError::io(Path::new(url), e.into()))?;
+    Ok(match &opts.disk_cache {
+        Some(config) => Arc::new(
+            brickray_remote::DiskCachedObjects::for_image(objects, config)
+                .map_err(|e| StoreError::io(Path::new(url), e))?,
+        ),
+        None => Arc::new(objects),
+    })
 }
 
 /// Reads an OME-Zarr image at `url` slab by slab (level, channel and time
@@ -105,10 +126,8 @@ pub fn open_zarr_reader_url(
     opts: &brickray_remote::RemoteOptions,
     read: &brickray_io::ReadOptions,
 ) -> Result<brickray_io::zarr::ZarrReader, StoreError> {
-    let objects = brickray_remote::RemoteObjects::open(url, opts)
-        .map_err(|e| StoreError::io(Path::new(url), e.into()))?;
     Ok(brickray_io::zarr::ZarrReader::open_objects(
-        Arc::new(objects),
+        zarr_objects(url, opts)?,
         read,
     )?)
 }
