@@ -26,8 +26,9 @@
 //! (`Lookahead::Remote`): what asking for the next level ahead saves. The
 //! store at the largest delay runs a second time with batching off (one
 //! request per brick, as the loader read before batches): the requests
-//! batching saves; and twice through a disk cache (`DiskCached`, empty each
-//! round): its first visit fills the cache, its second reads from it.
+//! batching saves; and both sources twice through a disk cache
+//! (`DiskCached`, `DiskCachedObjects`, empty each round): its first visit
+//! fills the cache, its second reads from it.
 //!
 //! With `--raycast` every frame is also ray cast (`prepare`, the ray cast,
 //! submit and wait: a host's whole frame), so the frame times include what
@@ -57,7 +58,7 @@ use brickray_core::{
 use brickray_harness::GpuContext;
 use brickray_io::zarr::ZarrBrickSource;
 use brickray_remote::{
-    DiskCacheConfig, DiskCached, RemoteObjects, RemoteOptions, RemoteRangeReader,
+    DiskCacheConfig, DiskCached, DiskCachedObjects, RemoteObjects, RemoteOptions, RemoteRangeReader,
 };
 use brickray_render::{Lookahead, OutOfCoreConfig, VolumeRenderer};
 use brickray_store::{BuildOptions, Store};
@@ -171,13 +172,15 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
                 Variant::Lookahead,
             ));
         }
-        for (variant, what) in [
-            (Variant::Unbatched, "unbatched"),
-            (Variant::CacheCold, "disk cache, first visit"),
-            (Variant::CacheWarm, "disk cache, second visit"),
+        for (src, variant, what) in [
+            ("brs", Variant::Unbatched, "unbatched"),
+            ("brs", Variant::CacheCold, "disk cache, first visit"),
+            ("brs", Variant::CacheWarm, "disk cache, second visit"),
+            ("zarr", Variant::CacheCold, "disk cache, first visit"),
+            ("zarr", Variant::CacheWarm, "disk cache, second visit"),
         ] {
             cases.push((
-                "brs",
+                src,
                 format!("http +{worst} ms, {what}"),
                 Some(worst),
                 variant,
@@ -345,18 +348,20 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
             }
         }
     }
-    if let (Some(cold), Some(warm)) = (
-        worst.and_then(|d| find("brs", Some(d), Variant::CacheCold)),
-        worst.and_then(|d| find("brs", Some(d), Variant::CacheWarm)),
-    ) {
-        fig.insert(
-            "disk_cache_second_visit_converged_ratio".into(),
-            json!(round2(warm.converged_s / cold.converged_s.max(1e-9))),
-        );
-        fig.insert(
-            "disk_cache_second_visit_requests".into(),
-            json!(warm.fetched.0),
-        );
+    for (src, prefix) in [("brs", ""), ("zarr", "zarr_")] {
+        if let (Some(cold), Some(warm)) = (
+            worst.and_then(|d| find(src, Some(d), Variant::CacheCold)),
+            worst.and_then(|d| find(src, Some(d), Variant::CacheWarm)),
+        ) {
+            fig.insert(
+                format!("{prefix}disk_cache_second_visit_converged_ratio"),
+                json!(round2(warm.converged_s / cold.converged_s.max(1e-9))),
+            );
+            fig.insert(
+                format!("{prefix}disk_cache_second_visit_requests"),
+                json!(warm.fetched.0),
+            );
+        }
     }
     Ok(fig)
 }
@@ -451,6 +456,18 @@ fn open(
             let z =
                 ZarrBrickSource::open(zarr, &read, d_brick, d_apron, None).map_err(|x| e(&x))?;
             (Arc::new(z), Box::new(|| (0, 0)), None)
+        }
+        ("zarr", Some(base)) if matches!(variant, Variant::CacheCold | Variant::CacheWarm) => {
+            let url = format!("{base}/mri.ome.zarr");
+            let objects = RemoteObjects::open(&url, opts).map_err(|x| e(&x))?;
+            let cached = Arc::new(DiskCachedObjects::for_image(objects, cache).map_err(|x| e(&x))?);
+            let z = ZarrBrickSource::open_objects(cached.clone(), &read, d_brick, d_apron, None)
+                .map_err(|x| e(&x))?;
+            let fetched = Box::new(move || {
+                let f = cached.inner().fetched();
+                (f.requests, f.bytes)
+            });
+            (Arc::new(z), fetched, None)
         }
         ("zarr", Some(base)) => {
             let url = format!("{base}/mri.ome.zarr");
