@@ -193,14 +193,12 @@ impl Orientation {
         ];
         let score = |p: &[usize; 3]| (0..3).map(|i| unit(i)[p[i]].abs()).sum::<f64>();
         // The first best permutation: deterministic at exact ties (45 degrees).
-        let best = PERMS
-            .iter()
-            .copied()
-            .fold(None::<[usize; 3]>, |b, p| match b {
-                Some(q) if score(&q) >= score(&p) => Some(q),
-                _ => Some(p),
-            })
-            .expect("six permutations");
+        let mut best = PERMS[0];
+        for p in &PERMS[1..] {
+            if score(p) > score(&best) {
+                best = *p;
+            }
+        }
         let axes = [0, 1, 2].map(|i| Direction::of_axis(best[i], unit(i)[best[i]] < 0.0));
         Ok(Orientation { voxel_to_ras, axes })
     }
