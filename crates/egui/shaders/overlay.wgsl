@@ -1,4 +1,4 @@
-// The viewer's own host geometry: the volume's bounding box and axes, drawn as
+// brickray-egui's host geometry: the volume's bounding box and axes, drawn as
 // depth-tested lines in world space (a depth-only pre-pass gives the rays the
 // lines' depth; the same lines drawn in egui's pass get the colour).
 

@@ -15,14 +15,14 @@ use crate::source::{Input, Loaded, OpenOptions, Opened, Opening};
 use crate::stats::Stats;
 use crate::tf::Histogram;
 use crate::tf_widget::TfEditor;
-use crate::view::{FourViewCallback, ViewResources, VolumeCallback, viewport_px};
 use brickray::core::anatomy::{Direction, Orientation};
-use brickray::core::camera::{AxisView, CameraController, CameraInput, DragButton, Navigation};
+use brickray::core::camera::{AxisView, CameraController, Navigation};
 use brickray::core::tf::{TABLE_ENTRIES, TfModel, TfPreset as Preset};
 use brickray::{
     LabelTable, OutOfCoreConfig, RenderMode, RenderSettings, Viewport, VolumeDesc, VolumeFrame,
 };
 use brickray::{SliceAxis, SliceView};
+use brickray_egui::{FourViewCallback, ViewResources, VolumeCallback, VolumeView, viewport_px};
 use eframe::egui::{self, Color32};
 use eframe::egui_wgpu;
 use orient::{slice_normal, slice_through};
@@ -154,11 +154,8 @@ impl ViewerApp {
                     background_planning: true,
                     ..Default::default()
                 };
-                match ViewResources::new(&rs.device, rs.target_format, options) {
-                    Ok(r) => {
-                        rs.renderer.write().callback_resources.insert(r);
-                    }
-                    Err(e) => gpu_error = Some(format!("brickray cannot render here: {e}")),
+                if let Err(e) = brickray_egui::install(rs, options) {
+                    gpu_error = Some(format!("brickray cannot render here: {e}"));
                 }
             }
             None => gpu_error = Some("eframe runs without wgpu".into()),
@@ -241,10 +238,7 @@ impl ViewerApp {
         frame: &eframe::Frame,
         f: impl FnOnce(&wgpu::Device, &wgpu::Queue, &mut ViewResources) -> R,
     ) -> Option<R> {
-        let rs = frame.wgpu_render_state()?;
-        let mut renderer = rs.renderer.write();
-        let r = renderer.callback_resources.get_mut::<ViewResources>()?;
-        Some(f(&rs.device, &rs.queue, r))
+        brickray_egui::with_resources(frame.wgpu_render_state()?, f)
     }
 
     /// Installs a loaded volume in the renderer.
@@ -377,9 +371,8 @@ impl ViewerApp {
             // An interactive host: the render thread only applies plans.
             background_planning: true,
         };
-        match ViewResources::new(&rs.device, rs.target_format, options) {
-            Ok(r) => {
-                rs.renderer.write().callback_resources.insert(r);
+        match brickray_egui::install(rs, options) {
+            Ok(()) => {
                 // The budgets travel with the reopen (`install`).
                 self.tf_dirty = true;
                 if let Some(input) = self.shown.as_ref().map(|s| s.input.clone()) {
@@ -546,57 +539,6 @@ impl ViewerApp {
             ui.label(egui::RichText::new(m).weak());
         }
     }
-
-    /// Camera input over the view; returns true while a fly key is held.
-    fn camera_input(&mut self, ui: &egui::Ui, response: &egui::Response) -> bool {
-        let Some(c) = self.camera.as_mut() else {
-            return false;
-        };
-        let d = response.drag_delta();
-        let drag = |button| CameraInput::Drag {
-            button,
-            dx: d.x,
-            dy: d.y,
-            viewport_height: response.rect.height(),
-        };
-        if response.dragged_by(egui::PointerButton::Primary) {
-            c.apply(drag(DragButton::Primary));
-        }
-        if response.dragged_by(egui::PointerButton::Secondary)
-            || response.dragged_by(egui::PointerButton::Middle)
-        {
-            c.apply(drag(DragButton::Secondary));
-        }
-        if response.hovered() {
-            let scroll = ui.input(|i| i.smooth_scroll_delta.y);
-            if scroll != 0.0 {
-                c.apply(CameraInput::Wheel(scroll / 50.0));
-            }
-        }
-        if ui.ctx().egui_wants_keyboard_input() {
-            return false;
-        }
-        let (keys, dt) = ui.input(|i| {
-            let k = |key| if i.key_down(key) { 1.0 } else { 0.0 };
-            let v = glam::Vec3::new(
-                k(egui::Key::D) - k(egui::Key::A),
-                k(egui::Key::E) - k(egui::Key::Q),
-                k(egui::Key::W) - k(egui::Key::S),
-            );
-            if i.key_pressed(egui::Key::R) {
-                c.apply(CameraInput::Reset);
-            }
-            (v, i.stable_dt.min(0.1))
-        });
-        if keys != glam::Vec3::ZERO {
-            c.apply(CameraInput::Move {
-                velocity: keys * 0.5,
-                dt,
-            });
-            return true;
-        }
-        false
-    }
 }
 
 impl ViewerApp {
@@ -661,10 +603,10 @@ impl ViewerApp {
             ui.scope_id().with("view 3d"),
             egui::Sense::click_and_drag(),
         );
-        let flying = self.camera_input(ui, &resp);
-        let Some(c) = &self.camera else {
-            return (None, flying);
+        let Some(c) = self.camera.as_mut() else {
+            return (None, false);
         };
+        let flying = brickray_egui::camera_input(ui, &resp, c);
         let view_3d = VolumeCallback {
             rect: r3,
             camera: c.camera(),
@@ -762,7 +704,7 @@ impl ViewerApp {
             .with_gpu(frame, |_, _, r| {
                 (
                     r.renderer.stats(),
-                    r.frames,
+                    r.frames(),
                     r.renderer.wants_redraw()
                         || (four && r.slices.iter().any(|s| s.wants_redraw())),
                     r.take_error(),
@@ -830,12 +772,12 @@ impl ViewerApp {
         egui::CentralPanel::default_margins()
             .frame(egui::Frame::NONE)
             .show(ui, |ui| {
-                let (rect, response) =
-                    ui.allocate_exact_size(ui.available_size(), egui::Sense::click_and_drag());
                 let [r, g, b] = self.background;
-                ui.painter()
-                    .rect_filled(rect, 0.0, Color32::from_rgb(r, g, b));
+                let background = Color32::from_rgb(r, g, b);
                 if self.four_views && self.shown.is_some() && self.camera.is_some() {
+                    let (rect, _) =
+                        ui.allocate_exact_size(ui.available_size(), egui::Sense::click_and_drag());
+                    ui.painter().rect_filled(rect, 0.0, background);
                     let (cb, fly) = self.four_views_ui(ui, rect);
                     flying = fly;
                     callback = cb;
@@ -843,7 +785,22 @@ impl ViewerApp {
                 }
                 self.shown_slices.clear();
                 self.shown_view_3d = None;
-                flying = self.camera_input(ui, &response);
+                let settings = self.frame_settings();
+                let (Some(s), Some(c)) = (&self.shown, self.camera.as_mut()) else {
+                    let (rect, _) =
+                        ui.allocate_exact_size(ui.available_size(), egui::Sense::click_and_drag());
+                    ui.painter().rect_filled(rect, 0.0, background);
+                    if self.opening.is_some() {
+                        ui.centered_and_justified(|ui| ui.spinner());
+                    }
+                    return;
+                };
+                let view = VolumeView::new(c, s.frame, settings)
+                    .overlays(self.overlays)
+                    .background(background)
+                    .show_output(ui);
+                flying = view.flying;
+                let (rect, response) = (view.response.rect, &view.response);
                 // A click on a label map picks the label under it.
                 if self.labels.is_some()
                     && let Some(pos) = response
@@ -855,24 +812,10 @@ impl ViewerApp {
                     self.pick_queue
                         .push([p.x.max(0.0) as u32, p.y.max(0.0) as u32]);
                 }
-                if let (Some(s), Some(c)) = (&self.shown, &self.camera) {
-                    let cb = VolumeCallback {
-                        rect,
-                        camera: c.camera(),
-                        frame: s.frame,
-                        settings: self.frame_settings(),
-                        overlays: self.overlays,
-                        time: ui.input(|i| i.time),
-                    };
-                    ui.painter()
-                        .add(egui_wgpu::Callback::new_paint_callback(rect, cb.clone()));
-                    if s.orientation.is_some() && self.overlays {
-                        orient::marker(ui.painter(), rect, &cb.camera);
-                    }
-                    callback = Some(cb);
-                } else if self.opening.is_some() {
-                    ui.centered_and_justified(|ui| ui.spinner());
+                if s.orientation.is_some() && self.overlays {
+                    orient::marker(ui.painter(), rect, &view.callback.camera);
                 }
+                callback = Some(view.callback);
             });
         if std::mem::take(&mut self.shot_requested) && self.shot.is_none() {
             self.shots_taken += 1;

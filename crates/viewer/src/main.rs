@@ -12,7 +12,6 @@ mod source;
 mod stats;
 mod tf;
 mod tf_widget;
-mod view;
 
 use clap::Parser;
 use std::path::PathBuf;
