@@ -14,6 +14,7 @@
 #[cfg(doc)]
 use crate::DEPTH_FORMAT;
 use crate::ViewResources;
+use crate::overlay::{PLANE_COLORS, PlaneOutline};
 use brickray::{
     Camera, FrameDesc, RenderSettings, SliceView, Viewport, VolumeFrame, VolumeRenderer,
 };
@@ -43,12 +44,14 @@ pub struct VolumeCallback {
 /// One frame of the four-view layout: the 3D view and three slices, prepared
 /// together (one plan of a streamed volume for all four, through
 /// `VolumeRenderer::prepare_views`) and drawn in one paint callback (add it
-/// over the rectangle that holds the four). The 3D view is drawn without
-/// overlays by [`ViewResources::renderer`], the slices by
+/// over the rectangle that holds the four). The 3D view is drawn by
+/// [`ViewResources::renderer`], the slices by
 /// [`ViewResources::slices`] in order.
 #[derive(Debug, Clone)]
 pub struct FourViewCallback {
-    /// The 3D view (its `rect` is its quadrant; its `overlays` is ignored).
+    /// The 3D view (its `rect` is its quadrant; with `overlays`, its box and
+    /// axes and the outlines of the slices normal to an index axis, in
+    /// [`crate::PLANE_COLORS`]).
     pub view_3d: VolumeCallback,
     /// The slices for [`ViewResources::slices`] 0, 1 and 2, and their
     /// rectangles in points.
@@ -108,12 +111,24 @@ impl CallbackTrait for FourViewCallback {
         let Some(vp) = px(&cb.rect) else {
             return Vec::new();
         };
+        // With overlays, the box and the slices' planes in the 3D view.
+        let host_depth = if cb.overlays {
+            let planes: Vec<PlaneOutline> = self
+                .slices
+                .iter()
+                .zip(PLANE_COLORS)
+                .filter_map(|((_, s), c)| PlaneOutline::of(s, &cb.frame, c))
+                .collect();
+            overlay_depth(r, device, queue, encoder, screen, vp, cb, &planes)
+        } else {
+            None
+        };
         let mut descs = vec![FrameDesc {
             camera: cb.camera,
             frame: cb.frame,
             viewport: vp,
             settings: cb.settings,
-            host_depth: None,
+            host_depth: host_depth.as_ref(),
             time: Some(cb.time),
         }];
         for (i, (rect, slice)) in self.slices.iter().enumerate() {
@@ -123,6 +138,7 @@ impl CallbackTrait for FourViewCallback {
             r.slices[i].set_slice(Some(*slice));
             descs.push(FrameDesc {
                 viewport: vp,
+                host_depth: None,
                 ..descs[0].clone()
             });
         }
@@ -143,19 +159,81 @@ impl CallbackTrait for FourViewCallback {
 
     fn paint(
         &self,
-        _info: egui::PaintCallbackInfo,
+        info: egui::PaintCallbackInfo,
         pass: &mut wgpu::RenderPass<'static>,
         resources: &CallbackResources,
     ) {
         let Some(r) = resources.get::<ViewResources>() else {
             return;
         };
+        if self.view_3d.overlays
+            && let Some(vp) = viewport_px(
+                &self.view_3d.rect,
+                info.pixels_per_point,
+                info.screen_size_px,
+            )
+        {
+            pass.set_viewport(
+                vp.x as f32,
+                vp.y as f32,
+                vp.width as f32,
+                vp.height as f32,
+                0.0,
+                1.0,
+            );
+            r.overlay().draw(pass, true);
+        }
         for i in (0..4).filter(|&i| r.is_prepared(i)) {
             if let Err(e) = r.renderer_at(i).render(pass) {
                 r.set_error(format!("render: {e}"));
             }
         }
     }
+}
+
+/// The 3D view's overlay lines (the box, the axes and `planes`) for
+/// `view` in viewport `vp`: their view-projection and vertices updated, and
+/// their depth drawn into the host depth the rays test against (the host's
+/// opaque pass); that depth, or `None` (the error recorded).
+#[allow(clippy::too_many_arguments)]
+fn overlay_depth(
+    r: &mut ViewResources,
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    encoder: &mut wgpu::CommandEncoder,
+    screen: &ScreenDescriptor,
+    vp: Viewport,
+    view: &VolumeCallback,
+    planes: &[PlaneOutline],
+) -> Option<wgpu::TextureView> {
+    let view_proj = view.camera.view_proj(vp.aspect() as f32);
+    r.overlay_mut()
+        .update(device, queue, &view.frame, planes, view_proj);
+    let depth = match r.host_depth(device, screen.size_in_pixels) {
+        Ok(depth) => depth.clone(),
+        Err(e) => {
+            r.set_error(e);
+            return None;
+        }
+    };
+    let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+        label: Some("brickray-egui overlay depth"),
+        color_attachments: &[],
+        depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+            view: &depth,
+            depth_ops: Some(wgpu::Operations {
+                load: wgpu::LoadOp::Clear(view.camera.depth.far_value()),
+                store: wgpu::StoreOp::Store,
+            }),
+            stencil_ops: None,
+        }),
+        ..Default::default()
+    });
+    let (x, y) = (vp.x as f32, vp.y as f32);
+    pass.set_viewport(x, y, vp.width as f32, vp.height as f32, 0.0, 1.0);
+    r.overlay().draw(&mut pass, false);
+    drop(pass);
+    r.host_depth_view().cloned()
 }
 
 impl CallbackTrait for VolumeCallback {
@@ -175,37 +253,10 @@ impl CallbackTrait for VolumeCallback {
         else {
             return Vec::new();
         };
-        let view_proj = self.camera.view_proj(vp.aspect() as f32);
-        r.overlay_mut()
-            .update(device, queue, &self.frame, view_proj);
-        let mut host_depth = None;
-        if self.overlays {
-            match r.host_depth(device, screen.size_in_pixels) {
-                Ok(view) => {
-                    let view = view.clone();
-                    // The host's opaque pass: the lines' depth, for the rays.
-                    let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-                        label: Some("brickray-egui overlay depth"),
-                        color_attachments: &[],
-                        depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                            view: &view,
-                            depth_ops: Some(wgpu::Operations {
-                                load: wgpu::LoadOp::Clear(self.camera.depth.far_value()),
-                                store: wgpu::StoreOp::Store,
-                            }),
-                            stencil_ops: None,
-                        }),
-                        ..Default::default()
-                    });
-                    let (x, y) = (vp.x as f32, vp.y as f32);
-                    pass.set_viewport(x, y, vp.width as f32, vp.height as f32, 0.0, 1.0);
-                    r.overlay().draw(&mut pass, false);
-                    drop(pass);
-                }
-                Err(e) => r.set_error(e),
-            }
-            host_depth = r.host_depth_view().cloned();
-        }
+        let host_depth = self
+            .overlays
+            .then(|| overlay_depth(r, device, queue, encoder, screen, vp, self, &[]));
+        let host_depth = host_depth.flatten();
         let desc = FrameDesc {
             camera: self.camera,
             frame: self.frame,

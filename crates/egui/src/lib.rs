@@ -58,6 +58,7 @@ mod resources;
 mod widget;
 
 pub use callback::{FourViewCallback, SliceCallback, VolumeCallback, viewport_px};
+pub use overlay::PLANE_COLORS;
 pub use resources::ViewResources;
 pub use widget::{SliceWidget, VolumeView, VolumeViewOutput, camera_input};
 

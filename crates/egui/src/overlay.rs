@@ -15,9 +15,44 @@ pub(crate) struct LineVertex {
     color: [f32; 4],
 }
 
-/// The bounding box's 12 edges and three axes from the volume's origin
-/// corner (x red, y green, z blue), in world space.
-pub(crate) fn overlay_lines(frame: &VolumeFrame) -> Vec<LineVertex> {
+/// The colours of the slice planes' outlines in the 3D view of the
+/// four-view layout (slot 0, 1, 2: axial, coronal, sagittal, after 3D
+/// Slicer's red and green; the third is blue, not Slicer's yellow, which is
+/// the crosshair's colour here).
+pub const PLANE_COLORS: [[f32; 4]; 3] = [
+    [0.95, 0.3, 0.25, 1.0],
+    [0.35, 0.85, 0.35, 1.0],
+    [0.35, 0.55, 1.0, 1.0],
+];
+
+/// A slice plane to outline in the 3D view: the index axis it is normal to
+/// and its position along that axis in texture coordinates (0..1).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct PlaneOutline {
+    pub(crate) axis: usize,
+    pub(crate) t: f32,
+    pub(crate) color: [f32; 4],
+}
+
+impl PlaneOutline {
+    /// The outline of `slice` of a volume placed by `frame`, when the slice
+    /// is normal to an index axis (its right and up lie along the other two;
+    /// an oblique plane has no outline here).
+    pub(crate) fn of(
+        slice: &brickray::SliceView,
+        frame: &VolumeFrame,
+        color: [f32; 4],
+    ) -> Option<PlaneOutline> {
+        let axis = (0..3).find(|&a| slice.right[a] == 0.0 && slice.up[a] == 0.0)?;
+        let n = frame.dims[axis].max(1) as f64;
+        let t = ((slice.centre[axis] + 0.5) / n) as f32;
+        (t.is_finite() && (0.0..=1.0).contains(&t)).then_some(PlaneOutline { axis, t, color })
+    }
+}
+
+/// The bounding box's 12 edges, three axes from the volume's origin corner
+/// (x red, y green, z blue) and the outlines of `planes`, in world space.
+pub(crate) fn overlay_lines(frame: &VolumeFrame, planes: &[PlaneOutline]) -> Vec<LineVertex> {
     let corner = |i: u32| {
         let p = Vec3::new((i & 1) as f32, ((i >> 1) & 1) as f32, (i >> 2) as f32);
         frame.model.transform_point3(p)
@@ -51,6 +86,20 @@ pub(crate) fn overlay_lines(frame: &VolumeFrame) -> Vec<LineVertex> {
         let end = frame.model.transform_point3(axis * 1.25);
         line(o, end, color);
     }
+    for p in planes {
+        // The plane's four corners in texture space, in order round it.
+        let (a, b) = ((p.axis + 1) % 3, (p.axis + 2) % 3);
+        let corner = |i: usize| {
+            let mut c = Vec3::ZERO;
+            c[p.axis] = p.t;
+            c[a] = [0.0, 1.0, 1.0, 0.0][i];
+            c[b] = [0.0, 0.0, 1.0, 1.0][i];
+            frame.model.transform_point3(c)
+        };
+        for i in 0..4 {
+            line(corner(i), corner((i + 1) % 4), p.color);
+        }
+    }
     v
 }
 
@@ -61,7 +110,7 @@ pub(crate) struct Overlay {
     colored: wgpu::RenderPipeline,
     uniforms: wgpu::Buffer,
     bind_group: wgpu::BindGroup,
-    vertices: Option<(wgpu::Buffer, u32, VolumeFrame)>,
+    vertices: Option<(wgpu::Buffer, u32, VolumeFrame, Vec<PlaneOutline>)>,
     view_proj: Option<Mat4>,
 }
 
@@ -160,12 +209,14 @@ impl Overlay {
         }
     }
 
-    /// Writes the view-projection and (when the volume moved) the lines.
+    /// Writes the view-projection and (when the volume or the planes moved)
+    /// the lines.
     pub(crate) fn update(
         &mut self,
         device: &wgpu::Device,
         queue: &wgpu::Queue,
         frame: &VolumeFrame,
+        planes: &[PlaneOutline],
         view_proj: Mat4,
     ) {
         // Uniforms are written only when they change.
@@ -177,10 +228,14 @@ impl Overlay {
                 bytemuck::cast_slice(&view_proj.to_cols_array()),
             );
         }
-        if self.vertices.as_ref().is_some_and(|v| v.2 == *frame) {
+        if self
+            .vertices
+            .as_ref()
+            .is_some_and(|v| v.2 == *frame && v.3 == planes)
+        {
             return;
         }
-        let lines = overlay_lines(frame);
+        let lines = overlay_lines(frame, planes);
         let buffer = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("brickray-egui overlay lines"),
             size: std::mem::size_of_val(lines.as_slice()) as u64,
@@ -188,11 +243,11 @@ impl Overlay {
             mapped_at_creation: false,
         });
         queue.write_buffer(&buffer, 0, bytemuck::cast_slice(&lines));
-        self.vertices = Some((buffer, lines.len() as u32, *frame));
+        self.vertices = Some((buffer, lines.len() as u32, *frame, planes.to_vec()));
     }
 
     pub(crate) fn draw(&self, pass: &mut wgpu::RenderPass<'_>, color: bool) {
-        let Some((buffer, count, _)) = &self.vertices else {
+        let Some((buffer, count, ..)) = &self.vertices else {
             return;
         };
         pass.set_pipeline(if color {
@@ -232,7 +287,7 @@ mod tests {
     #[test]
     fn overlay_lines_outline_the_box() {
         let frame = VolumeFrame::centered([64, 32, 16], [1.0; 3]);
-        let v = overlay_lines(&frame);
+        let v = overlay_lines(&frame, &[]);
         assert_eq!(v.len(), 2 * (12 + 3));
         let size = frame.world_size();
         // Box edges have the box's side lengths: four of each.
@@ -252,5 +307,35 @@ mod tests {
         for (a, b) in lengths.iter().zip(&want) {
             assert!((a - b).abs() < 1e-5, "{lengths:?} vs {want:?}");
         }
+    }
+
+    /// An axial slice through index 12 of 16 is outlined at 12.5/16 of the
+    /// box along z, spanning the box in x and y; an oblique one is not.
+    #[test]
+    fn slice_planes_are_outlined_where_they_cut_the_box() {
+        let frame = VolumeFrame::centered([64, 32, 16], [1.0; 3]);
+        let axial =
+            brickray::SliceView::orthogonal(brickray::SliceAxis::Axial, 12.0, &frame, 1.0).unwrap();
+        let p = PlaneOutline::of(&axial, &frame, PLANE_COLORS[0]).unwrap();
+        assert_eq!((p.axis, p.t), (2, 12.5 / 16.0));
+        let v = overlay_lines(&frame, &[p]);
+        assert_eq!(v.len(), 2 * (12 + 3 + 4));
+        let size = frame.world_size();
+        let z = frame.model.transform_point3(Vec3::new(0.0, 0.0, p.t)).z;
+        for e in v[30..].chunks(2) {
+            let (a, b) = (
+                Vec3::from_slice(&e[0].position[..3]),
+                Vec3::from_slice(&e[1].position[..3]),
+            );
+            assert!((a.z - z).abs() < 1e-6 && (b.z - z).abs() < 1e-6);
+            let len = (a - b).length();
+            assert!(
+                (len - size.x).abs() < 1e-5 || (len - size.y).abs() < 1e-5,
+                "{len}"
+            );
+            assert_eq!(e[0].color, PLANE_COLORS[0]);
+        }
+        let oblique = brickray::SliceView::with_normal([8.0; 3], [1.0, 1.0, 0.0], 1.0).unwrap();
+        assert_eq!(PlaneOutline::of(&oblique, &frame, PLANE_COLORS[1]), None);
     }
 }

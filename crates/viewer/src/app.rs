@@ -612,7 +612,8 @@ impl ViewerApp {
             camera: c.camera(),
             frame: vframe,
             settings: self.frame_settings(),
-            overlays: false,
+            // The box and the slices' planes.
+            overlays: self.overlays,
             time: ui.input(|i| i.time),
         };
         let mut views = Vec::with_capacity(3);
