@@ -131,6 +131,16 @@ impl Direction {
     }
 }
 
+/// The six assignments of three index axes to three anatomical axes.
+pub(crate) const PERMS: [[usize; 3]; 6] = [
+    [0, 1, 2],
+    [0, 2, 1],
+    [1, 0, 2],
+    [1, 2, 0],
+    [2, 0, 1],
+    [2, 1, 0],
+];
+
 /// Patient space (RAS+) to the display world: `x = R`, `y = S`, `z = -A`.
 pub const RAS_TO_WORLD: DMat3 = DMat3::from_cols(
     DVec3::new(1.0, 0.0, 0.0),
@@ -183,14 +193,6 @@ impl Orientation {
             return Err(AnatomyError::Singular { determinant });
         }
         let unit = |i: usize| lin.col(i).normalize();
-        const PERMS: [[usize; 3]; 6] = [
-            [0, 1, 2],
-            [0, 2, 1],
-            [1, 0, 2],
-            [1, 2, 0],
-            [2, 0, 1],
-            [2, 1, 0],
-        ];
         let score = |p: &[usize; 3]| (0..3).map(|i| unit(i)[p[i]].abs()).sum::<f64>();
         // The first best permutation: deterministic at exact ties (45 degrees).
         let mut best = PERMS[0];

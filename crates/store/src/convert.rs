@@ -1,7 +1,7 @@
 //! Conversion of any readable volume into raw samples + a JSON sidecar (the
 //! form of `shared/data`), streamed in z-slabs within a memory bound.
 
-use crate::{StoreError, check_output};
+use crate::{BuildProgress, StoreError, check_output};
 use brickray_io::VolumeReader;
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -33,6 +33,17 @@ pub fn convert(
     json: &Path,
     memory_bound: u64,
 ) -> Result<ConvertReport, StoreError> {
+    convert_with_progress(reader, json, memory_bound, None)
+}
+
+/// [`convert`], reporting `(done, total)` voxels written to `progress` after
+/// each slab (as [`BuildProgress`] reports a build's), first `(0, total)`.
+pub fn convert_with_progress(
+    reader: &mut dyn VolumeReader,
+    json: &Path,
+    memory_bound: u64,
+    progress: Option<&BuildProgress>,
+) -> Result<ConvertReport, StoreError> {
     let t0 = Instant::now();
     let json = &sidecar_path(json);
     let raw = json.with_extension("raw");
@@ -52,12 +63,21 @@ pub fn convert(
         let mut w = std::io::BufWriter::new(f);
         let mut buf = Vec::new();
         let mut z = 0;
+        let per_slice = d.dims[0] as u64 * d.dims[1] as u64;
+        let total = per_slice * d.dims[2] as u64;
+        let report = |z: u32| {
+            if let Some(p) = progress {
+                (p.0)(per_slice * z as u64, total);
+            }
+        };
+        report(0);
         while z < d.dims[2] {
             let z1 = (z + slab).min(d.dims[2]);
             buf.resize(((z1 - z) as u64 * slice) as usize, 0);
             reader.read_slices(z, z1, &mut buf)?;
             w.write_all(&buf).map_err(|e| io(&tmp, e))?;
             z = z1;
+            report(z);
         }
         w.flush().map_err(|e| io(&tmp, e))?;
         Ok(())
@@ -124,6 +144,42 @@ mod tests {
         assert_eq!(
             sidecar_path(Path::new("out")).with_extension("raw"),
             Path::new("out.raw")
+        );
+    }
+}
+
+#[cfg(test)]
+mod progress_tests {
+    use super::*;
+    use brickray_io::MemoryReader;
+    use std::sync::{Arc, Mutex};
+
+    /// The progress of a conversion in slabs of 3 slices of a 10-slice
+    /// volume: `(0, total)` first, then after each slab, ending at the total;
+    /// the files are those of a conversion without progress.
+    #[test]
+    fn a_conversion_reports_its_progress_slab_by_slab() {
+        let volume = brickray_core::synthetic::sphere(10);
+        let slice = 10 * 10 * volume.desc().dtype.size() as u64;
+        let dir = tempfile::tempdir().unwrap();
+        let seen = Arc::new(Mutex::new(Vec::new()));
+        let s = seen.clone();
+        let progress = BuildProgress(Arc::new(move |done, total| {
+            s.lock().unwrap().push((done, total));
+        }));
+        let mut reader = MemoryReader::new(volume.clone(), "sphere");
+        let with = dir.path().join("with.json");
+        convert_with_progress(&mut reader, &with, 3 * slice, Some(&progress)).unwrap();
+        let total = 1000;
+        let want: Vec<(u64, u64)> = [0, 3, 6, 9, 10].iter().map(|z| (z * 100, total)).collect();
+        assert_eq!(*seen.lock().unwrap(), want);
+        let mut reader = MemoryReader::new(volume, "sphere");
+        let without = dir.path().join("without.json");
+        convert(&mut reader, &without, 3 * slice).unwrap();
+        let read = |p: &Path| std::fs::read(p).unwrap();
+        assert_eq!(
+            read(&with.with_extension("raw")),
+            read(&without.with_extension("raw"))
         );
     }
 }

@@ -42,7 +42,7 @@ pub use brickray_core::{MemRangeReader, RangeRead, RangeReader};
 pub use brickray_remote as remote;
 pub use build::{BuildOptions, BuildProgress, BuildReport, build, build_file, check_output};
 pub use bulb::MandelbulbSource;
-pub use convert::{ConvertReport, convert};
+pub use convert::{ConvertReport, convert, convert_with_progress};
 pub use error::{Mismatch, StoreError};
 pub use errsec::ERROR_ENTRY_LEN;
 pub use partial::{ignored_signals, remove_partial_files};

@@ -19,14 +19,6 @@ fn placement(dirs: [Direction; 3], spacing: [f64; 3], tilt_axis: DVec3, angle: f
 /// Index-axis directions covering the three anatomical axes, each way.
 fn directions() -> impl Strategy<Value = [Direction; 3]> {
     (0usize..6, any::<[bool; 3]>()).prop_map(|(p, flip)| {
-        const PERMS: [[usize; 3]; 6] = [
-            [0, 1, 2],
-            [0, 2, 1],
-            [1, 0, 2],
-            [1, 2, 0],
-            [2, 0, 1],
-            [2, 1, 0],
-        ];
         [0, 1, 2].map(|i| Direction::of_axis(PERMS[p][i], flip[i]))
     })
 }

@@ -9,7 +9,7 @@
 //!                      [--allow-http] [--anonymous] [--endpoint URL]
 //! brickray-store info <store.brs | URL | input> [--bins N]
 //!                     [--allow-http] [--anonymous] [--endpoint URL]
-//! brickray-store convert <input> <out.json> [--memory-mib N] [selection as for build]
+//! brickray-store convert <input> <out.json> [--memory-mib N] [--quiet] [selection as for build]
 //! ```
 //!
 //! An input is any format `brickray_io::open` reads: raw + JSON, NRRD, NIfTI,
@@ -103,6 +103,9 @@ enum Command {
         memory_mib: u64,
         #[command(flatten)]
         select: Select,
+        /// No progress bar.
+        #[arg(long)]
+        quiet: bool,
     },
     /// Describe a store (placement, levels, bricks, empty and uniform
     /// fractions, compression, value histogram) or an input volume (format,
@@ -356,7 +359,14 @@ fn main() -> ExitCode {
             output,
             memory_mib,
             select,
-        } => cmd_convert(&input, &output, memory_mib << 20, &select.options()),
+            quiet,
+        } => cmd_convert(
+            &input,
+            &output,
+            memory_mib << 20,
+            &select.options(),
+            (!quiet).then(progress_bar).as_ref(),
+        ),
         Command::Info {
             store,
             bins,
@@ -421,7 +431,8 @@ fn remove_temporaries_on_signals() -> Result<(), String> {
     Ok(())
 }
 
-/// A progress bar on stderr, drawn from the build's progress reports.
+/// A progress bar on stderr, drawn from a build's or a conversion's
+/// progress reports.
 fn progress_bar() -> brickray_store::BuildProgress {
     let pb = indicatif::ProgressBar::new(0);
     pb.set_style(
@@ -527,12 +538,13 @@ fn cmd_convert(
     out: &std::path::Path,
     memory_bound: u64,
     read: &ReadOptions,
+    progress: Option<&brickray_store::BuildProgress>,
 ) -> Result<(), String> {
     let mut reader =
         brickray_io::open_with(input, read).map_err(|e| StoreError::Input(e).to_string())?;
     print_warnings(reader.as_ref());
-    let r =
-        brickray_store::convert(reader.as_mut(), out, memory_bound).map_err(|e| e.to_string())?;
+    let r = brickray_store::convert_with_progress(reader.as_mut(), out, memory_bound, progress)
+        .map_err(|e| e.to_string())?;
     println!(
         "converted {} ({}) to {} + {}: {:.1} MiB in {:.2} s, slabs of {} slices",
         input.display(),
