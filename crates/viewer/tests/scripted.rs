@@ -173,18 +173,6 @@ fn library_image(
     mode: RenderMode,
     clip: ClipBox,
 ) -> Vec<u8> {
-    let gpu = brickray_harness::shared_gpu();
-    let mut renderer =
-        VolumeRenderer::new(&gpu.device, brickray_harness::target_desc()).expect("renderer");
-    renderer
-        .set_volume(&gpu.device, &gpu.queue, volume)
-        .expect("volume");
-    // The viewer samples its editor's points into 1024 entries.
-    let tf = TransferFunction::from_points(&bone_points(), 1024);
-    renderer
-        .set_transfer_function(&gpu.device, &gpu.queue, &tf)
-        .expect("tf");
-    let target = brickray_harness::Offscreen::new(&gpu.device, w, h);
     let d = volume.desc();
     let desc = FrameDesc {
         settings: RenderSettings {
@@ -194,7 +182,33 @@ fn library_image(
         },
         ..FrameDesc::new(camera, VolumeFrame::centered(d.dims, d.spacing), w, h)
     };
-    brickray_harness::draw_frame(gpu, &mut renderer, &target, &desc, Some(wgpu::Color::BLACK))
+    library_render(volume, &desc, None, None)
+}
+
+/// The library's in-core rendering of `volume` for `desc` with the bone TF
+/// (the viewer samples its editor's points into 1024 entries), a slice view
+/// and a window if given.
+fn library_render(
+    volume: &brickray::Volume,
+    desc: &FrameDesc,
+    slice: Option<brickray::SliceView>,
+    intensity: Option<brickray::Intensity>,
+) -> Vec<u8> {
+    let gpu = brickray_harness::shared_gpu();
+    let mut renderer =
+        VolumeRenderer::new(&gpu.device, brickray_harness::target_desc()).expect("renderer");
+    renderer
+        .set_volume(&gpu.device, &gpu.queue, volume)
+        .expect("volume");
+    let tf = TransferFunction::from_points(&bone_points(), 1024);
+    renderer
+        .set_transfer_function(&gpu.device, &gpu.queue, &tf)
+        .expect("tf");
+    renderer.set_slice(slice);
+    renderer.set_intensity(intensity);
+    let (w, h) = (desc.viewport.width, desc.viewport.height);
+    let target = brickray_harness::Offscreen::new(&gpu.device, w, h);
+    brickray_harness::draw_frame(gpu, &mut renderer, &target, desc, Some(wgpu::Color::BLACK))
         .expect("draw");
     target.read_color(gpu)
 }

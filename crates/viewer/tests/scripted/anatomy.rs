@@ -26,26 +26,9 @@ fn library_view(
     w: u32,
     h: u32,
 ) -> Vec<u8> {
-    let gpu = brickray_harness::shared_gpu();
-    let mut renderer =
-        VolumeRenderer::new(&gpu.device, brickray_harness::target_desc()).expect("renderer");
-    renderer
-        .set_volume(&gpu.device, &gpu.queue, volume)
-        .expect("volume");
-    let tf = TransferFunction::from_points(&bone_points(), 1024);
-    renderer
-        .set_transfer_function(&gpu.device, &gpu.queue, &tf)
-        .expect("tf");
-    renderer.set_slice(slice);
-    renderer.set_intensity(Some(brickray::Intensity::new(
-        window,
-        brickray::ColorMap::Grey,
-    )));
-    let target = brickray_harness::Offscreen::new(&gpu.device, w, h);
+    let intensity = brickray::Intensity::new(window, brickray::ColorMap::Grey);
     let desc = FrameDesc::new(camera, frame, w, h);
-    brickray_harness::draw_frame(gpu, &mut renderer, &target, &desc, Some(wgpu::Color::BLACK))
-        .expect("draw");
-    target.read_color(gpu)
+    library_render(volume, &desc, slice, Some(intensity))
 }
 
 /// Rows `vp[1]..vp[1]+vp[3]`, columns `vp[0]..vp[0]+vp[2]` of an RGBA image
