@@ -18,9 +18,8 @@ fn placement(dirs: [Direction; 3], spacing: [f64; 3], tilt_axis: DVec3, angle: f
 
 /// Index-axis directions covering the three anatomical axes, each way.
 fn directions() -> impl Strategy<Value = [Direction; 3]> {
-    (0usize..6, any::<[bool; 3]>()).prop_map(|(p, flip)| {
-        [0, 1, 2].map(|i| Direction::of_axis(PERMS[p][i], flip[i]))
-    })
+    (0usize..6, any::<[bool; 3]>())
+        .prop_map(|(p, flip)| [0, 1, 2].map(|i| Direction::of_axis(PERMS[p][i], flip[i])))
 }
 
 fn ras_of_world(v: DVec3) -> DVec3 {
