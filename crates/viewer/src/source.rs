@@ -350,7 +350,11 @@ pub(crate) fn open(
                 .and_then(|s| s.to_str())
                 .unwrap_or("volume");
             let store = opts.store_dir.join(format!("{stem}.{STORE_EXTENSION}"));
-            let fresh = newer(&store, &reader.input_files());
+            // A store built before stores kept placements (format 6) is
+            // built again when the file has one.
+            let fresh = newer(&store, &reader.input_files())
+                && (placement.is_none()
+                    || brickray::store::open(&store).is_ok_and(|s| s.placement().is_some()));
             if !fresh {
                 progress.set_stage(format!("building the brick store {}", store.display()));
                 std::fs::create_dir_all(&opts.store_dir).map_err(|e| {
@@ -467,6 +471,25 @@ impl VolumeReader for Counting<'_> {
 
     fn input_files(&self) -> Vec<PathBuf> {
         self.inner.input_files()
+    }
+
+    // What a store records of its input: the placement (lost here before,
+    // so a big NIfTI or DICOM streamed out of core was not oriented), and
+    // the format, notes and warnings it reports.
+    fn placement(&self) -> Option<brickray::io::Placement> {
+        self.inner.placement()
+    }
+
+    fn format(&self) -> &'static str {
+        self.inner.format()
+    }
+
+    fn notes(&self) -> Vec<String> {
+        self.inner.notes()
+    }
+
+    fn warnings(&self) -> Vec<String> {
+        self.inner.warnings()
     }
 }
 
@@ -609,6 +632,53 @@ mod tests {
         assert!(l.histogram.bins.iter().sum::<u64>() > 0);
         let l = open(&input, &opts, &Progress::default()).unwrap();
         assert!(l.note.contains("reused"), "{}", l.note);
+    }
+
+    /// A file placed in patient space keeps its placement in core and
+    /// through the store built for it; a store built without one (as before
+    /// stores kept placements) is built again rather than reused.
+    #[test]
+    fn a_placement_survives_the_store_and_an_old_store_is_rebuilt() {
+        let dir = tempfile::tempdir().unwrap();
+        let plain = write_sphere(dir.path());
+        // The same voxels, an LPS placement (rows toward the patient's
+        // left, columns toward posterior, slices toward the head).
+        let placed = dir.path().join("placed.json");
+        std::fs::write(
+            &placed,
+            r#"{"dims": [24, 24, 24], "dtype": "u8", "spacing": [0.5, 0.5, 2], "file": "s.raw",
+                "value_range": [0, 255], "affine_space": "LPS",
+                "affine": [[0.5, 0, 0, -6], [0, 0.5, 0, 4], [0, 0, 2, 10], [0, 0, 0, 1]]}"#,
+        )
+        .unwrap();
+        let mut opts = OpenOptions {
+            in_core_max_bytes: 1 << 20,
+            max_3d_side: 2048,
+            store_dir: dir.path().join("stores"),
+            labels: false,
+        };
+        let code = |l: &Loaded| l.placement.and_then(|p| p.orientation()).map(|o| o.code());
+        let l = open(&Input::Path(placed.clone()), &opts, &Progress::default()).unwrap();
+        assert!(matches!(l.volume, Opened::InCore(_)));
+        assert_eq!(code(&l).as_deref(), Some("LPS"));
+        opts.in_core_max_bytes = 100;
+        let l = open(&Input::Path(placed.clone()), &opts, &Progress::default()).unwrap();
+        assert!(l.note.contains("built"), "{}", l.note);
+        assert_eq!(code(&l).as_deref(), Some("LPS"));
+        // An old store in its place: no placement, newer than the input.
+        let store = opts.store_dir.join("placed.brs");
+        let mut reader = brickray::io::open(&plain).unwrap();
+        brickray::store::build(reader.as_mut(), &store, &Default::default()).unwrap();
+        assert!(brickray::store::open(&store).unwrap().placement().is_none());
+        let l = open(&Input::Path(placed), &opts, &Progress::default()).unwrap();
+        assert!(l.note.contains("built"), "{}", l.note);
+        assert_eq!(code(&l).as_deref(), Some("LPS"));
+        // A file without a placement reuses its store.
+        let plain_input = Input::Path(plain);
+        open(&plain_input, &opts, &Progress::default()).unwrap();
+        let l = open(&plain_input, &opts, &Progress::default()).unwrap();
+        assert!(l.note.contains("reused"), "{}", l.note);
+        assert_eq!(code(&l), None);
     }
 
     #[test]
