@@ -6,7 +6,6 @@ mod common;
 use brickray_core::DType;
 use brickray_io::{self as io, IoError, NrrdReader, RawReader, VolumeReader};
 use common::*;
-use std::path::Path;
 use tempfile::TempDir;
 
 // ---------------------------------------------------------------------------
@@ -261,15 +260,9 @@ fn open_dispatches_on_extension() {
 
 #[test]
 fn shared_data_sets_open_as_declared() {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data");
-    if !root.is_dir() {
-        let msg = format!("shared data directory {} is missing", root.display());
-        if std::env::var("CI").as_deref() == Ok("true") {
-            panic!("{msg}");
-        }
-        eprintln!("skipping: {msg}");
+    let Some(root) = shared_data_root() else {
         return;
-    }
+    };
     let mut seen = 0;
     let mut entries: Vec<_> = std::fs::read_dir(&root)
         .unwrap()

@@ -181,3 +181,19 @@ pub(crate) fn err_of(path: &Path) -> IoError {
 pub(crate) fn nrrd_err(dir: &Path, fields: &str, payload: &[u8]) -> IoError {
     err_of(&write_attached(dir, "e", fields, payload))
 }
+
+/// `../shared/data`, or `None` (the caller returns) when it is absent; with
+/// `CI=true` its absence fails the test.
+#[allow(dead_code)]
+pub(crate) fn shared_data_root() -> Option<PathBuf> {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data");
+    if !root.is_dir() {
+        let msg = format!("shared data directory {} is missing", root.display());
+        if std::env::var("CI").as_deref() == Ok("true") {
+            panic!("{msg}");
+        }
+        eprintln!("skipping: {msg}");
+        return None;
+    }
+    Some(root)
+}
