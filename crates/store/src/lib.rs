@@ -35,6 +35,8 @@ mod placement;
 mod procedural;
 mod reader;
 mod sample;
+#[cfg(feature = "remote")]
+mod url;
 
 pub use brickray_core::{MemRangeReader, RangeRead, RangeReader};
 /// Range readers over object storage and HTTP(S) (feature `remote`).
@@ -49,7 +51,7 @@ pub use partial::{ignored_signals, remove_partial_files};
 pub use procedural::ProceduralSource;
 pub use reader::{NodeRecord, STORE_BATCH, Store, StoreStats, decode_payload, open};
 #[cfg(feature = "remote")]
-pub use reader::{
+pub use url::{
     is_zarr_url, open_any, open_source_any, open_url, open_zarr_reader_url, open_zarr_url,
 };
 
