@@ -1,6 +1,7 @@
 //! An HTTP server for the OME-Zarr tests: serves the files under a folder
 //! on loopback with ranges, counts every request, and answers each GET as a
 //! plan says (serve, a status, a reset, a truncated or a stalled body).
+#![allow(dead_code)] // each test file uses part of it
 
 use crate::common::*;
 use std::io::{BufReader, Write};
