@@ -51,6 +51,8 @@ mod octant_tests;
 pub use octant::{MAX_DEMOTIONS, OCTANT_HYSTERESIS, OctantMemory};
 mod rank;
 #[cfg(test)]
+mod retry_tests;
+#[cfg(test)]
 pub(crate) mod tests;
 
 pub use geometry::{ViewGeometry, Views, is_visible, lod_voxel_world};
