@@ -92,13 +92,18 @@ impl<O: ObjectReader> DiskCachedObjects<O> {
     }
 
     /// Caches the OME-Zarr image `inner` reads: its identity is its
-    /// location and a hash of its root metadata (`zarr.json`, or `.zattrs`
-    /// and `.zgroup`), fetched here (one or two small requests).
+    /// location and a hash of its root metadata (`zarr.json`, or for zarr
+    /// v2 `.zattrs` and `.zgroup`), fetched here: one small request for a
+    /// v3 image, three for a v2 one.
     pub fn for_image(inner: O, config: &DiskCacheConfig) -> io::Result<Self> {
         let mut identity = inner.location().to_string();
         for key in ["zarr.json", ".zattrs", ".zgroup"] {
             if let Some((bytes, _)) = inner.read_object(key, ObjectSpan::All)? {
                 identity += &format!("\n{key} {:016x}", fnv1a(&bytes));
+                if key == "zarr.json" {
+                    // A v3 image: its root metadata is this one document.
+                    break;
+                }
             }
         }
         DiskCachedObjects::new(inner, &identity, config)
