@@ -6,6 +6,8 @@
 //!   answers "is the value range `[min, max]` transparent?" in O(1);
 //! * [`anatomy`]: anatomical orientation (RAS+ axis codes, the upright
 //!   display frame, views from A/P/L/R/S/I, radiological slices);
+//! * [`channels`]: multi-channel volumes, per-channel styles and how the
+//!   channels of a sample mix;
 //! * [`brick`]: the brick-octree vocabulary (node keys, layout, [`BrickSource`]);
 //! * [`camera`]: perspective and orthographic cameras and the ray model shared by
 //!   the GPU ray caster and the CPU reference;
@@ -29,6 +31,7 @@
 pub mod anatomy;
 pub mod brick;
 pub mod camera;
+pub mod channels;
 pub mod labels;
 pub mod lod;
 pub mod macrocell;
@@ -53,12 +56,13 @@ pub use camera::{
     Camera, CameraError, DepthConvention, DepthMap, FrameError, FrameView, Projection, Ray, RayGen,
     ViewGenerations, VolumeFrame,
 };
+pub use channels::{ChannelError, ChannelStyle, ChannelVolume, MAX_CHANNELS};
 pub use labels::{LABEL_TABLE_ENTRIES, LabelError, LabelStyle, LabelTable};
 pub use lod::{
     BinStats, ERROR_BINS, LodMetric, NodeError, TfErrorTable, node_pixel_error, node_tf_error,
     node_tf_error_expected, node_visible_error,
 };
-pub use macrocell::{MacroCellGrid, sub_cell_ranges, sub_cells_per_axis};
+pub use macrocell::{MacroCellGrid, empty_distance, sub_cell_ranges, sub_cells_per_axis};
 pub use moments::{MomentGrid, Moments};
 pub use overlay::{LabelOverlay, OverlayError, OverlayMode, OverlayStyle, overlay_transform};
 pub use pyramid::{ALL_AXES, Children, LayoutError, MAX_LEVELS, anisotropic_split_masks};

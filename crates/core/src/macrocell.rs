@@ -96,37 +96,42 @@ impl MacroCellGrid {
     /// cells). Separable in three passes, O(cells * cap). Cells outside the grid
     /// count as empty (rays leave the volume there).
     pub fn empty_distance(&self, empty: impl Fn([f32; 2]) -> bool, cap: u32) -> Vec<u32> {
-        let [cx, cy, cz] = self.dims.map(|d| d as usize);
-        let idx = |x: usize, y: usize, z: usize| (z * cy + y) * cx + x;
-        let cap = cap.max(1);
-        let mut d: Vec<u32> = self
-            .ranges
-            .iter()
-            .map(|&r| if empty(r) { cap } else { 0 })
-            .collect();
-        // One pass along an axis: d'(p) = min over q on p's line within cap of
-        // max(|p - q|, d(q)), the L-infinity distance transform's separable step.
-        let pass = |d: &Vec<u32>, n: usize, at: &dyn Fn(usize, usize) -> usize, lines: usize| {
-            let mut out = d.clone();
-            for line in 0..lines {
-                for p in 0..n {
-                    let mut best = d[at(line, p)];
-                    let lo = p.saturating_sub(cap as usize);
-                    let hi = (p + cap as usize).min(n - 1);
-                    for q in lo..=hi {
-                        let v = d[at(line, q)].max(p.abs_diff(q) as u32);
-                        best = best.min(v);
-                    }
-                    out[at(line, p)] = best;
-                }
-            }
-            out
-        };
-        d = pass(&d, cx, &|l, p| idx(p, l % cy, l / cy), cy * cz);
-        d = pass(&d, cy, &|l, p| idx(l % cx, p, l / cx), cx * cz);
-        d = pass(&d, cz, &|l, p| idx(l % cx, l / cx, p), cx * cy);
-        d
+        let empty: Vec<bool> = self.ranges.iter().map(|&r| empty(r)).collect();
+        empty_distance(self.dims, &empty, cap)
     }
+}
+
+/// [`MacroCellGrid::empty_distance`] of a grid of `dims` cells whose
+/// emptiness is given per cell (x fastest): what several grids over one
+/// volume share (a multi-channel volume's cell is empty when it is in every
+/// channel, [`crate::channels`]).
+pub fn empty_distance(dims: [u32; 3], empty: &[bool], cap: u32) -> Vec<u32> {
+    let [cx, cy, cz] = dims.map(|d| d as usize);
+    let idx = |x: usize, y: usize, z: usize| (z * cy + y) * cx + x;
+    let cap = cap.max(1);
+    let mut d: Vec<u32> = empty.iter().map(|&e| if e { cap } else { 0 }).collect();
+    // One pass along an axis: d'(p) = min over q on p's line within cap of
+    // max(|p - q|, d(q)), the L-infinity distance transform's separable step.
+    let pass = |d: &Vec<u32>, n: usize, at: &dyn Fn(usize, usize) -> usize, lines: usize| {
+        let mut out = d.clone();
+        for line in 0..lines {
+            for p in 0..n {
+                let mut best = d[at(line, p)];
+                let lo = p.saturating_sub(cap as usize);
+                let hi = (p + cap as usize).min(n - 1);
+                for q in lo..=hi {
+                    let v = d[at(line, q)].max(p.abs_diff(q) as u32);
+                    best = best.min(v);
+                }
+                out[at(line, p)] = best;
+            }
+        }
+        out
+    };
+    d = pass(&d, cx, &|l, p| idx(p, l % cy, l / cy), cy * cz);
+    d = pass(&d, cy, &|l, p| idx(l % cx, p, l / cx), cx * cz);
+    d = pass(&d, cz, &|l, p| idx(l % cx, l / cx, p), cx * cy);
+    d
 }
 
 /// Sub-cells per brick axis for empty-space skipping inside bricks: cells of
