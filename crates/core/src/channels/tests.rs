@@ -69,7 +69,7 @@ fn styles_are_checked_against_the_channels() {
     let s = ChannelStyle::window([1.0, 0.0, 0.0], [0.2, 0.6], 0.5);
     assert_eq!(validate_styles(&[s.clone(), s.clone()], 2), Ok(()));
     assert_eq!(
-        validate_styles(&[s.clone()], 2),
+        validate_styles(std::slice::from_ref(&s), 2),
         Err(ChannelError::StyleCount {
             styles: 1,
             channels: 2
