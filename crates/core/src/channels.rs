@@ -312,5 +312,31 @@ pub fn cells_empty(
         .collect()
 }
 
+/// Texel lanes that hold `channels` channels (1, 2 or 4: three channels
+/// take an RGBA texel, as GPUs have no three-lane filterable formats).
+pub fn texel_lanes(channels: usize) -> usize {
+    match channels {
+        0 | 1 => 1,
+        2 => 2,
+        _ => 4,
+    }
+}
+
+/// Interleaves the texels of each channel (`parts[c]`, `texel_bytes` bytes a
+/// texel, all of one length) into texels of `lanes` lanes (channel `c` in
+/// lane `c`, lanes past the channels zero): the layout of a packed RGBA
+/// texture.
+pub fn interleave(parts: &[&[u8]], texel_bytes: usize, lanes: usize) -> Vec<u8> {
+    let n = parts.first().map_or(0, |p| p.len() / texel_bytes.max(1));
+    let mut out = vec![0u8; n * texel_bytes * lanes];
+    for (c, part) in parts.iter().enumerate().take(lanes) {
+        for (i, t) in part.chunks_exact(texel_bytes).take(n).enumerate() {
+            let at = (i * lanes + c) * texel_bytes;
+            out[at..at + texel_bytes].copy_from_slice(t);
+        }
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests;

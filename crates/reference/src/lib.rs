@@ -75,7 +75,10 @@ pub use metrics::{
     ImageComparison, assert_close, compare, compare_and_report, max_abs_diff, mean_flip, psnr,
     test_output_dir,
 };
-pub use render::{DEFAULT_STEP_FACTOR, EXACT_STEP_FACTOR, ReferenceOptions, render_reference};
+pub use render::{
+    DEFAULT_STEP_FACTOR, EXACT_STEP_FACTOR, ReferenceOptions, render_channels_reference,
+    render_reference,
+};
 pub use slice::{SliceReferenceError, render_label_slice, render_slice, render_slice_with_overlay};
 pub use ssim::ssim;
 pub use temporal::{

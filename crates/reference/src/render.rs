@@ -366,8 +366,21 @@ impl Marcher<'_> {
 
     /// One pixel: `n x n` stratified rays, colours averaged, nearest depth kept.
     fn pixel(&self, px: f64, py: f64, n: u32, host_depth: Option<f32>) -> RayResult {
+        self.pixel_with(px, py, n, host_depth, |x, y, h| self.trace(x, y, h))
+    }
+
+    /// [`Self::pixel`] with each ray traced by `trace` (the multi-channel
+    /// marcher's).
+    fn pixel_with(
+        &self,
+        px: f64,
+        py: f64,
+        n: u32,
+        host_depth: Option<f32>,
+        trace: impl Fn(f64, f64, Option<f32>) -> RayResult,
+    ) -> RayResult {
         if n == 1 {
-            return self.trace(px, py, host_depth);
+            return trace(px, py, host_depth);
         }
         let mut sum = [0.0f64; 4];
         let mut depth: Option<f64> = None;
@@ -375,7 +388,7 @@ impl Marcher<'_> {
         for j in 0..n {
             for i in 0..n {
                 // `through_pixel` adds 0.5: sub-pixel centre (i + 0.5) / n.
-                let (c, z) = self.trace(
+                let (c, z) = trace(
                     px + (i as f64 + 0.5) * inv - 0.5,
                     py + (j as f64 + 0.5) * inv - 0.5,
                     host_depth,
@@ -392,16 +405,15 @@ impl Marcher<'_> {
         (sum.map(|s| s / count), depth)
     }
 
-    /// One ray through image position `(px + 0.5, py + 0.5)`.
-    fn trace(&self, px: f64, py: f64, host_depth: Option<f32>) -> RayResult {
+    /// The ray through image position `(px + 0.5, py + 0.5)` and its
+    /// samples' span (clipped to the clip box and the host's depth), or
+    /// `None` when it misses the clip box.
+    fn ray_span(&self, px: f64, py: f64, host_depth: Option<f32>) -> Option<(Ray, Span)> {
         let ray = self
             .rays
             .pixel_ray(&self.inv_model, px, py, self.width, self.height);
         let clip = self.settings.clip;
-        let Some((t0, mut t1)) = ray.clip_box(clip.min.map(f64::from), clip.max.map(f64::from))
-        else {
-            return ([0.0; 4], None);
-        };
+        let (t0, mut t1) = ray.clip_box(clip.min.map(f64::from), clip.max.map(f64::from))?;
         if let Some(d) = host_depth.filter(|d| !d.is_nan()) {
             t1 = t1.min(self.rays.t_at_depth(&ray, d as f64));
         }
@@ -409,6 +421,14 @@ impl Marcher<'_> {
             t0,
             t1,
             dt: self.dt,
+        };
+        Some((ray, span))
+    }
+
+    /// One ray through image position `(px + 0.5, py + 0.5)`.
+    fn trace(&self, px: f64, py: f64, host_depth: Option<f32>) -> RayResult {
+        let Some((ray, span)) = self.ray_span(px, py, host_depth) else {
+            return ([0.0; 4], None);
         };
         match self.settings.mode {
             RenderMode::Iso { value, color } => {
@@ -658,6 +678,9 @@ impl Span {
             .take_while(move |&t| t < self.t1)
     }
 }
+
+mod channels;
+pub use channels::render_channels_reference;
 
 #[cfg(test)]
 mod tests;

@@ -88,6 +88,14 @@ pub enum RenderError {
     /// label map, a singular placement, an opacity outside 0..1).
     #[error(transparent)]
     Overlay(#[from] brickray_core::OverlayError),
+    /// A multi-channel volume, or its styles, that cannot be drawn
+    /// ([`crate::VolumeRenderer::set_channel_volume`]).
+    #[error(transparent)]
+    Channels(#[from] brickray_core::ChannelError),
+    /// A feature not drawn with a multi-channel volume (slice views, a label
+    /// map over it, the prediction buffer); the message names it.
+    #[error("{0} cannot be drawn with a multi-channel volume")]
+    ChannelsUnsupported(&'static str),
     /// wgpu reported an error creating one of the library's objects (caught by an
     /// error scope, never a panic in the host).
     #[error("wgpu {kind:?} error creating {what}: {message}")]
@@ -141,6 +149,9 @@ pub enum PrepareError {
     /// No transfer function has been set.
     #[error("no transfer function set: call set_transfer_function first")]
     NoTransferFunction,
+    /// A multi-channel volume is drawn without styles.
+    #[error("no channel styles set: call set_channel_styles first")]
+    NoChannelStyles,
     /// More pixels queued for picking than one frame reads back.
     #[error("{requested} pixels queued for picking: at most {max} a frame")]
     TooManyPicks {

@@ -281,8 +281,32 @@ pub(crate) fn volume_texture(
     label: &'static str,
 ) -> Result<(wgpu::Texture, u64), RenderError> {
     let dims = vol.dims();
-    let format = crate::encoding::wgpu_format(enc.format);
-    let row = dims[0] * enc.texel_bytes();
+    let src = vol.data().as_bytes();
+    let src_slice = dims[0] as usize * dims[1] as usize * vol.desc().dtype.size();
+    slab_texture(
+        device,
+        queue,
+        dims,
+        crate::encoding::wgpu_format(enc.format),
+        enc.texel_bytes(),
+        label,
+        |z0, z1| enc.encode(&src[z0 * src_slice..z1 * src_slice]),
+    )
+}
+
+/// A limit-checked 3D texture of `dims` texels of `format` (`texel_bytes`
+/// each), written in slabs of at most 64 MiB whose texels `slab(z0, z1)`
+/// makes (slices `z0..z1`, x fastest). Returns the texture and its bytes.
+pub(crate) fn slab_texture<'a>(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    dims: [u32; 3],
+    format: wgpu::TextureFormat,
+    texel_bytes: u32,
+    label: &'static str,
+    slab: impl Fn(usize, usize) -> std::borrow::Cow<'a, [u8]>,
+) -> Result<(wgpu::Texture, u64), RenderError> {
+    let row = dims[0] * texel_bytes;
     let slice = row as usize * dims[1] as usize;
     let bytes = slice as u64 * dims[2] as u64;
     let texture = texture(
@@ -302,13 +326,11 @@ pub(crate) fn volume_texture(
             view_formats: &[],
         },
     )?;
-    let src = vol.data().as_bytes();
-    let src_slice = dims[0] as usize * dims[1] as usize * vol.desc().dtype.size();
     let per = ((64usize << 20) / slice.max(1)).clamp(1, dims[2] as usize) as u32;
     let mut z = 0;
     while z < dims[2] {
         let z1 = (z + per).min(dims[2]);
-        let texels = enc.encode(&src[z as usize * src_slice..z1 as usize * src_slice]);
+        let texels = slab(z as usize, z1 as usize);
         scoped(device, label, || {
             queue.write_texture(
                 wgpu::TexelCopyTextureInfo {

@@ -45,6 +45,8 @@ impl KernelMode {
 pub(crate) enum KernelKind {
     InCore,
     OutOfCore,
+    /// A multi-channel volume in core (`shaders/channels.wgsl`).
+    Channels,
 }
 
 /// The switches compiled into a pipeline.
@@ -74,6 +76,9 @@ pub(crate) struct Variant {
     /// A label map over the image (`OVERLAY` in overlay.wgsl: 0 none, 1
     /// colour, 2 mask).
     pub(crate) overlay: u32,
+    /// Channels of a multi-channel volume (`CHANNELS` in channels.wgsl; 0
+    /// for the single-channel kernels, which do not declare it).
+    pub(crate) channels: u32,
 }
 
 /// The override constants of a pipeline, by WGSL name (modes.wgsl,
@@ -137,6 +142,7 @@ impl Variant {
                 }
                 _ => 0,
             },
+            channels: 0,
         };
         match prediction {
             Some(p) if mode == KernelMode::Iso => Variant {
@@ -167,6 +173,21 @@ impl Variant {
             labels,
             smooth_labels: false,
             overlay: overlay.filter(|_| !labels).map_or(0, overlay_id),
+            channels: 0,
+        }
+    }
+
+    /// The multi-channel kernel's pipeline for `channels` channels: mode,
+    /// early termination, skipping and shading as the settings say; no
+    /// pre-integration, prediction, labels or overlay (channels.wgsl draws
+    /// none of them).
+    pub(crate) fn channels(s: &RenderSettings, channels: u32) -> Variant {
+        let v = Variant::of(s, None, false, false, None);
+        Variant {
+            preint: false,
+            smooth_labels: false,
+            channels,
+            ..v
         }
     }
 
@@ -175,7 +196,17 @@ impl Variant {
         self.predict
     }
 
-    fn constants(&self) -> [(&'static str, f64); 12] {
+    /// The override constants of the pipeline (the single-channel kernels
+    /// do not declare `CHANNELS`).
+    fn constants(&self) -> Vec<(&'static str, f64)> {
+        let mut c = self.shared_constants().to_vec();
+        if self.channels > 0 {
+            c.push(("CHANNELS", self.channels as f64));
+        }
+        c
+    }
+
+    fn shared_constants(&self) -> [(&'static str, f64); 12] {
         let b = |x: bool| if x { 1.0 } else { 0.0 };
         let v = [
             self.mode as u32 as f64,
@@ -310,6 +341,7 @@ impl Kernel {
         let (label, source) = match kind {
             KernelKind::InCore => ("brickray-render raycast in core", shaders::incore()),
             KernelKind::OutOfCore => ("brickray-render raycast out of core", shaders::ooc()),
+            KernelKind::Channels => ("brickray-render raycast channels", shaders::channels()),
         };
         let module = gpu::scoped(device, label, || {
             device.create_shader_module(wgpu::ShaderModuleDescriptor {

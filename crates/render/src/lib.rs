@@ -69,8 +69,8 @@ pub use volume::{StreamedVolume, VolumeOptions};
 use backend::{Backend, InCore, OutOfCore};
 use brickray_cache::{Classification, StreamFrame};
 use brickray_core::{
-    BrickSource, DepthConvention, FrameView, LabelOverlay, LabelTable, OverlayStyle,
-    TransferFunction, Volume,
+    BrickSource, ChannelStyle, ChannelVolume, DepthConvention, FrameView, LabelOverlay, LabelTable,
+    OverlayStyle, TransferFunction, Volume,
 };
 use composite::Compositor;
 use frame::{FrameState, FrameUniforms};
@@ -127,6 +127,9 @@ pub struct VolumeRenderer {
     picker: pick::Picker,
     /// A label map over the image ([`Self::set_overlay`]; group 3).
     overlay: overlay::OverlayState,
+    /// The styles of a multi-channel volume's channels
+    /// ([`Self::set_channel_styles`]) and their generation.
+    channel_styles: Option<(Vec<ChannelStyle>, u64)>,
 }
 
 impl VolumeRenderer {
@@ -165,6 +168,7 @@ impl VolumeRenderer {
             slice: None,
             intensity: None,
             mapping: None,
+            channel_styles: None,
         })
     }
 
@@ -191,6 +195,62 @@ impl VolumeRenderer {
         self.volume_dims = Some(volume.dims());
         self.value_range = volume.desc().value_range;
         Ok(())
+    }
+
+    /// Uploads a multi-channel volume (1 to 4 intensity channels on one
+    /// grid, [`ChannelVolume`]) into one 3D texture, its channels packed in
+    /// each texel (RG or RGBA of the dtype's format, filtered by the
+    /// hardware), with each channel's macro-cell ranges. Its channels are
+    /// drawn through [`Self::set_channel_styles`] (one transfer function,
+    /// visibility and isovalue per channel) and composited in one ray:
+    /// DVR mixes the visible channels' samples, MIP each channel's maximum,
+    /// iso finds the first crossing of any channel's own isovalue
+    /// ([`brickray_core::channels`]). Slice views, a label map over it and
+    /// pre-integration are not drawn with channels
+    /// ([`RenderError::ChannelsUnsupported`] from `prepare` for the first
+    /// two; pre-integration is ignored). Fails as
+    /// [`Self::set_volume`] does, per channel.
+    pub fn set_channel_volume(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        volume: &ChannelVolume,
+    ) -> Result<(), RenderError> {
+        for v in volume.channels() {
+            check_value_range(v.desc().value_range)?;
+        }
+        self.drop_volume();
+        let b = backend::Channels::new(device, queue, volume, self.options.u8_filtering)?;
+        self.backend = Some(Backend::Channels(Box::new(b)));
+        self.volume_dims = Some(volume.dims());
+        self.value_range = volume.desc().value_range;
+        Ok(())
+    }
+
+    /// Sets how each channel of a multi-channel volume is drawn: one style
+    /// per channel, in order (its transfer function, visibility and
+    /// isovalue; [`ChannelStyle::window`] makes one from a colour and a
+    /// window). Checked against the channel volume set, if any
+    /// ([`ChannelError::StyleCount`](brickray_core::ChannelError)), and again
+    /// at `prepare`; uploaded there, when they changed.
+    pub fn set_channel_styles(&mut self, styles: &[ChannelStyle]) -> Result<(), RenderError> {
+        if let Some(Backend::Channels(b)) = self.backend.as_ref() {
+            brickray_core::channels::validate_styles(styles, b.count())?;
+        }
+        if self
+            .channel_styles
+            .as_ref()
+            .is_some_and(|(s, _)| s == styles)
+        {
+            return Ok(());
+        }
+        self.channel_styles = Some((styles.to_vec(), tf::next_generation()));
+        Ok(())
+    }
+
+    /// The channel styles set last.
+    pub fn channel_styles(&self) -> Option<&[ChannelStyle]> {
+        self.channel_styles.as_ref().map(|(s, _)| s.as_slice())
     }
 
     /// Switches to the out-of-core path over a brick source (a brick-octree file
@@ -546,7 +606,20 @@ impl VolumeRenderer {
                     volume,
                 });
             }
-            if r.tf.current().is_none() && r.slice.is_none() {
+            let channels = matches!(r.backend, Some(Backend::Channels(_)));
+            if channels {
+                if r.channel_styles.is_none() {
+                    return Err(PrepareError::NoChannelStyles);
+                }
+                if r.slice.is_some() {
+                    return Err(RenderError::ChannelsUnsupported("a slice view").into());
+                }
+                if r.overlay.style().is_some() {
+                    return Err(
+                        RenderError::ChannelsUnsupported("a label map over the image").into(),
+                    );
+                }
+            } else if r.tf.current().is_none() && r.slice.is_none() {
                 return Err(PrepareError::NoTransferFunction);
             }
             r.mapping = Some(mapping);
@@ -577,6 +650,22 @@ impl VolumeRenderer {
                 done[i] = true;
                 continue;
             }
+            if let Some(Backend::Channels(b)) = r.backend.as_mut() {
+                let (styles, generation) = r
+                    .channel_styles
+                    .as_ref()
+                    .ok_or(PrepareError::NoChannelStyles)?;
+                uploaded[i] = b.update(
+                    device,
+                    queue,
+                    desc.settings.mode,
+                    styles,
+                    *generation,
+                    desc.settings.step_factor,
+                )?;
+                done[i] = true;
+                continue;
+            }
             let group = streamed_group(views, i, &done)?;
             plan_group(device, queue, views, &group, &mut uploaded)?;
             for j in group {
@@ -603,6 +692,10 @@ impl VolumeRenderer {
     ) -> Result<FrameStats, PrepareError> {
         let backend = self.backend.as_mut().ok_or(PrepareError::NoVolume)?;
         backend.get_mut().before_pass(encoder);
+        let channels = match backend {
+            Backend::Channels(b) => Some(b.count() as u32),
+            _ => None,
+        };
         let backend = backend.get();
         uploaded += self.tf.prepare(
             device,
@@ -616,7 +709,9 @@ impl VolumeRenderer {
         let mut uniforms = FrameUniforms::new(desc, backend.max_leaves());
         let mapping = self.mapping.ok_or(PrepareError::NoVolume)?;
         mapping.apply(&mut uniforms);
-        let variant = if mapping.slice.is_some() {
+        let variant = if let Some(n) = channels {
+            Variant::channels(&desc.settings, n)
+        } else if mapping.slice.is_some() {
             Variant::slice(
                 backend.measures_weights(),
                 backend.labels(),

@@ -8,6 +8,8 @@
 //! * `incore.wgsl`, `ooc.wgsl`: each backend's group 2, its sampling `Cursor`
 //!   and its march; the out-of-core kernel also includes brickray-index's
 //!   traversal library and `feedback.wgsl` (ray-guided usage counters);
+//! * `channels.wgsl`: the multi-channel in-core kernel (its group 2: the
+//!   packed channels and their stacked transfer functions; its march);
 //! * `overlay.wgsl`: group 3, a label map over the image (both kernels);
 //! * `predict.wgsl`: the isosurface prediction buffer's bindings (group 0) and
 //!   switches, in both kernels; `incore_predict.wgsl`, `ooc_predict.wgsl`:
@@ -27,6 +29,8 @@ pub const COMMON: &str = include_str!("../shaders/common.wgsl");
 pub const MODES: &str = include_str!("../shaders/modes.wgsl");
 /// The in-core kernel's own part.
 pub const INCORE: &str = include_str!("../shaders/incore.wgsl");
+/// The multi-channel in-core kernel's own part.
+pub const CHANNELS: &str = include_str!("../shaders/channels.wgsl");
 /// The out-of-core kernel's own part.
 pub const OOC: &str = include_str!("../shaders/ooc.wgsl");
 /// A label map over the image (group 3, both kernels).
@@ -69,6 +73,15 @@ pub fn color_tables() -> String {
 pub fn incore() -> String {
     format!(
         "{COMMON}\n{}\n{MODES}\n{OVERLAY}\n{PREDICT}\n{INCORE}\n{INCORE_PREDICT}\n{SLICE}\n{SLICE_INCORE}",
+        color_tables()
+    )
+}
+
+/// The multi-channel in-core ray caster as compiled (modes, overlay and
+/// prediction for their shared functions and switches).
+pub fn channels() -> String {
+    format!(
+        "{COMMON}\n{}\n{MODES}\n{OVERLAY}\n{PREDICT}\n{CHANNELS}",
         color_tables()
     )
 }

@@ -81,7 +81,7 @@ fn buffer(ty: wgpu::BufferBindingType) -> wgpu::BindingType {
 /// (5).
 /// Generations of transfer functions, unique in the process: renderers that
 /// share a volume plan it with the generation of whichever draws it first.
-fn next_generation() -> u64 {
+pub(crate) fn next_generation() -> u64 {
     static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
     NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
 }

@@ -183,3 +183,18 @@ fn no_channel_and_opaque_channels_mix_to_finite_samples() {
         "{m:?}"
     );
 }
+
+#[test]
+fn channels_interleave_into_lanes() {
+    assert_eq!((1..=4).map(texel_lanes).collect::<Vec<_>>(), [1, 2, 4, 4]);
+    let a = [1u8, 2, 3, 4];
+    let b = [5u8, 6, 7, 8];
+    let c = [9u8, 10, 11, 12];
+    // Two-byte texels: two of each channel.
+    assert_eq!(interleave(&[&a, &b], 2, 2), [1, 2, 5, 6, 3, 4, 7, 8]);
+    assert_eq!(
+        interleave(&[&a, &b, &c], 2, 4),
+        [1, 2, 5, 6, 9, 10, 0, 0, 3, 4, 7, 8, 11, 12, 0, 0]
+    );
+    assert_eq!(interleave(&[&a], 1, 1), a);
+}

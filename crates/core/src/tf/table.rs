@@ -50,7 +50,19 @@ impl TransferFunction {
     /// The corrected table: `rows` rows, row `r` with the opacity corrected to
     /// `step_factor * 2^r` reference lengths, [`Self::table_width`] columns.
     pub fn corrected_table(&self, step_factor: f32, rows: u32, max_width: u32) -> CorrectedTable {
-        let width = self.table_width(max_width);
+        self.corrected_table_of_width(step_factor, rows, self.table_width(max_width))
+    }
+
+    /// [`Self::corrected_table`] with `width` columns (at least 2): what
+    /// several TFs stacked in one texture share (a multi-channel volume's,
+    /// [`crate::channels`], at the widest of their widths).
+    pub fn corrected_table_of_width(
+        &self,
+        step_factor: f32,
+        rows: u32,
+        width: u32,
+    ) -> CorrectedTable {
+        let width = width.max(2);
         let rows = rows.max(1);
         let base: Vec<[f64; 4]> = (0..width)
             .map(|i| self.lookup(i as f64 / (width - 1) as f64))

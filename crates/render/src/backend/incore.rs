@@ -17,7 +17,7 @@ pub(crate) const CELL: u32 = 8;
 
 /// The largest jump of the skip distances, in cells: bounds the host's work
 /// when the transfer function or isovalue changes (O(cells * SKIP_CAP)).
-const SKIP_CAP: u32 = 8;
+pub(crate) const SKIP_CAP: u32 = 8;
 
 /// What the skip distances were computed for.
 #[derive(Debug, Clone, Copy, PartialEq)]

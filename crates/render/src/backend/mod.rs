@@ -3,12 +3,14 @@
 //! per frame. In core the volume is one 3D texture; out of core a brick atlas fed
 //! by the cache and walked through the octree-with-ropes index.
 
+pub(crate) mod channels;
 pub(crate) mod feedback;
 pub(crate) mod incore;
 pub(crate) mod occlusion;
 pub(crate) mod ooc;
 pub(crate) mod readback;
 
+pub(crate) use channels::Channels;
 pub use feedback::FeedbackStats;
 pub(crate) use incore::InCore;
 pub use occlusion::OcclusionStats;
@@ -61,6 +63,8 @@ pub(crate) trait VolumeBackend: std::fmt::Debug {
 pub(crate) enum Backend {
     InCore(InCore),
     OutOfCore(Box<OutOfCore>),
+    /// A multi-channel volume in core.
+    Channels(Box<Channels>),
 }
 
 impl Backend {
@@ -68,6 +72,7 @@ impl Backend {
         match self {
             Backend::InCore(b) => b,
             Backend::OutOfCore(b) => b.as_ref(),
+            Backend::Channels(b) => b.as_ref(),
         }
     }
 
@@ -75,13 +80,14 @@ impl Backend {
         match self {
             Backend::InCore(b) => b,
             Backend::OutOfCore(b) => b.as_mut(),
+            Backend::Channels(b) => b.as_mut(),
         }
     }
 
     pub(crate) fn out_of_core(&self) -> Option<&OutOfCore> {
         match self {
             Backend::OutOfCore(b) => Some(b),
-            Backend::InCore(_) => None,
+            Backend::InCore(_) | Backend::Channels(_) => None,
         }
     }
 }

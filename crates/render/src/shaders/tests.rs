@@ -183,13 +183,32 @@ fn rust_bindings(groups: &[&[wgpu::BindGroupLayoutEntry]]) -> BTreeSet<(u32, u32
 }
 
 fn check_kernel(name: &str, m: &naga::Module, volume: &[wgpu::BindGroupLayoutEntry]) {
-    // Entry points (the ray caster and the slice view) and workgroup size.
+    // Entry points (the ray caster and the slice view).
     let names: Vec<&str> = m.entry_points.iter().map(|e| e.name.as_str()).collect();
     assert_eq!(
         names,
         [crate::kernels::ENTRY_RAYCAST, crate::kernels::ENTRY_SLICE],
         "{name}"
     );
+    check_kernel_common(name, m, volume, &[]);
+    for (wgsl, mode) in [
+        ("SLAB_MAX", crate::slice::SLAB_MAX),
+        ("SLAB_MEAN", crate::slice::SLAB_MEAN),
+    ] {
+        assert_eq!(const_u32(m, wgsl), mode, "{name}: {wgsl}");
+    }
+}
+
+/// What every ray-cast kernel shares: workgroup size, the override
+/// constants (the shared ones and `extra`), ids, flags and the layouts of
+/// groups 0, 1 and 3, and every binding against the Rust layouts (group 2:
+/// `volume`).
+fn check_kernel_common(
+    name: &str,
+    m: &naga::Module,
+    volume: &[wgpu::BindGroupLayoutEntry],
+    extra: &[&str],
+) {
     for ep in &m.entry_points {
         assert_eq!(ep.stage, naga::ShaderStage::Compute, "{name}");
         assert_eq!(ep.workgroup_size, [WORKGROUP[0], WORKGROUP[1], 1], "{name}");
@@ -200,7 +219,11 @@ fn check_kernel(name: &str, m: &naga::Module, volume: &[wgpu::BindGroupLayoutEnt
         .iter()
         .filter_map(|(_, o)| o.name.clone())
         .collect();
-    let want: BTreeSet<String> = OVERRIDES.iter().map(|s| s.to_string()).collect();
+    let want: BTreeSet<String> = OVERRIDES
+        .iter()
+        .chain(extra)
+        .map(|s| s.to_string())
+        .collect();
     assert_eq!(overrides, want, "{name}: override constants");
     // Mode ids and flag bits.
     for (wgsl, mode) in KernelMode::ALL {
@@ -223,12 +246,6 @@ fn check_kernel(name: &str, m: &naga::Module, volume: &[wgpu::BindGroupLayoutEnt
         brickray_core::window::VIRIDIS.len(),
         "{name}"
     );
-    for (wgsl, mode) in [
-        ("SLAB_MAX", crate::slice::SLAB_MAX),
-        ("SLAB_MEAN", crate::slice::SLAB_MEAN),
-    ] {
-        assert_eq!(const_u32(m, wgsl), mode, "{name}: {wgsl}");
-    }
     // Uniform layouts of groups 0 and 1.
     check_struct(
         m,
@@ -304,6 +321,79 @@ fn check_kernel(name: &str, m: &naga::Module, volume: &[wgpu::BindGroupLayoutEnt
         kernel_bindings(volume),
         "{name}: bindings"
     );
+}
+
+/// The multi-channel kernel: one entry point, the shared overrides and
+/// `CHANNELS`, its group 2 and `ChannelParams` against the Rust side, and
+/// the opacity limit of the mixture against brickray-core's.
+#[test]
+fn channels_kernel_matches_the_rust_side() {
+    use crate::backend::channels::ChannelParams;
+    let m = module("channels", &channels());
+    let names: Vec<&str> = m.entry_points.iter().map(|e| e.name.as_str()).collect();
+    assert_eq!(names, [crate::kernels::ENTRY_RAYCAST]);
+    check_kernel_common(
+        "channels",
+        &m,
+        &crate::backend::channels::layout_entries(),
+        &["CHANNELS"],
+    );
+    check_struct(
+        &m,
+        "ChannelParams",
+        rust_fields!(
+            ChannelParams,
+            [
+                dims,
+                channels,
+                cells,
+                cell_size,
+                scale,
+                offset,
+                tf_count,
+                tf_offset,
+                table_rows,
+                table_width,
+                pad0,
+                pad1
+            ]
+        ),
+        std::mem::size_of::<ChannelParams>(),
+    );
+    let (_, c) = m
+        .constants
+        .iter()
+        .find(|(_, c)| c.name.as_deref() == Some("OPAQUE_ALPHA"))
+        .expect("OPAQUE_ALPHA");
+    let v = match m.global_expressions[c.init] {
+        naga::Expression::Literal(naga::Literal::F32(v)) => v,
+        ref e => panic!("OPAQUE_ALPHA is not an f32 literal: {e:?}"),
+    };
+    assert_eq!(v as f64, brickray_core::channels::OPAQUE_ALPHA);
+    assert_eq!(
+        const_u32(&m, "CLASS_HEADER") as usize,
+        crate::backend::channels::CLASS_HEADER
+    );
+}
+
+/// Every channel count (1-4) with every mode and combination of ERT, ESS
+/// and shading validates as the multi-channel kernel's pipelines specialise
+/// it (the other switches off: `Variant::channels` turns them off).
+#[test]
+fn every_channel_permutation_validates() {
+    let src = channels();
+    for n in 1..=4u32 {
+        for (_, mode) in KernelMode::ALL {
+            for bits in 0..8u32 {
+                let s = specialise("channels", &src, mode, bits, 0).replace(
+                    "override CHANNELS: u32 = 1u;",
+                    &format!("const CHANNELS: u32 = {n}u;"),
+                );
+                assert!(!s.contains("override "), "channels: an override left");
+                module(&format!("channels {n} {mode:?} {bits:03b}"), &s);
+            }
+        }
+    }
 }
 
 #[test]
@@ -545,6 +635,7 @@ fn every_shader_file_is_covered() {
         "slice_incore.wgsl",
         "slice_ooc.wgsl",
         "overlay.wgsl",
+        "channels.wgsl",
     ];
     for entry in std::fs::read_dir(dir).unwrap() {
         let name = entry.unwrap().file_name().into_string().unwrap();
@@ -573,18 +664,6 @@ fn every_shader_file_is_covered() {
 /// and in colour with iso (also predicting) and MIP.
 #[test]
 fn every_override_permutation_validates() {
-    let switches = [
-        "ERT",
-        "ESS",
-        "SHADE",
-        "PREDICT",
-        "GUARD",
-        "SPARSE_ESS",
-        "PREINT",
-        "WEIGHTS",
-        "LABELS",
-        "SMOOTH_LABELS",
-    ];
     let mut combos = Vec::new();
     for (_, mode) in KernelMode::ALL {
         for bits in 0..8u32 {
@@ -641,24 +720,7 @@ fn every_override_permutation_validates() {
     combos.push((KernelMode::Mip, 0b011 | 1 << 7, 1));
     for (name, src) in [("incore", incore()), ("ooc", ooc())] {
         for &(mode, bits, overlay) in &combos {
-            let mut s = src
-                .replace(
-                    "override MODE: u32 = 0u;",
-                    &format!("const MODE: u32 = {}u;", mode as u32),
-                )
-                .replace(
-                    "override OVERLAY: u32 = 0u;",
-                    &format!("const OVERLAY: u32 = {overlay}u;"),
-                );
-            for (i, sw) in switches.iter().enumerate() {
-                let on = bits >> i & 1 == 1;
-                let from = [true, false]
-                    .map(|d| format!("override {sw}: bool = {d};"))
-                    .into_iter()
-                    .find(|f| s.contains(f.as_str()))
-                    .unwrap_or_else(|| panic!("{name}: no override {sw}"));
-                s = s.replace(&from, &format!("const {sw}: bool = {on};"));
-            }
+            let s = specialise(name, &src, mode, bits, overlay);
             assert!(!s.contains("override "), "{name}: an override left");
             module(
                 &format!("{name} {mode:?} {bits:010b} overlay {overlay}"),
@@ -666,4 +728,42 @@ fn every_override_permutation_validates() {
             );
         }
     }
+}
+
+/// The switches of [`every_override_permutation_validates`], in bit order.
+const SWITCHES: [&str; 10] = [
+    "ERT",
+    "ESS",
+    "SHADE",
+    "PREDICT",
+    "GUARD",
+    "SPARSE_ESS",
+    "PREINT",
+    "WEIGHTS",
+    "LABELS",
+    "SMOOTH_LABELS",
+];
+
+/// `src` with its override constants made constants: `MODE`, `OVERLAY`,
+/// and each of [`SWITCHES`] on when its bit of `bits` is set.
+fn specialise(name: &str, src: &str, mode: KernelMode, bits: u32, overlay: u32) -> String {
+    let mut s = src
+        .replace(
+            "override MODE: u32 = 0u;",
+            &format!("const MODE: u32 = {}u;", mode as u32),
+        )
+        .replace(
+            "override OVERLAY: u32 = 0u;",
+            &format!("const OVERLAY: u32 = {overlay}u;"),
+        );
+    for (i, sw) in SWITCHES.iter().enumerate() {
+        let on = bits >> i & 1 == 1;
+        let from = [true, false]
+            .map(|d| format!("override {sw}: bool = {d};"))
+            .into_iter()
+            .find(|f| s.contains(f.as_str()))
+            .unwrap_or_else(|| panic!("{name}: no override {sw}"));
+        s = s.replace(&from, &format!("const {sw}: bool = {on};"));
+    }
+    s
 }

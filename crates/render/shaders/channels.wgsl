@@ -1,0 +1,392 @@
+// Multi-channel in-core ray caster (compute), after common.wgsl, modes.wgsl,
+// overlay.wgsl and predict.wgsl (for their shared functions and switches; the
+// overlay and the prediction buffer are not drawn with channels). 1 to 4
+// intensity channels packed in one texel, each classified by its own
+// transfer function and composited in one ray (brickray_core::channels;
+// docs/rendering-model.md, "Channels"):
+//   DVR: each sample mixes the visible channels' classified samples
+//        (channel_mix: opacity 1 - prod(1 - a_c), colour the
+//        extinction-weighted mean) and composites the mixture;
+//   MIP: each channel's maximum, classified, mixed;
+//   iso: the first crossing of any visible channel's own isovalue, in that
+//        channel's colour, shaded by its gradient.
+// Empty-space skipping: a macro cell is skipped when it is empty in every
+// visible channel (DVR, iso: distances computed on the CPU; MIP: per channel
+// against its running maximum).
+
+// Channels drawn (1..4). The code works lane-wise over vec4s, one lane per
+// channel, with no loop over channels and no dynamic index into local
+// values; visibility masks by multiplication (1 or 0 per lane, read from
+// storage: see chan_tf). Lanes past the channels are never visible.
+override CHANNELS: u32 = 1u;
+
+// The largest opacity whose extinction the mixture takes
+// (brickray_core::channels::OPAQUE_ALPHA).
+const OPAQUE_ALPHA: f32 = 1.0 - 1.0 / 1048576.0;
+
+// Group 2: the multi-channel volume and its classification
+// (`ChannelParams` in backend/channels.rs; a test checks the offsets).
+struct ChannelParams {
+    // Voxel dimensions.
+    dims: vec3<f32>,
+    // Channels (CHANNELS).
+    channels: u32,
+    // Macro cells per axis.
+    cells: vec3<u32>,
+    // Macro-cell side in voxels.
+    cell_size: u32,
+    // normalized = texel * scale + offset, per channel.
+    scale: vec4<f32>,
+    offset: vec4<f32>,
+    // Entries of each channel's TF (as floats) and the first in chan_tf.
+    tf_count: vec4<f32>,
+    tf_offset: vec4<u32>,
+    // Rows of each channel's corrected table, and the tables' columns.
+    table_rows: f32,
+    table_width: f32,
+    pad0: f32,
+    pad1: f32,
+}
+
+@group(2) @binding(0) var<uniform> chan: ChannelParams;
+@group(2) @binding(1) var volume_tex: texture_3d<f32>;
+@group(2) @binding(2) var volume_sampler: sampler;
+// Normalized min/max of every macro cell and channel (cell * CHANNELS + c).
+@group(2) @binding(3) var<storage, read> cell_ranges: array<vec2<f32>>;
+// Per macro cell: the Chebyshev distance in cells to the nearest cell that a
+// visible channel can contribute in (DVR: through its TF; iso: at or above
+// its isovalue), 0 for those.
+@group(2) @binding(4) var<storage, read> cell_skip: array<u32>;
+// The channels' corrected tables stacked: channel c's row r is row
+// c * table_rows + r (read through group 1's linear sampler).
+@group(2) @binding(5) var chan_table: texture_2d<f32>;
+// The channels' classification: CLASS_HEADER rows (visibility: 1 or 0 per
+// lane; isovalues; each channel's isosurface colour), then their TF entries,
+// concatenated (channel c's from tf_offset[c]). Lavapipe (22.x) inlines
+// uniform values that steer branches and crashed compiling this kernel when
+// the visibility and isovalues were uniforms: read from storage they are
+// never inlined.
+@group(2) @binding(6) var<storage, read> chan_tf: array<vec4<f32>>;
+
+// Rows of chan_tf before the TF entries (`CLASS_HEADER` in
+// backend/channels.rs).
+const CLASS_HEADER: u32 = 6u;
+
+// 1 in the lanes of the visible channels, 0 elsewhere.
+fn chan_visible() -> vec4<f32> {
+    return chan_tf[0];
+}
+
+// Each channel's normalized isovalue.
+fn chan_iso() -> vec4<f32> {
+    return chan_tf[1];
+}
+
+// Channel c's isosurface colour.
+fn chan_iso_color(c: u32) -> vec3<f32> {
+    return chan_tf[2u + min(c, 3u)].rgb;
+}
+
+// The normalized value of every channel at texture point u (filtered).
+fn channel_values(u: vec3<f32>) -> vec4<f32> {
+    return textureSampleLevel(volume_tex, volume_sampler, u, 0.0) * chan.scale + chan.offset;
+}
+
+// 1 in lane c, 0 elsewhere.
+fn lane(c: u32) -> vec4<f32> {
+    return vec4<f32>(f32(c == 0u), f32(c == 1u), f32(c == 2u), f32(c == 3u));
+}
+
+// Lane c of x.
+fn lane_of(x: vec4<f32>, c: u32) -> f32 {
+    return dot(x, lane(c));
+}
+
+// Four RGBA values, one per channel (lanes past the channels zero).
+struct Quad {
+    q0: vec4<f32>,
+    q1: vec4<f32>,
+    q2: vec4<f32>,
+    q3: vec4<f32>,
+}
+
+fn quad_get(q: Quad, c: u32) -> vec4<f32> {
+    return select(select(select(q.q0, q.q1, c == 1u), q.q2, c == 2u), q.q3, c == 3u);
+}
+
+fn quad_alpha(q: Quad) -> vec4<f32> {
+    return vec4<f32>(q.q0.a, q.q1.a, q.q2.a, q.q3.a);
+}
+
+// Channel c's TF at v with its opacity corrected to row r's step: one
+// filtered read of its corrected table.
+fn channel_tf_sample(c: u32, v: f32, r: f32) -> vec4<f32> {
+    let w = chan.table_width;
+    let x = (clamp(v, 0.0, 1.0) * (w - 1.0) + 0.5) / w;
+    let y = (f32(c) * chan.table_rows + r + 0.5) / (f32(CHANNELS) * chan.table_rows);
+    return textureSampleLevel(chan_table, tf_sampler, vec2<f32>(x, y), 0.0);
+}
+
+// Every channel's corrected TF sample at its value in v.
+fn channel_tf4(v: vec4<f32>, r: f32) -> Quad {
+    var q = Quad(channel_tf_sample(0u, v.x, r), vec4<f32>(0.0), vec4<f32>(0.0), vec4<f32>(0.0));
+    if (CHANNELS > 1u) {
+        q.q1 = channel_tf_sample(1u, v.y, r);
+    }
+    if (CHANNELS > 2u) {
+        q.q2 = channel_tf_sample(2u, v.z, r);
+    }
+    if (CHANNELS > 3u) {
+        q.q3 = channel_tf_sample(3u, v.w, r);
+    }
+    return q;
+}
+
+// Channel c's TF at v, exact and uncorrected (MIP's maxima): tf_lookup of
+// its entries.
+fn channel_tf_lookup(c: u32, v: f32) -> vec4<f32> {
+    let n = lane_of(chan.tf_count, c);
+    let x = clamp(v, 0.0, 1.0) * (n - 1.0);
+    let i = min(u32(floor(x)), u32(n) - 1u);
+    let j = min(i + 1u, u32(n) - 1u);
+    let f = x - f32(i);
+    let o = u32(lane_of(vec4<f32>(chan.tf_offset), c));
+    return mix(chan_tf[o + i], chan_tf[o + j], f);
+}
+
+// Every channel's exact TF at its value in v.
+fn channel_tf_lookup4(v: vec4<f32>) -> Quad {
+    var q = Quad(channel_tf_lookup(0u, v.x), vec4<f32>(0.0), vec4<f32>(0.0), vec4<f32>(0.0));
+    if (CHANNELS > 1u) {
+        q.q1 = channel_tf_lookup(1u, v.y);
+    }
+    if (CHANNELS > 2u) {
+        q.q2 = channel_tf_lookup(2u, v.z);
+    }
+    if (CHANNELS > 3u) {
+        q.q3 = channel_tf_lookup(3u, v.w);
+    }
+    return q;
+}
+
+// A voxel-space gradient as the world direction and its magnitude.
+fn world_gradient(g: vec3<f32>) -> vec4<f32> {
+    return vec4<f32>(frame.normal_mat * (g * chan.dims), length(g));
+}
+
+// The world-space gradient direction and voxel-space magnitude of every
+// channel at u (gradient() of incore.wgsl, four channels per fetch).
+fn channel_gradients(u: vec3<f32>) -> Quad {
+    let e = 1.0 / chan.dims;
+    let dx = (channel_values(u + vec3<f32>(e.x, 0.0, 0.0)) - channel_values(u - vec3<f32>(e.x, 0.0, 0.0))) * 0.5;
+    let dy = (channel_values(u + vec3<f32>(0.0, e.y, 0.0)) - channel_values(u - vec3<f32>(0.0, e.y, 0.0))) * 0.5;
+    let dz = (channel_values(u + vec3<f32>(0.0, 0.0, e.z)) - channel_values(u - vec3<f32>(0.0, 0.0, e.z))) * 0.5;
+    return Quad(
+        world_gradient(vec3<f32>(dx.x, dy.x, dz.x)),
+        world_gradient(vec3<f32>(dx.y, dy.y, dz.y)),
+        world_gradient(vec3<f32>(dx.z, dy.z, dz.z)),
+        world_gradient(vec3<f32>(dx.w, dy.w, dz.w)),
+    );
+}
+
+// The mixture of the channels' straight colours `q` with opacities `a`
+// (brickray_core::channels::mix), premultiplied.
+fn channel_mix(q: Quad, a: vec4<f32>) -> vec4<f32> {
+    let tau = -log(vec4<f32>(1.0) - min(a, vec4<f32>(OPAQUE_ALPHA)));
+    let total = tau.x + tau.y + tau.z + tau.w;
+    if (total <= 0.0) {
+        return vec4<f32>(0.0);
+    }
+    let keep = (1.0 - a.x) * (1.0 - a.y) * (1.0 - a.z) * (1.0 - a.w);
+    let rgb = q.q0.rgb * tau.x + q.q1.rgb * tau.y + q.q2.rgb * tau.z + q.q3.rgb * tau.w;
+    let alpha = 1.0 - keep;
+    return vec4<f32>(rgb * (alpha / total), alpha);
+}
+
+// DVR: the mixed, shaded sample of values v at u, premultiplied.
+fn channel_dvr_sample(v: vec4<f32>, u: vec3<f32>, r: Ray, row: f32) -> vec4<f32> {
+    var q = channel_tf4(v, row);
+    let a = quad_alpha(q) * chan_visible();
+    if (all(a <= vec4<f32>(0.0))) {
+        return vec4<f32>(0.0);
+    }
+    if (SHADE) {
+        let g = channel_gradients(u);
+        q.q0 = vec4<f32>(shade(q.q0.rgb, g.q0, r.dir), 0.0);
+        q.q1 = vec4<f32>(shade(q.q1.rgb, g.q1, r.dir), 0.0);
+        q.q2 = vec4<f32>(shade(q.q2.rgb, g.q2, r.dir), 0.0);
+        q.q3 = vec4<f32>(shade(q.q3.rgb, g.q3, r.dir), 0.0);
+    }
+    return channel_mix(q, a);
+}
+
+// In this kernel a cursor samples one channel (iso bisection and shading).
+struct Cursor {
+    r: Ray,
+    c: u32,
+}
+
+fn cursor_value(cur: Cursor, t: f32) -> f32 {
+    return lane_of(channel_values(tex_at(cur.r, t)), cur.c);
+}
+
+fn cursor_gradient(cur: Cursor, t: f32) -> vec4<f32> {
+    return quad_get(channel_gradients(tex_at(cur.r, t)), cur.c);
+}
+
+// Iso: the first visible channel at or above its isovalue in v, or CHANNELS.
+fn channel_inside(v: vec4<f32>) -> u32 {
+    // Above 0.25 in a visible lane at or above its isovalue (sign is 0 at
+    // equality), by arithmetic: no comparison with the uniforms themselves.
+    let m = chan_visible() * (sign(v - chan_iso()) * 0.5 + vec4<f32>(0.5));
+    var c = CHANNELS;
+    c = select(c, 3u, m.w > 0.25);
+    c = select(c, 2u, m.z > 0.25);
+    c = select(c, 1u, m.y > 0.25);
+    c = select(c, 0u, m.x > 0.25);
+    return c;
+}
+
+fn channel_cell_of(u: vec3<f32>) -> vec3<u32> {
+    let c = floor(u * chan.dims / f32(chan.cell_size));
+    return vec3<u32>(clamp(c, vec3<f32>(0.0), vec3<f32>(chan.cells) - 1.0));
+}
+
+fn channel_cell_index(c: vec3<u32>) -> u32 {
+    return (c.z * chan.cells.y + c.y) * chan.cells.x + c.x;
+}
+
+fn channel_cell_exit(r: Ray, inv_dir: vec3<f32>, c: vec3<u32>, reach: u32) -> f32 {
+    let s = f32(chan.cell_size) / chan.dims;
+    let lo = (vec3<f32>(c) - f32(reach - 1u)) * s;
+    let hi = (vec3<f32>(c) + f32(reach)) * s;
+    return box_exit(r.tex_origin, r.tex_dir, inv_dir, lo, hi);
+}
+
+// MIP: true when no visible channel's range in the cell exceeds its running
+// maximum mx.
+fn channel_mip_skips(cell: u32, mx: vec4<f32>) -> bool {
+    let at = cell * CHANNELS;
+    var hi = vec4<f32>(-3.0e38);
+    hi.x = cell_ranges[at].y;
+    if (CHANNELS > 1u) {
+        hi.y = cell_ranges[at + 1u].y;
+    }
+    if (CHANNELS > 2u) {
+        hi.z = cell_ranges[at + 2u].y;
+    }
+    if (CHANNELS > 3u) {
+        hi.w = cell_ranges[at + 3u].y;
+    }
+    return all(max(hi - mx, vec4<f32>(0.0)) * chan_visible() <= vec4<f32>(0.0));
+}
+
+@compute @workgroup_size(8, 8, 1)
+fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    if (gid.x >= frame.viewport_size.x || gid.y >= frame.viewport_size.y) {
+        return;
+    }
+    let px = gid.xy;
+    let start = start_ray(px);
+    let r = start.r;
+    let t0 = start.t0;
+    let t1 = start.t1;
+    var acc = accum_new();
+    var cur = Cursor(r, 0u);
+    // MIP: each channel's running maximum and where it was first attained.
+    var mx = vec4<f32>(-3.0e38);
+    var mt = vec4<f32>(0.0);
+    if (t1 > t0) {
+        let dt = frame.dt;
+        let inv_dir = safe_inverse(r.tex_dir);
+        let n = min(first_k_after(t1, t0, dt), frame.max_samples);
+        var k = 0u;
+        var k_cell = 0u;
+        loop {
+            if (k >= n) { break; }
+            let t = grid_t(t0, k, dt);
+            if (t >= t1) { break; }
+            let u = tex_at(r, t);
+            if (ESS && k >= k_cell) {
+                let c = channel_cell_of(u);
+                let cell = channel_cell_index(c);
+                var reach = 1u;
+                var skip = false;
+                if (MODE == MODE_MIP) {
+                    skip = channel_mip_skips(cell, mx);
+                } else {
+                    let d = cell_skip[cell];
+                    skip = d > 0u;
+                    reach = max(d, 1u);
+                }
+                let k_exit = max(k + 1u, first_k_after(channel_cell_exit(r, inv_dir, c, reach), t0, dt));
+                if (skip) {
+                    k = k_exit;
+                    continue;
+                }
+                k_cell = k_exit;
+            }
+            let v = channel_values(u);
+            acc.samples = acc.samples + 1u;
+            if (MODE == MODE_DVR) {
+                let p = channel_dvr_sample(v, u, r, 0.0);
+                if (p.a > 0.0) {
+                    let acc_a = acc.color.a;
+                    acc.color = vec4<f32>(acc.color.rgb + (1.0 - acc_a) * p.rgb, acc_a + (1.0 - acc_a) * p.a);
+                    if (!acc.depth_set && acc.color.a >= frame.depth_opacity) {
+                        acc.depth = depth_at(r, t);
+                        acc.depth_set = true;
+                    }
+                    if (ERT && acc.color.a >= frame.ert_threshold) { break; }
+                }
+            } else if (MODE == MODE_ISO) {
+                let c = channel_inside(v);
+                if (c < CHANNELS) {
+                    cur.c = c;
+                    // The first sample inside is a capped cut.
+                    iso_bracket(&acc, select(t - dt, t, k == 0u), t);
+                    break;
+                }
+            } else {
+                let better = v > mx;
+                mx = select(mx, v, better);
+                mt = select(mt, vec4<f32>(t), better);
+                if (ERT && all(max(vec4<f32>(1.0) - mx, vec4<f32>(0.0)) * chan_visible() <= vec4<f32>(0.0))) { break; }
+            }
+            k = k + 1u;
+        }
+    }
+    if (MODE == MODE_ISO && acc.hit) {
+        // Bisected on the crossing channel (its isovalue), shaded by its
+        // gradient, in its colour.
+        var a = acc.hit_a;
+        var b = acc.hit_b;
+        let steps = select(0u, frame.iso_refine_steps, b > a);
+        let iso = lane_of(chan_iso(), cur.c);
+        for (var i = 0u; i < steps; i = i + 1u) {
+            let m = 0.5 * (a + b);
+            acc.samples = acc.samples + 1u;
+            if (cursor_value(cur, m) >= iso) {
+                b = m;
+            } else {
+                a = m;
+            }
+        }
+        let th = 0.5 * (a + b);
+        acc.color = vec4<f32>(shade(chan_iso_color(cur.c), cursor_gradient(cur, th), r.dir), 1.0);
+        acc.depth = depth_at(r, th);
+        acc.depth_set = true;
+    }
+    if (MODE == MODE_MIP && any(mx > vec4<f32>(-1.0e38))) {
+        // Every channel's maximum was taken at once: 1 in the lanes of the
+        // visible channels (hidden ones mix nothing and place no depth).
+        let q = channel_tf_lookup4(mx);
+        acc.color = channel_mix(q, quad_alpha(q) * chan_visible());
+        let tn = mt + vec4<f32>(3.0e38) * (vec4<f32>(1.0) - chan_visible());
+        let t_near = min(min(tn.x, tn.y), min(tn.z, tn.w));
+        let shown = t_near < 1.0e38;
+        acc.depth = select(acc.depth, depth_at(r, t_near), shown);
+        acc.depth_set = shown;
+    }
+    store_pixel(px, acc.color, acc.depth, start.host, acc.samples);
+}
