@@ -154,6 +154,31 @@ pub enum IoError {
         /// What there is.
         available: String,
     },
+    /// An input of more channels than a multi-channel volume holds, read
+    /// without a selection ([`ReadOptions::channels`](crate::ReadOptions::channels)),
+    /// or a selection of more than that.
+    #[error(
+        "{path}: {count} channels, a multi-channel volume holds at most {max} \
+         (select up to {max} with ReadOptions::channels)"
+    )]
+    TooManyChannels {
+        /// The input.
+        path: PathBuf,
+        /// Channels in the input (or selected).
+        count: u64,
+        /// The most a volume holds ([`brickray_core::MAX_CHANNELS`]).
+        max: usize,
+    },
+    /// The channels read do not make one multi-channel volume (a label map
+    /// among them, different grids).
+    #[error("{path}: {source}")]
+    Channels {
+        /// The input.
+        path: PathBuf,
+        /// What is wrong.
+        #[source]
+        source: brickray_core::ChannelError,
+    },
     /// No registered format reads this path.
     #[error("{path}: no reader for this input ({tried})")]
     UnknownFormat {

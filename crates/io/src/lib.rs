@@ -52,6 +52,7 @@ pub use raw::RawReader;
 pub use registry::{Claim, Entry, EntryKind, Format, Probe, Registry};
 pub use slab::{SampleConverter, SourceType};
 
+mod channels;
 mod error;
 mod files;
 mod labels;
@@ -59,6 +60,10 @@ mod memory;
 mod reader;
 mod scan;
 
+pub use channels::{
+    CHANNEL_PALETTE, ChannelInfo, ChannelReaders, DEFAULT_CHANNEL_OPACITY, ReadChannels,
+    read_channels, select_channels,
+};
 pub use error::IoError;
 pub use files::{FileKind, regular_file_metadata};
 pub(crate) use files::{MAX_HEADER, open_regular, resolve_data_file};

@@ -6,6 +6,13 @@
 //! ([`VolumeReader::placement`]). An `"affine"` without `"affine_space"` (older
 //! sidecars copied a NIfTI affine so) is not used, and the reader's notes say
 //! so; an `"affine_space"` without `"affine"` is an error.
+//!
+//! A sidecar with `"channels": N` describes N channels of `dims` and `dtype`
+//! stored planar, channel slowest (channel 0's whole volume first, then
+//! channel 1's: OME's c, z, y, x order); the raw file holds exactly N
+//! volumes. [`ReadOptions::channel`] picks the one a [`RawReader`] reads,
+//! [`crate::read_channels`] reads them all. A declared `value_range` is every
+//! channel's; without one each channel's is scanned from its own samples.
 
 use super::{
     IoError, MAX_HEADER, Placement, ReadOptions, VolumeReader, check_slab, open_regular,
@@ -56,6 +63,9 @@ struct Sidecar {
     /// `"RAS"`, `"LPS"` or `"image"`.
     #[serde(default)]
     affine_space: Option<serde_json::Value>,
+    /// Channels in the raw file, planar: channel 0's whole volume first.
+    #[serde(default)]
+    channels: Option<serde_json::Value>,
 }
 
 impl RawReader {
@@ -67,11 +77,23 @@ impl RawReader {
         offset: u64,
         desc: VolumeDesc,
     ) -> Result<RawReader, IoError> {
-        let path = path.into();
+        RawReader::planar(path.into(), offset, desc, 1, 0)
+    }
+
+    /// Channel `channel` of a raw file of `channels` planar channels (each a
+    /// whole volume of `desc`, channel 0 first) after `offset` bytes: the
+    /// file must hold exactly `offset + channels * desc.byte_len()` bytes.
+    fn planar(
+        path: PathBuf,
+        offset: u64,
+        desc: VolumeDesc,
+        channels: u64,
+        channel: u64,
+    ) -> Result<RawReader, IoError> {
         desc.validate().map_err(|e| IoError::volume(&path, e))?;
         let file = open_regular(&path)?;
         let actual = file.metadata().map_err(|e| IoError::io(&path, e))?.len();
-        let expected = offset.saturating_add(desc.byte_len());
+        let expected = offset.saturating_add(channels.saturating_mul(desc.byte_len()));
         if actual != expected {
             return Err(IoError::SizeMismatch {
                 path,
@@ -83,7 +105,7 @@ impl RawReader {
             path,
             sidecar: None,
             file,
-            offset,
+            offset: offset + channel * desc.byte_len(),
             desc,
             placement: None,
             notes: Vec::new(),
@@ -103,18 +125,7 @@ impl RawReader {
     /// [`ReadOptions::allow_outside_dir`] lets `"file"` name a file outside the
     /// sidecar's folder.
     pub fn open_sidecar_with(json: &Path, opts: &ReadOptions) -> Result<RawReader, IoError> {
-        let mut bytes = Vec::new();
-        open_regular(json)?
-            .take(MAX_HEADER as u64 + 1)
-            .read_to_end(&mut bytes)
-            .map_err(|e| IoError::io(json, e))?;
-        if bytes.len() > MAX_HEADER {
-            return Err(IoError::header(json, "sidecar longer than 1 MiB"));
-        }
-        let text =
-            String::from_utf8(bytes).map_err(|_| IoError::header(json, "sidecar is not UTF-8"))?;
-        let sc: Sidecar =
-            serde_json::from_str(&text).map_err(|e| IoError::header(json, e.to_string()))?;
+        let sc = load_sidecar(json)?;
         let spacing_f32 = sc
             .spacing
             .as_ref()
@@ -218,6 +229,16 @@ impl RawReader {
             }
             (None, None) => (None, Vec::new()),
         };
+        let channels = sidecar_channels(json, &sc)?;
+        let channel = opts.channel.unwrap_or(0);
+        if channel >= channels {
+            return Err(IoError::NoSuchChoice {
+                path: json.to_owned(),
+                what: "channel",
+                wanted: channel.to_string(),
+                available: format!("0..{channels}"),
+            });
+        }
         let labels = kind.is_labels();
         let desc = VolumeDesc {
             dims,
@@ -231,14 +252,44 @@ impl RawReader {
             kind,
         };
         desc.validate().map_err(|e| IoError::volume(json, e))?;
-        let mut reader = RawReader::new(raw, 0, desc)?;
+        let mut reader = RawReader::planar(raw, 0, desc, channels, channel)?;
         reader.sidecar = Some(json.to_owned());
         reader.placement = placement;
         reader.notes = notes;
+        if channels > 1 {
+            reader
+                .notes
+                .push(format!("channel {channel} of {channels} (planar)"));
+        }
         if declared.is_none() && !labels {
             reader.desc.value_range = reader.scan()?;
         }
         Ok(reader)
+    }
+}
+
+/// A sidecar's JSON (a regular file of at most 1 MiB).
+fn load_sidecar(json: &Path) -> Result<Sidecar, IoError> {
+    let mut bytes = Vec::new();
+    open_regular(json)?
+        .take(MAX_HEADER as u64 + 1)
+        .read_to_end(&mut bytes)
+        .map_err(|e| IoError::io(json, e))?;
+    if bytes.len() > MAX_HEADER {
+        return Err(IoError::header(json, "sidecar longer than 1 MiB"));
+    }
+    let text =
+        String::from_utf8(bytes).map_err(|_| IoError::header(json, "sidecar is not UTF-8"))?;
+    serde_json::from_str(&text).map_err(|e| IoError::header(json, e.to_string()))
+}
+
+/// A sidecar's `channels`: a positive integer, 1 when absent.
+fn sidecar_channels(json: &Path, sc: &Sidecar) -> Result<u64, IoError> {
+    match &sc.channels {
+        None => Ok(1),
+        Some(v) => v.as_u64().filter(|&n| n > 0).ok_or_else(|| {
+            IoError::header(json, format!("channels is {v}, not a positive integer"))
+        }),
     }
 }
 
@@ -405,15 +456,50 @@ impl crate::Format for RawFormat {
         }
     }
     fn open(&self, path: &Path, opts: &ReadOptions) -> Result<Box<dyn VolumeReader>, IoError> {
-        let json = if path
-            .extension()
-            .is_some_and(|e| e.eq_ignore_ascii_case("raw"))
-        {
-            path.with_extension("json")
+        Ok(Box::new(RawReader::open_sidecar_with(
+            &sidecar_of(path),
+            opts,
+        )?))
+    }
+    fn list(&self, path: &Path, opts: &ReadOptions) -> Result<Vec<crate::Entry>, IoError> {
+        let json = sidecar_of(path);
+        let n = sidecar_channels(&json, &load_sidecar(&json)?)?;
+        let pick = opts.channel.unwrap_or(0);
+        Ok(if n > 1 {
+            (0..n)
+                .map(|i| crate::Entry {
+                    kind: crate::EntryKind::Channel,
+                    id: i.to_string(),
+                    summary: format!("channel {i} of {n} (planar)"),
+                    default: i == pick,
+                })
+                .collect()
         } else {
-            path.to_owned()
-        };
-        Ok(Box::new(RawReader::open_sidecar_with(&json, opts)?))
+            Vec::new()
+        })
+    }
+    fn open_channels(
+        &self,
+        path: &Path,
+        opts: &ReadOptions,
+    ) -> Result<crate::ChannelReaders, IoError> {
+        let json = sidecar_of(path);
+        let count = sidecar_channels(&json, &load_sidecar(&json)?)?;
+        crate::ChannelReaders::open_each(&json, count, &[], opts, |o| {
+            Ok(Box::new(RawReader::open_sidecar_with(&json, o)?))
+        })
+    }
+}
+
+/// The sidecar of `path`: itself, or a `.raw` file's `.json`.
+fn sidecar_of(path: &Path) -> PathBuf {
+    if path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("raw"))
+    {
+        path.with_extension("json")
+    } else {
+        path.to_owned()
     }
 }
 

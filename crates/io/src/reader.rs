@@ -27,6 +27,11 @@ pub struct ReadOptions {
     pub level: Option<usize>,
     /// The channel of a multi-channel input; `None`: the first.
     pub channel: Option<u64>,
+    /// The channels [`read_channels`](crate::read_channels) reads (indices
+    /// in the file, at most [`brickray_core::MAX_CHANNELS`], in this order);
+    /// `None`: every channel (an error beyond the maximum). The
+    /// single-channel reads use [`channel`](Self::channel) instead.
+    pub channels: Option<Vec<u64>>,
     /// The time point of a time series; `None`: the first.
     pub time: Option<u64>,
     /// The voxel spacing to use where the file states none (a plain TIFF);
@@ -53,6 +58,11 @@ impl ReadOptions {
     /// Sets [`ReadOptions::channel`].
     pub fn channel(mut self, channel: Option<u64>) -> ReadOptions {
         self.channel = channel;
+        self
+    }
+    /// Sets [`ReadOptions::channels`].
+    pub fn channels(mut self, channels: Option<Vec<u64>>) -> ReadOptions {
+        self.channels = channels;
         self
     }
     /// Sets [`ReadOptions::spacing`].

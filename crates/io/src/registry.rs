@@ -4,7 +4,7 @@
 //! application adds its own with [`Registry::register`] or
 //! [`Registry::register_global`].
 
-use crate::{FileKind, IoError, ReadOptions, VolumeReader};
+use crate::{ChannelReaders, FileKind, IoError, ReadChannels, ReadOptions, VolumeReader};
 use parking_lot::RwLock;
 use std::io::Read;
 use std::path::{Path, PathBuf};
@@ -128,6 +128,15 @@ pub trait Format: Send + Sync + std::fmt::Debug {
     /// Opens the path.
     fn open(&self, path: &Path, opts: &ReadOptions) -> Result<Box<dyn VolumeReader>, IoError>;
 
+    /// Opens every channel [`read_channels`](crate::read_channels) reads
+    /// (those of [`ReadOptions::channels`], else all; see
+    /// [`select_channels`](crate::select_channels)), one reader each, with
+    /// what the file says of each. By default the input is one channel:
+    /// [`open`](Self::open)'s.
+    fn open_channels(&self, path: &Path, opts: &ReadOptions) -> Result<ChannelReaders, IoError> {
+        crate::channels::open_single(path, opts, |o| self.open(path, o))
+    }
+
     /// The selectable parts of the input (series, levels, channels, time
     /// points); none by default.
     fn list(&self, path: &Path, opts: &ReadOptions) -> Result<Vec<Entry>, IoError> {
@@ -218,6 +227,13 @@ impl Registry {
     /// Opens `path` with the format that claims it.
     pub fn open(&self, path: &Path, opts: &ReadOptions) -> Result<Box<dyn VolumeReader>, IoError> {
         self.find(path)?.open(path, opts)
+    }
+
+    /// Every channel of `path`, read whole (see
+    /// [`read_channels`](crate::read_channels)).
+    pub fn read_channels(&self, path: &Path, opts: &ReadOptions) -> Result<ReadChannels, IoError> {
+        let opened = self.find(path)?.open_channels(path, opts)?;
+        ReadChannels::read(path, opened)
     }
 
     /// The selectable parts of `path` (see [`Format::list`]).

@@ -8,14 +8,17 @@
 //! Spacing comes from ImageJ metadata (`spacing=` for z, the resolution tags
 //! for x and y, in the description's `unit`) or OME-TIFF XML
 //! (`PhysicalSizeX/Y/Z`); a TIFF with neither has no spacing (1, 1, 1; set it
-//! or give it with [`ReadOptions::spacing`]). ImageJ hyperstacks and OME-TIFF with several
-//! channels or time points read one ([`ReadOptions::channel`],
-//! [`ReadOptions::time`]). Colour (RGB, palette) images are refused.
+//! or give it with [`ReadOptions::spacing`]). ImageJ hyperstacks (pages
+//! channel fastest, then z, then t; a missing `slices=` is what the channels
+//! and frames leave) and OME-TIFF (pages in its `DimensionOrder`) with
+//! several channels or time points read one ([`ReadOptions::channel`],
+//! [`ReadOptions::time`]), or every channel ([`TiffReader::open_channels`],
+//! [`crate::read_channels`]). Colour (RGB, palette) images are refused.
 
 use crate::slab::desc_range;
 use crate::{
-    Claim, Entry, EntryKind, Format, IoError, Probe, ReadOptions, Registry, SampleConverter,
-    SourceType, VolumeReader, check_slab, open_regular,
+    ChannelInfo, ChannelReaders, Claim, Entry, EntryKind, Format, IoError, Probe, ReadOptions,
+    Registry, SampleConverter, SourceType, VolumeReader, check_slab, open_regular,
 };
 use brickray_core::VolumeDesc;
 use std::fs::File;
@@ -136,13 +139,79 @@ pub fn natural_cmp(a: &str, b: &str) -> std::cmp::Ordering {
 #[derive(Debug, Default, Clone, PartialEq)]
 struct StackMeta {
     channels: u64,
+    /// 0: not stated (ImageJ writes `slices=` only for more than one).
     slices: u64,
     frames: u64,
-    /// Pages ordered channel fastest, then z, then t (ImageJ's order, OME's XYCZT).
+    /// The order of the pages: `C`, `Z` and `T`, fastest first (ImageJ's
+    /// is `CZT`; OME's `DimensionOrder` without its `XY`).
+    order: [u8; 3],
     spacing: [Option<f64>; 3],
     source: &'static str,
+    /// What OME-TIFF's `Channel` elements say (name, colour), in order.
+    channel_info: Vec<ChannelInfo>,
     /// What was assumed (a resolution tag of 0 read as spacing 1, ...).
     warnings: Vec<String>,
+}
+
+/// How a stack's pages are laid out: channels, slices and time points, and
+/// the page step of each.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Shape {
+    c: u64,
+    z: u64,
+    t: u64,
+    /// Pages between channels, slices, time points.
+    step: [u64; 3],
+}
+
+impl Shape {
+    /// The layout `meta` gives `pages` pages: its channels, slices and time
+    /// points when they account for every page (ImageJ's missing `slices=`:
+    /// the pages the others leave), else one channel of `pages` slices.
+    fn of(meta: Option<&StackMeta>, pages: u64) -> Shape {
+        if let Some(m) = meta {
+            let ct = m.channels.checked_mul(m.frames).filter(|&n| n > 0);
+            let z = match (m.slices, ct) {
+                (0, Some(ct)) if m.source == "ImageJ" && pages.is_multiple_of(ct) => pages / ct,
+                (z, _) => z,
+            };
+            if z > 0 && ct.and_then(|ct| ct.checked_mul(z)) == Some(pages) {
+                let n = |d: u8| match d {
+                    b'C' => m.channels,
+                    b'Z' => z,
+                    _ => m.frames,
+                };
+                let mut step = [0u64; 3];
+                let mut at = 1u64;
+                for &d in &m.order {
+                    let slot = match d {
+                        b'C' => 0,
+                        b'Z' => 1,
+                        _ => 2,
+                    };
+                    step[slot] = at;
+                    at *= n(d);
+                }
+                return Shape {
+                    c: m.channels,
+                    z,
+                    t: m.frames,
+                    step,
+                };
+            }
+        }
+        Shape {
+            c: 1,
+            z: pages,
+            t: 1,
+            step: [pages, 1, pages],
+        }
+    }
+
+    /// The page of channel `c`, slice `z` and time point `t`.
+    fn page(&self, c: u64, z: u64, t: u64) -> u64 {
+        c * self.step[0] + z * self.step[1] + t * self.step[2]
+    }
 }
 
 fn attr(xml: &str, name: &str) -> Option<String> {
@@ -185,6 +254,7 @@ fn parse_description(
             channels: 1,
             slices: 0,
             frames: 1,
+            order: *b"CZT",
             source: "ImageJ",
             ..Default::default()
         };
@@ -226,10 +296,10 @@ fn parse_description(
         };
         let pixels = &desc[at..];
         let order = attr(pixels, "DimensionOrder").unwrap_or_else(|| "XYCZT".into());
-        if order != "XYCZT" {
-            // other orders would need a page map; read as a plain stack
+        let Some(order) = ome_order(&order) else {
+            // not an order of the standard's: read as a plain stack
             return Ok(None);
-        }
+        };
         let n = |name: &str, default: u64| -> Result<u64, String> {
             attr(pixels, name).map_or(Ok(default), |v| count(&format!("OME {name}"), &v))
         };
@@ -237,9 +307,11 @@ fn parse_description(
             channels: n("SizeC", 1)?,
             slices: n("SizeZ", 0)?,
             frames: n("SizeT", 1)?,
+            order,
             source: "OME-TIFF",
             ..Default::default()
         };
+        m.channel_info = ome_channels(pixels, &mut m.warnings);
         for (a, name) in ["PhysicalSizeX", "PhysicalSizeY", "PhysicalSizeZ"]
             .into_iter()
             .enumerate()
@@ -254,6 +326,61 @@ fn parse_description(
         return Ok(Some(m));
     }
     Ok(None)
+}
+
+/// An OME `DimensionOrder` (`XY` then `C`, `Z` and `T` in some order) as
+/// its last three letters.
+fn ome_order(order: &str) -> Option<[u8; 3]> {
+    let b = order.as_bytes();
+    if b.len() != 5 || &b[..2] != b"XY" {
+        return None;
+    }
+    let o = [b[2], b[3], b[4]];
+    let mut sorted = o;
+    sorted.sort_unstable();
+    (&sorted == b"CTZ").then_some(o)
+}
+
+/// The `Name` and `Color` (a signed 32-bit RGBA integer) of each `Channel`
+/// element of an OME `Pixels` element, in order; a colour that is not such
+/// an integer is ignored with a warning.
+fn ome_channels(pixels: &str, warnings: &mut Vec<String>) -> Vec<ChannelInfo> {
+    let mut out = Vec::new();
+    let mut rest = pixels;
+    while let Some(at) = rest.find("<Channel") {
+        rest = &rest[at + "<Channel".len()..];
+        if !rest.starts_with(|c: char| c.is_whitespace() || c == '/' || c == '>') {
+            continue; // <ChannelRef ...>
+        }
+        let tag = &rest[..rest.find('>').unwrap_or(rest.len())];
+        let i = out.len();
+        let mut info = ChannelInfo {
+            label: attr(tag, "Name").map(|n| xml_unescape(&n)),
+            ..Default::default()
+        };
+        if let Some(c) = attr(tag, "Color") {
+            match c.trim().parse::<i64>() {
+                Ok(v) if (i64::from(i32::MIN)..=i64::from(u32::MAX)).contains(&v) => {
+                    let [r, g, b, _a] = (v as u32).to_be_bytes();
+                    info.color = Some([r, g, b].map(|x| f32::from(x) / 255.0));
+                }
+                _ => warnings.push(format!(
+                    "OME Channel {i}'s Color {c:?} is not a 32-bit RGBA integer: ignored"
+                )),
+            }
+        }
+        out.push(info);
+    }
+    out
+}
+
+/// XML's five predefined entities replaced.
+fn xml_unescape(s: &str) -> String {
+    s.replace("&lt;", "<")
+        .replace("&gt;", ">")
+        .replace("&quot;", "\"")
+        .replace("&apos;", "'")
+        .replace("&amp;", "&")
 }
 
 /// A resolution tag's value (a RATIONAL in practice; the `tiff` crate's
@@ -303,6 +430,20 @@ pub struct TiffReader {
     entries: Vec<Entry>,
 }
 
+/// A stack's metadata and page layout (a folder of slices: none, one
+/// channel of its files).
+fn stack_shape(path: &Path) -> Result<(Option<StackMeta>, Shape), IoError> {
+    let mut d = open_decoder(path)?;
+    let meta = describe(path, &mut d)?;
+    let mut pages = 1u64;
+    while d.more_images() {
+        d.next_image().map_err(|e| terr(path, e))?;
+        pages += 1;
+    }
+    let shape = Shape::of(meta.as_ref(), pages);
+    Ok((meta, shape))
+}
+
 impl TiffReader {
     #[allow(clippy::needless_range_loop)]
     /// Opens a multi-page TIFF or a folder of single-page TIFFs (`.tif`,
@@ -323,25 +464,8 @@ impl TiffReader {
             let meta = describe(&files[0], &mut d)?;
             (files, slices, meta, Vec::new())
         } else {
-            let mut d = open_decoder(path)?;
-            let meta = describe(path, &mut d)?;
-            let mut pages = 1usize;
-            while d.more_images() {
-                d.next_image().map_err(|e| terr(path, e))?;
-                pages += 1;
-            }
-            let (c, z, t) = match &meta {
-                Some(m)
-                    if m.slices > 0
-                        && m.channels
-                            .checked_mul(m.slices)
-                            .and_then(|v| v.checked_mul(m.frames))
-                            == Some(pages as u64) =>
-                {
-                    (m.channels, m.slices, m.frames)
-                }
-                _ => (1, pages as u64, 1),
-            };
+            let (meta, shape) = stack_shape(path)?;
+            let Shape { c, z, t, .. } = shape;
             let ch = opts.channel.unwrap_or(0);
             let tp = opts.time.unwrap_or(0);
             for (what, wanted, n) in [("channel", ch, c), ("time point", tp, t)] {
@@ -374,7 +498,7 @@ impl TiffReader {
             let slices = (0..z)
                 .map(|k| SliceRef {
                     file: 0,
-                    page: (tp * z * c + k * c + ch) as usize,
+                    page: shape.page(ch, k, tp) as usize,
                 })
                 .collect();
             (vec![path.to_owned()], slices, meta, entries)
@@ -519,6 +643,30 @@ impl TiffReader {
     pub fn entries(&self) -> &[Entry] {
         &self.entries
     }
+
+    /// One reader per channel of [`ReadOptions::channels`] (else every
+    /// channel; see [`crate::select_channels`]) of an ImageJ hyperstack or
+    /// OME-TIFF at the time point of `opts`, with the names and colours an
+    /// OME-TIFF gives its channels. A plain stack or a folder of slices is
+    /// one channel.
+    pub fn open_channels(path: &Path, opts: &ReadOptions) -> Result<ChannelReaders, IoError> {
+        let folder = std::fs::metadata(path)
+            .map_err(|e| IoError::io(path, e))?
+            .is_dir();
+        let (count, info) = if folder {
+            (1, Vec::new())
+        } else {
+            let (meta, shape) = stack_shape(path)?;
+            let info = match meta {
+                Some(m) if shape.c > 1 || m.channel_info.len() == 1 => m.channel_info,
+                _ => Vec::new(),
+            };
+            (shape.c, info)
+        };
+        ChannelReaders::open_each(path, count, &info, opts, |o| {
+            Ok(Box::new(TiffReader::open(path, o)?))
+        })
+    }
 }
 
 fn describe(path: &Path, d: &mut Dec) -> Result<Option<StackMeta>, IoError> {
@@ -642,6 +790,9 @@ impl Format for TiffFormat {
     fn list(&self, path: &Path, opts: &ReadOptions) -> Result<Vec<Entry>, IoError> {
         Ok(TiffReader::open(path, opts)?.entries)
     }
+    fn open_channels(&self, path: &Path, opts: &ReadOptions) -> Result<ChannelReaders, IoError> {
+        TiffReader::open_channels(path, opts)
+    }
 }
 
 pub(crate) fn register(r: &mut Registry) {
@@ -663,6 +814,56 @@ mod tests {
             [
                 "a.tif", "s1.tif", "s02.tif", "s2.tif", "s10.tif", "s100.tif"
             ]
+        );
+    }
+
+    #[test]
+    fn page_layouts() {
+        use super::{Shape, StackMeta, ome_order};
+        let meta = |c, z, t, order: &[u8; 3], source| StackMeta {
+            channels: c,
+            slices: z,
+            frames: t,
+            order: *order,
+            source,
+            ..Default::default()
+        };
+        // ImageJ: channel fastest, then z, then t
+        let s = Shape::of(Some(&meta(2, 3, 2, b"CZT", "ImageJ")), 12);
+        assert_eq!((s.c, s.z, s.t), (2, 3, 2));
+        assert_eq!(s.page(1, 2, 1), 1 + 2 * 2 + 6);
+        // ImageJ without slices=: what channels and frames leave
+        let s = Shape::of(Some(&meta(2, 0, 1, b"CZT", "ImageJ")), 10);
+        assert_eq!((s.c, s.z, s.t), (2, 5, 1));
+        // counts that do not account for the pages: a plain stack
+        let s = Shape::of(Some(&meta(2, 4, 1, b"CZT", "ImageJ")), 10);
+        assert_eq!((s.c, s.z, s.t), (1, 10, 1));
+        assert_eq!(s.page(0, 7, 0), 7);
+        // OME XYZCT: z fastest, then c
+        let s = Shape::of(Some(&meta(3, 4, 1, b"ZCT", "OME-TIFF")), 12);
+        assert_eq!(s.page(2, 1, 0), 2 * 4 + 1);
+        assert_eq!(ome_order("XYZCT"), Some(*b"ZCT"));
+        assert_eq!(ome_order("XYTZC"), Some(*b"TZC"));
+        assert_eq!(ome_order("XYZZT"), None);
+        assert_eq!(ome_order("YXCZT"), None);
+    }
+
+    #[test]
+    fn ome_channel_names_and_colours() {
+        let d = r#"<?xml version="1.0"?><OME><Image><Pixels DimensionOrder="XYZCT" SizeX="4" SizeY="4" SizeZ="2" SizeC="2" SizeT="1" PhysicalSizeX="1" PhysicalSizeY="1" PhysicalSizeZ="1"><Channel ID="Channel:0:0" Name="DAPI &amp; more" Color="65535" SamplesPerPixel="1"/><ChannelRef/><Channel ID="Channel:0:1" Color="-16776961"/><Channel ID="Channel:0:2" Color="red"/></Pixels></Image></OME>"#;
+        let m = super::parse_description(d, None, None).unwrap().unwrap();
+        assert_eq!(m.order, *b"ZCT");
+        let c = &m.channel_info;
+        assert_eq!(c.len(), 3);
+        assert_eq!(c[0].label.as_deref(), Some("DAPI & more"));
+        assert_eq!(c[0].color, Some([0.0, 0.0, 1.0]));
+        assert_eq!(c[1].label, None);
+        assert_eq!(c[1].color, Some([1.0, 0.0, 0.0]));
+        assert_eq!(c[2].color, None);
+        assert!(
+            m.warnings.iter().any(|w| w.contains("Channel 2")),
+            "{:?}",
+            m.warnings
         );
     }
 

@@ -7,7 +7,10 @@
 //!   the spacing and the [`Placement`] (the image's own axes and units);
 //! * the level ([`ReadOptions::level`], 0 = finest), channel and time point
 //!   ([`ReadOptions::channel`], [`ReadOptions::time`]) are selectable, the
-//!   first of each by default, and listed by [`crate::list`];
+//!   first of each by default, and listed by [`crate::list`]; every channel
+//!   at once through [`ZarrReader::open_channels`] ([`crate::read_channels`]),
+//!   with each one's `omero` label, colour, window and visibility
+//!   ([`OmeZarr::channel_info`]);
 //! * a missing chunk reads as the array's fill value (the zarr
 //!   specification's rule); a corrupt one is an [`IoError::Decode`] naming the
 //!   level;
@@ -42,6 +45,7 @@ use zarrs::array::{Array, ArrayMetadata, ArraySubset};
 
 mod cache;
 mod labels;
+mod omero;
 mod reader;
 mod region;
 mod safe;
@@ -55,7 +59,7 @@ pub use reader::ZarrReader;
 use safe::{MAX_CHUNK_BYTES, SafeStore};
 use scan::scan;
 pub use source::{MAX_BRICK_READ, ZARR_BATCH, ZarrBrickSource};
-pub use write::{add_ome_zarr_labels, write_ome_zarr};
+pub use write::{add_ome_zarr_labels, write_ome_zarr, write_ome_zarr_channels};
 
 type ZArray = Array<SafeStore>;
 
@@ -89,6 +93,9 @@ pub struct OmeZarr {
     /// A label image's colours (`image-label`; `labels.rs`), `None` for an
     /// intensity image.
     image_label: Option<Vec<(u32, [f32; 4])>>,
+    /// What `omero` says of the first channels (`omero.rs`; a channel past
+    /// the end has the default).
+    channel_info: Vec<crate::ChannelInfo>,
 }
 
 /// A metadata file's JSON; `Ok(None)` when it does not exist. Regular files
@@ -536,6 +543,9 @@ impl OmeZarr {
             return Err(bad("multiscales has no datasets"));
         };
         let image_label = attrs.get("image-label").map(labels::image_label_colors);
+        let channels = ax[3].map_or(1, |i| levels[0].shape[i]);
+        let (channel_info, omero_warnings) = omero::channel_info(attrs.get("omero"), channels);
+        warnings.extend(omero_warnings);
         Ok(OmeZarr {
             root: root.to_owned(),
             version,
@@ -546,7 +556,25 @@ impl OmeZarr {
             cache: ChunkCache::new(CHUNK_CACHE_BYTES),
             warnings,
             image_label,
+            channel_info,
         })
+    }
+
+    /// Number of channels (the extent of the `c` axis; 1 without one).
+    pub fn channel_count(&self) -> u64 {
+        self.extent(3)
+    }
+
+    /// What the image's `omero` metadata says of channel `c` (its label,
+    /// colour, window and whether it is active); the default where it says
+    /// nothing or something malformed (then with a warning in
+    /// [`warnings`](Self::warnings)).
+    pub fn channel_info(&self, c: u64) -> crate::ChannelInfo {
+        usize::try_from(c)
+            .ok()
+            .and_then(|c| self.channel_info.get(c))
+            .cloned()
+            .unwrap_or_default()
     }
 
     /// What was assumed where the metadata did not say (a level without a
@@ -717,6 +745,13 @@ impl Format for ZarrFormat {
     }
     fn list(&self, path: &Path, opts: &ReadOptions) -> Result<Vec<Entry>, IoError> {
         Ok(OmeZarr::open(path)?.entries(opts))
+    }
+    fn open_channels(
+        &self,
+        path: &Path,
+        opts: &ReadOptions,
+    ) -> Result<crate::ChannelReaders, IoError> {
+        ZarrReader::open_channels(path, opts)
     }
 }
 

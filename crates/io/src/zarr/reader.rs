@@ -5,7 +5,7 @@ use super::OmeZarr;
 use super::scan::scan;
 use crate::check_slab;
 use crate::slab::SampleConverter;
-use crate::{IoError, Placement, ReadOptions, VolumeReader};
+use crate::{ChannelReaders, IoError, Placement, ReadOptions, VolumeReader};
 use brickray_core::VolumeDesc;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -13,7 +13,8 @@ use std::sync::Arc;
 /// Streams one level, channel and time point of an OME-Zarr image in z-slabs.
 #[derive(Debug)]
 pub struct ZarrReader {
-    zarr: OmeZarr,
+    /// Shared by the readers of one image's channels (one chunk cache).
+    zarr: Arc<OmeZarr>,
     level: usize,
     c: u64,
     t: u64,
@@ -26,7 +27,30 @@ impl ZarrReader {
     /// Opens `root` with the level, channel and time point of `opts`. Scans the
     /// level once (in slabs) for its value range.
     pub fn open(root: &Path, opts: &ReadOptions) -> Result<ZarrReader, IoError> {
-        ZarrReader::from_zarr(OmeZarr::open(root)?, opts)
+        ZarrReader::from_zarr(Arc::new(OmeZarr::open(root)?), opts)
+    }
+
+    /// One reader per channel of [`ReadOptions::channels`] (else every
+    /// channel; see [`crate::select_channels`]) at the level and time point
+    /// of `opts`, sharing the opened image, with each channel's `omero`
+    /// metadata ([`OmeZarr::channel_info`]).
+    pub fn open_channels(root: &Path, opts: &ReadOptions) -> Result<ChannelReaders, IoError> {
+        let zarr = Arc::new(OmeZarr::open(root)?);
+        zarr.check_choice(&opts.clone().channel(None))?;
+        let count = zarr.channel_count();
+        let indices = crate::select_channels(root, count, opts)?;
+        let mut readers: Vec<Box<dyn VolumeReader>> = Vec::with_capacity(indices.len());
+        for &c in &indices {
+            readers.push(Box::new(ZarrReader::from_zarr(
+                zarr.clone(),
+                &opts.clone().channel(Some(c)),
+            )?));
+        }
+        Ok(ChannelReaders {
+            readers,
+            info: indices.iter().map(|&c| zarr.channel_info(c)).collect(),
+            indices,
+        })
     }
 
     /// Opens the image whose objects `reader` reads by key (an OME-Zarr
@@ -37,10 +61,10 @@ impl ZarrReader {
         reader: Arc<dyn brickray_core::ObjectReader>,
         opts: &ReadOptions,
     ) -> Result<ZarrReader, IoError> {
-        ZarrReader::from_zarr(OmeZarr::open_objects(reader)?, opts)
+        ZarrReader::from_zarr(Arc::new(OmeZarr::open_objects(reader)?), opts)
     }
 
-    fn from_zarr(zarr: OmeZarr, opts: &ReadOptions) -> Result<ZarrReader, IoError> {
+    fn from_zarr(zarr: Arc<OmeZarr>, opts: &ReadOptions) -> Result<ZarrReader, IoError> {
         let root = zarr.root.clone();
         let root = root.as_path();
         let (level, c, t) = zarr.check_choice(opts)?;
