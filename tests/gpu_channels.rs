@@ -13,7 +13,8 @@
 //!   every visible channel: with it off the image is the same (>= 60 dB)
 //!   and more samples are taken;
 //! * the shared confocal nuclei (u16) with two transformed copies of it (a
-//!   mirrored and a shifted one) as three channels: >= 45 dB in every mode;
+//!   mirrored and a shifted one) as three channels: >= 45 dB in every mode
+//!   (`brickray_harness::channels`, the `channels` bench's volumes);
 //! * typed errors: styles that do not match, no styles, slices.
 //!
 //! Images are marched at step 1/2 in both renderers: what is compared is
@@ -34,12 +35,7 @@ const SIZE: u32 = 96;
 const MIN_DB: f64 = 45.0;
 const STEP: f32 = 0.5;
 
-const COLORS: [[f32; 3]; 4] = [
-    [0.1, 1.0, 0.2],
-    [1.0, 0.2, 0.9],
-    [0.2, 0.8, 1.0],
-    [1.0, 0.9, 0.1],
-];
+use brickray_harness::channels::COLORS;
 
 /// A 40x36x32 u16 channel: a soft blob at `centre` over a faint shell.
 fn channel(centre: [f32; 3], peak: f32) -> Volume {
@@ -324,39 +320,24 @@ fn styles_slices_and_missing_styles_are_typed_errors() {
     draw(g, &mut r, &target, &desc).unwrap();
 }
 
-/// The shared confocal nuclei (u16, 256x256x60) and two transformed copies
-/// (mirrored in x; its values shifted by a quarter of the range, clamped)
-/// as three channels.
+/// The shared confocal nuclei (u16, 256x256x60) with transformed copies of
+/// it (mirrored in x; its values shifted by a quarter of the range) as three
+/// channels (`brickray_harness::channels`, also the `channels` bench's).
 #[test]
 #[cfg_attr(
     no_shared_data,
     ignore = "needs ../shared/data (the shared volumes), absent when the tests were built"
 )]
 fn shared_nuclei_as_three_channels_match_the_reference() {
-    let Some(path) = brickray_harness::shared_volume("cells3d_nuclei_fluo") else {
+    let Some(vol) = brickray_harness::channels::nuclei_channels(3) else {
         return;
     };
-    let nuclei = brickray::io::read_volume(&path).unwrap_or_else(|e| panic!("{e}"));
-    let d = nuclei.dims();
-    let [nx, ny, nz] = d.map(|x| x as usize);
-    let at = |x: usize, y: usize, z: usize| nuclei.data().get((z * ny + y) * nx + x);
-    let (lo, hi) = nuclei.data().min_max().unwrap();
-    let mut mirrored = Vec::with_capacity(nx * ny * nz);
-    let mut shifted = Vec::with_capacity(nx * ny * nz);
-    for z in 0..nz {
-        for y in 0..ny {
-            for x in 0..nx {
-                mirrored.push(at(nx - 1 - x, y, z) as u16);
-                shifted.push((at(x, y, z) + 0.25 * (hi - lo)).min(65535.0) as u16);
-            }
-        }
-    }
-    let copy = |data: Vec<u16>| Volume::new(nuclei.desc().clone(), VolumeData::U16(data)).unwrap();
-    let vol = ChannelVolume::new(vec![nuclei.clone(), copy(mirrored), copy(shifted)]).unwrap();
-    let s: Vec<ChannelStyle> = (0..3)
-        .map(|c| ChannelStyle::window(COLORS[c], [0.15, 0.6], 0.4).with_isovalue(0.35))
-        .collect();
     let camera = Camera::orbit(Vec3::ZERO, 2.0, 0.5, 0.6);
-    let worst = check("nuclei x3", &vol, &s, camera);
+    let worst = check(
+        "nuclei x3",
+        &vol,
+        &brickray_harness::channels::nuclei_styles(3),
+        camera,
+    );
     eprintln!("nuclei x3: worst {worst:.1} dB");
 }

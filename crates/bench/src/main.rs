@@ -8,6 +8,7 @@
 mod accel;
 mod aniso;
 mod build;
+mod channels;
 mod cut;
 mod formats;
 mod host;
@@ -388,6 +389,17 @@ enum Suite {
         #[arg(long)]
         charts: Option<String>,
     },
+    /// Multi-channel volumes: ms per frame of 1, 2 and 4 channels in every
+    /// mode, texel bytes, error against the reference (needs
+    /// ../shared/data).
+    Channels {
+        /// Image side in pixels of the timed frames (default 256).
+        #[arg(long, value_parser = image_side)]
+        size: Option<u32>,
+        /// Interleaved rounds (default 5).
+        #[arg(long, value_parser = at_least_one::<usize>)]
+        rounds: Option<usize>,
+    },
     /// Label maps: cost against intensity DVR of the same view, hidden-label
     /// skipping, error against the reference and of coarse levels (needs
     /// ../shared/data).
@@ -453,6 +465,7 @@ fn main() -> ExitCode {
         Suite::Stability { .. } => stability::run(rest),
         Suite::U8 { .. } => u8::run(rest),
         Suite::Labels { .. } => labels::run(rest),
+        Suite::Channels { size, rounds } => channels::run(size.unwrap_or(256), rounds.unwrap_or(5)),
         Suite::Remote { .. } => remote::run(rest),
         Suite::Lod { .. } => lod::run(rest),
         Suite::Visibility { .. } => visibility::run(rest),

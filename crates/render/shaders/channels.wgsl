@@ -204,9 +204,10 @@ fn channel_mix(q: Quad, a: vec4<f32>) -> vec4<f32> {
 }
 
 // DVR: the mixed, shaded sample of values v at u, premultiplied.
-fn channel_dvr_sample(v: vec4<f32>, u: vec3<f32>, r: Ray, row: f32) -> vec4<f32> {
+// `vis`: chan_visible(), read once per ray.
+fn channel_dvr_sample(v: vec4<f32>, u: vec3<f32>, r: Ray, row: f32, vis: vec4<f32>) -> vec4<f32> {
     var q = channel_tf4(v, row);
-    let a = quad_alpha(q) * chan_visible();
+    let a = quad_alpha(q) * vis;
     if (all(a <= vec4<f32>(0.0))) {
         return vec4<f32>(0.0);
     }
@@ -235,10 +236,10 @@ fn cursor_gradient(cur: Cursor, t: f32) -> vec4<f32> {
 }
 
 // Iso: the first visible channel at or above its isovalue in v, or CHANNELS.
-fn channel_inside(v: vec4<f32>) -> u32 {
+fn channel_inside(v: vec4<f32>, vis: vec4<f32>, iso: vec4<f32>) -> u32 {
     // Above 0.25 in a visible lane at or above its isovalue (sign is 0 at
     // equality), by arithmetic: no comparison with the uniforms themselves.
-    let m = chan_visible() * (sign(v - chan_iso()) * 0.5 + vec4<f32>(0.5));
+    let m = vis * (sign(v - iso) * 0.5 + vec4<f32>(0.5));
     var c = CHANNELS;
     c = select(c, 3u, m.w > 0.25);
     c = select(c, 2u, m.z > 0.25);
@@ -265,7 +266,7 @@ fn channel_cell_exit(r: Ray, inv_dir: vec3<f32>, c: vec3<u32>, reach: u32) -> f3
 
 // MIP: true when no visible channel's range in the cell exceeds its running
 // maximum mx.
-fn channel_mip_skips(cell: u32, mx: vec4<f32>) -> bool {
+fn channel_mip_skips(cell: u32, mx: vec4<f32>, vis: vec4<f32>) -> bool {
     let at = cell * CHANNELS;
     var hi = vec4<f32>(-3.0e38);
     hi.x = cell_ranges[at].y;
@@ -278,7 +279,7 @@ fn channel_mip_skips(cell: u32, mx: vec4<f32>) -> bool {
     if (CHANNELS > 3u) {
         hi.w = cell_ranges[at + 3u].y;
     }
-    return all(max(hi - mx, vec4<f32>(0.0)) * chan_visible() <= vec4<f32>(0.0));
+    return all(max(hi - mx, vec4<f32>(0.0)) * vis <= vec4<f32>(0.0));
 }
 
 @compute @workgroup_size(8, 8, 1)
@@ -293,6 +294,9 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let t1 = start.t1;
     var acc = accum_new();
     var cur = Cursor(r, 0u);
+    // The channels' visibility and isovalues, once per ray.
+    let vis = chan_visible();
+    let iso4 = chan_iso();
     // MIP: each channel's running maximum and where it was first attained.
     var mx = vec4<f32>(-3.0e38);
     var mt = vec4<f32>(0.0);
@@ -313,7 +317,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 var reach = 1u;
                 var skip = false;
                 if (MODE == MODE_MIP) {
-                    skip = channel_mip_skips(cell, mx);
+                    skip = channel_mip_skips(cell, mx, vis);
                 } else {
                     let d = cell_skip[cell];
                     skip = d > 0u;
@@ -329,7 +333,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             let v = channel_values(u);
             acc.samples = acc.samples + 1u;
             if (MODE == MODE_DVR) {
-                let p = channel_dvr_sample(v, u, r, 0.0);
+                let p = channel_dvr_sample(v, u, r, 0.0, vis);
                 if (p.a > 0.0) {
                     let acc_a = acc.color.a;
                     acc.color = vec4<f32>(acc.color.rgb + (1.0 - acc_a) * p.rgb, acc_a + (1.0 - acc_a) * p.a);
@@ -340,7 +344,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                     if (ERT && acc.color.a >= frame.ert_threshold) { break; }
                 }
             } else if (MODE == MODE_ISO) {
-                let c = channel_inside(v);
+                let c = channel_inside(v, vis, iso4);
                 if (c < CHANNELS) {
                     cur.c = c;
                     // The first sample inside is a capped cut.
@@ -351,7 +355,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 let better = v > mx;
                 mx = select(mx, v, better);
                 mt = select(mt, vec4<f32>(t), better);
-                if (ERT && all(max(vec4<f32>(1.0) - mx, vec4<f32>(0.0)) * chan_visible() <= vec4<f32>(0.0))) { break; }
+                if (ERT && all(max(vec4<f32>(1.0) - mx, vec4<f32>(0.0)) * vis <= vec4<f32>(0.0))) { break; }
             }
             k = k + 1u;
         }
@@ -362,7 +366,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         var a = acc.hit_a;
         var b = acc.hit_b;
         let steps = select(0u, frame.iso_refine_steps, b > a);
-        let iso = lane_of(chan_iso(), cur.c);
+        let iso = lane_of(iso4, cur.c);
         for (var i = 0u; i < steps; i = i + 1u) {
             let m = 0.5 * (a + b);
             acc.samples = acc.samples + 1u;
@@ -381,8 +385,8 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         // Every channel's maximum was taken at once: 1 in the lanes of the
         // visible channels (hidden ones mix nothing and place no depth).
         let q = channel_tf_lookup4(mx);
-        acc.color = channel_mix(q, quad_alpha(q) * chan_visible());
-        let tn = mt + vec4<f32>(3.0e38) * (vec4<f32>(1.0) - chan_visible());
+        acc.color = channel_mix(q, quad_alpha(q) * vis);
+        let tn = mt + vec4<f32>(3.0e38) * (vec4<f32>(1.0) - vis);
         let t_near = min(min(tn.x, tn.y), min(tn.z, tn.w));
         let shown = t_near < 1.0e38;
         acc.depth = select(acc.depth, depth_at(r, t_near), shown);

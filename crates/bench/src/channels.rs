@@ -1,0 +1,237 @@
+//! The `channels` suite: what 2 and 4 channels cost against one, in core.
+//!
+//! The shared confocal nuclei (u16, 256x256x60) and transformed copies of it
+//! as 1, 2 and 4 channels (`brickray_harness::channels`), each in its own
+//! colour and window, one view, the default step:
+//!
+//! * **cost**: ms per frame (`prepare + submit + wait`, median of
+//!   `--rounds` interleaved rounds at `--size` px) of DVR, shaded DVR, MIP
+//!   and per-channel isosurfaces, for 1, 2 and 4 channels and for the
+//!   single-channel kernel with channel 0's transfer function (what one
+//!   channel costs through the multi-channel kernel); samples per ray;
+//! * **bytes**: texel bytes per voxel of the packed texture;
+//! * **error**: each case against the CPU reference
+//!   (`render_channels_reference`) at the same step, at 128 px.
+//!
+//! `cargo run --release -p brickray-bench -- channels [--size PX] [--rounds N]`
+
+use crate::Figures;
+use crate::runner::median;
+use brickray_core::channels::ChannelVolume;
+use brickray_core::{Camera, RenderMode, RenderSettings, Shading, VolumeFrame};
+use brickray_harness::channels::{nuclei_channels, nuclei_styles};
+use brickray_harness::predict::{draw, samples_per_ray};
+use brickray_harness::{GpuContext, Offscreen};
+use brickray_reference::{ReferenceOptions, compare, render_channels_reference};
+use brickray_render::{FrameDesc, VolumeRenderer};
+
+/// The error images' side.
+const ERROR_SIZE: u32 = 128;
+/// Channel counts measured.
+const COUNTS: [usize; 3] = [1, 2, 4];
+
+/// One mode's figures.
+#[derive(Debug, serde::Serialize)]
+struct ModeRow {
+    mode: &'static str,
+    /// Median ms per frame of the single-channel kernel (channel 0).
+    single_ms: f64,
+    /// Median ms per frame with 1, 2 and 4 channels.
+    ms: [f64; 3],
+    /// Samples per ray with 1, 2 and 4 channels.
+    samples_per_ray: [f64; 3],
+    /// PSNR against the reference with 1, 2 and 4 channels.
+    psnr_db: [f64; 3],
+}
+
+/// The suite's result (its JSON line).
+#[derive(Debug, serde::Serialize)]
+struct ChannelsResult {
+    size: u32,
+    rounds: usize,
+    /// Texel bytes per voxel with 1, 2 and 4 channels.
+    bytes_per_voxel: [u32; 3],
+    modes: Vec<ModeRow>,
+    /// The largest ratio over the modes of 2 (4) channels' ms to 1's.
+    cost_ratio_2ch: f64,
+    cost_ratio_4ch: f64,
+    /// The largest ratio of one channel through the multi-channel kernel
+    /// to the single-channel kernel.
+    one_channel_overhead: f64,
+    psnr_min_db: f64,
+}
+
+fn modes() -> Vec<(&'static str, RenderSettings)> {
+    let base = RenderSettings::default();
+    vec![
+        ("dvr", base),
+        (
+            "dvr shaded",
+            RenderSettings {
+                shading: Shading {
+                    enabled: true,
+                    ..Default::default()
+                },
+                ..base
+            },
+        ),
+        (
+            "mip",
+            RenderSettings {
+                mode: RenderMode::Mip,
+                ..base
+            },
+        ),
+        (
+            "iso",
+            RenderSettings {
+                mode: RenderMode::Iso {
+                    value: 0.35,
+                    color: [1.0; 3],
+                },
+                ..base
+            },
+        ),
+    ]
+}
+
+pub(crate) fn run(size: u32, rounds: usize) -> Result<Figures, String> {
+    let gpu = GpuContext::new().map_err(|e| e.to_string())?;
+    println!("adapter: {}", gpu.describe());
+    println!("timing at {size}x{size}, {rounds} interleaved rounds; errors at {ERROR_SIZE} px");
+    let vols: Vec<ChannelVolume> = COUNTS
+        .iter()
+        .map(|&n| nuclei_channels(n).ok_or("the channels suite needs ../shared/data"))
+        .collect::<Result<_, _>>()?;
+    let d = vols[0].desc().clone();
+    let frame = VolumeFrame::centered(d.dims, d.spacing);
+    let camera = Camera::orbit(frame.center(), 2.0, 0.5, 0.6);
+    let mut renderers = Vec::new();
+    for (vol, &n) in vols.iter().zip(&COUNTS) {
+        let mut r = VolumeRenderer::new(&gpu.device, brickray_harness::target_desc())
+            .map_err(|e| e.to_string())?;
+        r.set_channel_volume(&gpu.device, &gpu.queue, vol)
+            .map_err(|e| e.to_string())?;
+        r.set_channel_styles(&nuclei_styles(n))
+            .map_err(|e| e.to_string())?;
+        renderers.push(r);
+    }
+    let style0 = nuclei_styles(1).remove(0);
+    let mut single = VolumeRenderer::new(&gpu.device, brickray_harness::target_desc())
+        .map_err(|e| e.to_string())?;
+    single
+        .set_volume(&gpu.device, &gpu.queue, &vols[0].channels()[0])
+        .map_err(|e| e.to_string())?;
+    single
+        .set_transfer_function(&gpu.device, &gpu.queue, &style0.tf)
+        .map_err(|e| e.to_string())?;
+    let bytes_per_voxel: [u32; 3] = std::array::from_fn(|i| {
+        let v = renderers[i].volume_bytes() / d.voxel_count();
+        v as u32
+    });
+    let target = Offscreen::new(&gpu.device, size, size);
+    let small = Offscreen::new(&gpu.device, ERROR_SIZE, ERROR_SIZE);
+    let mut rows = Vec::new();
+    println!(
+        "| mode | single-channel kernel ms | 1 / 2 / 4 channels ms | 2ch / 1ch | 4ch / 1ch | samples per ray | PSNR 1 / 2 / 4 ch (dB) |"
+    );
+    println!("|---|---:|---:|---:|---:|---:|---:|");
+    for (mode, settings) in modes() {
+        let mut desc = FrameDesc {
+            settings,
+            ..FrameDesc::new(camera, frame, size, size)
+        };
+        let mut single_desc = desc.clone();
+        if let RenderMode::Iso { .. } = settings.mode {
+            single_desc.settings.mode = RenderMode::Iso {
+                value: style0.isovalue,
+                color: style0.iso_color(),
+            };
+        }
+        // Warm-up: pipelines compiled, tables built.
+        let err = |e: brickray_render::PrepareError| e.to_string();
+        draw(&gpu, &mut single, &target, &single_desc).map_err(err)?;
+        let mut spr = [0.0; 3];
+        for (i, r) in renderers.iter_mut().enumerate() {
+            spr[i] = samples_per_ray(&draw(&gpu, r, &target, &desc).map_err(err)?.samples);
+        }
+        let mut single_ms = Vec::new();
+        let mut ms: [Vec<f64>; 3] = Default::default();
+        for _ in 0..rounds {
+            single_ms.push(
+                draw(&gpu, &mut single, &target, &single_desc)
+                    .map_err(err)?
+                    .ms,
+            );
+            for (i, r) in renderers.iter_mut().enumerate() {
+                ms[i].push(draw(&gpu, r, &target, &desc).map_err(err)?.ms);
+            }
+        }
+        desc.viewport = brickray_render::Viewport::full(ERROR_SIZE, ERROR_SIZE);
+        let mut psnr = [0.0; 3];
+        for (i, (r, vol)) in renderers.iter_mut().zip(&vols).enumerate() {
+            let got = draw(&gpu, r, &small, &desc).map_err(err)?.color;
+            let opts = ReferenceOptions::new(ERROR_SIZE, ERROR_SIZE)
+                .with_step_factor(settings.step_factor);
+            let want = render_channels_reference(
+                vol,
+                &frame,
+                &nuclei_styles(COUNTS[i]),
+                &camera,
+                &settings,
+                &opts,
+            )
+            .to_rgba8([0.0; 3]);
+            psnr[i] = compare(&got, &want, ERROR_SIZE, ERROR_SIZE).psnr_db;
+        }
+        let row = ModeRow {
+            mode,
+            single_ms: median(&single_ms),
+            ms: std::array::from_fn(|i| median(&ms[i])),
+            samples_per_ray: spr,
+            psnr_db: psnr,
+        };
+        println!(
+            "| {mode} | {:.1} | {:.1} / {:.1} / {:.1} | {:.2} | {:.2} | {:.1} / {:.1} / {:.1} | {:.1} / {:.1} / {:.1} |",
+            row.single_ms,
+            row.ms[0],
+            row.ms[1],
+            row.ms[2],
+            row.ms[1] / row.ms[0],
+            row.ms[2] / row.ms[0],
+            spr[0],
+            spr[1],
+            spr[2],
+            psnr[0],
+            psnr[1],
+            psnr[2]
+        );
+        rows.push(row);
+    }
+    let max_over = |f: &dyn Fn(&ModeRow) -> f64| rows.iter().map(f).fold(0.0f64, f64::max);
+    let result = ChannelsResult {
+        size,
+        rounds,
+        bytes_per_voxel,
+        cost_ratio_2ch: max_over(&|r| r.ms[1] / r.ms[0]),
+        cost_ratio_4ch: max_over(&|r| r.ms[2] / r.ms[0]),
+        one_channel_overhead: max_over(&|r| r.ms[0] / r.single_ms),
+        psnr_min_db: rows
+            .iter()
+            .flat_map(|r| r.psnr_db)
+            .fold(f64::INFINITY, f64::min),
+        modes: rows,
+    };
+    println!(
+        "bytes per voxel 1 / 2 / 4 channels: {:?}; worst 2ch / 1ch {:.2}, 4ch / 1ch {:.2}; one channel / single-channel kernel {:.2}; PSNR min {:.1} dB",
+        result.bytes_per_voxel,
+        result.cost_ratio_2ch,
+        result.cost_ratio_4ch,
+        result.one_channel_overhead,
+        result.psnr_min_db
+    );
+    match serde_json::to_value(&result).map_err(|e| e.to_string())? {
+        serde_json::Value::Object(m) => Ok(m),
+        _ => Err("the result is not an object".into()),
+    }
+}

@@ -1,0 +1,51 @@
+//! Multi-channel test volumes from the shared confocal nuclei: the tests'
+//! and the `channels` bench's (one source, so both draw the same channels).
+
+use brickray_core::channels::{ChannelStyle, ChannelVolume};
+use brickray_core::{Volume, VolumeData};
+
+/// Distinct channel colours (green, magenta, cyan, yellow).
+pub const COLORS: [[f32; 3]; 4] = [
+    [0.1, 1.0, 0.2],
+    [1.0, 0.2, 0.9],
+    [0.2, 0.8, 1.0],
+    [1.0, 0.9, 0.1],
+];
+
+/// The shared confocal nuclei (u16, 256x256x60) and transformed copies of
+/// it as `n` (1 to 4) channels: the nuclei; mirrored in x; its values
+/// shifted up by a quarter of its range (clamped); mirrored in y. `None`
+/// without ../shared (see [`crate::shared_data_dir`]).
+pub fn nuclei_channels(n: usize) -> Option<ChannelVolume> {
+    let path = crate::shared_volume("cells3d_nuclei_fluo")?;
+    let nuclei = brickray_io::read_volume(&path).unwrap_or_else(|e| panic!("{e}"));
+    let [nx, ny, nz] = nuclei.dims().map(|x| x as usize);
+    let at = |x: usize, y: usize, z: usize| nuclei.data().get((z * ny + y) * nx + x);
+    let (lo, hi) = nuclei.data().min_max().expect("a volume has samples");
+    let copy = |f: &dyn Fn(usize, usize, usize) -> f32| {
+        let mut data = Vec::with_capacity(nx * ny * nz);
+        for z in 0..nz {
+            for y in 0..ny {
+                for x in 0..nx {
+                    data.push(f(x, y, z).clamp(0.0, 65535.0) as u16);
+                }
+            }
+        }
+        Volume::new(nuclei.desc().clone(), VolumeData::U16(data)).expect("same grid")
+    };
+    let all = [
+        nuclei.clone(),
+        copy(&|x, y, z| at(nx - 1 - x, y, z)),
+        copy(&|x, y, z| at(x, y, z) + 0.25 * (hi - lo)),
+        copy(&|x, y, z| at(x, ny - 1 - y, z)),
+    ];
+    Some(ChannelVolume::new(all[..n.clamp(1, 4)].to_vec()).expect("1 to 4 channels of one grid"))
+}
+
+/// A style per channel: its colour of [`COLORS`] through the window
+/// `[0.15, 0.6]` at opacity 0.4, isovalue 0.35.
+pub fn nuclei_styles(n: usize) -> Vec<ChannelStyle> {
+    (0..n)
+        .map(|c| ChannelStyle::window(COLORS[c % 4], [0.15, 0.6], 0.4).with_isovalue(0.35))
+        .collect()
+}
