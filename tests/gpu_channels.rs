@@ -302,6 +302,9 @@ fn styles_slices_and_missing_styles_are_typed_errors() {
         }))
     ));
     r.set_channel_styles(&styles(2)).unwrap();
+    // Warming up compiles the multi-channel kernel's pipelines.
+    let all: Vec<RenderSettings> = modes().into_iter().map(|(_, s)| s).collect();
+    r.warm_up(&g.device, &all).unwrap();
     draw(g, &mut r, &target, &desc).unwrap();
     r.set_slice(Some(
         SliceView::orthogonal(SliceAxis::Axial, 10.0, &frame, 1.0).unwrap(),

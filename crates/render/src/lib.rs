@@ -500,6 +500,10 @@ impl VolumeRenderer {
         device: &wgpu::Device,
         settings: &[brickray_core::RenderSettings],
     ) -> Result<(), RenderError> {
+        let channels = match self.backend.as_ref() {
+            Some(Backend::Channels(b)) => Some(b.count() as u32),
+            _ => None,
+        };
         let Some(backend) = self.backend.as_ref().map(Backend::get) else {
             return Ok(());
         };
@@ -510,13 +514,16 @@ impl VolumeRenderer {
             self.overlay.layout(),
         ];
         for s in settings {
-            let v = Variant::of(
-                s,
-                self.prediction,
-                backend.measures_weights(),
-                backend.labels(),
-                self.overlay.style().map(|o| o.mode),
-            );
+            let v = match channels {
+                Some(n) => Variant::channels(s, n),
+                None => Variant::of(
+                    s,
+                    self.prediction,
+                    backend.measures_weights(),
+                    backend.labels(),
+                    self.overlay.style().map(|o| o.mode),
+                ),
+            };
             self.kernels.pipeline(device, backend.kind(), layouts, v)?;
         }
         Ok(())
