@@ -282,7 +282,7 @@ fn a_hidden_channel_is_absent_and_skipped() {
 }
 
 #[test]
-fn styles_slices_and_missing_styles_are_typed_errors() {
+fn styles_overlays_and_missing_styles_are_typed_errors() {
     let g = gpu();
     let vol = ChannelVolume::new(channels(2)).unwrap();
     let frame = frame_of(&vol.channels()[0]);
@@ -306,14 +306,34 @@ fn styles_slices_and_missing_styles_are_typed_errors() {
     let all: Vec<RenderSettings> = modes().into_iter().map(|(_, s)| s).collect();
     r.warm_up(&g.device, &all).unwrap();
     draw(g, &mut r, &target, &desc).unwrap();
-    r.set_slice(Some(
-        SliceView::orthogonal(SliceAxis::Axial, 10.0, &frame, 1.0).unwrap(),
-    ));
+    // A label map over a channel volume is refused, and drawing works again
+    // without it.
+    let labels = brickray::core::synthetic::u8_field(8, |p| (p[0] / 4) as f64);
+    let labels = Volume::new(
+        VolumeDesc {
+            kind: brickray::VolumeKind::Labels,
+            value_range: brickray::core::labels::label_value_range(),
+            ..labels.desc().clone()
+        },
+        labels.data().clone(),
+    )
+    .unwrap();
+    let table = brickray::LabelTable::default();
+    let overlay = brickray::LabelOverlay {
+        labels: &labels,
+        image_to_labels: brickray::overlay_transform(&frame, &frame_of(&labels)),
+        table: &table,
+        style: brickray::OverlayStyle {
+            mode: brickray::OverlayMode::Color,
+            opacity: 1.0,
+        },
+    };
+    r.set_overlay(&g.device, &g.queue, Some(&overlay)).unwrap();
     assert!(matches!(
         draw(g, &mut r, &target, &desc),
         Err(PrepareError::Render(RenderError::ChannelsUnsupported(_)))
     ));
-    r.set_slice(None);
+    r.set_overlay(&g.device, &g.queue, None).unwrap();
     draw(g, &mut r, &target, &desc).unwrap();
     // A single-channel volume set after channels needs its TF again.
     let tf = TransferFunction::ramp(0.1, 0.8, 0.5);
@@ -343,4 +363,54 @@ fn shared_nuclei_as_three_channels_match_the_reference() {
         camera,
     );
     eprintln!("nuclei x3: worst {worst:.1} dB");
+}
+
+/// Slice views of channels against the reference's (`render_channel_slice`):
+/// an axial plane, an oblique plane, and slabs by maximum and mean; a
+/// hidden channel is absent.
+#[test]
+fn channel_slices_match_the_reference() {
+    let g = gpu();
+    let all = channels(3);
+    let vol = ChannelVolume::new(all.clone()).unwrap();
+    let frame = frame_of(&all[0]);
+    let mut s = styles(3);
+    let mut r = renderer(&vol, &s);
+    let target = Offscreen::new(&g.device, SIZE, SIZE);
+    let plane = SliceView::orthogonal(SliceAxis::Axial, 13.0, &frame, 1.0).unwrap();
+    let cases = [
+        ("axial", plane),
+        (
+            "oblique",
+            SliceView::with_normal([20.0, 18.0, 15.0], [1.0, -1.0, 2.0], 0.8).unwrap(),
+        ),
+        ("slab max", plane.with_slab(6.0, brickray::SlabMode::Max)),
+        ("slab mean", plane.with_slab(6.0, brickray::SlabMode::Mean)),
+    ];
+    for hidden in [false, true] {
+        if hidden {
+            s[0] = s[0].clone().visible(false);
+            r.set_channel_styles(&s).unwrap();
+        }
+        for (name, view) in cases {
+            r.set_slice(Some(view));
+            let desc = FrameDesc::new(Camera::orbit(Vec3::ZERO, 2.3, 0.6, 0.35), frame, SIZE, SIZE);
+            let got = draw(g, &mut r, &target, &desc).unwrap().color;
+            let want =
+                brickray_reference::render_channel_slice(&vol, &frame, &view, &s, SIZE, SIZE)
+                    .unwrap()
+                    .to_rgba8([0.0; 3]);
+            assert!(
+                want.chunks_exact(4)
+                    .filter(|p| p[0].max(p[1]).max(p[2]) > 40)
+                    .count()
+                    > 300,
+                "{name}: the reference slice is nearly black"
+            );
+            let name = format!("channel slice {name}, channel 0 hidden {hidden}");
+            let c = assert_close(&name, &got, &want, SIZE, SIZE, MIN_DB)
+                .unwrap_or_else(|e| panic!("{e}"));
+            eprintln!("{name}: {:.1} dB", c.psnr_db);
+        }
+    }
 }

@@ -291,6 +291,31 @@ pub fn mix(samples: &[([f64; 3], f64)]) -> [f64; 4] {
     [rgb[0] * s, rgb[1] * s, rgb[2] * s, a]
 }
 
+/// The gain of a channel in slice views: one over its transfer function's
+/// largest opacity (0 when it is transparent everywhere), so that a slice
+/// shows the channel at full colour where its TF is most opaque.
+pub fn slice_gain(tf: &TransferFunction) -> f64 {
+    let max = tf.entries().iter().map(|e| e[3]).fold(0.0f32, f32::max) as f64;
+    if max > 0.0 { 1.0 / max } else { 0.0 }
+}
+
+/// The colour of a slice view's pixel (opaque) from the visible channels'
+/// classified values `(rgb_c, a_c, gain_c)` (their TFs' uncorrected lookups
+/// and [`slice_gain`]s): the channels' colours added, each weighted by its
+/// opacity over its TF's largest (a window style: its colour times the
+/// windowed intensity), clamped to 1: the additive blending of microscopy
+/// viewers.
+pub fn slice_color(parts: &[([f64; 3], f64, f64)]) -> [f64; 3] {
+    let mut rgb = [0.0f64; 3];
+    for &(c, a, gain) in parts {
+        let w = a.clamp(0.0, 1.0) * gain;
+        for k in 0..3 {
+            rgb[k] += w * c[k];
+        }
+    }
+    rgb.map(|x| x.min(1.0))
+}
+
 /// Per macro cell of a multi-channel volume: empty when every visible
 /// channel's range there is `empty` for that channel (`ranges[c]` is channel
 /// `c`'s cell ranges, [`crate::MacroCellGrid::ranges`]). A hidden channel

@@ -79,7 +79,10 @@ pub use render::{
     DEFAULT_STEP_FACTOR, EXACT_STEP_FACTOR, ReferenceOptions, render_channels_reference,
     render_reference,
 };
-pub use slice::{SliceReferenceError, render_label_slice, render_slice, render_slice_with_overlay};
+pub use slice::{
+    SliceReferenceError, render_channel_slice, render_label_slice, render_slice,
+    render_slice_with_overlay,
+};
 pub use ssim::ssim;
 pub use temporal::{
     CHANGE_EPS, TemporalError, TemporalOptions, TemporalReport, temporal_stability,

@@ -6,6 +6,7 @@
 //! with no sample in the box is transparent.
 
 use crate::Image;
+use brickray_core::channels::{self, ChannelStyle, ChannelVolume};
 use brickray_core::{
     Intensity, LabelOverlay, SlabMode, SliceError, SliceView, TransferFunction, Volume,
     VolumeFrame, WindowError,
@@ -85,6 +86,47 @@ pub fn render_label_slice(
     })
 }
 
+/// Renders `slice` of the multi-channel `vol` with one style per channel
+/// (`brickray_core::channels`): each visible channel's slab samples reduced
+/// by their maximum or mean, classified by its TF (uncorrected), and the
+/// channels added at full colour ([`channels::slice_color`]), opaque; a pixel
+/// with no sample is transparent.
+///
+/// # Panics
+/// If the styles do not match the channels.
+pub fn render_channel_slice(
+    vol: &ChannelVolume,
+    frame: &VolumeFrame,
+    slice: &SliceView,
+    styles: &[ChannelStyle],
+    width: u32,
+    height: u32,
+) -> Result<Image, SliceReferenceError> {
+    channels::validate_styles(styles, vol.len())
+        .unwrap_or_else(|e| panic!("the channel styles cannot be drawn: {e}"));
+    let gains: Vec<f64> = styles.iter().map(|s| channels::slice_gain(&s.tf)).collect();
+    let dims = vol.dims().map(f64::from);
+    slab_points(frame, slice, width, height, |points, mode| {
+        let mut parts = Vec::with_capacity(styles.len());
+        for ((v, s), &gain) in vol.channels().iter().zip(styles).zip(&gains) {
+            if !s.visible {
+                continue;
+            }
+            let values = points
+                .iter()
+                .map(|t| v.sample_trilinear([0, 1, 2].map(|a| t[a] * dims[a] - 0.5)));
+            let x = match mode {
+                SlabMode::Max => values.fold(f64::NEG_INFINITY, f64::max),
+                SlabMode::Mean => values.sum::<f64>() / points.len() as f64,
+            };
+            let [r, g, b, a] = s.tf.lookup(x);
+            parts.push(([r, g, b], a, gain));
+        }
+        let [r, g, b] = channels::slice_color(&parts);
+        Some([r as f32, g as f32, b as f32, 1.0])
+    })
+}
+
 /// Each pixel's slab samples that lie in the volume's texture box (front
 /// first; exact trilinear values, or the nearest voxel's for a label map),
 /// coloured by `color` (nothing: transparent), which also gets the front
@@ -97,40 +139,55 @@ fn slab_pixels(
     height: u32,
     color: impl Fn(&[f64], SlabMode, [f64; 3]) -> Option<[f32; 4]> + Sync,
 ) -> Result<Image, SliceReferenceError> {
+    let labels = vol.desc().kind.is_labels();
+    let dims = vol.dims().map(f64::from);
+    slab_points(frame, slice, width, height, |points, mode| {
+        let samples: Vec<f64> = points
+            .iter()
+            .map(|t| {
+                let p = [0, 1, 2].map(|a| t[a] * dims[a] - 0.5);
+                if labels {
+                    vol.sample_nearest(p)
+                } else {
+                    vol.sample_trilinear(p)
+                }
+            })
+            .collect();
+        color(&samples, mode, points[0])
+    })
+}
+
+/// Each pixel's slab points ([`SliceGeometry::texture_point`]) that lie in
+/// the texture box (inclusive), front first, coloured by `color` (called
+/// only with at least one point; nothing: transparent).
+fn slab_points(
+    frame: &VolumeFrame,
+    slice: &SliceView,
+    width: u32,
+    height: u32,
+    color: impl Fn(&[[f64; 3]], SlabMode) -> Option<[f32; 4]> + Sync,
+) -> Result<Image, SliceReferenceError> {
     let mut img = Image::new(width, height);
     if width == 0 || height == 0 {
         return Ok(img);
     }
     let g = slice.resolve(frame, width as f64 / height as f64)?;
-    let labels = vol.desc().kind.is_labels();
-    let dims = vol.dims().map(f64::from);
     let w = width as usize;
     img.color
         .par_chunks_mut(w)
         .enumerate()
         .for_each(|(py, row)| {
-            let mut samples = Vec::new();
+            let mut points = Vec::new();
             for (px, out) in row.iter_mut().enumerate() {
-                samples.clear();
-                let mut front = [0.0; 3];
+                points.clear();
                 for k in 0..g.samples {
                     let t = g.texture_point(px as u32, py as u32, width, height, k);
-                    let inside = (0..3).all(|a| (0.0..=1.0).contains(&t[a]));
-                    if !inside {
-                        continue;
+                    if (0..3).all(|a| (0.0..=1.0).contains(&t[a])) {
+                        points.push(t.to_array());
                     }
-                    if samples.is_empty() {
-                        front = t.to_array();
-                    }
-                    let p = [0, 1, 2].map(|a| t[a] * dims[a] - 0.5);
-                    samples.push(if labels {
-                        vol.sample_nearest(p)
-                    } else {
-                        vol.sample_trilinear(p)
-                    });
                 }
-                if !samples.is_empty()
-                    && let Some(c) = color(&samples, g.mode, front)
+                if !points.is_empty()
+                    && let Some(c) = color(&points, g.mode)
                 {
                     *out = c;
                 }
@@ -231,5 +288,26 @@ mod tests {
             render_slice(&vol, &frame, &s, &grey, 4, 4),
             Err(SliceReferenceError::Slice(_))
         ));
+    }
+
+    /// One white channel through a window is the grey slice of that window
+    /// (its slice gain undoes the opacity); a hidden channel adds nothing.
+    #[test]
+    fn a_white_channel_is_the_grey_slice() {
+        let n = 16;
+        let vol = ramp(n);
+        let frame = VolumeFrame::centered([n; 3], [1.0; 3]);
+        let grey = Intensity::new(Window::from_min_max(3.0, 12.0).unwrap(), ColorMap::Grey);
+        let style = ChannelStyle::window([1.0; 3], [3.0 / 15.0, 12.0 / 15.0], 0.3);
+        let two = ChannelVolume::new(vec![vol.clone(), vol.clone()]).unwrap();
+        let styles = [style.clone(), style.visible(false)];
+        let s = SliceView::orthogonal(SliceAxis::Coronal, 5.0, &frame, 1.0).unwrap();
+        let a = render_slice(&vol, &frame, &s, &grey, 24, 24).unwrap();
+        let b = render_channel_slice(&two, &frame, &s, &styles, 24, 24).unwrap();
+        for (x, y) in a.color.iter().zip(&b.color) {
+            for k in 0..4 {
+                assert!((x[k] - y[k]).abs() < 2e-3, "{x:?} {y:?}");
+            }
+        }
     }
 }

@@ -61,7 +61,7 @@ struct ChannelParams {
 // c * table_rows + r (read through group 1's linear sampler).
 @group(2) @binding(5) var chan_table: texture_2d<f32>;
 // The channels' classification: CLASS_HEADER rows (visibility: 1 or 0 per
-// lane; isovalues; each channel's isosurface colour), then their TF entries,
+// lane; isovalues; each channel's isosurface colour; slice gains), then their TF entries,
 // concatenated (channel c's from tf_offset[c]). Lavapipe (22.x) inlines
 // uniform values that steer branches and crashed compiling this kernel when
 // the visibility and isovalues were uniforms: read from storage they are
@@ -70,7 +70,12 @@ struct ChannelParams {
 
 // Rows of chan_tf before the TF entries (`CLASS_HEADER` in
 // backend/channels.rs).
-const CLASS_HEADER: u32 = 6u;
+const CLASS_HEADER: u32 = 7u;
+
+// Each channel's slice gain (brickray_core::channels::slice_gain).
+fn chan_slice_gain() -> vec4<f32> {
+    return chan_tf[6];
+}
 
 // 1 in the lanes of the visible channels, 0 elsewhere.
 fn chan_visible() -> vec4<f32> {
@@ -393,4 +398,51 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         acc.depth_set = shown;
     }
     store_pixel(px, acc.color, acc.depth, start.host, acc.samples);
+}
+
+// Slice views of the channels (slice.wgsl's geometry, every channel at once;
+// brickray_core::channels::slice_color): pixel (x, y) takes the slab's
+// samples in the clip box, reduces each channel by the maximum or mean,
+// classifies each by its TF (uncorrected) and adds the visible channels'
+// colours weighted by their opacity over their TF's largest, clamped,
+// opaque. A pixel with no sample is transparent; no depth is written.
+const SLAB_MAX: u32 = 0u;
+const SLAB_MEAN: u32 = 1u;
+
+@compute @workgroup_size(8, 8, 1)
+fn slice_main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    if (gid.x >= frame.viewport_size.x || gid.y >= frame.viewport_size.y) {
+        return;
+    }
+    let px = gid.xy;
+    let start = start_ray(px);
+    let sdt = frame.slab_dt;
+    let k0 = select(0u, u32(max(ceil(start.t0 / max(sdt, 1e-30) - 0.5), 0.0)), sdt > 0.0);
+    let span = select(0.0, min((start.t1 - start.t0) / max(sdt, 1e-30), 1.0e6), sdt > 0.0 && start.t1 > start.t0);
+    let n = min(frame.slab_samples, k0 + u32(span) + 2u);
+    var k = k0;
+    var count = 0u;
+    var sum = vec4<f32>(0.0);
+    var best = vec4<f32>(-3.0e38);
+    loop {
+        if (k >= n) { break; }
+        let t = (f32(k) + 0.5) * sdt;
+        if (t > start.t1) { break; }
+        if (t >= start.t0) {
+            let v = channel_values(tex_at(start.r, t));
+            count = count + 1u;
+            sum = sum + v;
+            best = max(best, v);
+        }
+        k = k + 1u;
+    }
+    var color = vec4<f32>(0.0);
+    if (count > 0u) {
+        let v = select(best, sum / f32(count), frame.slab_mode == SLAB_MEAN);
+        let q = channel_tf_lookup4(v);
+        let w = quad_alpha(q) * chan_slice_gain() * chan_visible();
+        let rgb = q.q0.rgb * w.x + q.q1.rgb * w.y + q.q2.rgb * w.z + q.q3.rgb * w.w;
+        color = vec4<f32>(min(rgb, vec3<f32>(1.0)), 1.0);
+    }
+    store_pixel(px, color, far_depth(), start.host, count);
 }

@@ -92,8 +92,8 @@ pub enum RenderError {
     /// ([`crate::VolumeRenderer::set_channel_volume`]).
     #[error(transparent)]
     Channels(#[from] brickray_core::ChannelError),
-    /// A feature not drawn with a multi-channel volume (slice views, a label
-    /// map over it, the prediction buffer); the message names it.
+    /// A feature not drawn with a multi-channel volume (a label map over
+    /// it); the message names it.
     #[error("{0} cannot be drawn with a multi-channel volume")]
     ChannelsUnsupported(&'static str),
     /// wgpu reported an error creating one of the library's objects (caught by an

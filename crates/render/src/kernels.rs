@@ -177,6 +177,14 @@ impl Variant {
         }
     }
 
+    /// The multi-channel kernel's slice view for `channels` channels.
+    pub(crate) fn channel_slice(channels: u32) -> Variant {
+        Variant {
+            channels,
+            ..Variant::slice(false, false, None)
+        }
+    }
+
     /// The multi-channel kernel's pipeline for `channels` channels: mode,
     /// early termination, skipping and shading as the settings say; no
     /// pre-integration, prediction, labels or overlay (channels.wgsl draws

@@ -205,10 +205,11 @@ impl VolumeRenderer {
     /// visibility and isovalue per channel) and composited in one ray:
     /// DVR mixes the visible channels' samples, MIP each channel's maximum,
     /// iso finds the first crossing of any channel's own isovalue
-    /// ([`brickray_core::channels`]). Slice views, a label map over it and
-    /// pre-integration are not drawn with channels
-    /// ([`RenderError::ChannelsUnsupported`] from `prepare` for the first
-    /// two; pre-integration is ignored). Fails as
+    /// ([`brickray_core::channels`]); slice views add the visible channels'
+    /// colours ([`brickray_core::channels::slice_color`]; the intensity
+    /// window is not used). A label map over it and pre-integration are not
+    /// drawn with channels ([`RenderError::ChannelsUnsupported`] from
+    /// `prepare` for the first; pre-integration is ignored). Fails as
     /// [`Self::set_volume`] does, per channel.
     pub fn set_channel_volume(
         &mut self,
@@ -618,9 +619,6 @@ impl VolumeRenderer {
                 if r.channel_styles.is_none() {
                     return Err(PrepareError::NoChannelStyles);
                 }
-                if r.slice.is_some() {
-                    return Err(RenderError::ChannelsUnsupported("a slice view").into());
-                }
                 if r.overlay.style().is_some() {
                     return Err(
                         RenderError::ChannelsUnsupported("a label map over the image").into(),
@@ -717,7 +715,11 @@ impl VolumeRenderer {
         let mapping = self.mapping.ok_or(PrepareError::NoVolume)?;
         mapping.apply(&mut uniforms);
         let variant = if let Some(n) = channels {
-            Variant::channels(&desc.settings, n)
+            if mapping.slice.is_some() {
+                Variant::channel_slice(n)
+            } else {
+                Variant::channels(&desc.settings, n)
+            }
         } else if mapping.slice.is_some() {
             Variant::slice(
                 backend.measures_weights(),

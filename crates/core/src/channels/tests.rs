@@ -198,3 +198,23 @@ fn channels_interleave_into_lanes() {
     );
     assert_eq!(interleave(&[&a], 1, 1), a);
 }
+
+/// A window style's slice shows its colour times the windowed intensity;
+/// channels add and clamp; a TF with no opacity shows nothing.
+#[test]
+fn slices_add_the_channels_at_full_colour() {
+    let s = ChannelStyle::window([0.2, 0.6, 1.0], [0.2, 0.6], 0.4);
+    let g = slice_gain(&s.tf);
+    assert!((g - 2.5).abs() < 1e-6, "{g}");
+    let at = |v: f64| {
+        let [r, gr, b, a] = s.tf.lookup(v);
+        ([r, gr, b], a, g)
+    };
+    let c = slice_color(&[at(0.4)]);
+    assert!((c[2] - 0.5).abs() < 1e-3 && (c[1] - 0.3).abs() < 1e-3, "{c:?}");
+    assert_eq!(slice_color(&[at(0.1)]), [0.0; 3]);
+    let full = slice_color(&[at(0.9), at(0.9)]);
+    assert_eq!(full[2], 1.0);
+    assert!((full[1] - 1.0).abs() < 1e-6 && (full[0] - 0.4).abs() < 1e-6, "{full:?}");
+    assert_eq!(slice_gain(&TransferFunction::ramp(0.5, 0.6, 0.0)), 0.0);
+}

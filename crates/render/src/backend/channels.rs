@@ -364,11 +364,11 @@ impl Channels {
 
 /// Rows of the classification buffer before the TF entries
 /// (`CLASS_HEADER` in channels.wgsl).
-pub(crate) const CLASS_HEADER: usize = 6;
+pub(crate) const CLASS_HEADER: usize = 7;
 
 /// The classification buffer's header: visibility (1 or 0 per lane),
-/// isovalues, and each channel's isosurface colour (lanes and rows past the
-/// channels zero). In storage, not uniforms: lavapipe inlines uniform
+/// isovalues, each channel's isosurface colour, and the slice gains
+/// (`channels::slice_gain`; lanes and rows past the channels zero). In storage, not uniforms: lavapipe inlines uniform
 /// values that steer branches, and crashed compiling the kernel with these.
 fn class_header(styles: &[ChannelStyle]) -> Vec<[f32; 4]> {
     let mut h = vec![[0.0f32; 4]; CLASS_HEADER];
@@ -377,6 +377,7 @@ fn class_header(styles: &[ChannelStyle]) -> Vec<[f32; 4]> {
         h[1][c] = s.isovalue;
         let [r, g, b] = s.iso_color();
         h[2 + c] = [r, g, b, 1.0];
+        h[6][c] = channels::slice_gain(&s.tf) as f32;
     }
     h
 }

@@ -331,7 +331,16 @@ fn channels_kernel_matches_the_rust_side() {
     use crate::backend::channels::ChannelParams;
     let m = module("channels", &channels());
     let names: Vec<&str> = m.entry_points.iter().map(|e| e.name.as_str()).collect();
-    assert_eq!(names, [crate::kernels::ENTRY_RAYCAST]);
+    assert_eq!(
+        names,
+        [crate::kernels::ENTRY_RAYCAST, crate::kernels::ENTRY_SLICE]
+    );
+    for (wgsl, mode) in [
+        ("SLAB_MAX", crate::slice::SLAB_MAX),
+        ("SLAB_MEAN", crate::slice::SLAB_MEAN),
+    ] {
+        assert_eq!(const_u32(&m, wgsl), mode, "channels: {wgsl}");
+    }
     check_kernel_common(
         "channels",
         &m,
