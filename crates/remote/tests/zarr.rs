@@ -447,3 +447,66 @@ fn crc32c(bytes: &[u8]) -> u32 {
     }
     !crc
 }
+
+/// A multi-channel OME-Zarr over HTTP reads as the same channels, voxel for
+/// voxel, with the same `omero` metadata (colours, windows, labels, active)
+/// as the local folder (`read_zarr_channels_url` against `read_channels`).
+#[test]
+fn multi_channel_zarr_over_http_equals_the_local_read() {
+    use brickray_core::channels::ChannelVolume;
+    use brickray_core::{Volume, VolumeData, VolumeDesc};
+    use brickray_io::ChannelInfo;
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path().join("cells.ome.zarr");
+    let dims = [20u32, 18, 9];
+    let n = (dims[0] * dims[1] * dims[2]) as usize;
+    let channel = |k: u16| {
+        let data: Vec<u16> = (0..n)
+            .map(|i| (i as u16).wrapping_mul(7 + k) % 3000)
+            .collect();
+        let desc = VolumeDesc {
+            dims,
+            dtype: brickray_core::DType::U16,
+            spacing: [1.0, 1.0, 2.0],
+            value_range: [0.0, 2999.0],
+            kind: Default::default(),
+        };
+        Volume::new(desc, VolumeData::U16(data)).unwrap()
+    };
+    let vol = ChannelVolume::new(vec![channel(0), channel(5)]).unwrap();
+    let info = vec![
+        ChannelInfo {
+            label: Some("nuclei".into()),
+            color: Some([0.0, 1.0, 0.0]),
+            window: Some([100.0, 2000.0]),
+            active: true,
+        },
+        ChannelInfo {
+            label: Some("membrane".into()),
+            color: Some([1.0, 0.0, 1.0]),
+            window: Some([50.0, 900.0]),
+            active: false,
+        },
+    ];
+    brickray_io::zarr::write_ome_zarr_channels(&root, &vol, &info).unwrap();
+    let server = serve_dir(dir.path(), 404, |_, _| Act::Serve);
+    let read = ReadOptions::default();
+    let remote =
+        brickray_store::read_zarr_channels_url(&server.url("cells.ome.zarr"), &opts(), &read)
+            .unwrap();
+    let local = brickray_io::read_channels(&root, &read).unwrap();
+    assert_eq!(remote.volume, local.volume);
+    assert_eq!(remote.info, local.info);
+    assert_eq!(remote.volume.len(), 2);
+    for (c, v) in remote.volume.channels().iter().enumerate() {
+        assert_eq!(v.data(), vol.channels()[c].data(), "channel {c}");
+    }
+    assert_eq!(remote.info[1].label.as_deref(), Some("membrane"));
+    assert!(!remote.styles()[1].visible);
+    // A channel the image does not have is a typed error, as locally.
+    let bad = ReadOptions::default().channels(Some(vec![2]));
+    assert!(
+        brickray_store::read_zarr_channels_url(&server.url("cells.ome.zarr"), &opts(), &bad)
+            .is_err()
+    );
+}

@@ -53,6 +53,7 @@ pub use reader::{NodeRecord, STORE_BATCH, Store, StoreStats, decode_payload, ope
 #[cfg(feature = "remote")]
 pub use url::{
     is_zarr_url, open_any, open_source_any, open_url, open_zarr_reader_url, open_zarr_url,
+    read_zarr_channels_url,
 };
 
 /// The 2x downsampling filter that computes a level-`l-1` voxel from the 2x2x2

@@ -112,6 +112,23 @@ pub fn open_zarr_reader_url(
     )?)
 }
 
+/// Every channel of the OME-Zarr image at `url` read whole
+/// ([`brickray_io::read_channels`] of a remote image: the level, time point
+/// and channels of `read`, each channel's `omero` metadata), through the
+/// disk cache of `opts` when there is one. For images that fit in memory
+/// (the multi-channel renderer draws them in core); a larger one is read at
+/// a coarser level (`ReadOptions::level`).
+pub fn read_zarr_channels_url(
+    url: &str,
+    opts: &brickray_remote::RemoteOptions,
+    read: &brickray_io::ReadOptions,
+) -> Result<brickray_io::ReadChannels, StoreError> {
+    let path = Path::new(url);
+    let readers =
+        brickray_io::zarr::ZarrReader::open_channels_objects(zarr_objects(url, opts)?, read)?;
+    Ok(brickray_io::ReadChannels::read(path, readers)?)
+}
+
 /// Whether the remote `url` names an OME-Zarr image rather than a store:
 /// its path ends in `.zarr` (or `.zarr/`), or, for a name ending in neither
 /// `.zarr` nor `.brs`, the folder it names holds a `zarr.json` or `.zattrs`

@@ -35,7 +35,22 @@ impl ZarrReader {
     /// of `opts`, sharing the opened image, with each channel's `omero`
     /// metadata ([`OmeZarr::channel_info`]).
     pub fn open_channels(root: &Path, opts: &ReadOptions) -> Result<ChannelReaders, IoError> {
-        let zarr = Arc::new(OmeZarr::open(root)?);
+        ZarrReader::channels_of(Arc::new(OmeZarr::open(root)?), opts)
+    }
+
+    /// [`ZarrReader::open_channels`] of the image whose objects `reader`
+    /// reads by key (an OME-Zarr image over HTTP or in a bucket; see
+    /// [`ZarrReader::open_objects`]).
+    pub fn open_channels_objects(
+        reader: Arc<dyn brickray_core::ObjectReader>,
+        opts: &ReadOptions,
+    ) -> Result<ChannelReaders, IoError> {
+        ZarrReader::channels_of(Arc::new(OmeZarr::open_objects(reader)?), opts)
+    }
+
+    fn channels_of(zarr: Arc<OmeZarr>, opts: &ReadOptions) -> Result<ChannelReaders, IoError> {
+        let root = zarr.root.clone();
+        let root = root.as_path();
         zarr.check_choice(&opts.clone().channel(None))?;
         let count = zarr.channel_count();
         let indices = crate::select_channels(root, count, opts)?;
