@@ -23,7 +23,7 @@
 use brickray::core::channels::{ChannelStyle, ChannelVolume};
 use brickray::{
     Camera, ChannelError, FrameDesc, PrepareError, RenderError, RenderMode, RenderSettings,
-    Shading, SliceAxis, SliceView, TransferFunction, Volume, VolumeData, VolumeDesc, VolumeFrame,
+    SliceAxis, SliceView, TransferFunction, Volume, VolumeData, VolumeDesc, VolumeFrame,
     VolumeRenderer,
 };
 use brickray_harness::predict::draw;
@@ -82,41 +82,7 @@ fn styles(n: usize) -> Vec<ChannelStyle> {
 }
 
 fn modes() -> Vec<(&'static str, RenderSettings)> {
-    let base = RenderSettings {
-        step_factor: STEP,
-        ..Default::default()
-    };
-    let shaded = Shading {
-        enabled: true,
-        ..Default::default()
-    };
-    vec![
-        ("dvr", base),
-        (
-            "dvr shaded",
-            RenderSettings {
-                shading: shaded,
-                ..base
-            },
-        ),
-        (
-            "mip",
-            RenderSettings {
-                mode: RenderMode::Mip,
-                ..base
-            },
-        ),
-        (
-            "iso",
-            RenderSettings {
-                mode: RenderMode::Iso {
-                    value: 0.45,
-                    color: [1.0; 3],
-                },
-                ..base
-            },
-        ),
-    ]
+    brickray_harness::channels::modes(STEP, 0.45)
 }
 
 fn frame_of(v: &Volume) -> VolumeFrame {

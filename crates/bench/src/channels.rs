@@ -18,8 +18,8 @@
 use crate::Figures;
 use crate::runner::median;
 use brickray_core::channels::ChannelVolume;
-use brickray_core::{Camera, RenderMode, RenderSettings, Shading, VolumeFrame};
-use brickray_harness::channels::{nuclei_channels, nuclei_styles};
+use brickray_core::{Camera, RenderMode, RenderSettings, VolumeFrame};
+use brickray_harness::channels::{modes, nuclei_channels, nuclei_styles};
 use brickray_harness::predict::{draw, samples_per_ray};
 use brickray_harness::{GpuContext, Offscreen};
 use brickray_reference::{ReferenceOptions, compare, render_channels_reference};
@@ -59,40 +59,6 @@ struct ChannelsResult {
     /// to the single-channel kernel.
     one_channel_overhead: f64,
     psnr_min_db: f64,
-}
-
-fn modes() -> Vec<(&'static str, RenderSettings)> {
-    let base = RenderSettings::default();
-    vec![
-        ("dvr", base),
-        (
-            "dvr shaded",
-            RenderSettings {
-                shading: Shading {
-                    enabled: true,
-                    ..Default::default()
-                },
-                ..base
-            },
-        ),
-        (
-            "mip",
-            RenderSettings {
-                mode: RenderMode::Mip,
-                ..base
-            },
-        ),
-        (
-            "iso",
-            RenderSettings {
-                mode: RenderMode::Iso {
-                    value: 0.35,
-                    color: [1.0; 3],
-                },
-                ..base
-            },
-        ),
-    ]
 }
 
 pub(crate) fn run(size: u32, rounds: usize) -> Result<Figures, String> {
@@ -136,7 +102,7 @@ pub(crate) fn run(size: u32, rounds: usize) -> Result<Figures, String> {
         "| mode | single-channel kernel ms | 1 / 2 / 4 channels ms | 2ch / 1ch | 4ch / 1ch | samples per ray | PSNR 1 / 2 / 4 ch (dB) |"
     );
     println!("|---|---:|---:|---:|---:|---:|---:|");
-    for (mode, settings) in modes() {
+    for (mode, settings) in modes(RenderSettings::default().step_factor, 0.35) {
         let mut desc = FrameDesc {
             settings,
             ..FrameDesc::new(camera, frame, size, size)

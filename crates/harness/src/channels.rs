@@ -49,3 +49,31 @@ pub fn nuclei_styles(n: usize) -> Vec<ChannelStyle> {
         .map(|c| ChannelStyle::window(COLORS[c % 4], [0.15, 0.6], 0.4).with_isovalue(0.35))
         .collect()
 }
+
+/// The modes the channel tests and bench draw, by name: DVR, shaded DVR,
+/// MIP and iso (the mode's isovalue `iso`; the channels' own isovalues are
+/// what the multi-channel kernel uses), at `step_factor`.
+pub fn modes(step_factor: f32, iso: f32) -> Vec<(&'static str, brickray_core::RenderSettings)> {
+    use brickray_core::{RenderMode, RenderSettings, Shading};
+    let base = RenderSettings {
+        step_factor,
+        ..Default::default()
+    };
+    let shading = Shading {
+        enabled: true,
+        ..Default::default()
+    };
+    let with = |mode| RenderSettings { mode, ..base };
+    vec![
+        ("dvr", base),
+        ("dvr shaded", RenderSettings { shading, ..base }),
+        ("mip", with(RenderMode::Mip)),
+        (
+            "iso",
+            with(RenderMode::Iso {
+                value: iso,
+                color: [1.0; 3],
+            }),
+        ),
+    ]
+}

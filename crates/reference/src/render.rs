@@ -219,23 +219,7 @@ pub fn render_reference(
     if width == 0 || height == 0 {
         return img;
     }
-    let step_factor = opts.step_factor as f64;
-    assert!(
-        step_factor.is_finite() && step_factor > 0.0,
-        "step_factor must be finite and > 0, got {step_factor}"
-    );
-    let voxel_world = frame.voxel_world as f64;
-    assert!(
-        voxel_world.is_finite() && voxel_world > 0.0,
-        "frame.voxel_world must be finite and > 0, got {voxel_world}"
-    );
-    if let Some(d) = opts.host_depth {
-        assert_eq!(
-            d.len(),
-            width as usize * height as usize,
-            "host_depth must hold width * height values"
-        );
-    }
+    let step_factor = checked_step(frame, opts);
 
     if let Some(s) = opts.spread {
         assert_eq!(
@@ -272,10 +256,47 @@ pub fn render_reference(
     if opts.preintegrated && !labels {
         marcher.preint = Some(Preintegrator::new(tf, PREINT_CELLS));
     }
+    fill_pixels(&mut img, camera, opts, |px, py, n, host| {
+        marcher.pixel(px, py, n, host)
+    });
+    img
+}
+
+/// The step factor of `opts`, after checking it and the frame's voxel size
+/// (finite, positive) and the host depth's length (panics otherwise).
+fn checked_step(frame: &VolumeFrame, opts: &ReferenceOptions<'_>) -> f64 {
+    let step_factor = opts.step_factor as f64;
+    assert!(
+        step_factor.is_finite() && step_factor > 0.0,
+        "step_factor must be finite and > 0, got {step_factor}"
+    );
+    let voxel_world = frame.voxel_world as f64;
+    assert!(
+        voxel_world.is_finite() && voxel_world > 0.0,
+        "frame.voxel_world must be finite and > 0, got {voxel_world}"
+    );
+    if let Some(d) = opts.host_depth {
+        assert_eq!(
+            d.len(),
+            opts.width as usize * opts.height as usize,
+            "host_depth must hold width * height values"
+        );
+    }
+    step_factor
+}
+
+/// Fills `img` (cleared to the far depth first) in parallel rows with
+/// `pixel(px, py, supersample, host depth)` of every pixel.
+fn fill_pixels(
+    img: &mut Image,
+    camera: &Camera,
+    opts: &ReferenceOptions<'_>,
+    pixel: impl Fn(f64, f64, u32, Option<f32>) -> RayResult + Sync,
+) {
     let n = opts.supersample.max(1);
     let far = camera.depth.far_value();
     img.depth.fill(far);
-    let w = width as usize;
+    let w = img.width as usize;
     img.color
         .par_chunks_mut(w)
         .zip(img.depth.par_chunks_mut(w))
@@ -283,12 +304,11 @@ pub fn render_reference(
         .for_each(|(py, (colors, depths))| {
             for (px, (color, depth)) in colors.iter_mut().zip(depths.iter_mut()).enumerate() {
                 let host = opts.host_depth.map(|d| d[py * w + px]);
-                let (c, z) = marcher.pixel(px as f64, py as f64, n, host);
+                let (c, z) = pixel(px as f64, py as f64, n, host);
                 *color = c.map(|x| x as f32);
                 *depth = z.map_or(far, |z| z as f32);
             }
         });
-    img
 }
 
 /// The per-frame constants of a render.

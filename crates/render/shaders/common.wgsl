@@ -253,6 +253,16 @@ fn start_ray(px: vec2<u32>) -> RayStart {
     return s;
 }
 
+// A slice view's samples t_k = (k + 1/2) slab_dt along the ray of `start`
+// (slice.wgsl): the first index at or after t0 and a bound from the ray's
+// extent, as (k0, n) (no loop bound on a uniform alone).
+fn slab_range(start: RayStart) -> vec2<u32> {
+    let sdt = frame.slab_dt;
+    let k0 = select(0u, u32(max(ceil(start.t0 / max(sdt, 1e-30) - 0.5), 0.0)), sdt > 0.0);
+    let span = select(0.0, min((start.t1 - start.t0) / max(sdt, 1e-30), 1.0e6), sdt > 0.0 && start.t1 > start.t0);
+    return vec2<u32>(k0, min(frame.slab_samples, k0 + u32(span) + 2u));
+}
+
 // The texture coordinate of the corrected table's row for a step of
 // step_factor * 2^r reference lengths (hoisted out of the sample loop).
 fn tf_row(r: f32) -> f32 {

@@ -34,12 +34,9 @@ fn slice_main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let start = start_ray(px);
     slice_begin(px);
     let sdt = frame.slab_dt;
-    // The first sample at or after t0, and a bound from the ray's extent (no
-    // loop bound on a uniform alone: common.wgsl).
-    let k0 = select(0u, u32(max(ceil(start.t0 / max(sdt, 1e-30) - 0.5), 0.0)), sdt > 0.0);
-    let span = select(0.0, min((start.t1 - start.t0) / max(sdt, 1e-30), 1.0e6), sdt > 0.0 && start.t1 > start.t0);
-    let n = min(frame.slab_samples, k0 + u32(span) + 2u);
-    var k = k0;
+    let range = slab_range(start);
+    let n = range.y;
+    var k = range.x;
     var count = 0u;
     var sum = 0.0;
     var best = -3.0e38;

@@ -25,7 +25,7 @@ pub(crate) struct TfInfo {
 }
 
 /// Texel format of the corrected table (filterable on every WebGPU device).
-const TABLE_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
+pub(crate) const TABLE_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
 
 /// What a corrected table was built for.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -261,26 +261,10 @@ impl TfTables {
             self.table = Some((tex, view));
             self.bind_group = None;
         }
-        let halfs: Vec<u16> = t
-            .texels
-            .iter()
-            .flatten()
-            .map(|&x| half::f16::from_f32(x).to_bits())
-            .collect();
         let Some((tex, _)) = self.table.as_ref() else {
             return Ok(0);
         };
-        queue.write_texture(
-            tex.as_image_copy(),
-            bytemuck::cast_slice(&halfs),
-            wgpu::TexelCopyBufferLayout {
-                offset: 0,
-                bytes_per_row: Some(t.width * 8),
-                rows_per_image: None,
-            },
-            size,
-        );
-        let mut written = halfs.len() as u64 * 2;
+        let mut written = write_rgba16f(queue, tex, &t.texels, size);
         self.preint_key = None;
         written += self.info.write(
             queue,
@@ -376,7 +360,7 @@ impl TfTables {
 
 /// A sampled 2D (array) texture of `TABLE_FORMAT` texels for a TF table,
 /// written by copies.
-fn table_texture(
+pub(crate) fn table_texture(
     device: &wgpu::Device,
     label: &'static str,
     size: wgpu::Extent3d,
@@ -425,20 +409,32 @@ fn upload_preint(
             (tex, view)
         }
     };
+    let bytes = write_rgba16f(queue, &pair.0, texels, size);
+    Ok((pair, bytes))
+}
+
+/// Writes `texels` (RGBA, converted to half floats) into the whole of
+/// `tex`, a `TABLE_FORMAT` texture of `size`; returns the bytes written.
+pub(crate) fn write_rgba16f(
+    queue: &wgpu::Queue,
+    tex: &wgpu::Texture,
+    texels: &[[f32; 4]],
+    size: wgpu::Extent3d,
+) -> u64 {
     let halfs: Vec<u16> = texels
         .iter()
         .flatten()
         .map(|&x| half::f16::from_f32(x).to_bits())
         .collect();
     queue.write_texture(
-        pair.0.as_image_copy(),
+        tex.as_image_copy(),
         bytemuck::cast_slice(&halfs),
         wgpu::TexelCopyBufferLayout {
             offset: 0,
-            bytes_per_row: Some(side * 8),
-            rows_per_image: Some(side),
+            bytes_per_row: Some(size.width * 8),
+            rows_per_image: Some(size.height),
         },
         size,
     );
-    Ok((pair, halfs.len() as u64 * 2))
+    halfs.len() as u64 * 2
 }

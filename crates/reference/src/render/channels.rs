@@ -6,7 +6,6 @@ use super::{Image, Marcher, RayResult, Span};
 use brickray_core::channels::{self, ChannelStyle, ChannelVolume};
 use brickray_core::tf::corrected_alpha;
 use brickray_core::{Camera, Ray, RenderMode, RenderSettings, VolumeFrame};
-use rayon::prelude::*;
 
 use super::ReferenceOptions;
 
@@ -57,18 +56,7 @@ pub fn render_channels_reference(
     if width == 0 || height == 0 {
         return img;
     }
-    let step_factor = opts.step_factor as f64;
-    assert!(
-        step_factor.is_finite() && step_factor > 0.0,
-        "step_factor must be finite and > 0, got {step_factor}"
-    );
-    if let Some(d) = opts.host_depth {
-        assert_eq!(
-            d.len(),
-            width as usize * height as usize,
-            "host_depth must hold width * height values"
-        );
-    }
+    let step_factor = super::checked_step(frame, opts);
     let marchers: Vec<Marcher<'_>> = vol
         .channels()
         .iter()
@@ -92,23 +80,9 @@ pub fn render_channels_reference(
         settings,
         step_factor,
     };
-    let n = opts.supersample.max(1);
-    let far = camera.depth.far_value();
-    img.depth.fill(far);
-    let w = width as usize;
-    img.color
-        .par_chunks_mut(w)
-        .zip(img.depth.par_chunks_mut(w))
-        .enumerate()
-        .for_each(|(py, (colors, depths))| {
-            for (px, (color, depth)) in colors.iter_mut().zip(depths.iter_mut()).enumerate() {
-                let host = opts.host_depth.map(|d| d[py * w + px]);
-                let (c, z) = m.marchers[0]
-                    .pixel_with(px as f64, py as f64, n, host, |x, y, h| m.trace(x, y, h));
-                *color = c.map(|x| x as f32);
-                *depth = z.map_or(far, |z| z as f32);
-            }
-        });
+    super::fill_pixels(&mut img, camera, opts, |px, py, n, host| {
+        m.marchers[0].pixel_with(px, py, n, host, |x, y, h| m.trace(x, y, h))
+    });
     img
 }
 

@@ -21,8 +21,6 @@ pub(crate) const STORAGE_BUFFERS: u32 = INCORE_STORAGE_BUFFERS + 1;
 const TABLE_BINDING: u32 = 5;
 /// The TF entries' binding.
 const ENTRIES_BINDING: u32 = 6;
-/// Texel format of the stacked tables (group 1's corrected table's).
-const TABLE_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
 
 /// `struct ChannelParams` of channels.wgsl.
 #[repr(C)]
@@ -289,22 +287,7 @@ impl Channels {
                 self.table = table_texture(device, width, styles.len() as u32)?;
                 rebind = true;
             }
-            let halfs: Vec<u16> = texels
-                .iter()
-                .flatten()
-                .map(|&x| half::f16::from_f32(x).to_bits())
-                .collect();
-            queue.write_texture(
-                self.table.0.as_image_copy(),
-                bytemuck::cast_slice(&halfs),
-                wgpu::TexelCopyBufferLayout {
-                    offset: 0,
-                    bytes_per_row: Some(width * 8),
-                    rows_per_image: None,
-                },
-                size,
-            );
-            written += halfs.len() as u64 * 2;
+            written += crate::tf::write_rgba16f(queue, &self.table.0, &texels, size);
             let mut all = class_header(styles);
             let mut p = self.base;
             for (c, s) in styles.iter().enumerate() {
@@ -388,21 +371,13 @@ fn table_texture(
     width: u32,
     rows: u32,
 ) -> Result<(wgpu::Texture, wgpu::TextureView), RenderError> {
-    let tex = gpu::texture(
+    let tex = crate::tf::table_texture(
         device,
-        &wgpu::TextureDescriptor {
-            label: Some("brickray-render channel tf tables"),
-            size: wgpu::Extent3d {
-                width,
-                height: rows.max(1),
-                depth_or_array_layers: 1,
-            },
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D2,
-            format: TABLE_FORMAT,
-            usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-            view_formats: &[],
+        "brickray-render channel tf tables",
+        wgpu::Extent3d {
+            width,
+            height: rows.max(1),
+            depth_or_array_layers: 1,
         },
     )?;
     let view = tex.create_view(&Default::default());

@@ -739,22 +739,18 @@ fn every_override_permutation_validates() {
     }
 }
 
-/// The switches of [`every_override_permutation_validates`], in bit order.
-const SWITCHES: [&str; 10] = [
-    "ERT",
-    "ESS",
-    "SHADE",
-    "PREDICT",
-    "GUARD",
-    "SPARSE_ESS",
-    "PREINT",
-    "WEIGHTS",
-    "LABELS",
-    "SMOOTH_LABELS",
-];
+/// The boolean switches of [`every_override_permutation_validates`], in
+/// bit order: the override constants between `MODE` and `OVERLAY`.
+fn switches() -> &'static [&'static str] {
+    assert_eq!(
+        (OVERRIDES[0], OVERRIDES[OVERRIDES.len() - 1]),
+        ("MODE", "OVERLAY")
+    );
+    &OVERRIDES[1..OVERRIDES.len() - 1]
+}
 
 /// `src` with its override constants made constants: `MODE`, `OVERLAY`,
-/// and each of [`SWITCHES`] on when its bit of `bits` is set.
+/// and each of [`switches`] on when its bit of `bits` is set.
 fn specialise(name: &str, src: &str, mode: KernelMode, bits: u32, overlay: u32) -> String {
     let mut s = src
         .replace(
@@ -765,7 +761,7 @@ fn specialise(name: &str, src: &str, mode: KernelMode, bits: u32, overlay: u32) 
             "override OVERLAY: u32 = 0u;",
             &format!("const OVERLAY: u32 = {overlay}u;"),
         );
-    for (i, sw) in SWITCHES.iter().enumerate() {
+    for (i, sw) in switches().iter().enumerate() {
         let on = bits >> i & 1 == 1;
         let from = [true, false]
             .map(|d| format!("override {sw}: bool = {d};"))
