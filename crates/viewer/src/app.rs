@@ -1,7 +1,8 @@
 //! The viewer application: state, the volume view and the frame (the side
 //! panel's widgets are in `panels`, the script runner and screenshots in
-//! `scripting`).
+//! `scripting`, multi-channel volumes in `channels`).
 
+mod channels;
 mod four_views;
 mod labels;
 mod orient;
@@ -136,6 +137,11 @@ pub(crate) struct ViewerApp {
     pick_queue: Vec<[u32; 2]>,
     /// Frames left to redraw while picks are read back.
     pick_frames: u32,
+    /// A multi-channel volume is shown: its channels' controls and styles.
+    channels: Option<channels::ChannelPanel>,
+    /// The message that slices of channel volumes are not drawn was given
+    /// (once per request of the four-view layout).
+    channel_slices_noted: bool,
 }
 
 impl std::fmt::Debug for ViewerApp {
@@ -221,6 +227,8 @@ impl ViewerApp {
             overlay_queue: Vec::new(),
             pick_queue: Vec::new(),
             pick_frames: 0,
+            channels: None,
+            channel_slices_noted: false,
         };
         if let Some(input) = startup.input {
             app.start_open(input);
@@ -240,6 +248,19 @@ impl ViewerApp {
         f: impl FnOnce(&wgpu::Device, &wgpu::Queue, &mut ViewResources) -> R,
     ) -> Option<R> {
         brickray_egui::with_resources(frame.wgpu_render_state()?, f)
+    }
+
+    /// The renderers' options (`u8_exact`; the render thread only applies
+    /// plans, as an interactive host should).
+    fn renderer_options(&self) -> brickray::RendererOptions {
+        brickray::RendererOptions {
+            u8_filtering: if self.u8_exact {
+                brickray::U8Filtering::Exact
+            } else {
+                brickray::U8Filtering::Fast
+            },
+            background_planning: true,
+        }
     }
 
     /// Installs a loaded volume in the renderer.
@@ -263,6 +284,18 @@ impl ViewerApp {
             ),
             _ => (Vec::new(), None),
         };
+        // Reopening what is shown (a renderer option changed) keeps the view
+        // (and a multi-channel volume's edited styles).
+        let reopened = self.shown.as_ref().is_some_and(|s| s.input == loaded.input);
+        let channel_panel = match &loaded.volume {
+            Opened::Channels(c) => Some(match self.channels.take() {
+                Some(p) if reopened && p.styles.len() == c.volume.len() => p,
+                _ => channels::ChannelPanel::new(c),
+            }),
+            _ => None,
+        };
+        let channel_styles = channel_panel.as_ref().map(|p| p.styles.clone());
+        let options = self.renderer_options();
         self.with_gpu(frame, |device, queue, r| {
             match loaded.volume {
                 Opened::InCore(v) => {
@@ -279,13 +312,25 @@ impl ViewerApp {
                         }
                     }
                 }
+                Opened::Channels(c) => {
+                    r.renderer.set_channel_volume(device, queue, &c.volume)?;
+                    r.renderer
+                        .set_channel_styles(channel_styles.as_deref().unwrap_or(&c.styles))?;
+                    // Slices of channel volumes are not drawn: the slice
+                    // renderers let the previous volume go.
+                    let targets = r.renderer.targets();
+                    for s in &mut r.slices {
+                        *s = brickray::VolumeRenderer::with_options(device, targets, options)?;
+                    }
+                }
             }
             Ok::<(), brickray::RenderError>(())
         })
         .ok_or("no GPU")?
         .map_err(|e| format!("{}: {e}", loaded.input.name()))?;
-        // Reopening what is shown (a renderer option changed) keeps the view.
-        let reopened = self.shown.as_ref().is_some_and(|s| s.input == loaded.input);
+        let is_channels = channel_panel.is_some();
+        self.channels = channel_panel;
+        self.channel_slices_noted = false;
         // An overlay stays over its image (drawn again by the new renderer
         // after a reopen) and goes with it.
         if !reopened || desc.kind.is_labels() {
@@ -352,7 +397,7 @@ impl ViewerApp {
         self.upload_overlay(frame)?;
         if let Some(path) = self.pending_overlay.take() {
             self.open_overlay(frame, &path)?;
-        } else if !reopened && self.labels.is_none() {
+        } else if !reopened && self.labels.is_none() && !is_channels {
             self.overlay_zarr_labels(frame)?;
         }
         Ok(())
@@ -363,15 +408,7 @@ impl ViewerApp {
         let Some(rs) = frame.wgpu_render_state() else {
             return;
         };
-        let options = brickray::RendererOptions {
-            u8_filtering: if self.u8_exact {
-                brickray::U8Filtering::Exact
-            } else {
-                brickray::U8Filtering::Fast
-            },
-            // An interactive host: the render thread only applies plans.
-            background_planning: true,
-        };
+        let options = self.renderer_options();
         match brickray_egui::install(rs, options) {
             Ok(()) => {
                 // The budgets travel with the reopen (`install`).
@@ -408,6 +445,11 @@ impl ViewerApp {
             self.tf_dirty = true;
         }
         self.apply_picks(frame);
+        self.apply_channels(frame);
+        // A multi-channel volume is drawn through its channels' styles.
+        if self.channels.is_some() {
+            self.tf_dirty = false;
+        }
         if self.tf_dirty && self.shown.is_some() {
             self.tf_dirty = false;
             // A label map is drawn through its label table; an overlay's
@@ -624,19 +666,25 @@ impl ViewerApp {
                         .default_open(true)
                         .show(ui, |ui| self.render_ui(ui));
                     let label_map = self.labels.is_some() && self.label_overlay.is_none();
-                    egui::CollapsingHeader::new(if label_map {
-                        "Labels"
+                    if self.channels.is_some() {
+                        egui::CollapsingHeader::new("Channels")
+                            .default_open(true)
+                            .show(ui, |ui| self.channels_ui(ui));
                     } else {
-                        "Transfer function"
-                    })
-                    .default_open(true)
-                    .show(ui, |ui| {
-                        if label_map {
-                            self.labels_ui(ui)
+                        egui::CollapsingHeader::new(if label_map {
+                            "Labels"
                         } else {
-                            self.tf_ui(ui)
-                        }
-                    });
+                            "Transfer function"
+                        })
+                        .default_open(true)
+                        .show(ui, |ui| {
+                            if label_map {
+                                self.labels_ui(ui)
+                            } else {
+                                self.tf_ui(ui)
+                            }
+                        });
+                    }
                     if self.label_overlay.is_some() {
                         egui::CollapsingHeader::new("Labels over the image")
                             .default_open(true)
@@ -657,7 +705,14 @@ impl ViewerApp {
             .show(ui, |ui| {
                 let [r, g, b] = self.background;
                 let background = Color32::from_rgb(r, g, b);
-                if self.four_views && self.shown.is_some() && self.camera.is_some() {
+                // Slices of channel volumes are not drawn yet: the 3D view
+                // alone, and a note.
+                let channel_slices = self.four_views && self.channels.is_some();
+                if self.four_views
+                    && !channel_slices
+                    && self.shown.is_some()
+                    && self.camera.is_some()
+                {
                     let (rect, _) =
                         ui.allocate_exact_size(ui.available_size(), egui::Sense::click_and_drag());
                     ui.painter().rect_filled(rect, 0.0, background);
@@ -698,8 +753,25 @@ impl ViewerApp {
                 if s.orientation.is_some() && self.overlays {
                     orient::marker(ui.painter(), rect, &view.callback.camera);
                 }
+                if channel_slices && self.overlays {
+                    ui.painter().text(
+                        rect.center_top() + egui::vec2(0.0, 8.0),
+                        egui::Align2::CENTER_TOP,
+                        CHANNEL_SLICES_NOTE,
+                        egui::FontId::proportional(14.0),
+                        Color32::from_gray(210),
+                    );
+                }
                 callback = Some(view.callback);
             });
+        if self.four_views && self.channels.is_some() {
+            if !self.channel_slices_noted {
+                self.channel_slices_noted = true;
+                self.messages.push(CHANNEL_SLICES_NOTE.into());
+            }
+        } else {
+            self.channel_slices_noted = false;
+        }
         if std::mem::take(&mut self.shot_requested) && self.shot.is_none() {
             self.shots_taken += 1;
             let path = PathBuf::from(format!("brickray-viewer-{}.png", self.shots_taken));
@@ -722,6 +794,11 @@ impl ViewerApp {
     }
 }
 
+/// Shown (once, and over the view) when the four-view layout is asked of a
+/// multi-channel volume.
+const CHANNEL_SLICES_NOTE: &str =
+    "slices of channel volumes are not drawn yet: the 3D view alone is shown";
+
 /// The device needs: brickray's limits within the adapter's, and the
 /// optional features it benefits from.
 pub(crate) fn device_descriptor(adapter: &wgpu::Adapter) -> wgpu::DeviceDescriptor<'static> {
@@ -731,6 +808,15 @@ pub(crate) fn device_descriptor(adapter: &wgpu::Adapter) -> wgpu::DeviceDescript
     limits.max_texture_dimension_2d = limits
         .max_texture_dimension_2d
         .max(adapter.limits().max_texture_dimension_2d.min(8192));
+    // A multi-channel volume binds one more sampled texture (its channels'
+    // stacked tables) than `required_limits` asks for.
+    limits.max_sampled_textures_per_shader_stage =
+        limits.max_sampled_textures_per_shader_stage.max(
+            adapter
+                .limits()
+                .max_sampled_textures_per_shader_stage
+                .min(16),
+        );
     wgpu::DeviceDescriptor {
         label: Some("brickray-viewer"),
         required_features: adapter.features() & wanted,

@@ -33,6 +33,11 @@
 //! overlay FILE | off             a label map over the image shown (placed by both files), or none
 //! overlay mode color | mask      label colours over the image, or the image inside visible labels only
 //! overlay opacity A              0..1
+//! channel N visible on | off     a multi-channel volume's channel N (0-based): shown or hidden
+//! channel N window LO HI         its window in the channel's raw values
+//! channel N color R G B | RRGGBB its colour, 0..255 each (or hex, as OME-Zarr's omero writes it)
+//! channel N opacity A            its opacity at and above the window's high end, 0..1
+//! channel N iso V                its isovalue in raw values (iso mode)
 //! screenshot FILE.png            the volume view, plus FILE.json (camera, viewport)
 //! screenshot-window FILE.png     the whole window
 //! quit
@@ -123,6 +128,24 @@ pub(crate) enum Action {
     Pick([u32; 2]),
     /// A label map over the image.
     Overlay(OverlayAction),
+    /// A change to one channel of a multi-channel volume (its index).
+    Channel(usize, ChannelEdit),
+}
+
+/// What a `channel N ...` script line (or the channel panel) changes of
+/// channel N of a multi-channel volume.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) enum ChannelEdit {
+    /// Shown (`true`) or hidden.
+    Visible(bool),
+    /// The window in the channel's raw values (low <= high).
+    Window(f32, f32),
+    /// The colour, linear RGB 0..1.
+    Color([f32; 3]),
+    /// The opacity at and above the window's high end, 0..1.
+    Opacity(f32),
+    /// The isovalue in the channel's raw values.
+    Iso(f32),
 }
 
 /// What an `overlay ...` script line does.
@@ -435,6 +458,57 @@ pub(crate) fn parse(text: &str) -> Result<Vec<Action>, ScriptError> {
                     LabelAction::ShowOnly(ids)
                 })
             }
+            ["channel", n, what @ ..] => {
+                let c = n
+                    .parse::<usize>()
+                    .ok()
+                    .filter(|&c| c < brickray::core::channels::MAX_CHANNELS)
+                    .ok_or_else(|| {
+                        err(&format!(
+                            "expected a channel index 0..={}",
+                            brickray::core::channels::MAX_CHANNELS - 1
+                        ))
+                    })?;
+                let edit = match what {
+                    ["visible", v] => ChannelEdit::Visible(on_off(v)?),
+                    ["window", lo, hi] => {
+                        let (lo, hi) = (num(lo)?, num(hi)?);
+                        if lo > hi {
+                            return Err(err("the window's low end exceeds its high end"));
+                        }
+                        ChannelEdit::Window(lo, hi)
+                    }
+                    ["color" | "colour", hex] => {
+                        let byte = |i: usize| {
+                            hex.get(i..i + 2)
+                                .and_then(|b| u8::from_str_radix(b, 16).ok())
+                        };
+                        match (hex.len(), byte(0), byte(2), byte(4)) {
+                            (6, Some(r), Some(g), Some(b)) => {
+                                ChannelEdit::Color([r, g, b].map(|v| f32::from(v) / 255.0))
+                            }
+                            _ => return Err(err("expected R G B (0..255) or RRGGBB")),
+                        }
+                    }
+                    ["color" | "colour", r, g, b] => {
+                        let c = |s: &str| {
+                            s.parse::<u8>()
+                                .map(|v| f32::from(v) / 255.0)
+                                .map_err(|_| err("expected R G B (0..255) or RRGGBB"))
+                        };
+                        ChannelEdit::Color([c(r)?, c(g)?, c(b)?])
+                    }
+                    ["opacity", a] => ChannelEdit::Opacity(unit(a)?),
+                    ["iso", v] => ChannelEdit::Iso(num(v)?),
+                    _ => {
+                        return Err(err(
+                            "expected channel N visible on|off, window LO HI, color R G B, \
+                             opacity A or iso V",
+                        ));
+                    }
+                };
+                Action::Channel(c, edit)
+            }
             ["layout", "four"] => Action::FourViews(true),
             ["layout", "single"] => Action::FourViews(false),
             ["crosshair", x, y, z] => {
@@ -710,6 +784,44 @@ mod tests {
         ] {
             let e = parse(text).unwrap_err();
             assert_eq!(e.line, line, "{text:?}: {e}");
+        }
+    }
+
+    #[test]
+    fn channel_lines_parse() {
+        let a = parse(
+            "channel 1 visible off\nchannel 0 window 100 2500.5\nchannel 2 color 255 0 128\n\
+             channel 3 colour 00FF80\nchannel 0 opacity 0.25\nchannel 1 iso 1200",
+        )
+        .unwrap();
+        assert_eq!(
+            a,
+            [
+                Action::Channel(1, ChannelEdit::Visible(false)),
+                Action::Channel(0, ChannelEdit::Window(100.0, 2500.5)),
+                Action::Channel(2, ChannelEdit::Color([1.0, 0.0, 128.0 / 255.0])),
+                Action::Channel(3, ChannelEdit::Color([0.0, 1.0, 128.0 / 255.0])),
+                Action::Channel(0, ChannelEdit::Opacity(0.25)),
+                Action::Channel(1, ChannelEdit::Iso(1200.0)),
+            ]
+        );
+        for bad in [
+            "channel 4 visible on",
+            "channel x visible on",
+            "channel 0",
+            "channel 0 visible maybe",
+            "channel 0 window 10",
+            "channel 0 window 20 10",
+            "channel 0 window 0 nan",
+            "channel 0 color 0 0 256",
+            "channel 0 color GG0000",
+            "channel 0 color 00FF",
+            "channel 0 opacity 1.5",
+            "channel 0 iso",
+            "channel 0 gamma 2",
+        ] {
+            let e = parse(&format!("\n{bad}")).unwrap_err();
+            assert_eq!(e.line, 2, "{bad}: {e}");
         }
     }
 

@@ -1,11 +1,13 @@
 //! Opening volumes in the background: raw+JSON and NRRD files (loaded whole
 //! when small, built into a brick store with progress when large), brick
-//! stores, and procedural volumes. GPU-free: the result is handed to the
-//! renderer by the app.
+//! stores, and procedural volumes; a local input of several channels is
+//! read whole with every channel (`brickray::io::read_channels`, drawn in
+//! core). GPU-free: the result is handed to the renderer by the app.
 
 use crate::tf::Histogram;
-use brickray::io::{IoError, VolumeReader};
-use brickray::{BrickSource, NodeKey, Volume, VolumeDesc};
+use brickray::core::channels::MAX_CHANNELS;
+use brickray::io::{ChannelInfo, IoError, ReadOptions, VolumeReader};
+use brickray::{BrickSource, ChannelStyle, ChannelVolume, NodeKey, Volume, VolumeDesc};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -87,6 +89,22 @@ pub(crate) enum Opened {
     InCore(Volume),
     /// Streamed out of core from a brick source.
     Streamed(Arc<dyn BrickSource>),
+    /// 2 to 4 channels of one grid (`brickray::io::read_channels`), in core.
+    Channels(Box<OpenedChannels>),
+}
+
+/// A multi-channel input read whole: its channels, what the file says of
+/// each and the file's default style of each (`ReadChannels::styles`).
+#[derive(Debug)]
+pub(crate) struct OpenedChannels {
+    /// The channels (one grid and dtype; each its own value range).
+    pub(crate) volume: ChannelVolume,
+    /// What the file says of each channel (label, colour, window, active).
+    pub(crate) info: Vec<ChannelInfo>,
+    /// The file's default classification of each channel.
+    pub(crate) styles: Vec<ChannelStyle>,
+    /// Each channel's histogram of its normalized values.
+    pub(crate) histograms: Vec<Histogram>,
 }
 
 impl std::fmt::Debug for Opened {
@@ -94,6 +112,11 @@ impl std::fmt::Debug for Opened {
         match self {
             Opened::InCore(v) => f.debug_tuple("InCore").field(&v.desc()).finish(),
             Opened::Streamed(s) => f.debug_tuple("Streamed").field(s.layout()).finish(),
+            Opened::Channels(c) => f
+                .debug_tuple("Channels")
+                .field(&c.volume.len())
+                .field(c.volume.desc())
+                .finish(),
         }
     }
 }
@@ -294,7 +317,15 @@ pub(crate) fn open(
                     }
                 }
             }
-            let mut reader = brickray::io::open(path)?;
+            // A multi-channel input is read whole with every channel; a
+            // one-channel input goes on with the reader the probe opened.
+            let mut reader = match probe_channels(path, opts)? {
+                Probe::Channels(opened, too_many) => {
+                    return read_channels(input, path, opts, progress, opened, too_many);
+                }
+                Probe::One(reader) => reader,
+                Probe::Plain => brickray::io::open(path)?,
+            };
             if opts.labels && !reader.desc().kind.is_labels() {
                 reader = Box::new(brickray::io::AsLabels::new(reader)?);
             }
@@ -374,6 +405,140 @@ pub(crate) fn open(
             )
         }
     }
+}
+
+/// What the channel probe of a local path found.
+enum Probe {
+    /// Two or more channels, opened (and how many the file has when it has
+    /// more than [`MAX_CHANNELS`]: the first ones are read).
+    Channels(brickray::io::ChannelReaders, Option<u64>),
+    /// One channel: its reader (the single-channel path goes on with it).
+    One(Box<dyn VolumeReader>),
+    /// Not probed, or the probe failed: the single-channel path opens the
+    /// path itself (and reports its errors).
+    Plain,
+}
+
+/// Opens every channel of `path` (its format's `open_channels`: an OME-Zarr
+/// `c` axis, an ImageJ hyperstack or OME-TIFF, a raw sidecar's `channels`;
+/// other formats are one channel). Label maps (`--labels`) are not probed.
+fn probe_channels(path: &Path, opts: &OpenOptions) -> Result<Probe, OpenError> {
+    if opts.labels {
+        return Ok(Probe::Plain);
+    }
+    let Ok(format) = brickray::io::Registry::global().find(path) else {
+        return Ok(Probe::Plain);
+    };
+    let defaults = ReadOptions::default();
+    let (mut opened, too_many) = match format.open_channels(path, &defaults) {
+        Ok(o) => (o, None),
+        Err(IoError::TooManyChannels { count, .. }) => {
+            let first = defaults.channels(Some((0..MAX_CHANNELS as u64).collect()));
+            (format.open_channels(path, &first)?, Some(count))
+        }
+        Err(_) => return Ok(Probe::Plain),
+    };
+    if opened.readers.len() == 1 && too_many.is_none() {
+        return Ok(match opened.readers.pop() {
+            Some(r) => Probe::One(r),
+            None => Probe::Plain,
+        });
+    }
+    Ok(Probe::Channels(opened, too_many))
+}
+
+/// Reads the channels `opened` holds whole (`ReadChannels::read`) with the
+/// file's default styles, or says why they cannot be drawn: a multi-channel
+/// volume is drawn in core, in one 3D texture.
+fn read_channels(
+    input: &Input,
+    path: &Path,
+    opts: &OpenOptions,
+    progress: &Progress,
+    opened: brickray::io::ChannelReaders,
+    too_many: Option<u64>,
+) -> Result<Loaded, OpenError> {
+    let n = opened.readers.len();
+    let first = opened
+        .readers
+        .first()
+        .ok_or_else(|| OpenError::BadInput(format!("{}: no channel", path.display())))?;
+    let d = first.desc().clone();
+    let bytes = d.byte_len() * n as u64;
+    let mib = |b: u64| b as f64 / (1 << 20) as f64;
+    let too_large = if d.dims.iter().any(|&s| s > opts.max_3d_side) {
+        Some(format!(
+            "more than {} voxels a side, the device's 3D texture limit",
+            opts.max_3d_side
+        ))
+    } else if bytes > opts.in_core_max_bytes {
+        Some(format!(
+            "more than --in-core-max {:.0} MiB",
+            mib(opts.in_core_max_bytes)
+        ))
+    } else {
+        None
+    };
+    if let Some(why) = too_large {
+        return Err(OpenError::BadInput(format!(
+            "{}: {n} channels of {:?} {} ({:.1} MiB) are too large to draw: multi-channel \
+             volumes are drawn in core, in one 3D texture, and this one is {why} \
+             (channels are not streamed yet)",
+            path.display(),
+            d.dims,
+            d.dtype.name(),
+            mib(bytes)
+        )));
+    }
+    progress.total.store(bytes, Ordering::Relaxed);
+    progress.set_stage(format!("reading {n} channels"));
+    let read = brickray::io::ReadChannels::read(path, opened)?;
+    progress.done.store(bytes, Ordering::Relaxed);
+    let styles = read.styles();
+    let histograms: Vec<Histogram> = read
+        .volume
+        .channels()
+        .iter()
+        .map(|v| {
+            let mut h = Histogram::new(HISTOGRAM_BINS);
+            let desc = v.desc();
+            for i in 0..v.data().len() {
+                h.add(desc.normalize(v.data().get(i)));
+            }
+            h
+        })
+        .collect();
+    let desc = read.volume.desc().clone();
+    let names: Vec<String> = read
+        .info
+        .iter()
+        .zip(&read.indices)
+        .map(|(info, c)| info.label.clone().unwrap_or_else(|| format!("channel {c}")))
+        .collect();
+    let more = too_many
+        .map(|count| format!("; the file has {count} channels, the first {n} are shown"))
+        .unwrap_or_default();
+    let note = format!(
+        "{n} channels ({}) of {:?} {} loaded whole ({:.1} MiB){more}{}",
+        names.join(", "),
+        desc.dims,
+        desc.dtype.name(),
+        mib(read.volume.byte_len()),
+        warning_note(&read.warnings)
+    );
+    Ok(Loaded {
+        input: input.clone(),
+        histogram: histograms.first().cloned().unwrap_or_default(),
+        desc,
+        placement: read.placement,
+        note,
+        volume: Opened::Channels(Box::new(OpenedChannels {
+            info: read.info,
+            styles,
+            histograms,
+            volume: read.volume,
+        })),
+    })
 }
 
 /// The reader's warnings as a suffix of a note (empty without any).

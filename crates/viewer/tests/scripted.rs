@@ -27,6 +27,8 @@ use std::time::{Duration, Instant};
 
 #[path = "scripted/anatomy.rs"]
 mod anatomy;
+#[path = "scripted/channels.rs"]
+mod channels;
 #[path = "scripted/labels.rs"]
 mod labels;
 

@@ -70,7 +70,9 @@ impl ViewerApp {
                     ui.selectable_value(&mut self.mode, m, m.label());
                 }
             });
-        if self.mode == ModeName::Iso
+        if self.mode == ModeName::Iso && self.channels.is_some() {
+            ui.label("each channel's isovalue: the Channels panel");
+        } else if self.mode == ModeName::Iso
             && let Some(s) = &self.shown
         {
             let raw =

@@ -292,6 +292,12 @@ impl ViewerApp {
                     return;
                 }
                 Action::Pick(px) => self.pick_queue.push(px),
+                // Sent to the renderer at the next frame's `apply`.
+                Action::Channel(c, edit) => {
+                    if let Err(e) = self.channel_action(c, edit) {
+                        return self.fail(e);
+                    }
+                }
                 // Run with the GPU at the next frame's `apply`, before the
                 // script's next line.
                 Action::Overlay(o) => {

@@ -318,3 +318,110 @@ fn procedural_volumes_open_with_a_histogram() {
             .any(|&c| c > 0)
     );
 }
+
+/// A raw + JSON sidecar of `n` planar u16 channels of 8x6x4 (channel `c`
+/// holds `c * 1000 + i % 97`) without a value range (each channel's is its
+/// own).
+fn write_channels(dir: &Path, n: u64) -> PathBuf {
+    let voxels = 8 * 6 * 4;
+    let mut bytes = Vec::new();
+    for c in 0..n {
+        for i in 0..voxels {
+            bytes.extend_from_slice(&((c * 1000 + i % 97) as u16).to_le_bytes());
+        }
+    }
+    std::fs::write(dir.join("c.raw"), bytes).unwrap();
+    let json = dir.join("c.json");
+    std::fs::write(
+        &json,
+        format!(
+            r#"{{"dims": [8, 6, 4], "dtype": "u16", "spacing": [1, 1, 2], "file": "c.raw", "channels": {n}}}"#
+        ),
+    )
+    .unwrap();
+    json
+}
+
+fn in_core(dir: &Path) -> OpenOptions {
+    OpenOptions {
+        in_core_max_bytes: 1 << 20,
+        max_3d_side: 2048,
+        store_dir: dir.join("stores"),
+        labels: false,
+    }
+}
+
+/// A multi-channel input opens with every channel (`read_channels`) and the
+/// file's default styles; one channel keeps the single-channel path; more
+/// than four shows the first four and says so.
+#[test]
+fn multi_channel_inputs_open_with_every_channel_and_the_files_styles() {
+    let dir = tempfile::tempdir().unwrap();
+    let opts = in_core(dir.path());
+    let json = write_channels(dir.path(), 3);
+    let l = open(&Input::Path(json.clone()), &opts, &Progress::default()).unwrap();
+    let Opened::Channels(c) = &l.volume else {
+        panic!("not channels: {:?}", l.volume);
+    };
+    let read = brickray::io::read_channels(&json, &ReadOptions::default()).unwrap();
+    assert_eq!(c.volume, read.volume);
+    assert_eq!(c.styles, read.styles());
+    assert_eq!(c.histograms.len(), 3);
+    assert_eq!(l.desc.dims, [8, 6, 4]);
+    assert_eq!(l.desc.spacing, [1.0, 1.0, 2.0]);
+    assert!(l.note.contains("3 channels"), "{}", l.note);
+    for h in &c.histograms {
+        assert_eq!(h.bins.iter().sum::<u64>(), 8 * 6 * 4);
+    }
+
+    let one = tempfile::tempdir().unwrap();
+    let json = write_channels(one.path(), 1);
+    let l = open(&Input::Path(json), &opts, &Progress::default()).unwrap();
+    assert!(matches!(l.volume, Opened::InCore(_)), "{:?}", l.volume);
+
+    let five = tempfile::tempdir().unwrap();
+    let json = write_channels(five.path(), 5);
+    let l = open(&Input::Path(json), &opts, &Progress::default()).unwrap();
+    let Opened::Channels(c) = &l.volume else {
+        panic!("not channels: {:?}", l.volume);
+    };
+    assert_eq!(c.volume.len(), 4);
+    assert!(l.note.contains("has 5 channels"), "{}", l.note);
+    // A label map (`--labels`) is never read as channels.
+    let labels = OpenOptions {
+        labels: true,
+        ..in_core(dir.path())
+    };
+    let json = write_channels(dir.path(), 2);
+    let l = open(&Input::Path(json), &labels, &Progress::default()).unwrap();
+    assert!(matches!(l.volume, Opened::InCore(_)), "{:?}", l.volume);
+}
+
+/// A multi-channel volume too large for one texture (or the in-core limit)
+/// is a clear error, not a crash.
+#[test]
+fn a_multi_channel_volume_too_large_for_one_texture_says_so() {
+    let dir = tempfile::tempdir().unwrap();
+    let json = write_channels(dir.path(), 2);
+    for (opts, why) in [
+        (
+            OpenOptions {
+                max_3d_side: 4,
+                ..in_core(dir.path())
+            },
+            "3D texture limit",
+        ),
+        (
+            OpenOptions {
+                in_core_max_bytes: 500,
+                ..in_core(dir.path())
+            },
+            "--in-core-max",
+        ),
+    ] {
+        let e = open(&Input::Path(json.clone()), &opts, &Progress::default())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("too large") && e.contains(why), "{e}");
+    }
+}
