@@ -102,6 +102,16 @@ fn limits_below_a_backends_needs_are_typed_errors() {
         ),
         "max_storage_buffers_per_shader_stage",
     );
+    // A multi-channel volume: 7 sampled textures (the in-core 6 and its
+    // channels' stacked TF tables); the single-channel kernels need 6.
+    let g = device_with(|l| l.max_sampled_textures_per_shader_stage = 6);
+    let mut r = new_renderer(&g).unwrap();
+    r.set_volume(&g.device, &g.queue, &sphere()).unwrap();
+    let two = brickray::ChannelVolume::new(vec![sphere(), sphere()]).unwrap();
+    expect_limit(
+        r.set_channel_volume(&g.device, &g.queue, &two),
+        "max_sampled_textures_per_shader_stage",
+    );
     // A volume beyond the 3D texture limit.
     let g = device_with(|l| l.max_texture_dimension_3d = 16);
     let mut r = new_renderer(&g).unwrap();

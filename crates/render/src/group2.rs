@@ -90,6 +90,9 @@ pub(crate) fn volume_layout_entries(storage: u32) -> Vec<wgpu::BindGroupLayoutEn
 pub(crate) const STORAGE_OUTSIDE_VOLUME: u32 = 3;
 pub(crate) const UNIFORM_BUFFERS: u32 = 5;
 pub(crate) const SAMPLED_TEXTURES: u32 = 6;
+/// Sampled textures of the multi-channel kernel: one more, its channels'
+/// stacked TF tables (`backend/channels.rs`).
+pub(crate) const CHANNEL_SAMPLED_TEXTURES: u32 = SAMPLED_TEXTURES + 1;
 pub(crate) const SAMPLERS: u32 = 2;
 /// The most storage buffers group 2 holds (out of core: slots, sub-cells,
 /// index, usage counters).

@@ -139,9 +139,6 @@ pub(crate) struct ViewerApp {
     pick_frames: u32,
     /// A multi-channel volume is shown: its channels' controls and styles.
     channels: Option<channels::ChannelPanel>,
-    /// The message that slices of channel volumes are not drawn was given
-    /// (once per request of the four-view layout).
-    channel_slices_noted: bool,
 }
 
 impl std::fmt::Debug for ViewerApp {
@@ -228,7 +225,6 @@ impl ViewerApp {
             pick_queue: Vec::new(),
             pick_frames: 0,
             channels: None,
-            channel_slices_noted: false,
         };
         if let Some(input) = startup.input {
             app.start_open(input);
@@ -295,7 +291,6 @@ impl ViewerApp {
             _ => None,
         };
         let channel_styles = channel_panel.as_ref().map(|p| p.styles.clone());
-        let options = self.renderer_options();
         self.with_gpu(frame, |device, queue, r| {
             match loaded.volume {
                 Opened::InCore(v) => {
@@ -313,14 +308,10 @@ impl ViewerApp {
                     }
                 }
                 Opened::Channels(c) => {
-                    r.renderer.set_channel_volume(device, queue, &c.volume)?;
-                    r.renderer
-                        .set_channel_styles(channel_styles.as_deref().unwrap_or(&c.styles))?;
-                    // Slices of channel volumes are not drawn: the slice
-                    // renderers let the previous volume go.
-                    let targets = r.renderer.targets();
-                    for s in &mut r.slices {
-                        *s = brickray::VolumeRenderer::with_options(device, targets, options)?;
+                    let styles = channel_styles.as_deref().unwrap_or(&c.styles);
+                    for v in std::iter::once(&mut r.renderer).chain(r.slices.iter_mut()) {
+                        v.set_channel_volume(device, queue, &c.volume)?;
+                        v.set_channel_styles(styles)?;
                     }
                 }
             }
@@ -330,7 +321,6 @@ impl ViewerApp {
         .map_err(|e| format!("{}: {e}", loaded.input.name()))?;
         let is_channels = channel_panel.is_some();
         self.channels = channel_panel;
-        self.channel_slices_noted = false;
         // An overlay stays over its image (drawn again by the new renderer
         // after a reopen) and goes with it.
         if !reopened || desc.kind.is_labels() {
@@ -705,14 +695,7 @@ impl ViewerApp {
             .show(ui, |ui| {
                 let [r, g, b] = self.background;
                 let background = Color32::from_rgb(r, g, b);
-                // Slices of channel volumes are not drawn yet: the 3D view
-                // alone, and a note.
-                let channel_slices = self.four_views && self.channels.is_some();
-                if self.four_views
-                    && !channel_slices
-                    && self.shown.is_some()
-                    && self.camera.is_some()
-                {
+                if self.four_views && self.shown.is_some() && self.camera.is_some() {
                     let (rect, _) =
                         ui.allocate_exact_size(ui.available_size(), egui::Sense::click_and_drag());
                     ui.painter().rect_filled(rect, 0.0, background);
@@ -753,25 +736,8 @@ impl ViewerApp {
                 if s.orientation.is_some() && self.overlays {
                     orient::marker(ui.painter(), rect, &view.callback.camera);
                 }
-                if channel_slices && self.overlays {
-                    ui.painter().text(
-                        rect.center_top() + egui::vec2(0.0, 8.0),
-                        egui::Align2::CENTER_TOP,
-                        CHANNEL_SLICES_NOTE,
-                        egui::FontId::proportional(14.0),
-                        Color32::from_gray(210),
-                    );
-                }
                 callback = Some(view.callback);
             });
-        if self.four_views && self.channels.is_some() {
-            if !self.channel_slices_noted {
-                self.channel_slices_noted = true;
-                self.messages.push(CHANNEL_SLICES_NOTE.into());
-            }
-        } else {
-            self.channel_slices_noted = false;
-        }
         if std::mem::take(&mut self.shot_requested) && self.shot.is_none() {
             self.shots_taken += 1;
             let path = PathBuf::from(format!("brickray-viewer-{}.png", self.shots_taken));
@@ -794,11 +760,6 @@ impl ViewerApp {
     }
 }
 
-/// Shown (once, and over the view) when the four-view layout is asked of a
-/// multi-channel volume.
-const CHANNEL_SLICES_NOTE: &str =
-    "slices of channel volumes are not drawn yet: the 3D view alone is shown";
-
 /// The device needs: brickray's limits within the adapter's, and the
 /// optional features it benefits from.
 pub(crate) fn device_descriptor(adapter: &wgpu::Adapter) -> wgpu::DeviceDescriptor<'static> {
@@ -808,15 +769,6 @@ pub(crate) fn device_descriptor(adapter: &wgpu::Adapter) -> wgpu::DeviceDescript
     limits.max_texture_dimension_2d = limits
         .max_texture_dimension_2d
         .max(adapter.limits().max_texture_dimension_2d.min(8192));
-    // A multi-channel volume binds one more sampled texture (its channels'
-    // stacked tables) than `required_limits` asks for.
-    limits.max_sampled_textures_per_shader_stage =
-        limits.max_sampled_textures_per_shader_stage.max(
-            adapter
-                .limits()
-                .max_sampled_textures_per_shader_stage
-                .min(16),
-        );
     wgpu::DeviceDescriptor {
         label: Some("brickray-viewer"),
         required_features: adapter.features() & wanted,

@@ -115,7 +115,7 @@ impl Channels {
         check_stage_limits(device, STORAGE_BUFFERS)?;
         gpu::need(
             "max_sampled_textures_per_shader_stage",
-            crate::group2::SAMPLED_TEXTURES as u64 + 1,
+            crate::group2::CHANNEL_SAMPLED_TEXTURES as u64,
             device.limits().max_sampled_textures_per_shader_stage as u64,
         )?;
         let dims = vol.dims();

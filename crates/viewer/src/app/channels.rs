@@ -283,8 +283,12 @@ impl ViewerApp {
         };
         p.dirty = false;
         let styles = p.styles.clone();
-        if let Some(Err(e)) = self.with_gpu(frame, |_, _, r| r.renderer.set_channel_styles(&styles))
-        {
+        let set = |r: &mut brickray_egui::ViewResources| {
+            std::iter::once(&mut r.renderer)
+                .chain(r.slices.iter_mut())
+                .try_for_each(|v| v.set_channel_styles(&styles))
+        };
+        if let Some(Err(e)) = self.with_gpu(frame, |_, _, r| set(r)) {
             self.fail(format!("channel styles: {e}"));
         }
     }

@@ -7,7 +7,7 @@ use super::*;
 use brickray::core::anatomy::{Direction, Orientation, RAS_TO_WORLD};
 
 /// A number array of the sidecar.
-fn numbers(v: &serde_json::Value) -> Vec<f64> {
+pub(super) fn numbers(v: &serde_json::Value) -> Vec<f64> {
     v.as_array()
         .expect("an array")
         .iter()
@@ -33,7 +33,7 @@ fn library_view(
 
 /// Rows `vp[1]..vp[1]+vp[3]`, columns `vp[0]..vp[0]+vp[2]` of an RGBA image
 /// `w` pixels wide.
-fn crop(img: &[u8], w: u32, vp: [u32; 4]) -> Vec<u8> {
+pub(super) fn crop(img: &[u8], w: u32, vp: [u32; 4]) -> Vec<u8> {
     let mut out = Vec::with_capacity((vp[2] * vp[3] * 4) as usize);
     for y in vp[1]..vp[1] + vp[3] {
         let row = ((y * w + vp[0]) * 4) as usize;
