@@ -15,7 +15,12 @@
 //! * the shared confocal nuclei (u16) with two transformed copies of it (a
 //!   mirrored and a shifted one) as three channels: >= 45 dB in every mode
 //!   (`brickray_harness::channels`, the `channels` bench's volumes);
-//! * typed errors: styles that do not match, no styles, slices.
+//! * the shared nuclei as four channels written as an OME-Zarr with `omero`
+//!   colours and windows, read back by `read_channels` and drawn with the
+//!   file's styles: >= 45 dB in every mode;
+//! * slices and slabs of channels against `render_channel_slice`: >= 45 dB;
+//! * typed errors: styles that do not match, no styles, a label map over
+//!   channels; warming up compiles the channel pipelines.
 //!
 //! Images are marched at step 1/2 in both renderers: what is compared is
 //! the compositing, not the discretisation.
@@ -379,4 +384,58 @@ fn channel_slices_match_the_reference() {
             eprintln!("{name}: {:.1} dB", c.psnr_db);
         }
     }
+}
+
+/// From a file to the image: the shared nuclei as four channels written as
+/// a multi-channel OME-Zarr with `omero` colours and windows, read back by
+/// `read_channels` (every voxel equal), drawn with the file's styles, in
+/// every mode against the reference (>= 45 dB).
+#[test]
+#[cfg(feature = "zarr")]
+#[cfg_attr(
+    no_shared_data,
+    ignore = "needs ../shared/data (the shared volumes), absent when the tests were built"
+)]
+fn a_four_channel_ome_zarr_is_drawn_with_its_omero_styles() {
+    use brickray::io::ChannelInfo;
+    let Some(vol) = brickray_harness::channels::nuclei_channels(4) else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path().join("nuclei4.ome.zarr");
+    let info: Vec<ChannelInfo> = (0..4)
+        .map(|c| ChannelInfo {
+            label: Some(format!("c{c}")),
+            color: Some(COLORS[c]),
+            window: Some([8000.0 + 2000.0 * c as f32, 40000.0]),
+            active: true,
+        })
+        .collect();
+    brickray::io::zarr::write_ome_zarr_channels(&root, &vol, &info).unwrap();
+    let read = brickray::io::read_channels(&root, &Default::default()).unwrap();
+    assert_eq!(read.volume.len(), 4);
+    for (a, b) in read.volume.channels().iter().zip(vol.channels()) {
+        assert_eq!(a.data(), b.data());
+    }
+    let styles = read.styles();
+    // The file's colours (stored as "RRGGBB": within a byte) and windows
+    // (normalized by each channel's range: transparent at the start).
+    for ((s, i), v) in styles.iter().zip(&info).zip(read.volume.channels()) {
+        let c = s.iso_color();
+        for k in 0..3 {
+            assert!((c[k] - i.color.unwrap()[k]).abs() <= 1.0 / 255.0, "{c:?}");
+        }
+        // Opacity rises linearly over the window, normalized by the
+        // channel's own range, to the default opacity.
+        let [lo, hi] = i.window.unwrap().map(|w| v.desc().normalize(w) as f64);
+        for x in [0.05, 0.2, 0.4, 0.7, 0.95] {
+            let want = brickray::io::DEFAULT_CHANNEL_OPACITY as f64
+                * ((x - lo) / (hi - lo)).clamp(0.0, 1.0);
+            let got = s.tf.lookup(x)[3];
+            assert!((got - want).abs() < 2e-3, "{x}: {got} against {want}");
+        }
+    }
+    let camera = Camera::orbit(Vec3::ZERO, 2.0, 0.5, 0.6);
+    let worst = check("nuclei x4 from OME-Zarr", &read.volume, &styles, camera);
+    eprintln!("nuclei x4 from OME-Zarr: worst {worst:.1} dB");
 }
