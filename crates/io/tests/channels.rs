@@ -690,3 +690,25 @@ fn shared_nuclei_image_omero_gives_its_channel_info_and_style() {
     assert!((a(50000.0) - 0.5).abs() < 1e-3, "{}", a(50000.0));
     assert!((a(21000.0) - 0.25).abs() < 0.01, "{}", a(21000.0));
 }
+
+/// The finest level that fits a budget: the shared sharded nuclei image has
+/// levels of 256x256x60 and 128x128x60 u16 voxels, one channel.
+#[test]
+#[cfg_attr(no_shared_data, ignore = "needs ../shared/data/formats (absent)")]
+fn the_finest_level_within_a_budget_is_found() {
+    let Some(formats) = formats_common::formats_dir() else {
+        return;
+    };
+    let p = formats.join("ome-zarr/cells3d_nuclei_sharded_v05.ome.zarr");
+    let image = brickray_io::zarr::OmeZarr::open(&p).unwrap();
+    assert_eq!(image.sample_bytes(), 2);
+    assert_eq!(image.level_dims(0), Some([256, 256, 60]));
+    assert_eq!(image.level_dims(1), Some([128, 128, 60]));
+    let s0 = 256 * 256 * 60 * 2;
+    assert_eq!(image.level_fitting(1, s0, 256), Some(0));
+    assert_eq!(image.level_fitting(1, s0 - 1, 256), Some(1));
+    assert_eq!(image.level_fitting(4, s0, 256), Some(1));
+    assert_eq!(image.level_fitting(1, s0, 255), Some(1));
+    assert_eq!(image.level_fitting(1, 1000, 256), None);
+    assert_eq!(image.level_fitting(1, u64::MAX, 100), None);
+}

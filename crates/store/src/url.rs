@@ -112,6 +112,17 @@ pub fn open_zarr_reader_url(
     )?)
 }
 
+/// The OME-Zarr image at `url`, its metadata read (channels, levels and
+/// their dims, `omero`), no chunk fetched: what decides how to open it.
+pub fn open_zarr_image_url(
+    url: &str,
+    opts: &brickray_remote::RemoteOptions,
+) -> Result<brickray_io::zarr::OmeZarr, StoreError> {
+    Ok(brickray_io::zarr::OmeZarr::open_objects(zarr_objects(
+        url, opts,
+    )?)?)
+}
+
 /// Every channel of the OME-Zarr image at `url` read whole
 /// ([`brickray_io::read_channels`] of a remote image: the level, time point
 /// and channels of `read`, each channel's `omero` metadata), through the

@@ -288,6 +288,14 @@ pub(crate) fn open(
                     let o = brickray::remote::RemoteOptions::from_env();
                     if brickray::store::is_zarr_url(&s, &o) {
                         progress.set_stage("opening the OME-Zarr image");
+                        // A multi-channel image that fits in core is read
+                        // whole, every channel at the finest level that
+                        // fits; otherwise its first channel streams.
+                        if !opts.labels
+                            && let Some(loaded) = url_channels(input, &s, &o, opts, progress)?
+                        {
+                            return Ok(loaded);
+                        }
                         let d = brickray::store::BuildOptions::default();
                         let src = brickray::store::open_zarr_url(
                             &s,
@@ -447,6 +455,38 @@ fn probe_channels(path: &Path, opts: &OpenOptions) -> Result<Probe, OpenError> {
     Ok(Probe::Channels(opened, too_many))
 }
 
+/// The channels of the OME-Zarr image at `url` read whole
+/// (`read_zarr_channels_url`) at the finest level that fits in core (the
+/// first [`MAX_CHANNELS`] of more), or `None` for an image of one channel,
+/// or one no level of which fits (it streams its first channel).
+#[cfg(feature = "remote")]
+fn url_channels(
+    input: &Input,
+    url: &str,
+    o: &brickray::remote::RemoteOptions,
+    opts: &OpenOptions,
+    progress: &Progress,
+) -> Result<Option<Loaded>, OpenError> {
+    let image = brickray::store::open_zarr_image_url(url, o)?;
+    let count = image.channel_count();
+    if count < 2 {
+        return Ok(None);
+    }
+    let n = count.min(MAX_CHANNELS as u64);
+    let Some(level) = image.level_fitting(n, opts.in_core_max_bytes, opts.max_3d_side as u64)
+    else {
+        return Ok(None);
+    };
+    progress.set_stage(format!("reading {n} channels of level {level}"));
+    let read = ReadOptions::default()
+        .level(Some(level))
+        .channels(Some((0..n).collect()));
+    let channels = brickray::store::read_zarr_channels_url(url, o, &read)?;
+    let too_many = (count > n).then_some(count);
+    let level_note = (level > 0).then(|| format!("level {level} (the finest that fits in core)"));
+    Ok(Some(loaded_channels(input, channels, too_many, level_note)))
+}
+
 /// Reads the channels `opened` holds whole (`ReadChannels::read`) with the
 /// file's default styles, or says why they cannot be drawn: a multi-channel
 /// volume is drawn in core, in one 3D texture.
@@ -494,6 +534,20 @@ fn read_channels(
     progress.set_stage(format!("reading {n} channels"));
     let read = brickray::io::ReadChannels::read(path, opened)?;
     progress.done.store(bytes, Ordering::Relaxed);
+    Ok(loaded_channels(input, read, too_many, None))
+}
+
+/// A volume of channels read whole, with the file's default styles and
+/// each channel's histogram; `too_many`: the channels the file has when
+/// only the first were read; `level`: a note on the level read.
+fn loaded_channels(
+    input: &Input,
+    read: brickray::io::ReadChannels,
+    too_many: Option<u64>,
+    level: Option<String>,
+) -> Loaded {
+    let n = read.volume.len();
+    let mib = |b: u64| b as f64 / (1 << 20) as f64;
     let styles = read.styles();
     let histograms: Vec<Histogram> = read
         .volume
@@ -518,15 +572,16 @@ fn read_channels(
     let more = too_many
         .map(|count| format!("; the file has {count} channels, the first {n} are shown"))
         .unwrap_or_default();
+    let level = level.map(|l| format!(", {l}")).unwrap_or_default();
     let note = format!(
-        "{n} channels ({}) of {:?} {} loaded whole ({:.1} MiB){more}{}",
+        "{n} channels ({}) of {:?} {} loaded whole ({:.1} MiB{level}){more}{}",
         names.join(", "),
         desc.dims,
         desc.dtype.name(),
         mib(read.volume.byte_len()),
         warning_note(&read.warnings)
     );
-    Ok(Loaded {
+    Loaded {
         input: input.clone(),
         histogram: histograms.first().cloned().unwrap_or_default(),
         desc,
@@ -538,7 +593,7 @@ fn read_channels(
             histograms,
             volume: read.volume,
         })),
-    })
+    }
 }
 
 /// The reader's warnings as a suffix of a note (empty without any).

@@ -593,6 +593,26 @@ impl OmeZarr {
         self.levels.len()
     }
 
+    /// Bytes of one stored sample (the array's data type).
+    pub fn sample_bytes(&self) -> usize {
+        self.src.size()
+    }
+
+    /// The finest level whose `channels` channels fit `max_bytes` of stored
+    /// samples and `max_side` voxels a side (what the in-core renderers can
+    /// take whole); `None` when not even the coarsest does.
+    pub fn level_fitting(&self, channels: u64, max_bytes: u64, max_side: u64) -> Option<usize> {
+        (0..self.level_count()).find(|&l| {
+            self.level_dims(l).is_some_and(|d| {
+                let bytes = d.iter().try_fold(
+                    channels.saturating_mul(self.sample_bytes() as u64),
+                    |a, &x| a.checked_mul(x),
+                );
+                d.iter().all(|&x| x <= max_side) && bytes.is_some_and(|b| b <= max_bytes)
+            })
+        })
+    }
+
     /// Voxel dims (x, y, z) of a level; `None` past the last level.
     pub fn level_dims(&self, level: usize) -> Option<[u64; 3]> {
         let s = &self.levels.get(level)?.shape;

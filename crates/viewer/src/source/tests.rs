@@ -138,6 +138,61 @@ fn bad_inputs_are_errors() {
     }
 }
 
+/// The Range HTTP test server's URL (scripts/test.sh starts it and sets
+/// BRICKRAY_TEST_HTTP and BRICKRAY_ALLOW_HTTP=1); `None` (a failure with
+/// `CI=true`) without it.
+#[cfg(feature = "remote")]
+fn test_http() -> Option<String> {
+    let ci = std::env::var("CI").is_ok_and(|v| v == "true");
+    match (
+        std::env::var("BRICKRAY_TEST_HTTP"),
+        std::env::var("BRICKRAY_ALLOW_HTTP"),
+    ) {
+        (Ok(http), Ok(_)) => Some(http),
+        _ => {
+            assert!(
+                !ci,
+                "CI=true but BRICKRAY_TEST_HTTP or BRICKRAY_ALLOW_HTTP is unset"
+            );
+            eprintln!("skipping: BRICKRAY_TEST_HTTP or BRICKRAY_ALLOW_HTTP is unset");
+            None
+        }
+    }
+}
+
+/// PUTs `bytes` at `url` on the test server.
+#[cfg(feature = "remote")]
+fn put_file(url: &str, bytes: &[u8]) {
+    use std::io::{Read, Write};
+    let rest = url.strip_prefix("http://").unwrap();
+    let (host, path) = rest.split_once('/').unwrap();
+    let mut c = std::net::TcpStream::connect(host).unwrap();
+    write!(
+        c,
+        "PUT /{path} HTTP/1.1\r\nHost: {host}\r\nContent-Length: {}\r\nConnection: close\r\n\r\n",
+        bytes.len()
+    )
+    .unwrap();
+    c.write_all(bytes).unwrap();
+    let mut resp = String::new();
+    let _ = c.read_to_string(&mut resp);
+    assert!(resp.starts_with("HTTP/1.1 201"), "{resp}");
+}
+
+/// PUTs every file under `dir` at `url` plus its path below `root`.
+#[cfg(feature = "remote")]
+fn put_tree(dir: &Path, root: &Path, url: &str) {
+    for e in std::fs::read_dir(dir).unwrap() {
+        let p = e.unwrap().path();
+        if p.is_dir() {
+            put_tree(&p, root, url);
+            continue;
+        }
+        let rel = p.strip_prefix(root).unwrap().to_string_lossy().into_owned();
+        put_file(&format!("{url}/{rel}"), &std::fs::read(&p).unwrap());
+    }
+}
+
 /// A store's URL on the Range HTTP test server (scripts/test.sh starts
 /// it and allows plain HTTP for this test with BRICKRAY_ALLOW_HTTP=1)
 /// opens as the local store does: the same description and histogram.
@@ -145,17 +200,8 @@ fn bad_inputs_are_errors() {
 #[test]
 #[ignore = "needs BRICKRAY_TEST_HTTP and BRICKRAY_ALLOW_HTTP=1 (scripts/test.sh sets both)"]
 fn a_store_url_opens_as_its_file() {
-    use std::io::{Read, Write};
-    let ci = std::env::var("CI").is_ok_and(|v| v == "true");
-    let (Ok(http), Ok(_)) = (
-        std::env::var("BRICKRAY_TEST_HTTP"),
-        std::env::var("BRICKRAY_ALLOW_HTTP"),
-    ) else {
-        assert!(
-            !ci,
-            "CI=true but BRICKRAY_TEST_HTTP or BRICKRAY_ALLOW_HTTP is unset"
-        );
-        return eprintln!("skipping: BRICKRAY_TEST_HTTP or BRICKRAY_ALLOW_HTTP is unset");
+    let Some(http) = test_http() else {
+        return;
     };
     let dir = tempfile::tempdir().unwrap();
     let json = write_sphere(dir.path());
@@ -174,19 +220,7 @@ fn a_store_url_opens_as_its_file() {
         http.trim_end_matches('/'),
         std::process::id()
     );
-    let rest = url.strip_prefix("http://").unwrap();
-    let (host, path) = rest.split_once('/').unwrap();
-    let mut c = std::net::TcpStream::connect(host).unwrap();
-    write!(
-        c,
-        "PUT /{path} HTTP/1.1\r\nHost: {host}\r\nContent-Length: {}\r\nConnection: close\r\n\r\n",
-        bytes.len()
-    )
-    .unwrap();
-    c.write_all(&bytes).unwrap();
-    let mut resp = String::new();
-    let _ = c.read_to_string(&mut resp);
-    assert!(resp.starts_with("HTTP/1.1 201"), "{resp}");
+    put_file(&url, &bytes);
     let remote = open(&Input::parse(&url).unwrap(), &opts, &p).unwrap();
     assert!(matches!(remote.volume, Opened::Streamed(_)));
     assert_eq!(remote.desc, local.desc);
@@ -201,22 +235,17 @@ fn a_store_url_opens_as_its_file() {
 #[test]
 #[ignore = "needs BRICKRAY_TEST_HTTP and BRICKRAY_ALLOW_HTTP=1 (scripts/test.sh sets both)"]
 fn an_ome_zarr_url_streams_as_the_local_image() {
-    use std::io::{Read, Write};
-    let ci = std::env::var("CI").is_ok_and(|v| v == "true");
-    let (Ok(http), Ok(_)) = (
-        std::env::var("BRICKRAY_TEST_HTTP"),
-        std::env::var("BRICKRAY_ALLOW_HTTP"),
-    ) else {
-        assert!(
-            !ci,
-            "CI=true but BRICKRAY_TEST_HTTP or BRICKRAY_ALLOW_HTTP is unset"
-        );
-        return eprintln!("skipping: BRICKRAY_TEST_HTTP or BRICKRAY_ALLOW_HTTP is unset");
+    let Some(http) = test_http() else {
+        return;
     };
     let image = Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../../../shared/data/formats/ome-zarr/pycortex_s1_t1_v05.ome.zarr");
     if !image.is_dir() {
-        assert!(!ci, "CI=true but {} is missing", image.display());
+        assert!(
+            !std::env::var("CI").is_ok_and(|v| v == "true"),
+            "CI=true but {} is missing",
+            image.display()
+        );
         return eprintln!("skipping: no shared data");
     }
     let url = format!(
@@ -224,32 +253,7 @@ fn an_ome_zarr_url_streams_as_the_local_image() {
         http.trim_end_matches('/'),
         std::process::id()
     );
-    fn put(dir: &Path, root: &Path, url: &str) {
-        for e in std::fs::read_dir(dir).unwrap() {
-            let p = e.unwrap().path();
-            if p.is_dir() {
-                put(&p, root, url);
-                continue;
-            }
-            let rel = p.strip_prefix(root).unwrap().to_string_lossy().into_owned();
-            let full = format!("{url}/{rel}");
-            let bytes = std::fs::read(&p).unwrap();
-            let rest = full.strip_prefix("http://").unwrap();
-            let (host, path) = rest.split_once('/').unwrap();
-            let mut c = std::net::TcpStream::connect(host).unwrap();
-            write!(
-                c,
-                "PUT /{path} HTTP/1.1\r\nHost: {host}\r\nContent-Length: {}\r\nConnection: close\r\n\r\n",
-                bytes.len()
-            )
-            .unwrap();
-            c.write_all(&bytes).unwrap();
-            let mut resp = String::new();
-            let _ = c.read_to_string(&mut resp);
-            assert!(resp.starts_with("HTTP/1.1 201"), "{resp}");
-        }
-    }
-    put(&image, &image, &url);
+    put_tree(&image, &image, &url);
     let opts = OpenOptions {
         in_core_max_bytes: 0,
         max_3d_side: 2048,
@@ -293,6 +297,50 @@ fn an_ome_zarr_url_streams_as_the_local_image() {
         }
     }
     assert!(data > 0, "no brick with data compared");
+}
+
+/// A multi-channel OME-Zarr's URL on the Range HTTP test server opens with
+/// every channel, read whole as the local image is (the same channels and
+/// styles); too large for the in-core budget, its first channel streams.
+#[cfg(feature = "remote")]
+#[test]
+#[ignore = "needs BRICKRAY_TEST_HTTP and BRICKRAY_ALLOW_HTTP=1 (scripts/test.sh sets both)"]
+fn a_multi_channel_ome_zarr_url_opens_with_every_channel() {
+    let Some(http) = test_http() else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let json = write_channels(dir.path(), 3);
+    let read = brickray::io::read_channels(&json, &ReadOptions::default()).unwrap();
+    let root = dir.path().join("c.ome.zarr");
+    brickray::io::zarr::write_ome_zarr_channels(&root, &read.volume, &read.info).unwrap();
+    let url = format!(
+        "{}/viewer-channels-{}/c.ome.zarr",
+        http.trim_end_matches('/'),
+        std::process::id()
+    );
+    put_tree(&root, &root, &url);
+    let p = Progress::default();
+    let remote = open(&Input::parse(&url).unwrap(), &in_core(dir.path()), &p).unwrap();
+    let local = open(&Input::Path(root), &in_core(dir.path()), &p).unwrap();
+    let (Opened::Channels(r), Opened::Channels(l)) = (&remote.volume, &local.volume) else {
+        panic!("not opened as channels: {} / {}", remote.note, local.note)
+    };
+    assert_eq!(r.volume, l.volume);
+    assert_eq!(r.styles, l.styles);
+    assert_eq!(r.volume.len(), 3);
+    assert!(remote.note.contains("3 channels"), "{}", remote.note);
+    // No level fits a budget of one byte: the first channel streams.
+    let tight = OpenOptions {
+        in_core_max_bytes: 1,
+        ..in_core(dir.path())
+    };
+    let streamed = open(&Input::parse(&url).unwrap(), &tight, &p).unwrap();
+    assert!(
+        matches!(streamed.volume, Opened::Streamed(_)),
+        "{}",
+        streamed.note
+    );
 }
 
 #[test]
