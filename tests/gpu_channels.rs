@@ -19,8 +19,10 @@
 //!   colours and windows, read back by `read_channels` and drawn with the
 //!   file's styles: >= 45 dB in every mode;
 //! * slices and slabs of channels against `render_channel_slice`: >= 45 dB;
-//! * typed errors: styles that do not match, no styles, a label map over
-//!   channels; warming up compiles the channel pipelines.
+//! * a label map over the channels (colour and mask), in DVR, iso, MIP and
+//!   a slice, against the reference's overlay: >= 45 dB;
+//! * typed errors: styles that do not match, no styles; warming up compiles
+//!   the channel pipelines.
 //!
 //! Images are marched at step 1/2 in both renderers: what is compared is
 //! the compositing, not the discretisation.
@@ -253,7 +255,7 @@ fn a_hidden_channel_is_absent_and_skipped() {
 }
 
 #[test]
-fn styles_overlays_and_missing_styles_are_typed_errors() {
+fn styles_and_missing_styles_are_typed_errors() {
     let g = gpu();
     let vol = ChannelVolume::new(channels(2)).unwrap();
     let frame = frame_of(&vol.channels()[0]);
@@ -276,35 +278,6 @@ fn styles_overlays_and_missing_styles_are_typed_errors() {
     // Warming up compiles the multi-channel kernel's pipelines.
     let all: Vec<RenderSettings> = modes().into_iter().map(|(_, s)| s).collect();
     r.warm_up(&g.device, &all).unwrap();
-    draw(g, &mut r, &target, &desc).unwrap();
-    // A label map over a channel volume is refused, and drawing works again
-    // without it.
-    let labels = brickray::core::synthetic::u8_field(8, |p| (p[0] / 4) as f64);
-    let labels = Volume::new(
-        VolumeDesc {
-            kind: brickray::VolumeKind::Labels,
-            value_range: brickray::core::labels::label_value_range(),
-            ..labels.desc().clone()
-        },
-        labels.data().clone(),
-    )
-    .unwrap();
-    let table = brickray::LabelTable::default();
-    let overlay = brickray::LabelOverlay {
-        labels: &labels,
-        image_to_labels: brickray::overlay_transform(&frame, &frame_of(&labels)),
-        table: &table,
-        style: brickray::OverlayStyle {
-            mode: brickray::OverlayMode::Color,
-            opacity: 1.0,
-        },
-    };
-    r.set_overlay(&g.device, &g.queue, Some(&overlay)).unwrap();
-    assert!(matches!(
-        draw(g, &mut r, &target, &desc),
-        Err(PrepareError::Render(RenderError::ChannelsUnsupported(_)))
-    ));
-    r.set_overlay(&g.device, &g.queue, None).unwrap();
     draw(g, &mut r, &target, &desc).unwrap();
     // A single-channel volume set after channels needs its TF again.
     let tf = TransferFunction::ramp(0.1, 0.8, 0.5);
@@ -368,7 +341,7 @@ fn channel_slices_match_the_reference() {
             let desc = FrameDesc::new(Camera::orbit(Vec3::ZERO, 2.3, 0.6, 0.35), frame, SIZE, SIZE);
             let got = draw(g, &mut r, &target, &desc).unwrap().color;
             let want =
-                brickray_reference::render_channel_slice(&vol, &frame, &view, &s, SIZE, SIZE)
+                brickray_reference::render_channel_slice(&vol, &frame, &view, &s, None, SIZE, SIZE)
                     .unwrap()
                     .to_rgba8([0.0; 3]);
             assert!(
@@ -438,4 +411,109 @@ fn a_four_channel_ome_zarr_is_drawn_with_its_omero_styles() {
     let camera = Camera::orbit(Vec3::ZERO, 2.0, 0.5, 0.6);
     let worst = check("nuclei x4 from OME-Zarr", &read.volume, &styles, camera);
     eprintln!("nuclei x4 from OME-Zarr: worst {worst:.1} dB");
+}
+
+/// A 20x18x16 u8 label map: label 1 in the lower x half, 3 in a ball, 0
+/// elsewhere.
+fn label_map() -> Volume {
+    let d = [20u32, 18, 16];
+    let mut ids = Vec::with_capacity((d[0] * d[1] * d[2]) as usize);
+    for z in 0..d[2] {
+        for y in 0..d[1] {
+            for x in 0..d[0] {
+                let p = (Vec3::new(x as f32, y as f32, z as f32) + 0.5)
+                    / Vec3::new(d[0] as f32, d[1] as f32, d[2] as f32);
+                ids.push(if (p - Vec3::new(0.7, 0.6, 0.5)).length() < 0.25 {
+                    3u8
+                } else if p.x < 0.45 {
+                    1
+                } else {
+                    0
+                });
+            }
+        }
+    }
+    brickray::core::labels::label_volume(d, [1.0; 3], VolumeData::U8(ids)).unwrap()
+}
+
+/// A label map over three channels, in colour and mask modes: DVR (shaded
+/// too), iso, MIP and an axial slice against the reference's overlay.
+#[test]
+fn overlays_over_channels_match_the_reference() {
+    let g = gpu();
+    let all = channels(3);
+    let vol = ChannelVolume::new(all.clone()).unwrap();
+    let frame = frame_of(&all[0]);
+    let labels = label_map();
+    let table = brickray::LabelTable::default();
+    let lframe = VolumeFrame::centered(labels.dims(), [1.0; 3]);
+    let s = styles(3);
+    let mut r = renderer(&vol, &s);
+    let target = Offscreen::new(&g.device, SIZE, SIZE);
+    let camera = Camera::orbit(Vec3::ZERO, 2.3, 0.6, 0.35);
+    let plain = {
+        let desc = FrameDesc {
+            settings: modes()[0].1,
+            ..FrameDesc::new(camera, frame, SIZE, SIZE)
+        };
+        draw(g, &mut r, &target, &desc).unwrap().color
+    };
+    for (mode, opacity) in [
+        (brickray::OverlayMode::Color, 0.8),
+        (brickray::OverlayMode::Mask, 1.0),
+    ] {
+        let overlay = brickray::LabelOverlay {
+            labels: &labels,
+            // The label map's box, stretched over the image's.
+            image_to_labels: brickray::overlay_transform(&frame, &lframe),
+            table: &table,
+            style: brickray::OverlayStyle { mode, opacity },
+        };
+        r.set_overlay(&g.device, &g.queue, Some(&overlay)).unwrap();
+        let opts = ReferenceOptions::new(SIZE, SIZE)
+            .with_step_factor(STEP)
+            .with_overlay(&overlay);
+        for (name, settings) in modes() {
+            // A mask applies to DVR; colour tints iso and MIP too.
+            if mode == brickray::OverlayMode::Mask && !name.starts_with("dvr") {
+                continue;
+            }
+            let desc = FrameDesc {
+                settings,
+                ..FrameDesc::new(camera, frame, SIZE, SIZE)
+            };
+            let got = draw(g, &mut r, &target, &desc).unwrap().color;
+            let want = render_channels_reference(&vol, &frame, &s, &camera, &settings, &opts)
+                .to_rgba8([0.0; 3]);
+            let name = format!("overlay {mode:?} {name}");
+            let c = assert_close(&name, &got, &want, SIZE, SIZE, MIN_DB)
+                .unwrap_or_else(|e| panic!("{e}"));
+            eprintln!("{name}: {:.1} dB", c.psnr_db);
+            if name.ends_with("dvr") {
+                let d = compare(&got, &plain, SIZE, SIZE).psnr_db;
+                assert!(d < 40.0, "{name}: the overlay changed little ({d:.1} dB)");
+            }
+        }
+        let view = SliceView::orthogonal(SliceAxis::Axial, 13.0, &frame, 1.0).unwrap();
+        r.set_slice(Some(view));
+        let desc = FrameDesc::new(camera, frame, SIZE, SIZE);
+        let got = draw(g, &mut r, &target, &desc).unwrap().color;
+        let want = brickray_reference::render_channel_slice(
+            &vol,
+            &frame,
+            &view,
+            &s,
+            Some(&overlay),
+            SIZE,
+            SIZE,
+        )
+        .unwrap()
+        .to_rgba8([0.0; 3]);
+        let name = format!("overlay {mode:?} slice");
+        let c =
+            assert_close(&name, &got, &want, SIZE, SIZE, MIN_DB).unwrap_or_else(|e| panic!("{e}"));
+        eprintln!("{name}: {:.1} dB", c.psnr_db);
+        r.set_slice(None);
+    }
+    r.set_overlay(&g.device, &g.queue, None).unwrap();
 }

@@ -89,8 +89,10 @@ pub fn render_label_slice(
 /// Renders `slice` of the multi-channel `vol` with one style per channel
 /// (`brickray_core::channels`): each visible channel's slab samples reduced
 /// by their maximum or mean, classified by its TF (uncorrected), and the
-/// channels added at full colour ([`channels::slice_color`]), opaque; a pixel
-/// with no sample is transparent.
+/// channels added at full colour ([`channels::slice_color`]), opaque, with a
+/// label map over them applied at the slab's front sample as
+/// [`render_slice_with_overlay`] does; a pixel with no sample is
+/// transparent.
 ///
 /// # Panics
 /// If the styles do not match the channels.
@@ -99,6 +101,7 @@ pub fn render_channel_slice(
     frame: &VolumeFrame,
     slice: &SliceView,
     styles: &[ChannelStyle],
+    overlay: Option<&LabelOverlay<'_>>,
     width: u32,
     height: u32,
 ) -> Result<Image, SliceReferenceError> {
@@ -123,7 +126,11 @@ pub fn render_channel_slice(
             parts.push(([r, g, b], a, gain));
         }
         let [r, g, b] = channels::slice_color(&parts);
-        Some([r as f32, g as f32, b as f32, 1.0])
+        let [r, g, b, a] = match overlay {
+            Some(o) => o.apply([r, g, b, 1.0], points[0], false),
+            None => [r, g, b, 1.0],
+        };
+        Some([(r * a) as f32, (g * a) as f32, (b * a) as f32, a as f32])
     })
 }
 
@@ -303,7 +310,7 @@ mod tests {
         let styles = [style.clone(), style.visible(false)];
         let s = SliceView::orthogonal(SliceAxis::Coronal, 5.0, &frame, 1.0).unwrap();
         let a = render_slice(&vol, &frame, &s, &grey, 24, 24).unwrap();
-        let b = render_channel_slice(&two, &frame, &s, &styles, 24, 24).unwrap();
+        let b = render_channel_slice(&two, &frame, &s, &styles, None, 24, 24).unwrap();
         for (x, y) in a.color.iter().zip(&b.color) {
             for k in 0..4 {
                 assert!((x[k] - y[k]).abs() < 2e-3, "{x:?} {y:?}");

@@ -212,7 +212,21 @@ fn channel_mix(q: Quad, a: vec4<f32>) -> vec4<f32> {
 // `vis`: chan_visible(), read once per ray.
 fn channel_dvr_sample(v: vec4<f32>, u: vec3<f32>, r: Ray, row: f32, vis: vec4<f32>) -> vec4<f32> {
     var q = channel_tf4(v, row);
-    let a = quad_alpha(q) * vis;
+    var a = quad_alpha(q) * vis;
+    // A label map over the channels (overlay.wgsl) colours or masks every
+    // channel's sample before shading, as it does a single channel's.
+    if (OVERLAY != 0u) {
+        let l = overlay_label(u);
+        if (OVERLAY == OVERLAY_MASK) {
+            a = a * select(1.0 - overlay.opacity, 1.0, l.a > 0.0);
+        } else {
+            let w = l.a * overlay.opacity;
+            q.q0 = vec4<f32>(mix(q.q0.rgb, l.rgb, w), q.q0.a);
+            q.q1 = vec4<f32>(mix(q.q1.rgb, l.rgb, w), q.q1.a);
+            q.q2 = vec4<f32>(mix(q.q2.rgb, l.rgb, w), q.q2.a);
+            q.q3 = vec4<f32>(mix(q.q3.rgb, l.rgb, w), q.q3.a);
+        }
+    }
     if (all(a <= vec4<f32>(0.0))) {
         return vec4<f32>(0.0);
     }
@@ -382,14 +396,21 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             }
         }
         let th = 0.5 * (a + b);
-        acc.color = vec4<f32>(shade(chan_iso_color(cur.c), cursor_gradient(cur, th), r.dir), 1.0);
+        let base = overlay_tint(chan_iso_color(cur.c), tex_at(r, th));
+        acc.color = vec4<f32>(shade(base, cursor_gradient(cur, th), r.dir), 1.0);
         acc.depth = depth_at(r, th);
         acc.depth_set = true;
     }
     if (MODE == MODE_MIP && any(mx > vec4<f32>(-1.0e38))) {
         // Every channel's maximum was taken at once: 1 in the lanes of the
         // visible channels (hidden ones mix nothing and place no depth).
-        let q = channel_tf_lookup4(mx);
+        var q = channel_tf_lookup4(mx);
+        // Colour mode tints each channel's colour by the label at its
+        // maximum.
+        q.q0 = vec4<f32>(overlay_tint(q.q0.rgb, tex_at(r, mt.x)), q.q0.a);
+        q.q1 = vec4<f32>(overlay_tint(q.q1.rgb, tex_at(r, mt.y)), q.q1.a);
+        q.q2 = vec4<f32>(overlay_tint(q.q2.rgb, tex_at(r, mt.z)), q.q2.a);
+        q.q3 = vec4<f32>(overlay_tint(q.q3.rgb, tex_at(r, mt.w)), q.q3.a);
         acc.color = channel_mix(q, quad_alpha(q) * vis);
         let tn = mt + vec4<f32>(3.0e38) * (vec4<f32>(1.0) - vis);
         let t_near = min(min(tn.x, tn.y), min(tn.z, tn.w));
@@ -423,12 +444,15 @@ fn slice_main(@builtin(global_invocation_id) gid: vec3<u32>) {
     var count = 0u;
     var sum = vec4<f32>(0.0);
     var best = vec4<f32>(-3.0e38);
+    var front_u = vec3<f32>(0.0);
     loop {
         if (k >= n) { break; }
         let t = (f32(k) + 0.5) * sdt;
         if (t > start.t1) { break; }
         if (t >= start.t0) {
-            let v = channel_values(tex_at(start.r, t));
+            let u = tex_at(start.r, t);
+            let v = channel_values(u);
+            front_u = select(front_u, u, count == 0u);
             count = count + 1u;
             sum = sum + v;
             best = max(best, v);
@@ -441,7 +465,10 @@ fn slice_main(@builtin(global_invocation_id) gid: vec3<u32>) {
         let q = channel_tf_lookup4(v);
         let w = quad_alpha(q) * chan_slice_gain() * chan_visible();
         let rgb = q.q0.rgb * w.x + q.q1.rgb * w.y + q.q2.rgb * w.z + q.q3.rgb * w.w;
-        color = vec4<f32>(min(rgb, vec3<f32>(1.0)), 1.0);
+        // A label map over the channels: the label under the front sample
+        // (overlay.wgsl), premultiplied.
+        let c = overlay_apply(vec4<f32>(min(rgb, vec3<f32>(1.0)), 1.0), front_u);
+        color = vec4<f32>(c.rgb * c.a, c.a);
     }
     store_pixel(px, color, far_depth(), start.host, count);
 }

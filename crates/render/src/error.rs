@@ -92,10 +92,6 @@ pub enum RenderError {
     /// ([`crate::VolumeRenderer::set_channel_volume`]).
     #[error(transparent)]
     Channels(#[from] brickray_core::ChannelError),
-    /// A feature not drawn with a multi-channel volume (a label map over
-    /// it); the message names it.
-    #[error("{0} cannot be drawn with a multi-channel volume")]
-    ChannelsUnsupported(&'static str),
     /// wgpu reported an error creating one of the library's objects (caught by an
     /// error scope, never a panic in the host).
     #[error("wgpu {kind:?} error creating {what}: {message}")]

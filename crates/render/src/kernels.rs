@@ -178,22 +178,25 @@ impl Variant {
     }
 
     /// The multi-channel kernel's slice view for `channels` channels.
-    pub(crate) fn channel_slice(channels: u32) -> Variant {
+    pub(crate) fn channel_slice(channels: u32, overlay: Option<OverlayMode>) -> Variant {
         Variant {
             channels,
-            ..Variant::slice(false, false, None)
+            ..Variant::slice(false, false, overlay)
         }
     }
 
     /// The multi-channel kernel's pipeline for `channels` channels: mode,
-    /// early termination, skipping and shading as the settings say; no
-    /// pre-integration, prediction, labels or overlay (channels.wgsl draws
-    /// none of them).
-    pub(crate) fn channels(s: &RenderSettings, channels: u32) -> Variant {
-        let v = Variant::of(s, None, false, false, None);
+    /// early termination, skipping and shading as the settings say, a label
+    /// map over the channels as for one channel; no pre-integration,
+    /// prediction or labels (channels.wgsl draws none of them).
+    pub(crate) fn channels(
+        s: &RenderSettings,
+        channels: u32,
+        overlay: Option<OverlayMode>,
+    ) -> Variant {
+        let v = Variant::of(s, None, false, false, overlay);
         Variant {
             preint: false,
-            smooth_labels: false,
             channels,
             ..v
         }

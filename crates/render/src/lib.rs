@@ -207,10 +207,11 @@ impl VolumeRenderer {
     /// iso finds the first crossing of any channel's own isovalue
     /// ([`brickray_core::channels`]); slice views add the visible channels'
     /// colours ([`brickray_core::channels::slice_color`]; the intensity
-    /// window is not used). A label map over it and pre-integration are not
-    /// drawn with channels ([`RenderError::ChannelsUnsupported`] from
-    /// `prepare` for the first; pre-integration is ignored). Fails as
-    /// [`Self::set_volume`] does, per channel.
+    /// window is not used). A label map over the channels
+    /// ([`Self::set_overlay`]) colours or masks every channel's samples as it
+    /// does a single channel's; pre-integration and the prediction buffer
+    /// are not used with channels. Fails as [`Self::set_volume`] does, per
+    /// channel.
     pub fn set_channel_volume(
         &mut self,
         device: &wgpu::Device,
@@ -516,7 +517,7 @@ impl VolumeRenderer {
         ];
         for s in settings {
             let v = match channels {
-                Some(n) => Variant::channels(s, n),
+                Some(n) => Variant::channels(s, n, self.overlay.style().map(|o| o.mode)),
                 None => Variant::of(
                     s,
                     self.prediction,
@@ -619,11 +620,6 @@ impl VolumeRenderer {
                 if r.channel_styles.is_none() {
                     return Err(PrepareError::NoChannelStyles);
                 }
-                if r.overlay.style().is_some() {
-                    return Err(
-                        RenderError::ChannelsUnsupported("a label map over the image").into(),
-                    );
-                }
             } else if r.tf.current().is_none() && r.slice.is_none() {
                 return Err(PrepareError::NoTransferFunction);
             }
@@ -715,10 +711,11 @@ impl VolumeRenderer {
         let mapping = self.mapping.ok_or(PrepareError::NoVolume)?;
         mapping.apply(&mut uniforms);
         let variant = if let Some(n) = channels {
+            let overlay = self.overlay.style().map(|o| o.mode);
             if mapping.slice.is_some() {
-                Variant::channel_slice(n)
+                Variant::channel_slice(n, overlay)
             } else {
-                Variant::channels(&desc.settings, n)
+                Variant::channels(&desc.settings, n, overlay)
             }
         } else if mapping.slice.is_some() {
             Variant::slice(

@@ -319,7 +319,6 @@ impl ViewerApp {
         })
         .ok_or("no GPU")?
         .map_err(|e| format!("{}: {e}", loaded.input.name()))?;
-        let is_channels = channel_panel.is_some();
         self.channels = channel_panel;
         // An overlay stays over its image (drawn again by the new renderer
         // after a reopen) and goes with it.
@@ -387,7 +386,7 @@ impl ViewerApp {
         self.upload_overlay(frame)?;
         if let Some(path) = self.pending_overlay.take() {
             self.open_overlay(frame, &path)?;
-        } else if !reopened && self.labels.is_none() && !is_channels {
+        } else if !reopened && self.labels.is_none() {
             self.overlay_zarr_labels(frame)?;
         }
         Ok(())

@@ -5,7 +5,7 @@
 use super::{Image, Marcher, RayResult, Span};
 use brickray_core::channels::{self, ChannelStyle, ChannelVolume};
 use brickray_core::tf::corrected_alpha;
-use brickray_core::{Camera, Ray, RenderMode, RenderSettings, VolumeFrame};
+use brickray_core::{Camera, LabelOverlay, Ray, RenderMode, RenderSettings, VolumeFrame};
 
 use super::ReferenceOptions;
 
@@ -22,10 +22,14 @@ use super::ReferenceOptions;
 /// `settings.mode`'s isovalue and colour are not used (each channel has its
 /// own).
 ///
+/// A label map over the channels (`opts.overlay`) applies to each channel's
+/// sample before shading (DVR), tints iso colours at the hit and each
+/// channel's MIP colour at its maximum (colour mode).
+///
 /// # Panics
 /// As [`super::render_reference`], and if the styles do not match the
 /// channels or `opts` asks for what channels are not drawn with
-/// (pre-integration, a spread, an intensity window or an overlay).
+/// (pre-integration, a spread or an intensity window).
 pub fn render_channels_reference(
     vol: &ChannelVolume,
     frame: &VolumeFrame,
@@ -45,12 +49,13 @@ pub fn render_channels_reference(
         settings.mode
     );
     assert!(
-        !opts.preintegrated
-            && opts.spread.is_none()
-            && opts.intensity.is_none()
-            && opts.overlay.is_none(),
-        "pre-integration, spreads, intensity windows and overlays are not drawn with channels"
+        !opts.preintegrated && opts.spread.is_none() && opts.intensity.is_none(),
+        "pre-integration, spreads and intensity windows are not drawn with channels"
     );
+    if let Some(o) = opts.overlay {
+        o.validate(false)
+            .unwrap_or_else(|e| panic!("the overlay cannot be drawn: {e}"));
+    }
     let (width, height) = (opts.width, opts.height);
     let mut img = Image::new(width, height);
     if width == 0 || height == 0 {
@@ -79,6 +84,7 @@ pub fn render_channels_reference(
         styles,
         settings,
         step_factor,
+        overlay: opts.overlay,
     };
     super::fill_pixels(&mut img, camera, opts, |px, py, n, host| {
         m.marchers[0].pixel_with(px, py, n, host, |x, y, h| m.trace(x, y, h))
@@ -92,9 +98,29 @@ struct ChannelMarcher<'a> {
     styles: &'a [ChannelStyle],
     settings: &'a RenderSettings,
     step_factor: f64,
+    /// A label map over the channels.
+    overlay: Option<&'a LabelOverlay<'a>>,
 }
 
 impl ChannelMarcher<'_> {
+    /// The image texture point of the ray at `t`.
+    fn point(&self, ray: &Ray, t: f64) -> [f64; 3] {
+        (ray.tex_origin + ray.tex_dir * t).to_array()
+    }
+
+    fn smooth(&self) -> bool {
+        self.settings.smooth_labels
+    }
+
+    /// Iso and MIP colours tinted by the overlay's label at `t` (colour
+    /// mode).
+    fn tint(&self, ray: &Ray, t: f64, rgb: [f64; 3]) -> [f64; 3] {
+        match self.overlay {
+            Some(o) => o.tint(rgb, self.point(ray, t), self.smooth()),
+            None => rgb,
+        }
+    }
+
     /// The visible channels' marchers, with their indices.
     fn visible(&self) -> impl Iterator<Item = (usize, &Marcher<'_>)> {
         self.marchers
@@ -126,6 +152,11 @@ impl ChannelMarcher<'_> {
             for (_, m) in self.visible() {
                 let [r, g, b, a] = m.tf.lookup(m.value(ray, t));
                 let a = corrected_alpha(a, self.step_factor);
+                // The overlay before shading, as for one channel.
+                let [r, g, b, a] = match self.overlay {
+                    Some(o) => o.apply([r, g, b, a], self.point(ray, t), self.smooth()),
+                    None => [r, g, b, a],
+                };
                 if a <= 0.0 {
                     continue;
                 }
@@ -183,7 +214,7 @@ impl ChannelMarcher<'_> {
                     0.5 * (a + b)
                 }
             };
-            let color = self.styles[c].iso_color().map(f64::from);
+            let color = self.tint(ray, th, self.styles[c].iso_color().map(f64::from));
             let [r, g, b] = m.shade(ray, th, color, &self.settings.shading);
             return ([r, g, b, 1.0], Some(m.clip_depth(ray, th)));
         }
@@ -205,7 +236,7 @@ impl ChannelMarcher<'_> {
         for (c, m) in self.visible() {
             if let Some((v, t)) = best[c] {
                 let [r, g, b, a] = m.tf.lookup(v);
-                parts.push(([r, g, b], a));
+                parts.push((self.tint(ray, t, [r, g, b]), a));
                 t_near = Some(t_near.map_or(t, |n| n.min(t)));
             }
         }

@@ -386,21 +386,37 @@ fn channels_kernel_matches_the_rust_side() {
 }
 
 /// Every channel count (1-4) with every mode and combination of ERT, ESS
-/// and shading validates as the multi-channel kernel's pipelines specialise
-/// it (the other switches off: `Variant::channels` turns them off).
+/// and shading, and with a label map over the channels (colour and mask,
+/// shaded, smooth boundaries), validates as the multi-channel kernel's
+/// pipelines specialise it (pre-integration, prediction and labels off, as
+/// `Variant::channels` has them).
 #[test]
 fn every_channel_permutation_validates() {
     let src = channels();
-    for n in 1..=4u32 {
-        for (_, mode) in KernelMode::ALL {
-            for bits in 0..8u32 {
-                let s = specialise("channels", &src, mode, bits, 0).replace(
-                    "override CHANNELS: u32 = 1u;",
-                    &format!("const CHANNELS: u32 = {n}u;"),
-                );
-                assert!(!s.contains("override "), "channels: an override left");
-                module(&format!("channels {n} {mode:?} {bits:03b}"), &s);
+    let mut combos = Vec::new();
+    for (_, mode) in KernelMode::ALL {
+        for bits in 0..8u32 {
+            combos.push((mode, bits, 0));
+        }
+        // A label map over the channels (colour, mask), with ERT and ESS,
+        // shaded, and with smooth label boundaries.
+        for overlay in [1, 2] {
+            for bits in [0b011, 0b111, 0b011 | 1 << 9] {
+                combos.push((mode, bits, overlay));
             }
+        }
+    }
+    for n in 1..=4u32 {
+        for &(mode, bits, overlay) in &combos {
+            let s = specialise("channels", &src, mode, bits, overlay).replace(
+                "override CHANNELS: u32 = 1u;",
+                &format!("const CHANNELS: u32 = {n}u;"),
+            );
+            assert!(!s.contains("override "), "channels: an override left");
+            module(
+                &format!("channels {n} {mode:?} {bits:010b} overlay {overlay}"),
+                &s,
+            );
         }
     }
 }

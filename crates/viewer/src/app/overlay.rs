@@ -66,9 +66,6 @@ impl ViewerApp {
         path: &Path,
     ) -> Result<(), String> {
         let shown = self.shown.as_ref().ok_or("overlay: no image is shown")?;
-        if self.channels.is_some() {
-            return Err("overlay: label maps over a multi-channel volume are not drawn yet".into());
-        }
         if shown.desc.kind.is_labels() {
             return Err("overlay: the volume shown is a label map (open an image first)".into());
         }
