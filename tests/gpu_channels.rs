@@ -21,6 +21,7 @@
 //! * slices and slabs of channels against `render_channel_slice`: >= 45 dB;
 //! * a label map over the channels (colour and mask), in DVR, iso, MIP and
 //!   a slice, against the reference's overlay: >= 45 dB;
+//! * the shared nuclei label map over the nuclei as three channels: >= 45 dB;
 //! * typed errors: styles that do not match, no styles; warming up compiles
 //!   the channel pipelines.
 //!
@@ -516,4 +517,66 @@ fn overlays_over_channels_match_the_reference() {
         r.set_slice(None);
     }
     r.set_overlay(&g.device, &g.queue, None).unwrap();
+}
+
+/// The shared nuclei label map (u32, on the fluorescence's grid) over the
+/// nuclei as three channels, colour mode, DVR: against the reference's
+/// overlay (>= 45 dB).
+#[test]
+#[cfg_attr(
+    no_shared_data,
+    ignore = "needs ../shared/data (the shared volumes), absent when the tests were built"
+)]
+fn shared_nuclei_labels_over_three_channels_match_the_reference() {
+    let Some(vol) = brickray_harness::channels::nuclei_channels(3) else {
+        return;
+    };
+    let Some(dir) = brickray_harness::shared_data_dir() else {
+        return;
+    };
+    let name = "cells3d_nuclei_labels";
+    let labels =
+        brickray::io::read_volume(dir.join("labels").join(name).join(format!("{name}.json")))
+            .unwrap_or_else(|e| panic!("{e}"));
+    assert!(labels.desc().kind.is_labels());
+    let g = gpu();
+    let d = vol.desc();
+    let frame = VolumeFrame::centered(d.dims, d.spacing);
+    let lframe = VolumeFrame::centered(labels.dims(), labels.desc().spacing);
+    let table = brickray::LabelTable::default();
+    let overlay = brickray::LabelOverlay {
+        labels: &labels,
+        image_to_labels: brickray::overlay_transform(&frame, &lframe),
+        table: &table,
+        style: brickray::OverlayStyle {
+            mode: brickray::OverlayMode::Color,
+            opacity: 0.7,
+        },
+    };
+    let s = brickray_harness::channels::nuclei_styles(3);
+    let mut r = renderer(&vol, &s);
+    r.set_overlay(&g.device, &g.queue, Some(&overlay)).unwrap();
+    let camera = Camera::orbit(Vec3::ZERO, 2.0, 0.5, 0.6);
+    let settings = modes()[0].1;
+    let desc = FrameDesc {
+        settings,
+        ..FrameDesc::new(camera, frame, SIZE, SIZE)
+    };
+    let target = Offscreen::new(&g.device, SIZE, SIZE);
+    let got = draw(g, &mut r, &target, &desc).unwrap().color;
+    let opts = ReferenceOptions::new(SIZE, SIZE)
+        .with_step_factor(STEP)
+        .with_overlay(&overlay);
+    let want =
+        render_channels_reference(&vol, &frame, &s, &camera, &settings, &opts).to_rgba8([0.0; 3]);
+    let c = assert_close(
+        "nuclei labels over 3 channels",
+        &got,
+        &want,
+        SIZE,
+        SIZE,
+        MIN_DB,
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    eprintln!("nuclei labels over 3 channels: {:.1} dB", c.psnr_db);
 }
