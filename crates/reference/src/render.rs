@@ -206,14 +206,7 @@ pub fn render_reference(
     settings: &RenderSettings,
     opts: &ReferenceOptions<'_>,
 ) -> Image {
-    assert!(
-        matches!(
-            settings.mode,
-            RenderMode::Dvr | RenderMode::Iso { .. } | RenderMode::Mip
-        ),
-        "the reference renderer does not implement {:?}",
-        settings.mode
-    );
+    check_mode(settings);
     let (width, height) = (opts.width, opts.height);
     let mut img = Image::new(width, height);
     if width == 0 || height == 0 {
@@ -260,6 +253,20 @@ pub fn render_reference(
         marcher.pixel(px, py, n, host)
     });
     img
+}
+
+/// Panics unless `settings.mode` is a mode the reference defines (DVR, Iso,
+/// MIP: a variant added to the non-exhaustive `RenderMode` later is refused
+/// rather than guessed).
+fn check_mode(settings: &RenderSettings) {
+    assert!(
+        matches!(
+            settings.mode,
+            RenderMode::Dvr | RenderMode::Iso { .. } | RenderMode::Mip
+        ),
+        "the reference renderer does not implement {:?}",
+        settings.mode
+    );
 }
 
 /// The step factor of `opts`, after checking it and the frame's voxel size

@@ -1,6 +1,6 @@
 // Multi-channel in-core ray caster (compute), after common.wgsl, modes.wgsl,
-// overlay.wgsl and predict.wgsl (for their shared functions and switches; the
-// overlay and the prediction buffer are not drawn with channels). 1 to 4
+// overlay.wgsl and predict.wgsl (for their shared functions and switches; a
+// label map over the channels is drawn, the prediction buffer is not). 1 to 4
 // intensity channels packed in one texel, each classified by its own
 // transfer function and composited in one ray (brickray_core::channels;
 // docs/rendering-model.md, "Channels"):
@@ -61,8 +61,8 @@ struct ChannelParams {
 // c * table_rows + r (read through group 1's linear sampler).
 @group(2) @binding(5) var chan_table: texture_2d<f32>;
 // The channels' classification: CLASS_HEADER rows (visibility: 1 or 0 per
-// lane; isovalues; each channel's isosurface colour; slice gains), then their TF entries,
-// concatenated (channel c's from tf_offset[c]). Lavapipe (22.x) inlines
+// lane; isovalues; each channel's isosurface colour; slice gains), then
+// their TF entries, concatenated (channel c's from tf_offset[c]). Lavapipe (22.x) inlines
 // uniform values that steer branches and crashed compiling this kernel when
 // the visibility and isovalues were uniforms: read from storage they are
 // never inlined.

@@ -40,14 +40,7 @@ pub fn render_channels_reference(
 ) -> Image {
     channels::validate_styles(styles, vol.len())
         .unwrap_or_else(|e| panic!("the channel styles cannot be drawn: {e}"));
-    assert!(
-        matches!(
-            settings.mode,
-            RenderMode::Dvr | RenderMode::Iso { .. } | RenderMode::Mip
-        ),
-        "the reference renderer does not implement {:?}",
-        settings.mode
-    );
+    super::check_mode(settings);
     assert!(
         !opts.preintegrated && opts.spread.is_none() && opts.intensity.is_none(),
         "pre-integration, spreads and intensity windows are not drawn with channels"

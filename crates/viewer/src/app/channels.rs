@@ -302,21 +302,7 @@ fn channel_histogram(
     log: bool,
     (window, iso, color): ([f32; 2], Option<f32>, [f32; 3]),
 ) {
-    let (rect, _) =
-        ui.allocate_exact_size(egui::vec2(ui.available_width(), 32.0), egui::Sense::hover());
-    let p = ui.painter_at(rect);
-    p.rect_filled(rect, 2.0, Color32::from_gray(24));
-    let heights = h.heights(log);
-    let n = heights.len().max(1) as f32;
-    for (i, v) in heights.iter().enumerate() {
-        let x0 = rect.left() + i as f32 / n * rect.width();
-        let x1 = rect.left() + (i + 1) as f32 / n * rect.width();
-        let bar = egui::Rect::from_min_max(
-            egui::pos2(x0, rect.bottom() - v * rect.height()),
-            egui::pos2(x1, rect.bottom()),
-        );
-        p.rect_filled(bar, 0.0, Color32::from_gray(90));
-    }
+    let (rect, p) = super::panels::histogram_bars(ui, h, log, 32.0);
     let c = egui::Rgba::from_rgb(color[0], color[1], color[2]);
     let stroke = egui::Stroke::new(1.5, Color32::from(c));
     let x = |v: f32| rect.left() + v * rect.width();

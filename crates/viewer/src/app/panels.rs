@@ -279,10 +279,18 @@ impl ViewerApp {
     }
 }
 
-/// The histogram as a strip with a marker (the isovalue slider's background).
-fn histogram_strip(ui: &mut egui::Ui, h: &Histogram, log: bool, marker: Option<f32>) {
-    let (rect, _) =
-        ui.allocate_exact_size(egui::vec2(ui.available_width(), 40.0), egui::Sense::hover());
+/// A strip `height` points high across the panel with the histogram's bars;
+/// its rect and painter, for markers over it.
+pub(super) fn histogram_bars(
+    ui: &mut egui::Ui,
+    h: &Histogram,
+    log: bool,
+    height: f32,
+) -> (egui::Rect, egui::Painter) {
+    let (rect, _) = ui.allocate_exact_size(
+        egui::vec2(ui.available_width(), height),
+        egui::Sense::hover(),
+    );
     let p = ui.painter_at(rect);
     p.rect_filled(rect, 2.0, Color32::from_gray(24));
     let heights = h.heights(log);
@@ -296,6 +304,12 @@ fn histogram_strip(ui: &mut egui::Ui, h: &Histogram, log: bool, marker: Option<f
         );
         p.rect_filled(bar, 0.0, Color32::from_gray(90));
     }
+    (rect, p)
+}
+
+/// The histogram as a strip with a marker (the isovalue slider's background).
+fn histogram_strip(ui: &mut egui::Ui, h: &Histogram, log: bool, marker: Option<f32>) {
+    let (rect, p) = histogram_bars(ui, h, log, 40.0);
     if let Some(m) = marker {
         let x = rect.left() + m * rect.width();
         p.line_segment(

@@ -72,6 +72,20 @@ fn library_channels(
     w: u32,
     h: u32,
 ) -> Vec<u8> {
+    library_draw(volume, styles, frame, camera, None, w, h)
+}
+
+/// The library's image of `volume` with `styles` (a slice `view` of it with
+/// `Some`), `w x h`.
+fn library_draw(
+    volume: &ChannelVolume,
+    styles: &[ChannelStyle],
+    frame: VolumeFrame,
+    camera: Camera,
+    view: Option<brickray::SliceView>,
+    w: u32,
+    h: u32,
+) -> Vec<u8> {
     let gpu = brickray_harness::shared_gpu();
     let mut renderer =
         VolumeRenderer::new(&gpu.device, brickray_harness::target_desc()).expect("renderer");
@@ -79,6 +93,7 @@ fn library_channels(
         .set_channel_volume(&gpu.device, &gpu.queue, volume)
         .expect("channel volume");
     renderer.set_channel_styles(styles).expect("styles");
+    renderer.set_slice(view);
     let target = brickray_harness::Offscreen::new(&gpu.device, w, h);
     let desc = FrameDesc::new(camera, frame, w, h);
     brickray_harness::draw_frame(gpu, &mut renderer, &target, &desc, Some(wgpu::Color::BLACK))
@@ -218,7 +233,7 @@ fn a_two_channel_ome_zarr_is_drawn_with_its_omero_styles() {
         let got = super::anatomy::crop(&img, fw, vp);
         shown += pixels_of(&got, 0);
         assert_eq!(pixels_of(&got, 1), 0, "slice {i}: channel 1 is hidden");
-        let lib = library_slice(&read.volume, &one, frame, view, vp[2], vp[3]);
+        let lib = library_draw(&read.volume, &one, frame, camera, Some(view), vp[2], vp[3]);
         let cmp = brickray_reference::assert_close(
             &format!("viewer-channels-slice-{i}"),
             &got,
@@ -231,29 +246,4 @@ fn a_two_channel_ome_zarr_is_drawn_with_its_omero_styles() {
         eprintln!("channel slice {i} vs library: {cmp}");
     }
     assert!(shown > 100, "channel 0 shows in {shown} slice pixels");
-}
-
-/// The library's slice `view` of `volume` with `styles`, `w x h`.
-fn library_slice(
-    volume: &ChannelVolume,
-    styles: &[ChannelStyle],
-    frame: VolumeFrame,
-    view: brickray::SliceView,
-    w: u32,
-    h: u32,
-) -> Vec<u8> {
-    let gpu = brickray_harness::shared_gpu();
-    let mut renderer =
-        VolumeRenderer::new(&gpu.device, brickray_harness::target_desc()).expect("renderer");
-    renderer
-        .set_channel_volume(&gpu.device, &gpu.queue, volume)
-        .expect("channel volume");
-    renderer.set_channel_styles(styles).expect("styles");
-    renderer.set_slice(Some(view));
-    let target = brickray_harness::Offscreen::new(&gpu.device, w, h);
-    let camera = Camera::orbit(glam::Vec3::ZERO, 2.0, 0.0, 0.0);
-    let desc = FrameDesc::new(camera, frame, w, h);
-    brickray_harness::draw_frame(gpu, &mut renderer, &target, &desc, Some(wgpu::Color::BLACK))
-        .expect("draw");
-    target.read_color(gpu)
 }
