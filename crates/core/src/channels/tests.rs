@@ -211,10 +211,16 @@ fn slices_add_the_channels_at_full_colour() {
         ([r, gr, b], a, g)
     };
     let c = slice_color(&[at(0.4)]);
-    assert!((c[2] - 0.5).abs() < 1e-3 && (c[1] - 0.3).abs() < 1e-3, "{c:?}");
+    assert!(
+        (c[2] - 0.5).abs() < 1e-3 && (c[1] - 0.3).abs() < 1e-3,
+        "{c:?}"
+    );
     assert_eq!(slice_color(&[at(0.1)]), [0.0; 3]);
     let full = slice_color(&[at(0.9), at(0.9)]);
     assert_eq!(full[2], 1.0);
-    assert!((full[1] - 1.0).abs() < 1e-6 && (full[0] - 0.4).abs() < 1e-6, "{full:?}");
+    assert!(
+        (full[1] - 1.0).abs() < 1e-6 && (full[0] - 0.4).abs() < 1e-6,
+        "{full:?}"
+    );
     assert_eq!(slice_gain(&TransferFunction::ramp(0.5, 0.6, 0.0)), 0.0);
 }
