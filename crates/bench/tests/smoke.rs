@@ -2,7 +2,9 @@
 //! exit successfully and end with one JSON object holding its documented
 //! keys (docs/benchmarks.md). They check that a suite still runs and still
 //! says what it measures, never how fast: the figures of a smoke run are
-//! not results. Suites join this file as they gain small settings.
+//! not results. The suites whose smallest settings run in seconds are
+//! here; all but soak read ../shared/data (reported as ignored in a
+//! user's clone without it, never skipped with `CI=true`).
 #![allow(missing_docs)]
 
 use std::process::Command;
@@ -32,6 +34,10 @@ fn run(args: &[&str]) -> serde_json::Map<String, serde_json::Value> {
 /// 2 and 4 channels, and its error against the reference (the error does not
 /// depend on the timed size: >= 45 dB, as the GPU tests ask).
 #[test]
+#[cfg_attr(
+    no_shared_data,
+    ignore = "needs ../shared/data (the shared volumes), absent when the tests were built"
+)]
 fn the_channels_suite_runs() {
     if brickray_harness::shared_data_dir().is_none() {
         return;
@@ -55,4 +61,150 @@ fn the_channels_suite_runs() {
     assert!(f("psnr_min_db") >= 45.0, "{fig:?}");
     assert_eq!(fig["bytes_per_voxel"], serde_json::json!([2, 4, 8]));
     assert_eq!(fig["modes"].as_array().map(Vec::len), Some(4));
+}
+
+/// Runs a suite with `args` and checks that its JSON object has `keys`
+/// (documented in docs/benchmarks.md; a value may be null where a smoke
+/// run measures nothing) and some finite numbers.
+fn smoke(args: &[&str], keys: &[&str]) -> serde_json::Map<String, serde_json::Value> {
+    let fig = run(args);
+    for key in keys {
+        assert!(fig.contains_key(*key), "{args:?}: no {key} in {fig:?}");
+    }
+    let numbers = fig
+        .values()
+        .filter(|v| v.as_f64().is_some_and(f64::is_finite))
+        .count();
+    assert!(
+        numbers >= 3,
+        "{args:?}: {numbers} finite numbers in {fig:?}"
+    );
+    fig
+}
+
+#[test]
+#[cfg_attr(
+    no_shared_data,
+    ignore = "needs ../shared/data (the shared volumes), absent when the tests were built"
+)]
+fn the_accel_suite_runs() {
+    if brickray_harness::shared_data_dir().is_none() {
+        return;
+    }
+    let fig = smoke(
+        &["accel", "--size", "32", "--rounds", "1"],
+        &[
+            "psnr_min_db",
+            "speedup_ert_ess_opaque",
+            "samples_per_ray_brute_opaque",
+        ],
+    );
+    // Skipping and early termination change the image within tolerance.
+    assert!(fig["psnr_min_db"].as_f64().unwrap() >= 40.0, "{fig:?}");
+}
+
+#[test]
+fn the_soak_suite_runs() {
+    let fig = smoke(
+        &["soak", "--frames", "3", "--size", "32"],
+        &["frames", "rss_growth_pct", "panics", "errors"],
+    );
+    assert_eq!(fig["frames"], serde_json::json!(3));
+    assert_eq!(fig["panics"], serde_json::json!(0));
+    assert_eq!(fig["errors"], serde_json::json!(0));
+}
+
+#[test]
+#[cfg_attr(
+    no_shared_data,
+    ignore = "needs ../shared/data (the shared volumes), absent when the tests were built"
+)]
+fn the_preint_suite_runs() {
+    if brickray_harness::shared_data_dir().is_none() {
+        return;
+    }
+    smoke(
+        &["preint", "--size", "32", "--rounds", "1"],
+        &[
+            "worst_ratio",
+            "ms_corrected_table",
+            "ms_preint_table_8_layers",
+        ],
+    );
+}
+
+#[test]
+#[cfg_attr(
+    no_shared_data,
+    ignore = "needs ../shared/data (the shared volumes), absent when the tests were built"
+)]
+fn the_u8_suite_runs() {
+    if brickray_harness::shared_data_dir().is_none() {
+        return;
+    }
+    smoke(
+        &["u8", "--size", "32", "--rounds", "1"],
+        &[
+            "exact_over_fast_worst",
+            "psnr_exact_dvr_db",
+            "psnr_fast_dvr_db",
+        ],
+    );
+}
+
+#[test]
+#[cfg_attr(
+    no_shared_data,
+    ignore = "needs ../shared/data (the shared volumes), absent when the tests were built"
+)]
+fn the_raw_suite_runs() {
+    if brickray_harness::shared_data_dir().is_none() {
+        return;
+    }
+    smoke(
+        &["raw", "--size", "32", "--rounds", "1"],
+        &["accel_rate_per_sample_dvr", "buffer_tf_rate_ratio_dvr"],
+    );
+}
+
+#[test]
+#[cfg_attr(
+    no_shared_data,
+    ignore = "needs ../shared/data (the shared volumes), absent when the tests were built"
+)]
+fn the_ooc_suite_runs() {
+    if brickray_harness::shared_data_dir().is_none() {
+        return;
+    }
+    smoke(
+        &["ooc", "--size", "32", "--rounds", "1"],
+        &[
+            "finest_vs_incore_time_ratio",
+            "frames_to_converge_after_jump",
+        ],
+    );
+}
+
+#[test]
+#[cfg_attr(
+    no_shared_data,
+    ignore = "needs ../shared/data (the shared volumes), absent when the tests were built"
+)]
+fn the_labels_suite_runs() {
+    if brickray_harness::shared_data_dir().is_none() {
+        return;
+    }
+    let fig = smoke(
+        &["labels", "--size", "32", "--rounds", "1"],
+        &[
+            "psnr_finest_db_min",
+            "psnr_2px_db_min",
+            "overlay_cost_ratio",
+            "smooth_cost_ratio",
+        ],
+    );
+    assert!(
+        fig["psnr_finest_db_min"].as_f64().unwrap() >= 45.0,
+        "{fig:?}"
+    );
 }
