@@ -1,0 +1,390 @@
+//! A frame's recording: every view's frame checked before any GPU work, the
+//! streamed volumes the views share planned once per frame, and each
+//! renderer's transfer-function tables, uniforms and ray-cast pass recorded
+//! into the host's encoder (the `prepare` half of the frame protocol in the
+//! crate docs).
+
+use crate::backend::Backend;
+use crate::frame::FrameUniforms;
+use crate::kernels::Variant;
+use crate::slice::FrameMapping;
+use crate::{FrameDesc, FrameStats, PrepareError, Prepared, VolumeRenderer, frame, gpu, slice};
+use brickray_cache::{Classification, StreamFrame};
+use brickray_core::FrameView;
+
+impl VolumeRenderer {
+    /// Checks everything `prepare` is given before any GPU work.
+    fn check_frame(&self, device: &wgpu::Device, f: &FrameDesc<'_>) -> Result<(), PrepareError> {
+        let limits = device.limits();
+        let vp = f.viewport;
+        let limit = limits.max_texture_dimension_2d;
+        let groups = limits.max_compute_workgroups_per_dimension;
+        let too_big = |n: u32| n > limit || n.div_ceil(gpu::WORKGROUP[0]) > groups;
+        if vp.width == 0 || vp.height == 0 || too_big(vp.width) || too_big(vp.height) {
+            return Err(PrepareError::BadViewport {
+                width: vp.width,
+                height: vp.height,
+                limit,
+            });
+        }
+        // `render` sets the pass's viewport to it: its far edges must exist
+        // and lie inside a target the device can create.
+        let inside =
+            |origin: u32, extent: u32| origin.checked_add(extent).is_some_and(|e| e <= limit);
+        if !inside(vp.x, vp.width) || !inside(vp.y, vp.height) {
+            return Err(PrepareError::ViewportOutOfRange {
+                viewport: vp,
+                limit,
+            });
+        }
+        f.camera.validate()?;
+        f.frame.validate()?;
+        f.settings.validate()?;
+        if let Some(view) = f.host_depth {
+            frame::check_host_depth(view, vp)?;
+        }
+        Ok(())
+    }
+
+    /// Writes this frame's uniforms and uploads and records the ray-cast compute
+    /// pass into `encoder`. Out of core it first plans the frame (refinement,
+    /// requests to the loader, uploads within the budget, index encoding); it never
+    /// waits for I/O or the GPU. The host submits the encoder, then records
+    /// [`Self::render`] into a pass that loads its colour and depth.
+    pub fn prepare(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        encoder: &mut wgpu::CommandEncoder,
+        desc: &FrameDesc<'_>,
+    ) -> Result<FrameStats, PrepareError> {
+        let stats = Self::prepare_views(device, queue, encoder, &mut [(self, desc)])?;
+        Ok(stats[0])
+    }
+
+    /// [`Self::prepare`] for several renderers in one frame (a stereo pair, a
+    /// 3D view beside an orthogonal view, several viewports of a viewer). Each
+    /// streamed volume they share is planned once for all the views that draw
+    /// it: one cut holds each node at the finest level any of them needs, each
+    /// brick is loaded once into the one pool, and what each view's rays
+    /// observed feeds one visibility state. The 3D views planned together
+    /// must share the render mode and the transfer function
+    /// ([`PrepareError::ViewsDisagree`]); slice views ([`Self::set_slice`])
+    /// join any group, which then classifies as MIP (every node with data is
+    /// visible). Every frame is checked before any GPU work; the stats are in
+    /// the order of `views`.
+    pub fn prepare_views(
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        encoder: &mut wgpu::CommandEncoder,
+        views: &mut [(&mut VolumeRenderer, &FrameDesc<'_>)],
+    ) -> Result<Vec<FrameStats>, PrepareError> {
+        // Everything is checked first, so that a rejected frame touches nothing.
+        let mut frames = Vec::with_capacity(views.len());
+        for (r, desc) in views.iter_mut() {
+            r.prepared = None;
+            r.mapping = None;
+            let mapping = FrameMapping::new(r.slice.as_ref(), r.intensity, r.value_range, desc)?;
+            // A slice is checked as the frame it is drawn as.
+            let desc = mapping.frame(desc);
+            r.check_frame(device, &desc)?;
+            let Some(volume) = r.volume_dims.filter(|_| r.backend.is_some()) else {
+                return Err(PrepareError::NoVolume);
+            };
+            if desc.frame.dims != volume {
+                return Err(PrepareError::FrameDoesNotFit {
+                    frame: desc.frame.dims,
+                    volume,
+                });
+            }
+            let channels = matches!(r.backend, Some(Backend::Channels(_)));
+            if channels {
+                if r.channel_styles.is_none() {
+                    return Err(PrepareError::NoChannelStyles);
+                }
+            } else if r.tf.current().is_none() && r.slice.is_none() {
+                return Err(PrepareError::NoTransferFunction);
+            }
+            r.mapping = Some(mapping);
+            frames.push(desc);
+        }
+        // A renderer that draws only slices binds a stand-in transfer function.
+        for (r, _) in views.iter_mut() {
+            if r.tf.current().is_none() {
+                r.tf.set(device, queue, &slice::slice_tf())?;
+            }
+        }
+        let mut views: Vec<(&mut VolumeRenderer, &FrameDesc<'_>)> = views
+            .iter_mut()
+            .zip(&frames)
+            .map(|((r, _), d)| (&mut **r, d))
+            .collect();
+        let views = views.as_mut_slice();
+        let mut uploaded = vec![0u64; views.len()];
+        let mut done = vec![false; views.len()];
+        for i in 0..views.len() {
+            if done[i] {
+                continue;
+            }
+            let (r, desc) = &mut views[i];
+            if let Some(Backend::InCore(b)) = r.backend.as_mut() {
+                let tf = r.tf.current().ok_or(PrepareError::NoTransferFunction)?;
+                uploaded[i] = b.update(queue, desc.settings.mode, tf, r.tf.generation());
+                done[i] = true;
+                continue;
+            }
+            if let Some(Backend::Channels(b)) = r.backend.as_mut() {
+                let (styles, generation) = r
+                    .channel_styles
+                    .as_ref()
+                    .ok_or(PrepareError::NoChannelStyles)?;
+                uploaded[i] = b.update(
+                    device,
+                    queue,
+                    desc.settings.mode,
+                    styles,
+                    *generation,
+                    desc.settings.step_factor,
+                )?;
+                done[i] = true;
+                continue;
+            }
+            let group = streamed_group(views, i, &done)?;
+            plan_group(device, queue, views, &group, &mut uploaded)?;
+            for j in group {
+                done[j] = true;
+            }
+        }
+        views
+            .iter_mut()
+            .zip(uploaded)
+            .map(|((r, desc), bytes)| r.record(device, queue, encoder, desc, bytes))
+            .collect()
+    }
+
+    /// Records this renderer's frame after its volume was updated: the
+    /// transfer function's tables, the frame's uniforms and prediction, the
+    /// composite's inputs and the ray-cast pass.
+    fn record(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        encoder: &mut wgpu::CommandEncoder,
+        desc: &FrameDesc<'_>,
+        mut uploaded: u64,
+    ) -> Result<FrameStats, PrepareError> {
+        let backend = self.backend.as_mut().ok_or(PrepareError::NoVolume)?;
+        backend.get_mut().before_pass(encoder);
+        let channels = match backend {
+            Backend::Channels(b) => Some(b.count() as u32),
+            _ => None,
+        };
+        let backend = backend.get();
+        uploaded += self.tf.prepare(
+            device,
+            queue,
+            desc.settings.step_factor,
+            backend.step_lengths(),
+            desc.settings.preintegrated
+                && !backend.labels()
+                && matches!(desc.settings.mode, brickray_core::RenderMode::Dvr),
+        )?;
+        let mut uniforms = FrameUniforms::new(desc, backend.max_leaves());
+        let mapping = self.mapping.ok_or(PrepareError::NoVolume)?;
+        mapping.apply(&mut uniforms);
+        let variant = if let Some(n) = channels {
+            let overlay = self.overlay.style().map(|o| o.mode);
+            if mapping.slice.is_some() {
+                Variant::channel_slice(n, overlay)
+            } else {
+                Variant::channels(&desc.settings, n, overlay)
+            }
+        } else if mapping.slice.is_some() {
+            Variant::slice(
+                backend.measures_weights(),
+                backend.labels(),
+                self.overlay.style().map(|o| o.mode),
+            )
+        } else {
+            Variant::of(
+                &desc.settings,
+                self.prediction,
+                backend.measures_weights(),
+                backend.labels(),
+                self.overlay.style().map(|o| o.mode),
+            )
+        };
+        let predict = self
+            .prediction
+            .filter(|_| variant.predicts())
+            .map(|p| (p, self.volume_epoch));
+        let (written, prediction) = self
+            .frame
+            .update(device, queue, encoder, desc, uniforms, predict)?;
+        uploaded += written;
+        let outputs = self.frame.outputs().ok_or(PrepareError::NoVolume)?;
+        uploaded += self
+            .compositor
+            .update(device, queue, outputs, desc.viewport)?;
+        let layouts = [
+            self.frame.layout(),
+            self.tf.layout(),
+            backend.layout(),
+            self.overlay.layout(),
+        ];
+        let pipeline = self
+            .kernels
+            .pipeline(device, backend.kind(), layouts, variant)?;
+        let groups = [
+            self.frame.bind_group(),
+            self.tf.bind_group(),
+            Some(backend.bind_group()),
+            Some(self.overlay.bind_group()),
+        ];
+        {
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("brickray-render raycast"),
+                timestamp_writes: None,
+            });
+            pass.set_pipeline(pipeline);
+            for (i, g) in groups.into_iter().enumerate() {
+                pass.set_bind_group(i as u32, g, &[]);
+            }
+            let vp = desc.viewport;
+            pass.dispatch_workgroups(
+                vp.width.div_ceil(gpu::WORKGROUP[0]),
+                vp.height.div_ceil(gpu::WORKGROUP[1]),
+                1,
+            );
+        }
+        if let Some(b) = self.backend.as_mut() {
+            b.get_mut().after_pass(queue, encoder);
+        }
+        if let Some(out) = self.frame.outputs() {
+            let size = [desc.viewport.width, desc.viewport.height];
+            self.picker.record(
+                queue,
+                encoder,
+                &out.depth_tex,
+                desc.camera,
+                desc.frame,
+                size,
+            );
+        }
+        self.prepared = Some(Prepared {
+            viewport: desc.viewport,
+            convention: desc.camera.depth,
+        });
+        self.last_frame = FrameStats {
+            rays: desc.viewport.width as u64 * desc.viewport.height as u64,
+            uploaded_bytes: uploaded,
+            prediction,
+        };
+        Ok(self.last_frame)
+    }
+}
+
+/// The views among `views[i..]` not `done` that draw the streamed volume of
+/// `views[i]`, `i` first; they must agree on the classification.
+fn streamed_group(
+    views: &[(&mut VolumeRenderer, &FrameDesc<'_>)],
+    i: usize,
+    done: &[bool],
+) -> Result<Vec<usize>, PrepareError> {
+    let volume = |j: usize| views[j].0.streamed_volume();
+    let lead = volume(i).ok_or(PrepareError::NoVolume)?;
+    let group: Vec<usize> = (i..views.len())
+        .filter(|&j| !done[j] && volume(j).is_some_and(|v| v.same(lead)))
+        .collect();
+    // The 3D views must agree; a slice agrees with any view.
+    let mut views_3d = group
+        .iter()
+        .copied()
+        .filter(|&j| views[j].0.slice.is_none());
+    if let Some(first) = views_3d.next() {
+        let (f, desc) = (&views[first].0, views[first].1);
+        for j in views_3d {
+            let (r, d) = (&views[j].0, views[j].1);
+            if d.settings.mode != desc.settings.mode || r.tf.current() != f.tf.current() {
+                return Err(PrepareError::ViewsDisagree { first, other: j });
+            }
+        }
+    }
+    Ok(group)
+}
+
+/// Plans the streamed volume drawn by the views `group` of `views` once for
+/// all of them (their feedback read back first), and hands each its part.
+fn plan_group(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    views: &mut [(&mut VolumeRenderer, &FrameDesc<'_>)],
+    group: &[usize],
+    uploaded: &mut [u64],
+) -> Result<(), PrepareError> {
+    let lead = group[0];
+    let volume = views[lead]
+        .0
+        .streamed_volume()
+        .cloned()
+        .ok_or(PrepareError::NoVolume)?;
+    let mut shared = volume.lock();
+    let next = shared.planner.next_frame();
+    let mut frame_views = Vec::with_capacity(group.len());
+    for (k, &j) in group.iter().enumerate() {
+        let (r, desc) = &mut views[j];
+        let vp = desc.viewport;
+        frame_views.push(
+            FrameView::new(desc.camera, desc.frame, [vp.width, vp.height])
+                .with_clip(desc.settings.clip),
+        );
+        if let Some(Backend::OutOfCore(o)) = r.backend.as_mut() {
+            shared.planner.add_feedback(k, o.poll(next));
+        }
+    }
+    let planned = {
+        // The classification is the 3D views' (they agree), MIP when a slice
+        // is among the views: every node with data is visible, as a slice
+        // shows every value (a superset of what DVR and iso classify as
+        // visible, so the 3D views draw the same image).
+        let sliced = group.iter().any(|&j| views[j].0.slice.is_some());
+        let lead_3d = group
+            .iter()
+            .copied()
+            .find(|&j| views[j].0.slice.is_none())
+            .unwrap_or(lead);
+        let (r, desc) = &views[lead_3d];
+        let tf = r.tf.current().ok_or(PrepareError::NoTransferFunction)?;
+        let frame = StreamFrame {
+            views: &frame_views,
+            classification: Classification {
+                mode: if sliced {
+                    brickray_core::RenderMode::Mip
+                } else {
+                    desc.settings.mode
+                },
+                tf,
+                tf_generation: r.tf.generation(),
+            },
+            feedback: &[],
+            time: desc.time,
+        };
+        shared.plan(device, queue, &frame)?
+    };
+    drop(shared);
+    // Without a new plan (in the background, the worker is still planning)
+    // the views draw the last one.
+    let Some(planned) = planned else {
+        return Ok(());
+    };
+    uploaded[lead] += planned.bytes;
+    for (k, &j) in group.iter().enumerate() {
+        let (r, desc) = &mut views[j];
+        let vp = desc.viewport;
+        let queries = planned.plan.queries.get(k).cloned().unwrap_or_default();
+        if let Some(Backend::OutOfCore(o)) = r.backend.as_mut() {
+            o.apply(device, queue, &planned, &queries, [vp.width, vp.height])?;
+        }
+    }
+    Ok(())
+}
