@@ -74,7 +74,7 @@ use brickray_core::{
 };
 use composite::Compositor;
 use frame::FrameState;
-use kernels::{Kernels, Variant};
+use kernels::Kernels;
 use slice::FrameMapping;
 use std::sync::Arc;
 use tf::TfTables;
@@ -502,13 +502,10 @@ impl VolumeRenderer {
         device: &wgpu::Device,
         settings: &[brickray_core::RenderSettings],
     ) -> Result<(), RenderError> {
-        let channels = match self.backend.as_ref() {
-            Some(Backend::Channels(b)) => Some(b.count() as u32),
-            _ => None,
-        };
-        let Some(backend) = self.backend.as_ref().map(Backend::get) else {
+        let Some(b) = self.backend.as_ref() else {
             return Ok(());
         };
+        let backend = b.get();
         let layouts = [
             self.frame.layout(),
             self.tf.layout(),
@@ -516,16 +513,7 @@ impl VolumeRenderer {
             self.overlay.layout(),
         ];
         for s in settings {
-            let v = match channels {
-                Some(n) => Variant::channels(s, n, self.overlay.style().map(|o| o.mode)),
-                None => Variant::of(
-                    s,
-                    self.prediction,
-                    backend.measures_weights(),
-                    backend.labels(),
-                    self.overlay.style().map(|o| o.mode),
-                ),
-            };
+            let v = prepare::frame_variant(b, s, false, self.prediction, self.overlay.style());
             self.kernels.pipeline(device, backend.kind(), layouts, v)?;
         }
         Ok(())

@@ -175,9 +175,14 @@ impl VolumeRenderer {
     ) -> Result<FrameStats, PrepareError> {
         let backend = self.backend.as_mut().ok_or(PrepareError::NoVolume)?;
         backend.get_mut().before_pass(encoder);
-        let channels = match backend {
-            Backend::Channels(b) => Some(b.count() as u32),
-            _ => None,
+        let variant_of = |settings: &brickray_core::RenderSettings, slice: bool| {
+            frame_variant(
+                backend,
+                settings,
+                slice,
+                self.prediction,
+                self.overlay.style(),
+            )
         };
         let backend = backend.get();
         uploaded += self.tf.prepare(
@@ -192,28 +197,7 @@ impl VolumeRenderer {
         let mut uniforms = FrameUniforms::new(desc, backend.max_leaves());
         let mapping = self.mapping.ok_or(PrepareError::NoVolume)?;
         mapping.apply(&mut uniforms);
-        let variant = if let Some(n) = channels {
-            let overlay = self.overlay.style().map(|o| o.mode);
-            if mapping.slice.is_some() {
-                Variant::channel_slice(n, overlay)
-            } else {
-                Variant::channels(&desc.settings, n, overlay)
-            }
-        } else if mapping.slice.is_some() {
-            Variant::slice(
-                backend.measures_weights(),
-                backend.labels(),
-                self.overlay.style().map(|o| o.mode),
-            )
-        } else {
-            Variant::of(
-                &desc.settings,
-                self.prediction,
-                backend.measures_weights(),
-                backend.labels(),
-                self.overlay.style().map(|o| o.mode),
-            )
-        };
+        let variant = variant_of(&desc.settings, mapping.slice.is_some());
         let predict = self
             .prediction
             .filter(|_| variant.predicts())
@@ -281,6 +265,40 @@ impl VolumeRenderer {
             prediction,
         };
         Ok(self.last_frame)
+    }
+}
+
+/// The pipeline variant that draws `settings` (with `slice`, a slice view)
+/// of `backend`: the multi-channel kernel's for a channel volume, else the
+/// single-channel kernels' with the renderer's prediction (iso), the
+/// backend's visible weights and label map, and the overlay's mode.
+pub(crate) fn frame_variant(
+    backend: &Backend,
+    settings: &brickray_core::RenderSettings,
+    slice: bool,
+    prediction: Option<crate::Prediction>,
+    overlay: Option<brickray_core::OverlayStyle>,
+) -> Variant {
+    let overlay = overlay.map(|o| o.mode);
+    if let Backend::Channels(b) = backend {
+        let n = b.count() as u32;
+        return if slice {
+            Variant::channel_slice(n, overlay)
+        } else {
+            Variant::channels(settings, n, overlay)
+        };
+    }
+    let b = backend.get();
+    if slice {
+        Variant::slice(b.measures_weights(), b.labels(), overlay)
+    } else {
+        Variant::of(
+            settings,
+            prediction,
+            b.measures_weights(),
+            b.labels(),
+            overlay,
+        )
     }
 }
 
