@@ -91,6 +91,7 @@ impl Twin {
             classification: brickray::cache::Classification {
                 mode: RenderMode::Dvr,
                 tf,
+                channels: &[],
                 tf_generation: 0,
             },
             feedback: &[],

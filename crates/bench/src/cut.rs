@@ -68,6 +68,7 @@ pub(crate) fn refine_cut(
         generation: 0,
         mode: view.mode,
         tf: view.tf,
+        channels: &[],
         tolerance_px,
         metric,
         max_data_leaves,

@@ -73,7 +73,7 @@ pub(crate) fn octant_cut(
     let info = |k: NodeKey| store.info(k).map_err(|e| e.to_string());
     let needs_data = |k: NodeKey| -> Result<bool, String> {
         let i = info(k)?;
-        Ok(i.kind != NodeKind::Empty && is_visible(&i, mode, tf, layout))
+        Ok(i.kind != NodeKind::Empty && is_visible(&i, mode, tf, &[], layout))
     };
     // Per refined node: its children that need data and are not refined yet.
     let mut open: HashMap<NodeKey, u32> = HashMap::new();
@@ -230,7 +230,7 @@ mod tests {
         let layout = store.layout();
         let needs = |k: NodeKey| {
             let i = store.info(k).unwrap();
-            i.kind != NodeKind::Empty && is_visible(&i, RenderMode::Dvr, tf, layout)
+            i.kind != NodeKind::Empty && is_visible(&i, RenderMode::Dvr, tf, &[], layout)
         };
         set.iter()
             .filter(|&&k| {

@@ -49,7 +49,7 @@ pub use brickray_core::{
     VolumeData, VolumeDesc, VolumeFrame, VolumeKind,
 };
 pub use brickray_core::{BrickSource, NodeKey, OctreeLayout};
-pub use brickray_core::{ChannelError, ChannelStyle, ChannelVolume};
+pub use brickray_core::{ChannelError, ChannelSource, ChannelStyle, ChannelVolume};
 pub use brickray_core::{
     LabelError, LabelOverlay, LabelStyle, LabelTable, OverlayError, OverlayMode, OverlayStyle,
     overlay_transform,

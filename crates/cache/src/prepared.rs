@@ -14,12 +14,14 @@ pub struct PreparedBrick {
     pub texels: Arc<[u8]>,
     /// Normalized `[min, max]` of each of the `n^3` sub-cells (x fastest,
     /// `n` = [`GpuFormat::sub_cells_per_axis`]); see
-    /// [`sub_cell_ranges`](brickray_core::sub_cell_ranges).
+    /// [`sub_cell_ranges`](brickray_core::sub_cell_ranges). A multi-channel
+    /// brick has one per sub-cell and channel, channel fastest.
     pub sub_cells: Arc<[[f32; 2]]>,
     /// Normalized `[min, max]` bounding every sample inside the brick: the
     /// node's metadata range (its interior voxels) widened to its sub-cells'
     /// ranges, which cover the apron voxels that samples near a face read.
-    /// `[-inf, inf]` when either is not finite: never skipped.
+    /// `[-inf, inf]` when either is not finite: never skipped; always for
+    /// a multi-channel brick (its channels' ranges are its sub-cells').
     pub range: [f32; 2],
 }
 
@@ -35,6 +37,7 @@ impl PreparedBrick {
 pub struct Preparer {
     layout: OctreeLayout,
     encoding: SampleEncoding,
+    gpu: GpuFormat,
     sub_cells_per_axis: u32,
     raw_bytes: usize,
 }
@@ -46,6 +49,7 @@ impl Preparer {
         Ok(Preparer {
             layout: layout.clone(),
             encoding: gpu.encoding,
+            gpu: *gpu,
             sub_cells_per_axis: gpu.sub_cells_per_axis,
             raw_bytes: raw_brick_bytes(layout)?,
         })
@@ -76,6 +80,9 @@ impl Preparer {
     /// Prepares a brick read from the source (`raw`: `raw_bytes()` little-endian
     /// samples) whose metadata is `info`.
     pub fn prepare(&self, raw: &[u8], info: &NodeInfo) -> PreparedBrick {
+        if self.gpu.channel_count > 1 {
+            return self.prepare_channels(raw);
+        }
         let texels: Arc<[u8]> = Arc::from(self.encoding.encode(raw).as_ref());
         let sub_cells: Arc<[[f32; 2]]> =
             sub_cell_ranges(&self.layout, raw, self.sub_cells_per_axis).into();
@@ -90,6 +97,54 @@ impl Preparer {
             texels,
             sub_cells,
             range,
+        }
+    }
+}
+
+impl Preparer {
+    /// A multi-channel brick (channels interleaved, channel fastest): each
+    /// channel encoded with its own encoding and its sub-cells ranged over
+    /// its own value range, the texels packed in the format's lanes
+    /// ([`brickray_core::channels::interleave`]), the sub-cell ranges
+    /// channel fastest.
+    fn prepare_channels(&self, raw: &[u8]) -> PreparedBrick {
+        let n = self.gpu.channel_count as usize;
+        let s = self.layout.volume.dtype.size();
+        let parts: Vec<Vec<u8>> = (0..n)
+            .map(|c| {
+                raw.chunks_exact(s * n)
+                    .flat_map(|v| &v[c * s..(c + 1) * s])
+                    .copied()
+                    .collect()
+            })
+            .collect();
+        let encoded: Vec<_> = parts
+            .iter()
+            .zip(&self.gpu.channel_encodings)
+            .map(|(p, e)| e.encode(p))
+            .collect();
+        let refs: Vec<&[u8]> = encoded.iter().map(|e| e.as_ref()).collect();
+        let texels = brickray_core::channels::interleave(
+            &refs,
+            self.encoding.texel_bytes() as usize,
+            self.gpu.lanes() as usize,
+        );
+        let ranges: Vec<Vec<[f32; 2]>> = parts
+            .iter()
+            .enumerate()
+            .map(|(c, p)| {
+                sub_cell_ranges(&self.layout.channel_layout(c), p, self.sub_cells_per_axis)
+            })
+            .collect();
+        let cells = ranges[0].len();
+        let mut sub_cells = Vec::with_capacity(cells * n);
+        for i in 0..cells {
+            sub_cells.extend(ranges.iter().map(|r| r[i]));
+        }
+        PreparedBrick {
+            texels: texels.into(),
+            sub_cells: sub_cells.into(),
+            range: [f32::NEG_INFINITY, f32::INFINITY],
         }
     }
 }
@@ -119,6 +174,7 @@ mod tests {
             max: 0.1,
             error: None,
             parent_error: None,
+            channels: Default::default(),
         };
         let b = p.prepare(&raw, &info);
         assert_eq!(b.texels.len(), 2000);
@@ -148,5 +204,39 @@ mod tests {
             ..info
         };
         assert_eq!(p.prepare(&flat, &wide).range, [1.0, 7.0]);
+    }
+
+    /// Three u8 channels of one brick: each encoded (u8 as R16Unorm) and
+    /// packed into four lanes, the fourth zero; each channel's sub-cells
+    /// ranged over its own value range, channel fastest; no brick range.
+    #[test]
+    fn prepares_the_channels_of_a_brick() {
+        let layout = ball_layout(64).with_channels(&[[0.0, 1.0], [0.0, 2.0], [0.0, 4.0]]);
+        let caps = TexelCaps {
+            norm16: true,
+            float32_filterable: false,
+        };
+        let gpu = GpuFormat::for_layout(&layout, caps, U8Filtering::Exact, 32, 2048);
+        assert_eq!(
+            (gpu.channel_count, gpu.lanes(), gpu.texel_bytes()),
+            (3, 4, 8)
+        );
+        let p = Preparer::new(&layout, &gpu).unwrap();
+        assert_eq!(p.raw_bytes(), 3000);
+        let raw: Vec<u8> = (0..1000).flat_map(|_| [1u8, 2, 4]).collect();
+        let info = NodeInfo {
+            kind: NodeKind::Data,
+            min: 1.0,
+            max: 1.0,
+            error: None,
+            parent_error: None,
+            channels: Default::default(),
+        };
+        let b = p.prepare(&raw, &info);
+        assert_eq!(b.texels.len(), 8000);
+        assert_eq!(&b.texels[..8], &[1, 1, 2, 2, 4, 4, 0, 0]);
+        assert_eq!(&*b.sub_cells, &[[1.0, 1.0], [1.0, 1.0], [1.0, 1.0]]);
+        assert_eq!(b.range, [f32::NEG_INFINITY, f32::INFINITY]);
+        assert_eq!(Some(b.bytes()), gpu.prepared_brick_bytes(&layout).ok());
     }
 }

@@ -92,6 +92,11 @@ pub struct OctreeLayout {
     /// Per-level split masks (see [`OctreeLayout::split_mask`]); empty for the
     /// isotropic octree, where every level halves all three axes.
     pub(crate) splits: Vec<u8>,
+    /// The value range of each channel of a channel volume
+    /// ([`crate::channels`]; channel 0's is `volume.value_range`); empty for
+    /// a plain single-channel volume. A stored brick holds every channel of
+    /// each voxel together, channel fastest ([`OctreeLayout::with_channels`]).
+    pub(crate) channels: Vec<[f32; 2]>,
 }
 
 impl OctreeLayout {
@@ -110,7 +115,49 @@ impl OctreeLayout {
             apron,
             levels,
             splits: Vec::new(),
+            channels: Vec::new(),
         }
+    }
+
+    /// This layout for a channel volume of `ranges.len()` channels (1 to
+    /// [`crate::channels::MAX_CHANNELS`]; none: a plain volume), channel
+    /// `c`'s values mapping to 0..1 over `ranges[c]`: a stored brick holds
+    /// the channels of each voxel together (channel fastest), `brick_bytes`
+    /// grows with them. A channel volume of one channel is stored as a plain
+    /// one but drawn through its channel's style.
+    pub fn with_channels(mut self, ranges: &[[f32; 2]]) -> OctreeLayout {
+        self.channels = ranges.to_vec();
+        if let Some(r) = ranges.first() {
+            self.volume.value_range = *r;
+        }
+        self
+    }
+
+    /// Channels per voxel (1 for a plain volume).
+    pub fn channels(&self) -> usize {
+        self.channels.len().max(1)
+    }
+
+    /// True for a channel volume ([`Self::with_channels`]), whose channels
+    /// are classified by their styles.
+    pub fn is_channel_volume(&self) -> bool {
+        !self.channels.is_empty()
+    }
+
+    /// Each channel's value range (empty for a plain volume).
+    pub fn channel_ranges(&self) -> &[[f32; 2]] {
+        &self.channels
+    }
+
+    /// The single-channel layout of channel `c` of a multi-channel one:
+    /// the same octree, channel `c`'s value range.
+    pub fn channel_layout(&self, c: usize) -> OctreeLayout {
+        let mut l = self.clone();
+        if let Some(r) = self.channels.get(c) {
+            l.volume.value_range = *r;
+        }
+        l.channels = Vec::new();
+        l
     }
 
     /// Stored voxels per brick side, `brick + 2 * apron`.
@@ -120,7 +167,7 @@ impl OctreeLayout {
 
     /// Bytes of one stored brick.
     pub fn brick_bytes(&self) -> usize {
-        (self.stored_side() as usize).pow(3) * self.volume.dtype.size()
+        (self.stored_side() as usize).pow(3) * self.volume.dtype.size() * self.channels()
     }
 
     /// Sample type.
@@ -235,6 +282,10 @@ pub struct NodeInfo {
     /// octant-granular cut ([`crate::LodMetric::VisibleOctants`]) ranks an
     /// octant by. `None` at the root and when the source records none.
     pub parent_error: Option<crate::lod::NodeError>,
+    /// A multi-channel source's raw `[min, max]` per channel (channel `c`
+    /// in entry `c`, as `min`/`max` are bounded; `min`/`max` then hold
+    /// channel 0's); zeros for a single-channel source.
+    pub channels: [[f32; 2]; crate::channels::MAX_CHANNELS],
 }
 
 /// Why a leaf of a cut needs no brick.

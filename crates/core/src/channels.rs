@@ -363,5 +363,41 @@ pub fn interleave(parts: &[&[u8]], texel_bytes: usize, lanes: usize) -> Vec<u8> 
     out
 }
 
+/// Whether a node whose channels' raw ranges are `ranges` (channel `c`'s
+/// in `ranges[c]`, its value range `value_ranges[c]`) can show anything
+/// under `styles` in `mode`: some visible channel is not transparent over
+/// its range (DVR), reaches its isovalue (iso, where a node wholly inside
+/// stays visible as for one channel), or is drawn at all (MIP). What
+/// out-of-core refinement skips a node by, and the kernel a sub-cell by
+/// (its GPU twin, in `ooc_channels.wgsl`).
+pub fn node_visible(
+    ranges: &[[f32; 2]],
+    value_ranges: &[[f32; 2]],
+    styles: &[ChannelStyle],
+    mode: crate::RenderMode,
+) -> bool {
+    ranges
+        .iter()
+        .zip(value_ranges)
+        .zip(styles)
+        .filter(|(_, s)| s.visible)
+        .any(|((r, vr), s)| {
+            let n = |v: f32| {
+                let span = vr[1] - vr[0];
+                if span > 0.0 { (v - vr[0]) / span } else { 0.0 }
+            };
+            let (a, b) = (n(r[0]), n(r[1]));
+            let (lo, hi) = (a.min(b), a.max(b));
+            match mode {
+                crate::RenderMode::Dvr => !s.tf.is_transparent(lo, hi),
+                crate::RenderMode::Iso { .. } => s.isovalue <= hi,
+                _ => true,
+            }
+        })
+}
+
+mod source;
+pub use source::ChannelSource;
+
 #[cfg(test)]
 mod tests;

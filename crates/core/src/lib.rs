@@ -56,7 +56,7 @@ pub use camera::{
     Camera, CameraError, DepthConvention, DepthMap, FrameError, FrameView, Projection, Ray, RayGen,
     ViewGenerations, VolumeFrame,
 };
-pub use channels::{ChannelError, ChannelStyle, ChannelVolume, MAX_CHANNELS};
+pub use channels::{ChannelError, ChannelSource, ChannelStyle, ChannelVolume, MAX_CHANNELS};
 pub use labels::{LABEL_TABLE_ENTRIES, LabelError, LabelStyle, LabelTable};
 pub use lod::{
     BinStats, ERROR_BINS, LodMetric, NodeError, TfErrorTable, node_pixel_error, node_tf_error,

@@ -595,6 +595,7 @@ mod tests {
             max,
             error: Some(NodeError::from_label_share(share)),
             parent_error: None,
+            channels: Default::default(),
         };
         let dvr = RenderMode::Dvr;
         let n = node(3.0, 4.0, 0.25);
@@ -672,6 +673,7 @@ mod tests {
             max: max as f32,
             error: Some(NodeError::encode(&bins, min, max)),
             parent_error: None,
+            channels: Default::default(),
         }
     }
 

@@ -75,6 +75,7 @@ fn a_fast_fly_through_cancels_what_the_view_left() {
             classification: Classification {
                 mode: RenderMode::Dvr,
                 tf: &tf,
+                channels: &[],
                 tf_generation: 1,
             },
             feedback: &[],

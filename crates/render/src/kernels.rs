@@ -47,6 +47,8 @@ pub(crate) enum KernelKind {
     OutOfCore,
     /// A multi-channel volume in core (`shaders/channels.wgsl`).
     Channels,
+    /// A multi-channel volume out of core (`shaders/ooc_channels.wgsl`).
+    OutOfCoreChannels,
 }
 
 /// The switches compiled into a pipeline.
@@ -353,6 +355,10 @@ impl Kernel {
             KernelKind::InCore => ("brickray-render raycast in core", shaders::incore()),
             KernelKind::OutOfCore => ("brickray-render raycast out of core", shaders::ooc()),
             KernelKind::Channels => ("brickray-render raycast channels", shaders::channels()),
+            KernelKind::OutOfCoreChannels => (
+                "brickray-render raycast channels out of core",
+                shaders::ooc_channels(),
+            ),
         };
         let module = gpu::scoped(device, label, || {
             device.create_shader_module(wgpu::ShaderModuleDescriptor {

@@ -236,8 +236,8 @@ impl VolumeRenderer {
     /// ([`ChannelError::StyleCount`](brickray_core::ChannelError)), and again
     /// at `prepare`; uploaded there, when they changed.
     pub fn set_channel_styles(&mut self, styles: &[ChannelStyle]) -> Result<(), RenderError> {
-        if let Some(Backend::Channels(b)) = self.backend.as_ref() {
-            brickray_core::channels::validate_styles(styles, b.count())?;
+        if let Some(n) = self.backend.as_ref().and_then(Backend::channel_count) {
+            brickray_core::channels::validate_styles(styles, n)?;
         }
         if self
             .channel_styles
@@ -290,7 +290,11 @@ impl VolumeRenderer {
         device: &wgpu::Device,
         volume: &StreamedVolume,
     ) -> Result<(), RenderError> {
-        let desc = volume.layout().volume;
+        let layout = volume.layout();
+        for r in layout.channel_ranges() {
+            check_value_range(*r)?;
+        }
+        let desc = layout.volume;
         check_value_range(desc.value_range)?;
         self.drop_volume();
         let b = OutOfCore::new(device, volume.clone())?;

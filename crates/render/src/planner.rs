@@ -70,6 +70,8 @@ struct Request {
     /// The transfer function when its generation changed since the last
     /// request (the worker keeps the last one).
     tf: Option<TransferFunction>,
+    /// A multi-channel volume's styles, sent with the TF.
+    channels: Vec<brickray_core::ChannelStyle>,
     tf_generation: u64,
     feedback: Vec<ViewFeedback>,
     time: Option<f64>,
@@ -95,10 +97,12 @@ fn spawn(streamer: Arc<Mutex<Streamer>>, splits: Splits) -> std::io::Result<Work
         .name("brickray-planner".into())
         .spawn(move || {
             let mut tf: Option<TransferFunction> = None;
+            let mut channels = Vec::new();
             // Ends when the volume (the sender) is dropped.
             while let Ok(r) = requests.recv() {
                 if let Some(t) = r.tf {
                     tf = Some(t);
+                    channels = r.channels;
                 }
                 let Some(tf) = tf.as_ref() else { continue };
                 let frame = StreamFrame {
@@ -106,6 +110,7 @@ fn spawn(streamer: Arc<Mutex<Streamer>>, splits: Splits) -> std::io::Result<Work
                     classification: Classification {
                         mode: r.mode,
                         tf,
+                        channels: &channels,
                         tf_generation: r.tf_generation,
                     },
                     feedback: &r.feedback,
@@ -251,13 +256,20 @@ impl Planner {
             .map_or(self.converged, |r| r.plan.stats.converged);
         let steady = same && settled && self.applied;
         if !w.outstanding && !steady {
-            let tf = (w.worker_tf != Some(c.tf_generation)).then(|| c.tf.clone());
+            let changed = w.worker_tf != Some(c.tf_generation);
+            let tf = changed.then(|| c.tf.clone());
+            let channels = if changed {
+                c.channels.to_vec()
+            } else {
+                Vec::new()
+            };
             w.worker_tf = Some(c.tf_generation);
             w.last = Some((frame.views.to_vec(), c.mode, c.tf_generation));
             let sent = w.tx.send(Request {
                 views: frame.views.to_vec(),
                 mode: c.mode,
                 tf,
+                channels,
                 tf_generation: c.tf_generation,
                 feedback,
                 time: frame.time,

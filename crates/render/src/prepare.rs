@@ -97,10 +97,13 @@ impl VolumeRenderer {
                     volume,
                 });
             }
-            let channels = matches!(r.backend, Some(Backend::Channels(_)));
-            if channels {
+            let channels = r.backend.as_ref().and_then(Backend::channel_count);
+            if channels.is_some() {
                 if r.channel_styles.is_none() {
                     return Err(PrepareError::NoChannelStyles);
+                }
+                if r.slice.is_some() && matches!(r.backend, Some(Backend::OutOfCore(_))) {
+                    return Err(PrepareError::StreamedChannelSlice);
                 }
             } else if r.tf.current().is_none() && r.slice.is_none() {
                 return Err(PrepareError::NoTransferFunction);
@@ -174,6 +177,17 @@ impl VolumeRenderer {
         mut uploaded: u64,
     ) -> Result<FrameStats, PrepareError> {
         let backend = self.backend.as_mut().ok_or(PrepareError::NoVolume)?;
+        if let (Backend::OutOfCore(o), Some((styles, generation))) =
+            (&mut *backend, &self.channel_styles)
+        {
+            uploaded += o.update_channels(
+                device,
+                queue,
+                styles,
+                *generation,
+                desc.settings.step_factor,
+            )?;
+        }
         backend.get_mut().before_pass(encoder);
         let variant_of = |settings: &brickray_core::RenderSettings, slice: bool| {
             frame_variant(
@@ -288,6 +302,13 @@ pub(crate) fn frame_variant(
             Variant::channels(settings, n, overlay)
         };
     }
+    if let (Backend::OutOfCore(_), Some(n)) = (backend, backend.channel_count()) {
+        // (Slices of a streamed multi-channel volume are refused before.)
+        return Variant {
+            weights: backend.get().measures_weights(),
+            ..Variant::channels(settings, n as u32, overlay)
+        };
+    }
     let b = backend.get();
     if slice {
         Variant::slice(b.measures_weights(), b.labels(), overlay)
@@ -323,7 +344,13 @@ fn streamed_group(
         let (f, desc) = (&views[first].0, views[first].1);
         for j in views_3d {
             let (r, d) = (&views[j].0, views[j].1);
-            if d.settings.mode != desc.settings.mode || r.tf.current() != f.tf.current() {
+            fn styles(r: &VolumeRenderer) -> Option<&[brickray_core::ChannelStyle]> {
+                r.channel_styles.as_ref().map(|(s, _)| s.as_slice())
+            }
+            if d.settings.mode != desc.settings.mode
+                || r.tf.current() != f.tf.current()
+                || styles(r) != styles(f)
+            {
                 return Err(PrepareError::ViewsDisagree { first, other: j });
             }
         }
@@ -373,6 +400,13 @@ fn plan_group(
             .unwrap_or(lead);
         let (r, desc) = &views[lead_3d];
         let tf = r.tf.current().ok_or(PrepareError::NoTransferFunction)?;
+        // A multi-channel volume is classified by its channels' styles.
+        let (channels, tf_generation) = match &r.channel_styles {
+            Some((styles, generation)) if shared.layout.is_channel_volume() => {
+                (styles.as_slice(), *generation)
+            }
+            _ => (&[][..], r.tf.generation()),
+        };
         let frame = StreamFrame {
             views: &frame_views,
             classification: Classification {
@@ -382,7 +416,8 @@ fn plan_group(
                     desc.settings.mode
                 },
                 tf,
-                tf_generation: r.tf.generation(),
+                channels,
+                tf_generation,
             },
             feedback: &[],
             time: desc.time,

@@ -6,10 +6,15 @@
 //! * `modes.wgsl`: the override switches and what a ray computes (DVR
 //!   accumulation, iso bisection and shading, MIP), once for both kernels;
 //! * `incore.wgsl`, `ooc.wgsl`: each backend's group 2, its sampling `Cursor`
-//!   and its march; the out-of-core kernel also includes brickray-index's
-//!   traversal library and `feedback.wgsl` (ray-guided usage counters);
-//! * `channels.wgsl`: the multi-channel in-core kernel (its group 2: the
-//!   packed channels and their stacked transfer functions; its march);
+//!   and its march; the out-of-core kernels also include brickray-index's
+//!   traversal library, `ooc_volume.wgsl` (their group 2, the brick a leaf
+//!   samples and the cursor through it) and `feedback.wgsl` (ray-guided
+//!   usage counters);
+//! * `channels.wgsl`, `ooc_channels.wgsl`: the multi-channel kernels in core
+//!   (group 2: the packed channels) and out of core (the packed brick atlas
+//!   and the channels' classification beside ooc_volume.wgsl's bindings),
+//!   both over `channel_class.wgsl` (the channels' stacked transfer
+//!   functions, visibility, isovalues and how their samples mix);
 //! * `overlay.wgsl`: group 3, a label map over the image (both kernels);
 //! * `predict.wgsl`: the isosurface prediction buffer's bindings (group 0) and
 //!   switches, in both kernels; `incore_predict.wgsl`, `ooc_predict.wgsl`:
@@ -33,6 +38,13 @@ pub const INCORE: &str = include_str!("../shaders/incore.wgsl");
 pub const CHANNELS: &str = include_str!("../shaders/channels.wgsl");
 /// The out-of-core kernel's own part.
 pub const OOC: &str = include_str!("../shaders/ooc.wgsl");
+/// The out-of-core group 2 and brick cursor both out-of-core kernels share.
+pub const OOC_VOLUME: &str = include_str!("../shaders/ooc_volume.wgsl");
+/// The multi-channel out-of-core kernel.
+pub const OOC_CHANNELS: &str = include_str!("../shaders/ooc_channels.wgsl");
+/// The classification of several channels, shared by both multi-channel
+/// kernels.
+pub const CHANNEL_CLASS: &str = include_str!("../shaders/channel_class.wgsl");
 /// A label map over the image (group 3, both kernels).
 pub const OVERLAY: &str = include_str!("../shaders/overlay.wgsl");
 /// The prediction buffer's bindings, switches and encoding (both kernels).
@@ -81,7 +93,7 @@ pub fn incore() -> String {
 /// prediction for their shared functions and switches).
 pub fn channels() -> String {
     format!(
-        "{COMMON}\n{}\n{MODES}\n{OVERLAY}\n{PREDICT}\n{CHANNELS}",
+        "{COMMON}\n{}\n{MODES}\n{OVERLAY}\n{PREDICT}\n{CHANNEL_CLASS}\n{CHANNELS}",
         color_tables()
     )
 }
@@ -90,7 +102,18 @@ pub fn channels() -> String {
 /// and its slice entry point).
 pub fn ooc() -> String {
     format!(
-        "{COMMON}\n{}\n{MODES}\n{OVERLAY}\n{PREDICT}\n{}\n{OOC}\n{OOC_PREDICT}\n{FEEDBACK}\n{SLICE}\n{SLICE_OOC}",
+        "{COMMON}\n{}\n{MODES}\n{OVERLAY}\n{PREDICT}\n{}\n{OOC_VOLUME}\n{OOC}\n{OOC_PREDICT}\n{FEEDBACK}\n{SLICE}\n{SLICE_OOC}",
+        color_tables(),
+        brickray_index::OCTREE_TRAVERSAL_WGSL
+    )
+}
+
+/// The multi-channel out-of-core ray caster as compiled (modes, overlay and
+/// prediction for their shared functions and switches; no slice entry
+/// point).
+pub fn ooc_channels() -> String {
+    format!(
+        "{COMMON}\n{}\n{MODES}\n{OVERLAY}\n{PREDICT}\n{}\n{OOC_VOLUME}\n{CHANNEL_CLASS}\n{OOC_CHANNELS}\n{FEEDBACK}",
         color_tables(),
         brickray_index::OCTREE_TRAVERSAL_WGSL
     )

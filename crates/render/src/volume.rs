@@ -93,13 +93,13 @@ impl Pool {
             },
         )?;
         let atlas_bytes =
-            dims.iter().map(|&d| d as u64).product::<u64>() * gpu.encoding.texel_bytes() as u64;
+            dims.iter().map(|&d| d as u64).product::<u64>() * gpu.texel_bytes() as u64;
         let slot_count = streamer.pool().slot_count().max(1) as u64;
         let rows = streamer.slot_rows() as usize;
         let sub_cells = gpu::storage_buffer(
             device,
             "brickray-render brick sub-cell table",
-            slot_count * (gpu.sub_cells_per_axis as u64).pow(3) * 8,
+            slot_count * (gpu.sub_cells_per_axis as u64).pow(3) * 8 * gpu.channel_count as u64,
         )?;
         Ok(Pool {
             atlas_view: atlas.create_view(&Default::default()),
@@ -303,6 +303,11 @@ impl Shared {
         }
     }
 
+    /// How the atlas stores the volume.
+    pub(crate) fn gpu_format(&self) -> &GpuFormat {
+        &self.gpu
+    }
+
     /// True when the kernel must measure visible weights (the metric ranks
     /// by them).
     pub(crate) fn measures_weights(&self) -> bool {
@@ -350,7 +355,7 @@ impl Shared {
         self.slot_rows = reply.slot_rows;
         let t = Instant::now();
         let side = self.layout.stored_side();
-        let bpp = self.gpu.encoding.texel_bytes();
+        let bpp = self.gpu.texel_bytes();
         let plan = reply.plan;
         let mut bytes = self
             .pool
@@ -432,7 +437,8 @@ impl StreamedVolume {
             std::mem::size_of::<SlotInfo>() as u32,
             device.limits().max_texture_dimension_3d,
         );
-        let format = encoding::wgpu_format(gpu_format.encoding.format);
+        let format =
+            encoding::wgpu_format_lanes(gpu_format.encoding.format, gpu_format.lanes() as usize);
         let mut streamer = Streamer::new(source, config, gpu_format)?;
         streamer.preload_root()?;
         let pool = Pool::new(device, &streamer, format)?;

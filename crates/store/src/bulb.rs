@@ -192,6 +192,7 @@ impl BrickSource for MandelbulbSource {
             max: 0.0,
             error: None,
             parent_error: None,
+            channels: Default::default(),
         };
         if !self.check(key)? {
             return Ok(uniform(NodeKind::Empty));
@@ -224,6 +225,7 @@ impl BrickSource for MandelbulbSource {
             max: 255.0,
             error: None,
             parent_error: None,
+            channels: Default::default(),
         })
     }
 

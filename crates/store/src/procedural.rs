@@ -354,6 +354,7 @@ impl BrickSource for ProceduralSource {
                 max: 0.0,
                 error: None,
                 parent_error: None,
+                channels: Default::default(),
             });
         }
         let (lo, hi) = self.layout.brick_footprint(key);
@@ -377,6 +378,7 @@ impl BrickSource for ProceduralSource {
                 max: mn as f32,
                 error: None,
                 parent_error: None,
+                channels: Default::default(),
             });
         }
         let r = self.reach[m as usize];
@@ -386,6 +388,7 @@ impl BrickSource for ProceduralSource {
             max: (mx + r).min(255) as f32,
             error: None,
             parent_error: None,
+            channels: Default::default(),
         })
     }
 

@@ -318,6 +318,7 @@ impl Store {
                 max: self.data_range[0],
                 error: None,
                 parent_error: None,
+                channels: Default::default(),
             },
             Some(e) => NodeInfo {
                 kind: match e.kind {
@@ -329,6 +330,7 @@ impl Store {
                 max: e.max,
                 error,
                 parent_error,
+                channels: Default::default(),
             },
         }
     }

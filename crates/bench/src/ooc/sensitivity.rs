@@ -33,6 +33,7 @@ fn cut_levels(
         generation: 0,
         mode: RenderMode::Dvr,
         tf,
+        channels: &[],
         tolerance_px,
         metric: brickray_core::LodMetric::Geometric,
         max_data_leaves,

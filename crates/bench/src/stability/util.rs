@@ -300,6 +300,7 @@ impl CutCheck {
             classification: brickray_cache::Classification {
                 mode,
                 tf,
+                channels: &[],
                 tf_generation: 0,
             },
             feedback: &[],

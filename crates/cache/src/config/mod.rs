@@ -217,6 +217,12 @@ pub struct GpuFormat {
     pub slot_row_bytes: u32,
     /// Device limit on a 3D texture dimension (`max_texture_dimension_3d`).
     pub max_texture_dim_3d: u32,
+    /// Channels per voxel ([`OctreeLayout::channels`]): a texel packs them
+    /// in [`lanes`](Self::lanes) lanes of `encoding`'s format.
+    pub channel_count: u32,
+    /// Each channel's encoding (its own value range; channel 0's is
+    /// `encoding`; entries past the channels repeat it).
+    pub channel_encodings: [SampleEncoding; brickray_core::MAX_CHANNELS],
 }
 
 /// Which size overflowed.
@@ -372,12 +378,29 @@ impl GpuFormat {
         slot_row_bytes: u32,
         max_texture_dim_3d: u32,
     ) -> GpuFormat {
+        let encoding = SampleEncoding::for_volume(&layout.volume, caps, u8_filtering);
         GpuFormat {
-            encoding: SampleEncoding::for_volume(&layout.volume, caps, u8_filtering),
+            encoding,
             sub_cells_per_axis: sub_cells_per_axis(layout.brick),
             slot_row_bytes,
             max_texture_dim_3d,
+            channel_count: layout.channels() as u32,
+            channel_encodings: std::array::from_fn(|c| {
+                layout.channel_ranges().get(c).map_or(encoding, |r| {
+                    SampleEncoding::choose(layout.volume.dtype, *r, caps, u8_filtering)
+                })
+            }),
         }
+    }
+
+    /// Texel lanes of the atlas: 1, 2 or 4 (three channels take four).
+    pub fn lanes(&self) -> u32 {
+        brickray_core::channels::texel_lanes(self.channel_count as usize) as u32
+    }
+
+    /// Bytes of one atlas texel (every channel of a voxel).
+    pub fn texel_bytes(&self) -> u32 {
+        self.encoding.texel_bytes() * self.lanes()
     }
 
     /// Checks the format against the layout: encoding of the same dtype and value
@@ -385,7 +408,10 @@ impl GpuFormat {
     pub fn validate(&self, layout: &OctreeLayout) -> Result<(), ConfigError> {
         let (ld, lr) = (layout.volume.dtype, layout.volume.value_range);
         let (ed, er) = (self.encoding.dtype(), self.encoding.value_range());
-        if ld != ed || lr.map(f32::to_bits) != er.map(f32::to_bits) {
+        if ld != ed
+            || lr.map(f32::to_bits) != er.map(f32::to_bits)
+            || self.channel_count as usize != layout.channels()
+        {
             return Err(ConfigError::EncodingMismatch {
                 layout_dtype: ld,
                 encoding_dtype: ed,
@@ -404,7 +430,8 @@ impl GpuFormat {
     }
 
     /// Bytes of one prepared brick: `stored_side^3` texels and `sub_cells^3`
-    /// ranges of 8 bytes (what the CPU cache counts and a frame uploads).
+    /// ranges of 8 bytes per channel (what the CPU cache counts and a frame
+    /// uploads).
     pub fn prepared_brick_bytes(&self, layout: &OctreeLayout) -> Result<u64, ConfigError> {
         let side = stored_side(layout)? as u64;
         let n = self.sub_cells_per_axis as u64;
@@ -413,8 +440,10 @@ impl GpuFormat {
         };
         let texels = side
             .checked_pow(3)
-            .and_then(|v| v.checked_mul(self.encoding.texel_bytes() as u64));
-        let cells = n.checked_pow(3).and_then(|v| v.checked_mul(8));
+            .and_then(|v| v.checked_mul(self.texel_bytes() as u64));
+        let cells = n
+            .checked_pow(3)
+            .and_then(|v| v.checked_mul(8 * self.channel_count as u64));
         texels
             .zip(cells)
             .and_then(|(t, c)| t.checked_add(c))
@@ -476,7 +505,7 @@ pub(crate) fn stored_side(layout: &OctreeLayout) -> Result<u32, ConfigError> {
 pub(crate) fn raw_brick_bytes(layout: &OctreeLayout) -> Result<usize, ConfigError> {
     (stored_side(layout)? as usize)
         .checked_pow(3)
-        .and_then(|v| v.checked_mul(layout.volume.dtype.size()))
+        .and_then(|v| v.checked_mul(layout.volume.dtype.size() * layout.channels()))
         .ok_or(ConfigError::SizeOverflow {
             quantity: SizeQuantity::RawBrick,
         })

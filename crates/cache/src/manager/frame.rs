@@ -39,6 +39,8 @@ pub struct FrameInput<'a> {
     pub mode: RenderMode,
     /// Transfer function (decides DVR transparency).
     pub tf: &'a TransferFunction,
+    /// Channel styles of a multi-channel volume (empty for one channel).
+    pub channels: &'a [brickray_core::ChannelStyle],
     /// The host's time of this frame in seconds (any origin, non-decreasing):
     /// fades in milliseconds advance by the difference to the last frame's.
     /// `None`: by `1 / UNTIMED_FRAME_RATE` seconds (no clock is read).
@@ -131,6 +133,7 @@ impl BrickManager {
             generation: input.generation,
             mode: input.mode,
             tf: input.tf,
+            channels: input.channels,
             tolerance_px: self.config.tolerance_px,
             metric: self.config.lod_metric,
             max_data_leaves: self.cut_slots(),

@@ -113,6 +113,7 @@ mod tests {
             max: 1.0,
             error: None,
             parent_error: None,
+            channels: Default::default(),
         }
     }
 

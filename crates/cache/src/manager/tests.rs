@@ -88,6 +88,7 @@ impl BrickManager {
             frame,
             mode,
             tf,
+            channels: &[],
             time: None,
         };
         self.update(&input, filter)

@@ -74,6 +74,7 @@ fn refine_in(
         generation: 0,
         mode: RenderMode::Mip,
         tf: &s.tf,
+        channels: &[],
         tolerance_px: 1.0,
         metric: brickray_core::LodMetric::Geometric,
         max_data_leaves: slots,

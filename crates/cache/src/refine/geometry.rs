@@ -283,13 +283,28 @@ pub fn lod_voxel_world(layout: &OctreeLayout, voxel_world: [f64; 3], level: u8) 
         .fold(0.0f64, |m, a| m.max(voxel_world[a] * f[a]))
 }
 
-/// True when a node with this metadata can contribute to the image in `mode`.
+/// True when a node with this metadata can contribute to the image in `mode`;
+/// a multi-channel node under `channels` (its styles; empty: one channel)
+/// when some visible channel does
+/// ([`brickray_core::channels::node_visible`]).
 pub fn is_visible(
     info: &NodeInfo,
     mode: RenderMode,
     tf: &TransferFunction,
+    channels: &[brickray_core::ChannelStyle],
     layout: &OctreeLayout,
 ) -> bool {
+    if info.kind == NodeKind::Empty {
+        return false;
+    }
+    if layout.is_channel_volume() && !channels.is_empty() {
+        return brickray_core::channels::node_visible(
+            &info.channels[..layout.channels()],
+            layout.channel_ranges(),
+            channels,
+            mode,
+        );
+    }
     let (min, max) = match info.kind {
         NodeKind::Empty => return false,
         NodeKind::Uniform(v) => (v, v),

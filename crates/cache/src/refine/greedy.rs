@@ -234,7 +234,13 @@ impl<'p, 'a, 'e> Greedy<'p, 'a, 'e> {
             match self.env.node(c) {
                 MetaState::Known(info) => {
                     if info.kind != NodeKind::Empty
-                        && is_visible(&info, self.params.mode, self.params.tf, self.layout)
+                        && is_visible(
+                            &info,
+                            self.params.mode,
+                            self.params.tf,
+                            self.params.channels,
+                            self.layout,
+                        )
                     {
                         data += 1;
                     }

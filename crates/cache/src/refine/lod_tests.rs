@@ -61,6 +61,7 @@ impl RampSource {
                 max.max(min + 1e-3) as f64,
             )),
             parent_error: None,
+            channels: Default::default(),
         }
     }
 }
@@ -123,6 +124,7 @@ pub(super) fn refine_limited(
         generation: 0,
         mode: RenderMode::Dvr,
         tf,
+        channels: &[],
         tolerance_px,
         metric,
         max_data_leaves,
@@ -254,7 +256,7 @@ proptest! {
                 .filter(|c| {
                     layout.in_volume(**c)
                         && !geo.culled(**c)
-                        && is_visible(&meta[*c], RenderMode::Dvr, &tf, &layout)
+                        && is_visible(&meta[*c], RenderMode::Dvr, &tf, &[], &layout)
                 })
                 .count() as u32;
             prop_assert!(
@@ -522,6 +524,7 @@ impl RefineEnv for PerBrick {
             max: 1.0,
             error: (key.level < 2).then(|| NodeError::encode(&bins, 0.0, 1.0)),
             parent_error: None,
+            channels: Default::default(),
         })
     }
     fn data(&mut self, _key: NodeKey) -> DataState {

@@ -207,6 +207,9 @@ pub struct RefineParams<'a> {
     pub mode: RenderMode,
     /// Transfer function (decides DVR transparency).
     pub tf: &'a TransferFunction,
+    /// Channel styles of a multi-channel volume (empty for one channel:
+    /// then `tf` classifies).
+    pub channels: &'a [brickray_core::ChannelStyle],
     /// Screen-space error tolerance: a node whose voxels project to at most this
     /// many pixels is not refined (default 1). The rule of
     /// [`LodMetric::Geometric`], and of error-aware refinement over a source

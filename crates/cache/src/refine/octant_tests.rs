@@ -202,6 +202,7 @@ fn octant_memory_counts_demotions_per_view() {
             generation,
             mode: RenderMode::Dvr,
             tf,
+            channels: &[],
             tolerance_px: 0.0,
             metric: LodMetric::VisibleOctants { budget: 0.0 },
             max_data_leaves: 8,

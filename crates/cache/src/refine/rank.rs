@@ -80,7 +80,7 @@ pub(super) fn classify(
     if info.kind == NodeKind::Empty {
         return Ok(empty(EmptyReason::Empty, Some(info)));
     }
-    if !is_visible(&info, params.mode, params.tf, layout) {
+    if !is_visible(&info, params.mode, params.tf, params.channels, layout) {
         return Ok(empty(EmptyReason::Invisible, Some(info)));
     }
     if geo.culled(key) {

@@ -84,6 +84,7 @@ impl RefineEnv for FullAndHollow {
             max: 1.0,
             error: None,
             parent_error: None,
+            channels: Default::default(),
         };
         let empty = NodeInfo {
             kind: NodeKind::Empty,
@@ -91,6 +92,7 @@ impl RefineEnv for FullAndHollow {
             max: 0.0,
             error: None,
             parent_error: None,
+            channels: Default::default(),
         };
         let under = |a: NodeKey| key == a || key.parent() == Some(a);
         MetaState::Known(
@@ -125,6 +127,7 @@ fn splits_the_pool_refused_are_retried_when_bricks_come_back() {
             generation: 0,
             mode: RenderMode::Dvr,
             tf: &tf,
+            channels: &[],
             tolerance_px: 0.0,
             metric: brickray_core::LodMetric::Geometric,
             max_data_leaves: 8,

@@ -34,6 +34,7 @@ pub(crate) fn ball_info(layout: &OctreeLayout, key: NodeKey) -> NodeInfo {
         max,
         error: None,
         parent_error: None,
+        channels: Default::default(),
     }
 }
 
@@ -129,6 +130,7 @@ fn run(
         generation: 0,
         mode,
         tf,
+        channels: &[],
         tolerance_px: 1.0,
         metric: brickray_core::LodMetric::Geometric,
         max_data_leaves: slots,
@@ -295,6 +297,7 @@ pub(super) fn mip_params<'a>(s: &'a Setup, views: &'a Views) -> RefineParams<'a>
         generation: 0,
         mode: RenderMode::Mip,
         tf: &s.tf,
+        channels: &[],
         tolerance_px: 1.0,
         metric: brickray_core::LodMetric::Geometric,
         max_data_leaves: 10_000,
@@ -367,7 +370,7 @@ proptest! {
         let tf = TransferFunction::ramp(0.3, 1.0, 0.5);
         let mut env = AllInCpu { layout: layout.clone(), on_gpu: HashSet::new(), meta_reads: 0 };
         let params = RefineParams { views: &Views::one(ViewGeometry::new(&layout, &cam, 1.3, 400, &frame)),
-        generation: 0, mode, tf: &tf, tolerance_px: tol, metric: brickray_core::LodMetric::Geometric, max_data_leaves: slots, max_requests: MIN_REQUESTS_PER_FRAME, brick_upload_bytes: 1000, lookahead: false };
+        generation: 0, mode, tf: &tf, channels: &[], tolerance_px: tol, metric: brickray_core::LodMetric::Geometric, max_data_leaves: slots, max_requests: MIN_REQUESTS_PER_FRAME, brick_upload_bytes: 1000, lookahead: false };
         let mut b = UploadBudget::new(u64::MAX);
         let r = refine(&layout, &params, &mut env, &mut b);
         assert_exact_cover(&keys(&r), layout.levels);
@@ -433,6 +436,7 @@ fn invisible_nodes_stay_at_their_level_and_request_nothing() {
             generation: 0,
             mode: RenderMode::Dvr,
             tf: &s.tf,
+            channels: &[],
             tolerance_px: 0.0,
             metric: brickray_core::LodMetric::Geometric,
             max_data_leaves: u32::MAX,
@@ -561,6 +565,7 @@ fn splits_that_cost_no_brick_are_taken_within_the_tolerance() {
             generation: 0,
             mode: iso,
             tf: &s.tf,
+            channels: &[],
             tolerance_px: tolerance,
             metric: brickray_core::LodMetric::Geometric,
             max_data_leaves: 10_000,
@@ -625,6 +630,7 @@ fn refine_time_on_dense_cuts() {
             generation: 0,
             mode: RenderMode::Dvr,
             tf: &tf,
+            channels: &[],
             tolerance_px: 1.0,
             metric: brickray_core::LodMetric::Geometric,
             max_data_leaves: 100_000,
@@ -668,6 +674,7 @@ fn nodes_outside_the_clip_box_need_no_brick() {
             generation: 0,
             mode: RenderMode::Dvr,
             tf: &tf,
+            channels: &[],
             tolerance_px: 0.0,
             metric: brickray_core::LodMetric::Geometric,
             max_data_leaves: 10_000,

@@ -44,6 +44,11 @@ pub struct Classification<'a> {
     pub mode: RenderMode,
     /// The transfer function.
     pub tf: &'a TransferFunction,
+    /// A multi-channel volume's channel styles (empty for one channel):
+    /// a node is visible when a visible channel shows in it
+    /// ([`brickray_core::channels::node_visible`]); `tf_generation` then
+    /// changes with them.
+    pub channels: &'a [brickray_core::ChannelStyle],
     /// Bumped by the transfer function's owner whenever it changes: what
     /// the planner remembers of a view holds for one generation (the
     /// function itself is never compared or cloned).
@@ -206,6 +211,7 @@ impl Streamer {
                 frame,
                 mode: f.classification.mode,
                 tf: f.classification.tf,
+                channels: f.classification.channels,
                 time: f.time,
             };
             self.manager.update(&input, Some(&mut filter))

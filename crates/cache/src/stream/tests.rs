@@ -77,6 +77,7 @@ impl Rig {
             classification: Classification {
                 mode: RenderMode::Dvr,
                 tf: &self.tf,
+                channels: &[],
                 tf_generation: 1,
             },
             feedback: &feedback,

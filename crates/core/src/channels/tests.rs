@@ -224,3 +224,199 @@ fn slices_add_the_channels_at_full_colour() {
     );
     assert_eq!(slice_gain(&TransferFunction::ramp(0.5, 0.6, 0.0)), 0.0);
 }
+
+/// A u16 source of `dims` whose every sample is `fill` (uniform nodes where
+/// `uniform`), counting its brick reads.
+struct Flat {
+    layout: crate::OctreeLayout,
+    fill: u16,
+    uniform: bool,
+    reads: std::sync::atomic::AtomicUsize,
+}
+
+impl Flat {
+    fn new(dims: [u32; 3], fill: u16, range: [f32; 2], uniform: bool) -> Flat {
+        let desc = VolumeDesc {
+            dims,
+            dtype: DType::U16,
+            spacing: [1.0; 3],
+            value_range: range,
+            kind: VolumeKind::Intensity,
+        };
+        Flat {
+            layout: crate::OctreeLayout::new(desc, 4, 1),
+            fill,
+            uniform,
+            reads: Default::default(),
+        }
+    }
+}
+
+impl crate::BrickSource for Flat {
+    fn layout(&self) -> &crate::OctreeLayout {
+        &self.layout
+    }
+    fn node(&self, key: crate::NodeKey) -> Result<crate::NodeInfo, crate::BrickError> {
+        let v = self.fill as f32;
+        Ok(crate::NodeInfo {
+            kind: if !self.layout.in_volume(key) {
+                crate::NodeKind::Empty
+            } else if self.uniform {
+                crate::NodeKind::Uniform(v)
+            } else {
+                crate::NodeKind::Data
+            },
+            min: v,
+            max: v,
+            error: None,
+            parent_error: None,
+            channels: Default::default(),
+        })
+    }
+    fn read_brick(&self, _key: crate::NodeKey, out: &mut [u8]) -> Result<(), crate::BrickError> {
+        self.reads
+            .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        for c in out.chunks_exact_mut(2) {
+            c.copy_from_slice(&self.fill.to_le_bytes());
+        }
+        Ok(())
+    }
+}
+
+/// A channel source interleaves its channels' bricks (channel fastest),
+/// reads each channel once per brick (one call or a batch), keeps each
+/// channel's range in the node's metadata, and is empty only where every
+/// channel is.
+#[test]
+fn a_channel_source_interleaves_its_channels() {
+    use crate::BrickSource;
+    let parts: Vec<std::sync::Arc<Flat>> = vec![
+        std::sync::Arc::new(Flat::new([10, 9, 8], 7, [0.0, 100.0], false)),
+        std::sync::Arc::new(Flat::new([10, 9, 8], 300, [0.0, 1000.0], true)),
+        std::sync::Arc::new(Flat::new([10, 9, 8], 2, [0.0, 10.0], false)),
+    ];
+    let dyns = parts
+        .iter()
+        .map(|p| p.clone() as std::sync::Arc<dyn crate::BrickSource>)
+        .collect();
+    let src = ChannelSource::new(dyns).unwrap();
+    let l = src.layout();
+    assert!(l.is_channel_volume());
+    assert_eq!(l.channels(), 3);
+    assert_eq!(
+        l.channel_ranges(),
+        &[[0.0, 100.0], [0.0, 1000.0], [0.0, 10.0]]
+    );
+    assert_eq!(l.brick_bytes(), 6usize.pow(3) * 2 * 3);
+    let key = crate::NodeKey::new(l.levels - 1, 1, 0, 1);
+    let mut b = vec![0u8; l.brick_bytes()];
+    src.read_brick(key, &mut b).unwrap();
+    let s: Vec<u16> = b
+        .chunks_exact(2)
+        .map(|c| u16::from_le_bytes([c[0], c[1]]))
+        .collect();
+    assert!(s.chunks_exact(3).all(|v| v == [7, 300, 2]), "{:?}", &s[..9]);
+    assert!(
+        parts
+            .iter()
+            .all(|p| p.reads.load(std::sync::atomic::Ordering::Relaxed) == 1)
+    );
+    // A batch reads each channel once per brick too, into the same bytes.
+    let mut b2 = vec![0u8; l.brick_bytes()];
+    let mut b3 = vec![0u8; l.brick_bytes()];
+    let r = src.read_bricks(
+        &[key, crate::NodeKey::new(0, 0, 0, 0)],
+        &mut [&mut b2, &mut b3],
+        &crate::CancelToken::new(),
+    );
+    assert!(r.iter().all(Result::is_ok));
+    assert_eq!(b2, b);
+    assert!(
+        parts
+            .iter()
+            .all(|p| p.reads.load(std::sync::atomic::Ordering::Relaxed) == 3)
+    );
+    // Metadata: a uniform channel is a range of one value; data either way.
+    let i = src.node(key).unwrap();
+    assert_eq!(i.kind, crate::NodeKind::Data);
+    assert_eq!(&i.channels[..3], &[[7.0, 7.0], [300.0, 300.0], [2.0, 2.0]]);
+    assert_eq!((i.min, i.max), (7.0, 7.0));
+    assert_eq!(i.error, None);
+    assert_eq!(src.nodes(&[key])[0].as_ref().unwrap(), &i);
+    // Outside the volume every channel is empty: so is the node.
+    let out = crate::NodeKey::new(l.levels - 1, 3, 3, 3);
+    assert_eq!(src.node(out).unwrap().kind, crate::NodeKind::Empty);
+    // A wrong buffer is a typed error.
+    assert!(matches!(
+        src.read_brick(key, &mut [0u8; 3]),
+        Err(crate::BrickError::BufferSize { .. })
+    ));
+}
+
+#[test]
+fn channel_sources_share_one_octree() {
+    let a = std::sync::Arc::new(Flat::new([10, 9, 8], 1, [0.0, 1.0], false));
+    let b = std::sync::Arc::new(Flat::new([10, 9, 9], 1, [0.0, 1.0], false));
+    let e = ChannelSource::new(vec![a.clone(), b]).unwrap_err();
+    assert!(
+        matches!(
+            e,
+            ChannelError::Mismatch {
+                channel: 1,
+                what: "octree",
+                ..
+            }
+        ),
+        "{e}"
+    );
+    let five: Vec<std::sync::Arc<dyn crate::BrickSource>> = (0..5)
+        .map(|_| a.clone() as std::sync::Arc<dyn crate::BrickSource>)
+        .collect();
+    assert!(matches!(
+        ChannelSource::new(five),
+        Err(ChannelError::Count { count: 5, .. })
+    ));
+    // A channel source is not a channel of another.
+    let inner = std::sync::Arc::new(ChannelSource::new(vec![a.clone(), a.clone()]).unwrap());
+    assert!(matches!(
+        ChannelSource::new(vec![a, inner]),
+        Err(ChannelError::Mismatch {
+            what: "channels",
+            ..
+        })
+    ));
+}
+
+proptest! {
+    /// A node is visible when some visible channel is, each by the rule of
+    /// one channel over its own value range: DVR not transparent, iso at or
+    /// below the top of the range, MIP always.
+    #[test]
+    fn a_node_is_visible_when_a_visible_channel_is(
+        ranges in proptest::collection::vec(proptest::array::uniform2(0.0f32..100.0), 1..=4),
+        vis in proptest::array::uniform4(any::<bool>()),
+        edges in proptest::array::uniform4(0.0f32..1.0),
+        mode in 0usize..3,
+    ) {
+        let n = ranges.len();
+        let value_ranges: Vec<[f32; 2]> = (0..n).map(|c| [0.0, 50.0 + 10.0 * c as f32]).collect();
+        let styles: Vec<ChannelStyle> = (0..n)
+            .map(|c| {
+                let s = ChannelStyle::window([1.0, 0.5, 0.2], [edges[c], (edges[c] + 0.1).min(1.0)], 0.5)
+                    .with_isovalue(edges[c]);
+                if vis[c] { s } else { s.visible(false) }
+            })
+            .collect();
+        let mode = [crate::RenderMode::Dvr, crate::RenderMode::Iso { value: 0.5, color: [1.0; 3] }, crate::RenderMode::Mip][mode];
+        let want = (0..n).filter(|&c| vis[c]).any(|c| {
+            let norm = |v: f32| v / value_ranges[c][1];
+            let (lo, hi) = (norm(ranges[c][0].min(ranges[c][1])), norm(ranges[c][0].max(ranges[c][1])));
+            match mode {
+                crate::RenderMode::Dvr => !styles[c].tf.is_transparent(lo, hi),
+                crate::RenderMode::Iso { .. } => styles[c].isovalue <= hi,
+                _ => true,
+            }
+        });
+        prop_assert_eq!(node_visible(&ranges, &value_ranges, &styles, mode), want);
+    }
+}

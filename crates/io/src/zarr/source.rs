@@ -290,6 +290,7 @@ impl BrickSource for ZarrBrickSource {
                 max: 0.0,
                 error: None,
                 parent_error: None,
+                channels: Default::default(),
             });
         }
         if let Some(n) = self.nodes.lock().get(&key) {
@@ -322,6 +323,7 @@ impl BrickSource for ZarrBrickSource {
             max: mx,
             error: None,
             parent_error: None,
+            channels: Default::default(),
         };
         self.nodes.lock().insert(key, info);
         Ok(info)

@@ -52,6 +52,7 @@ enum SkipKey {
 struct TableKey {
     step_factor: f32,
     generation: u64,
+    rows: u32,
 }
 
 /// The layout of this group 2: the in-core entries, the stacked tables and
@@ -95,12 +96,10 @@ pub(crate) struct Channels {
     sampler: wgpu::Sampler,
     cell_ranges: wgpu::Buffer,
     skip: wgpu::Buffer,
-    table: (wgpu::Texture, wgpu::TextureView),
-    entries: GrowBuffer,
+    class: ClassTables,
     /// Each channel's macro-cell grid (its ranges decide skipping).
     grids: Vec<MacroCellGrid>,
     skip_key: Option<SkipKey>,
-    table_key: Option<TableKey>,
 }
 
 impl Channels {
@@ -203,16 +202,15 @@ impl Channels {
                 entries: &layout_entries(),
             })
         })?;
-        let table = table_texture(device, 2, count as u32)?;
-        let entries = GrowBuffer::new(device, "brickray-render channel tf entries", 16)?;
+        let class = ClassTables::new(device, count)?;
         let view = texture.create_view(&Default::default());
         let bind_group = make_bind_group(
             device,
             &layout,
-            [&params.buffer, &cell_ranges, &skip, &entries.buffer],
+            [&params.buffer, &cell_ranges, &skip, &class.entries.buffer],
             &view,
             &sampler,
-            &table.1,
+            &class.table.1,
         )?;
         Ok(Channels {
             layout,
@@ -226,11 +224,9 @@ impl Channels {
             sampler,
             cell_ranges,
             skip,
-            table,
-            entries,
+            class,
             grids,
             skip_key: None,
-            table_key: None,
         })
     }
 
@@ -252,72 +248,32 @@ impl Channels {
         step_factor: f32,
     ) -> Result<u64, RenderError> {
         channels::validate_styles(styles, self.count)?;
-        for s in styles {
-            if s.tf.len() > TransferFunction::MAX_ENTRIES {
-                return Err(brickray_core::TfError::TooMany {
-                    len: s.tf.len(),
-                    max: TransferFunction::MAX_ENTRIES,
-                }
-                .into());
-            }
-        }
         let mut written = 0;
-        let key = TableKey {
-            step_factor,
-            generation,
-        };
-        let mut rebind = false;
-        if self.table_key != Some(key) {
-            let max_width = device.limits().max_texture_dimension_2d;
-            let width = styles
-                .iter()
-                .map(|s| s.tf.table_width(max_width))
-                .max()
-                .unwrap_or(2);
-            let mut texels = Vec::with_capacity(width as usize * styles.len());
-            for s in styles {
-                texels.extend(s.tf.corrected_table_of_width(step_factor, 1, width).texels);
-            }
-            let size = wgpu::Extent3d {
-                width,
-                height: styles.len() as u32,
-                depth_or_array_layers: 1,
-            };
-            if self.table.0.size() != size {
-                self.table = table_texture(device, width, styles.len() as u32)?;
-                rebind = true;
-            }
-            written += crate::tf::write_rgba16f(queue, &self.table.0, &texels, size);
-            let mut all = class_header(styles);
+        if let Some((w, layout, rebind)) =
+            self.class
+                .update(device, queue, styles, generation, step_factor, 1)?
+        {
             let mut p = self.base;
-            for (c, s) in styles.iter().enumerate() {
-                p.tf_offset[c] = all.len() as u32;
-                p.tf_count[c] = s.tf.len() as f32;
-                all.extend_from_slice(s.tf.entries());
-            }
-            p.table_width = width as f32;
+            p.tf_offset = layout.tf_offset;
+            p.tf_count = layout.tf_count;
+            p.table_width = layout.width;
             p.table_rows = 1.0;
-            let (w, grew) = self
-                .entries
-                .write(device, queue, bytemuck::cast_slice(&all))?;
             written += w + self.params.write(queue, p);
-            rebind |= grew;
-            self.table_key = Some(key);
-        }
-        if rebind {
-            self.bind_group = make_bind_group(
-                device,
-                &self.layout,
-                [
-                    &self.params.buffer,
-                    &self.cell_ranges,
-                    &self.skip,
-                    &self.entries.buffer,
-                ],
-                &self.view,
-                &self.sampler,
-                &self.table.1,
-            )?;
+            if rebind {
+                self.bind_group = make_bind_group(
+                    device,
+                    &self.layout,
+                    [
+                        &self.params.buffer,
+                        &self.cell_ranges,
+                        &self.skip,
+                        &self.class.entries.buffer,
+                    ],
+                    &self.view,
+                    &self.sampler,
+                    &self.class.table.1,
+                )?;
+            }
         }
         let skip = match mode {
             RenderMode::Iso { .. } => SkipKey::Iso(generation),
@@ -363,6 +319,120 @@ fn class_header(styles: &[ChannelStyle]) -> Vec<[f32; 4]> {
         h[6][c] = channels::slice_gain(&s.tf) as f32;
     }
     h
+}
+
+/// Where a channel's classification lies in the buffers [`ClassTables`]
+/// wrote (the `chan` uniform's fields).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct ClassLayout {
+    pub(crate) tf_count: [f32; 4],
+    pub(crate) tf_offset: [u32; 4],
+    /// Each channel's opacity prefix sums (`tf_count + 1` rows, the sum in
+    /// x), after every channel's entries.
+    pub(crate) prefix_offset: [u32; 4],
+    /// Columns of the stacked tables.
+    pub(crate) width: f32,
+}
+
+/// The channels' classification on the GPU, shared by both multi-channel
+/// kernels (`channel_class.wgsl`): their corrected tables stacked in one
+/// texture (`rows` per channel: one per step length), and one storage buffer
+/// of the header ([`class_header`]), each channel's TF entries and its
+/// opacity prefix sums. Rebuilt only when the styles, the step or the rows
+/// change.
+#[derive(Debug)]
+pub(crate) struct ClassTables {
+    pub(crate) table: (wgpu::Texture, wgpu::TextureView),
+    pub(crate) entries: GrowBuffer,
+    key: Option<TableKey>,
+}
+
+impl ClassTables {
+    pub(crate) fn new(device: &wgpu::Device, channels: usize) -> Result<ClassTables, RenderError> {
+        Ok(ClassTables {
+            table: table_texture(device, 2, channels as u32)?,
+            entries: GrowBuffer::new(device, "brickray-render channel tf entries", 16)?,
+            key: None,
+        })
+    }
+
+    /// Writes the tables and entries of `styles` (of `generation`) for
+    /// `step_factor` with `rows` rows per channel, when they changed:
+    /// `Some((bytes written, layout, rebind))`, `rebind` when a bound
+    /// object was recreated; `None` when nothing changed.
+    pub(crate) fn update(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        styles: &[ChannelStyle],
+        generation: u64,
+        step_factor: f32,
+        rows: u32,
+    ) -> Result<Option<(u64, ClassLayout, bool)>, RenderError> {
+        for s in styles {
+            if s.tf.len() > TransferFunction::MAX_ENTRIES {
+                return Err(brickray_core::TfError::TooMany {
+                    len: s.tf.len(),
+                    max: TransferFunction::MAX_ENTRIES,
+                }
+                .into());
+            }
+        }
+        let key = TableKey {
+            step_factor,
+            generation,
+            rows,
+        };
+        if self.key == Some(key) {
+            return Ok(None);
+        }
+        let max_width = device.limits().max_texture_dimension_2d;
+        let width = styles
+            .iter()
+            .map(|s| s.tf.table_width(max_width))
+            .max()
+            .unwrap_or(2);
+        let mut texels = Vec::with_capacity((width * rows) as usize * styles.len());
+        for s in styles {
+            texels.extend(
+                s.tf.corrected_table_of_width(step_factor, rows, width)
+                    .texels,
+            );
+        }
+        let size = wgpu::Extent3d {
+            width,
+            height: styles.len() as u32 * rows,
+            depth_or_array_layers: 1,
+        };
+        let mut rebind = false;
+        if self.table.0.size() != size {
+            self.table = table_texture(device, width, size.height)?;
+            rebind = true;
+        }
+        let mut written = crate::tf::write_rgba16f(queue, &self.table.0, &texels, size);
+        let mut all = class_header(styles);
+        let mut layout = ClassLayout {
+            tf_count: [2.0; 4],
+            tf_offset: [0; 4],
+            prefix_offset: [0; 4],
+            width: width as f32,
+        };
+        for (c, s) in styles.iter().enumerate() {
+            layout.tf_offset[c] = all.len() as u32;
+            layout.tf_count[c] = s.tf.len() as f32;
+            all.extend_from_slice(s.tf.entries());
+        }
+        for (c, s) in styles.iter().enumerate() {
+            layout.prefix_offset[c] = all.len() as u32;
+            all.extend(s.tf.prefix().iter().map(|&p| [p as f32, 0.0, 0.0, 0.0]));
+        }
+        let (w, grew) = self
+            .entries
+            .write(device, queue, bytemuck::cast_slice(&all))?;
+        written += w;
+        self.key = Some(key);
+        Ok(Some((written, layout, rebind || grew)))
+    }
 }
 
 /// The stacked tables' texture: `width` columns, one row per channel.

@@ -8,6 +8,7 @@ pub(crate) mod feedback;
 pub(crate) mod incore;
 pub(crate) mod occlusion;
 pub(crate) mod ooc;
+pub(crate) mod ooc_channels;
 pub(crate) mod readback;
 
 pub(crate) use channels::Channels;
@@ -81,6 +82,16 @@ impl Backend {
             Backend::InCore(b) => b,
             Backend::OutOfCore(b) => b.as_mut(),
             Backend::Channels(b) => b.as_mut(),
+        }
+    }
+
+    /// Channels of a multi-channel volume (in core or streamed), `None`
+    /// for a single-channel one.
+    pub(crate) fn channel_count(&self) -> Option<usize> {
+        match self {
+            Backend::Channels(b) => Some(b.count()),
+            Backend::OutOfCore(b) => b.channel_count(),
+            _ => None,
         }
     }
 

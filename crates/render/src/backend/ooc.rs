@@ -10,6 +10,7 @@
 use super::VolumeBackend;
 use super::feedback::UsageFeedback;
 use super::occlusion::OcclusionFeedback;
+use super::ooc_channels::OocChannels;
 use crate::desc::OutOfCoreStats;
 use crate::error::RenderError;
 use crate::gpu;
@@ -35,6 +36,8 @@ pub(crate) struct OutOfCore {
     levels: u8,
     format: wgpu::TextureFormat,
     stats: OutOfCoreStats,
+    /// A multi-channel volume's classification (ooc_channels.wgsl).
+    channels: Option<OocChannels>,
 }
 
 impl std::fmt::Debug for OutOfCore {
@@ -53,10 +56,21 @@ impl OutOfCore {
         volume: StreamedVolume,
     ) -> Result<OutOfCore, RenderError> {
         check_ooc_limits(device)?;
+        let channels = {
+            let s = volume.lock();
+            match s.layout.is_channel_volume() {
+                true => Some(OocChannels::new(device, s.gpu_format())?),
+                false => None,
+            }
+        };
+        let entries = match channels {
+            Some(_) => super::ooc_channels::layout_entries(),
+            None => crate::group2::ooc_layout_entries(),
+        };
         let group_layout = gpu::scoped(device, "brickray-render out-of-core layout", || {
             device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
                 label: Some("brickray-render out of core"),
-                entries: &crate::group2::ooc_layout_entries(),
+                entries: &entries,
             })
         })?;
         let occlusion = OcclusionFeedback::new(device, MAX_QUERIES_PER_FRAME)?;
@@ -64,7 +78,14 @@ impl OutOfCore {
             let s = volume.lock();
             let layout = &s.layout;
             let feedback = UsageFeedback::new(device, s.slot_rows, layout)?;
-            let bind_group = bind_group(device, &group_layout, &s.bound(), &feedback, &occlusion)?;
+            let bind_group = bind_group(
+                device,
+                &group_layout,
+                &s.bound(),
+                &feedback,
+                &occlusion,
+                channels.as_ref(),
+            )?;
             (feedback, bind_group, s.generation, layout.levels, s.format)
         };
         Ok(OutOfCore {
@@ -80,7 +101,43 @@ impl OutOfCore {
             levels,
             format,
             stats: OutOfCoreStats::default(),
+            channels,
         })
+    }
+
+    /// Channels of a channel volume, `None` for a plain one.
+    pub(crate) fn channel_count(&self) -> Option<usize> {
+        self.channels.as_ref().map(OocChannels::count)
+    }
+
+    /// Keeps a multi-channel volume's classification current for the frame
+    /// (`styles` of `generation`, one table row per level); rebuilds group 2
+    /// when an object it holds was recreated. Returns the bytes written.
+    pub(crate) fn update_channels(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        styles: &[brickray_core::ChannelStyle],
+        generation: u64,
+        step_factor: f32,
+    ) -> Result<u64, RenderError> {
+        let rows = self.levels as u32;
+        let Some(c) = self.channels.as_mut() else {
+            return Ok(0);
+        };
+        let (written, rebind) = c.update(device, queue, styles, generation, step_factor, rows)?;
+        if rebind {
+            let s = self.volume.lock();
+            self.bind_group = bind_group(
+                device,
+                &self.group_layout,
+                &s.bound(),
+                &self.feedback,
+                &self.occlusion,
+                self.channels.as_ref(),
+            )?;
+        }
+        Ok(written)
     }
 
     /// The volume this view draws.
@@ -123,6 +180,7 @@ impl OutOfCore {
                 &s.bound(),
                 &self.feedback,
                 &self.occlusion,
+                self.channels.as_ref(),
             )?;
             self.bound = s.generation;
         }
@@ -169,52 +227,60 @@ fn bind_group(
     v: &Bound<'_>,
     feedback: &UsageFeedback,
     occlusion: &OcclusionFeedback,
+    channels: Option<&OocChannels>,
 ) -> Result<wgpu::BindGroup, RenderError> {
     gpu::scoped(device, "brickray-render out-of-core bind group", || {
+        let mut entries = vec![
+            wgpu::BindGroupEntry {
+                binding: 0,
+                resource: v.params.as_entire_binding(),
+            },
+            wgpu::BindGroupEntry {
+                binding: 1,
+                resource: wgpu::BindingResource::TextureView(v.atlas),
+            },
+            wgpu::BindGroupEntry {
+                binding: 2,
+                resource: wgpu::BindingResource::Sampler(v.sampler),
+            },
+            wgpu::BindGroupEntry {
+                binding: 3,
+                resource: v.slots.as_entire_binding(),
+            },
+            wgpu::BindGroupEntry {
+                binding: 4,
+                resource: v.sub_cells.as_entire_binding(),
+            },
+            wgpu::BindGroupEntry {
+                binding: 5,
+                resource: v.index.as_entire_binding(),
+            },
+            wgpu::BindGroupEntry {
+                binding: USAGE_BINDING,
+                resource: feedback.usage.as_entire_binding(),
+            },
+            wgpu::BindGroupEntry {
+                binding: STOP_DEPTH_BINDING,
+                resource: wgpu::BindingResource::TextureView(occlusion.stop_view()),
+            },
+        ];
+        if let Some(c) = channels {
+            entries.extend(c.entries());
+        }
         device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("brickray-render out of core"),
             layout,
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: v.params.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: wgpu::BindingResource::TextureView(v.atlas),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: wgpu::BindingResource::Sampler(v.sampler),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 3,
-                    resource: v.slots.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 4,
-                    resource: v.sub_cells.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 5,
-                    resource: v.index.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: USAGE_BINDING,
-                    resource: feedback.usage.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: STOP_DEPTH_BINDING,
-                    resource: wgpu::BindingResource::TextureView(occlusion.stop_view()),
-                },
-            ],
+            entries: &entries,
         })
     })
 }
 
 impl VolumeBackend for OutOfCore {
     fn kind(&self) -> KernelKind {
-        KernelKind::OutOfCore
+        match self.channels {
+            Some(_) => KernelKind::OutOfCoreChannels,
+            None => KernelKind::OutOfCore,
+        }
     }
 
     fn layout(&self) -> &wgpu::BindGroupLayout {

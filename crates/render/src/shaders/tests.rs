@@ -421,6 +421,101 @@ fn every_channel_permutation_validates() {
     }
 }
 
+/// The multi-channel out-of-core kernel: one entry point (no slice view),
+/// the shared overrides and `CHANNELS`, its group 2 (the out-of-core
+/// bindings and the classification's) and its uniforms against the Rust
+/// side.
+#[test]
+fn ooc_channels_kernel_matches_the_rust_side() {
+    use crate::backend::ooc_channels::OocChannelParams;
+    let m = module("ooc channels", &ooc_channels());
+    let names: Vec<&str> = m.entry_points.iter().map(|e| e.name.as_str()).collect();
+    assert_eq!(names, [crate::kernels::ENTRY_RAYCAST]);
+    check_kernel_common(
+        "ooc channels",
+        &m,
+        &crate::backend::ooc_channels::layout_entries(),
+        &["CHANNELS"],
+    );
+    check_struct(
+        &m,
+        "OocChannelParams",
+        rust_fields!(
+            OocChannelParams,
+            [
+                scale,
+                offset,
+                tf_count,
+                tf_offset,
+                prefix_offset,
+                table_rows,
+                table_width,
+                pad0,
+                pad1
+            ]
+        ),
+        std::mem::size_of::<OocChannelParams>(),
+    );
+    check_struct(
+        &m,
+        "OocParams",
+        rust_fields!(
+            OocParams,
+            [
+                dims,
+                value_scale,
+                octree_scale,
+                value_offset,
+                atlas_size,
+                finest_level,
+                brick,
+                apron,
+                stored_side,
+                sub_cells,
+                splits,
+            ]
+        ),
+        std::mem::size_of::<OocParams>(),
+    );
+    assert_eq!(
+        const_u32(&m, "CLASS_HEADER") as usize,
+        crate::backend::channels::CLASS_HEADER
+    );
+}
+
+/// Every channel count (1-4) with every mode and combination of ERT, ESS,
+/// shading and the visible weights, and with a label map over the channels
+/// (colour and mask), validates as the out-of-core multi-channel pipelines
+/// specialise it.
+#[test]
+fn every_ooc_channel_permutation_validates() {
+    let src = ooc_channels();
+    let weights = 1 << 7;
+    let mut combos = Vec::new();
+    for (_, mode) in KernelMode::ALL {
+        for bits in 0..8u32 {
+            combos.push((mode, bits, 0));
+            combos.push((mode, bits | weights, 0));
+        }
+        for overlay in [1, 2] {
+            combos.push((mode, 0b111, overlay));
+        }
+    }
+    for n in 1..=4u32 {
+        for &(mode, bits, overlay) in &combos {
+            let s = specialise("ooc channels", &src, mode, bits, overlay).replace(
+                "override CHANNELS: u32 = 1u;",
+                &format!("const CHANNELS: u32 = {n}u;"),
+            );
+            assert!(!s.contains("override "), "ooc channels: an override left");
+            module(
+                &format!("ooc channels {n} {mode:?} {bits:010b} overlay {overlay}"),
+                &s,
+            );
+        }
+    }
+}
+
 #[test]
 fn incore_kernel_matches_the_rust_side() {
     let m = module("incore", &incore());
@@ -661,6 +756,9 @@ fn every_shader_file_is_covered() {
         "slice_ooc.wgsl",
         "overlay.wgsl",
         "channels.wgsl",
+        "channel_class.wgsl",
+        "ooc_volume.wgsl",
+        "ooc_channels.wgsl",
     ];
     for entry in std::fs::read_dir(dir).unwrap() {
         let name = entry.unwrap().file_name().into_string().unwrap();

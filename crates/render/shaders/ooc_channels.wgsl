@@ -1,0 +1,325 @@
+// Multi-channel out-of-core ray caster (compute), after common.wgsl,
+// modes.wgsl, overlay.wgsl, predict.wgsl (their shared functions and
+// switches), brickray-index's octree_traversal.wgsl, ooc_volume.wgsl,
+// channel_class.wgsl and feedback.wgsl. A brick holds every channel of its
+// voxels packed in one texel (RG or RGBA), so each sample is one filtered
+// atlas read for all channels, composited as in core (channels.wgsl;
+// brickray_core::channels): DVR mixes the visible channels' absorbers at
+// each sample with the TF tables corrected to the leaf level's step; MIP
+// classifies and mixes each channel's maximum; iso stops at the first
+// crossing of any visible channel's own isovalue. The walk over the index,
+// the per-level steps, fades, borrowed octants and the usage feedback are
+// ooc.wgsl's. Empty-space skipping: a sub-cell is skipped when it is empty in
+// every visible channel (its own range per channel).
+
+// Group 2 beyond ooc_volume.wgsl's: the channels' classification
+// (`OocChannelParams` in backend/ooc_channels.rs; a test checks the offsets).
+struct OocChannelParams {
+    // normalized = texel * scale + offset, per channel.
+    scale: vec4<f32>,
+    offset: vec4<f32>,
+    // Entries of each channel's TF (as floats) and the first in chan_tf.
+    tf_count: vec4<f32>,
+    tf_offset: vec4<u32>,
+    // Each channel's opacity prefix sums in chan_tf (tf_count + 1 rows, the
+    // sum in x): prefix[i] = entries j < i with alpha > 0.
+    prefix_offset: vec4<u32>,
+    // Rows of each channel's corrected table (one per level step), and the
+    // tables' columns.
+    table_rows: f32,
+    table_width: f32,
+    pad0: f32,
+    pad1: f32,
+}
+
+@group(2) @binding(8) var<uniform> chan: OocChannelParams;
+// The channels' corrected tables stacked: channel c's row r is row
+// c * table_rows + r.
+@group(2) @binding(9) var chan_table: texture_2d<f32>;
+// The classification header (channel_class.wgsl), the TF entries, then the
+// prefix sums.
+@group(2) @binding(10) var<storage, read> chan_tf: array<vec4<f32>>;
+
+// Every channel's normalized value at atlas point uv (one filtered read).
+fn atlas_values(uv: vec3<f32>) -> vec4<f32> {
+    return textureSampleLevel(atlas_tex, atlas_sampler, uv, 0.0) * chan.scale + chan.offset;
+}
+
+// Every channel's value at t, mixed with the fade fallback's as ooc.wgsl's
+// cursor_value mixes one.
+fn cursor_values(c: Cursor, t: f32) -> vec4<f32> {
+    let passes = cursor_passes(c);
+    var uv = c.ua + c.ud * t;
+    var w = 1.0 - c.b.fb_w;
+    var v = vec4<f32>(0.0);
+    var i = 0u;
+    loop {
+        v = v + w * atlas_values(uv);
+        i = i + 1u;
+        if (i >= passes) { break; }
+        uv = c.fa + c.fd * t;
+        w = c.b.fb_w;
+    }
+    return v;
+}
+
+// The cursor's channel (iso bisection).
+fn cursor_value(c: Cursor, t: f32) -> f32 {
+    return lane_of(cursor_values(c, t), c.c);
+}
+
+// Every channel's gradient at t (central differences of one voxel of the
+// brick's level, per finest voxel, mixed while fading) as world direction
+// and magnitude.
+fn cursor_gradients(c: Cursor, t: f32) -> Quad {
+    let passes = cursor_passes(c);
+    var uv = c.ua + c.ud * t;
+    var f3 = c.b.f3;
+    var w = 1.0 - c.b.fb_w;
+    let e = 1.0 / ooc.atlas_size;
+    var dx = vec4<f32>(0.0);
+    var dy = vec4<f32>(0.0);
+    var dz = vec4<f32>(0.0);
+    var i = 0u;
+    loop {
+        dx = dx + w * (atlas_values(uv + vec3<f32>(e.x, 0.0, 0.0)) - atlas_values(uv - vec3<f32>(e.x, 0.0, 0.0))) * 0.5 / f3.x;
+        dy = dy + w * (atlas_values(uv + vec3<f32>(0.0, e.y, 0.0)) - atlas_values(uv - vec3<f32>(0.0, e.y, 0.0))) * 0.5 / f3.y;
+        dz = dz + w * (atlas_values(uv + vec3<f32>(0.0, 0.0, e.z)) - atlas_values(uv - vec3<f32>(0.0, 0.0, e.z))) * 0.5 / f3.z;
+        i = i + 1u;
+        if (i >= passes) { break; }
+        uv = c.fa + c.fd * t;
+        f3 = c.b.fb_f3;
+        w = c.b.fb_w;
+    }
+    return Quad(
+        ooc_world_gradient(vec3<f32>(dx.x, dy.x, dz.x)),
+        ooc_world_gradient(vec3<f32>(dx.y, dy.y, dz.y)),
+        ooc_world_gradient(vec3<f32>(dx.z, dy.z, dz.z)),
+        ooc_world_gradient(vec3<f32>(dx.w, dy.w, dz.w)),
+    );
+}
+
+fn ooc_world_gradient(g: vec3<f32>) -> vec4<f32> {
+    return vec4<f32>(frame.normal_mat * (g * ooc.dims), length(g));
+}
+
+// The cursor's channel's gradient (iso shading).
+fn cursor_gradient(c: Cursor, t: f32) -> vec4<f32> {
+    return quad_get(cursor_gradients(c, t), c.c);
+}
+
+// 1 when channel c's TF is transparent over the normalized range r (its
+// prefix sums; tf_transparent of common.wgsl per channel), else 0.
+fn channel_transparent(c: u32, r: vec2<f32>) -> f32 {
+    let n1 = lane_of(chan.tf_count, c) - 1.0;
+    let i0 = u32(floor(clamp(r.x, 0.0, 1.0) * n1));
+    let i1 = min(u32(ceil(clamp(r.y, 0.0, 1.0) * n1)), u32(n1));
+    let p = u32(lane_of(vec4<f32>(chan.prefix_offset), c));
+    return f32(chan_tf[p + i1 + 1u].x == chan_tf[p + min(i0, i1)].x);
+}
+
+// True when sub-cell j of brick b is empty in every visible channel: DVR
+// transparent, iso below the isovalue, MIP not above the running maximum mx
+// (the CPU twin: brickray_core::channels::node_visible).
+fn channel_cell_skips(b: Brick, j: vec3<u32>, mx: vec4<f32>, vis: vec4<f32>, iso: vec4<f32>) -> bool {
+    let n = ooc.sub_cells;
+    let at = (((b.slot * n + j.z) * n + j.y) * n + j.x) * CHANNELS;
+    let r0 = sub_cells[at];
+    var hi = vec4<f32>(r0.y, -3.0e38, -3.0e38, -3.0e38);
+    var opaque = vec4<f32>(1.0 - channel_transparent(0u, r0), 0.0, 0.0, 0.0);
+    if (CHANNELS > 1u) {
+        let r = sub_cells[at + 1u];
+        hi.y = r.y;
+        opaque.y = 1.0 - channel_transparent(1u, r);
+    }
+    if (CHANNELS > 2u) {
+        let r = sub_cells[at + 2u];
+        hi.z = r.y;
+        opaque.z = 1.0 - channel_transparent(2u, r);
+    }
+    if (CHANNELS > 3u) {
+        let r = sub_cells[at + 3u];
+        hi.w = r.y;
+        opaque.w = 1.0 - channel_transparent(3u, r);
+    }
+    var shows = opaque;
+    if (MODE == MODE_MIP) {
+        shows = vec4<f32>(1.0) - step(hi, mx);
+    } else if (MODE == MODE_ISO) {
+        shows = step(iso, hi);
+    }
+    return dot(shows * vis, vec4<f32>(1.0)) <= 0.0;
+}
+
+// DVR: the mixed, shaded sample of values v at t (texture point u) of the
+// cursor's brick, its tables' row `row`, premultiplied.
+fn ooc_channel_dvr_sample(cur: Cursor, v: vec4<f32>, u: vec3<f32>, r: Ray, t: f32, row: f32, vis: vec4<f32>) -> vec4<f32> {
+    var q = channel_tf4(v, row);
+    var a = quad_alpha(q) * vis;
+    channel_overlay(&q, &a, u);
+    if (all(a <= vec4<f32>(0.0))) {
+        return vec4<f32>(0.0);
+    }
+    if (SHADE) {
+        q = channel_shade(q, cursor_gradients(cur, t), r.dir);
+    }
+    return channel_mix(q, a);
+}
+
+@compute @workgroup_size(8, 8, 1)
+fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    if (gid.x >= frame.viewport_size.x || gid.y >= frame.viewport_size.y) {
+        return;
+    }
+    let px = gid.xy;
+    let start = start_ray(px);
+    let r = start.r;
+    let t0 = start.t0;
+    let t1 = start.t1;
+    var acc = accum_new();
+    var cur: Cursor;
+    cur.c = 0u;
+    // The channels' visibility and isovalues, once per ray.
+    let vis = chan_visible();
+    let iso4 = chan_iso();
+    // MIP: each channel's running maximum and where it was first attained.
+    var mx = vec4<f32>(-3.0e38);
+    var mt = vec4<f32>(0.0);
+    feedback_stop(px, far_depth());
+    if (t1 > t0) {
+        let oo = r.tex_origin * ooc.octree_scale;
+        let od = r.tex_dir * ooc.octree_scale;
+        let inv_od = safe_inverse(od);
+        cur.oo = oo;
+        cur.od = od;
+        let dt = frame.dt;
+        // A bracket reaches back at most the brick's apron (ooc.wgsl).
+        let apron_t = finest_voxel_t() * f32(ooc.apron);
+        var budget = frame.max_samples;
+        var grid_f = 0.0;
+        var k = 0u;
+        var t_last = t0;
+        var st = oct_begin_inside(oo, od, t0, t1, frame.max_leaves, ooc.splits.xy);
+        var dtl = dt;
+        var done = false;
+        loop {
+            var found = false;
+            loop {
+                if (!oct_next_leaf(&st)) { break; }
+                if (st.hit.tag == OCT_TAG_DATA) {
+                    feedback_reached(st.hit.data);
+                    found = true;
+                    break;
+                }
+            }
+            if (!found) { break; }
+            cursor_enter(&cur, brick_of(st.hit.leaf, st.hit.data));
+            dtl = dt * cur.b.f;
+            if (cur.b.f != grid_f) {
+                grid_f = cur.b.f;
+                k = first_k_after(max(st.hit.t_enter, t_last), t0, dtl);
+            }
+            k = max(k, first_k_after(st.hit.t_enter, t0, dtl));
+            let t_end = min(st.hit.t_exit, t1);
+            var k_cell = 0u;
+            let t_in = max(st.hit.t_enter, t0);
+            let trans_in = select(1.0, 1.0 - acc.color.a, MODE == MODE_DVR);
+            // The row of this level's step in each channel's tables.
+            let row = cur.b.tf_v * tf_info.rows - 0.5;
+            loop {
+                let t = grid_t(t0, k, dtl);
+                if (t >= t_end) { break; }
+                if (budget == 0u) { done = true; break; }
+                budget = budget - 1u;
+                // (A fading brick's sub-cells do not bound its ancestor's.)
+                if (ESS && k >= k_cell && cur.b.fb_w == 0.0) {
+                    let j = sub_cell_of(cur.b, oo + od * t);
+                    let te = min(sub_cell_exit(cur.b, j, oo, od, inv_od), st.hit.t_exit);
+                    let k_exit = max(k + 1u, first_k_after(te, t0, dtl));
+                    if (channel_cell_skips(cur.b, j, mx, vis, iso4)) {
+                        k = k_exit;
+                        continue;
+                    }
+                    k_cell = k_exit;
+                }
+                let v = cursor_values(cur, t);
+                acc.samples = acc.samples + 1u;
+                if (MODE == MODE_DVR) {
+                    let p = ooc_channel_dvr_sample(cur, v, tex_at(r, t), r, t, row, vis);
+                    if (p.a > 0.0) {
+                        let acc_a = acc.color.a;
+                        acc.color = vec4<f32>(acc.color.rgb + (1.0 - acc_a) * p.rgb, acc_a + (1.0 - acc_a) * p.a);
+                        if (!acc.depth_set && acc.color.a >= frame.depth_opacity) {
+                            acc.depth = depth_at(r, t);
+                            acc.depth_set = true;
+                        }
+                        if (ERT && acc.color.a >= frame.ert_threshold) { done = true; break; }
+                    }
+                } else if (MODE == MODE_ISO) {
+                    let c = channel_inside(v, vis, iso4);
+                    if (c < CHANNELS) {
+                        cur.c = c;
+                        // The first sample inside is a capped cut; else the
+                        // bracket reaches back one step, within the apron.
+                        var a = t;
+                        if (t > t0) {
+                            a = max(max(t_last, st.hit.t_enter - apron_t * cur.b.f), t - dtl);
+                        }
+                        iso_bracket(&acc, a, t);
+                        done = true;
+                        break;
+                    }
+                } else {
+                    let better = v > mx;
+                    mx = select(mx, v, better);
+                    mt = select(mt, vec4<f32>(t), better);
+                    if (ERT && all(max(vec4<f32>(1.0) - mx, vec4<f32>(0.0)) * vis <= vec4<f32>(0.0))) { done = true; break; }
+                }
+                t_last = t;
+                k = k + 1u;
+            }
+            let t_out = clamp(grid_t(t0, k, dtl), t_in, t_end);
+            let trans_out = select(1.0, 1.0 - acc.color.a, MODE == MODE_DVR);
+            feedback_seen(cur.b.usage, t_in, t_out, trans_in, trans_out, finest_voxel_t() * cur.b.usage_f);
+            if (done) { break; }
+        }
+        let t_stop = grid_t(t0, k, dtl);
+        feedback_stop(px, depth_at(r, select(t1, t_stop, feedback_terminated(acc))));
+    }
+    if (MODE == MODE_ISO && acc.hit) {
+        // Bisected on the crossing channel (its isovalue) in the brick of the
+        // crossing, shaded by its gradient, in its colour.
+        var a = acc.hit_a;
+        var b = acc.hit_b;
+        let steps = select(0u, frame.iso_refine_steps, b > a);
+        let iso = lane_of(iso4, cur.c);
+        for (var i = 0u; i < steps; i = i + 1u) {
+            let m = 0.5 * (a + b);
+            acc.samples = acc.samples + 1u;
+            if (cursor_value(cur, m) >= iso) {
+                b = m;
+            } else {
+                a = m;
+            }
+        }
+        let th = 0.5 * (a + b);
+        let base = overlay_tint(chan_iso_color(cur.c), tex_at(r, th));
+        acc.color = vec4<f32>(shade(base, cursor_gradient(cur, th), r.dir), 1.0);
+        acc.depth = depth_at(r, th);
+        acc.depth_set = true;
+    }
+    if (MODE == MODE_MIP && any(mx > vec4<f32>(-1.0e38))) {
+        var q = channel_tf_lookup4(mx);
+        q.q0 = vec4<f32>(overlay_tint(q.q0.rgb, tex_at(r, mt.x)), q.q0.a);
+        q.q1 = vec4<f32>(overlay_tint(q.q1.rgb, tex_at(r, mt.y)), q.q1.a);
+        q.q2 = vec4<f32>(overlay_tint(q.q2.rgb, tex_at(r, mt.z)), q.q2.a);
+        q.q3 = vec4<f32>(overlay_tint(q.q3.rgb, tex_at(r, mt.w)), q.q3.a);
+        acc.color = channel_mix(q, quad_alpha(q) * vis);
+        let tn = mt + vec4<f32>(3.0e38) * (vec4<f32>(1.0) - vis);
+        let t_near = min(min(tn.x, tn.y), min(tn.z, tn.w));
+        let shown = t_near < 1.0e38;
+        acc.depth = select(acc.depth, depth_at(r, t_near), shown);
+        acc.depth_set = shown;
+    }
+    store_pixel(px, acc.color, acc.depth, start.host, acc.samples);
+}

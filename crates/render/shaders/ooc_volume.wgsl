@@ -1,0 +1,202 @@
+// The out-of-core volume's group 2 and what both out-of-core kernels (one
+// channel: ooc.wgsl; several: ooc_channels.wgsl) share: the brick a data leaf
+// samples (brick_of: its atlas mapping, level step, fade and borrowed
+// octant), the ray's cursor through it, its sub-cells and the step units.
+// After common.wgsl, modes.wgsl and brickray-index's octree_traversal.wgsl.
+
+// Group 2: the out-of-core volume (`OutOfCore` in backend/ooc.rs; a test checks
+// the offsets).
+struct OocParams {
+    // Voxel dimensions of the finest level.
+    dims: vec3<f32>,
+    // normalized = texel * value_scale + value_offset.
+    value_scale: f32,
+    // Octree coordinate = texture coordinate * octree_scale.
+    octree_scale: vec3<f32>,
+    value_offset: f32,
+    // Atlas size in texels.
+    atlas_size: vec3<f32>,
+    // The finest octree level.
+    finest_level: u32,
+    // Interior voxels per brick side.
+    brick: u32,
+    // Apron voxels on each side.
+    apron: u32,
+    // Stored voxels per brick side (brick + 2 apron).
+    stored_side: u32,
+    // Sub-cells per brick axis (empty-space skipping inside bricks).
+    sub_cells: u32,
+    // xy: the octree's split masks for octree_traversal.wgsl (OCT_SPLITS_ALL for
+    // an octree; docs/index-format.md); zw: unused.
+    splits: vec4<u32>,
+}
+
+struct SlotInfo {
+    // xyz: atlas texel offset of the slot, w: levels up to the brick's fade
+    // fallback (0: not fading; docs/stability.md).
+    offset: vec4<f32>,
+    // x: normalized min, y: normalized max of the brick; z: the fallback's
+    // slot, w: the fallback's weight (value = mix(own, fallback, w)).
+    range: vec4<f32>,
+}
+
+@group(2) @binding(0) var<uniform> ooc: OocParams;
+@group(2) @binding(1) var atlas_tex: texture_3d<f32>;
+@group(2) @binding(2) var atlas_sampler: sampler;
+@group(2) @binding(3) var<storage, read> slots: array<SlotInfo>;
+// Normalized min/max of each brick's sub-cells (`sub_cells`^3 per slot, x
+// fastest), for empty-space skipping inside a brick.
+@group(2) @binding(4) var<storage, read> sub_cells: array<vec2<f32>>;
+// The octree with ropes (docs/index-format.md), walked by octree_traversal.wgsl.
+@group(2) @binding(5) var<storage, read> index_words: array<u32>;
+
+// A data leaf's brick: atlas texture coordinate = uv0 + o * kuv for octree
+// point o (texel centres at +0.5 are folded in).
+struct Brick {
+    uv0: vec3<f32>,
+    kuv: vec3<f32>,
+    // The step multiple of this level: finest voxels per voxel along the axis
+    // the level keeps finest (2^(finest - level) in an octree).
+    f: f32,
+    // Finest voxels per voxel of this level, per axis.
+    f3: vec3<f32>,
+    // The corrected TF table's row for this level's step.
+    tf_v: f32,
+    // The slot sampled (sub-cells): the leaf's, or the ancestor's it is
+    // borrowed from.
+    slot: u32,
+    // The leaf's own slot (feedback counters) and its level's step multiple
+    // (the visible weight's unit): a borrowed leaf's differ from `slot`, `f`.
+    usage: u32,
+    usage_f: f32,
+    box_min: vec3<f32>,
+    box_size: vec3<f32>,
+    // A level-of-detail fade: the ancestor brick's mapping (as uv0, kuv), its
+    // finest voxels per voxel per axis, and its weight (0: not fading).
+    fb_uv0: vec3<f32>,
+    fb_kuv: vec3<f32>,
+    fb_f3: vec3<f32>,
+    fb_w: f32,
+}
+
+fn brick_of(leaf: OctBox, slot: u32) -> Brick {
+    var b: Brick;
+    let k = f32(ooc.brick) / leaf.box_size;
+    let inv_atlas = 1.0 / ooc.atlas_size;
+    b.kuv = k * inv_atlas;
+    b.uv0 = (slots[slot].offset.xyz + f32(ooc.apron) - leaf.box_min * k) * inv_atlas;
+    // Per-axis halvings between this level and the finest.
+    let hd = oct_halvings(ooc.splits.xy, ooc.finest_level) - oct_halvings(ooc.splits.xy, leaf.level);
+    b.f3 = vec3<f32>(oct_exp2_pos(hd.x), oct_exp2_pos(hd.y), oct_exp2_pos(hd.z));
+    let e = min(hd.x, min(hd.y, hd.z));
+    b.f = oct_exp2_pos(e);
+    b.tf_v = tf_row(f32(e));
+    b.slot = slot;
+    b.usage = slot;
+    b.usage_f = b.f;
+    b.box_min = leaf.box_min;
+    b.box_size = leaf.box_size;
+    // Fading: the ancestor `up` levels coarser, sampled at the same points.
+    let up = u32(slots[slot].offset.w);
+    b.fb_w = 0.0;
+    b.fb_f3 = b.f3;
+    b.fb_uv0 = b.uv0;
+    b.fb_kuv = b.kuv;
+    if (up > 0u && up <= leaf.level) {
+        // The ancestor's box: each axis doubled once per level that split it.
+        let anc = leaf.level - up;
+        let hu = oct_halvings(ooc.splits.xy, leaf.level) - oct_halvings(ooc.splits.xy, anc);
+        let size = leaf.box_size * vec3<f32>(oct_exp2_pos(hu.x), oct_exp2_pos(hu.y), oct_exp2_pos(hu.z));
+        let fmin = floor(leaf.box_min / size) * size;
+        let fk = f32(ooc.brick) / size;
+        let fs = u32(slots[slot].range.z);
+        b.fb_kuv = fk * inv_atlas;
+        b.fb_uv0 = (slots[fs].offset.xyz + f32(ooc.apron) - fmin * fk) * inv_atlas;
+        let hf = hd + hu;
+        b.fb_f3 = vec3<f32>(oct_exp2_pos(hf.x), oct_exp2_pos(hf.y), oct_exp2_pos(hf.z));
+        b.fb_w = clamp(slots[slot].range.w, 0.0, 1.0);
+        // A borrowed leaf (weight above 1; an octant-granular cut): drawn
+        // from the ancestor alone, as the ancestor draws it (its mapping,
+        // box, step and sub-cells); counted as itself.
+        if (slots[slot].range.w > 1.5) {
+            b.uv0 = b.fb_uv0;
+            b.kuv = b.fb_kuv;
+            b.f3 = b.fb_f3;
+            let ea = min(hf.x, min(hf.y, hf.z));
+            b.f = oct_exp2_pos(ea);
+            b.tf_v = tf_row(f32(ea));
+            b.slot = fs;
+            b.box_min = fmin;
+            b.box_size = size;
+            b.fb_w = 0.0;
+        }
+    }
+    return b;
+}
+
+// Out of core a sample depends on the brick and the ray in octree coordinates
+// (o(t) = oo + od t); the ray's line in the brick's atlas coordinates,
+// uv(t) = ua + ud t, is set once per leaf (`cursor_enter`).
+struct Cursor {
+    b: Brick,
+    oo: vec3<f32>,
+    od: vec3<f32>,
+    ua: vec3<f32>,
+    ud: vec3<f32>,
+    // The same line in the fade fallback's atlas coordinates.
+    fa: vec3<f32>,
+    fd: vec3<f32>,
+    // The channel a multi-channel kernel bisects and shades
+    // (ooc_channels.wgsl; unused by ooc.wgsl).
+    c: u32,
+}
+
+fn cursor_enter(c: ptr<function, Cursor>, b: Brick) {
+    (*c).b = b;
+    (*c).ua = b.uv0 + (*c).oo * b.kuv;
+    (*c).ud = (*c).od * b.kuv;
+    (*c).fa = b.fb_uv0 + (*c).oo * b.fb_kuv;
+    (*c).fd = (*c).od * b.fb_kuv;
+}
+
+// Passes over the atlas per value: 2 in a fading leaf (its own brick, then the
+// ancestor's), else 1. Lavapipe runs both sides of every `if` for the whole
+// SIMD group of rays, but leaves a loop once no lane continues: the ancestor's
+// read is the loop's second trip, which a group without a fading lane skips
+// (an `if` cost every sample a second atlas read, 30% of the brute-force
+// march).
+fn cursor_passes(c: Cursor) -> u32 {
+    return select(1u, 2u, c.b.fb_w > 0.0);
+}
+
+// The ray parameter of one finest voxel (the step is step_factor of it).
+fn finest_voxel_t() -> f32 {
+    return frame.dt / max(frame.step_factor, 1e-6);
+}
+
+// The ray parameter of one voxel of `level` along its finest axes (the
+// visible weight's unit, feedback.wgsl): the finest voxel times the level's
+// step multiple (Brick::f).
+fn level_voxel_t(level: u32) -> f32 {
+    let hd = oct_halvings(ooc.splits.xy, ooc.finest_level) - oct_halvings(ooc.splits.xy, level);
+    return finest_voxel_t() * oct_exp2_pos(min(hd.x, min(hd.y, hd.z)));
+}
+
+// The sub-cell of the brick holding octree point o (integer coordinates).
+fn sub_cell_of(b: Brick, o: vec3<f32>) -> vec3<u32> {
+    let n = f32(ooc.sub_cells);
+    return vec3<u32>(clamp(floor((o - b.box_min) * (n / b.box_size)), vec3<f32>(0.0), vec3<f32>(n - 1.0)));
+}
+
+fn sub_cell_range(b: Brick, j: vec3<u32>) -> vec2<f32> {
+    let n = ooc.sub_cells;
+    return sub_cells[((b.slot * n + j.z) * n + j.y) * n + j.x];
+}
+
+// t at which the ray o(t) = oo + od t leaves sub-cell j of brick b (`inv_od`:
+// safe_inverse(od)).
+fn sub_cell_exit(b: Brick, j: vec3<u32>, oo: vec3<f32>, od: vec3<f32>, inv_od: vec3<f32>) -> f32 {
+    let side = b.box_size / f32(ooc.sub_cells);
+    let lo = b.box_min + vec3<f32>(j) * side;
+    return box_exit(oo, od, inv_od, lo, lo + side);
+}

@@ -1,0 +1,416 @@
+//! Multi-channel volumes streamed out of core on a real wgpu device
+//! (lavapipe in CI), against the CPU reference's channel compositing
+//! (`brickray_reference::render_channels_reference`):
+//!
+//! * 2 and 4 u16 channels, each built into its own brick store and read
+//!   together as one `ChannelSource` (one brick per node holds every
+//!   channel): DVR, shaded DVR, MIP and per-channel isosurfaces at the
+//!   finest level >= 45 dB;
+//! * every brick is read once for all its channels: each channel's store
+//!   reads exactly the nodes the others read, each once;
+//! * one streamed channel through its style equals the single-channel
+//!   out-of-core image with its transfer function (>= 60 dB);
+//! * a hidden channel gives the image of the others and is skipped (the
+//!   same samples as the volume without it), and sub-cell skipping changes
+//!   no pixel (>= 60 dB) while it skips samples;
+//! * refinement under the channels' styles: a channel hidden or made
+//!   transparent leaves its bricks unloaded (fewer reads), without touching
+//!   the store;
+//! * the shared confocal nuclei with two transformed copies as three
+//!   streamed channels (u16, three channels in RGBA texels): >= 45 dB in
+//!   every mode;
+//! * typed errors: a slice of a streamed channel volume, styles that do not
+//!   match, sources that do not share an octree.
+//!
+//! Images are marched at step 1/2 in both renderers.
+
+use brickray::core::channels::{ChannelStyle, ChannelVolume};
+use brickray::{
+    Camera, ChannelError, ChannelSource, FrameDesc, OutOfCoreConfig, PrepareError, RenderError,
+    RenderSettings, SliceAxis, SliceView, Volume, VolumeData, VolumeDesc, VolumeFrame,
+    VolumeRenderer,
+};
+use brickray_harness::CountingSource;
+use brickray_harness::predict::draw;
+use brickray_harness::{Offscreen, draw_until_settled, shared_gpu as gpu, target_desc};
+use brickray_reference::{ReferenceOptions, assert_close, compare, render_channels_reference};
+use glam::Vec3;
+use std::collections::HashMap;
+use std::sync::Arc;
+
+const SIZE: u32 = 80;
+const MIN_DB: f64 = 45.0;
+const STEP: f32 = 0.5;
+
+use brickray_harness::channels::COLORS;
+
+/// A 40x36x32 u16 channel: a soft blob at `centre` over a faint shell.
+fn channel(centre: [f32; 3], peak: f32) -> Volume {
+    let d = [40u32, 36, 32];
+    let c = Vec3::from_array(centre);
+    let mut v = Vec::with_capacity((d[0] * d[1] * d[2]) as usize);
+    for z in 0..d[2] {
+        for y in 0..d[1] {
+            for x in 0..d[0] {
+                let p = Vec3::new(x as f32, y as f32, z as f32) / Vec3::new(40.0, 36.0, 32.0);
+                let blob = (-(p - c).length_squared() * 40.0).exp() * peak;
+                let r = (p - Vec3::splat(0.5)).length();
+                let shell = (-((r - 0.44) * 22.0).powi(2)).exp() * 0.15;
+                v.push(((blob + shell).min(1.0) * 60000.0) as u16);
+            }
+        }
+    }
+    let desc = VolumeDesc {
+        dims: d,
+        dtype: brickray::DType::U16,
+        spacing: [1.0, 1.0, 1.2],
+        value_range: [0.0, 60000.0],
+        kind: brickray::VolumeKind::Intensity,
+    };
+    Volume::new(desc, VolumeData::U16(v)).unwrap()
+}
+
+fn channels(n: usize) -> Vec<Volume> {
+    let centres = [
+        [0.3, 0.35, 0.4],
+        [0.7, 0.6, 0.5],
+        [0.45, 0.7, 0.65],
+        [0.6, 0.3, 0.3],
+    ];
+    (0..n)
+        .map(|c| channel(centres[c], 1.0 - 0.1 * c as f32))
+        .collect()
+}
+
+fn styles(n: usize) -> Vec<ChannelStyle> {
+    (0..n)
+        .map(|c| ChannelStyle::window(COLORS[c], [0.08, 0.7], 0.6).with_isovalue(0.45))
+        .collect()
+}
+
+fn modes() -> Vec<(&'static str, RenderSettings)> {
+    brickray_harness::channels::modes(STEP, 0.45)
+}
+
+/// Each channel built into a store of 8-voxel bricks under `dir`, its reads
+/// counted.
+fn stores(vols: &[Volume], dir: &std::path::Path) -> Vec<Arc<CountingSource>> {
+    vols.iter()
+        .enumerate()
+        .map(|(c, v)| CountingSource::store(v.clone(), dir, &format!("c{c}"), 8))
+        .collect()
+}
+
+fn source(parts: &[Arc<CountingSource>]) -> Arc<ChannelSource> {
+    let parts = parts
+        .iter()
+        .map(|p| p.clone() as Arc<dyn brickray::BrickSource>)
+        .collect();
+    Arc::new(ChannelSource::new(parts).unwrap())
+}
+
+/// Out of core at the finest level, with room for every brick.
+fn config() -> OutOfCoreConfig {
+    OutOfCoreConfig {
+        tolerance_px: 0.0,
+        upload_budget_bytes: 1 << 30,
+        ..Default::default()
+    }
+}
+
+fn streamed(src: Arc<ChannelSource>, styles: &[ChannelStyle]) -> VolumeRenderer {
+    let g = gpu();
+    let mut r = VolumeRenderer::new(&g.device, target_desc()).unwrap();
+    r.set_volume_source(&g.device, &g.queue, src, config())
+        .unwrap();
+    r.set_channel_styles(styles).unwrap();
+    r
+}
+
+/// Draws `desc` until the streamed volume settles; returns its last frame.
+fn settle(
+    r: &mut VolumeRenderer,
+    target: &Offscreen,
+    desc: &FrameDesc<'_>,
+) -> brickray_harness::predict::FrameResult {
+    let g = gpu();
+    draw_until_settled(g, r, target, desc, 300)
+        .unwrap()
+        .expect("the streamed channels settle");
+    draw(g, r, target, desc).unwrap()
+}
+
+/// The streamed channels against the reference in every mode; returns the
+/// smallest PSNR.
+fn check(name: &str, vols: Vec<Volume>, styles: &[ChannelStyle], camera: Camera) -> f64 {
+    let g = gpu();
+    let dir = tempfile::tempdir().unwrap();
+    let parts = stores(&vols, dir.path());
+    let vol = ChannelVolume::new(vols).unwrap();
+    let frame = VolumeFrame::centered(vol.dims(), vol.channels()[0].desc().spacing);
+    let target = Offscreen::new(&g.device, SIZE, SIZE);
+    let mut r = streamed(source(&parts), styles);
+    let mut worst = f64::INFINITY;
+    for (mode, settings) in modes() {
+        let desc = FrameDesc {
+            settings,
+            ..FrameDesc::new(camera, frame, SIZE, SIZE)
+        };
+        let got = settle(&mut r, &target, &desc).color;
+        let opts = ReferenceOptions::new(SIZE, SIZE).with_step_factor(STEP);
+        let want = render_channels_reference(&vol, &frame, styles, &camera, &settings, &opts)
+            .to_rgba8([0.0; 3]);
+        assert!(
+            want.chunks_exact(4).filter(|p| p[3] > 20).count() > 150,
+            "{name} {mode}: the reference image is nearly empty"
+        );
+        let c = assert_close(
+            &format!("streamed channels {name} {mode}"),
+            &got,
+            &want,
+            SIZE,
+            SIZE,
+            MIN_DB,
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        eprintln!("streamed {name} {mode}: {:.1} dB", c.psnr_db);
+        worst = worst.min(c.psnr_db);
+    }
+    // Each brick was read once, for all its channels: every channel's store
+    // read the same nodes, each once.
+    let reads: Vec<HashMap<_, u32>> = parts.iter().map(|p| p.reads()).collect();
+    assert!(!reads[0].is_empty(), "{name}: nothing was read");
+    for (c, r) in reads.iter().enumerate() {
+        assert!(
+            r.values().all(|&n| n == 1),
+            "{name}: channel {c} read a brick twice: {r:?}"
+        );
+        let mut a: Vec<_> = r.keys().collect();
+        let mut b: Vec<_> = reads[0].keys().collect();
+        a.sort();
+        b.sort();
+        assert_eq!(a, b, "{name}: channel {c} read other bricks than channel 0");
+    }
+    eprintln!(
+        "{name}: {} bricks, each read once for all channels",
+        reads[0].len()
+    );
+    worst
+}
+
+#[test]
+fn two_and_four_streamed_channels_match_the_reference() {
+    let camera = Camera::orbit(Vec3::ZERO, 2.3, 0.6, 0.35);
+    for n in [2, 4] {
+        let worst = check(&format!("{n} channels"), channels(n), &styles(n), camera);
+        eprintln!("{n} streamed channels: worst {worst:.1} dB");
+    }
+}
+
+/// One streamed channel drawn through its style equals the single-channel
+/// out-of-core image with that style's transfer function (>= 60 dB).
+#[test]
+fn one_streamed_channel_is_the_single_channel_image() {
+    let g = gpu();
+    let vol = channel([0.4, 0.5, 0.5], 1.0);
+    let dir = tempfile::tempdir().unwrap();
+    let parts = stores(std::slice::from_ref(&vol), dir.path());
+    let frame = VolumeFrame::centered(vol.dims(), vol.desc().spacing);
+    let camera = Camera::orbit(Vec3::ZERO, 2.3, 0.6, 0.35);
+    let target = Offscreen::new(&g.device, SIZE, SIZE);
+    let style = ChannelStyle::window(COLORS[0], [0.08, 0.7], 0.6).with_isovalue(0.45);
+    let mut multi = streamed(source(&parts), std::slice::from_ref(&style));
+    let mut single = VolumeRenderer::new(&g.device, target_desc()).unwrap();
+    single
+        .set_volume_source(&g.device, &g.queue, parts[0].clone(), config())
+        .unwrap();
+    single
+        .set_transfer_function(&g.device, &g.queue, &style.tf)
+        .unwrap();
+    for (mode, mut settings) in modes() {
+        if let brickray::RenderMode::Iso { .. } = settings.mode {
+            settings.mode = brickray::RenderMode::Iso {
+                value: style.isovalue,
+                color: style.iso_color(),
+            };
+        }
+        let desc = FrameDesc {
+            settings,
+            ..FrameDesc::new(camera, frame, SIZE, SIZE)
+        };
+        let a = settle(&mut multi, &target, &desc).color;
+        let b = settle(&mut single, &target, &desc).color;
+        let c = compare(&a, &b, SIZE, SIZE);
+        eprintln!(
+            "one streamed channel {mode}: {:.1} dB, max {}",
+            c.psnr_db, c.max_abs_diff
+        );
+        assert!(c.psnr_db >= 60.0, "one streamed channel {mode}: {c:?}");
+    }
+}
+
+/// A hidden channel: the image of the others with the samples of the
+/// volume without it; skipping changes nothing but the samples taken.
+#[test]
+fn a_hidden_streamed_channel_is_absent_and_skipped() {
+    let g = gpu();
+    let all = channels(3);
+    let dir = tempfile::tempdir().unwrap();
+    let parts = stores(&all, dir.path());
+    let camera = Camera::orbit(Vec3::ZERO, 2.3, 0.6, 0.35);
+    let frame = VolumeFrame::centered(all[0].dims(), all[0].desc().spacing);
+    let target = Offscreen::new(&g.device, SIZE, SIZE);
+    let mut s3 = styles(3);
+    s3[1] = s3[1].clone().visible(false);
+    let s2 = vec![styles(3)[0].clone(), styles(3)[2].clone()];
+    let mut hidden = streamed(source(&parts), &s3);
+    let mut without = streamed(source(&[parts[0].clone(), parts[2].clone()]), &s2);
+    let total = |v: &[u32]| v.iter().map(|&x| x as u64).sum::<u64>();
+    for (mode, settings) in modes() {
+        let desc = FrameDesc {
+            settings,
+            ..FrameDesc::new(camera, frame, SIZE, SIZE)
+        };
+        let h = settle(&mut hidden, &target, &desc);
+        let w = settle(&mut without, &target, &desc);
+        let c = compare(&h.color, &w.color, SIZE, SIZE);
+        eprintln!(
+            "streamed hidden {mode}: {:.1} dB against the two others",
+            c.psnr_db
+        );
+        assert!(c.psnr_db >= 60.0, "hidden {mode}: {c:?}");
+        let (sh, sw) = (total(&h.samples), total(&w.samples));
+        eprintln!("{mode}: samples hidden {sh}, without {sw}");
+        assert_eq!(
+            sh, sw,
+            "{mode}: a hidden channel is skipped as an absent one"
+        );
+        let off = FrameDesc {
+            settings: RenderSettings {
+                accel: brickray::core::Accel {
+                    empty_space_skipping: false,
+                    ..settings.accel
+                },
+                ..settings
+            },
+            ..desc.clone()
+        };
+        let ho = settle(&mut hidden, &target, &off);
+        assert!(total(&ho.samples) > sh, "{mode}: skipping skipped nothing");
+        let c = compare(&ho.color, &h.color, SIZE, SIZE);
+        assert!(
+            c.psnr_db >= 60.0,
+            "{mode}: skipping changed the image: {c:?}"
+        );
+    }
+}
+
+/// Refinement classifies nodes by every visible channel's style: with one
+/// channel made transparent the bricks only it shows are never read; its
+/// styles change without a new store.
+#[test]
+fn refinement_follows_the_channels_styles() {
+    let g = gpu();
+    let all = channels(2);
+    let camera = Camera::orbit(Vec3::ZERO, 2.3, 0.6, 0.35);
+    let frame = VolumeFrame::centered(all[0].dims(), all[0].desc().spacing);
+    let target = Offscreen::new(&g.device, SIZE, SIZE);
+    // The shell is below the window: only the blobs are visible.
+    let narrow = |c: usize| ChannelStyle::window(COLORS[c], [0.3, 0.9], 0.6);
+    let desc = FrameDesc::new(camera, frame, SIZE, SIZE);
+    let reads = |styles: &[ChannelStyle]| {
+        let dir = tempfile::tempdir().unwrap();
+        let parts = stores(&all, dir.path());
+        let mut r = streamed(source(&parts), styles);
+        settle(&mut r, &target, &desc);
+        parts[0].reads().len()
+    };
+    let both = reads(&[narrow(0), narrow(1)]);
+    let one = reads(&[narrow(0), narrow(1).visible(false)]);
+    eprintln!("bricks read: both channels shown {both}, one hidden {one}");
+    assert!(
+        one < both,
+        "hiding a channel loaded the same bricks ({one})"
+    );
+    // The styles of a volume in use change its classification at the next
+    // frame (no new store, no new source).
+    let dir = tempfile::tempdir().unwrap();
+    let parts = stores(&all, dir.path());
+    let mut r = streamed(source(&parts), &[narrow(0), narrow(1).visible(false)]);
+    let a = settle(&mut r, &target, &desc).color;
+    r.set_channel_styles(&[narrow(0), narrow(1)]).unwrap();
+    let b = settle(&mut r, &target, &desc).color;
+    assert!(
+        compare(&a, &b, SIZE, SIZE).psnr_db < 40.0,
+        "showing the second channel changed nothing"
+    );
+    assert!(
+        parts[0].reads().len() > one,
+        "no brick of the second channel was loaded"
+    );
+}
+
+#[test]
+#[cfg_attr(
+    no_shared_data,
+    ignore = "needs ../shared/data (the shared volumes), absent when the tests were built"
+)]
+fn shared_nuclei_as_three_streamed_channels_match_the_reference() {
+    let Some(vol) = brickray_harness::channels::nuclei_channels(3) else {
+        assert!(
+            std::env::var("CI").is_err(),
+            "CI=true but the shared nuclei are missing"
+        );
+        return;
+    };
+    let vols = vol.channels().to_vec();
+    let styles = brickray_harness::channels::nuclei_styles(3);
+    let camera = Camera::orbit(Vec3::ZERO, 2.2, 0.7, 0.4);
+    let worst = check("nuclei x3", vols, &styles, camera);
+    eprintln!("streamed nuclei x3: worst {worst:.1} dB");
+}
+
+#[test]
+fn streamed_channel_errors_are_typed() {
+    let g = gpu();
+    let dir = tempfile::tempdir().unwrap();
+    let all = channels(2);
+    let parts = stores(&all, dir.path());
+    let frame = VolumeFrame::centered(all[0].dims(), all[0].desc().spacing);
+    let camera = Camera::orbit(Vec3::ZERO, 2.3, 0.6, 0.35);
+    let target = Offscreen::new(&g.device, SIZE, SIZE);
+    let mut r = streamed(source(&parts), &styles(2));
+    // Styles for another count of channels.
+    assert!(matches!(
+        r.set_channel_styles(&styles(3)),
+        Err(RenderError::Channels(ChannelError::StyleCount { .. }))
+    ));
+    // A slice of a streamed channel volume.
+    r.set_slice(Some(
+        SliceView::orthogonal(SliceAxis::Axial, 13.0, &frame, 1.0).unwrap(),
+    ));
+    let desc = FrameDesc::new(camera, frame, SIZE, SIZE);
+    assert!(matches!(
+        brickray_harness::draw_frame(g, &mut r, &target, &desc, None),
+        Err(PrepareError::StreamedChannelSlice)
+    ));
+    // No styles.
+    let mut bare = VolumeRenderer::new(&g.device, target_desc()).unwrap();
+    bare.set_volume_source(&g.device, &g.queue, source(&parts), config())
+        .unwrap();
+    assert!(matches!(
+        brickray_harness::draw_frame(g, &mut bare, &target, &desc, None),
+        Err(PrepareError::NoChannelStyles)
+    ));
+    // Sources on different octrees, a single-channel source and none.
+    let other = CountingSource::store(brickray::core::synthetic::sphere(24), dir.path(), "s", 8);
+    let e = ChannelSource::new(vec![parts[0].clone(), other]).unwrap_err();
+    assert!(
+        matches!(e, ChannelError::Mismatch { channel: 1, .. }),
+        "{e:?}"
+    );
+    assert!(matches!(
+        ChannelSource::new(Vec::new()),
+        Err(ChannelError::Count { count: 0, .. })
+    ));
+}
