@@ -1,4 +1,5 @@
-//! The `channels` suite: what 2 and 4 channels cost against one, in core.
+//! The `channels` suite: what 2 and 4 channels cost against one, in core
+//! and out of core.
 //!
 //! The shared confocal nuclei (u16, 256x256x60) and transformed copies of it
 //! as 1, 2 and 4 channels (`brickray_harness::channels`), each in its own
@@ -8,8 +9,12 @@
 //!   `--rounds` interleaved rounds at `--size` px) of DVR, shaded DVR, MIP
 //!   and per-channel isosurfaces, for 1, 2 and 4 channels and for the
 //!   single-channel kernel with channel 0's transfer function (what one
-//!   channel costs through the multi-channel kernel); samples per ray;
-//! * **bytes**: texel bytes per voxel of the packed texture;
+//!   channel costs through the multi-channel kernel); samples per ray; the
+//!   same out of core: each channel built into a brick store (32-voxel
+//!   bricks) and the channels streamed as one `ChannelSource`, at the
+//!   finest level (tolerance 0, timed once the cut has settled);
+//! * **bytes**: texel bytes per voxel of the packed texture, and bytes of
+//!   one prepared brick (texels and sub-cell ranges) out of core;
 //! * **error**: each case against the CPU reference
 //!   (`render_channels_reference`) at the same step, at 128 px.
 //!
@@ -42,6 +47,9 @@ struct ModeRow {
     samples_per_ray: [f64; 3],
     /// PSNR against the reference with 1, 2 and 4 channels.
     psnr_db: [f64; 3],
+    /// The same out of core (streamed channels at the finest level).
+    ooc_ms: [f64; 3],
+    ooc_psnr_db: [f64; 3],
 }
 
 /// The suite's result (its JSON line).
@@ -58,7 +66,50 @@ struct ChannelsResult {
     /// The largest ratio of one channel through the multi-channel kernel
     /// to the single-channel kernel.
     one_channel_overhead: f64,
+    /// Out of core: bytes of one prepared brick with 1, 2 and 4 channels,
+    /// and the largest ratios of 2 (4) channels' ms to 1's.
+    ooc_bytes_per_brick: [u64; 3],
+    ooc_cost_ratio_2ch: f64,
+    ooc_cost_ratio_4ch: f64,
+    /// The largest ratio over modes and counts of out of core to in core.
+    ooc_over_incore: f64,
+    /// The smallest PSNR in core and out of core.
     psnr_min_db: f64,
+}
+
+/// The channels of `vols[last]` built into stores under `dir`, and a
+/// renderer streaming the first `n` of them for each count.
+fn streamed(
+    gpu: &GpuContext,
+    vols: &[ChannelVolume],
+    dir: &std::path::Path,
+) -> Result<Vec<VolumeRenderer>, String> {
+    let all = vols.last().ok_or("no volume")?;
+    let parts: Vec<std::sync::Arc<dyn brickray_core::BrickSource>> = all
+        .channels()
+        .iter()
+        .enumerate()
+        .map(|(c, v)| brickray_harness::store_of(v, &dir.join(format!("c{c}.brs"))))
+        .collect();
+    let config = brickray_cache::OutOfCoreConfig {
+        tolerance_px: 0.0,
+        upload_budget_bytes: 1 << 30,
+        ..Default::default()
+    };
+    COUNTS
+        .iter()
+        .map(|&n| {
+            let src = brickray_core::ChannelSource::new(parts[..n].to_vec())
+                .map_err(|e| e.to_string())?;
+            let mut r = VolumeRenderer::new(&gpu.device, brickray_harness::target_desc())
+                .map_err(|e| e.to_string())?;
+            r.set_volume_source(&gpu.device, &gpu.queue, std::sync::Arc::new(src), config)
+                .map_err(|e| e.to_string())?;
+            r.set_channel_styles(&nuclei_styles(n))
+                .map_err(|e| e.to_string())?;
+            Ok(r)
+        })
+        .collect()
 }
 
 pub(crate) fn run(size: u32, rounds: usize) -> Result<Figures, String> {
@@ -95,6 +146,14 @@ pub(crate) fn run(size: u32, rounds: usize) -> Result<Figures, String> {
         let v = renderers[i].volume_bytes() / d.voxel_count();
         v as u32
     });
+    let dir = tempfile::tempdir().map_err(|e| e.to_string())?;
+    let mut ooc = streamed(&gpu, &vols, dir.path())?;
+    let ooc_bytes_per_brick: [u64; 3] = std::array::from_fn(|i| {
+        ooc[i].streamed_volume().map_or(0, |v| {
+            let layout = v.layout();
+            v.inspect(|s| s.gpu_format().prepared_brick_bytes(&layout).unwrap_or(0))
+        })
+    });
     let target = Offscreen::new(&gpu.device, size, size);
     let small = Offscreen::new(&gpu.device, ERROR_SIZE, ERROR_SIZE);
     let mut rows = Vec::new();
@@ -121,8 +180,12 @@ pub(crate) fn run(size: u32, rounds: usize) -> Result<Figures, String> {
         for (i, r) in renderers.iter_mut().enumerate() {
             spr[i] = samples_per_ray(&draw(&gpu, r, &target, &desc).map_err(err)?.samples);
         }
+        for r in ooc.iter_mut() {
+            settle(&gpu, r, &target, &desc)?;
+        }
         let mut single_ms = Vec::new();
         let mut ms: [Vec<f64>; 3] = Default::default();
+        let mut ooc_ms: [Vec<f64>; 3] = Default::default();
         for _ in 0..rounds {
             single_ms.push(
                 draw(&gpu, &mut single, &target, &single_desc)
@@ -132,11 +195,14 @@ pub(crate) fn run(size: u32, rounds: usize) -> Result<Figures, String> {
             for (i, r) in renderers.iter_mut().enumerate() {
                 ms[i].push(draw(&gpu, r, &target, &desc).map_err(err)?.ms);
             }
+            for (i, r) in ooc.iter_mut().enumerate() {
+                ooc_ms[i].push(draw(&gpu, r, &target, &desc).map_err(err)?.ms);
+            }
         }
         desc.viewport = brickray_render::Viewport::full(ERROR_SIZE, ERROR_SIZE);
         let mut psnr = [0.0; 3];
-        for (i, (r, vol)) in renderers.iter_mut().zip(&vols).enumerate() {
-            let got = draw(&gpu, r, &small, &desc).map_err(err)?.color;
+        let mut ooc_psnr = [0.0; 3];
+        for (i, vol) in vols.iter().enumerate() {
             let opts = ReferenceOptions::new(ERROR_SIZE, ERROR_SIZE)
                 .with_step_factor(settings.step_factor);
             let want = render_channels_reference(
@@ -148,7 +214,12 @@ pub(crate) fn run(size: u32, rounds: usize) -> Result<Figures, String> {
                 &opts,
             )
             .to_rgba8([0.0; 3]);
+            let got = draw(&gpu, &mut renderers[i], &small, &desc)
+                .map_err(err)?
+                .color;
             psnr[i] = compare(&got, &want, ERROR_SIZE, ERROR_SIZE).psnr_db;
+            let got = settle(&gpu, &mut ooc[i], &small, &desc)?;
+            ooc_psnr[i] = compare(&got, &want, ERROR_SIZE, ERROR_SIZE).psnr_db;
         }
         let row = ModeRow {
             mode,
@@ -156,6 +227,8 @@ pub(crate) fn run(size: u32, rounds: usize) -> Result<Figures, String> {
             ms: std::array::from_fn(|i| median(&ms[i])),
             samples_per_ray: spr,
             psnr_db: psnr,
+            ooc_ms: std::array::from_fn(|i| median(&ooc_ms[i])),
+            ooc_psnr_db: ooc_psnr,
         };
         println!(
             "| {mode} | {:.1} | {:.1} / {:.1} / {:.1} | {:.2} | {:.2} | {:.1} / {:.1} / {:.1} | {:.1} / {:.1} / {:.1} |",
@@ -172,6 +245,17 @@ pub(crate) fn run(size: u32, rounds: usize) -> Result<Figures, String> {
             psnr[1],
             psnr[2]
         );
+        println!(
+            "| {mode} out of core | | {:.1} / {:.1} / {:.1} | {:.2} | {:.2} | | {:.1} / {:.1} / {:.1} |",
+            row.ooc_ms[0],
+            row.ooc_ms[1],
+            row.ooc_ms[2],
+            row.ooc_ms[1] / row.ooc_ms[0],
+            row.ooc_ms[2] / row.ooc_ms[0],
+            ooc_psnr[0],
+            ooc_psnr[1],
+            ooc_psnr[2]
+        );
         rows.push(row);
     }
     let max_over = |f: &dyn Fn(&ModeRow) -> f64| rows.iter().map(f).fold(0.0f64, f64::max);
@@ -182,9 +266,13 @@ pub(crate) fn run(size: u32, rounds: usize) -> Result<Figures, String> {
         cost_ratio_2ch: max_over(&|r| r.ms[1] / r.ms[0]),
         cost_ratio_4ch: max_over(&|r| r.ms[2] / r.ms[0]),
         one_channel_overhead: max_over(&|r| r.ms[0] / r.single_ms),
+        ooc_bytes_per_brick,
+        ooc_cost_ratio_2ch: max_over(&|r| r.ooc_ms[1] / r.ooc_ms[0]),
+        ooc_cost_ratio_4ch: max_over(&|r| r.ooc_ms[2] / r.ooc_ms[0]),
+        ooc_over_incore: max_over(&|r| (0..3).map(|i| r.ooc_ms[i] / r.ms[i]).fold(0.0, f64::max)),
         psnr_min_db: rows
             .iter()
-            .flat_map(|r| r.psnr_db)
+            .flat_map(|r| r.psnr_db.into_iter().chain(r.ooc_psnr_db))
             .fold(f64::INFINITY, f64::min),
         modes: rows,
     };
@@ -196,8 +284,29 @@ pub(crate) fn run(size: u32, rounds: usize) -> Result<Figures, String> {
         result.one_channel_overhead,
         result.psnr_min_db
     );
+    println!(
+        "out of core: bytes per brick {:?}; worst 2ch / 1ch {:.2}, 4ch / 1ch {:.2}; worst out of core / in core {:.2}",
+        result.ooc_bytes_per_brick,
+        result.ooc_cost_ratio_2ch,
+        result.ooc_cost_ratio_4ch,
+        result.ooc_over_incore
+    );
     match serde_json::to_value(&result).map_err(|e| e.to_string())? {
         serde_json::Value::Object(m) => Ok(m),
         _ => Err("the result is not an object".into()),
     }
+}
+
+/// Draws `desc` until the streamed volume settles (every brick the view
+/// needs arrived); returns the last frame's colour.
+fn settle(
+    gpu: &GpuContext,
+    r: &mut VolumeRenderer,
+    target: &Offscreen,
+    desc: &FrameDesc<'_>,
+) -> Result<Vec<u8>, String> {
+    brickray_harness::draw_until_settled(gpu, r, target, desc, 500)
+        .map_err(|e| e.to_string())?
+        .ok_or("the streamed channels did not settle in 500 frames")?;
+    Ok(draw(gpu, r, target, desc).map_err(|e| e.to_string())?.color)
 }

@@ -1,4 +1,5 @@
-// Multi-channel out-of-core ray caster (compute), after common.wgsl,
+// Multi-channel out-of-core ray caster (compute; its slice view:
+// channel_slice.wgsl), after common.wgsl,
 // modes.wgsl, overlay.wgsl, predict.wgsl (their shared functions and
 // switches), brickray-index's octree_traversal.wgsl, ooc_volume.wgsl,
 // channel_class.wgsl and feedback.wgsl. A brick holds every channel of its
@@ -322,4 +323,42 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         acc.depth_set = shown;
     }
     store_pixel(px, acc.color, acc.depth, start.host, acc.samples);
+}
+
+// Slice views (channel_slice.wgsl): the point located in the frame's cut
+// and sampled from its data leaf's brick as slice_ooc.wgsl samples one
+// channel (fades and borrowed leaves included; each brick a pixel samples
+// counts as reached and seen; nothing is occluded).
+fn channel_slice_begin(px: vec2<u32>) {
+    feedback_stop(px, far_depth());
+}
+
+fn channel_slice_sample(u: vec3<f32>, dir: vec3<f32>, last: ptr<function, u32>) -> ChannelSliceSample {
+    var s = ChannelSliceSample(vec4<f32>(0.0), false);
+    let o = u * ooc.octree_scale;
+    let root = OctBox(0u, 0u, vec3<f32>(0.0), vec3<f32>(1.0));
+    let loc = oct_locate_leaf(root, o, dir * ooc.octree_scale, ooc.splits.xy);
+    if (!loc.ok || (loc.word >> OCT_TAG_SHIFT) != OCT_TAG_DATA) {
+        return s;
+    }
+    let record = loc.word & OCT_PTR_MASK;
+    if (!oct_in_bounds(record)) {
+        return s;
+    }
+    let slot = index_words[record];
+    if (slot >= arrayLength(&slots)) {
+        return s;
+    }
+    if (slot != *last) {
+        feedback_reached(slot);
+        feedback_add(slot, 1.0);
+        *last = slot;
+    }
+    var c: Cursor;
+    c.oo = o;
+    c.od = vec3<f32>(0.0);
+    cursor_enter(&c, brick_of(loc.leaf, slot));
+    s.v = cursor_values(c, 0.0);
+    s.ok = true;
+    return s;
 }

@@ -148,12 +148,6 @@ pub enum PrepareError {
     /// A multi-channel volume is drawn without styles.
     #[error("no channel styles set: call set_channel_styles first")]
     NoChannelStyles,
-    /// A slice view of a streamed multi-channel volume: not drawn yet (the
-    /// multi-channel slice view samples a volume in core).
-    #[error(
-        "slice views of a streamed multi-channel volume are not supported; load it in core (set_channel_volume) to slice it"
-    )]
-    StreamedChannelSlice,
     /// More pixels queued for picking than one frame reads back.
     #[error("{requested} pixels queued for picking: at most {max} a frame")]
     TooManyPicks {

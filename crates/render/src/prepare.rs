@@ -102,9 +102,6 @@ impl VolumeRenderer {
                 if r.channel_styles.is_none() {
                     return Err(PrepareError::NoChannelStyles);
                 }
-                if r.slice.is_some() && matches!(r.backend, Some(Backend::OutOfCore(_))) {
-                    return Err(PrepareError::StreamedChannelSlice);
-                }
             } else if r.tf.current().is_none() && r.slice.is_none() {
                 return Err(PrepareError::NoTransferFunction);
             }
@@ -303,10 +300,14 @@ pub(crate) fn frame_variant(
         };
     }
     if let (Backend::OutOfCore(_), Some(n)) = (backend, backend.channel_count()) {
-        // (Slices of a streamed multi-channel volume are refused before.)
+        let v = if slice {
+            Variant::channel_slice(n as u32, overlay)
+        } else {
+            Variant::channels(settings, n as u32, overlay)
+        };
         return Variant {
             weights: backend.get().measures_weights(),
-            ..Variant::channels(settings, n as u32, overlay)
+            ..v
         };
     }
     let b = backend.get();

@@ -14,7 +14,8 @@
 //!   (group 2: the packed channels) and out of core (the packed brick atlas
 //!   and the channels' classification beside ooc_volume.wgsl's bindings),
 //!   both over `channel_class.wgsl` (the channels' stacked transfer
-//!   functions, visibility, isovalues and how their samples mix);
+//!   functions, visibility, isovalues and how their samples mix), with
+//!   `channel_slice.wgsl` their slice view;
 //! * `overlay.wgsl`: group 3, a label map over the image (both kernels);
 //! * `predict.wgsl`: the isosurface prediction buffer's bindings (group 0) and
 //!   switches, in both kernels; `incore_predict.wgsl`, `ooc_predict.wgsl`:
@@ -45,6 +46,8 @@ pub const OOC_CHANNELS: &str = include_str!("../shaders/ooc_channels.wgsl");
 /// The classification of several channels, shared by both multi-channel
 /// kernels.
 pub const CHANNEL_CLASS: &str = include_str!("../shaders/channel_class.wgsl");
+/// The slice view of both multi-channel kernels.
+pub const CHANNEL_SLICE: &str = include_str!("../shaders/channel_slice.wgsl");
 /// A label map over the image (group 3, both kernels).
 pub const OVERLAY: &str = include_str!("../shaders/overlay.wgsl");
 /// The prediction buffer's bindings, switches and encoding (both kernels).
@@ -93,7 +96,7 @@ pub fn incore() -> String {
 /// prediction for their shared functions and switches).
 pub fn channels() -> String {
     format!(
-        "{COMMON}\n{}\n{MODES}\n{OVERLAY}\n{PREDICT}\n{CHANNEL_CLASS}\n{CHANNELS}",
+        "{COMMON}\n{}\n{MODES}\n{OVERLAY}\n{PREDICT}\n{CHANNEL_CLASS}\n{CHANNELS}\n{CHANNEL_SLICE}",
         color_tables()
     )
 }
@@ -109,11 +112,11 @@ pub fn ooc() -> String {
 }
 
 /// The multi-channel out-of-core ray caster as compiled (modes, overlay and
-/// prediction for their shared functions and switches; no slice entry
+/// prediction for their shared functions and switches; with its slice entry
 /// point).
 pub fn ooc_channels() -> String {
     format!(
-        "{COMMON}\n{}\n{MODES}\n{OVERLAY}\n{PREDICT}\n{}\n{OOC_VOLUME}\n{CHANNEL_CLASS}\n{OOC_CHANNELS}\n{FEEDBACK}",
+        "{COMMON}\n{}\n{MODES}\n{OVERLAY}\n{PREDICT}\n{}\n{OOC_VOLUME}\n{CHANNEL_CLASS}\n{OOC_CHANNELS}\n{FEEDBACK}\n{CHANNEL_SLICE}",
         color_tables(),
         brickray_index::OCTREE_TRAVERSAL_WGSL
     )

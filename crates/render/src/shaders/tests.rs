@@ -421,7 +421,7 @@ fn every_channel_permutation_validates() {
     }
 }
 
-/// The multi-channel out-of-core kernel: one entry point (no slice view),
+/// The multi-channel out-of-core kernel: its ray caster and slice view,
 /// the shared overrides and `CHANNELS`, its group 2 (the out-of-core
 /// bindings and the classification's) and its uniforms against the Rust
 /// side.
@@ -430,7 +430,10 @@ fn ooc_channels_kernel_matches_the_rust_side() {
     use crate::backend::ooc_channels::OocChannelParams;
     let m = module("ooc channels", &ooc_channels());
     let names: Vec<&str> = m.entry_points.iter().map(|e| e.name.as_str()).collect();
-    assert_eq!(names, [crate::kernels::ENTRY_RAYCAST]);
+    assert_eq!(
+        names,
+        [crate::kernels::ENTRY_RAYCAST, crate::kernels::ENTRY_SLICE]
+    );
     check_kernel_common(
         "ooc channels",
         &m,
@@ -757,6 +760,7 @@ fn every_shader_file_is_covered() {
         "overlay.wgsl",
         "channels.wgsl",
         "channel_class.wgsl",
+        "channel_slice.wgsl",
         "ooc_volume.wgsl",
         "ooc_channels.wgsl",
     ];
