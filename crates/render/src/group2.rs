@@ -93,10 +93,13 @@ pub(crate) const SAMPLED_TEXTURES: u32 = 6;
 /// Sampled textures of the multi-channel kernel: one more, its channels'
 /// stacked TF tables (`backend/channels.rs`).
 pub(crate) const CHANNEL_SAMPLED_TEXTURES: u32 = SAMPLED_TEXTURES + 1;
+/// Uniform buffers of the multi-channel out-of-core kernel: one more, its
+/// channels' parameters (`backend/ooc_channels.rs`).
+pub(crate) const CHANNEL_UNIFORM_BUFFERS: u32 = UNIFORM_BUFFERS + 1;
 pub(crate) const SAMPLERS: u32 = 2;
 /// The most storage buffers group 2 holds (out of core: slots, sub-cells,
-/// index, usage counters).
-pub(crate) const MAX_VOLUME_STORAGE: u32 = OOC_STORAGE_BUFFERS;
+/// index, usage counters; with channels, their classification).
+pub(crate) const MAX_VOLUME_STORAGE: u32 = OOC_CHANNEL_STORAGE_BUFFERS;
 
 /// Checks the per-stage binding counts of a kernel whose group 2 has `storage`
 /// storage buffers.
@@ -135,6 +138,9 @@ pub(crate) const READ_ONLY_STORAGE: u32 = 3;
 /// Storage buffers of group 2: the read-only ones and the usage counters
 /// (read-write, binding 6).
 pub(crate) const OOC_STORAGE_BUFFERS: u32 = READ_ONLY_STORAGE + 1;
+/// Storage buffers of group 2 of the multi-channel out-of-core kernel: the
+/// out-of-core ones and the channels' classification.
+pub(crate) const OOC_CHANNEL_STORAGE_BUFFERS: u32 = OOC_STORAGE_BUFFERS + 1;
 /// The binding of the usage counters (`shaders/feedback.wgsl`).
 pub(crate) const USAGE_BINDING: u32 = 6;
 /// The binding of the stop-depth texture (`shaders/feedback.wgsl`).

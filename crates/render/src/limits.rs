@@ -19,7 +19,7 @@ pub fn required_limits() -> wgpu::Limits {
             + group2::STORAGE_TEXTURES,
         max_sampled_textures_per_shader_stage: group2::CHANNEL_SAMPLED_TEXTURES,
         max_samplers_per_shader_stage: group2::SAMPLERS,
-        max_uniform_buffers_per_shader_stage: group2::UNIFORM_BUFFERS,
+        max_uniform_buffers_per_shader_stage: group2::CHANNEL_UNIFORM_BUFFERS,
         max_compute_invocations_per_workgroup: gpu::WORKGROUP[0] * gpu::WORKGROUP[1],
         max_compute_workgroup_size_x: gpu::WORKGROUP[0],
         max_compute_workgroup_size_y: gpu::WORKGROUP[1],

@@ -430,6 +430,9 @@ impl StreamedVolume {
     ) -> Result<StreamedVolume, RenderError> {
         crate::group2::check_ooc_limits(device)?;
         let layout = source.layout().clone();
+        if layout.is_channel_volume() {
+            crate::backend::ooc_channels::check_limits(device)?;
+        }
         let gpu_format = GpuFormat::for_layout(
             &layout,
             encoding::caps(device),

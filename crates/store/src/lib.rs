@@ -52,8 +52,8 @@ pub use procedural::ProceduralSource;
 pub use reader::{NodeRecord, STORE_BATCH, Store, StoreStats, decode_payload, open};
 #[cfg(feature = "remote")]
 pub use url::{
-    is_zarr_url, open_any, open_source_any, open_url, open_zarr_image_url, open_zarr_reader_url,
-    open_zarr_url, read_zarr_channels_url,
+    is_zarr_url, open_any, open_source_any, open_url, open_zarr_channels_url, open_zarr_image_url,
+    open_zarr_reader_url, open_zarr_url, read_zarr_channels_url,
 };
 
 /// The 2x downsampling filter that computes a level-`l-1` voxel from the 2x2x2

@@ -140,6 +140,26 @@ pub fn read_zarr_channels_url(
     Ok(brickray_io::ReadChannels::read(path, readers)?)
 }
 
+/// The channels of the OME-Zarr image at `url` streamed together as one
+/// [`brickray_core::ChannelSource`] (every channel, at most four, or those
+/// `read.channels` selects; each read once per brick), with what its
+/// `omero` metadata says of each: a multi-channel image too large for
+/// memory, drawn out of core.
+pub fn open_zarr_channels_url(
+    url: &str,
+    opts: &brickray_remote::RemoteOptions,
+    read: &brickray_io::ReadOptions,
+    brick: u32,
+    apron: u32,
+) -> Result<(brickray_core::ChannelSource, Vec<brickray_io::ChannelInfo>), StoreError> {
+    Ok(brickray_io::zarr::ZarrBrickSource::open_channels_objects(
+        zarr_objects(url, opts)?,
+        read,
+        brick,
+        apron,
+    )?)
+}
+
 /// Whether the remote `url` names an OME-Zarr image rather than a store:
 /// its path ends in `.zarr` (or `.zarr/`), or, for a name ending in neither
 /// `.zarr` nor `.brs`, the folder it names holds a `zarr.json` or `.zattrs`

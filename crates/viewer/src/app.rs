@@ -13,7 +13,7 @@ mod scripting;
 use scripting::{PendingShot, ScriptRunner};
 
 use crate::script::{Action, LabelAction, ModeName, PredictionChoice, WindowChoice};
-use crate::source::{Input, Loaded, OpenOptions, Opened, Opening};
+use crate::source::{ChannelData, Input, Loaded, OpenOptions, Opened, Opening};
 use crate::stats::Stats;
 use crate::tf::Histogram;
 use crate::tf_widget::TfEditor;
@@ -268,7 +268,11 @@ impl ViewerApp {
             None => VolumeFrame::centered(desc.dims, desc.spacing),
         };
         let ooc = self.ooc;
-        let streamed = matches!(loaded.volume, Opened::Streamed(_));
+        let streamed = match &loaded.volume {
+            Opened::Streamed(_) => true,
+            Opened::Channels(c) => matches!(c.data, ChannelData::Streamed(_)),
+            Opened::InCore(_) => false,
+        };
         let label_source = match &loaded.volume {
             Opened::Streamed(src) if desc.kind.is_labels() => Some(src.clone()),
             _ => None,
@@ -285,7 +289,7 @@ impl ViewerApp {
         let reopened = self.shown.as_ref().is_some_and(|s| s.input == loaded.input);
         let channel_panel = match &loaded.volume {
             Opened::Channels(c) => Some(match self.channels.take() {
-                Some(p) if reopened && p.styles.len() == c.volume.len() => p,
+                Some(p) if reopened && p.styles.len() == c.data.len() => p,
                 _ => channels::ChannelPanel::new(c),
             }),
             _ => None,
@@ -309,8 +313,23 @@ impl ViewerApp {
                 }
                 Opened::Channels(c) => {
                     let styles = channel_styles.as_deref().unwrap_or(&c.styles);
+                    match &c.data {
+                        ChannelData::InCore(vol) => {
+                            for v in std::iter::once(&mut r.renderer).chain(r.slices.iter_mut()) {
+                                v.set_channel_volume(device, queue, vol)?;
+                            }
+                        }
+                        ChannelData::Streamed(src) => {
+                            r.renderer
+                                .set_volume_source(device, queue, src.clone(), ooc)?;
+                            if let Some(v) = r.renderer.streamed_volume().cloned() {
+                                for s in &mut r.slices {
+                                    s.set_streamed_volume(device, &v)?;
+                                }
+                            }
+                        }
+                    }
                     for v in std::iter::once(&mut r.renderer).chain(r.slices.iter_mut()) {
-                        v.set_channel_volume(device, queue, &c.volume)?;
                         v.set_channel_styles(styles)?;
                     }
                 }

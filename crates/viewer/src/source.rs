@@ -1,13 +1,17 @@
 //! Opening volumes in the background: raw+JSON and NRRD files (loaded whole
 //! when small, built into a brick store with progress when large), brick
-//! stores, and procedural volumes; a local input of several channels is
-//! read whole with every channel (`brickray::io::read_channels`, drawn in
-//! core). GPU-free: the result is handed to the renderer by the app.
+//! stores, and procedural volumes; an input of several channels is read
+//! whole with every channel (`brickray::io::read_channels`, drawn in core)
+//! or, too large for memory, streamed (an OME-Zarr image's channels as they
+//! are, other files built into one store per channel). GPU-free: the result
+//! is handed to the renderer by the app.
 
 use crate::tf::Histogram;
 use brickray::core::channels::MAX_CHANNELS;
 use brickray::io::{ChannelInfo, IoError, ReadOptions, VolumeReader};
-use brickray::{BrickSource, ChannelStyle, ChannelVolume, NodeKey, Volume, VolumeDesc};
+use brickray::{
+    BrickSource, ChannelSource, ChannelStyle, ChannelVolume, NodeKey, Volume, VolumeDesc,
+};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -89,16 +93,44 @@ pub(crate) enum Opened {
     InCore(Volume),
     /// Streamed out of core from a brick source.
     Streamed(Arc<dyn BrickSource>),
-    /// 2 to 4 channels of one grid (`brickray::io::read_channels`), in core.
+    /// 2 to 4 channels of one grid: read whole (`brickray::io::read_channels`)
+    /// or streamed as one `ChannelSource`.
     Channels(Box<OpenedChannels>),
 }
 
-/// A multi-channel input read whole: its channels, what the file says of
-/// each and the file's default style of each (`ReadChannels::styles`).
-#[derive(Debug)]
+/// A multi-channel volume's data: in core, or streamed.
+pub(crate) enum ChannelData {
+    /// Read whole, drawn from one packed 3D texture.
+    InCore(ChannelVolume),
+    /// Too large for memory: the channels' sources (one per channel: an
+    /// OME-Zarr image's channels, or one brick store per channel) streamed
+    /// together out of core.
+    Streamed(Arc<ChannelSource>),
+}
+
+impl ChannelData {
+    /// Channels.
+    pub(crate) fn len(&self) -> usize {
+        match self {
+            ChannelData::InCore(v) => v.len(),
+            ChannelData::Streamed(s) => s.len(),
+        }
+    }
+
+    /// Each channel's raw value range.
+    pub(crate) fn ranges(&self) -> Vec<[f32; 2]> {
+        match self {
+            ChannelData::InCore(v) => v.channels().iter().map(|c| c.desc().value_range).collect(),
+            ChannelData::Streamed(s) => s.layout().channel_ranges().to_vec(),
+        }
+    }
+}
+
+/// A multi-channel input: its channels, what the file says of each and the
+/// file's default style of each (`ReadChannels::styles`).
 pub(crate) struct OpenedChannels {
     /// The channels (one grid and dtype; each its own value range).
-    pub(crate) volume: ChannelVolume,
+    pub(crate) data: ChannelData,
     /// What the file says of each channel (label, colour, window, active).
     pub(crate) info: Vec<ChannelInfo>,
     /// The file's default classification of each channel.
@@ -114,8 +146,8 @@ impl std::fmt::Debug for Opened {
             Opened::Streamed(s) => f.debug_tuple("Streamed").field(s.layout()).finish(),
             Opened::Channels(c) => f
                 .debug_tuple("Channels")
-                .field(&c.volume.len())
-                .field(c.volume.desc())
+                .field(&c.data.len())
+                .field(&c.data.ranges())
                 .finish(),
         }
     }
@@ -455,10 +487,10 @@ fn probe_channels(path: &Path, opts: &OpenOptions) -> Result<Probe, OpenError> {
     Ok(Probe::Channels(opened, too_many))
 }
 
-/// The channels of the OME-Zarr image at `url` read whole
-/// (`read_zarr_channels_url`) at the finest level that fits in core (the
-/// first [`MAX_CHANNELS`] of more), or `None` for an image of one channel,
-/// or one no level of which fits (it streams its first channel).
+/// The channels of the OME-Zarr image at `url` (the first [`MAX_CHANNELS`]
+/// of more) read whole (`read_zarr_channels_url`) at the finest level that
+/// fits in core, or streamed when none fits; `None` for an image of one
+/// channel.
 #[cfg(feature = "remote")]
 fn url_channels(
     input: &Input,
@@ -473,16 +505,32 @@ fn url_channels(
         return Ok(None);
     }
     let n = count.min(MAX_CHANNELS as u64);
+    let too_many = (count > n).then_some(count);
     let Some(level) = image.level_fitting(n, opts.in_core_max_bytes, opts.max_3d_side as u64)
     else {
-        return Ok(None);
+        // No level fits in core: every channel streams.
+        progress.set_stage(format!("opening {n} channels to stream"));
+        let d = brickray::store::BuildOptions::default();
+        let read = ReadOptions::default().channels(Some((0..n).collect()));
+        let (src, info) = brickray::store::open_zarr_channels_url(url, o, &read, d.brick, d.apron)?;
+        let placement = None;
+        let indices: Vec<u64> = (0..n).collect();
+        return streamed_channels(
+            input,
+            Arc::new(src),
+            info,
+            &indices,
+            too_many,
+            placement,
+            format!("streamed from the OME-Zarr image {url}"),
+        )
+        .map(Some);
     };
     progress.set_stage(format!("reading {n} channels of level {level}"));
     let read = ReadOptions::default()
         .level(Some(level))
         .channels(Some((0..n).collect()));
     let channels = brickray::store::read_zarr_channels_url(url, o, &read)?;
-    let too_many = (count > n).then_some(count);
     let level_note = (level > 0).then(|| format!("level {level} (the finest that fits in core)"));
     Ok(Some(loaded_channels(input, channels, too_many, level_note)))
 }
@@ -520,21 +568,149 @@ fn read_channels(
         None
     };
     if let Some(why) = too_large {
-        return Err(OpenError::BadInput(format!(
-            "{}: {n} channels of {:?} {} ({:.1} MiB) are too large to draw: multi-channel \
-             volumes are drawn in core, in one 3D texture, and this one is {why} \
-             (channels are not streamed yet)",
-            path.display(),
-            d.dims,
-            d.dtype.name(),
-            mib(bytes)
-        )));
+        return stream_channels(input, path, opts, progress, opened, too_many, &why);
     }
     progress.total.store(bytes, Ordering::Relaxed);
     progress.set_stage(format!("reading {n} channels"));
     let read = brickray::io::ReadChannels::read(path, opened)?;
     progress.done.store(bytes, Ordering::Relaxed);
     Ok(loaded_channels(input, read, too_many, None))
+}
+
+/// Streams the channels `opened` holds (too large for memory: `why`): an
+/// OME-Zarr image's channels as the image stores them; any other file's
+/// channels built into one brick store each (`<stem>.c<index>.brs` in the
+/// store folder, reused while newer than the file), read together as one
+/// `ChannelSource` with the file's default styles.
+fn stream_channels(
+    input: &Input,
+    path: &Path,
+    opts: &OpenOptions,
+    progress: &Progress,
+    mut opened: brickray::io::ChannelReaders,
+    too_many: Option<u64>,
+    why: &str,
+) -> Result<Loaded, OpenError> {
+    let n = opened.readers.len();
+    let first = opened
+        .readers
+        .first()
+        .ok_or_else(|| OpenError::BadInput(format!("{}: no channel", path.display())))?;
+    let placement = first.placement();
+    let warned = warning_note(&first.warnings());
+    let zarr = first.format() == "OME-Zarr";
+    let d = brickray::store::BuildOptions::default();
+    let (source, how) = if zarr {
+        progress.set_stage(format!("opening {n} channels of the OME-Zarr image"));
+        let read = ReadOptions::default().channels(Some(opened.indices.clone()));
+        let (src, _) =
+            brickray::io::zarr::ZarrBrickSource::open_channels(path, &read, d.brick, d.apron)?;
+        (src, "streamed from the OME-Zarr image".to_string())
+    } else {
+        let stem = path
+            .file_stem()
+            .and_then(|s| s.to_str())
+            .unwrap_or("volume")
+            .to_string();
+        std::fs::create_dir_all(&opts.store_dir)
+            .map_err(|e| OpenError::BadInput(format!("{}: {e}", opts.store_dir.display())))?;
+        let mut parts: Vec<Arc<dyn BrickSource>> = Vec::with_capacity(n);
+        let mut built = 0;
+        for (reader, c) in opened.readers.iter_mut().zip(&opened.indices) {
+            let store = opts
+                .store_dir
+                .join(format!("{stem}.c{c}.{STORE_EXTENSION}"));
+            if !newer(&store, &reader.input_files()) {
+                progress.set_stage(format!("building the brick store {}", store.display()));
+                progress
+                    .total
+                    .store(reader.desc().byte_len(), Ordering::Relaxed);
+                progress.done.store(0, Ordering::Relaxed);
+                let mut counting = Counting {
+                    inner: reader.as_mut(),
+                    progress,
+                };
+                brickray::store::build(&mut counting, &store, &d)?;
+                built += 1;
+            }
+            parts.push(Arc::new(open_store_at(&store)?));
+        }
+        let src = ChannelSource::new(parts)
+            .map_err(|e| OpenError::BadInput(format!("{}: {e}", path.display())))?;
+        let how = if built > 0 { "built" } else { "reused" };
+        (
+            src,
+            format!(
+                "streamed from {how} brick stores {}.c*.{STORE_EXTENSION} in {}",
+                stem,
+                opts.store_dir.display()
+            ),
+        )
+    };
+    streamed_channels(
+        input,
+        Arc::new(source),
+        opened.info,
+        &opened.indices,
+        too_many,
+        placement,
+        format!("{how} ({why}){warned}"),
+    )
+}
+
+/// A streamed channel source with the file's default styles (`info`) and
+/// each channel's histogram of a coarse level.
+fn streamed_channels(
+    input: &Input,
+    source: Arc<ChannelSource>,
+    info: Vec<ChannelInfo>,
+    indices: &[u64],
+    too_many: Option<u64>,
+    placement: Option<brickray::io::Placement>,
+    how: String,
+) -> Result<Loaded, OpenError> {
+    let n = source.len();
+    let ranges = source.layout().channel_ranges().to_vec();
+    let styles = info
+        .iter()
+        .zip(&ranges)
+        .enumerate()
+        .map(|(i, (info, r))| info.style(i, *r))
+        .collect();
+    let histograms = (0..n)
+        .map(|c| match source.part(c) {
+            Some(p) => source_histogram(&**p),
+            None => Ok(Histogram::new(HISTOGRAM_BINS)),
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    let desc = source.layout().volume.clone();
+    let names: Vec<String> = info
+        .iter()
+        .zip(indices)
+        .map(|(info, c)| info.label.clone().unwrap_or_else(|| format!("channel {c}")))
+        .collect();
+    let more = too_many
+        .map(|count| format!("; the file has {count} channels, the first {n} are shown"))
+        .unwrap_or_default();
+    let note = format!(
+        "{n} channels ({}) of {:?} {} {how}{more}",
+        names.join(", "),
+        desc.dims,
+        desc.dtype.name(),
+    );
+    Ok(Loaded {
+        input: input.clone(),
+        histogram: histograms.first().cloned().unwrap_or_default(),
+        desc,
+        placement,
+        note,
+        volume: Opened::Channels(Box::new(OpenedChannels {
+            info,
+            styles,
+            histograms,
+            data: ChannelData::Streamed(source),
+        })),
+    })
 }
 
 /// A volume of channels read whole, with the file's default styles and
@@ -591,7 +767,7 @@ fn loaded_channels(
             info: read.info,
             styles,
             histograms,
-            volume: read.volume,
+            data: ChannelData::InCore(read.volume),
         })),
     }
 }

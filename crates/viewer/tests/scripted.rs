@@ -85,8 +85,15 @@ fn display_available() -> bool {
 
 /// Runs the viewer with `script`, killing it after `limit`.
 fn run_viewer(script: &Path, limit: Duration) -> std::process::Output {
+    run_viewer_with(script, limit, &[])
+}
+
+/// [`run_viewer`] with more command-line arguments.
+fn run_viewer_with(script: &Path, limit: Duration, args: &[&str]) -> std::process::Output {
     let mut child = Command::new(env!("CARGO_BIN_EXE_brickray-viewer"))
-        .args(["--window", "640x400", "--script"])
+        .args(["--window", "640x400"])
+        .args(args)
+        .arg("--script")
         .arg(script)
         // As on a bare X server: the viewer makes its own runtime directory
         // (no library complains of a missing one; `run_script` checks).
@@ -109,9 +116,14 @@ fn run_viewer(script: &Path, limit: Duration) -> std::process::Output {
 /// Writes `script` to `dir/script.txt`, runs the viewer on it (killed after
 /// `limit`) and asserts that every action succeeded.
 fn run_script(dir: &Path, script: &str, limit: Duration) {
+    run_script_with(dir, script, limit, &[]);
+}
+
+/// [`run_script`] with more command-line arguments.
+fn run_script_with(dir: &Path, script: &str, limit: Duration, args: &[&str]) {
     let path = dir.join("script.txt");
     std::fs::write(&path, script).expect("write the script");
-    let run = run_viewer(&path, limit);
+    let run = run_viewer_with(&path, limit, args);
     assert!(
         run.status.success(),
         "the viewer failed ({:?}): {}",

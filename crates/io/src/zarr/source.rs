@@ -102,6 +102,66 @@ impl ZarrBrickSource {
         ZarrBrickSource::with(zarr, opts, brick, apron, value_range)
     }
 
+    /// The channels of the image at `root` streamed together as one
+    /// [`ChannelSource`](brickray_core::ChannelSource) (each channel a
+    /// source of its own, read once per brick; every channel, at most
+    /// [`MAX_CHANNELS`](brickray_core::MAX_CHANNELS), or those
+    /// `opts.channels` selects, as [`crate::select_channels`] says), with
+    /// what the image's `omero` metadata says of each. The time point is
+    /// `opts`'; the level is ignored (every level is used).
+    pub fn open_channels(
+        root: &Path,
+        opts: &ReadOptions,
+        brick: u32,
+        apron: u32,
+    ) -> Result<(brickray_core::ChannelSource, Vec<crate::ChannelInfo>), IoError> {
+        let zarr = OmeZarr::open(root)?;
+        ZarrBrickSource::channels_with(root, zarr, opts, |o| {
+            ZarrBrickSource::open(root, o, brick, apron, None)
+        })
+    }
+
+    /// [`ZarrBrickSource::open_channels`] of the image whose objects
+    /// `reader` reads by key (see [`ZarrBrickSource::open_objects`]).
+    pub fn open_channels_objects(
+        reader: Arc<dyn ObjectReader>,
+        opts: &ReadOptions,
+        brick: u32,
+        apron: u32,
+    ) -> Result<(brickray_core::ChannelSource, Vec<crate::ChannelInfo>), IoError> {
+        let root = PathBuf::from(reader.location());
+        let zarr = OmeZarr::open_objects(reader.clone())?;
+        ZarrBrickSource::channels_with(&root, zarr, opts, |o| {
+            ZarrBrickSource::open_objects(reader.clone(), o, brick, apron, None)
+        })
+    }
+
+    /// The selected channels of `zarr`, each opened by `open` with its
+    /// channel chosen, as one channel source.
+    fn channels_with(
+        root: &Path,
+        zarr: OmeZarr,
+        opts: &ReadOptions,
+        open: impl Fn(&ReadOptions) -> Result<ZarrBrickSource, IoError>,
+    ) -> Result<(brickray_core::ChannelSource, Vec<crate::ChannelInfo>), IoError> {
+        zarr.check_choice(&opts.clone().channel(None))?;
+        let indices = crate::select_channels(root, zarr.channel_count(), opts)?;
+        let info = indices.iter().map(|&c| zarr.channel_info(c)).collect();
+        let parts = indices
+            .iter()
+            .map(|&c| {
+                let o = opts.clone().channels(None).channel(Some(c));
+                Ok(Arc::new(open(&o)?) as Arc<dyn brickray_core::BrickSource>)
+            })
+            .collect::<Result<Vec<_>, IoError>>()?;
+        let source =
+            brickray_core::ChannelSource::new(parts).map_err(|source| IoError::Channels {
+                path: root.to_owned(),
+                source,
+            })?;
+        Ok((source, info))
+    }
+
     fn with(
         zarr: OmeZarr,
         opts: &ReadOptions,

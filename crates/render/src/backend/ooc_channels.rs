@@ -8,7 +8,7 @@
 use super::channels::ClassTables;
 use crate::error::RenderError;
 use crate::gpu::{self, Uniform};
-use crate::group2::{OOC_STORAGE_BUFFERS, check_stage_limits};
+use crate::group2::{CHANNEL_UNIFORM_BUFFERS, OOC_CHANNEL_STORAGE_BUFFERS, check_stage_limits};
 use brickray_cache::GpuFormat;
 use brickray_core::channels::{self, ChannelStyle};
 
@@ -74,7 +74,7 @@ pub(crate) fn layout_entries() -> Vec<wgpu::BindGroupLayoutEntry> {
 /// The per-stage limits this kernel needs beyond the out-of-core kernel's:
 /// one more storage buffer, uniform and sampled texture.
 pub(crate) fn check_limits(device: &wgpu::Device) -> Result<(), RenderError> {
-    check_stage_limits(device, OOC_STORAGE_BUFFERS + 1)?;
+    check_stage_limits(device, OOC_CHANNEL_STORAGE_BUFFERS)?;
     let l = device.limits();
     gpu::need(
         "max_sampled_textures_per_shader_stage",
@@ -83,7 +83,7 @@ pub(crate) fn check_limits(device: &wgpu::Device) -> Result<(), RenderError> {
     )?;
     gpu::need(
         "max_uniform_buffers_per_shader_stage",
-        (crate::group2::UNIFORM_BUFFERS + 1) as u64,
+        CHANNEL_UNIFORM_BUFFERS as u64,
         l.max_uniform_buffers_per_shader_stage as u64,
     )
 }

@@ -2,8 +2,8 @@
 //! membrane, a protein of interest, each in its own colour): the channel
 //! panel (per channel its label, colour, window in the channel's raw units,
 //! opacity, visibility and isovalue) and the script's `channel N ...` lines.
-//! The channels are drawn in core by the renderer
-//! (`VolumeRenderer::set_channel_volume`), each through its own
+//! The channels are drawn in core (`VolumeRenderer::set_channel_volume`) or
+//! streamed (`set_volume_source` with a `ChannelSource`), each through its own
 //! `ChannelStyle`; the blend is the render mode (DVR: additive
 //! emission-absorption mix, MIP: each channel's maximum, isosurface: each
 //! channel's surface at its own isovalue).
@@ -85,13 +85,12 @@ impl ChannelPanel {
     /// (`ReadChannels::styles`: its colours, windows and active flags).
     pub(super) fn new(c: &OpenedChannels) -> ChannelPanel {
         let controls: Vec<ChannelControl> = c
-            .volume
-            .channels()
-            .iter()
+            .data
+            .ranges()
+            .into_iter()
             .enumerate()
-            .map(|(i, v)| {
+            .map(|(i, range)| {
                 let info = c.info.get(i).cloned().unwrap_or_default();
-                let range = v.desc().value_range;
                 ChannelControl {
                     label: info.label.unwrap_or_else(|| format!("channel {i}")),
                     color: info
@@ -367,7 +366,7 @@ mod tests {
             .map(|(i, (f, v))| f.style(i, v.desc().value_range))
             .collect();
         OpenedChannels {
-            volume,
+            data: crate::source::ChannelData::InCore(volume),
             info,
             styles,
             histograms: vec![Histogram::new(4), Histogram::new(4)],

@@ -326,21 +326,84 @@ fn a_multi_channel_ome_zarr_url_opens_with_every_channel() {
     let (Opened::Channels(r), Opened::Channels(l)) = (&remote.volume, &local.volume) else {
         panic!("not opened as channels: {} / {}", remote.note, local.note)
     };
-    assert_eq!(r.volume, l.volume);
+    assert_eq!(whole(r), whole(l));
     assert_eq!(r.styles, l.styles);
-    assert_eq!(r.volume.len(), 3);
+    assert_eq!(r.data.len(), 3);
     assert!(remote.note.contains("3 channels"), "{}", remote.note);
-    // No level fits a budget of one byte: the first channel streams.
+    // No level fits a budget of one byte: every channel streams, with the
+    // same styles.
     let tight = OpenOptions {
         in_core_max_bytes: 1,
         ..in_core(dir.path())
     };
     let streamed = open(&Input::parse(&url).unwrap(), &tight, &p).unwrap();
+    let Opened::Channels(s) = &streamed.volume else {
+        panic!("not streamed channels: {}", streamed.note)
+    };
     assert!(
-        matches!(streamed.volume, Opened::Streamed(_)),
+        matches!(s.data, ChannelData::Streamed(_)),
         "{}",
         streamed.note
     );
+    assert_eq!(s.styles, l.styles);
+}
+
+/// The channels read whole (panics when they were streamed).
+fn whole(c: &OpenedChannels) -> &brickray::ChannelVolume {
+    match &c.data {
+        ChannelData::InCore(v) => v,
+        ChannelData::Streamed(_) => panic!("streamed, not read whole"),
+    }
+}
+
+/// A multi-channel input too large for the in-core budget streams: a raw
+/// file's channels built into one store each (reused when opened again), an
+/// OME-Zarr image's channels as they are; the file's styles either way,
+/// each channel's value range and a histogram of each.
+#[test]
+fn large_multi_channel_inputs_stream_every_channel() {
+    let dir = tempfile::tempdir().unwrap();
+    let json = write_channels(dir.path(), 3);
+    let read = brickray::io::read_channels(&json, &ReadOptions::default()).unwrap();
+    let tight = OpenOptions {
+        in_core_max_bytes: 1,
+        ..in_core(dir.path())
+    };
+    let p = Progress::default();
+    let ranges: Vec<[f32; 2]> = read
+        .volume
+        .channels()
+        .iter()
+        .map(|v| v.desc().value_range)
+        .collect();
+    let check = |l: &Loaded| {
+        let Opened::Channels(c) = &l.volume else {
+            panic!("not channels: {}", l.note)
+        };
+        let ChannelData::Streamed(src) = &c.data else {
+            panic!("not streamed: {}", l.note)
+        };
+        assert_eq!(src.len(), 3);
+        assert_eq!(src.layout().channel_ranges(), ranges.as_slice());
+        assert_eq!(c.styles, read.styles());
+        assert_eq!(c.histograms.len(), 3);
+        assert!(c.histograms.iter().all(|h| h.bins.iter().sum::<u64>() > 0));
+        assert_eq!(l.desc.dims, [8, 6, 4]);
+    };
+    let l = open(&Input::Path(json.clone()), &tight, &p).unwrap();
+    check(&l);
+    assert!(l.note.contains("built brick stores"), "{}", l.note);
+    for c in 0..3 {
+        assert!(dir.path().join(format!("stores/c.c{c}.brs")).exists());
+    }
+    let again = open(&Input::Path(json), &tight, &p).unwrap();
+    check(&again);
+    assert!(again.note.contains("reused brick stores"), "{}", again.note);
+    let root = dir.path().join("c.ome.zarr");
+    brickray::io::zarr::write_ome_zarr_channels(&root, &read.volume, &read.info).unwrap();
+    let z = open(&Input::Path(root), &tight, &p).unwrap();
+    check(&z);
+    assert!(z.note.contains("OME-Zarr"), "{}", z.note);
 }
 
 #[test]
@@ -412,7 +475,7 @@ fn multi_channel_inputs_open_with_every_channel_and_the_files_styles() {
         panic!("not channels: {:?}", l.volume);
     };
     let read = brickray::io::read_channels(&json, &ReadOptions::default()).unwrap();
-    assert_eq!(c.volume, read.volume);
+    assert_eq!(whole(c), &read.volume);
     assert_eq!(c.styles, read.styles());
     assert_eq!(c.histograms.len(), 3);
     assert_eq!(l.desc.dims, [8, 6, 4]);
@@ -433,7 +496,7 @@ fn multi_channel_inputs_open_with_every_channel_and_the_files_styles() {
     let Opened::Channels(c) = &l.volume else {
         panic!("not channels: {:?}", l.volume);
     };
-    assert_eq!(c.volume.len(), 4);
+    assert_eq!(c.data.len(), 4);
     assert!(l.note.contains("has 5 channels"), "{}", l.note);
     // A label map (`--labels`) is never read as channels.
     let labels = OpenOptions {
@@ -446,9 +509,9 @@ fn multi_channel_inputs_open_with_every_channel_and_the_files_styles() {
 }
 
 /// A multi-channel volume too large for one texture (or the in-core limit)
-/// is a clear error, not a crash.
+/// streams, and its note says why.
 #[test]
-fn a_multi_channel_volume_too_large_for_one_texture_says_so() {
+fn a_multi_channel_volume_too_large_for_one_texture_streams() {
     let dir = tempfile::tempdir().unwrap();
     let json = write_channels(dir.path(), 2);
     for (opts, why) in [
@@ -467,9 +530,15 @@ fn a_multi_channel_volume_too_large_for_one_texture_says_so() {
             "--in-core-max",
         ),
     ] {
-        let e = open(&Input::Path(json.clone()), &opts, &Progress::default())
-            .unwrap_err()
-            .to_string();
-        assert!(e.contains("too large") && e.contains(why), "{e}");
+        let l = open(&Input::Path(json.clone()), &opts, &Progress::default()).unwrap();
+        let Opened::Channels(c) = &l.volume else {
+            panic!("not channels: {}", l.note)
+        };
+        assert!(matches!(c.data, ChannelData::Streamed(_)), "{}", l.note);
+        assert!(
+            l.note.contains("streamed") && l.note.contains(why),
+            "{}",
+            l.note
+        );
     }
 }

@@ -4,7 +4,9 @@
 //! library's own rendering of that view (`set_channel_volume` with
 //! `read_channels(..).styles()`); `channel 1 visible off` gives the
 //! library's image with channel 1 hidden; in the four-view layout each
-//! slice is the library's slice of the channels.
+//! slice is the library's slice of the channels. With `--in-core-max 0` the
+//! same file streams (every channel, as one `ChannelSource`) and its
+//! screenshot is the library's in-core image of the view.
 
 use super::*;
 use brickray::io::{ChannelInfo, ReadOptions};
@@ -246,4 +248,61 @@ fn a_two_channel_ome_zarr_is_drawn_with_its_omero_styles() {
         eprintln!("channel slice {i} vs library: {cmp}");
     }
     assert!(shown > 100, "channel 0 shows in {shown} slice pixels");
+}
+
+/// The two-channel OME-Zarr streamed (`--in-core-max 0`): every channel
+/// streams with the file's styles, and the converged screenshot is the
+/// library's in-core image of that view (the streamed cut at the finest
+/// level the view needs draws the same samples).
+#[test]
+#[cfg_attr(
+    no_display,
+    ignore = "needs an X server (DISPLAY unset when the tests were built; scripts/test.sh starts Xvfb)"
+)]
+fn a_two_channel_ome_zarr_streams_with_its_omero_styles() {
+    let Some(dir) = windowed_test_dir() else {
+        return;
+    };
+    let zarr = dir.path().join("two.ome.zarr");
+    write_two_channels(&zarr);
+    let out = dir.path().join("streamed.png");
+    let script = format!(
+        "open {zarr}\nbackground 0 0 0\noverlays off\ncamera orbit 20 15 0.9\n\
+         wait converged\nwait 2\nscreenshot {shot}\nquit\n",
+        zarr = zarr.display(),
+        shot = out.display(),
+    );
+    run_script_with(
+        dir.path(),
+        &script,
+        Duration::from_secs(120),
+        &["--in-core-max", "0"],
+    );
+    let read = brickray::io::read_channels(&zarr, &ReadOptions::default()).expect("read_channels");
+    let styles = read.styles();
+    let d = read.volume.desc();
+    let frame = VolumeFrame::centered(d.dims, d.spacing);
+    let (shot, w, h) = read_png(&out);
+    let (camera, _, _) = sidecar(&out);
+    let side = sidecar_json(&out);
+    assert!(
+        side["working_set_bricks"].as_u64().is_some_and(|n| n > 0),
+        "not streamed: {side}"
+    );
+    let lib = library_channels(&read.volume, &styles, frame, camera, w, h);
+    let (red, azure) = (pixels_of(&shot, 0), pixels_of(&shot, 1));
+    assert!(
+        red > 200 && azure > 200,
+        "both channels' colours show: {red} orange-red, {azure} azure pixels"
+    );
+    let cmp = brickray_reference::assert_close(
+        "viewer-channels-streamed",
+        &shot,
+        &lib,
+        w,
+        h,
+        MIN_PSNR_DB,
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    eprintln!("two streamed channels vs library in core: {cmp}");
 }
