@@ -313,6 +313,18 @@ pub fn read_channels(path: impl AsRef<Path>, opts: &ReadOptions) -> Result<ReadC
     Registry::global().read_channels(path.as_ref(), opts)
 }
 
+/// Opens a reader of each selected channel of `path` without reading them
+/// (what [`read_channels`] reads; a store builder builds one store of
+/// each): the channels `opts.channels` selects, else every channel (more
+/// than [`MAX_CHANNELS`] is [`IoError::TooManyChannels`]).
+pub fn open_channels(
+    path: impl AsRef<Path>,
+    opts: &ReadOptions,
+) -> Result<ChannelReaders, IoError> {
+    let path = path.as_ref();
+    Registry::global().find(path)?.open_channels(path, opts)
+}
+
 /// Opens the single-channel reader of each selected channel (`count` 1):
 /// the [`Format::open_channels`](crate::Format::open_channels) of formats
 /// without channels.

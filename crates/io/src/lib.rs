@@ -62,7 +62,7 @@ mod scan;
 
 pub use channels::{
     CHANNEL_PALETTE, ChannelInfo, ChannelReaders, DEFAULT_CHANNEL_OPACITY, ReadChannels,
-    read_channels, select_channels,
+    open_channels, read_channels, select_channels,
 };
 pub use error::IoError;
 pub use files::{FileKind, regular_file_metadata};

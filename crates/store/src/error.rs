@@ -278,6 +278,15 @@ pub enum StoreError {
         /// One past its last byte.
         end: u64,
     },
+    /// A channel set (`NAME.channels.json`) that cannot be read or whose
+    /// stores do not make one multi-channel volume.
+    #[error("{path}: channel set: {reason}")]
+    ChannelSet {
+        /// The channel set's file.
+        path: PathBuf,
+        /// What is wrong.
+        reason: String,
+    },
     /// Two data nodes' payloads overlap (one node pointed at another's bytes).
     #[error("{path}: node {key:?}'s payload overlaps node {other:?}'s")]
     PayloadOverlap {

@@ -14,6 +14,9 @@
 //!   opens from a file, from memory, or (feature `remote`) from S3, GCS,
 //!   Azure or HTTP(S) (`open_url`); OME-Zarr images stream from the same
 //!   places as brick sources (`open_zarr_url`, `open_source_any`);
+//! * channel sets ([`build_channels`], [`open_channels`]): a multi-channel
+//!   volume as one store per channel recorded in a `NAME.channels.json`,
+//!   opened as one [`brickray_core::ChannelSource`];
 //! * [`ProceduralSource`]: a virtual volume of up to `65536^3` voxels (and more)
 //!   whose bricks are computed on demand, with exactly filtered inner nodes;
 //!   implements [`BrickSource`].
@@ -25,6 +28,7 @@
 
 mod build;
 mod bulb;
+mod channels;
 mod convert;
 mod error;
 mod errsec;
@@ -44,6 +48,10 @@ pub use brickray_core::{MemRangeReader, RangeRead, RangeReader};
 pub use brickray_remote as remote;
 pub use build::{BuildOptions, BuildProgress, BuildReport, build, build_file, check_output};
 pub use bulb::MandelbulbSource;
+pub use channels::{
+    CHANNEL_SET_SUFFIX, ChannelSet, build_channels, channel_store_path, is_channel_set,
+    open_channels, write_channel_set,
+};
 pub use convert::{ConvertReport, convert, convert_with_progress};
 pub use error::{Mismatch, StoreError};
 pub use errsec::ERROR_ENTRY_LEN;

@@ -520,3 +520,60 @@ fn labels_build_and_info_into_a_closed_pipe() {
     assert!(!err.contains("panicked"), "{err}");
     assert_eq!(done.status.code(), Some(141), "{err}");
 }
+
+/// `build` into `NAME.channels.json` builds one store per channel (those
+/// `--channels` lists) and the set; `info` on the set describes each.
+#[test]
+fn a_channel_set_builds_and_describes_its_channels() {
+    let dir = tempfile::tempdir().unwrap();
+    let dims = [24u32, 20, 8];
+    let mut bytes = Vec::new();
+    for c in 0..3u8 {
+        let mut v = test_volume(dims, DType::U8, 5 + c as u64);
+        for b in &mut v {
+            *b = b.wrapping_add(40 * c);
+        }
+        bytes.extend(v);
+    }
+    std::fs::write(dir.path().join("c.raw"), bytes).unwrap();
+    std::fs::write(
+        dir.path().join("c.json"),
+        r#"{"dims": [24, 20, 8], "dtype": "u8", "spacing": [1, 1, 1], "channels": 3}"#,
+    )
+    .unwrap();
+    let exe = env!("CARGO_BIN_EXE_brickray-store");
+    let set = dir.path().join("cells.channels.json");
+    let st = Command::new(exe)
+        .args(["build", "--brick", "8", "--quiet", "--channels", "0,2"])
+        .arg(dir.path().join("c.json"))
+        .arg(&set)
+        .output()
+        .unwrap();
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
+    let out = String::from_utf8_lossy(&st.stdout);
+    assert!(out.contains("2 channels"), "{out}");
+    assert!(dir.path().join("cells.c0.brs").exists());
+    assert!(dir.path().join("cells.c2.brs").exists());
+    assert!(!dir.path().join("cells.c1.brs").exists());
+    let opened = brickray_store::open_channels(&set).unwrap();
+    assert_eq!(opened.source.len(), 2);
+    let info = Command::new(exe).arg("info").arg(&set).output().unwrap();
+    assert!(
+        info.status.success(),
+        "{}",
+        String::from_utf8_lossy(&info.stderr)
+    );
+    let text = String::from_utf8_lossy(&info.stdout);
+    assert!(
+        text.contains("2 channels") && text.contains("channel 1"),
+        "{text}"
+    );
+    assert!(
+        text.contains("cells.c0.brs") && text.contains("cells.c2.brs"),
+        "{text}"
+    );
+}

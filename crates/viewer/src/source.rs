@@ -311,6 +311,21 @@ pub(crate) fn open(
                 progress.set_stage("opening the brick store");
                 return open_store(input, path, "brick store".into());
             }
+            if brickray::store::is_channel_set(path) {
+                progress.set_stage("opening the channel set");
+                let set = brickray::store::open_channels(path)?;
+                let indices: Vec<u64> = (0..set.info.len() as u64).collect();
+                let placement = brickray::store::open(&set.stores[0])?.placement();
+                return streamed_channels(
+                    input,
+                    Arc::new(set.source),
+                    set.info,
+                    &indices,
+                    None,
+                    placement,
+                    format!("streamed from the channel set {}", path.display()),
+                );
+            }
             // An OME-Zarr image over the network streams as it is (no store
             // is built from it).
             #[cfg(feature = "remote")]
@@ -614,12 +629,14 @@ fn stream_channels(
             .to_string();
         std::fs::create_dir_all(&opts.store_dir)
             .map_err(|e| OpenError::BadInput(format!("{}: {e}", opts.store_dir.display())))?;
+        let set = opts
+            .store_dir
+            .join(format!("{stem}{}", brickray::store::CHANNEL_SET_SUFFIX));
         let mut parts: Vec<Arc<dyn BrickSource>> = Vec::with_capacity(n);
+        let mut stores = Vec::with_capacity(n);
         let mut built = 0;
-        for (reader, c) in opened.readers.iter_mut().zip(&opened.indices) {
-            let store = opts
-                .store_dir
-                .join(format!("{stem}.c{c}.{STORE_EXTENSION}"));
+        for (reader, &c) in opened.readers.iter_mut().zip(&opened.indices) {
+            let store = brickray::store::channel_store_path(&set, c);
             if !newer(&store, &reader.input_files()) {
                 progress.set_stage(format!("building the brick store {}", store.display()));
                 progress
@@ -634,16 +651,19 @@ fn stream_channels(
                 built += 1;
             }
             parts.push(Arc::new(open_store_at(&store)?));
+            stores.push(store);
         }
+        // The set records the stores with the file's description of each
+        // channel (`brickray-viewer NAME.channels.json` opens it again).
+        brickray::store::write_channel_set(&set, &stores, &opened.info)?;
         let src = ChannelSource::new(parts)
             .map_err(|e| OpenError::BadInput(format!("{}: {e}", path.display())))?;
         let how = if built > 0 { "built" } else { "reused" };
         (
             src,
             format!(
-                "streamed from {how} brick stores {}.c*.{STORE_EXTENSION} in {}",
-                stem,
-                opts.store_dir.display()
+                "streamed from {how} brick stores of the channel set {}",
+                set.display()
             ),
         )
     };

@@ -44,7 +44,7 @@ struct SetupReads {
 enum SetupRead {
     /// A read begins (what a deadline that passes names).
     Start(FetchKind, NodeKey),
-    Meta(NodeKey, Result<NodeInfo, LoadError>),
+    Meta(NodeKey, Box<Result<NodeInfo, LoadError>>),
     Brick(Result<PreparedBrick, LoadError>),
 }
 
@@ -64,7 +64,7 @@ impl SetupReads {
                 }
                 let r = fetch_meta(source, key);
                 let info = r.as_ref().ok().copied();
-                match (tx.send(SetupRead::Meta(key, r)), info) {
+                match (tx.send(SetupRead::Meta(key, Box::new(r))), info) {
                     (Ok(()), Some(info)) => info,
                     _ => return,
                 }
@@ -98,7 +98,7 @@ impl SetupReads {
             return;
         }
         for (c, r) in fetch_metas(source, &self.children) {
-            if tx.send(SetupRead::Meta(c, r)).is_err() {
+            if tx.send(SetupRead::Meta(c, Box::new(r))).is_err() {
                 return;
             }
         }
@@ -236,18 +236,20 @@ impl BrickManager {
             };
             match read {
                 SetupRead::Start(kind, k) => reading = (kind, k),
-                SetupRead::Meta(k, Ok(info)) => {
-                    self.meta.insert(k, info);
-                    self.failures.succeeded(FetchKind::Metadata, k);
-                }
-                SetupRead::Meta(k, Err(e)) => {
-                    let err = self
-                        .failures
-                        .record(FetchKind::Metadata, k, e, now, k != key);
-                    if k == key {
-                        return Err(err);
+                SetupRead::Meta(k, r) => match *r {
+                    Ok(info) => {
+                        self.meta.insert(k, info);
+                        self.failures.succeeded(FetchKind::Metadata, k);
                     }
-                }
+                    Err(e) => {
+                        let err = self
+                            .failures
+                            .record(FetchKind::Metadata, k, e, now, k != key);
+                        if k == key {
+                            return Err(err);
+                        }
+                    }
+                },
                 SetupRead::Brick(Ok(brick)) => {
                     self.cpu.insert(key, brick);
                     self.failures.succeeded(FetchKind::Brick, key);

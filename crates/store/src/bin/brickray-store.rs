@@ -7,7 +7,8 @@
 //!                      [--spacing X,Y,Z] [--allow-outside-dir] [--quiet]
 //!                      [--anisotropic] [--labels]
 //!                      [--allow-http] [--anonymous] [--endpoint URL]
-//! brickray-store info <store.brs | URL | input> [--bins N]
+//! brickray-store build <input> <NAME.channels.json> [--channels 0,2,...] [build options]
+//! brickray-store info <store.brs | NAME.channels.json | URL | input> [--bins N]
 //!                     [--allow-http] [--anonymous] [--endpoint URL]
 //! brickray-store convert <input> <out.json> [--memory-mib N] [--quiet] [selection as for build]
 //! ```
@@ -18,7 +19,12 @@
 //! also reads a store over S3, GCS, Azure or HTTP(S) (`s3://bucket/key`,
 //! `https://host/store.brs`; feature `remote`, on by default), configured
 //! by the usual environment variables (`AWS_*`, see docs/remote.md), and
-//! `build` reads an OME-Zarr image from such a URL.
+//! `build` reads an OME-Zarr image from such a URL. A `build` whose output
+//! ends in `.channels.json` builds every channel of a multi-channel input
+//! (at most 4, or those `--channels` lists) into a store of its own
+//! (`NAME.cC.brs` beside it) and records them in that channel set, which
+//! the library opens as one multi-channel volume
+//! (`brickray_store::open_channels`).
 //!
 //! On a signal that would end it and that a process may catch (SIGHUP,
 //! SIGINT, SIGQUIT, SIGTERM, SIGUSR1, SIGUSR2, SIGALRM, SIGXCPU, SIGXFSZ) a
@@ -52,7 +58,8 @@ enum Command {
         /// OME-Zarr folder, or an OME-Zarr image's URL (s3://, gs://, az://,
         /// https://; feature `remote`).
         input: PathBuf,
-        /// The store to write (by convention `.brs`).
+        /// The store to write (by convention `.brs`), or a channel set
+        /// (`NAME.channels.json`: one store per channel beside it).
         output: PathBuf,
         /// Interior voxels per brick side.
         #[arg(long, default_value_t = 32)]
@@ -253,6 +260,10 @@ struct Select {
     /// The channel (OME-Zarr, multi-channel TIFF); default 0.
     #[arg(long)]
     channel: Option<u64>,
+    /// The channels of a channel set's build, `0,2,3` (default: every
+    /// channel, at most 4).
+    #[arg(long, value_delimiter = ',')]
+    channels: Option<Vec<u64>>,
     /// The time point (OME-Zarr, TIFF, 4D NIfTI); default 0.
     #[arg(long)]
     time: Option<u64>,
@@ -273,6 +284,7 @@ impl Select {
             .series(self.series.clone())
             .level(self.level)
             .channel(self.channel)
+            .channels(self.channels.clone())
             .time(self.time)
             .spacing(self.spacing)
     }
@@ -375,7 +387,9 @@ fn main() -> ExitCode {
         } => {
             // A URL is a store; a path a volume format claims is an input;
             // anything else a store.
-            if !looks_like_url(&store.to_string_lossy())
+            if brickray_store::is_channel_set(&store) {
+                cmd_info_channels(&store, bins.clamp(1, 4096))
+            } else if !looks_like_url(&store.to_string_lossy())
                 && brickray_io::Registry::global().find(&store).is_ok()
             {
                 cmd_info_input(&store, &select.options())
@@ -468,6 +482,34 @@ fn cmd_build(
     remote: &RemoteArgs,
 ) -> Result<(), String> {
     let output = out.display();
+    if brickray_store::is_channel_set(out) {
+        if looks_like_url(&input.to_string_lossy()) {
+            return Err(format!(
+                "{}: a channel set is built from a local input (stream a remote \
+                 OME-Zarr image's channels as they are: brickray_store::open_zarr_channels_url)",
+                input.display()
+            ));
+        }
+        let _ = (labels, remote);
+        let readers = brickray_io::open_channels(input, read)
+            .map_err(|e| StoreError::Input(e).to_string())?;
+        let n = readers.readers.len();
+        let reports = brickray_store::build_channels(readers, out, o).map_err(|e| e.to_string())?;
+        let bytes: u64 = reports.iter().map(|r| r.file_bytes).sum();
+        let seconds: f64 = reports.iter().map(|r| r.seconds).sum();
+        println!(
+            "built {output}: {n} channels, one store each ({}), {:.1} MiB in {seconds:.2} s",
+            (0..n)
+                .map(|c| brickray_store::channel_store_path(out, c as u64)
+                    .file_name()
+                    .map(|f| f.to_string_lossy().into_owned())
+                    .unwrap_or_default())
+                .collect::<Vec<_>>()
+                .join(", "),
+            bytes as f64 / (1 << 20) as f64
+        );
+        return Ok(());
+    }
     let mut reader = open_input(input, read, remote)?;
     if labels && !reader.desc().kind.is_labels() {
         reader = Box::new(
@@ -493,6 +535,28 @@ fn cmd_build(
         r.seconds,
         r.input_voxels as f64 / r.seconds / 1e6
     );
+    Ok(())
+}
+
+/// `info` of a channel set: each channel's description, then its store's.
+fn cmd_info_channels(path: &std::path::Path, bins: usize) -> Result<(), String> {
+    let set = brickray_store::open_channels(path).map_err(|e| e.to_string())?;
+    println!(
+        "channel set {} ({} channels)",
+        path.display(),
+        set.stores.len()
+    );
+    for (c, (info, store)) in set.info.iter().zip(&set.stores).enumerate() {
+        println!(
+            "channel {c}   {} colour {:?} window {:?} {}",
+            info.label.as_deref().unwrap_or("(no label)"),
+            info.color,
+            info.window,
+            if info.active { "shown" } else { "hidden" }
+        );
+        let s = Store::open(store).map_err(|e| e.to_string())?;
+        cmd_info(&s, bins)?;
+    }
     Ok(())
 }
 

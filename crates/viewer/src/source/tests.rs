@@ -399,6 +399,11 @@ fn large_multi_channel_inputs_stream_every_channel() {
     let again = open(&Input::Path(json), &tight, &p).unwrap();
     check(&again);
     assert!(again.note.contains("reused brick stores"), "{}", again.note);
+    // The channel set the build recorded opens as the input did.
+    let set = dir.path().join("stores/c.channels.json");
+    let s = open(&Input::Path(set), &tight, &p).unwrap();
+    check(&s);
+    assert!(s.note.contains("channel set"), "{}", s.note);
     let root = dir.path().join("c.ome.zarr");
     brickray::io::zarr::write_ome_zarr_channels(&root, &read.volume, &read.info).unwrap();
     let z = open(&Input::Path(root), &tight, &p).unwrap();
