@@ -7,6 +7,8 @@
 //! grid exactly as the out-of-core kernel samples them (trilinear inside each
 //! leaf's stored brick, apron included), and the f64 CPU reference renders that
 //! volume; PSNR is against the reference render of the finest data. GPU-free.
+//! `--crop N` keeps the central N x N voxels of each slice (the spacing and
+//! the slices unchanged): a quick look, or a smoke run.
 
 use crate::Figures;
 use crate::cut::{CutView, cut_volume};
@@ -39,6 +41,32 @@ pub(crate) fn ct_every_third_slice() -> Result<Volume, String> {
     Volume::new(desc, VolumeData::I16(thick)).map_err(|e| e.to_string())
 }
 
+/// The central `side x side` voxels of each slice of an i16 volume (all of
+/// a slice's axis where it is narrower).
+fn crop_slices(vol: Volume, side: u32) -> Result<Volume, String> {
+    let d = vol.desc().clone();
+    let (w, h) = (side.min(d.dims[0]), side.min(d.dims[1]));
+    if (w, h) == (d.dims[0], d.dims[1]) {
+        return Ok(vol);
+    }
+    let VolumeData::I16(all) = vol.data() else {
+        return Err("--crop: the volume is not i16".into());
+    };
+    let (x0, y0) = ((d.dims[0] - w) / 2, (d.dims[1] - h) / 2);
+    let mut kept = Vec::with_capacity(w as usize * h as usize * d.dims[2] as usize);
+    for z in 0..d.dims[2] as usize {
+        for y in y0..y0 + h {
+            let row = (z * d.dims[1] as usize + y as usize) * d.dims[0] as usize;
+            kept.extend_from_slice(&all[row + x0 as usize..row + (x0 + w) as usize]);
+        }
+    }
+    let desc = VolumeDesc {
+        dims: [w, h, d.dims[2]],
+        ..d
+    };
+    Volume::new(desc, VolumeData::I16(kept)).map_err(|e| e.to_string())
+}
+
 pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
     let size: u32 = crate::arg(args, "--size", 160)?;
     let step: f32 = crate::arg(args, "--step", 0.5)?;
@@ -58,12 +86,16 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
     .collect::<Result<_, _>>()?;
     // An SVG chart of error against working set, when given a path.
     let chart: String = crate::arg(args, "--chart", String::new())?;
+    let crop: u32 = crate::arg(args, "--crop", u32::MAX)?;
+    if crop == 0 {
+        return Err("--crop must be at least 1".into());
+    }
     let mut curves: Vec<Curve> = Vec::new();
     let (_, mode, tf) = ct::scenes()
         .into_iter()
         .find(|(n, _, _)| *n == scene)
         .ok_or("--scene: one of dvr_translucent, dvr_opaque, iso, mip")?;
-    let vol = ct_every_third_slice()?;
+    let vol = crop_slices(ct_every_third_slice()?, crop)?;
     let desc = vol.desc().clone();
     let frame = VolumeFrame::centered(desc.dims, desc.spacing);
     let camera = Camera::orbit(frame.center(), 1.6, 0.6, 0.35);

@@ -1,7 +1,7 @@
 //! The `build` suite: brick-store build throughput and peak RSS, compression
 //! ratios, lz4 decode speed and random brick read latency.
 //!
-//! `cargo run --release -p brickray-bench -- build [--quick] [--keep]`
+//! `cargo run --release -p brickray-bench -- build [--quick] [--keep] [--smoke]`
 //!
 //! * generated 1024^3 u8 and 1024x1024x540 u16 volumes (written once to a raw
 //!   file under the temp dir, then built from it like any input; the file is
@@ -9,6 +9,12 @@
 //! * the four `shared/data` volumes (the head CT timed);
 //! * a generated 2048x2048x1024 u8 input (4 GiB) built under the default 1 GiB
 //!   memory bound (skipped with `--quick`).
+//!
+//! `--smoke` shrinks every generated input by 16 per side (64^3, 64x64x33,
+//! 128x128x64 under a 1 GiB and a 1 MiB bound, so that the finest level is
+//! still built in bands) and reads fewer leaves: a check that the suite
+//! runs, in seconds; its figures are not results (the keys keep their
+//! names).
 //!
 //! Peak RSS is the process's `VmHWM`, reset (`/proc/self/clear_refs` = 5)
 //! before each build.
@@ -201,8 +207,15 @@ fn read_latency(store: &Path, n: usize) -> Result<(f64, f64, f64), String> {
 }
 
 pub(crate) fn run(args: &[String]) -> Result<crate::Figures, String> {
-    let quick = args.iter().any(|a| a == "--quick");
+    let smoke = args.iter().any(|a| a == "--smoke");
+    let quick = args.iter().any(|a| a == "--quick") && !smoke;
     let keep = args.iter().any(|a| a == "--keep");
+    // Sides of the generated inputs: 1024 (the u16 input 540 deep, the large
+    // one 2048x2048x1024 under a 128 MiB bound), or all 16x smaller.
+    let scale = if smoke { 16 } else { 1 };
+    let side = 1024 / scale;
+    let large = [2048 / scale, 2048 / scale, 1024 / scale];
+    let tight_bound: u64 = if smoke { 1 << 20 } else { 128 << 20 };
     let mut fig = crate::Figures::new();
     let tmp = tempfile::Builder::new()
         .prefix("brickray-bench-build-")
@@ -217,12 +230,12 @@ pub(crate) fn run(args: &[String]) -> Result<crate::Figures, String> {
     let opts = BuildOptions::default();
 
     // 1024^3 u8.
-    let input = generate(&dir, "gen_u8_1024", [1024; 3], false, false)?;
+    let input = generate(&dir, "gen_u8_1024", [side; 3], false, false)?;
     let u8_1024 = build_one(
         &input,
         &dir.join("u8_1024.brick"),
         &opts,
-        "generated 1024^3 u8",
+        &format!("generated {side}^3 u8"),
     )?;
     let _ = std::fs::remove_file(input.with_extension("raw"));
     fig.insert(
@@ -233,12 +246,12 @@ pub(crate) fn run(args: &[String]) -> Result<crate::Figures, String> {
     fig.insert("ratio_u8_1024".into(), json!(round(u8_1024.ratio, 2)));
 
     // 1024^3 u8 white noise: the worst case (no uniform bricks, incompressible).
-    let input = generate(&dir, "gen_u8_1024_noise", [1024; 3], false, true)?;
+    let input = generate(&dir, "gen_u8_1024_noise", [side; 3], false, true)?;
     let noise = build_one(
         &input,
         &dir.join("noise.brick"),
         &opts,
-        "generated 1024^3 u8 noise",
+        &format!("generated {side}^3 u8 noise"),
     )?;
     let _ = std::fs::remove_file(input.with_extension("raw"));
     let _ = std::fs::remove_file(&noise.store);
@@ -252,7 +265,7 @@ pub(crate) fn run(args: &[String]) -> Result<crate::Figures, String> {
     let input = generate(
         &dir,
         "gen_u16_1024x1024x540",
-        [1024, 1024, 540],
+        [side, side, 540 / scale],
         true,
         false,
     )?;
@@ -260,7 +273,7 @@ pub(crate) fn run(args: &[String]) -> Result<crate::Figures, String> {
         &input,
         &dir.join("u16.brick"),
         &opts,
-        "generated 1024x1024x540 u16",
+        &format!("generated {side}x{side}x{} u16", 540 / scale),
     )?;
     let _ = std::fs::remove_file(input.with_extension("raw"));
     let _ = std::fs::remove_file(&u16b.store);
@@ -325,9 +338,9 @@ pub(crate) fn run(args: &[String]) -> Result<crate::Figures, String> {
         println!("lz4 decode {gbs:.2} GB/s (generated store; shared data missing)");
         fig.insert("decode_gb_per_s".into(), json!(round(gbs, 2)));
     }
-    let (mean, p50, p99) = read_latency(&u8_1024.store, 4000)?;
+    let (mean, p50, p99) = read_latency(&u8_1024.store, if smoke { 400 } else { 4000 })?;
     println!(
-        "random leaf read (1024^3 u8 store, warm page cache): mean {mean:.1} µs, p50 {p50:.1} µs, p99 {p99:.1} µs"
+        "random leaf read ({side}^3 u8 store, warm page cache): mean {mean:.1} µs, p50 {p50:.1} µs, p99 {p99:.1} µs"
     );
     fig.insert("read_latency_us_mean".into(), json!(round(mean, 1)));
     fig.insert("read_latency_us_p99".into(), json!(round(p99, 1)));
@@ -335,31 +348,25 @@ pub(crate) fn run(args: &[String]) -> Result<crate::Figures, String> {
 
     // 4 GiB input under the default 1 GiB bound.
     if !quick {
-        let input = generate(
-            &dir,
-            "gen_u8_2048x2048x1024",
-            [2048, 2048, 1024],
-            false,
-            false,
-        )?;
+        let input = generate(&dir, "gen_u8_2048x2048x1024", large, false, false)?;
         let big = build_one(
             &input,
             &dir.join("big.brick"),
             &opts,
-            "generated 2048^2x1024 u8 (4 GiB)",
+            &format!("generated {}^2x{} u8", large[0], large[2]),
         )?;
         let _ = std::fs::remove_file(&big.store);
         // The same input under a 128 MiB bound: the finest level is built in
         // y-bands (several passes), the rest from a temporary level file.
         let tight = BuildOptions {
-            memory_bound: 128 << 20,
+            memory_bound: tight_bound,
             ..opts.clone()
         };
         let small = build_one(
             &input,
             &dir.join("big_tight.brick"),
             &tight,
-            "same, 128 MiB memory bound",
+            &format!("same, {} MiB memory bound", tight_bound >> 20),
         )?;
         let _ = std::fs::remove_file(input.with_extension("raw"));
         let _ = std::fs::remove_file(&small.store);

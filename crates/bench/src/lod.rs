@@ -39,7 +39,8 @@
 //!
 //! Scenes: `mri` (shared T1 MRI, shaded DVR), `ct` (shared head CT,
 //! translucent DVR), `ct_iso` (head CT, bone isosurface), `ml` (Marschner-Lobb
-//! 128^3, DVR with a sharp band).
+//! 128^3, DVR with a sharp band; `--ml-side` voxels per side, as the pareto
+//! suite's procedural volumes, which `--by oracle` draws).
 
 use crate::runner::{Runner, round2};
 use crate::{Figures, arg};
@@ -178,10 +179,10 @@ fn ct_scene(iso: bool) -> Result<Scene, String> {
     })
 }
 
-fn ml_scene() -> Scene {
+fn ml_scene(side: u32) -> Scene {
     Scene {
         name: "ml",
-        vol: brickray_core::synthetic::marschner_lobb(128),
+        vol: brickray_core::synthetic::marschner_lobb(side),
         settings: RenderSettings {
             mode: RenderMode::Dvr,
             ..Default::default()
@@ -241,13 +242,13 @@ fn median(v: &mut [f64]) -> f64 {
     }
 }
 
-/// A scene by name.
-fn scene(name: &str) -> Result<Scene, String> {
+/// A scene by name (`ml` with `ml_side` voxels per side).
+fn scene(name: &str, ml_side: u32) -> Result<Scene, String> {
     match name {
         "mri" => mri_dvr(),
         "ct" => ct_scene(false),
         "ct_iso" => ct_scene(true),
-        "ml" => Ok(ml_scene()),
+        "ml" => Ok(ml_scene(ml_side)),
         other => Err(format!("unknown scene {other}")),
     }
 }
@@ -267,7 +268,7 @@ fn scene_median(fig: &mut Figures, scene: &str, label: &str, key: &str, gains: &
 
 /// `--by budget`: the geometric and the error-aware order under the same
 /// brick budgets (module docs).
-fn budget_run(size: u32, brick: u32, scenes: &str) -> Result<Figures, String> {
+fn budget_run(size: u32, brick: u32, scenes: &str, ml_side: u32) -> Result<Figures, String> {
     use crate::cut::{CutView, cut_volume};
     let fractions = [1.0, 0.9, 0.8, 0.7, 0.6, 0.5, 0.4, 0.3, 0.2, 0.1];
     println!(
@@ -277,7 +278,7 @@ fn budget_run(size: u32, brick: u32, scenes: &str) -> Result<Figures, String> {
     let mut all = Vec::new();
     let mut vall = Vec::new();
     for name in scenes.split(',') {
-        let scene = scene(name)?;
+        let scene = scene(name, ml_side)?;
         let d = scene.vol.desc().clone();
         let frame = VolumeFrame::centered(d.dims, d.spacing);
         let camera = Camera::orbit(frame.center(), 2.0, 0.7, 0.35);
@@ -395,11 +396,12 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
     let size: u32 = arg(args, "--size", 256)?;
     let brick: u32 = arg(args, "--brick", 32)?;
     let scenes: String = arg(args, "--scenes", "mri,ct,ml".to_string())?;
+    let ml_side: u32 = arg(args, "--ml-side", crate::pareto::ML_SIDE)?;
     match arg(args, "--by", "knob".to_string())?.as_str() {
         "knob" => {}
-        "budget" => return budget_run(size, brick, &scenes),
+        "budget" => return budget_run(size, brick, &scenes, ml_side),
         "oracle" => {
-            let o = crate::oracle::OracleOptions::parse(args, size, brick, &scenes)?;
+            let o = crate::oracle::OracleOptions::parse(args, size, brick, &scenes, ml_side)?;
             return crate::oracle::run(&o);
         }
         other => return Err(format!("--by {other}: knob, budget or oracle")),
@@ -425,7 +427,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
     let mut fig = Figures::new();
     let mut all_gains = Vec::new();
     for name in scenes.split(',') {
-        let scene = scene(name)?;
+        let scene = scene(name, ml_side)?;
         let d = scene.vol.desc().clone();
         let frame = VolumeFrame::centered(d.dims, d.spacing);
         let camera = Camera::orbit(frame.center(), 2.0, 0.7, 0.35);

@@ -128,6 +128,10 @@ enum Suite {
         /// Write an SVG chart of error against working set to this path.
         #[arg(long)]
         chart: Option<String>,
+        /// Keep the central N x N voxels of each slice (default all), for a
+        /// quick look.
+        #[arg(long, value_parser = at_least_one::<u32>)]
+        crop: Option<u32>,
     },
     /// The brick-store builder: throughput, memory bound, banded levels.
     Build {
@@ -137,6 +141,10 @@ enum Suite {
         /// Keep the stores built.
         #[arg(long)]
         keep: bool,
+        /// Inputs 16x smaller per side, for a check that the suite runs
+        /// (its figures are not results).
+        #[arg(long)]
+        smoke: bool,
     },
     /// Store build throughput and memory from each input format (the shared
     /// format fixtures).
@@ -304,6 +312,10 @@ enum Suite {
         /// Brick side of the stores (default 32).
         #[arg(long)]
         brick: Option<u32>,
+        /// Voxels per side of the procedural volumes (`ml`; with `--by
+        /// oracle` also `noise`) (default 128).
+        #[arg(long, value_parser = at_least_one::<u32>)]
+        ml_side: Option<u32>,
         /// Visibility feedback under both rules: none (default), rayguided or
         /// occlusion.
         #[arg(long)]

@@ -88,6 +88,8 @@ pub(crate) struct OracleOptions {
     pub(crate) size: u32,
     pub(crate) brick: u32,
     pub(crate) scenes: String,
+    /// Voxels per side of the procedural volumes (`ml`, `noise`).
+    pub(crate) ml_side: u32,
     /// Cost every node (the oracle order); off: geometric and visible only.
     pub(crate) costs: bool,
     /// DVR shaded, as the pareto suite draws it.
@@ -105,6 +107,7 @@ impl OracleOptions {
         size: u32,
         brick: u32,
         scenes: &str,
+        ml_side: u32,
     ) -> Result<Self, String> {
         let on_off = |name: &str, default: &str| -> Result<bool, String> {
             match crate::arg(args, name, default.to_string())?.as_str() {
@@ -118,6 +121,7 @@ impl OracleOptions {
             size,
             brick,
             scenes: scenes.to_string(),
+            ml_side,
             costs: on_off("--costs", "on")?,
             shading: on_off("--shading", "on")?,
             nodes: (!nodes.is_empty()).then(|| nodes.into()),
@@ -129,7 +133,7 @@ impl OracleOptions {
 pub(crate) fn run(o: &OracleOptions) -> Result<Figures, String> {
     let (size, brick) = (o.size, o.brick);
     let wanted: Vec<String> = o.scenes.split(',').map(str::to_string).collect();
-    let scenes = crate::pareto::scenes(&wanted, crate::pareto::ML_SIDE)?;
+    let scenes = crate::pareto::scenes(&wanted, o.ml_side)?;
     println!(
         "lod by oracle: {size}x{size}, bricks {brick}, budgets {FRACTIONS:?} of the finest cut; \
          PSNR against the finest cut's image (f64 reference, one ray per pixel)"
