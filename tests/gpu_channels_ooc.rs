@@ -15,7 +15,9 @@
 //!   no pixel (>= 60 dB) while it skips samples;
 //! * refinement under the channels' styles: a channel hidden or made
 //!   transparent leaves its bricks unloaded (fewer reads), without touching
-//!   the store;
+//!   the store; error-aware refinement weighs each visible channel's
+//!   recorded LOD error through its own transfer function (the planner
+//!   alone, no GPU);
 //! * the shared confocal nuclei with two transformed copies as three
 //!   streamed channels (u16, three channels in RGBA texels): >= 45 dB in
 //!   every mode;
@@ -459,4 +461,120 @@ fn streamed_channel_errors_are_typed() {
         ChannelSource::new(Vec::new()),
         Err(ChannelError::Count { count: 0, .. })
     ));
+}
+
+/// The data leaves of the cut a planner converges to for one view (no GPU:
+/// the planner alone), under `metric`, classifying by `tf` or `channels`.
+fn converged_cut(
+    src: Arc<dyn brickray::BrickSource>,
+    metric: brickray::core::LodMetric,
+    tf: &brickray::TransferFunction,
+    channels: &[ChannelStyle],
+) -> std::collections::BTreeSet<brickray::NodeKey> {
+    use brickray::cache::{Classification, GpuFormat, StreamFrame, Streamer};
+    let layout = src.layout().clone();
+    let caps = brickray::core::TexelCaps {
+        norm16: true,
+        float32_filterable: false,
+    };
+    let gpu = GpuFormat::for_layout(&layout, caps, brickray::core::U8Filtering::Exact, 32, 2048);
+    let config = OutOfCoreConfig {
+        lod_metric: metric,
+        tolerance_px: 1.0,
+        upload_budget_bytes: 1 << 30,
+        ..Default::default()
+    };
+    let mut s = Streamer::new(src, config, gpu).unwrap();
+    s.preload_root().unwrap();
+    let frame = VolumeFrame::centered(layout.volume.dims, layout.volume.spacing);
+    let view =
+        brickray::core::FrameView::new(Camera::orbit(Vec3::ZERO, 2.3, 0.6, 0.35), frame, [24, 24]);
+    let mut leaves = std::collections::BTreeSet::new();
+    for _ in 0..400 {
+        let plan = s.plan(&StreamFrame {
+            views: std::slice::from_ref(&view),
+            classification: Classification {
+                mode: brickray::RenderMode::Dvr,
+                tf,
+                channels,
+                tf_generation: 1,
+            },
+            feedback: &[],
+            time: None,
+        });
+        leaves = plan.leaves.iter().map(|&(_, k)| k).collect();
+        if plan.stats.converged {
+            return leaves;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(2));
+    }
+    panic!("the planner did not converge ({} leaves)", leaves.len());
+}
+
+/// Error-aware refinement of a channel volume weighs each visible channel's
+/// recorded LOD error (from its own store) through that channel's transfer
+/// function (faint wide windows, 24 px, budget 4: a regime where the errors
+/// do not saturate): with channel 1 hidden the cut is that of channel 0
+/// streamed alone; with both shown it refines at least where channel 0 alone
+/// does, and further; and it is not the geometric rule's cut (the records
+/// are used).
+#[test]
+fn error_aware_cuts_weigh_each_visible_channel() {
+    let all = channels(2);
+    let dir = tempfile::tempdir().unwrap();
+    let parts = stores(&all, dir.path());
+    let tf = brickray::TransferFunction::ramp(0.0, 1.0, 0.5);
+    // Faint, wide windows: errors that do not saturate over a brick's depth.
+    let s: Vec<ChannelStyle> = (0..2)
+        .map(|c| ChannelStyle::window(COLORS[c], [0.0, 1.0], 0.01))
+        .collect();
+    let metric = brickray::core::LodMetric::ErrorAware { budget: 4.0 };
+    let hidden = [s[0].clone(), s[1].clone().visible(false)];
+    let a = converged_cut(source(&parts), metric, &tf, &hidden);
+    let alone = converged_cut(source(&parts[..1]), metric, &tf, &s[..1]);
+    assert_eq!(a, alone, "channel 1 hidden: channel 0's own cut");
+    let both = converged_cut(source(&parts), metric, &tf, &s);
+    let covered = |fine: &std::collections::BTreeSet<brickray::NodeKey>,
+                   coarse: &std::collections::BTreeSet<brickray::NodeKey>| {
+        // Every leaf of `coarse` is in `fine` or an ancestor of some of its
+        // leaves (`fine` refines at least as far).
+        coarse.iter().all(|k| {
+            fine.contains(k)
+                || fine.iter().any(|f| {
+                    let mut a = *f;
+                    while a.level > k.level {
+                        a = a.parent().expect("a parent above level 0");
+                    }
+                    f.level > k.level && a == *k
+                })
+        })
+    };
+    assert!(covered(&both, &a), "both channels refine less than one");
+    assert_ne!(a, both, "the hidden channel's errors still refined the cut");
+    let geometric = converged_cut(
+        source(&parts),
+        brickray::core::LodMetric::Geometric,
+        &tf,
+        &s,
+    );
+    let levels = |c: &std::collections::BTreeSet<brickray::NodeKey>| {
+        let mut n = [0usize; 8];
+        for k in c {
+            n[k.level as usize] += 1;
+        }
+        n
+    };
+    eprintln!(
+        "levels: hidden {:?}, both {:?}, geometric {:?}",
+        levels(&a),
+        levels(&both),
+        levels(&geometric)
+    );
+    eprintln!(
+        "error-aware cut: {} leaves with channel 1 hidden, {} with both; geometric {}",
+        a.len(),
+        both.len(),
+        geometric.len()
+    );
+    assert_ne!(both, geometric, "the channels' error records were not used");
 }

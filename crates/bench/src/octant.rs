@@ -110,7 +110,7 @@ pub(crate) fn octant_cut(
                             Some(pe) => {
                                 let from = brickray_core::NodeInfo {
                                     error: Some(pe),
-                                    ..i
+                                    ..i.clone()
                                 };
                                 node_visible_error(&from, mode, &table, layout).unwrap_or(1.0)
                             }

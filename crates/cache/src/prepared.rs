@@ -175,6 +175,7 @@ mod tests {
             error: None,
             parent_error: None,
             channels: Default::default(),
+            channel_errors: None,
         };
         let b = p.prepare(&raw, &info);
         assert_eq!(b.texels.len(), 2000);
@@ -189,7 +190,7 @@ mod tests {
         assert_eq!(Some(b.bytes()), gpu.prepared_brick_bytes(&layout).ok());
         let nan = NodeInfo {
             min: f32::NAN,
-            ..info
+            ..info.clone()
         };
         assert_eq!(p.range(&nan), [f32::NEG_INFINITY, f32::INFINITY]);
         assert_eq!(
@@ -201,7 +202,7 @@ mod tests {
         let wide = NodeInfo {
             min: 1.0,
             max: 7.0,
-            ..info
+            ..info.clone()
         };
         assert_eq!(p.prepare(&flat, &wide).range, [1.0, 7.0]);
     }
@@ -231,6 +232,7 @@ mod tests {
             error: None,
             parent_error: None,
             channels: Default::default(),
+            channel_errors: None,
         };
         let b = p.prepare(&raw, &info);
         assert_eq!(b.texels.len(), 8000);

@@ -264,7 +264,7 @@ pub enum NodeKind {
 }
 
 /// Metadata of one node.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct NodeInfo {
     /// What the node holds.
     pub kind: NodeKind,
@@ -286,6 +286,32 @@ pub struct NodeInfo {
     /// in entry `c`, as `min`/`max` are bounded; `min`/`max` then hold
     /// channel 0's); zeros for a single-channel source.
     pub channels: [[f32; 2]; crate::channels::MAX_CHANNELS],
+    /// A multi-channel source's LOD error records per channel (each over
+    /// its channel's own range, as its store recorded it), where the
+    /// channels' sources record them; `None` otherwise.
+    pub channel_errors: Option<std::sync::Arc<crate::channels::ChannelErrors>>,
+}
+
+impl NodeInfo {
+    /// Channel `c`'s own metadata of a multi-channel node: its range, its
+    /// error records, the node's kind.
+    pub fn channel(&self, c: usize) -> NodeInfo {
+        let r = self
+            .channels
+            .get(c)
+            .copied()
+            .unwrap_or([self.min, self.max]);
+        let e = self.channel_errors.as_deref();
+        NodeInfo {
+            kind: self.kind,
+            min: r[0],
+            max: r[1],
+            error: e.and_then(|e| e.error.get(c).copied().flatten()),
+            parent_error: e.and_then(|e| e.parent_error.get(c).copied().flatten()),
+            channels: Default::default(),
+            channel_errors: None,
+        }
+    }
 }
 
 /// Why a leaf of a cut needs no brick.

@@ -363,6 +363,17 @@ pub fn interleave(parts: &[&[u8]], texel_bytes: usize, lanes: usize) -> Vec<u8> 
     out
 }
 
+/// A multi-channel node's LOD error records, channel `c`'s in entry `c`
+/// (see [`crate::NodeInfo::channel_errors`]).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct ChannelErrors {
+    /// Each channel's error of drawing the node instead of the finest data.
+    pub error: [Option<crate::lod::NodeError>; MAX_CHANNELS],
+    /// Each channel's error of drawing the node's region from its parent's
+    /// brick.
+    pub parent_error: [Option<crate::lod::NodeError>; MAX_CHANNELS],
+}
+
 /// Whether a node whose channels' raw ranges are `ranges` (channel `c`'s
 /// in `ranges[c]`, its value range `value_ranges[c]`) can show anything
 /// under `styles` in `mode`: some visible channel is not transparent over

@@ -596,6 +596,7 @@ mod tests {
             error: Some(NodeError::from_label_share(share)),
             parent_error: None,
             channels: Default::default(),
+            channel_errors: None,
         };
         let dvr = RenderMode::Dvr;
         let n = node(3.0, 4.0, 0.25);
@@ -674,6 +675,7 @@ mod tests {
             error: Some(NodeError::encode(&bins, min, max)),
             parent_error: None,
             channels: Default::default(),
+            channel_errors: None,
         }
     }
 

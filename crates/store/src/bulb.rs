@@ -193,6 +193,7 @@ impl BrickSource for MandelbulbSource {
             error: None,
             parent_error: None,
             channels: Default::default(),
+            channel_errors: None,
         };
         if !self.check(key)? {
             return Ok(uniform(NodeKind::Empty));
@@ -226,6 +227,7 @@ impl BrickSource for MandelbulbSource {
             error: None,
             parent_error: None,
             channels: Default::default(),
+            channel_errors: None,
         })
     }
 

@@ -355,6 +355,7 @@ impl BrickSource for ProceduralSource {
                 error: None,
                 parent_error: None,
                 channels: Default::default(),
+                channel_errors: None,
             });
         }
         let (lo, hi) = self.layout.brick_footprint(key);
@@ -379,6 +380,7 @@ impl BrickSource for ProceduralSource {
                 error: None,
                 parent_error: None,
                 channels: Default::default(),
+                channel_errors: None,
             });
         }
         let r = self.reach[m as usize];
@@ -389,6 +391,7 @@ impl BrickSource for ProceduralSource {
             error: None,
             parent_error: None,
             channels: Default::default(),
+            channel_errors: None,
         })
     }
 

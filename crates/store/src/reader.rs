@@ -59,7 +59,7 @@ pub struct Store {
 }
 
 /// One node's table record.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct NodeRecord {
     /// The node.
     pub key: NodeKey,
@@ -319,6 +319,7 @@ impl Store {
                 error: None,
                 parent_error: None,
                 channels: Default::default(),
+                channel_errors: None,
             },
             Some(e) => NodeInfo {
                 kind: match e.kind {
@@ -331,6 +332,7 @@ impl Store {
                 error,
                 parent_error,
                 channels: Default::default(),
+                channel_errors: None,
             },
         }
     }

@@ -96,7 +96,7 @@ impl Default for LoaderConfig {
 }
 
 /// A brick to load.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct BrickRequest {
     /// The node.
     pub key: NodeKey,
@@ -243,7 +243,7 @@ impl Loader {
             .chain(bricks.iter().map(|r| {
                 let job = Job::Brick {
                     key: r.key,
-                    info: r.info,
+                    info: r.info.clone(),
                     children_meta: r.children_meta,
                 };
                 (job, r.priority)
@@ -307,7 +307,7 @@ impl Loader {
         };
         for c in done {
             match c {
-                Completion::Meta { key, result } => meta(&mut report, key, result),
+                Completion::Meta { key, result } => meta(&mut report, key, *result),
                 Completion::Brick { key, result } => match result {
                     Ok(brick) => {
                         self.loaded_total += 1;

@@ -11,7 +11,7 @@ pub(crate) type JobKey = (FetchKind, NodeKey);
 /// What a worker does.
 // (Queued by value; boxing the brick job would allocate per request.)
 #[allow(clippy::large_enum_variant)]
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub(crate) enum Job {
     /// Read a node's metadata.
     Meta(NodeKey),

@@ -413,7 +413,7 @@ fn bricks_in_flight_stay_within_the_budget() {
     }
     let rest: Vec<BrickRequest> = (1..12).map(|x| brick(&src, k(3, x), 1.0)).collect();
     for r in &rest {
-        loader.request_brick(*r);
+        loader.request_brick(r.clone());
     }
     // Metadata is never held back by the budget.
     loader.request_metadata(k(2, 1), 1.0);

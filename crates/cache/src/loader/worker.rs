@@ -30,7 +30,7 @@ pub(crate) struct Shared {
 pub(crate) enum Completion {
     Meta {
         key: NodeKey,
-        result: Result<NodeInfo, LoadError>,
+        result: Box<Result<NodeInfo, LoadError>>,
     },
     Brick {
         key: NodeKey,
@@ -238,7 +238,7 @@ pub(crate) fn worker(
         let done = match job {
             Job::Meta(key) => Completion::Meta {
                 key,
-                result: fetch_meta(source.as_ref(), key),
+                result: Box::new(fetch_meta(source.as_ref(), key)),
             },
             Job::Brick {
                 key,
@@ -281,16 +281,16 @@ fn brick_batch(
 ) -> bool {
     let wanted: Vec<(NodeKey, NodeInfo, bool)> = jobs
         .iter()
-        .filter_map(|j| match *j {
+        .filter_map(|j| match j {
             Job::Brick {
                 key,
                 info,
                 children_meta,
-            } => Some((key, info, children_meta)),
+            } => Some((*key, info.clone(), *children_meta)),
             Job::Meta(_) => None,
         })
         .collect();
-    let pairs: Vec<(NodeKey, NodeInfo)> = wanted.iter().map(|&(k, i, _)| (k, i)).collect();
+    let pairs: Vec<(NodeKey, NodeInfo)> = wanted.iter().map(|(k, i, _)| (*k, i.clone())).collect();
     let (id, cancel) = shared
         .queue
         .lock()

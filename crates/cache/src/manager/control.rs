@@ -56,14 +56,14 @@ impl SetupReads {
     fn run(&self, tx: &Sender<SetupRead>) {
         let key = NodeKey::ROOT;
         let source = self.source.as_ref();
-        let info = match self.root {
+        let info = match self.root.clone() {
             Some(info) => info,
             None => {
                 if tx.send(SetupRead::Start(FetchKind::Metadata, key)).is_err() {
                     return;
                 }
                 let r = fetch_meta(source, key);
-                let info = r.as_ref().ok().copied();
+                let info = r.as_ref().ok().cloned();
                 match (tx.send(SetupRead::Meta(key, Box::new(r))), info) {
                     (Ok(()), Some(info)) => info,
                     _ => return,

@@ -358,7 +358,7 @@ impl BrickManager {
             .map(|r| BrickRequest {
                 key: r.key,
                 priority: r.priority,
-                info: r.info,
+                info: r.info.clone(),
                 children_meta: self.children_meta_missing(r.key, &r.info),
             })
             .collect();

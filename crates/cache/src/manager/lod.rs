@@ -123,8 +123,8 @@ impl BrickManager {
                 step.requests.push(BrickRequest {
                     key,
                     priority: FLOOR_PRIORITY,
-                    info,
                     children_meta: self.children_meta_missing(key, &info),
+                    info,
                 });
             }
         }

@@ -44,7 +44,7 @@ impl MetaCache {
     pub(crate) fn get(&self, key: NodeKey) -> Option<NodeInfo> {
         let e = self.map.get(&key)?;
         e.used.store(self.frame, Ordering::Relaxed);
-        Some(e.info)
+        Some(e.info.clone())
     }
 
     /// True when the node's metadata is known (not marking it used).
@@ -114,6 +114,7 @@ mod tests {
             error: None,
             parent_error: None,
             channels: Default::default(),
+            channel_errors: None,
         }
     }
 

@@ -276,7 +276,7 @@ impl<'p, 'a, 'e> Greedy<'p, 'a, 'e> {
     /// failed: the node stays a leaf.
     fn children(&mut self, item: &HeapItem, children: &[NodeKey]) -> Option<[Classified; 8]> {
         if let Some(i) = item.classified {
-            return Some(self.arena[i as usize]);
+            return Some(self.arena[i as usize].clone());
         }
         let mut classes = [UNCLASSIFIED; 8];
         let (mut pending, mut failed) = (Vec::new(), 0u32);
@@ -327,7 +327,7 @@ impl<'p, 'a, 'e> Greedy<'p, 'a, 'e> {
             let order =
                 priority * self.env.request_weight(key) * self.params.views.centre_weight(key);
             for i in missing {
-                if let Some(info) = classes[i].info {
+                if let Some(info) = classes[i].info.clone() {
                     self.out.requests.push(LoadRequest {
                         key: children[i],
                         priority: order as f32,

@@ -62,6 +62,7 @@ impl RampSource {
             )),
             parent_error: None,
             channels: Default::default(),
+            channel_errors: None,
         }
     }
 }
@@ -75,7 +76,7 @@ impl RefineEnv for Cached {
     fn node(&mut self, key: NodeKey) -> MetaState {
         self.meta
             .get(&key)
-            .copied()
+            .cloned()
             .map_or(MetaState::Pending, MetaState::Known)
     }
     fn data(&mut self, _key: NodeKey) -> DataState {
@@ -187,7 +188,7 @@ proptest! {
             if l.class != NodeClass::Data || l.key.level >= finest {
                 continue;
             }
-            let info = env.meta[&l.key];
+            let info = env.meta[&l.key].clone();
             let e = if strict {
                 node_tf_error(&info, RenderMode::Dvr, &table, &layout)
             } else {
@@ -525,6 +526,7 @@ impl RefineEnv for PerBrick {
             error: (key.level < 2).then(|| NodeError::encode(&bins, 0.0, 1.0)),
             parent_error: None,
             channels: Default::default(),
+            channel_errors: None,
         })
     }
     fn data(&mut self, _key: NodeKey) -> DataState {

@@ -112,7 +112,7 @@ pub enum DataState {
 /// What is known of a node's metadata.
 // (A copy out of the metadata cache per lookup: boxing would allocate.)
 #[allow(clippy::large_enum_variant)]
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub enum MetaState {
     /// Known.
     Known(NodeInfo),
@@ -265,7 +265,7 @@ pub struct SplitBlocks {
 }
 
 /// A brick refinement wants loaded.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct LoadRequest {
     /// The node.
     pub key: NodeKey,

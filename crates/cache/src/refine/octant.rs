@@ -24,7 +24,7 @@
 //! requested first). Everything else follows [`refine`](super::refine):
 //! metadata and bricks are requested, never read, failures are counted.
 
-use super::rank::{HeapItem, ScreenError, Unknown, classify};
+use super::rank::{HeapItem, ScreenError, Unknown, classify, drawn_from};
 use super::{
     DataState, LoadRequest, MAX_META_REQUESTS_PER_FRAME, NodeClass, RefineEnv, RefineParams,
     RefinedLeaf, Refinement, Views, empty_leaf, unknown_root,
@@ -183,13 +183,7 @@ impl Octants<'_, '_> {
                     // parent-error record, over `key`'s range; `key`'s own
                     // record where the source has none), seen through what
                     // the image shows of `c`.
-                    let drawn_from = match cl.info.and_then(|i| i.parent_error) {
-                        Some(e) => NodeInfo {
-                            error: Some(e),
-                            ..info
-                        },
-                        None => info,
-                    };
+                    let drawn_from = drawn_from(&info, cl.info.as_ref());
                     let hold = if env.held(c) { OCTANT_HYSTERESIS } else { 1.0 };
                     let p = hold
                         * self.screen.priority(

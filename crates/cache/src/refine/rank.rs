@@ -5,7 +5,7 @@
 
 use super::{MetaState, NodeClass, RefineEnv, RefineParams, Views, is_visible};
 use brickray_core::{
-    EmptyReason, LodMetric, NodeInfo, NodeKey, NodeKind, OctreeLayout, TfErrorTable,
+    EmptyReason, LodMetric, NodeInfo, NodeKey, NodeKind, OctreeLayout, RenderMode, TfErrorTable,
     node_pixel_error, node_tf_error, node_visible_error,
 };
 
@@ -40,7 +40,7 @@ impl Ord for HeapItem {
 }
 
 /// A classified node.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone)]
 pub(super) struct Classified {
     pub(super) class: NodeClass,
     pub(super) uniform: bool,
@@ -109,6 +109,29 @@ pub(super) fn classify_children(
     Some(classes)
 }
 
+/// What ranks drawing a child's region from `parent`'s brick: `parent`'s
+/// metadata with its error record replaced by the `child`'s parent-error
+/// record where the source has one (per channel for a multi-channel node).
+pub(super) fn drawn_from(parent: &NodeInfo, child: Option<&NodeInfo>) -> NodeInfo {
+    let mut d = parent.clone();
+    let Some(child) = child else {
+        return d;
+    };
+    if let Some(e) = child.parent_error {
+        d.error = Some(e);
+    }
+    if let (Some(ce), Some(pe)) = (&child.channel_errors, &parent.channel_errors) {
+        let mut m = (**pe).clone();
+        for (own, from_parent) in m.error.iter_mut().zip(&ce.parent_error) {
+            if from_parent.is_some() {
+                *own = *from_parent;
+            }
+        }
+        d.channel_errors = Some(std::sync::Arc::new(m));
+    }
+    d
+}
+
 /// Placeholder of a child array's unused entries.
 pub(super) const UNCLASSIFIED: Classified = Classified {
     class: NodeClass::Empty(EmptyReason::Empty),
@@ -126,6 +149,18 @@ pub(super) struct ScreenError {
     /// by this (`brick^2`); `None`: weights are not used.
     pub(super) weight_norm: Option<f64>,
     pub(super) threshold: f64,
+    /// Error-aware refinement of a multi-channel volume: each visible
+    /// channel's error table, single-channel layout and mode (its own
+    /// isovalue); a node's error is the largest of its visible channels'.
+    channels: Vec<ChannelRank>,
+}
+
+/// How one visible channel weighs a node's error.
+struct ChannelRank {
+    channel: usize,
+    table: TfErrorTable,
+    layout: OctreeLayout,
+    mode: RenderMode,
 }
 
 impl ScreenError {
@@ -134,9 +169,35 @@ impl ScreenError {
         root: Option<&NodeInfo>,
         layout: &OctreeLayout,
     ) -> ScreenError {
-        let has_errors = root.is_some_and(|i| i.error.is_some());
+        let by_channel = layout.is_channel_volume() && !params.channels.is_empty();
+        let has_errors = root.is_some_and(|i| match by_channel {
+            true => i.channel_errors.is_some(),
+            false => i.error.is_some(),
+        });
+        let channels = match by_channel && has_errors {
+            true => params
+                .channels
+                .iter()
+                .enumerate()
+                .filter(|(_, s)| s.visible)
+                .map(|(c, s)| ChannelRank {
+                    channel: c,
+                    table: TfErrorTable::new(&s.tf),
+                    layout: layout.channel_layout(c),
+                    mode: match params.mode {
+                        RenderMode::Iso { color, .. } => RenderMode::Iso {
+                            value: s.isovalue,
+                            color,
+                        },
+                        m => m,
+                    },
+                })
+                .collect(),
+            false => Vec::new(),
+        };
         match params.metric.budget() {
             Some(budget) if has_errors => ScreenError {
+                channels,
                 table: Some(TfErrorTable::new(params.tf)),
                 strict: matches!(params.metric, LodMetric::ErrorBound { .. }),
                 weight_norm: params
@@ -146,6 +207,7 @@ impl ScreenError {
                 threshold: budget.max(0.0) as f64,
             },
             _ => ScreenError {
+                channels,
                 table: None,
                 strict: false,
                 weight_norm: None,
@@ -174,20 +236,41 @@ impl ScreenError {
             // The node's summed pixel change, linearised (RefineEnv::visible_weight),
             // per brick^2 (LodMetric::VisibleError).
             (Some(t), Some(i), Some((w, norm))) => {
-                let e = node_visible_error(i, params.mode, t, layout).unwrap_or(1.0);
+                let e = self.error(i, params.mode, t, layout, node_visible_error);
                 w.max(0.0) * 255.0 * e / norm
             }
             (Some(t), Some(i), _) => {
                 let e = if self.strict {
-                    node_tf_error(i, params.mode, t, layout)
+                    self.error(i, params.mode, t, layout, node_tf_error)
                 } else {
-                    node_pixel_error(i, key.level, params.mode, t, layout)
-                }
-                .unwrap_or(1.0);
+                    self.error(i, params.mode, t, layout, |i, m, t, l| {
+                        node_pixel_error(i, key.level, m, t, l)
+                    })
+                };
                 // 0 x inf (a degenerate camera on a flat node) stays NaN: never refined.
                 px * 255.0 * e
             }
             _ => px,
         }
+    }
+
+    /// The node's error by `f` (full scale where it has no record): of its
+    /// own record, or for a multi-channel node the largest of its visible
+    /// channels', each through its channel's table and mode.
+    fn error(
+        &self,
+        i: &NodeInfo,
+        mode: RenderMode,
+        table: &TfErrorTable,
+        layout: &OctreeLayout,
+        f: impl Fn(&NodeInfo, RenderMode, &TfErrorTable, &OctreeLayout) -> Option<f64>,
+    ) -> f64 {
+        if self.channels.is_empty() {
+            return f(i, mode, table, layout).unwrap_or(1.0);
+        }
+        self.channels
+            .iter()
+            .map(|c| f(&i.channel(c.channel), c.mode, &c.table, &c.layout).unwrap_or(1.0))
+            .fold(0.0, f64::max)
     }
 }

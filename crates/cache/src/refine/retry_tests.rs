@@ -85,6 +85,7 @@ impl RefineEnv for FullAndHollow {
             error: None,
             parent_error: None,
             channels: Default::default(),
+            channel_errors: None,
         };
         let empty = NodeInfo {
             kind: NodeKind::Empty,
@@ -93,6 +94,7 @@ impl RefineEnv for FullAndHollow {
             error: None,
             parent_error: None,
             channels: Default::default(),
+            channel_errors: None,
         };
         let under = |a: NodeKey| key == a || key.parent() == Some(a);
         MetaState::Known(

@@ -35,6 +35,7 @@ pub(crate) fn ball_info(layout: &OctreeLayout, key: NodeKey) -> NodeInfo {
         error: None,
         parent_error: None,
         channels: Default::default(),
+        channel_errors: None,
     }
 }
 

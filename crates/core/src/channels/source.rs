@@ -100,10 +100,12 @@ impl ChannelSource {
 
     /// One node's metadata from each channel's: empty only where every
     /// channel is empty; `min`/`max` channel 0's, `channels` each one's raw
-    /// range (a uniform channel's value; an empty channel's fill). No LOD
-    /// error is recorded (the channels' errors are binned over different
-    /// value ranges and transfer functions): error-aware refinement uses
-    /// the geometric rule.
+    /// range (a uniform channel's value; an empty channel's fill),
+    /// `channel_errors` each one's LOD error records where the channels'
+    /// sources record them (each binned over its own channel's range:
+    /// error-aware refinement weighs each through its channel's transfer
+    /// function). `error` stays `None`: no single record stands for every
+    /// channel.
     fn combine(&self, infos: &[NodeInfo]) -> NodeInfo {
         let mut ranges = [[0.0f32; 2]; MAX_CHANNELS];
         for (r, i) in ranges.iter_mut().zip(infos) {
@@ -112,6 +114,12 @@ impl ChannelSource {
                 _ => [i.min, i.max],
             };
         }
+        let mut errors = super::ChannelErrors::default();
+        for (c, i) in infos.iter().enumerate().take(MAX_CHANNELS) {
+            errors.error[c] = i.error;
+            errors.parent_error[c] = i.parent_error;
+        }
+        let recorded = infos.iter().any(|i| i.error.is_some());
         let empty = infos.iter().all(|i| i.kind == NodeKind::Empty);
         NodeInfo {
             kind: if empty {
@@ -124,6 +132,7 @@ impl ChannelSource {
             error: None,
             parent_error: None,
             channels: ranges,
+            channel_errors: recorded.then(|| Arc::new(errors)),
         }
     }
 

@@ -271,6 +271,7 @@ impl crate::BrickSource for Flat {
             error: None,
             parent_error: None,
             channels: Default::default(),
+            channel_errors: None,
         })
     }
     fn read_brick(&self, _key: crate::NodeKey, out: &mut [u8]) -> Result<(), crate::BrickError> {

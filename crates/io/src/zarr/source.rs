@@ -351,10 +351,11 @@ impl BrickSource for ZarrBrickSource {
                 error: None,
                 parent_error: None,
                 channels: Default::default(),
+                channel_errors: None,
             });
         }
         if let Some(n) = self.nodes.lock().get(&key) {
-            return Ok(*n);
+            return Ok(n.clone());
         }
         let (lo, hi) = self.layout.brick_footprint(key);
         let v = self
@@ -384,8 +385,9 @@ impl BrickSource for ZarrBrickSource {
             error: None,
             parent_error: None,
             channels: Default::default(),
+            channel_errors: None,
         };
-        self.nodes.lock().insert(key, info);
+        self.nodes.lock().insert(key, info.clone());
         Ok(info)
     }
 
