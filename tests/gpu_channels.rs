@@ -31,8 +31,7 @@
 use brickray::core::channels::{ChannelStyle, ChannelVolume};
 use brickray::{
     Camera, ChannelError, FrameDesc, PrepareError, RenderError, RenderMode, RenderSettings,
-    SliceAxis, SliceView, TransferFunction, Volume, VolumeData, VolumeDesc, VolumeFrame,
-    VolumeRenderer,
+    SliceAxis, SliceView, TransferFunction, Volume, VolumeData, VolumeFrame, VolumeRenderer,
 };
 use brickray_harness::predict::draw;
 use brickray_harness::{Offscreen, shared_gpu as gpu, target_desc};
@@ -45,49 +44,9 @@ const STEP: f32 = 0.5;
 
 use brickray_harness::channels::COLORS;
 
-/// A 40x36x32 u16 channel: a soft blob at `centre` over a faint shell.
-fn channel(centre: [f32; 3], peak: f32) -> Volume {
-    let d = [40u32, 36, 32];
-    let c = Vec3::from_array(centre);
-    let mut v = Vec::with_capacity((d[0] * d[1] * d[2]) as usize);
-    for z in 0..d[2] {
-        for y in 0..d[1] {
-            for x in 0..d[0] {
-                let p = Vec3::new(x as f32, y as f32, z as f32) / Vec3::new(40.0, 36.0, 32.0);
-                let blob = (-(p - c).length_squared() * 40.0).exp() * peak;
-                let r = (p - Vec3::splat(0.5)).length();
-                let shell = (-((r - 0.44) * 22.0).powi(2)).exp() * 0.15;
-                v.push(((blob + shell).min(1.0) * 60000.0) as u16);
-            }
-        }
-    }
-    let desc = VolumeDesc {
-        dims: d,
-        dtype: brickray::DType::U16,
-        spacing: [1.0, 1.0, 1.2],
-        value_range: [0.0, 60000.0],
-        kind: brickray::VolumeKind::Intensity,
-    };
-    Volume::new(desc, VolumeData::U16(v)).unwrap()
-}
-
-fn channels(n: usize) -> Vec<Volume> {
-    let centres = [
-        [0.3, 0.35, 0.4],
-        [0.7, 0.6, 0.5],
-        [0.45, 0.7, 0.65],
-        [0.6, 0.3, 0.3],
-    ];
-    (0..n)
-        .map(|c| channel(centres[c], 1.0 - 0.1 * c as f32))
-        .collect()
-}
-
-fn styles(n: usize) -> Vec<ChannelStyle> {
-    (0..n)
-        .map(|c| ChannelStyle::window(COLORS[c], [0.08, 0.7], 0.6).with_isovalue(0.45))
-        .collect()
-}
+use brickray_harness::channels::{
+    blob_channel as channel, blob_channels as channels, blob_styles as styles,
+};
 
 fn modes() -> Vec<(&'static str, RenderSettings)> {
     brickray_harness::channels::modes(STEP, 0.45)

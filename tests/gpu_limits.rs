@@ -114,38 +114,36 @@ fn limits_below_a_backends_needs_are_typed_errors() {
     );
     // Streamed channels: 8 storage buffers (out of core's 7 and the
     // channels' classification) and 6 uniform buffers; one channel streams
-    // with 7.
-    let g = device_with(|l| l.max_storage_buffers_per_shader_stage = 7);
-    let mut r = new_renderer(&g).unwrap();
-    let channels = brickray::ChannelSource::new(vec![procedural(32), procedural(32)]).unwrap();
-    expect_limit(
+    // with one fewer of each.
+    let below: [(&str, fn(&mut wgpu::Limits)); 2] = [
+        ("max_storage_buffers_per_shader_stage", |l| {
+            l.max_storage_buffers_per_shader_stage = 7
+        }),
+        ("max_uniform_buffers_per_shader_stage", |l| {
+            l.max_uniform_buffers_per_shader_stage = 5
+        }),
+    ];
+    for (limit, set) in below {
+        let g = device_with(set);
+        let mut r = new_renderer(&g).unwrap();
+        let channels = brickray::ChannelSource::new(vec![procedural(32), procedural(32)]).unwrap();
+        expect_limit(
+            r.set_volume_source(
+                &g.device,
+                &g.queue,
+                Arc::new(channels),
+                OutOfCoreConfig::default(),
+            ),
+            limit,
+        );
         r.set_volume_source(
             &g.device,
             &g.queue,
-            Arc::new(channels),
+            procedural(32),
             OutOfCoreConfig::default(),
-        ),
-        "max_storage_buffers_per_shader_stage",
-    );
-    r.set_volume_source(
-        &g.device,
-        &g.queue,
-        procedural(32),
-        OutOfCoreConfig::default(),
-    )
-    .unwrap();
-    let g = device_with(|l| l.max_uniform_buffers_per_shader_stage = 5);
-    let mut r = new_renderer(&g).unwrap();
-    let channels = brickray::ChannelSource::new(vec![procedural(32), procedural(32)]).unwrap();
-    expect_limit(
-        r.set_volume_source(
-            &g.device,
-            &g.queue,
-            Arc::new(channels),
-            OutOfCoreConfig::default(),
-        ),
-        "max_uniform_buffers_per_shader_stage",
-    );
+        )
+        .unwrap();
+    }
     // A volume beyond the 3D texture limit.
     let g = device_with(|l| l.max_texture_dimension_3d = 16);
     let mut r = new_renderer(&g).unwrap();

@@ -3,7 +3,9 @@
 // ooc_channels.wgsl; brickray_core::channels). Each kernel declares in its
 // group 2 `chan` (a uniform with the fields tf_count, tf_offset, table_rows
 // and table_width), `chan_table` (the channels' corrected tables stacked)
-// and `chan_tf` (the classification header, then the TF entries).
+// and `chan_tf` (the classification header, then the TF entries), and its
+// `Cursor` (with the channel `c` it bisects and shades), `cursor_value` and
+// `cursor_gradient`.
 
 // Channels drawn (1..4). The code works lane-wise over vec4s, one lane per
 // channel, with no loop over channels and no dynamic index into local
@@ -170,3 +172,51 @@ fn channel_inside(v: vec4<f32>, vis: vec4<f32>, iso: vec4<f32>) -> u32 {
     c = select(c, 0u, m.x > 0.25);
     return c;
 }
+
+// Iso, both kernels: the hit bracketed in acc bisected on the crossing
+// channel (the cursor's; its isovalue in iso4) with the kernel's
+// cursor_value, drawn in that channel's colour (tinted by a label map at
+// the hit) and shaded by its gradient.
+fn channel_iso_finish(acc: ptr<function, Accum>, cur: Cursor, r: Ray, iso4: vec4<f32>) {
+    var a = (*acc).hit_a;
+    var b = (*acc).hit_b;
+    let steps = select(0u, frame.iso_refine_steps, b > a);
+    let iso = lane_of(iso4, cur.c);
+    for (var i = 0u; i < steps; i = i + 1u) {
+        let m = 0.5 * (a + b);
+        (*acc).samples = (*acc).samples + 1u;
+        if (cursor_value(cur, m) >= iso) {
+            b = m;
+        } else {
+            a = m;
+        }
+    }
+    let th = 0.5 * (a + b);
+    let base = overlay_tint(chan_iso_color(cur.c), tex_at(r, th));
+    (*acc).color = vec4<f32>(shade(base, cursor_gradient(cur, th), r.dir), 1.0);
+    (*acc).depth = depth_at(r, th);
+    (*acc).depth_set = true;
+}
+
+// MIP, both kernels: every channel's maximum mx (first attained at mt)
+// classified by its TF (uncorrected), each tinted by a label map at its
+// maximum, and mixed over the visible channels (vis: 1 or 0 per lane;
+// hidden ones mix nothing and place no depth); the depth is the nearest
+// visible maximum's. Nothing when no sample was taken.
+fn channel_mip_finish(acc: ptr<function, Accum>, r: Ray, mx: vec4<f32>, mt: vec4<f32>, vis: vec4<f32>) {
+    if (!any(mx > vec4<f32>(-1.0e38))) {
+        return;
+    }
+    var q = channel_tf_lookup4(mx);
+    q.q0 = vec4<f32>(overlay_tint(q.q0.rgb, tex_at(r, mt.x)), q.q0.a);
+    q.q1 = vec4<f32>(overlay_tint(q.q1.rgb, tex_at(r, mt.y)), q.q1.a);
+    q.q2 = vec4<f32>(overlay_tint(q.q2.rgb, tex_at(r, mt.z)), q.q2.a);
+    q.q3 = vec4<f32>(overlay_tint(q.q3.rgb, tex_at(r, mt.w)), q.q3.a);
+    (*acc).color = channel_mix(q, quad_alpha(q) * vis);
+    let tn = mt + vec4<f32>(3.0e38) * (vec4<f32>(1.0) - vis);
+    let t_near = min(min(tn.x, tn.y), min(tn.z, tn.w));
+    let shown = t_near < 1.0e38;
+    (*acc).depth = select((*acc).depth, depth_at(r, t_near), shown);
+    (*acc).depth_set = shown;
+}
+

@@ -226,43 +226,10 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         }
     }
     if (MODE == MODE_ISO && acc.hit) {
-        // Bisected on the crossing channel (its isovalue), shaded by its
-        // gradient, in its colour.
-        var a = acc.hit_a;
-        var b = acc.hit_b;
-        let steps = select(0u, frame.iso_refine_steps, b > a);
-        let iso = lane_of(iso4, cur.c);
-        for (var i = 0u; i < steps; i = i + 1u) {
-            let m = 0.5 * (a + b);
-            acc.samples = acc.samples + 1u;
-            if (cursor_value(cur, m) >= iso) {
-                b = m;
-            } else {
-                a = m;
-            }
-        }
-        let th = 0.5 * (a + b);
-        let base = overlay_tint(chan_iso_color(cur.c), tex_at(r, th));
-        acc.color = vec4<f32>(shade(base, cursor_gradient(cur, th), r.dir), 1.0);
-        acc.depth = depth_at(r, th);
-        acc.depth_set = true;
+        channel_iso_finish(&acc, cur, r, iso4);
     }
-    if (MODE == MODE_MIP && any(mx > vec4<f32>(-1.0e38))) {
-        // Every channel's maximum was taken at once: 1 in the lanes of the
-        // visible channels (hidden ones mix nothing and place no depth).
-        var q = channel_tf_lookup4(mx);
-        // Colour mode tints each channel's colour by the label at its
-        // maximum.
-        q.q0 = vec4<f32>(overlay_tint(q.q0.rgb, tex_at(r, mt.x)), q.q0.a);
-        q.q1 = vec4<f32>(overlay_tint(q.q1.rgb, tex_at(r, mt.y)), q.q1.a);
-        q.q2 = vec4<f32>(overlay_tint(q.q2.rgb, tex_at(r, mt.z)), q.q2.a);
-        q.q3 = vec4<f32>(overlay_tint(q.q3.rgb, tex_at(r, mt.w)), q.q3.a);
-        acc.color = channel_mix(q, quad_alpha(q) * vis);
-        let tn = mt + vec4<f32>(3.0e38) * (vec4<f32>(1.0) - vis);
-        let t_near = min(min(tn.x, tn.y), min(tn.z, tn.w));
-        let shown = t_near < 1.0e38;
-        acc.depth = select(acc.depth, depth_at(r, t_near), shown);
-        acc.depth_set = shown;
+    if (MODE == MODE_MIP) {
+        channel_mip_finish(&acc, r, mx, mt, vis);
     }
     store_pixel(px, acc.color, acc.depth, start.host, acc.samples);
 }

@@ -288,77 +288,24 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         feedback_stop(px, depth_at(r, select(t1, t_stop, feedback_terminated(acc))));
     }
     if (MODE == MODE_ISO && acc.hit) {
-        // Bisected on the crossing channel (its isovalue) in the brick of the
-        // crossing, shaded by its gradient, in its colour.
-        var a = acc.hit_a;
-        var b = acc.hit_b;
-        let steps = select(0u, frame.iso_refine_steps, b > a);
-        let iso = lane_of(iso4, cur.c);
-        for (var i = 0u; i < steps; i = i + 1u) {
-            let m = 0.5 * (a + b);
-            acc.samples = acc.samples + 1u;
-            if (cursor_value(cur, m) >= iso) {
-                b = m;
-            } else {
-                a = m;
-            }
-        }
-        let th = 0.5 * (a + b);
-        let base = overlay_tint(chan_iso_color(cur.c), tex_at(r, th));
-        acc.color = vec4<f32>(shade(base, cursor_gradient(cur, th), r.dir), 1.0);
-        acc.depth = depth_at(r, th);
-        acc.depth_set = true;
+        channel_iso_finish(&acc, cur, r, iso4);
     }
-    if (MODE == MODE_MIP && any(mx > vec4<f32>(-1.0e38))) {
-        var q = channel_tf_lookup4(mx);
-        q.q0 = vec4<f32>(overlay_tint(q.q0.rgb, tex_at(r, mt.x)), q.q0.a);
-        q.q1 = vec4<f32>(overlay_tint(q.q1.rgb, tex_at(r, mt.y)), q.q1.a);
-        q.q2 = vec4<f32>(overlay_tint(q.q2.rgb, tex_at(r, mt.z)), q.q2.a);
-        q.q3 = vec4<f32>(overlay_tint(q.q3.rgb, tex_at(r, mt.w)), q.q3.a);
-        acc.color = channel_mix(q, quad_alpha(q) * vis);
-        let tn = mt + vec4<f32>(3.0e38) * (vec4<f32>(1.0) - vis);
-        let t_near = min(min(tn.x, tn.y), min(tn.z, tn.w));
-        let shown = t_near < 1.0e38;
-        acc.depth = select(acc.depth, depth_at(r, t_near), shown);
-        acc.depth_set = shown;
+    if (MODE == MODE_MIP) {
+        channel_mip_finish(&acc, r, mx, mt, vis);
     }
     store_pixel(px, acc.color, acc.depth, start.host, acc.samples);
 }
 
-// Slice views (channel_slice.wgsl): the point located in the frame's cut
-// and sampled from its data leaf's brick as slice_ooc.wgsl samples one
-// channel (fades and borrowed leaves included; each brick a pixel samples
-// counts as reached and seen; nothing is occluded).
+// Slice views (channel_slice.wgsl): every channel at the point located in
+// the frame's cut (slice_cursor, ooc_volume.wgsl); nothing is occluded.
 fn channel_slice_begin(px: vec2<u32>) {
     feedback_stop(px, far_depth());
 }
 
 fn channel_slice_sample(u: vec3<f32>, dir: vec3<f32>, last: ptr<function, u32>) -> ChannelSliceSample {
-    var s = ChannelSliceSample(vec4<f32>(0.0), false);
-    let o = u * ooc.octree_scale;
-    let root = OctBox(0u, 0u, vec3<f32>(0.0), vec3<f32>(1.0));
-    let loc = oct_locate_leaf(root, o, dir * ooc.octree_scale, ooc.splits.xy);
-    if (!loc.ok || (loc.word >> OCT_TAG_SHIFT) != OCT_TAG_DATA) {
-        return s;
-    }
-    let record = loc.word & OCT_PTR_MASK;
-    if (!oct_in_bounds(record)) {
-        return s;
-    }
-    let slot = index_words[record];
-    if (slot >= arrayLength(&slots)) {
-        return s;
-    }
-    if (slot != *last) {
-        feedback_reached(slot);
-        feedback_add(slot, 1.0);
-        *last = slot;
-    }
     var c: Cursor;
-    c.oo = o;
-    c.od = vec3<f32>(0.0);
-    cursor_enter(&c, brick_of(loc.leaf, slot));
-    s.v = cursor_values(c, 0.0);
-    s.ok = true;
-    return s;
+    if (!slice_cursor(u, dir, last, &c)) {
+        return ChannelSliceSample(vec4<f32>(0.0), false);
+    }
+    return ChannelSliceSample(cursor_values(c, 0.0), true);
 }

@@ -200,3 +200,36 @@ fn sub_cell_exit(b: Brick, j: vec3<u32>, oo: vec3<f32>, od: vec3<f32>, inv_od: v
     let lo = b.box_min + vec3<f32>(j) * side;
     return box_exit(oo, od, inv_od, lo, lo + side);
 }
+
+// Slice views of both out-of-core kernels: `c` set at texture point u on the
+// data leaf the frame's cut holds there (located through the index from the
+// root; `dir`, the view direction, decides points on a face), sampled from
+// its brick as a ray samples it (apron, fades, borrowed leaves). Its brick
+// counts as reached and seen by the pixel once per run of samples in it
+// (`last`: the slot sampled before). False where the cut holds no data.
+fn slice_cursor(u: vec3<f32>, dir: vec3<f32>, last: ptr<function, u32>, c: ptr<function, Cursor>) -> bool {
+    let o = u * ooc.octree_scale;
+    let root = OctBox(0u, 0u, vec3<f32>(0.0), vec3<f32>(1.0));
+    let loc = oct_locate_leaf(root, o, dir * ooc.octree_scale, ooc.splits.xy);
+    if (!loc.ok || (loc.word >> OCT_TAG_SHIFT) != OCT_TAG_DATA) {
+        return false;
+    }
+    let record = loc.word & OCT_PTR_MASK;
+    if (!oct_in_bounds(record)) {
+        return false;
+    }
+    let slot = index_words[record];
+    if (slot >= arrayLength(&slots)) {
+        return false;
+    }
+    if (slot != *last) {
+        feedback_reached(slot);
+        feedback_add(slot, 1.0);
+        *last = slot;
+    }
+    (*c).oo = o;
+    (*c).od = vec3<f32>(0.0);
+    cursor_enter(c, brick_of(loc.leaf, slot));
+    return true;
+}
+
