@@ -28,6 +28,9 @@
 //! Images are marched at step 1/2 in both renderers: what is compared is
 //! the compositing, not the discretisation.
 
+#[path = "channel_slices_support.rs"]
+mod channel_slices;
+
 use brickray::core::channels::{ChannelStyle, ChannelVolume};
 use brickray::{
     Camera, ChannelError, FrameDesc, PrepareError, RenderError, RenderMode, RenderSettings,
@@ -275,48 +278,19 @@ fn shared_nuclei_as_three_channels_match_the_reference() {
 #[test]
 fn channel_slices_match_the_reference() {
     let g = gpu();
-    let all = channels(3);
-    let vol = ChannelVolume::new(all.clone()).unwrap();
-    let frame = frame_of(&all[0]);
-    let mut s = styles(3);
-    let mut r = renderer(&vol, &s);
+    let vol = ChannelVolume::new(channels(3)).unwrap();
+    let mut r = renderer(&vol, &styles(3));
     let target = Offscreen::new(&g.device, SIZE, SIZE);
-    let plane = SliceView::orthogonal(SliceAxis::Axial, 13.0, &frame, 1.0).unwrap();
-    let cases = [
-        ("axial", plane),
-        (
-            "oblique",
-            SliceView::with_normal([20.0, 18.0, 15.0], [1.0, -1.0, 2.0], 0.8).unwrap(),
-        ),
-        ("slab max", plane.with_slab(6.0, brickray::SlabMode::Max)),
-        ("slab mean", plane.with_slab(6.0, brickray::SlabMode::Mean)),
-    ];
-    for hidden in [false, true] {
-        if hidden {
-            s[0] = s[0].clone().visible(false);
-            r.set_channel_styles(&s).unwrap();
-        }
-        for (name, view) in cases {
-            r.set_slice(Some(view));
-            let desc = FrameDesc::new(Camera::orbit(Vec3::ZERO, 2.3, 0.6, 0.35), frame, SIZE, SIZE);
-            let got = draw(g, &mut r, &target, &desc).unwrap().color;
-            let want =
-                brickray_reference::render_channel_slice(&vol, &frame, &view, &s, None, SIZE, SIZE)
-                    .unwrap()
-                    .to_rgba8([0.0; 3]);
-            assert!(
-                want.chunks_exact(4)
-                    .filter(|p| p[0].max(p[1]).max(p[2]) > 40)
-                    .count()
-                    > 300,
-                "{name}: the reference slice is nearly black"
-            );
-            let name = format!("channel slice {name}, channel 0 hidden {hidden}");
-            let c = assert_close(&name, &got, &want, SIZE, SIZE, MIN_DB)
-                .unwrap_or_else(|e| panic!("{e}"));
-            eprintln!("{name}: {:.1} dB", c.psnr_db);
-        }
-    }
+    channel_slices::check_channel_slices(
+        "channel slice",
+        &mut r,
+        &vol,
+        &styles(3),
+        SIZE,
+        MIN_DB,
+        300,
+        |r, desc| draw(g, r, &target, desc).unwrap().color,
+    );
 }
 
 /// From a file to the image: the shared nuclei as four channels written as

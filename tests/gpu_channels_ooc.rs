@@ -28,10 +28,13 @@
 //!
 //! Images are marched at step 1/2 in both renderers.
 
+#[path = "channel_slices_support.rs"]
+mod channel_slices;
+
 use brickray::core::channels::{ChannelStyle, ChannelVolume};
 use brickray::{
     Camera, ChannelError, ChannelSource, FrameDesc, OutOfCoreConfig, PrepareError, RenderError,
-    RenderSettings, SliceAxis, SliceView, Volume, VolumeFrame, VolumeRenderer,
+    RenderSettings, Volume, VolumeFrame, VolumeRenderer,
 };
 use brickray_harness::CountingSource;
 use brickray_harness::predict::draw;
@@ -342,47 +345,19 @@ fn streamed_channel_slices_match_the_reference() {
     let all = channels(3);
     let dir = tempfile::tempdir().unwrap();
     let parts = stores(&all, dir.path());
-    let vol = ChannelVolume::new(all.clone()).unwrap();
-    let frame = VolumeFrame::centered(all[0].dims(), all[0].desc().spacing);
-    let mut s = styles(3);
-    let mut r = streamed(source(&parts), &s);
+    let vol = ChannelVolume::new(all).unwrap();
+    let mut r = streamed(source(&parts), &styles(3));
     let target = Offscreen::new(&g.device, SIZE, SIZE);
-    let plane = SliceView::orthogonal(SliceAxis::Axial, 13.0, &frame, 1.0).unwrap();
-    let cases = [
-        ("axial", plane),
-        (
-            "oblique",
-            SliceView::with_normal([20.0, 18.0, 15.0], [1.0, -1.0, 2.0], 0.8).unwrap(),
-        ),
-        ("slab max", plane.with_slab(6.0, brickray::SlabMode::Max)),
-        ("slab mean", plane.with_slab(6.0, brickray::SlabMode::Mean)),
-    ];
-    for hidden in [false, true] {
-        if hidden {
-            s[0] = s[0].clone().visible(false);
-            r.set_channel_styles(&s).unwrap();
-        }
-        for (name, view) in cases {
-            r.set_slice(Some(view));
-            let desc = FrameDesc::new(Camera::orbit(Vec3::ZERO, 2.3, 0.6, 0.35), frame, SIZE, SIZE);
-            let got = settle(&mut r, &target, &desc).color;
-            let want =
-                brickray_reference::render_channel_slice(&vol, &frame, &view, &s, None, SIZE, SIZE)
-                    .unwrap()
-                    .to_rgba8([0.0; 3]);
-            assert!(
-                want.chunks_exact(4)
-                    .filter(|p| p[0].max(p[1]).max(p[2]) > 40)
-                    .count()
-                    > 200,
-                "{name}: the reference slice is nearly black"
-            );
-            let name = format!("streamed channel slice {name}, channel 0 hidden {hidden}");
-            let c = assert_close(&name, &got, &want, SIZE, SIZE, MIN_DB)
-                .unwrap_or_else(|e| panic!("{e}"));
-            eprintln!("{name}: {:.1} dB", c.psnr_db);
-        }
-    }
+    channel_slices::check_channel_slices(
+        "streamed channel slice",
+        &mut r,
+        &vol,
+        &styles(3),
+        SIZE,
+        MIN_DB,
+        200,
+        |r, desc| settle(r, &target, desc).color,
+    );
 }
 
 #[test]

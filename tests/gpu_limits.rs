@@ -115,7 +115,8 @@ fn limits_below_a_backends_needs_are_typed_errors() {
     // Streamed channels: 8 storage buffers (out of core's 7 and the
     // channels' classification) and 6 uniform buffers; one channel streams
     // with one fewer of each.
-    let below: [(&str, fn(&mut wgpu::Limits)); 2] = [
+    type Lower = fn(&mut wgpu::Limits);
+    let below: [(&str, Lower); 2] = [
         ("max_storage_buffers_per_shader_stage", |l| {
             l.max_storage_buffers_per_shader_stage = 7
         }),

@@ -1,0 +1,64 @@
+//! The slice check of both multi-channel GPU test files (in core and
+//! streamed): an axial and an oblique slice and an axial slab (maximum and
+//! mean) of three channels, with channel 0 shown then hidden, each against
+//! `brickray_reference::render_channel_slice`.
+
+use brickray::core::channels::{ChannelStyle, ChannelVolume};
+use brickray::{Camera, FrameDesc, SliceAxis, SliceView, VolumeFrame, VolumeRenderer};
+use brickray_reference::assert_close;
+use glam::Vec3;
+
+/// Draws every case with `draw` (the renderer's settled frame) and checks
+/// it against the reference at `min_db`; `min_lit`: the least pixels the
+/// reference must light (a slice that missed the blobs proves nothing).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn check_channel_slices(
+    label: &str,
+    r: &mut VolumeRenderer,
+    vol: &ChannelVolume,
+    styles: &[ChannelStyle],
+    size: u32,
+    min_db: f64,
+    min_lit: usize,
+    mut draw: impl FnMut(&mut VolumeRenderer, &FrameDesc<'_>) -> Vec<u8>,
+) {
+    let d = vol.channels()[0].desc();
+    let frame = VolumeFrame::centered(d.dims, d.spacing);
+    let plane = SliceView::orthogonal(SliceAxis::Axial, 13.0, &frame, 1.0).unwrap();
+    let cases = [
+        ("axial", plane),
+        (
+            "oblique",
+            SliceView::with_normal([20.0, 18.0, 15.0], [1.0, -1.0, 2.0], 0.8).unwrap(),
+        ),
+        ("slab max", plane.with_slab(6.0, brickray::SlabMode::Max)),
+        ("slab mean", plane.with_slab(6.0, brickray::SlabMode::Mean)),
+    ];
+    let mut s = styles.to_vec();
+    for hidden in [false, true] {
+        if hidden {
+            s[0] = s[0].clone().visible(false);
+            r.set_channel_styles(&s).unwrap();
+        }
+        for (name, view) in cases {
+            r.set_slice(Some(view));
+            let camera = Camera::orbit(Vec3::ZERO, 2.3, 0.6, 0.35);
+            let desc = FrameDesc::new(camera, frame, size, size);
+            let got = draw(r, &desc);
+            let want =
+                brickray_reference::render_channel_slice(vol, &frame, &view, &s, None, size, size)
+                    .unwrap()
+                    .to_rgba8([0.0; 3]);
+            let lit = want
+                .chunks_exact(4)
+                .filter(|p| p[0].max(p[1]).max(p[2]) > 40)
+                .count();
+            assert!(lit > min_lit, "{name}: the reference slice is nearly black");
+            let name = format!("{label} {name}, channel 0 hidden {hidden}");
+            let c = assert_close(&name, &got, &want, size, size, min_db)
+                .unwrap_or_else(|e| panic!("{e}"));
+            eprintln!("{name}: {:.1} dB", c.psnr_db);
+        }
+    }
+    r.set_slice(None);
+}
