@@ -28,8 +28,8 @@
 //! Images are marched at step 1/2 in both renderers: what is compared is
 //! the compositing, not the discretisation.
 
-#[path = "channel_slices_support.rs"]
-mod channel_slices;
+#[path = "channel_support.rs"]
+mod channel_support;
 
 use brickray::core::channels::{ChannelStyle, ChannelVolume};
 use brickray::{
@@ -71,36 +71,20 @@ fn renderer(vol: &ChannelVolume, styles: &[ChannelStyle]) -> VolumeRenderer {
 /// least `MIN_DB` apart; returns the smallest PSNR.
 fn check(name: &str, vol: &ChannelVolume, styles: &[ChannelStyle], camera: Camera) -> f64 {
     let g = gpu();
-    let frame = frame_of(&vol.channels()[0]);
     let target = Offscreen::new(&g.device, SIZE, SIZE);
     let mut r = renderer(vol, styles);
-    let mut worst = f64::INFINITY;
-    for (mode, settings) in modes() {
-        let desc = FrameDesc {
-            settings,
-            ..FrameDesc::new(camera, frame, SIZE, SIZE)
-        };
-        let got = draw(g, &mut r, &target, &desc).unwrap().color;
-        let opts = ReferenceOptions::new(SIZE, SIZE).with_step_factor(STEP);
-        let want = render_channels_reference(vol, &frame, styles, &camera, &settings, &opts)
-            .to_rgba8([0.0; 3]);
-        assert!(
-            want.chunks_exact(4).filter(|p| p[3] > 20).count() > 200,
-            "{name} {mode}: the reference image is nearly empty"
-        );
-        let c = assert_close(
-            &format!("channels {name} {mode}"),
-            &got,
-            &want,
-            SIZE,
-            SIZE,
-            MIN_DB,
-        )
-        .unwrap_or_else(|e| panic!("{e}"));
-        eprintln!("{name} {mode}: {:.1} dB", c.psnr_db);
-        worst = worst.min(c.psnr_db);
-    }
-    worst
+    channel_support::check_channel_modes(
+        &format!("channels {name}"),
+        &mut r,
+        vol,
+        styles,
+        camera,
+        SIZE,
+        STEP,
+        MIN_DB,
+        200,
+        |r, desc| draw(g, r, &target, desc).unwrap().color,
+    )
 }
 
 #[test]
@@ -281,7 +265,7 @@ fn channel_slices_match_the_reference() {
     let vol = ChannelVolume::new(channels(3)).unwrap();
     let mut r = renderer(&vol, &styles(3));
     let target = Offscreen::new(&g.device, SIZE, SIZE);
-    channel_slices::check_channel_slices(
+    channel_support::check_channel_slices(
         "channel slice",
         &mut r,
         &vol,

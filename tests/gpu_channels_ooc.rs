@@ -28,8 +28,8 @@
 //!
 //! Images are marched at step 1/2 in both renderers.
 
-#[path = "channel_slices_support.rs"]
-mod channel_slices;
+#[path = "channel_support.rs"]
+mod channel_support;
 
 use brickray::core::channels::{ChannelStyle, ChannelVolume};
 use brickray::{
@@ -39,7 +39,7 @@ use brickray::{
 use brickray_harness::CountingSource;
 use brickray_harness::predict::draw;
 use brickray_harness::{Offscreen, draw_until_settled, shared_gpu as gpu, target_desc};
-use brickray_reference::{ReferenceOptions, assert_close, compare, render_channels_reference};
+use brickray_reference::compare;
 use glam::Vec3;
 use std::collections::HashMap;
 use std::sync::Arc;
@@ -113,35 +113,20 @@ fn check(name: &str, vols: Vec<Volume>, styles: &[ChannelStyle], camera: Camera)
     let dir = tempfile::tempdir().unwrap();
     let parts = stores(&vols, dir.path());
     let vol = ChannelVolume::new(vols).unwrap();
-    let frame = VolumeFrame::centered(vol.dims(), vol.channels()[0].desc().spacing);
     let target = Offscreen::new(&g.device, SIZE, SIZE);
     let mut r = streamed(source(&parts), styles);
-    let mut worst = f64::INFINITY;
-    for (mode, settings) in modes() {
-        let desc = FrameDesc {
-            settings,
-            ..FrameDesc::new(camera, frame, SIZE, SIZE)
-        };
-        let got = settle(&mut r, &target, &desc).color;
-        let opts = ReferenceOptions::new(SIZE, SIZE).with_step_factor(STEP);
-        let want = render_channels_reference(&vol, &frame, styles, &camera, &settings, &opts)
-            .to_rgba8([0.0; 3]);
-        assert!(
-            want.chunks_exact(4).filter(|p| p[3] > 20).count() > 150,
-            "{name} {mode}: the reference image is nearly empty"
-        );
-        let c = assert_close(
-            &format!("streamed channels {name} {mode}"),
-            &got,
-            &want,
-            SIZE,
-            SIZE,
-            MIN_DB,
-        )
-        .unwrap_or_else(|e| panic!("{e}"));
-        eprintln!("streamed {name} {mode}: {:.1} dB", c.psnr_db);
-        worst = worst.min(c.psnr_db);
-    }
+    let worst = channel_support::check_channel_modes(
+        &format!("streamed channels {name}"),
+        &mut r,
+        &vol,
+        styles,
+        camera,
+        SIZE,
+        STEP,
+        MIN_DB,
+        150,
+        |r, desc| settle(r, &target, desc).color,
+    );
     // Each brick was read once, for all its channels: every channel's store
     // read the same nodes, each once.
     let reads: Vec<HashMap<_, u32>> = parts.iter().map(|p| p.reads()).collect();
@@ -348,7 +333,7 @@ fn streamed_channel_slices_match_the_reference() {
     let vol = ChannelVolume::new(all).unwrap();
     let mut r = streamed(source(&parts), &styles(3));
     let target = Offscreen::new(&g.device, SIZE, SIZE);
-    channel_slices::check_channel_slices(
+    channel_support::check_channel_slices(
         "streamed channel slice",
         &mut r,
         &vol,

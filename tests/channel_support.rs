@@ -1,11 +1,13 @@
-//! The slice check of both multi-channel GPU test files (in core and
-//! streamed): an axial and an oblique slice and an axial slab (maximum and
-//! mean) of three channels, with channel 0 shown then hidden, each against
+//! The checks both multi-channel GPU test files run (in core and
+//! streamed): every render mode against
+//! `brickray_reference::render_channels_reference`, and an axial and an
+//! oblique slice and an axial slab (maximum and mean) of three channels,
+//! with channel 0 shown then hidden, against
 //! `brickray_reference::render_channel_slice`.
 
 use brickray::core::channels::{ChannelStyle, ChannelVolume};
 use brickray::{Camera, FrameDesc, SliceAxis, SliceView, VolumeFrame, VolumeRenderer};
-use brickray_reference::assert_close;
+use brickray_reference::{ReferenceOptions, assert_close, render_channels_reference};
 use glam::Vec3;
 
 /// Draws every case with `draw` (the renderer's settled frame) and checks
@@ -61,4 +63,45 @@ pub(crate) fn check_channel_slices(
         }
     }
     r.set_slice(None);
+}
+
+/// Draws `vol` through `styles` from `camera` in every mode of
+/// `brickray_harness::channels::modes` (step `step`, isovalue 0.45) with
+/// `draw` and checks each against the reference at `min_db`; `min_lit`: the
+/// least pixels the reference must cover. Returns the smallest PSNR.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn check_channel_modes(
+    label: &str,
+    r: &mut VolumeRenderer,
+    vol: &ChannelVolume,
+    styles: &[ChannelStyle],
+    camera: Camera,
+    size: u32,
+    step: f32,
+    min_db: f64,
+    min_lit: usize,
+    mut draw: impl FnMut(&mut VolumeRenderer, &FrameDesc<'_>) -> Vec<u8>,
+) -> f64 {
+    let d = vol.channels()[0].desc();
+    let frame = VolumeFrame::centered(d.dims, d.spacing);
+    let mut worst = f64::INFINITY;
+    for (mode, settings) in brickray_harness::channels::modes(step, 0.45) {
+        let desc = FrameDesc {
+            settings,
+            ..FrameDesc::new(camera, frame, size, size)
+        };
+        let got = draw(r, &desc);
+        let opts = ReferenceOptions::new(size, size).with_step_factor(step);
+        let want = render_channels_reference(vol, &frame, styles, &camera, &settings, &opts)
+            .to_rgba8([0.0; 3]);
+        assert!(
+            want.chunks_exact(4).filter(|p| p[3] > 20).count() > min_lit,
+            "{label} {mode}: the reference image is nearly empty"
+        );
+        let c = assert_close(&format!("{label} {mode}"), &got, &want, size, size, min_db)
+            .unwrap_or_else(|e| panic!("{e}"));
+        eprintln!("{label} {mode}: {:.1} dB", c.psnr_db);
+        worst = worst.min(c.psnr_db);
+    }
+    worst
 }
