@@ -354,13 +354,21 @@ pub fn texel_lanes(channels: usize) -> usize {
 pub fn interleave(parts: &[&[u8]], texel_bytes: usize, lanes: usize) -> Vec<u8> {
     let n = parts.first().map_or(0, |p| p.len() / texel_bytes.max(1));
     let mut out = vec![0u8; n * texel_bytes * lanes];
+    interleave_into(parts, texel_bytes, lanes, &mut out);
+    out
+}
+
+/// [`interleave`] into `out` (as many texels of `lanes` lanes as it
+/// holds; lanes past the parts keep their bytes).
+pub fn interleave_into(parts: &[&[u8]], texel_bytes: usize, lanes: usize, out: &mut [u8]) {
+    let stride = texel_bytes * lanes;
+    let n = out.len() / stride.max(1);
     for (c, part) in parts.iter().enumerate().take(lanes) {
         for (i, t) in part.chunks_exact(texel_bytes).take(n).enumerate() {
-            let at = (i * lanes + c) * texel_bytes;
+            let at = i * stride + c * texel_bytes;
             out[at..at + texel_bytes].copy_from_slice(t);
         }
     }
-    out
 }
 
 /// A multi-channel node's LOD error records, channel `c`'s in entry `c`

@@ -143,14 +143,13 @@ impl ChannelSource {
 
     /// Interleaves the channels' bricks `bufs` into `out` (channel fastest).
     fn interleave(&self, bufs: &[Vec<u8>], out: &mut [u8]) {
-        let s = self.layout.volume.dtype.size();
-        let n = self.parts.len();
-        for (c, b) in bufs.iter().enumerate() {
-            for (i, v) in b.chunks_exact(s).enumerate() {
-                let at = (i * n + c) * s;
-                out[at..at + s].copy_from_slice(v);
-            }
-        }
+        let parts: Vec<&[u8]> = bufs.iter().map(Vec::as_slice).collect();
+        super::interleave_into(
+            &parts,
+            self.layout.volume.dtype.size(),
+            self.parts.len(),
+            out,
+        );
     }
 
     fn check_len(&self, out: &[u8]) -> Result<(), BrickError> {
