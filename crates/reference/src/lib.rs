@@ -61,8 +61,16 @@
 //! [`compare`], [`compare_and_report`] (writes actual, expected and difference
 //! PNGs) and [`assert_close`] compare 8-bit RGBA images such as
 //! [`Image::to_rgba8`] produces (composited over a background) or GPU read-backs.
+//!
+//! # Level-of-detail models
+//!
+//! [`lod`] models on the CPU the cuts of a brick octree the out-of-core
+//! renderer draws (per-node and octant-granular), resampled onto the finest
+//! grid for the reference to render, and the LOD oracle (each node's exact
+//! image cost of being drawn coarse).
 
 mod image_buf;
+pub mod lod;
 mod metrics;
 mod render;
 mod slice;
