@@ -8,14 +8,14 @@
 //! rays that enter the volume), ms per frame, speedups over brute force and PSNR
 //! against the brute-force image.
 
-use crate::Figures;
-use crate::runner::{Runner, finite_db, median, round2};
+use crate::report::{RunInfo, Timing, interleave};
+use crate::runner::{Runner, finite_db, round2};
 use brickray_core::{
     Accel, Camera, RenderMode, RenderSettings, Shading, TransferFunction, Volume, VolumeFrame,
 };
 use brickray_harness::{GpuContext, ct};
 use brickray_render::VolumeRenderer;
-use serde_json::json;
+use serde::Serialize;
 
 const VARIANTS: [(&str, Accel); 4] = [
     ("brute", Accel::BRUTE_FORCE),
@@ -30,21 +30,48 @@ const VARIANTS: [(&str, Accel); 4] = [
     ),
 ];
 
-pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
-    let rounds: usize = args
-        .iter()
-        .position(|a| a == "--rounds")
-        .and_then(|i| args.get(i + 1))
-        .map(|s| s.parse().map_err(|_| "bad --rounds"))
-        .transpose()?
-        .unwrap_or(5);
-    let size: u32 = args
-        .iter()
-        .position(|a| a == "--size")
-        .and_then(|i| args.get(i + 1))
-        .map(|s| s.parse().map_err(|_| "bad --size"))
-        .transpose()?
-        .unwrap_or(512);
+/// The suite's options.
+#[derive(Debug, clap::Args)]
+pub(crate) struct Args {
+    /// Interleaved rounds.
+    #[arg(long, default_value_t = 5, value_parser = crate::at_least_one::<usize>)]
+    rounds: usize,
+    /// Image side in pixels.
+    #[arg(long, default_value_t = 512, value_parser = crate::image_side)]
+    size: u32,
+}
+
+/// One variant of one scene.
+#[derive(Debug, Serialize)]
+pub(crate) struct Row {
+    /// opaque, translucent or iso.
+    scene: &'static str,
+    /// brute, ert, ess or ert_ess.
+    variant: &'static str,
+    /// Mean samples per ray over the rays that enter the volume.
+    samples_per_ray: f64,
+    #[serde(flatten)]
+    time: Timing,
+    /// Brute force's wall time over this variant's.
+    speedup: f64,
+    /// Against the brute-force image (999 where identical).
+    psnr_db: f64,
+}
+
+/// The suite's JSON line.
+#[derive(Debug, Serialize)]
+pub(crate) struct AccelResult {
+    #[serde(flatten)]
+    run: RunInfo,
+    rows: Vec<Row>,
+    /// The smallest PSNR of an accelerated variant against brute force.
+    psnr_min_db: f64,
+    /// The largest speedup of ERT and ESS together over brute force.
+    speedup_ert_ess_max: f64,
+}
+
+pub(crate) fn run(args: &Args) -> Result<AccelResult, String> {
+    let (rounds, size) = (args.rounds, args.size);
     let path = brickray_harness::shared_volume("invesalius_cranium_ct")
         .ok_or("the accel suite needs ../shared/data/invesalius_cranium_ct")?;
     let vol: Volume = brickray_io::read_volume(&path).map_err(|e| e.to_string())?;
@@ -69,7 +96,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         enabled: true,
         ..Default::default()
     };
-    let scenes: [(&str, TransferFunction, RenderMode); 3] = [
+    let scenes: [(&'static str, TransferFunction, RenderMode); 3] = [
         ("opaque", ct::bone(), RenderMode::Dvr),
         ("translucent", ct::soft_tissue(), RenderMode::Dvr),
         (
@@ -81,7 +108,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
             },
         ),
     ];
-    let mut fig = Figures::new();
+    let mut rows = Vec::new();
     let mut psnr_min = f64::INFINITY;
     for (scene, tf, mode) in &scenes {
         renderer
@@ -102,16 +129,11 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
             samples.push(shot.samples);
         }
         // Timing: rounds of all variants, the order rotated each round.
-        let mut times = vec![Vec::new(); VARIANTS.len()];
-        for r in 0..rounds {
-            for k in 0..VARIANTS.len() {
-                let i = (k + r) % VARIANTS.len();
-                let shot =
-                    run.frame(&mut renderer, camera, frame, settings(VARIANTS[i].1), false)?;
-                times[i].push(shot.ms);
-            }
-        }
-        let ms: Vec<f64> = times.iter().map(|t| median(t)).collect();
+        let shots = interleave(rounds, VARIANTS.len(), |i| {
+            run.frame(&mut renderer, camera, frame, settings(VARIANTS[i].1), false)
+        })?;
+        let times: Vec<Timing> = shots.iter().map(|t| Timing::of(t)).collect();
+        let ms: Vec<f64> = times.iter().map(|t| t.ms).collect();
         println!("\n{scene} ({mode:?}):");
         println!(
             "  {:<8} {:>12} {:>10} {:>9} {:>10}",
@@ -127,20 +149,25 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
                 "  {name:<8} {:>12.1} {:>10.1} {:>8.2}x {:>10.2}",
                 samples[i], ms[i], speedup, psnr
             );
-            fig.insert(format!("ms_{name}_{scene}"), json!(round2(ms[i])));
-            fig.insert(
-                format!("samples_per_ray_{name}_{scene}"),
-                json!(round2(samples[i])),
-            );
-            if i > 0 {
-                fig.insert(format!("speedup_{name}_{scene}"), json!(round2(speedup)));
-                fig.insert(format!("psnr_{name}_{scene}_db"), json!(finite_db(psnr)));
-            }
+            rows.push(Row {
+                scene: *scene,
+                variant: name,
+                samples_per_ray: round2(samples[i]),
+                time: times[i],
+                speedup: round2(speedup),
+                psnr_db: finite_db(psnr),
+            });
         }
     }
-    fig.insert("psnr_min_db".into(), json!(finite_db(psnr_min)));
-    fig.insert("image_size".into(), json!(size));
-    fig.insert("rounds".into(), json!(rounds));
-    fig.insert("adapter".into(), json!(gpu.adapter.get_info().name));
-    Ok(fig)
+    let speedup_ert_ess_max = rows
+        .iter()
+        .filter(|r| r.variant == "ert_ess")
+        .map(|r| r.speedup)
+        .fold(0.0, f64::max);
+    Ok(AccelResult {
+        run: RunInfo::new(&gpu, size, rounds),
+        rows,
+        psnr_min_db: finite_db(psnr_min),
+        speedup_ert_ess_max,
+    })
 }

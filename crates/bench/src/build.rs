@@ -22,6 +22,7 @@
 use brickray_core::{BrickSource, NodeKey, NodeKind};
 use brickray_store::{BuildOptions, Store};
 use rayon::prelude::*;
+use serde::Serialize;
 use serde_json::json;
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -206,17 +207,75 @@ fn read_latency(store: &Path, n: usize) -> Result<(f64, f64, f64), String> {
     Ok((mean, times[n / 2], times[n * 99 / 100]))
 }
 
-pub(crate) fn run(args: &[String]) -> Result<crate::Figures, String> {
-    let smoke = args.iter().any(|a| a == "--smoke");
-    let quick = args.iter().any(|a| a == "--quick") && !smoke;
-    let keep = args.iter().any(|a| a == "--keep");
+/// The suite's options.
+#[derive(Debug, clap::Args)]
+pub(crate) struct Args {
+    /// Smaller inputs, for a quick look.
+    #[arg(long)]
+    quick: bool,
+    /// Keep the stores built.
+    #[arg(long)]
+    keep: bool,
+    /// Inputs 16x smaller per side, for a check that the suite runs (its
+    /// figures are not results).
+    #[arg(long)]
+    smoke: bool,
+}
+
+/// One store built.
+#[derive(Debug, Serialize)]
+pub(crate) struct BuildRow {
+    /// What was built: `u8`, `u8_noise`, `u16`, `u8_4gib`,
+    /// `u8_4gib_bound128` (generated) or a shared volume's name.
+    input: String,
+    /// Voxels per side of a generated input (null for shared volumes).
+    dims: Option<[u32; 3]>,
+    /// The builder's memory bound, MiB.
+    memory_bound_mb: u64,
+    /// Input voxels per second, millions (best of three for the head CT).
+    mvoxel_per_s: f64,
+    /// The process's peak RSS over the build, MiB.
+    peak_rss_mb: f64,
+    /// Input bytes over store bytes.
+    ratio: f64,
+}
+
+/// The suite's JSON line.
+#[derive(Debug, Serialize)]
+pub(crate) struct BuildResult {
+    /// Generated inputs were this many times smaller per side (16 with
+    /// `--smoke`, else 1).
+    scale: u32,
+    rows: Vec<BuildRow>,
+    /// Single-thread LZ4 decode of data bricks, GB/s of decoded bytes.
+    decode_gb_per_s: f64,
+    /// Random leaf reads of the u8 store (warm page cache), µs.
+    read_latency_us_mean: f64,
+    read_latency_us_p50: f64,
+    read_latency_us_p99: f64,
+}
+
+pub(crate) fn run(args: &Args) -> Result<BuildResult, String> {
+    let smoke = args.smoke;
+    let quick = args.quick && !smoke;
+    let keep = args.keep;
     // Sides of the generated inputs: 1024 (the u16 input 540 deep, the large
     // one 2048x2048x1024 under a 128 MiB bound), or all 16x smaller.
     let scale = if smoke { 16 } else { 1 };
     let side = 1024 / scale;
     let large = [2048 / scale, 2048 / scale, 1024 / scale];
     let tight_bound: u64 = if smoke { 1 << 20 } else { 128 << 20 };
-    let mut fig = crate::Figures::new();
+    let mut rows = Vec::new();
+    let mut row = |input: &str, dims: Option<[u32; 3]>, opts: &BuildOptions, b: &Built| {
+        rows.push(BuildRow {
+            input: input.to_string(),
+            dims,
+            memory_bound_mb: opts.memory_bound >> 20,
+            mvoxel_per_s: round(b.mvox_s, 1),
+            peak_rss_mb: round(b.rss_mb, 1),
+            ratio: round(b.ratio, 2),
+        })
+    };
     let tmp = tempfile::Builder::new()
         .prefix("brickray-bench-build-")
         .tempdir()
@@ -238,12 +297,7 @@ pub(crate) fn run(args: &[String]) -> Result<crate::Figures, String> {
         &format!("generated {side}^3 u8"),
     )?;
     let _ = std::fs::remove_file(input.with_extension("raw"));
-    fig.insert(
-        "build_mvoxel_per_s_u8_1024".into(),
-        json!(round(u8_1024.mvox_s, 1)),
-    );
-    fig.insert("peak_rss_mb".into(), json!(round(u8_1024.rss_mb, 1)));
-    fig.insert("ratio_u8_1024".into(), json!(round(u8_1024.ratio, 2)));
+    row("u8", Some([side; 3]), &opts, &u8_1024);
 
     // 1024^3 u8 white noise: the worst case (no uniform bricks, incompressible).
     let input = generate(&dir, "gen_u8_1024_noise", [side; 3], false, true)?;
@@ -255,11 +309,7 @@ pub(crate) fn run(args: &[String]) -> Result<crate::Figures, String> {
     )?;
     let _ = std::fs::remove_file(input.with_extension("raw"));
     let _ = std::fs::remove_file(&noise.store);
-    fig.insert(
-        "build_mvoxel_per_s_u8_1024_noise".into(),
-        json!(round(noise.mvox_s, 1)),
-    );
-    fig.insert("peak_rss_mb_noise".into(), json!(round(noise.rss_mb, 1)));
+    row("u8_noise", Some([side; 3]), &opts, &noise);
 
     // 1024x1024x540 u16.
     let input = generate(
@@ -277,15 +327,7 @@ pub(crate) fn run(args: &[String]) -> Result<crate::Figures, String> {
     )?;
     let _ = std::fs::remove_file(input.with_extension("raw"));
     let _ = std::fs::remove_file(&u16b.store);
-    fig.insert(
-        "build_mvoxel_per_s_u16_1024x1024x540".into(),
-        json!(round(u16b.mvox_s, 1)),
-    );
-    fig.insert("peak_rss_mb_u16".into(), json!(round(u16b.rss_mb, 1)));
-    fig.insert(
-        "ratio_u16_1024x1024x540".into(),
-        json!(round(u16b.ratio, 2)),
-    );
+    row("u16", Some([side, side, 540 / scale]), &opts, &u16b);
 
     // Shared data: compression ratio per dataset, head CT throughput.
     let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data");
@@ -314,36 +356,27 @@ pub(crate) fn run(args: &[String]) -> Result<crate::Figures, String> {
             }
         }
         if let Some(b) = best {
-            fig.insert(format!("ratio_{name}"), json!(round(b.ratio, 2)));
-            if name == "invesalius_cranium_ct" {
-                fig.insert(
-                    "build_mvoxel_per_s_head_ct".into(),
-                    json!(round(b.mvox_s, 1)),
-                );
-                fig.insert("peak_rss_mb_head_ct".into(), json!(round(b.rss_mb, 1)));
-            }
+            row(name, None, &opts, &b);
             real.push(b.store);
         }
     }
-    if !real.is_empty() {
+    let decode_gb_per_s = if !real.is_empty() {
         let gbs = decode_speed(&real)?;
         println!(
             "lz4 decode {:.2} GB/s (single thread, decoded bytes, data bricks of {} real stores)",
             gbs,
             real.len()
         );
-        fig.insert("decode_gb_per_s".into(), json!(round(gbs, 2)));
+        round(gbs, 2)
     } else {
         let gbs = decode_speed(std::slice::from_ref(&u8_1024.store))?;
         println!("lz4 decode {gbs:.2} GB/s (generated store; shared data missing)");
-        fig.insert("decode_gb_per_s".into(), json!(round(gbs, 2)));
-    }
+        round(gbs, 2)
+    };
     let (mean, p50, p99) = read_latency(&u8_1024.store, if smoke { 400 } else { 4000 })?;
     println!(
         "random leaf read ({side}^3 u8 store, warm page cache): mean {mean:.1} µs, p50 {p50:.1} µs, p99 {p99:.1} µs"
     );
-    fig.insert("read_latency_us_mean".into(), json!(round(mean, 1)));
-    fig.insert("read_latency_us_p99".into(), json!(round(p99, 1)));
     let _ = std::fs::remove_file(&u8_1024.store);
 
     // 4 GiB input under the default 1 GiB bound.
@@ -370,26 +403,21 @@ pub(crate) fn run(args: &[String]) -> Result<crate::Figures, String> {
         )?;
         let _ = std::fs::remove_file(input.with_extension("raw"));
         let _ = std::fs::remove_file(&small.store);
-        fig.insert(
-            "build_mvoxel_per_s_u8_4gib_bound128".into(),
-            json!(round(small.mvox_s, 1)),
-        );
-        fig.insert(
-            "peak_rss_mb_4gib_bound128".into(),
-            json!(round(small.rss_mb, 1)),
-        );
-        fig.insert(
-            "build_mvoxel_per_s_u8_4gib".into(),
-            json!(round(big.mvox_s, 1)),
-        );
-        fig.insert("peak_rss_mb_4gib".into(), json!(round(big.rss_mb, 1)));
-        fig.insert("memory_bound_mb".into(), json!(opts.memory_bound >> 20));
+        row("u8_4gib", Some(large), &opts, &big);
+        row("u8_4gib_bound128", Some(large), &tight, &small);
     }
     if keep {
         let kept = tmp.keep();
         println!("kept {}", kept.display());
     }
-    Ok(fig)
+    Ok(BuildResult {
+        scale,
+        rows,
+        decode_gb_per_s,
+        read_latency_us_mean: round(mean, 1),
+        read_latency_us_p50: round(p50, 1),
+        read_latency_us_p99: round(p99, 1),
+    })
 }
 
 fn round(v: f64, digits: i32) -> f64 {

@@ -20,7 +20,6 @@
 //!
 //! `cargo run --release -p brickray-bench -- channels [--size PX] [--rounds N]`
 
-use crate::Figures;
 use crate::runner::median;
 use brickray_core::channels::ChannelVolume;
 use brickray_core::{Camera, RenderMode, RenderSettings, VolumeFrame};
@@ -37,7 +36,7 @@ const COUNTS: [usize; 3] = [1, 2, 4];
 
 /// One mode's figures.
 #[derive(Debug, serde::Serialize)]
-struct ModeRow {
+pub(crate) struct ModeRow {
     mode: &'static str,
     /// Median ms per frame of the single-channel kernel (channel 0).
     single_ms: f64,
@@ -54,7 +53,7 @@ struct ModeRow {
 
 /// The suite's result (its JSON line).
 #[derive(Debug, serde::Serialize)]
-struct ChannelsResult {
+pub(crate) struct ChannelsResult {
     size: u32,
     rounds: usize,
     /// Texel bytes per voxel with 1, 2 and 4 channels.
@@ -112,7 +111,19 @@ fn streamed(
         .collect()
 }
 
-pub(crate) fn run(size: u32, rounds: usize) -> Result<Figures, String> {
+/// The suite's options.
+#[derive(Debug, clap::Args)]
+pub(crate) struct Args {
+    /// Image side in pixels of the timed frames.
+    #[arg(long, default_value_t = 256, value_parser = crate::image_side)]
+    size: u32,
+    /// Interleaved rounds.
+    #[arg(long, default_value_t = 5, value_parser = crate::at_least_one::<usize>)]
+    rounds: usize,
+}
+
+pub(crate) fn run(args: &Args) -> Result<ChannelsResult, String> {
+    let (size, rounds) = (args.size, args.rounds);
     let gpu = GpuContext::new().map_err(|e| e.to_string())?;
     println!("adapter: {}", gpu.describe());
     println!("timing at {size}x{size}, {rounds} interleaved rounds; errors at {ERROR_SIZE} px");
@@ -291,10 +302,7 @@ pub(crate) fn run(size: u32, rounds: usize) -> Result<Figures, String> {
         result.ooc_cost_ratio_4ch,
         result.ooc_over_incore
     );
-    match serde_json::to_value(&result).map_err(|e| e.to_string())? {
-        serde_json::Value::Object(m) => Ok(m),
-        _ => Err("the result is not an object".into()),
-    }
+    Ok(result)
 }
 
 /// Draws `desc` until the streamed volume settles (every brick the view

@@ -14,20 +14,56 @@
 use crate::build::peak_rss_mb;
 use brickray_io::ReadOptions;
 use brickray_store::BuildOptions;
-use serde_json::json;
+use serde::Serialize;
 use std::path::PathBuf;
 use std::time::Instant;
 
-pub(crate) fn run(args: &[String]) -> Result<crate::Figures, String> {
-    let memory_mib: u64 = crate::arg(args, "--memory-mib", 8)?;
-    let rounds: u64 = crate::arg(args, "--rounds", 3)?.max(1);
+/// The suite's options.
+#[derive(Debug, clap::Args)]
+pub(crate) struct Args {
+    /// The builder's memory bound, MiB.
+    #[arg(long, default_value_t = 8)]
+    memory_mib: u64,
+    /// Best of this many builds.
+    #[arg(long, default_value_t = 3, value_parser = crate::at_least_one::<u64>)]
+    rounds: u64,
+}
+
+/// One input's build.
+#[derive(Debug, Serialize)]
+pub(crate) struct Row {
+    /// The input, as printed.
+    input: &'static str,
+    /// Input voxels per second of the best build, millions.
+    mvoxel_per_s: f64,
+    /// Input bytes per second of the best build, MB.
+    mb_per_s: f64,
+    /// The best build's wall time and the fastest open, s.
+    build_s: f64,
+    open_s: f64,
+    /// Peak RSS over the builds, MiB.
+    peak_rss_mb: f64,
+    /// The builder's own estimate of its buffers, MiB.
+    builder_estimate_mib: f64,
+}
+
+/// The suite's JSON line.
+#[derive(Debug, Serialize)]
+pub(crate) struct FormatsResult {
+    memory_bound_mb: u64,
+    rounds: u64,
+    rows: Vec<Row>,
+}
+
+pub(crate) fn run(args: &Args) -> Result<FormatsResult, String> {
+    let (memory_mib, rounds) = (args.memory_mib, args.rounds);
     let data = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data");
     if !data.is_dir() {
         return Err(format!("shared data not found at {}", data.display()));
     }
     let f = data.join("formats");
     let raw = |n: &str| data.join(n).join(format!("{n}.json"));
-    let inputs: Vec<(&str, PathBuf)> = vec![
+    let inputs: Vec<(&'static str, PathBuf)> = vec![
         (
             "raw pycortex_s1_t1_mri (u8 256^3)",
             raw("pycortex_s1_t1_mri"),
@@ -72,9 +108,9 @@ pub(crate) fn run(args: &[String]) -> Result<crate::Figures, String> {
         progress: None,
         ..Default::default()
     };
-    let mut fig = crate::Figures::new();
+    let mut rows = Vec::new();
     println!("memory bound {memory_mib} MiB, best of {rounds}");
-    for (k, (label, path)) in inputs.iter().enumerate() {
+    for (k, &(label, ref path)) in inputs.iter().enumerate() {
         let mut best = f64::INFINITY;
         let mut rss = 0.0f64;
         let mut est = 0u64;
@@ -104,21 +140,20 @@ pub(crate) fn run(args: &[String]) -> Result<crate::Figures, String> {
             bytes as f64 / best / 1e6,
             est as f64 / (1 << 20) as f64
         );
-        let key = label
-            .split(" (")
-            .next()
-            .unwrap_or(label)
-            .replace([' ', '.', '-'], "_")
-            .to_lowercase();
-        fig.insert(
-            format!("mvoxel_per_s_{k}_{key}"),
-            json!((mvox * 10.0).round() / 10.0),
-        );
-        fig.insert(
-            format!("peak_rss_mb_{k}_{key}"),
-            json!((rss * 10.0).round() / 10.0),
-        );
+        let r1 = |x: f64| (x * 10.0).round() / 10.0;
+        rows.push(Row {
+            input: label,
+            mvoxel_per_s: r1(mvox),
+            mb_per_s: r1(bytes as f64 / best / 1e6),
+            build_s: (best * 1e3).round() / 1e3,
+            open_s: (open_s * 1e3).round() / 1e3,
+            peak_rss_mb: r1(rss),
+            builder_estimate_mib: r1(est as f64 / (1 << 20) as f64),
+        });
     }
-    fig.insert("memory_bound_mb".into(), json!(memory_mib));
-    Ok(fig)
+    Ok(FormatsResult {
+        memory_bound_mb: memory_mib,
+        rounds,
+        rows,
+    })
 }

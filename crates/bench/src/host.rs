@@ -24,11 +24,10 @@
 //! [--cuts 1000,5000,20000,50000] [--culling] [--culling-size 256]`
 
 use crate::runner::{Runner, median, quantile, round2};
-use crate::{Figures, arg};
 use brickray_core::{Camera, RenderSettings, VolumeFrame};
 use brickray_harness::GpuContext;
 use brickray_render::{OutOfCoreConfig, VisibilityPolicy, VolumeRenderer};
-use serde_json::json;
+use serde::Serialize;
 use std::sync::Arc;
 use std::time::Instant;
 
@@ -154,19 +153,70 @@ fn path(
     Ok(t)
 }
 
-pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
-    let size: u32 = arg(args, "--size", 1024)?;
-    let frames: usize = arg(args, "--frames", 60)?;
-    let culling = args.iter().any(|a| a == "--culling");
-    let culling_size: u32 = arg(args, "--culling-size", 256)?;
-    let cuts_arg: String = arg(args, "--cuts", "1000,5000,20000,50000".to_string())?;
-    let cuts: Vec<u32> = cuts_arg
-        .split(',')
-        .map(|c| c.trim().parse().map_err(|_| format!("bad cut size {c:?}")))
-        .collect::<Result<_, _>>()?;
-    if frames == 0 || size == 0 || cuts.contains(&0) {
-        return Err("--frames, --size and every cut must be at least 1".into());
-    }
+/// A brick budget: at least 1.
+fn cut_size(s: &str) -> Result<u32, String> {
+    crate::at_least_one::<u32>(s.trim())
+}
+
+/// The suite's options.
+#[derive(Debug, clap::Args)]
+pub(crate) struct Args {
+    /// Viewport side in pixels.
+    #[arg(long, default_value_t = 1024, value_parser = crate::image_side)]
+    size: u32,
+    /// Path frames timed per cut.
+    #[arg(long, default_value_t = 60, value_parser = crate::at_least_one::<usize>)]
+    frames: usize,
+    /// Brick budgets setting the cut sizes, comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "1000,5000,20000,50000", value_parser = cut_size)]
+    cuts: Vec<u32>,
+    /// Also draw the path under ray-guided visibility.
+    #[arg(long)]
+    culling: bool,
+    /// Viewport side of the drawn (culling) path.
+    #[arg(long, default_value_t = 256, value_parser = crate::image_side)]
+    culling_size: u32,
+}
+
+/// One cut size, planned inline or in the background, culled or not.
+#[derive(Debug, Serialize)]
+pub(crate) struct Row {
+    /// The brick budget that sets the cut's size.
+    budget: u32,
+    /// Planned on a worker (the viewer's way) or inline in `prepare`.
+    background: bool,
+    /// Drawn under ray-guided culling at `culling_size`.
+    culled: bool,
+    /// `prepare`'s wall time on the render thread, ms: median and p99.
+    host_ms_median: f64,
+    host_ms_p99: f64,
+    /// Planning (wherever it ran), uploads and index encoding, ms medians.
+    plan_ms_median: f64,
+    plan_ms_p99: f64,
+    upload_ms_median: f64,
+    encode_ms_median: f64,
+    /// Bricks in the working set at the end, and frames to converge.
+    working_set: u64,
+    converge_frames: usize,
+}
+
+/// The suite's JSON line.
+#[derive(Debug, Serialize)]
+pub(crate) struct HostResult {
+    size: u32,
+    frames: usize,
+    adapter: String,
+    rows: Vec<Row>,
+    /// The unculled background row at a budget of 20,000 (null when not run).
+    host_ms_median_20k: Option<f64>,
+    host_ms_p99_20k: Option<f64>,
+    plan_ms_median_20k: Option<f64>,
+}
+
+pub(crate) fn run(args: &Args) -> Result<HostResult, String> {
+    let (size, frames, culling, culling_size) =
+        (args.size, args.frames, args.culling, args.culling_size);
+    let cuts = &args.cuts;
     let gpu = GpuContext::new().map_err(|e| e.to_string())?;
     println!("adapter: {}", gpu.describe());
     println!(
@@ -177,23 +227,17 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         "  {:>7} {:>8} {:>9} {:>8} {:>8} {:>8} {:>9} {:>7}",
         "budget", "bricks", "host med", "host p99", "plan med", "plan p99", "upload med", "index"
     );
-    let mut fig = Figures::new();
+    let mut rows = Vec::new();
     let mut variants = vec![(VisibilityPolicy::None, size, false)];
     if culling {
         variants.push((VisibilityPolicy::RayGuided, culling_size, true));
     }
     for (policy, px, draw) in variants {
         let run = Runner::new(&gpu, px)?;
-        let tag = if draw { "_culled" } else { "" };
-        for &cut in &cuts {
+        for &cut in cuts {
             for background in [false, true] {
                 let (mut r, frame) = renderer(&gpu, cut, policy, background)?;
                 let t = path(&run, &mut r, frame, frames, draw)?;
-                let name = format!(
-                    "{}k{tag}{}",
-                    (cut as f64 / 1000.0).round() as u32,
-                    if background { "" } else { "_inline" }
-                );
                 println!(
                     "  {:>7} {:>8} {:>9.2} {:>8.2} {:>8.2} {:>8.2} {:>9.2} {:>7.2}{}",
                     cut,
@@ -210,33 +254,32 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
                         (false, false) => " (inline)".to_string(),
                     }
                 );
-                fig.insert(
-                    format!("host_ms_median_{name}"),
-                    json!(round2(median(&t.host_ms))),
-                );
-                fig.insert(
-                    format!("host_ms_p99_{name}"),
-                    json!(round2(quantile(&t.host_ms, 0.99))),
-                );
-                fig.insert(
-                    format!("plan_ms_median_{name}"),
-                    json!(round2(median(&t.plan_ms))),
-                );
-                fig.insert(
-                    format!("upload_ms_median_{name}"),
-                    json!(round2(median(&t.upload_ms))),
-                );
-                fig.insert(
-                    format!("encode_ms_median_{name}"),
-                    json!(round2(median(&t.encode_ms))),
-                );
-                fig.insert(format!("working_set_{name}"), json!(t.working_set));
-                fig.insert(format!("converge_frames_{name}"), json!(t.converge_frames));
+                rows.push(Row {
+                    budget: cut,
+                    background,
+                    culled: draw,
+                    host_ms_median: round2(median(&t.host_ms)),
+                    host_ms_p99: round2(quantile(&t.host_ms, 0.99)),
+                    plan_ms_median: round2(median(&t.plan_ms)),
+                    plan_ms_p99: round2(quantile(&t.plan_ms, 0.99)),
+                    upload_ms_median: round2(median(&t.upload_ms)),
+                    encode_ms_median: round2(median(&t.encode_ms)),
+                    working_set: t.working_set as u64,
+                    converge_frames: t.converge_frames,
+                });
             }
         }
     }
-    fig.insert("size".into(), json!(size));
-    fig.insert("frames".into(), json!(frames));
-    fig.insert("adapter".into(), json!(gpu.describe()));
-    Ok(fig)
+    let at_20k = rows
+        .iter()
+        .find(|r| r.budget == 20_000 && r.background && !r.culled);
+    Ok(HostResult {
+        size,
+        frames,
+        adapter: gpu.describe(),
+        host_ms_median_20k: at_20k.map(|r| r.host_ms_median),
+        host_ms_p99_20k: at_20k.map(|r| r.host_ms_p99),
+        plan_ms_median_20k: at_20k.map(|r| r.plan_ms_median),
+        rows,
+    })
 }

@@ -24,8 +24,8 @@
 //!
 //! `cargo run --release -p brickray-bench -- labels [--size PX] [--rounds N]`
 
+use crate::report::RunInfo;
 use crate::runner::median;
-use crate::{Figures, arg};
 use brickray_core::labels::{LabelTable, label_value_range};
 use brickray_core::{
     BrickSource, Camera, LabelOverlay, LodMetric, OverlayStyle, RenderMode, RenderSettings,
@@ -35,20 +35,88 @@ use brickray_harness::predict::{draw, samples_per_ray};
 use brickray_harness::{GpuContext, Offscreen, draw_frame, draw_until_settled};
 use brickray_reference::{DEFAULT_STEP_FACTOR, ReferenceOptions, compare, render_reference};
 use brickray_render::{FrameDesc, OutOfCoreConfig, VolumeRenderer};
-use serde_json::json;
+use serde::Serialize;
 use std::sync::Arc;
 
 /// The error images' side.
 const ERROR_SIZE: u32 = 128;
 
-pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
-    let size: u32 = arg(args, "--size", 256)?;
-    let rounds: usize = arg(args, "--rounds", 5)?;
+/// The suite's options.
+#[derive(Debug, clap::Args)]
+pub(crate) struct Args {
+    /// Image side in pixels of the timed frames.
+    #[arg(long, default_value_t = 256, value_parser = crate::image_side)]
+    size: u32,
+    /// Interleaved rounds.
+    #[arg(long, default_value_t = 5, value_parser = crate::at_least_one::<usize>)]
+    rounds: usize,
+}
+
+/// A cut of the label map's store under one LOD metric and budget.
+#[derive(Debug, Serialize)]
+pub(crate) struct LodRow {
+    metric: &'static str,
+    /// The metric's tolerance (px) or error budget.
+    budget: f32,
+    /// Against the finest level (128 px).
+    psnr_db: f64,
+    bricks: u64,
+}
+
+/// One label map.
+#[derive(Debug, Serialize)]
+pub(crate) struct MapRow {
+    /// brodmann or nuclei.
+    map: &'static str,
+    /// ms per frame of the labels and of the same ids drawn as intensity.
+    ms_labels_incore: f64,
+    ms_intensity_incore: f64,
+    ms_labels_ooc: f64,
+    ms_intensity_ooc: f64,
+    /// Labels over intensity, in core and out of core.
+    label_cost_ratio: f64,
+    label_cost_ratio_ooc: f64,
+    samples_per_ray: f64,
+    /// Smooth boundaries over nearest.
+    smooth_cost_ratio: f64,
+    /// Samples with hidden labels skipped over without skipping.
+    hidden_skip_sample_ratio: f64,
+    /// Against the reference at the finest level (in core, out of core).
+    psnr_incore_db: f64,
+    psnr_ooc_finest_db: f64,
+    /// Out of core at 1, 2 and 4 px against the finest level, and the ids
+    /// drawn as averaged intensities at 2 px.
+    psnr_1px_db: f64,
+    psnr_2px_db: f64,
+    psnr_4px_db: f64,
+    psnr_averaged_2px_db: f64,
+    lod: Vec<LodRow>,
+    overlay: OverlayFigures,
+}
+
+/// The suite's JSON line.
+#[derive(Debug, Serialize)]
+pub(crate) struct LabelsResult {
+    #[serde(flatten)]
+    run: RunInfo,
+    maps: Vec<MapRow>,
+    psnr_finest_db_min: f64,
+    psnr_2px_db_min: f64,
+    label_cost_ratio_max: f64,
+    label_cost_ratio_ooc_max: f64,
+    hidden_skip_sample_ratio_max: f64,
+    overlay_cost_ratio: f64,
+    overlay_psnr_db_min: f64,
+    smooth_cost_ratio: f64,
+}
+
+pub(crate) fn run(args: &Args) -> Result<LabelsResult, String> {
+    let (size, rounds) = (args.size, args.rounds);
     let gpu = GpuContext::new().map_err(|e| e.to_string())?;
     println!("adapter: {}", gpu.describe());
     println!("timing at {size}x{size}, {rounds} interleaved rounds; errors at {ERROR_SIZE} px");
     let dir = tempfile::tempdir().map_err(|e| e.to_string())?;
-    let mut fig = Figures::new();
+    let mut maps = Vec::new();
     let (mut finest_min, mut two_px_min, mut cost_max, mut ooc_cost_max) =
         (f64::INFINITY, f64::INFINITY, 0.0f64, 0.0f64);
     let mut skip_ratio_max = 0.0f64;
@@ -248,6 +316,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         // The label error in the LOD metric: error-aware cuts (the share of
         // changed labels times their classified change) against the
         // geometric ones above, PSNR against the label finest and bricks.
+        let mut lod = Vec::new();
         for (metric, budget) in [
             ("geometric", 2.0f32),
             ("geometric-smooth", 2.0),
@@ -291,11 +360,12 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
                 .out_of_core
                 .map_or(0, |s| s.cache.working_set_bricks);
             println!("  {name} LOD {metric} {budget}: {db:.1} dB vs finest, {bricks} bricks");
-            fig.insert(format!("{name}_lod_{metric}_{budget}_db"), json!(db));
-            fig.insert(
-                format!("{name}_lod_{metric}_{budget}_bricks"),
-                json!(bricks),
-            );
+            lod.push(LodRow {
+                metric,
+                budget,
+                psnr_db: db,
+                bricks: bricks as u64,
+            });
         }
         finest_min = finest_min.min(in_db).min(levels[0]);
         two_px_min = two_px_min.min(levels[2]);
@@ -303,33 +373,9 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         ooc_cost_max = ooc_cost_max.max(ooc_cost);
         skip_ratio_max = skip_ratio_max.max(skip_ratio);
         smooth_max = smooth_max.max(smooth_cost);
-        fig.insert(format!("{name}_ms_labels_incore"), json!(in_ms[0]));
-        fig.insert(format!("{name}_ms_intensity_incore"), json!(in_ms[1]));
-        fig.insert(format!("{name}_ms_labels_ooc"), json!(ooc_ms[0]));
-        fig.insert(format!("{name}_ms_intensity_ooc"), json!(ooc_ms[1]));
-        fig.insert(format!("{name}_samples_per_ray"), json!(samples[0]));
-        fig.insert(format!("{name}_smooth_cost_ratio"), json!(smooth_cost));
-        fig.insert(
-            format!("{name}_hidden_skip_sample_ratio"),
-            json!(skip_ratio),
-        );
-        fig.insert(format!("{name}_psnr_incore_db"), json!(in_db));
-        fig.insert(format!("{name}_psnr_ooc_finest_db"), json!(levels[0]));
-        fig.insert(format!("{name}_psnr_1px_db"), json!(levels[1]));
-        fig.insert(format!("{name}_psnr_2px_db"), json!(levels[2]));
-        fig.insert(format!("{name}_psnr_4px_db"), json!(levels[3]));
-        fig.insert(format!("{name}_psnr_averaged_2px_db"), json!(levels[4]));
-
         let o = overlay(&gpu, &vol, image_dir, name, dir.path(), size, rounds)?;
         overlay_max = overlay_max.max(o.cost_incore).max(o.cost_ooc);
         overlay_db_min = overlay_db_min.min(o.psnr_db);
-        fig.insert(format!("{name}_overlay_ms_incore"), json!(o.ms_incore));
-        fig.insert(
-            format!("{name}_overlay_cost_ratio_incore"),
-            json!(o.cost_incore),
-        );
-        fig.insert(format!("{name}_overlay_cost_ratio_ooc"), json!(o.cost_ooc));
-        fig.insert(format!("{name}_overlay_psnr_db"), json!(o.psnr_db));
         overlay_rows.push(format!(
             "| {name} over {image_dir} | {:.3} ({:.1} / {:.1} ms) | {:.3} ({:.1} / {:.1} ms) | {:.1} |",
             o.cost_incore,
@@ -340,6 +386,26 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
             o.ms_ooc[1],
             o.psnr_db
         ));
+        maps.push(MapRow {
+            map: name,
+            ms_labels_incore: in_ms[0],
+            ms_intensity_incore: in_ms[1],
+            ms_labels_ooc: ooc_ms[0],
+            ms_intensity_ooc: ooc_ms[1],
+            label_cost_ratio: cost,
+            label_cost_ratio_ooc: ooc_cost,
+            samples_per_ray: samples[0],
+            smooth_cost_ratio: smooth_cost,
+            hidden_skip_sample_ratio: skip_ratio,
+            psnr_incore_db: in_db,
+            psnr_ooc_finest_db: levels[0],
+            psnr_1px_db: levels[1],
+            psnr_2px_db: levels[2],
+            psnr_4px_db: levels[3],
+            psnr_averaged_2px_db: levels[4],
+            lod,
+            overlay: o,
+        });
     }
     println!();
     println!(
@@ -349,26 +415,28 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
     for row in &overlay_rows {
         println!("{row}");
     }
-    fig.insert("psnr_finest_db_min".into(), json!(finest_min));
-    fig.insert("psnr_2px_db_min".into(), json!(two_px_min));
-    fig.insert("label_cost_ratio_max".into(), json!(cost_max));
-    fig.insert("label_cost_ratio_ooc_max".into(), json!(ooc_cost_max));
-    fig.insert("hidden_skip_sample_ratio_max".into(), json!(skip_ratio_max));
-    fig.insert("overlay_cost_ratio".into(), json!(overlay_max));
-    fig.insert("overlay_psnr_db_min".into(), json!(overlay_db_min));
-    fig.insert("smooth_cost_ratio".into(), json!(smooth_max));
-    fig.insert("image_size".into(), json!(size));
-    fig.insert("rounds".into(), json!(rounds));
-    fig.insert("adapter".into(), json!(gpu.adapter.get_info().name));
-    Ok(fig)
+    Ok(LabelsResult {
+        run: RunInfo::new(&gpu, size, rounds),
+        maps,
+        psnr_finest_db_min: finest_min,
+        psnr_2px_db_min: two_px_min,
+        label_cost_ratio_max: cost_max,
+        label_cost_ratio_ooc_max: ooc_cost_max,
+        hidden_skip_sample_ratio_max: skip_ratio_max,
+        overlay_cost_ratio: overlay_max,
+        overlay_psnr_db_min: overlay_db_min,
+        smooth_cost_ratio: smooth_max,
+    })
 }
 
 /// What an overlay costs and how far it is from the reference's.
-struct OverlayFigures {
+#[derive(Debug, Serialize)]
+pub(crate) struct OverlayFigures {
     /// ms per frame with / without the overlay, in core.
     ms_incore: [f64; 2],
     /// The same out of core at the finest level.
     ms_ooc: [f64; 2],
+    /// With over without the overlay, in core and out of core.
     cost_incore: f64,
     cost_ooc: f64,
     /// In core against the reference's overlay at 128 px, at its step.

@@ -24,8 +24,6 @@
 //! in front of the large one in view, then the camera stops) with per-frame
 //! wrong pixels and the frames until they are gone; a translation + zoom path.
 
-use crate::Figures;
-use crate::arg;
 use crate::runner::{finite_db, round2};
 use brickray_core::{
     Accel, Camera, RenderMode, RenderSettings, TransferFunction, Volume, VolumeFrame,
@@ -35,7 +33,8 @@ use brickray_harness::{GpuContext, Offscreen, ct};
 use brickray_reference::psnr;
 use brickray_render::{FrameDesc, Prediction, TraversalClass, VolumeRenderer};
 use glam::Vec3;
-use serde_json::json;
+use serde::Serialize;
+use std::collections::BTreeMap;
 
 /// `(name, prediction)` of every variant; `full` first. `kappa`: the sparse
 /// step's (the paper's 0.5 unless `--kappa` says otherwise).
@@ -171,8 +170,105 @@ struct Track {
     unsettled: usize,
 }
 
+/// One variant along one path.
+#[derive(Debug, Clone, Serialize)]
+pub(crate) struct Summary {
+    /// full, paper, guard, ... (`variants()`).
+    variant: &'static str,
+    /// Mean ms per frame, and `full`'s total time over this variant's.
+    ms: f64,
+    speedup: f64,
+    samples_per_ray: f64,
+    /// Pixels that differ from `full`'s image, % of the image: mean and
+    /// largest over the frames.
+    wrong_mean_pct: f64,
+    wrong_max_pct: f64,
+    /// The smallest PSNR against `full` over the frames.
+    psnr_min_db: f64,
+    /// Frames identical to `full`'s.
+    frames_exact: usize,
+    /// Frames drawn while the cut was not settled (out of core).
+    unsettled_frames: usize,
+    /// Wrong pixels by the traversal class that drew them (summed over
+    /// frames; classes with none left out).
+    wrong_px_by_class: BTreeMap<String, u64>,
+}
+
+/// One orbit.
+#[derive(Debug, Serialize)]
+pub(crate) struct OrbitResult {
+    /// head_ct, mri or nested_shells.
+    scene: &'static str,
+    /// default or brute (the accelerations).
+    accel: &'static str,
+    variants: Vec<Summary>,
+    /// Traversal classes of the paper variant's last predicted frame, %.
+    paper_classes_pct: Option<BTreeMap<String, f64>>,
+}
+
+/// The failure path.
+#[derive(Debug, Serialize)]
+pub(crate) struct FailureResult {
+    variants: Vec<Summary>,
+    /// Frames after the camera stopped until the paper variant's wrong
+    /// pixels are gone (null: never within the path).
+    recovery_frames_paper: Option<usize>,
+}
+
+/// The suite's options.
+#[derive(Debug, clap::Args)]
+pub(crate) struct Args {
+    /// Image side in pixels.
+    #[arg(long, default_value_t = 256, value_parser = crate::image_side)]
+    size: u32,
+    /// Frames of each orbit.
+    #[arg(long, default_value_t = 120, value_parser = crate::at_least_one::<usize>)]
+    frames: usize,
+    /// Write the failure path's chart (SVG) here.
+    #[arg(long)]
+    chart: Option<String>,
+    /// Write the traversal-class image (PNG) here.
+    #[arg(long)]
+    classes_png: Option<String>,
+    /// Sparse traversal's kappa (default the paper's 0.5).
+    #[arg(long, default_value_t = Prediction::PAPER.kappa)]
+    kappa: f32,
+    /// 1: also time full traversal without empty-space skipping.
+    #[arg(long, default_value_t = 1)]
+    brute: u32,
+    /// `incore` or `ooc`: brick stores drawn out of core at the finest level.
+    #[arg(long, default_value = "incore")]
+    backend: String,
+}
+
+/// The suite's JSON line.
+#[derive(Debug, Serialize)]
+pub(crate) struct PredictionResult {
+    size: u32,
+    backend: &'static str,
+    kappa: f32,
+    frames: usize,
+    orbit: Vec<OrbitResult>,
+    failure: FailureResult,
+    /// The translation + zoom path on the first scene.
+    translate_zoom: Vec<Summary>,
+    /// On the first scene's orbit: the paper variant's speedup over full
+    /// (with default accelerations, and with brute force), and its mean
+    /// wrong pixels, %.
+    speedup_paper: f64,
+    speedup_paper_vs_brute: f64,
+    wrong_pixels_mean_paper_orbit: f64,
+    /// The fastest variant exact on every orbit and the failure path.
+    best_exact: &'static str,
+    speedup_best_exact: f64,
+    /// The largest wrong pixels on the failure path, %: paper and guard.
+    wrong_pixels_max_paper: f64,
+    wrong_pixels_max_guarded: f64,
+    recovery_frames_paper: Option<usize>,
+}
+
 impl Track {
-    fn summary(&self, full: &Track) -> serde_json::Value {
+    fn summary(&self, variant: &'static str, full: &Track) -> Summary {
         let n = self.ms.len().max(1) as f64;
         let sum = |v: &[f64]| v.iter().sum::<f64>();
         let finite: Vec<f64> = self
@@ -181,21 +277,27 @@ impl Track {
             .copied()
             .filter(|x| x.is_finite())
             .collect();
-        json!({
-            "ms": round2(sum(&self.ms) / n),
-            "speedup": round2(sum(&full.ms) / sum(&self.ms)),
-            "samples_per_ray": round2(sum(&self.samples) / n),
-            "wrong_mean_pct": (sum(&self.wrong) / n * 1e4).round() / 1e2,
-            "wrong_max_pct": (self.wrong.iter().copied().fold(0.0, f64::max) * 1e4).round() / 1e2,
-            "psnr_min_db": finite_db(finite.iter().copied().fold(f64::INFINITY, f64::min)),
-            "frames_exact": self.wrong.iter().filter(|&&w| w == 0.0).count(),
-            "unsettled_frames": self.unsettled,
-            "wrong_px_by_class": TraversalClass::ALL
+        Summary {
+            variant,
+            ms: round2(sum(&self.ms) / n),
+            speedup: round2(sum(&full.ms) / sum(&self.ms)),
+            samples_per_ray: round2(sum(&self.samples) / n),
+            wrong_mean_pct: (sum(&self.wrong) / n * 1e4).round() / 1e2,
+            wrong_max_pct: (self.wrong.iter().copied().fold(0.0, f64::max) * 1e4).round() / 1e2,
+            psnr_min_db: finite_db(finite.iter().copied().fold(f64::INFINITY, f64::min)),
+            frames_exact: self.wrong.iter().filter(|&&w| w == 0.0).count(),
+            unsettled_frames: self.unsettled,
+            wrong_px_by_class: TraversalClass::ALL
                 .iter()
                 .filter(|(_, c)| self.wrong_by_class[*c as usize] > 0)
-                .map(|(n, c)| (n.trim_start_matches("TRAVERSAL_").to_lowercase(), json!(self.wrong_by_class[*c as usize])))
-                .collect::<serde_json::Map<_, _>>(),
-        })
+                .map(|(n, c)| {
+                    (
+                        n.trim_start_matches("TRAVERSAL_").to_lowercase(),
+                        self.wrong_by_class[*c as usize],
+                    )
+                })
+                .collect(),
+        }
     }
 }
 
@@ -292,19 +394,17 @@ fn orbit(center: Vec3, distance: f32, frames: usize) -> Vec<Camera> {
         .collect()
 }
 
-fn class_share(r: &FrameResult) -> serde_json::Value {
-    let Some(c) = &r.classes else {
-        return json!(null);
-    };
-    let mut m = serde_json::Map::new();
+fn class_share(r: &FrameResult) -> Option<BTreeMap<String, f64>> {
+    let c = r.classes.as_ref()?;
+    let mut m = BTreeMap::new();
     for (name, class) in TraversalClass::ALL {
         let n = c.iter().filter(|&&x| x == class as u32).count();
         m.insert(
             name.trim_start_matches("TRAVERSAL_").to_lowercase(),
-            json!(round2(100.0 * n as f64 / c.len() as f64)),
+            round2(100.0 * n as f64 / c.len() as f64),
         );
     }
-    json!(m)
+    Some(m)
 }
 
 fn save_classes(r: &FrameResult, size: u32, path: &str) -> Result<(), String> {
@@ -319,14 +419,12 @@ fn save_classes(r: &FrameResult, size: u32, path: &str) -> Result<(), String> {
     brickray_reference::save_rgba8_png(path, &rgba, size, size).map_err(|e| e.to_string())
 }
 
-pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
-    let size: u32 = arg(args, "--size", 256)?;
-    let frames: usize = arg(args, "--frames", 120)?;
-    let chart: String = arg(args, "--chart", String::new())?;
-    let classes_png: String = arg(args, "--classes-png", String::new())?;
-    let kappa: f32 = arg(args, "--kappa", Prediction::PAPER.kappa)?;
-    let brute: bool = arg(args, "--brute", 1u32)? == 1;
-    let backend = Backend::parse(&arg(args, "--backend", "incore".to_string())?)?;
+pub(crate) fn run(args: &Args) -> Result<PredictionResult, String> {
+    let (size, frames, kappa) = (args.size, args.frames, args.kappa);
+    let chart = args.chart.clone().unwrap_or_default();
+    let classes_png = args.classes_png.clone().unwrap_or_default();
+    let brute = args.brute == 1;
+    let backend = Backend::parse(&args.backend)?;
     let gpu = GpuContext::new().map_err(|e| e.to_string())?;
     println!("adapter: {}", gpu.describe());
     println!(
@@ -359,9 +457,8 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         vol: predict::nested_shells(128),
         isovalue: 0.5,
     });
-    let names: Vec<&str> = variants(kappa).iter().map(|v| v.0).collect();
-    let mut fig = Figures::new();
-    let mut orbit_fig = serde_json::Map::new();
+    let names: Vec<&'static str> = variants(kappa).iter().map(|v| v.0).collect();
+    let mut orbit_results = Vec::new();
     let mut speedup_paper = 0.0;
     let mut speedup_paper_brute = 0.0;
     let mut wrong_mean_paper = 0.0;
@@ -391,41 +488,46 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
                 "\norbit, {} {:?} isovalue {:.4}, accelerations {accel_name}:",
                 scene.name, d.dims, scene.isovalue
             );
-            let mut m = serde_json::Map::new();
+            let mut summaries = Vec::new();
+            let mut paper_classes_pct = None;
             for (k, t) in tracks.iter().enumerate() {
-                let s = t.summary(&tracks[0]);
-                println!("  {:6} {s}", names[k]);
+                let s = t.summary(names[k], &tracks[0]);
+                println!("  {:6} {s:?}", names[k]);
                 if default && t.wrong.iter().any(|&w| w > 0.0) {
                     exact_orbit[k] = false;
                 }
                 if default && scene.name == scenes[0].name {
-                    speed_ct[k] = s["speedup"].as_f64().unwrap_or(0.0);
+                    speed_ct[k] = s.speedup;
                 }
                 if scene.name == scenes[0].name && k == 1 {
                     if default {
-                        speedup_paper = s["speedup"].as_f64().unwrap_or(0.0);
-                        wrong_mean_paper = s["wrong_mean_pct"].as_f64().unwrap_or(0.0);
+                        speedup_paper = s.speedup;
+                        wrong_mean_paper = s.wrong_mean_pct;
                     } else {
-                        speedup_paper_brute = s["speedup"].as_f64().unwrap_or(0.0);
+                        speedup_paper_brute = s.speedup;
                     }
                 }
-                m.insert(names[k].to_string(), s);
+                summaries.push(s);
             }
             if let Some(l) = &last {
                 let c = class_share(l);
                 println!(
-                    "  paper, traversal classes of its last predicted frame (% of pixels): {c}"
+                    "  paper, traversal classes of its last predicted frame (% of pixels): {c:?}"
                 );
-                m.insert("paper_classes_pct".into(), c);
+                paper_classes_pct = c;
                 if !classes_png.is_empty() && default && scene.name == scenes[0].name {
                     save_classes(l, size, &classes_png)?;
                     println!("  wrote {classes_png}");
                 }
             }
-            orbit_fig.insert(format!("{}_{accel_name}", scene.name), json!(m));
+            orbit_results.push(OrbitResult {
+                scene: scene.name,
+                accel: accel_name,
+                variants: summaries,
+                paper_classes_pct,
+            });
         }
     }
-    fig.insert("orbit".into(), json!(orbit_fig));
 
     // The failure path: the small ball slides in front of the large one for
     // `moving` frames, then the camera stops.
@@ -446,27 +548,23 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         .collect();
     let (tracks, _) = run_path(&gpu, &occ, size, &cams, Accel::default(), kappa, &backend)?;
     println!("\nfailure path (occluder; camera moves {moving} frames, then stops {still}):");
-    let mut fail = serde_json::Map::new();
+    let mut fail = Vec::new();
     for (k, t) in tracks.iter().enumerate() {
-        println!("  {:6} {}", names[k], t.summary(&tracks[0]));
+        println!("  {:6} {:?}", names[k], t.summary(names[k], &tracks[0]));
         let pct: Vec<String> = t
             .wrong
             .iter()
             .map(|w| format!("{:.2}", 100.0 * w))
             .collect();
         println!("         wrong % per frame: {}", pct.join(" "));
-        fail.insert(names[k].to_string(), t.summary(&tracks[0]));
+        fail.push(t.summary(names[k], &tracks[0]));
     }
     // Frames after the camera stopped until the paper's wrong pixels are gone.
-    let recovery = |t: &Track| {
-        t.wrong[moving..]
-            .iter()
-            .position(|&w| w == 0.0)
-            .map_or(json!(null), |p| json!(p))
+    let recovery_paper = tracks[1].wrong[moving..].iter().position(|&w| w == 0.0);
+    let failure = FailureResult {
+        variants: fail,
+        recovery_frames_paper: recovery_paper,
     };
-    let recovery_paper = recovery(&tracks[1]);
-    fail.insert("recovery_frames_paper".into(), recovery_paper.clone());
-    fig.insert("failure".into(), json!(fail));
     let exact_fail: Vec<bool> = tracks
         .iter()
         .map(|t| t.wrong.iter().all(|&w| w == 0.0))
@@ -505,12 +603,12 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         .collect();
     let (tracks, _) = run_path(&gpu, scene, size, &cams, Accel::default(), kappa, &backend)?;
     println!("\ntranslation + zoom, {} ({n} frames):", scene.name);
-    let mut tz = serde_json::Map::new();
+    let mut translate_zoom = Vec::new();
     for (k, t) in tracks.iter().enumerate() {
-        println!("  {:6} {}", names[k], t.summary(&tracks[0]));
-        tz.insert(names[k].to_string(), t.summary(&tracks[0]));
+        let s = t.summary(names[k], &tracks[0]);
+        println!("  {:6} {s:?}", names[k]);
+        translate_zoom.push(s);
     }
-    fig.insert("translate_zoom".into(), json!(tz));
 
     // The fastest variant (on the first scene's orbit) whose wrong pixels stay
     // at 0 on the orbits and the failure path; `full` itself is exact.
@@ -522,24 +620,25 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         "\nbest exact variant: {} ({}x)",
         names[best_exact], speed_ct[best_exact]
     );
-    fig.insert("size".into(), json!(size));
-    fig.insert("backend".into(), json!(backend.name()));
-    fig.insert("kappa".into(), json!(kappa));
-    fig.insert("frames".into(), json!(frames));
-    fig.insert("speedup_paper".into(), json!(speedup_paper));
-    fig.insert("speedup_paper_vs_brute".into(), json!(speedup_paper_brute));
-    fig.insert(
-        "wrong_pixels_mean_paper_orbit".into(),
-        json!(wrong_mean_paper),
-    );
-    fig.insert("speedup_best_exact".into(), json!(speed_ct[best_exact]));
-    fig.insert("best_exact".into(), json!(names[best_exact]));
-    fig.insert("wrong_pixels_max_paper".into(), json!(wrong_max(1)));
     let guard = names
         .iter()
         .position(|n| *n == "guard")
         .expect("a guard variant");
-    fig.insert("wrong_pixels_max_guarded".into(), json!(wrong_max(guard)));
-    fig.insert("recovery_frames_paper".into(), recovery_paper);
-    Ok(fig)
+    Ok(PredictionResult {
+        size,
+        backend: backend.name(),
+        kappa,
+        frames,
+        orbit: orbit_results,
+        failure,
+        translate_zoom,
+        speedup_paper,
+        speedup_paper_vs_brute: speedup_paper_brute,
+        wrong_pixels_mean_paper_orbit: wrong_mean_paper,
+        best_exact: names[best_exact],
+        speedup_best_exact: speed_ct[best_exact],
+        wrong_pixels_max_paper: wrong_max(1),
+        wrong_pixels_max_guarded: wrong_max(guard),
+        recovery_frames_paper: recovery_paper,
+    })
 }

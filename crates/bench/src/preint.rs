@@ -11,21 +11,62 @@
 //!   PSNR of plain and pre-integrated GPU images against the exact integral
 //!   (CPU reference at 1/16 voxel) at steps of 0.5 to 4 voxels.
 
-use crate::Figures;
+use crate::report::{RunInfo, Timing, interleave};
 use crate::runner::{Runner, finite_db, median, round2};
 use brickray_core::{Camera, RenderSettings, Shading, TransferFunction, VolumeFrame};
 use brickray_harness::{GpuContext, ct};
 use brickray_reference::{ReferenceOptions, psnr, render_reference};
 use brickray_render::VolumeRenderer;
-use serde_json::json;
+use serde::Serialize;
 use std::time::Instant;
 
-fn arg<T: std::str::FromStr>(args: &[String], name: &str) -> Result<Option<T>, String> {
-    args.iter()
-        .position(|a| a == name)
-        .and_then(|i| args.get(i + 1))
-        .map(|s| s.parse().map_err(|_| format!("bad {name}")))
-        .transpose()
+/// The suite's options.
+#[derive(Debug, clap::Args)]
+pub(crate) struct Args {
+    /// Image side in pixels of the timed frames.
+    #[arg(long, default_value_t = 256, value_parser = crate::image_side)]
+    size: u32,
+    /// Interleaved rounds.
+    #[arg(long, default_value_t = 5, value_parser = crate::at_least_one::<usize>)]
+    rounds: usize,
+}
+
+/// Plain against pre-integrated DVR on the head CT, one mode and step.
+#[derive(Debug, Serialize)]
+pub(crate) struct CostRow {
+    /// dvr or dvr_shaded.
+    mode: &'static str,
+    step: f32,
+    plain: Timing,
+    preint: Timing,
+    /// Pre-integrated wall time over plain.
+    ratio: f64,
+    /// The pre-integrated image against the plain one.
+    psnr_preint_vs_plain_db: f64,
+}
+
+/// The spike scene at one step: PSNR against the exact integral.
+#[derive(Debug, Serialize)]
+pub(crate) struct SpikeRow {
+    step: f32,
+    psnr_plain_db: f64,
+    psnr_preint_db: f64,
+}
+
+/// The suite's JSON line.
+#[derive(Debug, Serialize)]
+pub(crate) struct PreintResult {
+    #[serde(flatten)]
+    run: RunInfo,
+    /// CPU time of the opacity-corrected table (one row) and of the
+    /// pre-integrated table with 1 and 8 layers, ms.
+    ms_corrected_table: f64,
+    ms_preint_table_1_layers: f64,
+    ms_preint_table_8_layers: f64,
+    cost: Vec<CostRow>,
+    /// The largest pre-integrated over plain ratio.
+    worst_ratio: f64,
+    spike: Vec<SpikeRow>,
 }
 
 fn spike_tf() -> TransferFunction {
@@ -49,10 +90,8 @@ fn ms_of(f: impl Fn()) -> f64 {
     median(&t)
 }
 
-pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
-    let rounds: usize = arg(args, "--rounds")?.unwrap_or(5);
-    let size: u32 = arg(args, "--size")?.unwrap_or(256);
-    let mut fig = Figures::new();
+pub(crate) fn run(args: &Args) -> Result<PreintResult, String> {
+    let (rounds, size) = (args.rounds, args.size);
 
     // CPU table builds.
     let soft = ct::soft_tissue();
@@ -64,16 +103,13 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         std::thread::available_parallelism().map_or(1, |n| n.get())
     );
     println!("  corrected table, 1 row: {corrected:.2} ms");
-    fig.insert("ms_corrected_table".into(), json!(round2(corrected)));
-    for layers in [1u32, 8] {
+    let mut table_ms = [0.0; 2];
+    for (ms_out, layers) in table_ms.iter_mut().zip([1u32, 8]) {
         let ms = ms_of(|| {
             std::hint::black_box(soft.preintegrated_table(0.5, layers, 256));
         });
         println!("  pre-integrated table, 256x256 x {layers} layer(s): {ms:.1} ms");
-        fig.insert(
-            format!("ms_preint_table_{layers}_layers"),
-            json!(round2(ms)),
-        );
+        *ms_out = round2(ms);
     }
 
     let gpu = GpuContext::new().map_err(|e| e.to_string())?;
@@ -102,6 +138,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         "mode", "step", "plain ms", "preint ms", "ratio", "PSNR vs plain"
     );
     let mut worst_ratio = 0.0f64;
+    let mut cost = Vec::new();
     for shaded in [false, true] {
         for step in [0.5f32, 2.0] {
             let settings = |preintegrated| RenderSettings {
@@ -118,17 +155,11 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
             for p in [false, true] {
                 images.push(run.frame(&mut r, camera, frame, settings(p), true)?.rgba);
             }
-            let mut times = [Vec::new(), Vec::new()];
-            for round in 0..rounds {
-                for k in 0..2 {
-                    let i = (k + round) % 2;
-                    times[i].push(
-                        run.frame(&mut r, camera, frame, settings(i == 1), false)?
-                            .ms,
-                    );
-                }
-            }
-            let (plain, pre) = (median(&times[0]), median(&times[1]));
+            let shots = interleave(rounds, 2, |i| {
+                run.frame(&mut r, camera, frame, settings(i == 1), false)
+            })?;
+            let (plain_t, pre_t) = (Timing::of(&shots[0]), Timing::of(&shots[1]));
+            let (plain, pre) = (plain_t.ms, pre_t.ms);
             let ratio = pre / plain;
             worst_ratio = worst_ratio.max(ratio);
             let db = psnr(&images[1], &images[0]);
@@ -136,17 +167,16 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
             println!(
                 "  {mode:<16} {step:>5} {plain:>10.1} {pre:>10.1} {ratio:>6.2}x {db:>11.2} dB"
             );
-            let key = format!("{mode}_step{step}");
-            fig.insert(format!("ms_plain_{key}"), json!(round2(plain)));
-            fig.insert(format!("ms_preint_{key}"), json!(round2(pre)));
-            fig.insert(format!("ratio_{key}"), json!(round2(ratio)));
-            fig.insert(
-                format!("psnr_preint_vs_plain_{key}_db"),
-                json!(finite_db(db)),
-            );
+            cost.push(CostRow {
+                mode,
+                step,
+                plain: plain_t,
+                preint: pre_t,
+                ratio: round2(ratio),
+                psnr_preint_vs_plain_db: finite_db(db),
+            });
         }
     }
-    fig.insert("worst_ratio".into(), json!(round2(worst_ratio)));
 
     // Quality on the spike scene.
     let ball = brickray_core::synthetic::sphere(64);
@@ -174,6 +204,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
     .to_rgba8([0.0; 3]);
     println!("spike ball 64^3, {q}x{q}, PSNR vs the exact integral (1/16 voxel):");
     println!("  {:>5} {:>9} {:>9}", "step", "plain", "preint");
+    let mut spike = Vec::new();
     for step in [0.5f32, 1.0, 2.0, 4.0] {
         let mut db = [0.0; 2];
         for (i, p) in [false, true].into_iter().enumerate() {
@@ -185,17 +216,19 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
             db[i] = psnr(&qrun.frame(&mut rb, bcam, bframe, s, true)?.rgba, &exact);
         }
         println!("  {step:>5} {:>6.2} dB {:>6.2} dB", db[0], db[1]);
-        fig.insert(
-            format!("spike_psnr_plain_step{step}_db"),
-            json!(finite_db(db[0])),
-        );
-        fig.insert(
-            format!("spike_psnr_preint_step{step}_db"),
-            json!(finite_db(db[1])),
-        );
+        spike.push(SpikeRow {
+            step,
+            psnr_plain_db: finite_db(db[0]),
+            psnr_preint_db: finite_db(db[1]),
+        });
     }
-    fig.insert("image_size".into(), json!(size));
-    fig.insert("rounds".into(), json!(rounds));
-    fig.insert("adapter".into(), json!(gpu.adapter.get_info().name));
-    Ok(fig)
+    Ok(PreintResult {
+        run: RunInfo::new(&gpu, size, rounds),
+        ms_corrected_table: round2(corrected),
+        ms_preint_table_1_layers: table_ms[0],
+        ms_preint_table_8_layers: table_ms[1],
+        cost,
+        worst_ratio: round2(worst_ratio),
+        spike,
+    })
 }

@@ -10,6 +10,9 @@ use std::time::{Duration, Instant};
 pub(crate) struct Shot {
     /// `prepare + submit + wait` wall time.
     pub(crate) ms: f64,
+    /// The ray-cast pass's own time by GPU timestamps, where the device
+    /// has them.
+    pub(crate) gpu_ms: Option<f64>,
     /// The process's CPU time over the same span ([`process_cpu_ms`]).
     pub(crate) cpu_ms: f64,
     /// The image (RGBA8; empty when not read).
@@ -176,9 +179,11 @@ impl<'a> Runner<'a> {
         g.submit_wait(enc);
         let ms = t0.elapsed().as_secs_f64() * 1e3;
         let cpu_ms = process_cpu_ms() - cpu0;
+        let gpu_ms = None;
         if !read {
             return Ok(Shot {
                 ms,
+                gpu_ms,
                 cpu_ms,
                 rgba: Vec::new(),
                 samples: 0.0,
@@ -197,6 +202,7 @@ impl<'a> Runner<'a> {
         let n = counts.iter().filter(|&&c| c > 0).count() as u64;
         Ok(Shot {
             ms,
+            gpu_ms,
             cpu_ms,
             rgba,
             samples: sum as f64 / n.max(1) as f64,

@@ -11,17 +11,87 @@
 //!
 //! `cargo run --release -p brickray-bench -- soak [--frames N] [--size PX]`
 
-use crate::{Figures, arg};
 use brickray_harness::GpuContext;
-use brickray_harness::soak::{self, SoakConfig};
-use serde_json::json;
+use brickray_harness::soak::{self, FeatureFrames, SoakConfig};
+use serde::Serialize;
 
-pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
-    let d = SoakConfig::default();
+/// The suite's options.
+#[derive(Debug, clap::Args)]
+pub(crate) struct Args {
+    /// Frames.
+    #[arg(long, default_value_t = SoakConfig::default().frames, value_parser = crate::at_least_one::<usize>)]
+    frames: usize,
+    /// Image side in pixels.
+    #[arg(long, default_value_t = SoakConfig::default().size, value_parser = crate::image_side)]
+    size: u32,
+}
+
+/// Frames in which each feature was at work (`FeatureFrames`).
+#[derive(Debug, Serialize)]
+pub(crate) struct Features {
+    frames: u64,
+    dvr: u64,
+    iso: u64,
+    mip: u64,
+    reversed_z: u64,
+    prediction: u64,
+    visibility: u64,
+    culled: u64,
+    occlusion_queries: u64,
+    usage_feedback: u64,
+    fades: u64,
+    uploads: u64,
+}
+
+impl From<FeatureFrames> for Features {
+    fn from(f: FeatureFrames) -> Features {
+        Features {
+            frames: f.frames as u64,
+            dvr: f.dvr as u64,
+            iso: f.iso as u64,
+            mip: f.mip as u64,
+            reversed_z: f.reversed_z as u64,
+            prediction: f.prediction as u64,
+            visibility: f.visibility as u64,
+            culled: f.culled as u64,
+            occlusion_queries: f.occlusion_queries as u64,
+            usage_feedback: f.usage_feedback as u64,
+            fades: f.fades as u64,
+            uploads: f.uploads as u64,
+        }
+    }
+}
+
+/// The suite's JSON line.
+#[derive(Debug, Serialize)]
+pub(crate) struct SoakResult {
+    frames: usize,
+    /// Process RSS at frame 250, at the end, and its maximum, MiB.
+    rss_start_mib: f64,
+    rss_end_mib: f64,
+    rss_max_mib: f64,
+    /// RSS growth from frame 250 to the end, percent.
+    rss_growth_pct: f64,
+    /// The last block's median frame time over the first's.
+    frame_time_drift: f64,
+    /// Median and p99 frame time of each block of 1,000 frames, ms.
+    median_ms_per_1000: Vec<f64>,
+    p99_ms_per_1000: Vec<f64>,
+    /// Frames over 10x the median and what their work predicts.
+    stalls: usize,
+    /// Frames over 10x the median alone.
+    frames_over_10x_median: usize,
+    /// Frames in which each feature was active.
+    feature_frames: Features,
+    errors: usize,
+    panics: usize,
+}
+
+pub(crate) fn run(args: &Args) -> Result<SoakResult, String> {
     let config = SoakConfig {
-        frames: arg(args, "--frames", d.frames)?,
-        size: arg(args, "--size", d.size)?,
-        ..d
+        frames: args.frames,
+        size: args.size,
+        ..SoakConfig::default()
     };
     let gpu = GpuContext::new().map_err(|e| e.to_string())?;
     println!("adapter: {}", gpu.describe());
@@ -81,45 +151,19 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
     if let Some(f) = &r.first_failure {
         println!("first failure: {f}");
     }
-    let mut fig = Figures::new();
-    fig.insert("frames".into(), json!(config.frames));
-    fig.insert("rss_start_mib".into(), json!(mib(r.rss_at(start))));
-    fig.insert(
-        "rss_end_mib".into(),
-        json!(mib(r.rss.last().map_or(0, |s| s.1))),
-    );
-    fig.insert("rss_max_mib".into(), json!(mib(max)));
-    fig.insert("rss_growth_pct".into(), json!(growth));
-    fig.insert("frame_time_drift".into(), json!(drift));
-    fig.insert(
-        "median_ms_per_1000".into(),
-        json!(blocks.iter().map(|b| b.0).collect::<Vec<_>>()),
-    );
-    fig.insert(
-        "p99_ms_per_1000".into(),
-        json!(blocks.iter().map(|b| b.1).collect::<Vec<_>>()),
-    );
-    fig.insert("stalls".into(), json!(stalls));
-    fig.insert("frames_over_10x_median".into(), json!(slow));
-    let f = r.features;
-    fig.insert(
-        "feature_frames".into(),
-        json!({
-            "frames": f.frames,
-            "dvr": f.dvr,
-            "iso": f.iso,
-            "mip": f.mip,
-            "reversed_z": f.reversed_z,
-            "prediction": f.prediction,
-            "visibility": f.visibility,
-            "culled": f.culled,
-            "occlusion_queries": f.occlusion_queries,
-            "usage_feedback": f.usage_feedback,
-            "fades": f.fades,
-            "uploads": f.uploads,
-        }),
-    );
-    fig.insert("errors".into(), json!(r.errors));
-    fig.insert("panics".into(), json!(r.panics));
-    Ok(fig)
+    Ok(SoakResult {
+        frames: config.frames,
+        rss_start_mib: mib(r.rss_at(start)),
+        rss_end_mib: mib(r.rss.last().map_or(0, |s| s.1)),
+        rss_max_mib: mib(max),
+        rss_growth_pct: growth,
+        frame_time_drift: drift,
+        median_ms_per_1000: blocks.iter().map(|b| b.0).collect(),
+        p99_ms_per_1000: blocks.iter().map(|b| b.1).collect(),
+        stalls,
+        frames_over_10x_median: slow,
+        feature_frames: r.features.into(),
+        errors: r.errors,
+        panics: r.panics,
+    })
 }

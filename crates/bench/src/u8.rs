@@ -12,18 +12,54 @@
 //!
 //! `cargo run --release -p brickray-bench -- u8 [--size PX] [--rounds N]`
 
-use crate::runner::median;
-use crate::{Figures, arg};
+use crate::report::{RunInfo, Timing, interleave};
+use crate::runner::{Runner, round2};
 use brickray_core::{Camera, RenderMode, RenderSettings, Shading, TransferFunction, VolumeFrame};
 use brickray_harness::{GpuContext, Offscreen, draw_frame};
 use brickray_reference::{DEFAULT_STEP_FACTOR, ReferenceOptions, compare, render_reference};
 use brickray_render::{FrameDesc, RendererOptions, U8Filtering, VolumeRenderer};
-use serde_json::json;
-use std::time::Instant;
+use serde::Serialize;
 
-pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
-    let size: u32 = arg(args, "--size", 512)?;
-    let rounds: usize = arg(args, "--rounds", 5)?;
+/// The suite's options.
+#[derive(Debug, clap::Args)]
+pub(crate) struct Args {
+    /// Image side in pixels.
+    #[arg(long, default_value_t = 512, value_parser = crate::image_side)]
+    size: u32,
+    /// Interleaved rounds.
+    #[arg(long, default_value_t = 5, value_parser = crate::at_least_one::<usize>)]
+    rounds: usize,
+}
+
+/// One scene: exact against 8-bit (fast) filtering.
+#[derive(Debug, Serialize)]
+pub(crate) struct Row {
+    /// dvr, iso or mip.
+    scene: &'static str,
+    exact: Timing,
+    fast: Timing,
+    /// Exact wall time over fast.
+    exact_over_fast: f64,
+    /// Against the reference at the scene's step (192 px).
+    psnr_exact_db: f64,
+    psnr_fast_db: f64,
+    /// Against the reference at the reference's own step.
+    psnr_same_step_exact_db: f64,
+    psnr_same_step_fast_db: f64,
+}
+
+/// The suite's JSON line.
+#[derive(Debug, Serialize)]
+pub(crate) struct U8Result {
+    #[serde(flatten)]
+    run: RunInfo,
+    rows: Vec<Row>,
+    /// The largest exact over fast ratio.
+    exact_over_fast_worst: f64,
+}
+
+pub(crate) fn run(args: &Args) -> Result<U8Result, String> {
+    let (size, rounds) = (args.size, args.rounds);
     let path = brickray_harness::shared_volume("pycortex_s1_t1_mri")
         .ok_or("the u8 suite needs ../shared/data/pycortex_s1_t1_mri")?;
     let vol = brickray_io::read_volume(&path).map_err(|e| e.to_string())?;
@@ -54,7 +90,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         );
         renderers.push((name, r));
     }
-    let scenes = [
+    let scenes: [(&'static str, RenderSettings, TransferFunction); 3] = [
         (
             "dvr",
             RenderSettings {
@@ -95,44 +131,30 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
             TransferFunction::ramp(0.2, 0.9, 1.0),
         ),
     ];
-    let big = Offscreen::new(&gpu.device, size, size);
+    let big = Runner::new(&gpu, size)?;
     let small_size = 192;
     let small = Offscreen::new(&gpu.device, small_size, small_size);
-    let mut fig = Figures::new();
+    let mut rows = Vec::new();
     println!(
         "| scene | exact ms | fast ms | exact / fast | PSNR exact / fast (dB) | same-step PSNR exact / fast (dB) |"
     );
     println!("|---|---:|---:|---:|---:|---:|");
     let mut worst_ratio: f64 = 0.0;
     for (scene, settings, tf) in &scenes {
+        let scene = *scene;
         for (_, r) in renderers.iter_mut() {
             r.set_transfer_function(&gpu.device, &gpu.queue, tf)
                 .map_err(|e| e.to_string())?;
         }
-        let desc = FrameDesc {
-            settings: *settings,
-            ..FrameDesc::new(camera, frame, size, size)
-        };
         // Warm-up (pipeline compilation), then interleaved rounds.
-        let mut times = vec![Vec::new(); renderers.len()];
-        for round in 0..=rounds {
-            for k in 0..renderers.len() {
-                let i = (k + round) % renderers.len();
-                let t = Instant::now();
-                draw_frame(
-                    &gpu,
-                    &mut renderers[i].1,
-                    &big,
-                    &desc,
-                    Some(wgpu::Color::BLACK),
-                )
-                .map_err(|e| e.to_string())?;
-                if round > 0 {
-                    times[i].push(t.elapsed().as_secs_f64() * 1e3);
-                }
-            }
+        for (_, r) in renderers.iter_mut() {
+            big.frame(r, camera, frame, *settings, false)?;
         }
-        let ms: Vec<f64> = times.iter().map(|t| median(t)).collect();
+        let shots = interleave(rounds, renderers.len(), |i| {
+            big.frame(&mut renderers[i].1, camera, frame, *settings, false)
+        })?;
+        let times: Vec<Timing> = shots.iter().map(|t| Timing::of(t)).collect();
+        let ms: Vec<f64> = times.iter().map(|t| t.ms).collect();
         // Accuracy against the reference, at the default step and at its own.
         let mut psnr = Vec::new();
         for step in [settings.step_factor, DEFAULT_STEP_FACTOR] {
@@ -166,17 +188,20 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
             "| {scene} | {:.1} | {:.1} | {ratio:.3} | {:.2} / {:.2} | {:.2} / {:.2} |",
             ms[0], ms[1], psnr[0], psnr[1], psnr[2], psnr[3]
         );
-        fig.insert(format!("ms_exact_{scene}"), json!(ms[0]));
-        fig.insert(format!("ms_fast_{scene}"), json!(ms[1]));
-        fig.insert(format!("exact_over_fast_{scene}"), json!(ratio));
-        fig.insert(format!("psnr_exact_{scene}_db"), json!(psnr[0]));
-        fig.insert(format!("psnr_fast_{scene}_db"), json!(psnr[1]));
-        fig.insert(format!("psnr_same_step_exact_{scene}_db"), json!(psnr[2]));
-        fig.insert(format!("psnr_same_step_fast_{scene}_db"), json!(psnr[3]));
+        rows.push(Row {
+            scene,
+            exact: times[0],
+            fast: times[1],
+            exact_over_fast: round2(ratio),
+            psnr_exact_db: round2(psnr[0]),
+            psnr_fast_db: round2(psnr[1]),
+            psnr_same_step_exact_db: round2(psnr[2]),
+            psnr_same_step_fast_db: round2(psnr[3]),
+        });
     }
-    fig.insert("exact_over_fast_worst".into(), json!(worst_ratio));
-    fig.insert("image_size".into(), json!(size));
-    fig.insert("rounds".into(), json!(rounds));
-    fig.insert("adapter".into(), json!(gpu.adapter.get_info().name));
-    Ok(fig)
+    Ok(U8Result {
+        run: RunInfo::new(&gpu, size, rounds),
+        rows,
+        exact_over_fast_worst: round2(worst_ratio),
+    })
 }

@@ -33,7 +33,6 @@
 //! children kept as leaves). Timings are wall times on a shared machine:
 //! compare the ratios within one run, not across runs.
 
-use crate::{Figures, arg};
 use brickray_core::{
     BrickSource, Camera, NodeKey, RenderSettings, Shading, TransferFunction, Volume, VolumeFrame,
 };
@@ -41,8 +40,8 @@ use brickray_harness::{GpuContext, Offscreen, ct, target_desc as targets};
 use brickray_render::{
     FrameDesc, OutOfCoreConfig, OutOfCoreStats, VisibilityPolicy, VolumeRenderer,
 };
-use serde_json::json;
-use std::collections::{HashMap, HashSet};
+use serde::Serialize;
+use std::collections::HashSet;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -170,32 +169,136 @@ fn oracle_cut(cut: &[NodeKey], reached: &[NodeKey]) -> usize {
         .count()
 }
 
-pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
-    let size: u32 = arg(args, "--size", 256)?;
-    let hold: usize = arg(args, "--hold", 120)?;
-    let turn: usize = arg(args, "--turn", 12)?;
-    // The GPU pool per renderer: the unculled run must not be capped by it, or
-    // the cut is measured against a pool-limited baseline.
-    let gpu_mib: u64 = arg(args, "--gpu-mib", 1024)?;
-    let cpu_mib: u64 = arg(args, "--cpu-mib", 512)?;
-    // Only the start view (working set, oracle, image): no turn, no latency.
-    let start_only = args.iter().any(|a| a == "--start-only");
-    let shell_dims: u64 = arg(args, "--shell-dims", 4096)?;
-    let shell_size: u32 = arg(args, "--shell-size", 512)?;
-    let scenes_arg: String = arg(args, "--scenes", "head,shells".to_string())?;
-    let svg: Option<String> = args
-        .iter()
-        .position(|a| a == "--svg")
-        .and_then(|i| args.get(i + 1).cloned());
+/// The suite's options.
+#[derive(Debug, clap::Args)]
+pub(crate) struct Args {
+    /// Scenes, comma-separated, of head, shells.
+    #[arg(long, default_value = "head,shells")]
+    scenes: String,
+    /// Image side of the head CT scenes.
+    #[arg(long, default_value_t = 256, value_parser = crate::image_side)]
+    size: u32,
+    /// Brick side of the head CT's store.
+    #[arg(long, default_value_t = 32)]
+    head_brick: u32,
+    /// Image side of the shells scene.
+    #[arg(long, default_value_t = 512, value_parser = crate::image_side)]
+    shell_size: u32,
+    /// Voxels per side of the shells volume.
+    #[arg(long, default_value_t = 4096)]
+    shell_dims: u64,
+    /// Most frames each view is held.
+    #[arg(long, default_value_t = 120, value_parser = crate::at_least_one::<usize>)]
+    hold: usize,
+    /// Frames of the half turn.
+    #[arg(long, default_value_t = 12, value_parser = crate::at_least_one::<usize>)]
+    turn: usize,
+    /// Write the working-set chart (SVG) here.
+    #[arg(long)]
+    svg: Option<String>,
+    /// GPU pool budget per renderer in MiB (the unculled run must not be
+    /// capped by it, or the cut is measured against a pool-limited baseline).
+    #[arg(long, default_value_t = 1024)]
+    gpu_mib: u64,
+    /// CPU brick cache budget per renderer in MiB.
+    #[arg(long, default_value_t = 512)]
+    cpu_mib: u64,
+    /// Only the start view: working set, oracle and image, no turn.
+    #[arg(long)]
+    start_only: bool,
+    /// Policies, comma-separated, of rayguided, occlusion, both (none, the
+    /// baseline, always runs).
+    #[arg(long, default_value = "none,rayguided,occlusion,both")]
+    policies: String,
+}
+
+/// One policy on one scene.
+#[derive(Debug, Serialize)]
+pub(crate) struct PolicyRow {
+    /// none, rayguided, occlusion or both.
+    policy: &'static str,
+    /// Working set converged at the start view (and at the back view).
+    working_set_converged: f64,
+    working_set_back: Option<u64>,
+    /// Share of the unculled working set cut away (start, back).
+    cut: f64,
+    cut_back: Option<f64>,
+    /// Working set along the path: median and peak.
+    working_set_median: f64,
+    working_set_peak: f64,
+    uploaded_mb: f64,
+    frames_to_converge: Option<usize>,
+    /// Medians along the path: whole frame and `prepare` alone, ms.
+    ms_per_frame: f64,
+    host_ms_per_frame: f64,
+    /// Working set over the oracle (bricks a ray reaches) and over the
+    /// smallest hole-free cut holding them.
+    oracle_ratio: f64,
+    oracle_cut_ratio: f64,
+    /// Against the unculled images (start, back), capped at 999.
+    psnr_start_db: f64,
+    psnr_back_db: Option<f64>,
+    /// Frames until the back view (the jump back) is within 50 dB of the
+    /// unculled image.
+    disocclusion_frames: Option<usize>,
+    disocclusion_jump_frames: Option<usize>,
+}
+
+/// One scene.
+#[derive(Debug, Serialize)]
+pub(crate) struct SceneResult {
+    scene: &'static str,
+    /// opaque or translucent.
+    kind: &'static str,
+    /// Whether the unculled run converged at the start view within the hold.
+    baseline_converged: bool,
+    /// Bricks a ray reaches in the unculled cut, and the smallest hole-free
+    /// cut holding them.
+    oracle: usize,
+    oracle_cut: usize,
+    policies: Vec<PolicyRow>,
+}
+
+/// The suite's JSON line.
+#[derive(Debug, Serialize)]
+pub(crate) struct VisibilityResult {
+    image_size: u32,
+    shell_image_size: u32,
+    shell_dims: u64,
+    adapter: String,
+    scenes: Vec<SceneResult>,
+    /// The smallest cut over the scenes of a kind, per policy (null when
+    /// not run).
+    cut_opaque_occlusion: Option<f64>,
+    cut_opaque_rayguided: Option<f64>,
+    cut_translucent_occlusion: Option<f64>,
+    cut_translucent_rayguided: Option<f64>,
+    /// On opaque scenes, the worst over scenes of each scene's best culled
+    /// policy's oracle ratios.
+    oracle_ratio_best: Option<f64>,
+    oracle_cut_ratio_best: Option<f64>,
+    /// The lowest PSNR of a culled policy, the longest disocclusion.
+    psnr_min_culled_db: Option<f64>,
+    disocclusion_frames_max: Option<usize>,
+}
+
+pub(crate) fn run(args: &Args) -> Result<VisibilityResult, String> {
+    let (size, hold, turn, gpu_mib, cpu_mib, start_only) = (
+        args.size,
+        args.hold,
+        args.turn,
+        args.gpu_mib,
+        args.cpu_mib,
+        args.start_only,
+    );
+    let (shell_dims, shell_size) = (args.shell_dims, args.shell_size);
+    let scenes_arg = &args.scenes;
+    let svg = args.svg.clone();
     let gpu = GpuContext::new().map_err(|e| e.to_string())?;
     println!("adapter: {}", gpu.describe());
     // `--policies none,rayguided,...` restricts the run (none always runs: it
     // is the baseline every figure is relative to).
-    let wanted: String = arg(
-        args,
-        "--policies",
-        "none,rayguided,occlusion,both".to_string(),
-    )?;
+    let wanted = &args.policies;
     let want = |p: VisibilityPolicy| wanted.split(',').any(|w| w.trim() == p.name());
     let mut policies = vec![VisibilityPolicy::None];
     if want(VisibilityPolicy::RayGuided) {
@@ -216,12 +319,12 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
     }
     let mut scenes = Vec::new();
     if scenes_arg.contains("head") {
-        scenes.extend(head_scenes(arg(args, "--head-brick", 32)?)?);
+        scenes.extend(head_scenes(args.head_brick)?);
     }
     if scenes_arg.contains("shells") {
         scenes.push(shells_scene(shell_dims));
     }
-    let mut fig = Figures::new();
+    let mut results = Vec::new();
     let mut chart: Vec<Chart> = Vec::new();
     let t = Instant::now();
     for scene in &scenes {
@@ -245,7 +348,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
             &policies,
             (hold, turn, (gpu_mib, cpu_mib), start_only),
         )?;
-        report(scene, &policies, &tracks, &mut fig)?;
+        results.push(report(scene, &policies, &tracks)?);
         chart.push((
             format!("{} ({px}x{px})", scene.name),
             policies
@@ -255,17 +358,28 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
                 .collect(),
         ));
     }
-    headline(&mut fig);
+    let h = headline(&results);
+    println!("\nheadline: {h:?}");
     if let Some(path) = svg {
         write_chart(&path, &chart)?;
         println!("chart: {path}");
     }
     println!("\nsuite wall time: {:.0} s", t.elapsed().as_secs_f64());
-    fig.insert("image_size".into(), json!(size));
-    fig.insert("shell_image_size".into(), json!(shell_size));
-    fig.insert("shell_dims".into(), json!(shell_dims));
-    fig.insert("adapter".into(), json!(gpu.adapter.get_info().name));
-    Ok(fig)
+    Ok(VisibilityResult {
+        image_size: size,
+        shell_image_size: shell_size,
+        shell_dims,
+        adapter: gpu.adapter.get_info().name,
+        scenes: results,
+        cut_opaque_occlusion: h.cuts[0],
+        cut_opaque_rayguided: h.cuts[1],
+        cut_translucent_occlusion: h.cuts[2],
+        cut_translucent_rayguided: h.cuts[3],
+        oracle_ratio_best: h.oracle_ratio_best,
+        oracle_cut_ratio_best: h.oracle_cut_ratio_best,
+        psnr_min_culled_db: h.psnr_min,
+        disocclusion_frames_max: h.disocclusion_max,
+    })
 }
 
 fn supported(gpu: &GpuContext, p: VisibilityPolicy) -> bool {
@@ -496,8 +610,7 @@ fn report(
     scene: &Scene,
     policies: &[VisibilityPolicy],
     tracks: &[Track],
-    fig: &mut Figures,
-) -> Result<(), String> {
+) -> Result<SceneResult, String> {
     let base = &tracks[0];
     let (base_start, base_s) = base.start.as_ref().ok_or("no start image")?;
     // `--start-only` runs have no back view.
@@ -507,10 +620,6 @@ fn report(
             "  WARNING: the unculled run did not converge at the start view within --hold frames: its working set, and so every cut below, is understated"
         );
     }
-    fig.insert(
-        format!("baseline_converged_{}", scene.name),
-        json!(base.converge_start.is_some()),
-    );
     // The oracle from the unculled converged cut's usage.
     let usage = base.oracle_usage.clone().unwrap_or_default();
     let cut: Vec<NodeKey> = usage.iter().map(|(k, _)| *k).collect();
@@ -557,6 +666,7 @@ fn report(
             .position(|img| brickray_reference::psnr(img, base_start) >= SAME_DB)
             .map(|i| i + 1)
     };
+    let mut rows = Vec::new();
     for (p, t) in policies.iter().zip(tracks) {
         let (img, s) = t.start.as_ref().ok_or("no start image")?;
         let ws = s.cache.working_set_bricks as f64;
@@ -591,106 +701,107 @@ fn report(
             d.map_or("-".into(), |f| f.to_string()),
             jump(t).map_or("-".into(), |f| f.to_string()),
         );
-        let key = |m: &str| format!("{}_{}_{}", m, scene.name, p.name());
-        let mut put = |m: &str, v: serde_json::Value| {
-            fig.insert(key(m), v);
-        };
-        put("working_set_converged", json!(ws));
-        put("working_set_back", json!(back.map(|b| b.0)));
-        put("cut", json!(r2(cut_frac)));
-        put("cut_back", json!(back.map(|b| r2(b.1))));
-        put("working_set_median", json!(median(&t.working)));
-        put("working_set_peak", json!(peak));
-        put("uploaded_mb", json!(r2(t.uploaded as f64 / 1e6)));
-        put("frames_to_converge", json!(t.converge_start));
-        put("ms_per_frame", json!(r2(median(&t.ms))));
-        put("host_ms_per_frame", json!(r2(median(&t.host_ms))));
-        put("oracle_ratio", json!(r2(ws / oracle as f64)));
-        put("oracle_cut_ratio", json!(r2(ws / oracle_cut as f64)));
-        put("psnr_start_db", json!(r2(psnr_s.min(999.0))));
-        put("psnr_back_db", json!(back.map(|b| r2(b.2.min(999.0)))));
-        put("disocclusion_frames", json!(d));
-        put("disocclusion_jump_frames", json!(jump(t)));
-        put("kind", json!(scene.kind));
+        rows.push(PolicyRow {
+            policy: p.name(),
+            working_set_converged: ws,
+            working_set_back: back.map(|b| b.0 as u64),
+            cut: r2(cut_frac),
+            cut_back: back.map(|b| r2(b.1)),
+            working_set_median: median(&t.working),
+            working_set_peak: peak,
+            uploaded_mb: r2(t.uploaded as f64 / 1e6),
+            frames_to_converge: t.converge_start,
+            ms_per_frame: r2(median(&t.ms)),
+            host_ms_per_frame: r2(median(&t.host_ms)),
+            oracle_ratio: r2(ws / oracle as f64),
+            oracle_cut_ratio: r2(ws / oracle_cut as f64),
+            psnr_start_db: r2(psnr_s.min(999.0)),
+            psnr_back_db: back.map(|b| r2(b.2.min(999.0))),
+            disocclusion_frames: d,
+            disocclusion_jump_frames: jump(t),
+        });
     }
-    fig.insert(format!("oracle_{}", scene.name), json!(reached.len()));
-    fig.insert(format!("oracle_cut_{}", scene.name), json!(oracle_cut));
-    Ok(())
+    Ok(SceneResult {
+        scene: scene.name,
+        kind: scene.kind,
+        baseline_converged: base.converge_start.is_some(),
+        oracle: reached.len(),
+        oracle_cut,
+        policies: rows,
+    })
+}
+
+/// The headline figures over the scenes.
+#[derive(Debug)]
+struct Headline {
+    /// opaque occlusion, opaque ray-guided, translucent occlusion,
+    /// translucent ray-guided.
+    cuts: [Option<f64>; 4],
+    oracle_ratio_best: Option<f64>,
+    oracle_cut_ratio_best: Option<f64>,
+    psnr_min: Option<f64>,
+    disocclusion_max: Option<usize>,
 }
 
 /// The headline figures over the scenes: worst cut per kind and policy, the
 /// best oracle ratio on opaque scenes, the lowest PSNR of a culled policy, the
 /// longest disocclusion latency.
-fn headline(fig: &mut Figures) {
-    let get = |k: &str| fig.get(k).and_then(|v| v.as_f64());
-    let mut out: HashMap<String, serde_json::Value> = HashMap::new();
-    let scenes: Vec<String> = fig
-        .keys()
-        .filter_map(|k| k.strip_prefix("kind_"))
-        .filter_map(|k| k.strip_suffix("_none"))
-        .map(str::to_string)
-        .collect();
-    for (kind, pol, name) in [
-        ("opaque", "occlusion", "cut_opaque_occlusion"),
-        ("opaque", "rayguided", "cut_opaque_rayguided"),
-        ("translucent", "occlusion", "cut_translucent_occlusion"),
-        ("translucent", "rayguided", "cut_translucent_rayguided"),
-    ] {
-        let cuts: Vec<f64> = scenes
-            .iter()
-            .filter(|s| fig.get(&format!("kind_{s}_none")).and_then(|v| v.as_str()) == Some(kind))
-            .filter_map(|s| get(&format!("cut_{s}_{pol}")))
-            .collect();
+fn headline(scenes: &[SceneResult]) -> Headline {
+    fn rows<'a>(s: &'a SceneResult, pol: &'a str) -> impl Iterator<Item = &'a PolicyRow> {
+        s.policies.iter().filter(move |r| r.policy == pol)
+    }
+    let mut cuts = [None; 4];
+    for (i, (kind, pol)) in [
+        ("opaque", "occlusion"),
+        ("opaque", "rayguided"),
+        ("translucent", "occlusion"),
+        ("translucent", "rayguided"),
+    ]
+    .into_iter()
+    .enumerate()
+    {
         // The smallest cut over the scenes of the kind (null when not run).
-        let v = cuts.iter().cloned().reduce(f64::min);
-        out.insert(name.into(), json!(v));
+        cuts[i] = scenes
+            .iter()
+            .filter(|s| s.kind == kind)
+            .flat_map(|s| rows(s, pol).map(|r| r.cut))
+            .reduce(f64::min);
     }
-    let mut best_oracle: Option<f64> = None;
-    let mut best_oracle_cut: Option<f64> = None;
-    let mut psnr_min: Option<f64> = None;
-    let mut disocc_max: Option<f64> = None;
-    for s in &scenes {
-        let opaque = fig.get(&format!("kind_{s}_none")).and_then(|v| v.as_str()) == Some("opaque");
+    let culled = ["occlusion", "rayguided", "both"];
+    let (mut oracle_ratio_best, mut oracle_cut_ratio_best) = (None::<f64>, None::<f64>);
+    let (mut psnr_min, mut disocclusion_max) = (None::<f64>, None::<usize>);
+    for s in scenes {
+        let culled_rows = || s.policies.iter().filter(|r| culled.contains(&r.policy));
         // The better policy of the scene, then the worst scene.
-        let mut scene_best: Option<f64> = None;
-        let mut scene_best_cut: Option<f64> = None;
-        for pol in ["occlusion", "rayguided", "both"] {
-            if let Some(r) = get(&format!("oracle_ratio_{s}_{pol}")) {
-                scene_best = Some(scene_best.map_or(r, |b: f64| b.min(r)));
+        let best = culled_rows().map(|r| r.oracle_ratio).reduce(f64::min);
+        let best_cut = culled_rows().map(|r| r.oracle_cut_ratio).reduce(f64::min);
+        for r in culled_rows() {
+            for p in std::iter::once(r.psnr_start_db).chain(r.psnr_back_db) {
+                psnr_min = Some(psnr_min.map_or(p, |m| m.min(p)));
             }
-            if let Some(r) = get(&format!("oracle_cut_ratio_{s}_{pol}")) {
-                scene_best_cut = Some(scene_best_cut.map_or(r, |b: f64| b.min(r)));
-            }
-            for k in ["psnr_start_db", "psnr_back_db"] {
-                if let Some(p) = get(&format!("{k}_{s}_{pol}")) {
-                    psnr_min = Some(psnr_min.map_or(p, |m: f64| m.min(p)));
-                }
-            }
-            for k in ["disocclusion_frames", "disocclusion_jump_frames"] {
-                if let Some(d) = get(&format!("{k}_{s}_{pol}")) {
-                    disocc_max = Some(disocc_max.map_or(d, |m: f64| m.max(d)));
-                }
+            for d in r
+                .disocclusion_frames
+                .into_iter()
+                .chain(r.disocclusion_jump_frames)
+            {
+                disocclusion_max = Some(disocclusion_max.map_or(d, |m| m.max(d)));
             }
         }
-        if opaque {
-            if let Some(b) = scene_best {
-                best_oracle = Some(best_oracle.map_or(b, |m: f64| m.max(b)));
+        if s.kind == "opaque" {
+            if let Some(b) = best {
+                oracle_ratio_best = Some(oracle_ratio_best.map_or(b, |m| m.max(b)));
             }
-            if let Some(b) = scene_best_cut {
-                best_oracle_cut = Some(best_oracle_cut.map_or(b, |m: f64| m.max(b)));
+            if let Some(b) = best_cut {
+                oracle_cut_ratio_best = Some(oracle_cut_ratio_best.map_or(b, |m| m.max(b)));
             }
         }
     }
-    out.insert("oracle_ratio_best".into(), json!(best_oracle));
-    out.insert("oracle_cut_ratio_best".into(), json!(best_oracle_cut));
-    out.insert("psnr_min_culled_db".into(), json!(psnr_min));
-    out.insert("disocclusion_frames_max".into(), json!(disocc_max));
-    println!("\nheadline:");
-    let mut keys: Vec<_> = out.keys().cloned().collect();
-    keys.sort();
-    for k in keys {
-        println!("  {k}: {}", out[&k]);
-        fig.insert(k.clone(), out[&k].clone());
+    Headline {
+        cuts,
+        oracle_ratio_best,
+        oracle_cut_ratio_best,
+        psnr_min,
+        disocclusion_max,
     }
 }
 

@@ -2,8 +2,8 @@
 //! exit successfully and end with one JSON object holding its documented
 //! keys (docs/benchmarks.md). They check that a suite still runs and still
 //! says what it measures, never how fast: the figures of a smoke run are
-//! not results. Every suite has one here (lod one per `--by`, stability
-//! two halves of its cases); those that read ../shared/data are reported
+//! not results. Every suite has one here (stability two halves of its
+//! cases); those that read ../shared/data are reported
 //! as ignored in a user's clone without it (never skipped with `CI=true`),
 //! except where the suite falls back to procedural volumes (prediction,
 //! visibility). The remote suite starts its own loopback HTTP servers (and
@@ -11,6 +11,9 @@
 #![allow(missing_docs)]
 
 use std::process::Command;
+
+/// A suite's JSON line.
+type Fig = serde_json::Map<String, serde_json::Value>;
 
 /// Runs the bench with `args`; returns the JSON object of its last line.
 fn run(args: &[&str]) -> serde_json::Map<String, serde_json::Value> {
@@ -66,18 +69,48 @@ fn the_channels_suite_runs() {
     assert_eq!(fig["modes"].as_array().map(Vec::len), Some(4));
 }
 
+/// The rows of the array `key` of a suite's JSON object.
+fn rows<'a>(fig: &'a Fig, key: &str) -> &'a Vec<serde_json::Value> {
+    fig.get(key)
+        .and_then(|v| v.as_array())
+        .unwrap_or_else(|| panic!("no array {key} in {fig:?}"))
+}
+
+/// The row of the array `key` whose `field` is `value`.
+fn row<'a>(fig: &'a Fig, key: &str, field: &str, value: &str) -> &'a serde_json::Value {
+    rows(fig, key)
+        .iter()
+        .find(|r| r[field] == value)
+        .unwrap_or_else(|| panic!("no {key} row with {field} {value} in {fig:?}"))
+}
+
+/// Checks that every row of `key` has `fields`.
+fn has_fields(fig: &Fig, key: &str, fields: &[&str]) {
+    for r in rows(fig, key) {
+        for f in fields {
+            assert!(r.get(*f).is_some(), "{key}: no {f} in {r:?}");
+        }
+    }
+}
+
 /// Runs a suite with `args` and checks that its JSON object has `keys`
 /// (documented in docs/benchmarks.md; a value may be null where a smoke
-/// run measures nothing) and some finite numbers.
+/// run measures nothing) and some finite numbers (anywhere in it, rows
+/// included).
 fn smoke(args: &[&str], keys: &[&str]) -> serde_json::Map<String, serde_json::Value> {
     let fig = run(args);
     for key in keys {
         assert!(fig.contains_key(*key), "{args:?}: no {key} in {fig:?}");
     }
-    let numbers = fig
-        .values()
-        .filter(|v| v.as_f64().is_some_and(f64::is_finite))
-        .count();
+    fn finite(v: &serde_json::Value) -> usize {
+        match v {
+            serde_json::Value::Number(n) => usize::from(n.as_f64().is_some_and(f64::is_finite)),
+            serde_json::Value::Array(a) => a.iter().map(finite).sum(),
+            serde_json::Value::Object(m) => m.values().map(finite).sum(),
+            _ => 0,
+        }
+    }
+    let numbers: usize = fig.values().map(finite).sum();
     assert!(
         numbers >= 3,
         "{args:?}: {numbers} finite numbers in {fig:?}"
@@ -98,8 +131,27 @@ fn the_accel_suite_runs() {
         &["accel", "--size", "32", "--rounds", "1"],
         &[
             "psnr_min_db",
-            "speedup_ert_ess_opaque",
-            "samples_per_ray_brute_opaque",
+            "speedup_ert_ess_max",
+            "rows",
+            "image_size",
+            "rounds",
+            "adapter",
+            "gpu_timestamps",
+        ],
+    );
+    // Three scenes, four variants each.
+    assert_eq!(rows(&fig, "rows").len(), 12, "{fig:?}");
+    has_fields(
+        &fig,
+        "rows",
+        &[
+            "scene",
+            "variant",
+            "samples_per_ray",
+            "ms",
+            "gpu_ms",
+            "speedup",
+            "psnr_db",
         ],
     );
     // Skipping and early termination change the image within tolerance.
@@ -110,7 +162,13 @@ fn the_accel_suite_runs() {
 fn the_soak_suite_runs() {
     let fig = smoke(
         &["soak", "--frames", "3", "--size", "32"],
-        &["frames", "rss_growth_pct", "panics", "errors"],
+        &[
+            "frames",
+            "rss_growth_pct",
+            "panics",
+            "errors",
+            "feature_frames",
+        ],
     );
     assert_eq!(fig["frames"], serde_json::json!(3));
     assert_eq!(fig["panics"], serde_json::json!(0));
@@ -126,14 +184,20 @@ fn the_preint_suite_runs() {
     if brickray_harness::shared_data_dir().is_none() {
         return;
     }
-    smoke(
+    let fig = smoke(
         &["preint", "--size", "32", "--rounds", "1"],
         &[
             "worst_ratio",
             "ms_corrected_table",
             "ms_preint_table_8_layers",
+            "cost",
+            "spike",
         ],
     );
+    // Two modes at two steps; the spike scene at four steps.
+    assert_eq!(rows(&fig, "cost").len(), 4, "{fig:?}");
+    assert_eq!(rows(&fig, "spike").len(), 4, "{fig:?}");
+    has_fields(&fig, "cost", &["mode", "step", "plain", "preint", "ratio"]);
 }
 
 #[test]
@@ -145,14 +209,14 @@ fn the_u8_suite_runs() {
     if brickray_harness::shared_data_dir().is_none() {
         return;
     }
-    smoke(
+    let fig = smoke(
         &["u8", "--size", "32", "--rounds", "1"],
-        &[
-            "exact_over_fast_worst",
-            "psnr_exact_dvr_db",
-            "psnr_fast_dvr_db",
-        ],
+        &["exact_over_fast_worst", "rows"],
     );
+    assert_eq!(rows(&fig, "rows").len(), 3, "{fig:?}");
+    let dvr = row(&fig, "rows", "scene", "dvr");
+    assert!(dvr["psnr_exact_db"].as_f64().unwrap() > 0.0, "{fig:?}");
+    assert!(dvr["exact"]["ms"].as_f64().unwrap() > 0.0, "{fig:?}");
 }
 
 #[test]
@@ -164,10 +228,20 @@ fn the_raw_suite_runs() {
     if brickray_harness::shared_data_dir().is_none() {
         return;
     }
-    smoke(
+    let fig = smoke(
         &["raw", "--size", "32", "--rounds", "1"],
-        &["accel_rate_per_sample_dvr", "buffer_tf_rate_ratio_dvr"],
+        &["modes", "step_voxels"],
     );
+    assert_eq!(rows(&fig, "modes").len(), 4, "{fig:?}");
+    let dvr = row(&fig, "modes", "mode", "dvr");
+    assert_eq!(dvr["variants"].as_array().map(Vec::len), Some(8));
+    for k in [
+        "accel_rate_per_sample",
+        "buffer_tf_rate_ratio",
+        "ooc_vs_incore",
+    ] {
+        assert!(dvr["ratios"][k].is_number(), "no {k} in {dvr:?}");
+    }
 }
 
 #[test]
@@ -179,13 +253,24 @@ fn the_ooc_suite_runs() {
     if brickray_harness::shared_data_dir().is_none() {
         return;
     }
-    smoke(
+    let fig = smoke(
         &["ooc", "--size", "32", "--rounds", "1"],
         &[
             "finest_vs_incore_time_ratio",
+            "psnr_finest_vs_incore_db",
             "frames_to_converge_after_jump",
+            "p99_over_median",
+            "head",
+            "sensitivity",
+            "path",
         ],
     );
+    // Two TFs by two accelerations; far and close views; exact and 8-bit
+    // texels.
+    assert_eq!(rows(&fig, "head").len(), 4, "{fig:?}");
+    assert_eq!(rows(&fig, "sensitivity").len(), 2, "{fig:?}");
+    assert_eq!(rows(&fig, "path").len(), 2, "{fig:?}");
+    has_fields(&fig, "head", &["incore", "ooc", "time_ratio", "psnr_db"]);
 }
 
 #[test]
@@ -204,8 +289,11 @@ fn the_labels_suite_runs() {
             "psnr_2px_db_min",
             "overlay_cost_ratio",
             "smooth_cost_ratio",
+            "maps",
         ],
     );
+    assert_eq!(rows(&fig, "maps").len(), 2, "{fig:?}");
+    has_fields(&fig, "maps", &["map", "psnr_2px_db", "lod", "overlay"]);
     assert!(
         fig["psnr_finest_db_min"].as_f64().unwrap() >= 45.0,
         "{fig:?}"
@@ -230,28 +318,39 @@ fn the_build_suite_runs() {
     let fig = smoke(
         &["build", "--smoke"],
         &[
-            "build_mvoxel_per_s_u8_1024",
-            "peak_rss_mb",
-            "ratio_u8_1024",
-            "build_mvoxel_per_s_u8_1024_noise",
-            "build_mvoxel_per_s_u16_1024x1024x540",
-            "ratio_u16_1024x1024x540",
+            "scale",
+            "rows",
             "decode_gb_per_s",
             "read_latency_us_mean",
+            "read_latency_us_p50",
             "read_latency_us_p99",
-            "build_mvoxel_per_s_u8_4gib",
-            "build_mvoxel_per_s_u8_4gib_bound128",
-            "peak_rss_mb_4gib_bound128",
+        ],
+    );
+    assert_eq!(fig["scale"], serde_json::json!(16));
+    has_fields(
+        &fig,
+        "rows",
+        &[
+            "input",
             "memory_bound_mb",
+            "mvoxel_per_s",
+            "peak_rss_mb",
+            "ratio",
         ],
     );
     // The phantoms are half air: their stores are smaller than their input.
-    assert!(fig["ratio_u8_1024"].as_f64().unwrap() > 1.0, "{fig:?}");
-    assert!(
-        fig["ratio_u16_1024x1024x540"].as_f64().unwrap() > 1.0,
-        "{fig:?}"
+    for input in ["u8", "u16"] {
+        let r = row(&fig, "rows", "input", input);
+        assert!(r["ratio"].as_f64().unwrap() > 1.0, "{fig:?}");
+    }
+    assert_eq!(
+        row(&fig, "rows", "input", "u8_4gib")["memory_bound_mb"],
+        serde_json::json!(1024)
     );
-    assert_eq!(fig["memory_bound_mb"], serde_json::json!(1024));
+    assert_eq!(
+        row(&fig, "rows", "input", "u8_4gib_bound128")["memory_bound_mb"],
+        serde_json::json!(1)
+    );
 }
 
 /// The `formats` suite, one round: a store from each of the ten inputs.
@@ -264,15 +363,12 @@ fn the_formats_suite_runs() {
     if brickray_harness::shared_data_dir().is_none() {
         return;
     }
-    let fig = smoke(&["formats", "--rounds", "1"], &["memory_bound_mb"]);
-    for prefix in ["mvoxel_per_s_", "peak_rss_mb_"] {
-        let rows: Vec<f64> = fig
-            .iter()
-            .filter(|(k, _)| k.starts_with(prefix))
-            .map(|(_, v)| v.as_f64().unwrap_or(f64::NAN))
-            .collect();
-        assert_eq!(rows.len(), 10, "{prefix}: {fig:?}");
-        assert!(rows.iter().all(|&x| x > 0.0), "{prefix}: {fig:?}");
+    let fig = smoke(&["formats", "--rounds", "1"], &["memory_bound_mb", "rows"]);
+    assert_eq!(rows(&fig, "rows").len(), 10, "{fig:?}");
+    for r in rows(&fig, "rows") {
+        for k in ["mvoxel_per_s", "peak_rss_mb"] {
+            assert!(r[k].as_f64().unwrap_or(f64::NAN) > 0.0, "{k}: {r:?}");
+        }
     }
     assert_eq!(fig["memory_bound_mb"], serde_json::json!(8));
 }
@@ -282,21 +378,6 @@ fn the_formats_suite_runs() {
 /// visibility (`--culling`).
 #[test]
 fn the_host_suite_runs() {
-    let mut keys = Vec::new();
-    for suffix in ["1k", "1k_inline", "1k_culled", "1k_culled_inline"] {
-        for figure in [
-            "host_ms_median",
-            "host_ms_p99",
-            "plan_ms_median",
-            "upload_ms_median",
-            "encode_ms_median",
-            "working_set",
-            "converge_frames",
-        ] {
-            keys.push(format!("{figure}_{suffix}"));
-        }
-    }
-    let keys: Vec<&str> = keys.iter().map(String::as_str).collect();
     let fig = smoke(
         &[
             "host",
@@ -310,10 +391,43 @@ fn the_host_suite_runs() {
             "--culling-size",
             "32",
         ],
-        &keys,
+        &[
+            "size",
+            "frames",
+            "adapter",
+            "rows",
+            "host_ms_median_20k",
+            "host_ms_p99_20k",
+            "plan_ms_median_20k",
+        ],
     );
     assert_eq!(fig["frames"], serde_json::json!(3));
-    assert!(fig["working_set_1k"].as_u64().unwrap() > 0, "{fig:?}");
+    // Inline and in the background, unculled and culled.
+    assert_eq!(rows(&fig, "rows").len(), 4, "{fig:?}");
+    has_fields(
+        &fig,
+        "rows",
+        &[
+            "budget",
+            "background",
+            "culled",
+            "host_ms_median",
+            "host_ms_p99",
+            "plan_ms_median",
+            "upload_ms_median",
+            "encode_ms_median",
+            "working_set",
+            "converge_frames",
+        ],
+    );
+    assert!(
+        rows(&fig, "rows")
+            .iter()
+            .all(|r| r["working_set"].as_u64().unwrap() > 0),
+        "{fig:?}"
+    );
+    // No cut of 20,000 bricks ran.
+    assert!(fig["host_ms_median_20k"].is_null(), "{fig:?}");
 }
 
 /// The `pareto` suite on the procedural Marschner-Lobb volume (32^3, bricks
@@ -346,7 +460,6 @@ fn the_pareto_suite_runs() {
             &out,
         ],
         &[
-            "suite",
             "size",
             "rounds",
             "brick",
@@ -360,9 +473,8 @@ fn the_pareto_suite_runs() {
             "scenes",
         ],
     );
-    assert_eq!(fig["suite"], serde_json::json!("pareto"));
     for scene in ["ml_dvr", "ml_iso"] {
-        let s = &fig["scenes"][scene];
+        let s = row(&fig, "scenes", "scene", scene);
         for key in ["default_ms", "default_psnr_db", "default_bricks", "front"] {
             assert!(s.get(key).is_some(), "{scene}: no {key} in {fig:?}");
         }
@@ -385,14 +497,15 @@ fn the_pareto_suite_runs() {
 fn stability(cases: &str, keys: &[&str]) -> serde_json::Map<String, serde_json::Value> {
     let dir = tmp();
     let charts = at(&dir, "charts");
-    let mut all = vec![
+    let all = [
         "holes_max",
         "cases_with_bound",
         "cases_total",
         "image_size",
         "adapter",
+        "lod_paths",
+        "cases",
     ];
-    all.extend_from_slice(keys);
     let fig = run(&[
         "stability",
         "--size",
@@ -404,6 +517,21 @@ fn stability(cases: &str, keys: &[&str]) -> serde_json::Map<String, serde_json::
     ]);
     for key in all {
         assert!(fig.contains_key(key), "{cases}: no {key} in {fig:?}");
+    }
+    for name in keys {
+        let case = row(&fig, "cases", "name", name);
+        for k in [
+            "varied",
+            "fails",
+            "by",
+            "shipped",
+            "bound",
+            "kept",
+            "holes_max",
+            "figures",
+        ] {
+            assert!(case.get(k).is_some(), "{name}: no {k} in {case:?}");
+        }
     }
     // No frame of any case drew a leaf without its brick.
     assert_eq!(fig["holes_max"], serde_json::json!(0), "{fig:?}");
@@ -420,6 +548,7 @@ fn the_stability_suite_runs_cases_1_to_5() {
         &["streaming", "pressure", "hf_tf", "thin", "grazing"],
     );
     assert_eq!(fig["cases_total"], serde_json::json!(5));
+    assert!(fig["lod_paths"].is_null(), "{fig:?}");
 }
 
 /// Stability cases 6-9 (precision at 65536^3, early ray termination, the
@@ -430,20 +559,21 @@ fn the_stability_suite_runs_cases_1_to_5() {
 fn the_stability_suite_runs_cases_6_to_9() {
     let fig = stability(
         "6,7,8,9",
-        &[
-            "precision",
-            "ert",
-            "temporal",
-            "fly-through",
-            "zoom-in",
-            "temporal_excess_db_fades",
-            "temporal_excess_db_no_fades",
-            "pops_fades",
-            "pops_no_fades",
-        ],
+        &["precision", "ert", "temporal", "fly-through", "zoom-in"],
     );
     assert_eq!(fig["cases_total"], serde_json::json!(5));
-    assert_eq!(fig["ert"]["kept"], serde_json::json!(true), "{fig:?}");
+    let ert = row(&fig, "cases", "name", "ert");
+    assert_eq!(ert["kept"], serde_json::json!(true), "{fig:?}");
+    for k in [
+        "rows",
+        "temporal_excess_db_fades",
+        "temporal_excess_db_no_fades",
+        "pops_fades",
+        "pops_no_fades",
+        "holes_max",
+    ] {
+        assert!(fig["lod_paths"].get(k).is_some(), "no {k} in {fig:?}");
+    }
 }
 
 /// The `prediction` suite in core at 32 px, orbits of two frames, without
@@ -488,162 +618,22 @@ fn the_prediction_suite_runs() {
     );
     assert_eq!(fig["backend"], serde_json::json!("incore"));
     assert_eq!(fig["wrong_pixels_max_guarded"], serde_json::json!(0.0));
-    let orbits = fig["orbit"].as_object().unwrap();
-    assert!(orbits.contains_key("nested_shells_default"), "{fig:?}");
-    for (path, o) in orbits {
-        assert_eq!(
-            o["guard"]["wrong_max_pct"],
-            serde_json::json!(0.0),
-            "{path}: {fig:?}"
-        );
+    let orbits = rows(&fig, "orbit");
+    assert!(
+        orbits
+            .iter()
+            .any(|o| o["scene"] == "nested_shells" && o["accel"] == "default"),
+        "{fig:?}"
+    );
+    for o in orbits {
+        let guard = o["variants"]
+            .as_array()
+            .and_then(|v| v.iter().find(|s| s["variant"] == "guard"))
+            .unwrap_or_else(|| panic!("no guard in {o:?}"));
+        assert_eq!(guard["wrong_max_pct"], serde_json::json!(0.0), "{o:?}");
     }
     assert!(dir.path().join("failure.svg").is_file());
     assert!(dir.path().join("classes.png").is_file());
-}
-
-/// The `aniso` suite on the central 64 x 64 voxels of the 4.5 mm head CT's
-/// slices, 16 px, budgets of 8 bricks (the finest cut) and 4. The finest
-/// cut's image is the finest data's, in both layouts and orders.
-#[test]
-#[cfg_attr(
-    no_shared_data,
-    ignore = "needs ../shared/data (the shared volumes), absent when the tests were built"
-)]
-fn the_aniso_suite_runs() {
-    if brickray_harness::shared_data_dir().is_none() {
-        return;
-    }
-    let dir = tmp();
-    let chart = at(&dir, "aniso.svg");
-    let fig = smoke(
-        &[
-            "aniso",
-            "--size",
-            "16",
-            "--crop",
-            "64",
-            "--budgets",
-            "8,4",
-            "--chart",
-            &chart,
-        ],
-        &[
-            "anisotropic_ct_bricks_at_1px",
-            "before_bricks_at_1px",
-            "after_psnr_at_2px",
-            "before_geometric_worst_budget_step_share",
-            "after_error-aware_worst_budget_step_share",
-        ],
-    );
-    for octree in ["before", "after"] {
-        for order in ["geometric", "error-aware"] {
-            let key = format!("{octree}_{order}_rmse_at_budget_8");
-            assert_eq!(
-                fig.get(&key),
-                Some(&serde_json::json!(0.0)),
-                "{key}: {fig:?}"
-            );
-            let key = format!("{octree}_{order}_rmse_at_budget_4");
-            assert!(fig.contains_key(&key), "no {key} in {fig:?}");
-        }
-    }
-    assert!(dir.path().join("aniso.svg").is_file());
-}
-
-/// The `lod` suite by knob (the GPU sweeps) on the procedural
-/// Marschner-Lobb volume, 32^3 in bricks of 8, at 32 px. The finest cut
-/// (tolerance 0) against the CPU reference: 36.8 dB when written.
-#[test]
-fn the_lod_suite_runs_by_knob() {
-    let fig = smoke(
-        &[
-            "lod",
-            "--size",
-            "32",
-            "--scenes",
-            "ml",
-            "--brick",
-            "8",
-            "--ml-side",
-            "32",
-        ],
-        &[
-            "median_gain_db",
-            "ml_median_gain_db",
-            "ml_bound_median_gain_db",
-            "ml_points",
-            "ml_matched_points",
-            "image_size",
-            "brick",
-            "adapter",
-        ],
-    );
-    let points = fig["ml_points"].as_array().unwrap();
-    let finest = points
-        .iter()
-        .find(|p| p["metric"] == "geometric" && p["knob"] == 0.0)
-        .unwrap();
-    assert!(finest["psnr_db"].as_f64().unwrap() >= 30.0, "{finest:?}");
-}
-
-/// The `lod` suite by brick budget (GPU-free), as by knob.
-#[test]
-fn the_lod_suite_runs_by_budget() {
-    let fig = run(&[
-        "lod",
-        "--by",
-        "budget",
-        "--size",
-        "32",
-        "--scenes",
-        "ml",
-        "--brick",
-        "8",
-        "--ml-side",
-        "32",
-    ]);
-    for key in [
-        "error_aware_gain_db_at_equal_budget",
-        "visible_error_aware_gain_db_at_equal_budget",
-        "ml_budget_median_gain_db",
-        "ml_budget_visible_median_gain_db",
-        "ml_budget_points",
-    ] {
-        assert!(fig.contains_key(key), "no {key} in {fig:?}");
-    }
-    // The whole budget is the finest cut: its image is the finest data's
-    // (PSNR capped at 99).
-    let first = &fig["ml_budget_points"][0];
-    for order in ["geometric", "error_aware", "visible"] {
-        assert_eq!(first[format!("{order}_psnr_db")], 99.0, "{first:?}");
-    }
-}
-
-/// The `lod` suite by the oracle (GPU-free): every node costed, as by knob.
-#[test]
-fn the_lod_suite_runs_by_oracle() {
-    let fig = run(&[
-        "lod",
-        "--by",
-        "oracle",
-        "--size",
-        "32",
-        "--scenes",
-        "ml",
-        "--brick",
-        "8",
-        "--ml-side",
-        "32",
-    ]);
-    for key in [
-        "visible_gain_db_at_equal_budget",
-        "oracle_gain_db_at_equal_budget",
-        "ml_dvr_oracle_gain_db",
-        "ml_iso_visible_gain_db",
-        "ml_dvr_points",
-    ] {
-        assert!(fig.contains_key(key), "no {key} in {fig:?}");
-    }
 }
 
 /// The `visibility` suite: the procedural shells (4096^3) at 128 px, and
@@ -680,12 +670,9 @@ fn the_visibility_suite_runs() {
             &svg,
         ],
         &[
-            "cut_shells_rayguided",
-            "oracle_ratio_shells_rayguided",
-            "oracle_cut_ratio_shells_rayguided",
-            "oracle_shells",
-            "oracle_cut_shells",
-            "baseline_converged_shells",
+            "scenes",
+            "cut_opaque_rayguided",
+            "cut_translucent_rayguided",
             "oracle_ratio_best",
             "oracle_cut_ratio_best",
             "psnr_min_culled_db",
@@ -698,8 +685,25 @@ fn the_visibility_suite_runs() {
         fig["psnr_min_culled_db"].as_f64().unwrap() >= 50.0,
         "{fig:?}"
     );
+    let shells = row(&fig, "scenes", "scene", "shells");
+    for k in [
+        "kind",
+        "baseline_converged",
+        "oracle",
+        "oracle_cut",
+        "policies",
+    ] {
+        assert!(shells.get(k).is_some(), "shells: no {k} in {fig:?}");
+    }
+    let culled = shells["policies"]
+        .as_array()
+        .and_then(|p| p.iter().find(|r| r["policy"] == "rayguided"))
+        .unwrap_or_else(|| panic!("no rayguided row in {fig:?}"));
+    for k in ["cut", "oracle_ratio", "oracle_cut_ratio", "ms_per_frame"] {
+        assert!(culled.get(k).is_some(), "rayguided: no {k} in {fig:?}");
+    }
     if scenes.contains("head") {
-        assert!(fig.contains_key("cut_head_opaque_rayguided"), "{fig:?}");
+        row(&fig, "scenes", "scene", "head_opaque");
     }
     assert!(dir.path().join("visibility.svg").is_file());
 }
@@ -729,12 +733,16 @@ fn the_remote_suite_runs() {
             "2",
         ],
         &[
-            "first_image_s_0ms",
-            "converged_ratio_0ms_vs_local",
+            "cases",
+            "worst_delay_ms",
+            "first_image_s",
+            "converged_ratio_vs_local",
             "bytes_ratio_vs_cut",
             "requests_per_brick",
             "p99_over_median_streaming",
             "slowest_streaming_frame_ms",
+            "first_image_s_80ms",
+            "converged_ratio_80ms_vs_local",
             "requests_saved_by_batching",
             "converged_ratio_unbatched_vs_batched",
             "disk_cache_second_visit_converged_ratio",
@@ -742,10 +750,32 @@ fn the_remote_suite_runs() {
             "zarr_disk_cache_second_visit_requests",
             "brs_converged_ratio_no_lookahead_vs_lookahead",
             "zarr_converged_ratio_no_lookahead_vs_lookahead",
-            "brs_first_image_s_0ms",
-            "zarr_converged_ratio_0ms_vs_local",
         ],
     );
+    assert_eq!(fig["worst_delay_ms"], serde_json::json!(0));
+    // No case at 80 ms ran.
+    assert!(fig["first_image_s_80ms"].is_null(), "{fig:?}");
+    has_fields(
+        &fig,
+        "cases",
+        &[
+            "source",
+            "transport",
+            "variant",
+            "first_image_s",
+            "converged_ratio_vs_local",
+            "requests",
+            "p99_over_median",
+        ],
+    );
+    for src in ["brs", "zarr"] {
+        assert!(
+            rows(&fig, "cases")
+                .iter()
+                .any(|c| c["source"] == src && c["delay_ms"] == 0 && c["variant"] == "batched"),
+            "{src}: {fig:?}"
+        );
+    }
     // Every brick drawn was fetched (with the store's header and table).
     assert!(
         fig["bytes_ratio_vs_cut"].as_f64().unwrap() >= 1.0,

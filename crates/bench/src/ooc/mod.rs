@@ -24,8 +24,8 @@
 mod path;
 mod sensitivity;
 
+use crate::report::{RunInfo, Timing, interleave};
 use crate::runner::{Runner, finest_ooc_renderer, finite_db, median, quantile, round2};
-use crate::{Figures, arg};
 use brickray_cache::refine::{DataState, MetaState, NodeClass, RefineEnv, RefineParams};
 use brickray_core::{
     Accel, BrickSource, Camera, NodeKey, RenderMode, RenderSettings, Shading, TransferFunction,
@@ -36,7 +36,7 @@ use brickray_render::{
     OutOfCoreConfig, OutOfCoreStats, RendererOptions, U8Filtering, VolumeRenderer,
 };
 use glam::Vec3;
-use serde_json::json;
+use serde::Serialize;
 use std::sync::Arc;
 use std::time::Instant;
 
@@ -54,54 +54,136 @@ const TF_REFERENCE_DIMS: u64 = 256;
 /// one 256x256 frame takes about 17 s on lavapipe).
 const PATH_TF_REFERENCE_DIMS: u64 = 4096;
 
-pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
-    let size: u32 = arg(args, "--size", 512)?;
-    let rounds: usize = arg(args, "--rounds", 3)?.max(1);
-    let path_size: u32 = arg(args, "--path-size", 256)?;
-    let path_dims: u64 = arg(args, "--path-dims", 65536)?;
-    let parts: String = arg(args, "--parts", "abc".to_string())?;
+/// The suite's options.
+#[derive(Debug, clap::Args)]
+pub(crate) struct Args {
+    /// Image side in pixels.
+    #[arg(long, default_value_t = 512, value_parser = crate::image_side)]
+    size: u32,
+    /// Interleaved rounds.
+    #[arg(long, default_value_t = 3, value_parser = crate::at_least_one::<usize>)]
+    rounds: usize,
+    /// Parts to run: any of a (vs in core), b (output sensitivity), c (camera path).
+    #[arg(long, default_value = "abc", value_parser = crate::ooc_parts)]
+    parts: String,
+    /// Image side of the camera path.
+    #[arg(long, default_value_t = 256, value_parser = crate::image_side)]
+    path_size: u32,
+    /// Voxels per side of the path's procedural volume.
+    #[arg(long, default_value_t = 65536)]
+    path_dims: u64,
+    /// Frames each path view is held.
+    #[arg(long, default_value_t = 25)]
+    path_hold: usize,
+    /// GPU pool of the path, MiB.
+    #[arg(long, default_value_t = 256)]
+    path_gpu_mib: u64,
+}
+
+/// (a) One TF and accelerations, in core against out of core at the finest level.
+#[derive(Debug, Serialize)]
+pub(crate) struct HeadRow {
+    /// opaque or translucent.
+    scene: &'static str,
+    /// ert_ess (the default, the measured figure) or ert (a diagnostic).
+    accel: &'static str,
+    incore: Timing,
+    ooc: Timing,
+    /// Out-of-core wall time over in-core.
+    time_ratio: f64,
+    samples_per_ray_incore: f64,
+    samples_per_ray_ooc: f64,
+    /// The out-of-core image against the in-core one.
+    psnr_db: f64,
+    working_set_bricks: u64,
+    frames_to_converge: usize,
+}
+
+/// The suite's JSON line.
+#[derive(Debug, Serialize)]
+pub(crate) struct OocResult {
+    #[serde(flatten)]
+    run: RunInfo,
+    path_image_size: u32,
+    path_volume_dims: u64,
+    /// (a), head CT: rows, then the worst default ratio and PSNR (null when
+    /// the part did not run).
+    head: Vec<HeadRow>,
+    finest_vs_incore_time_ratio: Option<f64>,
+    psnr_finest_vs_incore_db: Option<f64>,
+    /// (b), output sensitivity from the far and the close view.
+    sensitivity: Vec<sensitivity::Sensitivity>,
+    /// (c), the camera path with exact and 8-bit texels.
+    path: Vec<path::PathResult>,
+    /// The exact path's p99 over median frame time and frames to converge
+    /// after the jump (null when part c did not run or did not converge).
+    p99_over_median: Option<f64>,
+    frames_to_converge_after_jump: Option<usize>,
+}
+
+pub(crate) fn run(args: &Args) -> Result<OocResult, String> {
+    let (size, rounds, path_size, path_dims) =
+        (args.size, args.rounds, args.path_size, args.path_dims);
+    let parts = &args.parts;
     let gpu = GpuContext::new().map_err(|e| e.to_string())?;
     println!("adapter: {}", gpu.describe());
     println!(
         "image {size}x{size}; {rounds} interleaved rounds; path {path_size}x{path_size} over {path_dims}^3"
     );
-    let mut fig = Figures::new();
     let t = Instant::now();
+    let mut head = Vec::new();
     if parts.contains('a') {
-        part_a(&gpu, size, rounds, &mut fig)?;
+        head = part_a(&gpu, size, rounds)?;
     }
+    let mut sensitivity = Vec::new();
     if parts.contains('b') {
         // The primary view: far enough that a 256^3 voxel covers at most about a
         // pixel (orbit distance 3.6, box side 1, 40 degree field of view at 512 px),
         // so every size is drawn at the resolution the image needs.
-        sensitivity::part_b(&gpu, size, rounds, &mut fig, 3.6 * size as f32 / 512.0, "")?;
+        sensitivity.push(sensitivity::part_b(
+            &gpu,
+            size,
+            rounds,
+            3.6 * size as f32 / 512.0,
+            "far",
+        )?);
         // A closer view, where 256^3 is below pixel resolution (1.4 px a voxel)
         // and the larger volumes legitimately refine further.
-        sensitivity::part_b(&gpu, size, rounds, &mut fig, 2.0, "_close")?;
+        sensitivity.push(sensitivity::part_b(&gpu, size, rounds, 2.0, "close")?);
     }
+    let mut paths = Vec::new();
     if parts.contains('c') {
         let path = path::PathOptions {
             size: path_size,
             dims: path_dims,
-            hold: arg(args, "--path-hold", 25)?,
-            gpu_mib: arg(args, "--path-gpu-mib", 256)?,
+            hold: args.path_hold,
+            gpu_mib: args.path_gpu_mib,
         };
-        path::part_c(&gpu, path, U8Filtering::Exact, "", &mut fig)?;
+        paths.push(path::part_c(&gpu, path, U8Filtering::Exact)?);
         // The same path with 8-bit texels: the pool then holds twice the bricks
         // and uploads carry half the bytes (the memory cost of exact u8).
-        path::part_c(&gpu, path, U8Filtering::Fast, "_u8_fast", &mut fig)?;
+        paths.push(path::part_c(&gpu, path, U8Filtering::Fast)?);
     }
     println!("\nsuite wall time: {:.0} s", t.elapsed().as_secs_f64());
-    fig.insert("image_size".into(), json!(size));
-    fig.insert("rounds".into(), json!(rounds));
-    fig.insert("path_image_size".into(), json!(path_size));
-    fig.insert("path_volume_dims".into(), json!(path_dims));
-    fig.insert("adapter".into(), json!(gpu.adapter.get_info().name));
-    Ok(fig)
+    let defaults = || head.iter().filter(|r| r.accel == "ert_ess");
+    let worst_ratio = defaults().map(|r| r.time_ratio).reduce(f64::max);
+    let worst_psnr = defaults().map(|r| r.psnr_db).reduce(f64::min);
+    Ok(OocResult {
+        run: RunInfo::new(&gpu, size, rounds),
+        path_image_size: path_size,
+        path_volume_dims: path_dims,
+        finest_vs_incore_time_ratio: worst_ratio,
+        psnr_finest_vs_incore_db: worst_psnr,
+        head,
+        sensitivity,
+        p99_over_median: paths.first().map(|p| p.p99_over_median),
+        frames_to_converge_after_jump: paths.first().and_then(|p| p.frames_to_converge_after_jump),
+        path: paths,
+    })
 }
 
 /// (a) Out of core at the finest level vs in core, head CT.
-fn part_a(gpu: &GpuContext, size: u32, rounds: usize, fig: &mut Figures) -> Result<(), String> {
+fn part_a(gpu: &GpuContext, size: u32, rounds: usize) -> Result<Vec<HeadRow>, String> {
     let path = brickray_harness::shared_volume("invesalius_cranium_ct")
         .ok_or("the ooc suite needs ../shared/data/invesalius_cranium_ct")?;
     let vol: Volume = brickray_io::read_volume(&path).map_err(|e| e.to_string())?;
@@ -148,12 +230,12 @@ fn part_a(gpu: &GpuContext, size: u32, rounds: usize, fig: &mut Figures) -> Resu
         accel,
         ..Default::default()
     };
-    let scenes: [(&str, TransferFunction); 2] =
+    let scenes: [(&'static str, TransferFunction); 2] =
         [("opaque", ct::bone()), ("translucent", ct::soft_tissue())];
     // The default switches (ERT + ESS) are the measured figure; ERT alone (no
     // ESS in either renderer) is a diagnostic separating the coarser empty-space
     // skipping of the out-of-core path (whole bricks) from per-sample costs.
-    let variants: [(&str, Accel); 2] = [
+    let variants: [(&'static str, Accel); 2] = [
         ("ert_ess", Accel::default()),
         (
             "ert",
@@ -176,8 +258,8 @@ fn part_a(gpu: &GpuContext, size: u32, rounds: usize, fig: &mut Figures) -> Resu
         "PSNR dB",
         "frames"
     );
-    let (mut worst_ratio, mut worst_psnr) = (0.0f64, f64::INFINITY);
-    for (scene, tf) in &scenes {
+    let mut rows = Vec::new();
+    for &(scene, ref tf) in &scenes {
         incore
             .set_transfer_function(&gpu.device, &gpu.queue, tf)
             .expect("transfer function");
@@ -195,77 +277,49 @@ fn part_a(gpu: &GpuContext, size: u32, rounds: usize, fig: &mut Figures) -> Resu
         }
         let stats = ooc.stats().out_of_core.ok_or("not out of core")?;
         // Timing: rounds over (renderer, variant), the order rotated each round.
-        let mut times = vec![Vec::new(); 2 * variants.len()];
-        for r in 0..rounds {
-            for k in 0..times.len() {
-                let i = (k + r) % times.len();
-                let accel = variants[i / 2].1;
-                let renderer = if i % 2 == 0 { &mut incore } else { &mut ooc };
-                times[i].push(
-                    run.frame(renderer, camera, frame, settings(accel), false)?
-                        .ms,
-                );
-            }
-        }
+        let times = interleave(rounds, 2 * variants.len(), |i| {
+            let accel = variants[i / 2].1;
+            let renderer = if i % 2 == 0 { &mut incore } else { &mut ooc };
+            run.frame(renderer, camera, frame, settings(accel), false)
+        })?;
         for (v, (name, _)) in variants.iter().enumerate() {
             let (a, b) = &shots[v];
-            let (mi, mo) = (median(&times[2 * v]), median(&times[2 * v + 1]));
+            let (ti, to) = (Timing::of(&times[2 * v]), Timing::of(&times[2 * v + 1]));
+            let (mi, mo) = (ti.ms, to.ms);
             let ratio = mo / mi;
             let psnr = brickray_reference::psnr(&b.rgba, &a.rgba);
             println!(
                 "  {scene:<12} {name:<8} {:>7} {mi:>10.1} {mo:>10.1} {ratio:>6.2}x {:>9.1} {:>9.1} {:>8.2} {frames:>7}",
                 stats.cache.working_set_bricks, a.samples, b.samples, psnr
             );
-            let suffix = if v == 0 {
-                scene.to_string()
-            } else {
-                format!("{scene}_{name}")
-            };
-            fig.insert(format!("ms_incore_{suffix}"), json!(round2(mi)));
-            fig.insert(format!("ms_ooc_finest_{suffix}"), json!(round2(mo)));
-            fig.insert(
-                format!("finest_vs_incore_time_ratio_{suffix}"),
-                json!(round2(ratio)),
-            );
-            fig.insert(
-                format!("samples_per_ray_incore_{suffix}"),
-                json!(round2(a.samples)),
-            );
-            fig.insert(
-                format!("samples_per_ray_ooc_{suffix}"),
-                json!(round2(b.samples)),
-            );
-            if v == 0 {
-                worst_ratio = worst_ratio.max(ratio);
-                worst_psnr = worst_psnr.min(psnr);
-                fig.insert(
-                    format!("psnr_finest_vs_incore_{scene}_db"),
-                    json!(finite_db(psnr)),
-                );
-            }
+            rows.push(HeadRow {
+                scene,
+                accel: name,
+                incore: ti,
+                ooc: to,
+                time_ratio: round2(ratio),
+                samples_per_ray_incore: round2(a.samples),
+                samples_per_ray_ooc: round2(b.samples),
+                psnr_db: finite_db(psnr),
+                working_set_bricks: stats.cache.working_set_bricks as u64,
+                frames_to_converge: frames,
+            });
         }
         println!(
             "  {:<21} ooc host side: refine {:.2} ms, upload {:.2} ms, index {:.2} ms ({} words)",
             "", stats.refine_ms, stats.upload_ms, stats.encode_ms, stats.index_words
         );
-        fig.insert(
-            format!("working_set_bricks_head_{scene}"),
-            json!(stats.cache.working_set_bricks),
-        );
     }
-    fig.insert(
-        "finest_vs_incore_time_ratio".into(),
-        json!(round2(worst_ratio)),
-    );
-    fig.insert(
-        "psnr_finest_vs_incore_db".into(),
-        json!(finite_db(worst_psnr)),
-    );
+    let worst_ratio = rows
+        .iter()
+        .filter(|r| r.accel == "ert_ess")
+        .map(|r| r.time_ratio)
+        .fold(0.0, f64::max);
     println!(
         "  worst ratio {worst_ratio:.2}x (bound 1.5x, goal 1.2x): {}",
         verdict(worst_ratio, 1.5, 1.2)
     );
-    Ok(())
+    Ok(rows)
 }
 
 fn verdict(x: f64, bound: f64, goal: f64) -> &'static str {

@@ -14,13 +14,23 @@ pub(super) struct PathOptions {
     pub(super) gpu_mib: u64,
 }
 
+/// (c) The path with one kind of texels.
+#[derive(Debug, Serialize)]
+pub(crate) struct PathResult {
+    /// exact or fast (8-bit texels).
+    u8_filtering: &'static str,
+    median_ms: f64,
+    p99_ms: f64,
+    pub(super) p99_over_median: f64,
+    /// Frames until converged after the jump (null: not within the hold).
+    pub(super) frames_to_converge_after_jump: Option<usize>,
+}
+
 pub(super) fn part_c(
     gpu: &GpuContext,
     path: PathOptions,
     u8_filtering: U8Filtering,
-    suffix: &str,
-    fig: &mut Figures,
-) -> Result<(), String> {
+) -> Result<PathResult, String> {
     let PathOptions {
         size, dims, hold, ..
     } = path;
@@ -132,12 +142,14 @@ pub(super) fn part_c(
         Some(f) => println!("  converged {f} frames after the jump"),
         None => println!("  NOT converged within the {hold} frames held after the jump"),
     }
-    fig.insert(format!("path_median_ms{suffix}"), json!(round2(med)));
-    fig.insert(format!("path_p99_ms{suffix}"), json!(round2(p99)));
-    fig.insert(format!("p99_over_median{suffix}"), json!(round2(p99 / med)));
-    fig.insert(
-        format!("frames_to_converge_after_jump{suffix}"),
-        after_jump.map_or(json!(null), |f| json!(f)),
-    );
-    Ok(())
+    Ok(PathResult {
+        u8_filtering: match u8_filtering {
+            U8Filtering::Exact => "exact",
+            _ => "fast",
+        },
+        median_ms: round2(med),
+        p99_ms: round2(p99),
+        p99_over_median: round2(p99 / med),
+        frames_to_converge_after_jump: after_jump,
+    })
 }

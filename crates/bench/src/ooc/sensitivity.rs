@@ -1,6 +1,7 @@
 //! Part (b) of the `ooc` suite: output sensitivity over the procedural source.
 
 use super::*;
+use crate::runner::Shot;
 
 /// Treats every brick as resident: refinement then yields the cut the view
 /// converges to (with unlimited uploads), whose levels we count.
@@ -66,14 +67,45 @@ fn levels_text(per_level: &[u32]) -> String {
 
 /// (b) Output sensitivity over the procedural source, from an orbit camera at
 /// `distance` (world units; the box's longest side is 1). Figures get `suffix`.
+/// (b) One volume size.
+#[derive(Debug, Serialize)]
+pub(crate) struct SizeRow {
+    dims: u64,
+    #[serde(flatten)]
+    time: Timing,
+    working_set_bricks: u64,
+    samples_per_ray: f64,
+    frames_to_converge: usize,
+}
+
+/// (b) The largest size against a smaller one.
+#[derive(Debug, Serialize)]
+pub(crate) struct SizeRatio {
+    /// The smaller size.
+    vs_dims: u64,
+    time_ratio: f64,
+    bricks_ratio: f64,
+}
+
+/// (b) Output sensitivity from one view.
+#[derive(Debug, Serialize)]
+pub(crate) struct Sensitivity {
+    /// far (a voxel of 256^3 about a pixel) or close.
+    view: &'static str,
+    distance: f32,
+    sizes: Vec<SizeRow>,
+    /// The largest size against each smaller one, the smallest first.
+    ratios: Vec<SizeRatio>,
+}
+
 pub(super) fn part_b(
     gpu: &GpuContext,
     size: u32,
     rounds: usize,
-    fig: &mut Figures,
     distance: f32,
-    suffix: &str,
-) -> Result<(), String> {
+    view: &'static str,
+) -> Result<Sensitivity, String> {
+    let suffix = view;
     println!(
         "\n(b{suffix}) output sensitivity: procedural fractal noise (bricks {BRICK}+2x{APRON}), same view (orbit at distance {distance}), tolerance 1 px,"
     );
@@ -95,7 +127,7 @@ pub(super) fn part_b(
         frames: usize,
         stats: OutOfCoreStats,
         samples: f64,
-        times: Vec<f64>,
+        times: Vec<Shot>,
     }
     let mut entries = Vec::new();
     let mut camera = None;
@@ -136,15 +168,13 @@ pub(super) fn part_b(
         });
     }
     let camera = camera.ok_or("no camera")?;
-    for r in 0..rounds {
-        for k in 0..entries.len() {
-            let n = entries.len();
-            let e = &mut entries[(k + r) % n];
-            let ms = run
-                .frame(&mut e.renderer, camera, e.frame, settings, false)?
-                .ms;
-            e.times.push(ms);
-        }
+    let n = entries.len();
+    let shots = interleave(rounds, n, |i| {
+        let e = &mut entries[i];
+        run.frame(&mut e.renderer, camera, e.frame, settings, false)
+    })?;
+    for (e, t) in entries.iter_mut().zip(shots) {
+        e.times = t;
     }
     println!(
         "  {:>8} {:>7} {:>8} {:>8} {:>9} {:>8} {:>7}  cut levels (data leaves per level)",
@@ -152,8 +182,10 @@ pub(super) fn part_b(
     );
     let mut ms = Vec::new();
     let mut bricks = Vec::new();
+    let mut sizes = Vec::new();
     for e in &entries {
-        let m = median(&e.times);
+        let time = Timing::of(&e.times);
+        let m = time.ms;
         let per_level = cut_levels(
             e.source.as_ref(),
             &camera,
@@ -174,15 +206,13 @@ pub(super) fn part_b(
             e.frames,
             levels_text(&per_level)
         );
-        fig.insert(format!("ms_noise_{}{suffix}", e.dims), json!(round2(m)));
-        fig.insert(
-            format!("bricks_noise_{}{suffix}", e.dims),
-            json!(e.stats.cache.working_set_bricks),
-        );
-        fig.insert(
-            format!("samples_per_ray_noise_{}{suffix}", e.dims),
-            json!(round2(e.samples)),
-        );
+        sizes.push(SizeRow {
+            dims: e.dims,
+            time,
+            working_set_bricks: e.stats.cache.working_set_bricks as u64,
+            samples_per_ray: round2(e.samples),
+            frames_to_converge: e.frames,
+        });
         ms.push(m);
         bricks.push(e.stats.cache.working_set_bricks as f64);
     }
@@ -196,29 +226,25 @@ pub(super) fn part_b(
         verdict(time_ratio, 2.0, 1.5),
         verdict(bricks_ratio, 2.0, 1.5)
     );
-    fig.insert(
-        format!("size_sensitivity_time_ratio{suffix}"),
-        json!(round2(time_ratio)),
-    );
-    fig.insert(
-        format!("size_sensitivity_bricks_ratio{suffix}"),
-        json!(round2(bricks_ratio)),
-    );
-    for i in 1..n {
+    let mut ratios = Vec::new();
+    for i in 0..n {
         let (t, b) = (ms[n] / ms[i], bricks[n] / bricks[i].max(1.0));
-        println!(
-            "  {}^3 / {}^3: time {t:.2}x, bricks {b:.2}x",
-            entries[n].dims, entries[i].dims
-        );
-        let d = entries[i].dims;
-        fig.insert(
-            format!("size_sensitivity_time_ratio_vs_{d}{suffix}"),
-            json!(round2(t)),
-        );
-        fig.insert(
-            format!("size_sensitivity_bricks_ratio_vs_{d}{suffix}"),
-            json!(round2(b)),
-        );
+        if i > 0 {
+            println!(
+                "  {}^3 / {}^3: time {t:.2}x, bricks {b:.2}x",
+                entries[n].dims, entries[i].dims
+            );
+        }
+        ratios.push(SizeRatio {
+            vs_dims: entries[i].dims,
+            time_ratio: round2(t),
+            bricks_ratio: round2(b),
+        });
     }
-    Ok(())
+    Ok(Sensitivity {
+        view,
+        distance,
+        sizes,
+        ratios,
+    })
 }

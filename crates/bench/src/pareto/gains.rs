@@ -18,7 +18,7 @@ pub(super) fn lod_gain(cfgs: &[Config], m: &[Measured], knob: &str) -> Option<f6
     let (geo, err) = (series("lod_geometric"), series(knob));
     let gains: Vec<f64> = err
         .iter()
-        .filter_map(|&(b, p)| crate::lod::interpolate(&geo, b).map(|g| p - g))
+        .filter_map(|&(b, p)| interpolate(&geo, b).map(|g| p - g))
         .collect();
     (!gains.is_empty()).then(|| median(&gains))
 }
@@ -65,4 +65,45 @@ pub(super) fn preint_gain(cfgs: &[Config], m: &[Measured]) -> Option<f64> {
             .map(|(_, x)| x.psnr_db)
     };
     Some(at("preint")? - at("step")?)
+}
+
+/// PSNR of the geometric curve at `bricks` (linear in log bricks), `None`
+/// outside its range (equal brick counts keep the best PSNR).
+fn interpolate(curve: &[(f64, f64)], bricks: f64) -> Option<f64> {
+    let mut c: Vec<(f64, f64)> = curve.to_vec();
+    c.sort_by(|a, b| a.0.total_cmp(&b.0));
+    // Equal brick counts: keep the best PSNR.
+    c.dedup_by(|b, a| {
+        if a.0 == b.0 {
+            a.1 = a.1.max(b.1);
+            true
+        } else {
+            false
+        }
+    });
+    for w in c.windows(2) {
+        let ((b0, p0), (b1, p1)) = (w[0], w[1]);
+        if b0 <= bricks && bricks <= b1 {
+            if b1 == b0 {
+                return Some(p0.max(p1));
+            }
+            let t = (bricks.ln() - b0.ln()) / (b1.ln() - b0.ln());
+            return Some(p0 + t * (p1 - p0));
+        }
+    }
+    c.iter().find(|p| p.0 == bricks).map(|p| p.1)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::interpolate;
+
+    #[test]
+    fn interpolation_is_linear_in_log_bricks_and_bounded() {
+        let c = [(10.0, 20.0), (100.0, 40.0), (1000.0, 50.0)];
+        assert_eq!(interpolate(&c, 5.0), None);
+        assert_eq!(interpolate(&c, 2000.0), None);
+        assert!((interpolate(&c, 10.0f64.powf(1.5)).unwrap() - 30.0).abs() < 1e-9);
+        assert_eq!(interpolate(&c, 1000.0), Some(50.0));
+    }
 }

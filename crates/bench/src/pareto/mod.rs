@@ -27,7 +27,6 @@ mod front;
 mod gains;
 mod scenes;
 
-use crate::Figures;
 use crate::runner::{Runner, finite_db, median, round2};
 use brickray_core::{RenderMode, TransferFunction};
 use brickray_harness::GpuContext;
@@ -38,10 +37,10 @@ use configs::{Config, RendererKey, configs};
 use gains::{brick_budget_gain, lod_gain, preint_gain};
 use scenes::Scene;
 pub(crate) use scenes::scenes;
+use serde::Serialize;
 
 /// Voxels per side of the procedural volumes, by default.
 pub(crate) const ML_SIDE: u32 = 128;
-use serde_json::json;
 use std::fmt::Write as _;
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -64,53 +63,81 @@ struct Measured {
     ssim: f64,
 }
 
-/// Options of the suite.
-struct Options {
+/// The suite's options.
+#[derive(Debug, clap::Args)]
+pub(crate) struct Args {
+    /// Image side in pixels.
+    #[arg(long, default_value_t = 512, value_parser = crate::image_side)]
     size: u32,
+    /// Interleaved rounds.
+    #[arg(long, default_value_t = 3, value_parser = crate::at_least_one::<usize>)]
     rounds: usize,
+    /// Volumes, comma-separated, of ct, ct5, mri, nuclei, ml, noise (default all).
+    #[arg(long, value_delimiter = ',')]
     scenes: Vec<String>,
+    /// Voxels per side of the procedural volumes.
+    #[arg(long, default_value_t = ML_SIDE, value_parser = crate::at_least_one::<u32>)]
     ml_side: u32,
+    /// Where the CSV and the cached reference images go.
+    #[arg(long, default_value = "target/pareto")]
     out: PathBuf,
+    /// Where the SVG charts go.
+    #[arg(long, default_value = "docs/charts/pareto")]
     charts: PathBuf,
+    /// Rays per pixel side of the reference.
+    #[arg(long, default_value_t = 2, value_parser = crate::at_least_one::<u32>)]
     supersample: u32,
-    /// Knobs swept (all when empty; the defaults always).
+    /// Knobs swept, comma-separated (default all; the defaults always run):
+    /// step, preint, lod_geometric, lod_error, lod_visible,
+    /// bricks_geometric, bricks_error, bricks_visible, bricks_octants, ert,
+    /// u8_filtering, visibility, in_core.
+    #[arg(long, value_delimiter = ',')]
     knobs: Vec<String>,
     /// Interior voxels per brick side of the stores.
+    #[arg(long, default_value_t = 32, value_parser = crate::at_least_one::<u32>)]
     brick: u32,
 }
 
-fn options(args: &[String]) -> Result<Options, String> {
-    let list = |name: &str| -> Vec<String> {
-        args.iter()
-            .position(|a| a == name)
-            .and_then(|i| args.get(i + 1))
-            .map(|s| s.split(',').map(str::to_string).collect())
-            .unwrap_or_default()
-    };
-    let path = |name: &str, default: &str| -> PathBuf {
-        args.iter()
-            .position(|a| a == name)
-            .and_then(|i| args.get(i + 1))
-            .map_or_else(|| PathBuf::from(default), PathBuf::from)
-    };
-    Ok(Options {
-        size: crate::arg(args, "--size", 512)?,
-        rounds: crate::arg(args, "--rounds", 3)?,
-        scenes: list("--scenes"),
-        ml_side: crate::arg(args, "--ml-side", ML_SIDE)?,
-        out: path("--out", "target/pareto"),
-        charts: path("--charts", "docs/charts/pareto"),
-        supersample: crate::arg(args, "--supersample", 2)?,
-        knobs: list("--knobs"),
-        brick: crate::arg(args, "--brick", 32)?,
-    })
+/// One volume and mode: its default configuration and the front.
+#[derive(Debug, Serialize)]
+pub(crate) struct SceneRow {
+    /// volume_mode, e.g. ct_dvr.
+    scene: String,
+    default_ms: f64,
+    default_psnr_db: f64,
+    default_bricks: u64,
+    /// Whether the default is within 5% of the front (all configurations;
+    /// out-of-core configurations only).
+    default_on_front: bool,
+    default_on_out_of_core_front: bool,
+    /// The configurations on the front, as knob=value.
+    front: Vec<String>,
 }
 
-pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
-    let o = options(args)?;
-    if o.size == 0 || o.rounds == 0 {
-        return Err("--size and --rounds must be > 0".into());
-    }
+/// The suite's JSON line. Gains are medians over the scenes, dB (null
+/// where no scene had them).
+#[derive(Debug, Serialize)]
+pub(crate) struct ParetoResult {
+    size: u32,
+    rounds: usize,
+    brick: u32,
+    default_on_front_all: bool,
+    default_on_out_of_core_front_all: bool,
+    error_aware_gain_db_at_equal_bricks: Option<f64>,
+    visible_error_gain_db_at_equal_bricks: Option<f64>,
+    error_aware_gain_db_at_equal_brick_budget: Option<f64>,
+    error_aware_gain_db_at_equal_brick_budget_vs_finest: Option<f64>,
+    visible_error_gain_db_at_equal_brick_budget: Option<f64>,
+    visible_error_gain_db_at_equal_brick_budget_vs_finest: Option<f64>,
+    octant_gain_db_at_equal_brick_budget: Option<f64>,
+    octant_gain_db_at_equal_brick_budget_vs_finest: Option<f64>,
+    preintegration_gain_db_at_step_2: Option<f64>,
+    /// The anisotropic CT's bricks at the default 1 px (DVR).
+    anisotropic_ct_bricks_at_1px: Option<u64>,
+    scenes: Vec<SceneRow>,
+}
+
+pub(crate) fn run(o: &Args) -> Result<ParetoResult, String> {
     let scenes = scenes(&o.scenes, o.ml_side)?;
     let gpu = GpuContext::new().map_err(|e| e.to_string())?;
     println!("adapter: {}", gpu.describe());
@@ -125,7 +152,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         "volume,mode,knob,value,ms,cpu_ms,samples_per_ray,bricks,bytes,psnr_db,mean_flip,ssim,on_front,default_within_5pct,psnr_vs_finest_db\n",
     );
     let (mut all_on_front, mut all_on_ooc_front) = (true, true);
-    let mut per_scene = serde_json::Map::new();
+    let mut per_scene = Vec::new();
     let (mut lod_gains, mut visible_gains, mut preint_gains) = (Vec::new(), Vec::new(), Vec::new());
     let (mut budget_gains, mut budget_lod_gains) = (Vec::new(), Vec::new());
     let (mut error_budget_gains, mut error_budget_lod_gains) = (Vec::new(), Vec::new());
@@ -287,62 +314,43 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
             if scene.anisotropic && *mode_name == "dvr" {
                 aniso_bricks = Some(d.bricks);
             }
-            per_scene.insert(
-                name,
-                json!({
-                    "default_ms": round2(d.ms),
-                    "default_psnr_db": finite_db(d.psnr_db),
-                    "default_bricks": d.bricks,
-                    "default_on_front": default_ok,
-                    "default_on_out_of_core_front": default_ooc_ok,
-                    "front": on.iter().map(|&i| format!("{}={}", cfgs[i].knob, cfgs[i].value)).collect::<Vec<_>>(),
-                }),
-            );
+            per_scene.push(SceneRow {
+                scene: name,
+                default_ms: round2(d.ms),
+                default_psnr_db: finite_db(d.psnr_db),
+                default_bricks: d.bricks as u64,
+                default_on_front: default_ok,
+                default_on_out_of_core_front: default_ooc_ok,
+                front: on
+                    .iter()
+                    .map(|&i| format!("{}={}", cfgs[i].knob, cfgs[i].value))
+                    .collect(),
+            });
         }
     }
     let csv_path = o.out.join("pareto.csv");
     std::fs::write(&csv_path, csv).map_err(|e| format!("{}: {e}", csv_path.display()))?;
     println!("\ndata: {}", csv_path.display());
-    let mut f = Figures::new();
-    f.insert("suite".into(), json!("pareto"));
-    f.insert("size".into(), json!(o.size));
-    f.insert("rounds".into(), json!(o.rounds));
-    f.insert("default_on_front_all".into(), json!(all_on_front));
-    f.insert(
-        "default_on_out_of_core_front_all".into(),
-        json!(all_on_ooc_front),
-    );
     // Each gain's median over the scenes (null where no scene had it).
-    for (key, gains) in [
-        ("error_aware_gain_db_at_equal_bricks", &lod_gains),
-        ("visible_error_gain_db_at_equal_bricks", &visible_gains),
-        (
-            "error_aware_gain_db_at_equal_brick_budget",
-            &error_budget_gains,
-        ),
-        (
-            "error_aware_gain_db_at_equal_brick_budget_vs_finest",
-            &error_budget_lod_gains,
-        ),
-        ("visible_error_gain_db_at_equal_brick_budget", &budget_gains),
-        (
-            "visible_error_gain_db_at_equal_brick_budget_vs_finest",
-            &budget_lod_gains,
-        ),
-        ("octant_gain_db_at_equal_brick_budget", &octant_gains),
-        (
-            "octant_gain_db_at_equal_brick_budget_vs_finest",
-            &octant_lod_gains,
-        ),
-        ("preintegration_gain_db_at_step_2", &preint_gains),
-    ] {
-        let med = (!gains.is_empty()).then(|| round2(median(gains)));
-        f.insert(key.into(), json!(med));
-    }
-    f.insert("brick".into(), json!(o.brick));
-    f.insert("anisotropic_ct_bricks_at_1px".into(), json!(aniso_bricks));
-    f.insert("scenes".into(), serde_json::Value::Object(per_scene));
-    Ok(f)
+    let med = |gains: &[f64]| (!gains.is_empty()).then(|| round2(median(gains)));
+    Ok(ParetoResult {
+        size: o.size,
+        rounds: o.rounds,
+        brick: o.brick,
+        default_on_front_all: all_on_front,
+        default_on_out_of_core_front_all: all_on_ooc_front,
+        error_aware_gain_db_at_equal_bricks: med(&lod_gains),
+        visible_error_gain_db_at_equal_bricks: med(&visible_gains),
+        error_aware_gain_db_at_equal_brick_budget: med(&error_budget_gains),
+        error_aware_gain_db_at_equal_brick_budget_vs_finest: med(&error_budget_lod_gains),
+        visible_error_gain_db_at_equal_brick_budget: med(&budget_gains),
+        visible_error_gain_db_at_equal_brick_budget_vs_finest: med(&budget_lod_gains),
+        octant_gain_db_at_equal_brick_budget: med(&octant_gains),
+        octant_gain_db_at_equal_brick_budget_vs_finest: med(&octant_lod_gains),
+        preintegration_gain_db_at_step_2: med(&preint_gains),
+        anisotropic_ct_bricks_at_1px: aniso_bricks.map(|b| b as u64),
+        scenes: per_scene,
+    })
 }
 
 /// The scene's f64 reference image (RGBA8 over black), cached under `o.out`
@@ -351,7 +359,7 @@ fn reference(
     scene: &Scene,
     mode: RenderMode,
     tf: &TransferFunction,
-    o: &Options,
+    o: &Args,
 ) -> Result<Vec<u8>, String> {
     let settings = base_settings(mode);
     let tag = match mode {

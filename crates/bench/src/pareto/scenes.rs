@@ -1,7 +1,9 @@
 //! The Pareto suite's scenes: five volumes (three shared, two procedural), each
 //! with its transfer function and the modes charted.
 
-use brickray_core::{Camera, RenderMode, TransferFunction, Volume, VolumeFrame, synthetic};
+use brickray_core::{
+    Camera, RenderMode, TransferFunction, Volume, VolumeData, VolumeDesc, VolumeFrame, synthetic,
+};
 use brickray_harness::ct;
 
 /// One volume and the modes charted on it.
@@ -60,7 +62,7 @@ pub(crate) fn scenes(wanted: &[String], ml_side: u32) -> Result<Vec<Scene>, Stri
         let [translucent, ..] = ct::scenes();
         let mut s = scene(
             "ct5",
-            crate::aniso::ct_every_third_slice()?,
+            ct_every_third_slice()?,
             vec![("dvr", translucent.1, translucent.2)],
         );
         s.anisotropic = true;
@@ -179,4 +181,26 @@ fn scene(
 /// Four octaves of value noise on an `n^3` u8 grid (base period 32 voxels).
 fn noise(n: u32) -> Volume {
     synthetic::u8_field(n, |p| synthetic::fractal_noise(p.map(f64::from), 32.0, 4))
+}
+
+/// The shared head CT with every third slice kept (0.96 x 0.96 x 4.5 mm).
+pub(crate) fn ct_every_third_slice() -> Result<Volume, String> {
+    let path = brickray_harness::shared_volume("invesalius_cranium_ct")
+        .ok_or("this suite needs ../shared/data/invesalius_cranium_ct")?;
+    let full = brickray_io::read_volume(&path).map_err(|e| e.to_string())?;
+    let d = full.desc().clone();
+    let slice = d.dims[0] as usize * d.dims[1] as usize;
+    let VolumeData::I16(all) = full.data() else {
+        return Err("the head CT is not i16".into());
+    };
+    let nz = d.dims[2].div_ceil(3);
+    let thick: Vec<i16> = (0..nz as usize)
+        .flat_map(|z| all[3 * z * slice..(3 * z + 1) * slice].iter().copied())
+        .collect();
+    let desc = VolumeDesc {
+        dims: [d.dims[0], d.dims[1], nz],
+        spacing: [d.spacing[0], d.spacing[1], d.spacing[2] * 3.0],
+        ..d
+    };
+    Volume::new(desc, VolumeData::I16(thick)).map_err(|e| e.to_string())
 }

@@ -37,15 +37,89 @@
 
 mod kernel;
 
+use crate::report::{RunInfo, interleave};
 use crate::runner::{Runner, finest_ooc_renderer, median, round2};
-use crate::{Figures, arg};
 use brickray_core::{
     Accel, Camera, RenderMode, RenderSettings, Shading, TransferFunction, VolumeFrame,
 };
 use brickray_harness::{GpuContext, target_desc};
 use brickray_render::{RendererOptions, U8Filtering, VolumeRenderer};
 use kernel::{MODES, RawKernel};
-use serde_json::json;
+use serde::Serialize;
+
+/// The suite's options.
+#[derive(Debug, clap::Args)]
+pub(crate) struct Args {
+    /// Image side in pixels.
+    #[arg(long, default_value_t = 512, value_parser = crate::image_side)]
+    size: u32,
+    /// Interleaved rounds.
+    #[arg(long, default_value_t = 3, value_parser = crate::at_least_one::<usize>)]
+    rounds: usize,
+    /// Step in voxels.
+    #[arg(long, default_value_t = 0.5)]
+    step: f32,
+    /// Modes, comma-separated, of dvr, dvr_shaded, iso, mip.
+    #[arg(long, default_value = "dvr,dvr_shaded,iso,mip")]
+    modes: String,
+}
+
+/// One variant in one mode.
+#[derive(Debug, Serialize)]
+pub(crate) struct VariantRow {
+    /// raw_tex, raw_buf (the minimal kernel), in_/ooc_ brute, default, noskip.
+    variant: &'static str,
+    /// Median wall and process CPU time, ms.
+    ms: f64,
+    cpu_ms: f64,
+    /// Median time of the ray-cast pass by GPU timestamps (null without,
+    /// and for the minimal kernel).
+    gpu_ms: Option<f64>,
+    samples_per_pixel: f64,
+    lane_samples_per_pixel: f64,
+}
+
+/// Rates per sample (samples per CPU ms) as ratios, one mode.
+#[derive(Debug, Serialize)]
+pub(crate) struct Ratios {
+    /// In core brute force (out of core brute force; the minimal kernel
+    /// with a buffer TF) against the minimal kernel.
+    useful_rate_ratio: f64,
+    useful_rate_ratio_ooc: f64,
+    buffer_tf_rate_ratio: f64,
+    /// Default accelerations against brute force, per sample and per
+    /// lane-bound sample; in core and out of core.
+    accel_rate_per_sample: f64,
+    accel_rate_per_sample_ooc: f64,
+    accel_lane_rate: f64,
+    accel_lane_rate_ooc: f64,
+    /// CPU time ratios: out of core over in core (default, brute), default
+    /// over no skipping (in core, out of core).
+    ooc_vs_incore: f64,
+    ooc_vs_incore_brute: f64,
+    default_vs_noskip: f64,
+    default_vs_noskip_ooc: f64,
+    /// The useful rate and the out-of-core ratio by wall time.
+    useful_rate_ratio_wall: f64,
+    ooc_vs_incore_wall: f64,
+}
+
+/// One mode.
+#[derive(Debug, Serialize)]
+pub(crate) struct ModeResult {
+    mode: &'static str,
+    variants: Vec<VariantRow>,
+    ratios: Ratios,
+}
+
+/// The suite's JSON line.
+#[derive(Debug, Serialize)]
+pub(crate) struct RawResult {
+    #[serde(flatten)]
+    run: RunInfo,
+    step_voxels: f32,
+    modes: Vec<ModeResult>,
+}
 
 /// The variants, in the order of the table.
 const VARIANTS: [&str; 8] = [
@@ -98,11 +172,8 @@ fn accel_of(variant: &str) -> Accel {
     }
 }
 
-pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
-    let size: u32 = arg(args, "--size", 512)?;
-    let rounds: usize = arg(args, "--rounds", 3)?.max(1);
-    let step: f32 = arg(args, "--step", 0.5)?;
-    let only: String = arg(args, "--modes", "dvr,dvr_shaded,iso,mip".to_string())?;
+pub(crate) fn run(args: &Args) -> Result<RawResult, String> {
+    let (size, rounds, step, only) = (args.size, args.rounds, args.step, &args.modes);
     let path = brickray_harness::shared_volume("pycortex_s1_t1_mri")
         .ok_or("the raw suite needs ../shared/data/pycortex_s1_t1_mri")?;
     let vol = brickray_io::read_volume(&path).map_err(|e| e.to_string())?;
@@ -140,7 +211,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         256,
     );
     let mip_tf = TransferFunction::ramp(0.2, 0.9, 1.0);
-    let mut fig = Figures::new();
+    let mut modes = Vec::new();
     println!(
         "\n| mode | variant | samples/ray | lane-bound samples/ray | wall ms | CPU ms | Msamples/CPU s | rate / yardstick | lane-bound rate / yardstick |\n|---|---|---:|---:|---:|---:|---:|---:|---:|"
     );
@@ -168,39 +239,54 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         // One counted frame per variant (also the warm-up), then timed rounds.
         let mut samples = [0u64; VARIANTS.len()];
         let mut lanes = [0u64; VARIANTS.len()];
-        let mut one = |i: usize, count: bool| -> Result<(f64, f64, u64, u64), String> {
-            let v = VARIANTS[i];
-            match v {
-                "raw_tex" | "raw_buf" => Ok(raw.run(&gpu, m, v == "raw_tex", count)),
-                _ => {
-                    let r = if v.starts_with("in_") {
-                        &mut incore
-                    } else {
-                        &mut ooc
-                    };
-                    let shot =
-                        run.frame(r, camera, frame, settings(m, step, accel_of(v)), count)?;
-                    Ok((shot.ms, shot.cpu_ms, shot.total_samples, shot.lane_samples))
+        let mut one =
+            |i: usize, count: bool| -> Result<(f64, f64, Option<f64>, u64, u64), String> {
+                let v = VARIANTS[i];
+                match v {
+                    "raw_tex" | "raw_buf" => {
+                        let (w, c, n, l) = raw.run(&gpu, m, v == "raw_tex", count);
+                        Ok((w, c, None, n, l))
+                    }
+                    _ => {
+                        let r = if v.starts_with("in_") {
+                            &mut incore
+                        } else {
+                            &mut ooc
+                        };
+                        let shot =
+                            run.frame(r, camera, frame, settings(m, step, accel_of(v)), count)?;
+                        Ok((
+                            shot.ms,
+                            shot.cpu_ms,
+                            shot.gpu_ms,
+                            shot.total_samples,
+                            shot.lane_samples,
+                        ))
+                    }
                 }
-            }
-        };
+            };
         for i in 0..VARIANTS.len() {
-            (_, _, samples[i], lanes[i]) = one(i, true)?;
+            (_, _, _, samples[i], lanes[i]) = one(i, true)?;
         }
-        let mut wall = vec![Vec::new(); VARIANTS.len()];
-        let mut cpu = vec![Vec::new(); VARIANTS.len()];
-        for round in 0..rounds {
-            for k in 0..VARIANTS.len() {
-                let i = (k + round) % VARIANTS.len();
-                let (w, c, _, _) = one(i, false)?;
-                wall[i].push(w);
-                cpu[i].push(c);
-            }
-        }
-        let wall: Vec<f64> = wall.iter().map(|t| median(t)).collect();
+        let times = interleave(rounds, VARIANTS.len(), |i| one(i, false))?;
+        let of = |f: &dyn Fn(&(f64, f64, Option<f64>, u64, u64)) -> f64| -> Vec<f64> {
+            times
+                .iter()
+                .map(|t| median(&t.iter().map(f).collect::<Vec<_>>()))
+                .collect()
+        };
+        let wall = of(&|t| t.0);
         // Rates and ratios from the process's CPU time: on this shared 2-core
         // machine wall time moved by up to 2x between variants of one round.
-        let ms: Vec<f64> = cpu.iter().map(|t| median(t)).collect();
+        let ms = of(&|t| t.1);
+        let gpu: Vec<Option<f64>> = times
+            .iter()
+            .map(|t| {
+                let g: Vec<f64> = t.iter().filter_map(|x| x.2).collect();
+                (!g.is_empty()).then(|| round2(median(&g)))
+            })
+            .collect();
+        let mut variants = Vec::new();
         let rays = size as f64 * size as f64;
         let rate = |i: usize| samples[i] as f64 / ms[i];
         let lane_rate = |i: usize| lanes[i] as f64 / ms[i];
@@ -215,74 +301,44 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
                 rate(i) / rate(0),
                 lane_rate(i) / lane_rate(0)
             );
-            fig.insert(format!("ms_{v}_{mode}"), json!(round2(wall[i])));
-            fig.insert(format!("cpu_ms_{v}_{mode}"), json!(round2(ms[i])));
-            fig.insert(
-                format!("samples_per_pixel_{v}_{mode}"),
-                json!(round2(samples[i] as f64 / rays)),
-            );
+            variants.push(VariantRow {
+                variant: v,
+                ms: round2(wall[i]),
+                cpu_ms: round2(ms[i]),
+                gpu_ms: gpu[i],
+                samples_per_pixel: round2(samples[i] as f64 / rays),
+                lane_samples_per_pixel: round2(lanes[i] as f64 / rays),
+            });
         }
         let ix = |name: &str| VARIANTS.iter().position(|v| *v == name).expect("variant");
-        let entries = [
-            ("useful_rate_ratio", rate(ix("in_brute")) / rate(0)),
-            ("useful_rate_ratio_ooc", rate(ix("ooc_brute")) / rate(0)),
-            ("buffer_tf_rate_ratio", rate(ix("raw_buf")) / rate(0)),
-            (
-                "accel_rate_per_sample",
-                rate(ix("in_default")) / rate(ix("in_brute")),
-            ),
-            (
-                "accel_rate_per_sample_ooc",
-                rate(ix("ooc_default")) / rate(ix("ooc_brute")),
-            ),
-            (
-                "accel_lane_rate",
-                lane_rate(ix("in_default")) / lane_rate(ix("in_brute")),
-            ),
-            (
-                "accel_lane_rate_ooc",
-                lane_rate(ix("ooc_default")) / lane_rate(ix("ooc_brute")),
-            ),
-            (
-                "ooc_vs_incore",
-                ms[ix("ooc_default")] / ms[ix("in_default")],
-            ),
-            (
-                "ooc_vs_incore_brute",
-                ms[ix("ooc_brute")] / ms[ix("in_brute")],
-            ),
-            (
-                "default_vs_noskip",
-                ms[ix("in_default")] / ms[ix("in_noskip")],
-            ),
-            (
-                "default_vs_noskip_ooc",
-                ms[ix("ooc_default")] / ms[ix("ooc_noskip")],
-            ),
-            (
-                "useful_rate_ratio_wall",
-                samples[ix("in_brute")] as f64
-                    / wall[ix("in_brute")]
-                    / (samples[0] as f64 / wall[0]),
-            ),
-            (
-                "ooc_vs_incore_wall",
-                wall[ix("ooc_default")] / wall[ix("in_default")],
-            ),
-        ];
-        print!("  {mode}:");
-        for (name, value) in entries {
-            print!(" {name} {value:.3};");
-            fig.insert(
-                format!("{name}_{mode}"),
-                json!((value * 1000.0).round() / 1000.0),
-            );
-        }
-        println!();
+        let r3 = |x: f64| (x * 1000.0).round() / 1000.0;
+        let ratios = Ratios {
+            useful_rate_ratio: r3(rate(ix("in_brute")) / rate(0)),
+            useful_rate_ratio_ooc: r3(rate(ix("ooc_brute")) / rate(0)),
+            buffer_tf_rate_ratio: r3(rate(ix("raw_buf")) / rate(0)),
+            accel_rate_per_sample: r3(rate(ix("in_default")) / rate(ix("in_brute"))),
+            accel_rate_per_sample_ooc: r3(rate(ix("ooc_default")) / rate(ix("ooc_brute"))),
+            accel_lane_rate: r3(lane_rate(ix("in_default")) / lane_rate(ix("in_brute"))),
+            accel_lane_rate_ooc: r3(lane_rate(ix("ooc_default")) / lane_rate(ix("ooc_brute"))),
+            ooc_vs_incore: r3(ms[ix("ooc_default")] / ms[ix("in_default")]),
+            ooc_vs_incore_brute: r3(ms[ix("ooc_brute")] / ms[ix("in_brute")]),
+            default_vs_noskip: r3(ms[ix("in_default")] / ms[ix("in_noskip")]),
+            default_vs_noskip_ooc: r3(ms[ix("ooc_default")] / ms[ix("ooc_noskip")]),
+            useful_rate_ratio_wall: r3(samples[ix("in_brute")] as f64
+                / wall[ix("in_brute")]
+                / (samples[0] as f64 / wall[0])),
+            ooc_vs_incore_wall: r3(wall[ix("ooc_default")] / wall[ix("in_default")]),
+        };
+        println!("  {mode}: {ratios:?}");
+        modes.push(ModeResult {
+            mode,
+            variants,
+            ratios,
+        });
     }
-    fig.insert("image_size".into(), json!(size));
-    fig.insert("step_voxels".into(), json!(step));
-    fig.insert("rounds".into(), json!(rounds));
-    fig.insert("adapter".into(), json!(gpu.adapter.get_info().name));
-    Ok(fig)
+    Ok(RawResult {
+        run: RunInfo::new(&gpu, size, rounds),
+        step_voxels: step,
+        modes,
+    })
 }

@@ -49,7 +49,6 @@
 mod servers;
 
 use crate::runner::{Runner, median, quantile, round2};
-use crate::{Figures, arg};
 use brickray_core::tf::{TfModel, TfPreset};
 use brickray_core::{
     BrickError, BrickSource, Camera, NodeInfo, NodeKey, OctreeLayout, RangeRead, RangeReader,
@@ -63,7 +62,7 @@ use brickray_remote::{
 use brickray_render::{Lookahead, OutOfCoreConfig, VolumeRenderer};
 use brickray_store::{BuildOptions, Store};
 use glam::Vec3;
-use serde_json::json;
+use serde::Serialize;
 use servers::{Server, copy_dir, create_bucket, files, s3_options, start_moto, start_proxies};
 use std::collections::HashSet;
 use std::path::Path;
@@ -79,20 +78,107 @@ const MOVE: usize = 15;
 /// Most frames a view is held waiting for convergence.
 const MAX_HOLD: usize = 1800;
 
-pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
-    let size: u32 = arg(args, "--size", 512)?;
-    let threads: usize = arg(args, "--threads", 8)?;
-    let rounds: usize = arg(args, "--rounds", 3)?.max(1);
-    let raycast = args.iter().any(|a| a == "--raycast");
-    let gap_kib: u64 = arg(
-        args,
-        "--gap-kib",
-        brickray_remote::DEFAULT_COALESCE_GAP >> 10,
-    )?;
-    let delays: Vec<u32> = arg(args, "--delays", "0,20,80".to_string())?
-        .split(',')
-        .map(|d| d.trim().parse().map_err(|_| format!("bad delay {d:?}")))
-        .collect::<Result<_, _>>()?;
+/// An added delay in ms.
+fn delay(s: &str) -> Result<u32, String> {
+    s.trim().parse().map_err(|_| format!("bad delay {s:?}"))
+}
+
+/// The suite's options.
+#[derive(Debug, clap::Args)]
+pub(crate) struct Args {
+    /// Image side in pixels of the planned frames.
+    #[arg(long, default_value_t = 512, value_parser = crate::image_side)]
+    size: u32,
+    /// Added delays in ms, comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "0,20,80", value_parser = delay)]
+    delays: Vec<u32>,
+    /// Loader threads.
+    #[arg(long, default_value_t = 8, value_parser = crate::at_least_one::<usize>)]
+    threads: usize,
+    /// Ranges this close (KiB) are fetched as one request.
+    #[arg(long, default_value_t = brickray_remote::DEFAULT_COALESCE_GAP >> 10)]
+    gap_kib: u64,
+    /// Rounds of every case (each row is the median round).
+    #[arg(long, default_value_t = 3, value_parser = crate::at_least_one::<usize>)]
+    rounds: usize,
+    /// Ray cast every frame too (whole frames; default: planned only).
+    #[arg(long)]
+    raycast: bool,
+}
+
+/// One case: a source over a transport, its median round.
+#[derive(Debug, Serialize)]
+pub(crate) struct CaseRow {
+    /// brs (the store) or zarr (the OME-Zarr image).
+    source: &'static str,
+    /// local, http or s3, with its variant.
+    transport: String,
+    /// Added round-trip delay, ms (null: local).
+    delay_ms: Option<u32>,
+    /// batched, unbatched, cache_cold, cache_warm, s3, lookahead.
+    variant: &'static str,
+    first_image_s: f64,
+    converged_s: f64,
+    converged_frames: usize,
+    /// Converged time over the local file's.
+    converged_ratio_vs_local: f64,
+    frames_after_jump: Option<usize>,
+    requests: u64,
+    mib_fetched: f64,
+    /// Bytes fetched over the bytes of the bricks drawn (stores).
+    bytes_ratio: Option<f64>,
+    requests_per_brick: f64,
+    cancelled_queued: u64,
+    cancelled_in_flight: u64,
+    /// Frame times while streaming, ms.
+    median_ms: f64,
+    p99_ms: f64,
+    p99_over_median: f64,
+    slowest_frame_ms: f64,
+}
+
+/// The suite's JSON line.
+#[derive(Debug, Serialize)]
+pub(crate) struct RemoteResult {
+    size: u32,
+    threads: usize,
+    rounds: usize,
+    cases: Vec<CaseRow>,
+    /// The store over HTTP at the largest delay: its delay and figures.
+    worst_delay_ms: Option<u32>,
+    first_image_s: Option<f64>,
+    converged_ratio_vs_local: Option<f64>,
+    bytes_ratio_vs_cut: Option<f64>,
+    requests_per_brick: Option<f64>,
+    p99_over_median_streaming: Option<f64>,
+    slowest_streaming_frame_ms: Option<f64>,
+    /// The same at 80 ms, when run (the figures the issue names).
+    first_image_s_80ms: Option<f64>,
+    converged_ratio_80ms_vs_local: Option<f64>,
+    /// At the largest delay: requests batching saves (share), and unbatched
+    /// over batched convergence time.
+    requests_saved_by_batching: Option<f64>,
+    converged_ratio_unbatched_vs_batched: Option<f64>,
+    /// At the largest delay: without over with lookahead.
+    brs_converged_ratio_no_lookahead_vs_lookahead: Option<f64>,
+    zarr_converged_ratio_no_lookahead_vs_lookahead: Option<f64>,
+    /// A second visit through the disk cache: its convergence time over
+    /// the first visit's, and its requests (store, OME-Zarr).
+    disk_cache_second_visit_converged_ratio: Option<f64>,
+    disk_cache_second_visit_requests: Option<u64>,
+    zarr_disk_cache_second_visit_converged_ratio: Option<f64>,
+    zarr_disk_cache_second_visit_requests: Option<u64>,
+}
+
+pub(crate) fn run(args: &Args) -> Result<RemoteResult, String> {
+    let (size, threads, rounds, raycast, gap_kib) = (
+        args.size,
+        args.threads,
+        args.rounds,
+        args.raycast,
+        args.gap_kib,
+    );
+    let delays = &args.delays;
     let shared = brickray_harness::shared_data_dir()
         .ok_or("the remote suite needs ../shared/data (the shared MRI)")?;
     let raw = shared.join("pycortex_s1_t1_mri/pycortex_s1_t1_mri.json");
@@ -116,7 +202,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         &["--root", &root.to_string_lossy()],
     )?;
     let upstream = format!("http://127.0.0.1:{}", server.port);
-    let proxies = start_proxies(dir.path(), &scripts, "http", &upstream, &delays)?;
+    let proxies = start_proxies(dir.path(), &scripts, "http", &upstream, delays)?;
     // S3 (moto) when it is installed: the same objects in a bucket, behind
     // proxies with the same delays.
     let moto = start_moto()?;
@@ -135,7 +221,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
             let rel = f.strip_prefix(&root).map_err(|e| e.to_string())?;
             put(&rel.to_string_lossy(), &f)?;
         }
-        s3_proxies = start_proxies(dir.path(), &scripts, "s3", &endpoint, &delays)?;
+        s3_proxies = start_proxies(dir.path(), &scripts, "s3", &endpoint, delays)?;
     }
     println!(
         "pycortex S1 T1 MRI (u8 256^3): a .brs store ({:.1} MiB) and the shared OME-Zarr 0.5 image, over a Range HTTP server with added delay; {size}x{size} frames {} at 60 Hz at most, {threads} loader threads",
@@ -151,14 +237,14 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         coalesce_gap: gap_kib << 10,
         ..RemoteOptions::default()
     };
-    let mut cases: Vec<(&str, String, Option<u32>, Variant)> = Vec::new();
+    let mut cases: Vec<(&'static str, String, Option<u32>, Variant)> = Vec::new();
     for src in ["brs", "zarr"] {
         cases.push((src, "local".into(), None, Variant::Batched));
-        for &d in &delays {
+        for &d in delays {
             cases.push((src, format!("http +{d} ms"), Some(d), Variant::Batched));
         }
         if moto.is_some() {
-            for &d in &delays {
+            for &d in delays {
                 cases.push((src, format!("s3 +{d} ms"), Some(d), Variant::S3));
             }
         }
@@ -188,7 +274,6 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         }
     }
     let run = Runner::new(&gpu, size)?;
-    let mut fig = Figures::new();
     // Rounds of every case in turn (this machine's speed drifts): each
     // case's row is its median round.
     let mut rounds_of: Vec<Vec<CaseResult>> = cases.iter().map(|_| Vec::new()).collect();
@@ -264,106 +349,80 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
             .find(|r| r.0 == src && r.1 == delay && r.2 == variant)
             .map(|r| &r.3)
     };
-    for (src, _, _, _) in results.iter().filter(|r| r.1.is_none()) {
+    let ratio = |a: &CaseResult, b: &CaseResult| round2(a.converged_s / b.converged_s.max(1e-9));
+    let mut rows = Vec::new();
+    for (src, delay, variant, r) in &results {
         let local = find(src, None, Variant::Batched).ok_or("no local case")?;
-        for &d in &delays {
-            let Some(r) = find(src, Some(d), Variant::Batched) else {
-                continue;
-            };
-            fig.insert(
-                format!("{src}_first_image_s_{d}ms"),
-                json!(round2(r.first_image_s)),
-            );
-            fig.insert(
-                format!("{src}_converged_ratio_{d}ms_vs_local"),
-                json!(round2(r.converged_s / local.converged_s.max(1e-9))),
-            );
-        }
+        rows.push(CaseRow {
+            source: src,
+            transport: cases_transport(*delay, *variant),
+            delay_ms: *delay,
+            variant: variant.name(),
+            first_image_s: round2(r.first_image_s),
+            converged_s: round2(r.converged_s),
+            converged_frames: r.converged_frames,
+            converged_ratio_vs_local: ratio(r, local),
+            frames_after_jump: r.after_jump,
+            requests: r.fetched.0,
+            mib_fetched: round2(r.fetched.1 as f64 / (1 << 20) as f64),
+            bytes_ratio: r.bytes_ratio.map(round2),
+            requests_per_brick: round2(r.requests_per_brick),
+            cancelled_queued: r.cancelled[0],
+            cancelled_in_flight: r.cancelled[1],
+            median_ms: round2(r.median_ms),
+            p99_ms: round2(r.p99_ms),
+            p99_over_median: round2(r.p99_ms / r.median_ms.max(1e-9)),
+            slowest_frame_ms: round2(r.max_ms),
+        });
     }
     let worst = delays.iter().max().copied();
-    let at = |src| worst.and_then(|d| find(src, Some(d), Variant::Batched));
-    if let (Some(r), Some(local), Some(d)) = (at("brs"), find("brs", None, Variant::Batched), worst)
-    {
-        // The store at the largest delay (80 ms by default): the issue's keys.
-        fig.insert(
-            format!("first_image_s_{d}ms"),
-            json!(round2(r.first_image_s)),
-        );
-        fig.insert(
-            format!("converged_ratio_{d}ms_vs_local"),
-            json!(round2(r.converged_s / local.converged_s.max(1e-9))),
-        );
-        fig.insert(
-            "bytes_ratio_vs_cut".into(),
-            json!(r.bytes_ratio.map(round2)),
-        );
-        fig.insert(
-            "requests_per_brick".into(),
-            json!(round2(r.requests_per_brick)),
-        );
-        fig.insert(
-            "p99_over_median_streaming".into(),
-            json!(round2(r.p99_ms / r.median_ms.max(1e-9))),
-        );
-        fig.insert("slowest_streaming_frame_ms".into(), json!(round2(r.max_ms)));
+    let at = |src, variant| worst.and_then(|d| find(src, Some(d), variant));
+    let store_local = find("brs", None, Variant::Batched);
+    // The store at the largest delay (80 ms by default).
+    let store = at("brs", Variant::Batched);
+    let at_80 = find("brs", Some(80), Variant::Batched);
+    let lookahead = |src| {
+        at(src, Variant::Batched)
+            .zip(at(src, Variant::Lookahead))
+            .map(|(without, with)| ratio(without, with))
+    };
+    let cache = |src| at(src, Variant::CacheCold).zip(at(src, Variant::CacheWarm));
+    Ok(RemoteResult {
+        size,
+        threads,
+        rounds,
+        cases: rows,
+        worst_delay_ms: worst,
+        first_image_s: store.map(|r| round2(r.first_image_s)),
+        converged_ratio_vs_local: store.zip(store_local).map(|(r, l)| ratio(r, l)),
+        bytes_ratio_vs_cut: store.and_then(|r| r.bytes_ratio.map(round2)),
+        requests_per_brick: store.map(|r| round2(r.requests_per_brick)),
+        p99_over_median_streaming: store.map(|r| round2(r.p99_ms / r.median_ms.max(1e-9))),
+        slowest_streaming_frame_ms: store.map(|r| round2(r.max_ms)),
+        first_image_s_80ms: at_80.map(|r| round2(r.first_image_s)),
+        converged_ratio_80ms_vs_local: at_80.zip(store_local).map(|(r, l)| ratio(r, l)),
+        requests_saved_by_batching: store
+            .zip(at("brs", Variant::Unbatched))
+            .map(|(b, u)| round2(1.0 - b.fetched.0 as f64 / u.fetched.0.max(1) as f64)),
+        converged_ratio_unbatched_vs_batched: store
+            .zip(at("brs", Variant::Unbatched))
+            .map(|(b, u)| ratio(u, b)),
+        brs_converged_ratio_no_lookahead_vs_lookahead: lookahead("brs"),
+        zarr_converged_ratio_no_lookahead_vs_lookahead: lookahead("zarr"),
+        disk_cache_second_visit_converged_ratio: cache("brs").map(|(c, w)| ratio(w, c)),
+        disk_cache_second_visit_requests: cache("brs").map(|(_, w)| w.fetched.0),
+        zarr_disk_cache_second_visit_converged_ratio: cache("zarr").map(|(c, w)| ratio(w, c)),
+        zarr_disk_cache_second_visit_requests: cache("zarr").map(|(_, w)| w.fetched.0),
+    })
+}
+
+/// How a case reached its source, for its row.
+fn cases_transport(delay: Option<u32>, variant: Variant) -> String {
+    match (delay, variant) {
+        (None, _) => "local".into(),
+        (Some(d), Variant::S3) => format!("s3 +{d} ms"),
+        (Some(d), _) => format!("http +{d} ms"),
     }
-    if let (Some(b), Some(u)) = (
-        at("brs"),
-        worst.and_then(|d| find("brs", Some(d), Variant::Unbatched)),
-    ) {
-        fig.insert(
-            "requests_saved_by_batching".into(),
-            json!(round2(1.0 - b.fetched.0 as f64 / u.fetched.0.max(1) as f64)),
-        );
-        fig.insert(
-            "converged_ratio_unbatched_vs_batched".into(),
-            json!(round2(u.converged_s / b.converged_s.max(1e-9))),
-        );
-    }
-    for src in ["brs", "zarr"] {
-        if let (Some(without), Some(with)) = (
-            at(src),
-            worst.and_then(|d| find(src, Some(d), Variant::Lookahead)),
-        ) {
-            fig.insert(
-                format!("{src}_converged_ratio_no_lookahead_vs_lookahead"),
-                json!(round2(without.converged_s / with.converged_s.max(1e-9))),
-            );
-        }
-    }
-    for src in ["brs", "zarr"] {
-        let Some(local) = find(src, None, Variant::Batched) else {
-            continue;
-        };
-        for &d in &delays {
-            if let Some(r) = find(src, Some(d), Variant::S3) {
-                fig.insert(
-                    format!("{src}_s3_first_image_s_{d}ms"),
-                    json!(round2(r.first_image_s)),
-                );
-                fig.insert(
-                    format!("{src}_s3_converged_ratio_{d}ms_vs_local"),
-                    json!(round2(r.converged_s / local.converged_s.max(1e-9))),
-                );
-            }
-        }
-    }
-    for (src, prefix) in [("brs", ""), ("zarr", "zarr_")] {
-        if let (Some(cold), Some(warm)) = (
-            worst.and_then(|d| find(src, Some(d), Variant::CacheCold)),
-            worst.and_then(|d| find(src, Some(d), Variant::CacheWarm)),
-        ) {
-            fig.insert(
-                format!("{prefix}disk_cache_second_visit_converged_ratio"),
-                json!(round2(warm.converged_s / cold.converged_s.max(1e-9))),
-            );
-            fig.insert(
-                format!("{prefix}disk_cache_second_visit_requests"),
-                json!(warm.fetched.0),
-            );
-        }
-    }
-    Ok(fig)
 }
 
 /// Requests and bytes fetched so far.
@@ -394,6 +453,19 @@ enum Variant {
     S3,
     /// Batched, asking for the next level ahead ([`Lookahead::Remote`]).
     Lookahead,
+}
+
+impl Variant {
+    fn name(self) -> &'static str {
+        match self {
+            Variant::Batched => "batched",
+            Variant::Unbatched => "unbatched",
+            Variant::CacheCold => "cache_cold",
+            Variant::CacheWarm => "cache_warm",
+            Variant::S3 => "s3",
+            Variant::Lookahead => "lookahead",
+        }
+    }
 }
 
 fn open(

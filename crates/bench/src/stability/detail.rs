@@ -9,7 +9,6 @@ use brickray_core::{
 use brickray_render::OutOfCoreConfig;
 use brickray_store::Filter;
 use glam::Vec3;
-use serde_json::json;
 use std::sync::Arc;
 
 pub(crate) use brickray_harness::scenes::ortho;
@@ -72,6 +71,19 @@ const TOLERANCES: [f32; 4] = [0.0, 2.0, 4.0, 8.0];
 const MIP_MAX_RETENTION: f64 = 0.9;
 
 /// Case 4.
+/// One filter, mode and level of the thin structures.
+#[derive(Debug, serde::Serialize)]
+struct ThinRow {
+    filter: String,
+    mode: String,
+    coarser: u32,
+    level: u32,
+    psnr_db: f64,
+    flip: f64,
+    /// Share of the features' brightness kept.
+    retention: f64,
+}
+
 pub(crate) fn thin_structures(ctx: &Ctx<'_>) -> Result<Case, String> {
     let size = ctx.size;
     let n = size;
@@ -92,7 +104,7 @@ pub(crate) fn thin_structures(ctx: &Ctx<'_>) -> Result<Case, String> {
         "  {:<8} {:<5} {:>6} {:>6} {:>9} {:>8} {:>10}",
         "filter", "mode", "tol", "level", "PSNR", "FLIP", "retention"
     );
-    let mut fig = serde_json::Map::new();
+    let mut rows = Vec::new();
     let mut series = Vec::new();
     let mut mip_max_min = f64::INFINITY;
     let mut mip_avg = Vec::new();
@@ -137,10 +149,15 @@ pub(crate) fn thin_structures(ctx: &Ctx<'_>) -> Result<Case, String> {
                         mip_avg.push((coarser, keep));
                     }
                 }
-                fig.insert(
-                    format!("{fname}_{mname}_coarser_{coarser}"),
-                    json!({"level": level, "psnr_db": p, "flip": fl, "retention": round2(keep)}),
-                );
+                rows.push(ThinRow {
+                    filter: fname.to_string(),
+                    mode: mname.to_string(),
+                    coarser: coarser as u32,
+                    level: level as u32,
+                    psnr_db: p,
+                    flip: fl,
+                    retention: round2(keep),
+                });
             }
             series.push(Series {
                 name: format!("{mname}, {fname}"),
@@ -168,6 +185,6 @@ pub(crate) fn thin_structures(ctx: &Ctx<'_>) -> Result<Case, String> {
         bound: format!("MIP with Filter::Max keeps >= {MIP_MAX_RETENTION} of the features' brightness at every level (measured min {mip_max_min:.3})"),
         holds: mip_max_min >= MIP_MAX_RETENTION,
         holes_max: 0,
-        fig: json!(fig),
+        fig: super::figures(&rows),
     })
 }

@@ -12,7 +12,6 @@ use brickray_core::{
 use brickray_render::{OutOfCoreConfig, RendererOptions, VolumeRenderer};
 use brickray_store::ProceduralSource;
 use glam::{DVec3, Mat4, Vec3};
-use serde_json::json;
 use std::sync::Arc;
 
 /// Mean absolute error (8-bit RGB) of the columns in `cols` over that of the
@@ -50,6 +49,58 @@ pub(crate) fn seam_ratio(
 /// brick side on brick faces); and a perspective view (odd width) whose centre
 /// column lies in the brick face x = 1/4 of every level and whose centre row
 /// in y = 1/2, at the finest level and with mixed levels (tolerance 1 px).
+/// One view, mode and renderer of the grazing rays.
+#[derive(Debug, serde::Serialize)]
+struct GrazingRow {
+    view: String,
+    mode: String,
+    renderer: String,
+    psnr_db: f64,
+    flip: f64,
+    holes: u64,
+    seam_ratio: f64,
+    levels: String,
+}
+
+/// The grazing case's figures.
+#[derive(Debug, serde::Serialize)]
+struct GrazingFigures {
+    rows: Vec<GrazingRow>,
+    /// Iso on voxel faces against a quarter pixel off, dB lost.
+    iso_on_face_loss_db: f64,
+}
+
+/// One position in the precision case: volume, level and mode.
+#[derive(Debug, serde::Serialize)]
+struct PrecisionRow {
+    where_: String,
+    level_name: String,
+    mode: String,
+    position_error_voxels: f64,
+    psnr_db: f64,
+    flip: f64,
+    psnr_unit_scale_ooc_db: f64,
+    psnr_unit_scale_incore_db: f64,
+    loss_db: f64,
+    finest_level_in_cut: Option<usize>,
+    lit_pct: f64,
+    converged: bool,
+}
+
+/// The f32 error of the emulated sweep at one volume side.
+#[derive(Debug, serde::Serialize)]
+struct SweepPoint {
+    dims: u64,
+    position_error_voxels: f64,
+}
+
+/// The precision case's figures.
+#[derive(Debug, serde::Serialize)]
+struct PrecisionFigures {
+    rows: Vec<PrecisionRow>,
+    f32_sweep: Vec<SweepPoint>,
+}
+
 pub(crate) fn grazing(ctx: &Ctx<'_>) -> Result<Case, String> {
     let n = ctx.size;
     let (vol, src) = noise(n as u64, BRICK)?;
@@ -108,7 +159,7 @@ pub(crate) fn grazing(ctx: &Ctx<'_>) -> Result<Case, String> {
         "  {:<6} {:<5} {:<10} {:>9} {:>8} {:>6} {:>7} {:>7}",
         "view", "mode", "renderer", "PSNR", "FLIP", "holes", "seam", "levels"
     );
-    let mut fig = serde_json::Map::new();
+    let mut rows = Vec::new();
     let (mut holes_max, mut seam_max, mut psnr_min) = (0u64, 0.0f64, f64::INFINITY);
     // Iso PSNR of the orthographic views: (on the faces, renderer, dB).
     let mut iso_ortho: Vec<(bool, &str, f64)> = Vec::new();
@@ -180,10 +231,16 @@ pub(crate) fn grazing(ctx: &Ctx<'_>) -> Result<Case, String> {
                 if *mname == "iso" && view.starts_with("ortho") {
                     iso_ortho.push((view == "ortho", rname, p));
                 }
-                fig.insert(
-                    format!("{view}_{mname}_{}", rname.replace(' ', "_")),
-                    json!({"psnr_db": p, "flip": f, "holes": h, "seam_ratio": round2(seam), "levels": levels}),
-                );
+                rows.push(GrazingRow {
+                    view: view.to_string(),
+                    mode: mname.to_string(),
+                    renderer: rname.to_string(),
+                    psnr_db: p,
+                    flip: f,
+                    holes: h as u64,
+                    seam_ratio: round2(seam),
+                    levels: levels.to_string(),
+                });
             }
         }
     }
@@ -204,7 +261,6 @@ pub(crate) fn grazing(ctx: &Ctx<'_>) -> Result<Case, String> {
             (f64::NEG_INFINITY, 0.0, 0.0),
             |a, b| if b.0 > a.0 { b } else { a },
         );
-    fig.insert("iso_on_face_loss_db".into(), json!(round2(iso_loss.0)));
     Ok(Case {
         name: "grazing",
         varied: "rays exactly on voxel and brick faces (orthographic), along a brick face of every level (perspective), finest and mixed levels, DVR and iso".into(),
@@ -225,7 +281,10 @@ pub(crate) fn grazing(ctx: &Ctx<'_>) -> Result<Case, String> {
             && psnr_min >= PSNR_BOUND
             && iso_loss.0 <= ISO_FACE_LOSS,
         holes_max,
-        fig: json!(fig),
+        fig: super::figures(&GrazingFigures {
+            rows,
+            iso_on_face_loss_db: round2(iso_loss.0),
+        }),
     })
 }
 
@@ -351,7 +410,7 @@ pub(crate) fn precision(ctx: &Ctx<'_>) -> Result<Case, String> {
         "lit%",
         "unit in"
     );
-    let mut fig = serde_json::Map::new();
+    let mut rows = Vec::new();
     const ERR_BOUND: f64 = 1.0 / 32.0;
     const LOSS_BOUND: f64 = 1.0;
     let mut iso_loss_max = f64::NEG_INFINITY;
@@ -473,12 +532,20 @@ pub(crate) fn precision(ctx: &Ctx<'_>) -> Result<Case, String> {
                 } else {
                     iso_loss_max = iso_loss_max.max(loss);
                 }
-                fig.insert(
-                    format!("{wname}_{lname}_{mname}"),
-                    json!({"position_error_voxels": err, "psnr_db": p, "flip": fl,
-                           "psnr_unit_scale_ooc_db": pu, "psnr_unit_scale_incore_db": pin, "loss_db": round2(loss), "finest_level_in_cut": level, "lit_pct": round2(lit),
-                           "converged": st.converged}),
-                );
+                rows.push(PrecisionRow {
+                    where_: wname.to_string(),
+                    level_name: lname.to_string(),
+                    mode: mname.to_string(),
+                    position_error_voxels: err,
+                    psnr_db: p,
+                    flip: fl,
+                    psnr_unit_scale_ooc_db: pu,
+                    psnr_unit_scale_incore_db: pin,
+                    loss_db: round2(loss),
+                    finest_level_in_cut: level,
+                    lit_pct: round2(lit),
+                    converged: st.converged,
+                });
             }
         }
     }
@@ -495,9 +562,11 @@ pub(crate) fn precision(ctx: &Ctx<'_>) -> Result<Case, String> {
         if breaks_at.is_none() && e > ERR_BOUND {
             breaks_at = Some((dd, e));
         }
-        sweep.push(json!({"dims": dd, "position_error_voxels": e}));
+        sweep.push(SweepPoint {
+            dims: dd,
+            position_error_voxels: e,
+        });
     }
-    fig.insert("f32_sweep".into(), json!(sweep));
     Ok(Case {
         name: "precision",
         varied: "65536^3, box at the centre and the far corner, close (40 voxels), telephoto (32768 voxels away, near and far planes 60 voxels either side of the box) and inside (20 voxels) views, DVR and iso".into(),
@@ -518,7 +587,10 @@ pub(crate) fn precision(ctx: &Ctx<'_>) -> Result<Case, String> {
         ),
         holds: err_max <= ERR_BOUND && loss_max <= LOSS_BOUND,
         holes_max: 0,
-        fig: json!(fig),
+        fig: super::figures(&PrecisionFigures {
+            rows,
+            f32_sweep: sweep,
+        }),
     })
 }
 

@@ -39,12 +39,12 @@ mod util;
 
 pub(crate) use util::*;
 
-use crate::{Figures, arg};
 use brickray_harness::GpuContext;
-use serde_json::json;
+use serde::Serialize;
 use std::time::Instant;
 
 /// What one case established.
+#[derive(Debug, Serialize)]
 pub(crate) struct Case {
     /// Short name (`streaming`, ...).
     pub(crate) name: &'static str,
@@ -59,11 +59,18 @@ pub(crate) struct Case {
     /// The bound the shipped setting keeps, with its metric.
     pub(crate) bound: String,
     /// Whether the shipped setting kept the bound in this run.
+    #[serde(rename = "kept")]
     pub(crate) holds: bool,
     /// Most hole pixels seen in any frame of the case.
     pub(crate) holes_max: u64,
-    /// The case's figures.
+    /// The case's own figures (each case's struct, serialised).
+    #[serde(rename = "figures")]
     pub(crate) fig: serde_json::Value,
+}
+
+/// A case's typed figures as the value of its `figures` key.
+pub(crate) fn figures<T: Serialize>(t: &T) -> serde_json::Value {
+    serde_json::to_value(t).unwrap_or(serde_json::Value::Null)
 }
 
 /// What the cases share.
@@ -75,14 +82,61 @@ pub(crate) struct Ctx<'a> {
     pub(crate) charts: String,
 }
 
-pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
-    let size: u32 = arg(args, "--size", 128)?;
-    let cases: String = arg(args, "--cases", "1,2,3,4,5,6,7,8,9".to_string())?;
-    let charts: String = arg(args, "--charts", "docs/charts".to_string())?;
-    let wanted: Vec<u32> = cases
-        .split(',')
-        .map(|s| s.trim().parse().map_err(|_| format!("bad case {s}")))
-        .collect::<Result<_, _>>()?;
+/// An image side for the stability cases: 32 to 1024.
+fn case_size(s: &str) -> Result<u32, String> {
+    let n: u32 = s.parse().map_err(|e| format!("{e}"))?;
+    if (32..=1024).contains(&n) {
+        Ok(n)
+    } else {
+        Err(format!("{n} is not in 32..=1024"))
+    }
+}
+
+/// A case number: 1 to 9.
+fn case_number(s: &str) -> Result<u32, String> {
+    match s.trim().parse() {
+        Ok(n @ 1..=9) => Ok(n),
+        _ => Err(format!("no case {s} (1-9)")),
+    }
+}
+
+/// The suite's options.
+#[derive(Debug, clap::Args)]
+pub(crate) struct Args {
+    /// Image side in pixels (also the volumes' side).
+    #[arg(long, default_value_t = 128, value_parser = case_size)]
+    size: u32,
+    /// Cases, comma-separated numbers 1-9.
+    #[arg(long, value_delimiter = ',', default_value = "1,2,3,4,5,6,7,8,9", value_parser = case_number)]
+    cases: Vec<u32>,
+    /// Folder of the SVG charts (empty: none).
+    #[arg(long, default_value = "docs/charts")]
+    charts: String,
+}
+
+/// The suite's JSON line.
+#[derive(Debug, Serialize)]
+pub(crate) struct StabilityResult {
+    image_size: u32,
+    adapter: String,
+    /// Most hole pixels in any frame of any case (and LOD path).
+    holes_max: u64,
+    /// Cases whose shipped setting kept its bound, of all run.
+    cases_with_bound: usize,
+    cases_total: usize,
+    /// The LOD paths (case 9; null when not run).
+    lod_paths: Option<paths::PathFigures>,
+    cases: Vec<Case>,
+}
+
+pub(crate) fn run(args: &Args) -> Result<StabilityResult, String> {
+    let (size, charts) = (args.size, args.charts.clone());
+    let wanted = args.cases.clone();
+    let cases = wanted
+        .iter()
+        .map(u32::to_string)
+        .collect::<Vec<_>>()
+        .join(",");
     if !(32..=1024).contains(&size) {
         return Err("--size must be in 32..=1024".into());
     }
@@ -99,7 +153,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
     };
     let t = Instant::now();
     let mut done: Vec<Case> = Vec::new();
-    let mut path_figures = Figures::new();
+    let mut lod_paths = None;
     for c in wanted {
         let t0 = Instant::now();
         if c == 9 {
@@ -108,7 +162,7 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
                 ..Default::default()
             };
             let results = paths::cases(ctx.gpu, &opt)?;
-            path_figures = paths::figures(&results);
+            lod_paths = Some(paths::figures(&results));
             for s in paths::summaries(&results, &opt) {
                 println!(
                     "  => {}: fails {}; by {}; shipped {}; bound {} ({}) [{:.0} s]",
@@ -161,34 +215,18 @@ pub(crate) fn run(args: &[String]) -> Result<Figures, String> {
         );
     }
     println!("suite wall time: {:.0} s", t.elapsed().as_secs_f64());
-    let mut fig = Figures::new();
-    fig.insert(
-        "holes_max".into(),
-        json!(done.iter().map(|c| c.holes_max).max().unwrap_or(0)),
-    );
-    fig.insert(
-        "cases_with_bound".into(),
-        json!(done.iter().filter(|c| c.holds).count()),
-    );
-    fig.insert("cases_total".into(), json!(done.len()));
-    // The LOD paths' headline figures (`temporal_excess_db_fades`,
-    // `pops_fades`, `pops_no_fades`); their holes enter `holes_max` above.
-    for (k, v) in path_figures {
-        if k != "holes_max" {
-            fig.insert(k, v);
-        }
-    }
-    fig.insert("image_size".into(), json!(size));
-    for c in done {
-        fig.insert(
-            c.name.into(),
-            json!({
-                "varied": c.varied, "fails": c.fails, "by": c.by,
-                "shipped": c.shipped, "bound": c.bound, "kept": c.holds,
-                "holes_max": c.holes_max, "figures": c.fig,
-            }),
-        );
-    }
-    fig.insert("adapter".into(), json!(gpu.adapter.get_info().name));
-    Ok(fig)
+    Ok(StabilityResult {
+        image_size: size,
+        adapter: gpu.adapter.get_info().name,
+        holes_max: done
+            .iter()
+            .map(|c| c.holes_max)
+            .chain(lod_paths.as_ref().map(|p| p.holes_max as u64))
+            .max()
+            .unwrap_or(0),
+        cases_with_bound: done.iter().filter(|c| c.holds).count(),
+        cases_total: done.len(),
+        lod_paths,
+        cases: done,
+    })
 }

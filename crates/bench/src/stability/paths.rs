@@ -14,7 +14,7 @@ use brickray_reference::{
 };
 use brickray_render::{FadeDuration, FrameDesc, OutOfCoreConfig, VolumeRenderer};
 use glam::Vec3;
-use serde_json::json;
+use serde::Serialize;
 use std::sync::Arc;
 
 /// Knobs of the path cases.
@@ -252,12 +252,12 @@ pub(crate) fn summaries(results: &[CaseResult], opt: &PathOptions) -> Vec<super:
                 bound: format!("pops with fades 0, change excess <= {EXCESS_DB_BOUND} dB, holes 0"),
                 holds: on.pops == 0 && on.change_excess_db <= EXCESS_DB_BOUND && holes == 0,
                 holes_max: holes as u64,
-                fig: json!({
-                    "excess_db_fades": on.change_excess_db,
-                    "excess_db_no_fades": off.change_excess_db,
-                    "pops_fades": on.pops,
-                    "pops_no_fades": off.pops,
-                    "holes_max": holes,
+                fig: super::figures(&PathSummary {
+                    excess_db_fades: on.change_excess_db,
+                    excess_db_no_fades: off.change_excess_db,
+                    pops_fades: on.pops,
+                    pops_no_fades: off.pops,
+                    holes_max: holes,
                 }),
             }
         })
@@ -267,8 +267,51 @@ pub(crate) fn summaries(results: &[CaseResult], opt: &PathOptions) -> Vec<super:
 /// Prints the cases and returns the suite's figures: `temporal_excess_db_fades`
 /// (the largest change excess in dB with fades), `..._no_fades`, `pops_fades`,
 /// `pops_no_fades` (summed), `holes_max`, and per case.
-pub(crate) fn figures(results: &[CaseResult]) -> serde_json::Map<String, serde_json::Value> {
-    let mut fig = serde_json::Map::new();
+/// One LOD path with or without fades.
+#[derive(Debug, Serialize)]
+pub(crate) struct PathRow {
+    /// The path's name.
+    path: &'static str,
+    fades: bool,
+    /// How much more the image changes frame to frame than the
+    /// reference's own change, dB.
+    excess_db: f64,
+    flicker_mean: f64,
+    flicker_p99: f64,
+    pops: usize,
+    pop_frames: Vec<usize>,
+    max_tile_jump: f64,
+    change_mean: f64,
+    reference_change_mean: f64,
+    holes_max: u32,
+    fading_frames: usize,
+}
+
+/// One LOD path's summary figures.
+#[derive(Debug, Serialize)]
+struct PathSummary {
+    excess_db_fades: f64,
+    excess_db_no_fades: f64,
+    pops_fades: usize,
+    pops_no_fades: usize,
+    holes_max: u32,
+}
+
+/// The LOD paths (case 9).
+#[derive(Debug, Serialize)]
+pub(crate) struct PathFigures {
+    rows: Vec<PathRow>,
+    /// The largest excess over the paths, with and without fades, dB.
+    temporal_excess_db_fades: f64,
+    temporal_excess_db_no_fades: f64,
+    /// Pops summed over the paths, with and without fades.
+    pops_fades: usize,
+    pops_no_fades: usize,
+    pub(super) holes_max: u32,
+}
+
+pub(crate) fn figures(results: &[CaseResult]) -> PathFigures {
+    let mut rows = Vec::new();
     println!(
         "{:<12} {:>6} {:>10} {:>9} {:>9} {:>5} {:>6} {:>6}",
         "case", "fades", "excess dB", "flick mu", "flick p99", "pops", "holes", "fading"
@@ -289,25 +332,20 @@ pub(crate) fn figures(results: &[CaseResult]) -> serde_json::Map<String, serde_j
                 r.holes_max,
                 r.fading_frames
             );
-            fig.insert(
-                format!(
-                    "{}_{}",
-                    c.name.replace('-', "_"),
-                    if on == "on" { "fades" } else { "no_fades" }
-                ),
-                json!({
-                    "excess_db": t.change_excess_db,
-                    "flicker_mean": t.flicker_mean,
-                    "flicker_p99": t.flicker_p99,
-                    "pops": t.pops,
-                    "pop_frames": t.pop_frames,
-                    "max_tile_jump": t.max_tile_jump,
-                    "change_mean": t.change_mean,
-                    "reference_change_mean": t.reference_change_mean,
-                    "holes_max": r.holes_max,
-                    "fading_frames": r.fading_frames,
-                }),
-            );
+            rows.push(PathRow {
+                path: c.name,
+                fades: on == "on",
+                excess_db: t.change_excess_db,
+                flicker_mean: t.flicker_mean,
+                flicker_p99: t.flicker_p99,
+                pops: t.pops,
+                pop_frames: t.pop_frames.clone(),
+                max_tile_jump: t.max_tile_jump,
+                change_mean: t.change_mean,
+                reference_change_mean: t.reference_change_mean,
+                holes_max: r.holes_max,
+                fading_frames: r.fading_frames,
+            });
         }
         ex_f = ex_f.max(c.fades.temporal.change_excess_db);
         ex_n = ex_n.max(c.no_fades.temporal.change_excess_db);
@@ -315,10 +353,12 @@ pub(crate) fn figures(results: &[CaseResult]) -> serde_json::Map<String, serde_j
         pops_n += c.no_fades.temporal.pops;
         holes = holes.max(c.fades.holes_max).max(c.no_fades.holes_max);
     }
-    fig.insert("temporal_excess_db_fades".into(), json!(ex_f));
-    fig.insert("temporal_excess_db_no_fades".into(), json!(ex_n));
-    fig.insert("pops_fades".into(), json!(pops_f));
-    fig.insert("pops_no_fades".into(), json!(pops_n));
-    fig.insert("holes_max".into(), json!(holes));
-    fig
+    PathFigures {
+        rows,
+        temporal_excess_db_fades: ex_f,
+        temporal_excess_db_no_fades: ex_n,
+        pops_fades: pops_f,
+        pops_no_fades: pops_n,
+        holes_max: holes,
+    }
 }

@@ -5,7 +5,6 @@ use super::{Case, Ctx, Series, line_chart, noise, quality, s};
 use crate::runner::{Runner, finest_ooc_renderer, median, round2};
 use brickray_core::{Accel, Camera, RenderSettings, TransferFunction, VolumeFrame};
 use brickray_render::RendererOptions;
-use serde_json::json;
 
 /// A narrow opacity spike: opacity 0.8 at 0.5, zero 0.005 either side (about
 /// a fifth of a voxel's change of the noise field).
@@ -37,6 +36,49 @@ const TF_VARIANTS: &[&str] = &["plain", "preintegrated"];
 
 /// Case 3: PSNR against the reference (step 1/32) per step, in core and out of
 /// core at the finest level.
+/// One TF variant and step of the high-frequency TF case.
+#[derive(Debug, serde::Serialize)]
+struct HfRow {
+    variant: String,
+    step: f32,
+    psnr_incore_db: f64,
+    flip_incore: f64,
+    psnr_ooc_db: f64,
+    flip_ooc: f64,
+    psnr_incore_vs_reference_same_step_db: f64,
+}
+
+/// Pre-integration's gain over the plain table at one step, in core.
+#[derive(Debug, serde::Serialize)]
+struct PreintGain {
+    step: f64,
+    gain_db: f64,
+}
+
+/// The high-frequency TF case's figures.
+#[derive(Debug, serde::Serialize)]
+struct HfFigures {
+    rows: Vec<HfRow>,
+    /// The smallest gain of halving the step (plain, in core), dB.
+    min_gain_per_halving_db: f64,
+    preint_gain: Vec<PreintGain>,
+    /// The reference at 1/8 against 1/32 voxel.
+    reference_1_8_vs_1_32_db: f64,
+}
+
+/// One TF and threshold of the early termination case.
+#[derive(Debug, serde::Serialize)]
+struct ErtRow {
+    tf: String,
+    threshold: String,
+    max_err_vs_no_ert: f64,
+    bound_levels: f64,
+    psnr_ref_db: f64,
+    flip_ref: f64,
+    samples_per_ray: f64,
+    time_vs_no_ert: f64,
+}
+
 pub(crate) fn high_frequency_tf(ctx: &Ctx<'_>) -> Result<Case, String> {
     let size = ctx.size;
     let dims = size as u64;
@@ -62,7 +104,7 @@ pub(crate) fn high_frequency_tf(ctx: &Ctx<'_>) -> Result<Case, String> {
         "  {:<12} {:>6} {:>10} {:>10} {:>10} {:>10} {:>12}",
         "variant", "step", "PSNR in", "FLIP in", "PSNR ooc", "FLIP ooc", "in vs ref@s"
     );
-    let mut fig = serde_json::Map::new();
+    let mut rows = Vec::new();
     let mut series = Vec::new();
     let mut shipped_db = f64::INFINITY;
     let mut fails_at = None;
@@ -100,11 +142,15 @@ pub(crate) fn high_frequency_tf(ctx: &Ctx<'_>) -> Result<Case, String> {
                     fails_at = Some((step, qa.0.min(qb.0)));
                 }
             }
-            fig.insert(
-                format!("{variant}_step_{step}"),
-                json!({"psnr_incore_db": qa.0, "flip_incore": qa.1, "psnr_ooc_db": qb.0, "flip_ooc": qb.1,
-                       "psnr_incore_vs_reference_same_step_db": same}),
-            );
+            rows.push(HfRow {
+                variant: variant.to_string(),
+                step,
+                psnr_incore_db: qa.0,
+                flip_incore: qa.1,
+                psnr_ooc_db: qb.0,
+                flip_ooc: qb.1,
+                psnr_incore_vs_reference_same_step_db: same,
+            });
             pin.push((step as f64, qa.0));
             pout.push((step as f64, qb.0));
         }
@@ -124,19 +170,19 @@ pub(crate) fn high_frequency_tf(ctx: &Ctx<'_>) -> Result<Case, String> {
         .iter()
         .map(|&(a, b)| at(b) - at(a))
         .fold(f64::INFINITY, f64::min);
-    fig.insert("min_gain_per_halving_db".into(), json!(round2(min_gain)));
     // Pre-integration's gain over the plain table at each step, in core.
     let pre_in = &series[2].points;
+    let mut preint_gain = Vec::new();
     for (p, q) in plain_in.iter().zip(pre_in) {
         println!(
             "  pre-integration at step {}: {:+.2} dB in core",
             p.0,
             q.1 - p.1
         );
-        fig.insert(
-            format!("preint_gain_db_step_{}", p.0),
-            json!(round2(q.1 - p.1)),
-        );
+        preint_gain.push(PreintGain {
+            step: p.0,
+            gain_db: round2(q.1 - p.1),
+        });
     }
     line_chart(
         &ctx.charts,
@@ -147,7 +193,6 @@ pub(crate) fn high_frequency_tf(ctx: &Ctx<'_>) -> Result<Case, String> {
         &series,
         true,
     )?;
-    fig.insert("reference_1_8_vs_1_32_db".into(), json!(ref_self));
     // The bound at the shipped step 0.5: what this run measured, floored to
     // the dB below, is what the regression test holds (tests/gpu_stability.rs
     // states its own threshold at its own size).
@@ -164,7 +209,12 @@ pub(crate) fn high_frequency_tf(ctx: &Ctx<'_>) -> Result<Case, String> {
         ),
         holds: shipped_db >= HF_SHIPPED_DB && min_gain >= HF_GAIN_DB,
         holes_max: 0,
-        fig: json!(fig),
+        fig: super::figures(&HfFigures {
+            rows,
+            min_gain_per_halving_db: round2(min_gain),
+            preint_gain,
+            reference_1_8_vs_1_32_db: ref_self,
+        }),
     })
 }
 
@@ -207,7 +257,7 @@ pub(crate) fn ert(ctx: &Ctx<'_>) -> Result<Case, String> {
         ),
     ];
     let run = Runner::new(ctx.gpu, size)?;
-    let mut fig = serde_json::Map::new();
+    let mut rows = Vec::new();
     let mut all_within = true;
     let mut shipped = String::new();
     let mut fails = None;
@@ -261,12 +311,16 @@ pub(crate) fn ert(ctx: &Ctx<'_>) -> Result<Case, String> {
                     fails = Some((*tv, p));
                 }
             }
-            fig.insert(
-                format!("{name}_{label}"),
-                json!({"max_err_vs_no_ert": err, "bound_levels": round2(bound),
-                       "psnr_ref_db": p, "flip_ref": f, "samples_per_ray": round2(shots[i].samples),
-                       "time_vs_no_ert": round2(ratio)}),
-            );
+            rows.push(ErtRow {
+                tf: name.to_string(),
+                threshold: label.to_string(),
+                max_err_vs_no_ert: err as f64,
+                bound_levels: round2(bound),
+                psnr_ref_db: p,
+                flip_ref: f,
+                samples_per_ray: round2(shots[i].samples),
+                time_vs_no_ert: round2(ratio),
+            });
         }
         series.push(Series {
             name: name.to_string(),
@@ -293,6 +347,6 @@ pub(crate) fn ert(ctx: &Ctx<'_>) -> Result<Case, String> {
         bound: "max 8-bit error vs no termination <= (1 - t) * 255 + 1 at every t".into(),
         holds: all_within,
         holes_max: 0,
-        fig: json!(fig),
+        fig: super::figures(&rows),
     })
 }

@@ -8,7 +8,6 @@ use crate::runner::{Runner, median, quantile, round2};
 use brickray_core::{BrickSource, Camera, RenderSettings, TransferFunction, VolumeFrame};
 use brickray_render::OutOfCoreConfig;
 use glam::Vec3;
-use serde_json::json;
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -32,6 +31,53 @@ const DELAYS_MS: [u64; 3] = [0, 5, 20];
 /// Case 1: a tiny pool (2 MiB) and a source that sleeps before every brick
 /// read; a cold start view, then a jump to a close-up. Holes per frame
 /// against the reference, frames to converge, frame time.
+/// One added read delay of the streaming case.
+#[derive(Debug, serde::Serialize)]
+struct DelayRow {
+    delay_ms: u64,
+    cut_holes_max: u64,
+    dark_pixels_max: u64,
+    frames_to_converge_start: Option<usize>,
+    frames_to_converge_jump: Option<usize>,
+    median_ms: f64,
+    p99_ms: f64,
+    p99_over_median: f64,
+    psnr_start_db: f64,
+    psnr_jump_db: f64,
+    flip_jump: f64,
+}
+
+/// The streaming case's figures.
+#[derive(Debug, serde::Serialize)]
+struct StreamingFigures {
+    rows: Vec<DelayRow>,
+    /// Dark pixels where only the root is resident.
+    root_only_dark_pixels: Vec<u64>,
+}
+
+/// One GPU pool size of the memory pressure case.
+#[derive(Debug, serde::Serialize)]
+struct PoolRow {
+    /// The pool as a multiple of the bricks the view needs.
+    pool_factor: f64,
+    slots: u64,
+    uploads_per_frame_median: f64,
+    uploads_per_frame_max: f64,
+    flicker_ratio: f64,
+    cut_holes_max: u64,
+    dark_pixels_max: u64,
+    psnr_min_db: f64,
+    psnr_mean_db: f64,
+}
+
+/// The memory pressure case's figures.
+#[derive(Debug, serde::Serialize)]
+struct PressureFigures {
+    rows: Vec<PoolRow>,
+    /// Bricks the view needs at the finest level.
+    need_bricks: u64,
+}
+
 pub(crate) fn streaming(ctx: &Ctx<'_>) -> Result<Case, String> {
     let size = ctx.size;
     let dims = size as u64;
@@ -66,7 +112,7 @@ pub(crate) fn streaming(ctx: &Ctx<'_>) -> Result<Case, String> {
         "PSNR A",
         "PSNR B"
     );
-    let mut fig = serde_json::Map::new();
+    let mut rows = Vec::new();
     let mut holes_max = 0;
     let mut ratio_max = 0.0f64;
     let mut chart = Vec::new();
@@ -124,15 +170,19 @@ pub(crate) fn streaming(ctx: &Ctx<'_>) -> Result<Case, String> {
             qb.0
         );
         conv_frames.push((delay, converged_at));
-        fig.insert(
-            format!("delay_{delay}ms"),
-            json!({
-                "cut_holes_max": h, "dark_pixels_max": dark_max, "frames_to_converge_start": converged_at[0],
-                "frames_to_converge_jump": converged_at[1], "median_ms": round2(med),
-                "p99_ms": round2(p99), "p99_over_median": round2(p99 / med),
-                "psnr_start_db": qa.0, "psnr_jump_db": qb.0, "flip_jump": qb.1,
-            }),
-        );
+        rows.push(DelayRow {
+            delay_ms: delay as u64,
+            cut_holes_max: h as u64,
+            dark_pixels_max: dark_max as u64,
+            frames_to_converge_start: converged_at[0],
+            frames_to_converge_jump: converged_at[1],
+            median_ms: round2(med),
+            p99_ms: round2(p99),
+            p99_over_median: round2(p99 / med),
+            psnr_start_db: qa.0,
+            psnr_jump_db: qb.0,
+            flip_jump: qb.1,
+        });
         chart.push(Series {
             name: format!("delay {delay} ms"),
             points: hole_track,
@@ -159,7 +209,6 @@ pub(crate) fn streaming(ctx: &Ctx<'_>) -> Result<Case, String> {
     println!(
         "  holes: leaves of the CPU twin's cuts wanting data without it (or not tiling the cube); dark: pixels dark in the frame, lit in the reference (the root alone: {root_dark:?})"
     );
-    fig.insert("root_only_dark_pixels".into(), json!(root_dark));
     let fast = conv_frames.first().and_then(|c| c.1[1]);
     let slowest = conv_frames.last().and_then(|c| c.1[1]);
     // The bound: no hole in any frame; p99 frame time within 4x the median
@@ -184,7 +233,10 @@ pub(crate) fn streaming(ctx: &Ctx<'_>) -> Result<Case, String> {
         ),
         holds,
         holes_max,
-        fig: json!(fig),
+        fig: super::figures(&StreamingFigures {
+            rows,
+            root_only_dark_pixels: root_dark,
+        }),
     })
 }
 
@@ -240,7 +292,7 @@ pub(crate) fn pressure(ctx: &Ctx<'_>) -> Result<Case, String> {
         "PSNR min",
         "PSNR mean"
     );
-    let mut fig = serde_json::Map::new();
+    let mut rows = Vec::new();
     let mut holes_max = 0;
     let mut flicker_at = Vec::new();
     let mut psnr_series = Vec::new();
@@ -284,14 +336,17 @@ pub(crate) fn pressure(ctx: &Ctx<'_>) -> Result<Case, String> {
             median(&uploads)
         );
         flicker_at.push((frac, flicker));
-        fig.insert(
-            format!("pool_{frac}x"),
-            json!({
-                "slots": slots, "uploads_per_frame_median": median(&uploads),
-                "uploads_per_frame_max": umax, "flicker_ratio": round2(flicker),
-                "cut_holes_max": h, "dark_pixels_max": dk, "psnr_min_db": round2(pmin), "psnr_mean_db": round2(pmean),
-            }),
-        );
+        rows.push(PoolRow {
+            pool_factor: frac as f64,
+            slots: slots as u64,
+            uploads_per_frame_median: median(&uploads),
+            uploads_per_frame_max: umax,
+            flicker_ratio: round2(flicker),
+            cut_holes_max: h as u64,
+            dark_pixels_max: dk as u64,
+            psnr_min_db: round2(pmin),
+            psnr_mean_db: round2(pmean),
+        });
         psnr_series.push(Series {
             name: format!("pool {frac}x need"),
             points: psnrs
@@ -333,7 +388,6 @@ pub(crate) fn pressure(ctx: &Ctx<'_>) -> Result<Case, String> {
         .copied()
         .fold((0.0, 0.0), |a, b| if b.1 > a.1 { b } else { a });
     let holds = holes_max == 0 && worst.1 <= FLICKER_BOUND;
-    fig.insert("need_bricks".into(), json!(need));
     Ok(Case {
         name: "pressure",
         varied: format!("pool {POOL_FRACTIONS:?} x the start view's need ({need} bricks)"),
@@ -343,6 +397,9 @@ pub(crate) fn pressure(ctx: &Ctx<'_>) -> Result<Case, String> {
         bound: format!("0 hole leaves (CPU twin); flicker ratio <= {FLICKER_BOUND} at pools >= 0.25x need"),
         holds,
         holes_max,
-        fig: json!(fig),
+        fig: super::figures(&PressureFigures {
+            rows,
+            need_bricks: need as u64,
+        }),
     })
 }

@@ -8,7 +8,6 @@ use brickray_core::{Accel, Camera, RenderMode, RenderSettings, TransferFunction,
 use brickray_harness::predict;
 use brickray_render::{OutOfCoreConfig, Prediction, VisibilityPolicy};
 use brickray_store::ProceduralSource;
-use serde_json::json;
 use std::sync::Arc;
 
 /// Frames the camera of the failure path moves, then holds.
@@ -21,6 +20,46 @@ const HOLD_BACK: usize = 30;
 const RECOVERED_DB: f64 = 0.5;
 /// Most frames after the turn until the ray-guided image is recovered.
 const RECOVERY_BOUND: usize = 10;
+
+/// One prediction variant along the failure path.
+#[derive(Debug, serde::Serialize)]
+struct PredictionRow {
+    variant: String,
+    psnr_min_db: f64,
+    psnr_mean_db: f64,
+    psnr_last_db: f64,
+}
+
+/// The prediction failure path.
+#[derive(Debug, serde::Serialize)]
+struct PredictionFigures {
+    rows: Vec<PredictionRow>,
+    /// Whether the guard variant equalled full traversal every frame.
+    guard_equals_full: bool,
+}
+
+/// One visibility policy along the half turn.
+#[derive(Debug, serde::Serialize)]
+struct PolicyRow {
+    policy: String,
+    psnr_min_after_turn_db: f64,
+    psnr_last_db: f64,
+}
+
+/// The visibility half turn.
+#[derive(Debug, serde::Serialize)]
+struct DisocclusionFigures {
+    rows: Vec<PolicyRow>,
+    /// Frames after the back view until ray-guided culling recovers.
+    recovery_frames: Option<usize>,
+}
+
+/// Both halves of the temporal case.
+#[derive(Debug, serde::Serialize)]
+struct TemporalFigures {
+    prediction: PredictionFigures,
+    disocclusion: DisocclusionFigures,
+}
 
 pub(crate) fn prediction_and_disocclusion(ctx: &Ctx<'_>) -> Result<Case, String> {
     let (pred_fig, pred_worst, pred_ok) = prediction_path(ctx)?;
@@ -40,13 +79,16 @@ pub(crate) fn prediction_and_disocclusion(ctx: &Ctx<'_>) -> Result<Case, String>
         ),
         holds,
         holes_max,
-        fig: json!({"prediction": pred_fig, "disocclusion": vis_fig}),
+        fig: super::figures(&TemporalFigures {
+            prediction: pred_fig,
+            disocclusion: vis_fig,
+        }),
     })
 }
 
 /// The failure path in core: full traversal, the paper's prediction and the
 /// guarded one, each frame against the reference.
-fn prediction_path(ctx: &Ctx<'_>) -> Result<(serde_json::Value, f64, bool), String> {
+fn prediction_path(ctx: &Ctx<'_>) -> Result<(PredictionFigures, f64, bool), String> {
     let size = ctx.size;
     let vol = predict::occluder_scene(size);
     let d = vol.desc();
@@ -99,7 +141,7 @@ fn prediction_path(ctx: &Ctx<'_>) -> Result<(serde_json::Value, f64, bool), Stri
         }
         guard_exact &= predict::wrong_share(&imgs[2], &imgs[0]) == 0.0;
     }
-    let mut fig = serde_json::Map::new();
+    let mut rows = Vec::new();
     let mut paper_worst = f64::INFINITY;
     for (k, (name, _)) in variants.iter().enumerate() {
         let v: Vec<f64> = psnr[k].iter().map(|p| p.1).collect();
@@ -110,13 +152,14 @@ fn prediction_path(ctx: &Ctx<'_>) -> Result<(serde_json::Value, f64, bool), Stri
         if *name == "paper" {
             paper_worst = worst;
         }
-        fig.insert(
-            name.to_string(),
-            json!({"psnr_min_db": round2(worst), "psnr_mean_db": round2(mean), "psnr_last_db": end}),
-        );
+        rows.push(PredictionRow {
+            variant: name.to_string(),
+            psnr_min_db: round2(worst),
+            psnr_mean_db: round2(mean),
+            psnr_last_db: end,
+        });
     }
     println!("  guard identical to full traversal every frame: {guard_exact}");
-    fig.insert("guard_equals_full".into(), json!(guard_exact));
     let series = named_series(&variants, psnr);
     line_chart(
         &ctx.charts,
@@ -127,12 +170,16 @@ fn prediction_path(ctx: &Ctx<'_>) -> Result<(serde_json::Value, f64, bool), Stri
         &series,
         false,
     )?;
-    Ok((json!(fig), paper_worst, guard_exact))
+    let fig = PredictionFigures {
+        rows,
+        guard_equals_full: guard_exact,
+    };
+    Ok((fig, paper_worst, guard_exact))
 }
 
 /// The visibility suite's shells scene at `size^3` (bricks 16, finest level),
 /// no culling and ray-guided, along the half turn.
-fn disocclusion(ctx: &Ctx<'_>) -> Result<(serde_json::Value, Option<usize>, u64), String> {
+fn disocclusion(ctx: &Ctx<'_>) -> Result<(DisocclusionFigures, Option<usize>, u64), String> {
     let size = ctx.size;
     let n = size as u64;
     let src = Arc::new(ProceduralSource::sphere_shells([n; 3], 16, 2).map_err(s)?);
@@ -195,22 +242,22 @@ fn disocclusion(ctx: &Ctx<'_>) -> Result<(serde_json::Value, Option<usize>, u64)
     let recovery = (TURN - 1..TURN + HOLD_BACK)
         .find(|&f| psnr[1][f].1 >= psnr[0][f].1 - RECOVERED_DB)
         .map(|f| f + 1 - TURN);
-    let mut fig = serde_json::Map::new();
+    let mut rows = Vec::new();
     for (j, (name, _)) in policies.iter().enumerate() {
         let after: Vec<f64> = psnr[j][TURN - 1..].iter().map(|p| p.1).collect();
         let worst = after.iter().copied().fold(f64::INFINITY, f64::min);
         let end = *after.last().unwrap_or(&0.0);
         println!("  {name:<10} from the back view on: PSNR min {worst:.2} dB, last {end:.2} dB");
-        fig.insert(
-            name.to_string(),
-            json!({"psnr_min_after_turn_db": round2(worst), "psnr_last_db": end}),
-        );
+        rows.push(PolicyRow {
+            policy: name.to_string(),
+            psnr_min_after_turn_db: round2(worst),
+            psnr_last_db: end,
+        });
     }
     println!(
         "  ray-guided within {RECOVERED_DB} dB of no culling {} frames after reaching the back view; holes max {holes_max}",
         recovery.map_or("never".into(), |r| r.to_string())
     );
-    fig.insert("recovery_frames".into(), json!(recovery));
     let series = named_series(&policies, psnr);
     line_chart(
         &ctx.charts,
@@ -221,5 +268,9 @@ fn disocclusion(ctx: &Ctx<'_>) -> Result<(serde_json::Value, Option<usize>, u64)
         &series,
         false,
     )?;
-    Ok((json!(fig), recovery, holes_max))
+    let fig = DisocclusionFigures {
+        rows,
+        recovery_frames: recovery,
+    };
+    Ok((fig, recovery, holes_max))
 }
