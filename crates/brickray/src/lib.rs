@@ -60,9 +60,10 @@ pub use brickray_render::{
 };
 pub use brickray_render::{
     ConfigError, FadeDuration, FrameDesc, FrameStats, GpuErrorKind, HostDepthError,
-    OPTIONAL_FEATURES, OptionalFeature, OutOfCoreConfig, OutOfCoreStats, PrepareError, RenderError,
-    RendererOptions, RendererStats, RetryPolicy, StreamError, StreamedVolume, TargetDesc,
-    U8Filtering, Viewport, VolumeOptions, VolumeRenderer, optional_features, required_limits,
+    OPTIONAL_FEATURES, OptionalFeature, OutOfCoreConfig, OutOfCoreStats, PassTimestamps,
+    PrepareError, RenderError, RendererOptions, RendererStats, RetryPolicy, StreamError,
+    StreamedVolume, TargetDesc, U8Filtering, Viewport, VolumeOptions, VolumeRenderer,
+    optional_features, required_limits,
 };
 pub use brickray_render::{
     FeedbackStats, OcclusionStats, UsageFrame, VisibilityConfig, VisibilityCounts, VisibilityPolicy,

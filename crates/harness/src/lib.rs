@@ -8,6 +8,8 @@
 //!   With no adapter at all it fails with [`GpuError::NoAdapter`], whose message
 //!   names the package to install.
 //! * [`Offscreen`] is a colour + depth target pair with read-back helpers.
+//! * [`GpuTimer`] times the ray-cast pass with GPU timestamps where the device
+//!   has them.
 //! * [`shared_data_dir`] finds `../shared/data` and decides whether a test that
 //!   needs it may skip.
 
@@ -60,11 +62,17 @@ pub struct GpuContext {
     pub queue: wgpu::Queue,
 }
 
-/// Optional features brickray uses when present.
-pub const WANTED_FEATURES: wgpu::Features = brickray_render::OPTIONAL_FEATURES[0]
-    .feature
-    .union(brickray_render::OPTIONAL_FEATURES[1].feature)
-    .union(wgpu::Features::TIMESTAMP_QUERY);
+/// Optional features brickray uses when present
+/// ([`brickray_render::OPTIONAL_FEATURES`], timestamp queries among them).
+pub const WANTED_FEATURES: wgpu::Features = {
+    let mut features = wgpu::Features::TIMESTAMP_QUERY;
+    let mut i = 0;
+    while i < brickray_render::OPTIONAL_FEATURES.len() {
+        features = features.union(brickray_render::OPTIONAL_FEATURES[i].feature);
+        i += 1;
+    }
+    features
+};
 
 impl GpuContext {
     /// Picks an adapter (see the crate docs) and creates a device.
@@ -156,6 +164,102 @@ impl GpuContext {
     pub fn submit_wait(&self, encoder: wgpu::CommandEncoder) {
         self.queue.submit([encoder.finish()]);
         let _ = self.device.poll(wgpu::PollType::wait_indefinitely());
+    }
+}
+
+/// Times a renderer's ray-cast pass with GPU timestamps
+/// ([`brickray_render::VolumeRenderer::set_pass_timestamps`]): a 2-entry
+/// timestamp query set, the buffer it resolves into and a buffer to map.
+/// Per frame: `renderer.set_pass_timestamps(&device, Some(timer.writes()))`
+/// (once), `prepare`, [`GpuTimer::resolve`] into the same encoder, submit and
+/// wait, then [`GpuTimer::read_ms`]. Blocking: tests and benchmarks only.
+#[derive(Debug)]
+pub struct GpuTimer {
+    queries: wgpu::QuerySet,
+    resolved: wgpu::Buffer,
+    readback: wgpu::Buffer,
+    /// Nanoseconds a tick.
+    period: f32,
+}
+
+impl GpuTimer {
+    /// Bytes of the two resolved timestamps.
+    const BYTES: u64 = 2 * std::mem::size_of::<u64>() as u64;
+
+    /// A timer on `gpu`'s device, `None` when it lacks
+    /// [`wgpu::Features::TIMESTAMP_QUERY`].
+    pub fn new(gpu: &GpuContext) -> Option<GpuTimer> {
+        let device = &gpu.device;
+        if !device.features().contains(wgpu::Features::TIMESTAMP_QUERY) {
+            return None;
+        }
+        let queries = device.create_query_set(&wgpu::QuerySetDescriptor {
+            label: Some("brickray-harness timer"),
+            ty: wgpu::QueryType::Timestamp,
+            count: 2,
+        });
+        let buffer = |label, usage| {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size: GpuTimer::BYTES,
+                usage,
+                mapped_at_creation: false,
+            })
+        };
+        Some(GpuTimer {
+            queries,
+            resolved: buffer(
+                "brickray-harness timer resolve",
+                wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
+            ),
+            readback: buffer(
+                "brickray-harness timer readback",
+                wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+            ),
+            period: gpu.queue.get_timestamp_period(),
+        })
+    }
+
+    /// Where the ray-cast pass writes its beginning (query 0) and end (1).
+    pub fn writes(&self) -> brickray_render::PassTimestamps {
+        brickray_render::PassTimestamps {
+            query_set: self.queries.clone(),
+            beginning: 0,
+            end: 1,
+        }
+    }
+
+    /// Records the resolve of both timestamps and their copy into the
+    /// buffer [`GpuTimer::read_ms`] maps: after the frame's `prepare`, in the
+    /// same or a later encoder of the same submission.
+    pub fn resolve(&self, encoder: &mut wgpu::CommandEncoder) {
+        encoder.resolve_query_set(&self.queries, 0..2, &self.resolved, 0);
+        encoder.copy_buffer_to_buffer(&self.resolved, 0, &self.readback, 0, GpuTimer::BYTES);
+    }
+
+    /// The pass's time in milliseconds, once the submission holding
+    /// [`GpuTimer::resolve`] completed (blocks on the map). `None` when the
+    /// map fails or the end precedes the beginning (nothing was written).
+    pub fn read_ms(&self, gpu: &GpuContext) -> Option<f64> {
+        let slice = self.readback.slice(..);
+        let (tx, rx) = std::sync::mpsc::channel();
+        slice.map_async(wgpu::MapMode::Read, move |r| {
+            let _ = tx.send(r);
+        });
+        let _ = gpu.device.poll(wgpu::PollType::wait_indefinitely());
+        rx.recv().ok()?.ok()?;
+        let ticks = slice.get_mapped_range().ok().map(|data| {
+            let t = |i: usize| {
+                let mut b = [0u8; 8];
+                b.copy_from_slice(&data[i * 8..i * 8 + 8]);
+                u64::from_le_bytes(b)
+            };
+            (t(0), t(1))
+        });
+        self.readback.unmap();
+        let (begin, end) = ticks?;
+        let elapsed = end.checked_sub(begin)?;
+        Some(elapsed as f64 * self.period as f64 / 1e6)
     }
 }
 

@@ -103,6 +103,33 @@ pub enum RenderError {
         /// wgpu's description.
         message: String,
     },
+    /// The operation needs an optional device feature the device was not
+    /// created with ([`crate::OPTIONAL_FEATURES`]).
+    #[error("{what} need {feature:?}, which the device was not created with")]
+    MissingFeature {
+        /// The feature.
+        feature: wgpu::Features,
+        /// What needs it.
+        what: &'static str,
+    },
+    /// The ray-cast pass cannot write its timestamps into this query set
+    /// ([`crate::VolumeRenderer::set_pass_timestamps`]): it is not of type
+    /// timestamp, an index is not below its count, or the two indices are
+    /// equal.
+    #[error(
+        "the pass timestamps need a Timestamp query set and two distinct indices below its count; \
+         got a {ty:?} set of {count} with beginning {beginning} and end {end}"
+    )]
+    BadTimestampQuery {
+        /// The query set's type.
+        ty: wgpu::QueryType,
+        /// Its number of queries.
+        count: u32,
+        /// The index of the pass's beginning.
+        beginning: u32,
+        /// The index of the pass's end.
+        end: u32,
+    },
     /// The operation needs an out-of-core volume.
     #[error("no out-of-core volume is set")]
     NotOutOfCore,

@@ -41,6 +41,7 @@ mod prepare;
 pub mod shaders;
 mod slice;
 mod tf;
+mod timestamps;
 mod volume;
 
 pub use backend::{FeedbackStats, OcclusionStats};
@@ -59,6 +60,7 @@ pub use frame::PredictionFrame;
 pub use limits::{OPTIONAL_FEATURES, OptionalFeature, optional_features, required_limits};
 pub use pick::{MAX_PICKS, Pick, PickPoint};
 pub use predict::{Prediction, PredictionCounts, PredictionError, TraversalClass};
+pub use timestamps::PassTimestamps;
 
 /// Slice views and the intensity window (GPU-free, from `brickray-core`).
 pub use brickray_core::{
@@ -130,6 +132,9 @@ pub struct VolumeRenderer {
     /// The styles of a multi-channel volume's channels
     /// ([`Self::set_channel_styles`]) and their generation.
     channel_styles: Option<(Vec<ChannelStyle>, u64)>,
+    /// Where the ray-cast pass writes its timestamps
+    /// ([`Self::set_pass_timestamps`]).
+    pass_timestamps: Option<PassTimestamps>,
 }
 
 impl VolumeRenderer {
@@ -169,6 +174,7 @@ impl VolumeRenderer {
             intensity: None,
             mapping: None,
             channel_styles: None,
+            pass_timestamps: None,
         })
     }
 
@@ -438,6 +444,40 @@ impl VolumeRenderer {
     /// The intensity window in use.
     pub fn intensity(&self) -> Option<Intensity> {
         self.intensity
+    }
+
+    /// Makes every later ray-cast pass this renderer records write its GPU
+    /// timestamps into a query set the host owns (`None`: no timestamps, the
+    /// default): the pass's `timestamp_writes` name `writes.query_set` at
+    /// `writes.beginning` and `writes.end`. The renderer never resolves or
+    /// reads the query set: the host resolves it into its buffer after
+    /// `prepare` (`CommandEncoder::resolve_query_set`), reads it once the
+    /// submission completed and converts ticks with
+    /// `Queue::get_timestamp_period` (nanoseconds a tick). The timestamps
+    /// bracket the ray-cast pass only ([`PassTimestamps`]).
+    ///
+    /// Checked before anything changes: without
+    /// [`wgpu::Features::TIMESTAMP_QUERY`] on `device` (the renderer's device,
+    /// on which the query set was created) it fails with
+    /// [`RenderError::MissingFeature`]; a query set not of type timestamp, an
+    /// index not below its count, or equal indices fail with
+    /// [`RenderError::BadTimestampQuery`]. The timestamps stay set until
+    /// replaced.
+    pub fn set_pass_timestamps(
+        &mut self,
+        device: &wgpu::Device,
+        writes: Option<PassTimestamps>,
+    ) -> Result<(), RenderError> {
+        if let Some(w) = &writes {
+            w.check(device)?;
+        }
+        self.pass_timestamps = writes;
+        Ok(())
+    }
+
+    /// Where the ray-cast pass writes its timestamps, `None` when it does not.
+    pub fn pass_timestamps(&self) -> Option<&PassTimestamps> {
+        self.pass_timestamps.as_ref()
     }
 
     /// The prediction settings in use.

@@ -47,9 +47,10 @@ pub fn optional_features() -> wgpu::Features {
         .fold(wgpu::Features::empty(), |f, o| f | o.feature)
 }
 
-/// [`optional_features`], each with what it buys
-/// (`docs/rendering-model.md`, "Texel formats").
-pub const OPTIONAL_FEATURES: [OptionalFeature; 2] = [
+/// [`optional_features`], each with what it buys (the texel formats:
+/// `docs/rendering-model.md`, "Sample storage and exact interpolation";
+/// timestamps: `docs/ARCHITECTURE.md`, "Timing the ray cast").
+pub const OPTIONAL_FEATURES: [OptionalFeature; 3] = [
     OptionalFeature {
         feature: wgpu::Features::TEXTURE_FORMAT_16BIT_NORM,
         buys: "R16Unorm texels: u16 and i16 volumes (and u8 volumes, filtered exactly) are \
@@ -61,10 +62,30 @@ pub const OPTIONAL_FEATURES: [OptionalFeature; 2] = [
         buys: "filterable R32Float texels: f32 volumes are interpolated in full precision; \
                without it they are stored as normalized R16Float",
     },
+    OptionalFeature {
+        feature: wgpu::Features::TIMESTAMP_QUERY,
+        buys: "GPU timestamps of the ray-cast pass: the host can time the kernel itself \
+               (VolumeRenderer::set_pass_timestamps); without it only the frame's wall time \
+               is measurable",
+    },
 ];
 
 #[cfg(test)]
 mod tests {
+    /// Each optional feature is listed once, says what it buys, and the
+    /// timestamps `set_pass_timestamps` writes are among them.
+    #[test]
+    fn optional_features_are_distinct_and_include_timestamps() {
+        let listed = &super::OPTIONAL_FEATURES;
+        for (i, a) in listed.iter().enumerate() {
+            assert!(!a.feature.is_empty() && !a.buys.is_empty(), "{a:?}");
+            for b in &listed[i + 1..] {
+                assert!(!a.feature.intersects(b.feature), "{a:?} and {b:?}");
+            }
+        }
+        assert!(super::optional_features().contains(wgpu::Features::TIMESTAMP_QUERY));
+    }
+
     /// What the library needs fits WebGPU's default limits, so any conformant
     /// adapter can run it.
     #[test]

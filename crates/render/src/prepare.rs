@@ -239,7 +239,11 @@ impl VolumeRenderer {
         {
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some("brickray-render raycast"),
-                timestamp_writes: None,
+                // The host's timestamps, checked by `set_pass_timestamps`.
+                timestamp_writes: self
+                    .pass_timestamps
+                    .as_ref()
+                    .map(crate::PassTimestamps::writes),
             });
             pass.set_pipeline(pipeline);
             for (i, g) in groups.into_iter().enumerate() {
