@@ -19,6 +19,7 @@ pub use counting::CountingSource;
 pub mod predict;
 pub mod scenes;
 pub mod soak;
+pub mod stand_in;
 
 use std::path::PathBuf;
 use thiserror::Error;
@@ -284,14 +285,62 @@ pub fn draw_frame(
     desc: &brickray_render::FrameDesc<'_>,
     clear: Option<wgpu::Color>,
 ) -> Result<brickray_render::FrameStats, brickray_render::PrepareError> {
+    draw_frame_timed(gpu, renderer, target, desc, clear, None).map(|f| f.stats)
+}
+
+/// A frame drawn by [`draw_frame_timed`].
+#[derive(Debug)]
+pub struct TimedFrame {
+    /// What `prepare` reported.
+    pub stats: brickray_render::FrameStats,
+    /// Wall time of prepare, submit and wait (ms; the timestamps' read-back
+    /// after it is not counted).
+    pub ms: f64,
+    /// The ray-cast pass's own time by GPU timestamps (ms); `None` without
+    /// a timer.
+    pub gpu_ms: Option<f64>,
+}
+
+/// [`draw_frame`], timed: its wall time, and with a `timer` the ray-cast
+/// pass's own time by GPU timestamps. The renderer's pass timestamps are
+/// set for this frame only.
+pub fn draw_frame_timed(
+    gpu: &GpuContext,
+    renderer: &mut brickray_render::VolumeRenderer,
+    target: &Offscreen,
+    desc: &brickray_render::FrameDesc<'_>,
+    clear: Option<wgpu::Color>,
+    timer: Option<&GpuTimer>,
+) -> Result<TimedFrame, brickray_render::PrepareError> {
+    // A timer is made on this device and has the feature: setting it cannot
+    // fail, and a failure would only lose the timing.
+    let timed = timer.is_some_and(|t| {
+        renderer
+            .set_pass_timestamps(&gpu.device, Some(t.writes()))
+            .is_ok()
+    });
+    let t0 = std::time::Instant::now();
     let mut enc = gpu.device.create_command_encoder(&Default::default());
-    let stats = renderer.prepare(&gpu.device, &gpu.queue, &mut enc, desc)?;
+    let prepared = renderer.prepare(&gpu.device, &gpu.queue, &mut enc, desc);
+    if timed {
+        let _ = renderer.set_pass_timestamps(&gpu.device, None);
+    }
+    let stats = prepared?;
     {
         let mut pass = target.pass_clear(&mut enc, clear);
         renderer.render(&mut pass)?;
     }
+    if let (true, Some(t)) = (timed, timer) {
+        t.resolve(&mut enc);
+    }
     gpu.submit_wait(enc);
-    Ok(stats)
+    let ms = t0.elapsed().as_secs_f64() * 1e3;
+    let gpu_ms = if timed {
+        timer.and_then(|t| t.read_ms(gpu))
+    } else {
+        None
+    };
+    Ok(TimedFrame { stats, ms, gpu_ms })
 }
 
 /// Draws frames of one view until the renderer no longer wants a redraw (out of

@@ -77,6 +77,9 @@ pub struct FrameResult {
     pub classes: Option<Vec<u32>>,
     /// Wall time of prepare, submit and wait (ms).
     pub ms: f64,
+    /// The ray-cast pass's own time by GPU timestamps (ms), when drawn
+    /// with a timer ([`draw_timed`]).
+    pub gpu_ms: Option<f64>,
 }
 
 /// Reads `size` bytes at `offset` of a `COPY_SRC` buffer (blocking).
@@ -115,9 +118,20 @@ pub fn draw(
     target: &Offscreen,
     desc: &FrameDesc<'_>,
 ) -> Result<FrameResult, PrepareError> {
-    let t = std::time::Instant::now();
-    let stats = crate::draw_frame(gpu, renderer, target, desc, Some(wgpu::Color::BLACK))?;
-    let ms = t.elapsed().as_secs_f64() * 1e3;
+    draw_timed(gpu, renderer, target, desc, None)
+}
+
+/// [`draw`], timing the ray-cast pass with `timer` when given
+/// ([`FrameResult::gpu_ms`]).
+pub fn draw_timed(
+    gpu: &GpuContext,
+    renderer: &mut VolumeRenderer,
+    target: &Offscreen,
+    desc: &FrameDesc<'_>,
+    timer: Option<&crate::GpuTimer>,
+) -> Result<FrameResult, PrepareError> {
+    let crate::TimedFrame { stats, ms, gpu_ms } =
+        crate::draw_frame_timed(gpu, renderer, target, desc, Some(wgpu::Color::BLACK), timer)?;
     let color = target.read_color(gpu);
     let samples = renderer
         .sample_count_texture()
@@ -132,6 +146,7 @@ pub fn draw(
         samples,
         classes,
         ms,
+        gpu_ms,
     })
 }
 
