@@ -11,7 +11,7 @@
 use crate::report::{RunInfo, Timing, interleave};
 use crate::runner::{Runner, finite_db, round2};
 use brickray_core::{
-    Accel, Camera, RenderMode, RenderSettings, Shading, TransferFunction, Volume, VolumeFrame,
+    Accel, Camera, RenderMode, RenderSettings, Shading, TransferFunction, VolumeFrame,
 };
 use brickray_harness::{GpuContext, ct};
 use brickray_render::VolumeRenderer;
@@ -72,9 +72,9 @@ pub(crate) struct AccelResult {
 
 pub(crate) fn run(args: &Args) -> Result<AccelResult, String> {
     let (rounds, size) = (args.rounds, args.size);
-    let path = brickray_harness::shared_volume("invesalius_cranium_ct")
-        .ok_or("the accel suite needs ../shared/data/invesalius_cranium_ct")?;
-    let vol: Volume = brickray_io::read_volume(&path).map_err(|e| e.to_string())?;
+    // The shared volume, or a procedural stand-in in a clone without it.
+    let (vol, volume) = brickray_harness::stand_in::head_ct_or_phantom()?;
+    println!("volume: {volume}");
     let gpu = GpuContext::new().map_err(|e| e.to_string())?;
     println!("adapter: {}", gpu.describe());
     let d = vol.desc();
@@ -150,7 +150,7 @@ pub(crate) fn run(args: &Args) -> Result<AccelResult, String> {
                 samples[i], ms[i], speedup, psnr
             );
             rows.push(Row {
-                scene: *scene,
+                scene,
                 variant: name,
                 samples_per_ray: round2(samples[i]),
                 time: times[i],
@@ -165,7 +165,7 @@ pub(crate) fn run(args: &Args) -> Result<AccelResult, String> {
         .map(|r| r.speedup)
         .fold(0.0, f64::max);
     Ok(AccelResult {
-        run: RunInfo::new(&gpu, size, rounds),
+        run: RunInfo::new(&gpu, size, rounds, volume),
         rows,
         psnr_min_db: finite_db(psnr_min),
         speedup_ert_ess_max,

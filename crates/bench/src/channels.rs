@@ -20,12 +20,12 @@
 //!
 //! `cargo run --release -p brickray-bench -- channels [--size PX] [--rounds N]`
 
-use crate::runner::median;
+use crate::report::Timing;
 use brickray_core::channels::ChannelVolume;
 use brickray_core::{Camera, RenderMode, RenderSettings, VolumeFrame};
 use brickray_harness::channels::{modes, nuclei_channels, nuclei_styles};
-use brickray_harness::predict::{draw, samples_per_ray};
-use brickray_harness::{GpuContext, Offscreen};
+use brickray_harness::predict::{FrameResult, draw, draw_timed, samples_per_ray};
+use brickray_harness::{GpuContext, GpuTimer, Offscreen};
 use brickray_reference::{ReferenceOptions, compare, render_channels_reference};
 use brickray_render::{FrameDesc, VolumeRenderer};
 
@@ -49,6 +49,11 @@ pub(crate) struct ModeRow {
     /// The same out of core (streamed channels at the finest level).
     ooc_ms: [f64; 3],
     ooc_psnr_db: [f64; 3],
+    /// The ray-cast pass's median time by GPU timestamps (null without):
+    /// single-channel kernel, 1/2/4 channels in core and out of core.
+    single_gpu_ms: Option<f64>,
+    gpu_ms: [Option<f64>; 3],
+    ooc_gpu_ms: [Option<f64>; 3],
 }
 
 /// The suite's result (its JSON line).
@@ -194,22 +199,27 @@ pub(crate) fn run(args: &Args) -> Result<ChannelsResult, String> {
         for r in ooc.iter_mut() {
             settle(&gpu, r, &target, &desc)?;
         }
-        let mut single_ms = Vec::new();
-        let mut ms: [Vec<f64>; 3] = Default::default();
-        let mut ooc_ms: [Vec<f64>; 3] = Default::default();
+        let mut single_t = Vec::new();
+        let mut times: [Vec<(f64, Option<f64>)>; 3] = Default::default();
+        let mut ooc_times: [Vec<(f64, Option<f64>)>; 3] = Default::default();
+        let timer = GpuTimer::new(&gpu);
+        let t = timer.as_ref();
+        let ms_of = |f: FrameResult| (f.ms, f.gpu_ms);
         for _ in 0..rounds {
-            single_ms.push(
-                draw(&gpu, &mut single, &target, &single_desc)
-                    .map_err(err)?
-                    .ms,
-            );
+            single_t.push(ms_of(
+                draw_timed(&gpu, &mut single, &target, &single_desc, t).map_err(err)?,
+            ));
             for (i, r) in renderers.iter_mut().enumerate() {
-                ms[i].push(draw(&gpu, r, &target, &desc).map_err(err)?.ms);
+                times[i].push(ms_of(draw_timed(&gpu, r, &target, &desc, t).map_err(err)?));
             }
             for (i, r) in ooc.iter_mut().enumerate() {
-                ooc_ms[i].push(draw(&gpu, r, &target, &desc).map_err(err)?.ms);
+                ooc_times[i].push(ms_of(draw_timed(&gpu, r, &target, &desc, t).map_err(err)?));
             }
         }
+        let single_timing = Timing::of_times(single_t);
+        let timing: [Timing; 3] = std::array::from_fn(|i| Timing::of_times(times[i].clone()));
+        let ooc_timing: [Timing; 3] =
+            std::array::from_fn(|i| Timing::of_times(ooc_times[i].clone()));
         desc.viewport = brickray_render::Viewport::full(ERROR_SIZE, ERROR_SIZE);
         let mut psnr = [0.0; 3];
         let mut ooc_psnr = [0.0; 3];
@@ -234,12 +244,15 @@ pub(crate) fn run(args: &Args) -> Result<ChannelsResult, String> {
         }
         let row = ModeRow {
             mode,
-            single_ms: median(&single_ms),
-            ms: std::array::from_fn(|i| median(&ms[i])),
+            single_ms: single_timing.ms,
+            ms: timing.map(|t| t.ms),
             samples_per_ray: spr,
             psnr_db: psnr,
-            ooc_ms: std::array::from_fn(|i| median(&ooc_ms[i])),
+            ooc_ms: ooc_timing.map(|t| t.ms),
             ooc_psnr_db: ooc_psnr,
+            single_gpu_ms: single_timing.gpu_ms,
+            gpu_ms: timing.map(|t| t.gpu_ms),
+            ooc_gpu_ms: ooc_timing.map(|t| t.gpu_ms),
         };
         println!(
             "| {mode} | {:.1} | {:.1} / {:.1} / {:.1} | {:.2} | {:.2} | {:.1} / {:.1} / {:.1} | {:.1} / {:.1} / {:.1} |",

@@ -24,15 +24,14 @@
 //!
 //! `cargo run --release -p brickray-bench -- labels [--size PX] [--rounds N]`
 
-use crate::report::RunInfo;
-use crate::runner::median;
+use crate::report::{RunInfo, Timing};
 use brickray_core::labels::{LabelTable, label_value_range};
 use brickray_core::{
     BrickSource, Camera, LabelOverlay, LodMetric, OverlayStyle, RenderMode, RenderSettings,
     TransferFunction, Volume, VolumeDesc, VolumeFrame, VolumeKind, overlay_transform,
 };
-use brickray_harness::predict::{draw, samples_per_ray};
-use brickray_harness::{GpuContext, Offscreen, draw_frame, draw_until_settled};
+use brickray_harness::predict::{draw, draw_timed, samples_per_ray};
+use brickray_harness::{GpuContext, GpuTimer, Offscreen, draw_frame, draw_until_settled};
 use brickray_reference::{DEFAULT_STEP_FACTOR, ReferenceOptions, compare, render_reference};
 use brickray_render::{FrameDesc, OutOfCoreConfig, VolumeRenderer};
 use serde::Serialize;
@@ -68,11 +67,11 @@ pub(crate) struct LodRow {
 pub(crate) struct MapRow {
     /// brodmann or nuclei.
     map: &'static str,
-    /// ms per frame of the labels and of the same ids drawn as intensity.
-    ms_labels_incore: f64,
-    ms_intensity_incore: f64,
-    ms_labels_ooc: f64,
-    ms_intensity_ooc: f64,
+    /// Frame times of the labels and of the same ids drawn as intensity.
+    labels_incore: Timing,
+    intensity_incore: Timing,
+    labels_ooc: Timing,
+    intensity_ooc: Timing,
     /// Labels over intensity, in core and out of core.
     label_cost_ratio: f64,
     label_cost_ratio_ooc: f64,
@@ -164,7 +163,7 @@ pub(crate) fn run(args: &Args) -> Result<LabelsResult, String> {
                 .map_err(|e| e.to_string())?;
             incore.push(r);
         }
-        let (in_ms, samples) = {
+        let (in_t, samples) = {
             let [a, b] = &mut incore[..] else {
                 unreachable!()
             };
@@ -178,7 +177,7 @@ pub(crate) fn run(args: &Args) -> Result<LabelsResult, String> {
             },
             ..desc.clone()
         };
-        let (smooth_ms, _) = {
+        let (smooth_t, _) = {
             let mut s = renderer(&gpu, &tf)?;
             s.set_volume(&gpu.device, &gpu.queue, &vol)
                 .map_err(|e| e.to_string())?;
@@ -190,7 +189,7 @@ pub(crate) fn run(args: &Args) -> Result<LabelsResult, String> {
                 rounds,
             )?
         };
-        let smooth_cost = smooth_ms[1] / smooth_ms[0];
+        let smooth_cost = smooth_t[1].ms / smooth_t[0].ms;
         let mut ooc = Vec::new();
         for v in [&vol, &intensity] {
             let mut r = renderer(&gpu, &tf)?;
@@ -206,10 +205,12 @@ pub(crate) fn run(args: &Args) -> Result<LabelsResult, String> {
                 .ok_or("out of core did not settle")?;
             ooc.push(r);
         }
-        let (ooc_ms, _) = {
+        let (ooc_t, _) = {
             let [a, b] = &mut ooc[..] else { unreachable!() };
             timed(&gpu, &mut [(a, &desc), (b, &desc)], &big, rounds)?
         };
+        let in_ms: Vec<f64> = in_t.iter().map(|t| t.ms).collect();
+        let ooc_ms: Vec<f64> = ooc_t.iter().map(|t| t.ms).collect();
         let cost = in_ms[0] / in_ms[1];
         let ooc_cost = ooc_ms[0] / ooc_ms[1];
 
@@ -379,19 +380,19 @@ pub(crate) fn run(args: &Args) -> Result<LabelsResult, String> {
         overlay_rows.push(format!(
             "| {name} over {image_dir} | {:.3} ({:.1} / {:.1} ms) | {:.3} ({:.1} / {:.1} ms) | {:.1} |",
             o.cost_incore,
-            o.ms_incore[0],
-            o.ms_incore[1],
+            o.incore[0].ms,
+            o.incore[1].ms,
             o.cost_ooc,
-            o.ms_ooc[0],
-            o.ms_ooc[1],
+            o.ooc[0].ms,
+            o.ooc[1].ms,
             o.psnr_db
         ));
         maps.push(MapRow {
             map: name,
-            ms_labels_incore: in_ms[0],
-            ms_intensity_incore: in_ms[1],
-            ms_labels_ooc: ooc_ms[0],
-            ms_intensity_ooc: ooc_ms[1],
+            labels_incore: in_t[0],
+            intensity_incore: in_t[1],
+            labels_ooc: ooc_t[0],
+            intensity_ooc: ooc_t[1],
             label_cost_ratio: cost,
             label_cost_ratio_ooc: ooc_cost,
             samples_per_ray: samples[0],
@@ -416,7 +417,7 @@ pub(crate) fn run(args: &Args) -> Result<LabelsResult, String> {
         println!("{row}");
     }
     Ok(LabelsResult {
-        run: RunInfo::new(&gpu, size, rounds),
+        run: RunInfo::new(&gpu, size, rounds, "brodmann_labels,cells3d_nuclei_labels"),
         maps,
         psnr_finest_db_min: finest_min,
         psnr_2px_db_min: two_px_min,
@@ -432,10 +433,10 @@ pub(crate) fn run(args: &Args) -> Result<LabelsResult, String> {
 /// What an overlay costs and how far it is from the reference's.
 #[derive(Debug, Serialize)]
 pub(crate) struct OverlayFigures {
-    /// ms per frame with / without the overlay, in core.
-    ms_incore: [f64; 2],
+    /// Frame times with / without the overlay, in core.
+    incore: [Timing; 2],
     /// The same out of core at the finest level.
-    ms_ooc: [f64; 2],
+    ooc: [Timing; 2],
     /// With over without the overlay, in core and out of core.
     cost_incore: f64,
     cost_ooc: f64,
@@ -498,7 +499,7 @@ fn overlay(
         }
         incore.push(r);
     }
-    let (ms_in, _) = {
+    let (t_in, _) = {
         let [a, b] = &mut incore[..] else {
             unreachable!()
         };
@@ -519,7 +520,7 @@ fn overlay(
             .ok_or("out of core did not settle")?;
         ooc.push(r);
     }
-    let (ms_ooc, _) = {
+    let (t_ooc, _) = {
         let [a, b] = &mut ooc[..] else { unreachable!() };
         timed(gpu, &mut [(a, &desc), (b, &desc)], &big, rounds)?
     };
@@ -551,10 +552,10 @@ fn overlay(
     .map_err(|e| e.to_string())?;
     let psnr_db = compare(&small.read_color(gpu), &reference, ERROR_SIZE, ERROR_SIZE).psnr_db;
     Ok(OverlayFigures {
-        ms_incore: [ms_in[0], ms_in[1]],
-        ms_ooc: [ms_ooc[0], ms_ooc[1]],
-        cost_incore: ms_in[0] / ms_in[1],
-        cost_ooc: ms_ooc[0] / ms_ooc[1],
+        incore: [t_in[0], t_in[1]],
+        ooc: [t_ooc[0], t_ooc[1]],
+        cost_incore: t_in[0].ms / t_in[1].ms,
+        cost_ooc: t_ooc[0].ms / t_ooc[1].ms,
         psnr_db,
     })
 }
@@ -609,21 +610,23 @@ fn timed(
     renderers: &mut [(&mut VolumeRenderer, &FrameDesc<'_>)],
     target: &Offscreen,
     rounds: usize,
-) -> Result<(Vec<f64>, Vec<f64>), String> {
+) -> Result<(Vec<Timing>, Vec<f64>), String> {
     let n = renderers.len();
+    let timer = GpuTimer::new(gpu);
     let mut times = vec![Vec::new(); n];
     let mut samples = vec![0.0; n];
     for round in 0..=rounds {
         for k in 0..n {
             let i = (k + round) % n;
             let (r, desc) = &mut renderers[i];
-            let f = draw(gpu, r, target, desc).map_err(|e| e.to_string())?;
+            let f = draw_timed(gpu, r, target, desc, timer.as_ref()).map_err(|e| e.to_string())?;
             if round > 0 {
-                times[i].push(f.ms);
+                times[i].push((f.ms, f.gpu_ms));
             } else {
                 samples[i] = samples_per_ray(&f.samples);
             }
         }
     }
-    Ok((times.iter().map(|t| median(t)).collect(), samples))
+    let timings = times.into_iter().map(Timing::of_times).collect();
+    Ok((timings, samples))
 }

@@ -161,6 +161,8 @@ fn accel_of(name: &str) -> Accel {
 #[derive(Default, Clone)]
 struct Track {
     ms: Vec<f64>,
+    /// The ray-cast pass by GPU timestamps, where the device has them.
+    gpu_ms: Vec<f64>,
     wrong: Vec<f64>,
     psnr: Vec<f64>,
     samples: Vec<f64>,
@@ -177,6 +179,8 @@ pub(crate) struct Summary {
     variant: &'static str,
     /// Mean ms per frame, and `full`'s total time over this variant's.
     ms: f64,
+    /// Mean ray-cast pass time by GPU timestamps (null without).
+    gpu_ms: Option<f64>,
     speedup: f64,
     samples_per_ray: f64,
     /// Pixels that differ from `full`'s image, % of the image: mean and
@@ -280,6 +284,8 @@ impl Track {
         Summary {
             variant,
             ms: round2(sum(&self.ms) / n),
+            gpu_ms: (!self.gpu_ms.is_empty())
+                .then(|| round2(sum(&self.gpu_ms) / self.gpu_ms.len() as f64)),
             speedup: round2(sum(&full.ms) / sum(&self.ms)),
             samples_per_ray: round2(sum(&self.samples) / n),
             wrong_mean_pct: (sum(&self.wrong) / n * 1e4).round() / 1e2,
@@ -342,6 +348,7 @@ fn run_path(
         rs.push((r, t));
     }
     let mut tracks = vec![Track::default(); vs.len()];
+    let timer = brickray_harness::GpuTimer::new(gpu);
     let mut last_paper = None;
     for (i, cam) in cameras.iter().enumerate() {
         let desc = FrameDesc {
@@ -352,7 +359,9 @@ fn run_path(
         for j in 0..vs.len() {
             let k = (i + j) % vs.len();
             let (r, t) = &mut rs[k];
-            shots[k] = Some(predict::draw(gpu, r, t, &desc).map_err(|e| e.to_string())?);
+            shots[k] = Some(
+                predict::draw_timed(gpu, r, t, &desc, timer.as_ref()).map_err(|e| e.to_string())?,
+            );
             if r.stats().out_of_core.is_some_and(|s| !s.converged) {
                 tracks[k].unsettled += 1;
             }
@@ -361,6 +370,7 @@ fn run_path(
         for (k, s) in shots.iter().enumerate() {
             let t = &mut tracks[k];
             t.ms.push(s.ms);
+            t.gpu_ms.extend(s.gpu_ms);
             t.wrong
                 .push(predict::wrong_share(&s.color, &shots[0].color));
             t.psnr.push(psnr(&s.color, &shots[0].color));

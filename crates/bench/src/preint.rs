@@ -116,9 +116,9 @@ pub(crate) fn run(args: &Args) -> Result<PreintResult, String> {
     println!("adapter: {}", gpu.describe());
 
     // GPU cost on the head CT.
-    let path = brickray_harness::shared_volume("invesalius_cranium_ct")
-        .ok_or("the preint suite needs ../shared/data/invesalius_cranium_ct")?;
-    let vol = brickray_io::read_volume(&path).map_err(|e| e.to_string())?;
+    // The shared volume, or a procedural stand-in in a clone without it.
+    let (vol, volume) = brickray_harness::stand_in::head_ct_or_phantom()?;
+    println!("volume: {volume}");
     let d = vol.desc();
     println!(
         "head CT {:?}, soft tissue, {size}x{size}, {rounds} interleaved rounds",
@@ -223,7 +223,7 @@ pub(crate) fn run(args: &Args) -> Result<PreintResult, String> {
         });
     }
     Ok(PreintResult {
-        run: RunInfo::new(&gpu, size, rounds),
+        run: RunInfo::new(&gpu, size, rounds, volume),
         ms_corrected_table: round2(corrected),
         ms_preint_table_1_layers: table_ms[0],
         ms_preint_table_8_layers: table_ms[1],

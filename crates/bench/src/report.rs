@@ -21,10 +21,19 @@ pub(crate) struct RunInfo {
     /// Whether the device measured the ray-cast pass with timestamps (the
     /// `*gpu_ms*` figures; null where it could not).
     pub(crate) gpu_timestamps: bool,
+    /// The volume timed: a shared volume's name, a procedural stand-in's
+    /// (`head_ct_phantom`, `mri_phantom`) where `../shared/data` is absent,
+    /// or the suite's own volumes.
+    pub(crate) volume: &'static str,
 }
 
 impl RunInfo {
-    pub(crate) fn new(gpu: &GpuContext, image_size: u32, rounds: usize) -> RunInfo {
+    pub(crate) fn new(
+        gpu: &GpuContext,
+        image_size: u32,
+        rounds: usize,
+        volume: &'static str,
+    ) -> RunInfo {
         RunInfo {
             image_size,
             rounds,
@@ -33,6 +42,7 @@ impl RunInfo {
                 .device
                 .features()
                 .contains(wgpu::Features::TIMESTAMP_QUERY),
+            volume,
         }
     }
 }
@@ -68,8 +78,13 @@ pub(crate) struct Timing {
 impl Timing {
     /// The medians of `shots`, rounded to 0.01 ms.
     pub(crate) fn of(shots: &[Shot]) -> Timing {
-        let ms: Vec<f64> = shots.iter().map(|s| s.ms).collect();
-        let gpu: Vec<f64> = shots.iter().filter_map(|s| s.gpu_ms).collect();
+        Timing::of_times(shots.iter().map(|s| (s.ms, s.gpu_ms)))
+    }
+
+    /// The medians of (wall, timestamp) times, rounded to 0.01 ms.
+    pub(crate) fn of_times(times: impl IntoIterator<Item = (f64, Option<f64>)>) -> Timing {
+        let (ms, gpu): (Vec<f64>, Vec<Option<f64>>) = times.into_iter().unzip();
+        let gpu: Vec<f64> = gpu.into_iter().flatten().collect();
         Timing {
             ms: round2(median_or_nan(&ms)),
             gpu_ms: (!gpu.is_empty()).then(|| round2(median_or_nan(&gpu))),

@@ -2,9 +2,9 @@
 //! the out-of-core path, and order statistics.
 
 use brickray_core::{Camera, RenderSettings, VolumeFrame};
-use brickray_harness::{GpuContext, Offscreen};
+use brickray_harness::{GpuContext, GpuTimer, Offscreen};
 use brickray_render::{FrameDesc, OutOfCoreStats, VolumeRenderer};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 /// One rendered frame.
 pub(crate) struct Shot {
@@ -118,6 +118,8 @@ pub(crate) struct Runner<'a> {
     pub(crate) gpu: &'a GpuContext,
     pub(crate) target: Offscreen,
     pub(crate) size: u32,
+    /// Times the ray-cast pass where the device has timestamps.
+    pub(crate) timer: Option<GpuTimer>,
 }
 
 impl<'a> Runner<'a> {
@@ -149,6 +151,7 @@ impl<'a> Runner<'a> {
             ));
         }
         Ok(Runner {
+            timer: GpuTimer::new(gpu),
             gpu,
             target: Offscreen::new(&gpu.device, size, size),
             size,
@@ -167,19 +170,18 @@ impl<'a> Runner<'a> {
     ) -> Result<Shot, String> {
         let g = self.gpu;
         let cpu0 = process_cpu_ms();
-        let t0 = Instant::now();
-        let mut enc = g.device.create_command_encoder(&Default::default());
         let desc = self.desc(camera, frame, settings);
-        r.prepare(&g.device, &g.queue, &mut enc, &desc)
-            .map_err(|e| e.to_string())?;
-        {
-            let mut pass = self.target.pass(&mut enc, true);
-            r.render(&mut pass).map_err(|e| e.to_string())?;
-        }
-        g.submit_wait(enc);
-        let ms = t0.elapsed().as_secs_f64() * 1e3;
+        let timed = brickray_harness::draw_frame_timed(
+            g,
+            r,
+            &self.target,
+            &desc,
+            Some(wgpu::Color::BLACK),
+            self.timer.as_ref(),
+        )
+        .map_err(|e| e.to_string())?;
+        let (ms, gpu_ms) = (timed.ms, timed.gpu_ms);
         let cpu_ms = process_cpu_ms() - cpu0;
-        let gpu_ms = None;
         if !read {
             return Ok(Shot {
                 ms,

@@ -60,9 +60,9 @@ pub(crate) struct U8Result {
 
 pub(crate) fn run(args: &Args) -> Result<U8Result, String> {
     let (size, rounds) = (args.size, args.rounds);
-    let path = brickray_harness::shared_volume("pycortex_s1_t1_mri")
-        .ok_or("the u8 suite needs ../shared/data/pycortex_s1_t1_mri")?;
-    let vol = brickray_io::read_volume(&path).map_err(|e| e.to_string())?;
+    // The shared volume, or a procedural stand-in in a clone without it.
+    let (vol, volume) = brickray_harness::stand_in::mri_or_phantom()?;
+    println!("volume: {volume}");
     let gpu = GpuContext::new().map_err(|e| e.to_string())?;
     println!("adapter: {}", gpu.describe());
     println!(
@@ -200,7 +200,7 @@ pub(crate) fn run(args: &Args) -> Result<U8Result, String> {
         });
     }
     Ok(U8Result {
-        run: RunInfo::new(&gpu, size, rounds),
+        run: RunInfo::new(&gpu, size, rounds, volume),
         rows,
         exact_over_fast_worst: round2(worst_ratio),
     })

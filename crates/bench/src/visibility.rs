@@ -62,7 +62,9 @@ struct Scene {
 /// Working set along the path per policy, for one scene's chart.
 type Chart = (String, Vec<(String, Vec<f64>)>);
 /// One host frame: wall ms, `prepare` ms, bytes uploaded, image if read.
-type FrameOut = (f64, f64, u64, Option<Vec<u8>>);
+/// (wall ms, prepare ms, ray-cast pass ms by timestamps, bytes uploaded,
+/// image when read).
+type FrameOut = (f64, f64, Option<f64>, u64, Option<Vec<u8>>);
 
 /// What one policy did on one scene.
 #[derive(Default)]
@@ -71,6 +73,7 @@ struct Track {
     uploaded: u64,
     ms: Vec<f64>,
     host_ms: Vec<f64>,
+    gpu_ms: Vec<f64>,
     converge_start: Option<usize>,
     start: Option<(Vec<u8>, OutOfCoreStats)>,
     back: Option<(Vec<u8>, OutOfCoreStats)>,
@@ -83,10 +86,12 @@ struct Runner<'a> {
     gpu: &'a GpuContext,
     target: Offscreen,
     size: u32,
+    /// Times the ray-cast pass where the device has timestamps.
+    timer: Option<brickray_harness::GpuTimer>,
 }
 
 impl Runner<'_> {
-    /// One host frame; returns (wall ms, prepare ms, image when `read`).
+    /// One host frame ([`FrameOut`]).
     fn frame(
         &self,
         r: &mut VolumeRenderer,
@@ -95,6 +100,10 @@ impl Runner<'_> {
         read: bool,
     ) -> Result<FrameOut, String> {
         let g = self.gpu;
+        let timed = self
+            .timer
+            .as_ref()
+            .is_some_and(|t| r.set_pass_timestamps(&g.device, Some(t.writes())).is_ok());
         let t0 = Instant::now();
         let mut enc = g.device.create_command_encoder(&Default::default());
         let desc = FrameDesc {
@@ -105,18 +114,25 @@ impl Runner<'_> {
             host_depth: None,
             time: Some(brickray_harness::host_time()),
         };
-        let fs = r
-            .prepare(&g.device, &g.queue, &mut enc, &desc)
-            .map_err(|e| e.to_string())?;
+        let fs = r.prepare(&g.device, &g.queue, &mut enc, &desc);
         let host = t0.elapsed().as_secs_f64() * 1e3;
+        if timed {
+            let _ = r.set_pass_timestamps(&g.device, None);
+        }
+        let fs = fs.map_err(|e| e.to_string())?;
         {
             let mut pass = self.target.pass(&mut enc, true);
             r.render(&mut pass).map_err(|e| e.to_string())?;
         }
+        let timer = self.timer.as_ref().filter(|_| timed);
+        if let Some(t) = timer {
+            t.resolve(&mut enc);
+        }
         g.submit_wait(enc);
         let ms = t0.elapsed().as_secs_f64() * 1e3;
+        let gpu_ms = timer.and_then(|t| t.read_ms(g));
         let img = read.then(|| self.target.read_color(g));
-        Ok((ms, host, fs.uploaded_bytes, img))
+        Ok((ms, host, gpu_ms, fs.uploaded_bytes, img))
     }
 }
 
@@ -231,6 +247,8 @@ pub(crate) struct PolicyRow {
     /// Medians along the path: whole frame and `prepare` alone, ms.
     ms_per_frame: f64,
     host_ms_per_frame: f64,
+    /// The ray-cast pass by GPU timestamps (null without).
+    gpu_ms_per_frame: Option<f64>,
     /// Working set over the oracle (bricks a ray reaches) and over the
     /// smallest hole-free cut holding them.
     oracle_ratio: f64,
@@ -337,6 +355,7 @@ pub(crate) fn run(args: &Args) -> Result<VisibilityResult, String> {
             gpu: &gpu,
             target: Offscreen::new(&gpu.device, px, px),
             size: px,
+            timer: brickray_harness::GpuTimer::new(&gpu),
         };
         println!(
             "\n{} ({px}x{px}): hold <= {hold}, turn {turn} frames, hold <= {hold}",
@@ -508,12 +527,13 @@ fn run_scene(
     }
     let mut tracks: Vec<Track> = policies.iter().map(|_| Track::default()).collect();
     let step = |r: &mut VolumeRenderer, t: &mut Track, cam: Camera, read: bool| {
-        let (ms, host, bytes, img) = runner.frame(r, scene, cam, read)?;
+        let (ms, host, gpu_ms, bytes, img) = runner.frame(r, scene, cam, read)?;
         let s = r.stats().out_of_core.ok_or("not out of core")?;
         t.working.push(s.cache.working_set_bricks as f64);
         t.uploaded += bytes;
         t.ms.push(ms);
         t.host_ms.push(host);
+        t.gpu_ms.extend(gpu_ms);
         Ok::<_, String>((s, img))
     };
     // 1. The start view, until every policy converged.
@@ -713,6 +733,7 @@ fn report(
             frames_to_converge: t.converge_start,
             ms_per_frame: r2(median(&t.ms)),
             host_ms_per_frame: r2(median(&t.host_ms)),
+            gpu_ms_per_frame: (!t.gpu_ms.is_empty()).then(|| r2(median(&t.gpu_ms))),
             oracle_ratio: r2(ws / oracle as f64),
             oracle_cut_ratio: r2(ws / oracle_cut as f64),
             psnr_start_db: r2(psnr_s.min(999.0)),

@@ -29,7 +29,7 @@ use crate::runner::{Runner, finest_ooc_renderer, finite_db, median, quantile, ro
 use brickray_cache::refine::{DataState, MetaState, NodeClass, RefineEnv, RefineParams};
 use brickray_core::{
     Accel, BrickSource, Camera, NodeKey, RenderMode, RenderSettings, Shading, TransferFunction,
-    Volume, VolumeFrame,
+    VolumeFrame,
 };
 use brickray_harness::{GpuContext, ct, target_desc as targets};
 use brickray_render::{
@@ -131,9 +131,9 @@ pub(crate) fn run(args: &Args) -> Result<OocResult, String> {
         "image {size}x{size}; {rounds} interleaved rounds; path {path_size}x{path_size} over {path_dims}^3"
     );
     let t = Instant::now();
-    let mut head = Vec::new();
+    let (mut head, mut volume) = (Vec::new(), "procedural noise");
     if parts.contains('a') {
-        head = part_a(&gpu, size, rounds)?;
+        (head, volume) = part_a(&gpu, size, rounds)?;
     }
     let mut sensitivity = Vec::new();
     if parts.contains('b') {
@@ -169,7 +169,7 @@ pub(crate) fn run(args: &Args) -> Result<OocResult, String> {
     let worst_ratio = defaults().map(|r| r.time_ratio).reduce(f64::max);
     let worst_psnr = defaults().map(|r| r.psnr_db).reduce(f64::min);
     Ok(OocResult {
-        run: RunInfo::new(&gpu, size, rounds),
+        run: RunInfo::new(&gpu, size, rounds, volume),
         path_image_size: path_size,
         path_volume_dims: path_dims,
         finest_vs_incore_time_ratio: worst_ratio,
@@ -183,10 +183,15 @@ pub(crate) fn run(args: &Args) -> Result<OocResult, String> {
 }
 
 /// (a) Out of core at the finest level vs in core, head CT.
-fn part_a(gpu: &GpuContext, size: u32, rounds: usize) -> Result<Vec<HeadRow>, String> {
-    let path = brickray_harness::shared_volume("invesalius_cranium_ct")
-        .ok_or("the ooc suite needs ../shared/data/invesalius_cranium_ct")?;
-    let vol: Volume = brickray_io::read_volume(&path).map_err(|e| e.to_string())?;
+/// Its rows, and the name of the volume drawn.
+fn part_a(
+    gpu: &GpuContext,
+    size: u32,
+    rounds: usize,
+) -> Result<(Vec<HeadRow>, &'static str), String> {
+    // The shared volume, or a procedural stand-in in a clone without it.
+    let (vol, volume) = brickray_harness::stand_in::head_ct_or_phantom()?;
+    println!("volume: {volume}");
     let d = vol.desc().clone();
     println!(
         "\n(a) finest level out of core vs in core: head CT {:?} {} spacing {:?}",
@@ -319,7 +324,7 @@ fn part_a(gpu: &GpuContext, size: u32, rounds: usize) -> Result<Vec<HeadRow>, St
         "  worst ratio {worst_ratio:.2}x (bound 1.5x, goal 1.2x): {}",
         verdict(worst_ratio, 1.5, 1.2)
     );
-    Ok(rows)
+    Ok((rows, volume))
 }
 
 fn verdict(x: f64, bound: f64, goal: f64) -> &'static str {

@@ -177,7 +177,7 @@ pub(crate) fn run(o: &Args) -> Result<ParetoResult, String> {
                 c.knob == "default" || o.knobs.is_empty() || o.knobs.iter().any(|k| k == c.knob)
             })
             .collect();
-            let reference = reference(scene, *mode, tf, &o)?;
+            let reference = reference(scene, *mode, tf, o)?;
             let images = Images {
                 reference: &reference,
                 finest: &finest_rgba,

@@ -134,6 +134,10 @@ const VARIANTS: [&str; 8] = [
 ];
 
 const ISOVALUE: f32 = 0.3;
+
+/// One run of a variant: wall ms, CPU ms, ray-cast pass ms by timestamps,
+/// samples and lane-bound samples (when counted).
+type Run = (f64, f64, Option<f64>, u64, u64);
 const REFINE_STEPS: u32 = 6;
 
 fn settings(mode: usize, step: f32, accel: Accel) -> RenderSettings {
@@ -174,9 +178,9 @@ fn accel_of(variant: &str) -> Accel {
 
 pub(crate) fn run(args: &Args) -> Result<RawResult, String> {
     let (size, rounds, step, only) = (args.size, args.rounds, args.step, &args.modes);
-    let path = brickray_harness::shared_volume("pycortex_s1_t1_mri")
-        .ok_or("the raw suite needs ../shared/data/pycortex_s1_t1_mri")?;
-    let vol = brickray_io::read_volume(&path).map_err(|e| e.to_string())?;
+    // The shared volume, or a procedural stand-in in a clone without it.
+    let (vol, volume) = brickray_harness::stand_in::mri_or_phantom()?;
+    println!("volume: {volume}");
     let gpu = GpuContext::new().map_err(|e| e.to_string())?;
     println!("adapter: {}", gpu.describe());
     let d = vol.desc().clone();
@@ -269,7 +273,7 @@ pub(crate) fn run(args: &Args) -> Result<RawResult, String> {
             (_, _, _, samples[i], lanes[i]) = one(i, true)?;
         }
         let times = interleave(rounds, VARIANTS.len(), |i| one(i, false))?;
-        let of = |f: &dyn Fn(&(f64, f64, Option<f64>, u64, u64)) -> f64| -> Vec<f64> {
+        let of = |f: &dyn Fn(&Run) -> f64| -> Vec<f64> {
             times
                 .iter()
                 .map(|t| median(&t.iter().map(f).collect::<Vec<_>>()))
@@ -337,7 +341,7 @@ pub(crate) fn run(args: &Args) -> Result<RawResult, String> {
         });
     }
     Ok(RawResult {
-        run: RunInfo::new(&gpu, size, rounds),
+        run: RunInfo::new(&gpu, size, rounds, volume),
         step_voxels: step,
         modes,
     })

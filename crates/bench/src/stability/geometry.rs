@@ -237,7 +237,7 @@ pub(crate) fn grazing(ctx: &Ctx<'_>) -> Result<Case, String> {
                     renderer: rname.to_string(),
                     psnr_db: p,
                     flip: f,
-                    holes: h as u64,
+                    holes: h,
                     seam_ratio: round2(seam),
                     levels: levels.to_string(),
                 });

@@ -171,9 +171,9 @@ pub(crate) fn streaming(ctx: &Ctx<'_>) -> Result<Case, String> {
         );
         conv_frames.push((delay, converged_at));
         rows.push(DelayRow {
-            delay_ms: delay as u64,
-            cut_holes_max: h as u64,
-            dark_pixels_max: dark_max as u64,
+            delay_ms: delay,
+            cut_holes_max: h,
+            dark_pixels_max: dark_max,
             frames_to_converge_start: converged_at[0],
             frames_to_converge_jump: converged_at[1],
             median_ms: round2(med),
@@ -337,13 +337,13 @@ pub(crate) fn pressure(ctx: &Ctx<'_>) -> Result<Case, String> {
         );
         flicker_at.push((frac, flicker));
         rows.push(PoolRow {
-            pool_factor: frac as f64,
+            pool_factor: frac,
             slots: slots as u64,
             uploads_per_frame_median: median(&uploads),
             uploads_per_frame_max: umax,
             flicker_ratio: round2(flicker),
-            cut_holes_max: h as u64,
-            dark_pixels_max: dk as u64,
+            cut_holes_max: h,
+            dark_pixels_max: dk,
             psnr_min_db: round2(pmin),
             psnr_mean_db: round2(pmean),
         });
