@@ -8,13 +8,13 @@
 mod accel;
 mod build;
 mod channels;
+mod chart;
 mod formats;
 mod host;
 mod labels;
 mod ooc;
 mod pareto;
 mod prediction;
-mod prediction_chart;
 mod preint;
 mod raw;
 mod remote;

@@ -580,14 +580,32 @@ pub(crate) fn run(args: &Args) -> Result<PredictionResult, String> {
         .map(|t| t.wrong.iter().all(|&w| w == 0.0))
         .collect();
     if !chart.is_empty() {
-        crate::prediction_chart::draw(
-            &chart,
-            &names,
-            &tracks
-                .iter()
-                .map(|t| (t.ms.clone(), t.wrong.clone()))
-                .collect::<Vec<_>>(),
-            moving,
+        use crate::chart::{Panel, Series};
+        let panel = |title: &str, ys: &dyn Fn(&Track) -> Vec<f64>| {
+            let mut p = Panel::new(
+                title,
+                "frame",
+                "",
+                tracks
+                    .iter()
+                    .zip(&names)
+                    .map(|(t, n)| Series::indexed(*n, ys(t)))
+                    .collect(),
+            );
+            p.y_from_zero = true;
+            p.marker_x = Some(moving as f64);
+            p
+        };
+        crate::chart::draw(
+            std::path::Path::new(&chart),
+            900,
+            320,
+            &[
+                panel("ms per frame (prepare + submit + wait)", &|t| t.ms.clone()),
+                panel("wrong pixels (% of the image, vs full traversal)", &|t| {
+                    t.wrong.iter().map(|w| 100.0 * w).collect()
+                }),
+            ],
         )?;
         println!("wrote {chart}");
     }

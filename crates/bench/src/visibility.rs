@@ -826,45 +826,24 @@ fn headline(scenes: &[SceneResult]) -> Headline {
     }
 }
 
-/// Working set along the path, per scene and policy, as an SVG (plotters).
+/// Working set along the path, per scene and policy, as an SVG.
 fn write_chart(path: &str, chart: &[Chart]) -> Result<(), String> {
-    use plotters::prelude::*;
-    let n = chart.len().max(1) as u32;
-    let root = SVGBackend::new(path, (720, 260 * n)).into_drawing_area();
-    root.fill(&WHITE).map_err(|e| e.to_string())?;
-    let areas = root.split_evenly((n as usize, 1));
-    let colors = [BLACK, RED, BLUE, GREEN];
-    for ((title, series), area) in chart.iter().zip(areas) {
-        let frames = series.iter().map(|s| s.1.len()).max().unwrap_or(1);
-        let peak = series
-            .iter()
-            .flat_map(|s| s.1.iter().cloned())
-            .fold(1.0, f64::max);
-        let mut c = ChartBuilder::on(&area)
-            .caption(title, ("sans-serif", 16))
-            .margin(8)
-            .x_label_area_size(28)
-            .y_label_area_size(48)
-            .build_cartesian_2d(0..frames, 0.0..peak * 1.05)
-            .map_err(|e| e.to_string())?;
-        c.configure_mesh()
-            .x_desc("frame along the path (all policies interleaved)")
-            .y_desc("working-set bricks")
-            .draw()
-            .map_err(|e| e.to_string())?;
-        for (i, (name, ws)) in series.iter().enumerate() {
-            let color = colors[i % colors.len()];
-            c.draw_series(LineSeries::new(ws.iter().cloned().enumerate(), color))
-                .map_err(|e| e.to_string())?
-                .label(name.as_str())
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], color));
-        }
-        c.configure_series_labels()
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .draw()
-            .map_err(|e| e.to_string())?;
-    }
-    root.present().map_err(|e| e.to_string())?;
-    Ok(())
+    use crate::chart::{Panel, Series};
+    let panels: Vec<Panel> = chart
+        .iter()
+        .map(|(title, series)| {
+            let mut p = Panel::new(
+                title,
+                "frame along the path (all policies interleaved)",
+                "working-set bricks",
+                series
+                    .iter()
+                    .map(|(name, ws)| Series::indexed(name.as_str(), ws.iter().copied()))
+                    .collect(),
+            );
+            p.y_from_zero = true;
+            p
+        })
+        .collect();
+    crate::chart::draw(std::path::Path::new(path), 720, 260, &panels)
 }

@@ -157,11 +157,7 @@ impl BrickSource for SlowSource {
     }
 }
 
-/// One line of a chart.
-pub(crate) struct Series {
-    pub(crate) name: String,
-    pub(crate) points: Vec<(f64, f64)>,
-}
+pub(crate) use crate::chart::Series;
 
 /// One series per named variant, its points taken in the same order.
 pub(crate) fn named_series<T>(names: &[(&str, T)], points: Vec<Vec<(f64, f64)>>) -> Vec<Series> {
@@ -176,7 +172,7 @@ pub(crate) fn named_series<T>(names: &[(&str, T)], points: Vec<Vec<(f64, f64)>>)
 }
 
 /// A line chart (SVG) at `dir/file`; `log2_x` puts x on a log2 axis. Does
-/// nothing when `dir` is empty.
+/// nothing when `dir` is empty or there is nothing to draw.
 pub(crate) fn line_chart(
     dir: &str,
     file: &str,
@@ -186,59 +182,24 @@ pub(crate) fn line_chart(
     series: &[Series],
     log2_x: bool,
 ) -> Result<(), String> {
-    use plotters::prelude::*;
     if dir.is_empty() || series.iter().all(|s| s.points.is_empty()) {
         return Ok(());
     }
     let path = std::path::Path::new(dir).join(file);
-    let fx = |x: f64| if log2_x { x.log2() } else { x };
-    let pts = || series.iter().flat_map(|s| s.points.iter());
-    let (x0, x1) = pts().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| {
-        (a.min(fx(p.0)), b.max(fx(p.0)))
-    });
-    let (y0, y1) = pts().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| {
-        (a.min(p.1), b.max(p.1))
-    });
-    let pad = ((y1 - y0) * 0.05).max(1e-3);
-    let xr = if x1 > x0 { x0..x1 } else { x0 - 1.0..x0 + 1.0 };
-    let root = SVGBackend::new(&path, (800, 480)).into_drawing_area();
-    root.fill(&WHITE).map_err(s)?;
-    let mut chart = ChartBuilder::on(&root)
-        .caption(title, ("sans-serif", 18))
-        .margin(12)
-        .x_label_area_size(36)
-        .y_label_area_size(56)
-        .build_cartesian_2d(xr, y0 - pad..y1 + pad)
-        .map_err(s)?;
-    chart
-        .configure_mesh()
-        .x_desc(if log2_x {
-            format!("log2 {x_desc}")
-        } else {
-            x_desc.to_string()
-        })
-        .y_desc(y_desc)
-        .draw()
-        .map_err(s)?;
-    let colors = [BLACK, BLUE, RED, GREEN, MAGENTA, CYAN];
-    for (k, se) in series.iter().enumerate() {
-        let c = colors[k % colors.len()];
-        chart
-            .draw_series(LineSeries::new(
-                se.points.iter().map(|&(x, y)| (fx(x), y)),
-                c,
-            ))
-            .map_err(s)?
-            .label(se.name.clone())
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c));
-    }
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .draw()
-        .map_err(s)?;
-    root.present().map_err(s)?;
+    let mut panel = crate::chart::Panel::new(
+        title,
+        x_desc,
+        y_desc,
+        series
+            .iter()
+            .map(|s| Series {
+                name: s.name.clone(),
+                points: s.points.clone(),
+            })
+            .collect(),
+    );
+    panel.log2_x = log2_x;
+    crate::chart::draw(&path, 800, 480, &[panel])?;
     println!("  wrote {}", path.display());
     Ok(())
 }
