@@ -7,7 +7,6 @@
 //! finest level vs the f64 CPU reference >= 40 dB PSNR, vs in core with the same
 //! switches >= 45 dB (8-bit RGB over black).
 
-use brickray::core::{VolumeData, VolumeDesc};
 use brickray::{
     Camera, FrameDesc, OutOfCoreConfig, RenderSettings, Volume, VolumeFrame, VolumeRenderer,
 };
@@ -19,21 +18,7 @@ use std::sync::Arc;
 fn thick_head_ct() -> Option<Volume> {
     let path = brickray_harness::shared_volume("invesalius_cranium_ct")?;
     let full = brickray::io::read_volume(path).unwrap();
-    let d = full.desc().clone();
-    let VolumeData::I16(all) = full.data() else {
-        panic!("head CT is i16")
-    };
-    let slice = d.dims[0] as usize * d.dims[1] as usize;
-    let nz = d.dims[2].div_ceil(3);
-    let data: Vec<i16> = (0..nz as usize)
-        .flat_map(|z| all[3 * z * slice..(3 * z + 1) * slice].iter().copied())
-        .collect();
-    let desc = VolumeDesc {
-        dims: [d.dims[0], d.dims[1], nz],
-        spacing: [d.spacing[0], d.spacing[1], d.spacing[2] * 3.0],
-        ..d
-    };
-    Some(Volume::new(desc, VolumeData::I16(data)).unwrap())
+    Some(ct::every_third_slice(&full).expect("the head CT is i16"))
 }
 
 fn source(

@@ -1,9 +1,7 @@
 //! The Pareto suite's scenes: five volumes (three shared, two procedural), each
 //! with its transfer function and the modes charted.
 
-use brickray_core::{
-    Camera, RenderMode, TransferFunction, Volume, VolumeData, VolumeDesc, VolumeFrame, synthetic,
-};
+use brickray_core::{Camera, RenderMode, TransferFunction, Volume, VolumeFrame, synthetic};
 use brickray_harness::ct;
 
 /// One volume and the modes charted on it.
@@ -188,19 +186,5 @@ pub(crate) fn ct_every_third_slice() -> Result<Volume, String> {
     let path = brickray_harness::shared_volume("invesalius_cranium_ct")
         .ok_or("this suite needs ../shared/data/invesalius_cranium_ct")?;
     let full = brickray_io::read_volume(&path).map_err(|e| e.to_string())?;
-    let d = full.desc().clone();
-    let slice = d.dims[0] as usize * d.dims[1] as usize;
-    let VolumeData::I16(all) = full.data() else {
-        return Err("the head CT is not i16".into());
-    };
-    let nz = d.dims[2].div_ceil(3);
-    let thick: Vec<i16> = (0..nz as usize)
-        .flat_map(|z| all[3 * z * slice..(3 * z + 1) * slice].iter().copied())
-        .collect();
-    let desc = VolumeDesc {
-        dims: [d.dims[0], d.dims[1], nz],
-        spacing: [d.spacing[0], d.spacing[1], d.spacing[2] * 3.0],
-        ..d
-    };
-    Volume::new(desc, VolumeData::I16(thick)).map_err(|e| e.to_string())
+    ct::every_third_slice(&full).ok_or_else(|| "the head CT is not i16".to_string())
 }
