@@ -104,6 +104,10 @@ pub(crate) struct Args {
     /// Ray cast every frame too (whole frames; default: planned only).
     #[arg(long)]
     raycast: bool,
+    /// Draw without fades between levels (`OutOfCoreConfig::fade` None): a
+    /// fading brick samples two levels, which is ray-cast time.
+    #[arg(long)]
+    no_fades: bool,
 }
 
 /// One case: a source over a transport, its median round.
@@ -135,6 +139,10 @@ pub(crate) struct CaseRow {
     p99_ms: f64,
     p99_over_median: f64,
     slowest_frame_ms: f64,
+    /// With `--raycast` on a device with timestamps: the same for the
+    /// render thread's part of each frame (the frame less the ray-cast
+    /// pass's own time), null otherwise.
+    p99_over_median_host: Option<f64>,
 }
 
 /// The suite's JSON line.
@@ -143,6 +151,9 @@ pub(crate) struct RemoteResult {
     size: u32,
     threads: usize,
     rounds: usize,
+    /// Whether frames were ray cast, and drawn with fades.
+    raycast: bool,
+    fades: bool,
     cases: Vec<CaseRow>,
     /// The store over HTTP at the largest delay: its delay and figures.
     worst_delay_ms: Option<u32>,
@@ -151,6 +162,7 @@ pub(crate) struct RemoteResult {
     bytes_ratio_vs_cut: Option<f64>,
     requests_per_brick: Option<f64>,
     p99_over_median_streaming: Option<f64>,
+    p99_over_median_streaming_host: Option<f64>,
     slowest_streaming_frame_ms: Option<f64>,
     /// The same at 80 ms, when run (the figures the issue names).
     first_image_s_80ms: Option<f64>,
@@ -305,7 +317,14 @@ pub(crate) fn run(args: &Args) -> Result<RemoteResult, String> {
             } else {
                 Lookahead::default()
             };
-            done.push(case(&gpu, &run, opened, threads, lookahead, raycast)?);
+            done.push(case(
+                &gpu,
+                &run,
+                opened,
+                threads,
+                lookahead,
+                (raycast, !args.no_fades),
+            )?);
         }
     }
     let mut results = Vec::new();
@@ -373,6 +392,7 @@ pub(crate) fn run(args: &Args) -> Result<RemoteResult, String> {
             p99_ms: round2(r.p99_ms),
             p99_over_median: round2(r.p99_ms / r.median_ms.max(1e-9)),
             slowest_frame_ms: round2(r.max_ms),
+            p99_over_median_host: r.host_p99_over_median.map(round2),
         });
     }
     let worst = delays.iter().max().copied();
@@ -391,6 +411,8 @@ pub(crate) fn run(args: &Args) -> Result<RemoteResult, String> {
         size,
         threads,
         rounds,
+        raycast,
+        fades: !args.no_fades,
         cases: rows,
         worst_delay_ms: worst,
         first_image_s: store.map(|r| round2(r.first_image_s)),
@@ -398,6 +420,7 @@ pub(crate) fn run(args: &Args) -> Result<RemoteResult, String> {
         bytes_ratio_vs_cut: store.and_then(|r| r.bytes_ratio.map(round2)),
         requests_per_brick: store.map(|r| round2(r.requests_per_brick)),
         p99_over_median_streaming: store.map(|r| round2(r.p99_ms / r.median_ms.max(1e-9))),
+        p99_over_median_streaming_host: store.and_then(|r| r.host_p99_over_median.map(round2)),
         slowest_streaming_frame_ms: store.map(|r| round2(r.max_ms)),
         first_image_s_80ms: at_80.map(|r| round2(r.first_image_s)),
         converged_ratio_80ms_vs_local: at_80.zip(store_local).map(|(r, l)| ratio(r, l)),
@@ -580,6 +603,9 @@ struct CaseResult {
     median_ms: f64,
     p99_ms: f64,
     max_ms: f64,
+    /// p99 over median of the render thread's part of the frames (the
+    /// frame less the ray-cast pass), where measured.
+    host_p99_over_median: Option<f64>,
 }
 
 fn case(
@@ -588,7 +614,7 @@ fn case(
     opened: Opened,
     threads: usize,
     lookahead: Lookahead,
-    raycast: bool,
+    (raycast, fades): (bool, bool),
 ) -> Result<CaseResult, String> {
     let layout = opened.source.layout().clone();
     let d = layout.volume.clone();
@@ -607,6 +633,7 @@ fn case(
         OutOfCoreConfig {
             loader_threads: threads,
             lookahead,
+            fade: OutOfCoreConfig::default().fade.filter(|_| fades),
             ..OutOfCoreConfig::default()
         },
     )
@@ -627,6 +654,7 @@ fn case(
         settings,
         drawn: HashSet::new(),
         streaming_ms: Vec::new(),
+        host_ms: Vec::new(),
         frames: 0,
         raycast,
     };
@@ -690,6 +718,8 @@ fn case(
         median_ms: median(&ms),
         p99_ms: quantile(&ms, 0.99),
         max_ms: ms.iter().copied().fold(0.0, f64::max),
+        host_p99_over_median: (!walk.host_ms.is_empty())
+            .then(|| quantile(&walk.host_ms, 0.99) / median(&walk.host_ms).max(1e-9)),
     })
 }
 
@@ -704,6 +734,9 @@ struct Walk<'a, 'g> {
     /// Planned frames' wall time while bricks were in flight, the first
     /// frame excepted.
     streaming_ms: Vec<f64>,
+    /// The same frames less their ray-cast pass by GPU timestamps (ray
+    /// cast frames on a device with timestamps).
+    host_ms: Vec<f64>,
     /// Frames planned.
     frames: usize,
     /// Ray cast every frame too (`--raycast`), not only plan it.
@@ -714,9 +747,12 @@ impl Walk<'_, '_> {
     /// Plans one frame; returns whether the view has converged.
     fn step(&mut self, r: &mut VolumeRenderer, camera: Camera) -> Result<bool, String> {
         let t = Instant::now();
+        let mut kernel_ms = None;
         if self.raycast {
-            self.run
-                .frame(r, camera, self.frame, self.settings, false)?;
+            kernel_ms = self
+                .run
+                .frame(r, camera, self.frame, self.settings, false)?
+                .gpu_ms;
         } else {
             self.run.plan(r, camera, self.frame, self.settings)?;
         }
@@ -726,6 +762,9 @@ impl Walk<'_, '_> {
         // image's time), the others are the host's frames.
         if self.frames > 0 && (s.cache.requests_in_flight > 0 || !s.converged) {
             self.streaming_ms.push(took.as_secs_f64() * 1e3);
+            if let Some(k) = kernel_ms {
+                self.host_ms.push(took.as_secs_f64() * 1e3 - k);
+            }
         }
         self.frames += 1;
         let v = r.streamed_volume().ok_or("not out of core")?;
