@@ -13,6 +13,9 @@ pub(crate) struct Shot {
     /// The ray-cast pass's own time by GPU timestamps, where the device
     /// has them.
     pub(crate) gpu_ms: Option<f64>,
+    /// The host thread's part of `ms`: `prepare`, recording and submitting,
+    /// before the wait for the GPU.
+    pub(crate) host_ms: f64,
     /// The process's CPU time over the same span ([`process_cpu_ms`]).
     pub(crate) cpu_ms: f64,
     /// The image (RGBA8; empty when not read).
@@ -180,12 +183,13 @@ impl<'a> Runner<'a> {
             self.timer.as_ref(),
         )
         .map_err(|e| e.to_string())?;
-        let (ms, gpu_ms) = (timed.ms, timed.gpu_ms);
+        let (ms, gpu_ms, host_ms) = (timed.ms, timed.gpu_ms, timed.host_ms);
         let cpu_ms = process_cpu_ms() - cpu0;
         if !read {
             return Ok(Shot {
                 ms,
                 gpu_ms,
+                host_ms,
                 cpu_ms,
                 rgba: Vec::new(),
                 samples: 0.0,
@@ -205,6 +209,7 @@ impl<'a> Runner<'a> {
         Ok(Shot {
             ms,
             gpu_ms,
+            host_ms,
             cpu_ms,
             rgba,
             samples: sum as f64 / n.max(1) as f64,

@@ -746,6 +746,7 @@ fn the_remote_suite_runs() {
             "slowest_streaming_frame_ms",
             "raycast",
             "fades",
+            "background",
             "first_image_s_80ms",
             "converged_ratio_80ms_vs_local",
             "requests_saved_by_batching",

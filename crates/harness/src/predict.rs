@@ -130,8 +130,9 @@ pub fn draw_timed(
     desc: &FrameDesc<'_>,
     timer: Option<&crate::GpuTimer>,
 ) -> Result<FrameResult, PrepareError> {
-    let crate::TimedFrame { stats, ms, gpu_ms } =
-        crate::draw_frame_timed(gpu, renderer, target, desc, Some(wgpu::Color::BLACK), timer)?;
+    let crate::TimedFrame {
+        stats, ms, gpu_ms, ..
+    } = crate::draw_frame_timed(gpu, renderer, target, desc, Some(wgpu::Color::BLACK), timer)?;
     let color = target.read_color(gpu);
     let samples = renderer
         .sample_count_texture()

@@ -108,6 +108,10 @@ pub(crate) struct Args {
     /// fading brick samples two levels, which is ray-cast time.
     #[arg(long)]
     no_fades: bool,
+    /// Plan on a worker (`RendererOptions::background_planning`, as the
+    /// viewer does) instead of in `prepare`.
+    #[arg(long)]
+    background: bool,
 }
 
 /// One case: a source over a transport, its median round.
@@ -139,9 +143,9 @@ pub(crate) struct CaseRow {
     p99_ms: f64,
     p99_over_median: f64,
     slowest_frame_ms: f64,
-    /// With `--raycast` on a device with timestamps: the same for the
-    /// render thread's part of each frame (the frame less the ray-cast
-    /// pass's own time), null otherwise.
+    /// With `--raycast`: the same for the render thread's part of each
+    /// frame (`prepare`, recording and submitting, before the wait for the
+    /// GPU), null otherwise.
     p99_over_median_host: Option<f64>,
 }
 
@@ -151,9 +155,10 @@ pub(crate) struct RemoteResult {
     size: u32,
     threads: usize,
     rounds: usize,
-    /// Whether frames were ray cast, and drawn with fades.
+    /// Whether frames were ray cast, drawn with fades, planned on a worker.
     raycast: bool,
     fades: bool,
+    background: bool,
     cases: Vec<CaseRow>,
     /// The store over HTTP at the largest delay: its delay and figures.
     worst_delay_ms: Option<u32>,
@@ -323,7 +328,7 @@ pub(crate) fn run(args: &Args) -> Result<RemoteResult, String> {
                 opened,
                 threads,
                 lookahead,
-                (raycast, !args.no_fades),
+                (raycast, !args.no_fades, args.background),
             )?);
         }
     }
@@ -413,6 +418,7 @@ pub(crate) fn run(args: &Args) -> Result<RemoteResult, String> {
         rounds,
         raycast,
         fades: !args.no_fades,
+        background: args.background,
         cases: rows,
         worst_delay_ms: worst,
         first_image_s: store.map(|r| round2(r.first_image_s)),
@@ -614,7 +620,7 @@ fn case(
     opened: Opened,
     threads: usize,
     lookahead: Lookahead,
-    (raycast, fades): (bool, bool),
+    (raycast, fades, background): (bool, bool, bool),
 ) -> Result<CaseResult, String> {
     let layout = opened.source.layout().clone();
     let d = layout.volume.clone();
@@ -624,7 +630,11 @@ fn case(
         .map_err(|e| e.to_string())?;
     let settings = RenderSettings::default();
     let start = Instant::now();
-    let mut r = VolumeRenderer::new(&gpu.device, brickray_harness::target_desc())
+    let options = brickray_render::RendererOptions {
+        background_planning: background,
+        ..Default::default()
+    };
+    let mut r = VolumeRenderer::with_options(&gpu.device, brickray_harness::target_desc(), options)
         .map_err(|e| e.to_string())?;
     r.set_volume_source(
         &gpu.device,
@@ -734,8 +744,8 @@ struct Walk<'a, 'g> {
     /// Planned frames' wall time while bricks were in flight, the first
     /// frame excepted.
     streaming_ms: Vec<f64>,
-    /// The same frames less their ray-cast pass by GPU timestamps (ray
-    /// cast frames on a device with timestamps).
+    /// The host thread's part of the same frames (`prepare`, recording,
+    /// submitting; ray-cast frames only).
     host_ms: Vec<f64>,
     /// Frames planned.
     frames: usize,
@@ -747,12 +757,13 @@ impl Walk<'_, '_> {
     /// Plans one frame; returns whether the view has converged.
     fn step(&mut self, r: &mut VolumeRenderer, camera: Camera) -> Result<bool, String> {
         let t = Instant::now();
-        let mut kernel_ms = None;
+        let mut host_ms = None;
         if self.raycast {
-            kernel_ms = self
-                .run
-                .frame(r, camera, self.frame, self.settings, false)?
-                .gpu_ms;
+            host_ms = Some(
+                self.run
+                    .frame(r, camera, self.frame, self.settings, false)?
+                    .host_ms,
+            );
         } else {
             self.run.plan(r, camera, self.frame, self.settings)?;
         }
@@ -762,9 +773,7 @@ impl Walk<'_, '_> {
         // image's time), the others are the host's frames.
         if self.frames > 0 && (s.cache.requests_in_flight > 0 || !s.converged) {
             self.streaming_ms.push(took.as_secs_f64() * 1e3);
-            if let Some(k) = kernel_ms {
-                self.host_ms.push(took.as_secs_f64() * 1e3 - k);
-            }
+            self.host_ms.extend(host_ms);
         }
         self.frames += 1;
         let v = r.streamed_volume().ok_or("not out of core")?;
