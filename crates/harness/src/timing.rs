@@ -121,7 +121,7 @@ pub struct TimedFrame {
     pub gpu_ms: Option<f64>,
 }
 
-/// [`draw_frame`], timed: its wall time, and with a `timer` the ray-cast
+/// [`draw_frame`](crate::draw_frame), timed: its wall time, and with a `timer` the ray-cast
 /// pass's own time by GPU timestamps. The renderer's pass timestamps are
 /// set for this frame only.
 pub fn draw_frame_timed(
