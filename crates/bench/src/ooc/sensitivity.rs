@@ -65,8 +65,6 @@ fn levels_text(per_level: &[u32]) -> String {
         .join(" ")
 }
 
-/// (b) Output sensitivity over the procedural source, from an orbit camera at
-/// `distance` (world units; the box's longest side is 1). Figures get `suffix`.
 /// (b) One volume size.
 #[derive(Debug, Serialize)]
 pub(crate) struct SizeRow {
@@ -98,6 +96,9 @@ pub(crate) struct Sensitivity {
     ratios: Vec<SizeRatio>,
 }
 
+/// (b) Output sensitivity over the procedural source, from an orbit camera at
+/// `distance` (world units; the box's longest side is 1), the view named
+/// `view`.
 pub(super) fn part_b(
     gpu: &GpuContext,
     size: u32,

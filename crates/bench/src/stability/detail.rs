@@ -70,7 +70,6 @@ const TOLERANCES: [f32; 4] = [0.0, 2.0, 4.0, 8.0];
 /// Retention the max filter keeps for MIP at every level.
 const MIP_MAX_RETENTION: f64 = 0.9;
 
-/// Case 4.
 /// One filter, mode and level of the thin structures.
 #[derive(Debug, serde::Serialize)]
 struct ThinRow {
@@ -84,6 +83,7 @@ struct ThinRow {
     retention: f64,
 }
 
+/// Case 4.
 pub(crate) fn thin_structures(ctx: &Ctx<'_>) -> Result<Case, String> {
     let size = ctx.size;
     let n = size;

@@ -44,11 +44,6 @@ pub(crate) fn seam_ratio(
     (on / n_on.max(1.0) + 1.0) / (off / n_off.max(1.0) + 1.0)
 }
 
-/// Case 5: an orthographic view down -z, shifted half a pixel, so that every
-/// ray lies exactly on a voxel face in x and y (the columns at multiples of the
-/// brick side on brick faces); and a perspective view (odd width) whose centre
-/// column lies in the brick face x = 1/4 of every level and whose centre row
-/// in y = 1/2, at the finest level and with mixed levels (tolerance 1 px).
 /// One view, mode and renderer of the grazing rays.
 #[derive(Debug, serde::Serialize)]
 struct GrazingRow {
@@ -101,6 +96,11 @@ struct PrecisionFigures {
     f32_sweep: Vec<SweepPoint>,
 }
 
+/// Case 5: an orthographic view down -z, shifted half a pixel, so that every
+/// ray lies exactly on a voxel face in x and y (the columns at multiples of the
+/// brick side on brick faces); and a perspective view (odd width) whose centre
+/// column lies in the brick face x = 1/4 of every level and whose centre row
+/// in y = 1/2, at the finest level and with mixed levels (tolerance 1 px).
 pub(crate) fn grazing(ctx: &Ctx<'_>) -> Result<Case, String> {
     let n = ctx.size;
     let (vol, src) = noise(n as u64, BRICK)?;

@@ -264,9 +264,6 @@ pub(crate) fn summaries(results: &[CaseResult], opt: &PathOptions) -> Vec<super:
         .collect()
 }
 
-/// Prints the cases and returns the suite's figures: `temporal_excess_db_fades`
-/// (the largest change excess in dB with fades), `..._no_fades`, `pops_fades`,
-/// `pops_no_fades` (summed), `holes_max`, and per case.
 /// One LOD path with or without fades.
 #[derive(Debug, Serialize)]
 pub(crate) struct PathRow {
@@ -310,6 +307,9 @@ pub(crate) struct PathFigures {
     pub(super) holes_max: u32,
 }
 
+/// Prints the cases and returns their figures: per path and fades, and
+/// over the paths the largest change excess in dB with and without fades,
+/// the pops summed and the most hole pixels.
 pub(crate) fn figures(results: &[CaseResult]) -> PathFigures {
     let mut rows = Vec::new();
     println!(

@@ -34,8 +34,6 @@ const HF_GAIN_DB: f64 = 3.0;
 /// pre-integrated table (`RenderSettings::preintegrated`).
 const TF_VARIANTS: &[&str] = &["plain", "preintegrated"];
 
-/// Case 3: PSNR against the reference (step 1/32) per step, in core and out of
-/// core at the finest level.
 /// One TF variant and step of the high-frequency TF case.
 #[derive(Debug, serde::Serialize)]
 struct HfRow {
@@ -79,6 +77,8 @@ struct ErtRow {
     time_vs_no_ert: f64,
 }
 
+/// Case 3: PSNR against the reference (step 1/32) per step, in core and out of
+/// core at the finest level.
 pub(crate) fn high_frequency_tf(ctx: &Ctx<'_>) -> Result<Case, String> {
     let size = ctx.size;
     let dims = size as u64;

@@ -28,9 +28,6 @@ const HOLD: usize = 40;
 /// Brick read delays of case 1, ms.
 const DELAYS_MS: [u64; 3] = [0, 5, 20];
 
-/// Case 1: a tiny pool (2 MiB) and a source that sleeps before every brick
-/// read; a cold start view, then a jump to a close-up. Holes per frame
-/// against the reference, frames to converge, frame time.
 /// One added read delay of the streaming case.
 #[derive(Debug, serde::Serialize)]
 struct DelayRow {
@@ -78,6 +75,9 @@ struct PressureFigures {
     need_bricks: u64,
 }
 
+/// Case 1: a tiny pool (2 MiB) and a source that sleeps before every brick
+/// read; a cold start view, then a jump to a close-up. Holes per frame
+/// against the reference, frames to converge, frame time.
 pub(crate) fn streaming(ctx: &Ctx<'_>) -> Result<Case, String> {
     let size = ctx.size;
     let dims = size as u64;
