@@ -97,11 +97,8 @@ fn print_placement(p: &brickray_io::Placement) {
     }
 }
 
-pub(crate) fn cmd_info_input(input: &std::path::Path, read: &ReadOptions) -> Result<(), String> {
-    let reader =
-        brickray_io::open_with(input, read).map_err(|e| StoreError::Input(e).to_string())?;
-    let d = reader.desc();
-    println!("input       {} ({})", input.display(), reader.format());
+/// The `volume` line: dims, type (and labels), spacing, value range.
+fn print_volume(d: &brickray_core::VolumeDesc) {
     println!(
         "volume      {}x{}x{} {}{}, spacing {:?}, value range {:?}",
         d.dims[0],
@@ -112,6 +109,14 @@ pub(crate) fn cmd_info_input(input: &std::path::Path, read: &ReadOptions) -> Res
         d.spacing,
         d.value_range
     );
+}
+
+pub(crate) fn cmd_info_input(input: &std::path::Path, read: &ReadOptions) -> Result<(), String> {
+    let reader =
+        brickray_io::open_with(input, read).map_err(|e| StoreError::Input(e).to_string())?;
+    let d = reader.desc();
+    println!("input       {} ({})", input.display(), reader.format());
+    print_volume(d);
     if let Some(p) = reader.placement() {
         print_placement(&p);
     }
@@ -135,16 +140,7 @@ pub(crate) fn cmd_info(store: &Store, bins: usize) -> Result<(), String> {
     let lay = store.layout().clone();
     let d = store.desc();
     println!("store       {path}");
-    println!(
-        "volume      {}x{}x{} {}{}, spacing {:?}, value range {:?}",
-        d.dims[0],
-        d.dims[1],
-        d.dims[2],
-        d.dtype.name(),
-        if d.kind.is_labels() { " labels" } else { "" },
-        d.spacing,
-        d.value_range
-    );
+    print_volume(d);
     if let Some(p) = store.placement() {
         print_placement(&p);
     }
