@@ -10,10 +10,10 @@ use crate::{GpuContext, Offscreen};
 /// (once), `prepare`, [`GpuTimer::resolve`] into the same encoder, submit and
 /// wait, then [`GpuTimer::read_ms`]. Blocking: tests and benchmarks only.
 ///
-/// On lavapipe the pass reads about 0 ms on frames whose submission also
-/// writes bricks into the atlas (the wait says otherwise), and now and then
-/// under load: there, [`TimedFrame::ms`] and [`TimedFrame::host_ms`] are the
-/// figures to trust.
+/// On lavapipe the pass can read far less than it took on frames whose
+/// submission also writes bricks into the atlas (about 0 ms where the wait
+/// says 100 ms), and now and then under load: there, [`TimedFrame::ms`] and
+/// [`TimedFrame::host_ms`] are the figures to trust.
 #[derive(Debug)]
 pub struct GpuTimer {
     queries: wgpu::QuerySet,
