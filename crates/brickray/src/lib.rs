@@ -54,6 +54,7 @@ pub use brickray_core::{
     LabelError, LabelOverlay, LabelStyle, LabelTable, OverlayError, OverlayMode, OverlayStyle,
     overlay_transform,
 };
+pub use brickray_core::{SpreadError, SpreadSource};
 pub use brickray_render::{
     ColorMap, CtPreset, Intensity, Slab, SlabMode, SliceAxis, SliceError, SliceGeometry, SliceView,
     Window, WindowError,

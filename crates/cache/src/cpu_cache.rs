@@ -190,6 +190,7 @@ mod tests {
             texels: vec![0u8; n].into(),
             sub_cells: Vec::new().into(),
             range: [0.0, 1.0],
+            spread: None,
         }
     }
 

@@ -3,7 +3,12 @@
 //! copies bytes.
 
 use crate::config::{ConfigError, GpuFormat, raw_brick_bytes};
-use brickray_core::{NodeInfo, OctreeLayout, SampleEncoding, sub_cell_ranges};
+use brickray_core::tf::spread::spread_reach;
+use brickray_core::tf::{SPREAD_ROWS, TABLE_MIN_WIDTH};
+use brickray_core::{
+    BrickError, BrickSource, NodeInfo, NodeKey, OctreeLayout, SampleEncoding, sub_cell_ranges,
+    sub_cell_spreads,
+};
 use std::sync::Arc;
 
 /// A brick ready to upload: what the renderer writes into its atlas slot, its
@@ -23,12 +28,20 @@ pub struct PreparedBrick {
     /// `[-inf, inf]` when either is not finite: never skipped; always for
     /// a multi-channel brick (its channels' ranges are its sub-cells').
     pub range: [f32; 2],
+    /// With [`GpuFormat::spread`]: the spread of each stored voxel as
+    /// half-float bits (`stored_side^3`, x fastest), what the renderer writes
+    /// into its spread atlas; the ranges above are then widened by the
+    /// spread's reach ([`brickray_core::tf::spread::spread_reach`]).
+    pub spread: Option<Arc<[u16]>>,
 }
 
 impl PreparedBrick {
-    /// Bytes it occupies (and uploads): `texels.len() + 8 * sub_cells.len()`.
+    /// Bytes it occupies (and uploads): `texels.len() + 8 * sub_cells.len()`,
+    /// and 2 per spread.
     pub fn bytes(&self) -> u64 {
-        self.texels.len() as u64 + 8 * self.sub_cells.len() as u64
+        self.texels.len() as u64
+            + 8 * self.sub_cells.len() as u64
+            + 2 * self.spread.as_ref().map_or(0, |s| s.len() as u64)
     }
 }
 
@@ -77,15 +90,59 @@ impl Preparer {
         }
     }
 
+    /// Prepares brick `key` read from `source` (`raw`: `raw_bytes()`
+    /// little-endian samples, metadata `info`), with its spread read from
+    /// `source` when the format carries one ([`GpuFormat::spread`]).
+    pub fn prepare_from(
+        &self,
+        source: &dyn BrickSource,
+        key: NodeKey,
+        raw: &[u8],
+        info: &NodeInfo,
+    ) -> Result<PreparedBrick, BrickError> {
+        if !self.gpu.spread || self.gpu.channel_count > 1 {
+            return Ok(self.prepare(raw, info));
+        }
+        let side = self.layout.stored_side() as usize;
+        let mut spread = vec![0u16; side * side * side];
+        source.read_spread(key, &mut spread)?;
+        Ok(self.prepare_with_spread(raw, Some(spread.into()), info))
+    }
+
     /// Prepares a brick read from the source (`raw`: `raw_bytes()` little-endian
-    /// samples) whose metadata is `info`.
+    /// samples) whose metadata is `info`, without a spread.
     pub fn prepare(&self, raw: &[u8], info: &NodeInfo) -> PreparedBrick {
         if self.gpu.channel_count > 1 {
             return self.prepare_channels(raw);
         }
+        self.prepare_with_spread(raw, None, info)
+    }
+
+    /// A single-channel brick, with its spread per stored voxel (half-float
+    /// bits) when given: each sub-cell's range widened by the reach of its
+    /// largest spread through any spread table the renderers build (at
+    /// least [`TABLE_MIN_WIDTH`] columns), so that skipping stays
+    /// conservative for the spread's lookups.
+    fn prepare_with_spread(
+        &self,
+        raw: &[u8],
+        spread: Option<Arc<[u16]>>,
+        info: &NodeInfo,
+    ) -> PreparedBrick {
         let texels: Arc<[u8]> = Arc::from(self.encoding.encode(raw).as_ref());
-        let sub_cells: Arc<[[f32; 2]]> =
-            sub_cell_ranges(&self.layout, raw, self.sub_cells_per_axis).into();
+        let mut cells = sub_cell_ranges(&self.layout, raw, self.sub_cells_per_axis);
+        if let Some(s) = &spread {
+            let widths = sub_cell_spreads(&self.layout, s, self.sub_cells_per_axis);
+            for (c, w) in cells.iter_mut().zip(widths) {
+                let reach = spread_reach(w, TABLE_MIN_WIDTH, SPREAD_ROWS) as f32;
+                if reach.is_finite() {
+                    *c = [c[0] - reach, c[1] + reach];
+                } else {
+                    *c = [f32::NEG_INFINITY, f32::INFINITY];
+                }
+            }
+        }
+        let sub_cells: Arc<[[f32; 2]]> = cells.into();
         let range = sub_cells.iter().fold(self.range(info), |[lo, hi], c| {
             if lo.is_finite() && c[0].is_finite() && c[1].is_finite() {
                 [lo.min(c[0]), hi.max(c[1])]
@@ -97,6 +154,7 @@ impl Preparer {
             texels,
             sub_cells,
             range,
+            spread,
         }
     }
 }
@@ -145,6 +203,7 @@ impl Preparer {
             texels: texels.into(),
             sub_cells: sub_cells.into(),
             range: [f32::NEG_INFINITY, f32::INFINITY],
+            spread: None,
         }
     }
 }

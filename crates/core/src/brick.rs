@@ -467,6 +467,27 @@ pub trait BrickSource: Send + Sync {
     /// value (empty: the volume's minimum).
     fn read_brick(&self, key: NodeKey, out: &mut [u8]) -> Result<(), BrickError>;
 
+    /// True when the source delivers each voxel's spread
+    /// ([`read_spread`](Self::read_spread)): the standard deviation of the
+    /// finest voxels a coarse voxel stands for, with which the renderers
+    /// classify coarse levels (`docs/rendering-model.md`, *Coarse levels*).
+    /// False by default: every voxel is drawn as the TF of its value.
+    fn has_spread(&self) -> bool {
+        false
+    }
+
+    /// Writes the node's spread per stored voxel into `out`
+    /// (`stored_side()^3` values, x fastest, apron included, laid out as
+    /// [`read_brick`](Self::read_brick)'s samples): the standard deviation
+    /// of the normalized values of the finest voxels each voxel covers, as
+    /// half-float bits (0 at the finest level). The default, for a source
+    /// without spreads, writes 0 everywhere.
+    fn read_spread(&self, key: NodeKey, out: &mut [u16]) -> Result<(), BrickError> {
+        let _ = key;
+        out.fill(0);
+        Ok(())
+    }
+
     /// How many bricks one [`read_bricks`](Self::read_bricks) call should
     /// carry: 1 (the default) for a source whose reads cost no round trip
     /// (memory, a local file); more for one over the network, where a batch

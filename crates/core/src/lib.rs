@@ -62,8 +62,10 @@ pub use lod::{
     BinStats, ERROR_BINS, LodMetric, NodeError, TfErrorTable, node_pixel_error, node_tf_error,
     node_tf_error_expected, node_visible_error,
 };
-pub use macrocell::{MacroCellGrid, empty_distance, sub_cell_ranges, sub_cells_per_axis};
-pub use moments::{MomentGrid, Moments};
+pub use macrocell::{
+    MacroCellGrid, empty_distance, sub_cell_ranges, sub_cell_spreads, sub_cells_per_axis,
+};
+pub use moments::{MomentGrid, Moments, SpreadError, SpreadSource};
 pub use overlay::{LabelOverlay, OverlayError, OverlayMode, OverlayStyle, overlay_transform};
 pub use pyramid::{ALL_AXES, Children, LayoutError, MAX_LEVELS, anisotropic_split_masks};
 pub use range::{CancelToken, MemRangeReader, ObjectReader, ObjectSpan, RangeRead, RangeReader};

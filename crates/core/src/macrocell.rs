@@ -154,13 +154,43 @@ pub fn sub_cell_ranges(layout: &OctreeLayout, bytes: &[u8], n: u32) -> Vec<[f32;
     if n == 0 || side == 0 || bytes.len() / d.dtype.size() < side * side * side {
         return vec![[f32::NEG_INFINITY, f32::INFINITY]; cells];
     }
-    let (b, a) = (layout.brick as f64, layout.apron as i64);
     let vals: Vec<f32> = d
         .dtype
         .decode_le(bytes)
         .into_iter()
         .map(|raw| d.normalize(raw))
         .collect();
+    sub_cell_extents(layout, &vals, n)
+}
+
+/// The largest spread of each of a brick's `n^3` sub-cells (x fastest), over
+/// the same voxels as [`sub_cell_ranges`]: `spread` is the brick's spread per
+/// stored voxel as half-float bits ([`crate::BrickSource::read_spread`]). A
+/// malformed brick (too short) or a NaN spread gives `inf` (widened without
+/// bound: never skipped).
+pub fn sub_cell_spreads(layout: &OctreeLayout, spread: &[u16], n: u32) -> Vec<f32> {
+    let side = layout.stored_side() as usize;
+    if n == 0 || side == 0 || spread.len() < side * side * side {
+        return vec![f32::INFINITY; (n.max(1) as usize).pow(3)];
+    }
+    let vals: Vec<f32> = spread
+        .iter()
+        .map(|&b| {
+            let s = half::f16::from_bits(b).to_f32();
+            if s.is_nan() { f32::INFINITY } else { s }
+        })
+        .collect();
+    sub_cell_extents(layout, &vals, n)
+        .into_iter()
+        .map(|m| m[1].max(0.0))
+        .collect()
+}
+
+/// `[min, max]` of `vals` (one per stored voxel) over each sub-cell's voxels.
+fn sub_cell_extents(layout: &OctreeLayout, vals: &[f32], n: u32) -> Vec<[f32; 2]> {
+    let side = layout.stored_side() as usize;
+    let cells = (n.max(1) as usize).pow(3);
+    let (b, a) = (layout.brick as f64, layout.apron as i64);
     let span = |j: u32| -> (usize, usize) {
         let lo = ((j as f64 * b / n as f64 - 0.5).floor() as i64 + a).clamp(0, side as i64 - 1);
         let hi = (((j + 1) as f64 * b / n as f64 - 0.5).floor() as i64 + 1 + a)

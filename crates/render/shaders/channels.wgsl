@@ -109,6 +109,12 @@ fn cursor_value(cur: Cursor, t: f32) -> f32 {
     return lane_of(channel_values(tex_at(cur.r, t)), cur.c);
 }
 
+// No spreads in this kernel (modes.wgsl's SPREAD is off): every sample is
+// classified as the TF of its value.
+fn cursor_spread(cur: Cursor, t: f32) -> f32 {
+    return 0.0;
+}
+
 fn cursor_gradient(cur: Cursor, t: f32) -> vec4<f32> {
     return quad_get(channel_gradients(tex_at(cur.r, t)), cur.c);
 }

@@ -119,6 +119,12 @@ struct TfInfo {
 // associated colour and opacity of a segment of step_factor * 2^r reference
 // lengths whose value runs linearly from front to back.
 @group(1) @binding(5) var tf_preint: texture_2d_array<f32>;
+// The spread table (brickray_core::tf::SpreadTable::corrected_layers; a 1x1
+// stand-in unless the pipeline classifies spreads): layer r holds, at
+// (value, spread row), the TF averaged over a Gaussian of that spread, its
+// opacity corrected to step_factor * 2^r reference lengths; row 0 is the
+// corrected table's row r.
+@group(1) @binding(6) var tf_spread: texture_2d_array<f32>;
 
 // A ray through one pixel, parametrised by world distance t from its origin on
 // the near plane.
@@ -275,6 +281,26 @@ fn tf_sample(v: f32, row: f32) -> vec4<f32> {
     let w = tf_info.width;
     let x = (clamp(v, 0.0, 1.0) * (w - 1.0) + 0.5) / w;
     return textureSampleLevel(tf_table, tf_sampler, vec2<f32>(x, row), 0.0);
+}
+
+// The TF at v averaged over a Gaussian of spread `s` (normalized units), its
+// opacity corrected to the step of row coordinate `row` (its layer:
+// floor(row * rows)): one filtered read, bilinear in the value's column and
+// the spread's row 31 sqrt(s / 0.5) (brickray_core::tf::spread). A spread of 0
+// reads the corrected table itself, so the finest level is classified
+// exactly as without spreads.
+// The largest spread (brickray_core::tf::spread::SIGMA_MAX).
+const SPREAD_SIGMA_MAX: f32 = 0.5;
+
+fn tf_spread_sample(v: f32, s: f32, row: f32) -> vec4<f32> {
+    if (!(s > 0.0)) {
+        return tf_sample(v, row);
+    }
+    let w = tf_info.width;
+    let rows = f32(textureDimensions(tf_spread).y);
+    let y = (rows - 1.0) * sqrt(min(s, SPREAD_SIGMA_MAX) / SPREAD_SIGMA_MAX);
+    let uv = vec2<f32>((clamp(v, 0.0, 1.0) * (w - 1.0) + 0.5) / w, (y + 0.5) / rows);
+    return textureSampleLevel(tf_spread, tf_sampler, uv, i32(row * tf_info.rows), 0.0);
 }
 
 // The pre-integrated segment from value `front` to `back` (clamped to 0..1) at

@@ -61,6 +61,12 @@ fn cursor_value(c: Cursor, t: f32) -> f32 {
     return sample_value(tex_at(c.r, t));
 }
 
+// No spreads in this kernel (modes.wgsl's SPREAD is off): every sample is
+// classified as the TF of its value.
+fn cursor_spread(c: Cursor, t: f32) -> f32 {
+    return 0.0;
+}
+
 fn cursor_gradient(c: Cursor, t: f32) -> vec4<f32> {
     return gradient(tex_at(c.r, t));
 }

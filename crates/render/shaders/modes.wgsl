@@ -26,6 +26,10 @@ override LABELS: bool = false;
 // A label map with smooth boundaries (RenderSettings::smooth_labels): the
 // label with the largest trilinear weight among a sample's 8 voxels.
 override SMOOTH_LABELS: bool = false;
+// DVR classifies each sample with its spread (out of core, a source with
+// spreads: coarse levels drawn as the average of what their finest voxels
+// look like under the TF; docs/rendering-model.md, "Coarse levels").
+override SPREAD: bool = false;
 
 // Of 8 voxels' label texels and trilinear weights, the label whose weights
 // sum highest, ties to the first corner's (labels::smooth_label_at).
@@ -255,7 +259,11 @@ fn dvr_sample(acc: ptr<function, Accum>, c: Cursor, r: Ray, t: f32, ts: f32, fro
         }
         s = vec4<f32>(p.rgb / p.a, p.a);
     } else {
-        s = tf_sample(v, tf_v);
+        if (SPREAD) {
+            s = tf_spread_sample(v, cursor_spread(c, t), tf_v);
+        } else {
+            s = tf_sample(v, tf_v);
+        }
         if (s.a <= 0.0) {
             return false;
         }

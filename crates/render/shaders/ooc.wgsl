@@ -14,6 +14,28 @@ fn atlas_value(uv: vec3<f32>) -> f32 {
     return textureSampleLevel(atlas_tex, atlas_sampler, uv, 0.0).r * ooc.value_scale + ooc.value_offset;
 }
 
+// Each atlas texel's spread (normalized units; R16Float at the atlas's
+// slots, a 1x1x1 stand-in unless SPREAD), filtered like the value.
+@group(2) @binding(11) var spread_tex: texture_3d<f32>;
+
+// The spread at the cursor's point, mixed like the value while fading (the
+// mixture's spread is taken as the mix of the spreads).
+fn cursor_spread(c: Cursor, t: f32) -> f32 {
+    let passes = cursor_passes(c);
+    var uv = c.ua + c.ud * t;
+    var w = 1.0 - c.b.fb_w;
+    var s = 0.0;
+    var i = 0u;
+    loop {
+        s = s + w * textureSampleLevel(spread_tex, atlas_sampler, uv, 0.0).r;
+        i = i + 1u;
+        if (i >= passes) { break; }
+        uv = c.fa + c.fd * t;
+        w = c.b.fb_w;
+    }
+    return s;
+}
+
 // A fading leaf mixes its value with its ancestor's at the same point, before
 // classification (one transfer-function lookup; iso-surfaces and maxima move
 // continuously from the old level to the new).

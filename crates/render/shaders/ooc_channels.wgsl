@@ -105,6 +105,12 @@ fn ooc_world_gradient(g: vec3<f32>) -> vec4<f32> {
 }
 
 // The cursor's channel's gradient (iso shading).
+// No spreads in this kernel (modes.wgsl's SPREAD is off): every sample is
+// classified as the TF of its value.
+fn cursor_spread(c: Cursor, t: f32) -> f32 {
+    return 0.0;
+}
+
 fn cursor_gradient(c: Cursor, t: f32) -> vec4<f32> {
     return quad_get(cursor_gradients(c, t), c.c);
 }

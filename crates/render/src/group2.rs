@@ -85,11 +85,12 @@ pub(crate) fn volume_layout_entries(storage: u32) -> Vec<wgpu::BindGroupLayoutEn
 /// Per-stage bindings of a kernel besides group 2's storage buffers: the
 /// transfer function's 2 storage buffers and the prediction history; uniforms
 /// of frame, prediction, TF, volume and overlay; the sampled volume, host
-/// depth, corrected TF table, pre-integrated table, and the overlay's labels
-/// and table; the volume and TF samplers.
+/// depth, corrected TF table, pre-integrated table, spread table, the
+/// overlay's labels and table, and out of core the spread atlas; the volume
+/// and TF samplers.
 pub(crate) const STORAGE_OUTSIDE_VOLUME: u32 = 3;
 pub(crate) const UNIFORM_BUFFERS: u32 = 5;
-pub(crate) const SAMPLED_TEXTURES: u32 = 6;
+pub(crate) const SAMPLED_TEXTURES: u32 = 8;
 /// Sampled textures of the multi-channel kernel: one more, its channels'
 /// stacked TF tables (`backend/channels.rs`).
 pub(crate) const CHANNEL_SAMPLED_TEXTURES: u32 = SAMPLED_TEXTURES + 1;
@@ -147,6 +148,26 @@ pub(crate) const USAGE_BINDING: u32 = 6;
 pub(crate) const STOP_DEPTH_BINDING: u32 = 7;
 /// Storage textures of group 2: the stop depth.
 pub(crate) const STORAGE_TEXTURES: u32 = 1;
+/// The binding of the spread atlas (`shaders/ooc.wgsl`; single-channel
+/// volumes out of core).
+pub(crate) const SPREAD_BINDING: u32 = 11;
+
+/// The layout of group 2 of the single-channel out-of-core kernel: the
+/// out-of-core entries and the spread atlas.
+pub(crate) fn ooc_single_layout_entries() -> Vec<wgpu::BindGroupLayoutEntry> {
+    let mut e = ooc_layout_entries();
+    e.push(wgpu::BindGroupLayoutEntry {
+        binding: SPREAD_BINDING,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Texture {
+            sample_type: wgpu::TextureSampleType::Float { filterable: true },
+            view_dimension: wgpu::TextureViewDimension::D3,
+            multisampled: false,
+        },
+        count: None,
+    });
+    e
+}
 
 /// The layout of group 2 out of core: the shared volume entries and the
 /// read-write usage counters.

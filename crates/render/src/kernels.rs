@@ -81,11 +81,14 @@ pub(crate) struct Variant {
     /// Channels of a multi-channel volume (`CHANNELS` in channels.wgsl; 0
     /// for the single-channel kernels, which do not declare it).
     pub(crate) channels: u32,
+    /// DVR classifies each sample with its spread (`SPREAD` in modes.wgsl;
+    /// out of core, a volume whose source has spreads).
+    pub(crate) spread: bool,
 }
 
 /// The override constants of a pipeline, by WGSL name (modes.wgsl,
 /// predict.wgsl).
-pub(crate) const OVERRIDES: [&str; 12] = [
+pub(crate) const OVERRIDES: [&str; 13] = [
     "MODE",
     "ERT",
     "ESS",
@@ -97,6 +100,7 @@ pub(crate) const OVERRIDES: [&str; 12] = [
     "WEIGHTS",
     "LABELS",
     "SMOOTH_LABELS",
+    "SPREAD",
     "OVERLAY",
 ];
 
@@ -145,6 +149,7 @@ impl Variant {
                 _ => 0,
             },
             channels: 0,
+            spread: false,
         };
         match prediction {
             Some(p) if mode == KernelMode::Iso => Variant {
@@ -176,6 +181,7 @@ impl Variant {
             smooth_labels: false,
             overlay: overlay.filter(|_| !labels).map_or(0, overlay_id),
             channels: 0,
+            spread: false,
         }
     }
 
@@ -219,7 +225,7 @@ impl Variant {
         c
     }
 
-    fn shared_constants(&self) -> [(&'static str, f64); 12] {
+    fn shared_constants(&self) -> [(&'static str, f64); 13] {
         let b = |x: bool| if x { 1.0 } else { 0.0 };
         let v = [
             self.mode as u32 as f64,
@@ -233,6 +239,7 @@ impl Variant {
             b(self.weights),
             b(self.labels),
             b(self.smooth_labels),
+            b(self.spread),
             self.overlay as f64,
         ];
         std::array::from_fn(|i| (OVERRIDES[i], v[i]))

@@ -196,6 +196,8 @@ impl VolumeRenderer {
             )
         };
         let backend = backend.get();
+        let mapping = self.mapping.ok_or(PrepareError::NoVolume)?;
+        let variant = variant_of(&desc.settings, mapping.slice.is_some());
         uploaded += self.tf.prepare(
             device,
             queue,
@@ -204,11 +206,10 @@ impl VolumeRenderer {
             desc.settings.preintegrated
                 && !backend.labels()
                 && matches!(desc.settings.mode, brickray_core::RenderMode::Dvr),
+            variant.spread,
         )?;
         let mut uniforms = FrameUniforms::new(desc, backend.max_leaves());
-        let mapping = self.mapping.ok_or(PrepareError::NoVolume)?;
         mapping.apply(&mut uniforms);
-        let variant = variant_of(&desc.settings, mapping.slice.is_some());
         let predict = self
             .prediction
             .filter(|_| variant.predicts())
@@ -318,13 +319,20 @@ pub(crate) fn frame_variant(
     if slice {
         Variant::slice(b.measures_weights(), b.labels(), overlay)
     } else {
-        Variant::of(
+        let v = Variant::of(
             settings,
             prediction,
             b.measures_weights(),
             b.labels(),
             overlay,
-        )
+        );
+        // Coarse levels classified with their spread: point-sampled DVR
+        // only (iso and MIP use the mean field, pre-integrated segments
+        // ignore the spread; docs/rendering-model.md).
+        Variant {
+            spread: b.spread() && v.mode == crate::kernels::KernelMode::Dvr && !v.preint,
+            ..v
+        }
     }
 }
 

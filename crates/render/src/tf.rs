@@ -4,11 +4,15 @@
 //! with its sampler, their sizes, the pre-integrated table (a filtered
 //! `Rgba16Float` 2D array, one layer per step length:
 //! `brickray_core::tf::PreintTable`; a 1x1 stand-in while pre-integration is
-//! off), and the bind group.
+//! off), the spread table (a filtered `Rgba16Float` 2D array, one layer per
+//! step length, each the TF convolved by 32 spreads:
+//! `brickray_core::tf::SpreadTable::corrected_layers`; a 1x1 stand-in until a
+//! volume with spreads is drawn), and the bind group.
 
 use crate::error::RenderError;
 use crate::gpu::{self, GrowBuffer, Uniform};
 use brickray_core::TransferFunction;
+use brickray_core::tf::SPREAD_ROWS;
 
 /// `struct TfInfo` of common.wgsl.
 #[repr(C)]
@@ -48,6 +52,10 @@ pub(crate) struct TfTables {
     table: Option<(wgpu::Texture, wgpu::TextureView)>,
     /// The pre-integrated table (or the 1x1 stand-in while it is off).
     preint: Option<(wgpu::Texture, wgpu::TextureView)>,
+    /// The spread table (or the 1x1 stand-in until one is asked for).
+    spread: Option<(wgpu::Texture, wgpu::TextureView)>,
+    /// What the spread table was built for (`None`: the stand-in, or stale).
+    spread_key: Option<TableKey>,
     table_key: Option<TableKey>,
     /// What the pre-integrated table was built for (`None`: the stand-in, or
     /// stale). Kept while pre-integration is off, so toggling it rebuilds nothing.
@@ -77,8 +85,8 @@ fn buffer(ty: wgpu::BufferBindingType) -> wgpu::BindingType {
 }
 
 /// Group 1's layout: entries (0), prefix sums (1), info (2), corrected table (3),
-/// its sampler (4, also the pre-integrated table's) and the pre-integrated table
-/// (5).
+/// its sampler (4, also the other tables'), the pre-integrated table (5) and
+/// the spread table (6).
 /// Generations of transfer functions, unique in the process: renderers that
 /// share a volume plan it with the generation of whichever draws it first.
 pub(crate) fn next_generation() -> u64 {
@@ -86,7 +94,7 @@ pub(crate) fn next_generation() -> u64 {
     NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
 }
 
-pub(crate) fn layout_entries() -> [wgpu::BindGroupLayoutEntry; 6] {
+pub(crate) fn layout_entries() -> [wgpu::BindGroupLayoutEntry; 7] {
     let storage = wgpu::BufferBindingType::Storage { read_only: true };
     [
         entry(0, buffer(storage)),
@@ -112,15 +120,23 @@ pub(crate) fn layout_entries() -> [wgpu::BindGroupLayoutEntry; 6] {
                 multisampled: false,
             },
         ),
+        entry(
+            6,
+            wgpu::BindingType::Texture {
+                sample_type: wgpu::TextureSampleType::Float { filterable: true },
+                view_dimension: wgpu::TextureViewDimension::D2Array,
+                multisampled: false,
+            },
+        ),
     ]
 }
 
 impl TfTables {
     pub(crate) fn new(device: &wgpu::Device) -> Result<TfTables, RenderError> {
-        // The corrected and the pre-integrated table.
+        // The corrected, the pre-integrated and the spread table.
         gpu::need(
             "max_sampled_textures_per_shader_stage",
-            2,
+            3,
             device.limits().max_sampled_textures_per_shader_stage as u64,
         )?;
         let layout = gpu::scoped(device, "brickray-render tf layout", || {
@@ -145,8 +161,10 @@ impl TfTables {
             sampler,
             table: None,
             preint: None,
+            spread: None,
             table_key: None,
             preint_key: None,
+            spread_key: None,
             bind_group: None,
             current: None,
             generation: 0,
@@ -207,8 +225,8 @@ impl TfTables {
 
     /// Builds the corrected table of the current TF for `step_factor` and `rows`
     /// step lengths when it is stale (and with `preint` the pre-integrated
-    /// table of as many layers), and the bind group when a resource changed;
-    /// returns the bytes written.
+    /// table of as many layers, with `spread` the spread table), and the bind
+    /// group when a resource changed; returns the bytes written.
     pub(crate) fn prepare(
         &mut self,
         device: &wgpu::Device,
@@ -216,6 +234,7 @@ impl TfTables {
         step_factor: f32,
         rows: u32,
         preint: bool,
+        spread: bool,
     ) -> Result<u64, RenderError> {
         if self.current.is_none() {
             return Ok(0);
@@ -226,6 +245,7 @@ impl TfTables {
             written += self.write_table(device, queue, key)?;
         }
         written += self.write_preintegrated(device, queue, key, preint)?;
+        written += self.write_spread(device, queue, key, spread)?;
         if self.bind_group.is_none() {
             self.bind_group = Some(self.make_bind_group(device)?);
         }
@@ -266,6 +286,7 @@ impl TfTables {
         };
         let mut written = write_rgba16f(queue, tex, &t.texels, size);
         self.preint_key = None;
+        self.spread_key = None;
         written += self.info.write(
             queue,
             TfInfo {
@@ -308,7 +329,14 @@ impl TfTables {
         };
         let old = self.preint.take();
         let old_size = old.as_ref().map(|(tex, _)| tex.size());
-        let (pair, bytes) = upload_preint(device, queue, old, table)?;
+        let table = table.map(|t| ArrayTable {
+            width: t.size,
+            height: t.size,
+            layers: t.layers,
+            texels: t.texels,
+        });
+        let label = "brickray-render tf pre-integrated table";
+        let (pair, bytes) = upload_array(device, queue, old, table, label)?;
         if old_size != Some(pair.0.size()) {
             self.bind_group = None;
         }
@@ -317,10 +345,61 @@ impl TfTables {
         Ok(bytes)
     }
 
+    /// The spread table when asked for and stale: per step length (layer),
+    /// the TF convolved by [`SPREAD_ROWS`] spreads at the corrected table's
+    /// width, opacity corrected after the average; a stand-in until the
+    /// first one. Its build costs about 0.2 s for a 512-entry TF (one core,
+    /// `docs/rendering-model.md`), paid when the TF or the step changes.
+    fn write_spread(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        key: TableKey,
+        spread: bool,
+    ) -> Result<u64, RenderError> {
+        let build = spread && self.spread_key != Some(key);
+        if build {
+            gpu::need(
+                "max_texture_array_layers",
+                key.rows.max(1) as u64,
+                device.limits().max_texture_array_layers as u64,
+            )?;
+        }
+        if !build && self.spread.is_some() {
+            return Ok(0);
+        }
+        let table = match (build, self.current.as_ref()) {
+            (true, Some(tf)) => {
+                let max_width = device.limits().max_texture_dimension_2d;
+                let t = tf.spread_table(SPREAD_ROWS, max_width);
+                Some(ArrayTable {
+                    width: t.width,
+                    height: t.rows,
+                    layers: key.rows.max(1),
+                    texels: t.corrected_layers(key.step_factor, key.rows.max(1)),
+                })
+            }
+            _ => None,
+        };
+        let old = self.spread.take();
+        let old_size = old.as_ref().map(|(tex, _)| tex.size());
+        let label = "brickray-render tf spread table";
+        let (pair, bytes) = upload_array(device, queue, old, table, label)?;
+        if old_size != Some(pair.0.size()) {
+            self.bind_group = None;
+        }
+        self.spread = Some(pair);
+        self.spread_key = build.then_some(key);
+        Ok(bytes)
+    }
+
     /// Group 1 over the entries, prefix sums, uniform and both tables.
     fn make_bind_group(&self, device: &wgpu::Device) -> Result<wgpu::BindGroup, RenderError> {
-        let (Some((_, view)), Some((_, preint_view))) = (self.table.as_ref(), self.preint.as_ref())
-        else {
+        let (Some((_, view)), Some((_, preint_view)), Some((_, spread_view))) = (
+            self.table.as_ref(),
+            self.preint.as_ref(),
+            self.spread.as_ref(),
+        ) else {
             return Err(RenderError::NotPrepared);
         };
         gpu::scoped(device, "brickray-render tf bind group", || {
@@ -352,6 +431,10 @@ impl TfTables {
                         binding: 5,
                         resource: wgpu::BindingResource::TextureView(preint_view),
                     },
+                    wgpu::BindGroupEntry {
+                        binding: 6,
+                        resource: wgpu::BindingResource::TextureView(spread_view),
+                    },
                 ],
             })
         })
@@ -380,28 +463,38 @@ pub(crate) fn table_texture(
     )
 }
 
-/// Uploads a pre-integrated table (`None`: a 1x1 transparent stand-in) into
+/// A table of 2D layers: `layers` of `height` rows of `width` RGBA texels,
+/// layer-major, then row, then column.
+struct ArrayTable {
+    width: u32,
+    height: u32,
+    layers: u32,
+    texels: Vec<[f32; 4]>,
+}
+
+/// Uploads a table of layers (`None`: a 1x1 transparent stand-in) into
 /// `old` when it has the right size, else into a new texture (device limits
 /// checked first); returns the texture and view and the bytes written.
-fn upload_preint(
+fn upload_array(
     device: &wgpu::Device,
     queue: &wgpu::Queue,
     old: Option<(wgpu::Texture, wgpu::TextureView)>,
-    table: Option<brickray_core::tf::PreintTable>,
+    table: Option<ArrayTable>,
+    label: &'static str,
 ) -> Result<((wgpu::Texture, wgpu::TextureView), u64), RenderError> {
-    let (side, layers, texels) = match &table {
-        Some(t) => (t.size, t.layers, t.texels.as_slice()),
-        None => (1, 1, &[[0.0f32; 4]][..]),
+    let (width, height, layers, texels) = match &table {
+        Some(t) => (t.width, t.height, t.layers, t.texels.as_slice()),
+        None => (1, 1, 1, &[[0.0f32; 4]][..]),
     };
     let size = wgpu::Extent3d {
-        width: side,
-        height: side,
+        width,
+        height,
         depth_or_array_layers: layers,
     };
     let pair = match old {
         Some(p) if p.0.size() == size => p,
         _ => {
-            let tex = table_texture(device, "brickray-render tf pre-integrated table", size)?;
+            let tex = table_texture(device, label, size)?;
             let view = tex.create_view(&wgpu::TextureViewDescriptor {
                 dimension: Some(wgpu::TextureViewDimension::D2Array),
                 ..Default::default()

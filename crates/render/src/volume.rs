@@ -58,6 +58,10 @@ pub(crate) struct OocParams {
 struct Pool {
     atlas: wgpu::Texture,
     atlas_view: wgpu::TextureView,
+    /// Each texel's spread (`R16Float`, the atlas's dims) when the format
+    /// carries spreads, else a 1x1x1 stand-in.
+    spread: wgpu::Texture,
+    spread_view: wgpu::TextureView,
     atlas_bytes: u64,
     slots: wgpu::Buffer,
     slots_cpu: Vec<SlotInfo>,
@@ -75,25 +79,34 @@ impl Pool {
     ) -> Result<Pool, RenderError> {
         let gpu = streamer.gpu_format();
         let dims = streamer.pool().atlas_dims();
-        let atlas = gpu::texture(
-            device,
-            &wgpu::TextureDescriptor {
-                label: Some("brickray-render brick atlas"),
-                size: wgpu::Extent3d {
-                    width: dims[0],
-                    height: dims[1],
-                    depth_or_array_layers: dims[2],
+        let atlas_texture = |label, dims: [u32; 3], format| {
+            gpu::texture(
+                device,
+                &wgpu::TextureDescriptor {
+                    label: Some(label),
+                    size: wgpu::Extent3d {
+                        width: dims[0],
+                        height: dims[1],
+                        depth_or_array_layers: dims[2],
+                    },
+                    mip_level_count: 1,
+                    sample_count: 1,
+                    dimension: wgpu::TextureDimension::D3,
+                    format,
+                    usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+                    view_formats: &[],
                 },
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D3,
-                format,
-                usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-                view_formats: &[],
-            },
+            )
+        };
+        let atlas = atlas_texture("brickray-render brick atlas", dims, format)?;
+        let spread_dims = if gpu.spread { dims } else { [1, 1, 1] };
+        let spread = atlas_texture(
+            "brickray-render spread atlas",
+            spread_dims,
+            wgpu::TextureFormat::R16Float,
         )?;
-        let atlas_bytes =
-            dims.iter().map(|&d| d as u64).product::<u64>() * gpu.texel_bytes() as u64;
+        let atlas_bytes = dims.iter().map(|&d| d as u64).product::<u64>()
+            * (gpu.texel_bytes() + gpu.spread_bytes()) as u64;
         let slot_count = streamer.pool().slot_count().max(1) as u64;
         let rows = streamer.slot_rows() as usize;
         let sub_cells = gpu::storage_buffer(
@@ -104,6 +117,8 @@ impl Pool {
         Ok(Pool {
             atlas_view: atlas.create_view(&Default::default()),
             atlas,
+            spread_view: spread.create_view(&Default::default()),
+            spread,
             atlas_bytes,
             slots: Pool::slot_table(device, rows)?,
             slots_cpu: vec![bytemuck::Zeroable::zeroed(); rows],
@@ -195,6 +210,37 @@ impl Pool {
                 depth_or_array_layers: side,
             },
         );
+        let mut spread_bytes = 0;
+        if let Some(s) = b
+            .spread
+            .as_deref()
+            .filter(|_| self.spread.depth_or_array_layers() > 1)
+        {
+            queue.write_texture(
+                wgpu::TexelCopyTextureInfo {
+                    texture: &self.spread,
+                    mip_level: 0,
+                    origin: wgpu::Origin3d {
+                        x: up.atlas_offset[0],
+                        y: up.atlas_offset[1],
+                        z: up.atlas_offset[2],
+                    },
+                    aspect: wgpu::TextureAspect::All,
+                },
+                bytemuck::cast_slice(s),
+                wgpu::TexelCopyBufferLayout {
+                    offset: 0,
+                    bytes_per_row: Some(side * 2),
+                    rows_per_image: Some(side),
+                },
+                wgpu::Extent3d {
+                    width: side,
+                    height: side,
+                    depth_or_array_layers: side,
+                },
+            );
+            spread_bytes = 2 * s.len() as u64;
+        }
         let cells: &[u8] = bytemuck::cast_slice(&b.sub_cells);
         queue.write_buffer(&self.sub_cells, up.slot as u64 * cells.len() as u64, cells);
         if let Some(s) = self.slots_cpu.get_mut(up.slot as usize) {
@@ -205,7 +251,7 @@ impl Pool {
             };
             self.slots_dirty = true;
         }
-        (b.texels.len() + cells.len()) as u64
+        (b.texels.len() + cells.len()) as u64 + spread_bytes
     }
 
     fn write_fade(&mut self, f: &FadeSlot) {
@@ -296,6 +342,7 @@ impl Shared {
         Bound {
             params: &self.params.buffer,
             atlas: &self.pool.atlas_view,
+            spread: &self.pool.spread_view,
             sampler: &self.sampler,
             slots: &self.pool.slots,
             sub_cells: &self.pool.sub_cells,
@@ -385,6 +432,8 @@ impl Shared {
 pub(crate) struct Bound<'a> {
     pub(crate) params: &'a wgpu::Buffer,
     pub(crate) atlas: &'a wgpu::TextureView,
+    /// The spread atlas (a 1x1x1 stand-in without spreads).
+    pub(crate) spread: &'a wgpu::TextureView,
     pub(crate) sampler: &'a wgpu::Sampler,
     pub(crate) slots: &'a wgpu::Buffer,
     pub(crate) sub_cells: &'a wgpu::Buffer,
@@ -433,13 +482,17 @@ impl StreamedVolume {
         if layout.is_channel_volume() {
             crate::backend::ooc_channels::check_limits(device)?;
         }
-        let gpu_format = GpuFormat::for_layout(
+        let mut gpu_format = GpuFormat::for_layout(
             &layout,
             encoding::caps(device),
             options.u8_filtering,
             std::mem::size_of::<SlotInfo>() as u32,
             device.limits().max_texture_dimension_3d,
         );
+        // Spreads classify coarse levels of a single-channel intensity
+        // volume (a label map's levels are modes; channels carry none).
+        gpu_format.spread =
+            source.has_spread() && !layout.is_channel_volume() && !layout.volume.kind.is_labels();
         let format =
             encoding::wgpu_format_lanes(gpu_format.encoding.format, gpu_format.lanes() as usize);
         let mut streamer = Streamer::new(source, config, gpu_format)?;

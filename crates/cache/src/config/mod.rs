@@ -223,6 +223,11 @@ pub struct GpuFormat {
     /// Each channel's encoding (its own value range; channel 0's is
     /// `encoding`; entries past the channels repeat it).
     pub channel_encodings: [SampleEncoding; brickray_core::MAX_CHANNELS],
+    /// The atlas carries each texel's spread (a second, `R16Float` atlas at
+    /// the same slots; [`brickray_core::BrickSource::read_spread`]): coarse
+    /// levels classified with their spread. Set when the source delivers
+    /// spreads; 2 more bytes per stored voxel.
+    pub spread: bool,
 }
 
 /// Which size overflowed.
@@ -390,6 +395,7 @@ impl GpuFormat {
                     SampleEncoding::choose(layout.volume.dtype, *r, caps, u8_filtering)
                 })
             }),
+            spread: false,
         }
     }
 
@@ -429,9 +435,14 @@ impl GpuFormat {
         self.slot_bytes(layout).map(|_| ())
     }
 
-    /// Bytes of one prepared brick: `stored_side^3` texels and `sub_cells^3`
-    /// ranges of 8 bytes per channel (what the CPU cache counts and a frame
-    /// uploads).
+    /// Bytes of one atlas texel's spread ([`Self::spread`]): 2 or 0.
+    pub fn spread_bytes(&self) -> u32 {
+        if self.spread { 2 } else { 0 }
+    }
+
+    /// Bytes of one prepared brick: `stored_side^3` texels (and spreads) and
+    /// `sub_cells^3` ranges of 8 bytes per channel (what the CPU cache counts
+    /// and a frame uploads).
     pub fn prepared_brick_bytes(&self, layout: &OctreeLayout) -> Result<u64, ConfigError> {
         let side = stored_side(layout)? as u64;
         let n = self.sub_cells_per_axis as u64;
@@ -440,7 +451,7 @@ impl GpuFormat {
         };
         let texels = side
             .checked_pow(3)
-            .and_then(|v| v.checked_mul(self.texel_bytes() as u64));
+            .and_then(|v| v.checked_mul((self.texel_bytes() + self.spread_bytes()) as u64));
         let cells = n
             .checked_pow(3)
             .and_then(|v| v.checked_mul(8 * self.channel_count as u64));

@@ -109,7 +109,7 @@ pub(crate) fn fetch_brick(
     catching(key, || {
         let mut buf = vec![0u8; prep.raw_bytes()];
         source.read_brick(key, &mut buf)?;
-        Ok(prep.prepare(&buf, info))
+        prep.prepare_from(source, key, &buf, info)
     })
 }
 
@@ -133,7 +133,7 @@ pub(crate) fn fetch_bricks(
             .zip(jobs)
             .zip(&bufs)
             .map(|((r, (key, info)), buf)| match r {
-                Ok(()) => Ok(prep.prepare(buf, info)),
+                Ok(()) => catching(*key, || prep.prepare_from(source, *key, buf, info)),
                 // Whatever the source says of a cancelled read, nobody wants it.
                 Err(_) if cancel.is_cancelled() => Err(LoadError::Cancelled { key: *key }),
                 Err(e) => Err(LoadError::from(e)),

@@ -62,6 +62,21 @@ pub fn spread_row_coord(sigma: f64, rows: u32) -> f64 {
     ((rows - 1) as f64 * (sigma.min(SIGMA_MAX) / SIGMA_MAX).sqrt()).min((rows - 1) as f64)
 }
 
+/// How far beyond a range of values a lookup with a spread of at most
+/// `sigma_max` can read through a [`SpreadTable`] of `width` columns and
+/// `rows` rows: the Gaussian's reach at the row at or above `sigma_max`,
+/// and one column (the bilinear lookup's neighbour). 0 for `sigma_max <= 0`.
+/// A range widened by it on both sides bounds every texel such a lookup
+/// reads ([`TransferFunction::is_transparent_spread`]; the renderers widen
+/// their sub-cell ranges by it).
+pub fn spread_reach(sigma_max: f32, width: u32, rows: u32) -> f64 {
+    if sigma_max.is_nan() || sigma_max <= 0.0 {
+        return 0.0;
+    }
+    let row = spread_row_coord(sigma_max as f64, rows).ceil() as u32;
+    TRUNCATE * spread_row_sigma(row, rows) + 1.0 / (width.max(2) - 1) as f64
+}
+
 /// The TF convolved with truncated Gaussians: `rows` rows of `width` RGBA
 /// texels (straight colour, opacity at the reference length), row-major.
 #[derive(Debug, Clone, PartialEq)]
@@ -189,8 +204,7 @@ impl TransferFunction {
         if sigma_max.is_nan() || sigma_max <= 0.0 {
             return self.is_transparent(min, max);
         }
-        let row = spread_row_coord(sigma_max as f64, rows).ceil() as u32;
-        let reach = TRUNCATE * spread_row_sigma(row, rows) + 1.0 / (width.max(2) - 1) as f64;
+        let reach = spread_reach(sigma_max, width, rows);
         // Round the widened range outwards in f32.
         let lo = (min as f64 - reach) as f32 - f32::EPSILON;
         let hi = (max as f64 + reach) as f32 + f32::EPSILON;

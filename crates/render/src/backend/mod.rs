@@ -46,6 +46,11 @@ pub(crate) trait VolumeBackend: std::fmt::Debug {
     /// label table: the kernels draw it unshaded and without
     /// pre-integration, which would interpolate between ids).
     fn labels(&self) -> bool;
+    /// True when the volume's atlas carries spreads (out of core, a source
+    /// with spreads): DVR classifies coarse levels with them.
+    fn spread(&self) -> bool {
+        false
+    }
     /// Most index leaves one ray may visit (0 in core).
     fn max_leaves(&self) -> u32;
     /// Step lengths the kernel samples with (rows of the corrected TF table):

@@ -14,7 +14,7 @@ use super::ooc_channels::OocChannels;
 use crate::desc::OutOfCoreStats;
 use crate::error::RenderError;
 use crate::gpu;
-use crate::group2::{STOP_DEPTH_BINDING, USAGE_BINDING, check_ooc_limits};
+use crate::group2::{SPREAD_BINDING, STOP_DEPTH_BINDING, USAGE_BINDING, check_ooc_limits};
 use crate::kernels::KernelKind;
 use crate::volume::{Bound, Planned, StreamedVolume};
 use brickray_cache::{MAX_QUERIES_PER_FRAME, QueryBatch, UsageFrame, ViewFeedback};
@@ -65,7 +65,7 @@ impl OutOfCore {
         };
         let entries = match channels {
             Some(_) => super::ooc_channels::layout_entries(),
-            None => crate::group2::ooc_layout_entries(),
+            None => crate::group2::ooc_single_layout_entries(),
         };
         let group_layout = gpu::scoped(device, "brickray-render out-of-core layout", || {
             device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
@@ -264,8 +264,12 @@ fn bind_group(
                 resource: wgpu::BindingResource::TextureView(occlusion.stop_view()),
             },
         ];
-        if let Some(c) = channels {
-            entries.extend(c.entries());
+        match channels {
+            Some(c) => entries.extend(c.entries()),
+            None => entries.push(wgpu::BindGroupEntry {
+                binding: SPREAD_BINDING,
+                resource: wgpu::BindingResource::TextureView(v.spread),
+            }),
         }
         device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("brickray-render out of core"),
@@ -309,6 +313,10 @@ impl VolumeBackend for OutOfCore {
 
     fn labels(&self) -> bool {
         self.volume.lock().layout.volume.kind.is_labels()
+    }
+
+    fn spread(&self) -> bool {
+        self.volume.lock().gpu_format().spread
     }
 
     fn max_leaves(&self) -> u32 {

@@ -383,7 +383,18 @@ fn check_ooc_params(m: &naga::Module) {
 #[test]
 fn ooc_kernel_matches_the_rust_side() {
     let m = module("ooc", &ooc());
-    check_kernel("ooc", &m, &crate::group2::ooc_layout_entries());
+    check_kernel("ooc", &m, &crate::group2::ooc_single_layout_entries());
+    // The spread's row mapping uses the core's largest spread.
+    let (_, c) = m
+        .constants
+        .iter()
+        .find(|(_, c)| c.name.as_deref() == Some("SPREAD_SIGMA_MAX"))
+        .expect("SPREAD_SIGMA_MAX");
+    assert!(matches!(
+        m.global_expressions[c.init],
+        naga::Expression::Literal(naga::Literal::F32(v))
+            if v as f64 == brickray_core::tf::spread::SIGMA_MAX
+    ));
     check_ooc_params(&m);
     check_struct(
         &m,
@@ -658,6 +669,15 @@ fn every_override_permutation_validates() {
     }
     combos.push((KernelMode::Iso, 0b1011_1011, 1));
     combos.push((KernelMode::Mip, 0b011 | 1 << 7, 1));
+    // DVR with spreads (bit 10): every combination of ERT, ESS and
+    // shading, with the visible weights, and under an overlay.
+    for bits in 0..8u32 {
+        combos.push((KernelMode::Dvr, bits | 1 << 10, 0));
+        combos.push((KernelMode::Dvr, bits | 1 << 7 | 1 << 10, 0));
+    }
+    for overlay in [1u32, 2] {
+        combos.push((KernelMode::Dvr, 0b111 | 1 << 10, overlay));
+    }
     for (name, src) in [("incore", incore()), ("ooc", ooc())] {
         for &(mode, bits, overlay) in &combos {
             let s = specialise(name, &src, mode, bits, overlay);

@@ -14,9 +14,13 @@
 //! [`MomentGrid`] is one level held in memory (the in-memory twin of a store
 //! level with its spread): built from a [`Volume`] (spread 0) and halved along
 //! any axes ([`MomentGrid::downsample`], the anisotropic pyramid's split
-//! masks).
+//! masks). [`SpreadSource`] serves another source's bricks with the spreads
+//! of a pyramid of them, for the renderers.
 
 use crate::volume::{DType, Volume, VolumeData, VolumeDesc, VolumeError};
+
+mod source;
+pub use source::{SpreadError, SpreadSource};
 
 /// `E[x]` and `E[x^2]` of a set of normalized values.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -522,7 +526,7 @@ mod consistency {
         /// more than 0.06 above the TF of the mean" until 2026-12-04 (two-valued
         /// volumes under TFs nearly linear between the two values lose 0.075
         /// against 0.008 and 0.170 against 0.048; seeds in
-        /// `proptest-regressions/moments.txt`), then "no voxel more than 0.5
+        /// `proptest-regressions/moments/mod.txt`), then "no voxel more than 0.5
         /// from its children" later that day, when a two-valued volume
         /// (0.22 and 0.71 under a TF opaque below 0.09) gave 0.516: a
         /// Gaussian of that spread reaches three sigmas past both values. The
