@@ -272,3 +272,141 @@ fn the_finest_level_is_unchanged_and_skipping_stays_conservative() {
         .unwrap_or_else(|e| panic!("{e}"));
     }
 }
+
+/// The issue's bone ramp on the head CT: opacity 0 at 100 HU, 0.02 at 150,
+/// 0.5 at 300.
+fn ct_bone_ramp() -> TransferFunction {
+    use brickray_harness::ct::hu;
+    TransferFunction::from_points(
+        &[
+            (hu(100.0), [0.8, 0.5, 0.4, 0.0]),
+            (hu(150.0), [0.9, 0.8, 0.7, 0.02]),
+            (hu(300.0), [1.0, 0.95, 0.85, 0.5]),
+        ],
+        512,
+    )
+}
+
+/// The pareto suite's MRI TF.
+fn mri_tf() -> TransferFunction {
+    TransferFunction::from_points(
+        &[
+            (0.12, [0.3, 0.12, 0.06, 0.0]),
+            (0.35, [0.9, 0.5, 0.3, 0.08]),
+            (0.7, [1.0, 0.9, 0.8, 0.4]),
+        ],
+        512,
+    )
+}
+
+/// A converged out-of-core image of `source` at `tolerance_px`, with the
+/// working set's bricks.
+fn draw_at(
+    source: Arc<dyn brickray::BrickSource>,
+    tf: &TransferFunction,
+    desc: &FrameDesc<'_>,
+    size: u32,
+    tolerance_px: f32,
+) -> (Vec<u8>, u32) {
+    let g = gpu();
+    let mut r = VolumeRenderer::new(&g.device, targets()).unwrap();
+    let config = OutOfCoreConfig {
+        tolerance_px,
+        upload_budget_bytes: 1 << 30,
+        fade: None,
+        ..Default::default()
+    };
+    r.set_volume_source(&g.device, &g.queue, source, config)
+        .unwrap();
+    r.set_transfer_function(&g.device, &g.queue, tf).unwrap();
+    let target = Offscreen::new(&g.device, size, size);
+    let settled = draw_until_settled(g, &mut r, &target, desc, 80).unwrap();
+    assert!(settled.is_some(), "not converged at {tolerance_px} px");
+    let bricks = r.stats().out_of_core.unwrap().cache.working_set_bricks;
+    (target.read_color(g), bricks as u32)
+}
+
+/// The shared head CT (isotropic octree), the head CT at 4.5 mm slices
+/// (anisotropic store) under the issue's bone ramp, and the T1 MRI under
+/// the pareto TF, 192 px, orbit at distance 2: out of core at 1, 2 and 4 px
+/// with and without spreads against in core (the finest level). Prints the
+/// figures (`--nocapture`); asserts that spreads never lose more than
+/// 0.5 dB and gain at least 1 dB on average where a coarse level is drawn.
+#[test]
+#[cfg_attr(
+    no_shared_data,
+    ignore = "needs ../shared/data (the shared volumes), absent when the tests were built"
+)]
+fn shared_volumes_lose_less_at_coarse_levels_with_spreads() {
+    let ct = brickray_harness::shared_volume("invesalius_cranium_ct");
+    let mri = brickray_harness::shared_volume("pycortex_s1_t1_mri");
+    let (Some(ct), Some(mri)) = (ct, mri) else {
+        return;
+    };
+    let ct = brickray::io::read_volume(ct).unwrap();
+    let ct5 = brickray_harness::ct::every_third_slice(&ct).unwrap();
+    let mri = brickray::io::read_volume(mri).unwrap();
+    let size = 192;
+    let g = gpu();
+    let dir = tempfile::tempdir().unwrap();
+    let mut gains = Vec::new();
+    for (name, vol, tf, anisotropic) in [
+        ("ct", &ct, ct_bone_ramp(), false),
+        ("ct5", &ct5, ct_bone_ramp(), true),
+        ("mri", &mri, mri_tf(), false),
+    ] {
+        let d = vol.desc();
+        let frame = VolumeFrame::centered(d.dims, d.spacing);
+        let desc = FrameDesc {
+            camera: Camera::orbit(frame.center(), 2.0, 0.5, 0.3),
+            frame,
+            viewport: brickray::Viewport::full(size, size),
+            settings: RenderSettings::default(),
+            host_depth: None,
+            time: None,
+        };
+        let mut incore = VolumeRenderer::new(&g.device, targets()).unwrap();
+        incore.set_volume(&g.device, &g.queue, vol).unwrap();
+        incore
+            .set_transfer_function(&g.device, &g.queue, &tf)
+            .unwrap();
+        let target = Offscreen::new(&g.device, size, size);
+        brickray_harness::draw_frame(g, &mut incore, &target, &desc, Some(wgpu::Color::BLACK))
+            .unwrap();
+        let finest = target.read_color(g);
+        let path = dir.path().join(format!("{name}.brs"));
+        let mut reader = brickray::io::MemoryReader::new(vol.clone(), name);
+        let options = brickray::store::BuildOptions {
+            anisotropic,
+            ..Default::default()
+        };
+        brickray::store::build(&mut reader, &path, &options).unwrap();
+        let plain: Arc<dyn brickray::BrickSource> = Arc::new(brickray::store::open(&path).unwrap());
+        let spread: Arc<dyn brickray::BrickSource> =
+            Arc::new(SpreadSource::new(plain.clone(), vol).unwrap());
+        for tol in [1.0f32, 2.0, 4.0] {
+            let (without, bricks) = draw_at(plain.clone(), &tf, &desc, size, tol);
+            let (with, bricks_with) = draw_at(spread.clone(), &tf, &desc, size, tol);
+            assert_eq!(bricks, bricks_with, "{name} at {tol} px: another cut");
+            let (p_without, p_with) = (psnr(&without, &finest), psnr(&with, &finest));
+            eprintln!(
+                "{name} at {tol} px ({bricks} bricks): vs in core, means {p_without:.2} dB, \
+                 spreads {p_with:.2} dB ({:+.2})",
+                p_with - p_without
+            );
+            if p_without < 45.0 {
+                assert!(
+                    p_with >= p_without - 0.5,
+                    "{name} at {tol} px: spreads {p_with:.2} dB, means {p_without:.2} dB"
+                );
+                gains.push(p_with - p_without);
+            }
+        }
+    }
+    let mean = gains.iter().sum::<f64>() / gains.len().max(1) as f64;
+    eprintln!(
+        "mean gain where a coarse level is drawn: {mean:+.2} dB over {} cases",
+        gains.len()
+    );
+    assert!(!gains.is_empty() && mean >= 1.0, "mean gain {mean:.2} dB");
+}

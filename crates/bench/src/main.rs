@@ -21,6 +21,7 @@ mod remote;
 mod report;
 mod runner;
 mod soak;
+mod spread;
 mod stability;
 mod u8;
 mod visibility;
@@ -110,6 +111,9 @@ enum Suite {
     Raw(raw::Args),
     /// Memory and frame time over a long random-camera run.
     Soak(soak::Args),
+    /// Coarse levels classified with their spread against the TF of their
+    /// values, out of core: frame time and PSNR against in core.
+    Spread(spread::Args),
     /// Visibility feedback: working set, image and latency per policy along a
     /// camera path with a half turn (head CT and procedural shells).
     Visibility(visibility::Args),
@@ -155,6 +159,7 @@ fn main() -> ExitCode {
         Suite::Preint(a) => emit(preint::run(&a)),
         Suite::Raw(a) => emit(raw::run(&a)),
         Suite::Soak(a) => emit(soak::run(&a)),
+        Suite::Spread(a) => emit(spread::run(&a)),
         Suite::Host(a) => emit(host::run(&a)),
         Suite::Stability(a) => emit(stability::run(&a)),
         Suite::U8(a) => emit(u8::run(&a)),

@@ -233,6 +233,29 @@ fn the_u8_suite_runs() {
     assert!(dvr["exact"]["ms"].as_f64().unwrap() > 0.0, "{fig:?}");
 }
 
+/// The `spread` suite at 32 px, one round, one tolerance (stand-ins in a
+/// clone without `../shared/data`).
+#[test]
+fn the_spread_suite_runs() {
+    let fig = smoke(
+        &[
+            "spread",
+            "--size",
+            "32",
+            "--rounds",
+            "1",
+            "--tolerances",
+            "4",
+        ],
+        &["rows", "setup", "spread_over_plain_worst"],
+    );
+    assert_eq!(rows(&fig, "rows").len(), 3, "{fig:?}");
+    let ct5 = row(&fig, "rows", "volume", "ct5");
+    assert!(ct5["spread"]["ms"].as_f64().unwrap() > 0.0, "{fig:?}");
+    assert!(ct5["bricks"].as_u64().unwrap() >= 1, "{fig:?}");
+    assert_eq!(rows(&fig, "setup").len(), 3, "{fig:?}");
+}
+
 #[test]
 fn the_raw_suite_runs() {
     let fig = smoke(

@@ -292,15 +292,29 @@ fn tf_sample(v: f32, row: f32) -> vec4<f32> {
 // The largest spread (brickray_core::tf::spread::SIGMA_MAX).
 const SPREAD_SIGMA_MAX: f32 = 0.5;
 
+// The two reads are loops of at most one trip, not the sides of an `if`
+// (lavapipe runs both sides of an `if` for the whole SIMD group; a loop no
+// lane enters costs nothing).
 fn tf_spread_sample(v: f32, s: f32, row: f32) -> vec4<f32> {
-    if (!(s > 0.0)) {
-        return tf_sample(v, row);
+    var out = vec4<f32>(0.0);
+    let spread = s > 0.0;
+    var plain = !spread;
+    loop {
+        if (!plain) { break; }
+        out = tf_sample(v, row);
+        plain = false;
     }
-    let w = tf_info.width;
-    let rows = f32(textureDimensions(tf_spread).y);
-    let y = (rows - 1.0) * sqrt(min(s, SPREAD_SIGMA_MAX) / SPREAD_SIGMA_MAX);
-    let uv = vec2<f32>((clamp(v, 0.0, 1.0) * (w - 1.0) + 0.5) / w, (y + 0.5) / rows);
-    return textureSampleLevel(tf_spread, tf_sampler, uv, i32(row * tf_info.rows), 0.0);
+    var wide = spread;
+    loop {
+        if (!wide) { break; }
+        let w = tf_info.width;
+        let rows = f32(textureDimensions(tf_spread).y);
+        let y = (rows - 1.0) * sqrt(min(s, SPREAD_SIGMA_MAX) / SPREAD_SIGMA_MAX);
+        let uv = vec2<f32>((clamp(v, 0.0, 1.0) * (w - 1.0) + 0.5) / w, (y + 0.5) / rows);
+        out = textureSampleLevel(tf_spread, tf_sampler, uv, i32(row * tf_info.rows), 0.0);
+        wide = false;
+    }
+    return out;
 }
 
 // The pre-integrated segment from value `front` to `back` (clamped to 0..1) at

@@ -19,19 +19,22 @@ fn atlas_value(uv: vec3<f32>) -> f32 {
 @group(2) @binding(11) var spread_tex: texture_3d<f32>;
 
 // The spread at the cursor's point, mixed like the value while fading (the
-// mixture's spread is taken as the mix of the spreads).
+// mixture's spread is taken as the mix of the spreads). A brick of the
+// finest level has none: its texels are not read (a fading one reads only
+// its coarser fallback's). The reads are the trips of a loop, not the sides
+// of an `if`: lavapipe runs both sides of an `if` for the whole SIMD group
+// (see cursor_passes), and a group of finest bricks makes no trip.
 fn cursor_spread(c: Cursor, t: f32) -> f32 {
-    let passes = cursor_passes(c);
-    var uv = c.ua + c.ud * t;
-    var w = 1.0 - c.b.fb_w;
     var s = 0.0;
-    var i = 0u;
+    var i = select(1u, 0u, c.b.coarse);
+    let end = cursor_passes(c);
     loop {
+        if (i >= end) { break; }
+        let own = i == 0u;
+        let uv = select(c.fa + c.fd * t, c.ua + c.ud * t, own);
+        let w = select(c.b.fb_w, 1.0 - c.b.fb_w, own);
         s = s + w * textureSampleLevel(spread_tex, atlas_sampler, uv, 0.0).r;
         i = i + 1u;
-        if (i >= passes) { break; }
-        uv = c.fa + c.fd * t;
-        w = c.b.fb_w;
     }
     return s;
 }

@@ -77,6 +77,9 @@ struct Brick {
     fb_kuv: vec3<f32>,
     fb_f3: vec3<f32>,
     fb_w: f32,
+    // The brick sampled is coarser than the finest level along some axis:
+    // its voxels may have a spread (the finest level's is 0).
+    coarse: bool,
 }
 
 fn brick_of(leaf: OctBox, slot: u32) -> Brick {
@@ -131,6 +134,7 @@ fn brick_of(leaf: OctBox, slot: u32) -> Brick {
             b.fb_w = 0.0;
         }
     }
+    b.coarse = any(b.f3 > vec3<f32>(1.0));
     return b;
 }
 
