@@ -60,4 +60,10 @@ impl BrickSource for CountingSource {
         }
         self.inner.read_brick(key, out)
     }
+    fn has_spread(&self) -> bool {
+        self.inner.has_spread()
+    }
+    fn read_spread(&self, key: NodeKey, out: &mut [u16]) -> Result<(), BrickError> {
+        self.inner.read_spread(key, out)
+    }
 }
