@@ -630,3 +630,33 @@ proptest! {
         }
     }
 }
+
+/// The head CT of the shared data (4 levels, i16, an anisotropic pyramid of
+/// its 0.96 x 0.96 x 1.5 mm voxels too): every node's spreads equal the
+/// reference's bits.
+#[test]
+fn the_head_ct_s_spreads_equal_the_reference() {
+    let Some(data) = shared_data() else { return };
+    let json = data.join("invesalius_cranium_ct/invesalius_cranium_ct.json");
+    let volume = brickray_io::read_volume(&json).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    for anisotropic in [false, true] {
+        let out = dir.path().join("ct.brs");
+        let o = BuildOptions {
+            anisotropic,
+            spread: true,
+            ..BuildOptions::default()
+        };
+        brickray_store::build_file(&json, &out, &o).unwrap();
+        let store = Arc::new(open(&out).unwrap());
+        assert!(store.has_spread() && store.levels() >= 3);
+        let reference = SpreadSource::new(store.clone(), &volume).unwrap();
+        for key in keys(&store) {
+            assert_eq!(
+                spreads(store.as_ref(), key),
+                spreads(&reference, key),
+                "{key:?}"
+            );
+        }
+    }
+}
