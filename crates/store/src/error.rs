@@ -223,22 +223,6 @@ pub enum StoreError {
         /// Bytes of one finest-level brick slab (brick + 2 apron slices).
         slab: u64,
     },
-    /// A build that records spreads ([`crate::BuildOptions::spread`]) needs
-    /// its levels built in one streaming pass (the moments travel with the
-    /// values through it), and that pass does not fit the memory bound: the
-    /// banded build that would otherwise run does not carry the moments.
-    /// Nothing was written.
-    #[error(
-        "recording spreads needs the levels built in one streaming pass, which needs about \
-         {needed} bytes of buffers, but the memory bound is {bound} bytes (the banded build \
-         of larger slices records no spreads); raise the bound or build without spreads"
-    )]
-    SpreadNeedsOnePass {
-        /// Estimated bytes of the streaming pass with its moment windows.
-        needed: u64,
-        /// The configured bound.
-        bound: u64,
-    },
     /// The build's output is one of its input files (the same file, by device
     /// and inode, whatever the spelling: links, `./`, `..`). Nothing was written.
     #[error("output {output} is an input of the build ({input}); refusing to overwrite it")]

@@ -122,7 +122,14 @@ impl LevelBuf {
                         p.slices.push_back(s);
                         if ctx.spread.is_some() {
                             let mut m = p.take_moments(pdims[0] as usize * pdims[1] as usize);
-                            self.downsample_moments(&ctx.layout, self.next_down, pdims, &mut m);
+                            let rows = (0, pdims[1]);
+                            self.downsample_moments(
+                                &ctx.layout,
+                                self.next_down,
+                                pdims,
+                                rows,
+                                &mut m,
+                            );
                             p.moments.push_back(m);
                         }
                     }
@@ -131,9 +138,8 @@ impl LevelBuf {
                         path,
                         rows,
                         buf,
+                        moments,
                     } => {
-                        // A banded build never records spreads (refused up front).
-                        debug_assert!(ctx.spread.is_none());
                         let (j0, j1) = *rows;
                         buf.resize((j1 - j0) as usize * pdims[0] as usize * size, 0);
                         self.downsample(ctx, self.next_down, pdims, (j0, j1), buf);
@@ -142,6 +148,19 @@ impl LevelBuf {
                             * size as u64;
                         file.write_all_at(buf, off)
                             .map_err(|e| StoreError::io(path, e))?;
+                        // The same rows' moments (a build that records spreads).
+                        if let Some(mo) = moments {
+                            let n = (j1 - j0) as usize * pdims[0] as usize;
+                            mo.buf.resize(n, Moments::default());
+                            self.downsample_moments(
+                                &ctx.layout,
+                                self.next_down,
+                                pdims,
+                                (j0, j1),
+                                mo.buf,
+                            );
+                            mo.file.write_rows(self.next_down, j0, mo.buf, mo.bytes)?;
+                        }
                     }
                     Sink::None => {}
                 }
@@ -442,11 +461,21 @@ pub(super) enum Sink<'a> {
     None,
     /// The next coarser level's window.
     Level(&'a mut LevelBuf),
-    /// Rows `rows` of each coarser slice, into a raw file of the coarser level.
+    /// Rows `rows` of each coarser slice, into a raw file of the coarser level
+    /// (and their moments into a file of its moments, when recorded).
     File {
         file: &'a std::fs::File,
         path: &'a Path,
         rows: (u32, u32),
         buf: &'a mut Vec<u8>,
+        moments: Option<MomentOut<'a>>,
     },
+}
+
+/// Where a banded level's filtered moments go, and the buffers they pass
+/// through.
+pub(super) struct MomentOut<'a> {
+    pub(super) file: &'a super::spread::MomentFile,
+    pub(super) buf: &'a mut Vec<Moments>,
+    pub(super) bytes: &'a mut Vec<u8>,
 }

@@ -40,9 +40,9 @@ mod level;
 mod spread;
 mod stage;
 
-use level::{LevelBuf, Sink};
-use spread::SpreadSink;
+use level::{LevelBuf, MomentOut, Sink};
 pub(crate) use spread::spread_brick_bytes;
+use spread::{MomentFile, SpreadSink};
 
 /// Options of a build.
 #[derive(Debug, Clone, PartialEq)]
@@ -71,10 +71,10 @@ pub struct BuildOptions {
     /// section; default false): the standard deviation of the normalized
     /// values of the finest voxels it stands for, which the renderers
     /// classify coarse levels with ([`brickray_core::BrickSource::read_spread`]).
-    /// Intensity volumes with the average filter only, built in one
-    /// streaming pass: a label map, another filter, or a volume whose slices
-    /// need a banded build within `memory_bound` is refused
-    /// ([`StoreError::BadOption`], [`StoreError::SpreadNeedsOnePass`]).
+    /// Intensity volumes with the average filter only: a label map or
+    /// another filter is refused ([`StoreError::BadOption`]). The moment
+    /// windows (16 bytes a coarse voxel) count against `memory_bound`, and
+    /// a banded build carries the moments through its temporary files.
     pub spread: bool,
 }
 
@@ -307,14 +307,6 @@ pub fn build(
         .saturating_add((8u64 << 20).min(opts.memory_bound / 16));
     let top = layout.levels - 1;
     let first_plan = plan(&layout, top, opts.memory_bound, fixed, opts.spread)?;
-    if let (true, Plan::Bands { .. }) = (opts.spread, first_plan) {
-        // The moments travel with the values through one streaming pass
-        // only: what that pass would need.
-        return Err(StoreError::SpreadNeedsOnePass {
-            needed: stream_need(&layout, top, fixed, true),
-            bound: opts.memory_bound,
-        });
-    }
     let needed = first_plan.need();
     remove_stale(parent_dir(out));
     let tmp = PartialFile::create(out)?;
@@ -365,6 +357,9 @@ pub fn build(
     let mut top = top;
     let mut owned: Option<brickray_io::RawReader> = None;
     let mut _level_file: Option<PartialFile> = None;
+    // The moments of level `top` when it is not the finest (a banded build
+    // that records spreads wrote them beside the level's values).
+    let mut moments_in: Option<MomentFile> = None;
     let mut cur_plan = first_plan;
     let mut banded = 0u8;
     loop {
@@ -374,7 +369,7 @@ pub fn build(
         };
         match cur_plan {
             Plan::Stream { per, .. } => {
-                run_stream(&mut ctx, input, top, per, &mut w, &pb)?;
+                run_stream(&mut ctx, input, moments_in.as_ref(), top, per, &mut w, &pb)?;
                 break;
             }
             Plan::Bands { band_bricks, .. } => {
@@ -385,16 +380,26 @@ pub fn build(
                 f.file()
                     .set_len(plen)
                     .map_err(|e| StoreError::io(f.path(), e))?;
+                let moments_out = if opts.spread {
+                    Some(MomentFile::create(out, pdims)?)
+                } else {
+                    None
+                };
                 run_bands(
                     &mut ctx,
                     input,
                     top,
                     band_bricks,
-                    f.file(),
-                    f.path(),
+                    Files {
+                        values: f.file(),
+                        path: f.path(),
+                        moments_in: moments_in.as_ref(),
+                        moments_out: moments_out.as_ref(),
+                    },
                     &mut w,
                     &pb,
                 )?;
+                moments_in = moments_out;
                 let pdesc = brickray_core::VolumeDesc {
                     dims: pdims,
                     ..layout.volume.clone()
@@ -403,7 +408,7 @@ pub fn build(
                 _level_file = Some(f);
                 top -= 1;
                 banded += 1;
-                cur_plan = plan(&layout, top, opts.memory_bound, fixed, false)?;
+                cur_plan = plan(&layout, top, opts.memory_bound, fixed, opts.spread)?;
             }
         }
     }
@@ -704,7 +709,7 @@ fn stream_need(layout: &OctreeLayout, top: u8, fixed: u64, spread: bool) -> u64 
             .sum();
         window * all
     };
-    // The moments (16 bytes a voxel) of every level above `top`.
+    // The moments (16 bytes a voxel) of every level that has them.
     let moments = if spread {
         spread::window_bytes(layout, top, window)
     } else {
@@ -740,13 +745,23 @@ fn plan(
         };
     }
     // Bands: one full input slice to read into, the band window, one band of
-    // coarser rows.
+    // coarser rows; with spreads the coarser rows' moments (and their
+    // bytes), and when `top` is not the finest level its band's moment
+    // window and the bytes one band slice of them is read through.
     let gy = d[1].div_ceil(layout.brick);
+    let finest = top + 1 == layout.levels;
     let band_need = |bb: u32| {
         let (lo, hi) = band_rows(layout, d[1], 0, bb.min(gy));
-        let band = (hi - lo) as u64 * d[0] as u64 * size;
+        let voxels = (hi - lo) as u64 * d[0] as u64;
+        let band = voxels * size;
         let per = per_step(band, layout.brick) as u64;
-        slice + (side + 2 + 2 * per) * band + band / 2 + fixed
+        let window = side + 2 + 2 * per;
+        let moments = match (spread, finest) {
+            (false, _) => 0,
+            (true, true) => 2 * voxels * 16,
+            (true, false) => (window + 3) * voxels * 16,
+        };
+        slice + window * band + band / 2 + moments + fixed
     };
     let mut lo = 1u32;
     if band_need(lo) > bound {
@@ -775,6 +790,7 @@ fn plan(
 fn run_stream<W: Write>(
     ctx: &mut Ctx,
     input: &mut dyn VolumeReader,
+    moments_in: Option<&MomentFile>,
     top: u8,
     per: u32,
     w: &mut W,
@@ -786,6 +802,7 @@ fn run_stream<W: Write>(
     let d = layout.level_dims(top);
     let slice_bytes = d[0] as usize * d[1] as usize * layout.dtype().size();
     let full = top + 1 == layout.levels;
+    let mut bytes = Vec::new();
     let mut z = 0;
     while z < d[2] {
         let z1 = (z + per).min(d[2]);
@@ -793,6 +810,12 @@ fn run_stream<W: Write>(
             let mut s = levels[finest].take_buffer(slice_bytes);
             input.read_slices(zi, zi + 1, &mut s)?;
             levels[finest].slices.push_back(s);
+            // Level `top`'s moments, when it is not the finest level.
+            if let Some(mf) = moments_in {
+                let mut m = levels[finest].take_moments(0);
+                mf.read_rows(zi, (0, d[1]), &mut m, &mut bytes)?;
+                levels[finest].moments.push_back(m);
+            }
         }
         z = z1;
         for l in (0..=finest).rev() {
@@ -810,16 +833,27 @@ fn run_stream<W: Write>(
     Ok(())
 }
 
+/// The temporary files of one banded level.
+struct Files<'a> {
+    /// The level `top - 1` volume, written.
+    values: &'a std::fs::File,
+    /// Its path.
+    path: &'a Path,
+    /// Level `top`'s moments (spreads recorded, `top` not the finest level).
+    moments_in: Option<&'a MomentFile>,
+    /// Level `top - 1`'s moments, written (spreads recorded).
+    moments_out: Option<&'a MomentFile>,
+}
+
 /// Builds level `top` in bands of `band_bricks` brick rows (one pass over the
-/// input each), writing the level `top - 1` volume to `file`.
-#[allow(clippy::too_many_arguments)]
+/// input each), writing the level `top - 1` volume (and its moments) to
+/// `files`.
 fn run_bands<W: Write>(
     ctx: &mut Ctx,
     input: &mut dyn VolumeReader,
     top: u8,
     band_bricks: u32,
-    file: &std::fs::File,
-    path: &Path,
+    files: Files<'_>,
     w: &mut W,
     pb: &Progress<'_>,
 ) -> Result<(), StoreError> {
@@ -832,6 +866,7 @@ fn run_bands<W: Write>(
     let full = top + 1 == layout.levels;
     let mut slice = vec![0u8; d[0] as usize * d[1] as usize * size];
     let mut out_rows = Vec::new();
+    let (mut moment_rows, mut moment_bytes) = (Vec::new(), Vec::new());
     for band in 0..bands {
         let by0 = band * band_bricks;
         let by1 = (by0 + band_bricks).min(gy);
@@ -864,14 +899,24 @@ fn run_bands<W: Write>(
                 let mut s = lb.take_buffer(band_bytes);
                 s.copy_from_slice(&slice[r0 as usize * row_bytes..r1 as usize * row_bytes]);
                 lb.slices.push_back(s);
+                if let Some(mf) = files.moments_in {
+                    let mut m = lb.take_moments(0);
+                    mf.read_rows(zi, (r0, r1), &mut m, &mut moment_bytes)?;
+                    lb.moments.push_back(m);
+                }
             }
             z = z1;
             let sink = if j1 > j0 {
                 Sink::File {
-                    file,
-                    path,
+                    file: files.values,
+                    path: files.path,
                     rows: (j0, j1),
                     buf: &mut out_rows,
+                    moments: files.moments_out.map(|file| MomentOut {
+                        file,
+                        buf: &mut moment_rows,
+                        bytes: &mut moment_bytes,
+                    }),
                 }
             } else {
                 Sink::None

@@ -17,7 +17,9 @@
 //! lz4-compressed; a brick of zeros has no payload. The payloads go to a
 //! temporary file beside the output while the values stream, and are copied
 //! after the value payloads when these are done, so the value payloads and
-//! the node table are those of a build without spreads.
+//! the node table are those of a build without spreads. A banded level
+//! writes the next coarser level's moments beside its values into a
+//! [`MomentFile`], which the remaining levels read back with them.
 
 use super::level::LevelBuf;
 use crate::error::StoreError;
@@ -28,6 +30,7 @@ use brickray_core::{Moments, NodeKey, OctreeLayout};
 use rayon::prelude::*;
 use std::fs::File;
 use std::io::{BufWriter, Read, Seek, SeekFrom, Write};
+use std::os::unix::fs::FileExt;
 use std::path::{Path, PathBuf};
 
 /// Bytes of one uncompressed spread brick: `stored_side^3` half floats.
@@ -35,10 +38,12 @@ pub(crate) fn spread_brick_bytes(layout: &OctreeLayout) -> usize {
     (layout.stored_side() as usize).pow(3) * 2
 }
 
-/// Bytes of the moment windows of levels `0..top` (the coarse levels of a
-/// streaming pass that starts at level `top`): `slices` slices each.
+/// Bytes of the moment windows of a streaming pass over levels `0..=top`,
+/// `slices` slices each: every level above the finest has moments (level
+/// `top` too when it is not the finest: a banded build's remaining levels).
 pub(super) fn window_bytes(layout: &OctreeLayout, top: u8, slices: u64) -> u64 {
-    (0..top)
+    let end = (top + 1).min(layout.levels.saturating_sub(1));
+    (0..end)
         .map(|l| {
             let d = layout.level_dims(l);
             d[0] as u64 * d[1] as u64 * std::mem::size_of::<Moments>() as u64
@@ -144,14 +149,16 @@ impl SpreadSink {
 }
 
 impl LevelBuf {
-    /// Level slice `k` of the coarser level's moments, filtered from this
-    /// level's slices `2k`, `2k+1` (slice `k` alone when z is not halved):
-    /// from its moment slices, or at the finest level from its values.
+    /// Rows `rows` of level slice `k` of the coarser level's moments,
+    /// filtered from this level's slices `2k`, `2k+1` (slice `k` alone when
+    /// z is not halved): from its moment slices, or at the finest level from
+    /// its values.
     pub(super) fn downsample_moments(
         &self,
         layout: &OctreeLayout,
         k: u32,
         pdims: [u32; 3],
+        rows: (u32, u32),
         out: &mut [Moments],
     ) {
         let nz = self.dims[2];
@@ -161,7 +168,7 @@ impl LevelBuf {
             (k, k)
         };
         let (nx, ny) = (self.dims[0] as usize, self.dims[1] as usize);
-        let px = pdims[0] as usize;
+        let (px, row0, j0) = (pdims[0] as usize, self.row0 as usize, rows.0 as usize);
         let (hx, hy) = (self.halve[0], self.halve[1]);
         let pair = |halve: bool, i: usize, n: usize| {
             if halve {
@@ -170,15 +177,16 @@ impl LevelBuf {
                 (i, i)
             }
         };
-        debug_assert_eq!(out.len(), px * pdims[1] as usize);
-        let rows = out.par_chunks_mut(px).with_min_len(8).enumerate();
+        debug_assert_eq!(out.len(), px * (rows.1 - rows.0) as usize);
+        let out_rows = out.par_chunks_mut(px).with_min_len(8).enumerate();
         if self.level + 1 == layout.levels {
             // The finest level: each child's moments from its value.
             let (s0, s1) = (self.slice(z0), self.slice(z1));
             let desc = &layout.volume;
-            with_sample!(layout.dtype(), T => rows.for_each(|(j, orow)| {
+            with_sample!(layout.dtype(), T => out_rows.for_each(|(jj, orow)| {
                 let sz = T::SIZE;
-                let (y0, y1) = pair(hy, j, ny);
+                let (y0, y1) = pair(hy, j0 + jj, ny);
+                let (y0, y1) = (y0 - row0, y1 - row0);
                 let at = |s: &[u8], x: usize, y: usize| {
                     let v = desc.normalize(T::read(&s[(y * nx + x) * sz..]).to_f32());
                     Moments::of_value(v as f64)
@@ -200,8 +208,9 @@ impl LevelBuf {
             }));
         } else {
             let (m0, m1) = (self.moment_slice(z0), self.moment_slice(z1));
-            rows.for_each(|(j, orow)| {
-                let (y0, y1) = pair(hy, j, ny);
+            out_rows.for_each(|(jj, orow)| {
+                let (y0, y1) = pair(hy, j0 + jj, ny);
+                let (y0, y1) = (y0 - row0, y1 - row0);
                 let (r00, r01) = (&m0[y0 * nx..][..nx], &m0[y1 * nx..][..nx]);
                 let (r10, r11) = (&m1[y0 * nx..][..nx], &m1[y1 * nx..][..nx]);
                 for (i, o) in orow.iter_mut().enumerate() {
@@ -244,7 +253,7 @@ impl LevelBuf {
         for k in 0..side {
             let sl = self.moment_slice((origin[2] + k).clamp(0, nz - 1) as u32);
             for j in 0..side {
-                let y = (origin[1] + j).clamp(0, ny - 1);
+                let y = (origin[1] + j).clamp(0, ny - 1) - self.row0 as i64;
                 let row = &sl[(y * nx) as usize..][..nx as usize];
                 for i in 0..side {
                     let x = (origin[0] + i).clamp(0, nx - 1);
@@ -256,5 +265,78 @@ impl LevelBuf {
             }
         }
         any.then(|| lz4_flex::block::compress(buf))
+    }
+}
+
+/// Bytes of one voxel's moments in a [`MomentFile`]: `E[x]`, then `E[x^2]`,
+/// as little-endian f64.
+const MOMENT_BYTES: usize = 16;
+
+/// The moments of a level volume in a temporary raw file, slice after
+/// slice, x fastest ([`MOMENT_BYTES`] a voxel): what a banded level writes
+/// for the next coarser one beside its values' raw file, and what that
+/// level's build reads back.
+pub(super) struct MomentFile {
+    file: PartialFile,
+    dims: [u32; 3],
+}
+
+impl MomentFile {
+    /// A file for the moments of a level of `dims`, beside `out`.
+    pub(super) fn create(out: &Path, dims: [u32; 3]) -> Result<MomentFile, StoreError> {
+        let file = PartialFile::create(out)?;
+        let len = dims.iter().map(|&d| d as u64).product::<u64>() * MOMENT_BYTES as u64;
+        file.file()
+            .set_len(len)
+            .map_err(|e| StoreError::io(file.path(), e))?;
+        Ok(MomentFile { file, dims })
+    }
+
+    fn offset(&self, z: u32, y: u32) -> u64 {
+        (z as u64 * self.dims[1] as u64 + y as u64) * self.dims[0] as u64 * MOMENT_BYTES as u64
+    }
+
+    /// Rows `rows` of slice `z` into `out` (resized), through `bytes`.
+    pub(super) fn read_rows(
+        &self,
+        z: u32,
+        rows: (u32, u32),
+        out: &mut Vec<Moments>,
+        bytes: &mut Vec<u8>,
+    ) -> Result<(), StoreError> {
+        let n = (rows.1 - rows.0) as usize * self.dims[0] as usize;
+        bytes.resize(n * MOMENT_BYTES, 0);
+        self.file
+            .file()
+            .read_exact_at(bytes, self.offset(z, rows.0))
+            .map_err(|e| StoreError::io(self.file.path(), e))?;
+        out.resize(n, Moments::default());
+        for (m, b) in out.iter_mut().zip(bytes.chunks_exact(MOMENT_BYTES)) {
+            let f = |o: usize| f64::from_le_bytes(b[o..o + 8].try_into().unwrap_or([0; 8]));
+            *m = Moments {
+                mean: f(0),
+                mean_sq: f(8),
+            };
+        }
+        Ok(())
+    }
+
+    /// Writes `m`, rows `rows.0..` of slice `z`, through `bytes`.
+    pub(super) fn write_rows(
+        &self,
+        z: u32,
+        row: u32,
+        m: &[Moments],
+        bytes: &mut Vec<u8>,
+    ) -> Result<(), StoreError> {
+        bytes.clear();
+        for v in m {
+            bytes.extend_from_slice(&v.mean.to_le_bytes());
+            bytes.extend_from_slice(&v.mean_sq.to_le_bytes());
+        }
+        self.file
+            .file()
+            .write_all_at(bytes, self.offset(z, row))
+            .map_err(|e| StoreError::io(self.file.path(), e))
     }
 }
