@@ -13,7 +13,7 @@ pub const MAGIC: [u8; 8] = *b"BRKSTORE";
 /// optional placement record at the end of the file (the volume's
 /// voxel-to-world affine and its space, [`brickray_io::Placement`]),
 /// version 7 the optional spread section (each coarse voxel's spread, for
-/// the renderers' spread model: [`FLAG_SPREAD`]). Every build writes the
+/// the renderers' spread model: header flag bit 6). Every build writes the
 /// newest version; the flags say which optional sections it holds.
 pub const VERSION: u32 = 7;
 /// The first format version with the spread section ([`FLAG_SPREAD`]).

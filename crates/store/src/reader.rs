@@ -383,7 +383,8 @@ impl Store {
         self.file_len
     }
 
-    /// Bytes of the payload section.
+    /// Bytes of the value payloads (the payload section; in a store with
+    /// spreads the spread payloads follow them: [`spread_bytes`](Self::spread_bytes)).
     pub fn payload_bytes(&self) -> u64 {
         self.payload_bytes
     }
