@@ -16,9 +16,15 @@ fuzz_target!(|data: &[u8]| {
         return;
     };
     let mut buf = vec![0u8; store.layout().brick_bytes()];
+    let side = store.layout().stored_side() as usize;
+    let mut spreads = vec![0u16; side * side * side];
     let keys: Vec<NodeKey> = store.nodes().map(|n| n.key).collect();
     for key in keys {
         let _ = store.node(key);
+        // Spreads (format version 7) that read are never negative nor NaN.
+        if BrickSource::read_spread(&store, key, &mut spreads).is_ok() {
+            assert!(spreads.iter().all(|&s| s <= 0x7c00), "{key:?}");
+        }
         let _ = store.children(key);
         if let Ok(Some(payload)) = store.read_compressed(key) {
             let _ = store.decode(key, &payload, &mut buf);
@@ -46,6 +52,8 @@ fuzz_target!(|data: &[u8]| {
     ] {
         let _ = store.node(key);
         let _ = store.read_brick(key, &mut buf);
+        let _ = BrickSource::read_spread(&store, key, &mut spreads);
     }
     let _ = store.read_brick(NodeKey::ROOT, &mut []);
+    let _ = BrickSource::read_spread(&store, NodeKey::ROOT, &mut []);
 });

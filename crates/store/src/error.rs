@@ -100,6 +100,18 @@ pub enum StoreError {
         /// The checksum of the bytes read.
         computed: u32,
     },
+    /// The spread table's checksum does not match (format version 7).
+    #[error(
+        "{path}: spread table checksum mismatch (stored {stored:#010x}, computed {computed:#010x})"
+    )]
+    SpreadChecksum {
+        /// The file.
+        path: PathBuf,
+        /// The stored checksum.
+        stored: u32,
+        /// The checksum of the bytes read.
+        computed: u32,
+    },
     /// The placement record's checksum does not match (format version 6).
     #[error(
         "{path}: placement record checksum mismatch (stored {stored:#010x}, computed {computed:#010x})"

@@ -11,8 +11,13 @@ pub const MAGIC: [u8; 8] = *b"BRKSTORE";
 /// its node (`docs/store-format.md`, "Payload checksums"), version 5 adds
 /// label stores (a header flag, u32 samples, the mode filter), version 6 the
 /// optional placement record at the end of the file (the volume's
-/// voxel-to-world affine and its space, [`brickray_io::Placement`]).
-pub const VERSION: u32 = 6;
+/// voxel-to-world affine and its space, [`brickray_io::Placement`]),
+/// version 7 the optional spread section (each coarse voxel's spread, for
+/// the renderers' spread model: header flag bit 6). Every build writes the
+/// newest version; the flags say which optional sections it holds.
+pub const VERSION: u32 = 7;
+/// The first format version with the spread section ([`FLAG_SPREAD`]).
+pub(crate) const SPREAD_VERSION: u32 = 7;
 /// The first format version with the placement record ([`FLAG_PLACEMENT`]).
 pub(crate) const PLACEMENT_VERSION: u32 = 6;
 /// The first format version whose payload checksums cover the node's key.
@@ -130,6 +135,16 @@ pub(crate) const FLAG_PLACEMENT: u8 = 32;
 /// three reserved zero bytes, then the CRC-32 of the record's first 100
 /// bytes (see `docs/store-format.md`).
 pub const PLACEMENT_LEN: usize = 104;
+/// Header flag (version 7, bit 6): the store records each coarse voxel's
+/// spread: the spread payloads follow the value payloads (bytes
+/// `HEADER_LEN + payload_bytes .. table_offset`) and the spread table
+/// ([`SPREAD_ENTRY_LEN`] bytes per node-table entry, then its CRC-32)
+/// follows the parent-error section (see `docs/store-format.md`).
+pub(crate) const FLAG_SPREAD: u8 = 64;
+/// Bytes of one spread-table entry (format version 7): the payload's offset
+/// (u64), its length (u32) and its checksum (u32); all zero for a node whose
+/// spreads are all 0 (every finest-level node).
+pub const SPREAD_ENTRY_LEN: usize = 16;
 /// Header flag: the empty threshold is set.
 pub(crate) const FLAG_THRESHOLD: u8 = 1;
 /// Header flag: the octree is an anisotropic pyramid whose split masks are
@@ -304,6 +319,31 @@ impl Entry {
             crc: u32_at(b, 40),
         };
         (e, [b[2], b[3], b[44], b[45], b[46], b[47]])
+    }
+}
+
+/// One spread-table entry (format version 7): where a coarse node's
+/// compressed spread brick lies. All zero: every spread of the node is 0.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub(crate) struct SpreadEntry {
+    pub(crate) offset: u64,
+    pub(crate) len: u32,
+    pub(crate) crc: u32,
+}
+
+impl SpreadEntry {
+    pub(crate) fn encode(&self, b: &mut [u8]) {
+        b[0..8].copy_from_slice(&self.offset.to_le_bytes());
+        b[8..12].copy_from_slice(&self.len.to_le_bytes());
+        b[12..16].copy_from_slice(&self.crc.to_le_bytes());
+    }
+
+    pub(crate) fn decode(b: &[u8]) -> SpreadEntry {
+        SpreadEntry {
+            offset: u64_at(b, 0),
+            len: u32_at(b, 8),
+            crc: u32_at(b, 12),
+        }
     }
 }
 

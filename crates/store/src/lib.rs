@@ -9,7 +9,9 @@
 //!   alone);
 //! * [`open`] / [`Store`]: validated open, lock-free positional brick reads with
 //!   checksum verification and a check of every decoded brick against its
-//!   node's table entry, metadata queries; implements [`BrickSource`]; the
+//!   node's table entry, metadata queries, and for a store built with
+//!   [`BuildOptions::spread`] each coarse voxel's spread
+//!   ([`Store::read_spread`], format version 7); implements [`BrickSource`]; the
 //!   parser reads through [`RangeReader`] ([`Store::open_with`]), so a store
 //!   opens from a file, from memory, or (feature `remote`) from S3, GCS,
 //!   Azure or HTTP(S) (`open_url`); OME-Zarr images stream from the same

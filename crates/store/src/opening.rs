@@ -12,9 +12,10 @@ use crate::error::StoreError;
 use crate::errsec::ERROR_ENTRY_LEN;
 use crate::format::{
     ENTRY_LEN, Entry, FLAG_ERRORS, FLAG_LABELS, FLAG_PARENT_ERRORS, FLAG_PLACEMENT,
-    FLAG_SPLIT_MASKS, FLAG_THRESHOLD, HEADER_LEN, Header, KIND_DATA, KIND_EMPTY, KIND_UNIFORM,
-    MAGIC, MAX_APRON, MAX_BRICK, MAX_BRICK_BYTES, MAX_SPLIT_MASKS, MIN_VERSION, PLACEMENT_LEN,
-    PLACEMENT_VERSION, TableGeometry, VERSION, dtype_from_code, filter_from_code, packed_masks,
+    FLAG_SPLIT_MASKS, FLAG_SPREAD, FLAG_THRESHOLD, HEADER_LEN, Header, KIND_DATA, KIND_EMPTY,
+    KIND_UNIFORM, MAGIC, MAX_APRON, MAX_BRICK, MAX_BRICK_BYTES, MAX_SPLIT_MASKS, MIN_VERSION,
+    PLACEMENT_LEN, PLACEMENT_VERSION, SPREAD_ENTRY_LEN, SPREAD_VERSION, SpreadEntry, TableGeometry,
+    VERSION, dtype_from_code, filter_from_code, packed_masks,
 };
 use crate::reader::{bad, max_compressed};
 use crate::sample::representable;
@@ -87,6 +88,7 @@ pub(crate) fn header(
 fn known_flags(version: u32) -> u8 {
     let v5 = FLAG_THRESHOLD | FLAG_SPLIT_MASKS | FLAG_ERRORS | FLAG_PARENT_ERRORS | FLAG_LABELS;
     match version {
+        v if v >= SPREAD_VERSION => v5 | FLAG_PLACEMENT | FLAG_SPREAD,
         v if v >= PLACEMENT_VERSION => v5 | FLAG_PLACEMENT,
         5 => v5,
         3 | 4 => FLAG_THRESHOLD | FLAG_SPLIT_MASKS | FLAG_ERRORS | FLAG_PARENT_ERRORS,
@@ -107,6 +109,13 @@ pub(crate) fn layout(h: &Header, path: &Path) -> Result<(OctreeLayout, Filter), 
         return Err(bad(path, "flags", format!("unknown bits {:#x}", h.flags)));
     }
     let labels = h.flags & FLAG_LABELS != 0;
+    if h.flags & FLAG_SPREAD != 0 && (labels || filter != Filter::Average) {
+        return Err(bad(
+            path,
+            "flags",
+            format!("spreads in a store of the {filter:?} filter (spreads need the average)"),
+        ));
+    }
     if labels && filter != Filter::Mode {
         return Err(bad(
             path,
@@ -182,9 +191,16 @@ pub(crate) fn layout(h: &Header, path: &Path) -> Result<(OctreeLayout, Filter), 
     Ok((layout, filter))
 }
 
-/// Phase 3: where the node table, the error sections and the placement
-/// record lie; they must end exactly at the file's end.
+/// Phase 3: where the node table, the error sections, the spread table and
+/// the placement record lie; they must end exactly at the file's end.
 pub(crate) struct Sections {
+    /// Where the value payloads end (the spread payloads start; the table's
+    /// offset without the spread section).
+    pub(crate) values_end: u64,
+    /// Bytes of the spread table, entries and CRC (0 without it).
+    pub(crate) spread_len: u64,
+    /// Where the spread table ends (the placement record starts).
+    pub(crate) spread_end: u64,
     /// Bytes of the error section's entries (0 without it).
     pub(crate) errors_len: u64,
     /// Bytes of the parent-error section, entries and CRC (0 without it).
@@ -232,7 +248,15 @@ impl Sections {
                 format!("{} overlaps the header", h.table_offset),
             ));
         }
-        if h.payload_bytes != h.table_offset - HEADER_LEN as u64 {
+        let has_spread = h.flags & FLAG_SPREAD != 0;
+        // With the spread section the spread payloads lie between the value
+        // payloads and the table.
+        let payload_room = h.table_offset - HEADER_LEN as u64;
+        if if has_spread {
+            h.payload_bytes > payload_room
+        } else {
+            h.payload_bytes != payload_room
+        } {
             return Err(bad(
                 path,
                 "payload_bytes",
@@ -278,13 +302,25 @@ impl Sections {
         let parent_end = errors_end
             .checked_add(parent_len)
             .ok_or_else(|| overflow("node_count"))?;
+        // The spread table (version 7): its entries, then their CRC.
+        let spread_len = if has_spread {
+            geo.count
+                .checked_mul(SPREAD_ENTRY_LEN as u64)
+                .and_then(|n| n.checked_add(4))
+                .ok_or_else(|| overflow("node_count"))?
+        } else {
+            0
+        };
+        let spread_end = parent_end
+            .checked_add(spread_len)
+            .ok_or_else(|| overflow("node_count"))?;
         // The placement record (version 6) ends the file.
         let placement_len = if h.flags & FLAG_PLACEMENT != 0 {
             PLACEMENT_LEN as u64
         } else {
             0
         };
-        let end = parent_end
+        let end = spread_end
             .checked_add(placement_len)
             .ok_or_else(|| overflow("node_count"))?;
         if end > file_len {
@@ -296,6 +332,8 @@ impl Sections {
                     "error section"
                 } else if parent_end > file_len {
                     "parent-error section"
+                } else if spread_end > file_len {
+                    "spread table"
                 } else {
                     "placement record"
                 },
@@ -311,6 +349,9 @@ impl Sections {
             ));
         }
         Ok(Sections {
+            values_end: HEADER_LEN as u64 + h.payload_bytes,
+            spread_len,
+            spread_end,
             errors_len,
             parent_len,
             table_end,
@@ -335,6 +376,13 @@ pub(crate) fn tail(
     file.read_exact_at(&mut tail, h.table_offset)
         .map_err(|e| StoreError::io(path, e))?;
     Ok(tail)
+}
+
+/// Where the value payloads end: the table's offset, or with the spread
+/// section (version 7) where the spread payloads start (phase 3 checked it
+/// is no further than the table's offset).
+fn values_end(h: &Header) -> u64 {
+    HEADER_LEN as u64 + h.payload_bytes
 }
 
 /// Phase 4: the node table, the first bytes of the [`tail`] (its length
@@ -366,7 +414,7 @@ pub(crate) fn table(
     table
         .chunks_exact(ENTRY_LEN)
         .enumerate()
-        .map(|(i, b)| entry(path, geo, layout, h.table_offset, max_len, i, b))
+        .map(|(i, b)| entry(path, geo, layout, values_end(h), max_len, i, b))
         .collect()
 }
 
@@ -428,7 +476,7 @@ fn entry(
     path: &Path,
     geo: &TableGeometry,
     layout: &OctreeLayout,
-    table_offset: u64,
+    values_end: u64,
     max_len: u64,
     i: usize,
     b: &[u8],
@@ -477,7 +525,7 @@ fn entry(
                 return Err(node("len", format!("{} (must be in 1..={max_len})", e.len)));
             }
             let pend = e.offset.checked_add(e.len as u64);
-            if e.offset < HEADER_LEN as u64 || pend.is_none_or(|p| p > table_offset) {
+            if e.offset < HEADER_LEN as u64 || pend.is_none_or(|p| p > values_end) {
                 return Err(node(
                     "offset",
                     format!("{}+{} outside the payload section", e.offset, e.len),
@@ -487,4 +535,112 @@ fn entry(
         k => return Err(node("kind", format!("unknown kind {k}"))),
     }
     Ok(e)
+}
+
+/// Phase 7 (version 7, flag bit 6): the spread table, its CRC verified and
+/// every entry checked: all zero at the finest level and for a node whose
+/// spreads are all 0; else a length within the lz4 bound of one spread brick
+/// and a payload within the spread payloads `values_end..table_offset`,
+/// which the payloads must tile exactly, as the value payloads tile theirs.
+pub(crate) fn spread_table(
+    section: &[u8],
+    path: &Path,
+    h: &Header,
+    sec: &Sections,
+    geo: &TableGeometry,
+    layout: &OctreeLayout,
+) -> Result<Vec<SpreadEntry>, StoreError> {
+    let (entries, c) = section.split_at(section.len().saturating_sub(4));
+    let stored = <[u8; 4]>::try_from(c).map_or(0, u32::from_le_bytes);
+    let computed = crc32fast::hash(entries);
+    if computed != stored {
+        return Err(StoreError::SpreadChecksum {
+            path: path.to_owned(),
+            stored,
+            computed,
+        });
+    }
+    let finest = layout.levels.saturating_sub(1);
+    let max_len = max_compressed(crate::build::spread_brick_bytes(layout));
+    let mut out = Vec::with_capacity(geo.count as usize);
+    for (i, b) in entries.chunks_exact(SPREAD_ENTRY_LEN).enumerate() {
+        let e = SpreadEntry::decode(b);
+        let key = geo.key(i as u64);
+        let node = |reason: String| StoreError::BadNode {
+            path: path.to_owned(),
+            key,
+            field: "spread",
+            reason,
+        };
+        if e.len == 0 || key.level == finest {
+            if e != SpreadEntry::default() {
+                return Err(node(if e.len == 0 {
+                    "offset or checksum set without a payload".into()
+                } else {
+                    "a payload at the finest level".into()
+                }));
+            }
+        } else if e.len as u64 > max_len {
+            return Err(node(format!("len {} (must be in 1..={max_len})", e.len)));
+        } else if e.offset < sec.values_end
+            || e.offset
+                .checked_add(e.len as u64)
+                .is_none_or(|p| p > h.table_offset)
+        {
+            return Err(node(format!(
+                "{}+{} outside the spread payloads {}..{}",
+                e.offset, e.len, sec.values_end, h.table_offset
+            )));
+        }
+        out.push(e);
+    }
+    let spans = out
+        .iter()
+        .enumerate()
+        .filter(|(_, e)| e.len > 0)
+        .map(|(i, e)| (e.offset, e.len as u64, geo.key(i as u64)));
+    check_tiling(path, spans, sec.values_end, h.table_offset)?;
+    Ok(out)
+}
+
+/// Checks that `spans` (offset, length, node) tile `start..end` exactly, as
+/// the builder writes payloads: a gap is a payload whose reference was
+/// removed or moved, an overlap two nodes sharing bytes.
+pub(crate) fn check_tiling(
+    path: &Path,
+    spans: impl Iterator<Item = (u64, u64, NodeKey)>,
+    start: u64,
+    end: u64,
+) -> Result<(), StoreError> {
+    let mut spans: Vec<(u64, u64, NodeKey)> = spans.collect();
+    // Stable: equal spans stay in table order.
+    spans.sort_by_key(|s| (s.0, s.1));
+    let mut at = start;
+    let mut prev: Option<NodeKey> = None;
+    for (off, len, key) in spans {
+        if off > at {
+            return Err(StoreError::PayloadGap {
+                path: path.to_owned(),
+                start: at,
+                end: off,
+            });
+        }
+        if off < at {
+            return Err(StoreError::PayloadOverlap {
+                path: path.to_owned(),
+                key,
+                other: prev.unwrap_or(key),
+            });
+        }
+        at = off + len;
+        prev = Some(key);
+    }
+    if at < end {
+        return Err(StoreError::PayloadGap {
+            path: path.to_owned(),
+            start: at,
+            end,
+        });
+    }
+    Ok(())
 }

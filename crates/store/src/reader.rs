@@ -4,8 +4,8 @@ use crate::Filter;
 use crate::error::{Mismatch, StoreError};
 use crate::errsec;
 use crate::format::{
-    Entry, FLAG_THRESHOLD, HEADER_LEN, KIND_DATA, KIND_EMPTY, KIND_UNIFORM, TableGeometry,
-    payload_crc,
+    Entry, FLAG_THRESHOLD, HEADER_LEN, KIND_DATA, KIND_EMPTY, KIND_UNIFORM, SpreadEntry,
+    TableGeometry, payload_crc,
 };
 use crate::opening;
 use crate::sample::{fill, first_nan, stats_dyn};
@@ -53,6 +53,8 @@ pub struct Store {
     errors: Option<Vec<NodeError>>,
     /// The parent-error section (format version 3), table order.
     parent_errors: Option<Vec<NodeError>>,
+    /// The spread table (format version 7), table order.
+    spread: Option<Vec<SpreadEntry>>,
     /// The placement record (format version 6).
     placement: Option<Placement>,
     version: u32,
@@ -175,7 +177,13 @@ impl Store {
         let tail = opening::tail(file.as_ref(), path, &h, len)?;
         let entries = opening::table(&tail, path, &h, &geo, &layout)?;
         opening::ranges(path, &h, &geo, &layout, &entries)?;
-        check_tiling(path, &entries, h.table_offset)?;
+        // The value payloads tile theirs (up to the spread payloads, or the
+        // table without them).
+        let spans = entries
+            .iter()
+            .filter(|e| e.kind == KIND_DATA)
+            .map(|e| (e.offset, e.len as u64, e.key()));
+        opening::check_tiling(path, spans, HEADER_LEN as u64, sec.values_end)?;
         // The sections as offsets into the tail (phase 3 checked that they
         // follow each other to its end).
         let at = |o: u64| (o - h.table_offset) as usize;
@@ -191,14 +199,21 @@ impl Store {
         } else {
             None
         };
+        let spread = if sec.spread_len > 0 {
+            let b = &tail[at(sec.parent_end)..at(sec.spread_end)];
+            Some(opening::spread_table(b, path, &h, &sec, &geo, &layout)?)
+        } else {
+            None
+        };
         let placement = if sec.placement_len > 0 {
-            Some(crate::placement::decode(&tail[at(sec.parent_end)..], path)?)
+            Some(crate::placement::decode(&tail[at(sec.spread_end)..], path)?)
         } else {
             None
         };
         Ok(Store {
             errors,
             parent_errors,
+            spread,
             placement,
             version: h.version,
             path: path.to_owned(),
@@ -234,6 +249,97 @@ impl Store {
     /// Whether the store records per-node error bounds (`NodeInfo::error`).
     pub fn has_errors(&self) -> bool {
         self.errors.is_some()
+    }
+
+    /// Whether the store records each coarse voxel's spread (format version
+    /// 7, built with [`BuildOptions::spread`](crate::BuildOptions::spread)):
+    /// [`read_spread`](Self::read_spread) returns them. False for every store
+    /// before version 7 and for builds without the option.
+    pub fn has_spread(&self) -> bool {
+        self.spread.is_some()
+    }
+
+    /// Bytes of the spread payloads (0 without spreads).
+    pub fn spread_bytes(&self) -> u64 {
+        self.spread
+            .as_ref()
+            .map_or(0, |s| s.iter().map(|e| e.len as u64).sum())
+    }
+
+    /// Writes node `key`'s spread per stored voxel into `out`
+    /// (`stored_side^3` half-float bits, x fastest, apron included, laid out
+    /// as [`read`](Self::read)'s samples): the standard deviation of the
+    /// normalized values of the finest voxels each voxel stands for
+    /// ([`BrickSource::read_spread`]). Zeros at the finest level, for a node
+    /// wholly outside the volume, for a node whose spreads are all 0 and in a
+    /// store without spreads. The payload's checksum is verified
+    /// ([`StoreError::PayloadChecksum`]), its decoded size
+    /// ([`StoreError::Decode`]) and every spread a non-negative half float
+    /// that is not NaN ([`StoreError::Decode`]). A failed read reopens the
+    /// store's path as [`read`](Self::read) does.
+    pub fn read_spread(&self, key: NodeKey, out: &mut [u16]) -> Result<(), StoreError> {
+        let n = (self.layout.stored_side() as usize).pow(3);
+        if out.len() != n {
+            return Err(StoreError::BufferSize {
+                expected: n * 2,
+                actual: out.len() * 2,
+            });
+        }
+        let e = self.check_key(key)?;
+        let entry = match (&self.spread, e.and_then(|e| self.geo.index(e.key()))) {
+            (Some(table), Some(i)) => table.get(i).copied().unwrap_or_default(),
+            _ => SpreadEntry::default(),
+        };
+        if entry.len == 0 {
+            out.fill(0);
+            return Ok(());
+        }
+        // `len` was bounded by the lz4 bound of one spread brick at open.
+        let mut payload = vec![0u8; entry.len as usize];
+        let file = self.file();
+        match self.read_spread_payload(file.as_ref(), key, &entry, &mut payload) {
+            Err(_) if self.reopened(&file) => {
+                self.read_spread_payload(self.file().as_ref(), key, &entry, &mut payload)?
+            }
+            r => r?,
+        }
+        let mut raw = vec![0u8; n * 2];
+        decode_payload(key, &payload, &mut raw)?;
+        for (o, b) in out.iter_mut().zip(raw.chunks_exact(2)) {
+            let bits = u16::from_le_bytes([b[0], b[1]]);
+            // A spread is >= 0 (sign bit clear) and never NaN (exponent all
+            // ones with a non-zero mantissa); infinity is a spread past the
+            // half floats' range.
+            if bits > 0x7c00 {
+                return Err(StoreError::Decode {
+                    key,
+                    reason: format!("spread bits {bits:#06x} are not a spread"),
+                });
+            }
+            *o = bits;
+        }
+        Ok(())
+    }
+
+    /// Reads a spread payload into `buf` from `file` and checks its checksum.
+    fn read_spread_payload(
+        &self,
+        file: &dyn RangeReader,
+        key: NodeKey,
+        e: &SpreadEntry,
+        buf: &mut [u8],
+    ) -> Result<(), StoreError> {
+        file.read_exact_at(buf, e.offset)
+            .map_err(|source| StoreError::NodeIo { key, source })?;
+        let crc = payload_crc(self.version, key, buf);
+        if crc != e.crc {
+            return Err(StoreError::PayloadChecksum {
+                key,
+                stored: e.crc,
+                computed: crc,
+            });
+        }
+        Ok(())
     }
 
     /// The file's path (or the name it was opened with: a URL for a remote
@@ -277,7 +383,8 @@ impl Store {
         self.file_len
     }
 
-    /// Bytes of the payload section.
+    /// Bytes of the value payloads (the payload section; in a store with
+    /// spreads the spread payloads follow them: [`spread_bytes`](Self::spread_bytes)).
     pub fn payload_bytes(&self) -> u64 {
         self.payload_bytes
     }
@@ -691,48 +798,6 @@ impl Store {
     }
 }
 
-/// Checks that the data nodes' payloads tile the payload section
-/// `HEADER_LEN..table_offset` exactly, as the builder writes them: a gap is a
-/// payload whose reference was removed or moved, an overlap two nodes sharing
-/// bytes.
-fn check_tiling(path: &Path, entries: &[Entry], table_offset: u64) -> Result<(), StoreError> {
-    let mut spans: Vec<(u64, u64, usize)> = entries
-        .iter()
-        .enumerate()
-        .filter(|(_, e)| e.kind == KIND_DATA)
-        .map(|(i, e)| (e.offset, e.len as u64, i))
-        .collect();
-    spans.sort_unstable();
-    let mut end = HEADER_LEN as u64;
-    let mut prev: Option<usize> = None;
-    for (off, len, i) in spans {
-        if off > end {
-            return Err(StoreError::PayloadGap {
-                path: path.to_owned(),
-                start: end,
-                end: off,
-            });
-        }
-        if off < end {
-            return Err(StoreError::PayloadOverlap {
-                path: path.to_owned(),
-                key: entries[i].key(),
-                other: prev.map_or(entries[i].key(), |p| entries[p].key()),
-            });
-        }
-        end = off + len;
-        prev = Some(i);
-    }
-    if end < table_offset {
-        return Err(StoreError::PayloadGap {
-            path: path.to_owned(),
-            start: end,
-            end: table_offset,
-        });
-    }
-    Ok(())
-}
-
 /// Decompresses one lz4 brick payload into `out`, which it must fill exactly.
 /// This checks the size only; [`Store::decode`] (and [`Store::read`]) also
 /// check the brick against its node's table entry.
@@ -783,6 +848,14 @@ impl BrickSource for Store {
             .zip(keys)
             .map(|(r, &key)| r.map_err(|e| e.into_brick_error(key)))
             .collect()
+    }
+
+    fn has_spread(&self) -> bool {
+        Store::has_spread(self)
+    }
+
+    fn read_spread(&self, key: NodeKey, out: &mut [u16]) -> Result<(), BrickError> {
+        Store::read_spread(self, key, out).map_err(|e| e.into_brick_error(key))
     }
 }
 

@@ -114,6 +114,64 @@ fn build_then_info() {
     assert!(!bad.status.success());
 }
 
+/// `build --spread` records the spreads (format version 7) and `info` says
+/// whether a store has them; `--spread` with `--labels` is refused.
+#[test]
+fn build_with_spreads_then_info() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(
+        dir.path().join("v.raw"),
+        test_volume([30, 20, 10], DType::U16, 4),
+    )
+    .unwrap();
+    std::fs::write(
+        dir.path().join("v.json"),
+        r#"{"dims": [30, 20, 10], "dtype": "u16", "spacing": [1, 1, 2], "byte_order": "little"}"#,
+    )
+    .unwrap();
+    let exe = env!("CARGO_BIN_EXE_brickray-store");
+    let run = |args: &[&str]| Command::new(exe).args(args).output().unwrap();
+    let input = dir.path().join("v.json");
+    let input = input.to_str().unwrap();
+    for (name, spread) in [("s.brs", true), ("p.brs", false)] {
+        let out = dir.path().join(name);
+        let out = out.to_str().unwrap();
+        let mut args = vec!["build", "--brick", "8", "--quiet", input, out];
+        if spread {
+            args.push("--spread");
+        }
+        let st = run(&args);
+        assert!(
+            st.status.success(),
+            "{}",
+            String::from_utf8_lossy(&st.stderr)
+        );
+        let built = String::from_utf8_lossy(&st.stdout);
+        assert_eq!(built.contains("spreads     recorded"), spread, "{built}");
+        assert_eq!(brickray_store::open(out).unwrap().has_spread(), spread);
+        let info = run(&["info", out]);
+        assert!(info.status.success());
+        let text = String::from_utf8_lossy(&info.stdout);
+        let want = if spread {
+            "spreads     recorded (format version 7)"
+        } else {
+            "spreads     not recorded"
+        };
+        assert!(text.contains(want), "info lacks {want:?}:\n{text}");
+    }
+    let out = dir.path().join("l.brs");
+    let st = run(&[
+        "build",
+        "--quiet",
+        "--labels",
+        "--spread",
+        input,
+        out.to_str().unwrap(),
+    ]);
+    assert!(!st.status.success());
+    assert!(String::from_utf8_lossy(&st.stderr).contains("`spread`"));
+}
+
 /// `convert` writes raw + JSON for inputs in other formats (the shared
 /// fixtures), voxel for voxel, and `info` lists an input's parts.
 #[test]

@@ -53,7 +53,7 @@ fn check_label_store(dims: [u32; 3], dtype: DType, ids: &[u32], seed: u64, brick
     let store = open(&out).unwrap();
     assert_eq!(store.desc().kind, VolumeKind::Labels);
     assert_eq!(store.filter(), Filter::Mode);
-    assert_eq!(store.version(), 6);
+    assert_eq!(store.version(), 7);
     let levels = reference_levels(store.layout(), decode(dtype, &bytes), Filter::Mode);
     check_source(&store, &levels, None);
     check_label_errors(&store, &levels);

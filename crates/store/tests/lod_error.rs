@@ -282,13 +282,13 @@ fn open_bytes(dir: &Path, name: &str, b: &[u8]) -> Result<brickray_store::Store,
 }
 
 #[test]
-fn version_6_round_trip() {
+fn version_7_round_trip() {
     let dir = tempfile::tempdir().unwrap();
     let (path, b) = small_store(dir.path());
-    assert_eq!(u32::from_le_bytes(b[8..12].try_into().unwrap()), 6);
+    assert_eq!(u32::from_le_bytes(b[8..12].try_into().unwrap()), 7);
     assert_eq!(b[30] & 12, 12, "error and parent-error flags");
     let s = open(&path).unwrap();
-    assert_eq!(s.version(), 6);
+    assert_eq!(s.version(), 7);
     // Each payload's checksum covers its node's key (version 4).
     let data: Vec<usize> = entry_offsets(&b)
         .into_iter()
@@ -447,13 +447,13 @@ fn version_1_stores_still_open() {
         open_bytes(dir.path(), "bad.brs", &bad),
         Err(StoreError::BadHeader { field: "flags", .. })
     ));
-    // Version 7 is not read.
+    // Version 8 is not read.
     let mut bad = b.clone();
-    bad[8..12].copy_from_slice(&7u32.to_le_bytes());
+    bad[8..12].copy_from_slice(&8u32.to_le_bytes());
     reseal_header(&mut bad);
     assert!(matches!(
         open_bytes(dir.path(), "bad.brs", &bad),
-        Err(StoreError::UnsupportedVersion { version: 7, .. })
+        Err(StoreError::UnsupportedVersion { version: 8, .. })
     ));
     // The label flag is version 5's: a version-4 header may not carry it.
     let mut bad = b.clone();
@@ -575,7 +575,7 @@ fn corrupt_error_sections_are_typed_errors() {
     ok[120..124].fill(0);
     reseal_header(&mut ok);
     let s = open_bytes(dir.path(), "ok.brs", &ok).unwrap();
-    assert_eq!(s.version(), 6);
+    assert_eq!(s.version(), 7);
     assert!(!s.has_errors());
     let _ = (HEADER_LEN, ENTRY_LEN, NodeKey::ROOT);
 }

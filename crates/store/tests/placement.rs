@@ -115,7 +115,7 @@ fn a_store_keeps_its_inputs_placement_bit_for_bit() {
     let want = lps_placement();
     let (path, b) = store(dir.path(), "placed.brs", Some(want));
     let (plain_path, plain) = store(dir.path(), "plain.brs", None);
-    assert_eq!(u32::from_le_bytes(b[8..12].try_into().unwrap()), 6);
+    assert_eq!(u32::from_le_bytes(b[8..12].try_into().unwrap()), 7);
     assert_eq!(b[FLAGS] & FLAG_PLACEMENT, FLAG_PLACEMENT);
     assert_eq!(plain[FLAGS] & FLAG_PLACEMENT, 0);
     // The record ends the file; everything before it is the store without
@@ -130,7 +130,7 @@ fn a_store_keeps_its_inputs_placement_bit_for_bit() {
         crc32fast::hash(&rec[..100])
     );
     let s = open(&path).unwrap();
-    assert_eq!(s.version(), 6);
+    assert_eq!(s.version(), 7);
     let got = s.placement().expect("a placement");
     assert_eq!(got.space, "LPS");
     assert_eq!(bits(&got), bits(&want));
@@ -138,7 +138,7 @@ fn a_store_keeps_its_inputs_placement_bit_for_bit() {
     assert_eq!(got.affine[2][3].to_bits(), (-0.0f64).to_bits());
     let plain_store = open(&plain_path).unwrap();
     assert_eq!(plain_store.placement(), None);
-    assert_eq!(plain_store.version(), 6);
+    assert_eq!(plain_store.version(), 7);
     same_nodes(&s, &plain_store);
     // Each space, and a deterministic file.
     for space in ["RAS", "image"] {
@@ -214,13 +214,13 @@ fn version_5_stores_open_without_a_placement() {
         open_bytes(dir.path(), "bad5.brs", &bad),
         Err(StoreError::BadHeader { field: "flags", .. })
     ));
-    // Nor does a version-6 reader accept version 7.
-    let mut v7 = b.clone();
-    v7[8..12].copy_from_slice(&7u32.to_le_bytes());
-    reseal_header(&mut v7);
+    // Nor does a version-7 reader accept version 8.
+    let mut v8 = b.clone();
+    v8[8..12].copy_from_slice(&8u32.to_le_bytes());
+    reseal_header(&mut v8);
     assert!(matches!(
-        open_bytes(dir.path(), "v7.brs", &v7),
-        Err(StoreError::UnsupportedVersion { version: 7, .. })
+        open_bytes(dir.path(), "v8.brs", &v8),
+        Err(StoreError::UnsupportedVersion { version: 8, .. })
     ));
 }
 

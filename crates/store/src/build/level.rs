@@ -7,7 +7,7 @@ use crate::error::StoreError;
 use crate::format::{Entry, KIND_DATA, KIND_EMPTY, KIND_UNIFORM, VERSION, payload_crc};
 use crate::sample::{Sample, range_dyn, with_sample};
 use crate::{Filter, NO_ENTRY_LEVEL};
-use brickray_core::{NodeKey, OctreeLayout};
+use brickray_core::{Moments, NodeKey, OctreeLayout};
 use rayon::prelude::*;
 use std::collections::VecDeque;
 use std::io::Write;
@@ -20,6 +20,11 @@ pub(super) struct LevelBuf {
     pub(super) grid: [u32; 3],
     /// `slices[i]` is level slice `base + i`.
     pub(super) slices: VecDeque<Vec<u8>>,
+    /// `moments[i]` is the moments of level slice `base + i` (a level above
+    /// the finest in a build that records spreads; else empty).
+    pub(super) moments: VecDeque<Vec<Moments>>,
+    /// Dropped moment slices, reused.
+    pub(super) moment_pool: Vec<Vec<Moments>>,
     /// Dropped slice buffers, reused (avoids page faults on fresh allocations).
     pub(super) pool: Vec<Vec<u8>>,
     pub(super) pool_cap: usize,
@@ -51,6 +56,8 @@ impl LevelBuf {
             grid: dims.map(|d| d.div_ceil(layout.brick)),
             slices: VecDeque::new(),
             pool: Vec::new(),
+            moments: VecDeque::new(),
+            moment_pool: Vec::new(),
             pool_cap: per as usize,
             base: 0,
             next_slab: 0,
@@ -113,12 +120,25 @@ impl LevelBuf {
                         let mut s = p.take_buffer(pdims[0] as usize * pdims[1] as usize * size);
                         self.downsample(ctx, self.next_down, pdims, (0, pdims[1]), &mut s);
                         p.slices.push_back(s);
+                        if ctx.spread.is_some() {
+                            let mut m = p.take_moments(pdims[0] as usize * pdims[1] as usize);
+                            let rows = (0, pdims[1]);
+                            self.downsample_moments(
+                                &ctx.layout,
+                                self.next_down,
+                                pdims,
+                                rows,
+                                &mut m,
+                            );
+                            p.moments.push_back(m);
+                        }
                     }
                     Sink::File {
                         file,
                         path,
                         rows,
                         buf,
+                        moments,
                     } => {
                         let (j0, j1) = *rows;
                         buf.resize((j1 - j0) as usize * pdims[0] as usize * size, 0);
@@ -128,6 +148,19 @@ impl LevelBuf {
                             * size as u64;
                         file.write_all_at(buf, off)
                             .map_err(|e| StoreError::io(path, e))?;
+                        // The same rows' moments (a build that records spreads).
+                        if let Some(mo) = moments {
+                            let n = (j1 - j0) as usize * pdims[0] as usize;
+                            mo.buf.resize(n, Moments::default());
+                            self.downsample_moments(
+                                &ctx.layout,
+                                self.next_down,
+                                pdims,
+                                (j0, j1),
+                                mo.buf,
+                            );
+                            mo.file.write_rows(self.next_down, j0, mo.buf, mo.bytes)?;
+                        }
                     }
                     Sink::None => {}
                 }
@@ -157,6 +190,11 @@ impl LevelBuf {
                 && self.pool.len() < self.pool_cap
             {
                 self.pool.push(b);
+            }
+            if let Some(m) = self.moments.pop_front()
+                && self.moment_pool.len() < self.pool_cap
+            {
+                self.moment_pool.push(m);
             }
             self.base += 1;
         }
@@ -199,7 +237,14 @@ impl LevelBuf {
         let [gx, _, _] = self.grid;
         let (by_start, gy) = self.by;
         let bb = ctx.layout.brick_bytes() as u64;
-        let rows_per_group = (ctx.group_cap / (bb * gx as u64).max(1)).max(1) as u32;
+        // Spread bricks of the levels above the finest, when recorded.
+        let spread = ctx.spread.is_some() && self.level + 1 < ctx.layout.levels;
+        let sb = if spread {
+            super::spread::spread_brick_bytes(&ctx.layout)
+        } else {
+            0
+        };
+        let rows_per_group = (ctx.group_cap / ((bb + sb as u64) * gx as u64).max(1)).max(1) as u32;
         let mut by0 = by_start;
         while by0 < gy {
             let by1 = (by0 + rows_per_group).min(gy);
@@ -208,20 +253,29 @@ impl LevelBuf {
                 .map(|(bx, by)| NodeKey::new(self.level, bx, by, bz))
                 .collect();
             let shared: &Ctx = ctx;
-            let results: Vec<(Entry, Option<Vec<u8>>)> = keys
+            type Cut = (Entry, Option<Vec<u8>>, Option<Vec<u8>>);
+            let results: Vec<Cut> = keys
                 .par_iter()
                 .map_init(
-                    || vec![0u8; bb as usize],
-                    |buf, &key| self.cut_brick(shared, key, buf),
+                    || (vec![0u8; bb as usize], vec![0u8; sb]),
+                    |(buf, sbuf), &key| {
+                        let (e, p) = self.cut_brick(shared, key, buf);
+                        let s = if spread {
+                            self.cut_spread(&shared.layout, key, sbuf)
+                        } else {
+                            None
+                        };
+                        (e, p, s)
+                    },
                 )
                 .collect();
-            if let Some((e, _)) = results
+            if let Some((e, _, _)) = results
                 .iter()
-                .find(|(e, _)| !(e.min.is_finite() && e.max.is_finite()))
+                .find(|(e, _, _)| !(e.min.is_finite() && e.max.is_finite()))
             {
                 return Err(StoreError::NonFinite { key: e.key() });
             }
-            for (mut e, payload) in results {
+            for (mut e, payload, spread_payload) in results {
                 if let Some(p) = payload {
                     e.offset = ctx.offset;
                     e.len = p.len() as u32;
@@ -236,6 +290,9 @@ impl LevelBuf {
                     ctx.data_range[1] = ctx.data_range[1].max(e.max);
                 }
                 let i = ctx.geo.index(e.key()).unwrap_or(usize::MAX);
+                if let (Some(p), Some(sink)) = (spread_payload, ctx.spread.as_mut()) {
+                    sink.push(i, e.key(), &p, sb)?;
+                }
                 if let Some(slot) = ctx.entries.get_mut(i) {
                     *slot = e;
                 }
@@ -404,11 +461,21 @@ pub(super) enum Sink<'a> {
     None,
     /// The next coarser level's window.
     Level(&'a mut LevelBuf),
-    /// Rows `rows` of each coarser slice, into a raw file of the coarser level.
+    /// Rows `rows` of each coarser slice, into a raw file of the coarser level
+    /// (and their moments into a file of its moments, when recorded).
     File {
         file: &'a std::fs::File,
         path: &'a Path,
         rows: (u32, u32),
         buf: &'a mut Vec<u8>,
+        moments: Option<MomentOut<'a>>,
     },
+}
+
+/// Where a banded level's filtered moments go, and the buffers they pass
+/// through.
+pub(super) struct MomentOut<'a> {
+    pub(super) file: &'a super::spread::MomentFile,
+    pub(super) buf: &'a mut Vec<Moments>,
+    pub(super) bytes: &'a mut Vec<u8>,
 }

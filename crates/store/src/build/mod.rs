@@ -21,8 +21,9 @@
 use crate::error::StoreError;
 use crate::format::{
     ENTRY_LEN, Entry, FLAG_ERRORS, FLAG_LABELS, FLAG_PARENT_ERRORS, FLAG_PLACEMENT,
-    FLAG_SPLIT_MASKS, FLAG_THRESHOLD, HEADER_LEN, Header, KIND_DATA, KIND_EMPTY, KIND_UNIFORM,
-    MAGIC, MAX_APRON, MAX_BRICK, MAX_BRICK_BYTES, TableGeometry, VERSION, dtype_code, filter_code,
+    FLAG_SPLIT_MASKS, FLAG_SPREAD, FLAG_THRESHOLD, HEADER_LEN, Header, KIND_DATA, KIND_EMPTY,
+    KIND_UNIFORM, MAGIC, MAX_APRON, MAX_BRICK, MAX_BRICK_BYTES, SPREAD_ENTRY_LEN, TableGeometry,
+    VERSION, dtype_code, filter_code,
 };
 use crate::partial::{PartialFile, parent_dir, remove_stale};
 use crate::{Filter, NO_ENTRY_LEVEL};
@@ -36,9 +37,12 @@ use std::time::Instant;
 mod errors;
 mod label_errors;
 mod level;
+mod spread;
 mod stage;
 
-use level::{LevelBuf, Sink};
+use level::{LevelBuf, MomentOut, Sink};
+pub(crate) use spread::spread_brick_bytes;
+use spread::{MomentFile, SpreadSink};
 
 /// Options of a build.
 #[derive(Debug, Clone, PartialEq)]
@@ -63,6 +67,15 @@ pub struct BuildOptions {
     /// false: every level halves all axes). Volumes with near-isotropic voxels
     /// get the same store either way.
     pub anisotropic: bool,
+    /// Record each coarse voxel's spread (format version 7, the spread
+    /// section; default false): the standard deviation of the normalized
+    /// values of the finest voxels it stands for, which the renderers
+    /// classify coarse levels with ([`brickray_core::BrickSource::read_spread`]).
+    /// Intensity volumes with the average filter only: a label map or
+    /// another filter is refused ([`StoreError::BadOption`]). The moment
+    /// windows (16 bytes a coarse voxel) count against `memory_bound`, and
+    /// a banded build carries the moments through its temporary files.
+    pub spread: bool,
 }
 
 impl Default for BuildOptions {
@@ -75,6 +88,7 @@ impl Default for BuildOptions {
             memory_bound: 1 << 30,
             progress: None,
             anisotropic: false,
+            spread: false,
         }
     }
 }
@@ -150,6 +164,11 @@ pub struct BuildReport {
     /// Levels built in y-bands (several passes over their input) because one
     /// streaming pass would not fit the memory bound; 0 for a single pass.
     pub banded_levels: u8,
+    /// Whether the store records spreads (the spread section, format
+    /// version 7: [`BuildOptions::spread`]).
+    pub spread: bool,
+    /// Bytes of spread payload written (0 without spreads).
+    pub spread_bytes: u64,
     /// Wall-clock seconds.
     pub seconds: f64,
 }
@@ -230,6 +249,20 @@ pub fn build(
     // average or a maximum of label ids invents labels.
     let labels = desc.kind.is_labels();
     let filter = if labels { Filter::Mode } else { opts.filter };
+    if opts.spread && labels {
+        return Err(StoreError::BadOption {
+            option: "spread",
+            reason: "a label map has no spread (its levels are the mode of their children)".into(),
+        });
+    }
+    if opts.spread && filter != Filter::Average {
+        return Err(StoreError::BadOption {
+            option: "spread",
+            reason: format!(
+                "spreads describe box averages; the {filter:?} filter's coarse voxels are not"
+            ),
+        });
+    }
     let layout = if opts.anisotropic {
         OctreeLayout::anisotropic(desc.clone(), opts.brick, opts.apron)
     } else {
@@ -253,14 +286,27 @@ pub fn build(
         .min(opts.memory_bound / 8)
         .max(layout.brick_bytes() as u64 * 2);
     let threads = rayon::current_num_threads() as u64;
-    let scratch = threads * 3 * layout.brick_bytes() as u64;
-    let table = geo.count.saturating_mul(ENTRY_LEN as u64 + 48);
+    let spread_scratch = if opts.spread {
+        3 * spread_brick_bytes(&layout) as u64
+    } else {
+        0
+    };
+    let scratch = threads * (3 * layout.brick_bytes() as u64 + spread_scratch);
+    // The entries and their encoded table (and the spread table's entries).
+    let per_node = ENTRY_LEN as u64
+        + 48
+        + if opts.spread {
+            2 * SPREAD_ENTRY_LEN as u64
+        } else {
+            0
+        };
+    let table = geo.count.saturating_mul(per_node);
     let fixed = group_cap
         .saturating_add(scratch)
         .saturating_add(table)
         .saturating_add((8u64 << 20).min(opts.memory_bound / 16));
     let top = layout.levels - 1;
-    let first_plan = plan(&layout, top, opts.memory_bound, fixed)?;
+    let first_plan = plan(&layout, top, opts.memory_bound, fixed, opts.spread)?;
     let needed = first_plan.need();
     remove_stale(parent_dir(out));
     let tmp = PartialFile::create(out)?;
@@ -292,8 +338,12 @@ pub fn build(
         path: tmp_path.clone(),
         data_range: [f32::INFINITY, f32::NEG_INFINITY],
         raw_payload: 0,
+        spread: None,
     };
     ctx.entries = vec![fill_entry; ctx.geo.count as usize];
+    if opts.spread {
+        ctx.spread = Some(SpreadSink::new(out, ctx.entries.len())?);
+    }
 
     let pb = Progress {
         to: opts.progress.as_ref(),
@@ -307,6 +357,9 @@ pub fn build(
     let mut top = top;
     let mut owned: Option<brickray_io::RawReader> = None;
     let mut _level_file: Option<PartialFile> = None;
+    // The moments of level `top` when it is not the finest (a banded build
+    // that records spreads wrote them beside the level's values).
+    let mut moments_in: Option<MomentFile> = None;
     let mut cur_plan = first_plan;
     let mut banded = 0u8;
     loop {
@@ -316,7 +369,7 @@ pub fn build(
         };
         match cur_plan {
             Plan::Stream { per, .. } => {
-                run_stream(&mut ctx, input, top, per, &mut w, &pb)?;
+                run_stream(&mut ctx, input, moments_in.as_ref(), top, per, &mut w, &pb)?;
                 break;
             }
             Plan::Bands { band_bricks, .. } => {
@@ -327,16 +380,26 @@ pub fn build(
                 f.file()
                     .set_len(plen)
                     .map_err(|e| StoreError::io(f.path(), e))?;
+                let moments_out = if opts.spread {
+                    Some(MomentFile::create(out, pdims)?)
+                } else {
+                    None
+                };
                 run_bands(
                     &mut ctx,
                     input,
                     top,
                     band_bricks,
-                    f.file(),
-                    f.path(),
+                    Files {
+                        values: f.file(),
+                        path: f.path(),
+                        moments_in: moments_in.as_ref(),
+                        moments_out: moments_out.as_ref(),
+                    },
                     &mut w,
                     &pb,
                 )?;
+                moments_in = moments_out;
                 let pdesc = brickray_core::VolumeDesc {
                     dims: pdims,
                     ..layout.volume.clone()
@@ -345,7 +408,7 @@ pub fn build(
                 _level_file = Some(f);
                 top -= 1;
                 banded += 1;
-                cur_plan = plan(&layout, top, opts.memory_bound, fixed)?;
+                cur_plan = plan(&layout, top, opts.memory_bound, fixed, opts.spread)?;
             }
         }
     }
@@ -357,6 +420,17 @@ pub fn build(
     }
     pb.set_position(pb.total);
 
+    // The spread payloads (format version 7) follow the value payloads.
+    let payload_end = ctx.offset;
+    let spread_entries = match ctx.spread.take() {
+        Some(sink) => {
+            let n = sink.len;
+            let entries = sink.finish(&mut w, payload_end, &tmp_path)?;
+            ctx.offset += n;
+            Some(entries)
+        }
+        None => None,
+    };
     // Node table, then the header.
     let table_offset = ctx.offset;
     let mut table = vec![0u8; ctx.entries.len() * ENTRY_LEN];
@@ -403,6 +477,20 @@ pub fn build(
         w.write_all(&crc32fast::hash(&b).to_le_bytes())
             .map_err(|e| StoreError::io(&tmp_path, e))?;
     }
+    // The spread table (format version 7), with its CRC at its end.
+    let spread_table = spread_entries.as_ref().map(|entries| {
+        let mut b = vec![0u8; entries.len() * SPREAD_ENTRY_LEN + 4];
+        for (e, c) in entries.iter().zip(b.chunks_exact_mut(SPREAD_ENTRY_LEN)) {
+            e.encode(c);
+        }
+        let n = entries.len() * SPREAD_ENTRY_LEN;
+        let crc = crc32fast::hash(&b[..n]);
+        b[n..].copy_from_slice(&crc.to_le_bytes());
+        b
+    });
+    if let Some(b) = &spread_table {
+        w.write_all(b).map_err(|e| StoreError::io(&tmp_path, e))?;
+    }
     // The placement record (format version 6) ends the file.
     if let Some(b) = &placement_bytes {
         w.write_all(b).map_err(|e| StoreError::io(&tmp_path, e))?;
@@ -435,6 +523,11 @@ pub fn build(
                 FLAG_PLACEMENT
             } else {
                 0
+            }
+            | if spread_table.is_some() {
+                FLAG_SPREAD
+            } else {
+                0
             },
         split_masks: layout.split_masks(),
         levels: layout.levels,
@@ -447,7 +540,8 @@ pub fn build(
         node_count: ctx.entries.len() as u64,
         table_offset,
         table_len: table.len() as u64,
-        payload_bytes: table_offset - HEADER_LEN as u64,
+        // The value payloads' bytes; the spread payloads follow them.
+        payload_bytes: payload_end - HEADER_LEN as u64,
         table_crc: crc32fast::hash(&table),
         errors_crc: error_bytes.as_deref().map_or(0, crc32fast::hash),
     };
@@ -475,10 +569,11 @@ pub fn build(
     stage::reached("rename");
     tmp.persist(out)?;
     // The error section, then the parent-error section of the same length
-    // and its CRC, then the placement record.
+    // and its CRC, then the spread table, then the placement record.
     let file_bytes = table_offset
         + table.len() as u64
         + error_bytes.as_ref().map_or(0, |b| 2 * b.len() as u64 + 4)
+        + spread_table.as_ref().map_or(0, |b| b.len() as u64)
         + placement_bytes.as_ref().map_or(0, |b| b.len() as u64);
     Ok(BuildReport {
         layout,
@@ -488,8 +583,10 @@ pub fn build(
         empty_nodes,
         input_voxels: desc.voxel_count(),
         input_bytes: desc.byte_len(),
-        payload_bytes: table_offset - HEADER_LEN as u64,
+        payload_bytes: payload_end - HEADER_LEN as u64,
         raw_payload_bytes: ctx.raw_payload,
+        spread: spread_table.is_some(),
+        spread_bytes: table_offset - payload_end,
         file_bytes,
         buffer_estimate: needed,
         banded_levels: banded,
@@ -554,6 +651,8 @@ struct Ctx {
     path: PathBuf,
     data_range: [f32; 2],
     raw_payload: u64,
+    /// Where the spread payloads go (a build that records spreads).
+    spread: Option<SpreadSink>,
 }
 
 /// How the remaining levels are built.
@@ -587,8 +686,9 @@ fn band_rows(layout: &OctreeLayout, ny: u32, by0: u32, by1: u32) -> (u32, u32) {
     (lo as u32, hi as u32)
 }
 
-/// Chooses how to build levels `0..=top` within `bound` bytes.
-fn plan(layout: &OctreeLayout, top: u8, bound: u64, fixed: u64) -> Result<Plan, StoreError> {
+/// Bytes one streaming pass over levels `0..=top` needs, the moment windows
+/// of a build that records spreads included.
+fn stream_need(layout: &OctreeLayout, top: u8, fixed: u64, spread: bool) -> u64 {
     let d = layout.level_dims(top);
     let size = layout.dtype().size() as u64;
     let slice = d[0] as u64 * d[1] as u64 * size;
@@ -596,8 +696,9 @@ fn plan(layout: &OctreeLayout, top: u8, bound: u64, fixed: u64) -> Result<Plan, 
     let per = per_step(slice, layout.brick);
     // Rolling windows: brick + 2 apron + 2 slices per level plus the slices read
     // in one step and as many recycled buffers; levels shrink 4x.
-    let need = if layout.is_isotropic() {
-        (side + 2 + 2 * per as u64) * slice * 4 / 3 + fixed
+    let window = side + 2 + 2 * per as u64;
+    let values = if layout.is_isotropic() {
+        window * slice * 4 / 3
     } else {
         // An anisotropic pyramid's levels need not shrink 4x: sum them.
         let all: u64 = (0..=top)
@@ -606,8 +707,32 @@ fn plan(layout: &OctreeLayout, top: u8, bound: u64, fixed: u64) -> Result<Plan, 
                 d[0] as u64 * d[1] as u64 * size
             })
             .sum();
-        (side + 2 + 2 * per as u64) * all + fixed
+        window * all
     };
+    // The moments (16 bytes a voxel) of every level that has them.
+    let moments = if spread {
+        spread::window_bytes(layout, top, window)
+    } else {
+        0
+    };
+    values.saturating_add(moments).saturating_add(fixed)
+}
+
+/// Chooses how to build levels `0..=top` within `bound` bytes (with the
+/// moment windows of a build that records spreads).
+fn plan(
+    layout: &OctreeLayout,
+    top: u8,
+    bound: u64,
+    fixed: u64,
+    spread: bool,
+) -> Result<Plan, StoreError> {
+    let d = layout.level_dims(top);
+    let size = layout.dtype().size() as u64;
+    let slice = d[0] as u64 * d[1] as u64 * size;
+    let side = layout.stored_side() as u64;
+    let per = per_step(slice, layout.brick);
+    let need = stream_need(layout, top, fixed, spread);
     if need <= bound || top == 0 {
         return if need <= bound {
             Ok(Plan::Stream { per, need })
@@ -620,13 +745,23 @@ fn plan(layout: &OctreeLayout, top: u8, bound: u64, fixed: u64) -> Result<Plan, 
         };
     }
     // Bands: one full input slice to read into, the band window, one band of
-    // coarser rows.
+    // coarser rows; with spreads the coarser rows' moments (and their
+    // bytes), and when `top` is not the finest level its band's moment
+    // window and the bytes one band slice of them is read through.
     let gy = d[1].div_ceil(layout.brick);
+    let finest = top + 1 == layout.levels;
     let band_need = |bb: u32| {
         let (lo, hi) = band_rows(layout, d[1], 0, bb.min(gy));
-        let band = (hi - lo) as u64 * d[0] as u64 * size;
+        let voxels = (hi - lo) as u64 * d[0] as u64;
+        let band = voxels * size;
         let per = per_step(band, layout.brick) as u64;
-        slice + (side + 2 + 2 * per) * band + band / 2 + fixed
+        let window = side + 2 + 2 * per;
+        let moments = match (spread, finest) {
+            (false, _) => 0,
+            (true, true) => 2 * voxels * 16,
+            (true, false) => (window + 3) * voxels * 16,
+        };
+        slice + window * band + band / 2 + moments + fixed
     };
     let mut lo = 1u32;
     if band_need(lo) > bound {
@@ -655,6 +790,7 @@ fn plan(layout: &OctreeLayout, top: u8, bound: u64, fixed: u64) -> Result<Plan, 
 fn run_stream<W: Write>(
     ctx: &mut Ctx,
     input: &mut dyn VolumeReader,
+    moments_in: Option<&MomentFile>,
     top: u8,
     per: u32,
     w: &mut W,
@@ -666,6 +802,7 @@ fn run_stream<W: Write>(
     let d = layout.level_dims(top);
     let slice_bytes = d[0] as usize * d[1] as usize * layout.dtype().size();
     let full = top + 1 == layout.levels;
+    let mut bytes = Vec::new();
     let mut z = 0;
     while z < d[2] {
         let z1 = (z + per).min(d[2]);
@@ -673,6 +810,12 @@ fn run_stream<W: Write>(
             let mut s = levels[finest].take_buffer(slice_bytes);
             input.read_slices(zi, zi + 1, &mut s)?;
             levels[finest].slices.push_back(s);
+            // Level `top`'s moments, when it is not the finest level.
+            if let Some(mf) = moments_in {
+                let mut m = levels[finest].take_moments(0);
+                mf.read_rows(zi, (0, d[1]), &mut m, &mut bytes)?;
+                levels[finest].moments.push_back(m);
+            }
         }
         z = z1;
         for l in (0..=finest).rev() {
@@ -690,16 +833,27 @@ fn run_stream<W: Write>(
     Ok(())
 }
 
+/// The temporary files of one banded level.
+struct Files<'a> {
+    /// The level `top - 1` volume, written.
+    values: &'a std::fs::File,
+    /// Its path.
+    path: &'a Path,
+    /// Level `top`'s moments (spreads recorded, `top` not the finest level).
+    moments_in: Option<&'a MomentFile>,
+    /// Level `top - 1`'s moments, written (spreads recorded).
+    moments_out: Option<&'a MomentFile>,
+}
+
 /// Builds level `top` in bands of `band_bricks` brick rows (one pass over the
-/// input each), writing the level `top - 1` volume to `file`.
-#[allow(clippy::too_many_arguments)]
+/// input each), writing the level `top - 1` volume (and its moments) to
+/// `files`.
 fn run_bands<W: Write>(
     ctx: &mut Ctx,
     input: &mut dyn VolumeReader,
     top: u8,
     band_bricks: u32,
-    file: &std::fs::File,
-    path: &Path,
+    files: Files<'_>,
     w: &mut W,
     pb: &Progress<'_>,
 ) -> Result<(), StoreError> {
@@ -712,6 +866,7 @@ fn run_bands<W: Write>(
     let full = top + 1 == layout.levels;
     let mut slice = vec![0u8; d[0] as usize * d[1] as usize * size];
     let mut out_rows = Vec::new();
+    let (mut moment_rows, mut moment_bytes) = (Vec::new(), Vec::new());
     for band in 0..bands {
         let by0 = band * band_bricks;
         let by1 = (by0 + band_bricks).min(gy);
@@ -744,14 +899,24 @@ fn run_bands<W: Write>(
                 let mut s = lb.take_buffer(band_bytes);
                 s.copy_from_slice(&slice[r0 as usize * row_bytes..r1 as usize * row_bytes]);
                 lb.slices.push_back(s);
+                if let Some(mf) = files.moments_in {
+                    let mut m = lb.take_moments(0);
+                    mf.read_rows(zi, (r0, r1), &mut m, &mut moment_bytes)?;
+                    lb.moments.push_back(m);
+                }
             }
             z = z1;
             let sink = if j1 > j0 {
                 Sink::File {
-                    file,
-                    path,
+                    file: files.values,
+                    path: files.path,
                     rows: (j0, j1),
                     buf: &mut out_rows,
+                    moments: files.moments_out.map(|file| MomentOut {
+                        file,
+                        buf: &mut moment_rows,
+                        bytes: &mut moment_bytes,
+                    }),
                 }
             } else {
                 Sink::None

@@ -69,9 +69,16 @@ mod tests {
     /// would leave is refused by `open` with a typed error. Until the magic
     /// is written (after everything else is synced) its bytes are not a
     /// store under any name; in the last instants before the rename they
-    /// are, and `open` refuses the file by its temporary name.
+    /// are, and `open` refuses the file by its temporary name. With spreads
+    /// too (their payloads' and the banded levels' moments' temporaries).
     #[test]
     fn an_interrupted_build_leaves_nothing_that_opens_as_a_store() {
+        for spread in [false, true] {
+            interrupted_build(spread);
+        }
+    }
+
+    fn interrupted_build(spread: bool) {
         let dims = [200u32, 300, 50];
         let n = dims.iter().map(|&d| d as usize).product::<usize>();
         let data = (0..n).map(|i| (i * 7 % 251) as u8).collect();
@@ -84,7 +91,9 @@ mod tests {
         let seen: Rc<RefCell<Seen>> = Rc::default();
         let opts = BuildOptions {
             brick: 8,
-            memory_bound: 1_500_000,
+            // The moments' band rows need more than the values'.
+            memory_bound: if spread { 3_000_000 } else { 1_500_000 },
+            spread,
             ..BuildOptions::default()
         };
         let report = {

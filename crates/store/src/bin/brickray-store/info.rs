@@ -190,6 +190,15 @@ pub(crate) fn cmd_info(store: &Store, bins: usize) -> Result<(), String> {
         s.payload_bytes as f64 / (1 << 20) as f64,
         d.byte_len() as f64 / (1 << 20) as f64
     );
+    if store.has_spread() {
+        println!(
+            "spreads     recorded (format version {}): {:.2} MiB of spread payload",
+            store.version(),
+            store.spread_bytes() as f64 / (1 << 20) as f64
+        );
+    } else {
+        println!("spreads     not recorded (build with --spread to record them)");
+    }
     println!(
         "compression {:.2}x lz4 on data bricks; {:.2}x volume bytes / file bytes",
         s.raw_payload_bytes as f64 / s.payload_bytes.max(1) as f64,

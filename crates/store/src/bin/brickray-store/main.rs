@@ -5,7 +5,7 @@
 //!                      [--filter average|max|mode] [--empty-below V] [--memory-mib N]
 //!                      [--series UID|N] [--level N] [--channel N] [--time N]
 //!                      [--spacing X,Y,Z] [--allow-outside-dir] [--quiet]
-//!                      [--anisotropic] [--labels]
+//!                      [--anisotropic] [--labels] [--spread]
 //!                      [--allow-http] [--anonymous] [--endpoint URL]
 //! brickray-store build <input> <NAME.channels.json> [--channels 0,2,...] [build options]
 //! brickray-store info <store.brs | NAME.channels.json | URL | input> [--bins N]
@@ -97,6 +97,12 @@ enum Command {
         /// `labels` list says so itself.
         #[arg(long)]
         labels: bool,
+        /// Record each coarse voxel's spread (the standard deviation of the
+        /// finest voxels it stands for), with which the renderers classify
+        /// coarse levels (docs/store-format.md, format version 7). Intensity
+        /// volumes with the average filter, built in one streaming pass.
+        #[arg(long)]
+        spread: bool,
         #[command(flatten)]
         remote: RemoteArgs,
     },
@@ -289,6 +295,7 @@ fn main() -> ExitCode {
             quiet,
             anisotropic,
             labels,
+            spread,
             remote,
         } => remove_temporaries_on_signals().and_then(|()| {
             let memory_bound = memory_mib.checked_mul(1 << 20).ok_or_else(|| {
@@ -306,6 +313,7 @@ fn main() -> ExitCode {
                 memory_bound,
                 progress: (!quiet).then(progress_bar),
                 anisotropic,
+                spread,
             };
             cmd_build(&input, &output, &o, &select.options(), labels, &remote)
         }),
@@ -478,6 +486,12 @@ fn cmd_build(
         r.seconds,
         r.input_voxels as f64 / r.seconds / 1e6
     );
+    if r.spread {
+        println!(
+            "spreads     recorded: {:.2} MiB of spread payload",
+            r.spread_bytes as f64 / (1 << 20) as f64
+        );
+    }
     Ok(())
 }
 
