@@ -100,7 +100,7 @@ fn scene() -> Scene {
 }
 
 /// The volume's store (brick 32: a root of 32^3 coarse voxels over 8
-/// finest bricks), plain and wrapped with its spreads.
+/// finest bricks), plain and wrapped with its spreads computed in memory.
 fn sources(
     s: &Scene,
     dir: &tempfile::TempDir,
@@ -113,6 +113,20 @@ fn sources(
     let spread: Arc<dyn brickray::BrickSource> =
         Arc::new(SpreadSource::new(plain.clone(), &s.vol).unwrap());
     (plain, spread)
+}
+
+/// The volume's store with its spreads recorded (format version 7).
+fn store_with_spreads(s: &Scene, dir: &tempfile::TempDir) -> Arc<dyn brickray::BrickSource> {
+    let path = dir.path().join("skull_spread.brs");
+    let mut reader = brickray::io::MemoryReader::new(s.vol.clone(), "skull");
+    let options = brickray::store::BuildOptions {
+        spread: true,
+        ..Default::default()
+    };
+    brickray::store::build(&mut reader, &path, &options).unwrap();
+    let store = brickray::store::open(&path).unwrap();
+    assert!(store.has_spread());
+    Arc::new(store)
 }
 
 /// The converged image of `source` out of core: the root alone
@@ -237,6 +251,14 @@ fn a_coarse_level_with_spreads_matches_the_reference_and_the_finest_better() {
             "{tag}: spreads {p_with:.2} dB, means {p_without:.2} dB against the finest"
         );
     }
+    // A store that records the spreads draws the same image as the
+    // spreads computed in memory (the same bits, tested in the store).
+    let settings = settings(false);
+    let stored = draw(&s, store_with_spreads(&s, &dir), settings, true);
+    assert!(
+        stored == draw(&s, spread, settings, true),
+        "stored spreads drew another image"
+    );
 }
 
 /// At the finest level every spread is 0: the image is the plain store's

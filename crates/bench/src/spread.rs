@@ -6,8 +6,9 @@
 //! Volumes: the shared head CT under the bone ramp, the same at
 //! 4.5 mm slices (every third slice, anisotropic store) and the T1 MRI under
 //! the pareto suite's TF (procedural stand-ins where `../shared/data` is
-//! absent). Each is built into a store; the spreads come from a
-//! [`SpreadSource`] over it (computed in memory from the finest level). At
+//! absent). Each is built into a store without spreads and one with them
+//! (`BuildOptions::spread`, format version 7; the build times of both are
+//! reported, and the in-memory [`SpreadSource`]'s). At
 //! each tolerance both renderers converge (no fades), then their frames are
 //! timed round by round (`--rounds`, 5) at `--size` (256) px, orbit camera
 //! at distance 2 (azimuth 0.5, elevation 0.3), default switches, unshaded.
@@ -23,6 +24,7 @@ use brickray_harness::{GpuContext, ct};
 use brickray_reference::psnr;
 use brickray_render::{OutOfCoreConfig, VolumeRenderer};
 use serde::Serialize;
+use std::path::Path;
 use std::sync::Arc;
 use std::time::Instant;
 
@@ -62,6 +64,12 @@ pub(crate) struct Row {
 #[derive(Debug, Serialize)]
 pub(crate) struct Setup {
     volume: &'static str,
+    /// Building its store without spreads, and with them.
+    build_ms: f64,
+    build_spread_ms: f64,
+    /// File sizes of the two stores.
+    store_bytes: u64,
+    store_spread_bytes: u64,
     /// Computing its spreads in memory ([`SpreadSource::new`]).
     spreads_ms: f64,
     /// Building its TF's spread table (32 rows, the GPU's width).
@@ -153,18 +161,31 @@ pub(crate) fn run(args: &Args) -> Result<SpreadResult, String> {
         let d = vol.desc();
         let frame = VolumeFrame::centered(d.dims, d.spacing);
         let camera = Camera::orbit(frame.center(), 2.0, 0.5, 0.3);
-        let path = dir.path().join(format!("{name}.brs"));
-        let mut reader = brickray_io::MemoryReader::new(vol.clone(), name);
-        let options = brickray_store::BuildOptions {
-            anisotropic,
-            ..Default::default()
+        let build = |path: &Path, spread: bool| -> Result<(Arc<dyn BrickSource>, f64), String> {
+            let mut reader = brickray_io::MemoryReader::new(vol.clone(), name);
+            let options = brickray_store::BuildOptions {
+                anisotropic,
+                spread,
+                ..Default::default()
+            };
+            let t0 = Instant::now();
+            brickray_store::build(&mut reader, path, &options).map_err(|e| e.to_string())?;
+            let ms = t0.elapsed().as_secs_f64() * 1e3;
+            let store = brickray_store::open(path).map_err(|e| e.to_string())?;
+            Ok((Arc::new(store), ms))
         };
-        brickray_store::build(&mut reader, &path, &options).map_err(|e| e.to_string())?;
-        let plain: Arc<dyn BrickSource> =
-            Arc::new(brickray_store::open(&path).map_err(|e| e.to_string())?);
+        let (path, spread_path) = (
+            dir.path().join(format!("{name}.brs")),
+            dir.path().join(format!("{name}_spread.brs")),
+        );
+        let (plain, build_ms) = build(&path, false)?;
+        let (spread, build_spread_ms) = build(&spread_path, true)?;
+        if !spread.has_spread() {
+            return Err(format!("{name}: the store built with spreads has none"));
+        }
+        let size = |p: &Path| std::fs::metadata(p).map(|m| m.len()).unwrap_or(0);
         let t0 = Instant::now();
-        let spread: Arc<dyn BrickSource> =
-            Arc::new(SpreadSource::new(plain.clone(), vol).map_err(|e| e.to_string())?);
+        SpreadSource::new(plain.clone(), vol).map_err(|e| e.to_string())?;
         let spreads_ms = t0.elapsed().as_secs_f64() * 1e3;
         let t0 = Instant::now();
         let max_width = gpu.device.limits().max_texture_dimension_2d;
@@ -172,6 +193,10 @@ pub(crate) fn run(args: &Args) -> Result<SpreadResult, String> {
         let table_ms = t0.elapsed().as_secs_f64() * 1e3;
         setup.push(Setup {
             volume: name,
+            build_ms: round2(build_ms),
+            build_spread_ms: round2(build_spread_ms),
+            store_bytes: size(&path),
+            store_spread_bytes: size(&spread_path),
             spreads_ms: round2(spreads_ms),
             table_ms: round2(table_ms),
         });
@@ -237,8 +262,14 @@ pub(crate) fn run(args: &Args) -> Result<SpreadResult, String> {
     }
     for s in &setup {
         println!(
-            "{}: spreads computed in {:.0} ms, spread table built in {:.0} ms",
-            s.volume, s.spreads_ms, s.table_ms
+            "{}: store built in {:.0} ms ({} B), with spreads {:.0} ms ({} B); spreads in memory {:.0} ms; spread table {:.0} ms",
+            s.volume,
+            s.build_ms,
+            s.store_bytes,
+            s.build_spread_ms,
+            s.store_spread_bytes,
+            s.spreads_ms,
+            s.table_ms
         );
     }
     let coarse: Vec<f64> = rows

@@ -283,38 +283,23 @@ fn tf_sample(v: f32, row: f32) -> vec4<f32> {
     return textureSampleLevel(tf_table, tf_sampler, vec2<f32>(x, row), 0.0);
 }
 
-// The TF at v averaged over a Gaussian of spread `s` (normalized units), its
-// opacity corrected to the step of row coordinate `row` (its layer:
-// floor(row * rows)): one filtered read, bilinear in the value's column and
-// the spread's row 31 sqrt(s / 0.5) (brickray_core::tf::spread). A spread of 0
-// reads the corrected table itself, so the finest level is classified
-// exactly as without spreads.
 // The largest spread (brickray_core::tf::spread::SIGMA_MAX).
 const SPREAD_SIGMA_MAX: f32 = 0.5;
 
-// The two reads are loops of at most one trip, not the sides of an `if`
-// (lavapipe runs both sides of an `if` for the whole SIMD group; a loop no
-// lane enters costs nothing).
+// The TF at v averaged over a Gaussian of spread `s` (normalized units), its
+// opacity corrected to the step of row coordinate `row` (its layer:
+// floor(row * rows)): one filtered read, bilinear in the value's column and
+// the spread's row 31 sqrt(s / 0.5) (brickray_core::tf::spread). Row 0 of a
+// layer is the corrected table's row: a spread of 0 is classified as
+// without spreads, to the half-float rounding of the two tables. (Reading
+// the corrected table instead where s is 0, behind a loop or an `if`, made
+// frames slower on lavapipe than this one read.)
 fn tf_spread_sample(v: f32, s: f32, row: f32) -> vec4<f32> {
-    var out = vec4<f32>(0.0);
-    let spread = s > 0.0;
-    var plain = !spread;
-    loop {
-        if (!plain) { break; }
-        out = tf_sample(v, row);
-        plain = false;
-    }
-    var wide = spread;
-    loop {
-        if (!wide) { break; }
-        let w = tf_info.width;
-        let rows = f32(textureDimensions(tf_spread).y);
-        let y = (rows - 1.0) * sqrt(min(s, SPREAD_SIGMA_MAX) / SPREAD_SIGMA_MAX);
-        let uv = vec2<f32>((clamp(v, 0.0, 1.0) * (w - 1.0) + 0.5) / w, (y + 0.5) / rows);
-        out = textureSampleLevel(tf_spread, tf_sampler, uv, i32(row * tf_info.rows), 0.0);
-        wide = false;
-    }
-    return out;
+    let w = tf_info.width;
+    let rows = f32(textureDimensions(tf_spread).y);
+    let y = (rows - 1.0) * sqrt(min(max(s, 0.0), SPREAD_SIGMA_MAX) / SPREAD_SIGMA_MAX);
+    let uv = vec2<f32>((clamp(v, 0.0, 1.0) * (w - 1.0) + 0.5) / w, (y + 0.5) / rows);
+    return textureSampleLevel(tf_spread, tf_sampler, uv, i32(row * tf_info.rows), 0.0);
 }
 
 // The pre-integrated segment from value `front` to `back` (clamped to 0..1) at

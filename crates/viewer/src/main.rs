@@ -58,6 +58,13 @@ struct Cli {
     /// table beside it (NAME.lut, mricron's, or NAME.labels.json) is loaded.
     #[arg(long)]
     labels: bool,
+    /// Draw coarse levels with their spread (docs/rendering-model.md,
+    /// "Coarse levels"): brick stores built from large files record each
+    /// coarse voxel's spread (format version 7), and a store without them
+    /// is built again. A store that records spreads is always drawn with
+    /// them. Intensity volumes only.
+    #[arg(long)]
+    spread: bool,
     /// Draw this label map over the image in the same rays (colours over the
     /// image's TF; docs/labels.md): placed where both files say (their
     /// affines when both give one, else both from the grid's origin at their
@@ -122,6 +129,7 @@ fn main() -> ExitCode {
             max_3d_side: 2048,
             store_dir,
             labels: cli.labels,
+            spread: cli.spread,
         },
         overlay: cli.overlay.clone(),
         ooc: brickray::OutOfCoreConfig {

@@ -220,6 +220,8 @@ pub(crate) struct OpenOptions {
     /// Open files as label maps (`--labels`; a sidecar or store that says
     /// so is one anyway).
     pub(crate) labels: bool,
+    /// Stores built from large files record spreads (`--spread`).
+    pub(crate) spread: bool,
 }
 
 /// A background open in progress.
@@ -438,9 +440,12 @@ pub(crate) fn open(
             let store = opts.store_dir.join(format!("{stem}.{STORE_EXTENSION}"));
             // A store built before stores kept placements (format 6) is
             // built again when the file has one.
+            // Likewise a store without spreads when they are asked for.
+            let spread = opts.spread && !reader.desc().kind.is_labels();
             let fresh = newer(&store, &reader.input_files())
-                && (placement.is_none()
-                    || brickray::store::open(&store).is_ok_and(|s| s.placement().is_some()));
+                && brickray::store::open(&store).is_ok_and(|s| {
+                    (placement.is_none() || s.placement().is_some()) && (!spread || s.has_spread())
+                });
             if !fresh {
                 progress.set_stage(format!("building the brick store {}", store.display()));
                 std::fs::create_dir_all(&opts.store_dir).map_err(|e| {
@@ -450,7 +455,11 @@ pub(crate) fn open(
                     inner: reader.as_mut(),
                     progress,
                 };
-                brickray::store::build(&mut counting, &store, &Default::default())?;
+                let build = brickray::store::BuildOptions {
+                    spread,
+                    ..Default::default()
+                };
+                brickray::store::build(&mut counting, &store, &build)?;
             }
             let how = if fresh { "reused" } else { "built" };
             open_store(

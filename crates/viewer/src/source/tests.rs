@@ -44,6 +44,7 @@ fn small_files_load_whole_and_large_ones_stream() {
         max_3d_side: 2048,
         store_dir: dir.path().join("stores"),
         labels: false,
+        spread: false,
     };
     let input = Input::Path(json);
     let p = Progress::default();
@@ -85,6 +86,7 @@ fn a_placement_survives_the_store_and_an_old_store_is_rebuilt() {
         max_3d_side: 2048,
         store_dir: dir.path().join("stores"),
         labels: false,
+        spread: false,
     };
     let code = |l: &Loaded| l.placement.and_then(|p| p.orientation()).map(|o| o.code());
     let l = open(&Input::Path(placed.clone()), &opts, &Progress::default()).unwrap();
@@ -110,6 +112,36 @@ fn a_placement_survives_the_store_and_an_old_store_is_rebuilt() {
     assert_eq!(code(&l), None);
 }
 
+/// `--spread`: the store built for a large file records spreads; a store
+/// without them is built again, one with them is reused (with or without
+/// the option) and drawn with them.
+#[test]
+fn spreads_are_recorded_when_asked_for() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = Input::Path(write_sphere(dir.path()));
+    let mut opts = OpenOptions {
+        in_core_max_bytes: 100,
+        max_3d_side: 2048,
+        store_dir: dir.path().join("stores"),
+        labels: false,
+        spread: false,
+    };
+    let spreads = |l: &Loaded| match &l.volume {
+        Opened::Streamed(s) => s.has_spread(),
+        _ => panic!("not streamed: {}", l.note),
+    };
+    let l = open(&input, &opts, &Progress::default()).unwrap();
+    assert!(l.note.contains("built") && !spreads(&l), "{}", l.note);
+    opts.spread = true;
+    let l = open(&input, &opts, &Progress::default()).unwrap();
+    assert!(l.note.contains("built") && spreads(&l), "{}", l.note);
+    let l = open(&input, &opts, &Progress::default()).unwrap();
+    assert!(l.note.contains("reused") && spreads(&l), "{}", l.note);
+    opts.spread = false;
+    let l = open(&input, &opts, &Progress::default()).unwrap();
+    assert!(l.note.contains("reused") && spreads(&l), "{}", l.note);
+}
+
 #[test]
 fn bad_inputs_are_errors() {
     let opts = OpenOptions {
@@ -117,6 +149,7 @@ fn bad_inputs_are_errors() {
         max_3d_side: 2048,
         store_dir: std::env::temp_dir(),
         labels: false,
+        spread: false,
     };
     let p = Progress::default();
     let missing = Input::Path("/nonexistent/v.json".into());
@@ -210,6 +243,7 @@ fn a_store_url_opens_as_its_file() {
         max_3d_side: 2048,
         store_dir: dir.path().join("stores"),
         labels: false,
+        spread: false,
     };
     let p = Progress::default();
     let local = open(&Input::Path(json), &opts, &p).unwrap();
@@ -259,6 +293,7 @@ fn an_ome_zarr_url_streams_as_the_local_image() {
         max_3d_side: 2048,
         store_dir: std::env::temp_dir(),
         labels: false,
+        spread: false,
     };
     let remote = open(&Input::parse(&url).unwrap(), &opts, &Progress::default()).unwrap();
     let Opened::Streamed(src) = &remote.volume else {
@@ -418,6 +453,7 @@ fn procedural_volumes_open_with_a_histogram() {
         max_3d_side: 2048,
         store_dir: std::env::temp_dir(),
         labels: false,
+        spread: false,
     };
     let l = open(&Input::Procedural(128), &opts, &Progress::default()).unwrap();
     assert!(matches!(l.volume, Opened::Streamed(_)));
@@ -464,6 +500,7 @@ fn in_core(dir: &Path) -> OpenOptions {
         max_3d_side: 2048,
         store_dir: dir.join("stores"),
         labels: false,
+        spread: false,
     }
 }
 
@@ -506,6 +543,7 @@ fn multi_channel_inputs_open_with_every_channel_and_the_files_styles() {
     // A label map (`--labels`) is never read as channels.
     let labels = OpenOptions {
         labels: true,
+        spread: false,
         ..in_core(dir.path())
     };
     let json = write_channels(dir.path(), 2);
