@@ -102,14 +102,24 @@ fn limits_below_a_backends_needs_are_typed_errors() {
         ),
         "max_storage_buffers_per_shader_stage",
     );
-    // A multi-channel volume: 7 sampled textures (the in-core 6 and its
-    // channels' stacked TF tables); the single-channel kernels need 6.
-    let g = device_with(|l| l.max_sampled_textures_per_shader_stage = 6);
+    // A multi-channel volume: 8 sampled textures (the in-core 7 and its
+    // channels' stacked TF tables); the single-channel kernel in core needs
+    // 7, out of core 8 (the spread atlas).
+    let g = device_with(|l| l.max_sampled_textures_per_shader_stage = 7);
     let mut r = new_renderer(&g).unwrap();
     r.set_volume(&g.device, &g.queue, &sphere()).unwrap();
     let two = brickray::ChannelVolume::new(vec![sphere(), sphere()]).unwrap();
     expect_limit(
         r.set_channel_volume(&g.device, &g.queue, &two),
+        "max_sampled_textures_per_shader_stage",
+    );
+    expect_limit(
+        r.set_volume_source(
+            &g.device,
+            &g.queue,
+            procedural(32),
+            OutOfCoreConfig::default(),
+        ),
         "max_sampled_textures_per_shader_stage",
     );
     // Streamed channels: 8 storage buffers (out of core's 7 and the

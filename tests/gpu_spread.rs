@@ -295,32 +295,6 @@ fn the_finest_level_is_unchanged_and_skipping_stays_conservative() {
     }
 }
 
-/// The bone ramp on the head CT: opacity 0 at 100 HU, 0.02 at 150,
-/// 0.5 at 300.
-fn ct_bone_ramp() -> TransferFunction {
-    use brickray_harness::ct::hu;
-    TransferFunction::from_points(
-        &[
-            (hu(100.0), [0.8, 0.5, 0.4, 0.0]),
-            (hu(150.0), [0.9, 0.8, 0.7, 0.02]),
-            (hu(300.0), [1.0, 0.95, 0.85, 0.5]),
-        ],
-        512,
-    )
-}
-
-/// The pareto suite's MRI TF.
-fn mri_tf() -> TransferFunction {
-    TransferFunction::from_points(
-        &[
-            (0.12, [0.3, 0.12, 0.06, 0.0]),
-            (0.35, [0.9, 0.5, 0.3, 0.08]),
-            (0.7, [1.0, 0.9, 0.8, 0.4]),
-        ],
-        512,
-    )
-}
-
 /// A converged out-of-core image of `source` at `tolerance_px`, with the
 /// working set's bricks.
 fn draw_at(
@@ -373,9 +347,9 @@ fn shared_volumes_lose_less_at_coarse_levels_with_spreads() {
     let dir = tempfile::tempdir().unwrap();
     let mut gains = Vec::new();
     for (name, vol, tf, anisotropic) in [
-        ("ct", &ct, ct_bone_ramp(), false),
-        ("ct5", &ct5, ct_bone_ramp(), true),
-        ("mri", &mri, mri_tf(), false),
+        ("ct", &ct, brickray_harness::ct::bone_ramp(), false),
+        ("ct5", &ct5, brickray_harness::ct::bone_ramp(), true),
+        ("mri", &mri, brickray_harness::scenes::mri_tf(), false),
     ] {
         let d = vol.desc();
         let frame = VolumeFrame::centered(d.dims, d.spacing);

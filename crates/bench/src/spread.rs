@@ -90,31 +90,6 @@ pub(crate) struct SpreadResult {
     gain_db_mean_coarse: Option<f64>,
 }
 
-/// The bone ramp on the head CT: opacity 0 at 100 HU, 0.02 at 150,
-/// 0.5 at 300.
-fn bone_ramp() -> TransferFunction {
-    TransferFunction::from_points(
-        &[
-            (ct::hu(100.0), [0.8, 0.5, 0.4, 0.0]),
-            (ct::hu(150.0), [0.9, 0.8, 0.7, 0.02]),
-            (ct::hu(300.0), [1.0, 0.95, 0.85, 0.5]),
-        ],
-        512,
-    )
-}
-
-/// The pareto suite's MRI TF.
-fn mri_tf() -> TransferFunction {
-    TransferFunction::from_points(
-        &[
-            (0.12, [0.3, 0.12, 0.06, 0.0]),
-            (0.35, [0.9, 0.5, 0.3, 0.08]),
-            (0.7, [1.0, 0.9, 0.8, 0.4]),
-        ],
-        512,
-    )
-}
-
 fn ooc_renderer(
     gpu: &GpuContext,
     source: Arc<dyn BrickSource>,
@@ -147,9 +122,9 @@ pub(crate) fn run(args: &Args) -> Result<SpreadResult, String> {
     let runner = Runner::new(&gpu, size)?;
     let dir = tempfile::tempdir().map_err(|e| e.to_string())?;
     let volumes: [(&'static str, &Volume, TransferFunction, bool); 3] = [
-        ("ct", &ct_vol, bone_ramp(), false),
-        ("ct5", &ct5, bone_ramp(), true),
-        ("mri", &mri, mri_tf(), false),
+        ("ct", &ct_vol, ct::bone_ramp(), false),
+        ("ct5", &ct5, ct::bone_ramp(), true),
+        ("mri", &mri, brickray_harness::scenes::mri_tf(), false),
     ];
     let settings = RenderSettings::default();
     let (mut rows, mut setup) = (Vec::new(), Vec::new());

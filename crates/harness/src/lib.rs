@@ -643,6 +643,19 @@ pub mod ct {
         (v + 1024.0) / 4010.0
     }
 
+    /// Issue 35's bone ramp: opacity 0 at 100 HU, 0.02 at 150, 0.5 at 300
+    /// (coarse levels that average bone with soft tissue fall down it).
+    pub fn bone_ramp() -> TransferFunction {
+        TransferFunction::from_points(
+            &[
+                (hu(100.0), [0.8, 0.5, 0.4, 0.0]),
+                (hu(150.0), [0.9, 0.8, 0.7, 0.02]),
+                (hu(300.0), [1.0, 0.95, 0.85, 0.5]),
+            ],
+            512,
+        )
+    }
+
     /// Opaque bone: transparent below 250 HU, opaque from 600 HU.
     pub fn bone() -> TransferFunction {
         TransferFunction::from_points(

@@ -5,6 +5,19 @@ use brickray_core::{
 };
 use glam::Vec3;
 
+/// The pareto suite's TF of the shared T1 MRI: tissue from 0.12, brighter
+/// and more opaque to 0.7.
+pub fn mri_tf() -> brickray_core::TransferFunction {
+    brickray_core::TransferFunction::from_points(
+        &[
+            (0.12, [0.3, 0.12, 0.06, 0.0]),
+            (0.35, [0.9, 0.5, 0.3, 0.08]),
+            (0.7, [1.0, 0.9, 0.8, 0.4]),
+        ],
+        512,
+    )
+}
+
 /// A u8 volume of `dims` voxels from `data` (x fastest), value range 0..255.
 pub fn u8_volume(dims: [u32; 3], data: Vec<u8>) -> Result<Volume, VolumeError> {
     Volume::new(

@@ -85,15 +85,17 @@ pub(crate) fn volume_layout_entries(storage: u32) -> Vec<wgpu::BindGroupLayoutEn
 /// Per-stage bindings of a kernel besides group 2's storage buffers: the
 /// transfer function's 2 storage buffers and the prediction history; uniforms
 /// of frame, prediction, TF, volume and overlay; the sampled volume, host
-/// depth, corrected TF table, pre-integrated table, spread table, the
-/// overlay's labels and table, and out of core the spread atlas; the volume
-/// and TF samplers.
+/// depth, corrected TF table, pre-integrated table, spread table, and the
+/// overlay's labels and table; the volume and TF samplers.
 pub(crate) const STORAGE_OUTSIDE_VOLUME: u32 = 3;
 pub(crate) const UNIFORM_BUFFERS: u32 = 5;
-pub(crate) const SAMPLED_TEXTURES: u32 = 8;
-/// Sampled textures of the multi-channel kernel: one more, its channels'
-/// stacked TF tables (`backend/channels.rs`).
+pub(crate) const SAMPLED_TEXTURES: u32 = 7;
+/// Sampled textures of the multi-channel kernels: one more, their channels'
+/// stacked TF tables (`backend/channels.rs`, `backend/ooc_channels.rs`).
 pub(crate) const CHANNEL_SAMPLED_TEXTURES: u32 = SAMPLED_TEXTURES + 1;
+/// Sampled textures of the single-channel out-of-core kernel: one more, the
+/// spread atlas.
+pub(crate) const OOC_SAMPLED_TEXTURES: u32 = SAMPLED_TEXTURES + 1;
 /// Uniform buffers of the multi-channel out-of-core kernel: one more, its
 /// channels' parameters (`backend/ooc_channels.rs`).
 pub(crate) const CHANNEL_UNIFORM_BUFFERS: u32 = UNIFORM_BUFFERS + 1;
@@ -199,6 +201,11 @@ pub(crate) fn ooc_layout_entries() -> Vec<wgpu::BindGroupLayoutEntry> {
 /// The per-stage limits the out-of-core kernel needs.
 pub(crate) fn check_ooc_limits(device: &wgpu::Device) -> Result<(), RenderError> {
     check_stage_limits(device, OOC_STORAGE_BUFFERS)?;
+    gpu::need(
+        "max_sampled_textures_per_shader_stage",
+        OOC_SAMPLED_TEXTURES as u64,
+        device.limits().max_sampled_textures_per_shader_stage as u64,
+    )?;
     gpu::need(
         "max_storage_textures_per_shader_stage",
         (crate::frame::OUTPUT_FORMATS.len() as u32 + STORAGE_TEXTURES) as u64,

@@ -17,7 +17,13 @@ pub fn required_limits() -> wgpu::Limits {
             + group2::STORAGE_OUTSIDE_VOLUME,
         max_storage_textures_per_shader_stage: frame::OUTPUT_FORMATS.len() as u32
             + group2::STORAGE_TEXTURES,
-        max_sampled_textures_per_shader_stage: group2::CHANNEL_SAMPLED_TEXTURES,
+        max_sampled_textures_per_shader_stage: if group2::CHANNEL_SAMPLED_TEXTURES
+            > group2::OOC_SAMPLED_TEXTURES
+        {
+            group2::CHANNEL_SAMPLED_TEXTURES
+        } else {
+            group2::OOC_SAMPLED_TEXTURES
+        },
         max_samplers_per_shader_stage: group2::SAMPLERS,
         max_uniform_buffers_per_shader_stage: group2::CHANNEL_UNIFORM_BUFFERS,
         max_compute_invocations_per_workgroup: gpu::WORKGROUP[0] * gpu::WORKGROUP[1],

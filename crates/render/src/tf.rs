@@ -309,39 +309,24 @@ impl TfTables {
         key: TableKey,
         preint: bool,
     ) -> Result<u64, RenderError> {
-        let build = preint && self.preint_key != Some(key);
-        if build {
-            // Checked before the (costly) table is computed.
-            gpu::need(
-                "max_texture_array_layers",
-                key.rows.max(1) as u64,
-                device.limits().max_texture_array_layers as u64,
-            )?;
-        }
-        if !build && self.preint.is_some() {
-            return Ok(0);
-        }
-        let table = match (build, self.current.as_ref()) {
-            (true, Some(tf)) => {
-                Some(tf.preintegrated_table(key.step_factor, key.rows.max(1), PREINT_SIZE))
-            }
-            _ => None,
+        let layers = LayeredTable {
+            texture: &mut self.preint,
+            built_for: &mut self.preint_key,
+            label: "brickray-render tf pre-integrated table",
         };
-        let old = self.preint.take();
-        let old_size = old.as_ref().map(|(tex, _)| tex.size());
-        let table = table.map(|t| ArrayTable {
-            width: t.size,
-            height: t.size,
-            layers: t.layers,
-            texels: t.texels,
-        });
-        let label = "brickray-render tf pre-integrated table";
-        let (pair, bytes) = upload_array(device, queue, old, table, label)?;
-        if old_size != Some(pair.0.size()) {
+        let (bytes, recreated) =
+            layers.refresh(device, queue, key, preint, self.current.as_ref(), |tf| {
+                let t = tf.preintegrated_table(key.step_factor, key.rows.max(1), PREINT_SIZE);
+                ArrayTable {
+                    width: t.size,
+                    height: t.size,
+                    layers: t.layers,
+                    texels: t.texels,
+                }
+            })?;
+        if recreated {
             self.bind_group = None;
         }
-        self.preint = Some(pair);
-        self.preint_key = build.then_some(key);
         Ok(bytes)
     }
 
@@ -357,39 +342,25 @@ impl TfTables {
         key: TableKey,
         spread: bool,
     ) -> Result<u64, RenderError> {
-        let build = spread && self.spread_key != Some(key);
-        if build {
-            gpu::need(
-                "max_texture_array_layers",
-                key.rows.max(1) as u64,
-                device.limits().max_texture_array_layers as u64,
-            )?;
-        }
-        if !build && self.spread.is_some() {
-            return Ok(0);
-        }
-        let table = match (build, self.current.as_ref()) {
-            (true, Some(tf)) => {
-                let max_width = device.limits().max_texture_dimension_2d;
+        let max_width = device.limits().max_texture_dimension_2d;
+        let layers = LayeredTable {
+            texture: &mut self.spread,
+            built_for: &mut self.spread_key,
+            label: "brickray-render tf spread table",
+        };
+        let (bytes, recreated) =
+            layers.refresh(device, queue, key, spread, self.current.as_ref(), |tf| {
                 let t = tf.spread_table(SPREAD_ROWS, max_width);
-                Some(ArrayTable {
+                ArrayTable {
                     width: t.width,
                     height: t.rows,
                     layers: key.rows.max(1),
                     texels: t.corrected_layers(key.step_factor, key.rows.max(1)),
-                })
-            }
-            _ => None,
-        };
-        let old = self.spread.take();
-        let old_size = old.as_ref().map(|(tex, _)| tex.size());
-        let label = "brickray-render tf spread table";
-        let (pair, bytes) = upload_array(device, queue, old, table, label)?;
-        if old_size != Some(pair.0.size()) {
+                }
+            })?;
+        if recreated {
             self.bind_group = None;
         }
-        self.spread = Some(pair);
-        self.spread_key = build.then_some(key);
         Ok(bytes)
     }
 
@@ -470,6 +441,51 @@ struct ArrayTable {
     height: u32,
     layers: u32,
     texels: Vec<[f32; 4]>,
+}
+
+/// A table of one layer per step length that is built only while a
+/// pipeline needs it (the pre-integrated and the spread table): its texture
+/// (a 1x1 stand-in until the first build) and what it was built for.
+struct LayeredTable<'a> {
+    texture: &'a mut Option<(wgpu::Texture, wgpu::TextureView)>,
+    built_for: &'a mut Option<TableKey>,
+    label: &'static str,
+}
+
+impl LayeredTable<'_> {
+    /// Builds the table of `tf` for `key` with `make` when `wanted` and
+    /// stale (the layer limit checked before the costly build), or puts the
+    /// stand-in in place before the first; returns the bytes written and
+    /// whether the texture was recreated (the bind group is then stale).
+    fn refresh(
+        self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        key: TableKey,
+        wanted: bool,
+        tf: Option<&TransferFunction>,
+        make: impl FnOnce(&TransferFunction) -> ArrayTable,
+    ) -> Result<(u64, bool), RenderError> {
+        let build = wanted && *self.built_for != Some(key);
+        if build {
+            gpu::need(
+                "max_texture_array_layers",
+                key.rows.max(1) as u64,
+                device.limits().max_texture_array_layers as u64,
+            )?;
+        }
+        if !build && self.texture.is_some() {
+            return Ok((0, false));
+        }
+        let table = tf.filter(|_| build).map(make);
+        let old = self.texture.take();
+        let old_size = old.as_ref().map(|(tex, _)| tex.size());
+        let (pair, bytes) = upload_array(device, queue, old, table, self.label)?;
+        let recreated = old_size != Some(pair.0.size());
+        *self.texture = Some(pair);
+        *self.built_for = build.then_some(key);
+        Ok((bytes, recreated))
+    }
 }
 
 /// Uploads a table of layers (`None`: a 1x1 transparent stand-in) into

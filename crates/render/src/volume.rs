@@ -62,6 +62,8 @@ struct Pool {
     /// carries spreads, else a 1x1x1 stand-in.
     spread: wgpu::Texture,
     spread_view: wgpu::TextureView,
+    /// The format carries spreads (the spread atlas is not the stand-in).
+    spreads: bool,
     atlas_bytes: u64,
     slots: wgpu::Buffer,
     slots_cpu: Vec<SlotInfo>,
@@ -119,6 +121,7 @@ impl Pool {
             atlas,
             spread_view: spread.create_view(&Default::default()),
             spread,
+            spreads: gpu.spread,
             atlas_bytes,
             slots: Pool::slot_table(device, rows)?,
             slots_cpu: vec![bytemuck::Zeroable::zeroed(); rows],
@@ -187,59 +190,12 @@ impl Pool {
 
     fn write_upload(&mut self, queue: &wgpu::Queue, up: &Upload, side: u32, bpp: u32) -> u64 {
         let b = &up.brick;
-        queue.write_texture(
-            wgpu::TexelCopyTextureInfo {
-                texture: &self.atlas,
-                mip_level: 0,
-                origin: wgpu::Origin3d {
-                    x: up.atlas_offset[0],
-                    y: up.atlas_offset[1],
-                    z: up.atlas_offset[2],
-                },
-                aspect: wgpu::TextureAspect::All,
-            },
-            &b.texels,
-            wgpu::TexelCopyBufferLayout {
-                offset: 0,
-                bytes_per_row: Some(side * bpp),
-                rows_per_image: Some(side),
-            },
-            wgpu::Extent3d {
-                width: side,
-                height: side,
-                depth_or_array_layers: side,
-            },
-        );
+        write_brick(queue, &self.atlas, up.atlas_offset, &b.texels, side, bpp);
         let mut spread_bytes = 0;
-        if let Some(s) = b
-            .spread
-            .as_deref()
-            .filter(|_| self.spread.depth_or_array_layers() > 1)
-        {
-            queue.write_texture(
-                wgpu::TexelCopyTextureInfo {
-                    texture: &self.spread,
-                    mip_level: 0,
-                    origin: wgpu::Origin3d {
-                        x: up.atlas_offset[0],
-                        y: up.atlas_offset[1],
-                        z: up.atlas_offset[2],
-                    },
-                    aspect: wgpu::TextureAspect::All,
-                },
-                bytemuck::cast_slice(s),
-                wgpu::TexelCopyBufferLayout {
-                    offset: 0,
-                    bytes_per_row: Some(side * 2),
-                    rows_per_image: Some(side),
-                },
-                wgpu::Extent3d {
-                    width: side,
-                    height: side,
-                    depth_or_array_layers: side,
-                },
-            );
-            spread_bytes = 2 * s.len() as u64;
+        if let Some(s) = b.spread.as_deref().filter(|_| self.spreads) {
+            let bytes: &[u8] = bytemuck::cast_slice(s);
+            write_brick(queue, &self.spread, up.atlas_offset, bytes, side, 2);
+            spread_bytes = bytes.len() as u64;
         }
         let cells: &[u8] = bytemuck::cast_slice(&b.sub_cells);
         queue.write_buffer(&self.sub_cells, up.slot as u64 * cells.len() as u64, cells);
@@ -284,6 +240,41 @@ impl Pool {
             self.slots_dirty = true;
         }
     }
+}
+
+/// Writes one brick's texels (`side^3` of `bpp` bytes, x fastest) into
+/// `texture` at `offset`.
+fn write_brick(
+    queue: &wgpu::Queue,
+    texture: &wgpu::Texture,
+    offset: [u32; 3],
+    texels: &[u8],
+    side: u32,
+    bpp: u32,
+) {
+    queue.write_texture(
+        wgpu::TexelCopyTextureInfo {
+            texture,
+            mip_level: 0,
+            origin: wgpu::Origin3d {
+                x: offset[0],
+                y: offset[1],
+                z: offset[2],
+            },
+            aspect: wgpu::TextureAspect::All,
+        },
+        texels,
+        wgpu::TexelCopyBufferLayout {
+            offset: 0,
+            bytes_per_row: Some(side * bpp),
+            rows_per_image: Some(side),
+        },
+        wgpu::Extent3d {
+            width: side,
+            height: side,
+            depth_or_array_layers: side,
+        },
+    );
 }
 
 /// What one plan of the volume gave the views that draw it.

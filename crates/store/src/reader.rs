@@ -297,10 +297,14 @@ impl Store {
         // `len` was bounded by the lz4 bound of one spread brick at open.
         let mut payload = vec![0u8; entry.len as usize];
         let file = self.file();
-        match self.read_spread_payload(file.as_ref(), key, &entry, &mut payload) {
-            Err(_) if self.reopened(&file) => {
-                self.read_spread_payload(self.file().as_ref(), key, &entry, &mut payload)?
-            }
+        match self.read_payload(file.as_ref(), key, entry.offset, entry.crc, &mut payload) {
+            Err(_) if self.reopened(&file) => self.read_payload(
+                self.file().as_ref(),
+                key,
+                entry.offset,
+                entry.crc,
+                &mut payload,
+            )?,
             r => r?,
         }
         let mut raw = vec![0u8; n * 2];
@@ -317,27 +321,6 @@ impl Store {
                 });
             }
             *o = bits;
-        }
-        Ok(())
-    }
-
-    /// Reads a spread payload into `buf` from `file` and checks its checksum.
-    fn read_spread_payload(
-        &self,
-        file: &dyn RangeReader,
-        key: NodeKey,
-        e: &SpreadEntry,
-        buf: &mut [u8],
-    ) -> Result<(), StoreError> {
-        file.read_exact_at(buf, e.offset)
-            .map_err(|source| StoreError::NodeIo { key, source })?;
-        let crc = payload_crc(self.version, key, buf);
-        if crc != e.crc {
-            return Err(StoreError::PayloadChecksum {
-                key,
-                stored: e.crc,
-                computed: crc,
-            });
         }
         Ok(())
     }
@@ -525,10 +508,10 @@ impl Store {
         // `len` was bounded by the brick size and the file at open.
         let mut buf = vec![0u8; e.len as usize];
         let file = self.file();
-        match self.read_payload(file.as_ref(), key, e, &mut buf) {
+        match self.read_payload(file.as_ref(), key, e.offset, e.crc, &mut buf) {
             // Read again from the file reopened at the store's path.
             Err(_) if self.reopened(&file) => {
-                self.read_payload(self.file().as_ref(), key, e, &mut buf)?
+                self.read_payload(self.file().as_ref(), key, e.offset, e.crc, &mut buf)?
             }
             r => r?,
         }
@@ -606,22 +589,24 @@ impl Store {
         self.file.read().unwrap_or_else(|p| p.into_inner()).clone()
     }
 
-    /// Reads `e`'s payload into `buf` from `file` and checks its checksum.
+    /// Reads `key`'s payload (a value or a spread payload) at `offset` into
+    /// `buf` from `file` and checks it against its checksum `crc`.
     fn read_payload(
         &self,
         file: &dyn RangeReader,
         key: NodeKey,
-        e: &Entry,
+        offset: u64,
+        crc: u32,
         buf: &mut [u8],
     ) -> Result<(), StoreError> {
-        file.read_exact_at(buf, e.offset)
+        file.read_exact_at(buf, offset)
             .map_err(|source| StoreError::NodeIo { key, source })?;
-        let crc = payload_crc(self.version, key, buf);
-        if crc != e.crc {
+        let computed = payload_crc(self.version, key, buf);
+        if computed != crc {
             return Err(StoreError::PayloadChecksum {
                 key,
-                stored: e.crc,
-                computed: crc,
+                stored: crc,
+                computed,
             });
         }
         Ok(())

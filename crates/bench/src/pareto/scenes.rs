@@ -67,14 +67,7 @@ pub(crate) fn scenes(wanted: &[String], ml_side: u32) -> Result<Vec<Scene>, Stri
         out.push(s);
     }
     if want("mri") {
-        let tf = TransferFunction::from_points(
-            &[
-                (0.12, [0.3, 0.12, 0.06, 0.0]),
-                (0.35, [0.9, 0.5, 0.3, 0.08]),
-                (0.7, [1.0, 0.9, 0.8, 0.4]),
-            ],
-            512,
-        );
+        let tf = brickray_harness::scenes::mri_tf();
         out.push(scene(
             "mri",
             shared("pycortex_s1_t1_mri")?,
