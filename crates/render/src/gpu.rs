@@ -294,22 +294,15 @@ pub(crate) fn volume_texture(
     )
 }
 
-/// A limit-checked 3D texture of `dims` texels of `format` (`texel_bytes`
-/// each), written in slabs of at most 64 MiB whose texels `slab(z0, z1)`
-/// makes (slices `z0..z1`, x fastest). Returns the texture and its bytes.
-pub(crate) fn slab_texture<'a>(
+/// A limit-checked, sampled 3D texture of `dims` texels of `format`,
+/// written by copies.
+pub(crate) fn sampled_3d(
     device: &wgpu::Device,
-    queue: &wgpu::Queue,
     dims: [u32; 3],
     format: wgpu::TextureFormat,
-    texel_bytes: u32,
     label: &'static str,
-    slab: impl Fn(usize, usize) -> std::borrow::Cow<'a, [u8]>,
-) -> Result<(wgpu::Texture, u64), RenderError> {
-    let row = dims[0] * texel_bytes;
-    let slice = row as usize * dims[1] as usize;
-    let bytes = slice as u64 * dims[2] as u64;
-    let texture = texture(
+) -> Result<wgpu::Texture, RenderError> {
+    texture(
         device,
         &wgpu::TextureDescriptor {
             label: Some(label),
@@ -325,7 +318,25 @@ pub(crate) fn slab_texture<'a>(
             usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
             view_formats: &[],
         },
-    )?;
+    )
+}
+
+/// A limit-checked 3D texture of `dims` texels of `format` (`texel_bytes`
+/// each), written in slabs of at most 64 MiB whose texels `slab(z0, z1)`
+/// makes (slices `z0..z1`, x fastest). Returns the texture and its bytes.
+pub(crate) fn slab_texture<'a>(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    dims: [u32; 3],
+    format: wgpu::TextureFormat,
+    texel_bytes: u32,
+    label: &'static str,
+    slab: impl Fn(usize, usize) -> std::borrow::Cow<'a, [u8]>,
+) -> Result<(wgpu::Texture, u64), RenderError> {
+    let row = dims[0] * texel_bytes;
+    let slice = row as usize * dims[1] as usize;
+    let bytes = slice as u64 * dims[2] as u64;
+    let texture = sampled_3d(device, dims, format, label)?;
     let per = ((64usize << 20) / slice.max(1)).clamp(1, dims[2] as usize) as u32;
     let mut z = 0;
     while z < dims[2] {

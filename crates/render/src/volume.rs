@@ -81,31 +81,13 @@ impl Pool {
     ) -> Result<Pool, RenderError> {
         let gpu = streamer.gpu_format();
         let dims = streamer.pool().atlas_dims();
-        let atlas_texture = |label, dims: [u32; 3], format| {
-            gpu::texture(
-                device,
-                &wgpu::TextureDescriptor {
-                    label: Some(label),
-                    size: wgpu::Extent3d {
-                        width: dims[0],
-                        height: dims[1],
-                        depth_or_array_layers: dims[2],
-                    },
-                    mip_level_count: 1,
-                    sample_count: 1,
-                    dimension: wgpu::TextureDimension::D3,
-                    format,
-                    usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-                    view_formats: &[],
-                },
-            )
-        };
-        let atlas = atlas_texture("brickray-render brick atlas", dims, format)?;
+        let atlas = gpu::sampled_3d(device, dims, format, "brickray-render brick atlas")?;
         let spread_dims = if gpu.spread { dims } else { [1, 1, 1] };
-        let spread = atlas_texture(
-            "brickray-render spread atlas",
+        let spread = gpu::sampled_3d(
+            device,
             spread_dims,
             wgpu::TextureFormat::R16Float,
+            "brickray-render spread atlas",
         )?;
         let atlas_bytes = dims.iter().map(|&d| d as u64).product::<u64>()
             * (gpu.texel_bytes() + gpu.spread_bytes()) as u64;
