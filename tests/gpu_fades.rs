@@ -11,6 +11,9 @@
 //! * a zoom path (40 frames, 2.6% closer a frame, tolerance 4 px) with fades
 //!   of 6 frames has no pop (16x16 tile error change above 8 units against
 //!   the in-core rendering at the finest level); without fades it has some.
+//! * a fading leaf skips empty space: in the frame a split from level 1 to
+//!   the finest starts fading, skipping on draws the image skipping off
+//!   draws, with fewer samples per ray, in DVR, MIP and iso.
 
 use brickray::{
     Camera, FadeDuration, FrameDesc, OutOfCoreConfig, RenderMode, RenderSettings, TransferFunction,
@@ -30,10 +33,15 @@ fn noise(n: u32) -> Volume {
 
 /// A store of `vol` with 8-voxel bricks (4 levels at 64^3).
 fn store(vol: &Volume, dir: &tempfile::TempDir) -> Arc<dyn brickray::BrickSource> {
+    store_of(vol, dir, 8)
+}
+
+/// A store of `vol` with `brick`-voxel bricks.
+fn store_of(vol: &Volume, dir: &tempfile::TempDir, brick: u32) -> Arc<dyn brickray::BrickSource> {
     let path = dir.path().join("noise.brs");
     let mut reader = brickray::io::MemoryReader::new(vol.clone(), "memory");
     let opt = brickray::store::BuildOptions {
-        brick: 8,
+        brick,
         ..Default::default()
     };
     brickray::store::build(&mut reader, &path, &opt).unwrap();
@@ -154,6 +162,85 @@ fn a_split_fades_over_the_configured_frames() {
         }
         assert_eq!(to_new[3], 0.0, "{mode:?}: the 4th frame is the new image");
         assert_eq!(to_new[4], 0.0);
+    }
+}
+
+/// The first frame of a split's fade: the occluder scene at 128^3 in bricks
+/// of 32 (4x4x4 sub-cells), settled with every brick resident, drawn at level
+/// 1, then refined to the finest level with fades of 4 frames, with
+/// empty-space skipping on or off. Returns the frame and the leaves fading
+/// in it.
+fn fading_frame(mode: RenderMode, skip: bool) -> (brickray_harness::predict::FrameResult, u32) {
+    let vol = brickray_harness::predict::occluder_scene(128);
+    let dir = tempfile::tempdir().unwrap();
+    let mut r = renderer(
+        store_of(&vol, &dir, 32),
+        OutOfCoreConfig {
+            fade: Some(FadeDuration::Frames(4)),
+            tolerance_px: 0.0,
+            upload_budget_bytes: 1 << 30,
+            ..Default::default()
+        },
+    );
+    let t = Offscreen::new(&gpu().device, SIZE, SIZE);
+    let mut d = desc(Camera::orbit(Vec3::ZERO, 1.8, 0.5, 0.3), mode);
+    d.frame = VolumeFrame::centered([128; 3], [0.5; 3]);
+    d.settings.accel.empty_space_skipping = skip;
+    settle(&mut r, &t, &d);
+    brickray_harness::configure(gpu(), &r, |c| c.tolerance_px = 2.0).unwrap();
+    settle(&mut r, &t, &d);
+    let levels = r.stats().out_of_core.unwrap().data_leaves_per_level;
+    assert_eq!(
+        levels[..3],
+        [0, 8, 0],
+        "{mode:?}: level 1 drawn before the split"
+    );
+    brickray_harness::configure(gpu(), &r, |c| c.tolerance_px = 0.0).unwrap();
+    let frame = brickray_harness::predict::draw(gpu(), &mut r, &t, &d).unwrap();
+    let stats = r.stats().out_of_core.unwrap();
+    let leaves: u32 = stats.data_leaves_per_level.iter().sum();
+    assert_eq!(
+        stats.data_leaves_per_level[2], leaves,
+        "{mode:?}: split to the finest level"
+    );
+    (frame, stats.cache.fading)
+}
+
+#[test]
+fn fading_leaves_skip_empty_space() {
+    use brickray_harness::predict::samples_per_ray;
+    for mode in [
+        RenderMode::Dvr,
+        RenderMode::Mip,
+        RenderMode::Iso {
+            value: 0.6,
+            color: [1.0, 0.8, 0.6],
+        },
+    ] {
+        let (on, fading) = fading_frame(mode, true);
+        let (off, _) = fading_frame(mode, false);
+        assert!(fading >= 32, "{mode:?}: the frame fades ({fading} leaves)");
+        let worst = on
+            .color
+            .iter()
+            .zip(&off.color)
+            .map(|(a, b)| a.abs_diff(*b))
+            .max()
+            .unwrap();
+        let (s_on, s_off) = (samples_per_ray(&on.samples), samples_per_ray(&off.samples));
+        eprintln!(
+            "{mode:?}: {fading} leaves fading, samples per ray {s_on:.1} skipping, {s_off:.1} not, worst channel difference {worst}"
+        );
+        // Skipping passes over only what shows nothing.
+        assert!(
+            worst <= 1,
+            "{mode:?}: skipping changed the image by {worst}"
+        );
+        // When fading leaves did not skip, the two took the same samples.
+        assert!(
+            s_on < 0.8 * s_off,
+            "{mode:?}: fading leaves took {s_on:.1} samples per ray skipping, {s_off:.1} not"
+        );
     }
 }
 

@@ -98,8 +98,8 @@ fn cursor_gradient(c: Cursor, t: f32) -> vec4<f32> {
 // lie on the full traversal's grid t0 + k dt f (f: the leaf level's step
 // multiple; `dt` the finest level's step: frame.dt, or the prediction's sparse
 // step), from its first point at or after t_from. Skips, when `ess`,
-// sub-cells whose maximum lies below the isovalue (never a fading brick's:
-// its range does not bound its ancestor's); every data leaf walked is counted
+// sub-cells whose maximum lies below the isovalue (a fading leaf's bound
+// both levels: sub_cell_range); every data leaf walked is counted
 // as reached (ray-guided feedback). Skipping whole bricks below the isovalue
 // in the walk as well made frames 10% slower on lavapipe (`raw --modes iso`,
 // interleaved runs): lanes that skip a brick keep the SIMD group in the walk
@@ -141,11 +141,10 @@ fn ooc_iso_march(acc: ptr<function, Accum>, cur: ptr<function, Cursor>, t0: f32,
             if (!oct_next_leaf(&st)) { break; }
             if (st.hit.tag == OCT_TAG_DATA) {
                 feedback_reached(st.hit.data);
-                let sl = slots[st.hit.data];
                 if (probe) {
                     (*acc).samples = (*acc).samples + 1u;
                 }
-                if (!(probe && sl.range.y < frame.isovalue && sl.offset.w == 0.0)) {
+                if (!(probe && leaf_max(st.hit.data) < frame.isovalue)) {
                     found = true;
                     break;
                 }
@@ -175,7 +174,7 @@ fn ooc_iso_march(acc: ptr<function, Accum>, cur: ptr<function, Cursor>, t0: f32,
                 return t_to;
             }
             budget = budget - 1u;
-            if ((ess || probe) && k >= k_cell && (*cur).b.fb_w == 0.0) {
+            if ((ess || probe) && k >= k_cell) {
                 let j = sub_cell_of((*cur).b, oo + od * t);
                 let range = sub_cell_range((*cur).b, j);
                 let te = min(sub_cell_exit((*cur).b, j, oo, od, inv_od), st.hit.t_exit);
@@ -270,8 +269,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 loop {
                     if (!oct_next_leaf(&st)) { break; }
                     if (st.hit.tag == OCT_TAG_DATA) { feedback_reached(st.hit.data); }
-                    // (A fading brick's range does not bound its ancestor's.)
-                    if (st.hit.tag == OCT_TAG_DATA && !(MODE == MODE_MIP && ESS && slots[st.hit.data].range.y <= acc.max_v && slots[st.hit.data].offset.w == 0.0)) {
+                    if (st.hit.tag == OCT_TAG_DATA && !(MODE == MODE_MIP && ESS && leaf_max(st.hit.data) <= acc.max_v)) {
                         found = true;
                         break;
                     }
@@ -301,9 +299,11 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                     if (t >= t_end) { break; }
                     if (budget == 0u) { done = true; break; }
                     budget = budget - 1u;
-                    // A fading brick's sub-cells do not bound its ancestor's values:
-                    // no skipping inside it while it fades.
-                    if (ESS && k >= k_cell && cur.b.fb_w == 0.0) {
+                    // A fading leaf's sub-cells bound both levels' values
+                    // (sub_cell_range), except the spread's reach: with
+                    // SPREAD, whose widened ranges do not bound a mixed
+                    // sample's reach, no skipping inside it while it fades.
+                    if (ESS && k >= k_cell && !(SPREAD && cur.b.fb_w > 0.0)) {
                         let j = sub_cell_of(cur.b, oo + od * t);
                         let range = sub_cell_range(cur.b, j);
                         let te = min(sub_cell_exit(cur.b, j, oo, od, inv_od), st.hit.t_exit);

@@ -129,23 +129,25 @@ fn channel_transparent(c: u32, r: vec2<f32>) -> f32 {
 // transparent, iso below the isovalue, MIP not above the running maximum mx
 // (the CPU twin: brickray_core::channels::node_visible).
 fn channel_cell_skips(b: Brick, j: vec3<u32>, mx: vec4<f32>, vis: vec4<f32>, iso: vec4<f32>) -> bool {
-    let n = ooc.sub_cells;
-    let at = (((b.slot * n + j.z) * n + j.y) * n + j.x) * CHANNELS;
-    let r0 = sub_cells[at];
+    // A fading leaf's values lie between its brick's and its fallback's
+    // (ooc_volume.wgsl, sub_cell_range).
+    let at = sub_cell_index(b.slot, j) * CHANNELS;
+    let fat = fade_sub_cell_index(b, j) * CHANNELS;
+    let r0 = range_union(sub_cells[at], sub_cells[fat]);
     var hi = vec4<f32>(r0.y, -3.0e38, -3.0e38, -3.0e38);
     var opaque = vec4<f32>(1.0 - channel_transparent(0u, r0), 0.0, 0.0, 0.0);
     if (CHANNELS > 1u) {
-        let r = sub_cells[at + 1u];
+        let r = range_union(sub_cells[at + 1u], sub_cells[fat + 1u]);
         hi.y = r.y;
         opaque.y = 1.0 - channel_transparent(1u, r);
     }
     if (CHANNELS > 2u) {
-        let r = sub_cells[at + 2u];
+        let r = range_union(sub_cells[at + 2u], sub_cells[fat + 2u]);
         hi.z = r.y;
         opaque.z = 1.0 - channel_transparent(2u, r);
     }
     if (CHANNELS > 3u) {
-        let r = sub_cells[at + 3u];
+        let r = range_union(sub_cells[at + 3u], sub_cells[fat + 3u]);
         hi.w = r.y;
         opaque.w = 1.0 - channel_transparent(3u, r);
     }
@@ -238,8 +240,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 if (t >= t_end) { break; }
                 if (budget == 0u) { done = true; break; }
                 budget = budget - 1u;
-                // (A fading brick's sub-cells do not bound its ancestor's.)
-                if (ESS && k >= k_cell && cur.b.fb_w == 0.0) {
+                if (ESS && k >= k_cell) {
                     let j = sub_cell_of(cur.b, oo + od * t);
                     let te = min(sub_cell_exit(cur.b, j, oo, od, inv_od), st.hit.t_exit);
                     let k_exit = max(k + 1u, first_k_after(te, t0, dtl));

@@ -77,6 +77,11 @@ struct Brick {
     fb_kuv: vec3<f32>,
     fb_f3: vec3<f32>,
     fb_w: f32,
+    // The fallback's slot and box (the leaf's own when it does not fade):
+    // its sub-cells bound the mixed values (fade_sub_cell_index).
+    fb_slot: u32,
+    fb_box_min: vec3<f32>,
+    fb_box_size: vec3<f32>,
     // The brick sampled is coarser than the finest level along some axis:
     // its voxels may have a spread (the finest level's is 0).
     coarse: bool,
@@ -105,6 +110,9 @@ fn brick_of(leaf: OctBox, slot: u32) -> Brick {
     b.fb_f3 = b.f3;
     b.fb_uv0 = b.uv0;
     b.fb_kuv = b.kuv;
+    b.fb_slot = slot;
+    b.fb_box_min = leaf.box_min;
+    b.fb_box_size = leaf.box_size;
     if (up > 0u && up <= leaf.level) {
         // The ancestor's box: each axis doubled once per level that split it.
         let anc = leaf.level - up;
@@ -118,6 +126,9 @@ fn brick_of(leaf: OctBox, slot: u32) -> Brick {
         let hf = hd + hu;
         b.fb_f3 = vec3<f32>(oct_exp2_pos(hf.x), oct_exp2_pos(hf.y), oct_exp2_pos(hf.z));
         b.fb_w = clamp(slots[slot].range.w, 0.0, 1.0);
+        b.fb_slot = fs;
+        b.fb_box_min = fmin;
+        b.fb_box_size = size;
         // A borrowed leaf (weight above 1; an octant-granular cut): drawn
         // from the ancestor alone, as the ancestor draws it (its mapping,
         // box, step and sub-cells); counted as itself.
@@ -192,9 +203,43 @@ fn sub_cell_of(b: Brick, o: vec3<f32>) -> vec3<u32> {
     return vec3<u32>(clamp(floor((o - b.box_min) * (n / b.box_size)), vec3<f32>(0.0), vec3<f32>(n - 1.0)));
 }
 
-fn sub_cell_range(b: Brick, j: vec3<u32>) -> vec2<f32> {
+// Sub-cell j of `slot` in `sub_cells` (a multi-channel kernel's entries are
+// this times its channels).
+fn sub_cell_index(slot: u32, j: vec3<u32>) -> u32 {
     let n = ooc.sub_cells;
-    return sub_cells[((b.slot * n + j.z) * n + j.y) * n + j.x];
+    return ((slot * n + j.z) * n + j.y) * n + j.x;
+}
+
+// The fallback's sub-cell that holds sub-cell j of a fading leaf's brick (j
+// itself for a leaf that does not fade). An ancestor's sub-cell grid is
+// aligned with its descendants' (boxes of powers of two, snapped), so each of
+// the leaf's sub-cells lies in one of the fallback's: found from its centre.
+fn fade_sub_cell_index(b: Brick, j: vec3<u32>) -> u32 {
+    let n = f32(ooc.sub_cells);
+    let centre = b.box_min + (vec3<f32>(j) + 0.5) * (b.box_size / n);
+    let fj = clamp(floor((centre - b.fb_box_min) * (n / b.fb_box_size)), vec3<f32>(0.0), vec3<f32>(n - 1.0));
+    return sub_cell_index(b.fb_slot, vec3<u32>(fj));
+}
+
+fn range_union(a: vec2<f32>, b: vec2<f32>) -> vec2<f32> {
+    return vec2<f32>(min(a.x, b.x), max(a.y, b.y));
+}
+
+// The normalized values a sample in sub-cell j of brick b can take: the
+// sub-cell's range, and while the leaf fades (value = mix(own, fallback, w),
+// between the two) its fallback's sub-cell's as well, so a fading leaf skips
+// empty space like any other (it once could not, and a frame in which many
+// bricks arrived took up to 2x a converged one).
+fn sub_cell_range(b: Brick, j: vec3<u32>) -> vec2<f32> {
+    return range_union(sub_cells[sub_cell_index(b.slot, j)], sub_cells[fade_sub_cell_index(b, j)]);
+}
+
+// The largest normalized value a sample of the data leaf in `slot` can take:
+// its brick's maximum and, while it fades or borrows, its fallback's.
+fn leaf_max(slot: u32) -> f32 {
+    let s = slots[slot];
+    let fs = min(u32(s.range.z), arrayLength(&slots) - 1u);
+    return max(s.range.y, slots[select(slot, fs, s.offset.w > 0.0)].range.y);
 }
 
 // t at which the ray o(t) = oo + od t leaves sub-cell j of brick b (`inv_od`:
