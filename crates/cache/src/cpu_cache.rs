@@ -1,13 +1,20 @@
 //! Level-2 cache: prepared bricks in system memory, LRU within a byte budget.
 
 use crate::prepared::PreparedBrick;
-use brickray_core::NodeKey;
-use std::collections::{BTreeMap, HashMap};
+use brickray_core::{NodeKey, NodeMap};
 
+/// No neighbour (the end of the recency list).
+const NIL: u32 = u32::MAX;
+
+/// A cached brick, linked into the recency list by slot index.
 #[derive(Debug)]
 struct Entry {
+    key: NodeKey,
     data: PreparedBrick,
-    tick: u64,
+    /// The next older entry.
+    prev: u32,
+    /// The next newer entry.
+    next: u32,
 }
 
 /// Prepared bricks keyed by [`NodeKey`], evicted least-recently-used first once
@@ -15,14 +22,21 @@ struct Entry {
 ///
 /// The most recently inserted brick is always kept, even when it alone exceeds the
 /// budget, so a cache smaller than one brick still makes progress.
+///
+/// Recency is a doubly linked list through the entries' slots: marking a brick
+/// used, inserting and evicting are O(1) and allocate nothing once the slots
+/// exist (refinement marks every brick it finds in CPU memory, every frame).
 #[derive(Debug)]
 pub struct CpuCache {
     budget: u64,
     bytes: u64,
-    tick: u64,
-    map: HashMap<NodeKey, Entry>,
-    /// `tick -> key`, oldest first.
-    order: BTreeMap<u64, NodeKey>,
+    map: NodeMap<u32>,
+    /// Entries by slot; `None` slots are listed in `free`.
+    slots: Vec<Option<Entry>>,
+    free: Vec<u32>,
+    /// The least and the most recently used entry.
+    oldest: u32,
+    newest: u32,
     hits: u64,
     misses: u64,
     evictions: u64,
@@ -34,40 +48,86 @@ impl CpuCache {
         CpuCache {
             budget: budget_bytes,
             bytes: 0,
-            tick: 0,
-            map: HashMap::new(),
-            order: BTreeMap::new(),
+            map: NodeMap::default(),
+            slots: Vec::new(),
+            free: Vec::new(),
+            oldest: NIL,
+            newest: NIL,
             hits: 0,
             misses: 0,
             evictions: 0,
         }
     }
 
-    fn next_tick(&mut self) -> u64 {
-        self.tick += 1;
-        self.tick
+    fn entry(&mut self, i: u32) -> &mut Entry {
+        self.slots[i as usize]
+            .as_mut()
+            .expect("listed slots hold entries")
+    }
+
+    /// Takes slot `i` out of the recency list.
+    fn unlink(&mut self, i: u32) {
+        let (prev, next) = {
+            let e = self.entry(i);
+            (e.prev, e.next)
+        };
+        if prev == NIL {
+            self.oldest = next;
+        } else {
+            self.entry(prev).next = next;
+        }
+        if next == NIL {
+            self.newest = prev;
+        } else {
+            self.entry(next).prev = prev;
+        }
+    }
+
+    /// Puts slot `i` at the newest end of the recency list.
+    fn push_newest(&mut self, i: u32) {
+        let newest = self.newest;
+        {
+            let e = self.entry(i);
+            e.prev = newest;
+            e.next = NIL;
+        }
+        if newest == NIL {
+            self.oldest = i;
+        } else {
+            self.entry(newest).next = i;
+        }
+        self.newest = i;
     }
 
     /// Looks a brick up, counting a hit or a miss and marking it most recently used.
     pub fn get(&mut self, key: NodeKey) -> Option<PreparedBrick> {
+        if !self.lookup(key) {
+            return None;
+        }
+        self.peek(key).cloned()
+    }
+
+    /// Whether the brick is cached, counting a hit or a miss and marking it
+    /// most recently used, without copying it out.
+    pub fn lookup(&mut self, key: NodeKey) -> bool {
         let found = self.touch(key);
         if found {
             self.hits += 1;
         } else {
             self.misses += 1;
         }
-        self.map.get(&key).map(|e| e.data.clone())
+        found
     }
 
     /// Marks a brick most recently used without counting a hit or miss; returns
     /// whether it is cached.
     pub fn touch(&mut self, key: NodeKey) -> bool {
-        let t = self.next_tick();
-        match self.map.get_mut(&key) {
-            Some(e) => {
-                self.order.remove(&e.tick);
-                e.tick = t;
-                self.order.insert(t, key);
+        match self.map.get(&key) {
+            Some(&i) => {
+                if i != self.newest {
+                    self.unlink(i);
+                    self.push_newest(i);
+                }
                 true
             }
             None => false,
@@ -76,7 +136,8 @@ impl CpuCache {
 
     /// The brick, if cached, without touching it or counting.
     pub fn peek(&self, key: NodeKey) -> Option<&PreparedBrick> {
-        self.map.get(&key).map(|e| &e.data)
+        let i = *self.map.get(&key)?;
+        self.slots[i as usize].as_ref().map(|e| &e.data)
     }
 
     /// True when the brick is cached (no LRU update, no counting).
@@ -88,10 +149,25 @@ impl CpuCache {
     /// recently used others until the total fits the budget. Returns the evicted keys.
     pub fn insert(&mut self, key: NodeKey, data: PreparedBrick) -> Vec<NodeKey> {
         self.remove(key);
-        let t = self.next_tick();
         self.bytes += data.bytes();
-        self.map.insert(key, Entry { data, tick: t });
-        self.order.insert(t, key);
+        let entry = Entry {
+            key,
+            data,
+            prev: NIL,
+            next: NIL,
+        };
+        let i = match self.free.pop() {
+            Some(i) => {
+                self.slots[i as usize] = Some(entry);
+                i
+            }
+            None => {
+                self.slots.push(Some(entry));
+                (self.slots.len() - 1) as u32
+            }
+        };
+        self.map.insert(key, i);
+        self.push_newest(i);
         self.evict_to_budget()
     }
 
@@ -104,13 +180,9 @@ impl CpuCache {
 
     fn evict_to_budget(&mut self) -> Vec<NodeKey> {
         let mut evicted = Vec::new();
-        while self.bytes > self.budget && self.map.len() > 1 {
-            let Some((_, victim)) = self.order.pop_first() else {
-                break;
-            };
-            if let Some(e) = self.map.remove(&victim) {
-                self.bytes -= e.data.bytes();
-            }
+        while self.bytes > self.budget && self.map.len() > 1 && self.oldest != NIL {
+            let victim = self.entry(self.oldest).key;
+            self.remove(victim);
             self.evictions += 1;
             evicted.push(victim);
         }
@@ -119,15 +191,23 @@ impl CpuCache {
 
     /// Removes a brick; returns it if it was cached.
     pub fn remove(&mut self, key: NodeKey) -> Option<PreparedBrick> {
-        let e = self.map.remove(&key)?;
-        self.order.remove(&e.tick);
+        let i = self.map.remove(&key)?;
+        self.unlink(i);
+        let e = self.slots[i as usize].take()?;
+        self.free.push(i);
         self.bytes -= e.data.bytes();
         Some(e.data)
     }
 
     /// Keys from least to most recently used.
     pub fn lru_order(&self) -> Vec<NodeKey> {
-        self.order.values().copied().collect()
+        let mut out = Vec::with_capacity(self.map.len());
+        let mut i = self.oldest;
+        while let Some(e) = self.slots.get(i as usize).and_then(Option::as_ref) {
+            out.push(e.key);
+            i = e.next;
+        }
+        out
     }
 
     /// Number of cached bricks.
@@ -266,17 +346,21 @@ mod tests {
         /// Against a model: the byte total never exceeds the budget (unless a single
         /// brick does), the evicted brick is always the least recently used.
         #[test]
-        fn matches_lru_model(ops in prop::collection::vec((0u32..12, 1usize..60, any::<bool>()), 1..200)) {
+        fn matches_lru_model(ops in prop::collection::vec((0u32..12, 1usize..60, 0u8..5), 1..200)) {
             let budget = 150usize;
             let mut c = CpuCache::new(budget as u64);
             let mut model: Vec<(NodeKey, usize)> = Vec::new(); // oldest first
-            for (i, size, is_get) in ops {
+            for (i, size, op) in ops {
                 let key = k(i);
-                if is_get {
-                    let hit = c.get(key).is_some();
-                    let pos = model.iter().position(|e| e.0 == key);
+                let pos = model.iter().position(|e| e.0 == key);
+                if op < 2 {
+                    // A counted lookup, copying the brick out or not.
+                    let hit = if op == 0 { c.get(key).is_some() } else { c.lookup(key) };
                     prop_assert_eq!(hit, pos.is_some());
                     if let Some(p) = pos { let e = model.remove(p); model.push(e); }
+                } else if op == 2 {
+                    let removed = c.remove(key).map(|d| d.bytes() as usize);
+                    prop_assert_eq!(removed, pos.map(|p| model.remove(p).1));
                 } else {
                     let evicted = c.insert(key, b(size));
                     model.retain(|e| e.0 != key);

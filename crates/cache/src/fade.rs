@@ -25,6 +25,7 @@
 
 use crate::refine::{NodeClass, RefinedLeaf};
 use brickray_core::NodeKey;
+use brickray_core::{NodeMap, NodeSet};
 use std::collections::{HashMap, HashSet};
 
 /// How long a level-of-detail transition lasts.
@@ -129,7 +130,7 @@ pub struct Fader {
     /// The last displayed cut.
     prev: Vec<RefinedLeaf>,
     /// Active fades by displayed leaf.
-    states: HashMap<NodeKey, State>,
+    states: NodeMap<State>,
 }
 
 fn is_data(l: &RefinedLeaf) -> bool {
@@ -195,14 +196,14 @@ impl Fader {
             };
         };
         let step = step.min(1.0);
-        let prev_data: HashSet<NodeKey> = self
+        let prev_data: NodeSet = self
             .prev
             .iter()
             .filter(|l| is_data(l))
             .map(|l| l.key)
             .collect();
         let under = self.drawn_under(refined);
-        let mut states: HashMap<NodeKey, State> = HashMap::new();
+        let mut states: NodeMap<State> = NodeMap::default();
         let mut out = Displayed::default();
         for (i, n) in refined.iter().enumerate() {
             if !is_data(n) {
@@ -248,7 +249,7 @@ impl Fader {
     /// Per refined leaf (its index), the last displayed leaves strictly
     /// inside it (their indices in `prev`).
     fn drawn_under(&self, refined: &[RefinedLeaf]) -> HashMap<usize, Vec<usize>> {
-        let refined_keys: HashMap<NodeKey, usize> = refined
+        let refined_keys: NodeMap<usize> = refined
             .iter()
             .enumerate()
             .map(|(i, l)| (l.key, i))
@@ -269,7 +270,7 @@ impl Fader {
 
     /// A split: the fade of `key` from the nearest ancestor drawn as a data
     /// leaf last frame, `None` when there is none.
-    fn split_from(&self, key: NodeKey, prev_data: &HashSet<NodeKey>) -> Option<State> {
+    fn split_from(&self, key: NodeKey, prev_data: &NodeSet) -> Option<State> {
         let mut p = self.parent(key);
         while let Some(a) = p {
             if prev_data.contains(&a) {
@@ -304,7 +305,7 @@ impl Fader {
         n: &RefinedLeaf,
         inside: &[usize],
         step: f32,
-        states: &mut HashMap<NodeKey, State>,
+        states: &mut NodeMap<State>,
         leaves: &mut Vec<RefinedLeaf>,
     ) {
         if !inside.iter().any(|&j| is_data(&self.prev[j])) {

@@ -5,7 +5,8 @@
 //! this bookkeeping assigns to slots.
 
 use brickray_core::NodeKey;
-use std::collections::{BTreeMap, HashMap};
+use brickray_core::NodeMap;
+use std::collections::BTreeMap;
 use thiserror::Error;
 
 /// Index of a slot in the pool, `0..slot_count()`.
@@ -122,7 +123,7 @@ pub struct BrickPool {
     grid: [u32; 3],
     stored_side: u32,
     slots: Vec<Slot>,
-    map: HashMap<NodeKey, SlotId>,
+    map: NodeMap<SlotId>,
     /// Occupied slots by `tick` (oldest first); free slots are not listed.
     lru: BTreeMap<u64, SlotId>,
     free: Vec<SlotId>,
@@ -159,7 +160,7 @@ impl BrickPool {
                 };
                 n as usize
             ],
-            map: HashMap::new(),
+            map: NodeMap::default(),
             lru: BTreeMap::new(),
             free: (0..n).rev().collect(),
             tick: 0,
@@ -456,7 +457,7 @@ mod tests {
             let mut p = BrickPool::with_grid([n_slots, 1, 1], 2);
             for (f, accesses) in frames.iter().enumerate() {
                 let frame = f as u64 + 1;
-                let mut used: HashMap<NodeKey, SlotId> = HashMap::new();
+                let mut used: NodeMap<SlotId> = NodeMap::default();
                 for &i in accesses {
                     let key = k(i);
                     match p.allocate(key, frame) {

@@ -12,6 +12,15 @@ use crate::range::CancelToken;
 use crate::volume::{DType, VolumeDesc};
 use thiserror::Error;
 
+/// A map keyed by node, hashed with FxHash (`rustc-hash`): several times
+/// cheaper per lookup than the standard library's SipHash, which planning
+/// pays on every node it visits. Keys come from the octree, not from outside,
+/// so the standard hasher's resistance to chosen collisions buys nothing here.
+pub type NodeMap<V> = std::collections::HashMap<NodeKey, V, rustc_hash::FxBuildHasher>;
+
+/// A set of nodes, hashed like [`NodeMap`].
+pub type NodeSet = std::collections::HashSet<NodeKey, rustc_hash::FxBuildHasher>;
+
 /// Identifies an octree node.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub struct NodeKey {

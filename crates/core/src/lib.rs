@@ -49,8 +49,8 @@ pub mod volume;
 pub mod window;
 
 pub use brick::{
-    BrickError, BrickSource, CutLeaf, EmptyReason, LeafKind, NodeInfo, NodeKey, NodeKind,
-    OctreeLayout, level_volume,
+    BrickError, BrickSource, CutLeaf, EmptyReason, LeafKind, NodeInfo, NodeKey, NodeKind, NodeMap,
+    NodeSet, OctreeLayout, level_volume,
 };
 pub use camera::{
     Camera, CameraError, DepthConvention, DepthMap, FrameError, FrameView, Projection, Ray, RayGen,

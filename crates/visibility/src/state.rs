@@ -1,7 +1,7 @@
 //! Per-node visibility with the feedback delay, propagated to the root.
 
 use brickray_core::NodeKey;
-use std::collections::HashMap;
+use brickray_core::{NodeMap, NodeSet};
 
 /// The knobs of [`VisibilityState`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -96,12 +96,12 @@ pub struct VisibilityCounts {
 #[derive(Debug, Clone, Default)]
 pub struct VisibilityState {
     config: VisibilityConfig,
-    leaves: HashMap<NodeKey, LeafVis>,
+    leaves: NodeMap<LeafVis>,
     /// Propagated visibility of the inner nodes of the cut.
-    inner: HashMap<NodeKey, bool>,
+    inner: NodeMap<bool>,
     /// Nodes that collapsed as invisible and then showed as leaves: they stay
     /// split while they are in the cut (see the type's documentation).
-    bounced: std::collections::HashSet<NodeKey>,
+    bounced: NodeSet,
     dirty: bool,
     /// The octree of an anisotropic pyramid, whose parents halve only some
     /// axes (`None`: every level halves all axes).
@@ -155,7 +155,7 @@ impl VisibilityState {
     /// previous cut keep their observations; new ones start unobserved.
     pub fn set_cut(&mut self, frame: u64, data_leaves: impl IntoIterator<Item = NodeKey>) {
         self.propagate();
-        let mut next = HashMap::with_capacity(self.leaves.len());
+        let mut next = NodeMap::with_capacity_and_hasher(self.leaves.len(), Default::default());
         for key in data_leaves {
             let v = self.leaves.get(&key).copied().unwrap_or_else(|| {
                 // A collapsed inner node found invisible stays invisible.

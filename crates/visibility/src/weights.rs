@@ -4,7 +4,7 @@
 //! [`LodMetric::VisibleError`]: brickray_core::LodMetric::VisibleError
 
 use brickray_core::{NodeKey, OctreeLayout};
-use std::collections::{HashMap, HashSet};
+use brickray_core::{NodeMap, NodeSet};
 
 /// One data leaf of the current cut.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -48,17 +48,17 @@ struct Leaf {
 #[derive(Debug, Clone)]
 pub struct VisibleWeights {
     layout: OctreeLayout,
-    leaves: HashMap<NodeKey, Leaf>,
+    leaves: NodeMap<Leaf>,
     /// Sums over the leaves below each inner node of the cut (lazily rebuilt).
-    inner: HashMap<NodeKey, f64>,
+    inner: NodeMap<f64>,
     /// Inner nodes of the cut that split in this view, with the weight they
     /// had as a leaf when they split (see [`ranked_weight`](Self::ranked_weight)).
-    split_from: HashMap<NodeKey, f64>,
+    split_from: NodeMap<f64>,
     /// Inner nodes of the last refined cut.
-    refined_inner: HashSet<NodeKey>,
+    refined_inner: NodeSet,
     /// Per node, how often it collapsed (was inner in one refined cut and a
     /// leaf in the next) in this view.
-    collapses: HashMap<NodeKey, u32>,
+    collapses: NodeMap<u32>,
     dirty: bool,
 }
 
@@ -87,11 +87,11 @@ impl VisibleWeights {
     pub fn new(layout: &OctreeLayout) -> VisibleWeights {
         VisibleWeights {
             layout: layout.clone(),
-            leaves: HashMap::new(),
-            inner: HashMap::new(),
-            split_from: HashMap::new(),
-            refined_inner: HashSet::new(),
-            collapses: HashMap::new(),
+            leaves: NodeMap::default(),
+            inner: NodeMap::default(),
+            split_from: NodeMap::default(),
+            refined_inner: NodeSet::default(),
+            collapses: NodeMap::default(),
             dirty: false,
         }
     }
@@ -134,8 +134,8 @@ impl VisibleWeights {
     }
 
     /// The inner nodes of a cut: every ancestor of its leaves.
-    fn ancestors(&self, leaves: impl IntoIterator<Item = NodeKey>) -> HashSet<NodeKey> {
-        let mut inner = HashSet::new();
+    fn ancestors(&self, leaves: impl IntoIterator<Item = NodeKey>) -> NodeSet {
+        let mut inner = NodeSet::default();
         for key in leaves {
             let mut a = self.layout.parent(key);
             while let Some(p) = a {
@@ -156,7 +156,7 @@ impl VisibleWeights {
         // The new cut's inner nodes: those that were leaves split now and
         // remember their weight; the others keep what they remembered.
         let inner = self.ancestors(data_leaves.iter().copied());
-        let mut split_from: HashMap<NodeKey, f64> = HashMap::new();
+        let mut split_from: NodeMap<f64> = NodeMap::default();
         for &key in &inner {
             let was = match self.leaves.get(&key) {
                 // Only what was observed: a leaf split on an estimate (its
@@ -169,7 +169,7 @@ impl VisibleWeights {
             }
         }
         self.split_from = split_from;
-        let mut next = HashMap::with_capacity(self.leaves.len());
+        let mut next = NodeMap::with_capacity_and_hasher(self.leaves.len(), Default::default());
         for key in data_leaves {
             let leaf = self.leaves.get(&key).copied().unwrap_or_else(|| Leaf {
                 entered: frame,

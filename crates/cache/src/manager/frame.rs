@@ -17,7 +17,7 @@ use crate::refine::{NodeClass, RefineParams, Refinement, SplitFilter, Views, ref
 use brickray_core::{
     CutLeaf, EmptyReason, LeafKind, LodMetric, NodeKey, RenderMode, TransferFunction,
 };
-use std::collections::{HashMap, HashSet};
+use brickray_core::{NodeMap, NodeSet};
 use std::time::Instant;
 
 /// Frames per second assumed for fades in milliseconds when a frame gives no
@@ -179,7 +179,7 @@ impl BrickManager {
         if shown.fades.is_empty() {
             return shown;
         }
-        let mut need: HashSet<NodeKey> = shown
+        let mut need: NodeSet = shown
             .leaves
             .iter()
             .filter(|l| l.class == NodeClass::Data)
@@ -222,7 +222,7 @@ impl BrickManager {
         // Octants drawn from their parent's brick (index in `cut`), and the
         // parents lending their bricks, with their slots once known.
         let mut borrowed = Vec::new();
-        let mut lenders: HashMap<NodeKey, Option<u32>> = HashMap::new();
+        let mut lenders: NodeMap<Option<u32>> = NodeMap::default();
         for l in &shown.leaves {
             let kind = match l.class {
                 NodeClass::Empty(r) => LeafKind::Empty(r),
@@ -288,7 +288,7 @@ impl BrickManager {
     fn lend(
         &mut self,
         placed: &mut Placed,
-        lenders: HashMap<NodeKey, Option<u32>>,
+        lenders: NodeMap<Option<u32>>,
         borrowed: &[usize],
         frame: u64,
     ) {
@@ -301,7 +301,7 @@ impl BrickManager {
                 placed.resident += 1;
             }
         }
-        let lent: HashMap<NodeKey, Option<u32>> = lent.into_iter().collect();
+        let lent: NodeMap<Option<u32>> = lent.into_iter().collect();
         let base = self.pool.slot_count();
         let rows = self.borrowed_slots();
         for (n, &i) in borrowed.iter().enumerate().take(rows as usize) {
@@ -328,7 +328,7 @@ impl BrickManager {
     /// Phase 5: each fading leaf with its slot and its fallback's; a fade
     /// whose bricks are not both resident is cancelled.
     fn fade_slots(&mut self, shown: &Displayed, cut: &[CutLeaf]) -> Vec<FadeSlot> {
-        let slot_of: HashMap<NodeKey, u32> = cut
+        let slot_of: NodeMap<u32> = cut
             .iter()
             .filter_map(|l| l.slot().map(|s| (l.key, s)))
             .collect();
@@ -364,9 +364,9 @@ impl BrickManager {
             .collect();
         let mut meta_requests = refined.meta_requests.clone();
         let (floor_bricks, floor_meta) = std::mem::take(&mut placed.floor_requests);
-        let known: HashSet<NodeKey> = bricks.iter().map(|b| b.key).collect();
+        let known: NodeSet = bricks.iter().map(|b| b.key).collect();
         bricks.extend(floor_bricks.into_iter().filter(|r| !known.contains(&r.key)));
-        let known: HashSet<NodeKey> = meta_requests.iter().map(|m| m.0).collect();
+        let known: NodeSet = meta_requests.iter().map(|m| m.0).collect();
         meta_requests.extend(floor_meta.into_iter().filter(|m| !known.contains(&m.0)));
         self.loader.submit(&meta_requests, &bricks);
         Requested {

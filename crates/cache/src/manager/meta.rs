@@ -4,8 +4,8 @@
 //! grew by about 8 kB a frame). A forgotten entry is fetched again by the loader
 //! when a view needs it; the root is never forgotten.
 
+use brickray_core::NodeMap;
 use brickray_core::{NodeInfo, NodeKey};
-use std::collections::HashMap;
 use std::sync::atomic::{AtomicU64, Ordering};
 
 #[derive(Debug)]
@@ -18,7 +18,7 @@ struct Entry {
 /// Metadata by node, LRU by frame of last use within a capacity.
 #[derive(Debug)]
 pub(crate) struct MetaCache {
-    map: HashMap<NodeKey, Entry>,
+    map: NodeMap<Entry>,
     frame: u64,
     capacity: usize,
     evicted: u64,
@@ -28,7 +28,7 @@ impl MetaCache {
     /// A cache of at most `capacity` entries (at least 64).
     pub(crate) fn new(capacity: usize) -> MetaCache {
         MetaCache {
-            map: HashMap::new(),
+            map: NodeMap::default(),
             frame: 0,
             capacity: capacity.max(64),
             evicted: 0,

@@ -138,7 +138,7 @@ impl RefineEnv for Env<'_, '_> {
             // those the least recently used whenever the working set outgrew
             // the CPU cache, and the split never happened.
             DataState::OnGpu
-        } else if self.cpu.get(key).is_some() {
+        } else if self.cpu.lookup(key) {
             DataState::InCpu
         } else if self.failures.is_failed(FetchKind::Brick, key) {
             DataState::Failed

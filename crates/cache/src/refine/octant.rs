@@ -31,7 +31,8 @@ use super::{
 };
 use crate::upload::UploadBudget;
 use brickray_core::{EmptyReason, NodeInfo, NodeKey, OctreeLayout};
-use std::collections::{BinaryHeap, HashMap, HashSet};
+use brickray_core::{NodeMap, NodeSet};
+use std::collections::BinaryHeap;
 
 /// How much more a candidate that had its own brick in the previous frame
 /// ranks ([`RefineEnv::held`]): it loses its brick only to a candidate that
@@ -52,8 +53,8 @@ pub const MAX_DEMOTIONS: u32 = 3;
 #[derive(Debug, Clone, Default)]
 pub struct OctantMemory {
     view: Option<u64>,
-    held: HashSet<NodeKey>,
-    demotions: HashMap<NodeKey, u32>,
+    held: NodeSet,
+    demotions: NodeMap<u32>,
 }
 
 impl OctantMemory {
@@ -82,7 +83,7 @@ impl OctantMemory {
     /// brick and split, whether it still lends it or not), and a demotion
     /// for each node that had one and is now drawn from its parent.
     pub fn end(&mut self, r: &Refinement, layout: &OctreeLayout) {
-        let mut held = HashSet::new();
+        let mut held = NodeSet::default();
         for l in &r.leaves {
             match l.class {
                 NodeClass::Data => {
@@ -120,7 +121,7 @@ struct Octants<'p, 'a> {
     out: Refinement,
     heap: BinaryHeap<HeapItem>,
     /// Nodes with their own brick that draw some children: how many.
-    open: HashMap<NodeKey, u32>,
+    open: NodeMap<u32>,
 }
 
 impl Octants<'_, '_> {
@@ -246,7 +247,7 @@ pub(super) fn refine_octants(
             ..Default::default()
         },
         heap: BinaryHeap::new(),
-        open: HashMap::new(),
+        open: NodeMap::default(),
     };
     s.expand(env, root, root_info, uniform, root_priority, root_upload);
     // Candidates that stay drawn from their parent's brick.

@@ -6,6 +6,7 @@
 
 use super::{Streamer, WEIGHT_HYSTERESIS};
 use brickray_core::NodeKey;
+use brickray_core::NodeMap;
 use brickray_visibility::{VisibilityState, VisibleWeights};
 
 /// One frame's usage counts, as the renderer read them back.
@@ -82,10 +83,7 @@ fn merge_views(feedback: &[ViewFeedback]) -> Vec<UsageFrame> {
     if feedback.len() == 1 {
         return feedback[0].usage.clone();
     }
-    type Rows = (
-        Vec<(NodeKey, u32, f64)>,
-        std::collections::HashMap<NodeKey, usize>,
-    );
+    type Rows = (Vec<(NodeKey, u32, f64)>, NodeMap<usize>);
     let mut frames: std::collections::BTreeMap<u64, Rows> = Default::default();
     for u in feedback.iter().flat_map(|f| &f.usage) {
         let (rows, at) = frames.entry(u.frame).or_default();
