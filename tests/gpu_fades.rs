@@ -27,6 +27,16 @@ use std::sync::Arc;
 
 const SIZE: u32 = 64;
 
+/// The modes every fade test draws.
+const MODES: [RenderMode; 3] = [
+    RenderMode::Dvr,
+    RenderMode::Mip,
+    RenderMode::Iso {
+        value: 0.6,
+        color: [1.0, 0.8, 0.6],
+    },
+];
+
 fn noise(n: u32) -> Volume {
     brickray_harness::scenes::noise_volume(n)
 }
@@ -127,14 +137,7 @@ fn switch(
 
 #[test]
 fn a_split_fades_over_the_configured_frames() {
-    for mode in [
-        RenderMode::Dvr,
-        RenderMode::Mip,
-        RenderMode::Iso {
-            value: 0.6,
-            color: [1.0, 0.8, 0.6],
-        },
-    ] {
+    for mode in MODES {
         let (old, new, after) = switch(mode, Some(FadeDuration::Frames(4)), 5);
         let span = mad(&old, &new);
         assert!(span > 1.0, "{mode:?}: the levels differ ({span})");
@@ -209,14 +212,7 @@ fn fading_frame(mode: RenderMode, skip: bool) -> (brickray_harness::predict::Fra
 #[test]
 fn fading_leaves_skip_empty_space() {
     use brickray_harness::predict::samples_per_ray;
-    for mode in [
-        RenderMode::Dvr,
-        RenderMode::Mip,
-        RenderMode::Iso {
-            value: 0.6,
-            color: [1.0, 0.8, 0.6],
-        },
-    ] {
+    for mode in MODES {
         let (on, fading) = fading_frame(mode, true);
         let (off, _) = fading_frame(mode, false);
         assert!(fading >= 32, "{mode:?}: the frame fades ({fading} leaves)");

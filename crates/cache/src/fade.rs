@@ -24,8 +24,7 @@
 //! manager pins in the pool for the frame; nothing here touches the pool.
 
 use crate::refine::{NodeClass, RefinedLeaf};
-use brickray_core::NodeKey;
-use brickray_core::{NodeMap, NodeSet};
+use brickray_core::{NodeKey, NodeMap, NodeSet};
 use std::collections::{HashMap, HashSet};
 
 /// How long a level-of-detail transition lasts.

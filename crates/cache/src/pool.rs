@@ -4,8 +4,7 @@
 //! No GPU object lives here; the renderer owns the texture and uploads the bricks
 //! this bookkeeping assigns to slots.
 
-use brickray_core::NodeKey;
-use brickray_core::NodeMap;
+use brickray_core::{NodeKey, NodeMap};
 use std::collections::BTreeMap;
 use thiserror::Error;
 

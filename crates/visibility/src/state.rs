@@ -1,7 +1,6 @@
 //! Per-node visibility with the feedback delay, propagated to the root.
 
-use brickray_core::NodeKey;
-use brickray_core::{NodeMap, NodeSet};
+use brickray_core::{NodeKey, NodeMap, NodeSet};
 
 /// The knobs of [`VisibilityState`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -3,8 +3,7 @@
 //!
 //! [`LodMetric::VisibleError`]: brickray_core::LodMetric::VisibleError
 
-use brickray_core::{NodeKey, OctreeLayout};
-use brickray_core::{NodeMap, NodeSet};
+use brickray_core::{NodeKey, NodeMap, NodeSet, OctreeLayout};
 
 /// One data leaf of the current cut.
 #[derive(Debug, Clone, Copy, PartialEq)]

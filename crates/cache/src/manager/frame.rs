@@ -15,9 +15,9 @@ use crate::loader::BrickRequest;
 use crate::pool::{BrickPool, PoolError};
 use crate::refine::{NodeClass, RefineParams, Refinement, SplitFilter, Views, refine};
 use brickray_core::{
-    CutLeaf, EmptyReason, LeafKind, LodMetric, NodeKey, RenderMode, TransferFunction,
+    CutLeaf, EmptyReason, LeafKind, LodMetric, NodeKey, NodeMap, NodeSet, RenderMode,
+    TransferFunction,
 };
-use brickray_core::{NodeMap, NodeSet};
 use std::time::Instant;
 
 /// Frames per second assumed for fades in milliseconds when a frame gives no

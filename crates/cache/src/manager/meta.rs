@@ -4,8 +4,7 @@
 //! grew by about 8 kB a frame). A forgotten entry is fetched again by the loader
 //! when a view needs it; the root is never forgotten.
 
-use brickray_core::NodeMap;
-use brickray_core::{NodeInfo, NodeKey};
+use brickray_core::{NodeInfo, NodeKey, NodeMap};
 use std::sync::atomic::{AtomicU64, Ordering};
 
 #[derive(Debug)]

@@ -30,8 +30,7 @@ use super::{
     RefinedLeaf, Refinement, Views, empty_leaf, unknown_root,
 };
 use crate::upload::UploadBudget;
-use brickray_core::{EmptyReason, NodeInfo, NodeKey, OctreeLayout};
-use brickray_core::{NodeMap, NodeSet};
+use brickray_core::{EmptyReason, NodeInfo, NodeKey, NodeMap, NodeSet, OctreeLayout};
 use std::collections::BinaryHeap;
 
 /// How much more a candidate that had its own brick in the previous frame

@@ -5,8 +5,7 @@
 //! cut goes back to them.
 
 use super::{Streamer, WEIGHT_HYSTERESIS};
-use brickray_core::NodeKey;
-use brickray_core::NodeMap;
+use brickray_core::{NodeKey, NodeMap};
 use brickray_visibility::{VisibilityState, VisibleWeights};
 
 /// One frame's usage counts, as the renderer read them back.
