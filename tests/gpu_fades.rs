@@ -11,10 +11,11 @@
 //! * a zoom path (40 frames, 2.6% closer a frame, tolerance 4 px) with fades
 //!   of 6 frames has no pop (16x16 tile error change above 8 units against
 //!   the in-core rendering at the finest level); without fades it has some.
-//! * a fading leaf skips empty space: in the frame a split from level 1 to
+//! * a fading leaf skips empty space (one channel and two): in the frame a split from level 1 to
 //!   the finest starts fading, skipping on draws the image skipping off
 //!   draws, with fewer samples per ray, in DVR, MIP and iso.
 
+use brickray::core::channels::ChannelStyle;
 use brickray::{
     Camera, FadeDuration, FrameDesc, OutOfCoreConfig, RenderMode, RenderSettings, TransferFunction,
     Volume, VolumeFrame, VolumeRenderer,
@@ -48,14 +49,18 @@ fn store(vol: &Volume, dir: &tempfile::TempDir) -> Arc<dyn brickray::BrickSource
 
 /// A store of `vol` with `brick`-voxel bricks.
 fn store_of(vol: &Volume, dir: &tempfile::TempDir, brick: u32) -> Arc<dyn brickray::BrickSource> {
-    let path = dir.path().join("noise.brs");
+    store_in(vol, &dir.path().join("noise.brs"), brick)
+}
+
+/// A store of `vol` at `path` with `brick`-voxel bricks.
+fn store_in(vol: &Volume, path: &std::path::Path, brick: u32) -> Arc<dyn brickray::BrickSource> {
     let mut reader = brickray::io::MemoryReader::new(vol.clone(), "memory");
     let opt = brickray::store::BuildOptions {
         brick,
         ..Default::default()
     };
-    brickray::store::build(&mut reader, &path, &opt).unwrap();
-    Arc::new(brickray::store::open(&path).unwrap())
+    brickray::store::build(&mut reader, path, &opt).unwrap();
+    Arc::new(brickray::store::open(path).unwrap())
 }
 
 fn tf() -> TransferFunction {
@@ -171,20 +176,41 @@ fn a_split_fades_over_the_configured_frames() {
 /// The first frame of a split's fade: the occluder scene at 128^3 in bricks
 /// of 32 (4x4x4 sub-cells), settled with every brick resident, drawn at level
 /// 1, then refined to the finest level with fades of 4 frames, with
-/// empty-space skipping on or off. Returns the frame and the leaves fading
-/// in it.
-fn fading_frame(mode: RenderMode, skip: bool) -> (brickray_harness::predict::FrameResult, u32) {
+/// empty-space skipping on or off. With `channels`, the scene and the nested
+/// shells as two channels of one volume (the multi-channel kernel). Returns
+/// the frame and the leaves fading in it.
+fn fading_frame(
+    mode: RenderMode,
+    skip: bool,
+    channels: bool,
+) -> (brickray_harness::predict::FrameResult, u32) {
     let vol = brickray_harness::predict::occluder_scene(128);
     let dir = tempfile::tempdir().unwrap();
-    let mut r = renderer(
-        store_of(&vol, &dir, 32),
-        OutOfCoreConfig {
-            fade: Some(FadeDuration::Frames(4)),
-            tolerance_px: 0.0,
-            upload_budget_bytes: 1 << 30,
-            ..Default::default()
-        },
-    );
+    let config = OutOfCoreConfig {
+        fade: Some(FadeDuration::Frames(4)),
+        tolerance_px: 0.0,
+        upload_budget_bytes: 1 << 30,
+        ..Default::default()
+    };
+    let mut r = if channels {
+        let shells = brickray_harness::predict::nested_shells(128);
+        let parts = vec![
+            store_of(&vol, &dir, 32),
+            store_in(&shells, &dir.path().join("shells.brs"), 32),
+        ];
+        let g = gpu();
+        let mut r = VolumeRenderer::new(&g.device, targets()).unwrap();
+        let source = Arc::new(brickray::ChannelSource::new(parts).unwrap());
+        r.set_volume_source(&g.device, &g.queue, source, config)
+            .unwrap();
+        let styles: Vec<_> = [[1.0, 0.5, 0.2], [0.2, 0.6, 1.0]]
+            .map(|c| ChannelStyle::window(c, [0.5, 0.8], 0.5).with_isovalue(0.6))
+            .into();
+        r.set_channel_styles(&styles).unwrap();
+        r
+    } else {
+        renderer(store_of(&vol, &dir, 32), config)
+    };
     let t = Offscreen::new(&gpu().device, SIZE, SIZE);
     let mut d = desc(Camera::orbit(Vec3::ZERO, 1.8, 0.5, 0.3), mode);
     d.frame = VolumeFrame::centered([128; 3], [0.5; 3]);
@@ -209,12 +235,13 @@ fn fading_frame(mode: RenderMode, skip: bool) -> (brickray_harness::predict::Fra
     (frame, stats.cache.fading)
 }
 
-#[test]
-fn fading_leaves_skip_empty_space() {
+/// Skipping on and off in the first frame of a fade (`fading_frame`): the
+/// same image, fewer samples.
+fn check_fading_skips(channels: bool) {
     use brickray_harness::predict::samples_per_ray;
     for mode in MODES {
-        let (on, fading) = fading_frame(mode, true);
-        let (off, _) = fading_frame(mode, false);
+        let (on, fading) = fading_frame(mode, true, channels);
+        let (off, _) = fading_frame(mode, false, channels);
         assert!(fading >= 32, "{mode:?}: the frame fades ({fading} leaves)");
         let worst = on
             .color
@@ -225,7 +252,7 @@ fn fading_leaves_skip_empty_space() {
             .unwrap();
         let (s_on, s_off) = (samples_per_ray(&on.samples), samples_per_ray(&off.samples));
         eprintln!(
-            "{mode:?}: {fading} leaves fading, samples per ray {s_on:.1} skipping, {s_off:.1} not, worst channel difference {worst}"
+            "{mode:?} (channels: {channels}): {fading} leaves fading, samples per ray {s_on:.1} skipping, {s_off:.1} not, worst channel difference {worst}"
         );
         // Skipping passes over only what shows nothing.
         assert!(
@@ -238,6 +265,16 @@ fn fading_leaves_skip_empty_space() {
             "{mode:?}: fading leaves took {s_on:.1} samples per ray skipping, {s_off:.1} not"
         );
     }
+}
+
+#[test]
+fn fading_leaves_skip_empty_space() {
+    check_fading_skips(false);
+}
+
+#[test]
+fn fading_leaves_of_channels_skip_empty_space() {
+    check_fading_skips(true);
 }
 
 #[test]
