@@ -11,9 +11,10 @@
 //! * a zoom path (40 frames, 2.6% closer a frame, tolerance 4 px) with fades
 //!   of 6 frames has no pop (16x16 tile error change above 8 units against
 //!   the in-core rendering at the finest level); without fades it has some.
-//! * a fading leaf skips empty space (one channel and two): in the frame a split from level 1 to
-//!   the finest starts fading, skipping on draws the image skipping off
-//!   draws, with fewer samples per ray, in DVR, MIP and iso.
+//! * a fading leaf skips empty space, with one channel and with two: in the
+//!   frame a split from level 1 to the finest starts fading, skipping on
+//!   draws the image skipping off draws, with fewer samples per ray, in DVR,
+//!   MIP and iso.
 
 use brickray::core::channels::ChannelStyle;
 use brickray::{
