@@ -201,6 +201,17 @@ impl LevelBuf {
         Ok(())
     }
 
+    /// The two slices of this level that coarser slice `k` is filtered
+    /// from: `2k` and `2k+1` (the last slice twice at an odd end), or `k`
+    /// twice when z is not halved.
+    pub(super) fn source_slices(&self, k: u32) -> (u32, u32) {
+        if self.halve[2] {
+            (2 * k, (2 * k + 1).min(self.dims[2] - 1))
+        } else {
+            (k, k)
+        }
+    }
+
     /// Rows `rows` of level slice `k` of the coarser level, filtered from
     /// slices `2k`, `2k+1` (slice `k` alone when z is not halved).
     pub(super) fn downsample(
@@ -211,12 +222,8 @@ impl LevelBuf {
         rows: (u32, u32),
         out: &mut [u8],
     ) {
-        let nz = self.dims[2];
-        let (s0, s1) = if self.halve[2] {
-            (self.slice(2 * k), self.slice((2 * k + 1).min(nz - 1)))
-        } else {
-            (self.slice(k), self.slice(k))
-        };
+        let (z0, z1) = self.source_slices(k);
+        let (s0, s1) = (self.slice(z0), self.slice(z1));
         let dtype = ctx.layout.dtype();
         let g = Geom {
             nx: self.dims[0] as usize,

@@ -161,12 +161,7 @@ impl LevelBuf {
         rows: (u32, u32),
         out: &mut [Moments],
     ) {
-        let nz = self.dims[2];
-        let (z0, z1) = if self.halve[2] {
-            (2 * k, (2 * k + 1).min(nz - 1))
-        } else {
-            (k, k)
-        };
+        let (z0, z1) = self.source_slices(k);
         let (nx, ny) = (self.dims[0] as usize, self.dims[1] as usize);
         let (px, row0, j0) = (pdims[0] as usize, self.row0 as usize, rows.0 as usize);
         let (hx, hy) = (self.halve[0], self.halve[1]);
