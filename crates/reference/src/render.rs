@@ -347,6 +347,21 @@ struct Marcher<'a> {
 /// The result of one ray: premultiplied RGBA and clip depth.
 type RayResult = ([f64; 4], Option<f64>);
 
+/// A DVR ray's running sum: premultiplied colour, opacity and the depth where
+/// the opacity first reached the settings' depth opacity.
+#[derive(Default)]
+struct Composite {
+    c: [f64; 3],
+    a: f64,
+    depth: Option<f64>,
+}
+
+impl Composite {
+    fn result(&self) -> RayResult {
+        ([self.c[0], self.c[1], self.c[2], self.a], self.depth)
+    }
+}
+
 impl<'a> Marcher<'a> {
     /// The constants of a `width x height` render at `step_factor`.
     #[allow(clippy::too_many_arguments)]
@@ -469,74 +484,86 @@ impl Marcher<'_> {
 
     /// Front-to-back emission-absorption.
     fn dvr(&self, ray: &Ray, span: Span) -> RayResult {
-        let shading = &self.settings.shading;
-        let depth_opacity = self.settings.depth_opacity as f64;
-        let mut c_acc = [0.0f64; 3];
-        let mut a_acc = 0.0f64;
-        let mut depth = None;
-        let mut prev = None;
+        let mut out = Composite::default();
+        if let Some(p) = &self.preint {
+            self.dvr_segments(ray, span, p, &mut out);
+            return out.result();
+        }
         for t in span.samples() {
             let v = self.value(ray, t);
-            let [r, g, b, a] = match &self.preint {
-                // The segment's associated colour, made straight again (shading
-                // applies to the straight colour; compositing multiplies back).
-                // The ray's first sample only records the front of the next
-                // segment: the segment ending there would start a step before
-                // the ray does.
-                Some(p) => {
-                    let Some(front) = prev.replace(v) else {
-                        continue;
-                    };
-                    let [r, g, b, a] = p.segment(front, v, self.step_factor);
-                    let s = if a > 0.0 { 1.0 / a } else { 0.0 };
-                    [r * s, g * s, b * s, a]
+            let [r, g, b, a] = match &self.spread {
+                Some((sigma, table)) => {
+                    let p = self.voxel_pos(ray, t).to_array();
+                    let s = field_trilinear(sigma, self.vol.dims(), p);
+                    table.lookup(self.tf, v, s)
                 }
-                None => {
-                    let [r, g, b, a] = match &self.spread {
-                        Some((sigma, table)) => {
-                            let p = self.voxel_pos(ray, t).to_array();
-                            let s = field_trilinear(sigma, self.vol.dims(), p);
-                            table.lookup(self.tf, v, s)
-                        }
-                        None => self.tf.lookup(v),
-                    };
-                    [r, g, b, corrected_alpha(a, self.step_factor)]
-                }
+                None => self.tf.lookup(v),
             };
-            let [r, g, b, a] = match self.overlay {
-                Some(o) => {
-                    let u = (ray.tex_origin + ray.tex_dir * t).to_array();
-                    o.apply([r, g, b, a], u, self.settings.smooth_labels)
-                }
-                None => [r, g, b, a],
-            };
-            if a <= 0.0 {
-                // Contributes nothing (and cannot change A or the depth).
-                continue;
-            }
-            let c = if shading.enabled {
-                // A pre-integrated segment [t - dt, t] is shaded at its
-                // midpoint: at its back sample the shading would lag the
-                // emission by half a step.
-                let ts = if self.preint.is_some() {
-                    t - 0.5 * self.dt
-                } else {
-                    t
-                };
-                self.shade(ray, ts, [r, g, b], shading)
-            } else {
-                [r, g, b]
-            };
-            let w = (1.0 - a_acc) * a;
-            for k in 0..3 {
-                c_acc[k] += w * c[k];
-            }
-            a_acc += w;
-            if depth.is_none() && a_acc >= depth_opacity {
-                depth = Some(self.clip_depth(ray, t));
+            let a = corrected_alpha(a, self.step_factor);
+            self.composite(&mut out, ray, [r, g, b, a], t, t);
+        }
+        out.result()
+    }
+
+    /// Pre-integrated DVR: the segment between each two samples, then the
+    /// ray's last piece. The ray's first sample only records the front of the
+    /// next segment (the segment ending there would start a step before the
+    /// ray does). A segment `[t - dt, t]` is shaded at its midpoint: at its
+    /// back sample the shading would lag the emission by half a step. The last
+    /// piece, from the last sample to the ray's end (less than a step), is
+    /// taken as constant at the last sample's value and shaded there: the
+    /// kernels sample nothing past their last sample. Without it a ray that
+    /// leaves the volume in material would lose up to a step of it (a plain
+    /// sample stands for the step after it, so the plain sum does not).
+    fn dvr_segments(&self, ray: &Ray, span: Span, p: &Preintegrator<'_>, out: &mut Composite) {
+        // The segment's associated colour, made straight again (shading
+        // applies to the straight colour; compositing multiplies back).
+        let straight = |[r, g, b, a]: [f64; 4]| {
+            let s = if a > 0.0 { 1.0 / a } else { 0.0 };
+            [r * s, g * s, b * s, a]
+        };
+        let mut prev: Option<(f64, f64)> = None;
+        for t in span.samples() {
+            let v = self.value(ray, t);
+            if let Some((_, front)) = prev.replace((t, v)) {
+                let s = straight(p.segment(front, v, self.step_factor));
+                self.composite(out, ray, s, t, t - 0.5 * self.dt);
             }
         }
-        ([c_acc[0], c_acc[1], c_acc[2], a_acc], depth)
+        if let Some((t, v)) = prev.filter(|&(t, _)| span.t1 > t) {
+            let d = self.step_factor * (span.t1 - t) / self.dt;
+            self.composite(out, ray, straight(p.segment(v, v, d)), t, t);
+        }
+    }
+
+    /// Composites the straight colour and opacity `rgba` of the sample at `t`
+    /// (the label overlay and the depth are taken there), shaded at `ts`.
+    fn composite(&self, out: &mut Composite, ray: &Ray, rgba: [f64; 4], t: f64, ts: f64) {
+        let [r, g, b, a] = match self.overlay {
+            Some(o) => {
+                let u = (ray.tex_origin + ray.tex_dir * t).to_array();
+                o.apply(rgba, u, self.settings.smooth_labels)
+            }
+            None => rgba,
+        };
+        if a <= 0.0 {
+            // Contributes nothing (and cannot change A or the depth).
+            return;
+        }
+        let shading = &self.settings.shading;
+        let c = if shading.enabled {
+            self.shade(ray, ts, [r, g, b], shading)
+        } else {
+            [r, g, b]
+        };
+        let w = (1.0 - out.a) * a;
+        for (acc, x) in out.c.iter_mut().zip(c) {
+            *acc += w * x;
+        }
+        out.a += w;
+        if out.depth.is_none() && out.a >= self.settings.depth_opacity as f64 {
+            out.depth = Some(self.clip_depth(ray, t));
+        }
     }
 
     /// First crossing of `iso`, bisection-refined, shaded, opaque.

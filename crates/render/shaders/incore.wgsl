@@ -219,6 +219,9 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             }
             k = k + 1u;
         }
+        if (PREINT && MODE == MODE_DVR) {
+            preint_tail(&acc, cur, r, t1, acc.prev_t, dt, tf_v);
+        }
     }
     finish_ray(px, &acc, cur, r, start.host);
 }

@@ -227,6 +227,29 @@ fn preint_fetch(acc: ptr<function, Accum>, c: Cursor, t: f32, dt: f32, t_min: f3
     }
 }
 
+// Pre-integration: the ray's last piece, from its last sample (prev_t) to its
+// end t_end, less than a step `dt`, taken as constant at the last sample's
+// value (the layer `tf_v`'s diagonal, its opacity raised to the piece's share
+// of the step) and shaded at `ts`, the last sample or the nearest point of
+// the brick being read (the kernels sample nothing past their last sample).
+// Without it a ray leaving the volume in material loses up to a step of it; a
+// plain sample stands for the step after it. None when the ray stopped early
+// (terminated, out of samples) or its last samples were skipped (transparent):
+// then the last sample lies more than a step before t_end.
+fn preint_tail(acc: ptr<function, Accum>, c: Cursor, r: Ray, t_end: f32, ts: f32, dt: f32, tf_v: f32) {
+    let len = t_end - (*acc).prev_t;
+    if (!(len > 0.0 && len <= 1.001 * dt)) {
+        return;
+    }
+    let v = (*acc).prev_v;
+    let p = tf_preint_sample(v, v, tf_v);
+    if (p.a <= 0.0) {
+        return;
+    }
+    let a = 1.0 - pow(max(1.0 - p.a, 0.0), min(len / dt, 1.0));
+    _ = dvr_composite(acc, c, r, (*acc).prev_t, ts, vec4<f32>(p.rgb / p.a, a));
+}
+
 // Blinn-Phong with a headlight (two-sided), clamped to 0..1. `g.xyz` is the
 // world-space gradient direction, `g.w` its magnitude in normalized value per
 // finest voxel (below 1e-6 the sample is left unshaded).
@@ -268,6 +291,14 @@ fn dvr_sample(acc: ptr<function, Accum>, c: Cursor, r: Ray, t: f32, ts: f32, fro
             return false;
         }
     }
+    return dvr_composite(acc, c, r, t, ts, s);
+}
+
+// DVR: composites the straight colour and opacity `s` of the sample at `t`
+// (the label overlay and the depth are taken there), shaded at `ts` with
+// PREINT and at `t` without. True when early ray termination ends the ray.
+fn dvr_composite(acc: ptr<function, Accum>, c: Cursor, r: Ray, t: f32, ts: f32, s_in: vec4<f32>) -> bool {
+    var s = s_in;
     if (OVERLAY != 0u) {
         s = overlay_apply(s, r.tex_origin + t * r.tex_dir);
         if (s.a <= 0.0) {

@@ -262,6 +262,9 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             // the ray through it (feedback.wgsl: only it is counted).
             var mip_slot = 0xffffffffu;
             var mip_w = 0.0;
+            // Where the cursor's leaf begins (pre-integration's last piece is
+            // shaded inside it).
+            var cur_in = t0;
             loop {
                 // Walk to the next data leaf (skipping empty ones, and for MIP
                 // bricks below the running maximum) in one go.
@@ -278,6 +281,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 }
                 if (!found) { break; }
                 cursor_enter(&cur, brick_of(st.hit.leaf, st.hit.data));
+                cur_in = st.hit.t_enter;
                 dtl = dt * cur.b.f;
                 if (cur.b.f != grid_f) {
                     grid_f = cur.b.f;
@@ -354,6 +358,9 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             }
             if (MODE == MODE_MIP && mip_slot != 0xffffffffu) {
                 feedback_add(mip_slot, mip_w);
+            }
+            if (PREINT && MODE == MODE_DVR) {
+                preint_tail(&acc, cur, r, t1, max(acc.prev_t, cur_in), dtl, cur.b.tf_v);
             }
             t_stop = grid_t(t0, k, dtl);
         }
