@@ -138,19 +138,47 @@ fn the_soak_suite_runs() {
 #[test]
 fn the_preint_suite_runs() {
     let fig = smoke(
-        &["preint", "--size", "32", "--rounds", "1"],
+        &[
+            "preint",
+            "--size",
+            "32",
+            "--rounds",
+            "1",
+            "--scenes",
+            "noise",
+            "--quality-size",
+            "24",
+            "--exact-div",
+            "16",
+        ],
         &[
             "worst_ratio",
             "ms_corrected_table",
             "ms_preint_table_8_layers",
             "cost",
             "spike",
+            "scenes",
+            "preint_gain_db_min",
+            "preint_never_loses",
         ],
     );
-    // Two modes at two steps; the spike scene at four steps.
+    // Two modes at two steps; the spike scene at four steps; one pareto scene
+    // at six steps, shaded and not.
     assert_eq!(rows(&fig, "cost").len(), 4, "{fig:?}");
     assert_eq!(rows(&fig, "spike").len(), 4, "{fig:?}");
+    assert_eq!(rows(&fig, "scenes").len(), 12, "{fig:?}");
     has_fields(&fig, "cost", &["mode", "step", "plain", "preint", "ratio"]);
+    has_fields(
+        &fig,
+        "scenes",
+        &[
+            "scene",
+            "step",
+            "gpu_plain_db",
+            "gpu_preint_db",
+            "cpu_preint_db",
+        ],
+    );
 }
 
 #[test]

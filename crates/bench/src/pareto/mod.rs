@@ -25,7 +25,7 @@ mod chart;
 mod configs;
 mod front;
 mod gains;
-mod scenes;
+pub(crate) mod scenes;
 
 use crate::runner::{Runner, finite_db, median, round2};
 use brickray_core::{RenderMode, TransferFunction};

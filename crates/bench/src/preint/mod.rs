@@ -10,6 +10,8 @@
 //! * Quality, synthetic: a ball with a narrow-spike TF (the GPU tests' scene),
 //!   PSNR of plain and pre-integrated GPU images against the exact integral
 //!   (CPU reference at 1/16 voxel) at steps of 0.5 to 4 voxels.
+//! * Quality on the `pareto` suite's scenes ([`scenes`]): every step from 1/8
+//!   to 4, shaded and not, GPU and CPU reference, against the exact integral.
 
 use crate::report::{RunInfo, Timing, interleave};
 use crate::runner::{Runner, finite_db, median, round2};
@@ -20,6 +22,8 @@ use brickray_render::VolumeRenderer;
 use serde::Serialize;
 use std::time::Instant;
 
+mod scenes;
+
 /// The suite's options.
 #[derive(Debug, clap::Args)]
 pub(crate) struct Args {
@@ -29,6 +33,16 @@ pub(crate) struct Args {
     /// Interleaved rounds.
     #[arg(long, default_value_t = 5, value_parser = crate::at_least_one::<usize>)]
     rounds: usize,
+    /// Image side in pixels of the scenes' quality images.
+    #[arg(long, default_value_t = 64, value_parser = crate::image_side)]
+    quality_size: u32,
+    /// The pareto scenes compared, comma-separated, of ml, noise, ct, ct5,
+    /// mri, nuclei (default all).
+    #[arg(long, value_delimiter = ',')]
+    scenes: Vec<String>,
+    /// The exact integral's step is 1 / this many voxels.
+    #[arg(long, default_value_t = 64, value_parser = crate::at_least_one::<u32>)]
+    exact_div: u32,
 }
 
 /// Plain against pre-integrated DVR on the head CT, one mode and step.
@@ -67,6 +81,15 @@ pub(crate) struct PreintResult {
     /// The largest pre-integrated over plain ratio.
     worst_ratio: f64,
     spike: Vec<SpikeRow>,
+    /// The pareto scenes, every step and shading ([`scenes::rows`]).
+    scenes: Vec<scenes::SceneRow>,
+    /// Shared scenes left out (no `../shared`).
+    scenes_missing: Vec<String>,
+    /// The smallest and the median pre-integrated minus plain PSNR over the
+    /// scene rows (GPU), dB; `preint_never_loses` when the smallest is >= 0.
+    preint_gain_db_min: f64,
+    preint_gain_db_median: f64,
+    preint_never_loses: bool,
 }
 
 fn spike_tf() -> TransferFunction {
@@ -222,8 +245,22 @@ pub(crate) fn run(args: &Args) -> Result<PreintResult, String> {
             psnr_preint_db: finite_db(db[1]),
         });
     }
+    let (scene_rows, scenes_missing) =
+        scenes::rows(&gpu, &args.scenes, args.quality_size, args.exact_div)?;
+    let gains: Vec<f64> = scene_rows.iter().map(|r| r.gpu_gain_db()).collect();
+    let gain_min = gains.iter().copied().fold(f64::INFINITY, f64::min);
+    println!(
+        "pre-integrated minus plain over {} rows: min {gain_min:+.2} dB, median {:+.2} dB",
+        gains.len(),
+        median(&gains)
+    );
     Ok(PreintResult {
         run: RunInfo::new(&gpu, size, rounds, volume),
+        preint_gain_db_min: finite_db(gain_min),
+        preint_gain_db_median: finite_db(median(&gains)),
+        preint_never_loses: gain_min >= 0.0,
+        scenes: scene_rows,
+        scenes_missing,
         ms_corrected_table: round2(corrected),
         ms_preint_table_1_layers: table_ms[0],
         ms_preint_table_8_layers: table_ms[1],
