@@ -102,12 +102,15 @@ fn limits_below_a_backends_needs_are_typed_errors() {
         ),
         "max_storage_buffers_per_shader_stage",
     );
-    // A multi-channel volume: 8 sampled textures (the in-core 7 and its
-    // channels' stacked TF tables); the single-channel kernel in core needs
-    // 7, out of core 8 (the spread atlas).
+    // 8 sampled textures for every kernel: 7 shared, and a multi-channel
+    // volume's stacked TF tables, the in-core volume's gradients, or out of
+    // core the spread atlas.
     let g = device_with(|l| l.max_sampled_textures_per_shader_stage = 7);
     let mut r = new_renderer(&g).unwrap();
-    r.set_volume(&g.device, &g.queue, &sphere()).unwrap();
+    expect_limit(
+        r.set_volume(&g.device, &g.queue, &sphere()),
+        "max_sampled_textures_per_shader_stage",
+    );
     let two = brickray::ChannelVolume::new(vec![sphere(), sphere()]).unwrap();
     expect_limit(
         r.set_channel_volume(&g.device, &g.queue, &two),

@@ -60,7 +60,7 @@ pub use brickray_render::{
     Window, WindowError,
 };
 pub use brickray_render::{
-    ConfigError, FadeDuration, FrameDesc, FrameStats, GpuErrorKind, HostDepthError,
+    ConfigError, FadeDuration, FrameDesc, FrameStats, GpuErrorKind, GradientSource, HostDepthError,
     OPTIONAL_FEATURES, OptionalFeature, OutOfCoreConfig, OutOfCoreStats, PassTimestamps,
     PrepareError, RenderError, RendererOptions, RendererStats, RetryPolicy, StreamError,
     StreamedVolume, TargetDesc, U8Filtering, Viewport, VolumeOptions, VolumeRenderer,

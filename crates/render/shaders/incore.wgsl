@@ -29,6 +29,9 @@ struct VolumeParams {
 // distance in cells to the nearest cell that can contribute, 0 for those
 // (MacroCellGrid::empty_distance); MIP reads the ranges instead.
 @group(2) @binding(4) var<storage, read> cell_skip: array<u32>;
+// Per-voxel gradients (gradients.wgsl; a 1x1x1 stand-in until a shaded DVR
+// frame makes them), read with GRADIENTS.
+@group(2) @binding(5) var gradient_tex: texture_3d<f32>;
 
 fn sample_value(u: vec3<f32>) -> f32 {
     if LABELS {
@@ -38,10 +41,23 @@ fn sample_value(u: vec3<f32>) -> f32 {
 }
 
 // World-space gradient direction (unnormalized) and the voxel-space magnitude
-// (a smooth label map: of its boundary's indicator).
+// (a smooth label map: of its boundary's indicator): the central difference of
+// the trilinear field one voxel apart, six taps, or with GRADIENTS one read of
+// the per-voxel gradients, which interpolate to the same (gradients.wgsl).
 fn gradient(u: vec3<f32>) -> vec4<f32> {
     if (LABELS && SMOOTH_LABELS) {
         let g = label_gradient(volume_tex, u, vol.dims);
+        return vec4<f32>(frame.normal_mat * (g * vol.dims), length(g));
+    }
+    if (GRADIENTS) {
+        // Within half a voxel of a face the six taps clamp their positions
+        // where the per-voxel differences clamp their indices: there the
+        // taps' difference along that axis falls linearly to half of the
+        // nearest voxel's at the face (and to 0 half a voxel outside), which
+        // this factor reproduces exactly.
+        let x = u * vol.dims;
+        let edge = clamp(min(x + 0.5, vol.dims + 0.5 - x), vec3<f32>(0.0), vec3<f32>(1.0));
+        let g = textureSampleLevel(gradient_tex, volume_sampler, u, 0.0).xyz * edge;
         return vec4<f32>(frame.normal_mat * (g * vol.dims), length(g));
     }
     let e = 1.0 / vol.dims;

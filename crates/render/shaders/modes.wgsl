@@ -30,6 +30,10 @@ override SMOOTH_LABELS: bool = false;
 // spreads: coarse levels drawn as the average of what their finest voxels
 // look like under the TF; docs/rendering-model.md, "Coarse levels").
 override SPREAD: bool = false;
+// Shaded DVR reads the per-voxel gradients, one filtered texel instead of six
+// taps (in core, gradients.wgsl; declared here with the other switches, read
+// by incore.wgsl alone).
+override GRADIENTS: bool = false;
 
 // Of 8 voxels' label texels and trilinear weights, the label whose weights
 // sum highest, ties to the first corner's (labels::smooth_label_at).

@@ -93,6 +93,9 @@ pub(crate) const SAMPLED_TEXTURES: u32 = 7;
 /// Sampled textures of the multi-channel kernels: one more, their channels'
 /// stacked TF tables (`backend/channels.rs`, `backend/ooc_channels.rs`).
 pub(crate) const CHANNEL_SAMPLED_TEXTURES: u32 = SAMPLED_TEXTURES + 1;
+/// Sampled textures of the in-core kernel: one more, the per-voxel gradients
+/// (`backend/gradients.rs`).
+pub(crate) const INCORE_SAMPLED_TEXTURES: u32 = SAMPLED_TEXTURES + 1;
 /// Sampled textures of the single-channel out-of-core kernel: one more, the
 /// spread atlas.
 pub(crate) const OOC_SAMPLED_TEXTURES: u32 = SAMPLED_TEXTURES + 1;

@@ -84,11 +84,14 @@ pub(crate) struct Variant {
     /// DVR classifies each sample with its spread (`SPREAD` in modes.wgsl;
     /// out of core, a volume whose source has spreads).
     pub(crate) spread: bool,
+    /// Shaded DVR reads the per-voxel gradients (`GRADIENTS` in modes.wgsl;
+    /// in core, once they are made).
+    pub(crate) gradients: bool,
 }
 
 /// The override constants of a pipeline, by WGSL name (modes.wgsl,
 /// predict.wgsl).
-pub(crate) const OVERRIDES: [&str; 13] = [
+pub(crate) const OVERRIDES: [&str; 14] = [
     "MODE",
     "ERT",
     "ESS",
@@ -101,6 +104,7 @@ pub(crate) const OVERRIDES: [&str; 13] = [
     "LABELS",
     "SMOOTH_LABELS",
     "SPREAD",
+    "GRADIENTS",
     "OVERLAY",
 ];
 
@@ -150,6 +154,7 @@ impl Variant {
             },
             channels: 0,
             spread: false,
+            gradients: false,
         };
         match prediction {
             Some(p) if mode == KernelMode::Iso => Variant {
@@ -182,6 +187,7 @@ impl Variant {
             overlay: overlay.filter(|_| !labels).map_or(0, overlay_id),
             channels: 0,
             spread: false,
+            gradients: false,
         }
     }
 
@@ -225,7 +231,7 @@ impl Variant {
         c
     }
 
-    fn shared_constants(&self) -> [(&'static str, f64); 13] {
+    fn shared_constants(&self) -> [(&'static str, f64); 14] {
         let b = |x: bool| if x { 1.0 } else { 0.0 };
         let v = [
             self.mode as u32 as f64,
@@ -240,6 +246,7 @@ impl Variant {
             b(self.labels),
             b(self.smooth_labels),
             b(self.spread),
+            b(self.gradients),
             self.overlay as f64,
         ];
         std::array::from_fn(|i| (OVERRIDES[i], v[i]))

@@ -62,6 +62,7 @@ pub use pick::{MAX_PICKS, Pick, PickPoint};
 pub use predict::{Prediction, PredictionCounts, PredictionError, TraversalClass};
 pub use timestamps::PassTimestamps;
 
+pub use backend::gradients::GradientSource;
 /// Slice views and the intensity window (GPU-free, from `brickray-core`).
 pub use brickray_core::{
     ColorMap, CtPreset, Intensity, Slab, SlabMode, SliceAxis, SliceError, SliceGeometry, SliceView,
@@ -90,6 +91,9 @@ pub struct RendererOptions {
     /// Streamed volumes made by [`VolumeRenderer::set_volume_source`] plan in
     /// the background ([`VolumeOptions::background_planning`]; default off).
     pub background_planning: bool,
+    /// How shaded DVR of a volume in core takes its gradients (default:
+    /// precomputed per voxel, [`GradientSource::Precomputed`]).
+    pub gradients: GradientSource,
 }
 
 /// What `render` needs from the last `prepare`.
@@ -196,8 +200,14 @@ impl VolumeRenderer {
         check_value_range(volume.desc().value_range)?;
         // Free the old volume first: two large volumes need not fit at once.
         self.drop_volume();
-        let b = InCore::new(device, queue, volume, self.options.u8_filtering)?;
-        self.backend = Some(Backend::InCore(b));
+        let b = InCore::new(
+            device,
+            queue,
+            volume,
+            self.options.u8_filtering,
+            self.options.gradients == GradientSource::Precomputed,
+        )?;
+        self.backend = Some(Backend::InCore(Box::new(b)));
         self.volume_dims = Some(volume.dims());
         self.value_range = volume.desc().value_range;
         Ok(())
@@ -531,7 +541,9 @@ impl VolumeRenderer {
         self.backend.as_ref().map(|b| b.get().texel_format())
     }
 
-    /// Bytes of volume data resident on the GPU (the texture or the atlas).
+    /// Bytes of volume data resident on the GPU (in core the texture and,
+    /// once a shaded DVR frame made them, its gradients; out of core the
+    /// atlas).
     pub fn volume_bytes(&self) -> u64 {
         self.backend
             .as_ref()

@@ -130,6 +130,10 @@ impl VolumeRenderer {
             if let Some(Backend::InCore(b)) = r.backend.as_mut() {
                 let tf = r.tf.current().ok_or(PrepareError::NoTransferFunction)?;
                 uploaded[i] = b.update(queue, desc.settings.mode, tf, r.tf.generation());
+                let s = &desc.settings;
+                let shaded_dvr =
+                    s.shading.enabled && matches!(s.mode, brickray_core::RenderMode::Dvr);
+                b.prepare_gradients(device, queue, encoder, shaded_dvr)?;
                 done[i] = true;
                 continue;
             }
@@ -329,8 +333,10 @@ pub(crate) fn frame_variant(
         // Coarse levels classified with their spread: point-sampled DVR
         // only (iso and MIP use the mean field, pre-integrated segments
         // ignore the spread; docs/rendering-model.md).
+        let dvr = v.mode == crate::kernels::KernelMode::Dvr;
         Variant {
-            spread: b.spread() && v.mode == crate::kernels::KernelMode::Dvr && !v.preint,
+            spread: b.spread() && dvr && !v.preint,
+            gradients: b.gradients() && dvr && v.shade && !v.labels,
             ..v
         }
     }

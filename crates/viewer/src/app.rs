@@ -256,6 +256,7 @@ impl ViewerApp {
                 brickray::U8Filtering::Fast
             },
             background_planning: true,
+            ..Default::default()
         }
     }
 

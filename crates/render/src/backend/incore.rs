@@ -2,12 +2,13 @@
 //! macro-cell grid (Krueger and Westermann 2003), and its group 2.
 
 use super::VolumeBackend;
+use super::gradients;
 use crate::encoding::{self, SampleEncoding, U8Filtering};
 use crate::error::RenderError;
 use crate::gpu::{self, Uniform};
 use crate::group2::{
-    INCORE_STORAGE_BUFFERS as STORAGE_BUFFERS, check_stage_limits, volume_layout_entries,
-    volume_sampler,
+    INCORE_SAMPLED_TEXTURES as SAMPLED_TEXTURES, INCORE_STORAGE_BUFFERS as STORAGE_BUFFERS,
+    check_stage_limits, volume_layout_entries, volume_sampler,
 };
 use crate::kernels::KernelKind;
 use brickray_core::{MacroCellGrid, RenderMode, TransferFunction, Volume};
@@ -47,15 +48,104 @@ pub(crate) struct VolumeParams {
 pub(crate) struct InCore {
     layout: wgpu::BindGroupLayout,
     bind_group: wgpu::BindGroup,
+    /// What group 2 binds besides the gradients (rebound when they are made).
+    parts: Parts,
+    /// The per-voxel gradients (`backend/gradients.rs`), once a shaded DVR
+    /// frame asked for them; `Unavailable` where they do not fit.
+    gradients: GradientState,
     format: wgpu::TextureFormat,
     bytes: u64,
     /// The min/max grid, kept to derive skip distances for each TF / isovalue.
     grid: MacroCellGrid,
-    /// Per cell: Chebyshev distance (in cells) to the nearest cell that can
-    /// contribute, for the current TF (DVR) or isovalue; MIP uses the ranges.
-    skip: wgpu::Buffer,
     skip_key: Option<SkipKey>,
     labels: bool,
+}
+
+/// Group 2's resources other than the gradients.
+#[derive(Debug)]
+struct Parts {
+    params: Uniform<VolumeParams>,
+    view: wgpu::TextureView,
+    sampler: wgpu::Sampler,
+    cell_ranges: wgpu::Buffer,
+    skip: wgpu::Buffer,
+    dims: [u32; 3],
+    /// normalized = texel * scale + offset.
+    scale_offset: [f32; 2],
+}
+
+/// The gradients of an in-core volume.
+#[derive(Debug)]
+enum GradientState {
+    /// Not asked for yet: group 2 binds a 1x1x1 stand-in.
+    NotMade,
+    /// Made and bound (the texture is owned here; group 2 holds its view).
+    Made { _texture: wgpu::Texture },
+    /// Turned off, a label map, or too large (`gradients::fit`).
+    Unavailable,
+}
+
+/// The binding of the gradients in group 2 (incore.wgsl).
+pub(crate) const GRADIENT_BINDING: u32 = 5;
+
+/// The layout of the in-core group 2: the volume entries, the macro cells'
+/// ranges and skip distances, and the gradients.
+pub(crate) fn layout_entries() -> Vec<wgpu::BindGroupLayoutEntry> {
+    let mut e = volume_layout_entries(STORAGE_BUFFERS);
+    e.push(wgpu::BindGroupLayoutEntry {
+        binding: GRADIENT_BINDING,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Texture {
+            sample_type: wgpu::TextureSampleType::Float { filterable: true },
+            view_dimension: wgpu::TextureViewDimension::D3,
+            multisampled: false,
+        },
+        count: None,
+    });
+    e
+}
+
+impl Parts {
+    /// Group 2 with `gradients` bound.
+    fn bind(
+        &self,
+        device: &wgpu::Device,
+        layout: &wgpu::BindGroupLayout,
+        gradients: &wgpu::TextureView,
+    ) -> Result<wgpu::BindGroup, RenderError> {
+        gpu::scoped(device, "brickray-render in-core bind group", || {
+            device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("brickray-render in core"),
+                layout,
+                entries: &[
+                    wgpu::BindGroupEntry {
+                        binding: 0,
+                        resource: self.params.buffer.as_entire_binding(),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 1,
+                        resource: wgpu::BindingResource::TextureView(&self.view),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 2,
+                        resource: wgpu::BindingResource::Sampler(&self.sampler),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 3,
+                        resource: self.cell_ranges.as_entire_binding(),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 4,
+                        resource: self.skip.as_entire_binding(),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: GRADIENT_BINDING,
+                        resource: wgpu::BindingResource::TextureView(gradients),
+                    },
+                ],
+            })
+        })
+    }
 }
 
 impl InCore {
@@ -65,8 +155,14 @@ impl InCore {
         queue: &wgpu::Queue,
         vol: &Volume,
         u8: U8Filtering,
+        want_gradients: bool,
     ) -> Result<InCore, RenderError> {
         check_stage_limits(device, STORAGE_BUFFERS)?;
+        gpu::need(
+            "max_sampled_textures_per_shader_stage",
+            SAMPLED_TEXTURES as u64,
+            device.limits().max_sampled_textures_per_shader_stage as u64,
+        )?;
         let dims = vol.dims();
         let limit = device.limits().max_texture_dimension_3d;
         if dims.iter().any(|&d| d > limit) {
@@ -109,45 +205,38 @@ impl InCore {
         let layout = gpu::scoped(device, "brickray-render in-core layout", || {
             device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
                 label: Some("brickray-render in core"),
-                entries: &volume_layout_entries(STORAGE_BUFFERS),
+                entries: &layout_entries(),
             })
         })?;
-        let view = texture.create_view(&Default::default());
-        let bind_group = gpu::scoped(device, "brickray-render in-core bind group", || {
-            device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("brickray-render in core"),
-                layout: &layout,
-                entries: &[
-                    wgpu::BindGroupEntry {
-                        binding: 0,
-                        resource: params.buffer.as_entire_binding(),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 1,
-                        resource: wgpu::BindingResource::TextureView(&view),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 2,
-                        resource: wgpu::BindingResource::Sampler(&sampler),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 3,
-                        resource: cell_ranges.as_entire_binding(),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 4,
-                        resource: skip.as_entire_binding(),
-                    },
-                ],
-            })
-        })?;
+        let parts = Parts {
+            params,
+            view: texture.create_view(&Default::default()),
+            sampler,
+            cell_ranges,
+            skip,
+            dims,
+            scale_offset: [enc.scale, enc.offset],
+        };
+        let stand_in = gpu::sampled_3d(
+            device,
+            [1; 3],
+            gradients::FORMAT,
+            "brickray-render gradients stand-in",
+        )?;
+        let bind_group = parts.bind(device, &layout, &stand_in.create_view(&Default::default()))?;
+        let gradients = if labels || !want_gradients || !gradients::fit(device, dims) {
+            GradientState::Unavailable
+        } else {
+            GradientState::NotMade
+        };
         Ok(InCore {
             layout,
             bind_group,
+            parts,
+            gradients,
             format,
             bytes,
             grid,
-            skip,
             skip_key: None,
             labels,
         })
@@ -182,13 +271,49 @@ impl InCore {
             SkipKey::Iso(iso) => self.grid.empty_distance(|r| r[1] < iso, SKIP_CAP),
         };
         let bytes: &[u8] = bytemuck::cast_slice(&d);
-        queue.write_buffer(&self.skip, 0, bytes);
+        queue.write_buffer(&self.parts.skip, 0, bytes);
         self.skip_key = Some(key);
         bytes.len() as u64
     }
 }
 
+impl InCore {
+    /// Makes the per-voxel gradients when `wanted` (a shaded DVR frame) and
+    /// not made yet: the texture, the pass that fills it recorded into
+    /// `encoder` ahead of the frame's, and group 2 bound again. (A volume
+    /// whose gradients do not fit, `gradients::fit`, was marked unavailable
+    /// at set-up and keeps six reads per sample.)
+    pub(crate) fn prepare_gradients(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        encoder: &mut wgpu::CommandEncoder,
+        wanted: bool,
+    ) -> Result<(), RenderError> {
+        if !wanted || !matches!(self.gradients, GradientState::NotMade) {
+            return Ok(());
+        }
+        let p = &self.parts;
+        let texture = gradients::compute(device, queue, encoder, &p.view, p.dims, p.scale_offset)?;
+        self.bind_group = p.bind(
+            device,
+            &self.layout,
+            &texture.create_view(&Default::default()),
+        )?;
+        self.bytes += gradients::bytes(p.dims);
+        self.gradients = GradientState::Made { _texture: texture };
+        Ok(())
+    }
+}
+
 impl VolumeBackend for InCore {
+    /// Made, or to be made by the first shaded DVR frame before its pass
+    /// (`prepare_gradients`), so that `warm_up` compiles the kernel that
+    /// frame uses.
+    fn gradients(&self) -> bool {
+        !matches!(self.gradients, GradientState::Unavailable)
+    }
+
     fn kind(&self) -> KernelKind {
         KernelKind::InCore
     }

@@ -5,6 +5,7 @@
 
 pub(crate) mod channels;
 pub(crate) mod feedback;
+pub(crate) mod gradients;
 pub(crate) mod incore;
 pub(crate) mod occlusion;
 pub(crate) mod ooc;
@@ -51,6 +52,11 @@ pub(crate) trait VolumeBackend: std::fmt::Debug {
     fn spread(&self) -> bool {
         false
     }
+    /// True when shaded DVR reads per-voxel gradients (in core, made by the
+    /// first shaded DVR frame): the kernel shades with one read instead of six.
+    fn gradients(&self) -> bool {
+        false
+    }
     /// Most index leaves one ray may visit (0 in core).
     fn max_leaves(&self) -> u32;
     /// Step lengths the kernel samples with (rows of the corrected TF table):
@@ -67,7 +73,7 @@ pub(crate) trait VolumeBackend: std::fmt::Debug {
 /// The backend in use.
 #[derive(Debug)]
 pub(crate) enum Backend {
-    InCore(InCore),
+    InCore(Box<InCore>),
     OutOfCore(Box<OutOfCore>),
     /// A multi-channel volume in core.
     Channels(Box<Channels>),
@@ -76,7 +82,7 @@ pub(crate) enum Backend {
 impl Backend {
     pub(crate) fn get(&self) -> &dyn VolumeBackend {
         match self {
-            Backend::InCore(b) => b,
+            Backend::InCore(b) => b.as_ref(),
             Backend::OutOfCore(b) => b.as_ref(),
             Backend::Channels(b) => b.as_ref(),
         }
@@ -84,7 +90,7 @@ impl Backend {
 
     pub(crate) fn get_mut(&mut self) -> &mut dyn VolumeBackend {
         match self {
-            Backend::InCore(b) => b,
+            Backend::InCore(b) => b.as_mut(),
             Backend::OutOfCore(b) => b.as_mut(),
             Backend::Channels(b) => b.as_mut(),
         }

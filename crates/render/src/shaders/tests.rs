@@ -329,11 +329,7 @@ fn check_kernel_common(
 #[test]
 fn incore_kernel_matches_the_rust_side() {
     let m = module("incore", &incore());
-    check_kernel(
-        "incore",
-        &m,
-        &volume_layout_entries(crate::group2::INCORE_STORAGE_BUFFERS),
-    );
+    check_kernel("incore", &m, &crate::backend::incore::layout_entries());
     check_struct(
         &m,
         "VolumeParams",
@@ -452,6 +448,29 @@ fn reproject_matches_the_rust_side() {
         const_u32(&m, "HIT_MAX"),
         const_u32(&module("incore", &incore()), "PRED_MISS_BOX")
     );
+}
+
+#[test]
+fn gradients_match_the_rust_side() {
+    use crate::backend::gradients::{GradientParams, WGSL, layout_entries};
+    let m = module("gradients", WGSL);
+    assert_eq!(m.entry_points.len(), 1);
+    let ep = &m.entry_points[0];
+    assert_eq!(
+        (ep.name.as_str(), ep.stage),
+        ("main", naga::ShaderStage::Compute)
+    );
+    assert_eq!(ep.workgroup_size, [WORKGROUP[0], WORKGROUP[1], 1]);
+    check_struct(
+        &m,
+        "GradientParams",
+        rust_fields!(
+            GradientParams,
+            [dims, value_scale, value_offset, pad0, pad1, pad2]
+        ),
+        std::mem::size_of::<GradientParams>(),
+    );
+    assert_eq!(wgsl_bindings(&m), rust_bindings(&[&layout_entries()]));
 }
 
 #[test]
@@ -578,6 +597,7 @@ fn every_shader_file_is_covered() {
         "incore_predict.wgsl",
         "ooc_predict.wgsl",
         "reproject.wgsl",
+        "gradients.wgsl",
         "slice.wgsl",
         "slice_incore.wgsl",
         "slice_ooc.wgsl",
@@ -612,7 +632,8 @@ fn every_shader_file_is_covered() {
 /// both; a label map over the image
 /// (OVERLAY colour and mask) with DVR and every combination of ERT, ESS and
 /// shading, pre-integrated, with the visible weights and smooth boundaries,
-/// and in colour with iso (also predicting) and MIP.
+/// and in colour with iso (also predicting) and MIP; DVR with spreads
+/// (SPREAD) and shaded DVR reading the per-voxel gradients (GRADIENTS).
 #[test]
 fn every_override_permutation_validates() {
     let mut combos = Vec::new();
@@ -677,6 +698,15 @@ fn every_override_permutation_validates() {
     }
     for overlay in [1u32, 2] {
         combos.push((KernelMode::Dvr, 0b111 | 1 << 10, overlay));
+    }
+    // Shaded DVR reading the per-voxel gradients (bit 11): with every
+    // combination of ERT and ESS, pre-integrated, and under an overlay.
+    for bits in 0..4u32 {
+        combos.push((KernelMode::Dvr, bits | 1 << 2 | 1 << 11, 0));
+        combos.push((KernelMode::Dvr, bits | 1 << 2 | 1 << 6 | 1 << 11, 0));
+    }
+    for overlay in [1u32, 2] {
+        combos.push((KernelMode::Dvr, 0b111 | 1 << 11, overlay));
     }
     for (name, src) in [("incore", incore()), ("ooc", ooc())] {
         for &(mode, bits, overlay) in &combos {
