@@ -20,6 +20,7 @@ mod raw;
 mod remote;
 mod report;
 mod runner;
+mod shading;
 mod soak;
 mod spread;
 mod stability;
@@ -109,6 +110,9 @@ enum Suite {
     /// Per-sample cost: brickray against a minimal kernel (the device's rate), in
     /// core and out of core, DVR, shaded DVR, iso and MIP.
     Raw(raw::Args),
+    /// Shading's cost in core: unshaded, six reads per shaded sample and
+    /// precomputed gradients, interleaved, with PSNR against the reference.
+    Shading(shading::Args),
     /// Memory and frame time over a long random-camera run.
     Soak(soak::Args),
     /// Coarse levels classified with their spread against the TF of their
@@ -158,6 +162,7 @@ fn main() -> ExitCode {
         Suite::Prediction(a) => emit(prediction::run(&a)),
         Suite::Preint(a) => emit(preint::run(&a)),
         Suite::Raw(a) => emit(raw::run(&a)),
+        Suite::Shading(a) => emit(shading::run(&a)),
         Suite::Soak(a) => emit(soak::run(&a)),
         Suite::Spread(a) => emit(spread::run(&a)),
         Suite::Host(a) => emit(host::run(&a)),

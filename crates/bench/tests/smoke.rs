@@ -182,6 +182,43 @@ fn the_preint_suite_runs() {
 }
 
 #[test]
+fn the_shading_suite_runs() {
+    let fig = smoke(
+        &[
+            "shading",
+            "--size",
+            "32",
+            "--rounds",
+            "1",
+            "--quality-size",
+            "24",
+        ],
+        &[
+            "rows",
+            "precomputed_over_six_reads_max",
+            "precomputed_over_unshaded_max",
+            "psnr_between_db_min",
+        ],
+    );
+    // The head CT twice (two TFs) and the MRI, or their stand-ins.
+    assert_eq!(rows(&fig, "rows").len(), 3, "{fig:?}");
+    has_fields(
+        &fig,
+        "rows",
+        &[
+            "scene",
+            "six_reads",
+            "precomputed",
+            "gradient_bytes",
+            "psnr_between_db",
+        ],
+    );
+    // The two shaded images agree (the GPU tests ask >= 70 dB at 96 px).
+    let between = fig["psnr_between_db_min"].as_f64().unwrap();
+    assert!(between >= 60.0, "{between} dB");
+}
+
+#[test]
 fn the_u8_suite_runs() {
     let fig = smoke(
         &["u8", "--size", "32", "--rounds", "1"],

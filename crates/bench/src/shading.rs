@@ -1,0 +1,234 @@
+//! The `shading` suite: what shading costs in core, with the gradient taken by
+//! six reads per sample (`GradientSource::SixReads`) and from the per-voxel
+//! gradients (`GradientSource::Precomputed`, the default).
+//!
+//! The head CT (soft tissue and bone TFs) and the MRI, or their procedural
+//! stand-ins, DVR at step 0.5: unshaded, shaded with six reads, and shaded
+//! from precomputed gradients, interleaved round by round (order rotated),
+//! each variant's time the median over rounds of `prepare + submit + wait`
+//! (wall time; `gpu_ms` is left null, see `run`).
+//! Each shaded image is compared with the CPU reference's (PSNR, at the
+//! quality size) and the two shaded images with each other. The first shaded
+//! frame of the precomputed renderer, which also makes the gradients, is
+//! timed on its own.
+
+use crate::report::{RunInfo, Timing, interleave};
+use crate::runner::{Runner, finite_db, round2};
+use brickray_core::{Camera, RenderSettings, Shading, TransferFunction, Volume, VolumeFrame};
+use brickray_harness::{GpuContext, ct};
+use brickray_reference::{ReferenceOptions, psnr, render_reference};
+use brickray_render::{GradientSource, RendererOptions, VolumeRenderer};
+use serde::Serialize;
+
+/// The suite's options.
+#[derive(Debug, clap::Args)]
+pub(crate) struct Args {
+    /// Image side in pixels of the timed frames.
+    #[arg(long, default_value_t = 512, value_parser = crate::image_side)]
+    size: u32,
+    /// Interleaved rounds.
+    #[arg(long, default_value_t = 5, value_parser = crate::at_least_one::<usize>)]
+    rounds: usize,
+    /// Image side in pixels of the images compared with the CPU reference.
+    #[arg(long, default_value_t = 128, value_parser = crate::image_side)]
+    quality_size: u32,
+}
+
+/// One volume and TF.
+#[derive(Debug, Serialize)]
+pub(crate) struct Row {
+    scene: String,
+    unshaded: Timing,
+    six_reads: Timing,
+    precomputed: Timing,
+    /// Shaded over unshaded wall time, each way.
+    six_reads_over_unshaded: f64,
+    precomputed_over_unshaded: f64,
+    /// Precomputed over six reads (shaded).
+    precomputed_over_six_reads: f64,
+    /// The first shaded frame of the precomputed renderer (it makes the
+    /// gradients; pipelines were compiled before), ms.
+    first_frame_ms: f64,
+    /// Bytes of the gradients (8 a voxel) and of the volume's texture.
+    gradient_bytes: u64,
+    volume_bytes: u64,
+    /// Against the CPU reference, and the two shaded images against each other.
+    psnr_six_reads_db: f64,
+    psnr_precomputed_db: f64,
+    psnr_between_db: f64,
+}
+
+/// The suite's JSON line.
+#[derive(Debug, Serialize)]
+pub(crate) struct ShadingResult {
+    #[serde(flatten)]
+    run: RunInfo,
+    rows: Vec<Row>,
+    /// The largest precomputed over six reads ratio.
+    precomputed_over_six_reads_max: f64,
+    /// The largest shaded over unshaded ratio with precomputed gradients.
+    precomputed_over_unshaded_max: f64,
+    /// The smallest PSNR between the two shaded images.
+    psnr_between_db_min: f64,
+}
+
+fn renderer(
+    gpu: &GpuContext,
+    vol: &Volume,
+    gradients: GradientSource,
+) -> Result<VolumeRenderer, String> {
+    let options = RendererOptions {
+        gradients,
+        ..Default::default()
+    };
+    let mut r = VolumeRenderer::with_options(&gpu.device, brickray_harness::target_desc(), options)
+        .map_err(|e| e.to_string())?;
+    r.set_volume(&gpu.device, &gpu.queue, vol)
+        .map_err(|e| e.to_string())?;
+    Ok(r)
+}
+
+pub(crate) fn run(args: &Args) -> Result<ShadingResult, String> {
+    let (rounds, size) = (args.rounds, args.size);
+    let gpu = GpuContext::new().map_err(|e| e.to_string())?;
+    println!("adapter: {}", gpu.describe());
+    let (ct_vol, ct_name) = brickray_harness::stand_in::head_ct_or_phantom()?;
+    let (mri_vol, mri_name) = brickray_harness::stand_in::mri_or_phantom()?;
+    let scenes: [(String, &Volume, TransferFunction); 3] = [
+        (
+            format!("{ct_name}, soft tissue"),
+            &ct_vol,
+            ct::soft_tissue(),
+        ),
+        (format!("{ct_name}, bone"), &ct_vol, ct::bone()),
+        (
+            mri_name.to_string(),
+            &mri_vol,
+            brickray_harness::scenes::mri_tf(),
+        ),
+    ];
+    println!(
+        "DVR at step 0.5, {size}x{size}, {rounds} interleaved rounds; PSNR at {0}x{0} against the CPU reference",
+        args.quality_size
+    );
+    println!(
+        "  {:<34} {:>9} {:>14} {:>14} {:>9} {:>12} {:>18}",
+        "scene",
+        "unshaded",
+        "six reads",
+        "precomputed",
+        "pre/six",
+        "first frame",
+        "PSNR six/pre/between"
+    );
+    // One runner (target) per renderer.
+    let run = Runner::new(&gpu, size)?;
+    let run_pre = Runner::new(&gpu, size)?;
+    let quality = Runner::new(&gpu, args.quality_size)?;
+    let mut rows = Vec::new();
+    for (scene, vol, tf) in scenes {
+        let d = vol.desc();
+        let frame = VolumeFrame::centered(d.dims, d.spacing);
+        let camera = Camera::orbit(frame.center(), 2.0, 0.5, 0.3);
+        let mut six = renderer(&gpu, vol, GradientSource::SixReads)?;
+        let mut pre = renderer(&gpu, vol, GradientSource::Precomputed)?;
+        for r in [&mut six, &mut pre] {
+            r.set_transfer_function(&gpu.device, &gpu.queue, &tf)
+                .map_err(|e| e.to_string())?;
+        }
+        let settings = |shaded: bool| RenderSettings {
+            shading: Shading {
+                enabled: shaded,
+                ..Default::default()
+            },
+            ..Default::default()
+        };
+        let volume_bytes = pre.volume_bytes();
+        // Pipelines compiled first, so that the first shaded frame's time is
+        // the gradients' pass and the frame.
+        pre.warm_up(&gpu.device, &[settings(true)])
+            .map_err(|e| e.to_string())?;
+        let first = run_pre.frame(&mut pre, camera, frame, settings(true), false)?;
+        let gradient_bytes = pre.volume_bytes() - volume_bytes;
+        // Warm-up of every variant, then the rounds.
+        run.frame(&mut six, camera, frame, settings(false), false)?;
+        run.frame(&mut six, camera, frame, settings(true), false)?;
+        let shots = interleave(rounds, 3, |i| match i {
+            0 => run.frame(&mut six, camera, frame, settings(false), false),
+            1 => run.frame(&mut six, camera, frame, settings(true), false),
+            _ => run_pre.frame(&mut pre, camera, frame, settings(true), false),
+        })?;
+        // Wall time only: on lavapipe the pass timestamps read near 0 for
+        // most frames when two renderers alternate (not understood; one
+        // renderer's, as in the other suites, read true).
+        let t: Vec<Timing> = shots
+            .iter()
+            .map(|s| Timing::of_times(s.iter().map(|f| (f.ms, None))))
+            .collect();
+        // Quality.
+        let q = args.quality_size;
+        let img_six = quality
+            .frame(&mut six, camera, frame, settings(true), true)?
+            .rgba;
+        let img_pre = quality
+            .frame(&mut pre, camera, frame, settings(true), true)?
+            .rgba;
+        let s = settings(true);
+        let cpu = render_reference(
+            vol,
+            &frame,
+            &tf,
+            &camera,
+            &s,
+            &ReferenceOptions::new(q, q).with_step_factor(s.step_factor),
+        )
+        .to_rgba8([0.0; 3]);
+        let (p_six, p_pre, p_between) = (
+            psnr(&img_six, &cpu),
+            psnr(&img_pre, &cpu),
+            psnr(&img_pre, &img_six),
+        );
+        let row = Row {
+            scene,
+            six_reads_over_unshaded: round2(t[1].ms / t[0].ms),
+            precomputed_over_unshaded: round2(t[2].ms / t[0].ms),
+            precomputed_over_six_reads: round2(t[2].ms / t[1].ms),
+            unshaded: t[0],
+            six_reads: t[1],
+            precomputed: t[2],
+            first_frame_ms: round2(first.ms),
+            gradient_bytes,
+            volume_bytes,
+            psnr_six_reads_db: finite_db(p_six),
+            psnr_precomputed_db: finite_db(p_pre),
+            psnr_between_db: finite_db(p_between),
+        };
+        println!(
+            "  {:<34} {:>9.1} {:>7.1} ({:.2}x) {:>7.1} ({:.2}x) {:>8.2}x {:>9.1} ms {:>6.2}/{:.2}/{:.2}",
+            row.scene,
+            row.unshaded.ms,
+            row.six_reads.ms,
+            row.six_reads_over_unshaded,
+            row.precomputed.ms,
+            row.precomputed_over_unshaded,
+            row.precomputed_over_six_reads,
+            row.first_frame_ms,
+            row.psnr_six_reads_db,
+            row.psnr_precomputed_db,
+            row.psnr_between_db
+        );
+        rows.push(row);
+    }
+    let max = |f: fn(&Row) -> f64| rows.iter().map(f).fold(f64::NEG_INFINITY, f64::max);
+    let psnr_between_db_min = rows
+        .iter()
+        .map(|r| r.psnr_between_db)
+        .fold(f64::INFINITY, f64::min);
+    Ok(ShadingResult {
+        run: RunInfo::new(&gpu, size, rounds, ct_name),
+        precomputed_over_six_reads_max: max(|r| r.precomputed_over_six_reads),
+        precomputed_over_unshaded_max: max(|r| r.precomputed_over_unshaded),
+        psnr_between_db_min,
+        rows,
+    })
+}
