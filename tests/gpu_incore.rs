@@ -1,6 +1,7 @@
 //! GPU tests of the in-core ray caster on a real wgpu device (lavapipe in CI):
 //! images against the CPU reference (PSNR), accelerations against brute force,
-//! host-depth compositing, proportions, and typed errors.
+//! host-depth compositing, proportions, typed errors, and MIP's skipping
+//! only where the macro cells say it pays.
 //!
 //! Thresholds: GPU vs CPU reference >= 40 dB PSNR (8-bit RGB over black);
 //! ERT+ESS vs brute force on the GPU >= 50 dB.
@@ -491,5 +492,94 @@ fn missing_texture_features_fall_back() {
         )
         .unwrap_or_else(|e| panic!("{e}"));
         eprintln!("fallback {name}: {cmp}");
+    }
+}
+
+/// MIP in core skips empty space only where the volume's macro cells say it
+/// pays (`MipSkipping::WherePays`, the default): on fractal noise (share of
+/// cells certain to be skipped 0.14, below `MIP_SKIP_SHARE_MIN`) a MIP frame
+/// with skipping asked for takes every sample, as without it, while
+/// `MipSkipping::Always` skips (fewer samples, the same image); on a bright
+/// box around a dim core (share above the threshold) both skip. Images are
+/// identical in every case.
+#[test]
+fn mip_skips_where_the_macro_cells_say_it_pays() {
+    use brickray::core::{MIP_SKIP_SHARE_MIN, MacroCellGrid, synthetic};
+    use brickray::{MipSkipping, RendererOptions, Viewport};
+    use brickray_reference::psnr;
+    const SIZE: u32 = 96;
+    let n = 64u32;
+    let noise = synthetic::u8_field(n, |p| synthetic::fractal_noise(p.map(f64::from), 32.0, 4));
+    // A bright box 12 voxels thick around noise at a fifth of its level.
+    let shell = synthetic::u8_field(n, |p| {
+        let edge = p.iter().map(|&c| c.min(n - 1 - c)).min().unwrap_or(0);
+        // Below the top of the range, which would end MIP rays at once.
+        if edge < 12 {
+            0.8
+        } else {
+            0.2 * synthetic::fractal_noise(p.map(f64::from), 16.0, 3)
+        }
+    });
+    let tf = TransferFunction::ramp(0.0, 1.0, 1.0);
+    for (name, vol, pays) in [("noise", &noise, false), ("shell", &shell, true)] {
+        let share = MacroCellGrid::build(vol, 8).mip_skip_share();
+        assert_eq!(share >= MIP_SKIP_SHARE_MIN, pays, "{name}: share {share}");
+        let g = gpu();
+        let target = Offscreen::new(&g.device, SIZE, SIZE);
+        let d = vol.desc();
+        let frame = VolumeFrame::centered(d.dims, d.spacing);
+        let camera = Camera::orbit(frame.center(), 2.0, 0.5, 0.3);
+        let frame_with = |r: &mut VolumeRenderer, ess: bool| {
+            let settings = RenderSettings {
+                mode: RenderMode::Mip,
+                accel: Accel {
+                    early_termination: Some(0.99),
+                    empty_space_skipping: ess,
+                },
+                ..Default::default()
+            };
+            let desc = FrameDesc {
+                camera,
+                frame,
+                viewport: Viewport::full(SIZE, SIZE),
+                settings,
+                host_depth: None,
+                time: None,
+            };
+            let f = brickray_harness::predict::draw(g, r, &target, &desc).unwrap();
+            (
+                brickray_harness::predict::samples_per_ray(&f.samples),
+                f.color,
+            )
+        };
+        let mut samples = Vec::new();
+        let mut images = Vec::new();
+        for rule in [MipSkipping::WherePays, MipSkipping::Always] {
+            let options = RendererOptions {
+                mip_skipping: rule,
+                ..Default::default()
+            };
+            let mut r = VolumeRenderer::with_options(&g.device, targets(), options).unwrap();
+            r.set_volume(&g.device, &g.queue, vol).unwrap();
+            r.set_transfer_function(&g.device, &g.queue, &tf).unwrap();
+            for ess in [false, true] {
+                let (s, img) = frame_with(&mut r, ess);
+                samples.push(s);
+                images.push(img);
+            }
+        }
+        eprintln!(
+            "{name} (share {share:.3}): samples per ray, rule off/on {:.1}/{:.1}, always off/on {:.1}/{:.1}",
+            samples[0], samples[1], samples[2], samples[3]
+        );
+        for img in &images[1..] {
+            assert_eq!(psnr(img, &images[0]), f64::INFINITY, "{name}: identical");
+        }
+        assert!(samples[3] < 0.9 * samples[2], "{name}: always skips");
+        if pays {
+            assert!(samples[1] < 0.8 * samples[0], "{name}: the rule skips");
+        } else {
+            assert_eq!(samples[1], samples[0], "{name}: the rule does not skip");
+        }
     }
 }

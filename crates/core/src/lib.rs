@@ -63,7 +63,8 @@ pub use lod::{
     node_tf_error_expected, node_visible_error,
 };
 pub use macrocell::{
-    MacroCellGrid, empty_distance, sub_cell_ranges, sub_cell_spreads, sub_cells_per_axis,
+    MIP_SKIP_SHARE_MIN, MacroCellGrid, empty_distance, mip_skipping_pays, sub_cell_ranges,
+    sub_cell_spreads, sub_cells_per_axis,
 };
 pub use moments::{MomentGrid, Moments, SpreadError, SpreadSource};
 pub use overlay::{LabelOverlay, OverlayError, OverlayMode, OverlayStyle, overlay_transform};

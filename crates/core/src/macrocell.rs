@@ -99,6 +99,62 @@ impl MacroCellGrid {
         let empty: Vec<bool> = self.ranges.iter().map(|&r| empty(r)).collect();
         empty_distance(self.dims, &empty, cap)
     }
+
+    /// The share of cells that MIP's skipping is certain to skip, over rays
+    /// along each axis in both directions, one per column of cells: a ray
+    /// skips a cell whose maximum is at most its running maximum, and after
+    /// sampling a cell its running maximum is at least that cell's minimum
+    /// (a lower bound on what skipping saves; 0 for an empty grid). What
+    /// [`mip_skipping_pays`] decides from.
+    pub fn mip_skip_share(&self) -> f64 {
+        let n = self.dims.map(|d| d as usize);
+        let idx = |c: [usize; 3]| (c[2] * n[1] + c[1]) * n[0] + c[0];
+        let (mut skipped, mut all) = (0usize, 0usize);
+        for axis in 0..3 {
+            let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
+            for reverse in [false, true] {
+                for i in 0..n[u] {
+                    for j in 0..n[v] {
+                        let mut running = f32::NEG_INFINITY;
+                        for k in 0..n[axis] {
+                            let mut c = [0usize; 3];
+                            c[axis] = if reverse { n[axis] - 1 - k } else { k };
+                            c[u] = i;
+                            c[v] = j;
+                            let [lo, hi] = self.ranges[idx(c)];
+                            all += 1;
+                            if hi <= running {
+                                skipped += 1;
+                            } else {
+                                running = running.max(lo);
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        if all == 0 {
+            0.0
+        } else {
+            skipped as f64 / all as f64
+        }
+    }
+}
+
+/// The least [`MacroCellGrid::mip_skip_share`] at which MIP's empty-space
+/// skipping is used in core. Measured on lavapipe (`brickray-bench
+/// skipping`, docs/benchmarks.md): skipping cost 1.31-1.72x the frame on the
+/// five volumes whose share is 0.00-0.14 (fractal noise, Marschner-Lobb, the
+/// head CT, the nuclei, the cryo-ET tomogram), took 0.88x on the Colin27
+/// MRI (0.34) and 1.05-1.06x on the other T1 MRI (0.52); the threshold lies
+/// between. A test of a macro cell costs about as much as ten samples there,
+/// so skipping pays only where it removes most of the samples.
+pub const MIP_SKIP_SHARE_MIN: f64 = 0.25;
+
+/// Whether MIP's empty-space skipping pays on a volume with these macro
+/// cells ([`MIP_SKIP_SHARE_MIN`]).
+pub fn mip_skipping_pays(grid: &MacroCellGrid) -> bool {
+    grid.mip_skip_share() >= MIP_SKIP_SHARE_MIN
 }
 
 /// [`MacroCellGrid::empty_distance`] of a grid of `dims` cells whose
@@ -231,7 +287,58 @@ mod tests {
     use crate::volume::{DType, VolumeData, VolumeDesc};
     use proptest::prelude::*;
 
+    /// A constant grid: each axis ray samples its first cell and is certain
+    /// to skip the rest; cells spanning the whole range skip nothing.
+    #[test]
+    fn mip_skip_share_of_simple_grids() {
+        let n = 5u32;
+        let cells = (n * n * n) as usize;
+        let constant = MacroCellGrid {
+            cell: 8,
+            dims: [n; 3],
+            ranges: vec![[0.3, 0.3]; cells],
+        };
+        assert!((constant.mip_skip_share() - 0.8).abs() < 1e-12);
+        let wide = MacroCellGrid {
+            ranges: vec![[0.0, 1.0]; cells],
+            ..constant.clone()
+        };
+        assert_eq!(wide.mip_skip_share(), 0.0);
+        let none = MacroCellGrid {
+            dims: [0; 3],
+            ranges: Vec::new(),
+            ..constant
+        };
+        assert_eq!(none.mip_skip_share(), 0.0);
+    }
+
     proptest! {
+        /// The share lies in 0..1, and widening cells' ranges (a lower
+        /// minimum, a higher maximum) never raises it: it counts only skips
+        /// the ranges make certain.
+        #[test]
+        fn mip_skip_share_falls_as_ranges_widen(
+            dims in proptest::array::uniform3(1u32..6),
+            seed in proptest::collection::vec((0.0f32..1.0, 0.0f32..0.3), 216),
+            widen in proptest::collection::vec((0.0f32..0.2, 0.0f32..0.2), 216),
+        ) {
+            let n = (dims[0] * dims[1] * dims[2]) as usize;
+            let ranges: Vec<[f32; 2]> = seed[..n].iter().map(|&(v, w)| [v, v + w]).collect();
+            let grid = MacroCellGrid { cell: 8, dims, ranges };
+            let share = grid.mip_skip_share();
+            prop_assert!((0.0..=1.0).contains(&share));
+            let wider = MacroCellGrid {
+                ranges: grid
+                    .ranges
+                    .iter()
+                    .zip(&widen)
+                    .map(|(r, &(a, b))| [r[0] - a, r[1] + b])
+                    .collect(),
+                ..grid.clone()
+            };
+            prop_assert!(wider.mip_skip_share() <= share);
+        }
+
         /// The separable transform equals the brute-force Chebyshev distance to
         /// the nearest non-empty cell (capped), and the cube a jump skips holds
         /// only empty cells.

@@ -94,6 +94,23 @@ pub struct RendererOptions {
     /// How shaded DVR of a volume in core takes its gradients (default:
     /// precomputed per voxel, [`GradientSource::Precomputed`]).
     pub gradients: GradientSource,
+    /// When MIP of a volume in core skips empty space (default: where its
+    /// macro cells say it pays, [`MipSkipping::WherePays`]).
+    pub mip_skipping: MipSkipping,
+}
+
+/// When MIP of a volume in core uses empty-space skipping (with
+/// `Accel::empty_space_skipping` on; off, it never does).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub enum MipSkipping {
+    /// Where the volume's macro cells make at least
+    /// [`brickray_core::MIP_SKIP_SHARE_MIN`] of the cells certain to be
+    /// skipped (`brickray_core::mip_skipping_pays`, decided at set-up):
+    /// below, skipping cost 1.2-2x the frame on lavapipe.
+    #[default]
+    WherePays,
+    /// Whenever the settings ask for it.
+    Always,
 }
 
 /// What `render` needs from the last `prepare`.
@@ -206,6 +223,7 @@ impl VolumeRenderer {
             volume,
             self.options.u8_filtering,
             self.options.gradients == GradientSource::Precomputed,
+            self.options.mip_skipping,
         )?;
         self.backend = Some(Backend::InCore(Box::new(b)));
         self.volume_dims = Some(volume.dims());

@@ -334,9 +334,11 @@ pub(crate) fn frame_variant(
         // only (iso and MIP use the mean field, pre-integrated segments
         // ignore the spread; docs/rendering-model.md).
         let dvr = v.mode == crate::kernels::KernelMode::Dvr;
+        let mip = v.mode == crate::kernels::KernelMode::Mip;
         Variant {
             spread: b.spread() && dvr && !v.preint,
             gradients: b.gradients() && dvr && v.shade && !v.labels,
+            ess: v.ess && (!mip || b.mip_skipping()),
             ..v
         }
     }

@@ -59,6 +59,9 @@ pub(crate) struct InCore {
     grid: MacroCellGrid,
     skip_key: Option<SkipKey>,
     labels: bool,
+    /// Whether MIP's skipping pays on this volume
+    /// (`brickray_core::mip_skipping_pays`, decided from the macro cells).
+    mip_skipping: bool,
 }
 
 /// Group 2's resources other than the gradients.
@@ -156,6 +159,7 @@ impl InCore {
         vol: &Volume,
         u8: U8Filtering,
         want_gradients: bool,
+        mip_skipping: crate::MipSkipping,
     ) -> Result<InCore, RenderError> {
         check_stage_limits(device, STORAGE_BUFFERS)?;
         gpu::need(
@@ -236,9 +240,11 @@ impl InCore {
             gradients,
             format,
             bytes,
-            grid,
             skip_key: None,
             labels,
+            mip_skipping: mip_skipping == crate::MipSkipping::Always
+                || brickray_core::mip_skipping_pays(&grid),
+            grid,
         })
     }
 }
@@ -312,6 +318,10 @@ impl VolumeBackend for InCore {
     /// frame uses.
     fn gradients(&self) -> bool {
         !matches!(self.gradients, GradientState::Unavailable)
+    }
+
+    fn mip_skipping(&self) -> bool {
+        self.mip_skipping
     }
 
     fn kind(&self) -> KernelKind {

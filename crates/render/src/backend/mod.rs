@@ -57,6 +57,12 @@ pub(crate) trait VolumeBackend: std::fmt::Debug {
     fn gradients(&self) -> bool {
         false
     }
+    /// False where MIP's empty-space skipping costs more than it saves (in
+    /// core, decided from the macro cells at set-up,
+    /// `brickray_core::mip_skipping_pays`): MIP frames then march without it.
+    fn mip_skipping(&self) -> bool {
+        true
+    }
     /// Most index leaves one ray may visit (0 in core).
     fn max_leaves(&self) -> u32;
     /// Step lengths the kernel samples with (rows of the corrected TF table):
