@@ -21,6 +21,7 @@ mod remote;
 mod report;
 mod runner;
 mod shading;
+mod skipping;
 mod soak;
 mod spread;
 mod stability;
@@ -113,6 +114,9 @@ enum Suite {
     /// Shading's cost in core: unshaded, six reads per shaded sample and
     /// precomputed gradients, interleaved, with PSNR against the reference.
     Shading(shading::Args),
+    /// MIP's empty-space skipping in core: without it, always, and where the
+    /// macro cells say it pays, interleaved, on procedural and shared volumes.
+    Skipping(skipping::Args),
     /// Memory and frame time over a long random-camera run.
     Soak(soak::Args),
     /// Coarse levels classified with their spread against the TF of their
@@ -163,6 +167,7 @@ fn main() -> ExitCode {
         Suite::Preint(a) => emit(preint::run(&a)),
         Suite::Raw(a) => emit(raw::run(&a)),
         Suite::Shading(a) => emit(shading::run(&a)),
+        Suite::Skipping(a) => emit(skipping::run(&a)),
         Suite::Soak(a) => emit(soak::run(&a)),
         Suite::Spread(a) => emit(spread::run(&a)),
         Suite::Host(a) => emit(host::run(&a)),

@@ -219,6 +219,33 @@ fn the_shading_suite_runs() {
 }
 
 #[test]
+fn the_skipping_suite_runs() {
+    let fig = smoke(
+        &["skipping", "--size", "32", "--rounds", "1", "--side", "24"],
+        &[
+            "rows",
+            "rule_over_off_max",
+            "always_over_off_max",
+            "wrong_decisions",
+        ],
+    );
+    // The two procedural volumes, and the shared ones where present.
+    assert!(rows(&fig, "rows").len() >= 2, "{fig:?}");
+    has_fields(
+        &fig,
+        "rows",
+        &[
+            "volume",
+            "skip_share",
+            "rule_skips",
+            "off",
+            "always",
+            "rule",
+        ],
+    );
+}
+
+#[test]
 fn the_u8_suite_runs() {
     let fig = smoke(
         &["u8", "--size", "32", "--rounds", "1"],
