@@ -1,9 +1,9 @@
 //! What the suites share: timed frames into an offscreen target, convergence of
 //! the out-of-core path, and order statistics.
 
-use brickray_core::{Camera, RenderSettings, VolumeFrame};
+use brickray_core::{Camera, RenderSettings, TransferFunction, Volume, VolumeFrame};
 use brickray_harness::{GpuContext, GpuTimer, Offscreen};
-use brickray_render::{FrameDesc, OutOfCoreStats, VolumeRenderer};
+use brickray_render::{FrameDesc, OutOfCoreStats, RendererOptions, VolumeRenderer};
 use std::time::Duration;
 
 /// One rendered frame.
@@ -283,4 +283,20 @@ pub(crate) fn round2(x: f64) -> f64 {
 
 pub(crate) fn finite_db(x: f64) -> f64 {
     if x.is_finite() { round2(x) } else { 999.0 }
+}
+
+/// A renderer with `options` drawing `vol` in core through `tf`.
+pub(crate) fn renderer_in_core(
+    gpu: &GpuContext,
+    options: RendererOptions,
+    vol: &Volume,
+    tf: &TransferFunction,
+) -> Result<VolumeRenderer, String> {
+    let mut r = VolumeRenderer::with_options(&gpu.device, brickray_harness::target_desc(), options)
+        .map_err(|e| e.to_string())?;
+    r.set_volume(&gpu.device, &gpu.queue, vol)
+        .map_err(|e| e.to_string())?;
+    r.set_transfer_function(&gpu.device, &gpu.queue, tf)
+        .map_err(|e| e.to_string())?;
+    Ok(r)
 }

@@ -13,11 +13,11 @@
 //! timed on its own.
 
 use crate::report::{RunInfo, Timing, interleave};
-use crate::runner::{Runner, finite_db, round2};
+use crate::runner::{Runner, finite_db, renderer_in_core, round2};
 use brickray_core::{Camera, RenderSettings, Shading, TransferFunction, Volume, VolumeFrame};
 use brickray_harness::{GpuContext, ct};
 use brickray_reference::{ReferenceOptions, psnr, render_reference};
-use brickray_render::{GradientSource, RendererOptions, VolumeRenderer};
+use brickray_render::{GradientSource, RendererOptions};
 use serde::Serialize;
 
 /// The suite's options.
@@ -72,22 +72,6 @@ pub(crate) struct ShadingResult {
     psnr_between_db_min: f64,
 }
 
-fn renderer(
-    gpu: &GpuContext,
-    vol: &Volume,
-    gradients: GradientSource,
-) -> Result<VolumeRenderer, String> {
-    let options = RendererOptions {
-        gradients,
-        ..Default::default()
-    };
-    let mut r = VolumeRenderer::with_options(&gpu.device, brickray_harness::target_desc(), options)
-        .map_err(|e| e.to_string())?;
-    r.set_volume(&gpu.device, &gpu.queue, vol)
-        .map_err(|e| e.to_string())?;
-    Ok(r)
-}
-
 pub(crate) fn run(args: &Args) -> Result<ShadingResult, String> {
     let (rounds, size) = (args.rounds, args.size);
     let gpu = GpuContext::new().map_err(|e| e.to_string())?;
@@ -130,12 +114,12 @@ pub(crate) fn run(args: &Args) -> Result<ShadingResult, String> {
         let d = vol.desc();
         let frame = VolumeFrame::centered(d.dims, d.spacing);
         let camera = Camera::orbit(frame.center(), 2.0, 0.5, 0.3);
-        let mut six = renderer(&gpu, vol, GradientSource::SixReads)?;
-        let mut pre = renderer(&gpu, vol, GradientSource::Precomputed)?;
-        for r in [&mut six, &mut pre] {
-            r.set_transfer_function(&gpu.device, &gpu.queue, &tf)
-                .map_err(|e| e.to_string())?;
-        }
+        let with = |gradients| RendererOptions {
+            gradients,
+            ..Default::default()
+        };
+        let mut six = renderer_in_core(&gpu, with(GradientSource::SixReads), vol, &tf)?;
+        let mut pre = renderer_in_core(&gpu, with(GradientSource::Precomputed), vol, &tf)?;
         let settings = |shaded: bool| RenderSettings {
             shading: Shading {
                 enabled: shaded,

@@ -10,13 +10,13 @@
 //! decides, interleaved round by round; samples per ray of each.
 
 use crate::report::{RunInfo, Timing, interleave};
-use crate::runner::{Runner, round2};
+use crate::runner::{Runner, renderer_in_core, round2};
 use brickray_core::{
     Accel, Camera, MacroCellGrid, RenderMode, RenderSettings, TransferFunction, Volume,
     VolumeFrame, synthetic,
 };
 use brickray_harness::GpuContext;
-use brickray_render::{MipSkipping, RendererOptions, VolumeRenderer};
+use brickray_render::{MipSkipping, RendererOptions};
 use serde::Serialize;
 
 /// The suite's options.
@@ -67,28 +67,6 @@ pub(crate) struct SkippingResult {
     wrong_decisions: usize,
 }
 
-fn renderer(
-    gpu: &GpuContext,
-    vol: &Volume,
-    mip_skipping: MipSkipping,
-) -> Result<VolumeRenderer, String> {
-    let options = RendererOptions {
-        mip_skipping,
-        ..Default::default()
-    };
-    let mut r = VolumeRenderer::with_options(&gpu.device, brickray_harness::target_desc(), options)
-        .map_err(|e| e.to_string())?;
-    r.set_volume(&gpu.device, &gpu.queue, vol)
-        .map_err(|e| e.to_string())?;
-    r.set_transfer_function(
-        &gpu.device,
-        &gpu.queue,
-        &TransferFunction::ramp(0.0, 1.0, 1.0),
-    )
-    .map_err(|e| e.to_string())?;
-    Ok(r)
-}
-
 /// The volumes: the procedural two, then the shared ones present.
 fn volumes(side: u32) -> Vec<(String, Volume)> {
     let mut out = vec![
@@ -137,8 +115,13 @@ pub(crate) fn run(args: &Args) -> Result<SkippingResult, String> {
         let d = vol.desc();
         let frame = VolumeFrame::centered(d.dims, d.spacing);
         let camera = Camera::orbit(frame.center(), 2.0, 0.5, 0.3);
-        let mut always = renderer(&gpu, &vol, MipSkipping::Always)?;
-        let mut rule = renderer(&gpu, &vol, MipSkipping::WherePays)?;
+        let tf = TransferFunction::ramp(0.0, 1.0, 1.0);
+        let with = |mip_skipping| RendererOptions {
+            mip_skipping,
+            ..Default::default()
+        };
+        let mut always = renderer_in_core(&gpu, with(MipSkipping::Always), &vol, &tf)?;
+        let mut rule = renderer_in_core(&gpu, with(MipSkipping::WherePays), &vol, &tf)?;
         let settings = |ess: bool| RenderSettings {
             mode: RenderMode::Mip,
             accel: Accel {

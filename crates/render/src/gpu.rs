@@ -294,12 +294,43 @@ pub(crate) fn volume_texture(
     )
 }
 
+/// A compute pass's uniform of type `T` at `binding`.
+pub(crate) fn uniform_entry<T>(binding: u32) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Uniform,
+            has_dynamic_offset: false,
+            min_binding_size: wgpu::BufferSize::new(std::mem::size_of::<T>() as u64),
+        },
+        count: None,
+    }
+}
+
 /// A limit-checked, sampled 3D texture of `dims` texels of `format`,
 /// written by copies.
 pub(crate) fn sampled_3d(
     device: &wgpu::Device,
     dims: [u32; 3],
     format: wgpu::TextureFormat,
+    label: &'static str,
+) -> Result<wgpu::Texture, RenderError> {
+    texture_3d(
+        device,
+        dims,
+        format,
+        wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+        label,
+    )
+}
+
+/// A limit-checked 3D texture of `dims` texels of `format` with `usage`.
+pub(crate) fn texture_3d(
+    device: &wgpu::Device,
+    dims: [u32; 3],
+    format: wgpu::TextureFormat,
+    usage: wgpu::TextureUsages,
     label: &'static str,
 ) -> Result<wgpu::Texture, RenderError> {
     texture(
@@ -315,7 +346,7 @@ pub(crate) fn sampled_3d(
             sample_count: 1,
             dimension: wgpu::TextureDimension::D3,
             format,
-            usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+            usage,
             view_formats: &[],
         },
     )

@@ -34,6 +34,21 @@ pub(crate) fn volume_sampler(
     })
 }
 
+/// A compute kernel's filterable float 3D texture at `binding` (a volume, an
+/// atlas, the spreads, the gradients).
+pub(crate) fn texture_3d_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Texture {
+            sample_type: wgpu::TextureSampleType::Float { filterable: true },
+            view_dimension: wgpu::TextureViewDimension::D3,
+            multisampled: false,
+        },
+        count: None,
+    }
+}
+
 /// Layout entries shared by both backends' group 2: the uniform (0), the volume
 /// texture (1), its sampler (2), then `storage` read-only storage buffers
 /// (3, 4, ...).
@@ -50,16 +65,7 @@ pub(crate) fn volume_layout_entries(storage: u32) -> Vec<wgpu::BindGroupLayoutEn
             },
             count: None,
         },
-        wgpu::BindGroupLayoutEntry {
-            binding: 1,
-            visibility: c,
-            ty: wgpu::BindingType::Texture {
-                sample_type: wgpu::TextureSampleType::Float { filterable: true },
-                view_dimension: wgpu::TextureViewDimension::D3,
-                multisampled: false,
-            },
-            count: None,
-        },
+        texture_3d_entry(1),
         wgpu::BindGroupLayoutEntry {
             binding: 2,
             visibility: c,
@@ -161,16 +167,7 @@ pub(crate) const SPREAD_BINDING: u32 = 11;
 /// out-of-core entries and the spread atlas.
 pub(crate) fn ooc_single_layout_entries() -> Vec<wgpu::BindGroupLayoutEntry> {
     let mut e = ooc_layout_entries();
-    e.push(wgpu::BindGroupLayoutEntry {
-        binding: SPREAD_BINDING,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::Texture {
-            sample_type: wgpu::TextureSampleType::Float { filterable: true },
-            view_dimension: wgpu::TextureViewDimension::D3,
-            multisampled: false,
-        },
-        count: None,
-    });
+    e.push(texture_3d_entry(SPREAD_BINDING));
     e
 }
 

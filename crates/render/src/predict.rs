@@ -294,18 +294,7 @@ pub(crate) fn reproject_layout_entries() -> Vec<wgpu::BindGroupLayoutEntry> {
             },
             count: None,
         },
-        wgpu::BindGroupLayoutEntry {
-            binding: 1,
-            visibility: c,
-            ty: wgpu::BindingType::Buffer {
-                ty: wgpu::BufferBindingType::Uniform,
-                has_dynamic_offset: false,
-                min_binding_size: wgpu::BufferSize::new(
-                    std::mem::size_of::<ReprojectUniforms>() as u64
-                ),
-            },
-            count: None,
-        },
+        gpu::uniform_entry::<ReprojectUniforms>(1),
     ]
 }
 

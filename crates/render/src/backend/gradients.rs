@@ -13,8 +13,10 @@ pub enum GradientSource {
     /// One filtered read of per-voxel gradients made once on the GPU, the
     /// first time a shaded DVR frame is prepared (8 bytes a voxel, counted in
     /// the volume's resident bytes; volumes whose gradients would pass 1 GiB
-    /// keep six reads). The same gradient as six reads within half-float
-    /// rounding (75-80 dB between the images, `tests/gpu_gradients.rs`).
+    /// keep six reads; so does a volume whose gradients the device refused,
+    /// after that frame's typed error). The same gradient as six reads within
+    /// half-float rounding (75-80 dB between the images,
+    /// `tests/gpu_gradients.rs`).
     #[default]
     Precomputed,
     /// Six reads of the volume per shaded sample (the central difference of
@@ -51,33 +53,12 @@ pub(crate) struct GradientParams {
 /// The pass's bindings: the volume (0), its parameters (1), the gradients
 /// written (2).
 pub(crate) fn layout_entries() -> Vec<wgpu::BindGroupLayoutEntry> {
-    let c = wgpu::ShaderStages::COMPUTE;
     vec![
-        wgpu::BindGroupLayoutEntry {
-            binding: 0,
-            visibility: c,
-            ty: wgpu::BindingType::Texture {
-                sample_type: wgpu::TextureSampleType::Float { filterable: true },
-                view_dimension: wgpu::TextureViewDimension::D3,
-                multisampled: false,
-            },
-            count: None,
-        },
-        wgpu::BindGroupLayoutEntry {
-            binding: 1,
-            visibility: c,
-            ty: wgpu::BindingType::Buffer {
-                ty: wgpu::BufferBindingType::Uniform,
-                has_dynamic_offset: false,
-                min_binding_size: wgpu::BufferSize::new(
-                    std::mem::size_of::<GradientParams>() as u64
-                ),
-            },
-            count: None,
-        },
+        crate::group2::texture_3d_entry(0),
+        gpu::uniform_entry::<GradientParams>(1),
         wgpu::BindGroupLayoutEntry {
             binding: 2,
-            visibility: c,
+            visibility: wgpu::ShaderStages::COMPUTE,
             ty: wgpu::BindingType::StorageTexture {
                 access: wgpu::StorageTextureAccess::WriteOnly,
                 format: FORMAT,
@@ -116,22 +97,12 @@ pub(crate) fn compute(
         1,
         device.limits().max_storage_textures_per_shader_stage as u64,
     )?;
-    let texture = gpu::texture(
+    let texture = gpu::texture_3d(
         device,
-        &wgpu::TextureDescriptor {
-            label: Some(label),
-            size: wgpu::Extent3d {
-                width: dims[0],
-                height: dims[1],
-                depth_or_array_layers: dims[2],
-            },
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D3,
-            format: FORMAT,
-            usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::STORAGE_BINDING,
-            view_formats: &[],
-        },
+        dims,
+        FORMAT,
+        wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::STORAGE_BINDING,
+        label,
     )?;
     let mut params = Uniform::<GradientParams>::new(device, "brickray-render gradient params")?;
     params.write(

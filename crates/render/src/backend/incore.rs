@@ -95,16 +95,7 @@ pub(crate) const GRADIENT_BINDING: u32 = 5;
 /// ranges and skip distances, and the gradients.
 pub(crate) fn layout_entries() -> Vec<wgpu::BindGroupLayoutEntry> {
     let mut e = volume_layout_entries(STORAGE_BUFFERS);
-    e.push(wgpu::BindGroupLayoutEntry {
-        binding: GRADIENT_BINDING,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::Texture {
-            sample_type: wgpu::TextureSampleType::Float { filterable: true },
-            view_dimension: wgpu::TextureViewDimension::D3,
-            multisampled: false,
-        },
-        count: None,
-    });
+    e.push(crate::group2::texture_3d_entry(GRADIENT_BINDING));
     e
 }
 
@@ -288,7 +279,10 @@ impl InCore {
     /// not made yet: the texture, the pass that fills it recorded into
     /// `encoder` ahead of the frame's, and group 2 bound again. (A volume
     /// whose gradients do not fit, `gradients::fit`, was marked unavailable
-    /// at set-up and keeps six reads per sample.)
+    /// at set-up and keeps six reads per sample.) They are an acceleration:
+    /// where the device refuses them (out of memory, say) the error is
+    /// returned for this frame and the volume keeps six reads from then on,
+    /// so the next frame draws.
     pub(crate) fn prepare_gradients(
         &mut self,
         device: &wgpu::Device,
@@ -299,13 +293,11 @@ impl InCore {
         if !wanted || !matches!(self.gradients, GradientState::NotMade) {
             return Ok(());
         }
+        self.gradients = GradientState::Unavailable;
         let p = &self.parts;
         let texture = gradients::compute(device, queue, encoder, &p.view, p.dims, p.scale_offset)?;
-        self.bind_group = p.bind(
-            device,
-            &self.layout,
-            &texture.create_view(&Default::default()),
-        )?;
+        let view = texture.create_view(&Default::default());
+        self.bind_group = p.bind(device, &self.layout, &view)?;
         self.bytes += gradients::bytes(p.dims);
         self.gradients = GradientState::Made { _texture: texture };
         Ok(())

@@ -400,9 +400,9 @@ fn ooc_kernel_matches_the_rust_side() {
     );
 }
 
-#[test]
-fn reproject_matches_the_rust_side() {
-    let m = module("reproject", REPROJECT);
+/// A module of its own with one compute entry point, `main`, on the ray
+/// casters' workgroup.
+fn check_one_compute_entry(m: &naga::Module) {
     assert_eq!(m.entry_points.len(), 1);
     let ep = &m.entry_points[0];
     assert_eq!(
@@ -410,6 +410,12 @@ fn reproject_matches_the_rust_side() {
         ("main", naga::ShaderStage::Compute)
     );
     assert_eq!(ep.workgroup_size, [WORKGROUP[0], WORKGROUP[1], 1]);
+}
+
+#[test]
+fn reproject_matches_the_rust_side() {
+    let m = module("reproject", REPROJECT);
+    check_one_compute_entry(&m);
     check_struct(
         &m,
         "Reproject",
@@ -454,13 +460,7 @@ fn reproject_matches_the_rust_side() {
 fn gradients_match_the_rust_side() {
     use crate::backend::gradients::{GradientParams, WGSL, layout_entries};
     let m = module("gradients", WGSL);
-    assert_eq!(m.entry_points.len(), 1);
-    let ep = &m.entry_points[0];
-    assert_eq!(
-        (ep.name.as_str(), ep.stage),
-        ("main", naga::ShaderStage::Compute)
-    );
-    assert_eq!(ep.workgroup_size, [WORKGROUP[0], WORKGROUP[1], 1]);
+    check_one_compute_entry(&m);
     check_struct(
         &m,
         "GradientParams",
