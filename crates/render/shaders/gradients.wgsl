@@ -1,5 +1,5 @@
 // Per-voxel gradients of an in-core volume, computed once on the GPU (a module
-// of its own; `Gradients` in backend/gradients.rs owns its pipeline): half the
+// of its own; backend/gradients.rs makes its pipeline and pass): half the
 // difference of the two neighbours' normalized values along each axis, the
 // indices clamped at the faces. Trilinear interpolation is linear in the data,
 // so one filtered read of this texture at u equals incore.wgsl's six-tap

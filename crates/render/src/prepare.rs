@@ -130,9 +130,11 @@ impl VolumeRenderer {
             if let Some(Backend::InCore(b)) = r.backend.as_mut() {
                 let tf = r.tf.current().ok_or(PrepareError::NoTransferFunction)?;
                 uploaded[i] = b.update(queue, desc.settings.mode, tf, r.tf.generation());
+                // Shaded DVR reads the gradients (a slice view shades nothing).
                 let s = &desc.settings;
-                let shaded_dvr =
-                    s.shading.enabled && matches!(s.mode, brickray_core::RenderMode::Dvr);
+                let shaded_dvr = s.shading.enabled
+                    && matches!(s.mode, brickray_core::RenderMode::Dvr)
+                    && r.slice.is_none();
                 b.prepare_gradients(device, queue, encoder, shaded_dvr)?;
                 done[i] = true;
                 continue;
@@ -332,7 +334,9 @@ pub(crate) fn frame_variant(
         );
         // Coarse levels classified with their spread: point-sampled DVR
         // only (iso and MIP use the mean field, pre-integrated segments
-        // ignore the spread; docs/rendering-model.md).
+        // ignore the spread; docs/rendering-model.md). Shaded DVR of an
+        // intensity volume reads the backend's gradients where it has them;
+        // MIP skips empty space only where the backend says it pays.
         let dvr = v.mode == crate::kernels::KernelMode::Dvr;
         let mip = v.mode == crate::kernels::KernelMode::Mip;
         Variant {
