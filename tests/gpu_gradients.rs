@@ -127,34 +127,16 @@ fn compare(name: &str, vol: &Volume, tf: &TransferFunction) -> f64 {
     between
 }
 
-fn ml_tf() -> TransferFunction {
-    TransferFunction::from_points(
-        &[
-            (0.45, [0.2, 0.4, 0.9, 0.0]),
-            (0.5, [0.9, 0.9, 0.9, 0.6]),
-            (0.55, [0.9, 0.5, 0.2, 0.0]),
-        ],
-        512,
-    )
-}
-
 #[test]
 fn precomputed_gradients_shade_as_six_reads() {
     use brickray::core::synthetic;
     compare(
         "Marschner-Lobb (f32)",
         &synthetic::marschner_lobb(48),
-        &ml_tf(),
+        &brickray_harness::scenes::marschner_lobb_tf(),
     );
     let noise = synthetic::u8_field(48, |p| synthetic::fractal_noise(p.map(f64::from), 16.0, 4));
-    let noise_tf = TransferFunction::from_points(
-        &[
-            (0.55, [0.8, 0.4, 0.1, 0.0]),
-            (0.65, [1.0, 0.8, 0.4, 0.3]),
-            (0.8, [1.0, 1.0, 1.0, 0.9]),
-        ],
-        512,
-    );
+    let noise_tf = brickray_harness::scenes::noise_tf();
     compare("fractal noise (u8)", &noise, &noise_tf);
     // The shared head CT (i16) where present, else its procedural stand-in.
     let (ct, name) = brickray_harness::stand_in::head_ct_or_phantom().unwrap();

@@ -509,7 +509,7 @@ fn mip_skips_where_the_macro_cells_say_it_pays() {
     use brickray_reference::psnr;
     const SIZE: u32 = 96;
     let n = 64u32;
-    let noise = synthetic::u8_field(n, |p| synthetic::fractal_noise(p.map(f64::from), 32.0, 4));
+    let noise = brickray_harness::scenes::pareto_noise(n);
     // A bright box 12 voxels thick around noise at a fifth of its level.
     let shell = synthetic::u8_field(n, |p| {
         let edge = p.iter().map(|&c| c.min(n - 1 - c)).min().unwrap_or(0);

@@ -19,17 +19,6 @@ use brickray_reference::{ReferenceOptions, psnr, render_reference};
 
 const SIZE: u32 = 96;
 
-fn spike_tf() -> TransferFunction {
-    TransferFunction::from_points(
-        &[
-            (0.47, [1.0, 0.6, 0.2, 0.0]),
-            (0.5, [1.0, 0.9, 0.5, 0.8]),
-            (0.53, [0.3, 0.6, 1.0, 0.0]),
-        ],
-        1024,
-    )
-}
-
 struct Scene {
     vol: Volume,
     tf: TransferFunction,
@@ -44,7 +33,7 @@ fn scene() -> Scene {
     Scene {
         camera: Camera::orbit(frame.center(), 2.0, 0.5, 0.3),
         vol,
-        tf: spike_tf(),
+        tf: brickray_harness::scenes::spike_tf(),
         frame,
     }
 }
@@ -209,7 +198,7 @@ fn step_ball() -> Scene {
     Scene {
         camera: Camera::orbit(frame.center(), 2.0, 0.5, 0.3),
         vol,
-        tf: spike_tf(),
+        tf: brickray_harness::scenes::spike_tf(),
         frame,
     }
 }
@@ -309,7 +298,7 @@ fn too_few_array_layers_is_a_typed_error() {
     let mut r = VolumeRenderer::new(&g.device, targets()).unwrap();
     r.set_volume_source(&g.device, &g.queue, source, OutOfCoreConfig::default())
         .unwrap();
-    r.set_transfer_function(&g.device, &g.queue, &spike_tf())
+    r.set_transfer_function(&g.device, &g.queue, &brickray_harness::scenes::spike_tf())
         .unwrap();
     let target = Offscreen::new(&g.device, 32, 32);
     let camera = Camera::orbit(frame.center(), 2.0, 0.5, 0.3);
@@ -396,33 +385,15 @@ fn out_of_core_coarse_levels_read_their_layers() {
 /// figures, docs/rendering-model.md).
 #[test]
 fn preintegration_never_loses_where_rays_leave_in_material() {
-    use brickray::core::synthetic;
+    use brickray_harness::scenes;
     let n = 40;
     let scenes = [
         (
             "ml",
-            synthetic::marschner_lobb(n),
-            TransferFunction::from_points(
-                &[
-                    (0.45, [0.2, 0.4, 0.9, 0.0]),
-                    (0.5, [0.9, 0.9, 0.9, 0.6]),
-                    (0.55, [0.9, 0.5, 0.2, 0.0]),
-                ],
-                512,
-            ),
+            brickray::core::synthetic::marschner_lobb(n),
+            scenes::marschner_lobb_tf(),
         ),
-        (
-            "noise",
-            synthetic::u8_field(n, |p| synthetic::fractal_noise(p.map(f64::from), 32.0, 4)),
-            TransferFunction::from_points(
-                &[
-                    (0.55, [0.8, 0.4, 0.1, 0.0]),
-                    (0.65, [1.0, 0.8, 0.4, 0.3]),
-                    (0.8, [1.0, 1.0, 1.0, 0.9]),
-                ],
-                512,
-            ),
-        ),
+        ("noise", scenes::pareto_noise(n), scenes::noise_tf()),
     ];
     for (name, vol, tf) in scenes {
         let d = vol.desc();

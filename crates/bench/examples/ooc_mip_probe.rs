@@ -26,7 +26,7 @@ fn main() -> Result<(), String> {
     let vols = vec![
         (
             "fractal noise 128^3",
-            synthetic::u8_field(128, |p| synthetic::fractal_noise(p.map(f64::from), 32.0, 4)),
+            brickray_harness::scenes::pareto_noise(128),
         ),
         ("Marschner-Lobb 128^3", synthetic::marschner_lobb(128)),
         ("pycortex T1 MRI", shared("pycortex_s1_t1_mri")?),

@@ -72,9 +72,7 @@ fn volumes(side: u32) -> Vec<(String, Volume)> {
     let mut out = vec![
         (
             format!("fractal noise {side}^3"),
-            synthetic::u8_field(side, |p| {
-                synthetic::fractal_noise(p.map(f64::from), 32.0, 4)
-            }),
+            brickray_harness::scenes::pareto_noise(side),
         ),
         (
             format!("Marschner-Lobb {side}^3"),
@@ -110,8 +108,11 @@ pub(crate) fn run(args: &Args) -> Result<SkippingResult, String> {
     let run = Runner::new(&gpu, size)?;
     let mut rows = Vec::new();
     for (name, vol) in volumes(args.side) {
-        let share = MacroCellGrid::build(&vol, 8).mip_skip_share();
-        let rule_skips = brickray_core::mip_skipping_pays(&MacroCellGrid::build(&vol, 8));
+        let grid = MacroCellGrid::build(&vol, 8);
+        let (share, rule_skips) = (
+            grid.mip_skip_share(),
+            brickray_core::mip_skipping_pays(&grid),
+        );
         let d = vol.desc();
         let frame = VolumeFrame::centered(d.dims, d.spacing);
         let camera = Camera::orbit(frame.center(), 2.0, 0.5, 0.3);

@@ -1,9 +1,57 @@
-//! Small scenes shared by the stability tests and the `stability` bench suite.
+//! Small scenes shared by the tests and the bench suites (stability, pareto,
+//! preint, skipping).
 
 use brickray_core::{
     Camera, DType, DepthConvention, Projection, Volume, VolumeData, VolumeDesc, VolumeError,
 };
 use glam::Vec3;
+
+/// The pareto suite's TF of Marschner-Lobb: a spike of opacity 0.6 at 0.5
+/// over 0.45..0.55, blue below and orange above.
+pub fn marschner_lobb_tf() -> brickray_core::TransferFunction {
+    brickray_core::TransferFunction::from_points(
+        &[
+            (0.45, [0.2, 0.4, 0.9, 0.0]),
+            (0.5, [0.9, 0.9, 0.9, 0.6]),
+            (0.55, [0.9, 0.5, 0.2, 0.0]),
+        ],
+        512,
+    )
+}
+
+/// The pareto suite's fractal noise: four octaves of value noise on an
+/// `n^3` u8 grid, base period 32 voxels.
+pub fn pareto_noise(n: u32) -> Volume {
+    brickray_core::synthetic::u8_field(n, |p| {
+        brickray_core::synthetic::fractal_noise(p.map(f64::from), 32.0, 4)
+    })
+}
+
+/// The pareto suite's TF of the fractal noise: from 0.55, opaque toward 0.8.
+pub fn noise_tf() -> brickray_core::TransferFunction {
+    brickray_core::TransferFunction::from_points(
+        &[
+            (0.55, [0.8, 0.4, 0.1, 0.0]),
+            (0.65, [1.0, 0.8, 0.4, 0.3]),
+            (0.8, [1.0, 1.0, 1.0, 0.9]),
+        ],
+        512,
+    )
+}
+
+/// A narrow opacity spike (0.47..0.53, peak 0.8 at 0.5) in an otherwise
+/// clear TF: what a coarse step samples through (pre-integration's tests and
+/// the `preint` suite).
+pub fn spike_tf() -> brickray_core::TransferFunction {
+    brickray_core::TransferFunction::from_points(
+        &[
+            (0.47, [1.0, 0.6, 0.2, 0.0]),
+            (0.5, [1.0, 0.9, 0.5, 0.8]),
+            (0.53, [0.3, 0.6, 1.0, 0.0]),
+        ],
+        1024,
+    )
+}
 
 /// The pareto suite's TF of the shared T1 MRI: tissue from 0.12, brighter
 /// and more opaque to 0.7.

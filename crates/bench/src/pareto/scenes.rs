@@ -104,14 +104,7 @@ pub(crate) fn scenes(wanted: &[String], ml_side: u32) -> Result<Vec<Scene>, Stri
         ));
     }
     if want("ml") {
-        let tf = TransferFunction::from_points(
-            &[
-                (0.45, [0.2, 0.4, 0.9, 0.0]),
-                (0.5, [0.9, 0.9, 0.9, 0.6]),
-                (0.55, [0.9, 0.5, 0.2, 0.0]),
-            ],
-            512,
-        );
+        let tf = brickray_harness::scenes::marschner_lobb_tf();
         out.push(scene(
             "ml",
             synthetic::marschner_lobb(ml_side),
@@ -129,17 +122,10 @@ pub(crate) fn scenes(wanted: &[String], ml_side: u32) -> Result<Vec<Scene>, Stri
         ));
     }
     if want("noise") {
-        let tf = TransferFunction::from_points(
-            &[
-                (0.55, [0.8, 0.4, 0.1, 0.0]),
-                (0.65, [1.0, 0.8, 0.4, 0.3]),
-                (0.8, [1.0, 1.0, 1.0, 0.9]),
-            ],
-            512,
-        );
+        let tf = brickray_harness::scenes::noise_tf();
         out.push(scene(
             "noise",
-            noise(ml_side),
+            brickray_harness::scenes::pareto_noise(ml_side),
             vec![("dvr", RenderMode::Dvr, tf)],
         ));
     }
@@ -167,11 +153,6 @@ fn scene(
         anisotropic: false,
         modes,
     }
-}
-
-/// Four octaves of value noise on an `n^3` u8 grid (base period 32 voxels).
-fn noise(n: u32) -> Volume {
-    synthetic::u8_field(n, |p| synthetic::fractal_noise(p.map(f64::from), 32.0, 4))
 }
 
 /// The shared head CT with every third slice kept (0.96 x 0.96 x 4.5 mm).

@@ -15,7 +15,7 @@
 
 use crate::report::{RunInfo, Timing, interleave};
 use crate::runner::{Runner, finite_db, median, round2};
-use brickray_core::{Camera, RenderSettings, Shading, TransferFunction, VolumeFrame};
+use brickray_core::{Camera, RenderSettings, Shading, VolumeFrame};
 use brickray_harness::{GpuContext, ct};
 use brickray_reference::{ReferenceOptions, psnr, render_reference};
 use brickray_render::VolumeRenderer;
@@ -92,15 +92,17 @@ pub(crate) struct PreintResult {
     preint_never_loses: bool,
 }
 
-fn spike_tf() -> TransferFunction {
-    TransferFunction::from_points(
-        &[
-            (0.47, [1.0, 0.6, 0.2, 0.0]),
-            (0.5, [1.0, 0.9, 0.5, 0.8]),
-            (0.53, [0.3, 0.6, 1.0, 0.0]),
-        ],
-        1024,
-    )
+/// DVR at `step`, plain or pre-integrated, shaded or not.
+fn dvr(step: f32, preintegrated: bool, shaded: bool) -> RenderSettings {
+    RenderSettings {
+        step_factor: step,
+        preintegrated,
+        shading: Shading {
+            enabled: shaded,
+            ..Default::default()
+        },
+        ..Default::default()
+    }
 }
 
 fn ms_of(f: impl Fn()) -> f64 {
@@ -164,15 +166,7 @@ pub(crate) fn run(args: &Args) -> Result<PreintResult, String> {
     let mut cost = Vec::new();
     for shaded in [false, true] {
         for step in [0.5f32, 2.0] {
-            let settings = |preintegrated| RenderSettings {
-                step_factor: step,
-                preintegrated,
-                shading: Shading {
-                    enabled: shaded,
-                    ..Default::default()
-                },
-                ..Default::default()
-            };
+            let settings = |preintegrated| dvr(step, preintegrated, shaded);
             // Warm-up (pipelines, tables) and the images.
             let mut images = Vec::new();
             for p in [false, true] {
@@ -206,7 +200,7 @@ pub(crate) fn run(args: &Args) -> Result<PreintResult, String> {
     let bd = ball.desc();
     let bframe = VolumeFrame::centered(bd.dims, bd.spacing);
     let bcam = Camera::orbit(bframe.center(), 2.0, 0.5, 0.3);
-    let tf = spike_tf();
+    let tf = brickray_harness::scenes::spike_tf();
     let q = 96;
     let mut rb = VolumeRenderer::new(&gpu.device, brickray_harness::target_desc())
         .map_err(|e| e.to_string())?;

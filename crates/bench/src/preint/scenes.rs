@@ -6,7 +6,7 @@
 
 use crate::pareto::{ML_SIDE, scenes::scenes};
 use crate::runner::{Runner, finite_db};
-use brickray_core::{RenderMode, RenderSettings, Shading};
+use brickray_core::{RenderMode, RenderSettings};
 use brickray_harness::GpuContext;
 use brickray_reference::{ReferenceOptions, psnr, render_reference};
 use brickray_render::VolumeRenderer;
@@ -78,15 +78,7 @@ pub(crate) fn rows(
         r.set_transfer_function(&gpu.device, &gpu.queue, tf)
             .map_err(|e| e.to_string())?;
         for shaded in [false, true] {
-            let settings = |step: f32, preintegrated: bool| RenderSettings {
-                step_factor: step,
-                preintegrated,
-                shading: Shading {
-                    enabled: shaded,
-                    ..Default::default()
-                },
-                ..Default::default()
-            };
+            let settings = |step, preintegrated| super::dvr(step, preintegrated, shaded);
             let cpu = |o: ReferenceOptions<'_>, s: &RenderSettings| {
                 render_reference(&scene.volume, &scene.frame, tf, &scene.camera, s, &o)
                     .to_rgba8([0.0; 3])

@@ -81,8 +81,8 @@ pub(crate) fn fit(device: &wgpu::Device, dims: [u32; 3]) -> bool {
 }
 
 /// Creates the gradients of the volume `volume` (`dims` voxels, normalized
-/// as `texel * scale + offset`) and records the pass that fills them into
-/// `encoder`. Returns the texture.
+/// as `texel * scale + offset`; [`fit`] checked) and records the pass that
+/// fills them into `encoder`. Returns the texture.
 pub(crate) fn compute(
     device: &wgpu::Device,
     queue: &wgpu::Queue,
@@ -92,11 +92,6 @@ pub(crate) fn compute(
     scale_offset: [f32; 2],
 ) -> Result<wgpu::Texture, RenderError> {
     let label = "brickray-render gradients";
-    gpu::need(
-        "max_storage_textures_per_shader_stage",
-        1,
-        device.limits().max_storage_textures_per_shader_stage as u64,
-    )?;
     let texture = gpu::texture_3d(
         device,
         dims,
