@@ -50,7 +50,14 @@ impl Scene<'_> {
     /// Renders on the GPU into a fresh target; returns RGBA8 and depth.
     fn gpu(&self) -> (Vec<u8>, Vec<f32>) {
         let g = gpu();
-        let mut r = VolumeRenderer::new(&g.device, targets()).unwrap();
+        // MIP skips whenever the settings ask, so that the accelerations'
+        // test exercises it on every volume (by default the head CT's macro
+        // cells turn it off; mip_skips_where_the_macro_cells_say_it_pays).
+        let options = brickray::RendererOptions {
+            mip_skipping: brickray::MipSkipping::Always,
+            ..Default::default()
+        };
+        let mut r = VolumeRenderer::with_options(&g.device, targets(), options).unwrap();
         r.set_volume(&g.device, &g.queue, self.vol).unwrap();
         r.set_transfer_function(&g.device, &g.queue, self.tf)
             .unwrap();
