@@ -6,11 +6,20 @@ use brickray_core::{NodeKey, NodeMap};
 /// No neighbour (the end of the recency list).
 const NIL: u32 = u32::MAX;
 
-/// A cached brick, linked into the recency list by slot index.
+/// A cached brick.
 #[derive(Debug)]
 struct Entry {
     key: NodeKey,
     data: PreparedBrick,
+}
+
+/// A slot's place in the recency list, by slot index. The links live apart
+/// from the entries, 8 bytes a slot: marking a brick used rewrites three
+/// slots' links, and in a table of links they stay in the processor's caches
+/// where the entries do not (refinement marks about 100,000 bricks a frame
+/// at a cut of 20,000).
+#[derive(Debug, Clone, Copy)]
+struct Link {
     /// The next older entry.
     prev: u32,
     /// The next newer entry.
@@ -33,6 +42,8 @@ pub struct CpuCache {
     map: NodeMap<u32>,
     /// Entries by slot; `None` slots are listed in `free`.
     slots: Vec<Option<Entry>>,
+    /// Recency links by slot (a free slot's are stale).
+    links: Vec<Link>,
     free: Vec<u32>,
     /// The least and the most recently used entry.
     oldest: u32,
@@ -50,6 +61,7 @@ impl CpuCache {
             bytes: 0,
             map: NodeMap::default(),
             slots: Vec::new(),
+            links: Vec::new(),
             free: Vec::new(),
             oldest: NIL,
             newest: NIL,
@@ -67,34 +79,30 @@ impl CpuCache {
 
     /// Takes slot `i` out of the recency list.
     fn unlink(&mut self, i: u32) {
-        let (prev, next) = {
-            let e = self.entry(i);
-            (e.prev, e.next)
-        };
+        let Link { prev, next } = self.links[i as usize];
         if prev == NIL {
             self.oldest = next;
         } else {
-            self.entry(prev).next = next;
+            self.links[prev as usize].next = next;
         }
         if next == NIL {
             self.newest = prev;
         } else {
-            self.entry(next).prev = prev;
+            self.links[next as usize].prev = prev;
         }
     }
 
     /// Puts slot `i` at the newest end of the recency list.
     fn push_newest(&mut self, i: u32) {
         let newest = self.newest;
-        {
-            let e = self.entry(i);
-            e.prev = newest;
-            e.next = NIL;
-        }
+        self.links[i as usize] = Link {
+            prev: newest,
+            next: NIL,
+        };
         if newest == NIL {
             self.oldest = i;
         } else {
-            self.entry(newest).next = i;
+            self.links[newest as usize].next = i;
         }
         self.newest = i;
     }
@@ -150,12 +158,7 @@ impl CpuCache {
     pub fn insert(&mut self, key: NodeKey, data: PreparedBrick) -> Vec<NodeKey> {
         self.remove(key);
         self.bytes += data.bytes();
-        let entry = Entry {
-            key,
-            data,
-            prev: NIL,
-            next: NIL,
-        };
+        let entry = Entry { key, data };
         let i = match self.free.pop() {
             Some(i) => {
                 self.slots[i as usize] = Some(entry);
@@ -163,6 +166,10 @@ impl CpuCache {
             }
             None => {
                 self.slots.push(Some(entry));
+                self.links.push(Link {
+                    prev: NIL,
+                    next: NIL,
+                });
                 (self.slots.len() - 1) as u32
             }
         };
@@ -205,7 +212,7 @@ impl CpuCache {
         let mut i = self.oldest;
         while let Some(e) = self.slots.get(i as usize).and_then(Option::as_ref) {
             out.push(e.key);
-            i = e.next;
+            i = self.links[i as usize].next;
         }
         out
     }

@@ -9,7 +9,9 @@ struct AllResident<'a>(&'a dyn BrickSource);
 
 impl RefineEnv for AllResident<'_> {
     fn node(&mut self, key: NodeKey) -> MetaState {
-        self.0.node(key).map_or(MetaState::Failed, MetaState::Known)
+        self.0.node(key).map_or(MetaState::Failed, |i| {
+            MetaState::Known(std::sync::Arc::new(i))
+        })
     }
     fn data(&mut self, _key: NodeKey) -> DataState {
         DataState::OnGpu

@@ -103,7 +103,7 @@ pub struct BrickRequest {
     /// Higher goes first.
     pub priority: f32,
     /// The node's metadata (its range goes into the prepared brick).
-    pub info: NodeInfo,
+    pub info: Arc<NodeInfo>,
     /// Also read the metadata of the node's children (inside the volume) in the
     /// same job, right after the brick (delivered first), so that a later split
     /// of the node seldom waits for it; it counts as metadata in flight meanwhile.

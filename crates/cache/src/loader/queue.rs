@@ -19,7 +19,7 @@ pub(crate) enum Job {
     /// metadata of its children inside the volume.
     Brick {
         key: NodeKey,
-        info: NodeInfo,
+        info: std::sync::Arc<NodeInfo>,
         children_meta: bool,
     },
 }

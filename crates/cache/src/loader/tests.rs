@@ -20,7 +20,7 @@ fn brick(src: &TestSource, key: NodeKey, priority: f32) -> BrickRequest {
     BrickRequest {
         key,
         priority,
-        info: ball_info(&src.layout, key),
+        info: ball_info(&src.layout, key).into(),
         children_meta: false,
     }
 }

@@ -279,7 +279,7 @@ fn brick_batch(
     tx: &Sender<Completion>,
     jobs: &[Job],
 ) -> bool {
-    let wanted: Vec<(NodeKey, NodeInfo, bool)> = jobs
+    let wanted: Vec<(NodeKey, Arc<NodeInfo>, bool)> = jobs
         .iter()
         .filter_map(|j| match j {
             Job::Brick {
@@ -290,7 +290,10 @@ fn brick_batch(
             Job::Meta(_) => None,
         })
         .collect();
-    let pairs: Vec<(NodeKey, NodeInfo)> = wanted.iter().map(|(k, i, _)| (*k, i.clone())).collect();
+    let pairs: Vec<(NodeKey, NodeInfo)> = wanted
+        .iter()
+        .map(|(k, i, _)| (*k, NodeInfo::clone(i)))
+        .collect();
     let (id, cancel) = shared
         .queue
         .lock()

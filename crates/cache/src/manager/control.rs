@@ -142,7 +142,7 @@ impl BrickManager {
 
     /// The node's metadata, if known.
     pub fn metadata(&self, key: NodeKey) -> Option<NodeInfo> {
-        self.meta.get(key)
+        self.meta.get(key).map(|i| (*i).clone())
     }
 
     /// The error that made a node fail (its brick, else its metadata), while it
@@ -197,7 +197,7 @@ impl BrickManager {
         let reads = SetupReads {
             source: self.source.clone(),
             preparer: self.preparer.clone(),
-            root: self.meta.get(key),
+            root: self.meta.get(key).map(|i| (*i).clone()),
             has_brick: self.cpu.contains(key) || self.pool.contains(key),
             children: children_in_volume(&self.layout, key)
                 .into_iter()
@@ -313,10 +313,8 @@ impl BrickManager {
         }
         if config.cpu_budget_bytes != old.cpu_budget_bytes {
             self.cpu.set_budget(config.cpu_budget_bytes);
-            self.meta.set_capacity(super::meta_capacity(
-                config.cpu_budget_bytes,
-                self.brick_bytes,
-            ));
+            self.meta
+                .set_capacity(super::meta_capacity(config.cpu_budget_bytes));
         }
         if config.retry != old.retry {
             self.failures.set_policy(config.retry);

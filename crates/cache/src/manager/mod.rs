@@ -94,10 +94,14 @@ impl std::fmt::Debug for BrickManager {
     }
 }
 
-/// Metadata entries kept per prepared brick the CPU budget holds (at least
-/// 16,384): the nodes a view meets while refining down to its bricks, with room
-/// for the views before it. About 48 bytes an entry, under 4% of the budget.
-const META_PER_BRICK: u64 = 64;
+/// The metadata map holds at most this share of the CPU budget (1/16, by
+/// [`MetaCache::ENTRY_BYTES`], at least 16,384 entries): at the default
+/// 512 MiB about 110,000 nodes, the nodes a view meets while refining down to
+/// a cut of thousands of bricks (each visited node's eight children), with room
+/// for the views before it. (It was 64 entries per prepared brick, sized for
+/// entries of 48 bytes; with the error records an entry is about 300 bytes, and
+/// over bricks of 16 the map could outgrow the budget itself.)
+const META_BUDGET_DIVISOR: u64 = 16;
 
 /// [`OutOfCoreConfig::max_bytes_in_flight`] in stored bricks of `layout`
 /// (at least 1).
@@ -106,8 +110,9 @@ fn bricks_in_flight(config: &OutOfCoreConfig, layout: &OctreeLayout) -> usize {
     (config.max_bytes_in_flight / brick).clamp(1, usize::MAX as u64) as usize
 }
 
-fn meta_capacity(cpu_budget_bytes: u64, brick_bytes: u64) -> usize {
-    (META_PER_BRICK * (cpu_budget_bytes / brick_bytes.max(1))).clamp(16_384, 1 << 24) as usize
+fn meta_capacity(cpu_budget_bytes: u64) -> usize {
+    (cpu_budget_bytes / META_BUDGET_DIVISOR / MetaCache::ENTRY_BYTES as u64).clamp(16_384, 1 << 24)
+        as usize
 }
 
 /// Refinement's view of the manager: caches only, never the source.
@@ -203,7 +208,7 @@ impl BrickManager {
             last_fade_time: None,
             source,
             layout,
-            meta: MetaCache::new(meta_capacity(config.cpu_budget_bytes, brick_bytes)),
+            meta: MetaCache::new(meta_capacity(config.cpu_budget_bytes)),
             cpu: CpuCache::new(config.cpu_budget_bytes),
             pool,
             loader,

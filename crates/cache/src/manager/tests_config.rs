@@ -158,3 +158,22 @@ fn setters_validate_and_apply() {
     m.set_retry_policy(None).unwrap();
     assert_eq!(m.config().retry, None);
 }
+
+#[test]
+fn the_metadata_map_stays_within_a_sixteenth_of_the_cpu_budget() {
+    // (An entry holds the node's error records: far more than the 48 bytes
+    // the map was once sized for, MetaCache::ENTRY_BYTES.)
+    for budget in [256u64 << 20, 512 << 20, 4 << 30] {
+        let cap = super::meta_capacity(budget) as u64;
+        assert!(
+            cap * MetaCache::ENTRY_BYTES as u64 <= budget / 16,
+            "{budget}: {cap}"
+        );
+        assert!(
+            cap * MetaCache::ENTRY_BYTES as u64 > budget / 17,
+            "{budget}: {cap}"
+        );
+    }
+    // A small budget still keeps the floor.
+    assert_eq!(super::meta_capacity(1 << 20), 16_384);
+}

@@ -40,7 +40,7 @@ impl RefineEnv for Scripted {
         if self.meta_failed.contains(&key) {
             MetaState::Failed
         } else if self.known.as_ref().is_none_or(|k| k.contains(&key)) {
-            MetaState::Known(ball_info(&self.layout, key))
+            MetaState::Known(ball_info(&self.layout, key).into())
         } else {
             MetaState::Pending
         }

@@ -69,12 +69,12 @@ impl<'p, 'a, 'e> Greedy<'p, 'a, 'e> {
             Ok(c) => c,
             Err(u) => return Err(unknown_root(u)),
         };
-        let screen = ScreenError::new(params, c.info.as_ref(), layout);
+        let screen = ScreenError::new(params, c.info.as_deref(), layout);
         let priority = screen.priority(
             params.views.voxel_pixels(root),
             env.visible_weight(root),
             root,
-            c.info.as_ref(),
+            c.info.as_deref(),
             params,
             layout,
         );
@@ -306,10 +306,17 @@ impl<'p, 'a, 'e> Greedy<'p, 'a, 'e> {
     /// those not on the GPU; the children join the heap.
     fn split(&mut self, item: HeapItem, children: &[NodeKey], classes: &[Classified; 8]) {
         let (key, priority) = (item.key, item.priority);
-        let data: Vec<usize> = (0..children.len())
-            .filter(|&i| classes[i].class == NodeClass::Data)
-            .collect();
-        let states: Vec<DataState> = data.iter().map(|&i| self.env.data(children[i])).collect();
+        // The data children and where their bricks are (at most eight: on
+        // the stack, as refinement visits tens of thousands of nodes a frame).
+        let (mut data, mut states, mut n) = ([0usize; 8], [DataState::Missing; 8], 0);
+        for i in 0..children.len() {
+            if classes[i].class == NodeClass::Data {
+                data[n] = i;
+                states[n] = self.env.data(children[i]);
+                n += 1;
+            }
+        }
+        let (data, states) = (&data[..n], &states[..n]);
         let failed = states.iter().filter(|s| **s == DataState::Failed).count() as u32;
         if failed > 0 {
             self.out.blocked.failed += 1;
@@ -317,13 +324,12 @@ impl<'p, 'a, 'e> Greedy<'p, 'a, 'e> {
             self.finals.push((key, priority));
             return;
         }
-        let missing: Vec<usize> = data
+        let missing = data
             .iter()
-            .zip(&states)
+            .zip(states)
             .filter(|(_, s)| **s == DataState::Missing)
-            .map(|(i, _)| *i)
-            .collect();
-        if !missing.is_empty() {
+            .map(|(i, _)| *i);
+        if states.contains(&DataState::Missing) {
             let order =
                 priority * self.env.request_weight(key) * self.params.views.centre_weight(key);
             for i in missing {
@@ -338,7 +344,7 @@ impl<'p, 'a, 'e> Greedy<'p, 'a, 'e> {
             self.out.blocked.missing_data += 1;
             self.finals.push((key, priority));
             if self.params.lookahead {
-                for &i in &data {
+                for &i in data {
                     self.look_ahead(children[i], &classes[i]);
                 }
             }
@@ -371,7 +377,7 @@ impl<'p, 'a, 'e> Greedy<'p, 'a, 'e> {
                         self.params.views.voxel_pixels(c),
                         self.env.visible_weight(c),
                         c,
-                        classes[i].info.as_ref(),
+                        classes[i].info.as_deref(),
                         self.params,
                         self.layout,
                     );
@@ -401,7 +407,7 @@ impl<'p, 'a, 'e> Greedy<'p, 'a, 'e> {
             self.params.views.voxel_pixels(c),
             self.env.visible_weight(c),
             c,
-            class.info.as_ref(),
+            class.info.as_deref(),
             self.params,
             self.layout,
         );

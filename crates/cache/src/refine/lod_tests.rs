@@ -77,7 +77,7 @@ impl RefineEnv for Cached {
         self.meta
             .get(&key)
             .cloned()
-            .map_or(MetaState::Pending, MetaState::Known)
+            .map_or(MetaState::Pending, |i| MetaState::Known(i.into()))
     }
     fn data(&mut self, _key: NodeKey) -> DataState {
         DataState::OnGpu
@@ -515,19 +515,22 @@ impl RefineEnv for PerBrick {
             && key.parent() == Some(self.sparse)
             && key != self.sparse.child(0)
             && key != self.sparse.child(7);
-        MetaState::Known(NodeInfo {
-            kind: if empty {
-                NodeKind::Empty
-            } else {
-                NodeKind::Data
-            },
-            min: 0.0,
-            max: 1.0,
-            error: (key.level < 2).then(|| NodeError::encode(&bins, 0.0, 1.0)),
-            parent_error: None,
-            channels: Default::default(),
-            channel_errors: None,
-        })
+        MetaState::Known(
+            NodeInfo {
+                kind: if empty {
+                    NodeKind::Empty
+                } else {
+                    NodeKind::Data
+                },
+                min: 0.0,
+                max: 1.0,
+                error: (key.level < 2).then(|| NodeError::encode(&bins, 0.0, 1.0)),
+                parent_error: None,
+                channels: Default::default(),
+                channel_errors: None,
+            }
+            .into(),
+        )
     }
     fn data(&mut self, _key: NodeKey) -> DataState {
         DataState::OnGpu

@@ -17,7 +17,7 @@ struct Streaming {
 
 impl RefineEnv for Streaming {
     fn node(&mut self, key: NodeKey) -> MetaState {
-        MetaState::Known(ball_info(&self.layout, key))
+        MetaState::Known(ball_info(&self.layout, key).into())
     }
     fn data(&mut self, key: NodeKey) -> DataState {
         if self.loaded.contains(&key) {

@@ -62,6 +62,7 @@ use crate::upload::UploadBudget;
 use brickray_core::{
     EmptyReason, LodMetric, NodeInfo, NodeKey, OctreeLayout, RenderMode, TransferFunction,
 };
+use std::sync::Arc;
 
 /// Bricks a frame may request at least (when the pool has the slots), whatever
 /// the upload budget.
@@ -110,12 +111,12 @@ pub enum DataState {
 }
 
 /// What is known of a node's metadata.
-// (A copy out of the metadata cache per lookup: boxing would allocate.)
-#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone, PartialEq)]
 pub enum MetaState {
-    /// Known.
-    Known(NodeInfo),
+    /// Known (shared with the metadata cache: refinement looks up every
+    /// child of every node it visits, and a copy of a `NodeInfo`, with its
+    /// error records, is about 250 bytes).
+    Known(Arc<NodeInfo>),
     /// Not known yet (refinement requests it).
     Pending,
     /// Its read failed (and is not yet due for a retry).
@@ -272,7 +273,7 @@ pub struct LoadRequest {
     /// Higher first.
     pub priority: f32,
     /// Its metadata.
-    pub info: NodeInfo,
+    pub info: Arc<NodeInfo>,
 }
 
 /// The result of [`refine`].

@@ -32,6 +32,7 @@ use super::{
 use crate::upload::UploadBudget;
 use brickray_core::{EmptyReason, NodeInfo, NodeKey, NodeMap, NodeSet, OctreeLayout};
 use std::collections::BinaryHeap;
+use std::sync::Arc;
 
 /// How much more a candidate that had its own brick in the previous frame
 /// ranks ([`RefineEnv::held`]): it loses its brick only to a candidate that
@@ -131,7 +132,7 @@ impl Octants<'_, '_> {
         &mut self,
         env: &mut dyn RefineEnv,
         key: NodeKey,
-        info: NodeInfo,
+        info: Arc<NodeInfo>,
         uniform: bool,
         priority: f64,
         needs_upload: bool,
@@ -183,7 +184,7 @@ impl Octants<'_, '_> {
                     // parent-error record, over `key`'s range; `key`'s own
                     // record where the source has none), seen through what
                     // the image shows of `c`.
-                    let drawn_from = drawn_from(&info, cl.info.as_ref());
+                    let drawn_from = drawn_from(&info, cl.info.as_deref());
                     let hold = if env.held(c) { OCTANT_HYSTERESIS } else { 1.0 };
                     let p = hold
                         * self.screen.priority(
@@ -267,7 +268,7 @@ fn root(
     params: &RefineParams<'_>,
     env: &mut dyn RefineEnv,
     budget: &mut UploadBudget,
-) -> Result<(NodeInfo, bool, bool), Refinement> {
+) -> Result<(Arc<NodeInfo>, bool, bool), Refinement> {
     let mut out = Refinement::default();
     let root = NodeKey::ROOT;
     let root_class = classify(root, layout, params, params.views, env).map_err(unknown_root)?;

@@ -3,6 +3,8 @@
 //! ([`ScreenError`]) and the heap's order, which under the error-aware
 //! metrics is that error per brick a split adds ([`HeapItem`]).
 
+use std::sync::Arc;
+
 use super::{MetaState, NodeClass, RefineEnv, RefineParams, Views, is_visible};
 use brickray_core::{
     EmptyReason, LodMetric, NodeInfo, NodeKey, NodeKind, OctreeLayout, RenderMode, TfErrorTable,
@@ -45,7 +47,7 @@ pub(super) struct Classified {
     pub(super) class: NodeClass,
     pub(super) uniform: bool,
     /// Its metadata (for nodes inside the volume).
-    pub(super) info: Option<NodeInfo>,
+    pub(super) info: Option<Arc<NodeInfo>>,
 }
 
 /// Why a node could not be classified.

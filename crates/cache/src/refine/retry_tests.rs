@@ -15,7 +15,7 @@ struct SomeInCpu {
 
 impl RefineEnv for SomeInCpu {
     fn node(&mut self, key: NodeKey) -> MetaState {
-        MetaState::Known(ball_info(&self.layout, key))
+        MetaState::Known(ball_info(&self.layout, key).into())
     }
     fn data(&mut self, key: NodeKey) -> DataState {
         if self.in_cpu.contains(&key) {
@@ -102,7 +102,8 @@ impl RefineEnv for FullAndHollow {
                 data
             } else {
                 empty
-            },
+            }
+            .into(),
         )
     }
     fn data(&mut self, _key: NodeKey) -> DataState {

@@ -60,7 +60,7 @@ struct AllInCpu {
 impl RefineEnv for AllInCpu {
     fn node(&mut self, key: NodeKey) -> MetaState {
         self.meta_reads += 1;
-        MetaState::Known(ball_info(&self.layout, key))
+        MetaState::Known(ball_info(&self.layout, key).into())
     }
     fn data(&mut self, key: NodeKey) -> DataState {
         if self.on_gpu.contains(&key) {
@@ -485,7 +485,7 @@ struct Favour {
 
 impl RefineEnv for Favour {
     fn node(&mut self, key: NodeKey) -> MetaState {
-        MetaState::Known(ball_info(&self.layout, key))
+        MetaState::Known(ball_info(&self.layout, key).into())
     }
     fn data(&mut self, key: NodeKey) -> DataState {
         if key.level == 0 {

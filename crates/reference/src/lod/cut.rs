@@ -59,7 +59,7 @@ impl std::fmt::Debug for AllAvailable<'_> {
 impl RefineEnv for AllAvailable<'_> {
     fn node(&mut self, key: NodeKey) -> MetaState {
         match self.source.node(key) {
-            Ok(i) => MetaState::Known(i),
+            Ok(i) => MetaState::Known(std::sync::Arc::new(i)),
             Err(e) => {
                 self.error.get_or_insert(e);
                 MetaState::Failed
