@@ -16,8 +16,8 @@ struct Entry {
 /// A slot's place in the recency list, by slot index. The links live apart
 /// from the entries, 8 bytes a slot: marking a brick used rewrites three
 /// slots' links, and in a table of links they stay in the processor's caches
-/// where the entries do not (refinement marks about 100,000 bricks a frame
-/// at a cut of 20,000).
+/// where the entries do not (refinement marks every data child it finds in
+/// CPU memory, every frame).
 #[derive(Debug, Clone, Copy)]
 struct Link {
     /// The next older entry.
