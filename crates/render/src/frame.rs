@@ -238,16 +238,7 @@ fn storage_texture_entry(binding: u32, format: wgpu::TextureFormat) -> wgpu::Bin
 /// prediction history (5) and its uniforms (6).
 pub(crate) fn layout_entries() -> Vec<wgpu::BindGroupLayoutEntry> {
     vec![
-        wgpu::BindGroupLayoutEntry {
-            binding: 0,
-            visibility: wgpu::ShaderStages::COMPUTE,
-            ty: wgpu::BindingType::Buffer {
-                ty: wgpu::BufferBindingType::Uniform,
-                has_dynamic_offset: false,
-                min_binding_size: wgpu::BufferSize::new(std::mem::size_of::<FrameUniforms>() as u64),
-            },
-            count: None,
-        },
+        gpu::uniform_entry::<FrameUniforms>(0),
         wgpu::BindGroupLayoutEntry {
             binding: 1,
             visibility: wgpu::ShaderStages::COMPUTE,
