@@ -422,7 +422,10 @@ fn converged_cut(
             time: None,
         });
         leaves = plan.leaves.iter().map(|&(_, k)| k).collect();
-        if plan.stats.converged {
+        // The cache's convergence: nothing pending (no feedback is given, so
+        // `VisibleError` ranks by projected size x error and never waits for
+        // weights that no ray caster measures).
+        if plan.stats.cache.converged() {
             return leaves;
         }
         std::thread::sleep(std::time::Duration::from_millis(2));
@@ -447,7 +450,7 @@ fn error_aware_cuts_weigh_each_visible_channel() {
     let s: Vec<ChannelStyle> = (0..2)
         .map(|c| ChannelStyle::window(COLORS[c], [0.0, 1.0], 0.01))
         .collect();
-    let metric = brickray::core::LodMetric::ErrorAware { budget: 4.0 };
+    let metric = brickray::core::LodMetric::VisibleError { budget: 4.0 };
     let hidden = [s[0].clone(), s[1].clone().visible(false)];
     let a = converged_cut(source(&parts), metric, &tf, &hidden);
     let alone = converged_cut(source(&parts[..1]), metric, &tf, &s[..1]);

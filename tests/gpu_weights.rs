@@ -21,12 +21,14 @@
 //!
 //! Refinement: on opaque shells (256^3, bricks of 32, stored with error
 //! bounds), `VisibleError` with budget 0 keeps what no ray reaches coarse (it
-//! weighs 0): the converged working set is below 75% of `ErrorAware`'s at
-//! budget 0 (measured: 283 of 408 bricks, 69%); parents split although no
-//! ray reaches any of their data children are at most 2% of its bricks
-//! (measured: 2, against 18 for `ErrorAware`, which
-//! must show at least 10 for the test to mean anything); the image matches at
-//! >= 50 dB (measured: 71-74 dB).
+//! weighs 0): the converged working set is below 75% of the geometric rule's
+//! at tolerance 0 (measured: 283 of 408 bricks, 69%); parents split although
+//! no ray reaches any of their data children are at most 2% of its bricks
+//! (measured: 2, against 18 for the geometric rule, which must show at least
+//! 10 for the test to mean anything); the image matches at >= 50 dB
+//! (measured: 71-74 dB). The baseline was the error-aware rank without
+//! weights at budget 0 until that metric was removed; it measured the same
+//! 408 bricks and 18 hidden splits.
 
 use brickray::core::LodMetric;
 use brickray::{
@@ -359,22 +361,23 @@ fn visible_error_keeps_what_no_ray_reaches_coarse() {
         256,
     );
     let settings = RenderSettings::default();
-    let metric = |visible| match visible {
-        false => LodMetric::ErrorAware { budget: 0.0 },
-        true => LodMetric::VisibleError { budget: 0.0 },
-    };
-    let mut aware = renderer(shells(), metric(false), &tf);
-    let (a_img, _) = converge(&mut aware, 2 * DIM, settings, 300);
-    let mut seen = renderer(shells(), metric(true), &tf);
+    // Tolerance 0: the geometric rule refines everything it sees to the
+    // finest level, hidden or not.
+    let mut all = renderer(shells(), LodMetric::Geometric, &tf);
+    let (a_img, _) = converge(&mut all, 2 * DIM, settings, 300);
+    let mut seen = renderer(shells(), LodMetric::VisibleError { budget: 0.0 }, &tf);
     let (s_img, _) = converge(&mut seen, 2 * DIM, settings, 300);
     let p = psnr(&a_img, &s_img);
-    let ((ah, ab), (sh, sb)) = (hidden_splits(&aware), hidden_splits(&seen));
+    let ((ah, ab), (sh, sb)) = (hidden_splits(&all), hidden_splits(&seen));
     eprintln!(
-        "error-aware: {ab} bricks, {ah} hidden splits; visible-error: {sb} bricks ({:.0}%), {sh} hidden splits; {p:.1} dB",
+        "geometric: {ab} bricks, {ah} hidden splits; visible-error: {sb} bricks ({:.0}%), {sh} hidden splits; {p:.1} dB",
         100.0 * sb as f64 / ab as f64
     );
     assert!((sb as f64) < 0.75 * ab as f64, "{sb} of {ab} bricks");
-    assert!(ah >= 10, "error-aware split only {ah} hidden parents");
+    assert!(
+        ah >= 10,
+        "the geometric rule split only {ah} hidden parents"
+    );
     assert!(sh * 50 <= sb, "{sh} hidden splits in {sb} bricks");
     assert!(p >= 50.0, "{p} dB");
 }
@@ -394,11 +397,7 @@ fn switching_to_visible_error_never_collapses_the_cut() {
         256,
     );
     let settings = RenderSettings::default();
-    let mut r = renderer(
-        shells_store(&dir),
-        LodMetric::ErrorAware { budget: 0.0 },
-        &tf,
-    );
+    let mut r = renderer(shells_store(&dir), LodMetric::Geometric, &tf);
     converge(&mut r, 2 * DIM, settings, 300);
     brickray_harness::configure(gpu(), &r, |c| {
         c.lod_metric = LodMetric::VisibleError { budget: 0.0 }

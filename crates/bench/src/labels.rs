@@ -314,24 +314,22 @@ pub(crate) fn run(args: &Args) -> Result<LabelsResult, String> {
             levels[3],
             levels[4]
         );
-        // The label error in the LOD metric: error-aware cuts (the share of
-        // changed labels times their classified change) against the
-        // geometric ones above, PSNR against the label finest and bricks.
+        // The label error in the LOD metric: visible-error cuts (the share of
+        // changed labels times their classified change, weighted by what the
+        // image shows) against the geometric ones above, PSNR against the
+        // label finest and bricks.
         let mut lod = Vec::new();
         for (metric, budget) in [
             ("geometric", 2.0f32),
             ("geometric-smooth", 2.0),
             ("geometric-smooth", 1.0),
-            ("error", 255.0),
-            ("error", 64.0),
-            ("error", 16.0),
             ("visible", 255.0),
             ("visible", 64.0),
+            ("visible", 16.0),
         ] {
             let geometric = metric.starts_with("geometric");
             let mut config = finest(if geometric { budget } else { 1.0 });
             config.lod_metric = match metric {
-                "error" => LodMetric::ErrorAware { budget },
                 "visible" => LodMetric::VisibleError { budget },
                 _ => LodMetric::Geometric,
             };

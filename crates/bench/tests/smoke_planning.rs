@@ -165,7 +165,7 @@ fn the_pareto_suite_runs() {
             "brick",
             "default_on_front_all",
             "default_on_out_of_core_front_all",
-            "error_aware_gain_db_at_equal_bricks",
+            "visible_error_gain_db_at_equal_bricks",
             "visible_error_gain_db_at_equal_brick_budget",
             "octant_gain_db_at_equal_brick_budget",
             "preintegration_gain_db_at_step_2",

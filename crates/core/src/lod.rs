@@ -32,8 +32,9 @@
 //! range, so each bin also records its typical deviation (`rms`: the RMS of
 //! `F - C` over each coarse voxel's own footprint) and its share of the
 //! node's voxels (`weight`). [`node_tf_error_expected`] and
-//! [`node_pixel_error`] (what [`LodMetric::ErrorAware`] ranks by) use them;
-//! [`node_tf_error`] (what [`LodMetric::ErrorBound`] ranks by) is the bound.
+//! [`node_pixel_error`] (what [`LodMetric::VisibleError`] ranks a node by
+//! before the renderer has measured its visible weight) use them;
+//! [`node_tf_error`] is the bound.
 
 use crate::{NodeInfo, NodeKind, OctreeLayout, RenderMode, TransferFunction};
 
@@ -44,45 +45,39 @@ pub enum LodMetric {
     /// tolerance in pixels, whatever the data and transfer function do there.
     #[default]
     Geometric,
-    /// A node is refined while its projected voxel size (pixels) times its
-    /// expected pixel error under the current mode and transfer function
-    /// ([`node_pixel_error`], in 8-bit levels: 255 x the share-weighted change
-    /// of the opacity-weighted classified sample, accumulated over the node's
-    /// depth in DVR) exceeds `budget`. The unit of `budget` is therefore
-    /// "8-bit levels x pixels": 16 lets a voxel covering one pixel err by
-    /// 16/255, or one covering 4 pixels by 4/255; 255 refines a node of
-    /// full-scale error to 1 px, like the geometric rule at 1 px. A flat
-    /// transfer-function region or smooth data costs nothing and coarsens
-    /// freely; a sharp edge refines first. Sources without error bounds (a
-    /// version-1 store) fall back to [`LodMetric::Geometric`].
-    ErrorAware {
-        /// The error budget (finite, `>= 0`).
-        budget: f32,
-    },
-    /// Like [`LodMetric::ErrorAware`] with the strict bound
-    /// ([`node_tf_error`]) instead of the expected error: every leaf's
-    /// projected size times 255 x its worst-case change stays within the budget
-    /// (when nothing else blocks a split), but the worst case over a node's
-    /// neighbourhood is rarely much below its value range, so this ranks
-    /// nodes almost like the geometric rule (docs/benchmarks.md).
-    ErrorBound {
-        /// The error budget (finite, `>= 0`).
-        budget: f32,
-    },
-    /// Like [`LodMetric::ErrorAware`], but a node is ranked by what the image
-    /// shows of it where the renderer measured that: its *visible weight*
+    /// A node is refined while its error in the image exceeds `budget`, in
+    /// 8-bit levels x pixels. The error is what the image shows of the node
+    /// where the renderer measured that: its *visible weight*
     /// `w`, the transmittance-weighted length in finest voxels of every
     /// pixel's ray through it (an isosurface ray's up to its hit), summed over
     /// pixels, times 255 x its per-sample expected error
-    /// ([`node_visible_error`]: the mean change of a sample, where
-    /// [`LodMetric::ErrorAware`] takes the worst bin's): the node's summed
+    /// ([`node_visible_error`]: the mean change of a sample): the node's summed
     /// change of the image, linearised, in 8-bit levels x pixels. It is
     /// divided by `brick^2` so that for a fully visible node whose voxels
     /// project to 1 px it is that mean change per pixel; a nearer node ranks
     /// higher by the extra pixels it covers, a half-hidden one lower by its
-    /// transmittance, a hidden one (weight 0) is never split. Nodes without a measured weight (the first frames of a
-    /// view, in-core rendering, refinement on the CPU without weights) are
-    /// ranked as by [`LodMetric::ErrorAware`].
+    /// transmittance, a hidden one (weight 0) is never split.
+    ///
+    /// Nodes without a measured weight (the first frames of a view, in-core
+    /// rendering, refinement on the CPU without weights) are ranked by their
+    /// projected voxel size (pixels) times their expected pixel error under
+    /// the current mode and transfer function ([`node_pixel_error`]: 255 x
+    /// the share-weighted change of the opacity-weighted classified sample,
+    /// accumulated over the node's depth in DVR): 16 lets a voxel covering
+    /// one pixel err by 16/255, or one covering 4 pixels by 4/255; 255
+    /// refines a node of full-scale error to 1 px, like the geometric rule at
+    /// 1 px. A flat transfer-function region or smooth data costs nothing and
+    /// coarsens freely. Sources without error records (a version-1 store, the
+    /// procedural source) fall back to [`LodMetric::Geometric`]. A host that
+    /// plans with no ray caster's feedback (a GPU-free streamer) gets that
+    /// rank throughout; its streamer's convergence then waits for weights
+    /// that never come, so it reads the cache's own convergence instead.
+    ///
+    /// The rank without weights was once a metric of its own (`ErrorAware`,
+    /// and `ErrorBound` with the strict bound [`node_tf_error`]); at equal
+    /// bricks it was ahead of neither this order nor
+    /// [`LodMetric::VisibleOctants`] on any pareto scene (docs/accuracy.md),
+    /// so it is only this fallback now.
     VisibleError {
         /// The error budget (finite, `>= 0`).
         budget: f32,
@@ -106,10 +101,9 @@ impl LodMetric {
     pub fn budget(self) -> Option<f32> {
         match self {
             LodMetric::Geometric => None,
-            LodMetric::ErrorAware { budget }
-            | LodMetric::ErrorBound { budget }
-            | LodMetric::VisibleError { budget }
-            | LodMetric::VisibleOctants { budget } => Some(budget),
+            LodMetric::VisibleError { budget } | LodMetric::VisibleOctants { budget } => {
+                Some(budget)
+            }
         }
     }
 
@@ -377,7 +371,8 @@ pub fn node_tf_error(
 /// [`node_tf_error`], but each occupied bin is widened by its typical (RMS)
 /// deviation instead of its largest. Not a bound: a guide to where
 /// refinement pays most, which error-aware refinement
-/// ([`LodMetric::ErrorAware`], through [`node_pixel_error`]) ranks nodes by.
+/// ([`LodMetric::VisibleError`], through [`node_pixel_error`] where a node's
+/// visible weight is not measured) ranks nodes by.
 ///
 /// * DVR: `max_b change(bin_b +- rms_b)` of the opacity-weighted classified
 ///   sample (the worst bin, not weighted by its share: a few visible voxels in
@@ -454,7 +449,8 @@ pub fn node_visible_error(
 /// voxel length, so a change of the classified sample of `e` over `n` voxels
 /// changes the composited pixel by up to about `n * e` while that is small),
 /// capped at 1; for iso-surfaces and MIP, where one sample decides the pixel,
-/// the per-sample error itself. What [`LodMetric::ErrorAware`] ranks by.
+/// the per-sample error itself. What [`LodMetric::VisibleError`] ranks a node
+/// by while its visible weight is not measured.
 pub fn node_pixel_error(
     info: &NodeInfo,
     level: u8,

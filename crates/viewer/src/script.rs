@@ -25,7 +25,7 @@
 //!                                out of core: where refinement's visibility comes from
 //! prediction off | paper | fast | exact
 //!                                the isosurface prediction buffer (iso frames)
-//! lod geometric [TOL] | error [BUDGET] | visible [BUDGET] | octants [BUDGET]
+//! lod geometric [TOL] | visible [BUDGET] | octants [BUDGET]
 //!                                out of core: the level-of-detail rule, with its tolerance
 //!                                (px per voxel) or error budget (8-bit levels x px, default 255)
 //! wait N                         draw N frames
@@ -210,10 +210,10 @@ impl ModeName {
     }
 }
 
-/// The error budget of `lod error`, `lod visible` and `lod octants` without one, and of
+/// The error budget of `lod visible` and `lod octants` without one, and of
 /// the viewer's error-aware rules when chosen: 255 (8-bit levels x px) lets a
-/// node of full-scale error be as coarse as the geometric rule at 1 px
-/// (`brickray::LodMetric::ErrorAware`).
+/// fully visible node of full-scale error be as coarse as the geometric rule
+/// at 1 px (`brickray::LodMetric::VisibleError`).
 pub(crate) const DEFAULT_ERROR_BUDGET: f32 = 255.0;
 
 /// The isosurface prediction buffer's settings the viewer offers
@@ -298,8 +298,6 @@ impl PredictionChoice {
 pub(crate) fn lod_rule_name(metric: brickray::LodMetric) -> &'static str {
     match metric {
         brickray::LodMetric::Geometric => "geometric",
-        brickray::LodMetric::ErrorAware { .. } => "error-aware",
-        brickray::LodMetric::ErrorBound { .. } => "error bound",
         brickray::LodMetric::VisibleError { .. } => "visible error",
         brickray::LodMetric::VisibleOctants { .. } => "visible octants",
     }
@@ -545,10 +543,9 @@ pub(crate) fn parse(text: &str) -> Result<Vec<Action>, ScriptError> {
                 let budget = value.unwrap_or(DEFAULT_ERROR_BUDGET);
                 match *rule {
                     "geometric" => Action::Lod(brickray::LodMetric::Geometric, value),
-                    "error" => Action::Lod(brickray::LodMetric::ErrorAware { budget }, None),
                     "visible" => Action::Lod(brickray::LodMetric::VisibleError { budget }, None),
                     "octants" => Action::Lod(brickray::LodMetric::VisibleOctants { budget }, None),
-                    _ => return Err(err("expected geometric, error, visible or octants")),
+                    _ => return Err(err("expected geometric, visible or octants")),
                 }
             }
             ["visibility", name] => Action::Visibility(

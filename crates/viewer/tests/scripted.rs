@@ -512,8 +512,8 @@ fn a_brick_budget_caps_the_viewers_working_set() {
 }
 
 /// The script's `lod` chooses the level-of-detail rule and its budget, and
-/// the screenshot sidecar reports them: on a store with error records, an
-/// error-aware budget of 1e9 keeps the cut coarse, 0 refines it, and the
+/// the screenshot sidecar reports them: on a store with error records, a
+/// visible-error budget of 1e9 keeps the cut coarse, 0 refines it, and the
 /// visible-error rule under a brick budget of 8 keeps within it and settles
 /// (`wait converged` fails the script otherwise).
 #[test]
@@ -529,8 +529,8 @@ fn the_lod_rule_and_its_budget_reach_the_renderer() {
     let store = sphere_store(dir.path());
     let script = format!(
         "open {store}\ntf grey\ncamera orbit -20 25 0.9\n\
-         lod error 1e9\nwait converged 600\nscreenshot {a}\n\
-         lod error 0\nwait converged 600\nscreenshot {b}\n\
+         lod visible 1e9\nwait converged 600\nscreenshot {a}\n\
+         lod visible 0\nwait converged 600\nscreenshot {b}\n\
          lod visible 0\nbricks 8\nwait converged 600\nscreenshot {c}\n\
          lod geometric 2\nbricks off\nwait converged 600\nscreenshot {d}\nquit\n",
         store = store.display(),
@@ -548,7 +548,7 @@ fn the_lod_rule_and_its_budget_reach_the_renderer() {
         read("visible.png"),
         read("geometric.png"),
     );
-    assert_eq!(coarse["lod"]["rule"], "error-aware");
+    assert_eq!(coarse["lod"]["rule"], "visible error");
     assert_eq!(coarse["lod"]["error_budget"], 1e9);
     assert_eq!(fine["lod"]["error_budget"], 0.0);
     assert_eq!(visible["lod"]["rule"], "visible error");

@@ -90,19 +90,11 @@ pub(super) fn configs(mode: RenderMode, u8_volume: bool, finest_bricks: u32) -> 
         };
         out.push(cfg("lod_geometric", format!("{tol} px"), key, base));
     }
-    // The error budget in 8-bit levels x pixels: 255 refines a node of
-    // full-scale error to 1 px, like the geometric rule at 1 px.
-    for budget in [32.0f32, 64.0, 128.0, 255.0, 510.0, 1020.0, 2040.0] {
-        let key = RendererKey {
-            metric: LodMetric::ErrorAware { budget },
-            ..DEFAULT_KEY
-        };
-        out.push(cfg("lod_error", format!("{budget}"), key, base));
-    }
-    // The same budgets ranked by what the image shows (the renderer's
-    // measured visible weights, LodMetric::VisibleError): equal to lod_error's
-    // priority for a fully visible node at 1 px; nearer nodes weigh more, so
-    // the sweep goes further to reach the coarse cuts.
+    // The error budget in 8-bit levels x pixels, ranked by what the image
+    // shows (the renderer's measured visible weights, LodMetric::VisibleError):
+    // 255 refines a fully visible node of full-scale error whose voxels
+    // project to 1 px, like the geometric rule at 1 px; nearer nodes weigh
+    // more, so the sweep goes far to reach the coarse cuts.
     for budget in [
         32.0f32, 64.0, 128.0, 255.0, 510.0, 1020.0, 2040.0, 4080.0, 8160.0, 16320.0,
     ] {
@@ -114,16 +106,14 @@ pub(super) fn configs(mode: RenderMode, u8_volume: bool, finest_bricks: u32) -> 
     }
     // Equal working sets by construction: the same brick budgets, filled in
     // the geometric order (projected voxel size, tolerance 0), the
-    // error-aware order (`ErrorAware` at budget 0: the node's error under the
-    // TF times its projected size) and the visible-error order
-    // (`VisibleError` at budget 0), and that order one octant at a time
+    // visible-error order (`VisibleError` at budget 0), and that order one
+    // octant at a time
     // (`VisibleOctants` at budget 0); at budget 0 only the brick budget
     // stops refinement.
     for frac in BRICK_FRACTIONS {
         let bricks = ((finest_bricks as f64 * frac).round() as u32).max(1);
         for (knob, metric, tolerance_px) in [
             ("bricks_geometric", LodMetric::Geometric, 0.0),
-            ("bricks_error", LodMetric::ErrorAware { budget: 0.0 }, 0.0),
             (
                 "bricks_visible",
                 LodMetric::VisibleError { budget: 0.0 },

@@ -3,10 +3,11 @@
 use super::{Config, Measured};
 use crate::runner::median;
 
-/// The median PSNR gain of an error-aware LOD sweep (`knob`) over the geometric one at
-/// equal working-set size: each error-aware point's PSNR minus the geometric
-/// sweep's PSNR interpolated (in log bricks) at its brick count; points outside
-/// the geometric sweep's range are left out. `None` without both sweeps.
+/// The median PSNR gain of an error-aware LOD sweep (`knob`) over the
+/// geometric one at equal working-set size: each error-aware point's PSNR
+/// minus the geometric sweep's PSNR interpolated (in log bricks) at its brick
+/// count; points outside the geometric sweep's range are left out. `None`
+/// without both sweeps.
 pub(super) fn lod_gain(cfgs: &[Config], m: &[Measured], knob: &str) -> Option<f64> {
     let series = |knob: &str| -> Vec<(f64, f64)> {
         cfgs.iter()

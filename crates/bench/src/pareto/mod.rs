@@ -2,11 +2,11 @@
 //!
 //! For each scene (a volume, its transfer function and a mode) it renders one
 //! view with a set of configurations: the defaults, and one knob at a time swept
-//! around them (step, pre-integration, geometric, error-aware and
-//! visible-error level-of-detail budgets, early-termination threshold, the u8 interpolation, the visibility
-//! policy, in core instead of out of core), and the geometric, error-aware
-//! and visible-error orders under equal brick budgets (10-90% of the finest
-//! cut: equal working sets by construction). Each
+//! around them (step, pre-integration, geometric and visible-error
+//! level-of-detail budgets, early-termination threshold, the u8
+//! interpolation, the visibility policy, in core instead of out of core), and
+//! the geometric, visible-error and octant orders under equal brick budgets
+//! (10-90% of the finest cut: equal working sets by construction). Each
 //! configuration gets its own renderer state (a renderer per cache setting,
 //! converged before timing); frames are interleaved round by round over all the
 //! configurations (the machine's speed drifts), each round starting at another
@@ -88,9 +88,9 @@ pub(crate) struct Args {
     #[arg(long, default_value_t = 2, value_parser = crate::at_least_one::<u32>)]
     supersample: u32,
     /// Knobs swept, comma-separated (default all; the defaults always run):
-    /// step, preint, lod_geometric, lod_error, lod_visible,
-    /// bricks_geometric, bricks_error, bricks_visible, bricks_octants, ert,
-    /// u8_filtering, visibility, in_core.
+    /// step, preint, lod_geometric, lod_visible, bricks_geometric,
+    /// bricks_visible, bricks_octants, ert, u8_filtering, visibility,
+    /// in_core.
     #[arg(long, value_delimiter = ',')]
     knobs: Vec<String>,
     /// Interior voxels per brick side of the stores.
@@ -123,10 +123,7 @@ pub(crate) struct ParetoResult {
     brick: u32,
     default_on_front_all: bool,
     default_on_out_of_core_front_all: bool,
-    error_aware_gain_db_at_equal_bricks: Option<f64>,
     visible_error_gain_db_at_equal_bricks: Option<f64>,
-    error_aware_gain_db_at_equal_brick_budget: Option<f64>,
-    error_aware_gain_db_at_equal_brick_budget_vs_finest: Option<f64>,
     visible_error_gain_db_at_equal_brick_budget: Option<f64>,
     visible_error_gain_db_at_equal_brick_budget_vs_finest: Option<f64>,
     octant_gain_db_at_equal_brick_budget: Option<f64>,
@@ -153,9 +150,8 @@ pub(crate) fn run(o: &Args) -> Result<ParetoResult, String> {
     );
     let (mut all_on_front, mut all_on_ooc_front) = (true, true);
     let mut per_scene = Vec::new();
-    let (mut lod_gains, mut visible_gains, mut preint_gains) = (Vec::new(), Vec::new(), Vec::new());
+    let (mut visible_gains, mut preint_gains) = (Vec::new(), Vec::new());
     let (mut budget_gains, mut budget_lod_gains) = (Vec::new(), Vec::new());
-    let (mut error_budget_gains, mut error_budget_lod_gains) = (Vec::new(), Vec::new());
     let (mut octant_gains, mut octant_lod_gains) = (Vec::new(), Vec::new());
     let mut aniso_bricks = None;
     for scene in &scenes {
@@ -269,21 +265,11 @@ pub(crate) fn run(o: &Args) -> Result<ParetoResult, String> {
                 chart::draw(&svg, &title, axis, &chart_pts, &on, 0)?;
                 println!("  chart: {}", svg.display());
             }
-            if let Some(g) = lod_gain(&cfgs, &m, "lod_error") {
-                println!("  error-aware LOD over geometric at equal bricks: {g:+.2} dB");
-                lod_gains.push(g);
-            }
             if let Some(g) = lod_gain(&cfgs, &m, "lod_visible") {
                 println!("  visible-error LOD over geometric at equal bricks: {g:+.2} dB");
                 visible_gains.push(g);
             }
             for (knob, order, gains, lod_gains) in [
-                (
-                    "bricks_error",
-                    "error-aware",
-                    &mut error_budget_gains,
-                    &mut error_budget_lod_gains,
-                ),
                 (
                     "bricks_visible",
                     "visible-error",
@@ -339,10 +325,7 @@ pub(crate) fn run(o: &Args) -> Result<ParetoResult, String> {
         brick: o.brick,
         default_on_front_all: all_on_front,
         default_on_out_of_core_front_all: all_on_ooc_front,
-        error_aware_gain_db_at_equal_bricks: med(&lod_gains),
         visible_error_gain_db_at_equal_bricks: med(&visible_gains),
-        error_aware_gain_db_at_equal_brick_budget: med(&error_budget_gains),
-        error_aware_gain_db_at_equal_brick_budget_vs_finest: med(&error_budget_lod_gains),
         visible_error_gain_db_at_equal_brick_budget: med(&budget_gains),
         visible_error_gain_db_at_equal_brick_budget_vs_finest: med(&budget_lod_gains),
         octant_gain_db_at_equal_brick_budget: med(&octant_gains),

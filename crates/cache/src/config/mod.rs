@@ -260,7 +260,8 @@ pub enum ConfigError {
         /// The value given.
         value: u32,
     },
-    /// The error budget of [`LodMetric::ErrorAware`] is NaN, negative or infinite.
+    /// The error budget of an error-aware [`LodMetric`] is NaN, negative or
+    /// infinite.
     #[error("the error budget must be finite and >= 0, got {value}")]
     ErrorBudget {
         /// The value given.

@@ -41,9 +41,8 @@ fn every_violation_is_a_typed_error() {
         });
         assert!(matches!(e, Err(ConfigError::Tolerance { .. })), "{value}");
         for metric in [
-            LodMetric::ErrorAware { budget: value },
-            LodMetric::ErrorBound { budget: value },
             LodMetric::VisibleError { budget: value },
+            LodMetric::VisibleOctants { budget: value },
         ] {
             let e = check(OutOfCoreConfig {
                 lod_metric: metric,

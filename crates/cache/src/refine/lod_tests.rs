@@ -1,11 +1,10 @@
-//! Error-aware refinement ([`LodMetric::ErrorAware`]) over synthetic metadata:
-//! a ramp along x whose nodes record error bounds.
+//! Error-aware refinement ([`LodMetric::VisibleError`], here mostly without
+//! measured weights: the rank by projected size times expected error) over
+//! synthetic metadata: a ramp along x whose nodes record error bounds.
 
 use super::tests::{assert_exact_cover, ball_layout};
 use super::*;
-use brickray_core::{
-    BinStats, ERROR_BINS, NodeError, TfErrorTable, node_pixel_error, node_tf_error,
-};
+use brickray_core::{BinStats, ERROR_BINS, NodeError, TfErrorTable, node_pixel_error};
 #[allow(unused_imports)]
 use brickray_core::{Camera, NodeKind, RenderMode, TransferFunction, VolumeFrame};
 use proptest::prelude::*;
@@ -154,15 +153,14 @@ fn step_tf(edge: f32) -> TransferFunction {
 proptest! {
     #![proptest_config(ProptestConfig { cases: 48, ..ProptestConfig::default() })]
 
-    /// With everything resident, no leaf that could be split stays coarser
-    /// than the budget: its projected voxel size times 255 x its error under
-    /// the TF (expected, or the bound) is within the budget.
+    /// With everything resident and no visible weights measured, no leaf that
+    /// could be split stays coarser than the budget: its projected voxel size
+    /// times 255 x its expected error under the TF is within the budget.
     #[test]
     fn never_coarsens_a_node_over_the_budget(
         seed in any::<u64>(),
         rough in 0.0f64..0.5,
         budget in 0.0f32..400.0,
-        strict in any::<bool>(),
         dist in 1.2f32..6.0,
         yaw in 0.0f32..std::f32::consts::TAU,
         entries in proptest::collection::vec(proptest::array::uniform4(0.0f32..1.0), 2..10),
@@ -173,11 +171,7 @@ proptest! {
         let tf = TransferFunction::from_entries(entries);
         let frame = VolumeFrame::centered(layout.volume.dims, [1.0; 3]);
         let cam = Camera::orbit(frame.center(), dist, yaw, 0.3);
-        let metric = if strict {
-            LodMetric::ErrorBound { budget }
-        } else {
-            LodMetric::ErrorAware { budget }
-        };
+        let metric = LodMetric::VisibleError { budget };
         let r = refine_with(&layout, &mut env, &cam, &tf, metric);
         let keys: Vec<NodeKey> = r.leaves.iter().map(|l| l.key).collect();
         assert_exact_cover(&keys, layout.levels);
@@ -189,12 +183,8 @@ proptest! {
                 continue;
             }
             let info = env.meta[&l.key].clone();
-            let e = if strict {
-                node_tf_error(&info, RenderMode::Dvr, &table, &layout)
-            } else {
-                node_pixel_error(&info, l.key.level, RenderMode::Dvr, &table, &layout)
-            }
-            .unwrap();
+            let e = node_pixel_error(&info, l.key.level, RenderMode::Dvr, &table, &layout)
+                .unwrap();
             let px = geo.voxel_pixels(l.key);
             prop_assert!(
                 px * 255.0 * e <= budget as f64 * (1.0 + 1e-6) + 1e-9,
@@ -227,11 +217,7 @@ proptest! {
         let frame = VolumeFrame::centered(layout.volume.dims, [1.0; 3]);
         let cam = Camera::orbit(frame.center(), dist, yaw, 0.3);
         let scale = layout.volume_scale();
-        let metric = if visible {
-            LodMetric::VisibleError { budget: 0.0 }
-        } else {
-            LodMetric::ErrorAware { budget: 0.0 }
-        };
+        let metric = LodMetric::VisibleError { budget: 0.0 };
         let mut env: Box<dyn RefineEnv> = if visible {
             Box::new(Seen { inner: Cached { meta: meta.clone() }, scale })
         } else {
@@ -285,7 +271,7 @@ fn a_new_tf_reprioritises_without_reading_the_source() {
     let reads = src.reads;
     let frame = VolumeFrame::centered(layout.volume.dims, [1.0; 3]);
     let cam = Camera::orbit(frame.center(), 2.5, 0.0, 0.0);
-    let metric = LodMetric::ErrorAware { budget: 64.0 };
+    let metric = LodMetric::VisibleError { budget: 64.0 };
     // Mean level of the data leaves whose x range is near `x`.
     let depth_near = |r: &Refinement, x: f64| {
         let geo = ViewGeometry::new(&layout, &cam, 1.0, 256, &frame);
@@ -330,7 +316,8 @@ fn a_new_tf_reprioritises_without_reading_the_source() {
     assert!(depth_near(&a, 0.9) < depth_near(&g, 0.9));
 }
 
-/// A source without error bounds: error-aware refinement is the geometric rule.
+/// A source without error bounds: error-aware refinement is the geometric rule
+/// (at the tolerance, whatever the error budget).
 #[test]
 fn without_error_bounds_it_is_geometric() {
     let layout = ball_layout(64);
@@ -354,7 +341,7 @@ fn without_error_bounds_it_is_geometric() {
         &mut env,
         &cam,
         &tf,
-        LodMetric::ErrorAware { budget: 3.0 },
+        LodMetric::VisibleError { budget: 3.0 },
     );
     assert_eq!(g, e);
 }
@@ -382,7 +369,7 @@ fn a_flat_tf_coarsens_freely() {
         &[(0.0, [0.8, 0.5, 0.3, 0.4]), (1.0, [0.8, 0.5, 0.3, 0.4])],
         256,
     );
-    let metric = LodMetric::ErrorAware { budget: 0.0 };
+    let metric = LodMetric::VisibleError { budget: 0.0 };
     let r = refine_with(&layout, &mut env, &cam, &flat, metric);
     let data: Vec<&RefinedLeaf> = r
         .leaves
@@ -469,18 +456,21 @@ fn visible_weights_keep_hidden_nodes_coarse() {
         scale,
     };
     let seen = run(&mut seen_env, metric);
-    // The plain error-aware rule ignores the weights; without weights the
-    // visible one falls back to it.
-    let aware = run(&mut seen_env, LodMetric::ErrorAware { budget: 0.0 });
-    let keys = |r: &Refinement| r.leaves.iter().map(|l| l.key).collect::<Vec<_>>();
-    assert_eq!(keys(&aware), keys(&plain));
     // With an error budget instead of a brick budget, no hidden node splits
-    // either, and the seen half still refines.
-    let mut budgeted =
-        |metric| refine_limited(&layout, &mut seen_env, &cam, &tf, metric, 0.0, u32::MAX);
-    let unweighted = budgeted(LodMetric::ErrorAware { budget: 64.0 });
+    // either, and the seen half still refines; without the weights the same
+    // budget splits hidden nodes.
+    let metric = LodMetric::VisibleError { budget: 64.0 };
+    let unweighted = refine_limited(
+        &layout,
+        &mut Cached { meta: meta.clone() },
+        &cam,
+        &tf,
+        metric,
+        0.0,
+        u32::MAX,
+    );
     assert!(hidden_splits(&unweighted) > 0);
-    let budgeted = budgeted(LodMetric::VisibleError { budget: 64.0 });
+    let budgeted = refine_limited(&layout, &mut seen_env, &cam, &tf, metric, 0.0, u32::MAX);
     assert_eq!(hidden_splits(&budgeted), 0, "{:?}", budgeted.leaves);
     assert!(budgeted.leaves.iter().any(|l| l.key.level >= 2));
     for r in [&plain, &seen] {

@@ -3,10 +3,11 @@
 //! Each frame the cut is rebuilt from the root: a max-heap of the cut's refinable
 //! nodes, keyed by their screen error, is refined greedily. The screen error is
 //! the projected screen-space size of their voxels ([`LodMetric::Geometric`]),
-//! or that size times the node's recorded error under the current mode and
-//! transfer function, in 8-bit levels ([`LodMetric::ErrorAware`],
-//! `brickray_core::lod`; from metadata only, so a new transfer function
-//! re-prioritises without reading anything). Terminal nodes are those outside
+//! or the node's error in the image under the current mode and transfer
+//! function, in 8-bit levels x pixels ([`LodMetric::VisibleError`],
+//! `brickray_core::lod`: its measured visible weight, or before that its
+//! projected size, times its recorded error; from metadata only, so a new
+//! transfer function re-prioritises without reading anything). Terminal nodes are those outside
 //! the view frustum, empty or invisible under the current mode and transfer
 //! function, uniform, at the finest level, already within the tolerance (or
 //! error budget), or whose screen error is not finite (a non-finite camera or
@@ -240,9 +241,9 @@ pub struct RefinedLeaf {
     /// Whether it needs its brick.
     pub class: NodeClass,
     /// Its screen error: projected voxel size in pixels
-    /// ([`LodMetric::Geometric`]), times its error in 8-bit levels
-    /// ([`LodMetric::ErrorAware`]); 0 for culled and empty leaves and when not
-    /// finite.
+    /// ([`LodMetric::Geometric`]), or its error in the image in 8-bit levels
+    /// x pixels ([`LodMetric::VisibleError`]); 0 for culled and empty leaves
+    /// and when not finite.
     pub priority: f32,
     /// True when the brick is needed and not on the GPU (an upload this frame).
     pub needs_upload: bool,

@@ -7,8 +7,8 @@ use std::sync::Arc;
 
 use super::{MetaState, NodeClass, RefineEnv, RefineParams, Views, is_visible};
 use brickray_core::{
-    EmptyReason, LodMetric, NodeInfo, NodeKey, NodeKind, OctreeLayout, RenderMode, TfErrorTable,
-    node_pixel_error, node_tf_error, node_visible_error,
+    EmptyReason, NodeInfo, NodeKey, NodeKind, OctreeLayout, RenderMode, TfErrorTable,
+    node_pixel_error, node_visible_error,
 };
 
 /// A node in refinement's max-heap.
@@ -145,10 +145,9 @@ pub(super) const UNCLASSIFIED: Classified = Classified {
 pub(super) struct ScreenError {
     /// `Some` for error-aware refinement over a source with error bounds.
     pub(super) table: Option<TfErrorTable>,
-    /// The strict bound ([`LodMetric::ErrorBound`]) instead of the expected error.
-    pub(super) strict: bool,
-    /// Ranks by measured visible weights ([`LodMetric::VisibleError`]), divided
-    /// by this (`brick^2`); `None`: weights are not used.
+    /// Ranks by measured visible weights
+    /// ([`brickray_core::LodMetric::VisibleError`]), divided by this
+    /// (`brick^2`); `None`: weights are not used.
     pub(super) weight_norm: Option<f64>,
     pub(super) threshold: f64,
     /// Error-aware refinement of a multi-channel volume: each visible
@@ -201,7 +200,6 @@ impl ScreenError {
             Some(budget) if has_errors => ScreenError {
                 channels,
                 table: Some(TfErrorTable::new(params.tf)),
-                strict: matches!(params.metric, LodMetric::ErrorBound { .. }),
                 weight_norm: params
                     .metric
                     .uses_visible_weights()
@@ -211,7 +209,6 @@ impl ScreenError {
             _ => ScreenError {
                 channels,
                 table: None,
-                strict: false,
                 weight_norm: None,
                 threshold: params.tolerance_px.max(0.0) as f64,
             },
@@ -219,11 +216,10 @@ impl ScreenError {
     }
 
     /// The node's priority: its projected voxel size, times 255 x its
-    /// expected error (or its bound) under the mode and transfer function when
-    /// error-aware (a node without error data counts as full-scale error);
-    /// under [`LodMetric::VisibleError`], for a node with a `visible` weight,
-    /// that weight times 255 x the per-sample expected error
-    /// ([`node_visible_error`]) over `brick^2` instead.
+    /// expected error under the mode and transfer function when error-aware
+    /// (a node without error data counts as full-scale error); for a node
+    /// with a `visible` weight, that weight times 255 x the per-sample
+    /// expected error ([`node_visible_error`]) over `brick^2` instead.
     #[allow(clippy::too_many_arguments)]
     pub(super) fn priority(
         &self,
@@ -242,13 +238,9 @@ impl ScreenError {
                 w.max(0.0) * 255.0 * e / norm
             }
             (Some(t), Some(i), _) => {
-                let e = if self.strict {
-                    self.error(i, params.mode, t, layout, node_tf_error)
-                } else {
-                    self.error(i, params.mode, t, layout, |i, m, t, l| {
-                        node_pixel_error(i, key.level, m, t, l)
-                    })
-                };
+                let e = self.error(i, params.mode, t, layout, |i, m, t, l| {
+                    node_pixel_error(i, key.level, m, t, l)
+                });
                 // 0 x inf (a degenerate camera on a flat node) stays NaN: never refined.
                 px * 255.0 * e
             }

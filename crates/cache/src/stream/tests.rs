@@ -377,7 +377,7 @@ fn configuration_changes_upload_nothing_resident() {
         ("tolerance", Box::new(|c| c.tolerance_px = 0.5)),
         (
             "metric",
-            Box::new(|c| c.lod_metric = LodMetric::ErrorAware { budget: 0.0 }),
+            Box::new(|c| c.lod_metric = LodMetric::VisibleError { budget: 0.0 }),
         ),
         (
             "fade",

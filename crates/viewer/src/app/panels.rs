@@ -334,14 +334,10 @@ fn lod_ui(ui: &mut egui::Ui, metric: &mut brickray::LodMetric, tolerance_px: &mu
             "refine while a voxel projects to more than the tolerance",
         ),
         (
-            LodMetric::ErrorAware { budget },
-            "refine by projected size x the node's error under the transfer function \
-             (from the store's error records; sources without them refine geometrically)",
-        ),
-        (
             LodMetric::VisibleError { budget },
             "refine by what the image shows of each node, as the renderer measures it, \
-             x its error under the transfer function",
+             x its error under the transfer function (from the store's error records; \
+             sources without them refine geometrically)",
         ),
         (
             LodMetric::VisibleOctants { budget },
@@ -376,10 +372,7 @@ fn lod_ui(ui: &mut egui::Ui, metric: &mut brickray::LodMetric, tolerance_px: &mu
                 )
                 .changed();
         }
-        LodMetric::ErrorAware { budget }
-        | LodMetric::ErrorBound { budget }
-        | LodMetric::VisibleError { budget }
-        | LodMetric::VisibleOctants { budget } => {
+        LodMetric::VisibleError { budget } | LodMetric::VisibleOctants { budget } => {
             changed |= ui
                 .add(
                     egui::Slider::new(budget, 0.0..=16384.0)

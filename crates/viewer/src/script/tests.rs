@@ -22,7 +22,7 @@ fn every_action_parses() {
         bricks 300
         bricks off
         lod geometric 0.5
-        lod error
+        lod visible
         lod visible 16
         visibility rayguided
         prediction exact
@@ -110,7 +110,7 @@ fn every_action_parses() {
     assert_eq!(
         a[18],
         Action::Lod(
-            brickray::LodMetric::ErrorAware {
+            brickray::LodMetric::VisibleError {
                 budget: DEFAULT_ERROR_BUDGET
             },
             None
@@ -175,7 +175,8 @@ fn bad_lines_name_their_line() {
         ("bricks many", 1),
         ("lod fast", 1),
         ("lod visible -1", 1),
-        ("lod error x", 1),
+        ("lod visible x", 1),
+        ("lod error", 1),
         ("lod geometric 1 2", 1),
         ("visibility some", 1),
         ("prediction on", 1),
