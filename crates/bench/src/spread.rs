@@ -12,6 +12,11 @@
 //! each tolerance both renderers converge (no fades), then their frames are
 //! timed round by round (`--rounds`, 5) at `--size` (256) px, orbit camera
 //! at distance 2 (azimuth 0.5, elevation 0.3), default switches, unshaded.
+//! Beside the times, what each cut costs in bytes: a GPU-free streamer at
+//! the same view converges over each store and sums the prepared bytes it
+//! uploads (`upload_mb_*`) and the CPU cache's bytes at convergence
+//! (`cpu_mb_*`); bricks of the finest level carry no spread (the kernel
+//! never reads it), so a mostly-finest cut costs little more with spreads.
 //!
 //! `cargo run --release -p brickray-bench -- spread [--size PX] [--rounds N] [--tolerances 1,2,4]`
 
@@ -53,6 +58,12 @@ pub(crate) struct Row {
     spread: Timing,
     /// Spread wall time over plain.
     spread_over_plain: f64,
+    /// Prepared bytes a streamer at the same view uploads until it
+    /// converges, and its CPU cache then, MB, without and with spreads.
+    upload_mb_plain: f64,
+    upload_mb_spread: f64,
+    cpu_mb_plain: f64,
+    cpu_mb_spread: f64,
     /// Against in core at the finest level.
     psnr_plain_db: f64,
     psnr_spread_db: f64,
@@ -111,6 +122,63 @@ fn ooc_renderer(
     Ok(r)
 }
 
+/// Converges a GPU-free streamer over `source` at the view and tolerance of
+/// a row (the renderer's spread switch, u16 texels, no fades, no upload
+/// cap); returns the prepared bytes it uploaded and its CPU cache's bytes,
+/// in MB.
+fn converged_bytes(
+    source: Arc<dyn BrickSource>,
+    tf: &TransferFunction,
+    tolerance_px: f32,
+    view: brickray_core::FrameView,
+) -> Result<(f64, f64), String> {
+    let s = |e: brickray_cache::CacheError| e.to_string();
+    let layout = source.layout().clone();
+    let caps = brickray_core::TexelCaps {
+        norm16: true,
+        float32_filterable: false,
+    };
+    let gpu = brickray_cache::GpuFormat {
+        spread: source.has_spread(),
+        ..brickray_cache::GpuFormat::for_layout(
+            &layout,
+            caps,
+            brickray_core::U8Filtering::Exact,
+            32,
+            2048,
+        )
+    };
+    let config = OutOfCoreConfig {
+        tolerance_px,
+        upload_budget_bytes: 1 << 30,
+        fade: None,
+        ..Default::default()
+    };
+    let mut streamer = brickray_cache::Streamer::new(source, config, gpu).map_err(s)?;
+    streamer.preload_root().map_err(|e| e.to_string())?;
+    let mut uploaded = 0u64;
+    for _ in 0..2000 {
+        let plan = streamer.plan(&brickray_cache::StreamFrame {
+            views: std::slice::from_ref(&view),
+            classification: brickray_cache::Classification {
+                mode: brickray_core::RenderMode::Dvr,
+                tf,
+                channels: &[],
+                tf_generation: 0,
+            },
+            feedback: &[],
+            time: None,
+        });
+        uploaded += plan.uploads.iter().map(|u| u.brick.bytes()).sum::<u64>();
+        if plan.stats.converged {
+            let cpu = streamer.manager().cpu_cache().bytes();
+            return Ok((uploaded as f64 / 1e6, cpu as f64 / 1e6));
+        }
+        std::thread::sleep(std::time::Duration::from_millis(2));
+    }
+    Err("the streamer did not converge".into())
+}
+
 pub(crate) fn run(args: &Args) -> Result<SpreadResult, String> {
     let (size, rounds) = (args.size, args.rounds);
     let (ct_vol, ct_name) = brickray_harness::stand_in::head_ct_or_phantom()?;
@@ -129,9 +197,9 @@ pub(crate) fn run(args: &Args) -> Result<SpreadResult, String> {
     let settings = RenderSettings::default();
     let (mut rows, mut setup) = (Vec::new(), Vec::new());
     println!(
-        "| volume | px | bricks | plain ms | spread ms | spread / plain | PSNR plain / spread (dB) | gain |"
+        "| volume | px | bricks | plain ms | spread ms | spread / plain | PSNR plain / spread (dB) | gain | uploaded MB plain / spread | CPU cache MB plain / spread |"
     );
-    println!("|---|---:|---:|---:|---:|---:|---:|---:|");
+    println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
     for (name, vol, tf, anisotropic) in volumes {
         let d = vol.desc();
         let frame = VolumeFrame::centered(d.dims, d.spacing);
@@ -216,8 +284,11 @@ pub(crate) fn run(args: &Args) -> Result<SpreadResult, String> {
             let t: Vec<Timing> = shots.iter().map(|s| Timing::of(s)).collect();
             let (pp, ps) = (psnr(&images[0], &finest), psnr(&images[1], &finest));
             let ratio = t[1].ms / t[0].ms;
+            let view = brickray_core::FrameView::new(camera, frame, [args.size; 2]);
+            let (up_p, cpu_p) = converged_bytes(plain.clone(), &tf, tol, view)?;
+            let (up_s, cpu_s) = converged_bytes(spread.clone(), &tf, tol, view)?;
             println!(
-                "| {name} | {tol} | {bricks} | {:.1} | {:.1} | {ratio:.3} | {pp:.2} / {ps:.2} | {:+.2} |",
+                "| {name} | {tol} | {bricks} | {:.1} | {:.1} | {ratio:.3} | {pp:.2} / {ps:.2} | {:+.2} | {up_p:.1} / {up_s:.1} | {cpu_p:.1} / {cpu_s:.1} |",
                 t[0].ms,
                 t[1].ms,
                 ps - pp
@@ -229,6 +300,10 @@ pub(crate) fn run(args: &Args) -> Result<SpreadResult, String> {
                 plain: t[0],
                 spread: t[1],
                 spread_over_plain: round2(ratio),
+                upload_mb_plain: round2(up_p),
+                upload_mb_spread: round2(up_s),
+                cpu_mb_plain: round2(cpu_p),
+                cpu_mb_spread: round2(cpu_s),
                 psnr_plain_db: round2(pp),
                 psnr_spread_db: round2(ps),
                 gain_db: round2(ps - pp),

@@ -277,6 +277,11 @@ fn the_spread_suite_runs() {
     let ct5 = row(&fig, "rows", "volume", "ct5");
     assert!(ct5["spread"]["ms"].as_f64().unwrap() > 0.0, "{fig:?}");
     assert!(ct5["bricks"].as_u64().unwrap() >= 1, "{fig:?}");
+    // Bytes of the cut: spreads add to the values' bytes, never remove.
+    let mb = |k: &str| ct5[k].as_f64().unwrap_or(-1.0);
+    assert!(mb("upload_mb_plain") > 0.0, "{fig:?}");
+    assert!(mb("upload_mb_spread") >= mb("upload_mb_plain"), "{fig:?}");
+    assert!(mb("cpu_mb_spread") >= mb("cpu_mb_plain"), "{fig:?}");
     assert_eq!(rows(&fig, "setup").len(), 3, "{fig:?}");
 }
 

@@ -28,10 +28,12 @@ pub struct PreparedBrick {
     /// `[-inf, inf]` when either is not finite: never skipped; always for
     /// a multi-channel brick (its channels' ranges are its sub-cells').
     pub range: [f32; 2],
-    /// With [`GpuFormat::spread`]: the spread of each stored voxel as
-    /// half-float bits (`stored_side^3`, x fastest), what the renderer writes
-    /// into its spread atlas; the ranges above are then widened by the
-    /// spread's reach ([`brickray_core::tf::spread::spread_reach`]).
+    /// With [`GpuFormat::spread`], for a brick above the finest level: the
+    /// spread of each stored voxel as half-float bits (`stored_side^3`, x
+    /// fastest), what the renderer writes into its spread atlas; the ranges
+    /// above are then widened by the spread's reach
+    /// ([`brickray_core::tf::spread::spread_reach`]). `None` at the finest
+    /// level, whose spread is 0 and which the kernel never reads.
     pub spread: Option<Arc<[u16]>>,
 }
 
@@ -92,7 +94,12 @@ impl Preparer {
 
     /// Prepares brick `key` read from `source` (`raw`: `raw_bytes()`
     /// little-endian samples, metadata `info`), with its spread read from
-    /// `source` when the format carries one ([`GpuFormat::spread`]).
+    /// `source` when the format carries one ([`GpuFormat::spread`]) and the
+    /// brick lies above the finest level. A finest-level brick's spread is 0
+    /// and the kernel never reads it (it classifies such a brick by its
+    /// values, and a fade reads only the coarser fallback's spread), so it
+    /// is neither read, kept in CPU memory nor uploaded: half of a u8 or u16
+    /// brick's bytes.
     pub fn prepare_from(
         &self,
         source: &dyn BrickSource,
@@ -100,7 +107,8 @@ impl Preparer {
         raw: &[u8],
         info: &NodeInfo,
     ) -> Result<PreparedBrick, BrickError> {
-        if !self.gpu.spread || self.gpu.channel_count > 1 {
+        let finest = key.level + 1 >= self.layout.levels;
+        if !self.gpu.spread || self.gpu.channel_count > 1 || finest {
             return Ok(self.prepare(raw, info));
         }
         let side = self.layout.stored_side() as usize;
@@ -213,6 +221,85 @@ mod tests {
     use super::*;
     use crate::refine::tests::ball_layout;
     use brickray_core::{NodeKind, TexelCaps, U8Filtering};
+
+    /// A source whose spreads are non-zero and counted.
+    struct Spreads {
+        inner: crate::test_source::TestSource,
+        reads: std::sync::atomic::AtomicUsize,
+    }
+
+    impl BrickSource for Spreads {
+        fn layout(&self) -> &OctreeLayout {
+            self.inner.layout()
+        }
+        fn node(&self, key: NodeKey) -> Result<NodeInfo, BrickError> {
+            self.inner.node(key)
+        }
+        fn read_brick(&self, key: NodeKey, out: &mut [u8]) -> Result<(), BrickError> {
+            self.inner.read_brick(key, out)
+        }
+        fn has_spread(&self) -> bool {
+            true
+        }
+        fn read_spread(&self, _key: NodeKey, out: &mut [u16]) -> Result<(), BrickError> {
+            self.reads
+                .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            out.fill(0x2000);
+            Ok(())
+        }
+    }
+
+    /// A format with spreads reads, keeps and uploads them above the finest
+    /// level only: a finest-level brick (spread 0, never read by the
+    /// kernel) carries none and costs its texels and ranges alone, with the
+    /// same ranges as without spreads.
+    #[test]
+    fn finest_bricks_carry_no_spread() {
+        let layout = ball_layout(64);
+        let caps = TexelCaps {
+            norm16: true,
+            float32_filterable: false,
+        };
+        let plain = GpuFormat::for_layout(&layout, caps, U8Filtering::Exact, 32, 2048);
+        let gpu = GpuFormat {
+            spread: true,
+            ..plain
+        };
+        let p = Preparer::new(&layout, &gpu).unwrap();
+        let src = Spreads {
+            inner: crate::test_source::TestSource::new(64),
+            reads: Default::default(),
+        };
+        let finest = layout.levels - 1;
+        let keys = [
+            NodeKey::ROOT,
+            NodeKey::new(finest - 1, 0, 0, 0),
+            NodeKey::new(finest, 1, 2, 3),
+        ];
+        for key in keys {
+            let info = src.node(key).unwrap();
+            let mut raw = vec![0u8; p.raw_bytes()];
+            src.read_brick(key, &mut raw).unwrap();
+            let before = src.reads.load(std::sync::atomic::Ordering::Relaxed);
+            let b = p.prepare_from(&src, key, &raw, &info).unwrap();
+            let read = src.reads.load(std::sync::atomic::Ordering::Relaxed) - before;
+            let without = Preparer::new(&layout, &plain).unwrap().prepare(&raw, &info);
+            let max = gpu.prepared_brick_bytes(&layout).unwrap();
+            if key.level == finest {
+                assert_eq!((b.spread.is_none(), read), (true, 0), "{key:?}");
+                assert_eq!(b.bytes(), without.bytes());
+                assert_eq!(
+                    (&*b.sub_cells, b.range),
+                    (&*without.sub_cells, without.range)
+                );
+                assert!(b.bytes() < max);
+            } else {
+                let s = b.spread.as_deref().expect("a coarse brick's spread");
+                assert_eq!((s.len(), s[0], read), (p.raw_bytes(), 0x2000, 1), "{key:?}");
+                assert_eq!(b.bytes(), max);
+            }
+        }
+    }
 
     #[test]
     fn prepares_texels_cells_and_range() {

@@ -441,9 +441,10 @@ impl GpuFormat {
         if self.spread { 2 } else { 0 }
     }
 
-    /// Bytes of one prepared brick: `stored_side^3` texels (and spreads) and
-    /// `sub_cells^3` ranges of 8 bytes per channel (what the CPU cache counts
-    /// and a frame uploads).
+    /// Bytes of one prepared brick at most (the most the CPU cache counts
+    /// and a frame uploads for one): `stored_side^3` texels (and spreads,
+    /// which a finest-level brick does not carry) and `sub_cells^3` ranges
+    /// of 8 bytes per channel.
     pub fn prepared_brick_bytes(&self, layout: &OctreeLayout) -> Result<u64, ConfigError> {
         let side = stored_side(layout)? as u64;
         let n = self.sub_cells_per_axis as u64;
