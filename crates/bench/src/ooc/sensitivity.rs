@@ -41,6 +41,7 @@ fn cut_levels(
         metric: brickray_core::LodMetric::Geometric,
         max_data_leaves,
         max_requests: u32::MAX,
+        max_prefetch: u32::MAX,
         brick_upload_bytes: layout.brick_bytes() as u64,
         lookahead: false,
     };

@@ -128,6 +128,18 @@ impl BrickManager {
         input: &FrameInput<'_>,
         filter: Option<&mut dyn SplitFilter>,
     ) -> Refinement {
+        let max_data_leaves = self.cut_slots();
+        let max_requests = crate::refine::requests_per_frame(
+            self.pool.slot_count(),
+            self.config.upload_budget_bytes,
+            self.brick_bytes,
+        );
+        // A full cut prefetches at most a frame's requests, and no more than
+        // the CPU cache holds beside the cut: a prefetch that outgrew it
+        // would be evicted and requested again, frame after frame.
+        let cpu_room = (self.cpu.budget() / self.brick_bytes.max(1))
+            .saturating_sub(max_data_leaves as u64)
+            .min(u32::MAX as u64) as u32;
         let params = RefineParams {
             views: input.views,
             generation: input.generation,
@@ -136,12 +148,9 @@ impl BrickManager {
             channels: input.channels,
             tolerance_px: self.config.tolerance_px,
             metric: self.config.lod_metric,
-            max_data_leaves: self.cut_slots(),
-            max_requests: crate::refine::requests_per_frame(
-                self.pool.slot_count(),
-                self.config.upload_budget_bytes,
-                self.brick_bytes,
-            ),
+            max_data_leaves,
+            max_requests,
+            max_prefetch: max_requests.min(max_data_leaves).min(cpu_room),
             brick_upload_bytes: self.brick_bytes,
             lookahead: self.config.lookahead.applies(self.remote),
         };

@@ -79,6 +79,7 @@ fn refine_in(
         metric: brickray_core::LodMetric::Geometric,
         max_data_leaves: slots,
         max_requests: MIN_REQUESTS_PER_FRAME,
+        max_prefetch: u32::MAX,
         brick_upload_bytes: 1000,
         lookahead: false,
     };

@@ -45,7 +45,16 @@ pub(super) struct Greedy<'p, 'a, 'e> {
     /// only those that now fit are retried.
     pool_deferred: Vec<(HeapItem, u32)>,
     split_since_retry: bool,
+    /// Bricks not on the GPU among the data children of the nodes visited
+    /// while the cut was nearly full ([`NEARLY_FULL`]): what those nodes
+    /// prefetch, bounded by [`RefineParams::max_prefetch`].
+    prefetched: u32,
 }
+
+/// The cut has fewer than this many bricks of room left: a split (which adds
+/// up to seven) may not fit, and what a node visited now requests is
+/// prefetch for splits the cut cannot take yet.
+const NEARLY_FULL: u32 = 7;
 
 impl<'p, 'a, 'e> Greedy<'p, 'a, 'e> {
     /// Classifies and queues the root; `Err` holds the whole refinement when
@@ -115,6 +124,7 @@ impl<'p, 'a, 'e> Greedy<'p, 'a, 'e> {
             arena: Vec::new(),
             pool_deferred: Vec::new(),
             split_since_retry: false,
+            prefetched: 0,
         })
     }
 
@@ -156,6 +166,16 @@ impl<'p, 'a, 'e> Greedy<'p, 'a, 'e> {
         let finest = self.layout.levels.saturating_sub(1);
         // A non-finite size (a non-finite camera or frame) is never refined.
         if item.uniform || key.level >= finest || !priority.is_finite() {
+            self.finals.push((key, priority));
+            return;
+        }
+        // The cut is (nearly) full and the prefetch is spent: a node whose
+        // split cannot fit by its children's metadata stays a leaf,
+        // unclassified (without this, each frame of a full cut classified
+        // every child of every such node, and requested their bricks
+        // without end once they outgrew the CPU cache).
+        if self.prefetch_spent() && !self.may_fit(key) {
+            self.out.blocked.pool_full += 1;
             self.finals.push((key, priority));
             return;
         }
@@ -262,6 +282,54 @@ impl<'p, 'a, 'e> Greedy<'p, 'a, 'e> {
         false
     }
 
+    /// The bricks of room the cut has left.
+    fn room(&self) -> u32 {
+        self.params
+            .max_data_leaves
+            .saturating_sub(self.out.data_leaves)
+    }
+
+    /// True when the cut is nearly full and the nodes visited since have
+    /// prefetched [`RefineParams::max_prefetch`] bricks.
+    fn prefetch_spent(&self) -> bool {
+        self.room() < NEARLY_FULL && self.prefetched >= self.params.max_prefetch
+    }
+
+    /// Whether `key`'s split may fit in the cut's room, by its children's
+    /// metadata alone: at most `room + 1` of them inside the volume are
+    /// neither empty nor invisible (a culled child counts, the frustum test
+    /// being left to the split), and none is unknown. Stops at the first
+    /// child past that.
+    fn may_fit(&mut self, key: NodeKey) -> bool {
+        let limit = self.room() + 1;
+        let mut data = 0;
+        for &c in &self.layout.children(key) {
+            if !self.layout.in_volume(c) {
+                continue;
+            }
+            match self.env.node(c) {
+                MetaState::Known(info) => {
+                    if info.kind != NodeKind::Empty
+                        && is_visible(
+                            &info,
+                            self.params.mode,
+                            self.params.tf,
+                            self.params.channels,
+                            self.layout,
+                        )
+                    {
+                        data += 1;
+                    }
+                }
+                MetaState::Pending | MetaState::Failed => return false,
+            }
+            if data > limit {
+                return false;
+            }
+        }
+        true
+    }
+
     fn request_meta(&mut self, keys: &[NodeKey], priority: f64) {
         let max = MAX_META_REQUESTS_PER_FRAME as usize;
         for &c in keys {
@@ -317,6 +385,11 @@ impl<'p, 'a, 'e> Greedy<'p, 'a, 'e> {
             }
         }
         let (data, states) = (&data[..n], &states[..n]);
+        // What this node prefetches if its split waits or does not fit.
+        let prefetch = match self.room() < NEARLY_FULL {
+            true => states.iter().filter(|s| **s != DataState::OnGpu).count() as u32,
+            false => 0,
+        };
         let failed = states.iter().filter(|s| **s == DataState::Failed).count() as u32;
         if failed > 0 {
             self.out.blocked.failed += 1;
@@ -342,6 +415,7 @@ impl<'p, 'a, 'e> Greedy<'p, 'a, 'e> {
                 }
             }
             self.out.blocked.missing_data += 1;
+            self.prefetched = self.prefetched.saturating_add(prefetch);
             self.finals.push((key, priority));
             if self.params.lookahead {
                 for &i in data {
@@ -351,6 +425,7 @@ impl<'p, 'a, 'e> Greedy<'p, 'a, 'e> {
             return;
         }
         if self.out.data_leaves - 1 + data.len() as u32 > self.params.max_data_leaves {
+            self.prefetched = self.prefetched.saturating_add(prefetch);
             self.pool_deferred.push((item, data.len() as u32 - 1));
             return;
         }

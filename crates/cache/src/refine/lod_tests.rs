@@ -129,6 +129,7 @@ pub(super) fn refine_limited(
         metric,
         max_data_leaves,
         max_requests: u32::MAX,
+        max_prefetch: u32::MAX,
         brick_upload_bytes: 1,
         lookahead: false,
     };

@@ -49,6 +49,8 @@ mod lookahead_tests;
 mod octant;
 #[cfg(test)]
 mod octant_tests;
+#[cfg(test)]
+mod prefetch_tests;
 pub use octant::{MAX_DEMOTIONS, OCTANT_HYSTERESIS, OctantMemory};
 mod rank;
 #[cfg(test)]
@@ -223,6 +225,14 @@ pub struct RefineParams<'a> {
     pub max_data_leaves: u32,
     /// Most bricks to request this frame ([`requests_per_frame`]).
     pub max_requests: u32,
+    /// Most bricks a nearly full cut prefetches: once fewer than seven
+    /// bricks of room are left, the data children not on the GPU of the
+    /// nodes visited (split or not) are counted, and when they reach this,
+    /// a node whose split cannot fit by its children's metadata stays a
+    /// leaf without its children being classified or requested. The
+    /// manager takes the frame's request cap, or the CPU cache's room beyond
+    /// the cut if that is smaller. `u32::MAX`: no bound.
+    pub max_prefetch: u32,
     /// Bytes one brick upload costs against the frame's upload budget.
     pub brick_upload_bytes: u64,
     /// Also request the bricks one level past a split that waits for its

@@ -207,6 +207,7 @@ fn octant_memory_counts_demotions_per_view() {
             metric: LodMetric::VisibleOctants { budget: 0.0 },
             max_data_leaves: 8,
             max_requests: 8,
+            max_prefetch: u32::MAX,
             brick_upload_bytes: 1,
             lookahead: false,
         }

@@ -135,6 +135,7 @@ fn splits_the_pool_refused_are_retried_when_bricks_come_back() {
             metric: brickray_core::LodMetric::Geometric,
             max_data_leaves: 8,
             max_requests: u32::MAX,
+            max_prefetch: u32::MAX,
             brick_upload_bytes: layout.brick_bytes() as u64,
             lookahead: false,
         };

@@ -136,6 +136,7 @@ fn run(
         metric: brickray_core::LodMetric::Geometric,
         max_data_leaves: slots,
         max_requests: u32::MAX,
+        max_prefetch: u32::MAX,
         brick_upload_bytes: s.layout.brick_bytes() as u64,
         lookahead: false,
     };
@@ -303,6 +304,7 @@ pub(super) fn mip_params<'a>(s: &'a Setup, views: &'a Views) -> RefineParams<'a>
         metric: brickray_core::LodMetric::Geometric,
         max_data_leaves: 10_000,
         max_requests: u32::MAX,
+        max_prefetch: u32::MAX,
         brick_upload_bytes: s.layout.brick_bytes() as u64,
         lookahead: false,
     }
@@ -371,7 +373,7 @@ proptest! {
         let tf = TransferFunction::ramp(0.3, 1.0, 0.5);
         let mut env = AllInCpu { layout: layout.clone(), on_gpu: HashSet::new(), meta_reads: 0 };
         let params = RefineParams { views: &Views::one(ViewGeometry::new(&layout, &cam, 1.3, 400, &frame)),
-        generation: 0, mode, tf: &tf, channels: &[], tolerance_px: tol, metric: brickray_core::LodMetric::Geometric, max_data_leaves: slots, max_requests: MIN_REQUESTS_PER_FRAME, brick_upload_bytes: 1000, lookahead: false };
+        generation: 0, mode, tf: &tf, channels: &[], tolerance_px: tol, metric: brickray_core::LodMetric::Geometric, max_data_leaves: slots, max_requests: MIN_REQUESTS_PER_FRAME, max_prefetch: u32::MAX, brick_upload_bytes: 1000, lookahead: false };
         let mut b = UploadBudget::new(u64::MAX);
         let r = refine(&layout, &params, &mut env, &mut b);
         assert_exact_cover(&keys(&r), layout.levels);
@@ -442,6 +444,7 @@ fn invisible_nodes_stay_at_their_level_and_request_nothing() {
             metric: brickray_core::LodMetric::Geometric,
             max_data_leaves: u32::MAX,
             max_requests: u32::MAX,
+            max_prefetch: u32::MAX,
             brick_upload_bytes: 1,
             lookahead: false,
         };
@@ -571,6 +574,7 @@ fn splits_that_cost_no_brick_are_taken_within_the_tolerance() {
             metric: brickray_core::LodMetric::Geometric,
             max_data_leaves: 10_000,
             max_requests: u32::MAX,
+            max_prefetch: u32::MAX,
             brick_upload_bytes: s.layout.brick_bytes() as u64,
             lookahead: false,
         };
@@ -636,6 +640,7 @@ fn refine_time_on_dense_cuts() {
             metric: brickray_core::LodMetric::Geometric,
             max_data_leaves: 100_000,
             max_requests: u32::MAX,
+            max_prefetch: u32::MAX,
             brick_upload_bytes: layout.brick_bytes() as u64,
             lookahead: false,
         };
@@ -680,6 +685,7 @@ fn nodes_outside_the_clip_box_need_no_brick() {
             metric: brickray_core::LodMetric::Geometric,
             max_data_leaves: 10_000,
             max_requests: u32::MAX,
+            max_prefetch: u32::MAX,
             brick_upload_bytes: 1,
             lookahead: false,
         };

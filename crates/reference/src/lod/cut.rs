@@ -135,6 +135,7 @@ pub fn refine_cut(
         metric,
         max_data_leaves,
         max_requests: u32::MAX / 2,
+        max_prefetch: u32::MAX,
         brick_upload_bytes: layout.brick_bytes() as u64,
         lookahead: false,
     };
