@@ -51,6 +51,15 @@ pub(super) struct Greedy<'p, 'a, 'e> {
     prefetched: u32,
 }
 
+/// What a child's metadata alone says of its data
+/// ([`Greedy::child_data`]).
+enum ChildData {
+    Data,
+    None,
+    Pending,
+    Failed,
+}
+
 /// The cut has fewer than this many bricks of room left: a split (which adds
 /// up to seven) may not fit, and what a node visited now requests is
 /// prefetch for splits the cut cannot take yet.
@@ -248,25 +257,11 @@ impl<'p, 'a, 'e> Greedy<'p, 'a, 'e> {
         let (mut data, mut failed) = (0, false);
         let mut pending: Vec<NodeKey> = Vec::new();
         for &c in children {
-            if !self.layout.in_volume(c) {
-                continue;
-            }
-            match self.env.node(c) {
-                MetaState::Known(info) => {
-                    if info.kind != NodeKind::Empty
-                        && is_visible(
-                            &info,
-                            self.params.mode,
-                            self.params.tf,
-                            self.params.channels,
-                            self.layout,
-                        )
-                    {
-                        data += 1;
-                    }
-                }
-                MetaState::Pending => pending.push(c),
-                MetaState::Failed => failed = true,
+            match self.child_data(c) {
+                ChildData::Data => data += 1,
+                ChildData::None => {}
+                ChildData::Pending => pending.push(c),
+                ChildData::Failed => failed = true,
             }
             if data > 1 {
                 break;
@@ -280,6 +275,34 @@ impl<'p, 'a, 'e> Greedy<'p, 'a, 'e> {
         }
         self.finals.push((key, priority));
         false
+    }
+
+    /// What a child's metadata alone says of its data: none outside the
+    /// volume, when empty or invisible under the mode and transfer function;
+    /// unknown while its metadata is pending or failed.
+    fn child_data(&mut self, c: NodeKey) -> ChildData {
+        if !self.layout.in_volume(c) {
+            return ChildData::None;
+        }
+        match self.env.node(c) {
+            MetaState::Known(info) => {
+                let data = info.kind != NodeKind::Empty
+                    && is_visible(
+                        &info,
+                        self.params.mode,
+                        self.params.tf,
+                        self.params.channels,
+                        self.layout,
+                    );
+                if data {
+                    ChildData::Data
+                } else {
+                    ChildData::None
+                }
+            }
+            MetaState::Pending => ChildData::Pending,
+            MetaState::Failed => ChildData::Failed,
+        }
     }
 
     /// The bricks of room the cut has left.
@@ -304,24 +327,10 @@ impl<'p, 'a, 'e> Greedy<'p, 'a, 'e> {
         let limit = self.room() + 1;
         let mut data = 0;
         for &c in &self.layout.children(key) {
-            if !self.layout.in_volume(c) {
-                continue;
-            }
-            match self.env.node(c) {
-                MetaState::Known(info) => {
-                    if info.kind != NodeKind::Empty
-                        && is_visible(
-                            &info,
-                            self.params.mode,
-                            self.params.tf,
-                            self.params.channels,
-                            self.layout,
-                        )
-                    {
-                        data += 1;
-                    }
-                }
-                MetaState::Pending | MetaState::Failed => return false,
+            match self.child_data(c) {
+                ChildData::Data => data += 1,
+                ChildData::None => {}
+                ChildData::Pending | ChildData::Failed => return false,
             }
             if data > limit {
                 return false;

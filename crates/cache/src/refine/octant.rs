@@ -122,6 +122,9 @@ struct Octants<'p, 'a> {
     heap: BinaryHeap<HeapItem>,
     /// Nodes with their own brick that draw some children: how many.
     open: NodeMap<u32>,
+    /// Candidates the full cut could not take that were requested or are in
+    /// CPU memory: its prefetch ([`RefineParams::max_prefetch`]).
+    prefetched: u32,
 }
 
 impl Octants<'_, '_> {
@@ -248,6 +251,7 @@ pub(super) fn refine_octants(
         },
         heap: BinaryHeap::new(),
         open: NodeMap::default(),
+        prefetched: 0,
     };
     s.expand(env, root, root_info, uniform, root_priority, root_upload);
     // Candidates that stay drawn from their parent's brick.
@@ -334,10 +338,23 @@ impl Octants<'_, '_> {
             self.out.blocked.invisible += 1;
             return false;
         }
+        // The last child drawn from its parent frees the parent's brick.
+        let frees = self.open.get(&parent) == Some(&1);
+        let cost = u32::from(!frees);
+        // The cut cannot take it: what it asks for is prefetch, bounded as
+        // in greedy refinement (`RefineParams::max_prefetch`).
+        let full = self.out.data_leaves + cost > self.params.max_data_leaves;
+        if full && self.prefetched >= self.params.max_prefetch {
+            self.out.blocked.pool_full += 1;
+            return false;
+        }
         let super::MetaState::Known(info) = env.node(c) else {
             return false;
         };
         let state = env.data(c);
+        if full && matches!(state, DataState::Missing | DataState::InCpu) {
+            self.prefetched += 1;
+        }
         match state {
             DataState::Failed => {
                 self.out.blocked.failed += 1;
@@ -355,10 +372,7 @@ impl Octants<'_, '_> {
             }
             DataState::OnGpu | DataState::InCpu => {}
         }
-        // The last child drawn from its parent frees the parent's brick.
-        let frees = self.open.get(&parent) == Some(&1);
-        let cost = u32::from(!frees);
-        if self.out.data_leaves + cost > self.params.max_data_leaves {
+        if full {
             self.out.blocked.pool_full += 1;
             return false;
         }

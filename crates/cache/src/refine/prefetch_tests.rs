@@ -2,7 +2,8 @@
 //! fewer than seven bricks of room, what the nodes whose splits it cannot
 //! take request is bounded, the same nodes prefetch frame after frame (so
 //! the set is loaded and refinement settles), the cut is the one an
-//! unbounded prefetch gives, and a split that adds no brick still happens.
+//! unbounded prefetch gives, and a split that adds no brick still happens;
+//! the same bound in octant-granular refinement.
 
 use super::tests::{assert_exact_cover, ball_info, keys, setup};
 use super::*;
@@ -63,6 +64,14 @@ fn loading(sparse: Option<NodeKey>) -> Loading {
 }
 
 fn refine_full(env: &mut Loading, max_prefetch: u32) -> Refinement {
+    refine_with(env, max_prefetch, brickray_core::LodMetric::Geometric)
+}
+
+fn refine_with(
+    env: &mut Loading,
+    max_prefetch: u32,
+    metric: brickray_core::LodMetric,
+) -> Refinement {
     let s = setup();
     let cam = Camera::orbit(Vec3::ZERO, 1.5, 0.3, 0.2);
     let params = RefineParams {
@@ -72,7 +81,7 @@ fn refine_full(env: &mut Loading, max_prefetch: u32) -> Refinement {
         tf: &s.tf,
         channels: &[],
         tolerance_px: 0.0,
-        metric: brickray_core::LodMetric::Geometric,
+        metric,
         max_data_leaves: 8,
         max_requests: u32::MAX,
         max_prefetch,
@@ -88,10 +97,18 @@ fn refine_full(env: &mut Loading, max_prefetch: u32) -> Refinement {
 /// memory, until nothing is requested: the frames, the bricks loaded, the
 /// last cut and the metadata reads of the first frame.
 fn settle(env: &mut Loading, max_prefetch: u32) -> (usize, usize, Vec<NodeKey>, usize) {
+    settle_with(env, max_prefetch, brickray_core::LodMetric::Geometric)
+}
+
+fn settle_with(
+    env: &mut Loading,
+    max_prefetch: u32,
+    metric: brickray_core::LodMetric,
+) -> (usize, usize, Vec<NodeKey>, usize) {
     let mut first_reads = 0;
     for frame in 1..=40 {
         env.meta_reads = 0;
-        let r = refine_full(env, max_prefetch);
+        let r = refine_with(env, max_prefetch, metric);
         if frame == 1 {
             first_reads = env.meta_reads;
         }
@@ -146,4 +163,22 @@ fn a_split_that_adds_no_brick_still_happens_when_the_prefetch_is_spent() {
     assert_eq!(leaf(sparse), None);
     assert!(r.requests.is_empty(), "{:?}", r.requests);
     assert_eq!(r.data_leaves, 8);
+}
+
+/// Octant-granular refinement: a full cut's candidates request their bricks
+/// up to the same bound, then settle, with the cut an unbounded prefetch
+/// gives (here level 2, drawn from the eight level-1 bricks).
+#[test]
+fn a_full_octant_cut_prefetches_a_bounded_set_and_settles() {
+    let metric = brickray_core::LodMetric::VisibleOctants { budget: 0.0 };
+    let (frames, loaded, cut, _) = settle_with(&mut loading(None), 16, metric);
+    let (all_frames, all, all_cut, _) = settle_with(&mut loading(None), u32::MAX, metric);
+    assert_eq!(cut, all_cut);
+    assert!(cut.iter().all(|k| k.level == 2), "{cut:?}");
+    assert!((16..=17).contains(&loaded), "{loaded} bricks prefetched");
+    assert!(all > 40, "the unbounded prefetch loaded only {all}");
+    assert!(
+        frames < all_frames,
+        "{frames} frames, unbounded {all_frames}"
+    );
 }
