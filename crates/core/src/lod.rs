@@ -75,9 +75,10 @@ pub enum LodMetric {
     ///
     /// The rank without weights was once a metric of its own (`ErrorAware`,
     /// and `ErrorBound` with the strict bound [`node_tf_error`]); at equal
-    /// bricks it was ahead of neither this order nor
-    /// [`LodMetric::VisibleOctants`] on any pareto scene (docs/accuracy.md),
-    /// so it is only this fallback now.
+    /// bricks it was never ahead of both this order and
+    /// [`LodMetric::VisibleOctants`] on the pareto scenes, and 1.3-3.4 dB
+    /// behind them in the median (docs/accuracy.md), so it is only this
+    /// fallback now.
     VisibleError {
         /// The error budget (finite, `>= 0`).
         budget: f32,
