@@ -145,10 +145,10 @@ pub(super) const UNCLASSIFIED: Classified = Classified {
 pub(super) struct ScreenError {
     /// `Some` for error-aware refinement over a source with error bounds.
     pub(super) table: Option<TfErrorTable>,
-    /// Ranks by measured visible weights
-    /// ([`brickray_core::LodMetric::VisibleError`]), divided by this
-    /// (`brick^2`); `None`: weights are not used.
-    pub(super) weight_norm: Option<f64>,
+    /// A node's measured visible weight is divided by this (`brick^2`) in
+    /// its rank under the error-aware metrics
+    /// ([`brickray_core::LodMetric::VisibleError`]).
+    pub(super) weight_norm: f64,
     pub(super) threshold: f64,
     /// Error-aware refinement of a multi-channel volume: each visible
     /// channel's error table, single-channel layout and mode (its own
@@ -200,16 +200,13 @@ impl ScreenError {
             Some(budget) if has_errors => ScreenError {
                 channels,
                 table: Some(TfErrorTable::new(params.tf)),
-                weight_norm: params
-                    .metric
-                    .uses_visible_weights()
-                    .then(|| (layout.brick as f64).powi(2).max(1.0)),
+                weight_norm: (layout.brick as f64).powi(2).max(1.0),
                 threshold: budget.max(0.0) as f64,
             },
             _ => ScreenError {
                 channels,
                 table: None,
-                weight_norm: None,
+                weight_norm: 1.0,
                 threshold: params.tolerance_px.max(0.0) as f64,
             },
         }
@@ -230,12 +227,12 @@ impl ScreenError {
         params: &RefineParams<'_>,
         layout: &OctreeLayout,
     ) -> f64 {
-        match (&self.table, info, visible.zip(self.weight_norm)) {
+        match (&self.table, info, visible) {
             // The node's summed pixel change, linearised (RefineEnv::visible_weight),
             // per brick^2 (LodMetric::VisibleError).
-            (Some(t), Some(i), Some((w, norm))) => {
+            (Some(t), Some(i), Some(w)) => {
                 let e = self.error(i, params.mode, t, layout, node_visible_error);
-                w.max(0.0) * 255.0 * e / norm
+                w.max(0.0) * 255.0 * e / self.weight_norm
             }
             (Some(t), Some(i), _) => {
                 let e = self.error(i, params.mode, t, layout, |i, m, t, l| {
