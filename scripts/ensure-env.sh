@@ -263,3 +263,33 @@ stop_remote_servers() {
     BRICKRAY_REMOTE_DIR=""
   fi
 }
+
+# VTK's Python package, for the benchmark suite that compares brickray with
+# VTK's volume mappers (`brickray-bench vtk`, its smoke test among the
+# ignored tests that test.sh runs in its second pass). Installed as moto is
+# above, or it stops with the exact command.
+ensure_vtk() {
+  have_vtk() { python3 -c 'import vtk, numpy' >/dev/null 2>&1; }
+  # One offscreen render: VTK's wheel loads the system's OpenGL (EGL or GLX).
+  vtk_renders() {
+    python3 -c 'import vtk; w = vtk.vtkRenderWindow(); w.SetOffScreenRendering(1); w.SetSize(8, 8); w.AddRenderer(vtk.vtkRenderer()); w.Render()' >/dev/null 2>&1
+  }
+  if ! have_vtk; then
+    echo "brickray: installing VTK's Python package (the vtk benchmark's comparison) ..." >&2
+    python3 -m pip install --quiet vtk numpy >&2 ||
+      python3 -m pip install --quiet --break-system-packages vtk numpy >&2 || true
+  fi
+  if ! have_vtk; then
+    echo "brickray: no VTK for Python. Install it with:" >&2
+    echo "  python3 -m pip install vtk numpy" >&2
+    exit 1
+  fi
+  if ! vtk_renders; then
+    apt_install libegl1 libegl-mesa0 libgl1 libglx-mesa0 || true
+  fi
+  if ! vtk_renders; then
+    echo "brickray: VTK cannot render offscreen (no OpenGL). Install Mesa's with:" >&2
+    echo "  sudo apt-get install -y libegl1 libegl-mesa0 libgl1 libglx-mesa0" >&2
+    exit 1
+  fi
+}

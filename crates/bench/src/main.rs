@@ -144,6 +144,10 @@ enum Suite {
     Remote(remote::Args),
     /// u8 volumes: exact interpolation vs 8-bit texels.
     U8(u8::Args),
+    /// brickray against VTK's CPU and GPU volume mappers at equal error on
+    /// the head CT and MRI (DVR, shaded DVR, MIP; needs ../shared/data and
+    /// VTK's Python package).
+    Vtk(pareto::vtk::Args),
 }
 
 /// A suite's typed result as its JSON object.
@@ -177,6 +181,7 @@ fn main() -> ExitCode {
         Suite::Channels(a) => emit(channels::run(&a)),
         Suite::Remote(a) => emit(remote::run(&a)),
         Suite::Visibility(a) => emit(visibility::run(&a)),
+        Suite::Vtk(a) => emit(pareto::vtk::run(&a)),
     };
     match result {
         Ok(fig) => {

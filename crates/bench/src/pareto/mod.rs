@@ -26,6 +26,7 @@ mod configs;
 mod front;
 mod gains;
 pub(crate) mod scenes;
+pub(crate) mod vtk;
 
 use crate::runner::{Runner, finite_db, median, round2};
 use brickray_core::{RenderMode, TransferFunction};
@@ -178,7 +179,16 @@ pub(crate) fn run(o: &Args) -> Result<ParetoResult, String> {
                 reference: &reference,
                 finest: &finest_rgba,
             };
-            let m = measure(&run, scene, store.clone(), tf, &cfgs, images, o.rounds)?;
+            let m = measure(
+                &run,
+                scene,
+                store.clone(),
+                tf,
+                &cfgs,
+                images,
+                o.rounds,
+                &mut || Ok(()),
+            )?;
             let pts: Vec<(f64, f64)> = m.iter().map(|x| (x.ms, x.mse)).collect();
             let on = front::front(&pts);
             let default_ok = front::within(&pts, 0, 0.05);
@@ -336,31 +346,53 @@ pub(crate) fn run(o: &Args) -> Result<ParetoResult, String> {
     })
 }
 
-/// The scene's f64 reference image (RGBA8 over black), cached under `o.out`
-/// by scene, mode, size and supersampling.
+/// The scene's f64 reference image (RGBA8 over black) with the mode's base
+/// settings, cached under `o.out` by scene, mode, size and supersampling.
 fn reference(
     scene: &Scene,
     mode: RenderMode,
     tf: &TransferFunction,
     o: &Args,
 ) -> Result<Vec<u8>, String> {
-    let settings = base_settings(mode);
     let tag = match mode {
         RenderMode::Dvr => "dvr".to_string(),
         RenderMode::Iso { value, .. } => format!("iso{value}"),
         RenderMode::Mip => "mip".to_string(),
         _ => "other".to_string(),
     };
-    let path = o.out.join(format!(
+    reference_image(
+        scene,
+        tf,
+        &base_settings(mode),
+        &tag,
+        o.size,
+        o.supersample,
+        &o.out,
+    )
+}
+
+/// The scene's f64 reference image (RGBA8 over black) with `settings`,
+/// cached in `out` by scene, `tag` (what names the settings), size and
+/// supersampling.
+fn reference_image(
+    scene: &Scene,
+    tf: &TransferFunction,
+    settings: &brickray_core::RenderSettings,
+    tag: &str,
+    size: u32,
+    supersample: u32,
+    out: &std::path::Path,
+) -> Result<Vec<u8>, String> {
+    let path = out.join(format!(
         "ref_{}_{}_{}_ss{}_{}.rgba",
         scene.name,
         tag,
-        o.size,
-        o.supersample,
+        size,
+        supersample,
         cache_tag(scene, tf)
     ));
     if let Ok(b) = std::fs::read(&path)
-        && b.len() == (o.size * o.size * 4) as usize
+        && b.len() == (size * size * 4) as usize
     {
         return Ok(b);
     }
@@ -370,8 +402,8 @@ fn reference(
         &scene.frame,
         tf,
         &scene.camera,
-        &settings,
-        &ReferenceOptions::new(o.size, o.size).with_supersample(o.supersample),
+        settings,
+        &ReferenceOptions::new(size, size).with_supersample(supersample),
     );
     let rgba = img.to_rgba8([0.0; 3]);
     println!(
@@ -409,7 +441,9 @@ struct Images<'a> {
 }
 
 /// Builds one renderer per distinct key, converges each on the view, then times
-/// every configuration over interleaved rounds and reads its image.
+/// every configuration over interleaved rounds and reads its image;
+/// `between` runs after each round (another renderer timed in turn).
+#[allow(clippy::too_many_arguments)]
 fn measure(
     run: &Runner<'_>,
     scene: &Scene,
@@ -418,6 +452,7 @@ fn measure(
     cfgs: &[Config],
     images: Images<'_>,
     rounds: usize,
+    between: &mut dyn FnMut() -> Result<(), String>,
 ) -> Result<Vec<Measured>, String> {
     let reference = images.reference;
     let gpu = run.gpu;
@@ -503,6 +538,7 @@ fn measure(
             times[i].push(s.ms);
             cpu[i].push(s.cpu_ms);
         }
+        between()?;
     }
     let (w, h) = (run.size, run.size);
     let mut out = Vec::new();
