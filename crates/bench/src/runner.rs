@@ -24,9 +24,9 @@ pub(crate) struct Shot {
     pub(crate) samples: f64,
     /// Samples of all rays (0 when not read).
     pub(crate) total_samples: u64,
-    /// Samples as SIMD hardware executes them: each run of
-    /// [`SIMD_LANES`] neighbouring rays of a row costs its longest ray's
-    /// samples times the lanes (0 when not read).
+    /// Samples as SIMD hardware executes them: each group of
+    /// [`SIMD_LANES`] rays (a 4 x 2 pixel block, [`lane_samples`]) costs its
+    /// longest ray's samples times the lanes (0 when not read).
     pub(crate) lane_samples: u64,
 }
 
@@ -84,17 +84,35 @@ pub(crate) fn finest_ooc_renderer(
     Ok(ooc)
 }
 
-/// Lanes of one SIMD group of rays: 8 x 32-bit on lavapipe's 256-bit vectors
-/// (consecutive invocations of an 8x8 workgroup are consecutive pixels of a row).
+/// Lanes of one SIMD group of rays: 8 x 32-bit on lavapipe's 256-bit vectors.
+/// Consecutive invocations of an 8x8 workgroup are pixels in Morton order
+/// (`tile_pixel` in common.wgsl), so each group covers a 4 x 2 block.
 pub(crate) const SIMD_LANES: usize = 8;
 
-/// [`Shot::lane_samples`] of per-ray sample counts of a `width`-wide image.
+/// Samples as SIMD lanes execute them: each group of [`SIMD_LANES`] rays (a
+/// 4 x 2 pixel block; clipped at the image's edges) costs its longest ray's
+/// samples on every lane it holds.
 pub(crate) fn lane_samples(counts: &[u32], width: usize) -> u64 {
-    counts
-        .chunks(width)
-        .flat_map(|row| row.chunks(SIMD_LANES))
-        .map(|g| g.iter().copied().max().unwrap_or(0) as u64 * g.len() as u64)
-        .sum()
+    const W: usize = 4;
+    const H: usize = SIMD_LANES / W;
+    if width == 0 {
+        return 0;
+    }
+    let height = counts.len() / width;
+    let mut sum = 0u64;
+    for y0 in (0..height).step_by(H) {
+        for x0 in (0..width).step_by(W) {
+            let (mut max, mut lanes) = (0u32, 0u64);
+            for y in y0..(y0 + H).min(height) {
+                for x in x0..(x0 + W).min(width) {
+                    max = max.max(counts[y * width + x]);
+                    lanes += 1;
+                }
+            }
+            sum += max as u64 * lanes;
+        }
+    }
+    sum
 }
 
 /// Builds `vol` into a brick store of `brick`-voxel bricks at `path` (default
@@ -299,4 +317,22 @@ pub(crate) fn renderer_in_core(
     r.set_transfer_function(&gpu.device, &gpu.queue, tf)
         .map_err(|e| e.to_string())?;
     Ok(r)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::lane_samples;
+
+    #[test]
+    fn lane_groups_are_four_by_two_blocks() {
+        // 8 x 2 pixels: two 4 x 2 groups; the longest ray of each sets it.
+        let counts = [1, 2, 3, 4, 10, 0, 0, 0, 5, 6, 7, 8, 0, 0, 0, 1];
+        assert_eq!(lane_samples(&counts, 8), 8 * 8 + 10 * 8);
+        // An image 6 x 3: groups clipped at the edges (4x2, 2x2, 4x1, 2x1).
+        let mut c = [0u32; 18];
+        c[5] = 3; // (5, 0): the 2 x 2 group
+        c[12] = 2; // (0, 2): the 4 x 1 group
+        assert_eq!(lane_samples(&c, 6), 3 * 4 + 2 * 4);
+        assert_eq!(lane_samples(&[], 0), 0);
+    }
 }

@@ -154,11 +154,11 @@ fn channel_mip_skips(cell: u32, mx: vec4<f32>, vis: vec4<f32>) -> bool {
 }
 
 @compute @workgroup_size(8, 8, 1)
-fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
-    if (gid.x >= frame.viewport_size.x || gid.y >= frame.viewport_size.y) {
+fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) li: u32) {
+    let px = tile_pixel(wg.xy, li);
+    if (px.x >= frame.viewport_size.x || px.y >= frame.viewport_size.y) {
         return;
     }
-    let px = gid.xy;
     let start = start_ray(px);
     let r = start.r;
     let t0 = start.t0;

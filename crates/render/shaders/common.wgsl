@@ -355,3 +355,14 @@ fn intensity_color(v: f32) -> vec3<f32> {
     let viridis = mix(table[i], table[i + 1u], f);
     return select(select(grey, hot, frame.color_map == MAP_HOT), viridis, frame.color_map == MAP_VIRIDIS);
 }
+
+// The pixel of invocation `li` of workgroup `wg`: a workgroup's 8 x 8 pixels
+// in Morton (Z) order, so that any 2^k consecutive invocations, the rays one
+// SIMD group runs together, cover a compact block (8 lanes: 4 x 2 pixels,
+// 16: 4 x 4, 32: 8 x 4) whose rays end alike, rather than a row of 8
+// (docs/benchmarks.md, `raw`).
+fn tile_pixel(wg: vec2<u32>, li: u32) -> vec2<u32> {
+    let x = (li & 1u) | ((li >> 1u) & 2u) | ((li >> 2u) & 4u);
+    let y = ((li >> 1u) & 1u) | ((li >> 2u) & 2u) | ((li >> 3u) & 4u);
+    return wg * 8u + vec2<u32>(x, y);
+}

@@ -150,11 +150,11 @@ fn iso_march(acc: ptr<function, Accum>, r: Ray, t0: f32, t1: f32, dt: f32, ess: 
 }
 
 @compute @workgroup_size(8, 8, 1)
-fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
-    if (gid.x >= frame.viewport_size.x || gid.y >= frame.viewport_size.y) {
+fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) li: u32) {
+    let px = tile_pixel(wg.xy, li);
+    if (px.x >= frame.viewport_size.x || px.y >= frame.viewport_size.y) {
         return;
     }
-    let px = gid.xy;
     let start = start_ray(px);
     // Iso with the prediction buffer: incore_predict.wgsl (an override: pipelines
     // without prediction compile none of it).

@@ -213,11 +213,11 @@ fn ooc_iso_march(acc: ptr<function, Accum>, cur: ptr<function, Cursor>, t0: f32,
 }
 
 @compute @workgroup_size(8, 8, 1)
-fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
-    if (gid.x >= frame.viewport_size.x || gid.y >= frame.viewport_size.y) {
+fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) li: u32) {
+    let px = tile_pixel(wg.xy, li);
+    if (px.x >= frame.viewport_size.x || px.y >= frame.viewport_size.y) {
         return;
     }
-    let px = gid.xy;
     let start = start_ray(px);
     // Iso with the prediction buffer: ooc_predict.wgsl (an override: pipelines
     // without prediction compile none of it).

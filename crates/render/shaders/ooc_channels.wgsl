@@ -176,11 +176,11 @@ fn ooc_channel_dvr_sample(cur: Cursor, v: vec4<f32>, u: vec3<f32>, r: Ray, t: f3
 }
 
 @compute @workgroup_size(8, 8, 1)
-fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
-    if (gid.x >= frame.viewport_size.x || gid.y >= frame.viewport_size.y) {
+fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) li: u32) {
+    let px = tile_pixel(wg.xy, li);
+    if (px.x >= frame.viewport_size.x || px.y >= frame.viewport_size.y) {
         return;
     }
-    let px = gid.xy;
     let start = start_ray(px);
     let r = start.r;
     let t0 = start.t0;

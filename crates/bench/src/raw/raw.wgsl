@@ -73,7 +73,12 @@ fn shade(c: vec3<f32>, u: vec3<f32>, dir: vec3<f32>) -> vec3<f32> {
 }
 
 @compute @workgroup_size(8, 8, 1)
-fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
+fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) li: u32) {
+    // brickray's pixel order (common.wgsl, tile_pixel): a workgroup's 8 x 8
+    // pixels in Morton order.
+    let gx = (li & 1u) | ((li >> 1u) & 2u) | ((li >> 2u) & 4u);
+    let gy = ((li >> 1u) & 1u) | ((li >> 2u) & 2u) | ((li >> 3u) & 4u);
+    let gid = wg.xy * 8u + vec2<u32>(gx, gy);
     if (gid.x >= p.size.x || gid.y >= p.size.y) {
         return;
     }
