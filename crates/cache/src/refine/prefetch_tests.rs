@@ -5,9 +5,9 @@
 //! unbounded prefetch gives, and a split that adds no brick still happens;
 //! the same bound in octant-granular refinement.
 
-use super::tests::{assert_exact_cover, ball_info, keys, setup};
+use super::tests::{assert_exact_cover, ball_info, dvr_params, keys, setup};
 use super::*;
-use brickray_core::{Camera, NodeKind, RenderMode};
+use brickray_core::{Camera, LodMetric, NodeKind};
 use glam::Vec3;
 use std::collections::HashSet;
 
@@ -63,30 +63,16 @@ fn loading(sparse: Option<NodeKey>) -> Loading {
     }
 }
 
-fn refine_full(env: &mut Loading, max_prefetch: u32) -> Refinement {
-    refine_with(env, max_prefetch, brickray_core::LodMetric::Geometric)
-}
-
-fn refine_with(
-    env: &mut Loading,
-    max_prefetch: u32,
-    metric: brickray_core::LodMetric,
-) -> Refinement {
+/// One frame of refinement of the ball at 512 px with room for 8 bricks.
+fn refine_with(env: &mut Loading, max_prefetch: u32, metric: LodMetric) -> Refinement {
     let s = setup();
     let cam = Camera::orbit(Vec3::ZERO, 1.5, 0.3, 0.2);
+    let views = Views::one(ViewGeometry::new(&s.layout, &cam, 1.0, 512, &s.frame));
     let params = RefineParams {
-        views: &Views::one(ViewGeometry::new(&s.layout, &cam, 1.0, 512, &s.frame)),
-        generation: 0,
-        mode: RenderMode::Dvr,
-        tf: &s.tf,
-        channels: &[],
-        tolerance_px: 0.0,
         metric,
         max_data_leaves: 8,
-        max_requests: u32::MAX,
         max_prefetch,
-        brick_upload_bytes: 1,
-        lookahead: false,
+        ..dvr_params(&s, &views)
     };
     let mut b = UploadBudget::new(u64::MAX / 4);
     b.begin_frame();
@@ -96,14 +82,10 @@ fn refine_with(
 /// Frames of refinement, each loading what the last one requested into CPU
 /// memory, until nothing is requested: the frames, the bricks loaded, the
 /// last cut and the metadata reads of the first frame.
-fn settle(env: &mut Loading, max_prefetch: u32) -> (usize, usize, Vec<NodeKey>, usize) {
-    settle_with(env, max_prefetch, brickray_core::LodMetric::Geometric)
-}
-
-fn settle_with(
+fn settle(
     env: &mut Loading,
     max_prefetch: u32,
-    metric: brickray_core::LodMetric,
+    metric: LodMetric,
 ) -> (usize, usize, Vec<NodeKey>, usize) {
     let mut first_reads = 0;
     for frame in 1..=40 {
@@ -125,8 +107,9 @@ fn settle_with(
 
 #[test]
 fn a_full_cut_prefetches_a_bounded_set_and_settles() {
-    let (frames, loaded, cut, reads) = settle(&mut loading(None), 16);
-    let (all_frames, all, all_cut, all_reads) = settle(&mut loading(None), u32::MAX);
+    let (frames, loaded, cut, reads) = settle(&mut loading(None), 16, LodMetric::Geometric);
+    let (all_frames, all, all_cut, all_reads) =
+        settle(&mut loading(None), u32::MAX, LodMetric::Geometric);
     // The same cut (as a set); the bound (plus the last node's children) loaded, in
     // fewer frames and with far fewer metadata reads.
     assert_eq!(cut, all_cut);
@@ -151,7 +134,7 @@ fn a_full_cut_prefetches_a_bounded_set_and_settles() {
 fn a_split_that_adds_no_brick_still_happens_when_the_prefetch_is_spent() {
     let sparse = NodeKey::ROOT.child(5);
     let mut env = loading(Some(sparse));
-    let r = refine_full(&mut env, 0);
+    let r = refine_with(&mut env, 0, LodMetric::Geometric);
     assert_exact_cover(&keys(&r), env.layout.levels);
     let leaf = |k: NodeKey| r.leaves.iter().find(|l| l.key == k).map(|l| l.class);
     assert_eq!(
@@ -170,9 +153,9 @@ fn a_split_that_adds_no_brick_still_happens_when_the_prefetch_is_spent() {
 /// gives (here level 2, drawn from the eight level-1 bricks).
 #[test]
 fn a_full_octant_cut_prefetches_a_bounded_set_and_settles() {
-    let metric = brickray_core::LodMetric::VisibleOctants { budget: 0.0 };
-    let (frames, loaded, cut, _) = settle_with(&mut loading(None), 16, metric);
-    let (all_frames, all, all_cut, _) = settle_with(&mut loading(None), u32::MAX, metric);
+    let metric = LodMetric::VisibleOctants { budget: 0.0 };
+    let (frames, loaded, cut, _) = settle(&mut loading(None), 16, metric);
+    let (all_frames, all, all_cut, _) = settle(&mut loading(None), u32::MAX, metric);
     assert_eq!(cut, all_cut);
     assert!(cut.iter().all(|k| k.level == 2), "{cut:?}");
     assert!((16..=17).contains(&loaded), "{loaded} bricks prefetched");

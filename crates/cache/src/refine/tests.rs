@@ -292,6 +292,25 @@ fn upload_budget_limits_splits_but_progresses() {
     }
 }
 
+/// DVR, the geometric order at tolerance 0 (only the limits stop it), no
+/// pool, request or prefetch limit, bricks of one upload byte.
+pub(super) fn dvr_params<'a>(s: &'a Setup, views: &'a Views) -> RefineParams<'a> {
+    RefineParams {
+        views,
+        generation: 0,
+        mode: RenderMode::Dvr,
+        tf: &s.tf,
+        channels: &[],
+        tolerance_px: 0.0,
+        metric: brickray_core::LodMetric::Geometric,
+        max_data_leaves: u32::MAX,
+        max_requests: u32::MAX,
+        max_prefetch: u32::MAX,
+        brick_upload_bytes: 1,
+        lookahead: false,
+    }
+}
+
 /// MIP at 512 px, 1 px tolerance, no pool or request limit.
 pub(super) fn mip_params<'a>(s: &'a Setup, views: &'a Views) -> RefineParams<'a> {
     RefineParams {
@@ -434,20 +453,8 @@ fn invisible_nodes_stay_at_their_level_and_request_nothing() {
             hidden,
             asked: Vec::new(),
         };
-        let params = RefineParams {
-            views: &Views::one(ViewGeometry::new(&s.layout, &cam, 1.0, 512, &s.frame)),
-            generation: 0,
-            mode: RenderMode::Dvr,
-            tf: &s.tf,
-            channels: &[],
-            tolerance_px: 0.0,
-            metric: brickray_core::LodMetric::Geometric,
-            max_data_leaves: u32::MAX,
-            max_requests: u32::MAX,
-            max_prefetch: u32::MAX,
-            brick_upload_bytes: 1,
-            lookahead: false,
-        };
+        let views = Views::one(ViewGeometry::new(&s.layout, &cam, 1.0, 512, &s.frame));
+        let params = dvr_params(&s, &views);
         let mut b = UploadBudget::new(u64::MAX);
         let r = refine(&s.layout, &params, &mut env, &mut b);
         assert_exact_cover(&keys(&r), s.layout.levels);
