@@ -70,6 +70,10 @@ pub(crate) struct Args {
     /// Interior voxels per brick side of the stores.
     #[arg(long, default_value_t = 32, value_parser = crate::at_least_one::<u32>)]
     brick: u32,
+    /// Also brickray in core with pre-integrated DVR at each step (DVR
+    /// modes only; `in_core_preint` configurations).
+    #[arg(long)]
+    preint: bool,
 }
 
 /// One VTK point: a mapper at a step.
@@ -210,7 +214,7 @@ pub(crate) fn run(o: &Args) -> Result<VtkResult, String> {
                 mode_name
             };
             let reference = reference_image(scene, &tf, &base, tag, o.size, o.supersample, &o.out)?;
-            let cfgs = brickray_configs(base, &o.steps);
+            let cfgs = brickray_configs(base, &o.steps, o.preint);
             let scene_json = o.out.join(format!("{name}.json"));
             let prefix = o.out.join(&name);
             let desc = vtk_scene(scene, &tf, &base, &raw, o, &prefix);
@@ -355,26 +359,33 @@ fn scene_mode(scene: &Scene, mode_name: &str) -> Result<(RenderMode, TransferFun
 }
 
 /// brickray's configurations: out of core at the default tolerance, and in
-/// core, at each step.
-fn brickray_configs(base: RenderSettings, steps: &[f32]) -> Vec<Config> {
+/// core, at each step; with `preint` (DVR only), in core pre-integrated too.
+fn brickray_configs(base: RenderSettings, steps: &[f32], preint: bool) -> Vec<Config> {
     let in_core = RendererKey {
         in_core: true,
         ..DEFAULT_KEY
     };
-    [("out_of_core", DEFAULT_KEY), ("in_core", in_core)]
-        .into_iter()
-        .flat_map(|(knob, key)| {
-            steps.iter().map(move |&step| Config {
-                knob,
-                value: format!("{step}"),
-                key,
-                settings: RenderSettings {
-                    step_factor: step,
-                    ..base
-                },
-            })
+    let preint = preint && matches!(base.mode, RenderMode::Dvr);
+    [
+        ("out_of_core", DEFAULT_KEY, false),
+        ("in_core", in_core, false),
+        ("in_core_preint", in_core, true),
+    ]
+    .into_iter()
+    .filter(|c| preint || !c.2)
+    .flat_map(|(knob, key, preintegrated)| {
+        steps.iter().map(move |&step| Config {
+            knob,
+            value: format!("{step}"),
+            key,
+            settings: RenderSettings {
+                step_factor: step,
+                preintegrated,
+                ..base
+            },
         })
-        .collect()
+    })
+    .collect()
 }
 
 /// The scene as VTK's script reads it: brickray's voxel centres in world
@@ -534,10 +545,10 @@ fn draw(
         .iter()
         .zip(m)
         .map(|(c, x)| chart::ChartPoint {
-            knob: if c.key.in_core {
-                "brickray in core"
-            } else {
-                "brickray out of core"
+            knob: match (c.key.in_core, c.settings.preintegrated) {
+                (true, false) => "brickray in core",
+                (true, true) => "brickray in core, pre-integrated",
+                (false, _) => "brickray out of core",
             },
             ms: x.ms,
             psnr_db: x.psnr_db,
