@@ -155,6 +155,18 @@ impl BrickManager {
             lookahead: self.config.lookahead.applies(self.remote),
         };
         self.octants.begin(&params);
+        let same = self.classified.as_ref().is_some_and(|c| {
+            c.mode == input.mode && c.tf == *input.tf && c.channels == input.channels
+        });
+        if !same {
+            // (Stamp 0 means "none": after 2^32 - 1 changes it wraps to 1.)
+            self.class_stamp = self.class_stamp.checked_add(1).unwrap_or(1);
+            self.classified = Some(super::Classification {
+                mode: input.mode,
+                tf: input.tf.clone(),
+                channels: input.channels.to_vec(),
+            });
+        }
         let refined = {
             let mut env = Env {
                 meta: &self.meta,
@@ -163,6 +175,7 @@ impl BrickManager {
                 pool: &self.pool,
                 filter,
                 octants: &self.octants,
+                class_stamp: self.class_stamp,
             };
             refine(&self.layout, &params, &mut env, &mut self.budget)
         };

@@ -4,6 +4,7 @@
 //! grew by about 8 kB a frame). A forgotten entry is fetched again by the loader
 //! when a view needs it; the root is never forgotten.
 
+use crate::refine::MetaClass;
 use brickray_core::{NodeInfo, NodeKey, NodeMap};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -20,6 +21,38 @@ struct Group {
     /// The frame a member was last used in (atomic so lookups need only
     /// `&self`); a group is kept or forgotten whole.
     used: AtomicU64,
+    /// The known members' classes under one classification
+    /// ([`MetaCache::class`]): its stamp in the high 32 bits (0: none), then
+    /// three bits per member (`CLASS_*`). Cleared when a member's metadata
+    /// arrives.
+    classes: AtomicU64,
+}
+
+/// A member's class in [`Group::classes`]: `CLASS_EMPTY`,
+/// `CLASS_INVISIBLE`, `CLASS_DATA`, with `CLASS_UNIFORM` added to data.
+const CLASS_EMPTY: u64 = 1;
+const CLASS_INVISIBLE: u64 = 2;
+const CLASS_DATA: u64 = 3;
+const CLASS_UNIFORM: u64 = 4;
+
+fn encode_class(c: MetaClass) -> u64 {
+    match c {
+        MetaClass::Empty => CLASS_EMPTY,
+        MetaClass::Invisible => CLASS_INVISIBLE,
+        MetaClass::Data { uniform } => CLASS_DATA | if uniform { CLASS_UNIFORM } else { 0 },
+        // (Only known metadata is classed.)
+        MetaClass::Pending | MetaClass::Failed => 0,
+    }
+}
+
+fn decode_class(bits: u64) -> MetaClass {
+    match bits & 3 {
+        CLASS_EMPTY => MetaClass::Empty,
+        CLASS_INVISIBLE => MetaClass::Invisible,
+        _ => MetaClass::Data {
+            uniform: bits & CLASS_UNIFORM != 0,
+        },
+    }
 }
 
 /// The group of `key` (the same level, each coordinate halved) and its
@@ -74,6 +107,36 @@ impl MetaCache {
         Some(info)
     }
 
+    /// The class of the node's metadata under the classification `stamp`
+    /// (non-zero; the caller gives a new one whenever `visible` changes),
+    /// marking it used this frame; `None` when not known. The classes of a
+    /// group's members are computed together, once per stamp and arrival
+    /// of metadata: refinement asks for the classes of every child of every
+    /// node it visits, frame after frame, and reads the metadata itself
+    /// only for the children it keeps.
+    pub(crate) fn class(
+        &self,
+        key: NodeKey,
+        stamp: u32,
+        visible: &dyn Fn(&NodeInfo) -> bool,
+    ) -> Option<MetaClass> {
+        let (group, i) = group_of(key);
+        let g = self.map.get(&group)?;
+        g.infos[i].as_ref()?;
+        g.used.store(self.frame, Ordering::Relaxed);
+        let mut classes = g.classes.load(Ordering::Relaxed);
+        if (classes >> 32) as u32 != stamp {
+            classes = u64::from(stamp) << 32;
+            for (m, info) in g.infos.iter().enumerate() {
+                if let Some(info) = info {
+                    classes |= encode_class(MetaClass::of(info, visible)) << (3 * m);
+                }
+            }
+            g.classes.store(classes, Ordering::Relaxed);
+        }
+        Some(decode_class(classes >> (3 * i)))
+    }
+
     /// True when the node's metadata is known (not marking it used).
     pub(crate) fn contains(&self, key: NodeKey) -> bool {
         let (group, i) = group_of(key);
@@ -87,6 +150,7 @@ impl MetaCache {
         if g.infos[i].replace(Arc::new(info)).is_none() {
             self.len += 1;
         }
+        g.classes.store(0, Ordering::Relaxed);
         g.used.store(self.frame, Ordering::Relaxed);
     }
 
@@ -194,6 +258,58 @@ mod tests {
             min: key.x as f32,
             max: key.y as f32 + key.z as f32 * 1000.0,
             ..info()
+        }
+    }
+
+    /// A node of kind `k` (0 empty, 1 uniform, 2 data) with values up to `max`.
+    fn classed_info(k: u8, max: f32) -> NodeInfo {
+        NodeInfo {
+            kind: match k {
+                0 => NodeKind::Empty,
+                1 => NodeKind::Uniform(max),
+                _ => NodeKind::Data,
+            },
+            max,
+            ..info()
+        }
+    }
+
+    proptest::proptest! {
+        /// The kept classes are those of the metadata held now under the
+        /// classification asked for: across new metadata for a member
+        /// (inserted after its group's classes were kept), classifications
+        /// changed and changed back under new stamps, and trims.
+        #[test]
+        fn kept_classes_follow_metadata_and_stamps(
+            ops in proptest::collection::vec((0u8..4, 0u32..4, 0u32..2, 0u8..3, 0u8..4), 1..300),
+        ) {
+            let mut m = MetaCache::new(64);
+            let mut model: std::collections::HashMap<NodeKey, NodeInfo> = Default::default();
+            // The classification: visible when max > threshold; a new stamp
+            // each time the threshold changes.
+            let (mut threshold, mut stamp) = (0u8, 1u32);
+            for (op, x, y, k, t) in ops {
+                let key = NodeKey::new(4, x, y, 0);
+                match op {
+                    0 => {
+                        let info = classed_info(k, f32::from(t));
+                        m.insert(key, info.clone());
+                        model.insert(key, info);
+                    }
+                    1 if t != threshold => {
+                        threshold = t;
+                        stamp += 1;
+                    }
+                    2 => {
+                        m.trim();
+                        model.retain(|k, _| m.contains(*k));
+                    }
+                    _ => {}
+                }
+                let visible = |i: &NodeInfo| i.max > f32::from(threshold);
+                let want = model.get(&key).map(|i| MetaClass::of(i, &visible));
+                proptest::prop_assert_eq!(m.class(key, stamp, &visible), want);
+            }
         }
     }
 

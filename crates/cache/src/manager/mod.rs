@@ -32,7 +32,7 @@ use crate::failures::{Clock, Failures, FetchKind, SystemClock};
 use crate::loader::{Loader, LoaderConfig};
 use crate::pool::{BrickPool, PoolError};
 use crate::prepared::Preparer;
-use crate::refine::{DataState, MetaState, OctantMemory, RefineEnv, SplitFilter};
+use crate::refine::{DataState, MetaClass, MetaState, OctantMemory, RefineEnv, SplitFilter};
 use crate::upload::UploadBudget;
 use brickray_core::{BrickSource, NodeInfo, NodeKey, NodeKind, OctreeLayout};
 use std::sync::Arc;
@@ -79,6 +79,19 @@ pub struct BrickManager {
     floor: Vec<NodeKey>,
     /// The host's time of the last update (fades), when it gave one.
     last_fade_time: Option<f64>,
+    /// The classification the metadata's kept classes are under
+    /// ([`MetaCache::class`]): a new stamp whenever the mode, transfer
+    /// function or channel styles change.
+    class_stamp: u32,
+    classified: Option<Classification>,
+}
+
+/// What decides whether a node holding data is visible.
+#[derive(Debug, Clone, PartialEq)]
+struct Classification {
+    mode: brickray_core::RenderMode,
+    tf: brickray_core::TransferFunction,
+    channels: Vec<brickray_core::ChannelStyle>,
 }
 
 impl std::fmt::Debug for BrickManager {
@@ -123,6 +136,8 @@ struct Env<'a, 'f> {
     pool: &'a BrickPool,
     filter: Option<&'f mut dyn SplitFilter>,
     octants: &'a OctantMemory,
+    /// The frame's classification stamp ([`MetaCache::class`]).
+    class_stamp: u32,
 }
 
 impl RefineEnv for Env<'_, '_> {
@@ -131,6 +146,14 @@ impl RefineEnv for Env<'_, '_> {
             Some(info) => MetaState::Known(info),
             None if self.failures.is_failed(FetchKind::Metadata, key) => MetaState::Failed,
             None => MetaState::Pending,
+        }
+    }
+
+    fn meta_class(&mut self, key: NodeKey, visible: &dyn Fn(&NodeInfo) -> bool) -> MetaClass {
+        match self.meta.class(key, self.class_stamp, visible) {
+            Some(class) => class,
+            None if self.failures.is_failed(FetchKind::Metadata, key) => MetaClass::Failed,
+            None => MetaClass::Pending,
         }
     }
 
@@ -206,6 +229,8 @@ impl BrickManager {
             octants: OctantMemory::default(),
             floor,
             last_fade_time: None,
+            class_stamp: 0,
+            classified: None,
             source,
             layout,
             meta: MetaCache::new(meta_capacity(config.cpu_budget_bytes)),

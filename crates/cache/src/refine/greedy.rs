@@ -10,13 +10,14 @@
 
 use super::rank::{
     Classified, HeapItem, ScreenError, UNCLASSIFIED, Unknown, classify, classify_children,
+    known_info, visible_under,
 };
 use super::{
-    DataState, LoadRequest, MAX_META_REQUESTS_PER_FRAME, MetaState, NodeClass, RefineEnv,
-    RefineParams, RefinedLeaf, Refinement, empty_leaf, is_visible, unknown_root,
+    DataState, LoadRequest, MAX_META_REQUESTS_PER_FRAME, MetaClass, NodeClass, RefineEnv,
+    RefineParams, RefinedLeaf, Refinement, empty_leaf, unknown_root,
 };
 use crate::upload::UploadBudget;
-use brickray_core::{EmptyReason, NodeKey, NodeKind, OctreeLayout};
+use brickray_core::{EmptyReason, NodeKey, OctreeLayout};
 use std::collections::BinaryHeap;
 
 pub(super) struct Greedy<'p, 'a, 'e> {
@@ -76,7 +77,7 @@ impl<'p, 'a, 'e> Greedy<'p, 'a, 'e> {
     ) -> Result<Self, Refinement> {
         let root = NodeKey::ROOT;
         let mut out = Refinement::default();
-        let c = match classify(root, layout, params, params.views, env) {
+        let c = match classify(root, layout, params, params.views, env, true) {
             Ok(Classified {
                 class: NodeClass::Empty(r),
                 ..
@@ -231,6 +232,7 @@ impl<'p, 'a, 'e> Greedy<'p, 'a, 'e> {
             self.params,
             self.params.views,
             self.env,
+            self.screen.needs_info(),
         ) else {
             return false;
         };
@@ -284,24 +286,14 @@ impl<'p, 'a, 'e> Greedy<'p, 'a, 'e> {
         if !self.layout.in_volume(c) {
             return ChildData::None;
         }
-        match self.env.node(c) {
-            MetaState::Known(info) => {
-                let data = info.kind != NodeKind::Empty
-                    && is_visible(
-                        &info,
-                        self.params.mode,
-                        self.params.tf,
-                        self.params.channels,
-                        self.layout,
-                    );
-                if data {
-                    ChildData::Data
-                } else {
-                    ChildData::None
-                }
-            }
-            MetaState::Pending => ChildData::Pending,
-            MetaState::Failed => ChildData::Failed,
+        match self
+            .env
+            .meta_class(c, &visible_under(self.params, self.layout))
+        {
+            MetaClass::Data { .. } => ChildData::Data,
+            MetaClass::Empty | MetaClass::Invisible => ChildData::None,
+            MetaClass::Pending => ChildData::Pending,
+            MetaClass::Failed => ChildData::Failed,
         }
     }
 
@@ -358,7 +350,15 @@ impl<'p, 'a, 'e> Greedy<'p, 'a, 'e> {
         let mut classes = [UNCLASSIFIED; 8];
         let (mut pending, mut failed) = (Vec::new(), 0u32);
         for (i, &c) in children.iter().enumerate() {
-            match classify(c, self.layout, self.params, self.params.views, self.env) {
+            let with_info = self.screen.needs_info();
+            match classify(
+                c,
+                self.layout,
+                self.params,
+                self.params.views,
+                self.env,
+                with_info,
+            ) {
                 Ok(cl) => classes[i] = cl,
                 Err(Unknown::Pending) => pending.push(c),
                 Err(Unknown::Failed) => failed += 1,
@@ -415,7 +415,11 @@ impl<'p, 'a, 'e> Greedy<'p, 'a, 'e> {
             let order =
                 priority * self.env.request_weight(key) * self.params.views.centre_weight(key);
             for i in missing {
-                if let Some(info) = classes[i].info.clone() {
+                let info = match &classes[i].info {
+                    Some(info) => Some(info.clone()),
+                    None => known_info(self.env, children[i]),
+                };
+                if let Some(info) = info {
                     self.out.requests.push(LoadRequest {
                         key: children[i],
                         priority: order as f32,
@@ -501,17 +505,25 @@ impl<'p, 'a, 'e> Greedy<'p, 'a, 'e> {
         let order = priority * self.env.request_weight(c) * self.params.views.centre_weight(c);
         let mut pending = Vec::new();
         for &g in self.layout.children(c).iter() {
-            match classify(g, self.layout, self.params, self.params.views, self.env) {
+            match classify(
+                g,
+                self.layout,
+                self.params,
+                self.params.views,
+                self.env,
+                false,
+            ) {
                 Ok(Classified {
                     class: NodeClass::Data,
-                    info: Some(info),
                     ..
                 }) if self.env.data(g) == DataState::Missing => {
-                    self.out.requests.push(LoadRequest {
-                        key: g,
-                        priority: order as f32,
-                        info,
-                    });
+                    if let Some(info) = known_info(self.env, g) {
+                        self.out.requests.push(LoadRequest {
+                            key: g,
+                            priority: order as f32,
+                            info,
+                        });
+                    }
                 }
                 Err(Unknown::Pending) => pending.push(g),
                 _ => {}

@@ -23,8 +23,10 @@
 //! per brick it adds (its children that need data, less its own brick), once
 //! its children's metadata is known: the order changes, the stop test does not.
 //!
-//! Classification uses node metadata only ([`RefineEnv::node`]); no brick is read
-//! and refinement never calls the source: it only says what to request. At most
+//! Classification uses node metadata only, through each node's class
+//! ([`RefineEnv::meta_class`]; the metadata itself, [`RefineEnv::node`], only
+//! for the nodes a load request or an error-aware rank needs); no brick is
+//! read and refinement never calls the source: it only says what to request. At most
 //! `min(max_data_leaves, max_requests)` bricks ([`requests_per_frame`]) and
 //! [`MAX_META_REQUESTS_PER_FRAME`] metadata reads are requested per frame,
 //! highest priority first.
@@ -63,7 +65,7 @@ use rank::Unknown;
 
 use crate::upload::UploadBudget;
 use brickray_core::{
-    EmptyReason, LodMetric, NodeInfo, NodeKey, OctreeLayout, RenderMode, TransferFunction,
+    EmptyReason, LodMetric, NodeInfo, NodeKey, NodeKind, OctreeLayout, RenderMode, TransferFunction,
 };
 use std::sync::Arc;
 
@@ -126,11 +128,61 @@ pub enum MetaState {
     Failed,
 }
 
+/// What a node's metadata says under the frame's mode and transfer function,
+/// without the view ([`RefineEnv::meta_class`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum MetaClass {
+    /// Holds no data.
+    Empty,
+    /// Holds data, all of it invisible under the mode and transfer function.
+    Invisible,
+    /// Holds visible data (`uniform`: of one value).
+    Data {
+        /// The node is of one value.
+        uniform: bool,
+    },
+    /// Its metadata is not known yet.
+    Pending,
+    /// Its metadata read failed (and is not yet due for a retry).
+    Failed,
+}
+
+impl MetaClass {
+    /// The class of known metadata, `visible` deciding a node that holds
+    /// data.
+    pub fn of(info: &NodeInfo, visible: &dyn Fn(&NodeInfo) -> bool) -> MetaClass {
+        if info.kind == NodeKind::Empty {
+            MetaClass::Empty
+        } else if !visible(info) {
+            MetaClass::Invisible
+        } else {
+            MetaClass::Data {
+                uniform: matches!(info.kind, NodeKind::Uniform(_)),
+            }
+        }
+    }
+}
+
 /// What refinement needs to know about the world outside it. Neither method may
 /// block: the answers come from caches.
 pub trait RefineEnv {
     /// Node metadata, as far as it is known.
     fn node(&mut self, key: NodeKey) -> MetaState;
+    /// The class of `key`'s metadata, `visible` being the frame's test of a
+    /// node that holds data (the same function of the mode, transfer
+    /// function and channels for a whole frame). Refinement asks it of every
+    /// child of every node it visits and needs the metadata itself only for
+    /// the children it keeps, so an environment may keep the classes of its
+    /// nodes from frame to frame until their metadata or the classification
+    /// changes (the manager does, per group of siblings). By default the
+    /// class of [`node`](Self::node)'s answer.
+    fn meta_class(&mut self, key: NodeKey, visible: &dyn Fn(&NodeInfo) -> bool) -> MetaClass {
+        match self.node(key) {
+            MetaState::Known(info) => MetaClass::of(&info, visible),
+            MetaState::Pending => MetaClass::Pending,
+            MetaState::Failed => MetaClass::Failed,
+        }
+    }
     /// Where the node's brick is.
     fn data(&mut self, key: NodeKey) -> DataState;
     /// Whether `key`, which refinement would split, may be split: false for a

@@ -155,7 +155,7 @@ impl Octants<'_, '_> {
         let mut classes = Vec::with_capacity(children.len());
         let (mut pending, mut failed) = (Vec::new(), 0u32);
         for &c in children.iter() {
-            match classify(c, self.layout, self.params, self.geo, env) {
+            match classify(c, self.layout, self.params, self.geo, env, true) {
                 Ok(cl) => classes.push(cl),
                 Err(Unknown::Pending) => pending.push(c),
                 Err(Unknown::Failed) => failed += 1,
@@ -275,7 +275,8 @@ fn root(
 ) -> Result<(Arc<NodeInfo>, bool, bool), Refinement> {
     let mut out = Refinement::default();
     let root = NodeKey::ROOT;
-    let root_class = classify(root, layout, params, params.views, env).map_err(unknown_root)?;
+    let root_class =
+        classify(root, layout, params, params.views, env, true).map_err(unknown_root)?;
     let (NodeClass::Data, Some(root_info)) = (root_class.class, root_class.info) else {
         let reason = match root_class.class {
             NodeClass::Empty(r) => r,

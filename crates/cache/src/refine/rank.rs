@@ -5,10 +5,10 @@
 
 use std::sync::Arc;
 
-use super::{MetaState, NodeClass, RefineEnv, RefineParams, Views, is_visible};
+use super::{MetaClass, MetaState, NodeClass, RefineEnv, RefineParams, Views, is_visible};
 use brickray_core::{
-    EmptyReason, NodeInfo, NodeKey, NodeKind, OctreeLayout, RenderMode, TfErrorTable,
-    node_pixel_error, node_visible_error,
+    EmptyReason, NodeInfo, NodeKey, OctreeLayout, RenderMode, TfErrorTable, node_pixel_error,
+    node_visible_error,
 };
 
 /// A node in refinement's max-heap.
@@ -46,7 +46,7 @@ impl Ord for HeapItem {
 pub(super) struct Classified {
     pub(super) class: NodeClass,
     pub(super) uniform: bool,
-    /// Its metadata (for nodes inside the volume).
+    /// Its metadata (for data nodes classified with it).
     pub(super) info: Option<Arc<NodeInfo>>,
 }
 
@@ -57,42 +57,62 @@ pub(super) enum Unknown {
     Failed,
 }
 
-/// Classifies `key` under the view from its metadata: empty, invisible
-/// under the mode and transfer function, culled, or data.
+/// The frame's test of a node that holds data: visible under the mode,
+/// transfer function and channels of `params` ([`is_visible`]).
+pub(super) fn visible_under<'p>(
+    params: &'p RefineParams<'_>,
+    layout: &'p OctreeLayout,
+) -> impl Fn(&NodeInfo) -> bool + 'p {
+    move |i| is_visible(i, params.mode, params.tf, params.channels, layout)
+}
+
+/// Classifies `key` under the view from its class
+/// ([`RefineEnv::meta_class`]): empty, invisible under the mode and
+/// transfer function, culled, or data. With `with_info` a data node's
+/// metadata is read too ([`RefineEnv::node`]); without it, its
+/// [`Classified::info`] is `None` (see [`known_info`]).
 pub(super) fn classify(
     key: NodeKey,
     layout: &OctreeLayout,
     params: &RefineParams<'_>,
     geo: &Views,
     env: &mut dyn RefineEnv,
+    with_info: bool,
 ) -> Result<Classified, Unknown> {
-    let empty = |reason, info| Classified {
+    let empty = |reason| Classified {
         class: NodeClass::Empty(reason),
         uniform: false,
-        info,
+        info: None,
     };
     if !layout.in_volume(key) {
-        return Ok(empty(EmptyReason::Empty, None));
+        return Ok(empty(EmptyReason::Empty));
     }
-    let info = match env.node(key) {
-        MetaState::Known(info) => info,
-        MetaState::Pending => return Err(Unknown::Pending),
-        MetaState::Failed => return Err(Unknown::Failed),
+    let uniform = match env.meta_class(key, &visible_under(params, layout)) {
+        MetaClass::Empty => return Ok(empty(EmptyReason::Empty)),
+        MetaClass::Invisible => return Ok(empty(EmptyReason::Invisible)),
+        MetaClass::Pending => return Err(Unknown::Pending),
+        MetaClass::Failed => return Err(Unknown::Failed),
+        MetaClass::Data { uniform } => uniform,
     };
-    if info.kind == NodeKind::Empty {
-        return Ok(empty(EmptyReason::Empty, Some(info)));
-    }
-    if !is_visible(&info, params.mode, params.tf, params.channels, layout) {
-        return Ok(empty(EmptyReason::Invisible, Some(info)));
-    }
     if geo.culled(key) {
-        return Ok(empty(EmptyReason::Culled, Some(info)));
+        return Ok(empty(EmptyReason::Culled));
     }
-    Ok(Classified {
-        class: NodeClass::Data,
-        uniform: matches!(info.kind, NodeKind::Uniform(_)),
-        info: Some(info),
-    })
+    if !with_info {
+        return Ok(Classified {
+            class: NodeClass::Data,
+            uniform,
+            info: None,
+        });
+    }
+    match env.node(key) {
+        MetaState::Known(info) => Ok(Classified {
+            class: NodeClass::Data,
+            uniform,
+            info: Some(info),
+        }),
+        MetaState::Pending => Err(Unknown::Pending),
+        MetaState::Failed => Err(Unknown::Failed),
+    }
 }
 
 /// The classification of a node's children (`children.len()` first
@@ -103,12 +123,21 @@ pub(super) fn classify_children(
     params: &RefineParams<'_>,
     geo: &Views,
     env: &mut dyn RefineEnv,
+    with_info: bool,
 ) -> Option<[Classified; 8]> {
     let mut classes = [UNCLASSIFIED; 8];
     for (c, out) in children.iter().zip(classes.iter_mut()) {
-        *out = classify(*c, layout, params, geo, env).ok()?;
+        *out = classify(*c, layout, params, geo, env, with_info).ok()?;
     }
     Some(classes)
+}
+
+/// A node's metadata where it is known.
+pub(super) fn known_info(env: &mut dyn RefineEnv, key: NodeKey) -> Option<Arc<NodeInfo>> {
+    match env.node(key) {
+        MetaState::Known(info) => Some(info),
+        MetaState::Pending | MetaState::Failed => None,
+    }
 }
 
 /// What ranks drawing a child's region from `parent`'s brick: `parent`'s
@@ -210,6 +239,12 @@ impl ScreenError {
                 threshold: params.tolerance_px.max(0.0) as f64,
             },
         }
+    }
+
+    /// Whether [`priority`](Self::priority) reads a node's metadata (under
+    /// the error-aware metrics; the geometric rule needs its size only).
+    pub(super) fn needs_info(&self) -> bool {
+        self.table.is_some()
     }
 
     /// The node's priority: its projected voxel size, times 255 x its
