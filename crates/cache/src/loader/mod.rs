@@ -26,8 +26,7 @@ use crate::failures::FetchKind;
 use crate::prepared::Preparer;
 use brickray_core::{BrickError, BrickSource, NodeInfo, NodeKey};
 use crossbeam_channel::Receiver;
-use queue::Job;
-use std::collections::HashSet;
+use queue::{Job, JobSet};
 use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
@@ -249,7 +248,7 @@ impl Loader {
                 (job, r.priority)
             }))
             .collect();
-        let keep: HashSet<_> = jobs.iter().map(|(j, _)| j.key()).collect();
+        let keep: JobSet = jobs.iter().map(|(j, _)| j.key()).collect();
         let mut q = self.shared.queue.lock();
         let stale = q.stale(&keep);
         for jk in &stale {
