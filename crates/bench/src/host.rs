@@ -7,7 +7,8 @@
 //! render thread (wall time: it never waits for I/O or the GPU), with its
 //! parts as the renderer reports them: planning (`refine_ms`: the streamer's
 //! frame), writing uploads and tables (`upload_ms`) and encoding the index
-//! (`encode_ms`). The path's frames are planned, not ray cast (their GPU work
+//! (`encode_ms`), and planning's own phases as the brick manager times them
+//! (`brickray_cache::PhaseTimes`). The path's frames are planned, not ray cast (their GPU work
 //! is recorded and dropped): the host's cost does not depend on the ray cast,
 //! and lavapipe takes seconds for one 1024^2 frame of a large cut. Each cut
 //! runs twice, planned in `prepare` (inline) and in the background
@@ -42,8 +43,38 @@ struct PathTimes {
     plan_ms: Vec<f64>,
     upload_ms: Vec<f64>,
     encode_ms: Vec<f64>,
+    /// The planning's phases ([`brickray_cache::PhaseTimes`]) of each frame.
+    phases: Vec<brickray_cache::PhaseTimes>,
     working_set: u32,
     converge_frames: usize,
+}
+
+/// The median of each of planning's phases, ms.
+#[derive(Debug, Serialize)]
+pub(crate) struct PhaseMedians {
+    poll: f64,
+    refine: f64,
+    display: f64,
+    place: f64,
+    request: f64,
+    stats: f64,
+}
+
+impl PhaseMedians {
+    fn of(phases: &[brickray_cache::PhaseTimes]) -> PhaseMedians {
+        // (Not rounded: a phase of a small cut takes microseconds.)
+        let m = |f: fn(&brickray_cache::PhaseTimes) -> f64| {
+            median(&phases.iter().map(f).collect::<Vec<f64>>())
+        };
+        PhaseMedians {
+            poll: m(|p| p.poll_ms),
+            refine: m(|p| p.refine_ms),
+            display: m(|p| p.display_ms),
+            place: m(|p| p.place_ms),
+            request: m(|p| p.request_ms),
+            stats: m(|p| p.stats_ms),
+        }
+    }
 }
 
 fn config(cut: u32, policy: VisibilityPolicy) -> OutOfCoreConfig {
@@ -118,6 +149,7 @@ fn path(
         plan_ms: Vec::new(),
         upload_ms: Vec::new(),
         encode_ms: Vec::new(),
+        phases: Vec::new(),
         working_set: 0,
         converge_frames,
     };
@@ -148,6 +180,7 @@ fn path(
         t.plan_ms.push(s.refine_ms);
         t.upload_ms.push(s.upload_ms);
         t.encode_ms.push(s.encode_ms);
+        t.phases.push(s.cache.phases);
         t.working_set = s.cache.working_set_bricks;
     }
     Ok(t)
@@ -195,6 +228,9 @@ pub(crate) struct Row {
     plan_ms_p99: f64,
     upload_ms_median: f64,
     encode_ms_median: f64,
+    /// The brick manager's phases within planning, ms medians (in the
+    /// background: of the plans the path's frames applied).
+    phase_ms_median: PhaseMedians,
     /// Bricks in the working set at the end, and frames to converge.
     working_set: u64,
     converge_frames: usize,
@@ -254,6 +290,12 @@ pub(crate) fn run(args: &Args) -> Result<HostResult, String> {
                         (false, false) => " (inline)".to_string(),
                     }
                 );
+                let p = PhaseMedians::of(&t.phases);
+                println!(
+                    "           planning's phases, median ms: refine {:.2}, place {:.2}, \
+                     request {:.2}, display {:.2}, poll {:.2}, stats {:.2}",
+                    p.refine, p.place, p.request, p.display, p.poll, p.stats
+                );
                 rows.push(Row {
                     budget: cut,
                     background,
@@ -264,6 +306,7 @@ pub(crate) fn run(args: &Args) -> Result<HostResult, String> {
                     plan_ms_p99: round2(quantile(&t.plan_ms, 0.99)),
                     upload_ms_median: round2(median(&t.upload_ms)),
                     encode_ms_median: round2(median(&t.encode_ms)),
+                    phase_ms_median: p,
                     working_set: t.working_set as u64,
                     converge_frames: t.converge_frames,
                 });

@@ -116,6 +116,7 @@ fn the_host_suite_runs() {
             "plan_ms_median",
             "upload_ms_median",
             "encode_ms_median",
+            "phase_ms_median",
             "working_set",
             "converge_frames",
         ],
@@ -126,6 +127,27 @@ fn the_host_suite_runs() {
             .all(|r| r["working_set"].as_u64().unwrap() > 0),
         "{fig:?}"
     );
+    // Planning's phases are timed: every one a number, refinement's
+    // above 0 where planning ran in `prepare` (the medians are not rounded),
+    // and together within the planning they are part of.
+    for r in rows(&fig, "rows") {
+        let p = &r["phase_ms_median"];
+        for k in ["poll", "refine", "display", "place", "request", "stats"] {
+            assert!(p[k].as_f64().is_some_and(|v| v >= 0.0), "{k}: {r:?}");
+        }
+        if r["background"] == serde_json::json!(false) {
+            assert!(p["refine"].as_f64().unwrap() > 0.0, "{r:?}");
+        }
+        let sum: f64 = ["poll", "refine", "display", "place", "request", "stats"]
+            .iter()
+            .map(|k| p[k].as_f64().unwrap())
+            .sum();
+        let plan = r["plan_ms_p99"].as_f64().unwrap();
+        assert!(
+            sum <= 2.0 * plan + 0.05,
+            "phases {sum} ms, planning {plan} ms: {r:?}"
+        );
+    }
     // No cut of 20,000 bricks ran.
     assert!(fig["host_ms_median_20k"].is_null(), "{fig:?}");
 }

@@ -255,6 +255,12 @@ impl Fader {
             .collect();
         let mut under: HashMap<usize, Vec<usize>> = HashMap::new();
         for (j, d) in self.prev.iter().enumerate() {
+            // A leaf of both cuts lies strictly inside none of the refined
+            // leaves (they tile the cube without overlap): its ancestors are
+            // not walked (most leaves of a moving view's cut stay).
+            if refined_keys.contains_key(&d.key) {
+                continue;
+            }
             let mut p = self.parent(d.key);
             while let Some(k) = p {
                 if let Some(&i) = refined_keys.get(&k) {

@@ -7,7 +7,7 @@
 //! [`request`](BrickManager::request) what is missing, and count the
 //! [`stats`](BrickManager::frame_stats).
 
-use super::{BrickManager, Env, FadeSlot, FramePlan, FrameStats, Upload};
+use super::{BrickManager, Env, FadeSlot, FramePlan, FrameStats, PhaseTimes, Upload};
 use crate::cpu_cache::CpuCache;
 use crate::fade::Displayed;
 use crate::failures::FetchKind;
@@ -47,6 +47,23 @@ pub struct FrameInput<'a> {
     pub time: Option<f64>,
 }
 
+/// Milliseconds between successive calls (the phases' times).
+struct Lap(Instant);
+
+impl Lap {
+    fn start() -> Lap {
+        Lap(Instant::now())
+    }
+
+    /// Milliseconds since the last call (or the start).
+    fn next(&mut self) -> f64 {
+        let now = Instant::now();
+        let ms = (now - self.0).as_secs_f64() * 1e3;
+        self.0 = now;
+        ms
+    }
+}
+
 /// The cut placed in the pool: every leaf with its slot where it has one.
 struct Placed {
     cut: Vec<CutLeaf>,
@@ -81,14 +98,23 @@ impl BrickManager {
         filter: Option<&mut dyn SplitFilter>,
     ) -> FramePlan {
         let now = self.clock.now();
+        let mut lap = Lap::start();
+        let mut phases = PhaseTimes::default();
         self.poll(input.frame, now);
+        phases.poll_ms = lap.next();
         let refined = self.refine_cut(input, filter);
+        phases.refine_ms = lap.next();
         let shown = self.display(&refined, input.time);
+        phases.display_ms = lap.next();
         let mut placed = self.place(&shown, input.frame);
-        let mut fades = self.fade_slots(&shown, &placed.cut);
+        let mut fades = self.fade_slots(&shown);
+        phases.place_ms = lap.next();
         let requested = self.request(&refined, &mut placed);
+        phases.request_ms = lap.next();
         fades.append(&mut placed.borrowed);
-        let stats = self.frame_stats(input.frame, &refined, &placed, &fades, &requested);
+        let mut stats = self.frame_stats(input.frame, &refined, &placed, &fades, &requested);
+        phases.stats_ms = lap.next();
+        stats.phases = phases;
         FramePlan {
             cut: placed.cut,
             uploads: placed.uploads,
@@ -349,15 +375,16 @@ impl BrickManager {
 
     /// Phase 5: each fading leaf with its slot and its fallback's; a fade
     /// whose bricks are not both resident is cancelled.
-    fn fade_slots(&mut self, shown: &Displayed, cut: &[CutLeaf]) -> Vec<FadeSlot> {
-        let slot_of: NodeMap<u32> = cut
-            .iter()
-            .filter_map(|l| l.slot().map(|s| (l.key, s)))
-            .collect();
+    ///
+    /// A fading leaf's slot in the cut is its pool slot (`place` gave the
+    /// cut's data leaves theirs and pinned them; fades are never of octants
+    /// drawn from a parent's brick), so the pool is asked for the fading
+    /// leaves alone rather than the cut mapped whole.
+    fn fade_slots(&mut self, shown: &Displayed) -> Vec<FadeSlot> {
         let mut fades = Vec::with_capacity(shown.fades.len());
         for f in &shown.fades {
-            match (slot_of.get(&f.leaf), self.pool.slot_of(f.ancestor)) {
-                (Some(&slot), Some(fallback)) => fades.push(FadeSlot {
+            match (self.pool.slot_of(f.leaf), self.pool.slot_of(f.ancestor)) {
+                (Some(slot), Some(fallback)) => fades.push(FadeSlot {
                     slot,
                     fallback,
                     levels_up: (f.leaf.level - f.ancestor.level) as u32,
@@ -456,6 +483,8 @@ impl BrickManager {
             fading: fades.iter().filter(|f| !f.borrowed).count() as u32,
             holes,
             floor_pinned: self.floor_pinned(),
+            // (Set by `update` once this phase is timed too.)
+            phases: PhaseTimes::default(),
         }
     }
 }

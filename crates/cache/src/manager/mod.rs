@@ -23,7 +23,7 @@ mod tests_lod;
 pub use control::Reconfigured;
 pub use frame::{FrameInput, UNTIMED_FRAME_RATE};
 pub use lod::FadeSlot;
-pub use stats::{FramePlan, FrameStats, Residency, ResidencyCounts, Upload};
+pub use stats::{FramePlan, FrameStats, PhaseTimes, Residency, ResidencyCounts, Upload};
 
 use crate::config::{ConfigError, GpuFormat, OutOfCoreConfig};
 use crate::cpu_cache::CpuCache;

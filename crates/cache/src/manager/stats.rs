@@ -110,6 +110,39 @@ pub struct FrameStats {
     pub holes: u32,
     /// Floor bricks resident and pinned for good.
     pub floor_pinned: u32,
+    /// Where the frame's planning went ([`BrickManager::update`](super::BrickManager::update)'s
+    /// phases, wall time).
+    pub phases: PhaseTimes,
+}
+
+/// The wall time of each phase of one [`BrickManager::update`](super::BrickManager::update),
+/// in milliseconds.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct PhaseTimes {
+    /// What the loader finished, into the caches.
+    pub poll_ms: f64,
+    /// Refinement of the cut.
+    pub refine_ms: f64,
+    /// The displayed cut (fades).
+    pub display_ms: f64,
+    /// Residency: pins, slots, octants lent, the floor, and the fades' slots.
+    pub place_ms: f64,
+    /// The loads wanted, to the loader.
+    pub request_ms: f64,
+    /// The statistics (and the metadata map's trim).
+    pub stats_ms: f64,
+}
+
+impl PhaseTimes {
+    /// The phases' sum.
+    pub fn total_ms(&self) -> f64 {
+        self.poll_ms
+            + self.refine_ms
+            + self.display_ms
+            + self.place_ms
+            + self.request_ms
+            + self.stats_ms
+    }
 }
 
 impl FrameStats {
