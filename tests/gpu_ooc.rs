@@ -358,3 +358,95 @@ fn mixed_levels_show_no_seams() {
         );
     }
 }
+
+/// MIP out of core skips empty space only where the plan's bricks say it
+/// pays (`MipSkipping::WherePays`, the default): the share of their
+/// sub-cells certain to be skipped within each brick
+/// (`brickray_core::mip_skip_counts`, summed over the cut), against
+/// `MIP_SKIP_SHARE_MIN_BRICKS`. On fractal noise (below) a MIP frame with
+/// skipping asked for takes every sample, as without it, while
+/// `MipSkipping::Always` skips (fewer samples, the same image); on a bright
+/// box around a dim core (above) both skip. Images are identical in every
+/// case. The shares are computed here from the store's finest bricks, as
+/// the renderer computes them from the bricks it uploads.
+#[test]
+fn mip_skips_out_of_core_where_the_bricks_say_it_pays() {
+    use brickray::core::{MIP_SKIP_SHARE_MIN_BRICKS, synthetic};
+    use brickray::{MipSkipping, RendererOptions};
+    use brickray_harness::predict::{draw, samples_per_ray};
+    use brickray_reference::psnr;
+    const SIZE: u32 = 96;
+    let n = 64u32;
+    let noise = brickray_harness::scenes::pareto_noise(n);
+    // A bright box 12 voxels thick around noise at a fifth of its level.
+    let shell = synthetic::u8_field(n, |p| {
+        let edge = p.iter().map(|&c| c.min(n - 1 - c)).min().unwrap_or(0);
+        // Below the top of the range, which would end MIP rays at once.
+        if edge < 12 {
+            0.8
+        } else {
+            0.2 * synthetic::fractal_noise(p.map(f64::from), 16.0, 3)
+        }
+    });
+    let tf = TransferFunction::ramp(0.0, 1.0, 1.0);
+    let g = gpu();
+    let target = Offscreen::new(&g.device, SIZE, SIZE);
+    for (name, vol, pays) in [("noise", &noise, false), ("shell", &shell, true)] {
+        let dir = tempfile::tempdir().unwrap();
+        let source = store_of(vol, &dir);
+        // The share over the finest bricks (the converged cut at 0 px).
+        let share = brickray_harness::finest_bricks_mip_share(source.as_ref()).unwrap();
+        assert_eq!(
+            share >= MIP_SKIP_SHARE_MIN_BRICKS,
+            pays,
+            "{name}: share {share}"
+        );
+        let d = vol.desc();
+        let frame = VolumeFrame::centered(d.dims, d.spacing);
+        let camera = Camera::orbit(frame.center(), 2.0, 0.5, 0.3);
+        let desc = |ess: bool| FrameDesc {
+            settings: RenderSettings {
+                mode: RenderMode::Mip,
+                accel: brickray::Accel {
+                    early_termination: Some(0.99),
+                    empty_space_skipping: ess,
+                },
+                ..Default::default()
+            },
+            ..FrameDesc::new(camera, frame, SIZE, SIZE)
+        };
+        let mut samples = Vec::new();
+        let mut images = Vec::new();
+        for rule in [MipSkipping::WherePays, MipSkipping::Always] {
+            let options = RendererOptions {
+                mip_skipping: rule,
+                ..Default::default()
+            };
+            let mut r = VolumeRenderer::with_options(&g.device, targets(), options).unwrap();
+            r.set_volume_source(&g.device, &g.queue, source.clone(), finest())
+                .unwrap();
+            r.set_transfer_function(&g.device, &g.queue, &tf).unwrap();
+            brickray_harness::draw_until_settled(g, &mut r, &target, &desc(true), 200)
+                .unwrap()
+                .expect("out of core settles");
+            for ess in [false, true] {
+                let f = draw(g, &mut r, &target, &desc(ess)).unwrap();
+                samples.push(samples_per_ray(&f.samples));
+                images.push(f.color);
+            }
+        }
+        eprintln!(
+            "{name} (share within bricks {share:.3}): samples per ray, rule off/on {:.1}/{:.1}, always off/on {:.1}/{:.1}",
+            samples[0], samples[1], samples[2], samples[3]
+        );
+        for img in &images[1..] {
+            assert_eq!(psnr(img, &images[0]), f64::INFINITY, "{name}: identical");
+        }
+        assert!(samples[3] < 0.9 * samples[2], "{name}: always skips");
+        if pays {
+            assert!(samples[1] < 0.8 * samples[0], "{name}: the rule skips");
+        } else {
+            assert_eq!(samples[1], samples[0], "{name}: the rule does not skip");
+        }
+    }
+}

@@ -1,13 +1,17 @@
-//! The `skipping` suite: whether MIP's empty-space skipping pays in core, and
-//! whether the rule that decides it from the macro cells
-//! (`brickray_core::mip_skipping_pays`, `MipSkipping::WherePays`) chooses
-//! right.
+//! The `skipping` suite: whether MIP's empty-space skipping pays, in core and
+//! out of core, and whether the rules that decide it (`MipSkipping::WherePays`:
+//! in core from the macro cells, `brickray_core::mip_skipping_pays`; out of
+//! core from the sub-cells of the cut's bricks,
+//! `brickray_core::MIP_SKIP_SHARE_MIN_BRICKS`) choose right.
 //!
 //! Per volume (fractal noise and Marschner-Lobb, 128^3, and the shared
 //! volumes where present): the share of cells certain to be skipped
-//! (`MacroCellGrid::mip_skip_share`), the rule's decision, and MIP frames
-//! without skipping, with it always (`MipSkipping::Always`), and as the rule
-//! decides, interleaved round by round; samples per ray of each.
+//! (`MacroCellGrid::mip_skip_share`; out of core, within each finest brick,
+//! `brickray_harness::finest_bricks_mip_share`), the rule's decision, and
+//! MIP frames without skipping, with it always (`MipSkipping::Always`), and
+//! as the rule decides, interleaved round by round; samples per ray of each.
+//! Out of core the volume is a brick store (bricks of 32) drawn at its
+//! finest level, converged before timing.
 
 use crate::report::{RunInfo, Timing, interleave};
 use crate::runner::{Runner, renderer_in_core, round2};
@@ -16,7 +20,7 @@ use brickray_core::{
     VolumeFrame, synthetic,
 };
 use brickray_harness::GpuContext;
-use brickray_render::{MipSkipping, RendererOptions};
+use brickray_render::{MipSkipping, OutOfCoreConfig, RendererOptions, VolumeRenderer};
 use serde::Serialize;
 
 /// The suite's options.
@@ -58,6 +62,12 @@ pub(crate) struct SkippingResult {
     #[serde(flatten)]
     run: RunInfo,
     rows: Vec<Row>,
+    /// The same out of core (`skip_share`: within each finest brick).
+    ooc_rows: Vec<Row>,
+    /// Out of core, as the three figures below.
+    ooc_rule_over_off_max: f64,
+    ooc_always_over_off_max: f64,
+    ooc_wrong_decisions: usize,
     /// The largest rule over no-skipping ratio.
     rule_over_off_max: f64,
     /// The largest always-skipping over no-skipping ratio.
@@ -100,19 +110,16 @@ pub(crate) fn run(args: &Args) -> Result<SkippingResult, String> {
     let (rounds, size) = (args.rounds, args.size);
     let gpu = GpuContext::new().map_err(|e| e.to_string())?;
     println!("adapter: {}", gpu.describe());
-    println!("MIP in core, {size}x{size}, {rounds} interleaved rounds");
+    println!("MIP, {size}x{size}, {rounds} interleaved rounds");
     println!(
-        "  {:<28} {:>6} {:>6} {:>9} {:>16} {:>16}",
+        "  {:<36} {:>6} {:>6} {:>9} {:>16} {:>16}",
         "volume", "share", "rule", "off ms", "always ms (x)", "rule ms (x)"
     );
     let run = Runner::new(&gpu, size)?;
-    let mut rows = Vec::new();
-    for (name, vol) in volumes(args.side) {
+    let dir = tempfile::tempdir().map_err(|e| e.to_string())?;
+    let (mut rows, mut ooc_rows) = (Vec::new(), Vec::new());
+    for (i, (name, vol)) in volumes(args.side).into_iter().enumerate() {
         let grid = MacroCellGrid::build(&vol, 8);
-        let (share, rule_skips) = (
-            grid.mip_skip_share(),
-            brickray_core::mip_skipping_pays(&grid),
-        );
         let d = vol.desc();
         let frame = VolumeFrame::centered(d.dims, d.spacing);
         let camera = Camera::orbit(frame.center(), 2.0, 0.5, 0.3);
@@ -121,69 +128,151 @@ pub(crate) fn run(args: &Args) -> Result<SkippingResult, String> {
             mip_skipping,
             ..Default::default()
         };
+        let share = grid.mip_skip_share();
         let mut always = renderer_in_core(&gpu, with(MipSkipping::Always), &vol, &tf)?;
         let mut rule = renderer_in_core(&gpu, with(MipSkipping::WherePays), &vol, &tf)?;
-        let settings = |ess: bool| RenderSettings {
-            mode: RenderMode::Mip,
-            accel: Accel {
-                early_termination: Some(0.99),
-                empty_space_skipping: ess,
+        let row = measure(&run, &mut always, &mut rule, (camera, frame), rounds, share)?;
+        report(
+            &name,
+            Row {
+                volume: name.clone(),
+                dims: vol.dims(),
+                rule_skips: brickray_core::mip_skipping_pays(&grid),
+                ..row
             },
-            ..Default::default()
-        };
-        // Warm-up, with the samples per ray.
-        let off_shot = run.frame(&mut always, camera, frame, settings(false), true)?;
-        let on_shot = run.frame(&mut always, camera, frame, settings(true), true)?;
-        run.frame(&mut rule, camera, frame, settings(true), false)?;
-        let shots = interleave(rounds, 3, |i| match i {
-            0 => run.frame(&mut always, camera, frame, settings(false), false),
-            1 => run.frame(&mut always, camera, frame, settings(true), false),
-            _ => run.frame(&mut rule, camera, frame, settings(true), false),
-        })?;
-        // Wall time (two renderers alternate, as in the shading suite).
-        let t: Vec<Timing> = shots
-            .iter()
-            .map(|s| Timing::of_times(s.iter().map(|f| (f.ms, None))))
-            .collect();
-        let row = Row {
-            volume: name,
-            dims: vol.dims(),
-            skip_share: (share * 1000.0).round() / 1000.0,
-            rule_skips,
-            always_over_off: round2(t[1].ms / t[0].ms),
-            rule_over_off: round2(t[2].ms / t[0].ms),
-            off: t[0],
-            always: t[1],
-            rule: t[2],
-            samples_per_ray_off: round2(off_shot.samples),
-            samples_per_ray_always: round2(on_shot.samples),
-        };
-        println!(
-            "  {:<28} {:>6.3} {:>6} {:>9.1} {:>9.1} ({:.2}) {:>9.1} ({:.2})",
-            row.volume,
-            row.skip_share,
-            if row.rule_skips { "skip" } else { "off" },
-            row.off.ms,
-            row.always.ms,
-            row.always_over_off,
-            row.rule.ms,
-            row.rule_over_off
+            &mut rows,
         );
-        rows.push(row);
+        // Out of core: a brick store at its finest level.
+        let src = brickray_harness::store_of(&vol, &dir.path().join(format!("{i}.brs")));
+        let share = brickray_harness::finest_bricks_mip_share(src.as_ref())?;
+        let ooc = |mip_skipping| -> Result<_, String> {
+            let mut r = VolumeRenderer::with_options(
+                &gpu.device,
+                brickray_harness::target_desc(),
+                with(mip_skipping),
+            )
+            .map_err(|e| e.to_string())?;
+            let config = OutOfCoreConfig {
+                tolerance_px: 0.0,
+                upload_budget_bytes: 1 << 30,
+                ..Default::default()
+            };
+            r.set_volume_source(&gpu.device, &gpu.queue, src.clone(), config)
+                .map_err(|e| e.to_string())?;
+            r.set_transfer_function(&gpu.device, &gpu.queue, &tf)
+                .map_err(|e| e.to_string())?;
+            match run.converge(&mut r, camera, frame, settings(true), 300)? {
+                (Some(_), _) => Ok(r),
+                (None, _) => Err(format!("{name}: out of core did not converge")),
+            }
+        };
+        let (mut always, mut rule) = (ooc(MipSkipping::Always)?, ooc(MipSkipping::WherePays)?);
+        let row = measure(&run, &mut always, &mut rule, (camera, frame), rounds, share)?;
+        let label = format!("{name}, out of core");
+        report(
+            &label,
+            Row {
+                volume: name,
+                dims: vol.dims(),
+                rule_skips: share >= brickray_core::MIP_SKIP_SHARE_MIN_BRICKS,
+                ..row
+            },
+            &mut ooc_rows,
+        );
     }
-    let max = |f: fn(&Row) -> f64| rows.iter().map(f).fold(f64::NEG_INFINITY, f64::max);
-    let wrong_decisions = rows
+    let (max, wrong) = (max_ratio, wrong_decisions);
+    Ok(SkippingResult {
+        run: RunInfo::new(&gpu, size, rounds, "procedural and shared volumes"),
+        rule_over_off_max: max(&rows, |r| r.rule_over_off),
+        always_over_off_max: max(&rows, |r| r.always_over_off),
+        wrong_decisions: wrong(&rows),
+        ooc_rule_over_off_max: max(&ooc_rows, |r| r.rule_over_off),
+        ooc_always_over_off_max: max(&ooc_rows, |r| r.always_over_off),
+        ooc_wrong_decisions: wrong(&ooc_rows),
+        rows,
+        ooc_rows,
+    })
+}
+
+/// MIP with or without empty-space skipping.
+fn settings(ess: bool) -> RenderSettings {
+    RenderSettings {
+        mode: RenderMode::Mip,
+        accel: Accel {
+            early_termination: Some(0.99),
+            empty_space_skipping: ess,
+        },
+        ..Default::default()
+    }
+}
+
+/// No skipping, always and the rule, interleaved: `always` draws the first
+/// two (without and with skipping asked for), `rule` the third. The row's
+/// volume, dims and decision are left for the caller.
+fn measure(
+    run: &Runner<'_>,
+    always: &mut VolumeRenderer,
+    rule: &mut VolumeRenderer,
+    (camera, frame): (Camera, VolumeFrame),
+    rounds: usize,
+    share: f64,
+) -> Result<Row, String> {
+    // Warm-up, with the samples per ray.
+    let off_shot = run.frame(always, camera, frame, settings(false), true)?;
+    let on_shot = run.frame(always, camera, frame, settings(true), true)?;
+    run.frame(rule, camera, frame, settings(true), false)?;
+    let shots = interleave(rounds, 3, |i| match i {
+        0 => run.frame(always, camera, frame, settings(false), false),
+        1 => run.frame(always, camera, frame, settings(true), false),
+        _ => run.frame(rule, camera, frame, settings(true), false),
+    })?;
+    // Wall time (two renderers alternate, as in the shading suite).
+    let t: Vec<Timing> = shots
         .iter()
+        .map(|s| Timing::of_times(s.iter().map(|f| (f.ms, None))))
+        .collect();
+    Ok(Row {
+        volume: String::new(),
+        dims: [0; 3],
+        skip_share: (share * 1000.0).round() / 1000.0,
+        rule_skips: false,
+        always_over_off: round2(t[1].ms / t[0].ms),
+        rule_over_off: round2(t[2].ms / t[0].ms),
+        off: t[0],
+        always: t[1],
+        rule: t[2],
+        samples_per_ray_off: round2(off_shot.samples),
+        samples_per_ray_always: round2(on_shot.samples),
+    })
+}
+
+/// Prints a row and keeps it.
+fn report(label: &str, row: Row, rows: &mut Vec<Row>) {
+    println!(
+        "  {:<36} {:>6.3} {:>6} {:>9.1} {:>9.1} ({:.2}) {:>9.1} ({:.2})",
+        label,
+        row.skip_share,
+        if row.rule_skips { "skip" } else { "off" },
+        row.off.ms,
+        row.always.ms,
+        row.always_over_off,
+        row.rule.ms,
+        row.rule_over_off
+    );
+    rows.push(row);
+}
+
+fn max_ratio(rows: &[Row], f: fn(&Row) -> f64) -> f64 {
+    rows.iter().map(f).fold(f64::NEG_INFINITY, f64::max)
+}
+
+/// Volumes where the rule chose the slower of skipping and not (by more
+/// than 5%).
+fn wrong_decisions(rows: &[Row]) -> usize {
+    rows.iter()
         .filter(|r| {
             (r.rule_skips && r.always_over_off > 1.05)
                 || (!r.rule_skips && r.always_over_off < 0.95)
         })
-        .count();
-    Ok(SkippingResult {
-        run: RunInfo::new(&gpu, size, rounds, "procedural and shared volumes"),
-        rule_over_off_max: max(|r| r.rule_over_off),
-        always_over_off_max: max(|r| r.always_over_off),
-        wrong_decisions,
-        rows,
-    })
+        .count()
 }

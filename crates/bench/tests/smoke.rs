@@ -229,22 +229,30 @@ fn the_skipping_suite_runs() {
             "rule_over_off_max",
             "always_over_off_max",
             "wrong_decisions",
+            "ooc_rows",
+            "ooc_rule_over_off_max",
+            "ooc_always_over_off_max",
+            "ooc_wrong_decisions",
         ],
     );
-    // The two procedural volumes, and the shared ones where present.
+    // The two procedural volumes, and the shared ones where present, in
+    // core and out of core.
     assert!(rows(&fig, "rows").len() >= 2, "{fig:?}");
-    has_fields(
-        &fig,
-        "rows",
-        &[
-            "volume",
-            "skip_share",
-            "rule_skips",
-            "off",
-            "always",
-            "rule",
-        ],
-    );
+    assert_eq!(rows(&fig, "rows").len(), rows(&fig, "ooc_rows").len());
+    for key in ["rows", "ooc_rows"] {
+        has_fields(
+            &fig,
+            key,
+            &[
+                "volume",
+                "skip_share",
+                "rule_skips",
+                "off",
+                "always",
+                "rule",
+            ],
+        );
+    }
 }
 
 #[test]

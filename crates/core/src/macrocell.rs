@@ -101,44 +101,58 @@ impl MacroCellGrid {
     }
 
     /// The share of cells that MIP's skipping is certain to skip, over rays
-    /// along each axis in both directions, one per column of cells: a ray
-    /// skips a cell whose maximum is at most its running maximum, and after
-    /// sampling a cell its running maximum is at least that cell's minimum
-    /// (a lower bound on what skipping saves; 0 for an empty grid). What
+    /// along each axis in both directions, one per column of cells
+    /// ([`mip_skip_counts`]; 0 for an empty grid). What
     /// [`mip_skipping_pays`] decides from.
     pub fn mip_skip_share(&self) -> f64 {
-        let n = self.dims.map(|d| d as usize);
-        let idx = |c: [usize; 3]| (c[2] * n[1] + c[1]) * n[0] + c[0];
-        let (mut skipped, mut all) = (0usize, 0usize);
-        for axis in 0..3 {
-            let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
-            for reverse in [false, true] {
-                for i in 0..n[u] {
-                    for j in 0..n[v] {
-                        let mut running = f32::NEG_INFINITY;
-                        for k in 0..n[axis] {
-                            let mut c = [0usize; 3];
-                            c[axis] = if reverse { n[axis] - 1 - k } else { k };
-                            c[u] = i;
-                            c[v] = j;
-                            let [lo, hi] = self.ranges[idx(c)];
-                            all += 1;
-                            if hi <= running {
-                                skipped += 1;
-                            } else {
-                                running = running.max(lo);
-                            }
-                        }
-                    }
-                }
-            }
-        }
+        let [skipped, all] = mip_skip_counts(self.dims, &self.ranges);
         if all == 0 {
             0.0
         } else {
             skipped as f64 / all as f64
         }
     }
+}
+
+/// Of a grid of `dims` cells with these normalized `[min, max]` ranges (x
+/// fastest), `[skipped, all]`: the cells that MIP's skipping is certain to
+/// skip over rays along each axis in both directions, one per column of
+/// cells, and the cells those rays cross. A ray skips a cell whose maximum
+/// is at most its running maximum, and after sampling a cell its running
+/// maximum is at least that cell's minimum (so `skipped` is a lower bound
+/// on what skipping saves). Ranges missing from a short slice count as
+/// never skipped.
+pub fn mip_skip_counts(dims: [u32; 3], ranges: &[[f32; 2]]) -> [u64; 2] {
+    let n = dims.map(|d| d as usize);
+    let idx = |c: [usize; 3]| (c[2] * n[1] + c[1]) * n[0] + c[0];
+    let (mut skipped, mut all) = (0u64, 0u64);
+    for axis in 0..3 {
+        let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
+        for reverse in [false, true] {
+            for i in 0..n[u] {
+                for j in 0..n[v] {
+                    let mut running = f32::NEG_INFINITY;
+                    for k in 0..n[axis] {
+                        let mut c = [0usize; 3];
+                        c[axis] = if reverse { n[axis] - 1 - k } else { k };
+                        c[u] = i;
+                        c[v] = j;
+                        let [lo, hi] = ranges
+                            .get(idx(c))
+                            .copied()
+                            .unwrap_or([f32::NEG_INFINITY, f32::INFINITY]);
+                        all += 1;
+                        if hi <= running {
+                            skipped += 1;
+                        } else {
+                            running = running.max(lo);
+                        }
+                    }
+                }
+            }
+        }
+    }
+    [skipped, all]
 }
 
 /// The least [`MacroCellGrid::mip_skip_share`] at which MIP's empty-space
@@ -156,6 +170,20 @@ pub const MIP_SKIP_SHARE_MIN: f64 = 0.25;
 pub fn mip_skipping_pays(grid: &MacroCellGrid) -> bool {
     grid.mip_skip_share() >= MIP_SKIP_SHARE_MIN
 }
+
+/// The least share of sub-cells certain to be skipped, counted within each
+/// brick of an out-of-core cut ([`mip_skip_counts`] over a brick's
+/// sub-cells, the running maximum starting afresh at each brick, summed
+/// over the cut's bricks), at which MIP's empty-space skipping is used out
+/// of core. Within a brick the count is a lower bound of the volume-wide
+/// one (a ray enters each brick knowing nothing of the last), but it
+/// separates the same volumes (`brickray-bench skipping`, 2026-12-06, bricks
+/// of 32 at the finest level, docs/benchmarks.md): fractal noise 0.028,
+/// Marschner-Lobb 0.000, the head CT 0.005, the nuclei 0.001 and the cryo-ET
+/// tomogram 0.003, where out-of-core skipping cost 1.03-1.39x the frame on
+/// lavapipe, against the pycortex T1 MRI 0.391 and the Colin27 MRI 0.305,
+/// where it took 0.61-0.79x. The threshold lies between.
+pub const MIP_SKIP_SHARE_MIN_BRICKS: f64 = 0.1;
 
 /// [`MacroCellGrid::empty_distance`] of a grid of `dims` cells whose
 /// emptiness is given per cell (x fastest): what several grids over one
@@ -310,6 +338,22 @@ mod tests {
             ..constant
         };
         assert_eq!(none.mip_skip_share(), 0.0);
+    }
+
+    /// The counts behind the share: a brick's 2 x 2 x 2 sub-cells, a bright
+    /// one in a corner of dim ones. Rays along each axis cross 48 cells (4
+    /// columns x 2 directions x 3 axes, 2 cells each); a dim cell is skipped
+    /// only after the bright one, in its column and one direction (one per
+    /// axis: 3), not after another dim one (its maximum 0.2 is above the
+    /// running 0.1); a slice too short never skips.
+    #[test]
+    fn mip_skip_counts_of_a_brick() {
+        let mut ranges = vec![[0.1f32, 0.2]; 8];
+        ranges[0] = [0.9, 1.0];
+        let [skipped, all] = mip_skip_counts([2; 3], &ranges);
+        assert_eq!(all, 48);
+        assert_eq!(skipped, 3);
+        assert_eq!(mip_skip_counts([2; 3], &ranges[..1]), [0, 48]);
     }
 
     proptest! {

@@ -226,6 +226,33 @@ pub fn store_of(
     std::sync::Arc::new(brickray_store::open(path).expect("open the brick store"))
 }
 
+/// Of the sub-cells of `source`'s finest bricks, the share MIP's skipping is
+/// certain to skip within each brick (`brickray_core::mip_skip_counts` per
+/// brick, summed): what the out-of-core renderer decides MIP's skipping from
+/// once its cut is the finest level (`MIP_SKIP_SHARE_MIN_BRICKS`).
+pub fn finest_bricks_mip_share(source: &dyn brickray_core::BrickSource) -> Result<f64, String> {
+    use brickray_core::{NodeKey, mip_skip_counts, sub_cell_ranges, sub_cells_per_axis};
+    let layout = source.layout();
+    let level = layout.levels.saturating_sub(1);
+    let cells = sub_cells_per_axis(layout.brick);
+    let grid = layout.level_dims(level).map(|d| d.div_ceil(layout.brick));
+    let mut counts = [0u64; 2];
+    let mut bytes = vec![0u8; layout.brick_bytes()];
+    for z in 0..grid[2] {
+        for y in 0..grid[1] {
+            for x in 0..grid[0] {
+                let key = NodeKey::new(level, x, y, z);
+                source
+                    .read_brick(key, &mut bytes)
+                    .map_err(|e| e.to_string())?;
+                let c = mip_skip_counts([cells; 3], &sub_cell_ranges(layout, &bytes, cells));
+                counts = [counts[0] + c[0], counts[1] + c[1]];
+            }
+        }
+    }
+    Ok(counts[0] as f64 / counts[1].max(1) as f64)
+}
+
 /// A colour (`Rgba8Unorm`) and depth (`Depth32Float`) target pair, as a host
 /// application would have, with read-back. With `samples > 1` the attachments
 /// are multisampled and the colour resolves into [`Offscreen::color`].

@@ -94,19 +94,23 @@ pub struct RendererOptions {
     /// How shaded DVR of a volume in core takes its gradients (default:
     /// precomputed per voxel, [`GradientSource::Precomputed`]).
     pub gradients: GradientSource,
-    /// When MIP of a volume in core skips empty space (default: where its
-    /// macro cells say it pays, [`MipSkipping::WherePays`]).
+    /// When MIP skips empty space (default: where the volume's macro cells,
+    /// or out of core the cut's bricks, say it pays, [`MipSkipping::WherePays`]).
     pub mip_skipping: MipSkipping,
 }
 
-/// When MIP of a volume in core uses empty-space skipping (with
-/// `Accel::empty_space_skipping` on; off, it never does).
+/// When MIP uses empty-space skipping (with `Accel::empty_space_skipping`
+/// on; off, it never does). The image is the same either way.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub enum MipSkipping {
-    /// Where the volume's macro cells make at least
+    /// In core, where the volume's macro cells make at least
     /// [`brickray_core::MIP_SKIP_SHARE_MIN`] of the cells certain to be
-    /// skipped (`brickray_core::mip_skipping_pays`, decided at set-up):
-    /// below, skipping cost 1.2-2x the frame on lavapipe.
+    /// skipped (`brickray_core::mip_skipping_pays`, decided at set-up); out
+    /// of core, each frame, where the sub-cells of the bricks the frame
+    /// draws make at least [`brickray_core::MIP_SKIP_SHARE_MIN_BRICKS`] of
+    /// them certain to be skipped within their brick
+    /// (`brickray_core::mip_skip_counts`; a multi-channel volume always
+    /// skips). Below, skipping cost 1.03-2x the frame on lavapipe.
     #[default]
     WherePays,
     /// Whenever the settings ask for it.
@@ -331,7 +335,7 @@ impl VolumeRenderer {
         let desc = layout.volume;
         check_value_range(desc.value_range)?;
         self.drop_volume();
-        let b = OutOfCore::new(device, volume.clone())?;
+        let b = OutOfCore::new(device, volume.clone(), self.options.mip_skipping)?;
         self.backend = Some(Backend::OutOfCore(Box::new(b)));
         self.volume_dims = Some(desc.dims);
         self.value_range = desc.value_range;

@@ -16,7 +16,7 @@ use brickray_cache::{
     FadeSlot, GpuFormat, OutOfCoreConfig, StreamError, StreamFrame, StreamPlan, StreamStats,
     Streamer, Upload,
 };
-use brickray_core::{BrickSource, OctreeLayout};
+use brickray_core::{BrickSource, NodeKey, OctreeLayout};
 use brickray_index::Splits;
 use parking_lot::{Mutex, MutexGuard};
 use std::sync::Arc;
@@ -71,6 +71,13 @@ struct Pool {
     sub_cells: wgpu::Buffer,
     /// Slots whose rows carry a fade (cleared before the next frame's fades).
     faded: Vec<u32>,
+    /// Per slot, of its brick's sub-cells, `[skipped, all]` by MIP's
+    /// skipping over axis rays within the brick
+    /// (`brickray_core::mip_skip_counts`); `None` for a multi-channel
+    /// volume (its MIP always skips).
+    mip_cells: Option<Vec<[u64; 2]>>,
+    /// Sub-cells per brick axis.
+    sub_cells_per_axis: u32,
 }
 
 impl Pool {
@@ -110,6 +117,8 @@ impl Pool {
             slots_dirty: true,
             sub_cells,
             faded: Vec::new(),
+            mip_cells: (gpu.channel_count == 1).then(|| vec![[0, 0]; slot_count as usize]),
+            sub_cells_per_axis: gpu.sub_cells_per_axis,
         })
     }
 
@@ -181,6 +190,14 @@ impl Pool {
         }
         let cells: &[u8] = bytemuck::cast_slice(&b.sub_cells);
         queue.write_buffer(&self.sub_cells, up.slot as u64 * cells.len() as u64, cells);
+        if let Some(m) = self
+            .mip_cells
+            .as_mut()
+            .and_then(|m| m.get_mut(up.slot as usize))
+        {
+            let n = self.sub_cells_per_axis;
+            *m = brickray_core::mip_skip_counts([n; 3], &b.sub_cells);
+        }
         if let Some(s) = self.slots_cpu.get_mut(up.slot as usize) {
             let o = up.atlas_offset;
             *s = SlotInfo {
@@ -326,6 +343,23 @@ impl Shared {
     /// How the atlas stores the volume.
     pub(crate) fn gpu_format(&self) -> &GpuFormat {
         &self.gpu
+    }
+
+    /// Of the sub-cells of the bricks in `leaves` (`(slot, node)`), the
+    /// share MIP's skipping is certain to skip within each brick
+    /// (`brickray_core::MIP_SKIP_SHARE_MIN_BRICKS`); `None` for a
+    /// multi-channel volume, and 0 for no bricks.
+    pub(crate) fn mip_skip_share(&self, leaves: &[(u32, NodeKey)]) -> Option<f64> {
+        let cells = self.pool.mip_cells.as_ref()?;
+        let [skipped, all] = leaves
+            .iter()
+            .filter_map(|&(slot, _)| cells.get(slot as usize))
+            .fold([0u64; 2], |a, c| [a[0] + c[0], a[1] + c[1]]);
+        Some(if all == 0 {
+            0.0
+        } else {
+            skipped as f64 / all as f64
+        })
     }
 
     /// True when the kernel must measure visible weights (the metric ranks

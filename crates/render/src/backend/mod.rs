@@ -59,7 +59,8 @@ pub(crate) trait VolumeBackend: std::fmt::Debug {
     }
     /// False where MIP's empty-space skipping costs more than it saves (in
     /// core, decided from the macro cells at set-up,
-    /// `brickray_core::mip_skipping_pays`): MIP frames then march without it.
+    /// `brickray_core::mip_skipping_pays`; out of core, from the sub-cells of
+    /// the bricks of the plan applied last): MIP frames then march without it.
     fn mip_skipping(&self) -> bool {
         true
     }

@@ -38,6 +38,12 @@ pub(crate) struct OutOfCore {
     stats: OutOfCoreStats,
     /// A multi-channel volume's classification (ooc_channels.wgsl).
     channels: Option<OocChannels>,
+    /// When MIP skips empty space ([`crate::MipSkipping`]).
+    mip_policy: crate::MipSkipping,
+    /// Whether this frame's MIP skips: by the policy, or where the plan's
+    /// bricks make `brickray_core::MIP_SKIP_SHARE_MIN_BRICKS` of their
+    /// sub-cells certain to be skipped.
+    mip_skipping: bool,
 }
 
 impl std::fmt::Debug for OutOfCore {
@@ -54,6 +60,7 @@ impl OutOfCore {
     pub(crate) fn new(
         device: &wgpu::Device,
         volume: StreamedVolume,
+        mip_policy: crate::MipSkipping,
     ) -> Result<OutOfCore, RenderError> {
         check_ooc_limits(device)?;
         let channels = {
@@ -102,6 +109,8 @@ impl OutOfCore {
             format,
             stats: OutOfCoreStats::default(),
             channels,
+            mip_policy,
+            mip_skipping: true,
         })
     }
 
@@ -184,8 +193,14 @@ impl OutOfCore {
             )?;
             self.bound = s.generation;
         }
-        drop(s);
         let plan = &planned.plan;
+        // MIP skips where the plan's bricks say it pays (a sum over the
+        // cut's slots; the image is the same either way, only the time
+        // differs), or always as the policy or a multi-channel volume asks.
+        self.mip_skipping = self.mip_policy == crate::MipSkipping::Always
+            || s.mip_skip_share(&plan.leaves)
+                .is_none_or(|share| share >= brickray_core::MIP_SKIP_SHARE_MIN_BRICKS);
+        drop(s);
         self.frame = plan.frame;
         self.leaves.clone_from(&plan.leaves);
         self.queries = plan.stats.policy.occlusion_queries();
@@ -313,6 +328,10 @@ impl VolumeBackend for OutOfCore {
 
     fn labels(&self) -> bool {
         self.volume.lock().layout.volume.kind.is_labels()
+    }
+
+    fn mip_skipping(&self) -> bool {
+        self.mip_skipping
     }
 
     fn spread(&self) -> bool {
