@@ -50,11 +50,15 @@ impl Scene<'_> {
     /// Renders on the GPU into a fresh target; returns RGBA8 and depth.
     fn gpu(&self) -> (Vec<u8>, Vec<f32>) {
         let g = gpu();
-        // MIP skips whenever the settings ask, so that the accelerations'
-        // test exercises it on every volume (by default the head CT's macro
-        // cells turn it off; mip_skips_where_the_macro_cells_say_it_pays).
+        // MIP and DVR skip whenever the settings ask, so that the
+        // accelerations' test exercises skipping on every volume and TF (by
+        // default the head CT's macro cells turn MIP's off, and a TF that
+        // leaves few cells transparent DVR's;
+        // mip_skips_where_the_macro_cells_say_it_pays,
+        // dvr_skips_where_enough_cells_are_transparent).
         let options = brickray::RendererOptions {
-            mip_skipping: brickray::MipSkipping::Always,
+            mip_skipping: brickray::SkipRule::Always,
+            dvr_skipping: brickray::SkipRule::Always,
             ..Default::default()
         };
         let mut r = VolumeRenderer::with_options(&g.device, targets(), options).unwrap();
@@ -503,16 +507,16 @@ fn missing_texture_features_fall_back() {
 }
 
 /// MIP in core skips empty space only where the volume's macro cells say it
-/// pays (`MipSkipping::WherePays`, the default): on fractal noise (share of
+/// pays (`SkipRule::WherePays`, the default): on fractal noise (share of
 /// cells certain to be skipped 0.14, below `MIP_SKIP_SHARE_MIN`) a MIP frame
 /// with skipping asked for takes every sample, as without it, while
-/// `MipSkipping::Always` skips (fewer samples, the same image); on a bright
+/// `SkipRule::Always` skips (fewer samples, the same image); on a bright
 /// box around a dim core (share above the threshold) both skip. Images are
 /// identical in every case.
 #[test]
 fn mip_skips_where_the_macro_cells_say_it_pays() {
     use brickray::core::{MIP_SKIP_SHARE_MIN, MacroCellGrid, synthetic};
-    use brickray::{MipSkipping, RendererOptions, Viewport};
+    use brickray::{RendererOptions, SkipRule, Viewport};
     use brickray_reference::psnr;
     const SIZE: u32 = 96;
     let n = 64u32;
@@ -561,7 +565,7 @@ fn mip_skips_where_the_macro_cells_say_it_pays() {
         };
         let mut samples = Vec::new();
         let mut images = Vec::new();
-        for rule in [MipSkipping::WherePays, MipSkipping::Always] {
+        for rule in [SkipRule::WherePays, SkipRule::Always] {
             let options = RendererOptions {
                 mip_skipping: rule,
                 ..Default::default()
@@ -587,6 +591,101 @@ fn mip_skips_where_the_macro_cells_say_it_pays() {
             assert!(samples[1] < 0.8 * samples[0], "{name}: the rule skips");
         } else {
             assert_eq!(samples[1], samples[0], "{name}: the rule does not skip");
+        }
+    }
+}
+
+/// DVR in core skips empty space only where enough of the volume's macro
+/// cells are transparent through the transfer function
+/// (`SkipRule::WherePays`, the default; `DVR_SKIP_SHARE_MIN`): on fractal
+/// noise through a ramp that leaves a few cells transparent (below the
+/// threshold) a DVR frame with skipping asked for takes every sample, as
+/// without it, while `SkipRule::Always` skips those cells (fewer samples);
+/// through a ramp that leaves many transparent (above) both skip. Images
+/// are identical in every case.
+#[test]
+fn dvr_skips_where_enough_cells_are_transparent() {
+    use brickray::core::{DVR_SKIP_SHARE_MIN, MacroCellGrid};
+    use brickray::{RendererOptions, SkipRule, Viewport};
+    use brickray_reference::psnr;
+    const SIZE: u32 = 96;
+    let noise = brickray_harness::scenes::pareto_noise(64);
+    let grid = MacroCellGrid::build(&noise, 8);
+    let g = gpu();
+    let target = Offscreen::new(&g.device, SIZE, SIZE);
+    let d = noise.desc();
+    let frame = VolumeFrame::centered(d.dims, d.spacing);
+    let camera = Camera::orbit(frame.center(), 2.0, 0.5, 0.3);
+    for (from, pays) in [(0.45f32, false), (0.6, true)] {
+        let tf = TransferFunction::ramp(from, 1.0, 0.05);
+        let share = grid
+            .ranges
+            .iter()
+            .filter(|r| tf.is_transparent(r[0], r[1]))
+            .count() as f64
+            / grid.ranges.len() as f64;
+        assert!(share > 0.0, "ramp from {from}: some cells transparent");
+        assert_eq!(
+            share >= DVR_SKIP_SHARE_MIN,
+            pays,
+            "ramp from {from}: share {share}"
+        );
+        let frame_with = |r: &mut VolumeRenderer, ess: bool| {
+            let desc = FrameDesc {
+                camera,
+                frame,
+                viewport: Viewport::full(SIZE, SIZE),
+                settings: RenderSettings {
+                    accel: Accel {
+                        early_termination: Some(0.99),
+                        empty_space_skipping: ess,
+                    },
+                    ..Default::default()
+                },
+                host_depth: None,
+                time: None,
+            };
+            let f = brickray_harness::predict::draw(g, r, &target, &desc).unwrap();
+            (
+                brickray_harness::predict::samples_per_ray(&f.samples),
+                f.color,
+            )
+        };
+        let mut samples = Vec::new();
+        let mut images = Vec::new();
+        for rule in [SkipRule::WherePays, SkipRule::Always] {
+            let options = RendererOptions {
+                dvr_skipping: rule,
+                ..Default::default()
+            };
+            let mut r = VolumeRenderer::with_options(&g.device, targets(), options).unwrap();
+            r.set_volume(&g.device, &g.queue, &noise).unwrap();
+            r.set_transfer_function(&g.device, &g.queue, &tf).unwrap();
+            for ess in [false, true] {
+                let (s, img) = frame_with(&mut r, ess);
+                samples.push(s);
+                images.push(img);
+            }
+        }
+        eprintln!(
+            "ramp from {from} (transparent cells {share:.3}): samples per ray, rule off/on {:.1}/{:.1}, always off/on {:.1}/{:.1}",
+            samples[0], samples[1], samples[2], samples[3]
+        );
+        for img in &images[1..] {
+            assert_eq!(
+                psnr(img, &images[0]),
+                f64::INFINITY,
+                "from {from}: identical"
+            );
+        }
+        assert!(samples[3] < samples[2], "from {from}: always skips");
+        if pays {
+            assert!(samples[1] < samples[0], "from {from}: the rule skips");
+        } else {
+            assert_eq!(
+                samples[1], samples[0],
+                "from {from}: the rule does not skip"
+            );
         }
     }
 }

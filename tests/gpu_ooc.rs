@@ -360,19 +360,19 @@ fn mixed_levels_show_no_seams() {
 }
 
 /// MIP out of core skips empty space only where the plan's bricks say it
-/// pays (`MipSkipping::WherePays`, the default): the share of their
+/// pays (`SkipRule::WherePays`, the default): the share of their
 /// sub-cells certain to be skipped within each brick
 /// (`brickray_core::mip_skip_counts`, summed over the cut), against
 /// `MIP_SKIP_SHARE_MIN_BRICKS`. On fractal noise (below) a MIP frame with
 /// skipping asked for takes every sample, as without it, while
-/// `MipSkipping::Always` skips (fewer samples, the same image); on a bright
+/// `SkipRule::Always` skips (fewer samples, the same image); on a bright
 /// box around a dim core (above) both skip. Images are identical in every
 /// case. The shares are computed here from the store's finest bricks, as
 /// the renderer computes them from the bricks it uploads.
 #[test]
 fn mip_skips_out_of_core_where_the_bricks_say_it_pays() {
     use brickray::core::{MIP_SKIP_SHARE_MIN_BRICKS, synthetic};
-    use brickray::{MipSkipping, RendererOptions};
+    use brickray::{RendererOptions, SkipRule};
     use brickray_harness::predict::{draw, samples_per_ray};
     use brickray_reference::psnr;
     const SIZE: u32 = 96;
@@ -417,7 +417,7 @@ fn mip_skips_out_of_core_where_the_bricks_say_it_pays() {
         };
         let mut samples = Vec::new();
         let mut images = Vec::new();
-        for rule in [MipSkipping::WherePays, MipSkipping::Always] {
+        for rule in [SkipRule::WherePays, SkipRule::Always] {
             let options = RendererOptions {
                 mip_skipping: rule,
                 ..Default::default()

@@ -73,7 +73,14 @@ fn reference(sc: &Scene, s: &RenderSettings, opts: ReferenceOptions<'_>) -> Vec<
 
 fn in_core(sc: &Scene) -> VolumeRenderer {
     let g = gpu();
-    let mut r = VolumeRenderer::new(&g.device, targets()).unwrap();
+    // DVR skips whenever the settings ask, so that the skipping test
+    // exercises it whatever share of the ball's cells the TF leaves
+    // transparent (`dvr_skips_where_enough_cells_are_transparent`).
+    let options = brickray::RendererOptions {
+        dvr_skipping: brickray::SkipRule::Always,
+        ..Default::default()
+    };
+    let mut r = VolumeRenderer::with_options(&g.device, targets(), options).unwrap();
     r.set_volume(&g.device, &g.queue, &sc.vol).unwrap();
     r.set_transfer_function(&g.device, &g.queue, &sc.tf)
         .unwrap();

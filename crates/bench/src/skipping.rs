@@ -1,5 +1,5 @@
 //! The `skipping` suite: whether MIP's empty-space skipping pays, in core and
-//! out of core, and whether the rules that decide it (`MipSkipping::WherePays`:
+//! out of core, and whether the rules that decide it (`SkipRule::WherePays`:
 //! in core from the macro cells, `brickray_core::mip_skipping_pays`; out of
 //! core from the sub-cells of the cut's bricks,
 //! `brickray_core::MIP_SKIP_SHARE_MIN_BRICKS`) choose right.
@@ -8,10 +8,13 @@
 //! volumes where present): the share of cells certain to be skipped
 //! (`MacroCellGrid::mip_skip_share`; out of core, within each finest brick,
 //! `brickray_harness::finest_bricks_mip_share`), the rule's decision, and
-//! MIP frames without skipping, with it always (`MipSkipping::Always`), and
+//! MIP frames without skipping, with it always (`SkipRule::Always`), and
 //! as the rule decides, interleaved round by round; samples per ray of each.
 //! Out of core the volume is a brick store (bricks of 32) drawn at its
-//! finest level, converged before timing.
+//! finest level, converged before timing. Then DVR through three ramps per
+//! volume (opaque from 0, 30% and 60% of the range), in core with and
+//! without its rule (`brickray_core::DVR_SKIP_SHARE_MIN`, the share of macro
+//! cells transparent through the TF) and out of core (always skipping).
 
 use crate::report::{RunInfo, Timing, interleave};
 use crate::runner::{Runner, renderer_in_core, round2};
@@ -20,7 +23,7 @@ use brickray_core::{
     VolumeFrame, synthetic,
 };
 use brickray_harness::GpuContext;
-use brickray_render::{MipSkipping, OutOfCoreConfig, RendererOptions, VolumeRenderer};
+use brickray_render::{OutOfCoreConfig, RendererOptions, SkipRule, VolumeRenderer};
 use serde::Serialize;
 
 /// The suite's options.
@@ -68,6 +71,15 @@ pub(crate) struct SkippingResult {
     ooc_rule_over_off_max: f64,
     ooc_always_over_off_max: f64,
     ooc_wrong_decisions: usize,
+    /// DVR in core through three ramps per volume (`skip_share`: the macro
+    /// cells transparent through the TF), and the figures below.
+    dvr_rows: Vec<Row>,
+    dvr_rule_over_off_max: f64,
+    dvr_always_over_off_max: f64,
+    dvr_wrong_decisions: usize,
+    /// DVR out of core through the same ramps (no rule: always skips).
+    dvr_ooc_rows: Vec<Row>,
+    dvr_ooc_always_over_off_max: f64,
     /// The largest rule over no-skipping ratio.
     rule_over_off_max: f64,
     /// The largest always-skipping over no-skipping ratio.
@@ -110,7 +122,7 @@ pub(crate) fn run(args: &Args) -> Result<SkippingResult, String> {
     let (rounds, size) = (args.rounds, args.size);
     let gpu = GpuContext::new().map_err(|e| e.to_string())?;
     println!("adapter: {}", gpu.describe());
-    println!("MIP, {size}x{size}, {rounds} interleaved rounds");
+    println!("MIP and DVR, {size}x{size}, {rounds} interleaved rounds");
     println!(
         "  {:<36} {:>6} {:>6} {:>9} {:>16} {:>16}",
         "volume", "share", "rule", "off ms", "always ms (x)", "rule ms (x)"
@@ -118,6 +130,8 @@ pub(crate) fn run(args: &Args) -> Result<SkippingResult, String> {
     let run = Runner::new(&gpu, size)?;
     let dir = tempfile::tempdir().map_err(|e| e.to_string())?;
     let (mut rows, mut ooc_rows) = (Vec::new(), Vec::new());
+    let (mut dvr_rows, mut dvr_ooc_rows) = (Vec::new(), Vec::new());
+    let mip = RenderMode::Mip;
     for (i, (name, vol)) in volumes(args.side).into_iter().enumerate() {
         let grid = MacroCellGrid::build(&vol, 8);
         let d = vol.desc();
@@ -129,9 +143,10 @@ pub(crate) fn run(args: &Args) -> Result<SkippingResult, String> {
             ..Default::default()
         };
         let share = grid.mip_skip_share();
-        let mut always = renderer_in_core(&gpu, with(MipSkipping::Always), &vol, &tf)?;
-        let mut rule = renderer_in_core(&gpu, with(MipSkipping::WherePays), &vol, &tf)?;
-        let row = measure(&run, &mut always, &mut rule, (camera, frame), rounds, share)?;
+        let mut always = renderer_in_core(&gpu, with(SkipRule::Always), &vol, &tf)?;
+        let mut rule = renderer_in_core(&gpu, with(SkipRule::WherePays), &vol, &tf)?;
+        let view = (camera, frame);
+        let row = measure(&run, mip, &mut always, Some(&mut rule), view, rounds, share)?;
         report(
             &name,
             Row {
@@ -161,24 +176,67 @@ pub(crate) fn run(args: &Args) -> Result<SkippingResult, String> {
                 .map_err(|e| e.to_string())?;
             r.set_transfer_function(&gpu.device, &gpu.queue, &tf)
                 .map_err(|e| e.to_string())?;
-            match run.converge(&mut r, camera, frame, settings(true), 300)? {
+            match run.converge(&mut r, camera, frame, settings(mip, true), 300)? {
                 (Some(_), _) => Ok(r),
                 (None, _) => Err(format!("{name}: out of core did not converge")),
             }
         };
-        let (mut always, mut rule) = (ooc(MipSkipping::Always)?, ooc(MipSkipping::WherePays)?);
-        let row = measure(&run, &mut always, &mut rule, (camera, frame), rounds, share)?;
+        let (mut always, mut rule) = (ooc(SkipRule::Always)?, ooc(SkipRule::WherePays)?);
+        let row = measure(&run, mip, &mut always, Some(&mut rule), view, rounds, share)?;
         let label = format!("{name}, out of core");
         report(
             &label,
             Row {
-                volume: name,
+                volume: name.clone(),
                 dims: vol.dims(),
                 rule_skips: share >= brickray_core::MIP_SKIP_SHARE_MIN_BRICKS,
                 ..row
             },
             &mut ooc_rows,
         );
+        // DVR through ramps opaque from 0, 30% and 60% of the range (0.05
+        // per reference length at the top): the share of macro cells
+        // transparent through each, in core with and without the rule, and
+        // out of core (which has no DVR rule: its "rule" column is always).
+        let dvr = RenderMode::Dvr;
+        let mut ooc_dvr = ooc(SkipRule::Always)?;
+        for from in [0.0f32, 0.3, 0.6] {
+            let tf = TransferFunction::ramp(from, 1.0, 0.05);
+            let share = grid
+                .ranges
+                .iter()
+                .filter(|r| tf.is_transparent(r[0], r[1]))
+                .count() as f64
+                / grid.ranges.len().max(1) as f64;
+            let with = |dvr_skipping| RendererOptions {
+                dvr_skipping,
+                ..Default::default()
+            };
+            let mut always = renderer_in_core(&gpu, with(SkipRule::Always), &vol, &tf)?;
+            let mut rule = renderer_in_core(&gpu, with(SkipRule::WherePays), &vol, &tf)?;
+            let row = measure(&run, dvr, &mut always, Some(&mut rule), view, rounds, share)?;
+            let label = format!("{name}, DVR from {from}");
+            let row = Row {
+                volume: label.clone(),
+                dims: vol.dims(),
+                rule_skips: share >= brickray_core::DVR_SKIP_SHARE_MIN,
+                ..row
+            };
+            report(&label, row, &mut dvr_rows);
+            ooc_dvr
+                .set_transfer_function(&gpu.device, &gpu.queue, &tf)
+                .map_err(|e| e.to_string())?;
+            run.converge(&mut ooc_dvr, camera, frame, settings(dvr, true), 300)?;
+            let row = measure(&run, dvr, &mut ooc_dvr, None, view, rounds, share)?;
+            let label = format!("{name}, DVR from {from}, out of core");
+            let row = Row {
+                volume: label.clone(),
+                dims: vol.dims(),
+                rule_skips: true,
+                ..row
+            };
+            report(&label, row, &mut dvr_ooc_rows);
+        }
     }
     let (max, wrong) = (max_ratio, wrong_decisions);
     Ok(SkippingResult {
@@ -189,15 +247,21 @@ pub(crate) fn run(args: &Args) -> Result<SkippingResult, String> {
         ooc_rule_over_off_max: max(&ooc_rows, |r| r.rule_over_off),
         ooc_always_over_off_max: max(&ooc_rows, |r| r.always_over_off),
         ooc_wrong_decisions: wrong(&ooc_rows),
+        dvr_rule_over_off_max: max(&dvr_rows, |r| r.rule_over_off),
+        dvr_always_over_off_max: max(&dvr_rows, |r| r.always_over_off),
+        dvr_wrong_decisions: wrong(&dvr_rows),
+        dvr_ooc_always_over_off_max: max(&dvr_ooc_rows, |r| r.always_over_off),
         rows,
         ooc_rows,
+        dvr_rows,
+        dvr_ooc_rows,
     })
 }
 
-/// MIP with or without empty-space skipping.
-fn settings(ess: bool) -> RenderSettings {
+/// `mode` with or without empty-space skipping.
+fn settings(mode: RenderMode, ess: bool) -> RenderSettings {
     RenderSettings {
-        mode: RenderMode::Mip,
+        mode,
         accel: Accel {
             early_termination: Some(0.99),
             empty_space_skipping: ess,
@@ -207,24 +271,29 @@ fn settings(ess: bool) -> RenderSettings {
 }
 
 /// No skipping, always and the rule, interleaved: `always` draws the first
-/// two (without and with skipping asked for), `rule` the third. The row's
-/// volume, dims and decision are left for the caller.
+/// two (without and with skipping asked for), `rule` the third (`always`
+/// again where there is no rule to measure). The row's volume, dims and
+/// decision are left for the caller.
 fn measure(
     run: &Runner<'_>,
+    mode: RenderMode,
     always: &mut VolumeRenderer,
-    rule: &mut VolumeRenderer,
+    mut rule: Option<&mut VolumeRenderer>,
     (camera, frame): (Camera, VolumeFrame),
     rounds: usize,
     share: f64,
 ) -> Result<Row, String> {
+    let s = |ess| settings(mode, ess);
     // Warm-up, with the samples per ray.
-    let off_shot = run.frame(always, camera, frame, settings(false), true)?;
-    let on_shot = run.frame(always, camera, frame, settings(true), true)?;
-    run.frame(rule, camera, frame, settings(true), false)?;
-    let shots = interleave(rounds, 3, |i| match i {
-        0 => run.frame(always, camera, frame, settings(false), false),
-        1 => run.frame(always, camera, frame, settings(true), false),
-        _ => run.frame(rule, camera, frame, settings(true), false),
+    let off_shot = run.frame(always, camera, frame, s(false), true)?;
+    let on_shot = run.frame(always, camera, frame, s(true), true)?;
+    if let Some(r) = rule.as_deref_mut() {
+        run.frame(r, camera, frame, s(true), false)?;
+    }
+    let shots = interleave(rounds, 3, |i| match (i, rule.as_deref_mut()) {
+        (0, _) => run.frame(always, camera, frame, s(false), false),
+        (1, _) | (_, None) => run.frame(always, camera, frame, s(true), false),
+        (_, Some(r)) => run.frame(r, camera, frame, s(true), false),
     })?;
     // Wall time (two renderers alternate, as in the shading suite).
     let t: Vec<Timing> = shots

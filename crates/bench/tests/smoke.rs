@@ -233,13 +233,25 @@ fn the_skipping_suite_runs() {
             "ooc_rule_over_off_max",
             "ooc_always_over_off_max",
             "ooc_wrong_decisions",
+            "dvr_rows",
+            "dvr_rule_over_off_max",
+            "dvr_always_over_off_max",
+            "dvr_wrong_decisions",
+            "dvr_ooc_rows",
+            "dvr_ooc_always_over_off_max",
         ],
+    );
+    // Three ramps per volume, in core and out of core.
+    assert_eq!(rows(&fig, "dvr_rows").len(), 3 * rows(&fig, "rows").len());
+    assert_eq!(
+        rows(&fig, "dvr_ooc_rows").len(),
+        3 * rows(&fig, "rows").len()
     );
     // The two procedural volumes, and the shared ones where present, in
     // core and out of core.
     assert!(rows(&fig, "rows").len() >= 2, "{fig:?}");
     assert_eq!(rows(&fig, "rows").len(), rows(&fig, "ooc_rows").len());
-    for key in ["rows", "ooc_rows"] {
+    for key in ["rows", "ooc_rows", "dvr_rows", "dvr_ooc_rows"] {
         has_fields(
             &fig,
             key,

@@ -61,9 +61,9 @@ pub use brickray_render::{
 };
 pub use brickray_render::{
     ConfigError, FadeDuration, FrameDesc, FrameStats, GpuErrorKind, GradientSource, HostDepthError,
-    MipSkipping, OPTIONAL_FEATURES, OptionalFeature, OutOfCoreConfig, OutOfCoreStats,
-    PassTimestamps, PrepareError, RenderError, RendererOptions, RendererStats, RetryPolicy,
-    StreamError, StreamedVolume, TargetDesc, U8Filtering, Viewport, VolumeOptions, VolumeRenderer,
+    OPTIONAL_FEATURES, OptionalFeature, OutOfCoreConfig, OutOfCoreStats, PassTimestamps,
+    PrepareError, RenderError, RendererOptions, RendererStats, RetryPolicy, SkipRule, StreamError,
+    StreamedVolume, TargetDesc, U8Filtering, Viewport, VolumeOptions, VolumeRenderer,
     optional_features, required_limits,
 };
 pub use brickray_render::{

@@ -171,6 +171,15 @@ pub fn mip_skipping_pays(grid: &MacroCellGrid) -> bool {
     grid.mip_skip_share() >= MIP_SKIP_SHARE_MIN
 }
 
+/// The least share of macro cells transparent through the transfer
+/// function at which DVR's empty-space skipping is used in core. Measured
+/// on lavapipe (2026-12-06, 256 x 256, ramps from 0 to 1 starting at 0 to
+/// 0.6 of the range, `brickray-bench skipping`, docs/benchmarks.md): with
+/// no cell or 7% of them transparent skipping cost 1.15-1.20x the frame
+/// (fractal noise, Marschner-Lobb, the head CT), from 19% on (Marschner-Lobb
+/// 0.188: 0.97x) it paid, down to 0.23x. The threshold lies between.
+pub const DVR_SKIP_SHARE_MIN: f64 = 0.15;
+
 /// The least share of sub-cells certain to be skipped, counted within each
 /// brick of an out-of-core cut ([`mip_skip_counts`] over a brick's
 /// sub-cells, the running maximum starting afresh at each brick, summed

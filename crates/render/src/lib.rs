@@ -95,15 +95,25 @@ pub struct RendererOptions {
     /// precomputed per voxel, [`GradientSource::Precomputed`]).
     pub gradients: GradientSource,
     /// When MIP skips empty space (default: where the volume's macro cells,
-    /// or out of core the cut's bricks, say it pays, [`MipSkipping::WherePays`]).
-    pub mip_skipping: MipSkipping,
+    /// or out of core the cut's bricks, say it pays, [`SkipRule::WherePays`]).
+    pub mip_skipping: SkipRule,
+    /// When DVR of a volume in core skips empty space (default: where enough
+    /// of its macro cells are transparent through the transfer function,
+    /// [`SkipRule::WherePays`]; label maps always skip the cells of hidden
+    /// labels).
+    pub dvr_skipping: SkipRule,
 }
 
-/// When MIP uses empty-space skipping (with `Accel::empty_space_skipping`
-/// on; off, it never does). The image is the same either way.
+/// When a mode uses empty-space skipping (with `Accel::empty_space_skipping`
+/// on; off, it never does): [`RendererOptions::mip_skipping`] and
+/// [`RendererOptions::dvr_skipping`]. The image is the same either way.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
-pub enum MipSkipping {
-    /// In core, where the volume's macro cells make at least
+pub enum SkipRule {
+    /// DVR in core: where at least [`brickray_core::DVR_SKIP_SHARE_MIN`] of
+    /// the macro cells are transparent through the frame's transfer
+    /// function (decided when it changes, with the skip distances).
+    ///
+    /// MIP in core, where the volume's macro cells make at least
     /// [`brickray_core::MIP_SKIP_SHARE_MIN`] of the cells certain to be
     /// skipped (`brickray_core::mip_skipping_pays`, decided at set-up); out
     /// of core, each frame, where the sub-cells of the bricks the frame
@@ -228,6 +238,7 @@ impl VolumeRenderer {
             self.options.u8_filtering,
             self.options.gradients == GradientSource::Precomputed,
             self.options.mip_skipping,
+            self.options.dvr_skipping,
         )?;
         self.backend = Some(Backend::InCore(Box::new(b)));
         self.volume_dims = Some(volume.dims());

@@ -336,13 +336,13 @@ pub(crate) fn frame_variant(
         // only (iso and MIP use the mean field, pre-integrated segments
         // ignore the spread; docs/rendering-model.md). Shaded DVR of an
         // intensity volume reads the backend's gradients where it has them;
-        // MIP skips empty space only where the backend says it pays.
+        // MIP and DVR skip empty space only where the backend says it pays.
         let dvr = v.mode == crate::kernels::KernelMode::Dvr;
         let mip = v.mode == crate::kernels::KernelMode::Mip;
         Variant {
             spread: b.spread() && dvr && !v.preint,
             gradients: b.gradients() && dvr && v.shade && !v.labels,
-            ess: v.ess && (!mip || b.mip_skipping()),
+            ess: v.ess && (!mip || b.mip_skipping()) && (!dvr || b.dvr_skipping()),
             ..v
         }
     }

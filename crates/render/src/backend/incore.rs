@@ -62,6 +62,10 @@ pub(crate) struct InCore {
     /// Whether MIP's skipping pays on this volume
     /// (`brickray_core::mip_skipping_pays`, decided from the macro cells).
     mip_skipping: bool,
+    /// When DVR skips, and whether it does under the current transfer
+    /// function (decided with the skip distances, `update`).
+    dvr_rule: crate::SkipRule,
+    dvr_skipping: bool,
 }
 
 /// Group 2's resources other than the gradients.
@@ -150,7 +154,8 @@ impl InCore {
         vol: &Volume,
         u8: U8Filtering,
         want_gradients: bool,
-        mip_skipping: crate::MipSkipping,
+        mip_skipping: crate::SkipRule,
+        dvr_rule: crate::SkipRule,
     ) -> Result<InCore, RenderError> {
         check_stage_limits(device, STORAGE_BUFFERS)?;
         gpu::need(
@@ -233,8 +238,10 @@ impl InCore {
             bytes,
             skip_key: None,
             labels,
-            mip_skipping: mip_skipping == crate::MipSkipping::Always
+            mip_skipping: mip_skipping == crate::SkipRule::Always
                 || brickray_core::mip_skipping_pays(&grid),
+            dvr_rule,
+            dvr_skipping: true,
             grid,
         })
     }
@@ -262,9 +269,18 @@ impl InCore {
             return 0;
         }
         let d = match key {
-            SkipKey::Dvr(_) => self
-                .grid
-                .empty_distance(|r| tf.is_transparent(r[0], r[1]), SKIP_CAP),
+            SkipKey::Dvr(_) => {
+                let d = self
+                    .grid
+                    .empty_distance(|r| tf.is_transparent(r[0], r[1]), SKIP_CAP);
+                // The share of transparent cells (distance > 0) decides
+                // whether DVR skips (label maps: hidden labels, always).
+                let empty = d.iter().filter(|&&c| c > 0).count() as f64 / d.len().max(1) as f64;
+                self.dvr_skipping = self.dvr_rule == crate::SkipRule::Always
+                    || self.labels
+                    || empty >= brickray_core::DVR_SKIP_SHARE_MIN;
+                d
+            }
             SkipKey::Iso(iso) => self.grid.empty_distance(|r| r[1] < iso, SKIP_CAP),
         };
         let bytes: &[u8] = bytemuck::cast_slice(&d);
@@ -314,6 +330,10 @@ impl VolumeBackend for InCore {
 
     fn mip_skipping(&self) -> bool {
         self.mip_skipping
+    }
+
+    fn dvr_skipping(&self) -> bool {
+        self.dvr_skipping
     }
 
     fn kind(&self) -> KernelKind {

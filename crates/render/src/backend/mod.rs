@@ -64,6 +64,13 @@ pub(crate) trait VolumeBackend: std::fmt::Debug {
     fn mip_skipping(&self) -> bool {
         true
     }
+    /// False where DVR's empty-space skipping costs more than it saves (in
+    /// core, too few macro cells transparent through the transfer function,
+    /// `brickray_core::DVR_SKIP_SHARE_MIN`): DVR frames then march without
+    /// it.
+    fn dvr_skipping(&self) -> bool {
+        true
+    }
     /// Most index leaves one ray may visit (0 in core).
     fn max_leaves(&self) -> u32;
     /// Step lengths the kernel samples with (rows of the corrected TF table):

@@ -38,8 +38,8 @@ pub(crate) struct OutOfCore {
     stats: OutOfCoreStats,
     /// A multi-channel volume's classification (ooc_channels.wgsl).
     channels: Option<OocChannels>,
-    /// When MIP skips empty space ([`crate::MipSkipping`]).
-    mip_policy: crate::MipSkipping,
+    /// When MIP skips empty space ([`crate::SkipRule`]).
+    mip_policy: crate::SkipRule,
     /// Whether this frame's MIP skips: by the policy, or where the plan's
     /// bricks make `brickray_core::MIP_SKIP_SHARE_MIN_BRICKS` of their
     /// sub-cells certain to be skipped.
@@ -60,7 +60,7 @@ impl OutOfCore {
     pub(crate) fn new(
         device: &wgpu::Device,
         volume: StreamedVolume,
-        mip_policy: crate::MipSkipping,
+        mip_policy: crate::SkipRule,
     ) -> Result<OutOfCore, RenderError> {
         check_ooc_limits(device)?;
         let channels = {
@@ -197,7 +197,7 @@ impl OutOfCore {
         // MIP skips where the plan's bricks say it pays (a sum over the
         // cut's slots; the image is the same either way, only the time
         // differs), or always as the policy or a multi-channel volume asks.
-        self.mip_skipping = self.mip_policy == crate::MipSkipping::Always
+        self.mip_skipping = self.mip_policy == crate::SkipRule::Always
             || s.mip_skip_share(&plan.leaves)
                 .is_none_or(|share| share >= brickray_core::MIP_SKIP_SHARE_MIN_BRICKS);
         drop(s);
