@@ -450,3 +450,89 @@ fn mip_skips_out_of_core_where_the_bricks_say_it_pays() {
         }
     }
 }
+
+/// DVR out of core skips empty space only where enough of the sub-cells of
+/// the bricks it draws are transparent through the transfer function
+/// (`SkipRule::WherePays`, the default; `DVR_SKIP_SHARE_MIN_BRICKS`): on
+/// fractal noise through a ramp that leaves a few sub-cells transparent
+/// (below the threshold) a DVR frame with skipping asked for takes every
+/// sample, as without it, while `SkipRule::Always` skips them (fewer
+/// samples); through a ramp that leaves many transparent (above) both skip.
+/// Images are identical in every case. The shares are computed here from
+/// the store's finest bricks, as the renderer counts the bricks it draws.
+#[test]
+fn dvr_skips_out_of_core_where_enough_sub_cells_are_transparent() {
+    use brickray::core::DVR_SKIP_SHARE_MIN_BRICKS;
+    use brickray::{RendererOptions, SkipRule};
+    use brickray_harness::predict::{draw, samples_per_ray};
+    use brickray_reference::psnr;
+    const SIZE: u32 = 96;
+    let noise = brickray_harness::scenes::pareto_noise(64);
+    let g = gpu();
+    let target = Offscreen::new(&g.device, SIZE, SIZE);
+    let dir = tempfile::tempdir().unwrap();
+    let source = store_of(&noise, &dir);
+    let d = noise.desc();
+    let frame = VolumeFrame::centered(d.dims, d.spacing);
+    let camera = Camera::orbit(frame.center(), 2.0, 0.5, 0.3);
+    let desc = |ess: bool| FrameDesc {
+        settings: RenderSettings {
+            accel: brickray::Accel {
+                early_termination: Some(0.99),
+                empty_space_skipping: ess,
+            },
+            ..Default::default()
+        },
+        ..FrameDesc::new(camera, frame, SIZE, SIZE)
+    };
+    for (from, pays) in [(0.45f32, false), (0.6, true)] {
+        let tf = TransferFunction::ramp(from, 1.0, 0.05);
+        let share = brickray_harness::finest_bricks_dvr_share(source.as_ref(), &tf).unwrap();
+        assert!(share > 0.0, "ramp from {from}: some sub-cells transparent");
+        assert_eq!(
+            share >= DVR_SKIP_SHARE_MIN_BRICKS,
+            pays,
+            "ramp from {from}: share {share}"
+        );
+        let mut samples = Vec::new();
+        let mut images = Vec::new();
+        for rule in [SkipRule::WherePays, SkipRule::Always] {
+            let options = RendererOptions {
+                dvr_skipping: rule,
+                ..Default::default()
+            };
+            let mut r = VolumeRenderer::with_options(&g.device, targets(), options).unwrap();
+            r.set_volume_source(&g.device, &g.queue, source.clone(), finest())
+                .unwrap();
+            r.set_transfer_function(&g.device, &g.queue, &tf).unwrap();
+            brickray_harness::draw_until_settled(g, &mut r, &target, &desc(true), 200)
+                .unwrap()
+                .expect("out of core settles");
+            for ess in [false, true] {
+                let f = draw(g, &mut r, &target, &desc(ess)).unwrap();
+                samples.push(samples_per_ray(&f.samples));
+                images.push(f.color);
+            }
+        }
+        eprintln!(
+            "ramp from {from} (transparent sub-cells {share:.3}): samples per ray, rule off/on {:.1}/{:.1}, always off/on {:.1}/{:.1}",
+            samples[0], samples[1], samples[2], samples[3]
+        );
+        for img in &images[1..] {
+            assert_eq!(
+                psnr(img, &images[0]),
+                f64::INFINITY,
+                "from {from}: identical"
+            );
+        }
+        assert!(samples[3] < samples[2], "from {from}: always skips");
+        if pays {
+            assert!(samples[1] < samples[0], "from {from}: the rule skips");
+        } else {
+            assert_eq!(
+                samples[1], samples[0],
+                "from {from}: the rule does not skip"
+            );
+        }
+    }
+}
