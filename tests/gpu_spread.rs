@@ -138,14 +138,7 @@ fn draw(
     coarse: bool,
 ) -> Vec<u8> {
     let g = gpu();
-    // DVR skips whenever the settings ask, so that the skipping comparison
-    // exercises it whatever share of sub-cells the TF leaves transparent
-    // (`dvr_skips_out_of_core_where_enough_sub_cells_are_transparent`).
-    let options = brickray::RendererOptions {
-        dvr_skipping: brickray::SkipRule::Always,
-        ..Default::default()
-    };
-    let mut r = VolumeRenderer::with_options(&g.device, targets(), options).unwrap();
+    let mut r = VolumeRenderer::new(&g.device, targets()).unwrap();
     let config = OutOfCoreConfig {
         tolerance_px: 0.0,
         brick_budget: coarse.then_some(1),

@@ -12,11 +12,9 @@
 //! as the rule decides, interleaved round by round; samples per ray of each.
 //! Out of core the volume is a brick store (bricks of 32) drawn at its
 //! finest level, converged before timing. Then DVR through three ramps per
-//! volume (opaque from 0, 30% and 60% of the range), with and without its
-//! rule: in core the share of macro cells transparent through the TF
-//! (`brickray_core::DVR_SKIP_SHARE_MIN`), out of core of the drawn bricks'
-//! sub-cells (`DVR_SKIP_SHARE_MIN_BRICKS`,
-//! `brickray_harness::finest_bricks_dvr_share`).
+//! volume (opaque from 0, 30% and 60% of the range), in core with and
+//! without its rule (`brickray_core::DVR_SKIP_SHARE_MIN`, the share of macro
+//! cells transparent through the TF) and out of core (always skipping).
 
 use crate::report::{RunInfo, Timing, interleave};
 use crate::runner::{Runner, renderer_in_core, round2};
@@ -79,12 +77,9 @@ pub(crate) struct SkippingResult {
     dvr_rule_over_off_max: f64,
     dvr_always_over_off_max: f64,
     dvr_wrong_decisions: usize,
-    /// DVR out of core through the same ramps (`skip_share`: the drawn
-    /// bricks' sub-cells transparent through the TF), and the same figures.
+    /// DVR out of core through the same ramps (no rule: always skips).
     dvr_ooc_rows: Vec<Row>,
     dvr_ooc_always_over_off_max: f64,
-    dvr_ooc_rule_over_off_max: f64,
-    dvr_ooc_wrong_decisions: usize,
     /// The largest rule over no-skipping ratio.
     rule_over_off_max: f64,
     /// The largest always-skipping over no-skipping ratio.
@@ -165,10 +160,13 @@ pub(crate) fn run(args: &Args) -> Result<SkippingResult, String> {
         // Out of core: a brick store at its finest level.
         let src = brickray_harness::store_of(&vol, &dir.path().join(format!("{i}.brs")));
         let share = brickray_harness::finest_bricks_mip_share(src.as_ref())?;
-        let ooc = |options| -> Result<_, String> {
-            let mut r =
-                VolumeRenderer::with_options(&gpu.device, brickray_harness::target_desc(), options)
-                    .map_err(|e| e.to_string())?;
+        let ooc = |mip_skipping| -> Result<_, String> {
+            let mut r = VolumeRenderer::with_options(
+                &gpu.device,
+                brickray_harness::target_desc(),
+                with(mip_skipping),
+            )
+            .map_err(|e| e.to_string())?;
             let config = OutOfCoreConfig {
                 tolerance_px: 0.0,
                 upload_budget_bytes: 1 << 30,
@@ -183,10 +181,7 @@ pub(crate) fn run(args: &Args) -> Result<SkippingResult, String> {
                 (None, _) => Err(format!("{name}: out of core did not converge")),
             }
         };
-        let (mut always, mut rule) = (
-            ooc(with(SkipRule::Always))?,
-            ooc(with(SkipRule::WherePays))?,
-        );
+        let (mut always, mut rule) = (ooc(SkipRule::Always)?, ooc(SkipRule::WherePays)?);
         let row = measure(&run, mip, &mut always, Some(&mut rule), view, rounds, share)?;
         let label = format!("{name}, out of core");
         report(
@@ -200,16 +195,11 @@ pub(crate) fn run(args: &Args) -> Result<SkippingResult, String> {
             &mut ooc_rows,
         );
         // DVR through ramps opaque from 0, 30% and 60% of the range (0.05
-        // per reference length at the top), in core and out of core, with
-        // and without the rule: the share of macro cells (in core) or of the
-        // drawn bricks' sub-cells (out of core) transparent through each.
+        // per reference length at the top): the share of macro cells
+        // transparent through each, in core with and without the rule, and
+        // out of core (which has no DVR rule: its "rule" column is always).
         let dvr = RenderMode::Dvr;
-        let dvr_with = |dvr_skipping| RendererOptions {
-            dvr_skipping,
-            ..Default::default()
-        };
-        let mut ooc_always = ooc(dvr_with(SkipRule::Always))?;
-        let mut ooc_rule = ooc(dvr_with(SkipRule::WherePays))?;
+        let mut ooc_dvr = ooc(SkipRule::Always)?;
         for from in [0.0f32, 0.3, 0.6] {
             let tf = TransferFunction::ramp(from, 1.0, 0.05);
             let share = grid
@@ -218,8 +208,12 @@ pub(crate) fn run(args: &Args) -> Result<SkippingResult, String> {
                 .filter(|r| tf.is_transparent(r[0], r[1]))
                 .count() as f64
                 / grid.ranges.len().max(1) as f64;
-            let mut always = renderer_in_core(&gpu, dvr_with(SkipRule::Always), &vol, &tf)?;
-            let mut rule = renderer_in_core(&gpu, dvr_with(SkipRule::WherePays), &vol, &tf)?;
+            let with = |dvr_skipping| RendererOptions {
+                dvr_skipping,
+                ..Default::default()
+            };
+            let mut always = renderer_in_core(&gpu, with(SkipRule::Always), &vol, &tf)?;
+            let mut rule = renderer_in_core(&gpu, with(SkipRule::WherePays), &vol, &tf)?;
             let row = measure(&run, dvr, &mut always, Some(&mut rule), view, rounds, share)?;
             let label = format!("{name}, DVR from {from}");
             let row = Row {
@@ -229,27 +223,16 @@ pub(crate) fn run(args: &Args) -> Result<SkippingResult, String> {
                 ..row
             };
             report(&label, row, &mut dvr_rows);
-            for r in [&mut ooc_always, &mut ooc_rule] {
-                r.set_transfer_function(&gpu.device, &gpu.queue, &tf)
-                    .map_err(|e| e.to_string())?;
-                run.converge(r, camera, frame, settings(dvr, true), 300)?;
-            }
-            // Out of core: the share of the drawn bricks' sub-cells.
-            let share = brickray_harness::finest_bricks_dvr_share(src.as_ref(), &tf)?;
-            let row = measure(
-                &run,
-                dvr,
-                &mut ooc_always,
-                Some(&mut ooc_rule),
-                view,
-                rounds,
-                share,
-            )?;
+            ooc_dvr
+                .set_transfer_function(&gpu.device, &gpu.queue, &tf)
+                .map_err(|e| e.to_string())?;
+            run.converge(&mut ooc_dvr, camera, frame, settings(dvr, true), 300)?;
+            let row = measure(&run, dvr, &mut ooc_dvr, None, view, rounds, share)?;
             let label = format!("{name}, DVR from {from}, out of core");
             let row = Row {
                 volume: label.clone(),
                 dims: vol.dims(),
-                rule_skips: share >= brickray_core::DVR_SKIP_SHARE_MIN_BRICKS,
+                rule_skips: true,
                 ..row
             };
             report(&label, row, &mut dvr_ooc_rows);
@@ -268,8 +251,6 @@ pub(crate) fn run(args: &Args) -> Result<SkippingResult, String> {
         dvr_always_over_off_max: max(&dvr_rows, |r| r.always_over_off),
         dvr_wrong_decisions: wrong(&dvr_rows),
         dvr_ooc_always_over_off_max: max(&dvr_ooc_rows, |r| r.always_over_off),
-        dvr_ooc_rule_over_off_max: max(&dvr_ooc_rows, |r| r.rule_over_off),
-        dvr_ooc_wrong_decisions: wrong(&dvr_ooc_rows),
         rows,
         ooc_rows,
         dvr_rows,

@@ -239,8 +239,6 @@ fn the_skipping_suite_runs() {
             "dvr_wrong_decisions",
             "dvr_ooc_rows",
             "dvr_ooc_always_over_off_max",
-            "dvr_ooc_rule_over_off_max",
-            "dvr_ooc_wrong_decisions",
         ],
     );
     // Three ramps per volume, in core and out of core.

@@ -171,45 +171,14 @@ pub fn mip_skipping_pays(grid: &MacroCellGrid) -> bool {
     grid.mip_skip_share() >= MIP_SKIP_SHARE_MIN
 }
 
-/// Of a brick's sub-cell ranges (normalized `[min, max]`), `[transparent,
-/// all]` through `tf`, where the brick is drawn at all: a brick all of whose
-/// sub-cells are transparent is an empty leaf of the out-of-core cut
-/// (`[0, 0]`), so the count is over the bricks rays sample.
-pub fn transparent_counts(ranges: &[[f32; 2]], tf: &crate::TransferFunction) -> [u64; 2] {
-    let transparent = ranges
-        .iter()
-        .filter(|r| tf.is_transparent(r[0], r[1]))
-        .count() as u64;
-    let all = ranges.len() as u64;
-    if transparent == all {
-        [0, 0]
-    } else {
-        [transparent, all]
-    }
-}
-
 /// The least share of macro cells transparent through the transfer
 /// function at which DVR's empty-space skipping is used in core. Measured
-/// on lavapipe (2026-12-06, 256 x 256, ramps opaque from 0, 0.3 and 0.6 of
-/// the range on seven volumes, `brickray-bench skipping`,
-/// docs/benchmarks.md): with no cell transparent skipping cost 1.14-1.30x
-/// the frame; from a share of 0.188 on it broke even or paid (0.18-1.00x).
-/// The threshold lies between.
+/// on lavapipe (2026-12-06, 256 x 256, ramps from 0 to 1 starting at 0 to
+/// 0.6 of the range, `brickray-bench skipping`, docs/benchmarks.md): with
+/// no cell or 7% of them transparent skipping cost 1.15-1.20x the frame
+/// (fractal noise, Marschner-Lobb, the head CT), from 19% on (Marschner-Lobb
+/// 0.188: 0.97x) it paid, down to 0.23x. The threshold lies between.
 pub const DVR_SKIP_SHARE_MIN: f64 = 0.15;
-
-/// The least share of the sub-cells of an out-of-core cut's bricks
-/// transparent through the transfer function ([`transparent_counts`]
-/// summed over the bricks drawn) at which DVR's empty-space skipping is
-/// used out of core. Measured on lavapipe (`brickray-bench skipping`,
-/// 2026-12-06, the DVR rows out of core, docs/benchmarks.md): skipping cost
-/// 1.24-1.40x the frame where no sub-cell is transparent and 1.00-1.19x at
-/// shares of 0.19-0.32 (Marschner-Lobb, the two MRIs), and paid from 0.37
-/// (the pycortex MRI, 0.91x; the fractal noise at 0.498, 0.88x) up, but for
-/// the cryo-ET tomogram at 0.456 (1.03x). Out of core a sub-cell test costs
-/// more against what it skips than a macro cell's in core
-/// ([`DVR_SKIP_SHARE_MIN`]), and bricks wholly transparent are empty leaves
-/// whatever the switch, so the threshold is higher.
-pub const DVR_SKIP_SHARE_MIN_BRICKS: f64 = 0.35;
 
 /// The least share of sub-cells certain to be skipped, counted within each
 /// brick of an out-of-core cut ([`mip_skip_counts`] over a brick's

@@ -231,33 +231,7 @@ pub fn store_of(
 /// brick, summed): what the out-of-core renderer decides MIP's skipping from
 /// once its cut is the finest level (`MIP_SKIP_SHARE_MIN_BRICKS`).
 pub fn finest_bricks_mip_share(source: &dyn brickray_core::BrickSource) -> Result<f64, String> {
-    let n = brickray_core::sub_cells_per_axis(source.layout().brick);
-    finest_bricks_share(source, |ranges| {
-        brickray_core::mip_skip_counts([n; 3], ranges)
-    })
-}
-
-/// Of the sub-cells of `source`'s finest bricks that are not wholly
-/// transparent through `tf` (those the out-of-core index draws; a wholly
-/// transparent brick is an empty leaf), the share transparent through it:
-/// what the out-of-core renderer decides DVR's skipping from once its cut is
-/// the finest level (`DVR_SKIP_SHARE_MIN_BRICKS`).
-pub fn finest_bricks_dvr_share(
-    source: &dyn brickray_core::BrickSource,
-    tf: &brickray_core::TransferFunction,
-) -> Result<f64, String> {
-    finest_bricks_share(source, |ranges| {
-        brickray_core::transparent_counts(ranges, tf)
-    })
-}
-
-/// `[counted, all]` summed over `source`'s finest bricks, `count` taking each
-/// brick's sub-cell ranges (`brickray_core::sub_cell_ranges`); their ratio.
-fn finest_bricks_share(
-    source: &dyn brickray_core::BrickSource,
-    count: impl Fn(&[[f32; 2]]) -> [u64; 2],
-) -> Result<f64, String> {
-    use brickray_core::{NodeKey, sub_cell_ranges, sub_cells_per_axis};
+    use brickray_core::{NodeKey, mip_skip_counts, sub_cell_ranges, sub_cells_per_axis};
     let layout = source.layout();
     let level = layout.levels.saturating_sub(1);
     let cells = sub_cells_per_axis(layout.brick);
@@ -271,7 +245,7 @@ fn finest_bricks_share(
                 source
                     .read_brick(key, &mut bytes)
                     .map_err(|e| e.to_string())?;
-                let c = count(&sub_cell_ranges(layout, &bytes, cells));
+                let c = mip_skip_counts([cells; 3], &sub_cell_ranges(layout, &bytes, cells));
                 counts = [counts[0] + c[0], counts[1] + c[1]];
             }
         }

@@ -97,10 +97,10 @@ pub struct RendererOptions {
     /// When MIP skips empty space (default: where the volume's macro cells,
     /// or out of core the cut's bricks, say it pays, [`SkipRule::WherePays`]).
     pub mip_skipping: SkipRule,
-    /// When DVR skips empty space (default: where enough of the volume's
-    /// macro cells, or out of core of the cut's bricks' sub-cells, are
-    /// transparent through the transfer function, [`SkipRule::WherePays`];
-    /// label maps and multi-channel volumes always skip).
+    /// When DVR of a volume in core skips empty space (default: where enough
+    /// of its macro cells are transparent through the transfer function,
+    /// [`SkipRule::WherePays`]; label maps always skip the cells of hidden
+    /// labels).
     pub dvr_skipping: SkipRule,
 }
 
@@ -111,10 +111,7 @@ pub struct RendererOptions {
 pub enum SkipRule {
     /// DVR in core: where at least [`brickray_core::DVR_SKIP_SHARE_MIN`] of
     /// the macro cells are transparent through the frame's transfer
-    /// function (decided when it changes, with the skip distances); out of
-    /// core, each frame, where at least
-    /// [`brickray_core::DVR_SKIP_SHARE_MIN_BRICKS`] of the sub-cells of the
-    /// bricks the frame draws are (`brickray_core::transparent_counts`).
+    /// function (decided when it changes, with the skip distances).
     ///
     /// MIP in core, where the volume's macro cells make at least
     /// [`brickray_core::MIP_SKIP_SHARE_MIN`] of the cells certain to be
@@ -349,12 +346,7 @@ impl VolumeRenderer {
         let desc = layout.volume;
         check_value_range(desc.value_range)?;
         self.drop_volume();
-        let b = OutOfCore::new(
-            device,
-            volume.clone(),
-            self.options.mip_skipping,
-            self.options.dvr_skipping,
-        )?;
+        let b = OutOfCore::new(device, volume.clone(), self.options.mip_skipping)?;
         self.backend = Some(Backend::OutOfCore(Box::new(b)));
         self.volume_dims = Some(desc.dims);
         self.value_range = desc.value_range;

@@ -460,9 +460,8 @@ fn plan_group(
         let (r, desc) = &mut views[j];
         let vp = desc.viewport;
         let queries = planned.plan.queries.get(k).cloned().unwrap_or_default();
-        let tf = r.tf.current().map(|tf| (tf, r.tf.generation()));
         if let Some(Backend::OutOfCore(o)) = r.backend.as_mut() {
-            o.apply(device, queue, &planned, &queries, [vp.width, vp.height], tf)?;
+            o.apply(device, queue, &planned, &queries, [vp.width, vp.height])?;
         }
     }
     Ok(())

@@ -53,14 +53,6 @@ pub(crate) struct OocParams {
     pub(crate) splits: [u32; 4],
 }
 
-/// Per slot, its brick's sub-cell ranges (`sub_cells_per_axis^3` each),
-/// and `[transparent, all]` of them through the transfer function of the
-/// generation beside it (`u64::MAX`: not counted since the upload).
-struct DvrCells {
-    ranges: Vec<[f32; 2]>,
-    counts: Vec<(u64, [u64; 2])>,
-}
-
 /// The pool's GPU side, sized by the pool's slot grid: the atlas and the
 /// per-slot tables (recreated when the GPU budget changes).
 struct Pool {
@@ -82,10 +74,8 @@ struct Pool {
     /// Per slot, of its brick's sub-cells, `[skipped, all]` by MIP's
     /// skipping over axis rays within the brick
     /// (`brickray_core::mip_skip_counts`); `None` for a multi-channel
-    /// volume or a label map (they always skip).
+    /// volume (its MIP always skips).
     mip_cells: Option<Vec<[u64; 2]>>,
-    /// For DVR's rule; `None` where `mip_cells` is.
-    dvr_cells: Option<DvrCells>,
     /// Sub-cells per brick axis.
     sub_cells_per_axis: u32,
 }
@@ -106,8 +96,6 @@ impl Pool {
             wgpu::TextureFormat::R16Float,
             "brickray-render spread atlas",
         )?;
-        // The skipping rules count single-channel intensity bricks.
-        let rules = gpu.channel_count == 1 && !streamer.layout().volume.kind.is_labels();
         let atlas_bytes = dims.iter().map(|&d| d as u64).product::<u64>()
             * (gpu.texel_bytes() + gpu.spread_bytes()) as u64;
         let slot_count = streamer.pool().slot_count().max(1) as u64;
@@ -129,14 +117,7 @@ impl Pool {
             slots_dirty: true,
             sub_cells,
             faded: Vec::new(),
-            mip_cells: rules.then(|| vec![[0, 0]; slot_count as usize]),
-            dvr_cells: rules.then(|| {
-                let cells = (gpu.sub_cells_per_axis as usize).pow(3);
-                DvrCells {
-                    ranges: vec![[0.0; 2]; slot_count as usize * cells],
-                    counts: vec![(u64::MAX, [0, 0]); slot_count as usize],
-                }
-            }),
+            mip_cells: (gpu.channel_count == 1).then(|| vec![[0, 0]; slot_count as usize]),
             sub_cells_per_axis: gpu.sub_cells_per_axis,
         })
     }
@@ -216,16 +197,6 @@ impl Pool {
         {
             let n = self.sub_cells_per_axis;
             *m = brickray_core::mip_skip_counts([n; 3], &b.sub_cells);
-        }
-        if let Some(DvrCells { ranges, counts }) = self.dvr_cells.as_mut() {
-            let n = b.sub_cells.len();
-            let at = up.slot as usize * n;
-            if let (Some(r), Some(c)) =
-                (ranges.get_mut(at..at + n), counts.get_mut(up.slot as usize))
-            {
-                r.copy_from_slice(&b.sub_cells);
-                *c = (u64::MAX, [0, 0]);
-            }
         }
         if let Some(s) = self.slots_cpu.get_mut(up.slot as usize) {
             let o = up.atlas_offset;
@@ -372,38 +343,6 @@ impl Shared {
     /// How the atlas stores the volume.
     pub(crate) fn gpu_format(&self) -> &GpuFormat {
         &self.gpu
-    }
-
-    /// Of the sub-cells of the bricks in `leaves` (`(slot, node)`), the
-    /// share transparent through `tf` (of generation `generation`: each
-    /// slot's count is kept until its brick or the generation changes);
-    /// `None` for a multi-channel volume or a label map, and 0 for no
-    /// bricks (`brickray_core::DVR_SKIP_SHARE_MIN_BRICKS`).
-    pub(crate) fn dvr_skip_share(
-        &mut self,
-        leaves: &[(u32, NodeKey)],
-        tf: &brickray_core::TransferFunction,
-        generation: u64,
-    ) -> Option<f64> {
-        let DvrCells { ranges, counts } = self.pool.dvr_cells.as_mut()?;
-        let n = (self.pool.sub_cells_per_axis as usize).pow(3);
-        let mut sum = [0u64; 2];
-        for &(slot, _) in leaves {
-            let slot = slot as usize;
-            let (Some(c), Some(r)) = (counts.get_mut(slot), ranges.get(slot * n..(slot + 1) * n))
-            else {
-                continue;
-            };
-            if c.0 != generation {
-                *c = (generation, brickray_core::transparent_counts(r, tf));
-            }
-            sum = [sum[0] + c.1[0], sum[1] + c.1[1]];
-        }
-        Some(if sum[1] == 0 {
-            0.0
-        } else {
-            sum[0] as f64 / sum[1] as f64
-        })
     }
 
     /// Of the sub-cells of the bricks in `leaves` (`(slot, node)`), the

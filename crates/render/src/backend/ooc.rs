@@ -40,11 +40,6 @@ pub(crate) struct OutOfCore {
     channels: Option<OocChannels>,
     /// When MIP skips empty space ([`crate::SkipRule`]).
     mip_policy: crate::SkipRule,
-    /// When DVR skips empty space, and whether this frame's does (where the
-    /// plan's bricks make `brickray_core::DVR_SKIP_SHARE_MIN_BRICKS` of
-    /// their sub-cells transparent through the TF).
-    dvr_policy: crate::SkipRule,
-    dvr_skipping: bool,
     /// Whether this frame's MIP skips: by the policy, or where the plan's
     /// bricks make `brickray_core::MIP_SKIP_SHARE_MIN_BRICKS` of their
     /// sub-cells certain to be skipped.
@@ -66,7 +61,6 @@ impl OutOfCore {
         device: &wgpu::Device,
         volume: StreamedVolume,
         mip_policy: crate::SkipRule,
-        dvr_policy: crate::SkipRule,
     ) -> Result<OutOfCore, RenderError> {
         check_ooc_limits(device)?;
         let channels = {
@@ -117,8 +111,6 @@ impl OutOfCore {
             channels,
             mip_policy,
             mip_skipping: true,
-            dvr_policy,
-            dvr_skipping: true,
         })
     }
 
@@ -181,9 +173,8 @@ impl OutOfCore {
         planned: &Planned,
         queries: &QueryBatch,
         viewport: [u32; 2],
-        tf: Option<(&brickray_core::TransferFunction, u64)>,
     ) -> Result<(), RenderError> {
-        let mut s = self.volume.lock();
+        let s = self.volume.lock();
         let mut rebuild = self.occlusion.resize(device, viewport)? || s.generation != self.bound;
         let rows = s.slot_rows;
         if rows != self.feedback.rows() {
@@ -209,12 +200,6 @@ impl OutOfCore {
         self.mip_skipping = self.mip_policy == crate::SkipRule::Always
             || s.mip_skip_share(&plan.leaves)
                 .is_none_or(|share| share >= brickray_core::MIP_SKIP_SHARE_MIN_BRICKS);
-        // DVR likewise, from the share of the bricks' sub-cells transparent
-        // through the frame's TF (counted once per brick and TF).
-        self.dvr_skipping = self.dvr_policy == crate::SkipRule::Always
-            || tf
-                .and_then(|(tf, generation)| s.dvr_skip_share(&plan.leaves, tf, generation))
-                .is_none_or(|share| share >= brickray_core::DVR_SKIP_SHARE_MIN_BRICKS);
         drop(s);
         self.frame = plan.frame;
         self.leaves.clone_from(&plan.leaves);
@@ -347,10 +332,6 @@ impl VolumeBackend for OutOfCore {
 
     fn mip_skipping(&self) -> bool {
         self.mip_skipping
-    }
-
-    fn dvr_skipping(&self) -> bool {
-        self.dvr_skipping
     }
 
     fn spread(&self) -> bool {
