@@ -77,6 +77,11 @@ pub(crate) struct SkippingResult {
     dvr_rule_over_off_max: f64,
     dvr_always_over_off_max: f64,
     dvr_wrong_decisions: usize,
+    /// The same, shaded.
+    dvr_shaded_rows: Vec<Row>,
+    dvr_shaded_rule_over_off_max: f64,
+    dvr_shaded_always_over_off_max: f64,
+    dvr_shaded_wrong_decisions: usize,
     /// DVR out of core through the same ramps (no rule: always skips).
     dvr_ooc_rows: Vec<Row>,
     dvr_ooc_always_over_off_max: f64,
@@ -131,6 +136,7 @@ pub(crate) fn run(args: &Args) -> Result<SkippingResult, String> {
     let dir = tempfile::tempdir().map_err(|e| e.to_string())?;
     let (mut rows, mut ooc_rows) = (Vec::new(), Vec::new());
     let (mut dvr_rows, mut dvr_ooc_rows) = (Vec::new(), Vec::new());
+    let mut dvr_shaded_rows = Vec::new();
     let mip = RenderMode::Mip;
     for (i, (name, vol)) in volumes(args.side).into_iter().enumerate() {
         let grid = MacroCellGrid::build(&vol, 8);
@@ -146,7 +152,15 @@ pub(crate) fn run(args: &Args) -> Result<SkippingResult, String> {
         let mut always = renderer_in_core(&gpu, with(SkipRule::Always), &vol, &tf)?;
         let mut rule = renderer_in_core(&gpu, with(SkipRule::WherePays), &vol, &tf)?;
         let view = (camera, frame);
-        let row = measure(&run, mip, &mut always, Some(&mut rule), view, rounds, share)?;
+        let row = measure(
+            &run,
+            settings(mip, true),
+            &mut always,
+            Some(&mut rule),
+            view,
+            rounds,
+            share,
+        )?;
         report(
             &name,
             Row {
@@ -182,7 +196,15 @@ pub(crate) fn run(args: &Args) -> Result<SkippingResult, String> {
             }
         };
         let (mut always, mut rule) = (ooc(SkipRule::Always)?, ooc(SkipRule::WherePays)?);
-        let row = measure(&run, mip, &mut always, Some(&mut rule), view, rounds, share)?;
+        let row = measure(
+            &run,
+            settings(mip, true),
+            &mut always,
+            Some(&mut rule),
+            view,
+            rounds,
+            share,
+        )?;
         let label = format!("{name}, out of core");
         report(
             &label,
@@ -214,7 +236,15 @@ pub(crate) fn run(args: &Args) -> Result<SkippingResult, String> {
             };
             let mut always = renderer_in_core(&gpu, with(SkipRule::Always), &vol, &tf)?;
             let mut rule = renderer_in_core(&gpu, with(SkipRule::WherePays), &vol, &tf)?;
-            let row = measure(&run, dvr, &mut always, Some(&mut rule), view, rounds, share)?;
+            let row = measure(
+                &run,
+                settings(dvr, true),
+                &mut always,
+                Some(&mut rule),
+                view,
+                rounds,
+                share,
+            )?;
             let label = format!("{name}, DVR from {from}");
             let row = Row {
                 volume: label.clone(),
@@ -223,11 +253,44 @@ pub(crate) fn run(args: &Args) -> Result<SkippingResult, String> {
                 ..row
             };
             report(&label, row, &mut dvr_rows);
+            // Shaded (samples cost two to three times as much).
+            let shaded = RenderSettings {
+                shading: brickray_core::Shading {
+                    enabled: true,
+                    ..Default::default()
+                },
+                ..settings(dvr, true)
+            };
+            let row = measure(
+                &run,
+                shaded,
+                &mut always,
+                Some(&mut rule),
+                view,
+                rounds,
+                share,
+            )?;
+            let label = format!("{name}, shaded DVR from {from}");
+            let row = Row {
+                volume: label.clone(),
+                dims: vol.dims(),
+                rule_skips: share >= brickray_core::DVR_SKIP_SHARE_MIN,
+                ..row
+            };
+            report(&label, row, &mut dvr_shaded_rows);
             ooc_dvr
                 .set_transfer_function(&gpu.device, &gpu.queue, &tf)
                 .map_err(|e| e.to_string())?;
             run.converge(&mut ooc_dvr, camera, frame, settings(dvr, true), 300)?;
-            let row = measure(&run, dvr, &mut ooc_dvr, None, view, rounds, share)?;
+            let row = measure(
+                &run,
+                settings(dvr, true),
+                &mut ooc_dvr,
+                None,
+                view,
+                rounds,
+                share,
+            )?;
             let label = format!("{name}, DVR from {from}, out of core");
             let row = Row {
                 volume: label.clone(),
@@ -250,6 +313,10 @@ pub(crate) fn run(args: &Args) -> Result<SkippingResult, String> {
         dvr_rule_over_off_max: max(&dvr_rows, |r| r.rule_over_off),
         dvr_always_over_off_max: max(&dvr_rows, |r| r.always_over_off),
         dvr_wrong_decisions: wrong(&dvr_rows),
+        dvr_shaded_always_over_off_max: max(&dvr_shaded_rows, |r| r.always_over_off),
+        dvr_shaded_rule_over_off_max: max(&dvr_shaded_rows, |r| r.rule_over_off),
+        dvr_shaded_wrong_decisions: wrong(&dvr_shaded_rows),
+        dvr_shaded_rows,
         dvr_ooc_always_over_off_max: max(&dvr_ooc_rows, |r| r.always_over_off),
         rows,
         ooc_rows,
@@ -276,14 +343,20 @@ fn settings(mode: RenderMode, ess: bool) -> RenderSettings {
 /// decision are left for the caller.
 fn measure(
     run: &Runner<'_>,
-    mode: RenderMode,
+    base: RenderSettings,
     always: &mut VolumeRenderer,
     mut rule: Option<&mut VolumeRenderer>,
     (camera, frame): (Camera, VolumeFrame),
     rounds: usize,
     share: f64,
 ) -> Result<Row, String> {
-    let s = |ess| settings(mode, ess);
+    let s = |ess| RenderSettings {
+        accel: Accel {
+            empty_space_skipping: ess,
+            ..base.accel
+        },
+        ..base
+    };
     // Warm-up, with the samples per ray.
     let off_shot = run.frame(always, camera, frame, s(false), true)?;
     let on_shot = run.frame(always, camera, frame, s(true), true)?;

@@ -237,6 +237,8 @@ fn the_skipping_suite_runs() {
             "dvr_rule_over_off_max",
             "dvr_always_over_off_max",
             "dvr_wrong_decisions",
+            "dvr_shaded_rows",
+            "dvr_shaded_wrong_decisions",
             "dvr_ooc_rows",
             "dvr_ooc_always_over_off_max",
         ],
@@ -251,7 +253,13 @@ fn the_skipping_suite_runs() {
     // core and out of core.
     assert!(rows(&fig, "rows").len() >= 2, "{fig:?}");
     assert_eq!(rows(&fig, "rows").len(), rows(&fig, "ooc_rows").len());
-    for key in ["rows", "ooc_rows", "dvr_rows", "dvr_ooc_rows"] {
+    for key in [
+        "rows",
+        "ooc_rows",
+        "dvr_rows",
+        "dvr_shaded_rows",
+        "dvr_ooc_rows",
+    ] {
         has_fields(
             &fig,
             key,
