@@ -515,70 +515,20 @@ fn missing_texture_features_fall_back() {
 /// identical in every case.
 #[test]
 fn mip_skips_where_the_macro_cells_say_it_pays() {
-    use brickray::core::{MIP_SKIP_SHARE_MIN, MacroCellGrid, synthetic};
-    use brickray::{RendererOptions, SkipRule, Viewport};
+    use brickray::RendererOptions;
+    use brickray::core::{MIP_SKIP_SHARE_MIN, MacroCellGrid};
     use brickray_reference::psnr;
-    const SIZE: u32 = 96;
     let n = 64u32;
     let noise = brickray_harness::scenes::pareto_noise(n);
-    // A bright box 12 voxels thick around noise at a fifth of its level.
-    let shell = synthetic::u8_field(n, |p| {
-        let edge = p.iter().map(|&c| c.min(n - 1 - c)).min().unwrap_or(0);
-        // Below the top of the range, which would end MIP rays at once.
-        if edge < 12 {
-            0.8
-        } else {
-            0.2 * synthetic::fractal_noise(p.map(f64::from), 16.0, 3)
-        }
-    });
+    let shell = brickray_harness::scenes::bright_shell(n);
     let tf = TransferFunction::ramp(0.0, 1.0, 1.0);
     for (name, vol, pays) in [("noise", &noise, false), ("shell", &shell, true)] {
         let share = MacroCellGrid::build(vol, 8).mip_skip_share();
         assert_eq!(share >= MIP_SKIP_SHARE_MIN, pays, "{name}: share {share}");
-        let g = gpu();
-        let target = Offscreen::new(&g.device, SIZE, SIZE);
-        let d = vol.desc();
-        let frame = VolumeFrame::centered(d.dims, d.spacing);
-        let camera = Camera::orbit(frame.center(), 2.0, 0.5, 0.3);
-        let frame_with = |r: &mut VolumeRenderer, ess: bool| {
-            let settings = RenderSettings {
-                mode: RenderMode::Mip,
-                accel: Accel {
-                    early_termination: Some(0.99),
-                    empty_space_skipping: ess,
-                },
-                ..Default::default()
-            };
-            let desc = FrameDesc {
-                camera,
-                frame,
-                viewport: Viewport::full(SIZE, SIZE),
-                settings,
-                host_depth: None,
-                time: None,
-            };
-            let f = brickray_harness::predict::draw(g, r, &target, &desc).unwrap();
-            (
-                brickray_harness::predict::samples_per_ray(&f.samples),
-                f.color,
-            )
-        };
-        let mut samples = Vec::new();
-        let mut images = Vec::new();
-        for rule in [SkipRule::WherePays, SkipRule::Always] {
-            let options = RendererOptions {
-                mip_skipping: rule,
-                ..Default::default()
-            };
-            let mut r = VolumeRenderer::with_options(&g.device, targets(), options).unwrap();
-            r.set_volume(&g.device, &g.queue, vol).unwrap();
-            r.set_transfer_function(&g.device, &g.queue, &tf).unwrap();
-            for ess in [false, true] {
-                let (s, img) = frame_with(&mut r, ess);
-                samples.push(s);
-                images.push(img);
-            }
-        }
+        let (samples, images) = skip_frames(vol, &tf, RenderMode::Mip, |rule| RendererOptions {
+            mip_skipping: rule,
+            ..Default::default()
+        });
         eprintln!(
             "{name} (share {share:.3}): samples per ray, rule off/on {:.1}/{:.1}, always off/on {:.1}/{:.1}",
             samples[0], samples[1], samples[2], samples[3]
@@ -605,68 +555,24 @@ fn mip_skips_where_the_macro_cells_say_it_pays() {
 /// are identical in every case.
 #[test]
 fn dvr_skips_where_enough_cells_are_transparent() {
+    use brickray::RendererOptions;
     use brickray::core::{DVR_SKIP_SHARE_MIN, MacroCellGrid};
-    use brickray::{RendererOptions, SkipRule, Viewport};
     use brickray_reference::psnr;
-    const SIZE: u32 = 96;
     let noise = brickray_harness::scenes::pareto_noise(64);
     let grid = MacroCellGrid::build(&noise, 8);
-    let g = gpu();
-    let target = Offscreen::new(&g.device, SIZE, SIZE);
-    let d = noise.desc();
-    let frame = VolumeFrame::centered(d.dims, d.spacing);
-    let camera = Camera::orbit(frame.center(), 2.0, 0.5, 0.3);
     for (from, pays) in [(0.45f32, false), (0.6, true)] {
         let tf = TransferFunction::ramp(from, 1.0, 0.05);
-        let share = grid
-            .ranges
-            .iter()
-            .filter(|r| tf.is_transparent(r[0], r[1]))
-            .count() as f64
-            / grid.ranges.len() as f64;
+        let share = grid.transparent_share(&tf);
         assert!(share > 0.0, "ramp from {from}: some cells transparent");
         assert_eq!(
             share >= DVR_SKIP_SHARE_MIN,
             pays,
             "ramp from {from}: share {share}"
         );
-        let frame_with = |r: &mut VolumeRenderer, ess: bool| {
-            let desc = FrameDesc {
-                camera,
-                frame,
-                viewport: Viewport::full(SIZE, SIZE),
-                settings: RenderSettings {
-                    accel: Accel {
-                        early_termination: Some(0.99),
-                        empty_space_skipping: ess,
-                    },
-                    ..Default::default()
-                },
-                host_depth: None,
-                time: None,
-            };
-            let f = brickray_harness::predict::draw(g, r, &target, &desc).unwrap();
-            (
-                brickray_harness::predict::samples_per_ray(&f.samples),
-                f.color,
-            )
-        };
-        let mut samples = Vec::new();
-        let mut images = Vec::new();
-        for rule in [SkipRule::WherePays, SkipRule::Always] {
-            let options = RendererOptions {
-                dvr_skipping: rule,
-                ..Default::default()
-            };
-            let mut r = VolumeRenderer::with_options(&g.device, targets(), options).unwrap();
-            r.set_volume(&g.device, &g.queue, &noise).unwrap();
-            r.set_transfer_function(&g.device, &g.queue, &tf).unwrap();
-            for ess in [false, true] {
-                let (s, img) = frame_with(&mut r, ess);
-                samples.push(s);
-                images.push(img);
-            }
-        }
+        let (samples, images) = skip_frames(&noise, &tf, RenderMode::Dvr, |rule| RendererOptions {
+            dvr_skipping: rule,
+            ..Default::default()
+        });
         eprintln!(
             "ramp from {from} (transparent cells {share:.3}): samples per ray, rule off/on {:.1}/{:.1}, always off/on {:.1}/{:.1}",
             samples[0], samples[1], samples[2], samples[3]
@@ -688,4 +594,45 @@ fn dvr_skips_where_enough_cells_are_transparent() {
             );
         }
     }
+}
+
+/// In core at 96 px, for the rule `WherePays` and then `Always` (`options`
+/// sets it), a `mode` frame of `vol` through `tf` without and then with
+/// empty-space skipping asked for: the samples per ray and the images, in
+/// that order.
+fn skip_frames(
+    vol: &Volume,
+    tf: &TransferFunction,
+    mode: RenderMode,
+    options: impl Fn(brickray::SkipRule) -> brickray::RendererOptions,
+) -> (Vec<f64>, Vec<Vec<u8>>) {
+    const SIZE: u32 = 96;
+    let g = gpu();
+    let target = Offscreen::new(&g.device, SIZE, SIZE);
+    let d = vol.desc();
+    let frame = VolumeFrame::centered(d.dims, d.spacing);
+    let camera = Camera::orbit(frame.center(), 2.0, 0.5, 0.3);
+    let (mut samples, mut images) = (Vec::new(), Vec::new());
+    for rule in [brickray::SkipRule::WherePays, brickray::SkipRule::Always] {
+        let mut r = VolumeRenderer::with_options(&g.device, targets(), options(rule)).unwrap();
+        r.set_volume(&g.device, &g.queue, vol).unwrap();
+        r.set_transfer_function(&g.device, &g.queue, tf).unwrap();
+        for ess in [false, true] {
+            let desc = FrameDesc {
+                settings: RenderSettings {
+                    mode,
+                    accel: Accel {
+                        early_termination: Some(0.99),
+                        empty_space_skipping: ess,
+                    },
+                    ..Default::default()
+                },
+                ..FrameDesc::new(camera, frame, SIZE, SIZE)
+            };
+            let f = brickray_harness::predict::draw(g, &mut r, &target, &desc).unwrap();
+            samples.push(brickray_harness::predict::samples_per_ray(&f.samples));
+            images.push(f.color);
+        }
+    }
+    (samples, images)
 }

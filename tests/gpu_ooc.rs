@@ -371,23 +371,14 @@ fn mixed_levels_show_no_seams() {
 /// the renderer computes them from the bricks it uploads.
 #[test]
 fn mip_skips_out_of_core_where_the_bricks_say_it_pays() {
-    use brickray::core::{MIP_SKIP_SHARE_MIN_BRICKS, synthetic};
+    use brickray::core::MIP_SKIP_SHARE_MIN_BRICKS;
     use brickray::{RendererOptions, SkipRule};
     use brickray_harness::predict::{draw, samples_per_ray};
     use brickray_reference::psnr;
     const SIZE: u32 = 96;
     let n = 64u32;
     let noise = brickray_harness::scenes::pareto_noise(n);
-    // A bright box 12 voxels thick around noise at a fifth of its level.
-    let shell = synthetic::u8_field(n, |p| {
-        let edge = p.iter().map(|&c| c.min(n - 1 - c)).min().unwrap_or(0);
-        // Below the top of the range, which would end MIP rays at once.
-        if edge < 12 {
-            0.8
-        } else {
-            0.2 * synthetic::fractal_noise(p.map(f64::from), 16.0, 3)
-        }
-    });
+    let shell = brickray_harness::scenes::bright_shell(n);
     let tf = TransferFunction::ramp(0.0, 1.0, 1.0);
     let g = gpu();
     let target = Offscreen::new(&g.device, SIZE, SIZE);

@@ -152,25 +152,18 @@ pub(crate) fn run(args: &Args) -> Result<SkippingResult, String> {
         let mut always = renderer_in_core(&gpu, with(SkipRule::Always), &vol, &tf)?;
         let mut rule = renderer_in_core(&gpu, with(SkipRule::WherePays), &vol, &tf)?;
         let view = (camera, frame);
-        let row = measure(
-            &run,
-            settings(mip, true),
-            &mut always,
-            Some(&mut rule),
-            view,
-            rounds,
+        let dims = vol.dims();
+        let case = |label: String, volume: String, share: f64, rule_skips: bool| Case {
+            label,
+            volume,
+            dims,
             share,
-        )?;
-        report(
-            &name,
-            Row {
-                volume: name.clone(),
-                dims: vol.dims(),
-                rule_skips: brickray_core::mip_skipping_pays(&grid),
-                ..row
-            },
-            &mut rows,
-        );
+            rule_skips,
+        };
+        let skips = brickray_core::mip_skipping_pays(&grid);
+        let c = case(name.clone(), name.clone(), share, skips);
+        let (a, r) = (&mut always, Some(&mut rule));
+        measure(&run, settings(mip, true), a, r, view, rounds, c, &mut rows)?;
         // Out of core: a brick store at its finest level.
         let src = brickray_harness::store_of(&vol, &dir.path().join(format!("{i}.brs")));
         let share = brickray_harness::finest_bricks_mip_share(src.as_ref())?;
@@ -196,109 +189,69 @@ pub(crate) fn run(args: &Args) -> Result<SkippingResult, String> {
             }
         };
         let (mut always, mut rule) = (ooc(SkipRule::Always)?, ooc(SkipRule::WherePays)?);
-        let row = measure(
+        let skips = share >= brickray_core::MIP_SKIP_SHARE_MIN_BRICKS;
+        let c = case(format!("{name}, out of core"), name.clone(), share, skips);
+        let (a, r) = (&mut always, Some(&mut rule));
+        measure(
             &run,
             settings(mip, true),
-            &mut always,
-            Some(&mut rule),
+            a,
+            r,
             view,
             rounds,
-            share,
-        )?;
-        let label = format!("{name}, out of core");
-        report(
-            &label,
-            Row {
-                volume: name.clone(),
-                dims: vol.dims(),
-                rule_skips: share >= brickray_core::MIP_SKIP_SHARE_MIN_BRICKS,
-                ..row
-            },
+            c,
             &mut ooc_rows,
-        );
+        )?;
         // DVR through ramps opaque from 0, 30% and 60% of the range (0.05
         // per reference length at the top): the share of macro cells
-        // transparent through each, in core with and without the rule, and
-        // out of core (which has no DVR rule: its "rule" column is always).
+        // transparent through each, in core with and without the rule,
+        // unshaded and shaded (samples two to three times as dear), and out
+        // of core (which has no DVR rule: its "rule" column is always).
         let dvr = RenderMode::Dvr;
+        let shaded = RenderSettings {
+            shading: brickray_core::Shading {
+                enabled: true,
+                ..Default::default()
+            },
+            ..settings(dvr, true)
+        };
         let mut ooc_dvr = ooc(SkipRule::Always)?;
         for from in [0.0f32, 0.3, 0.6] {
             let tf = TransferFunction::ramp(from, 1.0, 0.05);
-            let share = grid
-                .ranges
-                .iter()
-                .filter(|r| tf.is_transparent(r[0], r[1]))
-                .count() as f64
-                / grid.ranges.len().max(1) as f64;
+            let share = grid.transparent_share(&tf);
+            let skips = share >= brickray_core::DVR_SKIP_SHARE_MIN;
             let with = |dvr_skipping| RendererOptions {
                 dvr_skipping,
                 ..Default::default()
             };
             let mut always = renderer_in_core(&gpu, with(SkipRule::Always), &vol, &tf)?;
             let mut rule = renderer_in_core(&gpu, with(SkipRule::WherePays), &vol, &tf)?;
-            let row = measure(
-                &run,
-                settings(dvr, true),
-                &mut always,
-                Some(&mut rule),
-                view,
-                rounds,
-                share,
-            )?;
-            let label = format!("{name}, DVR from {from}");
-            let row = Row {
-                volume: label.clone(),
-                dims: vol.dims(),
-                rule_skips: share >= brickray_core::DVR_SKIP_SHARE_MIN,
-                ..row
-            };
-            report(&label, row, &mut dvr_rows);
-            // Shaded (samples cost two to three times as much).
-            let shaded = RenderSettings {
-                shading: brickray_core::Shading {
-                    enabled: true,
-                    ..Default::default()
-                },
-                ..settings(dvr, true)
-            };
-            let row = measure(
-                &run,
-                shaded,
-                &mut always,
-                Some(&mut rule),
-                view,
-                rounds,
-                share,
-            )?;
-            let label = format!("{name}, shaded DVR from {from}");
-            let row = Row {
-                volume: label.clone(),
-                dims: vol.dims(),
-                rule_skips: share >= brickray_core::DVR_SKIP_SHARE_MIN,
-                ..row
-            };
-            report(&label, row, &mut dvr_shaded_rows);
+            for (base, kind, rows) in [
+                (settings(dvr, true), "DVR", &mut dvr_rows),
+                (shaded, "shaded DVR", &mut dvr_shaded_rows),
+            ] {
+                let label = format!("{name}, {kind} from {from}");
+                let c = case(label.clone(), label, share, skips);
+                let (a, r) = (&mut always, Some(&mut rule));
+                measure(&run, base, a, r, view, rounds, c, rows)?;
+            }
             ooc_dvr
                 .set_transfer_function(&gpu.device, &gpu.queue, &tf)
                 .map_err(|e| e.to_string())?;
             run.converge(&mut ooc_dvr, camera, frame, settings(dvr, true), 300)?;
-            let row = measure(
+            let label = format!("{name}, DVR from {from}, out of core");
+            let c = case(label.clone(), label, share, true);
+            let a = &mut ooc_dvr;
+            measure(
                 &run,
                 settings(dvr, true),
-                &mut ooc_dvr,
+                a,
                 None,
                 view,
                 rounds,
-                share,
+                c,
+                &mut dvr_ooc_rows,
             )?;
-            let label = format!("{name}, DVR from {from}, out of core");
-            let row = Row {
-                volume: label.clone(),
-                dims: vol.dims(),
-                rule_skips: true,
-                ..row
-            };
-            report(&label, row, &mut dvr_ooc_rows);
         }
     }
     let (max, wrong) = (max_ratio, wrong_decisions);
@@ -337,10 +290,22 @@ fn settings(mode: RenderMode, ess: bool) -> RenderSettings {
     }
 }
 
+/// What one row measures, beside its timings.
+struct Case {
+    /// Printed.
+    label: String,
+    /// The row's `volume`.
+    volume: String,
+    dims: [u32; 3],
+    share: f64,
+    rule_skips: bool,
+}
+
 /// No skipping, always and the rule, interleaved: `always` draws the first
-/// two (without and with skipping asked for), `rule` the third (`always`
-/// again where there is no rule to measure). The row's volume, dims and
-/// decision are left for the caller.
+/// two (without and with skipping asked for, on `base`), `rule` the third
+/// (`always` again where there is no rule to measure); the row is printed
+/// and kept in `rows`.
+#[allow(clippy::too_many_arguments)]
 fn measure(
     run: &Runner<'_>,
     base: RenderSettings,
@@ -348,8 +313,9 @@ fn measure(
     mut rule: Option<&mut VolumeRenderer>,
     (camera, frame): (Camera, VolumeFrame),
     rounds: usize,
-    share: f64,
-) -> Result<Row, String> {
+    case: Case,
+    rows: &mut Vec<Row>,
+) -> Result<(), String> {
     let s = |ess| RenderSettings {
         accel: Accel {
             empty_space_skipping: ess,
@@ -373,11 +339,11 @@ fn measure(
         .iter()
         .map(|s| Timing::of_times(s.iter().map(|f| (f.ms, None))))
         .collect();
-    Ok(Row {
-        volume: String::new(),
-        dims: [0; 3],
-        skip_share: (share * 1000.0).round() / 1000.0,
-        rule_skips: false,
+    let row = Row {
+        volume: case.volume,
+        dims: case.dims,
+        skip_share: (case.share * 1000.0).round() / 1000.0,
+        rule_skips: case.rule_skips,
         always_over_off: round2(t[1].ms / t[0].ms),
         rule_over_off: round2(t[2].ms / t[0].ms),
         off: t[0],
@@ -385,14 +351,10 @@ fn measure(
         rule: t[2],
         samples_per_ray_off: round2(off_shot.samples),
         samples_per_ray_always: round2(on_shot.samples),
-    })
-}
-
-/// Prints a row and keeps it.
-fn report(label: &str, row: Row, rows: &mut Vec<Row>) {
+    };
     println!(
         "  {:<36} {:>6.3} {:>6} {:>9.1} {:>9.1} ({:.2}) {:>9.1} ({:.2})",
-        label,
+        case.label,
         row.skip_share,
         if row.rule_skips { "skip" } else { "off" },
         row.off.ms,
@@ -402,6 +364,7 @@ fn report(label: &str, row: Row, rows: &mut Vec<Row>) {
         row.rule_over_off
     );
     rows.push(row);
+    Ok(())
 }
 
 fn max_ratio(rows: &[Row], f: fn(&Row) -> f64) -> f64 {

@@ -100,6 +100,17 @@ impl MacroCellGrid {
         empty_distance(self.dims, &empty, cap)
     }
 
+    /// The share of cells transparent through `tf` (DVR skips them; what
+    /// [`DVR_SKIP_SHARE_MIN`] is compared with; 0 for an empty grid).
+    pub fn transparent_share(&self, tf: &crate::TransferFunction) -> f64 {
+        let transparent = self
+            .ranges
+            .iter()
+            .filter(|r| tf.is_transparent(r[0], r[1]))
+            .count();
+        transparent as f64 / self.ranges.len().max(1) as f64
+    }
+
     /// The share of cells that MIP's skipping is certain to skip, over rays
     /// along each axis in both directions, one per column of cells
     /// ([`mip_skip_counts`]; 0 for an empty grid). What

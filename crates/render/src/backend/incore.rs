@@ -273,12 +273,11 @@ impl InCore {
                 let d = self
                     .grid
                     .empty_distance(|r| tf.is_transparent(r[0], r[1]), SKIP_CAP);
-                // The share of transparent cells (distance > 0) decides
-                // whether DVR skips (label maps: hidden labels, always).
-                let empty = d.iter().filter(|&&c| c > 0).count() as f64 / d.len().max(1) as f64;
+                // The share of transparent cells decides whether DVR skips
+                // (label maps: hidden labels, always).
                 self.dvr_skipping = self.dvr_rule == crate::SkipRule::Always
                     || self.labels
-                    || empty >= brickray_core::DVR_SKIP_SHARE_MIN;
+                    || self.grid.transparent_share(tf) >= brickray_core::DVR_SKIP_SHARE_MIN;
                 d
             }
             SkipKey::Iso(iso) => self.grid.empty_distance(|r| r[1] < iso, SKIP_CAP),
