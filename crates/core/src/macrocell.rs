@@ -184,11 +184,11 @@ pub fn mip_skipping_pays(grid: &MacroCellGrid) -> bool {
 
 /// The least share of macro cells transparent through the transfer
 /// function at which DVR's empty-space skipping is used in core. Measured
-/// on lavapipe (2026-12-06, 256 x 256, ramps from 0 to 1 starting at 0 to
-/// 0.6 of the range, `brickray-bench skipping`, docs/benchmarks.md): with
-/// no cell or 7% of them transparent skipping cost 1.15-1.20x the frame
-/// (fractal noise, Marschner-Lobb, the head CT), from 19% on (Marschner-Lobb
-/// 0.188: 0.97x) it paid, down to 0.23x. The threshold lies between.
+/// on lavapipe (`brickray-bench skipping`, 2026-12-06, docs/benchmarks.md:
+/// ramps opaque from 0, 0.3 and 0.6 of the range on seven volumes): where
+/// no cell is transparent skipping cost 1.14-1.30x the frame unshaded and
+/// 1.11-1.14x shaded; from a share of 0.188 on it broke even or paid
+/// (0.15-1.07x, the tomogram at 0.231 a wash). The threshold lies between.
 pub const DVR_SKIP_SHARE_MIN: f64 = 0.15;
 
 /// The least share of sub-cells certain to be skipped, counted within each
