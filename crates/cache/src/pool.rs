@@ -5,7 +5,6 @@
 //! this bookkeeping assigns to slots.
 
 use brickray_core::{NodeKey, NodeMap};
-use std::collections::BTreeMap;
 use thiserror::Error;
 
 /// Index of a slot in the pool, `0..slot_count()`.
@@ -102,7 +101,14 @@ struct Slot {
     tick: u64,
     /// Pinned for good (the coarse floor): never an eviction candidate.
     pinned: bool,
+    /// Neighbours in the eviction order ([`NIL`] at either end, and for a slot
+    /// not in it: free or pinned for good).
+    prev: SlotId,
+    next: SlotId,
 }
+
+/// No slot (the ends of the eviction order).
+const NIL: SlotId = SlotId::MAX;
 
 /// The result of [`BrickPool::allocate`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -123,8 +129,12 @@ pub struct BrickPool {
     stored_side: u32,
     slots: Vec<Slot>,
     map: NodeMap<SlotId>,
-    /// Occupied slots by `tick` (oldest first); free slots are not listed.
-    lru: BTreeMap<u64, SlotId>,
+    /// The eviction order: the occupied slots not pinned for good, a list
+    /// linked through the slots by increasing `tick` (every stamp moves its
+    /// slot to the tail, in constant time), the least recently used at the
+    /// head.
+    head: SlotId,
+    tail: SlotId,
     free: Vec<SlotId>,
     tick: u64,
     evictions: u64,
@@ -156,11 +166,14 @@ impl BrickPool {
                     frame: 0,
                     tick: 0,
                     pinned: false,
+                    prev: NIL,
+                    next: NIL,
                 };
                 n as usize
             ],
             map: NodeMap::default(),
-            lru: BTreeMap::new(),
+            head: NIL,
+            tail: NIL,
             free: (0..n).rev().collect(),
             tick: 0,
             evictions: 0,
@@ -226,16 +239,53 @@ impl BrickPool {
         self.evictions
     }
 
+    /// Takes an occupied slot out of the eviction order.
+    fn unlink(&mut self, slot: SlotId) {
+        let Slot { prev, next, .. } = self.slots[slot as usize];
+        match prev {
+            NIL => self.head = next,
+            p => self.slots[p as usize].next = next,
+        }
+        match next {
+            NIL => self.tail = prev,
+            n => self.slots[n as usize].prev = prev,
+        }
+        let s = &mut self.slots[slot as usize];
+        (s.prev, s.next) = (NIL, NIL);
+    }
+
+    /// Puts a slot into the eviction order after every slot of a smaller
+    /// tick: at the tail when its tick is the newest (every stamp), else
+    /// found from the tail (a slot unpinned for good).
+    fn link(&mut self, slot: SlotId) {
+        let tick = self.slots[slot as usize].tick;
+        let mut prev = self.tail;
+        while prev != NIL && self.slots[prev as usize].tick > tick {
+            prev = self.slots[prev as usize].prev;
+        }
+        let next = match prev {
+            NIL => std::mem::replace(&mut self.head, slot),
+            p => std::mem::replace(&mut self.slots[p as usize].next, slot),
+        };
+        match next {
+            NIL => self.tail = slot,
+            n => self.slots[n as usize].prev = slot,
+        }
+        let s = &mut self.slots[slot as usize];
+        (s.prev, s.next) = (prev, next);
+    }
+
     fn stamp(&mut self, slot: SlotId, frame: u64) {
         self.tick += 1;
-        let s = &mut self.slots[slot as usize];
-        if s.key.is_some() {
-            self.lru.remove(&s.tick);
+        let pinned = self.slots[slot as usize].pinned;
+        if !pinned {
+            self.unlink(slot);
         }
+        let s = &mut self.slots[slot as usize];
         s.tick = self.tick;
         s.frame = s.frame.max(frame);
-        if !s.pinned {
-            self.lru.insert(self.tick, slot);
+        if !pinned {
+            self.link(slot);
         }
     }
 
@@ -247,8 +297,8 @@ impl BrickPool {
         let s = &mut self.slots[slot as usize];
         if !s.pinned {
             s.pinned = true;
-            self.lru.remove(&s.tick);
             self.pinned += 1;
+            self.unlink(slot);
         }
         Some(slot)
     }
@@ -260,7 +310,7 @@ impl BrickPool {
             if s.pinned {
                 s.pinned = false;
                 self.pinned -= 1;
-                self.lru.insert(s.tick, slot);
+                self.link(slot);
             }
         }
     }
@@ -299,17 +349,14 @@ impl BrickPool {
             (slot, None)
         } else {
             // Ticks and frames grow together, so the oldest tick has the oldest frame.
-            let (&tick, &slot) = self.lru.first_key_value().ok_or(PoolError::Full {
-                slots: self.slot_count(),
-                frame,
-            })?;
-            if self.slots[slot as usize].frame >= frame {
+            let slot = self.head;
+            if slot == NIL || self.slots[slot as usize].frame >= frame {
                 return Err(PoolError::Full {
                     slots: self.slot_count(),
                     frame,
                 });
             }
-            self.lru.remove(&tick);
+            self.unlink(slot);
             let old = self.slots[slot as usize].key.take();
             if let Some(old) = old {
                 self.map.remove(&old);
@@ -322,7 +369,7 @@ impl BrickPool {
         s.frame = frame;
         self.tick += 1;
         s.tick = self.tick;
-        self.lru.insert(self.tick, slot);
+        self.link(slot);
         self.map.insert(key, slot);
         Ok(Allocation {
             slot,
@@ -334,12 +381,13 @@ impl BrickPool {
     /// Frees the slot of `key`; returns it.
     pub fn evict(&mut self, key: NodeKey) -> Option<SlotId> {
         let slot = self.map.remove(&key)?;
-        let s = &mut self.slots[slot as usize];
-        if s.pinned {
-            s.pinned = false;
+        if self.slots[slot as usize].pinned {
+            self.slots[slot as usize].pinned = false;
             self.pinned -= 1;
+        } else {
+            self.unlink(slot);
         }
-        self.lru.remove(&s.tick);
+        let s = &mut self.slots[slot as usize];
         s.key = None;
         self.free.push(slot);
         Some(slot)
@@ -478,6 +526,155 @@ mod tests {
                     let slots: HashSet<SlotId> = p.resident().map(|r| r.1).collect();
                     prop_assert_eq!(slots.len() as u32, p.occupied());
                 }
+            }
+        }
+    }
+
+    impl BrickPool {
+        /// The eviction order from the head, walked both ways (they must
+        /// agree).
+        fn eviction_order(&self) -> Vec<SlotId> {
+            let mut forward = Vec::new();
+            let mut s = self.head;
+            while s != NIL {
+                forward.push(s);
+                s = self.slots[s as usize].next;
+            }
+            let mut backward = Vec::new();
+            let mut s = self.tail;
+            while s != NIL {
+                backward.push(s);
+                s = self.slots[s as usize].prev;
+            }
+            backward.reverse();
+            assert_eq!(forward, backward);
+            forward
+        }
+    }
+
+    /// A model of the pool: slots as (key, frame, tick, pinned for good), the
+    /// victim found by scanning for the smallest tick among the occupied
+    /// slots not pinned for good.
+    #[derive(Default)]
+    struct Model {
+        slots: Vec<Option<(NodeKey, u64, u64, bool)>>,
+        free: Vec<SlotId>,
+        tick: u64,
+    }
+
+    impl Model {
+        fn new(n: u32) -> Model {
+            Model {
+                slots: vec![None; n as usize],
+                free: (0..n).rev().collect(),
+                tick: 0,
+            }
+        }
+
+        fn slot_of(&self, key: NodeKey) -> Option<SlotId> {
+            (0..self.slots.len() as u32)
+                .find(|&i| self.slots[i as usize].is_some_and(|s| s.0 == key))
+        }
+
+        fn touch(&mut self, key: NodeKey, frame: u64) -> Option<SlotId> {
+            let i = self.slot_of(key)?;
+            self.tick += 1;
+            let s = self.slots[i as usize].as_mut().unwrap();
+            (s.1, s.2) = (s.1.max(frame), self.tick);
+            Some(i)
+        }
+
+        fn order(&self) -> Vec<SlotId> {
+            let mut v: Vec<(u64, SlotId)> = (0..self.slots.len() as u32)
+                .filter_map(|i| match self.slots[i as usize] {
+                    Some((_, _, tick, false)) => Some((tick, i)),
+                    _ => None,
+                })
+                .collect();
+            v.sort();
+            v.into_iter().map(|(_, i)| i).collect()
+        }
+
+        fn allocate(&mut self, key: NodeKey, frame: u64) -> Result<Allocation, PoolError> {
+            if let Some(slot) = self.touch(key, frame) {
+                return Ok(Allocation {
+                    slot,
+                    resident: true,
+                    evicted: None,
+                });
+            }
+            let full = PoolError::Full {
+                slots: self.slots.len() as u32,
+                frame,
+            };
+            let (slot, evicted) = match self.free.pop() {
+                Some(i) => (i, None),
+                None => {
+                    let &i = self.order().first().ok_or(full.clone())?;
+                    let old = self.slots[i as usize].unwrap();
+                    if old.1 >= frame {
+                        return Err(full);
+                    }
+                    (i, Some(old.0))
+                }
+            };
+            self.tick += 1;
+            self.slots[slot as usize] = Some((key, frame, self.tick, false));
+            Ok(Allocation {
+                slot,
+                resident: false,
+                evicted,
+            })
+        }
+    }
+
+    proptest! {
+        /// Allocations, touches, evictions and pins for good against the
+        /// model: the same slots, residency and victims, and the linked
+        /// eviction order equal to the model's order by tick.
+        #[test]
+        fn matches_a_model_of_the_eviction_order(
+            ops in prop::collection::vec((0u8..6, 0u32..10), 1..300),
+            n_slots in 1u32..7,
+        ) {
+            let mut p = BrickPool::with_grid([n_slots, 1, 1], 2);
+            let mut m = Model::new(n_slots);
+            let mut frame = 1u64;
+            for (op, i) in ops {
+                let key = k(i);
+                match op {
+                    0 | 1 => prop_assert_eq!(p.allocate(key, frame), m.allocate(key, frame)),
+                    2 => prop_assert_eq!(p.touch(key, frame), m.touch(key, frame)),
+                    3 => {
+                        let slot = m.slot_of(key);
+                        if let Some(i) = slot {
+                            m.slots[i as usize] = None;
+                            m.free.push(i);
+                        }
+                        prop_assert_eq!(p.evict(key), slot);
+                    }
+                    4 => {
+                        let slot = m.slot_of(key);
+                        if let Some(i) = slot {
+                            m.slots[i as usize].as_mut().unwrap().3 = true;
+                        }
+                        prop_assert_eq!(p.pin(key), slot);
+                    }
+                    _ => {
+                        if i % 2 == 0 {
+                            if let Some(i) = m.slot_of(key) {
+                                m.slots[i as usize].as_mut().unwrap().3 = false;
+                            }
+                            p.unpin(key);
+                        } else {
+                            frame += 1;
+                        }
+                    }
+                }
+                prop_assert_eq!(p.eviction_order(), m.order());
+                let pinned = m.slots.iter().flatten().filter(|s| s.3).count() as u32;
+                prop_assert_eq!(p.pinned_count(), pinned);
+                prop_assert_eq!(p.occupied(), m.slots.iter().flatten().count() as u32);
             }
         }
     }
