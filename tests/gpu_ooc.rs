@@ -441,3 +441,63 @@ fn mip_skips_out_of_core_where_the_bricks_say_it_pays() {
         }
     }
 }
+
+/// DVR out of core tests sub-cells only in leaves whose values meet a
+/// transparent TF entry (`tf_opaque_throughout` in common.wgsl): under a TF
+/// that is transparent below 0.3, the bright box's bricks (a dim core inside
+/// a bright shell) hold transparent sub-cells, and skipping takes fewer
+/// samples with the same image; under a TF opaque at every value no leaf
+/// has one, and skipping takes every sample, with the same image.
+#[test]
+fn dvr_skips_sub_cells_only_where_a_leaf_can_hold_a_transparent_one() {
+    use brickray_harness::predict::{draw, samples_per_ray};
+    use brickray_reference::psnr;
+    const SIZE: u32 = 96;
+    let shell = brickray_harness::scenes::bright_shell(64);
+    let g = gpu();
+    let target = Offscreen::new(&g.device, SIZE, SIZE);
+    let dir = tempfile::tempdir().unwrap();
+    let source = store_of(&shell, &dir);
+    let d = shell.desc();
+    let frame = VolumeFrame::centered(d.dims, d.spacing);
+    let camera = Camera::orbit(frame.center(), 2.0, 0.5, 0.3);
+    let desc = |ess: bool| FrameDesc {
+        settings: RenderSettings {
+            mode: RenderMode::Dvr,
+            accel: brickray::Accel {
+                early_termination: Some(0.99),
+                empty_space_skipping: ess,
+            },
+            ..Default::default()
+        },
+        ..FrameDesc::new(camera, frame, SIZE, SIZE)
+    };
+    let transparent_below = TransferFunction::ramp(0.3, 1.0, 0.05);
+    let opaque = TransferFunction::from_entries(vec![[0.9, 0.8, 0.7, 0.01]; 256]);
+    for (name, tf, skips) in [
+        ("transparent below 0.3", &transparent_below, true),
+        ("opaque throughout", &opaque, false),
+    ] {
+        let mut r = VolumeRenderer::new(&g.device, targets()).unwrap();
+        r.set_volume_source(&g.device, &g.queue, source.clone(), finest())
+            .unwrap();
+        r.set_transfer_function(&g.device, &g.queue, tf).unwrap();
+        brickray_harness::draw_until_settled(g, &mut r, &target, &desc(true), 200)
+            .unwrap()
+            .expect("out of core settles");
+        let off = draw(g, &mut r, &target, &desc(false)).unwrap();
+        let on = draw(g, &mut r, &target, &desc(true)).unwrap();
+        let (n_off, n_on) = (samples_per_ray(&off.samples), samples_per_ray(&on.samples));
+        eprintln!("{name}: samples per ray, skipping off/on {n_off:.1}/{n_on:.1}");
+        assert_eq!(
+            psnr(&on.color, &off.color),
+            f64::INFINITY,
+            "{name}: identical"
+        );
+        if skips {
+            assert!(n_on < 0.95 * n_off, "{name}: skips");
+        } else {
+            assert_eq!(n_on, n_off, "{name}: nothing to skip");
+        }
+    }
+}

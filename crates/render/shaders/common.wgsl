@@ -322,12 +322,27 @@ fn tf_lookup(v: f32) -> vec4<f32> {
     return mix(tf[i], tf[j], f);
 }
 
-// O(1): can any value in [lo, hi] be visible through the TF?
+// O(1): true when no value in [lo, hi] is visible through the TF.
 fn tf_transparent(range: vec2<f32>) -> bool {
+    let b = tf_bins(range);
+    return tf_prefix[b.y + 1u] == tf_prefix[b.x];
+}
+
+// The TF entries a value range touches, first and last (the range's ends
+// rounded outwards, so a sub-range touches a subset of them).
+fn tf_bins(range: vec2<f32>) -> vec2<u32> {
     let n1 = tf_info.count - 1.0;
     let i0 = u32(floor(clamp(range.x, 0.0, 1.0) * n1));
     let i1 = min(u32(ceil(clamp(range.y, 0.0, 1.0) * n1)), u32(n1));
-    return tf_prefix[i1 + 1u] == tf_prefix[min(i0, i1)];
+    return vec2<u32>(min(i0, i1), i1);
+}
+
+// True when no TF entry the range touches is transparent: then no sub-range
+// of it is (tf_transparent is false for each), and a region whose values lie
+// in it has nothing to skip.
+fn tf_opaque_throughout(range: vec2<f32>) -> bool {
+    let b = tf_bins(range);
+    return tf_prefix[b.y + 1u] - tf_prefix[b.x] == b.y + 1u - b.x;
 }
 
 // Writes one pixel of the outputs: premultiplied colour, the nearer of the

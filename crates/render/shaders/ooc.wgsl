@@ -290,6 +290,10 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
                 k = max(k, first_k_after(st.hit.t_enter, t0, dtl));
                 let t_end = min(st.hit.t_exit, t1);
                 var k_cell = 0u;
+                // DVR: a leaf whose values meet no transparent TF entry has no
+                // sub-cell to skip, and its samples run without tests (one
+                // test of its range instead of one per sub-cell).
+                let cell_tests = ESS && (MODE != MODE_DVR || !tf_opaque_throughout(leaf_range(st.hit.data)));
                 // The visible weight's start (feedback.wgsl); MIP and iso rays
                 // are transparent.
                 let t_in = max(st.hit.t_enter, t0);
@@ -307,7 +311,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
                     // (sub_cell_range), except the spread's reach: with
                     // SPREAD, whose widened ranges do not bound a mixed
                     // sample's reach, no skipping inside it while it fades.
-                    if (ESS && k >= k_cell && !(SPREAD && cur.b.fb_w > 0.0)) {
+                    if (cell_tests && k >= k_cell && !(SPREAD && cur.b.fb_w > 0.0)) {
                         let j = sub_cell_of(cur.b, oo + od * t);
                         let range = sub_cell_range(cur.b, j);
                         let te = min(sub_cell_exit(cur.b, j, oo, od, inv_od), st.hit.t_exit);

@@ -234,12 +234,19 @@ fn sub_cell_range(b: Brick, j: vec3<u32>) -> vec2<f32> {
     return range_union(sub_cells[sub_cell_index(b.slot, j)], sub_cells[fade_sub_cell_index(b, j)]);
 }
 
-// The largest normalized value a sample of the data leaf in `slot` can take:
-// its brick's maximum and, while it fades or borrows, its fallback's.
-fn leaf_max(slot: u32) -> f32 {
+// The normalized values a sample of the data leaf in `slot` can take: its
+// brick's range and, while it fades or borrows, its fallback's (each brick's
+// range covers its sub-cells', apron included).
+fn leaf_range(slot: u32) -> vec2<f32> {
     let s = slots[slot];
     let fs = min(u32(s.range.z), arrayLength(&slots) - 1u);
-    return max(s.range.y, slots[select(slot, fs, s.offset.w > 0.0)].range.y);
+    let f = slots[select(slot, fs, s.offset.w > 0.0)].range;
+    return vec2<f32>(min(s.range.x, f.x), max(s.range.y, f.y));
+}
+
+// The largest normalized value a sample of the data leaf in `slot` can take.
+fn leaf_max(slot: u32) -> f32 {
+    return leaf_range(slot).y;
 }
 
 // t at which the ray o(t) = oo + od t leaves sub-cell j of brick b (`inv_od`:
