@@ -359,6 +359,25 @@ fn mixed_levels_show_no_seams() {
     }
 }
 
+/// The skipping tests' frame: `vol` centred, the orbit camera of the pareto
+/// suite, ERT at 0.99, skipping as `ess` says.
+fn skip_frame(vol: &Volume, mode: RenderMode, ess: bool, size: u32) -> FrameDesc<'static> {
+    let d = vol.desc();
+    let frame = VolumeFrame::centered(d.dims, d.spacing);
+    let camera = Camera::orbit(frame.center(), 2.0, 0.5, 0.3);
+    FrameDesc {
+        settings: RenderSettings {
+            mode,
+            accel: brickray::Accel {
+                early_termination: Some(0.99),
+                empty_space_skipping: ess,
+            },
+            ..Default::default()
+        },
+        ..FrameDesc::new(camera, frame, size, size)
+    }
+}
+
 /// MIP out of core skips empty space only where the plan's bricks say it
 /// pays (`SkipRule::WherePays`, the default): the share of their
 /// sub-cells certain to be skipped within each brick
@@ -392,20 +411,7 @@ fn mip_skips_out_of_core_where_the_bricks_say_it_pays() {
             pays,
             "{name}: share {share}"
         );
-        let d = vol.desc();
-        let frame = VolumeFrame::centered(d.dims, d.spacing);
-        let camera = Camera::orbit(frame.center(), 2.0, 0.5, 0.3);
-        let desc = |ess: bool| FrameDesc {
-            settings: RenderSettings {
-                mode: RenderMode::Mip,
-                accel: brickray::Accel {
-                    early_termination: Some(0.99),
-                    empty_space_skipping: ess,
-                },
-                ..Default::default()
-            },
-            ..FrameDesc::new(camera, frame, SIZE, SIZE)
-        };
+        let desc = |ess: bool| skip_frame(vol, RenderMode::Mip, ess, SIZE);
         let mut samples = Vec::new();
         let mut images = Vec::new();
         for rule in [SkipRule::WherePays, SkipRule::Always] {
@@ -458,20 +464,7 @@ fn dvr_skips_sub_cells_only_where_a_leaf_can_hold_a_transparent_one() {
     let target = Offscreen::new(&g.device, SIZE, SIZE);
     let dir = tempfile::tempdir().unwrap();
     let source = store_of(&shell, &dir);
-    let d = shell.desc();
-    let frame = VolumeFrame::centered(d.dims, d.spacing);
-    let camera = Camera::orbit(frame.center(), 2.0, 0.5, 0.3);
-    let desc = |ess: bool| FrameDesc {
-        settings: RenderSettings {
-            mode: RenderMode::Dvr,
-            accel: brickray::Accel {
-                early_termination: Some(0.99),
-                empty_space_skipping: ess,
-            },
-            ..Default::default()
-        },
-        ..FrameDesc::new(camera, frame, SIZE, SIZE)
-    };
+    let desc = |ess: bool| skip_frame(&shell, RenderMode::Dvr, ess, SIZE);
     let transparent_below = TransferFunction::ramp(0.3, 1.0, 0.05);
     let opaque = TransferFunction::from_entries(vec![[0.9, 0.8, 0.7, 0.01]; 256]);
     for (name, tf, skips) in [
