@@ -164,3 +164,120 @@ fn label_maps_make_no_gradients() {
     draw(&mut r, &vol, s);
     assert_eq!(r.volume_bytes(), before);
 }
+
+/// Out of core, a streamed volume that keeps its texels' gradients
+/// (`VolumeOptions::gradients`): made on the GPU as each brick is uploaded,
+/// counted in the atlas's bytes, and shading as six reads do (half floats
+/// apart; the bricks' apron keeps every tap within the brick, so no factor
+/// at the faces), at the finest level and at a coarser cut.
+fn compare_out_of_core(name: &str, vol: &Volume, tf: &TransferFunction, tolerance_px: f32) -> f64 {
+    let g = gpu();
+    let dir = tempfile::tempdir().unwrap();
+    let source = brickray_harness::store_of(vol, &dir.path().join("vol.brs"));
+    let config = brickray::OutOfCoreConfig {
+        tolerance_px,
+        upload_budget_bytes: 1 << 30,
+        ..Default::default()
+    };
+    let streamed = |gradients: bool| {
+        let options = brickray::VolumeOptions {
+            gradients,
+            ..Default::default()
+        };
+        let v = brickray::StreamedVolume::new(&g.device, &g.queue, source.clone(), config, options)
+            .unwrap();
+        let mut r = VolumeRenderer::new(&g.device, targets()).unwrap();
+        r.set_streamed_volume(&g.device, &v).unwrap();
+        r.set_transfer_function(&g.device, &g.queue, tf).unwrap();
+        (r, v)
+    };
+    let (mut pre, with) = streamed(true);
+    let (mut six, without) = streamed(false);
+    // The atlas's bytes per texel: the texels' and 8 more for the gradients,
+    // within the same budget (fewer slots).
+    let texels = |v: &brickray::StreamedVolume| {
+        v.inspect(|s| {
+            s.pool()
+                .atlas_dims()
+                .iter()
+                .map(|&d| d as u64)
+                .product::<u64>()
+        })
+    };
+    let bpp = |v: &brickray::StreamedVolume| v.resident_bytes() / texels(v);
+    assert_eq!(
+        bpp(&with),
+        bpp(&without) + 8,
+        "{name}: 8 bytes of gradient a texel"
+    );
+    assert!(
+        texels(&with) < texels(&without),
+        "{name}: the budget holds fewer slots"
+    );
+    let s = shaded(RenderMode::Dvr, true);
+    let a = draw_converged(&mut pre, vol, s);
+    let b = draw_converged(&mut six, vol, s);
+    // The cut's levels: only the finest at 0 px, some coarser one above.
+    let levels = with.layout().levels as usize;
+    let per_level = pre.stats().out_of_core.unwrap().data_leaves_per_level;
+    let coarse: u32 = per_level[..levels - 1].iter().sum();
+    assert_eq!(coarse > 0, tolerance_px > 0.0, "{name}: {per_level:?}");
+    let between = psnr(&a, &b);
+    let (frame, camera) = view(vol);
+    let cpu = render_reference(
+        vol,
+        &frame,
+        tf,
+        &camera,
+        &s,
+        &ReferenceOptions::new(SIZE, SIZE).with_step_factor(s.step_factor),
+    )
+    .to_rgba8([0.0; 3]);
+    let (ref_pre, ref_six) = (psnr(&a, &cpu), psnr(&b, &cpu));
+    eprintln!(
+        "{name}, out of core at {tolerance_px} px: gradients kept vs six reads {between:.2} dB; \
+         against the reference {ref_pre:.2} dB (six reads {ref_six:.2} dB)"
+    );
+    assert!(between >= 70.0, "{name}: {between} dB");
+    assert!(
+        ref_pre >= ref_six - 0.5,
+        "{name}: gradients kept {ref_pre} dB, six reads {ref_six} dB"
+    );
+    between
+}
+
+#[test]
+fn streamed_gradients_shade_as_six_reads() {
+    use brickray::core::synthetic;
+    let ml = synthetic::marschner_lobb(48);
+    let ml_tf = brickray_harness::scenes::marschner_lobb_tf();
+    compare_out_of_core("Marschner-Lobb (f32)", &ml, &ml_tf, 0.0);
+    compare_out_of_core("Marschner-Lobb (f32)", &ml, &ml_tf, 16.0);
+    let noise = synthetic::u8_field(48, |p| synthetic::fractal_noise(p.map(f64::from), 16.0, 4));
+    compare_out_of_core(
+        "fractal noise (u8)",
+        &noise,
+        &brickray_harness::scenes::noise_tf(),
+        0.0,
+    );
+    let (ct, name) = brickray_harness::stand_in::head_ct_or_phantom().unwrap();
+    compare_out_of_core(name, &ct, &brickray_harness::ct::soft_tissue(), 0.0);
+}
+
+/// The converged frame of `settings` (out of core, within 60 frames); RGBA8.
+fn draw_converged(r: &mut VolumeRenderer, vol: &Volume, settings: RenderSettings) -> Vec<u8> {
+    let g = gpu();
+    let target = Offscreen::new(&g.device, SIZE, SIZE);
+    let (frame, camera) = view(vol);
+    let desc = FrameDesc {
+        camera,
+        frame,
+        viewport: Viewport::full(SIZE, SIZE),
+        settings,
+        host_depth: None,
+        time: None,
+    };
+    let frames = brickray_harness::draw_until_settled(g, r, &target, &desc, 60).expect("frame");
+    assert!(frames.is_some(), "not converged within 60 frames");
+    target.read_color(g)
+}

@@ -1,6 +1,8 @@
 //! The `shading` suite: what shading costs in core, with the gradient taken by
 //! six reads per sample (`GradientSource::SixReads`) and from the per-voxel
-//! gradients (`GradientSource::Precomputed`, the default).
+//! gradients (`GradientSource::Precomputed`, the default); and out of core at
+//! the finest level, six reads against the gradients a streamed volume keeps
+//! per atlas texel (`VolumeOptions::gradients`).
 //!
 //! The head CT (soft tissue and bone TFs) and the MRI, or their procedural
 //! stand-ins, DVR at step 0.5: unshaded, shaded with six reads, and shaded
@@ -17,7 +19,9 @@ use crate::runner::{Runner, finite_db, renderer_in_core, round2};
 use brickray_core::{Camera, RenderSettings, Shading, TransferFunction, Volume, VolumeFrame};
 use brickray_harness::{GpuContext, ct};
 use brickray_reference::{ReferenceOptions, psnr, render_reference};
-use brickray_render::{GradientSource, RendererOptions};
+use brickray_render::{
+    GradientSource, RendererOptions, StreamedVolume, VolumeOptions, VolumeRenderer,
+};
 use serde::Serialize;
 
 /// The suite's options.
@@ -56,6 +60,31 @@ pub(crate) struct Row {
     psnr_six_reads_db: f64,
     psnr_precomputed_db: f64,
     psnr_between_db: f64,
+    out_of_core: OocRow,
+}
+
+/// The same scene out of core at the finest level (bricks of 32, a 1 GiB
+/// GPU budget): one volume that keeps gradients, one that does not.
+#[derive(Debug, Serialize)]
+pub(crate) struct OocRow {
+    unshaded: Timing,
+    six_reads: Timing,
+    kept: Timing,
+    six_reads_over_unshaded: f64,
+    kept_over_unshaded: f64,
+    kept_over_six_reads: f64,
+    /// Out of core over in core, shaded: six reads over six reads, and
+    /// kept gradients over precomputed ones.
+    six_reads_over_in_core: f64,
+    kept_over_in_core: f64,
+    /// GPU bytes per atlas texel, and the pool's slots, each way.
+    bytes_per_texel_six_reads: u64,
+    bytes_per_texel_kept: u64,
+    slots_six_reads: u64,
+    slots_kept: u64,
+    psnr_six_reads_db: f64,
+    psnr_kept_db: f64,
+    psnr_between_db: f64,
 }
 
 /// The suite's JSON line.
@@ -70,6 +99,10 @@ pub(crate) struct ShadingResult {
     precomputed_over_unshaded_max: f64,
     /// The smallest PSNR between the two shaded images.
     psnr_between_db_min: f64,
+    /// Out of core: the largest kept-gradients over six-reads ratio, and the
+    /// smallest PSNR between their images.
+    ooc_kept_over_six_reads_max: f64,
+    ooc_psnr_between_db_min: f64,
 }
 
 pub(crate) fn run(args: &Args) -> Result<ShadingResult, String> {
@@ -120,6 +153,13 @@ pub(crate) fn run(args: &Args) -> Result<ShadingResult, String> {
         };
         let mut six = renderer_in_core(&gpu, with(GradientSource::SixReads), vol, &tf)?;
         let mut pre = renderer_in_core(&gpu, with(GradientSource::Precomputed), vol, &tf)?;
+        let dir = tempfile::tempdir().map_err(|e| e.to_string())?;
+        let store = dir.path().join("vol.brs");
+        crate::runner::build_store(vol.clone(), 32, &store)?;
+        let source: std::sync::Arc<dyn brickray_core::BrickSource> =
+            std::sync::Arc::new(brickray_store::open(&store).map_err(|e| e.to_string())?);
+        let (mut ooc_six, six_volume) = streamed(&gpu, source.clone(), false, &tf)?;
+        let (mut ooc_kept, kept_volume) = streamed(&gpu, source, true, &tf)?;
         let settings = |shaded: bool| RenderSettings {
             shading: Shading {
                 enabled: shaded,
@@ -134,13 +174,22 @@ pub(crate) fn run(args: &Args) -> Result<ShadingResult, String> {
             .map_err(|e| e.to_string())?;
         let first = run_pre.frame(&mut pre, camera, frame, settings(true), false)?;
         let gradient_bytes = pre.volume_bytes() - volume_bytes;
-        // Warm-up of every variant, then the rounds.
+        // Warm-up of every variant (out of core: frames until the finest cut
+        // is drawn, each frame's gradient pass submitted), then the rounds.
         run.frame(&mut six, camera, frame, settings(false), false)?;
         run.frame(&mut six, camera, frame, settings(true), false)?;
-        let shots = interleave(rounds, 3, |i| match i {
+        let run_ooc = Runner::new(&gpu, size)?;
+        for r in [&mut ooc_six, &mut ooc_kept] {
+            converge_drawn(&run_ooc, r, camera, frame, settings(true))?;
+            run_ooc.frame(r, camera, frame, settings(false), false)?;
+        }
+        let shots = interleave(rounds, 6, |i| match i {
             0 => run.frame(&mut six, camera, frame, settings(false), false),
             1 => run.frame(&mut six, camera, frame, settings(true), false),
-            _ => run_pre.frame(&mut pre, camera, frame, settings(true), false),
+            2 => run_pre.frame(&mut pre, camera, frame, settings(true), false),
+            3 => run_ooc.frame(&mut ooc_six, camera, frame, settings(false), false),
+            4 => run_ooc.frame(&mut ooc_six, camera, frame, settings(true), false),
+            _ => run_ooc.frame(&mut ooc_kept, camera, frame, settings(true), false),
         })?;
         // Wall time only: on lavapipe the pass timestamps read near 0 for
         // most frames when two renderers alternate (not understood; one
@@ -157,6 +206,11 @@ pub(crate) fn run(args: &Args) -> Result<ShadingResult, String> {
         let img_pre = quality
             .frame(&mut pre, camera, frame, settings(true), true)?
             .rgba;
+        let mut ooc_images = Vec::new();
+        for r in [&mut ooc_six, &mut ooc_kept] {
+            converge_drawn(&quality, r, camera, frame, settings(true))?;
+            ooc_images.push(quality.frame(r, camera, frame, settings(true), true)?.rgba);
+        }
         let s = settings(true);
         let cpu = render_reference(
             vol,
@@ -172,7 +226,35 @@ pub(crate) fn run(args: &Args) -> Result<ShadingResult, String> {
             psnr(&img_pre, &cpu),
             psnr(&img_pre, &img_six),
         );
+        let texels = |v: &StreamedVolume| {
+            v.inspect(|s| {
+                s.pool()
+                    .atlas_dims()
+                    .iter()
+                    .map(|&d| d as u64)
+                    .product::<u64>()
+            })
+        };
+        let slots = |v: &StreamedVolume| v.inspect(|s| s.pool().slot_count() as u64);
+        let out_of_core = OocRow {
+            six_reads_over_unshaded: round2(t[4].ms / t[3].ms),
+            kept_over_unshaded: round2(t[5].ms / t[3].ms),
+            kept_over_six_reads: round2(t[5].ms / t[4].ms),
+            six_reads_over_in_core: round2(t[4].ms / t[1].ms),
+            kept_over_in_core: round2(t[5].ms / t[2].ms),
+            unshaded: t[3],
+            six_reads: t[4],
+            kept: t[5],
+            bytes_per_texel_six_reads: six_volume.resident_bytes() / texels(&six_volume),
+            bytes_per_texel_kept: kept_volume.resident_bytes() / texels(&kept_volume),
+            slots_six_reads: slots(&six_volume),
+            slots_kept: slots(&kept_volume),
+            psnr_six_reads_db: finite_db(psnr(&ooc_images[0], &cpu)),
+            psnr_kept_db: finite_db(psnr(&ooc_images[1], &cpu)),
+            psnr_between_db: finite_db(psnr(&ooc_images[1], &ooc_images[0])),
+        };
         let row = Row {
+            out_of_core,
             scene,
             six_reads_over_unshaded: round2(t[1].ms / t[0].ms),
             precomputed_over_unshaded: round2(t[2].ms / t[0].ms),
@@ -201,18 +283,82 @@ pub(crate) fn run(args: &Args) -> Result<ShadingResult, String> {
             row.psnr_precomputed_db,
             row.psnr_between_db
         );
+        let o = &row.out_of_core;
+        println!(
+            "  {:<34} {:>9.1} {:>7.1} ({:.2}x) {:>7.1} ({:.2}x) {:>8.2}x {:>12} {:>6.2}/{:.2}/{:.2}",
+            "  out of core (kept: gradient atlas)",
+            o.unshaded.ms,
+            o.six_reads.ms,
+            o.six_reads_over_unshaded,
+            o.kept.ms,
+            o.kept_over_unshaded,
+            o.kept_over_six_reads,
+            format!("{}/{} slots", o.slots_kept, o.slots_six_reads),
+            o.psnr_six_reads_db,
+            o.psnr_kept_db,
+            o.psnr_between_db
+        );
         rows.push(row);
     }
     let max = |f: fn(&Row) -> f64| rows.iter().map(f).fold(f64::NEG_INFINITY, f64::max);
-    let psnr_between_db_min = rows
-        .iter()
-        .map(|r| r.psnr_between_db)
-        .fold(f64::INFINITY, f64::min);
+    let min = |f: fn(&Row) -> f64| rows.iter().map(f).fold(f64::INFINITY, f64::min);
+    let psnr_between_db_min = min(|r| r.psnr_between_db);
     Ok(ShadingResult {
         run: RunInfo::new(&gpu, size, rounds, ct_name),
+        ooc_kept_over_six_reads_max: max(|r| r.out_of_core.kept_over_six_reads),
+        ooc_psnr_between_db_min: min(|r| r.out_of_core.psnr_between_db),
         precomputed_over_six_reads_max: max(|r| r.precomputed_over_six_reads),
         precomputed_over_unshaded_max: max(|r| r.precomputed_over_unshaded),
         psnr_between_db_min,
         rows,
     })
+}
+
+/// A renderer of a streamed volume over `source` at the finest level (a 1
+/// GiB GPU budget, so that the finest cut fits with or without gradients)
+/// that keeps its texels' gradients or not.
+fn streamed(
+    gpu: &GpuContext,
+    source: std::sync::Arc<dyn brickray_core::BrickSource>,
+    gradients: bool,
+    tf: &TransferFunction,
+) -> Result<(VolumeRenderer, StreamedVolume), String> {
+    let config = brickray_render::OutOfCoreConfig {
+        tolerance_px: 0.0,
+        upload_budget_bytes: 1 << 30,
+        gpu_budget_bytes: 1 << 30,
+        ..Default::default()
+    };
+    let options = VolumeOptions {
+        gradients,
+        ..Default::default()
+    };
+    let v = StreamedVolume::new(&gpu.device, &gpu.queue, source, config, options)
+        .map_err(|e| e.to_string())?;
+    let mut r = VolumeRenderer::new(&gpu.device, brickray_harness::target_desc())
+        .map_err(|e| e.to_string())?;
+    r.set_streamed_volume(&gpu.device, &v)
+        .map_err(|e| e.to_string())?;
+    r.set_transfer_function(&gpu.device, &gpu.queue, tf)
+        .map_err(|e| e.to_string())?;
+    Ok((r, v))
+}
+
+/// Draws frames (each one's encoder submitted, gradient passes included)
+/// until the out-of-core cut converges, at most 200.
+fn converge_drawn(
+    run: &Runner,
+    r: &mut VolumeRenderer,
+    camera: Camera,
+    frame: VolumeFrame,
+    settings: RenderSettings,
+) -> Result<(), String> {
+    for _ in 0..200 {
+        run.frame(r, camera, frame, settings, false)?;
+        if r.stats().out_of_core.is_some_and(|s| s.converged) {
+            return Ok(());
+        }
+        std::thread::sleep(std::time::Duration::from_millis(10));
+    }
+    Err("the out-of-core cut did not converge within 200 frames".into())
 }

@@ -31,8 +31,9 @@ override SMOOTH_LABELS: bool = false;
 // look like under the TF; docs/rendering-model.md, "Coarse levels").
 override SPREAD: bool = false;
 // Shaded DVR reads the per-voxel gradients, one filtered texel instead of six
-// taps (in core, gradients.wgsl; declared here with the other switches, read
-// by incore.wgsl alone).
+// taps (gradients.wgsl: in core once made, out of core where the volume keeps
+// them; declared here with the other switches, read by incore.wgsl and
+// ooc.wgsl).
 override GRADIENTS: bool = false;
 
 // Of 8 voxels' label texels and trilinear weights, the label whose weights

@@ -18,6 +18,10 @@ fn atlas_value(uv: vec3<f32>) -> f32 {
 // slots, a 1x1x1 stand-in unless SPREAD), filtered like the value.
 @group(2) @binding(11) var spread_tex: texture_3d<f32>;
 
+// Each atlas texel's gradient (gradients.wgsl, made for each upload; a
+// 1x1x1 stand-in unless the volume keeps them), read with GRADIENTS.
+@group(2) @binding(12) var gradient_tex: texture_3d<f32>;
+
 // The spread at the cursor's point, mixed like the value while fading (the
 // mixture's spread is taken as the mix of the spreads). A brick of the
 // finest level has none: its texels are not read (a fading one reads only
@@ -59,11 +63,16 @@ fn cursor_value(c: Cursor, t: f32) -> f32 {
 }
 
 // Central differences of one atlas texel at uv, per finest voxel (f3: finest
-// voxels per texel, per axis); a smooth label map: its boundary indicator's
-// gradient.
+// voxels per texel, per axis), six reads or with GRADIENTS one read of the
+// per-texel differences, which interpolate to the same (gradients.wgsl: the
+// apron keeps every tap within the brick, so no factor at the faces); a
+// smooth label map: its boundary indicator's gradient.
 fn atlas_gradient(uv: vec3<f32>, f3: vec3<f32>) -> vec3<f32> {
     if (LABELS && SMOOTH_LABELS) {
         return label_gradient(atlas_tex, uv, ooc.atlas_size) / f3;
+    }
+    if (GRADIENTS) {
+        return textureSampleLevel(gradient_tex, atlas_sampler, uv, 0.0).xyz / f3;
     }
     let e = 1.0 / ooc.atlas_size;
     let gx = (atlas_value(uv + vec3<f32>(e.x, 0.0, 0.0)) - atlas_value(uv - vec3<f32>(e.x, 0.0, 0.0))) * 0.5;

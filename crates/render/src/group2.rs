@@ -102,9 +102,9 @@ pub(crate) const CHANNEL_SAMPLED_TEXTURES: u32 = SAMPLED_TEXTURES + 1;
 /// Sampled textures of the in-core kernel: one more, the per-voxel gradients
 /// (`backend/gradients.rs`).
 pub(crate) const INCORE_SAMPLED_TEXTURES: u32 = SAMPLED_TEXTURES + 1;
-/// Sampled textures of the single-channel out-of-core kernel: one more, the
-/// spread atlas.
-pub(crate) const OOC_SAMPLED_TEXTURES: u32 = SAMPLED_TEXTURES + 1;
+/// Sampled textures of the single-channel out-of-core kernel: two more, the
+/// spread and gradient atlases.
+pub(crate) const OOC_SAMPLED_TEXTURES: u32 = SAMPLED_TEXTURES + 2;
 /// Uniform buffers of the multi-channel out-of-core kernel: one more, its
 /// channels' parameters (`backend/ooc_channels.rs`).
 pub(crate) const CHANNEL_UNIFORM_BUFFERS: u32 = UNIFORM_BUFFERS + 1;
@@ -162,12 +162,16 @@ pub(crate) const STORAGE_TEXTURES: u32 = 1;
 /// The binding of the spread atlas (`shaders/ooc.wgsl`; single-channel
 /// volumes out of core).
 pub(crate) const SPREAD_BINDING: u32 = 11;
+/// The binding of the gradient atlas (`shaders/ooc.wgsl`; single-channel
+/// volumes out of core).
+pub(crate) const OOC_GRADIENT_BINDING: u32 = 12;
 
 /// The layout of group 2 of the single-channel out-of-core kernel: the
-/// out-of-core entries and the spread atlas.
+/// out-of-core entries, the spread atlas and the gradient atlas.
 pub(crate) fn ooc_single_layout_entries() -> Vec<wgpu::BindGroupLayoutEntry> {
     let mut e = ooc_layout_entries();
     e.push(texture_3d_entry(SPREAD_BINDING));
+    e.push(texture_3d_entry(OOC_GRADIENT_BINDING));
     e
 }
 

@@ -92,7 +92,8 @@ pub struct RendererOptions {
     /// the background ([`VolumeOptions::background_planning`]; default off).
     pub background_planning: bool,
     /// How shaded DVR of a volume in core takes its gradients (default:
-    /// precomputed per voxel, [`GradientSource::Precomputed`]).
+    /// precomputed per voxel, [`GradientSource::Precomputed`]; out of core,
+    /// [`VolumeOptions::gradients`]).
     pub gradients: GradientSource,
     /// When MIP skips empty space (default: where the volume's macro cells,
     /// or out of core the cut's bricks, say it pays, [`SkipRule::WherePays`]).
@@ -322,9 +323,12 @@ impl VolumeRenderer {
         check_value_range(source.layout().volume.value_range)?;
         // Free the old volume first: two large volumes need not fit at once.
         self.drop_volume();
+        // (Gradients out of core take GPU budget from the bricks: a host
+        // asks for them with `VolumeOptions::gradients`.)
         let options = VolumeOptions {
             u8_filtering: self.options.u8_filtering,
             background_planning: self.options.background_planning,
+            ..Default::default()
         };
         let v = StreamedVolume::new(device, queue, source, config, options)?;
         self.set_streamed_volume(device, &v)

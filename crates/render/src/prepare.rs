@@ -156,7 +156,7 @@ impl VolumeRenderer {
                 continue;
             }
             let group = streamed_group(views, i, &done)?;
-            plan_group(device, queue, views, &group, &mut uploaded)?;
+            plan_group(device, queue, encoder, views, &group, &mut uploaded)?;
             for j in group {
                 done[j] = true;
             }
@@ -388,6 +388,7 @@ fn streamed_group(
 fn plan_group(
     device: &wgpu::Device,
     queue: &wgpu::Queue,
+    encoder: &mut wgpu::CommandEncoder,
     views: &mut [(&mut VolumeRenderer, &FrameDesc<'_>)],
     group: &[usize],
     uploaded: &mut [u64],
@@ -447,7 +448,7 @@ fn plan_group(
             feedback: &[],
             time: desc.time,
         };
-        shared.plan(device, queue, &frame)?
+        shared.plan(device, queue, encoder, &frame)?
     };
     drop(shared);
     // Without a new plan (in the background, the worker is still planning)

@@ -8,6 +8,7 @@
 //! ([`crate::VolumeRenderer::prepare_views`]). A clone is another handle to
 //! the same volume.
 
+use crate::backend::gradients::{self, GradientPass};
 use crate::encoding::{self, U8Filtering};
 use crate::error::{PrepareError, RenderError};
 use crate::gpu::{self, GrowBuffer, Uniform};
@@ -64,6 +65,12 @@ struct Pool {
     spread_view: wgpu::TextureView,
     /// The format carries spreads (the spread atlas is not the stand-in).
     spreads: bool,
+    /// Each texel's gradient (`gradients::FORMAT`, the atlas's dims) when the
+    /// format keeps them ([`GpuFormat::gradients`]), else a 1x1x1 stand-in;
+    /// made on the GPU for each upload by `gradient_pass`.
+    _gradients: wgpu::Texture,
+    gradients_view: wgpu::TextureView,
+    gradient_pass: Option<GradientPass>,
     atlas_bytes: u64,
     slots: wgpu::Buffer,
     slots_cpu: Vec<SlotInfo>,
@@ -96,8 +103,21 @@ impl Pool {
             wgpu::TextureFormat::R16Float,
             "brickray-render spread atlas",
         )?;
+        let gradients = match gpu.gradients {
+            true => gradients::storage_3d(device, dims, "brickray-render gradient atlas")?,
+            false => gpu::sampled_3d(
+                device,
+                [1, 1, 1],
+                gradients::FORMAT,
+                "brickray-render gradient atlas stand-in",
+            )?,
+        };
+        let gradient_pass = gpu
+            .gradients
+            .then(|| GradientPass::new(device))
+            .transpose()?;
         let atlas_bytes = dims.iter().map(|&d| d as u64).product::<u64>()
-            * (gpu.texel_bytes() + gpu.spread_bytes()) as u64;
+            * (gpu.texel_bytes() + gpu.spread_bytes() + gpu.gradient_bytes()) as u64;
         let slot_count = streamer.pool().slot_count().max(1) as u64;
         let rows = streamer.slot_rows() as usize;
         let sub_cells = gpu::storage_buffer(
@@ -111,6 +131,9 @@ impl Pool {
             spread_view: spread.create_view(&Default::default()),
             spread,
             spreads: gpu.spread,
+            gradients_view: gradients.create_view(&Default::default()),
+            _gradients: gradients,
+            gradient_pass,
             atlas_bytes,
             slots: Pool::slot_table(device, rows)?,
             slots_cpu: vec![bytemuck::Zeroable::zeroed(); rows],
@@ -144,19 +167,39 @@ impl Pool {
     }
 
     /// Writes this frame's uploads, prepared by the loader threads: texels into
-    /// the atlas, sub-cell ranges and slot rows into their tables; then the
-    /// rows of fading and borrowed leaves. Returns the bytes written.
+    /// the atlas, sub-cell ranges and slot rows into their tables (and,
+    /// where the format keeps gradients, records into `encoder` the pass
+    /// that makes the uploaded slots' gradients, `scale_offset` mapping
+    /// texels to normalized values); then the rows of fading and borrowed
+    /// leaves. Returns the bytes written.
+    #[allow(clippy::too_many_arguments)]
     fn write(
         &mut self,
+        device: &wgpu::Device,
         queue: &wgpu::Queue,
+        encoder: &mut wgpu::CommandEncoder,
         uploads: &[Upload],
         fades: &[FadeSlot],
         side: u32,
         bpp: u32,
-    ) -> u64 {
+        scale_offset: [f32; 2],
+    ) -> Result<u64, RenderError> {
         let mut bytes = 0u64;
         for up in uploads {
             bytes += self.write_upload(queue, up, side, bpp);
+        }
+        if let Some(pass) = self.gradient_pass.as_mut() {
+            let origins: Vec<[u32; 3]> = uploads.iter().map(|u| u.atlas_offset).collect();
+            pass.record(
+                device,
+                queue,
+                encoder,
+                &self.atlas_view,
+                &self.gradients_view,
+                [side; 3],
+                scale_offset,
+                &origins,
+            )?;
         }
         // Fades: last frame's cleared, this frame's set (after the uploads,
         // which reset their slots' rows).
@@ -176,7 +219,7 @@ impl Pool {
             bytes += std::mem::size_of_val(self.slots_cpu.as_slice()) as u64;
             self.slots_dirty = false;
         }
-        bytes
+        Ok(bytes)
     }
 
     fn write_upload(&mut self, queue: &wgpu::Queue, up: &Upload, side: u32, bpp: u32) -> u64 {
@@ -301,6 +344,13 @@ pub struct VolumeOptions {
     /// frame later; the image at convergence is the same. Off by default
     /// (every frame planned in `prepare`, deterministic frame by frame).
     pub background_planning: bool,
+    /// Keep each atlas texel's gradient on the GPU, made from every brick as
+    /// it is uploaded, so that shaded DVR reads one texel per sample instead
+    /// of six ([`GpuFormat::gradients`]; docs/rendering-model.md,
+    /// *Shading*). They take 8 bytes per stored voxel of the GPU budget, so
+    /// the pool holds fewer bricks (a u8 volume's slots cost 5x as much).
+    /// A multi-channel volume or a label map keeps none. Off by default.
+    pub gradients: bool,
 }
 
 /// The shared state behind a [`StreamedVolume`].
@@ -333,6 +383,7 @@ impl Shared {
             params: &self.params.buffer,
             atlas: &self.pool.atlas_view,
             spread: &self.pool.spread_view,
+            gradients: &self.pool.gradients_view,
             sampler: &self.sampler,
             slots: &self.pool.slots,
             sub_cells: &self.pool.sub_cells,
@@ -398,6 +449,7 @@ impl Shared {
         &mut self,
         device: &wgpu::Device,
         queue: &wgpu::Queue,
+        encoder: &mut wgpu::CommandEncoder,
         frame: &StreamFrame<'_>,
     ) -> Result<Option<Planned>, PrepareError> {
         let Some(reply) = self.planner.plan(frame) else {
@@ -411,9 +463,17 @@ impl Shared {
         let side = self.layout.stored_side();
         let bpp = self.gpu.texel_bytes();
         let plan = reply.plan;
-        let mut bytes = self
-            .pool
-            .write(queue, &plan.uploads, &plan.fades, side, bpp);
+        let scale_offset = [self.gpu.encoding.scale, self.gpu.encoding.offset];
+        let mut bytes = self.pool.write(
+            device,
+            queue,
+            encoder,
+            &plan.uploads,
+            &plan.fades,
+            side,
+            bpp,
+            scale_offset,
+        )?;
         let words = reply.words.map_err(RenderError::from)?;
         let (written, grew) = self
             .index
@@ -441,6 +501,8 @@ pub(crate) struct Bound<'a> {
     pub(crate) atlas: &'a wgpu::TextureView,
     /// The spread atlas (a 1x1x1 stand-in without spreads).
     pub(crate) spread: &'a wgpu::TextureView,
+    /// The gradient atlas (a 1x1x1 stand-in without gradients).
+    pub(crate) gradients: &'a wgpu::TextureView,
     pub(crate) sampler: &'a wgpu::Sampler,
     pub(crate) slots: &'a wgpu::Buffer,
     pub(crate) sub_cells: &'a wgpu::Buffer,
@@ -500,6 +562,9 @@ impl StreamedVolume {
         // volume (a label map's levels are modes; channels carry none).
         gpu_format.spread =
             source.has_spread() && !layout.is_channel_volume() && !layout.volume.kind.is_labels();
+        // Gradients shade a single-channel intensity volume.
+        gpu_format.gradients =
+            options.gradients && !layout.is_channel_volume() && !layout.volume.kind.is_labels();
         let format =
             encoding::wgpu_format_lanes(gpu_format.encoding.format, gpu_format.lanes() as usize);
         let mut streamer = Streamer::new(source, config, gpu_format)?;

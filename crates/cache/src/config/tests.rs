@@ -26,6 +26,24 @@ fn defaults_are_valid_and_sizes_count_the_format() {
     assert_eq!(g.slot_bytes(&layout), Ok(2000 + 8 + 32));
     let fast = GpuFormat::for_layout(&layout, TexelCaps::default(), U8Filtering::Fast, 0, 64);
     assert_eq!(fast.slot_bytes(&layout), Ok(1000 + 8));
+    // Kept gradients: 8 bytes a stored voxel on the GPU, none in the CPU
+    // cache or the uploads; the same budget holds fewer slots.
+    let kept = GpuFormat {
+        gradients: true,
+        ..g
+    };
+    assert_eq!(kept.prepared_brick_bytes(&layout), Ok(2000 + 8));
+    assert_eq!(kept.slot_bytes(&layout), Ok(2000 + 8 + 32 + 8000));
+    let slots = |f: &GpuFormat| {
+        let l = f.pool_limits(&layout, 1 << 20).unwrap();
+        l.grid().unwrap().iter().map(|&a| a as u64).product::<u64>()
+    };
+    assert!(
+        slots(&kept) * 4 < slots(&g),
+        "{} {}",
+        slots(&kept),
+        slots(&g)
+    );
 }
 
 #[test]

@@ -14,7 +14,9 @@ use super::ooc_channels::OocChannels;
 use crate::desc::OutOfCoreStats;
 use crate::error::RenderError;
 use crate::gpu;
-use crate::group2::{SPREAD_BINDING, STOP_DEPTH_BINDING, USAGE_BINDING, check_ooc_limits};
+use crate::group2::{
+    OOC_GRADIENT_BINDING, SPREAD_BINDING, STOP_DEPTH_BINDING, USAGE_BINDING, check_ooc_limits,
+};
 use crate::kernels::KernelKind;
 use crate::volume::{Bound, Planned, StreamedVolume};
 use brickray_cache::{MAX_QUERIES_PER_FRAME, QueryBatch, UsageFrame, ViewFeedback};
@@ -281,10 +283,16 @@ fn bind_group(
         ];
         match channels {
             Some(c) => entries.extend(c.entries()),
-            None => entries.push(wgpu::BindGroupEntry {
-                binding: SPREAD_BINDING,
-                resource: wgpu::BindingResource::TextureView(v.spread),
-            }),
+            None => entries.extend([
+                wgpu::BindGroupEntry {
+                    binding: SPREAD_BINDING,
+                    resource: wgpu::BindingResource::TextureView(v.spread),
+                },
+                wgpu::BindGroupEntry {
+                    binding: OOC_GRADIENT_BINDING,
+                    resource: wgpu::BindingResource::TextureView(v.gradients),
+                },
+            ]),
         }
         device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("brickray-render out of core"),
@@ -336,6 +344,10 @@ impl VolumeBackend for OutOfCore {
 
     fn spread(&self) -> bool {
         self.volume.lock().gpu_format().spread
+    }
+
+    fn gradients(&self) -> bool {
+        self.volume.lock().gpu_format().gradients
     }
 
     fn max_leaves(&self) -> u32 {
