@@ -45,6 +45,8 @@ pub(crate) struct Startup {
     pub(crate) open: OpenOptions,
     /// Out-of-core budgets.
     pub(crate) ooc: OutOfCoreConfig,
+    /// Streamed volumes keep their texels' gradients (`--gradients`).
+    pub(crate) streamed_gradients: bool,
     /// A label map to draw over the first image opened (`--overlay`).
     pub(crate) overlay: Option<PathBuf>,
 }
@@ -68,6 +70,8 @@ struct Shown {
 pub(crate) struct ViewerApp {
     open_opts: OpenOptions,
     ooc: OutOfCoreConfig,
+    /// Streamed volumes keep their texels' gradients (`--gradients`).
+    streamed_gradients: bool,
     ooc_dirty: bool,
     /// The isosurface prediction buffer.
     prediction: PredictionChoice,
@@ -172,6 +176,7 @@ impl ViewerApp {
         let mut app = ViewerApp {
             open_opts,
             ooc: startup.ooc,
+            streamed_gradients: startup.streamed_gradients,
             prediction: PredictionChoice::Off,
             prediction_dirty: false,
             ooc_dirty: false,
@@ -269,6 +274,11 @@ impl ViewerApp {
             None => VolumeFrame::centered(desc.dims, desc.spacing),
         };
         let ooc = self.ooc;
+        let volume_options = brickray::VolumeOptions {
+            u8_filtering: self.renderer_options().u8_filtering,
+            background_planning: true,
+            gradients: self.streamed_gradients,
+        };
         let streamed = match &loaded.volume {
             Opened::Streamed(_) => true,
             Opened::Channels(c) => matches!(c.data, ChannelData::Streamed(_)),
@@ -305,11 +315,10 @@ impl ViewerApp {
                     }
                 }
                 Opened::Streamed(src) => {
-                    r.renderer.set_volume_source(device, queue, src, ooc)?;
-                    if let Some(v) = r.renderer.streamed_volume().cloned() {
-                        for s in &mut r.slices {
-                            s.set_streamed_volume(device, &v)?;
-                        }
+                    let v = brickray::StreamedVolume::new(device, queue, src, ooc, volume_options)?;
+                    r.renderer.set_streamed_volume(device, &v)?;
+                    for s in &mut r.slices {
+                        s.set_streamed_volume(device, &v)?;
                     }
                 }
                 Opened::Channels(c) => {

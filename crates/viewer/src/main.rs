@@ -65,6 +65,13 @@ struct Cli {
     /// them. Intensity volumes only.
     #[arg(long)]
     spread: bool,
+    /// Streamed volumes keep each texel's gradient on the GPU, so that
+    /// shaded DVR reads one texel per sample instead of six (about 0.7x the
+    /// shaded frame; docs/rendering-model.md, "Shading"). They take 8 bytes
+    /// per stored voxel of the GPU pool (`--gpu-pool`), which then holds
+    /// fewer bricks.
+    #[arg(long)]
+    gradients: bool,
     /// Draw this label map over the image in the same rays (colours over the
     /// image's TF; docs/labels.md): placed where both files say (their
     /// affines when both give one, else both from the grid's origin at their
@@ -132,6 +139,7 @@ fn main() -> ExitCode {
             spread: cli.spread,
         },
         overlay: cli.overlay.clone(),
+        streamed_gradients: cli.gradients,
         ooc: brickray::OutOfCoreConfig {
             gpu_budget_bytes: cli.gpu_pool << 20,
             cpu_budget_bytes: cli.cpu_cache << 20,

@@ -431,6 +431,55 @@ fn opens_a_store_and_a_procedural_volume_out_of_core() {
     );
 }
 
+/// `--gradients`: a streamed store keeps its texels' gradients and draws
+/// shaded DVR as six reads do (two runs of the same script, with and without
+/// the flag; the library's own test holds the two images 74-80 dB apart),
+/// and they take their bytes from the GPU pool (a pool that holds the
+/// finest cut without them holds a smaller working set with them).
+#[test]
+#[cfg_attr(
+    no_display,
+    ignore = "needs an X server (DISPLAY unset when the tests were built; scripts/test.sh starts Xvfb)"
+)]
+fn streamed_gradients_shade_as_six_reads() {
+    let Some(dir) = windowed_test_dir() else {
+        return;
+    };
+    let out = |name: &str| -> PathBuf { dir.path().join(name) };
+    let store = sphere_store(dir.path());
+    let shot = |name: &str, args: &[&str]| {
+        let script = format!(
+            "open {store}\nbackground 0 0 0\noverlays off\ntf grey\nmode shaded\n\
+             camera orbit -20 25 0.9\nwait converged 600\nscreenshot {a}\nquit\n",
+            store = store.display(),
+            a = out(name).display(),
+        );
+        run_script_with(dir.path(), &script, Duration::from_secs(120), args);
+        read_png(&out(name))
+    };
+    let (kept, w, h) = shot("kept.png", &["--gradients"]);
+    let (six, _, _) = shot("six.png", &[]);
+    let lit = lit_pixels(&kept);
+    assert!(lit * 20 > (w * h) as usize, "only {lit} lit pixels");
+    let db = brickray_reference::psnr(&kept, &six);
+    eprintln!("viewer --gradients against six reads: {db:.2} dB");
+    assert!(db >= 60.0, "{db} dB");
+    // The gradients take their bytes from the pool: an 8 MiB pool holds the
+    // store's finest cut (27 bricks) without them, not with them.
+    shot("kept_small.png", &["--gradients", "--gpu-pool", "8"]);
+    shot("six_small.png", &["--gpu-pool", "8"]);
+    let bricks = |name: &str| {
+        sidecar_json(&out(name))["working_set_bricks"]
+            .as_u64()
+            .expect("a streamed volume's working set")
+    };
+    let (small_kept, small_six) = (bricks("kept_small.png"), bricks("six_small.png"));
+    eprintln!(
+        "working sets in an 8 MiB pool: {small_kept} bricks with gradients, {small_six} without"
+    );
+    assert!(small_kept < small_six, "{small_kept} vs {small_six}");
+}
+
 /// A script whose step fails ends the run at once with a failing exit status
 /// and the reason on stderr: an `open` of a missing file, and a failed
 /// `wait converged` is covered by the same path (the window closes on the
