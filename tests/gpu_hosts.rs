@@ -462,6 +462,35 @@ fn several_prepares_into_one_encoder_out_of_core() {
     }
 }
 
+/// Planned in `prepare` (the default), a converged view whose camera and
+/// classification stay is not planned again: its frames draw the converged
+/// plan (the same image, no new plan applied) until the camera moves.
+#[test]
+fn a_converged_static_view_is_not_planned_again() {
+    let g = gpu();
+    let (mut r, desc, target) = streamed_scene();
+    let settled = brickray_harness::draw_until_settled(g, &mut r, &target, &desc, 200).unwrap();
+    assert!(settled.is_some(), "not converged");
+    let planned = |r: &VolumeRenderer| r.stats().out_of_core.unwrap().cache.frame;
+    let (frame, image) = (planned(&r), target.read_color(g));
+    for _ in 0..3 {
+        draw_frame(g, &mut r, &target, &desc, Some(wgpu::Color::BLACK)).unwrap();
+        assert_eq!(
+            planned(&r),
+            frame,
+            "a static converged view was planned again"
+        );
+        assert!(!r.wants_redraw());
+    }
+    assert!(target.read_color(g) == image, "the image changed");
+    let moved = FrameDesc {
+        camera: Camera::orbit(desc.frame.center(), 1.8, 0.6, 0.3),
+        ..desc
+    };
+    draw_frame(g, &mut r, &target, &moved, Some(wgpu::Color::BLACK)).unwrap();
+    assert!(planned(&r) > frame, "a moved camera was not planned");
+}
+
 /// Encoders the host drops without submitting them hold no read-back entry
 /// for ever: after more dropped frames than the read-back rings hold, the
 /// feedback still arrives.

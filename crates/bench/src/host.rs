@@ -20,6 +20,11 @@
 //! `_inline` keys are the same frames planned in `prepare`.
 //! With `--culling`, the path is also drawn, ray cast at `--culling-size`,
 //! under ray-guided visibility (its feedback needs the frames rendered).
+//! Before the path the converged start view is held still for
+//! `STATIC_FRAMES` frames (`prepare`'s time and the frames that applied a
+//! new plan), and, for the inline rows, a GPU-free `Streamer` over the same
+//! volume is held still as long (its `plan` time and whether it reused the
+//! converged refinement).
 //!
 //! `cargo run --release -p brickray-bench -- host [--size 1024] [--frames 60]
 //! [--cuts 1000,5000,20000,50000] [--culling] [--culling-size 256]`
@@ -47,7 +52,14 @@ struct PathTimes {
     phases: Vec<brickray_cache::PhaseTimes>,
     working_set: u32,
     converge_frames: usize,
+    /// The converged start view held still before the path: `prepare`'s
+    /// wall time per frame, and the frames that applied a new plan.
+    static_host_ms: Vec<f64>,
+    static_plans: usize,
 }
+
+/// Frames the converged start view is held still before the path.
+const STATIC_FRAMES: usize = 20;
 
 /// The median of each of planning's phases, ms.
 #[derive(Debug, Serialize)]
@@ -152,31 +164,21 @@ fn path(
         phases: Vec::new(),
         working_set: 0,
         converge_frames,
+        static_host_ms: Vec::new(),
+        static_plans: 0,
     };
+    let mut planned = r.stats().out_of_core.map(|s| s.cache.frame);
+    for _ in 0..STATIC_FRAMES {
+        // (A pause, so that a background worker could plan between frames.)
+        std::thread::sleep(std::time::Duration::from_millis(30));
+        let (host_ms, s) = timed_frame(run, r, frame, camera(&frame, 0), draw)?;
+        t.static_host_ms.push(host_ms);
+        t.static_plans += usize::from(planned != Some(s.cache.frame));
+        planned = Some(s.cache.frame);
+    }
     for i in 1..=frames {
-        let cam = camera(&frame, i);
-        let g = run.gpu;
-        let mut enc = g.device.create_command_encoder(&Default::default());
-        let desc = brickray_render::FrameDesc {
-            settings,
-            time: Some(brickray_harness::host_time()),
-            ..brickray_render::FrameDesc::new(cam, frame, run.size, run.size)
-        };
-        let t0 = Instant::now();
-        r.prepare(&g.device, &g.queue, &mut enc, &desc)
-            .map_err(|e| e.to_string())?;
-        t.host_ms.push(t0.elapsed().as_secs_f64() * 1e3);
-        if draw {
-            let mut pass = run.target.pass(&mut enc, true);
-            r.render(&mut pass).map_err(|e| e.to_string())?;
-            drop(pass);
-            g.submit_wait(enc);
-        } else {
-            // The recorded ray cast is dropped; the queued writes are flushed.
-            drop(enc);
-            g.submit_wait(g.device.create_command_encoder(&Default::default()));
-        }
-        let s = r.stats().out_of_core.ok_or("not out of core")?;
+        let (host_ms, s) = timed_frame(run, r, frame, camera(&frame, i), draw)?;
+        t.host_ms.push(host_ms);
         t.plan_ms.push(s.refine_ms);
         t.upload_ms.push(s.upload_ms);
         t.encode_ms.push(s.encode_ms);
@@ -184,6 +186,112 @@ fn path(
         t.working_set = s.cache.working_set_bricks;
     }
     Ok(t)
+}
+
+/// One frame of `cam`: `prepare`'s wall time on the render thread, ms, and
+/// the frame's out-of-core statistics. Drawn when `draw`; otherwise the
+/// recorded ray cast is dropped and the queued writes flushed.
+fn timed_frame(
+    run: &Runner<'_>,
+    r: &mut VolumeRenderer,
+    frame: VolumeFrame,
+    cam: Camera,
+    draw: bool,
+) -> Result<(f64, brickray_render::OutOfCoreStats), String> {
+    let g = run.gpu;
+    let mut enc = g.device.create_command_encoder(&Default::default());
+    let desc = brickray_render::FrameDesc {
+        settings: RenderSettings::default(),
+        time: Some(brickray_harness::host_time()),
+        ..brickray_render::FrameDesc::new(cam, frame, run.size, run.size)
+    };
+    let t0 = Instant::now();
+    r.prepare(&g.device, &g.queue, &mut enc, &desc)
+        .map_err(|e| e.to_string())?;
+    let host_ms = t0.elapsed().as_secs_f64() * 1e3;
+    if draw {
+        let mut pass = run.target.pass(&mut enc, true);
+        r.render(&mut pass).map_err(|e| e.to_string())?;
+        drop(pass);
+        g.submit_wait(enc);
+    } else {
+        drop(enc);
+        g.submit_wait(g.device.create_command_encoder(&Default::default()));
+    }
+    let s = r.stats().out_of_core.ok_or("not out of core")?;
+    Ok((host_ms, s))
+}
+
+/// A GPU-free streamer's frames of a converged view held still.
+struct StreamerStatic {
+    plan_ms: f64,
+    refine_ms: f64,
+    reused_share: f64,
+}
+
+/// Converges a `Streamer` (no renderer) over the suite's volume at the start
+/// view of a `cut`-brick budget and a `size` viewport, then calls its `plan`
+/// [`STATIC_FRAMES`] times with the same frame.
+fn streamer_static(cut: u32, size: u32) -> Result<StreamerStatic, String> {
+    let src = brickray_store::ProceduralSource::sphere_shells([DIMS; 3], BRICK, 2)
+        .map_err(|e| e.to_string())?;
+    let layout = brickray_core::BrickSource::layout(&src).clone();
+    let caps = brickray_core::TexelCaps {
+        norm16: true,
+        float32_filterable: false,
+    };
+    let gpu = brickray_cache::GpuFormat::for_layout(
+        &layout,
+        caps,
+        brickray_core::U8Filtering::Exact,
+        32,
+        2048,
+    );
+    let mut s =
+        brickray_cache::Streamer::new(Arc::new(src), config(cut, VisibilityPolicy::None), gpu)
+            .map_err(|e| e.to_string())?;
+    s.preload_root().map_err(|e| e.to_string())?;
+    let frame = VolumeFrame::centered([DIMS as u32; 3], [1.0; 3]);
+    let view = brickray_core::FrameView::new(camera(&frame, 0), frame, [size, size]);
+    let tf = brickray_core::TransferFunction::ramp(0.3, 0.9, 0.3);
+    let plan = |s: &mut brickray_cache::Streamer| {
+        let t0 = Instant::now();
+        let p = s.plan(&brickray_cache::StreamFrame {
+            views: std::slice::from_ref(&view),
+            classification: brickray_cache::Classification {
+                mode: brickray_core::RenderMode::Dvr,
+                tf: &tf,
+                channels: &[],
+                tf_generation: 0,
+            },
+            feedback: &[],
+            time: None,
+        });
+        (t0.elapsed().as_secs_f64() * 1e3, p.stats)
+    };
+    let mut converged = false;
+    for _ in 0..2000 {
+        if plan(&mut s).1.converged {
+            converged = true;
+            break;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    if !converged {
+        return Err(format!("a streamer of {cut} bricks did not converge"));
+    }
+    let (mut plan_ms, mut refine_ms, mut reused) = (Vec::new(), Vec::new(), 0);
+    for _ in 0..STATIC_FRAMES {
+        let (ms, st) = plan(&mut s);
+        plan_ms.push(ms);
+        refine_ms.push(st.cache.phases.refine_ms);
+        reused += usize::from(st.cache.refine_reused);
+    }
+    Ok(StreamerStatic {
+        plan_ms: median(&plan_ms),
+        refine_ms: median(&refine_ms),
+        reused_share: reused as f64 / STATIC_FRAMES as f64,
+    })
 }
 
 /// A brick budget: at least 1.
@@ -234,6 +342,19 @@ pub(crate) struct Row {
     /// Bricks in the working set at the end, and frames to converge.
     working_set: u64,
     converge_frames: usize,
+    /// The converged start view held still (`STATIC_FRAMES` frames before
+    /// the path): `prepare`'s wall time, ms median, and the frames that
+    /// applied a new plan.
+    static_host_ms_median: f64,
+    static_plans: usize,
+    /// The same held still through a GPU-free `Streamer` alone, its
+    /// `plan` called every frame (as a host with its own GPU side would):
+    /// `plan`'s wall time and its refine phase, ms medians, and the share
+    /// of frames that reused the converged refinement
+    /// (`FrameStats::refine_reused`). Inline rows only (null in the others).
+    streamer_static_plan_ms_median: Option<f64>,
+    streamer_static_refine_ms_median: Option<f64>,
+    streamer_static_reused_share: Option<f64>,
 }
 
 /// The suite's JSON line.
@@ -296,6 +417,24 @@ pub(crate) fn run(args: &Args) -> Result<HostResult, String> {
                      request {:.2}, display {:.2}, poll {:.2}, stats {:.2}",
                     p.refine, p.place, p.request, p.display, p.poll, p.stats
                 );
+                println!(
+                    "           held still: prepare {:.3} ms (median), {} of {STATIC_FRAMES} frames planned",
+                    median(&t.static_host_ms),
+                    t.static_plans
+                );
+                let alone = match (background, draw) {
+                    (false, false) => Some(streamer_static(cut, size)?),
+                    _ => None,
+                };
+                if let Some(a) = &alone {
+                    println!(
+                        "           a GPU-free streamer held still: plan {:.3} ms, refine {:.3} ms (medians), \
+                         refinement reused in {:.0}% of {STATIC_FRAMES} frames",
+                        a.plan_ms,
+                        a.refine_ms,
+                        100.0 * a.reused_share
+                    );
+                }
                 rows.push(Row {
                     budget: cut,
                     background,
@@ -309,6 +448,11 @@ pub(crate) fn run(args: &Args) -> Result<HostResult, String> {
                     phase_ms_median: p,
                     working_set: t.working_set as u64,
                     converge_frames: t.converge_frames,
+                    static_host_ms_median: median(&t.static_host_ms),
+                    static_plans: t.static_plans,
+                    streamer_static_plan_ms_median: alone.as_ref().map(|a| a.plan_ms),
+                    streamer_static_refine_ms_median: alone.as_ref().map(|a| a.refine_ms),
+                    streamer_static_reused_share: alone.as_ref().map(|a| a.reused_share),
                 });
             }
         }

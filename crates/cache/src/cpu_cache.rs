@@ -51,6 +51,8 @@ pub struct CpuCache {
     hits: u64,
     misses: u64,
     evictions: u64,
+    /// Bumped whenever a brick comes or goes (not when one is used).
+    changes: u64,
 }
 
 impl CpuCache {
@@ -68,7 +70,14 @@ impl CpuCache {
             hits: 0,
             misses: 0,
             evictions: 0,
+            changes: 0,
         }
+    }
+
+    /// A count that changes whenever a brick is inserted or removed (not
+    /// when one is looked up or touched): equal counts, the same bricks.
+    pub fn changes(&self) -> u64 {
+        self.changes
     }
 
     fn entry(&mut self, i: u32) -> &mut Entry {
@@ -175,6 +184,7 @@ impl CpuCache {
         };
         self.map.insert(key, i);
         self.push_newest(i);
+        self.changes += 1;
         self.evict_to_budget()
     }
 
@@ -202,6 +212,7 @@ impl CpuCache {
         self.unlink(i);
         let e = self.slots[i as usize].take()?;
         self.free.push(i);
+        self.changes += 1;
         self.bytes -= e.data.bytes();
         Some(e.data)
     }

@@ -224,6 +224,11 @@ impl Failures {
         self.unreported.take()
     }
 
+    /// True when no read is recorded as failed (due for a retry or not).
+    pub(crate) fn is_empty(&self) -> bool {
+        self.records.is_empty()
+    }
+
     /// Failure counts (current and cumulative).
     pub(crate) fn counts(&self) -> FailureCounts {
         let mut c = self.counts;

@@ -138,6 +138,8 @@ pub struct BrickPool {
     free: Vec<SlotId>,
     tick: u64,
     evictions: u64,
+    /// Bumped whenever a node gets or loses a slot.
+    changes: u64,
     pinned: u32,
 }
 
@@ -177,6 +179,7 @@ impl BrickPool {
             free: (0..n).rev().collect(),
             tick: 0,
             evictions: 0,
+            changes: 0,
             pinned: 0,
         }
     }
@@ -237,6 +240,12 @@ impl BrickPool {
     /// Bricks evicted so far.
     pub fn evictions(&self) -> u64 {
         self.evictions
+    }
+
+    /// A count that changes whenever a node gets or loses a slot (not when
+    /// one is touched or pinned): equal counts, the same residents.
+    pub fn changes(&self) -> u64 {
+        self.changes
     }
 
     /// Takes an occupied slot out of the eviction order.
@@ -364,6 +373,7 @@ impl BrickPool {
             }
             (slot, old)
         };
+        self.changes += 1;
         let s = &mut self.slots[slot as usize];
         s.key = Some(key);
         s.frame = frame;
@@ -390,6 +400,7 @@ impl BrickPool {
         let s = &mut self.slots[slot as usize];
         s.key = None;
         self.free.push(slot);
+        self.changes += 1;
         Some(slot)
     }
 

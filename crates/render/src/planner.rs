@@ -6,11 +6,12 @@
 //!
 //! Each plan is applied exactly once and in order (one request is in flight
 //! at a time), so the planner's pool bookkeeping and the GPU atlas agree. A
-//! request is sent unless the last plan converged and the views and the
-//! classification are those it was made for and the configuration did not
-//! change since: the planner's own convergence rule says that more frames of
-//! it (and their feedback, which is then dropped) would change nothing, so a
-//! converged, unchanged view sends none and wants no redraw. Background
+//! frame is planned (inline) or a request sent (in the background) unless
+//! the last plan converged and the views and the classification are those
+//! it was made for and the configuration did not change since: the
+//! planner's own convergence rule says that more frames of it (and their
+//! feedback, which is then dropped) would change nothing, so a converged,
+//! unchanged view plans nothing, draws the last plan and wants no redraw. Background
 //! planning adds one frame of latency to a camera move (the frame after the
 //! move is drawn with the plan of the view before); the first frame, and the
 //! first after the pool was rebuilt, wait for their plan.
@@ -84,8 +85,6 @@ struct Worker {
     rx: Receiver<Reply>,
     /// A request was sent whose reply was not taken yet.
     outstanding: bool,
-    /// What the last request planned for: views, mode, TF generation.
-    last: Option<(Vec<FrameView>, RenderMode, u64)>,
     /// The TF generation the worker holds.
     worker_tf: Option<u64>,
 }
@@ -128,7 +127,6 @@ fn spawn(streamer: Arc<Mutex<Streamer>>, splits: Splits) -> std::io::Result<Work
         tx,
         rx,
         outstanding: false,
-        last: None,
         worker_tf: None,
     })
 }
@@ -149,6 +147,9 @@ pub(crate) struct Planner {
     pending: Vec<ViewFeedback>,
     /// The last applied plan converged.
     converged: bool,
+    /// What the last plan (inline) or request (in the background) was made
+    /// for: views, mode, TF generation.
+    last: Option<(Vec<FrameView>, RenderMode, u64)>,
 }
 
 impl Planner {
@@ -172,6 +173,7 @@ impl Planner {
             frame: 0,
             pending: Vec::new(),
             converged: false,
+            last: None,
         })
     }
 
@@ -203,9 +205,7 @@ impl Planner {
     /// not converged until a plan made after the change is applied.
     pub(crate) fn reconfigured(&mut self) {
         self.converged = false;
-        if let Some(w) = self.worker.as_mut() {
-            w.last = None;
-        }
+        self.last = None;
     }
 
     /// True when another frame of the same views would change the image.
@@ -218,7 +218,17 @@ impl Planner {
     /// epoch waits for it), and the next request is sent.
     pub(crate) fn plan(&mut self, frame: &StreamFrame<'_>) -> Option<Reply> {
         let feedback = std::mem::take(&mut self.pending);
+        let c = frame.classification;
+        let same = self.last.as_ref().is_some_and(|(v, m, g)| {
+            v.as_slice() == frame.views && *m == c.mode && *g == c.tf_generation
+        });
         let Some(w) = self.worker.as_mut() else {
+            // A converged plan of the same views stands: another would
+            // change nothing (the views draw it again).
+            if same && self.converged && self.applied {
+                return None;
+            }
+            self.last = Some((frame.views.to_vec(), c.mode, c.tf_generation));
             self.frame += 1;
             let f = StreamFrame {
                 feedback: &feedback,
@@ -247,10 +257,6 @@ impl Planner {
                 }
             }
         }
-        let c = frame.classification;
-        let same = w.last.as_ref().is_some_and(|(v, m, g)| {
-            v.as_slice() == frame.views && *m == c.mode && *g == c.tf_generation
-        });
         let settled = got
             .as_ref()
             .map_or(self.converged, |r| r.plan.stats.converged);
@@ -264,7 +270,7 @@ impl Planner {
                 Vec::new()
             };
             w.worker_tf = Some(c.tf_generation);
-            w.last = Some((frame.views.to_vec(), c.mode, c.tf_generation));
+            self.last = Some((frame.views.to_vec(), c.mode, c.tf_generation));
             let sent = w.tx.send(Request {
                 views: frame.views.to_vec(),
                 mode: c.mode,

@@ -342,7 +342,9 @@ pub struct VolumeOptions {
     /// renders, and `prepare` only applies the latest plan, so the render
     /// thread's cost no longer grows with the cut. A camera move shows one
     /// frame later; the image at convergence is the same. Off by default
-    /// (every frame planned in `prepare`, deterministic frame by frame).
+    /// (frames planned in `prepare`, deterministic frame by frame). Either
+    /// way a frame whose views and classification are those of a converged
+    /// plan is not planned again: it draws that plan.
     pub background_planning: bool,
     /// Keep each atlas texel's gradient on the GPU, made from every brick as
     /// it is uploaded, so that shaded DVR reads one texel per sample instead

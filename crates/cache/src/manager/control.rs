@@ -274,6 +274,9 @@ impl BrickManager {
         config.validate(&self.layout, &self.gpu)?;
         let old = self.config;
         let mut out = Reconfigured::default();
+        // Refinement's knobs change (and a new pool counts its changes
+        // from 0): no earlier refinement is reused.
+        self.refine_memo = None;
         if config.gpu_budget_bytes != old.gpu_budget_bytes || config.floor_slots != old.floor_slots
         {
             let limits = self

@@ -14,6 +14,7 @@ use crate::failures::FetchKind;
 use crate::loader::BrickRequest;
 use crate::pool::{BrickPool, PoolError};
 use crate::refine::{NodeClass, RefineParams, Refinement, SplitFilter, Views, refine};
+use crate::upload::UploadBudget;
 use brickray_core::{
     CutLeaf, EmptyReason, LeafKind, LodMetric, NodeKey, NodeMap, NodeSet, RenderMode,
     TransferFunction,
@@ -80,6 +81,15 @@ struct Placed {
     floor_requests: (Vec<BrickRequest>, Vec<(NodeKey, f32)>),
 }
 
+/// What [`BrickManager::refine_cut`] says of its refinement: the key it was
+/// made under (`None`: not reusable), whether it was reused, and the upload
+/// budget as it left it.
+struct Memo {
+    key: Option<super::MemoKey>,
+    reused: bool,
+    budget: UploadBudget,
+}
+
 /// What the frame asked of the loader.
 struct Requested {
     bricks: u32,
@@ -102,7 +112,7 @@ impl BrickManager {
         let mut phases = PhaseTimes::default();
         self.poll(input.frame, now);
         phases.poll_ms = lap.next();
-        let refined = self.refine_cut(input, filter);
+        let (refined, memo) = self.refine_cut(input, filter);
         phases.refine_ms = lap.next();
         let shown = self.display(&refined, input.time);
         phases.display_ms = lap.next();
@@ -115,7 +125,8 @@ impl BrickManager {
         let mut stats = self.frame_stats(input.frame, &refined, &placed, &fades, &requested);
         phases.stats_ms = lap.next();
         stats.phases = phases;
-        FramePlan {
+        stats.refine_reused = memo.reused;
+        let plan = FramePlan {
             cut: placed.cut,
             uploads: placed.uploads,
             fades,
@@ -126,7 +137,18 @@ impl BrickManager {
                 .map(|l| l.key)
                 .collect(),
             stats,
-        }
+        };
+        // A converged frame's refinement serves the next frames for as long
+        // as nothing it read changes (what changes them is in the key).
+        self.refine_memo = match memo.key {
+            Some(key) if plan.stats.converged() => Some(super::RefineMemo {
+                key,
+                refined,
+                budget: memo.budget,
+            }),
+            _ => None,
+        };
+        plan
     }
 
     /// Phase 1: what the loader finished (metadata, bricks, failures) goes
@@ -148,12 +170,15 @@ impl BrickManager {
         self.budget.begin_frame();
     }
 
-    /// Phase 2: refinement over the caches (never the source).
+    /// Phase 2: refinement over the caches (never the source), or the last
+    /// converged frame's refinement where nothing it read has changed
+    /// ([`super::MemoKey`]; in debug builds the refinement is made again and
+    /// compared).
     fn refine_cut(
         &mut self,
         input: &FrameInput<'_>,
         filter: Option<&mut dyn SplitFilter>,
-    ) -> Refinement {
+    ) -> (Refinement, Memo) {
         let max_data_leaves = self.cut_slots();
         let max_requests = crate::refine::requests_per_frame(
             self.pool.slot_count(),
@@ -193,6 +218,49 @@ impl BrickManager {
                 channels: input.channels.to_vec(),
             });
         }
+        // Reusable only where refinement reads nothing but the key: an inert
+        // filter, no visible weights, no failures (whose retries come due
+        // with time).
+        let key = (filter.as_ref().is_none_or(|f| f.is_inert())
+            && !self.config.lod_metric.uses_visible_weights()
+            && self.failures.is_empty())
+        .then(|| super::MemoKey {
+            generation: input.generation,
+            class_stamp: self.class_stamp,
+            meta: self.meta.changes(),
+            cpu: self.cpu.changes(),
+            pool: self.pool.changes(),
+        });
+        let reused = match (&self.refine_memo, key) {
+            (Some(m), Some(k)) if m.key == k => Some((m.refined.clone(), m.budget)),
+            _ => None,
+        };
+        let memo = |reused: bool, budget: UploadBudget| Memo {
+            key,
+            reused,
+            budget,
+        };
+        if let Some((refined, budget)) = reused {
+            #[cfg(debug_assertions)]
+            {
+                let mut env = Env {
+                    meta: &self.meta,
+                    failures: &self.failures,
+                    cpu: &mut self.cpu,
+                    pool: &self.pool,
+                    filter,
+                    octants: &self.octants,
+                    class_stamp: self.class_stamp,
+                };
+                let mut b = self.budget;
+                let again = refine(&self.layout, &params, &mut env, &mut b);
+                assert_eq!(again, refined, "a reused refinement differs from a new one");
+                assert_eq!(b, budget, "a reused refinement's upload budget differs");
+            }
+            self.budget = budget;
+            self.octants.end(&refined, &self.layout);
+            return (refined, memo(true, budget));
+        }
         let refined = {
             let mut env = Env {
                 meta: &self.meta,
@@ -206,7 +274,7 @@ impl BrickManager {
             refine(&self.layout, &params, &mut env, &mut self.budget)
         };
         self.octants.end(&refined, &self.layout);
-        refined
+        (refined, memo(false, self.budget))
     }
 
     /// Phase 3: the displayed cut, the refined one with level changes fading
@@ -485,6 +553,7 @@ impl BrickManager {
             floor_pinned: self.floor_pinned(),
             // (Set by `update` once this phase is timed too.)
             phases: PhaseTimes::default(),
+            refine_reused: false,
         }
     }
 }

@@ -72,6 +72,8 @@ pub(crate) struct MetaCache {
     frame: u64,
     capacity: usize,
     evicted: u64,
+    /// Entries inserted (new or replaced) so far.
+    inserted: u64,
 }
 
 impl MetaCache {
@@ -90,6 +92,7 @@ impl MetaCache {
             frame: 0,
             capacity: capacity.max(64),
             evicted: 0,
+            inserted: 0,
         }
     }
 
@@ -152,6 +155,7 @@ impl MetaCache {
         }
         g.classes.store(0, Ordering::Relaxed);
         g.used.store(self.frame, Ordering::Relaxed);
+        self.inserted += 1;
     }
 
     /// Forgets the groups used longest ago, down to three quarters of the
@@ -209,6 +213,12 @@ impl MetaCache {
     /// Entries forgotten so far.
     pub(crate) fn evicted(&self) -> u64 {
         self.evicted
+    }
+
+    /// A count that changes whenever an entry is inserted or forgotten (not
+    /// when one is read): equal counts, the same metadata.
+    pub(crate) fn changes(&self) -> u64 {
+        self.inserted + self.evicted
     }
 }
 

@@ -84,6 +84,31 @@ pub struct BrickManager {
     /// function or channel styles change.
     class_stamp: u32,
     classified: Option<Classification>,
+    /// The last converged frame's refinement, reused while nothing it read
+    /// has changed ([`RefineMemo`]).
+    refine_memo: Option<RefineMemo>,
+}
+
+/// What a refinement read that a later frame can see change: the views and
+/// classification (`generation`, `class_stamp`) and the metadata, CPU cache
+/// and pool contents (their change counts). Equal keys under an inert
+/// filter, a metric without visible weights and no failures: the same
+/// refinement.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct MemoKey {
+    generation: u64,
+    class_stamp: u32,
+    meta: u64,
+    cpu: u64,
+    pool: u64,
+}
+
+/// A converged frame's refinement and the upload budget as it left it.
+#[derive(Debug)]
+struct RefineMemo {
+    key: MemoKey,
+    refined: crate::refine::Refinement,
+    budget: UploadBudget,
 }
 
 /// What decides whether a node holding data is visible.
@@ -231,6 +256,7 @@ impl BrickManager {
             last_fade_time: None,
             class_stamp: 0,
             classified: None,
+            refine_memo: None,
             source,
             layout,
             meta: MetaCache::new(meta_capacity(config.cpu_budget_bytes)),

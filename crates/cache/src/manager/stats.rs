@@ -113,6 +113,12 @@ pub struct FrameStats {
     /// Where the frame's planning went ([`BrickManager::update`](super::BrickManager::update)'s
     /// phases, wall time).
     pub phases: PhaseTimes,
+    /// The frame drew the last converged frame's refinement again, nothing
+    /// it read having changed since (no new views, classification,
+    /// metadata, CPU or pool contents; an inert visibility filter, a
+    /// metric without visible weights, no failures): the refine phase then
+    /// costs a copy of the cut.
+    pub refine_reused: bool,
 }
 
 /// The wall time of each phase of one [`BrickManager::update`](super::BrickManager::update),

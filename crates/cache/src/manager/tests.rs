@@ -308,6 +308,85 @@ fn converges_to_a_complete_resident_cut() {
     assert!(again.uploads.is_empty());
 }
 
+/// A converged static view reuses its refinement (the same plan, the refine
+/// phase a copy), and anything refinement reads that changes makes a new
+/// one: the camera, the transfer function, the configuration, a filter that
+/// is not inert. (In debug builds every reuse is also checked against a
+/// refinement made again.)
+#[test]
+fn a_converged_static_view_reuses_its_refinement() {
+    struct Blocking;
+    impl SplitFilter for Blocking {
+        fn may_split(&mut self, _: NodeKey) -> bool {
+            true
+        }
+    }
+    let src = Arc::new(TestSource::new(64));
+    let mut m = manager(&src, config());
+    let cam = Camera::orbit(Vec3::ZERO, 1.6, 0.4, 0.3);
+    let tf = TransferFunction::ramp(0.1, 1.0, 0.5);
+    let mut frame = 0;
+    let plan = converge(&mut m, &mut frame, &cam, RenderMode::Dvr, &tf, |_, _| {});
+    assert!(!plan.stats.refine_reused, "the converging frame refined");
+    for _ in 0..3 {
+        frame += 1;
+        let again = m.update_view(&cam, 1.0, 128, frame, RenderMode::Dvr, &tf);
+        assert!(again.stats.refine_reused);
+        assert!(again.stats.converged());
+        assert_eq!(again.cut, plan.cut);
+        assert_eq!(again.refined, plan.refined);
+        assert!(again.uploads.is_empty());
+    }
+    // The camera moves: refined again (and reused once it settles).
+    let moved = Camera::orbit(Vec3::ZERO, 1.6, 0.5, 0.3);
+    frame += 1;
+    let p = m.update_view(&moved, 1.0, 128, frame, RenderMode::Dvr, &tf);
+    assert!(!p.stats.refine_reused);
+    let settled = converge(&mut m, &mut frame, &moved, RenderMode::Dvr, &tf, |_, _| {});
+    frame += 1;
+    let p = m.update_view(&moved, 1.0, 128, frame, RenderMode::Dvr, &tf);
+    assert!(p.stats.refine_reused);
+    assert_eq!(p.cut, settled.cut);
+    // A new transfer function: refined again.
+    let tf2 = TransferFunction::ramp(0.3, 1.0, 0.5);
+    frame += 1;
+    assert!(
+        !m.update_view(&moved, 1.0, 128, frame, RenderMode::Dvr, &tf2)
+            .stats
+            .refine_reused
+    );
+    converge(&mut m, &mut frame, &moved, RenderMode::Dvr, &tf2, |_, _| {});
+    frame += 1;
+    assert!(
+        m.update_view(&moved, 1.0, 128, frame, RenderMode::Dvr, &tf2)
+            .stats
+            .refine_reused
+    );
+    // A configuration change: refined again.
+    m.set_tolerance_px(2.0).unwrap();
+    frame += 1;
+    assert!(
+        !m.update_view(&moved, 1.0, 128, frame, RenderMode::Dvr, &tf2)
+            .stats
+            .refine_reused
+    );
+    // A filter that is not inert: never reused.
+    converge(&mut m, &mut frame, &moved, RenderMode::Dvr, &tf2, |_, _| {});
+    for _ in 0..2 {
+        frame += 1;
+        let p = m.update_view_filtered(
+            &moved,
+            1.0,
+            128,
+            frame,
+            RenderMode::Dvr,
+            &tf2,
+            Some(&mut Blocking),
+        );
+        assert!(!p.stats.refine_reused);
+    }
+}
+
 #[test]
 fn tf_and_isovalue_changes_reclassify_without_reads() {
     let src = Arc::new(TestSource::new(64));

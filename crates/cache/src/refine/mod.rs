@@ -247,6 +247,13 @@ pub trait SplitFilter {
         let _ = key;
         None
     }
+    /// True when the filter answers as no filter would (every node may
+    /// split, every weight 1, nothing measured), whatever happened since
+    /// the last frame: a converged refinement may then be reused
+    /// (`BrickManager::update`). False by default.
+    fn is_inert(&self) -> bool {
+        false
+    }
 }
 
 /// The views and the knobs of one refinement.

@@ -68,6 +68,10 @@ impl crate::refine::SplitFilter for Filter<'_> {
             .map_or(1.0, |p| 1.0 + (1.0 + p as f64).ln())
     }
 
+    fn is_inert(&self) -> bool {
+        self.visibility.is_none() && self.weights.is_none()
+    }
+
     fn visible_weight(&mut self, key: NodeKey) -> Option<f64> {
         self.weights
             .as_mut()

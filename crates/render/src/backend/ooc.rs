@@ -226,9 +226,15 @@ impl OutOfCore {
         Ok(())
     }
 
-    /// Statistics of the last frame.
+    /// Statistics of the last plan applied, with the read-backs' counts as
+    /// they stand (a converged view's frames apply no new plan, and its
+    /// read-backs go on).
     pub(crate) fn stats(&self) -> OutOfCoreStats {
-        self.stats
+        OutOfCoreStats {
+            feedback: self.feedback.stats(),
+            occlusion: self.occlusion.stats(),
+            ..self.stats
+        }
     }
 
     /// The latest usage counts read back (whatever the policy).
