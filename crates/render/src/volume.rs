@@ -350,8 +350,11 @@ pub struct VolumeOptions {
     /// it is uploaded, so that shaded DVR reads one texel per sample instead
     /// of six ([`GpuFormat::gradients`]; docs/rendering-model.md,
     /// *Shading*). They take 8 bytes per stored voxel of the GPU budget, so
-    /// the pool holds fewer bricks (a u8 volume's slots cost 5x as much).
-    /// A multi-channel volume or a label map keeps none. Off by default.
+    /// the pool holds fewer bricks (a slot of t-byte texels costs about
+    /// (t + 8) / t as much: 5x for 2-byte texels). They are made by a pass
+    /// recorded into the encoder of the `prepare` that uploads the brick,
+    /// which the host submits as it does every frame's. A multi-channel
+    /// volume or a label map keeps none. Off by default.
     pub gradients: bool,
 }
 

@@ -14,6 +14,9 @@ pub(super) struct RendererKey {
     pub(super) policy: VisibilityPolicy,
     /// The cut's brick budget (`OutOfCoreConfig::brick_budget`).
     pub(super) brick_budget: Option<u32>,
+    /// Out of core, the streamed volume keeps its texels' gradients
+    /// (`VolumeOptions::gradients`).
+    pub(super) gradients: bool,
 }
 
 /// The defaults: out of core with the cache's default LOD tolerance.
@@ -24,6 +27,7 @@ pub(super) const DEFAULT_KEY: RendererKey = RendererKey {
     u8_filtering: U8Filtering::Exact,
     policy: VisibilityPolicy::None,
     brick_budget: None,
+    gradients: false,
 };
 
 /// The brick budgets of the equal-working-set sweeps, as fractions of the

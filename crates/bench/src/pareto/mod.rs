@@ -478,19 +478,28 @@ fn measure(
             r.set_volume(&gpu.device, &gpu.queue, &scene.volume)
                 .map_err(|e| e.to_string())?;
         } else {
-            r.set_volume_source(
+            let config = OutOfCoreConfig {
+                tolerance_px: k.tolerance_px,
+                lod_metric: k.metric,
+                brick_budget: k.brick_budget,
+                upload_budget_bytes: 1 << 30,
+                ..Default::default()
+            };
+            let options = brickray_render::VolumeOptions {
+                u8_filtering: k.u8_filtering,
+                gradients: k.gradients,
+                ..Default::default()
+            };
+            let v = brickray_render::StreamedVolume::new(
                 &gpu.device,
                 &gpu.queue,
                 store.clone(),
-                OutOfCoreConfig {
-                    tolerance_px: k.tolerance_px,
-                    lod_metric: k.metric,
-                    brick_budget: k.brick_budget,
-                    upload_budget_bytes: 1 << 30,
-                    ..Default::default()
-                },
+                config,
+                options,
             )
             .map_err(|e| e.to_string())?;
+            r.set_streamed_volume(&gpu.device, &v)
+                .map_err(|e| e.to_string())?;
             crate::runner::configure(gpu, &r, |c| c.visibility = k.policy)?;
         }
         r.set_transfer_function(&gpu.device, &gpu.queue, tf)

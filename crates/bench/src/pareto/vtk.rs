@@ -359,20 +359,29 @@ fn scene_mode(scene: &Scene, mode_name: &str) -> Result<(RenderMode, TransferFun
 }
 
 /// brickray's configurations: out of core at the default tolerance, and in
-/// core, at each step; with `preint` (DVR only), in core pre-integrated too.
+/// core, at each step; shaded DVR also out of core from the gradients the
+/// streamed volume keeps (`out_of_core_gradients`, as VTK's mappers keep
+/// theirs); with `preint` (DVR only), in core pre-integrated too.
 fn brickray_configs(base: RenderSettings, steps: &[f32], preint: bool) -> Vec<Config> {
     let in_core = RendererKey {
         in_core: true,
         ..DEFAULT_KEY
     };
+    let kept = RendererKey {
+        gradients: true,
+        ..DEFAULT_KEY
+    };
+    let shaded = matches!(base.mode, RenderMode::Dvr) && base.shading.enabled;
     let preint = preint && matches!(base.mode, RenderMode::Dvr);
     [
-        ("out_of_core", DEFAULT_KEY, false),
-        ("in_core", in_core, false),
-        ("in_core_preint", in_core, true),
+        ("out_of_core", DEFAULT_KEY, false, true),
+        ("out_of_core_gradients", kept, false, shaded),
+        ("in_core", in_core, false, true),
+        ("in_core_preint", in_core, true, preint),
     ]
     .into_iter()
-    .filter(|c| preint || !c.2)
+    .filter(|c| c.3)
+    .map(|(knob, key, preintegrated, _)| (knob, key, preintegrated))
     .flat_map(|(knob, key, preintegrated)| {
         steps.iter().map(move |&step| Config {
             knob,
@@ -545,10 +554,11 @@ fn draw(
         .iter()
         .zip(m)
         .map(|(c, x)| chart::ChartPoint {
-            knob: match (c.key.in_core, c.settings.preintegrated) {
-                (true, false) => "brickray in core",
-                (true, true) => "brickray in core, pre-integrated",
-                (false, _) => "brickray out of core",
+            knob: match (c.key.in_core, c.settings.preintegrated, c.key.gradients) {
+                (true, false, _) => "brickray in core",
+                (true, true, _) => "brickray in core, pre-integrated",
+                (false, _, false) => "brickray out of core",
+                (false, _, true) => "brickray out of core, gradients kept",
             },
             ms: x.ms,
             psnr_db: x.psnr_db,
