@@ -424,12 +424,112 @@ fn mip_skips_out_of_core_where_the_bricks_say_it_pays() {
     }
 }
 
+/// DVR out of core skips empty space only where enough of the sub-cells of
+/// the bricks the frame draws are transparent through the TF
+/// (`SkipRule::WherePays`, `DVR_SKIP_SHARE_MIN_BRICKS`): a box with a thin
+/// bright shell and a dim core, under a TF transparent below 0.3, has 0.4
+/// of them transparent and skips (fewer samples); the box with a thick
+/// shell (0.13), the box under a TF opaque at every value and noise under a
+/// ramp transparent only at 0 (none) run without sub-cell tests (the frame's
+/// statistics say so; `SkipRule::Always` still tests). Every image of a
+/// scene is the same.
+#[test]
+fn dvr_skips_out_of_core_only_where_enough_drawn_sub_cells_are_transparent() {
+    use brickray::{RendererOptions, SkipRule};
+    use brickray_harness::predict::{draw, samples_per_ray};
+    use brickray_reference::psnr;
+    const SIZE: u32 = 96;
+    use brickray::core::DVR_SKIP_SHARE_MIN_BRICKS;
+    let shell = brickray_harness::scenes::bright_shell(64);
+    let thin = brickray::core::synthetic::u8_field(64, |p| {
+        let edge = p.iter().map(|&c| c.min(63 - c)).min().unwrap_or(0);
+        if edge < 4 {
+            0.8
+        } else {
+            0.2 * brickray::core::synthetic::fractal_noise(p.map(f64::from), 16.0, 3)
+        }
+    });
+    let noise = brickray_harness::scenes::pareto_noise(64);
+    let g = gpu();
+    let target = Offscreen::new(&g.device, SIZE, SIZE);
+    let transparent_below = TransferFunction::ramp(0.3, 1.0, 0.05);
+    let opaque = TransferFunction::from_entries(vec![[0.9, 0.8, 0.7, 0.01]; 256]);
+    let from_zero = TransferFunction::ramp(0.0, 1.0, 0.05);
+    for (name, vol, tf, skips) in [
+        (
+            "thin shell, transparent below 0.3",
+            &thin,
+            &transparent_below,
+            true,
+        ),
+        (
+            "thick shell, transparent below 0.3",
+            &shell,
+            &transparent_below,
+            false,
+        ),
+        ("thick shell, opaque throughout", &shell, &opaque, false),
+        ("noise, transparent at 0 only", &noise, &from_zero, false),
+    ] {
+        let dir = tempfile::tempdir().unwrap();
+        let source = store_of(vol, &dir);
+        let desc = |ess: bool| skip_frame(vol, RenderMode::Dvr, ess, SIZE);
+        let (mut samples, mut images, mut skipped) = (Vec::new(), Vec::new(), Vec::new());
+        for rule in [SkipRule::WherePays, SkipRule::Always] {
+            let options = RendererOptions {
+                dvr_skipping: rule,
+                ..Default::default()
+            };
+            let mut r = VolumeRenderer::with_options(&g.device, targets(), options).unwrap();
+            r.set_volume_source(&g.device, &g.queue, source.clone(), finest())
+                .unwrap();
+            r.set_transfer_function(&g.device, &g.queue, tf).unwrap();
+            brickray_harness::draw_until_settled(g, &mut r, &target, &desc(true), 200)
+                .unwrap()
+                .expect("out of core settles");
+            for ess in [false, true] {
+                let f = draw(g, &mut r, &target, &desc(ess)).unwrap();
+                samples.push(samples_per_ray(&f.samples));
+                images.push(f.color);
+                skipped.push(r.stats().frame.empty_space_skipping);
+            }
+            let share = r.stats().out_of_core.unwrap().dvr_transparent_share;
+            let share = share.expect("a single-channel intensity volume's share");
+            assert_eq!(
+                share >= DVR_SKIP_SHARE_MIN_BRICKS,
+                skips,
+                "{name}: share {share}"
+            );
+            eprintln!("{name}: drawn sub-cells transparent {share:.3}");
+        }
+        eprintln!(
+            "{name}: samples per ray, rule off/on {:.1}/{:.1}, always off/on {:.1}/{:.1}; skipping {skipped:?}",
+            samples[0], samples[1], samples[2], samples[3]
+        );
+        for img in &images[1..] {
+            assert_eq!(psnr(img, &images[0]), f64::INFINITY, "{name}: identical");
+        }
+        assert_eq!(
+            skipped,
+            [false, skips, false, true],
+            "{name}: the decisions"
+        );
+        if skips {
+            assert!(samples[1] < 0.95 * samples[0], "{name}: the rule skips");
+        } else {
+            assert_eq!(samples[1], samples[0], "{name}: the rule does not skip");
+        }
+    }
+}
+
 /// DVR out of core tests sub-cells only in leaves whose values meet a
 /// transparent TF entry (`tf_opaque_throughout` in common.wgsl): under a TF
 /// that is transparent below 0.3, the bright box's bricks (a dim core inside
 /// a bright shell) hold transparent sub-cells, and skipping takes fewer
 /// samples with the same image; under a TF opaque at every value no leaf
-/// has one, and skipping takes every sample, with the same image.
+/// has one, and skipping takes every sample, with the same image. (Skipping
+/// whenever asked, `SkipRule::Always`: the frame-level rule would turn it
+/// off for both, test above.)
 #[test]
 fn dvr_skips_sub_cells_only_where_a_leaf_can_hold_a_transparent_one() {
     use brickray_harness::predict::{draw, samples_per_ray};
@@ -447,7 +547,11 @@ fn dvr_skips_sub_cells_only_where_a_leaf_can_hold_a_transparent_one() {
         ("transparent below 0.3", &transparent_below, true),
         ("opaque throughout", &opaque, false),
     ] {
-        let mut r = VolumeRenderer::new(&g.device, targets()).unwrap();
+        let options = brickray::RendererOptions {
+            dvr_skipping: brickray::SkipRule::Always,
+            ..Default::default()
+        };
+        let mut r = VolumeRenderer::with_options(&g.device, targets(), options).unwrap();
         r.set_volume_source(&g.device, &g.queue, source.clone(), finest())
             .unwrap();
         r.set_transfer_function(&g.device, &g.queue, tf).unwrap();

@@ -85,6 +85,10 @@ pub(crate) struct SkippingResult {
     /// DVR out of core through the same ramps (no rule: always skips).
     dvr_ooc_rows: Vec<Row>,
     dvr_ooc_always_over_off_max: f64,
+    /// Out of core DVR under its rule (`SkipRule::WherePays`), and where it
+    /// chose the slower by more than 5%.
+    dvr_ooc_rule_over_off_max: f64,
+    dvr_ooc_wrong_decisions: usize,
     /// The largest rule over no-skipping ratio.
     rule_over_off_max: f64,
     /// The largest always-skipping over no-skipping ratio.
@@ -167,13 +171,10 @@ pub(crate) fn run(args: &Args) -> Result<SkippingResult, String> {
         // Out of core: a brick store at its finest level.
         let src = brickray_harness::store_of(&vol, &dir.path().join(format!("{i}.brs")));
         let share = brickray_harness::finest_bricks_mip_share(src.as_ref())?;
-        let ooc = |mip_skipping| -> Result<_, String> {
-            let mut r = VolumeRenderer::with_options(
-                &gpu.device,
-                brickray_harness::target_desc(),
-                with(mip_skipping),
-            )
-            .map_err(|e| e.to_string())?;
+        let ooc = |options: RendererOptions| -> Result<_, String> {
+            let mut r =
+                VolumeRenderer::with_options(&gpu.device, brickray_harness::target_desc(), options)
+                    .map_err(|e| e.to_string())?;
             let config = OutOfCoreConfig {
                 tolerance_px: 0.0,
                 upload_budget_bytes: 1 << 30,
@@ -188,7 +189,10 @@ pub(crate) fn run(args: &Args) -> Result<SkippingResult, String> {
                 (None, _) => Err(format!("{name}: out of core did not converge")),
             }
         };
-        let (mut always, mut rule) = (ooc(SkipRule::Always)?, ooc(SkipRule::WherePays)?);
+        let (mut always, mut rule) = (
+            ooc(with(SkipRule::Always))?,
+            ooc(with(SkipRule::WherePays))?,
+        );
         let skips = share >= brickray_core::MIP_SKIP_SHARE_MIN_BRICKS;
         let c = case(format!("{name}, out of core"), name.clone(), share, skips);
         let (a, r) = (&mut always, Some(&mut rule));
@@ -206,7 +210,9 @@ pub(crate) fn run(args: &Args) -> Result<SkippingResult, String> {
         // per reference length at the top): the share of macro cells
         // transparent through each, in core with and without the rule,
         // unshaded and shaded (samples two to three times as dear), and out
-        // of core (which has no DVR rule: its "rule" column is always).
+        // of core with and without its rule (the row's share: of the drawn
+        // bricks' sub-cells, those transparent; `rule_skips` the rule's
+        // decision from it).
         let dvr = RenderMode::Dvr;
         let shaded = RenderSettings {
             shading: brickray_core::Shading {
@@ -215,7 +221,12 @@ pub(crate) fn run(args: &Args) -> Result<SkippingResult, String> {
             },
             ..settings(dvr, true)
         };
-        let mut ooc_dvr = ooc(SkipRule::Always)?;
+        let dvr_with = |dvr_skipping| RendererOptions {
+            dvr_skipping,
+            ..Default::default()
+        };
+        let mut ooc_dvr = ooc(dvr_with(SkipRule::Always))?;
+        let mut ooc_dvr_rule = ooc(dvr_with(SkipRule::WherePays))?;
         for from in [0.0f32, 0.3, 0.6] {
             let tf = TransferFunction::ramp(from, 1.0, 0.05);
             let share = grid.transparent_share(&tf);
@@ -235,18 +246,26 @@ pub(crate) fn run(args: &Args) -> Result<SkippingResult, String> {
                 let (a, r) = (&mut always, Some(&mut rule));
                 measure(&run, base, a, r, view, rounds, c, rows)?;
             }
-            ooc_dvr
-                .set_transfer_function(&gpu.device, &gpu.queue, &tf)
-                .map_err(|e| e.to_string())?;
-            run.converge(&mut ooc_dvr, camera, frame, settings(dvr, true), 300)?;
+            for r in [&mut ooc_dvr, &mut ooc_dvr_rule] {
+                r.set_transfer_function(&gpu.device, &gpu.queue, &tf)
+                    .map_err(|e| e.to_string())?;
+                run.converge(r, camera, frame, settings(dvr, true), 300)?;
+            }
+            run.frame(&mut ooc_dvr_rule, camera, frame, settings(dvr, true), false)?;
+            let rule_skips = ooc_dvr_rule.stats().frame.empty_space_skipping;
+            let drawn = ooc_dvr_rule
+                .stats()
+                .out_of_core
+                .and_then(|s| s.dvr_transparent_share)
+                .unwrap_or(f64::NAN);
             let label = format!("{name}, DVR from {from}, out of core");
-            let c = case(label.clone(), label, share, true);
-            let a = &mut ooc_dvr;
+            let c = case(label.clone(), label, drawn, rule_skips);
+            let (a, r) = (&mut ooc_dvr, Some(&mut ooc_dvr_rule));
             measure(
                 &run,
                 settings(dvr, true),
                 a,
-                None,
+                r,
                 view,
                 rounds,
                 c,
@@ -271,6 +290,8 @@ pub(crate) fn run(args: &Args) -> Result<SkippingResult, String> {
         dvr_shaded_wrong_decisions: wrong(&dvr_shaded_rows),
         dvr_shaded_rows,
         dvr_ooc_always_over_off_max: max(&dvr_ooc_rows, |r| r.always_over_off),
+        dvr_ooc_rule_over_off_max: max(&dvr_ooc_rows, |r| r.rule_over_off),
+        dvr_ooc_wrong_decisions: wrong(&dvr_ooc_rows),
         rows,
         ooc_rows,
         dvr_rows,

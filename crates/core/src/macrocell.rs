@@ -205,6 +205,19 @@ pub const DVR_SKIP_SHARE_MIN: f64 = 0.15;
 /// where it took 0.61-0.79x. The threshold lies between.
 pub const MIP_SKIP_SHARE_MIN_BRICKS: f64 = 0.1;
 
+/// The least share of sub-cells transparent through the transfer function,
+/// over the bricks a frame draws, at which DVR's empty-space skipping is used
+/// out of core (`SkipRule::WherePays` in brickray-render). Measured on
+/// lavapipe (`brickray-bench skipping`, 2026-12-06, docs/benchmarks.md:
+/// ramps opaque from 0, 0.3 and 0.6 on seven volumes, bricks of 32 at the
+/// finest level, unshaded): at shares of 0 to 0.278 skipping cost 1.00-1.34x
+/// the frame (0.278: the pycortex T1 MRI, 1.18x), from 0.305 to 0.909 it
+/// broke even or paid (0.49-0.99x) but for the cryo-ET tomogram at 0.467
+/// (1.09x); the `raw` suite's view of the pycortex MRI, 0.358, pays (0.85x,
+/// shaded 0.71x). The threshold lies between 0.278 and 0.305: close to
+/// both, so a volume near it may take either side.
+pub const DVR_SKIP_SHARE_MIN_BRICKS: f64 = 0.29;
+
 /// [`MacroCellGrid::empty_distance`] of a grid of `dims` cells whose
 /// emptiness is given per cell (x fastest): what several grids over one
 /// volume share (a multi-channel volume's cell is empty when it is in every

@@ -128,6 +128,10 @@ pub struct FrameStats {
     /// What the isosurface prediction buffer did (`None`: the frame did not
     /// predict).
     pub prediction: Option<crate::PredictionFrame>,
+    /// The frame's ray cast skipped empty space: the settings asked for it
+    /// and the mode's skip rule chose it ([`crate::SkipRule`]; the image is
+    /// the same either way).
+    pub empty_space_skipping: bool,
 }
 
 /// Everything the renderer knows about its last frame.
@@ -170,4 +174,10 @@ pub struct OutOfCoreStats {
     pub feedback: FeedbackStats,
     /// This view's occlusion queries' schedule and read-back counters.
     pub occlusion: OcclusionStats,
+    /// DVR of a single-channel intensity volume: the share of the sub-cells
+    /// of the bricks the plan draws that are transparent through the
+    /// transfer function, what its skip rule compares with
+    /// `brickray_core::DVR_SKIP_SHARE_MIN_BRICKS` ([`crate::SkipRule`]);
+    /// `None` otherwise.
+    pub dvr_transparent_share: Option<f64>,
 }

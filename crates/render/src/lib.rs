@@ -98,10 +98,11 @@ pub struct RendererOptions {
     /// When MIP skips empty space (default: where the volume's macro cells,
     /// or out of core the cut's bricks, say it pays, [`SkipRule::WherePays`]).
     pub mip_skipping: SkipRule,
-    /// When DVR of a volume in core skips empty space (default: where enough
-    /// of its macro cells are transparent through the transfer function,
-    /// [`SkipRule::WherePays`]; label maps always skip the cells of hidden
-    /// labels).
+    /// When DVR skips empty space (default: in core where enough of the
+    /// volume's macro cells are transparent through the transfer function,
+    /// out of core where enough of the sub-cells of the bricks the frame
+    /// draws are, [`SkipRule::WherePays`]; label maps always skip the cells
+    /// of hidden labels).
     pub dvr_skipping: SkipRule,
 }
 
@@ -112,7 +113,13 @@ pub struct RendererOptions {
 pub enum SkipRule {
     /// DVR in core: where at least [`brickray_core::DVR_SKIP_SHARE_MIN`] of
     /// the macro cells are transparent through the frame's transfer
-    /// function (decided when it changes, with the skip distances).
+    /// function (decided when it changes, with the skip distances). Out of
+    /// core, each frame a plan is applied, where at least
+    /// [`brickray_core::DVR_SKIP_SHARE_MIN_BRICKS`] of the sub-cells of the
+    /// bricks the frame draws are transparent through it
+    /// (`OutOfCoreStats::dvr_transparent_share`; a multi-channel volume and
+    /// a label map always skip). Below, skipping cost up to 1.34x the frame
+    /// on lavapipe.
     ///
     /// MIP in core, where the volume's macro cells make at least
     /// [`brickray_core::MIP_SKIP_SHARE_MIN`] of the cells certain to be
@@ -350,7 +357,12 @@ impl VolumeRenderer {
         let desc = layout.volume;
         check_value_range(desc.value_range)?;
         self.drop_volume();
-        let b = OutOfCore::new(device, volume.clone(), self.options.mip_skipping)?;
+        let b = OutOfCore::new(
+            device,
+            volume.clone(),
+            self.options.mip_skipping,
+            self.options.dvr_skipping,
+        )?;
         self.backend = Some(Backend::OutOfCore(Box::new(b)));
         self.volume_dims = Some(desc.dims);
         self.value_range = desc.value_range;

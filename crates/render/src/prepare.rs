@@ -285,6 +285,7 @@ impl VolumeRenderer {
             rays: desc.viewport.width as u64 * desc.viewport.height as u64,
             uploaded_bytes: uploaded,
             prediction,
+            empty_space_skipping: variant.ess,
         };
         Ok(self.last_frame)
     }
@@ -413,6 +414,9 @@ fn plan_group(
             shared.planner.add_feedback(k, o.poll(next));
         }
     }
+    // The transfer function the views draw with (the lead 3D view's; they
+    // agree) and its generation, for the out-of-core DVR skip rule.
+    let mut tf_drawn: Option<(brickray_core::TransferFunction, u64)> = None;
     let planned = {
         // The classification is the 3D views' (they agree), MIP when a slice
         // is among the views: every node with data is visible, as a slice
@@ -426,6 +430,9 @@ fn plan_group(
             .unwrap_or(lead);
         let (r, desc) = &views[lead_3d];
         let tf = r.tf.current().ok_or(PrepareError::NoTransferFunction)?;
+        if r.slice.is_none() && shared.needs_dvr_rule(desc.settings.mode) {
+            tf_drawn = Some((tf.clone(), r.tf.generation()));
+        }
         // A multi-channel volume is classified by its channels' styles.
         let (channels, tf_generation) = match &r.channel_styles {
             Some((styles, generation)) if shared.layout.is_channel_volume() => {
@@ -462,7 +469,8 @@ fn plan_group(
         let vp = desc.viewport;
         let queries = planned.plan.queries.get(k).cloned().unwrap_or_default();
         if let Some(Backend::OutOfCore(o)) = r.backend.as_mut() {
-            o.apply(device, queue, &planned, &queries, [vp.width, vp.height])?;
+            let tf = tf_drawn.as_ref().map(|(tf, g)| (tf, *g));
+            o.apply(device, queue, &planned, &queries, [vp.width, vp.height], tf)?;
         }
     }
     Ok(())

@@ -83,8 +83,100 @@ struct Pool {
     /// (`brickray_core::mip_skip_counts`); `None` for a multi-channel
     /// volume (its MIP always skips).
     mip_cells: Option<Vec<[u64; 2]>>,
+    /// Per slot, its brick's sub-cell ranges and how many are transparent
+    /// through a transfer function, for DVR's skip rule; `None` for a
+    /// multi-channel volume or a label map (they always skip).
+    dvr_cells: Option<DvrCells>,
     /// Sub-cells per brick axis.
     sub_cells_per_axis: u32,
+}
+
+/// The sub-cell ranges of each slot's brick (kept at upload) and, counted
+/// lazily, how many of them are transparent through the transfer function
+/// of generation `tf` (`TransferFunction::is_transparent`, the CPU twin of
+/// common.wgsl's `tf_transparent`).
+struct DvrCells {
+    /// Sub-cells per slot.
+    per_slot: usize,
+    /// `per_slot` ranges per slot, slot after slot.
+    ranges: Vec<[f32; 2]>,
+    transparent: Vec<u32>,
+    /// Slots uploaded since the counts were last brought up to date.
+    stale: Vec<u32>,
+    /// The generation of the transfer function the counts are under.
+    tf: Option<u64>,
+}
+
+impl DvrCells {
+    fn new(slots: usize, per_slot: usize) -> DvrCells {
+        DvrCells {
+            per_slot,
+            ranges: vec![[0.0, 0.0]; slots * per_slot],
+            transparent: vec![0; slots],
+            stale: Vec::new(),
+            tf: None,
+        }
+    }
+
+    /// Keeps `slot`'s brick's sub-cell ranges (counted at the next query).
+    fn upload(&mut self, slot: u32, cells: &[[f32; 2]]) {
+        let at = slot as usize * self.per_slot;
+        if let Some(dst) = self.ranges.get_mut(at..at + self.per_slot) {
+            let n = cells.len().min(dst.len());
+            dst[..n].copy_from_slice(&cells[..n]);
+            self.stale.push(slot);
+        }
+    }
+
+    /// The share of the sub-cells of the bricks in `leaves` transparent
+    /// through `tf` (generation `generation`; 0 for no bricks): every slot
+    /// counted again when the generation changed, else the slots uploaded
+    /// since.
+    fn transparent_share(
+        &mut self,
+        leaves: &[(u32, NodeKey)],
+        tf: &brickray_core::TransferFunction,
+        generation: u64,
+    ) -> f64 {
+        let count = |ranges: &[[f32; 2]]| {
+            ranges
+                .iter()
+                .filter(|r| tf.is_transparent(r[0], r[1]))
+                .count() as u32
+        };
+        if self.tf != Some(generation) {
+            self.tf = Some(generation);
+            self.stale.clear();
+            for (t, ranges) in self
+                .transparent
+                .iter_mut()
+                .zip(self.ranges.chunks(self.per_slot.max(1)))
+            {
+                *t = count(ranges);
+            }
+        } else {
+            for slot in std::mem::take(&mut self.stale) {
+                let at = slot as usize * self.per_slot;
+                if let (Some(t), Some(ranges)) = (
+                    self.transparent.get_mut(slot as usize),
+                    self.ranges.get(at..at + self.per_slot),
+                ) {
+                    *t = count(ranges);
+                }
+            }
+        }
+        let transparent: u64 = leaves
+            .iter()
+            .filter_map(|&(slot, _)| self.transparent.get(slot as usize))
+            .map(|&n| n as u64)
+            .sum();
+        let all = leaves.len() as u64 * self.per_slot as u64;
+        if all == 0 {
+            0.0
+        } else {
+            transparent as f64 / all as f64
+        }
+    }
 }
 
 impl Pool {
@@ -94,6 +186,7 @@ impl Pool {
         format: wgpu::TextureFormat,
     ) -> Result<Pool, RenderError> {
         let gpu = streamer.gpu_format();
+        let labels = streamer.layout().volume.kind.is_labels();
         let dims = streamer.pool().atlas_dims();
         let atlas = gpu::sampled_3d(device, dims, format, "brickray-render brick atlas")?;
         let spread_dims = if gpu.spread { dims } else { [1, 1, 1] };
@@ -141,6 +234,12 @@ impl Pool {
             sub_cells,
             faded: Vec::new(),
             mip_cells: (gpu.channel_count == 1).then(|| vec![[0, 0]; slot_count as usize]),
+            dvr_cells: (gpu.channel_count == 1 && !labels).then(|| {
+                DvrCells::new(
+                    slot_count as usize,
+                    (gpu.sub_cells_per_axis as usize).pow(3),
+                )
+            }),
             sub_cells_per_axis: gpu.sub_cells_per_axis,
         })
     }
@@ -240,6 +339,9 @@ impl Pool {
         {
             let n = self.sub_cells_per_axis;
             *m = brickray_core::mip_skip_counts([n; 3], &b.sub_cells);
+        }
+        if let Some(d) = self.dvr_cells.as_mut() {
+            d.upload(up.slot, &b.sub_cells);
         }
         if let Some(s) = self.slots_cpu.get_mut(up.slot as usize) {
             let o = up.atlas_offset;
@@ -416,6 +518,26 @@ impl Shared {
         } else {
             skipped as f64 / all as f64
         })
+    }
+
+    /// True when DVR's skip rule applies to frames of `mode`: DVR of a
+    /// single-channel intensity volume (multi-channel volumes and label maps
+    /// always skip).
+    pub(crate) fn needs_dvr_rule(&self, mode: brickray_core::RenderMode) -> bool {
+        matches!(mode, brickray_core::RenderMode::Dvr) && self.pool.dvr_cells.is_some()
+    }
+
+    /// Of the sub-cells of the bricks in `leaves` (`(slot, node)`), the
+    /// share transparent through `tf` (of generation `generation`); `None`
+    /// where the rule does not apply ([`Self::needs_dvr_rule`]).
+    pub(crate) fn dvr_transparent_share(
+        &mut self,
+        leaves: &[(u32, NodeKey)],
+        tf: &brickray_core::TransferFunction,
+        generation: u64,
+    ) -> Option<f64> {
+        let d = self.pool.dvr_cells.as_mut()?;
+        Some(d.transparent_share(leaves, tf, generation))
     }
 
     /// True when the kernel must measure visible weights (the metric ranks

@@ -46,6 +46,12 @@ pub(crate) struct OutOfCore {
     /// bricks make `brickray_core::MIP_SKIP_SHARE_MIN_BRICKS` of their
     /// sub-cells certain to be skipped.
     mip_skipping: bool,
+    /// When DVR skips empty space ([`crate::SkipRule`]).
+    dvr_policy: crate::SkipRule,
+    /// Whether this frame's DVR tests sub-cells: by the policy, or where
+    /// `brickray_core::DVR_SKIP_SHARE_MIN_BRICKS` of the plan's bricks'
+    /// sub-cells are transparent through the transfer function.
+    dvr_skipping: bool,
 }
 
 impl std::fmt::Debug for OutOfCore {
@@ -63,6 +69,7 @@ impl OutOfCore {
         device: &wgpu::Device,
         volume: StreamedVolume,
         mip_policy: crate::SkipRule,
+        dvr_policy: crate::SkipRule,
     ) -> Result<OutOfCore, RenderError> {
         check_ooc_limits(device)?;
         let channels = {
@@ -113,6 +120,8 @@ impl OutOfCore {
             channels,
             mip_policy,
             mip_skipping: true,
+            dvr_policy,
+            dvr_skipping: true,
         })
     }
 
@@ -167,7 +176,9 @@ impl OutOfCore {
 
     /// Takes this frame's plan of the volume: sizes the counters and the
     /// stop depth, rebuilds group 2 when an object it holds was recreated,
-    /// and writes this view's occlusion boxes.
+    /// and writes this view's occlusion boxes. `dvr_tf`: the transfer
+    /// function and its generation when the views draw DVR of a
+    /// single-channel intensity volume (the DVR skip rule's input).
     pub(crate) fn apply(
         &mut self,
         device: &wgpu::Device,
@@ -175,8 +186,9 @@ impl OutOfCore {
         planned: &Planned,
         queries: &QueryBatch,
         viewport: [u32; 2],
+        dvr_tf: Option<(&brickray_core::TransferFunction, u64)>,
     ) -> Result<(), RenderError> {
-        let s = self.volume.lock();
+        let mut s = self.volume.lock();
         let mut rebuild = self.occlusion.resize(device, viewport)? || s.generation != self.bound;
         let rows = s.slot_rows;
         if rows != self.feedback.rows() {
@@ -202,6 +214,14 @@ impl OutOfCore {
         self.mip_skipping = self.mip_policy == crate::SkipRule::Always
             || s.mip_skip_share(&plan.leaves)
                 .is_none_or(|share| share >= brickray_core::MIP_SKIP_SHARE_MIN_BRICKS);
+        // DVR tests sub-cells only where enough of the plan's bricks' are
+        // transparent (`DVR_SKIP_SHARE_MIN_BRICKS`): with fewer, the tests
+        // cost more than the samples they save (the image is the same
+        // either way).
+        let share = dvr_tf
+            .and_then(|(tf, generation)| s.dvr_transparent_share(&plan.leaves, tf, generation));
+        self.dvr_skipping = self.dvr_policy == crate::SkipRule::Always
+            || share.is_none_or(|share| share >= brickray_core::DVR_SKIP_SHARE_MIN_BRICKS);
         drop(s);
         self.frame = plan.frame;
         self.leaves.clone_from(&plan.leaves);
@@ -222,6 +242,7 @@ impl OutOfCore {
             visibility: st.visibility,
             feedback: self.feedback.stats(),
             occlusion: self.occlusion.stats(),
+            dvr_transparent_share: share,
         };
         Ok(())
     }
@@ -346,6 +367,10 @@ impl VolumeBackend for OutOfCore {
 
     fn mip_skipping(&self) -> bool {
         self.mip_skipping
+    }
+
+    fn dvr_skipping(&self) -> bool {
+        self.dvr_skipping
     }
 
     fn spread(&self) -> bool {
