@@ -14,6 +14,12 @@
 //! The gradients are made by the first shaded DVR frame and counted in
 //! `volume_bytes` (8 bytes a voxel); unshaded, MIP and iso frames make none,
 //! and a label map never has them.
+//!
+//! Out of core, a streamed volume that keeps its texels' gradients
+//! (`VolumeOptions::gradients`, made for each uploaded brick) against one
+//! that does not, with the same thresholds (measured 74.49-79.99 dB apart,
+//! within 0.01 dB against the reference, at the finest level and at a coarse
+//! cut); the atlas takes 8 more bytes a texel of the same budget.
 
 use brickray::{
     Camera, FrameDesc, GradientSource, RenderMode, RenderSettings, RendererOptions, Shading,
@@ -53,8 +59,14 @@ fn shaded(mode: RenderMode, shaded: bool) -> RenderSettings {
     }
 }
 
-/// One frame of `settings`; RGBA8.
-fn draw(r: &mut VolumeRenderer, vol: &Volume, settings: RenderSettings) -> Vec<u8> {
+/// Frames of `settings` until the renderer settles, at most `max_frames`:
+/// the frames it took (`None`: not settled) and the last image, RGBA8.
+fn settle(
+    r: &mut VolumeRenderer,
+    vol: &Volume,
+    settings: RenderSettings,
+    max_frames: usize,
+) -> (Option<usize>, Vec<u8>) {
     let g = gpu();
     let target = Offscreen::new(&g.device, SIZE, SIZE);
     let (frame, camera) = view(vol);
@@ -66,9 +78,16 @@ fn draw(r: &mut VolumeRenderer, vol: &Volume, settings: RenderSettings) -> Vec<u
         host_depth: None,
         time: None,
     };
-    let frames = brickray_harness::draw_until_settled(g, r, &target, &desc, 1).expect("frame");
+    let frames =
+        brickray_harness::draw_until_settled(g, r, &target, &desc, max_frames).expect("frame");
+    (frames, target.read_color(g))
+}
+
+/// One frame of `settings` (in core: settled at once); RGBA8.
+fn draw(r: &mut VolumeRenderer, vol: &Volume, settings: RenderSettings) -> Vec<u8> {
+    let (frames, img) = settle(r, vol, settings, 1);
     assert_eq!(frames, Some(1));
-    target.read_color(g)
+    img
 }
 
 /// Shaded DVR with precomputed gradients against six reads, and both against
@@ -104,6 +123,20 @@ fn compare(name: &str, vol: &Volume, tf: &TransferFunction) -> f64 {
     );
     let b = draw(&mut six, vol, s);
     assert_eq!(six.volume_bytes(), base, "{name}: six reads keep none");
+    as_six_reads(&format!("{name}, precomputed"), vol, tf, s, &a, &b)
+}
+
+/// Checks `kept` (shaded from per-voxel gradients) against `six` (six reads)
+/// of the same frame: >= 70 dB apart, and against the CPU reference within
+/// 0.5 dB of six reads. Returns the PSNR between them.
+fn as_six_reads(
+    label: &str,
+    vol: &Volume,
+    tf: &TransferFunction,
+    s: RenderSettings,
+    kept: &[u8],
+    six: &[u8],
+) -> f64 {
     let (frame, camera) = view(vol);
     let cpu = render_reference(
         vol,
@@ -114,15 +147,15 @@ fn compare(name: &str, vol: &Volume, tf: &TransferFunction) -> f64 {
         &ReferenceOptions::new(SIZE, SIZE).with_step_factor(s.step_factor),
     )
     .to_rgba8([0.0; 3]);
-    let between = psnr(&a, &b);
-    let (ref_pre, ref_six) = (psnr(&a, &cpu), psnr(&b, &cpu));
+    let between = psnr(kept, six);
+    let (ref_kept, ref_six) = (psnr(kept, &cpu), psnr(six, &cpu));
     eprintln!(
-        "{name}: precomputed vs six reads {between:.2} dB; against the reference {ref_pre:.2} dB (six reads {ref_six:.2} dB)"
+        "{label}: against six reads {between:.2} dB; against the reference {ref_kept:.2} dB (six reads {ref_six:.2} dB)"
     );
-    assert!(between >= 70.0, "{name}: {between} dB");
+    assert!(between >= 70.0, "{label}: {between} dB");
     assert!(
-        ref_pre >= ref_six - 0.5,
-        "{name}: precomputed {ref_pre} dB, six reads {ref_six} dB"
+        ref_kept >= ref_six - 0.5,
+        "{label}: {ref_kept} dB, six reads {ref_six} dB"
     );
     between
 }
@@ -222,28 +255,8 @@ fn compare_out_of_core(name: &str, vol: &Volume, tf: &TransferFunction, toleranc
     let per_level = pre.stats().out_of_core.unwrap().data_leaves_per_level;
     let coarse: u32 = per_level[..levels - 1].iter().sum();
     assert_eq!(coarse > 0, tolerance_px > 0.0, "{name}: {per_level:?}");
-    let between = psnr(&a, &b);
-    let (frame, camera) = view(vol);
-    let cpu = render_reference(
-        vol,
-        &frame,
-        tf,
-        &camera,
-        &s,
-        &ReferenceOptions::new(SIZE, SIZE).with_step_factor(s.step_factor),
-    )
-    .to_rgba8([0.0; 3]);
-    let (ref_pre, ref_six) = (psnr(&a, &cpu), psnr(&b, &cpu));
-    eprintln!(
-        "{name}, out of core at {tolerance_px} px: gradients kept vs six reads {between:.2} dB; \
-         against the reference {ref_pre:.2} dB (six reads {ref_six:.2} dB)"
-    );
-    assert!(between >= 70.0, "{name}: {between} dB");
-    assert!(
-        ref_pre >= ref_six - 0.5,
-        "{name}: gradients kept {ref_pre} dB, six reads {ref_six} dB"
-    );
-    between
+    let label = format!("{name}, out of core at {tolerance_px} px, gradients kept");
+    as_six_reads(&label, vol, tf, s, &a, &b)
 }
 
 #[test]
@@ -266,18 +279,7 @@ fn streamed_gradients_shade_as_six_reads() {
 
 /// The converged frame of `settings` (out of core, within 60 frames); RGBA8.
 fn draw_converged(r: &mut VolumeRenderer, vol: &Volume, settings: RenderSettings) -> Vec<u8> {
-    let g = gpu();
-    let target = Offscreen::new(&g.device, SIZE, SIZE);
-    let (frame, camera) = view(vol);
-    let desc = FrameDesc {
-        camera,
-        frame,
-        viewport: Viewport::full(SIZE, SIZE),
-        settings,
-        host_depth: None,
-        time: None,
-    };
-    let frames = brickray_harness::draw_until_settled(g, r, &target, &desc, 60).expect("frame");
+    let (frames, img) = settle(r, vol, settings, 60);
     assert!(frames.is_some(), "not converged within 60 frames");
-    target.read_color(g)
+    img
 }

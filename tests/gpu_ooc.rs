@@ -81,6 +81,26 @@ fn finest() -> OutOfCoreConfig {
     }
 }
 
+/// A renderer with `options` over `source` at the finest level under `tf`,
+/// drawn until it settles at `desc` (within 200 frames).
+fn settled(
+    options: brickray::RendererOptions,
+    source: &Arc<dyn brickray::BrickSource>,
+    tf: &TransferFunction,
+    target: &Offscreen,
+    desc: &FrameDesc<'_>,
+) -> VolumeRenderer {
+    let g = gpu();
+    let mut r = VolumeRenderer::with_options(&g.device, targets(), options).unwrap();
+    r.set_volume_source(&g.device, &g.queue, source.clone(), finest())
+        .unwrap();
+    r.set_transfer_function(&g.device, &g.queue, tf).unwrap();
+    brickray_harness::draw_until_settled(g, &mut r, target, desc, 200)
+        .unwrap()
+        .expect("out of core settles");
+    r
+}
+
 #[test]
 #[cfg_attr(
     no_shared_data,
@@ -403,13 +423,7 @@ fn mip_skips_out_of_core_where_the_bricks_say_it_pays() {
                 mip_skipping: rule,
                 ..Default::default()
             };
-            let mut r = VolumeRenderer::with_options(&g.device, targets(), options).unwrap();
-            r.set_volume_source(&g.device, &g.queue, source.clone(), finest())
-                .unwrap();
-            r.set_transfer_function(&g.device, &g.queue, &tf).unwrap();
-            brickray_harness::draw_until_settled(g, &mut r, &target, &desc(true), 200)
-                .unwrap()
-                .expect("out of core settles");
+            let mut r = settled(options, &source, &tf, &target, &desc(true));
             for ess in [false, true] {
                 let f = draw(g, &mut r, &target, &desc(ess)).unwrap();
                 samples.push(samples_per_ray(&f.samples));
@@ -480,13 +494,7 @@ fn dvr_skips_out_of_core_only_where_enough_drawn_sub_cells_are_transparent() {
                 dvr_skipping: rule,
                 ..Default::default()
             };
-            let mut r = VolumeRenderer::with_options(&g.device, targets(), options).unwrap();
-            r.set_volume_source(&g.device, &g.queue, source.clone(), finest())
-                .unwrap();
-            r.set_transfer_function(&g.device, &g.queue, tf).unwrap();
-            brickray_harness::draw_until_settled(g, &mut r, &target, &desc(true), 200)
-                .unwrap()
-                .expect("out of core settles");
+            let mut r = settled(options, &source, tf, &target, &desc(true));
             for ess in [false, true] {
                 let f = draw(g, &mut r, &target, &desc(ess)).unwrap();
                 samples.push(samples_per_ray(&f.samples));
@@ -551,13 +559,7 @@ fn dvr_skips_sub_cells_only_where_a_leaf_can_hold_a_transparent_one() {
             dvr_skipping: brickray::SkipRule::Always,
             ..Default::default()
         };
-        let mut r = VolumeRenderer::with_options(&g.device, targets(), options).unwrap();
-        r.set_volume_source(&g.device, &g.queue, source.clone(), finest())
-            .unwrap();
-        r.set_transfer_function(&g.device, &g.queue, tf).unwrap();
-        brickray_harness::draw_until_settled(g, &mut r, &target, &desc(true), 200)
-            .unwrap()
-            .expect("out of core settles");
+        let mut r = settled(options, &source, tf, &target, &desc(true));
         let off = draw(g, &mut r, &target, &desc(false)).unwrap();
         let on = draw(g, &mut r, &target, &desc(true)).unwrap();
         let (n_off, n_on) = (samples_per_ray(&off.samples), samples_per_ray(&on.samples));

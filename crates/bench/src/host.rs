@@ -235,22 +235,11 @@ struct StreamerStatic {
 fn streamer_static(cut: u32, size: u32) -> Result<StreamerStatic, String> {
     let src = brickray_store::ProceduralSource::sphere_shells([DIMS; 3], BRICK, 2)
         .map_err(|e| e.to_string())?;
-    let layout = brickray_core::BrickSource::layout(&src).clone();
-    let caps = brickray_core::TexelCaps {
-        norm16: true,
-        float32_filterable: false,
-    };
-    let gpu = brickray_cache::GpuFormat::for_layout(
-        &layout,
-        caps,
-        brickray_core::U8Filtering::Exact,
-        32,
-        2048,
-    );
-    let mut s =
-        brickray_cache::Streamer::new(Arc::new(src), config(cut, VisibilityPolicy::None), gpu)
-            .map_err(|e| e.to_string())?;
-    s.preload_root().map_err(|e| e.to_string())?;
+    let mut s = crate::runner::gpu_free_streamer(
+        Arc::new(src),
+        config(cut, VisibilityPolicy::None),
+        false,
+    )?;
     let frame = VolumeFrame::centered([DIMS as u32; 3], [1.0; 3]);
     let view = brickray_core::FrameView::new(camera(&frame, 0), frame, [size, size]);
     let tf = brickray_core::TransferFunction::ramp(0.3, 0.9, 0.3);

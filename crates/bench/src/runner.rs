@@ -84,6 +84,34 @@ pub(crate) fn finest_ooc_renderer(
     Ok(ooc)
 }
 
+/// A GPU-free streamer over `source` with `config`, for a device that
+/// stores 16-bit texels exactly (lavapipe's formats, the renderer's
+/// defaults), carrying spreads when `spread`; its root read.
+pub(crate) fn gpu_free_streamer(
+    source: std::sync::Arc<dyn brickray_core::BrickSource>,
+    config: brickray_render::OutOfCoreConfig,
+    spread: bool,
+) -> Result<brickray_cache::Streamer, String> {
+    let caps = brickray_core::TexelCaps {
+        norm16: true,
+        float32_filterable: false,
+    };
+    let gpu = brickray_cache::GpuFormat {
+        spread,
+        ..brickray_cache::GpuFormat::for_layout(
+            source.layout(),
+            caps,
+            brickray_core::U8Filtering::Exact,
+            32,
+            2048,
+        )
+    };
+    let mut streamer =
+        brickray_cache::Streamer::new(source, config, gpu).map_err(|e| e.to_string())?;
+    streamer.preload_root().map_err(|e| e.to_string())?;
+    Ok(streamer)
+}
+
 /// Lanes of one SIMD group of rays: 8 x 32-bit on lavapipe's 256-bit vectors.
 /// Consecutive invocations of an 8x8 workgroup are pixels in Morton order
 /// (`tile_pixel` in common.wgsl), so each group covers a 4 x 2 block.

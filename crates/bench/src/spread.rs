@@ -132,30 +132,14 @@ fn converged_bytes(
     tolerance_px: f32,
     view: brickray_core::FrameView,
 ) -> Result<(f64, f64), String> {
-    let s = |e: brickray_cache::CacheError| e.to_string();
-    let layout = source.layout().clone();
-    let caps = brickray_core::TexelCaps {
-        norm16: true,
-        float32_filterable: false,
-    };
-    let gpu = brickray_cache::GpuFormat {
-        spread: source.has_spread(),
-        ..brickray_cache::GpuFormat::for_layout(
-            &layout,
-            caps,
-            brickray_core::U8Filtering::Exact,
-            32,
-            2048,
-        )
-    };
+    let spread = source.has_spread();
     let config = OutOfCoreConfig {
         tolerance_px,
         upload_budget_bytes: 1 << 30,
         fade: None,
         ..Default::default()
     };
-    let mut streamer = brickray_cache::Streamer::new(source, config, gpu).map_err(s)?;
-    streamer.preload_root().map_err(|e| e.to_string())?;
+    let mut streamer = crate::runner::gpu_free_streamer(source, config, spread)?;
     let mut uploaded = 0u64;
     for _ in 0..2000 {
         let plan = streamer.plan(&brickray_cache::StreamFrame {

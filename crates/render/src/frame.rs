@@ -252,16 +252,7 @@ pub(crate) fn layout_entries() -> Vec<wgpu::BindGroupLayoutEntry> {
         storage_texture_entry(2, OUTPUT_FORMATS[0]),
         storage_texture_entry(3, OUTPUT_FORMATS[1]),
         storage_texture_entry(4, OUTPUT_FORMATS[2]),
-        wgpu::BindGroupLayoutEntry {
-            binding: 5,
-            visibility: wgpu::ShaderStages::COMPUTE,
-            ty: wgpu::BindingType::Buffer {
-                ty: wgpu::BufferBindingType::Storage { read_only: false },
-                has_dynamic_offset: false,
-                min_binding_size: None,
-            },
-            count: None,
-        },
+        gpu::storage_entry(5, false),
         wgpu::BindGroupLayoutEntry {
             binding: 6,
             visibility: wgpu::ShaderStages::COMPUTE,

@@ -74,16 +74,7 @@ pub(crate) fn volume_layout_entries(storage: u32) -> Vec<wgpu::BindGroupLayoutEn
         },
     ];
     for i in 0..storage {
-        e.push(wgpu::BindGroupLayoutEntry {
-            binding: 3 + i,
-            visibility: c,
-            ty: wgpu::BindingType::Buffer {
-                ty: wgpu::BufferBindingType::Storage { read_only: true },
-                has_dynamic_offset: false,
-                min_binding_size: None,
-            },
-            count: None,
-        });
+        e.push(gpu::storage_entry(3 + i, true));
     }
     e
 }
@@ -179,16 +170,7 @@ pub(crate) fn ooc_single_layout_entries() -> Vec<wgpu::BindGroupLayoutEntry> {
 /// read-write usage counters.
 pub(crate) fn ooc_layout_entries() -> Vec<wgpu::BindGroupLayoutEntry> {
     let mut e = volume_layout_entries(READ_ONLY_STORAGE);
-    e.push(wgpu::BindGroupLayoutEntry {
-        binding: USAGE_BINDING,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::Buffer {
-            ty: wgpu::BufferBindingType::Storage { read_only: false },
-            has_dynamic_offset: false,
-            min_binding_size: None,
-        },
-        count: None,
-    });
+    e.push(gpu::storage_entry(USAGE_BINDING, false));
     e.push(wgpu::BindGroupLayoutEntry {
         binding: STOP_DEPTH_BINDING,
         visibility: wgpu::ShaderStages::COMPUTE,

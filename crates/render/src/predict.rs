@@ -282,18 +282,8 @@ impl ReprojectUniforms {
 
 /// Layout of the reprojection pass: the history (0) and its uniforms (1).
 pub(crate) fn reproject_layout_entries() -> Vec<wgpu::BindGroupLayoutEntry> {
-    let c = wgpu::ShaderStages::COMPUTE;
     vec![
-        wgpu::BindGroupLayoutEntry {
-            binding: 0,
-            visibility: c,
-            ty: wgpu::BindingType::Buffer {
-                ty: wgpu::BufferBindingType::Storage { read_only: false },
-                has_dynamic_offset: false,
-                min_binding_size: None,
-            },
-            count: None,
-        },
+        gpu::storage_entry(0, false),
         gpu::uniform_entry::<ReprojectUniforms>(1),
     ]
 }

@@ -222,19 +222,7 @@ impl CutCheck {
         config: OutOfCoreConfig,
     ) -> Result<CutCheck, String> {
         let layout = source.layout().clone();
-        let caps = brickray_core::TexelCaps {
-            norm16: true,
-            float32_filterable: false,
-        };
-        let gpu = brickray_cache::GpuFormat::for_layout(
-            &layout,
-            caps,
-            brickray_core::U8Filtering::Exact,
-            32,
-            2048,
-        );
-        let mut streamer = brickray_cache::Streamer::new(source, config, gpu).map_err(s)?;
-        streamer.preload_root().map_err(s)?;
+        let streamer = crate::runner::gpu_free_streamer(source, config, false)?;
         Ok(CutCheck {
             streamer,
             placement: frame,

@@ -240,41 +240,41 @@ impl BrickManager {
             reused,
             budget,
         };
-        if let Some((refined, budget)) = reused {
+        let mut budget = self.budget;
+        if let Some((refined, kept)) = reused {
             #[cfg(debug_assertions)]
             {
-                let mut env = Env {
-                    meta: &self.meta,
-                    failures: &self.failures,
-                    cpu: &mut self.cpu,
-                    pool: &self.pool,
-                    filter,
-                    octants: &self.octants,
-                    class_stamp: self.class_stamp,
-                };
-                let mut b = self.budget;
-                let again = refine(&self.layout, &params, &mut env, &mut b);
+                let again = self.refine_with(&params, filter, &mut budget);
                 assert_eq!(again, refined, "a reused refinement differs from a new one");
-                assert_eq!(b, budget, "a reused refinement's upload budget differs");
+                assert_eq!(budget, kept, "a reused refinement's upload budget differs");
             }
-            self.budget = budget;
+            self.budget = kept;
             self.octants.end(&refined, &self.layout);
-            return (refined, memo(true, budget));
+            return (refined, memo(true, kept));
         }
-        let refined = {
-            let mut env = Env {
-                meta: &self.meta,
-                failures: &self.failures,
-                cpu: &mut self.cpu,
-                pool: &self.pool,
-                filter,
-                octants: &self.octants,
-                class_stamp: self.class_stamp,
-            };
-            refine(&self.layout, &params, &mut env, &mut self.budget)
-        };
+        let refined = self.refine_with(&params, filter, &mut budget);
+        self.budget = budget;
         self.octants.end(&refined, &self.layout);
-        (refined, memo(false, self.budget))
+        (refined, memo(false, budget))
+    }
+
+    /// Refines over the caches (never the source), charging `budget`.
+    fn refine_with(
+        &mut self,
+        params: &RefineParams<'_>,
+        filter: Option<&mut dyn SplitFilter>,
+        budget: &mut UploadBudget,
+    ) -> Refinement {
+        let mut env = Env {
+            meta: &self.meta,
+            failures: &self.failures,
+            cpu: &mut self.cpu,
+            pool: &self.pool,
+            filter,
+            octants: &self.octants,
+            class_stamp: self.class_stamp,
+        };
+        refine(&self.layout, params, &mut env, budget)
     }
 
     /// Phase 3: the displayed cut, the refined one with level changes fading

@@ -69,16 +69,7 @@ pub(crate) fn layout_entries() -> Vec<wgpu::BindGroupLayoutEntry> {
         },
         count: None,
     });
-    e.push(wgpu::BindGroupLayoutEntry {
-        binding: ENTRIES_BINDING,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::Buffer {
-            ty: wgpu::BufferBindingType::Storage { read_only: true },
-            has_dynamic_offset: false,
-            min_binding_size: None,
-        },
-        count: None,
-    });
+    e.push(gpu::storage_entry(ENTRIES_BINDING, true));
     e
 }
 
