@@ -6,16 +6,16 @@
 //! glyphon's `TextAtlas` is handed to its text renderers; the renderers'
 //! `prepare` plans it once per frame for all the views that draw it
 //! ([`crate::VolumeRenderer::prepare_views`]). A clone is another handle to
-//! the same volume.
+//! the same volume. The pool's GPU objects and the writes of a plan into
+//! them are `volume/pool.rs`; this file plans and hands the views what they
+//! bind.
 
-use crate::backend::gradients::{self, GradientPass};
 use crate::encoding::{self, U8Filtering};
 use crate::error::{PrepareError, RenderError};
-use crate::gpu::{self, GrowBuffer, Uniform};
+use crate::gpu::{GrowBuffer, Uniform};
 use crate::planner::Planner;
 use brickray_cache::{
-    FadeSlot, GpuFormat, OutOfCoreConfig, StreamError, StreamFrame, StreamPlan, StreamStats,
-    Streamer, Upload,
+    GpuFormat, OutOfCoreConfig, StreamError, StreamFrame, StreamPlan, StreamStats, Streamer,
 };
 use brickray_core::{BrickSource, NodeKey, OctreeLayout};
 use brickray_index::Splits;
@@ -23,19 +23,9 @@ use parking_lot::{Mutex, MutexGuard};
 use std::sync::Arc;
 use std::time::Instant;
 
-/// `range[3]` of a borrowed slot's row ([`FadeSlot::borrowed`]): above 1,
-/// ooc.wgsl draws the leaf from the ancestor alone, at the ancestor's step.
-const BORROWED_WEIGHT: f32 = 2.0;
-
-/// `struct SlotInfo` of ooc.wgsl: one row of the slot table. `offset[3]`
-/// (levels up to the fade fallback, 0: none), `range[2]` (the fallback's slot)
-/// and `range[3]` (its weight) carry a level-of-detail fade ([`FadeSlot`]).
-#[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
-pub(crate) struct SlotInfo {
-    pub(crate) offset: [f32; 4],
-    pub(crate) range: [f32; 4],
-}
+mod pool;
+use pool::Pool;
+pub(crate) use pool::SlotInfo;
 
 /// `struct OocParams` of ooc.wgsl.
 #[repr(C)]
@@ -52,373 +42,6 @@ pub(crate) struct OocParams {
     pub(crate) stored_side: u32,
     pub(crate) sub_cells: u32,
     pub(crate) splits: [u32; 4],
-}
-
-/// The pool's GPU side, sized by the pool's slot grid: the atlas and the
-/// per-slot tables (recreated when the GPU budget changes).
-struct Pool {
-    atlas: wgpu::Texture,
-    atlas_view: wgpu::TextureView,
-    /// Each texel's spread (`R16Float`, the atlas's dims) when the format
-    /// carries spreads, else a 1x1x1 stand-in.
-    spread: wgpu::Texture,
-    spread_view: wgpu::TextureView,
-    /// The format carries spreads (the spread atlas is not the stand-in).
-    spreads: bool,
-    /// Each texel's gradient (`gradients::FORMAT`, the atlas's dims) when the
-    /// format keeps them ([`GpuFormat::gradients`]), else a 1x1x1 stand-in;
-    /// made on the GPU for each upload by `gradient_pass`.
-    _gradients: wgpu::Texture,
-    gradients_view: wgpu::TextureView,
-    gradient_pass: Option<GradientPass>,
-    atlas_bytes: u64,
-    slots: wgpu::Buffer,
-    slots_cpu: Vec<SlotInfo>,
-    slots_dirty: bool,
-    sub_cells: wgpu::Buffer,
-    /// Slots whose rows carry a fade (cleared before the next frame's fades).
-    faded: Vec<u32>,
-    /// Per slot, of its brick's sub-cells, `[skipped, all]` by MIP's
-    /// skipping over axis rays within the brick
-    /// (`brickray_core::mip_skip_counts`); `None` for a multi-channel
-    /// volume (its MIP always skips).
-    mip_cells: Option<Vec<[u64; 2]>>,
-    /// Per slot, its brick's sub-cell ranges and how many are transparent
-    /// through a transfer function, for DVR's skip rule; `None` for a
-    /// multi-channel volume or a label map (they always skip).
-    dvr_cells: Option<DvrCells>,
-    /// Sub-cells per brick axis.
-    sub_cells_per_axis: u32,
-}
-
-/// The sub-cell ranges of each slot's brick (kept at upload) and, counted
-/// lazily, how many of them are transparent through the transfer function
-/// of generation `tf` (`TransferFunction::is_transparent`, the CPU twin of
-/// common.wgsl's `tf_transparent`).
-struct DvrCells {
-    /// Sub-cells per slot.
-    per_slot: usize,
-    /// `per_slot` ranges per slot, slot after slot.
-    ranges: Vec<[f32; 2]>,
-    transparent: Vec<u32>,
-    /// Slots uploaded since the counts were last brought up to date.
-    stale: Vec<u32>,
-    /// The generation of the transfer function the counts are under.
-    tf: Option<u64>,
-}
-
-impl DvrCells {
-    fn new(slots: usize, per_slot: usize) -> DvrCells {
-        DvrCells {
-            per_slot,
-            ranges: vec![[0.0, 0.0]; slots * per_slot],
-            transparent: vec![0; slots],
-            stale: Vec::new(),
-            tf: None,
-        }
-    }
-
-    /// Keeps `slot`'s brick's sub-cell ranges (counted at the next query).
-    fn upload(&mut self, slot: u32, cells: &[[f32; 2]]) {
-        let at = slot as usize * self.per_slot;
-        if let Some(dst) = self.ranges.get_mut(at..at + self.per_slot) {
-            let n = cells.len().min(dst.len());
-            dst[..n].copy_from_slice(&cells[..n]);
-            self.stale.push(slot);
-        }
-    }
-
-    /// The share of the sub-cells of the bricks in `leaves` transparent
-    /// through `tf` (generation `generation`; 0 for no bricks): every slot
-    /// counted again when the generation changed, else the slots uploaded
-    /// since.
-    fn transparent_share(
-        &mut self,
-        leaves: &[(u32, NodeKey)],
-        tf: &brickray_core::TransferFunction,
-        generation: u64,
-    ) -> f64 {
-        let count = |ranges: &[[f32; 2]]| {
-            ranges
-                .iter()
-                .filter(|r| tf.is_transparent(r[0], r[1]))
-                .count() as u32
-        };
-        if self.tf != Some(generation) {
-            self.tf = Some(generation);
-            self.stale.clear();
-            for (t, ranges) in self
-                .transparent
-                .iter_mut()
-                .zip(self.ranges.chunks(self.per_slot.max(1)))
-            {
-                *t = count(ranges);
-            }
-        } else {
-            for slot in std::mem::take(&mut self.stale) {
-                let at = slot as usize * self.per_slot;
-                if let (Some(t), Some(ranges)) = (
-                    self.transparent.get_mut(slot as usize),
-                    self.ranges.get(at..at + self.per_slot),
-                ) {
-                    *t = count(ranges);
-                }
-            }
-        }
-        let transparent: u64 = leaves
-            .iter()
-            .filter_map(|&(slot, _)| self.transparent.get(slot as usize))
-            .map(|&n| n as u64)
-            .sum();
-        let all = leaves.len() as u64 * self.per_slot as u64;
-        if all == 0 {
-            0.0
-        } else {
-            transparent as f64 / all as f64
-        }
-    }
-}
-
-impl Pool {
-    fn new(
-        device: &wgpu::Device,
-        streamer: &Streamer,
-        format: wgpu::TextureFormat,
-    ) -> Result<Pool, RenderError> {
-        let gpu = streamer.gpu_format();
-        let labels = streamer.layout().volume.kind.is_labels();
-        let dims = streamer.pool().atlas_dims();
-        let atlas = gpu::sampled_3d(device, dims, format, "brickray-render brick atlas")?;
-        let spread_dims = if gpu.spread { dims } else { [1, 1, 1] };
-        let spread = gpu::sampled_3d(
-            device,
-            spread_dims,
-            wgpu::TextureFormat::R16Float,
-            "brickray-render spread atlas",
-        )?;
-        let gradients = match gpu.gradients {
-            true => gradients::storage_3d(device, dims, "brickray-render gradient atlas")?,
-            false => gpu::sampled_3d(
-                device,
-                [1, 1, 1],
-                gradients::FORMAT,
-                "brickray-render gradient atlas stand-in",
-            )?,
-        };
-        let gradient_pass = gpu
-            .gradients
-            .then(|| GradientPass::new(device))
-            .transpose()?;
-        let atlas_bytes = dims.iter().map(|&d| d as u64).product::<u64>()
-            * (gpu.texel_bytes() + gpu.spread_bytes() + gpu.gradient_bytes()) as u64;
-        let slot_count = streamer.pool().slot_count().max(1) as u64;
-        let rows = streamer.slot_rows() as usize;
-        let sub_cells = gpu::storage_buffer(
-            device,
-            "brickray-render brick sub-cell table",
-            slot_count * (gpu.sub_cells_per_axis as u64).pow(3) * 8 * gpu.channel_count as u64,
-        )?;
-        Ok(Pool {
-            atlas_view: atlas.create_view(&Default::default()),
-            atlas,
-            spread_view: spread.create_view(&Default::default()),
-            spread,
-            spreads: gpu.spread,
-            gradients_view: gradients.create_view(&Default::default()),
-            _gradients: gradients,
-            gradient_pass,
-            atlas_bytes,
-            slots: Pool::slot_table(device, rows)?,
-            slots_cpu: vec![bytemuck::Zeroable::zeroed(); rows],
-            slots_dirty: true,
-            sub_cells,
-            faded: Vec::new(),
-            mip_cells: (gpu.channel_count == 1).then(|| vec![[0, 0]; slot_count as usize]),
-            dvr_cells: (gpu.channel_count == 1 && !labels).then(|| {
-                DvrCells::new(
-                    slot_count as usize,
-                    (gpu.sub_cells_per_axis as usize).pow(3),
-                )
-            }),
-            sub_cells_per_axis: gpu.sub_cells_per_axis,
-        })
-    }
-
-    fn slot_table(device: &wgpu::Device, rows: usize) -> Result<wgpu::Buffer, RenderError> {
-        gpu::storage_buffer(
-            device,
-            "brickray-render brick slot table",
-            (rows * std::mem::size_of::<SlotInfo>()) as u64,
-        )
-    }
-
-    /// Grows the slot table to the rows the planner needs now (a switch to
-    /// octant-granular cuts at run time); the atlas and the pool's slots
-    /// stay. True when it was recreated.
-    fn ensure_rows(&mut self, device: &wgpu::Device, rows: usize) -> Result<bool, RenderError> {
-        if rows <= self.slots_cpu.len() {
-            return Ok(false);
-        }
-        self.slots = Pool::slot_table(device, rows)?;
-        self.slots_cpu.resize(rows, bytemuck::Zeroable::zeroed());
-        self.slots_dirty = true;
-        Ok(true)
-    }
-
-    /// Writes this frame's uploads, prepared by the loader threads: texels into
-    /// the atlas, sub-cell ranges and slot rows into their tables (and,
-    /// where the format keeps gradients, records into `encoder` the pass
-    /// that makes the uploaded slots' gradients, `scale_offset` mapping
-    /// texels to normalized values); then the rows of fading and borrowed
-    /// leaves. Returns the bytes written.
-    #[allow(clippy::too_many_arguments)]
-    fn write(
-        &mut self,
-        device: &wgpu::Device,
-        queue: &wgpu::Queue,
-        encoder: &mut wgpu::CommandEncoder,
-        uploads: &[Upload],
-        fades: &[FadeSlot],
-        side: u32,
-        bpp: u32,
-        scale_offset: [f32; 2],
-    ) -> Result<u64, RenderError> {
-        let mut bytes = 0u64;
-        for up in uploads {
-            bytes += self.write_upload(queue, up, side, bpp);
-        }
-        if let Some(pass) = self.gradient_pass.as_mut() {
-            let origins: Vec<[u32; 3]> = uploads.iter().map(|u| u.atlas_offset).collect();
-            pass.record(
-                device,
-                queue,
-                encoder,
-                &self.atlas_view,
-                &self.gradients_view,
-                [side; 3],
-                scale_offset,
-                &origins,
-            )?;
-        }
-        // Fades: last frame's cleared, this frame's set (after the uploads,
-        // which reset their slots' rows).
-        for slot in std::mem::take(&mut self.faded) {
-            if let Some(s) = self.slots_cpu.get_mut(slot as usize) {
-                s.offset[3] = 0.0;
-                s.range[2] = 0.0;
-                s.range[3] = 0.0;
-                self.slots_dirty = true;
-            }
-        }
-        for f in fades {
-            self.write_fade(f);
-        }
-        if self.slots_dirty {
-            queue.write_buffer(&self.slots, 0, bytemuck::cast_slice(&self.slots_cpu));
-            bytes += std::mem::size_of_val(self.slots_cpu.as_slice()) as u64;
-            self.slots_dirty = false;
-        }
-        Ok(bytes)
-    }
-
-    fn write_upload(&mut self, queue: &wgpu::Queue, up: &Upload, side: u32, bpp: u32) -> u64 {
-        let b = &up.brick;
-        write_brick(queue, &self.atlas, up.atlas_offset, &b.texels, side, bpp);
-        let mut spread_bytes = 0;
-        if let Some(s) = b.spread.as_deref().filter(|_| self.spreads) {
-            let bytes: &[u8] = bytemuck::cast_slice(s);
-            write_brick(queue, &self.spread, up.atlas_offset, bytes, side, 2);
-            spread_bytes = bytes.len() as u64;
-        }
-        let cells: &[u8] = bytemuck::cast_slice(&b.sub_cells);
-        queue.write_buffer(&self.sub_cells, up.slot as u64 * cells.len() as u64, cells);
-        if let Some(m) = self
-            .mip_cells
-            .as_mut()
-            .and_then(|m| m.get_mut(up.slot as usize))
-        {
-            let n = self.sub_cells_per_axis;
-            *m = brickray_core::mip_skip_counts([n; 3], &b.sub_cells);
-        }
-        if let Some(d) = self.dvr_cells.as_mut() {
-            d.upload(up.slot, &b.sub_cells);
-        }
-        if let Some(s) = self.slots_cpu.get_mut(up.slot as usize) {
-            let o = up.atlas_offset;
-            *s = SlotInfo {
-                offset: [o[0] as f32, o[1] as f32, o[2] as f32, 0.0],
-                range: [b.range[0], b.range[1], 0.0, 0.0],
-            };
-            self.slots_dirty = true;
-        }
-        (b.texels.len() + cells.len()) as u64 + spread_bytes
-    }
-
-    fn write_fade(&mut self, f: &FadeSlot) {
-        // A borrowed slot's row is its ancestor's (offset, range), drawn
-        // from the ancestor alone: weight 2 tells ooc.wgsl.
-        let row = if f.borrowed {
-            let Some(&lender) = self.slots_cpu.get(f.fallback as usize) else {
-                return;
-            };
-            SlotInfo {
-                offset: [lender.offset[0], lender.offset[1], lender.offset[2], 0.0],
-                range: [lender.range[0], lender.range[1], 0.0, 0.0],
-            }
-        } else {
-            match self.slots_cpu.get(f.slot as usize) {
-                Some(&s) => s,
-                None => return,
-            }
-        };
-        if let Some(s) = self.slots_cpu.get_mut(f.slot as usize) {
-            *s = row;
-            s.offset[3] = f.levels_up as f32;
-            s.range[2] = f.fallback as f32;
-            s.range[3] = if f.borrowed {
-                BORROWED_WEIGHT
-            } else {
-                f.weight
-            };
-            self.faded.push(f.slot);
-            self.slots_dirty = true;
-        }
-    }
-}
-
-/// Writes one brick's texels (`side^3` of `bpp` bytes, x fastest) into
-/// `texture` at `offset`.
-fn write_brick(
-    queue: &wgpu::Queue,
-    texture: &wgpu::Texture,
-    offset: [u32; 3],
-    texels: &[u8],
-    side: u32,
-    bpp: u32,
-) {
-    queue.write_texture(
-        wgpu::TexelCopyTextureInfo {
-            texture,
-            mip_level: 0,
-            origin: wgpu::Origin3d {
-                x: offset[0],
-                y: offset[1],
-                z: offset[2],
-            },
-            aspect: wgpu::TextureAspect::All,
-        },
-        texels,
-        wgpu::TexelCopyBufferLayout {
-            offset: 0,
-            bytes_per_row: Some(side * bpp),
-            rows_per_image: Some(side),
-        },
-        wgpu::Extent3d {
-            width: side,
-            height: side,
-            depth_or_array_layers: side,
-        },
-    );
 }
 
 /// What one plan of the volume gave the views that draw it.
@@ -508,23 +131,14 @@ impl Shared {
     /// (`brickray_core::MIP_SKIP_SHARE_MIN_BRICKS`); `None` for a
     /// multi-channel volume, and 0 for no bricks.
     pub(crate) fn mip_skip_share(&self, leaves: &[(u32, NodeKey)]) -> Option<f64> {
-        let cells = self.pool.mip_cells.as_ref()?;
-        let [skipped, all] = leaves
-            .iter()
-            .filter_map(|&(slot, _)| cells.get(slot as usize))
-            .fold([0u64; 2], |a, c| [a[0] + c[0], a[1] + c[1]]);
-        Some(if all == 0 {
-            0.0
-        } else {
-            skipped as f64 / all as f64
-        })
+        self.pool.mip_skip_share(leaves)
     }
 
     /// True when DVR's skip rule applies to frames of `mode`: DVR of a
     /// single-channel intensity volume (multi-channel volumes and label maps
     /// always skip).
     pub(crate) fn needs_dvr_rule(&self, mode: brickray_core::RenderMode) -> bool {
-        matches!(mode, brickray_core::RenderMode::Dvr) && self.pool.dvr_cells.is_some()
+        matches!(mode, brickray_core::RenderMode::Dvr) && self.pool.counts_dvr_cells()
     }
 
     /// Of the sub-cells of the bricks in `leaves` (`(slot, node)`), the
@@ -536,8 +150,7 @@ impl Shared {
         tf: &brickray_core::TransferFunction,
         generation: u64,
     ) -> Option<f64> {
-        let d = self.pool.dvr_cells.as_mut()?;
-        Some(d.transparent_share(leaves, tf, generation))
+        self.pool.dvr_transparent_share(leaves, tf, generation)
     }
 
     /// True when the kernel must measure visible weights (the metric ranks
