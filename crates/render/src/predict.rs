@@ -302,35 +302,12 @@ pub(crate) struct Reprojector {
 impl Reprojector {
     pub(crate) fn new(device: &wgpu::Device) -> Result<Reprojector, RenderError> {
         let label = "brickray-render prediction reprojection";
-        let layout = gpu::scoped(device, label, || {
-            device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-                label: Some(label),
-                entries: &reproject_layout_entries(),
-            })
-        })?;
-        let module = gpu::scoped(device, label, || {
-            device.create_shader_module(wgpu::ShaderModuleDescriptor {
-                label: Some(label),
-                source: wgpu::ShaderSource::Wgsl(crate::shaders::REPROJECT.into()),
-            })
-        })?;
-        let pl = gpu::scoped(device, label, || {
-            device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-                label: Some(label),
-                bind_group_layouts: &[Some(&layout)],
-                immediate_size: 0,
-            })
-        })?;
-        let pipeline = gpu::scoped(device, label, || {
-            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some(label),
-                layout: Some(&pl),
-                module: &module,
-                entry_point: Some("main"),
-                compilation_options: Default::default(),
-                cache: None,
-            })
-        })?;
+        let (layout, pipeline) = gpu::single_group_pipeline(
+            device,
+            label,
+            &reproject_layout_entries(),
+            crate::shaders::REPROJECT,
+        )?;
         Ok(Reprojector {
             layout,
             pipeline,

@@ -107,30 +107,8 @@ impl std::fmt::Debug for GradientPass {
 impl GradientPass {
     pub(crate) fn new(device: &wgpu::Device) -> Result<GradientPass, RenderError> {
         let label = "brickray-render gradients";
-        let (layout, pipeline) = gpu::scoped(device, label, || {
-            let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-                label: Some(label),
-                entries: &layout_entries(),
-            });
-            let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-                label: Some(label),
-                source: wgpu::ShaderSource::Wgsl(WGSL.into()),
-            });
-            let pl = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-                label: Some(label),
-                bind_group_layouts: &[Some(&layout)],
-                immediate_size: 0,
-            });
-            let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some(label),
-                layout: Some(&pl),
-                module: &module,
-                entry_point: Some("main"),
-                compilation_options: Default::default(),
-                cache: None,
-            });
-            (layout, pipeline)
-        })?;
+        let (layout, pipeline) =
+            gpu::single_group_pipeline(device, label, &layout_entries(), WGSL)?;
         Ok(GradientPass {
             layout,
             pipeline,
