@@ -228,23 +228,15 @@ fn compare_out_of_core(name: &str, vol: &Volume, tf: &TransferFunction, toleranc
     let (mut six, without) = streamed(false);
     // The atlas's bytes per texel: the texels' and 8 more for the gradients,
     // within the same budget (fewer slots).
-    let texels = |v: &brickray::StreamedVolume| {
-        v.inspect(|s| {
-            s.pool()
-                .atlas_dims()
-                .iter()
-                .map(|&d| d as u64)
-                .product::<u64>()
-        })
-    };
-    let bpp = |v: &brickray::StreamedVolume| v.resident_bytes() / texels(v);
+    let bpp = brickray_harness::atlas_bytes_per_texel;
+    let slots = |v: &brickray::StreamedVolume| v.inspect(|s| s.pool().slot_count());
     assert_eq!(
         bpp(&with),
         bpp(&without) + 8,
         "{name}: 8 bytes of gradient a texel"
     );
     assert!(
-        texels(&with) < texels(&without),
+        slots(&with) < slots(&without),
         "{name}: the budget holds fewer slots"
     );
     let s = shaded(RenderMode::Dvr, true);

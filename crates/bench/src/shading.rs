@@ -226,15 +226,7 @@ pub(crate) fn run(args: &Args) -> Result<ShadingResult, String> {
             psnr(&img_pre, &cpu),
             psnr(&img_pre, &img_six),
         );
-        let texels = |v: &StreamedVolume| {
-            v.inspect(|s| {
-                s.pool()
-                    .atlas_dims()
-                    .iter()
-                    .map(|&d| d as u64)
-                    .product::<u64>()
-            })
-        };
+        let bpp = brickray_harness::atlas_bytes_per_texel;
         let slots = |v: &StreamedVolume| v.inspect(|s| s.pool().slot_count() as u64);
         let out_of_core = OocRow {
             six_reads_over_unshaded: round2(t[4].ms / t[3].ms),
@@ -245,8 +237,8 @@ pub(crate) fn run(args: &Args) -> Result<ShadingResult, String> {
             unshaded: t[3],
             six_reads: t[4],
             kept: t[5],
-            bytes_per_texel_six_reads: six_volume.resident_bytes() / texels(&six_volume),
-            bytes_per_texel_kept: kept_volume.resident_bytes() / texels(&kept_volume),
+            bytes_per_texel_six_reads: bpp(&six_volume),
+            bytes_per_texel_kept: bpp(&kept_volume),
             slots_six_reads: slots(&six_volume),
             slots_kept: slots(&kept_volume),
             psnr_six_reads_db: finite_db(psnr(&ooc_images[0], &cpu)),

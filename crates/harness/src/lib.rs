@@ -226,6 +226,19 @@ pub fn store_of(
     std::sync::Arc::new(brickray_store::open(path).expect("open the brick store"))
 }
 
+/// The GPU bytes of a streamed volume's atlases per atlas texel (the
+/// texels', and the spreads' and gradients' where it keeps them).
+pub fn atlas_bytes_per_texel(v: &brickray_render::StreamedVolume) -> u64 {
+    let texels = v.inspect(|s| {
+        s.pool()
+            .atlas_dims()
+            .iter()
+            .map(|&d| d as u64)
+            .product::<u64>()
+    });
+    v.resident_bytes() / texels.max(1)
+}
+
 /// Of the sub-cells of `source`'s finest bricks, the share MIP's skipping is
 /// certain to skip within each brick (`brickray_core::mip_skip_counts` per
 /// brick, summed): what the out-of-core renderer decides MIP's skipping from
