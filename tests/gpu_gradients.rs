@@ -275,3 +275,39 @@ fn draw_converged(r: &mut VolumeRenderer, vol: &Volume, settings: RenderSettings
     assert!(frames.is_some(), "not converged within 60 frames");
     img
 }
+
+/// A GPU budget that holds the minimum of slots without gradients but not
+/// with them is a typed error when the streamed volume is made (nothing
+/// created, no panic), and the same budget without gradients opens.
+#[test]
+fn a_budget_too_small_for_kept_gradients_is_a_typed_error() {
+    let g = gpu();
+    let vol = brickray::core::synthetic::marschner_lobb(48);
+    let dir = tempfile::tempdir().unwrap();
+    let source = brickray_harness::store_of(&vol, &dir.path().join("vol.brs"));
+    // About 24 slots of 36^3 4-byte texels (the f32 volume's) without
+    // gradients; with them, a third of that: below the 9 a pool needs.
+    let config = brickray::OutOfCoreConfig {
+        gpu_budget_bytes: 24 * 36u64.pow(3) * 4 + (1 << 16),
+        ..Default::default()
+    };
+    let open = |gradients: bool| {
+        let options = brickray::VolumeOptions {
+            gradients,
+            ..Default::default()
+        };
+        brickray::StreamedVolume::new(&g.device, &g.queue, source.clone(), config, options)
+    };
+    if let Err(e) = open(false) {
+        panic!("the budget holds the slots without gradients: {e}");
+    }
+    let e = open(true).expect_err("too small with gradients");
+    eprintln!("{e}");
+    // (`RenderError::Cache(CacheError::Config(..))`: the facade does not
+    // re-export `CacheError`, so the variant inside is read from `Debug`.)
+    assert!(
+        matches!(e, brickray::RenderError::Cache(_))
+            && format!("{e:?}").contains("GpuBudgetTooSmall"),
+        "{e:?}"
+    );
+}
