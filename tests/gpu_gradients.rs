@@ -20,6 +20,13 @@
 //! that does not, with the same thresholds (measured 74.49-79.99 dB apart,
 //! within 0.01 dB against the reference, at the finest level and at a coarse
 //! cut); the atlas takes 8 more bytes a texel of the same budget.
+//!
+//! Both record the pass that makes gradients into the host's encoder; a host
+//! that drops that encoder instead of submitting it would leave no gradients
+//! where the kernel reads them (17.7 dB from six reads, in core and out of
+//! core, before the renderer watched its encoders): the renderer records the
+//! pass again into the next frame's encoder, and the same thresholds hold
+//! after dropped frames (measured 75.07 and 74.49 dB, as without them).
 
 use brickray::{
     Camera, FrameDesc, GradientSource, RenderMode, RenderSettings, RendererOptions, Shading,
@@ -267,6 +274,115 @@ fn streamed_gradients_shade_as_six_reads() {
     );
     let (ct, name) = brickray_harness::stand_in::head_ct_or_phantom().unwrap();
     compare_out_of_core(name, &ct, &brickray_harness::ct::soft_tissue(), 0.0);
+}
+
+/// Prepares a frame of `settings` and drops its encoder unsubmitted (the
+/// queue's writes still land with the next submission, here an empty one).
+fn prepare_and_drop(r: &mut VolumeRenderer, vol: &Volume, settings: RenderSettings) {
+    let g = gpu();
+    let (frame, camera) = view(vol);
+    let desc = FrameDesc {
+        camera,
+        frame,
+        viewport: Viewport::full(SIZE, SIZE),
+        settings,
+        host_depth: None,
+        time: None,
+    };
+    let mut enc = g.device.create_command_encoder(&Default::default());
+    r.prepare(&g.device, &g.queue, &mut enc, &desc).unwrap();
+    drop(enc);
+    g.queue.submit([g
+        .device
+        .create_command_encoder(&Default::default())
+        .finish()]);
+}
+
+/// In core: the first shaded DVR frame's encoder dropped, so the pass that
+/// makes the gradients never ran; the next frame records it again and
+/// shades as six reads.
+#[test]
+fn a_dropped_gradient_pass_in_core_is_recorded_again() {
+    let vol = brickray::core::synthetic::marschner_lobb(48);
+    let tf = brickray_harness::scenes::marschner_lobb_tf();
+    let mut pre = renderer(&vol, &tf, GradientSource::Precomputed);
+    let mut six = renderer(&vol, &tf, GradientSource::SixReads);
+    let s = shaded(RenderMode::Dvr, true);
+    prepare_and_drop(&mut pre, &vol, s);
+    let a = draw(&mut pre, &vol, s);
+    let b = draw(&mut six, &vol, s);
+    as_six_reads(
+        "in core, the gradient pass dropped once",
+        &vol,
+        &tf,
+        s,
+        &a,
+        &b,
+    );
+}
+
+/// Out of core: a streamed volume that keeps gradients converges through
+/// frames whose encoders are all dropped (every brick uploaded, none of their
+/// gradient passes run; the bench's planning frames do this), then draws a
+/// frame that uploads nothing: its encoder makes the gradients of every
+/// brick whose pass was dropped, and the image is six reads'.
+#[test]
+fn dropped_gradient_passes_out_of_core_are_recorded_again() {
+    let g = gpu();
+    let vol = brickray::core::synthetic::marschner_lobb(48);
+    let tf = brickray_harness::scenes::marschner_lobb_tf();
+    let dir = tempfile::tempdir().unwrap();
+    let source = brickray_harness::store_of(&vol, &dir.path().join("vol.brs"));
+    let config = brickray::OutOfCoreConfig {
+        tolerance_px: 0.0,
+        upload_budget_bytes: 1 << 30,
+        ..Default::default()
+    };
+    let streamed = |gradients: bool| {
+        let options = brickray::VolumeOptions {
+            gradients,
+            ..Default::default()
+        };
+        let v = brickray::StreamedVolume::new(&g.device, &g.queue, source.clone(), config, options)
+            .unwrap();
+        let mut r = VolumeRenderer::new(&g.device, targets()).unwrap();
+        r.set_streamed_volume(&g.device, &v).unwrap();
+        r.set_transfer_function(&g.device, &g.queue, &tf).unwrap();
+        (r, v)
+    };
+    let (mut pre, _with) = streamed(true);
+    let (mut six, _without) = streamed(false);
+    let s = shaded(RenderMode::Dvr, true);
+    let (mut planned, mut uploaded) = (0, 0);
+    for _ in 0..60 {
+        prepare_and_drop(&mut pre, &vol, s);
+        planned += 1;
+        uploaded += pre.stats().out_of_core.unwrap().cache.upload_bricks;
+        if !pre.wants_redraw() {
+            break;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    assert!(
+        !pre.wants_redraw(),
+        "not converged in {planned} dropped frames"
+    );
+    assert!(uploaded > 0, "the dropped frames uploaded the cut");
+    let (frames, a) = settle(&mut pre, &vol, s, 1);
+    let last = pre.stats().out_of_core.unwrap().cache.upload_bricks;
+    assert!(
+        frames == Some(1) && last == 0,
+        "the drawn frame uploaded {last} bricks: only dropped passes should make gradients"
+    );
+    let b = draw_converged(&mut six, &vol, s);
+    as_six_reads(
+        "out of core, every gradient pass dropped",
+        &vol,
+        &tf,
+        s,
+        &a,
+        &b,
+    );
 }
 
 /// The converged frame of `settings` (out of core, within 60 frames); RGBA8.

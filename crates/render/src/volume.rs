@@ -192,7 +192,11 @@ impl Shared {
         encoder: &mut wgpu::CommandEncoder,
         frame: &StreamFrame<'_>,
     ) -> Result<Option<Planned>, PrepareError> {
+        let side = self.layout.stored_side();
+        let scale_offset = [self.gpu.encoding.scale, self.gpu.encoding.offset];
         let Some(reply) = self.planner.plan(frame) else {
+            self.pool
+                .record_gradients(device, queue, encoder, &[], side, scale_offset)?;
             return Ok(None);
         };
         if self.pool.ensure_rows(device, reply.slot_rows as usize)? {
@@ -200,20 +204,13 @@ impl Shared {
         }
         self.slot_rows = reply.slot_rows;
         let t = Instant::now();
-        let side = self.layout.stored_side();
         let bpp = self.gpu.texel_bytes();
         let plan = reply.plan;
-        let scale_offset = [self.gpu.encoding.scale, self.gpu.encoding.offset];
-        let mut bytes = self.pool.write(
-            device,
-            queue,
-            encoder,
-            &plan.uploads,
-            &plan.fades,
-            side,
-            bpp,
-            scale_offset,
-        )?;
+        let mut bytes = self
+            .pool
+            .write(queue, &plan.uploads, &plan.fades, side, bpp);
+        self.pool
+            .record_gradients(device, queue, encoder, &plan.uploads, side, scale_offset)?;
         let words = reply.words.map_err(RenderError::from)?;
         let (written, grew) = self
             .index

@@ -232,17 +232,31 @@ pub(crate) fn compute(
 ) -> Result<wgpu::Texture, RenderError> {
     let texture = storage_3d(device, dims, "brickray-render gradients")?;
     let out = texture.create_view(&Default::default());
+    record(device, queue, encoder, volume, &out, dims, scale_offset)?;
+    Ok(texture)
+}
+
+/// Records into `encoder` the pass that fills `out` with the gradients of the
+/// whole volume `volume` (as [`compute`]).
+pub(crate) fn record(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    encoder: &mut wgpu::CommandEncoder,
+    volume: &wgpu::TextureView,
+    out: &wgpu::TextureView,
+    dims: [u32; 3],
+    scale_offset: [f32; 2],
+) -> Result<(), RenderError> {
     GradientPass::new(device)?.record(
         device,
         queue,
         encoder,
         volume,
-        &out,
+        out,
         dims,
         scale_offset,
         &[[0; 3]],
-    )?;
-    Ok(texture)
+    )
 }
 
 /// A texture of gradients that the pass writes and the kernels sample.

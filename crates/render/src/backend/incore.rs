@@ -3,6 +3,7 @@
 
 use super::VolumeBackend;
 use super::gradients;
+use super::readback::{Outcome, Submission};
 use crate::encoding::{self, SampleEncoding, U8Filtering};
 use crate::error::RenderError;
 use crate::gpu::{self, Uniform};
@@ -86,8 +87,13 @@ struct Parts {
 enum GradientState {
     /// Not asked for yet: group 2 binds a 1x1x1 stand-in.
     NotMade,
-    /// Made and bound (the texture is owned here; group 2 holds its view).
-    Made { _texture: wgpu::Texture },
+    /// Made and bound (the texture is owned here; group 2 holds its view);
+    /// `run` watches the host encoder the pass that fills it went into (a
+    /// dropped one's pass is recorded again).
+    Made {
+        texture: wgpu::Texture,
+        run: Submission,
+    },
     /// Turned off, a label map, or too large (`gradients::fit`).
     Unavailable,
 }
@@ -297,7 +303,8 @@ impl InCore {
     /// at set-up and keeps six reads per sample.) They are an acceleration:
     /// where the device refuses them (out of memory, say) the error is
     /// returned for this frame and the volume keeps six reads from then on,
-    /// so the next frame draws.
+    /// so the next frame draws. If the host dropped the encoder the pass went
+    /// into, the next frame that wants them records the pass again.
     pub(crate) fn prepare_gradients(
         &mut self,
         device: &wgpu::Device,
@@ -305,17 +312,41 @@ impl InCore {
         encoder: &mut wgpu::CommandEncoder,
         wanted: bool,
     ) -> Result<(), RenderError> {
-        if !wanted || !matches!(self.gradients, GradientState::NotMade) {
-            return Ok(());
-        }
-        self.gradients = GradientState::Unavailable;
         let p = &self.parts;
-        let texture = gradients::compute(device, queue, encoder, &p.view, p.dims, p.scale_offset)?;
-        let view = texture.create_view(&Default::default());
-        self.bind_group = p.bind(device, &self.layout, &view)?;
-        self.bytes += gradients::bytes(p.dims);
-        self.gradients = GradientState::Made { _texture: texture };
-        Ok(())
+        match &mut self.gradients {
+            _ if !wanted => Ok(()),
+            GradientState::Made { texture, run } if run.outcome() == Outcome::Dropped => {
+                let view = texture.create_view(&Default::default());
+                let recorded = gradients::record(
+                    device,
+                    queue,
+                    encoder,
+                    &p.view,
+                    &view,
+                    p.dims,
+                    p.scale_offset,
+                );
+                *run = match recorded {
+                    Ok(()) => Submission::watch(encoder),
+                    Err(_) => Submission::dropped(),
+                };
+                recorded
+            }
+            GradientState::NotMade => {
+                self.gradients = GradientState::Unavailable;
+                let texture =
+                    gradients::compute(device, queue, encoder, &p.view, p.dims, p.scale_offset)?;
+                let view = texture.create_view(&Default::default());
+                self.bind_group = p.bind(device, &self.layout, &view)?;
+                self.bytes += gradients::bytes(p.dims);
+                self.gradients = GradientState::Made {
+                    texture,
+                    run: Submission::watch(encoder),
+                };
+                Ok(())
+            }
+            _ => Ok(()),
+        }
     }
 }
 

@@ -14,6 +14,10 @@
 //! the frame's commands ran, and frees the entry. An encoder the host drops
 //! without submitting drops the mapping request: the entry is freed and
 //! counted as discarded. Nothing here calls `poll` or waits.
+//!
+//! [`Submission`] watches an encoder the same way, without a buffer: whether
+//! the work recorded into it ran or was dropped with it (the gradient
+//! passes, recorded again when their encoder was dropped).
 
 use crate::error::RenderError;
 use crate::gpu;
@@ -48,6 +52,48 @@ impl Drop for Pending {
     fn drop(&mut self) {
         if let Some(s) = self.0.take() {
             s.store(FAILED, Ordering::Release);
+        }
+    }
+}
+
+/// What became of the commands an encoder held when [`Submission::watch`]
+/// was called.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Outcome {
+    /// Not run yet (or run, and wgpu has not said so yet).
+    Pending,
+    /// Ran on the GPU: the host submitted the encoder and the work is done.
+    Ran,
+    /// Will never run: the host dropped the encoder (or its command buffer)
+    /// unsubmitted.
+    Dropped,
+}
+
+/// Watches one host encoder: its work-done callback says it ran; the
+/// callback dropped uncalled (the encoder dropped unsubmitted) says it never
+/// will. Never waits.
+#[derive(Debug)]
+pub(crate) struct Submission(Arc<AtomicU8>);
+
+impl Submission {
+    /// Watches `encoder` (what it holds now and what is recorded later).
+    pub(crate) fn watch(encoder: &wgpu::CommandEncoder) -> Submission {
+        let state = Arc::new(AtomicU8::new(MAPPING));
+        let pending = Pending(Some(state.clone()));
+        encoder.on_submitted_work_done(move || pending.complete(true));
+        Submission(state)
+    }
+
+    /// A submission known never to run (what was to be recorded failed).
+    pub(crate) fn dropped() -> Submission {
+        Submission(Arc::new(AtomicU8::new(FAILED)))
+    }
+
+    pub(crate) fn outcome(&self) -> Outcome {
+        match self.0.load(Ordering::Acquire) {
+            READY => Outcome::Ran,
+            FAILED => Outcome::Dropped,
+            _ => Outcome::Pending,
         }
     }
 }

@@ -4,6 +4,7 @@
 //! fades into them.
 
 use crate::backend::gradients::{self, GradientPass};
+use crate::backend::readback::{Outcome, Submission};
 use crate::error::RenderError;
 use crate::gpu;
 use brickray_cache::{FadeSlot, Streamer, Upload};
@@ -40,6 +41,11 @@ pub(super) struct Pool {
     _gradients: wgpu::Texture,
     pub(super) gradients_view: wgpu::TextureView,
     gradient_pass: Option<GradientPass>,
+    /// The gradient passes recorded into host encoders not known to have run,
+    /// with their boxes (atlas offsets): those of an encoder the host
+    /// dropped are recorded again into the next frame's
+    /// ([`record_gradients`](Pool::record_gradients)).
+    gradient_runs: Vec<(Submission, Vec<[u32; 3]>)>,
     pub(super) atlas_bytes: u64,
     pub(super) slots: wgpu::Buffer,
     slots_cpu: Vec<SlotInfo>,
@@ -196,6 +202,7 @@ impl Pool {
             gradients_view: gradients.create_view(&Default::default()),
             _gradients: gradients,
             gradient_pass,
+            gradient_runs: Vec::new(),
             atlas_bytes,
             slots: Pool::slot_table(device, rows)?,
             slots_cpu: vec![bytemuck::Zeroable::zeroed(); rows],
@@ -239,39 +246,20 @@ impl Pool {
     }
 
     /// Writes this frame's uploads, prepared by the loader threads: texels into
-    /// the atlas, sub-cell ranges and slot rows into their tables (and,
-    /// where the format keeps gradients, records into `encoder` the pass
-    /// that makes the uploaded slots' gradients, `scale_offset` mapping
-    /// texels to normalized values); then the rows of fading and borrowed
-    /// leaves. Returns the bytes written.
-    #[allow(clippy::too_many_arguments)]
+    /// the atlas, sub-cell ranges and slot rows into their tables; then the
+    /// rows of fading and borrowed leaves. Returns the bytes written. (Their
+    /// gradients, where the format keeps them: [`record_gradients`](Pool::record_gradients).)
     pub(super) fn write(
         &mut self,
-        device: &wgpu::Device,
         queue: &wgpu::Queue,
-        encoder: &mut wgpu::CommandEncoder,
         uploads: &[Upload],
         fades: &[FadeSlot],
         side: u32,
         bpp: u32,
-        scale_offset: [f32; 2],
-    ) -> Result<u64, RenderError> {
+    ) -> u64 {
         let mut bytes = 0u64;
         for up in uploads {
             bytes += self.write_upload(queue, up, side, bpp);
-        }
-        if let Some(pass) = self.gradient_pass.as_mut() {
-            let origins: Vec<[u32; 3]> = uploads.iter().map(|u| u.atlas_offset).collect();
-            pass.record(
-                device,
-                queue,
-                encoder,
-                &self.atlas_view,
-                &self.gradients_view,
-                [side; 3],
-                scale_offset,
-                &origins,
-            )?;
         }
         // Fades: last frame's cleared, this frame's set (after the uploads,
         // which reset their slots' rows).
@@ -291,7 +279,61 @@ impl Pool {
             bytes += std::mem::size_of_val(self.slots_cpu.as_slice()) as u64;
             self.slots_dirty = false;
         }
-        Ok(bytes)
+        bytes
+    }
+
+    /// Where the format keeps gradients, records into `encoder` the pass that
+    /// makes the gradients of this frame's `uploads` (`side`^3 texels each,
+    /// `scale_offset` mapping texels to normalized values) and of the bricks
+    /// whose pass went into an encoder the host dropped unsubmitted (the
+    /// queue's writes of their texels landed all the same; a slot uploaded
+    /// again since holds a newer brick, whose gradients the pass then makes
+    /// once more). Called every frame, with or without a plan, so that no
+    /// submitted frame samples a brick whose gradients were never made.
+    pub(super) fn record_gradients(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        encoder: &mut wgpu::CommandEncoder,
+        uploads: &[Upload],
+        side: u32,
+        scale_offset: [f32; 2],
+    ) -> Result<(), RenderError> {
+        let Some(pass) = self.gradient_pass.as_mut() else {
+            return Ok(());
+        };
+        let mut boxes: Vec<[u32; 3]> = uploads.iter().map(|u| u.atlas_offset).collect();
+        self.gradient_runs
+            .retain_mut(|(run, dropped)| match run.outcome() {
+                Outcome::Pending => true,
+                Outcome::Ran => false,
+                Outcome::Dropped => {
+                    boxes.append(dropped);
+                    false
+                }
+            });
+        if boxes.is_empty() {
+            return Ok(());
+        }
+        boxes.sort_unstable();
+        boxes.dedup();
+        let recorded = pass.record(
+            device,
+            queue,
+            encoder,
+            &self.atlas_view,
+            &self.gradients_view,
+            [side; 3],
+            scale_offset,
+            &boxes,
+        );
+        // A pass that could not be recorded is tried again next frame.
+        let run = match recorded {
+            Ok(()) => Submission::watch(encoder),
+            Err(_) => Submission::dropped(),
+        };
+        self.gradient_runs.push((run, boxes));
+        recorded
     }
 
     /// Of the sub-cells of the bricks in `leaves` (`(slot, node)`), the
