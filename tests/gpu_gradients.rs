@@ -29,8 +29,8 @@
 //! after dropped frames (measured 75.07 and 74.49 dB, as without them).
 
 use brickray::{
-    Camera, FrameDesc, GradientSource, RenderMode, RenderSettings, RendererOptions, Shading,
-    TransferFunction, Viewport, Volume, VolumeFrame, VolumeRenderer,
+    Camera, FrameDesc, GradientSource, KeepGradients, RenderMode, RenderSettings, RendererOptions,
+    Shading, TransferFunction, Viewport, Volume, VolumeFrame, VolumeRenderer,
 };
 use brickray_harness::{Offscreen, shared_gpu as gpu, target_desc as targets};
 use brickray_reference::{ReferenceOptions, psnr, render_reference};
@@ -221,7 +221,7 @@ fn compare_out_of_core(name: &str, vol: &Volume, tf: &TransferFunction, toleranc
     };
     let streamed = |gradients: bool| {
         let options = brickray::VolumeOptions {
-            gradients,
+            gradients: keep(gradients),
             ..Default::default()
         };
         let v = brickray::StreamedVolume::new(&g.device, &g.queue, source.clone(), config, options)
@@ -340,7 +340,7 @@ fn dropped_gradient_passes_out_of_core_are_recorded_again() {
     };
     let streamed = |gradients: bool| {
         let options = brickray::VolumeOptions {
-            gradients,
+            gradients: keep(gradients),
             ..Default::default()
         };
         let v = brickray::StreamedVolume::new(&g.device, &g.queue, source.clone(), config, options)
@@ -385,6 +385,72 @@ fn dropped_gradient_passes_out_of_core_are_recorded_again() {
     );
 }
 
+/// Kept gradients (`KeepGradients::Always`) or six reads (`Never`), whatever
+/// the budget holds.
+fn keep(kept: bool) -> KeepGradients {
+    if kept {
+        KeepGradients::Always
+    } else {
+        KeepGradients::Never
+    }
+}
+
+/// The default, `KeepGradients::WhenEveryBrickFits`: a volume whose every
+/// brick (each level's) fits the GPU budget with its gradients keeps them and
+/// shades as six reads do; the same volume under a budget that holds its
+/// bricks only without gradients (the pool would lose bricks to them) keeps
+/// none, and a budget that holds them with gradients again keeps them.
+#[test]
+fn gradients_are_kept_by_default_where_every_brick_fits() {
+    let g = gpu();
+    let vol = brickray::core::synthetic::marschner_lobb(48);
+    let tf = brickray_harness::scenes::marschner_lobb_tf();
+    let dir = tempfile::tempdir().unwrap();
+    let source = brickray_harness::store_of(&vol, &dir.path().join("vol.brs"));
+    let bricks = brickray::cache::brick_count(source.layout());
+    let open = |gpu_budget_bytes: u64| {
+        let config = brickray::OutOfCoreConfig {
+            tolerance_px: 0.0,
+            upload_budget_bytes: 1 << 30,
+            gpu_budget_bytes,
+            ..Default::default()
+        };
+        brickray::StreamedVolume::new(
+            &g.device,
+            &g.queue,
+            source.clone(),
+            config,
+            Default::default(),
+        )
+        .unwrap()
+    };
+    let slots = |v: &brickray::StreamedVolume| v.inspect(|s| s.pool().slot_count()) as u64;
+    let roomy = open(1 << 30);
+    assert!(
+        roomy.keeps_gradients(),
+        "1 GiB holds the {bricks} bricks with gradients"
+    );
+    assert!(slots(&roomy) >= bricks);
+    // Just enough slots without gradients: with them, a fifth as many.
+    let stored = source.layout().stored_side() as u64;
+    let tight = open(bricks * (stored.pow(3) * 4 + 64) + (1 << 16));
+    assert!(
+        !tight.keeps_gradients() && slots(&tight) >= bricks,
+        "{} slots for {bricks} bricks",
+        slots(&tight)
+    );
+    // Kept by default, drawn as six reads draw.
+    let draw_with = |v: &brickray::StreamedVolume| {
+        let mut r = VolumeRenderer::new(&g.device, targets()).unwrap();
+        r.set_streamed_volume(&g.device, v).unwrap();
+        r.set_transfer_function(&g.device, &g.queue, &tf).unwrap();
+        draw_converged(&mut r, &vol, shaded(RenderMode::Dvr, true))
+    };
+    let s = shaded(RenderMode::Dvr, true);
+    let (a, b) = (draw_with(&roomy), draw_with(&tight));
+    as_six_reads("kept by default, out of core", &vol, &tf, s, &a, &b);
+}
+
 /// The converged frame of `settings` (out of core, within 60 frames); RGBA8.
 fn draw_converged(r: &mut VolumeRenderer, vol: &Volume, settings: RenderSettings) -> Vec<u8> {
     let (frames, img) = settle(r, vol, settings, 60);
@@ -409,7 +475,7 @@ fn a_budget_too_small_for_kept_gradients_is_a_typed_error() {
     };
     let open = |gradients: bool| {
         let options = brickray::VolumeOptions {
-            gradients,
+            gradients: keep(gradients),
             ..Default::default()
         };
         brickray::StreamedVolume::new(&g.device, &g.queue, source.clone(), config, options)

@@ -84,6 +84,17 @@ pub(crate) fn finest_ooc_renderer(
     Ok(ooc)
 }
 
+/// A streamed volume's gradients as a suite compares them: kept, or six
+/// reads (never the library's default, which keeps them only where every
+/// brick fits, so that a suite's variants stay what they say).
+pub(crate) fn keep_gradients(kept: bool) -> brickray_render::KeepGradients {
+    if kept {
+        brickray_render::KeepGradients::Always
+    } else {
+        brickray_render::KeepGradients::Never
+    }
+}
+
 /// A GPU-free streamer over `source` with `config`, for a device that
 /// stores 16-bit texels exactly (lavapipe's formats, the renderer's
 /// defaults), carrying spreads when `spread`; its root read.

@@ -322,7 +322,7 @@ fn streamed(
         ..Default::default()
     };
     let options = VolumeOptions {
-        gradients,
+        gradients: crate::runner::keep_gradients(gradients),
         ..Default::default()
     };
     let v = StreamedVolume::new(&gpu.device, &gpu.queue, source, config, options)

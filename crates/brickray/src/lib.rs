@@ -39,7 +39,7 @@ pub mod cache {
         Classification, ConfigError, CutLeaf, EmptyReason, FadeDuration, FrameStats, GpuFormat,
         LeafKind, Lookahead, OutOfCoreConfig, QueryBatch, QueryResult, QuerySchedule, Residency,
         ResidencyCounts, RetryPolicy, StreamError, StreamFrame, StreamPlan, StreamStats, Streamer,
-        UsageFrame, ViewFeedback,
+        UsageFrame, ViewFeedback, brick_count,
     };
 }
 
@@ -61,10 +61,10 @@ pub use brickray_render::{
 };
 pub use brickray_render::{
     ConfigError, FadeDuration, FrameDesc, FrameStats, GpuErrorKind, GradientSource, HostDepthError,
-    OPTIONAL_FEATURES, OptionalFeature, OutOfCoreConfig, OutOfCoreStats, PassTimestamps,
-    PrepareError, RenderError, RendererOptions, RendererStats, RetryPolicy, SkipRule, StreamError,
-    StreamedVolume, TargetDesc, U8Filtering, Viewport, VolumeOptions, VolumeRenderer,
-    optional_features, required_limits,
+    KeepGradients, OPTIONAL_FEATURES, OptionalFeature, OutOfCoreConfig, OutOfCoreStats,
+    PassTimestamps, PrepareError, RenderError, RendererOptions, RendererStats, RetryPolicy,
+    SkipRule, StreamError, StreamedVolume, TargetDesc, U8Filtering, Viewport, VolumeOptions,
+    VolumeRenderer, optional_features, required_limits,
 };
 pub use brickray_render::{
     FeedbackStats, OcclusionStats, UsageFrame, VisibilityConfig, VisibilityCounts, VisibilityPolicy,

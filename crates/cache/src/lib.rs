@@ -45,7 +45,7 @@ pub use brickray_core::{CutLeaf, EmptyReason, LeafKind};
 pub use config::{
     ConfigError, DEFAULT_FLOOR_SLOTS, DEFAULT_MAX_BYTES_IN_FLIGHT, DEFAULT_SETUP_DEADLINE,
     GpuFormat, Lookahead, MAX_LOADER_THREADS, MIN_RESIDENT_BRICKS, OutOfCoreConfig, RetryPolicy,
-    SizeQuantity,
+    SizeQuantity, brick_count,
 };
 pub use cpu_cache::CpuCache;
 pub use fade::{Displayed, Fade, FadeDuration, Fader, MAX_FADE_FRAMES};

@@ -68,7 +68,7 @@ pub use brickray_core::{
     ColorMap, CtPreset, Intensity, Slab, SlabMode, SliceAxis, SliceError, SliceGeometry, SliceView,
     Window, WindowError,
 };
-pub use volume::{StreamedVolume, VolumeOptions};
+pub use volume::{KeepGradients, StreamedVolume, VolumeOptions};
 
 use backend::{Backend, InCore, OutOfCore};
 use brickray_core::{
@@ -330,8 +330,8 @@ impl VolumeRenderer {
         check_value_range(source.layout().volume.value_range)?;
         // Free the old volume first: two large volumes need not fit at once.
         self.drop_volume();
-        // (Gradients out of core take GPU budget from the bricks: a host
-        // asks for them with `VolumeOptions::gradients`.)
+        // (Gradients out of core are kept where the budget holds every
+        // brick with them: `KeepGradients::WhenEveryBrickFits`.)
         let options = VolumeOptions {
             u8_filtering: self.options.u8_filtering,
             background_planning: self.options.background_planning,

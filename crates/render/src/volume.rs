@@ -71,16 +71,35 @@ pub struct VolumeOptions {
     /// way a frame whose views and classification are those of a converged
     /// plan is not planned again: it draws that plan.
     pub background_planning: bool,
-    /// Keep each atlas texel's gradient on the GPU, made from every brick as
-    /// it is uploaded, so that shaded DVR reads one texel per sample instead
-    /// of six ([`GpuFormat::gradients`]; docs/rendering-model.md,
-    /// *Shading*). They take 8 bytes per stored voxel of the GPU budget, so
-    /// the pool holds fewer bricks (a slot of t-byte texels costs about
-    /// (t + 8) / t as much: 5x for 2-byte texels). They are made by a pass
-    /// recorded into the encoder of the `prepare` that uploads the brick,
-    /// which the host submits as it does every frame's. A multi-channel
-    /// volume or a label map keeps none. Off by default.
-    pub gradients: bool,
+    /// Whether to keep each atlas texel's gradient on the GPU, made from
+    /// every brick as it is uploaded, so that shaded DVR reads one texel per
+    /// sample instead of six ([`GpuFormat::gradients`];
+    /// docs/rendering-model.md, *Shading*). They take 8 bytes per stored
+    /// voxel of the GPU budget, so the pool holds fewer bricks (a slot of
+    /// t-byte texels costs about (t + 8) / t as much: 5x for 2-byte texels).
+    /// By default they are kept when the budget holds every brick of the
+    /// volume with them ([`KeepGradients::WhenEveryBrickFits`]). A
+    /// multi-channel volume or a label map keeps none.
+    pub gradients: KeepGradients,
+}
+
+/// Whether a streamed volume keeps its texels' gradients
+/// ([`VolumeOptions::gradients`]); [`StreamedVolume::keeps_gradients`] says
+/// what was decided.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub enum KeepGradients {
+    /// When the GPU budget ([`OutOfCoreConfig::gpu_budget_bytes`] when the
+    /// volume is made) holds a slot, with its gradients, for every brick of
+    /// every level ([`GpuFormat::holds_every_brick`]): the pool then never
+    /// evicts for room, so the gradients cost no brick a cut could use. A
+    /// volume that streams (larger than its budget) shades by six reads.
+    #[default]
+    WhenEveryBrickFits,
+    /// Always: the pool holds fewer bricks, so a cut that needs more than
+    /// it holds stays coarser (a trade of bricks for shading time).
+    Always,
+    /// Never: six reads per shaded sample.
+    Never,
 }
 
 /// The shared state behind a [`StreamedVolume`].
@@ -300,8 +319,17 @@ impl StreamedVolume {
         gpu_format.spread =
             source.has_spread() && !layout.is_channel_volume() && !layout.volume.kind.is_labels();
         // Gradients shade a single-channel intensity volume.
-        gpu_format.gradients =
-            options.gradients && !layout.is_channel_volume() && !layout.volume.kind.is_labels();
+        gpu_format.gradients = !layout.is_channel_volume()
+            && !layout.volume.kind.is_labels()
+            && match options.gradients {
+                KeepGradients::Always => true,
+                KeepGradients::Never => false,
+                KeepGradients::WhenEveryBrickFits => GpuFormat {
+                    gradients: true,
+                    ..gpu_format
+                }
+                .holds_every_brick(&layout, config.gpu_budget_bytes),
+            };
         let format =
             encoding::wgpu_format_lanes(gpu_format.encoding.format, gpu_format.lanes() as usize);
         let mut streamer = Streamer::new(source, config, gpu_format)?;
@@ -335,6 +363,12 @@ impl StreamedVolume {
 
     pub(crate) fn lock(&self) -> MutexGuard<'_, Shared> {
         self.shared.lock()
+    }
+
+    /// True when the volume keeps its texels' gradients
+    /// ([`VolumeOptions::gradients`], as decided when it was made).
+    pub fn keeps_gradients(&self) -> bool {
+        self.lock().gpu.gradients
     }
 
     /// True when `other` is a handle to the same volume.

@@ -47,8 +47,8 @@ pub(crate) struct Startup {
     pub(crate) open: OpenOptions,
     /// Out-of-core budgets.
     pub(crate) ooc: OutOfCoreConfig,
-    /// Streamed volumes keep their texels' gradients (`--gradients`).
-    pub(crate) streamed_gradients: bool,
+    /// Whether streamed volumes keep their texels' gradients (`--gradients`).
+    pub(crate) streamed_gradients: brickray::KeepGradients,
     /// A label map to draw over the first image opened (`--overlay`).
     pub(crate) overlay: Option<PathBuf>,
 }
@@ -72,8 +72,8 @@ struct Shown {
 pub(crate) struct ViewerApp {
     open_opts: OpenOptions,
     ooc: OutOfCoreConfig,
-    /// Streamed volumes keep their texels' gradients (`--gradients`).
-    streamed_gradients: bool,
+    /// Whether streamed volumes keep their texels' gradients (`--gradients`).
+    streamed_gradients: brickray::KeepGradients,
     ooc_dirty: bool,
     /// The isosurface prediction buffer.
     prediction: PredictionChoice,

@@ -65,13 +65,20 @@ struct Cli {
     /// them. Intensity volumes only.
     #[arg(long)]
     spread: bool,
-    /// Streamed volumes keep each texel's gradient on the GPU, so that
-    /// shaded DVR reads one texel per sample instead of six (about 0.7x the
-    /// shaded frame; docs/rendering-model.md, "Shading"). They take 8 bytes
-    /// per stored voxel of the GPU pool (`--gpu-pool`), which then holds
-    /// fewer bricks.
-    #[arg(long)]
-    gradients: bool,
+    /// Whether streamed volumes keep each texel's gradient on the GPU, so
+    /// that shaded DVR reads one texel per sample instead of six (about 0.7x
+    /// the shaded frame; docs/rendering-model.md, "Shading"): `auto` where
+    /// the GPU pool (`--gpu-pool`) holds every brick of the volume with them,
+    /// `always` (what `--gradients` alone asks; the pool then holds fewer
+    /// bricks: 8 more bytes per stored voxel), or `never`.
+    #[arg(
+        long,
+        value_enum,
+        default_value_t = Gradients::Auto,
+        num_args = 0..=1,
+        default_missing_value = "always"
+    )]
+    gradients: Gradients,
     /// Draw this label map over the image in the same rays (colours over the
     /// image's TF; docs/labels.md): placed where both files say (their
     /// affines when both give one, else both from the grid's origin at their
@@ -79,6 +86,24 @@ struct Cli {
     /// label store (.brs) gives its finest level that fits one texture.
     #[arg(long, value_name = "LABELS")]
     overlay: Option<PathBuf>,
+}
+
+/// `--gradients`: [`brickray::KeepGradients`] by its command-line name.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+enum Gradients {
+    Auto,
+    Always,
+    Never,
+}
+
+impl From<Gradients> for brickray::KeepGradients {
+    fn from(g: Gradients) -> Self {
+        match g {
+            Gradients::Auto => brickray::KeepGradients::WhenEveryBrickFits,
+            Gradients::Always => brickray::KeepGradients::Always,
+            Gradients::Never => brickray::KeepGradients::Never,
+        }
+    }
 }
 
 fn parse_size(s: &str) -> Result<(u32, u32), String> {
@@ -139,7 +164,7 @@ fn main() -> ExitCode {
             spread: cli.spread,
         },
         overlay: cli.overlay.clone(),
-        streamed_gradients: cli.gradients,
+        streamed_gradients: cli.gradients.into(),
         ooc: brickray::OutOfCoreConfig {
             gpu_budget_bytes: cli.gpu_pool << 20,
             cpu_budget_bytes: cli.cpu_cache << 20,

@@ -487,7 +487,7 @@ fn measure(
             };
             let options = brickray_render::VolumeOptions {
                 u8_filtering: k.u8_filtering,
-                gradients: k.gradients,
+                gradients: crate::runner::keep_gradients(k.gradients),
                 ..Default::default()
             };
             let v = brickray_render::StreamedVolume::new(

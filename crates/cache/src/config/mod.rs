@@ -520,6 +520,38 @@ impl GpuFormat {
     }
 }
 
+impl GpuFormat {
+    /// True when a pool of `gpu_budget_bytes` in this format has a slot for
+    /// every brick of `layout` at once (each level's nodes over the volume,
+    /// [`brick_count`]): the pool then never evicts for room, and what more
+    /// each slot carries costs no brick a cut could use. False when the
+    /// budget does not size a pool.
+    pub fn holds_every_brick(&self, layout: &OctreeLayout, gpu_budget_bytes: u64) -> bool {
+        let Ok(limits) = self.pool_limits(layout, gpu_budget_bytes) else {
+            return false;
+        };
+        let slots = limits
+            .grid()
+            .map_or(0, |g| g.iter().map(|&a| a as u64).product::<u64>());
+        slots >= brick_count(layout)
+    }
+}
+
+/// The bricks of `layout`: at each level, the nodes whose boxes meet the
+/// volume (`ceil(level_dims / brick)` per axis), summed over the levels.
+pub fn brick_count(layout: &OctreeLayout) -> u64 {
+    let b = layout.brick.max(1) as u64;
+    (0..layout.levels)
+        .map(|l| {
+            layout
+                .level_dims(l)
+                .iter()
+                .map(|&d| (d as u64).div_ceil(b))
+                .product::<u64>()
+        })
+        .sum()
+}
+
 /// `brick + 2 * apron`, checked.
 pub(crate) fn stored_side(layout: &OctreeLayout) -> Result<u32, ConfigError> {
     layout

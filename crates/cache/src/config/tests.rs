@@ -283,3 +283,51 @@ fn bad_fade_durations_are_typed_errors() {
         assert_eq!(c.validate(&layout, &g), Ok(()));
     }
 }
+
+/// A pool holds every brick when its slots cover each level's nodes over the
+/// volume (a non-cubic volume counts only the nodes its box meets), and not
+/// at a budget one slot short.
+#[test]
+fn a_pool_holds_every_brick_when_its_slots_cover_every_level() {
+    let cube = ball_layout(64);
+    // 8^3 + 4^3 + 2^3 + 1 bricks of 8 voxels.
+    assert_eq!(brick_count(&cube), 585);
+    let flat = OctreeLayout::new(
+        brickray_core::VolumeDesc {
+            dims: [64, 64, 20],
+            ..cube.volume.clone()
+        },
+        8,
+        1,
+    );
+    // 8x8x3 + 4x4x2 + 2x2x1 + 1x1x1 (the levels' dims 64x64x20, 32x32x10,
+    // 16x16x5, 8x8x3).
+    assert_eq!(brick_count(&flat), 192 + 32 + 4 + 1);
+    let kept = GpuFormat {
+        gradients: true,
+        ..gpu(&cube)
+    };
+    let slot = kept.slot_bytes(&cube).unwrap();
+    for (layout, bricks) in [(&cube, 585u64), (&flat, 229)] {
+        // The smallest budget whose grid has a slot per brick holds them;
+        // one slot's bytes less does not.
+        let fits = (bricks..4 * bricks)
+            .map(|n| n * slot)
+            .find(|&b| {
+                let g = kept.pool_limits(layout, b).unwrap().grid().unwrap();
+                g.iter().map(|&a| a as u64).product::<u64>() >= bricks
+            })
+            .unwrap();
+        assert!(
+            kept.holds_every_brick(layout, fits),
+            "{bricks} bricks at {fits} B"
+        );
+        assert!(
+            !kept.holds_every_brick(layout, fits - slot),
+            "{bricks} bricks at {} B",
+            fits - slot
+        );
+    }
+    // No pool at all: false, not an error.
+    assert!(!kept.holds_every_brick(&cube, 0));
+}
