@@ -27,6 +27,9 @@
 //! core, before the renderer watched its encoders): the renderer records the
 //! pass again into the next frame's encoder, and the same thresholds hold
 //! after dropped frames (measured 75.07 and 74.49 dB, as without them).
+//! Out of core the pass runs only in frames that shade DVR, for every brick
+//! that arrived since the last one; by default a streamed volume keeps
+//! gradients where its GPU budget holds every brick with them.
 
 use brickray::{
     Camera, FrameDesc, GradientSource, KeepGradients, RenderMode, RenderSettings, RendererOptions,
@@ -377,6 +380,53 @@ fn dropped_gradient_passes_out_of_core_are_recorded_again() {
     let b = draw_converged(&mut six, &vol, s);
     as_six_reads(
         "out of core, every gradient pass dropped",
+        &vol,
+        &tf,
+        s,
+        &a,
+        &b,
+    );
+}
+
+/// Out of core the gradients are made by the first frame that shades DVR:
+/// a volume converged through unshaded frames (every brick uploaded, no
+/// pass) and then drawn shaded once shades as six reads do.
+#[test]
+fn kept_gradients_are_made_by_the_first_shaded_frame() {
+    let g = gpu();
+    let vol = brickray::core::synthetic::marschner_lobb(48);
+    let tf = brickray_harness::scenes::marschner_lobb_tf();
+    let dir = tempfile::tempdir().unwrap();
+    let source = brickray_harness::store_of(&vol, &dir.path().join("vol.brs"));
+    let config = brickray::OutOfCoreConfig {
+        tolerance_px: 0.0,
+        upload_budget_bytes: 1 << 30,
+        ..Default::default()
+    };
+    let streamed = |kept: bool| {
+        let options = brickray::VolumeOptions {
+            gradients: keep(kept),
+            ..Default::default()
+        };
+        let v = brickray::StreamedVolume::new(&g.device, &g.queue, source.clone(), config, options)
+            .unwrap();
+        let mut r = VolumeRenderer::new(&g.device, targets()).unwrap();
+        r.set_streamed_volume(&g.device, &v).unwrap();
+        r.set_transfer_function(&g.device, &g.queue, &tf).unwrap();
+        r
+    };
+    let (mut pre, mut six) = (streamed(true), streamed(false));
+    draw_converged(&mut pre, &vol, shaded(RenderMode::Dvr, false));
+    let s = shaded(RenderMode::Dvr, true);
+    let (frames, a) = settle(&mut pre, &vol, s, 1);
+    let last = pre.stats().out_of_core.unwrap().cache.upload_bricks;
+    assert!(
+        frames == Some(1) && last == 0,
+        "the shaded frame uploaded {last} bricks: every brick should have arrived unshaded"
+    );
+    let b = draw_converged(&mut six, &vol, s);
+    as_six_reads(
+        "out of core, gradients made by the first shaded frame",
         &vol,
         &tf,
         s,

@@ -117,6 +117,26 @@ pub(crate) fn ooc(
     r
 }
 
+/// As [`ooc`], with a streamed volume that never keeps gradients: its slots
+/// are the size a pool under pressure has (one that does not hold every
+/// brick keeps none by default), whatever the budget.
+pub(crate) fn ooc_without_gradients(
+    source: Arc<dyn BrickSource>,
+    config: OutOfCoreConfig,
+    tf: &TransferFunction,
+) -> VolumeRenderer {
+    let g = gpu();
+    let options = brickray::VolumeOptions {
+        gradients: brickray::KeepGradients::Never,
+        ..Default::default()
+    };
+    let v = brickray::StreamedVolume::new(&g.device, &g.queue, source, config, options).unwrap();
+    let mut r = VolumeRenderer::new(&g.device, targets()).unwrap();
+    r.set_streamed_volume(&g.device, &v).unwrap();
+    r.set_transfer_function(&g.device, &g.queue, tf).unwrap();
+    r
+}
+
 pub(crate) fn peak(p: &[u8]) -> u8 {
     p[0].max(p[1]).max(p[2])
 }

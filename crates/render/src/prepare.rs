@@ -440,6 +440,13 @@ fn plan_group(
             }
             _ => (&[][..], r.tf.generation()),
         };
+        // Kept gradients are made only for frames that shade DVR.
+        let shaded_dvr = group.iter().any(|&j| {
+            let s = &views[j].1.settings;
+            views[j].0.slice.is_none()
+                && s.shading.enabled
+                && matches!(s.mode, brickray_core::RenderMode::Dvr)
+        });
         let frame = StreamFrame {
             views: &frame_views,
             classification: Classification {
@@ -455,7 +462,7 @@ fn plan_group(
             feedback: &[],
             time: desc.time,
         };
-        shared.plan(device, queue, encoder, &frame)?
+        shared.plan(device, queue, encoder, &frame, shaded_dvr)?
     };
     drop(shared);
     // Without a new plan (in the background, the worker is still planning)

@@ -204,18 +204,28 @@ impl Shared {
     /// latest plan), writes what the plan uploads and the index over its
     /// cut; `None` when no new plan is to be applied this frame (the views
     /// draw the last one). The feedback is what `Planner::add_feedback` kept.
+    /// Where the volume keeps gradients, they are made when `shaded_dvr` (a
+    /// view draws shaded DVR), for every brick that has none yet.
     pub(crate) fn plan(
         &mut self,
         device: &wgpu::Device,
         queue: &wgpu::Queue,
         encoder: &mut wgpu::CommandEncoder,
         frame: &StreamFrame<'_>,
+        shaded_dvr: bool,
     ) -> Result<Option<Planned>, PrepareError> {
         let side = self.layout.stored_side();
         let scale_offset = [self.gpu.encoding.scale, self.gpu.encoding.offset];
         let Some(reply) = self.planner.plan(frame) else {
-            self.pool
-                .record_gradients(device, queue, encoder, &[], side, scale_offset)?;
+            self.pool.record_gradients(
+                device,
+                queue,
+                encoder,
+                &[],
+                shaded_dvr,
+                side,
+                scale_offset,
+            )?;
             return Ok(None);
         };
         if self.pool.ensure_rows(device, reply.slot_rows as usize)? {
@@ -228,8 +238,15 @@ impl Shared {
         let mut bytes = self
             .pool
             .write(queue, &plan.uploads, &plan.fades, side, bpp);
-        self.pool
-            .record_gradients(device, queue, encoder, &plan.uploads, side, scale_offset)?;
+        self.pool.record_gradients(
+            device,
+            queue,
+            encoder,
+            &plan.uploads,
+            shaded_dvr,
+            side,
+            scale_offset,
+        )?;
         let words = reply.words.map_err(RenderError::from)?;
         let (written, grew) = self
             .index

@@ -518,9 +518,7 @@ impl GpuFormat {
         }
         Ok(limits)
     }
-}
 
-impl GpuFormat {
     /// True when a pool of `gpu_budget_bytes` in this format has a slot for
     /// every brick of `layout` at once (each level's nodes over the volume,
     /// [`brick_count`]): the pool then never evicts for room, and what more

@@ -46,6 +46,10 @@ pub(super) struct Pool {
     /// dropped are recorded again into the next frame's
     /// ([`record_gradients`](Pool::record_gradients)).
     gradient_runs: Vec<(Submission, Vec<[u32; 3]>)>,
+    /// Boxes (atlas offsets) uploaded, or whose pass was dropped, since the
+    /// last frame that drew shaded DVR: their gradients are made by the next
+    /// such frame, so a volume drawn unshaded pays no pass.
+    gradients_owed: Vec<[u32; 3]>,
     pub(super) atlas_bytes: u64,
     pub(super) slots: wgpu::Buffer,
     slots_cpu: Vec<SlotInfo>,
@@ -203,6 +207,7 @@ impl Pool {
             _gradients: gradients,
             gradient_pass,
             gradient_runs: Vec::new(),
+            gradients_owed: Vec::new(),
             atlas_bytes,
             slots: Pool::slot_table(device, rows)?,
             slots_cpu: vec![bytemuck::Zeroable::zeroed(); rows],
@@ -282,41 +287,52 @@ impl Pool {
         bytes
     }
 
-    /// Where the format keeps gradients, records into `encoder` the pass that
-    /// makes the gradients of this frame's `uploads` (`side`^3 texels each,
-    /// `scale_offset` mapping texels to normalized values) and of the bricks
-    /// whose pass went into an encoder the host dropped unsubmitted (the
-    /// queue's writes of their texels landed all the same; a slot uploaded
-    /// again since holds a newer brick, whose gradients the pass then makes
-    /// once more). Called every frame, with or without a plan, so that no
-    /// submitted frame samples a brick whose gradients were never made.
+    /// Where the format keeps gradients, and `wanted` (a view draws shaded
+    /// DVR this frame), records into `encoder` the pass that makes the
+    /// gradients of this frame's `uploads` (`side`^3 texels each,
+    /// `scale_offset` mapping texels to normalized values), of the bricks
+    /// uploaded since the last such frame, and of those whose pass went into
+    /// an encoder the host dropped unsubmitted (the queue's writes of their
+    /// texels landed all the same; a slot uploaded again since holds a newer
+    /// brick, whose gradients the pass then makes once more). Otherwise it
+    /// only notes what it owes. Called every frame, with or without a plan,
+    /// so that no submitted frame samples a brick whose gradients were never
+    /// made.
+    #[allow(clippy::too_many_arguments)]
     pub(super) fn record_gradients(
         &mut self,
         device: &wgpu::Device,
         queue: &wgpu::Queue,
         encoder: &mut wgpu::CommandEncoder,
         uploads: &[Upload],
+        wanted: bool,
         side: u32,
         scale_offset: [f32; 2],
     ) -> Result<(), RenderError> {
         let Some(pass) = self.gradient_pass.as_mut() else {
             return Ok(());
         };
-        let mut boxes: Vec<[u32; 3]> = uploads.iter().map(|u| u.atlas_offset).collect();
+        let owed = &mut self.gradients_owed;
+        owed.extend(uploads.iter().map(|u| u.atlas_offset));
         self.gradient_runs
             .retain_mut(|(run, dropped)| match run.outcome() {
                 Outcome::Pending => true,
                 Outcome::Ran => false,
                 Outcome::Dropped => {
-                    boxes.append(dropped);
+                    owed.append(dropped);
                     false
                 }
             });
-        if boxes.is_empty() {
+        // Each box once (a slot uploaded again while owed is listed twice):
+        // before a pass, and whenever the list outgrows twice the slots.
+        if wanted || owed.len() > 2 * self.slots_cpu.len() {
+            owed.sort_unstable();
+            owed.dedup();
+        }
+        if !wanted || owed.is_empty() {
             return Ok(());
         }
-        boxes.sort_unstable();
-        boxes.dedup();
+        let boxes = std::mem::take(owed);
         let recorded = pass.record(
             device,
             queue,

@@ -82,7 +82,10 @@ fn streamed_gradients_shade_as_six_reads() {
     // store's finest cut (27 bricks) without them, not with them.
     shot("kept_small.png", &["--gradients", "--gpu-pool", "8"]);
     shot("six_small.png", &["--gpu-pool", "8"]);
-    shot("never_small.png", &["--gradients", "never", "--gpu-pool", "8"]);
+    shot(
+        "never_small.png",
+        &["--gradients", "never", "--gpu-pool", "8"],
+    );
     let bricks = |name: &str| {
         sidecar_json(&out(name))["working_set_bricks"]
             .as_u64()
