@@ -208,34 +208,60 @@ fn label_maps_make_no_gradients() {
     assert_eq!(r.volume_bytes(), before);
 }
 
+/// An out-of-core configuration at `tolerance_px` whose uploads never wait.
+fn streaming(tolerance_px: f32) -> brickray::OutOfCoreConfig {
+    brickray::OutOfCoreConfig {
+        tolerance_px,
+        upload_budget_bytes: 1 << 30,
+        ..Default::default()
+    }
+}
+
+/// A streamed volume of `source` under `config` keeping gradients as
+/// `gradients` says, and a renderer drawing it through `tf`.
+fn streamed(
+    source: &std::sync::Arc<dyn brickray::BrickSource>,
+    tf: &TransferFunction,
+    config: brickray::OutOfCoreConfig,
+    gradients: KeepGradients,
+) -> (VolumeRenderer, brickray::StreamedVolume) {
+    let g = gpu();
+    let options = brickray::VolumeOptions {
+        gradients,
+        ..Default::default()
+    };
+    let v = brickray::StreamedVolume::new(&g.device, &g.queue, source.clone(), config, options)
+        .unwrap();
+    let mut r = VolumeRenderer::new(&g.device, targets()).unwrap();
+    r.set_streamed_volume(&g.device, &v).unwrap();
+    r.set_transfer_function(&g.device, &g.queue, tf).unwrap();
+    (r, v)
+}
+
+/// Marschner-Lobb at 48^3 (f32), its TF, and a store of it (in `dir`).
+fn marschner_lobb_store(
+    dir: &tempfile::TempDir,
+) -> (
+    Volume,
+    TransferFunction,
+    std::sync::Arc<dyn brickray::BrickSource>,
+) {
+    let vol = brickray::core::synthetic::marschner_lobb(48);
+    let source = brickray_harness::store_of(&vol, &dir.path().join("vol.brs"));
+    (vol, brickray_harness::scenes::marschner_lobb_tf(), source)
+}
+
 /// Out of core, a streamed volume that keeps its texels' gradients
 /// (`VolumeOptions::gradients`): made on the GPU as each brick is uploaded,
 /// counted in the atlas's bytes, and shading as six reads do (half floats
 /// apart; the bricks' apron keeps every tap within the brick, so no factor
 /// at the faces), at the finest level and at a coarser cut.
 fn compare_out_of_core(name: &str, vol: &Volume, tf: &TransferFunction, tolerance_px: f32) -> f64 {
-    let g = gpu();
     let dir = tempfile::tempdir().unwrap();
     let source = brickray_harness::store_of(vol, &dir.path().join("vol.brs"));
-    let config = brickray::OutOfCoreConfig {
-        tolerance_px,
-        upload_budget_bytes: 1 << 30,
-        ..Default::default()
-    };
-    let streamed = |gradients: bool| {
-        let options = brickray::VolumeOptions {
-            gradients: keep(gradients),
-            ..Default::default()
-        };
-        let v = brickray::StreamedVolume::new(&g.device, &g.queue, source.clone(), config, options)
-            .unwrap();
-        let mut r = VolumeRenderer::new(&g.device, targets()).unwrap();
-        r.set_streamed_volume(&g.device, &v).unwrap();
-        r.set_transfer_function(&g.device, &g.queue, tf).unwrap();
-        (r, v)
-    };
-    let (mut pre, with) = streamed(true);
-    let (mut six, without) = streamed(false);
+    let config = streaming(tolerance_px);
+    let (mut pre, with) = streamed(&source, tf, config, KeepGradients::Always);
+    let (mut six, without) = streamed(&source, tf, config, KeepGradients::Never);
     // The atlas's bytes per texel: the texels' and 8 more for the gradients,
     // within the same budget (fewer slots).
     let bpp = brickray_harness::atlas_bytes_per_texel;
@@ -331,30 +357,10 @@ fn a_dropped_gradient_pass_in_core_is_recorded_again() {
 /// brick whose pass was dropped, and the image is six reads'.
 #[test]
 fn dropped_gradient_passes_out_of_core_are_recorded_again() {
-    let g = gpu();
-    let vol = brickray::core::synthetic::marschner_lobb(48);
-    let tf = brickray_harness::scenes::marschner_lobb_tf();
     let dir = tempfile::tempdir().unwrap();
-    let source = brickray_harness::store_of(&vol, &dir.path().join("vol.brs"));
-    let config = brickray::OutOfCoreConfig {
-        tolerance_px: 0.0,
-        upload_budget_bytes: 1 << 30,
-        ..Default::default()
-    };
-    let streamed = |gradients: bool| {
-        let options = brickray::VolumeOptions {
-            gradients: keep(gradients),
-            ..Default::default()
-        };
-        let v = brickray::StreamedVolume::new(&g.device, &g.queue, source.clone(), config, options)
-            .unwrap();
-        let mut r = VolumeRenderer::new(&g.device, targets()).unwrap();
-        r.set_streamed_volume(&g.device, &v).unwrap();
-        r.set_transfer_function(&g.device, &g.queue, &tf).unwrap();
-        (r, v)
-    };
-    let (mut pre, _with) = streamed(true);
-    let (mut six, _without) = streamed(false);
+    let (vol, tf, source) = marschner_lobb_store(&dir);
+    let (mut pre, _with) = streamed(&source, &tf, streaming(0.0), KeepGradients::Always);
+    let (mut six, _without) = streamed(&source, &tf, streaming(0.0), KeepGradients::Never);
     let s = shaded(RenderMode::Dvr, true);
     let (mut planned, mut uploaded) = (0, 0);
     for _ in 0..60 {
@@ -393,29 +399,10 @@ fn dropped_gradient_passes_out_of_core_are_recorded_again() {
 /// pass) and then drawn shaded once shades as six reads do.
 #[test]
 fn kept_gradients_are_made_by_the_first_shaded_frame() {
-    let g = gpu();
-    let vol = brickray::core::synthetic::marschner_lobb(48);
-    let tf = brickray_harness::scenes::marschner_lobb_tf();
     let dir = tempfile::tempdir().unwrap();
-    let source = brickray_harness::store_of(&vol, &dir.path().join("vol.brs"));
-    let config = brickray::OutOfCoreConfig {
-        tolerance_px: 0.0,
-        upload_budget_bytes: 1 << 30,
-        ..Default::default()
-    };
-    let streamed = |kept: bool| {
-        let options = brickray::VolumeOptions {
-            gradients: keep(kept),
-            ..Default::default()
-        };
-        let v = brickray::StreamedVolume::new(&g.device, &g.queue, source.clone(), config, options)
-            .unwrap();
-        let mut r = VolumeRenderer::new(&g.device, targets()).unwrap();
-        r.set_streamed_volume(&g.device, &v).unwrap();
-        r.set_transfer_function(&g.device, &g.queue, &tf).unwrap();
-        r
-    };
-    let (mut pre, mut six) = (streamed(true), streamed(false));
+    let (vol, tf, source) = marschner_lobb_store(&dir);
+    let (mut pre, _with) = streamed(&source, &tf, streaming(0.0), KeepGradients::Always);
+    let (mut six, _without) = streamed(&source, &tf, streaming(0.0), KeepGradients::Never);
     draw_converged(&mut pre, &vol, shaded(RenderMode::Dvr, false));
     let s = shaded(RenderMode::Dvr, true);
     let (frames, a) = settle(&mut pre, &vol, s, 1);
@@ -435,16 +422,6 @@ fn kept_gradients_are_made_by_the_first_shaded_frame() {
     );
 }
 
-/// Kept gradients (`KeepGradients::Always`) or six reads (`Never`), whatever
-/// the budget holds.
-fn keep(kept: bool) -> KeepGradients {
-    if kept {
-        KeepGradients::Always
-    } else {
-        KeepGradients::Never
-    }
-}
-
 /// The default, `KeepGradients::WhenEveryBrickFits`: a volume whose every
 /// brick (each level's) fits the GPU budget with its gradients keeps them and
 /// shades as six reads do; the same volume under a budget that holds its
@@ -452,30 +429,18 @@ fn keep(kept: bool) -> KeepGradients {
 /// none, and a budget that holds them with gradients again keeps them.
 #[test]
 fn gradients_are_kept_by_default_where_every_brick_fits() {
-    let g = gpu();
-    let vol = brickray::core::synthetic::marschner_lobb(48);
-    let tf = brickray_harness::scenes::marschner_lobb_tf();
     let dir = tempfile::tempdir().unwrap();
-    let source = brickray_harness::store_of(&vol, &dir.path().join("vol.brs"));
+    let (vol, tf, source) = marschner_lobb_store(&dir);
     let bricks = brickray::cache::brick_count(source.layout());
     let open = |gpu_budget_bytes: u64| {
         let config = brickray::OutOfCoreConfig {
-            tolerance_px: 0.0,
-            upload_budget_bytes: 1 << 30,
             gpu_budget_bytes,
-            ..Default::default()
+            ..streaming(0.0)
         };
-        brickray::StreamedVolume::new(
-            &g.device,
-            &g.queue,
-            source.clone(),
-            config,
-            Default::default(),
-        )
-        .unwrap()
+        streamed(&source, &tf, config, KeepGradients::default())
     };
     let slots = |v: &brickray::StreamedVolume| v.inspect(|s| s.pool().slot_count()) as u64;
-    let roomy = open(1 << 30);
+    let (mut roomy_r, roomy) = open(1 << 30);
     assert!(
         roomy.keeps_gradients(),
         "1 GiB holds the {bricks} bricks with gradients"
@@ -483,21 +448,16 @@ fn gradients_are_kept_by_default_where_every_brick_fits() {
     assert!(slots(&roomy) >= bricks);
     // Just enough slots without gradients: with them, a fifth as many.
     let stored = source.layout().stored_side() as u64;
-    let tight = open(bricks * (stored.pow(3) * 4 + 64) + (1 << 16));
+    let (mut tight_r, tight) = open(bricks * (stored.pow(3) * 4 + 64) + (1 << 16));
     assert!(
         !tight.keeps_gradients() && slots(&tight) >= bricks,
         "{} slots for {bricks} bricks",
         slots(&tight)
     );
     // Kept by default, drawn as six reads draw.
-    let draw_with = |v: &brickray::StreamedVolume| {
-        let mut r = VolumeRenderer::new(&g.device, targets()).unwrap();
-        r.set_streamed_volume(&g.device, v).unwrap();
-        r.set_transfer_function(&g.device, &g.queue, &tf).unwrap();
-        draw_converged(&mut r, &vol, shaded(RenderMode::Dvr, true))
-    };
     let s = shaded(RenderMode::Dvr, true);
-    let (a, b) = (draw_with(&roomy), draw_with(&tight));
+    let a = draw_converged(&mut roomy_r, &vol, s);
+    let b = draw_converged(&mut tight_r, &vol, s);
     as_six_reads("kept by default, out of core", &vol, &tf, s, &a, &b);
 }
 
@@ -510,7 +470,8 @@ fn draw_converged(r: &mut VolumeRenderer, vol: &Volume, settings: RenderSettings
 
 /// A GPU budget that holds the minimum of slots without gradients but not
 /// with them is a typed error when the streamed volume is made (nothing
-/// created, no panic), and the same budget without gradients opens.
+/// created, no panic), and the same budget without gradients opens, as it
+/// does by default (which then keeps none).
 #[test]
 fn a_budget_too_small_for_kept_gradients_is_a_typed_error() {
     let g = gpu();
@@ -523,17 +484,22 @@ fn a_budget_too_small_for_kept_gradients_is_a_typed_error() {
         gpu_budget_bytes: 24 * 36u64.pow(3) * 4 + (1 << 16),
         ..Default::default()
     };
-    let open = |gradients: bool| {
+    let open = |gradients: KeepGradients| {
         let options = brickray::VolumeOptions {
-            gradients: keep(gradients),
+            gradients,
             ..Default::default()
         };
         brickray::StreamedVolume::new(&g.device, &g.queue, source.clone(), config, options)
     };
-    if let Err(e) = open(false) {
+    if let Err(e) = open(KeepGradients::Never) {
         panic!("the budget holds the slots without gradients: {e}");
     }
-    let e = open(true).expect_err("too small with gradients");
+    // By default the volume opens, without them.
+    match open(KeepGradients::default()) {
+        Ok(v) => assert!(!v.keeps_gradients(), "kept where they do not fit"),
+        Err(e) => panic!("the default keeps no gradients that do not fit: {e}"),
+    }
+    let e = open(KeepGradients::Always).expect_err("too small with gradients");
     eprintln!("{e}");
     // (`RenderError::Cache(CacheError::Config(..))`: the facade does not
     // re-export `CacheError`, so the variant inside is read from `Debug`.)

@@ -33,8 +33,9 @@ import json
 import os
 import numpy as np
 
+from caster import psnr, render
+
 DATA = os.path.join(os.path.dirname(__file__), "../../../shared/data")
-SIZE = 128
 
 
 def load(name):
@@ -78,33 +79,6 @@ def trilinear(grid, f, p):
         g = grid[i[..., 0], i[..., 1], i[..., 2]]
         out = out + (w[..., None] * g if g.ndim > w.ndim else w * g)
     return out
-
-
-def render(sample, box, step):
-    d = np.array([0.8, 0.45, 0.4])
-    d /= np.linalg.norm(d)
-    u = np.cross(d, [0, 0, 1.0])
-    u /= np.linalg.norm(u)
-    v = np.cross(u, d)
-    radius = np.linalg.norm(box) / 2
-    s = np.linspace(-radius, radius, SIZE)
-    uu, vv = np.meshgrid(s, s)
-    origin = box / 2 + uu[..., None] * u + vv[..., None] * v - d * radius * 1.01
-    color = np.zeros((SIZE, SIZE, 3))
-    trans = np.ones((SIZE, SIZE))
-    for k in range(int(2.02 * radius / step)):
-        p = origin + d * (k + 0.5) * step
-        inside = np.all((p >= 0) & (p <= box), axis=-1)
-        rgb, ext = sample(p)
-        a = np.where(inside, 1 - np.exp(-ext * step), 0.0)
-        color += (trans * a)[..., None] * rgb
-        trans *= 1 - a
-    return color
-
-
-def psnr(a, b):
-    mse = ((np.clip(a, 0, 1) * 255 - np.clip(b, 0, 1) * 255) ** 2).mean()
-    return float("inf") if mse == 0 else 10 * np.log10(255 ** 2 / mse)
 
 
 def blocks(vol, f):

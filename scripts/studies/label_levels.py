@@ -26,42 +26,17 @@ brickray's renderer. Needs numpy and ../shared/data beside the repository.
 import os
 import numpy as np
 
+from caster import psnr, render
+
 DATA = os.path.join(os.path.dirname(__file__), "../../../shared/data/labels")
 MAPS = [("mricron_brodmann_labels", (181, 217, 181), np.uint8),
         ("cells3d_nuclei_labels", (256, 256, 60), np.uint32)]
-SIZE, ALPHA = 128, 0.3
+ALPHA = 0.3
 
 
 def load(name, dims, dtype):
     raw = np.fromfile(os.path.join(DATA, name, name + ".raw"), dtype=dtype)
     return raw.reshape(dims[2], dims[1], dims[0]).transpose(2, 1, 0).astype(np.int64)
-
-
-def render(sample, dims, step):
-    """Front-to-back over orthographic rays through the finest box [0, dims]."""
-    box = np.array(dims, float)
-    d = np.array([0.8, 0.45, 0.4])
-    d /= np.linalg.norm(d)
-    u = np.cross(d, [0, 0, 1.0])
-    u /= np.linalg.norm(u)
-    v = np.cross(u, d)
-    radius = np.linalg.norm(box) / 2
-    s = np.linspace(-radius, radius, SIZE)
-    uu, vv = np.meshgrid(s, s)
-    origin = box / 2 + uu[..., None] * u + vv[..., None] * v - d * radius * 1.01
-    color = np.zeros((SIZE, SIZE, 3))
-    trans = np.ones((SIZE, SIZE))
-    for k in range(int(2.02 * radius / step)):
-        rgb, ext = sample(origin + d * (k + 0.5) * step)
-        a = 1 - np.exp(-ext * step)
-        color += (trans * a)[..., None] * rgb
-        trans *= 1 - a
-    return color
-
-
-def psnr(a, b):
-    mse = ((np.clip(a, 0, 1) * 255 - np.clip(b, 0, 1) * 255) ** 2).mean()
-    return 10 * np.log10(255 ** 2 / mse)
 
 
 def lookup(grid, scale, p):
