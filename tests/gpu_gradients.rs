@@ -377,20 +377,12 @@ fn dropped_gradient_passes_out_of_core_are_recorded_again() {
         "not converged in {planned} dropped frames"
     );
     assert!(uploaded > 0, "the dropped frames uploaded the cut");
-    let (frames, a) = settle(&mut pre, &vol, s, 1);
-    let last = pre.stats().out_of_core.unwrap().cache.upload_bricks;
-    assert!(
-        frames == Some(1) && last == 0,
-        "the drawn frame uploaded {last} bricks: only dropped passes should make gradients"
-    );
-    let b = draw_converged(&mut six, &vol, s);
-    as_six_reads(
+    settled_frame_as_six_reads(
         "out of core, every gradient pass dropped",
+        &mut pre,
+        &mut six,
         &vol,
         &tf,
-        s,
-        &a,
-        &b,
     );
 }
 
@@ -404,22 +396,34 @@ fn kept_gradients_are_made_by_the_first_shaded_frame() {
     let (mut pre, _with) = streamed(&source, &tf, streaming(0.0), KeepGradients::Always);
     let (mut six, _without) = streamed(&source, &tf, streaming(0.0), KeepGradients::Never);
     draw_converged(&mut pre, &vol, shaded(RenderMode::Dvr, false));
+    settled_frame_as_six_reads(
+        "out of core, gradients made by the first shaded frame",
+        &mut pre,
+        &mut six,
+        &vol,
+        &tf,
+    );
+}
+
+/// One shaded DVR frame of `pre`, whose cut has converged, uploading no
+/// brick (so its gradients come only from passes owed to bricks already
+/// uploaded), against six reads' converged frame (`as_six_reads`).
+fn settled_frame_as_six_reads(
+    label: &str,
+    pre: &mut VolumeRenderer,
+    six: &mut VolumeRenderer,
+    vol: &Volume,
+    tf: &TransferFunction,
+) {
     let s = shaded(RenderMode::Dvr, true);
-    let (frames, a) = settle(&mut pre, &vol, s, 1);
+    let (frames, a) = settle(pre, vol, s, 1);
     let last = pre.stats().out_of_core.unwrap().cache.upload_bricks;
     assert!(
         frames == Some(1) && last == 0,
-        "the shaded frame uploaded {last} bricks: every brick should have arrived unshaded"
+        "{label}: the drawn frame uploaded {last} bricks"
     );
-    let b = draw_converged(&mut six, &vol, s);
-    as_six_reads(
-        "out of core, gradients made by the first shaded frame",
-        &vol,
-        &tf,
-        s,
-        &a,
-        &b,
-    );
+    let b = draw_converged(six, vol, s);
+    as_six_reads(label, vol, tf, s, &a, &b);
 }
 
 /// The default, `KeepGradients::WhenEveryBrickFits`: a volume whose every
