@@ -70,12 +70,14 @@ struct Cli {
     /// the shaded frame; docs/rendering-model.md, "Shading"): `auto` where
     /// the GPU pool (`--gpu-pool`) holds every brick of the volume with them,
     /// `always` (what `--gradients` alone asks; the pool then holds fewer
-    /// bricks: 8 more bytes per stored voxel), or `never`.
+    /// bricks: 8 more bytes per stored voxel), or `never`. A value is given
+    /// as `--gradients=never`, so that `--gradients PATH` still opens PATH.
     #[arg(
         long,
         value_enum,
         default_value_t = Gradients::Auto,
         num_args = 0..=1,
+        require_equals = true,
         default_missing_value = "always"
     )]
     gradients: Gradients,
@@ -243,5 +245,29 @@ fn ensure_runtime_dir() {
             // exists, so nothing reads the environment concurrently.
             unsafe { std::env::set_var("XDG_RUNTIME_DIR", &dir) };
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `--gradients` alone is `always` and leaves a path after it a path; a
+    /// value goes after `=`; without the flag, `auto`.
+    #[test]
+    fn gradients_take_a_value_only_after_an_equals_sign() {
+        let parse = |args: &[&str]| Cli::try_parse_from(args).expect("valid arguments");
+        let c = parse(&["brickray-viewer", "--gradients", "head.brs"]);
+        assert_eq!(c.gradients, Gradients::Always);
+        assert_eq!(c.path.as_deref(), Some("head.brs"));
+        assert_eq!(
+            parse(&["brickray-viewer", "--gradients=never"]).gradients,
+            Gradients::Never
+        );
+        assert_eq!(
+            parse(&["brickray-viewer", "head.brs"]).gradients,
+            Gradients::Auto
+        );
+        assert!(Cli::try_parse_from(["brickray-viewer", "--gradients=sometimes"]).is_err());
     }
 }

@@ -44,7 +44,7 @@ fn opens_a_store_and_a_procedural_volume_out_of_core() {
 }
 
 /// `--gradients`: a streamed store keeps its texels' gradients and draws
-/// shaded DVR as six reads do (`--gradients never`; two runs of the same
+/// shaded DVR as six reads do (`--gradients=never`; two runs of the same
 /// script; the library's own test holds the two images 74-80 dB apart),
 /// and they take their bytes from the GPU pool (a pool that holds the
 /// finest cut without them holds a smaller working set with them). By
@@ -72,7 +72,7 @@ fn streamed_gradients_shade_as_six_reads() {
         read_png(&out(name))
     };
     let (kept, w, h) = shot("kept.png", &["--gradients"]);
-    let (six, _, _) = shot("six.png", &["--gradients", "never"]);
+    let (six, _, _) = shot("six.png", &["--gradients=never"]);
     let lit = lit_pixels(&kept);
     assert!(lit * 20 > (w * h) as usize, "only {lit} lit pixels");
     let db = brickray_reference::psnr(&kept, &six);
@@ -82,10 +82,7 @@ fn streamed_gradients_shade_as_six_reads() {
     // store's finest cut (27 bricks) without them, not with them.
     shot("kept_small.png", &["--gradients", "--gpu-pool", "8"]);
     shot("six_small.png", &["--gpu-pool", "8"]);
-    shot(
-        "never_small.png",
-        &["--gradients", "never", "--gpu-pool", "8"],
-    );
+    shot("never_small.png", &["--gradients=never", "--gpu-pool", "8"]);
     let bricks = |name: &str| {
         sidecar_json(&out(name))["working_set_bricks"]
             .as_u64()
