@@ -180,4 +180,8 @@ pub struct OutOfCoreStats {
     /// `brickray_core::DVR_SKIP_SHARE_MIN_BRICKS` ([`crate::SkipRule`]);
     /// `None` otherwise.
     pub dvr_transparent_share: Option<f64>,
+    /// The streamed volume keeps its texels' gradients, so shaded DVR reads
+    /// one texel per sample ([`crate::VolumeOptions::gradients`], as decided
+    /// when the volume was made; [`crate::StreamedVolume::keeps_gradients`]).
+    pub gradients_kept: bool,
 }

@@ -39,6 +39,8 @@ pub(crate) struct Stats {
     prediction: Option<brickray::PredictionFrame>,
     /// Out of core: the visibility policy and the cut's leaves by visibility.
     visibility: Option<(brickray::VisibilityPolicy, brickray::VisibilityCounts)>,
+    /// Out of core: whether the volume keeps its texels' gradients.
+    gradients_kept: Option<bool>,
 }
 
 impl Stats {
@@ -64,6 +66,7 @@ impl Stats {
             sample.in_flight = c.requests_in_flight as f64;
             self.levels = o.data_leaves_per_level;
             self.visibility = Some((o.policy, o.visibility));
+            self.gradients_kept = Some(o.gradients_kept);
             self.since_converged = if o.converged {
                 0
             } else {
@@ -80,6 +83,11 @@ impl Stats {
     /// The last frame's prediction buffer state.
     pub(crate) fn prediction(&self) -> Option<brickray::PredictionFrame> {
         self.prediction
+    }
+
+    /// Out of core: whether the volume keeps its texels' gradients.
+    pub(crate) fn gradients_kept(&self) -> Option<bool> {
+        self.gradients_kept
     }
 
     /// The last sample.
@@ -109,11 +117,16 @@ impl Stats {
                 s.upload_mib,
                 if self.streamed {
                     format!(
-                        ", working set {} bricks, pool {:.0}%, {} in flight, {} frames since converged",
+                        ", working set {} bricks, pool {:.0}%, {} in flight, {} frames since converged, shading {}",
                         s.working_set,
                         s.pool * 100.0,
                         s.in_flight,
-                        s.since_converged
+                        s.since_converged,
+                        if self.gradients_kept == Some(true) {
+                            "from kept gradients"
+                        } else {
+                            "by six reads"
+                        }
                     )
                 } else {
                     String::new()

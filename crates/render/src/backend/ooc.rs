@@ -222,6 +222,7 @@ impl OutOfCore {
             .and_then(|(tf, generation)| s.dvr_transparent_share(&plan.leaves, tf, generation));
         self.dvr_skipping = self.dvr_policy == crate::SkipRule::Always
             || share.is_none_or(|share| share >= brickray_core::DVR_SKIP_SHARE_MIN_BRICKS);
+        let gradients_kept = s.gpu_format().gradients;
         drop(s);
         self.frame = plan.frame;
         self.leaves.clone_from(&plan.leaves);
@@ -243,6 +244,7 @@ impl OutOfCore {
             feedback: self.feedback.stats(),
             occlusion: self.occlusion.stats(),
             dvr_transparent_share: share,
+            gradients_kept,
         };
         Ok(())
     }

@@ -19,6 +19,8 @@ pub(super) struct PendingShot {
     pub(super) lod: Option<(brickray::LodMetric, f32)>,
     /// Out of core: the visibility policy in force.
     pub(super) visibility: Option<brickray::VisibilityPolicy>,
+    /// Out of core: whether the volume keeps its texels' gradients.
+    pub(super) gradients_kept: Option<bool>,
     /// The prediction buffer's setting, and the last frame's state of it
     /// (`None`: that frame did not predict).
     pub(super) prediction: (PredictionChoice, Option<brickray::PredictionFrame>),
@@ -112,6 +114,7 @@ impl ViewerApp {
                 .map(|s| s.working_set as u32),
             lod: streamed.then_some((self.ooc.lod_metric, self.ooc.tolerance_px)),
             visibility: streamed.then_some(self.ooc.visibility),
+            gradients_kept: self.stats.gradients_kept().filter(|_| streamed),
             prediction: (self.prediction, self.stats.prediction()),
             slices,
             view_3d,
@@ -394,6 +397,7 @@ fn save_shot(shot: &PendingShot, image: &egui::ColorImage) -> Result<(), String>
             Some(budget) => serde_json::json!({"rule": crate::script::lod_rule_name(metric), "error_budget": budget}),
         }),
         "visibility": shot.visibility.map(brickray::VisibilityPolicy::name),
+        "gradients_kept": shot.gradients_kept,
         "prediction": {
             "setting": shot.prediction.0.name(),
             // Frames since the history was cleared, as the renderer reported

@@ -48,8 +48,9 @@ fn opens_a_store_and_a_procedural_volume_out_of_core() {
 /// script; the library's own test holds the two images 74-80 dB apart),
 /// and they take their bytes from the GPU pool (a pool that holds the
 /// finest cut without them holds a smaller working set with them). By
-/// default (`auto`) the small pool keeps none: with them it would not hold
-/// every brick.
+/// default (`auto`) the default pool keeps them and the small pool none:
+/// with them it would not hold every brick (the screenshots' sidecars say
+/// which, `gradients_kept`).
 #[test]
 #[cfg_attr(
     no_display,
@@ -89,6 +90,20 @@ fn streamed_gradients_shade_as_six_reads() {
             .expect("a streamed volume's working set")
     };
     let (small_kept, small_six) = (bricks("kept_small.png"), bricks("six_small.png"));
+    // The sidecar says what each run decided (`auto` keeps them where the
+    // default pool holds every brick with them, not in the 8 MiB one).
+    shot("auto.png", &[]);
+    let kept = |name: &str| sidecar_json(&out(name))["gradients_kept"].as_bool();
+    assert_eq!(
+        [
+            kept("kept.png"),
+            kept("six.png"),
+            kept("auto.png"),
+            kept("kept_small.png"),
+            kept("six_small.png")
+        ],
+        [Some(true), Some(false), Some(true), Some(true), Some(false)]
+    );
     assert_eq!(
         small_six,
         bricks("never_small.png"),
