@@ -462,6 +462,9 @@ fn gradients_are_kept_by_default_where_every_brick_fits() {
     let s = shaded(RenderMode::Dvr, true);
     let a = draw_converged(&mut roomy_r, &vol, s);
     let b = draw_converged(&mut tight_r, &vol, s);
+    // The frames' statistics report the decision.
+    let kept = |r: &VolumeRenderer| r.stats().out_of_core.unwrap().gradients_kept;
+    assert!(kept(&roomy_r) && !kept(&tight_r));
     as_six_reads("kept by default, out of core", &vol, &tf, s, &a, &b);
 }
 
