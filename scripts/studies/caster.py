@@ -30,6 +30,15 @@ def render(sample, box, step, size=128):
     return color
 
 
+def print_variants(label, variants, box, step, finest):
+    """Prints one line: `label`, then each (name, sample) variant drawn at
+    `step` and its PSNR against the image `finest`."""
+    row = [label]
+    for name, sample in variants:
+        row.append(f"{name} {psnr(render(sample, box, step), finest):.2f} dB;")
+    print(" ".join(row), flush=True)
+
+
 def psnr(a, b):
     """PSNR of two images in 0..1 as 8-bit RGB, dB (inf when equal)."""
     mse = ((np.clip(a, 0, 1) * 255 - np.clip(b, 0, 1) * 255) ** 2).mean()

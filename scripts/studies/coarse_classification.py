@@ -33,7 +33,7 @@ import json
 import os
 import numpy as np
 
-from caster import psnr, render
+from caster import print_variants, render
 
 DATA = os.path.join(os.path.dirname(__file__), "../../../shared/data")
 
@@ -125,7 +125,14 @@ def main():
     for name, vol, spacing, (ext, rgb) in scenes:
         box = np.array(vol.shape, float)
         lo, hi = vol.min(), vol.max()
-        finest = render(lambda p: (rgb(trilinear(vol, 1, p)), ext(trilinear(vol, 1, p))), box, 0.5)
+        def classified(grid, f):
+            """Values interpolated on `grid`, then classified (one read each)."""
+            def sample(p):
+                v = trilinear(grid, f, p)
+                return rgb(v), ext(v)
+            return sample
+
+        finest = render(classified(vol, 1), box, 0.5)
         f = np.ones(3, int)
         sp = spacing.copy()
         for level in (1, 2):
@@ -154,15 +161,13 @@ def main():
                 return trilinear(col_avg, f, p) / np.maximum(e, 1e-12)[..., None], e
 
             variants = [
-                ("finest at the level's step", lambda p: (rgb(trilinear(vol, 1, p)), ext(trilinear(vol, 1, p)))),
-                ("TF of the mean", lambda p: (rgb(trilinear(mean, f, p)), ext(trilinear(mean, f, p)))),
+                ("finest at the level's step", classified(vol, 1)),
+                ("TF of the mean", classified(mean, f)),
                 ("spread", spread),
                 ("averaged classification", averaged),
             ]
-            row = [f"{name} level {level} ({'x'.join(str(k) for k in f)} finest voxels, step {step:g}):"]
-            for vname, fn in variants:
-                row.append(f"{vname} {psnr(render(fn, box, step), finest):.2f} dB;")
-            print(" ".join(row), flush=True)
+            label = f"{name} level {level} ({'x'.join(str(k) for k in f)} finest voxels, step {step:g}):"
+            print_variants(label, variants, box, step, finest)
 
 
 if __name__ == "__main__":

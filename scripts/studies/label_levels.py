@@ -26,7 +26,7 @@ brickray's renderer. Needs numpy and ../shared/data beside the repository.
 import os
 import numpy as np
 
-from caster import psnr, render
+from caster import print_variants, render
 
 DATA = os.path.join(os.path.dirname(__file__), "../../../shared/data/labels")
 MAPS = [("mricron_brodmann_labels", (181, 217, 181), np.uint8),
@@ -116,10 +116,7 @@ def main():
                 ("coverage", coverage),
                 ("average", average),
             ]
-            row = [f"{name} level {level}:"]
-            for vname, f in variants:
-                row.append(f"{vname} {psnr(render(f, dims, 0.5 * s), finest):.2f} dB;")
-            print(" ".join(row), flush=True)
+            print_variants(f"{name} level {level}:", variants, dims, 0.5 * s, finest)
 
 
 if __name__ == "__main__":
