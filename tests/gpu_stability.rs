@@ -185,7 +185,7 @@ fn memory_pressure_does_not_flicker() {
     // it holds every brick with them).
     let mut r = ooc_without_gradients(src.clone(), cfg(big), &tf);
     let (_, s) = converge(&mut r, cam(0), frame, st);
-    let per_slot = big / s.cache.pool_slots as u64;
+    let per_slot = s.cache.pool_slot_bytes;
     // A quarter of the need in slots (at least the 9 the cache requires).
     let need = s.cache.working_set_bricks as u64;
     let want = (need / 4).max(9);

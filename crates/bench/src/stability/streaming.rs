@@ -266,10 +266,13 @@ pub(crate) fn pressure(ctx: &Ctx<'_>) -> Result<Case, String> {
         tolerance_px: tolerance,
         ..Default::default()
     };
-    let mut r = super::ooc(ctx.gpu, src.clone(), config(big), &tf)?;
+    // Without gradients, which the big pool would keep (it holds every
+    // brick with them) and the small ones not: the same slot under every
+    // budget.
+    let mut r = super::ooc_without_gradients(ctx.gpu, src.clone(), config(big), &tf)?;
     let (_, st) = run.converge(&mut r, cam(0), frame, settings, 200)?;
     let need = st.cache.working_set_bricks as f64;
-    let per_slot = big as f64 / st.cache.pool_slots as f64;
+    let per_slot = st.cache.pool_slot_bytes as f64;
     drop(r);
     println!(
         "\n2. memory pressure: {dims}^3 noise, bricks {BRICK}, tolerance {tolerance} px; the start view needs {need} bricks; pools of {POOL_FRACTIONS:?} x that; {CIRCLE} frames circling (0.1 rad a frame)"
@@ -300,7 +303,7 @@ pub(crate) fn pressure(ctx: &Ctx<'_>) -> Result<Case, String> {
     for frac in POOL_FRACTIONS {
         // The cache needs at least 9 slots.
         let budget = ((frac * need).max(9.0) * per_slot + per_slot / 2.0) as u64;
-        let mut r = super::ooc(ctx.gpu, src.clone(), config(budget), &tf)?;
+        let mut r = super::ooc_without_gradients(ctx.gpu, src.clone(), config(budget), &tf)?;
         run.converge(&mut r, cam(0), frame, settings, 200)?;
         let mut twin = CutCheck::new(src.clone(), frame, config(budget))?;
         for _ in 0..50 {

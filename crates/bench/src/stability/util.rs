@@ -123,6 +123,28 @@ pub(crate) fn ooc(
     Ok(r)
 }
 
+/// [`ooc`] keeping no gradients whatever the budget (`KeepGradients::Never`):
+/// a pool's slots then cost the same under every budget, so a budget can be
+/// sized in slots.
+pub(crate) fn ooc_without_gradients(
+    gpu: &GpuContext,
+    source: Arc<dyn BrickSource>,
+    config: OutOfCoreConfig,
+    tf: &TransferFunction,
+) -> Result<VolumeRenderer, String> {
+    let options = brickray_render::VolumeOptions {
+        gradients: brickray_render::KeepGradients::Never,
+        ..Default::default()
+    };
+    let v = brickray_render::StreamedVolume::new(&gpu.device, &gpu.queue, source, config, options)
+        .map_err(s)?;
+    let mut r = VolumeRenderer::new(&gpu.device, target_desc()).map_err(s)?;
+    r.set_streamed_volume(&gpu.device, &v).map_err(s)?;
+    r.set_transfer_function(&gpu.device, &gpu.queue, tf)
+        .map_err(s)?;
+    Ok(r)
+}
+
 /// A source that sleeps `delay` before every brick read (a slow disk or
 /// network) and counts the reads.
 pub(crate) struct SlowSource {

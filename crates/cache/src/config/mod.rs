@@ -491,7 +491,8 @@ impl GpuFormat {
     }
 
     /// The pool's sizing inputs for a GPU budget, checked to give at least
-    /// [`MIN_RESIDENT_BRICKS`] slots.
+    /// [`MIN_RESIDENT_BRICKS`] slots, and capped at a slot for every brick of
+    /// `layout` ([`brick_count`]): a budget beyond that is not allocated.
     pub fn pool_limits(
         &self,
         layout: &OctreeLayout,
@@ -502,6 +503,7 @@ impl GpuFormat {
             slot_bytes: self.slot_bytes(layout)?,
             stored_side: stored_side(layout)?,
             max_dim: self.max_texture_dim_3d,
+            max_slots: brick_count(layout).max(MIN_RESIDENT_BRICKS as u64),
         };
         let slots = limits
             .grid()

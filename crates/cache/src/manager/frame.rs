@@ -525,6 +525,7 @@ impl BrickManager {
             leaves: cut.len() as u32,
             working_set_bricks: working,
             pool_slots: self.pool.slot_count(),
+            pool_slot_bytes: self.gpu.slot_bytes(&self.layout).unwrap_or(0),
             pool_occupied: self.pool.occupied(),
             upload_bricks: placed.uploads.len() as u32,
             upload_bytes: placed.uploads.iter().map(|u| u.brick.bytes()).sum(),

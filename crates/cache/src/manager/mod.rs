@@ -61,6 +61,9 @@ pub struct BrickManager {
     gpu: GpuFormat,
     preparer: Arc<Preparer>,
     brick_bytes: u64,
+    /// Every brick of the volume ([`crate::brick_count`]): a pool with this
+    /// many slots holds any cut with its floor and fades.
+    bricks: u64,
     meta: MetaCache,
     cpu: CpuCache,
     pool: BrickPool,
@@ -257,6 +260,7 @@ impl BrickManager {
             class_stamp: 0,
             classified: None,
             refine_memo: None,
+            bricks: crate::brick_count(&layout),
             source,
             layout,
             meta: MetaCache::new(meta_capacity(config.cpu_budget_bytes)),
@@ -281,11 +285,18 @@ impl BrickManager {
 
     /// Most data leaves refinement may use: the pool less the floor and, with
     /// fades on, an eighth of it for the bricks fades keep (fallbacks, merged
-    /// leaves still fading); at most the brick budget.
+    /// leaves still fading); at most the brick budget. A pool with a slot for
+    /// every brick of the volume (the most it is given,
+    /// [`GpuFormat::pool_limits`]) keeps nothing back: the floor, the fades
+    /// and any cut are bricks of the volume, each with its own slot.
     fn cut_slots(&self) -> u32 {
         let n = self.pool.slot_count();
         let fades = if self.config.fade.is_some() { n / 8 } else { 0 };
-        let pool = n.saturating_sub(self.floor.len() as u32 + fades).max(1);
+        let pool = if n as u64 >= self.bricks {
+            n
+        } else {
+            n.saturating_sub(self.floor.len() as u32 + fades).max(1)
+        };
         self.config
             .brick_budget
             .map_or(pool, |b| pool.min(b.max(1)))

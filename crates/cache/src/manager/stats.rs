@@ -61,8 +61,13 @@ pub struct FrameStats {
     pub leaves: u32,
     /// Leaves holding a brick (the GPU working set).
     pub working_set_bricks: u32,
-    /// Pool slots.
+    /// Pool slots: as many as the GPU budget holds, at most a slot for
+    /// every brick of the volume ([`brick_count`](crate::brick_count)).
     pub pool_slots: u32,
+    /// Bytes of the GPU budget one pool slot costs
+    /// ([`GpuFormat::slot_bytes`](crate::GpuFormat::slot_bytes)): what a
+    /// budget of `n` slots takes.
+    pub pool_slot_bytes: u64,
     /// Occupied pool slots.
     pub pool_occupied: u32,
     /// Bricks scheduled for upload.

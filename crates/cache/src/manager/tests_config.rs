@@ -177,3 +177,44 @@ fn the_metadata_map_stays_within_a_sixteenth_of_the_cpu_budget() {
     // A small budget still keeps the floor.
     assert_eq!(super::meta_capacity(1 << 20), 16_384);
 }
+
+/// A GPU budget beyond a slot for every brick of the volume is not
+/// allocated, and such a pool, fades on, still refines to the finest level
+/// (a pool that holds every brick keeps nothing back for the floor and the
+/// fades; before, the cut was left short by both).
+#[test]
+fn a_roomy_budget_stops_at_a_slot_per_brick_and_refines_fully() {
+    let src = Arc::new(TestSource::new(32));
+    let bricks = crate::brick_count(&src.layout);
+    let mut m = manager(
+        &src,
+        OutOfCoreConfig {
+            gpu_budget_bytes: 1 << 30,
+            tolerance_px: 0.0,
+            fade: Some(crate::FadeDuration::Frames(2)),
+            ..config()
+        },
+    );
+    let slots = m.pool().slot_count() as u64;
+    assert!(
+        (bricks..bricks + 8).contains(&slots),
+        "{slots} slots for {bricks} bricks (1 GiB holds {})",
+        (1u64 << 30) / slot_bytes(&src)
+    );
+    let cam = Camera::orbit(Vec3::ZERO, 1.6, 0.4, 0.3);
+    let tf = TransferFunction::ramp(0.1, 1.0, 0.5);
+    let mut frame = 0;
+    let plan = converge(&mut m, &mut frame, &cam, RenderMode::Mip, &tf, |_, _| {});
+    let finest = src.layout.levels - 1;
+    let data: Vec<u8> = plan
+        .cut
+        .iter()
+        .filter(|l| l.kind.is_data())
+        .map(|l| l.key.level)
+        .collect();
+    assert!(
+        !data.is_empty() && data.iter().all(|&l| l == finest),
+        "data leaves' levels {data:?}, {:?}",
+        plan.stats
+    );
+}
