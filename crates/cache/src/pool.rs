@@ -118,8 +118,18 @@ fn largest_grid(n: u64, m: u64) -> [u64; 3] {
 fn covering_grid(need: u64, m: u64) -> Option<[u64; 3]> {
     let need = need.max(1);
     let mut best: Option<([u64; 3], (u64, u64))> = None;
+    // Every grid from here on holds at least sz * sy^2 slots.
+    let beaten = |best: &Option<([u64; 3], (u64, u64))>, least: u64| {
+        best.is_some_and(|(_, (p, _))| least > p)
+    };
     for sz in 1..=m {
+        if beaten(&best, sz * sz * sz) {
+            break;
+        }
         for sy in sz..=m {
+            if beaten(&best, sz * sy * sy) {
+                break;
+            }
             let sx = need.div_ceil(sz * sy).max(sy);
             if sx > m {
                 continue;
