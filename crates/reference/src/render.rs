@@ -1,7 +1,9 @@
 //! The brute-force ray marcher.
 
 use brickray_core::moments::field_trilinear;
-use brickray_core::tf::{Preintegrator, SPREAD_ROWS, SpreadTable, corrected_alpha};
+use brickray_core::tf::{
+    Preintegrator, SPREAD_ROWS, SpreadTable, corrected_alpha, join_halves, segment_midpoint,
+};
 use brickray_core::{
     Camera, Intensity, LabelOverlay, Ray, RayGen, RenderMode, RenderSettings, Shading,
     TransferFunction, Volume, VolumeFrame,
@@ -52,7 +54,10 @@ pub struct ReferenceOptions<'a> {
     /// composites the segment from the value of sample `k - 1` to its own,
     /// `step_factor` reference lengths long (the first sample composites
     /// nothing: the ray starts there), integrated exactly through the TF in f64
-    /// ([`Preintegrator::segment`](brickray_core::tf::Preintegrator::segment)),
+    /// ([`Preintegrator::segment`](brickray_core::tf::Preintegrator::segment))
+    /// in two halves through the midpoint of the parabola through it and the
+    /// sample before ([`segment_midpoint`](brickray_core::tf::segment_midpoint),
+    /// [`join_halves`](brickray_core::tf::join_halves)), as the kernels do,
     /// shaded at the segment's midpoint. `settings.preintegrated` is ignored, like
     /// `settings.step_factor`. Default off.
     pub preintegrated: bool,
@@ -505,7 +510,8 @@ impl Marcher<'_> {
         out.result()
     }
 
-    /// Pre-integrated DVR: the segment between each two samples, then the
+    /// Pre-integrated DVR: the segment between each two samples, in two
+    /// halves through [`segment_midpoint`] ([`join_halves`]), then the
     /// ray's last piece. The ray's first sample only records the front of the
     /// next segment (the segment ending there would start a step before the
     /// ray does). A segment `[t - dt, t]` is shaded at its midpoint: at its
@@ -523,11 +529,18 @@ impl Marcher<'_> {
             [r * s, g * s, b * s, a]
         };
         let mut prev: Option<(f64, f64)> = None;
+        // The sample before `prev` (the parabola's third point).
+        let mut before: Option<f64> = None;
         for t in span.samples() {
             let v = self.value(ray, t);
             if let Some((_, front)) = prev.replace((t, v)) {
-                let s = straight(p.segment(front, v, self.step_factor));
-                self.composite(out, ray, s, t, t - 0.5 * self.dt);
+                let m = segment_midpoint(before, front, v);
+                let halves = join_halves(
+                    p.segment(front, m, self.step_factor),
+                    p.segment(m, v, self.step_factor),
+                );
+                self.composite(out, ray, straight(halves), t, t - 0.5 * self.dt);
+                before = Some(front);
             }
         }
         if let Some((t, v)) = prev.filter(|&(t, _)| span.t1 > t) {

@@ -169,9 +169,16 @@ struct Accum {
     hit_b: f32,
     // Volume samples taken (march and bisection).
     samples: u32,
-    // Pre-integration: t and value of the last sample composited.
+    // Pre-integration: t and value of the last sample composited; the value
+    // one step before it, when `prev_joined` (the parabola's third point,
+    // preint_front); the segment's third point as preint_front found it
+    // (`seg_s0`, used when `seg_s0_set`).
     prev_t: f32,
     prev_v: f32,
+    prev2_v: f32,
+    prev_joined: bool,
+    seg_s0: f32,
+    seg_s0_set: bool,
 }
 
 fn accum_new() -> Accum {
@@ -187,6 +194,10 @@ fn accum_new() -> Accum {
     a.samples = 0u;
     a.prev_t = -3.0e38;
     a.prev_v = 0.0;
+    a.prev2_v = 0.0;
+    a.prev_joined = false;
+    a.seg_s0 = 0.0;
+    a.seg_s0_set = false;
     return a;
 }
 
@@ -215,11 +226,39 @@ fn preint_before_start(t: f32, dt: f32, t_min: f32) -> bool {
 // shader compiler): the first sample after skipped space (an empty leaf or
 // sub-cell, transparent by construction) or a change of level composites a
 // constant segment.
+// The sample before the front, when it too lay a step before, is recorded
+// as the segment's third point for its midpoint (`preint_segment`).
 fn preint_front(acc: ptr<function, Accum>, t: f32, dt: f32, v: f32) -> f32 {
-    let front = select(v, (*acc).prev_v, preint_joined(*acc, t, dt));
+    let joined = preint_joined(*acc, t, dt);
+    let front = select(v, (*acc).prev_v, joined);
+    (*acc).seg_s0 = (*acc).prev2_v;
+    (*acc).seg_s0_set = joined && (*acc).prev_joined;
+    (*acc).prev2_v = (*acc).prev_v;
+    (*acc).prev_joined = joined;
     (*acc).prev_t = t;
     (*acc).prev_v = v;
     return front;
+}
+
+// Pre-integration: the segment from `front` to `back` in two halves through
+// the midpoint of the parabola through the sample before the front (`s0`,
+// when `has_s0`; else the straight line's midpoint) and the two, each half
+// looked up as a whole step's segment and halved: opacity `1 - sqrt(1 - a)`,
+// colour scaled with it (brickray_core::tf::segment_midpoint and
+// join_halves, the CPU twins). A linear segment alone cuts every peak the
+// samples straddle (docs/rendering-model.md, "Pre-integration").
+fn preint_segment(s0: f32, has_s0: bool, front: f32, back: f32, tf_v: f32) -> vec4<f32> {
+    let s = select(2.0 * front - back, s0, has_s0);
+    let m = clamp((6.0 * front + 3.0 * back - s) * 0.125, 0.0, 1.0);
+    let p1 = tf_preint_sample(front, m, tf_v);
+    let p2 = tf_preint_sample(m, back, tf_v);
+    let a1 = clamp(p1.a, 0.0, 1.0);
+    let a2 = clamp(p2.a, 0.0, 1.0);
+    let h1 = 1.0 - sqrt(1.0 - a1);
+    let h2 = 1.0 - sqrt(1.0 - a2);
+    let c1 = p1.rgb * select(0.0, h1 / a1, a1 > 0.0);
+    let c2 = p2.rgb * select(0.0, h2 / a2, a2 > 0.0);
+    return vec4<f32>(c1 + (1.0 - h1) * c2, h1 + (1.0 - h1) * h2);
 }
 
 // Pre-integration after skipped space: records the value at t - dt (when not
@@ -228,6 +267,7 @@ fn preint_fetch(acc: ptr<function, Accum>, c: Cursor, t: f32, dt: f32, t_min: f3
     if (!preint_joined(*acc, t, dt) && !preint_before_start(t, dt, t_min)) {
         (*acc).prev_t = t - dt;
         (*acc).prev_v = cursor_value(c, t - dt);
+        (*acc).prev_joined = false;
         (*acc).samples = (*acc).samples + 1u;
     }
 }
@@ -270,7 +310,8 @@ fn shade(c: vec3<f32>, g: vec4<f32>, dir: vec3<f32>) -> vec3<f32> {
 
 // DVR: composites the sample of value `v` at `t` front to back, its opacity
 // corrected to the step by the corrected table's row `tf_v` (see tf_row); with
-// PREINT the pre-integrated segment from value `front` to `v` instead (shaded:
+// PREINT the pre-integrated segment from value `front` to `v` instead, in two
+// halves through its midpoint (`preint_segment`; shaded:
 // its straight colour, associated / opacity, shaded at `ts` and multiplied
 // back; the kernels pass the segment's midpoint, where the reference shades
 // it, clamped out of core to the brick's entry).
@@ -281,7 +322,7 @@ fn dvr_sample(acc: ptr<function, Accum>, c: Cursor, r: Ray, t: f32, ts: f32, fro
     // stays skipped.
     var s: vec4<f32>;
     if (PREINT) {
-        let p = tf_preint_sample(front, v, tf_v);
+        let p = preint_segment((*acc).seg_s0, (*acc).seg_s0_set, front, v, tf_v);
         if (p.a <= 0.0) {
             return false;
         }

@@ -19,7 +19,10 @@ pub mod spread;
 mod table;
 
 pub use model::{ColorPoint, OpacityPoint, TABLE_ENTRIES, TfFileError, TfModel, TfPreset};
-pub use preint::{FINE as PREINT_FINE, PREINT_MIN_SIZE, PreintTable, Preintegrator, TAU_MAX};
+pub use preint::{
+    FINE as PREINT_FINE, PREINT_MIN_SIZE, PreintTable, Preintegrator, TAU_MAX, join_halves,
+    segment_midpoint,
+};
 pub use spread::{SPREAD_ROWS, SpreadTable};
 pub use table::{CorrectedTable, MIN_WIDTH as TABLE_MIN_WIDTH};
 

@@ -27,6 +27,21 @@
 //! `sf == sb` is the corrected single sample exactly (`c * a'`, `a'` from
 //! [`corrected_alpha`]). An opacity of exactly 1 over a value interval is an
 //! extinction of [`TAU_MAX`] per reference length.
+//!
+//! # Segments through a midpoint
+//!
+//! A value that runs linearly between two samples cuts every peak or dip
+//! the samples straddle; where the data varies within a step (a skull met
+//! at a grazing angle) the linear segment loses to a plain point sample
+//! (docs/studies/preint-segment-models.md). The renderers therefore draw a
+//! segment as two linear halves through a midpoint value,
+//! [`segment_midpoint`]: the midpoint of the parabola through the
+//! segment's two samples and the sample before them, which needs no sample
+//! past the segment. Each half is looked up as a whole segment of the step
+//! (from the front to the midpoint, from the midpoint to the back) and
+//! halved by [`join_halves`]: the half's opacity `1 - sqrt(1 - a)` is exact
+//! (a linear segment's extinction is its length times the mean extinction
+//! of its values), its colour is scaled with it.
 
 use super::{TransferFunction, corrected_alpha};
 
@@ -68,6 +83,39 @@ fn tau_piece(u0: f64, u1: f64, len: f64) -> f64 {
         len * (f(u1) - f(u0)) / (u1 - u0)
     };
     v.clamp(0.0, TAU_MAX * len)
+}
+
+/// The value halfway through the segment from `s1` to `s2` (consecutive
+/// samples one step apart): on the parabola through the sample before them,
+/// `s0`, and the two, `(6 s1 + 3 s2 - s0) / 8`; without `s0` (the segment
+/// follows a ray's first sample, skipped space or a change of step) on the
+/// straight line, `(s1 + s2) / 2`. Clamped to 0..1.
+pub fn segment_midpoint(s0: Option<f64>, s1: f64, s2: f64) -> f64 {
+    let s0 = s0.unwrap_or(2.0 * s1 - s2);
+    ((6.0 * s1 + 3.0 * s2 - s0) / 8.0).clamp(0.0, 1.0)
+}
+
+/// A segment in two halves, each given as the premultiplied RGBA of a whole
+/// step's segment over its values (`first`: front to midpoint, `second`:
+/// midpoint to back, [`Preintegrator::segment`] or the table): each half's
+/// opacity `1 - sqrt(1 - a)` (exact for a segment of half the length), its
+/// colour scaled by the same factor, composited front to back. A constant
+/// segment gives back its whole step's.
+pub fn join_halves(first: [f64; 4], second: [f64; 4]) -> [f64; 4] {
+    let half = |p: [f64; 4]| {
+        let a = p[3].clamp(0.0, 1.0);
+        let h = 1.0 - (1.0 - a).sqrt();
+        let k = if a > 0.0 { h / a } else { 0.0 };
+        [p[0] * k, p[1] * k, p[2] * k, h]
+    };
+    let (f, b) = (half(first), half(second));
+    let t = 1.0 - f[3];
+    [
+        f[0] + t * b[0],
+        f[1] + t * b[1],
+        f[2] + t * b[2],
+        f[3] + t * b[3],
+    ]
 }
 
 impl<'a> Preintegrator<'a> {

@@ -187,3 +187,53 @@ fn full_table_on_a_sharp_peak() {
     println!("peak 0.45..0.55, step 2: worst bilinear table error {worst:.2e}");
     assert!(worst < 0.05, "{worst}");
 }
+
+/// The midpoint of the parabola through three samples one step apart is
+/// exact on a parabola; without the sample before, the straight line's.
+#[test]
+fn segment_midpoint_is_exact_on_a_parabola() {
+    let q = |x: f64| 0.3 + 0.2 * x - 0.15 * x * x;
+    let m = segment_midpoint(Some(q(-1.0)), q(0.0), q(1.0));
+    assert!((m - q(0.5)).abs() < 1e-12, "{m} against {}", q(0.5));
+    assert_eq!(segment_midpoint(None, 0.2, 0.6), 0.4);
+    // Clamped to the table's range.
+    assert_eq!(segment_midpoint(Some(1.0), 0.0, 0.1), 0.0);
+}
+
+proptest! {
+    /// Two halves through the straight line's midpoint are the whole linear
+    /// segment: the opacity exactly, the colour within the colour's change
+    /// across the segment; a constant segment's halves give it back whole.
+    #[test]
+    fn halves_through_the_linear_midpoint_join_to_the_segment(
+        e in entries(),
+        sf in 0.0f64..=1.0,
+        sb in 0.0f64..=1.0,
+        d in 0.1f64..=4.0,
+    ) {
+        let tf = tf_of(&e);
+        let p = Preintegrator::new(&tf, 1024);
+        let m = segment_midpoint(None, sf, sb);
+        let joined = join_halves(p.segment(sf, m, d), p.segment(m, sb, d));
+        let whole = p.segment(sf, sb, d);
+        prop_assert!((joined[3] - whole[3]).abs() < 1e-9, "{joined:?} {whole:?}");
+        // Both straight colours are averages of the TF's colours over the
+        // segment's values: they differ by at most the colours' spread there.
+        let n = 4096;
+        let cs: Vec<[f64; 4]> = (0..=n)
+            .map(|i| tf.lookup(sf + (sb - sf) * i as f64 / n as f64))
+            .collect();
+        for k in 0..3 {
+            let (lo, hi) = cs.iter().fold((f64::MAX, f64::MIN), |(lo, hi), c| {
+                (lo.min(c[k]), hi.max(c[k]))
+            });
+            let bound = whole[3] * (hi - lo) + 1e-6;
+            prop_assert!((joined[k] - whole[k]).abs() <= bound, "{joined:?} {whole:?} {bound}");
+        }
+        let c = p.segment(sf, sf, d);
+        let constant = join_halves(c, c);
+        for k in 0..4 {
+            prop_assert!((constant[k] - c[k]).abs() < 1e-12, "{constant:?} {c:?}");
+        }
+    }
+}
