@@ -2,7 +2,7 @@
 
 use brickray_core::moments::field_trilinear;
 use brickray_core::tf::{
-    Preintegrator, SPREAD_ROWS, SpreadTable, corrected_alpha, join_halves, segment_midpoint,
+    Preintegrator, SPREAD_ROWS, SpreadTable, corrected_alpha, join_pieces, segment_values,
 };
 use brickray_core::{
     Camera, Intensity, LabelOverlay, Ray, RayGen, RenderMode, RenderSettings, Shading,
@@ -55,9 +55,9 @@ pub struct ReferenceOptions<'a> {
     /// `step_factor` reference lengths long (the first sample composites
     /// nothing: the ray starts there), integrated exactly through the TF in f64
     /// ([`Preintegrator::segment`](brickray_core::tf::Preintegrator::segment))
-    /// in two halves through the midpoint of the parabola through it and the
-    /// sample before ([`segment_midpoint`](brickray_core::tf::segment_midpoint),
-    /// [`join_halves`](brickray_core::tf::join_halves)), as the kernels do,
+    /// in pieces along the parabola through its samples and the sample before
+    /// ([`segment_values`](brickray_core::tf::segment_values),
+    /// [`join_pieces`](brickray_core::tf::join_pieces)), as the kernels do,
     /// shaded at the segment's midpoint. `settings.preintegrated` is ignored, like
     /// `settings.step_factor`. Default off.
     pub preintegrated: bool,
@@ -510,9 +510,9 @@ impl Marcher<'_> {
         out.result()
     }
 
-    /// Pre-integrated DVR: the segment between each two samples, in two
-    /// halves through [`segment_midpoint`] ([`join_halves`]), then the
-    /// ray's last piece. The ray's first sample only records the front of the
+    /// Pre-integrated DVR: the segment between each two samples, in pieces
+    /// along the parabola through them and the sample before
+    /// ([`segment_values`], [`join_pieces`]), then the ray's last piece. The ray's first sample only records the front of the
     /// next segment (the segment ending there would start a step before the
     /// ray does). A segment `[t - dt, t]` is shaded at its midpoint: at its
     /// back sample the shading would lag the emission by half a step. The last
@@ -534,12 +534,11 @@ impl Marcher<'_> {
         for t in span.samples() {
             let v = self.value(ray, t);
             if let Some((_, front)) = prev.replace((t, v)) {
-                let m = segment_midpoint(before, front, v);
-                let halves = join_halves(
-                    p.segment(front, m, self.step_factor),
-                    p.segment(m, v, self.step_factor),
-                );
-                self.composite(out, ray, straight(halves), t, t - 0.5 * self.dt);
+                let x = segment_values(before, front, v);
+                let pieces = join_pieces(std::array::from_fn(|j| {
+                    p.segment(x[j], x[j + 1], self.step_factor)
+                }));
+                self.composite(out, ray, straight(pieces), t, t - 0.5 * self.dt);
                 before = Some(front);
             }
         }

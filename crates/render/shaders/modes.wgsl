@@ -227,7 +227,7 @@ fn preint_before_start(t: f32, dt: f32, t_min: f32) -> bool {
 // sub-cell, transparent by construction) or a change of level composites a
 // constant segment.
 // The sample before the front, when it too lay a step before, is recorded
-// as the segment's third point for its midpoint (`preint_segment`).
+// as the segment's third point for its parabola (`preint_segment`).
 fn preint_front(acc: ptr<function, Accum>, t: f32, dt: f32, v: f32) -> f32 {
     let joined = preint_joined(*acc, t, dt);
     let front = select(v, (*acc).prev_v, joined);
@@ -240,25 +240,35 @@ fn preint_front(acc: ptr<function, Accum>, t: f32, dt: f32, v: f32) -> f32 {
     return front;
 }
 
-// Pre-integration: the segment from `front` to `back` in two halves through
-// the midpoint of the parabola through the sample before the front (`s0`,
-// when `has_s0`; else the straight line's midpoint) and the two, each half
-// looked up as a whole step's segment and halved: opacity `1 - sqrt(1 - a)`,
-// colour scaled with it (brickray_core::tf::segment_midpoint and
-// join_halves, the CPU twins). A linear segment alone cuts every peak the
-// samples straddle (docs/rendering-model.md, "Pre-integration").
+// Pre-integration: the segment from `front` to `back` in four linear pieces
+// along the parabola through the sample before the front (`s0`, when
+// `has_s0`; else along the straight line) and the two, each piece looked up
+// as a whole step's segment over its values and shortened: opacity
+// `1 - (1 - a)^(1/4)`, colour scaled with it (brickray_core::tf::
+// segment_values and join_pieces, the CPU twins). A linear segment alone
+// cuts every peak the samples straddle (docs/rendering-model.md,
+// "Pre-integration"). The pieces are a loop's trips, not unrolled.
 fn preint_segment(s0: f32, has_s0: bool, front: f32, back: f32, tf_v: f32) -> vec4<f32> {
     let s = select(2.0 * front - back, s0, has_s0);
-    let m = clamp((6.0 * front + 3.0 * back - s) * 0.125, 0.0, 1.0);
-    let p1 = tf_preint_sample(front, m, tf_v);
-    let p2 = tf_preint_sample(m, back, tf_v);
-    let a1 = clamp(p1.a, 0.0, 1.0);
-    let a2 = clamp(p2.a, 0.0, 1.0);
-    let h1 = 1.0 - sqrt(1.0 - a1);
-    let h2 = 1.0 - sqrt(1.0 - a2);
-    let c1 = p1.rgb * select(0.0, h1 / a1, a1 > 0.0);
-    let c2 = p2.rgb * select(0.0, h2 / a2, a2 > 0.0);
-    return vec4<f32>(c1 + (1.0 - h1) * c2, h1 + (1.0 - h1) * h2);
+    let b = 0.5 * (back - s);
+    let c = 0.5 * (back - 2.0 * front + s);
+    var out = vec4<f32>(0.0);
+    var v0 = front;
+    var j = 1u;
+    loop {
+        let x = f32(j) * 0.25;
+        let v1 = clamp(front + (b + c * x) * x, 0.0, 1.0);
+        let p = tf_preint_sample(v0, v1, tf_v);
+        let a = clamp(p.a, 0.0, 1.0);
+        let h = 1.0 - sqrt(sqrt(1.0 - a));
+        let k = select(0.0, h / a, a > 0.0);
+        let t = 1.0 - out.a;
+        out = out + vec4<f32>(t * k * p.rgb, t * h);
+        v0 = v1;
+        j = j + 1u;
+        if (j > 4u) { break; }
+    }
+    return out;
 }
 
 // Pre-integration after skipped space: records the value at t - dt (when not
@@ -310,8 +320,8 @@ fn shade(c: vec3<f32>, g: vec4<f32>, dir: vec3<f32>) -> vec3<f32> {
 
 // DVR: composites the sample of value `v` at `t` front to back, its opacity
 // corrected to the step by the corrected table's row `tf_v` (see tf_row); with
-// PREINT the pre-integrated segment from value `front` to `v` instead, in two
-// halves through its midpoint (`preint_segment`; shaded:
+// PREINT the pre-integrated segment from value `front` to `v` instead, in
+// pieces along a parabola (`preint_segment`; shaded:
 // its straight colour, associated / opacity, shaded at `ts` and multiplied
 // back; the kernels pass the segment's midpoint, where the reference shades
 // it, clamped out of core to the brick's entry).

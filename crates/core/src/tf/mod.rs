@@ -20,8 +20,8 @@ mod table;
 
 pub use model::{ColorPoint, OpacityPoint, TABLE_ENTRIES, TfFileError, TfModel, TfPreset};
 pub use preint::{
-    FINE as PREINT_FINE, PREINT_MIN_SIZE, PreintTable, Preintegrator, TAU_MAX, join_halves,
-    segment_midpoint,
+    FINE as PREINT_FINE, PREINT_MIN_SIZE, PreintTable, Preintegrator, SEGMENT_PIECES, TAU_MAX,
+    join_pieces, segment_values,
 };
 pub use spread::{SPREAD_ROWS, SpreadTable};
 pub use table::{CorrectedTable, MIN_WIDTH as TABLE_MIN_WIDTH};

@@ -34,14 +34,13 @@
 //! the samples straddle; where the data varies within a step (a skull met
 //! at a grazing angle) the linear segment loses to a plain point sample
 //! (docs/studies/preint-segment-models.md). The renderers therefore draw a
-//! segment as two linear halves through a midpoint value,
-//! [`segment_midpoint`]: the midpoint of the parabola through the
-//! segment's two samples and the sample before them, which needs no sample
-//! past the segment. Each half is looked up as a whole segment of the step
-//! (from the front to the midpoint, from the midpoint to the back) and
-//! halved by [`join_halves`]: the half's opacity `1 - sqrt(1 - a)` is exact
-//! (a linear segment's extinction is its length times the mean extinction
-//! of its values), its colour is scaled with it.
+//! segment as [`SEGMENT_PIECES`] linear pieces along the parabola through
+//! the segment's two samples and the sample before them
+//! ([`segment_values`]), which needs no sample past the segment. Each piece
+//! is looked up as a whole segment of the step over its values and shortened
+//! by [`join_pieces`]: a piece's opacity `1 - (1 - a)^(1/n)` is exact (a
+//! linear segment's extinction is its length times the mean extinction of
+//! its values), its colour is scaled with it.
 
 use super::{TransferFunction, corrected_alpha};
 
@@ -85,37 +84,43 @@ fn tau_piece(u0: f64, u1: f64, len: f64) -> f64 {
     v.clamp(0.0, TAU_MAX * len)
 }
 
-/// The value halfway through the segment from `s1` to `s2` (consecutive
-/// samples one step apart): on the parabola through the sample before them,
-/// `s0`, and the two, `(6 s1 + 3 s2 - s0) / 8`; without `s0` (the segment
-/// follows a ray's first sample, skipped space or a change of step) on the
-/// straight line, `(s1 + s2) / 2`. Clamped to 0..1.
-pub fn segment_midpoint(s0: Option<f64>, s1: f64, s2: f64) -> f64 {
+/// Linear pieces of a pre-integrated segment ([`segment_values`]).
+pub const SEGMENT_PIECES: usize = 4;
+
+/// The values at the ends of the [`SEGMENT_PIECES`] pieces of the segment
+/// from `s1` to `s2` (consecutive samples one step apart), `x = j / n` for
+/// `j` in `0..=n`: on the parabola through the sample before them, `s0`, and
+/// the two, `s1 + (s2 - s0) x / 2 + (s2 - 2 s1 + s0) x^2 / 2`; without `s0`
+/// (the segment follows a ray's first sample, skipped space or a change of
+/// step) on the straight line. Clamped to 0..1; the ends are `s1` and `s2`.
+pub fn segment_values(s0: Option<f64>, s1: f64, s2: f64) -> [f64; SEGMENT_PIECES + 1] {
     let s0 = s0.unwrap_or(2.0 * s1 - s2);
-    ((6.0 * s1 + 3.0 * s2 - s0) / 8.0).clamp(0.0, 1.0)
+    std::array::from_fn(|j| {
+        let x = j as f64 / SEGMENT_PIECES as f64;
+        (s1 + 0.5 * (s2 - s0) * x + 0.5 * (s2 - 2.0 * s1 + s0) * x * x).clamp(0.0, 1.0)
+    })
 }
 
-/// A segment in two halves, each given as the premultiplied RGBA of a whole
-/// step's segment over its values (`first`: front to midpoint, `second`:
-/// midpoint to back, [`Preintegrator::segment`] or the table): each half's
-/// opacity `1 - sqrt(1 - a)` (exact for a segment of half the length), its
-/// colour scaled by the same factor, composited front to back. A constant
-/// segment gives back its whole step's.
-pub fn join_halves(first: [f64; 4], second: [f64; 4]) -> [f64; 4] {
-    let half = |p: [f64; 4]| {
+/// A segment in [`SEGMENT_PIECES`] pieces, each given as the premultiplied
+/// RGBA of a whole step's segment over its values (from one value of
+/// [`segment_values`] to the next, [`Preintegrator::segment`] or the table):
+/// each piece's opacity `1 - (1 - a)^(1/n)` (exact for a linear segment of
+/// `1/n` the length: its extinction is its length times the mean extinction
+/// of its values), its colour scaled by the same factor, composited front to
+/// back. A constant segment gives back its whole step's.
+pub fn join_pieces(pieces: [[f64; 4]; SEGMENT_PIECES]) -> [f64; 4] {
+    let mut out = [0.0; 4];
+    for p in pieces {
         let a = p[3].clamp(0.0, 1.0);
-        let h = 1.0 - (1.0 - a).sqrt();
+        let h = 1.0 - (1.0 - a).powf(1.0 / SEGMENT_PIECES as f64);
         let k = if a > 0.0 { h / a } else { 0.0 };
-        [p[0] * k, p[1] * k, p[2] * k, h]
-    };
-    let (f, b) = (half(first), half(second));
-    let t = 1.0 - f[3];
-    [
-        f[0] + t * b[0],
-        f[1] + t * b[1],
-        f[2] + t * b[2],
-        f[3] + t * b[3],
-    ]
+        let t = 1.0 - out[3];
+        for c in 0..3 {
+            out[c] += t * k * p[c];
+        }
+        out[3] += t * h;
+    }
+    out
 }
 
 impl<'a> Preintegrator<'a> {

@@ -188,24 +188,30 @@ fn full_table_on_a_sharp_peak() {
     assert!(worst < 0.05, "{worst}");
 }
 
-/// The midpoint of the parabola through three samples one step apart is
-/// exact on a parabola; without the sample before, the straight line's.
+/// The pieces' values lie on the parabola through three samples one step
+/// apart (exact on a parabola); without the sample before, on the line.
 #[test]
-fn segment_midpoint_is_exact_on_a_parabola() {
+fn segment_values_follow_the_parabola() {
     let q = |x: f64| 0.3 + 0.2 * x - 0.15 * x * x;
-    let m = segment_midpoint(Some(q(-1.0)), q(0.0), q(1.0));
-    assert!((m - q(0.5)).abs() < 1e-12, "{m} against {}", q(0.5));
-    assert_eq!(segment_midpoint(None, 0.2, 0.6), 0.4);
+    let v = segment_values(Some(q(-1.0)), q(0.0), q(1.0));
+    for (j, &x) in v.iter().enumerate() {
+        let want = q(j as f64 / SEGMENT_PIECES as f64);
+        assert!((x - want).abs() < 1e-12, "{j}: {x} against {want}");
+    }
+    let line = segment_values(None, 0.2, 0.6);
+    assert_eq!(line[0], 0.2);
+    assert!((line[SEGMENT_PIECES / 2] - 0.4).abs() < 1e-12);
+    assert!((line[SEGMENT_PIECES] - 0.6).abs() < 1e-12);
     // Clamped to the table's range.
-    assert_eq!(segment_midpoint(Some(1.0), 0.0, 0.1), 0.0);
+    assert_eq!(segment_values(Some(1.0), 0.0, 0.1)[1], 0.0);
 }
 
 proptest! {
-    /// Two halves through the straight line's midpoint are the whole linear
-    /// segment: the opacity exactly, the colour within the colour's change
-    /// across the segment; a constant segment's halves give it back whole.
+    /// Pieces along the straight line are the whole linear segment: the
+    /// opacity exactly, the colour within the colours' spread over the
+    /// segment's values; a constant segment's pieces give it back whole.
     #[test]
-    fn halves_through_the_linear_midpoint_join_to_the_segment(
+    fn pieces_along_the_line_join_to_the_segment(
         e in entries(),
         sf in 0.0f64..=1.0,
         sb in 0.0f64..=1.0,
@@ -213,8 +219,8 @@ proptest! {
     ) {
         let tf = tf_of(&e);
         let p = Preintegrator::new(&tf, 1024);
-        let m = segment_midpoint(None, sf, sb);
-        let joined = join_halves(p.segment(sf, m, d), p.segment(m, sb, d));
+        let v = segment_values(None, sf, sb);
+        let joined = join_pieces(std::array::from_fn(|j| p.segment(v[j], v[j + 1], d)));
         let whole = p.segment(sf, sb, d);
         prop_assert!((joined[3] - whole[3]).abs() < 1e-9, "{joined:?} {whole:?}");
         // Both straight colours are averages of the TF's colours over the
@@ -231,7 +237,7 @@ proptest! {
             prop_assert!((joined[k] - whole[k]).abs() <= bound, "{joined:?} {whole:?} {bound}");
         }
         let c = p.segment(sf, sf, d);
-        let constant = join_halves(c, c);
+        let constant = join_pieces([c; SEGMENT_PIECES]);
         for k in 0..4 {
             prop_assert!((constant[k] - c[k]).abs() < 1e-12, "{constant:?} {c:?}");
         }
