@@ -4,10 +4,10 @@ sample function giving each point's colour and extinction."""
 import numpy as np
 
 
-def render(sample, box, step, size=128):
-    """A size x size image of the box [0, box] (finest voxel units) drawn at
-    `step`: `sample(points)` returns (rgb, extinction per unit length) at an
-    array of points; points outside the box add nothing."""
+def ray_grid(box, size, span=1.0):
+    """The size x size rays' origins (a plane in front of the box [0, box],
+    `span` times the box's half diagonal each way), their shared oblique
+    direction and that half diagonal."""
     box = np.array(box, float)
     d = np.array([0.8, 0.45, 0.4])
     d /= np.linalg.norm(d)
@@ -15,9 +15,18 @@ def render(sample, box, step, size=128):
     u /= np.linalg.norm(u)
     v = np.cross(u, d)
     radius = np.linalg.norm(box) / 2
-    s = np.linspace(-radius, radius, size)
+    s = np.linspace(-span * radius, span * radius, size)
     uu, vv = np.meshgrid(s, s)
     origin = box / 2 + uu[..., None] * u + vv[..., None] * v - d * radius * 1.01
+    return origin, d, radius
+
+
+def render(sample, box, step, size=128):
+    """A size x size image of the box [0, box] (finest voxel units) drawn at
+    `step`: `sample(points)` returns (rgb, extinction per unit length) at an
+    array of points; points outside the box add nothing."""
+    origin, d, radius = ray_grid(box, size)
+    box = np.array(box, float)
     color = np.zeros((size, size, 3))
     trans = np.ones((size, size))
     for k in range(int(2.02 * radius / step)):

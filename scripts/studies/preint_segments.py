@@ -6,7 +6,7 @@ know to stop losing (issue 35, item 5; docs/rendering-model.md,
 One small orthographic caster (64 x 64 rays through the volume's box in
 voxel units, trilinear, front to back, unshaded) draws the shared head CT
 with two transfer functions and the T1 MRI at steps 1/8 to
-4 voxels six ways, each against the exact integral (the plain sum at 1/32
+4 voxels seven ways, each against the exact integral (the plain sum at 1/32
 voxel) as PSNR in dB:
 
   plain          a point sample every step, standing for the step after it
@@ -22,6 +22,10 @@ voxel) as PSNR in dB:
                  segment's two samples and the one before them
                  ((-s0 + 6 s1 + 3 s2) / 8: no sample after the segment, so
                  no latency)
+  parabola, 4 pieces
+                 four linear pieces along that parabola (what the renderers
+                 now do: docs/rendering-model.md, "The value along a
+                 segment")
   cubic          the segment integrated along that Catmull-Rom cubic (what
                  any model built from the samples along the ray can reach at
                  best with this interpolant)
@@ -33,14 +37,15 @@ Every segment is integrated numerically (16 sub-steps), so the figures are
 the models', not a table's. The transfer functions: the pareto suite's
 for the CT's DVR (soft tissue, a transparent notch at 300 HU, bone from
 500 HU) and the MRI's, and issue 35's
-bone ramp on the CT, in grey (the suite's colours aside). Needs numpy and ../shared/data beside the
-repository; about 3 minutes on two cores.
+bone ramp on the CT in grey; the suite's colours matter (a first version
+in grey had the MRI's segments win where brickray's lose). Needs numpy and ../shared/data beside the
+repository; about 4 minutes on two idle cores.
 
     python3 scripts/studies/preint_segments.py
 """
 import numpy as np
 
-from caster import psnr
+from caster import psnr, ray_grid
 from coarse_classification import load, ramp, trilinear
 
 H = 1.0 / 32  # the exact integral's step, voxels
@@ -49,18 +54,26 @@ SUB = 16  # sub-steps per segment
 STEPS = [0.125, 0.25, 0.5, 1.0, 2.0, 4.0]
 
 
+def coloured(points):
+    """A piecewise-linear TF over raw values with colours: (value, opacity
+    per voxel, (r, g, b)) points; returns extinction and colour functions."""
+    xs = np.array([p[0] for p in points], float)
+    alpha = np.array([p[1] for p in points], float)
+    cols = np.array([p[2] for p in points], float)
+
+    def ext(v):
+        return -np.log1p(-np.minimum(np.interp(v, xs, alpha), 0.999))
+
+    def rgb(v):
+        return np.stack([np.interp(v, xs, cols[:, k]) for k in range(3)], -1)
+    return ext, rgb
+
+
 def rays(box):
     """Origins, the shared direction, and each ray's [t0, t1] in the box."""
+    origin, d, _ = ray_grid(box, SIZE, 0.7)
+    origin = origin.reshape(-1, 3)
     box = np.array(box, float)
-    d = np.array([0.8, 0.45, 0.4])
-    d /= np.linalg.norm(d)
-    u = np.cross(d, [0, 0, 1.0])
-    u /= np.linalg.norm(u)
-    v = np.cross(u, d)
-    radius = np.linalg.norm(box) / 2
-    s = np.linspace(-0.7 * radius, 0.7 * radius, SIZE)
-    uu, vv = np.meshgrid(s, s)
-    origin = (box / 2 + uu[..., None] * u + vv[..., None] * v - d * radius * 1.01).reshape(-1, 3)
     with np.errstate(divide="ignore"):
         a = (0 - origin) / d
         b = (box - origin) / d
@@ -140,6 +153,16 @@ def draw(vals, ext, rgb, t0, t1, step, how):
         mid_cr = (9 * (s1 + s2) - s0 - s3) / 16
         if how == "linear":
             c, a = segment(ext, rgb, lambda x: s1 + (s2 - s1) * x, step)
+        elif how == "parabola, 4 pieces":
+            b = 0.5 * (s2 - s0)
+            q = 0.5 * (s2 - 2 * s1 + s0)
+            xs = [s1 + (b + q * (j / 4)) * (j / 4) for j in range(5)]
+            c = 0.0
+            a = np.zeros_like(s1)
+            for j in range(4):
+                cj, aj = segment(ext, rgb, (lambda u, w: (lambda x: u + (w - u) * x))(xs[j], xs[j + 1]), step / 4)
+                c = c + (1 - a)[:, None] * cj
+                a = a + (1 - a) * aj
         elif how in ("midpoint", "quadratic", "sampled mid"):
             if how == "midpoint":
                 m = mid_cr
@@ -183,19 +206,23 @@ def exact(vals, ext, rgb):
 def main():
     ct, _ = load("invesalius_cranium_ct")
     mri, _ = load("pycortex_s1_t1_mri")
-    # The pareto suite's CT DVR (soft tissue with faint bone) and MRI
-    # transfer functions (crates/harness), as (raw value, opacity, grey); and
-    # issue 35's bone ramp (coarse_classification.py).
-    soft = ramp([(-2000, 0, 0.4), (-500, 0, 0.4), (-100, 0.02, 0.6), (150, 0.03, 0.7),
-                 (300, 0.0, 1.0), (500, 0.3, 1.0), (4000, 0.3, 1.0)])
+    # The pareto suite's CT DVR (soft tissue, a transparent notch at 300 HU,
+    # bone from 500 HU) and MRI transfer functions with their colours
+    # (crates/harness), and issue 35's bone ramp in grey.
+    soft = coloured([(-3000, 0, (.6, .3, .2)), (-500, 0, (.6, .3, .2)), (-100, 0.02, (.8, .5, .4)),
+                     (150, 0.03, (.9, .6, .5)), (300, 0.0, (1, 1, .9)), (500, 0.3, (1, 1, .95)),
+                     (5000, 0.3, (1, 1, .95))])
     bone = ramp([(-2000, 0, 0), (100, 0, 0.2), (150, 0.02, 0.5), (300, 0.5, 1.0), (4000, 0.5, 1.0)])
-    mri_tf = ramp([(0, 0, 0.3), (30.6, 0, 0.3), (89.25, 0.08, 0.9), (178.5, 0.4, 1.0), (255, 0.4, 1.0)])
+    top = 248  # the MRI's value range, 0..248
+    mri_tf = coloured([(0, 0, (.3, .12, .06)), (0.12 * top, 0, (.3, .12, .06)),
+                       (0.35 * top, 0.08, (.9, .5, .3)), (0.7 * top, 0.4, (1, .9, .8)),
+                       (top + 10, 0.4, (1, .9, .8))])
     scenes = [
         ("head CT, soft tissue", ct, soft),
         ("head CT, bone ramp", ct, bone),
         ("T1 MRI", mri, mri_tf),
     ]
-    hows = ["plain", "linear", "midpoint", "quadratic", "cubic", "sampled mid"]
+    hows = ["plain", "linear", "midpoint", "quadratic", "parabola, 4 pieces", "cubic", "sampled mid"]
     print("| volume | step (voxels) | " + " | ".join(hows) + " |")
     print("|---|---:|" + "---:|" * len(hows))
     for name, vol, (ext, rgb) in scenes:
