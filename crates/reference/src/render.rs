@@ -512,9 +512,9 @@ impl Marcher<'_> {
 
     /// Pre-integrated DVR: the segment between each two samples, in pieces
     /// along the parabola through them and the sample before
-    /// ([`segment_values`], [`join_pieces`]), then the ray's last piece. The ray's first sample only records the front of the
-    /// next segment (the segment ending there would start a step before the
-    /// ray does). A segment `[t - dt, t]` is shaded at its midpoint: at its
+    /// ([`segment_values`], [`join_pieces`]), then the ray's last piece. The
+    /// ray's first sample only records the front of the next segment (the
+    /// segment ending there would start a step before the ray does). A segment `[t - dt, t]` is shaded at its midpoint: at its
     /// back sample the shading would lag the emission by half a step. The last
     /// piece, from the last sample to the ray's end (less than a step), is
     /// taken as constant at the last sample's value and shaded there: the
