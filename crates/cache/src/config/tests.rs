@@ -331,3 +331,66 @@ fn a_pool_holds_every_brick_when_its_slots_cover_every_level() {
     // No pool at all: false, not an error.
     assert!(!kept.holds_every_brick(&cube, 0));
 }
+
+/// The pool sizes docs/cache.md quotes for the shared volumes' stores
+/// (bricks of 32, apron 2, 16-bit texels, a 2048 texture limit): a budget
+/// beyond a slot for every brick is not allocated. Printed with
+/// `cargo test -p brickray-cache --lib shared_volumes_pools -- --nocapture`.
+#[test]
+fn shared_volumes_pools_stop_at_their_bricks() {
+    use brickray_core::{DType, VolumeDesc};
+    let volume = |dims, dtype, value_range| VolumeDesc {
+        dims,
+        dtype,
+        spacing: [1.0; 3],
+        value_range,
+        kind: Default::default(),
+    };
+    let cases = [
+        (
+            "T1 MRI",
+            volume([256; 3], DType::U8, [0.0, 248.0]),
+            585,
+            585,
+        ),
+        (
+            "head CT",
+            volume([256, 256, 108], DType::I16, [-1024.0, 2986.0]),
+            293,
+            294,
+        ),
+    ];
+    let mib = |slots: u64, bytes: u64| (slots * bytes) as f64 / f64::from(1 << 20);
+    for (name, desc, bricks, slots) in cases {
+        let layout = OctreeLayout::new(desc, 32, 2);
+        assert_eq!(brick_count(&layout), bricks, "{name}");
+        for (gradients, budget) in [(false, 256u64 << 20), (true, 1 << 30)] {
+            let mut g = gpu(&layout);
+            g.gradients = gradients;
+            let l = g.pool_limits(&layout, budget).unwrap();
+            let capped = l.grid().unwrap().iter().map(|&a| a as u64).product::<u64>();
+            let whole = PoolLimits {
+                max_slots: u64::MAX,
+                ..l
+            }
+            .grid()
+            .unwrap()
+            .iter()
+            .map(|&a| a as u64)
+            .product::<u64>();
+            println!(
+                "{name}, gradients {gradients}, {} MiB: {bricks} bricks, slot {} B: {whole} slots \
+                 ({:.1} MiB) without the cap, {capped} ({:.1} MiB) with it",
+                budget >> 20,
+                l.slot_bytes,
+                mib(whole, l.slot_bytes),
+                mib(capped, l.slot_bytes)
+            );
+            assert_eq!(capped, slots, "{name}, gradients {gradients}");
+            assert!(
+                whole > capped,
+                "{name}: the budget holds more than the volume"
+            );
+        }
+    }
+}
