@@ -251,6 +251,24 @@ fn marschner_lobb_store(
     (vol, brickray_harness::scenes::marschner_lobb_tf(), source)
 }
 
+/// Marschner-Lobb's store (`marschner_lobb_store`) streamed at the finest
+/// level twice, one volume keeping its gradients and one shading by six
+/// reads, each with its renderer.
+#[allow(clippy::type_complexity)]
+fn kept_and_six_reads(
+    dir: &tempfile::TempDir,
+) -> (
+    Volume,
+    TransferFunction,
+    (VolumeRenderer, brickray::StreamedVolume),
+    (VolumeRenderer, brickray::StreamedVolume),
+) {
+    let (vol, tf, source) = marschner_lobb_store(dir);
+    let kept = streamed(&source, &tf, streaming(0.0), KeepGradients::Always);
+    let six = streamed(&source, &tf, streaming(0.0), KeepGradients::Never);
+    (vol, tf, kept, six)
+}
+
 /// Out of core, a streamed volume that keeps its texels' gradients
 /// (`VolumeOptions::gradients`): made on the GPU as each brick is uploaded,
 /// counted in the atlas's bytes, and shading as six reads do (half floats
@@ -362,9 +380,7 @@ fn a_dropped_gradient_pass_in_core_is_recorded_again() {
 #[test]
 fn dropped_gradient_passes_out_of_core_are_recorded_again() {
     let dir = tempfile::tempdir().unwrap();
-    let (vol, tf, source) = marschner_lobb_store(&dir);
-    let (mut pre, _with) = streamed(&source, &tf, streaming(0.0), KeepGradients::Always);
-    let (mut six, _without) = streamed(&source, &tf, streaming(0.0), KeepGradients::Never);
+    let (vol, tf, (mut pre, _with), (mut six, _without)) = kept_and_six_reads(&dir);
     let s = shaded(RenderMode::Dvr, true);
     let (mut planned, mut uploaded) = (0, 0);
     for _ in 0..60 {
@@ -396,9 +412,7 @@ fn dropped_gradient_passes_out_of_core_are_recorded_again() {
 #[test]
 fn kept_gradients_are_made_by_the_first_shaded_frame() {
     let dir = tempfile::tempdir().unwrap();
-    let (vol, tf, source) = marschner_lobb_store(&dir);
-    let (mut pre, _with) = streamed(&source, &tf, streaming(0.0), KeepGradients::Always);
-    let (mut six, _without) = streamed(&source, &tf, streaming(0.0), KeepGradients::Never);
+    let (vol, tf, (mut pre, _with), (mut six, _without)) = kept_and_six_reads(&dir);
     draw_converged(&mut pre, &vol, shaded(RenderMode::Dvr, false));
     settled_frame_as_six_reads(
         "out of core, gradients made by the first shaded frame",
