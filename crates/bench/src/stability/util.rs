@@ -6,7 +6,7 @@ use brickray_core::{
     TransferFunction, Volume, VolumeFrame,
 };
 use brickray_harness::{GpuContext, target_desc};
-use brickray_render::{OutOfCoreConfig, VolumeRenderer};
+use brickray_render::{OutOfCoreConfig, RenderError, VolumeRenderer};
 use brickray_store::ProceduralSource;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -95,17 +95,26 @@ pub(crate) fn quality(img: &[u8], reference: &[u8], size: u32) -> (f64, f64) {
     (p, (f * 1e4).round() / 1e4)
 }
 
+/// A renderer given its volume by `attach`, then `tf`.
+fn renderer_with(
+    gpu: &GpuContext,
+    tf: &TransferFunction,
+    attach: impl FnOnce(&mut VolumeRenderer) -> Result<(), RenderError>,
+) -> Result<VolumeRenderer, String> {
+    let mut r = VolumeRenderer::new(&gpu.device, target_desc()).map_err(s)?;
+    attach(&mut r).map_err(s)?;
+    r.set_transfer_function(&gpu.device, &gpu.queue, tf)
+        .map_err(s)?;
+    Ok(r)
+}
+
 /// An in-core renderer of `vol` with `tf`.
 pub(crate) fn incore(
     gpu: &GpuContext,
     vol: &Volume,
     tf: &TransferFunction,
 ) -> Result<VolumeRenderer, String> {
-    let mut r = VolumeRenderer::new(&gpu.device, target_desc()).map_err(s)?;
-    r.set_volume(&gpu.device, &gpu.queue, vol).map_err(s)?;
-    r.set_transfer_function(&gpu.device, &gpu.queue, tf)
-        .map_err(s)?;
-    Ok(r)
+    renderer_with(gpu, tf, |r| r.set_volume(&gpu.device, &gpu.queue, vol))
 }
 
 /// An out-of-core renderer of `source` with `config` and `tf`.
@@ -115,12 +124,9 @@ pub(crate) fn ooc(
     config: OutOfCoreConfig,
     tf: &TransferFunction,
 ) -> Result<VolumeRenderer, String> {
-    let mut r = VolumeRenderer::new(&gpu.device, target_desc()).map_err(s)?;
-    r.set_volume_source(&gpu.device, &gpu.queue, source, config)
-        .map_err(s)?;
-    r.set_transfer_function(&gpu.device, &gpu.queue, tf)
-        .map_err(s)?;
-    Ok(r)
+    renderer_with(gpu, tf, |r| {
+        r.set_volume_source(&gpu.device, &gpu.queue, source, config)
+    })
 }
 
 /// [`ooc`] keeping no gradients whatever the budget (`KeepGradients::Never`):
@@ -138,11 +144,7 @@ pub(crate) fn ooc_without_gradients(
     };
     let v = brickray_render::StreamedVolume::new(&gpu.device, &gpu.queue, source, config, options)
         .map_err(s)?;
-    let mut r = VolumeRenderer::new(&gpu.device, target_desc()).map_err(s)?;
-    r.set_streamed_volume(&gpu.device, &v).map_err(s)?;
-    r.set_transfer_function(&gpu.device, &gpu.queue, tf)
-        .map_err(s)?;
-    Ok(r)
+    renderer_with(gpu, tf, |r| r.set_streamed_volume(&gpu.device, &v))
 }
 
 /// A source that sleeps `delay` before every brick read (a slow disk or
