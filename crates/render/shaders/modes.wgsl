@@ -35,6 +35,12 @@ override SPREAD: bool = false;
 // them; declared here with the other switches, read by incore.wgsl and
 // ooc.wgsl).
 override GRADIENTS: bool = false;
+// Out of core: some leaf of the cut drawn fades between its brick and an
+// ancestor's (docs/stability.md). Off, a sample reads its own brick alone
+// and a sub-cell its own range: a converged frame has no fade, and its
+// samples cost 5-10% less without the second pass (benchmarks.md, `raw`).
+// The in-core kernels ignore it.
+override FADES: bool = true;
 
 // Of 8 voxels' label texels and trilinear weights, the label whose weights
 // sum highest, ties to the first corner's (labels::smooth_label_at).

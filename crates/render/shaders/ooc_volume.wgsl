@@ -125,7 +125,8 @@ fn brick_of(leaf: OctBox, slot: u32) -> Brick {
         b.fb_uv0 = (slots[fs].offset.xyz + f32(ooc.apron) - fmin * fk) * inv_atlas;
         let hf = hd + hu;
         b.fb_f3 = vec3<f32>(oct_exp2_pos(hf.x), oct_exp2_pos(hf.y), oct_exp2_pos(hf.z));
-        b.fb_w = clamp(slots[slot].range.w, 0.0, 1.0);
+        // (Without FADES no row carries a fade: 0 whatever the table says.)
+        b.fb_w = select(0.0, clamp(slots[slot].range.w, 0.0, 1.0), FADES);
         b.fb_slot = fs;
         b.fb_box_min = fmin;
         b.fb_box_size = size;
@@ -180,8 +181,10 @@ fn cursor_enter(c: ptr<function, Cursor>, b: Brick) {
 // read is the loop's second trip, which a group without a fading lane skips
 // (an `if` cost every sample a second atlas read, 30% of the brute-force
 // march).
+// Without FADES (no leaf of the frame's cut fades) always 1, and the
+// second pass is compiled out.
 fn cursor_passes(c: Cursor) -> u32 {
-    return select(1u, 2u, c.b.fb_w > 0.0);
+    return select(1u, 2u, FADES && c.b.fb_w > 0.0);
 }
 
 // The ray parameter of one finest voxel (the step is step_factor of it).
@@ -231,7 +234,11 @@ fn range_union(a: vec2<f32>, b: vec2<f32>) -> vec2<f32> {
 // empty space like any other (it once could not, and a frame in which many
 // bricks arrived took up to 2x a converged one).
 fn sub_cell_range(b: Brick, j: vec3<u32>) -> vec2<f32> {
-    return range_union(sub_cells[sub_cell_index(b.slot, j)], sub_cells[fade_sub_cell_index(b, j)]);
+    let own = sub_cells[sub_cell_index(b.slot, j)];
+    if (!FADES) {
+        return own;
+    }
+    return range_union(own, sub_cells[fade_sub_cell_index(b, j)]);
 }
 
 // The normalized values a sample of the data leaf in `slot` can take: its

@@ -87,11 +87,14 @@ pub(crate) struct Variant {
     /// Shaded DVR reads the per-voxel gradients (`GRADIENTS` in modes.wgsl;
     /// in core, once they are made).
     pub(crate) gradients: bool,
+    /// Out of core: some leaf of the cut applied last fades (`FADES` in
+    /// modes.wgsl; without, a sample reads its own brick alone).
+    pub(crate) fades: bool,
 }
 
 /// The override constants of a pipeline, by WGSL name (modes.wgsl,
 /// predict.wgsl).
-pub(crate) const OVERRIDES: [&str; 14] = [
+pub(crate) const OVERRIDES: [&str; 15] = [
     "MODE",
     "ERT",
     "ESS",
@@ -105,6 +108,7 @@ pub(crate) const OVERRIDES: [&str; 14] = [
     "SMOOTH_LABELS",
     "SPREAD",
     "GRADIENTS",
+    "FADES",
     "OVERLAY",
 ];
 
@@ -155,6 +159,7 @@ impl Variant {
             channels: 0,
             spread: false,
             gradients: false,
+            fades: false,
         };
         match prediction {
             Some(p) if mode == KernelMode::Iso => Variant {
@@ -188,6 +193,7 @@ impl Variant {
             channels: 0,
             spread: false,
             gradients: false,
+            fades: false,
         }
     }
 
@@ -231,7 +237,7 @@ impl Variant {
         c
     }
 
-    fn shared_constants(&self) -> [(&'static str, f64); 14] {
+    fn shared_constants(&self) -> [(&'static str, f64); 15] {
         let b = |x: bool| if x { 1.0 } else { 0.0 };
         let v = [
             self.mode as u32 as f64,
@@ -247,6 +253,7 @@ impl Variant {
             b(self.smooth_labels),
             b(self.spread),
             b(self.gradients),
+            b(self.fades),
             self.overlay as f64,
         ];
         std::array::from_fn(|i| (OVERRIDES[i], v[i]))

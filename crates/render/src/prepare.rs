@@ -319,12 +319,16 @@ pub(crate) fn frame_variant(
         };
         return Variant {
             weights: backend.get().measures_weights(),
+            fades: backend.get().fades(),
             ..v
         };
     }
     let b = backend.get();
     if slice {
-        Variant::slice(b.measures_weights(), b.labels(), overlay)
+        Variant {
+            fades: b.fades(),
+            ..Variant::slice(b.measures_weights(), b.labels(), overlay)
+        }
     } else {
         let v = Variant::of(
             settings,
@@ -344,6 +348,7 @@ pub(crate) fn frame_variant(
             spread: b.spread() && dvr && !v.preint,
             gradients: b.gradients() && dvr && v.shade && !v.labels,
             ess: v.ess && (!mip || b.mip_skipping()) && (!dvr || b.dvr_skipping()),
+            fades: b.fades(),
             ..v
         }
     }

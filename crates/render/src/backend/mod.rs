@@ -71,6 +71,12 @@ pub(crate) trait VolumeBackend: std::fmt::Debug {
     fn dvr_skipping(&self) -> bool {
         true
     }
+    /// True when some leaf the kernel draws mixes its brick with an
+    /// ancestor's (out of core, a fade of the plan applied last): without
+    /// one, the kernel reads each sample's own brick alone (`FADES`).
+    fn fades(&self) -> bool {
+        false
+    }
     /// Most index leaves one ray may visit (0 in core).
     fn max_leaves(&self) -> u32;
     /// Step lengths the kernel samples with (rows of the corrected TF table):

@@ -52,6 +52,9 @@ pub(crate) struct OutOfCore {
     /// `brickray_core::DVR_SKIP_SHARE_MIN_BRICKS` of the plan's bricks'
     /// sub-cells are transparent through the transfer function.
     dvr_skipping: bool,
+    /// Whether a leaf of the plan applied last fades (its slot's row
+    /// mixes in an ancestor's brick; a borrowed octant does not).
+    fades: bool,
 }
 
 impl std::fmt::Debug for OutOfCore {
@@ -122,6 +125,7 @@ impl OutOfCore {
             mip_skipping: true,
             dvr_policy,
             dvr_skipping: true,
+            fades: true,
         })
     }
 
@@ -224,6 +228,7 @@ impl OutOfCore {
             || share.is_none_or(|share| share >= brickray_core::DVR_SKIP_SHARE_MIN_BRICKS);
         let gradients_kept = s.gpu_format().gradients;
         drop(s);
+        self.fades = plan.fades.iter().any(|f| !f.borrowed);
         self.frame = plan.frame;
         self.leaves.clone_from(&plan.leaves);
         self.queries = plan.stats.policy.occlusion_queries();
@@ -373,6 +378,10 @@ impl VolumeBackend for OutOfCore {
 
     fn dvr_skipping(&self) -> bool {
         self.dvr_skipping
+    }
+
+    fn fades(&self) -> bool {
+        self.fades
     }
 
     fn spread(&self) -> bool {

@@ -633,7 +633,8 @@ fn every_shader_file_is_covered() {
 /// (OVERLAY colour and mask) with DVR and every combination of ERT, ESS and
 /// shading, pre-integrated, with the visible weights and smooth boundaries,
 /// and in colour with iso (also predicting) and MIP; DVR with spreads
-/// (SPREAD) and shaded DVR reading the per-voxel gradients (GRADIENTS).
+/// (SPREAD) and shaded DVR reading the per-voxel gradients (GRADIENTS);
+/// out of core, each with a fading leaf and without (FADES).
 #[test]
 fn every_override_permutation_validates() {
     let mut combos = Vec::new();
@@ -708,14 +709,23 @@ fn every_override_permutation_validates() {
     for overlay in [1u32, 2] {
         combos.push((KernelMode::Dvr, 0b111 | 1 << 11, overlay));
     }
-    for (name, src) in [("incore", incore()), ("ooc", ooc())] {
+    // Out of core each with and without a fading leaf (FADES, bit 12); the
+    // in-core kernel ignores it.
+    let fades = 1u32 << switches().iter().position(|s| *s == "FADES").unwrap();
+    for (name, src, fading) in [
+        ("incore", incore(), &[0][..]),
+        ("ooc", ooc(), &[0, fades][..]),
+    ] {
         for &(mode, bits, overlay) in &combos {
-            let s = specialise(name, &src, mode, bits, overlay);
-            assert!(!s.contains("override "), "{name}: an override left");
-            module(
-                &format!("{name} {mode:?} {bits:010b} overlay {overlay}"),
-                &s,
-            );
+            for &f in fading {
+                let bits = bits | f;
+                let s = specialise(name, &src, mode, bits, overlay);
+                assert!(!s.contains("override "), "{name}: an override left");
+                module(
+                    &format!("{name} {mode:?} {bits:013b} overlay {overlay}"),
+                    &s,
+                );
+            }
         }
     }
 }
