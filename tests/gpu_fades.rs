@@ -5,7 +5,8 @@
 //!   tolerance change refines the whole cut in one frame; with fades of 4
 //!   frames the 3 frames in between lie between the old and the new image
 //!   (mean absolute distance to the old one grows, to the new one shrinks) and
-//!   the 4th is the new image; with fades off the 1st is;
+//!   the 4th is the new image; with fades off the 1st is; a renderer warmed
+//!   up for the mode compiles no pipeline in any of these frames;
 //! * the floor: with a pool of 40 slots and a CPU cache of 9 bricks, a camera
 //!   circling and diving never draws a leaf without a brick (`holes` 0);
 //! * a zoom path (40 frames, 2.6% closer a frame, tolerance 4 px) with fades
@@ -108,13 +109,20 @@ fn mad(a: &[u8], b: &[u8]) -> f64 {
     s as f64 / (a.len() / 4 * 3) as f64
 }
 
-/// Settles coarse (root only) and fine (all resident), then switches from
-/// coarse to fine; returns (old, new, the frames after the switch).
-fn switch(
-    mode: RenderMode,
-    fade: Option<FadeDuration>,
-    frames: usize,
-) -> (Vec<u8>, Vec<u8>, Vec<Vec<u8>>) {
+/// What [`switch`] drew: the settled coarse and fine images, the frames
+/// after the switch, and the pipelines compiled once the renderer was warmed
+/// up for the mode and at the end.
+struct Switch {
+    old: Vec<u8>,
+    new: Vec<u8>,
+    after: Vec<Vec<u8>>,
+    pipelines_warm: usize,
+    pipelines_end: usize,
+}
+
+/// Warms the renderer up for the mode's default settings, settles coarse
+/// (root only) and fine (all resident), then switches from coarse to fine.
+fn switch(mode: RenderMode, fade: Option<FadeDuration>, frames: usize) -> Switch {
     let vol = noise(64);
     let dir = tempfile::tempdir().unwrap();
     let mut r = renderer(
@@ -128,6 +136,8 @@ fn switch(
     );
     let t = Offscreen::new(&gpu().device, SIZE, SIZE);
     let d = desc(Camera::orbit(Vec3::ZERO, 1.8, 0.5, 0.3), mode);
+    r.warm_up(&gpu().device, &[d.settings]).unwrap();
+    let pipelines_warm = r.compiled_pipelines();
     let new = settle(&mut r, &t, &d);
     brickray_harness::configure(gpu(), &r, |c| c.tolerance_px = 1e6).unwrap();
     let old = settle(&mut r, &t, &d);
@@ -138,13 +148,32 @@ fn switch(
     );
     brickray_harness::configure(gpu(), &r, |c| c.tolerance_px = 0.0).unwrap();
     let after = (0..frames).map(|_| draw(&mut r, &t, &d)).collect();
-    (old, new, after)
+    Switch {
+        old,
+        new,
+        after,
+        pipelines_warm,
+        pipelines_end: r.compiled_pipelines(),
+    }
 }
 
 #[test]
 fn a_split_fades_over_the_configured_frames() {
     for mode in MODES {
-        let (old, new, after) = switch(mode, Some(FadeDuration::Frames(4)), 5);
+        let Switch {
+            old,
+            new,
+            after,
+            pipelines_warm,
+            pipelines_end,
+        } = switch(mode, Some(FadeDuration::Frames(4)), 5);
+        // Warming up compiled what the frames used: with fading leaves (while
+        // bricks arrived, and during the split's fade) and without (settled).
+        assert!(pipelines_warm >= 2, "{mode:?}: {pipelines_warm} warmed");
+        assert_eq!(
+            pipelines_end, pipelines_warm,
+            "{mode:?}: a frame compiled a pipeline warm_up had not"
+        );
         let span = mad(&old, &new);
         assert!(span > 1.0, "{mode:?}: the levels differ ({span})");
         let to_old: Vec<f64> = after.iter().map(|f| mad(f, &old)).collect();
@@ -280,7 +309,9 @@ fn fading_leaves_of_channels_skip_empty_space() {
 
 #[test]
 fn fades_off_switch_in_one_frame() {
-    let (old, new, after) = switch(RenderMode::Dvr, None, 2);
+    let Switch {
+        old, new, after, ..
+    } = switch(RenderMode::Dvr, None, 2);
     assert!(mad(&old, &new) > 1.0);
     assert_eq!(mad(&after[0], &new), 0.0);
 }

@@ -227,6 +227,36 @@ impl Variant {
         self.predict
     }
 
+    /// The variants a view drawn with this one may switch to with no change
+    /// of its settings, this one first: where `skipping_asked` (the settings
+    /// ask for empty-space skipping in DVR or MIP of one channel) without
+    /// skipping as well, which the backend's rule may choose (in core when the
+    /// transfer function changes, out of core with each plan); out of core
+    /// (`kind`), each with and without a fading leaf ([`Variant::fades`],
+    /// which changes whenever bricks arrive or a fade ends).
+    pub(crate) fn siblings(self, kind: KernelKind, skipping_asked: bool) -> Vec<Variant> {
+        let one_channel = matches!(kind, KernelKind::InCore | KernelKind::OutOfCore);
+        let mut ess = vec![self.ess];
+        if one_channel && skipping_asked && self.mode != KernelMode::Iso && !self.slice {
+            ess.push(!self.ess);
+        }
+        let mut fades = vec![self.fades];
+        if matches!(kind, KernelKind::OutOfCore | KernelKind::OutOfCoreChannels) {
+            fades.push(!self.fades);
+        }
+        let mut out = Vec::new();
+        for &f in &fades {
+            for &e in &ess {
+                out.push(Variant {
+                    ess: e,
+                    fades: f,
+                    ..self
+                });
+            }
+        }
+        out
+    }
+
     /// The override constants of the pipeline (the single-channel kernels
     /// do not declare `CHANNELS`).
     fn constants(&self) -> Vec<(&'static str, f64)> {
@@ -325,6 +355,11 @@ pub(crate) fn check_limits(device: &wgpu::Device) -> Result<(), RenderError> {
 }
 
 impl Kernels {
+    /// Pipelines compiled so far, over every kernel.
+    pub(crate) fn compiled(&self) -> usize {
+        self.kernels.values().map(|k| k.pipelines.len()).sum()
+    }
+
     /// The pipeline of `variant` for the `kind` backend, whose bind group layouts
     /// are `groups` (frame, transfer function, volume, overlay); compiled on
     /// first use.
@@ -429,5 +464,51 @@ mod tests {
                 assert!(r.is_ok(), "{b:?}: {r:?}");
             }
         }
+    }
+
+    /// The variants a warm-up compiles: skipping both ways only where a
+    /// backend's rule may turn it off (DVR and MIP of one channel, asked
+    /// for), fades both ways only out of core; each once, the variant itself
+    /// first.
+    #[test]
+    fn siblings_cover_what_a_backend_switches_by_itself() {
+        let s = |mode| RenderSettings {
+            mode,
+            ..Default::default()
+        };
+        let iso = RenderMode::Iso {
+            value: 0.5,
+            color: [1.0; 3],
+        };
+        let cases = [
+            (KernelKind::InCore, RenderMode::Dvr, true, 2),
+            (KernelKind::InCore, iso, false, 1),
+            (KernelKind::InCore, RenderMode::Dvr, false, 1),
+            (KernelKind::OutOfCore, RenderMode::Mip, true, 4),
+            (KernelKind::OutOfCore, iso, false, 2),
+            (KernelKind::Channels, RenderMode::Dvr, true, 1),
+            (KernelKind::OutOfCoreChannels, RenderMode::Dvr, true, 2),
+        ];
+        for (kind, mode, asked, n) in cases {
+            let v = Variant::of(&s(mode), None, false, false, None);
+            let all = v.siblings(kind, asked);
+            assert_eq!(all.len(), n, "{kind:?} {mode:?} asked {asked}");
+            assert_eq!(all[0], v);
+            let distinct: std::collections::HashSet<_> = all.iter().collect();
+            assert_eq!(distinct.len(), n, "{kind:?} {mode:?}: repeated");
+            for w in &all {
+                assert_eq!(
+                    Variant {
+                        ess: v.ess,
+                        fades: v.fades,
+                        ..*w
+                    },
+                    v
+                );
+            }
+        }
+        // A slice view samples without skipping: fades only.
+        let slice = Variant::slice(false, false, None);
+        assert_eq!(slice.siblings(KernelKind::OutOfCore, true).len(), 2);
     }
 }

@@ -601,7 +601,12 @@ impl VolumeRenderer {
 
     /// Compiles the ray-cast pipelines of `settings` for the current volume now
     /// (set-up time) instead of on first use in `prepare`, so switching mode,
-    /// accelerations or shading later does not stall a frame.
+    /// accelerations or shading later does not stall a frame. With each
+    /// setting, the pipelines its frames may switch to by themselves: without
+    /// empty-space skipping where the volume's rule may turn it off (a new
+    /// transfer function in core, a new cut out of core), and out of core
+    /// with and without fading leaves (a cut's fades start and end as bricks
+    /// arrive): up to four per setting.
     pub fn warm_up(
         &mut self,
         device: &wgpu::Device,
@@ -619,9 +624,20 @@ impl VolumeRenderer {
         ];
         for s in settings {
             let v = prepare::frame_variant(b, s, false, self.prediction, self.overlay.style());
-            self.kernels.pipeline(device, backend.kind(), layouts, v)?;
+            let asked = s.accel.empty_space_skipping
+                && !matches!(s.mode, brickray_core::RenderMode::Iso { .. });
+            for w in v.siblings(backend.kind(), asked) {
+                self.kernels.pipeline(device, backend.kind(), layouts, w)?;
+            }
         }
         Ok(())
+    }
+
+    /// Diagnostics for tests and benchmarks: the ray-cast and slice
+    /// pipelines compiled so far (each on first use, or by
+    /// [`warm_up`](Self::warm_up)).
+    pub fn compiled_pipelines(&self) -> usize {
+        self.kernels.compiled()
     }
 
     /// Asks what lies under `pixels` (viewport coordinates): the next
