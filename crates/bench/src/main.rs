@@ -12,6 +12,7 @@ mod chart;
 mod formats;
 mod host;
 mod labels;
+mod lodrank;
 mod ooc;
 mod pareto;
 mod prediction;
@@ -138,6 +139,10 @@ enum Suite {
     /// skipping, error against the reference and of coarse levels (needs
     /// ../shared/data).
     Labels(labels::Args),
+    /// How the refiner's priorities rank nodes against their exact cost to
+    /// the image, levels drawn as the TF of their mean and with their spreads
+    /// (GPU-free).
+    Lodrank(lodrank::Args),
     /// Streaming over HTTP with added round-trip time against the local
     /// disk: first image, convergence, bytes and requests, frame times
     /// (needs ../shared/data and python3).
@@ -178,6 +183,7 @@ fn main() -> ExitCode {
         Suite::Stability(a) => emit(stability::run(&a)),
         Suite::U8(a) => emit(u8::run(&a)),
         Suite::Labels(a) => emit(labels::run(&a)),
+        Suite::Lodrank(a) => emit(lodrank::run(&a)),
         Suite::Channels(a) => emit(channels::run(&a)),
         Suite::Remote(a) => emit(remote::run(&a)),
         Suite::Visibility(a) => emit(visibility::run(&a)),

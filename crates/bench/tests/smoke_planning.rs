@@ -1,5 +1,6 @@
-//! Smoke runs of the suites that build, plan and chart rather than time
-//! ray-cast frames (build, formats, host, pareto, stability), as in
+//! Smoke runs of the suites that build, plan, rank and chart rather than
+//! time ray-cast frames (build, formats, host, lodrank, pareto, stability),
+//! as in
 //! `smoke.rs`: a suite at its smallest settings must exit successfully and
 //! end with one JSON object holding its documented keys (docs/benchmarks.md);
 //! never speed. `formats` needs ../shared/data (reported as ignored in a
@@ -296,4 +297,51 @@ fn the_stability_suite_runs_cases_6_to_9() {
     ] {
         assert!(fig["lod_paths"].get(k).is_some(), "no {k} in {fig:?}");
     }
+}
+
+/// The `lodrank` suite on a 32^3 Marschner-Lobb volume at 16 px, bricks of
+/// 8: its keys, and correlations and cost ratios in range.
+#[test]
+fn the_lodrank_suite_runs() {
+    let fig = smoke(
+        &[
+            "lodrank",
+            "--scenes",
+            "ml",
+            "--ml-side",
+            "32",
+            "--size",
+            "16",
+            "--brick",
+            "8",
+        ],
+        &[
+            "size",
+            "brick",
+            "rows",
+            "rho_plain_median",
+            "rho_spread_median",
+        ],
+    );
+    has_fields(
+        &fig,
+        "rows",
+        &[
+            "scene",
+            "finest_bricks",
+            "nodes",
+            "rho_plain",
+            "rho_spread",
+            "rho_costs",
+            "cost_ratio",
+            "seconds",
+        ],
+    );
+    let r = row(&fig, "rows", "scene", "ml_dvr");
+    assert!(r["nodes"].as_u64().unwrap() >= 2, "{r}");
+    for k in ["rho_plain", "rho_spread", "rho_costs"] {
+        let rho = r[k].as_f64().unwrap();
+        assert!((-1.0..=1.0).contains(&rho), "{k}: {r}");
+    }
+    assert!(r["cost_ratio"].as_f64().unwrap() > 0.0, "{r}");
 }

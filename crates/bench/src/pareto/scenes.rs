@@ -21,10 +21,22 @@ impl Scene {
     /// Builds the scene's brick store at `path` (bricks of `brick` voxels; an
     /// anisotropic pyramid where the scene asks for one).
     pub(crate) fn build_store(&self, brick: u32, path: &std::path::Path) -> Result<(), String> {
+        self.build_store_with(brick, path, false)
+    }
+
+    /// [`build_store`](Self::build_store), with each coarse voxel's spread
+    /// where `spread` (`BuildOptions::spread`).
+    pub(crate) fn build_store_with(
+        &self,
+        brick: u32,
+        path: &std::path::Path,
+        spread: bool,
+    ) -> Result<(), String> {
         let mut reader = brickray_io::MemoryReader::new(self.volume.clone(), "memory");
         let build = brickray_store::BuildOptions {
             anisotropic: self.anisotropic,
             brick,
+            spread,
             ..Default::default()
         };
         brickray_store::build(&mut reader, path, &build).map_err(|e| e.to_string())?;

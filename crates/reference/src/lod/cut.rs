@@ -194,8 +194,10 @@ pub struct Resampler<'a> {
     source: &'a dyn BrickSource,
     /// Finest voxels per node voxel, per level and axis.
     factors: Vec<[f64; 3]>,
-    /// Each brick read so far, decoded.
+    /// Each brick read so far, decoded: its values, and apart its spreads
+    /// ([`sample_spread`](Self::sample_spread)).
     bricks: HashMap<NodeKey, Vec<f32>>,
+    spreads: HashMap<NodeKey, Vec<f32>>,
     buf: Vec<u8>,
     /// Stored voxels per brick side; interior voxels and apron per side.
     side: i64,
@@ -231,6 +233,7 @@ impl<'a> Resampler<'a> {
             source,
             factors: (0..layout.levels).map(|l| layout.voxel_factor(l)).collect(),
             bricks: HashMap::new(),
+            spreads: HashMap::new(),
             buf: vec![0u8; layout.brick_bytes()],
             side: layout.stored_side() as i64,
             brick: layout.brick as f64,
@@ -260,7 +263,6 @@ impl<'a> Resampler<'a> {
     pub fn sample(&mut self, key: NodeKey, v: [u32; 3]) -> Result<f32, LodModelError> {
         let f = self.factor(key)?;
         let dtype = self.source.layout().volume.dtype;
-        let (side, b, a) = (self.side, self.brick, self.apron);
         let br = match self.bricks.entry(key) {
             Entry::Occupied(e) => e.into_mut(),
             Entry::Vacant(e) => {
@@ -279,30 +281,34 @@ impl<'a> Resampler<'a> {
                 })
             }
         };
-        let kp = [key.x, key.y, key.z];
-        // Brick-local coordinate of this voxel's centre.
-        let c: [f64; 3] = std::array::from_fn(|i| {
-            ((v[i] as f64 + 0.5) / f[i] - 0.5 - kp[i] as f64 * b + a).clamp(0.0, (side - 1) as f64)
-        });
-        let i0 = c.map(|t| (t.floor() as i64).min(side - 2).max(0));
-        let w: [f64; 3] = std::array::from_fn(|i| c[i] - i0[i] as f64);
-        let at = |i: i64, j: i64, k: i64| {
-            br.get((i + side * (j + side * k)) as usize)
-                .copied()
-                .unwrap_or(0.0) as f64
-        };
-        let mut s = 0.0;
-        for dz in 0..2 {
-            for dy in 0..2 {
-                for dx in 0..2 {
-                    let wt = (if dx == 1 { w[0] } else { 1.0 - w[0] })
-                        * (if dy == 1 { w[1] } else { 1.0 - w[1] })
-                        * (if dz == 1 { w[2] } else { 1.0 - w[2] });
-                    s += wt * at(i0[0] + dx, i0[1] + dy, i0[2] + dz);
-                }
+        Ok(trilinear(br, key, v, f, self.side, self.brick, self.apron))
+    }
+
+    /// The spread ([`BrickSource::read_spread`]: the standard deviation of
+    /// the normalized values of the finest voxels a voxel stands for) at the
+    /// finest voxel `v` as the node `key` draws it, trilinear in its stored
+    /// spreads as [`sample`](Self::sample) is in its values: 0 at the finest
+    /// level, in uniform and empty nodes and in a source without spreads.
+    pub fn sample_spread(&mut self, key: NodeKey, v: [u32; 3]) -> Result<f32, LodModelError> {
+        let f = self.factor(key)?;
+        let n = (self.side * self.side * self.side) as usize;
+        let br = match self.spreads.entry(key) {
+            Entry::Occupied(e) => e.into_mut(),
+            Entry::Vacant(e) => {
+                let info = self.source.node(key)?;
+                e.insert(match info.kind {
+                    NodeKind::Data => {
+                        let mut bits = vec![0u16; n];
+                        self.source.read_spread(key, &mut bits)?;
+                        bits.into_iter()
+                            .map(brickray_core::texel::f16_to_f32)
+                            .collect()
+                    }
+                    _ => vec![0.0; n],
+                })
             }
-        }
-        Ok(s as f32)
+        };
+        Ok(trilinear(br, key, v, f, self.side, self.brick, self.apron))
     }
 
     /// The node of level `l` holding the finest voxel `v`.
@@ -316,7 +322,29 @@ impl<'a> Resampler<'a> {
     /// Every finest voxel (x fastest), from the coarsest node of `leaves`
     /// that holds it: for a cut's leaves, the one leaf that does.
     pub fn resample(&mut self, leaves: &HashSet<NodeKey>) -> Result<Vec<f32>, LodModelError> {
-        self.resample_from(leaves, false)
+        self.resample_from(leaves, false, false)
+    }
+
+    /// The spreads of [`resample`](Self::resample)'s voxels
+    /// ([`sample_spread`](Self::sample_spread)).
+    pub fn resample_spread(
+        &mut self,
+        leaves: &HashSet<NodeKey>,
+    ) -> Result<Vec<f32>, LodModelError> {
+        self.resample_from(leaves, false, true)
+    }
+
+    /// `v` of `key`: its value, or with `spread` its spread.
+    fn sample_field(
+        &mut self,
+        key: NodeKey,
+        v: [u32; 3],
+        spread: bool,
+    ) -> Result<f32, LodModelError> {
+        match spread {
+            true => self.sample_spread(key, v),
+            false => self.sample(key, v),
+        }
     }
 
     /// Every finest voxel (x fastest), from the deepest node of `nodes` that
@@ -326,13 +354,14 @@ impl<'a> Resampler<'a> {
         &mut self,
         nodes: &HashSet<NodeKey>,
     ) -> Result<Vec<f32>, LodModelError> {
-        self.resample_from(nodes, true)
+        self.resample_from(nodes, true, false)
     }
 
     fn resample_from(
         &mut self,
         set: &HashSet<NodeKey>,
         deepest: bool,
+        spread: bool,
     ) -> Result<Vec<f32>, LodModelError> {
         let layout = self.source.layout();
         let d = layout.volume.dims;
@@ -351,7 +380,8 @@ impl<'a> Resampler<'a> {
                     let key = l
                         .map(|l| self.node_at(l, v))
                         .ok_or(LodModelError::Uncovered { voxel: v })?;
-                    out[(x + d[0] * (y + d[1] * z)) as usize] = self.sample(key, v)?;
+                    out[(x + d[0] * (y + d[1] * z)) as usize] =
+                        self.sample_field(key, v, spread)?;
                 }
             }
         }
@@ -380,6 +410,22 @@ impl<'a> Resampler<'a> {
     /// that one node drawn instead of its descendants. Every other voxel is
     /// left as it is.
     pub fn splice(&mut self, key: NodeKey, out: &mut [f32]) -> Result<(), LodModelError> {
+        self.splice_field(key, out, false)
+    }
+
+    /// Overwrites the finest voxels under `key` in `out` with `key`'s
+    /// spreads ([`sample_spread`](Self::sample_spread)), as
+    /// [`splice`](Self::splice) does its values.
+    pub fn splice_spread(&mut self, key: NodeKey, out: &mut [f32]) -> Result<(), LodModelError> {
+        self.splice_field(key, out, true)
+    }
+
+    fn splice_field(
+        &mut self,
+        key: NodeKey,
+        out: &mut [f32],
+        spread: bool,
+    ) -> Result<(), LodModelError> {
         let d = self.source.layout().volume.dims;
         let expected: usize = d.iter().map(|&n| n as usize).product();
         if out.len() != expected {
@@ -395,12 +441,43 @@ impl<'a> Resampler<'a> {
                 for x in lo[0]..hi[0] {
                     let v = [x, y, z];
                     debug_assert_eq!(self.node_at(key.level, v), key);
-                    out[(x + d[0] * (y + d[1] * z)) as usize] = self.sample(key, v)?;
+                    out[(x + d[0] * (y + d[1] * z)) as usize] =
+                        self.sample_field(key, v, spread)?;
                 }
             }
         }
         Ok(())
     }
+}
+
+/// Trilinear interpolation in a stored brick `br` (`side`^3 values, x
+/// fastest) of node `key` at the centre of the finest voxel `v`, `f` finest
+/// voxels per node voxel per axis; coordinates outside the brick clamped.
+fn trilinear(br: &[f32], key: NodeKey, v: [u32; 3], f: [f64; 3], side: i64, b: f64, a: f64) -> f32 {
+    let kp = [key.x, key.y, key.z];
+    // Brick-local coordinate of this voxel's centre.
+    let c: [f64; 3] = std::array::from_fn(|i| {
+        ((v[i] as f64 + 0.5) / f[i] - 0.5 - kp[i] as f64 * b + a).clamp(0.0, (side - 1) as f64)
+    });
+    let i0 = c.map(|t| (t.floor() as i64).min(side - 2).max(0));
+    let w: [f64; 3] = std::array::from_fn(|i| c[i] - i0[i] as f64);
+    let at = |i: i64, j: i64, k: i64| {
+        br.get((i + side * (j + side * k)) as usize)
+            .copied()
+            .unwrap_or(0.0) as f64
+    };
+    let mut s = 0.0;
+    for dz in 0..2 {
+        for dy in 0..2 {
+            for dx in 0..2 {
+                let wt = (if dx == 1 { w[0] } else { 1.0 - w[0] })
+                    * (if dy == 1 { w[1] } else { 1.0 - w[1] })
+                    * (if dz == 1 { w[2] } else { 1.0 - w[2] });
+                s += wt * at(i0[0] + dx, i0[1] + dy, i0[2] + dz);
+            }
+        }
+    }
+    s as f32
 }
 
 /// A finest-grid resampling (x fastest) stored as the source's type, with

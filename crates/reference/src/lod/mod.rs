@@ -19,7 +19,8 @@
 //!   [`OctantError`]; [`data_error`] measures a node's error on the data;
 //! * [`node_costs`]: the LOD oracle, each node above the finest cut costed
 //!   by the squared RGB error ([`sse`]) of the image when it is drawn instead
-//!   of its descendants; [`spearman`] compares rankings.
+//!   of its descendants ([`node_costs_spread`]: with the levels' spreads);
+//!   [`spearman`] compares rankings.
 //!
 //! Every function reports a failing source or inconsistent input as a
 //! [`LodModelError`]; none panics on bad input.
@@ -34,7 +35,7 @@ mod tests;
 
 pub use cut::{AllAvailable, CutView, CutVolume, Resampler, cut_volume, refine_cut, typed};
 pub use octant::{OctantCut, OctantError, data_error, octant_cut};
-pub use oracle::{NodeCost, node_costs, nodes_above, spearman, sse};
+pub use oracle::{NodeCost, node_costs, node_costs_spread, nodes_above, spearman, sse};
 
 use brickray_core::{BrickError, DType, NodeKey, VolumeError};
 

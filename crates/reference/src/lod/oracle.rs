@@ -51,16 +51,48 @@ pub fn node_costs(
     finest_leaves: &HashSet<NodeKey>,
     draw: impl Fn(&Volume) -> Vec<u8>,
 ) -> Result<Vec<NodeCost>, LodModelError> {
+    costs(source, finest_leaves, false, |v, _| draw(v))
+}
+
+/// [`node_costs`] with the levels drawn as the renderers draw a source with
+/// spreads (docs/rendering-model.md, *Coarse levels*): `draw` also gets the
+/// spread of every finest voxel ([`ReferenceOptions::with_spread`](crate::ReferenceOptions::with_spread)),
+/// each node's spliced in with its values ([`Resampler::splice_spread`]);
+/// those of the finest cut's leaves are 0 but where a leaf is coarser.
+pub fn node_costs_spread(
+    source: &dyn BrickSource,
+    finest_leaves: &HashSet<NodeKey>,
+    draw: impl Fn(&Volume, &[f32]) -> Vec<u8>,
+) -> Result<Vec<NodeCost>, LodModelError> {
+    costs(source, finest_leaves, true, |v, s| {
+        draw(v, s.unwrap_or(&[]))
+    })
+}
+
+fn costs(
+    source: &dyn BrickSource,
+    finest_leaves: &HashSet<NodeKey>,
+    spread: bool,
+    draw: impl Fn(&Volume, Option<&[f32]>) -> Vec<u8>,
+) -> Result<Vec<NodeCost>, LodModelError> {
     let layout = source.layout();
     let mut resampler = Resampler::new(source)?;
     let samples = resampler.resample(finest_leaves)?;
-    let finest_rgba = draw(&typed(layout, samples.clone())?);
+    let spreads = match spread {
+        true => Some(resampler.resample_spread(finest_leaves)?),
+        false => None,
+    };
+    let finest_rgba = draw(&typed(layout, samples.clone())?, spreads.as_deref());
     nodes_above(layout, finest_leaves)
         .into_iter()
         .map(|key| {
             let mut s = samples.clone();
             resampler.splice(key, &mut s)?;
-            let rgba = draw(&typed(layout, s)?);
+            let mut sp = spreads.clone();
+            if let Some(sp) = sp.as_mut() {
+                resampler.splice_spread(key, sp)?;
+            }
+            let rgba = draw(&typed(layout, s)?, sp.as_deref());
             if rgba.len() != finest_rgba.len() {
                 return Err(LodModelError::ImageSize {
                     expected: finest_rgba.len(),

@@ -330,6 +330,102 @@ fn oracle_costs_zero_over_uniform_data_and_more_where_coarse_differs() {
     assert_eq!(*calls.get_mut(), 2);
 }
 
+/// Spreads through the oracle: the finest cut's are 0; a coarse node's,
+/// spliced, change only its own voxels, and lie between 0 and the standard
+/// deviation of the finest values under the whole node; costs drawn without
+/// them are `node_costs`'; drawn with them, those of nodes over varying data
+/// change.
+#[test]
+fn spreads_splice_like_values_into_the_oracle() {
+    let vol = synthetic::u8_field(32, |[x, y, z]| {
+        if x < 18 {
+            0.5
+        } else {
+            0.5 + 0.45 * ((y as f64 * 0.9).sin() * (z as f64 * 0.7 + x as f64 * 0.5).cos())
+        }
+    });
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("v.brs");
+    let mut reader = brickray_io::MemoryReader::new(vol.clone(), "memory");
+    let opts = brickray_store::BuildOptions {
+        brick: 8,
+        spread: true,
+        ..Default::default()
+    };
+    brickray_store::build(&mut reader, &path, &opts).unwrap();
+    let store = brickray_store::open(&path).unwrap();
+    assert!(store.has_spread());
+    let layout = store.layout().clone();
+    // A ramp whose slope is where the field varies: spreads matter there.
+    let scene = Scene {
+        tf: TransferFunction::ramp(0.3, 0.7, 1.0),
+        ..Scene::new(&vol)
+    };
+    let leaves = finest_leaves(&scene.view(&store));
+    let mut r = Resampler::new(&store).unwrap();
+    let spreads = r.resample_spread(&leaves).unwrap();
+    assert!(spreads.iter().all(|&s| s == 0.0));
+    // A level-1 node over the varying half.
+    let key = NodeKey::new(1, 1, 1, 1);
+    let (lo, hi) = r.region(key).unwrap();
+    let mut sp = spreads.clone();
+    r.splice_spread(key, &mut sp).unwrap();
+    let d = layout.volume.dims;
+    let idx = |x: u32, y: u32, z: u32| (x + d[0] * (y + d[1] * z)) as usize;
+    let (mut inside, mut n) = (0.0f64, 0usize);
+    let (mut sum, mut sum2) = (0.0f64, 0.0f64);
+    for z in 0..d[2] {
+        for y in 0..d[1] {
+            for x in 0..d[0] {
+                let i = idx(x, y, z);
+                let within = (lo[0]..hi[0]).contains(&x)
+                    && (lo[1]..hi[1]).contains(&y)
+                    && (lo[2]..hi[2]).contains(&z);
+                if within {
+                    inside += sp[i] as f64;
+                    n += 1;
+                    let v = vol.data().get(i) as f64 / 255.0;
+                    sum += v;
+                    sum2 += v * v;
+                } else {
+                    assert_eq!(sp[i], 0.0, "({x}, {y}, {z}) outside the node");
+                }
+            }
+        }
+    }
+    let mean_spread = inside / n as f64;
+    let sd = (sum2 / n as f64 - (sum / n as f64).powi(2)).max(0.0).sqrt();
+    // Each coarse voxel stands for 2^3 finest ones: its spread is that
+    // block's deviation, smaller than the whole node's, and not 0.
+    assert!(
+        mean_spread > 0.02 && mean_spread < sd,
+        "{mean_spread} vs {sd}"
+    );
+    // Without the spreads in the image, the costs are node_costs'.
+    let plain = node_costs(&store, &leaves, |v| scene.draw(v)).unwrap();
+    let ignored = node_costs_spread(&store, &leaves, |v, _| scene.draw(v)).unwrap();
+    assert_eq!(plain, ignored);
+    let settings = RenderSettings::default();
+    let with = node_costs_spread(&store, &leaves, |v, s| {
+        let o = ReferenceOptions::new(32, 32).with_spread(s);
+        render_reference(v, &scene.frame, &scene.tf, &scene.camera, &settings, &o)
+            .to_rgba8([0.0; 3])
+    })
+    .unwrap();
+    let keys = |c: &[NodeCost]| c.iter().map(|c| c.key).collect::<Vec<_>>();
+    assert_eq!(keys(&with), keys(&plain));
+    // The uniform half's nodes (spread 0) cost nothing either way; the
+    // varying half's cost otherwise (on this field some more, some less).
+    let mut changed = 0;
+    for (p, w) in plain.iter().zip(&with) {
+        if p.key.level == 1 && p.key.x == 0 {
+            assert_eq!((p.cost, w.cost), (0.0, 0.0), "{p:?} -> {w:?}");
+        }
+        changed += usize::from(p.cost != w.cost);
+    }
+    assert!(changed >= 3, "{plain:?} -> {with:?}");
+}
+
 #[test]
 fn sse_sums_squared_rgb_differences() {
     let a = [10u8, 20, 30, 255, 0, 0, 0, 0];
