@@ -2,7 +2,8 @@
 
 use brickray_core::moments::field_trilinear;
 use brickray_core::tf::{
-    Preintegrator, SPREAD_ROWS, SpreadTable, corrected_alpha, join_pieces, segment_values,
+    Preintegrator, SEGMENT_PIECES, SPREAD_ROWS, SpreadTable, corrected_alpha, join_pieces,
+    segment_values,
 };
 use brickray_core::{
     Camera, Intensity, LabelOverlay, Ray, RayGen, RenderMode, RenderSettings, Shading,
@@ -535,10 +536,27 @@ impl Marcher<'_> {
             let v = self.value(ray, t);
             if let Some((_, front)) = prev.replace((t, v)) {
                 let x = segment_values(before, front, v);
-                let pieces = join_pieces(std::array::from_fn(|j| {
-                    p.segment(x[j], x[j + 1], self.step_factor)
-                }));
-                self.composite(out, ray, straight(pieces), t, t - 0.5 * self.dt);
+                let whole: [[f64; 4]; SEGMENT_PIECES] =
+                    std::array::from_fn(|j| p.segment(x[j], x[j + 1], self.step_factor));
+                if self.settings.shading.enabled {
+                    // Piece by piece, each lit at its middle with the
+                    // gradient interpolated between the segment's two
+                    // samples (the kernels' `preint_shaded`).
+                    let g = [self.gradient(ray, t - self.dt), self.gradient(ray, t)];
+                    for (j, w) in whole.iter().enumerate() {
+                        let f = (j as f64 + 0.5) / SEGMENT_PIECES as f64;
+                        let piece =
+                            join_pieces(std::array::from_fn(
+                                |i| {
+                                    if i == 0 { *w } else { [0.0; 4] }
+                                },
+                            ));
+                        let n = self.normal_of(g[0] * (1.0 - f) + g[1] * f);
+                        self.composite_lit(out, ray, straight(piece), t, n);
+                    }
+                } else {
+                    self.composite(out, ray, straight(join_pieces(whole)), t, t);
+                }
                 before = Some(front);
             }
         }
@@ -551,6 +569,21 @@ impl Marcher<'_> {
     /// Composites the straight colour and opacity `rgba` of the sample at `t`
     /// (the label overlay and the depth are taken there), shaded at `ts`.
     fn composite(&self, out: &mut Composite, ray: &Ray, rgba: [f64; 4], t: f64, ts: f64) {
+        let shaded = self.settings.shading.enabled && rgba[3] > 0.0;
+        let n = if shaded { self.normal(ray, ts) } else { None };
+        self.composite_lit(out, ray, rgba, t, n);
+    }
+
+    /// [`composite`](Self::composite) lit with the normal `n` (unlit where
+    /// `None`, as a vanishing gradient leaves a sample).
+    fn composite_lit(
+        &self,
+        out: &mut Composite,
+        ray: &Ray,
+        rgba: [f64; 4],
+        t: f64,
+        n: Option<DVec3>,
+    ) {
         let [r, g, b, a] = match self.overlay {
             Some(o) => {
                 let u = (ray.tex_origin + ray.tex_dir * t).to_array();
@@ -564,7 +597,7 @@ impl Marcher<'_> {
         }
         let shading = &self.settings.shading;
         let c = if shading.enabled {
-            self.shade(ray, ts, [r, g, b], shading)
+            lit(n, ray, [r, g, b], shading)
         } else {
             [r, g, b]
         };
@@ -685,14 +718,25 @@ impl Marcher<'_> {
     /// The unit world normal at `t`, or `None` where the gradient vanishes
     /// (a smooth label map: of its boundary's filtered indicator).
     fn normal(&self, ray: &Ray, t: f64) -> Option<DVec3> {
+        self.normal_of(self.gradient(ray, t))
+    }
+
+    /// The gradient at `t` per voxel: central differences of the
+    /// normalized field (a smooth label map: its boundary indicator's).
+    fn gradient(&self, ray: &Ray, t: f64) -> DVec3 {
         let p = self.voxel_pos(ray, t);
-        let g = if self.labels {
+        if self.labels {
             DVec3::from_array(
                 brickray_core::labels::smooth_label_gradient(self.vol, p.to_array()).1,
             )
         } else {
             self.central_difference(p)
-        };
+        }
+    }
+
+    /// The world normal of the per-voxel gradient `g` (`None` below
+    /// `MIN_GRADIENT`).
+    fn normal_of(&self, g: DVec3) -> Option<DVec3> {
         if g.length() < MIN_GRADIENT {
             return None;
         }
@@ -717,15 +761,21 @@ impl Marcher<'_> {
 
     /// Blinn-Phong with a headlight, two-sided, clamped to 0..1.
     fn shade(&self, ray: &Ray, t: f64, c: [f64; 3], s: &Shading) -> [f64; 3] {
-        let Some(n) = self.normal(ray, t) else {
-            return c.map(|x| x.clamp(0.0, 1.0));
-        };
-        let l = -ray.dir; // L = H
-        let ndl = n.dot(l).abs();
-        let diffuse = s.ambient as f64 + s.diffuse as f64 * ndl;
-        let specular = s.specular as f64 * ndl.powf(s.shininess as f64);
-        c.map(|x| (x * diffuse + specular).clamp(0.0, 1.0))
+        lit(self.normal(ray, t), ray, c, s)
     }
+}
+
+/// Blinn-Phong with a headlight (two-sided) of normal `n`, clamped to 0..1;
+/// unlit (clamped) without a normal.
+fn lit(n: Option<DVec3>, ray: &Ray, c: [f64; 3], s: &Shading) -> [f64; 3] {
+    let Some(n) = n else {
+        return c.map(|x| x.clamp(0.0, 1.0));
+    };
+    let l = -ray.dir; // L = H
+    let ndl = n.dot(l).abs();
+    let diffuse = s.ambient as f64 + s.diffuse as f64 * ndl;
+    let specular = s.specular as f64 * ndl.powf(s.shininess as f64);
+    c.map(|x| (x * diffuse + specular).clamp(0.0, 1.0))
 }
 
 /// The sample positions of a clipped ray.

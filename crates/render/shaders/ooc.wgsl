@@ -345,7 +345,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
                             first = preint_before_start(t, dtl, t0);
                             front = preint_front(&acc, t, dtl, v);
                         }
-                        let ts = max(t - 0.5 * dtl, st.hit.t_enter);
+                        // The segment's start, inside the brick (preint_shaded).
+                        let ts = max(t - dtl, st.hit.t_enter);
                         if (!first && dvr_sample(&acc, cur, r, t, ts, front, v, cur.b.tf_v)) { done = true; break; }
                     } else {
                         let before = acc.max_v;

@@ -138,13 +138,14 @@ fn preintegration_is_closer_to_the_exact_integral() {
     }
 }
 
-/// Shaded pre-integration on a smooth field keeps up with the plain sum at the
-/// default step: a segment `[t - dt, t]` is shaded at its midpoint. Shaded at its
-/// back sample instead, the shading lags the emission by half a step, which on
-/// Marschner-Lobb (the `pareto` suite's TF, step 0.5) put the pre-integrated
-/// image 4.5 dB behind the plain one against the exact integral; at the
-/// midpoint it is within 1 dB (this test allows 1.5 dB), and at step 2 it still
-/// gains >= 3 dB.
+/// Shaded pre-integration on a smooth field is well ahead of the plain sum at
+/// the default step: each of a segment's four pieces is lit at its middle
+/// with the gradient interpolated between the segment's two samples (47.4
+/// against 37.9 dB on Marschner-Lobb with the `pareto` suite's TF at step
+/// 0.5, against the exact integral; this test asks 8 dB ahead). The joined
+/// segment lit once at its midpoint scored 44.9 dB (the linear segment so
+/// lit was within 1 dB of plain, lit at its back sample 4.5 dB behind); at
+/// step 2 it gains >= 3 dB (6.4 dB; lit once 5.6 dB).
 #[test]
 fn shaded_segments_keep_up_with_the_plain_sum() {
     let vol = synthetic::marschner_lobb(48);
@@ -166,7 +167,7 @@ fn shaded_segments_keep_up_with_the_plain_sum() {
         render_reference(&vol, &frame, &tf, &camera, &s, o).to_rgba8([0.0; 3])
     };
     let exact = img(&opts.exact_integral());
-    for (step, margin) in [(0.5f32, -1.5), (2.0, 3.0)] {
+    for (step, margin) in [(0.5f32, 8.0), (2.0, 3.0)] {
         let plain = img(&opts.with_step_factor(step));
         let pre = img(&opts.with_step_factor(step).with_preintegration(true));
         let (p_plain, p_pre) = (psnr(&plain, &exact), psnr(&pre, &exact));
