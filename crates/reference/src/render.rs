@@ -381,7 +381,8 @@ impl Marcher<'_> {
                     // Piece by piece, each lit at its middle with the
                     // gradient interpolated between the segment's two
                     // samples (the kernels' `preint_shaded`).
-                    let g = [self.gradient(ray, t - self.dt), self.gradient(ray, t)];
+                    // (Read once, where a piece is drawn.)
+                    let g = std::cell::OnceCell::new();
                     for (j, w) in whole.iter().enumerate() {
                         let f = (j as f64 + 0.5) / SEGMENT_PIECES as f64;
                         let piece =
@@ -390,8 +391,12 @@ impl Marcher<'_> {
                                     if i == 0 { *w } else { [0.0; 4] }
                                 },
                             ));
-                        let n = self.normal_of(g[0] * (1.0 - f) + g[1] * f);
-                        self.composite_lit(out, ray, straight(piece), t, n);
+                        self.composite_lit(out, ray, straight(piece), t, || {
+                            let [g0, g1] = *g.get_or_init(|| {
+                                [self.gradient(ray, t - self.dt), self.gradient(ray, t)]
+                            });
+                            self.normal_of(g0 * (1.0 - f) + g1 * f)
+                        });
                     }
                 } else {
                     self.composite(out, ray, straight(join_pieces(whole)), t, t);
@@ -408,20 +413,19 @@ impl Marcher<'_> {
     /// Composites the straight colour and opacity `rgba` of the sample at `t`
     /// (the label overlay and the depth are taken there), shaded at `ts`.
     fn composite(&self, out: &mut Composite, ray: &Ray, rgba: [f64; 4], t: f64, ts: f64) {
-        let shaded = self.settings.shading.enabled && rgba[3] > 0.0;
-        let n = if shaded { self.normal(ray, ts) } else { None };
-        self.composite_lit(out, ray, rgba, t, n);
+        self.composite_lit(out, ray, rgba, t, || self.normal(ray, ts));
     }
 
-    /// [`composite`](Self::composite) lit with the normal `n` (unlit where
-    /// `None`, as a vanishing gradient leaves a sample).
+    /// [`composite`](Self::composite) lit with the normal `n` gives (unlit
+    /// where `None`, as a vanishing gradient leaves a sample), asked only
+    /// when the sample shows and is shaded.
     fn composite_lit(
         &self,
         out: &mut Composite,
         ray: &Ray,
         rgba: [f64; 4],
         t: f64,
-        n: Option<DVec3>,
+        n: impl FnOnce() -> Option<DVec3>,
     ) {
         let [r, g, b, a] = match self.overlay {
             Some(o) => {
@@ -436,7 +440,7 @@ impl Marcher<'_> {
         }
         let shading = &self.settings.shading;
         let c = if shading.enabled {
-            lit(n, ray, [r, g, b], shading)
+            lit(n(), ray, [r, g, b], shading)
         } else {
             [r, g, b]
         };
