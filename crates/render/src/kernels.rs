@@ -229,8 +229,8 @@ impl Variant {
 
     /// The variants a view drawn with this one may switch to with no change
     /// of its settings, this one first: where `skipping_asked` (the settings
-    /// ask for empty-space skipping in DVR or MIP of one channel) without
-    /// skipping as well, which the backend's rule may choose (in core when the
+    /// ask for empty-space skipping) and the view draws DVR or MIP of one
+    /// channel, without skipping as well, which the backend's rule may choose (in core when the
     /// transfer function changes, out of core with each plan); out of core
     /// (`kind`), each with and without a fading leaf ([`Variant::fades`],
     /// which changes whenever bricks arrive or a fade ends).

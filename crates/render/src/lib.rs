@@ -624,9 +624,7 @@ impl VolumeRenderer {
         ];
         for s in settings {
             let v = prepare::frame_variant(b, s, false, self.prediction, self.overlay.style());
-            let asked = s.accel.empty_space_skipping
-                && !matches!(s.mode, brickray_core::RenderMode::Iso { .. });
-            for w in v.siblings(backend.kind(), asked) {
+            for w in v.siblings(backend.kind(), s.accel.empty_space_skipping) {
                 self.kernels.pipeline(device, backend.kind(), layouts, w)?;
             }
         }
