@@ -471,12 +471,13 @@ fn each_step_against_exact(
 /// The pareto suite's head CT scene (soft tissue with a transparent notch
 /// before bone; shared data): pre-integrated DVR in core against the exact
 /// integral (the reference's plain sum at 1/64 voxel) at every step from
-/// 1/8 to 4, unshaded and shaded, is at most 0.5 dB behind plain sampling
-/// (the 8-bit images' noise where both lie near 50 dB; the `preint` suite at
-/// 64 px measured -0.07 dB at worst), and shaded never behind it (+0.35 dB
-/// at worst). Segments that took the value as linear between two samples
-/// lost up to 5.5 dB here, and segments lit once at their middle 0.10 dB
-/// shaded: each fails this test.
+/// 1/8 to 4, unshaded and shaded, is never behind plain sampling (measured
+/// +0.49 dB at worst unshaded, +1.34 shaded). Segments that took the value
+/// as linear between two samples lost up to 5.5 dB here, segments lit once
+/// at their middle 0.10 dB shaded, and with early termination's residual
+/// dropped instead of filled (docs/rendering-model.md, *Accelerations*)
+/// the unshaded worst was -0.07 dB: each fails this test (it asked -0.5 dB
+/// unshaded until the residual was filled).
 #[test]
 #[cfg_attr(
     no_shared_data,
@@ -491,7 +492,7 @@ fn preintegration_holds_its_own_on_the_head_ct() {
         return;
     };
     assert!(
-        worst >= -0.5,
+        worst >= 0.0,
         "pre-integrated minus plain at worst {worst:.2} dB"
     );
     assert!(
@@ -500,20 +501,23 @@ fn preintegration_holds_its_own_on_the_head_ct() {
     );
 }
 
-/// The pareto suite's T1 MRI scene (shared data), shaded, in core:
-/// pre-integrated DVR against the exact integral at every step from 1/8 to 4
-/// is at most 0.1 dB behind plain sampling (measured +0.04 to +2.82 dB),
-/// where segments lit once at their middle were 0.13 dB behind (1.02 dB in
-/// the `preint` suite at 64 px). The MRI's unshaded segments still lose up
-/// to 1.2 dB (docs/accuracy.md, the defaults); they are printed, not
-/// checked.
+/// The pareto suite's T1 MRI scene (shared data), in core: pre-integrated
+/// DVR against the exact integral at every step from 1/8 to 4 is never
+/// behind plain sampling shaded (measured +0.27 to +4.15 dB; segments lit
+/// once at their middle were 0.13 dB behind), and at most 0.3 dB behind
+/// unshaded (measured -0.14 dB at worst, at step 2; with early
+/// termination's residual dropped, -1.20 dB, which fails). The 0.3 dB is
+/// the segment model's own loss on this volume, whose values vary faster
+/// than the step: the CPU reference, with the same segments in f64 and no
+/// termination, is 0.30 dB behind its plain sum at step 1 (`preint` suite,
+/// 64 px; docs/accuracy.md, the defaults).
 #[test]
 #[cfg_attr(
     no_shared_data,
     ignore = "needs ../shared/data (the shared volumes), absent when the tests were built"
 )]
-fn shaded_preintegration_holds_its_own_on_the_mri() {
-    let Some([_, worst_shaded]) = worst_in_core(
+fn preintegration_holds_its_own_on_the_mri() {
+    let Some([worst, worst_shaded]) = worst_in_core(
         "pycortex_s1_t1_mri",
         "MRI",
         brickray_harness::scenes::mri_tf(),
@@ -521,7 +525,11 @@ fn shaded_preintegration_holds_its_own_on_the_mri() {
         return;
     };
     assert!(
-        worst_shaded >= -0.1,
+        worst >= -0.3,
+        "pre-integrated minus plain at worst {worst:.2} dB"
+    );
+    assert!(
+        worst_shaded >= 0.0,
         "shaded, pre-integrated minus plain at worst {worst_shaded:.2} dB"
     );
 }

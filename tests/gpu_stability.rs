@@ -285,8 +285,11 @@ fn high_frequency_tf_converges_with_the_step() {
 
 /// Case 7. Threshold: with early termination at t, no 8-bit channel differs
 /// from the unterminated image by more than (1 - t) * 255 + 1 levels, for t of
-/// 0.9, 0.99 and 0.999, on a translucent TF. Guard: the 0.9 image exceeds
-/// the bound of 0.999.
+/// 0.9, 0.99 and 0.999, on a translucent TF; and, with the residual filled by
+/// the last sample's colour (docs/rendering-model.md, *Accelerations*), the
+/// 0.9 and 0.99 images are at least 33 and 53 dB from the unterminated one
+/// (measured 35.48 and 54.73; with the residual dropped 27.64 and 50.57).
+/// Guard: the 0.9 image exceeds the bound of 0.999.
 #[test]
 fn early_termination_error_stays_within_its_bound() {
     let (vol, _) = noise(DIM, 32);
@@ -303,13 +306,21 @@ fn early_termination_error_stays_within_its_bound() {
     let mut r = incore(&vol, &tf);
     let full = draw(&mut r, cam, frame, st(None));
     let bound = |t: f32| (1.0 - t as f64) * 255.0 + 1.0;
-    let mut errs = Vec::new();
+    let (mut errs, mut dbs) = (Vec::new(), Vec::new());
     for t in [0.9f32, 0.99, 0.999] {
-        let e = max_abs_diff(&draw(&mut r, cam, frame, st(Some(t))), &full) as f64;
-        eprintln!("ERT {t}: max error {e} (bound {:.1})", bound(t));
+        let img = draw(&mut r, cam, frame, st(Some(t)));
+        let e = max_abs_diff(&img, &full) as f64;
+        eprintln!(
+            "ERT {t}: max error {e} (bound {:.1}), {:.2} dB",
+            bound(t),
+            psnr(&img, &full)
+        );
         assert!(e <= bound(t), "ERT {t}: {e} > {:.1}", bound(t));
         errs.push(e);
+        dbs.push(psnr(&img, &full));
     }
+    assert!(dbs[0] >= 33.0, "ERT 0.9: {:.2} dB < 33", dbs[0]);
+    assert!(dbs[1] >= 53.0, "ERT 0.99: {:.2} dB < 53", dbs[1]);
     assert!(
         errs[0] > bound(0.999),
         "guard: ERT 0.9 differs by only {}",

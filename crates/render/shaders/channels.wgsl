@@ -206,13 +206,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
             if (MODE == MODE_DVR) {
                 let p = channel_dvr_sample(v, u, r, 0.0, vis);
                 if (p.a > 0.0) {
-                    let acc_a = acc.color.a;
-                    acc.color = vec4<f32>(acc.color.rgb + (1.0 - acc_a) * p.rgb, acc_a + (1.0 - acc_a) * p.a);
-                    if (!acc.depth_set && acc.color.a >= frame.depth_opacity) {
-                        acc.depth = depth_at(r, t);
-                        acc.depth_set = true;
-                    }
-                    if (ERT && acc.color.a >= frame.ert_threshold) { break; }
+                    if (accumulate(&acc, r, t, p)) { break; }
                 }
             } else if (MODE == MODE_ISO) {
                 let c = channel_inside(v, vis, iso4);

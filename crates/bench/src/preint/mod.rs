@@ -43,6 +43,11 @@ pub(crate) struct Args {
     /// The exact integral's step is 1 / this many voxels.
     #[arg(long, default_value_t = 64, value_parser = crate::at_least_one::<u32>)]
     exact_div: u32,
+    /// Draw the scenes' GPU images without early ray termination (the
+    /// default terminates at 0.99, as the library does); the exact integral
+    /// never terminates.
+    #[arg(long)]
+    no_termination: bool,
 }
 
 /// Plain against pre-integrated DVR on the head CT, one mode and step.
@@ -85,6 +90,8 @@ pub(crate) struct PreintResult {
     scenes: Vec<scenes::SceneRow>,
     /// Shared scenes left out (no `../shared`).
     scenes_missing: Vec<String>,
+    /// The scenes' GPU images were drawn without early ray termination.
+    scenes_unterminated: bool,
     /// The smallest and the median pre-integrated minus plain PSNR over the
     /// scene rows (GPU), dB; `preint_never_loses` when the smallest is >= 0.
     preint_gain_db_min: f64,
@@ -239,8 +246,13 @@ pub(crate) fn run(args: &Args) -> Result<PreintResult, String> {
             psnr_preint_db: finite_db(db[1]),
         });
     }
-    let (scene_rows, scenes_missing) =
-        scenes::rows(&gpu, &args.scenes, args.quality_size, args.exact_div)?;
+    let (scene_rows, scenes_missing) = scenes::rows(
+        &gpu,
+        &args.scenes,
+        args.quality_size,
+        args.exact_div,
+        args.no_termination,
+    )?;
     let gains: Vec<f64> = scene_rows.iter().map(|r| r.gpu_gain_db()).collect();
     let gain_min = gains.iter().copied().fold(f64::INFINITY, f64::min);
     println!(
@@ -255,6 +267,7 @@ pub(crate) fn run(args: &Args) -> Result<PreintResult, String> {
         preint_never_loses: gain_min >= 0.0,
         scenes: scene_rows,
         scenes_missing,
+        scenes_unterminated: args.no_termination,
         ms_corrected_table: round2(corrected),
         ms_preint_table_1_layers: table_ms[0],
         ms_preint_table_8_layers: table_ms[1],

@@ -37,17 +37,24 @@ impl SceneRow {
 /// The rows of the scenes `wanted` (all when empty) that are present (the
 /// shared ones are left out, and named in the second list, where `../shared`
 /// is missing), images `size` pixels on a side, the exact integral at
-/// `1 / exact_div` voxel.
+/// `1 / exact_div` voxel; the GPU's images without early ray termination
+/// when `unterminated`.
 pub(crate) fn rows(
     gpu: &GpuContext,
     wanted: &[String],
     size: u32,
     exact_div: u32,
+    unterminated: bool,
 ) -> Result<(Vec<SceneRow>, Vec<String>), String> {
     let run = Runner::new(gpu, size)?;
     let (mut out, mut missing) = (Vec::new(), Vec::new());
     println!(
-        "pareto scenes' DVR, {size}x{size}, PSNR against the exact integral (1/{exact_div} voxel), plain / pre-integrated:"
+        "pareto scenes' DVR, {size}x{size}, PSNR against the exact integral (1/{exact_div} voxel), plain / pre-integrated{}:",
+        if unterminated {
+            ", no early termination"
+        } else {
+            ""
+        }
     );
     println!(
         "  {:<7} {:<7} {}",
@@ -78,7 +85,13 @@ pub(crate) fn rows(
         r.set_transfer_function(&gpu.device, &gpu.queue, tf)
             .map_err(|e| e.to_string())?;
         for shaded in [false, true] {
-            let settings = |step, preintegrated| super::dvr(step, preintegrated, shaded);
+            let settings = |step, preintegrated| {
+                let mut s = super::dvr(step, preintegrated, shaded);
+                if unterminated {
+                    s.accel.early_termination = None;
+                }
+                s
+            };
             let cpu = |o: ReferenceOptions<'_>, s: &RenderSettings| {
                 render_reference(&scene.volume, &scene.frame, tf, &scene.camera, s, &o)
                     .to_rgba8([0.0; 3])
