@@ -478,22 +478,23 @@ fn dvr_accumulate(acc: ptr<function, Accum>, r: Ray, t: f32, s: vec4<f32>, g: ve
 // depth_opacity. True when early ray termination ends the ray; the light
 // the ray would still gather (its remaining transmittance, at most
 // 1 - ert_threshold) is then taken as that of the material it stops in: the
-// sample's straight colour fills it and the opacity becomes 1. Against the
-// exact integral on `preint`'s scenes (64 px, ERT 0.99) the residual dropped
-// left images up to 16 dB below the unterminated ones at fine steps;
-// filled, up to 7 dB, and the error never exceeds the residual either way
-// (docs/rendering-model.md, "Accelerations").
+// sample's straight colour fills it and the opacity becomes 1 (so a
+// threshold below depth_opacity still gives the stopped ray its depth).
+// Against the exact integral on `preint`'s scenes (64 px, ERT 0.99) the
+// residual dropped left images up to 16 dB below the unterminated ones at
+// fine steps; filled, up to 7 dB, and the error never exceeds the residual
+// either way (docs/rendering-model.md, "Accelerations").
 fn accumulate(acc: ptr<function, Accum>, r: Ray, t: f32, p: vec4<f32>) -> bool {
     let acc_a = (*acc).color.a;
     var c = vec4<f32>((*acc).color.rgb + (1.0 - acc_a) * p.rgb, acc_a + (1.0 - acc_a) * p.a);
-    if (!(*acc).depth_set && c.a >= frame.depth_opacity) {
-        (*acc).depth = depth_at(r, t);
-        (*acc).depth_set = true;
-    }
     let stop = ERT && c.a >= frame.ert_threshold;
     if (ERT) {
         let fill = select(0.0, 1.0 - c.a, stop);
         c = vec4<f32>(c.rgb + fill * p.rgb / max(p.a, 1e-6), c.a + fill);
+    }
+    if (!(*acc).depth_set && c.a >= frame.depth_opacity) {
+        (*acc).depth = depth_at(r, t);
+        (*acc).depth_set = true;
     }
     (*acc).color = c;
     return stop;
