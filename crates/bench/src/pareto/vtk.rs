@@ -74,6 +74,22 @@ pub(crate) struct Args {
     /// modes only; `in_core_preint` configurations).
     #[arg(long)]
     preint: bool,
+    /// Also brickray in core at each step with early ray termination at
+    /// each of these thresholds instead of the default 0.99 (DVR modes
+    /// only; `in_core_ert` configurations, valued `<step>, ert
+    /// <threshold>`), comma-separated, each in (0, 1].
+    #[arg(long, value_delimiter = ',', value_parser = ert_threshold)]
+    ert: Vec<f32>,
+}
+
+/// An early-termination threshold in (0, 1].
+fn ert_threshold(s: &str) -> Result<f32, String> {
+    let t: f32 = s.parse().map_err(|e| format!("{s}: {e}"))?;
+    if t > 0.0 && t <= 1.0 {
+        Ok(t)
+    } else {
+        Err(format!("{s}: a threshold lies in (0, 1]"))
+    }
 }
 
 /// One VTK point: a mapper at a step.
@@ -214,7 +230,7 @@ pub(crate) fn run(o: &Args) -> Result<VtkResult, String> {
                 mode_name
             };
             let reference = reference_image(scene, &tf, &base, tag, o.size, o.supersample, &o.out)?;
-            let cfgs = brickray_configs(base, &o.steps, o.preint);
+            let cfgs = brickray_configs(base, &o.steps, o.preint, &o.ert);
             let scene_json = o.out.join(format!("{name}.json"));
             let prefix = o.out.join(&name);
             let desc = vtk_scene(scene, &tf, &base, &raw, o, &prefix);
@@ -361,8 +377,14 @@ fn scene_mode(scene: &Scene, mode_name: &str) -> Result<(RenderMode, TransferFun
 /// brickray's configurations: out of core at the default tolerance, and in
 /// core, at each step; shaded DVR also out of core from the gradients the
 /// streamed volume keeps (`out_of_core_gradients`, as VTK's mappers keep
-/// theirs); with `preint` (DVR only), in core pre-integrated too.
-fn brickray_configs(base: RenderSettings, steps: &[f32], preint: bool) -> Vec<Config> {
+/// theirs); with `preint` (DVR only), in core pre-integrated too; for each
+/// threshold of `erts` (DVR only), in core terminating there.
+fn brickray_configs(
+    base: RenderSettings,
+    steps: &[f32],
+    preint: bool,
+    erts: &[f32],
+) -> Vec<Config> {
     let in_core = RendererKey {
         in_core: true,
         ..DEFAULT_KEY
@@ -371,9 +393,10 @@ fn brickray_configs(base: RenderSettings, steps: &[f32], preint: bool) -> Vec<Co
         gradients: true,
         ..DEFAULT_KEY
     };
-    let shaded = matches!(base.mode, RenderMode::Dvr) && base.shading.enabled;
-    let preint = preint && matches!(base.mode, RenderMode::Dvr);
-    [
+    let dvr = matches!(base.mode, RenderMode::Dvr);
+    let shaded = dvr && base.shading.enabled;
+    let preint = preint && dvr;
+    let mut out: Vec<Config> = [
         ("out_of_core", DEFAULT_KEY, false, true),
         ("out_of_core_gradients", kept, false, shaded),
         ("in_core", in_core, false, true),
@@ -394,7 +417,23 @@ fn brickray_configs(base: RenderSettings, steps: &[f32], preint: bool) -> Vec<Co
             },
         })
     })
-    .collect()
+    .collect();
+    for &t in erts.iter().filter(|_| dvr) {
+        out.extend(steps.iter().map(|&step| {
+            let mut settings = RenderSettings {
+                step_factor: step,
+                ..base
+            };
+            settings.accel.early_termination = Some(t);
+            Config {
+                knob: "in_core_ert",
+                value: format!("{step}, ert {t}"),
+                key: in_core,
+                settings,
+            }
+        }));
+    }
+    out
 }
 
 /// The scene as VTK's script reads it: brickray's voxel centres in world
@@ -555,6 +594,7 @@ fn draw(
         .zip(m)
         .map(|(c, x)| chart::ChartPoint {
             knob: match (c.key.in_core, c.settings.preintegrated, c.key.gradients) {
+                _ if c.knob == "in_core_ert" => "brickray in core, other termination",
                 (true, false, _) => "brickray in core",
                 (true, true, _) => "brickray in core, pre-integrated",
                 (false, _, false) => "brickray out of core",
@@ -597,6 +637,35 @@ fn draw(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn other_terminations_are_in_core_dvr_at_every_step() {
+        let steps = [0.5f32, 2.0];
+        let dvr = base_settings(RenderMode::Dvr);
+        let cfgs = brickray_configs(dvr, &steps, false, &[0.95, 0.9]);
+        let ert: Vec<&Config> = cfgs.iter().filter(|c| c.knob == "in_core_ert").collect();
+        assert_eq!(ert.len(), 4);
+        assert!(ert.iter().all(|c| c.key.in_core));
+        assert_eq!(ert[1].value, "2, ert 0.95");
+        assert_eq!(ert[1].settings.step_factor, 2.0);
+        assert_eq!(ert[2].settings.accel.early_termination, Some(0.9));
+        // The others keep the default termination; MIP gets none.
+        assert!(
+            cfgs.iter().filter(|c| c.knob != "in_core_ert").all(|c| c
+                .settings
+                .accel
+                .early_termination
+                == dvr.accel.early_termination)
+        );
+        let mip = base_settings(RenderMode::Mip);
+        assert!(
+            brickray_configs(mip, &steps, false, &[0.9])
+                .iter()
+                .all(|c| c.knob != "in_core_ert")
+        );
+        assert!(ert_threshold("0").is_err() && ert_threshold("1.5").is_err());
+        assert_eq!(ert_threshold("0.9"), Ok(0.9));
+    }
 
     fn p(config: &str, in_core: bool, ms: f64, psnr_db: f64) -> OurPoint {
         OurPoint {
