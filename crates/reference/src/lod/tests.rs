@@ -266,13 +266,7 @@ fn oracle_costs_zero_over_uniform_data_and_more_where_coarse_differs() {
     // Uniform below x = 18 (the level-1 nodes at x = 0 cover 0..16, their
     // apron reaches 20: data nodes, split at tolerance 0, yet their interior
     // samples are exact); a varying field above.
-    let vol = synthetic::u8_field(32, |[x, y, z]| {
-        if x < 18 {
-            0.5
-        } else {
-            0.5 + 0.45 * ((y as f64 * 0.7).sin() * (z as f64 * 0.5 + x as f64 * 0.3).cos())
-        }
-    });
+    let vol = half_uniform([0.7, 0.5, 0.3]);
     let dir = tempfile::tempdir().unwrap();
     let store = build(dir.path(), &vol, 8, false);
     let layout = store.layout().clone();
@@ -337,13 +331,7 @@ fn oracle_costs_zero_over_uniform_data_and_more_where_coarse_differs() {
 /// change.
 #[test]
 fn spreads_splice_like_values_into_the_oracle() {
-    let vol = synthetic::u8_field(32, |[x, y, z]| {
-        if x < 18 {
-            0.5
-        } else {
-            0.5 + 0.45 * ((y as f64 * 0.9).sin() * (z as f64 * 0.7 + x as f64 * 0.5).cos())
-        }
-    });
+    let vol = half_uniform([0.9, 0.7, 0.5]);
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("v.brs");
     let mut reader = brickray_io::MemoryReader::new(vol.clone(), "memory");
@@ -752,4 +740,16 @@ fn data_error_is_zero_at_the_finest_level() {
         let coarse = data_error(&mut r, NodeKey::ROOT, NodeKey::ROOT, mode, &table, &vol).unwrap();
         assert!(coarse > 0.0, "{mode:?}");
     }
+}
+
+/// A 32^3 u8 field, uniform (0.5) below x = 18 and varying above, as
+/// `sin(y ky) cos(z kz + x kx)` for `[ky, kz, kx]`.
+fn half_uniform(k: [f64; 3]) -> Volume {
+    synthetic::u8_field(32, |[x, y, z]| {
+        if x < 18 {
+            0.5
+        } else {
+            0.5 + 0.45 * ((y as f64 * k[0]).sin() * (z as f64 * k[1] + x as f64 * k[2]).cos())
+        }
+    })
 }
