@@ -285,10 +285,13 @@ fn high_frequency_tf_converges_with_the_step() {
 
 /// Case 7. Threshold: with early termination at t, no 8-bit channel differs
 /// from the unterminated image by more than (1 - t) * 255 + 1 levels, for t of
-/// 0.9, 0.99 and 0.999, on a translucent TF; and, with the residual filled by
-/// the last sample's colour (docs/rendering-model.md, *Accelerations*), the
-/// 0.9 and 0.99 images are at least 33 and 53 dB from the unterminated one
-/// (measured 35.48 and 54.73; with the residual dropped 27.64 and 50.57).
+/// 0.9, 0.99 and 0.999, on a translucent TF; and, with the residual filled as
+/// the ray's material so far would fill it to the ray's end
+/// (docs/rendering-model.md, *Accelerations*), the 0.9, 0.99 and 0.999
+/// images are at least 37.5, 57 and 72 dB from the unterminated one
+/// (measured 39.33, 58.45 and 73.58; with the residual filled whole with the
+/// last sample's colour 35.48, 54.73 and 69.73; dropped 27.64 and 50.57 at
+/// 0.9 and 0.99).
 /// Guard: the 0.9 image exceeds the bound of 0.999.
 #[test]
 fn early_termination_error_stays_within_its_bound() {
@@ -319,8 +322,9 @@ fn early_termination_error_stays_within_its_bound() {
         errs.push(e);
         dbs.push(psnr(&img, &full));
     }
-    assert!(dbs[0] >= 33.0, "ERT 0.9: {:.2} dB < 33", dbs[0]);
-    assert!(dbs[1] >= 53.0, "ERT 0.99: {:.2} dB < 53", dbs[1]);
+    assert!(dbs[0] >= 37.5, "ERT 0.9: {:.2} dB < 37.5", dbs[0]);
+    assert!(dbs[1] >= 57.0, "ERT 0.99: {:.2} dB < 57", dbs[1]);
+    assert!(dbs[2] >= 72.0, "ERT 0.999: {:.2} dB < 72", dbs[2]);
     assert!(
         errs[0] > bound(0.999),
         "guard: ERT 0.9 differs by only {}",

@@ -206,7 +206,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
             if (MODE == MODE_DVR) {
                 let p = channel_dvr_sample(v, u, r, 0.0, vis);
                 if (p.a > 0.0) {
-                    if (accumulate(&acc, r, t, p)) { break; }
+                    if (accumulate(&acc, r, t, p, vec2<f32>(dt, t1 - t - dt))) { break; }
                 }
             } else if (MODE == MODE_ISO) {
                 let c = channel_inside(v, vis, iso4);

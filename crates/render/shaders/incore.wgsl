@@ -229,7 +229,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
                     first = preint_before_start(t, dt, t0);
                     front = preint_front(&acc, t, dt, v);
                 }
-                if (!first && dvr_sample(&acc, cur, r, t, t - dt, front, v, tf_v)) { break; }
+                if (!first && dvr_sample(&acc, cur, r, t, t - dt, front, v, tf_v, dt, t1)) { break; }
             } else {
                 if (mip_sample(&acc, t, v)) { break; }
             }

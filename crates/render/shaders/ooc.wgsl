@@ -347,7 +347,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
                         }
                         // The segment's start, inside the brick (preint_shaded).
                         let ts = max(t - dtl, st.hit.t_enter);
-                        if (!first && dvr_sample(&acc, cur, r, t, ts, front, v, cur.b.tf_v)) { done = true; break; }
+                        if (!first && dvr_sample(&acc, cur, r, t, ts, front, v, cur.b.tf_v, dtl, t1)) { done = true; break; }
                     } else {
                         let before = acc.max_v;
                         let stop = mip_sample(&acc, t, v);

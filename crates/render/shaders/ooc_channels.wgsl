@@ -255,7 +255,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
                 if (MODE == MODE_DVR) {
                     let p = ooc_channel_dvr_sample(cur, v, tex_at(r, t), r, t, row, vis);
                     if (p.a > 0.0) {
-                        if (accumulate(&acc, r, t, p)) { done = true; break; }
+                        if (accumulate(&acc, r, t, p, vec2<f32>(dtl, t1 - t - dtl))) { done = true; break; }
                     }
                 } else if (MODE == MODE_ISO) {
                     let c = channel_inside(v, vis, iso4);
