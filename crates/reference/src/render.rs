@@ -88,6 +88,7 @@ pub fn render_reference(
     marcher.labels = labels;
     marcher.overlay = opts.overlay;
     marcher.intensity = opts.intensity;
+    marcher.ert = opts.early_termination.map(f64::from);
     if let Some(s) = opts.spread {
         marcher.spread = Some((s, tf.spread_table(SPREAD_ROWS, SPREAD_TABLE_WIDTH)));
     }
@@ -187,18 +188,30 @@ struct Marcher<'a> {
     labels: bool,
     /// A label map over the image ([`ReferenceOptions::overlay`]).
     overlay: Option<&'a LabelOverlay<'a>>,
+    /// DVR's termination threshold ([`ReferenceOptions::early_termination`]).
+    ert: Option<f64>,
+}
+
+/// The opacity of `n` pieces of opacity `a` each, `1 - (1 - a)^n` (0 when
+/// `n <= 0`): the share of a stopped ray's residual its fill takes (the
+/// kernels' `ert_fill`).
+fn ert_fill(a: f64, n: f64) -> f64 {
+    1.0 - (1.0 - a).max(1e-30).powf(n.max(0.0))
 }
 
 /// The result of one ray: premultiplied RGBA and clip depth.
 type RayResult = ([f64; 4], Option<f64>);
 
 /// A DVR ray's running sum: premultiplied colour, opacity and the depth where
-/// the opacity first reached the settings' depth opacity.
+/// the opacity first reached the settings' depth opacity; with termination,
+/// the length of ray whose pieces composited colour and whether it stopped.
 #[derive(Default)]
 struct Composite {
     c: [f64; 3],
     a: f64,
     depth: Option<f64>,
+    seen: f64,
+    stopped: bool,
 }
 
 impl Composite {
@@ -238,6 +251,7 @@ impl<'a> Marcher<'a> {
             spread: None,
             labels: false,
             overlay: None,
+            ert: None,
         }
     }
 }
@@ -345,7 +359,12 @@ impl Marcher<'_> {
                 None => self.tf.lookup(v),
             };
             let a = corrected_alpha(a, self.step_factor);
-            self.composite(&mut out, ray, [r, g, b, a], t, t);
+            // A plain sample stands for the step after it.
+            let piece = [self.dt, span.t1 - t - self.dt];
+            self.composite(&mut out, ray, [r, g, b, a], t, t, piece);
+            if out.stopped {
+                break;
+            }
         }
         out.result()
     }
@@ -383,15 +402,20 @@ impl Marcher<'_> {
                     // samples (the kernels' `preint_shaded`).
                     // (Read once, where a piece is drawn.)
                     let g = std::cell::OnceCell::new();
+                    let len = self.dt / SEGMENT_PIECES as f64;
                     for (j, w) in whole.iter().enumerate() {
+                        if out.stopped {
+                            break;
+                        }
                         let f = (j as f64 + 0.5) / SEGMENT_PIECES as f64;
+                        let rest = span.t1 - t + (SEGMENT_PIECES - 1 - j) as f64 * len;
                         let piece =
                             join_pieces(std::array::from_fn(
                                 |i| {
                                     if i == 0 { *w } else { [0.0; 4] }
                                 },
                             ));
-                        self.composite_lit(out, ray, straight(piece), t, || {
+                        self.composite_lit(out, ray, straight(piece), t, [len, rest], || {
                             let [g0, g1] = *g.get_or_init(|| {
                                 [self.gradient(ray, t - self.dt), self.gradient(ray, t)]
                             });
@@ -399,21 +423,36 @@ impl Marcher<'_> {
                         });
                     }
                 } else {
-                    self.composite(out, ray, straight(join_pieces(whole)), t, t);
+                    let piece = [self.dt, span.t1 - t];
+                    self.composite(out, ray, straight(join_pieces(whole)), t, t, piece);
                 }
                 before = Some(front);
+                if out.stopped {
+                    return;
+                }
             }
         }
         if let Some((t, v)) = prev.filter(|&(t, _)| span.t1 > t) {
             let d = self.step_factor * (span.t1 - t) / self.dt;
-            self.composite(out, ray, straight(p.segment(v, v, d)), t, t);
+            let piece = [span.t1 - t, 0.0];
+            self.composite(out, ray, straight(p.segment(v, v, d)), t, t, piece);
         }
     }
 
     /// Composites the straight colour and opacity `rgba` of the sample at `t`
-    /// (the label overlay and the depth are taken there), shaded at `ts`.
-    fn composite(&self, out: &mut Composite, ray: &Ray, rgba: [f64; 4], t: f64, ts: f64) {
-        self.composite_lit(out, ray, rgba, t, || self.normal(ray, ts));
+    /// (the label overlay and the depth are taken there), shaded at `ts`;
+    /// `piece`: the length of ray it stands for and the ray's length after
+    /// it (for termination's fill).
+    fn composite(
+        &self,
+        out: &mut Composite,
+        ray: &Ray,
+        rgba: [f64; 4],
+        t: f64,
+        ts: f64,
+        piece: [f64; 2],
+    ) {
+        self.composite_lit(out, ray, rgba, t, piece, || self.normal(ray, ts));
     }
 
     /// [`composite`](Self::composite) lit with the normal `n` gives (unlit
@@ -425,6 +464,7 @@ impl Marcher<'_> {
         ray: &Ray,
         rgba: [f64; 4],
         t: f64,
+        piece: [f64; 2],
         n: impl FnOnce() -> Option<DVec3>,
     ) {
         let [r, g, b, a] = match self.overlay {
@@ -449,7 +489,21 @@ impl Marcher<'_> {
             *acc += w * x;
         }
         out.a += w;
-        if out.depth.is_none() && out.a >= self.settings.depth_opacity as f64 {
+        if let Some(threshold) = self.ert {
+            out.seen += piece[0];
+            if out.a >= threshold {
+                // The residual, as far as the ray's mean extinction so far
+                // would fill it over the rest of the ray (the kernels'
+                // `accumulate` and `ert_fill`).
+                let fill = (1.0 - out.a) * ert_fill(out.a, piece[1] / out.seen.max(1e-30));
+                for (acc, x) in out.c.iter_mut().zip(c) {
+                    *acc += fill * x;
+                }
+                out.a += fill;
+                out.stopped = true;
+            }
+        }
+        if out.depth.is_none() && (out.a >= self.settings.depth_opacity as f64 || out.stopped) {
             out.depth = Some(self.clip_depth(ray, t));
         }
     }

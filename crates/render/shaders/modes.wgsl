@@ -378,11 +378,13 @@ fn preint_fetch(acc: ptr<function, Accum>, c: Cursor, t: f32, dt: f32, t_min: f3
 // the brick being read (the kernels sample nothing past their last sample).
 // Without it a ray leaving the volume in material loses up to a step of it; a
 // plain sample stands for the step after it. None when the ray stopped early
-// (terminated, out of samples) or its last samples were skipped (transparent):
-// then the last sample lies more than a step before t_end.
+// (terminated: its fill already covers the rest; out of samples) or its last
+// samples were skipped (transparent): then the last sample lies more than a
+// step before t_end.
 fn preint_tail(acc: ptr<function, Accum>, c: Cursor, r: Ray, t_end: f32, ts: f32, dt: f32, tf_v: f32) {
     let len = t_end - (*acc).prev_t;
-    if (!(len > 0.0 && len <= 1.001 * dt)) {
+    let stopped = ERT && (*acc).color.a >= frame.ert_threshold;
+    if (!(len > 0.0 && len <= 1.001 * dt) || stopped) {
         return;
     }
     let v = (*acc).prev_v;

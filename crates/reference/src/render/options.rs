@@ -62,6 +62,14 @@ pub struct ReferenceOptions<'a> {
     /// iso surfaces (before shading) and MIP maxima are tinted by the label
     /// under them in colour mode ([`LabelOverlay::tint`]). Default `None`.
     pub overlay: Option<&'a LabelOverlay<'a>>,
+    /// DVR stops a ray once its opacity reaches this threshold and fills
+    /// the residual as the kernels do: the ray's mean extinction over the
+    /// pieces that composited colour, continued over the rest of the ray,
+    /// in the stopping piece's colour (the CPU twin of the kernels'
+    /// `accumulate`; docs/rendering-model.md, *Accelerations*). The GPU's
+    /// `settings.accel.early_termination` is ignored: by default (`None`) the
+    /// reference does not terminate.
+    pub early_termination: Option<f32>,
 }
 
 impl ReferenceOptions<'static> {
@@ -77,6 +85,7 @@ impl ReferenceOptions<'static> {
             intensity: None,
             spread: None,
             overlay: None,
+            early_termination: None,
         }
     }
 }
@@ -151,6 +160,15 @@ impl<'a> ReferenceOptions<'a> {
     {
         ReferenceOptions {
             spread: Some(sigma),
+            ..self
+        }
+    }
+
+    /// Terminating DVR rays at `threshold` as the kernels do
+    /// ([`Self::early_termination`]).
+    pub fn with_early_termination(self, threshold: f32) -> Self {
+        ReferenceOptions {
+            early_termination: Some(threshold),
             ..self
         }
     }

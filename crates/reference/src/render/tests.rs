@@ -146,6 +146,71 @@ fn constant_slab_opacity_is_step_independent() {
     }
 }
 
+/// (a') Early termination's fill: a ray stopped in a constant slab at 0.33
+/// (below the depth opacity; no step tested puts a sample on it) gathers the continuous answer
+/// `1 - (1 - a)^(L/voxel_world)` exactly, at every step (the mean extinction
+/// of the pieces it crossed, continued over the rest of the slab, is the
+/// slab's own), where the unterminated discrete sum is off by up to a step;
+/// and it has its depth where it stops.
+#[test]
+fn a_terminated_ray_in_a_constant_slab_gathers_the_continuous_integral() {
+    let (vol, frame) = slab();
+    let vw = frame.voxel_world as f64;
+    let len = SLAB_Z as f64;
+    let cam = ortho(Vec3::new(0.0, 0.0, 3.0), 0.8);
+    let rgb = [0.2f32, 0.6, 1.0];
+    for a in [0.05f32, 0.1, 0.3] {
+        let tf = constant_tf(rgb, a);
+        let continuous = 1.0 - (1.0 - a as f64).powf(len / vw);
+        for sf in [1.0f32, 0.5, 0.25, 0.125] {
+            let opts = ReferenceOptions::new(4, 4)
+                .with_step_factor(sf)
+                .with_early_termination(0.33);
+            let img = render_reference(&vol, &frame, &tf, &cam, &dvr(), &opts);
+            // The sample at which the ray stops: the first with A >= 0.33.
+            let k_stop = (0u32..)
+                .find(|&k| 1.0 - (1.0 - a as f64).powf((k + 1) as f64 * sf as f64) >= 0.33)
+                .unwrap();
+            let z = SLAB_Z as f64 * 0.5 - k_stop as f64 * sf as f64 * vw;
+            let depth = ortho_depth(3.0 - z);
+            for (i, c) in img.color.iter().enumerate() {
+                assert!(
+                    (c[3] as f64 - continuous).abs() < 1e-6,
+                    "a={a} sf={sf} px={i}: {} vs {continuous}",
+                    c[3]
+                );
+                for k in 0..3 {
+                    assert!((c[k] as f64 - continuous * rgb[k] as f64).abs() < 1e-6);
+                }
+                assert!(
+                    (img.depth[i] as f64 - depth).abs() < 1e-6,
+                    "a={a} sf={sf}: depth {} vs {depth}",
+                    img.depth[i]
+                );
+            }
+        }
+    }
+}
+
+proptest::proptest! {
+    /// The fill's share of the residual makes any uniform medium exact: `k`
+    /// pieces of opacity `a` composited, then the fill over `n` more,
+    /// gather what `k + n` pieces would; and the share lies in 0..=1.
+    #[test]
+    fn ert_fill_continues_a_uniform_medium_exactly(
+        a in 1e-4f64..0.9,
+        k in 1u32..200,
+        n in 0.0f64..300.0,
+    ) {
+        let gathered = 1.0 - (1.0 - a).powi(k as i32);
+        let share = ert_fill(gathered, n / k as f64);
+        proptest::prop_assert!((0.0..=1.0).contains(&share));
+        let filled = gathered + (1.0 - gathered) * share;
+        let exact = 1.0 - (1.0 - a).powf(k as f64 + n);
+        proptest::prop_assert!((filled - exact).abs() < 1e-9, "{filled} vs {exact}");
+    }
+}
+
 /// A linear ramp along z: raw value = z index over 32 slices, normalized by 0..31,
 /// in an 8 x 8 x 32 grid (a 0.25 x 0.25 x 1 box).
 fn ramp() -> (Volume, VolumeFrame) {
