@@ -184,9 +184,9 @@ fn finest_level_matches_in_core_on_head_ct() {
 /// early fills its residual as far as the material it has crossed would, to
 /// the ray's end. A 64^3 volume of one value in bricks of 16 at the finest
 /// level, a TF of opacity 0.04 a voxel, terminated at 0.8. Threshold:
-/// against the unterminated out-of-core image, max error <= 3 levels and
-/// >= 55 dB. Measured: max error 2, 57.2 dB; with the residual filled
-/// whole (the kernel before), max error 50 and 27.0 dB.
+/// against the unterminated out-of-core image, max error at most 3 levels
+/// and at least 55 dB. Measured: max error 2, 57.2 dB; with the residual
+/// filled whole (the kernel before), max error 50 and 27.0 dB.
 #[test]
 fn a_stopped_ray_fills_only_what_the_material_ahead_would() {
     let n = 64u32;
