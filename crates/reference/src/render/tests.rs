@@ -93,6 +93,39 @@ fn slab() -> (Volume, VolumeFrame) {
     )
 }
 
+/// The clip depth, viewed head-on from (0, 0, 3), of the first sample in the
+/// slab at which the opacity of a TF of opacity `a` reaches `threshold` at
+/// step `sf`.
+fn slab_depth(a: f32, sf: f32, vw: f64, threshold: f64) -> f64 {
+    let k = (0u32..)
+        .find(|&k| 1.0 - (1.0 - a as f64).powf((k + 1) as f64 * sf as f64) >= threshold)
+        .unwrap();
+    ortho_depth(3.0 - (SLAB_Z as f64 * 0.5 - k as f64 * sf as f64 * vw))
+}
+
+/// Every pixel of `img` is `alpha` of the colour `rgb` (premultiplied) at
+/// `depth`, to 1e-6.
+fn assert_slab(img: &Image, alpha: f64, rgb: [f32; 3], depth: f64, what: &str) {
+    for (i, c) in img.color.iter().enumerate() {
+        assert!(
+            (c[3] as f64 - alpha).abs() < 1e-6,
+            "{what} px={i}: {} vs {alpha}",
+            c[3]
+        );
+        for k in 0..3 {
+            assert!(
+                (c[k] as f64 - alpha * rgb[k] as f64).abs() < 1e-6,
+                "{what} px={i}"
+            );
+        }
+        assert!(
+            (img.depth[i] as f64 - depth).abs() < 1e-6,
+            "{what}: depth {} vs {depth}",
+            img.depth[i]
+        );
+    }
+}
+
 /// (a) A constant slab viewed along its axis accumulates `1 - (1 - a)^(L/voxel_world)`,
 /// whatever the step: the discrete sum is exactly `1 - (1 - a)^(N * step)` with
 /// `N = ceil(L / dt)` samples, which here is the continuous answer to within one step.
@@ -114,26 +147,8 @@ fn constant_slab_opacity_is_step_independent() {
             let n = sample_count(len, sf as f64 * vw);
             let exact = 1.0 - (1.0 - a as f64).powf(n as f64 * sf as f64);
             // Depth: the first sample at which A >= 0.5.
-            let k_half = (0u32..)
-                .find(|&k| 1.0 - (1.0 - a as f64).powf((k + 1) as f64 * sf as f64) >= 0.5)
-                .unwrap();
-            let z = SLAB_Z as f64 * 0.5 - k_half as f64 * sf as f64 * vw;
-            let depth = ortho_depth(3.0 - z);
-            for (i, c) in img.color.iter().enumerate() {
-                assert!(
-                    (c[3] as f64 - exact).abs() < 1e-6,
-                    "a={a} sf={sf} px={i}: {} vs {exact}",
-                    c[3]
-                );
-                for k in 0..3 {
-                    assert!((c[k] as f64 - exact * rgb[k] as f64).abs() < 1e-6);
-                }
-                assert!(
-                    (img.depth[i] as f64 - depth).abs() < 1e-6,
-                    "{} vs {depth}",
-                    img.depth[i]
-                );
-            }
+            let depth = slab_depth(a, sf, vw, 0.5);
+            assert_slab(&img, exact, rgb, depth, &format!("a={a} sf={sf}"));
             assert!(
                 (img.color[0][3] as f64 - continuous).abs() < 1e-3,
                 "a={a} sf={sf}"
@@ -147,8 +162,8 @@ fn constant_slab_opacity_is_step_independent() {
 }
 
 /// (a') Early termination's fill: a ray stopped in a constant slab at 0.33
-/// (below the depth opacity; no step tested puts a sample on it) gathers the continuous answer
-/// `1 - (1 - a)^(L/voxel_world)` exactly, at every step (the mean extinction
+/// (below the depth opacity; no step tested puts a sample on it) gathers the
+/// continuous answer `1 - (1 - a)^(L/voxel_world)` exactly, at every step (the mean extinction
 /// of the pieces it crossed, continued over the rest of the slab, is the
 /// slab's own), where the unterminated discrete sum is off by up to a step;
 /// and it has its depth where it stops.
@@ -167,27 +182,9 @@ fn a_terminated_ray_in_a_constant_slab_gathers_the_continuous_integral() {
                 .with_step_factor(sf)
                 .with_early_termination(0.33);
             let img = render_reference(&vol, &frame, &tf, &cam, &dvr(), &opts);
-            // The sample at which the ray stops: the first with A >= 0.33.
-            let k_stop = (0u32..)
-                .find(|&k| 1.0 - (1.0 - a as f64).powf((k + 1) as f64 * sf as f64) >= 0.33)
-                .unwrap();
-            let z = SLAB_Z as f64 * 0.5 - k_stop as f64 * sf as f64 * vw;
-            let depth = ortho_depth(3.0 - z);
-            for (i, c) in img.color.iter().enumerate() {
-                assert!(
-                    (c[3] as f64 - continuous).abs() < 1e-6,
-                    "a={a} sf={sf} px={i}: {} vs {continuous}",
-                    c[3]
-                );
-                for k in 0..3 {
-                    assert!((c[k] as f64 - continuous * rgb[k] as f64).abs() < 1e-6);
-                }
-                assert!(
-                    (img.depth[i] as f64 - depth).abs() < 1e-6,
-                    "a={a} sf={sf}: depth {} vs {depth}",
-                    img.depth[i]
-                );
-            }
+            // Depth: where the ray stops, at the first sample with A >= 0.33.
+            let depth = slab_depth(a, sf, vw, 0.33);
+            assert_slab(&img, continuous, rgb, depth, &format!("a={a} sf={sf}"));
         }
     }
 }
