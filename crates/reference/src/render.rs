@@ -89,6 +89,7 @@ pub fn render_reference(
     marcher.overlay = opts.overlay;
     marcher.intensity = opts.intensity;
     marcher.ert = opts.early_termination.map(f64::from);
+    marcher.mip_refine = opts.mip_refine;
     if let Some(s) = opts.spread {
         marcher.spread = Some((s, tf.spread_table(SPREAD_ROWS, SPREAD_TABLE_WIDTH)));
     }
@@ -190,6 +191,8 @@ struct Marcher<'a> {
     overlay: Option<&'a LabelOverlay<'a>>,
     /// DVR's termination threshold ([`ReferenceOptions::early_termination`]).
     ert: Option<f64>,
+    /// MIP refines its maximum ([`ReferenceOptions::mip_refine`]).
+    mip_refine: bool,
 }
 
 /// The opacity of `n` pieces of opacity `a` each, `1 - (1 - a)^n` (0 when
@@ -252,6 +255,7 @@ impl<'a> Marcher<'a> {
             labels: false,
             overlay: None,
             ert: None,
+            mip_refine: true,
         }
     }
 }
@@ -548,10 +552,42 @@ impl Marcher<'_> {
     /// Maximum intensity projection.
     fn mip(&self, ray: &Ray, span: Span) -> RayResult {
         let mut best: Option<(f64, f64)> = None; // (value, t)
+        // The runner-up: a maximum replaced by one more than a step and a
+        // half away, or a sample that far from the maximum above it (the
+        // kernels' `mip_sample`).
+        let mut alt: Option<(f64, f64)> = None;
         for t in span.samples() {
             let v = self.value(ray, t);
+            let far = best.is_some_and(|(_, tm)| t - tm > 1.5 * span.dt);
             if best.is_none_or(|(m, _)| v > m) {
+                if far {
+                    alt = best;
+                }
                 best = Some((v, t));
+            } else if far && alt.is_none_or(|(a, _)| v > a) {
+                alt = Some((v, t));
+            }
+        }
+        // The maximum and the runner-up refined between samples, as the
+        // kernels' `mip_refine` does: half a step, then a quarter, either
+        // side of each peak's best value so far, within the ray; the running
+        // maximum takes the best.
+        if self.mip_refine {
+            for (v0, t0) in [best, alt].into_iter().flatten() {
+                let (mut bv, mut bt) = (v0, t0);
+                let mut h = 0.5 * span.dt;
+                for _ in 0..2 {
+                    for t in [bt - h, bt + h].map(|t| t.clamp(span.t0, span.t1)) {
+                        let v = self.value(ray, t);
+                        if v > bv {
+                            (bv, bt) = (v, t);
+                        }
+                    }
+                    h *= 0.5;
+                }
+                if best.is_none_or(|(m, _)| bv > m) {
+                    best = Some((bv, bt));
+                }
             }
         }
         match best {

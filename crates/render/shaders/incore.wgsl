@@ -231,12 +231,19 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
                 }
                 if (!first && dvr_sample(&acc, cur, r, t, t - dt, front, v, tf_v, dt, t1)) { break; }
             } else {
-                if (mip_sample(&acc, t, v)) { break; }
+                if (mip_sample(&acc, t, v, dt)) { break; }
             }
             k = k + 1u;
         }
         if (PREINT && MODE == MODE_DVR) {
             preint_tail(&acc, cur, r, t1, acc.prev_t, dt, tf_v);
+        }
+        if (MODE == MODE_MIP && acc.max_v > -1.0e38) {
+            let alt = vec2<f32>(acc.alt_t, acc.alt_v);
+            mip_refine(&acc, cur, vec2<f32>(acc.max_t, acc.max_v), t0, t1, dt);
+            if (alt.y > -1.0e38) {
+                mip_refine(&acc, cur, alt, t0, t1, dt);
+            }
         }
     }
     finish_ray(px, &acc, cur, r, start.host);

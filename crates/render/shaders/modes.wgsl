@@ -169,6 +169,10 @@ struct Accum {
     // MIP: running maximum and where it was first attained.
     max_v: f32,
     max_t: f32,
+    // MIP: the best sample more than a step and a half from the maximum's
+    // when it was taken (the runner-up, a second peak; mip_refine).
+    alt_v: f32,
+    alt_t: f32,
     // Iso: the bracket [hit_a, hit_b] of the first crossing, when hit.
     hit: bool,
     hit_a: f32,
@@ -203,6 +207,8 @@ fn accum_new() -> Accum {
     a.depth_set = false;
     a.max_v = -3.0e38;
     a.max_t = 0.0;
+    a.alt_v = -3.0e38;
+    a.alt_t = 0.0;
     a.hit = false;
     a.hit_a = 0.0;
     a.hit_b = 0.0;
@@ -564,14 +570,65 @@ fn iso_hit(acc: ptr<function, Accum>, c: Cursor, r: Ray, a_in: f32, b_in: f32) {
     (*acc).depth_set = true;
 }
 
-// MIP: takes the sample of value `v` at `t`. True when early ray termination
-// ends the ray (the maximum reached 1).
-fn mip_sample(acc: ptr<function, Accum>, t: f32, v: f32) -> bool {
+// MIP: takes the sample of value `v` at `t` on a grid of step `dt`, and
+// keeps the runner-up: a maximum replaced by one more than a step and a half
+// away, or a sample that far from the maximum above the runner-up. True when
+// early ray termination ends the ray (the maximum reached 1).
+fn mip_sample(acc: ptr<function, Accum>, t: f32, v: f32, dt: f32) -> bool {
+    let far = t - (*acc).max_t > 1.5 * dt && (*acc).max_v > -1.0e38;
     if (v > (*acc).max_v) {
+        if (far) {
+            (*acc).alt_v = (*acc).max_v;
+            (*acc).alt_t = (*acc).max_t;
+        }
         (*acc).max_v = v;
         (*acc).max_t = t;
+    } else if (far && v > (*acc).alt_v) {
+        (*acc).alt_v = v;
+        (*acc).alt_t = t;
     }
     return ERT && (*acc).max_v >= 1.0;
+}
+
+// MIP: refines a peak between the samples. The largest value near the
+// sample `p` (t, value) lies within a step `dt` of it; two rounds probe half
+// a step and then a quarter step either side of the best value so far,
+// within [lo, hi] (the ray's extent; out of core, the ray's extent in the
+// leaf that holds the sample, widened by the refinement's reach, three
+// quarters of a step, where the brick's apron holds it, so both backends
+// probe alike), and the running maximum takes
+// the best. Real samples: it never overshoots the data. The kernels refine
+// the maximum and the runner-up (mip_sample), eight samples a ray: two
+// peaks whose samples lie within the texture filter's rounding of each other
+// are both refined in either backend. The CPU twin: the reference's `mip`.
+// The multi-channel kernels do not refine.
+fn mip_refine(acc: ptr<function, Accum>, c: Cursor, p: vec2<f32>, lo: f32, hi: f32, dt: f32) {
+    var bt = p.x;
+    var bv = p.y;
+    var h = 0.5 * dt;
+    var i = 0u;
+    loop {
+        if (i >= 2u) { break; }
+        let ta = clamp(bt - h, lo, hi);
+        let tb = clamp(bt + h, lo, hi);
+        let va = cursor_value(c, ta);
+        let vb = cursor_value(c, tb);
+        (*acc).samples = (*acc).samples + 2u;
+        if (va > bv) {
+            bv = va;
+            bt = ta;
+        }
+        if (vb > bv) {
+            bv = vb;
+            bt = tb;
+        }
+        h = 0.5 * h;
+        i = i + 1u;
+    }
+    if (bv > (*acc).max_v) {
+        (*acc).max_v = bv;
+        (*acc).max_t = bt;
+    }
 }
 
 // MIP: maps the maximum through the TF (premultiplied, no step correction),

@@ -70,6 +70,12 @@ pub struct ReferenceOptions<'a> {
     /// `settings.accel.early_termination` is ignored: by default (`None`) the
     /// reference does not terminate.
     pub early_termination: Option<f32>,
+    /// MIP refines the largest sample and the runner-up (the best sample more
+    /// than a step and a half from it) between samples as the scalar kernels
+    /// do (`mip_sample`, `mip_refine`: half a step, then a quarter, either
+    /// side). Default on; off, the maximum of the samples alone, as the
+    /// multi-channel kernels and [`render_channels_reference`](crate::render_channels_reference) take it.
+    pub mip_refine: bool,
 }
 
 impl ReferenceOptions<'static> {
@@ -86,6 +92,7 @@ impl ReferenceOptions<'static> {
             spread: None,
             overlay: None,
             early_termination: None,
+            mip_refine: true,
         }
     }
 }
@@ -171,6 +178,11 @@ impl<'a> ReferenceOptions<'a> {
             early_termination: Some(threshold),
             ..self
         }
+    }
+
+    /// With or without MIP's refinement between samples ([`Self::mip_refine`]).
+    pub fn with_mip_refinement(self, mip_refine: bool) -> Self {
+        ReferenceOptions { mip_refine, ..self }
     }
 
     /// With a label map over the image ([`Self::overlay`]).
