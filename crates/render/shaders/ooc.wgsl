@@ -318,8 +318,14 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
                 let trans_in = select(1.0, 1.0 - acc.color.a, MODE == MODE_DVR);
                 // Pre-integration: as in incore.wgsl.
                 var forced = false;
-                // MIP: whether a sample of this leaf raised the maximum.
+                // MIP: whether a sample of this leaf raised the maximum; the
+                // ray's extent in the leaf where a peak taken in it is
+                // refined: up to three quarters of a step past the leaf
+                // either side (the refinement's reach), as in core, where
+                // the brick's apron holds it.
                 var holds_max = false;
+                let reach = min(0.75 * dtl, f32(ooc.apron) * finest_voxel_t() * min(cur.b.f3.x, min(cur.b.f3.y, cur.b.f3.z)));
+                let mip_reach = vec3<f32>(max(t_in - reach, t0), min(t_end + reach, t1), dtl);
                 loop {
                     let t = grid_t(t0, k, dtl);
                     if (t >= t_end) { break; }
@@ -362,11 +368,6 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
                         let before_t = acc.max_t;
                         let before_alt = vec2<f32>(acc.alt_t, acc.alt_v);
                         let stop = mip_sample(&acc, t, v, dtl);
-                        // Up to three quarters of a step past the leaf either
-                        // side (the refinement's reach), as in core, where
-                        // the brick's apron holds it.
-                        let m = min(0.75 * dtl, f32(ooc.apron) * finest_voxel_t() * min(cur.b.f3.x, min(cur.b.f3.y, cur.b.f3.z)));
-                        let span = vec3<f32>(max(t_in - m, t0), min(t_end + m, t1), dtl);
                         if (any(vec2<f32>(acc.alt_t, acc.alt_v) != before_alt)) {
                             // The maximum demoted, or this sample.
                             if (acc.alt_t == before_t) {
@@ -376,13 +377,13 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
                             } else {
                                 alt_leaf = st.hit.leaf;
                                 alt_data = st.hit.data;
-                                alt_span = span;
+                                alt_span = mip_reach;
                             }
                         }
                         if (acc.max_t != before_t || acc.max_v > before) {
                             max_leaf = st.hit.leaf;
                             max_data = st.hit.data;
-                            max_span = span;
+                            max_span = mip_reach;
                         }
                         holds_max = holds_max || acc.max_v > before;
                         if (stop) { done = true; break; }

@@ -68,7 +68,9 @@ pub struct ReferenceOptions<'a> {
     /// in the stopping piece's colour (the CPU twin of the kernels'
     /// `accumulate`; docs/rendering-model.md, *Accelerations*). The GPU's
     /// `settings.accel.early_termination` is ignored: by default (`None`) the
-    /// reference does not terminate.
+    /// reference does not terminate. The multi-channel reference
+    /// ([`render_channels_reference`](crate::render_channels_reference))
+    /// ignores this too.
     pub early_termination: Option<f32>,
     /// MIP refines the largest sample and the runner-up (the best sample more
     /// than a step and a half from it) between samples as the scalar kernels
