@@ -92,25 +92,24 @@ impl Scene<'_> {
             r.render(&mut pass).unwrap();
         }
         g.submit_wait(enc);
-        let tex = r
-            .sample_count_texture()
-            .expect("a prepared frame counts samples");
-        let counts: Vec<u32> = brickray_harness::read_texture(g, tex, 4, wgpu::TextureAspect::All)
-            .chunks_exact(4)
-            .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]))
-            .collect();
+        let counts = brickray_harness::predict::sample_counts(g, &r);
         let spr = brickray_harness::predict::samples_per_ray(&counts);
         (target.read_color(g), target.read_depth(g), spr)
     }
 
     fn reference(&self) -> Vec<u8> {
+        self.reference_with(ReferenceOptions::new(self.size, self.size))
+    }
+
+    /// The CPU reference of the scene with options `o`, RGBA8 over black.
+    fn reference_with(&self, o: ReferenceOptions) -> Vec<u8> {
         render_reference(
             self.vol,
             &self.frame,
             self.tf,
             &self.camera,
             &self.settings,
-            &ReferenceOptions::new(self.size, self.size),
+            &o,
         )
         .to_rgba8([0.0; 3])
     }
@@ -366,11 +365,9 @@ fn early_termination_matches_its_cpu_twin() {
         let opts = ReferenceOptions::new(s.size, s.size)
             .with_step_factor(s.settings.step_factor)
             .with_preintegration(preint);
-        let cpu = |o: ReferenceOptions| {
-            render_reference(s.vol, &s.frame, s.tf, &s.camera, &s.settings, &o).to_rgba8([0.0; 3])
-        };
-        let twin = brickray_reference::psnr(&gpu, &cpu(opts.with_early_termination(0.8)));
-        let full = brickray_reference::psnr(&gpu, &cpu(opts));
+        let twin =
+            brickray_reference::psnr(&gpu, &s.reference_with(opts.with_early_termination(0.8)));
+        let full = brickray_reference::psnr(&gpu, &s.reference_with(opts));
         eprintln!(
             "preint {preint}, shaded {shaded}: GPU at 0.8 vs its twin {twin:.2} dB, vs unterminated {full:.2} dB"
         );
@@ -401,14 +398,12 @@ fn mip_refines_its_maximum_between_samples() {
     let mut s = Scene::new(&ml, &tf, RenderMode::Mip, 64);
     s.settings.step_factor = 2.0;
     let (gpu, _) = s.gpu();
-    let cpu = |o: ReferenceOptions| {
-        render_reference(s.vol, &s.frame, s.tf, &s.camera, &s.settings, &o).to_rgba8([0.0; 3])
-    };
     let at_step = ReferenceOptions::new(s.size, s.size).with_step_factor(2.0);
-    let fine = cpu(ReferenceOptions::new(s.size, s.size));
-    let twin = brickray_reference::psnr(&gpu, &cpu(at_step));
+    let fine = s.reference();
+    let twin = brickray_reference::psnr(&gpu, &s.reference_with(at_step));
     let refined = brickray_reference::psnr(&gpu, &fine);
-    let samples_only = brickray_reference::psnr(&cpu(at_step.with_mip_refinement(false)), &fine);
+    let samples_only =
+        brickray_reference::psnr(&s.reference_with(at_step.with_mip_refinement(false)), &fine);
     eprintln!(
         "MIP at step 2: GPU vs its twin {twin:.2} dB; vs the fine reference {refined:.2} dB, the samples' maximum alone {samples_only:.2} dB"
     );

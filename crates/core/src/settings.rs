@@ -51,10 +51,10 @@ impl Default for Shading {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Accel {
     /// Early ray termination: stop once accumulated opacity reaches this
-    /// (`None` = off). Default 0.99. A DVR ray that stops takes the light it
-    /// would still gather to be the colour of the sample that stopped it:
-    /// the rest of its transmittance is filled with that colour and its
-    /// opacity becomes 1 (docs/rendering-model.md, *Accelerations*).
+    /// (`None` = off). Default 0.99. A DVR ray that stops fills the light it
+    /// would still gather with the colour of the sample that stopped it, as
+    /// far as its mean extinction so far would take it over the rest of the
+    /// ray (docs/rendering-model.md, *Accelerations*).
     pub early_termination: Option<f32>,
     /// Empty-space skipping over the min/max macro-cell grid.
     pub empty_space_skipping: bool,

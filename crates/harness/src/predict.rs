@@ -134,10 +134,7 @@ pub fn draw_timed(
         stats, ms, gpu_ms, ..
     } = crate::draw_frame_timed(gpu, renderer, target, desc, Some(wgpu::Color::BLACK), timer)?;
     let color = target.read_color(gpu);
-    let samples = renderer
-        .sample_count_texture()
-        .map(|t| words(&crate::read_texture(gpu, t, 4, wgpu::TextureAspect::All)))
-        .unwrap_or_default();
+    let samples = sample_counts(gpu, renderer);
     let classes = match (stats.prediction, renderer.prediction_classes()) {
         (Some(_), Some((buf, off, size))) => Some(words(&read_buffer(gpu, buf, off, size))),
         _ => None,
@@ -149,6 +146,16 @@ pub fn draw_timed(
         ms,
         gpu_ms,
     })
+}
+
+/// The volume samples each ray took in `renderer`'s last prepared frame
+/// (`VolumeRenderer::sample_count_texture`, read back after the frame was
+/// submitted and waited on); empty before any frame.
+pub fn sample_counts(gpu: &GpuContext, renderer: &VolumeRenderer) -> Vec<u32> {
+    renderer
+        .sample_count_texture()
+        .map(|t| words(&crate::read_texture(gpu, t, 4, wgpu::TextureAspect::All)))
+        .unwrap_or_default()
 }
 
 /// Share of pixels whose colour differs by more than [`WRONG_LEVELS`] in any
