@@ -18,7 +18,7 @@ use brickray_harness::{shared_gpu as gpu, target_desc as targets};
 
 #[path = "skip_support.rs"]
 mod skip_support;
-use skip_support::{check_rule_decision, skip_frame};
+use skip_support::{STEP, check_rule_decision, skip_frame};
 
 struct Scene<'a> {
     vol: &'a Volume,
@@ -684,8 +684,9 @@ fn missing_texture_features_fall_back() {
 /// cells certain to be skipped 0.14, below `MIP_SKIP_SHARE_MIN`) a MIP frame
 /// with skipping asked for takes every sample, as without it, while
 /// `SkipRule::Always` skips (fewer samples, the same image); on a bright
-/// box around a dim core (share above the threshold) both skip. Images are
-/// identical in every case.
+/// box around a dim core (share above the threshold) both skip, but at a
+/// step of 2 voxels, where the threshold is 1, only `Always` does. Images
+/// are identical in every case.
 #[test]
 fn mip_skips_where_the_macro_cells_say_it_pays() {
     use brickray::RendererOptions;
@@ -694,13 +695,22 @@ fn mip_skips_where_the_macro_cells_say_it_pays() {
     let noise = brickray_harness::scenes::pareto_noise(n);
     let shell = brickray_harness::scenes::bright_shell(n);
     let tf = TransferFunction::ramp(0.0, 1.0, 1.0);
-    for (name, vol, pays) in [("noise", &noise, false), ("shell", &shell, true)] {
+    for (name, vol, step, pays) in [
+        ("noise", &noise, STEP, false),
+        ("shell", &shell, STEP, true),
+        ("shell, a step of 2 voxels", &shell, 2.0, false),
+    ] {
         let share = MacroCellGrid::build(vol, 8).mip_skip_share();
-        assert_eq!(share >= MIP_SKIP_SHARE_MIN, pays, "{name}: share {share}");
-        let (samples, images) = skip_frames(vol, &tf, RenderMode::Mip, |rule| RendererOptions {
-            mip_skipping: rule,
-            ..Default::default()
-        });
+        assert_eq!(
+            MIP_SKIP_SHARE_MIN.pays(share, step),
+            pays,
+            "{name}: share {share}"
+        );
+        let (samples, images) =
+            skip_frames(vol, &tf, RenderMode::Mip, step, |rule| RendererOptions {
+                mip_skipping: rule,
+                ..Default::default()
+            });
         eprintln!(
             "{name} (share {share:.3}): samples per ray, rule off/on {:.1}/{:.1}, always off/on {:.1}/{:.1}",
             samples[0], samples[1], samples[2], samples[3]
@@ -728,14 +738,15 @@ fn dvr_skips_where_enough_cells_are_transparent() {
         let share = grid.transparent_share(&tf);
         assert!(share > 0.0, "ramp from {from}: some cells transparent");
         assert_eq!(
-            share >= DVR_SKIP_SHARE_MIN,
+            DVR_SKIP_SHARE_MIN.pays(share, STEP),
             pays,
             "ramp from {from}: share {share}"
         );
-        let (samples, images) = skip_frames(&noise, &tf, RenderMode::Dvr, |rule| RendererOptions {
-            dvr_skipping: rule,
-            ..Default::default()
-        });
+        let (samples, images) =
+            skip_frames(&noise, &tf, RenderMode::Dvr, STEP, |rule| RendererOptions {
+                dvr_skipping: rule,
+                ..Default::default()
+            });
         eprintln!(
             "ramp from {from} (transparent cells {share:.3}): samples per ray, rule off/on {:.1}/{:.1}, always off/on {:.1}/{:.1}",
             samples[0], samples[1], samples[2], samples[3]
@@ -752,6 +763,7 @@ fn skip_frames(
     vol: &Volume,
     tf: &TransferFunction,
     mode: RenderMode,
+    step: f32,
     options: impl Fn(brickray::SkipRule) -> brickray::RendererOptions,
 ) -> (Vec<f64>, Vec<Vec<u8>>) {
     const SIZE: u32 = 96;
@@ -763,7 +775,7 @@ fn skip_frames(
         r.set_volume(&g.device, &g.queue, vol).unwrap();
         r.set_transfer_function(&g.device, &g.queue, tf).unwrap();
         for ess in [false, true] {
-            let desc = skip_frame(vol, mode, ess, SIZE);
+            let desc = skip_frame(vol, mode, ess, SIZE, step);
             let f = brickray_harness::predict::draw(g, &mut r, &target, &desc).unwrap();
             samples.push(brickray_harness::predict::samples_per_ray(&f.samples));
             images.push(f.color);

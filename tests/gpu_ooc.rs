@@ -16,7 +16,7 @@ use brickray_harness::{shared_gpu as gpu, target_desc as targets};
 
 #[path = "skip_support.rs"]
 mod skip_support;
-use skip_support::{check_rule_decision, skip_frame};
+use skip_support::{STEP, check_rule_decision, skip_frame};
 
 /// Builds a brick store of `vol` in a temporary directory and opens it.
 fn store_of(vol: &Volume, dir: &tempfile::TempDir) -> Arc<dyn brickray::BrickSource> {
@@ -439,9 +439,10 @@ fn mixed_levels_show_no_seams() {
 /// `MIP_SKIP_SHARE_MIN_BRICKS`. On fractal noise (below) a MIP frame with
 /// skipping asked for takes every sample, as without it, while
 /// `SkipRule::Always` skips (fewer samples, the same image); on a bright
-/// box around a dim core (above) both skip. Images are identical in every
-/// case. The shares are computed here from the store's finest bricks, as
-/// the renderer computes them from the bricks it uploads.
+/// box around a dim core (above) both skip, but at a step of 4 voxels,
+/// where the threshold is 1, only `Always` does. Images are identical in
+/// every case. The shares are computed here from the store's finest
+/// bricks, as the renderer computes them from the bricks it uploads.
 #[test]
 fn mip_skips_out_of_core_where_the_bricks_say_it_pays() {
     use brickray::core::MIP_SKIP_SHARE_MIN_BRICKS;
@@ -454,17 +455,21 @@ fn mip_skips_out_of_core_where_the_bricks_say_it_pays() {
     let tf = TransferFunction::ramp(0.0, 1.0, 1.0);
     let g = gpu();
     let target = Offscreen::new(&g.device, SIZE, SIZE);
-    for (name, vol, pays) in [("noise", &noise, false), ("shell", &shell, true)] {
+    for (name, vol, step, pays) in [
+        ("noise", &noise, STEP, false),
+        ("shell", &shell, STEP, true),
+        ("shell, a step of 4 voxels", &shell, 4.0, false),
+    ] {
         let dir = tempfile::tempdir().unwrap();
         let source = store_of(vol, &dir);
         // The share over the finest bricks (the converged cut at 0 px).
         let share = brickray_harness::finest_bricks_mip_share(source.as_ref()).unwrap();
         assert_eq!(
-            share >= MIP_SKIP_SHARE_MIN_BRICKS,
+            MIP_SKIP_SHARE_MIN_BRICKS.pays(share, step),
             pays,
             "{name}: share {share}"
         );
-        let desc = |ess: bool| skip_frame(vol, RenderMode::Mip, ess, SIZE);
+        let desc = |ess: bool| skip_frame(vol, RenderMode::Mip, ess, SIZE, step);
         let mut samples = Vec::new();
         let mut images = Vec::new();
         for rule in [SkipRule::WherePays, SkipRule::Always] {
@@ -494,7 +499,8 @@ fn mip_skips_out_of_core_where_the_bricks_say_it_pays() {
 /// of them transparent and skips (fewer samples); the box with a thick
 /// shell (0.13), the box under a TF opaque at every value and noise under a
 /// ramp transparent only at 0 (none) run without sub-cell tests (the frame's
-/// statistics say so; `SkipRule::Always` still tests). Every image of a
+/// statistics say so; `SkipRule::Always` still tests), and so does the thin
+/// shell at a step of 1 voxel, where the threshold is 0.55. Every image of a
 /// scene is the same.
 #[test]
 fn dvr_skips_out_of_core_only_where_enough_drawn_sub_cells_are_transparent() {
@@ -518,25 +524,46 @@ fn dvr_skips_out_of_core_only_where_enough_drawn_sub_cells_are_transparent() {
     let transparent_below = TransferFunction::ramp(0.3, 1.0, 0.05);
     let opaque = TransferFunction::from_entries(vec![[0.9, 0.8, 0.7, 0.01]; 256]);
     let from_zero = TransferFunction::ramp(0.0, 1.0, 0.05);
-    for (name, vol, tf, skips) in [
+    for (name, vol, tf, step, skips) in [
         (
             "thin shell, transparent below 0.3",
             &thin,
             &transparent_below,
+            STEP,
             true,
+        ),
+        (
+            "thin shell, transparent below 0.3, a step of 1 voxel",
+            &thin,
+            &transparent_below,
+            1.0,
+            false,
         ),
         (
             "thick shell, transparent below 0.3",
             &shell,
             &transparent_below,
+            STEP,
             false,
         ),
-        ("thick shell, opaque throughout", &shell, &opaque, false),
-        ("noise, transparent at 0 only", &noise, &from_zero, false),
+        (
+            "thick shell, opaque throughout",
+            &shell,
+            &opaque,
+            STEP,
+            false,
+        ),
+        (
+            "noise, transparent at 0 only",
+            &noise,
+            &from_zero,
+            STEP,
+            false,
+        ),
     ] {
         let dir = tempfile::tempdir().unwrap();
         let source = store_of(vol, &dir);
-        let desc = |ess: bool| skip_frame(vol, RenderMode::Dvr, ess, SIZE);
+        let desc = |ess: bool| skip_frame(vol, RenderMode::Dvr, ess, SIZE, step);
         let (mut samples, mut images, mut skipped) = (Vec::new(), Vec::new(), Vec::new());
         for rule in [SkipRule::WherePays, SkipRule::Always] {
             let options = RendererOptions {
@@ -553,7 +580,7 @@ fn dvr_skips_out_of_core_only_where_enough_drawn_sub_cells_are_transparent() {
             let share = r.stats().out_of_core.unwrap().dvr_transparent_share;
             let share = share.expect("a single-channel intensity volume's share");
             assert_eq!(
-                share >= DVR_SKIP_SHARE_MIN_BRICKS,
+                DVR_SKIP_SHARE_MIN_BRICKS.pays(share, step),
                 skips,
                 "{name}: share {share}"
             );
@@ -597,7 +624,7 @@ fn dvr_skips_sub_cells_only_where_a_leaf_can_hold_a_transparent_one() {
     let target = Offscreen::new(&g.device, SIZE, SIZE);
     let dir = tempfile::tempdir().unwrap();
     let source = store_of(&shell, &dir);
-    let desc = |ess: bool| skip_frame(&shell, RenderMode::Dvr, ess, SIZE);
+    let desc = |ess: bool| skip_frame(&shell, RenderMode::Dvr, ess, SIZE, STEP);
     let transparent_below = TransferFunction::ramp(0.3, 1.0, 0.05);
     let opaque = TransferFunction::from_entries(vec![[0.9, 0.8, 0.7, 0.01]; 256]);
     for (name, tf, skips) in [

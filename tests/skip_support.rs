@@ -4,13 +4,17 @@
 
 use brickray::{Camera, FrameDesc, RenderMode, RenderSettings, Volume, VolumeFrame};
 
+/// The default sample step, in voxels, the skipping tests draw at.
+pub(crate) const STEP: f32 = 0.5;
+
 /// The skipping tests' frame: `vol` centred, the orbit camera of the pareto
-/// suite, ERT at 0.99, skipping as `ess` says.
+/// suite, ERT at 0.99, skipping as `ess` says, at a step of `step` voxels.
 pub(crate) fn skip_frame(
     vol: &Volume,
     mode: RenderMode,
     ess: bool,
     size: u32,
+    step: f32,
 ) -> FrameDesc<'static> {
     let d = vol.desc();
     let frame = VolumeFrame::centered(d.dims, d.spacing);
@@ -18,6 +22,7 @@ pub(crate) fn skip_frame(
     FrameDesc {
         settings: RenderSettings {
             mode,
+            step_factor: step,
             accel: brickray::Accel {
                 early_termination: Some(0.99),
                 empty_space_skipping: ess,

@@ -51,6 +51,20 @@ fn image_side(s: &str) -> Result<u32, String> {
     }
 }
 
+/// A sample step in voxels, within what `RenderSettings::validate` accepts.
+fn sample_step(s: &str) -> Result<f32, String> {
+    let step: f32 = s.parse().map_err(|e| format!("{s}: {e}"))?;
+    let (lo, hi) = (
+        brickray_core::RenderSettings::MIN_STEP_FACTOR,
+        brickray_core::RenderSettings::MAX_STEP_FACTOR,
+    );
+    if (lo..=hi).contains(&step) {
+        Ok(step)
+    } else {
+        Err(format!("{s}: a sample step lies in {lo}..={hi} voxels"))
+    }
+}
+
 /// A count of rounds or frames: at least 1.
 fn at_least_one<T: std::str::FromStr + PartialOrd + From<u8>>(s: &str) -> Result<T, String>
 where
@@ -197,6 +211,17 @@ fn main() -> ExitCode {
         Err(e) => {
             eprintln!("brickray-bench {suite}: {e}");
             ExitCode::FAILURE
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn a_sample_step_is_one_the_renderer_accepts() {
+        assert_eq!(super::sample_step("2"), Ok(2.0));
+        for bad in ["0", "-1", "17", "nan", "one"] {
+            assert!(super::sample_step(bad).is_err(), "{bad}");
         }
     }
 }

@@ -38,6 +38,10 @@ pub(crate) struct Args {
     /// Voxels per side of the procedural volumes.
     #[arg(long, default_value_t = 128, value_parser = crate::at_least_one::<u32>)]
     side: u32,
+    /// Sample step in voxels of every frame (the rules' thresholds were
+    /// measured at the default, 0.5; `brickray_core::skip_share_min`).
+    #[arg(long, default_value_t = 0.5, value_parser = crate::sample_step)]
+    step: f32,
 }
 
 /// One volume.
@@ -64,6 +68,8 @@ pub(crate) struct Row {
 pub(crate) struct SkippingResult {
     #[serde(flatten)]
     run: RunInfo,
+    /// Every frame's sample step, voxels.
+    step_voxels: f32,
     rows: Vec<Row>,
     /// The same out of core (`skip_share`: within each finest brick).
     ooc_rows: Vec<Row>,
@@ -128,10 +134,10 @@ fn volumes(side: u32) -> Vec<(String, Volume)> {
 }
 
 pub(crate) fn run(args: &Args) -> Result<SkippingResult, String> {
-    let (rounds, size) = (args.rounds, args.size);
+    let (rounds, size, step) = (args.rounds, args.size, args.step);
     let gpu = GpuContext::new().map_err(|e| e.to_string())?;
     println!("adapter: {}", gpu.describe());
-    println!("MIP and DVR, {size}x{size}, {rounds} interleaved rounds");
+    println!("MIP and DVR, {size}x{size}, step {step} voxel, {rounds} interleaved rounds");
     println!(
         "  {:<36} {:>6} {:>6} {:>9} {:>16} {:>16}",
         "volume", "share", "rule", "off ms", "always ms (x)", "rule ms (x)"
@@ -164,10 +170,10 @@ pub(crate) fn run(args: &Args) -> Result<SkippingResult, String> {
             share,
             rule_skips,
         };
-        let skips = brickray_core::mip_skipping_pays(&grid);
+        let skips = brickray_core::mip_skipping_pays(&grid, step);
         let c = case(name.clone(), name.clone(), share, skips);
         let (a, r) = (&mut always, Some(&mut rule));
-        measure(&run, settings(mip, true), a, r, view, rounds, c, &mut rows)?;
+        measure(&run, settings(mip, step), a, r, view, rounds, c, &mut rows)?;
         // Out of core: a brick store at its finest level.
         let src = brickray_harness::store_of(&vol, &dir.path().join(format!("{i}.brs")));
         let share = brickray_harness::finest_bricks_mip_share(src.as_ref())?;
@@ -184,7 +190,7 @@ pub(crate) fn run(args: &Args) -> Result<SkippingResult, String> {
                 .map_err(|e| e.to_string())?;
             r.set_transfer_function(&gpu.device, &gpu.queue, &tf)
                 .map_err(|e| e.to_string())?;
-            match run.converge(&mut r, camera, frame, settings(mip, true), 300)? {
+            match run.converge(&mut r, camera, frame, settings(mip, step), 300)? {
                 (Some(_), _) => Ok(r),
                 (None, _) => Err(format!("{name}: out of core did not converge")),
             }
@@ -193,12 +199,12 @@ pub(crate) fn run(args: &Args) -> Result<SkippingResult, String> {
             ooc(with(SkipRule::Always))?,
             ooc(with(SkipRule::WherePays))?,
         );
-        let skips = share >= brickray_core::MIP_SKIP_SHARE_MIN_BRICKS;
+        let skips = brickray_core::MIP_SKIP_SHARE_MIN_BRICKS.pays(share, step);
         let c = case(format!("{name}, out of core"), name.clone(), share, skips);
         let (a, r) = (&mut always, Some(&mut rule));
         measure(
             &run,
-            settings(mip, true),
+            settings(mip, step),
             a,
             r,
             view,
@@ -219,7 +225,7 @@ pub(crate) fn run(args: &Args) -> Result<SkippingResult, String> {
                 enabled: true,
                 ..Default::default()
             },
-            ..settings(dvr, true)
+            ..settings(dvr, step)
         };
         let dvr_with = |dvr_skipping| RendererOptions {
             dvr_skipping,
@@ -230,7 +236,7 @@ pub(crate) fn run(args: &Args) -> Result<SkippingResult, String> {
         for from in [0.0f32, 0.3, 0.6] {
             let tf = TransferFunction::ramp(from, 1.0, 0.05);
             let share = grid.transparent_share(&tf);
-            let skips = share >= brickray_core::DVR_SKIP_SHARE_MIN;
+            let skips = brickray_core::DVR_SKIP_SHARE_MIN.pays(share, step);
             let with = |dvr_skipping| RendererOptions {
                 dvr_skipping,
                 ..Default::default()
@@ -238,7 +244,7 @@ pub(crate) fn run(args: &Args) -> Result<SkippingResult, String> {
             let mut always = renderer_in_core(&gpu, with(SkipRule::Always), &vol, &tf)?;
             let mut rule = renderer_in_core(&gpu, with(SkipRule::WherePays), &vol, &tf)?;
             for (base, kind, rows) in [
-                (settings(dvr, true), "DVR", &mut dvr_rows),
+                (settings(dvr, step), "DVR", &mut dvr_rows),
                 (shaded, "shaded DVR", &mut dvr_shaded_rows),
             ] {
                 let label = format!("{name}, {kind} from {from}");
@@ -249,9 +255,9 @@ pub(crate) fn run(args: &Args) -> Result<SkippingResult, String> {
             for r in [&mut ooc_dvr, &mut ooc_dvr_rule] {
                 r.set_transfer_function(&gpu.device, &gpu.queue, &tf)
                     .map_err(|e| e.to_string())?;
-                run.converge(r, camera, frame, settings(dvr, true), 300)?;
+                run.converge(r, camera, frame, settings(dvr, step), 300)?;
             }
-            run.frame(&mut ooc_dvr_rule, camera, frame, settings(dvr, true), false)?;
+            run.frame(&mut ooc_dvr_rule, camera, frame, settings(dvr, step), false)?;
             let rule_skips = ooc_dvr_rule.stats().frame.empty_space_skipping;
             let drawn = ooc_dvr_rule
                 .stats()
@@ -263,7 +269,7 @@ pub(crate) fn run(args: &Args) -> Result<SkippingResult, String> {
             let (a, r) = (&mut ooc_dvr, Some(&mut ooc_dvr_rule));
             measure(
                 &run,
-                settings(dvr, true),
+                settings(dvr, step),
                 a,
                 r,
                 view,
@@ -276,6 +282,7 @@ pub(crate) fn run(args: &Args) -> Result<SkippingResult, String> {
     let (max, wrong) = (max_ratio, wrong_decisions);
     Ok(SkippingResult {
         run: RunInfo::new(&gpu, size, rounds, "procedural and shared volumes"),
+        step_voxels: step,
         rule_over_off_max: max(&rows, |r| r.rule_over_off),
         always_over_off_max: max(&rows, |r| r.always_over_off),
         wrong_decisions: wrong(&rows),
@@ -299,13 +306,14 @@ pub(crate) fn run(args: &Args) -> Result<SkippingResult, String> {
     })
 }
 
-/// `mode` with or without empty-space skipping.
-fn settings(mode: RenderMode, ess: bool) -> RenderSettings {
+/// `mode` at `step` voxels, empty-space skipping asked for.
+fn settings(mode: RenderMode, step: f32) -> RenderSettings {
     RenderSettings {
         mode,
+        step_factor: step,
         accel: Accel {
             early_termination: Some(0.99),
-            empty_space_skipping: ess,
+            empty_space_skipping: true,
         },
         ..Default::default()
     }

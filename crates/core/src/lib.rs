@@ -64,8 +64,8 @@ pub use lod::{
 };
 pub use macrocell::{
     DVR_SKIP_SHARE_MIN, DVR_SKIP_SHARE_MIN_BRICKS, MIP_SKIP_SHARE_MIN, MIP_SKIP_SHARE_MIN_BRICKS,
-    MacroCellGrid, empty_distance, mip_skip_counts, mip_skipping_pays, sub_cell_ranges,
-    sub_cell_spreads, sub_cells_per_axis,
+    MacroCellGrid, ShareByStep, empty_distance, mip_skip_counts, mip_skipping_pays,
+    sub_cell_ranges, sub_cell_spreads, sub_cells_per_axis,
 };
 pub use moments::{MomentGrid, Moments, SpreadError, SpreadSource};
 pub use overlay::{LabelOverlay, OverlayError, OverlayMode, OverlayStyle, overlay_transform};

@@ -166,57 +166,115 @@ pub fn mip_skip_counts(dims: [u32; 3], ranges: &[[f32; 2]]) -> [u64; 2] {
     [skipped, all]
 }
 
+/// A skip rule's least share by sample step: anchors `(step, share)`, the
+/// step in voxels, in increasing step, each measured on lavapipe. Between two
+/// anchors the share is interpolated linearly in `log2(step)`; below the
+/// first and above the last it is the end's. A share of 1 skips only where
+/// every cell can be skipped.
+///
+/// Why it depends on the step: a rule that tests each cell it enters pays a
+/// test per cell whatever the step, and saves the samples the cell would
+/// have taken, fewer at a coarser step; from a step of a few voxels on, a
+/// ray tests a cell at nearly every sample (`brickray-bench skipping
+/// --step S`, docs/benchmarks.md, *skipping*).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ShareByStep(pub &'static [(f32, f64)]);
+
+impl ShareByStep {
+    /// The least share at a sample step of `step` voxels.
+    pub fn at(&self, step: f32) -> f64 {
+        let a = self.0;
+        let Some(&(first, first_share)) = a.first() else {
+            return 0.0;
+        };
+        // At or below the first anchor (NaN too).
+        if step.partial_cmp(&first) != Some(std::cmp::Ordering::Greater) {
+            return first_share;
+        }
+        for w in a.windows(2) {
+            let ((s0, v0), (s1, v1)) = (w[0], w[1]);
+            if step <= s1 {
+                let x = f64::from((step / s0).log2() / (s1 / s0).log2());
+                return v0 + (v1 - v0) * x;
+            }
+        }
+        a[a.len() - 1].1
+    }
+
+    /// Whether a rule skips at `share` and `step`.
+    pub fn pays(&self, share: f64, step: f32) -> bool {
+        share >= self.at(step)
+    }
+}
+
 /// The least [`MacroCellGrid::mip_skip_share`] at which MIP's empty-space
-/// skipping is used in core. Measured on lavapipe (`brickray-bench
-/// skipping`, docs/benchmarks.md): skipping cost 1.31-1.72x the frame on the
-/// five volumes whose share is 0.00-0.14 (fractal noise, Marschner-Lobb, the
-/// head CT, the nuclei, the cryo-ET tomogram), took 0.88x on the Colin27
-/// MRI (0.34) and 1.05-1.06x on the other T1 MRI (0.52); the threshold lies
-/// between. A test of a macro cell costs about as much as ten samples there,
-/// so skipping pays only where it removes most of the samples.
-pub const MIP_SKIP_SHARE_MIN: f64 = 0.25;
+/// skipping is used in core, by step. Measured on lavapipe (`brickray-bench
+/// skipping --step S`, docs/benchmarks.md): at 1/2 voxel skipping cost
+/// 1.31-1.72x the frame on the five volumes whose share is 0.00-0.14
+/// (fractal noise, Marschner-Lobb, the head CT, the nuclei, the cryo-ET
+/// tomogram), took 0.88x on the Colin27 MRI (0.34) and 1.05-1.06x on the
+/// other T1 MRI (0.52); at 1 voxel it cost 1.07-1.27x on the five and took
+/// 0.91x and 0.99x on the two MRIs; from 2 voxels on it cost on all seven
+/// (1.12-1.31x at 2, 1.11-1.26x at 4). A test of a macro cell costs about
+/// as much as ten samples there, so skipping pays only where it removes
+/// most of the samples, and a coarse step leaves few to remove.
+pub const MIP_SKIP_SHARE_MIN: ShareByStep = ShareByStep(&[(0.5, 0.25), (1.0, 0.3), (2.0, 1.0)]);
 
 /// Whether MIP's empty-space skipping pays on a volume with these macro
-/// cells ([`MIP_SKIP_SHARE_MIN`]).
-pub fn mip_skipping_pays(grid: &MacroCellGrid) -> bool {
-    grid.mip_skip_share() >= MIP_SKIP_SHARE_MIN
+/// cells at a sample step of `step` voxels ([`MIP_SKIP_SHARE_MIN`]).
+pub fn mip_skipping_pays(grid: &MacroCellGrid, step: f32) -> bool {
+    MIP_SKIP_SHARE_MIN.pays(grid.mip_skip_share(), step)
 }
 
 /// The least share of macro cells transparent through the transfer
-/// function at which DVR's empty-space skipping is used in core. Measured
-/// on lavapipe (`brickray-bench skipping`, 2026-12-06, docs/benchmarks.md:
-/// ramps opaque from 0, 0.3 and 0.6 of the range on seven volumes): where
-/// no cell is transparent skipping cost 1.14-1.30x the frame unshaded and
-/// 1.11-1.14x shaded; from a share of 0.188 on it broke even or paid
-/// (0.15-1.07x, the tomogram at 0.231 a wash). The threshold lies between.
-pub const DVR_SKIP_SHARE_MIN: f64 = 0.15;
+/// function at which DVR's empty-space skipping is used in core, whatever
+/// the step. Measured on lavapipe (`brickray-bench skipping`, 2026-12-06,
+/// docs/benchmarks.md: ramps opaque from 0, 0.3 and 0.6 of the range on
+/// seven volumes): where no cell is transparent skipping cost 1.14-1.30x
+/// the frame unshaded and 1.11-1.14x shaded; from a share of 0.188 on it
+/// broke even or paid (0.15-1.07x, the tomogram at 0.231 a wash). The
+/// threshold lies between. In core DVR skips a run of empty cells with one
+/// test (skip distances), so a coarser step costs it less than the rules
+/// that test every cell, and the threshold stays at every step: at 1, 2 and
+/// 4 voxels shaded frames paid or broke even from a share of 0.19 on (but
+/// the tomogram at 0.231 and 4 voxels, 1.11x), while unshaded frames at 4
+/// voxels cost 1.04-1.16x up to a share of 0.52 (1/4-voxel frames of 5-20
+/// ms at 256 x 256, within this machine's noise of each other).
+pub const DVR_SKIP_SHARE_MIN: ShareByStep = ShareByStep(&[(0.5, 0.15)]);
 
 /// The least share of sub-cells certain to be skipped, counted within each
 /// brick of an out-of-core cut ([`mip_skip_counts`] over a brick's
 /// sub-cells, the running maximum starting afresh at each brick, summed
 /// over the cut's bricks), at which MIP's empty-space skipping is used out
-/// of core. Within a brick the count is a lower bound of the volume-wide
-/// one (a ray enters each brick knowing nothing of the last), but it
-/// separates the same volumes (`brickray-bench skipping`, 2026-12-06, bricks
-/// of 32 at the finest level, docs/benchmarks.md): fractal noise 0.028,
+/// of core, by step. Within a brick the count is a lower bound of the
+/// volume-wide one (a ray enters each brick knowing nothing of the last),
+/// but it separates the same volumes (`brickray-bench skipping`, bricks of
+/// 32 at the finest level, docs/benchmarks.md): fractal noise 0.028,
 /// Marschner-Lobb 0.000, the head CT 0.005, the nuclei 0.001 and the cryo-ET
 /// tomogram 0.003, where out-of-core skipping cost 1.03-1.39x the frame on
-/// lavapipe, against the pycortex T1 MRI 0.391 and the Colin27 MRI 0.305,
-/// where it took 0.61-0.79x. The threshold lies between.
-pub const MIP_SKIP_SHARE_MIN_BRICKS: f64 = 0.1;
+/// lavapipe at 1/2 voxel (1.06-1.29x at 1 and 2, 1.10-1.22x at 4), against
+/// the pycortex T1 MRI 0.391 and the Colin27 MRI 0.305, where it took
+/// 0.61-0.79x at 1/2 voxel and 0.83-0.96x at 1 and 2; at 4 voxels it took
+/// 0.94x and cost 1.07x there, and cost the pycortex MRI 1.12x in the `raw`
+/// suite's view (`brickray-bench raw --step 4 --size 384`), 1.07x at 8.
+pub const MIP_SKIP_SHARE_MIN_BRICKS: ShareByStep =
+    ShareByStep(&[(0.5, 0.1), (2.0, 0.1), (4.0, 1.0)]);
 
 /// The least share of sub-cells transparent through the transfer function,
 /// over the bricks a frame draws, at which DVR's empty-space skipping is used
-/// out of core (`SkipRule::WherePays` in brickray-render). Measured on
-/// lavapipe (`brickray-bench skipping`, 2026-12-06, docs/benchmarks.md:
+/// out of core (`SkipRule::WherePays` in brickray-render), by step. Measured
+/// on lavapipe (`brickray-bench skipping --step S`, docs/benchmarks.md:
 /// ramps opaque from 0, 0.3 and 0.6 on seven volumes, bricks of 32 at the
-/// finest level, unshaded): at shares of 0 to 0.278 skipping cost 1.00-1.34x
-/// the frame (0.278: the pycortex T1 MRI, 1.18x), from 0.305 to 0.909 it
-/// broke even or paid (0.49-0.99x) but for the cryo-ET tomogram at 0.467
-/// (1.09x); the `raw` suite's view of the pycortex MRI, 0.358, pays (0.85x,
-/// shaded 0.71x). The threshold lies between 0.278 and 0.305: close to
-/// both, so a volume near it may take either side.
-pub const DVR_SKIP_SHARE_MIN_BRICKS: f64 = 0.29;
+/// finest level, unshaded). At 1/2 voxel (2026-12-06): at shares of 0 to
+/// 0.278 skipping cost 1.00-1.34x the frame (0.278: the pycortex T1 MRI,
+/// 1.18x), from 0.305 to 0.909 it broke even or paid (0.49-0.99x) but for
+/// the cryo-ET tomogram at 0.467 (1.09x); the `raw` suite's view of the
+/// pycortex MRI, 0.358, pays (0.85x, shaded 0.71x). At 1 voxel it cost up
+/// to 0.498 (1.02-1.15x) and paid from 0.644 (0.70-0.85x); at 2 voxels it
+/// cost up to 0.762 (1.01-1.17x) and paid or broke even from 0.745 (0.90-0.98x);
+/// at 4 voxels it cost or broke even at every share (0.96-1.31x).
+pub const DVR_SKIP_SHARE_MIN_BRICKS: ShareByStep =
+    ShareByStep(&[(0.5, 0.29), (1.0, 0.55), (2.0, 0.76), (4.0, 1.0)]);
 
 /// [`MacroCellGrid::empty_distance`] of a grid of `dims` cells whose
 /// emptiness is given per cell (x fastest): what several grids over one
@@ -387,6 +445,57 @@ mod tests {
         assert_eq!(all, 48);
         assert_eq!(skipped, 3);
         assert_eq!(mip_skip_counts([2; 3], &ranges[..1]), [0, 48]);
+    }
+
+    /// A rule's threshold is its anchors' at their steps, the ends' beyond
+    /// them, and in between linear in log2(step): halfway from 1 to 4
+    /// voxels is 2.
+    #[test]
+    fn a_threshold_follows_its_anchors() {
+        let t = ShareByStep(&[(1.0, 0.2), (4.0, 0.8)]);
+        assert_eq!(t.at(1.0), 0.2);
+        assert_eq!(t.at(4.0), 0.8);
+        assert_eq!(t.at(0.25), 0.2);
+        assert_eq!(t.at(16.0), 0.8);
+        assert!((t.at(2.0) - 0.5).abs() < 1e-9);
+        assert!(t.pays(0.5, 1.5) && !t.pays(0.5, 3.0));
+        assert_eq!(ShareByStep(&[]).at(1.0), 0.0);
+        assert_eq!(ShareByStep(&[(0.5, 0.3)]).at(8.0), 0.3);
+        // NaN takes the first anchor's.
+        assert_eq!(t.at(f32::NAN), 0.2);
+    }
+
+    /// The shipped rules: anchors in increasing step with shares in 0..=1,
+    /// each threshold never falling as the step grows (a coarser step saves
+    /// fewer samples per cell tested), and the rules that test each cell
+    /// skipping nothing but all-empty volumes at the coarsest step measured.
+    #[test]
+    fn the_shipped_rules_rise_with_the_step() {
+        for rule in [
+            MIP_SKIP_SHARE_MIN,
+            DVR_SKIP_SHARE_MIN,
+            MIP_SKIP_SHARE_MIN_BRICKS,
+            DVR_SKIP_SHARE_MIN_BRICKS,
+        ] {
+            assert!(rule.0.windows(2).all(|w| w[0].0 < w[1].0), "{rule:?}");
+            assert!(
+                rule.0.iter().all(|a| (0.0..=1.0).contains(&a.1)),
+                "{rule:?}"
+            );
+            let mut last = 0.0;
+            for i in 0..=64 {
+                let v = rule.at(1.0 / 64.0 * 2f32.powf(i as f32 * 10.0 / 64.0));
+                assert!(v >= last, "{rule:?}");
+                last = v;
+            }
+        }
+        for rule in [
+            MIP_SKIP_SHARE_MIN,
+            MIP_SKIP_SHARE_MIN_BRICKS,
+            DVR_SKIP_SHARE_MIN_BRICKS,
+        ] {
+            assert_eq!(rule.at(16.0), 1.0, "{rule:?}");
+        }
     }
 
     proptest! {

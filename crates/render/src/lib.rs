@@ -113,7 +113,7 @@ pub struct RendererOptions {
 pub enum SkipRule {
     /// DVR in core: where at least [`brickray_core::DVR_SKIP_SHARE_MIN`] of
     /// the macro cells are transparent through the frame's transfer
-    /// function (decided when it changes, with the skip distances). Out of
+    /// function (counted when it changes, with the skip distances). Out of
     /// core, each frame a plan is applied, where at least
     /// [`brickray_core::DVR_SKIP_SHARE_MIN_BRICKS`] of the sub-cells of the
     /// bricks the frame draws are transparent through it
@@ -123,12 +123,16 @@ pub enum SkipRule {
     ///
     /// MIP in core, where the volume's macro cells make at least
     /// [`brickray_core::MIP_SKIP_SHARE_MIN`] of the cells certain to be
-    /// skipped (`brickray_core::mip_skipping_pays`, decided at set-up); out
+    /// skipped (`brickray_core::mip_skipping_pays`, counted at set-up); out
     /// of core, each frame, where the sub-cells of the bricks the frame
     /// draws make at least [`brickray_core::MIP_SKIP_SHARE_MIN_BRICKS`] of
     /// them certain to be skipped within their brick
     /// (`brickray_core::mip_skip_counts`; a multi-channel volume always
     /// skips). Below, skipping cost 1.03-2x the frame on lavapipe.
+    ///
+    /// Each threshold is taken at the frame's step
+    /// ([`brickray_core::ShareByStep`]): a coarser step saves fewer samples
+    /// per cell tested, so every rule but DVR's in core asks for more.
     #[default]
     WherePays,
     /// Whenever the settings ask for it.

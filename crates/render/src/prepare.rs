@@ -347,7 +347,9 @@ pub(crate) fn frame_variant(
         Variant {
             spread: b.spread() && dvr && !v.preint,
             gradients: b.gradients() && dvr && v.shade && !v.labels,
-            ess: v.ess && (!mip || b.mip_skipping()) && (!dvr || b.dvr_skipping()),
+            ess: v.ess
+                && (!mip || b.mip_skipping(settings.step_factor))
+                && (!dvr || b.dvr_skipping(settings.step_factor)),
             fades: b.fades(),
             ..v
         }

@@ -54,6 +54,11 @@ pub(crate) struct Args {
     /// Sample steps in voxels, for brickray and VTK alike.
     #[arg(long, value_delimiter = ',', default_value = "0.25,0.5,1,1.5,2,3,4")]
     steps: Vec<f32>,
+    /// Further steps in voxels that brickray alone draws (its front may
+    /// reach the error of VTK's coarsest images at a coarser step; VTK's
+    /// points stay at `--steps`); `--own-steps` with no value: none.
+    #[arg(long, value_delimiter = ',', num_args = 0.., default_value = "6,8", value_parser = crate::sample_step)]
+    own_steps: Vec<f32>,
     /// The Python interpreter with the `vtk` package.
     #[arg(long, default_value = "python3")]
     python: String,
@@ -196,8 +201,8 @@ pub(crate) fn run(o: &Args) -> Result<VtkResult, String> {
     let gpu = GpuContext::new().map_err(|e| e.to_string())?;
     println!("adapter: {}", gpu.describe());
     println!(
-        "image {0}x{0}; {1} rounds, brickray then VTK in each; steps {2:?} voxels; reference: step 1/8 voxel, {3}x{3} rays per pixel",
-        o.size, o.rounds, o.steps, o.supersample
+        "image {0}x{0}; {1} rounds, brickray then VTK in each; steps {2:?} voxels (brickray also {3:?}); reference: step 1/8 voxel, {4}x{4} rays per pixel",
+        o.size, o.rounds, o.steps, o.own_steps, o.supersample
     );
     std::fs::create_dir_all(&o.out).map_err(|e| format!("{}: {e}", o.out.display()))?;
     std::fs::create_dir_all(&o.charts).map_err(|e| format!("{}: {e}", o.charts.display()))?;
@@ -230,7 +235,7 @@ pub(crate) fn run(o: &Args) -> Result<VtkResult, String> {
                 mode_name
             };
             let reference = reference_image(scene, &tf, &base, tag, o.size, o.supersample, &o.out)?;
-            let cfgs = brickray_configs(base, &o.steps, o.preint, &o.ert);
+            let cfgs = brickray_configs(base, &our_steps(o), o.preint, &o.ert);
             let scene_json = o.out.join(format!("{name}.json"));
             let prefix = o.out.join(&name);
             let desc = vtk_scene(scene, &tf, &base, &raw, o, &prefix);
@@ -346,6 +351,17 @@ pub(crate) fn run(o: &Args) -> Result<VtkResult, String> {
         worst_time_ratio: worst,
         scenes: rows,
     })
+}
+
+/// brickray's steps: VTK's, then the further ones not among them.
+fn our_steps(o: &Args) -> Vec<f32> {
+    let mut steps = o.steps.clone();
+    for s in &o.own_steps {
+        if !steps.contains(s) {
+            steps.push(*s);
+        }
+    }
+    steps
 }
 
 /// Stops early, with the command to run, when the interpreter lacks `vtk`.
@@ -637,6 +653,25 @@ fn draw(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[derive(clap::Parser)]
+    struct Cli {
+        #[command(flatten)]
+        args: Args,
+    }
+
+    #[test]
+    fn brickray_alone_draws_the_further_steps() {
+        use clap::Parser;
+        let o = Cli::parse_from(["vtk", "--steps", "1,4"]).args;
+        assert_eq!(o.steps, [1.0, 4.0]);
+        assert_eq!(our_steps(&o), [1.0, 4.0, 6.0, 8.0]);
+        let o = Cli::parse_from(["vtk", "--steps", "1,4", "--own-steps", "4,5"]).args;
+        assert_eq!(our_steps(&o), [1.0, 4.0, 5.0]);
+        let o = Cli::parse_from(["vtk", "--steps", "1,4", "--own-steps"]).args;
+        assert_eq!(our_steps(&o), [1.0, 4.0]);
+        assert!(Cli::try_parse_from(["vtk", "--own-steps", "32"]).is_err());
+    }
 
     #[test]
     fn other_terminations_are_in_core_dvr_at_every_step() {

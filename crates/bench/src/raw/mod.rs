@@ -242,8 +242,8 @@ pub(crate) fn run(args: &Args) -> Result<RawResult, String> {
         frames.ok_or_else(|| format!("{mode}: out of core did not converge: {stats:?}"))?;
         if let Some(share) = stats.dvr_transparent_share {
             println!(
-                "| {mode} | (out of core: the drawn bricks' sub-cells transparent through the TF, {share:.3}; DVR skips from {}) | | | | | | | |",
-                brickray_core::DVR_SKIP_SHARE_MIN_BRICKS
+                "| {mode} | (out of core: the drawn bricks' sub-cells transparent through the TF, {share:.3}; DVR skips from {:.3} at this step) | | | | | | | |",
+                brickray_core::DVR_SKIP_SHARE_MIN_BRICKS.at(step)
             );
         }
         // One counted frame per variant (also the warm-up), then timed rounds.

@@ -60,13 +60,17 @@ pub(crate) struct InCore {
     grid: MacroCellGrid,
     skip_key: Option<SkipKey>,
     labels: bool,
-    /// Whether MIP's skipping pays on this volume
-    /// (`brickray_core::mip_skipping_pays`, decided from the macro cells).
-    mip_skipping: bool,
-    /// When DVR skips, and whether it does under the current transfer
-    /// function (decided with the skip distances, `update`).
+    /// The share of macro cells MIP's skipping is certain to skip
+    /// (`MacroCellGrid::mip_skip_share`, compared with
+    /// `brickray_core::MIP_SKIP_SHARE_MIN` at the frame's step); `None`:
+    /// always skip (`SkipRule::Always`).
+    mip_share: Option<f64>,
+    /// When DVR skips, and the share of macro cells transparent through the
+    /// current transfer function (found with the skip distances, `update`;
+    /// compared with `brickray_core::DVR_SKIP_SHARE_MIN`); `None`: always
+    /// skip (`SkipRule::Always`, or a label map's hidden labels).
     dvr_rule: crate::SkipRule,
-    dvr_skipping: bool,
+    dvr_share: Option<f64>,
 }
 
 /// Group 2's resources other than the gradients.
@@ -244,10 +248,9 @@ impl InCore {
             bytes,
             skip_key: None,
             labels,
-            mip_skipping: mip_skipping == crate::SkipRule::Always
-                || brickray_core::mip_skipping_pays(&grid),
+            mip_share: (mip_skipping == crate::SkipRule::WherePays).then(|| grid.mip_skip_share()),
             dvr_rule,
-            dvr_skipping: true,
+            dvr_share: None,
             grid,
         })
     }
@@ -281,9 +284,8 @@ impl InCore {
                     .empty_distance(|r| tf.is_transparent(r[0], r[1]), SKIP_CAP);
                 // The share of transparent cells decides whether DVR skips
                 // (label maps: hidden labels, always).
-                self.dvr_skipping = self.dvr_rule == crate::SkipRule::Always
-                    || self.labels
-                    || self.grid.transparent_share(tf) >= brickray_core::DVR_SKIP_SHARE_MIN;
+                let rule = self.dvr_rule == crate::SkipRule::WherePays && !self.labels;
+                self.dvr_share = rule.then(|| self.grid.transparent_share(tf));
                 d
             }
             SkipKey::Iso(iso) => self.grid.empty_distance(|r| r[1] < iso, SKIP_CAP),
@@ -358,12 +360,14 @@ impl VolumeBackend for InCore {
         !matches!(self.gradients, GradientState::Unavailable)
     }
 
-    fn mip_skipping(&self) -> bool {
-        self.mip_skipping
+    fn mip_skipping(&self, step: f32) -> bool {
+        self.mip_share
+            .is_none_or(|share| brickray_core::MIP_SKIP_SHARE_MIN.pays(share, step))
     }
 
-    fn dvr_skipping(&self) -> bool {
-        self.dvr_skipping
+    fn dvr_skipping(&self, step: f32) -> bool {
+        self.dvr_share
+            .is_none_or(|share| brickray_core::DVR_SKIP_SHARE_MIN.pays(share, step))
     }
 
     fn kind(&self) -> KernelKind {

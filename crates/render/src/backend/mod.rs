@@ -57,18 +57,22 @@ pub(crate) trait VolumeBackend: std::fmt::Debug {
     fn gradients(&self) -> bool {
         false
     }
-    /// False where MIP's empty-space skipping costs more than it saves (in
-    /// core, decided from the macro cells at set-up,
-    /// `brickray_core::mip_skipping_pays`; out of core, from the sub-cells of
-    /// the bricks of the plan applied last): MIP frames then march without it.
-    fn mip_skipping(&self) -> bool {
+    /// False where MIP's empty-space skipping costs more than it saves at a
+    /// sample step of `step` voxels (in core, from the macro cells,
+    /// `brickray_core::MIP_SKIP_SHARE_MIN`; out of core, from the sub-cells
+    /// of the bricks of the plan applied last,
+    /// `brickray_core::MIP_SKIP_SHARE_MIN_BRICKS`): MIP frames then march
+    /// without it.
+    fn mip_skipping(&self, _step: f32) -> bool {
         true
     }
-    /// False where DVR's empty-space skipping costs more than it saves (in
-    /// core, too few macro cells transparent through the transfer function,
-    /// `brickray_core::DVR_SKIP_SHARE_MIN`): DVR frames then march without
-    /// it.
-    fn dvr_skipping(&self) -> bool {
+    /// False where DVR's empty-space skipping costs more than it saves at a
+    /// sample step of `step` voxels (in core, too few macro cells
+    /// transparent through the transfer function,
+    /// `brickray_core::DVR_SKIP_SHARE_MIN`; out of core, too few sub-cells
+    /// of the plan's bricks, `brickray_core::DVR_SKIP_SHARE_MIN_BRICKS`): DVR
+    /// frames then march without it.
+    fn dvr_skipping(&self, _step: f32) -> bool {
         true
     }
     /// True when some leaf the kernel draws mixes its brick with an

@@ -42,16 +42,19 @@ pub(crate) struct OutOfCore {
     channels: Option<OocChannels>,
     /// When MIP skips empty space ([`crate::SkipRule`]).
     mip_policy: crate::SkipRule,
-    /// Whether this frame's MIP skips: by the policy, or where the plan's
-    /// bricks make `brickray_core::MIP_SKIP_SHARE_MIN_BRICKS` of their
-    /// sub-cells certain to be skipped.
-    mip_skipping: bool,
+    /// The share of the plan's bricks' sub-cells MIP's skipping is certain
+    /// to skip within their brick, compared with
+    /// `brickray_core::MIP_SKIP_SHARE_MIN_BRICKS` at the frame's step;
+    /// `None`: always skip (the policy, or a multi-channel volume).
+    mip_share: Option<f64>,
     /// When DVR skips empty space ([`crate::SkipRule`]).
     dvr_policy: crate::SkipRule,
-    /// Whether this frame's DVR tests sub-cells: by the policy, or where
-    /// `brickray_core::DVR_SKIP_SHARE_MIN_BRICKS` of the plan's bricks'
-    /// sub-cells are transparent through the transfer function.
-    dvr_skipping: bool,
+    /// The share of the plan's bricks' sub-cells transparent through the
+    /// transfer function, compared with
+    /// `brickray_core::DVR_SKIP_SHARE_MIN_BRICKS` at the frame's step;
+    /// `None`: always test them (the policy, a multi-channel volume, a label
+    /// map).
+    dvr_share: Option<f64>,
     /// Whether a leaf of the plan applied last fades (its slot's row
     /// mixes in an ancestor's brick; a borrowed octant does not).
     fades: bool,
@@ -122,9 +125,9 @@ impl OutOfCore {
             stats: OutOfCoreStats::default(),
             channels,
             mip_policy,
-            mip_skipping: true,
+            mip_share: None,
             dvr_policy,
-            dvr_skipping: true,
+            dvr_share: None,
             fades: true,
         })
     }
@@ -215,17 +218,17 @@ impl OutOfCore {
         // MIP skips where the plan's bricks say it pays (a sum over the
         // cut's slots; the image is the same either way, only the time
         // differs), or always as the policy or a multi-channel volume asks.
-        self.mip_skipping = self.mip_policy == crate::SkipRule::Always
-            || s.mip_skip_share(&plan.leaves)
-                .is_none_or(|share| share >= brickray_core::MIP_SKIP_SHARE_MIN_BRICKS);
+        self.mip_share = match self.mip_policy {
+            crate::SkipRule::Always => None,
+            crate::SkipRule::WherePays => s.mip_skip_share(&plan.leaves),
+        };
         // DVR tests sub-cells only where enough of the plan's bricks' are
         // transparent (`DVR_SKIP_SHARE_MIN_BRICKS`): with fewer, the tests
         // cost more than the samples they save (the image is the same
         // either way).
         let share = dvr_tf
             .and_then(|(tf, generation)| s.dvr_transparent_share(&plan.leaves, tf, generation));
-        self.dvr_skipping = self.dvr_policy == crate::SkipRule::Always
-            || share.is_none_or(|share| share >= brickray_core::DVR_SKIP_SHARE_MIN_BRICKS);
+        self.dvr_share = share.filter(|_| self.dvr_policy == crate::SkipRule::WherePays);
         let gradients_kept = s.gpu_format().gradients;
         drop(s);
         self.fades = plan.fades.iter().any(|f| !f.borrowed);
@@ -372,12 +375,14 @@ impl VolumeBackend for OutOfCore {
         self.volume.lock().layout.volume.kind.is_labels()
     }
 
-    fn mip_skipping(&self) -> bool {
-        self.mip_skipping
+    fn mip_skipping(&self, step: f32) -> bool {
+        self.mip_share
+            .is_none_or(|share| brickray_core::MIP_SKIP_SHARE_MIN_BRICKS.pays(share, step))
     }
 
-    fn dvr_skipping(&self) -> bool {
-        self.dvr_skipping
+    fn dvr_skipping(&self, step: f32) -> bool {
+        self.dvr_share
+            .is_none_or(|share| brickray_core::DVR_SKIP_SHARE_MIN_BRICKS.pays(share, step))
     }
 
     fn fades(&self) -> bool {
