@@ -105,3 +105,43 @@ pub(crate) fn check_channel_modes(
     }
     worst
 }
+
+/// MIP refines each visible channel's maximum and runner-up between
+/// samples, as a single channel's (docs/rendering-model.md, *Channels*):
+/// `vol` through `styles` at a step of 2 voxels, drawn with `draw`, against
+/// the reference at the same step, refining (its twin), and against the
+/// fine reference (1/8 voxel), with the reference at step 2 without
+/// refinement (the samples' maxima alone) beside it. Returns the three
+/// PSNRs: twin, fine, samples alone.
+pub(crate) fn channel_mip_at_a_coarse_step(
+    r: &mut VolumeRenderer,
+    vol: &ChannelVolume,
+    styles: &[ChannelStyle],
+    camera: Camera,
+    size: u32,
+    mut draw: impl FnMut(&mut VolumeRenderer, &FrameDesc<'_>) -> Vec<u8>,
+) -> [f64; 3] {
+    let d = vol.channels()[0].desc();
+    let frame = VolumeFrame::centered(d.dims, d.spacing);
+    let settings = brickray::RenderSettings {
+        mode: brickray::RenderMode::Mip,
+        step_factor: 2.0,
+        ..Default::default()
+    };
+    let desc = FrameDesc {
+        settings,
+        ..FrameDesc::new(camera, frame, size, size)
+    };
+    let got = draw(r, &desc);
+    let reference = |opts: &ReferenceOptions| {
+        render_channels_reference(vol, &frame, styles, &camera, &settings, opts).to_rgba8([0.0; 3])
+    };
+    let at_step = ReferenceOptions::new(size, size).with_step_factor(2.0);
+    let fine = reference(&ReferenceOptions::new(size, size));
+    let psnr = brickray_reference::psnr;
+    [
+        psnr(&got, &reference(&at_step)),
+        psnr(&got, &fine),
+        psnr(&reference(&at_step.with_mip_refinement(false)), &fine),
+    ]
+}

@@ -551,45 +551,11 @@ impl Marcher<'_> {
 
     /// Maximum intensity projection.
     fn mip(&self, ray: &Ray, span: Span) -> RayResult {
-        let mut best: Option<(f64, f64)> = None; // (value, t)
-        // The runner-up: a maximum replaced by one more than a step and a
-        // half away, or a sample that far from the maximum above it (the
-        // kernels' `mip_sample`).
-        let mut alt: Option<(f64, f64)> = None;
+        let mut peaks = Peaks::default();
         for t in span.samples() {
-            let v = self.value(ray, t);
-            let far = best.is_some_and(|(_, tm)| t - tm > 1.5 * span.dt);
-            if best.is_none_or(|(m, _)| v > m) {
-                if far {
-                    alt = best;
-                }
-                best = Some((v, t));
-            } else if far && alt.is_none_or(|(a, _)| v > a) {
-                alt = Some((v, t));
-            }
+            peaks.take(self.value(ray, t), t, span.dt);
         }
-        // The maximum and the runner-up refined between samples, as the
-        // kernels' `mip_refine` does: half a step, then a quarter, either
-        // side of each peak's best value so far, within the ray; the running
-        // maximum takes the best.
-        if self.mip_refine {
-            for (v0, t0) in [best, alt].into_iter().flatten() {
-                let (mut bv, mut bt) = (v0, t0);
-                let mut h = 0.5 * span.dt;
-                for _ in 0..2 {
-                    for t in [bt - h, bt + h].map(|t| t.clamp(span.t0, span.t1)) {
-                        let v = self.value(ray, t);
-                        if v > bv {
-                            (bv, bt) = (v, t);
-                        }
-                    }
-                    h *= 0.5;
-                }
-                if best.is_none_or(|(m, _)| bv > m) {
-                    best = Some((bv, bt));
-                }
-            }
-        }
+        let best = peaks.maximum(self.mip_refine, span, |t| self.value(ray, t));
         match best {
             None => ([0.0; 4], None),
             Some((m, t)) if self.intensity.is_some() => {
@@ -725,6 +691,60 @@ impl Span {
         (0u64..)
             .map(move |k| self.t0 + k as f64 * self.dt)
             .take_while(move |&t| t < self.t1)
+    }
+}
+
+/// MIP's peaks along a ray, `(value, t)`: the running maximum and the
+/// runner-up (a maximum replaced by one more than a step and a half away,
+/// or a sample that far from the maximum above it), as the kernels'
+/// `mip_sample` keeps them (the multi-channel kernels: per channel,
+/// `channel_mip_sample`).
+#[derive(Debug, Clone, Copy, Default)]
+struct Peaks {
+    best: Option<(f64, f64)>,
+    alt: Option<(f64, f64)>,
+}
+
+impl Peaks {
+    /// The sample `v` at `t`, the samples `dt` apart.
+    fn take(&mut self, v: f64, t: f64, dt: f64) {
+        let far = self.best.is_some_and(|(_, tm)| t - tm > 1.5 * dt);
+        if self.best.is_none_or(|(m, _)| v > m) {
+            if far {
+                self.alt = self.best;
+            }
+            self.best = Some((v, t));
+        } else if far && self.alt.is_none_or(|(a, _)| v > a) {
+            self.alt = Some((v, t));
+        }
+    }
+
+    /// The ray's maximum: with `refine`, the maximum and the runner-up
+    /// refined between samples of `value`, as the kernels' `mip_refine`
+    /// does (half a step, then a quarter, either side of each peak's best
+    /// value so far, within the span), the best kept; without, the
+    /// samples' maximum.
+    fn maximum(self, refine: bool, span: Span, value: impl Fn(f64) -> f64) -> Option<(f64, f64)> {
+        let mut best = self.best;
+        if refine {
+            for (v0, t0) in [self.best, self.alt].into_iter().flatten() {
+                let (mut bv, mut bt) = (v0, t0);
+                let mut h = 0.5 * span.dt;
+                for _ in 0..2 {
+                    for t in [bt - h, bt + h].map(|t| t.clamp(span.t0, span.t1)) {
+                        let v = value(t);
+                        if v > bv {
+                            (bv, bt) = (v, t);
+                        }
+                    }
+                    h *= 0.5;
+                }
+                if best.is_none_or(|(m, _)| bv > m) {
+                    best = Some((bv, bt));
+                }
+            }
+        }
+        best
     }
 }
 

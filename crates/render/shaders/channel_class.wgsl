@@ -198,6 +198,40 @@ fn channel_iso_finish(acc: ptr<function, Accum>, cur: Cursor, r: Ray, iso4: vec4
     (*acc).depth_set = true;
 }
 
+// MIP, every channel as mip_sample keeps one (modes.wgsl): the running
+// maximum mx (first attained at mt) and the runner-up ax (at at), the best
+// sample more than a step and a half from the maximum when it was taken.
+fn channel_mip_sample(mx: ptr<function, vec4<f32>>, mt: ptr<function, vec4<f32>>, ax: ptr<function, vec4<f32>>, at: ptr<function, vec4<f32>>, v: vec4<f32>, t: f32, dt: f32) {
+    let far = (vec4<f32>(t) - *mt > vec4<f32>(1.5 * dt)) & (*mx > vec4<f32>(-1.0e38));
+    let better = v > *mx;
+    let demoted = better & far;
+    let second = !better & far & (v > *ax);
+    *ax = select(select(*ax, v, second), *mx, demoted);
+    *at = select(select(*at, vec4<f32>(t), second), *mt, demoted);
+    *mx = select(*mx, v, better);
+    *mt = select(*mt, vec4<f32>(t), better);
+}
+
+// MIP: channel c's peak p (t, value) refined in cursor cur as mip_refine
+// refines a single channel's (modes.wgsl), within [lo, hi] at step dt;
+// returns the best (t, value) of p and what the probes found, and counts
+// the probes in acc.
+fn channel_mip_refine(acc: ptr<function, Accum>, cur: Cursor, c: u32, p: vec2<f32>, lo: f32, hi: f32, dt: f32) -> vec2<f32> {
+    var k = cur;
+    k.c = c;
+    var pk = accum_new();
+    pk.max_t = p.x;
+    pk.max_v = p.y;
+    mip_refine(&pk, k, p, lo, hi, dt);
+    (*acc).samples = (*acc).samples + pk.samples;
+    return vec2<f32>(pk.max_t, pk.max_v);
+}
+
+// MIP: lane c of x set to v.
+fn with_lane(x: vec4<f32>, c: u32, v: f32) -> vec4<f32> {
+    return select(x, vec4<f32>(v), lane(c) > vec4<f32>(0.0));
+}
+
 // MIP, both kernels: every channel's maximum mx (first attained at mt)
 // classified by its TF (uncorrected), each tinted by a label map at its
 // maximum, and mixed over the visible channels (vis: 1 or 0 per lane;

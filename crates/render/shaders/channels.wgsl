@@ -168,9 +168,12 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     // The channels' visibility and isovalues, once per ray.
     let vis = chan_visible();
     let iso4 = chan_iso();
-    // MIP: each channel's running maximum and where it was first attained.
+    // MIP: each channel's running maximum and where it was first attained,
+    // and its runner-up (channel_mip_sample).
     var mx = vec4<f32>(-3.0e38);
     var mt = vec4<f32>(0.0);
+    var ax = vec4<f32>(-3.0e38);
+    var at = vec4<f32>(0.0);
     if (t1 > t0) {
         let dt = frame.dt;
         let inv_dir = safe_inverse(r.tex_dir);
@@ -217,12 +220,32 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
                     break;
                 }
             } else {
-                let better = v > mx;
-                mx = select(mx, v, better);
-                mt = select(mt, vec4<f32>(t), better);
+                channel_mip_sample(&mx, &mt, &ax, &at, v, t, dt);
                 if (ERT && all(max(vec4<f32>(1.0) - mx, vec4<f32>(0.0)) * vis <= vec4<f32>(0.0))) { break; }
             }
             k = k + 1u;
+        }
+        // MIP: each visible channel's maximum and runner-up refined between
+        // samples within the ray, as a single channel's (incore.wgsl).
+        if (MODE == MODE_MIP) {
+            var c = 0u;
+            loop {
+                if (c >= CHANNELS) { break; }
+                let m = lane_of(mx, c);
+                if (lane_of(vis, c) > 0.0 && m > -1.0e38) {
+                    var b = channel_mip_refine(&acc, cur, c, vec2<f32>(lane_of(mt, c), m), t0, t1, dt);
+                    let a = lane_of(ax, c);
+                    if (a > -1.0e38) {
+                        let q = channel_mip_refine(&acc, cur, c, vec2<f32>(lane_of(at, c), a), t0, t1, dt);
+                        if (q.y > b.y) {
+                            b = q;
+                        }
+                    }
+                    mx = with_lane(mx, c, b.y);
+                    mt = with_lane(mt, c, b.x);
+                }
+                c = c + 1u;
+            }
         }
     }
     if (MODE == MODE_ISO && acc.hit) {

@@ -235,6 +235,14 @@ fn box_exit(o: vec3<f32>, d: vec3<f32>, inv_d: vec3<f32>, lo: vec3<f32>, hi: vec
     return min(t.x, min(t.y, t.z));
 }
 
+// t at which the ray o + d t enters the box [lo, hi] (from outside or on its
+// face; -3e38 where no axis bounds it); `inv_d` is safe_inverse(d).
+fn box_entry(o: vec3<f32>, d: vec3<f32>, inv_d: vec3<f32>, lo: vec3<f32>, hi: vec3<f32>) -> f32 {
+    let near = select(hi, lo, d > vec3<f32>(0.0));
+    let t = select(vec3<f32>(-3.0e38), (near - o) * inv_d, d != vec3<f32>(0.0));
+    return max(t.x, max(t.y, t.z));
+}
+
 // A pixel's ray, the host's depth there (the far value without one) and the
 // ray's extent in the clip box (the volume box by default), clipped to the
 // host's depth.

@@ -601,7 +601,8 @@ fn mip_sample(acc: ptr<function, Accum>, t: f32, v: f32, dt: f32) -> bool {
 // the maximum and the runner-up (mip_sample), eight samples a ray: two
 // peaks whose samples lie within the texture filter's rounding of each other
 // are both refined in either backend. The CPU twin: the reference's `mip`.
-// The multi-channel kernels do not refine.
+// The multi-channel kernels refine each visible channel's two peaks the same
+// way (channel_mip_sample, channel_mip_refine in channel_class.wgsl).
 fn mip_refine(acc: ptr<function, Accum>, c: Cursor, p: vec2<f32>, lo: f32, hi: f32, dt: f32) {
     var bt = p.x;
     var bv = p.y;

@@ -175,6 +175,40 @@ fn ooc_channel_dvr_sample(cur: Cursor, v: vec4<f32>, u: vec3<f32>, r: Ray, t: f3
     return channel_mix(q, a);
 }
 
+// MIP: channel c's peak p (t, value) refined in the brick of the data leaf
+// the cut holds at the peak's point (located from the root; a point on a
+// face goes to the leaf the ray enters there, as the march assigns it), over
+// the ray's extent in that leaf widened by the refinement's reach, within
+// [t0, t1], at the leaf level's step: where ooc.wgsl refines a single
+// channel's peak, found after the march instead of noted at every sample.
+// Returns the best (t, value); p itself where the cut holds no data there.
+fn channel_peak_refine(acc: ptr<function, Accum>, cur: ptr<function, Cursor>, c: u32, p: vec2<f32>, t0: f32, t1: f32, dt: f32) -> vec2<f32> {
+    let oo = (*cur).oo;
+    let od = (*cur).od;
+    let root = OctBox(0u, 0u, vec3<f32>(0.0), vec3<f32>(1.0));
+    let loc = oct_locate_leaf(root, oo + od * p.x, od, ooc.splits.xy);
+    if (!loc.ok || (loc.word >> OCT_TAG_SHIFT) != OCT_TAG_DATA) {
+        return p;
+    }
+    let record = loc.word & OCT_PTR_MASK;
+    if (!oct_in_bounds(record)) {
+        return p;
+    }
+    let slot = index_words[record];
+    if (slot >= arrayLength(&slots)) {
+        return p;
+    }
+    cursor_enter(cur, brick_of(loc.leaf, slot));
+    let inv = safe_inverse(od);
+    let hi = loc.leaf.box_min + loc.leaf.box_size;
+    let t_in = box_entry(oo, od, inv, loc.leaf.box_min, hi);
+    let t_out = box_exit(oo, od, inv, loc.leaf.box_min, hi);
+    let b = (*cur).b;
+    let dtl = dt * b.f;
+    let reach = min(0.75 * dtl, f32(ooc.apron) * finest_voxel_t() * min(b.f3.x, min(b.f3.y, b.f3.z)));
+    return channel_mip_refine(acc, *cur, c, p, max(t_in - reach, t0), min(t_out + reach, t1), dtl);
+}
+
 @compute @workgroup_size(8, 8, 1)
 fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) li: u32) {
     let px = tile_pixel(wg.xy, li);
@@ -191,9 +225,12 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     // The channels' visibility and isovalues, once per ray.
     let vis = chan_visible();
     let iso4 = chan_iso();
-    // MIP: each channel's running maximum and where it was first attained.
+    // MIP: each channel's running maximum and where it was first attained,
+    // and its runner-up (channel_mip_sample).
     var mx = vec4<f32>(-3.0e38);
     var mt = vec4<f32>(0.0);
+    var ax = vec4<f32>(-3.0e38);
+    var at = vec4<f32>(0.0);
     feedback_stop(px, far_depth());
     if (t1 > t0) {
         let oo = r.tex_origin * ooc.octree_scale;
@@ -272,9 +309,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
                         break;
                     }
                 } else {
-                    let better = v > mx;
-                    mx = select(mx, v, better);
-                    mt = select(mt, vec4<f32>(t), better);
+                    channel_mip_sample(&mx, &mt, &ax, &at, v, t, dtl);
                     if (ERT && all(max(vec4<f32>(1.0) - mx, vec4<f32>(0.0)) * vis <= vec4<f32>(0.0))) { done = true; break; }
                 }
                 t_last = t;
@@ -287,6 +322,28 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
         }
         let t_stop = grid_t(t0, k, dtl);
         feedback_stop(px, depth_at(r, select(t1, t_stop, feedback_terminated(acc))));
+        // MIP: each visible channel's peaks refined in the bricks that hold
+        // them (channel_peak_refine).
+        if (MODE == MODE_MIP) {
+            var c = 0u;
+            loop {
+                if (c >= CHANNELS) { break; }
+                let m = lane_of(mx, c);
+                if (lane_of(vis, c) > 0.0 && m > -1.0e38) {
+                    var b = channel_peak_refine(&acc, &cur, c, vec2<f32>(lane_of(mt, c), m), t0, t1, dt);
+                    let a = lane_of(ax, c);
+                    if (a > -1.0e38) {
+                        let q = channel_peak_refine(&acc, &cur, c, vec2<f32>(lane_of(at, c), a), t0, t1, dt);
+                        if (q.y > b.y) {
+                            b = q;
+                        }
+                    }
+                    mx = with_lane(mx, c, b.y);
+                    mt = with_lane(mt, c, b.x);
+                }
+                c = c + 1u;
+            }
+        }
     }
     if (MODE == MODE_ISO && acc.hit) {
         channel_iso_finish(&acc, cur, r, iso4);

@@ -2,7 +2,7 @@
 //! [`Marcher`] (its volume and transfer function) along the same rays, the
 //! channels composited as `brickray_core::channels` specifies.
 
-use super::{Image, Marcher, RayResult, Span};
+use super::{Image, Marcher, Peaks, RayResult, Span};
 use brickray_core::channels::{self, ChannelStyle, ChannelVolume};
 use brickray_core::tf::corrected_alpha;
 use brickray_core::{Camera, LabelOverlay, Ray, RenderMode, RenderSettings, VolumeFrame};
@@ -60,7 +60,7 @@ pub fn render_channels_reference(
         .iter()
         .zip(styles)
         .map(|(v, s)| {
-            Marcher::new(
+            let mut m = Marcher::new(
                 v,
                 frame,
                 &s.tf,
@@ -69,7 +69,9 @@ pub fn render_channels_reference(
                 step_factor,
                 width,
                 height,
-            )
+            );
+            m.mip_refine = opts.mip_refine;
+            m
         })
         .collect();
     let m = ChannelMarcher {
@@ -214,20 +216,19 @@ impl ChannelMarcher<'_> {
         ([0.0; 4], None)
     }
 
+    /// Each visible channel's maximum, refined between samples as the
+    /// single-channel MIP's (`Peaks`, per channel), classified and mixed.
     fn mip(&self, ray: &Ray, span: Span) -> RayResult {
-        let mut best: Vec<Option<(f64, f64)>> = vec![None; self.marchers.len()];
+        let mut peaks = vec![Peaks::default(); self.marchers.len()];
         for t in span.samples() {
             for (c, m) in self.visible() {
-                let v = m.value(ray, t);
-                if best[c].is_none_or(|(b, _)| v > b) {
-                    best[c] = Some((v, t));
-                }
+                peaks[c].take(m.value(ray, t), t, span.dt);
             }
         }
         let mut parts = Vec::new();
         let mut t_near: Option<f64> = None;
         for (c, m) in self.visible() {
-            if let Some((v, t)) = best[c] {
+            if let Some((v, t)) = peaks[c].maximum(m.mip_refine, span, |t| m.value(ray, t)) {
                 let [r, g, b, a] = m.tf.lookup(v);
                 parts.push((self.tint(ray, t, [r, g, b]), a));
                 t_near = Some(t_near.map_or(t, |n| n.min(t)));
@@ -272,8 +273,7 @@ mod tests {
 
     /// One channel is the single-channel image of that channel, in every
     /// mode, shaded and not (the iso colour is the TF's at the isovalue; MIP
-    /// the maximum of the samples, which the multi-channel model does not
-    /// refine between samples).
+    /// refined between samples in both).
     #[test]
     fn one_channel_is_the_single_channel_image() {
         let vol = synthetic::marschner_lobb(24);
@@ -285,9 +285,7 @@ mod tests {
         );
         let one = ChannelVolume::new(vec![vol.clone()]).unwrap();
         let style = ChannelStyle::new(tf.clone()).with_isovalue(0.4);
-        let opts = ReferenceOptions::new(40, 32)
-            .with_step_factor(0.5)
-            .with_mip_refinement(false);
+        let opts = ReferenceOptions::new(40, 32).with_step_factor(0.5);
         for mode in modes() {
             for shaded in [false, true] {
                 let settings = RenderSettings {
