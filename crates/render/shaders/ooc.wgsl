@@ -271,15 +271,6 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
             // the ray through it (feedback.wgsl: only it is counted).
             var mip_slot = 0xffffffffu;
             var mip_w = 0.0;
-            // MIP: the leaves that hold the maximum and the runner-up
-            // (mip_sample), and the ray's extent in each and its step, where
-            // they are refined (mip_refine).
-            var max_leaf: OctBox;
-            var max_data = 0u;
-            var max_span = vec3<f32>(0.0);
-            var alt_leaf: OctBox;
-            var alt_data = 0u;
-            var alt_span = vec3<f32>(0.0);
             // Where the cursor's leaf begins (pre-integration's last piece is
             // shaded inside it).
             var cur_in = t0;
@@ -318,14 +309,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
                 let trans_in = select(1.0, 1.0 - acc.color.a, MODE == MODE_DVR);
                 // Pre-integration: as in incore.wgsl.
                 var forced = false;
-                // MIP: whether a sample of this leaf raised the maximum; the
-                // ray's extent in the leaf where a peak taken in it is
-                // refined: up to three quarters of a step past the leaf
-                // either side (the refinement's reach), as in core, where
-                // the brick's apron holds it.
+                // MIP: whether a sample of this leaf raised the maximum.
                 var holds_max = false;
-                let reach = min(0.75 * dtl, f32(ooc.apron) * finest_voxel_t() * min(cur.b.f3.x, min(cur.b.f3.y, cur.b.f3.z)));
-                let mip_reach = vec3<f32>(max(t_in - reach, t0), min(t_end + reach, t1), dtl);
                 loop {
                     let t = grid_t(t0, k, dtl);
                     if (t >= t_end) { break; }
@@ -365,26 +350,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
                         if (!first && dvr_sample(&acc, cur, r, t, ts, front, v, cur.b.tf_v, dtl, t1)) { done = true; break; }
                     } else {
                         let before = acc.max_v;
-                        let before_t = acc.max_t;
-                        let before_alt = vec2<f32>(acc.alt_t, acc.alt_v);
                         let stop = mip_sample(&acc, t, v, dtl);
-                        if (any(vec2<f32>(acc.alt_t, acc.alt_v) != before_alt)) {
-                            // The maximum demoted, or this sample.
-                            if (acc.alt_t == before_t) {
-                                alt_leaf = max_leaf;
-                                alt_data = max_data;
-                                alt_span = max_span;
-                            } else {
-                                alt_leaf = st.hit.leaf;
-                                alt_data = st.hit.data;
-                                alt_span = mip_reach;
-                            }
-                        }
-                        if (acc.max_t != before_t || acc.max_v > before) {
-                            max_leaf = st.hit.leaf;
-                            max_data = st.hit.data;
-                            max_span = mip_reach;
-                        }
                         holds_max = holds_max || acc.max_v > before;
                         if (stop) { done = true; break; }
                     }
@@ -407,13 +373,19 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
             if (MODE == MODE_MIP && mip_slot != 0xffffffffu) {
                 feedback_add(mip_slot, mip_w);
             }
+            // MIP: the maximum and the runner-up refined in the bricks of
+            // the leaves that hold them (peak_leaf_span, ooc_volume.wgsl).
             if (MODE == MODE_MIP && acc.max_v > -1.0e38) {
                 let alt = vec2<f32>(acc.alt_t, acc.alt_v);
-                cursor_enter(&cur, brick_of(max_leaf, max_data));
-                mip_refine(&acc, cur, vec2<f32>(acc.max_t, acc.max_v), max_span.x, max_span.y, max_span.z);
+                var s = peak_leaf_span(&cur, acc.max_t, t0, t1, dt);
+                if (s.z > 0.0) {
+                    mip_refine(&acc, cur, vec2<f32>(acc.max_t, acc.max_v), s.x, s.y, s.z);
+                }
                 if (alt.y > -1.0e38) {
-                    cursor_enter(&cur, brick_of(alt_leaf, alt_data));
-                    mip_refine(&acc, cur, alt, alt_span.x, alt_span.y, alt_span.z);
+                    s = peak_leaf_span(&cur, alt.x, t0, t1, dt);
+                    if (s.z > 0.0) {
+                        mip_refine(&acc, cur, alt, s.x, s.y, s.z);
+                    }
                 }
             }
             if (PREINT && MODE == MODE_DVR) {

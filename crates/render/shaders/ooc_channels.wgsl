@@ -175,38 +175,15 @@ fn ooc_channel_dvr_sample(cur: Cursor, v: vec4<f32>, u: vec3<f32>, r: Ray, t: f3
     return channel_mix(q, a);
 }
 
-// MIP: channel c's peak p (t, value) refined in the brick of the data leaf
-// the cut holds at the peak's point (located from the root; a point on a
-// face goes to the leaf the ray enters there, as the march assigns it), over
-// the ray's extent in that leaf widened by the refinement's reach, within
-// [t0, t1], at the leaf level's step: where ooc.wgsl refines a single
-// channel's peak, found after the march instead of noted at every sample.
-// Returns the best (t, value); p itself where the cut holds no data there.
+// MIP: channel c's peak p (t, value) refined in the brick of the leaf that
+// holds it (peak_leaf_span, ooc_volume.wgsl); returns the best (t, value),
+// p itself where the cut holds no data there.
 fn channel_peak_refine(acc: ptr<function, Accum>, cur: ptr<function, Cursor>, c: u32, p: vec2<f32>, t0: f32, t1: f32, dt: f32) -> vec2<f32> {
-    let oo = (*cur).oo;
-    let od = (*cur).od;
-    let root = OctBox(0u, 0u, vec3<f32>(0.0), vec3<f32>(1.0));
-    let loc = oct_locate_leaf(root, oo + od * p.x, od, ooc.splits.xy);
-    if (!loc.ok || (loc.word >> OCT_TAG_SHIFT) != OCT_TAG_DATA) {
+    let s = peak_leaf_span(cur, p.x, t0, t1, dt);
+    if (s.z <= 0.0) {
         return p;
     }
-    let record = loc.word & OCT_PTR_MASK;
-    if (!oct_in_bounds(record)) {
-        return p;
-    }
-    let slot = index_words[record];
-    if (slot >= arrayLength(&slots)) {
-        return p;
-    }
-    cursor_enter(cur, brick_of(loc.leaf, slot));
-    let inv = safe_inverse(od);
-    let hi = loc.leaf.box_min + loc.leaf.box_size;
-    let t_in = box_entry(oo, od, inv, loc.leaf.box_min, hi);
-    let t_out = box_exit(oo, od, inv, loc.leaf.box_min, hi);
-    let b = (*cur).b;
-    let dtl = dt * b.f;
-    let reach = min(0.75 * dtl, f32(ooc.apron) * finest_voxel_t() * min(b.f3.x, min(b.f3.y, b.f3.z)));
-    return channel_mip_refine(acc, *cur, c, p, max(t_in - reach, t0), min(t_out + reach, t1), dtl);
+    return channel_mip_refine(acc, *cur, c, p, s.x, s.y, s.z);
 }
 
 @compute @workgroup_size(8, 8, 1)

@@ -296,3 +296,39 @@ fn slice_cursor(u: vec3<f32>, dir: vec3<f32>, last: ptr<function, u32>, c: ptr<f
     return true;
 }
 
+// MIP, both out-of-core kernels: where a peak at t (a sample the march took)
+// is refined (mip_refine). The cursor `c` (its ray: oo, od) enters the brick
+// of the data leaf the cut holds at the peak's point, located from the root
+// (a point on a leaf's face goes to the leaf the ray enters there, as the
+// march assigns its samples); returns the ray's extent in that leaf widened
+// by the refinement's reach (three quarters of the leaf level's step, within
+// the brick's apron), within [t0, t1], and the leaf level's step (z; 0
+// where the cut holds no data there). Found after the march, so the march
+// notes nothing per sample.
+fn peak_leaf_span(c: ptr<function, Cursor>, t: f32, t0: f32, t1: f32, dt: f32) -> vec3<f32> {
+    let oo = (*c).oo;
+    let od = (*c).od;
+    let root = OctBox(0u, 0u, vec3<f32>(0.0), vec3<f32>(1.0));
+    let loc = oct_locate_leaf(root, oo + od * t, od, ooc.splits.xy);
+    if (!loc.ok || (loc.word >> OCT_TAG_SHIFT) != OCT_TAG_DATA) {
+        return vec3<f32>(0.0);
+    }
+    let record = loc.word & OCT_PTR_MASK;
+    if (!oct_in_bounds(record)) {
+        return vec3<f32>(0.0);
+    }
+    let slot = index_words[record];
+    if (slot >= arrayLength(&slots)) {
+        return vec3<f32>(0.0);
+    }
+    cursor_enter(c, brick_of(loc.leaf, slot));
+    let inv = safe_inverse(od);
+    let hi = loc.leaf.box_min + loc.leaf.box_size;
+    let t_in = box_entry(oo, od, inv, loc.leaf.box_min, hi);
+    let t_out = box_exit(oo, od, inv, loc.leaf.box_min, hi);
+    let b = (*c).b;
+    let dtl = dt * b.f;
+    let reach = min(0.75 * dtl, f32(ooc.apron) * finest_voxel_t() * min(b.f3.x, min(b.f3.y, b.f3.z)));
+    return vec3<f32>(max(t_in - reach, t0), min(t_out + reach, t1), dtl);
+}
+
