@@ -232,6 +232,31 @@ fn with_lane(x: vec4<f32>, c: u32, v: f32) -> vec4<f32> {
     return select(x, vec4<f32>(v), lane(c) > vec4<f32>(0.0));
 }
 
+// MIP, both kernels: each visible channel's maximum (mx, at mt) and
+// runner-up (ax, at at) refined between samples within [t0, t1] at step dt
+// (channel_peak_refine: in core along the ray, out of core in the brick of
+// the leaf that holds each peak); mx and mt take the best of each channel.
+fn channel_mip_refine_all(acc: ptr<function, Accum>, cur: ptr<function, Cursor>, mx: ptr<function, vec4<f32>>, mt: ptr<function, vec4<f32>>, ax: vec4<f32>, at: vec4<f32>, vis: vec4<f32>, t0: f32, t1: f32, dt: f32) {
+    var c = 0u;
+    loop {
+        if (c >= CHANNELS) { break; }
+        let m = lane_of(*mx, c);
+        if (lane_of(vis, c) > 0.0 && m > -1.0e38) {
+            var b = channel_peak_refine(acc, cur, c, vec2<f32>(lane_of(*mt, c), m), t0, t1, dt);
+            let a = lane_of(ax, c);
+            if (a > -1.0e38) {
+                let q = channel_peak_refine(acc, cur, c, vec2<f32>(lane_of(at, c), a), t0, t1, dt);
+                if (q.y > b.y) {
+                    b = q;
+                }
+            }
+            *mx = with_lane(*mx, c, b.y);
+            *mt = with_lane(*mt, c, b.x);
+        }
+        c = c + 1u;
+    }
+}
+
 // MIP, both kernels: every channel's maximum mx (first attained at mt)
 // classified by its TF (uncorrected), each tinted by a label map at its
 // maximum, and mixed over the visible channels (vis: 1 or 0 per lane;

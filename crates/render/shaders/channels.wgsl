@@ -225,27 +225,10 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
             }
             k = k + 1u;
         }
-        // MIP: each visible channel's maximum and runner-up refined between
-        // samples within the ray, as a single channel's (incore.wgsl).
+        // MIP: each visible channel's peaks refined between samples within
+        // the ray, as a single channel's (incore.wgsl).
         if (MODE == MODE_MIP) {
-            var c = 0u;
-            loop {
-                if (c >= CHANNELS) { break; }
-                let m = lane_of(mx, c);
-                if (lane_of(vis, c) > 0.0 && m > -1.0e38) {
-                    var b = channel_mip_refine(&acc, cur, c, vec2<f32>(lane_of(mt, c), m), t0, t1, dt);
-                    let a = lane_of(ax, c);
-                    if (a > -1.0e38) {
-                        let q = channel_mip_refine(&acc, cur, c, vec2<f32>(lane_of(at, c), a), t0, t1, dt);
-                        if (q.y > b.y) {
-                            b = q;
-                        }
-                    }
-                    mx = with_lane(mx, c, b.y);
-                    mt = with_lane(mt, c, b.x);
-                }
-                c = c + 1u;
-            }
+            channel_mip_refine_all(&acc, &cur, &mx, &mt, ax, at, vis, t0, t1, dt);
         }
     }
     if (MODE == MODE_ISO && acc.hit) {
@@ -255,6 +238,12 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
         channel_mip_finish(&acc, r, mx, mt, vis);
     }
     store_pixel(px, acc.color, acc.depth, start.host, acc.samples);
+}
+
+// MIP: channel c's peak p (t, value) refined along the ray within [t0, t1]
+// (channel_mip_refine_all); returns the best (t, value).
+fn channel_peak_refine(acc: ptr<function, Accum>, cur: ptr<function, Cursor>, c: u32, p: vec2<f32>, t0: f32, t1: f32, dt: f32) -> vec2<f32> {
+    return channel_mip_refine(acc, *cur, c, p, t0, t1, dt);
 }
 
 // Slice views (channel_slice.wgsl): every channel at texture point u.

@@ -300,26 +300,9 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
         let t_stop = grid_t(t0, k, dtl);
         feedback_stop(px, depth_at(r, select(t1, t_stop, feedback_terminated(acc))));
         // MIP: each visible channel's peaks refined in the bricks that hold
-        // them (channel_peak_refine).
+        // them.
         if (MODE == MODE_MIP) {
-            var c = 0u;
-            loop {
-                if (c >= CHANNELS) { break; }
-                let m = lane_of(mx, c);
-                if (lane_of(vis, c) > 0.0 && m > -1.0e38) {
-                    var b = channel_peak_refine(&acc, &cur, c, vec2<f32>(lane_of(mt, c), m), t0, t1, dt);
-                    let a = lane_of(ax, c);
-                    if (a > -1.0e38) {
-                        let q = channel_peak_refine(&acc, &cur, c, vec2<f32>(lane_of(at, c), a), t0, t1, dt);
-                        if (q.y > b.y) {
-                            b = q;
-                        }
-                    }
-                    mx = with_lane(mx, c, b.y);
-                    mt = with_lane(mt, c, b.x);
-                }
-                c = c + 1u;
-            }
+            channel_mip_refine_all(&acc, &cur, &mx, &mt, ax, at, vis, t0, t1, dt);
         }
     }
     if (MODE == MODE_ISO && acc.hit) {
