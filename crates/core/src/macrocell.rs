@@ -238,7 +238,7 @@ pub fn mip_skipping_pays(grid: &MacroCellGrid, step: f32) -> bool {
 /// that test every cell, and the threshold stays at every step: at 1, 2 and
 /// 4 voxels shaded frames paid or broke even from a share of 0.19 on (but
 /// the tomogram at 0.231 and 4 voxels, 1.11x), while unshaded frames at 4
-/// voxels cost 1.04-1.16x up to a share of 0.52 (1/4-voxel frames of 5-20
+/// voxels cost 1.04-1.16x up to a share of 0.52 (frames of 5-20
 /// ms at 256 x 256, within this machine's noise of each other).
 pub const DVR_SKIP_SHARE_MIN: ShareByStep = ShareByStep(&[(0.5, 0.15)]);
 
