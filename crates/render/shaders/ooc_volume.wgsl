@@ -264,6 +264,39 @@ fn sub_cell_exit(b: Brick, j: vec3<u32>, oo: vec3<f32>, od: vec3<f32>, inv_od: v
     return box_exit(oo, od, inv_od, lo, lo + side);
 }
 
+// The data leaf the frame's cut holds at the octree point o, located from
+// the root (a point on a face goes to the side `dir` moves into), and its
+// brick-pool slot; `ok` false where the cut holds no data there or the index
+// or the slot is out of bounds. Slice views and MIP's peaks look up their
+// leaves with it.
+struct DataLeaf {
+    ok: bool,
+    leaf: OctBox,
+    slot: u32,
+}
+
+fn locate_data_leaf(o: vec3<f32>, dir: vec3<f32>) -> DataLeaf {
+    var found: DataLeaf;
+    found.ok = false;
+    let root = OctBox(0u, 0u, vec3<f32>(0.0), vec3<f32>(1.0));
+    let loc = oct_locate_leaf(root, o, dir, ooc.splits.xy);
+    if (!loc.ok || (loc.word >> OCT_TAG_SHIFT) != OCT_TAG_DATA) {
+        return found;
+    }
+    let record = loc.word & OCT_PTR_MASK;
+    if (!oct_in_bounds(record)) {
+        return found;
+    }
+    let slot = index_words[record];
+    if (slot >= arrayLength(&slots)) {
+        return found;
+    }
+    found.ok = true;
+    found.leaf = loc.leaf;
+    found.slot = slot;
+    return found;
+}
+
 // Slice views of both out-of-core kernels: `c` set at texture point u on the
 // data leaf the frame's cut holds there (located through the index from the
 // root; `dir`, the view direction, decides points on a face), sampled from
@@ -272,19 +305,11 @@ fn sub_cell_exit(b: Brick, j: vec3<u32>, oo: vec3<f32>, od: vec3<f32>, inv_od: v
 // (`last`: the slot sampled before). False where the cut holds no data.
 fn slice_cursor(u: vec3<f32>, dir: vec3<f32>, last: ptr<function, u32>, c: ptr<function, Cursor>) -> bool {
     let o = u * ooc.octree_scale;
-    let root = OctBox(0u, 0u, vec3<f32>(0.0), vec3<f32>(1.0));
-    let loc = oct_locate_leaf(root, o, dir * ooc.octree_scale, ooc.splits.xy);
-    if (!loc.ok || (loc.word >> OCT_TAG_SHIFT) != OCT_TAG_DATA) {
+    let found = locate_data_leaf(o, dir * ooc.octree_scale);
+    if (!found.ok) {
         return false;
     }
-    let record = loc.word & OCT_PTR_MASK;
-    if (!oct_in_bounds(record)) {
-        return false;
-    }
-    let slot = index_words[record];
-    if (slot >= arrayLength(&slots)) {
-        return false;
-    }
+    let slot = found.slot;
     if (slot != *last) {
         feedback_reached(slot);
         feedback_add(slot, 1.0);
@@ -292,7 +317,7 @@ fn slice_cursor(u: vec3<f32>, dir: vec3<f32>, last: ptr<function, u32>, c: ptr<f
     }
     (*c).oo = o;
     (*c).od = vec3<f32>(0.0);
-    cursor_enter(c, brick_of(loc.leaf, slot));
+    cursor_enter(c, brick_of(found.leaf, slot));
     return true;
 }
 
@@ -308,24 +333,16 @@ fn slice_cursor(u: vec3<f32>, dir: vec3<f32>, last: ptr<function, u32>, c: ptr<f
 fn peak_leaf_span(c: ptr<function, Cursor>, t: f32, t0: f32, t1: f32, dt: f32) -> vec3<f32> {
     let oo = (*c).oo;
     let od = (*c).od;
-    let root = OctBox(0u, 0u, vec3<f32>(0.0), vec3<f32>(1.0));
-    let loc = oct_locate_leaf(root, oo + od * t, od, ooc.splits.xy);
-    if (!loc.ok || (loc.word >> OCT_TAG_SHIFT) != OCT_TAG_DATA) {
+    let found = locate_data_leaf(oo + od * t, od);
+    if (!found.ok) {
         return vec3<f32>(0.0);
     }
-    let record = loc.word & OCT_PTR_MASK;
-    if (!oct_in_bounds(record)) {
-        return vec3<f32>(0.0);
-    }
-    let slot = index_words[record];
-    if (slot >= arrayLength(&slots)) {
-        return vec3<f32>(0.0);
-    }
-    cursor_enter(c, brick_of(loc.leaf, slot));
+    let leaf = found.leaf;
+    cursor_enter(c, brick_of(leaf, found.slot));
     let inv = safe_inverse(od);
-    let hi = loc.leaf.box_min + loc.leaf.box_size;
-    let t_in = box_entry(oo, od, inv, loc.leaf.box_min, hi);
-    let t_out = box_exit(oo, od, inv, loc.leaf.box_min, hi);
+    let hi = leaf.box_min + leaf.box_size;
+    let t_in = box_entry(oo, od, inv, leaf.box_min, hi);
+    let t_out = box_exit(oo, od, inv, leaf.box_min, hi);
     let b = (*c).b;
     let dtl = dt * b.f;
     let reach = min(0.75 * dtl, f32(ooc.apron) * finest_voxel_t() * min(b.f3.x, min(b.f3.y, b.f3.z)));
