@@ -382,6 +382,51 @@ fn early_termination_matches_its_cpu_twin() {
     }
 }
 
+/// DVR's adaptive step (`Accel::adaptive_step`, docs/rendering-model.md,
+/// *Accelerations*) draws what its CPU twin draws
+/// (`ReferenceOptions::with_adaptive_step`, termination at 0.99 as the
+/// kernels' default), plain and shaded, and takes fewer samples.
+/// Marschner-Lobb through a translucent ramp at a step of 1 voxel.
+/// Thresholds: against the twin >= 55 dB and at least 10 dB closer than to
+/// the reference that keeps its step; samples per ray below 0.95x the
+/// fixed step's. Measured: see the test's output (docs/rendering-model.md
+/// gives the figures).
+#[test]
+fn adaptive_step_matches_its_cpu_twin() {
+    let ml = brickray_core::synthetic::marschner_lobb(64);
+    let tf = TransferFunction::from_points(
+        &[(0.2, [0.3, 0.6, 1.0, 0.0]), (0.9, [1.0, 0.8, 0.5, 0.6])],
+        256,
+    );
+    let mut s = Scene::new(&ml, &tf, RenderMode::Dvr, 64);
+    s.camera = Camera::orbit(s.frame.center(), 2.2, 0.5, 0.3);
+    s.settings.step_factor = 1.0;
+    for shaded in [false, true] {
+        s.settings.shading.enabled = shaded;
+        s.settings.accel.adaptive_step = false;
+        let (_, _, fixed_samples) = s.gpu_counted();
+        s.settings.accel.adaptive_step = true;
+        let (gpu, _, samples) = s.gpu_counted();
+        let opts = ReferenceOptions::new(s.size, s.size)
+            .with_step_factor(1.0)
+            .with_early_termination(0.99);
+        let twin = brickray_reference::psnr(&gpu, &s.reference_with(opts.with_adaptive_step(true)));
+        let fixed = brickray_reference::psnr(&gpu, &s.reference_with(opts));
+        eprintln!(
+            "shaded {shaded}: adaptive step vs its twin {twin:.2} dB, vs the fixed step's reference {fixed:.2} dB; {samples:.1} samples per ray against {fixed_samples:.1}"
+        );
+        assert!(twin >= 55.0, "shaded {shaded}: {twin:.2} dB < 55");
+        assert!(
+            twin >= fixed + 10.0,
+            "guard, shaded {shaded}: {twin:.2} dB against {fixed:.2} to the fixed step"
+        );
+        assert!(
+            samples < 0.95 * fixed_samples,
+            "shaded {shaded}: {samples:.1} samples per ray against {fixed_samples:.1}"
+        );
+    }
+}
+
 /// MIP refines its maximum and the runner-up between samples
 /// (docs/rendering-model.md, *Modes*). Marschner-Lobb through a grey ramp
 /// at a step of 2 voxels. Thresholds: the GPU against its twin (the

@@ -228,6 +228,66 @@ fn a_stopped_ray_fills_only_what_the_material_ahead_would() {
     assert!(db >= 55.0, "{db:.2} dB < 55");
 }
 
+/// Out of core, as in core (`tests/gpu_incore.rs`,
+/// `adaptive_step_matches_its_cpu_twin`): DVR's adaptive step draws what
+/// its CPU twin draws at the finest level, plain and shaded, its new grids
+/// carried across leaves. Marschner-Lobb 64^3 (bricks of 32) through a
+/// translucent ramp at a step of 1 voxel. Thresholds: against the twin >= 55
+/// dB and at least 10 dB closer than to the reference that keeps its step.
+#[test]
+fn adaptive_step_matches_its_cpu_twin_out_of_core() {
+    let ml = brickray::core::synthetic::marschner_lobb(64);
+    let dir = tempfile::tempdir().unwrap();
+    let source = store_of(&ml, &dir);
+    let tf = TransferFunction::from_points(
+        &[(0.2, [0.3, 0.6, 1.0, 0.0]), (0.9, [1.0, 0.8, 0.5, 0.6])],
+        256,
+    );
+    let g = gpu();
+    let wf = VolumeFrame::centered([64; 3], [1.0; 3]);
+    let mut ooc = VolumeRenderer::new(&g.device, targets()).unwrap();
+    ooc.set_volume_source(&g.device, &g.queue, source, finest())
+        .unwrap();
+    ooc.set_transfer_function(&g.device, &g.queue, &tf).unwrap();
+    for shaded in [false, true] {
+        let v = View {
+            camera: Camera::orbit(wf.center(), 2.2, 0.5, 0.3),
+            frame: wf,
+            settings: RenderSettings {
+                step_factor: 1.0,
+                accel: brickray::Accel {
+                    adaptive_step: true,
+                    ..Default::default()
+                },
+                shading: Shading {
+                    enabled: shaded,
+                    ..Default::default()
+                },
+                ..Default::default()
+            },
+            size: 64,
+        };
+        let (img, _, _) = converge(&mut ooc, &v, 60);
+        let opts = brickray_reference::ReferenceOptions::new(64, 64)
+            .with_step_factor(1.0)
+            .with_early_termination(0.99);
+        let reference = |o| {
+            brickray_reference::render_reference(&ml, &wf, &tf, &v.camera, &v.settings, &o)
+                .to_rgba8([0.0; 3])
+        };
+        let twin = brickray_reference::psnr(&img, &reference(opts.with_adaptive_step(true)));
+        let fixed = brickray_reference::psnr(&img, &reference(opts));
+        eprintln!(
+            "out of core, shaded {shaded}: adaptive step vs its twin {twin:.2} dB, vs the fixed step's reference {fixed:.2} dB"
+        );
+        assert!(twin >= 55.0, "shaded {shaded}: {twin:.2} dB < 55");
+        assert!(
+            twin >= fixed + 10.0,
+            "guard, shaded {shaded}: {twin:.2} dB against {fixed:.2} to the fixed step"
+        );
+    }
+}
+
 /// A volume whose bricks far exceed an 8 MiB pool renders a coarser but complete
 /// image, without error.
 #[test]

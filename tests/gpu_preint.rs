@@ -231,6 +231,7 @@ fn in_core_skipping_keeps_the_preintegrated_image() {
         accel: brickray::Accel {
             early_termination: None,
             empty_space_skipping: false,
+            adaptive_step: false,
         },
         ..fast
     };

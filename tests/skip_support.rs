@@ -26,6 +26,7 @@ pub(crate) fn skip_frame(
             accel: brickray::Accel {
                 early_termination: Some(0.99),
                 empty_space_skipping: ess,
+                adaptive_step: false,
             },
             ..Default::default()
         },

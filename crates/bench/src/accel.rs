@@ -26,6 +26,7 @@ const VARIANTS: [(&str, Accel); 4] = [
         Accel {
             early_termination: Some(0.99),
             empty_space_skipping: true,
+            adaptive_step: false,
         },
     ),
 ];

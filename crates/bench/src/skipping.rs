@@ -314,6 +314,7 @@ fn settings(mode: RenderMode, step: f32) -> RenderSettings {
         accel: Accel {
             early_termination: Some(0.99),
             empty_space_skipping: true,
+            adaptive_step: false,
         },
         ..Default::default()
     }

@@ -71,7 +71,10 @@ pub use moments::{MomentGrid, Moments, SpreadError, SpreadSource};
 pub use overlay::{LabelOverlay, OverlayError, OverlayMode, OverlayStyle, overlay_transform};
 pub use pyramid::{ALL_AXES, Children, LayoutError, MAX_LEVELS, anisotropic_split_masks};
 pub use range::{CancelToken, MemRangeReader, ObjectReader, ObjectSpan, RangeRead, RangeReader};
-pub use settings::{Accel, ClipBox, RenderMode, RenderSettings, SettingsError, Shading};
+pub use settings::{
+    ADAPTIVE_STEP_DOUBLINGS, Accel, ClipBox, RenderMode, RenderSettings, SettingsError, Shading,
+    adaptive_step_doublings,
+};
 pub use slice::{Slab, SlabMode, SliceAxis, SliceError, SliceGeometry, SliceView};
 pub use texel::{SampleEncoding, TexelCaps, TexelFormat, U8Filtering};
 pub use tf::{TfError, TransferFunction};

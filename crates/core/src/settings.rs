@@ -58,6 +58,29 @@ pub struct Accel {
     pub early_termination: Option<f32>,
     /// Empty-space skipping over the min/max macro-cell grid.
     pub empty_space_skipping: bool,
+    /// DVR: the step grows as the ray's transmittance falls, doubled once it
+    /// reaches 1/4 and again at 1/16 ([`ADAPTIVE_STEP_DOUBLINGS`] times at
+    /// most, each sample's opacity corrected to its step): samples behind
+    /// what the ray has gathered weigh less, so they are taken further apart.
+    /// Each change of step starts the new step's grid at the sample where it
+    /// happens. Not with pre-integration, and not in the multi-channel
+    /// kernels (they keep the step). Default off (docs/rendering-model.md,
+    /// *Accelerations*).
+    pub adaptive_step: bool,
+}
+
+/// The most times [`Accel::adaptive_step`] doubles the step (so at most 4x).
+pub const ADAPTIVE_STEP_DOUBLINGS: u32 = 2;
+
+/// The doublings of [`Accel::adaptive_step`] for a ray of transmittance `t`:
+/// one per factor of 4 it has fallen (`t <= 1/4`: 1, `t <= 1/16`: 2), at
+/// most [`ADAPTIVE_STEP_DOUBLINGS`] (the kernels' `step_doublings`).
+pub fn adaptive_step_doublings(t: f64) -> u32 {
+    let mut j = 0;
+    while j < ADAPTIVE_STEP_DOUBLINGS && t <= 0.25f64.powi(j as i32 + 1) {
+        j += 1;
+    }
+    j
 }
 
 impl Default for Accel {
@@ -65,6 +88,7 @@ impl Default for Accel {
         Accel {
             early_termination: Some(0.99),
             empty_space_skipping: true,
+            adaptive_step: false,
         }
     }
 }
@@ -74,16 +98,19 @@ impl Accel {
     pub const BRUTE_FORCE: Accel = Accel {
         early_termination: None,
         empty_space_skipping: false,
+        adaptive_step: false,
     };
     /// Early ray termination at 0.99 only.
     pub const ERT_ONLY: Accel = Accel {
         early_termination: Some(0.99),
         empty_space_skipping: false,
+        adaptive_step: false,
     };
     /// Empty-space skipping only.
     pub const ESS_ONLY: Accel = Accel {
         early_termination: None,
         empty_space_skipping: true,
+        adaptive_step: false,
     };
 }
 
@@ -249,6 +276,23 @@ impl RenderSettings {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_step_doubles_per_factor_of_four_of_transmittance() {
+        assert_eq!(adaptive_step_doublings(1.0), 0);
+        assert_eq!(adaptive_step_doublings(0.2501), 0);
+        assert_eq!(adaptive_step_doublings(0.25), 1);
+        assert_eq!(adaptive_step_doublings(0.0626), 1);
+        assert_eq!(adaptive_step_doublings(0.0625), 2);
+        assert_eq!(adaptive_step_doublings(0.0), ADAPTIVE_STEP_DOUBLINGS);
+        // Never fewer as the transmittance falls.
+        let mut last = 0;
+        for i in (0..=1000).rev() {
+            let j = adaptive_step_doublings(i as f64 / 1000.0);
+            assert!(j >= last && j <= ADAPTIVE_STEP_DOUBLINGS);
+            last = j;
+        }
+    }
 
     #[test]
     fn defaults_validate() {

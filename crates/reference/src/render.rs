@@ -7,7 +7,7 @@ use brickray_core::tf::{
 };
 use brickray_core::{
     Camera, Intensity, LabelOverlay, Ray, RayGen, RenderMode, RenderSettings, Shading,
-    TransferFunction, Volume, VolumeFrame,
+    TransferFunction, Volume, VolumeFrame, adaptive_step_doublings,
 };
 use glam::{DMat3, DMat4, DVec3};
 use rayon::prelude::*;
@@ -90,6 +90,7 @@ pub fn render_reference(
     marcher.intensity = opts.intensity;
     marcher.ert = opts.early_termination.map(f64::from);
     marcher.mip_refine = opts.mip_refine;
+    marcher.adaptive_step = opts.adaptive_step;
     if let Some(s) = opts.spread {
         marcher.spread = Some((s, tf.spread_table(SPREAD_ROWS, SPREAD_TABLE_WIDTH)));
     }
@@ -193,6 +194,8 @@ struct Marcher<'a> {
     ert: Option<f64>,
     /// MIP refines its maximum ([`ReferenceOptions::mip_refine`]).
     mip_refine: bool,
+    /// DVR's adaptive step ([`ReferenceOptions::adaptive_step`]).
+    adaptive_step: bool,
 }
 
 /// The opacity of `n` pieces of opacity `a` each, `1 - (1 - a)^n` (0 when
@@ -256,6 +259,7 @@ impl<'a> Marcher<'a> {
             overlay: None,
             ert: None,
             mip_refine: true,
+            adaptive_step: false,
         }
     }
 }
@@ -352,7 +356,23 @@ impl Marcher<'_> {
             self.dvr_segments(ray, span, p, &mut out);
             return out.result();
         }
-        for t in span.samples() {
+        // The grid's start, its index and the step's doublings: the samples
+        // lie at `tb + k dt 2^j`, and a change of `j` starts the grid anew at
+        // the sample where it happens (the kernels' `step_doublings`).
+        let (mut tb, mut k, mut j) = (span.t0, 0u64, 0u32);
+        loop {
+            let t = tb + k as f64 * self.dt * f64::from(1u32 << j);
+            if t >= span.t1 {
+                break;
+            }
+            if self.adaptive_step {
+                let jn = adaptive_step_doublings(1.0 - out.a);
+                if jn != j {
+                    (tb, k, j) = (t, 0, jn);
+                }
+            }
+            k += 1;
+            let m = f64::from(1u32 << j);
             let v = self.value(ray, t);
             let [r, g, b, a] = match &self.spread {
                 Some((sigma, table)) => {
@@ -362,9 +382,9 @@ impl Marcher<'_> {
                 }
                 None => self.tf.lookup(v),
             };
-            let a = corrected_alpha(a, self.step_factor);
+            let a = corrected_alpha(a, self.step_factor * m);
             // A plain sample stands for the step after it.
-            let piece = [self.dt, span.t1 - t - self.dt];
+            let piece = [self.dt * m, span.t1 - t - self.dt * m];
             self.composite(&mut out, ray, [r, g, b, a], t, t, piece);
             if out.stopped {
                 break;

@@ -84,6 +84,7 @@ const MAP_VIRIDIS: u32 = 3u;
 const FLAG_HOST_DEPTH: u32 = 1u;
 const FLAG_PERSPECTIVE: u32 = 2u;
 const FLAG_REVERSED_Z: u32 = 4u;
+const FLAG_ADAPTIVE_STEP: u32 = 8u;
 
 @group(0) @binding(0) var<uniform> frame: Frame;
 // The host's opaque depth (a 1x1 far-valued texture when the host gives none).

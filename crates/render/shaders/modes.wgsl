@@ -147,6 +147,17 @@ fn grid_t(t0: f32, k: u32, dt: f32) -> f32 {
     return t0 + f32(k) * dt;
 }
 
+// DVR's adaptive step (FLAG_ADAPTIVE_STEP, Accel::adaptive_step): the
+// doublings of the step for a ray of opacity `a`, one per factor of 4 its
+// transmittance has fallen, at most 2 (brickray_core::
+// adaptive_step_doublings); 0 without the flag. A kernel that sees the
+// count change at a sample starts the new step's grid there.
+fn step_doublings(a: f32) -> u32 {
+    let tr = 1.0 - a;
+    let j = select(select(0u, 1u, tr <= 0.25), 2u, tr <= 0.0625);
+    return select(0u, j, has_flag(FLAG_ADAPTIVE_STEP));
+}
+
 // The first index k of the sample grid at or after t: the smallest k with
 // grid_t(t0, k, dt) >= t, exactly (skips land on the same grid, so empty-space
 // skipping never changes which samples are taken). The quotient rounds apart

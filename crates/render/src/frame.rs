@@ -11,6 +11,13 @@ use crate::predict::{
 use brickray_core::{DepthConvention, RenderMode, RenderSettings};
 use glam::{DMat3, DVec3};
 
+/// Whether the frame's DVR grows its step as the transmittance falls
+/// (`Accel::adaptive_step`, DVR without pre-integration): then the corrected
+/// table needs [`brickray_core::ADAPTIVE_STEP_DOUBLINGS`] rows more.
+pub(crate) fn adaptive_step(s: &RenderSettings) -> bool {
+    s.accel.adaptive_step && matches!(s.mode, RenderMode::Dvr) && !s.preintegrated
+}
+
 /// Bits of [`FrameUniforms::flags`] (`FLAG_*` in common.wgsl).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, bytemuck::Pod, bytemuck::Zeroable)]
 #[repr(transparent)]
@@ -23,12 +30,16 @@ impl FrameFlags {
     pub(crate) const PERSPECTIVE: FrameFlags = FrameFlags(2);
     /// Reversed-Z depth.
     pub(crate) const REVERSED_Z: FrameFlags = FrameFlags(4);
+    /// DVR's step grows as the transmittance falls (`Accel::adaptive_step`;
+    /// never with pre-integration).
+    pub(crate) const ADAPTIVE_STEP: FrameFlags = FrameFlags(8);
     /// Every flag with its WGSL name, for the reflection test.
     #[cfg(test)]
-    pub(crate) const ALL: [(&'static str, FrameFlags); 3] = [
+    pub(crate) const ALL: [(&'static str, FrameFlags); 4] = [
         ("FLAG_HOST_DEPTH", Self::HOST_DEPTH),
         ("FLAG_PERSPECTIVE", Self::PERSPECTIVE),
         ("FLAG_REVERSED_Z", Self::REVERSED_Z),
+        ("FLAG_ADAPTIVE_STEP", Self::ADAPTIVE_STEP),
     ];
 
     fn set(&mut self, f: FrameFlags, on: bool) {
@@ -117,6 +128,7 @@ impl FrameUniforms {
             FrameFlags::REVERSED_Z,
             desc.camera.depth == DepthConvention::ReversedZ,
         );
+        flags.set(FrameFlags::ADAPTIVE_STEP, adaptive_step(s));
         let (isovalue, iso_color) = match s.mode {
             RenderMode::Iso { value, color } => (value, color),
             _ => (0.0, [0.0; 3]),

@@ -208,7 +208,12 @@ impl VolumeRenderer {
             device,
             queue,
             desc.settings.step_factor,
-            backend.step_lengths(),
+            backend.step_lengths()
+                + if crate::frame::adaptive_step(&desc.settings) {
+                    brickray_core::ADAPTIVE_STEP_DOUBLINGS
+                } else {
+                    0
+                },
             desc.settings.preintegrated
                 && !backend.labels()
                 && matches!(desc.settings.mode, brickray_core::RenderMode::Dvr),

@@ -85,6 +85,11 @@ pub(crate) struct Args {
     /// <threshold>`), comma-separated, each in (0, 1].
     #[arg(long, value_delimiter = ',', value_parser = ert_threshold)]
     ert: Vec<f32>,
+    /// Also brickray at each step with DVR's step growing as the ray's
+    /// transmittance falls (`Accel::adaptive_step`; DVR modes only), in
+    /// core and out of core (`in_core_adaptive`, `out_of_core_adaptive`).
+    #[arg(long)]
+    adaptive: bool,
 }
 
 /// An early-termination threshold in (0, 1].
@@ -235,7 +240,7 @@ pub(crate) fn run(o: &Args) -> Result<VtkResult, String> {
                 mode_name
             };
             let reference = reference_image(scene, &tf, &base, tag, o.size, o.supersample, &o.out)?;
-            let cfgs = brickray_configs(base, &our_steps(o), o.preint, &o.ert);
+            let cfgs = brickray_configs(base, &our_steps(o), o.preint, &o.ert, o.adaptive);
             let scene_json = o.out.join(format!("{name}.json"));
             let prefix = o.out.join(&name);
             let desc = vtk_scene(scene, &tf, &base, &raw, o, &prefix);
@@ -394,12 +399,14 @@ fn scene_mode(scene: &Scene, mode_name: &str) -> Result<(RenderMode, TransferFun
 /// core, at each step; shaded DVR also out of core from the gradients the
 /// streamed volume keeps (`out_of_core_gradients`, as VTK's mappers keep
 /// theirs); with `preint` (DVR only), in core pre-integrated too; for each
-/// threshold of `erts` (DVR only), in core terminating there.
+/// threshold of `erts` (DVR only), in core terminating there; with
+/// `adaptive` (DVR only), in core and out of core with the adaptive step.
 fn brickray_configs(
     base: RenderSettings,
     steps: &[f32],
     preint: bool,
     erts: &[f32],
+    adaptive: bool,
 ) -> Vec<Config> {
     let in_core = RendererKey {
         in_core: true,
@@ -412,25 +419,31 @@ fn brickray_configs(
     let dvr = matches!(base.mode, RenderMode::Dvr);
     let shaded = dvr && base.shading.enabled;
     let preint = preint && dvr;
+    let adaptive = adaptive && dvr;
     let mut out: Vec<Config> = [
-        ("out_of_core", DEFAULT_KEY, false, true),
-        ("out_of_core_gradients", kept, false, shaded),
-        ("in_core", in_core, false, true),
-        ("in_core_preint", in_core, true, preint),
+        ("out_of_core", DEFAULT_KEY, false, false, true),
+        ("out_of_core_gradients", kept, false, false, shaded),
+        ("in_core", in_core, false, false, true),
+        ("in_core_preint", in_core, true, false, preint),
+        ("in_core_adaptive", in_core, false, true, adaptive),
+        ("out_of_core_adaptive", DEFAULT_KEY, false, true, adaptive),
     ]
     .into_iter()
-    .filter(|c| c.3)
-    .map(|(knob, key, preintegrated, _)| (knob, key, preintegrated))
-    .flat_map(|(knob, key, preintegrated)| {
-        steps.iter().map(move |&step| Config {
-            knob,
-            value: format!("{step}"),
-            key,
-            settings: RenderSettings {
+    .filter(|c| c.4)
+    .flat_map(|(knob, key, preintegrated, adaptive_step, _)| {
+        steps.iter().map(move |&step| {
+            let mut settings = RenderSettings {
                 step_factor: step,
                 preintegrated,
                 ..base
-            },
+            };
+            settings.accel.adaptive_step = adaptive_step;
+            Config {
+                knob,
+                value: format!("{step}"),
+                key,
+                settings,
+            }
         })
     })
     .collect();
@@ -611,6 +624,8 @@ fn draw(
         .map(|(c, x)| chart::ChartPoint {
             knob: match (c.key.in_core, c.settings.preintegrated, c.key.gradients) {
                 _ if c.knob == "in_core_ert" => "brickray in core, other termination",
+                _ if c.knob == "in_core_adaptive" => "brickray in core, adaptive step",
+                _ if c.knob == "out_of_core_adaptive" => "brickray out of core, adaptive step",
                 (true, false, _) => "brickray in core",
                 (true, true, _) => "brickray in core, pre-integrated",
                 (false, _, false) => "brickray out of core",
@@ -677,7 +692,7 @@ mod tests {
     fn other_terminations_are_in_core_dvr_at_every_step() {
         let steps = [0.5f32, 2.0];
         let dvr = base_settings(RenderMode::Dvr);
-        let cfgs = brickray_configs(dvr, &steps, false, &[0.95, 0.9]);
+        let cfgs = brickray_configs(dvr, &steps, false, &[0.95, 0.9], false);
         let ert: Vec<&Config> = cfgs.iter().filter(|c| c.knob == "in_core_ert").collect();
         assert_eq!(ert.len(), 4);
         assert!(ert.iter().all(|c| c.key.in_core));
@@ -694,12 +709,33 @@ mod tests {
         );
         let mip = base_settings(RenderMode::Mip);
         assert!(
-            brickray_configs(mip, &steps, false, &[0.9])
+            brickray_configs(mip, &steps, false, &[0.9], true)
                 .iter()
                 .all(|c| c.knob != "in_core_ert")
         );
         assert!(ert_threshold("0").is_err() && ert_threshold("1.5").is_err());
         assert_eq!(ert_threshold("0.9"), Ok(0.9));
+    }
+
+    #[test]
+    fn adaptive_steps_are_dvr_in_both_backends_at_every_step() {
+        let steps = [0.5f32, 2.0];
+        let dvr = base_settings(RenderMode::Dvr);
+        let cfgs = brickray_configs(dvr, &steps, false, &[], true);
+        let adaptive: Vec<&Config> = cfgs
+            .iter()
+            .filter(|c| c.settings.accel.adaptive_step)
+            .collect();
+        assert_eq!(adaptive.len(), 4);
+        assert_eq!(adaptive.iter().filter(|c| c.key.in_core).count(), 2);
+        assert!(adaptive.iter().all(|c| c.knob.ends_with("_adaptive")));
+        assert_eq!(adaptive[1].settings.step_factor, 2.0);
+        let mip = base_settings(RenderMode::Mip);
+        assert!(
+            brickray_configs(mip, &steps, false, &[], true)
+                .iter()
+                .all(|c| !c.settings.accel.adaptive_step)
+        );
     }
 
     fn p(config: &str, in_core: bool, ms: f64, psnr_db: f64) -> OurPoint {

@@ -78,6 +78,13 @@ pub struct ReferenceOptions<'a> {
     /// side). Default on; off, the maximum of the samples alone, as the
     /// multi-channel kernels and [`render_channels_reference`](crate::render_channels_reference) take it.
     pub mip_refine: bool,
+    /// DVR's step grows as the ray's transmittance falls, as the kernels'
+    /// does with `Accel::adaptive_step` (`brickray_core::adaptive_step_doublings`
+    /// before each sample: when the count changes, the new step's grid
+    /// starts at that sample; each sample's opacity corrected to its step).
+    /// The GPU's `settings.accel.adaptive_step` is ignored. Pre-integrated
+    /// segments and the multi-channel reference keep the step. Default off.
+    pub adaptive_step: bool,
 }
 
 impl ReferenceOptions<'static> {
@@ -95,6 +102,7 @@ impl ReferenceOptions<'static> {
             overlay: None,
             early_termination: None,
             mip_refine: true,
+            adaptive_step: false,
         }
     }
 }
@@ -139,6 +147,14 @@ impl<'a> ReferenceOptions<'a> {
         ReferenceOptions {
             step_factor: EXACT_STEP_FACTOR,
             preintegrated: false,
+            ..self
+        }
+    }
+
+    /// With or without DVR's adaptive step ([`Self::adaptive_step`]).
+    pub fn with_adaptive_step(self, adaptive_step: bool) -> Self {
+        ReferenceOptions {
+            adaptive_step,
             ..self
         }
     }
