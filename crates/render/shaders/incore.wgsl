@@ -187,29 +187,19 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
         // Pre-integration: the last sample was taken in a cell that could be
         // skipped, only to composite the segment entering it.
         var forced = false;
-        // DVR's adaptive step (step_doublings): the grid's start, step and
-        // doublings, and the corrected table's row for that step. Each trip
-        // advances at least one step of at least `dt`, so `n` bounds them.
-        var tb = t0;
-        var dtc = dt;
-        var jm = 0u;
-        var tf_c = tf_v;
+        // The sample grid (StepGrid: DVR's adaptive step moves it). Each
+        // trip advances at least one step of at least `dt` on the grid of
+        // step `dt` from t0, so `n` bounds them.
+        var grid = StepGrid(t0, dt, 0u, tf_v);
         var trips = 0u;
         loop {
             if (trips >= n) { break; }
             trips = trips + 1u;
-            let t = grid_t(tb, k, dtc);
+            let t = grid_t(grid.tb, k, grid.dt);
             if (t >= t1) { break; }
-            if (MODE == MODE_DVR) {
-                let j = step_doublings(acc.color.a);
-                if (j != jm) {
-                    jm = j;
-                    tb = t;
-                    k = 0u;
-                    k_cell = 0u;
-                    dtc = dt * f32(1u << j);
-                    tf_c = tf_row(f32(j));
-                }
+            if (MODE == MODE_DVR && step_grid_adapt(&grid, acc.color.a, t, dt, tf_v)) {
+                k = 0u;
+                k_cell = 0u;
             }
             let u = tex_at(r, t);
             if (ESS && k >= k_cell) {
@@ -226,7 +216,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
                     skip = d > 0u;
                     reach = max(d, 1u);
                 }
-                let k_exit = max(k + 1u, first_k_after(cell_exit(r, inv_dir, c, reach), tb, dtc));
+                let k_exit = max(k + 1u, first_k_after(cell_exit(r, inv_dir, c, reach), grid.tb, grid.dt));
                 // Pre-integrated DVR: the segment from the last sample into a
                 // skipped cell can still contribute; this sample is taken, and
                 // the cell tested again at the next one.
@@ -249,7 +239,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
                     first = preint_before_start(t, dt, t0);
                     front = preint_front(&acc, t, dt, v);
                 }
-                if (!first && dvr_sample(&acc, cur, r, t, t - dtc, front, v, tf_c, dtc, t1)) { break; }
+                if (!first && dvr_sample(&acc, cur, r, t, t - grid.dt, front, v, grid.row, grid.dt, t1)) { break; }
             } else {
                 if (mip_sample(&acc, t, v, dt)) { break; }
             }

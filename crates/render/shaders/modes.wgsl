@@ -158,6 +158,37 @@ fn step_doublings(a: f32) -> u32 {
     return select(0u, j, has_flag(FLAG_ADAPTIVE_STEP));
 }
 
+// A DVR ray's sample grid under the adaptive step: it starts at `tb` and
+// steps `dt`, the undoubled step doubled `j` times, its opacity corrected
+// by the table's row `row` (the undoubled step's row plus `j`).
+struct StepGrid {
+    tb: f32,
+    dt: f32,
+    j: u32,
+    row: f32,
+}
+
+// The grid's step and row for an undoubled step `dt0` of row `row0` (a
+// leaf's level, out of core), at its doublings.
+fn step_grid_set(g: ptr<function, StepGrid>, dt0: f32, row0: f32) {
+    (*g).dt = dt0 * f32(1u << (*g).j);
+    (*g).row = row0 + f32((*g).j) / tf_info.rows;
+}
+
+// Before the sample at t of a ray of opacity `a`: when the doublings
+// change, the grid starts anew at t and true is returned (the kernel's
+// sample index then restarts at 0, its sub-cell test with it).
+fn step_grid_adapt(g: ptr<function, StepGrid>, a: f32, t: f32, dt0: f32, row0: f32) -> bool {
+    let j = step_doublings(a);
+    if (j == (*g).j) {
+        return false;
+    }
+    (*g).j = j;
+    (*g).tb = t;
+    step_grid_set(g, dt0, row0);
+    return true;
+}
+
 // The first index k of the sample grid at or after t: the smallest k with
 // grid_t(t0, k, dt) >= t, exactly (skips land on the same grid, so empty-space
 // skipping never changes which samples are taken). The quotient rounds apart

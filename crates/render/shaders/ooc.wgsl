@@ -266,13 +266,9 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
             // lost its first sample.)
             var st = oct_begin_inside(oo, od, t0, t1, frame.max_leaves, ooc.splits.xy);
             var dtl = dt;
-            // DVR's adaptive step (step_doublings): the grid starts at tb
-            // and steps dtm, the level's step doubled jm times, its opacity
-            // corrected by the table's row tf_c (the level's, jm rows on).
-            var tb = t0;
-            var jm = 0u;
-            var dtm = dt;
-            var tf_c = 0.0;
+            // The sample grid (StepGrid: the leaf level's step, doubled by
+            // DVR's adaptive step).
+            var grid = StepGrid(t0, dt, 0u, 0.0);
             var done = false;
             // MIP: the leaf that holds the running maximum and the weight of
             // the ray through it (feedback.wgsl: only it is counted).
@@ -299,13 +295,12 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
                 cursor_enter(&cur, brick_of(st.hit.leaf, st.hit.data));
                 cur_in = st.hit.t_enter;
                 dtl = dt * cur.b.f;
-                dtm = dtl * f32(1u << jm);
-                tf_c = cur.b.tf_v + f32(jm) / tf_info.rows;
+                step_grid_set(&grid, dtl, cur.b.tf_v);
                 if (cur.b.f != grid_f) {
                     grid_f = cur.b.f;
-                    k = first_k_after(max(st.hit.t_enter, t_last), tb, dtm);
+                    k = first_k_after(max(st.hit.t_enter, t_last), grid.tb, grid.dt);
                 }
-                k = max(k, first_k_after(st.hit.t_enter, tb, dtm));
+                k = max(k, first_k_after(st.hit.t_enter, grid.tb, grid.dt));
                 let t_end = min(st.hit.t_exit, t1);
                 var k_cell = 0u;
                 // DVR: a leaf whose values meet no transparent TF entry has no
@@ -321,20 +316,13 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
                 // MIP: whether a sample of this leaf raised the maximum.
                 var holds_max = false;
                 loop {
-                    let t = grid_t(tb, k, dtm);
+                    let t = grid_t(grid.tb, k, grid.dt);
                     if (t >= t_end) { break; }
                     if (budget == 0u) { done = true; break; }
                     budget = budget - 1u;
-                    if (MODE == MODE_DVR) {
-                        let j = step_doublings(acc.color.a);
-                        if (j != jm) {
-                            jm = j;
-                            tb = t;
-                            k = 0u;
-                            k_cell = 0u;
-                            dtm = dtl * f32(1u << j);
-                            tf_c = cur.b.tf_v + f32(j) / tf_info.rows;
-                        }
+                    if (MODE == MODE_DVR && step_grid_adapt(&grid, acc.color.a, t, dtl, cur.b.tf_v)) {
+                        k = 0u;
+                        k_cell = 0u;
                     }
                     // A fading leaf's sub-cells bound both levels' values
                     // (sub_cell_range), except the spread's reach: with
@@ -344,10 +332,10 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
                         let j = sub_cell_of(cur.b, oo + od * t);
                         let range = sub_cell_range(cur.b, j);
                         let te = min(sub_cell_exit(cur.b, j, oo, od, inv_od), st.hit.t_exit);
-                        let k_exit = max(k + 1u, first_k_after(te, tb, dtm));
+                        let k_exit = max(k + 1u, first_k_after(te, grid.tb, grid.dt));
                         let skip = (MODE == MODE_DVR && tf_transparent(range))
                             || (MODE == MODE_MIP && range.y <= acc.max_v);
-                        let force = PREINT && MODE == MODE_DVR && skip && !forced && preint_joined(acc, t, dtm);
+                        let force = PREINT && MODE == MODE_DVR && skip && !forced && preint_joined(acc, t, grid.dt);
                         forced = force;
                         if (skip && !force) {
                             k = k_exit;
@@ -363,11 +351,11 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
                         var first = false;
                         if (PREINT) {
                             first = preint_before_start(t, dtl, t0);
-                            front = preint_front(&acc, t, dtm, v);
+                            front = preint_front(&acc, t, grid.dt, v);
                         }
                         // The segment's start, inside the brick (preint_shaded).
-                        let ts = max(t - dtm, st.hit.t_enter);
-                        if (!first && dvr_sample(&acc, cur, r, t, ts, front, v, tf_c, dtm, t1)) { done = true; break; }
+                        let ts = max(t - grid.dt, st.hit.t_enter);
+                        if (!first && dvr_sample(&acc, cur, r, t, ts, front, v, grid.row, grid.dt, t1)) { done = true; break; }
                     } else {
                         let before = acc.max_v;
                         let stop = mip_sample(&acc, t, v, dtl);
@@ -378,7 +366,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
                     k = k + 1u;
                 }
                 // Where the ray left the brick, or stopped in it.
-                let t_out = clamp(grid_t(tb, k, dtm), t_in, t_end);
+                let t_out = clamp(grid_t(grid.tb, k, grid.dt), t_in, t_end);
                 let trans_out = select(1.0, 1.0 - acc.color.a, MODE == MODE_DVR);
                 if (MODE == MODE_MIP) {
                     if (holds_max) {
@@ -411,7 +399,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
             if (PREINT && MODE == MODE_DVR) {
                 preint_tail(&acc, cur, r, t1, max(acc.prev_t, cur_in), dtl, cur.b.tf_v);
             }
-            t_stop = grid_t(tb, k, dtm);
+            t_stop = grid_t(grid.tb, k, grid.dt);
         }
         feedback_stop(px, depth_at(r, select(t1, t_stop, feedback_terminated(acc))));
     }
