@@ -179,7 +179,7 @@ fn finest_level_matches_in_core_on_head_ct() {
     }
 }
 
-/// Out of core, as in core (`tests/gpu_incore.rs`,
+/// Out of core, as in core (`tests/gpu_incore_rays.rs`,
 /// `a_stopped_ray_fills_only_what_the_material_ahead_would`): a ray stopped
 /// early fills its residual as far as the material it has crossed would, to
 /// the ray's end. A 64^3 volume of one value in bricks of 16 at the finest
@@ -228,7 +228,7 @@ fn a_stopped_ray_fills_only_what_the_material_ahead_would() {
     assert!(db >= 55.0, "{db:.2} dB < 55");
 }
 
-/// Out of core, as in core (`tests/gpu_incore.rs`,
+/// Out of core, as in core (`tests/gpu_incore_rays.rs`,
 /// `adaptive_step_matches_its_cpu_twin`): DVR's adaptive step draws what
 /// its CPU twin draws at the finest level, plain and shaded, its new grids
 /// carried across leaves. Marschner-Lobb 64^3 (bricks of 32) through a
