@@ -154,7 +154,8 @@ fn the_host_suite_runs() {
 }
 
 /// The `pareto` suite on the procedural Marschner-Lobb volume (32^3, bricks
-/// of 16) at 32 px, one round, the step and pre-integration knobs; a
+/// of 16) at 32 px, one round, the step, pre-integration and adaptive-step
+/// knobs; a
 /// one-ray-per-pixel reference.
 #[test]
 fn the_pareto_suite_runs() {
@@ -176,7 +177,7 @@ fn the_pareto_suite_runs() {
             "--supersample",
             "1",
             "--knobs",
-            "step,preint",
+            "step,preint,adaptive",
             "--out",
             &out,
             "--charts",
@@ -192,6 +193,8 @@ fn the_pareto_suite_runs() {
             "visible_error_gain_db_at_equal_brick_budget",
             "octant_gain_db_at_equal_brick_budget",
             "preintegration_gain_db_at_step_2",
+            "adaptive_step_time_ratio",
+            "adaptive_step_psnr_gain_db",
             "anisotropic_ct_bricks_at_1px",
             "scenes",
         ],
@@ -211,6 +214,10 @@ fn the_pareto_suite_runs() {
         fig["preintegration_gain_db_at_step_2"].as_f64().unwrap() > 0.0,
         "{fig:?}"
     );
+    // The adaptive step was drawn and compared at the default step (DVR).
+    for key in ["adaptive_step_time_ratio", "adaptive_step_psnr_gain_db"] {
+        assert!(fig[key].as_f64().is_some_and(f64::is_finite), "{fig:?}");
+    }
     assert!(dir.path().join("out/pareto.csv").is_file());
     assert!(dir.path().join("out/ml_dvr.svg").is_file());
 }

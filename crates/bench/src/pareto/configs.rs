@@ -86,6 +86,19 @@ pub(super) fn configs(mode: RenderMode, u8_volume: bool, finest_bricks: u32) -> 
             };
             out.push(cfg("preint", format!("{step}"), DEFAULT_KEY, s));
         }
+        // The step doubling as the ray's transmittance falls
+        // (`Accel::adaptive_step`), from the default step and around it.
+        for step in [0.25f32, 0.5, 1.0, 2.0] {
+            let s = RenderSettings {
+                step_factor: step,
+                accel: Accel {
+                    adaptive_step: true,
+                    ..base.accel
+                },
+                ..base
+            };
+            out.push(cfg("adaptive", format!("{step}"), DEFAULT_KEY, s));
+        }
     }
     for tol in [0.0f32, 0.5, 2.0, 4.0, 8.0] {
         let key = RendererKey {

@@ -68,6 +68,25 @@ pub(super) fn preint_gain(cfgs: &[Config], m: &[Measured]) -> Option<f64> {
     Some(at("preint")? - at("step")?)
 }
 
+/// The adaptive step (`Accel::adaptive_step`) against plain sampling at the
+/// same step (the defaults' at their own step, the step sweep's elsewhere):
+/// its time over plain sampling's and its PSNR minus theirs, `None` without
+/// both.
+pub(super) fn adaptive_vs_plain(cfgs: &[Config], m: &[Measured], step: f32) -> Option<(f64, f64)> {
+    let at = |knob: &str| {
+        cfgs.iter()
+            .zip(m)
+            .find(|(c, _)| c.knob == knob && c.settings.step_factor == step)
+            .map(|(_, x)| x)
+    };
+    let adaptive = at("adaptive")?;
+    let plain = at("default").or_else(|| at("step"))?;
+    Some((
+        adaptive.ms / plain.ms,
+        adaptive.psnr_db.min(99.0) - plain.psnr_db.min(99.0),
+    ))
+}
+
 /// PSNR of the geometric curve at `bricks` (linear in log bricks), `None`
 /// outside its range (equal brick counts keep the best PSNR).
 fn interpolate(curve: &[(f64, f64)], bricks: f64) -> Option<f64> {

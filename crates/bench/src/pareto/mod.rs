@@ -2,7 +2,7 @@
 //!
 //! For each scene (a volume, its transfer function and a mode) it renders one
 //! view with a set of configurations: the defaults, and one knob at a time swept
-//! around them (step, pre-integration, geometric and visible-error
+//! around them (step, pre-integration, the adaptive step, geometric and visible-error
 //! level-of-detail budgets, early-termination threshold, the u8
 //! interpolation, the visibility policy, in core instead of out of core), and
 //! the geometric, visible-error and octant orders under equal brick budgets
@@ -35,7 +35,7 @@ use brickray_reference::{ReferenceOptions, mean_flip, psnr, render_reference, ss
 use brickray_render::{OutOfCoreConfig, RendererOptions, VolumeRenderer};
 pub(crate) use configs::base_settings;
 use configs::{Config, RendererKey, configs};
-use gains::{brick_budget_gain, lod_gain, preint_gain};
+use gains::{adaptive_vs_plain, brick_budget_gain, lod_gain, preint_gain};
 use scenes::Scene;
 pub(crate) use scenes::scenes;
 use serde::Serialize;
@@ -89,7 +89,7 @@ pub(crate) struct Args {
     #[arg(long, default_value_t = 2, value_parser = crate::at_least_one::<u32>)]
     supersample: u32,
     /// Knobs swept, comma-separated (default all; the defaults always run):
-    /// step, preint, lod_geometric, lod_visible, bricks_geometric,
+    /// step, preint, adaptive, lod_geometric, lod_visible, bricks_geometric,
     /// bricks_visible, bricks_octants, ert, u8_filtering, visibility,
     /// in_core.
     #[arg(long, value_delimiter = ',')]
@@ -130,6 +130,10 @@ pub(crate) struct ParetoResult {
     octant_gain_db_at_equal_brick_budget: Option<f64>,
     octant_gain_db_at_equal_brick_budget_vs_finest: Option<f64>,
     preintegration_gain_db_at_step_2: Option<f64>,
+    /// The adaptive step at the default step against plain sampling there
+    /// (DVR scenes, medians): time over plain time, and PSNR gained.
+    adaptive_step_time_ratio: Option<f64>,
+    adaptive_step_psnr_gain_db: Option<f64>,
     /// The anisotropic CT's bricks at the default 1 px (DVR).
     anisotropic_ct_bricks_at_1px: Option<u64>,
     scenes: Vec<SceneRow>,
@@ -152,6 +156,7 @@ pub(crate) fn run(o: &Args) -> Result<ParetoResult, String> {
     let (mut all_on_front, mut all_on_ooc_front) = (true, true);
     let mut per_scene = Vec::new();
     let (mut visible_gains, mut preint_gains) = (Vec::new(), Vec::new());
+    let (mut adaptive_ratios, mut adaptive_gains) = (Vec::new(), Vec::new());
     let (mut budget_gains, mut budget_lod_gains) = (Vec::new(), Vec::new());
     let (mut octant_gains, mut octant_lod_gains) = (Vec::new(), Vec::new());
     let mut aniso_bricks = None;
@@ -306,6 +311,15 @@ pub(crate) fn run(o: &Args) -> Result<ParetoResult, String> {
                 println!("  pre-integration at step 2: {g:+.2} dB");
                 preint_gains.push(g);
             }
+            for step in [0.25f32, 0.5, 1.0, 2.0] {
+                if let Some((r, g)) = adaptive_vs_plain(&cfgs, &m, step) {
+                    println!("  adaptive step at {step} voxel: {r:.2}x the time, {g:+.2} dB");
+                    if step == base_settings(*mode).step_factor {
+                        adaptive_ratios.push(r);
+                        adaptive_gains.push(g);
+                    }
+                }
+            }
             let d = &m[0];
             if scene.anisotropic && *mode_name == "dvr" {
                 aniso_bricks = Some(d.bricks);
@@ -341,6 +355,8 @@ pub(crate) fn run(o: &Args) -> Result<ParetoResult, String> {
         octant_gain_db_at_equal_brick_budget: med(&octant_gains),
         octant_gain_db_at_equal_brick_budget_vs_finest: med(&octant_lod_gains),
         preintegration_gain_db_at_step_2: med(&preint_gains),
+        adaptive_step_time_ratio: med(&adaptive_ratios),
+        adaptive_step_psnr_gain_db: med(&adaptive_gains),
         anisotropic_ct_bricks_at_1px: aniso_bricks.map(|b| b as u64),
         scenes: per_scene,
     })
