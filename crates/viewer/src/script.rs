@@ -7,6 +7,10 @@
 //! mode dvr | shaded | iso [VALUE] | mip
 //! iso VALUE                      isovalue, normalized 0..1
 //! step FACTOR                    sampling step in voxels
+//! termination T | off            early ray termination at opacity T (0 < T <= 1), or none
+//! skipping on | off              empty-space skipping
+//! preint on | off                pre-integrated DVR
+//! adaptive on | off              DVR's step doubling as the ray's transmittance falls
 //! camera orbit YAW PITCH DIST    degrees, degrees, multiple of the home distance
 //! camera axis +x|-x|+y|-y|+z|-z  camera reset
 //! camera view A|P|L|R|S|I          (an anatomical view: an oriented volume)
@@ -77,6 +81,14 @@ pub(crate) enum Action {
     Iso(f32),
     /// The step factor.
     Step(f32),
+    /// Early ray termination's opacity (`None`: off).
+    Termination(Option<f32>),
+    /// Empty-space skipping.
+    Skipping(bool),
+    /// Pre-integrated DVR.
+    Preint(bool),
+    /// DVR's adaptive step (`Accel::adaptive_step`).
+    AdaptiveStep(bool),
     /// Orbit: yaw and pitch in degrees, distance as a multiple of the home distance.
     Orbit(f32, f32, f32),
     /// An axis view.
@@ -382,6 +394,17 @@ pub(crate) fn parse(text: &str) -> Result<Vec<Action>, ScriptError> {
                 }
                 Action::Step(v)
             }
+            ["termination", "off"] => Action::Termination(None),
+            ["termination", v] => {
+                let v = num(v)?;
+                if !(v > 0.0 && v <= 1.0) {
+                    return Err(err("the termination opacity must be in (0, 1]"));
+                }
+                Action::Termination(Some(v))
+            }
+            ["skipping", v] => Action::Skipping(on_off(v)?),
+            ["preint", v] => Action::Preint(on_off(v)?),
+            ["adaptive", v] => Action::AdaptiveStep(on_off(v)?),
             ["camera", "orbit", y, p, d] => {
                 let d = num(d)?;
                 if d <= 0.0 {

@@ -11,7 +11,11 @@
 //! scene scores far below (checked: the DVR screenshot against the library's
 //! isosurface image).
 //!
-//! The third screenshot cuts the head with a clip box (drawn by the library).
+//! The third screenshot cuts the head with a clip box (drawn by the library),
+//! the fourth and fifth draw DVR with the accelerations the script sets
+//! (termination, skipping, the adaptive step, pre-integration): each matches
+//! the library's image with those settings, its sidecar records them, and
+//! it differs from the defaults' image.
 //!
 //! Out-of-core runs (a brick store, a procedural volume, the out-of-core
 //! settings the script reaches) are in `scripted/streamed.rs`.
@@ -178,23 +182,18 @@ fn sidecar(png: &Path) -> (Camera, u32, u32) {
     (camera, size(0), size(1))
 }
 
-/// The library's rendering of the head CT with `mode`, for the camera and
-/// viewport of a screenshot.
+/// The library's rendering of the head CT with `settings`, for the camera
+/// and viewport of a screenshot.
 fn library_image(
     volume: &brickray::Volume,
     camera: Camera,
     w: u32,
     h: u32,
-    mode: RenderMode,
-    clip: ClipBox,
+    settings: RenderSettings,
 ) -> Vec<u8> {
     let d = volume.desc();
     let desc = FrameDesc {
-        settings: RenderSettings {
-            mode,
-            clip,
-            ..RenderSettings::default()
-        },
+        settings,
         ..FrameDesc::new(camera, VolumeFrame::centered(d.dims, d.spacing), w, h)
     };
     library_render(volume, &desc, None, None)
@@ -324,12 +323,16 @@ fn scripted_screenshots_match_the_library() {
     let script = format!(
         "open {ct}\nbackground 0 0 0\noverlays off\ntf load {tf}\ncamera orbit 30 15 1.0\n\
          wait converged\nscreenshot {dvr}\nmode iso {iso}\nwait 2\nscreenshot {isopng}\n\
-         clip 0 0 0 1 0.55 1\nwait 2\nscreenshot {clippng}\nquit\n",
+         clip 0 0 0 1 0.55 1\nwait 2\nscreenshot {clippng}\n\
+         clip off\nmode dvr\ntermination 0.9\nskipping off\nadaptive on\nwait 2\nscreenshot {fast}\n\
+         preint on\nwait 2\nscreenshot {preint}\nquit\n",
         ct = ct.display(),
         tf = out("bone.json").display(),
         dvr = out("dvr.png").display(),
         isopng = out("iso.png").display(),
         clippng = out("clip.png").display(),
+        fast = out("fast.png").display(),
+        preint = out("preint.png").display(),
     );
     let t = Instant::now();
     run_script(dir.path(), &script, Duration::from_secs(120));
@@ -343,15 +346,36 @@ fn scripted_screenshots_match_the_library() {
         value: iso,
         color: [0.9, 0.85, 0.75],
     };
-    let (mut dvr_lib, mut iso_shot) = (None, None);
+    let (mut dvr_shot, mut iso_shot) = (None, None);
     let cut = ClipBox {
         min: [0.0; 3],
         max: [1.0, 0.55, 1.0],
     };
-    for (name, mode, clip) in [
-        ("dvr", RenderMode::Dvr, ClipBox::FULL),
-        ("iso", iso_mode, ClipBox::FULL),
-        ("clip", iso_mode, cut),
+    let with = |mode, clip| RenderSettings {
+        mode,
+        clip,
+        ..RenderSettings::default()
+    };
+    // The script's accelerations: termination at 0.9, no skipping, the
+    // adaptive step; then pre-integrated (which the adaptive step yields to).
+    let fast = RenderSettings {
+        accel: brickray::Accel {
+            early_termination: Some(0.9),
+            empty_space_skipping: false,
+            adaptive_step: true,
+        },
+        ..RenderSettings::default()
+    };
+    let preint = RenderSettings {
+        preintegrated: true,
+        ..fast
+    };
+    for (name, settings) in [
+        ("dvr", with(RenderMode::Dvr, ClipBox::FULL)),
+        ("iso", with(iso_mode, ClipBox::FULL)),
+        ("clip", with(iso_mode, cut)),
+        ("fast", fast),
+        ("preint", preint),
     ] {
         let png = out(&format!("{name}.png"));
         let (shot, w, h) = read_png(&png);
@@ -362,7 +386,7 @@ fn scripted_screenshots_match_the_library() {
             "{name}: the screenshot is the view's size"
         );
         assert!(w >= 64 && h >= 64, "{name}: a {w}x{h} view");
-        let lib = library_image(&volume, camera, w, h, mode, clip);
+        let lib = library_image(&volume, camera, w, h, settings);
         // The head covers a good part of the view (not a blank image).
         let lit = lit_pixels(&shot);
         assert!(lit * 10 > (w * h) as usize, "{name}: only {lit} lit pixels");
@@ -376,12 +400,33 @@ fn scripted_screenshots_match_the_library() {
         )
         .unwrap_or_else(|e| panic!("{e}"));
         eprintln!("viewer {name} vs library: {cmp}");
+        // The sidecar records what the view was drawn with.
+        let drawn = &sidecar_json(&png)["settings"];
+        assert_eq!(
+            (
+                drawn["early_termination"].as_f64().map(|t| t as f32),
+                drawn["empty_space_skipping"].as_bool(),
+                drawn["adaptive_step"].as_bool(),
+                drawn["preintegrated"].as_bool(),
+            ),
+            (
+                settings.accel.early_termination,
+                Some(settings.accel.empty_space_skipping),
+                Some(settings.accel.adaptive_step),
+                Some(settings.preintegrated),
+            ),
+            "{name}: {drawn}"
+        );
         if name == "dvr" {
-            dvr_lib = Some(shot);
+            dvr_shot = Some(shot);
+        } else if matches!(name, "fast" | "preint") {
+            // Each changed the image (drawn the same otherwise).
+            let db = brickray_reference::psnr(dvr_shot.as_deref().expect("dvr first"), &shot);
+            assert!(db.is_finite(), "{name}: the same image as the defaults'");
         } else if name == "iso" {
             // The metric tells these scenes apart: the DVR screenshot is far
             // from the library's isosurface.
-            let other = brickray_reference::psnr(dvr_lib.as_deref().expect("dvr first"), &lib);
+            let other = brickray_reference::psnr(dvr_shot.as_deref().expect("dvr first"), &lib);
             assert!(
                 other < MIN_PSNR_DB - 10.0,
                 "DVR vs iso scored {other:.1} dB"

@@ -9,6 +9,8 @@ pub(super) struct PendingShot {
     pub(super) path: PathBuf,
     pub(super) viewport: Viewport,
     pub(super) camera: brickray::Camera,
+    /// The settings the view was drawn with.
+    pub(super) settings: brickray::RenderSettings,
     /// Where the volume was placed (its model matrix) and its anatomical
     /// axis code, if it has one.
     pub(super) frame: brickray::VolumeFrame,
@@ -101,6 +103,7 @@ impl ViewerApp {
             path,
             viewport,
             camera: cb.camera,
+            settings: cb.settings,
             frame: cb.frame,
             orientation: self
                 .shown
@@ -198,6 +201,10 @@ impl ViewerApp {
                 }
                 Action::Iso(v) => self.iso = v,
                 Action::Step(v) => self.settings.step_factor = v,
+                Action::Termination(t) => self.settings.accel.early_termination = t,
+                Action::Skipping(on) => self.settings.accel.empty_space_skipping = on,
+                Action::Preint(on) => self.settings.preintegrated = on,
+                Action::AdaptiveStep(on) => self.settings.accel.adaptive_step = on,
                 Action::Orbit(yaw, pitch, d) => {
                     let home = self
                         .shown
@@ -391,6 +398,15 @@ fn save_shot(shot: &PendingShot, image: &egui::ColorImage) -> Result<(), String>
             "dims": shot.frame.dims,
         },
         "orientation": shot.orientation,
+        // What the view was drawn with (the sampling and its accelerations).
+        "settings": {
+            "step": shot.settings.step_factor,
+            "shading": shot.settings.shading.enabled,
+            "early_termination": shot.settings.accel.early_termination,
+            "empty_space_skipping": shot.settings.accel.empty_space_skipping,
+            "adaptive_step": shot.settings.accel.adaptive_step,
+            "preintegrated": shot.settings.preintegrated,
+        },
         "working_set_bricks": shot.working_set_bricks,
         "lod": shot.lod.map(|(metric, tolerance_px)| match metric.budget() {
             None => serde_json::json!({"rule": "geometric", "tolerance_px": tolerance_px}),

@@ -53,11 +53,26 @@ fn every_action_parses() {
         overlay off
         camera view a
         camera view inferior
+        termination 0.95
+        termination off
+        skipping off
+        preint on
+        adaptive on
     ";
     let a = parse(text).unwrap();
-    assert_eq!(a.len(), 49);
+    assert_eq!(a.len(), 54);
     assert_eq!(a[47], Action::View(Direction::Anterior));
     assert_eq!(a[48], Action::View(Direction::Inferior));
+    assert_eq!(
+        a[49..],
+        [
+            Action::Termination(Some(0.95)),
+            Action::Termination(None),
+            Action::Skipping(false),
+            Action::Preint(true),
+            Action::AdaptiveStep(true),
+        ]
+    );
     assert_eq!(
         a[42],
         Action::Overlay(OverlayAction::Open("atlas.json".into()))
@@ -84,6 +99,12 @@ fn every_action_parses() {
         "overlay opacity 1.5",
         "overlay mode",
         "overlay",
+        "termination 0",
+        "termination 1.5",
+        "termination nan",
+        "preint yes",
+        "adaptive",
+        "skipping",
     ] {
         assert!(parse(bad).is_err(), "{bad}");
     }
