@@ -151,3 +151,56 @@ pub(crate) fn check_channel_mip_at_a_coarse_step(
         "{label}: refined {refined:.2} dB, samples alone {samples_only:.2} dB"
     );
 }
+
+/// DVR's adaptive step in the multi-channel kernels
+/// (`Accel::adaptive_step`: the step doubles as the mixture's transmittance
+/// falls to 1/4 and 1/16): `vol` through `styles` at `step`, without
+/// termination (the reference does not terminate), drawn with `draw`,
+/// against its twin (the reference with the adaptive step) at >= `min_db`,
+/// and at least 10 dB closer to it than to the reference that keeps its
+/// step (a kernel that ignored the setting draws the latter). Returns the
+/// two PSNRs.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn check_channel_adaptive_step(
+    label: &str,
+    r: &mut VolumeRenderer,
+    vol: &ChannelVolume,
+    styles: &[ChannelStyle],
+    camera: Camera,
+    size: u32,
+    step: f32,
+    min_db: f64,
+    mut draw: impl FnMut(&mut VolumeRenderer, &FrameDesc<'_>) -> Vec<u8>,
+) -> (f64, f64) {
+    let d = vol.channels()[0].desc();
+    let frame = VolumeFrame::centered(d.dims, d.spacing);
+    let settings = brickray::RenderSettings {
+        step_factor: step,
+        accel: brickray::Accel {
+            early_termination: None,
+            adaptive_step: true,
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    let desc = FrameDesc {
+        settings,
+        ..FrameDesc::new(camera, frame, size, size)
+    };
+    let got = draw(r, &desc);
+    let reference = |opts: &ReferenceOptions| {
+        render_channels_reference(vol, &frame, styles, &camera, &settings, opts).to_rgba8([0.0; 3])
+    };
+    let fixed = ReferenceOptions::new(size, size).with_step_factor(step);
+    let twin = brickray_reference::psnr(&got, &reference(&fixed.with_adaptive_step(true)));
+    let kept = brickray_reference::psnr(&got, &reference(&fixed));
+    eprintln!(
+        "{label}, DVR with the adaptive step at {step} voxel: vs its twin {twin:.2} dB, vs the fixed step {kept:.2} dB"
+    );
+    assert!(twin >= min_db, "{label}: {twin:.2} dB against the twin");
+    assert!(
+        twin >= kept + 10.0,
+        "{label}: {twin:.2} dB against the twin, {kept:.2} against the fixed step"
+    );
+    (twin, kept)
+}

@@ -118,6 +118,30 @@ fn channel_mip_refines_each_maximum_between_samples() {
     );
 }
 
+/// DVR's step doubles as the mixture's transmittance falls
+/// (`channel_support::check_channel_adaptive_step`, four channels at a step
+/// of 1 voxel): the GPU against its twin >= 55 dB, and 10 dB closer to it
+/// than to the fixed step's reference.
+#[test]
+fn channel_dvr_takes_the_adaptive_step() {
+    let g = gpu();
+    let target = Offscreen::new(&g.device, SIZE, SIZE);
+    let vol = ChannelVolume::new(channels(4)).unwrap();
+    let mut r = renderer(&vol, &styles(4));
+    let camera = Camera::orbit(Vec3::ZERO, 2.3, 0.6, 0.35);
+    channel_support::check_channel_adaptive_step(
+        "four channels",
+        &mut r,
+        &vol,
+        &styles(4),
+        camera,
+        SIZE,
+        1.0,
+        55.0,
+        |r, desc| draw(g, r, &target, desc).unwrap().color,
+    );
+}
+
 /// One channel drawn as a channel volume is the single-channel renderer's
 /// image of it with the same transfer function (and isovalue).
 #[test]

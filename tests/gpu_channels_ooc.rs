@@ -184,6 +184,33 @@ fn streamed_channel_mip_refines_each_maximum_between_samples() {
     );
 }
 
+/// DVR's step doubles as the mixture's transmittance falls in the streamed
+/// channels too (`channel_support::check_channel_adaptive_step`, four
+/// channels at a step of 1 voxel, the finest level): the GPU against its
+/// twin >= 55 dB, and 10 dB closer to it than to the fixed step's reference.
+#[test]
+fn streamed_channel_dvr_takes_the_adaptive_step() {
+    let g = gpu();
+    let all = channels(4);
+    let dir = tempfile::tempdir().unwrap();
+    let parts = stores(&all, dir.path());
+    let vol = ChannelVolume::new(all).unwrap();
+    let target = Offscreen::new(&g.device, SIZE, SIZE);
+    let mut r = streamed(source(&parts), &styles(4));
+    let camera = Camera::orbit(Vec3::ZERO, 2.3, 0.6, 0.35);
+    channel_support::check_channel_adaptive_step(
+        "four streamed channels",
+        &mut r,
+        &vol,
+        &styles(4),
+        camera,
+        SIZE,
+        1.0,
+        55.0,
+        |r, desc| settle(r, &target, desc).color,
+    );
+}
+
 /// One streamed channel drawn through its style equals the single-channel
 /// out-of-core image with that style's transfer function (>= 60 dB).
 #[test]

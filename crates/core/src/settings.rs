@@ -63,8 +63,8 @@ pub struct Accel {
     /// most, each sample's opacity corrected to its step): samples behind
     /// what the ray has gathered weigh less, so they are taken further apart.
     /// Each change of step starts the new step's grid at the sample where it
-    /// happens. Not with pre-integration, and not in the multi-channel
-    /// kernels (they keep the step). Default off (docs/rendering-model.md,
+    /// happens (a multi-channel volume's from the mixture's transmittance).
+    /// Not with pre-integration. Default off (docs/rendering-model.md,
     /// *Accelerations*).
     pub adaptive_step: bool,
 }

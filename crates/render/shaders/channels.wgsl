@@ -180,10 +180,20 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
         let n = min(first_k_after(t1, t0, dt), frame.max_samples);
         var k = 0u;
         var k_cell = 0u;
+        // The sample grid (StepGrid: DVR's adaptive step moves it, as in
+        // incore.wgsl); `n` bounds the trips.
+        let tf_v = tf_row(0.0);
+        var grid = StepGrid(t0, dt, 0u, tf_v);
+        var trips = 0u;
         loop {
-            if (k >= n) { break; }
-            let t = grid_t(t0, k, dt);
+            if (trips >= n) { break; }
+            trips = trips + 1u;
+            let t = grid_t(grid.tb, k, grid.dt);
             if (t >= t1) { break; }
+            if (MODE == MODE_DVR && step_grid_adapt(&grid, acc.color.a, t, dt, tf_v)) {
+                k = 0u;
+                k_cell = 0u;
+            }
             let u = tex_at(r, t);
             if (ESS && k >= k_cell) {
                 let c = channel_cell_of(u);
@@ -197,7 +207,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
                     skip = d > 0u;
                     reach = max(d, 1u);
                 }
-                let k_exit = max(k + 1u, first_k_after(channel_cell_exit(r, inv_dir, c, reach), t0, dt));
+                let k_exit = max(k + 1u, first_k_after(channel_cell_exit(r, inv_dir, c, reach), grid.tb, grid.dt));
                 if (skip) {
                     k = k_exit;
                     continue;
@@ -207,9 +217,10 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
             let v = channel_values(u);
             acc.samples = acc.samples + 1u;
             if (MODE == MODE_DVR) {
-                let p = channel_dvr_sample(v, u, r, 0.0, vis);
+                // The row of the grid's step in each channel's tables.
+                let p = channel_dvr_sample(v, u, r, grid.row * tf_info.rows - 0.5, vis);
                 if (p.a > 0.0) {
-                    if (accumulate(&acc, r, t, p, vec2<f32>(dt, t1 - t - dt))) { break; }
+                    if (accumulate(&acc, r, t, p, vec2<f32>(grid.dt, t1 - t - grid.dt))) { break; }
                 }
             } else if (MODE == MODE_ISO) {
                 let c = channel_inside(v, vis, iso4);

@@ -224,6 +224,9 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
         var t_last = t0;
         var st = oct_begin_inside(oo, od, t0, t1, frame.max_leaves, ooc.splits.xy);
         var dtl = dt;
+        // The sample grid (StepGrid: the leaf level's step, doubled by
+        // DVR's adaptive step; ooc.wgsl).
+        var grid = StepGrid(t0, dt, 0u, 0.0);
         var done = false;
         loop {
             var found = false;
@@ -238,26 +241,29 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
             if (!found) { break; }
             cursor_enter(&cur, brick_of(st.hit.leaf, st.hit.data));
             dtl = dt * cur.b.f;
+            step_grid_set(&grid, dtl, cur.b.tf_v);
             if (cur.b.f != grid_f) {
                 grid_f = cur.b.f;
-                k = first_k_after(max(st.hit.t_enter, t_last), t0, dtl);
+                k = first_k_after(max(st.hit.t_enter, t_last), grid.tb, grid.dt);
             }
-            k = max(k, first_k_after(st.hit.t_enter, t0, dtl));
+            k = max(k, first_k_after(st.hit.t_enter, grid.tb, grid.dt));
             let t_end = min(st.hit.t_exit, t1);
             var k_cell = 0u;
             let t_in = max(st.hit.t_enter, t0);
             let trans_in = select(1.0, 1.0 - acc.color.a, MODE == MODE_DVR);
-            // The row of this level's step in each channel's tables.
-            let row = cur.b.tf_v * tf_info.rows - 0.5;
             loop {
-                let t = grid_t(t0, k, dtl);
+                let t = grid_t(grid.tb, k, grid.dt);
                 if (t >= t_end) { break; }
                 if (budget == 0u) { done = true; break; }
                 budget = budget - 1u;
+                if (MODE == MODE_DVR && step_grid_adapt(&grid, acc.color.a, t, dtl, cur.b.tf_v)) {
+                    k = 0u;
+                    k_cell = 0u;
+                }
                 if (ESS && k >= k_cell) {
                     let j = sub_cell_of(cur.b, oo + od * t);
                     let te = min(sub_cell_exit(cur.b, j, oo, od, inv_od), st.hit.t_exit);
-                    let k_exit = max(k + 1u, first_k_after(te, t0, dtl));
+                    let k_exit = max(k + 1u, first_k_after(te, grid.tb, grid.dt));
                     if (channel_cell_skips(cur.b, j, mx, vis, iso4)) {
                         k = k_exit;
                         continue;
@@ -267,9 +273,12 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
                 let v = cursor_values(cur, t);
                 acc.samples = acc.samples + 1u;
                 if (MODE == MODE_DVR) {
+                    // The row of the grid's step (the leaf level's, doubled)
+                    // in each channel's tables.
+                    let row = grid.row * tf_info.rows - 0.5;
                     let p = ooc_channel_dvr_sample(cur, v, tex_at(r, t), r, t, row, vis);
                     if (p.a > 0.0) {
-                        if (accumulate(&acc, r, t, p, vec2<f32>(dtl, t1 - t - dtl))) { done = true; break; }
+                        if (accumulate(&acc, r, t, p, vec2<f32>(grid.dt, t1 - t - grid.dt))) { done = true; break; }
                     }
                 } else if (MODE == MODE_ISO) {
                     let c = channel_inside(v, vis, iso4);
@@ -292,12 +301,12 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
                 t_last = t;
                 k = k + 1u;
             }
-            let t_out = clamp(grid_t(t0, k, dtl), t_in, t_end);
+            let t_out = clamp(grid_t(grid.tb, k, grid.dt), t_in, t_end);
             let trans_out = select(1.0, 1.0 - acc.color.a, MODE == MODE_DVR);
             feedback_seen(cur.b.usage, t_in, t_out, trans_in, trans_out, finest_voxel_t() * cur.b.usage_f);
             if (done) { break; }
         }
-        let t_stop = grid_t(t0, k, dtl);
+        let t_stop = grid_t(grid.tb, k, grid.dt);
         feedback_stop(px, depth_at(r, select(t1, t_stop, feedback_terminated(acc))));
         // MIP: each visible channel's peaks refined in the bricks that hold
         // them.

@@ -18,6 +18,16 @@ pub(crate) fn adaptive_step(s: &RenderSettings) -> bool {
     s.accel.adaptive_step && matches!(s.mode, RenderMode::Dvr) && !s.preintegrated
 }
 
+/// The corrected tables' rows past the step lengths' for the frame's
+/// settings: one per doubling of the adaptive step ([`adaptive_step`]).
+pub(crate) fn adaptive_rows(s: &RenderSettings) -> u32 {
+    if adaptive_step(s) {
+        brickray_core::ADAPTIVE_STEP_DOUBLINGS
+    } else {
+        0
+    }
+}
+
 /// Bits of [`FrameUniforms::flags`] (`FLAG_*` in common.wgsl).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, bytemuck::Pod, bytemuck::Zeroable)]
 #[repr(transparent)]

@@ -151,6 +151,7 @@ impl VolumeRenderer {
                     styles,
                     *generation,
                     desc.settings.step_factor,
+                    crate::frame::adaptive_rows(&desc.settings),
                 )?;
                 done[i] = true;
                 continue;
@@ -189,6 +190,7 @@ impl VolumeRenderer {
                 styles,
                 *generation,
                 desc.settings.step_factor,
+                crate::frame::adaptive_rows(&desc.settings),
             )?;
         }
         backend.get_mut().before_pass(encoder);
@@ -208,12 +210,7 @@ impl VolumeRenderer {
             device,
             queue,
             desc.settings.step_factor,
-            backend.step_lengths()
-                + if crate::frame::adaptive_step(&desc.settings) {
-                    brickray_core::ADAPTIVE_STEP_DOUBLINGS
-                } else {
-                    0
-                },
+            backend.step_lengths() + crate::frame::adaptive_rows(&desc.settings),
             desc.settings.preintegrated
                 && !backend.labels()
                 && matches!(desc.settings.mode, brickray_core::RenderMode::Dvr),

@@ -5,7 +5,9 @@
 use super::{Image, Marcher, Peaks, RayResult, Span};
 use brickray_core::channels::{self, ChannelStyle, ChannelVolume};
 use brickray_core::tf::corrected_alpha;
-use brickray_core::{Camera, LabelOverlay, Ray, RenderMode, RenderSettings, VolumeFrame};
+use brickray_core::{
+    Camera, LabelOverlay, Ray, RenderMode, RenderSettings, VolumeFrame, adaptive_step_doublings,
+};
 
 use super::ReferenceOptions;
 
@@ -20,7 +22,8 @@ use super::ReferenceOptions;
 /// reaches its isovalue (the lowest such channel), bisects on that channel,
 /// and shades that channel's isosurface colour by its gradient.
 /// `settings.mode`'s isovalue and colour are not used (each channel has its
-/// own).
+/// own). With [`ReferenceOptions::adaptive_step`] DVR's step doubles with
+/// the mixture's transmittance, as one channel's does.
 ///
 /// A label map over the channels (`opts.overlay`) applies to each channel's
 /// sample before shading (DVR), tints iso colours at the hit and each
@@ -80,6 +83,7 @@ pub fn render_channels_reference(
         settings,
         step_factor,
         overlay: opts.overlay,
+        adaptive_step: opts.adaptive_step,
     };
     super::fill_pixels(&mut img, camera, opts, |px, py, n, host| {
         m.marchers[0].pixel_with(px, py, n, host, |x, y, h| m.trace(x, y, h))
@@ -95,6 +99,8 @@ struct ChannelMarcher<'a> {
     step_factor: f64,
     /// A label map over the channels.
     overlay: Option<&'a LabelOverlay<'a>>,
+    /// DVR's adaptive step ([`ReferenceOptions::adaptive_step`]).
+    adaptive_step: bool,
 }
 
 impl ChannelMarcher<'_> {
@@ -142,11 +148,26 @@ impl ChannelMarcher<'_> {
         let mut a_acc = 0.0f64;
         let mut depth = None;
         let mut parts = Vec::with_capacity(self.marchers.len());
-        for t in span.samples() {
+        // The grid's start, its index and the step's doublings, as one
+        // channel's (`Marcher::dvr`): the samples lie at `tb + k dt 2^j`.
+        let (mut tb, mut k, mut j) = (span.t0, 0u64, 0u32);
+        loop {
+            let t = tb + k as f64 * span.dt * f64::from(1u32 << j);
+            if t >= span.t1 {
+                break;
+            }
+            if self.adaptive_step {
+                let jn = adaptive_step_doublings(1.0 - a_acc);
+                if jn != j {
+                    (tb, k, j) = (t, 0, jn);
+                }
+            }
+            k += 1;
+            let m_step = self.step_factor * f64::from(1u32 << j);
             parts.clear();
             for (_, m) in self.visible() {
                 let [r, g, b, a] = m.tf.lookup(m.value(ray, t));
-                let a = corrected_alpha(a, self.step_factor);
+                let a = corrected_alpha(a, m_step);
                 // The overlay before shading, as for one channel.
                 let [r, g, b, a] = match self.overlay {
                     Some(o) => o.apply([r, g, b, a], self.point(ray, t), self.smooth()),

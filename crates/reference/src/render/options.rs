@@ -75,15 +75,17 @@ pub struct ReferenceOptions<'a> {
     /// MIP refines the largest sample and the runner-up (the best sample more
     /// than a step and a half from it) between samples as the scalar kernels
     /// do (`mip_sample`, `mip_refine`: half a step, then a quarter, either
-    /// side). Default on; off, the maximum of the samples alone, as the
-    /// multi-channel kernels and [`render_channels_reference`](crate::render_channels_reference) take it.
+    /// side), and so do the multi-channel kernels and
+    /// [`render_channels_reference`](crate::render_channels_reference) per
+    /// channel. Default on; off, the maximum of the samples alone.
     pub mip_refine: bool,
     /// DVR's step grows as the ray's transmittance falls, as the kernels'
     /// does with `Accel::adaptive_step` (`brickray_core::adaptive_step_doublings`
     /// before each sample: when the count changes, the new step's grid
     /// starts at that sample; each sample's opacity corrected to its step).
     /// The GPU's `settings.accel.adaptive_step` is ignored. Pre-integrated
-    /// segments and the multi-channel reference keep the step. Default off.
+    /// segments keep the step; the multi-channel reference doubles it with
+    /// the mixture's transmittance. Default off.
     pub adaptive_step: bool,
 }
 

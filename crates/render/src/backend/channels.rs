@@ -227,8 +227,10 @@ impl Channels {
     }
 
     /// Keeps the classification current for the frame: the stacked tables
-    /// for `step_factor` and `styles` (of `generation`), the uniforms, and the
-    /// skip distances for the mode. Returns the bytes written.
+    /// for `step_factor` and `styles` (of `generation`; one row, and
+    /// `extra_rows` more for the adaptive step's doublings), the uniforms,
+    /// and the skip distances for the mode. Returns the bytes written.
+    #[allow(clippy::too_many_arguments)]
     pub(crate) fn update(
         &mut self,
         device: &wgpu::Device,
@@ -237,18 +239,20 @@ impl Channels {
         styles: &[ChannelStyle],
         generation: u64,
         step_factor: f32,
+        extra_rows: u32,
     ) -> Result<u64, RenderError> {
         channels::validate_styles(styles, self.count)?;
         let mut written = 0;
+        let rows = 1 + extra_rows;
         if let Some((w, layout, rebind)) =
             self.class
-                .update(device, queue, styles, generation, step_factor, 1)?
+                .update(device, queue, styles, generation, step_factor, rows)?
         {
             let mut p = self.base;
             p.tf_offset = layout.tf_offset;
             p.tf_count = layout.tf_count;
             p.table_width = layout.width;
-            p.table_rows = 1.0;
+            p.table_rows = rows as f32;
             written += w + self.params.write(queue, p);
             if rebind {
                 self.bind_group = make_bind_group(

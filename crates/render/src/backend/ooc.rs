@@ -138,8 +138,9 @@ impl OutOfCore {
     }
 
     /// Keeps a multi-channel volume's classification current for the frame
-    /// (`styles` of `generation`, one table row per level); rebuilds group 2
-    /// when an object it holds was recreated. Returns the bytes written.
+    /// (`styles` of `generation`, one table row per level and `extra_rows`
+    /// more for the adaptive step's doublings); rebuilds group 2 when an
+    /// object it holds was recreated. Returns the bytes written.
     pub(crate) fn update_channels(
         &mut self,
         device: &wgpu::Device,
@@ -147,8 +148,9 @@ impl OutOfCore {
         styles: &[brickray_core::ChannelStyle],
         generation: u64,
         step_factor: f32,
+        extra_rows: u32,
     ) -> Result<u64, RenderError> {
-        let rows = self.levels as u32;
+        let rows = self.levels as u32 + extra_rows;
         let Some(c) = self.channels.as_mut() else {
             return Ok(0);
         };

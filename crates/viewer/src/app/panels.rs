@@ -126,8 +126,7 @@ impl ViewerApp {
             )
             .on_hover_text(
                 "the step doubles as the ray's transmittance falls to 1/4 and 1/16: \
-                 0.6-1.0x the frame for 0.1-1.7 dB (not with pre-integration, nor on \
-                 multi-channel volumes)",
+                 0.6-1.0x the frame for 0.1-1.7 dB (not with pre-integration)",
             );
         }
         if ui
