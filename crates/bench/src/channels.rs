@@ -18,7 +18,9 @@
 //! * **error**: each case against the CPU reference
 //!   (`render_channels_reference`) at the same step, at 128 px.
 //!
-//! `cargo run --release -p brickray-bench -- channels [--size PX] [--rounds N]`
+//! With `--adaptive`, also DVR with the adaptive step (`dvr adaptive`).
+//!
+//! `cargo run --release -p brickray-bench -- channels [--size PX] [--rounds N] [--adaptive]`
 
 use crate::report::Timing;
 use brickray_core::channels::ChannelVolume;
@@ -125,6 +127,10 @@ pub(crate) struct Args {
     /// Interleaved rounds.
     #[arg(long, default_value_t = 5, value_parser = crate::at_least_one::<usize>)]
     rounds: usize,
+    /// Also DVR with the adaptive step (`Accel::adaptive_step`), its error
+    /// against the reference with the same step rule.
+    #[arg(long)]
+    adaptive: bool,
 }
 
 pub(crate) fn run(args: &Args) -> Result<ChannelsResult, String> {
@@ -177,7 +183,13 @@ pub(crate) fn run(args: &Args) -> Result<ChannelsResult, String> {
         "| mode | single-channel kernel ms | 1 / 2 / 4 channels ms | 2ch / 1ch | 4ch / 1ch | samples per ray | PSNR 1 / 2 / 4 ch (dB) |"
     );
     println!("|---|---:|---:|---:|---:|---:|---:|");
-    for (mode, settings) in modes(RenderSettings::default().step_factor, 0.35) {
+    let mut cases = modes(RenderSettings::default().step_factor, 0.35);
+    if args.adaptive {
+        let mut s = cases[0].1;
+        s.accel.adaptive_step = true;
+        cases.insert(1, ("dvr adaptive", s));
+    }
+    for (mode, settings) in cases {
         let mut desc = FrameDesc {
             settings,
             ..FrameDesc::new(camera, frame, size, size)
@@ -225,7 +237,8 @@ pub(crate) fn run(args: &Args) -> Result<ChannelsResult, String> {
         let mut ooc_psnr = [0.0; 3];
         for (i, vol) in vols.iter().enumerate() {
             let opts = ReferenceOptions::new(ERROR_SIZE, ERROR_SIZE)
-                .with_step_factor(settings.step_factor);
+                .with_step_factor(settings.step_factor)
+                .with_adaptive_step(settings.accel.adaptive_step);
             let want = render_channels_reference(
                 vol,
                 &frame,

@@ -33,7 +33,7 @@ fn the_channels_suite_runs() {
     if brickray_harness::shared_data_dir().is_none() {
         return;
     }
-    let fig = run(&["channels", "--size", "32", "--rounds", "1"]);
+    let fig = run(&["channels", "--size", "32", "--rounds", "1", "--adaptive"]);
     for key in [
         "bytes_per_voxel",
         "modes",
@@ -51,7 +51,10 @@ fn the_channels_suite_runs() {
     );
     assert!(f("psnr_min_db") >= 45.0, "{fig:?}");
     assert_eq!(fig["bytes_per_voxel"], serde_json::json!([2, 4, 8]));
-    assert_eq!(fig["modes"].as_array().map(Vec::len), Some(4));
+    // The four modes, and DVR with the adaptive step (`--adaptive`), whose
+    // error against its twin is in psnr_min_db.
+    assert_eq!(fig["modes"].as_array().map(Vec::len), Some(5));
+    assert_eq!(fig["modes"][1]["mode"], "dvr adaptive", "{fig:?}");
 }
 
 #[test]
