@@ -11,7 +11,7 @@
 //! samples (apron included).
 
 use crate::brick::OctreeLayout;
-use crate::volume::Volume;
+use crate::volume::{DType, Volume};
 
 /// Normalized min/max per macro cell.
 #[derive(Debug, Clone, PartialEq)]
@@ -329,13 +329,62 @@ pub fn sub_cell_ranges(layout: &OctreeLayout, bytes: &[u8], n: u32) -> Vec<[f32;
     if n == 0 || side == 0 || bytes.len() / d.dtype.size() < side * side * side {
         return vec![[f32::NEG_INFINITY, f32::INFINITY]; cells];
     }
-    let vals: Vec<f32> = d
-        .dtype
-        .decode_le(bytes)
-        .into_iter()
-        .map(|raw| d.normalize(raw))
-        .collect();
-    sub_cell_extents(layout, &vals, n)
+    // A range that never changes: every value normalizes to 0.
+    let [lo, hi] = d.value_range;
+    if !(hi - lo > 0.0) {
+        return vec![[0.0, 0.0]; cells];
+    }
+    // The extents of the raw values, read in place (the loader threads
+    // prepare every brick through here, and a decoded copy of each was a
+    // fresh allocation whose pages the kernel zeroed), normalized after:
+    // `normalize` is non-decreasing, so it maps each extent to the extent
+    // of the normalized values exactly (NaN, skipped by `min` and `max`,
+    // either way).
+    // Integers: each row's extent in the integers, converted once
+    // (the conversion is non-decreasing too).
+    fn ints<const W: usize, T: Ord + Copy>(
+        bytes: &[u8],
+        decode: impl Fn([u8; W]) -> T,
+        to_f32: impl Fn(T) -> f32,
+    ) -> impl Fn(usize, usize) -> [f32; 2] {
+        move |a, b| {
+            let mut it = bytes[a * W..(b + 1) * W]
+                .chunks_exact(W)
+                .map(|c| decode(c.try_into().expect("W bytes")));
+            let first = it.next().expect("a row holds a voxel");
+            let (lo, hi) = it.fold((first, first), |(lo, hi), v| (lo.min(v), hi.max(v)));
+            [to_f32(lo), to_f32(hi)]
+        }
+    }
+    let raw = match d.dtype {
+        DType::U8 => sub_cell_extents(layout, n, ints::<1, u8>(bytes, |b| b[0], f32::from)),
+        DType::U16 => sub_cell_extents(
+            layout,
+            n,
+            ints::<2, u16>(bytes, u16::from_le_bytes, f32::from),
+        ),
+        DType::I16 => sub_cell_extents(
+            layout,
+            n,
+            ints::<2, i16>(bytes, i16::from_le_bytes, f32::from),
+        ),
+        DType::U32 => sub_cell_extents(
+            layout,
+            n,
+            ints::<4, u32>(bytes, u32::from_le_bytes, |v| v as f32),
+        ),
+        DType::F32 => sub_cell_extents(layout, n, |a, b| {
+            bytes[a * 4..(b + 1) * 4]
+                .chunks_exact(4)
+                .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+                .fold([f32::INFINITY, f32::NEG_INFINITY], |m, v| {
+                    [m[0].min(v), m[1].max(v)]
+                })
+        }),
+    };
+    raw.into_iter()
+        .map(|[a, b]| [d.normalize(a), d.normalize(b)])
+        .collect()
 }
 
 /// The largest spread of each of a brick's `n^3` sub-cells (x fastest), over
@@ -348,21 +397,29 @@ pub fn sub_cell_spreads(layout: &OctreeLayout, spread: &[u16], n: u32) -> Vec<f3
     if n == 0 || side == 0 || spread.len() < side * side * side {
         return vec![f32::INFINITY; (n.max(1) as usize).pow(3)];
     }
-    let vals: Vec<f32> = spread
-        .iter()
-        .map(|&b| {
-            let s = half::f16::from_bits(b).to_f32();
-            if s.is_nan() { f32::INFINITY } else { s }
-        })
-        .collect();
-    sub_cell_extents(layout, &vals, n)
-        .into_iter()
-        .map(|m| m[1].max(0.0))
-        .collect()
+    sub_cell_extents(layout, n, |a, b| {
+        spread[a..=b]
+            .iter()
+            .map(|&h| {
+                let s = half::f16::from_bits(h).to_f32();
+                if s.is_nan() { f32::INFINITY } else { s }
+            })
+            .fold([f32::INFINITY, f32::NEG_INFINITY], |m, v| {
+                [m[0].min(v), m[1].max(v)]
+            })
+    })
+    .into_iter()
+    .map(|m| m[1].max(0.0))
+    .collect()
 }
 
-/// `[min, max]` of `vals` (one per stored voxel) over each sub-cell's voxels.
-fn sub_cell_extents(layout: &OctreeLayout, vals: &[f32], n: u32) -> Vec<[f32; 2]> {
+/// `[min, max]` over each sub-cell's voxels, from `row(a, b)`: the
+/// `[min, max]` of stored voxels `a..=b` (x fastest; one row of a cell).
+fn sub_cell_extents(
+    layout: &OctreeLayout,
+    n: u32,
+    row: impl Fn(usize, usize) -> [f32; 2],
+) -> Vec<[f32; 2]> {
     let side = layout.stored_side() as usize;
     let cells = (n.max(1) as usize).pow(3);
     let (b, a) = (layout.brick as f64, layout.apron as i64);
@@ -382,10 +439,9 @@ fn sub_cell_extents(layout: &OctreeLayout, vals: &[f32], n: u32) -> Vec<[f32; 2]
                 let mut m = [f32::INFINITY, f32::NEG_INFINITY];
                 for z in z0..=z1 {
                     for y in y0..=y1 {
-                        let row = (z * side + y) * side;
-                        for &v in &vals[row + x0..=row + x1] {
-                            m = [m[0].min(v), m[1].max(v)];
-                        }
+                        let at = (z * side + y) * side;
+                        let r = row(at + x0, at + x1);
+                        m = [m[0].min(r[0]), m[1].max(r[1])];
                     }
                 }
                 // NaN samples (f32 volumes) make `min`/`max` skip them; a cell of
@@ -403,7 +459,7 @@ fn sub_cell_extents(layout: &OctreeLayout, vals: &[f32], n: u32) -> Vec<[f32; 2]
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::volume::{DType, VolumeData, VolumeDesc};
+    use crate::volume::{VolumeData, VolumeDesc};
     use proptest::prelude::*;
 
     /// A constant grid: each axis ray samples its first cell and is certain
@@ -629,6 +685,67 @@ mod tests {
         }
         // The ranges are normalized.
         assert!(r.iter().all(|c| c[0] >= 0.0 && c[1] <= 1.0));
+    }
+
+    proptest! {
+        /// The ranges read in place are those of the decoded, normalized
+        /// values (the model: decode the brick, normalize each value, take
+        /// each sub-cell's extent), bit for bit, in every dtype, over value
+        /// ranges that map every value to 0 and f32 bricks with NaN and
+        /// infinities.
+        #[test]
+        fn ranges_read_in_place_are_the_decoded_ones(
+            dtype in prop::sample::select(vec![DType::U8, DType::U16, DType::I16, DType::F32, DType::U32]),
+            range in prop::sample::select(vec![[0.0f32, 255.0], [-1024.0, 3071.0], [5.0, 5.0], [1.0, -1.0], [-1e6, 1e9]]),
+            apron in 0u32..3,
+            bytes_seed in any::<u64>(),
+            special in 0u32..4,
+        ) {
+            let desc = VolumeDesc {
+                dims: [24; 3],
+                dtype,
+                spacing: [1.0; 3],
+                value_range: range,
+                kind: Default::default(),
+            };
+            let layout = OctreeLayout::new(desc, 8, apron);
+            let side = layout.stored_side() as usize;
+            let size = dtype.size();
+            let mut seed = bytes_seed | 1;
+            let mut bytes: Vec<u8> = (0..side * side * side * size)
+                .map(|_| {
+                    seed ^= seed << 13;
+                    seed ^= seed >> 7;
+                    seed ^= seed << 17;
+                    seed as u8
+                })
+                .collect();
+            if dtype == DType::F32 {
+                // Finite values of a moderate size, some NaN or infinite.
+                for (i, c) in bytes.chunks_exact_mut(4).enumerate() {
+                    let v = match (i as u32 + special) % 97 {
+                        0 => f32::NAN,
+                        1 => f32::INFINITY,
+                        2 => f32::NEG_INFINITY,
+                        _ => (u32::from_le_bytes([c[0], c[1], c[2], c[3]]) % 100_000) as f32 - 50_000.0,
+                    };
+                    c.copy_from_slice(&v.to_le_bytes());
+                }
+            }
+            for n in [1u32, 2, 3] {
+                let vals: Vec<f32> = dtype
+                    .decode_le(&bytes)
+                    .into_iter()
+                    .map(|raw| layout.volume.normalize(raw))
+                    .collect();
+                let want = sub_cell_extents(&layout, n, |a, b| {
+                    vals[a..=b].iter().fold([f32::INFINITY, f32::NEG_INFINITY], |m, &v| [m[0].min(v), m[1].max(v)])
+                });
+                let got = sub_cell_ranges(&layout, &bytes, n);
+                let bits = |r: &[[f32; 2]]| r.iter().map(|m| m.map(f32::to_bits)).collect::<Vec<_>>();
+                prop_assert_eq!(bits(&got), bits(&want), "n = {}", n);
+            }
+        }
     }
 
     #[test]
