@@ -331,7 +331,8 @@ pub fn sub_cell_ranges(layout: &OctreeLayout, bytes: &[u8], n: u32) -> Vec<[f32;
     }
     // A range that never changes: every value normalizes to 0.
     let [lo, hi] = d.value_range;
-    if !(hi - lo > 0.0) {
+    let span = hi - lo;
+    if span.is_nan() || span <= 0.0 {
         return vec![[0.0, 0.0]; cells];
     }
     // The extents of the raw values, read in place (the loader threads
