@@ -119,23 +119,14 @@ pub(crate) fn check_channel_mip_at_a_coarse_step(
     styles: &[ChannelStyle],
     camera: Camera,
     size: u32,
-    mut draw: impl FnMut(&mut VolumeRenderer, &FrameDesc<'_>) -> Vec<u8>,
+    draw: impl FnMut(&mut VolumeRenderer, &FrameDesc<'_>) -> Vec<u8>,
 ) {
-    let d = vol.channels()[0].desc();
-    let frame = VolumeFrame::centered(d.dims, d.spacing);
     let settings = brickray::RenderSettings {
         mode: brickray::RenderMode::Mip,
         step_factor: 2.0,
         ..Default::default()
     };
-    let desc = FrameDesc {
-        settings,
-        ..FrameDesc::new(camera, frame, size, size)
-    };
-    let got = draw(r, &desc);
-    let reference = |opts: &ReferenceOptions| {
-        render_channels_reference(vol, &frame, styles, &camera, &settings, opts).to_rgba8([0.0; 3])
-    };
+    let (got, reference) = drawn_and_reference(r, vol, styles, camera, size, settings, draw);
     let at_step = ReferenceOptions::new(size, size).with_step_factor(2.0);
     let fine = reference(&ReferenceOptions::new(size, size));
     let psnr = brickray_reference::psnr;
@@ -170,10 +161,8 @@ pub(crate) fn check_channel_adaptive_step(
     size: u32,
     step: f32,
     min_db: f64,
-    mut draw: impl FnMut(&mut VolumeRenderer, &FrameDesc<'_>) -> Vec<u8>,
+    draw: impl FnMut(&mut VolumeRenderer, &FrameDesc<'_>) -> Vec<u8>,
 ) -> (f64, f64) {
-    let d = vol.channels()[0].desc();
-    let frame = VolumeFrame::centered(d.dims, d.spacing);
     let settings = brickray::RenderSettings {
         step_factor: step,
         accel: brickray::Accel {
@@ -183,14 +172,7 @@ pub(crate) fn check_channel_adaptive_step(
         },
         ..Default::default()
     };
-    let desc = FrameDesc {
-        settings,
-        ..FrameDesc::new(camera, frame, size, size)
-    };
-    let got = draw(r, &desc);
-    let reference = |opts: &ReferenceOptions| {
-        render_channels_reference(vol, &frame, styles, &camera, &settings, opts).to_rgba8([0.0; 3])
-    };
+    let (got, reference) = drawn_and_reference(r, vol, styles, camera, size, settings, draw);
     let fixed = ReferenceOptions::new(size, size).with_step_factor(step);
     let twin = brickray_reference::psnr(&got, &reference(&fixed.with_adaptive_step(true)));
     let kept = brickray_reference::psnr(&got, &reference(&fixed));
@@ -203,4 +185,30 @@ pub(crate) fn check_channel_adaptive_step(
         "{label}: {twin:.2} dB against the twin, {kept:.2} against the fixed step"
     );
     (twin, kept)
+}
+
+/// `vol` through `styles` from `camera` at `size` px with `settings`, drawn
+/// by the renderer under test (`draw`), and the reference's image of the
+/// same under the options it is given.
+#[allow(clippy::too_many_arguments)]
+fn drawn_and_reference<'a>(
+    r: &mut VolumeRenderer,
+    vol: &'a ChannelVolume,
+    styles: &'a [ChannelStyle],
+    camera: Camera,
+    size: u32,
+    settings: brickray::RenderSettings,
+    mut draw: impl FnMut(&mut VolumeRenderer, &FrameDesc<'_>) -> Vec<u8>,
+) -> (Vec<u8>, impl Fn(&ReferenceOptions) -> Vec<u8> + 'a) {
+    let d = vol.channels()[0].desc();
+    let frame = VolumeFrame::centered(d.dims, d.spacing);
+    let desc = FrameDesc {
+        settings,
+        ..FrameDesc::new(camera, frame, size, size)
+    };
+    let got = draw(r, &desc);
+    let reference = move |opts: &ReferenceOptions| {
+        render_channels_reference(vol, &frame, styles, &camera, &settings, opts).to_rgba8([0.0; 3])
+    };
+    (got, reference)
 }

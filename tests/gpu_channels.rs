@@ -96,26 +96,36 @@ fn two_and_four_channels_match_the_reference() {
     }
 }
 
+/// The draw the channel checks take: the renderer under test's frame.
+type Draw<'a> = dyn FnMut(&mut VolumeRenderer, &FrameDesc<'_>) -> Vec<u8> + 'a;
+
+/// Runs `check` on the four blob channels in core, seen from the tests'
+/// camera, with the draw of a `SIZE` px target.
+fn on_four_channels(
+    check: impl FnOnce(&mut VolumeRenderer, &ChannelVolume, &[ChannelStyle], Camera, &mut Draw<'_>),
+) {
+    let g = gpu();
+    let target = Offscreen::new(&g.device, SIZE, SIZE);
+    let vol = ChannelVolume::new(channels(4)).unwrap();
+    let mut r = renderer(&vol, &styles(4));
+    let camera = Camera::orbit(Vec3::ZERO, 2.3, 0.6, 0.35);
+    let mut draw =
+        |r: &mut VolumeRenderer, desc: &FrameDesc<'_>| draw(g, r, &target, desc).unwrap().color;
+    check(&mut r, &vol, &styles(4), camera, &mut draw);
+}
+
 /// MIP refines each channel's peaks between samples
 /// (`channel_support::check_channel_mip_at_a_coarse_step`, four channels at a
 /// step of 2 voxels): the GPU against its twin >= 62 dB, and against the
 /// fine reference at least 8 dB closer than the samples' maxima alone.
 #[test]
 fn channel_mip_refines_each_maximum_between_samples() {
-    let g = gpu();
-    let target = Offscreen::new(&g.device, SIZE, SIZE);
-    let vol = ChannelVolume::new(channels(4)).unwrap();
-    let mut r = renderer(&vol, &styles(4));
-    let camera = Camera::orbit(Vec3::ZERO, 2.3, 0.6, 0.35);
-    channel_support::check_channel_mip_at_a_coarse_step(
-        "four channels",
-        &mut r,
-        &vol,
-        &styles(4),
-        camera,
-        SIZE,
-        |r, desc| draw(g, r, &target, desc).unwrap().color,
-    );
+    on_four_channels(|r, vol, styles, camera, draw| {
+        let label = "four channels";
+        channel_support::check_channel_mip_at_a_coarse_step(
+            label, r, vol, styles, camera, SIZE, draw,
+        );
+    });
 }
 
 /// DVR's step doubles as the mixture's transmittance falls
@@ -124,22 +134,12 @@ fn channel_mip_refines_each_maximum_between_samples() {
 /// than to the fixed step's reference.
 #[test]
 fn channel_dvr_takes_the_adaptive_step() {
-    let g = gpu();
-    let target = Offscreen::new(&g.device, SIZE, SIZE);
-    let vol = ChannelVolume::new(channels(4)).unwrap();
-    let mut r = renderer(&vol, &styles(4));
-    let camera = Camera::orbit(Vec3::ZERO, 2.3, 0.6, 0.35);
-    channel_support::check_channel_adaptive_step(
-        "four channels",
-        &mut r,
-        &vol,
-        &styles(4),
-        camera,
-        SIZE,
-        1.0,
-        55.0,
-        |r, desc| draw(g, r, &target, desc).unwrap().color,
-    );
+    on_four_channels(|r, vol, styles, camera, draw| {
+        let label = "four channels";
+        channel_support::check_channel_adaptive_step(
+            label, r, vol, styles, camera, SIZE, 1.0, 55.0, draw,
+        );
+    });
 }
 
 /// One channel drawn as a channel volume is the single-channel renderer's

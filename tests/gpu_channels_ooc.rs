@@ -158,6 +158,26 @@ fn two_and_four_streamed_channels_match_the_reference() {
     }
 }
 
+/// The draw the channel checks take: the renderer under test's frame.
+type Draw<'a> = dyn FnMut(&mut VolumeRenderer, &FrameDesc<'_>) -> Vec<u8> + 'a;
+
+/// Runs `check` on the four blob channels streamed from their stores at
+/// the finest level, seen from the tests' camera, with the settled draw of
+/// a `SIZE` px target.
+fn on_four_streamed_channels(
+    check: impl FnOnce(&mut VolumeRenderer, &ChannelVolume, &[ChannelStyle], Camera, &mut Draw<'_>),
+) {
+    let all = channels(4);
+    let dir = tempfile::tempdir().unwrap();
+    let parts = stores(&all, dir.path());
+    let vol = ChannelVolume::new(all).unwrap();
+    let target = Offscreen::new(&gpu().device, SIZE, SIZE);
+    let mut r = streamed(source(&parts), &styles(4));
+    let camera = Camera::orbit(Vec3::ZERO, 2.3, 0.6, 0.35);
+    let mut draw = |r: &mut VolumeRenderer, desc: &FrameDesc<'_>| settle(r, &target, desc).color;
+    check(&mut r, &vol, &styles(4), camera, &mut draw);
+}
+
 /// MIP refines each streamed channel's peaks between samples in the bricks
 /// that hold them (`channel_support::check_channel_mip_at_a_coarse_step`, four
 /// channels at a step of 2 voxels, the finest level): the GPU against its
@@ -165,23 +185,12 @@ fn two_and_four_streamed_channels_match_the_reference() {
 /// the samples' maxima alone.
 #[test]
 fn streamed_channel_mip_refines_each_maximum_between_samples() {
-    let g = gpu();
-    let all = channels(4);
-    let dir = tempfile::tempdir().unwrap();
-    let parts = stores(&all, dir.path());
-    let vol = ChannelVolume::new(all).unwrap();
-    let target = Offscreen::new(&g.device, SIZE, SIZE);
-    let mut r = streamed(source(&parts), &styles(4));
-    let camera = Camera::orbit(Vec3::ZERO, 2.3, 0.6, 0.35);
-    channel_support::check_channel_mip_at_a_coarse_step(
-        "four streamed channels",
-        &mut r,
-        &vol,
-        &styles(4),
-        camera,
-        SIZE,
-        |r, desc| settle(r, &target, desc).color,
-    );
+    on_four_streamed_channels(|r, vol, styles, camera, draw| {
+        let label = "four streamed channels";
+        channel_support::check_channel_mip_at_a_coarse_step(
+            label, r, vol, styles, camera, SIZE, draw,
+        );
+    });
 }
 
 /// DVR's step doubles as the mixture's transmittance falls in the streamed
@@ -190,25 +199,12 @@ fn streamed_channel_mip_refines_each_maximum_between_samples() {
 /// twin >= 55 dB, and 10 dB closer to it than to the fixed step's reference.
 #[test]
 fn streamed_channel_dvr_takes_the_adaptive_step() {
-    let g = gpu();
-    let all = channels(4);
-    let dir = tempfile::tempdir().unwrap();
-    let parts = stores(&all, dir.path());
-    let vol = ChannelVolume::new(all).unwrap();
-    let target = Offscreen::new(&g.device, SIZE, SIZE);
-    let mut r = streamed(source(&parts), &styles(4));
-    let camera = Camera::orbit(Vec3::ZERO, 2.3, 0.6, 0.35);
-    channel_support::check_channel_adaptive_step(
-        "four streamed channels",
-        &mut r,
-        &vol,
-        &styles(4),
-        camera,
-        SIZE,
-        1.0,
-        55.0,
-        |r, desc| settle(r, &target, desc).color,
-    );
+    on_four_streamed_channels(|r, vol, styles, camera, draw| {
+        let label = "four streamed channels";
+        channel_support::check_channel_adaptive_step(
+            label, r, vol, styles, camera, SIZE, 1.0, 55.0, draw,
+        );
+    });
 }
 
 /// One streamed channel drawn through its style equals the single-channel
