@@ -356,23 +356,8 @@ impl Marcher<'_> {
             self.dvr_segments(ray, span, p, &mut out);
             return out.result();
         }
-        // The grid's start, its index and the step's doublings: the samples
-        // lie at `tb + k dt 2^j`, and a change of `j` starts the grid anew at
-        // the sample where it happens (the kernels' `step_doublings`).
-        let (mut tb, mut k, mut j) = (span.t0, 0u64, 0u32);
-        loop {
-            let t = tb + k as f64 * self.dt * f64::from(1u32 << j);
-            if t >= span.t1 {
-                break;
-            }
-            if self.adaptive_step {
-                let jn = adaptive_step_doublings(1.0 - out.a);
-                if jn != j {
-                    (tb, k, j) = (t, 0, jn);
-                }
-            }
-            k += 1;
-            let m = f64::from(1u32 << j);
+        let mut grid = StepGrid::new(span, self.adaptive_step);
+        while let Some((t, m)) = grid.next(out.a) {
             let v = self.value(ray, t);
             let [r, g, b, a] = match &self.spread {
                 Some((sigma, table)) => {
@@ -703,6 +688,48 @@ struct Span {
     t0: f64,
     t1: f64,
     dt: f64,
+}
+
+/// DVR's sample grid along a span (the kernels' `StepGrid`): the samples
+/// lie at `tb + k dt 2^j`; with the adaptive step the doublings `j` follow
+/// the ray's opacity ([`adaptive_step_doublings`], the kernels'
+/// `step_doublings`), and a change of `j` starts the grid anew at the
+/// sample where it happens.
+struct StepGrid {
+    span: Span,
+    adaptive: bool,
+    tb: f64,
+    k: u64,
+    j: u32,
+}
+
+impl StepGrid {
+    fn new(span: Span, adaptive: bool) -> StepGrid {
+        StepGrid {
+            span,
+            adaptive,
+            tb: span.t0,
+            k: 0,
+            j: 0,
+        }
+    }
+
+    /// The next sample of a ray whose opacity so far is `a`: its `t` and
+    /// its step in steps `dt` (`2^j`); `None` past the span.
+    fn next(&mut self, a: f64) -> Option<(f64, f64)> {
+        let t = self.tb + self.k as f64 * self.span.dt * f64::from(1u32 << self.j);
+        if t >= self.span.t1 {
+            return None;
+        }
+        if self.adaptive {
+            let j = adaptive_step_doublings(1.0 - a);
+            if j != self.j {
+                (self.tb, self.k, self.j) = (t, 0, j);
+            }
+        }
+        self.k += 1;
+        Some((t, f64::from(1u32 << self.j)))
+    }
 }
 
 impl Span {

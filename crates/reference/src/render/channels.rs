@@ -2,12 +2,10 @@
 //! [`Marcher`] (its volume and transfer function) along the same rays, the
 //! channels composited as `brickray_core::channels` specifies.
 
-use super::{Image, Marcher, Peaks, RayResult, Span};
+use super::{Image, Marcher, Peaks, RayResult, Span, StepGrid};
 use brickray_core::channels::{self, ChannelStyle, ChannelVolume};
 use brickray_core::tf::corrected_alpha;
-use brickray_core::{
-    Camera, LabelOverlay, Ray, RenderMode, RenderSettings, VolumeFrame, adaptive_step_doublings,
-};
+use brickray_core::{Camera, LabelOverlay, Ray, RenderMode, RenderSettings, VolumeFrame};
 
 use super::ReferenceOptions;
 
@@ -148,22 +146,10 @@ impl ChannelMarcher<'_> {
         let mut a_acc = 0.0f64;
         let mut depth = None;
         let mut parts = Vec::with_capacity(self.marchers.len());
-        // The grid's start, its index and the step's doublings, as one
-        // channel's (`Marcher::dvr`): the samples lie at `tb + k dt 2^j`.
-        let (mut tb, mut k, mut j) = (span.t0, 0u64, 0u32);
-        loop {
-            let t = tb + k as f64 * span.dt * f64::from(1u32 << j);
-            if t >= span.t1 {
-                break;
-            }
-            if self.adaptive_step {
-                let jn = adaptive_step_doublings(1.0 - a_acc);
-                if jn != j {
-                    (tb, k, j) = (t, 0, jn);
-                }
-            }
-            k += 1;
-            let m_step = self.step_factor * f64::from(1u32 << j);
+        // The step doubles with the mixture's opacity, as one channel's.
+        let mut grid = StepGrid::new(span, self.adaptive_step);
+        while let Some((t, m)) = grid.next(a_acc) {
+            let m_step = self.step_factor * m;
             parts.clear();
             for (_, m) in self.visible() {
                 let [r, g, b, a] = m.tf.lookup(m.value(ray, t));
