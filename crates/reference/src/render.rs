@@ -7,7 +7,7 @@ use brickray_core::tf::{
 };
 use brickray_core::{
     Camera, Intensity, LabelOverlay, Ray, RayGen, RenderMode, RenderSettings, Shading,
-    TransferFunction, Volume, VolumeFrame, adaptive_step_doublings,
+    TransferFunction, Volume, VolumeFrame,
 };
 use glam::{DMat3, DMat4, DVec3};
 use rayon::prelude::*;
@@ -15,7 +15,9 @@ use rayon::prelude::*;
 use crate::Image;
 
 mod options;
+mod span;
 pub use options::{DEFAULT_STEP_FACTOR, EXACT_STEP_FACTOR, ReferenceOptions};
+use span::{Peaks, Span, StepGrid};
 
 /// Fine value cells of the reference's segment integrals (16 per column of a
 /// 256-column table).
@@ -680,119 +682,6 @@ fn lit(n: Option<DVec3>, ray: &Ray, c: [f64; 3], s: &Shading) -> [f64; 3] {
     let diffuse = s.ambient as f64 + s.diffuse as f64 * ndl;
     let specular = s.specular as f64 * ndl.powf(s.shininess as f64);
     c.map(|x| (x * diffuse + specular).clamp(0.0, 1.0))
-}
-
-/// The sample positions of a clipped ray.
-#[derive(Debug, Clone, Copy)]
-struct Span {
-    t0: f64,
-    t1: f64,
-    dt: f64,
-}
-
-/// DVR's sample grid along a span (the kernels' `StepGrid`): the samples
-/// lie at `tb + k dt 2^j`; with the adaptive step the doublings `j` follow
-/// the ray's opacity ([`adaptive_step_doublings`], the kernels'
-/// `step_doublings`), and a change of `j` starts the grid anew at the
-/// sample where it happens.
-struct StepGrid {
-    span: Span,
-    adaptive: bool,
-    tb: f64,
-    k: u64,
-    j: u32,
-}
-
-impl StepGrid {
-    fn new(span: Span, adaptive: bool) -> StepGrid {
-        StepGrid {
-            span,
-            adaptive,
-            tb: span.t0,
-            k: 0,
-            j: 0,
-        }
-    }
-
-    /// The next sample of a ray whose opacity so far is `a`: its `t` and
-    /// its step in steps `dt` (`2^j`); `None` past the span.
-    fn next(&mut self, a: f64) -> Option<(f64, f64)> {
-        let t = self.tb + self.k as f64 * self.span.dt * f64::from(1u32 << self.j);
-        if t >= self.span.t1 {
-            return None;
-        }
-        if self.adaptive {
-            let j = adaptive_step_doublings(1.0 - a);
-            if j != self.j {
-                (self.tb, self.k, self.j) = (t, 0, j);
-            }
-        }
-        self.k += 1;
-        Some((t, f64::from(1u32 << self.j)))
-    }
-}
-
-impl Span {
-    /// `t_k = t0 + k * dt` for `k = 0, 1, ...` while `t_k < t1`.
-    fn samples(self) -> impl Iterator<Item = f64> {
-        (0u64..)
-            .map(move |k| self.t0 + k as f64 * self.dt)
-            .take_while(move |&t| t < self.t1)
-    }
-}
-
-/// MIP's peaks along a ray, `(value, t)`: the running maximum and the
-/// runner-up (a maximum replaced by one more than a step and a half away,
-/// or a sample that far from the maximum above it), as the kernels'
-/// `mip_sample` keeps them (the multi-channel kernels: per channel,
-/// `channel_mip_sample`).
-#[derive(Debug, Clone, Copy, Default)]
-struct Peaks {
-    best: Option<(f64, f64)>,
-    alt: Option<(f64, f64)>,
-}
-
-impl Peaks {
-    /// The sample `v` at `t`, the samples `dt` apart.
-    fn take(&mut self, v: f64, t: f64, dt: f64) {
-        let far = self.best.is_some_and(|(_, tm)| t - tm > 1.5 * dt);
-        if self.best.is_none_or(|(m, _)| v > m) {
-            if far {
-                self.alt = self.best;
-            }
-            self.best = Some((v, t));
-        } else if far && self.alt.is_none_or(|(a, _)| v > a) {
-            self.alt = Some((v, t));
-        }
-    }
-
-    /// The ray's maximum: with `refine`, the maximum and the runner-up
-    /// refined between samples of `value`, as the kernels' `mip_refine`
-    /// does (half a step, then a quarter, either side of each peak's best
-    /// value so far, within the span), the best kept; without, the
-    /// samples' maximum.
-    fn maximum(self, refine: bool, span: Span, value: impl Fn(f64) -> f64) -> Option<(f64, f64)> {
-        let mut best = self.best;
-        if refine {
-            for (v0, t0) in [self.best, self.alt].into_iter().flatten() {
-                let (mut bv, mut bt) = (v0, t0);
-                let mut h = 0.5 * span.dt;
-                for _ in 0..2 {
-                    for t in [bt - h, bt + h].map(|t| t.clamp(span.t0, span.t1)) {
-                        let v = value(t);
-                        if v > bv {
-                            (bv, bt) = (v, t);
-                        }
-                    }
-                    h *= 0.5;
-                }
-                if best.is_none_or(|(m, _)| bv > m) {
-                    best = Some((bv, bt));
-                }
-            }
-        }
-        best
-    }
 }
 
 mod channels;
