@@ -24,7 +24,8 @@
 //! `STATIC_FRAMES` frames (`prepare`'s time and the frames that applied a
 //! new plan), and, for the inline rows, a GPU-free `Streamer` over the same
 //! volume is held still as long (its `plan` time and whether it reused the
-//! converged refinement).
+//! converged refinement), then plans every frame of the path (its `plan`
+//! time and the share of its cut that changed from frame to frame).
 //!
 //! `cargo run --release -p brickray-bench -- host [--size 1024] [--frames 60]
 //! [--cuts 1000,5000,20000,50000] [--culling] [--culling-size 256]`
@@ -222,17 +223,25 @@ fn timed_frame(
     Ok((host_ms, s))
 }
 
-/// A GPU-free streamer's frames of a converged view held still.
+/// A GPU-free streamer's frames of a converged view held still, then along
+/// the path.
 struct StreamerStatic {
     plan_ms: f64,
     refine_ms: f64,
     reused_share: f64,
+    /// Along the path: `plan`'s wall time and its refine phase, ms medians,
+    /// and the median share of the cut that changed from the frame before
+    /// (leaves added plus leaves gone, over the cut's leaves).
+    path_plan_ms: f64,
+    path_refine_ms: f64,
+    path_cut_change: f64,
 }
 
 /// Converges a `Streamer` (no renderer) over the suite's volume at the start
 /// view of a `cut`-brick budget and a `size` viewport, then calls its `plan`
-/// [`STATIC_FRAMES`] times with the same frame.
-fn streamer_static(cut: u32, size: u32) -> Result<StreamerStatic, String> {
+/// [`STATIC_FRAMES`] times with the same frame, then once per frame of the
+/// path's `frames`.
+fn streamer_static(cut: u32, size: u32, frames: usize) -> Result<StreamerStatic, String> {
     let src = brickray_store::ProceduralSource::sphere_shells([DIMS; 3], BRICK, 2)
         .map_err(|e| e.to_string())?;
     let mut s = crate::runner::gpu_free_streamer(
@@ -241,9 +250,9 @@ fn streamer_static(cut: u32, size: u32) -> Result<StreamerStatic, String> {
         false,
     )?;
     let frame = VolumeFrame::centered([DIMS as u32; 3], [1.0; 3]);
-    let view = brickray_core::FrameView::new(camera(&frame, 0), frame, [size, size]);
     let tf = brickray_core::TransferFunction::ramp(0.3, 0.9, 0.3);
-    let plan = |s: &mut brickray_cache::Streamer| {
+    let plan_at = |s: &mut brickray_cache::Streamer, i: usize| {
+        let view = brickray_core::FrameView::new(camera(&frame, i), frame, [size, size]);
         let t0 = Instant::now();
         let p = s.plan(&brickray_cache::StreamFrame {
             views: std::slice::from_ref(&view),
@@ -256,8 +265,11 @@ fn streamer_static(cut: u32, size: u32) -> Result<StreamerStatic, String> {
             feedback: &[],
             time: None,
         });
-        (t0.elapsed().as_secs_f64() * 1e3, p.stats)
+        let ms = t0.elapsed().as_secs_f64() * 1e3;
+        let leaves: brickray_core::NodeSet = p.cut.iter().map(|l| l.key).collect();
+        (ms, p.stats, leaves)
     };
+    let plan = |s: &mut brickray_cache::Streamer| plan_at(s, 0);
     let mut converged = false;
     for _ in 0..2000 {
         if plan(&mut s).1.converged {
@@ -270,17 +282,41 @@ fn streamer_static(cut: u32, size: u32) -> Result<StreamerStatic, String> {
         return Err(format!("a streamer of {cut} bricks did not converge"));
     }
     let (mut plan_ms, mut refine_ms, mut reused) = (Vec::new(), Vec::new(), 0);
+    let mut before = Default::default();
     for _ in 0..STATIC_FRAMES {
-        let (ms, st) = plan(&mut s);
+        let (ms, st, leaves) = plan(&mut s);
         plan_ms.push(ms);
         refine_ms.push(st.cache.phases.refine_ms);
         reused += usize::from(st.cache.refine_reused);
+        before = leaves;
+    }
+    let (mut path_ms, mut path_refine, mut change) = (Vec::new(), Vec::new(), Vec::new());
+    for i in 1..=frames {
+        let (ms, st, leaves) = plan_at(&mut s, i);
+        path_ms.push(ms);
+        path_refine.push(st.cache.phases.refine_ms);
+        change.push(cut_change(&before, &leaves));
+        before = leaves;
     }
     Ok(StreamerStatic {
         plan_ms: median(&plan_ms),
         refine_ms: median(&refine_ms),
         reused_share: reused as f64 / STATIC_FRAMES as f64,
+        path_plan_ms: median(&path_ms),
+        path_refine_ms: median(&path_refine),
+        path_cut_change: median(&change),
     })
+}
+
+/// The share of a cut that changed from the cut `before`: leaves added plus
+/// leaves gone, over the new cut's leaves (an empty new cut: their count).
+fn cut_change(before: &brickray_core::NodeSet, after: &brickray_core::NodeSet) -> f64 {
+    let added = after.iter().filter(|k| !before.contains(*k)).count();
+    let gone = before.iter().filter(|k| !after.contains(*k)).count();
+    match after.len() {
+        0 => (added + gone) as f64,
+        n => (added + gone) as f64 / n as f64,
+    }
 }
 
 /// A brick budget: at least 1.
@@ -344,6 +380,14 @@ pub(crate) struct Row {
     streamer_static_plan_ms_median: Option<f64>,
     streamer_static_refine_ms_median: Option<f64>,
     streamer_static_reused_share: Option<f64>,
+    /// The same streamer then planning every frame of the path: `plan`'s
+    /// wall time and its refine phase, ms medians, and the median share of
+    /// the cut's leaves that changed from one frame to the next (added plus
+    /// gone, over the cut): what planning that scaled with change would
+    /// revisit, where refinement revisits the whole cut. Inline rows only.
+    streamer_path_plan_ms_median: Option<f64>,
+    streamer_path_refine_ms_median: Option<f64>,
+    streamer_path_cut_change_median: Option<f64>,
 }
 
 /// The suite's JSON line.
@@ -412,7 +456,7 @@ pub(crate) fn run(args: &Args) -> Result<HostResult, String> {
                     t.static_plans
                 );
                 let alone = match (background, draw) {
-                    (false, false) => Some(streamer_static(cut, size)?),
+                    (false, false) => Some(streamer_static(cut, size, frames)?),
                     _ => None,
                 };
                 if let Some(a) = &alone {
@@ -422,6 +466,13 @@ pub(crate) fn run(args: &Args) -> Result<HostResult, String> {
                         a.plan_ms,
                         a.refine_ms,
                         100.0 * a.reused_share
+                    );
+                    println!(
+                        "           the same streamer along the path: plan {:.3} ms, refine {:.3} ms (medians), \
+                         {:.2}% of the cut's leaves changed per frame (median)",
+                        a.path_plan_ms,
+                        a.path_refine_ms,
+                        100.0 * a.path_cut_change
                     );
                 }
                 rows.push(Row {
@@ -442,6 +493,9 @@ pub(crate) fn run(args: &Args) -> Result<HostResult, String> {
                     streamer_static_plan_ms_median: alone.as_ref().map(|a| a.plan_ms),
                     streamer_static_refine_ms_median: alone.as_ref().map(|a| a.refine_ms),
                     streamer_static_reused_share: alone.as_ref().map(|a| a.reused_share),
+                    streamer_path_plan_ms_median: alone.as_ref().map(|a| a.path_plan_ms),
+                    streamer_path_refine_ms_median: alone.as_ref().map(|a| a.path_refine_ms),
+                    streamer_path_cut_change_median: alone.as_ref().map(|a| a.path_cut_change),
                 });
             }
         }
@@ -458,4 +512,27 @@ pub(crate) fn run(args: &Args) -> Result<HostResult, String> {
         plan_ms_median_20k: at_20k.map(|r| r.plan_ms_median),
         rows,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::cut_change;
+    use brickray_core::{NodeKey, NodeSet};
+
+    fn set(keys: &[(u8, u32)]) -> NodeSet {
+        keys.iter()
+            .map(|&(l, x)| NodeKey::new(l, x, 0, 0))
+            .collect()
+    }
+
+    #[test]
+    fn the_cut_change_counts_leaves_added_and_gone() {
+        let a = set(&[(1, 0), (1, 1), (2, 4), (2, 5)]);
+        assert_eq!(cut_change(&a, &a), 0.0);
+        // A leaf replaced by two: one gone, two added, over the new five.
+        let b = set(&[(1, 0), (1, 1), (2, 4), (3, 10), (3, 11)]);
+        assert_eq!(cut_change(&a, &b), 3.0 / 5.0);
+        assert_eq!(cut_change(&NodeSet::default(), &NodeSet::default()), 0.0);
+        assert_eq!(cut_change(&a, &NodeSet::default()), 4.0);
+    }
 }

@@ -149,6 +149,29 @@ fn the_host_suite_runs() {
             "phases {sum} ms, planning {plan} ms: {r:?}"
         );
     }
+    // The GPU-free streamer's path: numbers in the inline unculled row, a
+    // changed share within [0, 2] (added plus gone over the cut), null in
+    // the other rows.
+    for r in rows(&fig, "rows") {
+        let alone =
+            r["background"] == serde_json::json!(false) && r["culled"] == serde_json::json!(false);
+        for k in [
+            "streamer_path_plan_ms_median",
+            "streamer_path_refine_ms_median",
+            "streamer_path_cut_change_median",
+        ] {
+            match alone {
+                true => assert!(r[k].as_f64().is_some_and(|v| v >= 0.0), "{k}: {r:?}"),
+                false => assert!(r[k].is_null(), "{k}: {r:?}"),
+            }
+        }
+        if alone {
+            assert!(
+                r["streamer_path_cut_change_median"].as_f64().unwrap() <= 2.0,
+                "{r:?}"
+            );
+        }
+    }
     // No cut of 20,000 bricks ran.
     assert!(fig["host_ms_median_20k"].is_null(), "{fig:?}");
 }
