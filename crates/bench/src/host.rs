@@ -225,7 +225,7 @@ fn timed_frame(
 
 /// A GPU-free streamer's frames of a converged view held still, then along
 /// the path.
-struct StreamerStatic {
+struct StreamerAlone {
     plan_ms: f64,
     refine_ms: f64,
     reused_share: f64,
@@ -241,7 +241,7 @@ struct StreamerStatic {
 /// view of a `cut`-brick budget and a `size` viewport, then calls its `plan`
 /// [`STATIC_FRAMES`] times with the same frame, then once per frame of the
 /// path's `frames`.
-fn streamer_static(cut: u32, size: u32, frames: usize) -> Result<StreamerStatic, String> {
+fn streamer_alone(cut: u32, size: u32, frames: usize) -> Result<StreamerAlone, String> {
     let src = brickray_store::ProceduralSource::sphere_shells([DIMS; 3], BRICK, 2)
         .map_err(|e| e.to_string())?;
     let mut s = crate::runner::gpu_free_streamer(
@@ -298,7 +298,7 @@ fn streamer_static(cut: u32, size: u32, frames: usize) -> Result<StreamerStatic,
         change.push(cut_change(&before, &leaves));
         before = leaves;
     }
-    Ok(StreamerStatic {
+    Ok(StreamerAlone {
         plan_ms: median(&plan_ms),
         refine_ms: median(&refine_ms),
         reused_share: reused as f64 / STATIC_FRAMES as f64,
@@ -456,7 +456,7 @@ pub(crate) fn run(args: &Args) -> Result<HostResult, String> {
                     t.static_plans
                 );
                 let alone = match (background, draw) {
-                    (false, false) => Some(streamer_static(cut, size, frames)?),
+                    (false, false) => Some(streamer_alone(cut, size, frames)?),
                     _ => None,
                 };
                 if let Some(a) = &alone {
