@@ -10,6 +10,10 @@ use brickray::{Camera, FrameDesc, SliceAxis, SliceView, VolumeFrame, VolumeRende
 use brickray_reference::{ReferenceOptions, assert_close, render_channels_reference};
 use glam::Vec3;
 
+/// The draw the channel checks' callers hand them: the renderer under
+/// test's frame (RGBA8).
+pub(crate) type Draw<'a> = dyn FnMut(&mut VolumeRenderer, &FrameDesc<'_>) -> Vec<u8> + 'a;
+
 /// Draws every case with `draw` (the renderer's settled frame) and checks
 /// it against the reference at `min_db`; `min_lit`: the least pixels the
 /// reference must light (a slice that missed the blobs proves nothing).

@@ -96,13 +96,16 @@ fn two_and_four_channels_match_the_reference() {
     }
 }
 
-/// The draw the channel checks take: the renderer under test's frame.
-type Draw<'a> = dyn FnMut(&mut VolumeRenderer, &FrameDesc<'_>) -> Vec<u8> + 'a;
-
 /// Runs `check` on the four blob channels in core, seen from the tests'
 /// camera, with the draw of a `SIZE` px target.
 fn on_four_channels(
-    check: impl FnOnce(&mut VolumeRenderer, &ChannelVolume, &[ChannelStyle], Camera, &mut Draw<'_>),
+    check: impl FnOnce(
+        &mut VolumeRenderer,
+        &ChannelVolume,
+        &[ChannelStyle],
+        Camera,
+        &mut channel_support::Draw<'_>,
+    ),
 ) {
     let g = gpu();
     let target = Offscreen::new(&g.device, SIZE, SIZE);

@@ -158,14 +158,17 @@ fn two_and_four_streamed_channels_match_the_reference() {
     }
 }
 
-/// The draw the channel checks take: the renderer under test's frame.
-type Draw<'a> = dyn FnMut(&mut VolumeRenderer, &FrameDesc<'_>) -> Vec<u8> + 'a;
-
 /// Runs `check` on the four blob channels streamed from their stores at
 /// the finest level, seen from the tests' camera, with the settled draw of
 /// a `SIZE` px target.
 fn on_four_streamed_channels(
-    check: impl FnOnce(&mut VolumeRenderer, &ChannelVolume, &[ChannelStyle], Camera, &mut Draw<'_>),
+    check: impl FnOnce(
+        &mut VolumeRenderer,
+        &ChannelVolume,
+        &[ChannelStyle],
+        Camera,
+        &mut channel_support::Draw<'_>,
+    ),
 ) {
     let all = channels(4);
     let dir = tempfile::tempdir().unwrap();

@@ -11,6 +11,15 @@ pub(super) struct Span {
     pub(super) dt: f64,
 }
 
+impl Span {
+    /// `t_k = t0 + k * dt` for `k = 0, 1, ...` while `t_k < t1`.
+    pub(super) fn samples(self) -> impl Iterator<Item = f64> {
+        (0u64..)
+            .map(move |k| self.t0 + k as f64 * self.dt)
+            .take_while(move |&t| t < self.t1)
+    }
+}
+
 /// DVR's sample grid along a span (the kernels' `StepGrid`): the samples
 /// lie at `tb + k dt 2^j`; with the adaptive step the doublings `j` follow
 /// the ray's opacity ([`adaptive_step_doublings`], the kernels'
@@ -50,15 +59,6 @@ impl StepGrid {
         }
         self.k += 1;
         Some((t, f64::from(1u32 << self.j)))
-    }
-}
-
-impl Span {
-    /// `t_k = t0 + k * dt` for `k = 0, 1, ...` while `t_k < t1`.
-    pub(super) fn samples(self) -> impl Iterator<Item = f64> {
-        (0u64..)
-            .map(move |k| self.t0 + k as f64 * self.dt)
-            .take_while(move |&t| t < self.t1)
     }
 }
 
