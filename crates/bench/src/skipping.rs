@@ -95,6 +95,12 @@ pub(crate) struct SkippingResult {
     /// chose the slower by more than 5%.
     dvr_ooc_rule_over_off_max: f64,
     dvr_ooc_wrong_decisions: usize,
+    /// The same out of core, shaded (the streamed volume's default
+    /// gradients: kept per brick where its budget holds them).
+    dvr_shaded_ooc_rows: Vec<Row>,
+    dvr_shaded_ooc_always_over_off_max: f64,
+    dvr_shaded_ooc_rule_over_off_max: f64,
+    dvr_shaded_ooc_wrong_decisions: usize,
     /// The largest rule over no-skipping ratio.
     rule_over_off_max: f64,
     /// The largest always-skipping over no-skipping ratio.
@@ -146,7 +152,7 @@ pub(crate) fn run(args: &Args) -> Result<SkippingResult, String> {
     let dir = tempfile::tempdir().map_err(|e| e.to_string())?;
     let (mut rows, mut ooc_rows) = (Vec::new(), Vec::new());
     let (mut dvr_rows, mut dvr_ooc_rows) = (Vec::new(), Vec::new());
-    let mut dvr_shaded_rows = Vec::new();
+    let (mut dvr_shaded_rows, mut dvr_shaded_ooc_rows) = (Vec::new(), Vec::new());
     let mip = RenderMode::Mip;
     for (i, (name, vol)) in volumes(args.side).into_iter().enumerate() {
         let grid = MacroCellGrid::build(&vol, 8);
@@ -257,26 +263,22 @@ pub(crate) fn run(args: &Args) -> Result<SkippingResult, String> {
                     .map_err(|e| e.to_string())?;
                 run.converge(r, camera, frame, settings(dvr, step), 300)?;
             }
-            run.frame(&mut ooc_dvr_rule, camera, frame, settings(dvr, step), false)?;
-            let rule_skips = ooc_dvr_rule.stats().frame.empty_space_skipping;
-            let drawn = ooc_dvr_rule
-                .stats()
-                .out_of_core
-                .and_then(|s| s.dvr_transparent_share)
-                .unwrap_or(f64::NAN);
-            let label = format!("{name}, DVR from {from}, out of core");
-            let c = case(label.clone(), label, drawn, rule_skips);
-            let (a, r) = (&mut ooc_dvr, Some(&mut ooc_dvr_rule));
-            measure(
-                &run,
-                settings(dvr, step),
-                a,
-                r,
-                view,
-                rounds,
-                c,
-                &mut dvr_ooc_rows,
-            )?;
+            for (base, kind, rows) in [
+                (settings(dvr, step), "DVR", &mut dvr_ooc_rows),
+                (shaded, "shaded DVR", &mut dvr_shaded_ooc_rows),
+            ] {
+                run.frame(&mut ooc_dvr_rule, camera, frame, base, false)?;
+                let rule_skips = ooc_dvr_rule.stats().frame.empty_space_skipping;
+                let drawn = ooc_dvr_rule
+                    .stats()
+                    .out_of_core
+                    .and_then(|s| s.dvr_transparent_share)
+                    .unwrap_or(f64::NAN);
+                let label = format!("{name}, {kind} from {from}, out of core");
+                let c = case(label.clone(), label, drawn, rule_skips);
+                let (a, r) = (&mut ooc_dvr, Some(&mut ooc_dvr_rule));
+                measure(&run, base, a, r, view, rounds, c, rows)?;
+            }
         }
     }
     let (max, wrong) = (max_ratio, wrong_decisions);
@@ -299,6 +301,10 @@ pub(crate) fn run(args: &Args) -> Result<SkippingResult, String> {
         dvr_ooc_always_over_off_max: max(&dvr_ooc_rows, |r| r.always_over_off),
         dvr_ooc_rule_over_off_max: max(&dvr_ooc_rows, |r| r.rule_over_off),
         dvr_ooc_wrong_decisions: wrong(&dvr_ooc_rows),
+        dvr_shaded_ooc_always_over_off_max: max(&dvr_shaded_ooc_rows, |r| r.always_over_off),
+        dvr_shaded_ooc_rule_over_off_max: max(&dvr_shaded_ooc_rows, |r| r.rule_over_off),
+        dvr_shaded_ooc_wrong_decisions: wrong(&dvr_shaded_ooc_rows),
+        dvr_shaded_ooc_rows,
         rows,
         ooc_rows,
         dvr_rows,

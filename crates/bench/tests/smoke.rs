@@ -244,14 +244,19 @@ fn the_skipping_suite_runs() {
             "dvr_shaded_wrong_decisions",
             "dvr_ooc_rows",
             "dvr_ooc_always_over_off_max",
+            "dvr_shaded_ooc_rows",
+            "dvr_shaded_ooc_wrong_decisions",
         ],
     );
-    // Three ramps per volume, in core and out of core.
-    assert_eq!(rows(&fig, "dvr_rows").len(), 3 * rows(&fig, "rows").len());
-    assert_eq!(
-        rows(&fig, "dvr_ooc_rows").len(),
-        3 * rows(&fig, "rows").len()
-    );
+    // Three ramps per volume, in core and out of core, unshaded and shaded.
+    for key in [
+        "dvr_rows",
+        "dvr_shaded_rows",
+        "dvr_ooc_rows",
+        "dvr_shaded_ooc_rows",
+    ] {
+        assert_eq!(rows(&fig, key).len(), 3 * rows(&fig, "rows").len(), "{key}");
+    }
     // The two procedural volumes, and the shared ones where present, in
     // core and out of core.
     assert!(rows(&fig, "rows").len() >= 2, "{fig:?}");
@@ -262,6 +267,7 @@ fn the_skipping_suite_runs() {
         "dvr_rows",
         "dvr_shaded_rows",
         "dvr_ooc_rows",
+        "dvr_shaded_ooc_rows",
     ] {
         has_fields(
             &fig,
