@@ -554,21 +554,22 @@ fn mip_skips_out_of_core_where_the_bricks_say_it_pays() {
 
 /// DVR out of core skips empty space only where enough of the sub-cells of
 /// the bricks the frame draws are transparent through the TF
-/// (`SkipRule::WherePays`, `DVR_SKIP_SHARE_MIN_BRICKS`): a box with a thin
+/// (`SkipRule::WherePays`, `dvr_skip_share_min_bricks`): a box with a thin
 /// bright shell and a dim core, under a TF transparent below 0.3, has 0.4
-/// of them transparent and skips (fewer samples); the box with a thick
-/// shell (0.13), the box under a TF opaque at every value and noise under a
-/// ramp transparent only at 0 (none) run without sub-cell tests (the frame's
-/// statistics say so; `SkipRule::Always` still tests), and so does the thin
-/// shell at a step of 1 voxel, where the threshold is 0.55. Every image of a
-/// scene is the same.
+/// of them transparent, and skips shaded (fewer samples; the shaded rule's
+/// threshold is 0.29 at 1/2 voxel) but not unshaded (0.55); the box with a
+/// thick shell (0.13), the box under a TF opaque at every value and noise
+/// under a ramp transparent only at 0 (none) run without sub-cell tests
+/// shaded or not (the frame's statistics say so; `SkipRule::Always` still
+/// tests), and so does the thin shell shaded at a step of 1 voxel, where
+/// the threshold is 0.55. Every image of a scene is the same.
 #[test]
 fn dvr_skips_out_of_core_only_where_enough_drawn_sub_cells_are_transparent() {
     use brickray::{RendererOptions, SkipRule};
     use brickray_harness::predict::{draw, samples_per_ray};
     use brickray_reference::psnr;
     const SIZE: u32 = 96;
-    use brickray::core::DVR_SKIP_SHARE_MIN_BRICKS;
+    use brickray::core::dvr_skip_share_min_bricks;
     let shell = brickray_harness::scenes::bright_shell(64);
     let thin = brickray::core::synthetic::u8_field(64, |p| {
         let edge = p.iter().map(|&c| c.min(63 - c)).min().unwrap_or(0);
@@ -584,26 +585,37 @@ fn dvr_skips_out_of_core_only_where_enough_drawn_sub_cells_are_transparent() {
     let transparent_below = TransferFunction::ramp(0.3, 1.0, 0.05);
     let opaque = TransferFunction::from_entries(vec![[0.9, 0.8, 0.7, 0.01]; 256]);
     let from_zero = TransferFunction::ramp(0.0, 1.0, 0.05);
-    for (name, vol, tf, step, skips) in [
+    for (name, vol, tf, step, shaded, skips) in [
         (
-            "thin shell, transparent below 0.3",
+            "thin shell, transparent below 0.3, shaded",
             &thin,
             &transparent_below,
             STEP,
             true,
+            true,
         ),
         (
-            "thin shell, transparent below 0.3, a step of 1 voxel",
+            "thin shell, transparent below 0.3, unshaded",
             &thin,
             &transparent_below,
-            1.0,
+            STEP,
+            false,
             false,
         ),
         (
-            "thick shell, transparent below 0.3",
+            "thin shell, transparent below 0.3, shaded, a step of 1 voxel",
+            &thin,
+            &transparent_below,
+            1.0,
+            true,
+            false,
+        ),
+        (
+            "thick shell, transparent below 0.3, shaded",
             &shell,
             &transparent_below,
             STEP,
+            true,
             false,
         ),
         (
@@ -611,6 +623,7 @@ fn dvr_skips_out_of_core_only_where_enough_drawn_sub_cells_are_transparent() {
             &shell,
             &opaque,
             STEP,
+            true,
             false,
         ),
         (
@@ -619,11 +632,16 @@ fn dvr_skips_out_of_core_only_where_enough_drawn_sub_cells_are_transparent() {
             &from_zero,
             STEP,
             false,
+            false,
         ),
     ] {
         let dir = tempfile::tempdir().unwrap();
         let source = store_of(vol, &dir);
-        let desc = |ess: bool| skip_frame(vol, RenderMode::Dvr, ess, SIZE, step);
+        let desc = |ess: bool| {
+            let mut d = skip_frame(vol, RenderMode::Dvr, ess, SIZE, step);
+            d.settings.shading.enabled = shaded;
+            d
+        };
         let (mut samples, mut images, mut skipped) = (Vec::new(), Vec::new(), Vec::new());
         for rule in [SkipRule::WherePays, SkipRule::Always] {
             let options = RendererOptions {
@@ -640,7 +658,7 @@ fn dvr_skips_out_of_core_only_where_enough_drawn_sub_cells_are_transparent() {
             let share = r.stats().out_of_core.unwrap().dvr_transparent_share;
             let share = share.expect("a single-channel intensity volume's share");
             assert_eq!(
-                DVR_SKIP_SHARE_MIN_BRICKS.pays(share, step),
+                dvr_skip_share_min_bricks(shaded).pays(share, step),
                 skips,
                 "{name}: share {share}"
             );

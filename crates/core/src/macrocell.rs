@@ -261,20 +261,43 @@ pub const MIP_SKIP_SHARE_MIN_BRICKS: ShareByStep =
     ShareByStep(&[(0.5, 0.1), (2.0, 0.1), (4.0, 1.0)]);
 
 /// The least share of sub-cells transparent through the transfer function,
-/// over the bricks a frame draws, at which DVR's empty-space skipping is used
-/// out of core (`SkipRule::WherePays` in brickray-render), by step. Measured
-/// on lavapipe (`brickray-bench skipping --step S`, docs/benchmarks.md:
-/// ramps opaque from 0, 0.3 and 0.6 on seven volumes, bricks of 32 at the
-/// finest level, unshaded). At 1/2 voxel (2026-12-06): at shares of 0 to
-/// 0.278 skipping cost 1.00-1.34x the frame (0.278: the pycortex T1 MRI,
-/// 1.18x), from 0.305 to 0.909 it broke even or paid (0.49-0.99x) but for
-/// the cryo-ET tomogram at 0.467 (1.09x); the `raw` suite's view of the
-/// pycortex MRI, 0.358, pays (0.85x, shaded 0.71x). At 1 voxel it cost up
-/// to 0.498 (1.02-1.15x) and paid from 0.644 (0.70-0.85x); at 2 voxels it
-/// cost up to 0.762 (1.01-1.17x) and paid or broke even from 0.745 (0.90-0.98x);
-/// at 4 voxels it cost or broke even at every share (0.96-1.31x).
+/// over the bricks a frame draws, at which unshaded DVR's empty-space
+/// skipping is used out of core (`SkipRule::WherePays` in brickray-render),
+/// by step; shaded DVR has its own ([`DVR_SHADED_SKIP_SHARE_MIN_BRICKS`]).
+/// Measured on lavapipe (`brickray-bench skipping --step S`,
+/// docs/benchmarks.md: ramps opaque from 0, 0.3 and 0.6 on seven volumes,
+/// bricks of 32 at the finest level). At 1/2 voxel, four runs (2026-12-06
+/// and three on 2026-12-07): up to a share of 0.498 skipping cost or broke
+/// even (in the last three runs 1.08-1.31x at 0.278-0.467 but for one
+/// volume at 0.253 and 0.498, 0.94-1.02x; the first run had 0.305-0.388 at
+/// 0.95-1.03x), and from 0.644 on it paid in every run (0.49-0.86x). At 1
+/// voxel it cost up to 0.498 (1.02-1.15x) and paid from 0.644 (0.70-0.85x);
+/// at 2 voxels it cost up to 0.762 (1.01-1.17x) and paid or broke even from
+/// 0.745 (0.90-0.98x); at 4 voxels it cost or broke even at every share
+/// (0.96-1.31x).
 pub const DVR_SKIP_SHARE_MIN_BRICKS: ShareByStep =
+    ShareByStep(&[(1.0, 0.55), (2.0, 0.76), (4.0, 1.0)]);
+
+/// [`DVR_SKIP_SHARE_MIN_BRICKS`] for shaded DVR, whose samples cost two to
+/// three times an unshaded one's, so that skipping pays from fewer
+/// transparent sub-cells. At 1/2 voxel (`brickray-bench skipping`,
+/// 2026-12-07, the streamed volume's default gradients kept per brick):
+/// where no sub-cell is transparent skipping cost 1.18-1.45x the frame;
+/// from a share of 0.188 to 0.467 it broke even or paid (0.87-1.05x), from
+/// 0.498 on it paid (0.40-0.84x); the `raw` suite's view of the pycortex MRI
+/// (0.358) took 0.71x (2026-12-06). The coarser steps' anchors are the
+/// unshaded rule's (not measured shaded; a shaded frame saves more per
+/// sample skipped, so they err towards not skipping).
+pub const DVR_SHADED_SKIP_SHARE_MIN_BRICKS: ShareByStep =
     ShareByStep(&[(0.5, 0.29), (1.0, 0.55), (2.0, 0.76), (4.0, 1.0)]);
+
+/// The out-of-core DVR rule of a shaded or an unshaded frame.
+pub fn dvr_skip_share_min_bricks(shaded: bool) -> ShareByStep {
+    match shaded {
+        true => DVR_SHADED_SKIP_SHARE_MIN_BRICKS,
+        false => DVR_SKIP_SHARE_MIN_BRICKS,
+    }
+}
 
 /// [`MacroCellGrid::empty_distance`] of a grid of `dims` cells whose
 /// emptiness is given per cell (x fastest): what several grids over one
@@ -533,6 +556,7 @@ mod tests {
             DVR_SKIP_SHARE_MIN,
             MIP_SKIP_SHARE_MIN_BRICKS,
             DVR_SKIP_SHARE_MIN_BRICKS,
+            DVR_SHADED_SKIP_SHARE_MIN_BRICKS,
         ] {
             assert!(rule.0.windows(2).all(|w| w[0].0 < w[1].0), "{rule:?}");
             assert!(
@@ -550,6 +574,7 @@ mod tests {
             MIP_SKIP_SHARE_MIN,
             MIP_SKIP_SHARE_MIN_BRICKS,
             DVR_SKIP_SHARE_MIN_BRICKS,
+            DVR_SHADED_SKIP_SHARE_MIN_BRICKS,
         ] {
             assert_eq!(rule.at(16.0), 1.0, "{rule:?}");
         }

@@ -177,7 +177,7 @@ pub struct OutOfCoreStats {
     /// DVR of a single-channel intensity volume: the share of the sub-cells
     /// of the bricks the plan draws that are transparent through the
     /// transfer function, what its skip rule compares with
-    /// `brickray_core::DVR_SKIP_SHARE_MIN_BRICKS` at the frame's step
+    /// `brickray_core::dvr_skip_share_min_bricks` at the frame's step
     /// ([`crate::SkipRule`]);
     /// `None` otherwise.
     pub dvr_transparent_share: Option<f64>,

@@ -115,8 +115,9 @@ pub enum SkipRule {
     /// the macro cells are transparent through the frame's transfer
     /// function (counted when it changes, with the skip distances). Out of
     /// core, each frame a plan is applied, where at least
-    /// [`brickray_core::DVR_SKIP_SHARE_MIN_BRICKS`] of the sub-cells of the
-    /// bricks the frame draws are transparent through it
+    /// [`brickray_core::DVR_SKIP_SHARE_MIN_BRICKS`] (shaded,
+    /// [`brickray_core::DVR_SHADED_SKIP_SHARE_MIN_BRICKS`]) of the sub-cells
+    /// of the bricks the frame draws are transparent through it
     /// (`OutOfCoreStats::dvr_transparent_share`; a multi-channel volume and
     /// a label map always skip). Below, skipping cost up to 1.34x the frame
     /// on lavapipe.

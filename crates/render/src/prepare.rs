@@ -351,7 +351,7 @@ pub(crate) fn frame_variant(
             gradients: b.gradients() && dvr && v.shade && !v.labels,
             ess: v.ess
                 && (!mip || b.mip_skipping(settings.step_factor))
-                && (!dvr || b.dvr_skipping(settings.step_factor)),
+                && (!dvr || b.dvr_skipping(settings.step_factor, v.shade)),
             fades: b.fades(),
             ..v
         }

@@ -242,8 +242,9 @@ pub(crate) fn run(args: &Args) -> Result<RawResult, String> {
         frames.ok_or_else(|| format!("{mode}: out of core did not converge: {stats:?}"))?;
         if let Some(share) = stats.dvr_transparent_share {
             println!(
-                "| {mode} | (out of core: the drawn bricks' sub-cells transparent through the TF, {share:.3}; DVR skips from {:.3} at this step) | | | | | | | |",
-                brickray_core::DVR_SKIP_SHARE_MIN_BRICKS.at(step)
+                "| {mode} | (out of core: the drawn bricks' sub-cells transparent through the TF, {share:.3}; DVR skips from {:.3} at this step, shaded from {:.3}) | | | | | | | |",
+                brickray_core::DVR_SKIP_SHARE_MIN_BRICKS.at(step),
+                brickray_core::DVR_SHADED_SKIP_SHARE_MIN_BRICKS.at(step)
             );
         }
         // One counted frame per variant (also the warm-up), then timed rounds.

@@ -365,7 +365,7 @@ impl VolumeBackend for InCore {
             .is_none_or(|share| brickray_core::MIP_SKIP_SHARE_MIN.pays(share, step))
     }
 
-    fn dvr_skipping(&self, step: f32) -> bool {
+    fn dvr_skipping(&self, step: f32, _shaded: bool) -> bool {
         self.dvr_share
             .is_none_or(|share| brickray_core::DVR_SKIP_SHARE_MIN.pays(share, step))
     }

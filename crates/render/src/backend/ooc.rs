@@ -50,8 +50,8 @@ pub(crate) struct OutOfCore {
     /// When DVR skips empty space ([`crate::SkipRule`]).
     dvr_policy: crate::SkipRule,
     /// The share of the plan's bricks' sub-cells transparent through the
-    /// transfer function, compared with
-    /// `brickray_core::DVR_SKIP_SHARE_MIN_BRICKS` at the frame's step;
+    /// transfer function, compared with the frame's rule at its step
+    /// (`brickray_core::dvr_skip_share_min_bricks`, shaded or not);
     /// `None`: always test them (the policy, a multi-channel volume, a label
     /// map).
     dvr_share: Option<f64>,
@@ -225,7 +225,8 @@ impl OutOfCore {
             crate::SkipRule::WherePays => s.mip_skip_share(&plan.leaves),
         };
         // DVR tests sub-cells only where enough of the plan's bricks' are
-        // transparent (`DVR_SKIP_SHARE_MIN_BRICKS`): with fewer, the tests
+        // transparent (`DVR_SKIP_SHARE_MIN_BRICKS`, shaded
+        // `DVR_SHADED_SKIP_SHARE_MIN_BRICKS`): with fewer, the tests
         // cost more than the samples they save (the image is the same
         // either way).
         let share = dvr_tf
@@ -382,9 +383,9 @@ impl VolumeBackend for OutOfCore {
             .is_none_or(|share| brickray_core::MIP_SKIP_SHARE_MIN_BRICKS.pays(share, step))
     }
 
-    fn dvr_skipping(&self, step: f32) -> bool {
-        self.dvr_share
-            .is_none_or(|share| brickray_core::DVR_SKIP_SHARE_MIN_BRICKS.pays(share, step))
+    fn dvr_skipping(&self, step: f32, shaded: bool) -> bool {
+        let rule = brickray_core::dvr_skip_share_min_bricks(shaded);
+        self.dvr_share.is_none_or(|share| rule.pays(share, step))
     }
 
     fn fades(&self) -> bool {
