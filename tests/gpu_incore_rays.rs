@@ -237,11 +237,12 @@ fn mip_skips_where_the_macro_cells_say_it_pays() {
             pays,
             "{name}: share {share}"
         );
-        let (samples, images) =
-            skip_frames(vol, &tf, RenderMode::Mip, step, |rule| RendererOptions {
+        let (samples, images) = skip_frames(vol, &tf, RenderMode::Mip, step, false, |rule| {
+            RendererOptions {
                 mip_skipping: rule,
                 ..Default::default()
-            });
+            }
+        });
         eprintln!(
             "{name} (share {share:.3}): samples per ray, rule off/on {:.1}/{:.1}, always off/on {:.1}/{:.1}",
             samples[0], samples[1], samples[2], samples[3]
@@ -252,49 +253,59 @@ fn mip_skips_where_the_macro_cells_say_it_pays() {
 
 /// DVR in core skips empty space only where enough of the volume's macro
 /// cells are transparent through the transfer function
-/// (`SkipRule::WherePays`, the default; `DVR_SKIP_SHARE_MIN`): on fractal
-/// noise through a ramp that leaves a few cells transparent (below the
-/// threshold) a DVR frame with skipping asked for takes every sample, as
-/// without it, while `SkipRule::Always` skips those cells (fewer samples);
-/// through a ramp that leaves many transparent (above) both skip. Images
-/// are identical in every case.
+/// (`SkipRule::WherePays`, the default; `dvr_skip_share_min`, 0.3 unshaded
+/// and 0.15 shaded): on fractal noise through a ramp that leaves a few
+/// cells transparent (below both thresholds) a DVR frame with skipping
+/// asked for takes every sample, as without it, while `SkipRule::Always`
+/// skips those cells (fewer samples); through a ramp that leaves a share
+/// between the two the shaded frame skips and the unshaded does not;
+/// through a ramp that leaves many transparent (above both) both skip.
+/// Images are identical in every case.
 #[test]
 fn dvr_skips_where_enough_cells_are_transparent() {
     use brickray::RendererOptions;
-    use brickray::core::{DVR_SKIP_SHARE_MIN, MacroCellGrid};
+    use brickray::core::{MacroCellGrid, dvr_skip_share_min};
     let noise = brickray_harness::scenes::pareto_noise(64);
     let grid = MacroCellGrid::build(&noise, 8);
-    for (from, pays) in [(0.45f32, false), (0.6, true)] {
+    for (from, shaded, pays) in [
+        (0.45f32, true, false),
+        (0.5, true, true),
+        (0.5, false, false),
+        (0.6, false, true),
+    ] {
         let tf = TransferFunction::ramp(from, 1.0, 0.05);
         let share = grid.transparent_share(&tf);
         assert!(share > 0.0, "ramp from {from}: some cells transparent");
         assert_eq!(
-            DVR_SKIP_SHARE_MIN.pays(share, STEP),
+            dvr_skip_share_min(shaded).pays(share, STEP),
             pays,
-            "ramp from {from}: share {share}"
+            "ramp from {from}, shaded {shaded}: share {share}"
         );
+        let mode = RenderMode::Dvr;
         let (samples, images) =
-            skip_frames(&noise, &tf, RenderMode::Dvr, STEP, |rule| RendererOptions {
+            skip_frames(&noise, &tf, mode, STEP, shaded, |rule| RendererOptions {
                 dvr_skipping: rule,
                 ..Default::default()
             });
         eprintln!(
-            "ramp from {from} (transparent cells {share:.3}): samples per ray, rule off/on {:.1}/{:.1}, always off/on {:.1}/{:.1}",
+            "ramp from {from}, shaded {shaded} (transparent cells {share:.3}): samples per ray, rule off/on {:.1}/{:.1}, always off/on {:.1}/{:.1}",
             samples[0], samples[1], samples[2], samples[3]
         );
-        check_rule_decision(&format!("from {from}"), &samples, &images, pays, 1.0, 1.0);
+        let label = format!("from {from}, shaded {shaded}");
+        check_rule_decision(&label, &samples, &images, pays, 1.0, 1.0);
     }
 }
 
 /// In core at 96 px, for the rule `WherePays` and then `Always` (`options`
-/// sets it), a `mode` frame of `vol` through `tf` without and then with
-/// empty-space skipping asked for: the samples per ray and the images, in
-/// that order.
+/// sets it), a `mode` frame of `vol` through `tf` (`shaded` or not) without
+/// and then with empty-space skipping asked for: the samples per ray and
+/// the images, in that order.
 fn skip_frames(
     vol: &Volume,
     tf: &TransferFunction,
     mode: RenderMode,
     step: f32,
+    shaded: bool,
     options: impl Fn(brickray::SkipRule) -> brickray::RendererOptions,
 ) -> (Vec<f64>, Vec<Vec<u8>>) {
     const SIZE: u32 = 96;
@@ -306,7 +317,8 @@ fn skip_frames(
         r.set_volume(&g.device, &g.queue, vol).unwrap();
         r.set_transfer_function(&g.device, &g.queue, tf).unwrap();
         for ess in [false, true] {
-            let desc = skip_frame(vol, mode, ess, SIZE, step);
+            let mut desc = skip_frame(vol, mode, ess, SIZE, step);
+            desc.settings.shading.enabled = shaded;
             let f = brickray_harness::predict::draw(g, &mut r, &target, &desc).unwrap();
             samples.push(brickray_harness::predict::samples_per_ray(&f.samples));
             images.push(f.color);

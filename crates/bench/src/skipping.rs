@@ -12,9 +12,11 @@
 //! as the rule decides, interleaved round by round; samples per ray of each.
 //! Out of core the volume is a brick store (bricks of 32) drawn at its
 //! finest level, converged before timing. Then DVR through three ramps per
-//! volume (opaque from 0, 30% and 60% of the range), in core with and
-//! without its rule (`brickray_core::DVR_SKIP_SHARE_MIN`, the share of macro
-//! cells transparent through the TF) and out of core (always skipping).
+//! volume (opaque from 0, 30% and 60% of the range), unshaded and shaded,
+//! in core with and without its rule (`brickray_core::dvr_skip_share_min`,
+//! the share of macro cells transparent through the TF) and out of core
+//! with and without its own (`brickray_core::dvr_skip_share_min_bricks`,
+//! the share of the drawn bricks' sub-cells transparent).
 
 use crate::report::{RunInfo, Timing, interleave};
 use crate::runner::{Runner, renderer_in_core, round2};
@@ -242,7 +244,6 @@ pub(crate) fn run(args: &Args) -> Result<SkippingResult, String> {
         for from in [0.0f32, 0.3, 0.6] {
             let tf = TransferFunction::ramp(from, 1.0, 0.05);
             let share = grid.transparent_share(&tf);
-            let skips = brickray_core::DVR_SKIP_SHARE_MIN.pays(share, step);
             let with = |dvr_skipping| RendererOptions {
                 dvr_skipping,
                 ..Default::default()
@@ -253,6 +254,8 @@ pub(crate) fn run(args: &Args) -> Result<SkippingResult, String> {
                 (settings(dvr, step), "DVR", &mut dvr_rows),
                 (shaded, "shaded DVR", &mut dvr_shaded_rows),
             ] {
+                let threshold = brickray_core::dvr_skip_share_min(base.shading.enabled);
+                let skips = threshold.pays(share, step);
                 let label = format!("{name}, {kind} from {from}");
                 let c = case(label.clone(), label, share, skips);
                 let (a, r) = (&mut always, Some(&mut rule));

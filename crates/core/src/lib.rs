@@ -63,10 +63,10 @@ pub use lod::{
     node_tf_error_expected, node_visible_error,
 };
 pub use macrocell::{
-    DVR_SHADED_SKIP_SHARE_MIN_BRICKS, DVR_SKIP_SHARE_MIN, DVR_SKIP_SHARE_MIN_BRICKS,
-    MIP_SKIP_SHARE_MIN, MIP_SKIP_SHARE_MIN_BRICKS, MacroCellGrid, ShareByStep,
-    dvr_skip_share_min_bricks, empty_distance, mip_skip_counts, mip_skipping_pays, sub_cell_ranges,
-    sub_cell_spreads, sub_cells_per_axis,
+    DVR_SHADED_SKIP_SHARE_MIN, DVR_SHADED_SKIP_SHARE_MIN_BRICKS, DVR_SKIP_SHARE_MIN,
+    DVR_SKIP_SHARE_MIN_BRICKS, MIP_SKIP_SHARE_MIN, MIP_SKIP_SHARE_MIN_BRICKS, MacroCellGrid,
+    ShareByStep, dvr_skip_share_min, dvr_skip_share_min_bricks, empty_distance, mip_skip_counts,
+    mip_skipping_pays, sub_cell_ranges, sub_cell_spreads, sub_cells_per_axis,
 };
 pub use moments::{MomentGrid, Moments, SpreadError, SpreadSource};
 pub use overlay::{LabelOverlay, OverlayError, OverlayMode, OverlayStyle, overlay_transform};

@@ -227,20 +227,38 @@ pub fn mip_skipping_pays(grid: &MacroCellGrid, step: f32) -> bool {
 }
 
 /// The least share of macro cells transparent through the transfer
-/// function at which DVR's empty-space skipping is used in core, whatever
-/// the step. Measured on lavapipe (`brickray-bench skipping`, 2026-12-06,
-/// docs/benchmarks.md: ramps opaque from 0, 0.3 and 0.6 of the range on
-/// seven volumes): where no cell is transparent skipping cost 1.14-1.30x
-/// the frame unshaded and 1.11-1.14x shaded; from a share of 0.188 on it
-/// broke even or paid (0.15-1.07x, the tomogram at 0.231 a wash). The
-/// threshold lies between. In core DVR skips a run of empty cells with one
-/// test (skip distances), so a coarser step costs it less than the rules
-/// that test every cell, and the threshold stays at every step: at 1, 2 and
-/// 4 voxels shaded frames paid or broke even from a share of 0.19 on (but
-/// the tomogram at 0.231 and 4 voxels, 1.11x), while unshaded frames at 4
-/// voxels cost 1.04-1.16x up to a share of 0.52 (frames of 5-20
-/// ms at 256 x 256, within this machine's noise of each other).
-pub const DVR_SKIP_SHARE_MIN: ShareByStep = ShareByStep(&[(0.5, 0.15)]);
+/// function at which unshaded DVR's empty-space skipping is used in core,
+/// whatever the step; shaded DVR has its own
+/// ([`DVR_SHADED_SKIP_SHARE_MIN`]). Measured on lavapipe (`brickray-bench
+/// skipping`, docs/benchmarks.md: ramps opaque from 0, 0.3 and 0.6 of the
+/// range on seven volumes): where no cell is transparent skipping cost
+/// 1.14-1.45x the frame; at shares of 0.188 and 0.231 it cost 1.02-1.22x in
+/// three runs of 2026-12-07 (0.97-1.00x in the first run, 2026-12-06), and
+/// from 0.357 on it broke even or paid (0.84-1.00x at 0.357, 0.20-0.90x
+/// above).
+/// In core DVR skips a run of empty cells with one test (skip distances),
+/// so a coarser step costs it less than the rules that test every cell, and
+/// the threshold stays at every step (unshaded frames at 4 voxels cost
+/// 1.04-1.16x up to a share of 0.52, frames of 5-20 ms at 256 x 256, within
+/// this machine's noise of each other).
+pub const DVR_SKIP_SHARE_MIN: ShareByStep = ShareByStep(&[(0.5, 0.3)]);
+
+/// [`DVR_SKIP_SHARE_MIN`] for shaded DVR, whose samples cost two to three
+/// times an unshaded one's: where no cell is transparent skipping cost
+/// 1.11-1.27x the frame, from a share of 0.188 on it broke even or paid
+/// (0.86-0.95x at 0.188 in three runs; the tomogram at 0.231 0.95-1.12x in
+/// four; 0.14-0.81x from 0.357 on). At 1, 2 and 4 voxels shaded frames paid or
+/// broke even from a share of 0.19 on (but the tomogram at 0.231 and 4
+/// voxels, 1.11x).
+pub const DVR_SHADED_SKIP_SHARE_MIN: ShareByStep = ShareByStep(&[(0.5, 0.15)]);
+
+/// The in-core DVR rule of a shaded or an unshaded frame.
+pub fn dvr_skip_share_min(shaded: bool) -> ShareByStep {
+    match shaded {
+        true => DVR_SHADED_SKIP_SHARE_MIN,
+        false => DVR_SKIP_SHARE_MIN,
+    }
+}
 
 /// The least share of sub-cells certain to be skipped, counted within each
 /// brick of an out-of-core cut ([`mip_skip_counts`] over a brick's
@@ -554,6 +572,7 @@ mod tests {
         for rule in [
             MIP_SKIP_SHARE_MIN,
             DVR_SKIP_SHARE_MIN,
+            DVR_SHADED_SKIP_SHARE_MIN,
             MIP_SKIP_SHARE_MIN_BRICKS,
             DVR_SKIP_SHARE_MIN_BRICKS,
             DVR_SHADED_SKIP_SHARE_MIN_BRICKS,

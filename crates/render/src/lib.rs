@@ -111,7 +111,8 @@ pub struct RendererOptions {
 /// [`RendererOptions::dvr_skipping`]. The image is the same either way.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub enum SkipRule {
-    /// DVR in core: where at least [`brickray_core::DVR_SKIP_SHARE_MIN`] of
+    /// DVR in core: where at least [`brickray_core::DVR_SKIP_SHARE_MIN`]
+    /// (shaded, [`brickray_core::DVR_SHADED_SKIP_SHARE_MIN`]) of
     /// the macro cells are transparent through the frame's transfer
     /// function (counted when it changes, with the skip distances). Out of
     /// core, each frame a plan is applied, where at least

@@ -67,7 +67,8 @@ pub(crate) struct InCore {
     mip_share: Option<f64>,
     /// When DVR skips, and the share of macro cells transparent through the
     /// current transfer function (found with the skip distances, `update`;
-    /// compared with `brickray_core::DVR_SKIP_SHARE_MIN`); `None`: always
+    /// compared with the frame's rule, `brickray_core::dvr_skip_share_min`,
+    /// shaded or not); `None`: always
     /// skip (`SkipRule::Always`, or a label map's hidden labels).
     dvr_rule: crate::SkipRule,
     dvr_share: Option<f64>,
@@ -365,9 +366,9 @@ impl VolumeBackend for InCore {
             .is_none_or(|share| brickray_core::MIP_SKIP_SHARE_MIN.pays(share, step))
     }
 
-    fn dvr_skipping(&self, step: f32, _shaded: bool) -> bool {
-        self.dvr_share
-            .is_none_or(|share| brickray_core::DVR_SKIP_SHARE_MIN.pays(share, step))
+    fn dvr_skipping(&self, step: f32, shaded: bool) -> bool {
+        let rule = brickray_core::dvr_skip_share_min(shaded);
+        self.dvr_share.is_none_or(|share| rule.pays(share, step))
     }
 
     fn kind(&self) -> KernelKind {

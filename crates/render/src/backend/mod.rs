@@ -69,10 +69,9 @@ pub(crate) trait VolumeBackend: std::fmt::Debug {
     /// False where DVR's empty-space skipping costs more than it saves at a
     /// sample step of `step` voxels, `shaded` or not (in core, too few macro
     /// cells transparent through the transfer function,
-    /// `brickray_core::DVR_SKIP_SHARE_MIN`, either way; out of core, too few
-    /// sub-cells of the plan's bricks,
-    /// `brickray_core::dvr_skip_share_min_bricks`): DVR frames then march
-    /// without it.
+    /// `brickray_core::dvr_skip_share_min`; out of core, too few sub-cells
+    /// of the plan's bricks, `brickray_core::dvr_skip_share_min_bricks`):
+    /// DVR frames then march without it.
     fn dvr_skipping(&self, _step: f32, _shaded: bool) -> bool {
         true
     }
