@@ -286,9 +286,10 @@ pub const MIP_SKIP_SHARE_MIN_BRICKS: ShareByStep =
 /// docs/benchmarks.md: ramps opaque from 0, 0.3 and 0.6 on seven volumes,
 /// bricks of 32 at the finest level). At 1/2 voxel, four runs (2026-12-06
 /// and three on 2026-12-07): up to a share of 0.498 skipping cost or broke
-/// even (in the last three runs 1.08-1.31x at 0.278-0.467 but for one
-/// volume at 0.253 and 0.498, 0.94-1.02x; the first run had 0.305-0.388 at
-/// 0.95-1.03x), and from 0.644 on it paid in every run (0.49-0.86x). At 1
+/// even (in the last three runs 1.08-1.31x at shares of 0.278-0.467 but
+/// once, 1.02x at 0.388; 0.94-1.15x at 0.253 and 0.96-1.02x at 0.498; the
+/// first run had 0.305-0.388 at 0.95-1.03x), and from 0.644 on it paid in
+/// every run (0.48-0.86x). At 1
 /// voxel it cost up to 0.498 (1.02-1.15x) and paid from 0.644 (0.70-0.85x);
 /// at 2 voxels it cost up to 0.762 (1.01-1.17x) and paid or broke even from
 /// 0.745 (0.90-0.98x); at 4 voxels it cost or broke even at every share
