@@ -41,6 +41,7 @@ pub mod overlay;
 mod pyramid;
 pub mod range;
 pub mod settings;
+pub mod skip_rule;
 pub mod slice;
 pub mod synthetic;
 pub mod texel;
@@ -63,10 +64,8 @@ pub use lod::{
     node_tf_error_expected, node_visible_error,
 };
 pub use macrocell::{
-    DVR_SHADED_SKIP_SHARE_MIN, DVR_SHADED_SKIP_SHARE_MIN_BRICKS, DVR_SKIP_SHARE_MIN,
-    DVR_SKIP_SHARE_MIN_BRICKS, MIP_SKIP_SHARE_MIN, MIP_SKIP_SHARE_MIN_BRICKS, MacroCellGrid,
-    ShareByStep, dvr_skip_share_min, dvr_skip_share_min_bricks, empty_distance, mip_skip_counts,
-    mip_skipping_pays, sub_cell_ranges, sub_cell_spreads, sub_cells_per_axis,
+    MacroCellGrid, empty_distance, mip_skip_counts, sub_cell_ranges, sub_cell_spreads,
+    sub_cells_per_axis,
 };
 pub use moments::{MomentGrid, Moments, SpreadError, SpreadSource};
 pub use overlay::{LabelOverlay, OverlayError, OverlayMode, OverlayStyle, overlay_transform};
@@ -75,6 +74,11 @@ pub use range::{CancelToken, MemRangeReader, ObjectReader, ObjectSpan, RangeRead
 pub use settings::{
     ADAPTIVE_STEP_DOUBLINGS, Accel, ClipBox, RenderMode, RenderSettings, SettingsError, Shading,
     adaptive_step_doublings,
+};
+pub use skip_rule::{
+    DVR_SHADED_SKIP_SHARE_MIN, DVR_SHADED_SKIP_SHARE_MIN_BRICKS, DVR_SKIP_SHARE_MIN,
+    DVR_SKIP_SHARE_MIN_BRICKS, MIP_SKIP_SHARE_MIN, MIP_SKIP_SHARE_MIN_BRICKS, ShareByStep,
+    dvr_skip_share_min, dvr_skip_share_min_bricks, mip_skipping_pays,
 };
 pub use slice::{Slab, SlabMode, SliceAxis, SliceError, SliceGeometry, SliceView};
 pub use texel::{SampleEncoding, TexelCaps, TexelFormat, U8Filtering};
