@@ -54,8 +54,8 @@ pub use loader::{
     BrickRequest, LoadError, Loader, LoaderConfig, PollReport, RequestOutcome, SHUTDOWN_WAIT,
 };
 pub use manager::{
-    BrickManager, CacheError, FadeSlot, FrameInput, FramePlan, FrameStats, PhaseTimes,
-    Reconfigured, Residency, ResidencyCounts, UNTIMED_FRAME_RATE, Upload,
+    BrickManager, CacheError, EVOLVED_FRAMES_MAX, FadeSlot, FrameInput, FramePlan, FrameStats,
+    PhaseTimes, Reconfigured, Residency, ResidencyCounts, UNTIMED_FRAME_RATE, Upload,
 };
 pub use pool::{Allocation, BrickPool, PoolError, PoolLimits, SlotId};
 pub use prepared::{PreparedBrick, Preparer};

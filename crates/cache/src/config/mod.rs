@@ -134,6 +134,14 @@ pub struct OutOfCoreConfig {
     /// When refinement also requests the bricks one level past those a split
     /// waits for ([`Lookahead`]); never by default.
     pub lookahead: Lookahead,
+    /// While the view moves, refine by evolving the last frame's cut instead
+    /// of rebuilding it from the root (docs/cache.md, "A moving view: the
+    /// cut evolves"): on by default. Applies under
+    /// [`LodMetric::Geometric`] without lookahead, visibility feedback or
+    /// failures; a view that stops, and every
+    /// [`EVOLVED_FRAMES_MAX`](crate::EVOLVED_FRAMES_MAX)-th moving frame,
+    /// are refined from the root, so the cut at convergence is the same.
+    pub evolve: bool,
 }
 
 /// When refinement requests the bricks one level past those a split waits
@@ -200,6 +208,7 @@ impl Default for OutOfCoreConfig {
             visibility_config: VisibilityConfig::default(),
             setup_deadline: DEFAULT_SETUP_DEADLINE,
             lookahead: Lookahead::Never,
+            evolve: true,
         }
     }
 }

@@ -275,8 +275,9 @@ impl BrickManager {
         let old = self.config;
         let mut out = Reconfigured::default();
         // Refinement's knobs change (and a new pool counts its changes
-        // from 0): no earlier refinement is reused.
+        // from 0): no earlier refinement is reused or evolved.
         self.refine_memo = None;
+        self.last_cut = None;
         if config.gpu_budget_bytes != old.gpu_budget_bytes || config.floor_slots != old.floor_slots
         {
             let limits = self

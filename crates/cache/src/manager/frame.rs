@@ -82,11 +82,12 @@ struct Placed {
 }
 
 /// What [`BrickManager::refine_cut`] says of its refinement: the key it was
-/// made under (`None`: not reusable), whether it was reused, and the upload
-/// budget as it left it.
+/// made under (`None`: not reusable), whether it was reused or evolved from
+/// the last cut (then never reused), and the upload budget as it left it.
 struct Memo {
     key: Option<super::MemoKey>,
     reused: bool,
+    evolved: bool,
     budget: UploadBudget,
 }
 
@@ -126,6 +127,7 @@ impl BrickManager {
         phases.stats_ms = lap.next();
         stats.phases = phases;
         stats.refine_reused = memo.reused;
+        stats.refine_evolved = memo.evolved;
         let plan = FramePlan {
             cut: placed.cut,
             uploads: placed.uploads,
@@ -141,7 +143,7 @@ impl BrickManager {
         // A converged frame's refinement serves the next frames for as long
         // as nothing it read changes (what changes them is in the key).
         self.refine_memo = match memo.key {
-            Some(key) if plan.stats.converged() => Some(super::RefineMemo {
+            Some(key) if plan.stats.converged() && !memo.evolved => Some(super::RefineMemo {
                 key,
                 refined,
                 budget: memo.budget,
@@ -235,9 +237,10 @@ impl BrickManager {
             (Some(m), Some(k)) if m.key == k => Some((m.refined.clone(), m.budget)),
             _ => None,
         };
-        let memo = |reused: bool, budget: UploadBudget| Memo {
+        let memo = |reused: bool, evolved: bool, budget: UploadBudget| Memo {
             key,
             reused,
+            evolved,
             budget,
         };
         let mut budget = self.budget;
@@ -250,12 +253,77 @@ impl BrickManager {
             }
             self.budget = kept;
             self.octants.end(&refined, &self.layout);
-            return (refined, memo(true, kept));
+            self.note_cut(input.generation, &refined, false);
+            return (refined, memo(true, false, kept));
         }
+        let inert = filter.as_ref().is_none_or(|f| f.is_inert());
+        if let Some(refined) = self.evolved(&params, inert, &mut budget) {
+            self.budget = budget;
+            self.octants.end(&refined, &self.layout);
+            self.note_cut(input.generation, &refined, true);
+            return (refined, memo(false, true, budget));
+        }
+        let mut budget = self.budget;
         let refined = self.refine_with(&params, filter, &mut budget);
         self.budget = budget;
         self.octants.end(&refined, &self.layout);
-        (refined, memo(false, budget))
+        self.note_cut(input.generation, &refined, false);
+        (refined, memo(false, false, budget))
+    }
+
+    /// The last frame's cut evolved to a moving view
+    /// ([`OutOfCoreConfig::evolve`](crate::OutOfCoreConfig::evolve)), where
+    /// that applies: the view changed since the last frame and the
+    /// classification did not, no failures, an `inert` visibility filter,
+    /// and fewer than [`EVOLVED_FRAMES_MAX`](super::EVOLVED_FRAMES_MAX)
+    /// frames evolved in a row. `None`: refine from the root.
+    fn evolved(
+        &mut self,
+        params: &RefineParams<'_>,
+        inert: bool,
+        budget: &mut UploadBudget,
+    ) -> Option<Refinement> {
+        let last = self.last_cut.as_ref()?;
+        let applies = self.config.evolve
+            && inert
+            && self.failures.is_empty()
+            && last.generation != params.generation
+            && last.class_stamp == self.class_stamp
+            && last.evolved < super::EVOLVED_FRAMES_MAX;
+        if !applies {
+            return None;
+        }
+        let recheck = last.waiting || last.meta != self.meta.changes();
+        let leaves = std::mem::take(&mut self.last_cut.as_mut()?.leaves);
+        let mut env = Env {
+            meta: &self.meta,
+            failures: &self.failures,
+            cpu: &mut self.cpu,
+            pool: &self.pool,
+            filter: None,
+            octants: &self.octants,
+            class_stamp: self.class_stamp,
+        };
+        crate::refine::evolve(&self.layout, params, &mut env, budget, &leaves, recheck)
+    }
+
+    /// Keeps `refined` as the cut the next frame may evolve.
+    fn note_cut(&mut self, generation: u64, refined: &Refinement, evolved: bool) {
+        let evolved = match (evolved, &self.last_cut) {
+            (true, Some(l)) => l.evolved + 1,
+            _ => 0,
+        };
+        let mut leaves = self.last_cut.take().map(|l| l.leaves).unwrap_or_default();
+        leaves.clear();
+        leaves.extend_from_slice(&refined.leaves);
+        self.last_cut = Some(super::LastCut {
+            generation,
+            class_stamp: self.class_stamp,
+            meta: self.meta.changes(),
+            leaves,
+            waiting: refined.blocked.missing_data + refined.blocked.missing_meta > 0,
+            evolved,
+        });
     }
 
     /// Refines over the caches (never the source), charging `budget`.
@@ -555,6 +623,7 @@ impl BrickManager {
             // (Set by `update` once this phase is timed too.)
             phases: PhaseTimes::default(),
             refine_reused: false,
+            refine_evolved: false,
         }
     }
 }

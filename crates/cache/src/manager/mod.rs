@@ -16,6 +16,8 @@ mod tests;
 #[cfg(test)]
 mod tests_config;
 #[cfg(test)]
+mod tests_evolve;
+#[cfg(test)]
 mod tests_faults;
 #[cfg(test)]
 mod tests_lod;
@@ -90,6 +92,32 @@ pub struct BrickManager {
     /// The last converged frame's refinement, reused while nothing it read
     /// has changed ([`RefineMemo`]).
     refine_memo: Option<RefineMemo>,
+    /// The last frame's cut, which a moving view's next refinement evolves
+    /// ([`OutOfCoreConfig::evolve`](crate::OutOfCoreConfig::evolve)).
+    last_cut: Option<LastCut>,
+}
+
+/// The most frames in a row that evolve the last cut
+/// ([`OutOfCoreConfig::evolve`](crate::OutOfCoreConfig::evolve)); the next
+/// moving frame is refined from the root. Where the pool binds, an evolving
+/// cut drifts from the greedy order's by a few per cent of its leaves over
+/// tens of frames (docs/cache.md): the root's refinement every 32 frames
+/// (about half a second at 60 Hz) bounds that, at the cost of one greedy
+/// refinement among 32.
+pub const EVOLVED_FRAMES_MAX: u32 = 32;
+
+/// A frame's refined cut, as the next frame's evolving refinement needs it.
+#[derive(Debug)]
+struct LastCut {
+    generation: u64,
+    class_stamp: u32,
+    /// The metadata cache's change count when it was refined.
+    meta: u64,
+    leaves: Vec<crate::refine::RefinedLeaf>,
+    /// A split waited for metadata or bricks.
+    waiting: bool,
+    /// Frames evolved in a row up to it (0: refined from the root).
+    evolved: u32,
 }
 
 /// What a refinement read that a later frame can see change: the views and
@@ -260,6 +288,7 @@ impl BrickManager {
             class_stamp: 0,
             classified: None,
             refine_memo: None,
+            last_cut: None,
             bricks: crate::brick_count(&layout),
             source,
             layout,

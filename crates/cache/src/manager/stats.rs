@@ -124,6 +124,9 @@ pub struct FrameStats {
     /// metric without visible weights, no failures): the refine phase then
     /// costs a copy of the cut.
     pub refine_reused: bool,
+    /// The cut was evolved from the last frame's instead of refined from
+    /// the root (a moving view, [`OutOfCoreConfig::evolve`](crate::OutOfCoreConfig::evolve)).
+    pub refine_evolved: bool,
 }
 
 /// The wall time of each phase of one [`BrickManager::update`](super::BrickManager::update),

@@ -40,6 +40,9 @@
 //! (frustum, emptiness, transparency) as any child is. When they arrive with
 //! or soon after the child's, the next level splits a round trip earlier.
 
+mod evolve;
+#[cfg(test)]
+mod evolve_tests;
 #[cfg(test)]
 mod fault_tests;
 mod geometry;
@@ -60,6 +63,7 @@ mod retry_tests;
 #[cfg(test)]
 pub(crate) mod tests;
 
+pub(crate) use evolve::evolve;
 pub use geometry::{ViewGeometry, Views, is_visible, lod_voxel_world};
 use rank::Unknown;
 
