@@ -25,7 +25,10 @@
 //! new plan), and, for the inline rows, a GPU-free `Streamer` over the same
 //! volume is held still as long (its `plan` time and whether it reused the
 //! converged refinement), then plans every frame of the path (its `plan`
-//! time and the share of its cut that changed from frame to frame).
+//! time and the share of its cut that changed from frame to frame),
+//! evolving its cut from frame to frame (`OutOfCoreConfig::evolve`), beside
+//! a second streamer that refines each frame from the root (their times,
+//! and how far apart their cuts are).
 //!
 //! `cargo run --release -p brickray-bench -- host [--size 1024] [--frames 60]
 //! [--cuts 1000,5000,20000,50000] [--culling] [--culling-size 256]`
@@ -229,26 +232,43 @@ struct StreamerAlone {
     plan_ms: f64,
     refine_ms: f64,
     reused_share: f64,
-    /// Along the path: `plan`'s wall time and its refine phase, ms medians,
-    /// and the median share of the cut that changed from the frame before
-    /// (leaves added plus leaves gone, over the cut's leaves).
+    /// Along the path: `plan`'s wall time and its refine phase, ms medians
+    /// (and the refine phase's 99th percentile), and the median share of the
+    /// cut that changed from the frame before (leaves added plus leaves
+    /// gone, over the cut's leaves).
     path_plan_ms: f64,
     path_refine_ms: f64,
+    path_refine_ms_p99: f64,
     path_cut_change: f64,
+    /// The share of the path's frames whose cut was evolved.
+    path_evolved_share: f64,
+    /// The streamer that refines from the root on the same frames.
+    path_exact_plan_ms: f64,
+    path_exact_refine_ms: f64,
+    path_exact_refine_ms_p99: f64,
+    /// The evolved cut against the one refined from the root on the same
+    /// frame: leaves in one and not the other, over the latter's leaves.
+    path_differs_from_exact_median: f64,
+    path_differs_from_exact_max: f64,
 }
 
-/// Converges a `Streamer` (no renderer) over the suite's volume at the start
-/// view of a `cut`-brick budget and a `size` viewport, then calls its `plan`
-/// [`STATIC_FRAMES`] times with the same frame, then once per frame of the
-/// path's `frames`.
+/// Converges two `Streamer`s (no renderer) over the suite's volume at the
+/// start view of a `cut`-brick budget and a `size` viewport, one evolving a
+/// moving view's cut (`OutOfCoreConfig::evolve`, the default) and one
+/// refining every frame from the root; calls the evolving one's `plan`
+/// [`STATIC_FRAMES`] times with the same frame, then both once per frame of
+/// the path, in alternating order.
 fn streamer_alone(cut: u32, size: u32, frames: usize) -> Result<StreamerAlone, String> {
-    let src = brickray_store::ProceduralSource::sphere_shells([DIMS; 3], BRICK, 2)
-        .map_err(|e| e.to_string())?;
-    let mut s = crate::runner::gpu_free_streamer(
-        Arc::new(src),
-        config(cut, VisibilityPolicy::None),
-        false,
-    )?;
+    let make = |evolve: bool| {
+        let src = brickray_store::ProceduralSource::sphere_shells([DIMS; 3], BRICK, 2)
+            .map_err(|e| e.to_string())?;
+        let config = OutOfCoreConfig {
+            evolve,
+            ..config(cut, VisibilityPolicy::None)
+        };
+        crate::runner::gpu_free_streamer(Arc::new(src), config, false)
+    };
+    let (mut s, mut exact) = (make(true)?, make(false)?);
     let frame = VolumeFrame::centered([DIMS as u32; 3], [1.0; 3]);
     let tf = brickray_core::TransferFunction::ramp(0.3, 0.9, 0.3);
     let plan_at = |s: &mut brickray_cache::Streamer, i: usize| {
@@ -269,43 +289,75 @@ fn streamer_alone(cut: u32, size: u32, frames: usize) -> Result<StreamerAlone, S
         let leaves: brickray_core::NodeSet = p.cut.iter().map(|l| l.key).collect();
         (ms, p.stats, leaves)
     };
-    let plan = |s: &mut brickray_cache::Streamer| plan_at(s, 0);
-    let mut converged = false;
-    for _ in 0..2000 {
-        if plan(&mut s).1.converged {
-            converged = true;
-            break;
+    for s in [&mut s, &mut exact] {
+        let converged = (0..2000).any(|_| {
+            let done = plan_at(s, 0).1.converged;
+            if !done {
+                std::thread::sleep(std::time::Duration::from_millis(5));
+            }
+            done
+        });
+        if !converged {
+            return Err(format!("a streamer of {cut} bricks did not converge"));
         }
-        std::thread::sleep(std::time::Duration::from_millis(5));
-    }
-    if !converged {
-        return Err(format!("a streamer of {cut} bricks did not converge"));
     }
     let (mut plan_ms, mut refine_ms, mut reused) = (Vec::new(), Vec::new(), 0);
     let mut before = Default::default();
     for _ in 0..STATIC_FRAMES {
-        let (ms, st, leaves) = plan(&mut s);
+        let (ms, st, leaves) = plan_at(&mut s, 0);
         plan_ms.push(ms);
         refine_ms.push(st.cache.phases.refine_ms);
         reused += usize::from(st.cache.refine_reused);
         before = leaves;
     }
-    let (mut path_ms, mut path_refine, mut change) = (Vec::new(), Vec::new(), Vec::new());
+    let mut path = PathSide::default();
+    let mut exact_path = PathSide::default();
+    let (mut evolved, mut differ) = (0, Vec::new());
     for i in 1..=frames {
-        let (ms, st, leaves) = plan_at(&mut s, i);
-        path_ms.push(ms);
-        path_refine.push(st.cache.phases.refine_ms);
-        change.push(cut_change(&before, &leaves));
-        before = leaves;
+        let (a, b) = match i % 2 {
+            0 => (plan_at(&mut s, i), plan_at(&mut exact, i)),
+            _ => {
+                let b = plan_at(&mut exact, i);
+                (plan_at(&mut s, i), b)
+            }
+        };
+        evolved += usize::from(a.1.cache.refine_evolved);
+        differ.push(cut_change(&b.2, &a.2));
+        path.push(&a);
+        exact_path.push(&b);
+        path.change.push(cut_change(&before, &a.2));
+        before = a.2;
     }
     Ok(StreamerAlone {
         plan_ms: median(&plan_ms),
         refine_ms: median(&refine_ms),
         reused_share: reused as f64 / STATIC_FRAMES as f64,
-        path_plan_ms: median(&path_ms),
-        path_refine_ms: median(&path_refine),
-        path_cut_change: median(&change),
+        path_plan_ms: median(&path.plan_ms),
+        path_refine_ms: median(&path.refine_ms),
+        path_refine_ms_p99: quantile(&path.refine_ms, 0.99),
+        path_cut_change: median(&path.change),
+        path_evolved_share: evolved as f64 / frames.max(1) as f64,
+        path_exact_plan_ms: median(&exact_path.plan_ms),
+        path_exact_refine_ms: median(&exact_path.refine_ms),
+        path_exact_refine_ms_p99: quantile(&exact_path.refine_ms, 0.99),
+        path_differs_from_exact_median: median(&differ),
+        path_differs_from_exact_max: differ.iter().copied().fold(0.0, f64::max),
     })
+}
+
+/// One streamer's frames along the path.
+#[derive(Default)]
+struct PathSide {
+    plan_ms: Vec<f64>,
+    refine_ms: Vec<f64>,
+    change: Vec<f64>,
+}
+
+impl PathSide {
+    fn push(&mut self, frame: &(f64, brickray_cache::StreamStats, brickray_core::NodeSet)) {
+        self.plan_ms.push(frame.0);
+        self.refine_ms.push(frame.1.cache.phases.refine_ms);
+    }
 }
 
 /// The share of a cut that changed from the cut `before`: leaves added plus
@@ -380,14 +432,27 @@ pub(crate) struct Row {
     streamer_static_plan_ms_median: Option<f64>,
     streamer_static_refine_ms_median: Option<f64>,
     streamer_static_reused_share: Option<f64>,
-    /// The same streamer then planning every frame of the path: `plan`'s
-    /// wall time and its refine phase, ms medians, and the median share of
-    /// the cut's leaves that changed from one frame to the next (added plus
-    /// gone, over the cut): what planning that scaled with change would
-    /// revisit, where refinement revisits the whole cut. Inline rows only.
+    /// The same streamer then planning every frame of the path, evolving
+    /// its cut (`OutOfCoreConfig::evolve`): `plan`'s wall time and its
+    /// refine phase, ms medians (and the refine phase's 99th percentile),
+    /// the median share of the cut's leaves that changed from one frame to
+    /// the next (added plus gone, over the cut), and the share of frames
+    /// evolved. Inline rows only.
     streamer_path_plan_ms_median: Option<f64>,
     streamer_path_refine_ms_median: Option<f64>,
     streamer_path_cut_change_median: Option<f64>,
+    streamer_path_refine_ms_p99: Option<f64>,
+    streamer_path_evolved_share: Option<f64>,
+    /// A second streamer refining every frame of the path from the root
+    /// (`evolve: false`), planned on the same frames in alternating order:
+    /// its `plan` and refine times, and how far the evolved cut is from its
+    /// cut (leaves in one and not the other over its leaves: median and
+    /// largest over the path). Inline rows only.
+    streamer_path_exact_plan_ms_median: Option<f64>,
+    streamer_path_exact_refine_ms_median: Option<f64>,
+    streamer_path_exact_refine_ms_p99: Option<f64>,
+    streamer_path_differs_from_exact_median: Option<f64>,
+    streamer_path_differs_from_exact_max: Option<f64>,
 }
 
 /// The suite's JSON line.
@@ -468,11 +533,24 @@ pub(crate) fn run(args: &Args) -> Result<HostResult, String> {
                         100.0 * a.reused_share
                     );
                     println!(
-                        "           the same streamer along the path: plan {:.3} ms, refine {:.3} ms (medians), \
-                         {:.2}% of the cut's leaves changed per frame (median)",
+                        "           the same streamer along the path: plan {:.3} ms, refine {:.3} ms (medians; \
+                         refine p99 {:.3}), {:.2}% of the cut's leaves changed per frame (median), \
+                         {:.0}% of frames evolved",
                         a.path_plan_ms,
                         a.path_refine_ms,
-                        100.0 * a.path_cut_change
+                        a.path_refine_ms_p99,
+                        100.0 * a.path_cut_change,
+                        100.0 * a.path_evolved_share
+                    );
+                    println!(
+                        "           one refining from the root on the same frames: plan {:.3} ms, refine {:.3} ms \
+                         (medians; refine p99 {:.3}); the evolved cut differs from it by {:.2}% of its leaves \
+                         (median; {:.2}% at most)",
+                        a.path_exact_plan_ms,
+                        a.path_exact_refine_ms,
+                        a.path_exact_refine_ms_p99,
+                        100.0 * a.path_differs_from_exact_median,
+                        100.0 * a.path_differs_from_exact_max
                     );
                 }
                 rows.push(Row {
@@ -496,6 +574,23 @@ pub(crate) fn run(args: &Args) -> Result<HostResult, String> {
                     streamer_path_plan_ms_median: alone.as_ref().map(|a| a.path_plan_ms),
                     streamer_path_refine_ms_median: alone.as_ref().map(|a| a.path_refine_ms),
                     streamer_path_cut_change_median: alone.as_ref().map(|a| a.path_cut_change),
+                    streamer_path_refine_ms_p99: alone.as_ref().map(|a| a.path_refine_ms_p99),
+                    streamer_path_evolved_share: alone.as_ref().map(|a| a.path_evolved_share),
+                    streamer_path_exact_plan_ms_median: alone
+                        .as_ref()
+                        .map(|a| a.path_exact_plan_ms),
+                    streamer_path_exact_refine_ms_median: alone
+                        .as_ref()
+                        .map(|a| a.path_exact_refine_ms),
+                    streamer_path_exact_refine_ms_p99: alone
+                        .as_ref()
+                        .map(|a| a.path_exact_refine_ms_p99),
+                    streamer_path_differs_from_exact_median: alone
+                        .as_ref()
+                        .map(|a| a.path_differs_from_exact_median),
+                    streamer_path_differs_from_exact_max: alone
+                        .as_ref()
+                        .map(|a| a.path_differs_from_exact_max),
                 });
             }
         }

@@ -149,9 +149,10 @@ fn the_host_suite_runs() {
             "phases {sum} ms, planning {plan} ms: {r:?}"
         );
     }
-    // The GPU-free streamer's path: numbers in the inline unculled row, a
-    // changed share within [0, 2] (added plus gone over the cut), null in
-    // the other rows.
+    // The GPU-free streamers' path: numbers in the inline unculled row, a
+    // changed share and the evolved cut's distance from the one refined from
+    // the root within [0, 2] (added plus gone over the cut), the moving
+    // frames evolved, null in the other rows.
     for r in rows(&fig, "rows") {
         let alone =
             r["background"] == serde_json::json!(false) && r["culled"] == serde_json::json!(false);
@@ -159,6 +160,13 @@ fn the_host_suite_runs() {
             "streamer_path_plan_ms_median",
             "streamer_path_refine_ms_median",
             "streamer_path_cut_change_median",
+            "streamer_path_refine_ms_p99",
+            "streamer_path_evolved_share",
+            "streamer_path_exact_plan_ms_median",
+            "streamer_path_exact_refine_ms_median",
+            "streamer_path_exact_refine_ms_p99",
+            "streamer_path_differs_from_exact_median",
+            "streamer_path_differs_from_exact_max",
         ] {
             match alone {
                 true => assert!(r[k].as_f64().is_some_and(|v| v >= 0.0), "{k}: {r:?}"),
@@ -166,10 +174,11 @@ fn the_host_suite_runs() {
             }
         }
         if alone {
-            assert!(
-                r["streamer_path_cut_change_median"].as_f64().unwrap() <= 2.0,
-                "{r:?}"
-            );
+            let at = |k: &str| r[k].as_f64().unwrap();
+            assert!(at("streamer_path_cut_change_median") <= 2.0, "{r:?}");
+            assert!(at("streamer_path_differs_from_exact_max") <= 2.0, "{r:?}");
+            assert!(at("streamer_path_evolved_share") > 0.0, "{r:?}");
+            assert!(at("streamer_path_evolved_share") <= 1.0, "{r:?}");
         }
     }
     // No cut of 20,000 bricks ran.
