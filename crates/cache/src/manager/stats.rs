@@ -166,9 +166,11 @@ impl FrameStats {
     /// node the cut needs has failed ([`degraded`](Self::degraded) is false). A
     /// degraded image is not converged: a retry (automatic after the back-off, or
     /// [`BrickManager::retry_failed`](super::BrickManager::retry_failed)) may
-    /// still change it.
+    /// still change it. Nor is a cut evolved from the last frame's
+    /// ([`refine_evolved`](Self::refine_evolved)): the next frame of the same
+    /// view refines from the root, which may change it.
     pub fn converged(&self) -> bool {
-        self.settled() && !self.degraded()
+        self.settled() && !self.degraded() && !self.refine_evolved
     }
 
     /// True when the cut needs nodes whose metadata or brick failed.
