@@ -137,8 +137,8 @@ pub struct OutOfCoreConfig {
     /// While the view moves, refine by evolving the last frame's cut instead
     /// of rebuilding it from the root (docs/cache.md, "A moving view: the
     /// cut evolves"): on by default. Applies under
-    /// [`LodMetric::Geometric`] without lookahead, visibility feedback or
-    /// failures; a view that stops, and every
+    /// [`LodMetric::Geometric`] without lookahead or failures; a view that
+    /// stops, and every
     /// [`EVOLVED_FRAMES_MAX`](crate::EVOLVED_FRAMES_MAX)-th moving frame,
     /// are refined from the root, so the cut at convergence is the same.
     pub evolve: bool,

@@ -83,11 +83,13 @@ struct Placed {
 
 /// What [`BrickManager::refine_cut`] says of its refinement: the key it was
 /// made under (`None`: not reusable), whether it was reused or evolved from
-/// the last cut (then never reused), and the upload budget as it left it.
+/// the last cut (then never reused; `provisional`: the greedy order may
+/// give another cut), and the upload budget as it left it.
 struct Memo {
     key: Option<super::MemoKey>,
     reused: bool,
     evolved: bool,
+    provisional: bool,
     budget: UploadBudget,
 }
 
@@ -128,6 +130,7 @@ impl BrickManager {
         stats.phases = phases;
         stats.refine_reused = memo.reused;
         stats.refine_evolved = memo.evolved;
+        stats.cut_provisional = memo.provisional;
         let plan = FramePlan {
             cut: placed.cut,
             uploads: placed.uploads,
@@ -179,7 +182,7 @@ impl BrickManager {
     fn refine_cut(
         &mut self,
         input: &FrameInput<'_>,
-        filter: Option<&mut dyn SplitFilter>,
+        mut filter: Option<&mut dyn SplitFilter>,
     ) -> (Refinement, Memo) {
         let max_data_leaves = self.cut_slots();
         let max_requests = crate::refine::requests_per_frame(
@@ -237,10 +240,11 @@ impl BrickManager {
             (Some(m), Some(k)) if m.key == k => Some((m.refined.clone(), m.budget)),
             _ => None,
         };
-        let memo = |reused: bool, evolved: bool, budget: UploadBudget| Memo {
+        let memo = |reused: bool, evolved: Option<bool>, budget: UploadBudget| Memo {
             key,
             reused,
-            evolved,
+            evolved: evolved.is_some(),
+            provisional: evolved == Some(true),
             budget,
         };
         let mut budget = self.budget;
@@ -254,38 +258,39 @@ impl BrickManager {
             self.budget = kept;
             self.octants.end(&refined, &self.layout);
             self.note_cut(input.generation, &refined, false);
-            return (refined, memo(true, false, kept));
+            return (refined, memo(true, None, kept));
         }
-        let inert = filter.as_ref().is_none_or(|f| f.is_inert());
-        if let Some(refined) = self.evolved(&params, inert, &mut budget) {
+        // (A reborrow: the filter serves the refinement from the root if
+        // evolving does not apply.)
+        let reborrowed = filter.as_mut().map(|f| &mut **f as &mut dyn SplitFilter);
+        if let Some((refined, provisional)) = self.evolved(&params, reborrowed, &mut budget) {
             self.budget = budget;
             self.octants.end(&refined, &self.layout);
             self.note_cut(input.generation, &refined, true);
-            return (refined, memo(false, true, budget));
+            return (refined, memo(false, Some(provisional), budget));
         }
         let mut budget = self.budget;
         let refined = self.refine_with(&params, filter, &mut budget);
         self.budget = budget;
         self.octants.end(&refined, &self.layout);
         self.note_cut(input.generation, &refined, false);
-        (refined, memo(false, false, budget))
+        (refined, memo(false, None, budget))
     }
 
     /// The last frame's cut evolved to a moving view
     /// ([`OutOfCoreConfig::evolve`](crate::OutOfCoreConfig::evolve)), where
     /// that applies: the view changed since the last frame and the
-    /// classification did not, no failures, an `inert` visibility filter,
-    /// and fewer than [`EVOLVED_FRAMES_MAX`](super::EVOLVED_FRAMES_MAX)
-    /// frames evolved in a row. `None`: refine from the root.
+    /// classification did not, no failures, and fewer than
+    /// [`EVOLVED_FRAMES_MAX`](super::EVOLVED_FRAMES_MAX) frames evolved in a
+    /// row. `None`: refine from the root.
     fn evolved(
         &mut self,
         params: &RefineParams<'_>,
-        inert: bool,
+        filter: Option<&mut dyn SplitFilter>,
         budget: &mut UploadBudget,
-    ) -> Option<Refinement> {
+    ) -> Option<(Refinement, bool)> {
         let last = self.last_cut.as_ref()?;
         let applies = self.config.evolve
-            && inert
             && self.failures.is_empty()
             && last.generation != params.generation
             && last.class_stamp == self.class_stamp
@@ -300,7 +305,7 @@ impl BrickManager {
             failures: &self.failures,
             cpu: &mut self.cpu,
             pool: &self.pool,
-            filter: None,
+            filter,
             octants: &self.octants,
             class_stamp: self.class_stamp,
         };
@@ -624,6 +629,7 @@ impl BrickManager {
             phases: PhaseTimes::default(),
             refine_reused: false,
             refine_evolved: false,
+            cut_provisional: false,
         }
     }
 }

@@ -127,6 +127,12 @@ pub struct FrameStats {
     /// The cut was evolved from the last frame's instead of refined from
     /// the root (a moving view, [`OutOfCoreConfig::evolve`](crate::OutOfCoreConfig::evolve)).
     pub refine_evolved: bool,
+    /// The cut was evolved where the refinement from the root may give
+    /// another (the pool refused a split, a merge made room, or a split node
+    /// was kept for want of its brick): not converged, so that a still view
+    /// is refined from the root. An evolved cut that is not provisional is
+    /// the one refined from the root would give.
+    pub cut_provisional: bool,
 }
 
 /// The wall time of each phase of one [`BrickManager::update`](super::BrickManager::update),
@@ -166,11 +172,11 @@ impl FrameStats {
     /// node the cut needs has failed ([`degraded`](Self::degraded) is false). A
     /// degraded image is not converged: a retry (automatic after the back-off, or
     /// [`BrickManager::retry_failed`](super::BrickManager::retry_failed)) may
-    /// still change it. Nor is a cut evolved from the last frame's
-    /// ([`refine_evolved`](Self::refine_evolved)): the next frame of the same
-    /// view refines from the root, which may change it.
+    /// still change it. Nor is a provisional cut
+    /// ([`cut_provisional`](Self::cut_provisional)): the next frame of the
+    /// same view refines from the root, which may change it.
     pub fn converged(&self) -> bool {
-        self.settled() && !self.degraded() && !self.refine_evolved
+        self.settled() && !self.degraded() && !self.cut_provisional
     }
 
     /// True when the cut needs nodes whose metadata or brick failed.

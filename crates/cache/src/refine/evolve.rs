@@ -16,10 +16,11 @@
 //!    parent's subtree collapses into the parent, as the greedy order would
 //!    not have split the parent).
 //! 2. The split nodes are revisited from the top: one now outside the view
-//!    collapses into a culled leaf, one within the tolerance whose split
-//!    costs bricks (more than one child holds visible data) collapses into
-//!    a leaf with its own brick. Split nodes whose children are all leaves
-//!    are the candidates to merge, lowest priority first.
+//!    collapses into a culled leaf, one the visibility feedback hides now
+//!    ([`RefineEnv::may_split`]), or within the tolerance whose split costs
+//!    bricks (more than one child holds visible data), collapses into a
+//!    leaf with its own brick. Split nodes whose children are all leaves are
+//!    the candidates to merge, lowest priority first.
 //! 3. Data leaves above the tolerance (and the leaves this frame made) are
 //!    visited highest priority first exactly as the greedy order visits a
 //!    node (uniform, finest, hidden by the feedback, children pending or
@@ -129,6 +130,10 @@ struct Evolve<'p, 'a, 'e> {
     /// too little; the split queue goes down in priority, and a merge
     /// candidate added later is of a split's priority, above what follows).
     gain_below: Option<(f64, i64)>,
+    /// The cut may differ from the greedy order's: the pool refused a
+    /// split, a merge made room, or a split node was kept for want of its
+    /// brick (module docs).
+    provisional: bool,
 }
 
 /// Evolves the cut `last` (a refinement of an earlier frame under the same
@@ -137,7 +142,11 @@ struct Evolve<'p, 'a, 'e> {
 /// `last` waited for metadata or bricks, so the leaves within the tolerance
 /// are visited again, as the greedy order visits them every frame (a split
 /// that costs no brick may have become known, or may request what it
-/// waits for). `None` where it does not apply (module docs).
+/// waits for). With the refinement, whether it is provisional: the pool
+/// refused a split, a merge made room or a split node was kept for want of
+/// its brick, so the greedy order may give another cut (where it is not,
+/// the greedy order's cut is this one). `None` where it does not apply
+/// (module docs).
 pub(crate) fn evolve(
     layout: &OctreeLayout,
     params: &RefineParams<'_>,
@@ -145,7 +154,7 @@ pub(crate) fn evolve(
     budget: &mut UploadBudget,
     last: &[RefinedLeaf],
     recheck_within: bool,
-) -> Option<Refinement> {
+) -> Option<(Refinement, bool)> {
     if !matches!(params.metric, LodMetric::Geometric) || params.lookahead || last.is_empty() {
         return None;
     }
@@ -165,6 +174,7 @@ pub(crate) fn evolve(
         out: Refinement::default(),
         prefetched: 0,
         gain_below: None,
+        provisional: false,
     };
     e.cut.reserve(last.len() + last.len() / 8);
     for l in last {
@@ -189,7 +199,8 @@ pub(crate) fn evolve(
     e.revisit_splits().ok()?;
     e.split_and_merge();
     e.make_room().ok()?;
-    e.finish(last).ok()
+    let provisional = e.provisional;
+    e.finish(last).ok().map(|r| (r, provisional))
 }
 
 impl Evolve<'_, '_, '_> {
@@ -407,6 +418,22 @@ impl Evolve<'_, '_, '_> {
                 continue;
             }
             let p = self.priority(key);
+            // Hidden by the feedback (`RefineEnv::may_split`): a leaf at its
+            // level, visited as one (and counted) in step 3.
+            if !self.env.may_split(key) {
+                match self.take_brick(key) {
+                    true => {
+                        self.remove_under(key);
+                        self.insert(key, NodeClass::Data, p);
+                        self.splits.push(Candidate { priority: p, key });
+                    }
+                    false => {
+                        self.provisional = true;
+                        self.request_own(key, p);
+                    }
+                }
+                continue;
+            }
             if p <= self.threshold && !self.costs_no_brick(key) {
                 match self.take_brick(key) {
                     true => {
@@ -415,7 +442,10 @@ impl Evolve<'_, '_, '_> {
                     }
                     // Kept split (finer than the rule asks) until its brick
                     // arrives.
-                    false => self.request_own(key, p),
+                    false => {
+                        self.provisional = true;
+                        self.request_own(key, p);
+                    }
                 }
                 continue;
             }
@@ -632,6 +662,7 @@ impl Evolve<'_, '_, '_> {
             self.out.blocked.pool_full += 1;
             self.prefetched = self.prefetched.saturating_add(prefetch);
             *balanced = true;
+            self.provisional = true;
             return;
         }
         let bytes = self.params.brick_upload_bytes;
@@ -640,6 +671,7 @@ impl Evolve<'_, '_, '_> {
         let release = if charged { bytes } else { 0 };
         if uploads > 0 && !self.budget.try_exchange(release, uploads * bytes) {
             self.out.blocked.upload_budget += 1;
+            self.provisional = true;
             return;
         }
         if charged {
@@ -708,6 +740,7 @@ impl Evolve<'_, '_, '_> {
             taken.push(m);
         }
         if gain >= need {
+            self.provisional = true;
             for m in taken.drain(..) {
                 if !self.merge(m.key) {
                     kept.push(m);
@@ -746,6 +779,7 @@ impl Evolve<'_, '_, '_> {
     /// or leaves came into view) merges its lowest candidates until it fits.
     fn make_room(&mut self) -> Result<(), GiveUp> {
         while self.room() < 0 {
+            self.provisional = true;
             let Reverse(m) = self.merges.pop().ok_or(GiveUp)?;
             self.merge(m.key);
         }

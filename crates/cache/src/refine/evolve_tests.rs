@@ -7,13 +7,19 @@ use glam::Vec3;
 use proptest::prelude::*;
 
 /// The ball's metadata, every brick of levels up to `loaded` on the GPU
-/// and the deeper ones missing.
+/// and the deeper ones missing; the nodes under `hidden` may not split (as
+/// the visibility feedback hides them).
 struct Loaded {
     layout: OctreeLayout,
     loaded: u8,
+    hidden: Option<NodeKey>,
 }
 
 impl RefineEnv for Loaded {
+    fn may_split(&mut self, key: NodeKey) -> bool {
+        self.hidden
+            .is_none_or(|h| !std::iter::successors(Some(key), |p| p.parent()).any(|p| p == h))
+    }
     fn node(&mut self, key: NodeKey) -> MetaState {
         MetaState::Known(ball_info(&self.layout, key).into())
     }
@@ -69,7 +75,7 @@ impl Scene {
     fn evolved(&self, cam: &Camera, env: &mut dyn RefineEnv, last: &Refinement) -> Refinement {
         let views = self.views(cam);
         let waiting = last.blocked.missing_data + last.blocked.missing_meta > 0;
-        evolve(
+        let (r, provisional) = evolve(
             &self.layout,
             &self.params(&views),
             env,
@@ -77,7 +83,11 @@ impl Scene {
             &last.leaves,
             waiting,
         )
-        .expect("the last cut can be evolved")
+        .expect("the last cut can be evolved");
+        // Where the tolerance binds (an unbounded pool and upload budget),
+        // never provisional: the greedy order's cut.
+        assert!(self.slots != u32::MAX || !provisional);
+        r
     }
 }
 
@@ -110,6 +120,13 @@ fn mode() -> impl Strategy<Value = RenderMode> {
             color: [1.0; 3]
         }),
     ]
+}
+
+/// A node whose subtree the feedback hides (or none): the root, or one 1-3
+/// levels down.
+fn hidden() -> impl Strategy<Value = Option<NodeKey>> {
+    prop::option::of(prop::collection::vec(0u8..8, 0..4))
+        .prop_map(|path| path.map(|p| p.iter().fold(NodeKey::ROOT, |k, &i| k.child(i))))
 }
 
 /// A camera path: a start orbit and four small moves of it (turns, a dolly
@@ -151,8 +168,9 @@ proptest! {
     /// Where the tolerance binds before the pool and the upload budget, each
     /// frame of a camera path evolved from the last is the greedy order's
     /// cut, leaf for leaf (class, priority, upload), with the same requests
-    /// and the same refusals, including with the deeper bricks missing and
-    /// after a jump.
+    /// and the same refusals, including with the deeper bricks missing,
+    /// after a jump, and with a subtree the feedback hides that changes
+    /// from frame to frame.
     #[test]
     fn where_the_tolerance_binds_the_evolved_cut_is_the_greedy_one(
         cams in path(),
@@ -160,6 +178,7 @@ proptest! {
         tolerance in 0.5f32..4.0,
         dim in prop_oneof![Just(40u32), Just(64), Just(100)],
         loaded in 1u8..8,
+        hidden in prop::collection::vec(hidden(), 6),
     ) {
         let scene = Scene {
             layout: ball_layout(dim),
@@ -169,9 +188,10 @@ proptest! {
             tolerance,
             slots: u32::MAX,
         };
-        let mut env = Loaded { layout: scene.layout.clone(), loaded };
+        let mut env = Loaded { layout: scene.layout.clone(), loaded, hidden: hidden[0] };
         let mut last = scene.greedy(&cams[0], &mut env);
-        for cam in &cams[1..] {
+        for (cam, hidden) in cams[1..].iter().zip(&hidden[1..]) {
+            env.hidden = *hidden;
             let greedy = scene.greedy(cam, &mut env);
             let evolved = scene.evolved(cam, &mut env, &last);
             assert_exact_cover(&tests::keys(&evolved), scene.layout.levels);
@@ -219,6 +239,7 @@ fn where_the_pool_binds_the_evolved_cut_stays_near_the_greedy_one() {
         let mut env = Loaded {
             layout: scene.layout.clone(),
             loaded: u8::MAX,
+            hidden: None,
         };
         let cam = |i: usize| Camera::orbit(Vec3::ZERO, 1.4, 0.5 + step * i as f32, 0.3);
         let mut last = scene.greedy(&cam(0), &mut env);
