@@ -300,16 +300,9 @@ impl BrickManager {
         }
         let recheck = last.waiting || last.meta != self.meta.changes();
         let leaves = std::mem::take(&mut self.last_cut.as_mut()?.leaves);
-        let mut env = Env {
-            meta: &self.meta,
-            failures: &self.failures,
-            cpu: &mut self.cpu,
-            pool: &self.pool,
-            filter,
-            octants: &self.octants,
-            class_stamp: self.class_stamp,
-        };
-        crate::refine::evolve(&self.layout, params, &mut env, budget, &leaves, recheck)
+        self.with_env(filter, |layout, env| {
+            crate::refine::evolve(layout, params, env, budget, &leaves, recheck)
+        })
     }
 
     /// Keeps `refined` as the cut the next frame may evolve.
@@ -338,6 +331,15 @@ impl BrickManager {
         filter: Option<&mut dyn SplitFilter>,
         budget: &mut UploadBudget,
     ) -> Refinement {
+        self.with_env(filter, |layout, env| refine(layout, params, env, budget))
+    }
+
+    /// Runs `f` over refinement's view of the caches (never the source).
+    fn with_env<R>(
+        &mut self,
+        filter: Option<&mut dyn SplitFilter>,
+        f: impl FnOnce(&brickray_core::OctreeLayout, &mut dyn crate::refine::RefineEnv) -> R,
+    ) -> R {
         let mut env = Env {
             meta: &self.meta,
             failures: &self.failures,
@@ -347,7 +349,7 @@ impl BrickManager {
             octants: &self.octants,
             class_stamp: self.class_stamp,
         };
-        refine(&self.layout, params, &mut env, budget)
+        f(&self.layout, &mut env)
     }
 
     /// Phase 3: the displayed cut, the refined one with level changes fading

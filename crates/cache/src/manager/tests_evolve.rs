@@ -107,19 +107,20 @@ fn evolve_then_stop(config: OutOfCoreConfig, dim: u32, hide: Option<NodeKey>) ->
     provisional
 }
 
+/// Budgets that hold every brick of the test volume: the tolerance binds.
+fn ample() -> OutOfCoreConfig {
+    OutOfCoreConfig {
+        gpu_budget_bytes: 16 << 20,
+        cpu_budget_bytes: 32 << 20,
+        ..config()
+    }
+}
+
 #[test]
 fn a_moving_view_evolves_and_a_still_one_converges_to_the_same_cut_where_the_tolerance_binds() {
     // (Where the tolerance binds an evolved cut is the greedy one: never
     // provisional.)
-    let provisional = evolve_then_stop(
-        OutOfCoreConfig {
-            gpu_budget_bytes: 16 << 20,
-            cpu_budget_bytes: 32 << 20,
-            ..config()
-        },
-        64,
-        None,
-    );
+    let provisional = evolve_then_stop(ample(), 64, None);
     assert_eq!(provisional, 0);
 }
 
@@ -141,14 +142,6 @@ fn a_moving_view_evolves_and_a_still_one_converges_to_the_same_cut_where_the_poo
 /// (the octant the camera looks at: what it held split collapses).
 #[test]
 fn a_moving_view_evolves_under_visibility_feedback_and_converges_to_the_same_cut() {
-    let provisional = evolve_then_stop(
-        OutOfCoreConfig {
-            gpu_budget_bytes: 16 << 20,
-            cpu_budget_bytes: 32 << 20,
-            ..config()
-        },
-        64,
-        Some(NodeKey::ROOT.child(7)),
-    );
+    let provisional = evolve_then_stop(ample(), 64, Some(NodeKey::ROOT.child(7)));
     assert_eq!(provisional, 0);
 }

@@ -48,10 +48,11 @@
 //! no longer available, a collapse whose node has no brick): the caller then
 //! refines from the root.
 
-use super::rank::{Classified, UNCLASSIFIED, Unknown, classify, known_info, visible_under};
+use super::rank::{Classified, Unknown, classify, known_info, visible_under};
+use super::split::{ChildBricks, known_children, request_meta};
 use super::{
-    DataState, LoadRequest, MAX_META_REQUESTS_PER_FRAME, MetaClass, NodeClass, RefineEnv,
-    RefineParams, RefinedLeaf, Refinement, empty_leaf,
+    DataState, LoadRequest, MetaClass, NodeClass, RefineEnv, RefineParams, RefinedLeaf, Refinement,
+    empty_leaf,
 };
 use crate::upload::UploadBudget;
 use brickray_core::{EmptyReason, LodMetric, NodeKey, NodeMap, NodeSet, OctreeLayout};
@@ -208,6 +209,18 @@ impl Evolve<'_, '_, '_> {
         self.params.views.culled(key)
     }
 
+    /// `key`'s class under this frame's views, without its metadata.
+    fn classify(&mut self, key: NodeKey) -> Result<Classified, Unknown> {
+        classify(
+            key,
+            self.layout,
+            self.params,
+            self.params.views,
+            self.env,
+            false,
+        )
+    }
+
     fn priority(&self, key: NodeKey) -> f64 {
         self.params.views.voxel_pixels(key)
     }
@@ -292,14 +305,7 @@ impl Evolve<'_, '_, '_> {
                     }
                 }
                 NodeClass::Empty(EmptyReason::Culled) if !self.culled(key) => {
-                    match classify(
-                        key,
-                        self.layout,
-                        self.params,
-                        self.params.views,
-                        self.env,
-                        false,
-                    ) {
+                    match self.classify(key) {
                         Ok(Classified {
                             class: NodeClass::Data,
                             ..
@@ -355,15 +361,7 @@ impl Evolve<'_, '_, '_> {
     /// Collapses the inner node `key` into a leaf with its brick (which must
     /// be available; else the frame goes back to the greedy order).
     fn collapse_to_data(&mut self, key: NodeKey) -> Result<(), GiveUp> {
-        let class = classify(
-            key,
-            self.layout,
-            self.params,
-            self.params.views,
-            self.env,
-            false,
-        )
-        .map_err(|_| GiveUp)?;
+        let class = self.classify(key).map_err(|_| GiveUp)?;
         if class.class != NodeClass::Data || !self.take_brick(key) {
             return Err(GiveUp);
         }
@@ -421,32 +419,11 @@ impl Evolve<'_, '_, '_> {
             // Hidden by the feedback (`RefineEnv::may_split`): a leaf at its
             // level, visited as one (and counted) in step 3.
             if !self.env.may_split(key) {
-                match self.take_brick(key) {
-                    true => {
-                        self.remove_under(key);
-                        self.insert(key, NodeClass::Data, p);
-                        self.splits.push(Candidate { priority: p, key });
-                    }
-                    false => {
-                        self.provisional = true;
-                        self.request_own(key, p);
-                    }
-                }
+                self.collapse_or_keep(key, p, true);
                 continue;
             }
-            if p <= self.threshold && !self.costs_no_brick(key) {
-                match self.take_brick(key) {
-                    true => {
-                        self.remove_under(key);
-                        self.insert(key, NodeClass::Data, p);
-                    }
-                    // Kept split (finer than the rule asks) until its brick
-                    // arrives.
-                    false => {
-                        self.provisional = true;
-                        self.request_own(key, p);
-                    }
-                }
+            if p <= self.threshold && !self.costs_no_brick(key, None) {
+                self.collapse_or_keep(key, p, false);
                 continue;
             }
             if leaf_children as usize == self.layout.children(key).len() {
@@ -454,6 +431,23 @@ impl Evolve<'_, '_, '_> {
             }
         }
         Ok(())
+    }
+
+    /// Collapses the split node `key` (of priority `p`) into a leaf with
+    /// its brick (to be `visited` in step 3: a node the feedback hides is
+    /// counted there), or, while that brick is not available, keeps it
+    /// split (finer than the rule asks: provisional) and requests it.
+    fn collapse_or_keep(&mut self, key: NodeKey, p: f64, visited: bool) {
+        if !self.take_brick(key) {
+            self.provisional = true;
+            self.request_own(key, p);
+            return;
+        }
+        self.remove_under(key);
+        self.insert(key, NodeClass::Data, p);
+        if visited {
+            self.splits.push(Candidate { priority: p, key });
+        }
     }
 
     /// Requests `key`'s own brick where it is missing.
@@ -480,10 +474,12 @@ impl Evolve<'_, '_, '_> {
 
     /// Within the tolerance a node splits only when the split costs no
     /// brick: at most one child holds visible data by its metadata (the
-    /// greedy order's rule; pending children count as costing one).
-    fn costs_no_brick(&mut self, key: NodeKey) -> bool {
+    /// greedy order's rule). A child whose metadata is pending or failed
+    /// leaves that unknown (false); with `request_at`, pending metadata is
+    /// asked for at that priority when only it is in the way.
+    fn costs_no_brick(&mut self, key: NodeKey, request_at: Option<f64>) -> bool {
         let visible = visible_under(self.params, self.layout);
-        let mut data = 0;
+        let (mut data, mut failed, mut pending) = (0, false, Vec::new());
         for &c in &self.layout.children(key) {
             if !self.layout.in_volume(c) {
                 continue;
@@ -491,21 +487,19 @@ impl Evolve<'_, '_, '_> {
             match self.env.meta_class(c, &visible) {
                 MetaClass::Empty | MetaClass::Invisible => {}
                 MetaClass::Data { .. } => data += 1,
-                MetaClass::Pending | MetaClass::Failed => return false,
+                MetaClass::Pending => pending.push(c),
+                MetaClass::Failed => failed = true,
             }
             if data > 1 {
                 return false;
             }
         }
-        true
-    }
-
-    fn request_meta(&mut self, keys: &[NodeKey], priority: f64) {
-        for &c in keys {
-            if self.out.meta_requests.len() < MAX_META_REQUESTS_PER_FRAME as usize {
-                self.out.meta_requests.push((c, priority as f32));
-            }
+        if let Some(p) = request_at
+            && !failed
+        {
+            request_meta(&mut self.out, &pending, p);
         }
+        !failed && pending.is_empty()
     }
 
     /// Step 3 (module docs): the split queue against the merge queue.
@@ -548,70 +542,17 @@ impl Evolve<'_, '_, '_> {
                 }
                 continue;
             }
-            if within && !self.within_may_split(key, p) {
+            if within && !self.costs_no_brick(key, Some(p)) {
                 continue;
             }
-            if let Some(classes) = self.children(key, p) {
+            let children = self.layout.children(key);
+            let (layout, params) = (self.layout, self.params);
+            let known =
+                known_children(&children, layout, params, self.env, false, p, &mut self.out);
+            if let Some(classes) = known {
                 self.split(key, p, &classes, &mut balanced);
             }
         }
-    }
-
-    /// The greedy order's test of a node within the tolerance: true when its
-    /// split costs no brick; its children's missing metadata is asked for
-    /// when only that is in the way.
-    fn within_may_split(&mut self, key: NodeKey, p: f64) -> bool {
-        let visible = visible_under(self.params, self.layout);
-        let (mut data, mut failed, mut pending) = (0, false, Vec::new());
-        for &c in &self.layout.children(key) {
-            if !self.layout.in_volume(c) {
-                continue;
-            }
-            match self.env.meta_class(c, &visible) {
-                MetaClass::Empty | MetaClass::Invisible => {}
-                MetaClass::Data { .. } => data += 1,
-                MetaClass::Pending => pending.push(c),
-                MetaClass::Failed => failed = true,
-            }
-            if data > 1 {
-                return false;
-            }
-        }
-        if !failed && !pending.is_empty() {
-            self.request_meta(&pending, p);
-        }
-        !failed && pending.is_empty()
-    }
-
-    /// The classes of `key`'s children, or `None` (counted, and pending
-    /// metadata requested) while one is unknown.
-    fn children(&mut self, key: NodeKey, p: f64) -> Option<[Classified; 8]> {
-        let mut classes = [UNCLASSIFIED; 8];
-        let (mut pending, mut failed) = (Vec::new(), 0u32);
-        for (i, &c) in self.layout.children(key).iter().enumerate() {
-            match classify(
-                c,
-                self.layout,
-                self.params,
-                self.params.views,
-                self.env,
-                false,
-            ) {
-                Ok(cl) => classes[i] = cl,
-                Err(Unknown::Pending) => pending.push(c),
-                Err(Unknown::Failed) => failed += 1,
-            }
-        }
-        if failed > 0 {
-            self.out.blocked.failed += 1;
-            self.out.failed_needed += failed;
-        } else if !pending.is_empty() {
-            self.request_meta(&pending, p);
-            self.out.blocked.missing_meta += 1;
-        } else {
-            return Some(classes);
-        }
-        None
     }
 
     /// Splits the data leaf `key` when its children's bricks are available
@@ -620,43 +561,22 @@ impl Evolve<'_, '_, '_> {
     /// `balanced` is set once a split found no room.
     fn split(&mut self, key: NodeKey, p: f64, classes: &[Classified; 8], balanced: &mut bool) {
         let children = self.layout.children(key);
-        let (mut data, mut states, mut n) = ([0usize; 8], [DataState::Missing; 8], 0);
-        for i in 0..children.len() {
-            if classes[i].class == NodeClass::Data {
-                data[n] = i;
-                states[n] = self.data(children[i]);
-                n += 1;
-            }
-        }
-        let (data, states) = (&data[..n], &states[..n]);
-        let prefetch = match self.room() < NEARLY_FULL {
-            true => states.iter().filter(|s| **s != DataState::OnGpu).count() as u32,
-            false => 0,
-        };
-        let failed = states.iter().filter(|s| **s == DataState::Failed).count() as u32;
+        let bricks = ChildBricks::of(&children, classes, |c| self.data(c));
+        let prefetch = bricks.prefetch(self.room() < NEARLY_FULL);
+        let failed = bricks.count(DataState::Failed);
         if failed > 0 {
             self.out.blocked.failed += 1;
             self.out.failed_needed += failed;
             return;
         }
-        if states.contains(&DataState::Missing) {
+        if bricks.count(DataState::Missing) > 0 {
             let order = p * self.env.request_weight(key) * self.params.views.centre_weight(key);
-            for (&i, s) in data.iter().zip(states) {
-                if *s != DataState::Missing {
-                    continue;
-                }
-                if let Some(info) = known_info(self.env, children[i]) {
-                    self.out.requests.push(LoadRequest {
-                        key: children[i],
-                        priority: order as f32,
-                        info,
-                    });
-                }
-            }
+            bricks.request_missing(&children, classes, order, self.env, &mut self.out);
             self.out.blocked.missing_data += 1;
             self.prefetched = self.prefetched.saturating_add(prefetch);
             return;
         }
+        let data = bricks.data();
         let cost = data.len() as i64 - 1;
         if self.room() < cost && !self.merge_for(key, p, cost) {
             self.out.blocked.pool_full += 1;
@@ -666,7 +586,7 @@ impl Evolve<'_, '_, '_> {
             return;
         }
         let bytes = self.params.brick_upload_bytes;
-        let uploads = states.iter().filter(|s| **s == DataState::InCpu).count() as u64;
+        let uploads = bricks.count(DataState::InCpu) as u64;
         let charged = self.charged.contains(&key);
         let release = if charged { bytes } else { 0 };
         if uploads > 0 && !self.budget.try_exchange(release, uploads * bytes) {
@@ -682,7 +602,7 @@ impl Evolve<'_, '_, '_> {
         }
         self.cut.remove(&key);
         self.data_leaves -= 1;
-        let mut state = states.iter();
+        let mut state = bricks.states().iter();
         for (i, &c) in children.iter().enumerate() {
             match classes[i].class {
                 NodeClass::Data => {

@@ -9,12 +9,13 @@
 //! them; [`finish`](Greedy::finish) turns what stayed into leaves.
 
 use super::rank::{
-    Classified, HeapItem, ScreenError, UNCLASSIFIED, Unknown, classify, classify_children,
-    known_info, visible_under,
+    Classified, HeapItem, ScreenError, Unknown, classify, classify_children, known_info,
+    visible_under,
 };
+use super::split::{ChildBricks, known_children, request_meta};
 use super::{
-    DataState, LoadRequest, MAX_META_REQUESTS_PER_FRAME, MetaClass, NodeClass, RefineEnv,
-    RefineParams, RefinedLeaf, Refinement, empty_leaf, unknown_root,
+    DataState, LoadRequest, MetaClass, NodeClass, RefineEnv, RefineParams, RefinedLeaf, Refinement,
+    empty_leaf, unknown_root,
 };
 use crate::upload::UploadBudget;
 use brickray_core::{EmptyReason, NodeKey, OctreeLayout};
@@ -332,12 +333,7 @@ impl<'p, 'a, 'e> Greedy<'p, 'a, 'e> {
     }
 
     fn request_meta(&mut self, keys: &[NodeKey], priority: f64) {
-        let max = MAX_META_REQUESTS_PER_FRAME as usize;
-        for &c in keys {
-            if self.out.meta_requests.len() < max {
-                self.out.meta_requests.push((c, priority as f32));
-            }
-        }
+        request_meta(&mut self.out, keys, priority);
     }
 
     /// The children's classification (a node ranked per brick has it
@@ -347,34 +343,20 @@ impl<'p, 'a, 'e> Greedy<'p, 'a, 'e> {
         if let Some(i) = item.classified {
             return Some(self.arena[i as usize].clone());
         }
-        let mut classes = [UNCLASSIFIED; 8];
-        let (mut pending, mut failed) = (Vec::new(), 0u32);
-        for (i, &c) in children.iter().enumerate() {
-            let with_info = self.screen.needs_info();
-            match classify(
-                c,
-                self.layout,
-                self.params,
-                self.params.views,
-                self.env,
-                with_info,
-            ) {
-                Ok(cl) => classes[i] = cl,
-                Err(Unknown::Pending) => pending.push(c),
-                Err(Unknown::Failed) => failed += 1,
-            }
+        let with_info = self.screen.needs_info();
+        let classes = known_children(
+            children,
+            self.layout,
+            self.params,
+            self.env,
+            with_info,
+            item.priority,
+            &mut self.out,
+        );
+        if classes.is_none() {
+            self.finals.push((item.key, item.priority));
         }
-        if failed > 0 {
-            self.out.blocked.failed += 1;
-            self.out.failed_needed += failed;
-        } else if !pending.is_empty() {
-            self.request_meta(&pending, item.priority);
-            self.out.blocked.missing_meta += 1;
-        } else {
-            return Some(classes);
-        }
-        self.finals.push((item.key, item.priority));
-        None
+        classes
     }
 
     /// Splits `item` when its data children's bricks are available (else
@@ -383,50 +365,22 @@ impl<'p, 'a, 'e> Greedy<'p, 'a, 'e> {
     /// those not on the GPU; the children join the heap.
     fn split(&mut self, item: HeapItem, children: &[NodeKey], classes: &[Classified; 8]) {
         let (key, priority) = (item.key, item.priority);
-        // The data children and where their bricks are (at most eight: on
-        // the stack, as refinement visits tens of thousands of nodes a frame).
-        let (mut data, mut states, mut n) = ([0usize; 8], [DataState::Missing; 8], 0);
-        for i in 0..children.len() {
-            if classes[i].class == NodeClass::Data {
-                data[n] = i;
-                states[n] = self.env.data(children[i]);
-                n += 1;
-            }
-        }
-        let (data, states) = (&data[..n], &states[..n]);
+        let env = &mut *self.env;
+        let bricks = ChildBricks::of(children, classes, |c| env.data(c));
         // What this node prefetches if its split waits or does not fit.
-        let prefetch = match self.room() < NEARLY_FULL {
-            true => states.iter().filter(|s| **s != DataState::OnGpu).count() as u32,
-            false => 0,
-        };
-        let failed = states.iter().filter(|s| **s == DataState::Failed).count() as u32;
+        let prefetch = bricks.prefetch(self.room() < NEARLY_FULL);
+        let failed = bricks.count(DataState::Failed);
         if failed > 0 {
             self.out.blocked.failed += 1;
             self.out.failed_needed += failed;
             self.finals.push((key, priority));
             return;
         }
-        let missing = data
-            .iter()
-            .zip(states)
-            .filter(|(_, s)| **s == DataState::Missing)
-            .map(|(i, _)| *i);
-        if states.contains(&DataState::Missing) {
+        let data = bricks.data();
+        if bricks.count(DataState::Missing) > 0 {
             let order =
                 priority * self.env.request_weight(key) * self.params.views.centre_weight(key);
-            for i in missing {
-                let info = match &classes[i].info {
-                    Some(info) => Some(info.clone()),
-                    None => known_info(self.env, children[i]),
-                };
-                if let Some(info) = info {
-                    self.out.requests.push(LoadRequest {
-                        key: children[i],
-                        priority: order as f32,
-                        info,
-                    });
-                }
-            }
+            bricks.request_missing(children, classes, order, self.env, &mut self.out);
             self.out.blocked.missing_data += 1;
             self.prefetched = self.prefetched.saturating_add(prefetch);
             self.finals.push((key, priority));
@@ -444,7 +398,7 @@ impl<'p, 'a, 'e> Greedy<'p, 'a, 'e> {
         }
         // A split node charged at its parent's split is not uploaded after all.
         let brick_bytes = self.params.brick_upload_bytes;
-        let uploads = states.iter().filter(|s| **s == DataState::InCpu).count() as u64;
+        let uploads = bricks.count(DataState::InCpu) as u64;
         let release = if item.charged { brick_bytes } else { 0 };
         if uploads > 0 && !self.budget.try_exchange(release, uploads * brick_bytes) {
             self.deferred.push(item);
@@ -455,7 +409,7 @@ impl<'p, 'a, 'e> Greedy<'p, 'a, 'e> {
         if uploads == 0 && item.charged {
             self.budget.release(brick_bytes);
         }
-        let mut state = states.iter();
+        let mut state = bricks.states().iter();
         for (i, &c) in children.iter().enumerate() {
             match classes[i].class {
                 NodeClass::Empty(r) => self.out.leaves.push(empty_leaf(c, r)),

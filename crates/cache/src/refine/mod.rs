@@ -60,6 +60,7 @@ pub use octant::{MAX_DEMOTIONS, OCTANT_HYSTERESIS, OctantMemory};
 mod rank;
 #[cfg(test)]
 mod retry_tests;
+mod split;
 #[cfg(test)]
 pub(crate) mod tests;
 
