@@ -226,16 +226,16 @@ impl BrickManager {
         // Reusable only where refinement reads nothing but the key: an inert
         // filter, no visible weights, no failures (whose retries come due
         // with time).
-        let key = (filter.as_ref().is_none_or(|f| f.is_inert())
-            && !self.config.lod_metric.uses_visible_weights()
-            && self.failures.is_empty())
-        .then(|| super::MemoKey {
-            generation: input.generation,
-            class_stamp: self.class_stamp,
-            meta: self.meta.changes(),
-            cpu: self.cpu.changes(),
-            pool: self.pool.changes(),
-        });
+        let inert = filter.as_ref().is_none_or(|f| f.is_inert());
+        let key =
+            (inert && !self.config.lod_metric.uses_visible_weights() && self.failures.is_empty())
+                .then(|| super::MemoKey {
+                    generation: input.generation,
+                    class_stamp: self.class_stamp,
+                    meta: self.meta.changes(),
+                    cpu: self.cpu.changes(),
+                    pool: self.pool.changes(),
+                });
         let reused = match (&self.refine_memo, key) {
             (Some(m), Some(k)) if m.key == k => Some((m.refined.clone(), m.budget)),
             _ => None,
@@ -257,23 +257,24 @@ impl BrickManager {
             }
             self.budget = kept;
             self.octants.end(&refined, &self.layout);
-            self.note_cut(input.generation, &refined, false);
+            self.note_cut(input.generation, &refined, false, inert);
             return (refined, memo(true, None, kept));
         }
         // (A reborrow: the filter serves the refinement from the root if
         // evolving does not apply.)
         let reborrowed = filter.as_mut().map(|f| &mut **f as &mut dyn SplitFilter);
-        if let Some((refined, provisional)) = self.evolved(&params, reborrowed, &mut budget) {
+        if let Some((refined, provisional)) = self.evolved(&params, reborrowed, inert, &mut budget)
+        {
             self.budget = budget;
             self.octants.end(&refined, &self.layout);
-            self.note_cut(input.generation, &refined, true);
+            self.note_cut(input.generation, &refined, true, inert);
             return (refined, memo(false, Some(provisional), budget));
         }
         let mut budget = self.budget;
         let refined = self.refine_with(&params, filter, &mut budget);
         self.budget = budget;
         self.octants.end(&refined, &self.layout);
-        self.note_cut(input.generation, &refined, false);
+        self.note_cut(input.generation, &refined, false, inert);
         (refined, memo(false, None, budget))
     }
 
@@ -287,6 +288,7 @@ impl BrickManager {
         &mut self,
         params: &RefineParams<'_>,
         filter: Option<&mut dyn SplitFilter>,
+        inert: bool,
         budget: &mut UploadBudget,
     ) -> Option<(Refinement, bool)> {
         let last = self.last_cut.as_ref()?;
@@ -298,7 +300,11 @@ impl BrickManager {
         if !applies {
             return None;
         }
-        let recheck = last.waiting || last.meta != self.meta.changes();
+        // The leaves within the tolerance are visited again (as the greedy
+        // order visits every leaf) where what kept one a leaf may have
+        // changed: a split waited, metadata arrived, or the feedback hid
+        // nodes in that frame or hides some in this one.
+        let recheck = last.waiting || last.meta != self.meta.changes() || !(inert && last.inert);
         let leaves = std::mem::take(&mut self.last_cut.as_mut()?.leaves);
         self.with_env(filter, |layout, env| {
             crate::refine::evolve(layout, params, env, budget, &leaves, recheck)
@@ -306,7 +312,7 @@ impl BrickManager {
     }
 
     /// Keeps `refined` as the cut the next frame may evolve.
-    fn note_cut(&mut self, generation: u64, refined: &Refinement, evolved: bool) {
+    fn note_cut(&mut self, generation: u64, refined: &Refinement, evolved: bool, inert: bool) {
         let evolved = match (evolved, &self.last_cut) {
             (true, Some(l)) => l.evolved + 1,
             _ => 0,
@@ -319,7 +325,11 @@ impl BrickManager {
             class_stamp: self.class_stamp,
             meta: self.meta.changes(),
             leaves,
-            waiting: refined.blocked.missing_data + refined.blocked.missing_meta > 0,
+            waiting: refined.blocked.missing_data
+                + refined.blocked.missing_meta
+                + refined.blocked.upload_budget
+                > 0,
+            inert,
             evolved,
         });
     }

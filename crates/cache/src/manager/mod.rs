@@ -114,8 +114,10 @@ struct LastCut {
     /// The metadata cache's change count when it was refined.
     meta: u64,
     leaves: Vec<crate::refine::RefinedLeaf>,
-    /// A split waited for metadata or bricks.
+    /// A split waited for metadata, bricks or upload budget.
     waiting: bool,
+    /// The visibility filter was inert (hid nothing).
+    inert: bool,
     /// Frames evolved in a row up to it (0: refined from the root).
     evolved: u32,
 }

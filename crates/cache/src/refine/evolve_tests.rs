@@ -72,9 +72,19 @@ impl Scene {
         )
     }
 
-    fn evolved(&self, cam: &Camera, env: &mut dyn RefineEnv, last: &Refinement) -> Refinement {
+    /// `last` evolved to `cam`; `hiding`: the feedback hid nodes in the
+    /// last frame or hides some in this one (so the leaves within the
+    /// tolerance are visited again, as the manager does).
+    fn evolved(
+        &self,
+        cam: &Camera,
+        env: &mut dyn RefineEnv,
+        last: &Refinement,
+        hiding: bool,
+    ) -> Refinement {
         let views = self.views(cam);
-        let waiting = last.blocked.missing_data + last.blocked.missing_meta > 0;
+        let b = &last.blocked;
+        let waiting = b.missing_data + b.missing_meta + b.upload_budget > 0 || hiding;
         let (r, provisional) = evolve(
             &self.layout,
             &self.params(&views),
@@ -191,9 +201,10 @@ proptest! {
         let mut env = Loaded { layout: scene.layout.clone(), loaded, hidden: hidden[0] };
         let mut last = scene.greedy(&cams[0], &mut env);
         for (cam, hidden) in cams[1..].iter().zip(&hidden[1..]) {
+            let hiding = env.hidden.is_some() || hidden.is_some();
             env.hidden = *hidden;
             let greedy = scene.greedy(cam, &mut env);
-            let evolved = scene.evolved(cam, &mut env, &last);
+            let evolved = scene.evolved(cam, &mut env, &last, hiding);
             assert_exact_cover(&tests::keys(&evolved), scene.layout.levels);
             prop_assert_eq!(sorted_leaves(&evolved), sorted_leaves(&greedy));
             prop_assert_eq!(sorted_requests(&evolved), sorted_requests(&greedy));
@@ -245,7 +256,7 @@ fn where_the_pool_binds_the_evolved_cut_stays_near_the_greedy_one() {
         let mut last = scene.greedy(&cam(0), &mut env);
         for i in 1..=30 {
             let greedy = scene.greedy(&cam(i), &mut env);
-            let evolved = scene.evolved(&cam(i), &mut env, &last);
+            let evolved = scene.evolved(&cam(i), &mut env, &last, false);
             assert_exact_cover(&tests::keys(&evolved), scene.layout.levels);
             assert!(evolved.data_leaves <= slots);
             assert!(
