@@ -13,7 +13,10 @@
 //! and lavapipe takes seconds for one 1024^2 frame of a large cut. Each cut
 //! runs twice, planned in `prepare` (inline) and in the background
 //! (`VolumeOptions::background_planning`: a worker plans while the frame
-//! renders; `prepare` applies the latest plan), the two paths interleaved.
+//! renders; `prepare` applies the latest plan), the two paths interleaved;
+//! the background path runs at 60 Hz (a host's frames), so that the worker's
+//! plans arrive within it (each row counts the plans its path applied and
+//! those that evolved the last cut).
 //! The JSON keys without a suffix (`host_ms_median_20k`, `host_ms_p99_20k`,
 //! `plan_ms_median_20k`) are the background path's: what the render thread
 //! pays when planning runs off it, and the planning it no longer pays;
@@ -60,7 +63,14 @@ struct PathTimes {
     /// wall time per frame, and the frames that applied a new plan.
     static_host_ms: Vec<f64>,
     static_plans: usize,
+    /// The plans the path's frames applied, and how many of them evolved
+    /// the last cut (`FrameStats::refine_evolved`).
+    path_plans: usize,
+    path_plans_evolved: usize,
 }
+
+/// A frame at 60 Hz: the background path's pace.
+const FRAME_60HZ: std::time::Duration = std::time::Duration::from_micros(16_667);
 
 /// Frames the converged start view is held still before the path.
 const STATIC_FRAMES: usize = 20;
@@ -145,6 +155,7 @@ fn path(
     frame: VolumeFrame,
     frames: usize,
     draw: bool,
+    background: bool,
 ) -> Result<PathTimes, String> {
     let settings = RenderSettings::default();
     let mut converge_frames = 0;
@@ -170,6 +181,8 @@ fn path(
         converge_frames,
         static_host_ms: Vec::new(),
         static_plans: 0,
+        path_plans: 0,
+        path_plans_evolved: 0,
     };
     let mut planned = r.stats().out_of_core.map(|s| s.cache.frame);
     for _ in 0..STATIC_FRAMES {
@@ -181,13 +194,26 @@ fn path(
         planned = Some(s.cache.frame);
     }
     for i in 1..=frames {
+        let start = Instant::now();
         let (host_ms, s) = timed_frame(run, r, frame, camera(&frame, i), draw)?;
+        // In the background the path runs at 60 Hz, as a host's frames
+        // would: unpaced, its undrawn frames passed before the worker
+        // delivered a plan, and the row's planning time was the last plan
+        // before the path (until 2026-12-07).
+        if background {
+            std::thread::sleep(FRAME_60HZ.saturating_sub(start.elapsed()));
+        }
         t.host_ms.push(host_ms);
         t.plan_ms.push(s.refine_ms);
         t.upload_ms.push(s.upload_ms);
         t.encode_ms.push(s.encode_ms);
         t.phases.push(s.cache.phases);
         t.working_set = s.cache.working_set_bricks;
+        if planned != Some(s.cache.frame) {
+            t.path_plans += 1;
+            t.path_plans_evolved += usize::from(s.cache.refine_evolved);
+            planned = Some(s.cache.frame);
+        }
     }
     Ok(t)
 }
@@ -416,6 +442,11 @@ pub(crate) struct Row {
     /// The brick manager's phases within planning, ms medians (in the
     /// background: of the plans the path's frames applied).
     phase_ms_median: PhaseMedians,
+    /// The plans the path's frames applied (each frame's inline; in the
+    /// background, those the worker finished in time), and how many of
+    /// them evolved the last cut.
+    path_plans: usize,
+    path_plans_evolved: usize,
     /// Bricks in the working set at the end, and frames to converge.
     working_set: u64,
     converge_frames: usize,
@@ -492,7 +523,7 @@ pub(crate) fn run(args: &Args) -> Result<HostResult, String> {
         for &cut in cuts {
             for background in [false, true] {
                 let (mut r, frame) = renderer(&gpu, cut, policy, background)?;
-                let t = path(&run, &mut r, frame, frames, draw)?;
+                let t = path(&run, &mut r, frame, frames, draw, background)?;
                 println!(
                     "  {:>7} {:>8} {:>9.2} {:>8.2} {:>8.2} {:>8.2} {:>9.2} {:>7.2}{}",
                     cut,
@@ -516,9 +547,12 @@ pub(crate) fn run(args: &Args) -> Result<HostResult, String> {
                     p.refine, p.place, p.request, p.display, p.poll, p.stats
                 );
                 println!(
-                    "           held still: prepare {:.3} ms (median), {} of {STATIC_FRAMES} frames planned",
+                    "           held still: prepare {:.3} ms (median), {} of {STATIC_FRAMES} frames planned; \
+                     the path applied {} plans, {} of them evolved",
                     median(&t.static_host_ms),
-                    t.static_plans
+                    t.static_plans,
+                    t.path_plans,
+                    t.path_plans_evolved
                 );
                 let alone = match (background, draw) {
                     (false, false) => Some(streamer_alone(cut, size, frames)?),
@@ -564,6 +598,8 @@ pub(crate) fn run(args: &Args) -> Result<HostResult, String> {
                     upload_ms_median: round2(median(&t.upload_ms)),
                     encode_ms_median: round2(median(&t.encode_ms)),
                     phase_ms_median: p,
+                    path_plans: t.path_plans,
+                    path_plans_evolved: t.path_plans_evolved,
                     working_set: t.working_set as u64,
                     converge_frames: t.converge_frames,
                     static_host_ms_median: median(&t.static_host_ms),

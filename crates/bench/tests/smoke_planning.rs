@@ -120,8 +120,22 @@ fn the_host_suite_runs() {
             "phase_ms_median",
             "working_set",
             "converge_frames",
+            "path_plans",
+            "path_plans_evolved",
         ],
     );
+    // Inline every path frame is planned; no more plans evolved than were
+    // applied.
+    for r in rows(&fig, "rows") {
+        let (plans, evolved) = (
+            r["path_plans"].as_u64().unwrap(),
+            r["path_plans_evolved"].as_u64().unwrap(),
+        );
+        assert!(evolved <= plans, "{r:?}");
+        if r["background"] == serde_json::json!(false) {
+            assert_eq!(plans, 3, "{r:?}");
+        }
+    }
     assert!(
         rows(&fig, "rows")
             .iter()
