@@ -587,6 +587,8 @@ pub(crate) fn run(args: &Args) -> Result<HostResult, String> {
                         100.0 * a.path_differs_from_exact_max
                     );
                 }
+                // (The GPU-free streamers' figures: inline unculled rows only.)
+                let of = |f: fn(&StreamerAlone) -> f64| alone.as_ref().map(f);
                 rows.push(Row {
                     budget: cut,
                     background,
@@ -604,29 +606,21 @@ pub(crate) fn run(args: &Args) -> Result<HostResult, String> {
                     converge_frames: t.converge_frames,
                     static_host_ms_median: median(&t.static_host_ms),
                     static_plans: t.static_plans,
-                    streamer_static_plan_ms_median: alone.as_ref().map(|a| a.plan_ms),
-                    streamer_static_refine_ms_median: alone.as_ref().map(|a| a.refine_ms),
-                    streamer_static_reused_share: alone.as_ref().map(|a| a.reused_share),
-                    streamer_path_plan_ms_median: alone.as_ref().map(|a| a.path_plan_ms),
-                    streamer_path_refine_ms_median: alone.as_ref().map(|a| a.path_refine_ms),
-                    streamer_path_cut_change_median: alone.as_ref().map(|a| a.path_cut_change),
-                    streamer_path_refine_ms_p99: alone.as_ref().map(|a| a.path_refine_ms_p99),
-                    streamer_path_evolved_share: alone.as_ref().map(|a| a.path_evolved_share),
-                    streamer_path_exact_plan_ms_median: alone
-                        .as_ref()
-                        .map(|a| a.path_exact_plan_ms),
-                    streamer_path_exact_refine_ms_median: alone
-                        .as_ref()
-                        .map(|a| a.path_exact_refine_ms),
-                    streamer_path_exact_refine_ms_p99: alone
-                        .as_ref()
-                        .map(|a| a.path_exact_refine_ms_p99),
-                    streamer_path_differs_from_exact_median: alone
-                        .as_ref()
-                        .map(|a| a.path_differs_from_exact_median),
-                    streamer_path_differs_from_exact_max: alone
-                        .as_ref()
-                        .map(|a| a.path_differs_from_exact_max),
+                    streamer_static_plan_ms_median: of(|a| a.plan_ms),
+                    streamer_static_refine_ms_median: of(|a| a.refine_ms),
+                    streamer_static_reused_share: of(|a| a.reused_share),
+                    streamer_path_plan_ms_median: of(|a| a.path_plan_ms),
+                    streamer_path_refine_ms_median: of(|a| a.path_refine_ms),
+                    streamer_path_cut_change_median: of(|a| a.path_cut_change),
+                    streamer_path_refine_ms_p99: of(|a| a.path_refine_ms_p99),
+                    streamer_path_evolved_share: of(|a| a.path_evolved_share),
+                    streamer_path_exact_plan_ms_median: of(|a| a.path_exact_plan_ms),
+                    streamer_path_exact_refine_ms_median: of(|a| a.path_exact_refine_ms),
+                    streamer_path_exact_refine_ms_p99: of(|a| a.path_exact_refine_ms_p99),
+                    streamer_path_differs_from_exact_median: of(|a| {
+                        a.path_differs_from_exact_median
+                    }),
+                    streamer_path_differs_from_exact_max: of(|a| a.path_differs_from_exact_max),
                 });
             }
         }

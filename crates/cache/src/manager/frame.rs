@@ -311,8 +311,13 @@ impl BrickManager {
         })
     }
 
-    /// Keeps `refined` as the cut the next frame may evolve.
+    /// Keeps `refined` as the cut the next frame may evolve (nothing where
+    /// no frame can: a copy of the cut a frame is not paid for nothing).
     fn note_cut(&mut self, generation: u64, refined: &Refinement, evolved: bool, inert: bool) {
+        if !self.config.evolve || !matches!(self.config.lod_metric, LodMetric::Geometric) {
+            self.last_cut = None;
+            return;
+        }
         let evolved = match (evolved, &self.last_cut) {
             (true, Some(l)) => l.evolved + 1,
             _ => 0,

@@ -49,7 +49,7 @@
 //! refines from the root.
 
 use super::rank::{Classified, Unknown, classify, known_info, visible_under};
-use super::split::{ChildBricks, known_children, request_meta};
+use super::split::{ChildBricks, NEARLY_FULL, known_children, request_meta};
 use super::{
     DataState, LoadRequest, MetaClass, NodeClass, RefineEnv, RefineParams, RefinedLeaf, Refinement,
     empty_leaf,
@@ -58,10 +58,6 @@ use crate::upload::UploadBudget;
 use brickray_core::{EmptyReason, LodMetric, NodeKey, NodeMap, NodeSet, OctreeLayout};
 use std::cmp::{Ordering, Reverse};
 use std::collections::BinaryHeap;
-
-/// The cut has fewer than this many bricks of room left: what a node
-/// visited after that requests is prefetch (as in the greedy order).
-const NEARLY_FULL: i64 = 7;
 
 /// Most nodes visited after the cut balanced (the pool binds), for their
 /// children's bricks (prefetch). The greedy order visits nodes until a
@@ -562,7 +558,7 @@ impl Evolve<'_, '_, '_> {
     fn split(&mut self, key: NodeKey, p: f64, classes: &[Classified; 8], balanced: &mut bool) {
         let children = self.layout.children(key);
         let bricks = ChildBricks::of(&children, classes, |c| self.data(c));
-        let prefetch = bricks.prefetch(self.room() < NEARLY_FULL);
+        let prefetch = bricks.prefetch(self.room() < NEARLY_FULL as i64);
         let failed = bricks.count(DataState::Failed);
         if failed > 0 {
             self.out.blocked.failed += 1;

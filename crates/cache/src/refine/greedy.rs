@@ -12,7 +12,7 @@ use super::rank::{
     Classified, HeapItem, ScreenError, Unknown, classify, classify_children, known_info,
     visible_under,
 };
-use super::split::{ChildBricks, known_children, request_meta};
+use super::split::{ChildBricks, NEARLY_FULL, known_children, request_meta};
 use super::{
     DataState, LoadRequest, MetaClass, NodeClass, RefineEnv, RefineParams, RefinedLeaf, Refinement,
     empty_leaf, unknown_root,
@@ -61,11 +61,6 @@ enum ChildData {
     Pending,
     Failed,
 }
-
-/// The cut has fewer than this many bricks of room left: a split (which adds
-/// up to seven) may not fit, and what a node visited now requests is
-/// prefetch for splits the cut cannot take yet.
-const NEARLY_FULL: u32 = 7;
 
 impl<'p, 'a, 'e> Greedy<'p, 'a, 'e> {
     /// Classifies and queues the root; `Err` holds the whole refinement when

@@ -10,6 +10,11 @@ use super::{
 };
 use brickray_core::{NodeKey, OctreeLayout};
 
+/// The cut has fewer than this many bricks of room left: a split (which adds
+/// up to seven) may not fit, and what a node visited now requests is
+/// prefetch for splits the cut cannot take yet.
+pub(super) const NEARLY_FULL: u32 = 7;
+
 /// Asks for the metadata of `keys` at `priority`, within the frame's cap.
 pub(super) fn request_meta(out: &mut Refinement, keys: &[NodeKey], priority: f64) {
     for &c in keys {
