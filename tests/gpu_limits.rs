@@ -80,17 +80,19 @@ fn limits_below_the_kernels_needs_are_typed_errors_at_creation() {
 
 #[test]
 fn limits_below_a_backends_needs_are_typed_errors() {
-    // In core: 5 storage buffers per stage (TF, prefix sums, prediction
-    // history, macro-cell ranges, skip distances).
-    let g = device_with(|l| l.max_storage_buffers_per_shader_stage = 4);
+    // In core: 4 storage buffers per stage (TF, prediction history,
+    // macro-cell ranges, skip distances; the TF's prefix sums are a table
+    // texture).
+    let g = device_with(|l| l.max_storage_buffers_per_shader_stage = 3);
     let mut r = new_renderer(&g).unwrap();
     expect_limit(
         r.set_volume(&g.device, &g.queue, &sphere()),
         "max_storage_buffers_per_shader_stage",
     );
-    // Out of core: 7 (TF, prefix sums, prediction history, slots, sub-cells,
-    // index, usage counters).
-    let g = device_with(|l| l.max_storage_buffers_per_shader_stage = 6);
+    // Out of core: 13 sampled textures (the 8 every kernel has, the spread
+    // and gradient atlases, and the slot, sub-cell and index tables), where
+    // in core needs 9.
+    let g = device_with(|l| l.max_sampled_textures_per_shader_stage = 12);
     let mut r = new_renderer(&g).unwrap();
     r.set_volume(&g.device, &g.queue, &sphere()).unwrap();
     expect_limit(
@@ -100,12 +102,12 @@ fn limits_below_a_backends_needs_are_typed_errors() {
             procedural(32),
             OutOfCoreConfig::default(),
         ),
-        "max_storage_buffers_per_shader_stage",
+        "max_sampled_textures_per_shader_stage",
     );
-    // 8 sampled textures for every kernel: 7 shared, and a multi-channel
-    // volume's stacked TF tables, the in-core volume's gradients, or out of
-    // core the spread atlas.
-    let g = device_with(|l| l.max_sampled_textures_per_shader_stage = 7);
+    // At least 9 sampled textures for every kernel: 8 shared, and a
+    // multi-channel volume's stacked TF tables, the in-core volume's
+    // gradients, or out of core the atlases and tables.
+    let g = device_with(|l| l.max_sampled_textures_per_shader_stage = 8);
     let mut r = new_renderer(&g).unwrap();
     expect_limit(
         r.set_volume(&g.device, &g.queue, &sphere()),
@@ -125,13 +127,13 @@ fn limits_below_a_backends_needs_are_typed_errors() {
         ),
         "max_sampled_textures_per_shader_stage",
     );
-    // Streamed channels: 8 storage buffers (out of core's 7 and the
-    // channels' classification) and 6 uniform buffers; one channel streams
-    // with one fewer of each.
+    // Streamed channels: 4 storage buffers (out of core's 3: TF, prediction
+    // history, usage counters; and the channels' classification) and 6
+    // uniform buffers; one channel streams with one fewer of each.
     type Lower = fn(&mut wgpu::Limits);
     let below: [(&str, Lower); 2] = [
         ("max_storage_buffers_per_shader_stage", |l| {
-            l.max_storage_buffers_per_shader_stage = 7
+            l.max_storage_buffers_per_shader_stage = 3
         }),
         ("max_uniform_buffers_per_shader_stage", |l| {
             l.max_uniform_buffers_per_shader_stage = 5
@@ -179,7 +181,8 @@ fn tables_beyond_the_storage_binding_limit_are_typed_errors() {
     let small = TransferFunction::from_points(&[(0.1, [1.0; 4])], 64);
     r.set_transfer_function(&g.device, &g.queue, &small)
         .unwrap();
-    // Small bricks and a large pool: the slot table exceeds the binding.
+    // Small bricks and a large pool: the usage counters (8 B a slot; the
+    // slot, sub-cell and index tables are textures) exceed the binding.
     let config = OutOfCoreConfig {
         gpu_budget_bytes: 4 << 20,
         ..Default::default()
@@ -190,11 +193,15 @@ fn tables_beyond_the_storage_binding_limit_are_typed_errors() {
     );
 }
 
-/// The index grows with the cut: once it exceeds the binding, `prepare` says so
-/// (and keeps the renderer usable), never a validation error. The limit is set
-/// between the fixed tables' sizes and the index size of a first, unlimited run.
+/// The index grows with the cut: its table texture outgrows its first rows
+/// and is made again with more (the views' bind groups with it), never a
+/// validation error. (Its bound is `max_texture_dimension_2d` rows of 2048
+/// words, at least 4M words: beyond what a test builds; the storage buffer
+/// it used to be had a binding limit a test could reach, and
+/// `tables_beyond_the_storage_binding_limit_are_typed_errors` still checks
+/// the usage counters'.)
 #[test]
-fn an_index_beyond_the_storage_binding_limit_is_a_typed_error() {
+fn an_index_outgrowing_its_table_keeps_drawing() {
     let frame = VolumeFrame::centered([1024; 3], [1.0; 3]);
     let config = OutOfCoreConfig {
         gpu_budget_bytes: 1 << 20,
@@ -206,42 +213,24 @@ fn an_index_beyond_the_storage_binding_limit_is_a_typed_error() {
     // Close up: many culled (empty) leaves per data leaf.
     let camera = Camera::orbit(frame.center(), 0.7, 0.4, 0.3);
     let desc = FrameDesc::new(camera, frame, 96, 96);
-    let run = |g: &GpuContext| -> Result<(VolumeRenderer, Option<PrepareError>), RenderError> {
-        let mut r = new_renderer(g)?;
-        r.set_volume_source(&g.device, &g.queue, procedural(8), config)?;
-        r.set_transfer_function(&g.device, &g.queue, &tf)?;
-        let target = Offscreen::new(&g.device, 96, 96);
-        for _ in 0..300 {
-            if let Err(e) = draw_frame(g, &mut r, &target, &desc, None) {
-                return Ok((r, Some(e)));
-            }
-            if !r.wants_redraw() {
-                break;
-            }
-            std::thread::sleep(std::time::Duration::from_millis(5));
+    let g = shared_gpu();
+    let mut r = new_renderer(g).unwrap();
+    r.set_volume_source(&g.device, &g.queue, procedural(8), config)
+        .unwrap();
+    r.set_transfer_function(&g.device, &g.queue, &tf).unwrap();
+    let target = Offscreen::new(&g.device, 96, 96);
+    let mut most = 0;
+    for _ in 0..300 {
+        draw_frame(g, &mut r, &target, &desc, None).unwrap();
+        most = most.max(r.stats().out_of_core.unwrap().index_words);
+        if !r.wants_redraw() {
+            break;
         }
-        Ok((r, None))
-    };
-    let (r, err) = run(shared_gpu()).unwrap();
-    assert!(err.is_none(), "{err:?}");
-    let s = r.stats().out_of_core.unwrap();
-    let index_bytes = s.index_words as u64 * 4;
-    // The slot table (32 B a slot) and the sub-cell table (8 B a slot with 8^3
-    // bricks) are the other storage buffers.
-    let fixed = s.cache.pool_slots as u64 * 32;
-    assert!(
-        index_bytes > fixed + 1024,
-        "index {index_bytes} B, tables {fixed} B"
-    );
-    let limit = (fixed + index_bytes) / 2;
-    let g = device_with(|l| l.max_storage_buffer_binding_size = limit);
-    let (_, err) = run(&g).unwrap();
-    match err {
-        Some(PrepareError::Render(e)) => {
-            expect_limit::<()>(Err(e), "max_storage_buffer_binding_size")
-        }
-        other => panic!("expected the index to outgrow {limit} B, got {other:?}"),
+        std::thread::sleep(std::time::Duration::from_millis(5));
     }
+    assert!(!r.wants_redraw(), "the cut did not converge");
+    // The first table holds 4096 words (two rows).
+    assert!(most > 4096, "index of {most} words");
 }
 
 #[test]

@@ -2,10 +2,19 @@
 // over the index encoded by brickray-index (docs/index-format.md).
 //
 // Library file: it has no entry point and declares NO binding. The including
-// shader must declare the index buffer under this exact name, at a binding of
-// its choice, e.g.
+// shader provides the index's words through two functions, from a storage
+// buffer, a texture or wherever it keeps them, e.g.
 //
 //     @group(0) @binding(9) var<storage, read> index_words: array<u32>;
+//     fn oct_word(i: u32) -> u32 { return index_words[i]; }
+//     fn oct_word_count() -> u32 { return arrayLength(&index_words); }
+//
+// (oct_word is called only for i < oct_word_count(). The ray casters keep the
+// words in a texture: on lavapipe a storage-buffer load whose address differs
+// between lanes runs as a loop over the lanes.)
+//
+// OCT_OCTREE: every level splits every axis (`splits` is OCT_SPLITS_ALL). A
+// pipeline that sets it has oct_mask and oct_halvings folded to constants.
 //
 // All names are prefixed `oct_` / `Oct` / `OCT_`. The code mirrors
 // crates/index/src/traverse.rs (the CPU twin, which the tests check against a
@@ -45,6 +54,10 @@ const OCT_T_BIG: f32 = 3.0e38;
 const OCT_SPLITS_ALL: vec2<u32> = vec2<u32>(0x3fffffffu, 0x3fffffffu);
 // Bit 0 of each level's 3-bit mask, levels 0..9.
 const OCT_SPLIT_AXIS_BITS: u32 = 0x09249249u;
+
+// Set by a pipeline whose index is an octree (see above); the split masks
+// are then not read.
+override OCT_OCTREE: bool = false;
 
 const OCT_STATUS_RUNNING: u32 = 0u;
 const OCT_STATUS_FINISHED: u32 = 1u;
@@ -111,12 +124,18 @@ fn oct_exp2_pos(level: u32) -> f32 {
 
 // Rust: Splits::mask. The axes a node of `level` is split along (7 from level 20).
 fn oct_mask(splits: vec2<u32>, level: u32) -> u32 {
+    if (OCT_OCTREE) {
+        return 7u;
+    }
     let w = select(splits.y, splits.x, level < 10u);
     return select(7u, (w >> (3u * (level % 10u))) & 7u, level < 20u);
 }
 
 // Rust: Splits::halvings. Per axis, the levels above `level` that split it.
 fn oct_halvings(splits: vec2<u32>, level: u32) -> vec3<u32> {
+    if (OCT_OCTREE) {
+        return vec3<u32>(level);
+    }
     let lo = splits.x & ((1u << (3u * min(level, 10u))) - 1u);
     let hi = splits.y & ((1u << (3u * (clamp(level, 10u, 20u) - 10u))) - 1u);
     let b = OCT_SPLIT_AXIS_BITS;
@@ -130,7 +149,7 @@ fn oct_halvings(splits: vec2<u32>, level: u32) -> vec3<u32> {
 }
 
 fn oct_in_bounds(i: u32) -> bool {
-    return i < arrayLength(&index_words);
+    return i < oct_word_count();
 }
 
 // Rust: clip_unit_cube. Returns (t0, t1); the ray misses when !(t0 < t1).
@@ -206,7 +225,7 @@ fn oct_locate_leaf(start: OctBox, p: vec3<f32>, dir: vec3<f32>, splits: vec2<u32
         r.leaf = c;
         return r;
     }
-    var word = index_words[c.node];
+    var word = oct_word(c.node);
     for (var i = 0u; i <= OCT_MAX_LEVEL; i = i + 1u) {
         if ((word >> OCT_TAG_SHIFT) != OCT_TAG_INNER) {
             let tag = word >> OCT_TAG_SHIFT;
@@ -230,7 +249,7 @@ fn oct_locate_leaf(start: OctBox, p: vec3<f32>, dir: vec3<f32>, splits: vec2<u32
         if (!oct_in_bounds(c.node)) {
             break;
         }
-        word = index_words[c.node];
+        word = oct_word(c.node);
     }
     r.leaf = c;
     return r;
@@ -317,7 +336,7 @@ fn oct_next_leaf(st: ptr<function, OctState>) -> bool {
                 (*st).status = OCT_STATUS_CORRUPT;
                 return false;
             }
-            rope = index_words[record + 1u + ex.face];
+            rope = oct_word(record + 1u + ex.face);
         }
         // The walk ends in this leaf (a NULL rope: t_end reached, or the leaf
         // left through the cube's face): it is left at t_end. After oct_begin
@@ -335,7 +354,7 @@ fn oct_next_leaf(st: ptr<function, OctState>) -> bool {
                 (*st).status = OCT_STATUS_CORRUPT;
                 return false;
             }
-            data = index_words[record];
+            data = oct_word(record);
         }
         let fr = oct_follow_rope(rope, loc.leaf, ex.face, (*st).splits);
         if (!fr.ok) {

@@ -48,6 +48,8 @@ pub use traverse::{
 };
 
 /// The WGSL traversal library (`crates/index/shaders/octree_traversal.wgsl`). It declares no
-/// bindings: the including shader must declare
-/// `var<storage, read> index_words: array<u32>;` at a binding of its choice.
+/// bindings: the including shader provides the index's words with
+/// `fn oct_word(i: u32) -> u32` and `fn oct_word_count() -> u32` (from a
+/// storage buffer, a texture, ...). Its override `OCT_OCTREE` (default
+/// false) folds the split masks away where the index is an octree.
 pub const OCTREE_TRAVERSAL_WGSL: &str = include_str!("../shaders/octree_traversal.wgsl");

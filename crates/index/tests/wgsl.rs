@@ -6,6 +6,8 @@ use brickray_index::OCTREE_TRAVERSAL_WGSL;
 /// caster will (the library itself declares no binding and no entry point).
 const HARNESS: &str = r#"
 @group(0) @binding(0) var<storage, read> index_words: array<u32>;
+fn oct_word(i: u32) -> u32 { return index_words[i]; }
+fn oct_word_count() -> u32 { return arrayLength(&index_words); }
 @group(0) @binding(1) var<storage, read_write> out_words: array<u32>;
 
 @compute @workgroup_size(1)
@@ -25,7 +27,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     // The building blocks on their own.
     let loc = oct_locate_leaf(OctBox(0u, 0u, vec3<f32>(0.0), vec3<f32>(1.0)), vec3<f32>(0.3), d, OCT_SPLITS_ALL);
     let ex = oct_exit_face(loc.leaf, o, d, vec3<f32>(1.0, 10.0, 0.0));
-    let rope = oct_follow_rope(index_words[(loc.word & OCT_PTR_MASK) + 1u + ex.face], loc.leaf, ex.face, OCT_SPLITS_ALL);
+    let rope = oct_follow_rope(oct_word((loc.word & OCT_PTR_MASK) + 1u + ex.face), loc.leaf, ex.face, OCT_SPLITS_ALL);
     let h = oct_halvings(vec2<u32>(gid.z, gid.x), gid.y);
     let tc = oct_clip_unit_cube(o, d, vec3<f32>(1.0, 10.0, 0.0), 0.0, 1.0);
     out_words[gid.x] = acc + st.status + st.steps + rope.next.node + select(0u, 1u, rope.ok && loc.ok)

@@ -107,8 +107,23 @@ struct TfInfo {
 }
 
 @group(1) @binding(0) var<storage, read> tf: array<vec4<f32>>;
-// Opacity prefix sums: tf_prefix[i] = entries j < i with alpha > 0.
-@group(1) @binding(1) var<storage, read> tf_prefix: array<u32>;
+// Texels per row of a table texture (gpu::TABLE_ROW; a test checks they
+// agree): entry i of a table at texel (i % TABLE_ROW, i / TABLE_ROW), read
+// with a texel fetch where a storage-buffer load whose address differs
+// between lanes costs lavapipe a loop over the lanes.
+const TABLE_ROW: u32 = 2048u;
+
+fn table_texel(i: u32) -> vec2<u32> {
+    return vec2<u32>(i % TABLE_ROW, i / TABLE_ROW);
+}
+
+// Opacity prefix sums (a table): entry i counts the entries j < i with
+// alpha > 0.
+@group(1) @binding(1) var tf_prefix_tex: texture_2d<u32>;
+
+fn tf_prefix(i: u32) -> u32 {
+    return textureLoad(tf_prefix_tex, table_texel(i), 0).r;
+}
 @group(1) @binding(2) var<uniform> tf_info: TfInfo;
 // The corrected table (brickray_core::tf::CorrectedTable): row r holds the TF
 // with its opacity corrected to step_factor * 2^r reference lengths, read with
@@ -334,7 +349,7 @@ fn tf_lookup(v: f32) -> vec4<f32> {
 // O(1): true when no value in [lo, hi] is visible through the TF.
 fn tf_transparent(range: vec2<f32>) -> bool {
     let b = tf_bins(range);
-    return tf_prefix[b.y + 1u] == tf_prefix[b.x];
+    return tf_prefix(b.y + 1u) == tf_prefix(b.x);
 }
 
 // The TF entries a value range touches, first and last (the range's ends
@@ -351,7 +366,7 @@ fn tf_bins(range: vec2<f32>) -> vec2<u32> {
 // in it has nothing to skip.
 fn tf_opaque_throughout(range: vec2<f32>) -> bool {
     let b = tf_bins(range);
-    return tf_prefix[b.y + 1u] - tf_prefix[b.x] == b.y + 1u - b.x;
+    return tf_prefix(b.y + 1u) - tf_prefix(b.x) == b.y + 1u - b.x;
 }
 
 // Writes one pixel of the outputs: premultiplied colour, the nearer of the

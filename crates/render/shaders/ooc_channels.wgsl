@@ -133,21 +133,21 @@ fn channel_cell_skips(b: Brick, j: vec3<u32>, mx: vec4<f32>, vis: vec4<f32>, iso
     // (ooc_volume.wgsl, sub_cell_range).
     let at = sub_cell_index(b.slot, j) * CHANNELS;
     let fat = fade_sub_cell_index(b, j) * CHANNELS;
-    let r0 = range_union(sub_cells[at], sub_cells[fat]);
+    let r0 = range_union(sub_cell_entry(at), sub_cell_entry(fat));
     var hi = vec4<f32>(r0.y, -3.0e38, -3.0e38, -3.0e38);
     var opaque = vec4<f32>(1.0 - channel_transparent(0u, r0), 0.0, 0.0, 0.0);
     if (CHANNELS > 1u) {
-        let r = range_union(sub_cells[at + 1u], sub_cells[fat + 1u]);
+        let r = range_union(sub_cell_entry(at + 1u), sub_cell_entry(fat + 1u));
         hi.y = r.y;
         opaque.y = 1.0 - channel_transparent(1u, r);
     }
     if (CHANNELS > 2u) {
-        let r = range_union(sub_cells[at + 2u], sub_cells[fat + 2u]);
+        let r = range_union(sub_cell_entry(at + 2u), sub_cell_entry(fat + 2u));
         hi.z = r.y;
         opaque.z = 1.0 - channel_transparent(2u, r);
     }
     if (CHANNELS > 3u) {
-        let r = range_union(sub_cells[at + 3u], sub_cells[fat + 3u]);
+        let r = range_union(sub_cell_entry(at + 3u), sub_cell_entry(fat + 3u));
         hi.w = r.y;
         opaque.w = 1.0 - channel_transparent(3u, r);
     }

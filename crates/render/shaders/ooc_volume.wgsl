@@ -43,12 +43,45 @@ struct SlotInfo {
 @group(2) @binding(0) var<uniform> ooc: OocParams;
 @group(2) @binding(1) var atlas_tex: texture_3d<f32>;
 @group(2) @binding(2) var atlas_sampler: sampler;
-@group(2) @binding(3) var<storage, read> slots: array<SlotInfo>;
+// The tables (`TableTexture`s, common.wgsl's table_texel). A table's
+// capacity is its rows': the entries past what was written are stale or
+// zero, as a grown buffer's were.
+//
+// The slot table: SlotInfo's two vec4 per row.
+@group(2) @binding(3) var slots_tex: texture_2d<f32>;
 // Normalized min/max of each brick's sub-cells (`sub_cells`^3 per slot, x
 // fastest), for empty-space skipping inside a brick.
-@group(2) @binding(4) var<storage, read> sub_cells: array<vec2<f32>>;
-// The octree with ropes (docs/index-format.md), walked by octree_traversal.wgsl.
-@group(2) @binding(5) var<storage, read> index_words: array<u32>;
+@group(2) @binding(4) var sub_cells_tex: texture_2d<f32>;
+// The octree with ropes (docs/index-format.md), walked by
+// octree_traversal.wgsl: one word per entry.
+@group(2) @binding(5) var index_tex: texture_2d<u32>;
+
+fn oct_word(i: u32) -> u32 {
+    return textureLoad(index_tex, table_texel(i), 0).r;
+}
+
+fn oct_word_count() -> u32 {
+    return TABLE_ROW * textureDimensions(index_tex).y;
+}
+
+// Rows of the slot table.
+fn slot_count() -> u32 {
+    return TABLE_ROW / 2u * textureDimensions(slots_tex).y;
+}
+
+// SlotInfo::offset and SlotInfo::range of a slot's row.
+fn slot_offset(slot: u32) -> vec4<f32> {
+    return textureLoad(slots_tex, table_texel(2u * slot), 0);
+}
+
+fn slot_range(slot: u32) -> vec4<f32> {
+    return textureLoad(slots_tex, table_texel(2u * slot + 1u), 0);
+}
+
+// Entry i of the sub-cell table.
+fn sub_cell_entry(i: u32) -> vec2<f32> {
+    return textureLoad(sub_cells_tex, table_texel(i), 0).xy;
+}
 
 // A data leaf's brick: atlas texture coordinate = uv0 + o * kuv for octree
 // point o (texel centres at +0.5 are folded in).
@@ -92,7 +125,9 @@ fn brick_of(leaf: OctBox, slot: u32) -> Brick {
     let k = f32(ooc.brick) / leaf.box_size;
     let inv_atlas = 1.0 / ooc.atlas_size;
     b.kuv = k * inv_atlas;
-    b.uv0 = (slots[slot].offset.xyz + f32(ooc.apron) - leaf.box_min * k) * inv_atlas;
+    let so = slot_offset(slot);
+    let sr = slot_range(slot);
+    b.uv0 = (so.xyz + f32(ooc.apron) - leaf.box_min * k) * inv_atlas;
     // Per-axis halvings between this level and the finest.
     let hd = oct_halvings(ooc.splits.xy, ooc.finest_level) - oct_halvings(ooc.splits.xy, leaf.level);
     b.f3 = vec3<f32>(oct_exp2_pos(hd.x), oct_exp2_pos(hd.y), oct_exp2_pos(hd.z));
@@ -105,7 +140,7 @@ fn brick_of(leaf: OctBox, slot: u32) -> Brick {
     b.box_min = leaf.box_min;
     b.box_size = leaf.box_size;
     // Fading: the ancestor `up` levels coarser, sampled at the same points.
-    let up = u32(slots[slot].offset.w);
+    let up = u32(so.w);
     b.fb_w = 0.0;
     b.fb_f3 = b.f3;
     b.fb_uv0 = b.uv0;
@@ -120,20 +155,20 @@ fn brick_of(leaf: OctBox, slot: u32) -> Brick {
         let size = leaf.box_size * vec3<f32>(oct_exp2_pos(hu.x), oct_exp2_pos(hu.y), oct_exp2_pos(hu.z));
         let fmin = floor(leaf.box_min / size) * size;
         let fk = f32(ooc.brick) / size;
-        let fs = u32(slots[slot].range.z);
+        let fs = u32(sr.z);
         b.fb_kuv = fk * inv_atlas;
-        b.fb_uv0 = (slots[fs].offset.xyz + f32(ooc.apron) - fmin * fk) * inv_atlas;
+        b.fb_uv0 = (slot_offset(fs).xyz + f32(ooc.apron) - fmin * fk) * inv_atlas;
         let hf = hd + hu;
         b.fb_f3 = vec3<f32>(oct_exp2_pos(hf.x), oct_exp2_pos(hf.y), oct_exp2_pos(hf.z));
         // (Without FADES no row carries a fade: 0 whatever the table says.)
-        b.fb_w = select(0.0, clamp(slots[slot].range.w, 0.0, 1.0), FADES);
+        b.fb_w = select(0.0, clamp(sr.w, 0.0, 1.0), FADES);
         b.fb_slot = fs;
         b.fb_box_min = fmin;
         b.fb_box_size = size;
         // A borrowed leaf (weight above 1; an octant-granular cut): drawn
         // from the ancestor alone, as the ancestor draws it (its mapping,
         // box, step and sub-cells); counted as itself.
-        if (slots[slot].range.w > 1.5) {
+        if (sr.w > 1.5) {
             b.uv0 = b.fb_uv0;
             b.kuv = b.fb_kuv;
             b.f3 = b.fb_f3;
@@ -234,21 +269,21 @@ fn range_union(a: vec2<f32>, b: vec2<f32>) -> vec2<f32> {
 // empty space like any other (it once could not, and a frame in which many
 // bricks arrived took up to 2x a converged one).
 fn sub_cell_range(b: Brick, j: vec3<u32>) -> vec2<f32> {
-    let own = sub_cells[sub_cell_index(b.slot, j)];
+    let own = sub_cell_entry(sub_cell_index(b.slot, j));
     if (!FADES) {
         return own;
     }
-    return range_union(own, sub_cells[fade_sub_cell_index(b, j)]);
+    return range_union(own, sub_cell_entry(fade_sub_cell_index(b, j)));
 }
 
 // The normalized values a sample of the data leaf in `slot` can take: its
 // brick's range and, while it fades or borrows, its fallback's (each brick's
 // range covers its sub-cells', apron included).
 fn leaf_range(slot: u32) -> vec2<f32> {
-    let s = slots[slot];
-    let fs = min(u32(s.range.z), arrayLength(&slots) - 1u);
-    let f = slots[select(slot, fs, s.offset.w > 0.0)].range;
-    return vec2<f32>(min(s.range.x, f.x), max(s.range.y, f.y));
+    let r = slot_range(slot);
+    let fs = min(u32(r.z), slot_count() - 1u);
+    let f = slot_range(select(slot, fs, slot_offset(slot).w > 0.0));
+    return vec2<f32>(min(r.x, f.x), max(r.y, f.y));
 }
 
 // The largest normalized value a sample of the data leaf in `slot` can take.
@@ -287,8 +322,8 @@ fn locate_data_leaf(o: vec3<f32>, dir: vec3<f32>) -> DataLeaf {
     if (!oct_in_bounds(record)) {
         return found;
     }
-    let slot = index_words[record];
-    if (slot >= arrayLength(&slots)) {
+    let slot = oct_word(record);
+    if (slot >= slot_count()) {
         return found;
     }
     found.ok = true;

@@ -232,6 +232,181 @@ impl GrowBuffer {
     }
 }
 
+/// Texels per row of a [`TableTexture`] (WebGPU's default
+/// `max_texture_dimension_2d` is 8192; 2048 is what downlevel devices give).
+pub(crate) const TABLE_ROW: u32 = 2048;
+
+/// A read-only table the kernels read with `textureLoad`, entry `i` at
+/// texel `(i % TABLE_ROW, i / TABLE_ROW)`, rather than from a storage
+/// buffer: on lavapipe a storage-buffer load whose address differs between
+/// lanes runs as a loop over the lanes with a branch per lane and
+/// component, a texel fetch as one gather (docs/rendering-model.md,
+/// "Tables in textures").
+#[derive(Debug)]
+pub(crate) struct TableTexture {
+    label: &'static str,
+    format: wgpu::TextureFormat,
+    texel_bytes: usize,
+    texture: wgpu::Texture,
+    pub(crate) view: wgpu::TextureView,
+    /// What [`write`](Self::write) wrote last (empty after a `write_at`).
+    contents: Vec<u8>,
+}
+
+impl TableTexture {
+    /// A table of `format`'s texels (an uncompressed colour format) with
+    /// room for at least `texels` entries.
+    pub(crate) fn new(
+        device: &wgpu::Device,
+        label: &'static str,
+        format: wgpu::TextureFormat,
+        texels: usize,
+    ) -> Result<TableTexture, RenderError> {
+        let rows = texels.div_ceil(TABLE_ROW as usize).max(1) as u32;
+        let (texture, view) = Self::create(device, label, format, rows)?;
+        Ok(TableTexture {
+            label,
+            format,
+            texel_bytes: format.block_copy_size(None).unwrap_or(4) as usize,
+            texture,
+            view,
+            contents: Vec::new(),
+        })
+    }
+
+    fn create(
+        device: &wgpu::Device,
+        label: &'static str,
+        format: wgpu::TextureFormat,
+        rows: u32,
+    ) -> Result<(wgpu::Texture, wgpu::TextureView), RenderError> {
+        let texture = texture(
+            device,
+            &wgpu::TextureDescriptor {
+                label: Some(label),
+                size: wgpu::Extent3d {
+                    width: TABLE_ROW,
+                    height: rows,
+                    depth_or_array_layers: 1,
+                },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format,
+                usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+                view_formats: &[],
+            },
+        )?;
+        let view = texture.create_view(&wgpu::TextureViewDescriptor::default());
+        Ok((texture, view))
+    }
+
+    /// Entries the table has room for.
+    pub(crate) fn capacity(&self) -> usize {
+        TABLE_ROW as usize * self.texture.height() as usize
+    }
+
+    /// Writes the whole table, `data` (whole texels) from entry 0, growing
+    /// its rows geometrically where it needs more; unchanged data is not
+    /// written again. Returns (bytes written, whether the texture was
+    /// recreated, so bind groups holding it must be rebuilt).
+    pub(crate) fn write(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        data: &[u8],
+    ) -> Result<(u64, bool), RenderError> {
+        if data == self.contents.as_slice() {
+            return Ok((0, false));
+        }
+        let rows = (data.len() / self.texel_bytes).div_ceil(TABLE_ROW as usize) as u32;
+        let mut grown = false;
+        if rows > self.texture.height() {
+            let max = device.limits().max_texture_dimension_2d;
+            let alloc = rows.next_power_of_two().min(max).max(rows);
+            (self.texture, self.view) = Self::create(device, self.label, self.format, alloc)?;
+            grown = true;
+        }
+        self.write_at(queue, 0, data);
+        self.contents.clear();
+        self.contents.extend_from_slice(data);
+        Ok((data.len() as u64, grown))
+    }
+
+    /// Writes `data` (whole texels) from entry `first`, within the table's
+    /// room (what lies past it is not written: the caller sized the table).
+    pub(crate) fn write_at(&mut self, queue: &wgpu::Queue, first: usize, data: &[u8]) {
+        self.contents.clear();
+        let texels = (data.len() / self.texel_bytes).min(self.capacity().saturating_sub(first));
+        for p in table_pieces(first, texels) {
+            let bytes =
+                &data[p.from * self.texel_bytes..(p.from + p.width * p.height) * self.texel_bytes];
+            let (x, y, width, height) = (p.x, p.y, p.width, p.height);
+            queue.write_texture(
+                wgpu::TexelCopyTextureInfo {
+                    texture: &self.texture,
+                    mip_level: 0,
+                    origin: wgpu::Origin3d {
+                        x: x as u32,
+                        y: y as u32,
+                        z: 0,
+                    },
+                    aspect: wgpu::TextureAspect::All,
+                },
+                bytes,
+                wgpu::TexelCopyBufferLayout {
+                    offset: 0,
+                    bytes_per_row: Some((width * self.texel_bytes) as u32),
+                    rows_per_image: None,
+                },
+                wgpu::Extent3d {
+                    width: width as u32,
+                    height: height as u32,
+                    depth_or_array_layers: 1,
+                },
+            );
+        }
+    }
+}
+
+/// One rectangle of a table write: `width` x `height` texels at (`x`,
+/// `y`), from entry `from` of the data written.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct TablePiece {
+    pub(crate) x: usize,
+    pub(crate) y: usize,
+    pub(crate) width: usize,
+    pub(crate) height: usize,
+    pub(crate) from: usize,
+}
+
+/// The rectangles that write `texels` entries from entry `first` of a
+/// table: a partial first row, the whole rows, a partial last row (each
+/// where there is one).
+pub(crate) fn table_pieces(first: usize, texels: usize) -> Vec<TablePiece> {
+    let row = TABLE_ROW as usize;
+    let mut out = Vec::new();
+    let mut done = 0;
+    while done < texels {
+        let at = first + done;
+        let (x, y) = (at % row, at / row);
+        let (width, height) = if x > 0 || texels - done < row {
+            ((row - x).min(texels - done), 1)
+        } else {
+            (row, (texels - done) / row)
+        };
+        out.push(TablePiece {
+            x,
+            y,
+            width,
+            height,
+            from: done,
+        });
+        done += width * height;
+    }
+    out
+}
+
 /// A limit-checked texture: its size against the dimension limit of its kind.
 pub(crate) fn texture(
     device: &wgpu::Device,
@@ -446,4 +621,49 @@ pub(crate) fn slab_texture<'a>(
         z = z1;
     }
     Ok((texture, bytes))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{TABLE_ROW, table_pieces};
+
+    /// Every entry of a write lands once, at (i % TABLE_ROW, i / TABLE_ROW),
+    /// in rectangles within the rows, read from its place in the data.
+    #[test]
+    fn table_pieces_cover_each_entry_once_at_its_texel() {
+        let row = TABLE_ROW as usize;
+        for first in [0, 1, 5, row - 1, row, row + 7, 3 * row] {
+            for texels in [
+                0,
+                1,
+                2,
+                row - 1,
+                row,
+                row + 1,
+                2 * row,
+                3 * row + 5,
+                5 * row - first % row,
+            ] {
+                let pieces = table_pieces(first, texels);
+                let mut seen = vec![0u8; texels];
+                for p in &pieces {
+                    assert!(p.width > 0 && p.height > 0 && p.x + p.width <= row, "{p:?}");
+                    assert!(p.height == 1 || (p.x == 0 && p.width == row), "{p:?}");
+                    for dy in 0..p.height {
+                        for dx in 0..p.width {
+                            let k = p.from + dy * p.width + dx;
+                            let at = first + k;
+                            assert_eq!((at % row, at / row), (p.x + dx, p.y + dy));
+                            seen[k] += 1;
+                        }
+                    }
+                }
+                assert!(
+                    seen.iter().all(|&c| c == 1),
+                    "first {first}, texels {texels}"
+                );
+                assert!(pieces.len() <= 3, "{pieces:?}");
+            }
+        }
+    }
 }

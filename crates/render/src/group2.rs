@@ -49,6 +49,24 @@ pub(crate) fn texture_3d_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
     }
 }
 
+/// A compute kernel's table at `binding` (a `TableTexture`, read with
+/// `textureLoad`).
+pub(crate) fn table_entry(
+    binding: u32,
+    sample_type: wgpu::TextureSampleType,
+) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Texture {
+            sample_type,
+            view_dimension: wgpu::TextureViewDimension::D2,
+            multisampled: false,
+        },
+        count: None,
+    }
+}
+
 /// Layout entries shared by both backends' group 2: the uniform (0), the volume
 /// texture (1), its sampler (2), then `storage` read-only storage buffers
 /// (3, 4, ...).
@@ -80,29 +98,37 @@ pub(crate) fn volume_layout_entries(storage: u32) -> Vec<wgpu::BindGroupLayoutEn
 }
 
 /// Per-stage bindings of a kernel besides group 2's storage buffers: the
-/// transfer function's 2 storage buffers and the prediction history; uniforms
-/// of frame, prediction, TF, volume and overlay; the sampled volume, host
-/// depth, corrected TF table, pre-integrated table, spread table, and the
-/// overlay's labels and table; the volume and TF samplers.
-pub(crate) const STORAGE_OUTSIDE_VOLUME: u32 = 3;
+/// transfer function's entries and the prediction history; uniforms of
+/// frame, prediction, TF, volume and overlay; the sampled volume, host
+/// depth, the TF's prefix sums (a table texture), corrected table,
+/// pre-integrated table and spread table, and the overlay's labels and
+/// table; the volume and TF samplers.
+pub(crate) const STORAGE_OUTSIDE_VOLUME: u32 = 2;
 pub(crate) const UNIFORM_BUFFERS: u32 = 5;
-pub(crate) const SAMPLED_TEXTURES: u32 = 7;
+pub(crate) const SAMPLED_TEXTURES: u32 = 8;
 /// Sampled textures of the multi-channel kernels: one more, their channels'
 /// stacked TF tables (`backend/channels.rs`, `backend/ooc_channels.rs`).
 pub(crate) const CHANNEL_SAMPLED_TEXTURES: u32 = SAMPLED_TEXTURES + 1;
+/// Sampled textures of the multi-channel out-of-core kernel: four more,
+/// its channels' stacked TF tables and the three out-of-core tables.
+pub(crate) const OOC_CHANNEL_SAMPLED_TEXTURES: u32 = SAMPLED_TEXTURES + 1 + OOC_TABLES;
 /// Sampled textures of the in-core kernel: one more, the per-voxel gradients
 /// (`backend/gradients.rs`).
 pub(crate) const INCORE_SAMPLED_TEXTURES: u32 = SAMPLED_TEXTURES + 1;
-/// Sampled textures of the single-channel out-of-core kernel: two more, the
-/// spread and gradient atlases.
-pub(crate) const OOC_SAMPLED_TEXTURES: u32 = SAMPLED_TEXTURES + 2;
+/// The out-of-core tables in textures: slots, sub-cells, index.
+pub(crate) const OOC_TABLES: u32 = 3;
+/// Sampled textures of the single-channel out-of-core kernel: five more,
+/// the spread and gradient atlases and the three tables.
+pub(crate) const OOC_SAMPLED_TEXTURES: u32 = SAMPLED_TEXTURES + 2 + OOC_TABLES;
 /// Uniform buffers of the multi-channel out-of-core kernel: one more, its
 /// channels' parameters (`backend/ooc_channels.rs`).
 pub(crate) const CHANNEL_UNIFORM_BUFFERS: u32 = UNIFORM_BUFFERS + 1;
 pub(crate) const SAMPLERS: u32 = 2;
-/// The most storage buffers group 2 holds (out of core: slots, sub-cells,
-/// index, usage counters; with channels, their classification).
-pub(crate) const MAX_VOLUME_STORAGE: u32 = OOC_CHANNEL_STORAGE_BUFFERS;
+/// The most storage buffers group 2 holds: a multi-channel volume in core
+/// (the macro-cell ranges and skip distances, the channels' TF entries; out
+/// of core group 2 holds the usage counters and, with channels, their TF
+/// entries).
+pub(crate) const MAX_VOLUME_STORAGE: u32 = INCORE_STORAGE_BUFFERS + 1;
 
 /// Checks the per-stage binding counts of a kernel whose group 2 has `storage`
 /// storage buffers.
@@ -136,11 +162,15 @@ pub(crate) fn check_stage_limits(device: &wgpu::Device, storage: u32) -> Result<
     Ok(())
 }
 
-/// Read-only storage buffers of group 2: slots, sub-cells, index.
-pub(crate) const READ_ONLY_STORAGE: u32 = 3;
-/// Storage buffers of group 2: the read-only ones and the usage counters
-/// (read-write, binding 6).
-pub(crate) const OOC_STORAGE_BUFFERS: u32 = READ_ONLY_STORAGE + 1;
+/// The bindings of the out-of-core tables (`TableTexture`s read with
+/// `textureLoad`; `shaders/ooc_volume.wgsl`): the slot table (Rgba32Float),
+/// the sub-cell ranges (Rg32Float) and the index's words (R32Uint).
+pub(crate) const SLOTS_BINDING: u32 = 3;
+pub(crate) const SUB_CELLS_BINDING: u32 = 4;
+pub(crate) const INDEX_BINDING: u32 = 5;
+/// Storage buffers of group 2 out of core: the usage counters (read-write,
+/// binding 6).
+pub(crate) const OOC_STORAGE_BUFFERS: u32 = 1;
 /// Storage buffers of group 2 of the multi-channel out-of-core kernel: the
 /// out-of-core ones and the channels' classification.
 pub(crate) const OOC_CHANNEL_STORAGE_BUFFERS: u32 = OOC_STORAGE_BUFFERS + 1;
@@ -169,7 +199,11 @@ pub(crate) fn ooc_single_layout_entries() -> Vec<wgpu::BindGroupLayoutEntry> {
 /// The layout of group 2 out of core: the shared volume entries and the
 /// read-write usage counters.
 pub(crate) fn ooc_layout_entries() -> Vec<wgpu::BindGroupLayoutEntry> {
-    let mut e = volume_layout_entries(READ_ONLY_STORAGE);
+    let mut e = volume_layout_entries(0);
+    let float = wgpu::TextureSampleType::Float { filterable: false };
+    e.push(table_entry(SLOTS_BINDING, float));
+    e.push(table_entry(SUB_CELLS_BINDING, float));
+    e.push(table_entry(INDEX_BINDING, wgpu::TextureSampleType::Uint));
     e.push(gpu::storage_entry(USAGE_BINDING, false));
     e.push(wgpu::BindGroupLayoutEntry {
         binding: STOP_DEPTH_BINDING,

@@ -90,7 +90,15 @@ pub(crate) struct Variant {
     /// Out of core: some leaf of the cut applied last fades (`FADES` in
     /// modes.wgsl; without, a sample reads its own brick alone).
     pub(crate) fades: bool,
+    /// Out of core: the index is an octree (every level splits every axis;
+    /// `OCT_OCTREE` in brickray-index's traversal library, which folds the
+    /// split masks away). The in-core kernels do not declare it.
+    pub(crate) octree: bool,
 }
+
+/// The out-of-core kernels' override of brickray-index's traversal library:
+/// the index is an octree ([`Variant::octree`]).
+pub(crate) const OCTREE_OVERRIDE: &str = "OCT_OCTREE";
 
 /// The override constants of a pipeline, by WGSL name (modes.wgsl,
 /// predict.wgsl).
@@ -160,6 +168,7 @@ impl Variant {
             spread: false,
             gradients: false,
             fades: false,
+            octree: false,
         };
         match prediction {
             Some(p) if mode == KernelMode::Iso => Variant {
@@ -194,6 +203,7 @@ impl Variant {
             spread: false,
             gradients: false,
             fades: false,
+            octree: false,
         }
     }
 
@@ -257,12 +267,16 @@ impl Variant {
         out
     }
 
-    /// The override constants of the pipeline (the single-channel kernels
-    /// do not declare `CHANNELS`).
-    fn constants(&self) -> Vec<(&'static str, f64)> {
+    /// The override constants of the pipeline for the `kind` kernel (the
+    /// single-channel kernels do not declare `CHANNELS`, the in-core ones
+    /// not `OCT_OCTREE`).
+    fn constants(&self, kind: KernelKind) -> Vec<(&'static str, f64)> {
         let mut c = self.shared_constants().to_vec();
         if self.channels > 0 {
             c.push(("CHANNELS", self.channels as f64));
+        }
+        if matches!(kind, KernelKind::OutOfCore | KernelKind::OutOfCoreChannels) {
+            c.push((OCTREE_OVERRIDE, if self.octree { 1.0 } else { 0.0 }));
         }
         c
     }
@@ -377,7 +391,7 @@ impl Kernels {
             }
         };
         if !k.pipelines.contains_key(&variant) {
-            let constants = variant.constants();
+            let constants = variant.constants(kind);
             let p = gpu::scoped(device, k.label, || {
                 device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
                     label: Some(k.label),

@@ -17,11 +17,14 @@ pub fn required_limits() -> wgpu::Limits {
             + group2::STORAGE_OUTSIDE_VOLUME,
         max_storage_textures_per_shader_stage: frame::OUTPUT_FORMATS.len() as u32
             + group2::STORAGE_TEXTURES,
-        max_sampled_textures_per_shader_stage: max3(
+        max_sampled_textures_per_shader_stage: [
             group2::CHANNEL_SAMPLED_TEXTURES,
+            group2::OOC_CHANNEL_SAMPLED_TEXTURES,
             group2::OOC_SAMPLED_TEXTURES,
             group2::INCORE_SAMPLED_TEXTURES,
-        ),
+        ]
+        .into_iter()
+        .fold(0, u32::max),
         max_samplers_per_shader_stage: group2::SAMPLERS,
         max_uniform_buffers_per_shader_stage: group2::CHANNEL_UNIFORM_BUFFERS,
         max_compute_invocations_per_workgroup: gpu::WORKGROUP[0] * gpu::WORKGROUP[1],
@@ -31,12 +34,6 @@ pub fn required_limits() -> wgpu::Limits {
         max_uniform_buffer_binding_size: std::mem::size_of::<FrameUniforms>() as u64,
         ..wgpu::Limits::downlevel_defaults()
     }
-}
-
-/// The largest of three counts (in a `const` context).
-const fn max3(a: u32, b: u32, c: u32) -> u32 {
-    let ab = if a > b { a } else { b };
-    if ab > c { ab } else { c }
 }
 
 /// An optional device feature brickray uses when the host enables it, and

@@ -322,6 +322,7 @@ pub(crate) fn frame_variant(
         return Variant {
             weights: backend.get().measures_weights(),
             fades: backend.get().fades(),
+            octree: backend.get().octree(),
             ..v
         };
     }
@@ -329,6 +330,7 @@ pub(crate) fn frame_variant(
     if slice {
         Variant {
             fades: b.fades(),
+            octree: b.octree(),
             ..Variant::slice(b.measures_weights(), b.labels(), overlay)
         }
     } else {
@@ -353,6 +355,7 @@ pub(crate) fn frame_variant(
                 && (!mip || b.mip_skipping(settings.step_factor))
                 && (!dvr || b.dvr_skipping(settings.step_factor, v.shade)),
             fades: b.fades(),
+            octree: b.octree(),
             ..v
         }
     }

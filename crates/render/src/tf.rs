@@ -10,7 +10,7 @@
 //! volume with spreads is drawn), and the bind group.
 
 use crate::error::RenderError;
-use crate::gpu::{self, GrowBuffer, Uniform};
+use crate::gpu::{self, GrowBuffer, TableTexture, Uniform};
 use brickray_core::TransferFunction;
 use brickray_core::tf::SPREAD_ROWS;
 
@@ -46,7 +46,9 @@ pub(crate) const PREINT_SIZE: u32 = brickray_core::tf::PREINT_MIN_SIZE;
 pub(crate) struct TfTables {
     layout: wgpu::BindGroupLayout,
     entries: GrowBuffer,
-    prefix: GrowBuffer,
+    /// The opacity prefix sums (a `TableTexture`, R32Uint: read per
+    /// sub-cell test out of core).
+    prefix: TableTexture,
     info: Uniform<TfInfo>,
     sampler: wgpu::Sampler,
     table: Option<(wgpu::Texture, wgpu::TextureView)>,
@@ -84,7 +86,7 @@ fn buffer(ty: wgpu::BufferBindingType) -> wgpu::BindingType {
     }
 }
 
-/// Group 1's layout: entries (0), prefix sums (1), info (2), corrected table (3),
+/// Group 1's layout: entries (0), prefix sums (1, a table texture), info (2), corrected table (3),
 /// its sampler (4, also the other tables'), the pre-integrated table (5) and
 /// the spread table (6).
 /// Generations of transfer functions, unique in the process: renderers that
@@ -98,7 +100,14 @@ pub(crate) fn layout_entries() -> [wgpu::BindGroupLayoutEntry; 7] {
     let storage = wgpu::BufferBindingType::Storage { read_only: true };
     [
         entry(0, buffer(storage)),
-        entry(1, buffer(storage)),
+        entry(
+            1,
+            wgpu::BindingType::Texture {
+                sample_type: wgpu::TextureSampleType::Uint,
+                view_dimension: wgpu::TextureViewDimension::D2,
+                multisampled: false,
+            },
+        ),
         entry(2, buffer(wgpu::BufferBindingType::Uniform)),
         entry(
             3,
@@ -156,7 +165,12 @@ impl TfTables {
         Ok(TfTables {
             layout,
             entries: GrowBuffer::new(device, "brickray-render tf", 16)?,
-            prefix: GrowBuffer::new(device, "brickray-render tf prefix", 16)?,
+            prefix: TableTexture::new(
+                device,
+                "brickray-render tf prefix",
+                wgpu::TextureFormat::R32Uint,
+                TransferFunction::MAX_ENTRIES + 1,
+            )?,
             info: Uniform::new(device, "brickray-render tf info")?,
             sampler,
             table: None,
@@ -384,7 +398,7 @@ impl TfTables {
                     },
                     wgpu::BindGroupEntry {
                         binding: 1,
-                        resource: self.prefix.buffer.as_entire_binding(),
+                        resource: wgpu::BindingResource::TextureView(&self.prefix.view),
                     },
                     wgpu::BindGroupEntry {
                         binding: 2,

@@ -12,7 +12,7 @@
 
 use crate::encoding::{self, U8Filtering};
 use crate::error::{PrepareError, RenderError};
-use crate::gpu::{GrowBuffer, Uniform};
+use crate::gpu::{TableTexture, Uniform};
 use crate::planner::Planner;
 use brickray_cache::{
     GpuFormat, OutOfCoreConfig, StreamError, StreamFrame, StreamPlan, StreamStats, Streamer,
@@ -117,7 +117,7 @@ pub(crate) struct Shared {
     pub(crate) format: wgpu::TextureFormat,
     pool: Pool,
     pub(crate) params: Uniform<OocParams>,
-    pub(crate) index: GrowBuffer,
+    pub(crate) index: TableTexture,
     pub(crate) sampler: wgpu::Sampler,
     splits: Splits,
     /// Bumped whenever an object a view's bind group holds is recreated.
@@ -134,10 +134,15 @@ impl Shared {
             spread: &self.pool.spread_view,
             gradients: &self.pool.gradients_view,
             sampler: &self.sampler,
-            slots: &self.pool.slots,
-            sub_cells: &self.pool.sub_cells,
-            index: &self.index.buffer,
+            slots: &self.pool.slots.view,
+            sub_cells: &self.pool.sub_cells.view,
+            index: &self.index.view,
         }
+    }
+
+    /// True when the index is an octree (every level splits every axis).
+    pub(crate) fn is_octree(&self) -> bool {
+        self.splits == Splits::ALL
     }
 
     /// How the atlas stores the volume.
@@ -277,9 +282,12 @@ pub(crate) struct Bound<'a> {
     /// The gradient atlas (a 1x1x1 stand-in without gradients).
     pub(crate) gradients: &'a wgpu::TextureView,
     pub(crate) sampler: &'a wgpu::Sampler,
-    pub(crate) slots: &'a wgpu::Buffer,
-    pub(crate) sub_cells: &'a wgpu::Buffer,
-    pub(crate) index: &'a wgpu::Buffer,
+    /// The slot and sub-cell tables (`TableTexture`s, Rgba32Float and
+    /// Rg32Float).
+    pub(crate) slots: &'a wgpu::TextureView,
+    pub(crate) sub_cells: &'a wgpu::TextureView,
+    /// The index's words (`TableTexture`, R32Uint).
+    pub(crate) index: &'a wgpu::TextureView,
 }
 
 /// A streamed (out-of-core) volume the host owns and hands to every renderer
@@ -360,7 +368,12 @@ impl StreamedVolume {
         let mut shared = Shared {
             pool,
             params: Uniform::new(device, "brickray-render out-of-core params")?,
-            index: GrowBuffer::new(device, "brickray-render octree index", 1 << 12)?,
+            index: TableTexture::new(
+                device,
+                "brickray-render octree index",
+                wgpu::TextureFormat::R32Uint,
+                1 << 12,
+            )?,
             sampler: crate::group2::volume_sampler(device, layout.volume.kind.is_labels())?,
             splits,
             generation: 0,

@@ -81,6 +81,11 @@ pub(crate) trait VolumeBackend: std::fmt::Debug {
     fn fades(&self) -> bool {
         false
     }
+    /// True when the out-of-core index is an octree (every level splits
+    /// every axis: [`crate::kernels::Variant::octree`]).
+    fn octree(&self) -> bool {
+        false
+    }
     /// Most index leaves one ray may visit (0 in core).
     fn max_leaves(&self) -> u32;
     /// Step lengths the kernel samples with (rows of the corrected TF table):

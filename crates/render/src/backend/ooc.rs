@@ -15,7 +15,8 @@ use crate::desc::OutOfCoreStats;
 use crate::error::RenderError;
 use crate::gpu;
 use crate::group2::{
-    OOC_GRADIENT_BINDING, SPREAD_BINDING, STOP_DEPTH_BINDING, USAGE_BINDING, check_ooc_limits,
+    INDEX_BINDING, OOC_GRADIENT_BINDING, SLOTS_BINDING, SPREAD_BINDING, STOP_DEPTH_BINDING,
+    SUB_CELLS_BINDING, USAGE_BINDING, check_ooc_limits,
 };
 use crate::kernels::KernelKind;
 use crate::volume::{Bound, Planned, StreamedVolume};
@@ -301,16 +302,16 @@ fn bind_group(
                 resource: wgpu::BindingResource::Sampler(v.sampler),
             },
             wgpu::BindGroupEntry {
-                binding: 3,
-                resource: v.slots.as_entire_binding(),
+                binding: SLOTS_BINDING,
+                resource: wgpu::BindingResource::TextureView(v.slots),
             },
             wgpu::BindGroupEntry {
-                binding: 4,
-                resource: v.sub_cells.as_entire_binding(),
+                binding: SUB_CELLS_BINDING,
+                resource: wgpu::BindingResource::TextureView(v.sub_cells),
             },
             wgpu::BindGroupEntry {
-                binding: 5,
-                resource: v.index.as_entire_binding(),
+                binding: INDEX_BINDING,
+                resource: wgpu::BindingResource::TextureView(v.index),
             },
             wgpu::BindGroupEntry {
                 binding: USAGE_BINDING,
@@ -390,6 +391,10 @@ impl VolumeBackend for OutOfCore {
 
     fn fades(&self) -> bool {
         self.fades
+    }
+
+    fn octree(&self) -> bool {
+        self.volume.lock().is_octree()
     }
 
     fn spread(&self) -> bool {

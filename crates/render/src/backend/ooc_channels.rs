@@ -62,14 +62,14 @@ pub(crate) fn layout_entries() -> Vec<wgpu::BindGroupLayoutEntry> {
     e
 }
 
-/// The per-stage limits this kernel needs beyond the out-of-core kernel's:
-/// one more storage buffer, uniform and sampled texture.
+/// The per-stage limits this kernel needs: the out-of-core kernel's, one
+/// more storage buffer and uniform, and its own sampled textures.
 pub(crate) fn check_limits(device: &wgpu::Device) -> Result<(), RenderError> {
     check_stage_limits(device, OOC_CHANNEL_STORAGE_BUFFERS)?;
     let l = device.limits();
     gpu::need(
         "max_sampled_textures_per_shader_stage",
-        crate::group2::CHANNEL_SAMPLED_TEXTURES as u64,
+        crate::group2::OOC_CHANNEL_SAMPLED_TEXTURES as u64,
         l.max_sampled_textures_per_shader_stage as u64,
     )?;
     gpu::need(

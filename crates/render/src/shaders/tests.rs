@@ -185,7 +185,12 @@ fn rust_bindings(groups: &[&[wgpu::BindGroupLayoutEntry]]) -> BTreeSet<(u32, u32
     out
 }
 
-fn check_kernel(name: &str, m: &naga::Module, volume: &[wgpu::BindGroupLayoutEntry]) {
+fn check_kernel(
+    name: &str,
+    m: &naga::Module,
+    volume: &[wgpu::BindGroupLayoutEntry],
+    extra: &[&str],
+) {
     // Entry points (the ray caster and the slice view).
     let names: Vec<&str> = m.entry_points.iter().map(|e| e.name.as_str()).collect();
     assert_eq!(
@@ -193,7 +198,7 @@ fn check_kernel(name: &str, m: &naga::Module, volume: &[wgpu::BindGroupLayoutEnt
         [crate::kernels::ENTRY_RAYCAST, crate::kernels::ENTRY_SLICE],
         "{name}"
     );
-    check_kernel_common(name, m, volume, &[]);
+    check_kernel_common(name, m, volume, extra);
     for (wgsl, mode) in [
         ("SLAB_MAX", crate::slice::SLAB_MAX),
         ("SLAB_MEAN", crate::slice::SLAB_MEAN),
@@ -228,6 +233,8 @@ fn check_kernel_common(
         .map(|s| s.to_string())
         .collect();
     assert_eq!(overrides, want, "{name}: override constants");
+    // The tables' rows (TableTexture).
+    assert_eq!(const_u32(m, "TABLE_ROW"), crate::gpu::TABLE_ROW, "{name}");
     // Mode ids and flag bits.
     for (wgsl, mode) in KernelMode::ALL {
         assert_eq!(const_u32(m, wgsl), mode as u32, "{name}: {wgsl}");
@@ -329,7 +336,7 @@ fn check_kernel_common(
 #[test]
 fn incore_kernel_matches_the_rust_side() {
     let m = module("incore", &incore());
-    check_kernel("incore", &m, &crate::backend::incore::layout_entries());
+    check_kernel("incore", &m, &crate::backend::incore::layout_entries(), &[]);
     check_struct(
         &m,
         "VolumeParams",
@@ -379,7 +386,12 @@ fn check_ooc_params(m: &naga::Module) {
 #[test]
 fn ooc_kernel_matches_the_rust_side() {
     let m = module("ooc", &ooc());
-    check_kernel("ooc", &m, &crate::group2::ooc_single_layout_entries());
+    check_kernel(
+        "ooc",
+        &m,
+        &crate::group2::ooc_single_layout_entries(),
+        &[crate::kernels::OCTREE_OVERRIDE],
+    );
     // The spread's row mapping uses the core's largest spread.
     let (_, c) = m
         .constants
@@ -720,11 +732,15 @@ fn every_override_permutation_validates() {
             for &f in fading {
                 let bits = bits | f;
                 let s = specialise(name, &src, mode, bits, overlay);
-                assert!(!s.contains("override "), "{name}: an override left");
-                module(
-                    &format!("{name} {mode:?} {bits:013b} overlay {overlay}"),
-                    &s,
-                );
+                // Out of core over an octree and over anisotropic splits
+                // (OCT_OCTREE in brickray-index's traversal library).
+                for s in octree_both(&s) {
+                    assert!(!s.contains("override "), "{name}: an override left");
+                    module(
+                        &format!("{name} {mode:?} {bits:013b} overlay {overlay}"),
+                        &s,
+                    );
+                }
             }
         }
     }
@@ -742,6 +758,26 @@ fn switches() -> &'static [&'static str] {
 
 /// `src` with its override constants made constants: `MODE`, `OVERLAY`,
 /// and each of [`switches`] on when its bit of `bits` is set.
+/// An out-of-core kernel's source with `OCT_OCTREE` set each way (the
+/// source alone where it has none: in core).
+pub(super) fn octree_both(src: &str) -> Vec<String> {
+    let from = format!(
+        "override {}: bool = false;",
+        crate::kernels::OCTREE_OVERRIDE
+    );
+    if !src.contains(&from) {
+        return vec![src.to_string()];
+    }
+    [false, true]
+        .map(|on| {
+            src.replace(
+                &from,
+                &format!("const {}: bool = {on};", crate::kernels::OCTREE_OVERRIDE),
+            )
+        })
+        .into()
+}
+
 fn specialise(name: &str, src: &str, mode: KernelMode, bits: u32, overlay: u32) -> String {
     let mut s = src
         .replace(

@@ -6,7 +6,7 @@
 use crate::backend::gradients::{self, GradientPass};
 use crate::backend::readback::{Outcome, Submission};
 use crate::error::RenderError;
-use crate::gpu;
+use crate::gpu::{self, TableTexture};
 use brickray_cache::{FadeSlot, Streamer, Upload};
 use brickray_core::NodeKey;
 
@@ -23,6 +23,9 @@ pub(crate) struct SlotInfo {
     pub(crate) offset: [f32; 4],
     pub(crate) range: [f32; 4],
 }
+
+/// Texels of one slot-table row (`SlotInfo`: two Rgba32Float texels).
+const SLOT_TEXELS: usize = 2;
 
 /// The pool's GPU side, sized by the pool's slot grid: the atlas and the
 /// per-slot tables (recreated when the GPU budget changes).
@@ -51,10 +54,14 @@ pub(super) struct Pool {
     /// such frame, so a volume drawn unshaded pays no pass.
     gradients_owed: Vec<[u32; 3]>,
     pub(super) atlas_bytes: u64,
-    pub(super) slots: wgpu::Buffer,
+    /// The slot table: two Rgba32Float texels a row (`slot_info` in
+    /// ooc_volume.wgsl).
+    pub(super) slots: TableTexture,
     slots_cpu: Vec<SlotInfo>,
     slots_dirty: bool,
-    pub(super) sub_cells: wgpu::Buffer,
+    /// Each slot's sub-cell ranges, one Rg32Float texel each (channel after
+    /// channel for a multi-channel volume).
+    pub(super) sub_cells: TableTexture,
     /// Slots whose rows carry a fade (cleared before the next frame's fades).
     faded: Vec<u32>,
     /// Per slot, of its brick's sub-cells, `[skipped, all]` by MIP's
@@ -192,10 +199,12 @@ impl Pool {
             * (gpu.texel_bytes() + gpu.spread_bytes() + gpu.gradient_bytes()) as u64;
         let slot_count = streamer.pool().slot_count().max(1) as u64;
         let rows = streamer.slot_rows() as usize;
-        let sub_cells = gpu::storage_buffer(
+        let sub_cells = TableTexture::new(
             device,
             "brickray-render brick sub-cell table",
-            slot_count * (gpu.sub_cells_per_axis as u64).pow(3) * 8 * gpu.channel_count as u64,
+            wgpu::TextureFormat::Rg32Float,
+            (slot_count * (gpu.sub_cells_per_axis as u64).pow(3) * gpu.channel_count as u64)
+                as usize,
         )?;
         Ok(Pool {
             atlas_view: atlas.create_view(&Default::default()),
@@ -225,11 +234,12 @@ impl Pool {
         })
     }
 
-    fn slot_table(device: &wgpu::Device, rows: usize) -> Result<wgpu::Buffer, RenderError> {
-        gpu::storage_buffer(
+    fn slot_table(device: &wgpu::Device, rows: usize) -> Result<TableTexture, RenderError> {
+        TableTexture::new(
             device,
             "brickray-render brick slot table",
-            (rows * std::mem::size_of::<SlotInfo>()) as u64,
+            wgpu::TextureFormat::Rgba32Float,
+            rows * SLOT_TEXELS,
         )
     }
 
@@ -280,7 +290,8 @@ impl Pool {
             self.write_fade(f);
         }
         if self.slots_dirty {
-            queue.write_buffer(&self.slots, 0, bytemuck::cast_slice(&self.slots_cpu));
+            self.slots
+                .write_at(queue, 0, bytemuck::cast_slice(&self.slots_cpu));
             bytes += std::mem::size_of_val(self.slots_cpu.as_slice()) as u64;
             self.slots_dirty = false;
         }
@@ -397,7 +408,9 @@ impl Pool {
             spread_bytes = bytes.len() as u64;
         }
         let cells: &[u8] = bytemuck::cast_slice(&b.sub_cells);
-        queue.write_buffer(&self.sub_cells, up.slot as u64 * cells.len() as u64, cells);
+        let per_slot = b.sub_cells.len();
+        self.sub_cells
+            .write_at(queue, up.slot as usize * per_slot, cells);
         if let Some(m) = self
             .mip_cells
             .as_mut()
