@@ -86,9 +86,6 @@ fn buffer(ty: wgpu::BufferBindingType) -> wgpu::BindingType {
     }
 }
 
-/// Group 1's layout: entries (0), prefix sums (1, a table texture), info (2), corrected table (3),
-/// its sampler (4, also the other tables'), the pre-integrated table (5) and
-/// the spread table (6).
 /// Generations of transfer functions, unique in the process: renderers that
 /// share a volume plan it with the generation of whichever draws it first.
 pub(crate) fn next_generation() -> u64 {
@@ -96,6 +93,9 @@ pub(crate) fn next_generation() -> u64 {
     NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
 }
 
+/// Group 1's layout: entries (0), prefix sums (1, a table texture), info
+/// (2), corrected table (3), its sampler (4, also the other tables'), the
+/// pre-integrated table (5) and the spread table (6).
 pub(crate) fn layout_entries() -> [wgpu::BindGroupLayoutEntry; 7] {
     let storage = wgpu::BufferBindingType::Storage { read_only: true };
     [

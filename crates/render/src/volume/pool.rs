@@ -54,8 +54,8 @@ pub(super) struct Pool {
     /// such frame, so a volume drawn unshaded pays no pass.
     gradients_owed: Vec<[u32; 3]>,
     pub(super) atlas_bytes: u64,
-    /// The slot table: two Rgba32Float texels a row (`slot_info` in
-    /// ooc_volume.wgsl).
+    /// The slot table: two Rgba32Float texels a row (`slot_offset` and
+    /// `slot_range` in ooc_volume.wgsl).
     pub(super) slots: TableTexture,
     slots_cpu: Vec<SlotInfo>,
     slots_dirty: bool,
