@@ -2,6 +2,7 @@
 //! overrides, group 2 and uniforms against the Rust side, and every
 //! permutation a pipeline can have.
 
+use super::permutations::{octree_both, specialise};
 use super::*;
 
 /// The multi-channel kernel: one entry point, the shared overrides and
@@ -171,7 +172,7 @@ fn every_ooc_channel_permutation_validates() {
                 "override CHANNELS: u32 = 1u;",
                 &format!("const CHANNELS: u32 = {n}u;"),
             );
-            for s in super::octree_both(&s) {
+            for s in octree_both(&s) {
                 assert!(!s.contains("override "), "ooc channels: an override left");
                 module(
                     &format!("ooc channels {n} {mode:?} {bits:010b} overlay {overlay}"),
