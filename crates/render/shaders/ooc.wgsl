@@ -102,6 +102,16 @@ fn cursor_gradient(c: Cursor, t: f32) -> vec4<f32> {
     return vec4<f32>(frame.normal_mat * (g * ooc.dims), length(g));
 }
 
+// A sub-cell of brick b that no sample of the frame's mode can draw from
+// (leaf_span, ooc_volume.wgsl): transparent through the TF (DVR), a maximum
+// at most the running maximum `mx.x` (MIP) or below the isovalue (iso).
+fn leaf_cell_skips(b: Brick, j: vec3<u32>, mx: vec4<f32>) -> bool {
+    let range = sub_cell_range(b, j);
+    return (MODE == MODE_DVR && tf_transparent(range))
+        || (MODE == MODE_MIP && range.y <= mx.x)
+        || (MODE == MODE_ISO && range.y < frame.isovalue);
+}
+
 // The iso march over the index from t_from to t_to (iso frames of the full
 // traversal, and the prediction buffer's traversals, ooc_predict.wgsl). Samples
 // lie on the full traversal's grid t0 + k dt f (f: the leaf level's step
@@ -170,35 +180,36 @@ fn ooc_iso_march(acc: ptr<function, Accum>, cur: ptr<function, Cursor>, t0: f32,
         }
         k = max(k, first_k_after(st.hit.t_enter, t0, dtl));
         let t_end = min(st.hit.t_exit, t_to);
-        var k_cell = 0u;
         // The visible weight (feedback.wgsl): the length marched in the brick
         // (a probe adds none).
         let t_in = max(st.hit.t_enter, t_from);
         let t_voxel = finest_voxel_t() * (*cur).b.usage_f;
+        // Skipping (and the probe): samples only from the first of the
+        // leaf's sub-cells that can hold the isovalue to the last
+        // (leaf_span); those before and after are below it (the bracket's
+        // lower end may lie in them: the last grid point skipped).
+        var t_samples = t_end;
+        if (ess || probe) {
+            let span = leaf_span((*cur).b, oo, od, inv_od, t_in, t_end, vec4<f32>(0.0));
+            if (probe) {
+                (*acc).samples = (*acc).samples + u32(span.z);
+            }
+            let ks = first_k_after(span.x, t0, dtl);
+            if (ks > k) {
+                t_last = grid_t(t0, ks - 1u, dtl);
+                below = true;
+                k = ks;
+            }
+            t_samples = min(t_end, span.y);
+        }
         loop {
             let t = grid_t(t0, k, dtl);
-            if (t >= t_end) { break; }
+            if (t >= t_samples) { break; }
             if (budget == 0u) {
                 if (!probe) { feedback_seen((*cur).b.usage, t_in, t, 1.0, 1.0, t_voxel); }
                 return t_to;
             }
             budget = budget - 1u;
-            if ((ess || probe) && k >= k_cell) {
-                let j = sub_cell_of((*cur).b, oo + od * t);
-                let range = sub_cell_range((*cur).b, j);
-                let te = min(sub_cell_exit((*cur).b, j, oo, od, inv_od), st.hit.t_exit);
-                let k_exit = max(k + 1u, first_k_after(te, t0, dtl));
-                if (probe) {
-                    (*acc).samples = (*acc).samples + 1u;
-                }
-                if (range.y < frame.isovalue) {
-                    t_last = grid_t(t0, k_exit - 1u, dtl);
-                    below = true;
-                    k = k_exit;
-                    continue;
-                }
-                k_cell = k_exit;
-            }
             if (probe) { return t; }
             let v = cursor_value(*cur, t);
             (*acc).samples = (*acc).samples + 1u;
@@ -215,6 +226,14 @@ fn ooc_iso_march(acc: ptr<function, Accum>, cur: ptr<function, Cursor>, t0: f32,
             below = true;
             t_last = t;
             k = k + 1u;
+        }
+        // The grid points after the last sub-cell that can hold the
+        // isovalue, skipped.
+        let ke = first_k_after(t_end, t0, dtl);
+        if (ke > k) {
+            t_last = grid_t(t0, ke - 1u, dtl);
+            below = true;
+            k = ke;
         }
         if (!probe) { feedback_seen((*cur).b.usage, t_in, t_end, 1.0, 1.0, t_voxel); }
     }
@@ -305,8 +324,23 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
                 var k_cell = 0u;
                 // DVR: a leaf whose values meet no transparent TF entry has no
                 // sub-cell to skip, and its samples run without tests (one
-                // test of its range instead of one per sub-cell).
-                let cell_tests = ESS && (MODE != MODE_DVR || !tf_opaque_throughout(leaf_range(st.hit.data)));
+                // test of its range instead of one per sub-cell). Nor does a
+                // fading leaf with SPREAD, whose widened ranges do not bound
+                // a mixed sample's reach.
+                let cell_tests = ESS && (MODE != MODE_DVR || !tf_opaque_throughout(leaf_range(st.hit.data)))
+                    && !(SPREAD && cur.b.fb_w > 0.0);
+                // Where the samples end: the leaf's exit, or without
+                // pre-integration the exit of its last sub-cell that can
+                // contribute (leaf_span; the samples begin at the entry of
+                // the first). Pre-integrated DVR tests each sub-cell as the
+                // ray enters it (below): a segment into a skipped sub-cell
+                // can still contribute.
+                var t_samples = t_end;
+                if (cell_tests && !PREINT) {
+                    let span = leaf_span(cur.b, oo, od, inv_od, max(st.hit.t_enter, t0), t_end, vec4<f32>(acc.max_v));
+                    k = max(k, first_k_after(span.x, grid.tb, grid.dt));
+                    t_samples = min(t_end, span.y);
+                }
                 // The visible weight's start (feedback.wgsl); MIP and iso rays
                 // are transparent.
                 let t_in = max(st.hit.t_enter, t0);
@@ -317,7 +351,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
                 var holds_max = false;
                 loop {
                     let t = grid_t(grid.tb, k, grid.dt);
-                    if (t >= t_end) { break; }
+                    if (t >= t_samples) { break; }
                     if (budget == 0u) { done = true; break; }
                     budget = budget - 1u;
                     if (MODE == MODE_DVR && step_grid_adapt(&grid, acc.color.a, t, dtl, cur.b.tf_v)) {
@@ -325,16 +359,12 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
                         k_cell = 0u;
                     }
                     // A fading leaf's sub-cells bound both levels' values
-                    // (sub_cell_range), except the spread's reach: with
-                    // SPREAD, whose widened ranges do not bound a mixed
-                    // sample's reach, no skipping inside it while it fades.
-                    if (cell_tests && k >= k_cell && !(SPREAD && cur.b.fb_w > 0.0)) {
+                    // (sub_cell_range).
+                    if (PREINT && cell_tests && k >= k_cell) {
                         let j = sub_cell_of(cur.b, oo + od * t);
-                        let range = sub_cell_range(cur.b, j);
                         let te = min(sub_cell_exit(cur.b, j, oo, od, inv_od), st.hit.t_exit);
                         let k_exit = max(k + 1u, first_k_after(te, grid.tb, grid.dt));
-                        let skip = (MODE == MODE_DVR && tf_transparent(range))
-                            || (MODE == MODE_MIP && range.y <= acc.max_v);
+                        let skip = leaf_cell_skips(cur.b, j, vec4<f32>(acc.max_v));
                         let force = PREINT && MODE == MODE_DVR && skip && !forced && preint_joined(acc, t, grid.dt);
                         forced = force;
                         if (skip && !force) {
@@ -365,8 +395,9 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
                     t_last = t;
                     k = k + 1u;
                 }
-                // Where the ray left the brick, or stopped in it.
-                let t_out = clamp(grid_t(grid.tb, k, grid.dt), t_in, t_end);
+                // Where the ray left the brick, or stopped in it (a ray whose
+                // samples ended before the leaf's exit passed the rest).
+                let t_out = select(clamp(grid_t(grid.tb, k, grid.dt), t_in, t_end), t_end, !done);
                 let trans_out = select(1.0, 1.0 - acc.color.a, MODE == MODE_DVR);
                 if (MODE == MODE_MIP) {
                     if (holds_max) {

@@ -160,6 +160,12 @@ fn channel_cell_skips(b: Brick, j: vec3<u32>, mx: vec4<f32>, vis: vec4<f32>, iso
     return dot(shows * vis, vec4<f32>(1.0)) <= 0.0;
 }
 
+// leaf_span's test (ooc_volume.wgsl): a sub-cell no visible channel draws
+// from (channel_cell_skips; MIP by the maxima `mx`).
+fn leaf_cell_skips(b: Brick, j: vec3<u32>, mx: vec4<f32>) -> bool {
+    return channel_cell_skips(b, j, mx, chan_visible(), chan_iso());
+}
+
 // DVR: the mixed, shaded sample of values v at t (texture point u) of the
 // cursor's brick, its tables' row `row`, premultiplied.
 fn ooc_channel_dvr_sample(cur: Cursor, v: vec4<f32>, u: vec3<f32>, r: Ray, t: f32, row: f32, vis: vec4<f32>) -> vec4<f32> {
@@ -248,27 +254,24 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
             }
             k = max(k, first_k_after(st.hit.t_enter, grid.tb, grid.dt));
             let t_end = min(st.hit.t_exit, t1);
-            var k_cell = 0u;
             let t_in = max(st.hit.t_enter, t0);
             let trans_in = select(1.0, 1.0 - acc.color.a, MODE == MODE_DVR);
+            // Skipping: samples only from the first of the leaf's sub-cells
+            // a visible channel can draw from to the last (leaf_span,
+            // ooc_volume.wgsl; MIP by the maxima at the leaf's entry).
+            var t_samples = t_end;
+            if (ESS) {
+                let span = leaf_span(cur.b, oo, od, inv_od, t_in, t_end, mx);
+                k = max(k, first_k_after(span.x, grid.tb, grid.dt));
+                t_samples = min(t_end, span.y);
+            }
             loop {
                 let t = grid_t(grid.tb, k, grid.dt);
-                if (t >= t_end) { break; }
+                if (t >= t_samples) { break; }
                 if (budget == 0u) { done = true; break; }
                 budget = budget - 1u;
                 if (MODE == MODE_DVR && step_grid_adapt(&grid, acc.color.a, t, dtl, cur.b.tf_v)) {
                     k = 0u;
-                    k_cell = 0u;
-                }
-                if (ESS && k >= k_cell) {
-                    let j = sub_cell_of(cur.b, oo + od * t);
-                    let te = min(sub_cell_exit(cur.b, j, oo, od, inv_od), st.hit.t_exit);
-                    let k_exit = max(k + 1u, first_k_after(te, grid.tb, grid.dt));
-                    if (channel_cell_skips(cur.b, j, mx, vis, iso4)) {
-                        k = k_exit;
-                        continue;
-                    }
-                    k_cell = k_exit;
                 }
                 let v = cursor_values(cur, t);
                 acc.samples = acc.samples + 1u;
@@ -301,7 +304,9 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
                 t_last = t;
                 k = k + 1u;
             }
-            let t_out = clamp(grid_t(grid.tb, k, grid.dt), t_in, t_end);
+            // (A ray whose samples ended before the leaf's exit passed the
+            // rest.)
+            let t_out = select(clamp(grid_t(grid.tb, k, grid.dt), t_in, t_end), t_end, !done);
             let trans_out = select(1.0, 1.0 - acc.color.a, MODE == MODE_DVR);
             feedback_seen(cur.b.usage, t_in, t_out, trans_in, trans_out, finest_voxel_t() * cur.b.usage_f);
             if (done) { break; }
