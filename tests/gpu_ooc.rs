@@ -556,13 +556,12 @@ fn mip_skips_out_of_core_where_the_bricks_say_it_pays() {
 /// the bricks the frame draws are transparent through the TF
 /// (`SkipRule::WherePays`, `dvr_skip_share_min_bricks`): a box with a thin
 /// bright shell and a dim core, under a TF transparent below 0.3, has 0.4
-/// of them transparent, and skips shaded (fewer samples; the shaded rule's
-/// threshold is 0.29 at 1/2 voxel) but not unshaded (0.55); the box with a
-/// thick shell (0.13), the box under a TF opaque at every value and noise
-/// under a ramp transparent only at 0 (none) run without sub-cell tests
-/// shaded or not (the frame's statistics say so; `SkipRule::Always` still
-/// tests), and so does the thin shell shaded at a step of 1 voxel, where
-/// the threshold is 0.55. Every image of a scene is the same.
+/// of them transparent, and skips shaded and unshaded at 1/2 voxel (fewer
+/// samples; both thresholds are 0.15 there) but not unshaded at a step of 2
+/// voxels (0.5); the box with a thick shell (0.13), the box under
+/// a TF opaque at every value and noise under a ramp transparent only at 0
+/// (none) run without skipping shaded or not (the frame's statistics say
+/// so; `SkipRule::Always` still skips). Every image of a scene is the same.
 #[test]
 fn dvr_skips_out_of_core_only_where_enough_drawn_sub_cells_are_transparent() {
     use brickray::{RendererOptions, SkipRule};
@@ -600,14 +599,14 @@ fn dvr_skips_out_of_core_only_where_enough_drawn_sub_cells_are_transparent() {
             &transparent_below,
             STEP,
             false,
-            false,
+            true,
         ),
         (
-            "thin shell, transparent below 0.3, shaded, a step of 1 voxel",
+            "thin shell, transparent below 0.3, unshaded, a step of 2 voxels",
             &thin,
             &transparent_below,
-            1.0,
-            true,
+            2.0,
+            false,
             false,
         ),
         (

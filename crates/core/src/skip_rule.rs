@@ -117,6 +117,16 @@ pub fn dvr_skip_share_min(shaded: bool) -> ShareByStep {
 /// 0.61-0.79x at 1/2 voxel and 0.83-0.96x at 1 and 2; at 4 voxels it took
 /// 0.94x and cost 1.07x there, and cost the pycortex MRI 1.12x in the `raw`
 /// suite's view (`brickray-bench raw --step 4 --size 384`), 1.07x at 8.
+/// Those figures are of per-sample tests. Out of core MIP now walks a data
+/// leaf's sub-cells once as the ray enters it (`leaf_span` in ooc.wgsl, the
+/// running maximum at the leaf's entry); measured again so (2026-12-08, one
+/// run at each step) the two MRIs took 0.63-0.64x at 1/2 voxel, 0.72-0.73x
+/// at 1, 0.85-0.93x at 2 and 0.90x and 1.06x at 4, while the five low
+/// shares no longer sort by cost: the head CT (0.005) took 0.83-0.91x up to
+/// 2 voxels and fractal noise (0.028) 0.92-0.93x up to 1 voxel but 1.37x at
+/// 2, where the tomogram (0.003) cost 1.08-1.28x and Marschner-Lobb 1.13-1.20x
+/// at every step. The thresholds were kept: nothing between 0.028 and 0.305
+/// was measured, and no lower threshold separates those five.
 pub const MIP_SKIP_SHARE_MIN_BRICKS: ShareByStep =
     ShareByStep(&[(0.5, 0.1), (2.0, 0.1), (4.0, 1.0)]);
 
@@ -124,33 +134,38 @@ pub const MIP_SKIP_SHARE_MIN_BRICKS: ShareByStep =
 /// over the bricks a frame draws, at which unshaded DVR's empty-space
 /// skipping is used out of core (`SkipRule::WherePays` in brickray-render),
 /// by step; shaded DVR has its own ([`DVR_SHADED_SKIP_SHARE_MIN_BRICKS`]).
-/// Measured on lavapipe (`brickray-bench skipping --step S`,
-/// docs/benchmarks.md: ramps opaque from 0, 0.3 and 0.6 on seven volumes,
-/// bricks of 32 at the finest level). At 1/2 voxel, four runs (2026-12-06
-/// and three on 2026-12-07): up to a share of 0.498 skipping cost or broke
-/// even (in the last three runs 1.08-1.31x at shares of 0.278-0.467 but
-/// once, 1.02x at 0.388; 0.94-1.15x at 0.253 and 0.96-1.02x at 0.498; the
-/// first run had 0.305-0.388 at 0.95-1.03x), and from 0.644 on it paid in
-/// every run (0.48-0.86x). At 1
-/// voxel it cost up to 0.498 (1.02-1.15x) and paid from 0.644 (0.70-0.85x);
-/// at 2 voxels it cost up to 0.762 (1.01-1.17x) and paid or broke even from
-/// 0.745 (0.90-0.98x); at 4 voxels it cost or broke even at every share
-/// (0.96-1.31x).
+/// Out of core a ray that skips walks a data leaf's sub-cells once as it
+/// enters the leaf and samples from the first that can contribute to the
+/// last (`leaf_span` in ooc.wgsl), so skipping costs a walk per leaf rather
+/// than a test per sub-cell. Measured on lavapipe (`brickray-bench skipping
+/// --step S`, 2026-12-08, one run at each of 1/2, 1, 2 and 4 voxels:
+/// ramps opaque from 0, 0.3 and 0.6 on seven volumes, bricks of 32 at the
+/// finest level): where no sub-cell is transparent skipping cost up to
+/// 1.12x the frame at 1/2 voxel (0.85-1.12x), 1.15x at 1, 1.32x at 2 and
+/// 1.34x at 4; at 1/2 voxel it paid at every share measured above 0, from
+/// 0.188 (0.73-0.97x, 0.38-0.58x from 0.644); at 1 voxel from 0.188 as well
+/// but 1.07x at 0.278 and 1.03x at 0.467; at 2 voxels it cost or broke even
+/// up to 0.467 (0.92-1.20x) and paid from 0.498 (0.69-0.93x); at 4 voxels
+/// it cost up to 0.498 (1.01-1.20x, but 0.78x at 0.388) and paid from 0.644
+/// (0.74-0.98x). No step beyond 4 voxels was measured (the last anchor's
+/// share holds there). Before the walk (per-sample tests in the sample
+/// loop, which cost 1.5x where no test was taken) the anchors were 0.55,
+/// 0.76 and 1 at 1, 2 and 4 voxels.
 pub const DVR_SKIP_SHARE_MIN_BRICKS: ShareByStep =
-    ShareByStep(&[(1.0, 0.55), (2.0, 0.76), (4.0, 1.0)]);
+    ShareByStep(&[(1.0, 0.15), (2.0, 0.5), (4.0, 0.6)]);
 
 /// [`DVR_SKIP_SHARE_MIN_BRICKS`] for shaded DVR, whose samples cost two to
 /// three times an unshaded one's, so that skipping pays from fewer
-/// transparent sub-cells. At 1/2 voxel (`brickray-bench skipping`,
-/// 2026-12-07, the streamed volume's default gradients kept per brick):
-/// where no sub-cell is transparent skipping cost 1.18-1.45x the frame;
-/// from a share of 0.188 to 0.467 it broke even or paid (0.87-1.05x), from
-/// 0.498 on it paid (0.40-0.84x); the `raw` suite's view of the pycortex MRI
-/// (0.358) took 0.71x (2026-12-06). The coarser steps' anchors are the
-/// unshaded rule's (not measured shaded; a shaded frame saves more per
-/// sample skipped, so they err towards not skipping).
-pub const DVR_SHADED_SKIP_SHARE_MIN_BRICKS: ShareByStep =
-    ShareByStep(&[(0.5, 0.29), (1.0, 0.55), (2.0, 0.76), (4.0, 1.0)]);
+/// transparent sub-cells. Measured as the unshaded rule (2026-12-08, the
+/// streamed volume's default gradients kept per brick): where no sub-cell
+/// is transparent skipping cost up to 1.08x the frame at 1/2 voxel, 1.13x
+/// at 1, 1.19x at 2 and 1.27x at 4; at 1/2, 1 and 2 voxels it paid or
+/// broke even at every share measured above 0, from 0.188 (0.62-0.92x at
+/// 1/2 voxel; 1.00x at 0.278 and 1.04x at 0.467 at 2 voxels); at 4 voxels
+/// it cost 1.10x at 0.188, broke even at 0.253 and 0.467 (1.00-1.01x) and
+/// paid at the other shares from 0.278 on (0.65-0.97x). Before the walk
+/// the anchors were 0.29, 0.55, 0.76 and 1 at 1/2, 1, 2 and 4 voxels.
+pub const DVR_SHADED_SKIP_SHARE_MIN_BRICKS: ShareByStep = ShareByStep(&[(2.0, 0.15), (4.0, 0.25)]);
 
 /// The out-of-core DVR rule of a shaded or an unshaded frame.
 pub fn dvr_skip_share_min_bricks(shaded: bool) -> ShareByStep {
@@ -184,8 +199,9 @@ mod tests {
 
     /// The shipped rules: anchors in increasing step with shares in 0..=1,
     /// each threshold never falling as the step grows (a coarser step saves
-    /// fewer samples per cell tested), and the rules that test each cell
-    /// skipping nothing but all-empty volumes at the coarsest step measured.
+    /// fewer samples per cell tested), and the MIP rules (in core a test as
+    /// the ray enters each cell) skipping nothing but all-empty volumes at
+    /// the coarsest step measured.
     #[test]
     fn the_shipped_rules_rise_with_the_step() {
         for rule in [
@@ -208,12 +224,7 @@ mod tests {
                 last = v;
             }
         }
-        for rule in [
-            MIP_SKIP_SHARE_MIN,
-            MIP_SKIP_SHARE_MIN_BRICKS,
-            DVR_SKIP_SHARE_MIN_BRICKS,
-            DVR_SHADED_SKIP_SHARE_MIN_BRICKS,
-        ] {
+        for rule in [MIP_SKIP_SHARE_MIN, MIP_SKIP_SHARE_MIN_BRICKS] {
             assert_eq!(rule.at(16.0), 1.0, "{rule:?}");
         }
     }
