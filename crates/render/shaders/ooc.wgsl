@@ -321,6 +321,9 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
                 }
                 k = max(k, first_k_after(st.hit.t_enter, grid.tb, grid.dt));
                 let t_end = min(st.hit.t_exit, t1);
+                // The visible weight's start (feedback.wgsl); MIP and iso rays
+                // are transparent.
+                let t_in = max(st.hit.t_enter, t0);
                 var k_cell = 0u;
                 // DVR: a leaf whose values meet no transparent TF entry has no
                 // sub-cell to skip, and its samples run without tests (one
@@ -337,13 +340,10 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
                 // can still contribute.
                 var t_samples = t_end;
                 if (cell_tests && !PREINT) {
-                    let span = leaf_span(cur.b, oo, od, inv_od, max(st.hit.t_enter, t0), t_end, vec4<f32>(acc.max_v));
+                    let span = leaf_span(cur.b, oo, od, inv_od, t_in, t_end, vec4<f32>(acc.max_v));
                     k = max(k, first_k_after(span.x, grid.tb, grid.dt));
                     t_samples = min(t_end, span.y);
                 }
-                // The visible weight's start (feedback.wgsl); MIP and iso rays
-                // are transparent.
-                let t_in = max(st.hit.t_enter, t0);
                 let trans_in = select(1.0, 1.0 - acc.color.a, MODE == MODE_DVR);
                 // Pre-integration: as in incore.wgsl.
                 var forced = false;
